@@ -1,0 +1,55 @@
+"""The one small interface every objective term shares.
+
+A term is an integrand f_j(Y, Y', Y'') of the objective E = sum_j lambda_j integral f_j dt (paper eq. 1),
+evaluated at the quadrature points. It returns the per-point values and their gradients with respect
+to Y, Y' and Y'' at the same points; the objective applies quadrature weights, term weights and the
+chain rule through the spline (DESIGN.md).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class TermEval:
+    """What a term returns at n quadrature points of an nq-dimensional state.
+
+    Attributes:
+        f: (n,) integrand values at the quadrature points (units: the term's docstring).
+        dY, dY1, dY2: (n, nq) gradients of f with respect to Y, Y', Y''; None where f does not depend
+            on that argument (saves the chain-rule product).
+    """
+
+    f: np.ndarray
+    dY: np.ndarray | None = None
+    dY1: np.ndarray | None = None
+    dY2: np.ndarray | None = None
+
+
+class Term:
+    """Base class of objective terms.
+
+    Subclasses set `name` (the command-line name, e.g. "penetration") and `units`, and implement
+    `evaluate(t, Y, Y1, Y2, grad)`. `needs` tells the objective which spline derivatives to compute.
+    """
+
+    name: str = "term"
+    units: str = ""
+    needs: tuple[int, ...] = (0,)  # which of Y (0), Y' (1), Y'' (2) the term reads
+
+    def evaluate(
+        self, t: np.ndarray, Y: np.ndarray, Y1: np.ndarray | None, Y2: np.ndarray | None, grad: bool = True
+    ) -> TermEval:
+        """Integrand and gradients at the quadrature points.
+
+        Args:
+            t: (n,) quadrature times [s].
+            Y, Y1, Y2: (n, nq) spline value, first and second time derivative at t (Y1, Y2 may be None
+                when not in `needs`).
+            grad: if False the gradients may be left None (value only).
+        Returns:
+            TermEval.
+        """
+        raise NotImplementedError
