@@ -1,0 +1,118 @@
+"""Static surfaces of a scene (floor planes, boxes) and the signed distance of points to them.
+
+Used by the ground-penetration term (paper eq. 12, generalized from the plane y = 0 to every static
+plane and box of the scene) and by contact indicators.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class StaticSurfaces:
+    """The planes and boxes attached to the world body of a MuJoCo model.
+
+    Attributes:
+        plane_point: (p, 3) a point of each plane [m].
+        plane_normal: (p, 3) unit normal (the free side) of each plane.
+        box_center: (b, 3) box centres [m].
+        box_rot: (b, 3, 3) box orientations (columns = box axes in world).
+        box_half: (b, 3) half sizes [m].
+        names: names of the surfaces, planes first.
+    """
+
+    plane_point: np.ndarray
+    plane_normal: np.ndarray
+    box_center: np.ndarray
+    box_rot: np.ndarray
+    box_half: np.ndarray
+    names: tuple[str, ...]
+
+    @classmethod
+    def from_model(cls, model, data=None) -> "StaticSurfaces":
+        """Collect geoms of type plane and box that belong to the world body (body 0).
+
+        Args:
+            model: MjModel. data: optional MjData; world geom poses are computed by mj_kinematics.
+        Returns:
+            StaticSurfaces (possibly empty).
+        """
+        import mujoco
+
+        if data is None:
+            data = mujoco.MjData(model)
+        mujoco.mj_kinematics(model, data)
+        pp, pn, bc, br, bh, names = [], [], [], [], [], []
+        for g in range(model.ngeom):
+            if model.geom_bodyid[g] != 0:
+                continue
+            name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom{g}"
+            R = data.geom_xmat[g].reshape(3, 3).copy()
+            if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE:
+                pp.append(data.geom_xpos[g].copy())
+                pn.append(R[:, 2])
+                names.append(name)
+        for g in range(model.ngeom):
+            if model.geom_bodyid[g] != 0 or model.geom_type[g] != mujoco.mjtGeom.mjGEOM_BOX:
+                continue
+            bc.append(data.geom_xpos[g].copy())
+            br.append(data.geom_xmat[g].reshape(3, 3).copy())
+            bh.append(model.geom_size[g].copy())
+            names.append(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom{g}")
+        return cls(
+            np.array(pp, float).reshape(-1, 3),
+            np.array(pn, float).reshape(-1, 3),
+            np.array(bc, float).reshape(-1, 3),
+            np.array(br, float).reshape(-1, 3, 3),
+            np.array(bh, float).reshape(-1, 3),
+            tuple(names),
+        )
+
+    @property
+    def count(self) -> int:
+        return len(self.plane_point) + len(self.box_center)
+
+    def penetration(self, points: np.ndarray, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Penetration depth of points into each surface, and its gradient.
+
+        Plane: depth = max(0, margin - n.(p - p0)). Box (grown by `margin` on every side): for a point
+        inside, the distance to the nearest face (the shortest way out), else 0; the gradient is minus
+        that face's outward normal. With margin 0 this is the paper's eq. 12 constraint per point.
+
+        Args:
+            points: (..., 3) world positions [m].
+            margin: [m] safety distance counted as penetration (0 for the true depth).
+        Returns:
+            depth: (..., S) depth [m] >= 0 for each of the S surfaces (planes then boxes).
+            grad: (..., S, 3) d depth / d point.
+        """
+        pts = np.asarray(points, float)
+        shape = pts.shape[:-1]
+        depths, grads = [], []
+        if len(self.plane_point):
+            s = np.einsum("...pk,pk->...p", pts[..., None, :] - self.plane_point, self.plane_normal)
+            d = np.maximum(0.0, margin - s)
+            g = np.where((d > 0)[..., None], -self.plane_normal, 0.0)
+            depths.append(d)
+            grads.append(np.broadcast_to(g, shape + g.shape[-2:]))
+        if len(self.box_center):
+            local = np.einsum("bji,...bj->...bi", self.box_rot, pts[..., None, :] - self.box_center)
+            gap = self.box_half + margin - np.abs(local)  # (..., b, 3): > 0 inside along that axis
+            inside = (gap > 0).all(axis=-1)
+            axis = np.argmin(gap, axis=-1)
+            d = np.where(inside, np.take_along_axis(gap, axis[..., None], -1)[..., 0], 0.0)
+            sign = np.sign(np.take_along_axis(local, axis[..., None], -1)[..., 0])
+            sign = np.where(sign == 0, 1.0, sign)
+            normal_world = np.take_along_axis(
+                np.broadcast_to(np.swapaxes(self.box_rot, -1, -2), local.shape[:-1] + (3, 3)),
+                axis[..., None, None],
+                -2,
+            )[..., 0, :] * sign[..., None]
+            g = np.where(inside[..., None], -normal_world, 0.0)
+            depths.append(d)
+            grads.append(g)
+        if not depths:
+            return np.zeros(shape + (0,)), np.zeros(shape + (0, 3))
+        return np.concatenate(depths, axis=-1), np.concatenate(grads, axis=-2)
