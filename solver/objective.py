@@ -1,0 +1,152 @@
+"""The objective E = sum_j lambda_j integral f_j(Y, Y', Y'') dt (paper eq. 1), optionally renormalized
+by each term's value on the initial path (eq. 7), and its gradient with respect to the frame values.
+
+Quadrature is uniform (midpoint) as in the paper. Renormalization divides each term's *integral* by its
+integral on the plain spline (the initial path), so every active term starts at lambda_j. The paper
+writes the ratio inside the integral; pointwise it is undefined where the initial integrand is zero
+(a foot above the floor), so we take the ratio of integrals; a term that is zero on the initial path
+keeps scale 1 (its own units).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solver.errors import DynsplinesError, InputError
+from solver.spline import SplineBasis, quadrature_times
+from solver.terms.base import Term
+
+
+class NonFiniteError(DynsplinesError):
+    """A term produced NaN or inf; `term` names it."""
+
+    def __init__(self, term: str, what: str):
+        super().__init__(f"objective term {term!r} produced a non-finite {what}")
+        self.term = term
+
+
+@dataclass
+class Evaluation:
+    """One evaluation of the objective.
+
+    Attributes:
+        E: total weighted (normalized) objective.
+        grad: (m, nq) dE/dP, or None.
+        integrals: {term name: integral of f_j dt in the term's units times s} (unweighted, unnormalized).
+    """
+
+    E: float
+    grad: np.ndarray | None
+    integrals: dict[str, float]
+
+
+@dataclass
+class Objective:
+    """Weighted sum of terms integrated over [t0, t1] by uniform quadrature.
+
+    Attributes:
+        terms: the objective terms.
+        weights: (len(terms),) lambda_j >= 0.
+        t0, t1: time interval [s] (the first and last keyframe).
+        rate: quadrature points per second [1/s].
+        scales: (len(terms),) divisors of each integral (1 unless `renormalize` was called).
+    Raises:
+        InputError: negative or non-finite weight, weights/terms length mismatch, bad interval or rate.
+    """
+
+    terms: list[Term]
+    weights: np.ndarray
+    t0: float
+    t1: float
+    rate: float = 400.0
+    scales: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        self.weights = np.asarray(self.weights, dtype=float).reshape(-1)
+        if len(self.weights) != len(self.terms):
+            raise InputError(f"{len(self.terms)} objective terms but {len(self.weights)} weights")
+        for term, w in zip(self.terms, self.weights):
+            if not np.isfinite(w) or w < 0:
+                raise InputError(f"weight of objective term {term.name!r} is {w}; weights must be >= 0")
+        if not (np.isfinite(self.t0) and np.isfinite(self.t1) and self.t1 > self.t0):
+            raise InputError(f"objective interval [{self.t0}, {self.t1}] s is empty")
+        if not np.isfinite(self.rate) or self.rate <= 0:
+            raise InputError(f"quadrature rate {self.rate} must be > 0 points per second")
+        if self.scales is None:
+            self.scales = np.ones(len(self.terms))
+        self.t, self.h = quadrature_times(self.t0, self.t1, self.rate)
+        self._needs = tuple(sorted({k for term in self.terms for k in term.needs}))
+        self._basis_cache: dict[bytes, SplineBasis] = {}
+
+    @property
+    def names(self) -> list[str]:
+        return [term.name for term in self.terms]
+
+    def basis(self, knots: np.ndarray) -> SplineBasis:
+        """The spline matrices for a frame set's knots at this objective's quadrature points (cached)."""
+        key = np.asarray(knots, float).tobytes()
+        b = self._basis_cache.get(key)
+        if b is None:
+            if len(self._basis_cache) > 8:
+                self._basis_cache.clear()
+            b = self._basis_cache[key] = SplineBasis(np.asarray(knots, float), self.t)
+        return b
+
+    def evaluate(self, knots: np.ndarray, P: np.ndarray, grad: bool = True) -> Evaluation:
+        """E and dE/dP for frames P at knot times `knots`.
+
+        Args:
+            knots: (m,) frame times [s]. P: (m, nq) frame values.
+            grad: compute the gradient.
+        Returns:
+            Evaluation.
+        Raises:
+            NonFiniteError: a term returned NaN/inf (value or gradient); names the term.
+        """
+        basis = self.basis(knots)
+        Y, Y1, Y2 = basis.evaluate(P, self._needs)
+        E = 0.0
+        integrals = {}
+        acc = [None, None, None]  # dE/dY, dE/dY', dE/dY'' at the quadrature points
+        for term, w, s in zip(self.terms, self.weights, self.scales):
+            ev = term.evaluate(self.t, Y, Y1, Y2, grad=grad and w != 0.0)
+            I = float(self.h * ev.f.sum())
+            if not np.isfinite(I):
+                raise NonFiniteError(term.name, "value")
+            integrals[term.name] = I
+            if w == 0.0:
+                continue
+            c = self.h * w / s
+            E += c * ev.f.sum()
+            if grad:
+                for k, g in enumerate((ev.dY, ev.dY1, ev.dY2)):
+                    if g is not None:
+                        acc[k] = c * g if acc[k] is None else acc[k] + c * g
+        G = None
+        if grad:
+            G = np.zeros_like(P) if all(a is None for a in acc) else basis.pullback(*acc)
+            if not np.all(np.isfinite(G)):
+                raise NonFiniteError(self._blame(Y, Y1, Y2), "gradient")
+        return Evaluation(E, G, integrals)
+
+    def _blame(self, Y, Y1, Y2) -> str:
+        """The name of the first term whose value or gradient is not finite at (Y, Y', Y'')."""
+        for term in self.terms:
+            ev = term.evaluate(self.t, Y, Y1, Y2, grad=True)
+            if any(g is not None and not np.all(np.isfinite(g)) for g in (ev.f, ev.dY, ev.dY1, ev.dY2)):
+                return term.name
+        return "+".join(self.names)
+
+    def renormalize(self, knots: np.ndarray, P: np.ndarray) -> dict[str, float]:
+        """Set each term's scale to its integral on the path (knots, P): paper eq. 7.
+
+        Call once on the initial (plain spline) path and keep the scales through subdivision, so the
+        objective stays the same function. Terms that are zero there keep scale 1.
+
+        Returns:
+            {term name: scale}.
+        """
+        ints = self.evaluate(knots, P, grad=False).integrals
+        self.scales = np.array([ints[n] if ints[n] > 1e-300 else 1.0 for n in self.names])
+        return dict(zip(self.names, self.scales.tolist()))

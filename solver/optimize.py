@@ -1,0 +1,200 @@
+"""The one wrapper around nlopt: gradient-based, unconstrained, every iterate a valid path.
+
+Paper sec. 2, "Minimization of the objective": the variable frames move to minimize E; the keyframes
+are not variables, so any iterate meets them and can be returned at any time (figure 1). We keep the
+best iterate seen; a stop request (Ctrl-C, a time limit), a non-finite objective, or an exception in
+the objective ends the run and returns that best iterate with a status saying why.
+"""
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import nlopt
+import numpy as np
+
+from solver.errors import InputError
+
+#: Gradient-based local algorithms offered by name (nlopt's documentation, "NLopt Algorithms").
+ALGORITHMS = {
+    "lbfgs": nlopt.LD_LBFGS,
+    "mma": nlopt.LD_MMA,
+    "ccsaq": nlopt.LD_CCSAQ,
+    "slsqp": nlopt.LD_SLSQP,
+    "tnewton": nlopt.LD_TNEWTON_PRECOND_RESTART,
+    "var2": nlopt.LD_VAR2,
+}
+
+
+class Status(enum.Enum):
+    """Why an optimization ended."""
+
+    CONVERGED = "converged"  # ftol/xtol reached, or no progress possible (roundoff)
+    MAX_EVALS = "max_evals"
+    MAX_TIME = "max_time"
+    INTERRUPTED = "interrupted"  # stop requested (Ctrl-C) by the caller
+    NONFINITE = "nonfinite"  # the objective or its gradient was NaN/inf; best finite iterate kept
+    FAILED = "failed"  # nlopt reported a failure
+    NOTHING_TO_DO = "nothing_to_do"  # no free variables
+
+
+_NLOPT_STATUS = {
+    nlopt.SUCCESS: Status.CONVERGED,
+    nlopt.STOPVAL_REACHED: Status.CONVERGED,
+    nlopt.FTOL_REACHED: Status.CONVERGED,
+    nlopt.XTOL_REACHED: Status.CONVERGED,
+    nlopt.MAXEVAL_REACHED: Status.MAX_EVALS,
+    nlopt.MAXTIME_REACHED: Status.MAX_TIME,
+}
+
+
+@dataclass(frozen=True)
+class OptimizeResult:
+    """The outcome of `minimize`.
+
+    Attributes:
+        x: (n,) best iterate found (never worse than x0).
+        fun: objective at x.
+        status: Status. message: human-readable reason.
+        n_evals: objective+gradient evaluations.
+        n_improvements: evaluations that improved on the best so far (accepted iterates).
+        trace: (n_evals,) best objective so far after each evaluation.
+        wall_time_s: [s].
+        algorithm: the nlopt algorithm's name.
+    """
+
+    x: np.ndarray
+    fun: float
+    status: Status
+    message: str
+    n_evals: int
+    n_improvements: int
+    trace: np.ndarray
+    wall_time_s: float
+    algorithm: str
+
+    @property
+    def ok(self) -> bool:
+        return self.status not in (Status.FAILED, Status.NONFINITE)
+
+
+class Stop(Exception):
+    """Raise from an objective to stop the optimization and keep the best iterate.
+
+    Attributes: status (Status.NONFINITE or INTERRUPTED), message."""
+
+    def __init__(self, status: Status, message: str):
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+def minimize(
+    fun: Callable[[np.ndarray, bool], tuple[float, np.ndarray | None]],
+    x0: np.ndarray,
+    *,
+    algorithm: str = "lbfgs",
+    ftol_rel: float = 1e-7,
+    xtol_rel: float = 0.0,
+    max_evals: int = 0,
+    max_time_s: float = 0.0,
+    should_stop: Callable[[], bool] | None = None,
+    callback: Callable[[int, float], None] | None = None,
+) -> OptimizeResult:
+    """Minimize fun from x0 with an nlopt gradient-based algorithm.
+
+    Args:
+        fun: fun(x, need_grad) -> (value, gradient (n,) or None). May raise `Stop`.
+        x0: (n,) start.
+        algorithm: a key of `ALGORITHMS`.
+        ftol_rel, xtol_rel: nlopt relative tolerances (0 = off).
+        max_evals: evaluation limit (0 = none). max_time_s: wall-time limit [s] (0 = none).
+        should_stop: polled at each evaluation; True stops with Status.INTERRUPTED.
+        callback: called as callback(n_evals, best_value) after each evaluation (progress display).
+    Returns:
+        OptimizeResult with the best iterate.
+    Raises:
+        InputError: unknown algorithm (lists the valid ones), negative limits.
+        Any exception other than `Stop` raised by fun, after the optimizer is stopped.
+    """
+    if algorithm not in ALGORITHMS:
+        raise InputError(f"unknown algorithm {algorithm!r}; choose one of: {', '.join(ALGORITHMS)}")
+    if max_evals < 0 or max_time_s < 0 or ftol_rel < 0 or xtol_rel < 0:
+        raise InputError("optimizer limits and tolerances must be >= 0")
+    x0 = np.asarray(x0, dtype=float).copy()
+    t_start = time.perf_counter()
+    if x0.size == 0:
+        f0, _ = fun(x0, False)
+        return OptimizeResult(x0, float(f0), Status.NOTHING_TO_DO, "no free variables", 1, 0,
+                              np.array([f0]), time.perf_counter() - t_start, algorithm)
+
+    opt = nlopt.opt(ALGORITHMS[algorithm], x0.size)
+    best = {"x": x0.copy(), "f": np.inf, "n": 0, "imp": 0}
+    trace: list[float] = []
+    stop: dict = {}
+
+    def objective(x, grad):
+        if stop:
+            opt.force_stop()
+            return best["f"] if np.isfinite(best["f"]) else 0.0
+        try:
+            if should_stop is not None and should_stop():
+                raise Stop(Status.INTERRUPTED, "stopped on request")
+            if max_time_s and time.perf_counter() - t_start > max_time_s:
+                raise Stop(Status.MAX_TIME, f"time limit of {max_time_s:g} s reached")
+            if max_evals and best["n"] >= max_evals:
+                raise Stop(Status.MAX_EVALS, f"evaluation limit of {max_evals} reached")
+            f, g = fun(x, grad.size > 0)
+            if not np.isfinite(f) or (grad.size and not np.all(np.isfinite(g))):
+                raise Stop(Status.NONFINITE, "the objective or its gradient is not finite")
+        except Stop as s:
+            stop["status"], stop["message"] = s.status, s.message
+        except BaseException as e:  # noqa: BLE001 - re-raised after nlopt unwinds
+            stop["status"], stop["message"], stop["error"] = Status.FAILED, repr(e), e
+        if stop:
+            opt.force_stop()
+            return best["f"] if np.isfinite(best["f"]) else 0.0
+        if grad.size:
+            grad[:] = g
+        best["n"] += 1
+        if f < best["f"]:
+            best["f"], best["x"], best["imp"] = float(f), x.copy(), best["imp"] + 1
+        trace.append(best["f"])
+        if callback is not None:
+            callback(best["n"], best["f"])
+        return float(f)
+
+    opt.set_min_objective(objective)
+    if ftol_rel:
+        opt.set_ftol_rel(ftol_rel)
+    if xtol_rel:
+        opt.set_xtol_rel(xtol_rel)
+    if max_evals:
+        opt.set_maxeval(int(max_evals))
+    if max_time_s:
+        opt.set_maxtime(float(max_time_s))
+    status, message = Status.CONVERGED, "converged"
+    try:
+        opt.optimize(x0)
+        code = opt.last_optimize_result()
+        status = _NLOPT_STATUS.get(code, Status.FAILED)
+        message = {Status.CONVERGED: "converged (tolerance reached)", Status.MAX_EVALS:
+                   f"evaluation limit of {max_evals} reached", Status.MAX_TIME:
+                   f"time limit of {max_time_s:g} s reached"}.get(status, f"nlopt code {code}")
+    except nlopt.RoundoffLimited:
+        status, message = Status.CONVERGED, "converged (no further progress possible: roundoff-limited)"
+    except nlopt.ForcedStop:
+        pass
+    except Exception as e:  # nlopt's SWIG runtime_error is not a RuntimeError subclass
+        if not stop:
+            status, message = Status.FAILED, f"nlopt failed: {type(e).__name__} {e}"
+    if stop:
+        status, message = stop["status"], stop["message"]
+        if "error" in stop:
+            raise stop["error"]
+    if not np.isfinite(best["f"]):  # not a single finite evaluation: report x0 as it is
+        best["x"] = x0
+    return OptimizeResult(best["x"], best["f"], status, message, best["n"], best["imp"],
+                          np.array(trace), time.perf_counter() - t_start, algorithm)

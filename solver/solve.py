@@ -1,0 +1,199 @@
+"""The algorithm of the paper's figure 5, end to end: frames -> optimize -> subdivide -> optimize ...
+
+1. the plain spline through the keyframes (partial keyframes' free components filled);
+2. optional renormalization of the terms on it (eq. 7);
+3. variable frames: none, n per segment (global) or where the weak-form Euler-Lagrange score is
+   largest (adaptive), valued on the current path;
+4. nlopt moves the free components; keyframes hold exactly at every iterate;
+5. repeat 3-4 until the frame budget, the round limit or the time limit.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from solver.errors import InputError
+from solver.frames import FrameSet
+from solver.objective import NonFiniteError, Objective
+from solver.optimize import OptimizeResult, Status, Stop, minimize
+from solver.subdivide import adaptive_times, global_times, weak_form_scores
+
+SUBDIVISIONS = ("none", "global", "adaptive")
+
+
+@dataclass(frozen=True)
+class SolveOptions:
+    """How to optimize.
+
+    Attributes:
+        subdivision: "none" (only the frames given), "global" (`per_segment` frames in every segment,
+            once) or "adaptive" (rounds of weak-form Euler-Lagrange subdivision).
+        per_segment: variable frames per keyframe interval for "global", and to start "adaptive" with.
+        rounds: adaptive rounds (each adds frames, then re-optimizes).
+        per_round: at most this many frames per adaptive round (0 = one per segment).
+        max_frames: cap on variable frames in total (0 = none).
+        renormalize: divide each term by its value on the plain spline (eq. 7).
+        algorithm, ftol_rel, max_evals (per round), max_time_s (whole solve): optimizer settings.
+    """
+
+    subdivision: str = "adaptive"
+    per_segment: int = 1
+    rounds: int = 2
+    per_round: int = 0
+    max_frames: int = 0
+    renormalize: bool = True
+    algorithm: str = "lbfgs"
+    ftol_rel: float = 1e-7
+    max_evals: int = 0
+    max_time_s: float = 0.0
+
+    def __post_init__(self):
+        if self.subdivision not in SUBDIVISIONS:
+            raise InputError(f"unknown subdivision {self.subdivision!r}; choose one of: {', '.join(SUBDIVISIONS)}")
+        for name in ("per_segment", "rounds", "per_round", "max_frames", "max_evals"):
+            if getattr(self, name) < 0:
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not self.max_time_s >= 0:
+            raise InputError(f"max_time_s must be >= 0, got {self.max_time_s}")
+
+
+@dataclass
+class Round:
+    """One optimization round: the frames it started with and the optimizer's result."""
+
+    n_frames: int
+    n_variable: int
+    result: OptimizeResult
+    scores: np.ndarray | None = None  # weak-form scores that chose this round's new frames
+
+
+@dataclass
+class Solution:
+    """The result of `solve`.
+
+    Attributes:
+        frames: optimized FrameSet (the path is the natural cubic spline through it).
+        initial: the plain spline's FrameSet (keyframes only).
+        rounds: per-round results.
+        status: Status of the last round (INTERRUPTED etc. end the solve early).
+        message: why it ended.
+        E_initial, E_final: objective on the plain spline and on the result.
+        integrals_initial, integrals_final: {term: integral} on each.
+        scales: {term: renormalization divisor}.
+        trace: (N,) best objective after each evaluation, all rounds concatenated.
+        wall_time_s: [s], optimization and subdivision (excludes building the terms).
+    """
+
+    frames: FrameSet
+    initial: FrameSet
+    rounds: list[Round]
+    status: Status
+    message: str
+    E_initial: float
+    E_final: float
+    integrals_initial: dict
+    integrals_final: dict
+    scales: dict
+    trace: np.ndarray
+    wall_time_s: float
+    n_evals: int = field(default=0)
+
+
+def solve(
+    objective: Objective,
+    initial: FrameSet,
+    options: SolveOptions = SolveOptions(),
+    *,
+    should_stop: Callable[[], bool] | None = None,
+    progress: Callable[[str, dict], None] | None = None,
+) -> Solution:
+    """Optimize the variable frames (and partial keyframes' free components) of a frame set.
+
+    Args:
+        objective: the weighted terms on the keyframe interval.
+        initial: the plain spline's frames (`FrameSet.from_keyframes`); may already hold variable frames.
+        options: SolveOptions.
+        should_stop: polled during optimization (Ctrl-C handler); True ends the solve, keeping the
+            best path so far (it meets every keyframe).
+        progress: progress(event, info) for "round" (start of a round) and "eval" (each evaluation).
+    Returns:
+        Solution.
+    """
+    t_start = time.perf_counter()
+    if options.renormalize:
+        scales = objective.renormalize(initial.times, initial.values)
+    else:
+        scales = dict(zip(objective.names, objective.scales.tolist()))
+    ev0 = objective.evaluate(initial.times, initial.values, grad=False)
+    frames = initial
+    if options.subdivision in ("global", "adaptive") and options.per_segment > 0:
+        new = global_times(frames, options.per_segment)
+        if options.max_frames:
+            new = new[: max(0, options.max_frames - frames.n_variable)] if options.subdivision == "global" else new
+        frames = frames.with_variable_frames(new)
+    n_rounds = 1 + (options.rounds if options.subdivision == "adaptive" else 0)
+    rounds: list[Round] = []
+    traces: list[np.ndarray] = []
+    status, message = Status.CONVERGED, "converged"
+    n_evals = 0
+    for r in range(n_rounds):
+        scores = None
+        if r > 0:
+            budget = options.per_round or (frames.count - 1)
+            if options.max_frames:
+                budget = min(budget, options.max_frames - frames.n_variable)
+            if budget <= 0:
+                break
+            scores = weak_form_scores(objective, frames)
+            new = adaptive_times(scores, frames, budget)
+            if new.size == 0:
+                break
+            frames = frames.with_variable_frames(new)
+        remaining = 0.0
+        if options.max_time_s:
+            remaining = options.max_time_s - (time.perf_counter() - t_start)
+            if remaining <= 0:
+                status, message = Status.MAX_TIME, f"time limit of {options.max_time_s:g} s reached"
+                break
+        if progress:
+            progress("round", {"round": r, "frames": frames.count, "variable": frames.n_variable})
+        result = _optimize(objective, frames, options, remaining, should_stop, progress, n_evals)
+        frames = frames.with_x(result.x)
+        rounds.append(Round(frames.count, frames.n_variable, result, scores))
+        traces.append(result.trace)
+        n_evals += result.n_evals
+        status, message = result.status, result.message
+        if status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED):
+            break
+    ev1 = objective.evaluate(frames.times, frames.values, grad=False)
+    return Solution(
+        frames, initial, rounds, status, message, ev0.E, ev1.E, ev0.integrals, ev1.integrals,
+        scales, np.concatenate(traces) if traces else np.array([ev0.E]),
+        time.perf_counter() - t_start, n_evals,
+    )
+
+
+def _optimize(objective, frames, options, remaining, should_stop, progress, evals_before) -> OptimizeResult:
+    knots = frames.times
+    last_error = {}
+
+    def fun(x, need_grad):
+        P = frames.values_from_x(x)
+        try:
+            ev = objective.evaluate(knots, P, grad=need_grad)
+        except NonFiniteError as e:
+            last_error["term"] = e.term
+            raise Stop(Status.NONFINITE, str(e)) from e
+        return ev.E, (ev.grad[frames.free] if need_grad else None)
+
+    def cb(n, f):
+        if progress:
+            progress("eval", {"evals": evals_before + n, "E": f})
+
+    return minimize(
+        fun, frames.x(), algorithm=options.algorithm, ftol_rel=options.ftol_rel,
+        max_evals=options.max_evals, max_time_s=remaining, should_stop=should_stop, callback=cb,
+    )

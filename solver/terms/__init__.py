@@ -1,0 +1,8 @@
+"""Objective terms: each returns its integrand and gradients at the quadrature points (`Term`)."""
+from solver.terms.base import Term, TermEval
+from solver.terms.bending import Hyperextension
+from solver.terms.covariant import CovariantAcceleration
+from solver.terms.penetration import Penetration
+from solver.terms.unit import UnitQuaternion
+
+__all__ = ["Term", "TermEval", "Hyperextension", "CovariantAcceleration", "Penetration", "UnitQuaternion"]

@@ -1,0 +1,108 @@
+"""Ground penetration of contact sites (paper eq. 12, sec. 5), against every static plane and box."""
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from solver.errors import InputError
+from solver.kinematics import TangentMap
+from solver.layout import StateLayout
+from solver.surfaces import StaticSurfaces
+from solver.terms.base import Term, TermEval
+
+#: The figure's contact sites (models/humanoid39.xml).
+CONTACT_SITES = ("l_heel", "l_toe", "r_heel", "r_toe")
+
+
+def site_ids(model, names) -> np.ndarray:
+    """Site ids for names. Raises InputError listing the model's sites if one is missing."""
+    ids = []
+    for name in names:
+        i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+        if i < 0:
+            have = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, k) for k in range(model.nsite)]
+            raise InputError(
+                f"the model has no site {name!r} (contact sites needed: {', '.join(names)}); "
+                f"its sites are: {', '.join(map(str, have)) or 'none'}. Is the figure included in the scene?"
+            )
+        ids.append(i)
+    return np.array(ids, int)
+
+
+def site_positions(model, data, Y: np.ndarray, sites: np.ndarray) -> np.ndarray:
+    """World positions of sites along a path, by MuJoCo forward kinematics.
+
+    Args:
+        model: MjModel. data: scratch MjData. Y: (n, nq) qpos. sites: (k,) site ids.
+    Returns:
+        (n, k, 3) positions [m].
+    """
+    out = np.empty((len(Y), len(sites), 3))
+    for i, y in enumerate(Y):
+        data.qpos[:] = y
+        mujoco.mj_kinematics(model, data)
+        out[i] = data.site_xpos[sites]
+    return out
+
+
+class Penetration(Term):
+    """f = sum over contact sites and static surfaces of depth^2 [m^2] (paper eq. 12, squared).
+
+    depth = how far the site is inside the floor plane or box, counting a safety `margin` as inside
+    (`StaticSurfaces.penetration`). The paper uses the depth itself; its square is C1, which a
+    gradient-based optimizer needs, and the margin makes a converged path clear the surface rather
+    than rest a hair inside it. Gradient: site Jacobian (`mj_jacSite`) mapped to qpos components by
+    `TangentMap.pullback`, only at points where a site is inside (cheap elsewhere).
+
+    Args:
+        model: MjModel of the scene (figure + static floor planes/boxes), loaded once by the caller.
+        sites: contact site names (default heel and toe of each foot).
+        margin: [m] clearance counted as penetration (default 2 mm).
+    Raises:
+        InputError: a site is missing or the scene has no static plane or box.
+    """
+
+    name = "penetration"
+    units = "m^2"
+    needs = (0,)
+
+    def __init__(self, model, sites=CONTACT_SITES, margin: float = 0.002):
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.sites = site_ids(model, sites)
+        self.surfaces = StaticSurfaces.from_model(model, self.data)
+        if self.surfaces.count == 0:
+            raise InputError("the scene has no static floor plane or box for the penetration term")
+        self.tmap = TangentMap.from_layout(StateLayout.from_model(model))
+        self.margin = float(margin)
+        self._jac = np.zeros((3, model.nv))
+
+    def depths(self, Y: np.ndarray, margin: float | None = None) -> np.ndarray:
+        """(n, k) deepest penetration of each contact site over all surfaces [m] (0 = clear)."""
+        p = site_positions(self.model, self.data, Y, self.sites)
+        d, _ = self.surfaces.penetration(p, self.margin if margin is None else margin)
+        return d.max(axis=-1)
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        m, d = self.model, self.data
+        p = site_positions(m, d, Y, self.sites)
+        depth, ddepth = self.surfaces.penetration(p, self.margin)  # (n,k,S), (n,k,S,3)
+        f = (depth * depth).sum(axis=(1, 2))
+        if not grad:
+            return TermEval(f)
+        dY = np.zeros_like(Y)
+        active = np.flatnonzero(f > 0)
+        if active.size:
+            # d f / d site position, per site: sum_S 2 depth * d depth / d p
+            gp = np.einsum("nks,nksi->nki", 2.0 * depth[active], ddepth[active])
+            gv = np.zeros((active.size, m.nv))
+            for r, i in enumerate(active):
+                d.qpos[:] = Y[i]
+                mujoco.mj_kinematics(m, d)
+                mujoco.mj_comPos(m, d)
+                for k, s in enumerate(self.sites):
+                    if np.any(gp[r, k]):
+                        mujoco.mj_jacSite(m, d, self._jac, None, int(s))
+                        gv[r] += gp[r, k] @ self._jac
+            dY[active] = self.tmap.pullback(Y[active], gv)
+        return TermEval(f, dY=dY)

@@ -1,0 +1,31 @@
+"""Unit quaternion soft constraint (paper eq. 9, f1)."""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.terms.base import Term, TermEval
+
+
+class UnitQuaternion(Term):
+    """f1 = sum over quaternion slots of (1 - q.q)^2 [1] (paper eq. 9).
+
+    Args:
+        quat_slots: (s, 4) qpos indices of the quaternions (`StateLayout.quat_slots`).
+    """
+
+    name = "unit"
+    units = "1"
+    needs = (0,)
+
+    def __init__(self, quat_slots: np.ndarray):
+        self.idx = np.asarray(quat_slots, dtype=int).reshape(-1, 4)
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        q = Y[:, self.idx]  # (n, s, 4)
+        e = 1.0 - np.einsum("nsi,nsi->ns", q, q)
+        f = (e * e).sum(axis=1)
+        if not grad:
+            return TermEval(f)
+        dY = np.zeros_like(Y)
+        dY[:, self.idx] = (-4.0 * e)[..., None] * q
+        return TermEval(f, dY=dY)

@@ -1,0 +1,66 @@
+"""Shared fixtures: a small inline figure (free root, ball joints, four contact sites) and a scene."""
+import mujoco
+import numpy as np
+import pytest
+
+TOY_SCENE = """
+<mujoco>
+  <worldbody>
+    <geom name="floor" type="plane" size="5 5 .1"/>
+    <geom name="step" type="box" pos="1.5 0 .1" size=".4 1 .1"/>
+    <body name="pelvis" pos="0 0 1">
+      <freejoint name="root"/>
+      <geom type="box" size=".1 .15 .1" mass="10"/>
+      <body name="l_thigh" pos="0 .1 -.1">
+        <joint name="l_hip" type="ball"/>
+        <geom type="capsule" fromto="0 0 0 0 0 -.4" size=".05"/>
+        <body name="l_shin" pos="0 0 -.4">
+          <joint name="l_knee" type="ball"/>
+          <geom type="capsule" fromto="0 0 0 0 0 -.4" size=".04"/>
+          <site name="l_heel" pos="-.05 0 -.45"/>
+          <site name="l_toe" pos=".15 0 -.45"/>
+        </body>
+      </body>
+      <body name="r_thigh" pos="0 -.1 -.1">
+        <joint name="r_hip" type="ball"/>
+        <geom type="capsule" fromto="0 0 0 0 0 -.4" size=".05"/>
+        <body name="r_shin" pos="0 0 -.4">
+          <joint name="r_knee" type="ball"/>
+          <geom type="capsule" fromto="0 0 0 0 0 -.4" size=".04"/>
+          <site name="r_heel" pos="-.05 0 -.45"/>
+          <site name="r_toe" pos=".15 0 -.45"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+@pytest.fixture(scope="session")
+def toy_model():
+    return mujoco.MjModel.from_xml_string(TOY_SCENE)
+
+
+def random_qpos(rng, layout, n, spread=0.6, scale=(0.8, 1.3)):
+    """(n, nq) random qpos with non-unit quaternions of moderate rotation, root near (0, 0, 1)."""
+    Y = np.zeros((n, layout.nq))
+    Y[:, :3] = [0, 0, 1] + rng.normal(scale=0.1, size=(n, 3))
+    for slot in layout.quat_slots:
+        q = np.concatenate([np.ones((n, 1)), rng.normal(scale=spread, size=(n, 3))], axis=1)
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        Y[:, slot] = q * rng.uniform(*scale, size=(n, 1))
+    return Y
+
+
+def fd_gradient(fun, X, h=1e-6):
+    """Central finite-difference gradient of a scalar fun at X (any shape)."""
+    G = np.zeros_like(X)
+    it = np.nditer(X, flags=["multi_index"])
+    for _ in it:
+        i = it.multi_index
+        Xp, Xm = X.copy(), X.copy()
+        Xp[i] += h
+        Xm[i] -= h
+        G[i] = (fun(Xp) - fun(Xm)) / (2 * h)
+    return G
