@@ -1,0 +1,430 @@
+"""`dynsplines animate KEYFRAMES --scene SCENE` and its showcase shortcut `dynsplines run-and-step`.
+
+Reads keyframes, optimizes the in-betweens (solver.solve), prints progress and a summary of what the
+optimization bought (plain spline vs optimized), saves the path (.npz) and renders a side-by-side video.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from solver.errors import InputError
+from solver.frames import FrameSet
+from solver.layout import StateLayout
+from solver.metrics import path_metrics, sample_times
+from solver.optimize import ALGORITHMS, Status
+from solver.problem import figure_objective, parse_terms, term_names
+from solver.solve import SUBDIVISIONS, SolveOptions, solve
+
+REPO = Path(__file__).resolve().parents[1]
+MODELS = REPO / "models"
+RENDERS = REPO / "renders"
+RUN_AND_STEP_KEYFRAMES = MODELS / "run_and_step.keyframes.json"
+
+
+# ----------------------------------------------------------------------------------------- arguments
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 960x540") from None
+    if w <= 0 or h <= 0 or w > 3840 or h > 2160:
+        raise argparse.ArgumentTypeError(f"--size {text!r}: width and height must be 1..3840 x 1..2160")
+    return w, h
+
+
+def _positive(kind):
+    def parse(text):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not np.isfinite(v) or v <= 0:
+            raise argparse.ArgumentTypeError(f"{text!r} must be > 0")
+        return v
+
+    return parse
+
+
+def _nonneg(kind):
+    def parse(text):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not np.isfinite(v) or v < 0:
+            raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
+        return v
+
+    return parse
+
+
+def _weight(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"--weight {text!r}: expected NAME=VALUE, e.g. torque=0.1")
+    try:
+        return name.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--weight {text!r}: {value!r} is not a number") from None
+
+
+def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> None:
+    """The options shared by `animate` and `run-and-step`."""
+    d = defaults or {}
+    out = p.add_argument_group("outputs")
+    out.add_argument("--out", type=Path, default=d.get("out"), help="video file (.mp4) [%(default)s]")
+    out.add_argument("--save-path", type=Path, default=d.get("save_path"),
+                     help="optimized path (.npz; see README) [%(default)s]")
+    out.add_argument("--no-render", action="store_true", help="skip the video")
+    out.add_argument("--fps", type=_positive(float), default=30.0, help="video frames per second [%(default)s]")
+    out.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="video size [960x540]")
+    out.add_argument("--speed", type=_positive(float), default=0.5, help="playback speed [%(default)s x real time]")
+    out.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write plots (PNG) to DIR")
+    opt = p.add_argument_group("optimization")
+    opt.add_argument("--terms", default=None,
+                     help=f"objective terms: 'all' or a list from {','.join(term_names())} "
+                          "[the keyframe file's, else penetration,unit,bending,smooth]")
+    opt.add_argument("--weight", type=_weight, action="append", default=[], metavar="NAME=VALUE",
+                     help="weight of a term (repeatable), e.g. --weight torque=0.1")
+    opt.add_argument("--max-time", type=_nonneg(float), default=0.0, metavar="S",
+                     help="stop optimizing after S seconds, keeping the best path so far [no limit]")
+    opt.add_argument("--subdivision", choices=SUBDIVISIONS, default="adaptive",
+                     help="where to add variable frames [%(default)s]")
+    opt.add_argument("--per-segment", type=_nonneg(int), default=1,
+                     help="variable frames per keyframe interval to start with [%(default)s]")
+    opt.add_argument("--rounds", type=_nonneg(int), default=2, help="adaptive subdivision rounds [%(default)s]")
+    opt.add_argument("--algorithm", choices=list(ALGORITHMS), default="lbfgs", help="nlopt algorithm [%(default)s]")
+    opt.add_argument("--ftol", type=_nonneg(float), default=1e-6, help="relative objective tolerance [%(default)s]")
+    opt.add_argument("--max-evals", type=_nonneg(int), default=0, help="evaluations per round [no limit]")
+    opt.add_argument("--rate", type=_positive(float), default=400.0,
+                     help="quadrature points per second [%(default)s]")
+    opt.add_argument("--no-renormalize", action="store_true",
+                     help="use the weights as they are instead of dividing each term by its initial value (eq. 7)")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("animate", help="optimize the in-betweens of a keyframe file and render them",
+                       description="Optimize the in-betweens of KEYFRAMES (a dynsplines keyframe file) in a "
+                                   "scene, print a summary, save the path and render a video.")
+    p.add_argument("keyframes", type=Path, help="keyframe file (.json, see models/README.md)")
+    p.add_argument("--scene", type=Path, default=None, help="scene MJCF [the keyframe file's 'scene']")
+    add_options(p)
+    p.set_defaults(func=run_animate)
+
+    q = sub.add_parser("run-and-step", help="the showcase: run and step onto a box, from CMU motion capture",
+                       description="Shortcut for: dynsplines animate models/run_and_step.keyframes.json "
+                                   "--out renders/run_and_step.mp4 --save-path renders/run_and_step.npz")
+    add_options(q, defaults={"out": RENDERS / "run_and_step.mp4", "save_path": RENDERS / "run_and_step.npz"})
+    q.set_defaults(func=run_animate, keyframes=RUN_AND_STEP_KEYFRAMES, scene=None)
+
+
+# ------------------------------------------------------------------------------------------ loading
+def load_model(path: Path):
+    """MjModel from an MJCF file; InputError naming the file on failure."""
+    import mujoco
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"scene file {path} does not exist; give an MJCF file with --scene")
+    try:
+        return mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as e:
+        raise InputError(f"scene file {path} could not be loaded by MuJoCo: {str(e).strip()}") from None
+
+
+def load_problem(keyframes_path: Path, scene: Path | None):
+    """(keyframes, info, model, layout) for a keyframe file and an optional scene override."""
+    from runner.keyframe_io import read_keyframes
+
+    import mujoco
+
+    keyframes_path = Path(keyframes_path)
+    if not keyframes_path.is_file():
+        raise InputError(f"keyframe file {keyframes_path} does not exist")
+    head = _peek_scene(keyframes_path)
+    scene_path = Path(scene) if scene is not None else head
+    if scene_path is None:
+        raise InputError(f"{keyframes_path}: no 'scene' in the file; give one with --scene SCENE.xml")
+    model = load_model(scene_path)
+    layout = StateLayout.from_model(model)
+    if not any(j.kind == "free" for j in layout.joints):
+        raise InputError(f"scene {scene_path} has no free joint: does it include the figure (humanoid39.xml)?")
+    for site in ("l_heel", "l_toe", "r_heel", "r_toe"):
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, site) < 0:
+            raise InputError(f"scene {scene_path} has no contact site {site!r}: does it include the figure?")
+    keyframes, info = read_keyframes(keyframes_path, layout)
+    return keyframes, info, model, layout, scene_path
+
+
+def _peek_scene(path: Path) -> Path | None:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None  # read_keyframes reports it properly
+    scene = data.get("scene") if isinstance(data, dict) else None
+    return (path.parent / scene).resolve() if isinstance(scene, str) else None
+
+
+# ---------------------------------------------------------------------------------------- progress
+class StopRequest:
+    """Ctrl-C during the optimization sets a flag (the solver returns its best path); a second
+    Ctrl-C aborts at once."""
+
+    def __init__(self, quiet=False):
+        self.requested = False
+        self.quiet = quiet
+
+    def __enter__(self):
+        self._old = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        signal.signal(signal.SIGINT, self._old)
+
+    def _handle(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        print("\nstopping: keeping the best path so far (Ctrl-C again to abort)", file=sys.stderr, flush=True)
+
+    def __call__(self) -> bool:
+        return self.requested
+
+
+class Progress:
+    """One line of progress, rewritten in place on a terminal, a line a second otherwise."""
+
+    def __init__(self, quiet=False, stream=sys.stdout):
+        self.quiet, self.stream = quiet, stream
+        self.tty = stream.isatty()
+        self.t0 = time.perf_counter()
+        self.last = 0.0
+        self.info = {}
+        self.E0 = None
+
+    def __call__(self, event, info):
+        if self.quiet:
+            return
+        if event == "round":
+            self.info.update(info)
+            self._print(force=True)
+        else:
+            self.info.update(info)
+            self._print()
+
+    def _print(self, force=False):
+        now = time.perf_counter()
+        if not force and now - self.last < (0.1 if self.tty else 1.0):
+            return
+        self.last = now
+        i = self.info
+        msg = (f"  round {i.get('round', 0) + 1}: {i.get('frames', 0)} frames ({i.get('variable', 0)} variable)"
+               f"  evals {i.get('evals', 0):5d}  E {i.get('E', float('nan')):.6g}  {now - self.t0:6.1f} s")
+        if self.tty:
+            self.stream.write("\r" + msg.ljust(90))
+        else:
+            self.stream.write(msg + "\n")
+        self.stream.flush()
+
+    def done(self):
+        if not self.quiet and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+# -------------------------------------------------------------------------------------------- run
+def run_animate(args) -> int:
+    """Run `animate` / `run-and-step`. Returns the exit code."""
+    from runner.cli import EXIT_INTERRUPTED, EXIT_OK
+    from runner.files import check_writable_dir
+
+    for out in (args.out, args.save_path):
+        if out is not None:
+            check_writable_dir(Path(out).parent)
+    if args.plot is not None:
+        check_writable_dir(args.plot)
+    keyframes, info, model, layout, scene_path = load_problem(args.keyframes, args.scene)
+    file_terms = dict(getattr(info, "terms", None) or {})
+    weights_in = dict(args.weight)
+    if args.terms is None and file_terms:
+        weights = parse_terms(",".join(file_terms), {**file_terms, **weights_in})
+    else:
+        weights = parse_terms(args.terms, weights_in)
+    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=args.rate)
+    options = SolveOptions(
+        subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
+        renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
+        max_evals=args.max_evals, max_time_s=args.max_time,
+    )
+    initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    say = (lambda *a: None) if args.quiet else print
+    say(f"dynsplines: {args.keyframes} -> {keyframes.count} keyframes "
+        f"({int(keyframes.is_partial.sum())} partial) over {keyframes.times[-1] - keyframes.times[0]:.2f} s, "
+        f"scene {_rel(scene_path)}")
+    say(f"  terms: {', '.join(f'{n}={w:g}' for n, w in weights.items())}"
+        f"{' (renormalized, eq. 7)' if options.renormalize else ''}; subdivision {options.subdivision}; "
+        f"nlopt {options.algorithm}")
+    progress = Progress(args.quiet)
+    with StopRequest(args.quiet) as stop:
+        solution = solve(objective, initial, options, should_stop=stop, progress=progress)
+    progress.done()
+    interrupted = solution.status is Status.INTERRUPTED
+    say(f"  stopped: {solution.message} after {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
+
+    reference = _reference(info, model)
+    plain_m = path_metrics(model, initial.times, initial.values, keyframes)
+    opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
+    if not args.quiet:
+        print(summary_table(plain_m, opt_m, solution, weights))
+    if args.save_path is not None:
+        save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
+                      {"plain": plain_m, "optimized": opt_m}, args)
+        say(f"  wrote {_rel(args.save_path)}")
+    if args.plot is not None:
+        from runner.plots import plot_solution
+
+        for f in plot_solution(args.plot, model, solution, keyframes, reference):
+            say(f"  wrote {_rel(f)}")
+    if args.out is not None and not args.no_render:
+        info_r = render_video(args.out, model, solution, keyframes, args)
+        say(f"  wrote {_rel(args.out)} ({info_r.n_frames} frames, {info_r.wall_time_s:.1f} s to render)")
+    return EXIT_INTERRUPTED if interrupted else EXIT_OK
+
+
+def _reference(info, model):
+    clip = (getattr(info, "source", None) or {}).get("clip")
+    if not clip:
+        return None
+    path = Path(info.path).parent / clip if hasattr(info, "path") else MODELS / clip
+    if not path.is_file():
+        return None
+    from runner.bvh_import import load_bvh_reference
+
+    return load_bvh_reference(path, model)
+
+
+def _rel(path) -> str:
+    path = Path(path).resolve()
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        try:
+            return str(path.relative_to(REPO))
+        except ValueError:
+            return str(path)
+
+
+def summary_table(plain: dict, opt: dict, solution, weights: dict) -> str:
+    """Plain spline vs optimized, the acceptance figures, as a text table."""
+    rows = [
+        ("max penetration [mm] (1000 Hz)", plain["max_penetration_mm"], opt["max_penetration_mm"], "{:.2f}"),
+    ]
+    for site in plain["penetration_mm_by_site"]:
+        rows.append((f"  {site} [mm]", plain["penetration_mm_by_site"][site],
+                     opt["penetration_mm_by_site"][site], "{:.2f}"))
+    rows += [
+        ("max |1 - |q||", plain["max_norm_deviation"], opt["max_norm_deviation"], "{:.4f}"),
+        ("max hyperextension [deg]", plain["max_hyperextension_deg"], opt["max_hyperextension_deg"], "{:.2f}"),
+        ("keyframe error (fixed comps)", plain.get("keyframe_error", np.nan), opt.get("keyframe_error", np.nan),
+         "{:.1e}"),
+        ("objective E", solution.E_initial, solution.E_final, "{:.5g}"),
+    ]
+    for name in weights:
+        rows.append((f"  integral {name}", solution.integrals_initial[name], solution.integrals_final[name],
+                     "{:.4g}"))
+    extra = getattr(solution, "extra_rows", None) or []
+    rows += extra
+    w = max(len(r[0]) for r in rows) + 2
+    lines = [f"{'':{w}}{'plain spline':>14}{'optimized':>14}", "-" * (w + 28)]
+    for label, a, b, fmt in rows:
+        lines.append(f"{label:{w}}{fmt.format(a):>14}{fmt.format(b):>14}")
+    lines.append("-" * (w + 28))
+    lines.append(f"frames: {solution.initial.count} keyframes + {solution.frames.n_variable} variable; "
+                 f"{len(solution.rounds)} rounds, {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
+    return "\n".join(lines)
+
+
+def versions() -> dict:
+    """Versions of the software that made a result (recorded in the .npz)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": sys.version.split()[0]}
+    for pkg in ("dynsplines", "mujoco", "nlopt", "numpy", "scipy"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "unknown"
+    return out
+
+
+def save_path_npz(path, solution, keyframes, reference, scene_path, weights, options, metrics, args=None):
+    """Write the optimized path (.npz) atomically. Fields: README "The saved path"."""
+    from runner.files import atomic_output
+
+    scene_rel = _repo_relative(scene_path)
+    opts = {"weights": weights, "solve": asdict(options)}
+    if args is not None:
+        opts["command"] = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
+                           if k not in ("func",)}
+    fields = dict(
+        frame_times=solution.frames.times,
+        frames=solution.frames.values,
+        frame_is_keyframe=solution.frames.is_keyframe,
+        keyframe_times=keyframes.times,
+        keyframes=keyframes.values,
+        keyframe_mask=keyframes.mask,
+        plain_frame_times=solution.initial.times,
+        plain_frames=solution.initial.values,
+        reference_times=reference.times if reference is not None else np.zeros(0),
+        reference_qpos=reference.qpos if reference is not None else np.zeros((0, keyframes.nq)),
+        scene=np.array(scene_rel),
+        wall_time_s=np.array(solution.wall_time_s),
+        objective_trace=solution.trace,
+        status=np.array(solution.status.value),
+        metrics_json=np.array(json.dumps(metrics, default=float)),
+        options_json=np.array(json.dumps(opts, default=str)),
+        versions_json=np.array(json.dumps(versions())),
+    )
+    with atomic_output(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **fields)
+
+
+def _repo_relative(path) -> str:
+    path = Path(path).resolve()
+    try:
+        return str(path.relative_to(REPO))
+    except ValueError:
+        return str(path)
+
+
+def render_video(out, model, solution, keyframes, args):
+    """Side-by-side video of the plain spline and the optimized path, keyframes marked."""
+    from runner.render import Track, render_tracks
+    from solver.terms.penetration import CONTACT_SITES, Penetration
+
+    t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
+    pen = Penetration(model, margin=0.0)
+    tracks = []
+    for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames)):
+        Y = fs.path(t)
+        tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
+    kq = solution.initial.values  # keyframes with free components filled: the poses the animator set
+    quiet = getattr(args, "quiet", False)
+
+    def progress(i, n):
+        if not quiet and (i % 20 == 0 or i == n):
+            print(f"\r  rendering {i}/{n}", end="" if i < n else "\n", flush=True)
+
+    return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
+                         keyframe_times=keyframes.times, keyframe_qpos=kq,
+                         title="dynsplines: plain spline vs optimized", progress=progress)

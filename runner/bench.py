@@ -1,0 +1,97 @@
+"""`dynsplines bench ...`: speed measured, not asserted in tests.
+
+    dynsplines bench run-and-step [--terms all] [--repeat N]
+        optimization wall time (median of N runs), evaluations, time per evaluation; with dynamics
+        terms, the geometric-only objective is run side by side in the same process for the ratio.
+    dynsplines bench orient
+        the single-body problem against the Barr-92 and constrained B-spline baselines (runner.bench_orient).
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+
+
+from solver.frames import FrameSet
+from solver.problem import figure_objective, parse_terms
+from solver.solve import SolveOptions, solve
+
+GEOMETRIC = "penetration,unit,bending,smooth"
+
+
+def register(sub) -> None:
+    p = sub.add_parser("bench", help="benchmarks: run-and-step, orient")
+    bsub = p.add_subparsers(dest="bench", metavar="BENCH")
+    bsub.required = True
+    r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip")
+    r.add_argument("--terms", default=None, help="objective terms as for `animate` ('all' adds the dynamics terms)")
+    r.add_argument("--repeat", type=int, default=3, help="runs per configuration; the median is reported [3]")
+    r.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
+    r.set_defaults(func=bench_run_and_step)
+    o = bsub.add_parser("orient", help="single-body orientation vs earlier methods", add_help=False)
+    o.add_argument("args", nargs=argparse.REMAINDER)
+    o.set_defaults(func=_bench_orient)
+
+
+def _bench_orient(args) -> int:
+    from runner.bench_orient import main
+
+    return main(args.args)
+
+
+def _one_config(model, keyframes, layout, weights, rate, repeat):
+    runs = []
+    for _ in range(max(1, repeat)):
+        objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate)
+        initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+        sol = solve(objective, initial, SolveOptions())
+        runs.append(sol)
+    # per-evaluation cost measured directly on the final frame set, value + gradient
+    fs = runs[-1].frames
+    n = 20
+    t0 = time.perf_counter()
+    for _ in range(n):
+        objective.evaluate(fs.times, fs.values, grad=True)
+    per_eval = (time.perf_counter() - t0) / n
+    walls = [s.wall_time_s for s in runs]
+    evals = [s.n_evals for s in runs]
+    return {
+        "wall_median_s": statistics.median(walls),
+        "wall_all_s": walls,
+        "evals": int(statistics.median(evals)),
+        "per_eval_ms": 1e3 * statistics.median([s.wall_time_s / max(1, s.n_evals) for s in runs]),
+        "per_eval_direct_ms": 1e3 * per_eval,
+        "E_final": runs[-1].E_final,
+        "frames": fs.count,
+        "quadrature_points": len(objective.t),
+    }
+
+
+def bench_run_and_step(args) -> int:
+    from runner.animate import RUN_AND_STEP_KEYFRAMES, load_problem
+
+    keyframes, info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
+    configs = {"geometric": parse_terms(GEOMETRIC)}
+    if args.terms is not None:
+        chosen = parse_terms(args.terms)
+        if set(chosen) != set(configs["geometric"]):
+            configs[args.terms] = chosen
+    print(f"bench run-and-step: {keyframes.count} keyframes, {args.repeat} runs per configuration, "
+          f"quadrature {args.rate:g} Hz")
+    results = {}
+    for name, weights in configs.items():
+        r = results[name] = _one_config(model, keyframes, layout, weights, args.rate, args.repeat)
+        print(f"  {name:<12} terms {','.join(weights)}")
+        print(f"  {'':<12} optimization {r['wall_median_s']:.2f} s median (runs: "
+              f"{', '.join(f'{w:.2f}' for w in r['wall_all_s'])}), {r['evals']} evaluations, "
+              f"{r['per_eval_ms']:.2f} ms/eval in the run ({r['per_eval_direct_ms']:.2f} ms value+gradient "
+              f"measured directly at {r['frames']} frames, {r['quadrature_points']} points)")
+    if len(results) > 1:
+        g, other = results["geometric"], results[list(results)[1]]
+        print(f"  ratio per evaluation (measured directly): {other['per_eval_direct_ms'] / g['per_eval_direct_ms']:.2f}x; "
+              f"optimization wall time: {other['wall_median_s'] / g['wall_median_s']:.2f}x")
+    return 0
+
+

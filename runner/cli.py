@@ -1,0 +1,93 @@
+"""The `dynsplines` command line: parses arguments and calls library functions; no algorithm here.
+
+Each subcommand lives in its own module with `register(subparsers)`, which adds its parser and sets
+`func` to a function(args) -> exit code.
+
+Exit codes:
+    0   success (also when --max-time ended the optimization: the best path so far is written)
+    1   internal error (a bug: please report it with the --debug traceback)
+    2   bad input (a file, field or option); the message says what and how to fix it
+    130 interrupted (Ctrl-C); the best path so far and the requested outputs were written
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from solver.errors import DynsplinesError, InputError
+
+EXIT_OK = 0
+EXIT_INTERNAL = 1
+EXIT_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse's own usage errors: one line and exit code 2
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_INPUT, f"dynsplines: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from runner import animate, bench
+
+    parser = _Parser(
+        prog="dynsplines",
+        description="Dynamic splines with constraints for animation: keyframes in, optimized in-betweens out.",
+    )
+    parser.add_argument("--debug", action="store_true", help="show the full traceback on errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    animate.register(sub)
+    _register_keyframes_from_bvh(sub)
+    bench.register(sub)
+    for optional in ("orient",):  # subcommands added by their own modules when present
+        try:
+            module = __import__(f"runner.{optional}_cmd", fromlist=["register"])
+        except ModuleNotFoundError:
+            continue
+        module.register(sub)
+    return parser
+
+
+def _register_keyframes_from_bvh(sub) -> None:
+    p = sub.add_parser("keyframes-from-bvh", add_help=False,
+                       help="make a keyframe file from a BVH motion-capture clip (see --help)")
+    p.add_argument("args", nargs=argparse.REMAINDER)
+
+    def run(args):
+        from runner.bvh_import import keyframes_from_bvh_main
+
+        return keyframes_from_bvh_main(args.args, prog="dynsplines keyframes-from-bvh")
+
+    p.set_defaults(func=run)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line. Returns the exit code (see the module docstring)."""
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except InputError as e:
+        if args.debug:
+            raise
+        print(f"dynsplines: error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        print("dynsplines: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except DynsplinesError as e:
+        if args.debug:
+            raise
+        print(f"dynsplines: error: {e}", file=sys.stderr)
+        return EXIT_INTERNAL
+    except Exception as e:  # noqa: BLE001 - a bug; say so, show the traceback with --debug
+        if args.debug:
+            raise
+        print(f"dynsplines: internal error: {type(e).__name__}: {e}\n(run again with --debug for the "
+              "traceback, and please report it)", file=sys.stderr)
+        return EXIT_INTERNAL

@@ -1,0 +1,102 @@
+"""The figure's objective from term names and weights (command line, keyframe files, API).
+
+Term names: penetration (eq. 12), unit (eq. 9 f1), bending (sec. 5), smooth (covariant acceleration of
+every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
+are available, torque and root (sec. 6, appendix A).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.errors import InputError
+from solver.layout import StateLayout
+from solver.objective import Objective
+from solver.terms import CovariantAcceleration, Hyperextension, Penetration, UnitQuaternion
+
+#: Weights used when none are given: the geometric terms of the paper's sec. 5, renormalized (eq. 7).
+DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05}
+
+
+def _dynamics_terms():
+    try:
+        from solver.terms import dynamics  # noqa: F401
+    except ImportError:
+        return {}
+    return {"torque": dynamics.JointTorque, "root": dynamics.RootResidual}
+
+
+def term_names() -> list[str]:
+    """Every term name this installation offers."""
+    return ["penetration", "unit", "bending", "smooth", *_dynamics_terms()]
+
+
+def parse_terms(spec: str | None, weights: dict[str, float] | None = None) -> dict[str, float]:
+    """Term weights from a command-line list ("all", or "penetration,unit,...") and overrides.
+
+    Args:
+        spec: None (defaults), "all", or a comma-separated list of term names.
+        weights: {name: weight} overrides (a name here also switches the term on).
+    Returns:
+        {name: weight >= 0}.
+    Raises:
+        InputError: unknown term (lists the valid ones), negative or non-finite weight.
+    """
+    valid = term_names()
+    if spec is None:
+        chosen = dict(DEFAULT_WEIGHTS)
+    else:
+        names = valid if spec.strip() == "all" else [s.strip() for s in spec.split(",") if s.strip()]
+        chosen = {}
+        for n in names:
+            if n not in valid:
+                raise InputError(f"unknown objective term {n!r}; valid terms: {', '.join(valid)} (or 'all')")
+            chosen[n] = DEFAULT_WEIGHTS.get(n, 1.0)
+    for n, w in (weights or {}).items():
+        if n not in valid:
+            raise InputError(f"unknown objective term {n!r} in a weight; valid terms: {', '.join(valid)}")
+        w = float(w)
+        if not np.isfinite(w) or w < 0:
+            raise InputError(f"weight of term {n!r} is {w}; weights must be finite and >= 0")
+        chosen[n] = w
+    if not chosen:
+        raise InputError(f"no objective terms chosen; valid terms: {', '.join(valid)}")
+    return chosen
+
+
+def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rate: float = 400.0,
+                     margin: float = 0.002) -> Objective:
+    """The objective for a figure in a scene.
+
+    Args:
+        model: MjModel of the scene with the figure (loaded once by the caller).
+        weights: {term name: lambda_j} from `parse_terms`.
+        t0, t1: [s] the keyframe interval. rate: quadrature points per second.
+        margin: [m] clearance the penetration term keeps from surfaces.
+    Returns:
+        Objective (scales 1; `solve` renormalizes if asked).
+    Raises:
+        InputError: unknown term, or the scene lacks what a term needs (contact sites, surfaces).
+    """
+    layout = StateLayout.from_model(model)
+    factories = {
+        "penetration": lambda: Penetration(model, margin=margin),
+        "unit": lambda: UnitQuaternion(layout.quat_slots),
+        "bending": lambda: Hyperextension(layout),
+        "smooth": lambda: _named(CovariantAcceleration(layout.quat_slots, layout.linear_index), "smooth"),
+    }
+    dyn = _dynamics_terms()
+    if "torque" in dyn:
+        factories["torque"] = lambda: dyn["torque"](model)
+        factories["root"] = lambda: dyn["root"](model)
+    terms, w = [], []
+    for name, weight in weights.items():
+        if name not in factories:
+            raise InputError(f"unknown objective term {name!r}; valid terms: {', '.join(factories)}")
+        terms.append(factories[name]())
+        w.append(weight)
+    return Objective(terms, np.array(w), t0, t1, rate)
+
+
+def _named(term, name):
+    term.name = name
+    return term
