@@ -1,0 +1,276 @@
+"""Keyframe files: human-readable JSON with named joints (format "dynsplines.keyframes/1").
+
+Format (models/README.md has a full example)::
+
+    {
+      "format": "dynsplines.keyframes/1",
+      "model": "humanoid39.xml",            # the figure, relative to this file
+      "scene": "run_and_step.xml",          # the scene (figure + floor + boxes), relative to this file
+      "source": {"clip": ..., "command": ..., "hand_edits": ...},   # provenance, free-form strings
+      "terms": {"penetration": 1.0},        # optional objective weights, passed through
+      "keyframes": [
+        {"time": 0.0, "joints": {"root": [x, y, z, qw, qx, qy, qz], "l_hip": [qw, qx, qy, qz], ...}},
+        {"time": 0.25, "joints": {"root": [x, y, z, qw, qx, qy, qz], "l_knee": [qw, null, null, null]}}
+      ]
+    }
+
+Times in seconds, positions in metres, quaternions w x y z. In a keyframe, an omitted joint is entirely
+free and a `null` component is free (a partial keyframe, paper sec. 2). A keyframe may carry a
+"comment" string. Checks of times (increasing, not negative), of the keyframe count (>= 2), of
+keyframes that fix nothing and of zero quaternions are `solver.Keyframes`'s; this module checks the
+file and the fields and names the file, keyframe index and field in every message.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from solver.errors import InputError
+from solver.keyframes import Keyframes
+from solver.layout import StateLayout
+
+FORMAT = "dynsplines.keyframes/1"
+_TOP_KEYS = {"format", "model", "scene", "source", "terms", "keyframes", "comment"}
+_KEYFRAME_KEYS = {"time", "joints", "comment"}
+_DIGITS = 6  # decimals written: 1 micrometre, 1e-6 of a unit quaternion
+
+
+@dataclass(frozen=True)
+class KeyframeFileInfo:
+    """What a keyframe file says besides the keyframes.
+
+    Attributes:
+        path: the keyframe file.
+        model: the figure's MJCF, resolved against the file's folder (None if the file has no "model").
+        scene: the scene's MJCF, resolved likewise (None if absent).
+        source: the "source" object (provenance), {} if absent.
+        terms: the "terms" object (objective weights by term name), {} if absent; passed through.
+    """
+
+    path: Path
+    model: Path | None
+    scene: Path | None
+    source: dict = field(default_factory=dict)
+    terms: dict = field(default_factory=dict)
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyframes, KeyframeFileInfo]:
+    """Read and check a keyframe file.
+
+    Args:
+        path: the .json keyframe file.
+        layout: the figure's qpos layout, `StateLayout.from_model(model)` (joint names and sizes).
+    Returns:
+        (keyframes, info): solver.Keyframes with times (k,) [s], values (k, nq) (NaN where free) and
+        mask (k, nq) (True where fixed), source = str(path); and the file's KeyframeFileInfo.
+    Raises:
+        InputError: unreadable file; malformed JSON (line and column); not a keyframe file (format);
+            missing "keyframes", "time" or "joints"; an unknown field, an unknown joint (the valid ones
+            are listed); a joint with the wrong number of components (the right number is given);
+            NaN, infinity or a non-number value; and everything solver.Keyframes rejects (times not
+            increasing or negative, fewer than two keyframes, a keyframe fixing nothing, a zero
+            quaternion).
+    """
+    p = Path(path)
+    src = str(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{src}: no such keyframe file (current folder: {Path.cwd()}); check the path") from None
+    except IsADirectoryError:
+        raise InputError(f"{src}: is a folder; give the path of a .json keyframe file") from None
+    except UnicodeDecodeError as e:
+        raise InputError(f"{src}: not a text file (byte {e.start} is not UTF-8); give a .json keyframe file") from None
+    except OSError as e:
+        raise InputError(f"{src}: cannot read the keyframe file: {e.strerror}; check its permissions") from None
+    try:
+        doc = json.loads(text, parse_constant=lambda c: {"NaN": math.nan}.get(c, math.inf if c == "Infinity" else -math.inf))
+    except json.JSONDecodeError as e:
+        raise InputError(
+            f"{src}: line {e.lineno}, column {e.colno}: malformed JSON ({e.msg}); check brackets, commas and "
+            "quotes near there (JSON has no comments and no trailing commas)"
+        ) from None
+    if not isinstance(doc, dict):
+        raise InputError(f"{src}: the top level is a {type(doc).__name__}; a keyframe file is a JSON object {{...}}")
+    fmt = doc.get("format", FORMAT)
+    if fmt != FORMAT:
+        raise InputError(f"{src}: field 'format' is {fmt!r}; this program reads {FORMAT!r} files")
+    unknown = sorted(set(doc) - _TOP_KEYS)
+    if unknown:
+        raise InputError(
+            f"{src}: unknown top-level field(s) {', '.join(map(repr, unknown))}; the fields are "
+            f"{', '.join(sorted(_TOP_KEYS))}"
+        )
+    if "keyframes" not in doc:
+        raise InputError(f"{src}: missing field 'keyframes'; add a list of {{\"time\": ..., \"joints\": {{...}}}}")
+    frames = doc["keyframes"]
+    if not isinstance(frames, list):
+        raise InputError(f"{src}: field 'keyframes' is a {type(frames).__name__}; it must be a list of keyframes")
+
+    times = np.empty(len(frames))
+    values = np.full((len(frames), layout.nq), np.nan)
+    mask = np.zeros((len(frames), layout.nq), bool)
+    for i, kf in enumerate(frames):
+        where = f"{src}: keyframe {i}"
+        if not isinstance(kf, dict):
+            raise InputError(f"{where} is a {type(kf).__name__}; a keyframe is an object {{\"time\": t, \"joints\": {{...}}}}")
+        extra = sorted(set(kf) - _KEYFRAME_KEYS)
+        if extra:
+            raise InputError(
+                f"{where}: unknown field(s) {', '.join(map(repr, extra))}; a keyframe has 'time', 'joints' "
+                "and optionally 'comment'"
+            )
+        if "time" not in kf:
+            raise InputError(f"{where}: missing field 'time'; give the keyframe's time in seconds")
+        t = kf["time"]
+        if not _is_number(t) or not math.isfinite(t):
+            raise InputError(f"{where}: 'time' is {t!r}; give a finite number of seconds")
+        times[i] = t
+        if "joints" not in kf:
+            raise InputError(f"{where} (t={t} s): missing field 'joints'; give an object {{joint name: [values]}}")
+        joints = kf["joints"]
+        if not isinstance(joints, dict):
+            raise InputError(f"{where} (t={t} s): 'joints' is a {type(joints).__name__}; it must be an object {{name: [values]}}")
+        for name, comps in joints.items():
+            try:
+                jt = layout.joint(name)
+            except InputError as e:
+                raise InputError(f"{where} (t={t} s), joints: {e}") from None
+            what = "x y z qw qx qy qz" if jt.kind == "free" else ("qw qx qy qz" if jt.kind == "ball" else "value")
+            if not isinstance(comps, list) or len(comps) != jt.nq:
+                n = len(comps) if isinstance(comps, list) else "not a list"
+                raise InputError(
+                    f"{where} (t={t} s), joint {name!r}: {comps!r} has {n} components; a {jt.kind} joint "
+                    f"takes a list of {jt.nq} ({what}), null for a free component"
+                )
+            for c, v in enumerate(comps):
+                if v is None:
+                    continue
+                if not _is_number(v) or not math.isfinite(v):
+                    raise InputError(
+                        f"{where} (t={t} s), joint {name!r}, component {c} ({what.split()[c]}): {v!r} is not a "
+                        "finite number; give a number, or null to leave it free"
+                    )
+                values[i, jt.qposadr + c] = v
+                mask[i, jt.qposadr + c] = True
+
+    def resolve(key):
+        v = doc.get(key)
+        if v is None:
+            return None
+        if not isinstance(v, str) or not v:
+            raise InputError(f"{src}: field {key!r} is {v!r}; give a path relative to the keyframe file")
+        return (p.parent / v).resolve()
+
+    source = doc.get("source", {})
+    if not isinstance(source, dict):
+        raise InputError(f"{src}: field 'source' is {source!r}; it must be an object (provenance notes)")
+    terms = doc.get("terms", {})
+    if not isinstance(terms, dict):
+        raise InputError(f"{src}: field 'terms' is {terms!r}; it must be an object {{term name: weight}}")
+    keyframes = Keyframes(times, values, mask, source=src)
+    return keyframes, KeyframeFileInfo(p, resolve("model"), resolve("scene"), dict(source), dict(terms))
+
+
+def _num(v: float) -> str:
+    r = round(float(v), _DIGITS)
+    if r == 0:
+        r = 0.0  # no "-0.0"
+    return repr(r)
+
+
+def _format(doc_head: Mapping[str, Any], keyframes: Keyframes, layout: StateLayout) -> str:
+    """The file's text: one line per joint, so the file reads (and diffs) like a table."""
+    lines = ["{"]
+    for key, value in doc_head.items():
+        lines.append(f"  {json.dumps(key)}: {json.dumps(value, ensure_ascii=False)},")
+    lines.append('  "keyframes": [')
+    for i in range(keyframes.count):
+        joints = []
+        for jt in layout.joints:
+            m = keyframes.mask[i, jt.qpos_slice]
+            if not m.any():
+                continue
+            vals = keyframes.values[i, jt.qpos_slice]
+            comps = ", ".join(_num(v) if f else "null" for v, f in zip(vals, m))
+            joints.append(f"      {json.dumps(jt.name)}: [{comps}]")
+        end = "," if i < keyframes.count - 1 else ""
+        lines.append(f'    {{"time": {_num(keyframes.times[i])}, "joints": {{')
+        lines.append(",\n".join(joints))
+        lines.append(f"    }}}}{end}")
+    lines.append("  ]")
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+def write_keyframes(
+    path: str | os.PathLike,
+    keyframes: Keyframes,
+    layout: StateLayout,
+    model: str | os.PathLike | None = None,
+    scene: str | os.PathLike | None = None,
+    source: Mapping[str, Any] | None = None,
+    terms: Mapping[str, Any] | None = None,
+) -> None:
+    """Write keyframes as a keyframe file, atomically (a temporary file in the same folder, then
+    `os.replace`), so a reader never sees half a file.
+
+    Components a keyframe leaves free are written as null; a joint with no fixed component is omitted.
+    Values are rounded to 6 decimals (1 micrometre, 1e-6 of a unit quaternion).
+
+    Args:
+        path: the .json file to write.
+        keyframes: solver.Keyframes, values (k, nq) in the layout's qpos order.
+        layout: the figure's qpos layout (joint names).
+        model, scene: paths of the figure and scene MJCF files; written relative to the file's folder.
+        source: provenance (clip, command, hand edits), JSON-serializable.
+        terms: optional objective weights {term name: weight}.
+    Raises:
+        InputError: keyframes and layout disagree in size, the folder does not exist or is not writable,
+            or source/terms are not JSON-serializable.
+    """
+    p = Path(path)
+    if keyframes.nq != layout.nq:
+        raise InputError(f"{p}: keyframes have {keyframes.nq} components per frame but the figure has nq={layout.nq}")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError(f"{p}: the folder {folder} does not exist; create it first")
+    head: dict[str, Any] = {"format": FORMAT}
+    if model is not None:
+        head["model"] = Path(os.path.relpath(Path(model).resolve(), folder.resolve())).as_posix()
+    if scene is not None:
+        head["scene"] = Path(os.path.relpath(Path(scene).resolve(), folder.resolve())).as_posix()
+    head["source"] = dict(source or {})
+    if terms is not None:
+        head["terms"] = dict(terms)
+    try:
+        text = _format(head, keyframes, layout)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"{p}: source or terms cannot be written as JSON ({e}); use strings and numbers") from None
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{p.name}.", suffix=".tmp")
+    except OSError as e:
+        raise InputError(f"{p}: cannot write in {folder}: {e.strerror}; check the folder's permissions") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, p)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
