@@ -181,6 +181,7 @@ class BvhClip:
 
     Attributes:
         names: the J joint names in file order (depth-first).
+        channels: the J joints' channel names, e.g. ("Zrotation", "Yrotation", "Xrotation").
         parents: (J,) parent index of each joint, -1 for the root.
         offsets: (J, 3) joint offsets from the parent [BVH units].
         local_quat: (n, J, 4) local rotation of each joint per frame (w x y z), BVH axes.
@@ -191,6 +192,7 @@ class BvhClip:
     """
 
     names: tuple[str, ...]
+    channels: tuple[tuple[str, ...], ...]
     parents: np.ndarray
     offsets: np.ndarray
     local_quat: np.ndarray
@@ -210,9 +212,10 @@ class BvhClip:
 def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
     """Check the structure of a BVH text enough to give line-numbered errors and to make bvhio safe.
 
-    Checks: HIERARCHY first, ROOT next, balanced braces ending before MOTION, CHANNELS lines (count
-    matches names, known names), "Frames: N" (N >= 2), "Frame Time: T" (T > 0), exactly N data lines
-    each with one finite number per declared channel.
+    Checks: HIERARCHY first, ROOT next, the joint grammar (`_check_hierarchy`: braces, OFFSET, CHANNELS
+    with matching count and known names, End Site), MOTION, "Frames: N" (N >= 2), "Frame Time: T"
+    (T > 0), exactly N data lines each with one finite number per declared channel. After this,
+    bvhio's reader cannot run past the end of the file.
 
     Args:
         text: the file's text. src: the file name for messages.
@@ -234,56 +237,12 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
     if len(rows) < 2 or rows[1][1][:1] != ["ROOT"] or len(rows[1][1]) != 2:
         ln, t = rows[1] if len(rows) > 1 else (lineno, [])
         raise InputError(f"{src}: line {ln}: expected 'ROOT <name>' after HIERARCHY, found {' '.join(t)!r}")
-    depth = 0
-    channels = 0
-    motion_at = None
-    for k, (ln, t) in enumerate(rows[2:], start=2):
-        head = t[0]
-        if head == "MOTION":
-            motion_at = k
-            break
-        if head == "{":
-            depth += 1
-        elif head == "}":
-            depth -= 1
-            if depth < 0:
-                raise InputError(f"{src}: line {ln}: unmatched '}}'; remove it or add the missing '{{'")
-        elif head == "CHANNELS":
-            try:
-                count = int(t[1])
-            except (IndexError, ValueError):
-                raise InputError(
-                    f"{src}: line {ln}: CHANNELS needs a count, got {' '.join(t)!r}; "
-                    "write e.g. 'CHANNELS 3 Zrotation Yrotation Xrotation'"
-                ) from None
-            names = t[2:]
-            if count != len(names):
-                raise InputError(
-                    f"{src}: line {ln}: CHANNELS says {count} channels but lists {len(names)} "
-                    f"({' '.join(names)}); make the count match the names"
-                )
-            for name in names:
-                if name not in _POSITION_CHANNELS + _ROTATION_CHANNELS:
-                    raise InputError(
-                        f"{src}: line {ln}: unknown channel {name!r}; channels are "
-                        f"{', '.join(_POSITION_CHANNELS + _ROTATION_CHANNELS)}"
-                    )
-            channels += count
-    if motion_at is None:
-        raise InputError(
-            f"{src}: no MOTION line after the HIERARCHY (file truncated?); a BVH file needs "
-            "'MOTION', 'Frames: N', 'Frame Time: T' and N lines of numbers"
-        )
-    ln_m, t_m = rows[motion_at]
-    if depth != 0:
-        raise InputError(
-            f"{src}: line {ln_m}: the HIERARCHY has {depth} unclosed '{{' before MOTION; add the missing '}}'"
-        )
-    if t_m != ["MOTION"]:
-        raise InputError(f"{src}: line {ln_m}: expected 'MOTION' alone on its line, found {' '.join(t_m)!r}")
+    channels, motion_at = _check_hierarchy(rows, src)
     rest = rows[motion_at + 1 :]
     if len(rest) < 2:
-        raise InputError(f"{src}: line {ln_m}: MOTION must be followed by 'Frames: N' and 'Frame Time: T'")
+        raise InputError(
+            f"{src}: line {rows[motion_at][0]}: MOTION must be followed by 'Frames: N' and 'Frame Time: T'"
+        )
     (ln_f, t_f), (ln_t, t_t) = rest[0], rest[1]
     if len(t_f) != 2 or t_f[0] != "Frames:":
         raise InputError(f"{src}: line {ln_f}: expected 'Frames: N', found {' '.join(t_f)!r}")
@@ -330,6 +289,101 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
     return frames, channels
 
 
+def _check_hierarchy(rows: list[tuple[int, list[str]]], src: str) -> tuple[int, int]:
+    """Check the HIERARCHY grammar (recursive descent over the non-empty lines' tokens).
+
+    joint := ('ROOT' | 'JOINT') name '{' 'OFFSET' x y z 'CHANNELS' n names... (joint | end)* '}'
+    end   := 'End' 'Site' '{' 'OFFSET' x y z '}'
+
+    Args:
+        rows: (line number, tokens) of the non-empty lines; rows[0] is HIERARCHY.
+        src: the file name for messages.
+    Returns:
+        (total channel count, index in rows of the MOTION line).
+    Raises:
+        InputError: naming the line, what was found and what was expected.
+    """
+    total = 0
+    k = 1  # rows[1] is "ROOT name", checked by the caller
+
+    def row(i):
+        if i >= len(rows):
+            raise InputError(
+                f"{src}: the file ends inside the HIERARCHY (truncated?); close every joint with '}}' and "
+                "add the MOTION section"
+            )
+        return rows[i]
+
+    def fail(i, expected):
+        ln, t = row(i)
+        found = " ".join(t)[:60]
+        raise InputError(f"{src}: line {ln}: expected {expected}, found {found!r}; fix the HIERARCHY there")
+
+    def offset(i):
+        ln, t = row(i)
+        if t[0] != "OFFSET":
+            fail(i, "'OFFSET x y z'")
+        if len(t) != 4 or not all(_is_float(v) for v in t[1:]):
+            raise InputError(f"{src}: line {ln}: {' '.join(t)!r}: OFFSET takes three numbers, e.g. 'OFFSET 0 -7.5 0'")
+
+    def joint(i):
+        nonlocal total
+        if row(i)[1] != ["{"]:
+            fail(i, "'{' opening the joint")
+        offset(i + 1)
+        ln, t = row(i + 2)
+        if t[0] != "CHANNELS":
+            fail(i + 2, "'CHANNELS n ...' after the OFFSET")
+        try:
+            count = int(t[1])
+        except (IndexError, ValueError):
+            raise InputError(
+                f"{src}: line {ln}: CHANNELS needs a count, got {' '.join(t)!r}; "
+                "write e.g. 'CHANNELS 3 Zrotation Yrotation Xrotation'"
+            ) from None
+        names = t[2:]
+        if count != len(names):
+            raise InputError(
+                f"{src}: line {ln}: CHANNELS says {count} channels but lists {len(names)} "
+                f"({' '.join(names)}); make the count match the names"
+            )
+        for name in names:
+            if name not in _POSITION_CHANNELS + _ROTATION_CHANNELS:
+                raise InputError(
+                    f"{src}: line {ln}: unknown channel {name!r}; channels are "
+                    f"{', '.join(_POSITION_CHANNELS + _ROTATION_CHANNELS)}"
+                )
+        total += count
+        i += 3
+        while True:
+            ln, t = row(i)
+            if t[0] == "JOINT" and len(t) == 2:
+                i = joint(i + 1)
+            elif t == ["End", "Site"]:
+                if row(i + 1)[1] != ["{"]:
+                    fail(i + 1, "'{' opening the End Site")
+                offset(i + 2)
+                if row(i + 3)[1] != ["}"]:
+                    fail(i + 3, "'}' closing the End Site")
+                i += 4
+            elif t == ["}"]:
+                return i + 1
+            else:
+                fail(i, "'JOINT <name>', 'End Site' or '}'")
+
+    k = joint(k + 1)
+    if k >= len(rows) or rows[k][1][:1] != ["MOTION"]:
+        if k >= len(rows):
+            raise InputError(
+                f"{src}: no MOTION line after the HIERARCHY (file truncated?); a BVH file needs "
+                "'MOTION', 'Frames: N', 'Frame Time: T' and N lines of numbers"
+            )
+        fail(k, "'MOTION' after the ROOT joint's closing '}'")
+    if rows[k][1] != ["MOTION"]:
+        fail(k, "'MOTION' alone on its line")
+    return total, k
+
+
 def _is_float(s: str) -> bool:
     try:
         float(s)
@@ -348,7 +402,11 @@ def read_bvh(path: str | Path) -> BvhClip:
     Raises:
         InputError: the file is missing or unreadable, or malformed (the message names the line).
     """
-    import bvhio
+    import warnings
+
+    with warnings.catch_warnings():  # bvhio imports PyGLM as "glm", which PyGLM marks as deprecated
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        import bvhio
 
     src = str(path)
     p = Path(path)
@@ -364,22 +422,18 @@ def read_bvh(path: str | Path) -> BvhClip:
     _check_bvh_text(text, src)
     try:
         container = bvhio.readAsBvh(str(p))
-    except SyntaxError as e:  # bvhio reports structure errors with (file, line, column, text)
-        line_text = ""
-        if len(e.args) > 1 and isinstance(e.args[1], tuple) and len(e.args[1]) >= 4:
-            line_text = str(e.args[1][3]).strip()
-        where = _find_line(text, line_text)
+    except SyntaxError as e:  # not expected after _check_bvh_text; bvhio's own message, no line number
         raise InputError(
-            f"{src}: {where}malformed HIERARCHY: {e.args[0]} (at {line_text!r}); each joint is "
-            "'JOINT <name>' then '{', 'OFFSET x y z', 'CHANNELS n ...', children or 'End Site', '}'"
+            f"{src}: malformed BVH file: {e.args[0] if e.args else e}; check the HIERARCHY and MOTION sections"
         ) from None
-    except (ValueError, IndexError, KeyError) as e:
+    except Exception as e:  # any other failure of the third-party parser on this user file
         raise InputError(f"{src}: malformed BVH file ({type(e).__name__}: {e}); check HIERARCHY and MOTION") from None
 
-    names, parents, offsets, joints = [], [], [], []
+    names, channels, parents, offsets, joints = [], [], [], [], []
 
     def walk(joint, parent):
         names.append(joint.Name)
+        channels.append(tuple(joint.Channels))
         parents.append(parent)
         offsets.append(list(joint.Offset))
         joints.append(joint)
@@ -399,6 +453,7 @@ def read_bvh(path: str | Path) -> BvhClip:
         pos[:, j] = [list(k.Position) for k in joint.Keyframes]
     return BvhClip(
         tuple(names),
+        tuple(channels),
         np.array(parents, int),
         np.array(offsets, float),
         normalize(quat),
@@ -407,14 +462,6 @@ def read_bvh(path: str | Path) -> BvhClip:
         src,
     )
 
-
-def _find_line(text: str, line_text: str) -> str:
-    if not line_text:
-        return ""
-    for i, ln in enumerate(text.splitlines()):
-        if ln.strip() == line_text:
-            return f"line {i + 1}: "
-    return ""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -528,6 +575,13 @@ def retarget(clip: BvhClip, layout: StateLayout) -> np.ndarray:
         )
     if clip.names[0] != "Hips":
         raise InputError(f"{clip.source}: the ROOT joint is {clip.names[0]!r}; the CMU skeleton's root is 'Hips'")
+    missing_pos = [c for c in _POSITION_CHANNELS if c not in clip.channels[0]]
+    if missing_pos:
+        raise InputError(
+            f"{clip.source}: the ROOT joint Hips has no {', '.join(missing_pos)} channel(s) (it has "
+            f"{' '.join(clip.channels[0]) or 'none'}); the root path needs 'CHANNELS 6 Xposition Yposition "
+            "Zposition Zrotation Yrotation Xrotation'"
+        )
     qw, pw = cmu_world(clip)
     offsets = _rest_offsets(clip)
     body_q = {b: mul(qw[:, clip.index(j)], offsets[b]) for b, (j, _) in BONE_MAP.items()}
@@ -927,9 +981,7 @@ def keyframes_from_bvh_main(argv: Sequence[str] | None = None, prog: str | None 
             "command": f"{prog or _DEFAULT_PROG} {shlex.join(argv)}",
             "hand_edits": "none",
         }
-        from solver.layout import StateLayout as _Layout
-
-        write_keyframes(out, keyframes, _Layout.from_model(model), model=figure, scene=scene, source=source)
+        write_keyframes(out, keyframes, StateLayout.from_model(model), model=figure, scene=scene, source=source)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

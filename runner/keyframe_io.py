@@ -39,6 +39,7 @@ from solver.layout import StateLayout
 FORMAT = "dynsplines.keyframes/1"
 _TOP_KEYS = {"format", "model", "scene", "source", "terms", "keyframes", "comment"}
 _KEYFRAME_KEYS = {"time", "joints", "comment"}
+_JSON_CONSTANTS = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
 _DIGITS = 6  # decimals written: 1 micrometre, 1e-6 of a unit quaternion
 
 
@@ -95,7 +96,7 @@ def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyfra
     except OSError as e:
         raise InputError(f"{src}: cannot read the keyframe file: {e.strerror}; check its permissions") from None
     try:
-        doc = json.loads(text, parse_constant=lambda c: {"NaN": math.nan}.get(c, math.inf if c == "Infinity" else -math.inf))
+        doc = json.loads(text, parse_constant=_JSON_CONSTANTS.__getitem__)  # checked per value below
     except json.JSONDecodeError as e:
         raise InputError(
             f"{src}: line {e.lineno}, column {e.colno}: malformed JSON ({e.msg}); check brackets, commas and "
@@ -149,9 +150,9 @@ def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyfra
                 raise InputError(f"{where} (t={t} s), joints: {e}") from None
             what = "x y z qw qx qy qz" if jt.kind == "free" else ("qw qx qy qz" if jt.kind == "ball" else "value")
             if not isinstance(comps, list) or len(comps) != jt.nq:
-                n = len(comps) if isinstance(comps, list) else "not a list"
+                got = f"has {len(comps)} components" if isinstance(comps, list) else "is not a list"
                 raise InputError(
-                    f"{where} (t={t} s), joint {name!r}: {comps!r} has {n} components; a {jt.kind} joint "
+                    f"{where} (t={t} s), joint {name!r}: {comps!r} {got}; a {jt.kind} joint "
                     f"takes a list of {jt.nq} ({what}), null for a free component"
                 )
             for c, v in enumerate(comps):
