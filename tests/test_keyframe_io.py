@@ -1,0 +1,185 @@
+"""Keyframe files (runner/keyframe_io.py): round trip, atomic write, and every malformed-input message."""
+import json
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from runner.keyframe_io import FORMAT, read_keyframes, write_keyframes
+from solver.errors import InputError
+from solver.keyframes import Keyframes
+from solver.layout import StateLayout
+
+MODELS = Path(__file__).resolve().parents[1] / "models"
+
+
+@pytest.fixture(scope="module")
+def layout():
+    return StateLayout.from_model(mujoco.MjModel.from_xml_path(str(MODELS / "humanoid39.xml")))
+
+
+def sample_keyframes(layout, rng):
+    k = 3
+    values = np.zeros((k, layout.nq))
+    values[:, :3] = rng.normal(size=(k, 3))
+    for slot in layout.quat_slots:
+        q = rng.normal(size=(k, 4))
+        values[:, slot] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    mask = np.ones_like(values, bool)
+    mask[1] = False
+    mask[1, layout.joint("root").qpos_slice] = True  # keyframe 1 fixes only the root ...
+    mask[1, layout.joint("l_knee").qposadr] = True  # ... and one component of the left knee
+    return Keyframes(np.array([0.0, 0.25, 0.6]), values, mask, source="test")
+
+
+def write_json(tmp_path, doc, name="k.json"):
+    p = tmp_path / name
+    p.write_text(doc if isinstance(doc, str) else json.dumps(doc))
+    return p
+
+
+def minimal(**kf1):
+    return {"keyframes": [{"time": 0.0, "joints": {"root": [0, 0, 1, 1, 0, 0, 0]}},
+                          {"time": 0.5, "joints": {"root": [1, 0, 1, 1, 0, 0, 0], **kf1}}]}
+
+
+def test_round_trip(tmp_path, layout):
+    kf = sample_keyframes(layout, np.random.default_rng(0))
+    (tmp_path / "sub").mkdir()
+    out = tmp_path / "sub" / "clip.keyframes.json"
+    source = {"clip": "cmu/x.bvh", "command": "python -c 'x' --out y", "hand_edits": "none"}
+    write_keyframes(out, kf, layout, model=MODELS / "humanoid39.xml", scene=MODELS / "run_and_step.xml",
+                    source=source, terms={"penetration": 2.0, "bending": 0.5})
+    assert sorted(p.name for p in out.parent.iterdir()) == ["clip.keyframes.json"]  # no temporary left
+    back, info = read_keyframes(out, layout)
+    assert back.times == pytest.approx(kf.times)
+    assert np.array_equal(back.mask, kf.mask)
+    assert back.values[kf.mask] == pytest.approx(kf.values[kf.mask], abs=1e-6)
+    assert np.isnan(back.values[~kf.mask]).all()
+    assert back.source == str(out)
+    assert info.model == (MODELS / "humanoid39.xml").resolve()
+    assert info.scene == (MODELS / "run_and_step.xml").resolve()
+    assert info.source == source and info.terms == {"penetration": 2.0, "bending": 0.5}
+    doc = json.loads(out.read_text())
+    assert doc["format"] == FORMAT
+    assert not Path(doc["model"]).is_absolute()  # relative to the keyframe file
+    assert (out.parent / doc["model"]).resolve() == (MODELS / "humanoid39.xml").resolve()
+    kf1 = doc["keyframes"][1]["joints"]
+    assert sorted(kf1) == ["l_knee", "root"]  # joints with nothing fixed are omitted
+    assert kf1["l_knee"][1:] == [None, None, None]  # free components are null
+    # a human-readable layout: one line per joint
+    assert '      "l_hip": [' in out.read_text()
+
+
+def test_reads_hand_written_file(tmp_path, layout):
+    p = write_json(tmp_path, {
+        "format": FORMAT, "model": "humanoid39.xml",
+        "keyframes": [
+            {"time": 0.0, "comment": "start", "joints": {"root": [0, 0, 1, 1, 0, 0, 0], "l_knee": [1, 0, 0, 0]}},
+            {"time": 0.5, "joints": {"root": [1, 0, None, None, None, None, None]}},
+        ],
+    })
+    kf, info = read_keyframes(p, layout)
+    assert kf.count == 2 and kf.is_partial.all()
+    assert kf.mask[1].sum() == 2 and kf.values[1, 0] == 1.0
+    assert info.model == (tmp_path / "humanoid39.xml").resolve() and info.scene is None
+    assert info.source == {} and info.terms == {}
+
+
+def test_overwrite_is_atomic_and_complete(tmp_path, layout):
+    kf = sample_keyframes(layout, np.random.default_rng(1))
+    out = tmp_path / "k.json"
+    out.write_text("old")
+    write_keyframes(out, kf, layout)
+    assert read_keyframes(out, layout)[0].count == 3
+    with pytest.raises(InputError, match="the folder .*nowhere does not exist"):
+        write_keyframes(tmp_path / "nowhere" / "k.json", kf, layout)
+    with pytest.raises(InputError, match="cannot be written as JSON"):
+        write_keyframes(out, kf, layout, source={"x": object()})
+    assert read_keyframes(out, layout)[0].count == 3  # the failed writes left the file alone
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["k.json"]
+
+
+def test_file_errors(tmp_path, layout):
+    with pytest.raises(InputError, match=r"nope\.json: no such keyframe file"):
+        read_keyframes(tmp_path / "nope.json", layout)
+    with pytest.raises(InputError, match="is a folder"):
+        read_keyframes(tmp_path, layout)
+    p = write_json(tmp_path, '{\n  "keyframes": [\n    {"time": 0,}\n  ]\n}\n')
+    with pytest.raises(InputError, match=r"k\.json: line 3, column 16: malformed JSON \(Expecting property name"):
+        read_keyframes(p, layout)
+    p = write_json(tmp_path, "[1, 2]")
+    with pytest.raises(InputError, match="the top level is a list; a keyframe file is a JSON object"):
+        read_keyframes(p, layout)
+    p = write_json(tmp_path, {"format": "other/2", "keyframes": []})
+    with pytest.raises(InputError, match=r"field 'format' is 'other/2'; this program reads 'dynsplines.keyframes/1'"):
+        read_keyframes(p, layout)
+    p = write_json(tmp_path, {"frames": []})
+    with pytest.raises(InputError, match=r"unknown top-level field\(s\) 'frames'"):
+        read_keyframes(p, layout)
+    p = write_json(tmp_path, {"model": "x.xml"})
+    with pytest.raises(InputError, match=r"missing field 'keyframes'"):
+        read_keyframes(p, layout)
+
+
+def test_keyframe_field_errors(tmp_path, layout):
+    doc = minimal()
+    del doc["keyframes"][1]["time"]
+    with pytest.raises(InputError, match=r"k\.json: keyframe 1: missing field 'time'"):
+        read_keyframes(write_json(tmp_path, doc), layout)
+    doc = minimal()
+    doc["keyframes"][1]["time"] = "0.5"
+    with pytest.raises(InputError, match=r"keyframe 1: 'time' is '0.5'; give a finite number of seconds"):
+        read_keyframes(write_json(tmp_path, doc), layout)
+    doc = minimal()
+    del doc["keyframes"][0]["joints"]
+    with pytest.raises(InputError, match=r"keyframe 0 \(t=0.0 s\): missing field 'joints'"):
+        read_keyframes(write_json(tmp_path, doc), layout)
+    doc = minimal()
+    doc["keyframes"][0]["tme"] = 1
+    with pytest.raises(InputError, match=r"keyframe 0: unknown field\(s\) 'tme'"):
+        read_keyframes(write_json(tmp_path, doc), layout)
+
+
+def test_joint_errors(tmp_path, layout):
+    p = write_json(tmp_path, minimal(l_knees=[1, 0, 0, 0]))
+    with pytest.raises(InputError, match=r"keyframe 1 \(t=0.5 s\), joints: unknown joint 'l_knees'; the figure's "
+                                         r"joints are: root, l_hip, l_knee, .*r_elbow"):
+        read_keyframes(p, layout)
+    p = write_json(tmp_path, minimal(l_knee=[1, 0, 0]))
+    with pytest.raises(InputError, match=r"joint 'l_knee': \[1, 0, 0\] has 3 components; a ball joint takes a list "
+                                         r"of 4 \(qw qx qy qz\)"):
+        read_keyframes(p, layout)
+    p = write_json(tmp_path, minimal(root=[0, 0, 1, 1]))
+    with pytest.raises(InputError, match=r"joint 'root'.* has 4 components; a free joint takes a list of 7 "
+                                         r"\(x y z qw qx qy qz\)"):
+        read_keyframes(p, layout)
+    p = write_json(tmp_path, minimal(l_knee=0.5))
+    with pytest.raises(InputError, match=r"joint 'l_knee': 0.5 is not a list; a ball joint takes a list of 4"):
+        read_keyframes(p, layout)
+
+
+@pytest.mark.parametrize("text, shown", [("NaN", "nan"), ("Infinity", "inf"), ("-Infinity", "-inf"),
+                                         ('"0.3"', "'0.3'"), ("true", "True"), ("[1]", r"\[1\]")])
+def test_bad_values(tmp_path, layout, text, shown):
+    raw = json.dumps(minimal(l_elbow=[1, 0, 0, 0])).replace('"l_elbow": [1, 0, 0, 0]', f'"l_elbow": [1, 0, {text}, 0]')
+    p = write_json(tmp_path, raw)
+    with pytest.raises(InputError, match=rf"keyframe 1 \(t=0.5 s\), joint 'l_elbow', component 2 \(qy\): {shown} is "
+                                         "not a finite number; give a number, or null"):
+        read_keyframes(p, layout)
+
+
+def test_checks_of_solver_keyframes_name_the_file(tmp_path, layout):
+    doc = minimal()
+    doc["keyframes"][1]["time"] = 0.0
+    with pytest.raises(InputError, match=r"k\.json: keyframe 1 \(t=0.0 s\) duplicates keyframe 0"):
+        read_keyframes(write_json(tmp_path, doc), layout)
+    doc = minimal()
+    doc["keyframes"] = doc["keyframes"][:1]
+    with pytest.raises(InputError, match=r"k\.json: need at least two keyframes"):
+        read_keyframes(write_json(tmp_path, doc), layout)
+    doc = minimal()
+    doc["keyframes"][1]["joints"] = {}
+    with pytest.raises(InputError, match=r"k\.json: keyframe 1 \(t=0.5 s\) fixes no component"):
+        read_keyframes(write_json(tmp_path, doc), layout)
