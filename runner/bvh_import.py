@@ -3,9 +3,10 @@
 The pipeline (one concept: from a BVH file to a reference motion and keyframes on *our* figure):
 
 1. Parse the BVH file with `bvhio` (hierarchy, channels, Euler angles -> local quaternions), after a
-   light check of the text (`_check_bvh_text`) that gives line-numbered errors for user mistakes and
-   protects against a known `bvhio` 1.5.4 defect: its line reader loops forever at end of file, so a
-   truncated file (fewer data lines than "Frames:") would hang it.
+   check of the text (`_check_bvh_text`: the HIERARCHY grammar, the MOTION header, every data line)
+   that gives exact line-numbered errors for user mistakes and protects against two `bvhio` 1.5.4
+   defects: its line reader loops forever at end of file (a truncated file would hang it), and the line
+   numbers in its SyntaxErrors are wrong inside nested joints.
 2. Forward kinematics of the CMU skeleton (BVH convention: local rotation R = Rz Ry Rx for the channel
    order Z Y X, applied to column vectors), in metres (1 unit = 0.05644 m, the ASF `length 0.45`) and in
    MuJoCo axes: BVH is Y up with the figure facing +Z and its left at +X; MuJoCo is z up, facing +x,
@@ -835,7 +836,8 @@ def load_bvh_reference(path: str | Path, model) -> Reference:
         path: a BVH file with the CMU skeleton (Hahne's cgspeed conversion, 31 joints, 1 unit =
             0.05644 m, first frame a T-pose).
         model: the scene's MjModel (figure + floor + step box), e.g. models/run_and_step.xml; its
-            figure must be models/humanoid39.xml (joint and site names).
+            figure must be models/humanoid39.xml (joint and site names). With a model that has no
+            static surfaces (the figure alone) the root height is left as retargeted.
     Returns:
         Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s];
         n = frames in the file - 1.
