@@ -1,0 +1,263 @@
+"""Inverse-dynamics objective terms (paper sec. 6, appendix A): joint torques and the root residual.
+
+Both read Y, Y', Y'' of the spline, turn them into MuJoCo's qpos, qvel, qacc (`TangentMap.motion`),
+compute the generalized forces that produce that motion (`mj_inverse` without constraints; by default
+the vectorized `solver.inverse_dynamics.InverseDynamics`, which matches it to rounding error) and chain
+the gradient back: reverse pass of the inverse dynamics to (pose tangent, qvel, qacc), then
+`PathMotion.vjp` to (Y, Y', Y'').
+
+Two terms built on one model can share an engine (`engine=`): the engine caches its last forward pass,
+so the second term only pays for its reverse pass.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.errors import InputError
+from solver.inverse_dynamics import InverseDynamics, MujocoInverseDynamics
+from solver.kinematics import TangentMap
+from solver.layout import StateLayout
+from solver.surfaces import StaticSurfaces
+from solver.terms.base import Term, TermEval
+
+#: The figure's contact sites (models/humanoid39.xml).
+CONTACT_SITES = ("l_heel", "l_toe", "r_heel", "r_toe")
+
+BACKENDS = {"analytic": InverseDynamics, "mujoco": MujocoInverseDynamics}
+
+
+def make_engine(model, sites=CONTACT_SITES, backend: str = "analytic"):
+    """An inverse-dynamics engine for `model` that also tracks `sites`, to share between terms.
+
+    Args:
+        model: MjModel. sites: site names. backend: "analytic" (vectorized recursive Newton-Euler,
+            fast) or "mujoco" (`mj_inverse` + `mjd_inverseFD`, general, ~100x slower).
+    Raises:
+        InputError: unknown backend (lists the valid ones), unknown site, or a model the analytic
+            backend does not support.
+    """
+    if backend not in BACKENDS:
+        raise InputError(f"unknown inverse-dynamics backend {backend!r}; choose one of: {', '.join(BACKENDS)}")
+    return BACKENDS[backend](model, sites)
+
+
+def _free_joint(model, layout: StateLayout) -> int:
+    """Id of the model's first free joint (the figure's root). Raises InputError if there is none."""
+    free = [j for j in range(model.njnt) if model.jnt_type[j] == 0]  # mjJNT_FREE
+    if not free:
+        raise InputError(
+            "the model has no free joint (the figure's root); joints are: " + ", ".join(layout.names)
+        )
+    return free[0]
+
+
+class JointTorque(Term):
+    """f = sum over the joint DOFs i of w_i tau_i^2 [N^2 m^2]: squared joint torques (paper sec. 6).
+
+    tau = M(q) qacc + c(q, qvel) - qfrc_passive at each quadrature point (`mj_inverse` without
+    constraints), for every DOF except those of the free root (the root's 6 are the residual wrench,
+    `RootResidual`): 33 of the figure's 39. Ball-joint torques are in the child body's frame; the sum of
+    squares is frame-independent per joint.
+
+    Args:
+        model: MjModel (loaded once by the caller).
+        weights: optional {joint name: w >= 0}; the weight applies to all DOFs of that joint, others
+            weigh 1.
+        engine: an engine from `make_engine` to share with other terms; default: a new one.
+        backend: "analytic" or "mujoco" when no engine is given.
+    Raises:
+        InputError: unknown joint name in `weights` (lists the joints), a negative or non-finite
+            weight, a weight on the free root, or an unsupported model (see `make_engine`).
+    """
+
+    name = "torque"
+    units = "N^2 m^2"
+    needs = (0, 1, 2)
+
+    def __init__(self, model, weights: dict[str, float] | None = None, engine=None, backend: str = "analytic"):
+        self.layout = StateLayout.from_model(model)
+        self.tmap = TangentMap.from_layout(self.layout)
+        self.engine = engine if engine is not None else make_engine(model, (), backend)
+        w = np.ones(int(model.nv))
+        for j in self.layout.joints:
+            if j.kind == "free":
+                w[j.dofadr : j.dofadr + j.nv] = 0.0
+        for name, value in (weights or {}).items():
+            joint = self.layout.joint(name)
+            if joint.kind == "free":
+                raise InputError(f"joint {name!r} is the free root; its forces are the 'root' term, not torques")
+            value = float(value)
+            if not np.isfinite(value) or value < 0:
+                raise InputError(f"torque weight of joint {name!r} is {value}; weights must be finite and >= 0")
+            w[joint.dofadr : joint.dofadr + joint.nv] = value
+        self.dof_weights = w
+
+    def torques(self, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> np.ndarray:
+        """(n, nv) generalized forces along the path [N, N m] (the free root's 6 included)."""
+        mo = self.tmap.motion(Y, Y1, Y2)
+        return self.engine.forward(Y, mo.qvel, mo.qacc).tau
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        mo = self.tmap.motion(Y, Y1, Y2)
+        res = self.engine.forward(Y, mo.qvel, mo.qacc)
+        wt = self.dof_weights * res.tau
+        f = (wt * res.tau).sum(axis=1)
+        if not grad:
+            return TermEval(f)
+        g_pose, g_v, g_a = self.engine.vjp(res, 2.0 * wt)
+        dY, dY1, dY2 = mo.vjp(g_v, g_a, g_pose)
+        return TermEval(f, dY, dY1, dY2)
+
+
+def figure_radius_of_gyration(model, body: int) -> float:
+    """sqrt(trace(I_c) / (3 m)) [m] of the subtree of `body` at `qpos0`: I_c its inertia about its
+    centre of mass, m its mass (the root-mean-square radius of gyration over the three axes)."""
+    import mujoco
+
+    d = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, d)
+    mujoco.mj_comPos(model, d)
+    bodies = [b for b in range(model.nbody) if _in_subtree(model, b, body)]
+    m = sum(float(model.body_mass[b]) for b in bodies)
+    com = d.subtree_com[body]
+    tr = 0.0
+    for b in bodies:
+        r = d.xipos[b] - com
+        tr += float(model.body_inertia[b].sum()) + float(model.body_mass[b]) * 2.0 * float(r @ r)
+    return float(np.sqrt(tr / (3.0 * m))) if m > 0 else 1.0
+
+
+def _in_subtree(model, b: int, root: int) -> bool:
+    while b > 0:
+        if b == root:
+            return True
+        b = int(model.body_parentid[b])
+    return root == 0
+
+
+class RootResidual(Term):
+    """f = phi(Y) (|F|^2 + |T|^2 / l^2) [N^2]: the "hand of god" wrench on the root while in flight.
+
+    (F, T) are the free root's 6 generalized forces from inverse dynamics: F the world force [N], T the
+    torque about the root body's origin in its frame [N m]. They are the external wrench needed to
+    produce the motion besides gravity. In flight only gravity acts, so the wrench should be zero; on
+    the ground the feet provide it, which this term does not model, so it is switched off there by
+
+        phi = prod over contact sites k and static surfaces j of S(c_kj),
+        c_kj = clip(1 - depth_kj / d, 0, 1),   S(c) = 3 c^2 - 2 c^3 (smoothstep, C1),
+
+    where depth_kj = `StaticSurfaces.penetration(site, margin=d)` is d minus the site's clearance above
+    surface j (planes: its signed height; boxes grown by d: distance to the nearest face), floored at
+    0. So phi = 1 when every site is at least d = `contact_distance` clear of every surface, 0 when any
+    site touches or is inside one, smooth in between. phi's gradient (through the site positions) is
+    part of the term's gradient.
+
+    Scaling: |T| / l with l the figure's radius of gyration (about 0.35 m for the 70 kg figure): a force
+    F changes the centre-of-mass acceleration by F/m and a torque T the acceleration of the body's mass
+    at its typical radius by T/(m l), so the two parts weigh equally in acceleration terms. Pass
+    `torque_arm` to choose l [m] yourself.
+
+    Args:
+        model: MjModel of the scene (figure + static surfaces), loaded once by the caller.
+        surfaces: StaticSurfaces of the scene; default `StaticSurfaces.from_model(model)`.
+        contact_distance: d [m] > 0, the clearance above which a site counts as in the air.
+        sites: contact site names (default heel and toe of each foot).
+        torque_arm: l [m] > 0; default the radius of gyration of the root's subtree at qpos0.
+        engine: an engine from `make_engine` (must track `sites`) to share; default a new one.
+        backend: "analytic" or "mujoco" when no engine is given.
+    Raises:
+        InputError: no free joint, missing site (lists the model's sites), bad distance or arm, an
+            engine that does not track the sites, or an unsupported model.
+    """
+
+    name = "root"
+    units = "N^2"
+    needs = (0, 1, 2)
+
+    def __init__(
+        self,
+        model,
+        surfaces: StaticSurfaces | None = None,
+        contact_distance: float = 0.05,
+        sites=CONTACT_SITES,
+        torque_arm: float | None = None,
+        engine=None,
+        backend: str = "analytic",
+    ):
+        import mujoco
+
+        self.layout = StateLayout.from_model(model)
+        self.tmap = TangentMap.from_layout(self.layout)
+        root = _free_joint(model, self.layout)
+        adr = int(model.jnt_dofadr[root])
+        self.root_dofs = np.arange(adr, adr + 6)
+        self.surfaces = StaticSurfaces.from_model(model) if surfaces is None else surfaces
+        d = float(contact_distance)
+        if not np.isfinite(d) or d <= 0:
+            raise InputError(f"contact_distance is {contact_distance}; it must be a distance > 0 [m]")
+        self.contact_distance = d
+        self.engine = engine if engine is not None else make_engine(model, tuple(sites), backend)
+        ids = []
+        for name in sites:
+            sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+            where = np.flatnonzero(self.engine.site_ids == sid)
+            if sid < 0 or not len(where):
+                have = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, k) for k in range(model.nsite)]
+                raise InputError(
+                    f"contact site {name!r} is not in the model or not tracked by the engine; the model's "
+                    f"sites are: {', '.join(map(str, have)) or 'none'}"
+                )
+            ids.append(int(where[0]))
+        self.site_index = np.array(ids, int)
+        if torque_arm is None:
+            torque_arm = figure_radius_of_gyration(model, int(model.jnt_bodyid[root]))
+        arm = float(torque_arm)
+        if not np.isfinite(arm) or arm <= 0:
+            raise InputError(f"torque_arm is {torque_arm}; it must be a length > 0 [m]")
+        self.torque_arm = arm
+        self._scale = np.array([1.0, 1.0, 1.0] + [1.0 / arm**2] * 3)
+
+    def flight(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The flight indicator phi and its gradient with respect to the site positions.
+
+        Args:
+            points: (n, k, 3) contact-site positions [m].
+        Returns:
+            phi (n,) in [0, 1]; dphi (n, k, 3) [1/m].
+        """
+        d = self.contact_distance
+        depth, ddepth = self.surfaces.penetration(points, margin=d)  # (n,k,S), (n,k,S,3)
+        c = np.clip(1.0 - depth / d, 0.0, 1.0)
+        S = c * c * (3.0 - 2.0 * c)
+        n = points.shape[0]
+        phi = S.reshape(n, -1).prod(axis=1)
+        # d phi / d S_kj = product of the other factors; where S_kj = 0, dS/dc = 0 as well (c = 0)
+        safe = np.where(S > 0, S, 1.0)
+        others = np.where(S > 0, phi[:, None, None] / safe, 0.0)
+        dS = 6.0 * c * (1.0 - c) * (-1.0 / d)
+        dphi = np.einsum("nks,nksi->nki", others * dS, ddepth)
+        return phi, dphi
+
+    def wrench(self, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> np.ndarray:
+        """(n, 6) the root's generalized forces along the path: world force [N], local torque [N m]."""
+        mo = self.tmap.motion(Y, Y1, Y2)
+        return self.engine.forward(Y, mo.qvel, mo.qacc).tau[:, self.root_dofs]
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        mo = self.tmap.motion(Y, Y1, Y2)
+        res = self.engine.forward(Y, mo.qvel, mo.qacc)
+        wr = res.tau[:, self.root_dofs]
+        sw = self._scale * wr
+        r = (sw * wr).sum(axis=1)
+        phi, dphi = self.flight(res.sites[:, self.site_index])
+        f = phi * r
+        if not grad:
+            return TermEval(f)
+        g_tau = np.zeros(res.tau.shape)
+        g_tau[:, self.root_dofs] = (2.0 * phi)[:, None] * sw
+        g_sites = np.zeros(res.sites.shape)
+        g_sites[:, self.site_index] = r[:, None, None] * dphi
+        g_pose, g_v, g_a = self.engine.vjp(res, g_tau, g_sites)
+        dY, dY1, dY2 = mo.vjp(g_v, g_a, g_pose)
+        return TermEval(f, dY, dY1, dY2)
+
