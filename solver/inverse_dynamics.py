@@ -48,7 +48,15 @@ from solver.errors import InputError
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    """a x b for (3, ...) arrays (written into one output array: fewer temporaries than np.stack)."""
+    o = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    np.multiply(a[1], b[2], out=o[0])
+    o[0] -= a[2] * b[1]
+    np.multiply(a[2], b[0], out=o[1])
+    o[1] -= a[0] * b[2]
+    np.multiply(a[0], b[1], out=o[2])
+    o[2] -= a[1] * b[0]
+    return o
 
 
 def _mv(R: np.ndarray, x: np.ndarray) -> np.ndarray:
