@@ -256,7 +256,8 @@ class InverseDynamics:
         Ic = np.einsum("bij,bj,bkj->bik", Ri, np.array(model.body_inertia[bodies], float), Ri)
         self._Ic = np.moveaxis(Ic, 0, -1)[..., None]  # (3, 3, B, 1)
         flags = int(model.opt.disableflags)
-        self._gravity = np.zeros(3) if flags & int(mujoco.mjtDisableBit.mjDSBL_GRAVITY) else np.array(model.opt.gravity)
+        no_gravity = flags & int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
+        self._gravity = np.zeros(3) if no_gravity else np.array(model.opt.gravity, float)
         self._armature = np.array(model.dof_armature, float)
         damp = np.array(model.dof_damping, float)
         self._damping = np.zeros(self.nv) if flags & int(mujoco.mjtDisableBit.mjDSBL_DAMPER) else damp
@@ -264,7 +265,7 @@ class InverseDynamics:
         self.site_ids = _site_ids(model, sites)
         sb = model.site_bodyid[self.site_ids]
         if not all(int(b) in index for b in sb):
-            raise InputError("sites must be on moving bodies of the figure (not on the world or a static body)")
+            raise InputError("sites must be on moving bodies of the figure, not on a static body")
         self._site_body = np.array([index[int(b)] for b in sb], int)
         self._site_pos = np.array(model.site_pos[self.site_ids], float).T[:, :, None]  # (3, K, 1)
         S = np.zeros((B, len(self.site_ids)))
@@ -282,7 +283,8 @@ class InverseDynamics:
         types = {int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL)}
         for b in range(1, model.nbody):
             if model.body_jntnum[b] > 1:
-                problems.append(f"body {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b)!r} has several joints")
+                name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b)
+                problems.append(f"body {name!r} has several joints")
         for j in range(model.njnt):
             if int(model.jnt_type[j]) not in types:
                 name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
@@ -438,7 +440,7 @@ class InverseDynamics:
         Reverse pass of `forward` (exact, not finite differences). The pose gradient is MuJoCo's
         tangent convention (the rows of `mjd_inverseFD`'s DfDq): free joint, world translation then
         a rotation in the body frame; ball joint, a rotation in the child frame. Map it to qpos
-        components with `TangentMap.pullback`.
+        components with `TangentMap.pullback` (or `PathMotion.vjp(..., g_pose=...)`).
 
         Args:
             res: the result of `forward` at the samples.
@@ -447,7 +449,8 @@ class InverseDynamics:
             g_pose (n, nv), g_qvel (n, nv), g_qacc (n, nv). g_qacc = M(q) g_tau (M with armature).
         """
         sv = res.saved
-        R, x, A, com, s, om, k, nu, as_, al = (sv[key] for key in ("R", "x", "A", "com", "s", "om", "k", "nu", "as_", "al"))
+        R, A, com, s, om = sv["R"], sv["A"], sv["com"], sv["s"], sv["om"]
+        k, nu, as_, al = sv["k"], sv["nu"], sv["as_"], sv["al"]
         rot, free, rs = self._rot, self._free, self._rs
         n = g_tau.shape[0]
         B = len(self.bodies)
@@ -603,7 +606,9 @@ class MujocoInverseDynamics:
         Gq, Gv, Ga = (np.zeros((n, self.nv)) for _ in range(3))
         for i in range(n):
             d.qpos[:], d.qvel[:], d.qacc[:] = res.qpos[i], res.qvel[i], res.qacc[i]
-            mujoco.mjd_inverseFD(m, d, self.eps, 0, self._DfDq, self._DfDv, self._DfDa, None, None, None, None)
+            mujoco.mjd_inverseFD(
+                m, d, self.eps, 0, self._DfDq, self._DfDv, self._DfDa, None, None, None, None
+            )
             Gq[i] = self._DfDq @ g_tau[i]
             Gv[i] = self._DfDv @ g_tau[i]
             Ga[i] = self._DfDa @ g_tau[i]

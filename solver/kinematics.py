@@ -29,14 +29,18 @@ def _gt(q: np.ndarray, g: np.ndarray) -> np.ndarray:
     """G(q)^T g = q * (0, g) (Hamilton product), component-first: (4, ...) q, (3, ...) g -> (4, ...)."""
     w, x, y, z = q
     a, b, c = g
-    return np.stack([-x * a - y * b - z * c, w * a - z * b + y * c, z * a + w * b - x * c, -y * a + x * b + w * c])
+    return np.stack(
+        [-x * a - y * b - z * c, w * a - z * b + y * c, z * a + w * b - x * c, -y * a + x * b + w * c]
+    )
 
 
 def _gq(q: np.ndarray, p: np.ndarray) -> np.ndarray:
     """G(q) p = vec(conj(q) p), component-first: (4, ...) q and p -> (3, ...)."""
     w, x, y, z = q
     a, b, c, d = p
-    return np.stack([-x * a + w * b + z * c - y * d, -y * a - z * b + w * c + x * d, -z * a + y * b - x * c + w * d])
+    return np.stack(
+        [-x * a + w * b + z * c - y * d, -y * a - z * b + w * c + x * d, -z * a + y * b - x * c + w * d]
+    )
 
 
 @dataclass(frozen=True)
@@ -135,7 +139,11 @@ class PathMotion:
         n = self.qvel.shape[0]
         out = {}
         eye = np.eye(tm.nv)
-        spec = {"dv_dY": (1, 0, 0), "dv_dY1": (1, 0, 1), "da_dY": (0, 1, 0), "da_dY1": (0, 1, 1), "da_dY2": (0, 1, 2)}
+        # name: (g_v on, g_a on, which output)
+        spec = {
+            "dv_dY": (1, 0, 0), "dv_dY1": (1, 0, 1),
+            "da_dY": (0, 1, 0), "da_dY1": (0, 1, 1), "da_dY2": (0, 1, 2),
+        }
         for name, (gv_on, ga_on, k) in spec.items():
             J = np.zeros((n, tm.nv, tm.nq))
             for i in range(tm.nv):

@@ -114,7 +114,8 @@ def test_spline_qvel_and_qacc_match_mj_differentiate_pos(scene):
     layout = StateLayout.from_model(scene)
     tm = TangentMap.from_layout(layout)
     times = np.array([0.0, 0.4, 0.9, 1.3, 2.0])
-    spline = make_interp_spline(times, random_qpos(rng, layout, len(times), spread=0.5), k=3, bc_type="natural")
+    frames = random_qpos(rng, layout, len(times), spread=0.5)
+    spline = make_interp_spline(times, frames, k=3, bc_type="natural")
     d1, d2 = spline.derivative(1), spline.derivative(2)
     t = np.array([0.3, 0.77, 1.6])
 
@@ -190,7 +191,8 @@ def test_inverse_dynamics_matches_mj_inverse(which, request):
     for i in range(len(Y)):
         d.qpos[:], d.qvel[:], d.qacc[:] = Y[i], V[i], A[i]
         mujoco.mj_inverse(m, d)
-        np.testing.assert_allclose(res.tau[i], d.qfrc_inverse, rtol=0, atol=1e-10 * (1 + np.abs(d.qfrc_inverse).max()))
+        scale = 1 + np.abs(d.qfrc_inverse).max()
+        np.testing.assert_allclose(res.tau[i], d.qfrc_inverse, rtol=0, atol=1e-10 * scale)
         np.testing.assert_allclose(res.sites[i], d.site_xpos[sites], atol=1e-12)
     assert int(model.opt.disableflags) == flags  # the caller's model is untouched (a copy was changed)
 
@@ -261,7 +263,8 @@ def check_term_gradient(term, Y, Y1, Y2, rtol=1e-6):
             return term.evaluate(None, *args, grad=False).f.sum()
 
         want = fd_gradient(f, X)
-        np.testing.assert_allclose(g, want, rtol=0, atol=rtol * np.abs(want).max(), err_msg=f"{term.name} d/dY{k}")
+        scale = np.abs(want).max()
+        np.testing.assert_allclose(g, want, rtol=0, atol=rtol * scale, err_msg=f"{term.name} d/dY{k}")
 
 
 def test_joint_torque_value_and_gradient(scene):

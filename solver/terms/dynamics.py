@@ -37,7 +37,9 @@ def make_engine(model, sites=CONTACT_SITES, backend: str = "analytic"):
             backend does not support.
     """
     if backend not in BACKENDS:
-        raise InputError(f"unknown inverse-dynamics backend {backend!r}; choose one of: {', '.join(BACKENDS)}")
+        raise InputError(
+            f"unknown inverse-dynamics backend {backend!r}; choose one of: {', '.join(BACKENDS)}"
+        )
     return BACKENDS[backend](model, sites)
 
 
@@ -74,7 +76,9 @@ class JointTorque(Term):
     units = "N^2 m^2"
     needs = (0, 1, 2)
 
-    def __init__(self, model, weights: dict[str, float] | None = None, engine=None, backend: str = "analytic"):
+    def __init__(
+        self, model, weights: dict[str, float] | None = None, engine=None, backend: str = "analytic"
+    ):
         self.layout = StateLayout.from_model(model)
         self.tmap = TangentMap.from_layout(self.layout)
         self.engine = engine if engine is not None else make_engine(model, (), backend)
@@ -85,10 +89,14 @@ class JointTorque(Term):
         for name, value in (weights or {}).items():
             joint = self.layout.joint(name)
             if joint.kind == "free":
-                raise InputError(f"joint {name!r} is the free root; its forces are the 'root' term, not torques")
+                raise InputError(
+                    f"joint {name!r} is the free root; its forces are the 'root' term, not torques"
+                )
             value = float(value)
             if not np.isfinite(value) or value < 0:
-                raise InputError(f"torque weight of joint {name!r} is {value}; weights must be finite and >= 0")
+                raise InputError(
+                    f"torque weight of joint {name!r} is {value}; weights must be finite and >= 0"
+                )
             w[joint.dofadr : joint.dofadr + joint.nv] = value
         self.dof_weights = w
 
