@@ -20,7 +20,7 @@ from solver.frames import FrameSet
 from solver.layout import StateLayout
 from solver.metrics import path_metrics, sample_times
 from solver.optimize import ALGORITHMS, Status
-from solver.problem import figure_objective, parse_terms, term_names
+from solver.problem import default_limits, figure_objective, parse_terms, term_names
 from solver.solve import SUBDIVISIONS, SolveOptions, solve
 
 REPO = Path(__file__).resolve().parents[1]
@@ -214,6 +214,10 @@ class Progress:
     def __call__(self, event, info):
         if self.quiet:
             return
+        if event == "boost":
+            worst = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
+            self.stream.write(("\n" if self.tty else "") + f"  over the limit ({worst}): weight x10, again\n")
+            return
         if event == "round":
             self.info.update(info)
             self._print(force=True)
@@ -249,9 +253,9 @@ def run_animate(args) -> int:
 
     for out in (args.out, args.save_path):
         if out is not None:
-            check_writable_dir(Path(out).parent)
+            check_writable_dir(out)
     if args.plot is not None:
-        check_writable_dir(args.plot)
+        check_writable_dir(Path(args.plot) / "plot.png")
     keyframes, info, model, layout, scene_path = load_problem(args.keyframes, args.scene)
     file_terms = dict(getattr(info, "terms", None) or {})
     weights_in = dict(args.weight)
@@ -263,7 +267,7 @@ def run_animate(args) -> int:
     options = SolveOptions(
         subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
         renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
-        max_evals=args.max_evals, max_time_s=args.max_time,
+        max_evals=args.max_evals, max_time_s=args.max_time, limits=default_limits(weights),
     )
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     say = (lambda *a: None) if args.quiet else print
@@ -418,7 +422,8 @@ def render_video(out, model, solution, keyframes, args):
     for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames)):
         Y = fs.path(t)
         tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
-    kq = solution.initial.values  # keyframes with free components filled: the poses the animator set
+    # keyframes with free components filled: the poses the animator set
+    kq = solution.initial.values[solution.initial.is_keyframe]
     quiet = getattr(args, "quiet", False)
 
     def progress(i, n):

@@ -16,6 +16,10 @@ from solver.terms import CovariantAcceleration, Hyperextension, Penetration, Uni
 #: Weights used when none are given: the geometric terms of the paper's sec. 5, renormalized (eq. 7).
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05}
 
+#: Penalty-continuation bounds (`SolveOptions.limits`), in each term's `violation` unit, set inside the
+#: acceptance bounds (penetration <= 1 mm, hyperextension <= 2 deg, |1 - |q|| <= 5 %) with headroom.
+DEFAULT_LIMITS = {"penetration": 0.0005, "bending": float(np.radians(1.0)), "unit": 0.03}
+
 
 def _dynamics_terms():
     try:
@@ -85,9 +89,12 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
         "smooth": lambda: _named(CovariantAcceleration(layout.quat_slots, layout.linear_index), "smooth"),
     }
     dyn = _dynamics_terms()
-    if "torque" in dyn:
-        factories["torque"] = lambda: dyn["torque"](model)
-        factories["root"] = lambda: dyn["root"](model)
+    if "torque" in dyn and ("torque" in weights or "root" in weights):
+        from solver.terms.dynamics import make_engine
+
+        engine = make_engine(model)  # one inverse-dynamics pass shared by both terms
+        factories["torque"] = lambda: dyn["torque"](model, engine=engine)
+        factories["root"] = lambda: dyn["root"](model, engine=engine)
     terms, w = [], []
     for name, weight in weights.items():
         if name not in factories:
@@ -95,6 +102,11 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
         terms.append(factories[name]())
         w.append(weight)
     return Objective(terms, np.array(w), t0, t1, rate)
+
+
+def default_limits(weights: dict[str, float]) -> tuple:
+    """`SolveOptions.limits` for the chosen terms: ((name, tolerance), ...) from DEFAULT_LIMITS."""
+    return tuple((n, DEFAULT_LIMITS[n]) for n in weights if n in DEFAULT_LIMITS and weights[n] > 0)
 
 
 def _named(term, name):

@@ -53,3 +53,13 @@ class Term:
             TermEval.
         """
         raise NotImplementedError
+
+    def violation(self, Y: np.ndarray) -> float | None:
+        """How far a path breaks this soft constraint at its worst, in the term's natural unit
+        (e.g. metres of penetration), or None if the term is not a constraint. Used for penalty
+        continuation (`SolveOptions.limits`) and reports.
+
+        Args:
+            Y: (n, nq) qpos samples of the path.
+        """
+        return None

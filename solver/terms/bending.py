@@ -68,6 +68,10 @@ class Hyperextension(Term):
         """(n, j) flexion angles [rad] of the term's joints."""
         return flexion_angles(Y, self.idx, self.axes)
 
+    def violation(self, Y: np.ndarray) -> float:
+        """Largest hyperextension of any joint [rad] (0 if none bends the wrong way)."""
+        return float(np.maximum(0.0, -self.angles(Y)).max())
+
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         theta = self.angles(Y)
         h = np.maximum(0.0, -theta - self.tol)

@@ -37,12 +37,13 @@ def site_positions(model, data, Y: np.ndarray, sites: np.ndarray) -> np.ndarray:
     Returns:
         (n, k, 3) positions [m].
     """
-    out = np.empty((len(Y), len(sites), 3))
+    out = np.empty((len(Y), model.nsite, 3))
+    qpos, xpos = data.qpos, data.site_xpos
     for i, y in enumerate(Y):
-        data.qpos[:] = y
+        qpos[:] = y
         mujoco.mj_kinematics(model, data)
-        out[i] = data.site_xpos[sites]
-    return out
+        out[i] = xpos
+    return out[:, sites]
 
 
 class Penetration(Term):
@@ -83,6 +84,10 @@ class Penetration(Term):
         d, _ = self.surfaces.penetration(p, self.margin if margin is None else margin)
         return d.max(axis=-1)
 
+    def violation(self, Y: np.ndarray) -> float:
+        """Deepest true penetration (margin 0) of any contact site into any surface [m]."""
+        return float(self.depths(Y, margin=0.0).max())
+
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         m, d = self.model, self.data
         p = site_positions(m, d, Y, self.sites)
@@ -91,18 +96,19 @@ class Penetration(Term):
         if not grad:
             return TermEval(f)
         dY = np.zeros_like(Y)
-        active = np.flatnonzero(f > 0)
+        # d f / d site position, per point and site: sum over surfaces of 2 depth * d depth / d p
+        gp = np.einsum("nks,nksi->nki", 2.0 * depth, ddepth)
+        hit = np.abs(gp).sum(axis=2) > 0  # (n, k) sites inside something
+        active = np.flatnonzero(hit.any(axis=1))
         if active.size:
-            # d f / d site position, per site: sum_S 2 depth * d depth / d p
-            gp = np.einsum("nks,nksi->nki", 2.0 * depth[active], ddepth[active])
             gv = np.zeros((active.size, m.nv))
+            jac, qpos = self._jac, d.qpos
             for r, i in enumerate(active):
-                d.qpos[:] = Y[i]
+                qpos[:] = Y[i]
                 mujoco.mj_kinematics(m, d)
                 mujoco.mj_comPos(m, d)
-                for k, s in enumerate(self.sites):
-                    if np.any(gp[r, k]):
-                        mujoco.mj_jacSite(m, d, self._jac, None, int(s))
-                        gv[r] += gp[r, k] @ self._jac
+                for k in np.flatnonzero(hit[i]):
+                    mujoco.mj_jacSite(m, d, jac, None, int(self.sites[k]))
+                    gv[r] += gp[i, k] @ jac
             dY[active] = self.tmap.pullback(Y[active], gv)
         return TermEval(f, dY=dY)

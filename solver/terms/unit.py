@@ -20,6 +20,10 @@ class UnitQuaternion(Term):
     def __init__(self, quat_slots: np.ndarray):
         self.idx = np.asarray(quat_slots, dtype=int).reshape(-1, 4)
 
+    def violation(self, Y: np.ndarray) -> float:
+        """Largest |1 - |q|| over samples and quaternions [1]."""
+        return float(np.abs(1.0 - np.linalg.norm(Y[:, self.idx], axis=-1)).max())
+
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         q = Y[:, self.idx]  # (n, s, 4)
         e = 1.0 - np.einsum("nsi,nsi->ns", q, q)
