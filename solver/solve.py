@@ -46,6 +46,12 @@ class SolveOptions:
             round): for acceleration-dominated objectives this removes most of the ill-conditioning
             of frame values (the Hessian of a spline's bending energy grows like 1/h^3) and L-BFGS
             needs 2-3x fewer evaluations. Iterates and results are the same kind of path.
+        limits: ((term name, tolerance), ...): penalty continuation. After a round, a term whose
+            `violation` on the path (sampled at 1000 Hz, in the term's own units, e.g. metres of
+            penetration) exceeds its tolerance has its weight multiplied by `boost` and the round is
+            optimized again, at most `max_boosts` times in a solve: the quadratic-penalty method's
+            schedule (Nocedal & Wright, Numerical Optimization, sec. 17.1), which drives a soft
+            constraint's violation to a stated bound without a constrained optimizer.
     """
 
     subdivision: str = "adaptive"
@@ -60,15 +66,23 @@ class SolveOptions:
     max_time_s: float = 0.0
     score: str = "gradient"
     precondition: bool = False
+    limits: tuple = ()
+    boost: float = 10.0
+    max_boosts: int = 4
 
     def __post_init__(self):
         if self.subdivision not in SUBDIVISIONS:
             raise InputError(f"unknown subdivision {self.subdivision!r}; choose one of: {', '.join(SUBDIVISIONS)}")
         if self.score not in SCORES:
             raise InputError(f"unknown subdivision score {self.score!r}; choose one of: {', '.join(SCORES)}")
-        for name in ("per_segment", "rounds", "per_round", "max_frames", "max_evals"):
+        for name in ("per_segment", "rounds", "per_round", "max_frames", "max_evals", "max_boosts"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not self.boost >= 1:
+            raise InputError(f"boost must be >= 1, got {self.boost}")
+        for lim in self.limits:
+            if len(lim) != 2 or not lim[1] >= 0:
+                raise InputError(f"limits must be (term name, tolerance >= 0) pairs, got {lim!r}")
         if not self.max_time_s >= 0:
             raise InputError(f"max_time_s must be >= 0, got {self.max_time_s}")
 
@@ -152,22 +166,10 @@ def solve(
     traces: list[np.ndarray] = []
     status, message = Status.CONVERGED, "converged"
     n_evals = 0
-    for r in range(n_rounds):
-        scores = None
-        if r > 0:
-            budget = options.per_round or (frames.count - 1)
-            if options.max_frames:
-                budget = min(budget, options.max_frames - frames.n_variable)
-            if budget <= 0:
-                break
-            if options.score == "decrease":
-                scores = predicted_decreases(objective, frames)
-            else:
-                scores = weak_form_scores(objective, frames)
-            new = adaptive_times(scores, frames, budget)
-            if new.size == 0:
-                break
-            frames = frames.with_variable_frames(new)
+    boosts = 0
+    r = 0
+    scores = None
+    while True:
         remaining = 0.0
         if options.max_time_s:
             remaining = options.max_time_s - (time.perf_counter() - t_start)
@@ -175,7 +177,7 @@ def solve(
                 status, message = Status.MAX_TIME, f"time limit of {options.max_time_s:g} s reached"
                 break
         if progress:
-            progress("round", {"round": r, "frames": frames.count, "variable": frames.n_variable})
+            progress("round", {"round": len(rounds), "frames": frames.count, "variable": frames.n_variable})
         result = _optimize(objective, frames, options, remaining, should_stop, progress, n_evals)
         frames = frames.with_x(result.x)
         rounds.append(Round(frames.count, frames.n_variable, result, scores))
@@ -184,7 +186,34 @@ def solve(
         status, message = result.status, result.message
         if status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED):
             break
+        over = _over_limits(objective, frames, options.limits) if boosts < options.max_boosts else {}
+        if over:  # penalty continuation: stiffen the violated terms, optimize the same frames again
+            boosts += 1
+            for name in over:
+                objective.weights[objective.names.index(name)] *= options.boost
+            if progress:
+                progress("boost", {"terms": over, "boosts": boosts})
+            scores = None
+            continue
+        r += 1
+        if r >= n_rounds:
+            break
+        budget = options.per_round or (frames.count - 1)
+        if options.max_frames:
+            budget = min(budget, options.max_frames - frames.n_variable)
+        if budget <= 0:
+            break
+        if options.score == "decrease":
+            scores = predicted_decreases(objective, frames)
+        else:
+            scores = weak_form_scores(objective, frames)
+        new = adaptive_times(scores, frames, budget)
+        if new.size == 0:
+            break
+        frames = frames.with_variable_frames(new)
     ev1 = objective.evaluate(frames.times, frames.values, grad=False)
+    if boosts:  # report both ends under the final weights, so E_initial and E_final compare
+        ev0 = objective.evaluate(initial.times, initial.values, grad=False)
     return Solution(
         frames, initial, rounds, status, message, ev0.E, ev1.E, ev0.integrals, ev1.integrals,
         scales, np.concatenate(traces) if traces else np.array([ev0.E]),
@@ -192,16 +221,31 @@ def solve(
     )
 
 
+def _over_limits(objective: Objective, frames: FrameSet, limits) -> dict[str, float]:
+    """{term name: violation} for the terms whose violation on the path exceeds their limit."""
+    if not limits:
+        return {}
+    t = np.linspace(frames.times[0], frames.times[-1], int((frames.times[-1] - frames.times[0]) * 1000) + 1)
+    Y = frames.path(t)
+    over = {}
+    for name, tol in limits:
+        if name not in objective.names:
+            continue
+        term = objective.terms[objective.names.index(name)]
+        v = term.violation(Y)
+        if v is not None and v > tol and objective.weights[objective.names.index(name)] > 0:
+            over[name] = float(v)
+    return over
+
+
 def _optimize(objective, frames, options, remaining, should_stop, progress, evals_before) -> OptimizeResult:
     knots = frames.times
-    last_error = {}
 
     def fun(x, need_grad):
         P = frames.values_from_x(x)
         try:
             ev = objective.evaluate(knots, P, grad=need_grad)
         except NonFiniteError as e:
-            last_error["term"] = e.term
             raise Stop(Status.NONFINITE, str(e)) from e
         return ev.E, (ev.grad[frames.free] if need_grad else None)
 
