@@ -8,7 +8,6 @@
 """
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 
@@ -30,15 +29,17 @@ def register(sub) -> None:
     r.add_argument("--repeat", type=int, default=3, help="runs per configuration; the median is reported [3]")
     r.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
     r.set_defaults(func=bench_run_and_step)
-    o = bsub.add_parser("orient", help="single-body orientation vs earlier methods", add_help=False)
-    o.add_argument("args", nargs=argparse.REMAINDER)
+    o = bsub.add_parser("orient", help="single-body orientation vs earlier methods")
+    from runner.bench_orient import add_arguments as _orient_arguments
+
+    _orient_arguments(o)
     o.set_defaults(func=_bench_orient)
 
 
 def _bench_orient(args) -> int:
-    from runner.bench_orient import main
+    from runner.bench_orient import run
 
-    return main(args.args)
+    return run(args)
 
 
 def _one_config(model, keyframes, layout, weights, rate, repeat):
