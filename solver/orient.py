@@ -56,7 +56,7 @@ def default_options(**changes) -> SolveOptions:
     decrease, preconditioned L-BFGS. Keyword arguments override fields (`SolveOptions`)."""
     base = dict(
         subdivision="adaptive", per_segment=1, rounds=2, per_round=0, max_frames=0, score="decrease",
-        precondition=True, ftol_rel=1e-7, renormalize=False,
+        precondition=True, ftol_rel=1e-6, renormalize=False,
     )
     base.update(changes)
     return SolveOptions(**base)
@@ -203,7 +203,9 @@ def orient(
         renormalize: divide each term by its plain-spline integral (eq. 7); default True for "paper"
             (its 2:5 ratio is on renormalized terms), False for "normalized".
         options: SolveOptions; default `default_options()` (adaptive subdivision). Its `renormalize`
-            field is replaced by the argument above.
+            field is replaced by the argument above. With adaptive subdivision and a `max_frames`
+            smaller than the starting frames (`per_segment` per interval), no starting frames are
+            placed and the adaptive rounds place all of them.
         rate: quadrature points per second [1/s]; default `default_rate(times)`.
         source: name for error messages. should_stop, progress: passed to `solve`.
     Returns:
@@ -218,6 +220,11 @@ def orient(
     from dataclasses import replace
 
     opts = replace(opts, renormalize=renorm)
+    if (opts.subdivision == "adaptive" and opts.max_frames
+            and opts.per_segment * (kf.count - 1) > opts.max_frames):
+        # `solve` does not cap the starting frames of adaptive subdivision; with a budget smaller than
+        # they would be, let the Euler-Lagrange score place every frame instead
+        opts = replace(opts, per_segment=0, rounds=max(opts.rounds, 1))
     initial = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)
     sol = solve(obj, initial, opts, should_stop=should_stop, progress=progress)
     fr = sol.frames

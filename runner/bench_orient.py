@@ -1,0 +1,188 @@
+"""`dynsplines bench orient`: time to reach a relative gap to the exact optimum, ours vs earlier methods.
+
+    dynsplines bench orient [--sets large_uniform,large_nonuniform,large_nonuniform_b] [--budget 60]
+                            [--repeat 3] [--methods dynsplines,barr92,bspline]
+
+For each keyframe set (7 keyframes, 30-150 degrees between them; tests/sphere_reference.py) the exact
+optimum E* is the natural Riemannian cubic spline on S^3 (solve_bvp). Every method runs a ladder of
+settings of increasing accuracy (ours: `LADDER` below; the baselines: their resolution ladder,
+runner.baselines.baseline_time_to_gap); the time to a gap level is the wall time of the single run of
+the fastest setting that reached it (what a user who knew that setting would spend), or the best gap
+reached within the budget. The gap of every method's *normalized continuous path* is measured by the
+same independent code (tests/sphere_reference.covariant_energy for ours, the baselines' own
+Gauss-Legendre energy for theirs; both agree with each other to ~1e-8).
+
+Needs a source checkout (the reference lives in tests/).
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+GAPS = (1e-2, 1e-3, 1e-4)
+
+#: our settings, from fast and coarse to slow and accurate: (label, orient keyword arguments)
+LADDER = (
+    ("global 1/interval", dict(options=dict(subdivision="global", per_segment=1, ftol_rel=1e-5))),
+    ("adaptive 1 round", dict(options=dict(rounds=1, ftol_rel=1e-6))),
+    ("default (adaptive 2 rounds)", dict(options=dict())),
+    ("adaptive 3 rounds, 100 Hz", dict(options=dict(rounds=3, ftol_rel=1e-8), rate=100.0)),
+    ("2/interval + 2 rounds, 200 Hz", dict(options=dict(per_segment=2, rounds=2, ftol_rel=1e-9), rate=200.0)),
+    ("adaptive 4 rounds, 300 Hz", dict(options=dict(rounds=4, ftol_rel=1e-9), rate=300.0)),
+)
+
+
+def _reference_module():
+    tests = REPO / "tests"
+    if not (tests / "sphere_reference.py").is_file():
+        from solver.errors import InputError
+
+        raise InputError("bench orient needs a source checkout: tests/sphere_reference.py not found")
+    if str(tests) not in sys.path:
+        sys.path.insert(0, str(tests))
+    import sphere_reference
+
+    return sphere_reference
+
+
+def ours_time_to_gap(times, quats, E_star, ref, gaps=GAPS, repeat: int = 3, log: list | None = None) -> dict:
+    """Our ladder: {gap: (wall_time_s, label, achieved_gap)} or (None, best label, best gap).
+
+    Each setting is run `repeat` times; its time is the median wall time of a whole `orient` call
+    (objective setup, optimization, subdivision, summary). The gap is measured on the normalized path
+    by `ref.covariant_energy` (dense samples, independent of solver/).
+    """
+    from solver.orient import default_options, orient
+
+    out: dict = {}
+    best = (None, None, np.inf)
+    for label, kw in LADDER:
+        kwargs = dict(kw)
+        kwargs["options"] = default_options(**kw.get("options", {}))
+        walls = []
+        for _ in range(max(1, repeat)):
+            t0 = time.perf_counter()
+            r = orient(times, quats, **kwargs)
+            walls.append(time.perf_counter() - t0)
+        wall = statistics.median(walls)
+        fr = r.frames
+        t = np.concatenate([np.linspace(a, b, 201)[:-1] for a, b in zip(fr.times[:-1], fr.times[1:])]
+                           + [fr.times[-1:]])
+        gap = (ref.covariant_energy(t, fr.path(t), breaks=fr.times) - E_star) / E_star
+        if log is not None:
+            log.append({"setting": label, "gap": gap, "wall_time_s": wall, "frames": r.n_variable,
+                        "evals": r.solution.n_evals, "max_norm_deviation": r.max_norm_deviation})
+        for g in gaps:
+            if gap <= g and (g not in out or wall < out[g][0]):
+                out[g] = (wall, label, gap)
+        if gap < best[2]:
+            best = (wall, label, gap)
+    for g in gaps:
+        out.setdefault(g, (None, best[1], best[2]))
+    return out
+
+
+def _fmt_time(entry) -> str:
+    wall, what, gap = entry
+    if wall is None:
+        return f"not reached (best {gap:.1e})"
+    return f"{wall * 1e3:9.1f} ms" if wall < 10 else f"{wall:9.2f} s "
+
+
+def _ratio(theirs, ours, budget) -> str:
+    if ours[0] is None:
+        return "-"
+    if theirs[0] is None:
+        return f">{budget / ours[0]:,.0f}x"
+    return f"{theirs[0] / ours[0]:,.1f}x"
+
+
+def bench_set(ks, methods, budget: float, repeat: int, ref, out=print) -> dict:
+    """Run every method on one keyframe set and print the table. Returns {method: {gap: entry}}."""
+    from runner.baselines import baseline_time_to_gap
+
+    angles = ref.rotation_angles_deg(ks.quats)
+    t0 = time.perf_counter()
+    E_star = ref.riemannian_cubic_reference(ks.times, ks.quats, tol=1e-6).E_star
+    E_disc = ref.discrete_sphere_reference(ks.times, ks.quats, n_levels=(32, 64, 128)).E_star
+    out(f"\n== {ks.name}: {len(ks.times)} keyframes over {ks.times[-1] - ks.times[0]:.2f} s, "
+        f"{angles.min():.0f}-{angles.max():.0f} deg between keyframes")
+    out(f"   E* = {E_star:.8f} 1/s^3 (solve_bvp; discrete+Richardson check: {E_disc:.8f}, "
+        f"rel. diff {abs(E_disc - E_star) / E_star:.1e}; {time.perf_counter() - t0:.1f} s)")
+    results, logs = {}, {}
+    for m in methods:
+        logs[m] = []
+        if m == "dynsplines":
+            results[m] = ours_time_to_gap(ks.times, ks.quats, E_star, ref, repeat=repeat, log=logs[m])
+        else:
+            results[m] = baseline_time_to_gap(m, ks.times, ks.quats, E_star, max_time_s=budget, log=logs[m])
+    head = f"   {'gap':<7}" + "".join(f"{m:>28}" for m in methods)
+    others = [m for m in methods if m != "dynsplines"]
+    if "dynsplines" in methods:
+        head += "".join(f"{m + '/ours':>16}" for m in others)
+    out(head)
+    for g in GAPS:
+        row = f"   {g:<7.0e}" + "".join(f"{_fmt_time(results[m][g]):>28}" for m in methods)
+        if "dynsplines" in methods:
+            row += "".join(f"{_ratio(results[m][g], results['dynsplines'][g], budget):>16}" for m in others)
+        out(row)
+    for m in methods:
+        settings = ", ".join(f"{g:.0e}: {results[m][g][1]}" for g in GAPS)
+        out(f"   {m} settings used - {settings}")
+    return {"results": results, "logs": logs, "E_star": E_star}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the options of `dynsplines bench orient` to a parser (runner.bench uses this)."""
+    p.add_argument("--sets", default="large_uniform,large_nonuniform,large_nonuniform_b",
+                   help="comma-separated keyframe sets (tests/sphere_reference.py) [the three large sets]")
+    p.add_argument("--methods", default="dynsplines,barr92,bspline", help="comma-separated methods")
+    p.add_argument("--budget", type=float, default=60.0, help="seconds per baseline and set [60]")
+    p.add_argument("--repeat", type=int, default=3, help="runs per setting of ours; median reported [3]")
+    p.add_argument("--verbose", action="store_true", help="print every run of every ladder")
+
+
+def run(args) -> int:
+    """Run the benchmark for parsed arguments (see `add_arguments`). Returns 0."""
+    import solver  # noqa: F401  (single-threaded BLAS before numpy work starts)
+    from solver.errors import InputError
+
+    ref = _reference_module()
+    known = {s.name: s for s in ref.large_rotation_sets() + [ref.moderate_rotation_set()]}
+    names = [s.strip() for s in args.sets.split(",") if s.strip()]
+    for n in names:
+        if n not in known:
+            raise InputError(f"unknown keyframe set {n!r}; choose from: {', '.join(known)}")
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    for m in methods:
+        if m not in ("dynsplines", "barr92", "bspline"):
+            raise InputError(f"unknown method {m!r}; choose from: dynsplines, barr92, bspline")
+    if args.budget <= 0 or args.repeat < 1:
+        raise InputError("--budget must be > 0 seconds and --repeat >= 1")
+    print("bench orient: wall time to reach a relative gap (E - E*)/E* of the normalized path "
+          f"(baselines: budget {args.budget:g} s per set; ours: median of {args.repeat} runs)")
+    for n in names:
+        res = bench_set(known[n], methods, args.budget, args.repeat, ref)
+        if args.verbose:
+            for m, log in res["logs"].items():
+                for row in log:
+                    print(f"     {m}: " + ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
+                                                   for k, v in row.items()))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m runner.bench_orient [options]`: the same as `dynsplines bench orient`."""
+    p = argparse.ArgumentParser(prog="dynsplines bench orient", description=__doc__.splitlines()[0])
+    add_arguments(p)
+    return run(p.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
