@@ -246,6 +246,22 @@ class Progress:
 
 
 # -------------------------------------------------------------------------------------------- run
+def solve_options(args, weights: dict) -> SolveOptions:
+    """SolveOptions from parsed `add_options` arguments (the command's and the benchmark's)."""
+    return SolveOptions(
+        subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
+        renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
+        max_evals=args.max_evals, max_time_s=args.max_time, limits=default_limits(weights),
+    )
+
+
+def default_args() -> argparse.Namespace:
+    """The options `animate` uses when none are given."""
+    p = argparse.ArgumentParser()
+    add_options(p)
+    return p.parse_args([])
+
+
 def run_animate(args) -> int:
     """Run `animate` / `run-and-step`. Returns the exit code."""
     from runner.cli import EXIT_INTERRUPTED, EXIT_OK
@@ -264,11 +280,7 @@ def run_animate(args) -> int:
     else:
         weights = parse_terms(args.terms, weights_in)
     objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=args.rate)
-    options = SolveOptions(
-        subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
-        renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
-        max_evals=args.max_evals, max_time_s=args.max_time, limits=default_limits(weights),
-    )
+    options = solve_options(args, weights)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     say = (lambda *a: None) if args.quiet else print
     say(f"dynsplines: {args.keyframes} -> {keyframes.count} keyframes "

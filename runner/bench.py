@@ -15,7 +15,7 @@ import time
 
 from solver.frames import FrameSet
 from solver.problem import figure_objective, parse_terms
-from solver.solve import SolveOptions, solve
+from solver.solve import solve
 
 GEOMETRIC = "penetration,unit,bending,smooth"
 
@@ -43,11 +43,14 @@ def _bench_orient(args) -> int:
 
 
 def _one_config(model, keyframes, layout, weights, rate, repeat):
+    from runner.animate import default_args, solve_options
+
+    options = solve_options(default_args(), weights)  # exactly what `dynsplines animate` runs
     runs = []
     for _ in range(max(1, repeat)):
         objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate)
         initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
-        sol = solve(objective, initial, SolveOptions())
+        sol = solve(objective, initial, options)
         runs.append(sol)
     # per-evaluation cost measured directly on the final frame set, value + gradient
     fs = runs[-1].frames
