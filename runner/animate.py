@@ -106,6 +106,8 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     opt.add_argument("--max-evals", type=_nonneg(int), default=0, help="evaluations per round [no limit]")
     opt.add_argument("--rate", type=_positive(float), default=400.0,
                      help="quadrature points per second [%(default)s]")
+    opt.add_argument("--no-precondition", action="store_true",
+                     help="optimize the frame values directly instead of in the spline-acceleration metric")
     opt.add_argument("--no-renormalize", action="store_true",
                      help="use the weights as they are instead of dividing each term by its initial value (eq. 7)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
@@ -138,7 +140,8 @@ def load_model(path: Path):
     try:
         return mujoco.MjModel.from_xml_path(str(path))
     except ValueError as e:
-        raise InputError(f"scene file {path} could not be loaded by MuJoCo: {str(e).strip()}") from None
+        why = "; ".join(line.strip() for line in str(e).splitlines() if line.strip())
+        raise InputError(f"scene file {path} could not be loaded by MuJoCo: {why}") from None
 
 
 def load_problem(keyframes_path: Path, scene: Path | None):
@@ -148,9 +151,7 @@ def load_problem(keyframes_path: Path, scene: Path | None):
     import mujoco
 
     keyframes_path = Path(keyframes_path)
-    if not keyframes_path.is_file():
-        raise InputError(f"keyframe file {keyframes_path} does not exist")
-    head = _peek_scene(keyframes_path)
+    head = _peek_scene(keyframes_path)  # also reports a missing, unreadable or malformed file
     scene_path = Path(scene) if scene is not None else head
     if scene_path is None:
         raise InputError(f"{keyframes_path}: no 'scene' in the file; give one with --scene SCENE.xml")
@@ -158,18 +159,19 @@ def load_problem(keyframes_path: Path, scene: Path | None):
     layout = StateLayout.from_model(model)
     if not any(j.kind == "free" for j in layout.joints):
         raise InputError(f"scene {scene_path} has no free joint: does it include the figure (humanoid39.xml)?")
-    for site in ("l_heel", "l_toe", "r_heel", "r_toe"):
-        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, site) < 0:
-            raise InputError(f"scene {scene_path} has no contact site {site!r}: does it include the figure?")
+    sites = ("l_heel", "l_toe", "r_heel", "r_toe")
+    missing = [s for s in sites if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0]
+    if missing:
+        raise InputError(f"scene {scene_path} has no contact site(s) {', '.join(map(repr, missing))} (the "
+                         f"figure's feet need {', '.join(sites)}): does it include the figure (humanoid39.xml)?")
     keyframes, info = read_keyframes(keyframes_path, layout)
     return keyframes, info, model, layout, scene_path
 
 
 def _peek_scene(path: Path) -> Path | None:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None  # read_keyframes reports it properly
+    from runner.keyframe_io import read_document
+
+    data = read_document(path)  # InputError naming the file for anything unreadable
     scene = data.get("scene") if isinstance(data, dict) else None
     return (path.parent / scene).resolve() if isinstance(scene, str) else None
 
@@ -252,6 +254,7 @@ def solve_options(args, weights: dict) -> SolveOptions:
         subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
         renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
         max_evals=args.max_evals, max_time_s=args.max_time, limits=default_limits(weights),
+        precondition=not args.no_precondition,
     )
 
 
@@ -264,18 +267,24 @@ def default_args() -> argparse.Namespace:
 
 def run_animate(args) -> int:
     """Run `animate` / `run-and-step`. Returns the exit code."""
-    from runner.cli import EXIT_INTERRUPTED, EXIT_OK
+    from runner.cli import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
     from runner.files import check_writable_dir
 
     for out in (args.out, args.save_path):
         if out is not None:
             check_writable_dir(out)
+    if args.out is not None and not args.no_render:
+        _check_video_out(args.out, args.size)  # before the optimization, not after it
     if args.plot is not None:
         check_writable_dir(Path(args.plot) / "plot.png")
     keyframes, info, model, layout, scene_path = load_problem(args.keyframes, args.scene)
     file_terms = dict(getattr(info, "terms", None) or {})
     weights_in = dict(args.weight)
     if args.terms is None and file_terms:
+        try:
+            parse_terms(",".join(file_terms), file_terms)
+        except InputError as e:
+            raise InputError(f"{args.keyframes}: field 'terms': {e}; fix the file, or choose with --terms") from None
         weights = parse_terms(",".join(file_terms), {**file_terms, **weights_in})
     else:
         weights = parse_terms(args.terms, weights_in)
@@ -292,28 +301,52 @@ def run_animate(args) -> int:
     progress = Progress(args.quiet)
     with StopRequest(args.quiet) as stop:
         solution = solve(objective, initial, options, should_stop=stop, progress=progress)
-    progress.done()
-    interrupted = solution.status is Status.INTERRUPTED
-    say(f"  stopped: {solution.message} after {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
+        progress.done()
+        failed = solution.status in (Status.NONFINITE, Status.FAILED)
+        say(f"  stopped: {solution.message} after {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
+        if failed:
+            print(f"dynsplines: warning: the optimization failed ({solution.message}); the best path before "
+                  "that (it meets every keyframe) is reported and written", file=sys.stderr)
 
-    reference = _reference(info, model)
-    plain_m = path_metrics(model, initial.times, initial.values, keyframes)
-    opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
-    if not args.quiet:
-        print(summary_table(plain_m, opt_m, solution, weights))
-    if args.save_path is not None:
-        save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
-                      {"plain": plain_m, "optimized": opt_m}, args)
-        say(f"  wrote {_rel(args.save_path)}")
-    if args.plot is not None:
-        from runner.plots import plot_solution
+        reference = _reference(info, model)
+        plain_m = path_metrics(model, initial.times, initial.values, keyframes)
+        opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
+        if not args.quiet:
+            print(summary_table(plain_m, opt_m, solution, weights))
+        if args.save_path is not None:  # Ctrl-C until it is written only sets stop.requested
+            save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
+                          {"plain": plain_m, "optimized": opt_m}, args)
+            say(f"  wrote {_rel(args.save_path)}")
+        if args.plot is not None:
+            from runner.plots import plot_solution
 
-        for f in plot_solution(args.plot, model, solution, keyframes, reference):
-            say(f"  wrote {_rel(f)}")
+            for f in plot_solution(args.plot, model, solution, keyframes, reference):
+                say(f"  wrote {_rel(f)}")
+    interrupted = solution.status is Status.INTERRUPTED or stop.requested  # also Ctrl-C while saving
+    code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
     if args.out is not None and not args.no_render:
-        info_r = render_video(args.out, model, solution, keyframes, args)
+        try:
+            info_r = render_video(args.out, model, solution, keyframes, args)
+        except KeyboardInterrupt:  # the video is written atomically: nothing half-written is left
+            saved = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
+            print(f"\ndynsplines: interrupted while rendering: {_rel(args.out)} not written (an earlier file "
+                  f"there is unchanged){saved}", file=sys.stderr)
+            return EXIT_INTERRUPTED
         say(f"  wrote {_rel(args.out)} ({info_r.n_frames} frames, {info_r.wall_time_s:.1f} s to render)")
-    return EXIT_INTERRUPTED if interrupted else EXIT_OK
+    return code
+
+
+def _check_video_out(out, size) -> None:
+    """The video's name and size are checked before the optimization (render_tracks checks again)."""
+    from runner.render import VIDEO_SUFFIXES, parse_size
+
+    if Path(out).suffix.lower() not in VIDEO_SUFFIXES:
+        raise InputError(f"--out {out}: a video file must end in one of {', '.join(VIDEO_SUFFIXES)}; "
+                         "use e.g. --out clip.mp4, or --no-render")
+    w, h = parse_size(size)
+    if w % 2 or h % 2:
+        raise InputError(f"--size {w}x{h}: width and height must be even (H.264 video); e.g. --size "
+                         f"{w + w % 2}x{h + h % 2}")
 
 
 def _reference(info, model):
@@ -410,9 +443,13 @@ def save_path_npz(path, solution, keyframes, reference, scene_path, weights, opt
         options_json=np.array(json.dumps(opts, default=str)),
         versions_json=np.array(json.dumps(versions())),
     )
-    with atomic_output(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **fields)
+    try:
+        with atomic_output(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **fields)
+    except OSError as e:  # e.g. a full disk: the temporary file is gone, an earlier file is unchanged
+        raise InputError(f"cannot write {path}: {e.strerror or e}; an earlier file there is unchanged; "
+                         "free some space or choose another --save-path") from None
 
 
 def _repo_relative(path) -> str:

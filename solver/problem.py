@@ -43,7 +43,8 @@ def parse_terms(spec: str | None, weights: dict[str, float] | None = None) -> di
     Returns:
         {name: weight >= 0}.
     Raises:
-        InputError: unknown term (lists the valid ones), negative or non-finite weight.
+        InputError: unknown term (lists the valid ones), a weight that is not a number, negative or
+            non-finite.
     """
     valid = term_names()
     if spec is None:
@@ -58,7 +59,12 @@ def parse_terms(spec: str | None, weights: dict[str, float] | None = None) -> di
     for n, w in (weights or {}).items():
         if n not in valid:
             raise InputError(f"unknown objective term {n!r} in a weight; valid terms: {', '.join(valid)}")
-        w = float(w)
+        try:
+            if isinstance(w, bool):
+                raise TypeError
+            w = float(w)
+        except (TypeError, ValueError):
+            raise InputError(f"weight of term {n!r} is {w!r}; give a number >= 0, e.g. {n}=0.5") from None
         if not np.isfinite(w) or w < 0:
             raise InputError(f"weight of term {n!r} is {w}; weights must be finite and >= 0")
         chosen[n] = w
@@ -68,7 +74,7 @@ def parse_terms(spec: str | None, weights: dict[str, float] | None = None) -> di
 
 
 def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rate: float = 400.0,
-                     margin: float = 0.002) -> Objective:
+                     margin: float = 0.005) -> Objective:
     """The objective for a figure in a scene.
 
     Args:

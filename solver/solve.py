@@ -17,11 +17,13 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.frames import FrameSet
+from solver.metrics import sample_times
 from solver.objective import NonFiniteError, Objective
 from solver.optimize import OptimizeResult, Status, Stop, minimize
 from solver.subdivide import adaptive_times, global_times, predicted_decreases, weak_form_scores
 
 SUBDIVISIONS = ("none", "global", "adaptive")
+LIMIT_CHECK_RATE = 4000.0  # [1/s] samples per second at which `limits` are checked
 SCORES = ("gradient", "decrease")
 
 
@@ -47,7 +49,7 @@ class SolveOptions:
             of frame values (the Hessian of a spline's bending energy grows like 1/h^3) and L-BFGS
             needs 2-3x fewer evaluations. Iterates and results are the same kind of path.
         limits: ((term name, tolerance), ...): penalty continuation. After a round, a term whose
-            `violation` on the path (sampled at 1000 Hz, in the term's own units, e.g. metres of
+            `violation` on the path (sampled at LIMIT_CHECK_RATE, in the term's own units, e.g. metres of
             penetration) exceeds its tolerance has its weight multiplied by `boost` and the round is
             optimized again, at most `max_boosts` times in a solve: the quadratic-penalty method's
             schedule (Nocedal & Wright, Numerical Optimization, sec. 17.1), which drives a soft
@@ -170,6 +172,9 @@ def solve(
     r = 0
     scores = None
     while True:
+        if should_stop is not None and should_stop():  # e.g. Ctrl-C during subdivision
+            status, message = Status.INTERRUPTED, "stopped on request"
+            break
         remaining = 0.0
         if options.max_time_s:
             remaining = options.max_time_s - (time.perf_counter() - t_start)
@@ -203,10 +208,14 @@ def solve(
             budget = min(budget, options.max_frames - frames.n_variable)
         if budget <= 0:
             break
-        if options.score == "decrease":
-            scores = predicted_decreases(objective, frames)
-        else:
-            scores = weak_form_scores(objective, frames)
+        try:
+            if options.score == "decrease":
+                scores = predicted_decreases(objective, frames)
+            else:
+                scores = weak_form_scores(objective, frames)
+        except NonFiniteError as e:  # keep the optimized frames; say which term failed
+            status, message = Status.NONFINITE, f"{e} while choosing new frames"
+            break
         new = adaptive_times(scores, frames, budget)
         if new.size == 0:
             break
@@ -225,8 +234,9 @@ def _over_limits(objective: Objective, frames: FrameSet, limits) -> dict[str, fl
     """{term name: violation} for the terms whose violation on the path exceeds their limit."""
     if not limits:
         return {}
-    t = np.linspace(frames.times[0], frames.times[-1], int((frames.times[-1] - frames.times[0]) * 1000) + 1)
-    Y = frames.path(t)
+    # Dense: a swing foot moves ~6 mm per ms, so a graze of a box edge can last about a millisecond;
+    # a check at the 1000 Hz of the acceptance figures would see it or not depending on phase.
+    Y = frames.path(sample_times(frames.times[0], frames.times[-1], LIMIT_CHECK_RATE))
     over = {}
     for name, tol in limits:
         if name not in objective.names:

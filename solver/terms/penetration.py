@@ -58,7 +58,9 @@ class Penetration(Term):
     Args:
         model: MjModel of the scene (figure + static floor planes/boxes), loaded once by the caller.
         sites: contact site names (default heel and toe of each foot).
-        margin: [m] clearance counted as penetration (default 2 mm).
+        margin: [m] clearance counted as penetration (default 5 mm). At 400 quadrature points per
+            second a swing foot (~6 m/s) moves ~15 mm between points and can cut a box corner between
+            two of them; 5 mm of margin absorbs that (2 mm left 0.5-0.9 mm grazes on the shipped clip).
     Raises:
         InputError: a site is missing or the scene has no static plane or box.
     """
@@ -67,7 +69,7 @@ class Penetration(Term):
     units = "m^2"
     needs = (0,)
 
-    def __init__(self, model, sites=CONTACT_SITES, margin: float = 0.002):
+    def __init__(self, model, sites=CONTACT_SITES, margin: float = 0.005):
         self.model = model
         self.data = mujoco.MjData(model)
         self.sites = site_ids(model, sites)
