@@ -26,6 +26,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 GAPS = (1e-2, 1e-3, 1e-4)
+DEFAULT_SETS = "large_uniform,large_nonuniform,large_nonuniform_b"
 
 #: our settings, from fast and coarse to slow and accurate: (label, orient keyword arguments)
 LADDER = (
@@ -138,14 +139,56 @@ def bench_set(ks, methods, budget: float, repeat: int, ref, out=print) -> dict:
     return {"results": results, "logs": logs, "E_star": E_star}
 
 
+#: objective variants of the trade-off table: (label, orient keyword arguments)
+TRADEOFF_VARIANTS = (
+    ("(a) paper, renormalized 2:5", dict(form="paper")),
+    ("(a) paper, renormalized 1:1", dict(form="paper", weights=(1.0, 1.0))),
+    ("(a) paper, renormalized 10:1", dict(form="paper", weights=(10.0, 1.0))),
+    ("(a) paper, plain lambda=1000", dict(form="paper", weights=(1000.0, 1.0), renormalize=False)),
+    ("(b) normalized (default)", dict()),
+)
+
+
+def tradeoff(ref, sets, per_segment=(0, 1, 2, 3, 5), rate: float = 100.0, out=print) -> dict:
+    """The trade-off the paper does not report: gap and max |1 - |q|| against the number of variable
+    frames (global subdivision, n per keyframe interval), for the paper's form at several weights and
+    for the normalized form. Returns {(set, label, n): (gap, max_norm_deviation)}."""
+    from solver.orient import default_options, orient
+
+    table = {}
+    for ks in sets:
+        E_star = ref.riemannian_cubic_reference(ks.times, ks.quats, tol=1e-6).E_star
+        angles = ref.rotation_angles_deg(ks.quats)
+        out(f"\n{ks.name} ({angles.min():.0f}-{angles.max():.0f} deg between keyframes): "
+            "gap (E - E*)/E* / max |1 - |q|| ; columns: variable frames (global, n per interval)")
+        out("| objective | " + " | ".join(f"{n * (len(ks.times) - 1)}" for n in per_segment) + " |")
+        out("|---|" + "---|" * len(per_segment))
+        for label, kw in TRADEOFF_VARIANTS:
+            cells = []
+            for n in per_segment:
+                opts = default_options(subdivision="global" if n else "none", per_segment=n, ftol_rel=1e-9)
+                r = orient(ks.times, ks.quats, options=opts, rate=rate, **kw)
+                fr = r.frames
+                t = np.concatenate([np.linspace(a, b, 161)[:-1] for a, b in zip(fr.times[:-1], fr.times[1:])]
+                                   + [fr.times[-1:]])
+                g = (ref.covariant_energy(t, fr.path(t), breaks=fr.times) - E_star) / E_star
+                table[(ks.name, label, n)] = (g, r.max_norm_deviation)
+                cells.append(f"{g:.1e} / {100 * r.max_norm_deviation:.2g}%")
+            out(f"| {label} | " + " | ".join(cells) + " |")
+    return table
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the options of `dynsplines bench orient` to a parser (runner.bench uses this)."""
-    p.add_argument("--sets", default="large_uniform,large_nonuniform,large_nonuniform_b",
+    p.add_argument("--sets", default=DEFAULT_SETS,
                    help="comma-separated keyframe sets (tests/sphere_reference.py) [the three large sets]")
     p.add_argument("--methods", default="dynsplines,barr92,bspline", help="comma-separated methods")
     p.add_argument("--budget", type=float, default=60.0, help="seconds per baseline and set [60]")
     p.add_argument("--repeat", type=int, default=3, help="runs per setting of ours; median reported [3]")
     p.add_argument("--verbose", action="store_true", help="print every run of every ladder")
+    p.add_argument("--tradeoff", action="store_true",
+                   help="instead: the table of gap and max |1 - |q|| against variable frames, for both "
+                   "objective forms (docs/orient.md), on --sets (default here: large_nonuniform,moderate)")
 
 
 def run(args) -> int:
@@ -155,7 +198,10 @@ def run(args) -> int:
 
     ref = _reference_module()
     known = {s.name: s for s in ref.large_rotation_sets() + [ref.moderate_rotation_set()]}
-    names = [s.strip() for s in args.sets.split(",") if s.strip()]
+    sets = args.sets
+    if args.tradeoff and sets == DEFAULT_SETS:
+        sets = "large_nonuniform,moderate"
+    names = [s.strip() for s in sets.split(",") if s.strip()]
     for n in names:
         if n not in known:
             raise InputError(f"unknown keyframe set {n!r}; choose from: {', '.join(known)}")
@@ -165,6 +211,9 @@ def run(args) -> int:
             raise InputError(f"unknown method {m!r}; choose from: dynsplines, barr92, bspline")
     if args.budget <= 0 or args.repeat < 1:
         raise InputError("--budget must be > 0 seconds and --repeat >= 1")
+    if args.tradeoff:
+        tradeoff(ref, [known[n] for n in names])
+        return 0
     print("bench orient: wall time to reach a relative gap (E - E*)/E* of the normalized path "
           f"(baselines: budget {args.budget:g} s per set; ours: median of {args.repeat} runs)")
     for n in names:
