@@ -64,7 +64,9 @@ class BaselineResult:
         wall_time_s: wall time of the optimization, setup and path evaluation included [s].
         n_evals: objective (+gradient) evaluations.
         status: "converged" (SLSQP's ftol reached), "time_limit" (stopped at max_time_s; the last
-            accepted iterate is returned), or "failed: <SLSQP message>" (last iterate returned).
+            accepted iterate is returned - SLSQP's early iterates on the larger Barr problems are far
+            from the optimum: m = 16 stopped after ~13 s had gap ~2e3), or "failed: <SLSQP message>"
+            (last iterate returned).
         E: energy integral |cov. acc.|^2 dt of the normalized continuous path [1/s^3], by Gauss-Legendre
             quadrature (8 nodes per polynomial piece) of the analytic expression - accurate to ~1e-12
             relative.
@@ -358,7 +360,7 @@ class BSplineProblem:
     Constraints: B(t_i) C = q_i for every keyframe (4K linear equalities).
     """
 
-    def __init__(self, times: np.ndarray, quats: np.ndarray, r: int, lam: float = 1e3, n_quad: int = 5):
+    def __init__(self, times: np.ndarray, quats: np.ndarray, r: int, lam: float = 1e4, n_quad: int = 5):
         times, q = _check(times, quats)
         if r < 1:
             raise ValueError("need r >= 1 spans per keyframe interval")
@@ -424,7 +426,7 @@ def bspline_coefficients(
     quats: np.ndarray,
     resolution: int,
     max_time_s: float = 60.0,
-    lam: float = 1e3,
+    lam: float = 1e4,
     ftol: float = 1e-10,
     maxiter: int = 100000,
 ) -> BaselineResult:
@@ -438,8 +440,12 @@ def bspline_coefficients(
         resolution: r >= 1 uniform knot spans per keyframe interval (unknowns: 4 ((K-1) r + 3)).
         max_time_s: wall-time limit for the optimization [s].
         lam: weight lambda of the unit-norm penalty (eq. 9) [1/s^4]. With finite lambda the spline
-            shrinks between keyframes (|q| < 1, by ~|cov. acc.|^2/(4 lambda)), which biases the
-            normalized path: a floor on the gap that does not go away with resolution.
+            dips below unit length between keyframes (by ~|cov. acc.|^2 / (4 lambda); measured max
+            | |q| - 1 | at r = 8: 5.7/lambda on large_nonuniform, 0.6/lambda on the moderate set; the paper
+            reports < 0.2%), which biases the normalized path: a floor on the gap that resolution does
+            not remove (large_nonuniform: ~4e-4 at lambda = 1e3, gap then *grows* with r; < 1e-5 at
+            the default 1e4). Much larger lambda makes the problem stiff for SLSQP (lambda = 1e5, r = 4:
+            gap 1.8e-3 vs 2.5e-4 at 1e4).
     Returns:
         BaselineResult.
     """

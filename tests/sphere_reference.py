@@ -37,7 +37,6 @@ import contextlib
 import ctypes
 import functools
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 from scipy.integrate import solve_bvp
