@@ -140,7 +140,7 @@ def load_model(path: Path):
     try:
         return mujoco.MjModel.from_xml_path(str(path))
     except ValueError as e:
-        why = "; ".join(line.strip() for line in str(e).splitlines() if line.strip())
+        why = " ".join(line.strip() for line in str(e).splitlines() if line.strip())
         raise InputError(f"scene file {path} could not be loaded by MuJoCo: {why}") from None
 
 
@@ -205,8 +205,8 @@ class StopRequest:
 class Progress:
     """One line of progress, rewritten in place on a terminal, a line a second otherwise."""
 
-    def __init__(self, quiet=False, stream=sys.stdout):
-        self.quiet, self.stream = quiet, stream
+    def __init__(self, quiet=False, stream=None):
+        self.quiet, self.stream = quiet, sys.stdout if stream is None else stream
         self.tty = stream.isatty()
         self.t0 = time.perf_counter()
         self.last = 0.0
@@ -303,7 +303,8 @@ def run_animate(args) -> int:
         solution = solve(objective, initial, options, should_stop=stop, progress=progress)
         progress.done()
         failed = solution.status in (Status.NONFINITE, Status.FAILED)
-        say(f"  stopped: {solution.message} after {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
+        why = "interrupted (Ctrl-C), best path so far kept" if stop.requested else solution.message
+        say(f"  stopped: {why} after {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
         if failed:
             print(f"dynsplines: warning: the optimization failed ({solution.message}); the best path before "
                   "that (it meets every keyframe) is reported and written", file=sys.stderr)
@@ -403,7 +404,10 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict) -> str:
 
 
 def versions() -> dict:
-    """Versions of the software that made a result (recorded in the .npz)."""
+    """Versions of the software that made a result (recorded in the .npz), and the BLAS thread settings:
+    a path is bit-identical for the same inputs, options, versions and BLAS thread count (the command
+    uses one thread, see solver/__init__.py; another count changes the last bits of matrix products)."""
+    import os
     from importlib.metadata import PackageNotFoundError, version
 
     out = {"python": sys.version.split()[0]}
@@ -412,6 +416,8 @@ def versions() -> dict:
             out[pkg] = version(pkg)
         except PackageNotFoundError:
             out[pkg] = "unknown"
+    out["blas_threads_env"] = {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                                              "MKL_NUM_THREADS")}
     return out
 
 

@@ -938,7 +938,7 @@ _DEFAULT_PROG = (
 _MODELS = Path(__file__).resolve().parents[1] / "models"
 
 
-def keyframes_from_bvh_main(argv: Sequence[str] | None = None, prog: str | None = None) -> int:
+def keyframes_from_bvh_main(argv: Sequence[str] | None = None, prog: str | None = None, debug: bool = False) -> int:
     """`keyframes-from-bvh`: write a keyframe file (runner/keyframe_io.py format) made from a BVH clip.
 
     Arguments: CLIP (a .bvh file), --out FILE (.keyframes.json), --every SECONDS (0.25), --scene MJCF
@@ -948,6 +948,7 @@ def keyframes_from_bvh_main(argv: Sequence[str] | None = None, prog: str | None 
     Args:
         argv: the arguments (without the program name); None = sys.argv[1:].
         prog: how the command was invoked, for the record; default: the `python -c` form above.
+        debug: re-raise an InputError (its traceback) instead of printing its message.
     Returns:
         0 on success, 2 on bad input (the message goes to stderr).
     """
@@ -985,7 +986,9 @@ def keyframes_from_bvh_main(argv: Sequence[str] | None = None, prog: str | None 
         }
         write_keyframes(out, keyframes, StateLayout.from_model(model), model=figure, scene=scene, source=source)
     except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
+        if debug:
+            raise
+        print(f"dynsplines: error: {e}", file=sys.stderr)
         return 2
     print(
         f"wrote {args.out}: {keyframes.count} keyframes at {', '.join(f'{t:.3f}' for t in keyframes.times)} s "

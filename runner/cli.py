@@ -7,7 +7,12 @@ Exit codes:
     0   success (also when --max-time ended the optimization: the best path so far is written)
     1   internal error (a bug: please report it with the --debug traceback)
     2   bad input (a file, field or option); the message says what and how to fix it
-    130 interrupted (Ctrl-C); the best path so far and the requested outputs were written
+    3   the optimization failed partway (a non-finite objective or gradient, named by term, or an
+        optimizer failure); the best path before it (it meets every keyframe) and the outputs were written
+    130 interrupted (Ctrl-C); the best path so far and the requested outputs were written (a second
+        Ctrl-C aborts at once and writes nothing; Ctrl-C while rendering leaves any earlier video as it was)
+
+A user mistake prints one line, "dynsplines: error: ...", never a traceback; --debug shows it.
 """
 from __future__ import annotations
 
@@ -19,13 +24,13 @@ from solver.errors import DynsplinesError, InputError
 EXIT_OK = 0
 EXIT_INTERNAL = 1
 EXIT_INPUT = 2
+EXIT_FAILED = 3
 EXIT_INTERRUPTED = 130
 
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # argparse's own usage errors: one line and exit code 2
-        self.print_usage(sys.stderr)
-        self.exit(EXIT_INPUT, f"dynsplines: error: {message}\n")
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -58,7 +63,7 @@ def _register_keyframes_from_bvh(sub) -> None:
     def run(args):
         from runner.bvh_import import keyframes_from_bvh_main
 
-        return keyframes_from_bvh_main(args.args, prog="dynsplines keyframes-from-bvh")
+        return keyframes_from_bvh_main(args.args, prog="dynsplines keyframes-from-bvh", debug=args.debug)
 
     p.set_defaults(func=run)
 

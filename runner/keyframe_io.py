@@ -66,6 +66,38 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+def read_document(path: str | os.PathLike) -> Any:
+    """The parsed JSON of a keyframe file, with the file checks of `read_keyframes` (its messages).
+
+    NaN and Infinity literals are accepted here (read_keyframes rejects them per value, naming the
+    joint and component).
+
+    Raises:
+        InputError: missing, a folder, unreadable, not UTF-8, malformed or too deeply nested JSON.
+    """
+    p = Path(path)
+    src = str(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{src}: no such keyframe file (current folder: {Path.cwd()}); check the path") from None
+    except IsADirectoryError:
+        raise InputError(f"{src}: is a folder; give the path of a .json keyframe file") from None
+    except UnicodeDecodeError as e:
+        raise InputError(f"{src}: not a text file (byte {e.start} is not UTF-8); give a .json keyframe file") from None
+    except OSError as e:
+        raise InputError(f"{src}: cannot read the keyframe file: {e.strerror}; check its permissions") from None
+    try:
+        return json.loads(text, parse_constant=_JSON_CONSTANTS.__getitem__)
+    except json.JSONDecodeError as e:
+        raise InputError(
+            f"{src}: line {e.lineno}, column {e.colno}: malformed JSON ({e.msg}); check brackets, commas and "
+            "quotes near there (JSON has no comments and no trailing commas)"
+        ) from None
+    except RecursionError:
+        raise InputError(f"{src}: JSON nested too deeply to read; a keyframe file is an object of lists") from None
+
+
 def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyframes, KeyframeFileInfo]:
     """Read and check a keyframe file.
 
@@ -85,23 +117,7 @@ def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyfra
     """
     p = Path(path)
     src = str(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{src}: no such keyframe file (current folder: {Path.cwd()}); check the path") from None
-    except IsADirectoryError:
-        raise InputError(f"{src}: is a folder; give the path of a .json keyframe file") from None
-    except UnicodeDecodeError as e:
-        raise InputError(f"{src}: not a text file (byte {e.start} is not UTF-8); give a .json keyframe file") from None
-    except OSError as e:
-        raise InputError(f"{src}: cannot read the keyframe file: {e.strerror}; check its permissions") from None
-    try:
-        doc = json.loads(text, parse_constant=_JSON_CONSTANTS.__getitem__)  # checked per value below
-    except json.JSONDecodeError as e:
-        raise InputError(
-            f"{src}: line {e.lineno}, column {e.colno}: malformed JSON ({e.msg}); check brackets, commas and "
-            "quotes near there (JSON has no comments and no trailing commas)"
-        ) from None
+    doc = read_document(path)
     if not isinstance(doc, dict):
         raise InputError(f"{src}: the top level is a {type(doc).__name__}; a keyframe file is a JSON object {{...}}")
     fmt = doc.get("format", FORMAT)

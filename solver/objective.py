@@ -18,6 +18,12 @@ from solver.spline import SplineBasis, quadrature_times
 from solver.terms.base import Term
 
 
+#: Largest quadrature (points on the keyframe interval) an Objective accepts: the spline matrices are
+#: dense (points x frames), so a clip minutes long at the default rate, or keyframe times in frames
+#: instead of seconds, would exhaust memory instead of failing clearly.
+MAX_QUADRATURE_POINTS = 100_000
+
+
 class NonFiniteError(DynsplinesError):
     """A term produced NaN or inf; `term` names it."""
 
@@ -52,7 +58,8 @@ class Objective:
         rate: quadrature points per second [1/s].
         scales: (len(terms),) divisors of each integral (1 unless `renormalize` was called).
     Raises:
-        InputError: negative or non-finite weight, weights/terms length mismatch, bad interval or rate.
+        InputError: negative or non-finite weight, weights/terms length mismatch, bad interval or rate,
+            more than MAX_QUADRATURE_POINTS quadrature points.
     """
 
     terms: list[Term]
@@ -73,6 +80,12 @@ class Objective:
             raise InputError(f"objective interval [{self.t0}, {self.t1}] s is empty")
         if not np.isfinite(self.rate) or self.rate <= 0:
             raise InputError(f"quadrature rate {self.rate} must be > 0 points per second")
+        n = (self.t1 - self.t0) * self.rate
+        if n > MAX_QUADRATURE_POINTS:
+            raise InputError(
+                f"the keyframes span {self.t1 - self.t0:g} s; at {self.rate:g} quadrature points per second "
+                f"that is {n:.3g} points (at most {MAX_QUADRATURE_POINTS}); check the keyframe times "
+                "(seconds, not frames) or lower the rate (--rate)")
         if self.scales is None:
             self.scales = np.ones(len(self.terms))
         self.t, self.h = quadrature_times(self.t0, self.t1, self.rate)

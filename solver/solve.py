@@ -189,6 +189,8 @@ def solve(
         traces.append(result.trace)
         n_evals += result.n_evals
         status, message = result.status, result.message
+        if status is Status.MAX_TIME:  # the round had what was left; report the whole solve's limit
+            message = f"time limit of {options.max_time_s:g} s reached"
         if status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED):
             break
         over = _over_limits(objective, frames, options.limits) if boosts < options.max_boosts else {}
