@@ -108,12 +108,16 @@ class Keyframes:
         Returns:
             (k, nq) finite values; fixed components equal `values` up to the sign of whole quaternions.
         Raises:
-            InputError: a fixed quaternion is zero or near zero (|q| < 1e-6).
+            InputError: a fixed quaternion is zero or near zero (|q| < 1e-6); a slot outside 0..nq-1.
         """
         from scipy.interpolate import make_interp_spline
 
         vals = self.values.copy()
-        for slot in np.asarray(quat_slots, dtype=int).reshape(-1, 4):
+        slots = np.asarray(quat_slots, dtype=int).reshape(-1, 4)
+        if slots.size and (slots.min() < 0 or slots.max() >= self.nq):
+            raise InputError(f"{self.source}: quaternion slots {slots.tolist()} do not fit keyframes of nq={self.nq}; "
+                             "pass the layout of the model the keyframes are for (layout.quat_slots)")
+        for slot in slots:
             full = self.mask[:, slot].all(axis=1)
             norms = np.linalg.norm(vals[full][:, slot], axis=1)
             if np.any(norms < 1e-6):

@@ -19,7 +19,7 @@ from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.metrics import sample_times
 from solver.objective import NonFiniteError, Objective
-from solver.optimize import OptimizeResult, Status, Stop, minimize
+from solver.optimize import ALGORITHMS, OptimizeResult, Status, Stop, minimize
 from solver.subdivide import adaptive_times, global_times, predicted_decreases, weak_form_scores
 
 SUBDIVISIONS = ("none", "global", "adaptive")
@@ -78,8 +78,13 @@ class SolveOptions:
         if self.score not in SCORES:
             raise InputError(f"unknown subdivision score {self.score!r}; choose one of: {', '.join(SCORES)}")
         for name in ("per_segment", "rounds", "per_round", "max_frames", "max_evals", "max_boosts"):
-            if getattr(self, name) < 0:
-                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 0:
+                raise InputError(f"{name} must be a whole number >= 0, got {v!r}")
+        if self.algorithm not in ALGORITHMS:
+            raise InputError(f"unknown algorithm {self.algorithm!r}; choose one of: {', '.join(ALGORITHMS)}")
+        if not self.ftol_rel >= 0:
+            raise InputError(f"ftol_rel must be >= 0, got {self.ftol_rel}")
         if not self.boost >= 1:
             raise InputError(f"boost must be >= 1, got {self.boost}")
         for lim in self.limits:
@@ -150,7 +155,13 @@ def solve(
         progress: progress(event, info) for "round" (start of a round) and "eval" (each evaluation).
     Returns:
         Solution.
+    Raises:
+        InputError: `initial` is not a FrameSet or `options` not SolveOptions; the objective's interval
+            is not the frames' [first, last] time; the objective cannot be evaluated on the frames
+            (their nq does not fit the objective's model).
+        NonFiniteError: the objective is NaN or infinite on the initial path (nothing to keep).
     """
+    _check_inputs(objective, initial, options)
     t_start = time.perf_counter()
     if options.renormalize:
         scales = objective.renormalize(initial.times, initial.values)
@@ -230,6 +241,28 @@ def solve(
         scales, np.concatenate(traces) if traces else np.array([ev0.E]),
         time.perf_counter() - t_start, n_evals,
     )
+
+
+def _check_inputs(objective, initial, options) -> None:
+    if not isinstance(initial, FrameSet):
+        hint = " (make one with FrameSet.from_keyframes(keyframes, layout.quat_slots))" if hasattr(
+            initial, "mask") else ""
+        raise InputError(f"initial must be a FrameSet, got {type(initial).__name__}{hint}")
+    if not isinstance(options, SolveOptions):
+        raise InputError(f"options must be a SolveOptions, got {type(options).__name__}")
+    if not isinstance(objective, Objective):
+        raise InputError(f"objective must be an Objective (e.g. from figure_objective), got {type(objective).__name__}")
+    t0, t1 = float(initial.times[0]), float(initial.times[-1])
+    if abs(objective.t0 - t0) > 1e-9 * max(1.0, abs(t0)) or abs(objective.t1 - t1) > 1e-9 * max(1.0, abs(t1)):
+        raise InputError(
+            f"the objective integrates over [{objective.t0:g}, {objective.t1:g}] s but the frames span "
+            f"[{t0:g}, {t1:g}] s; build the objective with keyframes.times[0] and keyframes.times[-1]")
+    try:
+        objective.evaluate(initial.times, initial.values, grad=False)
+    except (ValueError, IndexError) as e:
+        raise InputError(
+            f"the objective cannot be evaluated on frames of shape {initial.values.shape} ({e}); are the "
+            "keyframes for the model the objective was built from (same nq)?") from None
 
 
 def _over_limits(objective: Objective, frames: FrameSet, limits) -> dict[str, float]:
