@@ -207,7 +207,7 @@ class Progress:
 
     def __init__(self, quiet=False, stream=None):
         self.quiet, self.stream = quiet, sys.stdout if stream is None else stream
-        self.tty = stream.isatty()
+        self.tty = self.stream.isatty()
         self.t0 = time.perf_counter()
         self.last = 0.0
         self.info = {}
