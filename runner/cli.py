@@ -72,7 +72,10 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line. Returns the exit code (see the module docstring)."""
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help (0) or a usage error (2, its message already printed)
+        return e.code if isinstance(e.code, int) else EXIT_INPUT
     try:
         return int(args.func(args) or 0)
     except InputError as e:

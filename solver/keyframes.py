@@ -51,7 +51,7 @@ class Keyframes:
         bad = np.flatnonzero(~np.isfinite(times))
         if bad.size:
             i = int(bad[0])
-            raise InputError(f"{src}: keyframe {i} has time {times[i]!r}; times must be finite numbers")
+            raise InputError(f"{src}: keyframe {i} has time {float(times[i])}; times must be finite numbers")
         if times[0] < 0:
             raise InputError(f"{src}: keyframe 0 has negative time {times[0]} s; times start at 0 or later")
         steps = np.diff(times)
@@ -74,7 +74,7 @@ class Keyframes:
         if nonfinite.any():
             i, c = (int(a) for a in np.argwhere(nonfinite)[0])
             raise InputError(
-                f"{src}: keyframe {i} (t={times[i]} s) component {c} is {values[i, c]!r}; "
+                f"{src}: keyframe {i} (t={times[i]} s) component {c} is {float(values[i, c])}; "
                 "fixed values must be finite numbers"
             )
         object.__setattr__(self, "times", times)
