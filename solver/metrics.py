@@ -2,6 +2,20 @@
 
 These are the acceptance figures: penetration depth of the contact sites [mm], quaternion norm
 deviation, knee/elbow hyperextension [deg], keyframe error. They use the true surfaces (no margin).
+
+Physical plausibility (paper sec. 6, appendix A), from the contact-free inverse dynamics of the path
+(`dynamics_series`, the engine the torque and root terms use, on the spline's Y, Y', Y''):
+
+* joint torque: the 33 generalized forces of the 11 ball joints [N m] (the free root's 6 excluded).
+  RMS = sqrt(mean over samples of sum over the 33 of tau^2), i.e. the RMS over time of the Euclidean
+  norm of the joint-torque vector; peak = the largest torque magnitude |tau_j| (3-vector) of any one
+  joint at any sample.
+* root residual: the free root's generalized force, world force F [N] and torque T about the root's
+  origin [N m]: the external wrench besides gravity the motion needs. In flight nothing but gravity
+  acts, so it should be 0 (a figure at rest in the air needs F = m g). Flight is where the root term's
+  indicator phi > 0.5 (`RootResidual.flight`: every contact site clear of every surface by about
+  3 cm or more, with the default 5 cm contact distance); RMS and peak of |F| and |T| over the flight
+  samples, and the flight duration [s], are reported per path (each path's own flight phases).
 """
 from __future__ import annotations
 
@@ -37,17 +51,96 @@ def keyframe_error(frames: FrameSet | tuple, keyframes: Keyframes, quat_slots) -
     return float(err.max()) if err.size else 0.0
 
 
+def dynamics_series(model, frame_times, frames, rate: float = 1000.0, sites=CONTACT_SITES,
+                    flight_threshold: float = 0.5) -> dict:
+    """Inverse dynamics along a path (the natural cubic spline through frames), sampled densely.
+
+    Args:
+        model: MjModel of the scene (figure with a free root and ball joints, static surfaces).
+        frame_times: (m,) [s]. frames: (m, nq). rate: samples per second [1/s].
+        sites: contact sites for the flight indicator. flight_threshold: phi above which a sample is
+            in flight.
+    Returns:
+        dict of arrays over n samples: t (n,) [s]; joint_torque (n, 33) [N m] (ball-joint DOFs in
+        qvel order, child-frame components); joint_names (11,) and joint_torque_norm (n, 11) [N m]
+        (|tau_j| per ball joint); root_force (n, 3) [N] (world); root_torque (n, 3) [N m] (root
+        frame); phi (n,) the flight indicator in [0, 1]; flight (n,) bool.
+    Raises:
+        InputError: a model the analytic inverse dynamics does not support (see `make_engine`).
+    """
+    from solver.terms.dynamics import JointTorque, RootResidual, make_engine
+
+    layout = StateLayout.from_model(model)
+    t = sample_times(frame_times[0], frame_times[-1], rate)
+    Y, Y1, Y2 = (interpolate(frame_times, frames, t, nu) for nu in (0, 1, 2))
+    engine = make_engine(model, tuple(sites))
+    torque = JointTorque(model, engine=engine)
+    root = RootResidual(model, sites=sites, engine=engine)
+    mo = torque.tmap.motion(Y, Y1, Y2)
+    res = engine.forward(Y, mo.qvel, mo.qacc)
+    phi, _ = root.flight(res.sites[:, root.site_index])
+    balls = [j for j in layout.joints if j.kind == "ball"]
+    dofs = np.array([j.dofadr + i for j in balls for i in range(3)], int)
+    tau = res.tau[:, dofs]
+    wrench = res.tau[:, root.root_dofs]
+    return {
+        "t": t,
+        "joint_torque": tau,
+        "joint_names": [j.name for j in balls],
+        "joint_torque_norm": np.linalg.norm(tau.reshape(len(t), -1, 3), axis=-1),
+        "root_force": wrench[:, :3],
+        "root_torque": wrench[:, 3:],
+        "phi": phi,
+        "flight": phi > flight_threshold,
+    }
+
+
+def dynamics_metrics(series: dict) -> dict:
+    """Summary figures of `dynamics_series` (definitions: module docstring).
+
+    Returns:
+        dict: rms_joint_torque_Nm, peak_joint_torque_Nm, peak_joint_torque_joint, flight_s,
+        rms_root_force_flight_N, peak_root_force_flight_N, rms_root_torque_flight_Nm,
+        peak_root_torque_flight_Nm (NaN without flight samples).
+    """
+    t, tau, fl = series["t"], series["joint_torque"], series["flight"]
+    norms = series["joint_torque_norm"]
+    j = int(np.argmax(norms.max(axis=0)))
+    F = np.linalg.norm(series["root_force"][fl], axis=1)
+    T = np.linalg.norm(series["root_torque"][fl], axis=1)
+    dt = (t[-1] - t[0]) / max(1, len(t) - 1)
+
+    def rms(x):
+        return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
+
+    def peak(x):
+        return float(x.max()) if x.size else float("nan")
+
+    return {
+        "rms_joint_torque_Nm": float(np.sqrt(np.mean((tau * tau).sum(axis=1)))),
+        "peak_joint_torque_Nm": float(norms.max()),
+        "peak_joint_torque_joint": series["joint_names"][j],
+        "flight_s": float(fl.sum() * dt),
+        "rms_root_force_flight_N": rms(F),
+        "peak_root_force_flight_N": peak(F),
+        "rms_root_torque_flight_Nm": rms(T),
+        "peak_root_torque_flight_Nm": peak(T),
+    }
+
+
 def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None, rate: float = 1000.0,
-                 sites=CONTACT_SITES) -> dict:
+                 sites=CONTACT_SITES, dynamics: bool = True) -> dict:
     """Acceptance figures of a path (the natural cubic spline through frames).
 
     Args:
         model: MjModel of the scene. frame_times: (m,) [s]. frames: (m, nq).
         keyframes: to report the keyframe error (optional). rate: samples per second.
+        dynamics: also report the inverse-dynamics figures (`dynamics_metrics`; skipped, without an
+            error, for a model the analytic engine does not support).
     Returns:
         dict with max_penetration_mm, penetration_mm_by_site {site: mm}, max_norm_deviation (max over
         time and quaternions of |1 - |q||), max_hyperextension_deg {joint: deg} and overall,
-        keyframe_error (if keyframes given), samples.
+        keyframe_error (if keyframes given), samples, and the `dynamics_metrics` keys.
     """
     layout = StateLayout.from_model(model)
     t = sample_times(frame_times[0], frame_times[-1], rate)
@@ -71,4 +164,11 @@ def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None,
         out["max_hyperextension_deg"] = float("nan")
     if keyframes is not None:
         out["keyframe_error"] = keyframe_error((frame_times, frames), keyframes, layout.quat_slots)
+    if dynamics:
+        from solver.errors import InputError
+
+        try:
+            out.update(dynamics_metrics(dynamics_series(model, frame_times, frames, rate, sites)))
+        except InputError:  # a model the analytic inverse dynamics does not support
+            pass
     return out
