@@ -233,8 +233,9 @@ class Progress:
             return
         self.last = now
         i = self.info
+        E = f"E {i['E']:.6g}" if "E" in i else "E -"
         msg = (f"  round {i.get('round', 0) + 1}: {i.get('frames', 0)} frames ({i.get('variable', 0)} variable)"
-               f"  evals {i.get('evals', 0):5d}  E {i.get('E', float('nan')):.6g}  {now - self.t0:6.1f} s")
+               f"  evals {i.get('evals', 0):5d}  {E}  {now - self.t0:6.1f} s")
         if self.tty:
             self.stream.write("\r" + msg.ljust(90))
         else:
@@ -481,9 +482,15 @@ def render_video(out, model, solution, keyframes, args):
     kq = solution.initial.values[solution.initial.is_keyframe]
     quiet = getattr(args, "quiet", False)
 
+    tty = sys.stdout.isatty()
+
     def progress(i, n):
-        if not quiet and (i % 20 == 0 or i == n):
+        if quiet:
+            return
+        if tty and (i % 10 == 0 or i == n):
             print(f"\r  rendering {i}/{n}", end="" if i < n else "\n", flush=True)
+        elif not tty and (i % 50 == 0 or i == n):
+            print(f"  rendering {i}/{n}", flush=True)
 
     return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
                          keyframe_times=keyframes.times, keyframe_qpos=kq,
