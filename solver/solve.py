@@ -325,6 +325,14 @@ def _acceleration_metric_inverse(objective: Objective, frames: FrameSet) -> np.n
     H = 2.0 * objective.h * (W2.T @ W2)
     rows, comps = np.nonzero(frames.free)
     Hf = H[np.ix_(rows, rows)] * (comps[:, None] == comps[None, :])
+    # Directions the acceleration does not see get the identity (two frames: the spline is a line,
+    # Y'' = 0, H = 0, and the ridge alone would scale the first step by ~1e150 - an overflow).
+    d = np.diag(Hf).copy()
+    flat = d <= 1e-12 * d.max(initial=0.0)
+    if flat.any():
+        Hf[flat, :] = 0.0
+        Hf[:, flat] = 0.0
+        Hf[flat, flat] = d[~flat].mean() if (~flat).any() else 1.0
     Hf[np.diag_indices_from(Hf)] += 1e-10 * np.trace(Hf) / len(Hf) + 1e-300
     L = np.linalg.cholesky(Hf)  # Hf = L L^T, R = L^T
     return np.linalg.inv(L).T
