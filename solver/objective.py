@@ -143,6 +143,17 @@ class Objective:
                 raise NonFiniteError(self._blame(Y, Y1, Y2), "gradient")
         return Evaluation(E, G, integrals)
 
+    def prepare(self, knots: np.ndarray, P: np.ndarray) -> None:
+        """Let the terms fix what they hold constant during a round (`Term.prepare`) from the path
+        through frames P at times `knots`. `solve` calls it on the plain spline and before each round.
+
+        Args:
+            knots: (m,) frame times [s]. P: (m, nq) frame values.
+        """
+        Y, Y1, Y2 = self.basis(knots).evaluate(P, (0, 1, 2))
+        for term in self.terms:
+            term.prepare(self.t, Y, Y1, Y2)
+
     def _blame(self, Y, Y1, Y2) -> str:
         """The name of the first term whose value or gradient is not finite at (Y, Y', Y'')."""
         for term in self.terms:

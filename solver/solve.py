@@ -102,6 +102,7 @@ class Round:
     n_variable: int
     result: OptimizeResult
     scores: np.ndarray | None = None  # weak-form scores that chose this round's new frames
+    times: np.ndarray | None = None  # (n_frames,) the frame times this round optimized [s]
 
 
 @dataclass
@@ -163,6 +164,7 @@ def solve(
     """
     _check_inputs(objective, initial, options)
     t_start = time.perf_counter()
+    objective.prepare(initial.times, initial.values)  # terms' per-round state from the plain spline
     if options.renormalize:
         scales = objective.renormalize(initial.times, initial.values)
     else:
@@ -196,7 +198,8 @@ def solve(
             progress("round", {"round": len(rounds), "frames": frames.count, "variable": frames.n_variable})
         result = _optimize(objective, frames, options, remaining, should_stop, progress, n_evals)
         frames = frames.with_x(result.x)
-        rounds.append(Round(frames.count, frames.n_variable, result, scores))
+        objective.prepare(frames.times, frames.values)  # for the next round, the scores, the report
+        rounds.append(Round(frames.count, frames.n_variable, result, scores, frames.times))
         traces.append(result.trace)
         n_evals += result.n_evals
         status, message = result.status, result.message

@@ -54,6 +54,15 @@ class Term:
         """
         raise NotImplementedError
 
+    def prepare(self, t: np.ndarray, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> None:
+        """Called by `Objective.prepare` at the start of each optimization round with the current path
+        at the quadrature points. A term that holds something fixed during a round (the root
+        residual's lagged flight indicator) sets it here; the default does nothing.
+
+        Args:
+            t: (n,) quadrature times [s]. Y, Y1, Y2: (n, nq) the path and its derivatives there.
+        """
+
     def violation(self, Y: np.ndarray) -> float | None:
         """How far a path breaks this soft constraint at its worst, in the term's natural unit
         (e.g. metres of penetration), or None if the term is not a constraint. Used for penalty

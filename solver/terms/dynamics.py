@@ -157,8 +157,18 @@ class RootResidual(Term):
     where depth_kj = `StaticSurfaces.penetration(site, margin=d)` is d minus the site's clearance above
     surface j (planes: its signed height; boxes grown by d: distance to the nearest face), floored at
     0. So phi = 1 when every site is at least d = `contact_distance` clear of every surface, 0 when any
-    site touches or is inside one, smooth in between. phi's gradient (through the site positions) is
-    part of the term's gradient.
+    site touches or is inside one, smooth in between.
+
+    Which samples are in flight is *lagged* by default (`flight="lagged"`): phi is taken from the path
+    at the start of each optimization round (`prepare`, called by `solve`) and held fixed during the
+    round, so the term is a time-weighted |wrench|^2 and its gradient does not involve phi. With
+    phi a function of the path inside the round (`flight="path"`, phi's gradient through the site
+    positions part of the term's gradient) the cheapest way to lower the term is to end the flight:
+    on the run-and-step clip the optimizer kept the feet hovering 1-3 cm above the floor, where phi is
+    small, and the flight phases shrank from 0.25 s to 0.02 s while the figure still floated. Lagged,
+    the gait (which samples are airborne) is the path's own and the term has to make the flight
+    ballistic. Until `prepare` has been called for the quadrature points being evaluated, phi is
+    the path's own, as with "path".
 
     Scaling: |T| / l with l the figure's radius of gyration (about 0.35 m for the 70 kg figure): a force
     F changes the centre-of-mass acceleration by F/m and a torque T the acceleration of the body's mass
@@ -173,10 +183,13 @@ class RootResidual(Term):
         torque_arm: l [m] > 0; default the radius of gyration of the root's subtree at qpos0.
         engine: an engine from `make_engine` (must track `sites`) to share; default a new one.
         backend: "analytic" or "mujoco" when no engine is given.
+        flight: "lagged" (phi fixed during a round, see above) or "path".
     Raises:
         InputError: no free joint, missing site (lists the model's sites), bad distance or arm, an
-            engine that does not track the sites, or an unsupported model.
+            engine that does not track the sites, an unsupported model, or an unknown `flight`.
     """
+
+    FLIGHT_MODES = ("lagged", "path")
 
     name = "root"
     units = "N^2"
@@ -191,9 +204,14 @@ class RootResidual(Term):
         torque_arm: float | None = None,
         engine=None,
         backend: str = "analytic",
+        flight: str = "lagged",
     ):
         import mujoco
 
+        if flight not in self.FLIGHT_MODES:
+            raise InputError(f"unknown flight mode {flight!r}; choose one of: {', '.join(self.FLIGHT_MODES)}")
+        self.flight_mode = flight
+        self._lagged: tuple[np.ndarray, np.ndarray] | None = None  # (t, phi) from `prepare`
         self.layout = StateLayout.from_model(model)
         self.tmap = TangentMap.from_layout(self.layout)
         root = _free_joint(model, self.layout)
@@ -246,6 +264,22 @@ class RootResidual(Term):
         dphi = np.einsum("nks,nksi->nki", others * dS, ddepth)
         return phi, dphi
 
+    def prepare(self, t, Y, Y1, Y2) -> None:
+        """Lagged flight: fix phi at the quadrature points t from the path (Y, Y', Y'') there."""
+        if self.flight_mode != "lagged":
+            return
+        mo = self.tmap.motion(Y, Y1, Y2)
+        res = self.engine.forward(Y, mo.qvel, mo.qacc)
+        phi, _ = self.flight(res.sites[:, self.site_index])
+        self._lagged = (np.array(t, float), phi)
+
+    def _fixed_phi(self, t) -> np.ndarray | None:
+        """The lagged phi if `prepare` was called for these quadrature points, else None."""
+        lag = self._lagged
+        if lag is None or t is None or np.shape(t) != lag[0].shape or not np.array_equal(t, lag[0]):
+            return None
+        return lag[1]
+
     def wrench(self, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> np.ndarray:
         """(n, 6) the root's generalized forces along the path: world force [N], local torque [N m]."""
         mo = self.tmap.motion(Y, Y1, Y2)
@@ -257,14 +291,19 @@ class RootResidual(Term):
         wr = res.tau[:, self.root_dofs]
         sw = self._scale * wr
         r = (sw * wr).sum(axis=1)
-        phi, dphi = self.flight(res.sites[:, self.site_index])
+        phi = self._fixed_phi(t)
+        lagged = phi is not None
+        if not lagged:
+            phi, dphi = self.flight(res.sites[:, self.site_index])
         f = phi * r
         if not grad:
             return TermEval(f)
         g_tau = np.zeros(res.tau.shape)
         g_tau[:, self.root_dofs] = (2.0 * phi)[:, None] * sw
-        g_sites = np.zeros(res.sites.shape)
-        g_sites[:, self.site_index] = r[:, None, None] * dphi
+        g_sites = None
+        if not lagged:
+            g_sites = np.zeros(res.sites.shape)
+            g_sites[:, self.site_index] = r[:, None, None] * dphi
         g_pose, g_v, g_a = self.engine.vjp(res, g_tau, g_sites)
         dY, dY1, dY2 = mo.vjp(g_v, g_a, g_pose)
         return TermEval(f, dY, dY1, dY2)
