@@ -159,16 +159,23 @@ class RootResidual(Term):
     0. So phi = 1 when every site is at least d = `contact_distance` clear of every surface, 0 when any
     site touches or is inside one, smooth in between.
 
-    Which samples are in flight is *lagged* by default (`flight="lagged"`): phi is taken from the path
-    at the start of each optimization round (`prepare`, called by `solve`) and held fixed during the
-    round, so the term is a time-weighted |wrench|^2 and its gradient does not involve phi. With
-    phi a function of the path inside the round (`flight="path"`, phi's gradient through the site
-    positions part of the term's gradient) the cheapest way to lower the term is to end the flight:
-    on the run-and-step clip the optimizer kept the feet hovering 1-3 cm above the floor, where phi is
-    small, and the flight phases shrank from 0.25 s to 0.02 s while the figure still floated. Lagged,
-    the gait (which samples are airborne) is the path's own and the term has to make the flight
-    ballistic. Until `prepare` has been called for the quadrature points being evaluated, phi is
-    the path's own, as with "path".
+    The indicator is *lagged* by default (`flight="lagged"`): at the start of each optimization round
+    (`prepare`, called by `solve`) phi_0 = phi(path) is recorded at the quadrature points, and during
+    the round the term uses
+
+        phi_eff = smax(phi_0, phi) = (phi_0 + phi + sqrt((phi - phi_0)^2 + e^2) - e) / 2,  e = 0.05,
+
+    a smooth max (= phi at the round's start, >= 0, within e/2 of max(phi_0, phi)) whose gradient
+    flows through phi only where phi exceeds phi_0. So lifting the feet into flight costs (the
+    airborne wrench is penalized), but lowering them into the contact band does not pay: with phi
+    alone (`flight="path"`) the cheapest way to lower the term was to end the flight, and on the
+    run-and-step clip the optimizer kept the feet hovering 1-3 cm above the floor, where phi is
+    small, so the flight phases shrank from 0.25 s to 0.02 s while the figure still floated. With phi
+    held fixed during a round (no gradient at all) the opposite happened: making a flight ballistic
+    lifts the body, the next round counts more samples as flight, and the flight grew to ~1 s with
+    the feet 5-10 cm above the floor in support phases. The smooth max keeps the gait (0.23 s of
+    flight against the plain spline's 0.25 s) and makes its flight ballistic. Until `prepare` has
+    been called for the quadrature points being evaluated, phi_eff = phi ("path").
 
     Scaling: |T| / l with l the figure's radius of gyration (about 0.35 m for the 70 kg figure): a force
     F changes the centre-of-mass acceleration by F/m and a torque T the acceleration of the body's mass
@@ -183,13 +190,14 @@ class RootResidual(Term):
         torque_arm: l [m] > 0; default the radius of gyration of the root's subtree at qpos0.
         engine: an engine from `make_engine` (must track `sites`) to share; default a new one.
         backend: "analytic" or "mujoco" when no engine is given.
-        flight: "lagged" (phi fixed during a round, see above) or "path".
+        flight: "lagged" (phi_eff = smax(phi at the round's start, phi), see above) or "path".
     Raises:
         InputError: no free joint, missing site (lists the model's sites), bad distance or arm, an
             engine that does not track the sites, an unsupported model, or an unknown `flight`.
     """
 
     FLIGHT_MODES = ("lagged", "path")
+    LAG_SMOOTHING = 0.05  # e of the smooth max in the lagged indicator
 
     name = "root"
     units = "N^2"
@@ -265,7 +273,7 @@ class RootResidual(Term):
         return phi, dphi
 
     def prepare(self, t, Y, Y1, Y2) -> None:
-        """Lagged flight: fix phi at the quadrature points t from the path (Y, Y', Y'') there."""
+        """Lagged flight: record phi_0 at the quadrature points t from the path (Y, Y', Y'') there."""
         if self.flight_mode != "lagged":
             return
         mo = self.tmap.motion(Y, Y1, Y2)
@@ -291,19 +299,21 @@ class RootResidual(Term):
         wr = res.tau[:, self.root_dofs]
         sw = self._scale * wr
         r = (sw * wr).sum(axis=1)
-        phi = self._fixed_phi(t)
-        lagged = phi is not None
-        if not lagged:
-            phi, dphi = self.flight(res.sites[:, self.site_index])
+        phi, dphi = self.flight(res.sites[:, self.site_index])
+        phi0 = self._fixed_phi(t)
+        if phi0 is not None:  # lagged: smooth max of the round's start value and the path's own
+            e = self.LAG_SMOOTHING
+            d = phi - phi0
+            root = np.sqrt(d * d + e * e)
+            phi = 0.5 * (phi0 + phi + root - e)
+            dphi = (0.5 * (1.0 + d / root))[:, None, None] * dphi
         f = phi * r
         if not grad:
             return TermEval(f)
         g_tau = np.zeros(res.tau.shape)
         g_tau[:, self.root_dofs] = (2.0 * phi)[:, None] * sw
-        g_sites = None
-        if not lagged:
-            g_sites = np.zeros(res.sites.shape)
-            g_sites[:, self.site_index] = r[:, None, None] * dphi
+        g_sites = np.zeros(res.sites.shape)
+        g_sites[:, self.site_index] = r[:, None, None] * dphi
         g_pose, g_v, g_a = self.engine.vjp(res, g_tau, g_sites)
         dY, dY1, dY2 = mo.vjp(g_v, g_a, g_pose)
         return TermEval(f, dY, dY1, dY2)
