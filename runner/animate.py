@@ -314,7 +314,8 @@ def run_animate(args) -> int:
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
         if not args.quiet:
-            print(summary_table(plain_m, opt_m, solution, weights))
+            print(summary_table(plain_m, opt_m, solution, weights,
+                                dict(zip(objective.names, objective.weights.tolist()))))
         if args.save_path is not None:  # Ctrl-C until it is written only sets stop.requested
             save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
                           {"plain": plain_m, "optimized": opt_m}, args)
@@ -322,7 +323,7 @@ def run_animate(args) -> int:
         if args.plot is not None:
             from runner.plots import plot_solution
 
-            for f in plot_solution(args.plot, model, solution, keyframes, reference):
+            for f in plot_solution(args.plot, model, solution, keyframes, reference, objective=objective):
                 say(f"  wrote {_rel(f)}")
     interrupted = solution.status is Status.INTERRUPTED or stop.requested  # also Ctrl-C while saving
     code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
@@ -374,8 +375,13 @@ def _rel(path) -> str:
             return str(path)
 
 
-def summary_table(plain: dict, opt: dict, solution, weights: dict) -> str:
-    """Plain spline vs optimized, the acceptance figures, as a text table."""
+def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None) -> str:
+    """Plain spline vs optimized, the acceptance figures, as a text table.
+
+    Args:
+        plain, opt: `path_metrics` of the two paths. solution: the Solution. weights: {term: weight}
+            chosen. final_weights: {term: weight} at the end (penalty continuation raises some).
+    """
     rows = [
         ("max penetration [mm] (1000 Hz)", plain["max_penetration_mm"], opt["max_penetration_mm"], "{:.2f}"),
     ]
@@ -387,8 +393,18 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict) -> str:
         ("max hyperextension [deg]", plain["max_hyperextension_deg"], opt["max_hyperextension_deg"], "{:.2f}"),
         ("keyframe error (fixed comps)", plain.get("keyframe_error", np.nan), opt.get("keyframe_error", np.nan),
          "{:.1e}"),
-        ("objective E", solution.E_initial, solution.E_final, "{:.5g}"),
     ]
+    dynamics = [  # solver.metrics: contact-free inverse dynamics; flight = every contact site ~3 cm clear
+        ("RMS joint torque [N m]", "rms_joint_torque_Nm", "{:.1f}"),
+        ("peak joint torque [N m]", "peak_joint_torque_Nm", "{:.1f}"),
+        ("flight (all feet clear) [s]", "flight_s", "{:.3f}"),
+        ("RMS root force in flight [N]", "rms_root_force_flight_N", "{:.1f}"),
+        ("peak root force in flight [N]", "peak_root_force_flight_N", "{:.1f}"),
+        ("RMS root torque in flight [N m]", "rms_root_torque_flight_Nm", "{:.1f}"),
+        ("peak root torque in flight [N m]", "peak_root_torque_flight_Nm", "{:.1f}"),
+    ]
+    rows += [(label, plain[key], opt[key], fmt) for label, key, fmt in dynamics if key in plain and key in opt]
+    rows.append(("objective E", solution.E_initial, solution.E_final, "{:.5g}"))
     for name in weights:
         rows.append((f"  integral {name}", solution.integrals_initial[name], solution.integrals_final[name],
                      "{:.4g}"))
@@ -401,6 +417,12 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict) -> str:
     lines.append("-" * (w + 28))
     lines.append(f"frames: {solution.initial.count} keyframes + {solution.frames.n_variable} variable; "
                  f"{len(solution.rounds)} rounds, {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
+    final = final_weights or {}
+    terms = []
+    for name, w0 in weights.items():
+        w1 = final.get(name, w0)
+        terms.append(f"{name} {w0:g}" + (f" -> {w1:g}" if w1 != w0 else ""))
+    lines.append("terms (weight; -> after penalty continuation): " + ", ".join(terms))
     return "\n".join(lines)
 
 

@@ -1,0 +1,277 @@
+"""`--plot DIR`: figures of what the optimization did (matplotlib, Agg backend, PNG).
+
+    foot_heights.png    height of the four contact sites above the surface below them [mm] over time:
+                        plain spline, optimized, motion capture; keyframe times marked
+    dynamics.png        joint torque and root residual force over time (plain vs optimized), flight
+                        phases shaded (the definitions of `solver.metrics`)
+    objective.png       the objective E after each evaluation, rounds and weight boosts marked
+    euler_lagrange.png  the weak-form Euler-Lagrange score per segment before and after refinement
+
+Only drawing here: the numbers come from `solver.metrics` and `solver.subdivide`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from solver.errors import InputError
+from solver.metrics import dynamics_series, sample_times
+from solver.surfaces import StaticSurfaces
+from solver.terms.penetration import CONTACT_SITES, site_ids, site_positions
+
+#: line styles of the three motions, the same in every figure
+STYLE = {
+    "plain spline": dict(color="#d62728", lw=1.3, alpha=0.9),
+    "optimized": dict(color="#1f77b4", lw=1.8),
+    "motion capture": dict(color="0.35", lw=1.0, ls="--"),
+}
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def heights_above_surfaces(surfaces: StaticSurfaces, points: np.ndarray) -> np.ndarray:
+    """Signed height of points above the surface below them [m] (negative: inside it).
+
+    For each plane, the signed distance along its normal; for each box, the height above its top face
+    where the point is over the box's footprint (box axes with the local z up), else no support. The
+    height is the smallest of these: the surface the point would land on, or the one it is inside.
+
+    Args:
+        surfaces: the scene's static surfaces. points: (..., 3) [m].
+    Returns:
+        (...) heights [m]; +inf where nothing is below.
+    """
+    pts = np.asarray(points, float)
+    out = np.full(pts.shape[:-1], np.inf)
+    for p0, n in zip(surfaces.plane_point, surfaces.plane_normal):
+        out = np.minimum(out, (pts - p0) @ n)
+    for c, R, h in zip(surfaces.box_center, surfaces.box_rot, surfaces.box_half):
+        local = (pts - c) @ R  # box coordinates
+        over = (np.abs(local[..., 0]) <= h[0]) & (np.abs(local[..., 1]) <= h[1])
+        out = np.where(over, np.minimum(out, local[..., 2] - h[2]), out)
+    return out
+
+
+def _site_heights(model, data, surfaces, sites, Y) -> np.ndarray:
+    return heights_above_surfaces(surfaces, site_positions(model, data, Y, sites))
+
+
+def _mark_keyframes(ax, keyframe_times, label=True):
+    for i, tk in enumerate(keyframe_times):
+        ax.axvline(tk, color="0.75", lw=0.8, zorder=0, label="keyframe" if (label and i == 0) else None)
+
+
+def _shade(ax, t, mask, color, label=None):
+    """Shade the intervals of t where mask is True."""
+    if not np.any(mask):
+        return
+    m = np.concatenate([[False], mask, [False]]).astype(int)
+    starts = np.flatnonzero(np.diff(m) == 1)
+    ends = np.flatnonzero(np.diff(m) == -1) - 1
+    for i, (a, b) in enumerate(zip(starts, ends)):
+        ax.axvspan(t[a], t[b], color=color, alpha=0.15, lw=0, label=label if i == 0 else None, zorder=0)
+
+
+def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 500.0) -> Path:
+    """Heights of the contact sites above the surface below them, one panel per site.
+
+    Args:
+        path: output PNG. model: the scene's MjModel.
+        tracks: {label: (frame_times (m,), frames (m, nq))} splines, or {label: (times, qpos, "samples")}
+            for sampled motion (the motion capture).
+        keyframe_times: (k,) [s]. rate: samples per second of the splines.
+    """
+    import mujoco
+
+    from solver.spline import interpolate
+
+    plt = _pyplot()
+    data = mujoco.MjData(model)
+    surfaces = StaticSurfaces.from_model(model, data)
+    sites = site_ids(model, CONTACT_SITES)
+    t0, t1 = float(keyframe_times[0]), float(keyframe_times[-1])
+    fig, axes = plt.subplots(len(CONTACT_SITES), 1, figsize=(10, 8.5), sharex=True)
+    for label, track in tracks.items():
+        if len(track) == 3:  # samples
+            t, Y = np.asarray(track[0]), np.asarray(track[1])
+            keep = (t >= t0 - 1e-9) & (t <= t1 + 1e-9)
+            t, Y = t[keep], Y[keep]
+        else:
+            t = sample_times(t0, t1, rate)
+            Y = interpolate(track[0], track[1], t)
+        h = _site_heights(model, data, surfaces, sites, Y) * 1000.0
+        for k, ax in enumerate(axes):
+            ax.plot(t, h[:, k], label=label, **STYLE.get(label, {}))
+    for k, (ax, name) in enumerate(zip(axes, CONTACT_SITES)):
+        ax.axhline(0.0, color="k", lw=0.8)
+        ax.axhspan(-1e4, 0.0, color="#d62728", alpha=0.06, lw=0)
+        _mark_keyframes(ax, keyframe_times, label=(k == 0))
+        ax.set_ylabel(f"{name}\nheight [mm]")
+        lo, hi = ax.get_ylim()
+        ax.set_ylim(max(lo, -150.0), hi)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper left", ncol=4, fontsize=9, framealpha=0.9)
+    axes[0].set_title("Contact-site height above the surface below it (floor or step top); "
+                      "below 0 = inside the surface")
+    axes[-1].set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_dynamics(path, series: dict, keyframe_times) -> Path:
+    """Joint torque and root residual force over time, plain spline vs optimized.
+
+    Args:
+        path: output PNG. series: {label: `solver.metrics.dynamics_series` result} (same times).
+        keyframe_times: (k,) [s].
+    """
+    plt = _pyplot()
+    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(10, 9), sharex=True)
+    for label, s in series.items():
+        st = STYLE.get(label, {})
+        t = s["t"]
+        a1.plot(t, np.linalg.norm(s["joint_torque"], axis=1), label=label, **st)
+        a2.plot(t, np.linalg.norm(s["root_force"], axis=1), label=label, **st)
+        a3.plot(t, np.linalg.norm(s["root_torque"], axis=1), label=label, **st)
+    colors = {"plain spline": "#d62728", "optimized": "#1f77b4"}
+    for label, s in series.items():
+        for ax in (a2, a3):
+            _shade(ax, s["t"], s["flight"], colors.get(label, "0.5"),
+                   label=f"flight, {label}" if ax is a2 else None)
+    for k, ax in enumerate((a1, a2, a3)):
+        _mark_keyframes(ax, keyframe_times, label=(k == 0))
+        ax.grid(alpha=0.3)
+        ax.set_ylim(bottom=0.0)
+    a1.set_ylabel("joint torque |tau| [N m]\n(33 ball-joint DOFs)")
+    a2.set_ylabel("root residual force |F| [N]")
+    a3.set_ylabel("root residual torque |T| [N m]")
+    a1.set_title("Contact-free inverse dynamics: joint torques, and the wrench on the root besides gravity\n"
+                 "(should be 0 in flight; on the ground the feet supply it)")
+    a1.legend(loc="upper left", fontsize=9)
+    a2.legend(loc="upper left", fontsize=9, ncol=2)
+    a3.set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_objective(path, solution) -> Path:
+    """The objective E (best so far) after each evaluation, rounds and penalty boosts marked.
+
+    Args:
+        path: output PNG. solution: `solver.solve.Solution`.
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(10, 4.8))
+    start = 0
+    prev_vars = None
+    for i, rnd in enumerate(solution.rounds):
+        tr = np.asarray(rnd.result.trace)
+        x = start + np.arange(1, len(tr) + 1)
+        boosted = prev_vars is not None and rnd.n_variable == prev_vars
+        what = "weights boosted" if boosted else f"{rnd.n_variable} variable frames"
+        ax.plot(x, tr, lw=1.6, label=f"round {i + 1}: {what}")
+        if i:
+            ax.axvline(start + 0.5, color="0.6", lw=0.8, ls=":")
+        start += len(tr)
+        prev_vars = rnd.n_variable
+    ax.set_yscale("log")
+    ax.set_xlabel("objective evaluation")
+    ax.set_ylabel("objective E (renormalized, eq. 7)")
+    ax.set_title("Objective during the optimization (best so far after each evaluation)\n"
+                 "between rounds the objective itself changes: boosted weights (penalty continuation), "
+                 "updated flight indicator", fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_euler_lagrange(path, before: tuple, after: tuple, keyframe_times, chosen=None) -> Path:
+    """Weak-form Euler-Lagrange score per segment, before and after refinement (bars over segments).
+
+    Args:
+        path: output PNG.
+        before, after: (frame_times (m,), scores (m-1,)) of the two frame sets.
+        keyframe_times: (k,) [s]. chosen: times of the frames the refinement added (marked).
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(10, 4.8))
+    for (times, scores), label, color in ((before, "before refinement", "#d62728"),
+                                          (after, "after refinement", "#1f77b4")):
+        times = np.asarray(times)
+        scores = np.maximum(np.asarray(scores), 1e-300)
+        ax.stairs(scores, times, label=f"{label} ({len(times)} frames)", color=color, lw=1.8,
+                  baseline=None)
+    _mark_keyframes(ax, keyframe_times)
+    ax.set_yscale("log")
+    if chosen is not None and len(chosen):
+        ax.plot(chosen, np.zeros(len(chosen)), "^", color="k", ms=7, clip_on=False,
+                transform=ax.get_xaxis_transform(), label="frames added by refinement")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("|dE/dP| of a midpoint frame\n[E per unit of qpos]")
+    ax.set_title("Weak-form Euler-Lagrange score per segment (solver.subdivide.weak_form_scores):\n"
+                 "how fast E would fall if a frame were added at the segment's midpoint")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_solution(directory, model, solution, keyframes, reference=None, objective=None) -> list[Path]:
+    """Write the figures of a solved run into `directory` (created if missing).
+
+    Args:
+        directory: output folder. model: the scene's MjModel. solution: `solver.solve.Solution`.
+        keyframes: the keyframes. reference: motion capture (`.times`, `.qpos`) or None.
+        objective: the solved Objective, for the Euler-Lagrange scores after refinement (the figure
+            is skipped without it).
+    Returns:
+        the written paths.
+    """
+    from solver.subdivide import weak_form_scores
+
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    out = []
+    tracks = {"plain spline": (solution.initial.times, solution.initial.values),
+              "optimized": (solution.frames.times, solution.frames.values)}
+    if reference is not None and len(reference.times):
+        tracks["motion capture"] = (reference.times, reference.qpos, "samples")
+    out.append(plot_foot_heights(d / "foot_heights.png", model, tracks, keyframes.times))
+    try:
+        series = {label: dynamics_series(model, fs.times, fs.values, rate=500.0)
+                  for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames))}
+    except InputError:  # a model the analytic inverse dynamics does not support: no such figure
+        series = None
+    if series is not None:
+        out.append(plot_dynamics(d / "dynamics.png", series, keyframes.times))
+    out.append(plot_objective(d / "objective.png", solution))
+    if objective is not None:
+        rounds = solution.rounds
+        i = next((k for k, r in enumerate(rounds) if k and r.scores is not None and rounds[k - 1].times is not None),
+                 None)
+        if i is not None:  # the scores that chose the first adaptive frames, on the frames before them
+            before = (rounds[i - 1].times, rounds[i].scores)
+        else:  # no adaptive round: the scores on the frames the optimization started with
+            before = (solution.initial.times, weak_form_scores(objective, solution.initial))
+        added = np.setdiff1d(solution.frames.times, before[0])
+        after = (solution.frames.times, weak_form_scores(objective, solution.frames))
+        out.append(plot_euler_lagrange(d / "euler_lagrange.png", before, after, keyframes.times, added))
+    return out
+
