@@ -122,8 +122,12 @@ class Objective:
         E = 0.0
         integrals = {}
         acc = [None, None, None]  # dE/dY, dE/dY', dE/dY'' at the quadrature points
+        deferred = {}  # key -> summed deferred gradient (terms sharing an inverse-dynamics engine)
         for term, w, s in zip(self.terms, self.weights, self.scales):
-            ev = term.evaluate(self.t, Y, Y1, Y2, grad=grad and w != 0.0)
+            if hasattr(term, "evaluate_deferred"):
+                ev = term.evaluate_deferred(self.t, Y, Y1, Y2, grad=grad and w != 0.0)
+            else:
+                ev = term.evaluate(self.t, Y, Y1, Y2, grad=grad and w != 0.0)
             I = float(self.h * ev.f.sum())
             if not np.isfinite(I):
                 raise NonFiniteError(term.name, "value")
@@ -136,8 +140,15 @@ class Objective:
                 for k, g in enumerate((ev.dY, ev.dY1, ev.dY2)):
                     if g is not None:
                         acc[k] = c * g if acc[k] is None else acc[k] + c * g
+                d = ev.deferred
+                if d is not None:
+                    deferred[d.key] = d.scaled(c) if d.key not in deferred else deferred[d.key].plus(d, c)
         G = None
         if grad:
+            for d in deferred.values():  # one reverse pass per shared engine
+                for k, g in enumerate(d.pullback()):
+                    if g is not None:
+                        acc[k] = g if acc[k] is None else acc[k] + g
             G = np.zeros_like(P) if all(a is None for a in acc) else basis.pullback(*acc)
             if not np.all(np.isfinite(G)):
                 raise NonFiniteError(self._blame(Y, Y1, Y2), "gradient")

@@ -101,6 +101,8 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
         engine = make_engine(model)  # one inverse-dynamics pass shared by both terms
         factories["torque"] = lambda: dyn["torque"](model, engine=engine)
         factories["root"] = lambda: dyn["root"](model, engine=engine)
+        # the penetration term reads the same forward pass and joins its single reverse pass
+        factories["penetration"] = lambda: Penetration(model, margin=margin, engine=engine)
     terms, w = [], []
     for name, weight in weights.items():
         if name not in factories:

@@ -20,12 +20,17 @@ class TermEval:
         f: (n,) integrand values at the quadrature points (units: the term's docstring).
         dY, dY1, dY2: (n, nq) gradients of f with respect to Y, Y', Y''; None where f does not depend
             on that argument (saves the chain-rule product).
+        deferred: from `evaluate_deferred` only: the rest of the gradient, not yet pulled back to
+            (Y, Y', Y''), with `key`, `scaled(c)`, `plus(other, c)` and `pullback() -> (dY, dY1, dY2)`;
+            the objective sums the deferred gradients with the same key (terms sharing an
+            inverse-dynamics engine) and pulls the sum back once.
     """
 
     f: np.ndarray
     dY: np.ndarray | None = None
     dY1: np.ndarray | None = None
     dY2: np.ndarray | None = None
+    deferred: object | None = None
 
 
 class Term:

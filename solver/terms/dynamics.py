@@ -43,6 +43,52 @@ def make_engine(model, sites=CONTACT_SITES, backend: str = "analytic"):
     return BACKENDS[backend](model, sites)
 
 
+class EngineGradient:
+    """A term's gradient left in the inverse-dynamics engine's variables (`TermEval.deferred`).
+
+    d f / d tau (n, nv) and d f / d site positions (n, k, 3) at one forward pass of one engine. The
+    objective sums them over the terms that share the engine (they share the forward pass too: it is
+    cached) and pulls the sum back to (Y, Y', Y'') once: one reverse pass of the inverse dynamics
+    (`InverseDynamics.vjp`) and of the tangent map (`PathMotion.vjp`) instead of one per term. Both
+    are linear in the adjoints, so the result is the sum of the terms' gradients.
+    """
+
+    __slots__ = ("engine", "result", "motion", "g_tau", "g_sites")
+
+    def __init__(self, engine, result, motion, g_tau=None, g_sites=None):
+        self.engine, self.result, self.motion = engine, result, motion
+        self.g_tau, self.g_sites = g_tau, g_sites
+
+    @property
+    def key(self):
+        return (id(self.engine), id(self.result))
+
+    def scaled(self, c: float) -> "EngineGradient":
+        return EngineGradient(
+            self.engine, self.result, self.motion,
+            None if self.g_tau is None else c * self.g_tau,
+            None if self.g_sites is None else c * self.g_sites,
+        )
+
+    def plus(self, other: "EngineGradient", c: float) -> "EngineGradient":
+        """self + c * other (a new object)."""
+
+        def add(a, b):
+            if b is None:
+                return a
+            return c * b if a is None else a + c * b
+
+        return EngineGradient(
+            self.engine, self.result, self.motion, add(self.g_tau, other.g_tau), add(self.g_sites, other.g_sites)
+        )
+
+    def pullback(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(dY, dY1, dY2), each (n, nq)."""
+        g_tau = self.g_tau if self.g_tau is not None else np.zeros(self.result.tau.shape)
+        g_pose, g_v, g_a = self.engine.vjp(self.result, g_tau, self.g_sites)
+        return self.motion.vjp(g_v, g_a, g_pose)
+
+
 def _free_joint(model, layout: StateLayout) -> int:
     """Id of the model's first free joint (the figure's root). Raises InputError if there is none."""
     free = [j for j in range(model.njnt) if model.jnt_type[j] == 0]  # mjJNT_FREE
@@ -106,15 +152,19 @@ class JointTorque(Term):
         return self.engine.forward(Y, mo.qvel, mo.qacc).tau
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
+        return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
+
+    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        """`evaluate` with the gradient left as an `EngineGradient` (summed with other terms' by
+        the objective and pulled back once)."""
         mo = self.tmap.motion(Y, Y1, Y2)
         res = self.engine.forward(Y, mo.qvel, mo.qacc)
         wt = self.dof_weights * res.tau
         f = (wt * res.tau).sum(axis=1)
         if not grad:
             return TermEval(f)
-        g_pose, g_v, g_a = self.engine.vjp(res, 2.0 * wt)
-        dY, dY1, dY2 = mo.vjp(g_v, g_a, g_pose)
-        return TermEval(f, dY, dY1, dY2)
+        return TermEval(f, deferred=EngineGradient(self.engine, res, mo, 2.0 * wt))
 
 
 def figure_radius_of_gyration(model, body: int) -> float:
@@ -294,6 +344,11 @@ class RootResidual(Term):
         return self.engine.forward(Y, mo.qvel, mo.qacc).tau[:, self.root_dofs]
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
+        return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
+
+    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        """`evaluate` with the gradient left as an `EngineGradient` (see `JointTorque`)."""
         mo = self.tmap.motion(Y, Y1, Y2)
         res = self.engine.forward(Y, mo.qvel, mo.qacc)
         wr = res.tau[:, self.root_dofs]
@@ -314,7 +369,5 @@ class RootResidual(Term):
         g_tau[:, self.root_dofs] = (2.0 * phi)[:, None] * sw
         g_sites = np.zeros(res.sites.shape)
         g_sites[:, self.site_index] = r[:, None, None] * dphi
-        g_pose, g_v, g_a = self.engine.vjp(res, g_tau, g_sites)
-        dY, dY1, dY2 = mo.vjp(g_v, g_a, g_pose)
-        return TermEval(f, dY, dY1, dY2)
+        return TermEval(f, deferred=EngineGradient(self.engine, res, mo, g_tau, g_sites))
 

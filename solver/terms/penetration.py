@@ -61,15 +61,21 @@ class Penetration(Term):
         margin: [m] clearance counted as penetration (default 5 mm). At 400 quadrature points per
             second a swing foot (~6 m/s) moves ~15 mm between points and can cut a box corner between
             two of them; 5 mm of margin absorbs that (2 mm left 0.5-0.9 mm grazes on the shipped clip).
+        engine: optional inverse-dynamics engine tracking the sites (`solver.terms.dynamics.make_engine`)
+            shared with the dynamics terms: the site positions come from its (cached) forward pass
+            and the gradient is deferred to its reverse pass, which the objective runs once for all
+            terms sharing it (`evaluate_deferred`); the same values, about 4 ms cheaper per evaluation
+            at 680 points than forward kinematics and site Jacobians per point.
     Raises:
-        InputError: a site is missing or the scene has no static plane or box.
+        InputError: a site is missing, the scene has no static plane or box, or the engine does not
+            track a site.
     """
 
     name = "penetration"
     units = "m^2"
     needs = (0,)
 
-    def __init__(self, model, sites=CONTACT_SITES, margin: float = 0.005):
+    def __init__(self, model, sites=CONTACT_SITES, margin: float = 0.005, engine=None):
         self.model = model
         self.data = mujoco.MjData(model)
         self.sites = site_ids(model, sites)
@@ -79,6 +85,13 @@ class Penetration(Term):
         self.tmap = TangentMap.from_layout(StateLayout.from_model(model))
         self.margin = float(margin)
         self._jac = np.zeros((3, model.nv))
+        self.engine = engine
+        if engine is not None:
+            where = [np.flatnonzero(engine.site_ids == i) for i in self.sites]
+            if any(len(w) == 0 for w in where):
+                raise InputError(f"the engine does not track the contact sites {', '.join(sites)}")
+            self._engine_index = np.array([int(w[0]) for w in where], int)
+            self.needs = (0, 1, 2)  # the engine's forward pass reads qvel and qacc too
 
     def depths(self, Y: np.ndarray, margin: float | None = None) -> np.ndarray:
         """(n, k) deepest penetration of each contact site over all surfaces [m] (0 = clear)."""
@@ -90,7 +103,27 @@ class Penetration(Term):
         """Deepest true penetration (margin 0) of any contact site into any surface [m]."""
         return float(self.depths(Y, margin=0.0).max())
 
+    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        """With an engine: `evaluate` with the gradient left to the engine's reverse pass
+        (`solver.terms.dynamics.EngineGradient`); without one, `evaluate`."""
+        if self.engine is None:
+            return self.evaluate(t, Y, Y1, Y2, grad)
+        from solver.terms.dynamics import EngineGradient
+
+        mo = self.tmap.motion(Y, Y1, Y2)
+        res = self.engine.forward(Y, mo.qvel, mo.qacc)
+        depth, ddepth = self.surfaces.penetration(res.sites[:, self._engine_index], self.margin)
+        f = (depth * depth).sum(axis=(1, 2))
+        if not grad:
+            return TermEval(f)
+        g_sites = np.zeros(res.sites.shape)
+        g_sites[:, self._engine_index] = np.einsum("nks,nksi->nki", 2.0 * depth, ddepth)
+        return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites))
+
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        if self.engine is not None:
+            ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
+            return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
         m, d = self.model, self.data
         p = site_positions(m, d, Y, self.sites)
         depth, ddepth = self.surfaces.penetration(p, self.margin)  # (n,k,S), (n,k,S,3)
