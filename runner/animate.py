@@ -305,7 +305,7 @@ def run_animate(args) -> int:
         progress.done()
         failed = solution.status in (Status.NONFINITE, Status.FAILED)
         why = "interrupted (Ctrl-C), best path so far kept" if stop.requested else solution.message
-        say(f"  stopped: {why} after {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
+        say(f"  stopped: {why}; {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
         if failed:
             print(f"dynsplines: warning: the optimization failed ({solution.message}); the best path before "
                   "that (it meets every keyframe) is reported and written", file=sys.stderr)

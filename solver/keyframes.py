@@ -143,8 +143,12 @@ class Keyframes:
                 bc = "natural" if k == 3 else None
                 fill = make_interp_spline(t, y, k=k, bc_type=bc)(self.times)
             vals[~have, c] = fill[~have]
-        # quaternion slots that became zero by filling (unlikely) get the identity
-        for slot in np.asarray(quat_slots, dtype=int).reshape(-1, 4):
-            small = np.linalg.norm(vals[:, slot], axis=1) < 1e-6
-            vals[np.ix_(small, slot)] = [1.0, 0.0, 0.0, 0.0]
+        # a quaternion that is zero after filling (no keyframe fixes its free components, and the fixed
+        # ones are zero, e.g. [0, null, 0, 0]) gets 1 in its first free component: a unit quaternion
+        # that still meets the keyframe (a fully fixed zero quaternion was rejected above)
+        for slot in slots:
+            for i in np.flatnonzero(np.linalg.norm(vals[:, slot], axis=1) < 1e-6):
+                free = slot[~self.mask[i, slot]]
+                vals[i, free] = 0.0
+                vals[i, free[0]] = 1.0
         return vals

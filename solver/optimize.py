@@ -146,7 +146,8 @@ def minimize(
                 raise Stop(Status.MAX_TIME, f"time limit of {max_time_s:g} s reached")
             if max_evals and best["n"] >= max_evals:
                 raise Stop(Status.MAX_EVALS, f"evaluation limit of {max_evals} reached")
-            f, g = fun(x, grad.size > 0)
+            with np.errstate(all="ignore"):  # a trial point may overflow: reported just below, by status
+                f, g = fun(x, grad.size > 0)
             if not np.isfinite(f) or (grad.size and not np.all(np.isfinite(g))):
                 raise Stop(Status.NONFINITE, "the objective or its gradient is not finite")
         except Stop as s:
@@ -189,7 +190,9 @@ def minimize(
         pass
     except Exception as e:  # nlopt's SWIG runtime_error is not a RuntimeError subclass
         if not stop:
-            status, message = Status.FAILED, f"nlopt failed: {type(e).__name__} {e}"
+            detail = f" ({e})" if str(e) else ""
+            status, message = Status.FAILED, (f"nlopt {algorithm} stopped with a generic failure "
+                                              f"({type(e).__name__}{detail}); another algorithm may get further")
     if stop:
         status, message = stop["status"], stop["message"]
         if "error" in stop:
