@@ -31,10 +31,12 @@ DEFAULT_SETS = "large_uniform,large_nonuniform,large_nonuniform_b"
 #: our settings, from fast and coarse to slow and accurate: (label, orient keyword arguments)
 LADDER = (
     ("global 1/interval", dict(options=dict(subdivision="global", per_segment=1, ftol_rel=1e-5))),
+    ("global 2/interval", dict(options=dict(subdivision="global", per_segment=2, ftol_rel=1e-6))),
     ("adaptive 1 round", dict(options=dict(rounds=1, ftol_rel=1e-6))),
     ("default (adaptive 2 rounds)", dict(options=dict())),
-    ("adaptive 3 rounds, 100 Hz", dict(options=dict(rounds=3, ftol_rel=1e-8), rate=100.0)),
-    ("2/interval + 2 rounds, 200 Hz", dict(options=dict(per_segment=2, rounds=2, ftol_rel=1e-9), rate=200.0)),
+    ("global 3/interval, 80 Hz", dict(options=dict(subdivision="global", per_segment=3, ftol_rel=1e-7), rate=80.0)),
+    ("global 4/interval, 120 Hz", dict(options=dict(subdivision="global", per_segment=4, ftol_rel=1e-8), rate=120.0)),
+    ("2/interval + 2 rounds, 120 Hz", dict(options=dict(per_segment=2, rounds=2, ftol_rel=1e-7), rate=120.0)),
     ("adaptive 4 rounds, 300 Hz", dict(options=dict(rounds=4, ftol_rel=1e-9), rate=300.0)),
 )
 
