@@ -957,7 +957,9 @@ def keyframes_from_bvh_main(argv: Sequence[str] | None = None, prog: str | None 
     from runner.keyframe_io import write_keyframes
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    ap = argparse.ArgumentParser(
+    from runner.cli import OneLineParser
+
+    ap = OneLineParser(
         prog=prog or "keyframes-from-bvh",
         description="Make a keyframe file from a CMU BVH clip retargeted onto the figure.",
     )
@@ -966,7 +968,10 @@ def keyframes_from_bvh_main(argv: Sequence[str] | None = None, prog: str | None 
     ap.add_argument("--every", type=float, default=0.25, help="keyframe spacing [s] (default 0.25)")
     ap.add_argument("--scene", default=str(_MODELS / "run_and_step.xml"), help="scene MJCF (figure + surfaces)")
     ap.add_argument("--model", default=None, help="figure MJCF (default: humanoid39.xml beside the scene)")
-    args = ap.parse_args(argv)
+    try:
+        args = ap.parse_args(argv)
+    except SystemExit as e:  # --help (0) or a usage error (2, its one-line message printed)
+        return e.code if isinstance(e.code, int) else 2
     try:
         scene = Path(args.scene)
         if not scene.is_file():

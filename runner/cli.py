@@ -28,9 +28,14 @@ EXIT_FAILED = 3
 EXIT_INTERRUPTED = 130
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # argparse's own usage errors: one line and exit code 2
+class OneLineParser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors are one line (and the --help hint), exit code 2."""
+
+    def error(self, message):
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+_Parser = OneLineParser
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -72,10 +77,17 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line. Returns the exit code (see the module docstring)."""
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser()
+    head, tail = argv, None
+    if "keyframes-from-bvh" in argv:  # its own parser reads everything after it (also --help, --out first)
+        i = argv.index("keyframes-from-bvh")
+        if all(a == "--debug" for a in argv[:i]):
+            head, tail = argv[: i + 1], argv[i + 1:]
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(head)
     except SystemExit as e:  # --help (0) or a usage error (2, its message already printed)
         return e.code if isinstance(e.code, int) else EXIT_INPUT
+    if tail is not None:
+        args.args = tail
     try:
         return int(args.func(args) or 0)
     except InputError as e:

@@ -309,6 +309,11 @@ def test_bvh_errors_at_the_command_line(tmp_path, capsys):
                        "nope.bvh: cannot read the BVH clip: no such file")
     bvh = write(tmp_path, "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n", "x.bvh")
     expect_input_error(capsys, ["keyframes-from-bvh", bvh, "--out", out], "x.bvh: line 4:", "OFFSET takes three numbers")
+    expect_input_error(capsys, ["keyframes-from-bvh", "--out", out, bvh], "x.bvh: line 4:")  # options first work
+    expect_input_error(capsys, ["keyframes-from-bvh", bvh], "dynsplines keyframes-from-bvh: error: the following "
+                       "arguments are required: --out (see 'dynsplines keyframes-from-bvh --help')")
+    expect_input_error(capsys, ["keyframes-from-bvh", MODELS / "cmu" / "127_33.bvh", "--out", out, "--every", "-1"],
+                       "keyframe spacing every=-1.0; give a positive number of seconds")
     assert not out.exists()
 
 
