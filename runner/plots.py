@@ -37,6 +37,14 @@ def _pyplot():
     return plt
 
 
+def _savefig(fig, path) -> None:
+    """PNG written atomically (runner.files.atomic_output): never a truncated figure."""
+    from runner.files import atomic_output
+
+    with atomic_output(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+
+
 def heights_above_surfaces(surfaces: StaticSurfaces, points: np.ndarray) -> np.ndarray:
     """Signed height of points above the surface below them [m] (negative: inside it).
 
@@ -123,7 +131,7 @@ def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 5
                       "below 0 = inside the surface")
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _savefig(fig, path)
     plt.close(fig)
     return Path(path)
 
@@ -161,7 +169,7 @@ def plot_dynamics(path, series: dict, keyframe_times) -> Path:
     a2.legend(loc="upper left", fontsize=9, ncol=2)
     a3.set_xlabel("time [s]")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _savefig(fig, path)
     plt.close(fig)
     return Path(path)
 
@@ -195,7 +203,7 @@ def plot_objective(path, solution) -> Path:
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _savefig(fig, path)
     plt.close(fig)
     return Path(path)
 
@@ -228,7 +236,7 @@ def plot_euler_lagrange(path, before: tuple, after: tuple, keyframe_times, chose
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _savefig(fig, path)
     plt.close(fig)
     return Path(path)
 
