@@ -3,6 +3,10 @@
     dynsplines bench run-and-step [--terms all] [--repeat N]
         optimization wall time (median of N runs), evaluations, time per evaluation; with dynamics
         terms, the geometric-only objective is run side by side in the same process for the ratio.
+    dynsplines bench refine [--terms all] [--counts 14,21,28] [--scores gradient,decrease]
+        adaptive (weak-form Euler-Lagrange, each score) against global subdivision at equal
+        variable-frame counts on the run-and-step clip: final objective, evaluations, wall time
+        (`compare_refinement`).
     dynsplines bench orient
         the single-body problem against the Barr-92 and constrained B-spline baselines (runner.bench_orient).
 """
@@ -27,6 +31,14 @@ def register(sub) -> None:
     r.add_argument("--repeat", type=int, default=3, help="runs per configuration; the median is reported [3]")
     r.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
     r.set_defaults(func=bench_run_and_step)
+    f = bsub.add_parser("refine", help="adaptive vs global subdivision at equal variable-frame counts")
+    f.add_argument("--terms", default=None, help="objective terms as for `animate` [the default terms]")
+    f.add_argument("--counts", default="14,21,28",
+                   help="variable-frame counts, multiples of the keyframe intervals (7 on run-and-step) [14,21,28]")
+    f.add_argument("--scores", default="gradient,decrease",
+                   help="adaptive subdivision scores to run (SolveOptions.score) [gradient,decrease]")
+    f.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
+    f.set_defaults(func=bench_refine)
     o = bsub.add_parser("orient", help="single-body orientation vs earlier methods")
     from runner.bench_orient import add_arguments as _orient_arguments
 
@@ -110,4 +122,83 @@ def bench_run_and_step(args) -> int:
               f"{direct[name] - direct['geometric']:.2f} ms, {ratio - 1:.2f}x the geometric terms' cost); "
               f"optimization wall time {other['wall_median_s'] / g['wall_median_s']:.2f}x, evaluations "
               f"{other['evals'] / max(1, g['evals']):.2f}x")
+    return 0
+
+
+def compare_refinement(model, keyframes, layout, weights: dict, counts, scores=("gradient", "decrease"),
+                       rate: float = 400.0, ftol: float = 1e-6) -> list[dict]:
+    """Adaptive against global subdivision at equal numbers of variable frames (paper fig. 10's
+    experiment, on any keyframes).
+
+    Every run starts from the plain spline with the same renormalization scales (eq. 7, from the
+    plain spline) and *fixed* weights (no penalty continuation: it would change the objective by a
+    different amount in each run). Global: n frames in each of the k keyframe intervals, one
+    optimization. Adaptive: one frame per interval, then rounds that add frames where the weak-form
+    Euler-Lagrange score ranks segments highest until `count` variable frames, optimizing after each
+    round. The final objectives compare: the same terms, weights and scales (the root term's lagged
+    flight indicator equals the path's own at the end of a solve, see `RootResidual`).
+
+    Args:
+        model, keyframes, layout: the problem. weights: {term: weight}. counts: variable-frame
+            counts, each a multiple of the number of keyframe intervals k.
+        scores: adaptive rankings to run (`SolveOptions.score`: "gradient", "decrease").
+        rate: quadrature points per second. ftol: relative objective tolerance of each optimization.
+    Returns:
+        one dict per count: "count", and per method ("global", "adaptive-<score>"): E (final
+        objective), E_initial, variable (frames), evals, wall_s.
+    Raises:
+        InputError: a count that is not a positive multiple of k, or an unknown score.
+    """
+    from solver.errors import InputError
+    from solver.solve import SCORES, SolveOptions
+
+    k = keyframes.count - 1
+    for sc in scores:
+        if sc not in SCORES:
+            raise InputError(f"unknown subdivision score {sc!r}; choose from: {', '.join(SCORES)}")
+    rows = []
+    for count in counts:
+        if count <= 0 or count % k:
+            raise InputError(f"variable-frame count {count} is not a positive multiple of the {k} keyframe intervals")
+        row = {"count": count}
+        methods = [("global", SolveOptions(subdivision="global", per_segment=count // k, limits=(), ftol_rel=ftol,
+                                           precondition=True))]
+        methods += [(f"adaptive-{sc}", SolveOptions(subdivision="adaptive", per_segment=1, rounds=64,
+                                                     max_frames=count, limits=(), ftol_rel=ftol, score=sc,
+                                                     precondition=True)) for sc in scores]
+        for kind, options in methods:
+            objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate)
+            sol = solve(objective, FrameSet.from_keyframes(keyframes, layout.quat_slots), options)
+            row[kind] = {"E": sol.E_final, "variable": sol.frames.n_variable, "evals": sol.n_evals,
+                         "wall_s": sol.wall_time_s, "E_initial": sol.E_initial}
+        rows.append(row)
+    return rows
+
+
+def bench_refine(args) -> int:
+    from runner.animate import RUN_AND_STEP_KEYFRAMES, load_problem
+    from solver.errors import InputError
+
+    keyframes, info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
+    weights = parse_terms(args.terms)
+    try:
+        counts = [int(c) for c in args.counts.split(",") if c.strip()]
+    except ValueError:
+        raise InputError(f"--counts {args.counts!r}: expected a comma-separated list of integers, e.g. 14,21,28") from None
+    scores = [s.strip() for s in args.scores.split(",") if s.strip()]
+    print(f"bench refine: run-and-step, terms {', '.join(f'{n}={w:g}' for n, w in weights.items())}\n"
+          f"  renormalized on the plain spline, fixed weights (no penalty continuation); final objective E, "
+          f"evaluations, seconds")
+    rows = compare_refinement(model, keyframes, layout, weights, counts, scores, args.rate)
+    print(f"  objective on the plain spline: {rows[0]['global']['E_initial']:.6g}")
+    methods = [m for m in rows[0] if m != "count"]
+    print(f"  {'variable frames':>15}" + "".join(f"  {m:>26}" for m in methods))
+    for r in rows:
+        cells = []
+        for m in methods:
+            c = r[m]
+            ratio = "" if m == "global" else f" ({c['E'] / r['global']['E']:.3f}x)"
+            frames = "" if c["variable"] == r["count"] else f" [{c['variable']} frames]"
+            cells.append(f"{c['E']:.5g}{ratio}{frames} {c['evals']}/{c['wall_s']:.1f}s".rjust(26))
+        print(f"  {r['count']:>15}" + "".join(f"  {c}" for c in cells))
     return 0
