@@ -173,7 +173,9 @@ def _peek_scene(path: Path) -> Path | None:
 
     data = read_document(path)  # InputError naming the file for anything unreadable
     scene = data.get("scene") if isinstance(data, dict) else None
-    return (path.parent / scene).resolve() if isinstance(scene, str) else None
+    if isinstance(scene, str) and "\x00" in scene:
+        raise InputError(f"{path}: field 'scene' is {scene!r}; give a path relative to the keyframe file")
+    return (path.parent / scene).resolve() if isinstance(scene, str) and scene else None
 
 
 # ---------------------------------------------------------------------------------------- progress

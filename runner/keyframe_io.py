@@ -186,7 +186,7 @@ def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyfra
         v = doc.get(key)
         if v is None:
             return None
-        if not isinstance(v, str) or not v:
+        if not isinstance(v, str) or not v or "\x00" in v:
             raise InputError(f"{src}: field {key!r} is {v!r}; give a path relative to the keyframe file")
         return (p.parent / v).resolve()
 
