@@ -107,6 +107,7 @@ def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 5
     sites = site_ids(model, CONTACT_SITES)
     t0, t1 = float(keyframe_times[0]), float(keyframe_times[-1])
     fig, axes = plt.subplots(len(CONTACT_SITES), 1, figsize=(10, 8.5), sharex=True)
+    lo, hi = 0.0, 50.0  # [mm] the y range of the data, the same on every panel
     for label, track in tracks.items():
         if len(track) == 3:  # samples
             t, Y = np.asarray(track[0]), np.asarray(track[1])
@@ -116,6 +117,9 @@ def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 5
             t = sample_times(t0, t1, rate)
             Y = interpolate(track[0], track[1], t)
         h = _site_heights(model, data, surfaces, sites, Y) * 1000.0
+        finite = h[np.isfinite(h)]
+        if finite.size:
+            lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
         for k, ax in enumerate(axes):
             ax.plot(t, h[:, k], label=label, **STYLE.get(label, {}))
     for k, (ax, name) in enumerate(zip(axes, CONTACT_SITES)):
@@ -123,12 +127,11 @@ def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 5
         ax.axhspan(-1e4, 0.0, color="#d62728", alpha=0.06, lw=0)
         _mark_keyframes(ax, keyframe_times, label=(k == 0))
         ax.set_ylabel(f"{name}\nheight [mm]")
-        lo, hi = ax.get_ylim()
-        ax.set_ylim(max(lo, -150.0), hi)
+        ax.set_ylim(max(lo, -150.0) - 15.0, hi + 0.25 * (hi - lo))  # headroom for the legend
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper left", ncol=4, fontsize=9, framealpha=0.9)
-    axes[0].set_title("Contact-site height above the surface below it (floor or step top); "
-                      "below 0 = inside the surface")
+    axes[0].set_title("Contact-site height above the surface below it (floor or step top); below 0 = inside "
+                      "the surface;\nthe jumps are a site crossing the step's edge", fontsize=10)
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
     _savefig(fig, path)
