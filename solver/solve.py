@@ -307,35 +307,71 @@ def _optimize(objective, frames, options, remaining, should_stop, progress, eval
             fun, x0, algorithm=options.algorithm, ftol_rel=options.ftol_rel,
             max_evals=options.max_evals, max_time_s=remaining, should_stop=should_stop, callback=cb,
         )
-    Rinv = _acceleration_metric_inverse(objective, frames)
+    pre = AccelerationPreconditioner(objective, frames)
 
     def fun_z(z, need_grad):
-        f, g = fun(x0 + Rinv @ z, need_grad)
-        return f, (Rinv.T @ g if need_grad else None)
+        f, g = fun(x0 + pre.apply(z), need_grad)
+        return f, (pre.apply_transpose(g) if need_grad else None)
 
     res = minimize(
         fun_z, np.zeros_like(x0), algorithm=options.algorithm, ftol_rel=options.ftol_rel,
         max_evals=options.max_evals, max_time_s=remaining, should_stop=should_stop, callback=cb,
     )
-    return replace(res, x=x0 + Rinv @ res.x)
+    return replace(res, x=x0 + pre.apply(res.x))
 
 
-def _acceleration_metric_inverse(objective: Objective, frames: FrameSet) -> np.ndarray:
-    """R^-1 for `SolveOptions.precondition`: R upper triangular, R^T R = H + tiny ridge, with H the
-    Hessian of integral |Y''|^2 dt (= 2 h W2^T W2 per component) over the free components, in the
-    order of `FrameSet.x`. Shape (n_free, n_free)."""
-    W2 = objective.basis(frames.times).W2
-    H = 2.0 * objective.h * (W2.T @ W2)
-    rows, comps = np.nonzero(frames.free)
-    Hf = H[np.ix_(rows, rows)] * (comps[:, None] == comps[None, :])
-    # Directions the acceleration does not see get the identity (two frames: the spline is a line,
-    # Y'' = 0, H = 0, and the ridge alone would scale the first step by ~1e150 - an overflow).
-    d = np.diag(Hf).copy()
+class AccelerationPreconditioner:
+    """x = x0 + R^-1 z for `SolveOptions.precondition`: R upper triangular with R^T R = H + a tiny
+    ridge, H the Hessian of integral |Y''|^2 dt (= 2 h W2^T W2 for each component) over the free
+    components, in the order of `FrameSet.x`.
+
+    H is block diagonal by component, and components whose free frames are the same share one block
+    (all of a figure's components are free in the variable frames; partial keyframes add a few more
+    patterns), so R^-1 is applied per group as an (r, r) matrix times an (r, c) block: O(r^2 c) work
+    instead of the O(n_free^2) of a dense R^-1 (1600 x 1600 for the figure: ~3 ms per evaluation).
+    """
+
+    def __init__(self, objective: Objective, frames: FrameSet):
+        W2 = objective.basis(frames.times).W2
+        H = 2.0 * objective.h * (W2.T @ W2)
+        self.free = frames.free
+        patterns: dict[bytes, list[int]] = {}
+        for c in range(self.free.shape[1]):
+            if self.free[:, c].any():
+                patterns.setdefault(self.free[:, c].tobytes(), []).append(c)
+        self.groups = []
+        for key, comps in patterns.items():
+            rows = np.flatnonzero(np.frombuffer(key, dtype=bool))
+            self.groups.append((rows, np.array(comps), np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))))
+
+    def apply(self, z: np.ndarray) -> np.ndarray:
+        """R^-1 z for z of shape (n_free,)."""
+        return self._map(z, transpose=False)
+
+    def apply_transpose(self, g: np.ndarray) -> np.ndarray:
+        """R^-T g: a gradient with respect to x as one with respect to z."""
+        return self._map(g, transpose=True)
+
+    def _map(self, v, transpose):
+        X = np.zeros(self.free.shape)
+        X[self.free] = v
+        out = np.zeros_like(X)
+        for rows, comps, Rinv in self.groups:
+            block = X[np.ix_(rows, comps)]
+            out[np.ix_(rows, comps)] = (Rinv.T if transpose else Rinv) @ block
+        return out[self.free]
+
+
+def _upper_factor(Hg: np.ndarray) -> np.ndarray:
+    """R upper triangular with R^T R = Hg + ridge; directions the acceleration does not see get the
+    identity (two frames: the spline is a line, Y'' = 0, H = 0, and the ridge alone would scale the
+    first step by ~1e150 - an overflow)."""
+    Hg = Hg.copy()
+    d = np.diag(Hg).copy()
     flat = d <= 1e-12 * d.max(initial=0.0)
     if flat.any():
-        Hf[flat, :] = 0.0
-        Hf[:, flat] = 0.0
-        Hf[flat, flat] = d[~flat].mean() if (~flat).any() else 1.0
-    Hf[np.diag_indices_from(Hf)] += 1e-10 * np.trace(Hf) / len(Hf) + 1e-300
-    L = np.linalg.cholesky(Hf)  # Hf = L L^T, R = L^T
-    return np.linalg.inv(L).T
+        Hg[flat, :] = 0.0
+        Hg[:, flat] = 0.0
+        Hg[flat, flat] = d[~flat].mean() if (~flat).any() else 1.0
+    Hg[np.diag_indices_from(Hg)] += 1e-10 * np.trace(Hg) / len(Hg) + 1e-300
+    return np.linalg.cholesky(Hg).T  # Hg = L L^T, R = L^T
