@@ -18,7 +18,8 @@ import numpy as np
 from solver.errors import InputError
 from solver.metrics import dynamics_series, sample_times
 from solver.surfaces import StaticSurfaces
-from solver.terms.penetration import CONTACT_SITES, site_ids, site_positions
+from solver.layout import site_ids
+from solver.terms.penetration import CONTACT_SITES, site_positions
 
 #: line styles of the three motions, the same in every figure
 STYLE = {

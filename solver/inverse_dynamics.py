@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solver.errors import InputError
+from solver.layout import site_ids
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -119,21 +120,6 @@ class InverseDynamicsResult:
             a.shape == b.shape and np.array_equal(a, b)
             for a, b in ((self.qpos, qpos), (self.qvel, qvel), (self.qacc, qacc))
         )
-
-
-def _site_ids(model, names) -> np.ndarray:
-    import mujoco
-
-    ids = []
-    for name in names:
-        i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
-        if i < 0:
-            have = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, k) for k in range(model.nsite)]
-            raise InputError(
-                f"the model has no site {name!r}; its sites are: {', '.join(map(str, have)) or 'none'}"
-            )
-        ids.append(i)
-    return np.array(ids, int)
 
 
 def constraint_free_copy(model):
@@ -262,7 +248,7 @@ class InverseDynamics:
         damp = np.array(model.dof_damping, float)
         self._damping = np.zeros(self.nv) if flags & int(mujoco.mjtDisableBit.mjDSBL_DAMPER) else damp
         # sites
-        self.site_ids = _site_ids(model, sites)
+        self.site_ids = site_ids(model, sites)
         sb = model.site_bodyid[self.site_ids]
         if not all(int(b) in index for b in sb):
             raise InputError("sites must be on moving bodies of the figure, not on a static body")
@@ -569,7 +555,7 @@ class MujocoInverseDynamics:
         self.model = constraint_free_copy(model)
         self.data = mujoco.MjData(self.model)
         self.nq, self.nv = int(model.nq), int(model.nv)
-        self.site_ids = _site_ids(model, sites)
+        self.site_ids = site_ids(model, sites)
         self.eps = float(eps)
         nv = self.nv
         self._DfDq, self._DfDv, self._DfDa = (np.zeros((nv, nv)) for _ in range(3))

@@ -100,3 +100,29 @@ class StateLayout:
         mask = np.ones(self.nq, bool)
         mask[self.quat_slots.ravel()] = False
         return np.flatnonzero(mask)
+
+
+def site_ids(model, names) -> np.ndarray:
+    """Site ids of a MuJoCo model for site names.
+
+    Args:
+        model: MjModel. names: site names.
+    Returns:
+        (k,) int ids.
+    Raises:
+        InputError: a name the model does not have; lists the model's sites (is the figure included
+            in the scene?).
+    """
+    import mujoco
+
+    ids = []
+    for name in names:
+        i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+        if i < 0:
+            have = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, k) for k in range(model.nsite)]
+            raise InputError(
+                f"the model has no site {name!r} (needed: {', '.join(names)}); its sites are: "
+                f"{', '.join(map(str, have)) or 'none'}. Is the figure included in the scene?"
+            )
+        ids.append(i)
+    return np.array(ids, int)

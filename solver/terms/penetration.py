@@ -6,27 +6,12 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.kinematics import TangentMap
-from solver.layout import StateLayout
+from solver.layout import StateLayout, site_ids
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
 
 #: The figure's contact sites (models/humanoid39.xml).
 CONTACT_SITES = ("l_heel", "l_toe", "r_heel", "r_toe")
-
-
-def site_ids(model, names) -> np.ndarray:
-    """Site ids for names. Raises InputError listing the model's sites if one is missing."""
-    ids = []
-    for name in names:
-        i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
-        if i < 0:
-            have = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, k) for k in range(model.nsite)]
-            raise InputError(
-                f"the model has no site {name!r} (contact sites needed: {', '.join(names)}); "
-                f"its sites are: {', '.join(map(str, have)) or 'none'}. Is the figure included in the scene?"
-            )
-        ids.append(i)
-    return np.array(ids, int)
 
 
 def site_positions(model, data, Y: np.ndarray, sites: np.ndarray) -> np.ndarray:
