@@ -106,6 +106,9 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     opt.add_argument("--max-evals", type=_nonneg(int), default=0, help="evaluations per round [no limit]")
     opt.add_argument("--rate", type=_positive(float), default=400.0,
                      help="quadrature points per second [%(default)s]")
+    opt.add_argument("--score", choices=("decrease", "gradient"), default="decrease",
+                     help="how adaptive subdivision ranks segments: the decrease of E a midpoint frame "
+                          "predicts, or the raw weak-form Euler-Lagrange gradient [%(default)s]")
     opt.add_argument("--no-precondition", action="store_true",
                      help="optimize the frame values directly instead of in the spline-acceleration metric")
     opt.add_argument("--no-renormalize", action="store_true",
@@ -257,7 +260,7 @@ def solve_options(args, weights: dict) -> SolveOptions:
         subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
         renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
         max_evals=args.max_evals, max_time_s=args.max_time, limits=default_limits(weights),
-        precondition=not args.no_precondition,
+        precondition=not args.no_precondition, score=args.score,
     )
 
 

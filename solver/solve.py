@@ -66,7 +66,7 @@ class SolveOptions:
     ftol_rel: float = 1e-7
     max_evals: int = 0
     max_time_s: float = 0.0
-    score: str = "gradient"
+    score: str = "decrease"
     precondition: bool = False
     limits: tuple = ()
     boost: float = 10.0
