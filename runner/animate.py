@@ -276,13 +276,13 @@ def run_animate(args) -> int:
     from runner.cli import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
     from runner.files import check_writable_dir
 
-    for out in (args.out, args.save_path):
+    for out, option in ((args.out, "--out"), (args.save_path, "--save-path")):
         if out is not None:
-            check_writable_dir(out)
+            check_writable_dir(out, option)
     if args.out is not None and not args.no_render:
         _check_video_out(args.out, args.size)  # before the optimization, not after it
     if args.plot is not None:
-        check_writable_dir(Path(args.plot) / "plot.png")
+        check_writable_dir(Path(args.plot) / "plot.png", "--plot")
     keyframes, info, model, layout, scene_path = load_problem(args.keyframes, args.scene)
     file_terms = dict(getattr(info, "terms", None) or {})
     weights_in = dict(args.weight)

@@ -18,7 +18,7 @@ from solver.errors import InputError
 __all__ = ["atomic_output", "check_writable_dir"]
 
 
-def check_writable_dir(path: str | os.PathLike) -> Path:
+def check_writable_dir(path: str | os.PathLike, option: str = "--out") -> Path:
     """Make sure the folder of output file `path` exists (creating it) and can be written.
 
     Writability is probed by creating and removing a file there (`os.access` says yes to root even on
@@ -26,6 +26,7 @@ def check_writable_dir(path: str | os.PathLike) -> Path:
 
     Args:
         path: the output *file* path, e.g. "renders/run_and_step.mp4".
+        option: the command-line option that named it, for the message's fix ("choose another ...").
 
     Returns:
         The folder, as a `Path`.
@@ -37,17 +38,17 @@ def check_writable_dir(path: str | os.PathLike) -> Path:
     path = Path(path)
     folder = path.parent
     if path.is_dir():
-        raise InputError(f"cannot write {path}: it is an existing folder; choose a file name for --out")
+        raise InputError(f"cannot write {path}: it is an existing folder; choose a file name for {option}")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError) as e:
         raise InputError(
             f"cannot write {path}: folder {folder} does not exist and cannot be created "
-            f"(a file is in the way: {e.filename}); choose another --out") from e
+            f"(a file is in the way: {e.filename}); choose another {option}") from e
     except OSError as e:
         raise InputError(
             f"cannot write {path}: folder {folder} does not exist and cannot be created "
-            f"({e.strerror}); choose another --out") from e
+            f"({e.strerror}); choose another {option}") from e
     probe = folder / f".{path.name}.{uuid.uuid4().hex[:8]}.probe"
     try:
         with open(probe, "xb"):
@@ -55,7 +56,7 @@ def check_writable_dir(path: str | os.PathLike) -> Path:
     except OSError as e:
         raise InputError(
             f"cannot write {path}: folder {folder} is not writable ({e.strerror}); "
-            "choose another --out") from e
+            f"choose another {option}") from e
     finally:
         with contextlib.suppress(OSError):
             probe.unlink()

@@ -248,7 +248,7 @@ def test_bad_terms_in_the_keyframe_file_name_the_file(tmp_path, capsys, terms, f
 def test_output_folder_cannot_be_created(tmp_path, capsys):
     (tmp_path / "afile").write_text("")
     expect_input_error(capsys, animate(write(tmp_path, small_doc()), "--save-path", tmp_path / "afile" / "x.npz"),
-                       "cannot write", "x.npz: folder", "(a file is in the way", "choose another")
+                       "cannot write", "x.npz: folder", "(a file is in the way", "choose another --save-path")
 
 
 def test_output_is_a_folder(tmp_path, capsys):
