@@ -38,6 +38,11 @@ MODELS = REPO / "models"
 SCENE = MODELS / "run_and_step.xml"
 
 
+#: options that keep run-and-step optimizing for several seconds (it converges in about 1.5 s), so the
+#: signal surely arrives during the optimization
+LONG = ("--ftol", "1e-12", "--rounds", "4")
+
+
 def keyframe_error(z) -> float:
     """Largest |path(t_k) - keyframe| over fixed components, re-interpolating the saved frames."""
     Y = interpolate(z["frame_times"], z["frames"], z["keyframe_times"])
@@ -112,7 +117,7 @@ def optimizing(text: str) -> bool:
 
 def test_sigint_during_optimization_keeps_the_best_path(tmp_path):
     out = tmp_path / "rs.npz"
-    cmd = Command("run-and-step", "--no-render", "--save-path", out)
+    cmd = Command("run-and-step", "--no-render", "--save-path", out, *LONG)
     cmd.wait_for(optimizing)
     cmd.interrupt()
     code = cmd.finish()
@@ -135,7 +140,7 @@ def test_sigint_while_rendering_leaves_no_partial_video(tmp_path):
     video, path = tmp_path / "rs.mp4", tmp_path / "rs.npz"
     video.write_bytes(b"an earlier video")
     cmd = Command("run-and-step", "--save-path", path, "--out", video, "--size", "160x96", "--fps", "60",
-                  "--speed", "0.1")
+                  "--speed", "0.1", *LONG)
     cmd.wait_for(optimizing)
     cmd.interrupt()  # first: stop optimizing, keep the best path, go on to write the outputs
     cmd.wait_for(lambda text: re.search(r"rendering [1-9]\d*/", text) is not None)  # frames are being written
@@ -152,7 +157,7 @@ def test_sigint_while_rendering_leaves_no_partial_video(tmp_path):
 
 def test_max_time_stops_with_outputs_and_exit_0(tmp_path, capsys):
     out = tmp_path / "rs.npz"
-    code = main(["run-and-step", "--no-render", "--max-time", "0.5", "--save-path", str(out)])
+    code = main(["run-and-step", "--no-render", "--max-time", "0.5", "--save-path", str(out), *LONG])
     stdout = capsys.readouterr().out
     assert code == EXIT_OK
     assert "stopped: time limit of 0.5 s reached" in stdout
@@ -198,7 +203,7 @@ def test_nonfinite_term_is_named_and_last_good_iterate_kept():
     assert np.isfinite(sol.frames.values).all() and np.isfinite(sol.E_final)
     Y = sol.frames.path(kf.times)
     assert np.abs(Y - kf.values)[kf.mask].max() <= 1e-9  # keyframes met by the kept iterate
-    assert sol.E_final <= sol.E_initial
+    assert sol.E_final <= sol.E_initial * (1 + 1e-12)  # never worse (up to round-off of re-evaluation)
 
 
 def test_nonfinite_term_at_the_command_line(tmp_path, capsys, monkeypatch):
