@@ -161,7 +161,7 @@ def run(args) -> int:
         plot = Path(args.plot)
         if plot.suffix.lower() != ".png":
             raise InputError(f"--plot {plot}: give a file name ending in .png")
-        check_writable_dir(plot)
+        check_writable_dir(plot, option="--plot")
     times, quats = read_keyframes(args.keyframes)
     changes = dict(subdivision=args.subdivision, per_segment=args.per_segment, max_frames=args.max_frames)
     if args.rounds is not None:
