@@ -321,6 +321,12 @@ def run_animate(args) -> int:
         if not args.quiet:
             print(summary_table(plain_m, opt_m, solution, weights,
                                 dict(zip(objective.names, objective.weights.tolist()))))
+            if reference is not None:
+                from runner.bvh_import import worst_contact_distance
+
+                say(f"motion capture ({_rel(reference.source)}, retargeted, {reference.count} frames): "
+                    f"feet in contact stay within {1000 * worst_contact_distance(reference, model):.1f} mm "
+                    "of the surface under them")
         if args.save_path is not None:  # Ctrl-C until it is written only sets stop.requested
             save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
                           {"plain": plain_m, "optimized": opt_m}, args)
