@@ -308,10 +308,34 @@ def _optimize(objective, frames, options, remaining, should_stop, progress, eval
             max_evals=options.max_evals, max_time_s=remaining, should_stop=should_stop, callback=cb,
         )
     pre = AccelerationPreconditioner(objective, frames)
+    rows = pre.whole_rows()
+    if rows is not None and len(objective._needs) == 3:
+        # every free component belongs to whole free frames sharing one factor: fold R^-1 into the
+        # spline matrices, Y = B P0 + (B[:, rows] R^-1) Z, and skip the scatter/gather of x and z
+        # (the orientation problem; the figure without partial keyframes)
+        basis = objective.basis(knots)
+        Bz = basis.B[:, rows] @ pre.groups[0][2]  # (3n, r)
+        Y0 = basis.B @ frames.values
+        n, shape = len(basis.t), (len(rows), frames.values.shape[1])
 
-    def fun_z(z, need_grad):
-        f, g = fun(x0 + pre.apply(z), need_grad)
-        return f, (pre.apply_transpose(g) if need_grad else None)
+        def fun_z(z, need_grad):
+            Y = Y0 + Bz @ z.reshape(shape)
+            Yk = (Y[:n], Y[n:2 * n], Y[2 * n:])
+            try:
+                E, _, acc = objective.evaluate_path(basis, *Yk, grad=need_grad)
+            except NonFiniteError as e:
+                raise Stop(Status.NONFINITE, str(e)) from e
+            if not need_grad:
+                return E, None
+            g = Bz.T @ np.concatenate([np.zeros_like(Y0[:n]) if a is None else a for a in acc])
+            if not np.all(np.isfinite(g)):
+                name = objective._blame(basis, *Yk)
+                raise Stop(Status.NONFINITE, str(NonFiniteError(name, "gradient")))
+            return E, g.ravel()
+    else:
+        def fun_z(z, need_grad):
+            f, g = fun(x0 + pre.apply(z), need_grad)
+            return f, (pre.apply_transpose(g) if need_grad else None)
 
     res = minimize(
         fun_z, np.zeros_like(x0), algorithm=options.algorithm, ftol_rel=options.ftol_rel,
@@ -332,8 +356,12 @@ class AccelerationPreconditioner:
     """
 
     def __init__(self, objective: Objective, frames: FrameSet):
-        W2 = objective.basis(frames.times).W2
-        H = 2.0 * objective.h * (W2.T @ W2)
+        basis = objective.basis(frames.times)
+        W2 = basis.W2
+        if basis.weights is None:
+            H = 2.0 * objective.h * (W2.T @ W2)
+        else:
+            H = 2.0 * (W2.T * basis.weights) @ W2
         self.free = frames.free
         patterns: dict[bytes, list[int]] = {}
         for c in range(self.free.shape[1]):
@@ -343,6 +371,15 @@ class AccelerationPreconditioner:
         for key, comps in patterns.items():
             rows = np.flatnonzero(np.frombuffer(key, dtype=bool))
             self.groups.append((rows, np.array(comps), np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))))
+
+    def whole_rows(self) -> np.ndarray | None:
+        """The free frames' rows if every free component is in one group covering all components
+        (whole frames free, as in the orientation problem): then x = x0 + (R^-1 Z).ravel() with
+        Z = z.reshape(len(rows), nq), R^-1 = groups[0][2]. Otherwise None."""
+        if len(self.groups) != 1:
+            return None
+        rows, comps, _ = self.groups[0]
+        return rows if len(comps) == self.free.shape[1] else None
 
     def apply(self, z: np.ndarray) -> np.ndarray:
         """R^-1 z for z of shape (n_free,)."""

@@ -64,8 +64,9 @@ def predicted_decreases(objective: Objective, frames: FrameSet, min_points: int 
     every segment (neighbours of one parity are two knots apart; their coupling through the natural
     spline is a few percent).
 
-    Segments too short for the quadrature (a half with fewer than `min_points` quadrature points) score
-    0: a frame there would be under-determined by the integral (it could wiggle between the points).
+    Segments too short for the uniform quadrature (a half with fewer than `min_points` quadrature points)
+    score 0: a frame there would be under-determined by the integral (it could wiggle between the
+    points). Gauss quadrature puts nodes in every segment, so there every segment may be split.
 
     Args:
         objective: the objective (scales already set).
@@ -98,6 +99,8 @@ def predicted_decreases(objective: Objective, frames: FrameSet, min_points: int 
     fallback = np.median(curv[ok] / gg[ok]) if ok.any() else 1.0
     curv = np.where(ok, curv, fallback * gg)
     out = np.where(gg > 0, gg * gg / (2.0 * np.maximum(curv, 1e-300)), 0.0)
+    if objective.h is None:  # Gauss quadrature: every segment has its own nodes, however short
+        return out
     half = 0.5 * np.diff(frames.times)
     return np.where(half >= min_points * objective.h, out, 0.0)
 
