@@ -69,7 +69,8 @@ def register(sub) -> None:
                    help="objective: normalized (covariant acceleration of q/|q|) or paper (eq. 9 on q, "
                    "renormalized 2:5) [normalized]")
     p.add_argument("--rate", type=_positive, default=None, metavar="HZ",
-                   help="quadrature points per second [max(40, 32 / shortest keyframe interval)]")
+                   help="uniform quadrature (the paper's midpoint rule) at HZ points per second, instead of "
+                   "the default Gauss-Legendre rule with 4 nodes on every spline segment")
     p.add_argument("--plot", metavar="FILE.png", default=None,
                    help="also plot the figure-10 comparison of Euler-Lagrange deviations for these keyframes")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")

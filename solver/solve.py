@@ -144,6 +144,7 @@ def solve(
     *,
     should_stop: Callable[[], bool] | None = None,
     progress: Callable[[str, dict], None] | None = None,
+    project: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> Solution:
     """Optimize the variable frames (and partial keyframes' free components) of a frame set.
 
@@ -154,6 +155,10 @@ def solve(
         should_stop: polled during optimization (Ctrl-C handler); True ends the solve, keeping the
             best path so far (it meets every keyframe).
         progress: progress(event, info) for "round" (start of a round) and "eval" (each evaluation).
+        project: maps the values (r, nq) of the variable frames placed on the plain spline before the
+            first round (`per_segment`) to the values to start from (e.g. `solver.orient` puts the
+            quaternions back on the unit sphere); frames inserted by adaptive rounds keep the path's
+            values (the path is then unchanged by the insertion).
     Returns:
         Solution.
     Raises:
@@ -176,6 +181,11 @@ def solve(
         if options.max_frames:
             new = new[: max(0, options.max_frames - frames.n_variable)] if options.subdivision == "global" else new
         frames = frames.with_variable_frames(new)
+        if project is not None and new.size:
+            var = np.isin(frames.times, new)
+            vals = frames.values.copy()
+            vals[var] = project(vals[var])
+            frames = replace(frames, values=vals)
     n_rounds = 1 + (options.rounds if options.subdivision == "adaptive" else 0)
     rounds: list[Round] = []
     traces: list[np.ndarray] = []

@@ -8,7 +8,7 @@ the value the path already has there leaves the path unchanged, so subdivision n
 result worse.
 
 The matrices come straight from the spline's moments (second derivatives at the knots), M = S y with
-S = A^-1 R from the tridiagonal system A M = R y of a natural cubic spline (scipy.linalg.solve_banded;
+S = A^-1 R from the tridiagonal system A M = R y of a natural cubic spline (LAPACK dgtsv via scipy;
 de Boor, A Practical Guide to Splines, ch. IV): on segment [x_k, x_k+1] of length h, with a = x_k+1 - t,
 b = t - x_k,
 
@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import BSpline, make_interp_spline
-from scipy.linalg import solve_banded
+from scipy.linalg.lapack import dgtsv
 
 from solver.errors import InputError
 
@@ -74,11 +74,17 @@ def moment_matrix(knots: np.ndarray) -> np.ndarray:
     R[i, i] = inv[:-1]
     R[i, i + 1] = -inv[:-1] - inv[1:]
     R[i, i + 2] = inv[1:]
-    ab = np.zeros((3, m - 2))  # A: h_i-1 M_i-1 + 2 (h_i-1 + h_i) M_i + h_i M_i+1 (interior rows)
-    ab[0, 1:] = h[1:-1]
-    ab[1] = 2.0 * (h[:-1] + h[1:])
-    ab[2, :-1] = h[1:-1]
-    S[1:-1] = solve_banded((1, 1), ab, R, overwrite_ab=True, overwrite_b=True, check_finite=False)
+    # A M = R y, A tridiagonal: h_i-1 M_i-1 + 2 (h_i-1 + h_i) M_i + h_i M_i+1 (interior rows); LAPACK's
+    # tridiagonal solver (what solve_banded does for bandwidth 1, without its ~10 us of checks)
+    diag = 2.0 * (h[:-1] + h[1:])
+    if m == 3:
+        S[1] = R[0] / diag[0]
+        return S
+    off = h[1:-1]
+    *_, sol, info = dgtsv(off, diag, off.copy(), R, overwrite_b=True)
+    if info != 0:  # A is strictly diagonally dominant for increasing knots; cannot happen
+        raise ValueError(f"natural spline system is singular (LAPACK dgtsv info={info})")
+    S[1:-1] = sol
     return S
 
 
@@ -123,14 +129,15 @@ def _stacked_matrices(x: np.ndarray, t: np.ndarray) -> np.ndarray:
     return B
 
 
-def interpolate(frame_times: np.ndarray, frames: np.ndarray, t: np.ndarray, nu: int = 0) -> np.ndarray:
+def interpolate(frame_times: np.ndarray, frames: np.ndarray, t: np.ndarray, nu: int | tuple = 0):
     """Evaluate the natural cubic spline through frames (or its nu-th derivative) at times t.
 
     Args:
         frame_times: (m,) [s]. frames: (m, nq). t: (n,) [s]. nu: derivative order >= 0 (0 beyond 3;
-            the third derivative is piecewise constant, taken from the segment to the right of a knot).
+            the third derivative is piecewise constant, taken from the segment to the right of a knot),
+            or a tuple of orders (the spline's moments are then solved for once).
     Returns:
-        (n, nq) values [units of frames / s^nu].
+        (n, nq) values [units of frames / s^nu]; a tuple of them for a tuple nu.
     Raises:
         InputError: knots not strictly increasing or fewer than 2.
     """
@@ -143,17 +150,20 @@ def interpolate(frame_times: np.ndarray, frames: np.ndarray, t: np.ndarray, nu: 
     k, a, b, h = _segments(x, t.reshape(-1))
     a, b, h = a[:, None], b[:, None], h[:, None]
     yk, yk1, Mk, Mk1 = y[k], y[k + 1], M[k], M[k + 1]
-    if nu == 0:
-        out = (a * yk + b * yk1) / h + ((a * a / h - h) * a * Mk + (b * b / h - h) * b * Mk1) / 6.0
-    elif nu == 1:
-        out = (yk1 - yk) / h + ((h - 3.0 * a * a / h) * Mk + (3.0 * b * b / h - h) * Mk1) / 6.0
-    elif nu == 2:
-        out = (a * Mk + b * Mk1) / h
-    elif nu == 3:
-        out = (Mk1 - Mk) / h
-    else:
-        out = np.zeros((t.size, y.shape[1]))
-    return out.reshape(shape)
+    out = []
+    for order in (nu if isinstance(nu, tuple) else (nu,)):
+        if order == 0:
+            r = (a * yk + b * yk1) / h + ((a * a / h - h) * a * Mk + (b * b / h - h) * b * Mk1) / 6.0
+        elif order == 1:
+            r = (yk1 - yk) / h + ((h - 3.0 * a * a / h) * Mk + (3.0 * b * b / h - h) * Mk1) / 6.0
+        elif order == 2:
+            r = (a * Mk + b * Mk1) / h
+        elif order == 3:
+            r = (Mk1 - Mk) / h
+        else:
+            r = np.zeros((t.size, y.shape[1]))
+        out.append(r.reshape(shape))
+    return tuple(out) if isinstance(nu, tuple) else out[0]
 
 
 def quadrature_times(t0: float, t1: float, rate: float) -> tuple[np.ndarray, float]:

@@ -327,3 +327,16 @@ def test_cli_bad_paths(tmp_path, capsys):
     kf = write(tmp_path / "k.json", {"times": [0, 1], "quaternions": [[1, 0, 0, 0], [0, 1, 0, 0]]})
     assert main(["orient", kf, "--out", str(tmp_path / "p.txt")]) == 2
     assert "ending in .npz" in capsys.readouterr().err
+
+
+def test_quadrature_choice_gauss_by_default_uniform_on_request(E_star):
+    s = LARGE["large_nonuniform"]
+    opts = default_options(subdivision="global", per_segment=2)
+    g = orient(s.times, s.quats, options=opts)
+    assert g.points == 4 and g.rate is None
+    u = orient(s.times, s.quats, options=opts, rate=100.0)
+    assert u.rate == 100.0 and u.points is None
+    # both integrate the same objective: the same optimum to well within the gap
+    assert abs(gap(g, E_star[s.name]) - gap(u, E_star[s.name])) < 5e-5
+    with pytest.raises(InputError, match="not both"):
+        orient(s.times, s.quats, rate=100.0, points=3)

@@ -146,3 +146,14 @@ def test_matrices_and_interpolate_match_scipy_make_interp_spline(m):
         expect = spl.derivative(nu)(t) if nu <= k else np.zeros((len(t), 3))
         np.testing.assert_allclose(interpolate(x, y, t, nu), expect, atol=1e-12 * scale**nu, err_msg=f"nu={nu}")
     assert interpolate(x, y[:, 0], t).shape == (len(t),) and interpolate(x, y, 0.5).shape == (3,)
+
+
+def test_interpolate_several_orders_at_once():
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.uniform(0.1, 0.5, 8))
+    y = rng.normal(size=(8, 2))
+    t = np.linspace(x[0], x[-1], 57)
+    got = interpolate(x, y, t, (0, 2, 1, 4))
+    assert isinstance(got, tuple) and len(got) == 4
+    for g, nu in zip(got, (0, 2, 1, 4)):
+        np.testing.assert_array_equal(g, interpolate(x, y, t, nu))

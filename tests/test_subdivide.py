@@ -179,3 +179,17 @@ def test_preconditioner_folded_into_the_spline_matrices_gives_the_same_optimizat
     res = solve(obj, fs, SolveOptions(subdivision="none", precondition=True, ftol_rel=1e-10))
     plain = solve(obj, fs, SolveOptions(subdivision="none", precondition=False, ftol_rel=1e-12))
     assert res.E_final == pytest.approx(plain.E_final, rel=1e-6)
+
+
+def test_project_sets_the_starting_values_of_the_first_variable_frames_only():
+    kf, obj = orient_problem()
+    fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)
+    unit = lambda v: v / np.linalg.norm(v, axis=1, keepdims=True)  # noqa: E731
+    opts = SolveOptions(subdivision="global", per_segment=1, max_evals=1, renormalize=False)
+    sol = solve(obj, fs, opts, project=unit)  # one evaluation: the result is the starting point
+    var = ~sol.frames.is_keyframe
+    np.testing.assert_allclose(np.linalg.norm(sol.frames.values[var], axis=1), 1.0, rtol=1e-14)
+    np.testing.assert_array_equal(sol.frames.values[~var], fs.values)
+    plain = solve(obj, fs, opts)
+    assert np.abs(np.linalg.norm(plain.frames.values[var], axis=1) - 1).max() > 1e-3  # the spline dips
+    np.testing.assert_allclose(unit(plain.frames.values[var]), sol.frames.values[var], rtol=1e-14)
