@@ -215,9 +215,12 @@ class Objective:
         Args:
             knots: (m,) frame times [s]. P: (m, nq) frame values.
         """
+        terms = [term for term in self.terms if type(term).prepare is not Term.prepare]
+        if not terms:  # nothing to fix (the path is not even needed)
+            return
         basis = self.basis(knots)
         Y, Y1, Y2 = basis.evaluate(P, (0, 1, 2))
-        for term in self.terms:
+        for term in terms:
             term.prepare(basis.t, Y, Y1, Y2)
 
     def _blame(self, basis: SplineBasis, Y, Y1, Y2) -> str:

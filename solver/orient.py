@@ -29,7 +29,7 @@ from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.solve import Solution, SolveOptions, solve
-from solver.spline import gauss_times, interpolate
+from solver.spline import gauss_nodes, gauss_times, interpolate_segments
 from solver.terms import CovariantAcceleration, NormalizedCovariantAcceleration, UnitQuaternion
 
 FORMS = ("normalized", "paper")
@@ -275,12 +275,6 @@ def _unit_rows(values: np.ndarray) -> np.ndarray:
     return values / np.linalg.norm(values, axis=1, keepdims=True)
 
 
-def _segment_samples(frame_times: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-    """Times at the given relative positions (in [0, 1]) of every spline segment, (m-1) * len(nodes)."""
-    a, h = frame_times[:-1], np.diff(frame_times)
-    return (a[:, None] + h[:, None] * nodes[None, :]).ravel()
-
-
 def covariant_energy(frame_times: np.ndarray, frames: np.ndarray, points: int = 8) -> float:
     """integral |covariant acceleration of u = q/|q||^2 dt of the spline through frames [1/s^3].
 
@@ -292,13 +286,13 @@ def covariant_energy(frame_times: np.ndarray, frames: np.ndarray, points: int = 
     """
     ft = np.asarray(frame_times, float)
     t, wt = gauss_times(ft, points)
-    Y, Y1, Y2 = interpolate(ft, frames, t, (0, 1, 2))
+    Y, Y1, Y2 = interpolate_segments(ft, frames, gauss_nodes(points)[0], (0, 1, 2))
     f = NormalizedCovariantAcceleration(LAYOUT.quat_slots).evaluate(t, Y, Y1, Y2, grad=False).f
     return float(wt @ f)
 
 
 def max_norm_deviation(frame_times: np.ndarray, frames: np.ndarray, per_segment: int = 64) -> float:
     """max |1 - |q(t)|| over the spline through frames (`per_segment` samples per segment, ends included)."""
-    t = np.append(_segment_samples(np.asarray(frame_times, float), np.arange(per_segment) / per_segment),
-                  frame_times[-1])
-    return float(np.abs(1.0 - np.linalg.norm(interpolate(frame_times, frames, t), axis=1)).max())
+    q = np.vstack([interpolate_segments(frame_times, frames, np.arange(per_segment) / per_segment),
+                   np.asarray(frames, float)[-1:]])
+    return float(np.abs(1.0 - np.linalg.norm(q, axis=1)).max())

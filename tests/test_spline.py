@@ -157,3 +157,19 @@ def test_interpolate_several_orders_at_once():
     assert isinstance(got, tuple) and len(got) == 4
     for g, nu in zip(got, (0, 2, 1, 4)):
         np.testing.assert_array_equal(g, interpolate(x, y, t, nu))
+
+
+def test_interpolate_segments_equals_interpolate_at_the_same_times():
+    from solver.spline import interpolate_segments
+
+    rng = np.random.default_rng(4)
+    for m in (2, 3, 9):
+        x = np.cumsum(rng.uniform(0.1, 0.5, m))
+        y = rng.normal(size=(m, 3))
+        tau = np.array([0.0, 0.1, 0.5, 0.93])
+        t = (x[:-1, None] + np.diff(x)[:, None] * tau).ravel()
+        for nu in range(5):
+            expect = interpolate(x, y, t, nu)
+            got = interpolate_segments(x, y, tau, nu)
+            np.testing.assert_allclose(got, expect, atol=1e-13 * (1 + np.abs(expect).max()), err_msg=f"m={m} nu={nu}")
+        assert len(interpolate_segments(x, y, tau, (0, 2))) == 2
