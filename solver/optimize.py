@@ -28,6 +28,10 @@ ALGORITHMS = {
 }
 
 
+#: nlopt's luksan/luksan.h MEMAVAIL: doubles of scratch memory its L-BFGS sizes its default storage by.
+_LUKSAN_MEMAVAIL = 1310720
+
+
 class Status(enum.Enum):
     """Why an optimization ended."""
 
@@ -131,6 +135,11 @@ def minimize(
                               np.array([f0]), time.perf_counter() - t_start, algorithm)
 
     opt = nlopt.opt(ALGORITHMS[algorithm], x0.size)
+    if algorithm == "lbfgs":
+        # nlopt's default L-BFGS storage is max(1310720 // n, 10) correction pairs, ~10 MB zeroed on every
+        # call (~0.1 ms: most of a small orientation solve's optimizer overhead). At most 1000 pairs: the
+        # same iterates unless a run takes more than 1000 iterations (larger n keeps the default).
+        opt.set_vector_storage(min(max(_LUKSAN_MEMAVAIL // x0.size, 10), 1000))
     best = {"x": x0.copy(), "f": np.inf, "n": 0, "imp": 0}
     trace: list[float] = []
     stop: dict = {}

@@ -256,6 +256,11 @@ def gauss_nodes(points: int) -> tuple[np.ndarray, np.ndarray]:
     return r
 
 
+for _p in (4, 8):  # the rules orient uses (objective, summary energy): a table built at import
+    gauss_nodes(_p)
+del _p
+
+
 @dataclass
 class SplineBasis:
     """W, W1, W2 at fixed quadrature times for one frame set (built once per frame set).
