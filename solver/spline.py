@@ -88,6 +88,27 @@ def moment_matrix(knots: np.ndarray) -> np.ndarray:
     return S
 
 
+def _moments(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """M = moment_matrix(x) @ y for values y (m, nq), solved for directly (no (m, m) matrix)."""
+    m = len(x)
+    M = np.zeros_like(y)
+    if m < 3:
+        return M
+    h = np.diff(x)
+    d = np.diff(y, axis=0) / h[:, None]
+    r = 6.0 * (d[1:] - d[:-1])  # (m-2, nq)
+    diag = 2.0 * (h[:-1] + h[1:])
+    if m == 3:
+        M[1] = r[0] / diag[0]
+        return M
+    off = h[1:-1]
+    *_, sol, info = dgtsv(off, diag, off.copy(), r, overwrite_b=True)
+    if info != 0:
+        raise ValueError(f"natural spline system is singular (LAPACK dgtsv info={info})")
+    M[1:-1] = sol
+    return M
+
+
 def _segments(x: np.ndarray, t: np.ndarray):
     """Segment index k of each time (the end segments extend beyond the knots, like scipy's splines),
     a = x_k+1 - t, b = t - x_k and h = x_k+1 - x_k."""
@@ -146,7 +167,7 @@ def interpolate(frame_times: np.ndarray, frames: np.ndarray, t: np.ndarray, nu: 
     t = np.asarray(t, dtype=float)
     shape = t.shape + y.shape[1:]
     y = y.reshape(len(x), -1)
-    M = moment_matrix(x) @ y  # (m, nq) second derivatives at the knots
+    M = _moments(x, y)  # (m, nq) second derivatives at the knots
     k, a, b, h = _segments(x, t.reshape(-1))
     a, b, h = a[:, None], b[:, None], h[:, None]
     yk, yk1, Mk, Mk1 = y[k], y[k + 1], M[k], M[k + 1]
@@ -185,7 +206,7 @@ def interpolate_segments(frame_times: np.ndarray, frames: np.ndarray, nodes: np.
     x = _check_knots(frame_times)
     y = np.asarray(frames, dtype=float).reshape(len(x), -1)
     tau = np.asarray(nodes, dtype=float).reshape(-1)
-    M = moment_matrix(x) @ y
+    M = _moments(x, y)
     h = np.diff(x)[:, None]
     s = 1.0 - tau
     out = []
