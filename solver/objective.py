@@ -11,6 +11,7 @@ keeps scale 1 (its own units).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -183,7 +184,7 @@ class Objective:
             else:
                 ev = term.evaluate(t, Y, Y1, Y2, grad=grad and w != 0.0)
             I = float(self.h * ev.f.sum()) if wq is None else float(basis.weights @ ev.f)
-            if not np.isfinite(I):
+            if not math.isfinite(I):
                 raise NonFiniteError(term.name, "value")
             integrals[term.name] = I
             if w == 0.0:
@@ -215,13 +216,21 @@ class Objective:
         Args:
             knots: (m,) frame times [s]. P: (m, nq) frame values.
         """
-        terms = [term for term in self.terms if type(term).prepare is not Term.prepare]
+        terms = self._stateful_terms()
         if not terms:  # nothing to fix (the path is not even needed)
             return
         basis = self.basis(knots)
         Y, Y1, Y2 = basis.evaluate(P, (0, 1, 2))
         for term in terms:
             term.prepare(basis.t, Y, Y1, Y2)
+
+    @property
+    def keeps_state(self) -> bool:
+        """True if a term fixes something per round (`Term.prepare`): `prepare` can change E."""
+        return bool(self._stateful_terms())
+
+    def _stateful_terms(self) -> list[Term]:
+        return [term for term in self.terms if type(term).prepare is not Term.prepare]
 
     def _blame(self, basis: SplineBasis, Y, Y1, Y2) -> str:
         """The name of the first term whose value or gradient is not finite at (Y, Y', Y'')."""

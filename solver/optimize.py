@@ -8,6 +8,7 @@ the objective ends the run and returns that best iterate with a status saying wh
 from __future__ import annotations
 
 import enum
+import math
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -157,7 +158,7 @@ def minimize(
                 raise Stop(Status.MAX_EVALS, f"evaluation limit of {max_evals} reached")
             with np.errstate(all="ignore"):  # a trial point may overflow: reported just below, by status
                 f, g = fun(x, grad.size > 0)
-            if not np.isfinite(f) or (grad.size and not np.all(np.isfinite(g))):
+            if not math.isfinite(f) or (grad.size and not np.isfinite(g).all()):
                 raise Stop(Status.NONFINITE, "the objective or its gradient is not finite")
         except Stop as s:
             stop["status"], stop["message"] = s.status, s.message

@@ -167,14 +167,17 @@ def solve(
             (their nq does not fit the objective's model).
         NonFiniteError: the objective is NaN or infinite on the initial path (nothing to keep).
     """
-    _check_inputs(objective, initial, options)
+    ev_check = _check_inputs(objective, initial, options)
     t_start = time.perf_counter()
     objective.prepare(initial.times, initial.values)  # terms' per-round state from the plain spline
     if options.renormalize:
         scales = objective.renormalize(initial.times, initial.values)
     else:
         scales = dict(zip(objective.names, objective.scales.tolist()))
-    ev0 = objective.evaluate(initial.times, initial.values, grad=False)
+    if options.renormalize or objective.keeps_state:
+        ev0 = objective.evaluate(initial.times, initial.values, grad=False)
+    else:  # nothing changed the objective since the input check evaluated it on the same frames
+        ev0 = ev_check
     frames = initial
     if options.subdivision in ("global", "adaptive") and options.per_segment > 0:
         new = global_times(frames, options.per_segment)
@@ -256,7 +259,9 @@ def solve(
     )
 
 
-def _check_inputs(objective, initial, options) -> None:
+def _check_inputs(objective, initial, options):
+    """Raise InputError for inputs `solve` cannot use; returns the objective evaluated (no gradient) on
+    the initial frames."""
     if not isinstance(initial, FrameSet):
         hint = " (make one with FrameSet.from_keyframes(keyframes, layout.quat_slots))" if hasattr(
             initial, "mask") else ""
@@ -271,7 +276,7 @@ def _check_inputs(objective, initial, options) -> None:
             f"the objective integrates over [{objective.t0:g}, {objective.t1:g}] s but the frames span "
             f"[{t0:g}, {t1:g}] s; build the objective with keyframes.times[0] and keyframes.times[-1]")
     try:
-        objective.evaluate(initial.times, initial.values, grad=False)
+        return objective.evaluate(initial.times, initial.values, grad=False)
     except (ValueError, IndexError) as e:
         raise InputError(
             f"the objective cannot be evaluated on frames of shape {initial.values.shape} ({e}); are the "
