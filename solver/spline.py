@@ -289,7 +289,8 @@ class SplineBasis:
     Attributes:
         knots: (m,) frame times [s]. t: (n,) quadrature times [s].
         weights: (n,) quadrature weights [s], or None (the caller applies a uniform weight).
-        B: (3n, m) the three matrices stacked (Y, Y', Y'' at all points in one product).
+        B: (3n, m) the three matrices stacked (Y, Y', Y'' at all points in one product, as
+            `solve` uses it for whole free frames).
         W, W1, W2: (n, m) matrices (see `spline_matrices`), views of B.
     """
 
@@ -316,10 +317,6 @@ class SplineBasis:
         Returns:
             tuple of three (n, nq) arrays or None.
         """
-        if len(needs) == 3:  # one product for all three
-            n = len(self.t)
-            Y = self.B @ P
-            return Y[:n], Y[n:2 * n], Y[2 * n:]
         mats = (self.W, self.W1, self.W2)
         return tuple(mats[k] @ P if k in needs else None for k in range(3))
 
@@ -331,8 +328,6 @@ class SplineBasis:
         Returns:
             (m, nq).
         """
-        if dY is not None and dY1 is not None and dY2 is not None:
-            return self.B.T @ np.concatenate((dY, dY1, dY2))
         out = np.zeros((self.W.shape[1], next(g for g in (dY, dY1, dY2) if g is not None).shape[1]))
         for M, g in ((self.W, dY), (self.W1, dY1), (self.W2, dY2)):
             if g is not None:
