@@ -36,7 +36,7 @@ LADDER = (
     ("global 1/interval, ftol 1e-5", dict(options=dict(subdivision="global", per_segment=1, ftol_rel=1e-5))),
     ("global 2/interval, ftol 1e-5", dict(options=dict(subdivision="global", per_segment=2, ftol_rel=1e-5))),
     ("global 3/interval, ftol 1e-5", dict(options=dict(subdivision="global", per_segment=3, ftol_rel=1e-5))),
-    ("global 4/interval, ftol 1e-6", dict(options=dict(subdivision="global", per_segment=4, ftol_rel=1e-6))),
+    ("global 4/interval, ftol 1e-5", dict(options=dict(subdivision="global", per_segment=4, ftol_rel=1e-5))),
     ("global 5/interval, ftol 1e-5", dict(options=dict(subdivision="global", per_segment=5, ftol_rel=1e-5))),
     ("global 6/interval, ftol 1e-6", dict(options=dict(subdivision="global", per_segment=6, ftol_rel=1e-6))),
     ("default (adaptive 2 rounds)", dict(options=dict())),

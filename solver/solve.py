@@ -48,6 +48,12 @@ class SolveOptions:
             round): for acceleration-dominated objectives this removes most of the ill-conditioning
             of frame values (the Hessian of a spline's bending energy grows like 1/h^3) and L-BFGS
             needs 2-3x fewer evaluations. Iterates and results are the same kind of path.
+        radial_weight, quat_slots: with `precondition`, the curvature the preconditioner assumes along
+            the radial direction of each quaternion (qpos indices `quat_slots`, (s, 4)) of a free frame,
+            relative to the other directions (1: all alike). An objective that depends on q/|q| (the
+            normalized covariant acceleration) has little radial curvature (its unit term's): there
+            0.1 halves the evaluations to a given accuracy on the orientation test sets
+            (`solver.orient.default_options`, docs/orient.md).
         limits: ((term name, tolerance), ...): penalty continuation. After a round, a term whose
             `violation` on the path (sampled at LIMIT_CHECK_RATE, in the term's own units, e.g. metres of
             penetration) exceeds its tolerance has its weight multiplied by `boost` and the round is
@@ -68,6 +74,8 @@ class SolveOptions:
     max_time_s: float = 0.0
     score: str = "decrease"
     precondition: bool = False
+    radial_weight: float = 1.0
+    quat_slots: tuple = ()
     limits: tuple = ()
     boost: float = 10.0
     max_boosts: int = 4
@@ -85,6 +93,10 @@ class SolveOptions:
             raise InputError(f"unknown algorithm {self.algorithm!r}; choose one of: {', '.join(ALGORITHMS)}")
         if not self.ftol_rel >= 0:
             raise InputError(f"ftol_rel must be >= 0, got {self.ftol_rel}")
+        if not self.radial_weight > 0:
+            raise InputError(f"radial_weight must be > 0, got {self.radial_weight}")
+        if any(len(slot) != 4 for slot in self.quat_slots):
+            raise InputError(f"quat_slots must be groups of 4 qpos indices, got {self.quat_slots!r}")
         if not self.boost >= 1:
             raise InputError(f"boost must be >= 1, got {self.boost}")
         for lim in self.limits:
@@ -322,19 +334,29 @@ def _optimize(objective, frames, options, remaining, should_stop, progress, eval
             fun, x0, algorithm=options.algorithm, ftol_rel=options.ftol_rel,
             max_evals=options.max_evals, max_time_s=remaining, should_stop=should_stop, callback=cb,
         )
-    pre = AccelerationPreconditioner(objective, frames)
+    pre = AccelerationPreconditioner(objective, frames, options.radial_weight, options.quat_slots)
     rows = pre.whole_rows()
-    if rows is not None and len(objective._needs) == 3:
+    radial = pre.whole_radial() if rows is not None else None
+    if radial is not None and len(objective._needs) == 3:
         # every free component belongs to whole free frames sharing one factor: fold R^-1 into the
         # spline matrices, Y = B P0 + (B[:, rows] R^-1) Z, and skip the scatter/gather of x and z
-        # (the orientation problem; the figure without partial keyframes)
+        # (the orientation problem; the figure without partial keyframes). With a radial weight the
+        # frames' radial directions U are stretched between R^-1 and the spline: X = R^-1 Z,
+        # X += c (X.U) U, Y = B P0 + B[:, rows] X (the same map as `pre.apply`).
         basis = objective.basis(knots)
-        Bz = basis.B[:, rows] @ pre.groups[0][2]  # (3n, r)
+        U, c = radial
+        Rinv = pre.groups[0][2]
+        Brows = basis.B[:, rows]
+        Bz = Brows @ Rinv if U is None else None  # (3n, r)
         Y0 = basis.B @ frames.values
         n, shape = len(basis.t), (len(rows), frames.values.shape[1])
 
         def fun_z(z, need_grad):
-            Y = Y0 + Bz @ z.reshape(shape)
+            if U is None:
+                Y = Y0 + Bz @ z.reshape(shape)
+            else:
+                X = Rinv @ z.reshape(shape)
+                Y = Y0 + Brows @ (X + (c * np.einsum("ri,ri->r", X, U))[:, None] * U)
             Yk = (Y[:n], Y[n:2 * n], Y[2 * n:])
             try:
                 E, _, acc = objective.evaluate_path(basis, *Yk, grad=need_grad)
@@ -342,7 +364,12 @@ def _optimize(objective, frames, options, remaining, should_stop, progress, eval
                 raise Stop(Status.NONFINITE, str(e)) from e
             if not need_grad:
                 return E, None
-            g = Bz.T @ np.concatenate([np.zeros_like(Y0[:n]) if a is None else a for a in acc])
+            G = np.concatenate([np.zeros_like(Y0[:n]) if a is None else a for a in acc])
+            if U is None:
+                g = Bz.T @ G
+            else:
+                GX = Brows.T @ G
+                g = Rinv.T @ (GX + (c * np.einsum("ri,ri->r", GX, U))[:, None] * U)
             if not np.all(np.isfinite(g)):
                 name = objective._blame(basis, *Yk)
                 raise Stop(Status.NONFINITE, str(NonFiniteError(name, "gradient")))
@@ -370,7 +397,7 @@ class AccelerationPreconditioner:
     instead of the O(n_free^2) of a dense R^-1 (1600 x 1600 for the figure: ~3 ms per evaluation).
     """
 
-    def __init__(self, objective: Objective, frames: FrameSet):
+    def __init__(self, objective: Objective, frames: FrameSet, radial_weight: float = 1.0, quat_slots=()):
         basis = objective.basis(frames.times)
         W2 = basis.W2
         if basis.weights is None:
@@ -386,6 +413,19 @@ class AccelerationPreconditioner:
         for key, comps in patterns.items():
             rows = np.flatnonzero(np.frombuffer(key, dtype=bool))
             self.groups.append((rows, np.array(comps), np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))))
+        # radial stretch (see SolveOptions.radial_weight): x = S^-1 R^-1 z with, per free frame and
+        # quaternion, S^-1 = I + c u u^T (u its unit direction at the start), c = 1/sqrt(w) - 1:
+        # the assumed Hessian S (H x I) S has curvature w H along u
+        self.c = 1.0 / np.sqrt(radial_weight) - 1.0
+        self.radial = []  # (rows, slot (4,), U (len(rows), 4)) for quaternions free in those rows
+        if self.c != 0.0:
+            for slot in np.asarray(quat_slots, dtype=int).reshape(-1, 4):
+                rows = np.flatnonzero(self.free[:, slot].all(axis=1))
+                if rows.size:
+                    U = frames.values[np.ix_(rows, slot)]
+                    norm = np.linalg.norm(U, axis=1, keepdims=True)
+                    U = np.where(norm > 0, U / np.where(norm > 0, norm, 1.0), 0.0)
+                    self.radial.append((rows, slot, U))
 
     def whole_rows(self) -> np.ndarray | None:
         """The free frames' rows if every free component is in one group covering all components
@@ -395,6 +435,19 @@ class AccelerationPreconditioner:
             return None
         rows, comps, _ = self.groups[0]
         return rows if len(comps) == self.free.shape[1] else None
+
+    def whole_radial(self):
+        """For `whole_rows` frames: (None, 0) without radial stretch; (U, c) if it acts on one
+        quaternion filling the state in every free frame (the orientation problem: x = R^-1 Z, then
+        X += c (X.U) U row by row); None otherwise (use apply/apply_transpose)."""
+        if not self.radial:
+            return None, 0.0
+        rows, slot, U = self.radial[0]
+        whole = self.whole_rows()
+        if (len(self.radial) == 1 and whole is not None and np.array_equal(rows, whole)
+                and np.array_equal(slot, np.arange(self.free.shape[1]))):
+            return U, self.c
+        return None
 
     def apply(self, z: np.ndarray) -> np.ndarray:
         """R^-1 z for z of shape (n_free,)."""
@@ -407,11 +460,21 @@ class AccelerationPreconditioner:
     def _map(self, v, transpose):
         X = np.zeros(self.free.shape)
         X[self.free] = v
+        if transpose:
+            self._stretch(X)
         out = np.zeros_like(X)
         for rows, comps, Rinv in self.groups:
             block = X[np.ix_(rows, comps)]
             out[np.ix_(rows, comps)] = (Rinv.T if transpose else Rinv) @ block
+        if not transpose:
+            self._stretch(out)
         return out[self.free]
+
+    def _stretch(self, X):
+        """X[row, slot] += c (X[row, slot].u) u for the radial directions u (in place; symmetric)."""
+        for rows, slot, U in self.radial:
+            B = X[np.ix_(rows, slot)]
+            X[np.ix_(rows, slot)] = B + (self.c * np.einsum("ri,ri->r", B, U))[:, None] * U
 
 
 def _upper_factor(Hg: np.ndarray) -> np.ndarray:

@@ -193,3 +193,45 @@ def test_project_sets_the_starting_values_of_the_first_variable_frames_only():
     plain = solve(obj, fs, opts)
     assert np.abs(np.linalg.norm(plain.frames.values[var], axis=1) - 1).max() > 1e-3  # the spline dips
     np.testing.assert_allclose(unit(plain.frames.values[var]), sol.frames.values[var], rtol=1e-14)
+
+
+def test_radial_stretch_of_the_preconditioner():
+    """SolveOptions.radial_weight w: x = S^-1 R^-1 z with S^-1 = I + c u u^T per free quaternion,
+    c = 1/sqrt(w) - 1, so the assumed Hessian S (H x I) S has curvature w H along each frame's radial
+    direction u. apply_transpose is the transpose of apply; the whole-frames path of `_optimize`
+    (R^-1, then the stretch, folded next to the spline matrices) minimizes the same function."""
+    from solver.solve import AccelerationPreconditioner
+
+    kf, obj = orient_problem()
+    fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots).with_variable_frames([0.25, 0.8, 1.4, 2.0])
+    plain = AccelerationPreconditioner(obj, fs)
+    pre = AccelerationPreconditioner(obj, fs, radial_weight=0.04, quat_slots=LAYOUT.quat_slots)
+    assert pre.c == pytest.approx(4.0)
+    rows = pre.whole_rows()
+    U = fs.values[rows] / np.linalg.norm(fs.values[rows], axis=1, keepdims=True)
+    Sinv = np.zeros((fs.n_free, fs.n_free))
+    for i in range(len(rows)):
+        Sinv[4 * i:4 * i + 4, 4 * i:4 * i + 4] = np.eye(4) + 4.0 * np.outer(U[i], U[i])
+    eye = np.eye(fs.n_free)
+    A = np.stack([pre.apply(e) for e in eye], axis=1)
+    A0 = np.stack([plain.apply(e) for e in eye], axis=1)
+    np.testing.assert_allclose(A, Sinv @ A0, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.stack([pre.apply_transpose(e) for e in eye], axis=1), A.T, rtol=1e-12, atol=1e-12)
+    Uw, c = pre.whole_radial()
+    np.testing.assert_allclose(Uw, U, rtol=1e-14)
+    opts = dict(subdivision="none", precondition=True, ftol_rel=1e-11)
+    a = solve(obj, fs, SolveOptions(**opts, radial_weight=0.04, quat_slots=tuple(map(tuple, LAYOUT.quat_slots))))
+    b = solve(obj, fs, SolveOptions(**opts))
+    assert a.E_final == pytest.approx(b.E_final, rel=1e-6)
+    # a partial keyframe (free w, x only): the stretch covers the variable frames only, general path
+    vals = np.array([quat([1, 0, 0], 0), quat([0, 1, 0], 80), quat([0, 0, 1], 80)])
+    mask = np.ones_like(vals, bool)
+    mask[1, 2:] = False
+    fs2 = FrameSet.from_keyframes(Keyframes(np.array([0.0, 1.0, 2.0]), vals, mask), LAYOUT.quat_slots)
+    fs2 = fs2.with_variable_frames([0.5, 1.5])
+    obj2 = Objective([UnitQuaternion(LAYOUT.quat_slots), CovariantAcceleration(LAYOUT.quat_slots)], [1, 1], 0, 2,
+                     rate=100)
+    pre2 = AccelerationPreconditioner(obj2, fs2, radial_weight=0.04, quat_slots=LAYOUT.quat_slots)
+    assert pre2.whole_rows() is None and len(pre2.radial) == 1 and len(pre2.radial[0][0]) == 2
+    r2 = solve(obj2, fs2, SolveOptions(**opts, radial_weight=0.04, quat_slots=((0, 1, 2, 3),)))
+    assert r2.E_final == pytest.approx(solve(obj2, fs2, SolveOptions(**opts)).E_final, rel=1e-6)
