@@ -56,10 +56,10 @@ MIN_RATE = 40.0
 MIN_POINTS_PER_KEY_INTERVAL = 32
 
 #: Curvature the preconditioner assumes along each variable frame's radial direction, relative to the
-#: tangential ones (`SolveOptions.radial_weight`): the normalized form's f2 does not see the scale of q,
-#: only the light f1 does. Measured (docs/orient.md): 0.03-0.1 reach a given gap with 20-40% fewer
-#: evaluations than 1 (no distinction), 0.01 is worse again.
-RADIAL_WEIGHT = 0.1
+#: tangential ones (`SolveOptions.radial_weight`), per form: the normalized form's f2 does not see the
+#: scale of q, only the light f1 does (0.03-0.1 reach a given gap with 20-40% fewer evaluations than 1,
+#: 0.01 is worse again; docs/orient.md); the paper form's f2 falls as q shrinks (1: fewer evaluations).
+RADIAL_WEIGHTS = {"normalized": 0.1, "paper": 1.0}
 
 LAYOUT = StateLayout.single_quaternion()
 
@@ -68,11 +68,11 @@ def default_options(**changes) -> SolveOptions:
     """The solve options `orient` uses unless given others: one variable frame per keyframe interval, then
     two rounds of adaptive subdivision ranked by predicted decrease (`predicted_decreases`),
     preconditioned L-BFGS, ftol_rel 1e-6 (gap < 1e-3 on the large-rotation test sets, docs/orient.md).
-    Keyword arguments override fields (`SolveOptions`)."""
+    Keyword arguments override fields (`SolveOptions`). `orient` sets `renormalize` and `radial_weight`
+    from its own arguments (they belong to the objective form)."""
     base = dict(
         subdivision="adaptive", per_segment=1, rounds=2, per_round=0, max_frames=0, score="decrease",
-        precondition=True, radial_weight=RADIAL_WEIGHT, quat_slots=((0, 1, 2, 3),), ftol_rel=1e-6,
-        renormalize=False,
+        precondition=True, ftol_rel=1e-6, renormalize=False,
     )
     base.update(changes)
     return SolveOptions(**base)
@@ -215,6 +215,7 @@ def orient(
     form: str = "normalized",
     weights=None,
     renormalize: bool | None = None,
+    radial_weight: float | None = None,
     options: SolveOptions | None = None,
     rate: float | None = None,
     points: int | None = None,
@@ -231,8 +232,10 @@ def orient(
         weights: (lambda_1 unit, lambda_2 covariant); default see `build_objective`.
         renormalize: divide each term by its plain-spline integral (eq. 7); default True for "paper"
             (its 2:5 ratio is on renormalized terms), False for "normalized".
+        radial_weight: preconditioner curvature along the frames' radial directions
+            (`SolveOptions.radial_weight`); default RADIAL_WEIGHTS[form].
         options: SolveOptions; default `default_options()` (adaptive subdivision). Its `renormalize`
-            field is replaced by the argument above. With adaptive subdivision and a `max_frames`
+            and `radial_weight` fields are replaced by the arguments above. With adaptive subdivision and a `max_frames`
             smaller than the starting frames (`per_segment` per interval), no starting frames are
             placed and the adaptive rounds place all of them.
         rate: uniform (midpoint) quadrature at this many points per second [1/s], the paper's rule;
@@ -248,7 +251,9 @@ def orient(
     obj, w, renorm_default = build_objective(kf, form, weights, rate, points)
     renorm = renorm_default if renormalize is None else bool(renormalize)
     opts = default_options() if options is None else options
-    opts = replace(opts, renormalize=renorm)
+    radial = RADIAL_WEIGHTS[form] if radial_weight is None else float(radial_weight)
+    opts = replace(opts, renormalize=renorm, radial_weight=radial,
+                   quat_slots=tuple(tuple(int(i) for i in slot) for slot in LAYOUT.quat_slots))
     if (opts.subdivision == "adaptive" and opts.max_frames
             and opts.per_segment * (kf.count - 1) > opts.max_frames):
         # `solve` does not cap the starting frames of adaptive subdivision; with a budget smaller than
