@@ -44,9 +44,10 @@ UNIT_WEIGHT = 0.1
 PAPER_WEIGHTS = (2.0, 5.0)
 
 #: Default quadrature: Gauss-Legendre with GAUSS_POINTS nodes on every spline segment. The integrand is
-#: smooth inside a segment (the spline is one cubic there), so 4 nodes per segment integrate it to
-#: ~1e-7 relative on the test sets, where the paper's uniform rule needed 80-120 points per second for a
-#: gap of 1e-4 (docs/orient.md); and every segment, however short, has its own nodes.
+#: smooth inside a segment (the spline is one cubic there), so 4 nodes per segment integrate it to ~1e-6
+#: relative on the default frames of the test sets (1e-9 with 5 frames per keyframe interval), where the
+#: paper's uniform rule needed 80-120 points per second for a gap of 1e-4; 3 nodes change the default
+#: result (docs/orient.md). Every segment, however short, has its own nodes.
 GAUSS_POINTS = 4
 
 #: Uniform quadrature (`rate=` given, or `default_rate`): at least this many points per second, and at
@@ -57,7 +58,7 @@ MIN_POINTS_PER_KEY_INTERVAL = 32
 
 #: Curvature the preconditioner assumes along each variable frame's radial direction, relative to the
 #: tangential ones (`SolveOptions.radial_weight`), per form: the normalized form's f2 does not see the
-#: scale of q, only the light f1 does (0.03-0.1 reach a given gap with 20-40% fewer evaluations than 1,
+#: scale of q, only the light f1 does (0.03-0.1 need 25-40% fewer evaluations than 1 for the same result,
 #: 0.01 is worse again; docs/orient.md); the paper form's f2 falls as q shrinks (1: fewer evaluations).
 RADIAL_WEIGHTS = {"normalized": 0.1, "paper": 1.0}
 

@@ -52,8 +52,8 @@ class SolveOptions:
             the radial direction of each quaternion (qpos indices `quat_slots`, (s, 4)) of a free frame,
             relative to the other directions (1: all alike). An objective that depends on q/|q| (the
             normalized covariant acceleration) has little radial curvature (its unit term's): there
-            0.1 halves the evaluations to a given accuracy on the orientation test sets
-            (`solver.orient.default_options`, docs/orient.md).
+            0.1 saves 25-40% of the evaluations on the orientation test sets (`solver.orient`,
+            docs/orient.md).
         limits: ((term name, tolerance), ...): penalty continuation. After a round, a term whose
             `violation` on the path (sampled at LIMIT_CHECK_RATE, in the term's own units, e.g. metres of
             penetration) exceeds its tolerance has its weight multiplied by `boost` and the round is
