@@ -141,7 +141,7 @@ def _stacked_matrices(x: np.ndarray, t: np.ndarray) -> np.ndarray:
     ca = np.stack([(a * a * ih - h) * a / 6.0, (h - 3.0 * a * a * ih) / 6.0, a * ih])[:, :, None]
     cb = np.stack([(b * b * ih - h) * b / 6.0, (3.0 * b * b * ih - h) / 6.0, b * ih])[:, :, None]
     Sk, Sk1 = S[k], S[k + 1]
-    if Sk.size < 4096:  # small (orientation): whole-array products
+    if Sk.size < 8192:  # small (orientation): whole-array products
         B = ca * Sk
         B += cb * Sk1
     else:  # large (the figure at 400 Hz): no (3, n, m) temporaries - fresh large blocks cost page faults
