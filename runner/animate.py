@@ -297,6 +297,7 @@ def run_animate(args) -> int:
     objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=args.rate)
     options = solve_options(args, weights)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    _warn_penetrating_keyframes(model, keyframes, initial)
     say = (lambda *a: None) if args.quiet else print
     say(f"dynsplines: {args.keyframes} -> {keyframes.count} keyframes "
         f"({int(keyframes.is_partial.sum())} partial) over {keyframes.times[-1] - keyframes.times[0]:.2f} s, "
@@ -361,6 +362,20 @@ def _check_video_out(out, size) -> None:
     if w % 2 or h % 2:
         raise InputError(f"--size {w}x{h}: width and height must be even (H.264 video); e.g. --size "
                          f"{w + w % 2}x{h + h % 2}")
+
+
+def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
+    """Keyframes are hard constraints: a contact site a keyframe puts inside a surface stays there.
+    Say so before optimizing (the optimizer can only fix the in-betweens)."""
+    from solver.terms.penetration import CONTACT_SITES, Penetration
+
+    depth = Penetration(model, margin=0.0).depths(initial.values[initial.is_keyframe])  # (k, 4) [m]
+    for k, row in enumerate(depth):
+        if row.max() > 0.001:
+            site = CONTACT_SITES[int(np.argmax(row))]
+            print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) puts "
+                  f"{site} {1000 * row.max():.1f} mm inside a surface; keyframes are met exactly, so that "
+                  "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
 
 
 def _reference(info, model):

@@ -222,6 +222,15 @@ def solve(
         if progress:
             progress("round", {"round": len(rounds), "frames": frames.count, "variable": frames.n_variable})
         result = _optimize(objective, frames, options, remaining, should_stop, progress, n_evals)
+        if result.status is Status.FAILED and options.precondition:
+            # nlopt's generic failure (a line search that found no decrease) was seen with the
+            # preconditioner on extreme inputs (a root inside the floor); the plain variables recover
+            plain = replace(options, precondition=False)
+            retry = _optimize(objective, frames.with_x(result.x), plain, remaining, should_stop, progress,
+                              n_evals + result.n_evals)
+            result = replace(retry, n_evals=result.n_evals + retry.n_evals,
+                             trace=np.concatenate([result.trace, retry.trace]),
+                             wall_time_s=result.wall_time_s + retry.wall_time_s)
         frames = frames.with_x(result.x)
         objective.prepare(frames.times, frames.values)  # for the next round, the scores, the report
         rounds.append(Round(frames.count, frames.n_variable, result, scores, frames.times))

@@ -426,3 +426,14 @@ def test_solve_api_checks(model, problem):
     other = Keyframes([0.0, kf.times[-1]], [[1, 0, 0, 0]] * 2, np.ones((2, 4), bool))
     with pytest.raises(InputError, match=r"cannot be evaluated on frames of shape \(2, 4\).*same nq"):
         solve(obj, FrameSet.from_keyframes(other, [[0, 1, 2, 3]]))
+
+
+def test_keyframe_inside_a_surface_is_warned_about(tmp_path, capsys):
+    """Keyframes are hard constraints: one that puts a foot in the floor gets a warning naming it
+    (the run still completes: the in-betweens are optimized)."""
+    doc = small_doc(3)
+    doc["keyframes"][1]["joints"]["root"][2] = 0.5  # pelvis 0.5 m up: the legs go ~0.4 m into the floor
+    code, err = run(capsys, "animate", write(tmp_path, doc), "--no-render", "--max-evals", "5", "--rounds", "0")
+    assert code == 0
+    assert "keyframe 1 (t=0.241666 s) puts" in err and "mm inside a surface" in err
+    assert "keyframe 0" not in err and "keyframe 2" not in err

@@ -235,3 +235,27 @@ def test_radial_stretch_of_the_preconditioner():
     assert pre2.whole_rows() is None and len(pre2.radial) == 1 and len(pre2.radial[0][0]) == 2
     r2 = solve(obj2, fs2, SolveOptions(**opts, radial_weight=0.04, quat_slots=((0, 1, 2, 3),)))
     assert r2.E_final == pytest.approx(solve(obj2, fs2, SolveOptions(**opts)).E_final, rel=1e-6)
+
+
+def test_failed_preconditioned_round_is_retried_without_preconditioning(monkeypatch):
+    """A round whose preconditioned optimization fails is re-run on the plain variables."""
+    import solver.solve as solve_mod
+    from solver.optimize import minimize as real_minimize
+
+    calls = []
+
+    def flaky(fun, x0, **kw):
+        calls.append(len(calls))
+        res = real_minimize(fun, x0, **kw)
+        if len(calls) == 1:  # the first (preconditioned) run "fails" after some progress
+            from dataclasses import replace
+
+            return replace(res, status=Status.FAILED, message="nlopt failed: test")
+        return res
+
+    monkeypatch.setattr(solve_mod, "minimize", flaky)
+    kf, obj = orient_problem()
+    fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)
+    sol = solve(obj, fs, SolveOptions(subdivision="global", per_segment=1, precondition=True, ftol_rel=1e-10))
+    assert len(calls) == 2 and sol.status is Status.CONVERGED
+    assert sol.E_final < sol.E_initial and sol.n_evals == len(sol.trace)
