@@ -29,14 +29,13 @@ deterministic. Nothing here is shared with solver/.
 """
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 from scipy.interpolate import BSpline, CubicSpline
 from scipy.optimize import minimize
 
@@ -48,7 +47,6 @@ __all__ = [
     "bspline_coefficients",
     "baseline_time_to_gap",
     "normalized_path_energy",
-    "single_thread_blas",
     "METHODS",
 ]
 
@@ -160,38 +158,6 @@ def _dense_path(q_of_t: Callable, breaks: np.ndarray, times: np.ndarray, min_per
     return t, q / nq[:, None], float(np.max(np.abs(nq - 1.0)))
 
 
-@contextlib.contextmanager
-def single_thread_blas():
-    """Best effort: run OpenBLAS (numpy's and scipy's copies) single-threaded inside the block.
-
-    SLSQP's dense subproblems at these sizes (n ~ 100-1000) are slower with OpenBLAS threads on a
-    small, loaded machine (measured: B-spline r=6 on the moderate set 1.42 s threaded vs 0.16 s single
-    threaded), so both baselines run single-threaded, like the project's nlopt path. Uses the libraries'
-    own set/get_num_threads entry points via ctypes; a no-op where they are not found.
-    """
-    handles = []
-    try:
-        with open("/proc/self/maps") as fh:
-            libs = sorted({ln.split()[-1] for ln in fh if "openblas" in ln.lower() and "/" in ln})
-        for path in libs:
-            lib = ctypes.CDLL(path)
-            for suffix in ("64_", ""):
-                setter = getattr(lib, f"scipy_openblas_set_num_threads{suffix}", None)
-                getter = getattr(lib, f"scipy_openblas_get_num_threads{suffix}", None)
-                if setter is not None and getter is not None:
-                    old = int(getter())
-                    setter(ctypes.c_int(1))
-                    handles.append((setter, old))
-                    break
-    except Exception:  # pragma: no cover - platform without /proc or these symbols
-        pass
-    try:
-        yield
-    finally:
-        for setter, old in handles:
-            setter(ctypes.c_int(old))
-
-
 class _TimeUp(Exception):
     pass
 
@@ -213,7 +179,7 @@ def _run_slsqp(problem, max_time_s: float, ftol: float, maxiter: int):
 
     cons = [{"type": "eq", "fun": problem.constraint, "jac": problem.constraint_jac}]
     try:
-        with single_thread_blas():
+        with threadpool_limits(1):  # small dense products: threads only add contention
             res = minimize(
                 fun, problem.x0, jac=True, method="SLSQP", constraints=cons, callback=cb,
                 options={"ftol": ftol, "maxiter": maxiter},

@@ -33,12 +33,11 @@ Units: times in seconds, quaternions (w, x, y, z) dimensionless, E in 1/s^3 (rad
 """
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import functools
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 from scipy.integrate import solve_bvp
 from scipy.interpolate import CubicSpline, make_interp_spline
 from scipy.sparse import csr_matrix, diags
@@ -407,37 +406,6 @@ def _solve_bvp(times, q, guess_nodes, guess_y, tol, max_nodes):
     )
 
 
-@contextlib.contextmanager
-def _single_thread_blas():
-    """Best effort: run OpenBLAS (numpy's and scipy's) single-threaded inside the block.
-
-    solve_bvp does thousands of small dense (102 x 102) products; on a loaded 2-core machine OpenBLAS
-    threading made them ~5x slower (measured 3.4 s vs 0.6 s for one reference). Uses the libraries'
-    own set/get_num_threads entry points via ctypes; a no-op where they are not found.
-    """
-    handles = []
-    try:
-        with open("/proc/self/maps") as fh:
-            libs = sorted({ln.split()[-1] for ln in fh if "openblas" in ln.lower() and "/" in ln})
-        for path in libs:
-            lib = ctypes.CDLL(path)
-            for suffix in ("64_", ""):
-                setter = getattr(lib, f"scipy_openblas_set_num_threads{suffix}", None)
-                getter = getattr(lib, f"scipy_openblas_get_num_threads{suffix}", None)
-                if setter is not None and getter is not None:
-                    old = int(getter())
-                    setter(ctypes.c_int(1))
-                    handles.append((setter, old))
-                    break
-    except Exception:  # pragma: no cover - platform without /proc or these symbols
-        pass
-    try:
-        yield
-    finally:
-        for setter, old in handles:
-            setter(ctypes.c_int(old))
-
-
 def _key(times, quats):
     return (np.asarray(times, dtype=float).tobytes(), np.asarray(quats, dtype=float).tobytes())
 
@@ -450,7 +418,7 @@ def _reference_cached(tb: bytes, qb: bytes, tol: float) -> Reference:
     if len(times) != len(q) or len(times) < 2 or np.any(np.diff(times) <= 0):
         raise ValueError("need K >= 2 strictly increasing times and (K, 4) quaternions")
     nodes = np.linspace(0.0, 1.0, 41)
-    with _single_thread_blas():
+    with threadpool_limits(1):  # small dense products: threads only add contention
         sol = _solve_bvp(times, q, nodes, _initial_guess(times, q, nodes), tol, 20000)
     if sol.status != 0:
         # fallback start: the coarse discrete optimum (robust for very large rotations)
@@ -459,7 +427,7 @@ def _reference_cached(tb: bytes, qb: bytes, tol: float) -> Reference:
         y = np.zeros((_NS * (len(times) - 1), len(nodes)))
         for j, tt in enumerate(tg):
             y[_NS * j : _NS * j + 16] = dref.states(tt).T
-        with _single_thread_blas():
+        with threadpool_limits(1):  # small dense products: threads only add contention
             sol = _solve_bvp(times, q, nodes, y, tol, 20000)
     if sol.status != 0:
         raise RuntimeError(f"solve_bvp did not converge: {sol.message}")
