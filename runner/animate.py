@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from runner.argtypes import nonnegative, positive
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.layout import StateLayout
@@ -40,32 +41,6 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def _positive(kind):
-    def parse(text):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-        if not np.isfinite(v) or v <= 0:
-            raise argparse.ArgumentTypeError(f"{text!r} must be > 0")
-        return v
-
-    return parse
-
-
-def _nonneg(kind):
-    def parse(text):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-        if not np.isfinite(v) or v < 0:
-            raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
-        return v
-
-    return parse
-
-
 def _weight(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     if not sep:
@@ -84,9 +59,9 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     out.add_argument("--save-path", type=Path, default=d.get("save_path"),
                      help="optimized path (.npz; see README) [%(default)s]")
     out.add_argument("--no-render", action="store_true", help="skip the video")
-    out.add_argument("--fps", type=_positive(float), default=30.0, help="video frames per second [%(default)s]")
+    out.add_argument("--fps", type=positive(float), default=30.0, help="video frames per second [%(default)s]")
     out.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="video size [960x540]")
-    out.add_argument("--speed", type=_positive(float), default=0.5, help="playback speed [%(default)s x real time]")
+    out.add_argument("--speed", type=positive(float), default=0.5, help="playback speed [%(default)s x real time]")
     out.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write plots (PNG) to DIR")
     opt = p.add_argument_group("optimization")
     opt.add_argument("--terms", default=None,
@@ -94,17 +69,17 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
                           "[the keyframe file's, else penetration,unit,bending,smooth]")
     opt.add_argument("--weight", type=_weight, action="append", default=[], metavar="NAME=VALUE",
                      help="weight of a term (repeatable), e.g. --weight torque=0.1")
-    opt.add_argument("--max-time", type=_nonneg(float), default=0.0, metavar="S",
+    opt.add_argument("--max-time", type=nonnegative(float), default=0.0, metavar="S",
                      help="stop optimizing after S seconds, keeping the best path so far [no limit]")
     opt.add_argument("--subdivision", choices=SUBDIVISIONS, default="adaptive",
                      help="where to add variable frames [%(default)s]")
-    opt.add_argument("--per-segment", type=_nonneg(int), default=1,
+    opt.add_argument("--per-segment", type=nonnegative(int), default=1,
                      help="variable frames per keyframe interval to start with [%(default)s]")
-    opt.add_argument("--rounds", type=_nonneg(int), default=2, help="adaptive subdivision rounds [%(default)s]")
+    opt.add_argument("--rounds", type=nonnegative(int), default=2, help="adaptive subdivision rounds [%(default)s]")
     opt.add_argument("--algorithm", choices=list(ALGORITHMS), default="lbfgs", help="nlopt algorithm [%(default)s]")
-    opt.add_argument("--ftol", type=_nonneg(float), default=1e-6, help="relative objective tolerance [%(default)s]")
-    opt.add_argument("--max-evals", type=_nonneg(int), default=0, help="evaluations per round [no limit]")
-    opt.add_argument("--rate", type=_positive(float), default=400.0,
+    opt.add_argument("--ftol", type=nonnegative(float), default=1e-6, help="relative objective tolerance [%(default)s]")
+    opt.add_argument("--max-evals", type=nonnegative(int), default=0, help="evaluations per round [no limit]")
+    opt.add_argument("--rate", type=positive(float), default=400.0,
                      help="quadrature points per second [%(default)s]")
     opt.add_argument("--score", choices=("decrease", "gradient"), default="decrease",
                      help="how adaptive subdivision ranks segments: the decrease of E a midpoint frame "

@@ -19,28 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from runner.argtypes import nonnegative, positive
 from solver.errors import InputError
 from solver.solve import SUBDIVISIONS
-
-
-def _count(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
-    return v
-
-
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not np.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be > 0")
-    return v
 
 
 def register(sub) -> None:
@@ -59,16 +40,16 @@ def register(sub) -> None:
     p.add_argument("--subdivision", choices=SUBDIVISIONS, default="adaptive",
                    help="where variable frames go: none, global (N per keyframe interval), adaptive "
                    "(N per interval, then where the Euler-Lagrange score is largest) [adaptive]")
-    p.add_argument("--per-segment", type=_count, default=1, metavar="N",
+    p.add_argument("--per-segment", type=nonnegative(int), default=1, metavar="N",
                    help="variable frames per keyframe interval (global), or to start with (adaptive) [1]")
-    p.add_argument("--rounds", type=_count, default=None, metavar="N",
+    p.add_argument("--rounds", type=nonnegative(int), default=None, metavar="N",
                    help="adaptive subdivision rounds [2]")
-    p.add_argument("--max-frames", type=_count, default=0, metavar="N",
+    p.add_argument("--max-frames", type=nonnegative(int), default=0, metavar="N",
                    help="at most N variable frames in total (0 = no limit) [0]")
     p.add_argument("--form", choices=FORMS, default="normalized",
                    help="objective: normalized (covariant acceleration of q/|q|) or paper (eq. 9 on q, "
                    "renormalized 2:5) [normalized]")
-    p.add_argument("--rate", type=_positive, default=None, metavar="HZ",
+    p.add_argument("--rate", type=positive(), default=None, metavar="HZ",
                    help="uniform quadrature (the paper's midpoint rule) at HZ points per second, instead of "
                    "the default Gauss-Legendre rule with 4 nodes on every spline segment")
     p.add_argument("--plot", metavar="FILE.png", default=None,

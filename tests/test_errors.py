@@ -290,7 +290,7 @@ def test_read_only_output_folder(tmp_path, capsys):
     (["--weight", "torque"], "argument --weight: --weight 'torque': expected NAME=VALUE, e.g. torque=0.1"),
     (["--weight", "torque=abc"], "'abc' is not a number"),
     (["--algorithm", "bfgs"], "argument --algorithm: invalid choice: 'bfgs' (choose from 'lbfgs'"),
-    (["--rounds", "two"], "argument --rounds: 'two' is not a number"),
+    (["--rounds", "two"], "argument --rounds: 'two' is not a whole number"),
 ])
 def test_bad_option_values(tmp_path, capsys, argv, fragment):
     msg = expect_input_error(capsys, ["animate", tmp_path / "k.json", *argv], fragment)

@@ -1,0 +1,30 @@
+"""argparse value types shared by the subcommands: numbers with a bound, with one-line messages."""
+from __future__ import annotations
+
+import argparse
+import math
+
+
+def _bounded(kind, ok, requirement: str):
+    noun = "a whole number" if kind is int else "a number"
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {noun}") from None
+        if not (math.isfinite(v) and ok(v)):
+            raise argparse.ArgumentTypeError(f"{text!r} must be {requirement}")
+        return v
+
+    return parse
+
+
+def positive(kind=float):
+    """argparse type: a finite number > 0 of type `kind` (float or int)."""
+    return _bounded(kind, lambda v: v > 0, "> 0")
+
+
+def nonnegative(kind=float):
+    """argparse type: a finite number >= 0 of type `kind` (float or int)."""
+    return _bounded(kind, lambda v: v >= 0, ">= 0")
