@@ -30,7 +30,6 @@ The synthetic T-pose first frame of the cgspeed BVH conversion is dropped (see
 """
 from __future__ import annotations
 
-import argparse
 import math
 import shlex
 import sys
@@ -767,15 +766,6 @@ def worst_contact_distance(reference: Reference, model, height: float = CONTACT_
     if not contact.any():
         return 0.0
     return float(np.max(np.abs(lowest[contact])))
-
-
-def min_site_clearance(qpos: np.ndarray, model) -> np.ndarray:
-    """(n,) the lowest clearance [m] of any contact site over the surface under it, per frame.
-
-    Negative where a heel or toe is below the floor or inside the step box (seen from above).
-    """
-    kin = _SiteKinematics(model)
-    return kin.clearance(kin.positions(qpos)).min(axis=1)
 
 
 def _correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarray:

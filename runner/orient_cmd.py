@@ -13,7 +13,6 @@ and the summary numbers (form, energy [1/s^3], max_norm_deviation).
 """
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import BSpline, make_interp_spline
 from scipy.linalg.lapack import dgtsv
 
 from solver.errors import InputError
@@ -36,22 +35,6 @@ def _check_knots(knots: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(knots)) or np.any(np.diff(knots) <= 0):
         raise InputError(f"spline knots must be finite and strictly increasing, got {knots.tolist()}")
     return knots
-
-
-def cardinal_spline(knots: np.ndarray) -> BSpline:
-    """The natural cubic splines phi_j with phi_j(t_i) = delta_ij, as one vector-valued BSpline.
-
-    Args:
-        knots: (m,) frame times [s], strictly increasing, m >= 2.
-    Returns:
-        BSpline whose value at t is the (m,) row of W at t.
-    Raises:
-        InputError: knots not strictly increasing or fewer than 2.
-    """
-    knots = _check_knots(knots)
-    if len(knots) == 2:  # a natural cubic through two points is the straight line
-        return make_interp_spline(knots, np.eye(2), k=1)
-    return make_interp_spline(knots, np.eye(len(knots)), k=3, bc_type="natural")
 
 
 def moment_matrix(knots: np.ndarray) -> np.ndarray:
