@@ -149,9 +149,10 @@ def bench_set(ks, methods, budget: float, repeat: int, ref, out=print) -> dict:
 
 #: objective variants of the trade-off table: (label, orient keyword arguments)
 TRADEOFF_VARIANTS = (
-    ("(a) paper, renormalized 2:5", dict(form="paper")),
-    ("(a) paper, renormalized 1:1", dict(form="paper", weights=(1.0, 1.0))),
-    ("(a) paper, renormalized 10:1", dict(form="paper", weights=(10.0, 1.0))),
+    ("(a) paper 2:5, renormalized on the start path (default)", dict(form="paper")),
+    ("(a) paper 2:5, renormalized on the keyframe spline", dict(form="paper", renormalize="keyframes")),
+    ("(a) paper 1:1, renormalized on the keyframe spline", dict(form="paper", weights=(1.0, 1.0),
+                                                               renormalize="keyframes")),
     ("(a) paper, plain lambda=1000", dict(form="paper", weights=(1000.0, 1.0), renormalize=False)),
     ("(b) normalized (default)", dict()),
 )

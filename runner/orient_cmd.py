@@ -42,7 +42,7 @@ def register(sub) -> None:
     p.add_argument("--per-segment", type=nonnegative(int), default=1, metavar="N",
                    help="variable frames per keyframe interval (global), or to start with (adaptive) [1]")
     p.add_argument("--rounds", type=nonnegative(int), default=None, metavar="N",
-                   help="adaptive subdivision rounds [2]")
+                   help="adaptive subdivision rounds [2; 3 with --form paper]")
     p.add_argument("--max-frames", type=nonnegative(int), default=0, metavar="N",
                    help="at most N variable frames in total (0 = no limit) [0]")
     p.add_argument("--form", choices=FORMS, default="normalized",
@@ -147,7 +147,7 @@ def run(args) -> int:
     changes = dict(subdivision=args.subdivision, per_segment=args.per_segment, max_frames=args.max_frames)
     if args.rounds is not None:
         changes["rounds"] = args.rounds
-    result = orient(times, quats, form=args.form, options=default_options(**changes), rate=args.rate,
+    result = orient(times, quats, form=args.form, options=default_options(args.form, **changes), rate=args.rate,
                     source=str(args.keyframes))
     write_result(out, result)
     if not args.quiet:

@@ -5,8 +5,8 @@ The path is the natural cubic spline through the keyframes and variable frames i
 acceleration. Two objective forms:
 
 - ``"paper"`` (eq. 9): f = lambda f1 + f2 with f1 = (1 - q.q)^2 and f2 = |q'' - q (q''.q)/(q.q)|^2 on
-  the spline's own q, renormalized by the plain spline's integrals (eq. 7) with the paper's ratio 2:5.
-  A polynomial spline cannot stay on the unit sphere (between frames theta apart on S^3 it dips by
+  the spline's own q, renormalized (eq. 7) with the paper's ratio 2:5 by the integrals on the path the
+  optimizer starts from (`RENORMALIZE_ON`). A polynomial spline cannot stay on the unit sphere (between frames theta apart on S^3 it dips by
   about theta^2/8), and shrinking q lowers this f2, so with large rotations the optimum trades the
   orientation's smoothness for |q| far from 1.
 - ``"normalized"`` (default, beyond the paper): f2 is the covariant acceleration of u = q/|q|, the
@@ -62,18 +62,40 @@ MIN_POINTS_PER_KEY_INTERVAL = 32
 #: 0.01 is worse again; docs/orient.md); the paper form's f2 falls as q shrinks (1: fewer evaluations).
 RADIAL_WEIGHTS = {"normalized": 0.1, "paper": 1.0}
 
+#: The path eq. 7 renormalizes on ("the initial state before any optimization has taken place"), unless
+#: `orient(renormalize=...)` says otherwise: "start", the spline through the keyframes and the first
+#: variable frames at their starting values on the unit sphere, which is where the optimization starts.
+#: The other reading, "keyframes" (the plain spline through the keyframes alone; the two coincide when
+#: the variable frames start on that spline, as the paper's probably did), divides f1 by an integral
+#: 50-130x larger on the test sets, because the plain spline dips by ~theta^2/8 between keyframes theta
+#: apart on S^3 and f1 grows as the dip squared: with 2:5 the unit term is then so weak that |q| drifts by
+#: 0.41% on the moderate set and 12-27% on large rotations ("start": 0.035% and 0.1-0.6%). The paper
+#: reports |q| within 0.2% with 2:5 (figure 9); docs/orient.md has both, measured.
+RENORMALIZE_ON = "start"
+
+#: Adaptive rounds by default, per form. The paper form's unit term, renormalized on the start path, is
+#: stiff (|q| within 0.04-0.7%), and a stiff unit term needs more frames for the same gap: after two
+#: rounds the moderate set's gap is 8.3e-3, after three 6.3e-5 (the large sets: 1.1-3.0e-4).
+DEFAULT_ROUNDS = {"normalized": 2, "paper": 3}
+
 LAYOUT = StateLayout.single_quaternion()
 
 
-def default_options(**changes) -> SolveOptions:
+def default_options(form: str = "normalized", **changes) -> SolveOptions:
     """The solve options `orient` uses unless given others: one variable frame per keyframe interval, then
-    two rounds of adaptive subdivision ranked by predicted decrease (`predicted_decreases`),
-    preconditioned L-BFGS, ftol_rel 1e-6 (gap < 1e-3 on the large-rotation test sets, docs/orient.md).
-    Keyword arguments override fields (`SolveOptions`). `orient` sets `renormalize` and `radial_weight`
-    from its own arguments (they belong to the objective form)."""
+    DEFAULT_ROUNDS[form] rounds of adaptive subdivision ranked by predicted decrease
+    (`predicted_decreases`), preconditioned L-BFGS, ftol_rel 1e-6 (gap < 1e-3 on the large-rotation test
+    sets, docs/orient.md). Keyword arguments override fields (`SolveOptions`). `orient` sets
+    `renormalize` and `radial_weight` from its own arguments (they belong to the objective form).
+
+    Raises:
+        InputError: unknown form, or a field `SolveOptions` rejects.
+    """
+    if form not in FORMS:
+        raise InputError(f"unknown objective form {form!r}; choose one of: {', '.join(FORMS)}")
     base = dict(
-        subdivision="adaptive", per_segment=1, rounds=2, per_round=0, max_frames=0, score="decrease",
-        precondition=True, ftol_rel=1e-6, renormalize=False,
+        subdivision="adaptive", per_segment=1, rounds=DEFAULT_ROUNDS[form], per_round=0, max_frames=0,
+        score="decrease", precondition=True, ftol_rel=1e-6, renormalize=False,
     )
     base.update(changes)
     return SolveOptions(**base)
@@ -88,7 +110,8 @@ class OrientResult:
             `frames.times`, `frames.values` (`FrameSet.path`).
         keyframe_times: (k,) [s]. keyframes: (k, 4) keyframe quaternions as interpolated: normalized and
             hemisphere-aligned (each is q or -q of the input, whichever is nearer the previous).
-        form: "normalized" or "paper". weights: (lambda_1, lambda_2). renormalize: eq. 7 used.
+        form: "normalized" or "paper". weights: (lambda_1, lambda_2).
+        renormalize: False, or the path eq. 7 renormalized on ("start" or "keyframes", `RENORMALIZE_ON`).
         rate: uniform quadrature points per second [1/s], or None (Gauss quadrature).
         points: Gauss-Legendre nodes per spline segment, or None (uniform quadrature).
         solution: the `Solution` of `solve` (rounds, status, objective trace).
@@ -105,7 +128,7 @@ class OrientResult:
     keyframes: np.ndarray
     form: str
     weights: tuple
-    renormalize: bool
+    renormalize: bool | str
     rate: float | None
     solution: Solution = field(repr=False)
     points: int | None = None
@@ -215,7 +238,7 @@ def orient(
     *,
     form: str = "normalized",
     weights=None,
-    renormalize: bool | None = None,
+    renormalize: bool | str | None = None,
     radial_weight: float | None = None,
     options: SolveOptions | None = None,
     rate: float | None = None,
@@ -231,11 +254,13 @@ def orient(
         quats: (k, 4) keyframe quaternions (w x y z); normalized, then made hemisphere-consistent.
         form: "normalized" (default: covariant acceleration of q/|q|) or "paper" (eq. 9 on q).
         weights: (lambda_1 unit, lambda_2 covariant); default see `build_objective`.
-        renormalize: divide each term by its plain-spline integral (eq. 7); default True for "paper"
-            (its 2:5 ratio is on renormalized terms), False for "normalized".
+        renormalize: divide each term by its integral on the initial path (eq. 7): False, True (on
+            RENORMALIZE_ON), "start" (the path the optimizer starts from) or "keyframes" (the plain
+            spline through the keyframes). Default: RENORMALIZE_ON for "paper" (its 2:5 ratio is on
+            renormalized terms), False for "normalized".
         radial_weight: preconditioner curvature along the frames' radial directions
             (`SolveOptions.radial_weight`); default RADIAL_WEIGHTS[form].
-        options: SolveOptions; default `default_options()` (adaptive subdivision). Its `renormalize`
+        options: SolveOptions; default `default_options(form)` (adaptive subdivision). Its `renormalize`
             and `radial_weight` fields are replaced by the arguments above. With adaptive subdivision and a `max_frames`
             smaller than the starting frames (`per_segment` per interval), no starting frames are
             placed and the adaptive rounds place all of them.
@@ -250,10 +275,14 @@ def orient(
     """
     kf = check_keyframes(times, quats, source)
     obj, w, renorm_default = build_objective(kf, form, weights, rate, points)
-    renorm = renorm_default if renormalize is None else bool(renormalize)
-    opts = default_options() if options is None else options
+    renorm = renorm_default if renormalize is None else renormalize
+    if renorm is True:
+        renorm = RENORMALIZE_ON
+    if renorm not in (False, "start", "keyframes"):
+        raise InputError(f"renormalize must be True, False, 'start' or 'keyframes', got {renormalize!r}")
+    opts = default_options(form) if options is None else options
     radial = RADIAL_WEIGHTS[form] if radial_weight is None else float(radial_weight)
-    opts = replace(opts, renormalize=renorm, radial_weight=radial,
+    opts = replace(opts, renormalize=bool(renorm), renormalize_on=renorm or "keyframes", radial_weight=radial,
                    quat_slots=tuple(tuple(int(i) for i in slot) for slot in LAYOUT.quat_slots))
     if (opts.subdivision == "adaptive" and opts.max_frames
             and opts.per_segment * (kf.count - 1) > opts.max_frames):
