@@ -156,8 +156,7 @@ def minimize(
                 raise Stop(Status.MAX_TIME, f"time limit of {max_time_s:g} s reached")
             if max_evals and best["n"] >= max_evals:
                 raise Stop(Status.MAX_EVALS, f"evaluation limit of {max_evals} reached")
-            with np.errstate(all="ignore"):  # a trial point may overflow: reported just below, by status
-                f, g = fun(x, grad.size > 0)
+            f, g = fun(x, grad.size > 0)  # under errstate(all="ignore"), set around opt.optimize
             if not math.isfinite(f) or (grad.size and not np.isfinite(g).all()):
                 raise Stop(Status.NONFINITE, "the objective or its gradient is not finite")
         except Stop as s:
@@ -188,7 +187,10 @@ def minimize(
         opt.set_maxtime(float(max_time_s))
     status, message = Status.CONVERGED, "converged"
     try:
-        opt.optimize(x0)
+        # a trial point may overflow: reported by status (NONFINITE), not as numpy warnings. Set once
+        # here, not per evaluation (the context manager costs ~3 us, a few % of a small evaluation)
+        with np.errstate(all="ignore"):
+            opt.optimize(x0)
         code = opt.last_optimize_result()
         status = _NLOPT_STATUS.get(code, Status.FAILED)
         message = {Status.CONVERGED: "converged (tolerance reached)", Status.MAX_EVALS:

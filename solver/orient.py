@@ -5,10 +5,10 @@ The path is the natural cubic spline through the keyframes and variable frames i
 acceleration. Two objective forms:
 
 - ``"paper"`` (eq. 9): f = lambda f1 + f2 with f1 = (1 - q.q)^2 and f2 = |q'' - q (q''.q)/(q.q)|^2 on
-  the spline's own q, renormalized (eq. 7) with the paper's ratio 2:5 by the integrals on the path the
-  optimizer starts from (`RENORMALIZE_ON`). A polynomial spline cannot stay on the unit sphere (between frames theta apart on S^3 it dips by
-  about theta^2/8), and shrinking q lowers this f2, so with large rotations the optimum trades the
-  orientation's smoothness for |q| far from 1.
+  the spline's own q, renormalized (eq. 7) with the paper's ratio 2:5 by the integrals on the paper's
+  starting path (`RENORMALIZE_ON`). A polynomial spline cannot stay on the unit sphere (between frames
+  theta apart on S^3 it dips by about theta^2/8), and shrinking q lowers this f2, so the optimum trades
+  the orientation's smoothness for |q| near 1, by an amount the weights set.
 - ``"normalized"`` (default, beyond the paper): f2 is the covariant acceleration of u = q/|q|, the
   orientation actually shown (MuJoCo normalizes too; `NormalizedCovariantAcceleration`), and a light
   f1 only holds the scale of q near 1. Its exact-unit limit is the natural Riemannian cubic spline on
@@ -30,6 +30,7 @@ from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.solve import Solution, SolveOptions, solve
 from solver.spline import gauss_nodes, gauss_times, interpolate_segments
+from solver.subdivide import global_times
 from solver.terms import CovariantAcceleration, NormalizedCovariantAcceleration, UnitQuaternion
 
 FORMS = ("normalized", "paper")
@@ -63,19 +64,22 @@ MIN_POINTS_PER_KEY_INTERVAL = 32
 RADIAL_WEIGHTS = {"normalized": 0.1, "paper": 1.0}
 
 #: The path eq. 7 renormalizes on ("the initial state before any optimization has taken place"), unless
-#: `orient(renormalize=...)` says otherwise: "start", the spline through the keyframes and the first
-#: variable frames at their starting values on the unit sphere, which is where the optimization starts.
-#: The other reading, "keyframes" (the plain spline through the keyframes alone; the two coincide when
-#: the variable frames start on that spline, as the paper's probably did), divides f1 by an integral
-#: 50-130x larger on the test sets, because the plain spline dips by ~theta^2/8 between keyframes theta
-#: apart on S^3 and f1 grows as the dip squared: with 2:5 the unit term is then so weak that |q| drifts by
-#: 0.41% on the moderate set and 12-27% on large rotations ("start": 0.035% and 0.1-0.6%). The paper
+#: `orient(renormalize=...)` says otherwise: "start", the paper's starting path (sec. 3: "Initially, we
+#: had one variable point between any two key frames"), with that frame at each keyframe interval's
+#: midpoint and, as `orient` starts its frames, on the unit sphere. It is the same path whatever frames
+#: the solve then uses, so the objective is one function of the keyframes and adding frames converges
+#: to its optimum. The other reading, "keyframes" (the plain spline through the keyframes alone; the two
+#: coincide if the variable frames start on that spline, as the paper's may have), divides f1 by an
+#: integral 50-130x larger on the test sets: the plain spline dips by ~theta^2/8 between keyframes theta
+#: apart on S^3 and f1 grows as the dip squared. With 2:5 the unit term is then so weak that |q| drifts
+#: by 0.41% on the moderate set and 12-27% on large rotations ("start": 0.02% and 0.1-0.6%). The paper
 #: reports |q| within 0.2% with 2:5 (figure 9); docs/orient.md has both, measured.
 RENORMALIZE_ON = "start"
 
-#: Adaptive rounds by default, per form. The paper form's unit term, renormalized on the start path, is
-#: stiff (|q| within 0.04-0.7%), and a stiff unit term needs more frames for the same gap: after two
-#: rounds the moderate set's gap is 8.3e-3, after three 6.3e-5 (the large sets: 1.1-3.0e-4).
+#: Adaptive rounds by default, per form. The paper form's unit term, renormalized on the paper's start
+#: path, is stiff (|q| within 0.02-0.7% on the test sets), and a stiff unit term needs more frames for
+#: the same gap: after two rounds the moderate set's gap is 8.3e-3, after three 6.3e-5 (the large sets:
+#: 1.1-3.0e-4; docs/orient.md).
 DEFAULT_ROUNDS = {"normalized": 2, "paper": 3}
 
 LAYOUT = StateLayout.single_quaternion()
@@ -282,7 +286,7 @@ def orient(
         raise InputError(f"renormalize must be True, False, 'start' or 'keyframes', got {renormalize!r}")
     opts = default_options(form) if options is None else options
     radial = RADIAL_WEIGHTS[form] if radial_weight is None else float(radial_weight)
-    opts = replace(opts, renormalize=bool(renorm), renormalize_on=renorm or "keyframes", radial_weight=radial,
+    opts = replace(opts, renormalize=False, radial_weight=radial,
                    quat_slots=tuple(tuple(int(i) for i in slot) for slot in LAYOUT.quat_slots))
     if (opts.subdivision == "adaptive" and opts.max_frames
             and opts.per_segment * (kf.count - 1) > opts.max_frames):
@@ -290,6 +294,9 @@ def orient(
         # they would be, let the Euler-Lagrange score place every frame instead
         opts = replace(opts, per_segment=0, rounds=max(opts.rounds, 1))
     initial = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)
+    if renorm:  # eq. 7, once: the scales stay fixed through the solve (`Objective.renormalize`)
+        base = initial if renorm == "keyframes" else paper_start(initial)
+        obj.renormalize(base.times, base.values)
     sol = solve(obj, initial, opts, should_stop=should_stop, progress=progress, project=_unit_rows)
     fr = sol.frames
     return OrientResult(
@@ -308,6 +315,23 @@ def orient(
         keyframe_error=float(np.abs(fr.path(initial.times) - initial.values).max()),
         wall_time_s=sol.wall_time_s,
     )
+
+
+def paper_start(initial: FrameSet) -> FrameSet:
+    """The paper's starting path (sec. 3): the keyframes and one variable frame at the midpoint of every
+    keyframe interval, on the unit sphere (`_unit_rows`). eq. 7's "initial state" for `renormalize="start"`.
+
+    Args:
+        initial: the keyframes' FrameSet (`FrameSet.from_keyframes`), nq = 4.
+    Returns:
+        FrameSet with 2k - 1 frames.
+    """
+    new = global_times(initial, 1)
+    fr = initial.with_variable_frames(new)
+    var = ~fr.is_keyframe
+    vals = fr.values.copy()
+    vals[var] = _unit_rows(vals[var])
+    return replace(fr, values=vals)
 
 
 def _unit_rows(values: np.ndarray) -> np.ndarray:

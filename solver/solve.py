@@ -25,7 +25,6 @@ from solver.subdivide import adaptive_times, global_times, predicted_decreases, 
 SUBDIVISIONS = ("none", "global", "adaptive")
 LIMIT_CHECK_RATE = 4000.0  # [1/s] samples per second at which `limits` are checked
 SCORES = ("gradient", "decrease")
-RENORMALIZE_ON = ("keyframes", "start")
 
 
 @dataclass(frozen=True)
@@ -39,15 +38,7 @@ class SolveOptions:
         rounds: adaptive rounds (each adds frames, then re-optimizes).
         per_round: at most this many frames per adaptive round (0 = one per segment).
         max_frames: cap on variable frames in total (0 = none).
-        renormalize: divide each term by its integral on the initial path (eq. 7), fixed for the
-            rest of the solve (the objective stays one function through subdivision).
-        renormalize_on: which path is "initial" for eq. 7 ("the initial state before any
-            optimization"): "keyframes", the plain spline through the keyframes alone (the figure:
-            its first variable frames lie on that spline, so the two coincide), or "start", the
-            spline through the keyframes and the first round's variable frames at the values the
-            optimizer starts from (after `solve`'s `project`). They differ when `project` moves the
-            starting frames: the orientation problem puts them on the unit sphere, which shrinks the
-            plain spline's (1 - q.q)^2 integral 50-130x (docs/orient.md).
+        renormalize: divide each term by its value on the plain spline (eq. 7).
         algorithm, ftol_rel, max_evals (per round), max_time_s (whole solve): optimizer settings.
         score: what ranks segments for adaptive subdivision: "gradient" (|dE/dP| of a midpoint frame,
             `weak_form_scores`) or "decrease" (the decrease of E that frame predicts,
@@ -77,7 +68,6 @@ class SolveOptions:
     per_round: int = 0
     max_frames: int = 0
     renormalize: bool = True
-    renormalize_on: str = "keyframes"
     algorithm: str = "lbfgs"
     ftol_rel: float = 1e-7
     max_evals: int = 0
@@ -93,9 +83,6 @@ class SolveOptions:
     def __post_init__(self):
         if self.subdivision not in SUBDIVISIONS:
             raise InputError(f"unknown subdivision {self.subdivision!r}; choose one of: {', '.join(SUBDIVISIONS)}")
-        if self.renormalize_on not in RENORMALIZE_ON:
-            raise InputError(f"unknown renormalize_on {self.renormalize_on!r}; choose one of: "
-                             f"{', '.join(RENORMALIZE_ON)}")
         if self.score not in SCORES:
             raise InputError(f"unknown subdivision score {self.score!r}; choose one of: {', '.join(SCORES)}")
         for name in ("per_segment", "rounds", "per_round", "max_frames", "max_evals", "max_boosts"):
@@ -195,8 +182,14 @@ def solve(
     ev_check = _check_inputs(objective, initial, options)
     t_start = time.perf_counter()
     objective.prepare(initial.times, initial.values)  # terms' per-round state from the plain spline
-    if options.renormalize and options.renormalize_on == "keyframes":
-        objective.renormalize(initial.times, initial.values)
+    if options.renormalize:
+        scales = objective.renormalize(initial.times, initial.values)
+    else:
+        scales = dict(zip(objective.names, objective.scales.tolist()))
+    if options.renormalize or objective.keeps_state:
+        ev0 = objective.evaluate(initial.times, initial.values, grad=False)
+    else:  # nothing changed the objective since the input check evaluated it on the same frames
+        ev0 = ev_check
     frames = initial
     if options.subdivision in ("global", "adaptive") and options.per_segment > 0:
         new = global_times(frames, options.per_segment)
@@ -208,13 +201,6 @@ def solve(
             vals = frames.values.copy()
             vals[var] = project(vals[var])
             frames = replace(frames, values=vals)
-    if options.renormalize and options.renormalize_on == "start":
-        objective.renormalize(frames.times, frames.values)
-    scales = dict(zip(objective.names, objective.scales.tolist()))
-    if options.renormalize or objective.keeps_state:
-        ev0 = objective.evaluate(initial.times, initial.values, grad=False)
-    else:  # nothing changed the objective since the input check evaluated it on the same frames
-        ev0 = ev_check
     n_rounds = 1 + (options.rounds if options.subdivision == "adaptive" else 0)
     rounds: list[Round] = []
     traces: list[np.ndarray] = []

@@ -25,7 +25,6 @@ from sphere_reference import (
 from solver.errors import InputError
 from solver.euler_lagrange import deviation_by_region, el_lhs, residual, spline_residual
 from solver.orient import check_keyframes, default_options, orient
-from solver.solve import SolveOptions
 from solver.terms import NormalizedCovariantAcceleration
 
 LARGE = {s.name: s for s in large_rotation_sets()}
@@ -252,8 +251,6 @@ def test_bad_keyframes_raise_clear_errors():
         orient([0, 1, 2], q, weights=(1, 2, 3))
     with pytest.raises(InputError, match="renormalize must be True, False, 'start' or 'keyframes', got 'plain'"):
         orient([0, 1, 2], q, form="paper", renormalize="plain")
-    with pytest.raises(InputError, match="unknown renormalize_on 'first'; choose one of: keyframes, start"):
-        SolveOptions(renormalize_on="first")
 
 
 def test_non_unit_and_opposite_sign_keyframes_are_normalized_and_aligned():
@@ -356,9 +353,10 @@ def test_quadrature_choice_gauss_by_default_uniform_on_request(E_star):
         orient(s.times, s.quats, rate=100.0, points=3)
 
 
-def test_renormalize_on_start_uses_the_path_the_optimizer_starts_from():
-    """eq. 7's divisors: "start" is the spline through the keyframes and the projected first variable
-    frames, "keyframes" the plain spline; each checked against the unit term's integral computed here
+def test_renormalize_start_is_the_papers_starting_path_whatever_the_frames():
+    """eq. 7's divisors: "start" is the spline through the keyframes and one variable frame per interval
+    at its midpoint, on the unit sphere (sec. 3), whatever frames the solve uses; "keyframes" the plain
+    spline; each checked against the unit term's integral computed here
     by dense midpoint sums (no solver quadrature; the solver's 4-point Gauss rule integrates this
     degree-12 polynomial to ~3e-4), the two readings ~130x apart."""
     s = MODERATE
@@ -373,8 +371,10 @@ def test_renormalize_on_start_uses_the_path_the_optimizer_starts_from():
     t_start = np.sort(np.concatenate([s.times, mids]))
     v_start = CubicSpline(s.times, s.quats, bc_type="natural")(t_start)
     v_start[1::2] = plain_mid / np.linalg.norm(plain_mid, axis=1, keepdims=True)
-    one_round = default_options("paper", subdivision="global", per_segment=1)
-    start = orient(s.times, s.quats, form="paper", options=one_round)
-    keyf = orient(s.times, s.quats, form="paper", renormalize="keyframes", options=one_round)
-    assert start.solution.scales["unit"] == pytest.approx(unit_integral(t_start, v_start), rel=2e-3)
+    expected = unit_integral(t_start, v_start)
+    for per_segment in (1, 3):
+        opts = default_options("paper", subdivision="global", per_segment=per_segment)
+        start = orient(s.times, s.quats, form="paper", options=opts)
+        assert start.solution.scales["unit"] == pytest.approx(expected, rel=2e-3)
+    keyf = orient(s.times, s.quats, form="paper", renormalize="keyframes")
     assert keyf.solution.scales["unit"] == pytest.approx(unit_integral(s.times, s.quats), rel=2e-3)
