@@ -98,10 +98,10 @@ class FrameSet:
         if np.any(new_t <= self.times[0]) or np.any(new_t >= self.times[-1]):
             raise ValueError(f"variable frame times must lie inside ({self.times[0]}, {self.times[-1]})")
         all_t = np.concatenate([self.times, new_t])
-        if len(np.unique(all_t)) != len(all_t):
+        order = np.argsort(all_t, kind="stable")
+        if np.any(np.diff(all_t[order]) == 0):
             raise ValueError("a variable frame time coincides with an existing frame")
         new_v = self.path(new_t)
-        order = np.argsort(all_t, kind="stable")
         return FrameSet(
             all_t[order],
             np.concatenate([self.values, new_v])[order],

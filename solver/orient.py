@@ -20,6 +20,7 @@ forms against the number of variable frames).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -121,7 +122,8 @@ class OrientResult:
         solution: the `Solution` of `solve` (rounds, status, objective trace).
         energy: integral |covariant acceleration of u = q/|q||^2 dt of the result [1/s^3] (Gauss-Legendre,
             8 points per spline segment), the quantity the exact optimum minimizes.
-        energy_initial: the same for the plain spline through the keyframes [1/s^3].
+        energy_initial: the same for the plain spline through the keyframes [1/s^3] (a report on the
+            input, not part of the result: computed when first read).
         max_norm_deviation: max over the path of |1 - |q(t)|| (64 samples per segment).
         keyframe_error: max |q(t_i) - keyframe_i| (the hard constraints; ~1e-16).
         wall_time_s: [s] of `solve` (optimization and subdivision).
@@ -137,7 +139,6 @@ class OrientResult:
     solution: Solution = field(repr=False)
     points: int | None = None
     energy: float = 0.0
-    energy_initial: float = 0.0
     max_norm_deviation: float = 0.0
     keyframe_error: float = 0.0
     wall_time_s: float = 0.0
@@ -146,6 +147,10 @@ class OrientResult:
     def objective_trace(self) -> np.ndarray:
         """(N,) best objective after each evaluation, all rounds."""
         return self.solution.trace
+
+    @cached_property
+    def energy_initial(self) -> float:
+        return covariant_energy(self.keyframe_times, self.keyframes)
 
     @property
     def n_variable(self) -> int:
@@ -310,7 +315,6 @@ def orient(
         points=obj.points if obj.quadrature == "gauss" else None,
         solution=sol,
         energy=covariant_energy(fr.times, fr.values),
-        energy_initial=covariant_energy(initial.times, initial.values),
         max_norm_deviation=max_norm_deviation(fr.times, fr.values),
         keyframe_error=float(np.abs(fr.path(initial.times) - initial.values).max()),
         wall_time_s=sol.wall_time_s,
@@ -359,6 +363,7 @@ def covariant_energy(frame_times: np.ndarray, frames: np.ndarray, points: int = 
 
 def max_norm_deviation(frame_times: np.ndarray, frames: np.ndarray, per_segment: int = 64) -> float:
     """max |1 - |q(t)|| over the spline through frames (`per_segment` samples per segment, ends included)."""
-    q = np.vstack([interpolate_segments(frame_times, frames, np.arange(per_segment) / per_segment),
-                   np.asarray(frames, float)[-1:]])
-    return float(np.abs(1.0 - np.linalg.norm(q, axis=1)).max())
+    q = interpolate_segments(frame_times, frames, np.arange(per_segment) / per_segment)
+    r2 = np.einsum("ni,ni->n", q, q)  # |q|^2; the last frame is the path's end
+    last = np.asarray(frames, float)[-1]
+    return float(max(np.abs(1.0 - np.sqrt(r2)).max(), abs(1.0 - np.sqrt(last @ last))))

@@ -333,9 +333,10 @@ def _optimize(objective, frames, options, remaining, should_stop, progress, eval
             raise Stop(Status.NONFINITE, str(e)) from e
         return ev.E, (ev.grad[frames.free] if need_grad else None)
 
-    def cb(n, f):
-        if progress:
-            progress("eval", {"evals": evals_before + n, "E": f})
+    def report(n, f):
+        progress("eval", {"evals": evals_before + n, "E": f})
+
+    cb = report if progress else None
 
     x0 = frames.x()
     if not options.precondition or x0.size == 0:
