@@ -47,7 +47,7 @@ def register(sub) -> None:
                    help="at most N variable frames in total (0 = no limit) [0]")
     p.add_argument("--form", choices=FORMS, default="normalized",
                    help="objective: normalized (covariant acceleration of q/|q|) or paper (eq. 9 on q, "
-                   "renormalized 2:5) [normalized]")
+                   "renormalized 2:5 on the paper's starting path, docs/orient.md) [normalized]")
     p.add_argument("--rate", type=positive(), default=None, metavar="HZ",
                    help="uniform quadrature (the paper's midpoint rule) at HZ points per second, instead of "
                    "the default Gauss-Legendre rule with 4 nodes on every spline segment")
