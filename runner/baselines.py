@@ -39,6 +39,8 @@ from threadpoolctl import threadpool_limits
 from scipy.interpolate import BSpline, CubicSpline
 from scipy.optimize import minimize
 
+from solver.quaternion import align_hemispheres
+
 __all__ = [
     "BaselineResult",
     "BarrProblem",
@@ -93,16 +95,6 @@ class BaselineResult:
 # helpers
 
 
-def _align(quats: np.ndarray) -> np.ndarray:
-    """Normalize (K, 4) quaternions and flip each to the hemisphere of the previous one."""
-    q = np.array(quats, dtype=float, copy=True)
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    for i in range(1, len(q)):
-        if q[i] @ q[i - 1] < 0.0:
-            q[i] = -q[i]
-    return q
-
-
 def _check(times, quats):
     times = np.asarray(times, dtype=float)
     quats = np.asarray(quats, dtype=float)
@@ -110,7 +102,7 @@ def _check(times, quats):
         raise ValueError(f"need times (K,) with K >= 2 and quats (K, 4); got {times.shape}, {quats.shape}")
     if np.any(np.diff(times) <= 0) or not np.all(np.isfinite(times)):
         raise ValueError("keyframe times must be finite and strictly increasing")
-    return times, _align(quats)
+    return times, align_hemispheres(quats / np.linalg.norm(quats, axis=1, keepdims=True))
 
 
 def normalized_path_energy(q_of_t: Callable, breaks: np.ndarray, n_gauss: int = 8) -> float:

@@ -264,8 +264,8 @@ def orient(
         form: "normalized" (default: covariant acceleration of q/|q|) or "paper" (eq. 9 on q).
         weights: (lambda_1 unit, lambda_2 covariant); default see `build_objective`.
         renormalize: divide each term by its integral on the initial path (eq. 7): False, True (on
-            RENORMALIZE_ON), "start" (the path the optimizer starts from) or "keyframes" (the plain
-            spline through the keyframes). Default: RENORMALIZE_ON for "paper" (its 2:5 ratio is on
+            RENORMALIZE_ON), "start" (the paper's starting path, `paper_start`) or "keyframes" (the
+            plain spline through the keyframes). Default: RENORMALIZE_ON for "paper" (its 2:5 ratio is on
             renormalized terms), False for "normalized".
         radial_weight: preconditioner curvature along the frames' radial directions
             (`SolveOptions.radial_weight`); default RADIAL_WEIGHTS[form].
