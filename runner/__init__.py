@@ -1,2 +1,4 @@
 """dynsplines runner: command line, rendering, import and export around the `solver` package."""
-import solver  # noqa: F401  (sets the headless MuJoCo GL backend before mujoco is imported)
+from runner.environment import apply_defaults
+
+apply_defaults()  # before anything below imports mujoco or numpy

@@ -1,9 +1,9 @@
-"""The `dynsplines` command line: parses arguments and calls library functions; no algorithm here.
+"""The `dynsplines` command line: builds the parser from every subcommand and maps exceptions to exit codes.
 
-Each subcommand lives in its own module with `register(subparsers)`, which adds its parser and sets
-`func` to a function(args) -> exit code.
+Each subcommand lives in its own module of runner/commands/ with `register(subparsers)`, which adds its
+parser and sets `func` to a function(args) -> exit code. No algorithm here.
 
-Exit codes:
+Exit codes (runner/exit_codes.py):
     0   success (also when --max-time ended the optimization: the best path so far is written)
     1   internal error (a bug: please report it with the --debug traceback)
     2   bad input (a file, field or option); the message says what and how to fix it
@@ -19,75 +19,41 @@ from __future__ import annotations
 import argparse
 import sys
 
+from runner.commands.animate import register as register_animate
+from runner.commands.bench import register as register_bench
+from runner.commands.fig10 import register as register_fig10
+from runner.commands.keyframes_from_bvh import register as register_keyframes_from_bvh
+from runner.commands.orient import register as register_orient
+from runner.exit_codes import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED
+from runner.parser import OneLineParser
 from solver.errors import DynsplinesError, InputError
 
-EXIT_OK = 0
-EXIT_INTERNAL = 1
-EXIT_INPUT = 2
-EXIT_FAILED = 3
-EXIT_INTERRUPTED = 130
-
-
-class OneLineParser(argparse.ArgumentParser):
-    """An ArgumentParser whose usage errors are one line (and the --help hint), exit code 2."""
-
-    def error(self, message):
-        self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
-
-
-_Parser = OneLineParser
+#: every subcommand's `register`, in the order of `dynsplines --help`
+SUBCOMMANDS = (register_animate, register_keyframes_from_bvh, register_bench, register_orient, register_fig10)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from runner import animate, bench
-
-    parser = _Parser(
+    """The `dynsplines` parser with every subcommand."""
+    parser = OneLineParser(
         prog="dynsplines",
         description="Dynamic splines with constraints for animation: keyframes in, optimized in-betweens out.",
     )
     parser.add_argument("--debug", action="store_true", help="show the full traceback on errors")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     sub.required = True
-    animate.register(sub)
-    _register_keyframes_from_bvh(sub)
-    bench.register(sub)
-    for optional in ("orient",):  # subcommands added by their own modules when present
-        try:
-            module = __import__(f"runner.{optional}_cmd", fromlist=["register"])
-        except ModuleNotFoundError:
-            continue
-        module.register(sub)
+    for register in SUBCOMMANDS:
+        register(sub)
     return parser
-
-
-def _register_keyframes_from_bvh(sub) -> None:
-    p = sub.add_parser("keyframes-from-bvh", add_help=False,
-                       help="make a keyframe file from a BVH motion-capture clip (see --help)")
-    p.add_argument("args", nargs=argparse.REMAINDER)
-
-    def run(args):
-        from runner.bvh_import import keyframes_from_bvh_main
-
-        return keyframes_from_bvh_main(args.args, prog="dynsplines keyframes-from-bvh", debug=args.debug)
-
-    p.set_defaults(func=run)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line. Returns the exit code (see the module docstring)."""
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser()
-    head, tail = argv, None
-    if "keyframes-from-bvh" in argv:  # its own parser reads everything after it (also --help, --out first)
-        i = argv.index("keyframes-from-bvh")
-        if all(a == "--debug" for a in argv[:i]):
-            head, tail = argv[: i + 1], argv[i + 1:]
     try:
-        args = parser.parse_args(head)
+        args = parser.parse_args(argv)
     except SystemExit as e:  # --help (0) or a usage error (2, its message already printed)
         return e.code if isinstance(e.code, int) else EXIT_INPUT
-    if tail is not None:
-        args.args = tail
     try:
         return int(args.func(args) or 0)
     except InputError as e:

@@ -18,8 +18,8 @@ import numpy as np
 from solver.errors import InputError
 from solver.metrics import dynamics_series, sample_times
 from solver.surfaces import StaticSurfaces
-from solver.layout import site_ids
-from solver.terms.penetration import CONTACT_SITES, site_positions
+from solver.layout import CONTACT_SITES, site_ids
+from solver.terms.penetration import site_positions
 
 #: line styles of the three motions, the same in every figure
 STYLE = {
@@ -46,31 +46,8 @@ def _savefig(fig, path) -> None:
         fig.savefig(tmp, dpi=110, format="png")
 
 
-def heights_above_surfaces(surfaces: StaticSurfaces, points: np.ndarray) -> np.ndarray:
-    """Signed height of points above the surface below them [m] (negative: inside it).
-
-    For each plane, the signed distance along its normal; for each box, the height above its top face
-    where the point is over the box's footprint (box axes with the local z up), else no support. The
-    height is the smallest of these: the surface the point would land on, or the one it is inside.
-
-    Args:
-        surfaces: the scene's static surfaces. points: (..., 3) [m].
-    Returns:
-        (...) heights [m]; +inf where nothing is below.
-    """
-    pts = np.asarray(points, float)
-    out = np.full(pts.shape[:-1], np.inf)
-    for p0, n in zip(surfaces.plane_point, surfaces.plane_normal):
-        out = np.minimum(out, (pts - p0) @ n)
-    for c, R, h in zip(surfaces.box_center, surfaces.box_rot, surfaces.box_half):
-        local = (pts - c) @ R  # box coordinates
-        over = (np.abs(local[..., 0]) <= h[0]) & (np.abs(local[..., 1]) <= h[1])
-        out = np.where(over, np.minimum(out, local[..., 2] - h[2]), out)
-    return out
-
-
 def _site_heights(model, data, surfaces, sites, Y) -> np.ndarray:
-    return heights_above_surfaces(surfaces, site_positions(model, data, Y, sites))
+    return surfaces.height_above(site_positions(model, data, Y, sites))
 
 
 def _mark_keyframes(ax, keyframe_times, label=True):

@@ -12,6 +12,13 @@ import numpy as np
 
 from solver.errors import InputError
 
+#: the figure's contact sites (models/humanoid39.xml): the points of the feet that meet the surfaces
+#: (penetration term, flight indicator, metrics, contacts of motion capture)
+CONTACT_SITES: tuple[str, ...] = ("l_heel", "l_toe", "r_heel", "r_toe")
+
+#: the contact sites grouped by foot
+FEET: dict[str, tuple[str, str]] = {"left": ("l_heel", "l_toe"), "right": ("r_heel", "r_toe")}
+
 
 @dataclass(frozen=True)
 class Joint:

@@ -116,3 +116,42 @@ class StaticSurfaces:
         if not depths:
             return np.zeros(shape + (0,)), np.zeros(shape + (0, 3))
         return np.concatenate(depths, axis=-1), np.concatenate(grads, axis=-2)
+
+    def surface_below(self, points: np.ndarray) -> np.ndarray:
+        """Height of the highest static surface under each point (floor planes, tops of boxes).
+
+        A plane counts everywhere (its height at the point's x, y; a vertical plane, a wall, has none);
+        a box counts where the point's x, y lie within its footprint, with its top face as the surface.
+        Boxes are assumed upright (any rotation about z only), as the step box of models/run_and_step.xml is.
+
+        Args:
+            points: (..., 3) positions [m].
+        Returns:
+            (...,) surface height [m]; -inf where there is no surface at all.
+        """
+        pts = np.asarray(points, float)
+        h = np.full(pts.shape[:-1], -np.inf)
+        for p0, nrm in zip(self.plane_point, self.plane_normal):
+            if abs(nrm[2]) < 1e-6:
+                continue  # a vertical plane (a wall) has no height
+            z = p0[2] - (nrm[0] * (pts[..., 0] - p0[0]) + nrm[1] * (pts[..., 1] - p0[1])) / nrm[2]
+            h = np.maximum(h, z)
+        for c, rot, half in zip(self.box_center, self.box_rot, self.box_half):
+            local = (pts - c) @ rot  # box coordinates
+            inside = (np.abs(local[..., 0]) <= half[0]) & (np.abs(local[..., 1]) <= half[1])
+            top = c[2] + np.abs(rot[2]) @ half
+            h = np.where(inside, np.maximum(h, top), h)
+        return h
+
+    def height_above(self, points: np.ndarray) -> np.ndarray:
+        """Height of points above the surface below them [m] (negative: inside or under it).
+
+        The vertical distance to `surface_below`: the surface a point would land on, or the one it is in.
+
+        Args:
+            points: (..., 3) positions [m].
+        Returns:
+            (...,) heights [m]; +inf where nothing is below.
+        """
+        pts = np.asarray(points, float)
+        return pts[..., 2] - self.surface_below(pts)

@@ -1,7 +1,11 @@
 """Shared fixtures: a small inline figure (free root, ball joints, four contact sites) and a scene."""
-import mujoco
-import numpy as np
-import pytest
+from runner.environment import apply_defaults
+
+apply_defaults()  # before mujoco and numpy are imported
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 TOY_SCENE = """
 <mujoco>

@@ -1,15 +1,12 @@
-"""Tests of the two baselines (runner/baselines.py) against the independent reference."""
+"""Tests of the two baselines (solver/bench/) against the independent reference."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from runner import baselines as bl
+from solver.bench import baselines as bl
 
-try:  # tests/ is not a package: pytest puts tests/ on sys.path
-    import sphere_reference as sr
-except ImportError:  # tests/ made a package later
-    from tests import sphere_reference as sr
+from solver.bench import sphere_reference as sr
 
 
 MOD = sr.moderate_rotation_set()

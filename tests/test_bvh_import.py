@@ -1,4 +1,4 @@
-"""BVH import and retargeting (runner/bvh_import.py), checked against physical expectations and
+"""BVH import and retargeting (runner/mocap/), checked against physical expectations and
 hand-computed rotations, plus every malformed-input error."""
 import math
 from pathlib import Path
@@ -8,14 +8,11 @@ import numpy as np
 import pytest
 from scipy.interpolate import make_interp_spline
 
-from runner.bvh_import import (
-    LOWER_BODY_JOINTS,
-    keyframes_from_bvh_main,
-    keyframes_from_reference,
-    load_bvh_reference,
-    worst_contact_distance,
-)
-from runner.keyframe_io import read_keyframes
+from runner.commands.keyframes_from_bvh import keyframes_from_bvh_main
+from runner.mocap.contacts import worst_contact_distance
+from runner.mocap.keyframes import LOWER_BODY_JOINTS, keyframes_from_reference
+from runner.mocap.reference import load_bvh_reference
+from solver.keyframe_file import read_keyframes
 from solver.errors import InputError
 from solver.layout import StateLayout
 

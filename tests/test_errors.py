@@ -13,7 +13,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from runner.cli import EXIT_INPUT, EXIT_INTERNAL, main
+from runner.cli import main
+from runner.exit_codes import EXIT_INPUT, EXIT_INTERNAL
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.keyframes import Keyframes
@@ -257,9 +258,9 @@ def test_output_is_a_folder(tmp_path, capsys):
 
 
 def test_video_name_and_size_checked_before_optimizing(tmp_path, capsys, monkeypatch):
-    import runner.animate
+    import runner.commands.animate
 
-    monkeypatch.setattr(runner.animate, "solve", lambda *a, **k: pytest.fail("optimized before the check"))
+    monkeypatch.setattr(runner.commands.animate, "solve", lambda *a, **k: pytest.fail("optimized before the check"))
     p = write(tmp_path, small_doc())
     expect_input_error(capsys, ["animate", p, "--out", tmp_path / "x.avi"],
                        "--out", "x.avi: a video file must end in one of .mp4, .mkv, .mov")
@@ -324,12 +325,12 @@ def test_debug_shows_the_traceback(tmp_path):
 
 
 def test_internal_error_is_one_message_with_exit_1(tmp_path, capsys, monkeypatch):
-    import runner.animate
+    import runner.commands.animate
 
     def bug(*a, **k):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr(runner.animate, "solve", bug)
+    monkeypatch.setattr(runner.commands.animate, "solve", bug)
     code, err = run(capsys, *animate(write(tmp_path, small_doc())))
     assert code == EXIT_INTERNAL
     assert err.startswith("dynsplines: internal error: ZeroDivisionError: a bug")
@@ -344,7 +345,7 @@ def model():
 
 @pytest.fixture(scope="module")
 def problem(model):
-    from runner.keyframe_io import read_keyframes
+    from solver.keyframe_file import read_keyframes
     import tempfile
 
     layout = StateLayout.from_model(model)

@@ -19,8 +19,9 @@ import pytest
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
-from runner.cli import EXIT_FAILED, EXIT_INPUT, EXIT_OK, main
-from runner.keyframe_io import read_keyframes
+from runner.cli import main
+from runner.exit_codes import EXIT_FAILED, EXIT_INPUT, EXIT_OK
+from solver.keyframe_file import read_keyframes
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.layout import StateLayout

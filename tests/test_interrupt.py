@@ -20,8 +20,10 @@ import mujoco
 import numpy as np
 import pytest
 
-import runner.animate
-from runner.cli import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, main
+import runner.commands.animate
+import runner.saved_path
+from runner.cli import main
+from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.keyframes import Keyframes
@@ -189,7 +191,7 @@ class Poison(Term):
 def test_nonfinite_term_is_named_and_last_good_iterate_kept():
     model = mujoco.MjModel.from_xml_path(str(SCENE))
     layout = StateLayout.from_model(model)
-    from runner.keyframe_io import read_keyframes
+    from solver.keyframe_file import read_keyframes
     import tempfile
 
     with tempfile.TemporaryDirectory() as d:
@@ -207,13 +209,13 @@ def test_nonfinite_term_is_named_and_last_good_iterate_kept():
 
 
 def test_nonfinite_term_at_the_command_line(tmp_path, capsys, monkeypatch):
-    real = runner.animate.figure_objective
+    real = runner.commands.animate.figure_objective
 
     def with_poison(*args, **kwargs):
         obj = real(*args, **kwargs)
         return Objective(obj.terms + [Poison()], np.append(obj.weights, 1.0), obj.t0, obj.t1, obj.rate)
 
-    monkeypatch.setattr(runner.animate, "figure_objective", with_poison)
+    monkeypatch.setattr(runner.commands.animate, "figure_objective", with_poison)
     out = tmp_path / "p.npz"
     code = main(["animate", str(small_keyframes(tmp_path)), "--no-render", "--save-path", str(out)])
     captured = capsys.readouterr()
@@ -241,7 +243,7 @@ def saved_problem(tmp_path):
 def test_failed_npz_write_leaves_the_earlier_file_intact(tmp_path, monkeypatch, failure):
     out = tmp_path / "p.npz"
     args = saved_problem(tmp_path)
-    runner.animate.save_path_npz(out, *args)
+    runner.saved_path.save_path_npz(out, *args)
     good = out.read_bytes()
 
     def savez_then_fail(fh, **fields):
@@ -252,10 +254,10 @@ def test_failed_npz_write_leaves_the_earlier_file_intact(tmp_path, monkeypatch, 
     if isinstance(failure, OSError):
         with pytest.raises(InputError, match=r"cannot write .*p\.npz: No space left on device; an earlier file "
                                              "there is unchanged"):
-            runner.animate.save_path_npz(out, *args)
+            runner.saved_path.save_path_npz(out, *args)
     else:
         with pytest.raises(KeyboardInterrupt):
-            runner.animate.save_path_npz(out, *args)
+            runner.saved_path.save_path_npz(out, *args)
     assert out.read_bytes() == good
     assert [p.name for p in tmp_path.iterdir()] == ["p.npz"]
 

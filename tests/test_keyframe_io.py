@@ -1,4 +1,4 @@
-"""Keyframe files (runner/keyframe_io.py): round trip, atomic write, and every malformed-input message."""
+"""Keyframe files (solver/keyframe_file.py): round trip, atomic write, and every malformed-input message."""
 import json
 from pathlib import Path
 
@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from runner.keyframe_io import FORMAT, read_keyframes, write_keyframes
+from solver.keyframe_file import FORMAT, read_keyframes, write_keyframes
 from solver.errors import InputError
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout

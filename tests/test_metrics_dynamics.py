@@ -38,7 +38,7 @@ def layout(model):
 
 @pytest.fixture(scope="module")
 def keyframes(layout):
-    from runner.keyframe_io import read_keyframes
+    from solver.keyframe_file import read_keyframes
 
     return read_keyframes(KEYFRAMES, layout)[0]
 
@@ -202,7 +202,7 @@ def test_adaptive_refinement_beats_global_at_equal_frame_counts(model, layout, k
     """The first four keyframes of the clip, every term on, 6 variable frames: adaptive subdivision
     ranked by the predicted decrease ends lower than 2 frames in each interval (measured 0.75 vs
     1.01), with the same fixed weights and scales."""
-    from runner.bench import compare_refinement
+    from solver.bench.figure import compare_refinement
 
     kf = Keyframes(keyframes.times[:4], keyframes.values[:4], keyframes.mask[:4])
     (row,) = compare_refinement(model, kf, layout, parse_terms("all"), [6], scores=("decrease",), rate=400.0)
@@ -252,7 +252,7 @@ def test_plots_are_written(all_terms):
 
 
 def test_summary_lists_the_dynamics_rows_and_the_weights(model, layout, keyframes, capsys):
-    from runner.animate import summary_table
+    from runner.console import summary_table
     from solver.solve import SolveOptions, solve
 
     weights = parse_terms("all")

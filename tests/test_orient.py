@@ -1,5 +1,5 @@
 """The single-body orientation problem (paper sec. 3, solver/orient.py, solver/euler_lagrange.py,
-`dynsplines orient`) against the exact optimum computed independently in tests/sphere_reference.py.
+`dynsplines orient`) against the exact optimum computed independently in solver/bench/sphere_reference/.
 
 Acceptance-style checks: keyframes met exactly, relative gap (E - E*)/E* < 1e-3 with default settings on
 the large-rotation sets (E = integral |covariant acceleration of q/|q||^2 dt, measured by the reference
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 from conftest import fd_gradient
-from sphere_reference import (
+from solver.bench.sphere_reference import (
     align,
     covariant_energy,
     great_circle_set,
@@ -221,7 +221,7 @@ def test_residual_rejects_times_outside_the_path():
 def test_figure10_numbers():
     """The figure's data: optimization lowers the integrated deviation; a few adaptive frames lower it
     most where the initial spline's is largest."""
-    from runner.fig10 import CURVES, compute
+    from runner.figure10 import CURVES, compute
 
     s = LARGE["large_uniform"]
     data = compute(s.times, s.quats)

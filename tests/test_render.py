@@ -131,9 +131,9 @@ def test_penetrating_site_is_marked(model, tmp_path):
 
 
 def test_project_matches_the_rendered_image(model):
-    renderer = render._make_renderer(model, 96, 64)
+    renderer = render.gl.make_renderer(model, 96, 64)
     try:
-        panel = render._Panel(model, renderer)
+        panel = render.overlays.Panel(model, renderer)
         q = _path(n=1)[1][0]
         panel.set_camera(Camera(distance=3.0), np.array([0.0, 0.0, 1.0]))
         image = panel.render(q)

@@ -1,4 +1,4 @@
-"""Tests of the independent reference (tests/sphere_reference.py): the natural Riemannian cubic on S^3."""
+"""Tests of the independent reference (solver/bench/sphere_reference/): the natural Riemannian cubic on S^3."""
 from __future__ import annotations
 
 import math
@@ -6,10 +6,7 @@ import math
 import numpy as np
 import pytest
 
-try:  # tests/ is not a package: pytest puts tests/ on sys.path
-    import sphere_reference as sr
-except ImportError:  # tests/ made a package later
-    from tests import sphere_reference as sr
+from solver.bench import sphere_reference as sr
 
 
 def _orthonormal(seed, k):
@@ -149,7 +146,7 @@ def test_euler_lagrange_check_detects_a_wrong_curvature_sign(monkeypatch):
     """With R(X,Y)Z of the opposite sign in the ODE, the eq. 10 residual is O(1) and E is higher."""
     kset = sr.moderate_rotation_set()
     good = sr.riemannian_cubic_reference(kset.times, kset.quats)
-    rhs = sr._rhs
+    rhs = sr.bvp._rhs
 
     def flipped(y):
         out = rhs(y)
@@ -165,9 +162,9 @@ def test_euler_lagrange_check_detects_a_wrong_curvature_sign(monkeypatch):
             jac[:, k, :] = (flipped(y + e) - flipped(y - e)) / (2 * h)
         return jac
 
-    monkeypatch.setattr(sr, "_rhs", flipped)
-    monkeypatch.setattr(sr, "_rhs_jac", flipped_jac)
-    bad = sr._reference_cached.__wrapped__(*sr._key(kset.times, kset.quats), 1e-6)  # bypass the cache
+    monkeypatch.setattr(sr.bvp, "_rhs", flipped)
+    monkeypatch.setattr(sr.bvp, "_rhs_jac", flipped_jac)
+    bad = sr.bvp._reference_cached.__wrapped__(*sr.bvp._key(kset.times, kset.quats), 1e-6)  # bypass the cache
     t = np.linspace(kset.times[0], kset.times[-1], 201)[1:-1]
     res, scale = sr.euler_lagrange_residual(bad, t)
     assert np.max(np.linalg.norm(res, axis=1) / scale) > 1e-2

@@ -16,12 +16,9 @@ import numpy as np
 from solver.errors import InputError
 from solver.inverse_dynamics import InverseDynamics, MujocoInverseDynamics
 from solver.kinematics import TangentMap
-from solver.layout import StateLayout
+from solver.layout import CONTACT_SITES, StateLayout
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
-
-#: The figure's contact sites (models/humanoid39.xml).
-CONTACT_SITES = ("l_heel", "l_toe", "r_heel", "r_toe")
 
 BACKENDS = {"analytic": InverseDynamics, "mujoco": MujocoInverseDynamics}
 

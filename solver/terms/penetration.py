@@ -6,12 +6,9 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.kinematics import TangentMap
-from solver.layout import StateLayout, site_ids
+from solver.layout import CONTACT_SITES, StateLayout, site_ids
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
-
-#: The figure's contact sites (models/humanoid39.xml).
-CONTACT_SITES = ("l_heel", "l_toe", "r_heel", "r_toe")
 
 
 def site_positions(model, data, Y: np.ndarray, sites: np.ndarray) -> np.ndarray:

@@ -6,27 +6,27 @@ optimization bought (plain spline vs optimized), saves the path (.npz) and rende
 from __future__ import annotations
 
 import argparse
-import json
-import signal
 import sys
-import time
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from runner.argtypes import nonnegative, positive
+from runner.console import Progress, StopRequest, summary_table
+from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from runner.files import check_writable_dir
+from runner.parser import nonnegative, positive
+from runner.paths import MODELS, RENDERS, display_path as _rel
+from runner.saved_path import save_path_npz
 from solver.errors import InputError
 from solver.frames import FrameSet
+from solver.keyframe_file import read_document, read_keyframes
 from solver.layout import StateLayout
 from solver.metrics import path_metrics, sample_times
+from solver.model import load_model
 from solver.optimize import ALGORITHMS, Status
 from solver.problem import default_limits, figure_objective, parse_terms, term_names
 from solver.solve import SUBDIVISIONS, SolveOptions, solve
 
-REPO = Path(__file__).resolve().parents[1]
-MODELS = REPO / "models"
-RENDERS = REPO / "renders"
 RUN_AND_STEP_KEYFRAMES = MODELS / "run_and_step.keyframes.json"
 
 
@@ -41,6 +41,7 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+
 def _weight(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     if not sep:
@@ -49,6 +50,7 @@ def _weight(text: str) -> tuple[str, float]:
         return name.strip(), float(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"--weight {text!r}: {value!r} is not a number") from None
+
 
 
 def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> None:
@@ -91,6 +93,7 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
+
 def register(sub) -> None:
     p = sub.add_parser("animate", help="optimize the in-betweens of a keyframe file and render them",
                        description="Optimize the in-betweens of KEYFRAMES (a dynsplines keyframe file) in a "
@@ -107,25 +110,10 @@ def register(sub) -> None:
     q.set_defaults(func=run_animate, keyframes=RUN_AND_STEP_KEYFRAMES, scene=None)
 
 
+
 # ------------------------------------------------------------------------------------------ loading
-def load_model(path: Path):
-    """MjModel from an MJCF file; InputError naming the file on failure."""
-    import mujoco
-
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"scene file {path} does not exist; give an MJCF file with --scene")
-    try:
-        return mujoco.MjModel.from_xml_path(str(path))
-    except ValueError as e:
-        why = " ".join(line.strip() for line in str(e).splitlines() if line.strip())
-        raise InputError(f"scene file {path} could not be loaded by MuJoCo: {why}") from None
-
-
 def load_problem(keyframes_path: Path, scene: Path | None):
     """(keyframes, info, model, layout) for a keyframe file and an optional scene override."""
-    from runner.keyframe_io import read_keyframes
-
     import mujoco
 
     keyframes_path = Path(keyframes_path)
@@ -146,86 +134,14 @@ def load_problem(keyframes_path: Path, scene: Path | None):
     return keyframes, info, model, layout, scene_path
 
 
-def _peek_scene(path: Path) -> Path | None:
-    from runner.keyframe_io import read_document
 
+def _peek_scene(path: Path) -> Path | None:
     data = read_document(path)  # InputError naming the file for anything unreadable
     scene = data.get("scene") if isinstance(data, dict) else None
     if isinstance(scene, str) and "\x00" in scene:
         raise InputError(f"{path}: field 'scene' is {scene!r}; give a path relative to the keyframe file")
     return (path.parent / scene).resolve() if isinstance(scene, str) and scene else None
 
-
-# ---------------------------------------------------------------------------------------- progress
-class StopRequest:
-    """Ctrl-C during the optimization sets a flag (the solver returns its best path); a second
-    Ctrl-C aborts at once."""
-
-    def __init__(self, quiet=False):
-        self.requested = False
-        self.quiet = quiet
-
-    def __enter__(self):
-        self._old = signal.signal(signal.SIGINT, self._handle)
-        return self
-
-    def __exit__(self, *exc):
-        signal.signal(signal.SIGINT, self._old)
-
-    def _handle(self, signum, frame):
-        if self.requested:
-            raise KeyboardInterrupt
-        self.requested = True
-        print("\nstopping: keeping the best path so far (Ctrl-C again to abort)", file=sys.stderr, flush=True)
-
-    def __call__(self) -> bool:
-        return self.requested
-
-
-class Progress:
-    """One line of progress, rewritten in place on a terminal, a line a second otherwise."""
-
-    def __init__(self, quiet=False, stream=None):
-        self.quiet, self.stream = quiet, sys.stdout if stream is None else stream
-        self.tty = self.stream.isatty()
-        self.t0 = time.perf_counter()
-        self.last = 0.0
-        self.info = {}
-        self.E0 = None
-
-    def __call__(self, event, info):
-        if self.quiet:
-            return
-        if event == "boost":
-            worst = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
-            self.stream.write(("\n" if self.tty else "") + f"  over the limit ({worst}): weight x10, again\n")
-            return
-        if event == "round":
-            self.info.update(info)
-            self._print(force=True)
-        else:
-            self.info.update(info)
-            self._print()
-
-    def _print(self, force=False):
-        now = time.perf_counter()
-        if not force and now - self.last < (0.1 if self.tty else 1.0):
-            return
-        self.last = now
-        i = self.info
-        E = f"E {i['E']:.6g}" if "E" in i else "E -"
-        msg = (f"  round {i.get('round', 0) + 1}: {i.get('frames', 0)} frames ({i.get('variable', 0)} variable)"
-               f"  evals {i.get('evals', 0):5d}  {E}  {now - self.t0:6.1f} s")
-        if self.tty:
-            self.stream.write("\r" + msg.ljust(90))
-        else:
-            self.stream.write(msg + "\n")
-        self.stream.flush()
-
-    def done(self):
-        if not self.quiet and self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
 
 
 # -------------------------------------------------------------------------------------------- run
@@ -239,6 +155,7 @@ def solve_options(args, weights: dict) -> SolveOptions:
     )
 
 
+
 def default_args() -> argparse.Namespace:
     """The options `animate` uses when none are given."""
     p = argparse.ArgumentParser()
@@ -246,11 +163,9 @@ def default_args() -> argparse.Namespace:
     return p.parse_args([])
 
 
+
 def run_animate(args) -> int:
     """Run `animate` / `run-and-step`. Returns the exit code."""
-    from runner.cli import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-    from runner.files import check_writable_dir
-
     for out, option in ((args.out, "--out"), (args.save_path, "--save-path")):
         if out is not None:
             check_writable_dir(out, option)
@@ -298,7 +213,7 @@ def run_animate(args) -> int:
             print(summary_table(plain_m, opt_m, solution, weights,
                                 dict(zip(objective.names, objective.weights.tolist()))))
             if reference is not None:
-                from runner.bvh_import import worst_contact_distance
+                from runner.mocap.contacts import worst_contact_distance
 
                 say(f"motion capture ({_rel(reference.source)}, retargeted, {reference.count} frames): "
                     f"feet in contact stay within {1000 * worst_contact_distance(reference, model):.1f} mm "
@@ -326,6 +241,7 @@ def run_animate(args) -> int:
     return code
 
 
+
 def _check_video_out(out, size) -> None:
     """The video's name and size are checked before the optimization (render_tracks checks again)."""
     from runner.render import VIDEO_SUFFIXES, parse_size
@@ -337,6 +253,7 @@ def _check_video_out(out, size) -> None:
     if w % 2 or h % 2:
         raise InputError(f"--size {w}x{h}: width and height must be even (H.264 video); e.g. --size "
                          f"{w + w % 2}x{h + h % 2}")
+
 
 
 def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
@@ -353,6 +270,7 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
 
 
+
 def _reference(info, model):
     clip = (getattr(info, "source", None) or {}).get("clip")
     if not clip:
@@ -360,134 +278,10 @@ def _reference(info, model):
     path = Path(info.path).parent / clip if hasattr(info, "path") else MODELS / clip
     if not path.is_file():
         return None
-    from runner.bvh_import import load_bvh_reference
+    from runner.mocap.reference import load_bvh_reference
 
     return load_bvh_reference(path, model)
 
-
-def _rel(path) -> str:
-    path = Path(path).resolve()
-    try:
-        return str(path.relative_to(Path.cwd()))
-    except ValueError:
-        try:
-            return str(path.relative_to(REPO))
-        except ValueError:
-            return str(path)
-
-
-def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None) -> str:
-    """Plain spline vs optimized, the acceptance figures, as a text table.
-
-    Args:
-        plain, opt: `path_metrics` of the two paths. solution: the Solution. weights: {term: weight}
-            chosen. final_weights: {term: weight} at the end (penalty continuation raises some).
-    """
-    rows = [
-        ("max penetration [mm] (1000 Hz)", plain["max_penetration_mm"], opt["max_penetration_mm"], "{:.2f}"),
-    ]
-    for site in plain["penetration_mm_by_site"]:
-        rows.append((f"  {site} [mm]", plain["penetration_mm_by_site"][site],
-                     opt["penetration_mm_by_site"][site], "{:.2f}"))
-    rows += [
-        ("max |1 - |q||", plain["max_norm_deviation"], opt["max_norm_deviation"], "{:.4f}"),
-        ("max hyperextension [deg]", plain["max_hyperextension_deg"], opt["max_hyperextension_deg"], "{:.2f}"),
-        ("keyframe error (fixed comps)", plain.get("keyframe_error", np.nan), opt.get("keyframe_error", np.nan),
-         "{:.1e}"),
-    ]
-    dynamics = [  # solver.metrics: contact-free inverse dynamics; flight = every contact site ~3 cm clear
-        ("RMS joint torque [N m]", "rms_joint_torque_Nm", "{:.1f}"),
-        ("peak joint torque [N m]", "peak_joint_torque_Nm", "{:.1f}"),
-        ("flight (all feet clear) [s]", "flight_s", "{:.3f}"),
-        ("RMS root force in flight [N]", "rms_root_force_flight_N", "{:.1f}"),
-        ("peak root force in flight [N]", "peak_root_force_flight_N", "{:.1f}"),
-        ("RMS root torque in flight [N m]", "rms_root_torque_flight_Nm", "{:.1f}"),
-        ("peak root torque in flight [N m]", "peak_root_torque_flight_Nm", "{:.1f}"),
-    ]
-    rows += [(label, plain[key], opt[key], fmt) for label, key, fmt in dynamics if key in plain and key in opt]
-    rows.append(("objective E", solution.E_initial, solution.E_final, "{:.5g}"))
-    for name in weights:
-        rows.append((f"  integral {name}", solution.integrals_initial[name], solution.integrals_final[name],
-                     "{:.4g}"))
-    extra = getattr(solution, "extra_rows", None) or []
-    rows += extra
-    w = max(len(r[0]) for r in rows) + 2
-    lines = [f"{'':{w}}{'plain spline':>14}{'optimized':>14}", "-" * (w + 28)]
-    for label, a, b, fmt in rows:
-        lines.append(f"{label:{w}}{fmt.format(a):>14}{fmt.format(b):>14}")
-    lines.append("-" * (w + 28))
-    lines.append(f"frames: {solution.initial.count} keyframes + {solution.frames.n_variable} variable; "
-                 f"{len(solution.rounds)} rounds, {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
-    final = final_weights or {}
-    terms = []
-    for name, w0 in weights.items():
-        w1 = final.get(name, w0)
-        terms.append(f"{name} {w0:g}" + (f" -> {w1:g}" if w1 != w0 else ""))
-    lines.append("terms (weight; -> after penalty continuation): " + ", ".join(terms))
-    return "\n".join(lines)
-
-
-def versions() -> dict:
-    """Versions of the software that made a result (recorded in the .npz), and the BLAS thread settings:
-    a path is bit-identical for the same inputs, options, versions and BLAS thread count (the command
-    uses one thread, see solver/__init__.py; another count changes the last bits of matrix products)."""
-    import os
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = {"python": sys.version.split()[0]}
-    for pkg in ("dynsplines", "mujoco", "nlopt", "numpy", "scipy"):
-        try:
-            out[pkg] = version(pkg)
-        except PackageNotFoundError:
-            out[pkg] = "unknown"
-    out["blas_threads_env"] = {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
-                                                              "MKL_NUM_THREADS")}
-    return out
-
-
-def save_path_npz(path, solution, keyframes, reference, scene_path, weights, options, metrics, args=None):
-    """Write the optimized path (.npz) atomically. Fields: README "The saved path"."""
-    from runner.files import atomic_output
-
-    scene_rel = _repo_relative(scene_path)
-    opts = {"weights": weights, "solve": asdict(options)}
-    if args is not None:
-        opts["command"] = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
-                           if k not in ("func",)}
-    fields = dict(
-        frame_times=solution.frames.times,
-        frames=solution.frames.values,
-        frame_is_keyframe=solution.frames.is_keyframe,
-        keyframe_times=keyframes.times,
-        keyframes=keyframes.values,
-        keyframe_mask=keyframes.mask,
-        plain_frame_times=solution.initial.times,
-        plain_frames=solution.initial.values,
-        reference_times=reference.times if reference is not None else np.zeros(0),
-        reference_qpos=reference.qpos if reference is not None else np.zeros((0, keyframes.nq)),
-        scene=np.array(scene_rel),
-        wall_time_s=np.array(solution.wall_time_s),
-        objective_trace=solution.trace,
-        status=np.array(solution.status.value),
-        metrics_json=np.array(json.dumps(metrics, default=float)),
-        options_json=np.array(json.dumps(opts, default=str)),
-        versions_json=np.array(json.dumps(versions())),
-    )
-    try:
-        with atomic_output(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **fields)
-    except OSError as e:  # e.g. a full disk: the temporary file is gone, an earlier file is unchanged
-        raise InputError(f"cannot write {path}: {e.strerror or e}; an earlier file there is unchanged; "
-                         "free some space or choose another --save-path") from None
-
-
-def _repo_relative(path) -> str:
-    path = Path(path).resolve()
-    try:
-        return str(path.relative_to(REPO))
-    except ValueError:
-        return str(path)
 
 
 def render_video(out, model, solution, keyframes, args):
@@ -518,3 +312,4 @@ def render_video(out, model, solution, keyframes, args):
     return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
                          keyframe_times=keyframes.times, keyframe_qpos=kq,
                          title="dynsplines: plain spline vs optimized", progress=progress)
+

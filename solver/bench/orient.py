@@ -3,31 +3,31 @@
     dynsplines bench orient [--sets large_uniform,large_nonuniform,large_nonuniform_b] [--budget 60]
                             [--repeat 7] [--methods dynsplines,barr92,bspline]
 
-For each keyframe set (7 keyframes, 30-150 degrees between them; tests/sphere_reference.py) the exact
+For each keyframe set (7 keyframes, 30-150 degrees between them; solver/bench/sphere_reference/) the exact
 optimum E* is the natural Riemannian cubic spline on S^3 (solve_bvp). Every method runs a ladder of
 settings of increasing accuracy (ours: `LADDER` below; the baselines: their resolution ladder,
-runner.baselines.baseline_time_to_gap); the time to a gap level is the wall time of the single run of
+solver.bench.baselines.baseline_time_to_gap); the time to a gap level is the wall time of the single run of
 the fastest setting that reached it (what a user who knew that setting would spend), or the best gap
 reached within the budget. The gap of every method's *normalized continuous path* is measured by the
-same independent code (tests/sphere_reference.covariant_energy for ours, the baselines' own
+same independent code (sphere_reference.covariant_energy for ours, the baselines' own
 Gauss-Legendre energy for theirs; both agree with each other to ~1e-8).
 
-Needs a source checkout (the reference lives in tests/).
+The command: runner/commands/bench.py. Output goes through `out` (a print-like callback).
 """
 from __future__ import annotations
 
-import argparse
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+from solver.bench import sphere_reference
+from solver.bench.baselines import baseline_time_to_gap
+from solver.errors import InputError
+from solver.orient import default_options, orient
+
 GAPS = (1e-2, 1e-3, 1e-4)
 DEFAULT_SETS = "large_uniform,large_nonuniform,large_nonuniform_b"
-
 #: our settings, from fast and coarse to slow and accurate: (label, orient keyword arguments). Gauss
 #: quadrature (orient's default) unless a rate is given; one rung keeps the paper's uniform rule to show
 #: what it costs. The optimizer tolerance is part of a setting (in its label), as the resolution is for
@@ -50,19 +50,6 @@ LADDER = (
 )
 
 
-def _reference_module():
-    tests = REPO / "tests"
-    if not (tests / "sphere_reference.py").is_file():
-        from solver.errors import InputError
-
-        raise InputError("bench orient needs a source checkout: tests/sphere_reference.py not found")
-    if str(tests) not in sys.path:
-        sys.path.insert(0, str(tests))
-    import sphere_reference
-
-    return sphere_reference
-
-
 def ours_time_to_gap(times, quats, E_star, ref, gaps=GAPS, repeat: int = 7, log: list | None = None) -> dict:
     """Our ladder: {gap: (wall_time_s, label, achieved_gap)} or (None, best label, best gap).
 
@@ -72,8 +59,6 @@ def ours_time_to_gap(times, quats, E_star, ref, gaps=GAPS, repeat: int = 7, log:
     the median keep that out (the baselines' runs take seconds, where it does not matter). The gap is measured on the normalized path
     by `ref.covariant_energy` (dense samples, independent of solver/).
     """
-    from solver.orient import default_options, orient
-
     out: dict = {}
     best = (None, None, np.inf)
     for label, kw in LADDER:
@@ -103,11 +88,13 @@ def ours_time_to_gap(times, quats, E_star, ref, gaps=GAPS, repeat: int = 7, log:
     return out
 
 
+
 def _fmt_time(entry) -> str:
     wall, what, gap = entry
     if wall is None:
         return f"not reached (best {gap:.1e})"
     return f"{wall * 1e3:9.1f} ms" if wall < 10 else f"{wall:9.2f} s "
+
 
 
 def _ratio(theirs, ours, budget) -> str:
@@ -118,10 +105,9 @@ def _ratio(theirs, ours, budget) -> str:
     return f"{theirs[0] / ours[0]:,.1f}x"
 
 
-def bench_set(ks, methods, budget: float, repeat: int, ref, out=print) -> dict:
-    """Run every method on one keyframe set and print the table. Returns {method: {gap: entry}}."""
-    from runner.baselines import baseline_time_to_gap
 
+def bench_set(ks, methods, budget: float, repeat: int, ref=sphere_reference, out=lambda *a: None) -> dict:
+    """Run every method on one keyframe set and print the table. Returns {method: {gap: entry}}."""
     angles = ref.rotation_angles_deg(ks.quats)
     t0 = time.perf_counter()
     E_star = ref.riemannian_cubic_reference(ks.times, ks.quats, tol=1e-6).E_star
@@ -152,7 +138,6 @@ def bench_set(ks, methods, budget: float, repeat: int, ref, out=print) -> dict:
         out(f"   {m} settings used - {settings}")
     return {"results": results, "logs": logs, "E_star": E_star}
 
-
 #: objective variants of the trade-off table: (label, orient keyword arguments)
 TRADEOFF_VARIANTS = (
     ("(a) paper 2:5, renormalized on the start path (default)", dict(form="paper")),
@@ -164,12 +149,10 @@ TRADEOFF_VARIANTS = (
 )
 
 
-def tradeoff(ref, sets, per_segment=(0, 1, 2, 3, 5), rate: float = 100.0, out=print) -> dict:
+def tradeoff(ref, sets, per_segment=(0, 1, 2, 3, 5), rate: float = 100.0, out=lambda *a: None) -> dict:
     """The trade-off the paper does not report: gap and max |1 - |q|| against the number of variable
     frames (global subdivision, n per keyframe interval), for the paper's form at several weights and
     for the normalized form. Returns {(set, label, n): (gap, max_norm_deviation)}."""
-    from solver.orient import default_options, orient
-
     table = {}
     for ks in sets:
         E_star = ref.riemannian_cubic_reference(ks.times, ks.quats, tol=1e-6).E_star
@@ -193,61 +176,22 @@ def tradeoff(ref, sets, per_segment=(0, 1, 2, 3, 5), rate: float = 100.0, out=pr
     return table
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """Add the options of `dynsplines bench orient` to a parser (runner.bench uses this)."""
-    p.add_argument("--sets", default=DEFAULT_SETS,
-                   help="comma-separated keyframe sets (tests/sphere_reference.py) [the three large sets]")
-    p.add_argument("--methods", default="dynsplines,barr92,bspline", help="comma-separated methods")
-    p.add_argument("--budget", type=float, default=60.0, help="seconds per baseline and set [60]")
-    p.add_argument("--repeat", type=int, default=7,
-                   help="timed runs per setting of ours, after one untimed warm-up; median reported [7]")
-    p.add_argument("--verbose", action="store_true", help="print every run of every ladder")
-    p.add_argument("--tradeoff", action="store_true",
-                   help="instead: the table of gap and max |1 - |q|| against variable frames, for both "
-                   "objective forms (docs/orient.md), on --sets (default here: large_nonuniform,moderate)")
+
+METHODS = ("dynsplines", "barr92", "bspline")
 
 
-def run(args) -> int:
-    """Run the benchmark for parsed arguments (see `add_arguments`). Returns 0."""
-    import solver  # noqa: F401  (single-threaded BLAS before numpy work starts)
-    from solver.errors import InputError
-
-    ref = _reference_module()
-    known = {s.name: s for s in ref.large_rotation_sets() + [ref.moderate_rotation_set()]}
-    sets = args.sets
-    if args.tradeoff and sets == DEFAULT_SETS:
-        sets = "large_nonuniform,moderate"
-    names = [s.strip() for s in sets.split(",") if s.strip()]
+def keyframe_sets(names) -> list:
+    """The named keyframe sets of `sphere_reference` (large_uniform, large_nonuniform, large_nonuniform_b,
+    moderate). Raises InputError naming an unknown set."""
+    known = {s.name: s for s in sphere_reference.large_rotation_sets() + [sphere_reference.moderate_rotation_set()]}
     for n in names:
         if n not in known:
             raise InputError(f"unknown keyframe set {n!r}; choose from: {', '.join(known)}")
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    return [known[n] for n in names]
+
+
+def check_methods(methods) -> None:
+    """Raises InputError naming a method that is not one of `METHODS`."""
     for m in methods:
-        if m not in ("dynsplines", "barr92", "bspline"):
-            raise InputError(f"unknown method {m!r}; choose from: dynsplines, barr92, bspline")
-    if args.budget <= 0 or args.repeat < 1:
-        raise InputError("--budget must be > 0 seconds and --repeat >= 1")
-    if args.tradeoff:
-        tradeoff(ref, [known[n] for n in names])
-        return 0
-    print("bench orient: wall time to reach a relative gap (E - E*)/E* of the normalized path "
-          f"(baselines: budget {args.budget:g} s per set; ours: median of {args.repeat} runs)")
-    for n in names:
-        res = bench_set(known[n], methods, args.budget, args.repeat, ref)
-        if args.verbose:
-            for m, log in res["logs"].items():
-                for row in log:
-                    print(f"     {m}: " + ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
-                                                   for k, v in row.items()))
-    return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`python -m runner.bench_orient [options]`: the same as `dynsplines bench orient`."""
-    p = argparse.ArgumentParser(prog="dynsplines bench orient", description=__doc__.splitlines()[0])
-    add_arguments(p)
-    return run(p.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+        if m not in METHODS:
+            raise InputError(f"unknown method {m!r}; choose from: {', '.join(METHODS)}")

@@ -1,9 +1,17 @@
-"""argparse value types shared by the subcommands: numbers with a bound, with one-line messages."""
+"""Argument parsing pieces shared by the subcommands (a leaf): `OneLineParser` and bounded number types."""
 from __future__ import annotations
 
 import argparse
 import math
 
+from runner.exit_codes import EXIT_INPUT
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors are one line (and the --help hint), exit code 2."""
+
+    def error(self, message):
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 def _bounded(kind, ok, requirement: str):
     noun = "a whole number" if kind is int else "a number"

@@ -1,0 +1,1 @@
+"""One module per `dynsplines` subcommand, each with `register(subparsers)`: argument glue only."""

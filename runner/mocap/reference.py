@@ -1,0 +1,44 @@
+"""A BVH clip as a reference motion of the figure: parsed, retargeted, cleaned up (runner/mocap/retarget.py)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from runner.mocap.bvh import read_bvh
+from runner.mocap.contacts import correct_root_height
+from runner.mocap.retarget import JOINT_BODIES, Reference, tidy_quaternions, clamp_hyperextension, retarget
+from solver.layout import StateLayout
+
+def load_bvh_reference(path: str | Path, model) -> Reference:
+    """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion.
+
+    Steps (module docstring): parse (bvhio), drop the synthetic T-pose first frame, forward kinematics
+    in metres and MuJoCo axes, rest-offset retargeting of body orientations, local joint quaternions
+    (unit, w x y z, hemisphere-consistent), knee/elbow hyperextension clamped to 0 flexion
+    (`clamp_hyperextension`), root height corrected so feet in contact stand on the floor or the box
+    and no contact site is ever below a surface (`correct_root_height`).
+
+    Args:
+        path: a BVH file with the CMU skeleton (Hahne's cgspeed conversion, 31 joints, 1 unit =
+            0.05644 m, first frame a T-pose).
+        model: the scene's MjModel (figure + floor + step box), e.g. models/run_and_step.xml; its
+            figure must be models/humanoid39.xml (joint and site names). With a model that has no
+            static surfaces (the figure alone) the root height is left as retargeted.
+    Returns:
+        Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s];
+        n = frames in the file - 1.
+    Raises:
+        InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
+            joint the retargeting needs is missing, or the model lacks a joint or site it needs.
+    """
+    clip = read_bvh(path)
+    layout = StateLayout.from_model(model)
+    for name in ("root", *JOINT_BODIES):
+        layout.joint(name)
+    qpos = retarget(clip, layout)[1:]  # frame 0 is the synthetic T-pose
+    qpos, _ = clamp_hyperextension(qpos, layout)
+    qpos = correct_root_height(qpos, model, clip.frame_time)
+    qpos = tidy_quaternions(qpos, layout)
+    times = np.arange(len(qpos)) * clip.frame_time
+    return Reference(times, qpos, str(path), clip.frame_time)

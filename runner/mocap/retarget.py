@@ -1,0 +1,321 @@
+"""Retargeting: a CMU BVH clip onto the 39-DOF figure (the reference motion), and its clean-up.
+
+The pipeline (one concept: from a BVH file to a reference motion and keyframes on *our* figure):
+
+1. Parse the BVH file with `bvhio` (hierarchy, channels, Euler angles -> local quaternions), after a
+   check of the text (`_check_bvh_text`: the HIERARCHY grammar, the MOTION header, every data line)
+   that gives exact line-numbered errors for user mistakes and protects against two `bvhio` 1.5.4
+   defects: its line reader loops forever at end of file (a truncated file would hang it), and the line
+   numbers in its SyntaxErrors are wrong inside nested joints.
+2. Forward kinematics of the CMU skeleton (BVH convention: local rotation R = Rz Ry Rx for the channel
+   order Z Y X, applied to column vectors), in metres (1 unit = 0.05644 m, the ASF `length 0.45`) and in
+   MuJoCo axes: BVH is Y up with the figure facing +Z and its left at +X; MuJoCo is z up, facing +x,
+   left +y. So (x, y, z)_mujoco = (Z, X, Y)_bvh, a proper rotation (`BVH_TO_MUJOCO`).
+3. Retargeting: each figure body's world orientation is the corresponding CMU bone's world orientation
+   times a fixed rest-pose offset R_off (`_rest_offsets`): the smallest rotation that takes the figure
+   bone's direction at the identity pose to the CMU bone's direction in the CMU rest (T-) pose (all
+   channels zero). So the CMU T-pose maps to the figure with arms out sideways, and with legs and feet
+   along the subject's own rest bone directions (the CMU thigh and shin bones point about 20 degrees
+   outward in its rest pose, so mapping them to the identity would cross the figure's legs); the
+   pelvis and the torso have R_off = identity. Local joint quaternions follow as
+   q_joint = conj(q_parent_world) q_child_world, unit, w x y z, hemisphere-consistent over time. The
+   figure keeps its own bone lengths; the root position is the CMU Hips position.
+4. Clean-up for hard constraints: knee and elbow hyperextension (flexion < 0, see `FLEXION_AXES`) is
+   clamped to 0 by removing the twist about the hinge axis (swing-twist decomposition); then the root
+   height is corrected (`correct_root_height`) so that a foot in contact has its lowest contact site
+   on the surface under it, and no contact site is ever below a surface.
+
+The synthetic T-pose first frame of the cgspeed BVH conversion is dropped (see
+/work/shared/data/cmu/README.md). Data: CMU Graphics Lab Motion Capture Database, mocap.cs.cmu.edu.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+from runner.mocap.bvh import POSITION_CHANNELS, BvhClip
+from solver.errors import InputError
+from solver.layout import StateLayout
+from solver.quaternion import align_hemispheres, conj, mul, normalize, twist_angle
+
+# constants
+# --------------------------------------------------------------------------------------------------
+
+#: metres per CMU ASF length unit (ASF `length 0.45`: 1 unit = 1/0.45 inch).
+UNIT_TO_METRES = 0.0254 / 0.45
+
+#: (3, 3) rotation taking BVH axes (Y up, facing +Z, left +X) to MuJoCo axes (z up, facing +x, left +y).
+BVH_TO_MUJOCO = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+#: figure body -> (CMU joint whose world orientation drives it, CMU child joint giving the bone
+#: direction, or None for an identity rest offset).
+BONE_MAP: Mapping[str, tuple[str, str | None]] = MappingProxyType(
+    {
+        "pelvis": ("Hips", None),
+        "l_thigh": ("LeftUpLeg", "LeftLeg"),
+        "l_shin": ("LeftLeg", "LeftFoot"),
+        "l_foot": ("LeftFoot", "LeftToeBase"),
+        "r_thigh": ("RightUpLeg", "RightLeg"),
+        "r_shin": ("RightLeg", "RightFoot"),
+        "r_foot": ("RightFoot", "RightToeBase"),
+        "torso": ("Spine1", None),
+        "l_upper_arm": ("LeftArm", "LeftForeArm"),
+        "l_forearm": ("LeftForeArm", "LeftHand"),
+        "r_upper_arm": ("RightArm", "RightForeArm"),
+        "r_forearm": ("RightForeArm", "RightHand"),
+    }
+)
+
+#: figure bone directions at the identity pose (body frame = world frame), matching BONE_MAP's CMU
+#: bone directions: hip -> knee, knee -> ankle, shoulder -> elbow, elbow -> wrist point straight down;
+#: the foot's is ankle -> ball of the foot (0.13 m forward, 0.045 m down), the analogue of the CMU
+#: LeftFoot -> LeftToeBase bone.
+FIGURE_BONE_DIRECTION: Mapping[str, tuple[float, float, float]] = MappingProxyType(
+    {
+        "l_thigh": (0.0, 0.0, -1.0),
+        "l_shin": (0.0, 0.0, -1.0),
+        "l_foot": (0.13, 0.0, -0.045),
+        "r_thigh": (0.0, 0.0, -1.0),
+        "r_shin": (0.0, 0.0, -1.0),
+        "r_foot": (0.13, 0.0, -0.045),
+        "l_upper_arm": (0.0, 0.0, -1.0),
+        "l_forearm": (0.0, 0.0, -1.0),
+        "r_upper_arm": (0.0, 0.0, -1.0),
+        "r_forearm": (0.0, 0.0, -1.0),
+    }
+)
+
+#: figure joint -> (parent body, child body). The root (free joint) drives the pelvis.
+JOINT_BODIES: Mapping[str, tuple[str, str]] = MappingProxyType(
+    {
+        "l_hip": ("pelvis", "l_thigh"),
+        "l_knee": ("l_thigh", "l_shin"),
+        "l_ankle": ("l_shin", "l_foot"),
+        "r_hip": ("pelvis", "r_thigh"),
+        "r_knee": ("r_thigh", "r_shin"),
+        "r_ankle": ("r_shin", "r_foot"),
+        "torso": ("pelvis", "torso"),
+        "l_shoulder": ("torso", "l_upper_arm"),
+        "l_elbow": ("l_upper_arm", "l_forearm"),
+        "r_shoulder": ("torso", "r_upper_arm"),
+        "r_elbow": ("r_upper_arm", "r_forearm"),
+    }
+)
+
+#: hinge-like joints and their flexion axis in the parent frame (models/humanoid39.xml): flexion is
+#: `twist_angle(q, axis)`, hyperextension is flexion < 0.
+FLEXION_AXES: Mapping[str, tuple[float, float, float]] = MappingProxyType(
+    {
+        "l_knee": (0.0, 1.0, 0.0),
+        "r_knee": (0.0, 1.0, 0.0),
+        "l_elbow": (0.0, -1.0, 0.0),
+        "r_elbow": (0.0, -1.0, 0.0),
+    }
+)
+
+
+
+# --------------------------------------------------------------------------------------------------
+# data
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A dense reference motion of the figure, retargeted from motion capture.
+
+    Attributes:
+        times: (n,) frame times [s], starting at 0, spaced `frame_time`.
+        qpos: (n, nq) MuJoCo `qpos` per frame: root position [m], unit quaternions (w x y z),
+            hemisphere-consistent over time per joint.
+        source: the BVH file it came from.
+        frame_time: [s] time between frames of the clip.
+    """
+
+    times: np.ndarray
+    qpos: np.ndarray
+    source: str
+    frame_time: float
+
+    @property
+    def count(self) -> int:
+        return len(self.times)
+
+    @property
+    def duration(self) -> float:
+        """[s] time of the last frame."""
+        return float(self.times[-1])
+
+
+
+
+# --------------------------------------------------------------------------------------------------
+# kinematics of the CMU skeleton and retargeting
+# --------------------------------------------------------------------------------------------------
+
+
+def _to_mujoco_quat(q: np.ndarray) -> np.ndarray:
+    """Express (..., 4) rotations given in BVH axes in MuJoCo axes: R' = M R M^T, i.e. v' = M v."""
+    out = np.array(q, float, copy=True)
+    out[..., 1:] = q[..., 1:] @ BVH_TO_MUJOCO.T
+    return out
+
+
+def cmu_world(clip: BvhClip) -> tuple[np.ndarray, np.ndarray]:
+    """World orientation and position of every CMU joint, in MuJoCo axes and metres.
+
+    Forward kinematics: q_world[j] = q_world[parent] q_local[j], p_world[j] = p_world[parent] +
+    R(q_world[parent]) p_local[j] (BVH convention, column vectors), then the BVH -> MuJoCo axes change
+    and the unit scale `UNIT_TO_METRES`.
+
+    Args:
+        clip: a parsed clip.
+    Returns:
+        quat: (n, J, 4) world orientations (w x y z) in MuJoCo axes.
+        pos: (n, J, 3) world joint positions [m] in MuJoCo axes.
+    """
+    n, J = clip.local_quat.shape[:2]
+    q = np.empty((n, J, 4))
+    p = np.empty((n, J, 3))
+    for j in range(J):
+        par = clip.parents[j]
+        if par < 0:
+            q[:, j] = clip.local_quat[:, j]
+            p[:, j] = clip.local_pos[:, j]
+        else:
+            q[:, j] = mul(q[:, par], clip.local_quat[:, j])
+            p[:, j] = p[:, par] + _rotate(q[:, par], clip.local_pos[:, j])
+    return _to_mujoco_quat(q), (p @ BVH_TO_MUJOCO.T) * UNIT_TO_METRES
+
+
+def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate (..., 3) vectors by (..., 4) unit quaternions."""
+    qv = np.concatenate([np.zeros(v.shape[:-1] + (1,)), v], axis=-1)
+    return mul(mul(q, qv), conj(q))[..., 1:]
+
+
+def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation (unit quaternion) taking direction a to direction b (both (3,))."""
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    c = float(a @ b)
+    if c < -1.0 + 1e-12:  # opposite: any perpendicular axis
+        axis = np.cross(a, [1.0, 0.0, 0.0])
+        if np.linalg.norm(axis) < 1e-6:
+            axis = np.cross(a, [0.0, 1.0, 0.0])
+        return np.r_[0.0, axis / np.linalg.norm(axis)]
+    q = np.r_[1.0 + c, np.cross(a, b)]
+    return q / np.linalg.norm(q)
+
+
+def _rest_offsets(clip: BvhClip) -> dict[str, np.ndarray]:
+    """Rest-pose offset R_off (unit quaternion) per figure body: figure world = CMU world * R_off.
+
+    For a limb bone, the smallest rotation taking `FIGURE_BONE_DIRECTION` to the CMU bone direction in
+    the CMU rest pose (the child joint's OFFSET, in MuJoCo axes); identity for the pelvis and torso.
+    """
+    out = {}
+    for body, (_, child) in BONE_MAP.items():
+        if child is None:
+            out[body] = np.array([1.0, 0.0, 0.0, 0.0])
+            continue
+        d_cmu = BVH_TO_MUJOCO @ clip.offsets[clip.index(child)]
+        if np.linalg.norm(d_cmu) < 1e-9:
+            raise InputError(
+                f"{clip.source}: joint {child} has a zero OFFSET, so the bone that ends there has no "
+                "direction; the retargeting needs the CMU skeleton (Hahne's BVH conversion)"
+            )
+        out[body] = _swing(np.array(FIGURE_BONE_DIRECTION[body]), d_cmu)
+    return out
+
+
+def _required_joints() -> list[str]:
+    req = []
+    for joint, child in BONE_MAP.values():
+        req += [joint] + ([child] if child else [])
+    return list(dict.fromkeys(req))
+
+
+def retarget(clip: BvhClip, layout: StateLayout) -> np.ndarray:
+    """Retarget every frame of a clip onto the figure: `qpos` before any clean-up.
+
+    Root position = CMU Hips position [m]; body orientations = CMU bone orientations times the rest
+    offsets (module docstring, step 3); joint quaternions relative to the parent body; each joint's
+    quaternions hemisphere-aligned over time, the first with w >= 0.
+
+    Args:
+        clip: a parsed clip (all frames). layout: the figure's qpos layout.
+    Returns:
+        (n, nq) qpos.
+    Raises:
+        InputError: a joint the retargeting needs is missing from the clip, or the Hips has no
+            position channels.
+    """
+    missing = [j for j in _required_joints() if j not in clip.names]
+    if missing:
+        raise InputError(
+            f"{clip.source}: the skeleton has no joint(s) {', '.join(missing)}; the retargeting needs the "
+            f"CMU skeleton's {', '.join(_required_joints())} (the cgspeed BVH conversion of "
+            "mocap.cs.cmu.edu). Rename the joints of your skeleton to these names"
+        )
+    if clip.names[0] != "Hips":
+        raise InputError(f"{clip.source}: the ROOT joint is {clip.names[0]!r}; the CMU skeleton's root is 'Hips'")
+    missing_pos = [c for c in POSITION_CHANNELS if c not in clip.channels[0]]
+    if missing_pos:
+        raise InputError(
+            f"{clip.source}: the ROOT joint Hips has no {', '.join(missing_pos)} channel(s) (it has "
+            f"{' '.join(clip.channels[0]) or 'none'}); the root path needs 'CHANNELS 6 Xposition Yposition "
+            "Zposition Zrotation Yrotation Xrotation'"
+        )
+    qw, pw = cmu_world(clip)
+    offsets = _rest_offsets(clip)
+    body_q = {b: mul(qw[:, clip.index(j)], offsets[b]) for b, (j, _) in BONE_MAP.items()}
+    n = len(qw)
+    qpos = np.zeros((n, layout.nq))
+    root = layout.joint("root")
+    qpos[:, root.qposadr : root.qposadr + 3] = pw[:, clip.index("Hips")]
+    qpos[:, root.qposadr + 3 : root.qposadr + 7] = body_q["pelvis"]
+    for name, (parent, child) in JOINT_BODIES.items():
+        qpos[:, layout.joint(name).qpos_slice] = mul(conj(body_q[parent]), body_q[child])
+    return tidy_quaternions(qpos, layout)
+
+
+def tidy_quaternions(qpos: np.ndarray, layout: StateLayout) -> np.ndarray:
+    out = qpos.copy()
+    for slot in layout.quat_slots:
+        q = normalize(out[:, slot])
+        if q[0, 0] < 0:
+            q = -q
+        out[:, slot] = align_hemispheres(q)
+    return out
+
+
+def clamp_hyperextension(qpos: np.ndarray, layout: StateLayout) -> tuple[np.ndarray, int]:
+    """Clamp knee and elbow hyperextension to zero flexion.
+
+    Flexion is `twist_angle(q, axis)` with the axes of `FLEXION_AXES`. Where it is negative, the twist
+    about the hinge axis is removed: q = s t (swing-twist decomposition, t = normalize(w, (v.a) a)),
+    q <- s = q conj(t), which has twist angle exactly 0 and the same swing. Other joints are unchanged.
+
+    Args:
+        qpos: (n, nq) with unit quaternions. layout: the figure's layout.
+    Returns:
+        (clamped qpos (n, nq), number of joint-frames changed).
+    """
+    out = qpos.copy()
+    changed = 0
+    for name, axis in FLEXION_AXES.items():
+        a = np.array(axis)
+        sl = layout.joint(name).qpos_slice
+        q = out[:, sl]
+        bad = twist_angle(q, a) < 0
+        if not bad.any():
+            continue
+        t = np.concatenate([q[bad, :1], (q[bad, 1:] @ a)[:, None] * a], axis=1)
+        t = normalize(t)
+        out[np.flatnonzero(bad), sl] = normalize(mul(q[bad], conj(t)))
+        changed += int(bad.sum())
+    return out, changed

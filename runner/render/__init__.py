@@ -1,0 +1,39 @@
+"""Offscreen video of paths side by side, with the keyframes marked (the paper's figures 11 and 12).
+
+`render_tracks` draws each `Track` (a label and dense `qpos` samples in time) as one panel of the
+video, all panels over the same time range, seen by the same camera, so that the plain spline through
+the keyframes and the optimized path can be compared frame by frame. The keyframes are marked three
+ways: translucent "ghost" figures at the keyframe poses in every panel, a timeline under each panel
+with a tick per keyframe, and a "keyframe k" caption (and a yellow ghost) for a few frames when
+playback passes a keyframe time. Contact sites that are inside a surface (a `Track`'s optional
+`penetration`) are circled in magenta, on top of everything, so a foot hidden inside the step shows.
+
+Sampling: tracks come as dense samples (`times`, `qpos`) at any rate; the video frame at motion time t
+shows each track *linearly interpolated* between its two samples around t (held at its first/last
+sample outside its time range). Quaternions are interpolated component-wise and not normalized here:
+MuJoCo normalizes them when it computes the kinematics, as it does for the spline's own values (see
+DESIGN.md, "State = MuJoCo qpos"). With samples much denser than the video this is exact to the eye.
+
+The model is passed in (loaded once). One `mujoco.Renderer` is made per call, for the one panel size,
+and reused for every panel of every frame; its offscreen buffer is made large enough for the panel
+(`<visual><global offwidth offheight>` raised while the context is created, then restored), and a
+quality preset (`QUALITIES`) trades MuJoCo's defaults for speed on a software renderer. Rendering
+needs an OpenGL backend; without a display that is EGL (Mesa's llvmpipe), which `runner.environment`
+selects through MUJOCO_GL before mujoco is first imported (and `_headless_fallback` if mujoco came first).
+"""
+from runner.render.gl import QUALITIES, Quality
+from runner.render.tracks import IMAGE_SUFFIXES, VIDEO_SUFFIXES, Camera, RenderInfo, Track, frame_times, parse_size, sample_track
+from runner.render.video import render_still, render_tracks
+
+__all__ = [
+    "Camera",
+    "QUALITIES",
+    "Quality",
+    "RenderInfo",
+    "Track",
+    "frame_times",
+    "parse_size",
+    "render_still",
+    "render_tracks",
+    "sample_track",
+]

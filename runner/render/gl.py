@@ -1,0 +1,166 @@
+"""The OpenGL side: quality presets, the offscreen renderer and its headless fallback, projection."""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from PIL import ImageFont
+
+from solver.errors import InputError
+
+
+@dataclass(frozen=True)
+class Quality:
+    """A render quality preset.
+
+    Attributes:
+        caps: upper bounds for fields of the model's `<visual><quality>` (MSAA samples, shadow map
+            size [px], tessellation of round geoms and planes), applied while the GL context is made.
+        reflections: draw reflections in reflective materials (the floor): renders the scene twice.
+    """
+
+    caps: dict
+    reflections: bool
+
+
+QUALITIES = {
+    "fast": Quality({"offsamples": 0, "shadowsize": 1024, "numslices": 12, "numstacks": 6, "numquads": 1},
+                    reflections=False),
+    "high": Quality({}, reflections=True),
+}
+"""Render presets. "fast" (the default) renders a 480x540 panel of the run-and-step scene with 8
+keyframe ghosts in about 30 ms of CPU on Mesa's software renderer (llvmpipe), half of what MuJoCo's
+defaults take: no multisampling, a 1024 px shadow map, coarser capsules and spheres (invisible at
+these sizes), no reflections. "high" uses the model's own `<visual><quality>` settings (MuJoCo's
+defaults: 4x MSAA, 4096 px shadows, reflections), several times slower."""
+
+
+def check_quality(quality: str) -> None:
+    if quality not in QUALITIES:
+        raise InputError(f"unknown render quality {quality!r}; choose one of {list(QUALITIES)}")
+
+
+def make_renderer(model, width: int, height: int, quality: str = "fast"):
+    """A `mujoco.Renderer` of width x height with the `quality` preset's GL context settings.
+
+    The model's offscreen buffer size (raised to the image size) and `<visual><quality>` fields
+    (capped by the preset) are changed only while the rendering context is made, then restored: the
+    caller's model is unchanged.
+
+    Raises:
+        InputError: unknown quality; the OpenGL backend cannot be initialized (no EGL/OSMesa, bad
+            MUJOCO_GL).
+    """
+    check_quality(quality)
+    _headless_fallback()
+    vis = model.vis
+    saved_size = (vis.global_.offwidth, vis.global_.offheight)
+    saved_quality = {name: getattr(vis.quality, name) for name in QUALITIES[quality].caps}
+    vis.global_.offwidth = max(width, vis.global_.offwidth)
+    vis.global_.offheight = max(height, vis.global_.offheight)
+    for name, cap in QUALITIES[quality].caps.items():
+        setattr(vis.quality, name, min(cap, getattr(vis.quality, name)))
+    try:
+        renderer_cls = getattr(mujoco, "Renderer", None)
+        if renderer_cls is None:
+            raise ImportError("mujoco.Renderer could not be imported")
+        return renderer_cls(model, height, width)
+    except Exception as e:  # the GL backends raise ImportError, RuntimeError, mujoco.FatalError, ...
+        raise InputError(
+            f"offscreen rendering failed ({_gl_backend()}; {type(e).__name__}: {e}). "
+            "Offscreen rendering needs EGL (Mesa): set MUJOCO_GL=egl or osmesa; or use --no-render"
+        ) from e
+    finally:
+        vis.global_.offwidth, vis.global_.offheight = saved_size
+        for name, value in saved_quality.items():
+            setattr(vis.quality, name, value)
+
+
+_GLFW_CHOICES = ("", "glfw", "enable", "enabled", "on", "true", "1")
+
+
+def _headless_fallback() -> None:
+    """Use EGL/OSMesa after all if mujoco was imported before MUJOCO_GL was set and there is no display.
+
+    mujoco picks its OpenGL backend once, when first imported. A program (or a test's conftest) that
+    imports mujoco before `solver` gets GLFW, which needs a display. When there is none and
+    MUJOCO_GL now names "egl" or "osmesa" (as `solver` sets it), point mujoco's offscreen context
+    class at that backend, so rendering works whatever the import order. An explicit user choice of
+    backend at import time is left alone; if the switch is not possible, nothing changes and
+    `make_renderer` reports the failure.
+    """
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return
+    want = (os.environ.get("MUJOCO_GL") or "").lower().strip()
+    if want not in ("egl", "osmesa"):
+        return
+    try:
+        from mujoco.rendering.classic import gl_context
+    except ImportError:
+        return
+    used = getattr(gl_context, "_MUJOCO_GL", None)
+    if used is None or used == want or used not in _GLFW_CHOICES:
+        return
+    try:
+        if want == "egl":
+            from mujoco.egl import GLContext
+        else:
+            from mujoco.osmesa import GLContext
+    except Exception:  # noqa: BLE001  (PyOpenGL already bound to another platform, no libEGL, ...)
+        return
+    gl_context.GLContext = GLContext
+    gl_context._MUJOCO_GL = want
+
+
+def _gl_backend() -> str:
+    """Which OpenGL backend mujoco chose: it reads MUJOCO_GL once, when it is first imported."""
+    try:
+        from mujoco.rendering.classic import gl_context
+
+        used = getattr(gl_context, "_MUJOCO_GL", None)
+    except ImportError:
+        used = None
+    now = os.environ.get("MUJOCO_GL")
+    if used is None:
+        return f"MUJOCO_GL={now!r}"
+    text = f"mujoco was imported with MUJOCO_GL={used!r}"
+    if used in _GLFW_CHOICES:
+        text += " (GLFW: needs a display)"
+    now_l = (now or "").lower().strip()
+    if now_l != used and not (now_l in _GLFW_CHOICES and used in _GLFW_CHOICES):
+        text += f"; MUJOCO_GL={now!r} was set after that, too late (import solver or runner before mujoco)"
+    return text
+
+
+def load_font(px: int):
+    try:
+        return ImageFont.load_default(size=px)
+    except (TypeError, OSError, ImportError):  # old Pillow or no FreeType: small bitmap font
+        return ImageFont.load_default()
+
+
+def project_points(glcam, points: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Pixel coordinates (k, 2) (x right, y down) of world points (k, 3) in a rendered panel.
+
+    Uses the scene's OpenGL camera (frustum at the near plane, half-width from the aspect ratio, as
+    `mjr_render` sets it). Points behind the camera get NaN.
+    """
+    pos = np.asarray(glcam.pos, float)
+    fwd = np.asarray(glcam.forward, float)
+    up = np.asarray(glcam.up, float)
+    right = np.cross(fwd, up)
+    rel = points - pos
+    z = rel @ fwd
+    near, top, bottom = glcam.frustum_near, glcam.frustum_top, glcam.frustum_bottom
+    half = glcam.frustum_width or 0.5 * width / height * (top - bottom)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xn = (rel @ right) * near / z
+        yn = (rel @ up) * near / z
+    px = (xn - (glcam.frustum_center - half)) / (2 * half) * width
+    py = (top - yn) / (top - bottom) * height
+    out = np.stack([px, py], axis=1)
+    out[z <= 0] = np.nan
+    return out

@@ -1,0 +1,240 @@
+"""Tracks (a label and dense qpos samples in time), the camera and its path, frame times, sizes."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import mujoco
+import numpy as np
+
+from solver.errors import InputError
+
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """One path to show as a panel: dense `qpos` samples in time, and a label.
+
+    Attributes:
+        label: panel caption, e.g. "plain spline" or "optimized".
+        times: (n,) [s] strictly increasing sample times.
+        qpos: (n, nq) MuJoCo `qpos` at those times (quaternions need not be unit).
+        penetration: optional (n, s) [m] depth of each of `sites` inside a surface (>0 inside,
+            <=0 outside), e.g. from the ground-penetration term (eq. 12). Where deeper than
+            `PENETRATION_SHOWN` the site is circled in magenta and its body drawn magenta.
+        sites: s site names, the columns of `penetration` (e.g. "l_heel", "l_toe", ...).
+
+    Raises:
+        InputError: shapes or values that do not fit (checked on construction; nq against the model
+            in `render_tracks`).
+    """
+
+    label: str
+    times: np.ndarray
+    qpos: np.ndarray
+    penetration: np.ndarray | None = None
+    sites: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        times = np.asarray(self.times, dtype=float)
+        qpos = np.asarray(self.qpos, dtype=float)
+        name = f"track {self.label!r}"
+        if times.ndim != 1 or times.size == 0:
+            raise InputError(f"{name}: times must have shape (n,) with n >= 1; got shape {times.shape}")
+        if qpos.ndim != 2 or qpos.shape[0] != times.size:
+            raise InputError(
+                f"{name}: qpos must have shape (n, nq) = ({times.size}, nq) to match times; "
+                f"got shape {qpos.shape}")
+        if not (np.all(np.isfinite(times)) and np.all(np.isfinite(qpos))):
+            raise InputError(f"{name}: times and qpos must be finite (no NaN or inf)")
+        if times.size > 1 and np.any(np.diff(times) <= 0):
+            i = int(np.flatnonzero(np.diff(times) <= 0)[0])
+            raise InputError(
+                f"{name}: times must be strictly increasing; times[{i}] = {times[i]:g} s, "
+                f"times[{i + 1}] = {times[i + 1]:g} s")
+        sites = tuple(self.sites)
+        penetration = self.penetration
+        if penetration is not None:
+            penetration = np.asarray(penetration, dtype=float)
+            if penetration.ndim == 1:
+                penetration = penetration[:, None]
+            if penetration.shape != (times.size, len(sites)):
+                raise InputError(
+                    f"{name}: penetration must have shape (n, len(sites)) = ({times.size}, {len(sites)}); "
+                    f"got shape {penetration.shape}")
+        elif sites:
+            raise InputError(f"{name}: sites are given but penetration is not")
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "qpos", qpos)
+        object.__setattr__(self, "penetration", penetration)
+        object.__setattr__(self, "sites", sites)
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A free camera that follows the figure's root body (the pelvis), the same for every panel.
+
+    Attributes:
+        distance: [m] from the look-at point.
+        azimuth: [deg] MuJoCo free-camera azimuth. -90 puts the camera on +y, the left of a figure
+            facing +x, looking along -y: the step is seen in profile and the figure moves from right
+            to left on screen (+90: from its right, moving left to right).
+        elevation: [deg], negative looks down.
+        smoothing: [s] of motion time: the standard deviation of the Gaussian that smooths the
+            root's path into the look-at path (removes the running bob). 0: no smoothing.
+        height: [m] fixed look-at height; None follows the root's height (smoothed).
+    """
+
+    distance: float = 4.0
+    azimuth: float = -90.0
+    elevation: float = -12.0
+    smoothing: float = 0.3
+    height: float | None = None
+
+
+@dataclass(frozen=True)
+class RenderInfo:
+    """What `render_tracks` wrote.
+
+    Attributes:
+        path: the video file.
+        n_frames: number of video frames.
+        video_time_s: [s] length of the video (n_frames / fps).
+        wall_time_s: [s] time the call took.
+        ms_per_panel: [ms] mean time to pose, render and read back one panel (excludes encoding).
+        size: (width, height) [px] of the video.
+    """
+
+    path: Path
+    n_frames: int
+    video_time_s: float
+    wall_time_s: float
+    ms_per_panel: float
+    size: tuple[int, int]
+
+
+def parse_size(size) -> tuple[int, int]:
+    """Read an image size: a "WxH" string (e.g. "960x540") or a (width, height) pair.
+
+    Returns:
+        (width, height) [px], positive integers.
+
+    Raises:
+        InputError: anything else, naming what was received.
+    """
+    if isinstance(size, str):
+        parts = size.lower().replace("×", "x").split("x")
+        try:
+            if len(parts) != 2:
+                raise ValueError
+            w, h = (int(p.strip()) for p in parts)
+        except ValueError:
+            raise InputError(f"size must be WIDTHxHEIGHT in pixels, e.g. 960x540; got {size!r}") from None
+    else:
+        try:
+            w, h = size
+        except (TypeError, ValueError):
+            raise InputError(
+                f"size must be (width, height) in pixels, e.g. (960, 540); got {size!r}") from None
+        if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in (w, h)):
+            raise InputError(f"size must be two integers (width, height) in pixels; got {size!r}")
+        w, h = int(w), int(h)
+    if w <= 0 or h <= 0:
+        raise InputError(f"size must be positive, e.g. 960x540; got {w}x{h}")
+    return w, h
+
+
+def frame_times(t0: float, t1: float, fps: float, speed: float) -> np.ndarray:
+    """Motion times of the video frames: from t0 to t1 in steps of speed / fps, the last one at t1.
+
+    Args:
+        t0, t1: [s] first and last motion time, t1 >= t0.
+        fps: [1/s] video frame rate, > 0.
+        speed: playback speed (motion seconds per video second), > 0; 0.5 is half speed.
+
+    Returns:
+        (n_frames,) [s]; n_frames = ceil((t1 - t0) * fps / speed) + 1.
+    """
+    dt = speed / fps
+    n = int(math.ceil((t1 - t0) / dt - 1e-9)) + 1
+    return np.minimum(t0 + dt * np.arange(n), t1)
+
+
+def sample_track(track: Track, times: np.ndarray) -> np.ndarray:
+    """The track's `qpos` at `times`, linearly interpolated between samples, held outside its range.
+
+    Args:
+        track: the path.
+        times: (k,) [s].
+
+    Returns:
+        (k, nq) qpos (quaternions not renormalized; MuJoCo normalizes them in the kinematics).
+    """
+    return interpolate_samples(track.times, track.qpos, np.asarray(times, dtype=float))
+
+
+def interpolate_samples(t: np.ndarray, y: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Piecewise-linear interpolation of rows y (n, d) given at t (n,) at times (k,), clamped ends."""
+    if t.size == 1:
+        return np.repeat(y, times.size, axis=0)
+    tc = np.clip(times, t[0], t[-1])
+    i = np.clip(np.searchsorted(t, tc, side="right") - 1, 0, t.size - 2)
+    w = ((tc - t[i]) / (t[i + 1] - t[i]))[:, None]
+    return (1.0 - w) * y[i] + w * y[i + 1]
+
+
+def _smooth(x: np.ndarray, dt: float, sigma: float) -> np.ndarray:
+    """Gaussian smoothing of a path x (n, 3) sampled every dt [s], sigma [s].
+
+    The ends are padded by linear extrapolation (velocity averaged over about sigma), so a figure
+    moving at constant speed stays centred at the start and end instead of the camera lagging.
+    """
+    n = x.shape[0]
+    if sigma <= 0 or n < 3:
+        return x.copy()
+    r = int(math.ceil(3.0 * sigma / dt))
+    m = max(1, min(n - 1, int(round(sigma / dt))))
+    v0 = (x[m] - x[0]) / m
+    v1 = (x[-1] - x[-1 - m]) / m
+    steps = np.arange(1, r + 1)[:, None]
+    padded = np.concatenate([x[0] - v0 * steps[::-1], x, x[-1] + v1 * steps])
+    k = np.exp(-0.5 * (np.arange(-r, r + 1) * dt / sigma) ** 2)
+    k /= k.sum()
+    return np.stack([np.convolve(padded[:, j], k, mode="valid") for j in range(x.shape[1])], axis=1)
+
+
+def root_body(model) -> int:
+    """The body the camera follows: the one with the free joint (the pelvis), else the first body."""
+    free = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE)
+    if free.size:
+        return int(model.jnt_bodyid[free[0]])
+    return 1 if model.nbody > 1 else 0
+
+
+def forward_direction(model, data, qpos) -> None:
+    """Pose `data` at qpos: kinematics, centres of mass, cameras and lights (no collision, no dynamics)."""
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    mujoco.mj_camlight(model, data)
+
+
+def lookat_path(model, data, qposes: Sequence[np.ndarray], dt: float, camera: Camera) -> np.ndarray:
+    """(n, 3) [m] look-at points: the root body's position averaged over the tracks, smoothed."""
+    root = root_body(model)
+    pos = np.zeros((qposes[0].shape[0], 3))
+    for q in qposes:
+        for i in range(q.shape[0]):
+            data.qpos[:] = q[i]
+            mujoco.mj_kinematics(model, data)
+            pos[i] += data.xpos[root]
+    pos /= len(qposes)
+    pos = _smooth(pos, dt, camera.smoothing)
+    if camera.height is not None:
+        pos[:, 2] = camera.height
+    return pos

@@ -1,0 +1,200 @@
+"""`render_tracks` (the side-by-side video) and `render_still` (one image)."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Callable, Sequence
+
+import imageio.v2 as iio
+import numpy as np
+from PIL import Image, ImageDraw
+
+from runner.files import atomic_output
+from solver.errors import InputError
+from runner.files import check_writable_dir
+from runner.render.gl import check_quality, load_font, make_renderer
+from runner.render.overlays import KEYFRAME_CAPTION_SECONDS, Overlay, Panel, WHITE, check_keyframes, check_model_fit, deep_sites, draw_text, ghost_data, positive
+from runner.render.tracks import Camera, IMAGE_SUFFIXES, RenderInfo, Track, VIDEO_SUFFIXES, forward_direction, frame_times, interpolate_samples, lookat_path, parse_size, root_body, sample_track
+
+
+def render_tracks(
+    model,
+    tracks: Sequence[Track],
+    out_path,
+    *,
+    fps: float = 30,
+    size=(960, 540),
+    speed: float = 0.5,
+    keyframe_times=None,
+    keyframe_qpos=None,
+    title: str | None = None,
+    camera: Camera = Camera(),
+    quality: str = "fast",
+    progress: Callable[[int, int], None] | None = None,
+) -> RenderInfo:
+    """Write a video of the tracks side by side, keyframes marked (paper figures 11, 12).
+
+    Every track is a panel of width size[0] // len(tracks) and height size[1] (a remainder of the
+    width is split as dark margins), shown over the union of the tracks' time ranges at `speed` times
+    real time. Each panel has its label, the time counter and a timeline with a tick per keyframe;
+    translucent ghosts of the keyframe poses are drawn in every panel, and the ghost and a
+    "keyframe k" caption (k from 1) light up for `KEYFRAME_CAPTION_SECONDS` of video when playback
+    passes keyframe k. All panels use one camera, following the root body (see `Camera`).
+
+    Args:
+        model: MjModel of the scene with the figure (loaded once by the caller; not changed).
+        tracks: the paths, one panel each, left to right.
+        out_path: the video file (.mp4, .mkv or .mov; H.264). Written atomically: on any error an
+            earlier file there is left intact.
+        fps: [1/s] video frame rate, > 0.
+        size: (width, height) [px] or "WxH" of the whole video, both even (H.264 with 4:2:0 colour).
+        speed: playback speed, > 0 (0.5: half speed, so a 1.7 s motion lasts 3.4 s).
+        keyframe_times: (m,) [s] keyframe times, or None for no keyframe marks.
+        keyframe_qpos: (m, nq) keyframe poses for the ghosts, the same in every panel; None: each
+            panel's ghosts are its own track at `keyframe_times` (for full keyframes the same poses;
+            for partial keyframes it shows how each track completes them).
+        title: optional caption at the top centre of the video.
+        camera: camera distance, angles and smoothing.
+        quality: "fast" or "high", see `QUALITIES`.
+        progress: optional callback, called after each frame as progress(frames_done, n_frames).
+
+    Returns:
+        RenderInfo (path, n_frames, video_time_s, wall_time_s, ms_per_panel, size).
+
+    Raises:
+        InputError: bad size, fps or speed; an output suffix other than .mp4/.mkv/.mov; an output
+            folder that cannot be written; tracks whose nq does not match the model; keyframe arrays
+            of the wrong shape; no working OpenGL backend (set MUJOCO_GL=egl or osmesa).
+    """
+    wall0 = time.perf_counter()
+    out_path = Path(out_path)
+    width, height = parse_size(size)
+    fps, speed = positive(fps, "fps"), positive(speed, "speed")
+    tracks = list(tracks)
+    if not tracks:
+        raise InputError("render_tracks needs at least one track")
+    check_quality(quality)
+    if out_path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise InputError(f"video file must end in one of {list(VIDEO_SUFFIXES)}; got {str(out_path)!r}")
+    if width % 2 or height % 2:
+        raise InputError(f"video size must be even in both directions (H.264 4:2:0); got {width}x{height}")
+    panel_w = width // len(tracks)
+    if panel_w < 16 or height < 16:
+        raise InputError(
+            f"size {width}x{height} leaves panels of {panel_w}x{height} px for {len(tracks)} tracks; "
+            "each panel needs at least 16x16")
+    site_ids = [check_model_fit(model, tr) for tr in tracks]
+    kf_t, kf_q = check_keyframes(model, keyframe_times, keyframe_qpos)
+    check_writable_dir(out_path)
+
+    t0 = min(float(tr.times[0]) for tr in tracks)
+    t1 = max(float(tr.times[-1]) for tr in tracks)
+    times = frame_times(t0, t1, fps, speed)
+    n = times.size
+    qposes = [sample_track(tr, times) for tr in tracks]
+    depths = [None if tr.penetration is None else interpolate_samples(tr.times, tr.penetration, times) for tr in tracks]
+
+    renderer = make_renderer(model, panel_w, height, quality)
+    try:
+        panel = Panel(model, renderer, quality)
+        lookat = lookat_path(model, panel.data, qposes, speed / fps, camera)
+        ghosts = ghost_data(model, tracks, kf_t, kf_q)
+        caption_frames = max(1, int(round(KEYFRAME_CAPTION_SECONDS * fps)))
+        passed = np.searchsorted(times, kf_t - 1e-9, side="left") if kf_t is not None else np.zeros(0, int)
+        overlay = Overlay(width, height, panel_w, len(tracks), title, t0, t1, kf_t)
+
+        render_seconds = 0.0
+        with atomic_output(out_path) as tmp:
+            writer = iio.get_writer(
+                tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=8,
+                macro_block_size=1, ffmpeg_log_level="error", output_params=["-preset", "veryfast"])
+            try:
+                for i in range(n):
+                    active = np.flatnonzero((passed <= i) & (i < passed + caption_frames))
+                    current = int(active[-1]) if active.size else -1
+                    images, marks = [], []
+                    r0 = time.perf_counter()
+                    for p, tr in enumerate(tracks):
+                        panel.set_camera(camera, lookat[i])
+                        deep = deep_sites(depths[p], i, site_ids[p])
+                        marked_bodies = set(int(model.site_bodyid[s]) for s, _ in deep)
+                        images.append(panel.render(qposes[p][i], ghosts[p], current, marked_bodies))
+                        if deep:
+                            xy = panel.project(np.array([panel.data.site_xpos[s] for s, _ in deep]))
+                            marks.append((xy, max(d for _, d in deep)))
+                        else:
+                            marks.append(None)
+                    render_seconds += time.perf_counter() - r0
+                    frame = overlay.compose(images, [tr.label for tr in tracks], times[i], speed,
+                                            current, marks)
+                    writer.append_data(frame)
+                    if progress is not None:
+                        progress(i + 1, n)
+            finally:
+                writer.close()
+    finally:
+        renderer.close()
+    return RenderInfo(
+        path=out_path, n_frames=n, video_time_s=n / fps,
+        wall_time_s=time.perf_counter() - wall0,
+        ms_per_panel=1000.0 * render_seconds / (n * len(tracks)), size=(width, height))
+
+
+def render_still(
+    model,
+    qpos,
+    out_path,
+    *,
+    size=(960, 540),
+    camera: Camera = Camera(),
+    lookat=None,
+    label: str | None = None,
+    quality: str = "high",
+) -> Path:
+    """Write one image of the model at one pose (for docs, and to look at the figure).
+
+    Args:
+        model: MjModel (not changed: the rendering context gets a large enough buffer).
+        qpos: (nq,) the pose.
+        out_path: .png, .jpg or .jpeg; written atomically.
+        size: (width, height) [px] or "WxH".
+        camera: camera distance and angles (`smoothing` is unused).
+        lookat: (3,) [m] point looked at; None: the root body's position (height from
+            `camera.height` if set).
+        label: optional caption at the top left.
+        quality: "high" (default: one image, take the model's own settings) or "fast".
+
+    Returns:
+        The path written.
+
+    Raises:
+        InputError: bad size, qpos shape, suffix; unwritable folder; no OpenGL backend.
+    """
+    out_path = Path(out_path)
+    width, height = parse_size(size)
+    qpos = np.asarray(qpos, dtype=float)
+    if qpos.shape != (model.nq,):
+        raise InputError(f"qpos must have shape (nq,) = ({model.nq},); got shape {qpos.shape}")
+    check_quality(quality)
+    if out_path.suffix.lower() not in IMAGE_SUFFIXES:
+        raise InputError(f"image file must end in one of {list(IMAGE_SUFFIXES)}; got {str(out_path)!r}")
+    check_writable_dir(out_path)
+    renderer = make_renderer(model, width, height, quality)
+    try:
+        panel = Panel(model, renderer, quality)
+        if lookat is None:
+            forward_direction(model, panel.data, qpos)
+            lookat = panel.data.xpos[root_body(model)].copy()
+            if camera.height is not None:
+                lookat[2] = camera.height
+        panel.set_camera(camera, np.asarray(lookat, dtype=float))
+        image = panel.render(qpos)
+    finally:
+        renderer.close()
+    if label:
+        im = Image.fromarray(image)
+        draw_text(ImageDraw.Draw(im), (10, 8), label, load_font(max(11, height // 28)), WHITE)
+        image = np.asarray(im)
+    with atomic_output(out_path) as tmp:
+        iio.imwrite(tmp, image)
+    return out_path

@@ -1,0 +1,108 @@
+"""Benchmark workloads of the figure (`dynsplines bench run-and-step`, `dynsplines bench refine`): solve a
+keyframe problem several times and time it, and compare adaptive with global subdivision.
+
+Every function takes the model, keyframes, layout and options as arguments (no files read here) and
+returns data; runner/commands/bench.py loads the showcase clip and prints.
+"""
+from __future__ import annotations
+
+import statistics
+import time
+
+from solver.errors import InputError
+from solver.frames import FrameSet
+from solver.problem import figure_objective
+from solver.solve import SCORES, SolveOptions, solve
+
+#: the geometric terms (the default objective), the baseline of the dynamics terms' cost
+GEOMETRIC = "penetration,unit,bending,smooth"
+
+def time_solves(model, keyframes, layout, weights: dict, options: SolveOptions, rate: float, repeat: int) -> dict:
+    """Solve `repeat` times (at least once) with `options`; the timings and the last objective.
+
+    Args:
+        model: MjModel of the scene. keyframes: Keyframes. layout: StateLayout. weights: {term: weight}.
+        options: SolveOptions (the command passes exactly what `dynsplines animate` runs).
+        rate: quadrature points per second. repeat: runs.
+    Returns:
+        dict: wall_median_s, wall_all_s (list) [s], evals (median), per_eval_ms (median of wall / evals),
+        E_final, frames (count at the end), objective (the last Objective), solution (the last Solution).
+    """
+    runs = []
+    for _ in range(max(1, repeat)):
+        objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate)
+        initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+        sol = solve(objective, initial, options)
+        runs.append(sol)
+    walls = [s.wall_time_s for s in runs]
+    evals = [s.n_evals for s in runs]
+    return {
+        "wall_median_s": statistics.median(walls),
+        "wall_all_s": walls,
+        "evals": int(statistics.median(evals)),
+        "per_eval_ms": 1e3 * statistics.median([s.wall_time_s / max(1, s.n_evals) for s in runs]),
+        "E_final": runs[-1].E_final,
+        "frames": runs[-1].frames.count,
+        "objective": objective,
+        "solution": runs[-1],
+    }
+
+
+
+def per_eval_ms(objective, frames, n: int = 30) -> float:
+    """Median wall time [ms] of one value + gradient evaluation of `objective` on `frames`."""
+    objective.evaluate(frames.times, frames.values, grad=True)  # warm the spline-matrix cache
+    times = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        objective.evaluate(frames.times, frames.values, grad=True)
+        times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+
+def compare_refinement(model, keyframes, layout, weights: dict, counts, scores=("gradient", "decrease"),
+                       rate: float = 400.0, ftol: float = 1e-6) -> list[dict]:
+    """Adaptive against global subdivision at equal numbers of variable frames (paper fig. 10's
+    experiment, on any keyframes).
+
+    Every run starts from the plain spline with the same renormalization scales (eq. 7, from the
+    plain spline) and *fixed* weights (no penalty continuation: it would change the objective by a
+    different amount in each run). Global: n frames in each of the k keyframe intervals, one
+    optimization. Adaptive: one frame per interval, then rounds that add frames where the weak-form
+    Euler-Lagrange score ranks segments highest until `count` variable frames, optimizing after each
+    round. The final objectives compare: the same terms, weights and scales (the root term's lagged
+    flight indicator equals the path's own at the end of a solve, see `RootResidual`).
+
+    Args:
+        model, keyframes, layout: the problem. weights: {term: weight}. counts: variable-frame
+            counts, each a multiple of the number of keyframe intervals k.
+        scores: adaptive rankings to run (`SolveOptions.score`: "gradient", "decrease").
+        rate: quadrature points per second. ftol: relative objective tolerance of each optimization.
+    Returns:
+        one dict per count: "count", and per method ("global", "adaptive-<score>"): E (final
+        objective), E_initial, variable (frames), evals, wall_s.
+    Raises:
+        InputError: a count that is not a positive multiple of k, or an unknown score.
+    """
+    k = keyframes.count - 1
+    for sc in scores:
+        if sc not in SCORES:
+            raise InputError(f"unknown subdivision score {sc!r}; choose from: {', '.join(SCORES)}")
+    rows = []
+    for count in counts:
+        if count <= 0 or count % k:
+            raise InputError(f"variable-frame count {count} is not a positive multiple of the {k} keyframe intervals")
+        row = {"count": count}
+        methods = [("global", SolveOptions(subdivision="global", per_segment=count // k, limits=(), ftol_rel=ftol,
+                                           precondition=True))]
+        methods += [(f"adaptive-{sc}", SolveOptions(subdivision="adaptive", per_segment=1, rounds=64,
+                                                     max_frames=count, limits=(), ftol_rel=ftol, score=sc,
+                                                     precondition=True)) for sc in scores]
+        for kind, options in methods:
+            objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate)
+            sol = solve(objective, FrameSet.from_keyframes(keyframes, layout.quat_slots), options)
+            row[kind] = {"E": sol.E_final, "variable": sol.frames.n_variable, "evals": sol.n_evals,
+                         "wall_s": sol.wall_time_s, "E_initial": sol.E_initial}
+        rows.append(row)
+    return rows
