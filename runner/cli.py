@@ -3,15 +3,7 @@
 Each subcommand lives in its own module of runner/commands/ with `register(subparsers)`, which adds its
 parser and sets `func` to a function(args) -> exit code. No algorithm here.
 
-Exit codes (runner/exit_codes.py):
-    0   success (also when --max-time ended the optimization: the best path so far is written)
-    1   internal error (a bug: please report it with the --debug traceback)
-    2   bad input (a file, field or option); the message says what and how to fix it
-    3   the optimization failed partway (a non-finite objective or gradient, named by term, or an
-        optimizer failure); the best path before it (it meets every keyframe) and the outputs were written
-    130 interrupted (Ctrl-C); the best path so far and the requested outputs were written (a second
-        Ctrl-C aborts at once and writes nothing; Ctrl-C while rendering leaves any earlier video as it was)
-
+Exit codes: runner/exit_codes.py (0 success, 1 internal error, 2 bad input, 3 failed partway, 130 Ctrl-C).
 A user mistake prints one line, "dynsplines: error: ...", never a traceback; --debug shows it.
 """
 from __future__ import annotations

@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+
 class StopRequest:
     """Ctrl-C during the optimization sets a flag (the solver returns its best path); a second
     Ctrl-C aborts at once."""
@@ -30,7 +31,6 @@ class StopRequest:
 
     def __call__(self) -> bool:
         return self.requested
-
 
 
 class Progress:
@@ -77,7 +77,6 @@ class Progress:
         if not self.quiet and self.tty:
             self.stream.write("\n")
             self.stream.flush()
-
 
 
 def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None) -> str:

@@ -55,10 +55,8 @@ def compute(times, quats, n_regions: int = 10) -> dict:
     return {label: out[label] for label in CURVES}
 
 
-
 def _deviation(frames, n_regions):
     return deviation_by_region(frames.times, frames.values, n_regions=n_regions, normalized=True)
-
 
 
 def figure10(times, quats, out_png, result=None, source: str = "keyframes") -> dict:
@@ -105,7 +103,6 @@ def figure10(times, quats, out_png, result=None, source: str = "keyframes") -> d
         fig.savefig(tmp, format="png")
     plt.close(fig)
     return rows
-
 
 
 def format_table(rows: dict) -> str:

@@ -18,6 +18,7 @@ import numpy as np
 from runner.files import atomic_output
 from solver.errors import InputError
 
+
 def read_keyframes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Read an orientation keyframe file.
 
@@ -58,16 +59,13 @@ def read_keyframes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(times, dtype=float), np.asarray(quats, dtype=float).reshape(-1, 4)
 
 
-
 def _is_number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
-
 
 
 def _short(v) -> str:
     s = json.dumps(v)
     return s if len(s) <= 60 else s[:57] + "..."
-
 
 
 def write_result(path: str | Path, result) -> None:

@@ -13,6 +13,7 @@ class OneLineParser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
+
 def _bounded(kind, ok, requirement: str):
     noun = "a whole number" if kind is int else "a number"
 

@@ -18,6 +18,7 @@ from runner.files import atomic_output
 from runner.paths import REPO, repo_relative
 from solver.errors import InputError
 
+
 def versions() -> dict:
     """Versions of the software that made a result (recorded in the .npz), and the BLAS thread settings:
     a path is bit-identical for the same inputs, options, versions and BLAS thread count (the command
@@ -34,7 +35,6 @@ def versions() -> dict:
     out["blas_threads_env"] = {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
                                                               "MKL_NUM_THREADS")}
     return out
-
 
 
 def save_path_npz(path, solution, keyframes, reference, scene_path, weights, options, metrics, args=None):
@@ -70,7 +70,6 @@ def save_path_npz(path, solution, keyframes, reference, scene_path, weights, opt
     except OSError as e:  # e.g. a full disk: the temporary file is gone, an earlier file is unchanged
         raise InputError(f"cannot write {path}: {e.strerror or e}; an earlier file there is unchanged; "
                          "free some space or choose another --save-path") from None
-
 
 
 #: the fields every saved path has (`save_path_npz` writes them, `load_saved_path` checks them)

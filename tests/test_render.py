@@ -251,7 +251,7 @@ def test_missing_opengl_is_explained(model, tmp_path, monkeypatch):
         def __init__(self, *args, **kwargs):
             raise RuntimeError("Cannot initialize a EGL device display")
 
-    monkeypatch.setattr(render.mujoco, "Renderer", NoGL)
+    monkeypatch.setattr(render.gl.mujoco, "Renderer", NoGL)
     t, q = _path()
     message = r"needs EGL \(Mesa\): set MUJOCO_GL=egl or osmesa; or use --no-render"
     with pytest.raises(InputError, match=message):

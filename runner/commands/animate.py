@@ -20,7 +20,7 @@ from runner.saved_path import save_path_npz
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.keyframe_file import read_document, read_keyframes
-from solver.layout import StateLayout
+from solver.layout import CONTACT_SITES, StateLayout
 from solver.metrics import path_metrics, sample_times
 from solver.model import load_model
 from solver.optimize import ALGORITHMS, Status
@@ -41,7 +41,6 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
-
 def _weight(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     if not sep:
@@ -50,7 +49,6 @@ def _weight(text: str) -> tuple[str, float]:
         return name.strip(), float(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"--weight {text!r}: {value!r} is not a number") from None
-
 
 
 def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> None:
@@ -93,7 +91,6 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
-
 def register(sub) -> None:
     p = sub.add_parser("animate", help="optimize the in-betweens of a keyframe file and render them",
                        description="Optimize the in-betweens of KEYFRAMES (a dynsplines keyframe file) in a "
@@ -110,7 +107,6 @@ def register(sub) -> None:
     q.set_defaults(func=run_animate, keyframes=RUN_AND_STEP_KEYFRAMES, scene=None)
 
 
-
 # ------------------------------------------------------------------------------------------ loading
 def load_problem(keyframes_path: Path, scene: Path | None):
     """(keyframes, info, model, layout) for a keyframe file and an optional scene override."""
@@ -125,7 +121,7 @@ def load_problem(keyframes_path: Path, scene: Path | None):
     layout = StateLayout.from_model(model)
     if not any(j.kind == "free" for j in layout.joints):
         raise InputError(f"scene {scene_path} has no free joint: does it include the figure (humanoid39.xml)?")
-    sites = ("l_heel", "l_toe", "r_heel", "r_toe")
+    sites = CONTACT_SITES
     missing = [s for s in sites if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0]
     if missing:
         raise InputError(f"scene {scene_path} has no contact site(s) {', '.join(map(repr, missing))} (the "
@@ -134,14 +130,12 @@ def load_problem(keyframes_path: Path, scene: Path | None):
     return keyframes, info, model, layout, scene_path
 
 
-
 def _peek_scene(path: Path) -> Path | None:
     data = read_document(path)  # InputError naming the file for anything unreadable
     scene = data.get("scene") if isinstance(data, dict) else None
     if isinstance(scene, str) and "\x00" in scene:
         raise InputError(f"{path}: field 'scene' is {scene!r}; give a path relative to the keyframe file")
     return (path.parent / scene).resolve() if isinstance(scene, str) and scene else None
-
 
 
 # -------------------------------------------------------------------------------------------- run
@@ -155,13 +149,11 @@ def solve_options(args, weights: dict) -> SolveOptions:
     )
 
 
-
 def default_args() -> argparse.Namespace:
     """The options `animate` uses when none are given."""
     p = argparse.ArgumentParser()
     add_options(p)
     return p.parse_args([])
-
 
 
 def run_animate(args) -> int:
@@ -241,7 +233,6 @@ def run_animate(args) -> int:
     return code
 
 
-
 def _check_video_out(out, size) -> None:
     """The video's name and size are checked before the optimization (render_tracks checks again)."""
     from runner.render import VIDEO_SUFFIXES, parse_size
@@ -255,11 +246,10 @@ def _check_video_out(out, size) -> None:
                          f"{w + w % 2}x{h + h % 2}")
 
 
-
 def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
     """Keyframes are hard constraints: a contact site a keyframe puts inside a surface stays there.
     Say so before optimizing (the optimizer can only fix the in-betweens)."""
-    from solver.terms.penetration import CONTACT_SITES, Penetration
+    from solver.terms.penetration import Penetration
 
     depth = Penetration(model, margin=0.0).depths(initial.values[initial.is_keyframe])  # (k, 4) [m]
     for k, row in enumerate(depth):
@@ -268,7 +258,6 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
             print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) puts "
                   f"{site} {1000 * row.max():.1f} mm inside a surface; keyframes are met exactly, so that "
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
-
 
 
 def _reference(info, model):
@@ -283,11 +272,10 @@ def _reference(info, model):
     return load_bvh_reference(path, model)
 
 
-
 def render_video(out, model, solution, keyframes, args):
     """Side-by-side video of the plain spline and the optimized path, keyframes marked."""
     from runner.render import Track, render_tracks
-    from solver.terms.penetration import CONTACT_SITES, Penetration
+    from solver.terms.penetration import Penetration
 
     t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
     pen = Penetration(model, margin=0.0)

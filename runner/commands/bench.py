@@ -22,6 +22,7 @@ from solver.bench.figure import GEOMETRIC, compare_refinement, per_eval_ms, time
 from solver.errors import InputError
 from solver.problem import parse_terms
 
+
 def register(sub) -> None:
     p = sub.add_parser("bench", help="benchmarks: run-and-step, orient")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
@@ -44,7 +45,6 @@ def register(sub) -> None:
     o.set_defaults(func=bench_orient)
 
 
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the options of `dynsplines bench orient` to a parser."""
     p.add_argument("--sets", default=orient_workload.DEFAULT_SETS,
@@ -57,7 +57,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tradeoff", action="store_true",
                    help="instead: the table of gap and max |1 - |q|| against variable frames, for both "
                    "objective forms (docs/orient.md), on --sets (default here: large_nonuniform,moderate)")
-
 
 
 def bench_orient(args) -> int:
@@ -84,12 +83,6 @@ def bench_orient(args) -> int:
                                                    for k, v in row.items()))
     return 0
 
-
-def bench_orient_main(argv: list[str] | None = None) -> int:
-    """`dynsplines bench orient` as a function: parse `argv`, run. Returns 0."""
-    p = argparse.ArgumentParser(prog="dynsplines bench orient", description=orient_workload.__doc__.splitlines()[0])
-    add_arguments(p)
-    return bench_orient(p.parse_args(argv))
 
 def bench_run_and_step(args) -> int:
     keyframes, info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
@@ -125,7 +118,6 @@ def bench_run_and_step(args) -> int:
               f"optimization wall time {other['wall_median_s'] / g['wall_median_s']:.2f}x, evaluations "
               f"{other['evals'] / max(1, g['evals']):.2f}x")
     return 0
-
 
 
 def bench_refine(args) -> int:

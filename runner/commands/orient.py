@@ -17,6 +17,7 @@ from solver.errors import InputError
 from solver.orient import FORMS, default_options, orient
 from solver.solve import SUBDIVISIONS
 
+
 def register(sub) -> None:
     """Add the `orient` subcommand to the `dynsplines` parser."""
     p = sub.add_parser(
@@ -49,7 +50,6 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-
 def run(args) -> int:
     """The `orient` subcommand. Returns 0; raises InputError on bad input."""
     out = Path(args.out)
@@ -77,7 +77,6 @@ def run(args) -> int:
             for name, dev in rows.items():
                 print(f"  {name:<28} total {dev.sum():9.4g}  max tenth {dev.max():9.4g}")
     return 0
-
 
 
 def summary(result, out=None) -> str:

@@ -21,7 +21,6 @@ POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 
 
-
 @dataclass(frozen=True)
 class BvhClip:
     """A parsed BVH clip (CMU units, BVH axes), before retargeting.

@@ -17,7 +17,6 @@ from solver.layout import StateLayout
 LOWER_BODY_JOINTS: tuple[str, ...] = ("root", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle")
 
 
-
 #: default `partial` argument of `keyframes_from_reference`: the middle keyframe fixes only the root and
 #: the legs.
 MIDDLE_LOWER_BODY = "middle"

@@ -10,10 +10,11 @@ from runner.mocap.contacts import correct_root_height
 from runner.mocap.retarget import JOINT_BODIES, Reference, tidy_quaternions, clamp_hyperextension, retarget
 from solver.layout import StateLayout
 
+
 def load_bvh_reference(path: str | Path, model) -> Reference:
     """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion.
 
-    Steps (module docstring): parse (bvhio), drop the synthetic T-pose first frame, forward kinematics
+    Steps (runner/mocap/retarget.py docstring): parse (bvhio), drop the synthetic T-pose first frame, forward kinematics
     in metres and MuJoCo axes, rest-offset retargeting of body orientations, local joint quaternions
     (unit, w x y z, hemisphere-consistent), knee/elbow hyperextension clamped to 0 flexion
     (`clamp_hyperextension`), root height corrected so feet in contact stand on the floor or the box

@@ -17,6 +17,7 @@ from solver.solve import SCORES, SolveOptions, solve
 #: the geometric terms (the default objective), the baseline of the dynamics terms' cost
 GEOMETRIC = "penetration,unit,bending,smooth"
 
+
 def time_solves(model, keyframes, layout, weights: dict, options: SolveOptions, rate: float, repeat: int) -> dict:
     """Solve `repeat` times (at least once) with `options`; the timings and the last objective.
 
@@ -48,7 +49,6 @@ def time_solves(model, keyframes, layout, weights: dict, options: SolveOptions, 
     }
 
 
-
 def per_eval_ms(objective, frames, n: int = 30) -> float:
     """Median wall time [ms] of one value + gradient evaluation of `objective` on `frames`."""
     objective.evaluate(frames.times, frames.values, grad=True)  # warm the spline-matrix cache
@@ -58,7 +58,6 @@ def per_eval_ms(objective, frames, n: int = 30) -> float:
         objective.evaluate(frames.times, frames.values, grad=True)
         times.append(time.perf_counter() - t0)
     return 1e3 * statistics.median(times)
-
 
 
 def compare_refinement(model, keyframes, layout, weights: dict, counts, scores=("gradient", "decrease"),

@@ -88,13 +88,11 @@ def ours_time_to_gap(times, quats, E_star, ref, gaps=GAPS, repeat: int = 7, log:
     return out
 
 
-
 def _fmt_time(entry) -> str:
     wall, what, gap = entry
     if wall is None:
         return f"not reached (best {gap:.1e})"
     return f"{wall * 1e3:9.1f} ms" if wall < 10 else f"{wall:9.2f} s "
-
 
 
 def _ratio(theirs, ours, budget) -> str:
@@ -103,7 +101,6 @@ def _ratio(theirs, ours, budget) -> str:
     if theirs[0] is None:
         return f">{budget / ours[0]:,.0f}x"
     return f"{theirs[0] / ours[0]:,.1f}x"
-
 
 
 def bench_set(ks, methods, budget: float, repeat: int, ref=sphere_reference, out=lambda *a: None) -> dict:
@@ -174,7 +171,6 @@ def tradeoff(ref, sets, per_segment=(0, 1, 2, 3, 5), rate: float = 100.0, out=la
                 cells.append(f"{g:.1e} / {100 * r.max_norm_deviation:.2g}%")
             out(f"| {label} | " + " | ".join(cells) + " |")
     return table
-
 
 
 METHODS = ("dynsplines", "barr92", "bspline")
