@@ -22,7 +22,7 @@ from solver.errors import InputError
 def versions() -> dict:
     """Versions of the software that made a result (recorded in the .npz), and the BLAS thread settings:
     a path is bit-identical for the same inputs, options, versions and BLAS thread count (the command
-    uses one thread, see solver/__init__.py; another count changes the last bits of matrix products)."""
+    uses one thread, see runner/environment.py; another count changes the last bits of matrix products)."""
     import os
     from importlib.metadata import PackageNotFoundError, version
 

@@ -5,93 +5,30 @@ optimization bought (plain spline vs optimized), saves the path (.npz) and rende
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from runner.animate_options import add_options, solve_options
 from runner.console import Progress, StopRequest, summary_table
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.files import check_writable_dir
-from runner.parser import nonnegative, positive
-from runner.paths import MODELS, RENDERS, display_path as _rel
+from runner.paths import RENDERS, display_path as _rel
+from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_problem
 from runner.saved_path import save_path_npz
 from solver.errors import InputError
 from solver.frames import FrameSet
-from solver.keyframe_file import read_document, read_keyframes
-from solver.layout import CONTACT_SITES, StateLayout
+from solver.layout import CONTACT_SITES
 from solver.metrics import path_metrics, sample_times
-from solver.model import load_model
-from solver.optimize import ALGORITHMS, Status
-from solver.problem import default_limits, figure_objective, parse_terms, term_names
-from solver.solve import SUBDIVISIONS, SolveOptions, solve
-
-RUN_AND_STEP_KEYFRAMES = MODELS / "run_and_step.keyframes.json"
+from solver.optimize import Status
+from solver.problem import figure_objective, parse_terms
+from solver.solve import solve
 
 
 # ----------------------------------------------------------------------------------------- arguments
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 960x540") from None
-    if w <= 0 or h <= 0 or w > 3840 or h > 2160:
-        raise argparse.ArgumentTypeError(f"--size {text!r}: width and height must be 1..3840 x 1..2160")
-    return w, h
-
-
-def _weight(text: str) -> tuple[str, float]:
-    name, sep, value = text.partition("=")
-    if not sep:
-        raise argparse.ArgumentTypeError(f"--weight {text!r}: expected NAME=VALUE, e.g. torque=0.1")
-    try:
-        return name.strip(), float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--weight {text!r}: {value!r} is not a number") from None
-
-
-def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> None:
-    """The options shared by `animate` and `run-and-step`."""
-    d = defaults or {}
-    out = p.add_argument_group("outputs")
-    out.add_argument("--out", type=Path, default=d.get("out"), help="video file (.mp4) [%(default)s]")
-    out.add_argument("--save-path", type=Path, default=d.get("save_path"),
-                     help="optimized path (.npz; see README) [%(default)s]")
-    out.add_argument("--no-render", action="store_true", help="skip the video")
-    out.add_argument("--fps", type=positive(float), default=30.0, help="video frames per second [%(default)s]")
-    out.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="video size [960x540]")
-    out.add_argument("--speed", type=positive(float), default=0.5, help="playback speed [%(default)s x real time]")
-    out.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write plots (PNG) to DIR")
-    opt = p.add_argument_group("optimization")
-    opt.add_argument("--terms", default=None,
-                     help=f"objective terms: 'all' or a list from {','.join(term_names())} "
-                          "[the keyframe file's, else penetration,unit,bending,smooth]")
-    opt.add_argument("--weight", type=_weight, action="append", default=[], metavar="NAME=VALUE",
-                     help="weight of a term (repeatable), e.g. --weight torque=0.1")
-    opt.add_argument("--max-time", type=nonnegative(float), default=0.0, metavar="S",
-                     help="stop optimizing after S seconds, keeping the best path so far [no limit]")
-    opt.add_argument("--subdivision", choices=SUBDIVISIONS, default="adaptive",
-                     help="where to add variable frames [%(default)s]")
-    opt.add_argument("--per-segment", type=nonnegative(int), default=1,
-                     help="variable frames per keyframe interval to start with [%(default)s]")
-    opt.add_argument("--rounds", type=nonnegative(int), default=2, help="adaptive subdivision rounds [%(default)s]")
-    opt.add_argument("--algorithm", choices=list(ALGORITHMS), default="lbfgs", help="nlopt algorithm [%(default)s]")
-    opt.add_argument("--ftol", type=nonnegative(float), default=1e-6, help="relative objective tolerance [%(default)s]")
-    opt.add_argument("--max-evals", type=nonnegative(int), default=0, help="evaluations per round [no limit]")
-    opt.add_argument("--rate", type=positive(float), default=400.0,
-                     help="quadrature points per second [%(default)s]")
-    opt.add_argument("--score", choices=("decrease", "gradient"), default="decrease",
-                     help="how adaptive subdivision ranks segments: the decrease of E a midpoint frame "
-                          "predicts, or the raw weak-form Euler-Lagrange gradient [%(default)s]")
-    opt.add_argument("--no-precondition", action="store_true",
-                     help="optimize the frame values directly instead of in the spline-acceleration metric")
-    opt.add_argument("--no-renormalize", action="store_true",
-                     help="use the weights as they are instead of dividing each term by its initial value (eq. 7)")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
-
-
 def register(sub) -> None:
+    """Add `animate` and `run-and-step` to the `dynsplines` parser."""
     p = sub.add_parser("animate", help="optimize the in-betweens of a keyframe file and render them",
                        description="Optimize the in-betweens of KEYFRAMES (a dynsplines keyframe file) in a "
                                    "scene, print a summary, save the path and render a video.")
@@ -107,53 +44,7 @@ def register(sub) -> None:
     q.set_defaults(func=run_animate, keyframes=RUN_AND_STEP_KEYFRAMES, scene=None)
 
 
-# ------------------------------------------------------------------------------------------ loading
-def load_problem(keyframes_path: Path, scene: Path | None):
-    """(keyframes, info, model, layout) for a keyframe file and an optional scene override."""
-    import mujoco
-
-    keyframes_path = Path(keyframes_path)
-    head = _peek_scene(keyframes_path)  # also reports a missing, unreadable or malformed file
-    scene_path = Path(scene) if scene is not None else head
-    if scene_path is None:
-        raise InputError(f"{keyframes_path}: no 'scene' in the file; give one with --scene SCENE.xml")
-    model = load_model(scene_path)
-    layout = StateLayout.from_model(model)
-    if not any(j.kind == "free" for j in layout.joints):
-        raise InputError(f"scene {scene_path} has no free joint: does it include the figure (humanoid39.xml)?")
-    sites = CONTACT_SITES
-    missing = [s for s in sites if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0]
-    if missing:
-        raise InputError(f"scene {scene_path} has no contact site(s) {', '.join(map(repr, missing))} (the "
-                         f"figure's feet need {', '.join(sites)}): does it include the figure (humanoid39.xml)?")
-    keyframes, info = read_keyframes(keyframes_path, layout)
-    return keyframes, info, model, layout, scene_path
-
-
-def _peek_scene(path: Path) -> Path | None:
-    data = read_document(path)  # InputError naming the file for anything unreadable
-    scene = data.get("scene") if isinstance(data, dict) else None
-    if isinstance(scene, str) and "\x00" in scene:
-        raise InputError(f"{path}: field 'scene' is {scene!r}; give a path relative to the keyframe file")
-    return (path.parent / scene).resolve() if isinstance(scene, str) and scene else None
-
-
 # -------------------------------------------------------------------------------------------- run
-def solve_options(args, weights: dict) -> SolveOptions:
-    """SolveOptions from parsed `add_options` arguments (the command's and the benchmark's)."""
-    return SolveOptions(
-        subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
-        renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
-        max_evals=args.max_evals, max_time_s=args.max_time, limits=default_limits(weights),
-        precondition=not args.no_precondition, score=args.score,
-    )
-
-
-def default_args() -> argparse.Namespace:
-    """The options `animate` uses when none are given."""
-    p = argparse.ArgumentParser()
-    add_options(p)
-    return p.parse_args([])
 
 
 def run_animate(args) -> int:
@@ -198,7 +89,7 @@ def run_animate(args) -> int:
             print(f"dynsplines: warning: the optimization failed ({solution.message}); the best path before "
                   "that (it meets every keyframe) is reported and written", file=sys.stderr)
 
-        reference = _reference(info, model)
+        reference = find_reference(info, model)
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
         if not args.quiet:
@@ -260,18 +151,6 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
 
 
-def _reference(info, model):
-    clip = (getattr(info, "source", None) or {}).get("clip")
-    if not clip:
-        return None
-    path = Path(info.path).parent / clip if hasattr(info, "path") else MODELS / clip
-    if not path.is_file():
-        return None
-    from runner.mocap.reference import load_bvh_reference
-
-    return load_bvh_reference(path, model)
-
-
 def render_video(out, model, solution, keyframes, args):
     """Side-by-side video of the plain spline and the optimized path, keyframes marked."""
     from runner.render import Track, render_tracks
@@ -300,4 +179,3 @@ def render_video(out, model, solution, keyframes, args):
     return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
                          keyframe_times=keyframes.times, keyframe_qpos=kq,
                          title="dynsplines: plain spline vs optimized", progress=progress)
-

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import argparse
 
-from runner.commands.animate import RUN_AND_STEP_KEYFRAMES, default_args, load_problem, solve_options
+from runner.animate_options import default_args, solve_options
+from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
 from solver.bench import orient as orient_workload
 from solver.bench.figure import GEOMETRIC, compare_refinement, per_eval_ms, time_solves
 from solver.errors import InputError
@@ -24,6 +25,7 @@ from solver.problem import parse_terms
 
 
 def register(sub) -> None:
+    """Add `bench` (run-and-step, refine, orient) to the `dynsplines` parser."""
     p = sub.add_parser("bench", help="benchmarks: run-and-step, orient")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
@@ -85,6 +87,7 @@ def bench_orient(args) -> int:
 
 
 def bench_run_and_step(args) -> int:
+    """`dynsplines bench run-and-step`: print the optimization time of the showcase clip. Returns 0."""
     keyframes, info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
     configs = {"geometric": parse_terms(GEOMETRIC)}
     if args.terms is not None:
@@ -121,6 +124,8 @@ def bench_run_and_step(args) -> int:
 
 
 def bench_refine(args) -> int:
+    """`dynsplines bench refine`: print adaptive vs global subdivision at equal frame counts. Returns 0;
+    raises InputError for a malformed --counts or --scores."""
     keyframes, info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
     weights = parse_terms(args.terms)
     try:

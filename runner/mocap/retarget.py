@@ -281,6 +281,7 @@ def retarget(clip: BvhClip, layout: StateLayout) -> np.ndarray:
 
 
 def tidy_quaternions(qpos: np.ndarray, layout: StateLayout) -> np.ndarray:
+    """Unit joint quaternions of (n, nq) qpos, w >= 0 at the first frame, hemisphere-consistent over time."""
     out = qpos.copy()
     for slot in layout.quat_slots:
         q = normalize(out[:, slot])

@@ -22,7 +22,16 @@ needs an OpenGL backend; without a display that is EGL (Mesa's llvmpipe), which 
 selects through MUJOCO_GL before mujoco is first imported (and `_headless_fallback` if mujoco came first).
 """
 from runner.render.gl import QUALITIES, Quality
-from runner.render.tracks import IMAGE_SUFFIXES, VIDEO_SUFFIXES, Camera, RenderInfo, Track, frame_times, parse_size, sample_track
+from runner.render.tracks import (
+    IMAGE_SUFFIXES,
+    VIDEO_SUFFIXES,
+    Camera,
+    RenderInfo,
+    Track,
+    frame_times,
+    parse_size,
+    sample_track,
+)
 from runner.render.video import render_still, render_tracks
 
 __all__ = [

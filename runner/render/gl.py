@@ -39,6 +39,7 @@ defaults: 4x MSAA, 4096 px shadows, reflections), several times slower."""
 
 
 def check_quality(quality: str) -> None:
+    """Raises InputError naming the choices when `quality` is not a `QUALITIES` preset."""
     if quality not in QUALITIES:
         raise InputError(f"unknown render quality {quality!r}; choose one of {list(QUALITIES)}")
 
@@ -131,11 +132,13 @@ def _gl_backend() -> str:
         text += " (GLFW: needs a display)"
     now_l = (now or "").lower().strip()
     if now_l != used and not (now_l in _GLFW_CHOICES and used in _GLFW_CHOICES):
-        text += f"; MUJOCO_GL={now!r} was set after that, too late (import solver or runner before mujoco)"
+        text += (f"; MUJOCO_GL={now!r} was set after that, too late (import runner, which calls "
+                 "runner.environment.apply_defaults, before mujoco)")
     return text
 
 
 def load_font(px: int):
+    """A PIL font of `px` pixels (DejaVu Sans if available, else PIL's small bitmap font)."""
     try:
         return ImageFont.load_default(size=px)
     except (TypeError, OSError, ImportError):  # old Pillow or no FreeType: small bitmap font

@@ -134,10 +134,12 @@ def check_model_fit(model, track: Track) -> np.ndarray:
 
 
 def draw_text(draw, xy, s, font, fill, anchor="la"):
+    """Draw `s` at `xy` with a black outline (readable on any background)."""
     draw.text(xy, s, font=font, fill=fill, anchor=anchor, stroke_width=2, stroke_fill=(0, 0, 0))
 
 
 def positive(value, name: str) -> float:
+    """`value` as a float if finite and > 0; else InputError naming `name`."""
     try:
         v = float(value)
     except (TypeError, ValueError):

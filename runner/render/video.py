@@ -13,8 +13,32 @@ from runner.files import atomic_output
 from solver.errors import InputError
 from runner.files import check_writable_dir
 from runner.render.gl import check_quality, load_font, make_renderer
-from runner.render.overlays import KEYFRAME_CAPTION_SECONDS, Overlay, Panel, WHITE, check_keyframes, check_model_fit, deep_sites, draw_text, ghost_data, positive
-from runner.render.tracks import Camera, IMAGE_SUFFIXES, RenderInfo, Track, VIDEO_SUFFIXES, forward_direction, frame_times, interpolate_samples, lookat_path, parse_size, root_body, sample_track
+from runner.render.overlays import (
+    KEYFRAME_CAPTION_SECONDS,
+    Overlay,
+    Panel,
+    WHITE,
+    check_keyframes,
+    check_model_fit,
+    deep_sites,
+    draw_text,
+    ghost_data,
+    positive,
+)
+from runner.render.tracks import (
+    Camera,
+    IMAGE_SUFFIXES,
+    RenderInfo,
+    Track,
+    VIDEO_SUFFIXES,
+    forward_direction,
+    frame_times,
+    interpolate_samples,
+    lookat_path,
+    parse_size,
+    root_body,
+    sample_track,
+)
 
 
 def render_tracks(

@@ -78,7 +78,7 @@ def baseline_time_to_gap(
 
     Args:
         method: "barr92", "bspline", or a callable (times, quats, resolution, max_time_s) -> BaselineResult.
-        times, quats: the keyframes; E_star: the exact optimum [1/s^3] (tests/sphere_reference.py).
+        times, quats: the keyframes; E_star: the exact optimum [1/s^3] (solver/bench/sphere_reference/).
         gaps: relative-gap levels (E - E*)/E*.
         max_time_s: total wall-time budget [s].
         log: if a list is given, one dict per run is appended (resolution, gap, wall_time_s, status).

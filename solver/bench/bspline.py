@@ -1,4 +1,5 @@
-"""(b) Cohen 1992 style: cubic B-spline coefficients in R^4, eq. 9 with a plain weight (see solver/bench/baselines.py)."""
+"""(b) Cohen 1992 style: cubic B-spline coefficients in R^4, eq. 9 with a plain weight
+(the problem and the comparison: solver/bench/baselines.py)."""
 from __future__ import annotations
 
 import time

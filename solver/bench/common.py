@@ -58,6 +58,8 @@ class BaselineResult:
 
 
 def check_inputs(times, quats):
+    """Keyframe times (K,) [s] and unit, hemisphere-aligned quaternions (K, 4); ValueError for other
+    shapes, or times that are not finite and strictly increasing."""
     times = np.asarray(times, dtype=float)
     quats = np.asarray(quats, dtype=float)
     if times.ndim != 1 or len(times) < 2 or quats.shape != (len(times), 4):
@@ -113,7 +115,7 @@ def dense_path(q_of_t: Callable, breaks: np.ndarray, times: np.ndarray, min_per_
 
 
 class TimeUp(Exception):
-    pass
+    """Raised inside an SLSQP callback when the wall-time limit is reached."""
 
 
 def run_slsqp(problem, max_time_s: float, ftol: float, maxiter: int):

@@ -32,10 +32,10 @@ asserts 1e-6), and both reproduce the exact 1-D answer for keyframes on one grea
 Units: times in seconds, quaternions (w, x, y, z) dimensionless, E in 1/s^3 (rad^2/s^3).
 """
 
-from solver.bench.sphere_reference.bvp import Reference, euler_lagrange_residual, riemannian_cubic_reference
-from solver.bench.sphere_reference.discrete import DiscreteReference, discrete_sphere_reference
-from solver.bench.sphere_reference.geometry import align, covariant_energy, rotation_angles_deg
-from solver.bench.sphere_reference.keyframe_sets import (
+from .bvp import Reference, euler_lagrange_residual, riemannian_cubic_reference
+from .discrete import DiscreteReference, discrete_sphere_reference
+from .geometry import align, covariant_energy, rotation_angles_deg
+from .keyframe_sets import (
     KeyframeSet,
     great_circle_set,
     large_rotation_sets,

@@ -8,8 +8,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 from scipy.integrate import solve_bvp
 from scipy.interpolate import CubicSpline
-from solver.bench.sphere_reference.discrete import discrete_sphere_reference
-from solver.bench.sphere_reference.geometry import normalized_derivatives, states_from_path, tangent_basis, align
+from .discrete import discrete_sphere_reference
+from .geometry import normalized_derivatives, states_from_path, tangent_basis, align
 
 
 # ----------------------------------------------------------------------------------------------------

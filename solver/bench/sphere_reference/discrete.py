@@ -8,7 +8,7 @@ from scipy.integrate import solve_bvp
 from scipy.interpolate import CubicSpline, make_interp_spline
 from scipy.sparse import csr_matrix, diags
 from scipy.sparse.linalg import spsolve
-from solver.bench.sphere_reference.geometry import exp_map, normalized_derivatives, states_from_path, tangent_basis, align
+from .geometry import exp_map, normalized_derivatives, states_from_path, tangent_basis, align
 
 
 # ----------------------------------------------------------------------------------------------------

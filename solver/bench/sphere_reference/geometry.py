@@ -21,6 +21,7 @@ def align(quats: np.ndarray) -> np.ndarray:
 
 
 def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Quaternion product a b (w x y z), broadcasting over leading axes."""
     aw, ax, ay, az = np.moveaxis(a, -1, 0)
     bw, bx, by, bz = np.moveaxis(b, -1, 0)
     return np.stack(

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from solver.bench.sphere_reference.geometry import qmul, align
+from .geometry import qmul, align
 
 
 # ----------------------------------------------------------------------------------------------------

@@ -1,0 +1,88 @@
+"""The options of `dynsplines animate` and `run-and-step` (also what `dynsplines bench` runs): the parser
+arguments and the SolveOptions they make."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from runner.parser import nonnegative, positive
+from solver.optimize import ALGORITHMS
+from solver.problem import default_limits, term_names
+from solver.solve import SUBDIVISIONS, SolveOptions
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 960x540") from None
+    if w <= 0 or h <= 0 or w > 3840 or h > 2160:
+        raise argparse.ArgumentTypeError(f"--size {text!r}: width and height must be 1..3840 x 1..2160")
+    return w, h
+
+
+def _weight(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"--weight {text!r}: expected NAME=VALUE, e.g. torque=0.1")
+    try:
+        return name.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--weight {text!r}: {value!r} is not a number") from None
+
+
+def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> None:
+    """The options shared by `animate` and `run-and-step`."""
+    d = defaults or {}
+    out = p.add_argument_group("outputs")
+    out.add_argument("--out", type=Path, default=d.get("out"), help="video file (.mp4) [%(default)s]")
+    out.add_argument("--save-path", type=Path, default=d.get("save_path"),
+                     help="optimized path (.npz; see README) [%(default)s]")
+    out.add_argument("--no-render", action="store_true", help="skip the video")
+    out.add_argument("--fps", type=positive(float), default=30.0, help="video frames per second [%(default)s]")
+    out.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="video size [960x540]")
+    out.add_argument("--speed", type=positive(float), default=0.5, help="playback speed [%(default)s x real time]")
+    out.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write plots (PNG) to DIR")
+    opt = p.add_argument_group("optimization")
+    opt.add_argument("--terms", default=None,
+                     help=f"objective terms: 'all' or a list from {','.join(term_names())} "
+                          "[the keyframe file's, else penetration,unit,bending,smooth]")
+    opt.add_argument("--weight", type=_weight, action="append", default=[], metavar="NAME=VALUE",
+                     help="weight of a term (repeatable), e.g. --weight torque=0.1")
+    opt.add_argument("--max-time", type=nonnegative(float), default=0.0, metavar="S",
+                     help="stop optimizing after S seconds, keeping the best path so far [no limit]")
+    opt.add_argument("--subdivision", choices=SUBDIVISIONS, default="adaptive",
+                     help="where to add variable frames [%(default)s]")
+    opt.add_argument("--per-segment", type=nonnegative(int), default=1,
+                     help="variable frames per keyframe interval to start with [%(default)s]")
+    opt.add_argument("--rounds", type=nonnegative(int), default=2, help="adaptive subdivision rounds [%(default)s]")
+    opt.add_argument("--algorithm", choices=list(ALGORITHMS), default="lbfgs", help="nlopt algorithm [%(default)s]")
+    opt.add_argument("--ftol", type=nonnegative(float), default=1e-6, help="relative objective tolerance [%(default)s]")
+    opt.add_argument("--max-evals", type=nonnegative(int), default=0, help="evaluations per round [no limit]")
+    opt.add_argument("--rate", type=positive(float), default=400.0,
+                     help="quadrature points per second [%(default)s]")
+    opt.add_argument("--score", choices=("decrease", "gradient"), default="decrease",
+                     help="how adaptive subdivision ranks segments: the decrease of E a midpoint frame "
+                          "predicts, or the raw weak-form Euler-Lagrange gradient [%(default)s]")
+    opt.add_argument("--no-precondition", action="store_true",
+                     help="optimize the frame values directly instead of in the spline-acceleration metric")
+    opt.add_argument("--no-renormalize", action="store_true",
+                     help="use the weights as they are instead of dividing each term by its initial value (eq. 7)")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def solve_options(args, weights: dict) -> SolveOptions:
+    """SolveOptions from parsed `add_options` arguments (the command's and the benchmark's)."""
+    return SolveOptions(
+        subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
+        renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
+        max_evals=args.max_evals, max_time_s=args.max_time, limits=default_limits(weights),
+        precondition=not args.no_precondition, score=args.score,
+    )
+
+
+def default_args() -> argparse.Namespace:
+    """The options `animate` uses when none are given."""
+    p = argparse.ArgumentParser()
+    add_options(p)
+    return p.parse_args([])

@@ -1,0 +1,61 @@
+"""A figure problem from files: the keyframe file, its scene (or --scene) and the motion-capture clip it
+was made from (the reference shown in the summary and the saved path)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from runner.mocap.reference import load_bvh_reference
+from runner.paths import MODELS
+from solver.errors import InputError
+from solver.keyframe_file import read_document, read_keyframes
+from solver.layout import CONTACT_SITES, StateLayout
+from solver.model import load_model
+
+RUN_AND_STEP_KEYFRAMES = MODELS / "run_and_step.keyframes.json"
+
+
+def load_problem(keyframes_path: Path, scene: Path | None):
+    """(keyframes, info, model, layout, scene_path) for a keyframe file and an optional scene override.
+
+    Raises:
+        InputError: an unreadable or malformed keyframe file, no scene, a scene MuJoCo cannot load, or a
+            scene without the figure (no free joint or no contact sites); the message names the file.
+    """
+    import mujoco
+
+    keyframes_path = Path(keyframes_path)
+    head = _peek_scene(keyframes_path)  # also reports a missing, unreadable or malformed file
+    scene_path = Path(scene) if scene is not None else head
+    if scene_path is None:
+        raise InputError(f"{keyframes_path}: no 'scene' in the file; give one with --scene SCENE.xml")
+    model = load_model(scene_path)
+    layout = StateLayout.from_model(model)
+    if not any(j.kind == "free" for j in layout.joints):
+        raise InputError(f"scene {scene_path} has no free joint: does it include the figure (humanoid39.xml)?")
+    sites = CONTACT_SITES
+    missing = [s for s in sites if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0]
+    if missing:
+        raise InputError(f"scene {scene_path} has no contact site(s) {', '.join(map(repr, missing))} (the "
+                         f"figure's feet need {', '.join(sites)}): does it include the figure (humanoid39.xml)?")
+    keyframes, info = read_keyframes(keyframes_path, layout)
+    return keyframes, info, model, layout, scene_path
+
+
+def _peek_scene(path: Path) -> Path | None:
+    data = read_document(path)  # InputError naming the file for anything unreadable
+    scene = data.get("scene") if isinstance(data, dict) else None
+    if isinstance(scene, str) and "\x00" in scene:
+        raise InputError(f"{path}: field 'scene' is {scene!r}; give a path relative to the keyframe file")
+    return (path.parent / scene).resolve() if isinstance(scene, str) and scene else None
+
+
+def find_reference(info, model):
+    """The motion-capture reference of a keyframe file (its "source" "clip", relative to the file), or None
+    when the file names no clip or the clip is not there."""
+    clip = (getattr(info, "source", None) or {}).get("clip")
+    if not clip:
+        return None
+    path = Path(info.path).parent / clip if hasattr(info, "path") else MODELS / clip
+    if not path.is_file():
+        return None
+    return load_bvh_reference(path, model)
