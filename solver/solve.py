@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field, replace
 from typing import Callable
@@ -107,37 +108,53 @@ class SolveOptions:
             raise InputError(f"max_time_s must be >= 0, got {self.max_time_s}")
 
 
-@dataclass
+@dataclass(frozen=True)
 class Round:
-    """One optimization round: the frames it started with and the optimizer's result."""
+    """One optimization round: the frames it started with and the optimizer's result (read-only).
+
+    Attributes:
+        n_frames, n_variable: frames the round optimized, and how many of them are variable frames.
+        result: the optimizer's OptimizeResult.
+        scores: (n_frames_before - 1,) the subdivision scores (`SolveOptions.score`) that chose this
+            round's new frames, on the previous round's segments; None for the first round and after a
+            penalty boost.
+        times: (n_frames,) the frame times this round optimized [s].
+    """
 
     n_frames: int
     n_variable: int
     result: OptimizeResult
-    scores: np.ndarray | None = None  # weak-form scores that chose this round's new frames
-    times: np.ndarray | None = None  # (n_frames,) the frame times this round optimized [s]
+    scores: np.ndarray | None = None
+    times: np.ndarray | None = None
 
 
-@dataclass
+@dataclass(frozen=True)
 class Solution:
-    """The result of `solve`.
+    """The result of `solve` (read-only: a frozen dataclass whose arrays are not writeable).
 
     Attributes:
-        frames: optimized FrameSet (the path is the natural cubic spline through it).
-        initial: the plain spline's FrameSet (keyframes only).
-        rounds: per-round results.
+        frames: optimized FrameSet (the path is the natural cubic spline through it), (m, nq) values.
+        initial: the plain spline's FrameSet (a read-only copy of `solve`'s `initial`).
+        rounds: (Round, ...) per-round results.
         status: Status of the last round (INTERRUPTED etc. end the solve early).
         message: why it ended.
-        E_initial, E_final: objective on the plain spline and on the result.
-        integrals_initial, integrals_final: {term: integral} on each.
-        scales: {term: renormalization divisor}.
+        E_initial, E_final: objective on the plain spline and on the result, both under the final
+            weights (penalty continuation raises some) and the renormalization scales.
+        integrals_initial, integrals_final: {term: integral of f_j dt} on each (unweighted).
+        scales: {term: renormalization divisor} (eq. 7; 1 without renormalization).
         trace: (N,) best objective after each evaluation, all rounds concatenated.
         wall_time_s: [s], optimization and subdivision (excludes building the terms).
+        n_evals: objective evaluations in all rounds.
+        weights: {term: lambda_j} at the end: the objective's weights after penalty continuation
+            (`SolveOptions.limits`); the caller's Objective keeps its own.
+        objective: the working copy of the objective the last round optimized (final weights and
+            scales, terms prepared on the result): for scores or evaluations on the result under the
+            objective that produced it. `solve` never changes the caller's Objective.
     """
 
     frames: FrameSet
     initial: FrameSet
-    rounds: list[Round]
+    rounds: tuple[Round, ...]
     status: Status
     message: str
     E_initial: float
@@ -148,6 +165,8 @@ class Solution:
     trace: np.ndarray
     wall_time_s: float
     n_evals: int = field(default=0)
+    weights: dict = field(default_factory=dict)
+    objective: Objective | None = field(default=None, repr=False, compare=False)
 
 
 def solve(
@@ -179,7 +198,12 @@ def solve(
             is not the frames' [first, last] time; the objective cannot be evaluated on the frames
             (their nq does not fit the objective's model).
         NonFiniteError: the objective is NaN or infinite on the initial path (nothing to keep).
+
+    `objective` is not changed: renormalization (eq. 7) and penalty continuation act on a copy
+    (`Solution.objective`), so solving twice with the same inputs gives the same result. The copy
+    shares the terms, whose per-round state (`Term.prepare`) `solve` sets afresh from `initial`.
     """
+    objective = _working_copy(objective)
     ev_check = _check_inputs(objective, initial, options)
     t_start = time.perf_counter()
     objective.prepare(initial.times, initial.values)  # terms' per-round state from the plain spline
@@ -234,7 +258,8 @@ def solve(
                              wall_time_s=result.wall_time_s + retry.wall_time_s)
         frames = frames.with_x(result.x)
         objective.prepare(frames.times, frames.values)  # for the next round, the scores, the report
-        rounds.append(Round(frames.count, frames.n_variable, result, scores, frames.times))
+        _read_only(result.x), _read_only(result.trace)
+        rounds.append(Round(frames.count, frames.n_variable, result, _read_only(scores), _read_only(frames.times.copy())))
         traces.append(result.trace)
         n_evals += result.n_evals
         status, message = result.status, result.message
@@ -275,10 +300,33 @@ def solve(
     if boosts:  # report both ends under the final weights, so E_initial and E_final compare
         ev0 = objective.evaluate(initial.times, initial.values, grad=False)
     return Solution(
-        frames, initial, rounds, status, message, ev0.E, ev1.E, ev0.integrals, ev1.integrals,
-        scales, np.concatenate(traces) if traces else np.array([ev0.E]),
-        time.perf_counter() - t_start, n_evals,
+        _read_only_frames(frames), _read_only_frames(initial), tuple(rounds), status, message, ev0.E, ev1.E,
+        ev0.integrals, ev1.integrals, scales, _read_only(np.concatenate(traces) if traces else np.array([ev0.E])),
+        time.perf_counter() - t_start, n_evals, dict(zip(objective.names, objective.weights.tolist())), objective,
     )
+
+
+def _working_copy(objective):
+    """A copy of `objective` with its own weights and scales (what `solve` changes); the terms and the
+    spline-matrix cache are shared. Anything but an Objective is returned as is (`_check_inputs` says)."""
+    if not isinstance(objective, Objective):
+        return objective
+    work = copy.copy(objective)
+    work.weights = objective.weights.copy()
+    work.scales = objective.scales.copy()
+    return work
+
+
+def _read_only(a):
+    """`a` (an array this module made) marked not writeable; None stays None."""
+    if a is not None:
+        a.flags.writeable = False
+    return a
+
+
+def _read_only_frames(frames: FrameSet) -> FrameSet:
+    """A FrameSet of read-only copies of `frames`' arrays (they may be shared with the caller's)."""
+    return FrameSet(*(_read_only(np.array(a)) for a in (frames.times, frames.values, frames.fixed, frames.is_keyframe)))
 
 
 def _check_inputs(objective, initial, options):
