@@ -12,7 +12,7 @@ from __future__ import annotations
 import copy
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -258,8 +258,9 @@ def solve(
                              wall_time_s=result.wall_time_s + retry.wall_time_s)
         frames = frames.with_x(result.x)
         objective.prepare(frames.times, frames.values)  # for the next round, the scores, the report
-        _read_only(result.x), _read_only(result.trace)
-        rounds.append(Round(frames.count, frames.n_variable, result, _read_only(scores), _read_only(frames.times.copy())))
+        for arr in (result.x, result.trace, scores):
+            _read_only(arr)
+        rounds.append(Round(frames.count, frames.n_variable, result, scores, _read_only(frames.times.copy())))
         traces.append(result.trace)
         n_evals += result.n_evals
         status, message = result.status, result.message

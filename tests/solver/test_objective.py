@@ -70,7 +70,7 @@ def test_gauss_quadrature_integrates_a_cubic_integrand_exactly():
     knots = np.array([t0, 0.4, t1])
     P = (a + b * knots)[:, None]
     obj = Objective([Cubic()], [1.0], t0, t1, quadrature="gauss", points=2)
-    F = lambda t: (a + b * t) ** 4 / (4 * b) - (a + b * t) ** 2 / (2 * b)  # antiderivative  # noqa: E731
+    F = lambda t: (a + b * t) ** 4 / (4 * b) - (a + b * t) ** 2 / (2 * b)  # antiderivative
     assert obj.evaluate(knots, P).integrals["cubic"] == pytest.approx(F(t1) - F(t0), rel=1e-13)
 
 
