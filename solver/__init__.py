@@ -1,23 +1,54 @@
-"""dynsplines solver: dynamic splines with constraints (Ramamoorthi, Ball & Barr).
+"""dynsplines solver: dynamic splines with constraints (Ramamoorthi, Ball & Barr, SIGGRAPH 1997).
 
-The algorithm only: the C2 natural cubic spline through keyframes and variable frames, the objective
-terms with their gradients, the nlopt driver and Euler-Lagrange subdivision. No rendering, no CLI.
+The algorithm and the public Python API: the C2 natural cubic spline through keyframes and variable
+frames, the objective terms with their gradients, the nlopt driver and Euler-Lagrange subdivision. No
+rendering, no command line, no printing, and no process-wide side effects: importing it leaves
+`os.environ` alone (the command line chooses the GL backend and the BLAS threads itself).
+
+One call for a figure in a scene, one for a single orientation::
+
+    import solver
+    solution = solver.animate(model, keyframes)            # model: mujoco.MjModel; keyframes: Keyframes
+    result = solver.orient(times, quats)                   # paper sec. 3
 """
-import os as _os
+from solver.animate import animate, default_options
+from solver.errors import DynsplinesError, InputError
+from solver.frames import FrameSet
+from solver.keyframes import Keyframes
+from solver.layout import StateLayout
+from solver.metrics import path_metrics
+from solver.objective import Evaluation, NonFiniteError, Objective
+from solver.optimize import OptimizeResult, Status
+from solver.orient import OrientResult, orient
+from solver.problem import DEFAULT_TERMS, DEFAULT_WEIGHTS, default_limits, figure_objective, parse_terms, term_names
+from solver.solve import Round, Solution, SolveOptions, solve
+from solver.spline import SplineBasis
+from solver.terms import (
+    CovariantAcceleration,
+    Hyperextension,
+    JointTorque,
+    NormalizedCovariantAcceleration,
+    Penetration,
+    RootResidual,
+    Term,
+    TermEval,
+    UnitQuaternion,
+)
 
-# MuJoCo picks its OpenGL backend when it is first imported. With no display (servers, CI) the only
-# backend that works is EGL (Mesa's software renderer here), so choose it before anything imports
-# mujoco. A user's own MUJOCO_GL always wins.
-if not _os.environ.get("DISPLAY") and not _os.environ.get("WAYLAND_DISPLAY"):
-    _os.environ.setdefault("MUJOCO_GL", "egl")
-
-# The matrices here are small (hundreds of quadrature points x tens of frames): multithreaded BLAS only
-# adds contention, and on a loaded 2-core machine a 0.05 ms product was seen taking 25 ms. One thread
-# unless the user says otherwise (takes effect when solver is imported before numpy, as the CLI does).
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    _os.environ.setdefault(_var, "1")
-
-from solver.errors import DynsplinesError, InputError  # noqa: E402
-from solver.keyframes import Keyframes  # noqa: E402
-
-__all__ = ["DynsplinesError", "InputError", "Keyframes"]
+__all__ = [
+    # errors
+    "DynsplinesError", "InputError", "NonFiniteError",
+    # inputs: keyframes, the figure's state layout, frames and the spline
+    "Keyframes", "StateLayout", "FrameSet", "SplineBasis",
+    # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7)
+    "Term", "TermEval", "Penetration", "UnitQuaternion", "Hyperextension", "CovariantAcceleration",
+    "NormalizedCovariantAcceleration", "JointTorque", "RootResidual",
+    "Objective", "Evaluation", "figure_objective", "parse_terms", "term_names", "default_limits",
+    "DEFAULT_TERMS", "DEFAULT_WEIGHTS",
+    # solving (paper fig. 5)
+    "SolveOptions", "Solution", "Round", "Status", "OptimizeResult", "solve",
+    # one-call APIs
+    "animate", "default_options", "orient", "OrientResult",
+    # acceptance figures
+    "path_metrics",
+]

@@ -9,9 +9,10 @@
 """
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -20,6 +21,7 @@ from solver.frames import FrameSet
 from solver.metrics import sample_times
 from solver.objective import NonFiniteError, Objective
 from solver.optimize import ALGORITHMS, OptimizeResult, Status, Stop, minimize
+from solver.precondition import AccelerationPreconditioner
 from solver.subdivide import adaptive_times, global_times, predicted_decreases, weak_form_scores
 
 SUBDIVISIONS = ("none", "global", "adaptive")
@@ -106,37 +108,53 @@ class SolveOptions:
             raise InputError(f"max_time_s must be >= 0, got {self.max_time_s}")
 
 
-@dataclass
+@dataclass(frozen=True)
 class Round:
-    """One optimization round: the frames it started with and the optimizer's result."""
+    """One optimization round: the frames it started with and the optimizer's result (read-only).
+
+    Attributes:
+        n_frames, n_variable: frames the round optimized, and how many of them are variable frames.
+        result: the optimizer's OptimizeResult.
+        scores: (n_frames_before - 1,) the subdivision scores (`SolveOptions.score`) that chose this
+            round's new frames, on the previous round's segments; None for the first round and after a
+            penalty boost.
+        times: (n_frames,) the frame times this round optimized [s].
+    """
 
     n_frames: int
     n_variable: int
     result: OptimizeResult
-    scores: np.ndarray | None = None  # weak-form scores that chose this round's new frames
-    times: np.ndarray | None = None  # (n_frames,) the frame times this round optimized [s]
+    scores: np.ndarray | None = None
+    times: np.ndarray | None = None
 
 
-@dataclass
+@dataclass(frozen=True)
 class Solution:
-    """The result of `solve`.
+    """The result of `solve` (read-only: a frozen dataclass whose arrays are not writeable).
 
     Attributes:
-        frames: optimized FrameSet (the path is the natural cubic spline through it).
-        initial: the plain spline's FrameSet (keyframes only).
-        rounds: per-round results.
+        frames: optimized FrameSet (the path is the natural cubic spline through it), (m, nq) values.
+        initial: the plain spline's FrameSet (a read-only copy of `solve`'s `initial`).
+        rounds: (Round, ...) per-round results.
         status: Status of the last round (INTERRUPTED etc. end the solve early).
         message: why it ended.
-        E_initial, E_final: objective on the plain spline and on the result.
-        integrals_initial, integrals_final: {term: integral} on each.
-        scales: {term: renormalization divisor}.
+        E_initial, E_final: objective on the plain spline and on the result, both under the final
+            weights (penalty continuation raises some) and the renormalization scales.
+        integrals_initial, integrals_final: {term: integral of f_j dt} on each (unweighted).
+        scales: {term: renormalization divisor} (eq. 7; 1 without renormalization).
         trace: (N,) best objective after each evaluation, all rounds concatenated.
         wall_time_s: [s], optimization and subdivision (excludes building the terms).
+        n_evals: objective evaluations in all rounds.
+        weights: {term: lambda_j} at the end: the objective's weights after penalty continuation
+            (`SolveOptions.limits`); the caller's Objective keeps its own.
+        objective: the working copy of the objective the last round optimized (final weights and
+            scales, terms prepared on the result): for scores or evaluations on the result under the
+            objective that produced it. `solve` never changes the caller's Objective.
     """
 
     frames: FrameSet
     initial: FrameSet
-    rounds: list[Round]
+    rounds: tuple[Round, ...]
     status: Status
     message: str
     E_initial: float
@@ -147,6 +165,8 @@ class Solution:
     trace: np.ndarray
     wall_time_s: float
     n_evals: int = field(default=0)
+    weights: dict = field(default_factory=dict)
+    objective: Objective | None = field(default=None, repr=False, compare=False)
 
 
 def solve(
@@ -178,7 +198,12 @@ def solve(
             is not the frames' [first, last] time; the objective cannot be evaluated on the frames
             (their nq does not fit the objective's model).
         NonFiniteError: the objective is NaN or infinite on the initial path (nothing to keep).
+
+    `objective` is not changed: renormalization (eq. 7) and penalty continuation act on a copy
+    (`Solution.objective`), so solving twice with the same inputs gives the same result. The copy
+    shares the terms, whose per-round state (`Term.prepare`) `solve` sets afresh from `initial`.
     """
+    objective = _working_copy(objective)
     ev_check = _check_inputs(objective, initial, options)
     t_start = time.perf_counter()
     objective.prepare(initial.times, initial.values)  # terms' per-round state from the plain spline
@@ -233,7 +258,9 @@ def solve(
                              wall_time_s=result.wall_time_s + retry.wall_time_s)
         frames = frames.with_x(result.x)
         objective.prepare(frames.times, frames.values)  # for the next round, the scores, the report
-        rounds.append(Round(frames.count, frames.n_variable, result, scores, frames.times))
+        for arr in (result.x, result.trace, scores):
+            _read_only(arr)
+        rounds.append(Round(frames.count, frames.n_variable, result, scores, _read_only(frames.times.copy())))
         traces.append(result.trace)
         n_evals += result.n_evals
         status, message = result.status, result.message
@@ -274,10 +301,33 @@ def solve(
     if boosts:  # report both ends under the final weights, so E_initial and E_final compare
         ev0 = objective.evaluate(initial.times, initial.values, grad=False)
     return Solution(
-        frames, initial, rounds, status, message, ev0.E, ev1.E, ev0.integrals, ev1.integrals,
-        scales, np.concatenate(traces) if traces else np.array([ev0.E]),
-        time.perf_counter() - t_start, n_evals,
+        _read_only_frames(frames), _read_only_frames(initial), tuple(rounds), status, message, ev0.E, ev1.E,
+        ev0.integrals, ev1.integrals, scales, _read_only(np.concatenate(traces) if traces else np.array([ev0.E])),
+        time.perf_counter() - t_start, n_evals, dict(zip(objective.names, objective.weights.tolist())), objective,
     )
+
+
+def _working_copy(objective):
+    """A copy of `objective` with its own weights and scales (what `solve` changes); the terms and the
+    spline-matrix cache are shared. Anything but an Objective is returned as is (`_check_inputs` says)."""
+    if not isinstance(objective, Objective):
+        return objective
+    work = copy.copy(objective)
+    work.weights = objective.weights.copy()
+    work.scales = objective.scales.copy()
+    return work
+
+
+def _read_only(a):
+    """`a` (an array this module made) marked not writeable; None stays None."""
+    if a is not None:
+        a.flags.writeable = False
+    return a
+
+
+def _read_only_frames(frames: FrameSet) -> FrameSet:
+    """A FrameSet of read-only copies of `frames`' arrays (they may be shared with the caller's)."""
+    return FrameSet(*(_read_only(np.array(a)) for a in (frames.times, frames.values, frames.fixed, frames.is_keyframe)))
 
 
 def _check_inputs(objective, initial, options):
@@ -394,109 +444,3 @@ def _optimize(objective, frames, options, remaining, should_stop, progress, eval
         max_evals=options.max_evals, max_time_s=remaining, should_stop=should_stop, callback=cb,
     )
     return replace(res, x=x0 + pre.apply(res.x))
-
-
-class AccelerationPreconditioner:
-    """x = x0 + R^-1 z for `SolveOptions.precondition`: R upper triangular with R^T R = H + a tiny
-    ridge, H the Hessian of integral |Y''|^2 dt (= 2 h W2^T W2 for each component) over the free
-    components, in the order of `FrameSet.x`.
-
-    H is block diagonal by component, and components whose free frames are the same share one block
-    (all of a figure's components are free in the variable frames; partial keyframes add a few more
-    patterns), so R^-1 is applied per group as an (r, r) matrix times an (r, c) block: O(r^2 c) work
-    instead of the O(n_free^2) of a dense R^-1 (1600 x 1600 for the figure: ~3 ms per evaluation).
-    """
-
-    def __init__(self, objective: Objective, frames: FrameSet, radial_weight: float = 1.0, quat_slots=()):
-        basis = objective.basis(frames.times)
-        W2 = basis.W2
-        if basis.weights is None:
-            H = 2.0 * objective.h * (W2.T @ W2)
-        else:
-            H = 2.0 * (W2.T * basis.weights) @ W2
-        self.free = frames.free
-        patterns: dict[bytes, list[int]] = {}
-        for c in range(self.free.shape[1]):
-            if self.free[:, c].any():
-                patterns.setdefault(self.free[:, c].tobytes(), []).append(c)
-        self.groups = []
-        for key, comps in patterns.items():
-            rows = np.flatnonzero(np.frombuffer(key, dtype=bool))
-            self.groups.append((rows, np.array(comps), np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))))
-        # radial stretch (see SolveOptions.radial_weight): x = S^-1 R^-1 z with, per free frame and
-        # quaternion, S^-1 = I + c u u^T (u its unit direction at the start), c = 1/sqrt(w) - 1:
-        # the assumed Hessian S (H x I) S has curvature w H along u
-        self.c = 1.0 / np.sqrt(radial_weight) - 1.0
-        self.radial = []  # (rows, slot (4,), U (len(rows), 4)) for quaternions free in those rows
-        if self.c != 0.0:
-            for slot in np.asarray(quat_slots, dtype=int).reshape(-1, 4):
-                rows = np.flatnonzero(self.free[:, slot].all(axis=1))
-                if rows.size:
-                    U = frames.values[np.ix_(rows, slot)]
-                    norm = np.linalg.norm(U, axis=1, keepdims=True)
-                    U = np.where(norm > 0, U / np.where(norm > 0, norm, 1.0), 0.0)
-                    self.radial.append((rows, slot, U))
-
-    def whole_rows(self) -> np.ndarray | None:
-        """The free frames' rows if every free component is in one group covering all components
-        (whole frames free, as in the orientation problem): then x = x0 + (R^-1 Z).ravel() with
-        Z = z.reshape(len(rows), nq), R^-1 = groups[0][2]. Otherwise None."""
-        if len(self.groups) != 1:
-            return None
-        rows, comps, _ = self.groups[0]
-        return rows if len(comps) == self.free.shape[1] else None
-
-    def whole_radial(self):
-        """For `whole_rows` frames: (None, 0) without radial stretch; (U, c) if it acts on one
-        quaternion filling the state in every free frame (the orientation problem: x = R^-1 Z, then
-        X += c (X.U) U row by row); None otherwise (use apply/apply_transpose)."""
-        if not self.radial:
-            return None, 0.0
-        rows, slot, U = self.radial[0]
-        whole = self.whole_rows()
-        if (len(self.radial) == 1 and whole is not None and np.array_equal(rows, whole)
-                and np.array_equal(slot, np.arange(self.free.shape[1]))):
-            return U, self.c
-        return None
-
-    def apply(self, z: np.ndarray) -> np.ndarray:
-        """R^-1 z for z of shape (n_free,)."""
-        return self._map(z, transpose=False)
-
-    def apply_transpose(self, g: np.ndarray) -> np.ndarray:
-        """R^-T g: a gradient with respect to x as one with respect to z."""
-        return self._map(g, transpose=True)
-
-    def _map(self, v, transpose):
-        X = np.zeros(self.free.shape)
-        X[self.free] = v
-        if transpose:
-            self._stretch(X)
-        out = np.zeros_like(X)
-        for rows, comps, Rinv in self.groups:
-            block = X[np.ix_(rows, comps)]
-            out[np.ix_(rows, comps)] = (Rinv.T if transpose else Rinv) @ block
-        if not transpose:
-            self._stretch(out)
-        return out[self.free]
-
-    def _stretch(self, X):
-        """X[row, slot] += c (X[row, slot].u) u for the radial directions u (in place; symmetric)."""
-        for rows, slot, U in self.radial:
-            B = X[np.ix_(rows, slot)]
-            X[np.ix_(rows, slot)] = B + (self.c * np.einsum("ri,ri->r", B, U))[:, None] * U
-
-
-def _upper_factor(Hg: np.ndarray) -> np.ndarray:
-    """R upper triangular with R^T R = Hg + ridge; directions the acceleration does not see get the
-    identity (two frames: the spline is a line, Y'' = 0, H = 0, and the ridge alone would scale the
-    first step by ~1e150 - an overflow)."""
-    Hg = Hg.copy()
-    d = np.diag(Hg).copy()
-    flat = d <= 1e-12 * d.max(initial=0.0)
-    if flat.any():
-        Hg[flat, :] = 0.0
-        Hg[:, flat] = 0.0
-        Hg[flat, flat] = d[~flat].mean() if (~flat).any() else 1.0
-    Hg[np.diag_indices_from(Hg)] += 1e-10 * np.trace(Hg) / len(Hg) + 1e-300
-    return np.linalg.cholesky(Hg).T  # Hg = L L^T, R = L^T

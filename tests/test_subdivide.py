@@ -239,7 +239,9 @@ def test_radial_stretch_of_the_preconditioner():
 
 def test_failed_preconditioned_round_is_retried_without_preconditioning(monkeypatch):
     """A round whose preconditioned optimization fails is re-run on the plain variables."""
-    import solver.solve as solve_mod
+    import importlib
+
+    solve_mod = importlib.import_module("solver.solve")  # the module: `solver.solve` is the function
     from solver.optimize import minimize as real_minimize
 
     calls = []

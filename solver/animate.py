@@ -1,0 +1,115 @@
+"""The one-call API for a figure: the in-betweens of keyframes in a scene (the paper's whole method).
+
+`animate(model, keyframes)` builds what the command line `dynsplines animate` builds - the state layout
+of the figure, the objective (`figure_objective`: paper eq. 1 with the terms of sec. 5 and 6,
+renormalized by eq. 7), the plain spline through the keyframes (`FrameSet.from_keyframes`) - and runs
+the loop of the paper's figure 5 (`solve`) with the command's settings (`default_options`). The same
+model, keyframes, terms and weights give the command's path bit for bit (with the same BLAS thread
+count: the command uses one).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from solver.errors import InputError
+from solver.frames import FrameSet
+from solver.keyframes import Keyframes
+from solver.layout import StateLayout
+from solver.problem import default_limits, figure_objective, parse_terms
+from solver.solve import Solution, SolveOptions, solve
+
+__all__ = ["DEFAULT_RATE", "animate", "default_options"]
+
+#: Quadrature points per second [1/s] of the figure's objective (the command's --rate).
+DEFAULT_RATE = 400.0
+
+
+def default_options(weights: dict[str, float]) -> SolveOptions:
+    """The solve options of the command line (`dynsplines animate` with no optimization options).
+
+    One variable frame per keyframe interval, then 2 rounds of adaptive subdivision ranked by the
+    decrease of E each midpoint frame predicts (paper fig. 5 and sec. 4.2), renormalized terms
+    (eq. 7), L-BFGS preconditioned in the spline-acceleration metric with relative tolerance 1e-6, no
+    evaluation or time limit, and penalty continuation to `default_limits(weights)` (penetration
+    0.5 mm, hyperextension 1 deg, |1 - |q|| 0.03, for the terms switched on).
+
+    Args:
+        weights: {term name: lambda_j >= 0} as from `parse_terms`; only which terms have a nonzero
+            weight matters (it chooses the limits).
+    Returns:
+        SolveOptions. Change fields with `dataclasses.replace(default_options(w), rounds=4)`.
+    Raises:
+        InputError: `weights` is not a mapping of term names to weights.
+    """
+    if not hasattr(weights, "items"):
+        raise InputError(f"weights must be a dict {{term name: weight}} (e.g. from parse_terms), got "
+                         f"{type(weights).__name__}")
+    return SolveOptions(
+        subdivision="adaptive", per_segment=1, rounds=2, renormalize=True, algorithm="lbfgs", ftol_rel=1e-6,
+        max_evals=0, max_time_s=0.0, limits=default_limits(weights), precondition=True, score="decrease",
+    )
+
+
+def animate(
+    model,
+    keyframes: Keyframes,
+    terms: str | list[str] | tuple[str, ...] | None = None,
+    weights: dict[str, float] | None = None,
+    options: SolveOptions | None = None,
+    *,
+    rate: float | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    progress: Callable[[str, dict], None] | None = None,
+) -> Solution:
+    """Optimize the in-betweens of a figure's keyframes in a scene (paper sec. 2-6, fig. 5).
+
+    The path is the C2 natural cubic spline through the keyframes and variable frames; the variable
+    frames and the components partial keyframes leave free minimize E = sum_j lambda_j integral f_j dt
+    (eq. 1, each term renormalized by its value on the plain spline, eq. 7) while every keyframe holds
+    exactly. Variable frames are added where the Euler-Lagrange equations are furthest from holding.
+
+    Args:
+        model: mujoco.MjModel of a scene holding the figure (one free root joint, ball joints, the
+            contact sites l_heel, l_toe, r_heel, r_toe) and its floor/boxes. Not modified.
+        keyframes: Keyframes of the figure's qpos, values (k, nq) with nq = model.nq, times (k,) [s].
+        terms: which objective terms: None (penetration, unit, bending, smooth), "all", a
+            comma-separated string or a list of names from `term_names()`.
+        weights: {term name: lambda_j >= 0} overriding the default weights (`DEFAULT_WEIGHTS`); a name
+            here also switches the term on.
+        options: SolveOptions; default `default_options(weights)` (the command line's).
+        rate: quadrature points per second [1/s]; default DEFAULT_RATE.
+        should_stop: polled during the optimization; True ends it, keeping the best path so far.
+        progress: progress(event, info) for "round", "eval" and "boost" (see `solve`).
+    Returns:
+        Solution: `frames` (the optimized FrameSet, values (m, nq) qpos at times (m,) [s]; the path is
+        the spline through them, `frames.path(t)`), `initial` (the plain spline's), E and the term
+        integrals before and after, `weights` after penalty continuation, status and message.
+    Raises:
+        InputError: `keyframes` is not Keyframes or does not fit the model (nq), an unknown term or a
+            bad weight (lists the valid ones), a scene without what a term needs (contact sites),
+            bad `options` or `rate`.
+        NonFiniteError: the objective is NaN or infinite on the plain spline.
+    """
+    if not isinstance(keyframes, Keyframes):
+        raise InputError(f"keyframes must be a solver.Keyframes, got {type(keyframes).__name__}")
+    nq = int(getattr(model, "nq", -1))
+    if keyframes.values.shape[1] != nq:
+        raise InputError(f"{keyframes.source}: keyframes have {keyframes.values.shape[1]} qpos components but "
+                         f"the model has nq = {nq}; are they for this scene's figure?")
+    if terms is not None and not isinstance(terms, str):
+        terms = ",".join(terms)
+    chosen = parse_terms(terms, weights)
+    rate = DEFAULT_RATE if rate is None else float(rate)
+    if not np.isfinite(rate) or rate <= 0:
+        raise InputError(f"rate must be > 0 quadrature points per second, got {rate}")
+    if options is None:
+        options = default_options(chosen)
+    elif not isinstance(options, SolveOptions):
+        raise InputError(f"options must be a SolveOptions (e.g. default_options(weights)), got "
+                         f"{type(options).__name__}")
+    layout = StateLayout.from_model(model)
+    objective = figure_objective(model, chosen, keyframes.times[0], keyframes.times[-1], rate=rate)
+    initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    return solve(objective, initial, options, should_stop=should_stop, progress=progress)

@@ -1,0 +1,121 @@
+"""The acceleration preconditioner of `SolveOptions.precondition`: optimize in z = R (x - x0), with
+R^T R the Hessian of integral |Y''|^2 dt over the free components of a frame set.
+
+For acceleration-dominated objectives (the covariant acceleration, eq. 9 f2) this removes most of the
+ill-conditioning of frame values (the Hessian of a spline's bending energy grows like 1/h^3 in the
+frame spacing h), and L-BFGS needs 2-3x fewer evaluations.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.frames import FrameSet
+from solver.objective import Objective
+
+__all__ = ["AccelerationPreconditioner"]
+
+
+class AccelerationPreconditioner:
+    """x = x0 + R^-1 z for `SolveOptions.precondition`: R upper triangular with R^T R = H + a tiny
+    ridge, H the Hessian of integral |Y''|^2 dt (= 2 h W2^T W2 for each component) over the free
+    components, in the order of `FrameSet.x`.
+
+    H is block diagonal by component, and components whose free frames are the same share one block
+    (all of a figure's components are free in the variable frames; partial keyframes add a few more
+    patterns), so R^-1 is applied per group as an (r, r) matrix times an (r, c) block: O(r^2 c) work
+    instead of the O(n_free^2) of a dense R^-1 (1600 x 1600 for the figure: ~3 ms per evaluation).
+    """
+
+    def __init__(self, objective: Objective, frames: FrameSet, radial_weight: float = 1.0, quat_slots=()):
+        basis = objective.basis(frames.times)
+        W2 = basis.W2
+        if basis.weights is None:
+            H = 2.0 * objective.h * (W2.T @ W2)
+        else:
+            H = 2.0 * (W2.T * basis.weights) @ W2
+        self.free = frames.free
+        patterns: dict[bytes, list[int]] = {}
+        for c in range(self.free.shape[1]):
+            if self.free[:, c].any():
+                patterns.setdefault(self.free[:, c].tobytes(), []).append(c)
+        self.groups = []
+        for key, comps in patterns.items():
+            rows = np.flatnonzero(np.frombuffer(key, dtype=bool))
+            self.groups.append((rows, np.array(comps), np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))))
+        # radial stretch (see SolveOptions.radial_weight): x = S^-1 R^-1 z with, per free frame and
+        # quaternion, S^-1 = I + c u u^T (u its unit direction at the start), c = 1/sqrt(w) - 1:
+        # the assumed Hessian S (H x I) S has curvature w H along u
+        self.c = 1.0 / np.sqrt(radial_weight) - 1.0
+        self.radial = []  # (rows, slot (4,), U (len(rows), 4)) for quaternions free in those rows
+        if self.c != 0.0:
+            for slot in np.asarray(quat_slots, dtype=int).reshape(-1, 4):
+                rows = np.flatnonzero(self.free[:, slot].all(axis=1))
+                if rows.size:
+                    U = frames.values[np.ix_(rows, slot)]
+                    norm = np.linalg.norm(U, axis=1, keepdims=True)
+                    U = np.where(norm > 0, U / np.where(norm > 0, norm, 1.0), 0.0)
+                    self.radial.append((rows, slot, U))
+
+    def whole_rows(self) -> np.ndarray | None:
+        """The free frames' rows if every free component is in one group covering all components
+        (whole frames free, as in the orientation problem): then x = x0 + (R^-1 Z).ravel() with
+        Z = z.reshape(len(rows), nq), R^-1 = groups[0][2]. Otherwise None."""
+        if len(self.groups) != 1:
+            return None
+        rows, comps, _ = self.groups[0]
+        return rows if len(comps) == self.free.shape[1] else None
+
+    def whole_radial(self):
+        """For `whole_rows` frames: (None, 0) without radial stretch; (U, c) if it acts on one
+        quaternion filling the state in every free frame (the orientation problem: x = R^-1 Z, then
+        X += c (X.U) U row by row); None otherwise (use apply/apply_transpose)."""
+        if not self.radial:
+            return None, 0.0
+        rows, slot, U = self.radial[0]
+        whole = self.whole_rows()
+        if (len(self.radial) == 1 and whole is not None and np.array_equal(rows, whole)
+                and np.array_equal(slot, np.arange(self.free.shape[1]))):
+            return U, self.c
+        return None
+
+    def apply(self, z: np.ndarray) -> np.ndarray:
+        """R^-1 z for z of shape (n_free,)."""
+        return self._map(z, transpose=False)
+
+    def apply_transpose(self, g: np.ndarray) -> np.ndarray:
+        """R^-T g: a gradient with respect to x as one with respect to z."""
+        return self._map(g, transpose=True)
+
+    def _map(self, v, transpose):
+        X = np.zeros(self.free.shape)
+        X[self.free] = v
+        if transpose:
+            self._stretch(X)
+        out = np.zeros_like(X)
+        for rows, comps, Rinv in self.groups:
+            block = X[np.ix_(rows, comps)]
+            out[np.ix_(rows, comps)] = (Rinv.T if transpose else Rinv) @ block
+        if not transpose:
+            self._stretch(out)
+        return out[self.free]
+
+    def _stretch(self, X):
+        """X[row, slot] += c (X[row, slot].u) u for the radial directions u (in place; symmetric)."""
+        for rows, slot, U in self.radial:
+            B = X[np.ix_(rows, slot)]
+            X[np.ix_(rows, slot)] = B + (self.c * np.einsum("ri,ri->r", B, U))[:, None] * U
+
+
+def _upper_factor(Hg: np.ndarray) -> np.ndarray:
+    """R upper triangular with R^T R = Hg + ridge; directions the acceleration does not see get the
+    identity (two frames: the spline is a line, Y'' = 0, H = 0, and the ridge alone would scale the
+    first step by ~1e150 - an overflow)."""
+    Hg = Hg.copy()
+    d = np.diag(Hg).copy()
+    flat = d <= 1e-12 * d.max(initial=0.0)
+    if flat.any():
+        Hg[flat, :] = 0.0
+        Hg[:, flat] = 0.0
+        Hg[flat, flat] = d[~flat].mean() if (~flat).any() else 1.0
+    Hg[np.diag_indices_from(Hg)] += 1e-10 * np.trace(Hg) / len(Hg) + 1e-300
+    return np.linalg.cholesky(Hg).T  # Hg = L L^T, R = L^T

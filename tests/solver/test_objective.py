@@ -1,0 +1,109 @@
+"""The objective (solver/objective.py, paper eq. 1 and 7) against exact integrals and finite differences."""
+import numpy as np
+import pytest
+from conftest import fd_gradient
+
+from solver.errors import InputError
+from solver.objective import NonFiniteError, Objective
+from solver.terms.base import Term, TermEval
+
+
+class Value(Term):
+    """f = Y[:, 0] (exactly integrable on a straight path)."""
+
+    name, needs = "value", (0,)
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True):
+        dY = np.zeros_like(Y)
+        dY[:, 0] = 1.0
+        return TermEval(Y[:, 0].copy(), dY=dY if grad else None)
+
+
+class Wiggly(Term):
+    """f = sum_i sin(Y_i) Y'_i^2 + (Y''_i)^2: reads all three derivatives, nonlinear."""
+
+    name, needs = "wiggly", (0, 1, 2)
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True):
+        f = (np.sin(Y) * Y1**2 + Y2**2).sum(axis=1)
+        if not grad:
+            return TermEval(f)
+        return TermEval(f, dY=np.cos(Y) * Y1**2, dY1=2 * np.sin(Y) * Y1, dY2=2 * Y2)
+
+
+class Zero(Term):
+    name, needs = "zero", (0,)
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True):
+        return TermEval(np.zeros(len(t)), dY=np.zeros_like(Y) if grad else None)
+
+
+class Poison(Term):
+    name, needs = "poison", (0,)
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True):
+        return TermEval(np.full(len(t), np.nan), dY=np.zeros_like(Y) if grad else None)
+
+
+def test_weighted_integral_of_a_linear_path_is_exact():
+    """Midpoint quadrature integrates a linear integrand exactly: E = w (a (t1 - t0) + b (t1^2 - t0^2) / 2)."""
+    a, b, t0, t1, w = 0.3, -1.7, 0.5, 2.25, 2.5
+    knots = np.array([t0, 1.0, 1.6, t1])
+    P = np.stack([a + b * knots, np.zeros(4)], axis=1)  # frames on a line: the natural spline is the line
+    obj = Objective([Value()], np.array([w]), t0, t1, rate=200.0)
+    ev = obj.evaluate(knots, P)
+    exact = a * (t1 - t0) + b * (t1**2 - t0**2) / 2
+    assert ev.integrals["value"] == pytest.approx(exact, rel=1e-12)
+    assert ev.E == pytest.approx(w * exact, rel=1e-12)
+
+
+def test_gauss_quadrature_integrates_a_cubic_integrand_exactly():
+    """f = Y^3 - Y with Y linear is a cubic in t; two Gauss nodes per segment integrate it exactly."""
+
+    class Cubic(Term):
+        name, needs = "cubic", (0,)
+
+        def evaluate(self, t, Y, Y1, Y2, grad=True):
+            return TermEval(Y[:, 0] ** 3 - Y[:, 0], dY=(3 * Y**2 - 1) if grad else None)
+
+    a, b, t0, t1 = 0.2, 0.9, 0.0, 1.3
+    knots = np.array([t0, 0.4, t1])
+    P = (a + b * knots)[:, None]
+    obj = Objective([Cubic()], [1.0], t0, t1, quadrature="gauss", points=2)
+    F = lambda t: (a + b * t) ** 4 / (4 * b) - (a + b * t) ** 2 / (2 * b)  # antiderivative
+    assert obj.evaluate(knots, P).integrals["cubic"] == pytest.approx(F(t1) - F(t0), rel=1e-13)
+
+
+@pytest.mark.parametrize("quadrature", ["uniform", "gauss"])
+def test_gradient_matches_finite_differences(quadrature):
+    rng = np.random.default_rng(3)
+    knots = np.array([0.0, 0.3, 0.7, 0.8, 1.2])
+    P = rng.normal(size=(5, 3))
+    obj = Objective([Wiggly(), Value()], [0.7, 1.3], 0.0, 1.2, rate=300.0, quadrature=quadrature)
+    obj.scales = np.array([2.0, 0.5])  # as after renormalization: E = sum w_j I_j / s_j
+    G = obj.evaluate(knots, P).grad
+    G_fd = fd_gradient(lambda X: obj.evaluate(knots, X, grad=False).E, P)
+    np.testing.assert_allclose(G, G_fd, rtol=1e-6, atol=1e-6)
+
+
+def test_renormalized_terms_start_at_their_weights():
+    """Eq. 7: after renormalize on a path, each term contributes its weight there; a term that is zero
+    keeps scale 1 (and contributes 0)."""
+    rng = np.random.default_rng(4)
+    knots = np.array([0.0, 0.5, 1.0, 1.5])
+    P = rng.normal(size=(4, 2)) + 3.0  # Value's integral is positive here
+    obj = Objective([Wiggly(), Value(), Zero()], [0.25, 4.0, 9.0], 0.0, 1.5)
+    scales = obj.renormalize(knots, P)
+    assert scales["zero"] == 1.0
+    assert obj.evaluate(knots, P, grad=False).E == pytest.approx(0.25 + 4.0, rel=1e-12)
+
+
+def test_invalid_weights_and_nonfinite_terms_are_named():
+    with pytest.raises(InputError, match="'value'.*weights must be >= 0"):
+        Objective([Value()], [-1.0], 0.0, 1.0)
+    with pytest.raises(InputError, match="1 objective terms but 2 weights"):
+        Objective([Value()], [1.0, 2.0], 0.0, 1.0)
+    obj = Objective([Value(), Poison()], [1.0, 1.0], 0.0, 1.0)
+    with pytest.raises(NonFiniteError, match="'poison'") as e:
+        obj.evaluate(np.array([0.0, 1.0]), np.zeros((2, 1)))
+    assert e.value.term == "poison"
