@@ -21,7 +21,7 @@ from solver.problem import figure_objective, parse_terms
 from solver.terms.dynamics import RootResidual
 from solver.terms.penetration import Penetration
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SCENE = REPO / "models" / "run_and_step.xml"
 KEYFRAMES = REPO / "models" / "run_and_step.keyframes.json"
 

@@ -26,7 +26,7 @@ from solver.frames import FrameSet
 from solver.layout import StateLayout
 from solver.spline import interpolate
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
 SCENE = MODELS / "run_and_step.xml"
 LAYOUT = StateLayout.from_model(mujoco.MjModel.from_xml_path(str(SCENE)))
