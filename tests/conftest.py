@@ -68,3 +68,14 @@ def fd_gradient(fun, X, h=1e-6):
         Xm[i] -= h
         G[i] = (fun(Xp) - fun(Xm)) / (2 * h)
     return G
+
+
+def pytest_collection_modifyitems(config, items):
+    """Everything under tests/e2e/ (whole command runs through the CLI) is `slow`; other slow tests
+    carry @pytest.mark.slow themselves. `pytest -m "not slow"` is the fast part."""
+    from pathlib import Path  # here, not at the top: the top of this file belongs to the environment setup
+
+    e2e = Path(__file__).resolve().parent / "e2e"
+    for item in items:
+        if e2e in Path(str(item.path)).resolve().parents:
+            item.add_marker(pytest.mark.slow)

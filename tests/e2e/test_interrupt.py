@@ -35,7 +35,7 @@ from solver.solve import SolveOptions, solve
 from solver.spline import interpolate
 from solver.terms.base import Term, TermEval
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
 SCENE = MODELS / "run_and_step.xml"
 

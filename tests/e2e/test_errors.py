@@ -24,7 +24,7 @@ from solver.problem import figure_objective, parse_terms
 from solver.solve import SolveOptions, solve
 from solver.terms import UnitQuaternion
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
 SCENE = MODELS / "run_and_step.xml"
 JOINTS = "root, l_hip, l_knee, l_ankle, r_hip, r_knee, r_ankle, torso, l_shoulder, l_elbow, r_shoulder, r_elbow"

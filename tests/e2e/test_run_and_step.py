@@ -14,7 +14,7 @@ from scipy.interpolate import make_interp_spline
 
 from runner.cli import main
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,8 @@
 """Tests of the two baselines (solver/bench/) against the independent reference."""
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import pytest
 
@@ -86,13 +88,18 @@ def test_bspline_gap_decreases_with_resolution():
     assert gaps[2] < 1e-3
 
 
-def test_deterministic_and_time_limit():
+def test_deterministic_and_time_limit(monkeypatch):
     a = bl.bspline_coefficients(MOD.times, MOD.quats, 2)
     b = bl.bspline_coefficients(MOD.times, MOD.quats, 2)
     assert a.E == b.E and np.array_equal(a.path_u, b.path_u) and a.n_evals == b.n_evals
-    r = bl.barr92_discrete(LARGE.times, LARGE.quats, 24, max_time_s=0.3)
+    # a fake clock, one second per reading, instead of the wall clock: the limit is checked before
+    # every evaluation and stops at the first one past it. Readings: 0 (start of the run), 1 (start
+    # of SLSQP), 2, 3, 4 (evaluations 1-3, elapsed 1-3 s), 5 (elapsed 4 s > 3.5 s: stop), 6 (end).
+    ticks = iter(range(1000))
+    monkeypatch.setattr(bl, "time", types.SimpleNamespace(perf_counter=lambda: float(next(ticks))))
+    r = bl.barr92_discrete(LARGE.times, LARGE.quats, 24, max_time_s=3.5)
     assert r.status == "time_limit"
-    assert r.wall_time_s < 5.0
+    assert r.n_evals == 3 and r.wall_time_s == 6.0
     assert np.isfinite(r.E) and r.E > 0
 
 

@@ -16,7 +16,7 @@ from solver.keyframe_file import read_keyframes
 from solver.errors import InputError
 from solver.layout import StateLayout
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[3]
 MODELS = REPO / "models"
 CLIP = MODELS / "cmu" / "127_33.bvh"
 SITES = ["l_heel", "l_toe", "r_heel", "r_toe"]

@@ -16,7 +16,7 @@ from solver.layout import StateLayout
 from solver.surfaces import StaticSurfaces
 from solver.terms.dynamics import CONTACT_SITES, JointTorque, RootResidual, make_engine
 
-SCENE = Path(__file__).resolve().parents[1] / "models" / "run_and_step.xml"
+SCENE = Path(__file__).resolve().parents[2] / "models" / "run_and_step.xml"
 G = 9.81
 
 # Every feature the analytic engine models: a static body carrying a ball joint, body quats, joint

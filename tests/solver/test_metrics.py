@@ -21,7 +21,7 @@ from solver.problem import figure_objective, parse_terms
 from solver.terms.dynamics import RootResidual
 from solver.terms.penetration import Penetration
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SCENE = REPO / "models" / "run_and_step.xml"
 KEYFRAMES = REPO / "models" / "run_and_step.keyframes.json"
 
@@ -198,6 +198,7 @@ def test_shared_engine_gives_the_same_objective_and_gradient(model, layout, keyf
 # ------------------------------------------------------------------------------ refinement
 
 
+@pytest.mark.slow
 def test_adaptive_refinement_beats_global_at_equal_frame_counts(model, layout, keyframes):
     """The first four keyframes of the clip, every term on, 6 variable frames: adaptive subdivision
     ranked by the predicted decrease ends lower than 2 frames in each interval (measured 0.75 vs
@@ -226,6 +227,7 @@ def all_terms(tmp_path_factory):
     return json.loads(str(z["metrics_json"])), z, d / "plots"
 
 
+@pytest.mark.slow
 def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms):
     metrics, z, _ = all_terms
     plain, opt = metrics["plain"], metrics["optimized"]
@@ -243,6 +245,7 @@ def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms)
     assert set(opts["weights"]) == {"penetration", "unit", "bending", "smooth", "torque", "root"}
 
 
+@pytest.mark.slow
 def test_plots_are_written(all_terms):
     _, _, plots = all_terms
     names = sorted(p.name for p in plots.glob("*.png"))

@@ -11,7 +11,7 @@ from solver.errors import InputError
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 
-MODELS = Path(__file__).resolve().parents[1] / "models"
+MODELS = Path(__file__).resolve().parents[2] / "models"
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-MODELS = Path(__file__).resolve().parents[1] / "models"
+MODELS = Path(__file__).resolve().parents[2] / "models"
 BODIES = ["pelvis", "torso", "l_thigh", "l_shin", "l_foot", "r_thigh", "r_shin", "r_foot",
           "l_upper_arm", "l_forearm", "r_upper_arm", "r_forearm"]
 BALLS = ["torso", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle",
