@@ -204,10 +204,10 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
 
     joints = {}
     for j in range(model.njnt):
-        t = model.jnt_type[j]
-        if t not in (mujoco.mjtJoint.mjJNT_BALL, mujoco.mjtJoint.mjJNT_FREE):
+        t = int(model.jnt_type[j])
+        if t not in (int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_FREE)):
             continue
-        a = model.jnt_qposadr[j] + (3 if t == mujoco.mjtJoint.mjJNT_FREE else 0)
+        a = int(model.jnt_qposadr[j]) + (3 if t == int(mujoco.mjtJoint.mjJNT_FREE) else 0)
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
         joints[name] = _stats(_angle_deg(qpos[:, a:a + 4], ref[:, a:a + 4]))
     bodies = {}
