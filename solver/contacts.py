@@ -11,19 +11,22 @@ Defaults, chosen on the three CMU clips (127_33 run and step onto a box, 16_23 w
 120 fps, retargeted by `runner/bvh_import.py`, heights above the surface under each site):
 
 - HEIGHT_ON = 0.03 m, HEIGHT_OFF = 0.05 m. After the retargeting's root-height correction a planted
-  site sits 2 mm above its surface (toe 0.2 cm in every stance of the clips). A forefoot runner's
-  heel stays 5-10 cm up while the toe is planted (127_33 frames 3-18: l_heel 8-10 cm at 0.2 m/s), so
-  the entry height must be below ~5 cm or that heel would count as planted; 3 cm leaves room for the
-  heel of a walker, which sits 0-3 cm up at heel strike and in midstance (16_23). Leaving at 5 cm is
-  the GMD foot-contact height (METRICS.md).
-- SPEED_ON = 0.5 m/s, SPEED_OFF = 1.0 m/s (3-D speed, central differences). A planted site moves at
-  0.0-0.3 m/s in these clips (marker noise and the foot rolling about it); swinging feet move at
-  2-10 m/s, and a site slows through 0.5-1 m/s only within 1-2 frames of touch-down and lift-off.
-  0.5 m/s is the GMD skating speed, so a site entering contact is by construction not skating by
-  their measure; leaving at 1 m/s keeps a rolling toe planted through push-off until it really goes.
-- MIN_DURATION = 0.05 s (6 frames at 120 fps). The shortest real stance in the clips (a sprinting
-  toe, 35_17) lasts about 0.1 s; anything under 0.05 s is a swinging foot brushing past the
-  thresholds, not a support.
+  site sits 2 mm above its surface. A forefoot runner's heel hovers 5-10 cm up while the toe is
+  planted (127_33 frames 3-18: l_heel 8-10 cm, still at 0.2 m/s), so the entry height must stay
+  under ~5 cm or that heel would count as planted; 3 cm takes the walker's heel at heel strike
+  (16_23: 0.2-2.3 cm). Leaving at 5 cm is the GMD foot-contact height (../shared/METRICS.md).
+- SPEED_ON = 0.5 m/s, SPEED_OFF = 1.0 m/s (3-D speed, central differences). Planted sites move at
+  0.18-0.34 m/s (median over contact frames), 0.6-0.9 m/s at the 95th percentile (the foot rolling
+  over the toe at push-off, marker noise); swinging feet move at 2-10 m/s. Entering at 0.5 m/s (the
+  GMD skating speed) means a site enters contact not skating by their measure; leaving at 1 m/s
+  keeps a rolling toe planted through push-off.
+- MIN_DURATION = 0.05 s (6 frames at 120 fps). Stances last 0.16-0.23 s in the runs and 0.2-0.44 s
+  per site in the walk; the shortest real contacts are heel touches of a forefoot runner
+  (0.058-0.092 s, kept); a swinging foot brushing past the thresholds lasts a few frames.
+
+Why hysteresis: with single thresholds (3 cm / 0.5 m/s, or GMD's 5 cm / 0.5 m/s) and no minimum
+duration the walk 16_23 breaks into 29-32 site contacts (19 foot stances) instead of 12 (6 stances),
+the run 35_17 into 11-14 (9 stances) instead of 6 (4); hysteresis alone already gives 12 (6).
 """
 from __future__ import annotations
 
