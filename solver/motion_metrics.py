@@ -4,7 +4,8 @@
 reference's frame rate. Positions come from MuJoCo kinematics (`mj_kinematics`: `site_xpos` of the
 contact sites, `xquat` of the bodies), not from the objective's code, so the numbers check the solver
 rather than repeat it. Heights are above the highest static surface under each site
-(`contacts.surface_height_under`: floor planes and box tops of the scene model). Every plausibility
+(`contacts.surface_height_under`: floor planes and box tops of the scene model; a contact's
+`surface` name is not used). Every plausibility
 figure is computed for the reference too: capture is not perfect either (real data scores about
 0.05 on the GMD skating ratio; guided-motion-diffusion issue #8).
 
@@ -181,7 +182,7 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         JSON-serializable dict: {"fps", "frames", "sites", "error": {...}, "path": {...},
         "reference": {...}}; "path" and "reference" hold `plausibility` figures.
     Raises:
-        InputError: shapes disagree, fps not positive, a site missing in the model.
+        InputError: shapes disagree, fps not positive, a site missing in the model, no floor plane.
     """
     import mujoco
 
@@ -196,6 +197,9 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
     n = len(qpos)
     times = np.arange(n) / fps
     surfaces = StaticSurfaces.from_model(model)
+    if not np.any(np.abs(surfaces.plane_normal[:, 2]) > 1e-6):
+        raise InputError("the model has no floor plane; motion metrics measure heights above the scene's "
+                         "surfaces (add a plane, e.g. scene_fit.scene_mjcf)")
     pos, xq = _kinematics(model, qpos, sites)
     rpos, rxq = _kinematics(model, ref, sites)
     h = pos[..., 2] - surface_height_under(pos, surfaces)

@@ -108,6 +108,9 @@ def test_validation(floor_model):
         motion_metrics(floor_model, q, FPS, q[:-1], [])
     with pytest.raises(InputError, match="fps"):
         motion_metrics(floor_model, q, 0.0, q, [])
+    figure_only = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "humanoid39.xml"))
+    with pytest.raises(InputError, match="floor"):
+        motion_metrics(figure_only, q, FPS, q, [])
 
 
 def test_127_33_reference_own_metrics():

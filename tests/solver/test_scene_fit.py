@@ -138,3 +138,17 @@ def test_127_33_step_from_a_floor_only_retarget():
     floor_x = min(pos[(ref.times >= c_.start) & (ref.times <= c_.end), SITES.index(c_.site), 0].min()
                   for c_ in cs if c_.start > 1.4)
     assert box_x < hi[0] < floor_x and box_x < hc[0] + hh[0] < floor_x
+
+
+def test_fit_contacts_ignores_a_heel_hovering_over_a_planted_toe():
+    n = 40
+    times = np.arange(n) / 100.0
+    pos = np.zeros((n, 4, 3))
+    pos[:, 1] = (0.2, 0.1, 0.25)       # l_toe still, on a 25 cm box
+    pos[:, 0] = (0.0, 0.1, 0.33)       # l_heel still, 8 cm above its toe: not resting
+    pos[:, 2] = (0.0, -0.1, 0.30)      # right foot flat and still at 30 cm: both sites rest
+    pos[:, 3] = (0.25, -0.1, 0.30)
+    cs = fit_contacts(times, pos)
+    assert sorted(c.site for c in cs) == ["l_toe", "r_heel", "r_toe"]
+    pos[:, 3, 0] += 2.0 * times        # right toe swinging: fast, not resting
+    assert sorted(c.site for c in fit_contacts(times, pos)) == ["l_toe", "r_heel"]
