@@ -1,0 +1,270 @@
+"""Foot contacts: which contact site rests on a surface, and when.
+
+A contact is (site, surface, [start, end]) (DESIGN.md "Contacts"). `detect_contacts` labels them from
+a reference motion with height and speed thresholds, hysteresis and a minimum duration: threshold
+heuristics alone flicker and are known to be unreliable against pressure-insole ground truth
+(UnderPressure, Mourot et al. 2022; ../shared/METRICS.md "Contact labels"), so a site enters contact
+only below the tighter pair of thresholds, leaves only above the looser pair, and contacts shorter
+than `min_duration` are dropped. The animator overrides the result by writing contacts by hand.
+
+Defaults, chosen on the three CMU clips (127_33 run and step onto a box, 16_23 walk, 35_17 run;
+120 fps, retargeted by `runner/bvh_import.py`, heights above the surface under each site):
+
+- HEIGHT_ON = 0.03 m, HEIGHT_OFF = 0.05 m. After the retargeting's root-height correction a planted
+  site sits 2 mm above its surface. A forefoot runner's heel hovers 5-10 cm up while the toe is
+  planted (127_33 frames 3-18: l_heel 8-10 cm, still at 0.2 m/s), so the entry height must stay
+  under ~5 cm or that heel would count as planted; 3 cm takes the walker's heel at heel strike
+  (16_23: 0.2-2.3 cm). Leaving at 5 cm is the GMD foot-contact height (../shared/METRICS.md).
+- SPEED_ON = 0.5 m/s, SPEED_OFF = 1.0 m/s (3-D speed, central differences). Planted sites move at
+  0.18-0.34 m/s (median over contact frames), 0.6-0.9 m/s at the 95th percentile (the foot rolling
+  over the toe at push-off, marker noise); swinging feet move at 2-10 m/s. Entering at 0.5 m/s (the
+  GMD skating speed) means a site enters contact not skating by their measure; leaving at 1 m/s
+  keeps a rolling toe planted through push-off.
+- MIN_DURATION = 0.05 s (6 frames at 120 fps). Stances last 0.16-0.23 s in the runs and 0.2-0.44 s
+  per site in the walk; the shortest real contacts are heel touches of a forefoot runner
+  (0.058-0.092 s, kept); a swinging foot brushing past the thresholds lasts a few frames.
+
+Why hysteresis: with single thresholds (3 cm / 0.5 m/s, or GMD's 5 cm / 0.5 m/s) and no minimum
+duration the walk 16_23 breaks into 29-32 site contacts (19 foot stances) instead of 12 (6 stances),
+the run 35_17 into 11-14 (9 stances) instead of 6 (4); hysteresis alone already gives 12 (6).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from solver.errors import InputError
+
+#: the contact sites of the figure (models/humanoid39.xml), in the order of `site_pos` arrays.
+SITES: tuple[str, ...] = ("l_heel", "l_toe", "r_heel", "r_toe")
+#: feet -> their contact sites.
+FEET: dict[str, tuple[str, str]] = {"l": ("l_heel", "l_toe"), "r": ("r_heel", "r_toe")}
+
+#: a site enters contact below this height above the surface under it [m] ...
+HEIGHT_ON = 0.03
+#: ... and leaves above this one [m].
+HEIGHT_OFF = 0.05
+#: a site enters contact below this speed [m/s] ...
+SPEED_ON = 0.5
+#: ... and leaves above this one [m/s].
+SPEED_OFF = 1.0
+#: shorter contacts are dropped [s].
+MIN_DURATION = 0.05
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact site on a surface of the scene over [start, end] [s]."""
+    site: str        # one of l_heel, l_toe, r_heel, r_toe
+    start: float     # [s]
+    end: float       # [s]
+    surface: str = ""  # name of the StaticSurfaces surface ("" = whichever is under the site)
+
+    @property
+    def duration(self) -> float:
+        """[s] end - start."""
+        return self.end - self.start
+
+
+def site_speeds(times: np.ndarray, site_pos: np.ndarray) -> np.ndarray:
+    """(n, s) 3-D speed [m/s] of each site by central differences (one-sided at the ends).
+
+    Args:
+        times: (n,) [s], increasing. site_pos: (n, s, 3) [m].
+    """
+    if len(times) < 2:
+        return np.zeros(site_pos.shape[:2])
+    vel = np.gradient(site_pos, times, axis=0)
+    return np.linalg.norm(vel, axis=-1)
+
+
+def _check(times, site_pos, heights, sites):
+    times = np.asarray(times, float)
+    site_pos = np.asarray(site_pos, float)
+    heights = np.asarray(heights, float)
+    n = len(times)
+    if times.ndim != 1 or n < 1:
+        raise InputError(f"times must be a non-empty (n,) array; got shape {times.shape}")
+    if n > 1 and not np.all(np.diff(times) > 0):
+        raise InputError("times must be strictly increasing")
+    s = len(sites)
+    if site_pos.shape != (n, s, 3):
+        raise InputError(f"site_pos must have shape (n, s, 3) = ({n}, {s}, 3); got {site_pos.shape}")
+    if heights.shape != (n, s):
+        raise InputError(f"heights must have shape (n, s) = ({n}, {s}); got {heights.shape}")
+    return times, site_pos, heights
+
+
+def detect_contacts(
+    times: np.ndarray,
+    site_pos: np.ndarray,
+    heights: np.ndarray,
+    sites: Sequence[str] = SITES,
+    height_on: float = HEIGHT_ON,
+    height_off: float = HEIGHT_OFF,
+    speed_on: float = SPEED_ON,
+    speed_off: float = SPEED_OFF,
+    min_duration: float = MIN_DURATION,
+) -> list[Contact]:
+    """Contacts of each site from its height above the surface and its speed, with hysteresis.
+
+    Per site, frame by frame: out of contact, the site enters when height < height_on and
+    speed < speed_on; in contact, it stays while height <= height_off and speed <= speed_off.
+    A contact runs from its first to its last frame (times of those frames); contacts with
+    end - start < min_duration are dropped. Speeds are 3-D, central differences of `site_pos`.
+
+    Args:
+        times: (n,) frame times [s], strictly increasing.
+        site_pos: (n, s, 3) site positions [m] (world, z up).
+        heights: (n, s) height [m] of each site above the surface under it (negative: below).
+        sites: the s site names, in the order of the second axis.
+        height_on, height_off: [m], height_on <= height_off. speed_on, speed_off: [m/s],
+            speed_on <= speed_off. min_duration: [s] >= 0.
+    Returns:
+        contacts sorted by start time, then site order; surface "" (whichever is under the site).
+    Raises:
+        InputError: shapes disagree, times not increasing, thresholds out of order.
+    """
+    times, site_pos, heights = _check(times, site_pos, heights, sites)
+    if not (height_on <= height_off and speed_on <= speed_off and min_duration >= 0):
+        raise InputError(
+            f"thresholds need height_on <= height_off, speed_on <= speed_off, min_duration >= 0; got "
+            f"height {height_on}/{height_off} m, speed {speed_on}/{speed_off} m/s, min {min_duration} s"
+        )
+    speed = site_speeds(times, site_pos)
+    enter = (heights < height_on) & (speed < speed_on)
+    stay = (heights <= height_off) & (speed <= speed_off)
+    out: list[tuple[float, int, Contact]] = []
+    for k, name in enumerate(sites):
+        on = False
+        first = 0
+        for i in range(len(times) + 1):
+            if on and (i == len(times) or not stay[i, k]):
+                on = False
+                c = Contact(name, float(times[first]), float(times[i - 1]))
+                if c.duration >= min_duration - 1e-9:
+                    out.append((c.start, k, c))
+            if i < len(times) and not on and enter[i, k]:
+                on, first = True, i
+    out.sort(key=lambda t: (t[0], t[1]))
+    return [c for _, _, c in out]
+
+
+def contact_mask(contacts: Sequence[Contact], sites: Sequence[str], times: np.ndarray) -> np.ndarray:
+    """(n, s) bool: site k is in some contact at times[i] (start <= t <= end, 1e-9 s tolerance).
+
+    Args:
+        contacts: the contacts. sites: the s site names (columns). times: (n,) [s].
+    Raises:
+        InputError: a contact names a site not in `sites`.
+    """
+    times = np.asarray(times, float)
+    mask = np.zeros((len(times), len(sites)), bool)
+    for c in contacts:
+        if c.site not in sites:
+            raise InputError(f"contact site {c.site!r} is not one of {', '.join(sites)}")
+        k = list(sites).index(c.site)
+        mask[:, k] |= (times >= c.start - 1e-9) & (times <= c.end + 1e-9)
+    return mask
+
+
+def foot_contacts(contacts: Sequence[Contact], feet: dict[str, tuple[str, ...]] = FEET) -> list[Contact]:
+    """Contacts of whole feet: the union of the intervals of a foot's sites, site = the foot's name.
+
+    Overlapping or touching intervals of the heel and the toe of one foot merge into one contact
+    (a heel strike rolling onto the toe is one stance).
+    """
+    out = []
+    for foot, members in feet.items():
+        iv = sorted((c.start, c.end) for c in contacts if c.site in members)
+        merged: list[list[float]] = []
+        for a, b in iv:
+            if merged and a <= merged[-1][1] + 1e-9:
+                merged[-1][1] = max(merged[-1][1], b)
+            else:
+                merged.append([a, b])
+        out += [Contact(foot, a, b) for a, b in merged]
+    return sorted(out, key=lambda c: (c.start, c.site))
+
+
+def touchdowns_liftoffs(contacts: Sequence[Contact], per_foot: bool = True
+                        ) -> tuple[list[tuple[float, str]], list[tuple[float, str]]]:
+    """Touch-down and lift-off events, sorted by time.
+
+    Args:
+        contacts: site contacts. per_foot: merge a foot's heel and toe first (`foot_contacts`), so an
+            event is a foot landing or leaving; else one event per site contact.
+    Returns:
+        touchdowns: [(time [s], foot or site name)] at contact starts.
+        liftoffs: [(time [s], foot or site name)] at contact ends.
+    """
+    cs = foot_contacts(contacts) if per_foot else list(contacts)
+    return (sorted((c.start, c.site) for c in cs), sorted((c.end, c.site) for c in cs))
+
+
+def surface_height_under(points: np.ndarray, surfaces) -> np.ndarray:
+    """(...,) height [m] of the highest static surface under each (..., 3) point; -inf if none.
+
+    A non-vertical plane counts everywhere (its height at the point's x, y); a box counts where the
+    point's x, y lie within its footprint, with its top face as the surface (boxes upright: rotated
+    about z only). `surfaces`: solver.surfaces.StaticSurfaces. (The same rule as
+    runner/bvh_import.py `surface_height_under`, kept here so solver/ does not import runner/.)
+    """
+    pts = np.asarray(points, float)
+    h = np.full(pts.shape[:-1], -np.inf)
+    for p0, nrm in zip(surfaces.plane_point, surfaces.plane_normal):
+        if abs(nrm[2]) < 1e-6:
+            continue
+        z = p0[2] - (nrm[0] * (pts[..., 0] - p0[0]) + nrm[1] * (pts[..., 1] - p0[1])) / nrm[2]
+        h = np.maximum(h, z)
+    for c, rot, half in zip(surfaces.box_center, surfaces.box_rot, surfaces.box_half):
+        local = (pts - c) @ rot
+        inside = (np.abs(local[..., 0]) <= half[0]) & (np.abs(local[..., 1]) <= half[1])
+        top = c[2] + np.abs(rot[2]) @ half
+        h = np.where(inside, np.maximum(h, top), h)
+    return h
+
+
+def site_positions(model, qpos: np.ndarray, sites: Sequence[str] = SITES) -> np.ndarray:
+    """(n, s, 3) world positions [m] of the named sites for (n, nq) qpos (mj_kinematics, site_xpos).
+
+    Raises:
+        InputError: the model lacks a site.
+    """
+    import mujoco
+
+    ids = []
+    for s in sites:
+        sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s)
+        if sid < 0:
+            raise InputError(f"the model has no site {s!r}; contact sites needed: {', '.join(sites)}")
+        ids.append(sid)
+    data = mujoco.MjData(model)
+    qpos = np.atleast_2d(np.asarray(qpos, float))
+    out = np.empty((len(qpos), len(ids), 3))
+    for i, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        out[i] = data.site_xpos[ids]
+    return out
+
+
+def site_heights(model, site_pos: np.ndarray) -> np.ndarray:
+    """(n, s) height [m] of each site above the surface under it in the model's scene."""
+    from solver.surfaces import StaticSurfaces
+
+    return site_pos[..., 2] - surface_height_under(site_pos, StaticSurfaces.from_model(model))
+
+
+def reference_contacts(model, qpos: np.ndarray, frame_time: float, **thresholds) -> list[Contact]:
+    """`detect_contacts` on a motion in a scene: site positions and heights by MuJoCo kinematics.
+
+    Args:
+        model: the scene's MjModel (figure with the SITES, and static surfaces). qpos: (n, nq).
+        frame_time: [s]. thresholds: keyword arguments of `detect_contacts`.
+    """
+    pos = site_positions(model, qpos)
+    times = np.arange(len(pos)) * frame_time
+    return detect_contacts(times, pos, site_heights(model, pos), **thresholds)

@@ -1,0 +1,241 @@
+"""Metrics of a sampled motion against the reference it was made from (../shared/METRICS.md).
+
+`motion_metrics(model, qpos, fps, reference_qpos, reference_contacts)` evaluates a path sampled at the
+reference's frame rate. Positions come from MuJoCo kinematics (`mj_kinematics`: `site_xpos` of the
+contact sites, `xquat` of the bodies), not from the objective's code, so the numbers check the solver
+rather than repeat it. Heights are above the highest static surface under each site
+(`contacts.surface_height_under`: floor planes and box tops of the scene model; a contact's
+`surface` name is not used). Every plausibility
+figure is computed for the reference too: capture is not perfect either (real data scores about
+0.05 on the GMD skating ratio; guided-motion-diffusion issue #8).
+
+Definitions (n frames at fps; sites l_heel, l_toe, r_heel, r_toe; h = height above the surface):
+
+Accuracy against the reference
+- joint_orientation_deg: per ball joint (and the root's free-joint quaternion, "root"), the
+  geodesic angle 2 acos |<q, q_ref>| between the unit local quaternions, mean and max over frames.
+- body_orientation_deg: the same for the bodies' world orientations (`xquat`), in the spirit of the
+  LAFAN1 L2Q (global quaternions; we report an angle, not the L2 norm of the quaternion difference).
+- root_position_cm: |root position - reference|, mean and max.
+- site_position_cm: per contact site, |site position - reference|, mean and max.
+- accel_error_m_s2: mean |second difference of positions - reference's| * fps^2, root and sites
+  (WHAM's acceleration error, METRICS.md "Smoothness").
+
+Plausibility (PhysDiff, Yuan et al. 2023, after UHC `smpl_eval.py`; on the four contact sites rather
+than mesh vertices)
+- penetration_mm: per frame max(0, -min over sites of h), mean over all frames and max. No 5 mm
+  tolerance (the original has one); a retargeted reference holds planted sites 2 mm up.
+- float_contact_mm: per foot and frame where the REFERENCE has a site of that foot in contact, the
+  foot's lowest site height max(0, h) (what an animator calls a floating foot), mean over those
+  (foot, frame) pairs. float_physdiff_mm: PhysDiff's all-frame variant, per frame the lowest site's
+  h counted when above 5 mm (else 0), mean over all frames.
+- skate_mm / skate_speed_m_s: PhysDiff skate: mean horizontal displacement between consecutive
+  frames of sites on the ground (h <= SKATE_HEIGHT = 0.02 m) in both frames; as a speed (* fps).
+  skate_contact_mm / skate_contact_speed_m_s: the same over the sites the REFERENCE has in contact in
+  both frames (a planted site sliding).
+- phys_err_mm: penetration mean + float_physdiff + skate (PhysDiff's Phys-Err).
+- skating_ratio: Guided Motion Diffusion (`data_loaders/humanml/utils/metrics.py`): positions
+  subsampled to about GMD_RATE = 20 fps (every round(fps / 20)-th frame; the rate used is reported as
+  skating_ratio_rate_hz); a site is in contact in a step when h < 0.05 m at both ends; it skates
+  when its horizontal speed over the step exceeds 0.5 m/s; the ratio is the fraction of steps in
+  which any site skates (GMD uses the two foot joints and a 5-frame moving average; we use the four
+  sites and no average). skating_ratio_full_rate: the same at fps. Caveat: the sites are on the
+  sole, and a walking foot's toe clears the ground by only 1-3 cm in swing, so the 5 cm test counts
+  swinging feet as "in contact" (16_23 scores 0.7); skating_ratio_contacts replaces the height test
+  by the REFERENCE's contacts (a site planted at both ends of a step at fps moving > 0.5 m/s).
+- flight_time_s: frames in which every site is clear (h > FLIGHT_HEIGHT = 0.03 m, the contact entry
+  height of `contacts.HEIGHT_ON`) times 1/fps.
+- jerk_root_m_s3 / jerk_sites_m_s3: third finite difference of positions * fps^3, mean norm (root
+  position; all contact sites), METRICS.md "Smoothness".
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from solver.contacts import FEET, SITES, Contact, contact_mask, site_positions, surface_height_under
+from solver.errors import InputError
+
+#: a site is on the ground for the PhysDiff skate below this height [m].
+SKATE_HEIGHT = 0.02
+#: PhysDiff float tolerance [m].
+FLOAT_TOL = 0.005
+#: GMD contact height [m], skating speed [m/s], and frame rate [Hz].
+GMD_HEIGHT = 0.05
+GMD_SPEED = 0.5
+GMD_RATE = 20.0
+#: every site above this height: the figure is in flight [m].
+FLIGHT_HEIGHT = 0.03
+
+
+def _kinematics(model, qpos, sites):
+    import mujoco
+
+    data = mujoco.MjData(model)
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) for s in sites]
+    missing = [s for s, i in zip(sites, ids) if i < 0]
+    if missing:
+        raise InputError(f"the model has no site {missing[0]!r}; contact sites needed: {', '.join(sites)}")
+    pos = np.empty((len(qpos), len(sites), 3))
+    xquat = np.empty((len(qpos), model.nbody, 4))
+    for i, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        pos[i] = data.site_xpos[ids]
+        xquat[i] = data.xquat
+    return pos, xquat
+
+
+def _angle_deg(a, b):
+    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
+    b = b / np.linalg.norm(b, axis=-1, keepdims=True)
+    d = np.clip(np.abs(np.sum(a * b, axis=-1)), 0.0, 1.0)
+    return np.degrees(2.0 * np.arccos(d))
+
+
+def _stats(x, scale=1.0):
+    x = np.asarray(x, float) * scale
+    if x.size == 0:
+        return {"mean": 0.0, "max": 0.0}
+    return {"mean": float(x.mean()), "max": float(x.max())}
+
+
+def _mean(x, scale=1.0):
+    x = np.asarray(x, float)
+    return float(x.mean() * scale) if x.size else 0.0
+
+
+def _jerk(p, fps):
+    if len(p) < 4:
+        return 0.0
+    j = np.diff(p, n=3, axis=0) * fps**3
+    return float(np.linalg.norm(j, axis=-1).mean())
+
+
+def _skating_ratio(pos, h, stride, rate):
+    p, hh = pos[::stride], h[::stride]
+    if len(p) < 2:
+        return 0.0
+    on = (hh[1:] < GMD_HEIGHT) & (hh[:-1] < GMD_HEIGHT)
+    speed = np.linalg.norm(np.diff(p[..., :2], axis=0), axis=-1) * rate
+    return float(((speed > GMD_SPEED) & on).any(axis=1).mean())
+
+
+def plausibility(pos: np.ndarray, h: np.ndarray, fps: float, root: np.ndarray, ref_mask: np.ndarray,
+                 sites: Sequence[str] = SITES) -> dict:
+    """The plausibility figures of the module docstring for one motion.
+
+    Args:
+        pos: (n, s, 3) site positions [m]. h: (n, s) heights above the surface [m]. fps: [Hz].
+        root: (n, 3) root positions [m]. ref_mask: (n, s) bool, the reference's contacts.
+        sites: the s site names (feet grouped by `contacts.FEET`).
+    Returns:
+        a dict of floats (JSON-serializable).
+    """
+    n = len(pos)
+    lowest = h.min(axis=1)
+    pen = np.maximum(0.0, -lowest)
+    floats = []
+    for members in FEET.values():
+        ks = [list(sites).index(s) for s in members if s in sites]
+        if ks:
+            foot_on = ref_mask[:, ks].any(axis=1)
+            floats.append(np.maximum(0.0, h[foot_on][:, ks].min(axis=1)))
+    float_contact = np.concatenate(floats) if floats else np.zeros(0)
+    float_all = np.where(lowest > FLOAT_TOL, lowest, 0.0)
+    disp = np.linalg.norm(np.diff(pos[..., :2], axis=0), axis=-1)  # (n-1, s)
+    ground = (h[1:] <= SKATE_HEIGHT) & (h[:-1] <= SKATE_HEIGHT)
+    planted = ref_mask[1:] & ref_mask[:-1]
+    stride = max(1, int(round(fps / GMD_RATE)))
+    out = {
+        "penetration_mm": _stats(pen, 1e3),
+        "float_contact_mm": _mean(float_contact, 1e3),
+        "float_physdiff_mm": _mean(float_all, 1e3),
+        "skate_mm": _mean(disp[ground], 1e3),
+        "skate_speed_m_s": _mean(disp[ground], fps),
+        "skate_contact_mm": _mean(disp[planted], 1e3),
+        "skate_contact_speed_m_s": _mean(disp[planted], fps),
+        "skating_ratio": _skating_ratio(pos, h, stride, fps / stride),
+        "skating_ratio_rate_hz": fps / stride,
+        "skating_ratio_full_rate": _skating_ratio(pos, h, 1, fps),
+        "skating_ratio_contacts": float(((disp * fps > GMD_SPEED) & planted).any(axis=1).mean()) if n > 1 else 0.0,
+        "flight_time_s": float((h > FLIGHT_HEIGHT).all(axis=1).sum() / fps) if n else 0.0,
+        "jerk_root_m_s3": _jerk(root, fps),
+        "jerk_sites_m_s3": float(np.mean([_jerk(pos[:, k], fps) for k in range(pos.shape[1])])),
+    }
+    out["phys_err_mm"] = out["penetration_mm"]["mean"] + out["float_physdiff_mm"] + out["skate_mm"]
+    return out
+
+
+def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarray,
+                   reference_contacts: Sequence[Contact], sites: Sequence[str] = SITES) -> dict:
+    """Accuracy of a path against the reference, and the plausibility of both (module docstring).
+
+    Args:
+        model: the scene's MjModel (figure with the contact sites, static surfaces).
+        qpos: (n, nq) the path sampled at the reference's frames (times i / fps).
+        fps: [Hz] frame rate, > 0. reference_qpos: (n, nq) the reference motion.
+        reference_contacts: the reference's contacts (times in [s] from frame 0).
+        sites: contact site names.
+    Returns:
+        JSON-serializable dict: {"fps", "frames", "sites", "error": {...}, "path": {...},
+        "reference": {...}}; "path" and "reference" hold `plausibility` figures.
+    Raises:
+        InputError: shapes disagree, fps not positive, a site missing in the model, no floor plane.
+    """
+    import mujoco
+
+    from solver.surfaces import StaticSurfaces
+
+    qpos = np.atleast_2d(np.asarray(qpos, float))
+    ref = np.atleast_2d(np.asarray(reference_qpos, float))
+    if qpos.shape != ref.shape or qpos.shape[1] != model.nq:
+        raise InputError(f"qpos {qpos.shape} and reference_qpos {ref.shape} must both be (n, nq={model.nq})")
+    if not (fps > 0):
+        raise InputError(f"fps must be positive; got {fps!r}")
+    n = len(qpos)
+    times = np.arange(n) / fps
+    surfaces = StaticSurfaces.from_model(model)
+    if not np.any(np.abs(surfaces.plane_normal[:, 2]) > 1e-6):
+        raise InputError("the model has no floor plane; motion metrics measure heights above the scene's "
+                         "surfaces (add a plane, e.g. scene_fit.scene_mjcf)")
+    pos, xq = _kinematics(model, qpos, sites)
+    rpos, rxq = _kinematics(model, ref, sites)
+    h = pos[..., 2] - surface_height_under(pos, surfaces)
+    rh = rpos[..., 2] - surface_height_under(rpos, surfaces)
+    mask = contact_mask(reference_contacts, sites, times)
+
+    joints = {}
+    for j in range(model.njnt):
+        t = int(model.jnt_type[j])
+        if t not in (int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_FREE)):
+            continue
+        a = int(model.jnt_qposadr[j]) + (3 if t == int(mujoco.mjtJoint.mjJNT_FREE) else 0)
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
+        joints[name] = _stats(_angle_deg(qpos[:, a:a + 4], ref[:, a:a + 4]))
+    bodies = {}
+    for b in range(1, model.nbody):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
+        bodies[name] = _stats(_angle_deg(xq[:, b], rxq[:, b]))
+
+    def acc(p):
+        return np.diff(p, n=2, axis=0) * fps**2 if len(p) >= 3 else np.zeros((0,) + p.shape[1:])
+
+    error = {
+        "joint_orientation_deg": joints,
+        "body_orientation_deg": bodies,
+        "root_position_cm": _stats(np.linalg.norm(qpos[:, :3] - ref[:, :3], axis=1), 100.0),
+        "site_position_cm": {s: _stats(np.linalg.norm(pos[:, k] - rpos[:, k], axis=1), 100.0)
+                             for k, s in enumerate(sites)},
+        "accel_error_root_m_s2": _mean(np.linalg.norm(acc(qpos[:, :3]) - acc(ref[:, :3]), axis=-1)),
+        "accel_error_sites_m_s2": _mean(np.linalg.norm(acc(pos) - acc(rpos), axis=-1)),
+    }
+    return {
+        "fps": float(fps),
+        "frames": int(n),
+        "sites": list(sites),
+        "error": error,
+        "path": plausibility(pos, h, fps, qpos[:, :3], mask, sites),
+        "reference": plausibility(rpos, rh, fps, ref[:, :3], mask, sites),
+    }

@@ -1,0 +1,131 @@
+"""solver.contacts: hysteresis, minimum duration, masks and events on hand-built site paths, and the
+shipped clip 127_33 (touch-downs where the foot-height trace lands)."""
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from solver.contacts import (
+    SITES, Contact, contact_mask, detect_contacts, foot_contacts, reference_contacts, site_heights,
+    site_positions, touchdowns_liftoffs,
+)
+from solver.errors import InputError
+
+ROOT = Path(__file__).resolve().parents[2]
+FPS = 100.0
+
+
+def one_site(z, x=None):
+    """(n,) times, (n, 1, 3) positions of one site with height z (and x), and heights (n, 1)."""
+    z = np.asarray(z, float)
+    n = len(z)
+    pos = np.zeros((n, 1, 3))
+    pos[:, 0, 2] = z
+    if x is not None:
+        pos[:, 0, 0] = x
+    return np.arange(n) / FPS, pos, z[:, None]
+
+
+def test_down_then_up_gives_one_contact_over_the_down_part():
+    t = np.arange(101) / FPS
+    z = np.where(t <= 0.3, 0.0, 2.0 * (t - 0.3))  # planted 0.3 s, then lifts at 2 m/s
+    times, pos, h = one_site(z)
+    cs = detect_contacts(times, pos, h, sites=("l_toe",))
+    assert cs == [Contact("l_toe", 0.0, pytest.approx(0.30))]
+
+
+def test_hysteresis_stays_in_between_thresholds_but_does_not_enter_there():
+    n = 60
+    wobble = 0.04 + 0.005 * np.sin(np.arange(n))  # 3.5..4.5 cm: between height_on 3 and height_off 5
+    z = np.concatenate([np.zeros(20), wobble[:n - 20]])
+    times, pos, h = one_site(z)
+    fast = dict(speed_on=1e9, speed_off=1e9)  # height alone decides (the 0 -> 4 cm step is fast)
+    cs = detect_contacts(times, pos, h, sites=("l_toe",), **fast)
+    assert len(cs) == 1 and cs[0].start == 0.0 and cs[0].end == pytest.approx(times[-1])
+    times, pos, h = one_site(wobble)
+    assert detect_contacts(times, pos, h, sites=("l_toe",), **fast) == []
+
+
+def test_speed_hysteresis_and_sliding_foot():
+    t = np.arange(100) / FPS
+    for v, expect in ((0.3, 1), (0.7, 0), (1.5, 0)):
+        times, pos, h = one_site(np.zeros(100), x=v * t)  # sliding on the ground at v m/s
+        assert len(detect_contacts(times, pos, h, sites=("l_toe",))) == expect, v
+    # planted, then sliding at 0.7 m/s (between speed_on 0.5 and speed_off 1.0): stays in contact
+    x = np.where(t < 0.5, 0.0, 0.7 * (t - 0.5))
+    times, pos, h = one_site(np.zeros(100), x=x)
+    cs = detect_contacts(times, pos, h, sites=("l_toe",))
+    assert len(cs) == 1 and cs[0].end == pytest.approx(t[-1])
+
+
+def test_minimum_duration_drops_a_brush():
+    z = np.full(100, 0.2)
+    z[40:44] = 0.0  # 4 frames = 0.03 s (start to end) on the ground
+    times, pos, h = one_site(z)
+    pos[:, 0, 2] = z
+    # the step in height makes the site fast at 39/40 and 43/44; keep speed out of it
+    assert detect_contacts(times, pos, h, sites=("l_toe",), speed_on=1e9, speed_off=1e9) == []
+    assert len(detect_contacts(times, pos, h, sites=("l_toe",), speed_on=1e9, speed_off=1e9,
+                               min_duration=0.02)) == 1
+
+
+def test_validation():
+    times, pos, h = one_site(np.zeros(10))
+    with pytest.raises(InputError, match="site_pos"):
+        detect_contacts(times, pos, h)  # default 4 sites, 1 given
+    with pytest.raises(InputError, match="height_on"):
+        detect_contacts(times, pos, h, sites=("l_toe",), height_on=0.1, height_off=0.05)
+    with pytest.raises(InputError, match="increasing"):
+        detect_contacts(times[::-1], pos, h, sites=("l_toe",))
+
+
+def test_mask_events_and_feet():
+    cs = [Contact("l_heel", 0.0, 0.2), Contact("l_toe", 0.1, 0.4), Contact("r_toe", 0.5, 0.7)]
+    times = np.arange(11) / 10
+    m = contact_mask(cs, SITES, times)
+    assert m.shape == (11, 4)
+    assert m[:, 0].tolist() == [True, True, True] + [False] * 8
+    assert m[:, 1].tolist() == [False, True, True, True, True] + [False] * 6
+    assert m[:, 3].tolist() == [False] * 5 + [True] * 3 + [False] * 3
+    assert foot_contacts(cs) == [Contact("l", 0.0, 0.4), Contact("r", 0.5, 0.7)]
+    td, lo = touchdowns_liftoffs(cs)
+    assert td == [(0.0, "l"), (0.5, "r")] and lo == [(0.4, "l"), (0.7, "r")]
+    td, lo = touchdowns_liftoffs(cs, per_foot=False)
+    assert len(td) == 3 and lo[0] == (0.2, "l_heel")
+    with pytest.raises(InputError, match="nose"):
+        contact_mask([Contact("nose", 0, 1)], SITES, times)
+
+
+def load_clip(name, model):
+    try:  # the mocap import is moving from runner/bvh_import.py to runner/mocap/
+        from runner.mocap import load_bvh_reference
+    except ImportError:
+        from runner.bvh_import import load_bvh_reference
+    return load_bvh_reference(ROOT / "models" / "cmu" / f"{name}.bvh", model)
+
+
+def test_127_33_touchdowns_where_the_feet_land():
+    model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))
+    ref = load_clip("127_33", model)
+    cs = reference_contacts(model, ref.qpos, ref.frame_time)
+    pos = site_positions(model, ref.qpos)
+    h = site_heights(model, pos)
+    td, lo = touchdowns_liftoffs(cs)
+    for c in cs:
+        print(f"{c.site:7s} {c.start:.3f}-{c.end:.3f} s")
+    print("touch-downs", td, "\nlift-offs", lo)
+    # the run: six stances alternating feet, two of them on the box (0.85-1.37 s)
+    assert [f for _, f in td] == ["l", "r", "l", "r", "l", "r"]
+    for (t0, foot), (t1, _) in zip(td, lo):
+        ks = [SITES.index(s) for s in SITES if s.startswith(foot)]
+        i0, i1 = int(round(t0 / ref.frame_time)), int(round(t1 / ref.frame_time))
+        low = h[:, ks].min(axis=1)
+        assert low[i0:i1 + 1].max() < 0.05          # down throughout the stance
+        assert 0.1 <= t1 - t0 <= 0.3                  # a running stance
+        if i0 >= 6:                                   # landing: the foot was coming down
+            assert low[i0 - 6] > low[i0] + 0.01, (foot, t0, low[i0 - 6:i0 + 1])
+        if i1 + 6 < len(low):                         # lift-off: the foot goes up after
+            assert low[i1 + 6] > low[i1] + 0.01, (foot, t1, low[i1:i1 + 7])
+    on_box = [c for c in foot_contacts(cs) if 0.8 < c.start < 1.4]
+    assert len(on_box) == 2

@@ -1,0 +1,130 @@
+"""solver.motion_metrics on hand-built motions of the figure with known answers, and the reference's
+own figures on 127_33."""
+import json
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from solver.contacts import SITES, Contact, reference_contacts
+from solver.errors import InputError
+from solver.motion_metrics import motion_metrics
+from solver.scene_fit import FittedScene, scene_mjcf
+
+ROOT = Path(__file__).resolve().parents[2]
+FPS = 120.0
+N = 61
+
+
+@pytest.fixture(scope="module")
+def floor_model():
+    return mujoco.MjModel.from_xml_string(scene_mjcf(FittedScene(0.0), ROOT / "models" / "humanoid39.xml"))
+
+
+def standing(model, n=N):
+    """(n, nq): the identity pose with the pelvis at 1 m: every contact site at z = 0."""
+    q = np.tile(model.qpos0, (n, 1))
+    q[:, :3] = (0.0, 0.0, 1.0)
+    return q
+
+
+def planted(n=N):
+    return [Contact(s, 0.0, (n - 1) / FPS) for s in SITES]
+
+
+def test_same_motion_has_zero_error_and_is_json(floor_model):
+    q = standing(floor_model)
+    m = motion_metrics(floor_model, q, FPS, q, planted())
+    json.dumps(m)
+    assert m["error"]["root_position_cm"] == {"mean": 0.0, "max": 0.0}
+    assert all(v["max"] == 0 for v in m["error"]["joint_orientation_deg"].values())
+    assert m["path"] == m["reference"]
+    assert m["path"]["penetration_mm"]["max"] == 0 and m["path"]["flight_time_s"] == 0
+
+
+def test_lifted_figure_floats_by_the_lift(floor_model):
+    ref = standing(floor_model)
+    q = ref.copy()
+    q[:, 2] += 0.04
+    m = motion_metrics(floor_model, q, FPS, ref, planted())
+    p = m["path"]
+    assert p["float_contact_mm"] == pytest.approx(40.0)
+    assert p["float_physdiff_mm"] == pytest.approx(40.0)
+    assert p["penetration_mm"]["max"] == 0
+    assert p["flight_time_s"] == pytest.approx(N / FPS)          # every site 4 cm up: all clear
+    assert m["error"]["root_position_cm"]["mean"] == pytest.approx(4.0)
+    assert all(v["mean"] == pytest.approx(4.0) for v in m["error"]["site_position_cm"].values())
+    assert m["reference"]["float_contact_mm"] == pytest.approx(0, abs=1e-9)
+    # the reference has no contacts: no frames to count an animator's float over
+    assert motion_metrics(floor_model, q, FPS, ref, [])["path"]["float_contact_mm"] == 0.0
+
+
+def test_sunk_figure_penetrates_by_the_depth(floor_model):
+    ref = standing(floor_model)
+    q = ref.copy()
+    q[: N // 2, 2] -= 0.01        # 30 of 61 frames 1 cm down
+    p = motion_metrics(floor_model, q, FPS, ref, planted())["path"]
+    assert p["penetration_mm"]["max"] == pytest.approx(10.0)
+    assert p["penetration_mm"]["mean"] == pytest.approx(10.0 * (N // 2) / N)
+    assert p["float_contact_mm"] == pytest.approx(0, abs=1e-9)
+
+
+@pytest.mark.parametrize("speed, skating", [(0.6, 1.0), (0.3, 0.0)])
+def test_sliding_feet_skate_at_the_known_speed(floor_model, speed, skating):
+    ref = standing(floor_model)
+    q = ref.copy()
+    q[:, 0] += speed * np.arange(N) / FPS
+    p = motion_metrics(floor_model, q, FPS, ref, planted())["path"]
+    assert p["skate_contact_mm"] == pytest.approx(speed / FPS * 1e3)
+    assert p["skate_contact_speed_m_s"] == pytest.approx(speed)
+    assert p["skate_mm"] == pytest.approx(speed / FPS * 1e3)      # on the ground: PhysDiff's too
+    assert p["skating_ratio_rate_hz"] == 20.0
+    assert p["skating_ratio"] == skating and p["skating_ratio_contacts"] == skating
+
+
+def test_rotated_joint_and_cubic_root(floor_model):
+    ref = standing(floor_model)
+    q = ref.copy()
+    j = mujoco.mj_name2id(floor_model, mujoco.mjtObj.mjOBJ_JOINT, "torso")
+    a = floor_model.jnt_qposadr[j]
+    q[:, a:a + 4] = (np.cos(np.radians(5)), 0, 0, np.sin(np.radians(5)))   # 10 degrees about z
+    t = np.arange(N) / FPS
+    q[:, 2] += 0.1 * t**3      # jerk 0.6 m/s^3, also at the sites (they move with the root)
+    m = motion_metrics(floor_model, q, FPS, ref, planted())
+    jo = m["error"]["joint_orientation_deg"]
+    assert jo["torso"]["mean"] == pytest.approx(10.0) and jo["torso"]["max"] == pytest.approx(10.0)
+    assert jo["l_hip"]["max"] == 0 and jo["root"]["max"] == 0
+    bo = m["error"]["body_orientation_deg"]
+    assert bo["l_forearm"]["mean"] == pytest.approx(10.0) and bo["l_shin"]["max"] == pytest.approx(0, abs=1e-6)
+    assert m["path"]["jerk_root_m_s3"] == pytest.approx(0.6, rel=1e-5)
+    assert m["path"]["jerk_sites_m_s3"] == pytest.approx(0.6, rel=1e-4)
+    assert m["error"]["accel_error_root_m_s2"] == pytest.approx(np.mean(0.6 * t[1:-1]), rel=1e-4)
+
+
+def test_validation(floor_model):
+    q = standing(floor_model)
+    with pytest.raises(InputError, match="reference_qpos"):
+        motion_metrics(floor_model, q, FPS, q[:-1], [])
+    with pytest.raises(InputError, match="fps"):
+        motion_metrics(floor_model, q, 0.0, q, [])
+    figure_only = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "humanoid39.xml"))
+    with pytest.raises(InputError, match="floor"):
+        motion_metrics(figure_only, q, FPS, q, [])
+
+
+def test_127_33_reference_own_metrics():
+    try:
+        from runner.mocap import load_bvh_reference
+    except ImportError:
+        from runner.bvh_import import load_bvh_reference
+    model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))
+    ref = load_bvh_reference(ROOT / "models" / "cmu" / "127_33.bvh", model)
+    cs = reference_contacts(model, ref.qpos, ref.frame_time)
+    m = motion_metrics(model, ref.qpos, 1 / ref.frame_time, ref.qpos, cs)
+    r = m["reference"]
+    print(json.dumps(r, indent=1))
+    assert r["penetration_mm"]["max"] < 1e-6            # the retargeting keeps sites out of surfaces
+    assert r["float_contact_mm"] < 5.0                   # planted toes sit 2 mm up
+    assert 0.05 < r["flight_time_s"] < 0.3               # a run has short flights
+    assert r["skate_contact_speed_m_s"] < 0.5

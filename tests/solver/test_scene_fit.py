@@ -1,0 +1,154 @@
+"""solver.scene_fit: floor and boxes from where the feet rest; the MJCF loads from where it is saved.
+
+The independent check: 127_33 retargeted onto a FLOOR-ONLY scene (so the hand-made box cannot leak
+into the reference through the root-height correction) must give back the step of
+models/run_and_step.xml: top within 3 cm; the edges the contacts bound lie between the last box
+contact and the first floor contact, where the hand-made edges also lie.
+"""
+import os
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from solver.contacts import SITES, Contact, site_positions
+from solver.errors import InputError
+from solver.scene_fit import MARGIN, FittedScene, fit_contacts, fit_scene, scene_mjcf
+from solver.surfaces import StaticSurfaces
+
+ROOT = Path(__file__).resolve().parents[2]
+FIGURE = ROOT / "models" / "humanoid39.xml"
+
+
+def stances(spec, fps=100.0):
+    """Hand-built site paths: spec = [(site, t0, t1, x, y, z)], planted sites; others far up."""
+    n = int(round(max(s[2] for s in spec) * fps)) + 1
+    times = np.arange(n) / fps
+    pos = np.zeros((n, 4, 3))
+    pos[..., 2] = 1.0
+    contacts = []
+    for site, t0, t1, x, y, z in spec:
+        k = SITES.index(site)
+        rows = (times >= t0 - 1e-9) & (times <= t1 + 1e-9)
+        pos[rows, k] = (x, y, z)
+        contacts.append(Contact(site, t0, t1))
+    return times, pos, contacts
+
+
+def test_floor_and_one_box_with_known_answer():
+    times, pos, cs = stances([
+        ("l_toe", 0.0, 0.2, 0.0, 0.1, 0.01),
+        ("r_toe", 0.3, 0.5, 1.2, -0.1, 0.31),   # on the box
+        ("l_toe", 0.6, 0.8, 1.8, 0.1, 0.29),    # on the box, 2 cm lower
+        ("r_toe", 0.9, 1.1, 3.0, -0.1, 0.01),
+    ])
+    f = fit_scene(times, pos, cs)
+    assert f.floor_z == pytest.approx(0.01)
+    assert len(f.boxes) == 1
+    c, h = f.boxes[0]
+    assert f.box_tops()[0] == pytest.approx(0.30)
+    assert c[2] - h[2] == pytest.approx(0.01)                     # stands on the floor
+    np.testing.assert_allclose(c[:2] - h[:2], [1.2 - MARGIN, -0.1 - MARGIN])
+    np.testing.assert_allclose(c[:2] + h[:2], [1.8 + MARGIN, 0.1 + MARGIN])
+
+
+def test_padding_stops_halfway_to_a_floor_contact():
+    times, pos, cs = stances([
+        ("l_toe", 0.0, 0.2, 1.0, 0.0, 0.0),
+        ("r_toe", 0.3, 0.5, 1.2, 0.0, 0.3),
+        ("l_toe", 0.6, 0.8, 1.5, 0.0, 0.3),
+    ])
+    (c, h), = fit_scene(times, pos, cs).boxes
+    assert c[0] - h[0] == pytest.approx(1.1)   # halfway between the floor toe (1.0) and the box (1.2)
+    assert c[0] + h[0] == pytest.approx(1.5 + MARGIN)
+
+
+def test_two_heights_and_far_apart_make_separate_boxes():
+    times, pos, cs = stances([
+        ("l_toe", 0.0, 0.2, 0.0, 0.0, 0.0),
+        ("r_toe", 0.3, 0.5, 1.0, 0.0, 0.3),
+        ("l_toe", 0.6, 0.8, 1.5, 0.0, 0.6),     # 30 cm higher: another box
+        ("r_toe", 0.9, 1.1, 5.0, 0.0, 0.3),     # same height as the first, 3.5 m away
+    ])
+    f = fit_scene(times, pos, cs)
+    assert [round(t, 3) for t in f.box_tops()] == [0.3, 0.6, 0.3]
+
+
+def test_no_contacts_is_an_error():
+    times, pos, _ = stances([("l_toe", 0.0, 0.2, 0, 0, 0)])
+    with pytest.raises(InputError, match="no contacts"):
+        fit_scene(times, pos, [])
+
+
+def test_scene_mjcf_loads_from_where_it_is_saved(tmp_path, monkeypatch):
+    fitted = FittedScene(0.0, ((np.array([1.0, 0.0, 0.1]), np.array([0.5, 0.4, 0.1])),))
+    (tmp_path / "sub").mkdir()
+    for rel in (None, tmp_path / "sub"):
+        path = tmp_path / "sub" / "scene.xml"
+        path.write_text(scene_mjcf(fitted, FIGURE, relative_to=rel))
+        monkeypatch.chdir(tmp_path)  # not the scene's folder, not the repository
+        model = mujoco.MjModel.from_xml_path(str(path))
+        s = StaticSurfaces.from_model(model)
+        assert s.names == ("floor", "box0")
+        np.testing.assert_allclose(s.box_half[0], [0.5, 0.4, 0.1])
+        assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "l_toe") >= 0
+    with pytest.raises(InputError, match="figure_path"):
+        scene_mjcf(fitted, tmp_path / "nope.xml")
+
+
+def load_clip(name, model):
+    try:
+        from runner.mocap import load_bvh_reference
+    except ImportError:
+        from runner.bvh_import import load_bvh_reference
+    return load_bvh_reference(ROOT / "models" / "cmu" / f"{name}.bvh", model)
+
+
+def test_127_33_step_from_a_floor_only_retarget():
+    floor_only = mujoco.MjModel.from_xml_string(scene_mjcf(FittedScene(0.0), FIGURE))
+    ref = load_clip("127_33", floor_only)
+    pos = site_positions(floor_only, ref.qpos)
+    cs = fit_contacts(ref.times, pos)
+    f = fit_scene(ref.times, pos, cs)
+    hand = StaticSurfaces.from_model(mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml")))
+    hc, hh = hand.box_center[0], hand.box_half[0]
+    (c, h), = f.boxes
+    lo, hi = c - h, c + h
+    print(f"floor {f.floor_z * 100:.1f} cm; fitted box x {lo[0]:.3f}..{hi[0]:.3f} y {lo[1]:.3f}..{hi[1]:.3f} "
+          f"top {hi[2]:.3f}; hand-made x {hc[0] - hh[0]:.3f}..{hc[0] + hh[0]:.3f} "
+          f"y {hc[1] - hh[1]:.3f}..{hc[1] + hh[1]:.3f} top {hc[2] + hh[2]:.3f}")
+    assert abs(f.floor_z) < 0.01
+    assert abs(hi[2] - (hc[2] + hh[2])) < 0.03                  # top within 3 cm
+    assert abs(lo[0] - (hc[0] - hh[0])) < 0.04                  # near edge (the data bound it) ~3 cm
+    # every contact on the box is inside the fitted box, every floor contact outside it
+    for contact in cs:
+        k = SITES.index(contact.site)
+        rows = (ref.times >= contact.start - 1e-9) & (ref.times <= contact.end + 1e-9)
+        p = pos[rows, k]
+        inside = np.all((p[:, :2] >= lo[:2]) & (p[:, :2] <= hi[:2]), axis=1)
+        if np.median(p[:, 2]) > 0.1:
+            assert inside.all(), contact
+        elif contact.site.endswith("toe"):
+            assert not inside.any(), contact
+    # the hand-made far edge is not bound by the data: it lies where the fit may put it, between
+    # the last contact on the box and the first floor contact after it
+    box_x = max(pos[(ref.times >= c_.start) & (ref.times <= c_.end), SITES.index(c_.site), 0].max()
+                for c_ in cs if 0.8 < c_.start < 1.4)
+    floor_x = min(pos[(ref.times >= c_.start) & (ref.times <= c_.end), SITES.index(c_.site), 0].min()
+                  for c_ in cs if c_.start > 1.4)
+    assert box_x < hi[0] < floor_x and box_x < hc[0] + hh[0] < floor_x
+
+
+def test_fit_contacts_ignores_a_heel_hovering_over_a_planted_toe():
+    n = 40
+    times = np.arange(n) / 100.0
+    pos = np.zeros((n, 4, 3))
+    pos[:, 1] = (0.2, 0.1, 0.25)       # l_toe still, on a 25 cm box
+    pos[:, 0] = (0.0, 0.1, 0.33)       # l_heel still, 8 cm above its toe: not resting
+    pos[:, 2] = (0.0, -0.1, 0.30)      # right foot flat and still at 30 cm: both sites rest
+    pos[:, 3] = (0.25, -0.1, 0.30)
+    cs = fit_contacts(times, pos)
+    assert sorted(c.site for c in cs) == ["l_toe", "r_heel", "r_toe"]
+    pos[:, 3, 0] += 2.0 * times        # right toe swinging: fast, not resting
+    assert sorted(c.site for c in fit_contacts(times, pos)) == ["l_toe", "r_heel"]
