@@ -210,16 +210,21 @@ class FrictionCone(Term):
         mo = self.tmap.motion(Y, Y1, Y2)
         return mo, self.engine.forward(Y, mo.qvel, mo.qacc)
 
-    def residual(self, t, Y, Y1, Y2) -> tuple[np.ndarray, np.ndarray]:
-        """Per sample: A(t) and the residual sqrt(e1^2 + ... + e4^2) outside the cone [N] (0 off contact)."""
+    def components(self, t, Y, Y1, Y2) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample: A(t) (n,) and (e1, e2, e3, e4) (n, 4) [N] (0 off contact)."""
         _, res = self._forward(Y, Y1, Y2)
         A = np.zeros(len(Y))
-        out = np.zeros(len(Y))
+        e = np.zeros((len(Y), 4))
         q = self._wrench(t, Y, res)
         if q is not None:
             A[q["rows"]] = q["A"]
-            out[q["rows"]] = np.linalg.norm(q["e"], axis=1)
-        return A, out
+            e[q["rows"]] = q["e"]
+        return A, e
+
+    def residual(self, t, Y, Y1, Y2) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample: A(t) and the residual sqrt(e1^2 + ... + e4^2) outside the cone [N] (0 off contact)."""
+        A, e = self.components(t, Y, Y1, Y2)
+        return A, np.linalg.norm(e, axis=1)
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
