@@ -273,29 +273,50 @@ class SiteMotion:
             p[i] = d.site_xpos[self.sites]
         return p, J
 
-    def motion(self, Y: np.ndarray, Y1: np.ndarray):
+    def motion(self, Y: np.ndarray, Y1: np.ndarray, mask: np.ndarray | None = None, grad: bool = True):
         """Positions, velocities and the Jacobians needed for gradients at n samples.
 
+        Args:
+            Y, Y1: (n, nq) the path and its time derivative. mask: optional (n, k) bool, the sites
+                whose velocity (and Jacobians) are needed at each sample (others: v, J, Jdot left 0).
+            grad: False: velocities only (`mj_objectVelocity`), J and Jdot None.
         Returns:
             p (n, k, 3) [m], v (n, k, 3) [m/s], J (n, k, 3, nv), Jdot (n, k, 3, nv) [1/s].
         """
         m, d = self.model, self.data
         n, k = len(Y), len(self.sites)
+        if mask is None:
+            mask = np.ones((n, k), bool)
         qvel = self.tmap.velocity(Y, Y1)
         p = np.empty((n, k, 3))
-        J = np.zeros((n, k, 3, m.nv))
-        Jd = np.zeros((n, k, 3, m.nv))
-        for i in range(n):
+        v = np.zeros((n, k, 3))
+        J = np.zeros((n, k, 3, m.nv)) if grad else None
+        Jd = np.zeros((n, k, 3, m.nv)) if grad else None
+        vel6 = np.zeros(6)
+        site = int(mujoco.mjtObj.mjOBJ_SITE)
+        sites, bodies = [int(s) for s in self.sites], [int(b) for b in self.bodies]
+        kinematics, com_pos, com_vel = mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_comVel
+        jac_site, jac_dot, object_velocity = mujoco.mj_jacSite, mujoco.mj_jacDot, mujoco.mj_objectVelocity
+        xpos = d.site_xpos
+        for i, need in enumerate(mask.tolist()):
             d.qpos[:] = Y[i]
             d.qvel[:] = qvel[i]
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)
-            mujoco.mj_comVel(m, d)
-            for j, s in enumerate(self.sites):
-                mujoco.mj_jacSite(m, d, J[i, j], None, int(s))
-                mujoco.mj_jacDot(m, d, Jd[i, j], None, d.site_xpos[s], int(self.bodies[j]))
-            p[i] = d.site_xpos[self.sites]
-        v = np.einsum("nkij,nj->nki", J, qvel)
+            kinematics(m, d)
+            com_pos(m, d)
+            com_vel(m, d)
+            for j, on in enumerate(need):
+                if not on:
+                    continue
+                s = sites[j]
+                if grad:
+                    jac_site(m, d, J[i, j], None, s)
+                    jac_dot(m, d, Jd[i, j], None, xpos[s], bodies[j])
+                else:
+                    object_velocity(m, d, site, s, vel6, 0)
+                    v[i, j] = vel6[3:]
+            p[i] = xpos[sites]
+        if grad:
+            v = np.einsum("nkij,nj->nki", J, qvel)
         return p, v, J, Jd
 
     def pullback(self, Y, Y1, J, Jd, g_p, g_v):
@@ -404,8 +425,11 @@ class Planted(Term):
         if rows.size == 0:
             return TermEval(f, dY, dY1)
         Yr, Y1r = Y[rows], Y1[rows]
-        p, v, J, Jd = self.kin.motion(Yr, Y1r)
         Wr = W[rows]
+        mask = np.zeros((rows.size, len(self.kin.names)), bool)
+        for c in range(len(self.contacts)):
+            mask[:, self._col[c]] |= Wr[:, c] > 0
+        p, v, J, Jd = self.kin.motion(Yr, Y1r, mask, grad)
         h, vt, nrm = self._parts(p, v, Wr, rows)
         t2 = self.tau * self.tau
         f[rows] = (Wr * (h * h + t2 * (vt * vt).sum(-1))).sum(1)
@@ -437,7 +461,7 @@ class Planted(Term):
         if rows.size == 0:
             return W, h, speed
         if Y1 is not None:
-            p, v, _, _ = self.kin.motion(Y[rows], Y1[rows])
+            p, v, _, _ = self.kin.motion(Y[rows], Y1[rows], grad=False)
         else:
             P = self.kin.positions(Y)
             v = np.gradient(P, t, axis=0)[rows]

@@ -273,3 +273,24 @@ def test_cone_sliding_push_and_pull(toy_model, layout):
     off = FrictionCone(toy_model, [Contact("r_toe", 2.0, 3.0)])
     assert off.evaluate(t, Y, Z, Y2).f[0] == 0.0
     assert cone_metrics(off, t, Y, Z, Y2) == {"cone_rms": 0.0, "cone_peak": 0.0, "cone_samples": 0}
+
+
+def test_cone_moment_uses_the_root_torque_in_the_world_frame(toy_model, layout):
+    """A static pose with the root turned and tilted and a hip bent, so the COM is not under the root:
+    the wrench is the weight through the COM, so on one toe e3 = m g (|com - toe| along the floor - r0) / l."""
+    t = np.array([0.5])
+    Y = standing(layout, 1, (0.3, -0.2, 1.2))
+    Y[0, 3:7] = [np.cos(0.3), 0.1, 0.15, np.sin(0.3)]  # unnormalized on purpose
+    hip = layout.quat_slots[1]
+    Y[0, hip] = [np.cos(0.4), 0.0, np.sin(0.4), 0.0]
+    Z = np.zeros_like(Y)
+    m, com = _mass_and_com(toy_model, Y[0])
+    d = mujoco.MjData(toy_model)
+    d.qpos[:] = Y[0]
+    mujoco.mj_kinematics(toy_model, d)
+    toe = d.site_xpos[mujoco.mj_name2id(toy_model, mujoco.mjtObj.mjOBJ_SITE, "r_toe")]
+    term = FrictionCone(toy_model, [Contact("r_toe", 0.0, 1.0)], min_radius=0.02, torque_arm=0.3)
+    _, e = term.components(t, Y, Z, Z)
+    lever = np.hypot(*(com - toe)[:2])
+    assert lever > 0.1
+    np.testing.assert_allclose(e[0], [0, 0, m * 9.81 * (lever - 0.02) / 0.3, 0], rtol=1e-9, atol=1e-9)
