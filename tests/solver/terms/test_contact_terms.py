@@ -294,3 +294,29 @@ def test_cone_moment_uses_the_root_torque_in_the_world_frame(toy_model, layout):
     lever = np.hypot(*(com - toe)[:2])
     assert lever > 0.1
     np.testing.assert_allclose(e[0], [0, 0, m * 9.81 * (lever - 0.02) / 0.3, 0], rtol=1e-9, atol=1e-9)
+
+
+def test_objective_gradient_with_a_shared_engine(toy_model, layout):
+    """All three terms with the root residual in one Objective: the cone's deferred gradient is summed
+    with the root term's (one engine) and its direct root-lever part added; dE/dP against FD."""
+    from solver.objective import Objective
+    from solver.terms.dynamics import RootResidual, make_engine
+
+    rng = np.random.default_rng(7)
+    knots = np.array([0.0, 0.4, 0.7, 1.0])
+    P = random_qpos(rng, layout, len(knots), spread=0.3)
+    P[:, 2] = [0.97, 1.0, 0.96, 0.99]
+    contacts = [Contact("l_heel", 0.0, 0.45), Contact("l_toe", 0.05, 0.5), Contact("r_toe", 0.5, 1.0),
+                Contact("l_toe", 0.85, 1.0)]
+    engine = make_engine(toy_model)
+    terms = [
+        FrictionCone(toy_model, contacts, ramp=0.05, engine=engine),
+        RootResidual(toy_model, engine=engine, flight="path"),
+        Planted(toy_model, contacts),
+        Clearance(toy_model, contacts, clearance=0.9),
+    ]
+    obj = Objective(terms, np.array([1e-4, 1e-4, 10.0, 10.0]), knots[0], knots[-1], rate=30)
+    ev = obj.evaluate(knots, P)
+    assert all(ev.integrals[n] > 0 for n in ("cone", "planted", "clearance")), ev.integrals
+    G = fd_gradient(lambda X: obj.evaluate(knots, X, grad=False).E, P)
+    assert np.abs(ev.grad - G).max() < 1e-6 * np.abs(G).max()
