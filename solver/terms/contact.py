@@ -6,9 +6,12 @@ has that shape). Two terms here, one in `solver.terms.contact_wrench` (friction 
 
 `Planted` (name "planted", m^2): during a contact the site is on its surface and does not slide,
 
-    f(t) = sum over contacts c of  w_c(t) [ h_c(t)^2 + tau^2 |v_t,c(t)|^2 ],
+    f(t) = sum over contacts c of  w_c(t) [ (h_c(t) - h0)^2 + tau^2 |v_t,c(t)|^2 ],
 
     h   = signed height of the site above its support surface [m] (floating > 0, inside < 0),
+    h0  = `rest_height` (default 5 mm: the penetration term's default margin, so that the two terms
+          agree on where a planted site rests; with h0 = 0 they fight and the site ends up between,
+          inside the margin - on run-and-step 0.65 mm inside the floor),
     v_t = v - (n.v) n, the site's velocity along the surface (n its unit normal) [m/s],
     tau = `velocity_time` [s] (default 0.1 s: 1 cm of height weighs like 10 cm/s of sliding),
     w_c = the contact's window: 1 inside [start + r, end - r], 0 outside [start, end], a smoothstep
@@ -355,7 +358,7 @@ def _sample_times(Y, t, t_span):
 
 
 class Planted(Term):
-    """f = sum over contacts of w(t) (h^2 + tau^2 |v_t|^2) [m^2]: feet on their surface, not sliding.
+    """f = sum over contacts of w(t) ((h - h0)^2 + tau^2 |v_t|^2) [m^2]: feet on their surface, not sliding.
 
     See the module docstring for the equations. The gradient with respect to Y' is B^T J^T g_v, with
     respect to Y the site Jacobian for the height plus the second-derivative terms of the velocity
@@ -367,6 +370,8 @@ class Planted(Term):
         contacts: objects with site, start, end, surface (see module docstring).
         velocity_time: tau [s] > 0, weighs sliding speed against height.
         ramp: r [s] >= 0, length of the smoothstep ramp at each end of a contact.
+        rest_height: h0 [m], the height a planted site is pulled to (set it to the penetration term's
+            margin).
         footprint_margin: [m] see `SupportSurfaces`.
         t_span: (t0, t1) [s] of the keyframes: `violation(Y)` without times assumes Y sampled evenly on
             it (how `solve` checks limits).
@@ -379,7 +384,7 @@ class Planted(Term):
     needs = (0, 1)
 
     def __init__(self, model, contacts, velocity_time: float = 0.1, ramp: float = 0.02,
-                 footprint_margin: float = 0.03, t_span=None):
+                 rest_height: float = 0.005, footprint_margin: float = 0.03, t_span=None):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the planted term")
@@ -390,7 +395,9 @@ class Planted(Term):
             raise InputError(f"velocity_time is {velocity_time}; it must be a time > 0 [s]")
         if not np.isfinite(ramp) or ramp < 0:
             raise InputError(f"ramp is {ramp}; it must be a time >= 0 [s]")
-        self.tau, self.ramp, self.t_span = tau, ramp, t_span
+        if not np.isfinite(float(rest_height)):
+            raise InputError(f"rest_height is {rest_height}; it must be a finite height [m]")
+        self.tau, self.ramp, self.rest_height, self.t_span = tau, ramp, float(rest_height), t_span
         used = sorted({c.site for c in self.contacts}, key=CONTACT_SITES.index)
         self.kin = SiteMotion(model, used or CONTACT_SITES[:1])
         self._col = np.array([self.kin.names.index(c.site) for c in self.contacts], int)
@@ -411,6 +418,7 @@ class Planted(Term):
         for c in range(C):
             pc = p[:, self._col[c]]
             h[:, c], nrm[:, c] = self.support.height(pc, self._surf[c])
+            h[:, c] -= self.rest_height
             if v is not None:
                 vc = v[:, self._col[c]]
                 vt[:, c] = vc - np.einsum("mi,mi->m", vc, nrm[:, c])[:, None] * nrm[:, c]
@@ -450,7 +458,7 @@ class Planted(Term):
         given, else by finite differences of the site positions along t).
 
         Returns:
-            W (n, C), h (n, C), speed (n, C) (zero where the window is 0).
+            W (n, C), h - h0 (n, C), speed (n, C) (zero where the window is 0).
         """
         t = np.asarray(t, float)
         W = self.windows(t)
@@ -471,7 +479,7 @@ class Planted(Term):
         return W, h, speed
 
     def violation(self, Y: np.ndarray, t: np.ndarray | None = None) -> float | None:
-        """Largest max(|h|, tau |v_t|) [m] where a contact's window is full (velocities by finite
+        """Largest max(|h - h0|, tau |v_t|) [m] where a contact's window is full (velocities by finite
         differences of the samples). Times: `t`, else Y is taken as sampled evenly on `t_span`; None if
         neither is known or no sample is fully in contact."""
         t = _sample_times(Y, t, self.t_span)

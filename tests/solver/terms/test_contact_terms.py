@@ -113,10 +113,14 @@ def test_planted_held_height_integrates_to_h2_T(toy_model, layout):
     t, dt = midpoints(0.0, 1.0, 1000)
     Y = standing(layout, len(t), (0.0, 0.0, FOOT + h))
     Z = np.zeros_like(Y)
-    term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.0)
+    term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.0, rest_height=0.0)
     assert term.evaluate(t, Y, Z, Z).f.sum() * dt == pytest.approx(h * h * T, rel=1e-9)
+    # the default rest height is the penetration margin, 5 mm: (h - 0.005)^2 T
+    term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.0)
+    assert term.evaluate(t, Y, Z, Z).f.sum() * dt == pytest.approx((h - 0.005) ** 2 * T, rel=1e-9)
+    assert term.violation(Y, t) == pytest.approx(h - 0.005)
     # a smoothstep ramp r at each end integrates to half: h^2 (T - r)
-    term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.1)
+    term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.1, rest_height=0.0)
     assert term.evaluate(t, Y, Z, Z).f.sum() * dt == pytest.approx(h * h * (T - 0.1), rel=1e-4)
     assert term.violation(Y, t) == pytest.approx(h)
 
@@ -128,7 +132,7 @@ def test_planted_sliding_foot_costs_tau2_u2_T_and_normal_velocity_is_free(toy_mo
     Y1 = np.zeros_like(Y)
     Y1[:, 0] = u  # the whole figure slides along x at u
     Y[:, 0] = u * t
-    term = Planted(toy_model, [Contact("r_toe", 0.3, 0.3 + T)], velocity_time=tau, ramp=0.0)
+    term = Planted(toy_model, [Contact("r_toe", 0.3, 0.3 + T)], velocity_time=tau, ramp=0.0, rest_height=0.0)
     assert term.evaluate(t, Y, Y1, None).f.sum() * dt == pytest.approx(tau**2 * u**2 * T, rel=1e-9)
     # violation from finite differences of the positions alone: tau * u
     assert term.violation(Y, t) == pytest.approx(tau * u, rel=1e-6)
@@ -141,9 +145,9 @@ def test_planted_surface_under_the_site(toy_model, layout):
     t = np.array([0.5])
     Y = standing(layout, 1, (1.5 + 0.05, 0.0, 0.2 + FOOT + h))  # l_heel over the step's top
     Z = np.zeros_like(Y)
-    auto = Planted(toy_model, [Contact("l_heel", 0.0, 1.0)], ramp=0.0)
+    auto = Planted(toy_model, [Contact("l_heel", 0.0, 1.0)], ramp=0.0, rest_height=0.0)
     assert auto.evaluate(t, Y, Z, Z).f[0] == pytest.approx(h * h)
-    floor = Planted(toy_model, [Contact("l_heel", 0.0, 1.0, "floor")], ramp=0.0)
+    floor = Planted(toy_model, [Contact("l_heel", 0.0, 1.0, "floor")], ramp=0.0, rest_height=0.0)
     assert floor.evaluate(t, Y, Z, Z).f[0] == pytest.approx((0.2 + h) ** 2)
     Y[:, 0] = 0.5  # beside the step: the floor is under the site
     Y[:, 2] = FOOT + h
