@@ -1,0 +1,588 @@
+"""Feet that plant (issue 11): a contact schedule turned into objective terms.
+
+A contact is any object with attributes `site` (a contact site name, e.g. l_heel), `start`, `end` [s]
+and `surface` (a `StaticSurfaces` name, "" = whichever surface is under the site; `solver.contacts.Contact`
+has that shape). Two terms here, one in `solver.terms.contact_wrench` (friction cone):
+
+`Planted` (name "planted", m^2): during a contact the site is on its surface and does not slide,
+
+    f(t) = sum over contacts c of  w_c(t) [ (h_c(t) - h0)^2 + tau^2 |v_t,c(t)|^2 ],
+
+    h   = signed height of the site above its support surface [m] (floating > 0, inside < 0),
+    h0  = `rest_height` (default 5 mm: the penetration term's default margin, so that the two terms
+          agree on where a planted site rests; with h0 = 0 they fight and the site ends up between,
+          inside the margin - on run-and-step 0.65 mm inside the floor),
+    v_t = v - (n.v) n, the site's velocity along the surface (n its unit normal) [m/s],
+    tau = `velocity_time` [s] (default 0.1 s: 1 cm of height weighs like 10 cm/s of sliding),
+    w_c = the contact's window: 1 inside [start + r, end - r], 0 outside [start, end], a smoothstep
+          ramp of length r = `ramp` (default 0.02 s, at most half the contact) at each end.
+
+  The plant point is left to the optimizer: the height is pulled to the surface under the site and the
+  tangential velocity to zero, so the site stays wherever the path puts it (no keyframe pins it). The
+  ramp tolerates contact times that are a frame or two off (touchdown and lift-off are not instant in
+  the keyframes) and keeps the integrand continuous in t.
+
+`Clearance` (name "clearance", m^2): a site that is not in contact keeps a clearance c (default 2 cm)
+from every surface in the middle of its swing and during flights,
+
+    f(t) = sum over sites k of  u_k(t) sum over surfaces s of depth_ks(t)^2,
+    depth_ks = `StaticSurfaces.penetration(p_k, margin=c)` (planes: max(0, c - height); boxes grown by c),
+    u_k = max(swing window, flight window):
+      swing: each gap [a, b] between consecutive contacts of site k (not before its first or after its
+             last contact: there the schedule says nothing). u rises by a smoothstep from 0 at a to 1 at
+             a + f L and falls back to 0 from b - f L to b, L = b - a, f = (1 - core) / 2, core =
+             `core` (default 0.5: the central half of the swing is fully weighted).
+      flight: the same shape on each interval inside the schedule where no site is in contact; it
+             applies to all contact sites, so the flight of a run stays a flight (a walk has none).
+
+  So scuffing along the floor through the swing does not pay, while lift-off and touchdown (the ends
+  of the gap) are free.
+
+Velocities. The site velocity is v = P(Y) Y' with P = dp/dY = J(q) B(Y) (J the site Jacobian of
+`mj_jacSite`, B the tangent map of `solver.kinematics`). Its gradient with respect to Y needs the
+second derivatives of p: because d^2 p / dY_i dY_j is symmetric,
+
+    d (g.v) / dY = (dP/dt)^T g = B^T Jdot^T g + Bdot^T J^T g,   d (g.v) / dY' = B^T J^T g,
+
+with Jdot = dJ/dt along qvel = B Y' (MuJoCo's `mj_jacDot`, exact, no finite differences) and Bdot the
+time derivative of B (on each quaternion block B = 2 G(q)/s, s = q.q:
+Bdot = 2 G(q')/s - 4 (q.q') G(q)/s^2). `SiteMotion` does this.
+
+Support surfaces. A plane supports on its free side; a box on its top face (the face whose outward
+normal points most upward), over its footprint. With `surface=""` the support is chosen per point:
+among the planes and the boxes whose top-face footprint (grown by `footprint_margin`) contains the
+site, the one nearest in |height|. `SupportSurfaces` does this.
+"""
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from solver.errors import InputError
+from solver.kinematics import TangentMap
+from solver.layout import StateLayout, site_ids
+from solver.surfaces import StaticSurfaces
+from solver.terms.base import Term, TermEval
+
+#: The figure's contact sites (models/humanoid39.xml).
+CONTACT_SITES = ("l_heel", "l_toe", "r_heel", "r_toe")
+
+FULL = 1.0 - 1e-9  # a window at least this is "fully weighted" (where `violation` looks)
+
+
+# ---------------------------------------------------------------------------------------------------
+# schedule helpers
+
+
+def smoothstep(x: np.ndarray) -> np.ndarray:
+    """3 x^2 - 2 x^3 on [0, 1], clipped outside."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def contact_window(t: np.ndarray, start: float, end: float, ramp: float) -> np.ndarray:
+    """(n,) weight of a contact [start, end] at times t: 1 inside [start + r, end - r], 0 outside
+    [start, end], smoothstep ramps between (r = min(ramp, (end - start)/2); r = 0: the closed box)."""
+    t = np.asarray(t, float)
+    r = min(float(ramp), 0.5 * (end - start))
+    if r <= 0:
+        return ((t >= start) & (t <= end)).astype(float)
+    return smoothstep((t - start) / r) * smoothstep((end - t) / r)
+
+
+def gap_window(t: np.ndarray, a: float, b: float, core: float) -> np.ndarray:
+    """(n,) weight over a gap (a, b): 0 at the ends, 1 on the central `core` fraction, smoothstep
+    ramps over the outer (1 - core)/2 at each end (core = 1: the open box)."""
+    t = np.asarray(t, float)
+    L = b - a
+    if L <= 0:
+        return np.zeros(t.shape)
+    r = 0.5 * (1.0 - float(core)) * L
+    if r <= 0:
+        return ((t > a) & (t < b)).astype(float)
+    return smoothstep((t - a) / r) * smoothstep((b - t) / r)
+
+
+def _merged(intervals):
+    """Sorted, merged list of (start, end) intervals."""
+    out = []
+    for s, e in sorted(intervals):
+        if out and s <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], e))
+        else:
+            out.append((s, e))
+    return out
+
+
+def check_contacts(contacts, sites=CONTACT_SITES, surface_names=()) -> list:
+    """The contacts as a list, checked: known site, finite start < end, known surface.
+
+    Raises:
+        InputError: naming the contact and the valid choices.
+    """
+    out = []
+    for c in contacts:
+        for attr in ("site", "start", "end", "surface"):
+            if not hasattr(c, attr):
+                raise InputError(f"contact {c!r} has no attribute {attr!r} (needs site, start, end, surface)")
+        if c.site not in sites:
+            raise InputError(f"contact {c!r}: unknown site {c.site!r}; contact sites are: {', '.join(sites)}")
+        s, e = float(c.start), float(c.end)
+        if not (np.isfinite(s) and np.isfinite(e) and s < e):
+            raise InputError(f"contact {c!r}: start {c.start} and end {c.end} must be finite with start < end")
+        if c.surface and c.surface not in surface_names:
+            raise InputError(
+                f"contact {c!r}: unknown surface {c.surface!r}; the scene's surfaces are: "
+                f"{', '.join(surface_names) or 'none'}"
+            )
+        out.append(c)
+    return out
+
+
+def flights(contacts) -> list[tuple[float, float]]:
+    """Intervals between the first and the last contact of the schedule where no site is in contact."""
+    busy = _merged([(float(c.start), float(c.end)) for c in contacts])
+    return [(busy[i][1], busy[i + 1][0]) for i in range(len(busy) - 1)]
+
+
+def swings(contacts, site: str) -> list[tuple[float, float]]:
+    """Gaps between consecutive (merged) contacts of one site."""
+    busy = _merged([(float(c.start), float(c.end)) for c in contacts if c.site == site])
+    return [(busy[i][1], busy[i + 1][0]) for i in range(len(busy) - 1)]
+
+
+# ---------------------------------------------------------------------------------------------------
+# support surfaces
+
+
+class SupportSurfaces:
+    """Heights of points above the supporting face of each static surface (see module docstring).
+
+    Args:
+        surfaces: StaticSurfaces of the scene.
+        footprint_margin: [m] a box supports a point whose projection is within this of its top face.
+    """
+
+    def __init__(self, surfaces: StaticSurfaces, footprint_margin: float = 0.03):
+        self.surfaces = surfaces
+        self.names = surfaces.names
+        P = len(surfaces.plane_point)
+        pts, nrm, is_box, tang, half2 = [], [], [], [], []
+        for i in range(P):
+            pts.append(surfaces.plane_point[i])
+            nrm.append(surfaces.plane_normal[i])
+            is_box.append(False)
+            tang.append(np.zeros((3, 2)))
+            half2.append(np.full(2, np.inf))
+        for c, R, h in zip(surfaces.box_center, surfaces.box_rot, surfaces.box_half):
+            up = np.concatenate([R[2], -R[2]])  # z component of +axis0..2, -axis0..2
+            k = int(np.argmax(up))
+            a, sgn = k % 3, (1.0 if k < 3 else -1.0)
+            n = sgn * R[:, a]
+            pts.append(c + h[a] * n)
+            nrm.append(n)
+            is_box.append(True)
+            others = [b for b in range(3) if b != a]
+            tang.append(R[:, others])
+            half2.append(h[others] + footprint_margin)
+        self.point = np.array(pts, float).reshape(-1, 3)
+        self.normal = np.array(nrm, float).reshape(-1, 3)
+        self.is_box = np.array(is_box, bool)
+        self.tangent = np.array(tang, float).reshape(-1, 3, 2)
+        self.half = np.array(half2, float).reshape(-1, 2)
+
+    @property
+    def count(self) -> int:
+        return len(self.point)
+
+    def index(self, name: str) -> int | None:
+        """Index of a surface by name; None for "" (automatic)."""
+        if not name:
+            return None
+        if name not in self.names:
+            raise InputError(f"unknown surface {name!r}; the scene's surfaces are: {', '.join(self.names)}")
+        return self.names.index(name)
+
+    def height(self, p: np.ndarray, which: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Signed height of points above their support face, and that face's unit normal.
+
+        Args:
+            p: (..., 3) points [m]. which: surface index, or None to choose per point.
+        Returns:
+            h (...,) [m] (dh/dp = n), n (..., 3).
+        """
+        d = p[..., None, :] - self.point  # (..., S, 3)
+        h = np.einsum("...si,si->...s", d, self.normal)
+        if which is None:
+            loc = np.abs(np.einsum("...si,sij->...sj", d, self.tangent))
+            ok = ~self.is_box | (loc <= self.half).all(axis=-1)
+            ok = np.where(ok.any(axis=-1, keepdims=True), ok, True)  # nothing under: nearest of all
+            which = np.argmin(np.where(ok, np.abs(h), np.inf), axis=-1)
+        which = np.broadcast_to(np.asarray(which), h.shape[:-1])
+        hh = np.take_along_axis(h, which[..., None], -1)[..., 0]
+        return hh, self.normal[which]
+
+
+# ---------------------------------------------------------------------------------------------------
+# site kinematics with velocities
+
+
+def _gt(q: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """G(q)^T g = q * (0, g) (Hamilton product), last-axis: (..., 4) q, (..., 3) g -> (..., 4)."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    a, b, c = np.moveaxis(g, -1, 0)
+    return np.stack(
+        [-x * a - y * b - z * c, w * a - z * b + y * c, z * a + w * b - x * c, -y * a + x * b + w * c], -1
+    )
+
+
+class SiteMotion:
+    """Positions, velocities and their gradients of sites along a path, by MuJoCo kinematics.
+
+    Args:
+        model: MjModel. sites: site names.
+    """
+
+    def __init__(self, model, sites=CONTACT_SITES):
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.sites = site_ids(model, sites)
+        self.names = tuple(sites)
+        self.bodies = np.array(model.site_bodyid[self.sites], int)
+        self.tmap = TangentMap.from_layout(StateLayout.from_model(model))
+
+    def positions(self, Y: np.ndarray) -> np.ndarray:
+        """(n, k, 3) site positions [m]."""
+        m, d = self.model, self.data
+        out = np.empty((len(Y), len(self.sites), 3))
+        for i, y in enumerate(Y):
+            d.qpos[:] = y
+            mujoco.mj_kinematics(m, d)
+            out[i] = d.site_xpos[self.sites]
+        return out
+
+    def jacobians(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (n, k, 3) and translational site Jacobians (n, k, 3, nv) (tangent convention)."""
+        m, d = self.model, self.data
+        n, k = len(Y), len(self.sites)
+        p = np.empty((n, k, 3))
+        J = np.zeros((n, k, 3, m.nv))
+        for i, y in enumerate(Y):
+            d.qpos[:] = y
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            for j, s in enumerate(self.sites):
+                mujoco.mj_jacSite(m, d, J[i, j], None, int(s))
+            p[i] = d.site_xpos[self.sites]
+        return p, J
+
+    def motion(self, Y: np.ndarray, Y1: np.ndarray, mask: np.ndarray | None = None, grad: bool = True):
+        """Positions, velocities and the Jacobians needed for gradients at n samples.
+
+        Args:
+            Y, Y1: (n, nq) the path and its time derivative. mask: optional (n, k) bool, the sites
+                whose velocity (and Jacobians) are needed at each sample (others: v, J, Jdot left 0).
+            grad: False: velocities only (`mj_objectVelocity`), J and Jdot None.
+        Returns:
+            p (n, k, 3) [m], v (n, k, 3) [m/s], J (n, k, 3, nv), Jdot (n, k, 3, nv) [1/s].
+        """
+        m, d = self.model, self.data
+        n, k = len(Y), len(self.sites)
+        if mask is None:
+            mask = np.ones((n, k), bool)
+        qvel = self.tmap.velocity(Y, Y1)
+        p = np.empty((n, k, 3))
+        v = np.zeros((n, k, 3))
+        J = np.zeros((n, k, 3, m.nv)) if grad else None
+        Jd = np.zeros((n, k, 3, m.nv)) if grad else None
+        vel6 = np.zeros(6)
+        site = int(mujoco.mjtObj.mjOBJ_SITE)
+        sites, bodies = [int(s) for s in self.sites], [int(b) for b in self.bodies]
+        kinematics, com_pos, com_vel = mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_comVel
+        jac_site, jac_dot, object_velocity = mujoco.mj_jacSite, mujoco.mj_jacDot, mujoco.mj_objectVelocity
+        xpos = d.site_xpos
+        for i, need in enumerate(mask.tolist()):
+            d.qpos[:] = Y[i]
+            d.qvel[:] = qvel[i]
+            kinematics(m, d)
+            com_pos(m, d)
+            com_vel(m, d)
+            for j, on in enumerate(need):
+                if not on:
+                    continue
+                s = sites[j]
+                if grad:
+                    jac_site(m, d, J[i, j], None, s)
+                    jac_dot(m, d, Jd[i, j], None, xpos[s], bodies[j])
+                else:
+                    object_velocity(m, d, site, s, vel6, 0)
+                    v[i, j] = vel6[3:]
+            p[i] = xpos[sites]
+        if grad:
+            v = np.einsum("nkij,nj->nki", J, qvel)
+        return p, v, J, Jd
+
+    def pullback(self, Y, Y1, J, Jd, g_p, g_v):
+        """Gradients of a function of site positions and velocities, pulled back to Y and Y'.
+
+        Args:
+            Y, Y1: (n, nq). J, Jd: from `motion`. g_p, g_v: (n, k, 3) d f / d p and d f / d v.
+        Returns:
+            dY, dY1: (n, nq); dY = B^T (J^T g_p + Jdot^T g_v) + Bdot^T J^T g_v, dY1 = B^T J^T g_v.
+        """
+        tm = self.tmap
+        Jg = np.einsum("nkij,nki->nj", J, g_v)  # J^T g_v, (n, nv)
+        pose = np.einsum("nkij,nki->nj", J, g_p) + np.einsum("nkij,nki->nj", Jd, g_v)
+        B = tm.blocks(Y)
+        dY = tm.pullback(Y, pose, B)
+        dY1 = tm.pullback(Y, Jg, B)
+        # Bdot^T x on each quaternion slot: G(q')^T (2x/s) - G(q)^T (4 a x / s^2), a = q.q'
+        q, q1 = Y[:, tm.quat_q], Y1[:, tm.quat_q]  # (n, s, 4)
+        s = (q * q).sum(-1)[..., None]
+        a = (q * q1).sum(-1)[..., None]
+        x = Jg[:, tm.quat_v]  # (n, s, 3)
+        dY[:, tm.quat_q] += _gt(q1, 2.0 * x / s) - _gt(q, 4.0 * a * x / (s * s))
+        return dY, dY1
+
+
+# ---------------------------------------------------------------------------------------------------
+# terms
+
+
+def _sample_times(Y, t, t_span):
+    if t is not None:
+        return np.asarray(t, float)
+    if t_span is None:
+        return None
+    return np.linspace(float(t_span[0]), float(t_span[1]), len(Y))
+
+
+class Planted(Term):
+    """f = sum over contacts of w(t) ((h - h0)^2 + tau^2 |v_t|^2) [m^2]: feet on their surface, not sliding.
+
+    See the module docstring for the equations. The gradient with respect to Y' is B^T J^T g_v, with
+    respect to Y the site Jacobian for the height plus the second-derivative terms of the velocity
+    (`SiteMotion.pullback`); exact, no finite differences. Only quadrature points inside a contact are
+    computed.
+
+    Args:
+        model: MjModel of the scene (figure + static planes/boxes).
+        contacts: objects with site, start, end, surface (see module docstring).
+        velocity_time: tau [s] > 0, weighs sliding speed against height.
+        ramp: r [s] >= 0, length of the smoothstep ramp at each end of a contact.
+        rest_height: h0 [m], the height a planted site is pulled to (set it to the penetration term's
+            margin).
+        footprint_margin: [m] see `SupportSurfaces`.
+        t_span: (t0, t1) [s] of the keyframes: `violation(Y)` without times assumes Y sampled evenly on
+            it (how `solve` checks limits).
+    Raises:
+        InputError: a bad contact (unknown site or surface, start >= end), no surfaces, bad parameters.
+    """
+
+    name = "planted"
+    units = "m^2"
+    needs = (0, 1)
+
+    def __init__(self, model, contacts, velocity_time: float = 0.1, ramp: float = 0.02,
+                 rest_height: float = 0.005, footprint_margin: float = 0.03, t_span=None):
+        surfaces = StaticSurfaces.from_model(model)
+        if surfaces.count == 0:
+            raise InputError("the scene has no static floor plane or box for the planted term")
+        self.support = SupportSurfaces(surfaces, footprint_margin)
+        self.contacts = check_contacts(contacts, CONTACT_SITES, surfaces.names)
+        tau, ramp = float(velocity_time), float(ramp)
+        if not np.isfinite(tau) or tau <= 0:
+            raise InputError(f"velocity_time is {velocity_time}; it must be a time > 0 [s]")
+        if not np.isfinite(ramp) or ramp < 0:
+            raise InputError(f"ramp is {ramp}; it must be a time >= 0 [s]")
+        if not np.isfinite(float(rest_height)):
+            raise InputError(f"rest_height is {rest_height}; it must be a finite height [m]")
+        self.tau, self.ramp, self.rest_height, self.t_span = tau, ramp, float(rest_height), t_span
+        used = sorted({c.site for c in self.contacts}, key=CONTACT_SITES.index)
+        self.kin = SiteMotion(model, used or CONTACT_SITES[:1])
+        self._col = np.array([self.kin.names.index(c.site) for c in self.contacts], int)
+        self._surf = [self.support.index(c.surface) for c in self.contacts]
+
+    def windows(self, t: np.ndarray) -> np.ndarray:
+        """(n, C) window of each contact at times t."""
+        t = np.asarray(t, float)
+        return np.stack([contact_window(t, float(c.start), float(c.end), self.ramp) for c in self.contacts], 1) \
+            if self.contacts else np.zeros((len(t), 0))
+
+    def _parts(self, p, v, W, rows):
+        """Heights (m, C), tangential velocities (m, C, 3), normals (m, C, 3) of the contacts' sites."""
+        m, C = len(rows), len(self.contacts)
+        h = np.zeros((m, C))
+        vt = np.zeros((m, C, 3))
+        nrm = np.zeros((m, C, 3))
+        for c in range(C):
+            pc = p[:, self._col[c]]
+            h[:, c], nrm[:, c] = self.support.height(pc, self._surf[c])
+            h[:, c] -= self.rest_height
+            if v is not None:
+                vc = v[:, self._col[c]]
+                vt[:, c] = vc - np.einsum("mi,mi->m", vc, nrm[:, c])[:, None] * nrm[:, c]
+        return h, vt, nrm
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        n, nq = Y.shape
+        W = self.windows(t)
+        rows = np.flatnonzero((W > 0).any(axis=1))
+        f = np.zeros(n)
+        dY, dY1 = (np.zeros((n, nq)), np.zeros((n, nq))) if grad else (None, None)
+        if rows.size == 0:
+            return TermEval(f, dY, dY1)
+        Yr, Y1r = Y[rows], Y1[rows]
+        Wr = W[rows]
+        mask = np.zeros((rows.size, len(self.kin.names)), bool)
+        for c in range(len(self.contacts)):
+            mask[:, self._col[c]] |= Wr[:, c] > 0
+        p, v, J, Jd = self.kin.motion(Yr, Y1r, mask, grad)
+        h, vt, nrm = self._parts(p, v, Wr, rows)
+        t2 = self.tau * self.tau
+        f[rows] = (Wr * (h * h + t2 * (vt * vt).sum(-1))).sum(1)
+        if not grad:
+            return TermEval(f)
+        g_p = np.zeros(p.shape)
+        g_v = np.zeros(v.shape)
+        for c in range(len(self.contacts)):
+            k = self._col[c]
+            g_p[:, k] += (2.0 * Wr[:, c] * h[:, c])[:, None] * nrm[:, c]
+            g_v[:, k] += (2.0 * t2 * Wr[:, c])[:, None] * vt[:, c]  # d|v_t|^2/dv = 2 v_t (projector)
+        dYr, dY1r = self.kin.pullback(Yr, Y1r, J, Jd, g_p, g_v)
+        dY[rows], dY1[rows] = dYr, dY1r
+        return TermEval(f, dY, dY1)
+
+    def residuals(self, t, Y, Y1=None):
+        """Per sample and contact: window, height [m] and tangential speed [m/s] (velocity from Y1 if
+        given, else by finite differences of the site positions along t).
+
+        Returns:
+            W (n, C), h - h0 (n, C), speed (n, C) (zero where the window is 0).
+        """
+        t = np.asarray(t, float)
+        W = self.windows(t)
+        n, C = W.shape
+        h = np.zeros((n, C))
+        speed = np.zeros((n, C))
+        rows = np.flatnonzero((W > 0).any(axis=1))
+        if rows.size == 0:
+            return W, h, speed
+        if Y1 is not None:
+            p, v, _, _ = self.kin.motion(Y[rows], Y1[rows], grad=False)
+        else:
+            P = self.kin.positions(Y)
+            v = np.gradient(P, t, axis=0)[rows]
+            p = P[rows]
+        hh, vt, _ = self._parts(p, v, W[rows], rows)
+        h[rows], speed[rows] = hh, np.linalg.norm(vt, axis=-1)
+        return W, h, speed
+
+    def violation(self, Y: np.ndarray, t: np.ndarray | None = None) -> float | None:
+        """Largest max(|h - h0|, tau |v_t|) [m] where a contact's window is full (velocities by finite
+        differences of the samples). Times: `t`, else Y is taken as sampled evenly on `t_span`; None if
+        neither is known or no sample is fully in contact."""
+        t = _sample_times(Y, t, self.t_span)
+        if t is None or not self.contacts:
+            return None
+        W, h, speed = self.residuals(t, Y)
+        full = W >= FULL
+        if not full.any():
+            return None
+        return float(np.max(np.where(full, np.maximum(np.abs(h), self.tau * speed), 0.0)))
+
+
+class Clearance(Term):
+    """f = sum over sites of u(t) * sum over surfaces of depth(margin=c)^2 [m^2]: swing feet clear.
+
+    See the module docstring for u (swing cores and flights) and the depth. Gradient: site Jacobian,
+    only at points where a weighted site is closer than c to a surface.
+
+    Args:
+        model: MjModel of the scene. contacts: the schedule (objects with site, start, end, surface).
+        clearance: c [m] > 0 (default 2 cm).
+        core: fraction in [0, 1] of each swing / flight that is fully weighted (default 0.5).
+        flight: also apply to all contact sites during flights (default True).
+        sites: the sites the term looks after (default the four contact sites).
+        t_span: see `Planted`.
+    Raises:
+        InputError: bad contact, no surfaces, bad parameters.
+    """
+
+    name = "clearance"
+    units = "m^2"
+    needs = (0,)
+
+    def __init__(self, model, contacts, clearance: float = 0.02, core: float = 0.5, flight: bool = True,
+                 sites=CONTACT_SITES, t_span=None):
+        surfaces = StaticSurfaces.from_model(model)
+        if surfaces.count == 0:
+            raise InputError("the scene has no static floor plane or box for the clearance term")
+        self.surfaces = surfaces
+        self.contacts = check_contacts(contacts, CONTACT_SITES, surfaces.names)
+        c, core = float(clearance), float(core)
+        if not np.isfinite(c) or c <= 0:
+            raise InputError(f"clearance is {clearance}; it must be a distance > 0 [m]")
+        if not (0.0 <= core <= 1.0):
+            raise InputError(f"core is {core}; it must be a fraction in [0, 1]")
+        self.clearance, self.core, self.flight, self.t_span = c, core, bool(flight), t_span
+        self.kin = SiteMotion(model, tuple(sites))
+        self.swings = [swings(self.contacts, s) for s in self.kin.names]
+        self.flights = flights(self.contacts) if self.flight else []
+
+    def windows(self, t: np.ndarray) -> np.ndarray:
+        """(n, k) weight u of each site at times t."""
+        t = np.asarray(t, float)
+        fl = np.zeros(t.shape)
+        for a, b in self.flights:
+            fl = np.maximum(fl, gap_window(t, a, b, self.core))
+        cols = []
+        for gaps in self.swings:
+            u = fl.copy()
+            for a, b in gaps:
+                u = np.maximum(u, gap_window(t, a, b, self.core))
+            cols.append(u)
+        return np.stack(cols, 1)
+
+    def depths(self, Y: np.ndarray, rows: np.ndarray | None = None, margin: float | None = None) -> np.ndarray:
+        """(m, k) largest depth over surfaces of each site with the given margin (default c) [m]."""
+        Yr = Y if rows is None else Y[rows]
+        p = self.kin.positions(Yr)
+        d, _ = self.surfaces.penetration(p, self.clearance if margin is None else margin)
+        return d.max(axis=-1)
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        n, nq = Y.shape
+        U = self.windows(t)
+        rows = np.flatnonzero((U > 0).any(axis=1))
+        f = np.zeros(n)
+        dY = np.zeros((n, nq)) if grad else None
+        if rows.size == 0:
+            return TermEval(f, dY)
+        p = self.kin.positions(Y[rows])
+        depth, ddepth = self.surfaces.penetration(p, self.clearance)  # (m,k,S), (m,k,S,3)
+        Ur = U[rows]
+        f[rows] = (Ur * (depth * depth).sum(-1)).sum(1)
+        if not grad:
+            return TermEval(f)
+        gp = np.einsum("mk,mks,mksi->mki", 2.0 * Ur, depth, ddepth)
+        hit = np.flatnonzero(np.abs(gp).sum(axis=(1, 2)) > 0)
+        if hit.size:
+            Yh = Y[rows[hit]]
+            _, J = self.kin.jacobians(Yh)
+            gv = np.einsum("mkij,mki->mj", J, gp[hit])
+            dY[rows[hit]] = self.kin.tmap.pullback(Yh, gv)
+        return TermEval(f, dY)
+
+    def violation(self, Y: np.ndarray, t: np.ndarray | None = None) -> float | None:
+        """Deepest intrusion into the clearance band, max(c - distance, 0) [m], where a site's window is
+        full (times as in `Planted.violation`); None if unknown or nothing is fully weighted."""
+        t = _sample_times(Y, t, self.t_span)
+        if t is None:
+            return None
+        U = self.windows(t)
+        rows = np.flatnonzero((U >= FULL).any(axis=1))
+        if rows.size == 0:
+            return None
+        d = self.depths(Y, rows)
+        return float(np.max(np.where(U[rows] >= FULL, d, 0.0)))

@@ -1,0 +1,326 @@
+"""Contact-schedule terms (issue 11): planted, clearance, friction cone. Gradients against central
+finite differences (Y, Y', Y''), values against hand-built cases on the toy figure of conftest.py.
+
+Toy figure at identity rotations with the root at (x, y, z): l_heel at (x - .05, y + .1, z - .95),
+l_toe at (x + .15, y + .1, z - .95), r_* at y - .1. Floor plane z = 0, box "step" with top z = .2 over
+x in [1.1, 1.9]."""
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import pytest
+from conftest import fd_gradient, random_qpos
+
+from solver.errors import InputError
+from solver.layout import StateLayout
+from solver.terms.contact import Clearance, Planted, contact_window, flights, swings
+from solver.terms.contact_wrench import FrictionCone, cone_metrics
+
+FOOT = 0.95  # root height minus site height at identity rotations
+
+
+@dataclass(frozen=True)
+class Contact:
+    site: str
+    start: float
+    end: float
+    surface: str = ""
+
+
+@pytest.fixture(scope="module")
+def layout(toy_model):
+    return StateLayout.from_model(toy_model)
+
+
+def standing(layout, n, root=(0.0, 0.0, FOOT)):
+    """(n, nq) identity pose with the root at `root`."""
+    Y = np.zeros((n, layout.nq))
+    Y[:, :3] = root
+    Y[:, layout.quat_slots[:, 0]] = 1.0
+    return Y
+
+
+def midpoints(t0, t1, n):
+    """Midpoint-rule nodes and step."""
+    h = (t1 - t0) / n
+    return t0 + h * (np.arange(n) + 0.5), h
+
+
+def check_gradient(term, t, Y, Y1, Y2, rtol=1e-6):
+    """Largest |analytic - central FD| relative to the largest gradient entry, per argument."""
+    ev = term.evaluate(t, Y, Y1, Y2, grad=True)
+    errs = []
+    for k, (X, g) in enumerate(((Y, ev.dY), (Y1, ev.dY1), (Y2, ev.dY2))):
+        if k not in term.needs:
+            assert g is None or not np.any(g)
+            continue
+
+        def f(Z, k=k):
+            args = [Y, Y1, Y2]
+            args[k] = Z
+            return term.evaluate(t, *args, grad=False).f.sum()
+
+        G = fd_gradient(f, X)
+        assert np.abs(G).max() > 0, f"d/dY{k} is zero: the check checks nothing"
+        err = np.abs(g - G).max() / np.abs(G).max()
+        assert err < rtol, f"d/dY{k}: relative error {err:.3g}"
+        errs.append(err)
+    return errs
+
+
+# ---------------------------------------------------------------------------------------------------
+# schedule helpers
+
+
+def test_windows_swings_and_flights():
+    t = np.array([0.0, 0.05, 0.1, 0.5, 0.9, 0.95, 1.0, 1.1])
+    np.testing.assert_allclose(contact_window(t, 0.0, 1.0, 0.0), [1, 1, 1, 1, 1, 1, 1, 0])
+    w = contact_window(t, 0.0, 1.0, 0.1)
+    np.testing.assert_allclose(w, [0, 0.5, 1, 1, 1, 0.5, 0, 0])
+    run = [Contact("l_toe", 0.0, 0.3), Contact("r_toe", 0.4, 0.7), Contact("l_toe", 0.8, 1.1)]
+    assert flights(run) == [(0.3, 0.4), (0.7, 0.8)]
+    assert swings(run, "l_toe") == [(0.3, 0.8)]
+    assert swings(run, "r_toe") == []
+    walk = [Contact("l_heel", 0.0, 0.6), Contact("r_heel", 0.5, 1.1), Contact("l_heel", 1.0, 1.6)]
+    assert flights(walk) == []
+
+
+def test_bad_contacts_are_input_errors(toy_model):
+    with pytest.raises(InputError, match="unknown site"):
+        Planted(toy_model, [Contact("nose", 0, 1)])
+    with pytest.raises(InputError, match="start"):
+        Planted(toy_model, [Contact("l_toe", 1, 0.5)])
+    with pytest.raises(InputError, match="unknown surface.*floor"):
+        Clearance(toy_model, [Contact("l_toe", 0, 1, "moon")])
+
+
+# ---------------------------------------------------------------------------------------------------
+# planted
+
+
+def test_planted_gradient(toy_model, layout):
+    rng = np.random.default_rng(3)
+    n = 7
+    Y = random_qpos(rng, layout, n)
+    Y1, Y2 = rng.normal(size=Y.shape), rng.normal(size=Y.shape)
+    t = np.linspace(0, 1, n)
+    contacts = [Contact("l_heel", 0.1, 0.7), Contact("r_toe", 0.0, 0.4, "step"), Contact("l_toe", 0.5, 1.0)]
+    check_gradient(Planted(toy_model, contacts, ramp=0.15), t, Y, Y1, Y2)
+
+
+def test_planted_held_height_integrates_to_h2_T(toy_model, layout):
+    h, T = 0.03, 0.6
+    t, dt = midpoints(0.0, 1.0, 1000)
+    Y = standing(layout, len(t), (0.0, 0.0, FOOT + h))
+    Z = np.zeros_like(Y)
+    term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.0, rest_height=0.0)
+    assert term.evaluate(t, Y, Z, Z).f.sum() * dt == pytest.approx(h * h * T, rel=1e-9)
+    # the default rest height is the penetration margin, 5 mm: (h - 0.005)^2 T
+    term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.0)
+    assert term.evaluate(t, Y, Z, Z).f.sum() * dt == pytest.approx((h - 0.005) ** 2 * T, rel=1e-9)
+    assert term.violation(Y, t) == pytest.approx(h - 0.005)
+    # a smoothstep ramp r at each end integrates to half: h^2 (T - r)
+    term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.1, rest_height=0.0)
+    assert term.evaluate(t, Y, Z, Z).f.sum() * dt == pytest.approx(h * h * (T - 0.1), rel=1e-4)
+    assert term.violation(Y, t) == pytest.approx(h)
+
+
+def test_planted_sliding_foot_costs_tau2_u2_T_and_normal_velocity_is_free(toy_model, layout):
+    u, T, tau = 0.5, 0.4, 0.1
+    t, dt = midpoints(0.0, 1.0, 1000)
+    Y = standing(layout, len(t))
+    Y1 = np.zeros_like(Y)
+    Y1[:, 0] = u  # the whole figure slides along x at u
+    Y[:, 0] = u * t
+    term = Planted(toy_model, [Contact("r_toe", 0.3, 0.3 + T)], velocity_time=tau, ramp=0.0, rest_height=0.0)
+    assert term.evaluate(t, Y, Y1, None).f.sum() * dt == pytest.approx(tau**2 * u**2 * T, rel=1e-9)
+    # violation from finite differences of the positions alone: tau * u
+    assert term.violation(Y, t) == pytest.approx(tau * u, rel=1e-6)
+    Y1[:, 2] = 0.3  # moving along the normal: only the height term sees it
+    assert term.evaluate(t, Y, Y1, None).f.sum() * dt == pytest.approx(tau**2 * u**2 * T, rel=1e-9)
+
+
+def test_planted_surface_under_the_site(toy_model, layout):
+    h = 0.02
+    t = np.array([0.5])
+    Y = standing(layout, 1, (1.5 + 0.05, 0.0, 0.2 + FOOT + h))  # l_heel over the step's top
+    Z = np.zeros_like(Y)
+    auto = Planted(toy_model, [Contact("l_heel", 0.0, 1.0)], ramp=0.0, rest_height=0.0)
+    assert auto.evaluate(t, Y, Z, Z).f[0] == pytest.approx(h * h)
+    floor = Planted(toy_model, [Contact("l_heel", 0.0, 1.0, "floor")], ramp=0.0, rest_height=0.0)
+    assert floor.evaluate(t, Y, Z, Z).f[0] == pytest.approx((0.2 + h) ** 2)
+    Y[:, 0] = 0.5  # beside the step: the floor is under the site
+    Y[:, 2] = FOOT + h
+    assert auto.evaluate(t, Y, Z, Z).f[0] == pytest.approx(h * h)
+
+
+def test_planted_is_zero_outside_contacts(toy_model, layout):
+    rng = np.random.default_rng(4)
+    Y = random_qpos(rng, layout, 3)
+    t = np.array([0.0, 0.5, 2.0])
+    ev = Planted(toy_model, [Contact("l_toe", 0.6, 1.9)]).evaluate(t, Y, rng.normal(size=Y.shape), None)
+    assert not ev.f.any() and not ev.dY.any() and not ev.dY1.any()
+
+
+# ---------------------------------------------------------------------------------------------------
+# clearance
+
+WALK = [Contact("l_toe", 0.0, 0.4), Contact("l_toe", 1.0, 1.4), Contact("r_toe", 0.3, 1.1)]
+
+
+def test_clearance_gradient(toy_model, layout):
+    rng = np.random.default_rng(5)
+    n = 8
+    Y = random_qpos(rng, layout, n)
+    Y[:, 2] = rng.uniform(0.9, 1.2, n)  # sites within the 0.25 m band of the floor/step at some points
+    Y[:, 0] = rng.uniform(0.8, 2.0, n)
+    t = np.linspace(0.45, 0.95, n)
+    term = Clearance(toy_model, WALK, clearance=0.25, core=0.4)
+    check_gradient(term, t, Y, None, None)
+
+
+def test_clearance_value_in_the_swing(toy_model, layout):
+    c, z = 0.02, 0.005
+    t = np.array([0.2, 0.4, 0.55, 0.7, 0.85, 1.0, 1.2, 1.6])
+    Y = standing(layout, len(t), (0.0, 0.0, FOOT + z))
+    term = Clearance(toy_model, WALK, clearance=c, core=0.5)
+    f = term.evaluate(t, Y, None, None).f
+    # l_toe's swing (0.4, 1.0): weight 1 on [0.55, 0.85], 0 at its ends; r_toe has no gap; no flights
+    np.testing.assert_allclose(f, [0, 0, (c - z) ** 2, (c - z) ** 2, (c - z) ** 2, 0, 0, 0], atol=1e-15)
+    assert term.violation(Y, t) == pytest.approx(c - z)
+    Y[:, 2] = FOOT + 0.05  # clear
+    assert not term.evaluate(t, Y, None, None).f.any()
+    assert term.violation(Y, t) == 0.0
+
+
+def test_clearance_keeps_flights(toy_model, layout):
+    run = [Contact("l_toe", 0.0, 0.3), Contact("r_toe", 0.4, 0.7)]
+    t = np.array([0.35])  # the middle of the flight: every site counts
+    Y = standing(layout, 1, (0.0, 0.0, FOOT))
+    term = Clearance(toy_model, run, clearance=0.02)
+    assert term.evaluate(t, Y, None, None).f[0] == pytest.approx(4 * 0.02**2)
+    nofl = Clearance(toy_model, run, clearance=0.02, flight=False)
+    assert nofl.evaluate(t, Y, None, None).f[0] == 0.0
+
+
+# ---------------------------------------------------------------------------------------------------
+# friction cone
+
+STANCE = [Contact(s, 0.0, 1.0) for s in ("l_heel", "l_toe", "r_heel", "r_toe")]
+
+
+def _mass_and_com(model, Y):
+    d = mujoco.MjData(model)
+    d.qpos[:] = Y
+    mujoco.mj_kinematics(model, d)
+    mujoco.mj_comPos(model, d)
+    return float(model.body_mass.sum()), d.subtree_com[1].copy()
+
+
+@pytest.mark.parametrize("mu", [0.8, 0.05])
+def test_cone_gradient(toy_model, layout, mu):
+    rng = np.random.default_rng(6)
+    n = 6
+    Y = random_qpos(rng, layout, n)
+    Y1, Y2 = 0.3 * rng.normal(size=Y.shape), 0.3 * rng.normal(size=Y.shape)
+    t = np.linspace(0, 1, n)
+    contacts = [Contact("l_heel", 0.1, 0.7), Contact("l_toe", 0.1, 0.7), Contact("r_toe", 0.0, 0.3, "step"),
+                Contact("l_heel", 0.9, 1.0)]
+    term = FrictionCone(toy_model, contacts, mu=mu, ramp=0.2)
+    check_gradient(term, t, Y, Y1, Y2)
+    # the deferred form (shared engine reverse pass) gives the same gradient
+    ev, dv = term.evaluate(t, Y, Y1, Y2), term.evaluate_deferred(t, Y, Y1, Y2)
+    pulled = dv.deferred.pullback()
+    np.testing.assert_allclose(ev.dY, pulled[0] + dv.dY)
+    np.testing.assert_allclose(ev.dY2, pulled[2])
+
+
+def test_cone_standing_is_supported_and_one_toe_is_not(toy_model, layout):
+    t = np.array([0.5])
+    Y = standing(layout, 1)
+    Z = np.zeros_like(Y)
+    term = FrictionCone(toy_model, STANCE, min_radius=0.02, torque_arm=0.3)
+    A, e = term.components(t, Y, Z, Z)
+    assert A[0] == 1.0
+    np.testing.assert_allclose(e, 0.0, atol=1e-9)  # the COM is over the support: nothing outside
+    assert cone_metrics(term, t, Y, Z, Z)["cone_peak"] == pytest.approx(0.0, abs=1e-9)
+    # on the right toe alone: the weight acts 0.18 m beside it (the COM is at x = y = 0), the support
+    # radius is r0 = 0.02 m: e3 = m g (|d| - r0) / l, the rest zero
+    toe = FrictionCone(toy_model, [Contact("r_toe", 0.0, 1.0)], min_radius=0.02, torque_arm=0.3)
+    m, com = _mass_and_com(toy_model, Y[0])
+    g = 9.81
+    d = np.hypot(0.15 - com[0], -0.1 - com[1])
+    _, e = toe.components(t, Y, Z, Z)
+    np.testing.assert_allclose(e[0], [0, 0, m * g * (d - 0.02) / 0.3, 0], rtol=1e-9, atol=1e-9)
+    assert term.violation(np.repeat(Y, 5, 0), np.linspace(0.4, 0.6, 5)) == pytest.approx(0.0, abs=1e-7)
+
+
+def test_cone_sliding_push_and_pull(toy_model, layout):
+    t = np.array([0.5])
+    Y = standing(layout, 1)
+    Z = np.zeros_like(Y)
+    m, com = _mass_and_com(toy_model, Y[0])
+    g = 9.81
+    term = FrictionCone(toy_model, STANCE, mu=0.8, torque_arm=0.3)
+    Y2 = np.zeros_like(Y)
+    Y2[:, 0] = 1.0 * g  # accelerate along x at 1 g: the feet must push back with m g > 0.8 m g
+    _, e = term.components(t, Y, Z, Y2)
+    assert e[0, 0] == 0.0
+    assert e[0, 1] == pytest.approx(m * g * (1.0 - 0.8), rel=1e-9)
+    Y2[:, 0] = 0.0
+    Y2[:, 2] = -2.0 * g  # falling faster than gravity: the ground would have to pull with m g
+    _, e = term.components(t, Y, Z, Y2)
+    assert e[0, 0] == pytest.approx(m * g, rel=1e-9)
+    assert e[0, 1] == pytest.approx(0.8 * m * g, rel=1e-9)  # |F_t| - mu f_n with f_n = -m g
+    f = term.evaluate(t, Y, Z, Y2).f[0]
+    assert f == pytest.approx((e[0] ** 2).sum())
+    off = FrictionCone(toy_model, [Contact("r_toe", 2.0, 3.0)])
+    assert off.evaluate(t, Y, Z, Y2).f[0] == 0.0
+    assert cone_metrics(off, t, Y, Z, Y2) == {"cone_rms": 0.0, "cone_peak": 0.0, "cone_samples": 0}
+
+
+def test_cone_moment_uses_the_root_torque_in_the_world_frame(toy_model, layout):
+    """A static pose with the root turned and tilted and a hip bent, so the COM is not under the root:
+    the wrench is the weight through the COM, so on one toe e3 = m g (|com - toe| along the floor - r0) / l."""
+    t = np.array([0.5])
+    Y = standing(layout, 1, (0.3, -0.2, 1.2))
+    Y[0, 3:7] = [np.cos(0.3), 0.1, 0.15, np.sin(0.3)]  # unnormalized on purpose
+    hip = layout.quat_slots[1]
+    Y[0, hip] = [np.cos(0.4), 0.0, np.sin(0.4), 0.0]
+    Z = np.zeros_like(Y)
+    m, com = _mass_and_com(toy_model, Y[0])
+    d = mujoco.MjData(toy_model)
+    d.qpos[:] = Y[0]
+    mujoco.mj_kinematics(toy_model, d)
+    toe = d.site_xpos[mujoco.mj_name2id(toy_model, mujoco.mjtObj.mjOBJ_SITE, "r_toe")]
+    term = FrictionCone(toy_model, [Contact("r_toe", 0.0, 1.0)], min_radius=0.02, torque_arm=0.3)
+    _, e = term.components(t, Y, Z, Z)
+    lever = np.hypot(*(com - toe)[:2])
+    assert lever > 0.1
+    np.testing.assert_allclose(e[0], [0, 0, m * 9.81 * (lever - 0.02) / 0.3, 0], rtol=1e-9, atol=1e-9)
+
+
+def test_objective_gradient_with_a_shared_engine(toy_model, layout):
+    """All three terms with the root residual in one Objective: the cone's deferred gradient is summed
+    with the root term's (one engine) and its direct root-lever part added; dE/dP against FD."""
+    from solver.objective import Objective
+    from solver.terms.dynamics import RootResidual, make_engine
+
+    rng = np.random.default_rng(7)
+    knots = np.array([0.0, 0.4, 0.7, 1.0])
+    P = random_qpos(rng, layout, len(knots), spread=0.3)
+    P[:, 2] = [0.97, 1.0, 0.96, 0.99]
+    contacts = [Contact("l_heel", 0.0, 0.45), Contact("l_toe", 0.05, 0.5), Contact("r_toe", 0.5, 1.0),
+                Contact("l_toe", 0.85, 1.0)]
+    engine = make_engine(toy_model)
+    terms = [
+        FrictionCone(toy_model, contacts, ramp=0.05, engine=engine),
+        RootResidual(toy_model, engine=engine, flight="path"),
+        Planted(toy_model, contacts),
+        Clearance(toy_model, contacts, clearance=0.9),
+    ]
+    obj = Objective(terms, np.array([1e-4, 1e-4, 10.0, 10.0]), knots[0], knots[-1], rate=30)
+    ev = obj.evaluate(knots, P)
+    assert all(ev.integrals[n] > 0 for n in ("cone", "planted", "clearance")), ev.integrals
+    G = fd_gradient(lambda X: obj.evaluate(knots, X, grad=False).E, P)
+    assert np.abs(ev.grad - G).max() < 1e-6 * np.abs(G).max()
