@@ -386,15 +386,28 @@ class SplineBasis:
 
     @property
     def W(self) -> np.ndarray:
-        return self.B3[0]
+        return self._matrix(0)
 
     @property
     def W1(self) -> np.ndarray:
-        return self.B3[1]
+        return self._matrix(1)
 
     @property
     def W2(self) -> np.ndarray:
-        return self.B3[2]
+        return self._matrix(2)
+
+    def _matrix(self, j: int) -> np.ndarray:
+        """W, W1 or W2; a banded basis builds (and keeps) only the one asked for: (n, m), O(n m)."""
+        if self._B3 is not None:
+            return self._B3[j]
+        cache = self.__dict__.setdefault("_dense", {})
+        if j not in cache:
+            m = len(self.knots)
+            L = self._local[j]
+            # rows of [I; S] (2m, m) gathered by the local map: W_j = L_j [I; S]
+            IS = np.vstack([np.eye(m), moment_matrix(self.knots)])
+            cache[j] = L @ IS
+        return cache[j]
 
     # -- the banded evaluation --
 

@@ -3,9 +3,9 @@
     python -m solver.bench.scaling [--factors 1,2,4,8] [--dense] [--per-eval]
 
 The workload (`scaling`) takes a Keyframes object (the driver, `main`, reads the shipped clip) and
-repeats it end to end: copy r starts one mean keyframe interval after copy r-1 ends, with the root's
-x and y carried forward by the clip's displacement (plus one interval's worth, for the joining
-interval), so the tiled clip is a run r times as long. The scene is floor-only (`FLOOR_SCENE`: the
+repeats it end to end (`tile_keyframes`): copy r starts where copy r-1 ends, with the root's x and y
+carried forward by the clip's displacement, so the tiled clip is a run exactly r times as long (r
+times the keyframe intervals and quadrature points). The scene is floor-only (`FLOOR_SCENE`: the
 figure plus the floor plane): the shipped scene's step box would sit under the first copy only.
 
 Each length is solved in its own subprocess (one BLAS thread), so that its peak resident memory
@@ -59,31 +59,33 @@ def floor_model(figure: Path = FIGURE):
 
 
 def tile_keyframes(keyframes: Keyframes, copies: int, root_xy=(0, 1)) -> Keyframes:
-    """The keyframes repeated `copies` times end to end, the root's x, y carried forward.
+    """The keyframes repeated `copies` times end to end, the root's x, y carried forward; exactly
+    `copies` times the span and the keyframe intervals.
 
-    Copy r is shifted in time by r (T + dt) and in root x, y by r (D + D / (k - 1)), with T the clip's
-    span, k its keyframe count, dt = T / (k - 1) the mean interval and D the root's x, y displacement
-    from the first keyframe to the last (the join between copies is one more mean interval and step).
+    Copy r is the clip shifted in time by r T and in root x, y by r D (T the clip's span, D the root's
+    x, y displacement from its first keyframe to its last); every copy but the last drops its last
+    keyframe, whose time the next copy's first keyframe takes (the gait restarts there: its last
+    interval runs into the next copy's first pose).
 
     Args:
         keyframes: (k keyframes, full or partial). copies: >= 1. root_xy: qpos indices of the root's x, y.
     Returns:
-        Keyframes with k * copies keyframes.
+        Keyframes with (k - 1) copies + 1 keyframes over copies T.
     """
     t, v, mask = keyframes.times, keyframes.values, keyframes.mask
-    k = len(t)
     span = t[-1] - t[0]
-    dt = span / (k - 1)
     ix = list(root_xy)
     disp = v[-1, ix] - v[0, ix]
-    step = disp * (1.0 + 1.0 / (k - 1))
-    times, values = [], []
+    times, values, masks = [], [], []
     for r in range(copies):
-        times.append(t + r * (span + dt))
-        vr = v.copy()
-        vr[:, ix] += r * step
+        last = r == copies - 1
+        keep = slice(None) if last else slice(0, -1)
+        times.append(t[keep] + r * span)
+        vr = v[keep].copy()
+        vr[:, ix] += r * disp
         values.append(vr)
-    return Keyframes(np.concatenate(times), np.concatenate(values), np.tile(mask, (copies, 1)),
+        masks.append(mask[keep])
+    return Keyframes(np.concatenate(times), np.concatenate(values), np.concatenate(masks),
                      source=f"{keyframes.source} x{copies}")
 
 
