@@ -1,0 +1,279 @@
+"""Cost against clip length (issue 14 part 3): the run-and-step gait tiled 1x, 2x, 4x, 8x.
+
+    python -m solver.bench.scaling [--factors 1,2,4,8] [--dense] [--per-eval]
+
+The workload (`scaling`) takes a Keyframes object (the driver, `main`, reads the shipped clip) and
+repeats it end to end (`tile_keyframes`): copy r starts where copy r-1 ends, with the root's x and y
+carried forward by the clip's displacement, so the tiled clip is a run exactly r times as long (r
+times the keyframe intervals and quadrature points). The scene is floor-only (`FLOOR_SCENE`: the
+figure plus the floor plane): the shipped scene's step box would sit under the first copy only.
+
+Each length is solved in its own subprocess (one BLAS thread), so that its peak resident memory
+(getrusage ru_maxrss) is its own and not the largest of the lengths before it; the table reports the
+peak minus the resident size just before the solve (the solve's own memory: arrays, the spline bases,
+the optimizer; the interpreter, numpy, scipy and MuJoCo are the same at every length).
+
+Solve options: those of `dynsplines animate` (ftol 1e-6, preconditioner, renormalization, the default
+penalty-continuation limits) except the subdivision: *global*, 2 variable frames per keyframe interval,
+one optimization round. Adaptive subdivision picks frames by a score threshold and per-round budgets,
+so the number of frames and rounds need not be proportional to the length, and the comparison would
+mix the cost of a different problem into the cost of a longer one; with a fixed subdivision the
+problem at 8x is exactly 8 copies of the problem at 1x (plus 7 joins).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from solver.keyframes import Keyframes
+
+FIGURE = Path(__file__).resolve().parents[2] / "models" / "humanoid39.xml"
+
+#: The scene of the scaling workload: the figure and a floor, nothing else.
+FLOOR_SCENE = """<mujoco model="floor_only">
+  <include file="humanoid39.xml"/>
+  <option timestep="0.002" gravity="0 0 -9.81"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="0 0 0.05" contype="1" conaffinity="1"/>
+  </worldbody>
+</mujoco>
+"""
+
+SINGLE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+
+def floor_model(figure: Path = FIGURE):
+    """MjModel of `FLOOR_SCENE` with the figure file `figure` (humanoid39.xml)."""
+    import mujoco
+
+    return mujoco.MjModel.from_xml_string(FLOOR_SCENE, {"humanoid39.xml": Path(figure).read_bytes()})
+
+
+def tile_keyframes(keyframes: Keyframes, copies: int, root_xy=(0, 1)) -> Keyframes:
+    """The keyframes repeated `copies` times end to end, the root's x, y carried forward; exactly
+    `copies` times the span and the keyframe intervals.
+
+    Copy r is the clip shifted in time by r T and in root x, y by r D (T the clip's span, D the root's
+    x, y displacement from its first keyframe to its last); every copy but the last drops its last
+    keyframe, whose time the next copy's first keyframe takes (the gait restarts there: its last
+    interval runs into the next copy's first pose).
+
+    Args:
+        keyframes: (k keyframes, full or partial). copies: >= 1. root_xy: qpos indices of the root's x, y.
+    Returns:
+        Keyframes with (k - 1) copies + 1 keyframes over copies T.
+    """
+    t, v, mask = keyframes.times, keyframes.values, keyframes.mask
+    span = t[-1] - t[0]
+    ix = list(root_xy)
+    disp = v[-1, ix] - v[0, ix]
+    times, values, masks = [], [], []
+    for r in range(copies):
+        last = r == copies - 1
+        keep = slice(None) if last else slice(0, -1)
+        times.append(t[keep] + r * span)
+        vr = v[keep].copy()
+        vr[:, ix] += r * disp
+        values.append(vr)
+        masks.append(mask[keep])
+    return Keyframes(np.concatenate(times), np.concatenate(values), np.concatenate(masks),
+                     source=f"{keyframes.source} x{copies}")
+
+
+def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, per_segment: int = 2) -> dict:
+    """Solve the tiled clip once in this process; returns timings, memory and result figures.
+
+    Returns:
+        dict: keyframes, frames, points (quadrature), wall_s, cpu_s (user + system of the solve),
+        evals, ms_per_eval (wall / evals), rss_before_mb, maxrss_mb (peak resident size of the
+        process after the solve), peak_mb (the difference), E_initial, E_final, status,
+        max_penetration_mm, keyframe_error (path_metrics at 1000 Hz), banded (the solve's spline
+        bases evaluated through the tridiagonal system).
+    """
+    from solver.frames import FrameSet
+    from solver.layout import StateLayout
+    from solver.metrics import path_metrics
+    from solver.problem import default_limits, figure_objective, parse_terms
+    from solver.solve import SolveOptions, solve
+
+    model = floor_model(figure)
+    layout = StateLayout.from_model(model)
+    weights = parse_terms(None)
+    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate)
+    initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    options = SolveOptions(subdivision="global", per_segment=per_segment, ftol_rel=1e-6, precondition=True,
+                           limits=default_limits(weights))
+    rss_before = _rss_mb()
+    r0 = resource.getrusage(resource.RUSAGE_SELF)
+    t0 = time.perf_counter()
+    sol = solve(objective, initial, options)
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
+    maxrss = r1.ru_maxrss / 1024.0  # Linux: kilobytes
+    banded = objective.basis(sol.frames.times).banded
+    metrics = path_metrics(model, sol.frames.times, sol.frames.values, keyframes, rate=1000.0, dynamics=False)
+    return {
+        "keyframes": keyframes.count, "frames": sol.frames.count, "points": len(objective.t),
+        "wall_s": wall, "cpu_s": (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime),
+        "solve_wall_s": sol.wall_time_s, "evals": sol.n_evals, "ms_per_eval": 1e3 * wall / max(1, sol.n_evals),
+        "rss_before_mb": rss_before, "maxrss_mb": maxrss, "peak_mb": maxrss - rss_before,
+        "E_initial": sol.E_initial, "E_final": sol.E_final, "status": sol.status.name,
+        "max_penetration_mm": metrics["max_penetration_mm"], "keyframe_error": metrics["keyframe_error"],
+        "banded": bool(banded),
+    }
+
+
+def _rss_mb() -> float:
+    """Current resident set size [MB] (Linux /proc; 0 elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except OSError:
+        return 0.0
+
+
+def scaling(keyframes: Keyframes, factors=(1, 2, 4, 8), dense: bool = False, figure: Path = FIGURE,
+            rate: float = 400.0, per_segment: int = 2) -> list[dict]:
+    """The workload: per length factor, `solve_one` on the tiled clip in a fresh subprocess.
+
+    Args:
+        keyframes: the clip to tile. factors: length multiples. dense: force the dense spline matrices
+            at every size (the cost before the banded evaluation, for comparison).
+    Returns:
+        one `solve_one` dict per factor, plus "factor".
+    """
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for f in factors:
+            kf = tile_keyframes(keyframes, f)
+            path = Path(tmp) / f"x{f}.npz"
+            np.savez(path, times=kf.times, values=kf.values, mask=kf.mask)
+            cmd = [sys.executable, "-m", "solver.bench.scaling", "--worker", str(path), "--figure", str(figure),
+                   "--rate", str(rate), "--per-segment", str(per_segment)] + (["--dense"] if dense else [])
+            env = {**os.environ, **SINGLE_THREAD}
+            res = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+            if res.returncode != 0:
+                raise RuntimeError(f"scaling worker x{f} failed:\n{res.stderr}")
+            row = json.loads(res.stdout.strip().splitlines()[-1])
+            row["factor"] = f
+            out.append(row)
+    return out
+
+
+def per_eval_spline(sizes, nq: int = 51, needs=(0, 2), reps_budget: float = 2e5) -> list[dict]:
+    """Value + pullback time of `SplineBasis` dense against banded, side by side in one process.
+
+    Args:
+        sizes: ((points, frames), ...). nq: components (51: the figure). needs: orders evaluated
+            (the figure's default terms read Y and Y'').
+    Returns:
+        one dict per size: points, frames, entries, dense_us, banded_us (best of 5 repeats).
+    """
+    from solver.spline import SplineBasis
+
+    rng = np.random.default_rng(0)
+    rows = []
+    for n, m in sizes:
+        x = np.linspace(0.0, n / 400.0, m)
+        t = np.linspace(0.0, n / 400.0, n)
+        P = rng.normal(size=(m, nq))
+        g = rng.normal(size=(n, nq))
+        reps = max(3, int(reps_budget / (n * m)))
+        r = {"points": n, "frames": m, "entries": n * m}
+        for mode in ("dense", "banded"):
+            b = SplineBasis(x, t, mode=mode)
+            best = np.inf
+            for _ in range(5):
+                t0 = time.perf_counter()
+                for _ in range(reps):
+                    b.evaluate(P, needs)
+                    b.pullback(*(g if k in needs else None for k in range(3)))
+                best = min(best, (time.perf_counter() - t0) / reps)
+            r[f"{mode}_us"] = 1e6 * best
+        rows.append(r)
+    return rows
+
+
+def _worker(args) -> int:
+    import solver.spline as spline
+
+    if args.dense:  # the comparison run: dense matrices at every size
+        spline.DENSE_MAX_ENTRIES = 1 << 62
+    d = np.load(args.worker)
+    kf = Keyframes(d["times"], d["values"], d["mask"])
+    print(json.dumps(solve_one(kf, Path(args.figure), args.rate, args.per_segment)))
+    return 0
+
+
+def print_table(rows: list[dict], title: str) -> None:
+    """The table: wall and CPU time, evaluations, CPU per evaluation, peak memory, each also relative
+    to the first row; the result's penetration and keyframe error. CPU time (user + system of the
+    solve) is the figure to compare on a shared machine: wall time includes waiting for a core."""
+    base = rows[0]
+    b_cpu_eval = base["cpu_s"] / max(1, base["evals"])
+    print(title)
+    print(f"{'length':>6} {'keyfr':>5} {'frames':>6} {'points':>6} {'wall s':>7} {'cpu s':>6} {'evals':>5} "
+          f"{'cpu ms/ev':>9} {'peak MB':>7} | {'wall/1x':>7} {'cpu/1x':>6} {'ev/1x':>5} {'ms/ev/1x':>8} "
+          f"{'mem/1x':>6} | {'pen mm':>6} {'kf err':>7} {'E_final':>7}  status")
+    for r in rows:
+        cpu_eval = r["cpu_s"] / max(1, r["evals"])
+        print(f"{r['factor']:>5}x {r['keyframes']:>5} {r['frames']:>6} {r['points']:>6} {r['wall_s']:>7.2f} "
+              f"{r['cpu_s']:>6.2f} {r['evals']:>5} {1e3 * cpu_eval:>9.2f} {r['peak_mb']:>7.1f} | "
+              f"{r['wall_s'] / base['wall_s']:>7.2f} {r['cpu_s'] / base['cpu_s']:>6.2f} "
+              f"{r['evals'] / max(1, base['evals']):>5.2f} {cpu_eval / b_cpu_eval:>8.2f} "
+              f"{r['peak_mb'] / max(base['peak_mb'], 1e-9):>6.2f} | {r['max_penetration_mm']:>6.3f} "
+              f"{r['keyframe_error']:>7.0e} {r['E_final']:>7.4f}  {r['status']}{' banded' if r['banded'] else ''}")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m solver.bench.scaling", description=__doc__.splitlines()[0])
+    p.add_argument("--keyframes", type=Path, default=FIGURE.parent / "run_and_step.keyframes.json")
+    p.add_argument("--figure", type=Path, default=FIGURE)
+    p.add_argument("--factors", default="1,2,4,8")
+    p.add_argument("--rate", type=float, default=400.0)
+    p.add_argument("--per-segment", type=int, default=2)
+    p.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every size")
+    p.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table")
+    p.add_argument("--worker", default=None, help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.worker:
+        return _worker(args)
+    if args.per_eval:
+        sizes = ((64, 8), (200, 20), (400, 40), (700, 15), (700, 30), (1400, 60), (2800, 120), (5600, 240),
+                 (11200, 480))
+        for nq, needs in ((51, (0, 2)), (4, (0, 1, 2))):
+            print(f"SplineBasis value + pullback, nq={nq}, orders {needs}, best of 5 [us]")
+            print(f"{'points':>7} {'frames':>6} {'entries':>8} {'dense':>9} {'banded':>9} {'dense/banded':>12}")
+            for r in per_eval_spline(sizes, nq, needs):
+                print(f"{r['points']:>7} {r['frames']:>6} {r['entries']:>8} {r['dense_us']:>9.1f} "
+                      f"{r['banded_us']:>9.1f} {r['dense_us'] / r['banded_us']:>12.2f}")
+        return 0
+    # the driver: the shipped clip, read as the command line reads it (runner is imported only here)
+    from runner.keyframe_io import read_keyframes
+    from solver.layout import StateLayout
+
+    keyframes, _ = read_keyframes(args.keyframes, StateLayout.from_model(floor_model(args.figure)))
+    factors = [int(f) for f in args.factors.split(",")]
+    print(f"scaling: {args.keyframes.name} ({keyframes.count} keyframes, {keyframes.times[-1] - keyframes.times[0]:.2f} s) "
+          f"tiled {args.factors}x, floor-only scene, quadrature {args.rate:g} Hz, global subdivision "
+          f"{args.per_segment} per interval, ftol 1e-6, preconditioned; one subprocess per length, one BLAS "
+          "thread; peak MB = maxrss - RSS before the solve")
+    print_table(scaling(keyframes, factors, figure=args.figure, rate=args.rate, per_segment=args.per_segment),
+                "spline: auto (dense up to DENSE_MAX_ENTRIES, banded above)")
+    if args.dense:
+        print_table(scaling(keyframes, factors, dense=True, figure=args.figure, rate=args.rate,
+                            per_segment=args.per_segment), "spline: dense at every size (before)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
