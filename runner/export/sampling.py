@@ -101,6 +101,10 @@ def load_saved_path(path: str | Path) -> SavedPath:
     if not p.is_file():
         why = "it is a folder" if p.is_dir() else f"no such file (current folder: {Path.cwd()})"
         raise InputError(f"{p}: cannot read the saved path: {why}; give the .npz written by --save-path")
+    import zipfile
+
+    if not zipfile.is_zipfile(p):
+        raise InputError(f"{p}: not an .npz file (not a zip archive); give the .npz written by --save-path")
     try:
         with np.load(p, allow_pickle=False) as z:
             missing = [k for k in _REQUIRED if k not in z.files]
