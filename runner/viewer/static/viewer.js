@@ -132,6 +132,14 @@ for (const id of ['show-optimized', 'show-plain', 'show-reference', 'show-ghosts
 const pen = Object.entries(data.max_penetration_mm).map(([k, v]) => `${k} ${v.toFixed(1)} mm`).join(', ');
 $('info').textContent = `${data.source} - ${data.tracks.length} motions, ${data.keyframe_times.length} keyframes; ` +
                         `deepest contact-site penetration: ${pen}`;
+// URL options: ?show=optimized,plain,reference,ghosts,contacts (what is on) & t=SECONDS (start time)
+const params = new URLSearchParams(window.location.search);
+if (params.has('show')) {
+  const on = params.get('show').split(',');
+  for (const k of ['optimized', 'plain', 'reference', 'ghosts', 'contacts'])
+    if (!$(`show-${k}`).disabled) $(`show-${k}`).checked = on.includes(k);
+}
+if (params.has('t')) time = Math.min(Math.max(parseFloat(params.get('t')) || t0, t0), t1);
 visibility();
 frameCamera(true);
 window.dynsplinesReady = true;
