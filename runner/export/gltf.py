@@ -17,7 +17,6 @@ Colours: the geom's material `rgba` (times the mean colour of its texture, if an
 from __future__ import annotations
 
 import math
-import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence

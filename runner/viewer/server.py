@@ -1,7 +1,6 @@
 """Build the viewer's resources from a saved path and serve them on 127.0.0.1 (`runner.viewer` docstring)."""
 from __future__ import annotations
 
-import functools
 import http.server
 import json
 import threading
