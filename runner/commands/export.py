@@ -1,0 +1,35 @@
+"""`dynsplines export PATH.npz --to FILE.bvh|FILE.glb [--fps N] [--which optimized|plain|reference]`."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from runner.argtypes import positive
+
+__all__ = ["register", "run"]
+
+
+def register(sub) -> None:
+    """Add the `export` subcommand to argparse subparsers `sub`."""
+    from runner.export.sampling import DEFAULT_FPS, WHICH
+
+    p = sub.add_parser("export", help="write a saved path as BVH or glTF (.glb)",
+                       description="Sample a saved path (.npz from --save-path) and write it as a BVH clip on the "
+                                   "figure's own skeleton (.bvh) or as an animated glTF binary with the scene (.glb).")
+    p.add_argument("path", type=Path, help="saved path (.npz written by --save-path)")
+    p.add_argument("--to", type=Path, required=True, metavar="FILE", help="output file: FILE.bvh or FILE.glb")
+    p.add_argument("--fps", type=positive(float), default=None,
+                   help=f"samples per second [the reference clip's rate, else {DEFAULT_FPS:g}]")
+    p.add_argument("--which", choices=WHICH, default="optimized", help="which motion to export [%(default)s]")
+    p.add_argument("--quiet", action="store_true", help="no summary line")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run `export`; returns the exit code (0). Errors are InputError (the caller prints one line)."""
+    from runner.export import export_saved_path
+
+    res = export_saved_path(args.path, args.to, args.which, args.fps)
+    if not getattr(args, "quiet", False):
+        print(f"dynsplines: wrote {res.path} ({res.format}, {res.which}: {res.frames} frames at {res.fps:g} fps, "
+              f"{res.joints} joints, {res.size / 1024:.0f} KiB, {res.wall_time_s:.2f} s)")
+    return 0

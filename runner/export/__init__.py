@@ -1,0 +1,87 @@
+"""Results out: a saved path (.npz) sampled at a frame rate and written as BVH (`bvh`) or glTF binary (`gltf`).
+
+`sampling` reads the saved path and samples its optimized, plain or reference motion; the writers take
+MuJoCo `qpos` samples and the loaded model (offsets, geoms and the static scene come from the model).
+`export_saved_path` is the whole of `dynsplines export`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from solver.errors import InputError
+
+__all__ = ["FORMATS", "ExportResult", "export_saved_path", "check_output_name"]
+
+#: output file extension -> format.
+FORMATS = {".bvh": "BVH", ".glb": "glTF binary"}
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What `export_saved_path` wrote: path, format, which motion, fps [Hz], frames, joints (bodies),
+    size [bytes], wall_time_s [s] (sampling and writing)."""
+
+    path: Path
+    format: str
+    which: str
+    fps: float
+    frames: int
+    joints: int
+    size: int
+    wall_time_s: float
+
+
+def check_output_name(out: str | Path) -> str:
+    """The format of output file `out` from its extension; InputError naming the choices otherwise."""
+    suffix = Path(out).suffix.lower()
+    if suffix not in FORMATS:
+        given = f"extension {suffix!r}" if suffix else "no extension"
+        raise InputError(f"--to {out}: {given}; the output must end in one of {', '.join(FORMATS)} "
+                         f"(e.g. --to {Path(out).with_suffix('.glb').name})")
+    return FORMATS[suffix]
+
+
+def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized",
+                      fps: float | None = None) -> ExportResult:
+    """Sample motion `which` of saved path `npz` at `fps` [Hz] (default: the reference clip's rate, else
+    30) and write it to `out` (.bvh or .glb, chosen by the extension), atomically.
+
+    Raises:
+        InputError: unknown extension, unwritable folder, unreadable path or scene, unknown or absent
+            motion, bad fps, or a failed write (an earlier file at `out` is then unchanged).
+    """
+    from runner.animate import load_model
+    from runner.export.sampling import WHICH, default_fps, load_saved_path, sample_motion
+    from runner.files import check_writable_dir
+    from solver.layout import StateLayout
+
+    t0 = time.perf_counter()
+    fmt = check_output_name(out)
+    if which not in WHICH:
+        raise InputError(f"--which {which!r}: unknown motion; choose one of {', '.join(WHICH)}")
+    check_writable_dir(out, "--to")
+    saved = load_saved_path(npz)
+    model = load_model(saved.scene)
+    if model.nq != saved.nq:
+        raise InputError(f"{npz}: frames have {saved.nq} columns but the scene {saved.scene} has nq = {model.nq}; "
+                         "the path was made for another figure")
+    rate = default_fps(saved) if fps is None else float(fps)
+    motion = sample_motion(saved, which, rate, StateLayout.from_model(model).quat_slots)
+    try:
+        if fmt == "BVH":
+            from runner.export.bvh import write_bvh
+
+            joints = write_bvh(out, model, motion.qpos, motion.fps).count
+        else:
+            from runner.export.bvh import figure_skeleton
+            from runner.export.gltf import Track, write_glb
+
+            write_glb(out, model, [Track(which, motion.times, motion.qpos)])
+            joints = figure_skeleton(model).count
+    except OSError as e:
+        raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
+                         "space or choose another --to") from None
+    return ExportResult(Path(out), fmt, which, motion.fps, len(motion.times), joints, Path(out).stat().st_size,
+                        time.perf_counter() - t0)

@@ -1,0 +1,73 @@
+"""BVH export: the file reads back with our own reader and reproduces the sampled qpos."""
+import numpy as np
+import pytest
+
+from runner.bvh_import import read_bvh
+from runner.export.bvh import EULER_ORDER, figure_qpos_from_bvh, figure_skeleton, write_bvh
+from runner.export.sampling import WHICH, default_fps, load_saved_path, sample_motion
+from solver.errors import InputError
+from solver.layout import StateLayout
+
+
+def rotation_error(a, b, layout):
+    """Largest angle [rad] between the rotations of a and b (q and -q are the same rotation)."""
+    err = 0.0
+    for idx in layout.quat_slots:
+        dot = np.abs((a[:, idx] * b[:, idx]).sum(axis=1)) / (
+            np.linalg.norm(a[:, idx], axis=1) * np.linalg.norm(b[:, idx], axis=1))
+        err = max(err, float((2.0 * np.arccos(np.clip(dot, 0.0, 1.0))).max()))
+    return err
+
+
+@pytest.mark.parametrize("which", WHICH)
+def test_round_trip_reproduces_sampled_qpos(tmp_path, saved_npz, scene_model, which):
+    saved = load_saved_path(saved_npz)
+    layout = StateLayout.from_model(scene_model)
+    motion = sample_motion(saved, which, default_fps(saved), layout.quat_slots)
+    out = tmp_path / "clip.bvh"
+    write_bvh(out, scene_model, motion.qpos, motion.fps)
+    clip = read_bvh(out)
+    assert clip.local_quat.shape[:2] == (len(motion.times), 12)
+    assert clip.frame_time == pytest.approx(1.0 / motion.fps, rel=1e-6)
+    back = figure_qpos_from_bvh(clip, scene_model)
+    assert np.abs(back[:, :3] - motion.qpos[:, :3]).max() < 1e-6  # [m]
+    assert rotation_error(back, motion.qpos, layout) < 1e-6  # [rad]
+
+
+def test_gimbal_lock_and_large_angles_round_trip(tmp_path, scene_model):
+    """Rotations of exactly 90 degrees about the middle Euler axis, and half turns, survive."""
+    from scipy.spatial.transform import Rotation
+
+    layout = StateLayout.from_model(scene_model)
+    angles = [[0, 90, 0], [30, 90, -20], [179.9, -90, 45], [180, 0, 180], [-170, 45, 170]]
+    q = np.zeros((len(angles), scene_model.nq))
+    q[:, 2] = 1.0
+    for k, (a, b, c) in enumerate(angles):  # BVH axes Y Z X = MuJoCo z x y
+        r = Rotation.from_euler("zxy", [a, b, c], degrees=True).as_quat()[[3, 0, 1, 2]]
+        for idx in layout.quat_slots:
+            q[k, idx] = r
+    out = tmp_path / "lock.bvh"
+    write_bvh(out, scene_model, q, 30.0)
+    back = figure_qpos_from_bvh(read_bvh(out), scene_model)
+    assert rotation_error(back, q, layout) < 1e-6
+    assert EULER_ORDER == "YZX"
+
+
+def test_skeleton_is_upright_in_bvh_axes(tmp_path, scene_model):
+    """Y up: the torso sits above the pelvis, the thighs below, left at +X (Blender imports it upright)."""
+    identity = np.r_[0, 0, 1.0, 1, 0, 0, 0, [1, 0, 0, 0] * 11]
+    write_bvh(tmp_path / "id.bvh", scene_model, np.stack([identity, identity]), 30.0)  # our reader wants >= 2
+    clip = read_bvh(tmp_path / "id.bvh")
+    off = dict(zip(clip.names, clip.offsets))
+    assert off["torso"][1] > 0 and off["l_thigh"][1] < 0 and off["l_thigh"][0] > 0
+    assert clip.local_pos[0, clip.index("pelvis")] == pytest.approx([0, 1.0, 0])  # root height on Y
+    sk = figure_skeleton(scene_model)
+    assert sk.names[0] == "pelvis" and sk.count == 12
+
+
+def test_clip_without_figure_joints_is_refused(scene_model):
+    from runner.animate import MODELS
+
+    clip = read_bvh(MODELS / "cmu" / "127_33.bvh")
+    with pytest.raises(InputError, match="not on the figure's skeleton"):
+        figure_qpos_from_bvh(clip, scene_model)
