@@ -26,7 +26,8 @@ from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.spline import interpolate
 from solver.terms.bending import Hyperextension
-from solver.terms.penetration import CONTACT_SITES, Penetration
+from solver.layout import CONTACT_SITES
+from solver.terms.penetration import Penetration
 
 
 def sample_times(t0: float, t1: float, rate: float) -> np.ndarray:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from runner.argtypes import positive
+from runner.parser import positive
 
 __all__ = ["register", "run"]
 

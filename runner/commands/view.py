@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from runner.argtypes import nonnegative
+from runner.parser import nonnegative
 
 __all__ = ["register", "run"]
 

@@ -52,7 +52,7 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
         InputError: unknown extension, unwritable folder, unreadable path or scene, unknown or absent
             motion, bad fps, or a failed write (an earlier file at `out` is then unchanged).
     """
-    from runner.animate import load_model
+    from solver.model import load_model
     from runner.export.sampling import WHICH, default_fps, load_saved_path, sample_motion
     from runner.files import check_writable_dir
     from solver.layout import StateLayout

@@ -95,7 +95,7 @@ def load_saved_path(path: str | Path) -> SavedPath:
     Raises:
         InputError: the file is missing, not an .npz, or lacks a field (the message names the file).
     """
-    from runner.animate import REPO
+    from runner.paths import REPO
 
     p = Path(path)
     if not p.is_file():

@@ -40,11 +40,12 @@ def build_assets(npz: str | Path) -> ViewerAssets:
     Raises:
         InputError: unreadable path or scene (see `runner.export.sampling.load_saved_path`).
     """
-    from runner.animate import load_model
+    from solver.model import load_model
     from runner.export.gltf import Track, figure_gltf, glb_bytes
     from runner.export.sampling import default_fps, load_saved_path, sample_motion
     from solver.layout import StateLayout
-    from solver.terms.penetration import CONTACT_SITES, Penetration
+    from solver.layout import CONTACT_SITES
+from solver.terms.penetration import Penetration
 
     saved = load_saved_path(npz)
     model = load_model(saved.scene)

@@ -258,7 +258,7 @@ def main(argv=None) -> int:
                       f"{r['banded_us']:>9.1f} {r['dense_us'] / r['banded_us']:>12.2f}")
         return 0
     # the driver: the shipped clip, read as the command line reads it (runner is imported only here)
-    from runner.keyframe_io import read_keyframes
+    from solver.keyframe_file import read_keyframes
     from solver.layout import StateLayout
 
     keyframes, _ = read_keyframes(args.keyframes, StateLayout.from_model(floor_model(args.figure)))

@@ -3,7 +3,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from runner.animate import MODELS
+from runner.paths import MODELS
 from solver.layout import StateLayout
 from solver.quaternion import normalize
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from runner.bvh_import import read_bvh
+from runner.mocap.bvh import read_bvh
 from runner.export.bvh import EULER_ORDER, figure_qpos_from_bvh, figure_skeleton, write_bvh
 from runner.export.sampling import WHICH, default_fps, load_saved_path, sample_motion
 from solver.errors import InputError
@@ -66,7 +66,7 @@ def test_skeleton_is_upright_in_bvh_axes(tmp_path, scene_model):
 
 
 def test_clip_without_figure_joints_is_refused(scene_model):
-    from runner.animate import MODELS
+    from runner.paths import MODELS
 
     clip = read_bvh(MODELS / "cmu" / "127_33.bvh")
     with pytest.raises(InputError, match="not on the figure's skeleton"):

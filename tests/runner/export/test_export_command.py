@@ -3,7 +3,7 @@ import argparse
 
 import pytest
 
-from runner.bvh_import import read_bvh
+from runner.mocap.bvh import read_bvh
 from runner.commands import export
 from runner.export import export_saved_path
 from solver.errors import InputError

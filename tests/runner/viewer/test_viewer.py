@@ -15,7 +15,7 @@ from solver.errors import InputError
 def _saved(tmp_path):
     import mujoco
 
-    from runner.animate import MODELS
+    from runner.paths import MODELS
 
     model = mujoco.MjModel.from_xml_path(str(MODELS / "run_and_step.xml"))
     rng = np.random.default_rng(3)
