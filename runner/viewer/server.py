@@ -43,9 +43,8 @@ def build_assets(npz: str | Path) -> ViewerAssets:
     from solver.model import load_model
     from runner.export.gltf import Track, figure_gltf, glb_bytes
     from runner.export.sampling import default_fps, load_saved_path, sample_motion
-    from solver.layout import StateLayout
-    from solver.layout import CONTACT_SITES
-from solver.terms.penetration import Penetration
+    from solver.layout import CONTACT_SITES, StateLayout
+    from solver.terms.penetration import Penetration
 
     saved = load_saved_path(npz)
     model = load_model(saved.scene)
