@@ -6,9 +6,15 @@ import argparse
 from pathlib import Path
 
 from runner.parser import nonnegative, positive
+from dataclasses import replace
+
+from solver.animate import DEFAULT_RATE, default_options
 from solver.optimize import ALGORITHMS
-from solver.problem import default_limits, term_names
-from solver.solve import SUBDIVISIONS, SolveOptions
+from solver.problem import term_names
+from solver.solve import SCORES, SUBDIVISIONS, SolveOptions
+
+#: the library's settings (`solver.default_options`): the command's defaults are these, not its own
+_LIB = default_options({})
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -49,19 +55,19 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
                           "[the keyframe file's, else penetration,unit,bending,smooth]")
     opt.add_argument("--weight", type=_weight, action="append", default=[], metavar="NAME=VALUE",
                      help="weight of a term (repeatable), e.g. --weight torque=0.1")
-    opt.add_argument("--max-time", type=nonnegative(float), default=0.0, metavar="S",
+    opt.add_argument("--max-time", type=nonnegative(float), default=_LIB.max_time_s, metavar="S",
                      help="stop optimizing after S seconds, keeping the best path so far [no limit]")
-    opt.add_argument("--subdivision", choices=SUBDIVISIONS, default="adaptive",
+    opt.add_argument("--subdivision", choices=SUBDIVISIONS, default=_LIB.subdivision,
                      help="where to add variable frames [%(default)s]")
-    opt.add_argument("--per-segment", type=nonnegative(int), default=1,
+    opt.add_argument("--per-segment", type=nonnegative(int), default=_LIB.per_segment,
                      help="variable frames per keyframe interval to start with [%(default)s]")
-    opt.add_argument("--rounds", type=nonnegative(int), default=2, help="adaptive subdivision rounds [%(default)s]")
-    opt.add_argument("--algorithm", choices=list(ALGORITHMS), default="lbfgs", help="nlopt algorithm [%(default)s]")
-    opt.add_argument("--ftol", type=nonnegative(float), default=1e-6, help="relative objective tolerance [%(default)s]")
-    opt.add_argument("--max-evals", type=nonnegative(int), default=0, help="evaluations per round [no limit]")
-    opt.add_argument("--rate", type=positive(float), default=400.0,
+    opt.add_argument("--rounds", type=nonnegative(int), default=_LIB.rounds, help="adaptive subdivision rounds [%(default)s]")
+    opt.add_argument("--algorithm", choices=list(ALGORITHMS), default=_LIB.algorithm, help="nlopt algorithm [%(default)s]")
+    opt.add_argument("--ftol", type=nonnegative(float), default=_LIB.ftol_rel, help="relative objective tolerance [%(default)s]")
+    opt.add_argument("--max-evals", type=nonnegative(int), default=_LIB.max_evals, help="evaluations per round [no limit]")
+    opt.add_argument("--rate", type=positive(float), default=DEFAULT_RATE,
                      help="quadrature points per second [%(default)s]")
-    opt.add_argument("--score", choices=("decrease", "gradient"), default="decrease",
+    opt.add_argument("--score", choices=SCORES, default=_LIB.score,
                      help="how adaptive subdivision ranks segments: the decrease of E a midpoint frame "
                           "predicts, or the raw weak-form Euler-Lagrange gradient [%(default)s]")
     opt.add_argument("--no-precondition", action="store_true",
@@ -72,12 +78,14 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
 
 
 def solve_options(args, weights: dict) -> SolveOptions:
-    """SolveOptions from parsed `add_options` arguments (the command's and the benchmark's)."""
-    return SolveOptions(
+    """`solver.default_options(weights)` with the parsed `add_options` arguments applied (the command's
+    and the benchmark's settings)."""
+    return replace(
+        default_options(weights),
         subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
         renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
-        max_evals=args.max_evals, max_time_s=args.max_time, limits=default_limits(weights),
-        precondition=not args.no_precondition, score=args.score,
+        max_evals=args.max_evals, max_time_s=args.max_time, precondition=not args.no_precondition,
+        score=args.score,
     )
 
 
