@@ -28,11 +28,13 @@ class AccelerationPreconditioner:
 
     def __init__(self, objective: Objective, frames: FrameSet, radial_weight: float = 1.0, quat_slots=()):
         basis = objective.basis(frames.times)
-        W2 = basis.W2
-        if basis.weights is None:
-            H = 2.0 * objective.h * (W2.T @ W2)
+        # the Hessian of integral |Y''|^2 dt per component; long clips (banded bases) without forming W2
+        if basis.banded:
+            H = basis.bending_hessian(2.0 * (objective.h if basis.weights is None else basis.weights))
+        elif basis.weights is None:
+            H = 2.0 * objective.h * (basis.W2.T @ basis.W2)
         else:
-            H = 2.0 * (W2.T * basis.weights) @ W2
+            H = 2.0 * (basis.W2.T * basis.weights) @ basis.W2
         self.free = frames.free
         patterns: dict[bytes, list[int]] = {}
         for c in range(self.free.shape[1]):

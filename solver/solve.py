@@ -397,7 +397,7 @@ def _optimize(objective, frames, options, remaining, should_stop, progress, eval
     pre = AccelerationPreconditioner(objective, frames, options.radial_weight, options.quat_slots)
     rows = pre.whole_rows()
     radial = pre.whole_radial() if rows is not None else None
-    if radial is not None and len(objective._needs) == 3:
+    if radial is not None and len(objective._needs) == 3 and not objective.basis(knots).banded:
         # every free component belongs to whole free frames sharing one factor: fold R^-1 into the
         # spline matrices, Y = B P0 + (B[:, rows] R^-1) Z, and skip the scatter/gather of x and z
         # (the orientation problem; the figure without partial keyframes). With a radial weight the

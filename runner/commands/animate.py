@@ -94,7 +94,7 @@ def run_animate(args) -> int:
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
         if not args.quiet:
             print(summary_table(plain_m, opt_m, solution, weights,
-                                dict(zip(objective.names, objective.weights.tolist()))))
+                                dict(solution.weights)))
             if reference is not None:
                 from runner.mocap.contacts import worst_contact_distance
 
@@ -108,7 +108,7 @@ def run_animate(args) -> int:
         if args.plot is not None:
             from runner.plots import plot_solution
 
-            for f in plot_solution(args.plot, model, solution, keyframes, reference, objective=objective):
+            for f in plot_solution(args.plot, model, solution, keyframes, reference, objective=solution.objective):
                 say(f"  wrote {_rel(f)}")
     interrupted = solution.status is Status.INTERRUPTED or stop.requested  # also Ctrl-C while saving
     code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
