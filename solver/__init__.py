@@ -1,4 +1,4 @@
-"""dynsplines solver: dynamic splines with constraints (Ramamoorthi, Ball & Barr, SIGGRAPH 1997).
+"""dynsplines solver: dynamic splines with constraints (Ramamoorthi, Ball & Barr, Caltech).
 
 The algorithm and the public Python API: the C2 natural cubic spline through keyframes and variable
 frames, the objective terms with their gradients, the nlopt driver and Euler-Lagrange subdivision. No
@@ -8,15 +8,19 @@ rendering, no command line, no printing, and no process-wide side effects: impor
 One call for a figure in a scene, one for a single orientation::
 
     import solver
-    solution = solver.animate(model, keyframes)            # model: mujoco.MjModel; keyframes: Keyframes
+    model = solver.load_model("models/run_and_step.xml")
+    keyframes, info = solver.read_keyframes("models/run_and_step.keyframes.json", model)
+    solution = solver.animate(model, keyframes)            # the command line's settings
     result = solver.orient(times, quats)                   # paper sec. 3
 """
 from solver.animate import animate, default_options
 from solver.errors import DynsplinesError, InputError
 from solver.frames import FrameSet
+from solver.keyframe_file import KeyframeFileInfo, read_keyframes, write_keyframes
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.metrics import path_metrics
+from solver.model import load_model
 from solver.objective import Evaluation, NonFiniteError, Objective
 from solver.optimize import OptimizeResult, Status
 from solver.orient import OrientResult, orient
@@ -40,6 +44,8 @@ __all__ = [
     "DynsplinesError", "InputError", "NonFiniteError",
     # inputs: keyframes, the figure's state layout, frames and the spline
     "Keyframes", "StateLayout", "FrameSet", "SplineBasis",
+    # files: an MJCF scene, the JSON keyframe file
+    "load_model", "read_keyframes", "write_keyframes", "KeyframeFileInfo",
     # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7)
     "Term", "TermEval", "Penetration", "UnitQuaternion", "Hyperextension", "CovariantAcceleration",
     "NormalizedCovariantAcceleration", "JointTorque", "RootResidual",

@@ -98,12 +98,13 @@ def read_document(path: str | os.PathLike) -> Any:
         raise InputError(f"{src}: JSON nested too deeply to read; a keyframe file is an object of lists") from None
 
 
-def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyframes, KeyframeFileInfo]:
+def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, KeyframeFileInfo]:
     """Read and check a keyframe file.
 
     Args:
         path: the .json keyframe file.
-        layout: the figure's qpos layout, `StateLayout.from_model(model)` (joint names and sizes).
+        layout: the figure's qpos layout, `StateLayout.from_model(model)` (joint names and sizes), or
+            the mujoco.MjModel itself.
     Returns:
         (keyframes, info): solver.Keyframes with times (k,) [s], values (k, nq) (NaN where free) and
         mask (k, nq) (True where fixed), source = str(path); and the file's KeyframeFileInfo.
@@ -115,6 +116,8 @@ def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyfra
             increasing or negative, fewer than two keyframes, a keyframe fixing nothing, a zero
             quaternion).
     """
+    if not isinstance(layout, StateLayout):
+        layout = StateLayout.from_model(layout)
     p = Path(path)
     src = str(path)
     doc = read_document(path)

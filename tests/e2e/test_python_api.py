@@ -1,0 +1,35 @@
+"""The README's Python API snippet, run exactly as written, gives the command line's path."""
+import re
+from pathlib import Path
+
+import numpy as np
+
+from runner.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def readme_snippet() -> str:
+    text = (REPO / "README.md").read_text()
+    section = text[text.index("## Python API"):]
+    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+
+
+def test_readme_snippet_is_one_import_and_one_call():
+    code = readme_snippet()
+    imports = [line for line in code.splitlines() if line.startswith(("import ", "from "))]
+    assert imports == ["import solver"]
+    assert code.count("solver.animate(") == 1
+
+
+def test_readme_snippet_gives_the_command_lines_frames(tmp_path, monkeypatch):
+    out = tmp_path / "cli.npz"
+    assert main(["run-and-step", "--no-render", "--quiet", "--save-path", str(out)]) == 0
+    monkeypatch.chdir(REPO)  # the snippet's paths are relative to the repository root
+    scope: dict = {}
+    exec(compile(readme_snippet(), "README.md", "exec"), scope)
+    solution = scope["solution"]
+    with np.load(out) as z:
+        assert np.array_equal(solution.frames.times, z["frame_times"])
+        assert np.array_equal(solution.frames.values, z["frames"])  # identical, not merely close
+        assert scope["qpos"].shape == (len(z["frame_times"]), 51)
