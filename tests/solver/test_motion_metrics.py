@@ -115,7 +115,7 @@ def test_validation(floor_model):
 
 def test_127_33_reference_own_metrics():
     try:
-        from runner.mocap import load_bvh_reference
+        from runner.mocap.reference import load_bvh_reference
     except ImportError:
         from runner.bvh_import import load_bvh_reference
     model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))

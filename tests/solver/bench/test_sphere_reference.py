@@ -185,11 +185,11 @@ def test_bvp_and_discrete_methods_agree(kset):
 
 def test_reference_is_cached_and_fast():
     kset = sr.large_rotation_sets()[2]
-    before = sr._reference_cached.cache_info()
+    before = sr.bvp._reference_cached.cache_info()
     a = sr.riemannian_cubic_reference(kset.times, kset.quats)
-    middle = sr._reference_cached.cache_info()
+    middle = sr.bvp._reference_cached.cache_info()
     b = sr.riemannian_cubic_reference(kset.times.copy(), kset.quats.copy())
-    after = sr._reference_cached.cache_info()
+    after = sr.bvp._reference_cached.cache_info()
     assert a is b
     assert middle.misses - before.misses <= 1  # solved at most once (once when this file runs alone)
     assert (after.hits, after.misses) == (middle.hits + 1, middle.misses)  # equal copies: a cache hit
