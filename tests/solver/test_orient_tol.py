@@ -29,7 +29,7 @@ def test_tol_result_fields_and_fixed_rounds_still_estimate():
     r = orient(s.times, s.quats, tol=1e-4)
     assert r.tol == 1e-4 and r.converged_to_tol is True
     assert r.estimated_gap <= 1e-4 and r.estimated_gap == r.gap_estimates[-1]
-    assert len(r.gap_estimates) == len(r.solution.rounds) - r.unit_boosts
+    assert len(r.gap_estimates) == len(r.solution.rounds)
     assert "estimated gap" in r.solution.message
     assert r.keyframe_error < 1e-12
     fixed = orient(s.times, s.quats, options=default_options(rounds=1))
