@@ -494,10 +494,14 @@ def _solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: fl
     if opts.max_time_s and status is Status.MAX_TIME:
         message = f"time limit of {opts.max_time_s:g} s reached" + (
             f" at estimated gap {estimates[-1]:.2g} (tol {tol:g})" if estimates else "")
-    ev1 = obj.evaluate(frames.times, frames.values, grad=False)
+    if rounds and rounds[-1].times is frames.times and not boosts:  # the last solve reported these frames
+        E1, I1 = sol.E_final, sol.integrals_final
+    else:
+        ev1 = obj.evaluate(frames.times, frames.values, grad=False)
+        E1, I1 = ev1.E, ev1.integrals
     if boosts:  # both ends under the final weights, so E_initial and E_final compare
         ev0 = obj.evaluate(initial.times, initial.values, grad=False)
-    merged = Solution(frames, initial, rounds, status, message, ev0.E, ev1.E, ev0.integrals, ev1.integrals,
+    merged = Solution(frames, initial, rounds, status, message, ev0.E, E1, ev0.integrals, I1,
                       dict(zip(obj.names, obj.scales.tolist())), np.concatenate(traces) if traces else np.array([ev0.E]),
                       time.perf_counter() - t_start, n_evals)
     return merged, tuple(estimates), boosts, converged
