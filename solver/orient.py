@@ -364,7 +364,8 @@ def orient(
             midpoint frames where `predicted_decreases` is at least a quarter of the largest, until the
             estimate reaches tol or `max_frames` (default TOL_FRAMES_PER_INTERVAL per keyframe interval)
             or `max_time_s` runs out (`converged_to_tol` False, `solution.message` says which). After a
-            round with max |1 - |q|| above DRIFT_LIMIT the unit weight is stiffened (DRIFT_BOOST).
+            round with max |1 - |q|| above DRIFT_LIMIT the unit weight is stiffened (DRIFT_BOOST). The
+            estimate used is `estimate_gap` plus the quadrature discrepancy (`_quadrature_discrepancy`).
     Returns:
         OrientResult.
     Raises:
