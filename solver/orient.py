@@ -365,7 +365,8 @@ def orient(
             estimate reaches tol or `max_frames` (default TOL_FRAMES_PER_INTERVAL per keyframe interval)
             or `max_time_s` runs out (`converged_to_tol` False, `solution.message` says which). After a
             round with max |1 - |q|| above DRIFT_LIMIT the unit weight is stiffened (DRIFT_BOOST). The
-            estimate used is `estimate_gap` plus the quadrature discrepancy (`_quadrature_discrepancy`).
+            estimate used is `estimate_gap`, plus the quadrature discrepancy (`_quadrature_discrepancy`)
+            in the rounds where it would otherwise stop.
     Returns:
         OrientResult.
     Raises:
@@ -471,7 +472,8 @@ def _solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: fl
         if status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED):
             break
         est, D = estimate_gap(obj, frames, sol.E_final)
-        est += _quadrature_discrepancy(obj, frames, sol)
+        if est <= tol / TOL_SAFETY:  # only where it may stop: ~1e-6 usually, and it costs an evaluation
+            est += _quadrature_discrepancy(obj, frames, sol)
         estimates.append(est)
         if est <= tol / TOL_SAFETY and len(estimates) > MIN_ROUNDS:
             if boosts < DRIFT_BOOSTS and max_norm_deviation(frames.times, frames.values) > DRIFT_LIMIT:
