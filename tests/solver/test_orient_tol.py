@@ -1,0 +1,91 @@
+"""Accuracy on request (issue 13): `orient(tol=...)`, the a-posteriori gap estimate, budgets, |q| drift.
+
+The acceptance test runs the default and tol=1e-4 on generated keyframe sets (solver/bench/random_sets.py)
+against the exact optimum of the independent reference (tests/sphere_reference.py).
+"""
+import numpy as np
+import pytest
+
+from solver.bench.random_sets import random_set, true_energy
+from solver.errors import InputError
+from solver.orient import DEFAULT_TOL, OrientOptions, default_options, orient
+
+#: acceptance seeds used here (a subset of random_sets.ACCEPTANCE_SEEDS: never used for tuning)
+TEST_SEEDS = range(1000, 1010)
+
+
+def test_default_options_carry_the_tolerance_unless_rounds_are_given():
+    assert isinstance(default_options(), OrientOptions) and default_options().tol == DEFAULT_TOL
+    assert default_options(rounds=2).tol == 0  # explicit rounds: the fixed-rounds behaviour
+    assert default_options(subdivision="global").tol == 0
+    assert default_options("paper").tol == 0
+    assert default_options(tol=1e-5, rounds=3).tol == 1e-5
+    with pytest.raises(InputError, match="tol must be a number >= 0"):
+        default_options(tol=-1.0)
+
+
+def test_tol_result_fields_and_fixed_rounds_still_estimate():
+    s = random_set(3)
+    r = orient(s.times, s.quats, tol=1e-4)
+    assert r.tol == 1e-4 and r.converged_to_tol is True
+    assert r.estimated_gap <= 1e-4 and r.estimated_gap == r.gap_estimates[-1]
+    assert len(r.gap_estimates) == len(r.solution.rounds)
+    assert "estimated gap" in r.solution.message
+    assert r.keyframe_error < 1e-12
+    fixed = orient(s.times, s.quats, options=default_options(rounds=1))
+    assert fixed.tol == 0 and fixed.converged_to_tol is None and fixed.estimated_gap > 0
+    assert len(fixed.solution.rounds) == 2
+    assert np.isnan(orient(s.times, s.quats, form="paper").estimated_gap)
+
+
+def test_budgets_end_the_refinement_and_say_so():
+    s = random_set(3)
+    r = orient(s.times, s.quats, tol=1e-9, options=default_options(max_frames=12))
+    assert r.converged_to_tol is False and r.n_variable <= 12
+    assert "frame budget of 12" in r.solution.message and r.estimated_gap > 1e-9
+    t = orient(s.times, s.quats, tol=1e-9, options=default_options(max_time_s=0.02))
+    assert t.converged_to_tol is False and "time limit" in t.solution.message
+    assert t.keyframe_error < 1e-12
+
+
+def test_tol_errors():
+    s = random_set(3)
+    with pytest.raises(InputError, match="normalized form only"):
+        orient(s.times, s.quats, form="paper", tol=1e-3)
+    with pytest.raises(InputError, match="tol must be a number >= 0"):
+        orient(s.times, s.quats, tol=float("nan"))
+
+
+def test_drift_stiffens_the_unit_term():
+    """A tuning set where the light unit weight lets |q| drift 25% at gap 1e-3 (fixed rounds)."""
+    s = random_set(4)
+    fixed = orient(s.times, s.quats, options=default_options(rounds=2))
+    assert fixed.max_norm_deviation > 0.1
+    r = orient(s.times, s.quats)
+    assert r.unit_boosts >= 1 and r.max_norm_deviation <= 0.1
+
+
+@pytest.fixture(scope="module")
+def reference():
+    sphere_reference = pytest.importorskip("sphere_reference")
+    return sphere_reference
+
+
+@pytest.mark.slow
+def test_accuracy_on_generated_sets(reference):
+    """Default: true gap <= 1e-3; tol=1e-4: <= 1e-4; estimate within 3x of the truth on >= 90% of the
+    runs; max |1 - |q|| <= 10%."""
+    within, total, rows = 0, 0, []
+    for seed in TEST_SEEDS:
+        s = random_set(seed)
+        E = reference.riemannian_cubic_reference(s.times, s.quats, tol=1e-6).E_star
+        for tol, bound in ((None, 1e-3), (1e-4, 1e-4)):
+            r = orient(s.times, s.quats, tol=tol)
+            g = (true_energy(reference, r.frames) - E) / E
+            rows.append((seed, tol, g, r.estimated_gap, r.n_variable, r.max_norm_deviation))
+            assert r.converged_to_tol, (seed, tol, r.solution.message)
+            assert -1e-7 <= g <= bound, rows[-1]
+            assert r.max_norm_deviation <= 0.1, rows[-1]
+            total += 1
+            within += 1 / 3 <= g / r.estimated_gap <= 3
+    assert within >= 0.9 * total, rows
