@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solver.errors import DynsplinesError, InputError
-from solver.spline import SplineBasis, gauss_times, quadrature_times
+from solver.quadrature import gauss_times, quadrature_times
+from solver.spline import SplineBasis
 from solver.terms.base import Term
 
 

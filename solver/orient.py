@@ -33,7 +33,8 @@ from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.optimize import Status
 from solver.solve import Solution, SolveOptions, solve
-from solver.spline import gauss_nodes, gauss_times, interpolate_segments
+from solver.quadrature import gauss_nodes, gauss_times
+from solver.spline import interpolate_segments
 from solver.subdivide import adaptive_times, global_times
 from solver.terms import CovariantAcceleration, NormalizedCovariantAcceleration, UnitQuaternion
 

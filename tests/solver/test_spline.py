@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from solver.errors import InputError
-from solver.spline import SplineBasis, interpolate, quadrature_times, spline_matrices
+from solver.quadrature import quadrature_times
+from solver.spline import SplineBasis, interpolate, spline_matrices
 
 
 def naive_natural_spline(x, y, t):

@@ -6,7 +6,8 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 from solver.errors import InputError
-from solver.spline import DENSE_MAX_ENTRIES, SplineBasis, gauss_times, quadrature_times
+from solver.quadrature import gauss_times, quadrature_times
+from solver.spline import DENSE_MAX_ENTRIES, SplineBasis
 
 
 def knots_and_points(m, n, seed=0, rate=None):

@@ -1,0 +1,56 @@
+"""Quadrature rules on a spline's time span: the paper's uniform midpoint rule and Gauss-Legendre per
+spline segment. Each returns the points t [s] and their weights [s]; an integral is sum(w * f(t))."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def quadrature_times(t0: float, t1: float, rate: float) -> tuple[np.ndarray, float]:
+    """Uniform midpoint quadrature on [t0, t1] (paper, after eq. 7: "summing the values of the
+    integrand at uniformly distributed points and multiplying by the time interval each represents").
+
+    Args:
+        t0, t1: interval [s]. rate: points per second [1/s].
+    Returns:
+        t: (n,) points [s], n = ceil((t1 - t0) * rate); h: weight of each point [s].
+    """
+    n = max(2, int(np.ceil((t1 - t0) * rate)))
+    h = (t1 - t0) / n
+    return t0 + h * (np.arange(n) + 0.5), h
+
+
+def gauss_times(knots: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre quadrature with `points` nodes on every spline segment.
+
+    Inside a segment the spline is one cubic, so an integrand that is a smooth function of Y, Y', Y''
+    is smooth there and the rule converges fast (error ~ h^(2 points)); the knots, where the third
+    derivative jumps, are segment ends, not nodes. Used by `Objective(quadrature="gauss")`.
+
+    Args:
+        knots: (m,) frame times [s], strictly increasing. points: nodes per segment, >= 1.
+    Returns:
+        t: ((m-1) * points,) nodes [s], increasing; w: same shape, weights [s] (they sum to the span).
+    """
+    x = np.asarray(knots, dtype=float)
+    xg, wg = gauss_nodes(points)
+    h = np.diff(x)
+    t = (x[:-1, None] + h[:, None] * xg[None, :]).ravel()
+    return t, (h[:, None] * wg[None, :]).ravel()
+
+
+_GAUSS_NODES: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def gauss_nodes(points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre nodes and weights on [0, 1], each (points,) (cached: numpy's leggauss costs
+    ~0.2 ms a call)."""
+    r = _GAUSS_NODES.get(points)
+    if r is None:
+        xg, wg = np.polynomial.legendre.leggauss(points)
+        r = _GAUSS_NODES[points] = (0.5 * (xg + 1.0), 0.5 * wg)
+    return r
+
+
+for _p in (4, 8):  # the rules orient uses (objective, summary energy): a table built at import
+    gauss_nodes(_p)
+del _p
