@@ -1,7 +1,8 @@
 """Results out: a saved path (.npz) sampled at a frame rate and written as BVH (`bvh`) or glTF binary (`gltf`).
 
-`sampling` reads the saved path and samples its optimized, plain or reference motion; the writers take
-MuJoCo `qpos` samples and the loaded model (offsets, geoms and the static scene come from the model).
+`sampling` samples the optimized, plain or reference motion of a saved path (read by
+`runner.saved_path.load_saved_path`); the writers take MuJoCo `qpos` samples and the loaded model
+(offsets, geoms and the static scene come from the model).
 `export_saved_path` is the whole of `dynsplines export`.
 """
 from __future__ import annotations
@@ -53,7 +54,8 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
             motion, bad fps, or a failed write (an earlier file at `out` is then unchanged).
     """
     from solver.model import load_model
-    from runner.export.sampling import WHICH, default_fps, load_saved_path, sample_motion
+    from runner.export.sampling import WHICH, default_fps, sample_motion
+    from runner.saved_path import load_saved_path
     from runner.files import check_writable_dir
     from solver.layout import StateLayout
 

@@ -4,7 +4,8 @@ import pytest
 
 from runner.mocap.bvh import read_bvh
 from runner.export.bvh import EULER_ORDER, figure_qpos_from_bvh, figure_skeleton, write_bvh
-from runner.export.sampling import WHICH, default_fps, load_saved_path, sample_motion
+from runner.export.sampling import WHICH, default_fps, sample_motion
+from runner.saved_path import load_saved_path
 from solver.errors import InputError
 from solver.layout import StateLayout
 
