@@ -49,6 +49,9 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     out.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="video size [960x540]")
     out.add_argument("--speed", type=positive(float), default=0.5, help="playback speed [%(default)s x real time]")
     out.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write plots (PNG) to DIR")
+    out.add_argument("--export", type=Path, action="append", default=[], metavar="FILE",
+                     help="also write the optimized path as FILE.bvh (BVH on the figure's skeleton) or FILE.glb "
+                          "(animated glTF with the scene), after the path is saved; repeatable")
     opt = p.add_argument_group("optimization")
     opt.add_argument("--terms", default=None,
                      help=f"objective terms: 'all' or a list from {','.join(term_names())} "

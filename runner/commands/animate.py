@@ -56,6 +56,7 @@ def run_animate(args) -> int:
         _check_video_out(args.out, args.size)  # before the optimization, not after it
     if args.plot is not None:
         check_writable_dir(Path(args.plot) / "plot.png", "--plot")
+    _check_exports(args.export)
     keyframes, info, model, layout, scene_path = load_problem(args.keyframes, args.scene)
     file_terms = dict(getattr(info, "terms", None) or {})
     weights_in = dict(args.weight)
@@ -105,6 +106,10 @@ def run_animate(args) -> int:
             save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
                           {"plain": plain_m, "optimized": opt_m}, args)
             say(f"  wrote {_rel(args.save_path)}")
+        if args.export:
+            for res in export_results(args, solution, keyframes, reference, scene_path, weights, options,
+                                      {"plain": plain_m, "optimized": opt_m}):
+                say(f"  wrote {res.describe()}")
         if args.plot is not None:
             from runner.plots import plot_solution
 
@@ -122,6 +127,41 @@ def run_animate(args) -> int:
             return EXIT_INTERRUPTED
         say(f"  wrote {_rel(args.out)} ({info_r.n_frames} frames, {info_r.wall_time_s:.1f} s to render)")
     return code
+
+
+def _check_exports(exports) -> None:
+    """--export names are checked before the optimization: a known extension, a writable folder, no repeats."""
+    from runner.export import check_output_name
+
+    for out in exports:
+        check_output_name(out, "--export")
+        check_writable_dir(out, "--export")
+    seen = [Path(out).resolve() for out in exports]
+    dup = next((out for i, out in enumerate(exports) if seen[i] in seen[:i]), None)
+    if dup is not None:
+        raise InputError(f"--export {dup}: given twice; name each file once")
+
+
+def export_results(args, solution, keyframes, reference, scene_path, weights, options, metrics):
+    """Write every `--export FILE` (the optimized path) from the saved path: `--save-path` if given (already
+    written), else a temporary one. Returns the ExportResults. Raises InputError naming the failed file."""
+    import tempfile
+
+    from runner.export import export_saved_path
+
+    results = []
+    with tempfile.TemporaryDirectory(prefix="dynsplines-export-") as tmp:
+        npz = args.save_path
+        if npz is None:
+            npz = Path(tmp) / "path.npz"
+            save_path_npz(npz, solution, keyframes, reference, scene_path, weights, options, metrics, args)
+        for out in args.export:
+            try:
+                results.append(export_saved_path(npz, out, "optimized", None, option="--export"))
+            except InputError as e:
+                kept = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
+                raise InputError(f"--export {out}: not written: {e}{kept}") from None
+    return results
 
 
 def _check_video_out(out, size) -> None:

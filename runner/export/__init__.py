@@ -34,20 +34,27 @@ class ExportResult:
     wall_time_s: float
 
 
-def check_output_name(out: str | Path) -> str:
+    def describe(self) -> str:
+        """One line: what was written, e.g. for `wrote ...`."""
+        return (f"{self.path} ({self.format}, {self.which}: {self.frames} frames at {self.fps:g} fps, "
+                f"{self.joints} joints, {self.size / 1024:.0f} KiB, {self.wall_time_s:.2f} s)")
+
+
+def check_output_name(out: str | Path, option: str = "--to") -> str:
     """The format of output file `out` from its extension; InputError naming the choices otherwise."""
     suffix = Path(out).suffix.lower()
     if suffix not in FORMATS:
         given = f"extension {suffix!r}" if suffix else "no extension"
-        raise InputError(f"--to {out}: {given}; the output must end in one of {', '.join(FORMATS)} "
-                         f"(e.g. --to {Path(out).with_suffix('.glb').name})")
+        raise InputError(f"{option} {out}: {given}; the output must end in one of {', '.join(FORMATS)} "
+                         f"(e.g. {option} {Path(out).with_suffix('.glb').name})")
     return FORMATS[suffix]
 
 
 def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized",
-                      fps: float | None = None) -> ExportResult:
+                      fps: float | None = None, option: str = "--to") -> ExportResult:
     """Sample motion `which` of saved path `npz` at `fps` [Hz] (default: the reference clip's rate, else
-    30) and write it to `out` (.bvh or .glb, chosen by the extension), atomically.
+    30) and write it to `out` (.bvh or .glb, chosen by the extension), atomically. `option` is the
+    command-line option that named `out` (for messages).
 
     Raises:
         InputError: unknown extension, unwritable folder, unreadable path or scene, unknown or absent
@@ -60,10 +67,10 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
     from solver.layout import StateLayout
 
     t0 = time.perf_counter()
-    fmt = check_output_name(out)
+    fmt = check_output_name(out, option)
     if which not in WHICH:
         raise InputError(f"--which {which!r}: unknown motion; choose one of {', '.join(WHICH)}")
-    check_writable_dir(out, "--to")
+    check_writable_dir(out, option)
     saved = load_saved_path(npz)
     model = load_model(saved.scene)
     if model.nq != saved.nq:
@@ -84,6 +91,6 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
             joints = figure_skeleton(model).count
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
-                         "space or choose another --to") from None
+                         f"space or choose another {option}") from None
     return ExportResult(Path(out), fmt, which, motion.fps, len(motion.times), joints, Path(out).stat().st_size,
                         time.perf_counter() - t0)

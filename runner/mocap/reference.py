@@ -12,7 +12,10 @@ from solver.layout import StateLayout
 
 
 def load_bvh_reference(path: str | Path, model) -> Reference:
-    """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion.
+    """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
+    figure's own skeleton (written by `dynsplines export --to FILE.bvh` or `--export FILE.bvh`: a joint
+    named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
+    every frame, no retargeting, no clamping, no root-height correction.
 
     Steps (runner/mocap/retarget.py docstring): parse (bvhio), drop the synthetic T-pose first frame, forward kinematics
     in metres and MuJoCo axes, rest-offset retargeting of body orientations, local joint quaternions
@@ -33,7 +36,12 @@ def load_bvh_reference(path: str | Path, model) -> Reference:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
             joint the retargeting needs is missing, or the model lacks a joint or site it needs.
     """
+    from runner.export.bvh import figure_qpos_from_bvh, is_figure_clip
+
     clip = read_bvh(path)
+    if is_figure_clip(clip, model):  # our own export: the figure's qpos, read back without loss
+        qpos = figure_qpos_from_bvh(clip, model)
+        return Reference(np.arange(len(qpos)) * clip.frame_time, qpos, str(path), clip.frame_time)
     layout = StateLayout.from_model(model)
     for name in ("root", *JOINT_BODIES):
         layout.joint(name)
