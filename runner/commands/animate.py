@@ -47,8 +47,18 @@ def register(sub) -> None:
 # -------------------------------------------------------------------------------------------- run
 
 
+def default_video(keyframes) -> Path:
+    """renders/<name>.mp4 for keyframe file <name>.keyframes.json (or <name>.json)."""
+    name = Path(keyframes).name
+    for suffix in (".json", ".keyframes"):
+        name = name.removesuffix(suffix)
+    return RENDERS / f"{name or 'animation'}.mp4"
+
+
 def run_animate(args) -> int:
     """Run `animate` / `run-and-step`. Returns the exit code."""
+    if args.out is None and not args.no_render:
+        args.out = default_video(args.keyframes)
     for out, option in ((args.out, "--out"), (args.save_path, "--save-path")):
         if out is not None:
             check_writable_dir(out, option)
@@ -72,7 +82,7 @@ def run_animate(args) -> int:
     options = solve_options(args, weights)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     _warn_penetrating_keyframes(model, keyframes, initial)
-    say = (lambda *a: None) if args.quiet else print
+    say = print  # results; --quiet silences progress only
     say(f"dynsplines: {args.keyframes} -> {keyframes.count} keyframes "
         f"({int(keyframes.is_partial.sum())} partial) over {keyframes.times[-1] - keyframes.times[0]:.2f} s, "
         f"scene {_rel(scene_path)}")
@@ -90,18 +100,18 @@ def run_animate(args) -> int:
             print(f"dynsplines: warning: the optimization failed ({solution.message}); the best path before "
                   "that (it meets every keyframe) is reported and written", file=sys.stderr)
 
-        reference = find_reference(info, model)
+        reference = find_reference(info, model, quiet=args.quiet)
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
-        if not args.quiet:
+        if not args.no_summary:
             print(summary_table(plain_m, opt_m, solution, weights,
                                 dict(zip(objective.names, objective.weights.tolist()))))
-            if reference is not None:
-                from runner.mocap.contacts import worst_contact_distance
+        if reference is not None:
+            from runner.mocap.contacts import worst_contact_distance
 
-                say(f"motion capture ({_rel(reference.source)}, retargeted, {reference.count} frames): "
-                    f"feet in contact stay within {1000 * worst_contact_distance(reference, model):.1f} mm "
-                    "of the surface under them")
+            say(f"motion capture ({_rel(reference.source)}, retargeted, {reference.count} frames): "
+                f"feet in contact stay within {1000 * worst_contact_distance(reference, model):.1f} mm "
+                "of the surface under them")
         if args.save_path is not None:  # Ctrl-C until it is written only sets stop.requested
             save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
                           {"plain": plain_m, "optimized": opt_m}, args)
@@ -126,6 +136,8 @@ def run_animate(args) -> int:
                   f"there is unchanged){saved}", file=sys.stderr)
             return EXIT_INTERRUPTED
         say(f"  wrote {_rel(args.out)} ({info_r.n_frames} frames, {info_r.wall_time_s:.1f} s to render)")
+    else:
+        say("  no video (--no-render)")
     return code
 
 
@@ -149,8 +161,11 @@ def export_results(args, solution, keyframes, reference, scene_path, weights, op
 
     from runner.export import export_saved_path
 
+    from runner.console import Steps
+
     results = []
-    with tempfile.TemporaryDirectory(prefix="dynsplines-export-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="dynsplines-export-") as tmp, \
+            Steps("exporting", len(args.export), args.quiet, unit=" files") as bar:
         npz = args.save_path
         if npz is None:
             npz = Path(tmp) / "path.npz"
@@ -158,6 +173,7 @@ def export_results(args, solution, keyframes, reference, scene_path, weights, op
         for out in args.export:
             try:
                 results.append(export_saved_path(npz, out, "optimized", None, option="--export"))
+                bar.update(len(results), note=Path(out).name)
             except InputError as e:
                 kept = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
                 raise InputError(f"--export {out}: not written: {e}{kept}") from None
@@ -193,7 +209,7 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
 
 def render_video(out, model, solution, keyframes, args):
     """Side-by-side video of the plain spline and the optimized path, keyframes marked."""
-    from runner.render import Track, render_tracks
+    from runner.render import Track, frame_times, render_tracks
     from solver.terms.penetration import Penetration
 
     t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
@@ -204,18 +220,10 @@ def render_video(out, model, solution, keyframes, args):
         tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
     # keyframes with free components filled: the poses the animator set
     kq = solution.initial.values[solution.initial.is_keyframe]
-    quiet = getattr(args, "quiet", False)
+    from runner.console import Steps
 
-    tty = sys.stdout.isatty()
-
-    def progress(i, n):
-        if quiet:
-            return
-        if tty and (i % 10 == 0 or i == n):
-            print(f"\r  rendering {i}/{n}", end="" if i < n else "\n", flush=True)
-        elif not tty and (i % 50 == 0 or i == n):
-            print(f"  rendering {i}/{n}", flush=True)
-
-    return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
-                         keyframe_times=keyframes.times, keyframe_qpos=kq,
-                         title="dynsplines: plain spline vs optimized", progress=progress)
+    n_frames = len(frame_times(float(t[0]), float(t[-1]), args.fps, args.speed))
+    with Steps(f"rendering {_rel(out)}", n_frames, getattr(args, "quiet", False), unit=" frames") as bar:
+        return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
+                             keyframe_times=keyframes.times, keyframe_qpos=kq,
+                             title="dynsplines: plain spline vs optimized", progress=lambda i, n: bar.update(i))
