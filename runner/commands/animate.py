@@ -159,9 +159,8 @@ def export_results(args, solution, keyframes, reference, scene_path, weights, op
     written), else a temporary one. Returns the ExportResults. Raises InputError naming the failed file."""
     import tempfile
 
-    from runner.export import export_saved_path
-
     from runner.console import Steps
+    from runner.export import export_saved_path
 
     results = []
     with tempfile.TemporaryDirectory(prefix="dynsplines-export-") as tmp, \

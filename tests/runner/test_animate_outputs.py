@@ -114,3 +114,16 @@ def test_steps_off_a_terminal_start_still_and_end_lines(monkeypatch):
     with console.Steps("x", 3, quiet=True, stream=quiet) as bar:
         bar.update(3)
     assert quiet.getvalue() == ""
+
+
+def test_failed_export_names_the_file_and_keeps_the_saved_path(tmp_path, capsys, monkeypatch):
+    import runner.export.bvh
+
+    def full_disk(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(runner.export.bvh, "write_bvh", full_disk)
+    code, out, err = animate(capsys, "--no-render", "--save-path", tmp_path / "p.npz", "--export", tmp_path / "a.bvh")
+    assert code == EXIT_INPUT
+    assert f"--export {tmp_path / 'a.bvh'}: not written: cannot write" in err and "No space left" in err
+    assert "the path is saved in" in err and (tmp_path / "p.npz").is_file() and not (tmp_path / "a.bvh").exists()
