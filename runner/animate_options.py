@@ -41,7 +41,10 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     """The options shared by `animate` and `run-and-step`."""
     d = defaults or {}
     out = p.add_argument_group("outputs")
-    out.add_argument("--out", type=Path, default=d.get("out"), help="video file (.mp4) [%(default)s]")
+    out.add_argument("--out", type=Path, default=d.get("out"),
+                     help="video file (.mp4) [%(default)s]" if d.get("out") is not None else
+                     "video file (.mp4) [renders/<keyframe file name>.mp4, e.g. renders/walk.mp4 for "
+                     "walk.keyframes.json]")
     out.add_argument("--save-path", type=Path, default=d.get("save_path"),
                      help="optimized path (.npz; see README) [%(default)s]")
     out.add_argument("--no-render", action="store_true", help="skip the video")
@@ -49,6 +52,9 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     out.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="video size [960x540]")
     out.add_argument("--speed", type=positive(float), default=0.5, help="playback speed [%(default)s x real time]")
     out.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write plots (PNG) to DIR")
+    out.add_argument("--export", type=Path, action="append", default=[], metavar="FILE",
+                     help="also write the optimized path as FILE.bvh (BVH on the figure's skeleton) or FILE.glb "
+                          "(animated glTF with the scene), after the path is saved; repeatable")
     opt = p.add_argument_group("optimization")
     opt.add_argument("--terms", default=None,
                      help=f"objective terms: 'all' or a list from {','.join(term_names())} "
@@ -74,7 +80,9 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
                      help="optimize the frame values directly instead of in the spline-acceleration metric")
     opt.add_argument("--no-renormalize", action="store_true",
                      help="use the weights as they are instead of dividing each term by its initial value (eq. 7)")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress (bars or lines); results (summary, 'wrote ...') are still printed")
+    p.add_argument("--no-summary", action="store_true", help="do not print the summary table")
 
 
 def solve_options(args, weights: dict) -> SolveOptions:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from runner.mocap.reference import load_bvh_reference
+from runner.mocap.reference import IMPORT_STAGES, load_bvh_reference
 from runner.paths import MODELS
 from solver.errors import InputError
 from solver.keyframe_file import read_document, read_keyframes
@@ -49,13 +49,16 @@ def _peek_scene(path: Path) -> Path | None:
     return (path.parent / scene).resolve() if isinstance(scene, str) and scene else None
 
 
-def find_reference(info, model):
+def find_reference(info, model, quiet=False):
     """The motion-capture reference of a keyframe file (its "source" "clip", relative to the file), or None
-    when the file names no clip or the clip is not there."""
+    when the file names no clip or the clip is not there. Progress of the import unless `quiet`."""
     clip = (getattr(info, "source", None) or {}).get("clip")
     if not clip:
         return None
     path = Path(info.path).parent / clip if hasattr(info, "path") else MODELS / clip
     if not path.is_file():
         return None
-    return load_bvh_reference(path, model)
+    from runner.console import Steps
+
+    with Steps(f"importing {path.name}", len(IMPORT_STAGES), quiet, unit=" stages") as bar:
+        return load_bvh_reference(path, model, progress=lambda i, stage: bar.update(i, note=stage))

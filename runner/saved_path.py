@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import sys
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -72,50 +72,132 @@ def save_path_npz(path, solution, keyframes, reference, scene_path, weights, opt
                          "free some space or choose another --save-path") from None
 
 
-#: the fields every saved path has (`save_path_npz` writes them, `load_saved_path` checks them)
+#: the fields every saved path has (`save_path_npz` writes them all)
 FIELDS = ("frame_times", "frames", "frame_is_keyframe", "keyframe_times", "keyframes", "keyframe_mask",
           "plain_frame_times", "plain_frames", "reference_times", "reference_qpos", "scene", "wall_time_s",
           "objective_trace", "status", "metrics_json", "options_json", "versions_json")
+#: the fields `load_saved_path` requires: the motions and the scene. The others (bookkeeping: metrics,
+#: options, versions, trace, status, time) are read when present.
+REQUIRED = ("frame_times", "frames", "plain_frame_times", "plain_frames", "keyframe_times", "keyframes",
+            "reference_times", "reference_qpos", "scene")
+#: the motions a saved path holds.
+WHICH = ("optimized", "plain", "reference")
 
 
 @dataclass(frozen=True)
 class SavedPath:
-    """A saved path read back: the arrays of the .npz (see the module docstring), the JSON fields parsed,
-    and `scene_path`, the scene resolved against the repository (a relative `scene` is repository-relative)."""
+    """A saved path read back (shapes: m frames, p plain frames, k keyframes, r reference frames).
 
-    arrays: dict
-    metrics: dict
-    options: dict
-    versions: dict
-    scene_path: Path
+    Attributes:
+        frame_times: (m,) [s]. frames: (m, nq). plain_frame_times: (p,) [s]. plain_frames: (p, nq).
+        keyframe_times: (k,) [s]. keyframes: (k, nq), NaN where a partial keyframe leaves a component free.
+        reference_times: (r,) [s], r = 0 without a clip. reference_qpos: (r, nq).
+        scene: the scene MJCF, resolved (a relative name is relative to the repository root).
+        source: the .npz file.
+        arrays: every array of the file by name (also `saved["name"]`).
+        metrics, options, versions: the JSON fields parsed ({} when the file lacks them).
+    """
+
+    frame_times: np.ndarray
+    frames: np.ndarray
+    plain_frame_times: np.ndarray
+    plain_frames: np.ndarray
+    keyframe_times: np.ndarray
+    keyframes: np.ndarray
+    reference_times: np.ndarray
+    reference_qpos: np.ndarray
+    scene: Path
+    source: Path
+    arrays: dict = field(default_factory=dict, repr=False)
+    metrics: dict = field(default_factory=dict, repr=False)
+    options: dict = field(default_factory=dict, repr=False)
+    versions: dict = field(default_factory=dict, repr=False)
 
     def __getitem__(self, name: str):
         return self.arrays[name]
 
+    @property
+    def scene_path(self) -> Path:
+        return self.scene
+
+    @property
+    def nq(self) -> int:
+        return self.frames.shape[1]
+
+    @property
+    def has_reference(self) -> bool:
+        return len(self.reference_times) >= 2
+
+    def track(self, which: str) -> tuple[np.ndarray, np.ndarray]:
+        """(times (m,) [s], frames (m, nq)) of one motion; InputError for an unknown or absent one."""
+        if which not in WHICH:
+            raise InputError(f"--which {which!r}: unknown motion; choose one of {', '.join(WHICH)}")
+        if which == "optimized":
+            return self.frame_times, self.frames
+        if which == "plain":
+            return self.plain_frame_times, self.plain_frames
+        if not self.has_reference:
+            raise InputError(f"{self.source}: --which reference, but the path has no reference motion "
+                             "(it was not made from a motion-capture clip); choose --which optimized or plain")
+        return self.reference_times, self.reference_qpos
+
+
+def _json(arrays: dict, name: str, p: Path) -> dict:
+    if name not in arrays:
+        return {}
+    try:
+        return json.loads(str(arrays[name]))
+    except ValueError as e:
+        raise InputError(f"{p}: field {name!r} is not JSON ({e}); the file is damaged") from None
+
 
 def load_saved_path(path) -> SavedPath:
-    """Read a path written by `save_path_npz` (`--save-path`).
+    """Read a saved path (.npz written by `save_path_npz`, i.e. `--save-path`).
 
     Args:
         path: the .npz file.
     Returns:
         SavedPath.
     Raises:
-        InputError: the file is missing or not a NumPy archive, or lacks a field (named).
+        InputError: the file is missing, a folder, not an .npz (zip) archive, lacks a required field
+            (named), or has a motion whose shape does not fit (named); the message names the file.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"saved path {path} does not exist; write one with --save-path")
+    import zipfile
+
+    p = Path(path)
+    if not p.is_file():
+        why = "it is a folder" if p.is_dir() else f"no such file (current folder: {Path.cwd()})"
+        raise InputError(f"{p}: cannot read the saved path: {why}; give the .npz written by --save-path")
+    if not zipfile.is_zipfile(p):
+        raise InputError(f"{p}: not an .npz file (not a zip archive); give the .npz written by --save-path")
     try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
-        raise InputError(f"{path}: not a saved path (.npz): {e}") from None
-    missing = [f for f in FIELDS if f not in arrays]
-    if missing:
-        raise InputError(f"{path}: not a dynsplines saved path, missing field(s) {', '.join(missing)}")
+        with np.load(p, allow_pickle=False) as z:
+            missing = [k for k in REQUIRED if k not in z.files]
+            if missing:
+                raise InputError(f"{p}: not a saved path: field(s) {', '.join(missing)} missing; give the .npz "
+                                 "written by `dynsplines animate --save-path`")
+            arrays = {k: np.array(z[k]) for k in z.files}
+    except InputError:
+        raise
+    except Exception as e:  # zipfile / pickle / format errors of a user file
+        raise InputError(f"{p}: not a readable .npz file ({type(e).__name__}: {e}); give the .npz written by "
+                         "--save-path") from None
     scene = Path(str(arrays["scene"]))
-    return SavedPath(arrays=arrays, metrics=json.loads(str(arrays["metrics_json"])),
-                     options=json.loads(str(arrays["options_json"])),
-                     versions=json.loads(str(arrays["versions_json"])),
-                     scene_path=scene if scene.is_absolute() else REPO / scene)
+    if not scene.is_absolute():
+        scene = REPO / scene
+    try:
+        f = {k: np.asarray(arrays[k], float) for k in REQUIRED if k != "scene"}
+    except (TypeError, ValueError) as e:
+        raise InputError(f"{p}: a motion field is not numeric ({e}); the file is damaged") from None
+    nq = f["frames"].shape[1] if f["frames"].ndim == 2 else -1
+    for times, values, least in (("frame_times", "frames", 2), ("plain_frame_times", "plain_frames", 2),
+                                 ("keyframe_times", "keyframes", 2), ("reference_times", "reference_qpos", 0)):
+        v, t = f[values], f[times]
+        if v.ndim != 2 or v.shape[1] != nq or len(v) < least:
+            raise InputError(f"{p}: field {values!r} has shape {v.shape}; expected (m >= {least}, {nq}); "
+                             "the file is damaged")
+        if t.shape != (len(v),):
+            raise InputError(f"{p}: field {times!r} has shape {t.shape}; expected ({len(v)},) like {values!r}; "
+                             "the file is damaged")
+    return SavedPath(**f, scene=scene, source=p, arrays=arrays, metrics=_json(arrays, "metrics_json", p),
+                     options=_json(arrays, "options_json", p), versions=_json(arrays, "versions_json", p))

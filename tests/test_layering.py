@@ -31,7 +31,7 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
 
 def test_import_contracts():
     """solver never imports runner; solver.bench.sphere_reference imports nothing else from solver;
-    runner's layers (cli > commands > mocap|render|plots|console|saved_path > leaves); no cycles."""
+    runner's layers (docs/architecture.md); no cycles."""
     r = _run(_tool("lint-imports"), "--no-cache")
     assert r.returncode == 0, f"lint-imports failed:\n{r.stdout}\n{r.stderr}"
     assert "0 broken" in r.stdout, r.stdout

@@ -47,8 +47,18 @@ def register(sub) -> None:
 # -------------------------------------------------------------------------------------------- run
 
 
+def default_video(keyframes) -> Path:
+    """renders/<name>.mp4 for keyframe file <name>.keyframes.json (or <name>.json)."""
+    name = Path(keyframes).name
+    for suffix in (".json", ".keyframes"):
+        name = name.removesuffix(suffix)
+    return RENDERS / f"{name or 'animation'}.mp4"
+
+
 def run_animate(args) -> int:
     """Run `animate` / `run-and-step`. Returns the exit code."""
+    if args.out is None and not args.no_render:
+        args.out = default_video(args.keyframes)
     for out, option in ((args.out, "--out"), (args.save_path, "--save-path")):
         if out is not None:
             check_writable_dir(out, option)
@@ -56,6 +66,7 @@ def run_animate(args) -> int:
         _check_video_out(args.out, args.size)  # before the optimization, not after it
     if args.plot is not None:
         check_writable_dir(Path(args.plot) / "plot.png", "--plot")
+    _check_exports(args.export)
     keyframes, info, model, layout, scene_path = load_problem(args.keyframes, args.scene)
     file_terms = dict(getattr(info, "terms", None) or {})
     weights_in = dict(args.weight)
@@ -71,7 +82,7 @@ def run_animate(args) -> int:
     options = solve_options(args, weights)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     _warn_penetrating_keyframes(model, keyframes, initial)
-    say = (lambda *a: None) if args.quiet else print
+    say = print  # results; --quiet silences progress only
     say(f"dynsplines: {args.keyframes} -> {keyframes.count} keyframes "
         f"({int(keyframes.is_partial.sum())} partial) over {keyframes.times[-1] - keyframes.times[0]:.2f} s, "
         f"scene {_rel(scene_path)}")
@@ -89,22 +100,26 @@ def run_animate(args) -> int:
             print(f"dynsplines: warning: the optimization failed ({solution.message}); the best path before "
                   "that (it meets every keyframe) is reported and written", file=sys.stderr)
 
-        reference = find_reference(info, model)
+        reference = find_reference(info, model, quiet=args.quiet)
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
-        if not args.quiet:
+        if not args.no_summary:
             print(summary_table(plain_m, opt_m, solution, weights,
                                 dict(solution.weights)))
-            if reference is not None:
-                from runner.mocap.contacts import worst_contact_distance
+        if reference is not None:
+            from runner.mocap.contacts import worst_contact_distance
 
-                say(f"motion capture ({_rel(reference.source)}, retargeted, {reference.count} frames): "
-                    f"feet in contact stay within {1000 * worst_contact_distance(reference, model):.1f} mm "
-                    "of the surface under them")
+            say(f"motion capture ({_rel(reference.source)}, retargeted, {reference.count} frames): "
+                f"feet in contact stay within {1000 * worst_contact_distance(reference, model):.1f} mm "
+                "of the surface under them")
         if args.save_path is not None:  # Ctrl-C until it is written only sets stop.requested
             save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
                           {"plain": plain_m, "optimized": opt_m}, args)
             say(f"  wrote {_rel(args.save_path)}")
+        if args.export:
+            for res in export_results(args, solution, keyframes, reference, scene_path, weights, options,
+                                      {"plain": plain_m, "optimized": opt_m}):
+                say(f"  wrote {res.describe()}")
         if args.plot is not None:
             from runner.plots import plot_solution
 
@@ -121,7 +136,47 @@ def run_animate(args) -> int:
                   f"there is unchanged){saved}", file=sys.stderr)
             return EXIT_INTERRUPTED
         say(f"  wrote {_rel(args.out)} ({info_r.n_frames} frames, {info_r.wall_time_s:.1f} s to render)")
+    else:
+        say("  no video (--no-render)")
     return code
+
+
+def _check_exports(exports) -> None:
+    """--export names are checked before the optimization: a known extension, a writable folder, no repeats."""
+    from runner.export import check_output_name
+
+    for out in exports:
+        check_output_name(out, "--export")
+        check_writable_dir(out, "--export")
+    seen = [Path(out).resolve() for out in exports]
+    dup = next((out for i, out in enumerate(exports) if seen[i] in seen[:i]), None)
+    if dup is not None:
+        raise InputError(f"--export {dup}: given twice; name each file once")
+
+
+def export_results(args, solution, keyframes, reference, scene_path, weights, options, metrics):
+    """Write every `--export FILE` (the optimized path) from the saved path: `--save-path` if given (already
+    written), else a temporary one. Returns the ExportResults. Raises InputError naming the failed file."""
+    import tempfile
+
+    from runner.console import Steps
+    from runner.export import export_saved_path
+
+    results = []
+    with tempfile.TemporaryDirectory(prefix="dynsplines-export-") as tmp, \
+            Steps("exporting", len(args.export), args.quiet, unit=" files") as bar:
+        npz = args.save_path
+        if npz is None:
+            npz = Path(tmp) / "path.npz"
+            save_path_npz(npz, solution, keyframes, reference, scene_path, weights, options, metrics, args)
+        for out in args.export:
+            try:
+                results.append(export_saved_path(npz, out, "optimized", None, option="--export"))
+                bar.update(len(results), note=Path(out).name)
+            except InputError as e:
+                kept = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
+                raise InputError(f"--export {out}: not written: {e}{kept}") from None
+    return results
 
 
 def _check_video_out(out, size) -> None:
@@ -153,7 +208,7 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
 
 def render_video(out, model, solution, keyframes, args):
     """Side-by-side video of the plain spline and the optimized path, keyframes marked."""
-    from runner.render import Track, render_tracks
+    from runner.render import Track, frame_times, render_tracks
     from solver.terms.penetration import Penetration
 
     t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
@@ -164,18 +219,10 @@ def render_video(out, model, solution, keyframes, args):
         tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
     # keyframes with free components filled: the poses the animator set
     kq = solution.initial.values[solution.initial.is_keyframe]
-    quiet = getattr(args, "quiet", False)
+    from runner.console import Steps
 
-    tty = sys.stdout.isatty()
-
-    def progress(i, n):
-        if quiet:
-            return
-        if tty and (i % 10 == 0 or i == n):
-            print(f"\r  rendering {i}/{n}", end="" if i < n else "\n", flush=True)
-        elif not tty and (i % 50 == 0 or i == n):
-            print(f"  rendering {i}/{n}", flush=True)
-
-    return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
-                         keyframe_times=keyframes.times, keyframe_qpos=kq,
-                         title="dynsplines: plain spline vs optimized", progress=progress)
+    n_frames = len(frame_times(float(t[0]), float(t[-1]), args.fps, args.speed))
+    with Steps(f"rendering {_rel(out)}", n_frames, getattr(args, "quiet", False), unit=" frames") as bar:
+        return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
+                             keyframe_times=keyframes.times, keyframe_qpos=kq,
+                             title="dynsplines: plain spline vs optimized", progress=lambda i, n: bar.update(i))

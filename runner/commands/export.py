@@ -30,6 +30,5 @@ def run(args) -> int:
 
     res = export_saved_path(args.path, args.to, args.which, args.fps)
     if not getattr(args, "quiet", False):
-        print(f"dynsplines: wrote {res.path} ({res.format}, {res.which}: {res.frames} frames at {res.fps:g} fps, "
-              f"{res.joints} joints, {res.size / 1024:.0f} KiB, {res.wall_time_s:.2f} s)")
+        print(f"dynsplines: wrote {res.describe()}")
     return 0

@@ -34,6 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--every", type=float, default=0.25, help="keyframe spacing [s] (default 0.25)")
     p.add_argument("--scene", default=str(DEFAULT_SCENE), help="scene MJCF (figure + surfaces)")
     p.add_argument("--model", default=None, help="figure MJCF (default: humanoid39.xml beside the scene)")
+    p.add_argument("--quiet", action="store_true", help="no progress; the 'wrote ...' line is still printed")
 
 
 def register(sub) -> None:
@@ -62,7 +63,12 @@ def run(args, command: str | None = None) -> int:
     scene = Path(args.scene)
     figure = Path(args.model) if args.model else scene.parent / "humanoid39.xml"
     model = load_model(scene)
-    reference = load_bvh_reference(args.clip, model)
+    from runner.console import Steps
+    from runner.mocap.reference import IMPORT_STAGES
+
+    with Steps(f"importing {Path(args.clip).name}", len(IMPORT_STAGES), getattr(args, "quiet", False),
+               unit=" stages") as bar:
+        reference = load_bvh_reference(args.clip, model, progress=lambda i, stage: bar.update(i, note=stage))
     keyframes = keyframes_from_reference(reference, model, every=args.every)
     out = Path(args.out)
     source = {

@@ -1,7 +1,8 @@
 """Results out: a saved path (.npz) sampled at a frame rate and written as BVH (`bvh`) or glTF binary (`gltf`).
 
-`sampling` reads the saved path and samples its optimized, plain or reference motion; the writers take
-MuJoCo `qpos` samples and the loaded model (offsets, geoms and the static scene come from the model).
+`sampling` samples the optimized, plain or reference motion of a saved path (read by
+`runner.saved_path.load_saved_path`); the writers take MuJoCo `qpos` samples and the loaded model
+(offsets, geoms and the static scene come from the model).
 `export_saved_path` is the whole of `dynsplines export`.
 """
 from __future__ import annotations
@@ -33,35 +34,43 @@ class ExportResult:
     wall_time_s: float
 
 
-def check_output_name(out: str | Path) -> str:
+    def describe(self) -> str:
+        """One line: what was written, e.g. for `wrote ...`."""
+        return (f"{self.path} ({self.format}, {self.which}: {self.frames} frames at {self.fps:g} fps, "
+                f"{self.joints} joints, {self.size / 1024:.0f} KiB, {self.wall_time_s:.2f} s)")
+
+
+def check_output_name(out: str | Path, option: str = "--to") -> str:
     """The format of output file `out` from its extension; InputError naming the choices otherwise."""
     suffix = Path(out).suffix.lower()
     if suffix not in FORMATS:
         given = f"extension {suffix!r}" if suffix else "no extension"
-        raise InputError(f"--to {out}: {given}; the output must end in one of {', '.join(FORMATS)} "
-                         f"(e.g. --to {Path(out).with_suffix('.glb').name})")
+        raise InputError(f"{option} {out}: {given}; the output must end in one of {', '.join(FORMATS)} "
+                         f"(e.g. {option} {Path(out).with_suffix('.glb').name})")
     return FORMATS[suffix]
 
 
 def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized",
-                      fps: float | None = None) -> ExportResult:
+                      fps: float | None = None, option: str = "--to") -> ExportResult:
     """Sample motion `which` of saved path `npz` at `fps` [Hz] (default: the reference clip's rate, else
-    30) and write it to `out` (.bvh or .glb, chosen by the extension), atomically.
+    30) and write it to `out` (.bvh or .glb, chosen by the extension), atomically. `option` is the
+    command-line option that named `out` (for messages).
 
     Raises:
         InputError: unknown extension, unwritable folder, unreadable path or scene, unknown or absent
             motion, bad fps, or a failed write (an earlier file at `out` is then unchanged).
     """
     from solver.model import load_model
-    from runner.export.sampling import WHICH, default_fps, load_saved_path, sample_motion
+    from runner.export.sampling import WHICH, default_fps, sample_motion
+    from runner.saved_path import load_saved_path
     from runner.files import check_writable_dir
     from solver.layout import StateLayout
 
     t0 = time.perf_counter()
-    fmt = check_output_name(out)
+    fmt = check_output_name(out, option)
     if which not in WHICH:
         raise InputError(f"--which {which!r}: unknown motion; choose one of {', '.join(WHICH)}")
-    check_writable_dir(out, "--to")
+    check_writable_dir(out, option)
     saved = load_saved_path(npz)
     model = load_model(saved.scene)
     if model.nq != saved.nq:
@@ -82,6 +91,6 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
             joints = figure_skeleton(model).count
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
-                         "space or choose another --to") from None
+                         f"space or choose another {option}") from None
     return ExportResult(Path(out), fmt, which, motion.fps, len(motion.times), joints, Path(out).stat().st_size,
                         time.perf_counter() - t0)

@@ -31,7 +31,7 @@ from solver.errors import InputError
 from solver.quaternion import align_hemispheres, conj, mul, normalize
 
 __all__ = ["MUJOCO_TO_BVH", "EULER_ORDER", "Skeleton", "figure_skeleton", "bvh_text", "write_bvh",
-           "figure_qpos_from_bvh"]
+           "is_figure_clip", "figure_qpos_from_bvh"]
 
 #: (3, 3) axis change from MuJoCo (z up, facing +x, left +y) to BVH (Y up, facing +Z, left +X): v' = M v.
 MUJOCO_TO_BVH = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
@@ -190,6 +190,13 @@ def write_bvh(path: str | Path, model, qpos: np.ndarray, fps: float) -> Skeleton
     with atomic_output(path) as tmp:
         Path(tmp).write_text(text, encoding="utf-8")
     return skeleton
+
+
+def is_figure_clip(clip, model) -> bool:
+    """True if `clip` (a BvhClip) is on the figure's own skeleton: it has a joint named after every figure
+    body (what `write_bvh` writes), so `figure_qpos_from_bvh` reads it exactly, without retargeting."""
+    names = set(clip.names)
+    return all(n in names for n in figure_skeleton(model).names)
 
 
 def figure_qpos_from_bvh(clip, model) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Sample a saved path (.npz from `--save-path`) at a frame rate: the motion an exporter writes.
+"""Sample a saved path (`runner.saved_path.load_saved_path`) at a frame rate: the motion an exporter writes.
 
 A saved path holds three motions of the figure (README "Files"):
 
@@ -14,69 +14,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
+from runner.saved_path import WHICH, SavedPath
 from solver.errors import InputError
 from solver.quaternion import align_hemispheres, normalize
 from solver.spline import interpolate
 
-__all__ = ["WHICH", "DEFAULT_FPS", "SavedPath", "Motion", "load_saved_path", "default_fps", "sample_motion",
-           "sample_times_at"]
+__all__ = ["WHICH", "DEFAULT_FPS", "Motion", "default_fps", "sample_motion", "sample_times_at"]
 
-#: the motions a saved path holds.
-WHICH = ("optimized", "plain", "reference")
 #: [Hz] sampling rate when the path has no reference clip.
 DEFAULT_FPS = 30.0
-
-_REQUIRED = ("frame_times", "frames", "plain_frame_times", "plain_frames", "keyframe_times", "keyframes",
-             "reference_times", "reference_qpos", "scene")
-
-
-@dataclass(frozen=True)
-class SavedPath:
-    """The fields of a saved path this package uses (shapes: m frames, k keyframes, r reference frames).
-
-    Attributes:
-        frame_times: (m,) [s]. frames: (m, nq). plain_frame_times: (p,) [s]. plain_frames: (p, nq).
-        keyframe_times: (k,) [s]. keyframes: (k, nq), NaN where a partial keyframe leaves a component free.
-        reference_times: (r,) [s], r = 0 without a clip. reference_qpos: (r, nq).
-        scene: the scene MJCF, resolved (relative names are relative to the repository root).
-        source: the .npz file.
-    """
-
-    frame_times: np.ndarray
-    frames: np.ndarray
-    plain_frame_times: np.ndarray
-    plain_frames: np.ndarray
-    keyframe_times: np.ndarray
-    keyframes: np.ndarray
-    reference_times: np.ndarray
-    reference_qpos: np.ndarray
-    scene: Path
-    source: Path
-
-    @property
-    def nq(self) -> int:
-        return self.frames.shape[1]
-
-    @property
-    def has_reference(self) -> bool:
-        return len(self.reference_times) >= 2
-
-    def track(self, which: str) -> tuple[np.ndarray, np.ndarray]:
-        """(times (m,) [s], frames (m, nq)) of one motion; InputError for an unknown or absent one."""
-        if which not in WHICH:
-            raise InputError(f"--which {which!r}: unknown motion; choose one of {', '.join(WHICH)}")
-        if which == "optimized":
-            return self.frame_times, self.frames
-        if which == "plain":
-            return self.plain_frame_times, self.plain_frames
-        if not self.has_reference:
-            raise InputError(f"{self.source}: --which reference, but the path has no reference motion "
-                             "(it was not made from a motion-capture clip); choose --which optimized or plain")
-        return self.reference_times, self.reference_qpos
 
 
 @dataclass(frozen=True)
@@ -87,44 +36,6 @@ class Motion:
     times: np.ndarray
     qpos: np.ndarray
     fps: float
-
-
-def load_saved_path(path: str | Path) -> SavedPath:
-    """Read a saved path (.npz written by `--save-path`).
-
-    Raises:
-        InputError: the file is missing, not an .npz, or lacks a field (the message names the file).
-    """
-    from runner.paths import REPO
-
-    p = Path(path)
-    if not p.is_file():
-        why = "it is a folder" if p.is_dir() else f"no such file (current folder: {Path.cwd()})"
-        raise InputError(f"{p}: cannot read the saved path: {why}; give the .npz written by --save-path")
-    import zipfile
-
-    if not zipfile.is_zipfile(p):
-        raise InputError(f"{p}: not an .npz file (not a zip archive); give the .npz written by --save-path")
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            missing = [k for k in _REQUIRED if k not in z.files]
-            if missing:
-                raise InputError(f"{p}: not a saved path: field(s) {', '.join(missing)} missing; give the .npz "
-                                 "written by `dynsplines animate --save-path`")
-            f = {k: np.array(z[k]) for k in _REQUIRED}
-    except InputError:
-        raise
-    except Exception as e:  # zipfile / pickle / format errors of a user file
-        raise InputError(f"{p}: not a readable .npz file ({type(e).__name__}: {e}); give the .npz written by "
-                         "--save-path") from None
-    scene = Path(str(f.pop("scene")))
-    if not scene.is_absolute():
-        scene = REPO / scene
-    nq = f["frames"].shape[1] if f["frames"].ndim == 2 else -1
-    for k in ("frames", "plain_frames"):
-        if f[k].ndim != 2 or f[k].shape[1] != nq or len(f[k]) < 2:
-            raise InputError(f"{p}: field {k!r} has shape {f[k].shape}; expected (m >= 2, nq); the file is damaged")
-    return SavedPath(**{k: np.asarray(v, float) for k, v in f.items()}, scene=scene, source=p)
 
 
 def default_fps(saved: SavedPath) -> float:

@@ -11,8 +11,15 @@ from runner.mocap.retarget import JOINT_BODIES, Reference, tidy_quaternions, cla
 from solver.layout import StateLayout
 
 
-def load_bvh_reference(path: str | Path, model) -> Reference:
-    """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion.
+#: the stages of `load_bvh_reference` its `progress` callback reports
+IMPORT_STAGES = ("parse", "retarget", "clamp", "root height", "tidy")
+
+
+def load_bvh_reference(path: str | Path, model, progress=None) -> Reference:
+    """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
+    figure's own skeleton (written by `dynsplines export --to FILE.bvh` or `--export FILE.bvh`: a joint
+    named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
+    every frame, no retargeting, no clamping, no root-height correction.
 
     Steps (runner/mocap/retarget.py docstring): parse (bvhio), drop the synthetic T-pose first frame, forward kinematics
     in metres and MuJoCo axes, rest-offset retargeting of body orientations, local joint quaternions
@@ -26,6 +33,7 @@ def load_bvh_reference(path: str | Path, model) -> Reference:
         model: the scene's MjModel (figure + floor + step box), e.g. models/run_and_step.xml; its
             figure must be models/humanoid39.xml (joint and site names). With a model that has no
             static surfaces (the figure alone) the root height is left as retargeted.
+        progress: optional progress(stages_done, next_stage) after each of `IMPORT_STAGES`.
     Returns:
         Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s];
         n = frames in the file - 1.
@@ -33,13 +41,25 @@ def load_bvh_reference(path: str | Path, model) -> Reference:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
             joint the retargeting needs is missing, or the model lacks a joint or site it needs.
     """
+    from runner.export.bvh import figure_qpos_from_bvh, is_figure_clip
+
+    step = progress or (lambda i, stage: None)
     clip = read_bvh(path)
+    step(1, "parsed")
+    if is_figure_clip(clip, model):  # our own export: the figure's qpos, read back without loss
+        qpos = figure_qpos_from_bvh(clip, model)
+        step(len(IMPORT_STAGES), "figure skeleton, read exactly")
+        return Reference(np.arange(len(qpos)) * clip.frame_time, qpos, str(path), clip.frame_time)
     layout = StateLayout.from_model(model)
     for name in ("root", *JOINT_BODIES):
         layout.joint(name)
     qpos = retarget(clip, layout)[1:]  # frame 0 is the synthetic T-pose
+    step(2, "retargeted")
     qpos, _ = clamp_hyperextension(qpos, layout)
+    step(3, "clamped")
     qpos = correct_root_height(qpos, model, clip.frame_time)
+    step(4, "root height")
     qpos = tidy_quaternions(qpos, layout)
+    step(5, "done")
     times = np.arange(len(qpos)) * clip.frame_time
     return Reference(times, qpos, str(path), clip.frame_time)

@@ -108,13 +108,9 @@ class Command:
 
 
 def optimizing(text: str) -> bool:
-    """A progress line with at least one evaluation done."""
-    for line in text.splitlines():
-        if "evals" in line:
-            n = line.split("evals")[1].split()[0]
-            if n.isdigit() and int(n) > 0:
-                return True
-    return False
+    """A progress line (off a terminal: a round's "done" or "(still optimizing)" line) with at least one
+    evaluation done."""
+    return any(int(n) > 0 for n in re.findall(r"round \d+.*?: (?:done, )?(\d+) evaluations", text))
 
 
 def test_sigint_during_optimization_keeps_the_best_path(tmp_path):
@@ -145,7 +141,7 @@ def test_sigint_while_rendering_leaves_no_partial_video(tmp_path):
                   "--speed", "0.1", *LONG)
     cmd.wait_for(optimizing)
     cmd.interrupt()  # first: stop optimizing, keep the best path, go on to write the outputs
-    cmd.wait_for(lambda text: re.search(r"rendering [1-9]\d*/", text) is not None)  # frames are being written
+    cmd.wait_for(lambda text: re.search(r"rendering .*: [1-9]\d*/", text) is not None)  # frames are being written
     cmd.interrupt()  # second, while rendering: abandon the video
     code = cmd.finish()
     stderr = cmd.err.decode()

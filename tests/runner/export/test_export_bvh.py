@@ -4,7 +4,8 @@ import pytest
 
 from runner.mocap.bvh import read_bvh
 from runner.export.bvh import EULER_ORDER, figure_qpos_from_bvh, figure_skeleton, write_bvh
-from runner.export.sampling import WHICH, default_fps, load_saved_path, sample_motion
+from runner.export.sampling import WHICH, default_fps, sample_motion
+from runner.saved_path import load_saved_path
 from solver.errors import InputError
 from solver.layout import StateLayout
 
@@ -71,3 +72,23 @@ def test_clip_without_figure_joints_is_refused(scene_model):
     clip = read_bvh(MODELS / "cmu" / "127_33.bvh")
     with pytest.raises(InputError, match="not on the figure's skeleton"):
         figure_qpos_from_bvh(clip, scene_model)
+
+
+def test_our_bvh_of_the_127_33_reference_reads_back_as_the_reference(tmp_path, scene_model):
+    """The reference motion (CMU 127_33 retargeted) exported as BVH is a clip on the figure's own skeleton:
+    the importer recognizes it and reads it without retargeting (every frame, same qpos)."""
+    from runner.export.bvh import is_figure_clip
+    from runner.mocap.reference import load_bvh_reference
+    from runner.paths import MODELS
+
+    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", scene_model)
+    assert not is_figure_clip(read_bvh(MODELS / "cmu" / "127_33.bvh"), scene_model)
+    out = tmp_path / "ref.bvh"
+    write_bvh(out, scene_model, ref.qpos, 1.0 / ref.frame_time)
+    assert is_figure_clip(read_bvh(out), scene_model)
+    back = load_bvh_reference(out, scene_model)
+    layout = StateLayout.from_model(scene_model)
+    assert back.qpos.shape == ref.qpos.shape and back.frame_time == pytest.approx(ref.frame_time, rel=1e-9)
+    assert np.abs(back.qpos[:, :3] - ref.qpos[:, :3]).max() < 1e-6  # [m]
+    assert rotation_error(back.qpos, ref.qpos, layout) < 1e-6  # [rad]
+    assert np.allclose(back.times, ref.times)

@@ -12,7 +12,8 @@ import pygltflib
 import pytest
 
 from runner.export.gltf import MUJOCO_TO_GLTF, WORLD_ROTATION, Track, figure_gltf, geom_mesh, glb_bytes, write_glb
-from runner.export.sampling import default_fps, load_saved_path, sample_motion
+from runner.export.sampling import default_fps, sample_motion
+from runner.saved_path import load_saved_path
 from solver.layout import StateLayout
 from solver.quaternion import mul
 

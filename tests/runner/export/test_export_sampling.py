@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from runner.export.sampling import DEFAULT_FPS, default_fps, load_saved_path, sample_motion, sample_times_at
+from runner.export.sampling import DEFAULT_FPS, default_fps, sample_motion, sample_times_at
+from runner.saved_path import load_saved_path
 from solver.errors import InputError
 from solver.layout import StateLayout
 

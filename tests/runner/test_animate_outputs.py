@@ -1,0 +1,129 @@
+"""What `animate` / `run-and-step` write and say: --export, --quiet (progress only), the default video,
+progress lines off a terminal. The optimization is cut short (--rounds 0 --max-evals 3) and the renderer
+is replaced where a video would be made, to keep these fast."""
+import pytest
+
+from runner.cli import main
+from runner.exit_codes import EXIT_INPUT
+from runner.mocap.bvh import read_bvh
+from runner.problem_file import RUN_AND_STEP_KEYFRAMES
+
+FAST = ["--rounds", "0", "--max-evals", "3", "--subdivision", "none"]
+
+
+def animate(capsys, *argv):
+    code = main(["animate", str(RUN_AND_STEP_KEYFRAMES), *FAST, *map(str, argv)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_export_writes_each_file_after_the_path(tmp_path, capsys):
+    code, out, err = animate(capsys, "--no-render", "--export", tmp_path / "a.bvh", "--export", tmp_path / "a.glb")
+    assert code == 0, err
+    assert (tmp_path / "a.glb").read_bytes()[:4] == b"glTF"
+    clip = read_bvh(tmp_path / "a.bvh")
+    assert len(clip.names) == 12 and clip.frame_time == pytest.approx(1 / 120, rel=1e-4)
+    assert f"wrote {tmp_path / 'a.bvh'} (BVH, optimized:" in out and f"wrote {tmp_path / 'a.glb'} (glTF" in out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bvh", "a.glb"]  # no temporary path left
+
+
+@pytest.mark.parametrize("name, fragment", [("a.fbx", "--export"), ("a", "no extension")])
+def test_bad_export_name_fails_before_optimizing(tmp_path, capsys, name, fragment):
+    code, out, err = animate(capsys, "--no-render", "--export", tmp_path / name)
+    assert code == EXIT_INPUT and fragment in err and name in err
+    assert "round" not in out and "stopped" not in out
+
+
+def test_quiet_silences_progress_but_not_results(tmp_path, capsys):
+    code, out, err = animate(capsys, "--no-render", "--quiet", "--save-path", tmp_path / "p.npz")
+    assert code == 0, err
+    assert "plain spline" in out and "objective E" in out  # the summary table
+    assert "wrote" in out and "p.npz" in out and "stopped:" in out
+    assert "round 1" not in out and "importing" not in out  # progress
+    code, out, _ = animate(capsys, "--no-render", "--no-summary")
+    assert "objective E" not in out and "round 1: 8 frames (0 variable): started" in out
+
+
+def test_animate_without_out_renders_to_the_default_path(tmp_path, capsys, monkeypatch):
+    from runner.commands import animate as cmd
+    from runner.paths import RENDERS
+
+    seen = []
+
+    class Info:
+        n_frames, wall_time_s = 3, 0.0
+
+    monkeypatch.setattr(cmd, "render_video", lambda out, *a: seen.append(out) or Info())
+    code, out, err = animate(capsys)
+    assert code == 0, err
+    assert seen == [RENDERS / "run_and_step.mp4"] and "wrote renders/run_and_step.mp4" in out
+    assert cmd.default_video("walk.keyframes.json") == RENDERS / "walk.mp4"
+    assert cmd.default_video("dir/jump.json") == RENDERS / "jump.mp4"
+    code, out, err = animate(capsys, "--no-render")
+    assert len(seen) == 1 and "no video (--no-render)" in out
+
+
+class Clock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_progress_off_a_terminal_prints_rounds_once_and_a_still_line_every_5_s(monkeypatch):
+    import io
+
+    import runner.console as console
+
+    clock = Clock()
+    monkeypatch.setattr(console.time, "perf_counter", clock)
+    stream = io.StringIO()  # not a terminal
+    p = console.Progress(stream=stream)
+    p("round", {"round": 0, "frames": 15, "variable": 7})
+    for i in range(1, 121):  # 12 s of evaluations, 10 a second
+        clock.t = i / 10
+        p("eval", {"evals": i, "E": 1.0 / i})
+    p("round", {"round": 1, "frames": 20, "variable": 12})
+    clock.t = 13.0
+    p.done()
+    lines = stream.getvalue().splitlines()
+    assert [line.split(":")[0].strip() for line in lines] == [
+        "round 1", "round 1 (still optimizing)", "round 1 (still optimizing)", "round 1", "round 2", "round 2"]
+    assert "started" in lines[0] and "done, 120 evaluations" in lines[3] and "started" in lines[4]
+    assert "done, 0 evaluations" in lines[5]
+    assert console.Progress(quiet=True, stream=stream) is not None
+
+
+def test_steps_off_a_terminal_start_still_and_end_lines(monkeypatch):
+    import io
+
+    import runner.console as console
+
+    clock = Clock()
+    monkeypatch.setattr(console.time, "perf_counter", clock)
+    stream = io.StringIO()
+    with console.Steps("rendering a.mp4", 100, stream=stream, unit=" frames") as bar:
+        for i in range(1, 101):
+            clock.t = i / 10
+            bar.update(i)
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "  rendering a.mp4: 0/100" and lines[-1].startswith("  rendering a.mp4: 100/100 done")
+    assert len(lines) == 3 and "(still working): 50/100" in lines[1]
+    quiet = io.StringIO()
+    with console.Steps("x", 3, quiet=True, stream=quiet) as bar:
+        bar.update(3)
+    assert quiet.getvalue() == ""
+
+
+def test_failed_export_names_the_file_and_keeps_the_saved_path(tmp_path, capsys, monkeypatch):
+    import runner.export.bvh
+
+    def full_disk(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(runner.export.bvh, "write_bvh", full_disk)
+    code, out, err = animate(capsys, "--no-render", "--save-path", tmp_path / "p.npz", "--export", tmp_path / "a.bvh")
+    assert code == EXIT_INPUT
+    assert f"--export {tmp_path / 'a.bvh'}: not written: cannot write" in err and "No space left" in err
+    assert "the path is saved in" in err and (tmp_path / "p.npz").is_file() and not (tmp_path / "a.bvh").exists()
