@@ -54,7 +54,7 @@ from typing import Sequence
 
 import numpy as np
 
-from solver.contacts import FEET, SITES, Contact, contact_mask, site_positions
+from solver.contacts import FEET, SITES, Contact, contact_mask
 from solver.errors import InputError
 
 #: a site is on the ground for the PhysDiff skate below this height [m].

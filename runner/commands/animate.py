@@ -15,12 +15,13 @@ from runner.console import Progress, StopRequest, summary_table
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.files import check_writable_dir
 from runner.paths import RENDERS, display_path as _rel
+from runner.render.side_by_side import check_video_out as _check_video_out, render_video
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_problem
 from runner.saved_path import save_path_npz
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.layout import CONTACT_SITES
-from solver.metrics import path_metrics, sample_times
+from solver.metrics import path_metrics
 from solver.optimize import Status
 from solver.problem import figure_objective, parse_terms
 from solver.solve import solve
@@ -124,19 +125,6 @@ def run_animate(args) -> int:
     return code
 
 
-def _check_video_out(out, size) -> None:
-    """The video's name and size are checked before the optimization (render_tracks checks again)."""
-    from runner.render import VIDEO_SUFFIXES, parse_size
-
-    if Path(out).suffix.lower() not in VIDEO_SUFFIXES:
-        raise InputError(f"--out {out}: a video file must end in one of {', '.join(VIDEO_SUFFIXES)}; "
-                         "use e.g. --out clip.mp4, or --no-render")
-    w, h = parse_size(size)
-    if w % 2 or h % 2:
-        raise InputError(f"--size {w}x{h}: width and height must be even (H.264 video); e.g. --size "
-                         f"{w + w % 2}x{h + h % 2}")
-
-
 def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
     """Keyframes are hard constraints: a contact site a keyframe puts inside a surface stays there.
     Say so before optimizing (the optimizer can only fix the in-betweens)."""
@@ -149,33 +137,3 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
             print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) puts "
                   f"{site} {1000 * row.max():.1f} mm inside a surface; keyframes are met exactly, so that "
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
-
-
-def render_video(out, model, solution, keyframes, args):
-    """Side-by-side video of the plain spline and the optimized path, keyframes marked."""
-    from runner.render import Track, render_tracks
-    from solver.terms.penetration import Penetration
-
-    t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
-    pen = Penetration(model, margin=0.0)
-    tracks = []
-    for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames)):
-        Y = fs.path(t)
-        tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
-    # keyframes with free components filled: the poses the animator set
-    kq = solution.initial.values[solution.initial.is_keyframe]
-    quiet = getattr(args, "quiet", False)
-
-    tty = sys.stdout.isatty()
-
-    def progress(i, n):
-        if quiet:
-            return
-        if tty and (i % 10 == 0 or i == n):
-            print(f"\r  rendering {i}/{n}", end="" if i < n else "\n", flush=True)
-        elif not tty and (i % 50 == 0 or i == n):
-            print(f"  rendering {i}/{n}", flush=True)
-
-    return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
-                         keyframe_times=keyframes.times, keyframe_qpos=kq,
-                         title="dynsplines: plain spline vs optimized", progress=progress)
