@@ -179,7 +179,7 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
     for label, key, sub, fmt in _PLAUSIBILITY_ROWS:
         vals = [c[key][sub] if sub else c[key] for c in cols]
         rows.append((label, [fmt.format(v) for v in vals]))
-    w = max(max(len(r[0]) for r in rows), 34) + 2
+    w = max(max(len(r[0]) for r in rows), 38) + 2
     head = f"{'':{w}}{'reference':>14}{'plain':>14}{'optimized':>14}"
     lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz; "
              "README \"Motion metrics\")", head, "-" * len(head)]

@@ -99,6 +99,29 @@ def _sample(frames: FrameSet, times: np.ndarray, layout: StateLayout) -> np.ndar
     return Y
 
 
+def reference_motion_metrics(model, layout: StateLayout, solution, reference, contacts) -> dict:
+    """`motion_metrics` of the plain spline and the optimized path against the reference clip, over the
+    reference's frames within the keyframes' time span (contact times shifted with them).
+
+    Returns:
+        {"plain": ..., "optimized": ...}, each a `solver.motion_metrics.motion_metrics` dict.
+    """
+    from solver.contacts import Contact
+
+    t0, t1 = solution.initial.times[0], solution.initial.times[-1]
+    keep = (reference.times >= t0 - 1e-9) & (reference.times <= t1 + 1e-9)
+    times, qpos = reference.times[keep], reference.qpos[keep]
+    if len(times) < 4:
+        raise InputError(f"the keyframes span {t0:g}..{t1:g} s, which holds {len(times)} frames of the reference "
+                         f"{reference.source}; motion metrics need at least 4")
+    shift = float(times[0])
+    shifted = [Contact(c.site, c.start - shift, c.end - shift, c.surface) for c in contacts
+               if c.end >= shift and c.start <= times[-1]]
+    fps = 1.0 / reference.frame_time
+    return {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted)
+            for label, fs in (("plain", solution.initial), ("optimized", solution.frames))}
+
+
 def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=print) -> dict:
     """Turn a BVH clip into keyframes, an optimized path and its metrics (module docstring).
 
@@ -183,8 +206,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     plain_m = path_metrics(model, initial.times, initial.values, keyframes)
     opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
     fps = 1.0 / ref.frame_time
-    motion = {label: motion_metrics(model, _sample(fs, ref.times, layout), fps, ref.qpos, contacts)
-              for label, fs in (("plain", solution.initial), ("optimized", solution.frames))}
+    motion = reference_motion_metrics(model, layout, solution, ref, info.contacts)
     summary = summary_table(plain_m, opt_m, solution, weights,
                             dict(zip(objective.names, objective.weights.tolist())))
     table = motion_metrics_table(motion["plain"], motion["optimized"])

@@ -11,12 +11,14 @@ from pathlib import Path
 import numpy as np
 
 from runner.animate_options import add_options, solve_options
-from runner.console import Progress, StopRequest, summary_table
+from runner.console import Progress, StopRequest, motion_metrics_table, summary_table
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.files import check_writable_dir
-from runner.paths import RENDERS, display_path as _rel
-from runner.render.side_by_side import check_video_out as _check_video_out, render_video
+from runner.paths import RENDERS
+from runner.paths import display_path as _rel
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_problem
+from runner.render.side_by_side import check_video_out as _check_video_out
+from runner.render.side_by_side import render_video
 from runner.saved_path import save_path_npz
 from solver.errors import InputError
 from solver.frames import FrameSet
@@ -93,10 +95,20 @@ def run_animate(args) -> int:
         reference = find_reference(info, model)
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
+        contacts = tuple(getattr(info, "contacts", ()) or ())
+        metrics = {"plain": plain_m, "optimized": opt_m}
+        if reference is not None:
+            from runner.pipeline import reference_motion_metrics
+            from solver.contacts import reference_contacts
+
+            if not contacts:
+                contacts = tuple(reference_contacts(model, reference.qpos, reference.frame_time))
+            metrics["motion"] = reference_motion_metrics(model, layout, solution, reference, contacts)
         if not args.quiet:
             print(summary_table(plain_m, opt_m, solution, weights,
                                 dict(zip(objective.names, objective.weights.tolist()))))
             if reference is not None:
+                print(motion_metrics_table(metrics["motion"]["plain"], metrics["motion"]["optimized"]))
                 from runner.mocap.contacts import worst_contact_distance
 
                 say(f"motion capture ({_rel(reference.source)}, retargeted, {reference.count} frames): "
@@ -104,12 +116,13 @@ def run_animate(args) -> int:
                     "of the surface under them")
         if args.save_path is not None:  # Ctrl-C until it is written only sets stop.requested
             save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
-                          {"plain": plain_m, "optimized": opt_m}, args)
+                          metrics, args, contacts=contacts)
             say(f"  wrote {_rel(args.save_path)}")
         if args.plot is not None:
             from runner.plots import plot_solution
 
-            for f in plot_solution(args.plot, model, solution, keyframes, reference, objective=objective):
+            for f in plot_solution(args.plot, model, solution, keyframes, reference, objective=objective,
+                                   contacts=contacts):
                 say(f"  wrote {_rel(f)}")
     interrupted = solution.status is Status.INTERRUPTED or stop.requested  # also Ctrl-C while saving
     code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
