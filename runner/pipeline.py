@@ -210,8 +210,13 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     summary = summary_table(plain_m, opt_m, solution, weights,
                             dict(zip(objective.names, objective.weights.tolist())))
     table = motion_metrics_table(motion["plain"], motion["optimized"])
+    from runner.mocap.contacts import worst_contact_distance
+
+    contact_mm = 1000.0 * worst_contact_distance(ref, model)
     say(summary)
     say(table)
+    say(f"motion capture ({clip.name}, retargeted, {ref.count} frames): feet in contact stay within "
+        f"{contact_mm:.1f} mm of the surface under them")
 
     # 5: outputs
     metrics = {"plain": plain_m, "optimized": opt_m, "motion": motion}
@@ -227,6 +232,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "frames": ref.count, "fps": fps, "keyframes": keyframes.count,
         "partial": int(keyframes.is_partial.sum()), "contacts": len(info.contacts),
         "variable_frames": solution.frames.n_variable, "solve_time_s": solution.wall_time_s,
+        "max_penetration_mm": opt_m["max_penetration_mm"], "keyframe_error": opt_m.get("keyframe_error"),
+        "reference_contact_distance_mm": contact_mm,
         "metrics": metrics, "scene_fitted": fitted, "outputs": {k: str(v) for k, v in paths.items()},
     }
     report = {k: v for k, v in result.items() if k != "metrics"} | {"metrics": metrics}
