@@ -185,7 +185,8 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
              "README \"Motion metrics\")", head, "-" * len(head)]
     lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in vals) for label, vals in rows]
     lines.append("-" * len(head))
-    for (label, pm, px), (_, om, ox) in zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"])):
+    pairs = zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"]), strict=True)
+    for (label, pm, px), (_, om, ox) in pairs:
         cells = ["-"] + [f"{m:.2f}" + (f" / {x:.1f}" if np.isfinite(x) else "") for m, x in ((pm, px), (om, ox))]
         lines.append(f"{label + (' mean / max' if np.isfinite(px) else ' mean'):{w}}"
                      + "".join(f"{c:>14}" for c in cells))

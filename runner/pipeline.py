@@ -208,7 +208,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     fps = 1.0 / ref.frame_time
     motion = reference_motion_metrics(model, layout, solution, ref, info.contacts)
     summary = summary_table(plain_m, opt_m, solution, weights,
-                            dict(zip(objective.names, objective.weights.tolist())))
+                            dict(zip(objective.names, objective.weights.tolist(), strict=True)))
     table = motion_metrics_table(motion["plain"], motion["optimized"])
     from runner.mocap.contacts import worst_contact_distance
 

@@ -49,8 +49,8 @@ def edit_bvh(src, dst, *, seconds: float | None = None, stride: int = 1, order: 
     new = data.copy()
     for _, names in chans:
         idx = list(range(col, col + len(names)))
-        pos = [i for i, c in zip(idx, names) if c.endswith("position")]
-        rot = [i for i, c in zip(idx, names) if c.endswith("rotation")]
+        pos = [i for i, c in zip(idx, names, strict=True) if c.endswith("position")]
+        rot = [i for i, c in zip(idx, names, strict=True) if c.endswith("rotation")]
         if scale != 1.0:
             new[:, pos] = data[:, pos] * scale
         if order is not None and rot:
@@ -61,7 +61,7 @@ def edit_bvh(src, dst, *, seconds: float | None = None, stride: int = 1, order: 
         col += len(names)
     frames = np.concatenate([new[:1], new[1:][::stride]])
     if seconds is not None:
-        frames = frames[: 1 + int(round(seconds / (frame_time * stride))) + 1]
+        frames = frames[: 1 + round(seconds / (frame_time * stride)) + 1]
     text = out_head + ["MOTION", f"Frames: {len(frames)}", f"Frame Time: {frame_time * stride:.7f}"]
     text += [" ".join(f"{v:.6f}" for v in row) for row in frames]
     Path(dst).write_text("\n".join(text) + "\n")

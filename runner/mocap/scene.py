@@ -81,7 +81,8 @@ def name_surfaces(model, reference: Reference, contacts: list[Contact]) -> list[
         i = int(np.clip(round((c.start + c.end) / 2 / reference.frame_time), 0, reference.count - 1))
         p = site_positions(model, reference.qpos[i:i + 1], (c.site,))[0, 0]
         name, top = (planes[0] if planes else ""), -np.inf
-        for b, (ctr, rot, half) in enumerate(zip(surfaces.box_center, surfaces.box_rot, surfaces.box_half)):
+        boxes = zip(surfaces.box_center, surfaces.box_rot, surfaces.box_half, strict=True)
+        for b, (ctr, rot, half) in enumerate(boxes):
             local = (p - ctr) @ rot
             z = ctr[2] + np.abs(rot[2]) @ half
             if abs(local[0]) <= half[0] and abs(local[1]) <= half[1] and z > top:
