@@ -263,10 +263,14 @@ def read_contacts(entries: Any, src: str) -> tuple[Contact, ...]:
 
 
 def contacts_document(contacts) -> list[dict]:
-    """The "contacts" field for Contacts: one entry per site contact, times rounded like the keyframes."""
+    """The "contacts" field for Contacts: one entry per site contact, times rounded outward to 6 decimals
+    (start down, end up), so a contact read back still holds every frame it held."""
+    scale = 10.0**_DIGITS
     out = []
     for c in contacts:
-        entry: dict[str, Any] = {"site": c.site, "start": float(_num(c.start)), "end": float(_num(c.end))}
+        start = math.floor(round(c.start * scale, 3)) / scale
+        end = math.ceil(round(c.end * scale, 3)) / scale
+        entry: dict[str, Any] = {"site": c.site, "start": start, "end": end}
         if c.surface:
             entry["surface"] = c.surface
         out.append(entry)

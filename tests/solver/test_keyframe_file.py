@@ -202,6 +202,11 @@ def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
     assert info.contacts[2:] == (Contact("r_heel", 0.5, 0.6, "box0"), Contact("r_toe", 0.5, 0.6, "box0"))
     _, info = read_keyframes(write_json(tmp_path, minimal(), "none.json"), layout)
     assert info.contacts == ()
+    # times are rounded outward: a contact keeps every frame it held (frame times k * 0.0083333)
+    odd = [Contact("r_toe", 3 * 0.0083333, 28 * 0.0083333)]
+    write_keyframes(out, kf, layout, contacts=odd)
+    back = read_keyframes(out, layout)[1].contacts[0]
+    assert back.start <= odd[0].start and back.end >= odd[0].end and back.end - odd[0].end < 1e-6
 
 
 @pytest.mark.parametrize("contacts, shown", [
