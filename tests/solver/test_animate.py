@@ -41,7 +41,7 @@ def test_every_public_name_exists_once():
 def test_default_options_are_the_command_lines():
     """The settings `dynsplines animate` uses without options (runner/animate.py: add_options and
     solve_options), field by field."""
-    from runner.animate import default_args, solve_options
+    from runner.animate_options import default_args, solve_options
 
     for weights in (solver.parse_terms(None), {"unit": 1.0, "smooth": 0.05, "penetration": 0.0}):
         assert solver.default_options(weights) == solve_options(default_args(), weights)
