@@ -109,7 +109,8 @@ def reference_motion_metrics(model, layout: StateLayout, solution, reference, co
     from solver.contacts import Contact
 
     t0, t1 = solution.initial.times[0], solution.initial.times[-1]
-    keep = (reference.times >= t0 - 1e-9) & (reference.times <= t1 + 1e-9)
+    tol = 2e-6  # keyframe times in a file are rounded to 1e-6 s: the end frames still count
+    keep = (reference.times >= t0 - tol) & (reference.times <= t1 + tol)
     times, qpos = reference.times[keep], reference.qpos[keep]
     if len(times) < 4:
         raise InputError(f"the keyframes span {t0:g}..{t1:g} s, which holds {len(times)} frames of the reference "
