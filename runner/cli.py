@@ -16,6 +16,7 @@ from runner.commands.bench import register as register_bench
 from runner.commands.export import register as register_export
 from runner.commands.fig10 import register as register_fig10
 from runner.commands.keyframes_from_bvh import register as register_keyframes_from_bvh
+from runner.commands.mocap import register as register_mocap
 from runner.commands.orient import register as register_orient
 from runner.commands.view import register as register_view
 from runner.exit_codes import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED
@@ -23,7 +24,7 @@ from runner.parser import OneLineParser
 from solver.errors import DynsplinesError, InputError
 
 #: every subcommand's `register`, in the order of `dynsplines --help`
-SUBCOMMANDS = (register_animate, register_keyframes_from_bvh, register_export, register_view, register_bench,
+SUBCOMMANDS = (register_animate, register_mocap, register_keyframes_from_bvh, register_export, register_view, register_bench,
                register_orient, register_fig10)
 
 

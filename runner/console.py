@@ -216,3 +216,65 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
     lines.append("terms (weight; -> after penalty continuation): " + ", ".join(terms))
     return "\n".join(lines)
 
+
+
+#: rows of `motion_metrics_table`: (label, key in a `plausibility` block, sub-key or None, format)
+_PLAUSIBILITY_ROWS = (
+    ("penetration mean [mm]", "penetration_mm", "mean", "{:.2f}"),
+    ("penetration max [mm]", "penetration_mm", "max", "{:.2f}"),
+    ("float, ref. contacts [mm]", "float_contact_mm", None, "{:.1f}"),
+    ("float, PhysDiff [mm]", "float_physdiff_mm", None, "{:.1f}"),
+    ("skate, PhysDiff [mm]", "skate_mm", None, "{:.2f}"),
+    ("skate, ref. contacts [mm]", "skate_contact_mm", None, "{:.2f}"),
+    ("Phys-Err [mm]", "phys_err_mm", None, "{:.1f}"),
+    ("skating ratio, GMD", "skating_ratio", None, "{:.3f}"),
+    ("skating ratio, ref. contacts", "skating_ratio_contacts", None, "{:.3f}"),
+    ("flight time [s]", "flight_time_s", None, "{:.3f}"),
+    ("jerk root [m/s^3]", "jerk_root_m_s3", None, "{:.0f}"),
+    ("jerk sites [m/s^3]", "jerk_sites_m_s3", None, "{:.0f}"),
+)
+
+
+def _accuracy_rows(error: dict) -> list[tuple[str, float, float]]:
+    """(label, mean, max) of the accuracy figures of one `motion_metrics` "error" block."""
+    joints = error["joint_orientation_deg"]
+    sites = error["site_position_cm"]
+    return [
+        ("root position error [cm]", error["root_position_cm"]["mean"], error["root_position_cm"]["max"]),
+        ("joint angle error [deg]", float(np.mean([v["mean"] for v in joints.values()])),
+         max(v["max"] for v in joints.values())),
+        ("contact-site error [cm]", float(np.mean([v["mean"] for v in sites.values()])),
+         max(v["max"] for v in sites.values())),
+        ("acceleration error root [m/s^2]", error["accel_error_root_m_s2"], float("nan")),
+        ("acceleration error sites [m/s^2]", error["accel_error_sites_m_s2"], float("nan")),
+    ]
+
+
+def motion_metrics_table(plain: dict, optimized: dict) -> str:
+    """The motion metrics against the reference (`solver.motion_metrics`), reference | plain | optimized.
+
+    Args:
+        plain, optimized: `motion_metrics(...)` of the plain spline and of the optimized path, both
+            sampled at the reference's frames; the "reference" column is their (equal) "reference" block.
+    Returns:
+        the table as text: plausibility rows for all three, then the accuracy rows (mean, max over
+        frames; the joint angle is the mean over joints of each joint's mean, and the largest max).
+    """
+    ref = plain["reference"]
+    cols = (ref, plain["path"], optimized["path"])
+    rows = []
+    for label, key, sub, fmt in _PLAUSIBILITY_ROWS:
+        vals = [c[key][sub] if sub else c[key] for c in cols]
+        rows.append((label, [fmt.format(v) for v in vals]))
+    w = max(max(len(r[0]) for r in rows), 38) + 2
+    head = f"{'':{w}}{'reference':>14}{'plain':>14}{'optimized':>14}"
+    lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz; "
+             "README \"Motion metrics\")", head, "-" * len(head)]
+    lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in vals) for label, vals in rows]
+    lines.append("-" * len(head))
+    pairs = zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"]), strict=True)
+    for (label, pm, px), (_, om, ox) in pairs:
+        cells = ["-"] + [f"{m:.2f}" + (f" / {x:.1f}" if np.isfinite(x) else "") for m, x in ((pm, px), (om, ox))]
+        lines.append(f"{label + (' mean / max' if np.isfinite(px) else ' mean'):{w}}"
+                     + "".join(f"{c:>14}" for c in cells))
+    return "\n".join(lines)

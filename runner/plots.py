@@ -1,7 +1,7 @@
 """`--plot DIR`: figures of what the optimization did (matplotlib, Agg backend, PNG).
 
     foot_heights.png    height of the four contact sites above the surface below them [mm] over time:
-                        plain spline, optimized, motion capture; keyframe times marked
+                        plain spline, optimized, motion capture; keyframe times marked, contacts shaded
     dynamics.png        joint torque and root residual force over time (plain vs optimized), flight
                         phases shaded (the definitions of `solver.metrics`)
     objective.png       the objective E after each evaluation, rounds and weight boosts marked
@@ -66,7 +66,7 @@ def _shade(ax, t, mask, color, label=None):
         ax.axvspan(t[a], t[b], color=color, alpha=0.15, lw=0, label=label if i == 0 else None, zorder=0)
 
 
-def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 500.0) -> Path:
+def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 500.0, contacts=()) -> Path:
     """Heights of the contact sites above the surface below them, one panel per site.
 
     Args:
@@ -74,6 +74,8 @@ def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 5
         tracks: {label: (frame_times (m,), frames (m, nq))} splines, or {label: (times, qpos, "samples")}
             for sampled motion (the motion capture).
         keyframe_times: (k,) [s]. rate: samples per second of the splines.
+        contacts: `solver.contacts.Contact`s (the reference's or the keyframe file's), shaded green on
+            their site's panel over [start, end], labelled with the surface.
     """
     import mujoco
 
@@ -104,10 +106,23 @@ def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 5
         ax.axhline(0.0, color="k", lw=0.8)
         ax.axhspan(-1e4, 0.0, color="#d62728", alpha=0.06, lw=0)
         _mark_keyframes(ax, keyframe_times, label=(k == 0))
+        mine = [c for c in contacts if c.site == name]
+        for i, c in enumerate(mine):
+            ax.axvspan(c.start, c.end, color="#2ca02c", alpha=0.15, lw=0, zorder=0,
+                       label="contact (reference)" if i == 0 else None)
+            if c.surface:
+                ax.text((c.start + c.end) / 2, 0.97, c.surface, transform=ax.get_xaxis_transform(),
+                        ha="center", va="top", fontsize=7, color="#2ca02c")
         ax.set_ylabel(f"{name}\nheight [mm]")
         ax.set_ylim(max(lo, -150.0) - 15.0, hi + 0.25 * (hi - lo))  # headroom for the legend
         ax.grid(alpha=0.3)
-    axes[0].legend(loc="upper left", ncol=4, fontsize=9, framealpha=0.9)
+    handles, labels = [], []
+    for ax in axes:  # the contact label may be on any panel
+        for h_, l_ in zip(*ax.get_legend_handles_labels()):
+            if l_ not in labels:
+                handles.append(h_)
+                labels.append(l_)
+    axes[0].legend(handles, labels, loc="upper left", ncol=5, fontsize=9, framealpha=0.9)
     axes[0].set_title("Contact-site height above the surface below it (floor or step top); below 0 = inside "
                       "the surface;\nthe jumps are a site crossing the step's edge", fontsize=10)
     axes[-1].set_xlabel("time [s]")
@@ -222,14 +237,14 @@ def plot_euler_lagrange(path, before: tuple, after: tuple, keyframe_times, chose
     return Path(path)
 
 
-def plot_solution(directory, model, solution, keyframes, reference=None, objective=None) -> list[Path]:
+def plot_solution(directory, model, solution, keyframes, reference=None, objective=None, contacts=()) -> list[Path]:
     """Write the figures of a solved run into `directory` (created if missing).
 
     Args:
         directory: output folder. model: the scene's MjModel. solution: `solver.solve.Solution`.
         keyframes: the keyframes. reference: motion capture (`.times`, `.qpos`) or None.
         objective: the solved Objective, for the Euler-Lagrange scores after refinement (the figure
-            is skipped without it).
+            is skipped without it). contacts: Contacts shaded in the foot-height plot.
     Returns:
         the written paths.
     """
@@ -242,7 +257,7 @@ def plot_solution(directory, model, solution, keyframes, reference=None, objecti
               "optimized": (solution.frames.times, solution.frames.values)}
     if reference is not None and len(reference.times):
         tracks["motion capture"] = (reference.times, reference.qpos, "samples")
-    out.append(plot_foot_heights(d / "foot_heights.png", model, tracks, keyframes.times))
+    out.append(plot_foot_heights(d / "foot_heights.png", model, tracks, keyframes.times, contacts=contacts))
     try:
         series = {label: dynamics_series(model, fs.times, fs.values, rate=500.0)
                   for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames))}

@@ -3,7 +3,9 @@
 Fields (README "The saved path"): frame_times (m,) [s], frames (m, nq), frame_is_keyframe (m,),
 keyframe_times (k,), keyframes (k, nq), keyframe_mask (k, nq), plain_frame_times, plain_frames,
 reference_times, reference_qpos (motion capture, may be empty), scene (repository-relative path),
-wall_time_s, objective_trace, status, metrics_json, options_json, versions_json.
+wall_time_s, objective_trace, status, metrics_json, options_json, versions_json, and contacts (a structured
+array: site, start, end, surface; the reference's or the keyframe file's contacts, may be empty; files
+written before it have none).
 """
 from __future__ import annotations
 
@@ -37,8 +39,26 @@ def versions() -> dict:
     return out
 
 
-def save_path_npz(path, solution, keyframes, reference, scene_path, weights, options, metrics, args=None):
-    """Write the optimized path (.npz) atomically. Fields: README "The saved path"."""
+#: dtype of the `contacts` field: one row per site contact
+CONTACT_DTYPE = np.dtype([("site", "U16"), ("start", "f8"), ("end", "f8"), ("surface", "U64")])
+
+
+def contacts_array(contacts) -> np.ndarray:
+    """`solver.contacts.Contact`s as the structured `contacts` field (CONTACT_DTYPE)."""
+    return np.array([(c.site, c.start, c.end, c.surface) for c in contacts or ()], dtype=CONTACT_DTYPE)
+
+
+def contacts_from_array(arr) -> list:
+    """The `contacts` field back as `solver.contacts.Contact`s."""
+    from solver.contacts import Contact
+
+    return [Contact(str(r["site"]), float(r["start"]), float(r["end"]), str(r["surface"])) for r in arr]
+
+
+def save_path_npz(path, solution, keyframes, reference, scene_path, weights, options, metrics, args=None,
+                  contacts=None):
+    """Write the optimized path (.npz) atomically. Fields: README "The saved path"; `contacts`:
+    `solver.contacts.Contact`s (or None: an empty field)."""
     scene_rel = repo_relative(scene_path)
     opts = {"weights": weights, "solve": asdict(options)}
     if args is not None:
@@ -62,6 +82,7 @@ def save_path_npz(path, solution, keyframes, reference, scene_path, weights, opt
         metrics_json=np.array(json.dumps(metrics, default=float)),
         options_json=np.array(json.dumps(opts, default=str)),
         versions_json=np.array(json.dumps(versions())),
+        contacts=contacts_array(contacts),
     )
     try:
         with atomic_output(path) as tmp:

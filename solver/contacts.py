@@ -36,10 +36,12 @@ from typing import Sequence
 import numpy as np
 
 from solver.errors import InputError
+from solver.layout import CONTACT_SITES
 
-#: the contact sites of the figure (models/humanoid39.xml), in the order of `site_pos` arrays.
-SITES: tuple[str, ...] = ("l_heel", "l_toe", "r_heel", "r_toe")
-#: feet -> their contact sites.
+#: the contact sites of the figure, in the order of `site_pos` arrays: `solver.layout.CONTACT_SITES`
+#: (the name kept for the callers of this module).
+SITES: tuple[str, ...] = CONTACT_SITES
+#: feet -> their contact sites (short foot names "l", "r": the site-name prefixes).
 FEET: dict[str, tuple[str, str]] = {"l": ("l_heel", "l_toe"), "r": ("r_heel", "r_toe")}
 
 #: a site enters contact below this height above the surface under it [m] ...
@@ -204,29 +206,6 @@ def touchdowns_liftoffs(contacts: Sequence[Contact], per_foot: bool = True
     return (sorted((c.start, c.site) for c in cs), sorted((c.end, c.site) for c in cs))
 
 
-def surface_height_under(points: np.ndarray, surfaces) -> np.ndarray:
-    """(...,) height [m] of the highest static surface under each (..., 3) point; -inf if none.
-
-    A non-vertical plane counts everywhere (its height at the point's x, y); a box counts where the
-    point's x, y lie within its footprint, with its top face as the surface (boxes upright: rotated
-    about z only). `surfaces`: solver.surfaces.StaticSurfaces. (The same rule as
-    runner/bvh_import.py `surface_height_under`, kept here so solver/ does not import runner/.)
-    """
-    pts = np.asarray(points, float)
-    h = np.full(pts.shape[:-1], -np.inf)
-    for p0, nrm in zip(surfaces.plane_point, surfaces.plane_normal):
-        if abs(nrm[2]) < 1e-6:
-            continue
-        z = p0[2] - (nrm[0] * (pts[..., 0] - p0[0]) + nrm[1] * (pts[..., 1] - p0[1])) / nrm[2]
-        h = np.maximum(h, z)
-    for c, rot, half in zip(surfaces.box_center, surfaces.box_rot, surfaces.box_half):
-        local = (pts - c) @ rot
-        inside = (np.abs(local[..., 0]) <= half[0]) & (np.abs(local[..., 1]) <= half[1])
-        top = c[2] + np.abs(rot[2]) @ half
-        h = np.where(inside, np.maximum(h, top), h)
-    return h
-
-
 def site_positions(model, qpos: np.ndarray, sites: Sequence[str] = SITES) -> np.ndarray:
     """(n, s, 3) world positions [m] of the named sites for (n, nq) qpos (mj_kinematics, site_xpos).
 
@@ -255,7 +234,7 @@ def site_heights(model, site_pos: np.ndarray) -> np.ndarray:
     """(n, s) height [m] of each site above the surface under it in the model's scene."""
     from solver.surfaces import StaticSurfaces
 
-    return site_pos[..., 2] - surface_height_under(site_pos, StaticSurfaces.from_model(model))
+    return StaticSurfaces.from_model(model).height_above(site_pos)
 
 
 def reference_contacts(model, qpos: np.ndarray, frame_time: float, **thresholds) -> list[Contact]:

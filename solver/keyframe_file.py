@@ -8,6 +8,10 @@ Format (models/README.md has a full example)::
       "scene": "run_and_step.xml",          # the scene (figure + floor + boxes), relative to this file
       "source": {"clip": ..., "command": ..., "hand_edits": ...},   # provenance, free-form strings
       "terms": {"penetration": 1.0},        # optional objective weights, passed through
+      "contacts": [                         # optional: contact sites on surfaces over [start, end] s
+        {"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"},
+        {"foot": "right", "start": 0.3, "end": 0.5}             # a foot: its heel and its toe
+      ],
       "keyframes": [
         {"time": 0.0, "joints": {"root": [x, y, z, qw, qx, qy, qz], "l_hip": [qw, qx, qy, qz], ...}},
         {"time": 0.25, "joints": {"root": [x, y, z, qw, qx, qy, qz], "l_knee": [qw, null, null, null]}}
@@ -32,12 +36,14 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from solver.contacts import Contact
 from solver.errors import InputError
 from solver.keyframes import Keyframes
-from solver.layout import StateLayout
+from solver.layout import CONTACT_SITES, FEET, StateLayout
 
 FORMAT = "dynsplines.keyframes/1"
-_TOP_KEYS = {"format", "model", "scene", "source", "terms", "keyframes", "comment"}
+_TOP_KEYS = {"format", "model", "scene", "source", "terms", "contacts", "keyframes", "comment"}
+_CONTACT_KEYS = {"site", "foot", "start", "end", "surface", "comment"}
 _KEYFRAME_KEYS = {"time", "joints", "comment"}
 _JSON_CONSTANTS = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
 _DIGITS = 6  # decimals written: 1 micrometre, 1e-6 of a unit quaternion
@@ -53,6 +59,8 @@ class KeyframeFileInfo:
         scene: the scene's MJCF, resolved likewise (None if absent).
         source: the "source" object (provenance), {} if absent.
         terms: the "terms" object (objective weights by term name), {} if absent; passed through.
+        contacts: the "contacts" list as `solver.contacts.Contact`s, a foot's entry expanded to its
+            heel and toe (`solver.layout.FEET`), in file order; () if absent.
     """
 
     path: Path
@@ -60,6 +68,7 @@ class KeyframeFileInfo:
     scene: Path | None
     source: dict = field(default_factory=dict)
     terms: dict = field(default_factory=dict)
+    contacts: tuple[Contact, ...] = ()
 
 
 def _is_number(v: Any) -> bool:
@@ -199,8 +208,76 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
     terms = doc.get("terms", {})
     if not isinstance(terms, dict):
         raise InputError(f"{src}: field 'terms' is {terms!r}; it must be an object {{term name: weight}}")
+    contacts = read_contacts(doc.get("contacts", []), src)
     keyframes = Keyframes(times, values, mask, source=src)
-    return keyframes, KeyframeFileInfo(p, resolve("model"), resolve("scene"), dict(source), dict(terms))
+    return keyframes, KeyframeFileInfo(p, resolve("model"), resolve("scene"), dict(source), dict(terms),
+                                       contacts)
+
+
+def read_contacts(entries: Any, src: str) -> tuple[Contact, ...]:
+    """The "contacts" field of a keyframe file as Contacts (a foot expanded to its heel and toe).
+
+    Each entry is {"site": one of CONTACT_SITES | "foot": "left" | "right", "start": s, "end": s,
+    "surface": name (optional, "" = whichever surface is under the site), "comment": optional}.
+
+    Raises:
+        InputError: naming the file, the field ("contacts", entry index, key), the value and the fix.
+    """
+    if not isinstance(entries, list):
+        raise InputError(f"{src}: field 'contacts' is a {type(entries).__name__}; it must be a list of "
+                         '{"site": "l_toe", "start": s, "end": s} or {"foot": "left", "start": s, "end": s}')
+    out: list[Contact] = []
+    for i, c in enumerate(entries):
+        where = f"{src}: contacts[{i}]"
+        if not isinstance(c, dict):
+            raise InputError(f"{where} is {c!r}; a contact is an object "
+                             '{"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"}')
+        extra = sorted(set(c) - _CONTACT_KEYS)
+        if extra:
+            raise InputError(f"{where}: unknown field(s) {', '.join(map(repr, extra))}; a contact has 'site' or "
+                             "'foot', 'start', 'end' and optionally 'surface' and 'comment'")
+        if ("site" in c) == ("foot" in c):
+            raise InputError(f"{where}: give exactly one of 'site' ({', '.join(CONTACT_SITES)}) or 'foot' "
+                             f"({', '.join(FEET)})")
+        if "site" in c:
+            if c["site"] not in CONTACT_SITES:
+                raise InputError(f"{where}: 'site' is {c['site']!r}; the contact sites are "
+                                 f"{', '.join(CONTACT_SITES)} (or use 'foot': {' or '.join(map(repr, FEET))})")
+            sites: tuple[str, ...] = (c["site"],)
+        else:
+            if c["foot"] not in FEET:
+                raise InputError(f"{where}: 'foot' is {c['foot']!r}; give {' or '.join(map(repr, FEET))} "
+                                 "(or a 'site')")
+            sites = FEET[c["foot"]]
+        for key in ("start", "end"):
+            if key not in c:
+                raise InputError(f"{where}: missing field {key!r}; give the contact's {key} time in seconds")
+            v = c[key]
+            if not _is_number(v) or not math.isfinite(v) or v < 0:
+                raise InputError(f"{where}: {key!r} is {v!r}; give a finite number of seconds >= 0")
+        if c["end"] < c["start"]:
+            raise InputError(f"{where}: 'end' {c['end']!r} is before 'start' {c['start']!r}; swap them")
+        surface = c.get("surface", "")
+        if not isinstance(surface, str):
+            raise InputError(f"{where}: 'surface' is {surface!r}; give a surface's name (a geom of the scene, "
+                             'e.g. "floor") or leave it out')
+        out += [Contact(site, float(c["start"]), float(c["end"]), surface) for site in sites]
+    return tuple(out)
+
+
+def contacts_document(contacts) -> list[dict]:
+    """The "contacts" field for Contacts: one entry per site contact, times rounded outward to 6 decimals
+    (start down, end up), so a contact read back still holds every frame it held."""
+    scale = 10.0**_DIGITS
+    out = []
+    for c in contacts:
+        start = math.floor(round(c.start * scale, 3)) / scale
+        end = math.ceil(round(c.end * scale, 3)) / scale
+        entry: dict[str, Any] = {"site": c.site, "start": start, "end": end}
+        if c.surface:
+            entry["surface"] = c.surface
+        out.append(entry)
+    return out
 
 
 def _num(v: float) -> str:
@@ -214,6 +291,10 @@ def _format(doc_head: Mapping[str, Any], keyframes: Keyframes, layout: StateLayo
     """The file's text: one line per joint, so the file reads (and diffs) like a table."""
     lines = ["{"]
     for key, value in doc_head.items():
+        if key == "contacts" and value:  # one contact per line
+            items = ",\n".join(f"    {json.dumps(v, ensure_ascii=False)}" for v in value)
+            lines.append(f"  {json.dumps(key)}: [\n{items}\n  ],")
+            continue
         lines.append(f"  {json.dumps(key)}: {json.dumps(value, ensure_ascii=False)},")
     lines.append('  "keyframes": [')
     for i in range(keyframes.count):
@@ -242,6 +323,7 @@ def write_keyframes(
     scene: str | os.PathLike | None = None,
     source: Mapping[str, Any] | None = None,
     terms: Mapping[str, Any] | None = None,
+    contacts=None,
 ) -> None:
     """Write keyframes as a keyframe file, atomically (a temporary file in the same folder, then
     `os.replace`), so a reader never sees half a file.
@@ -256,6 +338,8 @@ def write_keyframes(
         model, scene: paths of the figure and scene MJCF files; written relative to the file's folder.
         source: provenance (clip, command, hand edits), JSON-serializable.
         terms: optional objective weights {term name: weight}.
+        contacts: optional `solver.contacts.Contact`s, written as the "contacts" list (one entry per
+            site; checked as `read_keyframes` checks them).
     Raises:
         InputError: keyframes and layout disagree in size, the folder does not exist or is not writable,
             or source/terms are not JSON-serializable.
@@ -274,6 +358,9 @@ def write_keyframes(
     head["source"] = dict(source or {})
     if terms is not None:
         head["terms"] = dict(terms)
+    if contacts is not None:
+        head["contacts"] = contacts_document(contacts)
+        read_contacts(head["contacts"], str(p))
     try:
         text = _format(head, keyframes, layout)
     except (TypeError, ValueError) as e:

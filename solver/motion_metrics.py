@@ -4,7 +4,7 @@
 reference's frame rate. Positions come from MuJoCo kinematics (`mj_kinematics`: `site_xpos` of the
 contact sites, `xquat` of the bodies), not from the objective's code, so the numbers check the solver
 rather than repeat it. Heights are above the highest static surface under each site
-(`contacts.surface_height_under`: floor planes and box tops of the scene model; a contact's
+(`StaticSurfaces.height_above`: floor planes and box tops of the scene model; a contact's
 `surface` name is not used). Every plausibility
 figure is computed for the reference too: capture is not perfect either (real data scores about
 0.05 on the GMD skating ratio; guided-motion-diffusion issue #8).
@@ -54,7 +54,7 @@ from typing import Sequence
 
 import numpy as np
 
-from solver.contacts import FEET, SITES, Contact, contact_mask, site_positions, surface_height_under
+from solver.contacts import FEET, SITES, Contact, contact_mask
 from solver.errors import InputError
 
 #: a site is on the ground for the PhysDiff skate below this height [m].
@@ -202,8 +202,8 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
                          "surfaces (add a plane, e.g. scene_fit.scene_mjcf)")
     pos, xq = _kinematics(model, qpos, sites)
     rpos, rxq = _kinematics(model, ref, sites)
-    h = pos[..., 2] - surface_height_under(pos, surfaces)
-    rh = rpos[..., 2] - surface_height_under(rpos, surfaces)
+    h = surfaces.height_above(pos)
+    rh = surfaces.height_above(rpos)
     mask = contact_mask(reference_contacts, sites, times)
 
     joints = {}

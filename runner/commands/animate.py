@@ -11,16 +11,19 @@ from pathlib import Path
 import numpy as np
 
 from runner.animate_options import add_options, solve_options
-from runner.console import Progress, StopRequest, summary_table
+from runner.console import Progress, StopRequest, motion_metrics_table, summary_table
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.files import check_writable_dir
-from runner.paths import RENDERS, display_path as _rel
+from runner.paths import RENDERS
+from runner.paths import display_path as _rel
+from runner.pipeline import render_with_progress
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_problem
+from runner.render.side_by_side import check_video_out as _check_video_out
 from runner.saved_path import save_path_npz
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.layout import CONTACT_SITES
-from solver.metrics import path_metrics, sample_times
+from solver.metrics import path_metrics
 from solver.optimize import Status
 from solver.problem import figure_objective, parse_terms
 from solver.solve import solve
@@ -103,9 +106,19 @@ def run_animate(args) -> int:
         reference = find_reference(info, model, quiet=args.quiet)
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
+        contacts = tuple(getattr(info, "contacts", ()) or ())
+        metrics = {"plain": plain_m, "optimized": opt_m}
+        if reference is not None:
+            from runner.pipeline import reference_motion_metrics
+            from solver.contacts import reference_contacts
+
+            if not contacts:
+                contacts = tuple(reference_contacts(model, reference.qpos, reference.frame_time))
+            metrics["motion"] = reference_motion_metrics(model, layout, solution, reference, contacts)
         if not args.no_summary:
-            print(summary_table(plain_m, opt_m, solution, weights,
-                                dict(solution.weights)))
+            print(summary_table(plain_m, opt_m, solution, weights, dict(solution.weights)))
+            if reference is not None:
+                print(motion_metrics_table(metrics["motion"]["plain"], metrics["motion"]["optimized"]))
         if reference is not None:
             from runner.mocap.contacts import worst_contact_distance
 
@@ -114,22 +127,23 @@ def run_animate(args) -> int:
                 "of the surface under them")
         if args.save_path is not None:  # Ctrl-C until it is written only sets stop.requested
             save_path_npz(args.save_path, solution, keyframes, reference, scene_path, weights, options,
-                          {"plain": plain_m, "optimized": opt_m}, args)
+                          metrics, args, contacts=contacts)
             say(f"  wrote {_rel(args.save_path)}")
         if args.export:
             for res in export_results(args, solution, keyframes, reference, scene_path, weights, options,
-                                      {"plain": plain_m, "optimized": opt_m}):
+                                      metrics):
                 say(f"  wrote {res.describe()}")
         if args.plot is not None:
             from runner.plots import plot_solution
 
-            for f in plot_solution(args.plot, model, solution, keyframes, reference, objective=solution.objective):
+            for f in plot_solution(args.plot, model, solution, keyframes, reference, objective=solution.objective,
+                                   contacts=contacts):
                 say(f"  wrote {_rel(f)}")
     interrupted = solution.status is Status.INTERRUPTED or stop.requested  # also Ctrl-C while saving
     code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
     if args.out is not None and not args.no_render:
         try:
-            info_r = render_video(args.out, model, solution, keyframes, args)
+            info_r = render_with_progress(args.out, model, solution, keyframes, args)
         except KeyboardInterrupt:  # the video is written atomically: nothing half-written is left
             saved = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
             print(f"\ndynsplines: interrupted while rendering: {_rel(args.out)} not written (an earlier file "
@@ -179,19 +193,6 @@ def export_results(args, solution, keyframes, reference, scene_path, weights, op
     return results
 
 
-def _check_video_out(out, size) -> None:
-    """The video's name and size are checked before the optimization (render_tracks checks again)."""
-    from runner.render import VIDEO_SUFFIXES, parse_size
-
-    if Path(out).suffix.lower() not in VIDEO_SUFFIXES:
-        raise InputError(f"--out {out}: a video file must end in one of {', '.join(VIDEO_SUFFIXES)}; "
-                         "use e.g. --out clip.mp4, or --no-render")
-    w, h = parse_size(size)
-    if w % 2 or h % 2:
-        raise InputError(f"--size {w}x{h}: width and height must be even (H.264 video); e.g. --size "
-                         f"{w + w % 2}x{h + h % 2}")
-
-
 def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
     """Keyframes are hard constraints: a contact site a keyframe puts inside a surface stays there.
     Say so before optimizing (the optimizer can only fix the in-betweens)."""
@@ -204,25 +205,3 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
             print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) puts "
                   f"{site} {1000 * row.max():.1f} mm inside a surface; keyframes are met exactly, so that "
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
-
-
-def render_video(out, model, solution, keyframes, args):
-    """Side-by-side video of the plain spline and the optimized path, keyframes marked."""
-    from runner.render import Track, frame_times, render_tracks
-    from solver.terms.penetration import Penetration
-
-    t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
-    pen = Penetration(model, margin=0.0)
-    tracks = []
-    for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames)):
-        Y = fs.path(t)
-        tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
-    # keyframes with free components filled: the poses the animator set
-    kq = solution.initial.values[solution.initial.is_keyframe]
-    from runner.console import Steps
-
-    n_frames = len(frame_times(float(t[0]), float(t[-1]), args.fps, args.speed))
-    with Steps(f"rendering {_rel(out)}", n_frames, getattr(args, "quiet", False), unit=" frames") as bar:
-        return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
-                             keyframe_times=keyframes.times, keyframe_qpos=kq,
-                             title="dynsplines: plain spline vs optimized", progress=lambda i, n: bar.update(i))

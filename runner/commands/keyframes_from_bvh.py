@@ -1,8 +1,10 @@
 """`dynsplines keyframes-from-bvh CLIP --out FILE`: a keyframe file made from a BVH motion-capture clip.
 
-Arguments: CLIP (a .bvh file), --out FILE (.keyframes.json), --every SECONDS (0.25), --scene MJCF
-(models/run_and_step.xml), --model MJCF (the figure, default humanoid39.xml beside the scene).
-The written file records the command in "source" (solver/keyframe_file.py format).
+Arguments: CLIP (a .bvh file), --out FILE (.keyframes.json), --every SECONDS (0.25), --keys every|contacts,
+--scene auto|MJCF (auto: a floor and boxes fitted to the clip, written next to --out), --model MJCF (the
+figure, default models/humanoid39.xml), --partial, --no-root-extremes.
+The written file records the command in "source" and the clip's contacts in "contacts"
+(solver/keyframe_file.py format).
 """
 from __future__ import annotations
 
@@ -14,42 +16,69 @@ from pathlib import Path
 from typing import Sequence
 
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
-from runner.mocap.keyframes import keyframes_from_reference
-from runner.mocap.reference import load_bvh_reference
+from runner.mocap.keyframes import KEY_CHOICES, pick_keyframes
+from runner.mocap.scene import AUTO, clip_scene, name_surfaces
 from runner.parser import OneLineParser
 from runner.paths import MODELS
+from solver.contacts import reference_contacts
 from solver.errors import InputError
 from solver.keyframe_file import write_keyframes
 from solver.layout import StateLayout
-from solver.model import load_model
 
 PROG = "dynsplines keyframes-from-bvh"
-DEFAULT_SCENE = MODELS / "run_and_step.xml"
+#: the figure every scene includes
+FIGURE = MODELS / "humanoid39.xml"
+
+
+def fitted_scene_path(out: Path) -> Path:
+    """Where `--scene auto` writes the fitted scene: next to `out`, `<name>.scene.xml`."""
+    name = out.name
+    for suffix in (".keyframes.json", ".json"):
+        if name.endswith(suffix):
+            name = name[: -len(suffix)]
+            break
+    return out.parent / f"{name}.scene.xml"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The arguments of the command (also used by `keyframes_from_bvh_main`)."""
     p.add_argument("clip", help="BVH clip (CMU skeleton), e.g. models/cmu/127_33.bvh")
     p.add_argument("--out", required=True, help="keyframe file to write (.keyframes.json)")
-    p.add_argument("--every", type=float, default=0.25, help="keyframe spacing [s] (default 0.25)")
-    p.add_argument("--scene", default=str(DEFAULT_SCENE), help="scene MJCF (figure + surfaces)")
-    p.add_argument("--model", default=None, help="figure MJCF (default: humanoid39.xml beside the scene)")
+    p.add_argument("--every", type=float, default=None,
+                   help="keyframe spacing [s] (default 0.25); with --keys contacts the largest gap (default none)")
+    p.add_argument("--keys", choices=KEY_CHOICES, default="every",
+                   help="every: evenly spaced keys plus the root's highest and lowest frames; contacts: keys at "
+                        "touch-downs and lift-offs, the ends and the root's extremes [%(default)s]")
+    p.add_argument("--scene", default=AUTO,
+                   help="scene MJCF (figure + surfaces), or 'auto' (default): a floor and boxes fitted to where "
+                        "the clip's feet rest, written next to --out as NAME.scene.xml")
+    p.add_argument("--model", default=None, help="figure MJCF [models/humanoid39.xml]")
+    p.add_argument("--partial", action="store_true",
+                   help="make the middle keyframe partial: it fixes only the root and the legs (torso and arms "
+                        "free for the optimizer); default: full keyframes")
+    p.add_argument("--no-root-extremes", action="store_true",
+                   help="with --keys every: do not add keys at the root's highest and lowest frames")
     p.add_argument("--quiet", action="store_true", help="no progress; the 'wrote ...' line is still printed")
 
 
 def register(sub) -> None:
     """Add `keyframes-from-bvh` to the `dynsplines` parser."""
     p = sub.add_parser("keyframes-from-bvh", help="make a keyframe file from a BVH motion-capture clip",
-                       description="Make a keyframe file from a CMU BVH clip retargeted onto the figure.")
+                       description="Make a keyframe file from a CMU BVH clip retargeted onto the figure. "
+                                   "Without --scene, the scene is fitted to the clip (--scene auto).")
     add_arguments(p)
     p.set_defaults(func=run)
 
 
 def command_line(args) -> str:
     """The command that makes the same file, as recorded in its "source"."""
-    words = [args.clip, "--out", args.out, "--every", f"{args.every:g}", "--scene", args.scene]
+    words = [args.clip, "--out", args.out]
+    if args.every is not None:
+        words += ["--every", f"{args.every:g}"]
+    words += ["--keys", args.keys, "--scene", args.scene]
     if args.model:
         words += ["--model", args.model]
+    words += ["--partial"] * bool(args.partial) + ["--no-root-extremes"] * bool(args.no_root_extremes)
     return f"{PROG} {shlex.join(str(w) for w in words)}"
 
 
@@ -60,26 +89,28 @@ def run(args, command: str | None = None) -> int:
         args: parsed `add_arguments` arguments. command: the command recorded in the file's "source"
             [`command_line(args)`].
     """
-    scene = Path(args.scene)
-    figure = Path(args.model) if args.model else scene.parent / "humanoid39.xml"
-    model = load_model(scene)
-    from runner.console import Steps
-    from runner.mocap.reference import IMPORT_STAGES
-
-    with Steps(f"importing {Path(args.clip).name}", len(IMPORT_STAGES), getattr(args, "quiet", False),
-               unit=" stages") as bar:
-        reference = load_bvh_reference(args.clip, model, progress=lambda i, stage: bar.update(i, note=stage))
-    keyframes = keyframes_from_reference(reference, model, every=args.every)
     out = Path(args.out)
+    figure = Path(args.model) if args.model else FIGURE
+    if not out.parent.is_dir():
+        raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first")
+    cs = clip_scene(args.clip, args.scene, figure, fitted_scene_path(out))
+    reference, model = cs.reference, cs.model
+    contacts = name_surfaces(model, reference, reference_contacts(model, reference.qpos, reference.frame_time))
+    every = args.every if (args.every is not None or args.keys == "contacts") else 0.25
+    keyframes = pick_keyframes(reference, model, contacts, keys=args.keys, every=every, partial=args.partial,
+                               extremes=not args.no_root_extremes)
     source = {
         "clip": _relpath(Path(args.clip), out.parent),
         "command": command or command_line(args),
         "hand_edits": "none",
     }
-    write_keyframes(out, keyframes, StateLayout.from_model(model), model=figure, scene=scene, source=source)
+    write_keyframes(out, keyframes, StateLayout.from_model(model), model=figure, scene=cs.scene_path,
+                    source=source, contacts=contacts)
+    scene_note = f"fitted scene {cs.scene_path}" if cs.fitted is not None else f"scene {cs.scene_path}"
     print(
         f"wrote {args.out}: {keyframes.count} keyframes at {', '.join(f'{t:.3f}' for t in keyframes.times)} s "
-        f"({int(keyframes.is_partial.sum())} partial) from {reference.count} frames of {args.clip}"
+        f"({int(keyframes.is_partial.sum())} partial), {len(contacts)} contacts, from {reference.count} frames "
+        f"of {args.clip}; {scene_note}"
     )
     return EXIT_OK
 

@@ -17,20 +17,30 @@ from solver.layout import StateLayout
 LOWER_BODY_JOINTS: tuple[str, ...] = ("root", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle")
 
 
-#: default `partial` argument of `keyframes_from_reference`: the middle keyframe fixes only the root and
-#: the legs.
+#: `partial="middle"` of `keyframes_from_reference` (the command's `--partial`): the middle keyframe
+#: fixes only the root and the legs.
 MIDDLE_LOWER_BODY = "middle"
 
 
-def keyframe_indices(reference: Reference, every: float = 0.25) -> np.ndarray:
-    """Frame indices an animator would key: evenly about every `every` seconds, first and last included.
+#: a root extreme closer than this many frames to an evenly spaced key adds no key of its own.
+EXTREME_MERGE_FRAMES = 4
+
+
+def keyframe_indices(reference: Reference, every: float = 0.25, extremes: bool = True) -> np.ndarray:
+    """Frame indices an animator would key: evenly about every `every` seconds, first and last included,
+    plus the root's highest and lowest frames (a broad jump's apex, the crouch before it).
 
     The clip's duration T is cut into round(T / every) equal intervals (at least one); each key is the
     frame nearest an interval end, so every gap is within a frame of T / round(T / every) (for a
-    clip longer than every, between 2/3 and 4/3 of `every`).
+    clip longer than every, between 2/3 and 4/3 of `every`). With `extremes`, the frames of the
+    highest and the lowest root height (qpos z) become keys: the nearest inner key moves onto the
+    extreme if it is at most every / 2 away, else the extreme is added; an extreme within
+    `EXTREME_MERGE_FRAMES` frames of the first or last frame is left out (the end is its key). So the
+    key count stays and the gaps stay between 1/6 and 11/6 of `every`. Evenly spaced keys
+    would otherwise cut the apex of a jump off the plain spline.
 
     Args:
-        reference: the dense motion. every: [s] spacing, > 0.
+        reference: the dense motion. every: [s] spacing, > 0. extremes: also key the root's extremes.
     Returns:
         (k,) strictly increasing frame indices, k >= 2, first 0, last n - 1.
     Raises:
@@ -43,35 +53,58 @@ def keyframe_indices(reference: Reference, every: float = 0.25) -> np.ndarray:
     T = reference.duration
     intervals = max(1, int(round(T / every)))
     idx = np.rint(np.linspace(0.0, T, intervals + 1) / reference.frame_time).astype(int)
-    return np.unique(np.clip(idx, 0, reference.count - 1))
+    idx = np.unique(np.clip(idx, 0, reference.count - 1))
+    if extremes:
+        z = reference.qpos[:, 2]
+        for e in (int(np.argmax(z)), int(np.argmin(z))):
+            if e in (0, reference.count - 1):
+                continue
+            near = int(np.argmin(np.abs(idx - e)))
+            if abs(int(idx[near]) - e) < EXTREME_MERGE_FRAMES and near in (0, len(idx) - 1):
+                continue  # at an end of the clip: the end is key enough
+            inner = np.arange(1, len(idx) - 1)
+            if len(inner):
+                j = int(inner[np.argmin(np.abs(idx[inner] - e))])
+                if abs(int(idx[j]) - e) * reference.frame_time <= every / 2 and e not in idx:
+                    idx[j] = e  # move the nearest inner key onto the extreme
+                    idx = np.unique(idx)
+                    continue
+            idx = np.unique(np.append(idx, e))
+        idx = np.unique(idx)
+    return idx
 
 
 def keyframes_from_reference(
     reference: Reference,
     model,
     every: float = 0.25,
-    partial: Mapping[int, Iterable[str]] | str = MIDDLE_LOWER_BODY,
+    partial: Mapping[int, Iterable[str]] | str | None = None,
+    indices: np.ndarray | None = None,
 ) -> Keyframes:
     """Keyframes from a dense reference motion, as an animator would set them.
 
-    Full keyframes at `keyframe_indices(reference, every)`; the keyframes listed in `partial` fix only
-    the named joints (all components of each), the rest of the figure is free for the optimizer.
+    Full keyframes at `indices` (default `keyframe_indices(reference, every)`); the keyframes listed in
+    `partial` fix only the named joints (all components of each), the rest of the figure is free for
+    the optimizer.
 
     Args:
         reference: the dense motion (`load_bvh_reference`).
         model: the figure's or scene's MjModel (for the qpos layout).
         every: [s] keyframe spacing (about 0.2-0.3 s for a run).
-        partial: "middle" (default): the middle keyframe (index k // 2) fixes only `LOWER_BODY_JOINTS`
-            (root and legs; torso and arms free). Or a mapping {keyframe index: joint names it fixes};
-            {} for full keyframes only.
+        partial: None or {} (default): full keyframes only. "middle": the middle keyframe (index
+            k // 2) fixes only `LOWER_BODY_JOINTS` (root and legs; torso and arms free). Or a mapping
+            {keyframe index: joint names it fixes}.
+        indices: the frames to key (strictly increasing); default `keyframe_indices(reference, every)`.
     Returns:
         solver.Keyframes with times (k,) [s] and values/mask (k, nq); source = reference.source.
     Raises:
         InputError: bad `every`, a partial keyframe index out of range, or an unknown joint name.
     """
     layout = StateLayout.from_model(model)
-    idx = keyframe_indices(reference, every)
+    idx = keyframe_indices(reference, every) if indices is None else np.asarray(indices, int)
     k = len(idx)
+    if partial is None:
+        partial = {}
     if isinstance(partial, str):
         if partial != MIDDLE_LOWER_BODY:
             raise InputError(f"partial={partial!r}; give 'middle' or a mapping {{keyframe index: joint names}}")
@@ -85,3 +118,33 @@ def keyframes_from_reference(
         for name in names:
             mask[i, layout.joint(name).qpos_slice] = True
     return Keyframes(reference.times[idx], values, mask, source=reference.source)
+
+
+#: `--keys` choices: evenly spaced (plus the root's extremes), or at the contact events
+KEY_CHOICES = ("every", "contacts")
+
+
+def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", every: float | None = 0.25,
+                   partial: bool = False, extremes: bool = True) -> Keyframes:
+    """The keyframes of `dynsplines mocap` and `keyframes-from-bvh`.
+
+    Args:
+        reference: the retargeted clip. model: the scene's MjModel. contacts: the clip's contacts.
+        keys: "every": `keyframe_indices(reference, every, extremes)`; "contacts": touch-downs,
+            lift-offs, the ends and the root's extremes (`solver.keyframe_selection.contact_keyframes`),
+            with `every` (or None) the largest gap [s].
+        partial: the middle keyframe fixes only the root and the legs (`LOWER_BODY_JOINTS`).
+        extremes: with keys="every", also key the root's highest and lowest frames.
+    """
+    from solver.keyframe_selection import contact_keyframes
+
+    if keys == "contacts":
+        if every is not None and not (isinstance(every, (int, float)) and math.isfinite(every) and every > 0):
+            raise InputError(f"keyframe spacing every={every!r}; give a positive number of seconds, e.g. 0.25")
+        idx = contact_keyframes(reference.times, contacts, reference.qpos[:, 2], every=every)
+    elif keys == "every":
+        idx = keyframe_indices(reference, 0.25 if every is None else every, extremes=extremes)
+    else:
+        raise InputError(f"keys={keys!r}; give one of {', '.join(KEY_CHOICES)}")
+    return keyframes_from_reference(reference, model, indices=idx,
+                                    partial=MIDDLE_LOWER_BODY if partial else None)

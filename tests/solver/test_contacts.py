@@ -98,10 +98,7 @@ def test_mask_events_and_feet():
 
 
 def load_clip(name, model):
-    try:  # the mocap import is moving from runner/bvh_import.py to runner/mocap/
-        from runner.mocap.reference import load_bvh_reference
-    except ImportError:
-        from runner.bvh_import import load_bvh_reference
+    from runner.mocap.reference import load_bvh_reference
     return load_bvh_reference(ROOT / "models" / "cmu" / f"{name}.bvh", model)
 
 

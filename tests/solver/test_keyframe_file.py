@@ -183,3 +183,46 @@ def test_checks_of_solver_keyframes_name_the_file(tmp_path, layout):
     doc["keyframes"][1]["joints"] = {}
     with pytest.raises(InputError, match=r"k\.json: keyframe 1 \(t=0.5 s\) fixes no component"):
         read_keyframes(write_json(tmp_path, doc), layout)
+
+
+def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
+    from solver.contacts import Contact
+
+    kf = sample_keyframes(layout, np.random.default_rng(1))
+    contacts = [Contact("l_toe", 0.0, 0.2, "floor"), Contact("r_heel", 0.3, 0.45)]
+    out = tmp_path / "c.keyframes.json"
+    write_keyframes(out, kf, layout, contacts=contacts)
+    text = out.read_text()
+    assert '    {"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"}' in text  # one per line
+    _, info = read_keyframes(out, layout)
+    assert info.contacts == tuple(contacts)
+    doc = json.loads(text)
+    doc["contacts"].append({"foot": "right", "start": 0.5, "end": 0.6, "surface": "box0"})
+    _, info = read_keyframes(write_json(tmp_path, doc), layout)
+    assert info.contacts[2:] == (Contact("r_heel", 0.5, 0.6, "box0"), Contact("r_toe", 0.5, 0.6, "box0"))
+    _, info = read_keyframes(write_json(tmp_path, minimal(), "none.json"), layout)
+    assert info.contacts == ()
+    # times are rounded outward: a contact keeps every frame it held (frame times k * 0.0083333)
+    odd = [Contact("r_toe", 3 * 0.0083333, 28 * 0.0083333)]
+    write_keyframes(out, kf, layout, contacts=odd)
+    back = read_keyframes(out, layout)[1].contacts[0]
+    assert back.start <= odd[0].start and back.end >= odd[0].end and back.end - odd[0].end < 1e-6
+
+
+@pytest.mark.parametrize("contacts, shown", [
+    ({"site": "l_toe"}, "list"),
+    ([5], "contacts[0] is 5"),
+    ([{"site": "nose", "start": 0, "end": 1}], "contacts[0]: 'site' is 'nose'; the contact sites are l_heel"),
+    ([{"foot": "l", "start": 0, "end": 1}], "contacts[0]: 'foot' is 'l'; give 'left' or 'right'"),
+    ([{"site": "l_toe", "foot": "left", "start": 0, "end": 1}], "exactly one of 'site'"),
+    ([{"site": "l_toe", "end": 1}], "contacts[0]: missing field 'start'"),
+    ([{"site": "l_toe", "start": "0", "end": 1}], "contacts[0]: 'start' is '0'; give a finite number"),
+    ([{"site": "l_toe", "start": 1, "end": 0.5}], "'end' 0.5 is before 'start' 1; swap them"),
+    ([{"site": "l_toe", "start": 0, "end": 1, "surface": 3}], "'surface' is 3"),
+    ([{"site": "l_toe", "start": 0, "end": 1, "force": 3}], "unknown field(s) 'force'"),
+])
+def test_contact_errors_name_file_field_value_and_fix(tmp_path, layout, contacts, shown):
+    p = write_json(tmp_path, {**minimal(), "contacts": contacts})
+    with pytest.raises(InputError) as e:
+        read_keyframes(p, layout)
+    assert str(e.value).startswith(str(p)) and shown in str(e.value)

@@ -51,10 +51,7 @@ def test_every_fills_long_gaps_only():
 
 
 def test_127_33_keys_at_the_landings():
-    try:
-        from runner.mocap.reference import load_bvh_reference
-    except ImportError:
-        from runner.bvh_import import load_bvh_reference
+    from runner.mocap.reference import load_bvh_reference
     model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))
     ref = load_bvh_reference(ROOT / "models" / "cmu" / "127_33.bvh", model)
     cs = reference_contacts(model, ref.qpos, ref.frame_time)

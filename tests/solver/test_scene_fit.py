@@ -98,10 +98,7 @@ def test_scene_mjcf_loads_from_where_it_is_saved(tmp_path, monkeypatch):
 
 
 def load_clip(name, model):
-    try:
-        from runner.mocap.reference import load_bvh_reference
-    except ImportError:
-        from runner.bvh_import import load_bvh_reference
+    from runner.mocap.reference import load_bvh_reference
     return load_bvh_reference(ROOT / "models" / "cmu" / f"{name}.bvh", model)
 
 

@@ -1,5 +1,6 @@
 """BVH import and retargeting (runner/mocap/), checked against physical expectations and
 hand-computed rotations, plus every malformed-input error."""
+import json
 import math
 from pathlib import Path
 
@@ -10,7 +11,7 @@ from scipy.interpolate import make_interp_spline
 
 from runner.commands.keyframes_from_bvh import keyframes_from_bvh_main
 from runner.mocap.contacts import worst_contact_distance
-from runner.mocap.keyframes import LOWER_BODY_JOINTS, keyframes_from_reference
+from runner.mocap.keyframes import LOWER_BODY_JOINTS, keyframe_indices, keyframes_from_reference
 from runner.mocap.reference import load_bvh_reference
 from solver.keyframe_file import read_keyframes
 from solver.errors import InputError
@@ -124,7 +125,8 @@ def test_no_hyperextension(reference, layout):
 
 
 def test_keyframes_from_reference(reference, scene, layout):
-    kf = keyframes_from_reference(reference, scene, every=0.25)
+    kf = keyframes_from_reference(reference, scene, partial="middle",
+                                  indices=keyframe_indices(reference, 0.25, extremes=False))
     assert kf.times[0] == 0.0 and kf.times[-1] == reference.times[-1]
     gaps = np.diff(kf.times)
     assert gaps.min() >= 0.2 and gaps.max() <= 0.3
@@ -142,11 +144,24 @@ def test_keyframes_from_reference(reference, scene, layout):
         assert flexion(kf.values[full][:, layout.joint(name).qpos_slice], axis).min() >= -1e-9
 
 
+def test_even_keys_keep_the_root_extremes(reference):
+    """Issue 15: evenly spaced keys cut a jump's apex off the plain spline; the extremes are keys."""
+    idx = keyframe_indices(reference, 0.25)
+    z = reference.qpos[:, 2]
+    assert int(np.argmax(z)) in idx
+    assert int(np.argmin(z)) in idx or min(int(np.argmin(z)), reference.count - 1 - int(np.argmin(z))) < 4
+    assert idx[0] == 0 and idx[-1] == reference.count - 1
+    assert len(idx) == len(keyframe_indices(reference, 0.25, extremes=False))  # moved, not added
+    even = keyframe_indices(reference, 0.25, extremes=False)
+    assert int(np.argmax(z)) not in even  # the test means something on this clip
+
+
 def test_keyframe_choices(reference, scene, layout):
     kf = keyframes_from_reference(reference, scene, every=0.2, partial={0: ["root"], 2: ["l_hip", "r_hip"]})
     assert kf.is_partial.tolist()[:3] == [True, False, True]
     assert kf.mask[0].sum() == 7 and kf.mask[2].sum() == 8
     assert not keyframes_from_reference(reference, scene, partial={}).is_partial.any()
+    assert not keyframes_from_reference(reference, scene).is_partial.any()  # full keyframes by default
     with pytest.raises(InputError, match=r"partial keyframe index 99 is out of range; there are 8 keyframes"):
         keyframes_from_reference(reference, scene, partial={99: ["root"]})
     with pytest.raises(InputError, match=r"unknown joint 'l_foot'.*l_ankle"):
@@ -163,7 +178,10 @@ def test_shipped_keyframes_match_the_clip_and_show_the_problem(reference, scene,
     assert info.scene == (MODELS / "run_and_step.xml").resolve()
     assert info.model == (MODELS / "humanoid39.xml").resolve()
     assert info.source["clip"] == "cmu/127_33.bvh" and "--out models/run_and_step.keyframes.json" in info.source["command"]
-    fresh = keyframes_from_reference(reference, scene, every=0.25)
+    # made before --partial and the root extremes: the command of models/README.md with
+    # --partial --no-root-extremes
+    fresh = keyframes_from_reference(reference, scene, partial="middle",
+                                     indices=keyframe_indices(reference, 0.25, extremes=False))
     assert np.array_equal(kf.mask, fresh.mask)
     assert kf.times == pytest.approx(fresh.times, abs=1e-6)
     assert np.nan_to_num(kf.values) == pytest.approx(np.nan_to_num(fresh.values), abs=2e-6)
@@ -460,3 +478,63 @@ def test_root_without_position_channels(tmp_path, scene):
     p = write(tmp_path, text)
     with pytest.raises(InputError, match=r"the ROOT joint Hips has no Xposition, Yposition, Zposition channel\(s\)"):
         load_bvh_reference(p, scene)
+
+
+# ---- clips of other sessions: other Euler orders, frame rates, bone lengths; another skeleton ----------
+
+
+def test_other_channel_order_frame_rate_and_bone_lengths_give_the_same_motion(tmp_path, scene, layout):
+    """The channel order is read per joint from the file (not assumed Z Y X), the frame rate from
+    'Frame Time', and the figure keeps its own bone lengths whatever the subject's."""
+    from bvh_edit import edit_bvh
+
+    short = edit_bvh(CLIP, tmp_path / "short.bvh", seconds=0.5)
+    base = load_bvh_reference(short, scene)
+    for order in ("XYZ", "YXZ"):
+        other = load_bvh_reference(edit_bvh(CLIP, tmp_path / f"{order}.bvh", seconds=0.5, order=order), scene)
+        assert other.qpos == pytest.approx(base.qpos, abs=2e-5), order
+    half = load_bvh_reference(edit_bvh(CLIP, tmp_path / "60fps.bvh", seconds=0.5, stride=2), scene)
+    assert half.frame_time == pytest.approx(2 / 120, rel=1e-4)
+    assert half.count == (base.count + 1) // 2 and half.times[-1] == pytest.approx(base.times[-1], abs=0.01)
+    # the same poses at every other frame (the root height correction smooths over 9 frames of each)
+    for slot in layout.quat_slots[1:]:
+        d = np.abs(np.sum(half.qpos[:, slot] * base.qpos[::2][: half.count, slot], axis=1))
+        assert d.min() > 0.9999
+    big = load_bvh_reference(edit_bvh(CLIP, tmp_path / "big.bvh", seconds=0.5, scale=1.2), scene)
+    for slot in layout.quat_slots[1:]:  # joint angles do not depend on the subject's bone lengths
+        d = np.abs(np.sum(big.qpos[:, slot] * base.qpos[:, slot], axis=1))
+        assert d.min() > 1 - 1e-9
+
+
+def test_another_skeleton_is_one_line_naming_the_missing_joints(tmp_path, scene, capsys):
+    from bvh_edit import edit_bvh
+
+    clip = edit_bvh(CLIP, tmp_path / "other.bvh", seconds=0.2, rename={"LeftUpLeg": "LThigh", "RightArm": "RUpperArm"})
+    with pytest.raises(InputError) as e:
+        load_bvh_reference(clip, scene)
+    msg = str(e.value)
+    assert "\n" not in msg and "LeftUpLeg" in msg and "RightArm" in msg and "no joint(s)" in msg
+    rc = keyframes_from_bvh_main([str(clip), "--out", str(tmp_path / "k.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "LeftUpLeg, RightArm" in err
+
+
+def test_default_scene_is_fitted_to_the_clip_not_the_step(tmp_path, capsys):
+    """Issue 15: without --scene a flat walk was retargeted onto models/run_and_step.xml (and lifted onto
+    its box). Now the scene is fitted to the clip and written next to --out."""
+    from bvh_edit import edit_bvh
+
+    src = REPO.parent / "shared" / "data" / "cmu" / "16_23.bvh"
+    if not src.exists():
+        pytest.skip("no shared clip ../shared/data/cmu/16_23.bvh")
+    walk = edit_bvh(src, tmp_path / "walk.bvh", seconds=0.8)
+    out = tmp_path / "walk.keyframes.json"
+    assert keyframes_from_bvh_main([str(walk), "--out", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["scene"] == "walk.scene.xml"
+    fitted = mujoco.MjModel.from_xml_path(str(tmp_path / "walk.scene.xml"))  # loads from where it is saved
+    assert "step" not in {fitted.geom(i).name for i in range(fitted.ngeom)}
+    assert doc["contacts"] and {c["surface"] for c in doc["contacts"]} == {"floor"}
+    kf, info = read_keyframes(out, StateLayout.from_model(fitted))
+    assert info.contacts and not kf.is_partial.any()
+    assert kf.values[:, 2].max() < 1.2  # the walker is not lifted onto a box

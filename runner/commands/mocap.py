@@ -1,0 +1,64 @@
+"""`dynsplines mocap CLIP.bvh`: one command from a motion-capture clip to a video, a saved path and a
+metrics report (the work is `runner.pipeline.process_clip`; this module is argument glue)."""
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+
+from runner.animate_options import add_options, solve_options
+from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from runner.mocap.keyframes import KEY_CHOICES
+from runner.mocap.scene import AUTO
+from runner.parser import positive
+from runner.pipeline import FIGURE, ClipOptions, default_out_dir, process_clip
+from solver.problem import parse_terms
+
+PROG = "dynsplines mocap"
+
+
+def register(sub) -> None:
+    """Add `mocap` to the `dynsplines` parser."""
+    p = sub.add_parser(
+        "mocap", help="a motion-capture clip in, an optimized path, a video and metrics out",
+        description="Retarget a BVH clip (CMU skeleton) onto the figure, fit the scene to where its feet rest, "
+                    "pick keyframes, optimize the in-betweens and compare the plain spline and the optimized path "
+                    "with the clip (motion metrics). Outputs go to renders/<clip stem>/ unless given: "
+                    "<stem>.keyframes.json (rerun or edit it with `dynsplines animate`), <stem>.scene.xml (with "
+                    "--scene auto), <stem>.npz, <stem>.metrics.json, <stem>.mp4.")
+    p.add_argument("clip", type=Path, help="BVH clip, e.g. models/cmu/127_33.bvh")
+    p.add_argument("--out-dir", type=Path, default=None, help="output folder [renders/<clip stem>/]")
+    keys = p.add_argument_group("keyframes")
+    keys.add_argument("--keys", choices=KEY_CHOICES, default="every",
+                      help="every: evenly spaced keys plus the root's highest and lowest frames; contacts: keys at "
+                           "touch-downs and lift-offs, the ends and the root's extremes [%(default)s]")
+    keys.add_argument("--every", type=positive(float), default=None, metavar="S",
+                      help="key spacing [s] (0.25); with --keys contacts: at most S s between keys [no limit]")
+    keys.add_argument("--partial", action="store_true",
+                      help="the middle keyframe fixes only the root and the legs (torso and arms free)")
+    p.add_argument("--scene", default=AUTO,
+                   help="scene MJCF, or 'auto' (default): a floor and boxes fitted to where the clip's feet rest, "
+                        "written next to the outputs as <stem>.scene.xml")
+    p.add_argument("--model", type=Path, default=FIGURE, help="figure MJCF [models/humanoid39.xml]")
+    p.add_argument("--metrics", type=Path, default=None, metavar="FILE.json",
+                   help="motion metrics and acceptance figures as JSON [<out-dir>/<stem>.metrics.json]")
+    add_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run `mocap`. Returns the exit code; raises InputError on bad input."""
+    weights = parse_terms(args.terms, dict(args.weight))
+    options = ClipOptions(
+        keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.model,
+        weights=weights, solve=solve_options(args, weights), rate=args.rate, out=args.out,
+        save_path=args.save_path, metrics=args.metrics, plot=args.plot, render=not args.no_render,
+        fps=args.fps, size=args.size, speed=args.speed, quiet=args.quiet,
+        command=f"{PROG} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == ["mocap"] else PROG,
+    )
+    out_dir = args.out_dir if args.out_dir is not None else default_out_dir(args.clip)
+    result = process_clip(args.clip, out_dir, options, say=(lambda *a: None) if args.quiet else print)
+    if result["exit"] == "failed":
+        print(f"dynsplines: warning: the optimization failed ({result['status']}); the best path before that "
+              "(it meets every keyframe) is reported and written", file=sys.stderr)
+    return {"ok": EXIT_OK, "failed": EXIT_FAILED, "interrupted": EXIT_INTERRUPTED}[result["exit"]]

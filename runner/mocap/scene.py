@@ -1,0 +1,91 @@
+"""The scene a clip is retargeted onto: a given MJCF file, or one fitted to where the clip's feet rest
+(`--scene auto`: a floor and boxes, solver/scene_fit.py), written next to the outputs."""
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from runner.files import atomic_output
+from runner.mocap.reference import load_bvh_reference
+from runner.mocap.retarget import Reference
+from solver.contacts import Contact, site_positions
+from solver.errors import InputError
+from solver.model import load_model
+from solver.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
+from solver.surfaces import StaticSurfaces
+
+#: `--scene auto`: fit the scene to the clip
+AUTO = "auto"
+
+
+@dataclass(frozen=True)
+class ClipScene:
+    """A clip retargeted onto its scene.
+
+    Attributes:
+        reference: the retargeted clip (root height corrected onto the scene's surfaces).
+        model: the scene's MjModel. scene_path: its MJCF file.
+        fitted: the fitted floor and boxes (None for a given scene).
+    """
+
+    reference: Reference
+    model: object
+    scene_path: Path
+    fitted: FittedScene | None = None
+
+
+def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_out: str | Path) -> ClipScene:
+    """Retarget `clip` onto `scene`, or with scene == "auto" onto a scene fitted to it.
+
+    Fitting (docs/contacts.md): retarget onto a floor-only scene, find where the feet rest
+    (`fit_contacts`), fit a floor and boxes (`fit_scene`), write the scene MJCF to `fitted_out` (its
+    include of the figure relative to that folder, so it loads from where it is saved), and retarget
+    again onto it (the height correction then stands the feet on the fitted boxes).
+
+    Args:
+        clip: the BVH file. scene: an MJCF file or "auto". figure: the figure's MJCF
+            (models/humanoid39.xml). fitted_out: where the fitted scene is written (only for "auto").
+    Raises:
+        InputError: the clip or a scene cannot be read, or the clip's skeleton lacks a joint.
+    """
+    if str(scene) != AUTO:
+        model = load_model(scene)
+        return ClipScene(load_bvh_reference(clip, model), model, Path(scene))
+    with tempfile.TemporaryDirectory(prefix="dynsplines-floor-") as tmp:
+        floor = Path(tmp) / "floor.xml"
+        floor.write_text(scene_mjcf(FittedScene(0.0), figure))
+        first = load_bvh_reference(clip, load_model(floor))
+        floor_model = load_model(floor)
+    pos = site_positions(floor_model, first.qpos)
+    fitted = fit_scene(first.times, pos, fit_contacts(first.times, pos))
+    out = Path(fitted_out)
+    if not out.parent.is_dir():
+        raise InputError(f"{out}: the folder {out.parent} does not exist; create it first")
+    with atomic_output(out, suffix=".xml") as tmp_path:
+        Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem))
+    model = load_model(out)
+    return ClipScene(load_bvh_reference(clip, model), model, out, fitted)
+
+
+def name_surfaces(model, reference: Reference, contacts: list[Contact]) -> list[Contact]:
+    """Each contact with `surface` set to the scene geom under its site in its middle frame (the highest
+    box whose footprint holds the site, else the first floor plane)."""
+    surfaces = StaticSurfaces.from_model(model)
+    n_planes = len(surfaces.plane_point)
+    planes = [surfaces.names[i] for i in range(n_planes) if abs(surfaces.plane_normal[i, 2]) > 1e-6]
+    out = []
+    for c in contacts:
+        i = int(np.clip(round((c.start + c.end) / 2 / reference.frame_time), 0, reference.count - 1))
+        p = site_positions(model, reference.qpos[i:i + 1], (c.site,))[0, 0]
+        name, top = (planes[0] if planes else ""), -np.inf
+        boxes = zip(surfaces.box_center, surfaces.box_rot, surfaces.box_half, strict=True)
+        for b, (ctr, rot, half) in enumerate(boxes):
+            local = (p - ctr) @ rot
+            z = ctr[2] + np.abs(rot[2]) @ half
+            if abs(local[0]) <= half[0] and abs(local[1]) <= half[1] and z > top:
+                name, top = surfaces.names[n_planes + b], z
+        out.append(Contact(c.site, c.start, c.end, name))
+    return out

@@ -1,0 +1,42 @@
+"""The video of `animate` and `mocap`: the plain spline and the optimized path side by side, keyframes
+marked (`render_video`), and the check of the video's name and size made before a long optimization."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from solver.errors import InputError
+from solver.layout import CONTACT_SITES
+from solver.metrics import sample_times
+
+
+def check_video_out(out, size) -> None:
+    """The video's name and size are checked before the optimization (render_tracks checks again)."""
+    from runner.render import VIDEO_SUFFIXES, parse_size
+
+    if Path(out).suffix.lower() not in VIDEO_SUFFIXES:
+        raise InputError(f"--out {out}: a video file must end in one of {', '.join(VIDEO_SUFFIXES)}; "
+                         "use e.g. --out clip.mp4, or --no-render")
+    w, h = parse_size(size)
+    if w % 2 or h % 2:
+        raise InputError(f"--size {w}x{h}: width and height must be even (H.264 video); e.g. --size "
+                         f"{w + w % 2}x{h + h % 2}")
+
+
+def render_video(out, model, solution, keyframes, args, progress=None):
+    """Side-by-side video of the plain spline and the optimized path, keyframes marked.
+
+    `progress(i, n)` is called after each of the n frames (None: silent)."""
+    from runner.render import Track, render_tracks
+    from solver.terms.penetration import Penetration
+
+    t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
+    pen = Penetration(model, margin=0.0)
+    tracks = []
+    for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames)):
+        Y = fs.path(t)
+        tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
+    # keyframes with free components filled: the poses the animator set
+    kq = solution.initial.values[solution.initial.is_keyframe]
+    return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
+                         keyframe_times=keyframes.times, keyframe_qpos=kq,
+                         title="dynsplines: plain spline vs optimized", progress=progress)

@@ -1,0 +1,93 @@
+"""`dynsplines mocap CLIP`: bad input is one line and exit code 2; a short clip runs end to end into a
+keyframe file (rerunnable with `animate`), a fitted scene, a saved path with contacts and metrics, and a
+metrics report."""
+import json
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+from bvh_edit import edit_bvh
+
+from runner.cli import main
+from runner.exit_codes import EXIT_INPUT
+from runner.saved_path import contacts_from_array, load_saved_path
+from solver.keyframe_file import read_keyframes
+from solver.layout import StateLayout
+
+REPO = Path(__file__).resolve().parents[3]
+CLIP = REPO / "models" / "cmu" / "127_33.bvh"
+FAST = ["--no-render", "--rounds", "0", "--max-evals", "40", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def short_clip(tmp_path_factory):
+    """The first 0.6 s of 127_33 (two foot contacts on the floor)."""
+    return edit_bvh(CLIP, tmp_path_factory.mktemp("clip") / "run.bvh", seconds=0.6)
+
+
+def one_line_error(capsys, argv):
+    rc = main(argv)
+    err = capsys.readouterr().err
+    assert rc == EXIT_INPUT, err
+    assert err.count("\n") == 1 and err.startswith("dynsplines: error: "), err
+    return err
+
+
+def test_missing_clip(tmp_path, capsys):
+    err = one_line_error(capsys, ["mocap", str(tmp_path / "nope.bvh"), "--out-dir", str(tmp_path)])
+    assert "nope.bvh" in err and "no such" in err
+
+
+def test_another_skeleton_names_the_missing_joints(tmp_path, capsys):
+    clip = edit_bvh(CLIP, tmp_path / "other.bvh", seconds=0.2, rename={"LeftFoot": "LAnkle", "Spine1": "Chest"})
+    err = one_line_error(capsys, ["mocap", str(clip), "--out-dir", str(tmp_path / "o"), *FAST])
+    assert "LeftFoot" in err and "Spine1" in err
+
+
+def test_missing_scene_and_bad_video_name(tmp_path, short_clip, capsys):
+    err = one_line_error(capsys, ["mocap", str(short_clip), "--out-dir", str(tmp_path), "--scene",
+                                  str(tmp_path / "none.xml"), *FAST])
+    assert "none.xml" in err
+    err = one_line_error(capsys, ["mocap", str(short_clip), "--out-dir", str(tmp_path), "--out",
+                                  str(tmp_path / "v.txt")])
+    assert "v.txt" in err
+
+
+def test_help_names_the_default_outputs(capsys):
+    assert main(["mocap", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert "renders/<clip stem>/" in out and "auto" in out and "--keys" in out and "--max-time" in out
+
+
+@pytest.mark.slow
+def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
+    out = tmp_path / "out"
+    assert main(["mocap", str(short_clip), "--out-dir", str(out), "--no-render", "--rounds", "0",
+                 "--max-evals", "60", "--metrics", str(tmp_path / "m.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "reference" in printed and "optimized" in printed and "penetration max [mm]" in printed
+    scene = out / "run.scene.xml"
+    model = mujoco.MjModel.from_xml_path(str(scene))  # the fitted scene loads from where it is saved
+    layout = StateLayout.from_model(model)
+    kf, info = read_keyframes(out / "run.keyframes.json", layout)
+    assert info.scene == scene.resolve() and info.contacts and kf.count >= 3 and not kf.is_partial.any()
+    assert {c.surface for c in info.contacts} == {"floor"}
+    saved = load_saved_path(out / "run.npz")
+    assert contacts_from_array(saved["contacts"]) == list(info.contacts)
+    assert set(saved.metrics) == {"plain", "optimized", "motion"}
+    report = json.loads((tmp_path / "m.json").read_text())
+    assert report["keyframes"] == kf.count and report["frames"] == 73 and report["fps"] == pytest.approx(120, rel=1e-4)
+    ref = report["metrics"]["motion"]["optimized"]["reference"]
+    assert ref["penetration_mm"]["max"] == 0.0
+    assert report["metrics"]["optimized"]["keyframe_error"] < 1e-9
+    # the keyframe file reruns with animate (the reference found through its "source" "clip")
+    assert main(["animate", str(out / "run.keyframes.json"), "--no-render", "--rounds", "0", "--max-evals", "20",
+                 "--save-path", str(tmp_path / "again.npz")]) == 0
+    assert "skating ratio" in capsys.readouterr().out
+    # keys at the contact events
+    assert main(["mocap", str(short_clip), "--out-dir", str(tmp_path / "c"), "--keys", "contacts", *FAST]) == 0
+    kc, _ = read_keyframes(tmp_path / "c" / "run.keyframes.json", layout)
+    events = sorted({c.start for c in info.contacts} | {c.end for c in info.contacts})
+    for t in events:
+        assert np.min(np.abs(kc.times - t)) < 0.05
