@@ -53,7 +53,7 @@ def test_animate_without_out_renders_to_the_default_path(tmp_path, capsys, monke
     class Info:
         n_frames, wall_time_s = 3, 0.0
 
-    monkeypatch.setattr(cmd, "render_video", lambda out, *a: seen.append(out) or Info())
+    monkeypatch.setattr(cmd, "render_with_progress", lambda out, *a: seen.append(out) or Info())
     code, out, err = animate(capsys)
     assert code == 0, err
     assert seen == [RENDERS / "run_and_step.mp4"] and "wrote renders/run_and_step.mp4" in out
