@@ -48,7 +48,9 @@ def default_options(weights: dict[str, float]) -> SolveOptions:
         weights: {term name: lambda_j >= 0} as from `parse_terms`; only which terms have a nonzero
             weight matters (it chooses the limits).
     Returns:
-        SolveOptions. Change fields with `dataclasses.replace(default_options(w), rounds=4)`.
+        SolveOptions. Change fields with `dataclasses.replace(default_options(w), tol=1e-3)`; for a
+        fixed number of rounds set tol to 0: `replace(default_options(w), tol=0, rounds=4)` (with a
+        tolerance `rounds` is not used).
     Raises:
         InputError: `weights` is not a mapping of term names to weights.
     """
