@@ -4,6 +4,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT
@@ -102,3 +103,17 @@ def test_bench_orient_random(capsys):
         line = next(ln for ln in printed.splitlines() if label in ln)
         for field in ("true gap", "estimated", "true/est", "frames", "time [ms]", "max|1-|q||"):
             assert field in line, (field, line)
+
+
+def test_speed_random_rows():
+    """`bench orient --speed-random`: one row per generated set; with a tiny budget Barr-92 does not reach
+    the gap and the ratio is printed as a lower bound."""
+    from solver.bench.orient import SPEED_GAP, speed_random
+
+    lines = []
+    rows = speed_random(1, budget=0.2, repeat=1, out=lines.append)
+    (row,) = rows
+    assert row["seed"] == 1000 and row["tol"][2] <= SPEED_GAP and row["tol"][0] > 0
+    assert row["barr"][0] is None and row["r_tol"] == pytest.approx(0.2 / row["tol"][0])
+    text = "\n".join(lines)
+    assert "Barr-92 / orient(tol=1e-4): median" in text and "lower bounds" in text
