@@ -9,6 +9,7 @@ from runner.parser import nonnegative, positive
 from dataclasses import replace
 
 from solver.animate import DEFAULT_RATE, default_options
+from solver.errors import InputError
 from solver.optimize import ALGORITHMS
 from solver.problem import term_names
 from solver.solve import SCORES, SUBDIVISIONS, SolveOptions
@@ -67,7 +68,16 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
                      help="where to add variable frames [%(default)s]")
     opt.add_argument("--per-segment", type=nonnegative(int), default=_LIB.per_segment,
                      help="variable frames per keyframe interval to start with [%(default)s]")
-    opt.add_argument("--rounds", type=nonnegative(int), default=_LIB.rounds, help="adaptive subdivision rounds [%(default)s]")
+    opt.add_argument("--rounds", type=nonnegative(int), default=None,
+                     help="a fixed number of adaptive subdivision rounds instead of the tolerance (ignored if "
+                          "--tol is given too) [rounds until --tol]")
+    opt.add_argument("--tol", type=positive(float), default=None, metavar="X",
+                     help="refine adaptively until the decrease of E that refinement still predicts, relative "
+                          "to E, is at most X, or the frame budget (--max-frames, else 10 per keyframe "
+                          f"interval) or --max-time runs out [{_LIB.tol:g}]")
+    opt.add_argument("--max-frames", type=nonnegative(int), default=_LIB.max_frames, metavar="N",
+                     help="at most N variable frames in total (0 = no limit; with --tol 10 per keyframe "
+                          "interval) [%(default)s]")
     opt.add_argument("--algorithm", choices=list(ALGORITHMS), default=_LIB.algorithm, help="nlopt algorithm [%(default)s]")
     opt.add_argument("--ftol", type=nonnegative(float), default=_LIB.ftol_rel, help="relative objective tolerance [%(default)s]")
     opt.add_argument("--max-evals", type=nonnegative(int), default=_LIB.max_evals, help="evaluations per round [no limit]")
@@ -88,12 +98,17 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
 def solve_options(args, weights: dict) -> SolveOptions:
     """`solver.default_options(weights)` with the parsed `add_options` arguments applied (the command's
     and the benchmark's settings)."""
+    if getattr(args, "tol", None) and args.subdivision != "adaptive":
+        raise InputError(f"--tol {args.tol:g} refines adaptively; it does not go with --subdivision "
+                         f"{args.subdivision}")
     return replace(
         default_options(weights),
-        subdivision=args.subdivision, per_segment=args.per_segment, rounds=args.rounds,
+        subdivision=args.subdivision, per_segment=args.per_segment,
         renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
         max_evals=args.max_evals, max_time_s=args.max_time, precondition=not args.no_precondition,
-        score=args.score,
+        score=args.score, max_frames=args.max_frames,
+        tol=args.tol if args.tol is not None else 0.0 if args.rounds is not None else _LIB.tol,
+        rounds=_LIB.rounds if args.rounds is None else args.rounds,
     )
 
 

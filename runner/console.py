@@ -98,6 +98,11 @@ class Progress:
             self._end_round()
             worst = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
             self._line(f"  over the limit ({worst}): weight x10, again")
+        elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
+            self._end_round()
+            tol = f" (tol {info['tol']:g})" if info.get("tol") else ""
+            self._line(f"  round {info['round'] + 1}: refinement estimate {info['estimate']:.3g} of E still "
+                       f"available{tol}")
 
     def _end_round(self):
         if self.round is None:
@@ -208,6 +213,12 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
     lines.append("-" * (w + 28))
     lines.append(f"frames: {solution.initial.count} keyframes + {solution.frames.n_variable} variable; "
                  f"{len(solution.rounds)} rounds, {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
+    estimate = getattr(solution, "refinement_estimate", None)
+    if estimate is not None and np.isfinite(estimate):
+        ok = getattr(solution, "converged_to_tol", None)
+        how = ("fixed rounds, no tolerance" if ok is None else f"tolerance met ({solution.message})" if ok
+               else f"tolerance NOT met: {solution.message}")
+        lines.append(f"refinement estimate (decrease of E still predicted, relative to E): {estimate:.3g}; {how}")
     final = final_weights or {}
     terms = []
     for name, w0 in weights.items():

@@ -6,7 +6,8 @@ times in seconds, strictly increasing; quaternions need not be unit (they are no
 
 Output (.npz): frame_times (m,) [s], frames (m, 4) - the path is the natural cubic spline through them -,
 keyframe_times (k,), keyframes (k, 4) (normalized, hemisphere-aligned), wall_time_s, objective_trace,
-and the summary numbers (form, energy [1/s^3], max_norm_deviation).
+and the summary numbers (form, energy [1/s^3], max_norm_deviation, estimated_gap (relative; NaN for the paper
+form), tol (0: fixed rounds), converged_to_tol (1, 0; -1 without a tolerance), message).
 """
 from __future__ import annotations
 
@@ -86,5 +87,9 @@ def write_result(path: str | Path, result) -> None:
             energy=np.float64(result.energy),
             energy_initial=np.float64(result.energy_initial),
             max_norm_deviation=np.float64(result.max_norm_deviation),
+            estimated_gap=np.float64(result.estimated_gap),
+            tol=np.float64(result.tol),
+            converged_to_tol=np.int8(-1 if result.converged_to_tol is None else int(result.converged_to_tol)),
+            message=np.str_(result.solution.message),
         )
 

@@ -451,7 +451,7 @@ def _solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: fl
         vals[var] = _unit_rows(vals[var])
         frames = replace(frames, values=vals)
     ev0 = obj.evaluate(initial.times, initial.values, grad=False)
-    round_opts = replace(opts, subdivision="none", renormalize=False)
+    round_opts = replace(opts, subdivision="none", renormalize=False, tol=0.0)
     rounds, traces, estimates = [], [], []
     n_evals, boosts = 0, 0
     status, message = Status.CONVERGED, "converged"

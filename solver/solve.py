@@ -5,7 +5,9 @@
 3. variable frames: none, n per segment (global) or where the weak-form Euler-Lagrange score is
    largest (adaptive), valued on the current path;
 4. nlopt moves the free components; keyframes hold exactly at every iterate;
-5. repeat 3-4 until the frame budget, the round limit or the time limit.
+5. repeat 3-4 until the frame budget, the round limit or the time limit; or, with a tolerance
+   (`SolveOptions.tol`), until the decrease of E that refinement still predicts, relative to E
+   (`refinement_estimate`), is at most tol.
 """
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ import copy
 import time
 from dataclasses import dataclass, field, replace
 from collections.abc import Callable
+from functools import cached_property
 
 import numpy as np
 
@@ -27,6 +30,24 @@ from solver.subdivide import adaptive_times, global_times, predicted_decreases, 
 SUBDIVISIONS = ("none", "global", "adaptive")
 LIMIT_CHECK_RATE = 4000.0  # [1/s] samples per second at which `limits` are checked
 SCORES = ("gradient", "decrease")
+#: With a tolerance and no `max_frames`: the frame budget, per keyframe interval.
+TOL_FRAMES_PER_INTERVAL = 10
+
+
+def refinement_estimate(objective: Objective, frames: FrameSet, E: float | None = None) -> tuple[float, np.ndarray]:
+    """The decrease of E still available from refinement, relative to E: sum_c D_c / E, with D_c the
+    predicted decrease from a frame inserted at the midpoint of segment c and moved to its best place
+    (`predicted_decreases`, what adaptive subdivision ranks segments by). A first-order prediction of
+    what halving every segment would buy (each frame moved alone, the others held); 0 where the path
+    is optimal for its frames and no frame could lower E.
+
+    Returns:
+        (estimate, D): D (m-1,) the predicted decreases [units of E].
+    """
+    D = predicted_decreases(objective, frames)
+    if E is None:
+        E = objective.evaluate(frames.times, frames.values, grad=False).E
+    return (float(D.sum() / E) if E > 0 else 0.0), D
 
 
 @dataclass(frozen=True)
@@ -56,6 +77,12 @@ class SolveOptions:
             normalized covariant acceleration) has little radial curvature (its unit term's): there
             0.1 saves 25-40% of the evaluations on the orientation test sets (`solver.orient`,
             docs/orient.md).
+        tol: with adaptive subdivision, > 0: rounds until the decrease of E refinement still predicts,
+            relative to E (`refinement_estimate`, after each round's optimization and penalty
+            continuation), is at most tol, instead of a fixed number of `rounds`; or until `max_frames`
+            (default TOL_FRAMES_PER_INTERVAL per keyframe interval) or `max_time_s` runs out
+            (`Solution.converged_to_tol` False, the message says which and gives the estimate).
+            0: `rounds` rounds.
         limits: ((term name, tolerance), ...): penalty continuation. After a round, a term whose
             `violation` on the path (sampled at LIMIT_CHECK_RATE, in the term's own units, e.g. metres of
             penetration) exceeds its tolerance has its weight multiplied by `boost` and the round is
@@ -81,6 +108,7 @@ class SolveOptions:
     limits: tuple = ()
     boost: float = 10.0
     max_boosts: int = 4
+    tol: float = 0.0
 
     def __post_init__(self):
         if self.subdivision not in SUBDIVISIONS:
@@ -106,6 +134,8 @@ class SolveOptions:
                 raise InputError(f"limits must be (term name, tolerance >= 0) pairs, got {lim!r}")
         if not self.max_time_s >= 0:
             raise InputError(f"max_time_s must be >= 0, got {self.max_time_s}")
+        if not (self.tol >= 0 and np.isfinite(self.tol)):
+            raise InputError(f"tol must be a number >= 0, got {self.tol!r}")
 
 
 @dataclass(frozen=True)
@@ -150,6 +180,9 @@ class Solution:
         objective: the working copy of the objective the last round optimized (final weights and
             scales, terms prepared on the result): for scores or evaluations on the result under the
             objective that produced it. `solve` never changes the caller's Objective.
+        refinement_estimates: with adaptive subdivision, `refinement_estimate` after each round that
+            computed it (every round but the last without a tolerance; every round with one).
+        converged_to_tol: with a tolerance, whether the estimate reached it; None without one.
     """
 
     frames: FrameSet
@@ -167,6 +200,20 @@ class Solution:
     n_evals: int = field(default=0)
     weights: dict = field(default_factory=dict)
     objective: Objective | None = field(default=None, repr=False, compare=False)
+    refinement_estimates: tuple = ()
+    converged_to_tol: bool | None = None
+    final_estimate: float = float("nan")
+
+    @cached_property
+    def refinement_estimate(self) -> float:
+        """`refinement_estimate` of the result (relative to E_final): the last round's with a
+        tolerance, else computed when first read (three gradient evaluations with a frame in every
+        segment); NaN without the objective."""
+        if np.isfinite(self.final_estimate):
+            return self.final_estimate
+        if self.objective is None:
+            return float("nan")
+        return refinement_estimate(self.objective, self.frames, self.E_final)[0]
 
 
 def solve(
@@ -227,6 +274,11 @@ def solve(
             vals[var] = project(vals[var])
             frames = replace(frames, values=vals)
     n_rounds = 1 + (options.rounds if options.subdivision == "adaptive" else 0)
+    tol = options.tol if options.subdivision == "adaptive" else 0.0
+    if tol and not options.max_frames:
+        options = replace(options, max_frames=TOL_FRAMES_PER_INTERVAL * (int(initial.is_keyframe.sum()) - 1))
+    estimates: list[float] = []
+    final_estimate, converged = float("nan"), False
     rounds: list[Round] = []
     traces: list[np.ndarray] = []
     status, message = Status.CONVERGED, "converged"
@@ -278,25 +330,40 @@ def solve(
             scores = None
             continue
         r += 1
-        if r >= n_rounds:
+        if r >= n_rounds and not tol:
             break
         budget = options.per_round or (frames.count - 1)
         if options.max_frames:
             budget = min(budget, options.max_frames - frames.n_variable)
-        if budget <= 0:
+        if budget <= 0 and not tol:
             break
         try:
-            if options.score == "decrease":
-                scores = predicted_decreases(objective, frames)
-            else:
-                scores = weak_form_scores(objective, frames)
+            if options.score == "decrease" or tol:  # the ranking and the estimate: free with "decrease"
+                est, D = refinement_estimate(objective, frames, result.fun)
+                estimates.append(est)
+                if progress:
+                    progress("estimate", {"round": len(rounds) - 1, "estimate": est, "tol": tol})
+            if tol:
+                final_estimate = est
+                if est <= tol:
+                    converged, message = True, f"refinement estimate {est:.2g} <= tol {tol:g}"
+                    break
+                if budget <= 0:
+                    message = (f"frame budget of {options.max_frames} variable frames reached at refinement "
+                               f"estimate {est:.2g} (tol {tol:g})")
+                    break
+            scores = D if options.score == "decrease" else weak_form_scores(objective, frames)
         except NonFiniteError as e:  # keep the optimized frames; say which term failed
             status, message = Status.NONFINITE, f"{e} while choosing new frames"
             break
         new = adaptive_times(scores, frames, budget)
         if new.size == 0:
+            if tol:
+                message = f"no segment to refine at refinement estimate {est:.2g} (tol {tol:g})"
             break
         frames = frames.with_variable_frames(new)
+    if tol and status is Status.MAX_TIME and estimates:
+        message += f" at refinement estimate {estimates[-1]:.2g} (tol {tol:g})"
     ev1 = objective.evaluate(frames.times, frames.values, grad=False)
     if boosts:  # report both ends under the final weights, so E_initial and E_final compare
         ev0 = objective.evaluate(initial.times, initial.values, grad=False)
@@ -304,6 +371,7 @@ def solve(
         _read_only_frames(frames), _read_only_frames(initial), tuple(rounds), status, message, ev0.E, ev1.E,
         ev0.integrals, ev1.integrals, scales, _read_only(np.concatenate(traces) if traces else np.array([ev0.E])),
         time.perf_counter() - t_start, n_evals, dict(zip(objective.names, objective.weights.tolist())), objective,
+        tuple(estimates), converged if tol else None, final_estimate,
     )
 
 

@@ -7,8 +7,12 @@
         adaptive (weak-form Euler-Lagrange, each score) against global subdivision at equal
         variable-frame counts on the run-and-step clip: final objective, evaluations, wall time
         (solver.bench.figure.compare_refinement).
-    dynsplines bench orient
-        the single-body problem against the Barr-92 and constrained B-spline baselines (solver.bench.orient).
+    dynsplines bench orient [--speed-random N]
+        the single-body problem against the Barr-92 and constrained B-spline baselines (solver.bench.orient);
+        with --speed-random N also the time to gap 1e-4 against Barr-92 on N generated sets.
+    dynsplines bench orient --random N [--bvp]
+        accuracy on request: true and estimated gap, frames, time and |q| drift of the default and
+        tol=1e-4 over N generated keyframe sets (solver.bench.random_sets).
 
 The workloads are in solver/bench/; here: parse, load the showcase clip, call, format, print.
 """
@@ -56,6 +60,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--repeat", type=int, default=7,
                    help="timed runs per setting of ours, after one untimed warm-up; median reported [7]")
     p.add_argument("--verbose", action="store_true", help="print every run of every ladder")
+    p.add_argument("--random", type=int, default=0, metavar="N",
+                   help="instead: the accuracy distribution (true and estimated gap, frames, time, max |1 - |q||) "
+                   "of the default and tol=1e-4 over the first N generated acceptance sets (seeds 1000+)")
+    p.add_argument("--bvp", action="store_true",
+                   help="with --random: E* by solve_bvp (minutes or out of memory on some sets; falls back to "
+                   "the discrete reference when it fails) instead of the discrete reference (1-5 s a set)")
+    p.add_argument("--speed-random", type=int, default=0, metavar="N",
+                   help="after the named sets: time to gap 1e-4 of Barr-92 against ours (orient(tol=1e-4) and "
+                   "the fastest ladder setting) on the first N generated acceptance sets")
     p.add_argument("--tradeoff", action="store_true",
                    help="instead: the table of gap and max |1 - |q|| against variable frames, for both "
                    "objective forms (docs/orient.md), on --sets (default here: large_nonuniform,moderate)")
@@ -71,8 +84,16 @@ def bench_orient(args) -> int:
     orient_workload.check_methods(methods)
     if args.budget <= 0 or args.repeat < 1:
         raise InputError("--budget must be > 0 seconds and --repeat >= 1")
+    if args.random < 0 or args.speed_random < 0:
+        raise InputError("--random and --speed-random take a number of sets >= 0")
+    if args.random > len(orient_workload.random_sets.ACCEPTANCE_SEEDS) or args.speed_random > len(
+            orient_workload.random_sets.ACCEPTANCE_SEEDS):
+        raise InputError(f"at most {len(orient_workload.random_sets.ACCEPTANCE_SEEDS)} generated acceptance sets")
     if args.tradeoff:
         orient_workload.tradeoff(orient_workload.sphere_reference, chosen, out=print)
+        return 0
+    if args.random:
+        orient_workload.random_accuracy(args.random, method="bvp" if args.bvp else "discrete", out=print)
         return 0
     print("bench orient: wall time to reach a relative gap (E - E*)/E* of the normalized path "
           f"(baselines: budget {args.budget:g} s per set; ours: median of {args.repeat} runs)")
@@ -83,6 +104,8 @@ def bench_orient(args) -> int:
                 for row in log:
                     print(f"     {m}: " + ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
                                                    for k, v in row.items()))
+    if args.speed_random:
+        orient_workload.speed_random(args.speed_random, args.budget, args.repeat, out=print)
     return 0
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from runner.figure10 import figure10
 from runner.files import check_writable_dir
 from runner.orient_file import read_keyframes, write_result
@@ -34,8 +36,14 @@ def register(sub) -> None:
                    "(N per interval, then where the Euler-Lagrange score is largest) [adaptive]")
     p.add_argument("--per-segment", type=nonnegative(int), default=1, metavar="N",
                    help="variable frames per keyframe interval (global), or to start with (adaptive) [1]")
+    p.add_argument("--tol", type=positive(), default=None, metavar="GAP",
+                   help="refine adaptively until the estimated relative gap (E - E*)/E* to the exact optimum "
+                   "is at most GAP, or the frame budget (--max-frames, else 40 per keyframe interval) runs "
+                   "out (normalized form only) [1e-3 unless --rounds is given]")
     p.add_argument("--rounds", type=nonnegative(int), default=None, metavar="N",
-                   help="adaptive subdivision rounds [2; 3 with --form paper]")
+                   help="a fixed number of adaptive subdivision rounds instead of a tolerance (ignored if "
+                   "--tol is given too) [normalized form: rounds until the estimated gap is at most --tol; "
+                   "3 with --form paper]")
     p.add_argument("--max-frames", type=nonnegative(int), default=0, metavar="N",
                    help="at most N variable frames in total (0 = no limit) [0]")
     p.add_argument("--form", choices=FORMS, default="normalized",
@@ -65,6 +73,11 @@ def run(args) -> int:
     changes = dict(subdivision=args.subdivision, per_segment=args.per_segment, max_frames=args.max_frames)
     if args.rounds is not None:
         changes["rounds"] = args.rounds
+    if args.tol is not None:
+        if args.form != "normalized":
+            raise InputError(f"--tol {args.tol:g}: the estimated gap is to the exact-unit optimum, which only "
+                             "the normalized form has; with --form paper give --rounds")
+        changes["tol"] = args.tol
     result = orient(times, quats, form=args.form, options=default_options(args.form, **changes), rate=args.rate,
                     source=str(args.keyframes))
     write_result(out, result)
@@ -79,8 +92,21 @@ def run(args) -> int:
     return 0
 
 
+def accuracy_line(result) -> str:
+    """The estimated gap reached and, with a tolerance, whether it was met (else which budget ran out)."""
+    est = result.estimated_gap
+    if not np.isfinite(est):
+        return "not estimated (the paper form's optimum is not the exact-unit one)"
+    text = f"{est:.2g} (relative, (E - E*)/E*)"
+    if result.converged_to_tol is None:
+        return text + "; fixed rounds, no tolerance"
+    if result.converged_to_tol:
+        return text + f"; tolerance {result.tol:g} met"
+    return text + f"; tolerance {result.tol:g} NOT met: {result.solution.message}"
+
+
 def summary(result, out=None) -> str:
-    """A few lines: objective, energy, max |1 - |q||, frames, time."""
+    """A few lines: objective, energy, estimated gap, max |1 - |q||, frames, time."""
     sol = result.solution
     lines = [
         f"orient: {len(result.keyframe_times)} keyframes, {result.n_variable} variable frames "
@@ -88,6 +114,7 @@ def summary(result, out=None) -> str:
         f"  objective            {sol.E_initial:.6g} -> {sol.E_final:.6g}",
         f"  angular accel. E     {result.energy_initial:.6g} -> {result.energy:.6g} 1/s^3 "
         "(integral |cov. acc. of q/|q||^2 dt)",
+        f"  estimated gap        {accuracy_line(result)}",
         f"  max |1 - |q||        {result.max_norm_deviation:.3g}",
         f"  keyframes met to     {result.keyframe_error:.1e}",
         f"  time                 {result.wall_time_s * 1e3:.1f} ms",

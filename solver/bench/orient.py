@@ -2,6 +2,8 @@
 
     dynsplines bench orient [--sets large_uniform,large_nonuniform,large_nonuniform_b] [--budget 60]
                             [--repeat 7] [--methods dynsplines,barr92,bspline]
+    dynsplines bench orient --random N [--bvp]      accuracy of the default and tol=1e-4 on N generated sets
+    dynsplines bench orient --speed-random N       also: time to gap 1e-4, ours vs Barr-92, on N generated sets
 
 For each keyframe set (7 keyframes, 30-150 degrees between them; solver/bench/sphere_reference/) the exact
 optimum E* is the natural Riemannian cubic spline on S^3 (solve_bvp). Every method runs a ladder of
@@ -21,7 +23,7 @@ import time
 
 import numpy as np
 
-from solver.bench import sphere_reference
+from solver.bench import random_sets, sphere_reference
 from solver.bench.baselines import baseline_time_to_gap
 from solver.errors import InputError
 from solver.orient import default_options, orient
@@ -134,6 +136,86 @@ def bench_set(ks, methods, budget: float, repeat: int, ref=sphere_reference, out
         settings = ", ".join(f"{g:.0e}: {results[m][g][1]}" for g in GAPS)
         out(f"   {m} settings used - {settings}")
     return {"results": results, "logs": logs, "E_star": E_star}
+
+def random_accuracy(n: int, method: str = "discrete", out=lambda *a: None) -> dict:
+    """The accuracy distribution of `orient` (default, tol=1e-4) over the first n acceptance sets
+    (`random_sets.ACCEPTANCE_SEEDS`, never used for tuning): `random_sets.evaluate`, one summary line per
+    run. E* by the reference's discrete solver (1-5 s a set; "bvp": solve_bvp, which took minutes or ran
+    out of memory on some sets, then the discrete one). Returns {label: Distribution}."""
+    seeds = list(random_sets.ACCEPTANCE_SEEDS)[:n]
+    out(f"bench orient --random {n}: acceptance seeds {seeds[0]}-{seeds[-1]}; true gap (E - E*)/E* with E* by "
+        f"the sphere reference's {'solve_bvp (discrete where it fails)' if method == 'bvp' else 'discrete solver'}; "
+        "time of one whole orient call (min/median/max)")
+    res = random_sets.evaluate(seeds, method=method)
+    for d in res.values():
+        out("  " + d.summary())
+    return res
+
+
+#: gap level of the speed comparison on generated sets
+SPEED_GAP = 1e-4
+
+
+def _timed(fn, repeat: int):
+    fn()  # warm-up, untimed
+    walls = []
+    for _ in range(max(1, repeat)):
+        t0 = time.perf_counter()
+        r = fn()
+        walls.append(time.perf_counter() - t0)
+    return r, statistics.median(walls)
+
+
+def _gap(ref, fr, E_star: float) -> float:
+    t = np.concatenate([np.linspace(a, b, 201)[:-1] for a, b in zip(fr.times[:-1], fr.times[1:], strict=True)]
+                       + [fr.times[-1:]])
+    return (ref.covariant_energy(t, fr.path(t), breaks=fr.times) - E_star) / E_star
+
+
+def speed_random(n: int, budget: float, repeat: int, ref=sphere_reference, out=lambda *a: None) -> list:
+    """Time to a gap of SPEED_GAP on the first n acceptance sets: Barr-92 (its resolution ladder,
+    `baseline_time_to_gap`, the single run of the smallest resolution reaching the gap) against ours,
+    two ways: `orient(tol=SPEED_GAP)` (accuracy on request: what a user without a tuned setting runs;
+    median of `repeat` runs after a warm-up) and the fastest rung of `LADDER` reaching the gap (as on the
+    named sets). E* by the reference's discrete solver. Prints a row per set and the median ratios.
+    Returns one dict per set."""
+    seeds = list(random_sets.ACCEPTANCE_SEEDS)[:n]
+    out(f"\n== generated sets (acceptance seeds {seeds[0]}-{seeds[-1]}): time to gap {SPEED_GAP:.0e}, "
+        f"Barr-92 (budget {budget:g} s a set) vs ours; E* by the discrete reference")
+    out(f"   {'seed':>5} {'keys':>4} {'deg max':>7} {'Barr-92':>18} {'ours tol=1e-4':>24} {'ours ladder':>22}"
+        f" {'Barr/tol':>10} {'Barr/ladder':>12}")
+    rows = []
+    for seed in seeds:
+        s = random_sets.random_set(seed)
+        E_star = ref.discrete_sphere_reference(s.times, s.quats).E_star
+        r, wall = _timed(lambda s=s: orient(s.times, s.quats, tol=SPEED_GAP), repeat)
+        tol_gap = _gap(ref, r.frames, E_star)
+        ladder = ours_time_to_gap(s.times, s.quats, E_star, ref, gaps=(SPEED_GAP,), repeat=repeat)[SPEED_GAP]
+        barr = baseline_time_to_gap("barr92", s.times, s.quats, E_star, gaps=(SPEED_GAP,),
+                                    max_time_s=budget)[SPEED_GAP]
+        tol_entry = (wall if tol_gap <= SPEED_GAP else None, "tol", tol_gap)
+        row = dict(seed=seed, keys=len(s.times), barr=barr, tol=tol_entry, ladder=ladder,
+                   r_tol=_ratio_value(barr, tol_entry, budget), r_ladder=_ratio_value(barr, ladder, budget))
+        rows.append(row)
+        out(f"   {seed:>5} {len(s.times):>4} {s.angles_deg.max():>7.0f} {_fmt_time(barr):>18} "
+            f"{_fmt_time(tol_entry) + f' ({tol_gap:.1e})':>24} {_fmt_time(ladder):>22} "
+            f"{_ratio(barr, tol_entry, budget):>10} {_ratio(barr, ladder, budget):>12}")
+    for key, what in (("r_tol", "orient(tol=1e-4)"), ("r_ladder", "our fastest ladder setting")):
+        vals = [r[key] for r in rows if r[key] is not None]
+        lower = sum(1 for r in rows if r[key] is not None and r["barr"][0] is None)
+        if vals:
+            out(f"   Barr-92 / {what}: median {np.median(vals):,.0f}x, min {min(vals):,.0f}x, max {max(vals):,.0f}x "
+                f"over {len(vals)} of {len(rows)} sets" + (f" ({lower} of them lower bounds: Barr-92 did not "
+                                                          f"reach the gap within {budget:g} s)" if lower else ""))
+    return rows
+
+
+def _ratio_value(theirs, ours, budget):
+    """Barr-92 time / ours (a lower bound budget / ours if Barr-92 did not reach the gap); None if we did not."""
+    if ours[0] is None:
+        return None
+    return (theirs[0] if theirs[0] is not None else budget) / ours[0]
+
 
 #: objective variants of the trade-off table: (label, orient keyword arguments)
 TRADEOFF_VARIANTS = (

@@ -6,9 +6,9 @@ exp(uniform(-ln 5, ln 5)), kept within [0.2, 3] s). Deterministic per seed (nump
 
 `evaluate(seeds, ...)`: runs `orient` on each set (default settings and `tol=1e-4`, or other runs
 given) and measures the true relative gap (E - E*)/E* against the exact optimum E* (the natural
-Riemannian cubic spline on S^3, computed independently by the reference module of the tests; passed in
-or loaded from a path, it is not part of the solver), with the estimate the result reports, frames,
-wall time and max |1 - |q||.
+Riemannian cubic spline on S^3, computed independently by `solver.bench.sphere_reference`, which imports
+nothing else from solver; another reference module may be passed in or loaded from a path), with the
+estimate the result reports, frames, wall time and max |1 - |q||.
 
 Seeds: tune on 0-49 (`TUNING_SEEDS`), report acceptance on 1000-1049 (`ACCEPTANCE_SEEDS`), never used
 for tuning.
@@ -66,7 +66,8 @@ def random_set(seed: int) -> RandomSet:
 
 
 def load_reference(path: str | Path):
-    """The sphere reference module (tests/sphere_reference.py, or wherever it lives) from a file path."""
+    """A sphere reference module loaded from a file path (the default reference is the package
+    `solver.bench.sphere_reference`; this is for another implementation of the same functions)."""
     path = Path(path)
     name = "_dynsplines_sphere_reference"
     if name in sys.modules:
@@ -121,6 +122,7 @@ class Distribution:
 
         n = len(self.runs)
         return (f"{self.label}: {n} sets; true gap min/med/max {mmm(self.column('true_gap'), '.2e')}; "
+                f"estimated {mmm(self.column('estimated_gap'), '.2e')}; "
                 f"true/est {mmm(self.ratio, '.2f')}, within 3x {self.within()}/{n}; "
                 f"converged {int(self.column('converged_to_tol').sum())}/{n}; "
                 f"frames {mmm(self.column('frames'), '.0f')}; time [ms] {mmm(1e3 * self.column('time_s'), '.1f')}; "
@@ -154,8 +156,8 @@ def evaluate(seeds=ACCEPTANCE_SEEDS, reference=None, runs=RUNS, method: str = "d
 
     Args:
         seeds: iterable of ints (`random_set`).
-        reference: the sphere reference module, or a path to it (`load_reference`); default
-            tests/sphere_reference.py of the source checkout.
+        reference: the sphere reference module, or a path to one (`load_reference`); default
+            `solver.bench.sphere_reference`.
         runs: ((label, orient keyword arguments), ...).
         method, ref_tol: how E* is computed (`exact_energy`).
     Returns:
@@ -164,7 +166,7 @@ def evaluate(seeds=ACCEPTANCE_SEEDS, reference=None, runs=RUNS, method: str = "d
     from solver.orient import orient
 
     if reference is None:
-        reference = Path(__file__).resolve().parents[2] / "tests" / "sphere_reference.py"
+        from solver.bench import sphere_reference as reference
     ref = load_reference(reference) if isinstance(reference, (str, Path)) else reference
     out = {label: Distribution(label) for label, _ in runs}
     for seed in seeds:
