@@ -19,7 +19,6 @@ forms against the number of variable frames).
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
@@ -31,11 +30,14 @@ from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
-from solver.optimize import Status
 from solver.solve import Solution, SolveOptions, solve
-from solver.quadrature import gauss_nodes, gauss_times
-from solver.spline import interpolate_segments
-from solver.subdivide import adaptive_times, global_times
+from solver.subdivide import global_times
+from solver.orient_refine import (  # noqa: F401  (measures re-exported: orient.covariant_energy, ...)
+    covariant_energy,
+    max_norm_deviation,
+    solve_to_tol,
+    unit_rows,
+)
 from solver.terms import CovariantAcceleration, NormalizedCovariantAcceleration, UnitQuaternion
 
 FORMS = ("normalized", "paper")
@@ -91,29 +93,6 @@ DEFAULT_ROUNDS = {"normalized": 2, "paper": 3}
 #: (E - E*)/E* (`solver.error_estimate.estimate_gap`) is at most DEFAULT_TOL / TOL_SAFETY. It replaces a
 #: fixed number of rounds (DEFAULT_ROUNDS, still the paper form's default: its optimum is not E*).
 DEFAULT_TOL = 1e-3
-
-#: The estimate is a median-calibrated guess (true/estimated 0.4-3.6 on the tuning sets, 90% within
-#: 0.7-1.6); a round is accepted when the estimate is at most tol / TOL_SAFETY, so that the true gap is
-#: at most tol on all tuning sets (docs/orient.md, "Accuracy on request").
-TOL_SAFETY = 2.0
-
-#: With a tolerance: the estimate is not accepted before this many adaptive rounds. On the starting
-#: frames alone (one per keyframe interval) the path is not yet in the asymptotic regime the estimate
-#: assumes: there true/estimated was 0.5-1.6, median 1.16 on the tuning sets (later rounds: median
-#: 0.96), and 2.2 on the moderate test set.
-MIN_ROUNDS = 1
-
-#: With a tolerance and no `max_frames`: the frame budget, per keyframe interval.
-TOL_FRAMES_PER_INTERVAL = 40
-
-#: With a tolerance: when a round reaches it but the path has max |1 - |q|| above DRIFT_LIMIT, the unit
-#: term's weight is multiplied by DRIFT_BOOST and the same frames are optimized again, and refined on if
-#: the estimate asks for it (at most DRIFT_BOOSTS times). The normalized form's f2 does not see |q|, so the weight does not move its exact-unit optimum;
-#: the light default weight lets |q| drift up to 36% on random sets with few frames.
-DRIFT_LIMIT = 0.08
-DRIFT_BOOST = 10.0
-DRIFT_BOOSTS = 3
-
 
 @dataclass(frozen=True)
 class OrientOptions(SolveOptions):
@@ -402,9 +381,9 @@ def orient(
                          "the paper form's optimum trades smoothness for unit length (use rounds)")
     estimates, boosts, converged = (), 0, False
     if tol > 0:
-        sol, estimates, boosts, converged = _solve_to_tol(obj, initial, opts, tol, kf.count, should_stop, progress)
+        sol, estimates, boosts, converged = solve_to_tol(obj, initial, opts, tol, kf.count, should_stop, progress)
     else:
-        sol = solve(obj, initial, opts, should_stop=should_stop, progress=progress, project=_unit_rows)
+        sol = solve(obj, initial, opts, should_stop=should_stop, progress=progress, project=unit_rows)
     fr = sol.frames
     return OrientResult(
         frames=fr,
@@ -428,106 +407,9 @@ def orient(
     )
 
 
-def _solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: float, n_keys: int,
-                  should_stop, progress) -> tuple[Solution, tuple, int, bool]:
-    """Rounds of optimize -> estimate -> refine until the estimated gap is at most tol (`orient`'s tol).
-
-    Each round is one `solve` of the current frames without subdivision; frames are added here by
-    `adaptive_times` on the predicted decreases the estimate computed. Returns (a Solution merging the
-    rounds, the estimate after each round, the number of unit-weight boosts, whether the estimate reached
-    tol).
-    """
-    t_start = time.perf_counter()
-    budget = opts.max_frames or TOL_FRAMES_PER_INTERVAL * (n_keys - 1)
-    per = 0 if opts.subdivision == "none" else opts.per_segment
-    if per * (n_keys - 1) > budget:
-        per = 0
-    frames = initial
-    new = global_times(frames, per)
-    if new.size:
-        frames = frames.with_variable_frames(new)
-        var = np.isin(frames.times, new)
-        vals = frames.values.copy()
-        vals[var] = _unit_rows(vals[var])
-        frames = replace(frames, values=vals)
-    ev0 = obj.evaluate(initial.times, initial.values, grad=False)
-    round_opts = replace(opts, subdivision="none", renormalize=False, tol=0.0)
-    rounds, traces, estimates = [], [], []
-    n_evals, boosts = 0, 0
-    status, message = Status.CONVERGED, "converged"
-    converged = False
-    while True:
-        remaining = 0.0
-        if opts.max_time_s:
-            remaining = opts.max_time_s - (time.perf_counter() - t_start)
-            if remaining <= 0:
-                status, message = Status.MAX_TIME, f"time limit of {opts.max_time_s:g} s reached"
-                break
-        sol = solve(obj, frames, replace(round_opts, max_time_s=remaining), should_stop=should_stop,
-                    progress=progress)
-        frames = sol.frames
-        rounds += sol.rounds
-        traces.append(sol.trace)
-        n_evals += sol.n_evals
-        status, message = sol.status, sol.message
-        if status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED):
-            break
-        est, D = estimate_gap(obj, frames, sol.E_final)
-        if est <= tol / TOL_SAFETY:  # only where it may stop: ~1e-6 usually, and it costs an evaluation
-            est += _quadrature_discrepancy(obj, frames, sol)
-        estimates.append(est)
-        if est <= tol / TOL_SAFETY and len(estimates) > MIN_ROUNDS:
-            if boosts < DRIFT_BOOSTS and max_norm_deviation(frames.times, frames.values) > DRIFT_LIMIT:
-                # accurate enough but |q| drifts: stiffen the unit term, optimize the same frames again
-                # (early rounds are not checked: there the drift is mostly the spline's dip between
-                # frames far apart, ~theta^2/8, which only more frames remove)
-                boosts += 1
-                obj.weights[0] *= DRIFT_BOOST
-                continue
-            converged = True
-            message = f"estimated gap {est:.2g} <= tol {tol:g} / {TOL_SAFETY:g}"
-            break
-        room = budget - frames.n_variable
-        if room <= 0:
-            message = f"frame budget of {budget} variable frames reached at estimated gap {est:.2g} (tol {tol:g})"
-            break
-        new = adaptive_times(D, frames, min(room, opts.per_round or frames.count - 1))
-        if new.size == 0:
-            message = f"no segment to refine at estimated gap {est:.2g} (tol {tol:g})"
-            break
-        frames = frames.with_variable_frames(new)
-    if opts.max_time_s and status is Status.MAX_TIME:
-        message = f"time limit of {opts.max_time_s:g} s reached" + (
-            f" at estimated gap {estimates[-1]:.2g} (tol {tol:g})" if estimates else "")
-    if rounds and rounds[-1].times is frames.times and not boosts:  # the last solve reported these frames
-        E1, I1 = sol.E_final, sol.integrals_final
-    else:
-        ev1 = obj.evaluate(frames.times, frames.values, grad=False)
-        E1, I1 = ev1.E, ev1.integrals
-    if boosts:  # both ends under the final weights, so E_initial and E_final compare
-        ev0 = obj.evaluate(initial.times, initial.values, grad=False)
-    merged = Solution(frames, initial, rounds, status, message, ev0.E, E1, ev0.integrals, I1,
-                      dict(zip(obj.names, obj.scales.tolist())), np.concatenate(traces) if traces else np.array([ev0.E]),
-                      time.perf_counter() - t_start, n_evals)
-    return merged, tuple(estimates), boosts, converged
-
-
-def _quadrature_discrepancy(obj: Objective, frames: FrameSet, sol: Solution) -> float:
-    """|E_8 - E_q| / E_8: the covariant energy of the path by 8 Gauss points per segment against the
-    objective's own quadrature (`points`, default 4). The optimizer minimizes the latter and may exploit
-    its error (a path that is smoother at the nodes than between them), which the predicted decreases,
-    computed with the same quadrature, cannot see. Usually ~1e-6; found 1.6e-3 on a generated set with
-    125-130 degree steps 0.2-0.3 s apart (docs/orient.md)."""
-    Eq = sol.integrals_final.get("covariant_normalized")
-    if Eq is None:
-        return 0.0
-    E8 = covariant_energy(frames.times, frames.values)
-    return abs(E8 - Eq) / E8 if E8 > 0 else 0.0
-
-
 def paper_start(initial: FrameSet) -> FrameSet:
     """The paper's starting path (sec. 3): the keyframes and one variable frame at the midpoint of every
-    keyframe interval, on the unit sphere (`_unit_rows`). eq. 7's "initial state" for `renormalize="start"`.
+    keyframe interval, on the unit sphere (`unit_rows`). eq. 7's "initial state" for `renormalize="start"`.
 
     Args:
         initial: the keyframes' FrameSet (`FrameSet.from_keyframes`), nq = 4.
@@ -538,36 +420,5 @@ def paper_start(initial: FrameSet) -> FrameSet:
     fr = initial.with_variable_frames(new)
     var = ~fr.is_keyframe
     vals = fr.values.copy()
-    vals[var] = _unit_rows(vals[var])
+    vals[var] = unit_rows(vals[var])
     return replace(fr, values=vals)
-
-
-def _unit_rows(values: np.ndarray) -> np.ndarray:
-    """Starting values of the first variable frames: the plain spline's values put back on the unit
-    sphere. Between keyframes theta apart the spline dips by ~theta^2/8; the spline through the
-    projected values is nearer the optimum (L-BFGS needs 10-25% fewer evaluations, docs/orient.md)."""
-    return values / np.linalg.norm(values, axis=1, keepdims=True)
-
-
-def covariant_energy(frame_times: np.ndarray, frames: np.ndarray, points: int = 8) -> float:
-    """integral |covariant acceleration of u = q/|q||^2 dt of the spline through frames [1/s^3].
-
-    Gauss-Legendre with `points` nodes on every spline segment (the integrand is smooth inside a
-    segment, so this converges fast: ~1e-10 relative with 8 points on the test sets).
-
-    Args:
-        frame_times: (m,) [s]. frames: (m, 4) quaternions.
-    """
-    ft = np.asarray(frame_times, float)
-    t, wt = gauss_times(ft, points)
-    Y, Y1, Y2 = interpolate_segments(ft, frames, gauss_nodes(points)[0], (0, 1, 2))
-    f = NormalizedCovariantAcceleration(LAYOUT.quat_slots).evaluate(t, Y, Y1, Y2, grad=False).f
-    return float(wt @ f)
-
-
-def max_norm_deviation(frame_times: np.ndarray, frames: np.ndarray, per_segment: int = 64) -> float:
-    """max |1 - |q(t)|| over the spline through frames (`per_segment` samples per segment, ends included)."""
-    q = interpolate_segments(frame_times, frames, np.arange(per_segment) / per_segment)
-    r2 = np.einsum("ni,ni->n", q, q)  # |q|^2; the last frame is the path's end
-    last = np.asarray(frames, float)[-1]
-    return float(max(np.abs(1.0 - np.sqrt(r2)).max(), abs(1.0 - np.sqrt(last @ last))))
