@@ -99,7 +99,7 @@ def test_partial_keyframe_components_are_free_and_others_fixed():
 def test_grouped_preconditioner_equals_dense_cholesky_factor():
     """R^-1 applied per component group equals the dense inverse Cholesky factor of the free-component
     Hessian of integral |Y''|^2 (built here directly), and apply_transpose is its transpose."""
-    from solver.solve import AccelerationPreconditioner
+    from solver.precondition import AccelerationPreconditioner
 
     times = np.array([0.0, 0.5, 1.2, 1.6])
     vals = np.array([quat([1, 0, 0], a) for a in (0, 40, 80, 120)])
@@ -156,9 +156,9 @@ def test_gauss_quadrature_objective_gradient_and_integral():
 
 
 def test_preconditioner_folded_into_the_spline_matrices_gives_the_same_optimization():
-    """Whole free frames (one preconditioner group): `_optimize` folds R^-1 into the spline matrices;
+    """Whole free frames (one preconditioner group): `solver.round.optimize_round` folds R^-1 into the spline matrices;
     the objective it minimizes is the same function of z as the scatter/gather path."""
-    from solver.solve import AccelerationPreconditioner
+    from solver.precondition import AccelerationPreconditioner
 
     kf, obj = orient_problem()
     fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots).with_variable_frames([0.25, 0.8, 1.4, 2.0])
@@ -198,9 +198,9 @@ def test_project_sets_the_starting_values_of_the_first_variable_frames_only():
 def test_radial_stretch_of_the_preconditioner():
     """SolveOptions.radial_weight w: x = S^-1 R^-1 z with S^-1 = I + c u u^T per free quaternion,
     c = 1/sqrt(w) - 1, so the assumed Hessian S (H x I) S has curvature w H along each frame's radial
-    direction u. apply_transpose is the transpose of apply; the whole-frames path of `_optimize`
+    direction u. apply_transpose is the transpose of apply; the whole-frames path of `optimize_round`
     (R^-1, then the stretch, folded next to the spline matrices) minimizes the same function."""
-    from solver.solve import AccelerationPreconditioner
+    from solver.precondition import AccelerationPreconditioner
 
     kf, obj = orient_problem()
     fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots).with_variable_frames([0.25, 0.8, 1.4, 2.0])
@@ -241,7 +241,7 @@ def test_failed_preconditioned_round_is_retried_without_preconditioning(monkeypa
     """A round whose preconditioned optimization fails is re-run on the plain variables."""
     import importlib
 
-    solve_mod = importlib.import_module("solver.solve")  # the module: `solver.solve` is the function
+    round_mod = importlib.import_module("solver.round")  # where a round calls nlopt
     from solver.optimize import minimize as real_minimize
 
     calls = []
@@ -255,7 +255,7 @@ def test_failed_preconditioned_round_is_retried_without_preconditioning(monkeypa
             return replace(res, status=Status.FAILED, message="nlopt failed: test")
         return res
 
-    monkeypatch.setattr(solve_mod, "minimize", flaky)
+    monkeypatch.setattr(round_mod, "minimize", flaky)
     kf, obj = orient_problem()
     fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)
     sol = solve(obj, fs, SolveOptions(subdivision="global", per_segment=1, precondition=True, ftol_rel=1e-10))
