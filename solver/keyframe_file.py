@@ -113,7 +113,7 @@ def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyfra
             are listed); a joint with the wrong number of components (the right number is given);
             NaN, infinity or a non-number value; and everything solver.Keyframes rejects (times not
             increasing or negative, fewer than two keyframes, a keyframe fixing nothing, a zero
-            quaternion).
+            quaternion); a "model" field that does not name an existing file.
     """
     p = Path(path)
     src = str(path)
@@ -190,6 +190,14 @@ def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyfra
             raise InputError(f"{src}: field {key!r} is {v!r}; give a path relative to the keyframe file")
         return (p.parent / v).resolve()
 
+    model = resolve("model")
+    if model is not None and not model.is_file():
+        raise InputError(
+            f"{src}: field 'model' is {doc['model']!r}, but {model} is not a file (the path is relative to "
+            f"the keyframe file's folder); write the figure's path relative to {p.parent.resolve()} (e.g. the "
+            "humanoid39.xml the scene includes) or remove the field"
+        )
+
     source = doc.get("source", {})
     if not isinstance(source, dict):
         raise InputError(f"{src}: field 'source' is {source!r}; it must be an object (provenance notes)")
@@ -197,7 +205,7 @@ def read_keyframes(path: str | os.PathLike, layout: StateLayout) -> tuple[Keyfra
     if not isinstance(terms, dict):
         raise InputError(f"{src}: field 'terms' is {terms!r}; it must be an object {{term name: weight}}")
     keyframes = Keyframes(times, values, mask, source=src)
-    return keyframes, KeyframeFileInfo(p, resolve("model"), resolve("scene"), dict(source), dict(terms))
+    return keyframes, KeyframeFileInfo(p, model, resolve("scene"), dict(source), dict(terms))
 
 
 def _num(v: float) -> str:

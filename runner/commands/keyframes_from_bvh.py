@@ -21,7 +21,7 @@ from runner.paths import MODELS
 from solver.errors import InputError
 from solver.keyframe_file import write_keyframes
 from solver.layout import StateLayout
-from solver.model import load_model
+from solver.model import check_scene, load_model
 
 PROG = "dynsplines keyframes-from-bvh"
 DEFAULT_SCENE = MODELS / "run_and_step.xml"
@@ -61,7 +61,10 @@ def run(args, command: str | None = None) -> int:
     """
     scene = Path(args.scene)
     figure = Path(args.model) if args.model else scene.parent / "humanoid39.xml"
+    if not args.model and not figure.is_file():
+        figure = MODELS / "humanoid39.xml"  # the scene includes the figure by another path
     model = load_model(scene)
+    check_scene(model, scene)  # before the work, not when `animate` builds the penetration term
     reference = load_bvh_reference(args.clip, model)
     keyframes = keyframes_from_reference(reference, model, every=args.every)
     out = Path(args.out)
