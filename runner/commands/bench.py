@@ -1,7 +1,8 @@
 """`dynsplines bench ...`: speed measured, not asserted in tests.
 
     dynsplines bench run-and-step [--terms all] [--repeat N]
-        optimization wall time (median of N runs), evaluations, time per evaluation; with dynamics
+        optimization wall time (median of N runs), evaluations, time per evaluation, and the acceptance
+        figures of the plain and the optimized path (the summary's rows, "worse" marked); with dynamics
         terms, the geometric-only objective is run side by side in the same process for the ratio.
     dynsplines bench refine [--terms all] [--counts 14,21,28] [--scores gradient,decrease]
         adaptive (weak-form Euler-Lagrange, each score) against global subdivision at equal
@@ -17,10 +18,12 @@ from __future__ import annotations
 import argparse
 
 from runner.animate_options import default_args, solve_options
+from runner.console import LEGEND, comparison_rows, format_rows
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
 from solver.bench import orient as orient_workload
 from solver.bench.figure import GEOMETRIC, compare_refinement, per_eval_ms, time_solves
 from solver.errors import InputError
+from solver.metrics import path_metrics
 from solver.problem import parse_terms
 
 
@@ -105,6 +108,8 @@ def bench_run_and_step(args) -> int:
               f"{', '.join(f'{w:.2f}' for w in r['wall_all_s'])}), {r['evals']} evaluations, "
               f"{r['per_eval_ms']:.2f} ms per evaluation in the run (wall time / evaluations, "
               f"{r['frames']} frames at the end)")
+        print_figures(model, keyframes, r["solution"], weights)
+    print(f"  {LEGEND}")
     # per-evaluation cost of every configuration on one frame set (the last run's result), so the
     # ratio compares the objectives and not the frame counts they ended with
     common = results[list(results)[-1]]["solution"].frames
@@ -121,6 +126,16 @@ def bench_run_and_step(args) -> int:
               f"optimization wall time {other['wall_median_s'] / g['wall_median_s']:.2f}x, evaluations "
               f"{other['evals'] / max(1, g['evals']):.2f}x")
     return 0
+
+
+def print_figures(model, keyframes, solution, weights, indent: str = "  ") -> None:
+    """The acceptance figures of the plain spline and of an optimized path (the summary's rows, marked
+    where the optimized path is worse), so a benchmark run tracks what the time bought."""
+    plain = path_metrics(model, solution.initial.times, solution.initial.values, keyframes)
+    opt = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
+    rows = comparison_rows(plain, opt, dynamics_terms=bool({"torque", "root"} & set(weights)))
+    for line in format_rows(rows):
+        print(indent + line)
 
 
 def bench_refine(args) -> int:
