@@ -27,6 +27,20 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+#: the video's panels: a name for `--panels` and the panel's label
+PANELS = {"plain": "plain spline", "optimized": "optimized", "reference": "motion capture"}
+
+
+def _panels(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    bad = [n for n in names if n not in PANELS]
+    if bad or not names or len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError(
+            f"--panels {text!r}: expected a comma-separated list of distinct panels from {', '.join(PANELS)}, "
+            "e.g. plain,optimized,reference")
+    return names
+
+
 def _weight(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     if not sep:
@@ -47,6 +61,12 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     out.add_argument("--no-render", action="store_true", help="skip the video")
     out.add_argument("--fps", type=positive(float), default=30.0, help="video frames per second [%(default)s]")
     out.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="video size [960x540]")
+    out.add_argument("--panels", type=_panels, default=("plain", "optimized"), metavar="LIST",
+                     help="video panels, left to right, from plain,optimized,reference (the motion capture "
+                          "the keyframes were made from) [plain,optimized]")
+    out.add_argument("--reference-panel", dest="panels", action="store_const",
+                     const=("plain", "optimized", "reference"),
+                     help="the same as --panels plain,optimized,reference")
     out.add_argument("--speed", type=positive(float), default=0.5, help="playback speed [%(default)s x real time]")
     out.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write plots (PNG) to DIR")
     opt = p.add_argument_group("optimization")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.animate_options import add_options, solve_options
+from runner.animate_options import PANELS, add_options, solve_options
 from runner.console import Progress, StopRequest, summary_table
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.files import check_writable_dir
@@ -57,6 +57,11 @@ def run_animate(args) -> int:
     if args.plot is not None:
         check_writable_dir(Path(args.plot) / "plot.png", "--plot")
     keyframes, info, model, layout, scene_path = load_problem(args.keyframes, args.scene)
+    reference = find_reference(info, model)
+    if "reference" in getattr(args, "panels", ()) and args.out is not None and not args.no_render \
+            and reference is None:
+        raise InputError(f"--panels reference: {args.keyframes} names no motion-capture clip that is there "
+                         "(its \"source\": {\"clip\": ...}, relative to the file); drop the reference panel")
     file_terms = dict(getattr(info, "terms", None) or {})
     weights_in = dict(args.weight)
     if args.terms is None and file_terms:
@@ -89,7 +94,6 @@ def run_animate(args) -> int:
             print(f"dynsplines: warning: the optimization failed ({solution.message}); the best path before "
                   "that (it meets every keyframe) is reported and written", file=sys.stderr)
 
-        reference = find_reference(info, model)
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
         if not args.quiet:
@@ -114,7 +118,7 @@ def run_animate(args) -> int:
     code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
     if args.out is not None and not args.no_render:
         try:
-            info_r = render_video(args.out, model, solution, keyframes, args)
+            info_r = render_video(args.out, model, solution, keyframes, args, reference)
         except KeyboardInterrupt:  # the video is written atomically: nothing half-written is left
             saved = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
             print(f"\ndynsplines: interrupted while rendering: {_rel(args.out)} not written (an earlier file "
@@ -151,17 +155,21 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
 
 
-def render_video(out, model, solution, keyframes, args):
-    """Side-by-side video of the plain spline and the optimized path, keyframes marked."""
-    from runner.render import Track, render_tracks
+def render_video(out, model, solution, keyframes, args, reference=None):
+    """Side-by-side video of the plain spline and the optimized path (and the motion capture, with
+    `--panels ...,reference`), keyframes marked."""
+    from runner.render import Track, render_tracks, sample_track
     from solver.terms.penetration import Penetration
 
     t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
     pen = Penetration(model, margin=0.0)
     tracks = []
-    for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames)):
-        Y = fs.path(t)
-        tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
+    for name in getattr(args, "panels", ("plain", "optimized")):
+        if name == "reference":  # over the keyframes' time span, like the other panels
+            Y = sample_track(Track("reference", reference.times, reference.qpos), t)
+        else:
+            Y = (solution.initial if name == "plain" else solution.frames).path(t)
+        tracks.append(Track(PANELS[name], t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
     # keyframes with free components filled: the poses the animator set
     kq = solution.initial.values[solution.initial.is_keyframe]
     quiet = getattr(args, "quiet", False)
@@ -178,4 +186,4 @@ def render_video(out, model, solution, keyframes, args):
 
     return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
                          keyframe_times=keyframes.times, keyframe_qpos=kq,
-                         title="dynsplines: plain spline vs optimized", progress=progress)
+                         title="dynsplines: " + " vs ".join(tr.label for tr in tracks), progress=progress)
