@@ -14,7 +14,7 @@ Sampling: tracks come as dense samples (`times`, `qpos`) at any rate; the video 
 shows each track *linearly interpolated* between its two samples around t (held at its first/last
 sample outside its time range). Quaternions are interpolated component-wise and not normalized here:
 MuJoCo normalizes them when it computes the kinematics, as it does for the spline's own values (see
-DESIGN.md, "State = MuJoCo qpos"). With samples much denser than the video this is exact to the eye.
+docs/design.md, "State = MuJoCo qpos"). With samples much denser than the video this is exact to the eye.
 
 The model is passed in (loaded once). One `mujoco.Renderer` is made per call, for the one panel size,
 and reused for every panel of every frame; its offscreen buffer is made large enough for the panel
