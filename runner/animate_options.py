@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from runner.parser import nonnegative, positive
+from runner.render.side_by_side import PANELS
 from dataclasses import replace
 
 from solver.animate import DEFAULT_RATE, default_options
@@ -26,6 +27,18 @@ def _size(text: str) -> tuple[int, int]:
     if w <= 0 or h <= 0 or w > 3840 or h > 2160:
         raise argparse.ArgumentTypeError(f"--size {text!r}: width and height must be 1..3840 x 1..2160")
     return w, h
+
+
+
+
+def _panels(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    bad = [n for n in names if n not in PANELS]
+    if bad or not names or len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError(
+            f"--panels {text!r}: expected a comma-separated list of distinct panels from {', '.join(PANELS)}, "
+            "e.g. plain,optimized,reference")
+    return names
 
 
 def _weight(text: str) -> tuple[str, float]:
@@ -51,6 +64,12 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     out.add_argument("--no-render", action="store_true", help="skip the video")
     out.add_argument("--fps", type=positive(float), default=30.0, help="video frames per second [%(default)s]")
     out.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="video size [960x540]")
+    out.add_argument("--panels", type=_panels, default=("plain", "optimized"), metavar="LIST",
+                     help="video panels, left to right, from plain,optimized,reference (the motion capture "
+                          "the keyframes were made from) [plain,optimized]")
+    out.add_argument("--reference-panel", dest="panels", action="store_const",
+                     const=("plain", "optimized", "reference"),
+                     help="the same as --panels plain,optimized,reference")
     out.add_argument("--speed", type=positive(float), default=0.5, help="playback speed [%(default)s x real time]")
     out.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write plots (PNG) to DIR")
     out.add_argument("--export", type=Path, action="append", default=[], metavar="FILE",

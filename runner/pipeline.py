@@ -259,7 +259,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     return result
 
 
-def render_with_progress(out, model, solution, keyframes, args):
+def render_with_progress(out, model, solution, keyframes, args, reference=None):
     """The side-by-side video (`runner.render.side_by_side.render_video`) with a progress bar over its
     frames (`runner.console.Steps`; silent with `args.quiet`). Returns the render's info."""
     from runner.console import Steps
@@ -269,4 +269,5 @@ def render_with_progress(out, model, solution, keyframes, args):
 
     n = len(frame_times(float(keyframes.times[0]), float(keyframes.times[-1]), args.fps, args.speed))
     with Steps(f"rendering {display_path(out)}", n, getattr(args, "quiet", False), unit=" frames") as bar:
-        return render_video(out, model, solution, keyframes, args, progress=lambda i, _n: bar.update(i))
+        return render_video(out, model, solution, keyframes, args, reference,
+                            progress=lambda i, _n: bar.update(i))

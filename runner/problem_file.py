@@ -8,8 +8,8 @@ from runner.mocap.reference import IMPORT_STAGES, load_bvh_reference
 from runner.paths import MODELS
 from solver.errors import InputError
 from solver.keyframe_file import read_document, read_keyframes
-from solver.layout import CONTACT_SITES, StateLayout
-from solver.model import load_model
+from solver.layout import StateLayout
+from solver.model import check_scene, load_model
 
 RUN_AND_STEP_KEYFRAMES = MODELS / "run_and_step.keyframes.json"
 
@@ -19,24 +19,17 @@ def load_problem(keyframes_path: Path, scene: Path | None):
 
     Raises:
         InputError: an unreadable or malformed keyframe file, no scene, a scene MuJoCo cannot load, or a
-            scene without the figure (no free joint or no contact sites); the message names the file.
+            scene without the figure (no free joint or no contact sites) or without a floor
+            (`solver.model.check_scene`); the message names the file.
     """
-    import mujoco
-
     keyframes_path = Path(keyframes_path)
     head = _peek_scene(keyframes_path)  # also reports a missing, unreadable or malformed file
     scene_path = Path(scene) if scene is not None else head
     if scene_path is None:
         raise InputError(f"{keyframes_path}: no 'scene' in the file; give one with --scene SCENE.xml")
     model = load_model(scene_path)
+    check_scene(model, scene_path)
     layout = StateLayout.from_model(model)
-    if not any(j.kind == "free" for j in layout.joints):
-        raise InputError(f"scene {scene_path} has no free joint: does it include the figure (humanoid39.xml)?")
-    sites = CONTACT_SITES
-    missing = [s for s in sites if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0]
-    if missing:
-        raise InputError(f"scene {scene_path} has no contact site(s) {', '.join(map(repr, missing))} (the "
-                         f"figure's feet need {', '.join(sites)}): does it include the figure (humanoid39.xml)?")
     keyframes, info = read_keyframes(keyframes_path, layout)
     return keyframes, info, model, layout, scene_path
 

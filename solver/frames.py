@@ -83,7 +83,7 @@ class FrameSet:
         """Insert variable frames at `times`, valued on the current path.
 
         With natural end conditions the refined spline through the old path's values is the old path
-        itself (DESIGN.md "The spline"), so insertion leaves the path unchanged.
+        itself (docs/design.md "The spline"), so insertion leaves the path unchanged.
 
         Args:
             times: (r,) new frame times [s], strictly inside (times[0], times[-1]) and not on a frame.

@@ -123,7 +123,7 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
             are listed); a joint with the wrong number of components (the right number is given);
             NaN, infinity or a non-number value; and everything solver.Keyframes rejects (times not
             increasing or negative, fewer than two keyframes, a keyframe fixing nothing, a zero
-            quaternion).
+            quaternion); a "model" field that does not name an existing file.
     """
     if not isinstance(layout, StateLayout):
         layout = StateLayout.from_model(layout)
@@ -202,6 +202,14 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
             raise InputError(f"{src}: field {key!r} is {v!r}; give a path relative to the keyframe file")
         return (p.parent / v).resolve()
 
+    model = resolve("model")
+    if model is not None and not model.is_file():
+        raise InputError(
+            f"{src}: field 'model' is {doc['model']!r}, but {model} is not a file (the path is relative to "
+            f"the keyframe file's folder); write the figure's path relative to {p.parent.resolve()} (e.g. the "
+            "humanoid39.xml the scene includes) or remove the field"
+        )
+
     source = doc.get("source", {})
     if not isinstance(source, dict):
         raise InputError(f"{src}: field 'source' is {source!r}; it must be an object (provenance notes)")
@@ -210,8 +218,7 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
         raise InputError(f"{src}: field 'terms' is {terms!r}; it must be an object {{term name: weight}}")
     contacts = read_contacts(doc.get("contacts", []), src)
     keyframes = Keyframes(times, values, mask, source=src)
-    return keyframes, KeyframeFileInfo(p, resolve("model"), resolve("scene"), dict(source), dict(terms),
-                                       contacts)
+    return keyframes, KeyframeFileInfo(p, model, resolve("scene"), dict(source), dict(terms), contacts)
 
 
 def read_contacts(entries: Any, src: str) -> tuple[Contact, ...]:

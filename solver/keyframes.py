@@ -98,7 +98,7 @@ class Keyframes:
         """Keyframe values ready to interpolate: quaternions hemisphere-aligned, free components filled.
 
         1. Each quaternion slot that is fully fixed at consecutive keyframes is flipped to q or -q,
-           whichever is nearer the previous fixed one (DESIGN.md).
+           whichever is nearer the previous fixed one (docs/design.md).
         2. A component a partial keyframe leaves free gets the value of the natural cubic spline through
            the keyframes that do fix it (linear with two, constant with one): the starting guess the
            optimizer moves.

@@ -1,8 +1,8 @@
 """From the spline's `qpos` (unnormalized quaternions) to MuJoCo's tangent space (`qvel`).
 
 MuJoCo normalizes every quaternion before kinematics, so a `qpos` sample Y describes the pose with
-unit quaternions u = q / |q|. A change dY moves the pose by the tangent vector (DESIGN.md, "Velocities
-for MuJoCo")
+unit quaternions u = q / |q|. A change dY moves the pose by the tangent vector (docs/design.md, "The
+objective": velocities for MuJoCo)
 
     dv = B(Y) dY,  with  B = 2 G(u) / |q|  on each quaternion block (G(u) p = vec(conj(u) p)),
                           B = I             on root position, hinge and slide components,

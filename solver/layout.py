@@ -1,6 +1,6 @@
 """Which components of the state vector are what: the `qpos` layout of a figure.
 
-The spline's state Y(t) is MuJoCo's `qpos` (DESIGN.md, "State = MuJoCo qpos"): for the 39-DOF figure
+The spline's state Y(t) is MuJoCo's `qpos` (docs/design.md, "State = MuJoCo qpos"): for the 39-DOF figure
 the root position (3), root quaternion (4, w x y z), then one quaternion per ball joint, 51 numbers.
 Objective terms need to know which columns are quaternions; keyframe files name joints.
 """

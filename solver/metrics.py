@@ -16,6 +16,11 @@ Physical plausibility (paper sec. 6, appendix A), from the contact-free inverse 
   indicator phi > 0.5 (`RootResidual.flight`: every contact site clear of every surface by about
   3 cm or more, with the default 5 cm contact distance); RMS and peak of |F| and |T| over the flight
   samples, and the flight duration [s], are reported per path (each path's own flight phases).
+* on the ground (phi <= 0.5) the root residual is what the feet must supply: RMS and peak |F| over
+  the ground samples in body weights (|F| / (m g), m the model's total mass), the check the
+  contact-free root term does not make (large forces on the ground are its price).
+* pelvis acceleration: peak over time of |x''| of the root position [m/s^2] (the spline's second
+  derivative, world frame), gravity not included.
 """
 from __future__ import annotations
 
@@ -65,7 +70,8 @@ def dynamics_series(model, frame_times, frames, rate: float = 1000.0, sites=CONT
         dict of arrays over n samples: t (n,) [s]; joint_torque (n, 33) [N m] (ball-joint DOFs in
         qvel order, child-frame components); joint_names (11,) and joint_torque_norm (n, 11) [N m]
         (|tau_j| per ball joint); root_force (n, 3) [N] (world); root_torque (n, 3) [N m] (root
-        frame); phi (n,) the flight indicator in [0, 1]; flight (n,) bool.
+        frame); phi (n,) the flight indicator in [0, 1]; flight (n,) bool; pelvis_acceleration (n, 3)
+        [m/s^2] (the root position's second derivative, world); body_weight_N (m g of the model).
     Raises:
         InputError: a model the analytic inverse dynamics does not support (see `make_engine`).
     """
@@ -93,6 +99,8 @@ def dynamics_series(model, frame_times, frames, rate: float = 1000.0, sites=CONT
         "root_torque": wrench[:, 3:],
         "phi": phi,
         "flight": phi > flight_threshold,
+        "pelvis_acceleration": Y2[:, :3],
+        "body_weight_N": float(np.sum(model.body_mass) * np.linalg.norm(model.opt.gravity)),
     }
 
 
@@ -102,7 +110,9 @@ def dynamics_metrics(series: dict) -> dict:
     Returns:
         dict: rms_joint_torque_Nm, peak_joint_torque_Nm, peak_joint_torque_joint, flight_s,
         rms_root_force_flight_N, peak_root_force_flight_N, rms_root_torque_flight_Nm,
-        peak_root_torque_flight_Nm (NaN without flight samples).
+        peak_root_torque_flight_Nm (NaN without flight samples), rms_root_force_ground_bw,
+        peak_root_force_ground_bw (body weights, NaN without ground samples; only when the series has
+        body_weight_N), peak_pelvis_acceleration_ms2 (when the series has pelvis_acceleration).
     """
     t, tau, fl = series["t"], series["joint_torque"], series["flight"]
     norms = series["joint_torque_norm"]
@@ -126,7 +136,18 @@ def dynamics_metrics(series: dict) -> dict:
         "peak_root_force_flight_N": peak(F),
         "rms_root_torque_flight_Nm": rms(T),
         "peak_root_torque_flight_Nm": peak(T),
-    }
+    } | _ground_and_pelvis(series, rms, peak)
+
+
+def _ground_and_pelvis(series: dict, rms, peak) -> dict:
+    out = {}
+    if "body_weight_N" in series:
+        G = np.linalg.norm(series["root_force"][~series["flight"]], axis=1) / series["body_weight_N"]
+        out["rms_root_force_ground_bw"] = rms(G)
+        out["peak_root_force_ground_bw"] = peak(G)
+    if "pelvis_acceleration" in series:
+        out["peak_pelvis_acceleration_ms2"] = peak(np.linalg.norm(series["pelvis_acceleration"], axis=1))
+    return out
 
 
 def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None, rate: float = 1000.0,

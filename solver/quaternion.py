@@ -1,7 +1,7 @@
 """Quaternion helpers on arrays, scalar-first (w, x, y, z) as in MuJoCo.
 
 All functions broadcast over leading axes: a quaternion array has shape (..., 4).
-Quaternions in the spline are *not* unit (DESIGN.md, "State = MuJoCo qpos"); the functions say
+Quaternions in the spline are *not* unit (docs/design.md, "State = MuJoCo qpos"); the functions say
 whether they expect unit input.
 """
 from __future__ import annotations
@@ -65,7 +65,7 @@ def align_hemispheres(quats: np.ndarray) -> np.ndarray:
     """Flip quaternions so that each is in the hemisphere of the previous one (q or -q).
 
     q and -q are the same rotation; interpolating between q_i and q_{i+1} with q_i . q_{i+1} < 0
-    takes the long way round (DESIGN.md). The first quaternion is kept.
+    takes the long way round (docs/design.md). The first quaternion is kept.
 
     Args:
         quats: (k, 4) quaternions in time order.

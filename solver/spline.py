@@ -3,7 +3,7 @@
 Paper eq. 2-6: the spline Y(t) through frame values P at knot times t_m is linear in P. At fixed
 sample times (the quadrature points) Y = W P, Y' = W1 P, Y'' = W2 P with W, W1, W2 of shape (n, m),
 built once per frame set (eq. 6: the matrix [Phi] is inverted once). End conditions are *natural*
-(Y'' = 0 at both ends, DESIGN.md "The spline"): with them, inserting a frame at a segment midpoint with
+(Y'' = 0 at both ends, docs/design.md "The spline"): with them, inserting a frame at a segment midpoint with
 the value the path already has there leaves the path unchanged, so subdivision never makes the
 result worse.
 
@@ -427,7 +427,7 @@ class SplineBasis:
         return tuple(out)
 
     def pullback(self, dY, dY1, dY2) -> np.ndarray:
-        """Chain rule through the spline: dE/dP = W^T dE/dY + W1^T dE/dY' + W2^T dE/dY'' (DESIGN.md).
+        """Chain rule through the spline: dE/dP = W^T dE/dY + W1^T dE/dY' + W2^T dE/dY'' (docs/design.md).
 
         Args:
             dY, dY1, dY2: (n, nq) or None.

@@ -1,7 +1,7 @@
 """Subdivision: where to add variable frames (paper sec. 2 "Subdivision", sec. 3, appendix C).
 
 Global subdivision adds n variable frames in every segment. Adaptive subdivision adds them where the
-path is furthest from optimal by the *weak form* of the Euler-Lagrange residual (DESIGN.md): a
+path is furthest from optimal by the *weak form* of the Euler-Lagrange residual (docs/design.md): a
 candidate frame inserted at a segment midpoint, valued on the current path, leaves the path unchanged
 (natural spline); the gradient of E with respect to its value is the integral of the Euler-Lagrange
 residual EL(Y) against the candidate's basis function phi_c,

@@ -71,6 +71,11 @@ def run_animate(args) -> int:
         check_writable_dir(Path(args.plot) / "plot.png", "--plot")
     _check_exports(args.export)
     keyframes, info, model, layout, scene_path = load_problem(args.keyframes, args.scene)
+    reference = find_reference(info, model, quiet=args.quiet)
+    if "reference" in getattr(args, "panels", ()) and args.out is not None and not args.no_render \
+            and reference is None:
+        raise InputError(f"--panels reference: {args.keyframes} names no motion-capture clip that is there "
+                         "(its \"source\": {\"clip\": ...}, relative to the file); drop the reference panel")
     file_terms = dict(getattr(info, "terms", None) or {})
     weights_in = dict(args.weight)
     if args.terms is None and file_terms:
@@ -103,7 +108,6 @@ def run_animate(args) -> int:
             print(f"dynsplines: warning: the optimization failed ({solution.message}); the best path before "
                   "that (it meets every keyframe) is reported and written", file=sys.stderr)
 
-        reference = find_reference(info, model, quiet=args.quiet)
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
         contacts = tuple(getattr(info, "contacts", ()) or ())
@@ -143,7 +147,7 @@ def run_animate(args) -> int:
     code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
     if args.out is not None and not args.no_render:
         try:
-            info_r = render_with_progress(args.out, model, solution, keyframes, args)
+            info_r = render_with_progress(args.out, model, solution, keyframes, args, reference)
         except KeyboardInterrupt:  # the video is written atomically: nothing half-written is left
             saved = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
             print(f"\ndynsplines: interrupted while rendering: {_rel(args.out)} not written (an earlier file "

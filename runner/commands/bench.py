@@ -1,7 +1,8 @@
 """`dynsplines bench ...`: speed measured, not asserted in tests.
 
     dynsplines bench run-and-step [--terms all] [--repeat N]
-        optimization wall time (median of N runs), evaluations, time per evaluation; with dynamics
+        optimization wall time (median of N runs), evaluations, time per evaluation, and the acceptance
+        figures of the plain and the optimized path (the summary's rows, "worse" marked); with dynamics
         terms, the geometric-only objective is run side by side in the same process for the ratio.
     dynsplines bench refine [--terms all] [--counts 14,21,28] [--scores gradient,decrease]
         adaptive (weak-form Euler-Lagrange, each score) against global subdivision at equal
@@ -13,6 +14,11 @@
     dynsplines bench orient --random N [--bvp]
         accuracy on request: true and estimated gap, frames, time and |q| drift of the default and
         tol=1e-4 over N generated keyframe sets (solver.bench.random_sets).
+    dynsplines bench readme [--check] [--only NAME,...] [--file README.md]
+        regenerate the README's measured tables (between `<!-- bench:NAME -->` and `<!-- /bench:NAME -->`)
+        from runs of the current code (runner/readme_tables.py); --check compares instead of writing
+        and exits 1 when a table no longer matches (wall times are not compared, every other figure
+        is, as printed).
 
 The workloads are in solver/bench/; here: parse, load the showcase clip, call, format, print.
 """
@@ -21,10 +27,15 @@ from __future__ import annotations
 import argparse
 
 from runner.animate_options import default_args, solve_options
+from runner.console import LEGEND, comparison_rows, format_rows
+from runner.paths import REPO
+from runner.readme_tables import Block, compare_blocks, replace_blocks, table, timing
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+from solver.animate import DEFAULT_RATE
 from solver.bench import orient as orient_workload
-from solver.bench.figure import GEOMETRIC, compare_refinement, per_eval_ms, time_solves
+from solver.bench.figure import GEOMETRIC, compare_refinement, path_figures, per_eval_ms, time_solves
 from solver.errors import InputError
+from solver.metrics import path_metrics
 from solver.problem import parse_terms
 
 
@@ -46,6 +57,14 @@ def register(sub) -> None:
                    help="adaptive subdivision scores to run (SolveOptions.score) [gradient,decrease]")
     f.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
     f.set_defaults(func=bench_refine)
+    m = bsub.add_parser("readme", help="regenerate (or --check) the README's measured tables",
+                        description="Regenerate the measured tables of the README (between <!-- bench:NAME --> "
+                        "markers) from runs of the current code; --check compares instead (wall times excepted).")
+    m.add_argument("--check", action="store_true",
+                   help="compare the file's tables with fresh runs instead of writing; exit 1 if one differs")
+    m.add_argument("--only", default=",".join(README_TABLES), help=f"tables to make [{','.join(README_TABLES)}]")
+    m.add_argument("--file", default=str(REPO / "README.md"), help="the Markdown file [README.md]")
+    m.set_defaults(func=bench_readme)
     o = bsub.add_parser("orient", help="single-body orientation vs earlier methods")
     add_arguments(o)
     o.set_defaults(func=bench_orient)
@@ -128,6 +147,8 @@ def bench_run_and_step(args) -> int:
               f"{', '.join(f'{w:.2f}' for w in r['wall_all_s'])}), {r['evals']} evaluations, "
               f"{r['per_eval_ms']:.2f} ms per evaluation in the run (wall time / evaluations, "
               f"{r['frames']} frames at the end)")
+        print_figures(model, keyframes, r["solution"], weights)
+    print(f"  {LEGEND}")
     # per-evaluation cost of every configuration on one frame set (the last run's result), so the
     # ratio compares the objectives and not the frame counts they ended with
     common = results[list(results)[-1]]["solution"].frames
@@ -144,6 +165,16 @@ def bench_run_and_step(args) -> int:
               f"optimization wall time {other['wall_median_s'] / g['wall_median_s']:.2f}x, evaluations "
               f"{other['evals'] / max(1, g['evals']):.2f}x")
     return 0
+
+
+def print_figures(model, keyframes, solution, weights, indent: str = "  ") -> None:
+    """The acceptance figures of the plain spline and of an optimized path (the summary's rows, marked
+    where the optimized path is worse), so a benchmark run tracks what the time bought."""
+    plain = path_metrics(model, solution.initial.times, solution.initial.values, keyframes)
+    opt = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
+    rows = comparison_rows(plain, opt, dynamics_terms=bool({"torque", "root"} & set(weights)))
+    for line in format_rows(rows):
+        print(indent + line)
 
 
 def bench_refine(args) -> int:
@@ -171,4 +202,147 @@ def bench_refine(args) -> int:
             frames = "" if c["variable"] == r["count"] else f" [{c['variable']} frames]"
             cells.append(f"{c['E']:.5g}{ratio}{frames} {c['evals']}/{c['wall_s']:.1f}s".rjust(26))
         print(f"  {r['count']:>15}" + "".join(f"  {c}" for c in cells))
+    return 0
+
+
+# ------------------------------------------------------------------------------- README tables
+#: the README's measured tables, in the order they are made: name -> what it shows
+README_TABLES = {
+    "terms-all": "run-and-step, plain spline vs `--terms all`: the acceptance figures",
+    "run-and-step": "bench run-and-step --terms all: both objectives' evaluations and times",
+    "refine": "bench refine --terms all: adaptive vs global subdivision, final objective",
+}
+REFINE_COUNTS = (14, 21, 28, 35, 42)
+
+
+class _Runs:
+    """The showcase clip's runs, made once and shared by the tables (the command's solve options)."""
+
+    def __init__(self, rate: float):
+        self.keyframes, _, self.model, self.layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
+        self.rate = rate
+        self._solved = {}
+
+    def solved(self, terms: str) -> dict:
+        if terms not in self._solved:
+            weights = parse_terms(terms)
+            r = time_solves(self.model, self.keyframes, self.layout, weights,
+                            solve_options(default_args(), weights), self.rate, 1)
+            r["figures"] = path_figures(self.model, self.keyframes, r["solution"])
+            r["weights"] = weights
+            self._solved[terms] = r
+        return self._solved[terms]
+
+
+def _kf_error(v: float) -> str:
+    return "< 1e-12" if v < 1e-12 else f"{v:.1e}"  # round-off differs between machines
+
+
+def _terms_all_block(runs: _Runs) -> Block:
+    r = runs.solved("all")
+    f = r["figures"]
+    p, o = f["plain"], f["optimized"]
+    worse = {label: flag for label, _, _, _, flag in comparison_rows(p, o, dynamics_terms=True)}
+
+    def mark(*labels):
+        return " (worse)" if any(worse.get(label) for label in labels) else ""
+
+    def pair(key_rms, key_peak, fmt, d):
+        return f"{fmt.format(d[key_rms])} / {fmt.format(d[key_peak])}"
+
+    def geometry(d):
+        return (f"{d['max_penetration_mm']:.2f} / {_kf_error(d['keyframe_error'])} / {d['max_norm_deviation']:.4f} / "
+                f"{d['max_hyperextension_deg']:.2f}")
+
+    rows = [
+        ["max penetration [mm] / keyframe error / max \\|1-\\|q\\|\\| / hyperextension [deg]", geometry(p),
+         geometry(o) + mark("max penetration [mm] (1000 Hz)", "max |1 - |q||", "max hyperextension [deg]")],
+        ["RMS / peak joint torque [N m]", pair("rms_joint_torque_Nm", "peak_joint_torque_Nm", "{:.1f}", p),
+         pair("rms_joint_torque_Nm", "peak_joint_torque_Nm", "{:.1f}", o)
+         + mark("RMS joint torque [N m]", "peak joint torque [N m]")],
+        ["flight (all four contact sites clear) [s]", f"{p['flight_s']:.3f}",
+         f"{o['flight_s']:.3f}" + mark("flight (all feet clear) [s]")],
+        [f"RMS / peak root force in flight [N] (body weight: {f['body_weight_N']:.0f} N)",
+         pair("rms_root_force_flight_N", "peak_root_force_flight_N", "{:.1f}", p),
+         pair("rms_root_force_flight_N", "peak_root_force_flight_N", "{:.1f}", o)
+         + mark("RMS root force in flight [N]", "peak root force in flight [N]")],
+        ["RMS / peak root torque in flight [N m]", pair("rms_root_torque_flight_Nm", "peak_root_torque_flight_Nm",
+                                                        "{:.1f}", p),
+         pair("rms_root_torque_flight_Nm", "peak_root_torque_flight_Nm", "{:.1f}", o)
+         + mark("RMS root torque in flight [N m]", "peak root torque in flight [N m]")],
+        ["peak pelvis acceleration [m/s^2]", f"{p['peak_pelvis_acceleration_ms2']:.1f}",
+         f"{o['peak_pelvis_acceleration_ms2']:.1f}" + mark("peak pelvis acceleration [m/s^2]")],
+        ["RMS / peak root force on the ground [body weights]",
+         pair("rms_root_force_ground_bw", "peak_root_force_ground_bw", "{:.2f}", p),
+         pair("rms_root_force_ground_bw", "peak_root_force_ground_bw", "{:.2f}", o)
+         + mark("RMS root force on ground [body wt]", "peak root force on ground [body wt]")],
+        ["optimization", "", f"{f['evals']} evaluations, {f['variable']} variable frames, "
+                             + timing(f"{f['wall_s']:.0f} s")],
+    ]
+    return Block("terms-all", table(["", "plain spline", "optimized (`--terms all`)"], rows))
+
+
+def _run_and_step_block(runs: _Runs) -> Block:
+    rows = []
+    common = runs.solved("all")["solution"].frames
+    for name, terms in (("geometric (default)", GEOMETRIC), ("all terms", "all")):
+        r = runs.solved(terms)
+        f = r["figures"]
+        rows.append([name, str(f["evals"]), str(f["frames"]), f"{f['E_final']:.5g}",
+                     timing(f"{f['wall_s']:.1f}"), timing(f"{per_eval_ms(r['objective'], common):.1f}")])
+    header = ["objective", "evaluations", "frames at the end", "final objective E",
+              "optimization [s]", f"value + gradient on one frame set ({common.count} frames) [ms]"]
+    return Block("run-and-step", table(header, rows))
+
+
+def _refine_block(runs: _Runs) -> Block:
+    weights = parse_terms("all")
+    out = compare_refinement(runs.model, runs.keyframes, runs.layout, weights, REFINE_COUNTS,
+                             ("gradient", "decrease"), 400.0)
+    methods = ["global", "adaptive-gradient", "adaptive-decrease"]
+    rows = []
+    for r in out:
+        cells = [str(r["count"])]
+        for m in methods:
+            c = r[m]
+            frames = "" if c["variable"] == r["count"] else f" ({c['variable']} frames)"
+            cells.append(f"{c['E']:.3f}{frames}")
+        rows.append(cells)
+    header = [f"variable frames (plain spline: {out[0]['global']['E_initial']:.3g})", "global",
+              'adaptive, score "gradient"', 'adaptive, score "decrease" (default)']
+    return Block("refine", table(header, rows))
+
+
+_MAKERS = {"terms-all": _terms_all_block, "run-and-step": _run_and_step_block, "refine": _refine_block}
+
+
+def bench_readme(args) -> int:
+    """`dynsplines bench readme [--check]`: regenerate or check the README's measured tables.
+
+    Returns 0 (written, or every table matches), 1 with --check when a table differs (each difference
+    printed). Raises InputError for an unknown table name or a file without the markers."""
+    from pathlib import Path
+
+    names = [n.strip() for n in args.only.split(",") if n.strip()]
+    unknown = [n for n in names if n not in _MAKERS]
+    if unknown or not names:
+        raise InputError(f"--only {args.only!r}: unknown table(s) {', '.join(unknown) or '(none given)'}; "
+                         f"the tables are {', '.join(_MAKERS)}")
+    path = Path(args.file)
+    if not path.is_file():
+        raise InputError(f"--file {path}: no such file")
+    runs = _Runs(DEFAULT_RATE)
+    blocks = []
+    for n in names:
+        print(f"bench readme: {n}: {README_TABLES[n]} ...", flush=True)
+        blocks.append(_MAKERS[n](runs))
+    if args.check:
+        problems = compare_blocks(path, blocks)
+        for p in problems:
+            print(p)
+        print(f"bench readme --check: {len(blocks) - len(problems)} of {len(blocks)} tables match {path} "
+              "(wall times not compared)")
+        return 1 if problems else 0
+    replace_blocks(path, blocks)
+    print(f"bench readme: wrote {', '.join(b.name for b in blocks)} in {path}")
     return 0

@@ -24,6 +24,7 @@ from solver.contacts import reference_contacts
 from solver.errors import InputError
 from solver.keyframe_file import write_keyframes
 from solver.layout import StateLayout
+from solver.model import check_scene
 
 PROG = "dynsplines keyframes-from-bvh"
 #: the figure every scene includes
@@ -95,6 +96,7 @@ def run(args, command: str | None = None) -> int:
         raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first")
     cs = clip_scene(args.clip, args.scene, figure, fitted_scene_path(out))
     reference, model = cs.reference, cs.model
+    check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
     contacts = name_surfaces(model, reference, reference_contacts(model, reference.qpos, reference.frame_time))
     every = args.every if (args.every is not None or args.keys == "contacts") else 0.25
     keyframes = pick_keyframes(reference, model, contacts, keys=args.keys, every=every, partial=args.partial,

@@ -3,16 +3,18 @@
 `render_tracks` draws each `Track` (a label and dense `qpos` samples in time) as one panel of the
 video, all panels over the same time range, seen by the same camera, so that the plain spline through
 the keyframes and the optimized path can be compared frame by frame. The keyframes are marked three
-ways: translucent "ghost" figures at the keyframe poses in every panel, a timeline under each panel
-with a tick per keyframe, and a "keyframe k" caption (and a yellow ghost) for a few frames when
-playback passes a keyframe time. Contact sites that are inside a surface (a `Track`'s optional
+ways: a translucent "ghost" figure at a keyframe pose in every panel, fading in and out while playback
+is within 0.3 s of that keyframe, a timeline under each panel with a tick per keyframe, and a
+"keyframe k" caption (and a yellow ghost) as playback reaches a keyframe time, gone once it has passed.
+The title sits in a band above the panels; the camera follows the root from the side of its direction
+of travel; videos smaller than 320x180 get no text. Contact sites that are inside a surface (a `Track`'s optional
 `penetration`) are circled in magenta, on top of everything, so a foot hidden inside the step shows.
 
 Sampling: tracks come as dense samples (`times`, `qpos`) at any rate; the video frame at motion time t
 shows each track *linearly interpolated* between its two samples around t (held at its first/last
 sample outside its time range). Quaternions are interpolated component-wise and not normalized here:
 MuJoCo normalizes them when it computes the kinematics, as it does for the spline's own values (see
-DESIGN.md, "State = MuJoCo qpos"). With samples much denser than the video this is exact to the eye.
+docs/design.md, "State = MuJoCo qpos"). With samples much denser than the video this is exact to the eye.
 
 The model is passed in (loaded once). One `mujoco.Renderer` is made per call, for the one panel size,
 and reused for every panel of every frame; its offscreen buffer is made large enough for the panel

@@ -16,7 +16,14 @@ from runner.render.tracks import Camera, Track, forward_direction, root_body, sa
 PENETRATION_SHOWN = 1e-3
 """[m] a contact site deeper than this inside a surface is circled in magenta."""
 KEYFRAME_CAPTION_SECONDS = 0.25
-"""[s] of video for which "keyframe k" stays on screen after playback passes keyframe k."""
+"""[s] of video before playback reaches keyframe k during which "keyframe k" and its yellow ghost are
+shown; they go at the first frame after the keyframe (they do not linger once it has passed)."""
+GHOST_WINDOW = 0.3
+"""[s] of motion time: a keyframe's ghost is drawn only while playback is within this of the keyframe,
+fading in and out (opacity 1 at the keyframe, 0 at this distance; `ghost_alphas`)."""
+LABELS_MIN_SIZE = (320, 180)
+"""[px] (width, height) of the video below which no text is drawn (labels, times, captions, title):
+at smaller sizes the letters are illegible scraps. The timeline and the magenta rings stay."""
 
 # Colours stay clear of the figure's own (left side blue, right side red, skin, grey trunk).
 _GHOST_RGBA = np.array([0.9, 0.93, 1.0, 0.2], np.float32)
@@ -58,14 +65,19 @@ class Panel:
         self.cam = mujoco.MjvCamera()
         self.cam.type = mujoco.mjtCamera.mjCAMERA_FREE
 
-    def set_camera(self, camera: Camera, lookat: np.ndarray) -> None:
+    def set_camera(self, camera: Camera, lookat: np.ndarray, azimuth: float | None = None) -> None:
+        """Look at `lookat` from `camera`'s distance and elevation; azimuth [deg]: this frame's (from
+        `azimuth_path`), default `camera.azimuth`."""
         self.cam.distance = camera.distance
-        self.cam.azimuth = camera.azimuth
+        self.cam.azimuth = camera.azimuth if azimuth is None else azimuth
         self.cam.elevation = camera.elevation
         self.cam.lookat[:] = lookat
 
-    def render(self, qpos, ghosts=(), current=-1, marked_bodies=()):
-        """Image (h, w, 3) uint8 of the figure at qpos with ghost MjData (posed) drawn translucent."""
+    def render(self, qpos, ghosts=(), current=-1, marked_bodies=(), alphas=None):
+        """Image (h, w, 3) uint8 of the figure at qpos with ghost MjData (posed) drawn translucent.
+
+        alphas: (len(ghosts),) opacity factor of each ghost in [0, 1] (`ghost_alphas`), None: all 1;
+        a ghost at 0 is not drawn."""
         model, scene = self.model, self.renderer.scene
         forward_direction(model, self.data, qpos)
         self.renderer.update_scene(self.data, self.cam, self.option)
@@ -77,13 +89,17 @@ class Panel:
                     g.rgba[:] = _PENETRATION_RGBA
                     g.matid = -1
         visible = self._visible(ghosts)
+        if alphas is not None:
+            visible &= np.asarray(alphas) > 0.01
         for k, gdata in enumerate(ghosts):
             if not visible[k]:
                 continue
             n0 = scene.ngeom
             mujoco.mjv_addGeoms(model, gdata, self.ghost_option, self.perturb,
                                 mujoco.mjtCatBit.mjCAT_DYNAMIC, scene)
-            rgba = _GHOST_CURRENT_RGBA if k == current else _GHOST_RGBA
+            rgba = (_GHOST_CURRENT_RGBA if k == current else _GHOST_RGBA).copy()
+            if alphas is not None:
+                rgba[3] *= float(alphas[k])
             for i in range(n0, scene.ngeom):
                 g = scene.geoms[i]
                 g.rgba[:] = rgba
@@ -183,11 +199,55 @@ def ghost_data(model, tracks, kf_t, kf_q) -> list[list]:
     return [[posed(q) for q in sample_track(tr, kf_t)] for tr in tracks]
 
 
+def ghost_alphas(t: float, kf_t, window: float = GHOST_WINDOW) -> np.ndarray:
+    """(m,) opacity factor of each keyframe's ghost at motion time t [s]: 1 at the keyframe, 0 from
+    `window` [s] away on, a smoothstep in between (fades in before the keyframe, out after it)."""
+    if kf_t is None:
+        return np.zeros(0)
+    x = np.clip(1.0 - np.abs(t - np.asarray(kf_t, dtype=float)) / window, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def current_keyframes(times: np.ndarray, kf_t, lead: float) -> np.ndarray:
+    """(n,) per video frame the keyframe whose caption and yellow ghost are shown, -1 for none.
+
+    Keyframe k is current from `lead` [s of motion time] before it up to the frame nearest to it
+    (at most half a frame step after it): the caption announces the keyframe as playback reaches it
+    and goes once it has passed. Where two windows overlap the nearer keyframe wins."""
+    n = times.size
+    out = np.full(n, -1, int)
+    if kf_t is None or not len(kf_t):
+        return out
+    step = float(np.median(np.diff(times))) if n > 1 else 0.0
+    kf = np.asarray(kf_t, dtype=float)
+    d = times[:, None] - kf[None, :]  # (n, m) time since keyframe
+    on = (d >= -max(lead, 0.0) - 1e-9) & (d <= 0.5 * step + 1e-9)
+    dist = np.where(on, np.abs(d), np.inf)
+    k = np.argmin(dist, axis=1)
+    has = np.isfinite(dist[np.arange(n), k])
+    out[has] = k[has]
+    return out
+
+
 def deep_sites(depth, i, site_ids):
     """[(site id, depth [m])] of the sites deeper than PENETRATION_SHOWN at frame i."""
     if depth is None:
         return []
     return [(int(s), float(d)) for s, d in zip(site_ids, depth[i]) if d > PENETRATION_SHOWN]
+
+
+def labels_shown(width: int, height: int) -> bool:
+    """Whether a video of this size gets text (see LABELS_MIN_SIZE)."""
+    return width >= LABELS_MIN_SIZE[0] and height >= LABELS_MIN_SIZE[1]
+
+
+def title_band(height: int, title: str | None) -> int:
+    """[px] height of the band above the panels that holds the title (0 without a title); even, so
+    the panels keep an even height."""
+    if not title:
+        return 0
+    fs = max(10, height // 28)
+    return 2 * ((int(1.6 * fs) + 1) // 2)
 
 
 class Overlay:
@@ -196,7 +256,9 @@ class Overlay:
     def __init__(self, width, height, panel_w, n_panels, title, t0, t1, kf_t):
         self.width, self.height, self.panel_w, self.n = width, height, panel_w, n_panels
         self.x0 = (width - panel_w * n_panels) // 2
-        self.title = title
+        self.labels = labels_shown(width, height)
+        self.title = title if self.labels else None
+        self.band = title_band(height, self.title)
         self.t0, self.t1 = t0, t1
         self.kf_t = kf_t if kf_t is not None else np.zeros(0)
         self.fs = max(10, height // 28)
@@ -220,19 +282,27 @@ class Overlay:
         im.paste(img, (int(round(xy[0])) + x0, int(round(xy[1])) + y0), img)
 
     def compose(self, images, labels, t, speed, current, marks) -> np.ndarray:
+        """The frame: the title in a band above all panels (never across a divider), then the panels
+        side by side, each with its label, time, caption, rings and timeline (no text below
+        LABELS_MIN_SIZE)."""
         frame = np.empty((self.height, self.width, 3), np.uint8)
         frame[:] = _PAD_COLOR
         for p, img in enumerate(images):
             x = self.x0 + p * self.panel_w
-            frame[:, x:x + self.panel_w] = img
+            frame[self.band:, x:x + self.panel_w] = img
         im = Image.fromarray(frame)
         draw = ImageDraw.Draw(im)
         fs, pad = self.fs, max(4, self.fs // 2)
-        y = pad + (int(1.4 * fs) if self.title else 0)
+        y = self.band + pad
         for p in range(len(images)):
             x = self.x0 + p * self.panel_w
             if p:
-                draw.line([(x, 0), (x, self.height)], fill=(0, 0, 0), width=2)
+                draw.line([(x, self.band), (x, self.height)], fill=(0, 0, 0), width=2)
+            if not self.labels:
+                if marks[p] is not None:
+                    self._rings(draw, x, marks[p][0])
+                self._timeline(im, draw, x, t, current)
+                continue
             right = x + self.panel_w - pad
             self.draw_text(im, (x + pad, y), labels[p], self.font, WHITE)
             self.draw_text(im, (right, y), f"t = {t:5.2f} s  ({speed:g}x)", self.small, WHITE, anchor="ra")
@@ -245,15 +315,18 @@ class Overlay:
                 xy, deepest = marks[p]
                 self.draw_text(im, (x + pad, line), f"foot inside a surface: {100 * deepest:.1f} cm",
                       self.small, _PENETRATION_TEXT)
-                r = max(6, self.height // 36)
-                for px, py in xy:
-                    if np.isfinite(px) and np.isfinite(py):
-                        draw.ellipse([(x + px - r, py - r), (x + px + r, py + r)],
-                                     outline=_PENETRATION_TEXT, width=3)
+                self._rings(draw, x, xy)
             self._timeline(im, draw, x, t, current)
         if self.title:
-            self.draw_text(im, (self.width // 2, pad), self.title, self.font, WHITE, anchor="ma")
+            self.draw_text(im, (self.width // 2, self.band // 2), self.title, self.font, WHITE, anchor="mm")
         return np.asarray(im)
+
+    def _rings(self, draw, x, xy):
+        r = max(6, self.height // 36)
+        for px, py in xy:
+            if np.isfinite(px) and np.isfinite(py):
+                py = py + self.band
+                draw.ellipse([(x + px - r, py - r), (x + px + r, py + r)], outline=_PENETRATION_TEXT, width=3)
 
     def _timeline(self, im, draw, x, t, current):
         pad = max(6, self.fs // 2)
@@ -272,6 +345,7 @@ class Overlay:
             xk = at(tk)
             color = _CURRENT_TEXT if k == current else _GHOST_TEXT
             draw.line([(xk, y - h), (xk, y + h)], fill=color, width=3 if k == current else 2)
-            self.draw_text(im, (xk, y - h - 2), str(k + 1), self.small, color, anchor="md")
+            if self.labels:
+                self.draw_text(im, (xk, y - h - 2), str(k + 1), self.small, color, anchor="md")
         xt = at(t)
         draw.ellipse([(xt - h, y - h), (xt + h, y + h)], fill=WHITE, outline=(0, 0, 0))

@@ -22,21 +22,39 @@ def check_video_out(out, size) -> None:
                          f"{w + w % 2}x{h + h % 2}")
 
 
-def render_video(out, model, solution, keyframes, args, progress=None):
-    """Side-by-side video of the plain spline and the optimized path, keyframes marked.
+#: the video's panels: a name for `--panels` and the panel's label
+PANELS = {"plain": "plain spline", "optimized": "optimized", "reference": "motion capture"}
 
-    `progress(i, n)` is called after each of the n frames (None: silent)."""
-    from runner.render import Track, render_tracks
+
+def render_video(out, model, solution, keyframes, args, reference=None, progress=None):
+    """Side-by-side video of the plain spline and the optimized path (and the motion capture, with
+    `args.panels` holding "reference"), keyframes marked.
+
+    Args:
+        out: video file. model: MjModel. solution: solver Solution. keyframes: Keyframes. args: fps,
+            size, speed and optionally panels (names from PANELS, left to right). reference: the
+            retargeted motion capture (times, qpos) for a "reference" panel. progress(i, n): called after
+            each of the n frames (None: silent).
+    Returns:
+        the render's info (n_frames, wall_time_s).
+    """
+    from runner.render import Track, render_tracks, sample_track
     from solver.terms.penetration import Penetration
 
     t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
     pen = Penetration(model, margin=0.0)
     tracks = []
-    for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames)):
-        Y = fs.path(t)
-        tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
+    for name in getattr(args, "panels", ("plain", "optimized")):
+        if name == "reference":  # over the keyframes' time span, like the other panels
+            if reference is None:
+                raise InputError("--panels reference: there is no motion-capture clip for this path; drop the "
+                                 "reference panel")
+            Y = sample_track(Track("reference", reference.times, reference.qpos), t)
+        else:
+            Y = (solution.initial if name == "plain" else solution.frames).path(t)
+        tracks.append(Track(PANELS[name], t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
     # keyframes with free components filled: the poses the animator set
     kq = solution.initial.values[solution.initial.is_keyframe]
     return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,
                          keyframe_times=keyframes.times, keyframe_qpos=kq,
-                         title="dynsplines: plain spline vs optimized", progress=progress)
+                         title="dynsplines: " + " vs ".join(tr.label for tr in tracks), progress=progress)

@@ -81,13 +81,18 @@ class Camera:
 
     Attributes:
         distance: [m] from the look-at point.
-        azimuth: [deg] MuJoCo free-camera azimuth. -90 puts the camera on +y, the left of a figure
-            facing +x, looking along -y: the step is seen in profile and the figure moves from right
-            to left on screen (+90: from its right, moving left to right).
+        azimuth: [deg] MuJoCo free-camera azimuth, relative to the direction of travel when `follow`
+            (else to +x). -90 puts the camera on the left of the direction of travel (on +y for a
+            figure running along +x), looking across it: a step is seen in profile and the figure moves
+            from right to left on screen (+90: from its right, moving left to right).
         elevation: [deg], negative looks down.
         smoothing: [s] of motion time: the standard deviation of the Gaussian that smooths the
             root's path into the look-at path (removes the running bob). 0: no smoothing.
         height: [m] fixed look-at height; None follows the root's height (smoothed).
+        follow: turn with the direction of travel: the heading of the root's horizontal velocity,
+            smoothed over `HEADING_SMOOTHING` (a diagonal or curved run stays seen from its side).
+            Where the root moves slower than `HEADING_MIN_SPEED` the heading is held; a path that
+            never moves that fast keeps heading +x.
     """
 
     distance: float = 4.0
@@ -95,6 +100,14 @@ class Camera:
     elevation: float = -12.0
     smoothing: float = 0.3
     height: float | None = None
+    follow: bool = True
+
+
+HEADING_SMOOTHING = 0.5
+"""[s] of motion time: standard deviation of the Gaussian that smooths the root's horizontal velocity
+before its heading turns the camera (a running stride sways the pelvis sideways every step)."""
+HEADING_MIN_SPEED = 0.3
+"""[m/s] below this (smoothed) horizontal root speed the direction of travel is not defined: held."""
 
 
 @dataclass(frozen=True)
@@ -224,8 +237,8 @@ def forward_direction(model, data, qpos) -> None:
     mujoco.mj_camlight(model, data)
 
 
-def lookat_path(model, data, qposes: Sequence[np.ndarray], dt: float, camera: Camera) -> np.ndarray:
-    """(n, 3) [m] look-at points: the root body's position averaged over the tracks, smoothed."""
+def root_positions(model, data, qposes: Sequence[np.ndarray]) -> np.ndarray:
+    """(n, 3) [m] the root body's position averaged over the tracks, per frame (unsmoothed)."""
     root = root_body(model)
     pos = np.zeros((qposes[0].shape[0], 3))
     for q in qposes:
@@ -233,8 +246,51 @@ def lookat_path(model, data, qposes: Sequence[np.ndarray], dt: float, camera: Ca
             data.qpos[:] = q[i]
             mujoco.mj_kinematics(model, data)
             pos[i] += data.xpos[root]
-    pos /= len(qposes)
+    return pos / len(qposes)
+
+
+def lookat_path(model, data, qposes: Sequence[np.ndarray], dt: float, camera: Camera,
+                positions: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3) [m] look-at points: the root body's position averaged over the tracks, smoothed.
+
+    Args:
+        positions: `root_positions` if already computed."""
+    pos = root_positions(model, data, qposes) if positions is None else positions
     pos = _smooth(pos, dt, camera.smoothing)
     if camera.height is not None:
         pos[:, 2] = camera.height
     return pos
+
+
+def heading_path(positions: np.ndarray, dt: float) -> np.ndarray:
+    """(n,) [deg] the direction of travel: the heading of the smoothed horizontal root velocity.
+
+    Args:
+        positions: (n, 3) [m] root positions per video frame. dt: [s] of motion time between frames.
+    Returns:
+        degrees from +x towards +y, unwrapped (continuous); held where the smoothed speed is below
+        HEADING_MIN_SPEED (the first valid heading before it, 0 if the root never moves that fast).
+    """
+    n = positions.shape[0]
+    if n < 2:
+        return np.zeros(n)
+    v = np.gradient(positions[:, :2], dt, axis=0)
+    v = _smooth(v, dt, HEADING_SMOOTHING)
+    speed = np.linalg.norm(v, axis=1)
+    valid = speed >= HEADING_MIN_SPEED
+    if not valid.any():
+        return np.zeros(n)
+    psi = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
+    idx = np.where(valid, np.arange(n), -1)
+    idx = np.maximum.accumulate(idx)  # the last valid sample at or before each frame
+    idx[idx < 0] = int(np.flatnonzero(valid)[0])
+    return np.degrees(psi[idx])
+
+
+def azimuth_path(positions: np.ndarray, dt: float, camera: Camera) -> np.ndarray:
+    """(n,) [deg] the camera azimuth per frame: `camera.azimuth`, relative to the direction of travel
+    (`heading_path`) when `camera.follow`."""
+    n = positions.shape[0]
+    if not camera.follow:
+        return np.full(n, float(camera.azimuth))
+    return heading_path(positions, dt) + camera.azimuth

@@ -20,10 +20,14 @@ from runner.render.overlays import (
     WHITE,
     check_keyframes,
     check_model_fit,
+    current_keyframes,
     deep_sites,
     draw_text,
+    ghost_alphas,
     ghost_data,
+    labels_shown,
     positive,
+    title_band,
 )
 from runner.render.tracks import (
     Camera,
@@ -31,12 +35,14 @@ from runner.render.tracks import (
     RenderInfo,
     Track,
     VIDEO_SUFFIXES,
+    azimuth_path,
     forward_direction,
     frame_times,
     interpolate_samples,
     lookat_path,
     parse_size,
     root_body,
+    root_positions,
     sample_track,
 )
 
@@ -58,12 +64,15 @@ def render_tracks(
 ) -> RenderInfo:
     """Write a video of the tracks side by side, keyframes marked (paper figures 11, 12).
 
-    Every track is a panel of width size[0] // len(tracks) and height size[1] (a remainder of the
-    width is split as dark margins), shown over the union of the tracks' time ranges at `speed` times
-    real time. Each panel has its label, the time counter and a timeline with a tick per keyframe;
-    translucent ghosts of the keyframe poses are drawn in every panel, and the ghost and a
-    "keyframe k" caption (k from 1) light up for `KEYFRAME_CAPTION_SECONDS` of video when playback
-    passes keyframe k. All panels use one camera, following the root body (see `Camera`).
+    Every track is a panel of width size[0] // len(tracks) (a remainder of the width is split as dark
+    margins) and height size[1] less the title band (the title sits above all panels, `title_band`),
+    shown over the union of the tracks' time ranges at `speed` times real time. Each panel has its
+    label, the time counter and a timeline with a tick per keyframe; a translucent ghost of a keyframe
+    pose is drawn in every panel while playback is within `GHOST_WINDOW` of the keyframe, fading in and
+    out (`ghost_alphas`), and the ghost turns yellow with a "keyframe k" caption (k from 1) during the
+    `KEYFRAME_CAPTION_SECONDS` of video before playback reaches keyframe k, gone once it has passed
+    (`current_keyframes`). Below `LABELS_MIN_SIZE` no text is drawn. All panels use one camera,
+    following the root body from the side of its direction of travel (see `Camera`).
 
     Args:
         model: MjModel of the scene with the figure (loaded once by the caller; not changed).
@@ -103,9 +112,11 @@ def render_tracks(
     if width % 2 or height % 2:
         raise InputError(f"video size must be even in both directions (H.264 4:2:0); got {width}x{height}")
     panel_w = width // len(tracks)
-    if panel_w < 16 or height < 16:
+    band = title_band(height, title if labels_shown(width, height) else None)
+    panel_h = height - band
+    if panel_w < 16 or panel_h < 16:
         raise InputError(
-            f"size {width}x{height} leaves panels of {panel_w}x{height} px for {len(tracks)} tracks; "
+            f"size {width}x{height} leaves panels of {panel_w}x{panel_h} px for {len(tracks)} tracks; "
             "each panel needs at least 16x16")
     site_ids = [check_model_fit(model, tr) for tr in tracks]
     kf_t, kf_q = check_keyframes(model, keyframe_times, keyframe_qpos)
@@ -118,13 +129,14 @@ def render_tracks(
     qposes = [sample_track(tr, times) for tr in tracks]
     depths = [None if tr.penetration is None else interpolate_samples(tr.times, tr.penetration, times) for tr in tracks]
 
-    renderer = make_renderer(model, panel_w, height, quality)
+    renderer = make_renderer(model, panel_w, panel_h, quality)
     try:
         panel = Panel(model, renderer, quality)
-        lookat = lookat_path(model, panel.data, qposes, speed / fps, camera)
+        positions = root_positions(model, panel.data, qposes)
+        lookat = lookat_path(model, panel.data, qposes, speed / fps, camera, positions)
+        azimuth = azimuth_path(positions, speed / fps, camera)
         ghosts = ghost_data(model, tracks, kf_t, kf_q)
-        caption_frames = max(1, int(round(KEYFRAME_CAPTION_SECONDS * fps)))
-        passed = np.searchsorted(times, kf_t - 1e-9, side="left") if kf_t is not None else np.zeros(0, int)
+        currents = current_keyframes(times, kf_t, KEYFRAME_CAPTION_SECONDS * speed)
         overlay = Overlay(width, height, panel_w, len(tracks), title, t0, t1, kf_t)
 
         render_seconds = 0.0
@@ -134,15 +146,16 @@ def render_tracks(
                 macro_block_size=1, ffmpeg_log_level="error", output_params=["-preset", "veryfast"])
             try:
                 for i in range(n):
-                    active = np.flatnonzero((passed <= i) & (i < passed + caption_frames))
-                    current = int(active[-1]) if active.size else -1
+                    current = int(currents[i])
+                    alphas = ghost_alphas(times[i], kf_t)
                     images, marks = [], []
                     r0 = time.perf_counter()
                     for p, tr in enumerate(tracks):
-                        panel.set_camera(camera, lookat[i])
+                        panel.set_camera(camera, lookat[i], azimuth[i])
                         deep = deep_sites(depths[p], i, site_ids[p])
                         marked_bodies = set(int(model.site_bodyid[s]) for s, _ in deep)
-                        images.append(panel.render(qposes[p][i], ghosts[p], current, marked_bodies))
+                        images.append(panel.render(qposes[p][i], ghosts[p], current, marked_bodies,
+                                                   alphas if len(ghosts[p]) else None))
                         if deep:
                             xy = panel.project(np.array([panel.data.site_xpos[s] for s, _ in deep]))
                             marks.append((xy, max(d for _, d in deep)))

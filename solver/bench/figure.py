@@ -105,3 +105,28 @@ def compare_refinement(model, keyframes, layout, weights: dict, counts, scores=(
                          "wall_s": sol.wall_time_s, "E_initial": sol.E_initial}
         rows.append(row)
     return rows
+
+
+def path_figures(model, keyframes, solution) -> dict:
+    """The acceptance figures (`solver.metrics.path_metrics`, 1000 Hz) of a solution's plain spline and
+    optimized path, for the README's tables and `dynsplines bench run-and-step`.
+
+    Returns:
+        dict: plain, optimized (path_metrics dicts), evals, frames (count at the end), variable,
+        E_initial, E_final, wall_s [s] (machine-dependent), body_weight_N (m g of the model).
+    """
+    import numpy as np
+
+    from solver.metrics import path_metrics
+
+    return {
+        "plain": path_metrics(model, solution.initial.times, solution.initial.values, keyframes),
+        "optimized": path_metrics(model, solution.frames.times, solution.frames.values, keyframes),
+        "evals": solution.n_evals,
+        "frames": solution.frames.count,
+        "variable": solution.frames.n_variable,
+        "E_initial": solution.E_initial,
+        "E_final": solution.E_final,
+        "wall_s": solution.wall_time_s,
+        "body_weight_N": float(np.sum(model.body_mass) * np.linalg.norm(model.opt.gravity)),
+    }

@@ -3,7 +3,7 @@
 A term is an integrand f_j(Y, Y', Y'') of the objective E = sum_j lambda_j integral f_j dt (paper eq. 1),
 evaluated at the quadrature points. It returns the per-point values and their gradients with respect
 to Y, Y' and Y'' at the same points; the objective applies quadrature weights, term weights and the
-chain rule through the spline (DESIGN.md).
+chain rule through the spline (docs/design.md).
 """
 from __future__ import annotations
 

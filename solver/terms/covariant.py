@@ -47,7 +47,7 @@ class CovariantAcceleration(Term):
 class NormalizedCovariantAcceleration(Term):
     """f2 of the orientation actually shown: |A|^2 with A the covariant acceleration of u = q/|q| [1/s^4].
 
-    Beyond the paper (DESIGN.md, objective terms table): eq. 9's f2 acts on the spline's q itself, and a
+    Beyond the paper (docs/design.md, the objective table): eq. 9's f2 acts on the spline's q itself, and a
     polynomial spline cannot stay on the unit sphere, so shrinking q lowers that f2. Here f2 is the
     covariant acceleration of the normalized path u = q/|q| (what MuJoCo shows), which is scale-free
     (f(c q) = f(q) for any c != 0); a unit term must then hold the scale of q near 1.

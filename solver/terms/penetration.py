@@ -63,7 +63,8 @@ class Penetration(Term):
         self.sites = site_ids(model, sites)
         self.surfaces = StaticSurfaces.from_model(model, self.data)
         if self.surfaces.count == 0:
-            raise InputError("the scene has no static floor plane or box for the penetration term")
+            raise InputError("the scene has no static floor plane or box for the penetration term; use "
+                             "models/floor.xml or add a plane geom to the scene's <worldbody>")
         self.tmap = TangentMap.from_layout(StateLayout.from_model(model))
         self.margin = float(margin)
         self._jac = np.zeros((3, model.nv))

@@ -31,10 +31,11 @@ JOINTS = "root, l_hip, l_knee, l_ankle, r_hip, r_knee, r_ankle, torso, l_shoulde
 
 
 def small_doc(n=3):
-    """The first n keyframes of the shipped clip, with the scene as an absolute path."""
+    """The first n keyframes of the shipped clip, with the scene and the figure as absolute paths."""
     doc = json.loads((MODELS / "run_and_step.keyframes.json").read_text())
     doc["keyframes"] = doc["keyframes"][:n]
     doc["scene"] = str(SCENE)
+    doc["model"] = str(MODELS / "humanoid39.xml")  # "model" must name a file relative to the copy
     doc["source"] = {}
     return doc
 

@@ -57,6 +57,7 @@ def small_keyframes(tmp_path, n=3) -> Path:
     doc = json.loads((MODELS / "run_and_step.keyframes.json").read_text())
     doc["keyframes"] = doc["keyframes"][:n]
     doc["scene"] = str(SCENE)
+    doc["model"] = str(MODELS / "humanoid39.xml")
     doc["source"] = {}
     p = tmp_path / "small.json"
     p.write_text(json.dumps(doc))

@@ -40,6 +40,7 @@ EXAMPLES = int(os.environ.get("DYNSPLINES_HYPOTHESIS_EXAMPLES", 400))
 GOOD = json.loads((MODELS / "run_and_step.keyframes.json").read_text())
 GOOD["keyframes"] = GOOD["keyframes"][:3]
 GOOD["scene"] = str(SCENE)
+GOOD["model"] = str(MODELS / "humanoid39.xml")  # "model" must name a file relative to the copy
 GOOD_TEXT = json.dumps(GOOD, indent=1)
 
 # ------------------------------------------------------------------------------------ strategies

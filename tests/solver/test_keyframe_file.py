@@ -73,6 +73,7 @@ def test_round_trip(tmp_path, layout):
 
 
 def test_reads_hand_written_file(tmp_path, layout):
+    (tmp_path / "humanoid39.xml").write_text("<mujoco/>")  # "model" must name a file (not read here)
     p = write_json(tmp_path, {
         "format": FORMAT, "model": "humanoid39.xml",
         "keyframes": [

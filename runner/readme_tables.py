@@ -1,0 +1,127 @@
+"""Measured tables in a Markdown file, between marker comments, regenerated from runs of the code.
+
+    <!-- bench:NAME -->
+    | generated | table |
+    <!-- /bench:NAME -->
+
+`replace_blocks` writes new blocks; `compare_blocks` checks a file's blocks against freshly generated
+ones. A `Block` is Markdown text plus the cells that are wall times: those differ from machine to
+machine and run to run, so the check skips them (every other cell - evaluation counts, objective
+values, millimetres, newtons - must match exactly as printed). `dynsplines bench readme [--check]`
+(runner/commands/bench.py) runs the workloads and uses these.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from solver.errors import InputError
+
+TIMING = "\x00t"
+"""Prefix of a table cell that is a wall time (stripped when written, masked when checked)."""
+_BLOCK = re.compile(r"(<!-- bench:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /bench:(?P=name) -->)", re.S)
+
+
+@dataclass
+class Block:
+    """One generated block: Markdown lines; cells starting with TIMING are wall times."""
+
+    name: str
+    lines: list[str] = field(default_factory=list)
+
+    def text(self) -> str:
+        return "".join(line.replace(TIMING, "") + "\n" for line in self.lines)
+
+    def masked(self) -> list[str]:
+        return [_mask_line(line) for line in self.lines]
+
+
+def timing(text: str) -> str:
+    """Mark a table cell as a wall time."""
+    return TIMING + text
+
+
+def table(header: list[str], rows: list[list[str]]) -> list[str]:
+    """Markdown table lines."""
+    out = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return out
+
+
+def _mask_line(line: str) -> str:
+    """A line with every wall-time cell replaced by '*'."""
+    return re.sub(re.escape(TIMING) + r"[^|]*", "* ", line).rstrip()
+
+
+def _mask_against(found: str, expected: str) -> str:
+    """`found` (a line of the file) with the cells masked where `expected` (a generated line) has
+    wall times; the other cells as they are."""
+    if TIMING not in expected:
+        return found.rstrip()
+    exp_cells, got_cells = expected.split("|"), found.split("|")
+    if len(exp_cells) != len(got_cells):
+        return found.rstrip()
+    cells = []
+    for e, g in zip(exp_cells, got_cells, strict=True):
+        if TIMING in e:  # a wall time ends its cell: compare what comes before it
+            cells.append(g[:e.index(TIMING)] + "* ")
+        else:
+            cells.append(g)
+    return "|".join(cells).rstrip()
+
+
+def read_blocks(path: Path) -> dict[str, str]:
+    """{name: body text} of the file's marked blocks."""
+    return {m.group("name"): m.group("body") for m in _BLOCK.finditer(Path(path).read_text(encoding="utf-8"))}
+
+
+def replace_blocks(path: Path, blocks: list[Block]) -> list[str]:
+    """Write the blocks' text between their markers in the file. Returns the names replaced.
+
+    Raises:
+        InputError: a block whose markers are not in the file (add them where the table goes)."""
+    path = Path(path)
+    text = path.read_text(encoding="utf-8")
+    names = set(read_blocks(path))
+    missing = [b.name for b in blocks if b.name not in names]
+    if missing:
+        raise InputError(f"{path}: no markers for {', '.join(missing)}; add '<!-- bench:NAME -->' and "
+                         "'<!-- /bench:NAME -->' lines where the table goes")
+    by_name = {b.name: b for b in blocks}
+
+    def sub(m):
+        b = by_name.get(m.group("name"))
+        return m.group(0) if b is None else m.group(1) + b.text() + m.group(4)
+
+    new = _BLOCK.sub(sub, text)
+    if new != text:
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_text(new, encoding="utf-8")
+        tmp.replace(path)
+    return [b.name for b in blocks]
+
+
+def compare_blocks(path: Path, blocks: list[Block]) -> list[str]:
+    """Differences between the file's blocks and freshly generated ones, wall times skipped.
+
+    Returns:
+        one message per block that differs (the first differing line, file vs code), [] if all match.
+    """
+    found = read_blocks(path)
+    problems = []
+    for b in blocks:
+        if b.name not in found:
+            problems.append(f"{path}: no block bench:{b.name}")
+            continue
+        got = found[b.name].splitlines()
+        exp = b.lines
+        if len(got) != len(exp):
+            problems.append(f"bench:{b.name}: {len(got)} lines in {path}, {len(exp)} generated")
+            continue
+        for g, e in zip(got, exp, strict=True):
+            gm, em = _mask_against(g, e), _mask_line(e)
+            if gm != em:
+                problems.append(f"bench:{b.name}: {path} has\n    {gm}\n  the code gives\n    {em}")
+                break
+    return problems

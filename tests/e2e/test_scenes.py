@@ -1,0 +1,111 @@
+"""Writing one's own scene (issue 15 item 2): the shipped flat-floor scene, a copied scene that loses its
+included figure, a scene without a floor, and a keyframe file whose "model" is not there - each a clear
+one-line error naming the file and the fix, reported when the scene or file is read."""
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from runner.cli import main
+from runner.exit_codes import EXIT_INPUT
+from runner.problem_file import load_problem
+from solver import model as model_module
+from solver.errors import InputError
+from solver.keyframe_file import read_keyframes
+from solver.layout import StateLayout
+from solver.model import load_model
+from solver.surfaces import StaticSurfaces
+
+REPO = Path(__file__).resolve().parents[2]
+MODELS = REPO / "models"
+
+
+def one_line_error(capsys, argv):
+    code = main([str(a) for a in argv])
+    err = capsys.readouterr().err.strip()
+    assert code == EXIT_INPUT, err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    return err
+
+
+def small_keyframes(tmp_path, scene=None):
+    doc = json.loads((MODELS / "run_and_step.keyframes.json").read_text())
+    doc["keyframes"] = doc["keyframes"][:3]
+    doc["scene"] = str(scene or MODELS / "run_and_step.xml")
+    doc["model"] = str(MODELS / "humanoid39.xml")
+    doc["source"] = {}
+    p = tmp_path / "k.json"
+    p.write_text(json.dumps(doc))
+    return p
+
+
+def test_floor_scene_is_the_figure_on_a_flat_floor():
+    model = load_model(MODELS / "floor.xml")
+    model_module.check_scene(model, MODELS / "floor.xml")
+    surfaces = StaticSurfaces.from_model(model)
+    assert surfaces.names == ("floor",)
+    assert StateLayout.from_model(model).nq == 51
+
+
+def test_floor_scene_works_with_the_shipped_keyframes(tmp_path):
+    keyframes, _info, _model, _layout, scene = load_problem(small_keyframes(tmp_path, MODELS / "floor.xml"), None)
+    assert scene == MODELS / "floor.xml" and keyframes.count == 3
+
+
+def test_a_copied_scene_names_the_missing_include_and_the_fix(tmp_path, capsys):
+    copy = tmp_path / "my_scene.xml"
+    shutil.copy(MODELS / "run_and_step.xml", copy)
+    with pytest.raises(InputError) as e:
+        load_model(copy)
+    msg = str(e.value)
+    assert "my_scene.xml includes humanoid39.xml" in msg
+    assert "absolute path" in msg and "copy humanoid39.xml next to the scene" in msg
+    err = one_line_error(capsys, ["animate", small_keyframes(tmp_path), "--scene", copy, "--no-render", "--quiet"])
+    assert "my_scene.xml includes humanoid39.xml" in err
+
+
+def test_a_copied_scene_with_the_figure_by_absolute_path_loads_anywhere(tmp_path):
+    text = (MODELS / "floor.xml").read_text().replace('file="humanoid39.xml"', f'file="{MODELS / "humanoid39.xml"}"')
+    copy = tmp_path / "sub" / "mine.xml"
+    copy.parent.mkdir()
+    copy.write_text(text)
+    model_module.check_scene(load_model(copy), copy)
+
+
+def test_scene_without_a_floor_is_refused_up_front_naming_the_file(tmp_path, capsys):
+    figure = MODELS / "humanoid39.xml"
+    err = one_line_error(capsys, ["animate", small_keyframes(tmp_path), "--scene", figure, "--no-render", "--quiet"])
+    assert "humanoid39.xml has no static floor plane or box" in err
+    assert "models/floor.xml" in err and "plane" in err
+    out = tmp_path / "k2.json"
+    err = one_line_error(capsys, ["keyframes-from-bvh", MODELS / "cmu" / "127_33.bvh", "--out", out,
+                                  "--scene", figure])
+    assert "humanoid39.xml has no static floor plane or box" in err and "models/floor.xml" in err
+    assert not out.exists()
+
+
+def test_keyframe_file_model_must_exist_relative_to_the_file(tmp_path):
+    p = small_keyframes(tmp_path)
+    doc = json.loads(p.read_text())
+    doc["model"] = "humanoid39.xml"  # not next to k.json
+    p.write_text(json.dumps(doc))
+    layout = StateLayout.from_model(load_model(MODELS / "humanoid39.xml"))
+    with pytest.raises(InputError, match=r"k\.json: field 'model' is 'humanoid39\.xml', but .*humanoid39\.xml is "
+                                         r"not a file .*relative to the keyframe file's folder.*or remove the field"):
+        read_keyframes(p, layout)
+    del doc["model"]
+    p.write_text(json.dumps(doc))
+    assert read_keyframes(p, layout)[1].model is None
+
+
+def test_keyframes_from_bvh_records_a_model_that_exists(tmp_path):
+    scene = tmp_path / "mine.xml"
+    scene.write_text((MODELS / "floor.xml").read_text().replace('file="humanoid39.xml"',
+                                                                 f'file="{MODELS / "humanoid39.xml"}"'))
+    out = tmp_path / "k.json"
+    assert main(["keyframes-from-bvh", str(MODELS / "cmu" / "127_33.bvh"), "--out", str(out), "--scene", str(scene),
+                 "--every", "0.5"]) == 0
+    doc = json.loads(out.read_text())
+    assert (out.parent / doc["model"]).resolve().is_file()
+    assert (out.parent / doc["scene"]).resolve() == scene.resolve()
