@@ -3,12 +3,11 @@ arguments and the SolveOptions they make."""
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from runner.parser import nonnegative, positive
 from runner.render.side_by_side import PANELS
-from dataclasses import replace
-
 from solver.animate import DEFAULT_RATE, default_options
 from solver.errors import InputError
 from solver.optimize import ALGORITHMS

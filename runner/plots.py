@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from solver.errors import InputError
+from solver.layout import CONTACT_SITES, site_ids
 from solver.metrics import dynamics_series, sample_times
 from solver.surfaces import StaticSurfaces
-from solver.layout import CONTACT_SITES, site_ids
 from solver.terms.penetration import site_positions
 
 #: line styles of the three motions, the same in every figure

@@ -85,9 +85,8 @@ def save_path_npz(path, solution, keyframes, reference, scene_path, weights, opt
         contacts=contacts_array(contacts),
     )
     try:
-        with atomic_output(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **fields)
+        with atomic_output(path) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, **fields)
     except OSError as e:  # e.g. a full disk: the temporary file is gone, an earlier file is unchanged
         raise InputError(f"cannot write {path}: {e.strerror or e}; an earlier file there is unchanged; "
                          "free some space or choose another --save-path") from None

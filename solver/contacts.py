@@ -30,8 +30,8 @@ the run 35_17 into 11-14 (9 stances) instead of 6 (4); hysteresis alone already 
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

@@ -21,7 +21,7 @@ Units: [1/s^4].
 """
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

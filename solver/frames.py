@@ -31,7 +31,7 @@ class FrameSet:
     is_keyframe: np.ndarray
 
     @classmethod
-    def from_keyframes(cls, keyframes: Keyframes, quat_slots: np.ndarray) -> "FrameSet":
+    def from_keyframes(cls, keyframes: Keyframes, quat_slots: np.ndarray) -> FrameSet:
         """Frame set of the keyframes alone (the plain spline), free components filled as in
         `Keyframes.initial_values` (hemisphere-aligned quaternions)."""
         return cls(
@@ -63,7 +63,7 @@ class FrameSet:
         """The free components as a flat vector (row-major over frames), shape (n_free,)."""
         return self.values[self.free]
 
-    def with_x(self, x: np.ndarray) -> "FrameSet":
+    def with_x(self, x: np.ndarray) -> FrameSet:
         """A copy with the free components replaced by x (n_free,); fixed components untouched."""
         vals = self.values.copy()
         vals[self.free] = x
@@ -79,7 +79,7 @@ class FrameSet:
         """The spline through the frames (or its nu-th derivative) at times t: (n,) -> (n, nq)."""
         return interpolate(self.times, self.values, t, nu)
 
-    def with_variable_frames(self, times: np.ndarray) -> "FrameSet":
+    def with_variable_frames(self, times: np.ndarray) -> FrameSet:
         """Insert variable frames at `times`, valued on the current path.
 
         With natural end conditions the refined spline through the old path's values is the old path

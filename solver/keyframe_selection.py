@@ -7,7 +7,7 @@ contacts and the root height; evenly spaced keys (`every`) only fill gaps longer
 """
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -75,7 +75,7 @@ class PathMotion:
 
     qvel: np.ndarray
     qacc: np.ndarray
-    tmap: "TangentMap"
+    tmap: TangentMap
     q: np.ndarray
     q1: np.ndarray
     q2: np.ndarray
@@ -153,7 +153,7 @@ class PathMotion:
         return out
 
 
-def _motion(tm: "TangentMap", Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> PathMotion:
+def _motion(tm: TangentMap, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> PathMotion:
     idx = tm.quat_q.T
     q, q1, q2 = Y.T[idx], Y1.T[idx], Y2.T[idx]  # (4, s, n)
     s = (q * q).sum(0)
@@ -190,7 +190,7 @@ class TangentMap:
     lin_v: np.ndarray
 
     @classmethod
-    def from_layout(cls, layout: StateLayout) -> "TangentMap":
+    def from_layout(cls, layout: StateLayout) -> TangentMap:
         qq, qv, lq, lv = [], [], [], []
         for j in layout.joints:
             if j.kind == "free":

@@ -72,7 +72,7 @@ class StateLayout:
     quat_slots: np.ndarray
 
     @classmethod
-    def from_model(cls, model) -> "StateLayout":
+    def from_model(cls, model) -> StateLayout:
         """Read the layout of a MuJoCo `MjModel` (joint names, types, addresses)."""
         import mujoco
 
@@ -86,7 +86,7 @@ class StateLayout:
         return cls(int(model.nq), tuple(joints), quat)
 
     @classmethod
-    def single_quaternion(cls) -> "StateLayout":
+    def single_quaternion(cls) -> StateLayout:
         """The layout of one orientation, Y(t) in R^4 (paper sec. 3)."""
         return cls(4, (Joint("orientation", "ball", 0, 4, 0, 3),), np.arange(4).reshape(1, 4))
 

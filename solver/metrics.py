@@ -28,10 +28,9 @@ import numpy as np
 
 from solver.frames import FrameSet
 from solver.keyframes import Keyframes
-from solver.layout import StateLayout
+from solver.layout import CONTACT_SITES, StateLayout
 from solver.spline import interpolate
 from solver.terms.bending import Hyperextension
-from solver.layout import CONTACT_SITES
 from solver.terms.penetration import Penetration
 
 

@@ -21,7 +21,6 @@ from solver.quadrature import gauss_times, quadrature_times
 from solver.spline import SplineBasis
 from solver.terms.base import Term
 
-
 #: Largest quadrature (points on the keyframe interval) an Objective accepts: the spline matrices are
 #: dense (points x frames), so a clip minutes long at the default rate, or keyframe times in frames
 #: instead of seconds, would exhaust memory instead of failing clearly.

@@ -30,14 +30,14 @@ from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
-from solver.solve import Solution, SolveOptions, solve
-from solver.subdivide import global_times
 from solver.orient_refine import (  # noqa: F401  (measures re-exported: orient.covariant_energy, ...)
     covariant_energy,
     max_norm_deviation,
     solve_to_tol,
     unit_rows,
 )
+from solver.solve import Solution, SolveOptions, solve
+from solver.subdivide import global_times
 from solver.terms import CovariantAcceleration, NormalizedCovariantAcceleration, UnitQuaternion
 
 FORMS = ("normalized", "paper")

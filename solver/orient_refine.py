@@ -11,12 +11,12 @@ import numpy as np
 
 from solver.error_estimate import estimate_gap
 from solver.frames import FrameSet
+from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.optimize import Status
 from solver.quadrature import gauss_nodes, gauss_times
 from solver.solve import Solution, SolveOptions, solve
 from solver.spline import interpolate_segments
-from solver.layout import StateLayout
 from solver.subdivide import adaptive_times, global_times
 from solver.terms import NormalizedCovariantAcceleration
 

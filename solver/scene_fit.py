@@ -31,9 +31,9 @@ the last contact on the box and the first on the floor). A surface nobody stood 
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import copy
 import time
-from dataclasses import dataclass, field, replace
 from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np

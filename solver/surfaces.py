@@ -31,7 +31,7 @@ class StaticSurfaces:
     names: tuple[str, ...]
 
     @classmethod
-    def from_model(cls, model, data=None) -> "StaticSurfaces":
+    def from_model(cls, model, data=None) -> StaticSurfaces:
         """Collect geoms of type plane and box that belong to the world body (body 0).
 
         Args:

@@ -29,8 +29,8 @@ import argparse
 from runner.animate_options import default_args, solve_options
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
-from runner.readme_tables import Block, compare_blocks, replace_blocks, table, timing
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+from runner.readme_tables import Block, compare_blocks, replace_blocks, table, timing
 from solver.animate import DEFAULT_RATE
 from solver.bench import orient as orient_workload
 from solver.bench.figure import GEOMETRIC, compare_refinement, path_figures, per_eval_ms, time_solves

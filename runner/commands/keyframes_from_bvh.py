@@ -12,8 +12,8 @@ import argparse
 import os
 import shlex
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
 from runner.mocap.keyframes import KEY_CHOICES, pick_keyframes

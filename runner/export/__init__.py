@@ -60,11 +60,11 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
         InputError: unknown extension, unwritable folder, unreadable path or scene, unknown or absent
             motion, bad fps, or a failed write (an earlier file at `out` is then unchanged).
     """
-    from solver.model import load_model
     from runner.export.sampling import WHICH, default_fps, sample_motion
-    from runner.saved_path import load_saved_path
     from runner.files import check_writable_dir
+    from runner.saved_path import load_saved_path
     from solver.layout import StateLayout
+    from solver.model import load_model
 
     t0 = time.perf_counter()
     fmt = check_output_name(out, option)

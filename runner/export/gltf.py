@@ -17,9 +17,9 @@ Colours: the geom's material `rgba` (times the mean colour of its texture, if an
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 

@@ -8,7 +8,6 @@ from runner.mocap.retarget import Reference
 from solver.errors import InputError
 from solver.layout import FEET
 
-
 #: contact definition (see `contact_mask`): a foot is in contact while its lowest site is at most this
 #: high above the surface under it [m] ...
 CONTACT_HEIGHT = 0.06

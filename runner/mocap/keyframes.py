@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from typing import Iterable, Mapping
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -10,7 +10,6 @@ from runner.mocap.retarget import Reference
 from solver.errors import InputError
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
-
 
 #: joints a default partial keyframe fixes: the root and the legs; torso and arms are left free
 #: (the optimizer chooses the upper body, the animator pins the stride).

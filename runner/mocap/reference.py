@@ -7,9 +7,8 @@ import numpy as np
 
 from runner.mocap.bvh import read_bvh
 from runner.mocap.contacts import correct_root_height
-from runner.mocap.retarget import JOINT_BODIES, Reference, tidy_quaternions, clamp_hyperextension, retarget
+from runner.mocap.retarget import JOINT_BODIES, Reference, clamp_hyperextension, retarget, tidy_quaternions
 from solver.layout import StateLayout
-
 
 #: the stages of `load_bvh_reference` its `progress` callback reports
 IMPORT_STAGES = ("parse", "retarget", "clamp", "root height", "tidy")

@@ -30,9 +30,9 @@ The synthetic T-pose first frame of the cgspeed BVH conversion is dropped (see
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Mapping
 
 import numpy as np
 

@@ -37,6 +37,8 @@ from runner.render.tracks import (
 from runner.render.video import render_still, render_tracks
 
 __all__ = [
+    "IMAGE_SUFFIXES",
+    "VIDEO_SUFFIXES",
     "Camera",
     "QUALITIES",
     "Quality",

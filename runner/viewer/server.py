@@ -40,11 +40,11 @@ def build_assets(npz: str | Path) -> ViewerAssets:
     Raises:
         InputError: unreadable path or scene (see `runner.saved_path.load_saved_path`).
     """
-    from solver.model import load_model
     from runner.export.gltf import Track, figure_gltf, glb_bytes
     from runner.export.sampling import default_fps, sample_motion
     from runner.saved_path import load_saved_path
     from solver.layout import CONTACT_SITES, StateLayout
+    from solver.model import load_model
     from solver.terms.penetration import Penetration
 
     saved = load_saved_path(npz)

@@ -6,7 +6,6 @@ import time
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-
 from solver.bench.common import BaselineResult, check_inputs, dense_path, normalized_path_energy, run_slsqp
 
 

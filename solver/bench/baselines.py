@@ -31,10 +31,9 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
-
 
 from solver.bench.barr92 import BarrProblem, barr92_discrete
 from solver.bench.bspline import BSplineProblem, bspline_coefficients

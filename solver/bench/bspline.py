@@ -7,9 +7,7 @@ import time
 import numpy as np
 from scipy.interpolate import BSpline, CubicSpline
 
-
 from solver.bench.common import BaselineResult, check_inputs, dense_path, normalized_path_energy, run_slsqp
-
 
 # ----------------------------------------------------------------------------------------------------
 # (b) Cohen 1992 style: B-spline coefficients, keyframes as linear equality constraints
@@ -45,7 +43,7 @@ class BSplineProblem:
         self.tq = (mid[:, None] + half[:, None] * xg[None, :]).ravel()
         self.wq = (half[:, None] * wg[None, :]).ravel()
         self.B0 = BSpline.design_matrix(self.tq, self.knots, k).tocsr()
-        from scipy.sparse import csr_matrix, kron, identity
+        from scipy.sparse import csr_matrix, identity, kron
 
         eye = np.eye(self.n_coef)
         self.B2 = csr_matrix(BSpline(self.knots, eye, k).derivative(2)(self.tq))

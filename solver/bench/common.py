@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
-from threadpoolctl import threadpool_limits
-from scipy.interpolate import BSpline, CubicSpline
 from scipy.optimize import minimize
+from threadpoolctl import threadpool_limits
 
 from solver.quaternion import align_hemispheres
 

@@ -346,8 +346,9 @@ def model():
 
 @pytest.fixture(scope="module")
 def problem(model):
-    from solver.keyframe_file import read_keyframes
     import tempfile
+
+    from solver.keyframe_file import read_keyframes
 
     layout = StateLayout.from_model(model)
     with tempfile.TemporaryDirectory() as d:

@@ -188,8 +188,9 @@ class Poison(Term):
 def test_nonfinite_term_is_named_and_last_good_iterate_kept():
     model = mujoco.MjModel.from_xml_path(str(SCENE))
     layout = StateLayout.from_model(model)
-    from solver.keyframe_file import read_keyframes
     import tempfile
+
+    from solver.keyframe_file import read_keyframes
 
     with tempfile.TemporaryDirectory() as d:
         kf, _ = read_keyframes(small_keyframes(Path(d)), layout)

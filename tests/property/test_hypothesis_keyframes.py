@@ -21,9 +21,9 @@ from hypothesis import strategies as st
 
 from runner.cli import main
 from runner.exit_codes import EXIT_FAILED, EXIT_INPUT, EXIT_OK
-from solver.keyframe_file import read_keyframes
 from solver.errors import InputError
 from solver.frames import FrameSet
+from solver.keyframe_file import read_keyframes
 from solver.layout import StateLayout
 from solver.spline import interpolate
 

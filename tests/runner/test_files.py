@@ -35,27 +35,24 @@ def test_atomic_output_suffix_override(tmp_path):
 def test_failed_write_leaves_earlier_output_intact(tmp_path, exc):
     out = tmp_path / "run.mp4"
     out.write_bytes(b"earlier complete video")
-    with pytest.raises(type(exc)):
-        with atomic_output(out) as tmp:
-            tmp.write_bytes(b"half a vid")
-            raise exc
+    with pytest.raises(type(exc)), atomic_output(out) as tmp:
+        tmp.write_bytes(b"half a vid")
+        raise exc
     assert out.read_bytes() == b"earlier complete video"
     assert _leftovers(tmp_path, {"run.mp4"}) == []
 
 
 def test_failed_first_write_leaves_nothing(tmp_path):
     out = tmp_path / "new.png"
-    with pytest.raises(ValueError):
-        with atomic_output(out) as tmp:
-            tmp.write_bytes(b"partial")
-            raise ValueError("encoder failed")
+    with pytest.raises(ValueError), atomic_output(out) as tmp:
+        tmp.write_bytes(b"partial")
+        raise ValueError("encoder failed")
     assert list(tmp_path.iterdir()) == []
 
 
 def test_body_that_writes_nothing_raises(tmp_path):
-    with pytest.raises(FileNotFoundError):
-        with atomic_output(tmp_path / "x.png"):
-            pass
+    with pytest.raises(FileNotFoundError), atomic_output(tmp_path / "x.png"):
+        pass
 
 
 def test_check_writable_dir_creates_missing_folders(tmp_path):

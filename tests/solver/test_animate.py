@@ -8,10 +8,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
-from conftest import TOY_SCENE
 
 import solver
 from solver.errors import InputError
+
+from conftest import TOY_SCENE
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -7,8 +7,15 @@ import numpy as np
 import pytest
 
 from solver.contacts import (
-    SITES, Contact, contact_mask, detect_contacts, foot_contacts, reference_contacts, site_heights,
-    site_positions, touchdowns_liftoffs,
+    SITES,
+    Contact,
+    contact_mask,
+    detect_contacts,
+    foot_contacts,
+    reference_contacts,
+    site_heights,
+    site_positions,
+    touchdowns_liftoffs,
 )
 from solver.errors import InputError
 

@@ -6,7 +6,6 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
-from conftest import fd_gradient, random_qpos
 from scipy.interpolate import make_interp_spline
 
 from solver.errors import InputError
@@ -15,6 +14,8 @@ from solver.kinematics import TangentMap
 from solver.layout import StateLayout
 from solver.surfaces import StaticSurfaces
 from solver.terms.dynamics import CONTACT_SITES, JointTorque, RootResidual, make_engine
+
+from conftest import fd_gradient, random_qpos
 
 SCENE = Path(__file__).resolve().parents[2] / "models" / "run_and_step.xml"
 G = 9.81

@@ -6,8 +6,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from solver.keyframe_file import FORMAT, read_keyframes, write_keyframes
 from solver.errors import InputError
+from solver.keyframe_file import FORMAT, read_keyframes, write_keyframes
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 

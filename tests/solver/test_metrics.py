@@ -9,7 +9,6 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
-from conftest import fd_gradient
 
 from runner.cli import main
 from solver.frames import FrameSet
@@ -20,6 +19,8 @@ from solver.metrics import dynamics_metrics, dynamics_series, path_metrics
 from solver.problem import figure_objective, parse_terms
 from solver.terms.dynamics import RootResidual
 from solver.terms.penetration import Penetration
+
+from conftest import fd_gradient
 
 REPO = Path(__file__).resolve().parents[2]
 SCENE = REPO / "models" / "run_and_step.xml"
@@ -190,7 +191,7 @@ def test_shared_engine_gives_the_same_objective_and_gradient(model, layout, keyf
     for obj in (shared, alone):
         obj.prepare(fs.times, fs.values)
     a, b = shared.evaluate(fs.times, fs.values), alone.evaluate(fs.times, fs.values)
-    assert a.E == pytest.approx(b.E, rel=1e-12)
+    assert pytest.approx(b.E, rel=1e-12) == a.E
     assert a.integrals["penetration"] > 0  # the path is inside the floor somewhere: the term is active
     np.testing.assert_allclose(a.grad, b.grad, rtol=0, atol=1e-10 * np.abs(b.grad).max())
 

@@ -1,11 +1,12 @@
 """The objective (solver/objective.py, paper eq. 1 and 7) against exact integrals and finite differences."""
 import numpy as np
 import pytest
-from conftest import fd_gradient
 
 from solver.errors import InputError
 from solver.objective import NonFiniteError, Objective
 from solver.terms.base import Term, TermEval
+
+from conftest import fd_gradient
 
 
 class Value(Term):
@@ -54,7 +55,7 @@ def test_weighted_integral_of_a_linear_path_is_exact():
     ev = obj.evaluate(knots, P)
     exact = a * (t1 - t0) + b * (t1**2 - t0**2) / 2
     assert ev.integrals["value"] == pytest.approx(exact, rel=1e-12)
-    assert ev.E == pytest.approx(w * exact, rel=1e-12)
+    assert pytest.approx(w * exact, rel=1e-12) == ev.E
 
 
 def test_gauss_quadrature_integrates_a_cubic_integrand_exactly():
@@ -70,7 +71,9 @@ def test_gauss_quadrature_integrates_a_cubic_integrand_exactly():
     knots = np.array([t0, 0.4, t1])
     P = (a + b * knots)[:, None]
     obj = Objective([Cubic()], [1.0], t0, t1, quadrature="gauss", points=2)
-    F = lambda t: (a + b * t) ** 4 / (4 * b) - (a + b * t) ** 2 / (2 * b)  # antiderivative
+    def F(t):  # antiderivative
+        return (a + b * t) ** 4 / (4 * b) - (a + b * t) ** 2 / (2 * b)
+
     assert obj.evaluate(knots, P).integrals["cubic"] == pytest.approx(F(t1) - F(t0), rel=1e-13)
 
 
@@ -95,7 +98,7 @@ def test_renormalized_terms_start_at_their_weights():
     obj = Objective([Wiggly(), Value(), Zero()], [0.25, 4.0, 9.0], 0.0, 1.5)
     scales = obj.renormalize(knots, P)
     assert scales["zero"] == 1.0
-    assert obj.evaluate(knots, P, grad=False).E == pytest.approx(0.25 + 4.0, rel=1e-12)
+    assert pytest.approx(0.25 + 4.0, rel=1e-12) == obj.evaluate(knots, P, grad=False).E
 
 
 def test_invalid_weights_and_nonfinite_terms_are_named():

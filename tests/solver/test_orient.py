@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
-from conftest import fd_gradient
+
 from solver.bench.sphere_reference import (
     align,
     covariant_energy,
@@ -21,11 +21,12 @@ from solver.bench.sphere_reference import (
     natural_spline_energy_1d,
     riemannian_cubic_reference,
 )
-
 from solver.errors import InputError
 from solver.euler_lagrange import deviation_by_region, el_lhs, residual, spline_residual
 from solver.orient import check_keyframes, default_options, orient
 from solver.terms import NormalizedCovariantAcceleration
+
+from conftest import fd_gradient
 
 LARGE = {s.name: s for s in large_rotation_sets()}
 MODERATE = moderate_rotation_set()

@@ -1,8 +1,14 @@
 """solver/bench/random_sets.py: the seeded keyframe-set generator of issue 13."""
 import numpy as np
 
-from solver.bench.random_sets import (ACCEPTANCE_SEEDS, ANGLE_DEG, KEYFRAMES, MAX_INTERVAL_RATIO,
-                                      TUNING_SEEDS, random_set)
+from solver.bench.random_sets import (
+    ACCEPTANCE_SEEDS,
+    ANGLE_DEG,
+    KEYFRAMES,
+    MAX_INTERVAL_RATIO,
+    TUNING_SEEDS,
+    random_set,
+)
 
 
 def angles_deg(q):

@@ -5,7 +5,6 @@ into the reference through the root-height correction) must give back the step o
 models/run_and_step.xml: top within 3 cm; the edges the contacts bound lie between the last box
 contact and the first floor contact, where the hand-made edges also lie.
 """
-import os
 from pathlib import Path
 
 import mujoco

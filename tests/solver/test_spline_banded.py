@@ -32,7 +32,7 @@ def test_banded_equals_dense(m):
         gd, gb = dense.pullback(*gs), banded.pullback(*gs)
         np.testing.assert_allclose(gb, gd, rtol=0, atol=1e-9 * (1 + np.abs(gd).max()))
     # the dense matrices of a banded basis (built on first use, one at a time) are the dense basis's
-    for j, name in enumerate(("W", "W1", "W2")):
+    for name in ("W", "W1", "W2"):
         fresh = SplineBasis(x, t, mode="banded")
         Wd = getattr(dense, name)
         np.testing.assert_allclose(getattr(fresh, name), Wd, atol=1e-12 * (1 + np.abs(Wd).max()))

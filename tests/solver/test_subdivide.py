@@ -1,7 +1,6 @@
 """Frame sets, the objective's gradient through the spline, subdivision and the solve loop."""
 import numpy as np
 import pytest
-from conftest import fd_gradient
 
 from solver.frames import FrameSet
 from solver.keyframes import Keyframes
@@ -11,6 +10,8 @@ from solver.optimize import Status
 from solver.solve import SolveOptions, solve
 from solver.subdivide import global_times, weak_form_scores
 from solver.terms import CovariantAcceleration, UnitQuaternion
+
+from conftest import fd_gradient
 
 LAYOUT = StateLayout.single_quaternion()
 
@@ -59,7 +60,7 @@ def test_weak_form_score_is_the_gradient_at_a_new_midpoint_frame():
     for seg in (0, 3):
         i = np.flatnonzero(~cand.is_keyframe)[seg]
 
-        def E(v):
+        def E(v, i=i):
             P = cand.values.copy()
             P[i] = v
             return obj.evaluate(cand.times, P, grad=False).E
@@ -173,7 +174,7 @@ def test_preconditioner_folded_into_the_spline_matrices_gives_the_same_optimizat
     n = len(basis.t)
     E, _, acc = obj.evaluate_path(basis, Y[:n], Y[n:2 * n], Y[2 * n:])
     ev = obj.evaluate(fs.times, P)
-    assert E == pytest.approx(ev.E, rel=1e-12)
+    assert pytest.approx(ev.E, rel=1e-12) == E
     g = Bz.T @ np.concatenate([np.zeros((n, 4)) if a is None else a for a in acc])
     np.testing.assert_allclose(g.ravel(), pre.apply_transpose(ev.grad[fs.free]), rtol=1e-9, atol=1e-12)
     res = solve(obj, fs, SolveOptions(subdivision="none", precondition=True, ftol_rel=1e-10))

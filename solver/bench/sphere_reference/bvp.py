@@ -5,12 +5,12 @@ import functools
 from dataclasses import dataclass, field
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 from scipy.integrate import solve_bvp
 from scipy.interpolate import CubicSpline
-from .discrete import discrete_sphere_reference
-from .geometry import normalized_derivatives, states_from_path, tangent_basis, align
+from threadpoolctl import threadpool_limits
 
+from .discrete import discrete_sphere_reference
+from .geometry import align, normalized_derivatives, states_from_path, tangent_basis
 
 # ----------------------------------------------------------------------------------------------------
 # method 1: solve_bvp on the Riemannian cubic ODE

@@ -4,12 +4,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import solve_bvp
 from scipy.interpolate import CubicSpline, make_interp_spline
 from scipy.sparse import csr_matrix, diags
 from scipy.sparse.linalg import spsolve
-from .geometry import exp_map, normalized_derivatives, states_from_path, tangent_basis, align
 
+from .geometry import align, exp_map, normalized_derivatives, states_from_path, tangent_basis
 
 # ----------------------------------------------------------------------------------------------------
 # method 2: discretization on the sphere + Richardson extrapolation

@@ -2,7 +2,6 @@
 covariant energy of a sampled path."""
 from __future__ import annotations
 
-
 import numpy as np
 from scipy.interpolate import make_interp_spline
 

@@ -5,8 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from .geometry import qmul, align
 
+from .geometry import align, qmul
 
 # ----------------------------------------------------------------------------------------------------
 # keyframe sets

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from runner.mocap.bvh import read_bvh
 from runner.export.bvh import EULER_ORDER, figure_qpos_from_bvh, figure_skeleton, write_bvh
 from runner.export.sampling import WHICH, default_fps, sample_motion
+from runner.mocap.bvh import read_bvh
 from runner.saved_path import load_saved_path
 from solver.errors import InputError
 from solver.layout import StateLayout

@@ -15,7 +15,6 @@ from runner.export.gltf import MUJOCO_TO_GLTF, WORLD_ROTATION, Track, figure_glt
 from runner.export.sampling import default_fps, sample_motion
 from runner.saved_path import load_saved_path
 from solver.layout import StateLayout
-from solver.quaternion import mul
 
 _TYPES = {5126: np.float32, 5123: np.uint16, 5125: np.uint32}
 _WIDTH = {"SCALAR": 1, "VEC3": 3, "VEC4": 4}

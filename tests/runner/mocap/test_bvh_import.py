@@ -13,8 +13,8 @@ from runner.commands.keyframes_from_bvh import keyframes_from_bvh_main
 from runner.mocap.contacts import worst_contact_distance
 from runner.mocap.keyframes import LOWER_BODY_JOINTS, keyframe_indices, keyframes_from_reference
 from runner.mocap.reference import load_bvh_reference
-from solver.keyframe_file import read_keyframes
 from solver.errors import InputError
+from solver.keyframe_file import read_keyframes
 from solver.layout import StateLayout
 
 REPO = Path(__file__).resolve().parents[3]

@@ -53,7 +53,7 @@ def _path(n=9, t1=0.4, leg_angle=0.0, z=1.0):
 
 def _frames(path):
     with iio.get_reader(path) as reader:
-        return np.stack([f for f in reader.iter_data()])
+        return np.stack(list(reader.iter_data()))
 
 
 def _halves_diff(frame):

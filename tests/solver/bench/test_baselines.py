@@ -6,11 +6,9 @@ import types
 import numpy as np
 import pytest
 
-from solver.bench import baselines as bl
 from solver.bench import barr92, common
-
+from solver.bench import baselines as bl
 from solver.bench import sphere_reference as sr
-
 
 MOD = sr.moderate_rotation_set()
 LARGE = sr.large_rotation_sets()[1]

@@ -9,12 +9,13 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 import pytest
-from conftest import fd_gradient, random_qpos
 
 from solver.errors import InputError
 from solver.layout import StateLayout
 from solver.terms.contact import Clearance, Planted, contact_window, flights, swings
 from solver.terms.contact_wrench import FrictionCone, cone_metrics
+
+from conftest import fd_gradient, random_qpos
 
 FOOT = 0.95  # root height minus site height at identity rotations
 

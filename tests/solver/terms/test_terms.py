@@ -2,10 +2,11 @@
 hand-computed cases."""
 import numpy as np
 import pytest
-from conftest import fd_gradient, random_qpos
 
 from solver.layout import StateLayout
 from solver.terms import CovariantAcceleration, Hyperextension, Penetration, UnitQuaternion
+
+from conftest import fd_gradient, random_qpos
 
 HINGES = {"l_knee": (0, 1, 0), "r_knee": (0, -1, 0)}
 
