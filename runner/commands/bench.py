@@ -40,8 +40,8 @@ from solver.problem import parse_terms
 
 
 def register(sub) -> None:
-    """Add `bench` (run-and-step, refine, orient) to the `dynsplines` parser."""
-    p = sub.add_parser("bench", help="benchmarks: run-and-step, orient")
+    """Add `bench` (run-and-step, refine, readme, orient, scaling) to the `dynsplines` parser."""
+    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, readme, orient, scaling")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
     r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip")
@@ -68,6 +68,16 @@ def register(sub) -> None:
     o = bsub.add_parser("orient", help="single-body orientation vs earlier methods")
     add_arguments(o)
     o.set_defaults(func=bench_orient)
+    c = bsub.add_parser("scaling", help="cost against clip length: run-and-step's gait tiled 1x..8x",
+                        description="The shipped clip's keyframes tiled end to end (root carried forward) on a "
+                        "floor-only scene: optimization time, evaluations, time per evaluation and peak memory "
+                        "of each length, one subprocess per length (solver.bench.scaling, docs/scaling.md).")
+    c.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the clip [1,2,4,8]")
+    c.add_argument("--per-segment", type=int, default=2, help="variable frames per keyframe interval [2]")
+    c.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
+    c.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every length")
+    c.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table, dense vs banded")
+    c.set_defaults(func=bench_scaling)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -346,3 +356,12 @@ def bench_readme(args) -> int:
     replace_blocks(path, blocks)
     print(f"bench readme: wrote {', '.join(b.name for b in blocks)} in {path}")
     return 0
+
+
+def bench_scaling(args) -> int:
+    """`dynsplines bench scaling`: solver.bench.scaling's table for the given lengths."""
+    from solver.bench import scaling
+
+    argv = ["--factors", args.factors, "--per-segment", str(args.per_segment), "--rate", str(args.rate)]
+    argv += ["--dense"] * args.dense + ["--per-eval"] * args.per_eval
+    return scaling.main(argv)
