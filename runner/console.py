@@ -79,12 +79,14 @@ class Progress:
             self.stream.flush()
 
 
-def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None) -> str:
+def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None,
+                  contact_rows=()) -> str:
     """Plain spline vs optimized, the acceptance figures, as a text table.
 
     Args:
         plain, opt: `path_metrics` of the two paths. solution: the Solution. weights: {term: weight}
             chosen. final_weights: {term: weight} at the end (penalty continuation raises some).
+        contact_rows: (label, plain, optimized, format) rows about the feet, printed after penetration.
     """
     rows = [
         ("max penetration [mm] (1000 Hz)", plain["max_penetration_mm"], opt["max_penetration_mm"], "{:.2f}"),
@@ -92,6 +94,7 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
     for site in plain["penetration_mm_by_site"]:
         rows.append((f"  {site} [mm]", plain["penetration_mm_by_site"][site],
                      opt["penetration_mm_by_site"][site], "{:.2f}"))
+    rows += list(contact_rows)
     rows += [
         ("max |1 - |q||", plain["max_norm_deviation"], opt["max_norm_deviation"], "{:.4f}"),
         ("max hyperextension [deg]", plain["max_hyperextension_deg"], opt["max_hyperextension_deg"], "{:.2f}"),

@@ -57,20 +57,23 @@ def run_animate(args) -> int:
     if args.plot is not None:
         check_writable_dir(Path(args.plot) / "plot.png", "--plot")
     keyframes, info, model, layout, scene_path = load_problem(args.keyframes, args.scene)
+    contacts = tuple(getattr(info, "contacts", ()) or ())
     file_terms = dict(getattr(info, "terms", None) or {})
     weights_in = dict(args.weight)
     if args.terms is None and file_terms:
         try:
-            parse_terms(",".join(file_terms), file_terms)
+            parse_terms(",".join(file_terms), file_terms, contacts)
         except InputError as e:
             raise InputError(f"{args.keyframes}: field 'terms': {e}; fix the file, or choose with --terms") from None
-        weights = parse_terms(",".join(file_terms), {**file_terms, **weights_in})
+        weights = parse_terms(",".join(file_terms), {**file_terms, **weights_in}, contacts)
     else:
-        weights = parse_terms(args.terms, weights_in)
-    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=args.rate)
+        weights = parse_terms(args.terms, weights_in, contacts)
+    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=args.rate,
+                                 contacts=contacts)
     options = solve_options(args, weights)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     _warn_penetrating_keyframes(model, keyframes, initial)
+    _warn_contact_conflicts(objective, keyframes, initial)
     say = (lambda *a: None) if args.quiet else print
     say(f"dynsplines: {args.keyframes} -> {keyframes.count} keyframes "
         f"({int(keyframes.is_partial.sum())} partial) over {keyframes.times[-1] - keyframes.times[0]:.2f} s, "
@@ -93,8 +96,9 @@ def run_animate(args) -> int:
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
         if not args.quiet:
+            rows = contact_summary_rows(model, solution, reference, contacts, objective)
             print(summary_table(plain_m, opt_m, solution, weights,
-                                dict(zip(objective.names, objective.weights.tolist()))))
+                                dict(zip(objective.names, objective.weights.tolist())), contact_rows=rows))
             if reference is not None:
                 from runner.mocap.contacts import worst_contact_distance
 
@@ -149,6 +153,57 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
             print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) puts "
                   f"{site} {1000 * row.max():.1f} mm inside a surface; keyframes are met exactly, so that "
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
+
+
+def _warn_contact_conflicts(objective, keyframes, initial) -> None:
+    """Keyframes that contradict the contact schedule (a site the schedule plants held up, a swing
+    site held on the ground): keyframes are met exactly, so the contact terms cannot fix those."""
+    from solver.problem import keyframe_conflicts
+
+    for name, k, site, dist in keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe]):
+        if name == "planted":
+            what = f"holds {site} {1000 * dist:+.1f} mm from where the contact schedule plants it"
+        else:
+            what = f"holds {site} {1000 * dist:.1f} mm inside the clearance band where the schedule swings it"
+        print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) {what}; "
+              "keyframes are met exactly, so that stays (not held to the bound) - edit the keyframe or the "
+              "contact's times", file=sys.stderr)
+
+
+def contact_summary_rows(model, solution, reference, contacts, objective) -> list:
+    """Summary rows for the feet (issue 11): float, skate, skating ratio and flight time of both paths
+    against the motion-capture reference (`motion_metrics` at the clip's rate, the capture's own figure
+    in the label), and the friction-cone residual when the cone term is on."""
+    rows = []
+    if reference is not None and contacts:
+        from solver.motion_metrics import motion_metrics
+
+        t0, t1 = solution.initial.times[0], solution.initial.times[-1]
+        on = (reference.times >= t0 - 1e-9) & (reference.times <= t1 + 1e-9)
+        t, ref_q = reference.times[on], reference.qpos[on]
+        fps = 1.0 / reference.frame_time
+        got = [motion_metrics(model, fs.path(t), fps, ref_q, contacts) for fs in (solution.initial, solution.frames)]
+        capture = got[0]["reference"]
+        for label, key, scale, fmt in (
+            ("float in contact [mm]", "float_contact_mm", 1.0, "{:.2f}"),
+            ("skate in contact [mm/frame]", "skate_contact_mm", 1.0, "{:.2f}"),
+            ("skate, PhysDiff [mm/frame]", "skate_mm", 1.0, "{:.2f}"),
+            ("skating ratio (contacts)", "skating_ratio_contacts", 1.0, "{:.3f}"),
+            ("flight time [s]", "flight_time_s", 1.0, "{:.3f}"),
+        ):
+            rows.append((f"{label} (capture {fmt.format(scale * capture[key])})",
+                         scale * got[0]["path"][key], scale * got[1]["path"][key], fmt))
+    if "cone" in objective.names:
+        from solver.metrics import sample_times
+        from solver.terms.contact_wrench import cone_metrics
+
+        term = objective.terms[objective.names.index("cone")]
+        t = sample_times(solution.initial.times[0], solution.initial.times[-1], 400.0)
+        cm = [cone_metrics(term, t, fs.path(t), fs.path(t, 1), fs.path(t, 2))
+              for fs in (solution.initial, solution.frames)]
+        rows.append(("RMS friction-cone residual [N]", cm[0]["cone_rms"], cm[1]["cone_rms"], "{:.1f}"))
+        rows.append(("peak friction-cone residual [N]", cm[0]["cone_peak"], cm[1]["cone_peak"], "{:.1f}"))
+    return rows
 
 
 def render_video(out, model, solution, keyframes, args):
