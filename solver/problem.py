@@ -111,8 +111,14 @@ def parse_terms(spec: str | None, weights: dict[str, float] | None = None, conta
     return chosen
 
 
+#: [m] the penetration term's margin without a contact schedule, and with one (then also the height a
+#: planted site rests at): a planted site sits at the margin, and motion capture's planted sites sit
+#: about 2 mm up (the float metric counts it), so with contacts the margin is 2 mm.
+MARGIN, CONTACT_MARGIN = 0.005, 0.002
+
+
 def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rate: float = 400.0,
-                     margin: float = 0.005, contacts=()) -> Objective:
+                     margin: float | None = None, contacts=()) -> Objective:
     """The objective for a figure in a scene.
 
     Args:
@@ -120,7 +126,7 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
         weights: {term name: lambda_j} from `parse_terms`.
         t0, t1: [s] the keyframe interval. rate: quadrature points per second.
         margin: [m] clearance the penetration term keeps from surfaces (and the rest height of a
-            planted site, so that the two terms agree).
+            planted site, so that the two terms agree); default MARGIN, CONTACT_MARGIN with contacts.
         contacts: the contact schedule (objects with site, start, end, surface), for planted,
             clearance and cone.
     Returns:
@@ -130,13 +136,15 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
             what a term needs (contact sites, surfaces).
     """
     layout = StateLayout.from_model(model)
+    contacts = tuple(contacts or ())
+    if margin is None:
+        margin = CONTACT_MARGIN if contacts else MARGIN
     factories = {
         "penetration": lambda: Penetration(model, margin=margin),
         "unit": lambda: UnitQuaternion(layout.quat_slots),
         "bending": lambda: Hyperextension(layout),
         "smooth": lambda: _named(CovariantAcceleration(layout.quat_slots, layout.linear_index), "smooth"),
     }
-    contacts = tuple(contacts or ())
     for name in CONTACT_TERMS:
         if name in weights and not contacts:
             raise _needs_schedule(name)

@@ -118,7 +118,7 @@ def run_animate(args) -> int:
     code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
     if args.out is not None and not args.no_render:
         try:
-            info_r = render_video(args.out, model, solution, keyframes, args)
+            info_r = render_video(args.out, model, solution, keyframes, args, contacts)
         except KeyboardInterrupt:  # the video is written atomically: nothing half-written is left
             saved = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
             print(f"\ndynsplines: interrupted while rendering: {_rel(args.out)} not written (an earlier file "
@@ -206,17 +206,23 @@ def contact_summary_rows(model, solution, reference, contacts, objective) -> lis
     return rows
 
 
-def render_video(out, model, solution, keyframes, args):
-    """Side-by-side video of the plain spline and the optimized path, keyframes marked."""
+def render_video(out, model, solution, keyframes, args, contacts=()):
+    """Side-by-side video of the plain spline and the optimized path, keyframes marked, planted sites
+    of the contact schedule dotted green."""
     from runner.render import Track, render_tracks
     from solver.terms.penetration import Penetration
 
     t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
     pen = Penetration(model, margin=0.0)
     tracks = []
+    planted = None
+    if contacts:
+        from solver.contacts import contact_mask
+
+        planted = contact_mask(contacts, CONTACT_SITES, t)
     for label, fs in (("plain spline", solution.initial), ("optimized", solution.frames)):
         Y = fs.path(t)
-        tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
+        tracks.append(Track(label, t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES, planted=planted))
     # keyframes with free components filled: the poses the animator set
     kq = solution.initial.values[solution.initial.is_keyframe]
     quiet = getattr(args, "quiet", False)

@@ -32,6 +32,7 @@ _GHOST_REACH = 1.1
 """[m] how far a figure reaches from its root body, for culling ghosts outside the view."""
 _ROUND_ENDED = frozenset(int(t) for t in (mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_CYLINDER))
 _GHOST_TEXT = (225, 235, 255)
+_PLANTED_FILL = (40, 220, 90)  # a site the contact schedule has planted
 _CURRENT_TEXT = (255, 217, 64)
 _PENETRATION_TEXT = (255, 40, 230)
 WHITE = (255, 255, 255)
@@ -219,7 +220,9 @@ class Overlay:
         img, x0, y0 = patch
         im.paste(img, (int(round(xy[0])) + x0, int(round(xy[1])) + y0), img)
 
-    def compose(self, images, labels, t, speed, current, marks) -> np.ndarray:
+    def compose(self, images, labels, t, speed, current, marks, planted=None) -> np.ndarray:
+        """The frame: panels, captions, timeline, magenta rings at `marks`; green dots at the projected
+        sites of `planted` (per panel an (m, 2) array of pixel positions, or None)."""
         frame = np.empty((self.height, self.width, 3), np.uint8)
         frame[:] = _PAD_COLOR
         for p, img in enumerate(images):
@@ -250,6 +253,11 @@ class Overlay:
                     if np.isfinite(px) and np.isfinite(py):
                         draw.ellipse([(x + px - r, py - r), (x + px + r, py + r)],
                                      outline=_PENETRATION_TEXT, width=3)
+            if planted is not None and planted[p] is not None:
+                r = max(3, self.height // 90)
+                for px, py in planted[p]:
+                    if np.isfinite(px) and np.isfinite(py):
+                        draw.ellipse([(x + px - r, py - r), (x + px + r, py + r)], fill=_PLANTED_FILL)
             self._timeline(im, draw, x, t, current)
         if self.title:
             self.draw_text(im, (self.width // 2, pad), self.title, self.font, WHITE, anchor="ma")

@@ -117,6 +117,8 @@ def render_tracks(
     n = times.size
     qposes = [sample_track(tr, times) for tr in tracks]
     depths = [None if tr.penetration is None else interpolate_samples(tr.times, tr.penetration, times) for tr in tracks]
+    plants = [None if tr.planted is None else
+              interpolate_samples(tr.times, tr.planted.astype(float), times) > 0.5 for tr in tracks]
 
     renderer = make_renderer(model, panel_w, height, quality)
     try:
@@ -136,7 +138,7 @@ def render_tracks(
                 for i in range(n):
                     active = np.flatnonzero((passed <= i) & (i < passed + caption_frames))
                     current = int(active[-1]) if active.size else -1
-                    images, marks = [], []
+                    images, marks, dots = [], [], []
                     r0 = time.perf_counter()
                     for p, tr in enumerate(tracks):
                         panel.set_camera(camera, lookat[i])
@@ -148,9 +150,12 @@ def render_tracks(
                             marks.append((xy, max(d for _, d in deep)))
                         else:
                             marks.append(None)
+                        on = [] if plants[p] is None else [
+                            int(s) for s, o in zip(site_ids[p], plants[p][i], strict=True) if o]
+                        dots.append(panel.project(np.array([panel.data.site_xpos[s] for s in on])) if on else None)
                     render_seconds += time.perf_counter() - r0
                     frame = overlay.compose(images, [tr.label for tr in tracks], times[i], speed,
-                                            current, marks)
+                                            current, marks, planted=dots)
                     writer.append_data(frame)
                     if progress is not None:
                         progress(i + 1, n)

@@ -359,8 +359,15 @@ def _engine_index(engine, model, names) -> np.ndarray:
 
 
 def _engine_motion(term, Y, Y1, Y2):
-    """(motion, engine result) of the shared engine's (cached) forward pass at the samples."""
-    mo = term.kin.tmap.motion(Y, Y1, Y2)
+    """(motion, engine result) of the shared engine's (cached) forward pass at the samples. The motion
+    (qvel, qacc) is cached on the engine too, so the contact terms sharing it compute it once."""
+    last = getattr(term.engine, "_contact_motion", None)
+    if last is not None and all(a is b or (a.shape == b.shape and np.array_equal(a, b))
+                                for a, b in zip(last[:3], (Y, Y1, Y2), strict=True)):
+        mo = last[3]
+    else:
+        mo = term.kin.tmap.motion(Y, Y1, Y2)
+        term.engine._contact_motion = (Y.copy(), Y1.copy(), Y2.copy(), mo)
     return mo, term.engine.forward(Y, mo.qvel, mo.qacc)
 
 
@@ -437,9 +444,15 @@ class Planted(Term):
         h = np.zeros((m, C))
         vt = np.zeros((m, C, 3))
         nrm = np.zeros((m, C, 3))
+        auto = {}  # per site column: the automatic support of all samples at once
         for c in range(C):
             pc = p[:, self._col[c]]
-            h[:, c], nrm[:, c] = self.support.height(pc, self._surf[c])
+            if self._surf[c] is None:
+                if self._col[c] not in auto:
+                    auto[self._col[c]] = self.support.height(pc, None)
+                h[:, c], nrm[:, c] = auto[self._col[c]]
+            else:
+                h[:, c], nrm[:, c] = self.support.height(pc, self._surf[c])
             h[:, c] -= self.rest_height
             if v is not None:
                 vc = v[:, self._col[c]]
@@ -455,23 +468,26 @@ class Planted(Term):
 
         mo, res = _engine_motion(self, Y, Y1, Y2)
         W = self.windows(t)
-        p = res.sites[:, self._eidx]
-        v = self.engine.site_velocities(res)[:, self._eidx]
-        h, vt, nrm = self._parts(p, v, W, np.arange(len(W)))
+        rows = np.flatnonzero((W > 0).any(axis=1))
+        f = np.zeros(len(Y))
+        Wr = W[rows]
+        p = res.sites[rows][:, self._eidx]
+        v = self.engine.site_velocities(res)[rows][:, self._eidx]
+        h, vt, nrm = self._parts(p, v, Wr, rows)
         t2 = self.tau * self.tau
-        f = (W * (h * h + t2 * (vt * vt).sum(-1))).sum(1)
+        f[rows] = (Wr * (h * h + t2 * (vt * vt).sum(-1))).sum(1)
         if not grad:
             return TermEval(f)
         g_p = np.zeros(p.shape)
         g_v = np.zeros(v.shape)
         for c in range(len(self.contacts)):
             k = self._col[c]
-            g_p[:, k] += (2.0 * W[:, c] * h[:, c])[:, None] * nrm[:, c]
-            g_v[:, k] += (2.0 * t2 * W[:, c])[:, None] * vt[:, c]
+            g_p[:, k] += (2.0 * Wr[:, c] * h[:, c])[:, None] * nrm[:, c]
+            g_v[:, k] += (2.0 * t2 * Wr[:, c])[:, None] * vt[:, c]
         g_sites = np.zeros(res.sites.shape)
         g_vel = np.zeros(res.sites.shape)
-        np.add.at(g_sites, (slice(None), self._eidx), g_p)
-        np.add.at(g_vel, (slice(None), self._eidx), g_v)
+        g_sites[np.ix_(rows, self._eidx)] = g_p
+        g_vel[np.ix_(rows, self._eidx)] = g_v
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites, g_vel))
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
