@@ -24,8 +24,11 @@ DEFAULT_TERMS = ("penetration", "unit", "bending", "smooth")
 #: main job and gives RMS root force in flight 20 N against the plain spline's 625 N, RMS joint torque
 #: 80 N m against 103 N m; 0.1 each also meets the acceptance figures but keeps less of the gain
 #: (74 N, 93 N m) and lets the flight grow to 0.49 s (plain spline 0.25 s).
+#: planted and clearance at 10: on run-and-step (127_33, its own contacts) weight 1 with 5 mm rest height
+#: floated planted feet 7.6 mm (capture 2.4) and raised the joint-orientation error to 13.1 deg (plain
+#: 10.2); weight 10 with the 2 mm contact margin: float 3.5 mm, joint error 10.7 deg (README "Contacts").
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
-                   "planted": 1.0, "clearance": 1.0, "cone": 1.0}
+                   "planted": 10.0, "clearance": 10.0, "cone": 1.0}
 
 #: The contact terms: they need a contact schedule. planted and clearance join the defaults when one is
 #: known; cone (inverse dynamics) joins "all".
@@ -35,9 +38,11 @@ DEFAULT_CONTACT_TERMS = ("planted", "clearance")
 #: Penalty-continuation bounds (`SolveOptions.limits`), in each term's `violation` unit, set inside the
 #: acceptance bounds (penetration <= 1 mm, hyperextension <= 2 deg, |1 - |q|| <= 5 %) with headroom.
 DEFAULT_LIMITS = {"penetration": 0.0005, "bending": float(np.radians(1.0)), "unit": 0.03,
-                  # planted: max(|h - h0|, tau |v_t|) where a contact is fully on [m] (tau = 0.1 s: 1 cm
-                  # or 10 cm/s); clearance: intrusion into the 2 cm band in swing cores and flights [m]
-                  "planted": 0.01, "clearance": 0.005}
+                  # planted: max(|h - h0|, tau |v_t|) where a contact is fully on [m] (tau = 0.1 s: 2 cm
+                  # or 20 cm/s); clearance: intrusion into the 2 cm band in swing cores and flights [m].
+                  # Peaks, so looser than the acceptance means (float <= 5 mm): with 1 cm / 5 mm the
+                  # run-and-step solve still missed planted after 3 boosts (41 -> 25 -> 12 mm)
+                  "planted": 0.02, "clearance": 0.01}
 
 
 def _dynamics_terms():
