@@ -3,15 +3,21 @@ schedule is known, refused without one, and share the inverse-dynamics engine (s
 import mujoco
 import numpy as np
 import pytest
-from conftest import TOY_SCENE, random_qpos
 
 from solver.contacts import Contact
 from solver.errors import InputError
 from solver.inverse_dynamics import InverseDynamics
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.problem import (
-    DEFAULT_TERMS, default_limits, figure_objective, keyframe_conflicts, parse_terms, term_names,
+    DEFAULT_TERMS,
+    default_limits,
+    figure_objective,
+    keyframe_conflicts,
+    parse_terms,
+    term_names,
 )
+
+from conftest import TOY_SCENE, random_qpos
 
 SCHEDULE = (Contact("l_heel", 0.0, 0.4), Contact("l_toe", 0.0, 0.5), Contact("r_toe", 0.6, 1.0))
 
@@ -106,3 +112,32 @@ def test_keyframes_that_contradict_the_schedule_are_found_and_excused(toy):
     assert ("planted", 1, "l_heel", pytest.approx(0.05 - 0.002, abs=1e-6)) in found
     planted = obj.terms[obj.names.index("planted")]
     assert 0 in planted.excused
+
+
+@pytest.mark.slow
+def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
+    from runner.commands.animate import contact_summary_rows
+    from runner.console import summary_table
+    from runner.mocap.reference import load_bvh_reference
+    from runner.paths import MODELS
+    from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+    from solver.contacts import reference_contacts
+    from solver.frames import FrameSet
+    from solver.metrics import path_metrics
+    from solver.solve import SolveOptions, solve
+
+    keyframes, _info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
+    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model)
+    contacts = tuple(reference_contacts(model, ref.qpos, ref.frame_time))
+    weights = parse_terms("all", contacts=contacts)
+    obj = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=100.0, contacts=contacts)
+    sol = solve(obj, FrameSet.from_keyframes(keyframes, layout.quat_slots),
+                SolveOptions(subdivision="none", max_evals=3))
+    rows = contact_summary_rows(model, sol, ref, contacts, obj)
+    plain = path_metrics(model, sol.initial.times, sol.initial.values, keyframes, rate=200.0)
+    opt = path_metrics(model, sol.frames.times, sol.frames.values, keyframes, rate=200.0)
+    text = summary_table(plain, opt, sol, weights, contact_rows=rows)
+    for row in ("float in contact [mm] (capture 2.4", "skate in contact [mm/frame]", "skating ratio (contacts)",
+                "flight time [s] (capture 0.117)", "RMS friction-cone residual [N]", "peak friction-cone residual [N]"):
+        assert row in text
+    assert text.index("float in contact") < text.index("max |1 - |q||")
