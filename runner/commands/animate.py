@@ -173,10 +173,15 @@ def _warn_contact_conflicts(objective, keyframes, initial) -> None:
 def contact_summary_rows(model, solution, reference, contacts, objective) -> list:
     """Summary rows for the feet (issue 11): float, skate, skating ratio and flight time of both paths
     against the motion-capture reference (`motion_metrics` at the clip's rate, the capture's own figure
-    in the label), and the friction-cone residual when the cone term is on."""
+    in the label; contacts: the schedule, else `reference_contacts` of the clip), and the friction-cone
+    residual when the cone term is on."""
     rows = []
-    if reference is not None and contacts:
+    if reference is not None:
+        from solver.contacts import reference_contacts
         from solver.motion_metrics import motion_metrics
+
+        # the capture's contacts: the file's schedule, else detected on the clip
+        contacts = contacts or tuple(reference_contacts(model, reference.qpos, reference.frame_time))
 
         t0, t1 = solution.initial.times[0], solution.initial.times[-1]
         on = (reference.times >= t0 - 1e-9) & (reference.times <= t1 + 1e-9)
