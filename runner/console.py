@@ -255,15 +255,19 @@ def format_rows(rows) -> list[str]:
     return lines
 
 
-def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None) -> str:
+def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None,
+                  contact_rows=()) -> str:
     """Plain spline vs optimized, the acceptance figures, as a text table; a figure on which the optimized
     path is worse is marked "worse" in a last column (`comparison_rows`), with a legend line.
 
     Args:
         plain, opt: `path_metrics` of the two paths. solution: the Solution. weights: {term: weight}
             chosen. final_weights: {term: weight} at the end (penalty continuation raises some).
+        contact_rows: (label, plain, optimized, format) rows about the feet, printed after penetration.
     """
     rows = comparison_rows(plain, opt, dynamics_terms=bool({"torque", "root"} & set(weights)))
+    n_pen = 1 + len(plain["penetration_mm_by_site"])  # the feet rows go after the penetration rows
+    rows[n_pen:n_pen] = list(contact_rows)
     rows.append(("objective E", solution.E_initial, solution.E_final, "{:.5g}"))
     for name in weights:
         rows.append((f"  integral {name}", solution.integrals_initial[name], solution.integrals_final[name],

@@ -251,7 +251,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         from types import SimpleNamespace
 
         args = SimpleNamespace(fps=o.fps, size=o.size, speed=o.speed, quiet=o.quiet)
-        r = render_with_progress(paths["video"], model, solution, keyframes, args)
+        r = render_with_progress(paths["video"], model, solution, keyframes, args, ref, info.contacts)
         say(f"  wrote {paths['video']} ({r.n_frames} frames, {r.wall_time_s:.1f} s to render)")
     result["wall_time_s"] = time.perf_counter() - t_start
     result["summary"], result["table"] = summary, table
@@ -259,7 +259,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     return result
 
 
-def render_with_progress(out, model, solution, keyframes, args, reference=None):
+def render_with_progress(out, model, solution, keyframes, args, reference=None, contacts=()):
     """The side-by-side video (`runner.render.side_by_side.render_video`) with a progress bar over its
     frames (`runner.console.Steps`; silent with `args.quiet`). Returns the render's info."""
     from runner.console import Steps
@@ -269,5 +269,5 @@ def render_with_progress(out, model, solution, keyframes, args, reference=None):
 
     n = len(frame_times(float(keyframes.times[0]), float(keyframes.times[-1]), args.fps, args.speed))
     with Steps(f"rendering {display_path(out)}", n, getattr(args, "quiet", False), unit=" frames") as bar:
-        return render_video(out, model, solution, keyframes, args, reference,
+        return render_video(out, model, solution, keyframes, args, reference, contacts,
                             progress=lambda i, _n: bar.update(i))

@@ -18,7 +18,7 @@ from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
-from solver.problem import default_limits, figure_objective, parse_terms
+from solver.problem import default_limits, figure_objective, keyframe_conflicts, parse_terms
 from solver.solve import Solution, SolveOptions, solve
 
 __all__ = ["DEFAULT_RATE", "DEFAULT_TOL", "animate", "default_options"]
@@ -42,7 +42,8 @@ def default_options(weights: dict[str, float]) -> SolveOptions:
     frame budget of 10 per keyframe interval; `replace(..., tol=0)` for `rounds` fixed rounds), renormalized terms
     (eq. 7), L-BFGS preconditioned in the spline-acceleration metric with relative tolerance 1e-6, no
     evaluation or time limit, and penalty continuation to `default_limits(weights)` (penetration
-    0.5 mm, hyperextension 1 deg, |1 - |q|| 0.03, for the terms switched on).
+    0.5 mm, hyperextension 1 deg, |1 - |q|| 0.03, planted 1 cm / 10 cm/s, clearance 5 mm, for the
+    terms switched on).
 
     Args:
         weights: {term name: lambda_j >= 0} as from `parse_terms`; only which terms have a nonzero
@@ -75,6 +76,7 @@ def animate(
     should_stop: Callable[[], bool] | None = None,
     progress: Callable[[str, dict], None] | None = None,
     tol: float | None = None,
+    contacts=(),
 ) -> Solution:
     """Optimize the in-betweens of a figure's keyframes in a scene (paper sec. 2-6, fig. 5).
 
@@ -98,6 +100,9 @@ def animate(
         tol: refine adaptively until the decrease of E refinement still predicts, relative to E, is at
             most tol (`SolveOptions.tol`, replacing the options' fixed rounds), or a frame or time
             budget runs out (`Solution.converged_to_tol`, `Solution.refinement_estimate`).
+        contacts: the contact schedule (`solver.contacts.Contact`s: site, start, end [s], surface), e.g.
+            `KeyframeFileInfo.contacts` or `reference_contacts`. With one, the default terms add planted
+            and clearance and "all" adds cone too (issue 11); without one, naming them is an InputError.
     Returns:
         Solution: `frames` (the optimized FrameSet, values (m, nq) qpos at times (m,) [s]; the path is
         the spline through them, `frames.path(t)`), `initial` (the plain spline's), E and the term
@@ -116,7 +121,8 @@ def animate(
                          f"the model has nq = {nq}; are they for this scene's figure?")
     if terms is not None and not isinstance(terms, str):
         terms = ",".join(terms)
-    chosen = parse_terms(terms, weights)
+    contacts = tuple(contacts or ())
+    chosen = parse_terms(terms, weights, contacts)
     rate = DEFAULT_RATE if rate is None else float(rate)
     if not np.isfinite(rate) or rate <= 0:
         raise InputError(f"rate must be > 0 quadrature points per second, got {rate}")
@@ -128,6 +134,8 @@ def animate(
     if tol is not None:
         options = replace(options, tol=float(tol))
     layout = StateLayout.from_model(model)
-    objective = figure_objective(model, chosen, keyframes.times[0], keyframes.times[-1], rate=rate)
+    objective = figure_objective(model, chosen, keyframes.times[0], keyframes.times[-1], rate=rate,
+                                 contacts=contacts)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe])
     return solve(objective, initial, options, should_stop=should_stop, progress=progress)

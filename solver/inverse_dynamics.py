@@ -369,10 +369,12 @@ class InverseDynamics:
         sb = self._site_body
         ry = mv(R[:, :, sb], self._site_pos)
         ys = x[:, sb] + ry
+        ysd = nu[:, sb] + cross(om[:, sb], ys)  # site velocities: nu is the velocity of the origin point
 
         saved = dict(
             R=R, x=x, A=A, cx=cx, com=com, Rpd=Rpd, Rj=Rj, s=s, om=om, k=k, nu=nu, as_=as_, al=al,
-            vc=vc, f=f, wl=wl, h=h, nw=nw, Ff=Ff, Wt=Wt, ry=ry,
+            vc=vc, f=f, wl=wl, h=h, nw=nw, Ff=Ff, Wt=Wt, ry=ry, ys=ys,
+            site_vel=np.ascontiguousarray(ysd.transpose(2, 1, 0)),
         )
         res = InverseDynamicsResult(
             np.ascontiguousarray(tau.T), np.ascontiguousarray(ys.transpose(2, 1, 0)),
@@ -381,10 +383,18 @@ class InverseDynamics:
         self._cache = res
         return res
 
+    @staticmethod
+    def site_velocities(res: InverseDynamicsResult) -> np.ndarray:
+        """(n, k, 3) world velocities [m/s] of the engine's sites at the samples of `forward`'s result
+        (nu_b + omega_b x y: the velocity of the site's point of its body)."""
+        return res.saved["site_vel"]
+
     def vjp(
-        self, res: InverseDynamicsResult, g_tau: np.ndarray, g_sites: np.ndarray | None = None
+        self, res: InverseDynamicsResult, g_tau: np.ndarray, g_sites: np.ndarray | None = None,
+        g_site_vel: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Gradient of phi = sum g_tau . tau + sum g_sites . sites with respect to pose, qvel, qacc.
+        """Gradient of phi = sum g_tau . tau + sum g_sites . sites (+ sum g_site_vel . site velocities)
+        with respect to pose, qvel, qacc.
 
         Reverse pass of `forward` (exact, not finite differences). The pose gradient is MuJoCo's
         tangent convention (the rows of `mjd_inverseFD`'s DfDq): free joint, world translation then
@@ -394,6 +404,7 @@ class InverseDynamics:
         Args:
             res: the result of `forward` at the samples.
             g_tau: (n, nv) d phi / d tau. g_sites: (n, k, 3) d phi / d site position, or None.
+            g_site_vel: (n, k, 3) d phi / d site velocity (`site_velocities`), or None.
         Returns:
             g_pose (n, nv), g_qvel (n, nv), g_qacc (n, nv). g_qacc = M(q) g_tau (M with armature).
         """
@@ -441,6 +452,14 @@ class InverseDynamics:
         wbar += cross(vc, acbar)
         vcbar = cross(acbar, om)
         nubar = vcbar
+        if g_site_vel is not None and len(self._site_body):
+            # ysd = nu_b + om_b x ys: nu_b += g, om_b += ys x g, ys += g x om_b
+            gsv = np.swapaxes(np.moveaxis(g_site_vel, -1, 0), 1, 2)  # (3, K, n)
+            ys_s = sv["ys"]
+            nubar = nubar + self._site_mat @ gsv
+            wbar = wbar + self._site_mat @ cross(ys_s, gsv)
+            gys = cross(gsv, om[:, self._site_body])
+            g_sites = gys.transpose(2, 1, 0) if g_sites is None else g_sites + gys.transpose(2, 1, 0)
         wbar += cross(com, vcbar)
         cbar += cross(vcbar, om)
         xbar = cbar

@@ -76,20 +76,23 @@ def run_animate(args) -> int:
             and reference is None:
         raise InputError(f"--panels reference: {args.keyframes} names no motion-capture clip that is there "
                          "(its \"source\": {\"clip\": ...}, relative to the file); drop the reference panel")
+    contacts = tuple(getattr(info, "contacts", ()) or ())
     file_terms = dict(getattr(info, "terms", None) or {})
     weights_in = dict(args.weight)
     if args.terms is None and file_terms:
         try:
-            parse_terms(",".join(file_terms), file_terms)
+            parse_terms(",".join(file_terms), file_terms, contacts)
         except InputError as e:
             raise InputError(f"{args.keyframes}: field 'terms': {e}; fix the file, or choose with --terms") from None
-        weights = parse_terms(",".join(file_terms), {**file_terms, **weights_in})
+        weights = parse_terms(",".join(file_terms), {**file_terms, **weights_in}, contacts)
     else:
-        weights = parse_terms(args.terms, weights_in)
-    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=args.rate)
+        weights = parse_terms(args.terms, weights_in, contacts)
+    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=args.rate,
+                                 contacts=contacts)
     options = solve_options(args, weights)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     _warn_penetrating_keyframes(model, keyframes, initial)
+    _warn_contact_conflicts(objective, keyframes, initial)
     say = print  # results; --quiet silences progress only
     say(f"dynsplines: {args.keyframes} -> {keyframes.count} keyframes "
         f"({int(keyframes.is_partial.sum())} partial) over {keyframes.times[-1] - keyframes.times[0]:.2f} s, "
@@ -110,7 +113,6 @@ def run_animate(args) -> int:
 
         plain_m = path_metrics(model, initial.times, initial.values, keyframes)
         opt_m = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
-        contacts = tuple(getattr(info, "contacts", ()) or ())
         metrics = {"plain": plain_m, "optimized": opt_m}
         if reference is not None:
             from runner.pipeline import reference_motion_metrics
@@ -120,7 +122,8 @@ def run_animate(args) -> int:
                 contacts = tuple(reference_contacts(model, reference.qpos, reference.frame_time))
             metrics["motion"] = reference_motion_metrics(model, layout, solution, reference, contacts)
         if not args.no_summary:
-            print(summary_table(plain_m, opt_m, solution, weights, dict(solution.weights)))
+            rows = contact_summary_rows(metrics.get("motion"), solution.objective, solution)
+            print(summary_table(plain_m, opt_m, solution, weights, dict(solution.weights), contact_rows=rows))
             if reference is not None:
                 print(motion_metrics_table(metrics["motion"]["plain"], metrics["motion"]["optimized"]))
         if reference is not None:
@@ -147,7 +150,7 @@ def run_animate(args) -> int:
     code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
     if args.out is not None and not args.no_render:
         try:
-            info_r = render_with_progress(args.out, model, solution, keyframes, args, reference)
+            info_r = render_with_progress(args.out, model, solution, keyframes, args, reference, contacts)
         except KeyboardInterrupt:  # the video is written atomically: nothing half-written is left
             saved = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
             print(f"\ndynsplines: interrupted while rendering: {_rel(args.out)} not written (an earlier file "
@@ -209,3 +212,48 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
             print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) puts "
                   f"{site} {1000 * row.max():.1f} mm inside a surface; keyframes are met exactly, so that "
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
+
+
+def _warn_contact_conflicts(objective, keyframes, initial) -> None:
+    """Keyframes that contradict the contact schedule (a site the schedule plants held up, a swing
+    site held on the ground): keyframes are met exactly, so the contact terms cannot fix those."""
+    from solver.problem import keyframe_conflicts
+
+    for name, k, site, dist in keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe]):
+        if name == "planted":
+            what = f"holds {site} {1000 * dist:+.1f} mm from where the contact schedule plants it"
+        else:
+            what = f"holds {site} {1000 * dist:.1f} mm inside the clearance band where the schedule swings it"
+        print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) {what}; "
+              "keyframes are met exactly, so that stays (not held to the bound) - edit the keyframe or the "
+              "contact's times", file=sys.stderr)
+
+
+def contact_summary_rows(motion, objective, solution) -> list:
+    """Summary rows for the feet (issue 11): float, skate, skating ratio and flight time of both paths
+    against the motion-capture reference (`motion`: metrics["motion"], the `motion_metrics` of both paths
+    at the clip's rate; the capture's own figure in the label), and the friction-cone residual when the
+    cone term is on."""
+    rows = []
+    if motion is not None:
+        capture = motion["plain"]["reference"]
+        for label, key, fmt in (
+            ("float in contact [mm]", "float_contact_mm", "{:.2f}"),
+            ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
+            ("skate, PhysDiff [mm/frame]", "skate_mm", "{:.2f}"),
+            ("skating ratio (contacts)", "skating_ratio_contacts", "{:.3f}"),
+            ("flight time [s]", "flight_time_s", "{:.3f}"),
+        ):
+            rows.append((f"{label} (capture {fmt.format(capture[key])})", motion["plain"]["path"][key],
+                         motion["optimized"]["path"][key], fmt))
+    if "cone" in objective.names:
+        from solver.metrics import sample_times
+        from solver.terms.contact_wrench import cone_metrics
+
+        term = objective.terms[objective.names.index("cone")]
+        t = sample_times(solution.initial.times[0], solution.initial.times[-1], 400.0)
+        cm = [cone_metrics(term, t, fs.path(t), fs.path(t, 1), fs.path(t, 2))
+              for fs in (solution.initial, solution.frames)]
+        rows.append(("RMS friction-cone residual [N]", cm[0]["cone_rms"], cm[1]["cone_rms"], "{:.1f}"))
+        rows.append(("peak friction-cone residual [N]", cm[0]["cone_peak"], cm[1]["cone_peak"], "{:.1f}"))
+    return rows

@@ -3,15 +3,14 @@ timelines and titles."""
 from __future__ import annotations
 
 import math
-import time
 
 import mujoco
 import numpy as np
 from PIL import Image, ImageDraw
 
-from solver.errors import InputError
 from runner.render.gl import QUALITIES, load_font, project_points
 from runner.render.tracks import Camera, Track, forward_direction, root_body, sample_track
+from solver.errors import InputError
 
 PENETRATION_SHOWN = 1e-3
 """[m] a contact site deeper than this inside a surface is circled in magenta."""
@@ -39,6 +38,7 @@ _GHOST_REACH = 1.1
 """[m] how far a figure reaches from its root body, for culling ghosts outside the view."""
 _ROUND_ENDED = frozenset(int(t) for t in (mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_CYLINDER))
 _GHOST_TEXT = (225, 235, 255)
+_PLANTED_FILL = (40, 220, 90)  # a site the contact schedule has planted
 _CURRENT_TEXT = (255, 217, 64)
 _PENETRATION_TEXT = (255, 40, 230)
 WHITE = (255, 255, 255)
@@ -281,10 +281,11 @@ class Overlay:
         img, x0, y0 = patch
         im.paste(img, (int(round(xy[0])) + x0, int(round(xy[1])) + y0), img)
 
-    def compose(self, images, labels, t, speed, current, marks) -> np.ndarray:
+    def compose(self, images, labels, t, speed, current, marks, planted=None) -> np.ndarray:
         """The frame: the title in a band above all panels (never across a divider), then the panels
         side by side, each with its label, time, caption, rings and timeline (no text below
-        LABELS_MIN_SIZE)."""
+        LABELS_MIN_SIZE); green dots at the projected sites of `planted` (per panel an (m, 2) array of
+        pixel positions, or None)."""
         frame = np.empty((self.height, self.width, 3), np.uint8)
         frame[:] = _PAD_COLOR
         for p, img in enumerate(images):
@@ -316,6 +317,12 @@ class Overlay:
                 self.draw_text(im, (x + pad, line), f"foot inside a surface: {100 * deepest:.1f} cm",
                       self.small, _PENETRATION_TEXT)
                 self._rings(draw, x, xy)
+            if planted is not None and planted[p] is not None:
+                r = max(3, self.height // 90)
+                for px, py in planted[p]:
+                    if np.isfinite(px) and np.isfinite(py):
+                        py = py + self.band
+                        draw.ellipse([(x + px - r, py - r), (x + px + r, py + r)], fill=_PLANTED_FILL)
             self._timeline(im, draw, x, t, current)
         if self.title:
             self.draw_text(im, (self.width // 2, self.band // 2), self.title, self.font, WHITE, anchor="mm")

@@ -26,14 +26,15 @@ def check_video_out(out, size) -> None:
 PANELS = {"plain": "plain spline", "optimized": "optimized", "reference": "motion capture"}
 
 
-def render_video(out, model, solution, keyframes, args, reference=None, progress=None):
+def render_video(out, model, solution, keyframes, args, reference=None, contacts=(), progress=None):
     """Side-by-side video of the plain spline and the optimized path (and the motion capture, with
     `args.panels` holding "reference"), keyframes marked.
 
     Args:
         out: video file. model: MjModel. solution: solver Solution. keyframes: Keyframes. args: fps,
             size, speed and optionally panels (names from PANELS, left to right). reference: the
-            retargeted motion capture (times, qpos) for a "reference" panel. progress(i, n): called after
+            retargeted motion capture (times, qpos) for a "reference" panel. contacts: the contact schedule
+            (`solver.contacts.Contact`s): planted sites are dotted green. progress(i, n): called after
             each of the n frames (None: silent).
     Returns:
         the render's info (n_frames, wall_time_s).
@@ -44,6 +45,11 @@ def render_video(out, model, solution, keyframes, args, reference=None, progress
     t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
     pen = Penetration(model, margin=0.0)
     tracks = []
+    planted = None
+    if contacts:
+        from solver.contacts import contact_mask
+
+        planted = contact_mask(contacts, CONTACT_SITES, t)
     for name in getattr(args, "panels", ("plain", "optimized")):
         if name == "reference":  # over the keyframes' time span, like the other panels
             if reference is None:
@@ -52,7 +58,7 @@ def render_video(out, model, solution, keyframes, args, reference=None, progress
             Y = sample_track(Track("reference", reference.times, reference.qpos), t)
         else:
             Y = (solution.initial if name == "plain" else solution.frames).path(t)
-        tracks.append(Track(PANELS[name], t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES))
+        tracks.append(Track(PANELS[name], t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES, planted=planted))
     # keyframes with free components filled: the poses the animator set
     kq = solution.initial.values[solution.initial.is_keyframe]
     return render_tracks(model, tracks, out, fps=args.fps, size=args.size, speed=args.speed,

@@ -2,10 +2,9 @@
 from __future__ import annotations
 
 import math
-import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import mujoco
 import numpy as np
@@ -28,6 +27,8 @@ class Track:
             <=0 outside), e.g. from the ground-penetration term (eq. 12). Where deeper than
             `PENETRATION_SHOWN` the site is circled in magenta and its body drawn magenta.
         sites: s site names, the columns of `penetration` (e.g. "l_heel", "l_toe", ...).
+        planted: optional (n, s) bool: the contact schedule has site k planted at times[i] (issue 11);
+            such a site is marked with a green dot while planted.
 
     Raises:
         InputError: shapes or values that do not fit (checked on construction; nq against the model
@@ -39,6 +40,7 @@ class Track:
     qpos: np.ndarray
     penetration: np.ndarray | None = None
     sites: tuple[str, ...] = ()
+    planted: np.ndarray | None = None
 
     def __post_init__(self):
         times = np.asarray(self.times, dtype=float)
@@ -69,6 +71,13 @@ class Track:
                     f"got shape {penetration.shape}")
         elif sites:
             raise InputError(f"{name}: sites are given but penetration is not")
+        planted = self.planted
+        if planted is not None:
+            planted = np.asarray(planted, dtype=bool)
+            if planted.shape != (times.size, len(sites)):
+                raise InputError(f"{name}: planted must have shape (n, len(sites)) = ({times.size}, {len(sites)}); "
+                                 f"got shape {planted.shape}")
+            object.__setattr__(self, "planted", planted)
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "qpos", qpos)
         object.__setattr__(self, "penetration", penetration)

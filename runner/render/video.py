@@ -2,22 +2,20 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 import imageio.v2 as iio
 import numpy as np
 from PIL import Image, ImageDraw
 
-from runner.files import atomic_output
-from solver.errors import InputError
-from runner.files import check_writable_dir
+from runner.files import atomic_output, check_writable_dir
 from runner.render.gl import check_quality, load_font, make_renderer
 from runner.render.overlays import (
     KEYFRAME_CAPTION_SECONDS,
+    WHITE,
     Overlay,
     Panel,
-    WHITE,
     check_keyframes,
     check_model_fit,
     current_keyframes,
@@ -30,11 +28,11 @@ from runner.render.overlays import (
     title_band,
 )
 from runner.render.tracks import (
-    Camera,
     IMAGE_SUFFIXES,
+    VIDEO_SUFFIXES,
+    Camera,
     RenderInfo,
     Track,
-    VIDEO_SUFFIXES,
     azimuth_path,
     forward_direction,
     frame_times,
@@ -45,6 +43,7 @@ from runner.render.tracks import (
     root_positions,
     sample_track,
 )
+from solver.errors import InputError
 
 
 def render_tracks(
@@ -58,7 +57,7 @@ def render_tracks(
     keyframe_times=None,
     keyframe_qpos=None,
     title: str | None = None,
-    camera: Camera = Camera(),
+    camera: Camera = Camera(),  # noqa: B008 (a frozen dataclass: an immutable default)
     quality: str = "fast",
     progress: Callable[[int, int], None] | None = None,
 ) -> RenderInfo:
@@ -128,6 +127,8 @@ def render_tracks(
     n = times.size
     qposes = [sample_track(tr, times) for tr in tracks]
     depths = [None if tr.penetration is None else interpolate_samples(tr.times, tr.penetration, times) for tr in tracks]
+    plants = [None if tr.planted is None else
+              interpolate_samples(tr.times, tr.planted.astype(float), times) > 0.5 for tr in tracks]
 
     renderer = make_renderer(model, panel_w, panel_h, quality)
     try:
@@ -148,12 +149,12 @@ def render_tracks(
                 for i in range(n):
                     current = int(currents[i])
                     alphas = ghost_alphas(times[i], kf_t)
-                    images, marks = [], []
+                    images, marks, dots = [], [], []
                     r0 = time.perf_counter()
-                    for p, tr in enumerate(tracks):
+                    for p in range(len(tracks)):
                         panel.set_camera(camera, lookat[i], azimuth[i])
                         deep = deep_sites(depths[p], i, site_ids[p])
-                        marked_bodies = set(int(model.site_bodyid[s]) for s, _ in deep)
+                        marked_bodies = {int(model.site_bodyid[s]) for s, _ in deep}
                         images.append(panel.render(qposes[p][i], ghosts[p], current, marked_bodies,
                                                    alphas if len(ghosts[p]) else None))
                         if deep:
@@ -161,9 +162,12 @@ def render_tracks(
                             marks.append((xy, max(d for _, d in deep)))
                         else:
                             marks.append(None)
+                        on = [] if plants[p] is None else [
+                            int(s) for s, o in zip(site_ids[p], plants[p][i], strict=True) if o]
+                        dots.append(panel.project(np.array([panel.data.site_xpos[s] for s in on])) if on else None)
                     render_seconds += time.perf_counter() - r0
                     frame = overlay.compose(images, [tr.label for tr in tracks], times[i], speed,
-                                            current, marks)
+                                            current, marks, planted=dots)
                     writer.append_data(frame)
                     if progress is not None:
                         progress(i + 1, n)
@@ -183,7 +187,7 @@ def render_still(
     out_path,
     *,
     size=(960, 540),
-    camera: Camera = Camera(),
+    camera: Camera = Camera(),  # noqa: B008 (a frozen dataclass: an immutable default)
     lookat=None,
     label: str | None = None,
     quality: str = "high",

@@ -60,12 +60,12 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.kinematics import TangentMap
-from solver.layout import StateLayout, site_ids
+from solver.layout import CONTACT_SITES, StateLayout, site_ids
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
 
-#: The figure's contact sites (models/humanoid39.xml).
-CONTACT_SITES = ("l_heel", "l_toe", "r_heel", "r_toe")
+__all__ = ["CONTACT_SITES", "Clearance", "Planted", "SiteMotion", "SupportSurfaces", "check_contacts",
+           "contact_window", "flights", "gap_window", "smoothstep", "swings"]
 
 FULL = 1.0 - 1e-9  # a window at least this is "fully weighted" (where `violation` looks)
 
@@ -349,6 +349,28 @@ class SiteMotion:
 # terms
 
 
+def _engine_index(engine, model, names) -> np.ndarray:
+    """Index in `engine.site_ids` of each named site (InputError if the engine does not track one)."""
+    ids = site_ids(model, names)
+    where = [np.flatnonzero(engine.site_ids == i) for i in ids]
+    if any(len(w) == 0 for w in where):
+        raise InputError(f"the inverse-dynamics engine does not track the contact sites {', '.join(names)}")
+    return np.array([int(w[0]) for w in where], int)
+
+
+def _engine_motion(term, Y, Y1, Y2):
+    """(motion, engine result) of the shared engine's (cached) forward pass at the samples. The motion
+    (qvel, qacc) is cached on the engine too, so the contact terms sharing it compute it once."""
+    last = getattr(term.engine, "_contact_motion", None)
+    if last is not None and all(a is b or (a.shape == b.shape and np.array_equal(a, b))
+                                for a, b in zip(last[:3], (Y, Y1, Y2), strict=True)):
+        mo = last[3]
+    else:
+        mo = term.kin.tmap.motion(Y, Y1, Y2)
+        term.engine._contact_motion = (Y.copy(), Y1.copy(), Y2.copy(), mo)
+    return mo, term.engine.forward(Y, mo.qvel, mo.qacc)
+
+
 def _sample_times(Y, t, t_span):
     if t is not None:
         return np.asarray(t, float)
@@ -384,7 +406,7 @@ class Planted(Term):
     needs = (0, 1)
 
     def __init__(self, model, contacts, velocity_time: float = 0.1, ramp: float = 0.02,
-                 rest_height: float = 0.005, footprint_margin: float = 0.03, t_span=None):
+                 rest_height: float = 0.005, footprint_margin: float = 0.03, t_span=None, engine=None):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the planted term")
@@ -402,6 +424,13 @@ class Planted(Term):
         self.kin = SiteMotion(model, used or CONTACT_SITES[:1])
         self._col = np.array([self.kin.names.index(c.site) for c in self.contacts], int)
         self._surf = [self.support.index(c.surface) for c in self.contacts]
+        self.excused: set[int] = set()  # contacts a keyframe contradicts: `violation` skips them
+        self.engine = engine if engine is not None and hasattr(engine, "site_velocities") else None
+        if self.engine is not None:
+            # site positions and velocities at all points from the engine's vectorized forward pass
+            # (shared with penetration/torque/root/cone), gradients through its single reverse pass
+            self._eidx = _engine_index(self.engine, model, self.kin.names)
+            self.needs = (0, 1, 2)  # the engine's forward pass reads qacc too
 
     def windows(self, t: np.ndarray) -> np.ndarray:
         """(n, C) window of each contact at times t."""
@@ -415,16 +444,56 @@ class Planted(Term):
         h = np.zeros((m, C))
         vt = np.zeros((m, C, 3))
         nrm = np.zeros((m, C, 3))
+        auto = {}  # per site column: the automatic support of all samples at once
         for c in range(C):
             pc = p[:, self._col[c]]
-            h[:, c], nrm[:, c] = self.support.height(pc, self._surf[c])
+            if self._surf[c] is None:
+                if self._col[c] not in auto:
+                    auto[self._col[c]] = self.support.height(pc, None)
+                h[:, c], nrm[:, c] = auto[self._col[c]]
+            else:
+                h[:, c], nrm[:, c] = self.support.height(pc, self._surf[c])
             h[:, c] -= self.rest_height
             if v is not None:
                 vc = v[:, self._col[c]]
                 vt[:, c] = vc - np.einsum("mi,mi->m", vc, nrm[:, c])[:, None] * nrm[:, c]
         return h, vt, nrm
 
+    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        """With an engine: `evaluate` at all points at once, the gradient left to the engine's reverse
+        pass (`solver.terms.dynamics.EngineGradient`); without one, `evaluate`."""
+        if self.engine is None:
+            return self.evaluate(t, Y, Y1, Y2, grad)
+        from solver.terms.dynamics import EngineGradient
+
+        mo, res = _engine_motion(self, Y, Y1, Y2)
+        W = self.windows(t)
+        rows = np.flatnonzero((W > 0).any(axis=1))
+        f = np.zeros(len(Y))
+        Wr = W[rows]
+        p = res.sites[rows][:, self._eidx]
+        v = self.engine.site_velocities(res)[rows][:, self._eidx]
+        h, vt, nrm = self._parts(p, v, Wr, rows)
+        t2 = self.tau * self.tau
+        f[rows] = (Wr * (h * h + t2 * (vt * vt).sum(-1))).sum(1)
+        if not grad:
+            return TermEval(f)
+        g_p = np.zeros(p.shape)
+        g_v = np.zeros(v.shape)
+        for c in range(len(self.contacts)):
+            k = self._col[c]
+            g_p[:, k] += (2.0 * Wr[:, c] * h[:, c])[:, None] * nrm[:, c]
+            g_v[:, k] += (2.0 * t2 * Wr[:, c])[:, None] * vt[:, c]
+        g_sites = np.zeros(res.sites.shape)
+        g_vel = np.zeros(res.sites.shape)
+        g_sites[np.ix_(rows, self._eidx)] = g_p
+        g_vel[np.ix_(rows, self._eidx)] = g_v
+        return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites, g_vel))
+
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        if self.engine is not None:
+            ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
+            return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
         n, nq = Y.shape
         W = self.windows(t)
         rows = np.flatnonzero((W > 0).any(axis=1))
@@ -487,9 +556,33 @@ class Planted(Term):
             return None
         W, h, speed = self.residuals(t, Y)
         full = W >= FULL
+        full[:, sorted(self.excused)] = False
         if not full.any():
             return None
         return float(np.max(np.where(full, np.maximum(np.abs(h), self.tau * speed), 0.0)))
+
+    def conflicts(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
+        """Keyframes that contradict the schedule: a keyframe at time t inside a contact's full window
+        whose site is more than `tolerance` [m] from the plant height (keyframes are met exactly, so
+        the term cannot pull that site down). excuse: also leave those contacts out of `violation`
+        (else penalty continuation would raise the weight against a bound it cannot reach).
+
+        Returns:
+            [(keyframe index, site, height - h0 [m]), ...].
+        """
+        times = np.asarray(times, float)
+        W = self.windows(times)
+        out = []
+        if not W.size:
+            return out
+        p = self.kin.positions(np.asarray(qpos, float))
+        for c, contact in enumerate(self.contacts):
+            h, _ = self.support.height(p[:, self._col[c]], self._surf[c])
+            for i in np.flatnonzero((W[:, c] >= FULL) & (np.abs(h - self.rest_height) > tolerance)):
+                out.append((int(i), contact.site, float(h[i] - self.rest_height)))
+                if excuse:
+                    self.excused.add(c)
+        return out
 
 
 class Clearance(Term):
@@ -514,7 +607,7 @@ class Clearance(Term):
     needs = (0,)
 
     def __init__(self, model, contacts, clearance: float = 0.02, core: float = 0.5, flight: bool = True,
-                 sites=CONTACT_SITES, t_span=None):
+                 sites=CONTACT_SITES, t_span=None, engine=None):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the clearance term")
@@ -529,6 +622,47 @@ class Clearance(Term):
         self.kin = SiteMotion(model, tuple(sites))
         self.swings = [swings(self.contacts, s) for s in self.kin.names]
         self.flights = flights(self.contacts) if self.flight else []
+        self.excused: list[tuple[int, float, float]] = []  # (site column, a, b): `violation` skips these
+        self.engine = engine
+        if engine is not None:  # site positions of all points from the shared engine's forward pass
+            self._eidx = _engine_index(engine, model, self.kin.names)
+            self.needs = (0, 1, 2)
+
+    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        """With an engine: `evaluate` with the gradient left to the engine's reverse pass."""
+        if self.engine is None:
+            return self.evaluate(t, Y, Y1, Y2, grad)
+        from solver.terms.dynamics import EngineGradient
+
+        mo, res = _engine_motion(self, Y, Y1, Y2)
+        U = self.windows(t)
+        depth, ddepth = self.surfaces.penetration(res.sites[:, self._eidx], self.clearance)
+        f = (U * (depth * depth).sum(-1)).sum(1)
+        if not grad:
+            return TermEval(f)
+        g_sites = np.zeros(res.sites.shape)
+        np.add.at(g_sites, (slice(None), self._eidx), np.einsum("mk,mks,mksi->mki", 2.0 * U, depth, ddepth))
+        return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites))
+
+    def conflicts(self, times, qpos, excuse: bool = False) -> list[tuple[int, str, float]]:
+        """Keyframes that contradict the schedule: a keyframe inside a fully weighted swing or flight
+        window that holds a site closer than the clearance to a surface (keyframes are met exactly).
+        excuse: also leave that site's swing (or flight) out of `violation`.
+
+        Returns:
+            [(keyframe index, site, distance short of the clearance [m]), ...].
+        """
+        times = np.asarray(times, float)
+        U = self.windows(times)
+        d = self.depths(np.asarray(qpos, float))
+        out = [(int(i), self.kin.names[k], float(d[i, k]))
+               for i, k in zip(*np.nonzero((U >= FULL) & (d > 1e-4)), strict=True)]
+        if excuse:
+            for i, k, _ in ((i, self.kin.names.index(site), dd) for i, site, dd in out):
+                for a, b in [*self.swings[k], *self.flights]:
+                    if a < times[i] < b:
+                        self.excused.append((k, a, b))
+        return out
 
     def windows(self, t: np.ndarray) -> np.ndarray:
         """(n, k) weight u of each site at times t."""
@@ -552,6 +686,9 @@ class Clearance(Term):
         return d.max(axis=-1)
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
+        if self.engine is not None:
+            ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
+            return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
         n, nq = Y.shape
         U = self.windows(t)
         rows = np.flatnonzero((U > 0).any(axis=1))
@@ -581,6 +718,8 @@ class Clearance(Term):
         if t is None:
             return None
         U = self.windows(t)
+        for k, a, b in self.excused:
+            U[(t > a) & (t < b), k] = 0.0
         rows = np.flatnonzero((U >= FULL).any(axis=1))
         if rows.size == 0:
             return None

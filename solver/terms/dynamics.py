@@ -50,24 +50,25 @@ class EngineGradient:
     are linear in the adjoints, so the result is the sum of the terms' gradients.
     """
 
-    __slots__ = ("engine", "result", "motion", "g_tau", "g_sites")
+    __slots__ = ("engine", "result", "motion", "g_tau", "g_sites", "g_site_vel")
 
-    def __init__(self, engine, result, motion, g_tau=None, g_sites=None):
+    def __init__(self, engine, result, motion, g_tau=None, g_sites=None, g_site_vel=None):
         self.engine, self.result, self.motion = engine, result, motion
-        self.g_tau, self.g_sites = g_tau, g_sites
+        self.g_tau, self.g_sites, self.g_site_vel = g_tau, g_sites, g_site_vel
 
     @property
     def key(self):
         return (id(self.engine), id(self.result))
 
-    def scaled(self, c: float) -> "EngineGradient":
+    def scaled(self, c: float) -> EngineGradient:
         return EngineGradient(
             self.engine, self.result, self.motion,
             None if self.g_tau is None else c * self.g_tau,
             None if self.g_sites is None else c * self.g_sites,
+            None if self.g_site_vel is None else c * self.g_site_vel,
         )
 
-    def plus(self, other: "EngineGradient", c: float) -> "EngineGradient":
+    def plus(self, other: EngineGradient, c: float) -> EngineGradient:
         """self + c * other (a new object)."""
 
         def add(a, b):
@@ -76,13 +77,17 @@ class EngineGradient:
             return c * b if a is None else a + c * b
 
         return EngineGradient(
-            self.engine, self.result, self.motion, add(self.g_tau, other.g_tau), add(self.g_sites, other.g_sites)
+            self.engine, self.result, self.motion, add(self.g_tau, other.g_tau), add(self.g_sites, other.g_sites),
+            add(self.g_site_vel, other.g_site_vel),
         )
 
     def pullback(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(dY, dY1, dY2), each (n, nq)."""
         g_tau = self.g_tau if self.g_tau is not None else np.zeros(self.result.tau.shape)
-        g_pose, g_v, g_a = self.engine.vjp(self.result, g_tau, self.g_sites)
+        if self.g_site_vel is None:
+            g_pose, g_v, g_a = self.engine.vjp(self.result, g_tau, self.g_sites)
+        else:
+            g_pose, g_v, g_a = self.engine.vjp(self.result, g_tau, self.g_sites, self.g_site_vel)
         return self.motion.vjp(g_v, g_a, g_pose)
 
 

@@ -1,0 +1,29 @@
+"""Issue 11 end to end: on run-and-step, the contact schedule of the clip (reference_contacts) makes the
+optimized path's planted feet float and skate less than the same solve without it."""
+import numpy as np
+import pytest
+
+from runner.mocap.reference import load_bvh_reference
+from runner.paths import MODELS
+from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+from solver.animate import animate
+from solver.contacts import reference_contacts
+from solver.motion_metrics import motion_metrics
+
+
+@pytest.mark.slow
+def test_run_and_step_with_contacts_floats_and_skates_less():
+    keyframes, _info, model, _layout, _scene = load_problem(RUN_AND_STEP_KEYFRAMES, None)
+    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model)
+    contacts = tuple(reference_contacts(model, ref.qpos, ref.frame_time))
+    on = ref.times <= keyframes.times[-1] + 1e-9
+    got = {}
+    for label, cs in (("without", ()), ("with", contacts)):
+        terms = "penetration,unit,bending,smooth" + (",planted,clearance" if cs else "")
+        sol = animate(model, keyframes, terms=terms, contacts=cs)
+        got[label] = motion_metrics(model, sol.frames.path(ref.times[on]), 1 / ref.frame_time, ref.qpos[on],
+                                    contacts)["path"]
+    assert got["with"]["float_contact_mm"] < got["without"]["float_contact_mm"]
+    assert got["with"]["skate_contact_mm"] < got["without"]["skate_contact_mm"]
+    assert got["with"]["penetration_mm"]["max"] <= 1.0
+    assert np.isfinite(got["with"]["flight_time_s"])

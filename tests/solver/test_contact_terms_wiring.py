@@ -1,0 +1,146 @@
+"""Issue 11, the objective side: the contact terms are registered, chosen by name where a contact
+schedule is known, refused without one, and share the inverse-dynamics engine (site velocities)."""
+import mujoco
+import numpy as np
+import pytest
+
+from solver.contacts import Contact
+from solver.errors import InputError
+from solver.inverse_dynamics import InverseDynamics
+from solver.layout import CONTACT_SITES, StateLayout
+from solver.problem import (
+    CONTACT_TERMS_BY_DEFAULT,
+    DEFAULT_TERMS,
+    default_limits,
+    figure_objective,
+    keyframe_conflicts,
+    parse_terms,
+    term_names,
+)
+
+from conftest import TOY_SCENE, random_qpos
+
+SCHEDULE = (Contact("l_heel", 0.0, 0.4), Contact("l_toe", 0.0, 0.5), Contact("r_toe", 0.6, 1.0))
+
+
+@pytest.fixture(scope="module")
+def toy():
+    return mujoco.MjModel.from_xml_string(TOY_SCENE)
+
+
+def test_contact_terms_are_chosen_by_name_and_only_with_a_schedule():
+    """Opt-in for now (CONTACT_TERMS_BY_DEFAULT is False: ~28x the solve time on run-and-step)."""
+    assert not CONTACT_TERMS_BY_DEFAULT
+    assert {"planted", "clearance", "cone"} <= set(term_names())
+    assert tuple(parse_terms(None)) == DEFAULT_TERMS
+    assert tuple(parse_terms(None, contacts=SCHEDULE)) == DEFAULT_TERMS
+    assert not {"planted", "clearance", "cone"} & set(parse_terms("all"))
+    assert not {"planted", "clearance", "cone"} & set(parse_terms("all", contacts=SCHEDULE))
+    chosen = parse_terms("penetration,unit,bending,smooth,planted,clearance,cone", contacts=SCHEDULE)
+    assert {"planted", "clearance", "cone"} <= set(chosen)
+    lim = dict(default_limits(chosen))
+    assert lim["planted"] > 0 and lim["clearance"] > 0
+
+
+@pytest.mark.parametrize("spec, weights", [("planted", None), ("penetration,cone", None), (None, {"clearance": 2})])
+def test_a_contact_term_without_a_schedule_is_an_input_error(spec, weights):
+    with pytest.raises(InputError, match="contact schedule"):
+        parse_terms(spec, weights)
+
+
+def test_figure_objective_builds_the_contact_terms_on_one_engine(toy):
+    w = parse_terms("penetration,torque,root,planted,clearance,cone", contacts=SCHEDULE)  # toy: no elbows
+    obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=SCHEDULE)
+    engines = {id(t.engine) for t in obj.terms if getattr(t, "engine", None) is not None}
+    assert {"planted", "clearance", "cone", "torque", "root", "penetration"} <= set(obj.names)
+    assert len(engines) == 1
+    with pytest.raises(InputError, match="contact schedule"):
+        figure_objective(toy, {"planted": 1.0}, 0.0, 1.0)
+
+
+def test_engine_site_velocities_and_their_gradient(toy):
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(3)
+    qpos = random_qpos(rng, layout, 3)
+    qvel, qacc = rng.normal(size=(3, toy.nv)), rng.normal(size=(3, toy.nv))
+    e = InverseDynamics(toy, CONTACT_SITES)
+    res = e.forward(qpos, qvel, qacc)
+    d, v6 = mujoco.MjData(toy), np.zeros(6)
+    for i in range(3):
+        d.qpos[:], d.qvel[:] = qpos[i], qvel[i]
+        mujoco.mj_forward(toy, d)
+        for k, s in enumerate(e.site_ids):
+            mujoco.mj_objectVelocity(toy, d, mujoco.mjtObj.mjOBJ_SITE, int(s), v6, 0)
+            np.testing.assert_allclose(e.site_velocities(res)[i, k], v6[3:], atol=1e-10)
+    g = rng.normal(size=res.sites.shape)
+    _, gv, _ = e.vjp(res, np.zeros_like(res.tau), None, g)
+
+    def phi(v):
+        e._cache = None
+        return float((e.site_velocities(e.forward(qpos, v, qacc)) * g).sum())
+
+    h = 1e-6
+    fd = np.array([[(phi(qvel + h * np.eye(toy.nv)[j] * (np.arange(3) == i)[:, None])
+                     - phi(qvel - h * np.eye(toy.nv)[j] * (np.arange(3) == i)[:, None])) / (2 * h)
+                    for j in range(toy.nv)] for i in range(3)])
+    np.testing.assert_allclose(gv, fd, atol=1e-6)
+
+
+def test_planted_and_clearance_with_the_engine_match_the_mujoco_loop(toy):
+    from solver.terms.contact import Clearance, Planted
+    from solver.terms.dynamics import make_engine
+
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(5)
+    t = np.linspace(0, 1, 40)
+    Y, Y1, Y2 = random_qpos(rng, layout, 40, spread=0.2, scale=(1, 1)), rng.normal(size=(40, toy.nq)), None
+    Y[:, 2] = 0.95
+    Y2 = rng.normal(size=(40, toy.nq))
+    engine = make_engine(toy)
+    for cls in (Planted, Clearance):
+        a, b = cls(toy, SCHEDULE), cls(toy, SCHEDULE, engine=engine)
+        ea, eb = a.evaluate(t, Y, Y1, Y2), b.evaluate(t, Y, Y1, Y2)
+        np.testing.assert_allclose(eb.f, ea.f, rtol=1e-10, atol=1e-14)
+        np.testing.assert_allclose(eb.dY, ea.dY, rtol=1e-7, atol=1e-10)
+        if ea.dY1 is not None:
+            np.testing.assert_allclose(eb.dY1, ea.dY1, rtol=1e-7, atol=1e-10)
+
+
+def test_keyframes_that_contradict_the_schedule_are_found_and_excused(toy):
+    w = parse_terms("penetration,planted,clearance", contacts=SCHEDULE)
+    obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=SCHEDULE)
+    q = np.tile(toy.qpos0, (3, 1))
+    q[:, 2] = 1.0  # sites at 5 cm above the floor: heel planted at t=0.2 is too high, r_toe swinging ok
+    found = keyframe_conflicts(obj, np.array([0.0, 0.2, 1.0]), q)
+    assert ("planted", 1, "l_heel", pytest.approx(0.05 - 0.002, abs=1e-6)) in found
+    planted = obj.terms[obj.names.index("planted")]
+    assert 0 in planted.excused
+
+
+@pytest.mark.slow
+def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
+    from runner.commands.animate import contact_summary_rows
+    from runner.console import summary_table
+    from runner.mocap.reference import load_bvh_reference
+    from runner.paths import MODELS
+    from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+    from solver.contacts import reference_contacts
+    from solver.frames import FrameSet
+    from solver.metrics import path_metrics
+    from solver.solve import SolveOptions, solve
+
+    keyframes, _info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
+    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model)
+    contacts = tuple(reference_contacts(model, ref.qpos, ref.frame_time))
+    weights = parse_terms("all", contacts=contacts)
+    obj = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=100.0, contacts=contacts)
+    sol = solve(obj, FrameSet.from_keyframes(keyframes, layout.quat_slots),
+                SolveOptions(subdivision="none", max_evals=3))
+    rows = contact_summary_rows(model, sol, ref, contacts, obj)
+    plain = path_metrics(model, sol.initial.times, sol.initial.values, keyframes, rate=200.0)
+    opt = path_metrics(model, sol.frames.times, sol.frames.values, keyframes, rate=200.0)
+    text = summary_table(plain, opt, sol, weights, contact_rows=rows)
+    for row in ("float in contact [mm] (capture 2.4", "skate in contact [mm/frame]", "skating ratio (contacts)",
+                "flight time [s] (capture 0.117)", "RMS friction-cone residual [N]", "peak friction-cone residual [N]"):
+        assert row in text
+    assert text.index("float in contact") < text.index("max |1 - |q||")
