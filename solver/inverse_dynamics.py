@@ -39,60 +39,9 @@ import numpy as np
 from solver.errors import InputError
 from solver.inverse_dynamics_mujoco import InverseDynamicsResult, MujocoInverseDynamics, constraint_free_copy
 from solver.layout import site_ids
+from solver.spatial import cross, mtv, mv, qmat, qmul
 
 __all__ = ["InverseDynamics", "InverseDynamicsResult", "MujocoInverseDynamics", "constraint_free_copy"]
-
-
-# small vector helpers on component-first arrays: a vector array is (3, ...), a matrix array (3, 3, ...)
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b for (3, ...) arrays (written into one output array: fewer temporaries than np.stack)."""
-    o = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    np.multiply(a[1], b[2], out=o[0])
-    o[0] -= a[2] * b[1]
-    np.multiply(a[2], b[0], out=o[1])
-    o[1] -= a[0] * b[2]
-    np.multiply(a[0], b[1], out=o[2])
-    o[2] -= a[1] * b[0]
-    return o
-
-
-def _mv(R: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """R x for (3, 3, ...) R and (3, ...) x."""
-    return R[:, 0] * x[0] + R[:, 1] * x[1] + R[:, 2] * x[2]
-
-
-def _mtv(R: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """R^T x for (3, 3, ...) R and (3, ...) x."""
-    return R[0] * x[0] + R[1] * x[1] + R[2] * x[2]
-
-
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of (4, ...) quaternions (w, x, y, z)."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ]
-    )
-
-
-def _qmat(q: np.ndarray) -> np.ndarray:
-    """(3, 3, ...) rotation matrices of (4, ...) unit quaternions."""
-    w, x, y, z = q
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
-    return np.stack(
-        [
-            np.stack([1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)]),
-            np.stack([2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)]),
-            np.stack([2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)]),
-        ]
-    )
-
 
 
 class InverseDynamics:
@@ -169,9 +118,9 @@ class InverseDynamics:
                 p = parent[b]
                 Rp = data.xmat[p].reshape(3, 3)
                 bpos[i] = data.xpos[p] + Rp @ bpos[i]
-                bq[i] = _qmul(data.xquat[p][:, None], bq[i][:, None])[:, 0]
+                bq[i] = qmul(data.xquat[p][:, None], bq[i][:, None])[:, 0]
         bq /= np.linalg.norm(bq, axis=1, keepdims=True)
-        Rbq = np.moveaxis(_qmat(bq.T), -1, 0)  # (B, 3, 3)
+        Rbq = np.moveaxis(qmat(bq.T), -1, 0)  # (B, 3, 3)
         self._bq = bq.T[:, :, None]  # (4, B, 1)
         self._bq_identity = bool(np.allclose(bq, [1, 0, 0, 0]))
         # anchor offset in the parent frame: d = pos + Rbq jpos
@@ -201,7 +150,7 @@ class InverseDynamics:
         # inertia: mass, com offset in the body frame, inertia about the com in the body frame
         self._mass = np.array(model.body_mass[bodies], float)[:, None]
         self._ipos = np.array(model.body_ipos[bodies], float).T[:, :, None]
-        Ri = np.moveaxis(_qmat(np.array(model.body_iquat[bodies], float).T), -1, 0)
+        Ri = np.moveaxis(qmat(np.array(model.body_iquat[bodies], float).T), -1, 0)
         Ic = np.einsum("bij,bj,bkj->bik", Ri, np.array(model.body_inertia[bodies], float), Ri)
         self._Ic = np.moveaxis(Ic, 0, -1)[..., None]  # (3, 3, B, 1)
         flags = int(model.opt.disableflags)
@@ -298,20 +247,19 @@ class InverseDynamics:
         B = len(self.bodies)
         rot, free = self._rot, self._free
         qp, qv, qa = qpos.T, qvel.T, qacc.T
-        cross, mv, mtv = _cross, _mv, _mtv
 
         # --- pose: world quaternions Q (4, B, n) down the tree, rotations R (3, 3, B, n)
         U = np.zeros((4, B, n))
         U[0] = 1.0
         q = qp[self._quat_q.T]  # (4, r, n)
         U[:, rot] = q / np.sqrt((q * q).sum(0))
-        W = U if self._bq_identity else _qmul(self._bq, U)
+        W = U if self._bq_identity else qmul(self._bq, U)
         if len(free) and not self._bq_identity:
             W[:, free] = U[:, free]
         Q = W.copy()
         for lvl in self._levels:
-            Q[:, lvl] = _qmul(Q[:, self._par[lvl]], W[:, lvl])
-        R = _qmat(Q)
+            Q[:, lvl] = qmul(Q[:, self._par[lvl]], W[:, lvl])
+        R = qmat(Q)
         # positions: x = anc(e), e = R_parent d - R jpos (child), const - R jpos (top), p (free)
         e = np.zeros((3, B, n))
         ch = self._child
@@ -414,7 +362,6 @@ class InverseDynamics:
         rot, free, rs = self._rot, self._free, self._rs
         n = g_tau.shape[0]
         B = len(self.bodies)
-        cross, mv, mtv = _cross, _mv, _mtv
         anc, desc = self._anc, self._desc
         gT = g_tau.T
         Ga = self._armature[:, None] * gT

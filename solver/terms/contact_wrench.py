@@ -49,10 +49,10 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.kinematics import TangentMap
-from solver.layout import StateLayout
+from solver.layout import CONTACT_SITES, StateLayout
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
-from solver.terms.contact import CONTACT_SITES, FULL, SupportSurfaces, _sample_times, check_contacts, contact_window
+from solver.terms.contact_schedule import FULL, SupportSurfaces, _sample_times, check_contacts, contact_window
 from solver.terms.dynamics import EngineGradient, figure_radius_of_gyration, make_engine
 
 
