@@ -125,9 +125,10 @@ def parse_terms(spec: str | None, weights: dict[str, float] | None = None, conta
     return chosen
 
 
-#: [m] the penetration term's margin without a contact schedule, and with one (then also the height a
-#: planted site rests at): a planted site sits at the margin, and motion capture's planted sites sit
-#: about 2 mm up (the float metric counts it), so with contacts the margin is 2 mm.
+#: [m] the penetration term's margin, and with the planted term on (then also the height a planted site
+#: rests at): a planted site sits at the margin, and motion capture's planted sites sit about 2 mm up
+#: (the float metric counts it), so with the planted term the margin is 2 mm. A schedule alone (a
+#: keyframe file's contacts, without the contact terms) changes nothing.
 MARGIN, CONTACT_MARGIN = 0.005, 0.002
 
 
@@ -140,7 +141,8 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
         weights: {term name: lambda_j} from `parse_terms`.
         t0, t1: [s] the keyframe interval. rate: quadrature points per second.
         margin: [m] clearance the penetration term keeps from surfaces (and the rest height of a
-            planted site, so that the two terms agree); default MARGIN, CONTACT_MARGIN with contacts.
+            planted site, so that the two terms agree); default MARGIN, CONTACT_MARGIN with the planted
+            term on.
         contacts: the contact schedule (objects with site, start, end, surface), for planted,
             clearance and cone.
     Returns:
@@ -152,7 +154,7 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
     layout = StateLayout.from_model(model)
     contacts = tuple(contacts or ())
     if margin is None:
-        margin = CONTACT_MARGIN if contacts else MARGIN
+        margin = CONTACT_MARGIN if contacts and weights.get("planted", 0) > 0 else MARGIN
     factories = {
         "penetration": lambda: Penetration(model, margin=margin),
         "unit": lambda: UnitQuaternion(layout.quat_slots),
