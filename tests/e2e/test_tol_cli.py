@@ -62,6 +62,7 @@ def small_clip(tmp_path, n=3):
     doc = json.loads((MODELS / "run_and_step.keyframes.json").read_text())
     doc["keyframes"] = doc["keyframes"][:n]
     doc["scene"] = str(MODELS / "run_and_step.xml")
+    doc["model"] = str(MODELS / "humanoid39.xml")
     doc["source"] = {}
     p = tmp_path / "clip.json"
     p.write_text(json.dumps(doc))

@@ -132,11 +132,14 @@ def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
     keyframes, _info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
     ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model)
     contacts = tuple(reference_contacts(model, ref.qpos, ref.frame_time))
-    weights = parse_terms("all", contacts=contacts)
+    weights = parse_terms("penetration,unit,bending,smooth,torque,root,cone", contacts=contacts)
     obj = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=100.0, contacts=contacts)
     sol = solve(obj, FrameSet.from_keyframes(keyframes, layout.quat_slots),
                 SolveOptions(subdivision="none", max_evals=3))
-    rows = contact_summary_rows(model, sol, ref, contacts, obj)
+    from runner.pipeline import reference_motion_metrics
+
+    motion = reference_motion_metrics(model, layout, sol, ref, contacts)
+    rows = contact_summary_rows(motion, obj, sol)
     plain = path_metrics(model, sol.initial.times, sol.initial.values, keyframes, rate=200.0)
     opt = path_metrics(model, sol.frames.times, sol.frames.values, keyframes, rate=200.0)
     text = summary_table(plain, opt, sol, weights, contact_rows=rows)
