@@ -270,7 +270,8 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
     def finished(i, row, bar):
         rows[i] = row
         msg = f"  {Path(row['clip']).name}: {row['status']}, {row['wall_time_s']:.1f} s"
-        say(msg + (f": {row['error']}" if row.get("error") else ""))
+        msg += f": {row['error']}" if row.get("error") else ""
+        (bar.bar.write if bar.bar is not None else say)(msg)  # above a terminal's bar, not through it
         note(bar)
 
     with Steps("clips", len(clips), quiet, unit=" clips") as bar:
