@@ -211,7 +211,9 @@ def _submitter(engine: str, workers: int, ray_address: str | None):
         import ray
     except ImportError:
         raise InputError('--engine ray needs Ray: pip install -e ".[cluster]"') from None
-    ray.init(address=ray_address, ignore_reinit_error=True, log_to_driver=False)
+    # a local Ray (no address) gets `workers` CPUs: at most that many clips at once, as with --engine local
+    ray.init(address=ray_address, num_cpus=None if ray_address else workers, ignore_reinit_error=True,
+             log_to_driver=False)
     remote = ray.remote(num_cpus=1)(run_clip)
 
     def wait_ray(hs):
@@ -222,7 +224,7 @@ def _submitter(engine: str, workers: int, ray_address: str | None):
         for h in hs:
             ray.cancel(h)
 
-    return (lambda fn, *a: remote.remote(*a), wait_ray, ray.get, cancel_ray, lambda cancel: None)
+    return (lambda fn, *a: remote.remote(*a), wait_ray, ray.get, cancel_ray, lambda cancel: ray.shutdown())
 
 
 def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers: int = 1, engine: str = "local",

@@ -128,3 +128,15 @@ def test_ctrl_c_stops_handing_out_clips(tmp_path, clips, monkeypatch):
     assert [r["status"] for r in rows[:-1]] == ["interrupted", "not run"]
     assert json.loads((out / "summary.json").read_text())["interrupted"]
     assert not list(out.glob("*/done.json")) and not list(out.glob("**/.*.tmp*"))
+
+
+@pytest.mark.slow
+def test_ray_engine_same_results(tmp_path, clips):
+    """--engine ray (a local Ray, 2 CPUs): the rows of the local engine."""
+    pytest.importorskip("ray")
+    rows = {}
+    for engine in ("local", "ray"):
+        assert main(["batch", str(clips), "--out", str(tmp_path / engine), "--engine", engine, "--workers", "2",
+                     *FAST]) == EXIT_OK
+        rows[engine] = [{k: r[k] for k in ("clip", *RESULTS)} for r in read_csv(tmp_path / engine / "summary.csv")[:-1]]
+    assert rows["local"] == rows["ray"]
