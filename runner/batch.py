@@ -287,11 +287,23 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
                     break
         elif todo:
             submit, wait, result, cancel, close = _submitter(engine, workers, ray_address)
-            handles = {submit(run_clip, clip, folder, options, fingerprint, sha): i for i, clip, folder, sha in todo}
-            pending = set(handles)
+            queue, handles, pending = iter(todo), {}, set()
+
+            def hand_out():  # at most `workers` clips in flight: after Ctrl-C none is queued to start
+                while len(pending) < workers and not interrupted:
+                    nxt = next(queue, None)
+                    if nxt is None:
+                        return
+                    h = submit(run_clip, nxt[1], nxt[2], options, fingerprint, nxt[3])
+                    handles[h] = nxt[0]
+                    pending.add(h)
+
             try:
+                hand_out()
                 while pending:
-                    done, pending = wait(pending)
+                    done, still = wait(pending)
+                    pending.clear()
+                    pending.update(still)
                     for h in done:
                         try:
                             row = result(h)
@@ -303,6 +315,7 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
                                                                 error=_one_line(e), wall_time_s=0.0)
                         finished(handles[h], row, bar)
                         interrupted |= row["status"] == "interrupted"
+                    hand_out()
                 close(False)
             except KeyboardInterrupt:
                 interrupted = True
@@ -311,7 +324,9 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
                     "(Ctrl-C again to stop waiting)")
                 try:
                     while pending:
-                        done, pending = wait(pending)
+                        done, still = wait(pending)
+                        pending.clear()
+                        pending.update(still)
                         for h in done:
                             try:
                                 finished(handles[h], result(h), bar)

@@ -31,8 +31,8 @@ def register(sub) -> None:
     p.add_argument("clips", nargs="+", type=Path, metavar="CLIP_OR_FOLDER", help=".bvh clips or folders of them")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--workers", type=positive(int), default=1, metavar="N",
-                   help="clips processed at once (worker processes, one BLAS thread each; with --engine ray and no "
-                        "--ray-address: the local Ray's CPUs) [%(default)s]")
+                   help="clips processed at once (worker processes, one BLAS thread each; with --engine ray: Ray tasks "
+                        "in flight, and a local Ray's CPUs) [%(default)s]")
     p.add_argument("--engine", choices=ENGINES, default="local",
                    help="local: processes on this machine; ray: Ray tasks, one CPU per clip (needs "
                         "pip install -e \".[cluster]\") [%(default)s]")
