@@ -74,6 +74,14 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     out.add_argument("--export", type=Path, action="append", default=[], metavar="FILE",
                      help="also write the optimized path as FILE.bvh (BVH on the figure's skeleton) or FILE.glb "
                           "(animated glTF with the scene), after the path is saved; repeatable")
+    add_solve_arguments(p)
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress (bars or lines); results (summary, 'wrote ...') are still printed")
+    p.add_argument("--no-summary", action="store_true", help="do not print the summary table")
+
+
+def add_solve_arguments(p: argparse.ArgumentParser) -> None:
+    """The "optimization" options of `add_options` (what `solve_options` reads); also `dynsplines batch`'s."""
     opt = p.add_argument_group("optimization")
     opt.add_argument("--terms", default=None,
                      help=f"objective terms: 'all' or a list from {','.join(term_names())} "
@@ -108,9 +116,6 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
                      help="optimize the frame values directly instead of in the spline-acceleration metric")
     opt.add_argument("--no-renormalize", action="store_true",
                      help="use the weights as they are instead of dividing each term by its initial value (eq. 7)")
-    p.add_argument("--quiet", action="store_true",
-                   help="no progress (bars or lines); results (summary, 'wrote ...') are still printed")
-    p.add_argument("--no-summary", action="store_true", help="do not print the summary table")
 
 
 def solve_options(args, weights: dict) -> SolveOptions:

@@ -12,6 +12,7 @@ import argparse
 import sys
 
 from runner.commands.animate import register as register_animate
+from runner.commands.batch import register as register_batch
 from runner.commands.bench import register as register_bench
 from runner.commands.export import register as register_export
 from runner.commands.fig10 import register as register_fig10
@@ -24,7 +25,7 @@ from runner.parser import OneLineParser
 from solver.errors import DynsplinesError, InputError
 
 #: every subcommand's `register`, in the order of `dynsplines --help`
-SUBCOMMANDS = (register_animate, register_mocap, register_keyframes_from_bvh, register_export, register_view, register_bench,
+SUBCOMMANDS = (register_animate, register_mocap, register_batch, register_keyframes_from_bvh, register_export, register_view, register_bench,
                register_orient, register_fig10)
 
 

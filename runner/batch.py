@@ -1,0 +1,347 @@
+"""A batch of motion-capture clips: `process_clip` on each, in worker processes, resumable, with a summary.
+
+Layout under the output folder DIR:
+
+    DIR/<clip stem>/      process_clip's outputs (keyframes, scene, .npz, metrics JSON, video if asked)
+    DIR/<clip stem>/done.json   written last, when the clip finished ok: the SHA-256 of the clip's bytes,
+                          the options and the clip's summary row; a rerun with the same clip bytes and
+                          options skips the clip (if its outputs are still there)
+    DIR/summary.csv, DIR/summary.json   one row per clip and a totals row (written atomically)
+
+A bad clip (unreadable, another skeleton, a failed optimization) is a row with its one-line error; the
+batch goes on. Ctrl-C: no new clips are started, the running ones stop with their best path (their
+outputs are written atomically, they are not marked done), the summary of what finished is written.
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import hashlib
+import io
+import json
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from runner.console import Steps
+from runner.files import atomic_output, check_writable_dir
+from runner.pipeline import ClipOptions, process_clip
+from solver.errors import InputError
+
+ENGINES = ("local", "ray")
+DONE = "done.json"
+#: the summary's columns, in order (CSV header; JSON rows have the same keys)
+COLUMNS = ("clip", "folder", "status", "error", "wall_time_s", "keyframes", "variable_frames", "solver_status",
+           "max_penetration_mm", "plain_float_contact_mm", "optimized_float_contact_mm", "plain_skate_mm",
+           "optimized_skate_mm")
+#: row statuses: ok (done now), skipped (done before, same clip and options), failed, interrupted (stopped
+#: by Ctrl-C, outputs of the best path so far), not run (Ctrl-C came first)
+STATUSES = ("ok", "skipped", "failed", "interrupted", "not run")
+
+
+def find_clips(paths: Sequence[str | Path]) -> list[Path]:
+    """The .bvh files named or inside the named folders (not recursive), sorted per folder, no repeats.
+
+    Raises:
+        InputError: a path does not exist, or no clip was found.
+    """
+    clips: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            clips.extend(sorted(f for f in p.iterdir() if f.suffix.lower() == ".bvh" and f.is_file()))
+        elif p.is_file():
+            clips.append(p)
+        else:
+            raise InputError(f"{p}: no such clip or folder (current folder: {Path.cwd()}); give .bvh files or folders of them")
+    seen, unique = set(), []
+    for c in clips:
+        if c.resolve() not in seen:
+            seen.add(c.resolve())
+            unique.append(c)
+    if not unique:
+        raise InputError(f"no .bvh clips in {', '.join(map(str, paths))}; give .bvh files or folders of them")
+    return unique
+
+
+def clip_folders(clips: Sequence[Path], out: Path) -> list[Path]:
+    """One folder per clip under `out`: the clip's stem, "-2", "-3", ... appended when stems repeat."""
+    used: dict[str, int] = {}
+    folders = []
+    for c in clips:
+        n = used.get(c.stem.lower(), 0) + 1
+        used[c.stem.lower()] = n
+        folders.append(out / (c.stem if n == 1 else f"{c.stem}-{n}"))
+    return folders
+
+
+def options_fingerprint(options: ClipOptions) -> dict:
+    """The options that decide a clip's outputs, as JSON values (not `quiet` or `command`)."""
+    d = dataclasses.asdict(options)
+    for k in ("quiet", "command"):
+        d.pop(k, None)
+    return json.loads(json.dumps(d, sort_keys=True, default=str))
+
+
+def file_sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def read_done(folder: Path, sha: str, fingerprint: dict) -> dict | None:
+    """The row recorded in `folder/done.json` if it is for these clip bytes and options and every output it
+    lists still exists; else None."""
+    try:
+        done = json.loads((folder / DONE).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(done, dict) or done.get("clip_sha256") != sha or done.get("options") != fingerprint:
+        return None
+    outputs = done.get("outputs") or {}
+    if not all(Path(p).is_file() for p in outputs.values()):
+        return None
+    return done.get("row")
+
+
+def _one_line(e: BaseException) -> str:
+    text = " ".join(str(e).split())
+    return text if isinstance(e, InputError) else f"{type(e).__name__}: {text}"
+
+
+def _motion(result: dict, which: str, key: str):
+    v = result.get("metrics", {}).get("motion", {}).get(which, {}).get("path", {}).get(key)
+    return None if v is None else float(v)
+
+
+def run_clip(clip: Path, folder: Path, options: ClipOptions, fingerprint: dict, sha: str) -> dict:
+    """Process one clip quietly (a worker's job): its summary row; never raises for a bad clip. On success
+    `done.json` is written last (atomically)."""
+    t0 = time.perf_counter()
+    row = dict.fromkeys(COLUMNS)
+    row.update(clip=str(clip), folder=folder.name)
+    try:
+        result = process_clip(clip, folder, dataclasses.replace(options, quiet=True), say=lambda *a: None)
+    except KeyboardInterrupt:
+        row.update(status="interrupted", error="interrupted (Ctrl-C)", wall_time_s=time.perf_counter() - t0)
+        return row
+    except Exception as e:  # noqa: BLE001 - any failure of one clip is its row; the batch goes on
+        row.update(status="failed", error=_one_line(e), wall_time_s=time.perf_counter() - t0)
+        return row
+    opt = result["metrics"]["optimized"]
+    row.update(
+        status=result["exit"], wall_time_s=float(result["wall_time_s"]), keyframes=int(result["keyframes"]),
+        variable_frames=int(result["variable_frames"]), solver_status=result["status"],
+        max_penetration_mm=float(opt["max_penetration_mm"]),
+        plain_float_contact_mm=_motion(result, "plain", "float_contact_mm"),
+        optimized_float_contact_mm=_motion(result, "optimized", "float_contact_mm"),
+        plain_skate_mm=_motion(result, "plain", "skate_mm"),
+        optimized_skate_mm=_motion(result, "optimized", "skate_mm"))
+    if result["exit"] == "failed":
+        row["error"] = f"the optimization failed ({result['status']}); the best path before it was written"
+    elif result["exit"] == "interrupted":
+        row["error"] = "interrupted (Ctrl-C); the best path so far was written"
+    else:
+        done = {"clip": str(clip), "clip_sha256": sha, "options": fingerprint, "outputs": result["outputs"],
+                "row": row}
+        with atomic_output(folder / DONE) as tmp:
+            tmp.write_text(json.dumps(done, indent=1) + "\n")
+    return row
+
+
+def totals(rows: list[dict], wall_time_s: float) -> dict:
+    """The totals row: counts per status, the batch's wall time, summed keyframes and variable frames, the
+    worst penetration and the mean float/skate over the clips that have them."""
+    def values(k):
+        return [r[k] for r in rows if r.get(k) is not None]
+
+    def mean(k):
+        v = values(k)
+        return sum(v) / len(v) if v else None
+
+    counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
+    t = dict.fromkeys(COLUMNS)
+    t.update(clip="TOTAL", folder=f"{len(rows)} clips",
+             status=", ".join(f"{n} {s}" for s, n in counts.items() if n),
+             error=f"{counts['failed']} failed" if counts["failed"] else "", wall_time_s=wall_time_s,
+             keyframes=sum(values("keyframes")), variable_frames=sum(values("variable_frames")),
+             max_penetration_mm=max(values("max_penetration_mm"), default=None))
+    for k in ("plain_float_contact_mm", "optimized_float_contact_mm", "plain_skate_mm", "optimized_skate_mm"):
+        t[k] = mean(k)
+    t["counts"] = counts
+    return t
+
+
+def write_summary(out: Path, rows: list[dict], total: dict, meta: dict) -> tuple[Path, Path]:
+    """DIR/summary.csv (COLUMNS, a row per clip, then the totals row) and DIR/summary.json, atomically."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in [*rows, total]:
+        w.writerow({k: ("" if r.get(k) is None else f"{r[k]:.6g}" if isinstance(r[k], float) else r[k])
+                    for k in COLUMNS})
+    paths = (out / "summary.csv", out / "summary.json")
+    with atomic_output(paths[0]) as tmp:
+        tmp.write_text(buf.getvalue())
+    with atomic_output(paths[1]) as tmp:
+        tmp.write_text(json.dumps({**meta, "clips": rows, "totals": total}, indent=1) + "\n")
+    return paths
+
+
+def _ignore_sigint():
+    """A local worker's start: Ctrl-C (sent to the whole process group) does not kill it; inside the solve
+    `process_clip`'s own handler still stops the optimization with its best path."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _submitter(engine: str, workers: int, ray_address: str | None):
+    """(submit(fn, *args) -> handle, wait(handles) -> (done, pending), result(handle), cancel_all, close)."""
+    if engine == "local":
+        import multiprocessing
+        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_ignore_sigint)
+
+        def close(cancel):
+            pool.shutdown(wait=not cancel, cancel_futures=cancel)
+
+        return (pool.submit, lambda hs: wait(hs, return_when=FIRST_COMPLETED), lambda h: h.result(),
+                lambda hs: [h.cancel() for h in hs], close)
+    try:
+        import ray
+    except ImportError:
+        raise InputError('--engine ray needs Ray: pip install -e ".[cluster]"') from None
+    # a local Ray (no address) gets `workers` CPUs: at most that many clips at once, as with --engine local
+    ray.init(address=ray_address, num_cpus=None if ray_address else workers, ignore_reinit_error=True,
+             log_to_driver=False)
+    remote = ray.remote(num_cpus=1)(run_clip)
+
+    def wait_ray(hs):
+        done, pending = ray.wait(list(hs), num_returns=1)
+        return set(done), set(pending)
+
+    def cancel_ray(hs):
+        for h in hs:
+            ray.cancel(h)
+
+    return (lambda fn, *a: remote.remote(*a), wait_ray, ray.get, cancel_ray, lambda cancel: ray.shutdown())
+
+
+def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers: int = 1, engine: str = "local",
+              ray_address: str | None = None, say: Callable = print, quiet: bool = False) -> dict:
+    """Run `run_clip` on every clip not already done (see the module docstring).
+
+    Returns:
+        {"rows" (COLUMNS per clip, in the clips' order), "totals", "interrupted", "summary" (the two paths),
+        "wall_time_s"}.
+    """
+    t0 = time.perf_counter()
+    out = Path(out)
+    check_writable_dir(out / "summary.json", "--out")
+    fingerprint = options_fingerprint(options)
+    folders = clip_folders(clips, out)
+    rows: list[dict | None] = [None] * len(clips)
+    todo = []
+    for i, (clip, folder) in enumerate(zip(clips, folders)):
+        try:
+            sha = file_sha256(clip)
+        except OSError as e:
+            rows[i] = dict.fromkeys(COLUMNS) | dict(clip=str(clip), folder=folder.name, status="failed",
+                                                   error=f"{clip}: cannot read ({e.strerror})", wall_time_s=0.0)
+            continue
+        done = read_done(folder, sha, fingerprint)
+        if done is not None:
+            rows[i] = {**done, "status": "skipped", "wall_time_s": 0.0}
+        else:
+            todo.append((i, clip, folder, sha))
+    n_skip = sum(r is not None and r["status"] == "skipped" for r in rows)
+    say(f"dynsplines batch: {len(clips)} clips -> {out}: {n_skip} already done, {len(todo)} to run "
+        f"({engine}, {workers} worker{'s' if workers != 1 else ''})")
+    interrupted = False
+    run_t0 = time.perf_counter()
+
+    def note(bar):
+        n_done = sum(r is not None for r in rows)
+        failed = sum(r is not None and r["status"] == "failed" for r in rows)
+        ran = n_done - n_skip
+        left = len(clips) - n_done
+        elapsed = time.perf_counter() - run_t0
+        eta = f", ETA {elapsed / ran * left:.0f} s" if ran and left else ""
+        bar.update(n_done, f"{failed} failed, {left} left, {elapsed:.0f} s{eta}")
+
+    def finished(i, row, bar):
+        rows[i] = row
+        msg = f"  {Path(row['clip']).name}: {row['status']}, {row['wall_time_s']:.1f} s"
+        msg += f": {row['error']}" if row.get("error") else ""
+        (bar.bar.write if bar.bar is not None else say)(msg)  # above a terminal's bar, not through it
+        note(bar)
+
+    with Steps("clips", len(clips), quiet, unit=" clips") as bar:
+        note(bar)
+        if todo and engine == "local" and workers == 1:  # in this process: no start-up cost
+            for i, clip, folder, sha in todo:
+                row = run_clip(clip, folder, options, fingerprint, sha)
+                finished(i, row, bar)
+                if row["status"] == "interrupted":
+                    interrupted = True
+                    break
+        elif todo:
+            submit, wait, result, cancel, close = _submitter(engine, workers, ray_address)
+            queue, handles, pending = iter(todo), {}, set()
+
+            def hand_out():  # at most `workers` clips in flight: after Ctrl-C none is queued to start
+                while len(pending) < workers and not interrupted:
+                    nxt = next(queue, None)
+                    if nxt is None:
+                        return
+                    h = submit(run_clip, nxt[1], nxt[2], options, fingerprint, nxt[3])
+                    handles[h] = nxt[0]
+                    pending.add(h)
+
+            try:
+                hand_out()
+                while pending:
+                    done, still = wait(pending)
+                    pending.clear()
+                    pending.update(still)
+                    for h in done:
+                        try:
+                            row = result(h)
+                        except BaseException as e:  # noqa: BLE001 - a worker that died: the clip's row
+                            if isinstance(e, KeyboardInterrupt):
+                                raise
+                            row = dict.fromkeys(COLUMNS) | dict(clip=str(clips[handles[h]]),
+                                                                folder=folders[handles[h]].name, status="failed",
+                                                                error=_one_line(e), wall_time_s=0.0)
+                        finished(handles[h], row, bar)
+                        interrupted |= row["status"] == "interrupted"
+                    hand_out()
+                close(False)
+            except KeyboardInterrupt:
+                interrupted = True
+                cancel(pending)
+                say("stopping: no new clips; waiting for the running ones to keep their best path "
+                    "(Ctrl-C again to stop waiting)")
+                try:
+                    while pending:
+                        done, still = wait(pending)
+                        pending.clear()
+                        pending.update(still)
+                        for h in done:
+                            try:
+                                finished(handles[h], result(h), bar)
+                            except Exception:  # noqa: BLE001 - cancelled or died: "not run"
+                                pass
+                except KeyboardInterrupt:
+                    pass
+                close(True)
+    for i, r in enumerate(rows):
+        if r is None:
+            rows[i] = dict.fromkeys(COLUMNS) | dict(clip=str(clips[i]), folder=folders[i].name, status="not run",
+                                                   error="not started: the batch was interrupted")
+    wall = time.perf_counter() - t0
+    total = totals(rows, wall)
+    meta = {"out": str(out), "engine": engine, "workers": workers, "interrupted": interrupted,
+            "wall_time_s": wall, "options": fingerprint}
+    summary = write_summary(out, rows, total, meta)
+    return {"rows": rows, "totals": total, "interrupted": interrupted, "summary": summary, "wall_time_s": wall}

@@ -1,0 +1,75 @@
+"""`dynsplines batch CLIP_OR_FOLDER... --out DIR`: `mocap` over many clips, in worker processes, resumable,
+with a summary (the work is `runner.batch.run_batch`; this module is argument glue)."""
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+
+from runner.animate_options import add_solve_arguments, solve_options
+from runner.batch import ENGINES, find_clips, run_batch
+from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from runner.mocap.keyframes import KEY_CHOICES
+from runner.mocap.scene import AUTO
+from runner.parser import positive
+from runner.pipeline import FIGURE, ClipOptions
+from solver.problem import parse_terms
+
+PROG = "dynsplines batch"
+
+
+def register(sub) -> None:
+    """Add `batch` to the `dynsplines` parser."""
+    p = sub.add_parser(
+        "batch", help="mocap over many clips: worker processes, resumable, a summary table",
+        description="Run `dynsplines mocap` on every clip given (or every .bvh in the folders given), in worker "
+                    "processes. Outputs: DIR/<clip stem>/ per clip (keyframes, scene, .npz, metrics JSON, "
+                    "done.json) and DIR/summary.csv, DIR/summary.json (a row per clip and a totals row). A rerun "
+                    "skips the clips already done with the same clip file and options. A bad clip is reported "
+                    "with its error and the others go on. Exit code 0 if every clip is ok, 3 if any failed, "
+                    "130 on Ctrl-C (no new clips started; the summary of what finished is written).")
+    p.add_argument("clips", nargs="+", type=Path, metavar="CLIP_OR_FOLDER", help=".bvh clips or folders of them")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument("--workers", type=positive(int), default=1, metavar="N",
+                   help="clips processed at once (worker processes, one BLAS thread each; with --engine ray: Ray tasks "
+                        "in flight, and a local Ray's CPUs) [%(default)s]")
+    p.add_argument("--engine", choices=ENGINES, default="local",
+                   help="local: processes on this machine; ray: Ray tasks, one CPU per clip (needs "
+                        "pip install -e \".[cluster]\") [%(default)s]")
+    p.add_argument("--ray-address", default=None, metavar="ADDR",
+                   help="Ray cluster address for --engine ray [a local Ray, or RAY_ADDRESS]")
+    keys = p.add_argument_group("keyframes")
+    keys.add_argument("--keys", choices=KEY_CHOICES, default="every", help="as in mocap [%(default)s]")
+    keys.add_argument("--every", type=positive(float), default=None, metavar="S",
+                      help="key spacing [s] (0.25); with --keys contacts: at most S s between keys [no limit]")
+    keys.add_argument("--partial", action="store_true", help="the middle keyframe fixes only the root and the legs")
+    p.add_argument("--scene", default=AUTO, help="scene MJCF, or 'auto' (default): fitted per clip")
+    p.add_argument("--model", type=Path, default=FIGURE, help="figure MJCF [models/humanoid39.xml]")
+    p.add_argument("--render", action="store_true",
+                   help="also render each clip's video (off by default in a batch: rendering is slow)")
+    add_solve_arguments(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar or per-clip lines")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run `batch`. Returns the exit code; raises InputError on bad input."""
+    if args.ray_address is not None and args.engine != "ray":
+        from solver.errors import InputError
+
+        raise InputError(f"--ray-address {args.ray_address} goes with --engine ray")
+    clips = find_clips(args.clips)
+    weights = parse_terms(args.terms, dict(args.weight))
+    options = ClipOptions(
+        keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.model,
+        weights=weights, solve=solve_options(args, weights), rate=args.rate, render=args.render,
+        command=f"{PROG} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == ["batch"] else PROG,
+    )
+    say = (lambda *a: None) if args.quiet else print
+    r = run_batch(clips, args.out, options, workers=args.workers, engine=args.engine,
+                  ray_address=args.ray_address, say=say, quiet=args.quiet)
+    t = r["totals"]
+    print(f"dynsplines batch: {t['status']} in {r['wall_time_s']:.1f} s; wrote {r['summary'][0]}, {r['summary'][1]}")
+    if r["interrupted"]:
+        return EXIT_INTERRUPTED
+    return EXIT_FAILED if t["counts"]["failed"] else EXIT_OK
