@@ -104,7 +104,11 @@ def twist_angle_grad(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     s = q[..., 1:] @ axis
     w = q[..., 0]
     den = w * w + s * s
+    # where w and the twist component both vanish (a half turn about an axis normal to `axis`, or
+    # components so small that their squares underflow) the twist angle is undefined: gradient 0 there
+    ok = den > 1e-24 * np.sum(q * q, axis=-1)
+    safe = np.where(ok, den, 1.0)
     g = np.zeros(q.shape)
-    g[..., 0] = -2.0 * s / den
-    g[..., 1:] = (2.0 * w / den)[..., None] * axis
+    g[..., 0] = np.where(ok, -2.0 * s / safe, 0.0)
+    g[..., 1:] = np.where(ok, 2.0 * w / safe, 0.0)[..., None] * axis
     return g

@@ -181,6 +181,9 @@ def test_reader_gives_keyframes_or_a_clean_error(data):
 @settings(max_examples=EXAMPLES // 8, deadline=10000, suppress_health_check=[HealthCheck.too_slow])
 @given(data=files)
 @example(data=b'{"keyframes": [], "scene": "\\u0000"}')  # found: a NUL in a path was a ValueError
+@example(data=json.dumps({"keyframes": [  # found: a knee at a half turn with 1e-167 components: twist gradient 0/0
+    {"time": 0.0, "joints": {"l_knee": [-2.2855872811881898e-167, 0.0, 8.0795528188009805e-174, 1.0]}},
+    {"time": 1.0, "joints": {"root": [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]}}]}).encode())
 @example(data=json.dumps({"keyframes": [  # found: a keyframe inside the step warns before the failure line
     {"time": 0.0, "joints": {"l_hip": [0, 0, 0, 1], "r_knee": [0, 0, 2.812893771223057e-194, 1],
                              "r_ankle": [None, 0, 0, 0]}},

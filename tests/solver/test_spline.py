@@ -174,3 +174,4 @@ def test_interpolate_segments_equals_interpolate_at_the_same_times():
             got = interpolate_segments(x, y, tau, nu)
             np.testing.assert_allclose(got, expect, atol=1e-13 * (1 + np.abs(expect).max()), err_msg=f"m={m} nu={nu}")
         assert len(interpolate_segments(x, y, tau, (0, 2))) == 2
+
