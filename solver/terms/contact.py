@@ -176,22 +176,30 @@ class Planted(Term):
         Wr = W[rows]
         p = res.sites[rows][:, self._eidx]
         v = self.engine.site_velocities(res)[rows][:, self._eidx]
-        h, vt, nrm = self._parts(p, v, Wr, rows)
-        t2 = self.tau * self.tau
-        f[rows] = (Wr * (h * h + t2 * (vt * vt).sum(-1))).sum(1)
+        f[rows], g_p, g_v = self._integrand(p, v, Wr, rows, grad)
         if not grad:
             return TermEval(f)
+        g_sites = np.zeros(res.sites.shape)
+        g_vel = np.zeros(res.sites.shape)
+        g_sites[np.ix_(rows, self._eidx)] = g_p
+        g_vel[np.ix_(rows, self._eidx)] = g_v
+        return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites, g_vel))
+
+    def _integrand(self, p, v, Wr, rows, grad):
+        """f at the contact rows (r,) from site positions p and velocities v (r, s, 3), and its gradients
+        with respect to p and v (None without grad). d|v_t|^2/dv = 2 v_t (v_t is a projection of v)."""
+        h, vt, nrm = self._parts(p, v, Wr, rows)
+        t2 = self.tau * self.tau
+        f = (Wr * (h * h + t2 * (vt * vt).sum(-1))).sum(1)
+        if not grad:
+            return f, None, None
         g_p = np.zeros(p.shape)
         g_v = np.zeros(v.shape)
         for c in range(len(self.contacts)):
             k = self._col[c]
             g_p[:, k] += (2.0 * Wr[:, c] * h[:, c])[:, None] * nrm[:, c]
             g_v[:, k] += (2.0 * t2 * Wr[:, c])[:, None] * vt[:, c]
-        g_sites = np.zeros(res.sites.shape)
-        g_vel = np.zeros(res.sites.shape)
-        g_sites[np.ix_(rows, self._eidx)] = g_p
-        g_vel[np.ix_(rows, self._eidx)] = g_v
-        return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites, g_vel))
+        return f, g_p, g_v
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         if self.engine is not None:
@@ -210,17 +218,9 @@ class Planted(Term):
         for c in range(len(self.contacts)):
             mask[:, self._col[c]] |= Wr[:, c] > 0
         p, v, J, Jd = self.kin.motion(Yr, Y1r, mask, grad)
-        h, vt, nrm = self._parts(p, v, Wr, rows)
-        t2 = self.tau * self.tau
-        f[rows] = (Wr * (h * h + t2 * (vt * vt).sum(-1))).sum(1)
+        f[rows], g_p, g_v = self._integrand(p, v, Wr, rows, grad)
         if not grad:
             return TermEval(f)
-        g_p = np.zeros(p.shape)
-        g_v = np.zeros(v.shape)
-        for c in range(len(self.contacts)):
-            k = self._col[c]
-            g_p[:, k] += (2.0 * Wr[:, c] * h[:, c])[:, None] * nrm[:, c]
-            g_v[:, k] += (2.0 * t2 * Wr[:, c])[:, None] * vt[:, c]  # d|v_t|^2/dv = 2 v_t (projector)
         dYr, dY1r = self.kin.pullback(Yr, Y1r, J, Jd, g_p, g_v)
         dY[rows], dY1[rows] = dYr, dY1r
         return TermEval(f, dY, dY1)
