@@ -35,6 +35,26 @@ def global_times(frames: FrameSet, per_segment: int) -> np.ndarray:
     return (a[:, None] + (b - a)[:, None] * s[None, :]).ravel()
 
 
+def knot_hint_times(frames: FrameSet, hints: np.ndarray, min_gap: float) -> np.ndarray:
+    """The hinted times (`Objective.knot_times`) at least `min_gap` from every frame and from each
+    other (earlier hints win), strictly inside the path.
+
+    Args:
+        frames: current frame set. hints: (r,) times [s]. min_gap: [s] >= 0.
+    Returns:
+        (r',) sorted times [s], r' <= r.
+    """
+    keep: list[float] = []
+    occupied = list(np.asarray(frames.times, float))
+    for x in np.sort(np.asarray(hints, float).ravel()):
+        if not frames.times[0] < x < frames.times[-1]:
+            continue
+        if min(abs(x - y) for y in occupied) >= max(min_gap, 1e-9):
+            keep.append(float(x))
+            occupied.append(float(x))
+    return np.array(keep)
+
+
 def weak_form_scores(objective: Objective, frames: FrameSet) -> np.ndarray:
     """Weak-form Euler-Lagrange score of each segment: |dE/dP_c| for a frame at its midpoint.
 

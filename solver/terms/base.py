@@ -68,6 +68,17 @@ class Term:
             t: (n,) quadrature times [s]. Y, Y1, Y2: (n, nq) the path and its derivatives there.
         """
 
+    def knot_times(self) -> np.ndarray:
+        """Times [s] where this term's integrand changes character within the path (e.g. a contact's
+        touch-down and lift-off, where a foot goes from swinging to still): `solve` places variable
+        frames there before the first round (`SolveOptions.term_knots`), so the spline can bend where
+        the motion does. The default: none.
+
+        Returns:
+            (r,) times [s], any order.
+        """
+        return np.zeros(0)
+
     def violation(self, Y: np.ndarray) -> float | None:
         """How far a path breaks this soft constraint at its worst, in the term's natural unit
         (e.g. metres of penetration), or None if the term is not a constraint. Used for penalty

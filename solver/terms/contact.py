@@ -135,6 +135,12 @@ class Planted(Term):
             self._eidx = _engine_index(self.engine, model, self.kin.names)
             self.needs = (0, 1, 2)  # the engine's forward pass reads qacc too
 
+    def knot_times(self) -> np.ndarray:
+        """(2C,) every contact's start and end [s]: at touch-down and lift-off a site goes from
+        moving to still and back, a change of its acceleration a spline can only follow with a knot
+        there (`Term.knot_times`)."""
+        return np.array([x for c in self.contacts for x in (c.start, c.end)], float)
+
     def windows(self, t: np.ndarray) -> np.ndarray:
         """(n, C) window of each contact at times t."""
         t = np.asarray(t, float)
