@@ -11,7 +11,7 @@ from runner.render.side_by_side import PANELS
 from solver.animate import DEFAULT_RATE, default_options
 from solver.errors import InputError
 from solver.optimize import ALGORITHMS
-from solver.problem import term_names
+from solver.problem import parse_terms, term_names
 from solver.solve import SCORES, SUBDIVISIONS, SolveOptions
 
 #: the library's settings (`solver.default_options`): the command's defaults are these, not its own
@@ -116,6 +116,15 @@ def add_solve_arguments(p: argparse.ArgumentParser) -> None:
                      help="optimize the frame values directly instead of in the spline-acceleration metric")
     opt.add_argument("--no-renormalize", action="store_true",
                      help="use the weights as they are instead of dividing each term by its initial value (eq. 7)")
+
+
+def clip_terms(args) -> dict:
+    """`ClipOptions` fields for the objective of clips whose contacts are not known yet (`mocap`,
+    `batch`): {"terms": the --terms spec, "weights": the --weight overrides, "solve": solve_options}.
+    The spec is checked here (a bad name or weight is an InputError before any clip is read) as if a
+    contact schedule were known; `process_clip` chooses the terms with the clip's own contacts."""
+    weights = parse_terms(args.terms, dict(args.weight), contacts=(None,))
+    return {"terms": args.terms, "weights": dict(args.weight), "solve": solve_options(args, weights)}
 
 
 def solve_options(args, weights: dict) -> SolveOptions:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +41,7 @@ from solver.layout import StateLayout
 from solver.metrics import path_metrics
 from solver.motion_metrics import motion_metrics
 from solver.optimize import Status
-from solver.problem import figure_objective, parse_terms
+from solver.problem import default_limits, figure_problem, parse_terms
 from solver.solve import SolveOptions, solve
 
 #: the figure every scene includes
@@ -57,7 +57,10 @@ class ClipOptions:
         every: [s] key spacing (default 0.25 with "every"; with "contacts" the largest gap, None = none).
         partial: the middle keyframe fixes only the root and the legs.
         scene: "auto" (fitted) or an MJCF file. figure: the figure's MJCF.
-        weights: {term: weight} (None: the default terms). solve: SolveOptions (None: default_options).
+        terms: the objective terms as for `solver.problem.parse_terms` (None: the default terms, which
+            add the contact terms when the clip has contacts). weights: {term: weight} overrides.
+            solve: SolveOptions (None: default_options); its `limits` follow the terms chosen for the
+            clip (`default_limits`), which are known only once its contacts are.
         rate: quadrature points per second.
         out, save_path, metrics, plot: output paths (None: the defaults under the output folder:
             <stem>.mp4, <stem>.npz, <stem>.metrics.json; no plots). render: write the video.
@@ -70,7 +73,8 @@ class ClipOptions:
     partial: bool = False
     scene: str | os.PathLike = AUTO
     figure: str | os.PathLike = FIGURE
-    weights: dict | None = None
+    terms: str | None = None
+    weights: dict = field(default_factory=dict)
     solve: SolveOptions | None = None
     rate: float = DEFAULT_RATE
     out: Path | None = None
@@ -123,6 +127,42 @@ def reference_motion_metrics(model, layout: StateLayout, solution, reference, co
             for label, fs in (("plain", solution.initial), ("optimized", solution.frames))}
 
 
+def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=print):
+    """Steps 1-3 of `process_clip`: the clip's scene (given or fitted), its retargeted reference, its
+    contacts, and keyframes picked from it, written to paths["keyframes"] (and the fitted scene to
+    paths["scene"] with --scene auto) and read back as `dynsplines animate FILE` reads them.
+
+    Returns:
+        (clip_scene result, reference, model, keyframes, keyframe-file info with the contacts).
+    Raises:
+        InputError: as `process_clip`.
+    """
+    # 1-2: scene, reference, contacts
+    cs = clip_scene(clip, o.scene, o.figure, paths.get("scene", out_dir / f"{clip.stem}.scene.xml"))
+    ref, model = cs.reference, cs.model
+    contacts = name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time))
+    say(f"dynsplines mocap: {clip} -> {ref.count} frames at {1 / ref.frame_time:.4g} Hz ({ref.duration:.2f} s), "
+        f"{len(contacts)} contacts; scene {'fitted: ' if cs.fitted is not None else ''}{cs.scene_path}")
+    if cs.fitted is not None:
+        for i, (c, h) in enumerate(cs.fitted.boxes):
+            say(f"  fitted box{i}: top {100 * (c[2] + h[2]):.1f} cm, x {100 * (c[0] - h[0]):.1f} .. "
+                f"{100 * (c[0] + h[0]):.1f} cm, y {100 * (c[1] - h[1]):.1f} .. {100 * (c[1] + h[1]):.1f} cm; "
+                f"floor {100 * cs.fitted.floor_z:.1f} cm")
+
+    # 3: keyframes, written and read back (what `dynsplines animate FILE` reads)
+    layout = StateLayout.from_model(model)
+    every = o.every if (o.every is not None or o.keys == "contacts") else 0.25
+    kf0 = pick_keyframes(ref, model, contacts, keys=o.keys, every=every, partial=o.partial)
+    source = {"clip": Path(os.path.relpath(clip.resolve(), out_dir.resolve())).as_posix(),
+              "command": o.command, "hand_edits": "none"}
+    write_keyframes(paths["keyframes"], kf0, layout, model=o.figure, scene=cs.scene_path, source=source,
+                    contacts=contacts)
+    keyframes, info = read_keyframes(paths["keyframes"], layout)
+    say(f"  wrote {paths['keyframes']}: {keyframes.count} keyframes ({int(keyframes.is_partial.sum())} partial) "
+        f"at {', '.join(f'{t:.3f}' for t in keyframes.times)} s")
+    return cs, ref, model, keyframes, info
+
+
 def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=print) -> dict:
     """Turn a BVH clip into keyframes, an optimized path and its metrics (module docstring).
 
@@ -167,35 +207,16 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     if str(o.scene) == AUTO:
         paths["scene"] = out_dir / f"{stem}.scene.xml"
 
-    # 1-2: scene, reference, contacts
-    cs = clip_scene(clip, o.scene, o.figure, paths.get("scene", out_dir / f"{stem}.scene.xml"))
-    ref, model = cs.reference, cs.model
-    contacts = name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time))
-    say(f"dynsplines mocap: {clip} -> {ref.count} frames at {1 / ref.frame_time:.4g} Hz ({ref.duration:.2f} s), "
-        f"{len(contacts)} contacts; scene {'fitted: ' if cs.fitted is not None else ''}{cs.scene_path}")
-    if cs.fitted is not None:
-        for i, (c, h) in enumerate(cs.fitted.boxes):
-            say(f"  fitted box{i}: top {100 * (c[2] + h[2]):.1f} cm, x {100 * (c[0] - h[0]):.1f} .. "
-                f"{100 * (c[0] + h[0]):.1f} cm, y {100 * (c[1] - h[1]):.1f} .. {100 * (c[1] + h[1]):.1f} cm; "
-                f"floor {100 * cs.fitted.floor_z:.1f} cm")
-
-    # 3: keyframes, written and read back (what `dynsplines animate FILE` reads)
+    cs, ref, model, keyframes, info = clip_keyframes(clip, out_dir, o, paths, say)
     layout = StateLayout.from_model(model)
-    every = o.every if (o.every is not None or o.keys == "contacts") else 0.25
-    kf0 = pick_keyframes(ref, model, contacts, keys=o.keys, every=every, partial=o.partial)
-    source = {"clip": Path(os.path.relpath(clip.resolve(), out_dir.resolve())).as_posix(),
-              "command": o.command, "hand_edits": "none"}
-    write_keyframes(paths["keyframes"], kf0, layout, model=o.figure, scene=cs.scene_path, source=source,
-                    contacts=contacts)
-    keyframes, info = read_keyframes(paths["keyframes"], layout)
-    say(f"  wrote {paths['keyframes']}: {keyframes.count} keyframes ({int(keyframes.is_partial.sum())} partial) "
-        f"at {', '.join(f'{t:.3f}' for t in keyframes.times)} s")
 
     # 4: solve and metrics
-    weights = o.weights if o.weights is not None else parse_terms(None, {})
-    options = o.solve if o.solve is not None else default_options(weights)
-    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=o.rate)
-    initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    weights = parse_terms(o.terms, dict(o.weights or {}), info.contacts)
+    options = replace(o.solve or default_options(weights), limits=default_limits(weights))
+    objective, initial, conflicts = figure_problem(model, weights, keyframes, rate=o.rate, contacts=info.contacts)
+    if conflicts:  # the clip's own keyframes against its own contacts: a heel "in contact" 3 cm up
+        say(f"  {len(conflicts)} keyframe(s) hold a site off the contact schedule (met exactly; those contacts "
+            "and swings are not held to the bounds)")
     progress = Progress(o.quiet)
     with StopRequest(o.quiet) as stop:
         solution = solve(objective, initial, options, should_stop=stop, progress=progress)

@@ -15,10 +15,8 @@ from dataclasses import replace
 import numpy as np
 
 from solver.errors import InputError
-from solver.frames import FrameSet
 from solver.keyframes import Keyframes
-from solver.layout import StateLayout
-from solver.problem import default_limits, figure_objective, keyframe_conflicts, parse_terms
+from solver.problem import default_limits, figure_problem, parse_terms
 from solver.solve import Solution, SolveOptions, solve
 
 __all__ = ["DEFAULT_RATE", "DEFAULT_TOL", "animate", "default_options"]
@@ -133,9 +131,5 @@ def animate(
                          f"{type(options).__name__}")
     if tol is not None:
         options = replace(options, tol=float(tol))
-    layout = StateLayout.from_model(model)
-    objective = figure_objective(model, chosen, keyframes.times[0], keyframes.times[-1], rate=rate,
-                                 contacts=contacts)
-    initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
-    keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe])
+    objective, initial, _ = figure_problem(model, chosen, keyframes, rate=rate, contacts=contacts)
     return solve(objective, initial, options, should_stop=should_stop, progress=progress)

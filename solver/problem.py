@@ -67,21 +67,22 @@ def _needs_schedule(name: str) -> InputError:
                       "contacts=; or leave the term out")
 
 
-#: Whether a contact schedule switches the contact terms on by default (and into "all"). Off for now:
-#: on 127_33 they bring float and skate to the capture's (README "Contact schedules") but the solve takes
-#: ~7.6x the evaluations (penalty continuation raises the penetration weight four times while planted
-#: feet push other sites into the floor) and ~28x the time; the issue's bound is 2x.
-CONTACT_TERMS_BY_DEFAULT = False
+#: Whether a contact schedule switches the contact terms on by default (planted and clearance; cone
+#: joins "all"). On: with variable frames at every touch-down and lift-off (`SolveOptions.term_knots`)
+#: the solve with them takes about as many evaluations as without (run-and-step: 339 vs 450; without
+#: those frames 1633, penalty continuation boosting the penetration term four times because a spline
+#: with one frame per keyframe interval cannot both hold a foot still and keep the other sites up).
+CONTACT_TERMS_BY_DEFAULT = True
 
 
 def parse_terms(spec: str | None, weights: dict[str, float] | None = None, contacts=()) -> dict[str, float]:
     """Term weights from a command-line list ("all", or "penetration,unit,...") and overrides.
 
     Args:
-        spec: None (the default terms), "all" (every term but the contact terms), or a comma-separated
-            list of term names; the contact terms (planted, clearance, cone) are chosen by name and need a
-            schedule. They are not on by default yet: with them a solve takes ~25x the evaluations
-            (README "Contact schedules"; CONTACT_TERMS_BY_DEFAULT).
+        spec: None (the default terms; with a contact schedule also planted and clearance), "all"
+            (every term; the contact terms, cone included, only with a schedule), or a comma-separated
+            list of term names (the contact terms need a schedule; leave them out of the list to switch
+            them off).
         weights: {name: weight} overrides (a name here also switches the term on).
         contacts: the contact schedule, if any (only whether it is empty matters here).
     Returns:
@@ -212,6 +213,29 @@ def keyframe_conflicts(objective: Objective, times, qpos) -> list[tuple[str, int
         if term.name in ("planted", "clearance"):
             out += [(term.name, *c) for c in term.conflicts(times, qpos, excuse=True)]
     return out
+
+
+def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 400.0, contacts=()):
+    """The objective and the plain spline's frames for keyframes of a figure, with the keyframes that
+    contradict the contact schedule found and excused (`keyframe_conflicts`): what `solver.animate`,
+    the command line and the benchmarks solve.
+
+    Args:
+        model: MjModel of the scene. weights: {term: lambda_j} (`parse_terms`). keyframes: Keyframes
+            (values (k, nq), times (k,) [s]). rate: quadrature points per second. contacts: the schedule.
+    Returns:
+        (objective, initial, conflicts): Objective, FrameSet (the plain spline's frames), and the
+        `keyframe_conflicts` list.
+    Raises:
+        InputError: as `figure_objective`.
+    """
+    from solver.frames import FrameSet
+
+    layout = StateLayout.from_model(model)
+    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate, contacts=contacts)
+    initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    conflicts = keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe])
+    return objective, initial, conflicts
 
 
 def default_limits(weights: dict[str, float]) -> tuple:

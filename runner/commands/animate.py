@@ -21,11 +21,10 @@ from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_pro
 from runner.render.side_by_side import check_video_out as _check_video_out
 from runner.saved_path import save_path_npz
 from solver.errors import InputError
-from solver.frames import FrameSet
 from solver.layout import CONTACT_SITES
 from solver.metrics import path_metrics
 from solver.optimize import Status
-from solver.problem import figure_objective, parse_terms
+from solver.problem import figure_problem, parse_terms
 from solver.solve import solve
 
 
@@ -87,12 +86,10 @@ def run_animate(args) -> int:
         weights = parse_terms(",".join(file_terms), {**file_terms, **weights_in}, contacts)
     else:
         weights = parse_terms(args.terms, weights_in, contacts)
-    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=args.rate,
-                                 contacts=contacts)
+    objective, initial, conflicts = figure_problem(model, weights, keyframes, rate=args.rate, contacts=contacts)
     options = solve_options(args, weights)
-    initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     _warn_penetrating_keyframes(model, keyframes, initial)
-    _warn_contact_conflicts(objective, keyframes, initial)
+    _warn_contact_conflicts(conflicts, keyframes)
     say = print  # results; --quiet silences progress only
     say(f"dynsplines: {args.keyframes} -> {keyframes.count} keyframes "
         f"({int(keyframes.is_partial.sum())} partial) over {keyframes.times[-1] - keyframes.times[0]:.2f} s, "
@@ -214,12 +211,11 @@ def _warn_penetrating_keyframes(model, keyframes, initial) -> None:
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
 
 
-def _warn_contact_conflicts(objective, keyframes, initial) -> None:
-    """Keyframes that contradict the contact schedule (a site the schedule plants held up, a swing
-    site held on the ground): keyframes are met exactly, so the contact terms cannot fix those."""
-    from solver.problem import keyframe_conflicts
-
-    for name, k, site, dist in keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe]):
+def _warn_contact_conflicts(conflicts, keyframes) -> None:
+    """Keyframes that contradict the contact schedule (`keyframe_conflicts`: a site the schedule plants
+    held up, a swing site held on the ground): keyframes are met exactly, so the contact terms cannot
+    fix those."""
+    for name, k, site, dist in conflicts:
         if name == "planted":
             what = f"holds {site} {1000 * dist:+.1f} mm from where the contact schedule plants it"
         else:

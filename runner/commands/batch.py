@@ -6,14 +6,13 @@ import shlex
 import sys
 from pathlib import Path
 
-from runner.animate_options import add_solve_arguments, solve_options
+from runner.animate_options import add_solve_arguments, clip_terms
 from runner.batch import ENGINES, find_clips, run_batch
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.mocap.keyframes import KEY_CHOICES
 from runner.mocap.scene import AUTO
 from runner.parser import positive
 from runner.pipeline import FIGURE, ClipOptions
-from solver.problem import parse_terms
 
 PROG = "dynsplines batch"
 
@@ -59,10 +58,9 @@ def run(args) -> int:
 
         raise InputError(f"--ray-address {args.ray_address} goes with --engine ray")
     clips = find_clips(args.clips)
-    weights = parse_terms(args.terms, dict(args.weight))
     options = ClipOptions(
         keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.model,
-        weights=weights, solve=solve_options(args, weights), rate=args.rate, render=args.render,
+        **clip_terms(args), rate=args.rate, render=args.render,
         command=f"{PROG} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == ["batch"] else PROG,
     )
     say = (lambda *a: None) if args.quiet else print

@@ -6,13 +6,12 @@ import shlex
 import sys
 from pathlib import Path
 
-from runner.animate_options import add_options, solve_options
+from runner.animate_options import add_options, clip_terms
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.mocap.keyframes import KEY_CHOICES
 from runner.mocap.scene import AUTO
 from runner.parser import positive
 from runner.pipeline import FIGURE, ClipOptions, default_out_dir, process_clip
-from solver.problem import parse_terms
 
 PROG = "dynsplines mocap"
 
@@ -48,10 +47,9 @@ def register(sub) -> None:
 
 def run(args) -> int:
     """Run `mocap`. Returns the exit code; raises InputError on bad input."""
-    weights = parse_terms(args.terms, dict(args.weight))
     options = ClipOptions(
         keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.model,
-        weights=weights, solve=solve_options(args, weights), rate=args.rate, out=args.out,
+        **clip_terms(args), rate=args.rate, out=args.out,
         save_path=args.save_path, metrics=args.metrics, plot=args.plot, render=not args.no_render,
         fps=args.fps, size=args.size, speed=args.speed, quiet=args.quiet,
         command=f"{PROG} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == ["mocap"] else PROG,

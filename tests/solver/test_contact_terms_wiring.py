@@ -28,14 +28,14 @@ def toy():
     return mujoco.MjModel.from_xml_string(TOY_SCENE)
 
 
-def test_contact_terms_are_chosen_by_name_and_only_with_a_schedule():
-    """Opt-in for now (CONTACT_TERMS_BY_DEFAULT is False: ~28x the solve time on run-and-step)."""
-    assert not CONTACT_TERMS_BY_DEFAULT
+def test_contact_terms_are_on_by_default_with_a_schedule_and_can_be_switched_off():
+    assert CONTACT_TERMS_BY_DEFAULT
     assert {"planted", "clearance", "cone"} <= set(term_names())
     assert tuple(parse_terms(None)) == DEFAULT_TERMS
-    assert tuple(parse_terms(None, contacts=SCHEDULE)) == DEFAULT_TERMS
+    assert tuple(parse_terms(None, contacts=SCHEDULE)) == (*DEFAULT_TERMS, "planted", "clearance")
     assert not {"planted", "clearance", "cone"} & set(parse_terms("all"))
-    assert not {"planted", "clearance", "cone"} & set(parse_terms("all", contacts=SCHEDULE))
+    assert {"planted", "clearance", "cone"} <= set(parse_terms("all", contacts=SCHEDULE))
+    assert tuple(parse_terms(",".join(DEFAULT_TERMS), contacts=SCHEDULE)) == DEFAULT_TERMS  # --terms: off
     chosen = parse_terms("penetration,unit,bending,smooth,planted,clearance,cone", contacts=SCHEDULE)
     assert {"planted", "clearance", "cone"} <= set(chosen)
     lim = dict(default_limits(chosen))

@@ -76,6 +76,9 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
     saved = load_saved_path(out / "run.npz")
     assert contacts_from_array(saved["contacts"]) == list(info.contacts)
     assert set(saved.metrics) == {"plain", "optimized", "motion"}
+    # the clip's contacts switch the contact terms on (issue 11), with their penalty-continuation bounds
+    assert {"planted", "clearance"} <= set(saved.options["weights"])
+    assert {"planted", "clearance"} <= {name for name, _ in saved.options["solve"]["limits"]}
     report = json.loads((tmp_path / "m.json").read_text())
     assert report["keyframes"] == kf.count and report["frames"] == 73 and report["fps"] == pytest.approx(120, rel=1e-4)
     ref = report["metrics"]["motion"]["optimized"]["reference"]
