@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 
 from runner.animate_options import default_args, solve_options
+from runner.commands import bench_contacts
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
@@ -40,8 +41,8 @@ from solver.problem import parse_terms
 
 
 def register(sub) -> None:
-    """Add `bench` (run-and-step, refine, readme, orient, scaling) to the `dynsplines` parser."""
-    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, readme, orient, scaling")
+    """Add `bench` (run-and-step, refine, readme, orient, scaling, contacts) to the `dynsplines` parser."""
+    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, readme, orient, scaling, contacts")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
     r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip")
@@ -78,6 +79,7 @@ def register(sub) -> None:
     c.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every length")
     c.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table, dense vs banded")
     c.set_defaults(func=bench_scaling)
+    bench_contacts.register(bsub)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

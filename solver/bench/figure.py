@@ -11,28 +11,29 @@ import time
 
 from solver.errors import InputError
 from solver.frames import FrameSet
-from solver.problem import figure_objective
+from solver.problem import figure_objective, figure_problem
 from solver.solve import SCORES, SolveOptions, solve
 
 #: the geometric terms (the default objective), the baseline of the dynamics terms' cost
 GEOMETRIC = "penetration,unit,bending,smooth"
 
 
-def time_solves(model, keyframes, layout, weights: dict, options: SolveOptions, rate: float, repeat: int) -> dict:
+def time_solves(model, keyframes, layout, weights: dict, options: SolveOptions, rate: float, repeat: int,
+                contacts=()) -> dict:
     """Solve `repeat` times (at least once) with `options`; the timings and the last objective.
 
     Args:
         model: MjModel of the scene. keyframes: Keyframes. layout: StateLayout. weights: {term: weight}.
         options: SolveOptions (the command passes exactly what `dynsplines animate` runs).
-        rate: quadrature points per second. repeat: runs.
+        rate: quadrature points per second. repeat: runs. contacts: the contact schedule (for the
+            contact terms; keyframes that contradict it are excused as `solver.animate` does).
     Returns:
         dict: wall_median_s, wall_all_s (list) [s], evals (median), per_eval_ms (median of wall / evals),
         E_final, frames (count at the end), objective (the last Objective), solution (the last Solution).
     """
     runs = []
     for _ in range(max(1, repeat)):
-        objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate)
-        initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+        objective, initial, _ = figure_problem(model, weights, keyframes, rate=rate, contacts=contacts)
         sol = solve(objective, initial, options)
         runs.append(sol)
     walls = [s.wall_time_s for s in runs]

@@ -1,0 +1,106 @@
+"""`dynsplines bench contacts`: what the contact terms cost and buy, clip by clip, in one run.
+
+For each input (a keyframe file with a contact schedule, or a BVH clip whose keyframes, contacts and
+fitted scene are made as `dynsplines mocap CLIP --every 0.25 --scene auto` makes them), the same
+keyframes are solved with the geometric terms only (`--terms penetration,unit,bending,smooth`) and with
+the default terms (which add planted and clearance where contacts are known), alternating, `--repeat`
+times each, with the command's solve options. Printed per input: evaluations and optimization time of
+both and their ratio (issue 11's bound: 2x), and the motion metrics against the motion capture (float,
+skate, skating ratio, flight, joint and site error) of the plain spline and both paths.
+"""
+from __future__ import annotations
+
+import statistics
+import tempfile
+from pathlib import Path
+
+from runner.animate_options import default_args, solve_options
+from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_problem
+from solver.bench.figure import GEOMETRIC, time_solves
+from solver.errors import InputError
+from solver.problem import parse_terms
+
+#: (label, key in the motion metrics' "path" block, format)
+ROWS = (("float in contact [mm]", "float_contact_mm", "{:.2f}"), ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
+        ("skating ratio (contacts)", "skating_ratio_contacts", "{:.3f}"), ("flight [s]", "flight_time_s", "{:.3f}"))
+
+
+def register(bsub) -> None:
+    """Add `bench contacts` to the `dynsplines bench` subparsers."""
+    c = bsub.add_parser("contacts", help="the contact terms' cost and effect, clip by clip",
+                        description=__doc__.split("\n\n")[1].replace("\n", " "))
+    c.add_argument("inputs", nargs="*", type=Path,
+                   help="keyframe files (.json, with 'contacts') or BVH clips [run-and-step's keyframe file]")
+    c.add_argument("--repeat", type=int, default=1, help="solves per configuration; medians reported [1]")
+    c.add_argument("--every", type=float, default=0.25, help="key spacing [s] for BVH clips [0.25]")
+    c.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
+    c.set_defaults(func=bench_contacts)
+
+
+def _problem(path: Path, every: float, tmp: Path):
+    """(keyframes, info, model, layout, reference) of a keyframe file or a BVH clip."""
+    if path.suffix.lower() == ".bvh":
+        from runner.pipeline import ClipOptions, clip_keyframes
+
+        out = tmp / path.stem
+        out.mkdir(parents=True, exist_ok=True)
+        paths = {"keyframes": out / f"{path.stem}.keyframes.json", "scene": out / f"{path.stem}.scene.xml"}
+        _, ref, model, keyframes, info = clip_keyframes(path, out, ClipOptions(every=every), paths, say=lambda *a: None)
+        return keyframes, info, model, ref
+    keyframes, info, model, _, _ = load_problem(path, None)
+    return keyframes, info, model, find_reference(info, model, quiet=True)
+
+
+def bench_contacts(args) -> int:
+    """Run `bench contacts`. Returns 0; raises InputError for an input without contacts."""
+    from runner.pipeline import reference_motion_metrics
+    from solver.layout import StateLayout
+
+    inputs = args.inputs or [RUN_AND_STEP_KEYFRAMES]
+    print(f"bench contacts: {len(inputs)} input(s), {args.repeat} solve(s) per configuration, the command's "
+          f"solve options; geometric = {GEOMETRIC}, contacts = the default terms with the input's schedule")
+    ratios = []
+    with tempfile.TemporaryDirectory(prefix="dynsplines-bench-") as tmp:
+        for path in inputs:
+            keyframes, info, model, ref = _problem(Path(path), args.every, Path(tmp))
+            contacts = tuple(info.contacts or ())
+            if not contacts:
+                raise InputError(f"{path}: no contact schedule ('contacts'); make the keyframes with "
+                                 "`dynsplines mocap` or give a BVH clip")
+            layout = StateLayout.from_model(model)
+            configs = {"geometric": parse_terms(GEOMETRIC, contacts=contacts), "contacts": parse_terms(None, contacts=contacts)}
+            runs = {name: [] for name in configs}
+            for _ in range(max(1, args.repeat)):  # alternate, so load on the machine hits both alike
+                for name, w in configs.items():
+                    runs[name].append(time_solves(model, keyframes, layout, w, solve_options(default_args(), w),
+                                                  args.rate, 1, contacts=contacts))
+            med = {n: (statistics.median(r["wall_median_s"] for r in rs), statistics.median(r["evals"] for r in rs))
+                   for n, rs in runs.items()}
+            ratio = med["contacts"][0] / med["geometric"][0]
+            ratios.append(ratio)
+            print(f"\n  {Path(path).name}: {keyframes.count} keyframes, {len(contacts)} contacts")
+            for n, (wall, ev) in med.items():
+                print(f"    {n:<10} {ev:>6.0f} evaluations  {wall:7.2f} s  ({runs[n][-1]['frames']} frames)")
+            print(f"    contacts / geometric: time {ratio:.2f}x, evaluations {med['contacts'][1] / med['geometric'][1]:.2f}x")
+            if ref is None:
+                continue
+            motion = {n: reference_motion_metrics(model, layout, rs[-1]["solution"], ref, contacts) for n, rs in runs.items()}
+            print(f"    {'':<28} {'capture':>8} {'plain':>8} {'geometric':>10} {'contacts':>9}")
+            for label, key, fmt in ROWS:
+                vals = [motion["geometric"]["plain"]["reference"][key], motion["geometric"]["plain"]["path"][key],
+                        motion["geometric"]["optimized"]["path"][key], motion["contacts"]["optimized"]["path"][key]]
+                print(f"    {label:<28} " + " ".join(f"{fmt.format(v):>{w}}" for v, w in zip(vals, (8, 8, 10, 9), strict=True)))
+            for label, key in (("joint-orientation error [deg]", "joint_orientation_deg"), ("site position error [cm]", "site_position_cm")):
+                vals = [_mean_of_means(motion["geometric"]["plain"]["error"][key]),
+                        _mean_of_means(motion["geometric"]["optimized"]["error"][key]),
+                        _mean_of_means(motion["contacts"]["optimized"]["error"][key])]
+                print(f"    {label:<28} {'':>8} " + " ".join(f"{v:>{w}.2f}" for v, w in zip(vals, (8, 10, 9), strict=True)))
+    if len(ratios) > 1:
+        print(f"\n  time ratio contacts / geometric: median {statistics.median(ratios):.2f}x, max {max(ratios):.2f}x "
+              f"over {len(ratios)} inputs (bound 2x)")
+    return 0
+
+
+def _mean_of_means(d: dict) -> float:
+    """The mean over joints (or sites) of each one's mean error."""
+    return float(statistics.fmean(v["mean"] for v in d.values()))
