@@ -197,7 +197,7 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
 
 def keyframe_conflicts(objective: Objective, times, qpos) -> list[tuple[str, int, str, float]]:
     """Keyframes that contradict the contact schedule, from the objective's planted and clearance terms
-    (`Planted.conflicts`, `Clearance.conflicts`); the contacts and swings concerned are left out of
+    (`Planted.conflicts`, `Planted.slides`, `Clearance.conflicts`); the contacts and swings concerned are left out of
     the terms' `violation` (keyframes are met exactly, so penalty continuation could not reach the
     bound there).
 
@@ -205,13 +205,16 @@ def keyframe_conflicts(objective: Objective, times, qpos) -> list[tuple[str, int
         objective: from `figure_objective`. times: (k,) keyframe times [s]. qpos: (k, nq) keyframe
             poses (free components filled, e.g. `FrameSet.from_keyframes(...).values[is_keyframe]`).
     Returns:
-        [(term name, keyframe index, site, distance [m]), ...]: planted: the site's height above its
-        plant height; clearance: how far inside the clearance band.
+        [(kind, keyframe index, site, distance [m]), ...]: "planted": the site's height above its plant
+        height; "sliding": two keyframes in one contact hold the site this far apart along the ground
+        (`Planted.slides`); "clearance": how far inside the clearance band.
     """
     out = []
     for term in objective.terms:
         if term.name in ("planted", "clearance"):
             out += [(term.name, *c) for c in term.conflicts(times, qpos, excuse=True)]
+        if term.name == "planted":
+            out += [("sliding", *c) for c in term.slides(times, qpos, excuse=True)]
     return out
 
 

@@ -218,6 +218,9 @@ def _warn_contact_conflicts(conflicts, keyframes) -> None:
     for name, k, site, dist in conflicts:
         if name == "planted":
             what = f"holds {site} {1000 * dist:+.1f} mm from where the contact schedule plants it"
+        elif name == "sliding":
+            what = (f"and an earlier keyframe in the same contact hold {site} {1000 * dist:.1f} mm apart along "
+                    "the ground (it must slide)")
         else:
             what = f"holds {site} {1000 * dist:.1f} mm inside the clearance band where the schedule swings it"
         print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) {what}; "

@@ -23,11 +23,14 @@ has that shape). Two terms here, one in `solver.terms.contact_wrench` (friction 
   the keyframes) and keeps the integrand continuous in t.
 
 `Clearance` (name "clearance", m^2): a site that is not in contact keeps a clearance c (default 2 cm)
-from every surface in the middle of its swing and during flights,
+from every surface in the middle of its swing, and every site keeps c_f in the middle of a flight,
 
-    f(t) = sum over sites k of  u_k(t) sum over surfaces s of depth_ks(t)^2,
-    depth_ks = `StaticSurfaces.penetration(p_k, margin=c)` (planes: max(0, c - height); boxes grown by c),
-    u_k = max(swing window, flight window):
+    f(t) = sum over sites k of  sum over surfaces s of [ u_k(t) depth_ks(t; c)^2 + u_f(t) depth_ks(t; c_f)^2 ],
+    depth_ks(c) = `StaticSurfaces.penetration(p_k, margin=c)` (planes: max(0, c - height); boxes grown by c),
+    c_f = min(c, g T^2 / 8) for a flight of duration T (default): the height a ballistic body rises in
+          a flight that long (g = 9.81 m/s^2), so a short hop's feet are not lifted more than the body
+          is (a 0.08 s flight: 8 mm; 0.13 s and longer: c); or a fixed `flight_clearance`,
+    u_k = the swing window of site k, u_f = the flight window:
       swing: each gap [a, b] between consecutive contacts of site k (not before its first or after its
              last contact: there the schedule says nothing). u rises by a smoothstep from 0 at a to 1 at
              a + f L and falls back to 0 from b - f L to b, L = b - a, f = (1 - core) / 2, core =
@@ -77,6 +80,9 @@ from solver.terms.contact_schedule import (  # noqa: F401  (the schedule helpers
     smoothstep,
     swings,
 )
+
+#: [m/s^2] for the ballistic flight clearance
+GRAVITY = 9.81
 
 __all__ = ["CONTACT_SITES", "Clearance", "Planted", "SiteMotion", "SupportSurfaces", "check_contacts",
            "contact_window", "flights", "gap_window", "smoothstep", "swings"]
@@ -293,6 +299,37 @@ class Planted(Term):
                     self.excused.add(c)
         return out
 
+    def slides(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
+        """Keyframes that make a planted site slide: two keyframes inside one contact (its window > 0)
+        that hold the site more than `tolerance` [m] apart along the ground (horizontally). Motion
+        capture's feet do slide a little while "in contact" (on the shared walk, 2-4 cm between keyframes
+        0.25 s apart as the heel rolls and the toe pivots); keyframes are met exactly, so no path can
+        keep that site still, and penalty continuation would stiffen the term against a bound it cannot
+        reach (on the walk: 4 boosts, 2979 evaluations, knees bent 2.4 deg backwards). excuse: leave
+        those contacts out of `violation`; the term still pulls toward no sliding between the keyframes.
+
+        Returns:
+            [(index of the later keyframe, site, largest horizontal distance between the contact's
+            keyframes [m]), ...].
+        """
+        times = np.asarray(times, float)
+        W = self.windows(times)
+        out = []
+        if not W.size:
+            return out
+        p = self.kin.positions(np.asarray(qpos, float))
+        for c, contact in enumerate(self.contacts):
+            inside = np.flatnonzero(W[:, c] > 0)
+            if len(inside) < 2:
+                continue
+            xy = p[inside, self._col[c], :2]
+            spread = float(np.max(np.linalg.norm(xy[:, None] - xy[None], axis=-1)))
+            if spread > tolerance:
+                out.append((int(inside[-1]), contact.site, spread))
+                if excuse:
+                    self.excused.add(c)
+        return out
+
 
 class Clearance(Term):
     """f = sum over sites of u(t) * sum over surfaces of depth(margin=c)^2 [m^2]: swing feet clear.
@@ -305,6 +342,8 @@ class Clearance(Term):
         clearance: c [m] > 0 (default 2 cm).
         core: fraction in [0, 1] of each swing / flight that is fully weighted (default 0.5).
         flight: also apply to all contact sites during flights (default True).
+        flight_clearance: c_f [m] > 0, the clearance during flights; default None: min(c, g T^2 / 8)
+            per flight of duration T (module docstring, docs/contacts.md).
         sites: the sites the term looks after (default the four contact sites).
         t_span: see `Planted`.
     Raises:
@@ -316,7 +355,7 @@ class Clearance(Term):
     needs = (0,)
 
     def __init__(self, model, contacts, clearance: float = 0.02, core: float = 0.5, flight: bool = True,
-                 sites=CONTACT_SITES, t_span=None, engine=None):
+                 sites=CONTACT_SITES, t_span=None, engine=None, flight_clearance: float | None = None):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the clearance term")
@@ -327,10 +366,15 @@ class Clearance(Term):
             raise InputError(f"clearance is {clearance}; it must be a distance > 0 [m]")
         if not (0.0 <= core <= 1.0):
             raise InputError(f"core is {core}; it must be a fraction in [0, 1]")
+        if flight_clearance is not None and not (np.isfinite(float(flight_clearance)) and float(flight_clearance) > 0):
+            raise InputError(f"flight_clearance is {flight_clearance}; it must be a distance > 0 [m]")
         self.clearance, self.core, self.flight, self.t_span = c, core, bool(flight), t_span
         self.kin = SiteMotion(model, tuple(sites))
         self.swings = [swings(self.contacts, s) for s in self.kin.names]
         self.flights = flights(self.contacts) if self.flight else []
+        #: c_f of each flight [m]
+        self.flight_bands = np.array([min(c, GRAVITY * (b - a) ** 2 / 8.0) if flight_clearance is None
+                                      else float(flight_clearance) for a, b in self.flights])
         self.excused: list[tuple[int, float, float]] = []  # (site column, a, b): `violation` skips these
         self.engine = engine
         if engine is not None:  # site positions of all points from the shared engine's forward pass
@@ -344,14 +388,26 @@ class Clearance(Term):
         from solver.terms.dynamics import EngineGradient
 
         mo, res = _engine_motion(self, Y, Y1, Y2)
-        U = self.windows(t)
-        depth, ddepth = self.surfaces.penetration(res.sites[:, self._eidx], self.clearance)
-        f = (U * (depth * depth).sum(-1)).sum(1)
+        f, gp = self._integrand(res.sites[:, self._eidx], *self.split_windows(t), grad=grad)
         if not grad:
             return TermEval(f)
         g_sites = np.zeros(res.sites.shape)
-        np.add.at(g_sites, (slice(None), self._eidx), np.einsum("mk,mks,mksi->mki", 2.0 * U, depth, ddepth))
+        np.add.at(g_sites, (slice(None), self._eidx), gp)
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites))
+
+    def _integrand(self, p, Us, Uf, Bf, grad=True):
+        """f (m,) and df/dp (m, k, 3) at site positions p (m, k, 3) with swing weights Us (m, k),
+        flight weights Uf (m,) and flight bands Bf (m,) [m]."""
+        f = np.zeros(len(p))
+        gp = np.zeros(p.shape) if grad else None
+        for U, band in ((Us, self.clearance), (np.broadcast_to(Uf[:, None], Us.shape), np.broadcast_to(Bf[:, None], Us.shape))):
+            if not U.any():
+                continue
+            depth, ddepth = self.surfaces.penetration(p, band)  # (m, k, S), (m, k, S, 3)
+            f += (U * (depth * depth).sum(-1)).sum(1)
+            if grad:
+                gp += np.einsum("mk,mks,mksi->mki", 2.0 * U, depth, ddepth)
+        return f, gp
 
     def conflicts(self, times, qpos, excuse: bool = False) -> list[tuple[int, str, float]]:
         """Keyframes that contradict the schedule: a keyframe inside a fully weighted swing or flight
@@ -362,8 +418,8 @@ class Clearance(Term):
             [(keyframe index, site, distance short of the clearance [m]), ...].
         """
         times = np.asarray(times, float)
+        d = self._band_depths(np.asarray(qpos, float), times)
         U = self.windows(times)
-        d = self.depths(np.asarray(qpos, float))
         out = [(int(i), self.kin.names[k], float(d[i, k]))
                for i, k in zip(*np.nonzero((U >= FULL) & (d > 1e-4)), strict=True)]
         if excuse:
@@ -373,45 +429,51 @@ class Clearance(Term):
                         self.excused.append((k, a, b))
         return out
 
-    def windows(self, t: np.ndarray) -> np.ndarray:
-        """(n, k) weight u of each site at times t."""
+    def split_windows(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(Us (n, k), Uf (n,), Bf (n,)): each site's swing window, the flight window and the flight's
+        band c_f [m] (the clearance outside flights) at times t."""
         t = np.asarray(t, float)
         fl = np.zeros(t.shape)
-        for a, b in self.flights:
+        band = np.full(t.shape, self.clearance)
+        for (a, b), cf in zip(self.flights, self.flight_bands, strict=True):
             fl = np.maximum(fl, gap_window(t, a, b, self.core))
+            band[(t > a) & (t < b)] = cf
         cols = []
         for gaps in self.swings:
-            u = fl.copy()
+            u = np.zeros(t.shape)
             for a, b in gaps:
                 u = np.maximum(u, gap_window(t, a, b, self.core))
             cols.append(u)
-        return np.stack(cols, 1)
+        return np.stack(cols, 1), fl, band
 
-    def depths(self, Y: np.ndarray, rows: np.ndarray | None = None, margin: float | None = None) -> np.ndarray:
-        """(m, k) largest depth over surfaces of each site with the given margin (default c) [m]."""
-        Yr = Y if rows is None else Y[rows]
-        p = self.kin.positions(Yr)
-        d, _ = self.surfaces.penetration(p, self.clearance if margin is None else margin)
-        return d.max(axis=-1)
+    def windows(self, t: np.ndarray) -> np.ndarray:
+        """(n, k) weight of each site at times t: the larger of its swing and the flight window."""
+        Us, Uf, _ = self.split_windows(t)
+        return np.maximum(Us, Uf[:, None])
+
+    def _band_depths(self, Y: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """(m, k) how far each site is inside the band of the window that weighs it most at times t [m]."""
+        Us, Uf, Bf = self.split_windows(t)
+        p = self.kin.positions(Y)
+        swing = self.surfaces.penetration(p, self.clearance)[0].max(axis=-1)
+        flight = self.surfaces.penetration(p, np.broadcast_to(Bf[:, None], Us.shape))[0].max(axis=-1)
+        return np.where(Us >= Uf[:, None], swing, flight)
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         if self.engine is not None:
             ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
             return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
         n, nq = Y.shape
-        U = self.windows(t)
-        rows = np.flatnonzero((U > 0).any(axis=1))
+        Us, Uf, Bf = self.split_windows(t)
+        rows = np.flatnonzero((Us > 0).any(axis=1) | (Uf > 0))
         f = np.zeros(n)
         dY = np.zeros((n, nq)) if grad else None
         if rows.size == 0:
             return TermEval(f, dY)
         p = self.kin.positions(Y[rows])
-        depth, ddepth = self.surfaces.penetration(p, self.clearance)  # (m,k,S), (m,k,S,3)
-        Ur = U[rows]
-        f[rows] = (Ur * (depth * depth).sum(-1)).sum(1)
+        f[rows], gp = self._integrand(p, Us[rows], Uf[rows], Bf[rows], grad)
         if not grad:
             return TermEval(f)
-        gp = np.einsum("mk,mks,mksi->mki", 2.0 * Ur, depth, ddepth)
         hit = np.flatnonzero(np.abs(gp).sum(axis=(1, 2)) > 0)
         if hit.size:
             Yh = Y[rows[hit]]
@@ -432,5 +494,5 @@ class Clearance(Term):
         rows = np.flatnonzero((U >= FULL).any(axis=1))
         if rows.size == 0:
             return None
-        d = self.depths(Y, rows)
+        d = self._band_depths(Y[rows], t[rows])
         return float(np.max(np.where(U[rows] >= FULL, d, 0.0)))

@@ -117,6 +117,26 @@ def test_keyframes_that_contradict_the_schedule_are_found_and_excused(toy):
     assert 0 in planted.excused
 
 
+def test_keyframes_that_slide_a_planted_site_are_found_and_excused(toy):
+    """Two keyframes inside one contact 3 cm apart along the ground: the site must slide (no path can
+    hold it still), so that contact leaves `violation`; 5 mm apart is within the 1 cm tolerance."""
+    sched = (Contact("l_toe", 0.0, 0.6), Contact("r_toe", 0.0, 0.6))
+    w = parse_terms("planted", contacts=sched)
+    times = np.array([0.0, 0.1, 0.3, 1.0])  # 0.1 and 0.3 inside both contacts (0 is where they start)
+    q = np.tile(toy.qpos0, (4, 1))
+    q[:, 2] = 0.952  # sites near the floor (2 mm up: the planted rest height)
+    q[2, 0] += 0.03  # the whole figure 3 cm along x at t = 0.3: both toes slide 3 cm
+    obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched)
+    found = [c for c in keyframe_conflicts(obj, times, q) if c[0] == "sliding"]
+    assert sorted(found) == [("sliding", 2, "l_toe", pytest.approx(0.03, abs=1e-9)),
+                             ("sliding", 2, "r_toe", pytest.approx(0.03, abs=1e-9))]
+    assert obj.terms[0].excused == {0, 1}
+    q[2, 0] -= 0.025  # 5 mm
+    obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched)
+    assert not [c for c in keyframe_conflicts(obj, times, q) if c[0] == "sliding"]
+    assert not obj.terms[0].excused
+
+
 @pytest.mark.slow
 def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
     from runner.commands.animate import contact_summary_rows

@@ -12,7 +12,7 @@ import pytest
 
 from solver.errors import InputError
 from solver.layout import StateLayout
-from solver.terms.contact import Clearance, Planted, contact_window, flights, swings
+from solver.terms.contact import Clearance, Planted, contact_window, flights, smoothstep, swings
 from solver.terms.contact_wrench import FrictionCone, cone_metrics
 
 from conftest import fd_gradient, random_qpos
@@ -199,9 +199,48 @@ def test_clearance_keeps_flights(toy_model, layout):
     t = np.array([0.35])  # the middle of the flight: every site counts
     Y = standing(layout, 1, (0.0, 0.0, FOOT))
     term = Clearance(toy_model, run, clearance=0.02)
-    assert term.evaluate(t, Y, None, None).f[0] == pytest.approx(4 * 0.02**2)
+    # the flight lasts 0.1 s: a ballistic body rises g T^2 / 8 = 12.3 mm in it, the band (< c = 2 cm)
+    cf = 9.81 * 0.1**2 / 8
+    assert term.evaluate(t, Y, None, None).f[0] == pytest.approx(4 * cf**2, rel=1e-12)
+    long = Clearance(toy_model, [Contact("l_toe", 0.0, 0.3), Contact("r_toe", 0.6, 0.7)], clearance=0.02)
+    np.testing.assert_allclose(long.flight_bands, [0.02])  # 0.3 s: g T^2 / 8 = 11 cm, capped at c
+    assert long.evaluate(np.array([0.45]), Y, None, None).f[0] == pytest.approx(4 * 0.02**2, rel=1e-12)
+    fixed = Clearance(toy_model, run, clearance=0.02, flight_clearance=0.02)
+    assert fixed.evaluate(t, Y, None, None).f[0] == pytest.approx(4 * 0.02**2, rel=1e-12)
     nofl = Clearance(toy_model, run, clearance=0.02, flight=False)
     assert nofl.evaluate(t, Y, None, None).f[0] == 0.0
+
+
+def test_flight_clearance_is_its_own_band(toy_model, layout):
+    """c_f: every site keeps c_f in a flight's core, the swing cores keep c; the violation is the
+    intrusion into the band of the window that weighs the site most."""
+    run = [Contact("l_toe", 0.0, 0.3), Contact("r_toe", 0.4, 0.7), Contact("l_toe", 0.8, 1.0)]
+    t = np.array([0.35, 0.55])  # flight core; l_toe's swing core (0.3, 0.8): 0.55 is its middle
+    z = 0.015
+    Y = standing(layout, 2, (0.0, 0.0, FOOT + z))
+    term = Clearance(toy_model, run, clearance=0.02, flight_clearance=0.01)
+    f = term.evaluate(t, Y, None, None).f
+    # 0.35: the flight (all four sites 1.5 cm up, band 1 cm: nothing) and l_toe's swing (0.35 is in the
+    # outer ramp of (0.3, 0.8): weight smoothstep((0.35 - 0.3) / 0.125)); 0.55: l_toe alone, band 2 cm
+    w = smoothstep(np.array([0.05 / 0.125]))[0]
+    np.testing.assert_allclose(f, [w * (0.02 - z) ** 2, (0.02 - z) ** 2], rtol=1e-12)
+    assert term.violation(Y, t) == pytest.approx(0.02 - z)
+    Y[:, 2] = FOOT + 0.004  # 4 mm up: inside both bands
+    f = term.evaluate(t, Y, None, None).f
+    assert f[0] == pytest.approx(4 * (0.01 - 0.004) ** 2 + w * (0.02 - 0.004) ** 2, rel=1e-12)
+    with pytest.raises(InputError, match="flight_clearance"):
+        Clearance(toy_model, run, flight_clearance=0.0)
+
+
+def test_clearance_gradient_with_a_flight_band(toy_model, layout):
+    rng = np.random.default_rng(11)
+    run = [Contact("l_toe", 0.0, 0.3), Contact("r_toe", 0.4, 0.7), Contact("l_toe", 0.8, 1.0)]
+    n = 8
+    Y = random_qpos(rng, layout, n)
+    Y[:, 2] = rng.uniform(0.9, 1.2, n)
+    Y[:, 0] = rng.uniform(0.8, 2.0, n)
+    t = np.linspace(0.31, 0.79, n)
+    check_gradient(Clearance(toy_model, run, clearance=0.25, flight_clearance=0.15, core=0.4), t, Y, None, None)
 
 
 # ---------------------------------------------------------------------------------------------------
