@@ -40,8 +40,9 @@ def default_options(weights: dict[str, float]) -> SolveOptions:
     frame budget of 10 per keyframe interval; `replace(..., tol=0)` for `rounds` fixed rounds), renormalized terms
     (eq. 7), L-BFGS preconditioned in the spline-acceleration metric with relative tolerance 1e-6, no
     evaluation or time limit, and penalty continuation to `default_limits(weights)` (penetration
-    0.5 mm, hyperextension 1 deg, |1 - |q|| 0.03, planted 1 cm / 10 cm/s, clearance 5 mm, for the
-    terms switched on).
+    0.5 mm, hyperextension 1 deg, |1 - |q|| 0.03, planted 2 cm / 20 cm/s, clearance 1 cm into its band,
+    for the terms switched on); with contact terms, variable frames first at every touch-down and
+    lift-off (`SolveOptions.term_knots`).
 
     Args:
         weights: {term name: lambda_j >= 0} as from `parse_terms`; only which terms have a nonzero
@@ -100,7 +101,9 @@ def animate(
             budget runs out (`Solution.converged_to_tol`, `Solution.refinement_estimate`).
         contacts: the contact schedule (`solver.contacts.Contact`s: site, start, end [s], surface), e.g.
             `KeyframeFileInfo.contacts` or `reference_contacts`. With one, the default terms add planted
-            and clearance and "all" adds cone too (issue 11); without one, naming them is an InputError.
+            and clearance and "all" adds cone too (issue 11; `terms="penetration,unit,bending,smooth"`
+            leaves them out); without one, naming them is an InputError. Keyframes that contradict it
+            are excused from the bounds (`solver.problem.keyframe_conflicts`).
     Returns:
         Solution: `frames` (the optimized FrameSet, values (m, nq) qpos at times (m,) [s]; the path is
         the spline through them, `frames.path(t)`), `initial` (the plain spline's), E and the term

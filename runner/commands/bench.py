@@ -297,7 +297,7 @@ def _terms_all_block(runs: _Runs) -> Block:
 def _run_and_step_block(runs: _Runs) -> Block:
     rows = []
     common = runs.solved("all")["solution"].frames
-    for name, terms in (("geometric (default)", GEOMETRIC), ("all terms", "all")):
+    for name, terms in (("geometric (no contact terms)", GEOMETRIC), ("all terms", "all")):
         r = runs.solved(terms)
         f = r["figures"]
         rows.append([name, str(f["evals"]), str(f["frames"]), f"{f['E_final']:.5g}",

@@ -77,6 +77,7 @@ from solver.terms.contact_schedule import (  # noqa: F401  (the schedule helpers
     contact_window,
     flights,
     gap_window,
+    last_for_times,
     smoothstep,
     swings,
 )
@@ -148,8 +149,10 @@ class Planted(Term):
         return np.array([x for c in self.contacts for x in (c.start, c.end)], float)
 
     def windows(self, t: np.ndarray) -> np.ndarray:
-        """(n, C) window of each contact at times t."""
-        t = np.asarray(t, float)
+        """(n, C) window of each contact at times t (read-only; the last times' are kept)."""
+        return last_for_times(self, "_window_cache", t, self._windows)
+
+    def _windows(self, t: np.ndarray) -> np.ndarray:
         return np.stack([contact_window(t, float(c.start), float(c.end), self.ramp) for c in self.contacts], 1) \
             if self.contacts else np.zeros((len(t), 0))
 
@@ -431,8 +434,11 @@ class Clearance(Term):
 
     def split_windows(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(Us (n, k), Uf (n,), Bf (n,)): each site's swing window, the flight window and the flight's
-        band c_f [m] (the clearance outside flights) at times t."""
-        t = np.asarray(t, float)
+        band c_f [m] (the clearance outside flights) at times t (read-only; the last times' are kept:
+        the quadrature points are the same at every evaluation)."""
+        return last_for_times(self, "_split_cache", t, self._split_windows)
+
+    def _split_windows(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         fl = np.zeros(t.shape)
         band = np.full(t.shape, self.clearance)
         for (a, b), cf in zip(self.flights, self.flight_bands, strict=True):

@@ -34,6 +34,22 @@ def contact_window(t: np.ndarray, start: float, end: float, ramp: float) -> np.n
     return smoothstep((t - start) / r) * smoothstep((end - t) / r)
 
 
+def last_for_times(owner, attr: str, t, compute):
+    """compute(t) (an array or a tuple of arrays, made read-only), remembered on `owner.attr` for the
+    last t: a term's windows depend only on the times, and an objective evaluates at the same
+    quadrature points every time."""
+    t = np.asarray(t, float)
+    key = (t.shape, t.tobytes())
+    hit = getattr(owner, attr, None)
+    if hit is not None and hit[0] == key:
+        return hit[1]
+    value = compute(t)
+    for a in value if isinstance(value, tuple) else (value,):
+        a.flags.writeable = False
+    setattr(owner, attr, (key, value))
+    return value
+
+
 def gap_window(t: np.ndarray, a: float, b: float, core: float) -> np.ndarray:
     """(n,) weight over a gap (a, b): 0 at the ends, 1 on the central `core` fraction, smoothstep
     ramps over the outer (1 - core)/2 at each end (core = 1: the open box)."""
