@@ -25,8 +25,11 @@ has that shape). Two terms here, one in `solver.terms.contact_wrench` (friction 
 `Clearance` (name "clearance", m^2): a site that is not in contact keeps a clearance c (default 2 cm)
 from every surface in the middle of its swing, and every site keeps c_f in the middle of a flight,
 
-    f(t) = sum over sites k of  sum over surfaces s of [ u_k(t) depth_ks(t; c)^2 + u_f(t) depth_ks(t; c_f)^2 ],
-    depth_ks(c) = `StaticSurfaces.penetration(p_k, margin=c)` (planes: max(0, c - height); boxes grown by c),
+    f(t) = sum over sites k of  u_k(t) max(0, c - h_k(t))^2 + u_f(t) max(0, c_f - h_k(t))^2,
+    h_k = height of site k above the surface under it (a box's top face over its footprint, else the
+          floor; `SupportSurfaces` with no footprint margin): clearance above the ground under the
+          foot, so a toe passing a step's edge on its way up is not pushed sideways (the penetration
+          term keeps it out of the box),
     c_f = min(c, g T^2 / 8) for a flight of duration T (default): the height a ballistic body rises in
           a flight that long (g = 9.81 m/s^2), so a short hop's feet are not lifted more than the body
           is (a 0.08 s flight: 8 mm; 0.13 s and longer: c); or a fixed `flight_clearance`,
@@ -335,10 +338,10 @@ class Planted(Term):
 
 
 class Clearance(Term):
-    """f = sum over sites of u(t) * sum over surfaces of depth(margin=c)^2 [m^2]: swing feet clear.
+    """f = sum over sites of u(t) max(0, c - h)^2 (+ the flight band) [m^2]: swing feet clear.
 
-    See the module docstring for u (swing cores and flights) and the depth. Gradient: site Jacobian,
-    only at points where a weighted site is closer than c to a surface.
+    See the module docstring for u (swing cores and flights) and h. Gradient: -n (the normal of the
+    surface under the site) through the site Jacobian, only where a weighted site is lower than its band.
 
     Args:
         model: MjModel of the scene. contacts: the schedule (objects with site, start, end, surface).
@@ -363,6 +366,8 @@ class Clearance(Term):
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the clearance term")
         self.surfaces = surfaces
+        #: the surface under a site: the boxes' top faces over their footprints exactly, else the floor
+        self.below = SupportSurfaces(surfaces, footprint_margin=0.0)
         self.contacts = check_contacts(contacts, CONTACT_SITES, surfaces.names)
         c, core = float(clearance), float(core)
         if not np.isfinite(c) or c <= 0:
@@ -401,20 +406,21 @@ class Clearance(Term):
     def _integrand(self, p, Us, Uf, Bf, grad=True):
         """f (m,) and df/dp (m, k, 3) at site positions p (m, k, 3) with swing weights Us (m, k),
         flight weights Uf (m,) and flight bands Bf (m,) [m]."""
+        h, n = self.below.height(p)  # (m, k) height above the surface under each site, (m, k, 3) its normal
         f = np.zeros(len(p))
         gp = np.zeros(p.shape) if grad else None
-        for U, band in ((Us, self.clearance), (np.broadcast_to(Uf[:, None], Us.shape), np.broadcast_to(Bf[:, None], Us.shape))):
+        for U, band in ((Us, self.clearance), (np.broadcast_to(Uf[:, None], Us.shape), Bf[:, None])):
             if not U.any():
                 continue
-            depth, ddepth = self.surfaces.penetration(p, band)  # (m, k, S), (m, k, S, 3)
-            f += (U * (depth * depth).sum(-1)).sum(1)
+            depth = np.maximum(0.0, band - h)  # (m, k)
+            f += (U * depth * depth).sum(1)
             if grad:
-                gp += np.einsum("mk,mks,mksi->mki", 2.0 * U, depth, ddepth)
+                gp -= (2.0 * U * depth)[..., None] * n
         return f, gp
 
-    def conflicts(self, times, qpos, excuse: bool = False) -> list[tuple[int, str, float]]:
+    def conflicts(self, times, qpos, excuse: bool = False, tolerance: float = 1e-4) -> list[tuple[int, str, float]]:
         """Keyframes that contradict the schedule: a keyframe inside a fully weighted swing or flight
-        window that holds a site closer than the clearance to a surface (keyframes are met exactly).
+        window that holds a site more than `tolerance` [m] inside its band (keyframes are met exactly).
         excuse: also leave that site's swing (or flight) out of `violation`.
 
         Returns:
@@ -424,7 +430,7 @@ class Clearance(Term):
         d = self._band_depths(np.asarray(qpos, float), times)
         U = self.windows(times)
         out = [(int(i), self.kin.names[k], float(d[i, k]))
-               for i, k in zip(*np.nonzero((U >= FULL) & (d > 1e-4)), strict=True)]
+               for i, k in zip(*np.nonzero((U >= FULL) & (d > tolerance)), strict=True)]
         if excuse:
             for i, k, _ in ((i, self.kin.names.index(site), dd) for i, site, dd in out):
                 for a, b in [*self.swings[k], *self.flights]:
@@ -460,10 +466,8 @@ class Clearance(Term):
     def _band_depths(self, Y: np.ndarray, t: np.ndarray) -> np.ndarray:
         """(m, k) how far each site is inside the band of the window that weighs it most at times t [m]."""
         Us, Uf, Bf = self.split_windows(t)
-        p = self.kin.positions(Y)
-        swing = self.surfaces.penetration(p, self.clearance)[0].max(axis=-1)
-        flight = self.surfaces.penetration(p, np.broadcast_to(Bf[:, None], Us.shape))[0].max(axis=-1)
-        return np.where(Us >= Uf[:, None], swing, flight)
+        h, _ = self.below.height(self.kin.positions(Y))
+        return np.maximum(0.0, np.where(Us >= Uf[:, None], self.clearance, Bf[:, None]) - h)
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         if self.engine is not None:

@@ -137,6 +137,28 @@ def test_keyframes_that_slide_a_planted_site_are_found_and_excused(toy):
     assert not obj.terms[0].excused
 
 
+def test_a_swing_the_path_next_to_a_keyframe_keeps_on_the_floor_is_excused(toy):
+    """With the plain path given, the clearance term is also checked 5 and 10 ms from each keyframe:
+    a keyframe whose neighbourhood holds a swinging site on the floor (more than half the bound inside
+    the 2 cm band) is reported, its swing excused; the keyframe alone (site 5 cm up) is not."""
+    sched = (Contact("l_toe", 0.0, 0.3), Contact("l_toe", 0.7, 1.0), Contact("r_toe", 0.0, 1.0))  # l_toe swings, no flight
+    w = parse_terms("clearance", contacts=sched)
+    times = np.array([0.0, 0.5, 1.0])
+    q = np.tile(toy.qpos0, (3, 1))
+    q[:, 2] = 1.0  # sites 5 cm up at the keyframes
+
+    def path(t):  # the plain spline dips to 2 mm right next to the middle keyframe
+        Y = np.tile(toy.qpos0, (len(t), 1))
+        Y[:, 2] = np.where(np.abs(np.asarray(t) - 0.5) < 0.011, 0.952, 1.0)
+        return Y
+
+    obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched)
+    assert keyframe_conflicts(obj, times, q) == []
+    found = keyframe_conflicts(obj, times, q, path=path)
+    assert found == [("clearance", 1, "l_toe", pytest.approx(0.02 - 0.002, abs=1e-6))]
+    assert (1, 0.3, 0.7) in obj.terms[0].excused  # l_toe is column 1 (l_heel, l_toe, r_heel, r_toe)
+
+
 @pytest.mark.slow
 def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
     from runner.commands.animate import contact_summary_rows

@@ -357,7 +357,7 @@ def test_objective_gradient_with_a_shared_engine(toy_model, layout):
         FrictionCone(toy_model, contacts, ramp=0.05, engine=engine),
         RootResidual(toy_model, engine=engine, flight="path"),
         Planted(toy_model, contacts),
-        Clearance(toy_model, contacts, clearance=0.9),
+        Clearance(toy_model, contacts, clearance=2.0),  # every site inside the band in its swing
     ]
     obj = Objective(terms, np.array([1e-4, 1e-4, 10.0, 10.0]), knots[0], knots[-1], rate=30)
     ev = obj.evaluate(knots, P)
