@@ -267,7 +267,7 @@ def main(argv=None) -> int:
     factors = [int(f) for f in args.factors.split(",")]
     print(f"scaling: {args.keyframes.name} ({keyframes.count} keyframes, {keyframes.times[-1] - keyframes.times[0]:.2f} s) "
           f"tiled {args.factors}x, floor-only scene, quadrature {args.rate:g} Hz, global subdivision "
-          f"{args.per_segment} per interval, ftol 1e-6, preconditioned; one subprocess per length, one BLAS "
+          f"{args.per_segment} per interval, otherwise animate's options (default_options); one subprocess per length, one BLAS "
           "thread; peak MB = maxrss - RSS before the solve")
     print_table(scaling(keyframes, factors, figure=args.figure, rate=args.rate, per_segment=args.per_segment),
                 "spline: auto (dense up to DENSE_MAX_ENTRIES, banded above)")
