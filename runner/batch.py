@@ -74,6 +74,31 @@ def clip_folders(clips: Sequence[Path], out: Path) -> list[Path]:
     return folders
 
 
+def clip_duration(path: Path) -> float:
+    """The clip's length [s] from its BVH header ("Frames: N" times "Frame Time: T"), read without
+    parsing the motion; 0 if the header cannot be read (such a clip fails at once when run)."""
+    frames = None
+    try:
+        with open(path, errors="replace") as f:
+            for line in f:
+                words = line.split()
+                if words[:1] == ["Frames:"] and len(words) == 2:
+                    frames = int(words[1])
+                elif words[:2] == ["Frame", "Time:"] and len(words) == 3 and frames is not None:
+                    return max(0.0, frames * float(words[2]))
+    except (OSError, ValueError):
+        pass
+    return 0.0
+
+
+def longest_first(todo: list, durations: Sequence[float]) -> list:
+    """`todo` ordered by decreasing clip duration (ties: the given order): the longest-processing-time
+    rule, so that with several workers a long clip does not start last and run alone at the end (a
+    clip's solve time grows with its length)."""
+    order = sorted(range(len(todo)), key=lambda j: -durations[j])
+    return [todo[j] for j in order]
+
+
 def options_fingerprint(options: ClipOptions) -> dict:
     """The options that decide a clip's outputs, as JSON values (not `quiet` or `command`)."""
     d = dataclasses.asdict(options)
@@ -211,13 +236,15 @@ def _submitter(engine: str, workers: int, ray_address: str | None):
         import ray
     except ImportError:
         raise InputError('--engine ray needs Ray: pip install -e ".[cluster]"') from None
-    # a local Ray (no address) gets `workers` CPUs: at most that many clips at once, as with --engine local
-    ray.init(address=ray_address, num_cpus=None if ray_address else workers, ignore_reinit_error=True,
-             log_to_driver=False)
+    # a local Ray (no address) gets `workers` CPUs: at most that many clips at once, as with --engine local,
+    # and workers at the priority of the local engine's: Ray starts its workers at niceness 15, and on a
+    # machine shared with other work such a worker got a fraction of a core (a clip ~7x slower)
+    local = {} if ray_address else {"num_cpus": workers, "_system_config": {"worker_niceness": 0}}
+    ray.init(address=ray_address, ignore_reinit_error=True, log_to_driver=False, **local)
     remote = ray.remote(num_cpus=1)(run_clip)
 
-    def wait_ray(hs):
-        done, pending = ray.wait(list(hs), num_returns=1)
+    def wait_ray(hs):  # with a timeout: a blocked ray.wait would not see Ctrl-C until a clip finished
+        done, pending = ray.wait(list(hs), num_returns=1, timeout=0.5)
         return set(done), set(pending)
 
     def cancel_ray(hs):
@@ -254,6 +281,7 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
             rows[i] = {**done, "status": "skipped", "wall_time_s": 0.0}
         else:
             todo.append((i, clip, folder, sha))
+    todo = longest_first(todo, [clip_duration(t[1]) for t in todo])
     n_skip = sum(r is not None and r["status"] == "skipped" for r in rows)
     say(f"dynsplines batch: {len(clips)} clips -> {out}: {n_skip} already done, {len(todo)} to run "
         f"({engine}, {workers} worker{'s' if workers != 1 else ''})")
@@ -298,8 +326,10 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
                     handles[h] = nxt[0]
                     pending.add(h)
 
-            try:
-                hand_out()
+            def drain(stopping: bool) -> None:
+                """Record the clips in flight as they finish, handing out the next ones (none once
+                interrupted); with `stopping` (after Ctrl-C) a cancelled or dead clip stays "not run"."""
+                nonlocal interrupted
                 while pending:
                     done, still = wait(pending)
                     pending.clear()
@@ -307,15 +337,21 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
                     for h in done:
                         try:
                             row = result(h)
+                        except KeyboardInterrupt:
+                            raise
                         except BaseException as e:  # noqa: BLE001 - a worker that died: the clip's row
-                            if isinstance(e, KeyboardInterrupt):
-                                raise
+                            if stopping:
+                                continue
                             row = dict.fromkeys(COLUMNS) | dict(clip=str(clips[handles[h]]),
                                                                 folder=folders[handles[h]].name, status="failed",
                                                                 error=_one_line(e), wall_time_s=0.0)
                         finished(handles[h], row, bar)
                         interrupted |= row["status"] == "interrupted"
                     hand_out()
+
+            try:
+                hand_out()
+                drain(stopping=False)
                 close(False)
             except KeyboardInterrupt:
                 interrupted = True
@@ -323,15 +359,7 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
                 say("stopping: no new clips; waiting for the running ones to keep their best path "
                     "(Ctrl-C again to stop waiting)")
                 try:
-                    while pending:
-                        done, still = wait(pending)
-                        pending.clear()
-                        pending.update(still)
-                        for h in done:
-                            try:
-                                finished(handles[h], result(h), bar)
-                            except Exception:  # noqa: BLE001 - cancelled or died: "not run"
-                                pass
+                    drain(stopping=True)
                 except KeyboardInterrupt:
                     pass
                 close(True)

@@ -38,7 +38,8 @@ def default_options(weights: dict[str, float]) -> SolveOptions:
     decrease of E each midpoint frame predicts (paper fig. 5 and sec. 4.2) until the predicted decrease
     still available, summed over all segments, is at most DEFAULT_TOL of E (`SolveOptions.tol`; a
     frame budget of 10 per keyframe interval; `replace(..., tol=0)` for `rounds` fixed rounds), renormalized terms
-    (eq. 7), L-BFGS preconditioned in the spline-acceleration metric with relative tolerance 1e-6, no
+    (eq. 7), L-BFGS preconditioned in the spline-acceleration metric (quaternions' radial directions
+    weighted by the unit term's curvature: `radial_weight="auto"`) with relative tolerance 1e-6, no
     evaluation or time limit, and penalty continuation to `default_limits(weights)` (penetration
     0.5 mm, hyperextension 1 deg, |1 - |q|| 0.03, planted 2 cm / 20 cm/s, clearance 1 cm into its band,
     for the terms switched on); with contact terms, variable frames first at every touch-down and
@@ -59,8 +60,8 @@ def default_options(weights: dict[str, float]) -> SolveOptions:
                          f"{type(weights).__name__}")
     return SolveOptions(
         subdivision="adaptive", per_segment=1, rounds=2, renormalize=True, algorithm="lbfgs", ftol_rel=1e-6,
-        max_evals=0, max_time_s=0.0, limits=default_limits(weights), precondition=True, score="decrease",
-        tol=DEFAULT_TOL,
+        max_evals=0, max_time_s=0.0, limits=default_limits(weights), precondition=True, radial_weight="auto",
+        score="decrease", tol=DEFAULT_TOL,
     )
 
 

@@ -264,7 +264,7 @@ class SplineBasis:
       why W itself is not sparse).
 
     W, W1, W2 and B stay available in both modes; a banded basis builds them on first use (O(n m);
-    `bending_hessian` gives W2^T diag(w) W2 without them).
+    `gram` gives W^T diag(w) W and W2^T diag(w) W2 without them).
 
     Attributes:
         knots: (m,) frame times [s]. t: (n,) quadrature times [s].
@@ -448,31 +448,46 @@ class SplineBasis:
         return self._moments_transpose(G)
 
     def bending_hessian(self, w) -> np.ndarray:
-        """H = W2^T diag(w) W2 (m, m) without forming W2: O(n + m^2) work and memory.
+        """H = W2^T diag(w) W2 (m, m): `gram(2, w)`. 2 h W2^T W2 (w = 2 h, uniform quadrature) is the
+        Hessian of integral |Y''|^2 dt per component, the preconditioner's."""
+        return self.gram(2, w)
 
-        2 h W2^T W2 (w = 2 h, uniform quadrature) is the Hessian of integral |Y''|^2 dt per component,
-        the preconditioner's. Y'' is linear in the moments, W2 = C S with C (n, m) two entries per row,
-        so C^T diag(w) C = Q is tridiagonal (O(n) to build), and with S = [0; T^-1 R; 0]:
-        H = R^T T^-1 Q_int T^-1 R (two tridiagonal solves with m right-hand sides, O(m^2)).
+    def gram(self, order: int, w) -> np.ndarray:
+        """W_k^T diag(w) W_k (m, m) for k = `order` (0: values, 2: second derivatives) without forming
+        W_k on a banded basis: O(n + m^2) work and memory.
+
+        W_k = L_k [I; S] with L_k the local map (n, 2m; 2 or 4 entries per row) and S = [0; T^-1 R; 0]
+        the moments. A = L_k^T diag(w) L_k is banded (O(n) to build); with its blocks A_PP, A_PM, A_MM
+        (values / moments): W_k^T diag(w) W_k = A_PP + A_PM S + S^T A_PM^T + S^T A_MM S, where S X and
+        S^T X are tridiagonal solves (O(m) per column). Y'' reads only the moments (A_PP = A_PM = 0):
+        R^T T^-1 A_MM T^-1 R.
 
         Args:
-            w: quadrature weight of each point [s], (n,) or a scalar.
+            order: 0 or 2. w: quadrature weight of each point [s], (n,) or a scalar.
         Returns:
-            (m, m) symmetric positive semidefinite [1/s^3 times the unit of w / s].
+            (m, m) symmetric positive semidefinite [s (order 0); 1/s^3 (order 2), times the unit of w / s].
+        Raises:
+            ValueError: order not 0 or 2.
         """
+        if order not in (0, 2):
+            raise ValueError(f"gram order must be 0 or 2, got {order}")
         w = np.broadcast_to(np.asarray(w, dtype=float), self.t.shape)
         m = len(self.knots)
         if not self.banded:
-            W2 = self._B3[2]
-            return (W2.T * w) @ W2
-        if m < 3:
-            return np.zeros((m, m))
-        C = self._local[2][:, m:]  # (n, m) sparse: Y'' = C M
-        Q = (C.T.multiply(w[None, :]) @ C).tocsr()[1:-1, 1:-1]  # tridiagonal (m-2, m-2)
-        X = self._solve(self._R_dense())  # T^-1 R (m-2, m)
-        Z = self._solve(np.ascontiguousarray(Q @ X))  # T^-1 Q T^-1 R
-        H = self._R_transpose(Z)
-        return 0.5 * (H + H.T)
+            Wk = self._B3[order]
+            return (Wk.T * w) @ Wk
+        L = self._local[order]
+        A = (L.T.multiply(w[None, :]) @ L).tocsr()  # (2m, 2m) banded
+        G = A[:m, :m].toarray()
+        if m >= 3:
+            X = self._solve(self._R_dense())  # T^-1 R (m-2, m): S's interior rows
+            A_MM = A[m + 1:2 * m - 1, m + 1:2 * m - 1]
+            SMS = self._R_transpose(self._solve(np.ascontiguousarray(A_MM @ X)))  # S^T A_MM S
+            if order == 0:
+                PMS = np.asarray(A[:m, m + 1:2 * m - 1] @ X)  # A_PM S
+                G += PMS + PMS.T
+            G += SMS
+        return 0.5 * (G + G.T)
 
     def _R_dense(self) -> np.ndarray:
         """R (m-2, m) with R y = 6 (second divided differences), as in `moment_matrix`."""

@@ -13,8 +13,9 @@ Each length is solved in its own subprocess (one BLAS thread), so that its peak 
 peak minus the resident size just before the solve (the solve's own memory: arrays, the spline bases,
 the optimizer; the interpreter, numpy, scipy and MuJoCo are the same at every length).
 
-Solve options: those of `dynsplines animate` (ftol 1e-6, preconditioner, renormalization, the default
-penalty-continuation limits) except the subdivision: *global*, 2 variable frames per keyframe interval,
+Solve options: those of `dynsplines animate` (`default_options`: ftol 1e-6, preconditioner with the
+radial weight from the terms, renormalization, the default penalty-continuation limits) except the
+subdivision: *global*, 2 variable frames per keyframe interval,
 one optimization round. Adaptive subdivision picks frames by a score threshold and per-round budgets,
 so the number of frames and rounds need not be proportional to the length, and the comparison would
 mix the cost of a different problem into the cost of a longer one; with a fixed subdivision the
@@ -30,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -99,19 +101,19 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, 
         max_penetration_mm, keyframe_error (path_metrics at 1000 Hz), banded (the solve's spline
         bases evaluated through the tridiagonal system).
     """
+    from solver.animate import default_options
     from solver.frames import FrameSet
     from solver.layout import StateLayout
     from solver.metrics import path_metrics
-    from solver.problem import default_limits, figure_objective, parse_terms
-    from solver.solve import SolveOptions, solve
+    from solver.problem import figure_objective, parse_terms
+    from solver.solve import solve
 
     model = floor_model(figure)
     layout = StateLayout.from_model(model)
     weights = parse_terms(None)
     objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
-    options = SolveOptions(subdivision="global", per_segment=per_segment, ftol_rel=1e-6, precondition=True,
-                           limits=default_limits(weights))
+    options = replace(default_options(weights), subdivision="global", per_segment=per_segment)
     rss_before = _rss_mb()
     r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
@@ -265,7 +267,7 @@ def main(argv=None) -> int:
     factors = [int(f) for f in args.factors.split(",")]
     print(f"scaling: {args.keyframes.name} ({keyframes.count} keyframes, {keyframes.times[-1] - keyframes.times[0]:.2f} s) "
           f"tiled {args.factors}x, floor-only scene, quadrature {args.rate:g} Hz, global subdivision "
-          f"{args.per_segment} per interval, ftol 1e-6, preconditioned; one subprocess per length, one BLAS "
+          f"{args.per_segment} per interval, otherwise animate's options (default_options); one subprocess per length, one BLAS "
           "thread; peak MB = maxrss - RSS before the solve")
     print_table(scaling(keyframes, factors, figure=args.figure, rate=args.rate, per_segment=args.per_segment),
                 "spline: auto (dense up to DENSE_MAX_ENTRIES, banded above)")

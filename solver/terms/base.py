@@ -43,6 +43,14 @@ class Term:
     name: str = "term"
     units: str = ""
     needs: tuple[int, ...] = (0,)  # which of Y (0), Y' (1), Y'' (2) the term reads
+    #: The Gauss-Newton curvature the preconditioner may assume (`solver.precondition`, radial weight
+    #: "auto"); 0 where the term says nothing. acceleration_curvature: d^2 f / d(y'')^2 of each component
+    #: whose acceleration the term penalizes (|y''|^2: 2) [units of f s^4].
+    acceleration_curvature: float = 0.0
+    #: radial_curvature: d^2 f / dr^2 along each quaternion's radial direction q/|q| at |q| = 1, for the
+    #: qpos slots `radial_slots` ((s, 4) indices) [units of f].
+    radial_curvature: float = 0.0
+    radial_slots: np.ndarray | None = None
 
     def evaluate(
         self, t: np.ndarray, Y: np.ndarray, Y1: np.ndarray | None, Y2: np.ndarray | None, grad: bool = True

@@ -22,6 +22,8 @@ class CovariantAcceleration(Term):
     name = "covariant"
     units = "1/s^4"
     needs = (0, 2)
+    #: |y''|^2 per linear component, and per tangential quaternion direction
+    acceleration_curvature = 2.0
 
     def __init__(self, quat_slots: np.ndarray, linear_index: np.ndarray | None = None):
         self.idx = np.asarray(quat_slots, dtype=int).reshape(-1, 4)
@@ -79,6 +81,7 @@ class NormalizedCovariantAcceleration(Term):
     name = "covariant_normalized"
     units = "1/s^4"
     needs = (0, 1, 2)
+    acceleration_curvature = 2.0  # |A|^2 on a unit quaternion's tangent directions
 
     def __init__(self, quat_slots: np.ndarray):
         self.idx = np.asarray(quat_slots, dtype=int).reshape(-1, 4)

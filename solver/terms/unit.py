@@ -16,9 +16,12 @@ class UnitQuaternion(Term):
     name = "unit"
     units = "1"
     needs = (0,)
+    #: d^2/dr^2 (1 - r^2)^2 = 12 r^2 - 4 = 8 at r = |q| = 1 (also its Gauss-Newton value 2 (2r)^2)
+    radial_curvature = 8.0
 
     def __init__(self, quat_slots: np.ndarray):
         self.idx = np.asarray(quat_slots, dtype=int).reshape(-1, 4)
+        self.radial_slots = self.idx
         self._single = self.idx.shape[0] == 1 and np.array_equal(self.idx[0], np.arange(4))
 
     def violation(self, Y: np.ndarray) -> float:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from runner.batch import COLUMNS, clip_folders, find_clips
+from runner.batch import COLUMNS, clip_duration, clip_folders, find_clips, longest_first
 from runner.cli import main
 from runner.exit_codes import EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED, EXIT_OK
 from solver.errors import InputError
@@ -128,6 +128,32 @@ def test_ctrl_c_stops_handing_out_clips(tmp_path, clips, monkeypatch):
     assert [r["status"] for r in rows[:-1]] == ["interrupted", "not run"]
     assert json.loads((out / "summary.json").read_text())["interrupted"]
     assert not list(out.glob("*/done.json")) and not list(out.glob("**/.*.tmp*"))
+
+
+def test_clip_duration_from_the_header(tmp_path, clips):
+    assert clip_duration(clips / "a.bvh") == pytest.approx(60 * 0.0083333)
+    assert clip_duration(clips / "b.bvh") == pytest.approx(50 * 0.0083333)
+    (tmp_path / "junk.bvh").write_text("HIERARCHY\nMOTION\nFrames: many\n")
+    assert clip_duration(tmp_path / "junk.bvh") == 0.0 and clip_duration(tmp_path / "missing.bvh") == 0.0
+    assert longest_first(["x", "y", "z", "w"], [1.0, 3.0, 1.0, 2.0]) == ["y", "w", "x", "z"]  # ties keep order
+
+
+def test_longest_clips_are_handed_out_first(tmp_path, clips, monkeypatch):
+    """The longest-processing-time rule: clips start in order of decreasing duration (with two workers
+    a long clip that started last would run alone at the end); the summary keeps the clips' order."""
+    import runner.batch
+
+    started = []
+
+    def record(clip, *a, **k):
+        started.append(Path(clip).name)
+        raise ValueError("not solved in this test")
+
+    monkeypatch.setattr(runner.batch, "process_clip", record)
+    short_bvh(clips / "c.bvh", frames=90)
+    assert main(["batch", str(clips), "--out", str(tmp_path / "out"), *FAST]) == EXIT_FAILED
+    assert started == ["c.bvh", "a.bvh", "b.bvh"]
+    assert [Path(r["clip"]).name for r in read_csv(tmp_path / "out" / "summary.csv")[:-1]] == ["a.bvh", "b.bvh", "c.bvh"]
 
 
 @pytest.mark.slow

@@ -114,6 +114,20 @@ def test_bending_hessian_equals_dense(m):
                                0.5 * Hd.W2.T @ Hd.W2, rtol=0, atol=1e-10 * np.abs(expected).max())
 
 
+@pytest.mark.parametrize("m", [2, 3, 4, 12, 300])
+def test_value_gram_equals_dense(m):
+    """gram(0, w) = W^T diag(w) W without W on a banded basis (the unit term's radial curvature)."""
+    x, t = knots_and_points(m, 5 * m + 30, seed=8)
+    w = np.random.default_rng(9).uniform(0.5, 2.0, len(t))
+    W = SplineBasis(x, t, mode="dense").W
+    expected = (W.T * w) @ W
+    for mode in ("dense", "banded"):
+        np.testing.assert_allclose(SplineBasis(x, t, mode=mode).gram(0, w), expected, rtol=0,
+                                   atol=1e-12 * np.abs(expected).max())
+    with pytest.raises(ValueError, match="order must be 0 or 2"):
+        SplineBasis(x, t).gram(1, w)
+
+
 def test_bending_hessian_two_frames_is_zero():
     b = SplineBasis(np.array([0.0, 1.0]), np.linspace(0, 1, 10), mode="banded")
     assert not b.bending_hessian(1.0).any()
