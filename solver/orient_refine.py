@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from solver.error_estimate import estimate_gap
+from solver.error_estimate import GAP_FACTOR, estimate_gap
 from solver.frames import FrameSet
 from solver.layout import StateLayout
 from solver.objective import Objective
@@ -17,7 +17,7 @@ from solver.optimize import Status
 from solver.quadrature import gauss_nodes, gauss_times
 from solver.solve import Solution, SolveOptions, solve
 from solver.spline import interpolate_segments
-from solver.subdivide import adaptive_times, global_times
+from solver.subdivide import global_times, predicted_times
 from solver.terms import NormalizedCovariantAcceleration
 
 _SINGLE = StateLayout.single_quaternion()  # one orientation: qpos = q (4,)
@@ -27,11 +27,26 @@ _SINGLE = StateLayout.single_quaternion()  # one orientation: qpos = q (4,)
 #: at most tol on all tuning sets (docs/orient.md, "Accuracy on request").
 TOL_SAFETY = 2.0
 
-#: With a tolerance: the estimate is not accepted before this many adaptive rounds. On the starting
-#: frames alone (one per keyframe interval) the path is not yet in the asymptotic regime the estimate
-#: assumes: there true/estimated was 0.5-1.6, median 1.16 on the tuning sets (later rounds: median
-#: 0.96), and 2.2 on the moderate test set.
-MIN_ROUNDS = 1
+#: With a tolerance, where to put frames (`solver.subdivide.predicted_times`): every segment c is cut so
+#: that its share GAP_FACTOR D_c / E of the estimate, assumed to fall as the segment length to the power
+#: PREDICT_RATE, brings the estimate to tol / TOL_SAFETY / PREDICT_MARGIN with the fewest frames. The
+#: first placement is made before any optimization, from the estimate on the starting path (one frame
+#: per keyframe interval, on the unit sphere): its shares put the frames where the optimized path will
+#: need them, so one optimization round usually meets the tolerance (previously: 4-6 rounds of midpoint
+#: frames, each re-optimized and re-estimated). Chosen on tuning seeds 0-49 (docs/orient.md, "Accuracy on
+#: request"): rate 4 and margin 2 met tol = 1e-4 in one round on 39 of 50 sets (rate 5: fewer frames but
+#: a second round on half the sets; margins 1.5-3 took the same time), the estimate accepted in the first
+#: round within 0.59-1.53x of the true gap.
+PREDICT_RATE = 4.0
+PREDICT_MARGIN = 2.0
+#: ... at most this many pieces per segment in one round.
+PREDICT_MAX_SPLIT = 8
+
+#: With a tolerance, each round's optimizer stops at ftol_rel = max(the options' ftol_rel, FTOL_FRACTION *
+#: tol): the optimizer's own error then stays a few percent of the tolerance (on the tuning seeds the
+#: evaluations to tol = 1e-4 fell from 40 to 29 in median at 0.1 x tol, with one estimate 7.7x below the
+#: truth; 0.03 x tol kept every estimate within 0.59-2.1x).
+FTOL_FRACTION = 0.03
 
 #: With a tolerance and no `max_frames`: the frame budget, per keyframe interval.
 TOL_FRAMES_PER_INTERVAL = 40
@@ -50,10 +65,11 @@ def solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: flo
                   should_stop, progress) -> tuple[Solution, tuple, int, bool]:
     """Rounds of optimize -> estimate -> refine until the estimated gap is at most tol (`orient`'s tol).
 
-    Each round is one `solve` of the current frames without subdivision; frames are added here by
-    `adaptive_times` on the predicted decreases the estimate computed. Returns (a Solution merging the
-    rounds, the estimate after each round, the number of unit-weight boosts, whether the estimate reached
-    tol).
+    Each round is one `solve` of the current frames without subdivision, at ftol_rel FTOL_FRACTION * tol
+    (or the options' if smaller). Frames are added here by `predicted_times` on the predicted decreases
+    the estimate computed: once before the first round, from the estimate on the starting path, then
+    after every round whose estimate is above tol / TOL_SAFETY. Returns (a Solution merging the rounds,
+    the estimate after each round, the number of unit-weight boosts, whether the estimate reached tol).
     """
     t_start = time.perf_counter()
     budget = opts.max_frames or TOL_FRAMES_PER_INTERVAL * (n_keys - 1)
@@ -69,7 +85,13 @@ def solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: flo
         vals[var] = unit_rows(vals[var])
         frames = replace(frames, values=vals)
     ev0 = obj.evaluate(initial.times, initial.values, grad=False)
-    round_opts = replace(opts, subdivision="none", renormalize=False, tol=0.0)
+    target = tol / TOL_SAFETY / PREDICT_MARGIN
+    per_round = opts.per_round or budget
+    E = obj.evaluate(frames.times, frames.values, grad=False).E
+    _, D = estimate_gap(obj, frames, E)  # on the starting path: where the optimized path will need frames
+    frames = frames.with_variable_frames(_place(D, E, frames, target, min(budget - frames.n_variable, per_round)))
+    round_opts = replace(opts, subdivision="none", renormalize=False, tol=0.0,
+                         ftol_rel=max(opts.ftol_rel, FTOL_FRACTION * tol))
     rounds, traces, estimates = [], [], []
     n_evals, boosts = 0, 0
     status, message = Status.CONVERGED, "converged"
@@ -94,7 +116,7 @@ def solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: flo
         if est <= tol / TOL_SAFETY:  # only where it may stop: ~1e-6 usually, and it costs an evaluation
             est += quadrature_discrepancy(obj, frames, sol)
         estimates.append(est)
-        if est <= tol / TOL_SAFETY and len(estimates) > MIN_ROUNDS:
+        if est <= tol / TOL_SAFETY:
             if boosts < DRIFT_BOOSTS and max_norm_deviation(frames.times, frames.values) > DRIFT_LIMIT:
                 # accurate enough but |q| drifts: stiffen the unit term, optimize the same frames again
                 # (early rounds are not checked: there the drift is mostly the spline's dip between
@@ -109,7 +131,7 @@ def solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: flo
         if room <= 0:
             message = f"frame budget of {budget} variable frames reached at estimated gap {est:.2g} (tol {tol:g})"
             break
-        new = adaptive_times(D, frames, min(room, opts.per_round or frames.count - 1))
+        new = _place(D, sol.E_final, frames, target, min(room, per_round))
         if new.size == 0:
             message = f"no segment to refine at estimated gap {est:.2g} (tol {tol:g})"
             break
@@ -128,6 +150,13 @@ def solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: flo
                       dict(zip(obj.names, obj.scales.tolist())), np.concatenate(traces) if traces else np.array([ev0.E]),
                       time.perf_counter() - t_start, n_evals)
     return merged, tuple(estimates), boosts, converged
+
+
+def _place(D: np.ndarray, E: float, frames: FrameSet, target: float, budget: int) -> np.ndarray:
+    """New frame times for the estimate's shares GAP_FACTOR D / E to reach `target` (`predicted_times`)."""
+    if not E > 0:
+        return np.zeros(0)
+    return predicted_times(GAP_FACTOR * D / E, frames, target, budget, PREDICT_RATE, PREDICT_MAX_SPLIT)
 
 
 def quadrature_discrepancy(obj: Objective, frames: FrameSet, sol: Solution) -> float:
