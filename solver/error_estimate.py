@@ -24,7 +24,8 @@ Assumptions: the path is optimized for its frames (the estimate is of the discre
 computed after every round's optimization; ftol_rel 1e-6 leaves below 1e-5 of E), the path is in the
 asymptotic regime where one midpoint per segment captures most of what refinement buys (less so on the
 starting frames, one per keyframe interval: 2.2x below the truth on the moderate test set; `orient`
-accepts it only after one adaptive round), and the objective is the normalized form with a light unit term (its
+uses it there only to place frames, `solver.subdivide.predicted_times`, and accepts it only after an
+optimization of frames so placed), and the objective is the normalized form with a light unit term (its
 optimum in the exact-unit limit is E*; with the paper form the optimum of the objective is not E* and
 the estimate does not apply).
 

@@ -340,8 +340,10 @@ def orient(
             (`OrientOptions.tol`; overrides the options' tol). Default: the options' tol (DEFAULT_TOL
             with the default options of the normalized form; 0, fixed rounds, for options that are a
             plain SolveOptions or give `rounds`). Normalized form only. The frames start as `options`
-            says (`per_segment` per interval; none with subdivision "none"); then every round adds
-            midpoint frames where `predicted_decreases` is at least a quarter of the largest, until the
+            says (`per_segment` per interval, on the unit sphere; none with subdivision "none"); the
+            estimate on that starting path places the first optimized frames, and every round whose
+            estimate is above tol adds more, each segment cut into as many equal pieces as the
+            estimate's share there asks for (`solver.subdivide.predicted_times`), until the
             estimate reaches tol or `max_frames` (default TOL_FRAMES_PER_INTERVAL per keyframe interval)
             or `max_time_s` runs out (`converged_to_tol` False, `solution.message` says which). After a
             round with max |1 - |q|| above DRIFT_LIMIT the unit weight is stiffened (DRIFT_BOOST). The
