@@ -340,12 +340,14 @@ def orient(
             (`OrientOptions.tol`; overrides the options' tol). Default: the options' tol (DEFAULT_TOL
             with the default options of the normalized form; 0, fixed rounds, for options that are a
             plain SolveOptions or give `rounds`). Normalized form only. The frames start as `options`
-            says (`per_segment` per interval; none with subdivision "none"); then every round adds
-            midpoint frames where `predicted_decreases` is at least a quarter of the largest, until the
+            says (`per_segment` per interval, on the unit sphere; none with subdivision "none"); the
+            estimate on that starting path places the first optimized frames, and every round whose
+            estimate is above tol adds more, each segment cut into as many equal pieces as the
+            estimate's share there asks for (`solver.subdivide.predicted_times`), until the
             estimate reaches tol or `max_frames` (default TOL_FRAMES_PER_INTERVAL per keyframe interval)
             or `max_time_s` runs out (`converged_to_tol` False, `solution.message` says which). After a
             round with max |1 - |q|| above DRIFT_LIMIT the unit weight is stiffened (DRIFT_BOOST). The
-            estimate used is `estimate_gap`, plus the quadrature discrepancy (`_quadrature_discrepancy`)
+            estimate used is `estimate_gap`, plus the quadrature discrepancy (`solver.orient_refine.quadrature_discrepancy`)
             in the rounds where it would otherwise stop.
     Returns:
         OrientResult.
@@ -379,9 +381,10 @@ def orient(
     if tol > 0 and form != "normalized":
         raise InputError("tol (an estimated gap to the exact-unit optimum) is for the normalized form only; "
                          "the paper form's optimum trades smoothness for unit length (use rounds)")
-    estimates, boosts, converged = (), 0, False
+    estimates, boosts, converged, measures = (), 0, False, {}
     if tol > 0:
-        sol, estimates, boosts, converged = solve_to_tol(obj, initial, opts, tol, kf.count, should_stop, progress)
+        sol, estimates, boosts, converged, measures = solve_to_tol(obj, initial, opts, tol, kf.count, should_stop,
+                                                                   progress)
     else:
         sol = solve(obj, initial, opts, should_stop=should_stop, progress=progress, project=unit_rows)
     fr = sol.frames
@@ -395,8 +398,8 @@ def orient(
         rate=obj.rate if obj.quadrature == "uniform" else None,
         points=obj.points if obj.quadrature == "gauss" else None,
         solution=sol,
-        energy=covariant_energy(fr.times, fr.values),
-        max_norm_deviation=max_norm_deviation(fr.times, fr.values),
+        energy=measures["energy"] if measures else covariant_energy(fr.times, fr.values),
+        max_norm_deviation=measures["drift"] if measures else max_norm_deviation(fr.times, fr.values),
         keyframe_error=float(np.abs(fr.path(initial.times) - initial.values).max()),
         wall_time_s=sol.wall_time_s,
         tol=tol,

@@ -11,7 +11,7 @@
     dynsplines bench orient [--speed-random N]
         the single-body problem against the Barr-92 and constrained B-spline baselines (solver.bench.orient);
         with --speed-random N also the time to gap 1e-4 against Barr-92 on N generated sets.
-    dynsplines bench orient --random N [--bvp]
+    dynsplines bench orient --random N [--bvp] [--first-seed SEED]
         accuracy on request: true and estimated gap, frames, time and |q| drift of the default and
         tol=1e-4 over N generated keyframe sets (solver.bench.random_sets).
     dynsplines bench readme [--check] [--only NAME,...] [--file README.md]
@@ -100,6 +100,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed-random", type=int, default=0, metavar="N",
                    help="after the named sets: time to gap 1e-4 of Barr-92 against ours (orient(tol=1e-4) and "
                    "the fastest ladder setting) on the first N generated acceptance sets")
+    p.add_argument("--first-seed", type=int, default=None, metavar="SEED",
+                   help="with --random or --speed-random: N generated sets from this seed on instead of the acceptance "
+                   "seeds 1000-1049 (0-49 are the tuning seeds the defaults were chosen on)")
     p.add_argument("--tradeoff", action="store_true",
                    help="instead: the table of gap and max |1 - |q|| against variable frames, for both "
                    "objective forms (docs/orient.md), on --sets (default here: large_nonuniform,moderate)")
@@ -117,14 +120,17 @@ def bench_orient(args) -> int:
         raise InputError("--budget must be > 0 seconds and --repeat >= 1")
     if args.random < 0 or args.speed_random < 0:
         raise InputError("--random and --speed-random take a number of sets >= 0")
-    if args.random > len(orient_workload.random_sets.ACCEPTANCE_SEEDS) or args.speed_random > len(
-            orient_workload.random_sets.ACCEPTANCE_SEEDS):
+    if args.first_seed is not None and args.first_seed < 0:
+        raise InputError(f"--first-seed must be >= 0, got {args.first_seed}")
+    if args.first_seed is None and (args.random > len(orient_workload.random_sets.ACCEPTANCE_SEEDS) or args.speed_random > len(
+            orient_workload.random_sets.ACCEPTANCE_SEEDS)):
         raise InputError(f"at most {len(orient_workload.random_sets.ACCEPTANCE_SEEDS)} generated acceptance sets")
     if args.tradeoff:
         orient_workload.tradeoff(orient_workload.sphere_reference, chosen, out=print)
         return 0
     if args.random:
-        orient_workload.random_accuracy(args.random, method="bvp" if args.bvp else "discrete", out=print)
+        orient_workload.random_accuracy(args.random, method="bvp" if args.bvp else "discrete", out=print,
+                                        first_seed=args.first_seed)
         return 0
     print("bench orient: wall time to reach a relative gap (E - E*)/E* of the normalized path "
           f"(baselines: budget {args.budget:g} s per set; ours: median of {args.repeat} runs)")
@@ -136,7 +142,7 @@ def bench_orient(args) -> int:
                     print(f"     {m}: " + ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
                                                    for k, v in row.items()))
     if args.speed_random:
-        orient_workload.speed_random(args.speed_random, args.budget, args.repeat, out=print)
+        orient_workload.speed_random(args.speed_random, args.budget, args.repeat, out=print, first_seed=args.first_seed)
     return 0
 
 

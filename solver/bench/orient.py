@@ -44,7 +44,8 @@ LADDER = (
     ("global 5/interval, ftol 1e-4", dict(options=dict(subdivision="global", per_segment=5, ftol_rel=1e-4))),
     ("global 6/interval, ftol 1e-4", dict(options=dict(subdivision="global", per_segment=6, ftol_rel=1e-4))),
     ("global 6/interval, ftol 1e-6", dict(options=dict(subdivision="global", per_segment=6, ftol_rel=1e-6))),
-    ("default (adaptive 2 rounds)", dict(options=dict())),
+    ("default (tol 1e-3)", dict(options=dict())),
+    ("tol 1e-4", dict(options=dict(), tol=1e-4)),
     ("2/interval + 2 rounds", dict(options=dict(per_segment=2, rounds=2, ftol_rel=1e-7))),
     ("global 4/interval, uniform 120 Hz", dict(options=dict(subdivision="global", per_segment=4, ftol_rel=1e-8),
                                            rate=120.0)),
@@ -137,13 +138,21 @@ def bench_set(ks, methods, budget: float, repeat: int, ref=sphere_reference, out
         out(f"   {m} settings used - {settings}")
     return {"results": results, "logs": logs, "E_star": E_star}
 
-def random_accuracy(n: int, method: str = "discrete", out=lambda *a: None) -> dict:
+def _seeds(n: int, first_seed: int | None) -> list:
+    """The first n acceptance seeds (`random_sets.ACCEPTANCE_SEEDS`), or n seeds from first_seed on."""
+    if first_seed is None:
+        return list(random_sets.ACCEPTANCE_SEEDS)[:n]
+    return list(range(first_seed, first_seed + n))
+
+
+def random_accuracy(n: int, method: str = "discrete", out=lambda *a: None, first_seed: int | None = None) -> dict:
     """The accuracy distribution of `orient` (default, tol=1e-4) over the first n acceptance sets
-    (`random_sets.ACCEPTANCE_SEEDS`, never used for tuning): `random_sets.evaluate`, one summary line per
-    run. E* by the reference's discrete solver (1-5 s a set; "bvp": solve_bvp, which took minutes or ran
-    out of memory on some sets, then the discrete one). Returns {label: Distribution}."""
-    seeds = list(random_sets.ACCEPTANCE_SEEDS)[:n]
-    out(f"bench orient --random {n}: acceptance seeds {seeds[0]}-{seeds[-1]}; true gap (E - E*)/E* with E* by "
+    (`random_sets.ACCEPTANCE_SEEDS`, never used for tuning), or n sets from `first_seed` on:
+    `random_sets.evaluate`, one summary line per run. E* by the reference's discrete solver (1-5 s a set;
+    "bvp": solve_bvp, which took minutes or ran out of memory on some sets, then the discrete one).
+    Returns {label: Distribution}."""
+    seeds = _seeds(n, first_seed)
+    out(f"bench orient --random {n}: {'acceptance ' if first_seed is None else ''}seeds {seeds[0]}-{seeds[-1]}; true gap (E - E*)/E* with E* by "
         f"the sphere reference's {'solve_bvp (discrete where it fails)' if method == 'bvp' else 'discrete solver'}; "
         "time of one whole orient call (min/median/max)")
     res = random_sets.evaluate(seeds, method=method)
@@ -172,15 +181,16 @@ def _gap(ref, fr, E_star: float) -> float:
     return (ref.covariant_energy(t, fr.path(t), breaks=fr.times) - E_star) / E_star
 
 
-def speed_random(n: int, budget: float, repeat: int, ref=sphere_reference, out=lambda *a: None) -> list:
-    """Time to a gap of SPEED_GAP on the first n acceptance sets: Barr-92 (its resolution ladder,
+def speed_random(n: int, budget: float, repeat: int, ref=sphere_reference, out=lambda *a: None,
+                 first_seed: int | None = None) -> list:
+    """Time to a gap of SPEED_GAP on the first n acceptance sets (or n sets from `first_seed` on): Barr-92 (its resolution ladder,
     `baseline_time_to_gap`, the single run of the smallest resolution reaching the gap) against ours,
     two ways: `orient(tol=SPEED_GAP)` (accuracy on request: what a user without a tuned setting runs;
     median of `repeat` runs after a warm-up) and the fastest rung of `LADDER` reaching the gap (as on the
     named sets). E* by the reference's discrete solver. Prints a row per set and the median ratios.
     Returns one dict per set."""
-    seeds = list(random_sets.ACCEPTANCE_SEEDS)[:n]
-    out(f"\n== generated sets (acceptance seeds {seeds[0]}-{seeds[-1]}): time to gap {SPEED_GAP:.0e}, "
+    seeds = _seeds(n, first_seed)
+    out(f"\n== generated sets ({'acceptance ' if first_seed is None else ''}seeds {seeds[0]}-{seeds[-1]}): time to gap {SPEED_GAP:.0e}, "
         f"Barr-92 (budget {budget:g} s a set) vs ours; E* by the discrete reference")
     out(f"   {'seed':>5} {'keys':>4} {'deg max':>7} {'Barr-92':>18} {'ours tol=1e-4':>24} {'ours ladder':>22}"
         f" {'Barr/tol':>10} {'Barr/ladder':>12}")

@@ -65,6 +65,36 @@ def test_drift_stiffens_the_unit_term():
     assert r.unit_boosts >= 1 and r.max_norm_deviation <= 0.1
 
 
+def test_optimization_gap_against_the_decrease_left():
+    """0.5 |g_z|^2 / E (`optimization_gap`) is ~0 on a converged path and, on paths stopped after a few
+    evaluations, within 0.5-10x of the decrease the optimizer still finds (E_stopped - E_converged) / E."""
+    from solver.error_estimate import optimization_gap
+
+    s = random_set(3)
+    slots = ((0, 1, 2, 3),)
+    conv = orient(s.times, s.quats, options=default_options(subdivision="global", per_segment=3, ftol_rel=1e-12))
+    assert optimization_gap(conv.solution.objective, conv.frames, 0.1, slots) < 1e-10
+    for evals in (2, 4, 8):
+        early = orient(s.times, s.quats, options=default_options(subdivision="global", per_segment=3, ftol_rel=1e-12,
+                                                                  max_evals=evals))
+        left = (early.solution.E_final - conv.solution.E_final) / conv.solution.E_final
+        gap = optimization_gap(early.solution.objective, early.frames, 0.1, slots)
+        assert 0.5 <= left / gap <= 10, (evals, left, gap)
+
+
+def test_a_stalled_round_is_optimized_again(monkeypatch):
+    """With a relative-decrease test so loose that L-BFGS stops early, the tolerance loop sees the
+    optimizer's gap and optimizes the same frames again at the options' ftol_rel."""
+    import solver.orient_refine as refine
+
+    monkeypatch.setattr(refine, "FTOL_FRACTION", 100.0)  # ftol_rel 0.1 at tol 1e-3: L-BFGS stops after 2 evaluations
+    s = random_set(3)
+    r = orient(s.times, s.quats, tol=1e-3)
+    counts = [rd.n_variable for rd in r.solution.rounds]
+    assert len(counts) >= 2 and counts[0] == counts[1]  # the same frames, optimized again
+    assert r.converged_to_tol and r.estimated_gap <= 5e-4
+
+
 @pytest.fixture(scope="module")
 def reference():
     from solver.bench import sphere_reference
