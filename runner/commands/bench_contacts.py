@@ -18,6 +18,7 @@ from runner.animate_options import default_args, solve_options
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_problem
 from solver.bench.figure import GEOMETRIC, per_eval_ms, time_solves
 from solver.errors import InputError
+from solver.metrics import path_metrics
 from solver.problem import parse_terms
 
 #: (label, key in the motion metrics' "path" block, format)
@@ -87,6 +88,13 @@ def bench_contacts(args) -> int:
             print(f"    contacts / geometric: time {ratio:.2f}x, evaluations {ev_ratio:.2f}x; value + gradient on one "
                   f"frame set ({common.count} frames): {per['geometric']:.1f} vs {per['contacts']:.1f} ms "
                   f"({per['contacts'] / per['geometric']:.2f}x)")
+            plain_fs = runs["geometric"][-1]["solution"].initial
+            geo = [path_metrics(model, fs.times, fs.values, keyframes, dynamics=False) for fs in
+                   (plain_fs, runs["geometric"][-1]["solution"].frames, runs["contacts"][-1]["solution"].frames)]
+            print("    max penetration [mm] / keyframe error / max |1-|q|| / hyperextension [deg]: "
+                  + "; ".join(f"{lab} {g['max_penetration_mm']:.2f} / {g['keyframe_error']:.0e} / "
+                              f"{g['max_norm_deviation']:.4f} / {g['max_hyperextension_deg']:.2f}"
+                              for lab, g in zip(("plain", "geometric", "contacts"), geo, strict=True)))
             if ref is None:
                 continue
             motion = {n: reference_motion_metrics(model, layout, rs[-1]["solution"], ref, contacts) for n, rs in runs.items()}
