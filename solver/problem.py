@@ -4,7 +4,8 @@ Term names: penetration (eq. 12), unit (eq. 9 f1), bending (sec. 5), smooth (cov
 every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
 are available, torque and root (sec. 6, appendix A). With a contact schedule (issue 11,
 `solver.contacts.Contact`s: site, start, end, surface): planted (feet on their surface and not sliding
-during a contact), clearance (swing feet and flights keep 2 cm clear) - both on by default - and cone
+during a contact), clearance (swing feet keep 2 cm, every site min(2 cm, g T^2/8) in a flight of length T)
+- both on by default - and cone
 (the root wrench inside the friction cone of the feet in contact; needs the inverse dynamics, "all").
 """
 from __future__ import annotations
@@ -39,7 +40,7 @@ DEFAULT_CONTACT_TERMS = ("planted", "clearance")
 #: acceptance bounds (penetration <= 1 mm, hyperextension <= 2 deg, |1 - |q|| <= 5 %) with headroom.
 DEFAULT_LIMITS = {"penetration": 0.0005, "bending": float(np.radians(1.0)), "unit": 0.03,
                   # planted: max(|h - h0|, tau |v_t|) where a contact is fully on [m] (tau = 0.1 s: 2 cm
-                  # or 20 cm/s); clearance: intrusion into the 2 cm band in swing cores and flights [m].
+                  # or 20 cm/s); clearance: intrusion into the band (2 cm in swing cores, c_f in flights) [m].
                   # Peaks, so looser than the acceptance means (float <= 5 mm): with 1 cm / 5 mm the
                   # run-and-step solve still missed planted after 3 boosts (41 -> 25 -> 12 mm)
                   "planted": 0.02, "clearance": 0.01}
