@@ -207,13 +207,14 @@ def test_nonfinite_term_is_named_and_last_good_iterate_kept():
 
 
 def test_nonfinite_term_at_the_command_line(tmp_path, capsys, monkeypatch):
-    real = runner.commands.animate.figure_objective
+    real = runner.commands.animate.figure_problem
 
     def with_poison(*args, **kwargs):
-        obj = real(*args, **kwargs)
-        return Objective(obj.terms + [Poison()], np.append(obj.weights, 1.0), obj.t0, obj.t1, obj.rate)
+        obj, initial, conflicts = real(*args, **kwargs)
+        poisoned = Objective(obj.terms + [Poison()], np.append(obj.weights, 1.0), obj.t0, obj.t1, obj.rate)
+        return poisoned, initial, conflicts
 
-    monkeypatch.setattr(runner.commands.animate, "figure_objective", with_poison)
+    monkeypatch.setattr(runner.commands.animate, "figure_problem", with_poison)
     out = tmp_path / "p.npz"
     code = main(["animate", str(small_keyframes(tmp_path)), "--no-render", "--save-path", str(out)])
     captured = capsys.readouterr()
@@ -280,5 +281,7 @@ def test_identical_runs_give_bit_identical_paths_and_record_versions(tmp_path):
         assert versions[pkg] and versions[pkg] != "unknown", pkg
     assert versions["blas_threads_env"]["OPENBLAS_NUM_THREADS"] == "1"  # pinned by solver/__init__.py
     options = json.loads(str(a["options_json"]))
-    assert options["weights"] == parse_terms(None)
+    # the default terms; the file carries the clip's contact schedule, so with planted and clearance
+    assert options["weights"] == parse_terms(None, contacts=json.loads(kf.read_text())["contacts"])
+    assert {"planted", "clearance"} <= set(options["weights"])
     assert options["solve"]["algorithm"] == "lbfgs" and options["command"]["keyframes"] == str(kf)

@@ -243,7 +243,9 @@ def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms)
     # ... without ending the flight phases (the figure still runs: 0.23 s vs the plain 0.25 s)
     assert opt["flight_s"] >= 0.5 * plain["flight_s"]
     opts = json.loads(str(z["options_json"]))
-    assert set(opts["weights"]) == {"penetration", "unit", "bending", "smooth", "torque", "root"}
+    # "all" with the file's contact schedule: the dynamics terms, the contact terms and the cone
+    assert set(opts["weights"]) == {"penetration", "unit", "bending", "smooth", "torque", "root", "planted",
+                                    "clearance", "cone"}
 
 
 @pytest.mark.slow
