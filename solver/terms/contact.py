@@ -282,6 +282,12 @@ class Planted(Term):
             return None
         return float(np.max(np.where(full, np.maximum(np.abs(h), self.tau * speed), 0.0)))
 
+    def _at_keyframes(self, times, qpos):
+        """(W (k, C) the contacts' windows at the keyframe times, p (k, sites, 3) the sites' positions;
+        p is None when no contact is given)."""
+        W = self.windows(np.asarray(times, float))
+        return W, (self.kin.positions(np.asarray(qpos, float)) if W.size else None)
+
     def conflicts(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
         """Keyframes that contradict the schedule: a keyframe at time t inside a contact's full window
         whose site is more than `tolerance` [m] from the plant height (keyframes are met exactly, so
@@ -291,12 +297,10 @@ class Planted(Term):
         Returns:
             [(keyframe index, site, height - h0 [m]), ...].
         """
-        times = np.asarray(times, float)
-        W = self.windows(times)
+        W, p = self._at_keyframes(times, qpos)
         out = []
         if not W.size:
             return out
-        p = self.kin.positions(np.asarray(qpos, float))
         for c, contact in enumerate(self.contacts):
             h, _ = self.support.height(p[:, self._col[c]], self._surf[c])
             for i in np.flatnonzero((W[:, c] >= FULL) & (np.abs(h - self.rest_height) > tolerance)):
@@ -318,12 +322,10 @@ class Planted(Term):
             [(index of the later keyframe, site, largest horizontal distance between the contact's
             keyframes [m]), ...].
         """
-        times = np.asarray(times, float)
-        W = self.windows(times)
+        W, p = self._at_keyframes(times, qpos)
         out = []
         if not W.size:
             return out
-        p = self.kin.positions(np.asarray(qpos, float))
         for c, contact in enumerate(self.contacts):
             inside = np.flatnonzero(W[:, c] > 0)
             if len(inside) < 2:
