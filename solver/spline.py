@@ -448,8 +448,7 @@ class SplineBasis:
         return self._moments_transpose(G)
 
     def bending_hessian(self, w) -> np.ndarray:
-        """H = W2^T diag(w) W2 (m, m): `gram(2, w)`. 2 h W2^T W2 (w = 2 h, uniform quadrature) is the
-        Hessian of integral |Y''|^2 dt per component, the preconditioner's."""
+        """`gram(2, w)` = W2^T diag(w) W2; w = 2 h: the Hessian of integral |Y''|^2 dt per component."""
         return self.gram(2, w)
 
     def gram(self, order: int, w) -> np.ndarray:

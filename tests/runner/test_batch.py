@@ -156,6 +156,23 @@ def test_longest_clips_are_handed_out_first(tmp_path, clips, monkeypatch):
     assert [Path(r["clip"]).name for r in read_csv(tmp_path / "out" / "summary.csv")[:-1]] == ["a.bvh", "b.bvh", "c.bvh"]
 
 
+def test_workers_are_forked_only_from_a_single_thread():
+    """Forking copies one thread: with another thread running (a lock it holds would stay held in the
+    child) the local engine spawns its workers instead."""
+    import threading
+
+    import runner.batch
+
+    go = threading.Event()
+    t = threading.Thread(target=go.wait)
+    t.start()
+    try:
+        assert not runner.batch._single_threaded()
+    finally:
+        go.set()
+        t.join()
+
+
 @pytest.mark.slow
 def test_ray_engine_same_results(tmp_path, clips):
     """--engine ray (a local Ray, 2 CPUs): the rows of the local engine."""
