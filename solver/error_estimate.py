@@ -33,6 +33,9 @@ The quadrature is assumed exact: D_c and E use the objective's own rule (Gauss, 
 which the optimizer may exploit. `solver.orient`'s tolerance loop therefore adds the discrepancy
 |E_8 - E_4| / E_8 between 8 and 4 points per segment (~1e-6 usually, 1.6e-3 on one generated set).
 
+The optimizer's own gap is assumed small; `optimization_gap` checks it (`solver.orient_refine` adds it
+to the estimate of a round it would accept, and optimizes again when it is not small).
+
 Cost: three gradient evaluations with a frame inserted in every segment (the predicted decreases are
 also what adaptive subdivision ranks segments by, so the estimate is free when another round follows).
 """
