@@ -9,9 +9,8 @@ has that shape). Two terms here, one in `solver.terms.contact_wrench` (friction 
     f(t) = sum over contacts c of  w_c(t) [ (h_c(t) - h0)^2 + tau^2 |v_t,c(t)|^2 ],
 
     h   = signed height of the site above its support surface [m] (floating > 0, inside < 0),
-    h0  = `rest_height` (default 5 mm: the penetration term's default margin, so that the two terms
-          agree on where a planted site rests; with h0 = 0 they fight and the site ends up between,
-          inside the margin - on run-and-step 0.65 mm inside the floor),
+    h0  = `rest_height` = the penetration term's margin (the figure: 2 mm), so the two terms agree on
+          where a planted site rests (with h0 = 0 they fight: run-and-step's site ended 0.65 mm inside),
     v_t = v - (n.v) n, the site's velocity along the surface (n its unit normal) [m/s],
     tau = `velocity_time` [s] (default 0.1 s: 1 cm of height weighs like 10 cm/s of sliding),
     w_c = the contact's window: 1 inside [start + r, end - r], 0 outside [start, end], a smoothstep
@@ -73,8 +72,6 @@ from solver.terms.contact_schedule import (  # noqa: F401  (the schedule helpers
     SupportSurfaces,
     _engine_index,
     _engine_motion,
-    _gt,
-    _merged,
     _sample_times,
     check_contacts,
     contact_window,
@@ -85,8 +82,7 @@ from solver.terms.contact_schedule import (  # noqa: F401  (the schedule helpers
     swings,
 )
 
-#: [m/s^2] for the ballistic flight clearance
-GRAVITY = 9.81
+GRAVITY = 9.81  # [m/s^2], for the ballistic flight clearance
 
 __all__ = ["CONTACT_SITES", "Clearance", "Planted", "SiteMotion", "SupportSurfaces", "check_contacts",
            "contact_window", "flights", "gap_window", "smoothstep", "swings"]
@@ -283,8 +279,7 @@ class Planted(Term):
         return float(np.max(np.where(full, np.maximum(np.abs(h), self.tau * speed), 0.0)))
 
     def _at_keyframes(self, times, qpos):
-        """(W (k, C) the contacts' windows at the keyframe times, p (k, sites, 3) the sites' positions;
-        p is None when no contact is given)."""
+        """(W (k, C) contact windows at the keyframe times, p (k, sites, 3) site positions or None)."""
         W = self.windows(np.asarray(times, float))
         return W, (self.kin.positions(np.asarray(qpos, float)) if W.size else None)
 
@@ -310,17 +305,12 @@ class Planted(Term):
         return out
 
     def slides(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
-        """Keyframes that make a planted site slide: two keyframes inside one contact (its window > 0)
-        that hold the site more than `tolerance` [m] apart along the ground (horizontally). Motion
-        capture's feet do slide a little while "in contact" (on the shared walk, 2-4 cm between keyframes
-        0.25 s apart as the heel rolls and the toe pivots); keyframes are met exactly, so no path can
-        keep that site still, and penalty continuation would stiffen the term against a bound it cannot
-        reach (on the walk: 4 boosts, 2979 evaluations, knees bent 2.4 deg backwards). excuse: leave
-        those contacts out of `violation`; the term still pulls toward no sliding between the keyframes.
+        """Keyframes that make a planted site slide: two keyframes in one contact (window > 0) that hold
+        the site more than `tolerance` [m] apart horizontally (capture's feet roll and pivot: 2-4 cm on
+        the walk; no path can then keep the site still, README "Feet that plant"). excuse: leave those
+        contacts out of `violation` (the term still pulls toward no sliding).
 
-        Returns:
-            [(index of the later keyframe, site, largest horizontal distance between the contact's
-            keyframes [m]), ...].
+        Returns: [(index of the later keyframe, site, largest horizontal distance [m]), ...].
         """
         W, p = self._at_keyframes(times, qpos)
         out = []
