@@ -83,26 +83,23 @@ class StaticSurfaces:
 
         Args:
             points: (..., 3) world positions [m].
-            margin: [m] safety distance counted as penetration (0 for the true depth): a number, or an
-                array of the points' leading shape (...) for a margin per point.
+            margin: [m] safety distance counted as penetration (0 for the true depth).
         Returns:
             depth: (..., S) depth [m] >= 0 for each of the S surfaces (planes then boxes).
             grad: (..., S, 3) d depth / d point.
         """
         pts = np.asarray(points, float)
         shape = pts.shape[:-1]
-        margin = np.asarray(margin, float)
-        m_plane, m_box = (margin[..., None], margin[..., None, None]) if margin.ndim else (margin, margin)
         depths, grads = [], []
         if len(self.plane_point):
             s = np.einsum("...pk,pk->...p", pts[..., None, :] - self.plane_point, self.plane_normal)
-            d = np.maximum(0.0, m_plane - s)
+            d = np.maximum(0.0, margin - s)
             g = np.where((d > 0)[..., None], -self.plane_normal, 0.0)
             depths.append(d)
             grads.append(np.broadcast_to(g, shape + g.shape[-2:]))
         if len(self.box_center):
             local = np.einsum("bji,...bj->...bi", self.box_rot, pts[..., None, :] - self.box_center)
-            gap = self.box_half + m_box - np.abs(local)  # (..., b, 3): > 0 inside along that axis
+            gap = self.box_half + margin - np.abs(local)  # (..., b, 3): > 0 inside along that axis
             inside = (gap > 0).all(axis=-1)
             axis = np.argmin(gap, axis=-1)
             d = np.where(inside, np.take_along_axis(gap, axis[..., None], -1)[..., 0], 0.0)

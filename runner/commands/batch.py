@@ -2,17 +2,13 @@
 with a summary (the work is `runner.batch.run_batch`; this module is argument glue)."""
 from __future__ import annotations
 
-import shlex
-import sys
 from pathlib import Path
 
-from runner.animate_options import add_solve_arguments, clip_terms
+from runner.animate_options import add_solve_arguments
 from runner.batch import ENGINES, find_clips, run_batch
+from runner.commands.mocap import add_clip_arguments, clip_options
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from runner.mocap.keyframes import KEY_CHOICES
-from runner.mocap.scene import AUTO
 from runner.parser import positive
-from runner.pipeline import FIGURE, ClipOptions
 
 PROG = "dynsplines batch"
 
@@ -37,13 +33,7 @@ def register(sub) -> None:
                         "pip install -e \".[cluster]\") [%(default)s]")
     p.add_argument("--ray-address", default=None, metavar="ADDR",
                    help="Ray cluster address for --engine ray [a local Ray, or RAY_ADDRESS]")
-    keys = p.add_argument_group("keyframes")
-    keys.add_argument("--keys", choices=KEY_CHOICES, default="every", help="as in mocap [%(default)s]")
-    keys.add_argument("--every", type=positive(float), default=None, metavar="S",
-                      help="key spacing [s] (0.25); with --keys contacts: at most S s between keys [no limit]")
-    keys.add_argument("--partial", action="store_true", help="the middle keyframe fixes only the root and the legs")
-    p.add_argument("--scene", default=AUTO, help="scene MJCF, or 'auto' (default): fitted per clip")
-    p.add_argument("--model", type=Path, default=FIGURE, help="figure MJCF [models/humanoid39.xml]")
+    add_clip_arguments(p)
     p.add_argument("--render", action="store_true",
                    help="also render each clip's video (off by default in a batch: rendering is slow)")
     add_solve_arguments(p)
@@ -58,11 +48,7 @@ def run(args) -> int:
 
         raise InputError(f"--ray-address {args.ray_address} goes with --engine ray")
     clips = find_clips(args.clips)
-    options = ClipOptions(
-        keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.model,
-        **clip_terms(args), rate=args.rate, render=args.render,
-        command=f"{PROG} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == ["batch"] else PROG,
-    )
+    options = clip_options(args, PROG, render=args.render)
     say = (lambda *a: None) if args.quiet else print
     r = run_batch(clips, args.out, options, workers=args.workers, engine=args.engine,
                   ray_address=args.ray_address, say=say, quiet=args.quiet)

@@ -27,6 +27,15 @@ def register(sub) -> None:
                     "--scene auto), <stem>.npz, <stem>.metrics.json, <stem>.mp4.")
     p.add_argument("clip", type=Path, help="BVH clip, e.g. models/cmu/127_33.bvh")
     p.add_argument("--out-dir", type=Path, default=None, help="output folder [renders/<clip stem>/]")
+    add_clip_arguments(p)
+    p.add_argument("--metrics", type=Path, default=None, metavar="FILE.json",
+                   help="motion metrics and acceptance figures as JSON [<out-dir>/<stem>.metrics.json]")
+    add_options(p)
+    p.set_defaults(func=run)
+
+
+def add_clip_arguments(p) -> None:
+    """The options of a clip's keyframes, scene and figure (`mocap` and `batch`)."""
     keys = p.add_argument_group("keyframes")
     keys.add_argument("--keys", choices=KEY_CHOICES, default="every",
                       help="every: evenly spaced keys plus the root's highest and lowest frames; contacts: keys at "
@@ -39,21 +48,23 @@ def register(sub) -> None:
                    help="scene MJCF, or 'auto' (default): a floor and boxes fitted to where the clip's feet rest, "
                         "written next to the outputs as <stem>.scene.xml")
     p.add_argument("--model", type=Path, default=FIGURE, help="figure MJCF [models/humanoid39.xml]")
-    p.add_argument("--metrics", type=Path, default=None, metavar="FILE.json",
-                   help="motion metrics and acceptance figures as JSON [<out-dir>/<stem>.metrics.json]")
-    add_options(p)
-    p.set_defaults(func=run)
+
+
+def clip_options(args, prog: str, **fields) -> ClipOptions:
+    """`ClipOptions` from the parsed `add_clip_arguments` and solve options (`mocap`, `batch`), with the
+    command line recorded as `prog` plus its arguments; `fields` are the command's own (outputs, render)."""
+    name = prog.split()[-1]
+    return ClipOptions(
+        keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.model,
+        **clip_terms(args), rate=args.rate,
+        command=f"{prog} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == [name] else prog, **fields,
+    )
 
 
 def run(args) -> int:
     """Run `mocap`. Returns the exit code; raises InputError on bad input."""
-    options = ClipOptions(
-        keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.model,
-        **clip_terms(args), rate=args.rate, out=args.out,
-        save_path=args.save_path, metrics=args.metrics, plot=args.plot, render=not args.no_render,
-        fps=args.fps, size=args.size, speed=args.speed, quiet=args.quiet,
-        command=f"{PROG} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == ["mocap"] else PROG,
-    )
+    options = clip_options(args, PROG, out=args.out, save_path=args.save_path, metrics=args.metrics, plot=args.plot,
+                           render=not args.no_render, fps=args.fps, size=args.size, speed=args.speed, quiet=args.quiet)
     out_dir = args.out_dir if args.out_dir is not None else default_out_dir(args.clip)
     result = process_clip(args.clip, out_dir, options, say=(lambda *a: None) if args.quiet else print)
     if result["exit"] == "failed":

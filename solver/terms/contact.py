@@ -357,7 +357,6 @@ class Clearance(Term):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the clearance term")
-        self.surfaces = surfaces
         #: the surface under a site: the boxes' top faces over their footprints exactly, else the floor
         self.below = SupportSurfaces(surfaces, footprint_margin=0.0)
         self.contacts = check_contacts(contacts, CONTACT_SITES, surfaces.names)
