@@ -38,13 +38,13 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.inverse_dynamics_mujoco import InverseDynamicsResult, MujocoInverseDynamics, constraint_free_copy
-from solver.layout import site_ids
-from solver.spatial import cross, mtv, mv, qmat, qmul
+from solver.kinematic_tree import KinematicTree
+from solver.spatial import cross, mtv, mv, qmat
 
 __all__ = ["InverseDynamics", "InverseDynamicsResult", "MujocoInverseDynamics", "constraint_free_copy"]
 
 
-class InverseDynamics:
+class InverseDynamics(KinematicTree):
     """Vectorized recursive Newton-Euler inverse dynamics with a reverse-mode gradient.
 
     Supports kinematic trees whose moving bodies each have one free joint (child of a static body),
@@ -61,92 +61,15 @@ class InverseDynamics:
             `mj_inverse` on a random state (a model feature this engine does not model).
     """
 
+    #: the path derivatives `forward` reads (qpos, qvel, qacc)
+    needs = (0, 1, 2)
+
     def __init__(self, model, sites=()):
         import mujoco
 
-        self.model = model
-        self.nq, self.nv = int(model.nq), int(model.nv)
         self._check_supported(model)
-        data = mujoco.MjData(model)
-        mujoco.mj_kinematics(model, data)
-
-        nb = model.nbody
-        parent = model.body_parentid
-        has_joint = model.body_jntnum > 0
-        moving = np.zeros(nb, bool)
-        for b in range(1, nb):
-            moving[b] = has_joint[b] or moving[parent[b]]
-        bodies = np.flatnonzero(moving)
-        index = {int(b): i for i, b in enumerate(bodies)}
-        B = len(bodies)
-        self.bodies = bodies
-        par = np.array([index.get(int(parent[b]), -1) for b in bodies], int)
-        kind = np.zeros(B, int)  # 0 weld, 1 ball, 2 free
-        quat_q = np.zeros((B, 4), int)
-        ang_v = np.zeros((B, 3), int)
-        lin_q = np.zeros((B, 3), int)
-        lin_v = np.zeros((B, 3), int)
-        jpos = np.zeros((B, 3))
-        for i, b in enumerate(bodies):
-            if not has_joint[b]:
-                continue
-            j = int(model.body_jntadr[b])
-            qa, da = int(model.jnt_qposadr[j]), int(model.jnt_dofadr[j])
-            jpos[i] = model.jnt_pos[j]
-            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-                kind[i] = 2
-                lin_q[i], lin_v[i] = range(qa, qa + 3), range(da, da + 3)
-                quat_q[i], ang_v[i] = range(qa + 3, qa + 7), range(da + 3, da + 6)
-            else:
-                kind[i] = 1
-                quat_q[i], ang_v[i] = range(qa, qa + 4), range(da, da + 3)
-        self.kind = kind
-        rot = np.flatnonzero(kind > 0)
-        # a slice when every moving body has a rotational joint (the figure): views, not gathers
-        self._rs = slice(None) if len(rot) == B else rot
-        free = np.flatnonzero(kind == 2)
-        self._rot, self._free = rot, free
-        self._quat_q, self._ang_v = quat_q[rot], ang_v[rot]
-        self._lin_q, self._lin_v = lin_q[free], lin_v[free]
-
-        # body frame relative to the parent (for top-level bodies: relative to the world, folding in the
-        # static parent's pose); free bodies: their qpos is the world pose.
-        bq = np.array(model.body_quat[bodies], float)
-        bpos = np.array(model.body_pos[bodies], float)
-        for i, b in enumerate(bodies):
-            if par[i] < 0 and kind[i] != 2:
-                p = parent[b]
-                Rp = data.xmat[p].reshape(3, 3)
-                bpos[i] = data.xpos[p] + Rp @ bpos[i]
-                bq[i] = qmul(data.xquat[p][:, None], bq[i][:, None])[:, 0]
-        bq /= np.linalg.norm(bq, axis=1, keepdims=True)
-        Rbq = np.moveaxis(qmat(bq.T), -1, 0)  # (B, 3, 3)
-        self._bq = bq.T[:, :, None]  # (4, B, 1)
-        self._bq_identity = bool(np.allclose(bq, [1, 0, 0, 0]))
-        # anchor offset in the parent frame: d = pos + Rbq jpos
-        d = bpos + np.einsum("bij,bj->bi", Rbq, jpos)
-        self._top = np.flatnonzero((par < 0) & (kind != 2))  # bodies hanging from a static parent
-        self._child = np.flatnonzero(par >= 0)  # bodies with a moving parent
-        self._par = par
-        self._d_child = d[self._child].T[:, :, None]  # (3, c, 1)
-        self._d_top = d[self._top].T[:, :, None]
-        self._jpos = jpos.T[:, :, None]
-        self._has_jpos = bool(np.any(jpos != 0))
-        # tree matrices: anc[b, a] = 1 if a is b or an ancestor of b (moving bodies only)
-        anc = np.zeros((B, B))
-        for i in range(B):
-            a = i
-            while a >= 0:
-                anc[i, a] = 1.0
-                a = par[a]
-        self._anc = anc
-        self._desc = np.ascontiguousarray(anc.T)
-        P = np.zeros((B, B))  # P[p, i] = 1 if p is the parent of i
-        for i in self._child:
-            P[par[i], i] = 1.0
-        self._parent_mat = np.ascontiguousarray(P[:, self._child])
-        depth = anc.sum(1).astype(int)
-        self._levels = [np.flatnonzero(depth == k) for k in range(2, int(depth.max()) + 1)] if B else []
+        super().__init__(model, sites)
+        bodies = self.bodies
         # inertia: mass, com offset in the body frame, inertia about the com in the body frame
         self._mass = np.array(model.body_mass[bodies], float)[:, None]
         self._ipos = np.array(model.body_ipos[bodies], float).T[:, :, None]
@@ -159,37 +82,14 @@ class InverseDynamics:
         self._armature = np.array(model.dof_armature, float)
         damp = np.array(model.dof_damping, float)
         self._damping = np.zeros(self.nv) if flags & int(mujoco.mjtDisableBit.mjDSBL_DAMPER) else damp
-        # sites
-        self.site_ids = site_ids(model, sites)
-        sb = model.site_bodyid[self.site_ids]
-        if not all(int(b) in index for b in sb):
-            raise InputError("sites must be on moving bodies of the figure, not on a static body")
-        self._site_body = np.array([index[int(b)] for b in sb], int)
-        self._site_pos = np.array(model.site_pos[self.site_ids], float).T[:, :, None]  # (3, K, 1)
-        S = np.zeros((B, len(self.site_ids)))
-        S[self._site_body, np.arange(len(self.site_ids))] = 1.0
-        self._site_mat = S
-        self._cache: InverseDynamicsResult | None = None
         self._self_check(model)
 
     # -----------------------------------------------------------------------------------------------
-    @staticmethod
-    def _check_supported(model):
+    @classmethod
+    def _check_supported(cls, model):
         import mujoco
 
-        problems = []
-        types = {int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL)}
-        for b in range(1, model.nbody):
-            if model.body_jntnum[b] > 1:
-                name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b)
-                problems.append(f"body {name!r} has several joints")
-        for j in range(model.njnt):
-            if int(model.jnt_type[j]) not in types:
-                name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
-                problems.append(f"joint {name!r} is a hinge or slide joint (only free and ball are modelled)")
-            elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and np.any(model.jnt_pos[j] != 0):
-                name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
-                problems.append(f"free joint {name!r} has a nonzero pos")
+        problems = cls._joint_problems(model)
         spring_off = int(model.opt.disableflags) & int(mujoco.mjtDisableBit.mjDSBL_SPRING)
         if not spring_off and np.any(model.jnt_stiffness != 0):
             problems.append("joint stiffness (springs)")
@@ -248,45 +148,15 @@ class InverseDynamics:
         rot, free = self._rot, self._free
         qp, qv, qa = qpos.T, qvel.T, qacc.T
 
-        # --- pose: world quaternions Q (4, B, n) down the tree, rotations R (3, 3, B, n)
-        U = np.zeros((4, B, n))
-        U[0] = 1.0
-        q = qp[self._quat_q.T]  # (4, r, n)
-        U[:, rot] = q / np.sqrt((q * q).sum(0))
-        W = U if self._bq_identity else qmul(self._bq, U)
-        if len(free) and not self._bq_identity:
-            W[:, free] = U[:, free]
-        Q = W.copy()
-        for lvl in self._levels:
-            Q[:, lvl] = qmul(Q[:, self._par[lvl]], W[:, lvl])
-        R = qmat(Q)
-        # positions: x = anc(e), e = R_parent d - R jpos (child), const - R jpos (top), p (free)
-        e = np.zeros((3, B, n))
-        ch = self._child
-        Rpd = mv(R[:, :, self._par[ch]], self._d_child) if len(ch) else np.zeros((3, 0, n))
-        e[:, ch] = Rpd
-        if len(self._top):
-            e[:, self._top] = self._d_top
-        Rj = mv(R, self._jpos) if self._has_jpos else None
-        if Rj is not None:
-            e -= Rj
-        e[:, free] = qp[self._lin_q.T]
-        x = self._anc @ e
-        A = x + Rj if Rj is not None else x
+        # --- pose and velocities (`KinematicTree`), then accelerations (spatial, about the world origin)
+        pose = self._pose(qp)
+        R, x, A = pose["R"], pose["x"], pose["A"]
         cx = mv(R, self._ipos)
         com = x + cx
-
-        # --- velocities and accelerations (spatial, about the world origin)
-        vl = np.zeros((3, B, n))
-        vl[:, rot] = qv[self._ang_v.T]
+        vel = self._velocity(R, A, qv)
+        s, om, k, nu = vel["s"], vel["om"], vel["k"], vel["nu"]
         al_loc = np.zeros((3, B, n))
         al_loc[:, rot] = qa[self._ang_v.T]
-        s = mv(R, vl)
-        om = self._anc @ s
-        k = cross(A, s)
-        lin = np.zeros((3, B, n))
-        lin[:, free] = qv[self._lin_v.T]
-        nu = self._anc @ (k + lin)
         as_ = mv(R, al_loc)
         al = self._anc @ (as_ + cross(om, s))
         lin = np.zeros((3, B, n))
@@ -313,19 +183,13 @@ class InverseDynamics:
         tau[self._lin_v.T] = Ff[:, free]
         tau += self._armature[:, None] * qa + self._damping[:, None] * qv
 
-        # --- sites
-        sb = self._site_body
-        ry = mv(R[:, :, sb], self._site_pos)
-        ys = x[:, sb] + ry
-        ysd = nu[:, sb] + cross(om[:, sb], ys)  # site velocities: nu is the velocity of the origin point
-
+        st = self._sites(R, x, nu, om)
         saved = dict(
-            R=R, x=x, A=A, cx=cx, com=com, Rpd=Rpd, Rj=Rj, s=s, om=om, k=k, nu=nu, as_=as_, al=al,
-            vc=vc, f=f, wl=wl, h=h, nw=nw, Ff=Ff, Wt=Wt, ry=ry, ys=ys,
-            site_vel=np.ascontiguousarray(ysd.transpose(2, 1, 0)),
+            **pose, **vel, **st, cx=cx, com=com, as_=as_, al=al, vc=vc, f=f, wl=wl, h=h, nw=nw, Ff=Ff, Wt=Wt,
+            site_vel=np.ascontiguousarray(st["ysd"].transpose(2, 1, 0)),
         )
         res = InverseDynamicsResult(
-            np.ascontiguousarray(tau.T), np.ascontiguousarray(ys.transpose(2, 1, 0)),
+            np.ascontiguousarray(tau.T), np.ascontiguousarray(st["ys"].transpose(2, 1, 0)),
             qpos.copy(), qvel.copy(), qacc.copy(), saved,
         )
         self._cache = res
@@ -399,24 +263,14 @@ class InverseDynamics:
         wbar += cross(vc, acbar)
         vcbar = cross(acbar, om)
         nubar = vcbar
-        if g_site_vel is not None and len(self._site_body):
-            # ysd = nu_b + om_b x ys: nu_b += g, om_b += ys x g, ys += g x om_b
-            gsv = np.swapaxes(np.moveaxis(g_site_vel, -1, 0), 1, 2)  # (3, K, n)
-            ys_s = sv["ys"]
-            nubar = nubar + self._site_mat @ gsv
-            wbar = wbar + self._site_mat @ cross(ys_s, gsv)
-            gys = cross(gsv, om[:, self._site_body])
-            g_sites = gys.transpose(2, 1, 0) if g_sites is None else g_sites + gys.transpose(2, 1, 0)
         wbar += cross(com, vcbar)
         cbar += cross(vcbar, om)
-        xbar = cbar
         gth += cross(sv["cx"], cbar)
-        if g_sites is not None and len(self._site_body):
-            ybar = np.moveaxis(g_sites, -1, 0)  # (3, n, K) -> want (3, K, n)
-            ybar = np.swapaxes(ybar, 1, 2)
-            Sm = self._site_mat
-            xbar = xbar + Sm @ ybar
-            gth += Sm @ cross(sv["ry"], ybar)
+        sx, snu, sw, sth = self._site_adjoints(sv, om, g_sites, g_site_vel)
+        xbar = cbar + sx
+        nubar = nubar + snu
+        wbar += sw
+        gth += sth
         # nudot = anc(z), z = A x as + om x k + nu x s + lin_acc
         zbar = desc @ nudbar
         Gl_a = zbar[:, free]
@@ -434,31 +288,7 @@ class InverseDynamics:
         # as = R a_local
         Ga[self._ang_v.T] += mtv(R[:, :, rs], asbar[:, rs])
         gth += cross(as_, asbar)
-        # nu = anc(k + lin_vel), k = A x s
-        nubar = desc @ nubar
-        Gl_v = nubar[:, free]
-        kbar += nubar
-        Abar += cross(s, kbar)
-        sbar += cross(kbar, A)
-        # omega = anc(s), s = R v_local
-        sbar += desc @ wbar
-        Gv[self._ang_v.T] += mtv(R[:, :, rs], sbar[:, rs])
-        gth += cross(s, sbar)
-        # A = x + R jpos
-        xbar = xbar + Abar
-        if sv["Rj"] is not None:
-            gth += cross(sv["Rj"], Abar)
-        # x = anc(e), e = R_parent d - R jpos (or p for free bodies)
-        ebar = desc @ xbar
-        Gq[self._lin_v.T] = ebar[:, free]
-        ch = self._child
-        if len(ch):
-            gth += self._parent_mat @ cross(sv["Rpd"], ebar[:, ch])
-        if sv["Rj"] is not None:
-            gth -= cross(sv["Rj"], ebar)
-        # rotations: R_b = R_parent L_b(q_b); world rotation adjoint of joint b = subtree sum
-        theta = desc @ gth
-        Gq[self._ang_v.T] = mtv(R[:, :, rs], theta[:, rs])
+        # velocities and pose (`KinematicTree._reverse`)
+        self._reverse(sv, nubar, kbar, Abar, sbar, wbar, xbar, gth, Gq, Gv)
         Ga[self._lin_v.T] += Gl_a
-        Gv[self._lin_v.T] += Gl_v
         return Gq.T, Gv.T, Ga.T

@@ -64,6 +64,9 @@ class MujocoInverseDynamics:
         eps: finite-difference step of `mjd_inverseFD`.
     """
 
+    #: the path derivatives `forward` reads (qpos, qvel, qacc)
+    needs = (0, 1, 2)
+
     def __init__(self, model, sites=(), eps: float = 1e-6):
         import mujoco
 

@@ -68,13 +68,13 @@ class PathMotion:
     Attributes:
         qvel: (n, nv) [m/s, rad/s]; qacc: (n, nv) [m/s^2, rad/s^2], MuJoCo's convention (ball and free
             angular parts in the child's local frame, free linear part in the world frame). May be
-            non-contiguous (transposed) views.
+            non-contiguous (transposed) views. qacc, q2 and z are None for a motion built without Y''.
         tmap: the TangentMap. q, q1, q2: (4, s, n) quaternion slots of Y, Y', Y''. ss: (s, n) q.q;
         a: (s, n) q.q'; w, z: (3, s, n) G(q) q', G(q) q''.
     """
 
     qvel: np.ndarray
-    qacc: np.ndarray
+    qacc: np.ndarray | None
     tmap: TangentMap
     q: np.ndarray
     q1: np.ndarray
@@ -107,21 +107,27 @@ class PathMotion:
         # gradients of the angular parts (3, s, n); zero where an argument is None
         zero = np.zeros(w.shape)
         gv = zero if g_v is None else g_v.T[qv]
-        ga = zero if g_a is None else g_a.T[qv]
+        ga = None if g_a is None else g_a.T[qv]
         if g_v is not None:
             dY1[tm.lin_q] = g_v.T[tm.lin_v]
         if g_a is not None:
+            if self.qacc is None:
+                raise ValueError("this PathMotion has no qacc (built without Y''); pass g_a=None")
             dY2[tm.lin_q] = g_a.T[tm.lin_v]
             dY2[qq] = _gt(q, c2 * ga)
         wgv = (w * gv).sum(0)
-        wga = (w * ga).sum(0)
-        zga = (z * ga).sum(0)
-        c4a = c4 * a
-        # d omega/dq' and d alpha/dq' (transposed, applied)
-        dY1[qq] = _gt(q, c2 * gv - c4a * ga) - (c4 * wga) * q
-        # d omega/dq and d alpha/dq (transposed, applied)
-        gq = _gt(q1, c4a * ga - c2 * gv) - _gt(q2, c2 * ga)
-        gq += (c4a * (2.0 * c2) * wga - c4 * (wgv + zga)) * q - (c4 * wga) * q1
+        if g_a is None:  # d omega/dq' and d omega/dq only (also when the motion has no qacc)
+            dY1[qq] = _gt(q, c2 * gv)
+            gq = -_gt(q1, c2 * gv) - (c4 * wgv) * q
+        else:
+            wga = (w * ga).sum(0)
+            zga = (z * ga).sum(0)
+            c4a = c4 * a
+            # d omega/dq' and d alpha/dq' (transposed, applied)
+            dY1[qq] = _gt(q, c2 * gv - c4a * ga) - (c4 * wga) * q
+            # d omega/dq and d alpha/dq (transposed, applied)
+            gq = _gt(q1, c4a * ga - c2 * gv) - _gt(q2, c2 * ga)
+            gq += (c4a * (2.0 * c2) * wga - c4 * (wgv + zga)) * q - (c4 * wga) * q1
         if g_pose is not None:
             gp = g_pose.T
             dY[tm.lin_q] = gp[tm.lin_v]
@@ -155,18 +161,21 @@ class PathMotion:
 
 def _motion(tm: TangentMap, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> PathMotion:
     idx = tm.quat_q.T
-    q, q1, q2 = Y.T[idx], Y1.T[idx], Y2.T[idx]  # (4, s, n)
+    q, q1 = Y.T[idx], Y1.T[idx]  # (4, s, n)
     s = (q * q).sum(0)
     a = (q * q1).sum(0)
     w = _gq(q, q1)
-    z = _gq(q, q2)
     n = Y.shape[0]
     v = np.empty((tm.nv, n))
-    acc = np.empty((tm.nv, n))
     v[tm.lin_v] = Y1.T[tm.lin_q]
-    acc[tm.lin_v] = Y2.T[tm.lin_q]
     c2 = 2.0 / s
     v[tm.quat_v.T] = c2 * w
+    if Y2 is None:  # velocities only
+        return PathMotion(v.T, None, tm, q, q1, None, s, a, w, None)
+    q2 = Y2.T[idx]
+    z = _gq(q, q2)
+    acc = np.empty((tm.nv, n))
+    acc[tm.lin_v] = Y2.T[tm.lin_q]
     acc[tm.quat_v.T] = c2 * (z - (c2 * a) * w)
     return PathMotion(v.T, acc.T, tm, q, q1, q2, s, a, w, z)
 
@@ -259,11 +268,12 @@ class TangentMap:
         out[:, :, self.quat_q] = np.einsum("nsij,nksi->nksj", B, G[:, :, self.quat_v])
         return out[:, 0] if squeeze else out
 
-    def motion(self, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> PathMotion:
+    def motion(self, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray | None) -> PathMotion:
         """`qvel` and `qacc` of the path at samples, with their Jacobians (see `PathMotion`).
 
         Args:
             Y, Y1, Y2: (n, nq) qpos and its first and second time derivatives [units/s, units/s^2].
+                Y2 None: velocities only (qacc None; `vjp` then takes no g_a).
         Returns:
             PathMotion with qvel, qacc (n, nv) and `vjp` / `jacobians`. Quaternion slots must be
             nonzero (a zero quaternion gives inf/NaN; nothing is raised in this inner loop).

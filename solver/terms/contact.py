@@ -139,7 +139,7 @@ class Planted(Term):
             # site positions and velocities at all points from the engine's vectorized forward pass
             # (shared with penetration/torque/root/cone), gradients through its single reverse pass
             self._eidx = _engine_index(self.engine, model, self.kin.names)
-            self.needs = (0, 1, 2)  # the engine's forward pass reads qacc too
+            self.needs = tuple(self.engine.needs)  # what the engine's forward pass reads
 
     def knot_times(self) -> np.ndarray:
         """(2C,) every contact's start and end [s]: at touch-down and lift-off a site goes from
@@ -378,7 +378,7 @@ class Clearance(Term):
         self.engine = engine
         if engine is not None:  # site positions of all points from the shared engine's forward pass
             self._eidx = _engine_index(engine, model, self.kin.names)
-            self.needs = (0, 1, 2)
+            self.needs = tuple(engine.needs)
 
     def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         """With an engine: `evaluate` with the gradient left to the engine's reverse pass."""

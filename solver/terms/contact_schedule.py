@@ -319,16 +319,11 @@ def _engine_index(engine, model, names) -> np.ndarray:
 
 
 def _engine_motion(term, Y, Y1, Y2):
-    """(motion, engine result) of the shared engine's (cached) forward pass at the samples. The motion
-    (qvel, qacc) is cached on the engine too, so the contact terms sharing it compute it once."""
-    last = getattr(term.engine, "_contact_motion", None)
-    if last is not None and all(a is b or (a.shape == b.shape and np.array_equal(a, b))
-                                for a, b in zip(last[:3], (Y, Y1, Y2), strict=True)):
-        mo = last[3]
-    else:
-        mo = term.kin.tmap.motion(Y, Y1, Y2)
-        term.engine._contact_motion = (Y.copy(), Y1.copy(), Y2.copy(), mo)
-    return mo, term.engine.forward(Y, mo.qvel, mo.qacc)
+    """(motion, engine result) of the shared engine's (cached) forward pass at the samples
+    (`solver.terms.dynamics.engine_forward`)."""
+    from solver.terms.dynamics import engine_forward
+
+    return engine_forward(term.engine, term.kin.tmap, Y, Y1, Y2)
 
 
 def _sample_times(Y, t, t_span):

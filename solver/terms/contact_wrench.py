@@ -207,8 +207,9 @@ class FrictionCone(Term):
                     T_loc=T_loc, R=R, T=T, lever=lever, M=M, fn=fn, Mn=Mn, uft=uft, umt=umt, e=e)
 
     def _forward(self, Y, Y1, Y2):
-        mo = self.tmap.motion(Y, Y1, Y2)
-        return mo, self.engine.forward(Y, mo.qvel, mo.qacc)
+        from solver.terms.dynamics import engine_forward
+
+        return engine_forward(self.engine, self.tmap, Y, Y1, Y2)
 
     def components(self, t, Y, Y1, Y2) -> tuple[np.ndarray, np.ndarray]:
         """Per sample: A(t) (n,) and (e1, e2, e3, e4) (n, 4) [N] (0 off contact)."""

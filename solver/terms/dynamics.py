@@ -40,6 +40,33 @@ def make_engine(model, sites=CONTACT_SITES, backend: str = "analytic"):
     return BACKENDS[backend](model, sites)
 
 
+def engine_forward(engine, tmap: TangentMap, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray | None):
+    """(PathMotion, engine result) of a path at its samples, computed once for all terms sharing `engine`.
+
+    The motion (qvel, and qacc if the engine reads it: `engine.needs`) is cached on the engine, keyed by
+    the values of Y, Y', Y'', and the engine caches its forward pass, so every term after the first
+    pays only for two comparisons.
+
+    Args:
+        engine: `InverseDynamics`, `MujocoInverseDynamics` or `SiteKinematics`. tmap: the model's
+            `TangentMap`. Y, Y1, Y2: (n, nq) qpos and its time derivatives (Y2 unused if the engine
+            does not read qacc).
+    """
+    if 2 not in engine.needs:
+        Y2 = None
+    key = (Y, Y1, Y2)
+    last = getattr(engine, "_motion_cache", None)
+    if last is not None and all(
+        (a is None and b is None) or (a is not None and b is not None and a.shape == b.shape and np.array_equal(a, b))
+        for a, b in zip(last[0], key, strict=True)
+    ):
+        mo = last[1]
+    else:
+        mo = tmap.motion(Y, Y1, Y2)
+        engine._motion_cache = (tuple(None if a is None else a.copy() for a in key), mo)
+    return mo, engine.forward(Y, mo.qvel, mo.qacc)
+
+
 class EngineGradient:
     """A term's gradient left in the inverse-dynamics engine's variables (`TermEval.deferred`).
 
@@ -150,8 +177,7 @@ class JointTorque(Term):
 
     def torques(self, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> np.ndarray:
         """(n, nv) generalized forces along the path [N, N m] (the free root's 6 included)."""
-        mo = self.tmap.motion(Y, Y1, Y2)
-        return self.engine.forward(Y, mo.qvel, mo.qacc).tau
+        return engine_forward(self.engine, self.tmap, Y, Y1, Y2)[1].tau
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
@@ -160,8 +186,7 @@ class JointTorque(Term):
     def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         """`evaluate` with the gradient left as an `EngineGradient` (summed with other terms' by
         the objective and pulled back once)."""
-        mo = self.tmap.motion(Y, Y1, Y2)
-        res = self.engine.forward(Y, mo.qvel, mo.qacc)
+        mo, res = engine_forward(self.engine, self.tmap, Y, Y1, Y2)
         wt = self.dof_weights * res.tau
         f = (wt * res.tau).sum(axis=1)
         if not grad:
@@ -328,8 +353,7 @@ class RootResidual(Term):
         """Lagged flight: record phi_0 at the quadrature points t from the path (Y, Y', Y'') there."""
         if self.flight_mode != "lagged":
             return
-        mo = self.tmap.motion(Y, Y1, Y2)
-        res = self.engine.forward(Y, mo.qvel, mo.qacc)
+        mo, res = engine_forward(self.engine, self.tmap, Y, Y1, Y2)
         phi, _ = self.flight(res.sites[:, self.site_index])
         self._lagged = (np.array(t, float), phi)
 
@@ -342,8 +366,7 @@ class RootResidual(Term):
 
     def wrench(self, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> np.ndarray:
         """(n, 6) the root's generalized forces along the path: world force [N], local torque [N m]."""
-        mo = self.tmap.motion(Y, Y1, Y2)
-        return self.engine.forward(Y, mo.qvel, mo.qacc).tau[:, self.root_dofs]
+        return engine_forward(self.engine, self.tmap, Y, Y1, Y2)[1].tau[:, self.root_dofs]
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
@@ -351,8 +374,7 @@ class RootResidual(Term):
 
     def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         """`evaluate` with the gradient left as an `EngineGradient` (see `JointTorque`)."""
-        mo = self.tmap.motion(Y, Y1, Y2)
-        res = self.engine.forward(Y, mo.qvel, mo.qacc)
+        mo, res = engine_forward(self.engine, self.tmap, Y, Y1, Y2)
         wr = res.tau[:, self.root_dofs]
         sw = self._scale * wr
         r = (sw * wr).sum(axis=1)

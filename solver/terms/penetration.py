@@ -74,7 +74,7 @@ class Penetration(Term):
             if any(len(w) == 0 for w in where):
                 raise InputError(f"the engine does not track the contact sites {', '.join(sites)}")
             self._engine_index = np.array([int(w[0]) for w in where], int)
-            self.needs = (0, 1, 2)  # the engine's forward pass reads qvel and qacc too
+            self.needs = tuple(engine.needs)  # the engine's forward pass reads qvel (and qacc) too
 
     def depths(self, Y: np.ndarray, margin: float | None = None) -> np.ndarray:
         """(n, k) deepest penetration of each contact site over all surfaces [m] (0 = clear)."""
@@ -91,10 +91,9 @@ class Penetration(Term):
         (`solver.terms.dynamics.EngineGradient`); without one, `evaluate`."""
         if self.engine is None:
             return self.evaluate(t, Y, Y1, Y2, grad)
-        from solver.terms.dynamics import EngineGradient
+        from solver.terms.dynamics import EngineGradient, engine_forward
 
-        mo = self.tmap.motion(Y, Y1, Y2)
-        res = self.engine.forward(Y, mo.qvel, mo.qacc)
+        mo, res = engine_forward(self.engine, self.tmap, Y, Y1, Y2)
         depth, ddepth = self.surfaces.penetration(res.sites[:, self._engine_index], self.margin)
         f = (depth * depth).sum(axis=(1, 2))
         if not grad:

@@ -54,6 +54,11 @@ def test_figure_objective_builds_the_contact_terms_on_one_engine(toy):
     engines = {id(t.engine) for t in obj.terms if getattr(t, "engine", None) is not None}
     assert {"planted", "clearance", "cone", "torque", "root", "penetration"} <= set(obj.names)
     assert len(engines) == 1
+    geometric = figure_objective(toy, parse_terms("penetration,planted,clearance", contacts=SCHEDULE), 0.0, 1.0,
+                                 rate=50, contacts=SCHEDULE)
+    kin = {type(t.engine).__name__ for t in geometric.terms if getattr(t, "engine", None) is not None}
+    assert kin == {"SiteKinematics"}  # no term reads the forces: the kinematics-only engine, no qacc
+    assert all(2 not in t.needs for t in geometric.terms if getattr(t, "engine", None) is not None)
     with pytest.raises(InputError, match="contact schedule"):
         figure_objective(toy, {"planted": 1.0}, 0.0, 1.0)
 
@@ -86,7 +91,9 @@ def test_engine_site_velocities_and_their_gradient(toy):
     np.testing.assert_allclose(gv, fd, atol=1e-6)
 
 
-def test_planted_and_clearance_with_the_engine_match_the_mujoco_loop(toy):
+@pytest.mark.parametrize("kind", ["inverse dynamics", "kinematics only"])
+def test_planted_and_clearance_with_the_engine_match_the_mujoco_loop(toy, kind):
+    from solver.kinematic_tree import SiteKinematics
     from solver.terms.contact import Clearance, Planted
     from solver.terms.dynamics import make_engine
 
@@ -96,7 +103,7 @@ def test_planted_and_clearance_with_the_engine_match_the_mujoco_loop(toy):
     Y, Y1, Y2 = random_qpos(rng, layout, 40, spread=0.2, scale=(1, 1)), rng.normal(size=(40, toy.nq)), None
     Y[:, 2] = 0.95
     Y2 = rng.normal(size=(40, toy.nq))
-    engine = make_engine(toy)
+    engine = make_engine(toy) if kind == "inverse dynamics" else SiteKinematics(toy, CONTACT_SITES)
     for cls in (Planted, Clearance):
         a, b = cls(toy, SCHEDULE), cls(toy, SCHEDULE, engine=engine)
         ea, eb = a.evaluate(t, Y, Y1, Y2), b.evaluate(t, Y, Y1, Y2)

@@ -1,0 +1,96 @@
+"""The kinematics-only engine (`SiteKinematics`): site positions and velocities against MuJoCo
+(mj_kinematics, mj_objectVelocity), its reverse pass against central differences, the velocity-only
+`PathMotion`, and the contact terms on it against the same terms on the full inverse dynamics."""
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+from tree_models import HINGE, ODD, tangent_step
+
+from solver.errors import InputError
+from solver.kinematic_tree import SiteKinematics
+from solver.kinematics import TangentMap
+from solver.layout import CONTACT_SITES, StateLayout
+
+from conftest import random_qpos
+
+SCENE = Path(__file__).resolve().parents[2] / "models" / "run_and_step.xml"
+
+
+@pytest.fixture(scope="module", params=["scene", "odd"])
+def model(request):
+    if request.param == "odd":
+        return mujoco.MjModel.from_xml_string(ODD)
+    if SCENE.exists():
+        return mujoco.MjModel.from_xml_path(str(SCENE))
+    return request.getfixturevalue("toy_model")
+
+
+def _state(model, rng, n):
+    Y = random_qpos(rng, StateLayout.from_model(model), n)
+    return Y, rng.normal(size=(n, model.nv))
+
+
+def test_sites_match_mujoco(model):
+    rng = np.random.default_rng(11)
+    Y, V = _state(model, rng, 5)
+    eng = SiteKinematics(model, CONTACT_SITES)
+    res = eng.forward(Y, V)
+    d = mujoco.MjData(model)
+    vel = np.zeros(6)
+    for i in range(len(Y)):
+        d.qpos[:], d.qvel[:] = Y[i], V[i]
+        mujoco.mj_forward(model, d)
+        for j, sid in enumerate(eng.site_ids):
+            np.testing.assert_allclose(res.sites[i, j], d.site_xpos[sid], atol=1e-12)
+            mujoco.mj_objectVelocity(model, d, mujoco.mjtObj.mjOBJ_SITE, int(sid), vel, 0)
+            np.testing.assert_allclose(eng.site_velocities(res)[i, j], vel[3:], atol=1e-10)
+    assert not res.tau.any() and res.qacc.shape == (len(Y), 0)
+    assert eng.forward(Y.copy(), V.copy()) is res  # cached by value
+
+
+def test_vjp_matches_central_differences(model):
+    rng = np.random.default_rng(12)
+    n, nv = 3, model.nv
+    Y, V = _state(model, rng, n)
+    eng = SiteKinematics(model, CONTACT_SITES)
+    gs, gv = rng.normal(size=(n, 4, 3)), rng.normal(size=(n, 4, 3))
+    Gq, Gv, Ga = eng.vjp(eng.forward(Y, V), None, gs, gv)
+    assert Ga is None
+
+    def phi(Y_, V_):
+        r = eng.forward(Y_, V_)
+        return (r.sites * gs).sum((1, 2)) + (eng.site_velocities(r) * gv).sum((1, 2))
+
+    h = 1e-6
+    fq, fv = np.zeros((n, nv)), np.zeros((n, nv))
+    for i in range(nv):
+        e = np.zeros((n, nv))
+        e[:, i] = h
+        fq[:, i] = (phi(tangent_step(model, Y, e), V) - phi(tangent_step(model, Y, -e), V)) / (2 * h)
+        fv[:, i] = (phi(Y, V + e) - phi(Y, V - e)) / (2 * h)
+    np.testing.assert_allclose(Gq, fq, rtol=0, atol=1e-6 * (1 + np.abs(fq).max()))
+    np.testing.assert_allclose(Gv, fv, rtol=0, atol=1e-6 * (1 + np.abs(fv).max()))
+
+
+def test_velocity_only_motion_matches_the_full_one():
+    model = mujoco.MjModel.from_xml_string(ODD)
+    layout = StateLayout.from_model(model)
+    tm = TangentMap.from_layout(layout)
+    rng = np.random.default_rng(13)
+    Y = random_qpos(rng, layout, 4)
+    Y1, Y2 = rng.normal(size=Y.shape), rng.normal(size=Y.shape)
+    full, vel = tm.motion(Y, Y1, Y2), tm.motion(Y, Y1, None)
+    assert vel.qacc is None
+    np.testing.assert_array_equal(vel.qvel, full.qvel)
+    g, gp = rng.normal(size=(4, tm.nv)), rng.normal(size=(4, tm.nv))
+    for a, b in zip(vel.vjp(g, None, gp), full.vjp(g, None, gp), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-13)
+    with pytest.raises(ValueError, match="no qacc"):
+        vel.vjp(g, g)
+
+
+def test_unsupported_joints_are_named():
+    with pytest.raises(InputError, match="elbow.*hinge"):
+        SiteKinematics(mujoco.MjModel.from_xml_string(HINGE))
