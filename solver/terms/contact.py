@@ -156,24 +156,22 @@ class Planted(Term):
             if self.contacts else np.zeros((len(t), 0))
 
     def _parts(self, p, v, W, rows):
-        """Heights (m, C), tangential velocities (m, C, 3), normals (m, C, 3) of the contacts' sites."""
+        """Heights (m, C), tangential velocities (m, C, 3), normals (m, C, 3) of the contacts' sites,
+        each contact's only where its window W (m, C) is on (zero elsewhere: W h^2 and W |v_t|^2 are
+        zero there anyway)."""
         m, C = len(rows), len(self.contacts)
         h = np.zeros((m, C))
         vt = np.zeros((m, C, 3))
         nrm = np.zeros((m, C, 3))
-        auto = {}  # per site column: the automatic support of all samples at once
         for c in range(C):
-            pc = p[:, self._col[c]]
-            if self._surf[c] is None:
-                if self._col[c] not in auto:
-                    auto[self._col[c]] = self.support.height(pc, None)
-                h[:, c], nrm[:, c] = auto[self._col[c]]
-            else:
-                h[:, c], nrm[:, c] = self.support.height(pc, self._surf[c])
-            h[:, c] -= self.rest_height
+            on = np.flatnonzero(W[:, c] > 0)
+            pc = p[on, self._col[c]]
+            hc, nc = self.support.height(pc, self._surf[c])
+            h[on, c] = hc - self.rest_height
+            nrm[on, c] = nc
             if v is not None:
-                vc = v[:, self._col[c]]
-                vt[:, c] = vc - np.einsum("mi,mi->m", vc, nrm[:, c])[:, None] * nrm[:, c]
+                vc = v[on, self._col[c]]
+                vt[on, c] = vc - np.einsum("mi,mi->m", vc, nc)[:, None] * nc
         return h, vt, nrm
 
     def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
