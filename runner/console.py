@@ -98,6 +98,10 @@ class Progress:
             self._end_round()
             worst = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
             self._line(f"  over the limit ({worst}): weight x10, again")
+        elif event == "stalled":
+            self._end_round()
+            what = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
+            self._line(f"  a boost did not halve it ({what}): out of reach with these keyframes, not boosted again")
         elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
             self._end_round()
             tol = f" (tol {info['tol']:g})" if info.get("tol") else ""
@@ -290,6 +294,10 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
         w1 = final.get(name, w0)
         terms.append(f"{name} {w0:g}" + (f" -> {w1:g}" if w1 != w0 else ""))
     lines.append("terms (weight; -> after penalty continuation): " + ", ".join(terms))
+    stalled = getattr(solution, "stalled", None) or {}
+    if stalled:
+        lines.append("bounds out of reach (a x10 boost did not halve the violation; not boosted again): "
+                     + ", ".join(f"{k} {v:.3g}" for k, v in stalled.items()))
     return "\n".join(lines)
 
 

@@ -70,11 +70,12 @@ def _needs_schedule(name: str) -> InputError:
 
 
 #: Whether a contact schedule switches the contact terms on by default (planted and clearance; cone
-#: joins "all"). On: with variable frames at every touch-down and lift-off (`SolveOptions.term_knots`)
-#: the solve with them takes 0.85-1.94x the evaluations of the solve without (run-and-step: 485 vs 336;
-#: without those frames 1633, penalty continuation boosting the penetration term four times because a
-#: spline with one frame per keyframe interval cannot both hold a foot still and keep the other sites
-#: up). README "Feet that plant" has the figures of the three clips.
+#: joins "all"). On: with variable frames at every touch-down and lift-off (`SolveOptions.term_knots`),
+#: the penetration weight CONTACT_PENETRATION_WEIGHT and the kinematics-only engine (`SiteKinematics`)
+#: the solve with them takes 0.55-1.63x the evaluations and 0.95-1.95x the time of the solve without
+#: (run-and-step: 257 vs 336 evaluations; without the frames 1633, penalty continuation boosting the
+#: penetration term four times because a spline with one frame per keyframe interval cannot both hold a
+#: foot still and keep the other sites up). README "Feet that plant" has the figures of the three clips.
 CONTACT_TERMS_BY_DEFAULT = True
 
 #: The penetration term's weight with the planted term on (DEFAULT_WEIGHTS' 1 otherwise). The weights
@@ -191,7 +192,8 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
         factories["root"] = lambda: dyn["root"](model, engine=engine)
         factories["penetration"] = lambda: Penetration(model, margin=margin, engine=engine)
     if contacts:
-        from solver.terms.contact import Clearance, Planted
+        from solver.terms.clearance import Clearance
+        from solver.terms.contact import Planted
 
         span = (float(t0), float(t1))
         factories["planted"] = lambda: Planted(model, contacts, rest_height=margin, t_span=span, engine=engine)

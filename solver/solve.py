@@ -29,6 +29,7 @@ from solver.round import optimize_round
 from solver.subdivide import adaptive_times, global_times, knot_hint_times, predicted_decreases, weak_form_scores
 
 SUBDIVISIONS = ("none", "global", "adaptive")
+STALL_FRACTION = 0.5  # penalty continuation: a boost must at least halve a violation (`SolveOptions.limits`)
 LIMIT_CHECK_RATE = 4000.0  # [1/s] samples per second at which `limits` are checked
 SCORES = ("gradient", "decrease")
 #: With a tolerance and no `max_frames`: the frame budget, per keyframe interval.
@@ -65,7 +66,8 @@ class SolveOptions:
             integrand changes character (`Objective.knot_times`: the contacts' touch-downs and
             lift-offs), at least KNOT_MIN_GAP from other frames; `per_segment` then splits every
             segment of that set. Without contact terms there are none. On run-and-step with its
-            contacts this took the solve from 1633 to 485 evaluations (README "Feet that plant").
+            contacts (penetration weight 1) this took the solve from 1633 to 485 evaluations (README
+            "Feet that plant").
         per_segment: variable frames per segment (of the keyframes and the term knots) for "global",
             and to start "adaptive" with.
         rounds: adaptive rounds (each adds frames, then re-optimizes).
@@ -102,7 +104,11 @@ class SolveOptions:
             penetration) exceeds its tolerance has its weight multiplied by `boost` and the round is
             optimized again, at most `max_boosts` times in a solve: the quadratic-penalty method's
             schedule (Nocedal & Wright, Numerical Optimization, sec. 17.1), which drives a soft
-            constraint's violation to a stated bound without a constrained optimizer.
+            constraint's violation to a stated bound without a constrained optimizer. A quadratic
+            penalty's violation falls about as 1/weight; a term whose violation a boost did not cut
+            below STALL_FRACTION of what it was is not boosted again (the keyframes make the bound
+            unreachable there: 127_33 keyed every 0.33 s took four boosts and 1550 evaluations while
+            its clearance violation grew from 68 to 112 mm); `Solution.stalled` lists them.
     """
 
     subdivision: str = "adaptive"
@@ -199,6 +205,8 @@ class Solution:
         refinement_estimates: with adaptive subdivision, `refinement_estimate` after each round that
             computed it (every round but the last without a tolerance; every round with one).
         converged_to_tol: with a tolerance, whether the estimate reached it; None without one.
+        stalled: {term: violation} of the terms penalty continuation gave up on (a boost did not halve
+            the violation; `SolveOptions.limits`), in the term's `violation` units.
     """
 
     frames: FrameSet
@@ -219,6 +227,7 @@ class Solution:
     refinement_estimates: tuple = ()
     converged_to_tol: bool | None = None
     final_estimate: float = float("nan")
+    stalled: dict = field(default_factory=dict)
 
     @cached_property
     def refinement_estimate(self) -> float:
@@ -249,7 +258,9 @@ def solve(
         options: SolveOptions.
         should_stop: polled during optimization (Ctrl-C handler); True ends the solve, keeping the
             best path so far (it meets every keyframe).
-        progress: progress(event, info) for "round" (start of a round) and "eval" (each evaluation).
+        progress: progress(event, info) for "round" (start of a round), "eval" (each evaluation),
+            "boost" ({"terms": {name: violation}, "boosts": n}), "stalled" ({"terms": {name:
+            violation}}: not boosted again) and "estimate" (after a round: the refinement estimate).
         project: maps the values (r, nq) of the variable frames placed on the plain spline before the
             first round (`per_segment`) to the values to start from (e.g. `solver.orient` puts the
             quaternions back on the unit sphere); frames inserted by adaptive rounds keep the path's
@@ -304,6 +315,9 @@ def solve(
     status, message = Status.CONVERGED, "converged"
     n_evals = 0
     boosts = 0
+    last_over: dict[str, float] = {}  # the violations that made the last boost
+    stalled: dict[str, float] = {}  # terms whose violation a boost did not halve: not boosted again
+    reported: set[str] = set()
     r = 0
     scores = None
     while True:
@@ -341,14 +355,22 @@ def solve(
         if status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED):
             break
         over = _over_limits(objective, frames, options.limits) if boosts < options.max_boosts else {}
+        for name in [n for n in over if n in last_over and over[n] > STALL_FRACTION * last_over[n]]:
+            stalled[name] = over[name]  # a boost that did not halve it: the bound is out of reach here
+        if stalled and progress and set(stalled) - reported:
+            progress("stalled", {"terms": {n: stalled[n] for n in set(stalled) - reported}})
+            reported |= set(stalled)
+        over = {n: v for n, v in over.items() if n not in stalled}
         if over:  # penalty continuation: stiffen the violated terms, optimize the same frames again
             boosts += 1
+            last_over = over
             for name in over:
                 objective.weights[objective.names.index(name)] *= options.boost
             if progress:
                 progress("boost", {"terms": over, "boosts": boosts})
             scores = None
             continue
+        last_over = {}
         r += 1
         if r >= n_rounds and not tol:
             break
@@ -391,7 +413,7 @@ def solve(
         _read_only_frames(frames), _read_only_frames(initial), tuple(rounds), status, message, ev0.E, ev1.E,
         ev0.integrals, ev1.integrals, scales, _read_only(np.concatenate(traces) if traces else np.array([ev0.E])),
         time.perf_counter() - t_start, n_evals, dict(zip(objective.names, objective.weights.tolist())), objective,
-        tuple(estimates), converged if tol else None, final_estimate,
+        tuple(estimates), converged if tol else None, final_estimate, dict(stalled),
     )
 
 

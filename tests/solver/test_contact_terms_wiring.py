@@ -94,7 +94,8 @@ def test_engine_site_velocities_and_their_gradient(toy):
 @pytest.mark.parametrize("kind", ["inverse dynamics", "kinematics only"])
 def test_planted_and_clearance_with_the_engine_match_the_mujoco_loop(toy, kind):
     from solver.kinematic_tree import SiteKinematics
-    from solver.terms.contact import Clearance, Planted
+    from solver.terms.clearance import Clearance
+    from solver.terms.contact import Planted
     from solver.terms.dynamics import make_engine
 
     layout = StateLayout.from_model(toy)

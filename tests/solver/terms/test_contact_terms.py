@@ -12,7 +12,8 @@ import pytest
 
 from solver.errors import InputError
 from solver.layout import StateLayout
-from solver.terms.contact import Clearance, Planted, contact_window, flights, smoothstep, swings
+from solver.terms.clearance import Clearance
+from solver.terms.contact import Planted, contact_window, flights, smoothstep, swings
 from solver.terms.contact_wrench import FrictionCone, cone_metrics
 
 from conftest import fd_gradient, random_qpos
@@ -192,6 +193,27 @@ def test_clearance_value_in_the_swing(toy_model, layout):
     Y[:, 2] = FOOT + 0.05  # clear
     assert not term.evaluate(t, Y, None, None).f.any()
     assert term.violation(Y, t) == 0.0
+
+
+def test_a_keyframe_low_in_a_swing_lowers_that_swings_band(toy_model, layout):
+    """A keyframe at t = 0.7 holds l_toe 5 mm up in the middle of its swing (0.4, 1.0): its band in that
+    swing drops to 5 mm, in the objective too (a path through the keyframe that had to be 2 cm up
+    around it would shoot the foot up between keyframes), and the swing leaves the bound."""
+    c, z = 0.02, 0.005
+    term = Clearance(toy_model, WALK, clearance=c, core=0.5)
+    t = np.array([0.55, 0.7, 0.85])
+    Y = standing(layout, len(t), (0.0, 0.0, FOOT + z))
+    before = term.evaluate(t, Y, None, None).f
+    np.testing.assert_allclose(before, (c - z) ** 2, atol=1e-15)
+    found = term.conflicts(np.array([0.7]), standing(layout, 1, (0.0, 0.0, FOOT + z)), excuse=True)
+    assert [(i, s) for i, s, _ in found] == [(0, "l_toe")]
+    assert found[0][2] == pytest.approx(c - z)
+    assert not term.evaluate(t, Y, None, None).f.any()  # the path at the keyframe's height: no penalty
+    Y[:, 2] = FOOT + 0.002  # lower than the keyframe: penalized against the lowered band
+    np.testing.assert_allclose(term.evaluate(t, Y, None, None).f, (z - 0.002) ** 2, atol=1e-15)
+    assert term.violation(Y, t) is None  # that swing is excused from the bound
+    other = Clearance(toy_model, WALK, clearance=c, core=0.5)  # a fresh term keeps its 2 cm band
+    np.testing.assert_allclose(other.evaluate(t, Y, None, None).f, (c - 0.002) ** 2, atol=1e-15)
 
 
 def test_clearance_keeps_flights(toy_model, layout):
