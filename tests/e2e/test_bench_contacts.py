@@ -1,0 +1,29 @@
+"""`dynsplines bench contacts` on the shipped run-and-step keyframes: both configurations solved in one
+process, the CPU-time ratio printed, and the contact terms' effect visible in the metrics it prints
+(bounds of issue 11, not the code's own numbers)."""
+import re
+
+import pytest
+
+from runner.cli import main
+
+
+def _row(printed: str, label: str) -> list[float]:
+    line = next(ln for ln in printed.splitlines() if ln.strip().startswith(label))
+    return [float(x) for x in re.findall(r"-?\d+\.\d+", line[len(label) + 4:])]
+
+
+@pytest.mark.slow
+def test_bench_contacts_on_run_and_step(capsys):
+    assert main(["bench", "contacts"]) == 0
+    printed = capsys.readouterr().out
+    evals = dict(re.findall(r"^\s+(geometric|contacts)\s+(\d+) evaluations\s+[\d.]+ s CPU", printed, re.M))
+    assert set(evals) == {"geometric", "contacts"} and all(int(v) > 0 for v in evals.values())
+    ratio = float(re.search(r"contacts / geometric: CPU time ([\d.]+)x", printed).group(1))
+    assert 0 < ratio < 100
+    capture, plain, geometric, contacts = _row(printed, "float in contact [mm]")
+    assert contacts <= 5.0 < geometric  # issue 11: mean float during contact at most 5 mm
+    capture_s, plain_s, _, contacts_s = _row(printed, "skate in contact [mm/frame]")
+    assert contacts_s <= capture_s + 0.5 and contacts_s <= plain_s / 2
+    pens = re.search(r"contacts ([\d.]+) / (\S+) / ([\d.]+) / ([\d.]+)$", printed, re.M)
+    assert float(pens.group(1)) <= 1.0 and float(pens.group(2)) <= 1e-9  # penetration [mm], keyframe error
