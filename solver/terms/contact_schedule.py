@@ -169,8 +169,13 @@ class SupportSurfaces:
         Args:
             p: (..., 3) points [m]. which: surface index, or None to choose per point.
         Returns:
-            h (...,) [m] (dh/dp = n), n (..., 3).
+            h (...,) [m] (dh/dp = n), n (..., 3) (read-only: may be a broadcast view).
         """
+        if which is None and self.count == 1:
+            which = 0
+        if which is not None and np.ndim(which) == 0:  # one surface for all points: no choosing
+            n = self.normal[int(which)]
+            return (p - self.point[int(which)]) @ n, np.broadcast_to(n, p.shape)
         d = p[..., None, :] - self.point  # (..., S, 3)
         h = np.einsum("...si,si->...s", d, self.normal)
         if which is None:
