@@ -47,7 +47,7 @@ from solver.errors import InputError
 from solver.layout import CONTACT_SITES
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
-from solver.terms.contact_schedule import (  # noqa: F401  (the schedule helpers, re-exported)
+from solver.terms.contact_schedule import (
     FULL,
     SiteMotion,
     SupportSurfaces,
