@@ -378,6 +378,9 @@ def write_keyframes(
     except OSError as e:
         raise InputError(f"{p}: cannot write in {folder}: {e.strerror}; check the folder's permissions") from None
     try:
+        mask = os.umask(0)  # mkstemp makes the file 0600; give it the permissions a new file gets
+        os.umask(mask)
+        os.fchmod(fd, 0o666 & ~mask)
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             f.write(text)
             f.flush()

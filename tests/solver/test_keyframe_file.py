@@ -88,6 +88,21 @@ def test_reads_hand_written_file(tmp_path, layout):
     assert info.source == {} and info.terms == {}
 
 
+@pytest.mark.parametrize("umask", [0o022, 0o077])
+def test_written_file_has_the_permissions_of_a_new_file(tmp_path, layout, umask):
+    """The atomic write goes through mkstemp (mode 0600); the result gets 0666 minus the umask, as a file
+    opened for writing would (a keyframe file is shared with other tools and people)."""
+    import os
+    import stat
+
+    old = os.umask(umask)
+    try:
+        write_keyframes(tmp_path / "k.json", sample_keyframes(layout, np.random.default_rng(2)), layout)
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "k.json").stat().st_mode) == 0o666 & ~umask
+
+
 def test_overwrite_is_atomic_and_complete(tmp_path, layout):
     kf = sample_keyframes(layout, np.random.default_rng(1))
     out = tmp_path / "k.json"
