@@ -29,8 +29,8 @@ MAX_QUADRATURE_POINTS = 100_000
 #: Doubles (points x nq) per block of the pointwise terms (`Term.pointwise`) on long paths (more than
 #: 4 blocks' worth; shorter paths are evaluated whole): a block's arrays (128 KB each; 321 points of
 #: the figure's 51 components) and a term's temporaries stay in a core's L2 cache, a long clip's do
-#: not. Run-and-step's gait tiled 8x (5440 points): 60.5 -> 54.1 ms per evaluation (the figure's unit
-#: and covariant terms 1.5x cheaper per point); measured 128-1024 points, 2048 KB L2 (docs/scaling.md).
+#: not. Run-and-step's gait tiled 8x (5440 points): 60-65 -> 54-60 ms per evaluation (6-11%; blocks of
+#: 128-1024 points within noise of each other; 2 MB L2; docs/scaling.md).
 BLOCK_DOUBLES = 1 << 14
 
 #: Quadrature rules: "uniform" (midpoint rule at `rate` points per second, the paper's) and "gauss"
