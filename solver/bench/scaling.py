@@ -31,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -99,7 +100,8 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, 
         evals, ms_per_eval (wall / evals), rss_before_mb, maxrss_mb (peak resident size of the
         process after the solve), peak_mb (the difference), E_initial, E_final, status,
         max_penetration_mm, keyframe_error (path_metrics at 1000 Hz), banded (the solve's spline
-        bases evaluated through the tridiagonal system).
+        bases evaluated through the tridiagonal system), obj_cpu_s and obj_calls (CPU time in, and
+        calls of, `Objective.evaluate` during the solve: `_objective_cpu`).
     """
     from solver.animate import default_options
     from solver.frames import FrameSet
@@ -117,7 +119,8 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, 
     rss_before = _rss_mb()
     r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
-    sol = solve(objective, initial, options)
+    with _objective_cpu() as obj:
+        sol = solve(objective, initial, options)
     wall = time.perf_counter() - t0
     r1 = resource.getrusage(resource.RUSAGE_SELF)
     maxrss = r1.ru_maxrss / 1024.0  # Linux: kilobytes
@@ -130,8 +133,34 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, 
         "rss_before_mb": rss_before, "maxrss_mb": maxrss, "peak_mb": maxrss - rss_before,
         "E_initial": sol.E_initial, "E_final": sol.E_final, "status": sol.status.name,
         "max_penetration_mm": metrics["max_penetration_mm"], "keyframe_error": metrics["keyframe_error"],
-        "banded": bool(banded),
+        "banded": bool(banded), "obj_cpu_s": obj["cpu_s"], "obj_calls": obj["calls"],
     }
+
+
+@contextmanager
+def _objective_cpu():
+    """Within the block, CPU time [s] and calls of `Objective.evaluate` (every evaluation of E: the
+    optimizer's, the input check's, renormalization's, the subdivision's), collected in the dict it
+    yields: "cpu_s", "calls". The rest of a solve's CPU time is the optimizer's own work (nlopt's
+    L-BFGS, the preconditioner's maps) and the setup (spline bases, preconditioner, limit checks)."""
+    from solver.objective import Objective
+
+    acc = {"cpu_s": 0.0, "calls": 0}
+    evaluate = Objective.evaluate
+
+    def timed(self, *args, **kwargs):
+        t = time.process_time()
+        try:
+            return evaluate(self, *args, **kwargs)
+        finally:
+            acc["cpu_s"] += time.process_time() - t
+            acc["calls"] += 1
+
+    Objective.evaluate = timed
+    try:
+        yield acc
+    finally:
+        Objective.evaluate = evaluate
 
 
 def _rss_mb() -> float:
@@ -217,21 +246,27 @@ def _worker(args) -> int:
 
 
 def print_table(rows: list[dict], title: str) -> None:
-    """The table: wall and CPU time, evaluations, CPU per evaluation, peak memory, each also relative
-    to the first row; the result's penetration and keyframe error. CPU time (user + system of the
-    solve) is the figure to compare on a shared machine: wall time includes waiting for a core."""
+    """The table: wall and CPU time, evaluations, CPU per evaluation, CPU per call of the objective
+    (obj ms) and the solve's CPU time outside it (rest s: nlopt, the preconditioner, the setup), peak
+    memory, each also relative to the first row; the result's penetration and keyframe error. CPU time
+    (user + system of the solve) is the figure to compare on a shared machine: wall time includes
+    waiting for a core."""
     base = rows[0]
     b_cpu_eval = base["cpu_s"] / max(1, base["evals"])
+    b_obj = base["obj_cpu_s"] / max(1, base["obj_calls"])
     print(title)
     print(f"{'length':>6} {'keyfr':>5} {'frames':>6} {'points':>6} {'wall s':>7} {'cpu s':>6} {'evals':>5} "
-          f"{'cpu ms/ev':>9} {'peak MB':>7} | {'wall/1x':>7} {'cpu/1x':>6} {'ev/1x':>5} {'ms/ev/1x':>8} "
-          f"{'mem/1x':>6} | {'pen mm':>6} {'kf err':>7} {'E_final':>7}  status")
+          f"{'cpu ms/ev':>9} {'obj ms':>6} {'rest s':>6} {'peak MB':>7} | {'wall/1x':>7} {'cpu/1x':>6} {'ev/1x':>5} "
+          f"{'ms/ev/1x':>8} {'obj/1x':>6} {'rest/1x':>7} {'mem/1x':>6} | {'pen mm':>6} {'kf err':>7} {'E_final':>7}  status")
     for r in rows:
         cpu_eval = r["cpu_s"] / max(1, r["evals"])
+        obj = r["obj_cpu_s"] / max(1, r["obj_calls"])
+        rest = r["cpu_s"] - r["obj_cpu_s"]
         print(f"{r['factor']:>5}x {r['keyframes']:>5} {r['frames']:>6} {r['points']:>6} {r['wall_s']:>7.2f} "
-              f"{r['cpu_s']:>6.2f} {r['evals']:>5} {1e3 * cpu_eval:>9.2f} {r['peak_mb']:>7.1f} | "
-              f"{r['wall_s'] / base['wall_s']:>7.2f} {r['cpu_s'] / base['cpu_s']:>6.2f} "
-              f"{r['evals'] / max(1, base['evals']):>5.2f} {cpu_eval / b_cpu_eval:>8.2f} "
+              f"{r['cpu_s']:>6.2f} {r['evals']:>5} {1e3 * cpu_eval:>9.2f} {1e3 * obj:>6.2f} {rest:>6.2f} "
+              f"{r['peak_mb']:>7.1f} | {r['wall_s'] / base['wall_s']:>7.2f} {r['cpu_s'] / base['cpu_s']:>6.2f} "
+              f"{r['evals'] / max(1, base['evals']):>5.2f} {cpu_eval / b_cpu_eval:>8.2f} {obj / b_obj:>6.2f} "
+              f"{rest / max(base['cpu_s'] - base['obj_cpu_s'], 1e-9):>7.2f} "
               f"{r['peak_mb'] / max(base['peak_mb'], 1e-9):>6.2f} | {r['max_penetration_mm']:>6.3f} "
               f"{r['keyframe_error']:>7.0e} {r['E_final']:>7.4f}  {r['status']}{' banded' if r['banded'] else ''}")
 

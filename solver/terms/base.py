@@ -51,6 +51,10 @@ class Term:
     #: qpos slots `radial_slots` ((s, 4) indices) [units of f].
     radial_curvature: float = 0.0
     radial_slots: np.ndarray | None = None
+    #: True if f and its gradients at a point depend only on that point's t, Y, Y', Y'' (no state kept
+    #: across points or rounds, no deferred gradient): the objective may then evaluate the term on
+    #: blocks of points (`solver.objective.BLOCK_DOUBLES`), which keeps a long clip's temporaries in cache.
+    pointwise: bool = False
 
     def evaluate(
         self, t: np.ndarray, Y: np.ndarray, Y1: np.ndarray | None, Y2: np.ndarray | None, grad: bool = True

@@ -48,6 +48,7 @@ class Hyperextension(Term):
     name = "bending"
     units = "rad^2"
     needs = (0,)
+    pointwise = True
 
     def __init__(self, layout, hinges: dict | None = None, tolerance: float = 0.0):
         hinges = FIGURE_HINGES if hinges is None else hinges

@@ -24,6 +24,7 @@ class CovariantAcceleration(Term):
     needs = (0, 2)
     #: |y''|^2 per linear component, and per tangential quaternion direction
     acceleration_curvature = 2.0
+    pointwise = True
 
     def __init__(self, quat_slots: np.ndarray, linear_index: np.ndarray | None = None):
         self.idx = np.asarray(quat_slots, dtype=int).reshape(-1, 4)
@@ -82,6 +83,7 @@ class NormalizedCovariantAcceleration(Term):
     units = "1/s^4"
     needs = (0, 1, 2)
     acceleration_curvature = 2.0  # |A|^2 on a unit quaternion's tangent directions
+    pointwise = True
 
     def __init__(self, quat_slots: np.ndarray):
         self.idx = np.asarray(quat_slots, dtype=int).reshape(-1, 4)

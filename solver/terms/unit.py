@@ -18,6 +18,7 @@ class UnitQuaternion(Term):
     needs = (0,)
     #: d^2/dr^2 (1 - r^2)^2 = 12 r^2 - 4 = 8 at r = |q| = 1 (also its Gauss-Newton value 2 (2r)^2)
     radial_curvature = 8.0
+    pointwise = True
 
     def __init__(self, quat_slots: np.ndarray):
         self.idx = np.asarray(quat_slots, dtype=int).reshape(-1, 4)

@@ -110,3 +110,35 @@ def test_invalid_weights_and_nonfinite_terms_are_named():
     with pytest.raises(NonFiniteError, match="'poison'") as e:
         obj.evaluate(np.array([0.0, 1.0]), np.zeros((2, 1)))
     assert e.value.term == "poison"
+
+
+class PointwiseWiggly(Wiggly):
+    name, pointwise = "wiggly_pointwise", True
+
+
+class PointwiseValue(Value):
+    name, pointwise = "value_pointwise", True
+
+
+@pytest.mark.parametrize("quadrature", ["uniform", "gauss"])
+def test_blocked_pointwise_terms_give_the_same_bits_and_a_checked_gradient(quadrature, monkeypatch):
+    """Pointwise terms on a long path are evaluated on blocks of points (`BLOCK_DOUBLES`), a run of
+    them at a time between terms that are not pointwise: E, gradient and integrals are the same bits
+    as whole-path evaluation, and the gradient matches finite differences."""
+    import solver.objective as objective_module
+
+    rng = np.random.default_rng(5)
+    knots = np.linspace(0.0, 1.2, 70)
+    P = np.sin(knots[:, None] * [1.0, 2.0, 3.0]) + 0.01 * rng.normal(size=(70, 3))
+    terms = [PointwiseWiggly(), PointwiseValue(), Wiggly(), PointwiseValue(), Value()]
+    obj = Objective(terms, [0.7, 1.3, 0.2, 0.0, 0.5], 0.0, 1.2, rate=300.0, quadrature=quadrature)
+    obj.scales = np.array([2.0, 0.5, 1.5, 1.0, 3.0])
+    whole = obj.evaluate(knots, P)
+    n = len(obj.basis(knots).t)
+    monkeypatch.setattr(objective_module, "BLOCK_DOUBLES", 1)  # the smallest blocks: 64 points
+    assert n > 4 * 64 and n % 64
+    blocked = obj.evaluate(knots, P)
+    assert blocked.E == whole.E and blocked.integrals == whole.integrals
+    np.testing.assert_array_equal(blocked.grad, whole.grad)
+    G_fd = fd_gradient(lambda X: obj.evaluate(knots, X, grad=False).E, P)
+    np.testing.assert_allclose(blocked.grad, G_fd, rtol=1e-6, atol=1e-6)

@@ -99,3 +99,28 @@ def test_penetration_value_and_gradient(toy_model, layout):
     Yr[:3, 0] = 1.5
     assert np.count_nonzero(term.evaluate(None, Yr, None, None).f) >= 3
     check_term_gradient(term, Yr, None, None, rtol=1e-5, atol=1e-8)
+
+
+def test_pointwise_terms_evaluate_the_same_on_any_split_of_the_points(layout):
+    """`Term.pointwise` (the objective then evaluates the term on blocks of points): f and the
+    gradients on each half of the points are the rows of the whole evaluation."""
+    from solver.terms import NormalizedCovariantAcceleration
+
+    rng = np.random.default_rng(6)
+    Y = random_qpos(rng, layout, 9)
+    Y1, Y2 = rng.normal(size=Y.shape), rng.normal(size=Y.shape)
+    t = np.linspace(0, 1, 9)
+    terms = [UnitQuaternion(layout.quat_slots), CovariantAcceleration(layout.quat_slots, layout.linear_index),
+             NormalizedCovariantAcceleration(layout.quat_slots), Hyperextension(layout, HINGES, tolerance=-0.3)]
+    for term in terms:
+        assert term.pointwise, term.name
+        whole = term.evaluate(t, Y, Y1, Y2, grad=True)
+        parts = [term.evaluate(t[s], Y[s], Y1[s], Y2[s], grad=True) for s in (slice(0, 4), slice(4, 9))]
+        for field in ("f", "dY", "dY1", "dY2"):
+            w = getattr(whole, field)
+            if w is None:
+                assert all(getattr(p, field) is None for p in parts)
+                continue
+            np.testing.assert_allclose(np.concatenate([getattr(p, field) for p in parts]), w, rtol=1e-15, atol=0,
+                                       err_msg=f"{term.name} {field}")
+    assert not Penetration.pointwise  # keeps a MuJoCo scratch state; may defer its gradient to an engine
