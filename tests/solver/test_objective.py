@@ -110,3 +110,28 @@ def test_invalid_weights_and_nonfinite_terms_are_named():
     with pytest.raises(NonFiniteError, match="'poison'") as e:
         obj.evaluate(np.array([0.0, 1.0]), np.zeros((2, 1)))
     assert e.value.term == "poison"
+
+
+def test_fused_orientation_objective_matches_the_two_terms():
+    """The orientation objective (unit + normalized covariant acceleration of one quaternion, Gauss)
+    takes the fused pass (`unit_and_normalized`); it gives the per-term path's E, integrals and
+    gradient, with weights, scales and a zero weight."""
+    from solver.terms import NormalizedCovariantAcceleration, UnitQuaternion
+
+    slots = np.arange(4).reshape(1, 4)
+    rng = np.random.default_rng(3)
+    knots = np.cumsum(rng.uniform(0.2, 1.0, 9))
+    P = rng.normal(size=(9, 4))
+    for weights in ((0.3, 1.0), (0.0, 2.0), (5.0, 0.0)):
+        fused = Objective([UnitQuaternion(slots), NormalizedCovariantAcceleration(slots)], weights,
+                          knots[0], knots[-1], quadrature="gauss", points=4)
+        fused.scales = np.array([0.7, 1.9])
+        plain = Objective([UnitQuaternion(slots), NormalizedCovariantAcceleration(slots)], weights,
+                          knots[0], knots[-1], quadrature="gauss", points=4)
+        plain.scales = fused.scales.copy()
+        plain._fused = False
+        assert fused._fused
+        a, b = fused.evaluate(knots, P), plain.evaluate(knots, P)
+        assert a.E == pytest.approx(b.E, rel=1e-13)
+        assert a.integrals == pytest.approx(b.integrals, rel=1e-13)
+        np.testing.assert_allclose(a.grad, b.grad, rtol=1e-12, atol=1e-12 * np.abs(b.grad).max())
