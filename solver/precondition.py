@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import solve_triangular
+from scipy.linalg.lapack import dtrtri
 
 from solver.frames import FrameSet
 from solver.objective import Objective
@@ -32,8 +33,15 @@ class AccelerationPreconditioner:
 
     def __init__(self, objective: Objective, frames: FrameSet, radial_weight: float | str = 1.0, quat_slots=()):
         basis = objective.basis(frames.times)
-        # the Hessian of integral |Y''|^2 dt per component; long clips (banded bases) without forming W2
-        H = basis.gram(2, 2.0 * (objective.h if basis.weights is None else basis.weights))
+        # H and the factors depend on the knots alone: kept with the spline basis (itself cached per
+        # objective and knots), so the rounds and checks on the same frames factor once
+        cache = basis.__dict__.setdefault("_preconditioner", {})
+        if "H" not in cache or cache["h"] != objective.h:
+            cache.clear()
+            # the Hessian of integral |Y''|^2 dt per component; long clips (banded bases) without forming W2
+            cache["H"] = basis.gram(2, 2.0 * (objective.h if basis.weights is None else basis.weights))
+            cache["h"] = objective.h
+        H = cache["H"]
         self.free = frames.free
         if radial_weight == "auto":
             radial_weight, quat_slots = auto_radial_weight(objective, frames, H)
@@ -45,7 +53,9 @@ class AccelerationPreconditioner:
         self.groups = []
         for key, comps in patterns.items():
             rows = np.flatnonzero(np.frombuffer(key, dtype=bool))
-            self.groups.append((rows, np.array(comps), np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))))
+            if key not in cache:
+                cache[key] = _upper_inverse(_upper_factor(H[np.ix_(rows, rows)]))
+            self.groups.append((rows, np.array(comps), cache[key]))
         # radial stretch (see SolveOptions.radial_weight): x = S^-1 R^-1 z with, per free frame and
         # quaternion, S^-1 = I + c u u^T (u its unit direction at the start), c = 1/sqrt(w) - 1:
         # the assumed Hessian S (H x I) S has curvature w H along u
@@ -152,6 +162,14 @@ def auto_radial_weight(objective: Objective, frames: FrameSet, H: np.ndarray) ->
     M = solve_triangular(R, solve_triangular(R, G, trans="T").T, trans="T")  # R^-T G R^-1
     lam_min = float(np.linalg.eigvalsh(0.5 * (M + M.T))[0])
     return (lam_min if np.isfinite(lam_min) and lam_min > 0 else 1.0), slots
+
+
+def _upper_inverse(R: np.ndarray) -> np.ndarray:
+    """R^-1 of an upper triangular R (LAPACK dtrtri: a third of the work of a general inverse)."""
+    Rinv, info = dtrtri(R, lower=0)
+    if info != 0:  # a zero on the diagonal: cannot happen for the factor of a positive definite matrix
+        raise ValueError(f"triangular inverse failed (LAPACK dtrtri info={info})")
+    return np.triu(Rinv)
 
 
 def _upper_factor(Hg: np.ndarray) -> np.ndarray:
