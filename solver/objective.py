@@ -222,13 +222,15 @@ class Objective:
         """`evaluate_path` for the orientation objective (`_fused`): the same results in one pass."""
         (w1, w2), (s1, s2) = self.weights, self.scales
         c1, c2 = w1 / s1, w2 / s2
-        I1, I2, D = unit_and_normalized(np.stack((Y, Y1, Y2)), basis.weights, c1, c2, grad)
+        X = np.empty((3, 4, len(Y)))  # component-major for the kernel
+        X[0], X[1], X[2] = Y.T, Y1.T, Y2.T
+        I1, I2, D = unit_and_normalized(X, basis.weights, c1, c2, grad)
         for term, I in zip(self.terms, (I1, I2)):
             if not math.isfinite(I):
                 raise NonFiniteError(term.name, "value")
         E = (c1 * I1 if w1 != 0.0 else 0.0) + (c2 * I2 if w2 != 0.0 else 0.0)
         integrals = {self.terms[0].name: I1, self.terms[1].name: I2}
-        return E, integrals, ([D[0], D[1], D[2]] if grad else [None, None, None])
+        return E, integrals, ([D[0].T, D[1].T, D[2].T] if grad else [None, None, None])
 
     def prepare(self, knots: np.ndarray, P: np.ndarray) -> None:
         """Let the terms fix what they hold constant during a round (`Term.prepare`) from the path
