@@ -47,8 +47,10 @@ PREDICT_MAX_SPLIT = 8
 #: 26 -> 19). A relative-decrease test can stop L-BFGS on a stall far from the optimum (seen once at
 #: 3e-5: true gap 1.6e-3 at an estimate of 1.1e-4), so a round that would be accepted is checked with
 #: `optimization_gap`: above OPT_FRACTION * tol its frames are optimized again at the options' own
-#: ftol_rel (at most POLISHES times), and the check is added to the estimate. On the tuning seeds the
-#: check was at most 0.013 x tol on converged rounds (default tolerance); on the stalled round, 0.1 x tol.
+#: ftol_rel (at most POLISHES times for the same frames and weights), and the check is added to the
+#: estimate. On the tuning seeds the check was at most 0.013 x tol on converged rounds (default
+#: tolerance); on the stalled round, 0.1 x tol. (The count was once for the whole loop: on acceptance
+#: seed 1028 the unit weight, boosted 1000x, left stalls the spent count could not polish.)
 FTOL_FRACTION = 0.03
 OPT_FRACTION = 0.03
 POLISHES = 2
@@ -143,6 +145,7 @@ def solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: flo
                 # frames far apart, ~theta^2/8, which only more frames remove)
                 boosts += 1
                 obj.weights[0] *= DRIFT_BOOST
+                polishes = 0  # a new objective: its optimizations may stall afresh
                 continue
             converged = True
             message = f"estimated gap {est:.2g} <= tol {tol:g} / {TOL_SAFETY:g}"
@@ -156,6 +159,7 @@ def solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: flo
             message = f"no segment to refine at estimated gap {est:.2g} (tol {tol:g})"
             break
         frames = frames.with_variable_frames(new)
+        polishes = 0
     if opts.max_time_s and status is Status.MAX_TIME:
         message = f"time limit of {opts.max_time_s:g} s reached" + (
             f" at estimated gap {estimates[-1]:.2g} (tol {tol:g})" if estimates else "")
