@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import solve_triangular
-from scipy.linalg.lapack import dtrtri
 
 from solver.frames import FrameSet
 from solver.objective import Objective
@@ -54,7 +53,7 @@ class AccelerationPreconditioner:
         for key, comps in patterns.items():
             rows = np.flatnonzero(np.frombuffer(key, dtype=bool))
             if key not in cache:
-                cache[key] = _upper_inverse(_upper_factor(H[np.ix_(rows, rows)]))
+                cache[key] = np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))
             self.groups.append((rows, np.array(comps), cache[key]))
         # radial stretch (see SolveOptions.radial_weight): x = S^-1 R^-1 z with, per free frame and
         # quaternion, S^-1 = I + c u u^T (u its unit direction at the start), c = 1/sqrt(w) - 1:
@@ -162,14 +161,6 @@ def auto_radial_weight(objective: Objective, frames: FrameSet, H: np.ndarray) ->
     M = solve_triangular(R, solve_triangular(R, G, trans="T").T, trans="T")  # R^-T G R^-1
     lam_min = float(np.linalg.eigvalsh(0.5 * (M + M.T))[0])
     return (lam_min if np.isfinite(lam_min) and lam_min > 0 else 1.0), slots
-
-
-def _upper_inverse(R: np.ndarray) -> np.ndarray:
-    """R^-1 of an upper triangular R (LAPACK dtrtri: a third of the work of a general inverse)."""
-    Rinv, info = dtrtri(R, lower=0)
-    if info != 0:  # a zero on the diagonal: cannot happen for the factor of a positive definite matrix
-        raise ValueError(f"triangular inverse failed (LAPACK dtrtri info={info})")
-    return np.triu(Rinv)
 
 
 def _upper_factor(Hg: np.ndarray) -> np.ndarray:
