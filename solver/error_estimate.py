@@ -34,7 +34,8 @@ which the optimizer may exploit. `solver.orient`'s tolerance loop therefore adds
 |E_8 - E_4| / E_8 between 8 and 4 points per segment (~1e-6 usually, 1.6e-3 on one generated set).
 
 The optimizer's own gap is assumed small; `optimization_gap` checks it (`solver.orient_refine` adds it
-to the estimate of a round it would accept, and optimizes again when it is not small).
+to the estimate of a round it would accept, and optimizes again when it is not small; there it is read
+off the gradient the optimizer last evaluated, `OptimizeResult.grad`, and this function is the fallback).
 
 Cost: three gradient evaluations with a frame inserted in every segment (the predicted decreases are
 also what adaptive subdivision ranks segments by, so the estimate is free when another round follows).

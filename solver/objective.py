@@ -20,6 +20,8 @@ from solver.errors import DynsplinesError, InputError
 from solver.quadrature import gauss_times, quadrature_times
 from solver.spline import SplineBasis
 from solver.terms.base import Term, TermEval
+from solver.terms.covariant import NormalizedCovariantAcceleration, unit_and_normalized
+from solver.terms.unit import UnitQuaternion
 
 #: Largest quadrature (points on the keyframe interval) an Objective accepts: the spline matrices are
 #: dense (points x frames), so a clip minutes long at the default rate, or keyframe times in frames
@@ -125,6 +127,11 @@ class Objective:
             self.t, self.h = None, None
         self._needs = tuple(sorted({k for term in self.terms for k in term.needs}))
         self._basis_cache: dict[bytes, SplineBasis] = {}
+        # the orientation objective (unit + normalized covariant acceleration of one quaternion filling
+        # the state) with Gauss quadrature: one fused pass (`unit_and_normalized`) in `evaluate_path`
+        self._fused = (self.quadrature == "gauss" and len(self.terms) == 2
+                       and type(self.terms[0]) is UnitQuaternion and self.terms[0]._single
+                       and type(self.terms[1]) is NormalizedCovariantAcceleration and self.terms[1]._single)
 
     @property
     def names(self) -> list[str]:
@@ -179,6 +186,8 @@ class Objective:
         Raises:
             NonFiniteError: a term's integral is NaN/inf; names the term.
         """
+        if self._fused and Y.shape[1] == 4 and basis.weights is not None:
+            return self._evaluate_fused(basis, Y, Y1, Y2, grad)
         t = basis.t
         wq = None if basis.weights is None else basis.weights[:, None]
         E = 0.0
@@ -257,6 +266,20 @@ class Objective:
                             acc[k] = np.zeros((n,) + g.shape[1:])
                         acc[k][b] += c * g
         return [TermEval(f) for f in fs]
+
+    def _evaluate_fused(self, basis: SplineBasis, Y, Y1, Y2, grad: bool):
+        """`evaluate_path` for the orientation objective (`_fused`): the same results in one pass."""
+        (w1, w2), (s1, s2) = self.weights, self.scales
+        c1, c2 = w1 / s1, w2 / s2
+        X = np.empty((3, 4, len(Y)))  # component-major for the kernel
+        X[0], X[1], X[2] = Y.T, Y1.T, Y2.T
+        I1, I2, D = unit_and_normalized(X, basis.weights, c1, c2, grad)
+        for term, I in zip(self.terms, (I1, I2)):
+            if not math.isfinite(I):
+                raise NonFiniteError(term.name, "value")
+        E = (c1 * I1 if w1 != 0.0 else 0.0) + (c2 * I2 if w2 != 0.0 else 0.0)
+        integrals = {self.terms[0].name: I1, self.terms[1].name: I2}
+        return E, integrals, ([D[0].T, D[1].T, D[2].T] if grad else [None, None, None])
 
     def prepare(self, knots: np.ndarray, P: np.ndarray) -> None:
         """Let the terms fix what they hold constant during a round (`Term.prepare`) from the path

@@ -68,6 +68,10 @@ class OptimizeResult:
         trace: (n_evals,) best objective so far after each evaluation.
         wall_time_s: [s].
         algorithm: the nlopt algorithm's name.
+        grad: (n,) gradient of the minimized function at x, in the optimizer's variables (those of
+            `fun`: for `solve`'s preconditioned rounds the z of `AccelerationPreconditioner`), or None
+            (x never evaluated with a gradient). Kept so that a caller can check stationarity without
+            another evaluation (`solver.orient_refine`).
     """
 
     x: np.ndarray
@@ -79,6 +83,7 @@ class OptimizeResult:
     trace: np.ndarray
     wall_time_s: float
     algorithm: str
+    grad: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -171,6 +176,7 @@ def minimize(
         best["n"] += 1
         if f < best["f"]:
             best["f"], best["x"], best["imp"] = float(f), x.copy(), best["imp"] + 1
+            best["g"] = grad.copy() if grad.size else None
         trace.append(best["f"])
         if callback is not None:
             callback(best["n"], best["f"])
@@ -212,4 +218,4 @@ def minimize(
     if not np.isfinite(best["f"]):  # not a single finite evaluation: report x0 as it is
         best["x"] = x0
     return OptimizeResult(best["x"], best["f"], status, message, best["n"], best["imp"],
-                          np.array(trace), time.perf_counter() - t_start, algorithm)
+                          np.array(trace), time.perf_counter() - t_start, algorithm, best.get("g"))

@@ -32,8 +32,15 @@ class AccelerationPreconditioner:
 
     def __init__(self, objective: Objective, frames: FrameSet, radial_weight: float | str = 1.0, quat_slots=()):
         basis = objective.basis(frames.times)
-        # the Hessian of integral |Y''|^2 dt per component; long clips (banded bases) without forming W2
-        H = basis.gram(2, 2.0 * (objective.h if basis.weights is None else basis.weights))
+        # H and the factors depend on the knots alone: kept with the spline basis (itself cached per
+        # objective and knots), so the rounds and checks on the same frames factor once
+        cache = basis.__dict__.setdefault("_preconditioner", {})
+        if "H" not in cache or cache["h"] != objective.h:
+            cache.clear()
+            # the Hessian of integral |Y''|^2 dt per component; long clips (banded bases) without forming W2
+            cache["H"] = basis.gram(2, 2.0 * (objective.h if basis.weights is None else basis.weights))
+            cache["h"] = objective.h
+        H = cache["H"]
         self.free = frames.free
         if radial_weight == "auto":
             radial_weight, quat_slots = auto_radial_weight(objective, frames, H)
@@ -45,7 +52,9 @@ class AccelerationPreconditioner:
         self.groups = []
         for key, comps in patterns.items():
             rows = np.flatnonzero(np.frombuffer(key, dtype=bool))
-            self.groups.append((rows, np.array(comps), np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))))
+            if key not in cache:
+                cache[key] = np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))
+            self.groups.append((rows, np.array(comps), cache[key]))
         # radial stretch (see SolveOptions.radial_weight): x = S^-1 R^-1 z with, per free frame and
         # quaternion, S^-1 = I + c u u^T (u its unit direction at the start), c = 1/sqrt(w) - 1:
         # the assumed Hessian S (H x I) S has curvature w H along u

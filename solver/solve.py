@@ -339,7 +339,7 @@ def solve(
             plain = replace(options, precondition=False)
             retry = optimize_round(objective, frames.with_x(result.x), plain, remaining, should_stop, progress,
                               n_evals + result.n_evals)
-            result = replace(retry, n_evals=result.n_evals + retry.n_evals,
+            result = replace(retry, n_evals=result.n_evals + retry.n_evals, grad=None,  # not in z
                              trace=np.concatenate([result.trace, retry.trace]),
                              wall_time_s=result.wall_time_s + retry.wall_time_s)
         frames = frames.with_x(result.x)

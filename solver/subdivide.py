@@ -96,7 +96,7 @@ def predicted_decreases(objective: Objective, frames: FrameSet, min_points: int 
         (m-1,) predicted decreases [units of E], >= 0.
     """
     mids = 0.5 * (frames.times[:-1] + frames.times[1:])
-    cand = frames.with_variable_frames(mids)
+    cand = frames.with_midpoints()
     is_mid = np.arange(cand.count) % 2 == 1  # one midpoint inside every segment: every other frame
     ev = objective.evaluate(cand.times, cand.values, grad=True)
     g = np.where(cand.fixed, 0.0, ev.grad)  # (M, nq); only the new frames' rows are used

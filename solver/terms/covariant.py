@@ -119,3 +119,47 @@ class NormalizedCovariantAcceleration(Term):
         dY, dY1, dY2 = np.zeros_like(Y), np.zeros_like(Y), np.zeros_like(Y)
         dY[:, self.idx], dY1[:, self.idx], dY2[:, self.idx] = D[0], D[1], D[2]
         return TermEval(f, dY=dY, dY1=dY1, dY2=dY2)
+
+
+def unit_and_normalized(X: np.ndarray, w: np.ndarray, c_unit: float, c_cov: float, grad: bool = True):
+    """`UnitQuaternion` and `NormalizedCovariantAcceleration` of one quaternion filling the state (the
+    orientation problem), weighted and integrated in one pass over the Gram matrix of (q, q', q'').
+
+    The same values and gradients as the two terms' `evaluate` weighted by the objective, with the
+    Gram form of `NormalizedCovariantAcceleration` rewritten in u = b/a and the entries over a (with
+    p = 1/a: m = c p - 2 u^2, f2 = g p - 4 u e p + 4 u^2 d p - m^2, C = p K with K free of p), and
+    f1 = (1 - a)^2 read off the Gram matrix too (its gradient -4 (1 - a) q adds to C_00). One Gram
+    product, one gradient product and ~30 operations on (n,) arrays, component-major so that the products
+    are plain broadcasts (einsum on (n, 4) rows was 2x slower here); `Objective.evaluate_path` takes
+    this path when its terms are these two (docs/orient.md).
+
+    Args:
+        X: (3, 4, n) q, q', q'' at the quadrature points, component-major.
+        w: (n,) quadrature weights [s].
+        c_unit, c_cov: each term's weight over its scale (lambda_j / s_j).
+        grad: compute the gradient.
+    Returns:
+        (integral of f1 [s], integral of f2 [1/s^3], dE/dX (3, 4, n) of E = c_unit I1 + c_cov I2, or None).
+    """
+    G = (X[:, None] * X[None]).sum(axis=2)  # (3, 3, n): a = q.q, b = q.q', c = q.q'', d, e, g
+    a = G[0, 0]
+    p = 1.0 / a
+    Gp = G * p
+    u, cp, dp, ep, gp = Gp[0, 1], Gp[0, 2], Gp[1, 1], Gp[1, 2], Gp[2, 2]
+    uu = u * u
+    m = cp - 2.0 * uu  # u.w of the class docstring
+    f2 = gp - 4.0 * u * ep + 4.0 * uu * dp - m * m
+    eu = 1.0 - a
+    I1, I2 = float(w @ (eu * eu)), float(w @ f2)
+    if not grad:
+        return I1, I2, None
+    C = np.empty_like(G)
+    C[0, 0] = -2.0 * (gp - 8.0 * u * ep + 12.0 * uu * dp - 2.0 * m * (cp - 4.0 * uu))
+    C[0, 1] = C[1, 0] = 8.0 * (u * dp + m * u) - 4.0 * ep
+    C[0, 2] = C[2, 0] = -2.0 * m
+    C[1, 1] = 8.0 * uu
+    C[1, 2] = C[2, 1] = -4.0 * u
+    C[2, 2] = 2.0
+    C *= (c_cov * w) * p
+    C[0, 0] -= (4.0 * c_unit) * (w * eu)
+    return I1, I2, (C[:, :, None, :] * X[None]).sum(axis=1)

@@ -64,3 +64,17 @@ def test_variable_frames_outside_or_on_a_frame_are_refused(bad):
     fs = FrameSet(times, line_frames(times), np.ones((3, 2), bool), np.ones(3, bool))
     with pytest.raises(ValueError):
         fs.with_variable_frames(np.array(bad))
+
+
+def test_with_midpoints_is_inserting_every_segment_midpoint():
+    """`with_midpoints` (the subdivision candidates) equals `with_variable_frames` of the midpoints,
+    including a partial keyframe's free component."""
+    values = np.array([[0.0, 1.0], [np.nan, 3.0], [2.0, -5.0], [1.0, 0.5]])
+    mask = np.array([[True, True], [False, True], [True, True], [True, True]])
+    fs = FrameSet.from_keyframes(Keyframes(np.array([0.0, 0.7, 2.0, 2.4]), values, mask), np.zeros((0, 4), int))
+    fs = fs.with_variable_frames([1.1])
+    a, b = fs.with_midpoints(), fs.with_variable_frames(0.5 * (fs.times[:-1] + fs.times[1:]))
+    np.testing.assert_array_equal(a.times, b.times)
+    np.testing.assert_allclose(a.values, b.values, rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(a.fixed, b.fixed)
+    np.testing.assert_array_equal(a.is_keyframe, b.is_keyframe)

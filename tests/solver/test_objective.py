@@ -142,3 +142,28 @@ def test_blocked_pointwise_terms_give_the_same_bits_and_a_checked_gradient(quadr
     np.testing.assert_array_equal(blocked.grad, whole.grad)
     G_fd = fd_gradient(lambda X: obj.evaluate(knots, X, grad=False).E, P)
     np.testing.assert_allclose(blocked.grad, G_fd, rtol=1e-6, atol=1e-6)
+
+
+def test_fused_orientation_objective_matches_the_two_terms():
+    """The orientation objective (unit + normalized covariant acceleration of one quaternion, Gauss)
+    takes the fused pass (`unit_and_normalized`); it gives the per-term path's E, integrals and
+    gradient, with weights, scales and a zero weight."""
+    from solver.terms import NormalizedCovariantAcceleration, UnitQuaternion
+
+    slots = np.arange(4).reshape(1, 4)
+    rng = np.random.default_rng(3)
+    knots = np.cumsum(rng.uniform(0.2, 1.0, 9))
+    P = rng.normal(size=(9, 4))
+    for weights in ((0.3, 1.0), (0.0, 2.0), (5.0, 0.0)):
+        fused = Objective([UnitQuaternion(slots), NormalizedCovariantAcceleration(slots)], weights,
+                          knots[0], knots[-1], quadrature="gauss", points=4)
+        fused.scales = np.array([0.7, 1.9])
+        plain = Objective([UnitQuaternion(slots), NormalizedCovariantAcceleration(slots)], weights,
+                          knots[0], knots[-1], quadrature="gauss", points=4)
+        plain.scales = fused.scales.copy()
+        plain._fused = False
+        assert fused._fused
+        a, b = fused.evaluate(knots, P), plain.evaluate(knots, P)
+        assert abs(a.E - b.E) <= 1e-13 * abs(b.E)
+        assert a.integrals == pytest.approx(b.integrals, rel=1e-13)
+        np.testing.assert_allclose(a.grad, b.grad, rtol=1e-12, atol=1e-12 * np.abs(b.grad).max())

@@ -64,3 +64,12 @@ def test_stop_exception_and_errors_in_objective():
 def test_unknown_algorithm_lists_choices():
     with pytest.raises(InputError, match="choose one of: " + ", ".join(ALGORITHMS)):
         minimize(rosenbrock, np.zeros(2), algorithm="newton")
+
+
+def test_result_keeps_the_gradient_at_the_best_iterate():
+    """`OptimizeResult.grad` is the gradient the optimizer evaluated at x (a stationarity check
+    without another evaluation), also when the run stops early on its evaluation limit."""
+    for max_evals in (0, 7):
+        res = minimize(rosenbrock, np.array([-1.2, 1.0]), ftol_rel=1e-12, max_evals=max_evals)
+        _, g = rosenbrock(res.x, True)
+        np.testing.assert_allclose(res.grad, g, rtol=0, atol=1e-12 * max(1.0, np.abs(g).max()))

@@ -88,3 +88,22 @@ def test_auto_weight_reaches_the_same_optimum_in_fewer_evaluations():
     plain = solve(obj, fs, SolveOptions(**opts))
     assert auto.E_final == pytest.approx(plain.E_final, rel=1e-7)
     assert auto.n_evals < plain.n_evals
+
+
+def test_factor_is_the_inverse_cholesky_factor_and_is_shared_on_the_same_knots():
+    """R^-1 with R^T R = H (+ ridge), H the Hessian of integral |Y''|^2 (2 h W2^T W2 on the uniform
+    rule); a second preconditioner on the same knots (the next round, the optimization check) reuses
+    it, and frames on other knots get their own."""
+    obj, fs = problem()
+    a = AccelerationPreconditioner(obj, fs, 1.0)
+    rows, comps, Rinv = a.groups[0]
+    _, _, W2 = spline_matrices(fs.times, obj.t)
+    H = 2.0 * obj.h * W2.T @ W2
+    Hr = H[np.ix_(rows, rows)]
+    R = np.linalg.inv(Rinv)
+    np.testing.assert_allclose(R.T @ R, Hr, rtol=1e-8, atol=1e-8 * np.abs(Hr).max())
+    assert np.allclose(np.tril(Rinv, -1), 0.0)
+    b = AccelerationPreconditioner(obj, fs.with_x(fs.x() * 0.9), 0.3, LAYOUT.quat_slots)
+    assert b.groups[0][2] is Rinv
+    c = AccelerationPreconditioner(obj, fs.with_variable_frames([0.6]), 1.0)
+    assert c.groups[0][2].shape[0] == Rinv.shape[0] + 1
