@@ -72,17 +72,17 @@ def _needs_schedule(name: str) -> InputError:
 #: Whether a contact schedule switches the contact terms on by default (planted and clearance; cone
 #: joins "all"). On: with variable frames at every touch-down and lift-off (`SolveOptions.term_knots`),
 #: the penetration weight CONTACT_PENETRATION_WEIGHT and the kinematics-only engine (`SiteKinematics`)
-#: the solve with them takes 0.55-1.63x the evaluations and 0.95-1.95x the time of the solve without
-#: (run-and-step: 257 vs 336 evaluations; without the frames 1633, penalty continuation boosting the
-#: penetration term four times because a spline with one frame per keyframe interval cannot both hold a
-#: foot still and keep the other sites up). README "Feet that plant" has the figures of the three clips.
+#: the solve with them takes 0.58-1.63x the evaluations and 1.05-2.62x the CPU time of the solve
+#: without on the four inputs of README "Feet that plant" (run-and-step: 257 vs 336 evaluations; without
+#: the frames 1633, penalty continuation boosting the penetration term four times because a spline with
+#: one frame per keyframe interval cannot both hold a foot still and keep the other sites up).
 CONTACT_TERMS_BY_DEFAULT = True
 
 #: The penetration term's weight with the planted term on (DEFAULT_WEIGHTS' 1 otherwise). The weights
 #: are renormalized by the plain spline's integrals (eq. 7), and the plain spline's feet go 10 cm into
 #: the floor or a step, so at weight 1 a planted foot held at the surface buys mm of depth for almost
 #: nothing: penalty continuation then boosted the weight to 100 in two extra rounds (run-and-step: 485
-#: evaluations; starting at 100: 245, the same bounds).
+#: evaluations; starting at 100: 257, the same bounds).
 CONTACT_PENETRATION_WEIGHT = 100.0
 
 
