@@ -78,6 +78,8 @@ def register(sub) -> None:
     c.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
     c.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every length")
     c.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table, dense vs banded")
+    c.add_argument("--repeat", type=int, default=3,
+                   help="solves per length, the lengths alternating; the table gives medians [3]")
     c.set_defaults(func=bench_scaling)
     bench_contacts.register(bsub)
 
@@ -371,6 +373,9 @@ def bench_scaling(args) -> int:
     """`dynsplines bench scaling`: solver.bench.scaling's table for the given lengths."""
     from solver.bench import scaling
 
-    argv = ["--factors", args.factors, "--per-segment", str(args.per_segment), "--rate", str(args.rate)]
+    if args.repeat < 1:
+        raise InputError(f"--repeat must be at least 1, got {args.repeat}")
+    argv = ["--factors", args.factors, "--per-segment", str(args.per_segment), "--rate", str(args.rate),
+            "--repeat", str(args.repeat)]
     argv += ["--dense"] * args.dense + ["--per-eval"] * args.per_eval
     return scaling.main(argv)

@@ -173,31 +173,71 @@ def _rss_mb() -> float:
 
 
 def scaling(keyframes: Keyframes, factors=(1, 2, 4, 8), dense: bool = False, figure: Path = FIGURE,
-            rate: float = 400.0, per_segment: int = 2) -> list[dict]:
+            rate: float = 400.0, per_segment: int = 2, repeat: int = 1) -> list[dict]:
     """The workload: per length factor, `solve_one` on the tiled clip in a fresh subprocess.
 
     Args:
         keyframes: the clip to tile. factors: length multiples. dense: force the dense spline matrices
             at every size (the cost before the banded evaluation, for comparison).
+        repeat: solves per length, the lengths alternating (1x, 2x, .., 1x, 2x, ..), so that a slow
+            or fast spell of a shared machine falls on every length (`median_rows` combines them).
     Returns:
-        one `solve_one` dict per factor, plus "factor".
+        one `solve_one` dict per factor and repeat, plus "factor" and "repeat", in the order run.
     """
     out = []
     with tempfile.TemporaryDirectory() as tmp:
+        paths = {}
         for f in factors:
             kf = tile_keyframes(keyframes, f)
-            path = Path(tmp) / f"x{f}.npz"
-            np.savez(path, times=kf.times, values=kf.values, mask=kf.mask)
-            cmd = [sys.executable, "-m", "solver.bench.scaling", "--worker", str(path), "--figure", str(figure),
-                   "--rate", str(rate), "--per-segment", str(per_segment)] + (["--dense"] if dense else [])
-            env = {**os.environ, **SINGLE_THREAD}
-            res = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
-            if res.returncode != 0:
-                raise RuntimeError(f"scaling worker x{f} failed:\n{res.stderr}")
-            row = json.loads(res.stdout.strip().splitlines()[-1])
-            row["factor"] = f
-            out.append(row)
+            paths[f] = Path(tmp) / f"x{f}.npz"
+            np.savez(paths[f], times=kf.times, values=kf.values, mask=kf.mask)
+        for rep in range(max(1, int(repeat))):
+            for f in factors:
+                cmd = [sys.executable, "-m", "solver.bench.scaling", "--worker", str(paths[f]), "--figure",
+                       str(figure), "--rate", str(rate), "--per-segment", str(per_segment)] + (["--dense"] if dense else [])
+                env = {**os.environ, **SINGLE_THREAD}
+                res = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+                if res.returncode != 0:
+                    raise RuntimeError(f"scaling worker x{f} failed:\n{res.stderr}")
+                row = json.loads(res.stdout.strip().splitlines()[-1])
+                row["factor"], row["repeat"] = f, rep
+                out.append(row)
     return out
+
+
+#: the timing and memory fields of a `solve_one` row that `median_rows` takes the median of; the rest
+#: (evaluations, frames, penetration, ...) is the same in every repeat of a length (the solve is
+#: deterministic) and is taken from the first
+TIMED_FIELDS = ("wall_s", "cpu_s", "obj_cpu_s", "peak_mb")
+
+
+def median_rows(rows: list[dict]) -> list[dict]:
+    """One row per factor (in the order first run): the median over its repeats of `TIMED_FIELDS`,
+    the other fields of its first repeat, and "repeats" (how many).
+
+    Raises:
+        RuntimeError: the repeats of a length differ in evaluations (the solve should be deterministic).
+    """
+    by: dict = {}
+    for r in rows:
+        by.setdefault(r["factor"], []).append(r)
+    out = []
+    for f, rs in by.items():
+        if len({r["evals"] for r in rs}) > 1:
+            raise RuntimeError(f"the {f}x solves took different evaluation counts: {[r['evals'] for r in rs]}")
+        m = dict(rs[0])
+        for k in TIMED_FIELDS:
+            m[k] = float(np.median([r[k] for r in rs]))
+        m["repeats"] = len(rs)
+        out.append(m)
+    return out
+
+
+def repeat_ratios(rows: list[dict], factor: int, base: int, key: str = "cpu_s") -> list[float]:
+    """`key` of `factor` over `key` of `base`, repeat by repeat (the two run next to each other)."""
+    by = {(r["factor"], r["repeat"]): r[key] for r in rows}
+    reps = sorted({r["repeat"] for r in rows})
+    return [by[(factor, k)] / by[(base, k)] for k in reps if (factor, k) in by and (base, k) in by]
 
 
 def per_eval_spline(sizes, nq: int = 51, needs=(0, 2), reps_budget: float = 2e5) -> list[dict]:
@@ -279,6 +319,7 @@ def main(argv=None) -> int:
     p.add_argument("--rate", type=float, default=400.0)
     p.add_argument("--per-segment", type=int, default=2)
     p.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every size")
+    p.add_argument("--repeat", type=int, default=3, help="solves per length, alternating; medians reported [3]")
     p.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table")
     p.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -304,11 +345,21 @@ def main(argv=None) -> int:
           f"tiled {args.factors}x, floor-only scene, quadrature {args.rate:g} Hz, global subdivision "
           f"{args.per_segment} per interval, otherwise animate's options (default_options); one subprocess per length, one BLAS "
           "thread; peak MB = maxrss - RSS before the solve")
-    print_table(scaling(keyframes, factors, figure=args.figure, rate=args.rate, per_segment=args.per_segment),
-                "spline: auto (dense up to DENSE_MAX_ENTRIES, banded above)")
-    if args.dense:
-        print_table(scaling(keyframes, factors, dense=True, figure=args.figure, rate=args.rate,
-                            per_segment=args.per_segment), "spline: dense at every size (before)")
+    for dense, title in ((False, "spline: auto (dense up to DENSE_MAX_ENTRIES, banded above)"),
+                         (True, "spline: dense at every size (before)")):
+        if dense and not args.dense:
+            break
+        rows = scaling(keyframes, factors, dense=dense, figure=args.figure, rate=args.rate,
+                       per_segment=args.per_segment, repeat=args.repeat)
+        if args.repeat > 1:
+            title += f"; times and memory: median of {args.repeat} runs per length, the lengths alternating"
+        print_table(median_rows(rows), title)
+        if args.repeat > 1 and len(factors) > 1:
+            top, base = factors[-1], factors[0]
+            for key, what in (("cpu_s", "CPU time"), ("wall_s", "wall time")):
+                ratios = repeat_ratios(rows, top, base, key)
+                print(f"{what} {top}x / {base}x, run by run: {', '.join(f'{r:.2f}' for r in ratios)} "
+                      f"(median {np.median(ratios):.2f}, min {min(ratios):.2f}, max {max(ratios):.2f})")
     return 0
 
 

@@ -52,3 +52,22 @@ def test_evaluations_barely_grow_with_length():
         assert m["max_penetration_mm"] <= 0.5 and m["keyframe_error"] < 1e-12
         evals[copies] = sol.n_evals
     assert evals[4] <= 1.4 * evals[1], evals
+
+
+def _row(factor, repeat, cpu, evals=100):
+    return {"factor": factor, "repeat": repeat, "cpu_s": cpu, "wall_s": cpu + 0.5, "obj_cpu_s": cpu / 2,
+            "peak_mb": 10.0 * factor + repeat, "evals": evals}
+
+
+def test_median_rows_and_repeat_ratios():
+    from solver.bench.scaling import median_rows, repeat_ratios
+
+    rows = [_row(1, 0, 1.0), _row(8, 0, 9.0), _row(1, 1, 2.0), _row(8, 1, 16.0), _row(1, 2, 1.5), _row(8, 2, 11.0)]
+    med = median_rows(rows)
+    assert [m["factor"] for m in med] == [1, 8] and [m["repeats"] for m in med] == [3, 3]
+    assert med[0]["cpu_s"] == 1.5 and med[1]["cpu_s"] == 11.0  # medians of (1, 2, 1.5) and (9, 16, 11)
+    assert med[1]["wall_s"] == 11.5 and med[1]["peak_mb"] == 81.0 and med[1]["evals"] == 100
+    # run by run: 9/1, 16/2, 11/1.5 (each 8x next to its own 1x)
+    np.testing.assert_allclose(repeat_ratios(rows, 8, 1), [9.0, 8.0, 11.0 / 1.5])
+    with pytest.raises(RuntimeError, match="different evaluation counts"):
+        median_rows([_row(1, 0, 1.0, evals=100), _row(1, 1, 1.0, evals=101)])
