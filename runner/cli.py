@@ -20,9 +20,10 @@ from runner.commands.keyframes_from_bvh import register as register_keyframes_fr
 from runner.commands.mocap import register as register_mocap
 from runner.commands.orient import register as register_orient
 from runner.commands.view import register as register_view
-from runner.exit_codes import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED
+from runner.exit_codes import EXIT_FAILED, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED
 from runner.parser import OneLineParser
 from solver.errors import DynsplinesError, InputError
+from solver.objective import NonFiniteError
 
 #: every subcommand's `register`, in the order of `dynsplines --help`
 SUBCOMMANDS = (register_animate, register_mocap, register_batch, register_keyframes_from_bvh, register_export, register_view, register_bench,
@@ -63,6 +64,12 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print("dynsplines: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except NonFiniteError as e:  # on the plain spline itself: nothing to optimize from, nothing written
+        if args.debug:
+            raise
+        print(f"dynsplines: error: {e} on the plain spline through the keyframes, before any optimization; "
+              "nothing was written (check the keyframes' values and the scene; --debug shows where)", file=sys.stderr)
+        return EXIT_FAILED
     except DynsplinesError as e:
         if args.debug:
             raise

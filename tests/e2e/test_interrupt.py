@@ -285,3 +285,32 @@ def test_identical_runs_give_bit_identical_paths_and_record_versions(tmp_path):
     assert options["weights"] == parse_terms(None, contacts=json.loads(kf.read_text())["contacts"])
     assert {"planted", "clearance"} <= set(options["weights"])
     assert options["solve"]["algorithm"] == "lbfgs" and options["command"]["keyframes"] == str(kf)
+
+
+class NaNFromTheStart(Term):
+    """NaN everywhere: the plain spline itself cannot be evaluated."""
+
+    name = "broken"
+    needs = (0,)
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True):
+        return TermEval(np.full(len(t), np.nan), dY=np.zeros_like(Y) if grad else None)
+
+
+def test_nonfinite_on_the_plain_spline_exits_3_and_writes_nothing(tmp_path, capsys, monkeypatch):
+    real = runner.commands.animate.figure_problem
+
+    def broken(*args, **kwargs):
+        obj, initial, conflicts = real(*args, **kwargs)
+        return (Objective(obj.terms + [NaNFromTheStart()], np.append(obj.weights, 1.0), obj.t0, obj.t1, obj.rate),
+                initial, conflicts)
+
+    monkeypatch.setattr(runner.commands.animate, "figure_problem", broken)
+    out = tmp_path / "p.npz"
+    code = main(["animate", str(small_keyframes(tmp_path)), "--no-render", "--save-path", str(out)])
+    err = capsys.readouterr().err
+    assert code == EXIT_FAILED
+    assert err.startswith("dynsplines: error: objective term 'broken' produced a non-finite value on the plain "
+                          "spline through the keyframes")
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
