@@ -48,6 +48,9 @@ HEIGHT_TOL = 0.08
 LINK = 1.0
 #: padding of a box's footprint on every side [m].
 MARGIN = 0.2
+#: `fit_contacts`: a "rest" whose site falls faster than this [m/s^2] (half of gravity) is the top of
+#: a hop or jump, not a rest on a surface
+BALLISTIC = 0.5 * 9.81
 
 
 @dataclass(frozen=True)
@@ -167,25 +170,42 @@ def fit_scene(
 
 
 def fit_contacts(times: np.ndarray, site_pos: np.ndarray, sites: Sequence[str] = SITES,
-                 **thresholds) -> list[Contact]:
+                 ballistic: float = BALLISTIC, **thresholds) -> list[Contact]:
     """Contacts for fitting a scene that is not known yet: heights relative to the foot's lowest site.
 
     `detect_contacts` needs each site's height above the surface under it, which is what is being
     fitted. Here a site's height is taken above the lowest site of the same foot in that frame, so
     the speed thresholds do the work: a foot's lowest site counts when it is still, its other site
-    when it is also within the height thresholds of it (a flat foot). A foot held still in the air
-    counts as resting (on something); the clips have none.
+    when it is also within the height thresholds of it (a flat foot).
+
+    A foot is also slow at the top of a hop or a jump, where its upward speed passes through zero;
+    it falls with the body there. A contact whose site height, fitted by a parabola over the contact's
+    frames (least squares), accelerates downward faster than `ballistic` is such a top, not a rest,
+    and is dropped: a box under it would stand where the feet took off (a 15 cm hop made a 14 cm box).
+    Resting contacts of the shipped clips accelerate between -1.2 and +15 m/s^2 (heel strikes and
+    push-offs curve upward), the tops of synthetic hops -6.5 to -10 (docs/contacts.md). A foot held
+    still in the air (not falling) still counts as resting on something; the clips have none.
 
     Args:
-        times: (n,) [s]. site_pos: (n, s, 3) [m]. sites: names. thresholds: of `detect_contacts`.
+        times: (n,) [s]. site_pos: (n, s, 3) [m]. sites: names. ballistic: [m/s^2] > 0.
+        thresholds: of `detect_contacts`.
     """
     site_pos = np.asarray(site_pos, float)
+    times = np.asarray(times, float)
     h = np.empty(site_pos.shape[:2])
     for members in FEET.values():
         ks = [list(sites).index(s) for s in members if s in sites]
         if ks:
             h[:, ks] = site_pos[:, ks, 2] - site_pos[:, ks, 2].min(axis=1, keepdims=True)
-    return detect_contacts(times, site_pos, h, sites, **thresholds)
+    out = []
+    for c in detect_contacts(times, site_pos, h, sites, **thresholds):
+        rows = (times >= c.start - 1e-9) & (times <= c.end + 1e-9)
+        if rows.sum() >= 3:
+            t = times[rows] - times[rows].mean()
+            if 2.0 * np.polyfit(t, site_pos[rows, list(sites).index(c.site), 2], 2)[0] < -ballistic:
+                continue
+        out.append(c)
+    return out
 
 
 _SCENE = """<mujoco model="{model}">

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 
 def edit_bvh(src, dst, *, seconds: float | None = None, stride: int = 1, order: str | None = None,
-             rename: dict | None = None, scale: float = 1.0) -> Path:
+             rename: dict | None = None, scale: float = 1.0, hop: tuple | None = None) -> Path:
     """Write an edited copy of the BVH clip `src` to `dst`.
 
     Args:
@@ -19,6 +19,9 @@ def edit_bvh(src, dst, *, seconds: float | None = None, stride: int = 1, order: 
             the angles so the rotations stay the same.
         rename: {old joint name: new name}. scale: multiply every OFFSET and root position (another
             subject's bone lengths).
+        hop: (start [s], duration [s], height [m]): add 4 height s (1 - s), s = (t - start) / duration,
+            to the root's height (BVH Y) for 0 < s < 1, t the time after the T-pose frame: the figure
+            lifted off the ground, both feet with it (a synthetic hop).
     """
     lines = Path(src).read_text().splitlines()
     m = next(i for i, ln in enumerate(lines) if ln.strip() == "MOTION")
@@ -53,6 +56,13 @@ def edit_bvh(src, dst, *, seconds: float | None = None, stride: int = 1, order: 
         rot = [i for i, c in zip(idx, names, strict=True) if c.endswith("rotation")]
         if scale != 1.0:
             new[:, pos] = data[:, pos] * scale
+        if hop is not None and "Yposition" in names and not cols:  # the root's height
+            from runner.mocap.retarget import UNIT_TO_METRES
+
+            start, duration, height = hop
+            s = (np.arange(len(data)) - 1) * frame_time - start
+            s = np.where((s > 0) & (s < duration), s / duration, 0.0)
+            new[:, col + names.index("Yposition")] += 4.0 * height * s * (1.0 - s) / UNIT_TO_METRES
         if order is not None and rot:
             seq = "".join(names[i - col][0] for i in rot)
             r = Rotation.from_euler(seq.upper(), data[:, rot], degrees=True)  # intrinsic: R = R1 R2 R3

@@ -13,6 +13,9 @@ from solver.layout import FEET
 CONTACT_HEIGHT = 0.06
 #: ... and that site moves slower than this [m/s].
 CONTACT_SPEED = 0.6
+#: the wide height window [m] in which `correct_root_height` looks for feet at rest to measure the
+#: retargeting's height error (the retargeted feet can be several cm off before the correction)
+FIT_HEIGHT = 0.15
 #: clearance of the lowest site of a foot in contact after the height correction [m]: a small positive
 #: margin so that keyframes, rounded to 6 decimals in a JSON file, never touch below the surface.
 CONTACT_CLEARANCE = 0.002
@@ -128,13 +131,22 @@ def worst_contact_distance(reference: Reference, model, height: float = CONTACT_
 def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarray:
     """Shift the root height per frame so feet in contact stand on the surfaces, and nothing sinks.
 
-    1. Contact frames (`_foot_contact` with a wide height window of 0.15 m: the retargeted feet can be
-       several cm off before the correction): dz = CONTACT_CLEARANCE - lowest clearance of the feet
-       in contact, so the lowest contact site of a standing foot ends `CONTACT_CLEARANCE` above its
-       surface.
-    2. Frames without contact (flight): dz interpolated linearly between the neighbouring contact
-       frames (held constant before the first and after the last).
-    3. dz smoothed over 9 frames (a moving average), then raised where needed so that every contact
+    1. The retargeting's height error: the retargeted feet can be several cm off before the
+       correction (another subject's bone lengths), nearly the same offset all through a clip. It is
+       the median, over the frames where a foot is provisionally in contact (`_foot_contact` with a
+       wide height window of `FIT_HEIGHT`), of CONTACT_CLEARANCE - the lowest clearance of the feet
+       in contact.
+    2. Contact frames: the feet in contact by the standard definition (`contact_mask`: CONTACT_HEIGHT,
+       CONTACT_SPEED) once that offset is applied. Only these are put on their surfaces: a foot near
+       the top of a small hop is slow (its vertical speed passes through 0) and within the wide
+       window, and putting it on the floor would pull the whole figure down and erase the flight
+       (a 15 cm hop kept 3 cm of its height before this step). dz = CONTACT_CLEARANCE - lowest
+       clearance of the feet in contact, so the lowest contact site of a standing foot ends
+       `CONTACT_CLEARANCE` above its surface.
+    3. Frames without contact (flight): dz interpolated linearly between the neighbouring contact
+       frames (held constant before the first and after the last; the offset of step 1 if no frame
+       is in contact).
+    4. dz smoothed over 9 frames (a moving average), then raised where needed so that every contact
        site of every frame is at least `CONTACT_CLEARANCE` above the surface under it.
 
     Args:
@@ -145,15 +157,21 @@ def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarra
     kin = _SiteKinematics(model)
     pos = kin.positions(qpos)
     clear = kin.clearance(pos)
-    lowest, contact = _foot_contact(pos, clear, frame_time, height=0.15, speed=CONTACT_SPEED)
+    lowest, provisional = _foot_contact(pos, clear, frame_time, height=FIT_HEIGHT, speed=CONTACT_SPEED)
     n = len(qpos)
     frames = np.arange(n)
-    on = contact.any(axis=1)
-    if on.any():
-        target = CONTACT_CLEARANCE - np.where(contact, lowest, np.inf).min(axis=1)
-        dz = np.interp(frames, frames[on], target[on])
-    else:
-        dz = np.zeros(n)
+    dz = np.zeros(n)
+    if provisional.any():
+        offset = float(np.median((CONTACT_CLEARANCE - np.where(provisional, lowest, np.inf).min(axis=1))[
+            provisional.any(axis=1)]))
+        # the same site is the lowest of each foot with or without the uniform offset: `lowest` stays
+        _, contact = _foot_contact(pos, clear + offset, frame_time, height=CONTACT_HEIGHT, speed=CONTACT_SPEED)
+        on = contact.any(axis=1)
+        if on.any():
+            target = CONTACT_CLEARANCE - np.where(contact, lowest, np.inf).min(axis=1)
+            dz = np.interp(frames, frames[on], target[on])
+        else:
+            dz = np.full(n, offset)
     width = min(9, n if n % 2 else n - 1)
     if width >= 3:
         pad = width // 2

@@ -148,3 +148,28 @@ def test_fit_contacts_ignores_a_heel_hovering_over_a_planted_toe():
     assert sorted(c.site for c in cs) == ["l_toe", "r_heel", "r_toe"]
     pos[:, 3, 0] += 2.0 * times        # right toe swinging: fast, not resting
     assert sorted(c.site for c in fit_contacts(times, pos)) == ["l_toe", "r_heel"]
+
+
+def test_fit_contacts_drops_the_top_of_a_hop():
+    """Both feet flat on the floor, then a hop: the body (and the feet with it) on a parabola with
+    gravity's acceleration, 12 cm at the top, the feet still horizontally. The feet are slow near the
+    top (their vertical speed passes through 0) but falling: no rest there, and no box in the scene;
+    a foot held still at that height (a box) is a rest."""
+    g, rate = 9.81, 120.0
+    times = np.arange(int(1.2 * rate)) / rate
+    up = 2.0 * np.sqrt(2 * 0.12 / g)  # time in the air for a 12 cm hop
+    s = times - 0.5
+    z = np.where((s > 0) & (s < up), 0.5 * g * s * (up - s), 0.0)
+    pos = np.zeros((len(times), 4, 3))
+    for k, (x, y) in enumerate(((0.0, 0.1), (0.2, 0.1), (0.0, -0.1), (0.2, -0.1))):
+        pos[:, k] = (x, y, 0.0)
+        pos[:, k, 2] = z
+    assert z.max() == pytest.approx(0.12, abs=1e-3)
+    cs = fit_contacts(times, pos)
+    assert cs and all(c.end <= 0.5 + 1e-9 or c.start >= 0.5 + up - 1e-9 for c in cs), cs
+    assert fit_scene(times, pos, cs).boxes == ()
+    held = pos.copy()  # the same, but the feet stop at the top and stay there (standing on a box)
+    top = s >= up / 2
+    held[top, :, 2] = 0.12
+    boxes = fit_scene(times, held, fit_contacts(times, held)).boxes
+    assert len(boxes) == 1 and boxes[0][0][2] + boxes[0][1][2] == pytest.approx(0.12, abs=1e-3)
