@@ -191,11 +191,11 @@ def scaling(keyframes: Keyframes, factors=(1, 2, 4, 8), dense: bool = False, fig
             kf = tile_keyframes(keyframes, f)
             paths[f] = Path(tmp) / f"x{f}.npz"
             np.savez(paths[f], times=kf.times, values=kf.values, mask=kf.mask)
+        env = {**os.environ, **SINGLE_THREAD}
         for rep in range(max(1, int(repeat))):
             for f in factors:
                 cmd = [sys.executable, "-m", "solver.bench.scaling", "--worker", str(paths[f]), "--figure",
                        str(figure), "--rate", str(rate), "--per-segment", str(per_segment)] + (["--dense"] if dense else [])
-                env = {**os.environ, **SINGLE_THREAD}
                 res = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
                 if res.returncode != 0:
                     raise RuntimeError(f"scaling worker x{f} failed:\n{res.stderr}")
