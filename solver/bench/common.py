@@ -22,7 +22,9 @@ class BaselineResult:
         path_times: (n,) increasing sample times [s], covering [t_0, t_{K-1}], including every keyframe
             time and every knot/sample time of the method's continuous path.
         path_u: (n, 4) the method's continuous path, normalized (unit quaternions, w x y z), at path_times.
-        wall_time_s: wall time of the optimization, setup and path evaluation included [s].
+        wall_time_s: wall time of setup, optimization and the continuous path's construction [s]; the
+            report on it (E, the dense samples and their unit violation) is not timed, as `orient`'s
+            summary is not (`OrientResult.energy`).
         n_evals: objective (+gradient) evaluations.
         status: "converged" (SLSQP's ftol reached), "time_limit" (stopped at max_time_s; the last
             accepted iterate is returned - SLSQP's early iterates on the larger Barr problems are far

@@ -57,7 +57,8 @@ def ours_time_to_gap(times, quats, E_star, ref, gaps=GAPS, repeat: int = 7, log:
     """Our ladder: {gap: (wall_time_s, label, achieved_gap)} or (None, best label, best gap).
 
     Each setting is run once untimed (warm-up), then `repeat` times; its time is the median wall time
-    of a whole `orient` call (objective setup, optimization, subdivision, summary). Our runs take
+    of a whole `orient` call (objective setup, optimization, subdivision; the summary figures, read
+    afterwards, are not timed, nor are the baselines' reports, `BaselineResult.wall_time_s`). Our runs take
     milliseconds, so a single context switch on a shared machine shows in one run; the warm-up and
     the median keep that out (the baselines' runs take seconds, where it does not matter). The gap is measured on the normalized path
     by `ref.covariant_energy` (dense samples, independent of solver/).
