@@ -100,6 +100,17 @@ class AccelerationPreconditioner:
         return self._map(g, transpose=True)
 
     def _map(self, v, transpose):
+        rows = self.whole_rows()
+        if rows is not None:  # whole free frames, one factor: no scatter into (m, nq) and gather back
+            (_, _, Rinv), = self.groups
+            X = v.reshape(len(rows), self.free.shape[1])
+            if transpose:
+                X = X.copy()
+                self._stretch_rows(X)
+                return (Rinv.T @ X).ravel()
+            out = Rinv @ X
+            self._stretch_rows(out)
+            return out.ravel()
         X = np.zeros(self.free.shape)
         X[self.free] = v
         if transpose:
@@ -111,6 +122,16 @@ class AccelerationPreconditioner:
         if not transpose:
             self._stretch(out)
         return out[self.free]
+
+    def _stretch_rows(self, X):
+        """`_stretch` on X (len(rows), nq) holding only the `whole_rows` frames."""
+        if not self.radial:
+            return
+        whole = self.whole_rows()
+        for rows, slot, U in self.radial:
+            at = np.searchsorted(whole, rows)  # rows is a subset of the (sorted) whole rows
+            B = X[np.ix_(at, slot)]
+            X[np.ix_(at, slot)] = B + (self.c * np.einsum("ri,ri->r", B, U))[:, None] * U
 
     def _stretch(self, X):
         """X[row, slot] += c (X[row, slot].u) u for the radial directions u (in place; symmetric)."""
@@ -174,5 +195,5 @@ def _upper_factor(Hg: np.ndarray) -> np.ndarray:
         Hg[flat, :] = 0.0
         Hg[:, flat] = 0.0
         Hg[flat, flat] = d[~flat].mean() if (~flat).any() else 1.0
-    Hg[np.diag_indices_from(Hg)] += 1e-10 * np.trace(Hg) / len(Hg) + 1e-300
+    Hg.flat[:: len(Hg) + 1] += 1e-10 * np.trace(Hg) / len(Hg) + 1e-300  # the diagonal
     return np.linalg.cholesky(Hg).T  # Hg = L L^T, R = L^T
