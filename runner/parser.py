@@ -37,3 +37,13 @@ def positive(kind=float):
 def nonnegative(kind=float):
     """argparse type: a finite number >= 0 of type `kind` (float or int)."""
     return _bounded(kind, lambda v: v >= 0, ">= 0")
+
+
+def positive_or(word: str):
+    """argparse type: the text `word` itself, or a number > 0 (e.g. `--root-scale legs|1`)."""
+    number = positive(float)
+
+    def parse(text: str):
+        return text if text == word else number(text)
+
+    return parse

@@ -29,6 +29,7 @@ import numpy as np
 from runner.console import Progress, StopRequest, motion_metrics_table, summary_table
 from runner.files import atomic_output, check_writable_dir
 from runner.mocap.keyframes import pick_keyframes
+from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO, clip_scene, name_surfaces
 from runner.paths import MODELS, RENDERS
 from runner.saved_path import save_path_npz
@@ -66,6 +67,9 @@ class ClipOptions:
             <stem>.mp4, <stem>.npz, <stem>.metrics.json; no plots). render: write the video.
         fps, size, speed: video settings. quiet: no progress output. command: the command line, recorded
             in the keyframe file's "source".
+        root_scale: the scale of the captured root path (`load_bvh_reference`): "legs" (the figure's
+            leg length over the subject's) or a number (1: as captured); the value used is recorded in
+            the keyframe file's "source".
     """
 
     keys: str = "every"
@@ -88,6 +92,7 @@ class ClipOptions:
     quiet: bool = False
     command: str = ""
     extra: dict = field(default_factory=dict)
+    root_scale: float | str = ROOT_SCALE_LEGS
 
 
 def default_out_dir(clip) -> Path:
@@ -138,7 +143,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
         InputError: as `process_clip`.
     """
     # 1-2: scene, reference, contacts
-    cs = clip_scene(clip, o.scene, o.figure, paths.get("scene", out_dir / f"{clip.stem}.scene.xml"))
+    cs = clip_scene(clip, o.scene, o.figure, paths.get("scene", out_dir / f"{clip.stem}.scene.xml"), o.root_scale)
     ref, model = cs.reference, cs.model
     contacts = name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time))
     say(f"dynsplines mocap: {clip} -> {ref.count} frames at {1 / ref.frame_time:.4g} Hz ({ref.duration:.2f} s), "
@@ -154,7 +159,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
     every = o.every if (o.every is not None or o.keys == "contacts") else 0.25
     kf0 = pick_keyframes(ref, model, contacts, keys=o.keys, every=every, partial=o.partial)
     source = {"clip": Path(os.path.relpath(clip.resolve(), out_dir.resolve())).as_posix(),
-              "command": o.command, "hand_edits": "none"}
+              "command": o.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
     write_keyframes(paths["keyframes"], kf0, layout, model=o.figure, scene=cs.scene_path, source=source,
                     contacts=contacts)
     keyframes, info = read_keyframes(paths["keyframes"], layout)

@@ -44,8 +44,11 @@ def _peek_scene(path: Path) -> Path | None:
 
 def find_reference(info, model, quiet=False):
     """The motion-capture reference of a keyframe file (its "source" "clip", relative to the file), or None
-    when the file names no clip or the clip is not there. Progress of the import unless `quiet`."""
-    clip = (getattr(info, "source", None) or {}).get("clip")
+    when the file names no clip or the clip is not there. Progress of the import unless `quiet`. The root
+    path is scaled as the file's keyframes were made: its "source" "root_scale", or 1 (as captured) for a
+    file that records none (made before the scaling, like the shipped run_and_step.keyframes.json)."""
+    source = getattr(info, "source", None) or {}
+    clip = source.get("clip")
     if not clip:
         return None
     path = Path(info.path).parent / clip if hasattr(info, "path") else MODELS / clip
@@ -54,4 +57,5 @@ def find_reference(info, model, quiet=False):
     from runner.console import Steps
 
     with Steps(f"importing {path.name}", len(IMPORT_STAGES), quiet, unit=" stages") as bar:
-        return load_bvh_reference(path, model, progress=lambda i, stage: bar.update(i, note=stage))
+        return load_bvh_reference(path, model, progress=lambda i, stage: bar.update(i, note=stage),
+                                  root_scale=source.get("root_scale", 1.0))

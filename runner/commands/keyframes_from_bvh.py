@@ -15,8 +15,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from runner.commands.mocap import add_root_scale_argument
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
 from runner.mocap.keyframes import KEY_CHOICES, pick_keyframes
+from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO, clip_scene, name_surfaces
 from runner.parser import OneLineParser
 from runner.paths import MODELS
@@ -60,6 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-root-extremes", action="store_true",
                    help="with --keys every: do not add keys at the root's highest and lowest frames")
     p.add_argument("--quiet", action="store_true", help="no progress; the 'wrote ...' line is still printed")
+    add_root_scale_argument(p)
 
 
 def register(sub) -> None:
@@ -80,6 +83,8 @@ def command_line(args) -> str:
     if args.model:
         words += ["--model", args.model]
     words += ["--partial"] * bool(args.partial) + ["--no-root-extremes"] * bool(args.no_root_extremes)
+    if args.root_scale != ROOT_SCALE_LEGS:
+        words += ["--root-scale", f"{args.root_scale:g}"]
     return f"{PROG} {shlex.join(str(w) for w in words)}"
 
 
@@ -94,7 +99,7 @@ def run(args, command: str | None = None) -> int:
     figure = Path(args.model) if args.model else FIGURE
     if not out.parent.is_dir():
         raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first")
-    cs = clip_scene(args.clip, args.scene, figure, fitted_scene_path(out))
+    cs = clip_scene(args.clip, args.scene, figure, fitted_scene_path(out), args.root_scale)
     reference, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
     contacts = name_surfaces(model, reference, reference_contacts(model, reference.qpos, reference.frame_time))
@@ -105,6 +110,7 @@ def run(args, command: str | None = None) -> int:
         "clip": _relpath(Path(args.clip), out.parent),
         "command": command or command_line(args),
         "hand_edits": "none",
+        "root_scale": round(reference.root_scale, 6),
     }
     write_keyframes(out, keyframes, StateLayout.from_model(model), model=figure, scene=cs.scene_path,
                     source=source, contacts=contacts)

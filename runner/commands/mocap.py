@@ -9,8 +9,9 @@ from pathlib import Path
 from runner.animate_options import add_options, clip_terms
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.mocap.keyframes import KEY_CHOICES
+from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO
-from runner.parser import positive
+from runner.parser import positive, positive_or
 from runner.pipeline import FIGURE, ClipOptions, default_out_dir, process_clip
 
 PROG = "dynsplines mocap"
@@ -48,6 +49,15 @@ def add_clip_arguments(p) -> None:
                    help="scene MJCF, or 'auto' (default): a floor and boxes fitted to where the clip's feet rest, "
                         "written next to the outputs as <stem>.scene.xml")
     p.add_argument("--model", type=Path, default=FIGURE, help="figure MJCF [models/humanoid39.xml]")
+    add_root_scale_argument(p)
+
+
+def add_root_scale_argument(p) -> None:
+    """`--root-scale legs|X` (`mocap`, `batch`, `keyframes-from-bvh`)."""
+    p.add_argument("--root-scale", type=positive_or(ROOT_SCALE_LEGS), default=ROOT_SCALE_LEGS, metavar="legs|X",
+                   help="scale of the captured root path: 'legs' (default) the figure's leg length over the "
+                        "subject's, so that its strides cover the subject's ground; a number, e.g. 1 for the "
+                        "path as captured (a scene built around the capture's coordinates)")
 
 
 def clip_options(args, prog: str, **fields) -> ClipOptions:
@@ -56,6 +66,7 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
     name = prog.split()[-1]
     return ClipOptions(
         keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.model,
+        root_scale=args.root_scale,
         **clip_terms(args), rate=args.rate,
         command=f"{prog} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == [name] else prog, **fields,
     )

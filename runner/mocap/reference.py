@@ -7,14 +7,26 @@ import numpy as np
 
 from runner.mocap.bvh import read_bvh
 from runner.mocap.contacts import correct_root_height
-from runner.mocap.retarget import JOINT_BODIES, Reference, clamp_hyperextension, retarget, tidy_quaternions
+from runner.mocap.retarget import (
+    JOINT_BODIES,
+    Reference,
+    clamp_hyperextension,
+    leg_length_ratio,
+    retarget,
+    tidy_quaternions,
+)
+from solver.errors import InputError
 from solver.layout import StateLayout
 
 #: the stages of `load_bvh_reference` its `progress` callback reports
 IMPORT_STAGES = ("parse", "retarget", "clamp", "root height", "tidy")
 
 
-def load_bvh_reference(path: str | Path, model, progress=None) -> Reference:
+#: `load_bvh_reference`'s default root scale: the figure's leg length over the subject's
+ROOT_SCALE_LEGS = "legs"
+
+
+def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS) -> Reference:
     """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
     figure's own skeleton (written by `dynsplines export --to FILE.bvh` or `--export FILE.bvh`: a joint
     named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
@@ -33,12 +45,17 @@ def load_bvh_reference(path: str | Path, model, progress=None) -> Reference:
             figure must be models/humanoid39.xml (joint and site names). With a model that has no
             static surfaces (the figure alone) the root height is left as retargeted.
         progress: optional progress(stages_done, next_stage) after each of `IMPORT_STAGES`.
+        root_scale: the scale of the captured root path: "legs" (default: the figure's leg length over
+            the subject's, `leg_length_ratio`, so that the figure's strides cover the ground the
+            subject's did) or a number > 0 (1: the root path as captured, e.g. for a scene built around
+            the capture's own coordinates, or a keyframe file made before the scaling).
     Returns:
-        Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s];
-        n = frames in the file - 1.
+        Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s],
+        root_scale; n = frames in the file - 1.
     Raises:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
-            joint the retargeting needs is missing, or the model lacks a joint or site it needs.
+            joint the retargeting needs is missing, the model lacks a joint or site it needs, or
+            root_scale is neither "legs" nor a number > 0.
     """
     from runner.export.bvh import figure_qpos_from_bvh, is_figure_clip
 
@@ -52,7 +69,8 @@ def load_bvh_reference(path: str | Path, model, progress=None) -> Reference:
     layout = StateLayout.from_model(model)
     for name in ("root", *JOINT_BODIES):
         layout.joint(name)
-    qpos = retarget(clip, layout)[1:]  # frame 0 is the synthetic T-pose
+    scale = _root_scale(root_scale, clip, model, path)
+    qpos = retarget(clip, layout, scale)[1:]  # frame 0 is the synthetic T-pose
     step(2, "retargeted")
     qpos, _ = clamp_hyperextension(qpos, layout)
     step(3, "clamped")
@@ -61,4 +79,17 @@ def load_bvh_reference(path: str | Path, model, progress=None) -> Reference:
     qpos = tidy_quaternions(qpos, layout)
     step(5, "done")
     times = np.arange(len(qpos)) * clip.frame_time
-    return Reference(times, qpos, str(path), clip.frame_time)
+    return Reference(times, qpos, str(path), clip.frame_time, scale)
+
+
+def _root_scale(root_scale, clip, model, path) -> float:
+    """The number `root_scale` stands for (`load_bvh_reference`). Raises InputError naming a bad value."""
+    if isinstance(root_scale, str) and root_scale == ROOT_SCALE_LEGS:
+        return leg_length_ratio(clip, model)
+    try:
+        value = float(root_scale)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if not (np.isfinite(value) and value > 0):
+        raise InputError(f"{path}: root scale {root_scale!r} is neither {ROOT_SCALE_LEGS!r} nor a number > 0")
+    return value

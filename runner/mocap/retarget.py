@@ -19,7 +19,13 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    outward in its rest pose, so mapping them to the identity would cross the figure's legs); the
    pelvis and the torso have R_off = identity. Local joint quaternions follow as
    q_joint = conj(q_parent_world) q_child_world, unit, w x y z, hemisphere-consistent over time. The
-   figure keeps its own bone lengths; the root position is the CMU Hips position.
+   figure keeps its own bone lengths; the root position is the CMU Hips position scaled by the ratio
+   of the figure's leg length to the subject's (`leg_length_ratio`), as humanoid retargeting scales
+   root motion by the hips' height (Unity's `Animator.humanScale`): a subject 10% taller than the
+   figure covers 10% more ground per stride, and the figure's shorter legs, at the subject's joint
+   angles, would slide its planted feet (a 16_23 walk with bones scaled 1.1 and the root path left
+   as captured: reference skate 2.19 instead of 1.58 mm/frame, and planting the feet moved the joints
+   7.5 deg from the capture where the plain spline was 5.2 deg off).
 4. Clean-up for hard constraints: knee and elbow hyperextension (flexion < 0, see `FLEXION_AXES`) is
    clamped to 0 by removing the twist about the hinge axis (swing-twist decomposition); then the root
    height is corrected (`correct_root_height`) so that a foot in contact has its lowest contact site
@@ -132,12 +138,14 @@ class Reference:
             hemisphere-consistent over time per joint.
         source: the BVH file it came from.
         frame_time: [s] time between frames of the clip.
+        root_scale: the scale applied to the captured root path (`retarget`; 1: as captured).
     """
 
     times: np.ndarray
     qpos: np.ndarray
     source: str
     frame_time: float
+    root_scale: float = 1.0
 
     @property
     def count(self) -> int:
@@ -229,6 +237,43 @@ def _rest_offsets(clip: BvhClip) -> dict[str, np.ndarray]:
     return out
 
 
+#: the leg bones whose lengths give the root path's scale: (figure knee body, figure ankle body, CMU
+#: knee joint, CMU ankle joint); the bone ending at a body has that body's offset from its parent.
+LEG_BONES = (("l_shin", "l_foot", "LeftLeg", "LeftFoot"), ("r_shin", "r_foot", "RightLeg", "RightFoot"))
+
+
+def leg_length_ratio(clip: BvhClip, model) -> float:
+    """The figure's leg length over the subject's: the scale `retarget` applies to the root path.
+
+    Leg length = hip -> knee + knee -> ankle at the rest pose, the mean of both legs: for the figure
+    the norms of its knee and ankle bodies' offsets (`model.body(name).pos`: 0.42 + 0.42 m for
+    humanoid39.xml), for the subject the norms of the CMU OFFSETs of the knee and ankle joints in
+    metres (0.836 m for the subject of 16_23, 0.865 m for 35_17, 0.863 m for 127_33).
+
+    Args:
+        clip: a parsed clip with the CMU leg joints. model: the scene's MjModel (the figure's bodies).
+    Returns:
+        the ratio, > 0 [1].
+    Raises:
+        InputError: the clip is not the CMU skeleton (`check_skeleton`), a leg joint has a zero OFFSET,
+            or the model lacks a leg body.
+    """
+    check_skeleton(clip)
+    figure, subject = [], []
+    for knee, ankle, cmu_knee, cmu_ankle in LEG_BONES:
+        try:
+            figure.append(float(np.linalg.norm(model.body(knee).pos) + np.linalg.norm(model.body(ankle).pos)))
+        except KeyError as e:
+            raise InputError(f"the figure has no body {e}; the retargeting needs models/humanoid39.xml's "
+                             f"{', '.join(b for leg in LEG_BONES for b in leg[:2])}") from None
+        bones = [np.linalg.norm(clip.offsets[clip.index(j)]) * UNIT_TO_METRES for j in (cmu_knee, cmu_ankle)]
+        if min(bones) <= 1e-9:
+            raise InputError(f"{clip.source}: joint {cmu_knee} or {cmu_ankle} has a zero OFFSET, so the leg "
+                             "has no length; the retargeting needs the CMU skeleton (Hahne's BVH conversion)")
+        subject.append(float(sum(bones)))
+    return float(np.mean(figure) / np.mean(subject))
+
+
 def _required_joints() -> list[str]:
     req = []
     for joint, child in BONE_MAP.values():
@@ -236,21 +281,9 @@ def _required_joints() -> list[str]:
     return list(dict.fromkeys(req))
 
 
-def retarget(clip: BvhClip, layout: StateLayout) -> np.ndarray:
-    """Retarget every frame of a clip onto the figure: `qpos` before any clean-up.
-
-    Root position = CMU Hips position [m]; body orientations = CMU bone orientations times the rest
-    offsets (module docstring, step 3); joint quaternions relative to the parent body; each joint's
-    quaternions hemisphere-aligned over time, the first with w >= 0.
-
-    Args:
-        clip: a parsed clip (all frames). layout: the figure's qpos layout.
-    Returns:
-        (n, nq) qpos.
-    Raises:
-        InputError: a joint the retargeting needs is missing from the clip, or the Hips has no
-            position channels.
-    """
+def check_skeleton(clip: BvhClip) -> None:
+    """Raises InputError (naming the file, the joints or channels and the fix) unless the clip has the
+    CMU joints the retargeting needs, the root Hips, and the root's position channels."""
     missing = [j for j in _required_joints() if j not in clip.names]
     if missing:
         raise InputError(
@@ -267,13 +300,33 @@ def retarget(clip: BvhClip, layout: StateLayout) -> np.ndarray:
             f"{' '.join(clip.channels[0]) or 'none'}); the root path needs 'CHANNELS 6 Xposition Yposition "
             "Zposition Zrotation Yrotation Xrotation'"
         )
+
+
+def retarget(clip: BvhClip, layout: StateLayout, root_scale: float = 1.0) -> np.ndarray:
+    """Retarget every frame of a clip onto the figure: `qpos` before any clean-up.
+
+    Root position = root_scale times the CMU Hips position [m] (scaled about the capture's origin);
+    body orientations = CMU bone orientations times the rest offsets (module docstring, step 3); joint
+    quaternions relative to the parent body; each joint's quaternions hemisphere-aligned over time, the
+    first with w >= 0.
+
+    Args:
+        clip: a parsed clip (all frames). layout: the figure's qpos layout.
+        root_scale: scale of the root path, > 0 (`leg_length_ratio` for the figure's legs; 1: as captured).
+    Returns:
+        (n, nq) qpos.
+    Raises:
+        InputError: a joint the retargeting needs is missing from the clip, or the Hips has no
+            position channels (`check_skeleton`).
+    """
+    check_skeleton(clip)
     qw, pw = cmu_world(clip)
     offsets = _rest_offsets(clip)
     body_q = {b: mul(qw[:, clip.index(j)], offsets[b]) for b, (j, _) in BONE_MAP.items()}
     n = len(qw)
     qpos = np.zeros((n, layout.nq))
     root = layout.joint("root")
-    qpos[:, root.qposadr : root.qposadr + 3] = pw[:, clip.index("Hips")]
+    qpos[:, root.qposadr : root.qposadr + 3] = root_scale * pw[:, clip.index("Hips")]
     qpos[:, root.qposadr + 3 : root.qposadr + 7] = body_q["pelvis"]
     for name, (parent, child) in JOINT_BODIES.items():
         qpos[:, layout.joint(name).qpos_slice] = mul(conj(body_q[parent]), body_q[child])

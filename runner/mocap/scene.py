@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.files import atomic_output
-from runner.mocap.reference import load_bvh_reference
+from runner.mocap.reference import ROOT_SCALE_LEGS, load_bvh_reference
 from runner.mocap.retarget import Reference
 from solver.contacts import Contact, site_positions
 from solver.errors import InputError
@@ -37,7 +37,8 @@ class ClipScene:
     fitted: FittedScene | None = None
 
 
-def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_out: str | Path) -> ClipScene:
+def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_out: str | Path,
+               root_scale: float | str = ROOT_SCALE_LEGS) -> ClipScene:
     """Retarget `clip` onto `scene`, or with scene == "auto" onto a scene fitted to it.
 
     Fitting (docs/contacts.md): retarget onto a floor-only scene, find where the feet rest
@@ -48,16 +49,17 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     Args:
         clip: the BVH file. scene: an MJCF file or "auto". figure: the figure's MJCF
             (models/humanoid39.xml). fitted_out: where the fitted scene is written (only for "auto").
+        root_scale: the root path's scale (`load_bvh_reference`: "legs" or a number).
     Raises:
         InputError: the clip or a scene cannot be read, or the clip's skeleton lacks a joint.
     """
     if str(scene) != AUTO:
         model = load_model(scene)
-        return ClipScene(load_bvh_reference(clip, model), model, Path(scene))
+        return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, Path(scene))
     with tempfile.TemporaryDirectory(prefix="dynsplines-floor-") as tmp:
         floor = Path(tmp) / "floor.xml"
         floor.write_text(scene_mjcf(FittedScene(0.0), figure))
-        first = load_bvh_reference(clip, load_model(floor))
+        first = load_bvh_reference(clip, load_model(floor), root_scale=root_scale)
         floor_model = load_model(floor)
     pos = site_positions(floor_model, first.qpos)
     fitted = fit_scene(first.times, pos, fit_contacts(first.times, pos))
@@ -67,7 +69,7 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     with atomic_output(out, suffix=".xml") as tmp_path:
         Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem))
     model = load_model(out)
-    return ClipScene(load_bvh_reference(clip, model), model, out, fitted)
+    return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, out, fitted)
 
 
 def name_surfaces(model, reference: Reference, contacts: list[Contact]) -> list[Contact]:

@@ -180,7 +180,7 @@ def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
     from solver.solve import SolveOptions, solve
 
     keyframes, _info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
-    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model)
+    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model, root_scale=1.0)  # as the file's keyframes
     contacts = tuple(reference_contacts(model, ref.qpos, ref.frame_time))
     weights = parse_terms("penetration,unit,bending,smooth,torque,root,cone", contacts=contacts)
     obj = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=100.0, contacts=contacts)

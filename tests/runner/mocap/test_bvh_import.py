@@ -36,7 +36,8 @@ def layout(scene):
 
 @pytest.fixture(scope="module")
 def reference(scene):
-    return load_bvh_reference(CLIP, scene)
+    # the root path as captured: the shipped keyframe file was made so (it records no root_scale)
+    return load_bvh_reference(CLIP, scene, root_scale=1.0)
 
 
 # ---- independent helpers: forward kinematics and the box straight from MuJoCo --------------------
@@ -347,7 +348,7 @@ def test_tiny_clip_known_rotations(tmp_path, scene, layout):
     ]
     path = tmp_path / "tiny.bvh"
     path.write_text(tiny_bvh(frames))
-    ref = load_bvh_reference(path, scene)
+    ref = load_bvh_reference(path, scene, root_scale=1.0)
     assert ref.qpos.shape == (2, 51) and ref.frame_time == 0.1
     q = lambda f, name: ref.qpos[f, layout.joint(name).qpos_slice]  # noqa: E731
     # frame 0: knee = 30 deg about +y (figure: shin back); root = 90 deg about +z (BVH up = MuJoCo z)
@@ -364,6 +365,43 @@ def test_tiny_clip_known_rotations(tmp_path, scene, layout):
     # legs straight and vertical in this skeleton: hips and knees at identity
     assert same_rotation(q(1, "l_hip"), [1, 0, 0, 0]) and same_rotation(q(1, "l_knee"), [1, 0, 0, 0])
 
+
+
+def test_the_root_path_is_scaled_by_the_leg_lengths(tmp_path, scene, layout):
+    """By default the root path is scaled by the figure's leg length over the subject's: the tiny
+    skeleton's legs are 7.5 + 7.5 units (0.8466 m), the figure's 0.42 + 0.42 m (humanoid39.xml's shin
+    and foot body offsets); the joint angles are unchanged."""
+    path = tmp_path / "tiny.bvh"
+    path.write_text(tiny_bvh([tiny_frame(), tiny_frame(), tiny_frame(hips_pos=(3.0, 16.0, 20.0))]))
+    raw = load_bvh_reference(path, scene, root_scale=1.0)
+    legs = load_bvh_reference(path, scene)
+    ratio = 0.84 / (15 * 0.0254 / 0.45)
+    assert legs.root_scale == pytest.approx(ratio, rel=1e-12) and raw.root_scale == 1.0
+    # horizontal root path scaled about the capture's origin (the height is then corrected, as ever)
+    assert legs.qpos[:, :2] == pytest.approx(ratio * raw.qpos[:, :2], rel=1e-12)
+    assert np.array_equal(legs.qpos[:, 3:], raw.qpos[:, 3:])
+    half = load_bvh_reference(path, scene, root_scale=0.5)
+    assert half.qpos[:, :2] == pytest.approx(0.5 * raw.qpos[:, :2], rel=1e-12)
+    for bad in (0, -1.0, "tall", float("nan")):
+        with pytest.raises(InputError, match="root scale"):
+            load_bvh_reference(path, scene, root_scale=bad)
+
+
+def test_a_taller_subject_gives_the_same_reference(tmp_path, scene):
+    """Every bone and the root path of 127_33 scaled by 1.1 (another subject, the same motion): with
+    the root path scaled by the legs the reference is the original's; as captured it strides 10%
+    further on the figure's legs."""
+    from bvh_edit import edit_bvh
+
+    clip = CLIP
+    tall = edit_bvh(clip, tmp_path / "tall.bvh", scale=1.1)
+    a, b = load_bvh_reference(clip, scene), load_bvh_reference(tall, scene)
+    # (the edited file's numbers are rounded to 6 significant digits)
+    assert b.root_scale == pytest.approx(a.root_scale / 1.1, rel=1e-6)
+    assert np.abs(b.qpos - a.qpos).max() < 1e-5
+    raw = load_bvh_reference(tall, scene, root_scale=1.0)
+    stride = lambda r: np.linalg.norm(r.qpos[-1, :2] - r.qpos[0, :2])  # noqa: E731
+    assert stride(raw) / stride(a) == pytest.approx(1.1 / a.root_scale, rel=1e-6)
 
 def test_tiny_clip_hyperextension_is_clamped(tmp_path, scene, layout):
     frames = [tiny_frame(), tiny_frame(LeftLeg=(0, 0, -20), RightForeArm=(0, -30, 0)), tiny_frame()]

@@ -11,6 +11,7 @@ from bvh_edit import edit_bvh
 
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT
+from runner.problem_file import find_reference
 from runner.saved_path import contacts_from_array, load_saved_path
 from solver.keyframe_file import read_keyframes
 from solver.layout import StateLayout
@@ -54,6 +55,12 @@ def test_missing_scene_and_bad_video_name(tmp_path, short_clip, capsys):
     assert "v.txt" in err
 
 
+def test_bad_root_scale_is_one_line(tmp_path, short_clip, capsys):
+    assert main(["mocap", str(short_clip), "--root-scale", "0", *FAST]) == EXIT_INPUT
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--root-scale" in err and "> 0" in err
+
+
 def test_help_names_the_default_outputs(capsys):
     assert main(["mocap", "--help"]) == 0
     out = capsys.readouterr().out
@@ -72,6 +79,15 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
     layout = StateLayout.from_model(model)
     kf, info = read_keyframes(out / "run.keyframes.json", layout)
     assert info.scene == scene.resolve() and info.contacts and kf.count >= 3 and not kf.is_partial.any()
+    # the root path scaled by the figure's leg length (0.42 + 0.42 m) over the subject's (127_33's knee
+    # and ankle OFFSETs, 1 unit = 0.0254 / 0.45 m), recorded so that `animate` retargets the same way
+    subject = 0.0254 / 0.45 * np.mean([np.hypot(2.58040, 7.08960) + np.hypot(2.64719, 7.27309),
+                                       np.hypot(2.56572, 7.04926) + np.hypot(2.57974, 7.08778)])
+    assert info.source["root_scale"] == pytest.approx(0.84 / subject, rel=1e-5)
+    assert find_reference(info, model, quiet=True).root_scale == info.source["root_scale"]
+    # a file that records no scale (made before it, like the shipped run-and-step keyframes): as captured
+    _, shipped = read_keyframes(REPO / "models" / "run_and_step.keyframes.json", layout)
+    assert "root_scale" not in shipped.source and find_reference(shipped, model, quiet=True).root_scale == 1.0
     assert {c.surface for c in info.contacts} == {"floor"}
     saved = load_saved_path(out / "run.npz")
     assert contacts_from_array(saved["contacts"]) == list(info.contacts)
