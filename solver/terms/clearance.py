@@ -11,6 +11,17 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
     c_f = min(c, g T^2 / 8) for a flight of duration T (default): the height a ballistic body rises in
           a flight that long (g = 9.81 m/s^2), so a short hop's feet are not lifted more than the body
           is (a 0.08 s flight: 8 mm; 0.13 s and longer: c); or a fixed `flight_clearance`,
+    the flight's band, with the default c_f, is lifted ballistically: max(c_f, min(H, g/2 (t - a)(b - t)))
+          over the flight (a, b), g/2 (t - a)(b - t) the height of a body that leaves the floor at a and
+          lands at b (its feet with it, as in a hop), H = `flight_lift` (FLIGHT_LIFT = 3.5 cm: the
+          contact entry height 3 cm, which is also the flight metric's height, and 5 mm for the
+          penalty's give). Without the lift c_f = 2 cm is under the 3 cm that makes a flight in the
+          metric (`solver.motion_metrics.FLIGHT_HEIGHT`), and the feet sank to it long before the
+          landing: a 15 cm, 0.35 s hop of 16_23 flew 58 ms less than the capture (0.258 / 0.317 s), now
+          0.317 s (docs/contacts.md "Hops and jumps"). Flights shorter than 0.13 s are not lifted
+          (g T^2 / 8 <= c); a run's (0.16-0.18 s) only in their middle. The lift is a target, not a
+          bound for `conflicts`; keyframes where it is at its ceiling lower the ceiling to the lowest
+          site they hold (`lower_lifts`),
     u_k = the swing window of site k, u_f = the flight window:
       swing: each gap [a, b] between consecutive contacts of site k (not before its first or after its
              last contact: there the schedule says nothing). u rises by a smoothstep from 0 at a to 1 at
@@ -31,6 +42,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.contacts import HEIGHT_ON
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES
 from solver.surfaces import StaticSurfaces
@@ -50,6 +62,9 @@ from solver.terms.contact_schedule import (
 )
 
 GRAVITY = 9.81  # [m/s^2], for the ballistic flight clearance
+#: ceiling of the ballistic lift of a flight's band [m]: the contact entry height (3 cm, also the flight
+#: height of `solver.motion_metrics.FLIGHT_HEIGHT`) and 5 mm for the penalty's give (docs/contacts.md)
+FLIGHT_LIFT = HEIGHT_ON + 0.005
 
 
 class Clearance(Term):
@@ -65,6 +80,8 @@ class Clearance(Term):
         flight: also apply to all contact sites during flights (default True).
         flight_clearance: c_f [m] > 0, the clearance during flights; default None: min(c, g T^2 / 8)
             per flight of duration T (module docstring, docs/contacts.md).
+        flight_lift: ceiling [m] of the ballistic lift of the flight band (default FLIGHT_LIFT, 3.5 cm;
+            None: no lift, the band is c_f). Only with the default c_f (flight_clearance None).
         sites: the sites the term looks after (default the four contact sites).
         t_span: see `Planted`.
     Raises:
@@ -76,7 +93,8 @@ class Clearance(Term):
     needs = (0,)
 
     def __init__(self, model, contacts, clearance: float = 0.02, core: float = 0.5, flight: bool = True,
-                 sites=CONTACT_SITES, t_span=None, engine=None, flight_clearance: float | None = None):
+                 sites=CONTACT_SITES, t_span=None, engine=None, flight_clearance: float | None = None,
+                 flight_lift: float | None = FLIGHT_LIFT):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the clearance term")
@@ -90,6 +108,8 @@ class Clearance(Term):
             raise InputError(f"core is {core}; it must be a fraction in [0, 1]")
         if flight_clearance is not None and not (np.isfinite(float(flight_clearance)) and float(flight_clearance) > 0):
             raise InputError(f"flight_clearance is {flight_clearance}; it must be a distance > 0 [m]")
+        if flight_lift is not None and not (np.isfinite(float(flight_lift)) and float(flight_lift) >= 0):
+            raise InputError(f"flight_lift is {flight_lift}; it must be a height >= 0 [m] (or None)")
         self.clearance, self.core, self.flight, self.t_span = c, core, bool(flight), t_span
         self.kin = SiteMotion(model, tuple(sites))
         self.swings = [swings(self.contacts, s) for s in self.kin.names]
@@ -97,6 +117,9 @@ class Clearance(Term):
         #: c_f of each flight [m]
         self.flight_bands = np.array([min(c, GRAVITY * (b - a) ** 2 / 8.0) if flight_clearance is None
                                       else float(flight_clearance) for a, b in self.flights])
+        #: ceiling of each flight's ballistic lift [m] (lowered by keyframes in `conflicts`); None: no lift
+        self.flight_lifts = (None if flight_lift is None or flight_clearance is not None
+                             else np.full(len(self.flights), float(flight_lift)))
         self.excused: list[tuple[int, float, float]] = []  # (site column, a, b): `violation` skips these
         self.lowered: dict[tuple[int, float, float], float] = {}  # (site column, a, b): swing band [m]
         self.engine = engine
@@ -138,14 +161,15 @@ class Clearance(Term):
         window that holds a site more than `tolerance` [m] inside its band (keyframes are met exactly).
         excuse: also leave that site's swing (or flight) out of `violation`, and lower the band of that
             swing, in the objective too, to the lowest height a keyframe holds the site at in it.
+        Flights' depths are against c_f: their ballistic lift is a target, not a conflict (`lower_lifts`).
 
         Returns:
             [(keyframe index, site, distance short of the clearance [m]), ...].
         """
-        times = np.asarray(times, float)
-        d = self._band_depths(np.asarray(qpos, float), times)
-        U = self.windows(times)
-        Us, Uf, Bf, Bs = self.split_windows(times)
+        times, qpos = np.asarray(times, float), np.asarray(qpos, float)
+        Us, Uf, Bf, Bs = self._split_windows(times, lift=False)  # the lift is a target, not a bound
+        U = np.maximum(Us, Uf[:, None])
+        d = self._band_depths(qpos, times, lift=False)
         height = np.where(Us >= Uf[:, None], Bs, Bf[:, None]) - d  # where d > 0: the site's height [m]
         out = [(int(i), self.kin.names[k], float(d[i, k]))
                for i, k in zip(*np.nonzero((U >= FULL) & (d > tolerance)), strict=True)]
@@ -161,6 +185,23 @@ class Clearance(Term):
             self.__dict__.pop("_split_cache", None)  # the windows' bands changed
         return out
 
+    def lower_lifts(self, times, qpos) -> None:
+        """Keyframes (times (k,) [s], poses qpos (k, nq)) lower each flight's lift ceiling, for good, to
+        the lowest site height they hold where the lift is at its ceiling (g/2 (t - a)(b - t) >=
+        ceiling; not just after take-off or before landing, where every flight is low): a path that must
+        pass through the keyframe and stay above the ceiling around it would bulge up between keyframes
+        (a synthetic hop into a run, whose schedule missed a touch-down: 23 cm, site error 7.2 -> 10.9 cm).
+        Call it with the keyframes only (`solver.problem.keyframe_conflicts`)."""
+        if self.flight_lifts is None:
+            return
+        times, qpos = np.asarray(times, float), np.asarray(qpos, float)
+        low = self.below.height(self.kin.positions(qpos))[0].min(axis=1)  # (k,) lowest site [m]
+        for j, (a, b) in enumerate(self.flights):
+            top = 0.5 * GRAVITY * (times - a) * (b - times) >= self.flight_lifts[j]
+            if top.any():
+                self.flight_lifts[j] = min(self.flight_lifts[j], max(0.0, float(low[top].min())))
+        self.__dict__.pop("_split_cache", None)
+
     def split_windows(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Us (n, k), Uf (n,), Bf (n,), Bs (n, k)): each site's swing window, the flight window, the
         flight's band c_f [m] and each site's swing band [m] (c, or lower where `conflicts` lowered it)
@@ -168,12 +209,16 @@ class Clearance(Term):
         evaluation)."""
         return last_for_times(self, "_split_cache", t, self._split_windows)
 
-    def _split_windows(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _split_windows(self, t: np.ndarray, lift: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         fl = np.zeros(t.shape)
         band = np.full(t.shape, self.clearance)
-        for (a, b), cf in zip(self.flights, self.flight_bands, strict=True):
+        for j, ((a, b), cf) in enumerate(zip(self.flights, self.flight_bands, strict=True)):
             fl = np.maximum(fl, gap_window(t, a, b, self.core))
-            band[(t > a) & (t < b)] = cf
+            inside = (t > a) & (t < b)
+            band[inside] = cf
+            if lift and self.flight_lifts is not None:  # max(c_f, min(ceiling, g/2 (t - a)(b - t)))
+                ti = t[inside]
+                band[inside] = np.maximum(cf, np.minimum(self.flight_lifts[j], 0.5 * GRAVITY * (ti - a) * (b - ti)))
         cols = []
         bands = np.full((len(t), len(self.swings)), self.clearance)
         for k, gaps in enumerate(self.swings):
@@ -191,9 +236,10 @@ class Clearance(Term):
         Us, Uf, _, _ = self.split_windows(t)
         return np.maximum(Us, Uf[:, None])
 
-    def _band_depths(self, Y: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """(m, k) how far each site is inside the band of the window that weighs it most at times t [m]."""
-        Us, Uf, Bf, Bs = self.split_windows(t)
+    def _band_depths(self, Y: np.ndarray, t: np.ndarray, lift: bool = True) -> np.ndarray:
+        """(m, k) how far each site is inside the band of the window that weighs it most at times t [m]
+        (lift False: flights' bands without the ballistic lift)."""
+        Us, Uf, Bf, Bs = self.split_windows(t) if lift else self._split_windows(t, lift=False)
         h, _ = self.below.height(self.kin.positions(Y))
         return np.maximum(0.0, np.where(Us >= Uf[:, None], Bs, Bf[:, None]) - h)
 

@@ -12,7 +12,7 @@ import pytest
 
 from solver.errors import InputError
 from solver.layout import StateLayout
-from solver.terms.clearance import Clearance
+from solver.terms.clearance import FLIGHT_LIFT, GRAVITY, Clearance
 from solver.terms.contact import Planted, contact_window, flights, smoothstep, swings
 from solver.terms.contact_wrench import FrictionCone, cone_metrics
 
@@ -226,11 +226,44 @@ def test_clearance_keeps_flights(toy_model, layout):
     assert term.evaluate(t, Y, None, None).f[0] == pytest.approx(4 * cf**2, rel=1e-12)
     long = Clearance(toy_model, [Contact("l_toe", 0.0, 0.3), Contact("r_toe", 0.6, 0.7)], clearance=0.02)
     np.testing.assert_allclose(long.flight_bands, [0.02])  # 0.3 s: g T^2 / 8 = 11 cm, capped at c
-    assert long.evaluate(np.array([0.45]), Y, None, None).f[0] == pytest.approx(4 * 0.02**2, rel=1e-12)
+    # ... and lifted to the ballistic height g/2 (t - a)(b - t) (11 cm at 0.45 s) up to FLIGHT_LIFT
+    assert long.evaluate(np.array([0.45]), Y, None, None).f[0] == pytest.approx(4 * FLIGHT_LIFT**2, rel=1e-12)
+    unlifted = Clearance(toy_model, long.contacts, clearance=0.02, flight_lift=None)
+    assert unlifted.evaluate(np.array([0.45]), Y, None, None).f[0] == pytest.approx(4 * 0.02**2, rel=1e-12)
     fixed = Clearance(toy_model, run, clearance=0.02, flight_clearance=0.02)
     assert fixed.evaluate(t, Y, None, None).f[0] == pytest.approx(4 * 0.02**2, rel=1e-12)
     nofl = Clearance(toy_model, run, clearance=0.02, flight=False)
     assert nofl.evaluate(t, Y, None, None).f[0] == 0.0
+
+
+def test_a_long_flights_band_is_lifted_ballistically(toy_model, layout):
+    """A flight (0.3, 0.65) of 0.35 s (a hop): the band is max(c_f, min(FLIGHT_LIFT, g/2 (t - a)(b - t))),
+    the height of a body that leaves the floor at a and lands at b, up to 3.5 cm (above the 3 cm of the
+    flight metric): for 12 ms after take-off it is c_f (2 cm), then the parabola, then the ceiling."""
+    hop = [Contact("l_toe", 0.0, 0.3), Contact("r_toe", 0.65, 0.9)]
+    term = Clearance(toy_model, hop, clearance=0.02)
+    a, b = 0.3, 0.65
+    t = np.array([0.301, 0.306, 0.32, 0.45, 0.64, 0.645])
+    Y = standing(layout, len(t), (0.0, 0.0, FOOT))
+    _, Uf, Bf, _ = term.split_windows(t)
+    expected = np.maximum(0.02, np.minimum(FLIGHT_LIFT, 0.5 * GRAVITY * (t - a) * (b - t)))
+    np.testing.assert_allclose(Bf, expected, rtol=1e-12)
+    assert Bf[0] == 0.02 and 0.02 < Bf[2] < FLIGHT_LIFT and Bf[3] == FLIGHT_LIFT
+    np.testing.assert_allclose(term.evaluate(t, Y, None, None).f, 4 * Uf * expected**2, rtol=1e-12)
+    assert term.violation(Y, np.array([0.45])) == pytest.approx(FLIGHT_LIFT)
+    # the lift is a target, not a conflict: a keyframe at the top of the flight 3 cm up is not reported,
+    # but it lowers the ceiling to 3 cm (a path held above it around the keyframe would bulge)
+    key = standing(layout, 1, (0.0, 0.0, FOOT + 0.03))
+    assert term.conflicts(np.array([0.45]), key, excuse=True) == []
+    np.testing.assert_allclose(term.split_windows(np.array([0.45]))[2], [FLIGHT_LIFT])
+    term.lower_lifts(np.array([0.45]), key)
+    np.testing.assert_allclose(term.split_windows(np.array([0.45]))[2], [0.03], rtol=1e-9)
+    # keyframes just after take-off (low in every flight: the lift is below its ceiling there) keep it
+    fresh = Clearance(toy_model, hop, clearance=0.02)
+    fresh.lower_lifts(np.array([0.305]), standing(layout, 1, (0.0, 0.0, FOOT + 0.003)))
+    np.testing.assert_allclose(fresh.split_windows(np.array([0.45]))[2], [FLIGHT_LIFT])
+    with pytest.raises(InputError, match="flight_lift"):
+        Clearance(toy_model, hop, flight_lift=-0.01)
 
 
 def test_flight_clearance_is_its_own_band(toy_model, layout):
