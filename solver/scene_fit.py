@@ -181,7 +181,9 @@ def fit_contacts(times: np.ndarray, site_pos: np.ndarray, sites: Sequence[str] =
     A foot is also slow at the top of a hop or a jump, where its upward speed passes through zero;
     it falls with the body there. A contact whose site height, fitted by a parabola over the contact's
     frames (least squares), accelerates downward faster than `ballistic` is such a top, not a rest,
-    and is dropped: a box under it would stand where the feet took off (a 15 cm hop made a 14 cm box).
+    and is dropped, with any contact of the same foot's other site that overlaps it in time: a box
+    under it would stand where the feet took off (a 15 cm hop made a 14 cm box; a 12 cm hop of the run
+    35_17 a 12 cm box under the heel, which rose as the toe fell).
     Resting contacts of the shipped clips accelerate between -1.2 and +15 m/s^2 (heel strikes and
     push-offs curve upward), the tops of synthetic hops -6.5 to -10 (docs/contacts.md). A foot held
     still in the air (not falling) still counts as resting on something; the clips have none.
@@ -197,15 +199,19 @@ def fit_contacts(times: np.ndarray, site_pos: np.ndarray, sites: Sequence[str] =
         ks = [list(sites).index(s) for s in members if s in sites]
         if ks:
             h[:, ks] = site_pos[:, ks, 2] - site_pos[:, ks, 2].min(axis=1, keepdims=True)
-    out = []
-    for c in detect_contacts(times, site_pos, h, sites, **thresholds):
+    found = detect_contacts(times, site_pos, h, sites, **thresholds)
+    falling = []
+    for c in found:
         rows = (times >= c.start - 1e-9) & (times <= c.end + 1e-9)
         if rows.sum() >= 3:
             t = times[rows] - times[rows].mean()
             if 2.0 * np.polyfit(t, site_pos[rows, list(sites).index(c.site), 2], 2)[0] < -ballistic:
-                continue
-        out.append(c)
-    return out
+                falling.append(c)
+    # a foot whose one site falls is in the air: its other site's "rest" at the same time is no rest
+    # either (its own motion can hide the fall: a push-off lifts the heel while the toe falls)
+    foot = {s: f for f, members in FEET.items() for s in members}
+    return [c for c in found if not any(foot.get(c.site) == foot.get(b.site) and c.start < b.end and b.start < c.end
+                                        for b in falling)]
 
 
 _SCENE = """<mujoco model="{model}">

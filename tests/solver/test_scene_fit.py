@@ -173,3 +173,29 @@ def test_fit_contacts_drops_the_top_of_a_hop():
     held[top, :, 2] = 0.12
     boxes = fit_scene(times, held, fit_contacts(times, held)).boxes
     assert len(boxes) == 1 and boxes[0][0][2] + boxes[0][1][2] == pytest.approx(0.12, abs=1e-3)
+
+
+def test_fit_contacts_drops_a_heel_that_rises_while_its_toe_falls():
+    """The hop of the test above, but each heel rises on its own near the top (+14 m/s^2 relative to
+    the toe, as in a push-off), so the heel alone does not fall faster than g/2 there while its toe
+    does: the foot is in the air, and neither site's slow moment is a rest (a 12 cm hop of the run
+    35_17 got a 12 cm box under the heel)."""
+    from solver.contacts import SITES
+
+    g, rate = 9.81, 120.0
+    times = np.arange(int(1.2 * rate)) / rate
+    up = 2.0 * np.sqrt(2 * 0.12 / g)
+    s = times - 0.5
+    air = (s > 0) & (s < up)
+    z = np.where(air, 0.5 * g * s * (up - s), 0.0)
+    pos = np.zeros((len(times), 4, 3))
+    xy = {"l_heel": (0.0, 0.1), "l_toe": (0.2, 0.1), "r_heel": (0.0, -0.1), "r_toe": (0.2, -0.1)}
+    for k, site in enumerate(SITES):
+        pos[:, k, :2] = xy[site]
+        pos[:, k, 2] = z + (np.where(air, 7.0 * (s - up / 2) ** 2, 0.0) if site.endswith("heel") else 0.0)
+    heel = [SITES.index("l_heel"), SITES.index("r_heel")]
+    top = air & (np.abs(s - up / 2) < 0.04)
+    assert np.polyfit(s[top], pos[top, heel[0], 2], 2)[0] * 2 > -0.5 * g  # the heel alone: no fall
+    cs = fit_contacts(times, pos)
+    assert all(c.end <= 0.5 + 1e-9 or c.start >= 0.5 + up - 1e-9 for c in cs), cs
+    assert fit_scene(times, pos, cs).boxes == ()
