@@ -7,20 +7,31 @@ has that shape). One term here, one in `solver.terms.clearance` and one in
 
 `Planted` (name "planted", m^2): during a contact the site is on its surface and does not slide,
 
-    f(t) = sum over contacts c of  w_c(t) [ (h_c(t) - h0)^2 + tau^2 |v_t,c(t)|^2 ],
+    f(t) = sum over contacts c of  s_c(t) (h_c(t) - h0)^2 + w_c(t) tau^2 |v_t,c(t)|^2,
 
     h   = signed height of the site above its support surface [m] (floating > 0, inside < 0),
     h0  = `rest_height` = the penetration term's margin (the figure: 2 mm), so the two terms agree on
           where a planted site rests (with h0 = 0 they fight: run-and-step's site ended 0.65 mm inside),
     v_t = v - (n.v) n, the site's velocity along the surface (n its unit normal) [m/s],
     tau = `velocity_time` [s] (default 0.1 s: 1 cm of height weighs like 10 cm/s of sliding),
-    w_c = the contact's window: 1 inside [start + r, end - r], 0 outside [start, end], a smoothstep
-          ramp of length r = `ramp` (default 0.02 s, at most half the contact) at each end.
+    w_c = the contact's sliding window: 1 inside [start + r, end - r], 0 outside [start, end], a
+          smoothstep ramp of length r = `ramp` (default 0.02 s, at most half the contact) at each end,
+    s_c = the contact's height window: 1 on the closed contact [start, end], 0 outside (no ramp).
 
   The plant point is left to the optimizer: the height is pulled to the surface under the site and the
   tangential velocity to zero, so the site stays wherever the path puts it (no keyframe pins it). The
-  ramp tolerates contact times that are a frame or two off (touchdown and lift-off are not instant in
-  the keyframes) and keeps the integrand continuous in t.
+  sliding ramps tolerate contact times a frame or two off: the capture's sites still move at touch-down
+  and lift-off (contacts start below 0.5 m/s and end above 1 m/s, `solver.contacts`). Height has no ramp:
+  a site in contact is on its surface from touch-down to lift-off (the capture's sites are 2-13 mm up at
+  a contact's first and last frames), and the float metric (`solver.motion_metrics`; issue 11: mean
+  float in reference contact <= 5 mm) counts every frame of the contact. With the height ramped as
+  well, the optimized feet came down 2-3 frames late and left 2-4 frames early, 1-3 cm up at the
+  contact's ends: on 127_33 keyed every 0.33 s the 24 % of contact frames inside the ramps made 2.5 of
+  its 5.2 mm mean float, on 35_17 keyed so 3.1 of 5.5 mm (docs/contacts.md "Float at the ends of
+  contacts"). A ramp outside the contact (pulling a foot that is still in the air) cut more float but
+  shortened flights by up to 0.11 s. The step in s_c is harmless to the quadrature: the solve puts a
+  frame at every touch-down and lift-off (`knot_times`), and the quadrature points are fixed, so the
+  objective stays a smooth function of the frames.
 
 `Clearance` (name "clearance", `solver.terms.clearance`): swing feet keep clear of the surfaces.
 
@@ -79,7 +90,7 @@ class Planted(Term):
         model: MjModel of the scene (figure + static planes/boxes).
         contacts: objects with site, start, end, surface (see module docstring).
         velocity_time: tau [s] > 0, weighs sliding speed against height.
-        ramp: r [s] >= 0, length of the smoothstep ramp at each end of a contact.
+        ramp: r [s] >= 0, length of the smoothstep ramp at each end of a contact's sliding window (height has none).
         rest_height: h0 [m], the height a planted site is pulled to (set it to the penetration term's
             margin).
         footprint_margin: [m] see `SupportSurfaces`.
@@ -127,23 +138,34 @@ class Planted(Term):
         return np.array([x for c in self.contacts for x in (c.start, c.end)], float)
 
     def windows(self, t: np.ndarray) -> np.ndarray:
-        """(n, C) window of each contact at times t (read-only; the last times' are kept)."""
+        """(n, C) sliding window w of each contact at times t (read-only; the last times' are kept)."""
+        return self._both(t)[1]
+
+    def height_windows(self, t: np.ndarray) -> np.ndarray:
+        """(n, C) height window s of each contact at times t: the closed contact (>= `windows`; read-only)."""
+        return self._both(t)[0]
+
+    def _both(self, t: np.ndarray):
         return last_for_times(self, "_window_cache", t, self._windows)
 
-    def _windows(self, t: np.ndarray) -> np.ndarray:
-        return np.stack([contact_window(t, float(c.start), float(c.end), self.ramp) for c in self.contacts], 1) \
-            if self.contacts else np.zeros((len(t), 0))
+    def _windows(self, t: np.ndarray):
+        if not self.contacts:
+            return np.zeros((len(t), 0)), np.zeros((len(t), 0))
+        # heights: the closed contact [start, end] (ramp 0); sliding: smoothstep ramps inside it
+        S = np.stack([contact_window(t, float(c.start), float(c.end), 0.0) for c in self.contacts], 1)
+        W = np.stack([contact_window(t, float(c.start), float(c.end), self.ramp) for c in self.contacts], 1)
+        return S, W
 
-    def _parts(self, p, v, W, rows):
+    def _parts(self, p, v, S, rows):
         """Heights (m, C), tangential velocities (m, C, 3), normals (m, C, 3) of the contacts' sites,
-        each contact's only where its window W (m, C) is on (zero elsewhere: W h^2 and W |v_t|^2 are
-        zero there anyway)."""
+        each contact's only where its height window S (m, C) is on (zero elsewhere: S h^2 and
+        W |v_t|^2 are zero there anyway, as W <= S)."""
         m, C = len(rows), len(self.contacts)
         h = np.zeros((m, C))
         vt = np.zeros((m, C, 3))
         nrm = np.zeros((m, C, 3))
         for c in range(C):
-            on = np.flatnonzero(W[:, c] > 0)
+            on = np.flatnonzero(S[:, c] > 0)
             pc = p[on, self._col[c]]
             hc, nc = self.support.height(pc, self._surf[c])
             h[on, c] = hc - self.rest_height
@@ -161,13 +183,12 @@ class Planted(Term):
         from solver.terms.dynamics import EngineGradient
 
         mo, res = _engine_motion(self, Y, Y1, Y2)
-        W = self.windows(t)
-        rows = np.flatnonzero((W > 0).any(axis=1))
+        S, W = self._both(t)
+        rows = np.flatnonzero((S > 0).any(axis=1))
         f = np.zeros(len(Y))
-        Wr = W[rows]
         p = res.sites[rows][:, self._eidx]
         v = self.engine.site_velocities(res)[rows][:, self._eidx]
-        f[rows], g_p, g_v = self._integrand(p, v, Wr, rows, grad)
+        f[rows], g_p, g_v = self._integrand(p, v, S[rows], W[rows], rows, grad)
         if not grad:
             return TermEval(f)
         g_sites = np.zeros(res.sites.shape)
@@ -176,19 +197,20 @@ class Planted(Term):
         g_vel[np.ix_(rows, self._eidx)] = g_v
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites, g_vel))
 
-    def _integrand(self, p, v, Wr, rows, grad):
-        """f at the contact rows (r,) from site positions p and velocities v (r, s, 3), and its gradients
-        with respect to p and v (None without grad). d|v_t|^2/dv = 2 v_t (v_t is a projection of v)."""
-        h, vt, nrm = self._parts(p, v, Wr, rows)
+    def _integrand(self, p, v, Sr, Wr, rows, grad):
+        """f at the contact rows (r,) from site positions p and velocities v (r, s, 3) under the height
+        and sliding windows Sr, Wr (r, C), and its gradients with respect to p and v (None without
+        grad). d|v_t|^2/dv = 2 v_t (v_t is a projection of v)."""
+        h, vt, nrm = self._parts(p, v, Sr, rows)
         t2 = self.tau * self.tau
-        f = (Wr * (h * h + t2 * (vt * vt).sum(-1))).sum(1)
+        f = (Sr * h * h + Wr * t2 * (vt * vt).sum(-1)).sum(1)
         if not grad:
             return f, None, None
         g_p = np.zeros(p.shape)
         g_v = np.zeros(v.shape)
         for c in range(len(self.contacts)):
             k = self._col[c]
-            g_p[:, k] += (2.0 * Wr[:, c] * h[:, c])[:, None] * nrm[:, c]
+            g_p[:, k] += (2.0 * Sr[:, c] * h[:, c])[:, None] * nrm[:, c]
             g_v[:, k] += (2.0 * t2 * Wr[:, c])[:, None] * vt[:, c]
         return f, g_p, g_v
 
@@ -197,19 +219,19 @@ class Planted(Term):
             ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
             return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
         n, nq = Y.shape
-        W = self.windows(t)
-        rows = np.flatnonzero((W > 0).any(axis=1))
+        S, W = self._both(t)
+        rows = np.flatnonzero((S > 0).any(axis=1))
         f = np.zeros(n)
         dY, dY1 = (np.zeros((n, nq)), np.zeros((n, nq))) if grad else (None, None)
         if rows.size == 0:
             return TermEval(f, dY, dY1)
         Yr, Y1r = Y[rows], Y1[rows]
-        Wr = W[rows]
+        Sr = S[rows]
         mask = np.zeros((rows.size, len(self.kin.names)), bool)
         for c in range(len(self.contacts)):
-            mask[:, self._col[c]] |= Wr[:, c] > 0
+            mask[:, self._col[c]] |= Sr[:, c] > 0
         p, v, J, Jd = self.kin.motion(Yr, Y1r, mask, grad)
-        f[rows], g_p, g_v = self._integrand(p, v, Wr, rows, grad)
+        f[rows], g_p, g_v = self._integrand(p, v, Sr, W[rows], rows, grad)
         if not grad:
             return TermEval(f)
         dYr, dY1r = self.kin.pullback(Yr, Y1r, J, Jd, g_p, g_v)
@@ -217,38 +239,41 @@ class Planted(Term):
         return TermEval(f, dY, dY1)
 
     def residuals(self, t, Y, Y1=None):
-        """Per sample and contact: window, height [m] and tangential speed [m/s] (velocity from Y1 if
-        given, else by finite differences of the site positions along t).
+        """Per sample and contact: height and sliding windows, height [m] and tangential speed [m/s]
+        (velocity from Y1 if given, else by finite differences of the site positions along t).
 
         Returns:
-            W (n, C), h - h0 (n, C), speed (n, C) (zero where the window is 0).
+            S (n, C), W (n, C), h - h0 (n, C), speed (n, C) (zero where the height window S is 0).
         """
         t = np.asarray(t, float)
-        W = self.windows(t)
+        S, W = self._both(t)
         n, C = W.shape
         h = np.zeros((n, C))
         speed = np.zeros((n, C))
-        rows = np.flatnonzero((W > 0).any(axis=1))
+        rows = np.flatnonzero((S > 0).any(axis=1))
         if rows.size == 0:
-            return W, h, speed
+            return S, W, h, speed
         if Y1 is not None:
             p, v, _, _ = self.kin.motion(Y[rows], Y1[rows], grad=False)
         else:
             P = self.kin.positions(Y)
             v = np.gradient(P, t, axis=0)[rows]
             p = P[rows]
-        hh, vt, _ = self._parts(p, v, W[rows], rows)
+        hh, vt, _ = self._parts(p, v, S[rows], rows)
         h[rows], speed[rows] = hh, np.linalg.norm(vt, axis=-1)
-        return W, h, speed
+        return S, W, h, speed
 
     def violation(self, Y: np.ndarray, t: np.ndarray | None = None) -> float | None:
-        """Largest max(|h - h0|, tau |v_t|) [m] where a contact's window is full (velocities by finite
-        differences of the samples). Times: `t`, else Y is taken as sampled evenly on `t_span`; None if
-        neither is known or no sample is fully in contact."""
+        """Largest max(|h - h0|, tau |v_t|) [m] where a contact's sliding window w is full, i.e. not at
+        the contact's ends, where the capture's own sites may already be up to 5 cm high (contacts end
+        above 5 cm or 1 m/s, `solver.contacts`: 127_33's heel rises 2.8 cm in the last 20 ms of a heel
+        touch while its toe stays down). Velocities by finite differences of the samples. Times: `t`,
+        else Y is taken as sampled evenly on `t_span`; None if neither is known or no sample is fully
+        in contact."""
         t = _sample_times(Y, t, self.t_span)
         if t is None or not self.contacts:
             return None
-        W, h, speed = self.residuals(t, Y)
+        _, W, h, speed = self.residuals(t, Y)
         full = W >= FULL
         full[:, sorted(self.excused)] = False
         if not full.any():
@@ -256,7 +281,7 @@ class Planted(Term):
         return float(np.max(np.where(full, np.maximum(np.abs(h), self.tau * speed), 0.0)))
 
     def _at_keyframes(self, times, qpos):
-        """(W (k, C) contact windows at the keyframe times, p (k, sites, 3) site positions or None)."""
+        """(W (k, C) sliding windows at the keyframe times, p (k, sites, 3) site positions or None)."""
         W = self.windows(np.asarray(times, float))
         return W, (self.kin.positions(np.asarray(qpos, float)) if W.size else None)
 

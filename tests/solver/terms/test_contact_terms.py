@@ -121,10 +121,29 @@ def test_planted_held_height_integrates_to_h2_T(toy_model, layout):
     term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.0)
     assert term.evaluate(t, Y, Z, Z).f.sum() * dt == pytest.approx((h - 0.005) ** 2 * T, rel=1e-9)
     assert term.violation(Y, t) == pytest.approx(h - 0.005)
-    # a smoothstep ramp r at each end integrates to half: h^2 (T - r)
+    # the ramps are the sliding window's only: the height counts over the whole contact, h^2 T
     term = Planted(toy_model, [Contact("l_heel", 0.2, 0.2 + T)], ramp=0.1, rest_height=0.0)
-    assert term.evaluate(t, Y, Z, Z).f.sum() * dt == pytest.approx(h * h * (T - 0.1), rel=1e-4)
+    assert term.evaluate(t, Y, Z, Z).f.sum() * dt == pytest.approx(h * h * T, rel=1e-9)
     assert term.violation(Y, t) == pytest.approx(h)
+
+
+def test_planted_height_counts_at_the_contact_ends_sliding_is_ramped(toy_model, layout):
+    """A foot up at touch-down and lift-off pays in full (the float metric counts every frame of a
+    contact; before, the height shared the sliding window's 20 ms ramps and a foot 1-3 cm up at a
+    contact's ends cost almost nothing), a foot sliding there pays on the ramp only."""
+    h, u, T, r, tau = 0.02, 0.5, 0.4, 0.05, 0.1
+    start, end = 0.3, 0.3 + T
+    t = np.array([start, start + 0.25 * r, end - 0.5 * r, end, end + 0.01])
+    Y = standing(layout, len(t), (0.0, 0.0, FOOT + h))  # l_heel h up
+    Z = np.zeros_like(Y)
+    term = Planted(toy_model, [Contact("l_heel", start, end)], velocity_time=tau, ramp=r, rest_height=0.0)
+    assert term.evaluate(t, Y, Z, Z).f == pytest.approx([h * h] * 4 + [0.0], rel=1e-9)
+    np.testing.assert_allclose(term.height_windows(t)[:, 0], [1, 1, 1, 1, 0])
+    np.testing.assert_allclose(term.windows(t)[:, 0], [0, 0.15625, 0.5, 0, 0])  # smoothstep(1/4), (1/2)
+    Y1 = np.zeros_like(Y)
+    Y1[:, 0] = u  # sliding along x at u, on the floor
+    Y[:, 2] = FOOT
+    assert term.evaluate(t, Y, Y1, Z).f == pytest.approx(tau**2 * u**2 * np.array([0, 0.15625, 0.5, 0, 0]), abs=1e-15)
 
 
 def test_planted_sliding_foot_costs_tau2_u2_T_and_normal_velocity_is_free(toy_model, layout):
