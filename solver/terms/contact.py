@@ -30,8 +30,8 @@ has that shape). One term here, one in `solver.terms.clearance` and one in
   its 5.2 mm mean float, on 35_17 keyed so 3.1 of 5.5 mm (docs/contacts.md "Float at the ends of
   contacts"). A ramp outside the contact (pulling a foot that is still in the air) cut more float but
   shortened flights by up to 0.11 s. The step in s_c is harmless to the quadrature: the solve puts a
-  frame at every touch-down and lift-off (`knot_times`), and the quadrature points are fixed, so the
-  objective stays a smooth function of the frames.
+  frame at every touch-down and lift-off (`knot_times`; not within 30 ms of another frame), and the
+  quadrature points are fixed, so the objective stays a smooth function of the frames.
 
 `Clearance` (name "clearance", `solver.terms.clearance`): swing feet keep clear of the surfaces.
 
@@ -266,8 +266,8 @@ class Planted(Term):
     def violation(self, Y: np.ndarray, t: np.ndarray | None = None) -> float | None:
         """Largest max(|h - h0|, tau |v_t|) [m] where a contact's sliding window w is full, i.e. not at
         the contact's ends, where the capture's own sites may already be up to 5 cm high (contacts end
-        above 5 cm or 1 m/s, `solver.contacts`: 127_33's heel rises 2.8 cm in the last 20 ms of a heel
-        touch while its toe stays down). Velocities by finite differences of the samples. Times: `t`,
+        above 5 cm or 1 m/s, `solver.contacts`: 127_33's captured heel is 2.3-3.3 cm up in the last
+        20 ms of its heel touch ending at 0.675 s, while the toe stays down). Velocities by finite differences of the samples. Times: `t`,
         else Y is taken as sampled evenly on `t_span`; None if neither is known or no sample is fully
         in contact."""
         t = _sample_times(Y, t, self.t_span)
