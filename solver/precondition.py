@@ -55,6 +55,8 @@ class AccelerationPreconditioner:
             if key not in cache:
                 cache[key] = np.linalg.inv(_upper_factor(H[np.ix_(rows, rows)]))
             self.groups.append((rows, np.array(comps), cache[key]))
+        # `whole_rows`: one group of whole free frames, or None
+        self._whole = self.groups[0][0] if len(self.groups) == 1 and len(self.groups[0][1]) == self.free.shape[1] else None
         # radial stretch (see SolveOptions.radial_weight): x = S^-1 R^-1 z with, per free frame and
         # quaternion, S^-1 = I + c u u^T (u its unit direction at the start), c = 1/sqrt(w) - 1:
         # the assumed Hessian S (H x I) S has curvature w H along u
@@ -73,10 +75,7 @@ class AccelerationPreconditioner:
         """The free frames' rows if every free component is in one group covering all components
         (whole frames free, as in the orientation problem): then x = x0 + (R^-1 Z).ravel() with
         Z = z.reshape(len(rows), nq), R^-1 = groups[0][2]. Otherwise None."""
-        if len(self.groups) != 1:
-            return None
-        rows, comps, _ = self.groups[0]
-        return rows if len(comps) == self.free.shape[1] else None
+        return self._whole
 
     def whole_radial(self):
         """For `whole_rows` frames: (None, 0) without radial stretch; (U, c) if it acts on one
@@ -100,16 +99,16 @@ class AccelerationPreconditioner:
         return self._map(g, transpose=True)
 
     def _map(self, v, transpose):
-        rows = self.whole_rows()
+        rows = self._whole
         if rows is not None:  # whole free frames, one factor: no scatter into (m, nq) and gather back
             (_, _, Rinv), = self.groups
             X = v.reshape(len(rows), self.free.shape[1])
             if transpose:
                 X = X.copy()
-                self._stretch_rows(X)
+                self._stretch(X, rows)
                 return (Rinv.T @ X).ravel()
             out = Rinv @ X
-            self._stretch_rows(out)
+            self._stretch(out, rows)
             return out.ravel()
         X = np.zeros(self.free.shape)
         X[self.free] = v
@@ -123,21 +122,13 @@ class AccelerationPreconditioner:
             self._stretch(out)
         return out[self.free]
 
-    def _stretch_rows(self, X):
-        """`_stretch` on X (len(rows), nq) holding only the `whole_rows` frames."""
-        if not self.radial:
-            return
-        whole = self.whole_rows()
+    def _stretch(self, X, whole=None):
+        """X[row, slot] += c (X[row, slot].u) u for the radial directions u (in place; symmetric). X is
+        (m, nq) over all frames, or with `whole` (the sorted `whole_rows`) (len(whole), nq) over those."""
         for rows, slot, U in self.radial:
-            at = np.searchsorted(whole, rows)  # rows is a subset of the (sorted) whole rows
+            at = rows if whole is None else np.searchsorted(whole, rows)  # radial rows are whole rows
             B = X[np.ix_(at, slot)]
             X[np.ix_(at, slot)] = B + (self.c * np.einsum("ri,ri->r", B, U))[:, None] * U
-
-    def _stretch(self, X):
-        """X[row, slot] += c (X[row, slot].u) u for the radial directions u (in place; symmetric)."""
-        for rows, slot, U in self.radial:
-            B = X[np.ix_(rows, slot)]
-            X[np.ix_(rows, slot)] = B + (self.c * np.einsum("ri,ri->r", B, U))[:, None] * U
 
 
 def auto_radial_weight(objective: Objective, frames: FrameSet, H: np.ndarray) -> tuple[float, np.ndarray]:
