@@ -228,6 +228,37 @@ class KinematicTree:
         ysd = nu[:, sb] + cross(om[:, sb], ys)  # nu is the velocity of the origin point
         return dict(ry=ry, ys=ys, ysd=ysd)
 
+    def site_positions(self, qpos: np.ndarray) -> tuple[np.ndarray, dict]:
+        """World positions of the tracked sites at n samples, by the forward pass of the pose alone
+        (eq. 13; no velocities): the same as MuJoCo's `mj_kinematics` to rounding error.
+
+        Args:
+            qpos: (n, nq) (quaternions need not be unit: normalized here, as MuJoCo does).
+        Returns:
+            (n, k, 3) positions [m], and the saved pose that `site_positions_vjp` reads.
+        """
+        pose = self._pose(np.asarray(qpos, float).T)
+        sb = self._site_body
+        pose["ry"] = mv(pose["R"][:, :, sb], self._site_pos)
+        ys = pose["x"][:, sb] + pose["ry"]
+        return np.ascontiguousarray(ys.transpose(2, 1, 0)), pose
+
+    def site_positions_vjp(self, pose: dict, g_sites: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Gradient of sum g_sites . site positions with respect to the pose (MuJoCo's tangent
+        convention, as `SiteKinematics.vjp`), at the samples `rows` of a `site_positions` call.
+
+        Args:
+            pose: the saved pose of `site_positions`. g_sites: (r, k, 3) [1/m of the function].
+            rows: (r,) sample indices into that call (default: all of them).
+        Returns:
+            (r, nv) gradient (zero for joints that do not move a site).
+        """
+        sv = pose if rows is None else {k: None if v is None else v[..., rows] for k, v in pose.items()}
+        xbar, _, _, gth = self._site_adjoints(sv, None, g_sites, None)
+        Gq = np.zeros((self.nv, g_sites.shape[0]))
+        self._reverse_pose(sv, xbar, gth, Gq)
+        return Gq.T
+
     def _site_adjoints(self, sv, om, g_sites, g_site_vel):
         """The sites' adjoints as body adjoints: (xbar, nubar, wbar, gth) parts, each (3, B, n) or 0.
         ysd = nu_b + om_b x ys: nu_b += g, om_b += ys x g, ys += g x om_b; ys = x_b + R_b r."""
@@ -267,6 +298,12 @@ class KinematicTree:
         xbar = xbar + Abar
         if sv["Rj"] is not None:
             gth += cross(sv["Rj"], Abar)
+        self._reverse_pose(sv, xbar, gth, Gq)
+
+    def _reverse_pose(self, sv, xbar, gth, Gq):
+        """Reverse of `_pose` from the adjoints of the body origins x and the world rotation adjoints
+        gth (3, B, n) (gth is added to in place): writes the pose gradient into Gq (nv, n)."""
+        R, free, rs, desc = sv["R"], self._free, self._rs, self._desc
         # x = anc(e), e = R_parent d - R jpos (or p for free bodies)
         ebar = desc @ xbar
         Gq[self._lin_v.T] = ebar[:, free]

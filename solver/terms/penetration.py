@@ -5,6 +5,7 @@ import mujoco
 import numpy as np
 
 from solver.errors import InputError
+from solver.kinematic_tree import KinematicTree
 from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout, site_ids
 from solver.surfaces import StaticSurfaces
@@ -34,8 +35,14 @@ class Penetration(Term):
     depth = how far the site is inside the floor plane or box, counting a safety `margin` as inside
     (`StaticSurfaces.penetration`). The paper uses the depth itself; its square is C1, which a
     gradient-based optimizer needs, and the margin makes a converged path clear the surface rather
-    than rest a hair inside it. Gradient: site Jacobian (`mj_jacSite`) mapped to qpos components by
-    `TangentMap.pullback`, only at points where a site is inside (cheap elsewhere).
+    than rest a hair inside it. Site positions at all points from one vectorized forward pass of the
+    pose (`KinematicTree.site_positions`, eq. 13 of appendix A: the legs and the root, MuJoCo's
+    positions to rounding error); the gradient by that pass's reverse, only at points where a site is
+    inside (`KinematicTree.site_positions_vjp`), mapped to qpos components by `TangentMap.pullback`.
+    Run-and-step's gait at 680 points: 0.7 ms for the positions instead of 1.5 ms for `mj_kinematics`
+    point by point, and ~1 ms for the gradient at 300 points inside instead of ~4 ms for `mj_jacSite`
+    point by point. A model the tree does not cover (hinge or slide joints) keeps MuJoCo's per-point
+    `mj_kinematics` and `mj_jacSite`.
 
     Args:
         model: MjModel of the scene (figure + static floor planes/boxes), loaded once by the caller.
@@ -68,6 +75,10 @@ class Penetration(Term):
         self.tmap = TangentMap.from_layout(StateLayout.from_model(model))
         self.margin = float(margin)
         self._jac = np.zeros((3, model.nv))
+        try:  # the vectorized forward and reverse pass of the sites' bodies
+            self._tree = KinematicTree(model, sites, prune=True) if engine is None else None
+        except InputError:  # joints the tree does not model: MuJoCo point by point
+            self._tree = None
         self.engine = engine
         if engine is not None:
             where = [np.flatnonzero(engine.site_ids == i) for i in self.sites]
@@ -78,7 +89,7 @@ class Penetration(Term):
 
     def depths(self, Y: np.ndarray, margin: float | None = None) -> np.ndarray:
         """(n, k) deepest penetration of each contact site over all surfaces [m] (0 = clear)."""
-        p = site_positions(self.model, self.data, Y, self.sites)
+        p = self._positions(Y)[0]
         d, _ = self.surfaces.penetration(p, self.margin if margin is None else margin)
         return d.max(axis=-1)
 
@@ -107,7 +118,7 @@ class Penetration(Term):
             ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
             return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
         m, d = self.model, self.data
-        p = site_positions(m, d, Y, self.sites)
+        p, pose = self._positions(Y)
         depth, ddepth = self.surfaces.penetration(p, self.margin)  # (n,k,S), (n,k,S,3)
         f = (depth * depth).sum(axis=(1, 2))
         if not grad:
@@ -117,7 +128,9 @@ class Penetration(Term):
         gp = np.einsum("nks,nksi->nki", 2.0 * depth, ddepth)
         hit = np.abs(gp).sum(axis=2) > 0  # (n, k) sites inside something
         active = np.flatnonzero(hit.any(axis=1))
-        if active.size:
+        if active.size and pose is not None:
+            dY[active] = self.tmap.pullback(Y[active], self._tree.site_positions_vjp(pose, gp[active], active))
+        elif active.size:
             gv = np.zeros((active.size, m.nv))
             jac, qpos = self._jac, d.qpos
             for r, i in enumerate(active):
@@ -129,3 +142,9 @@ class Penetration(Term):
                     gv[r] += gp[i, k] @ jac
             dY[active] = self.tmap.pullback(Y[active], gv)
         return TermEval(f, dY=dY)
+
+    def _positions(self, Y: np.ndarray):
+        """((n, k, 3) site positions [m], the tree's saved pose or None) along the path Y (n, nq)."""
+        if self._tree is not None:
+            return self._tree.site_positions(Y)
+        return site_positions(self.model, self.data, Y, self.sites), None

@@ -74,6 +74,36 @@ def test_vjp_matches_central_differences(model):
     np.testing.assert_allclose(Gv, fv, rtol=0, atol=1e-6 * (1 + np.abs(fv).max()))
 
 
+def test_pose_only_site_positions_and_their_reverse_pass(model):
+    """`KinematicTree.site_positions` against MuJoCo's mj_kinematics, and `site_positions_vjp` on a subset
+    of the rows against central differences of those positions (the penetration term's pass)."""
+    rng = np.random.default_rng(14)
+    n, nv = 5, model.nv
+    Y, _ = _state(model, rng, n)
+    tree = SiteKinematics(model, CONTACT_SITES)
+    P, pose = tree.site_positions(Y)
+    d = mujoco.MjData(model)
+    for i in range(n):
+        d.qpos[:] = Y[i]
+        mujoco.mj_kinematics(model, d)
+        np.testing.assert_allclose(P[i], d.site_xpos[tree.site_ids], rtol=0, atol=1e-12)
+    rows = np.array([1, 3, 4])
+    gs = rng.normal(size=(len(rows), 4, 3))
+    G = tree.site_positions_vjp(pose, gs, rows)
+    assert G.shape == (len(rows), nv)
+
+    def phi(Y_):
+        return (tree.site_positions(Y_)[0] * gs).sum((1, 2))
+
+    h, fd = 1e-6, np.zeros((len(rows), nv))
+    for i in range(nv):
+        e = np.zeros((len(rows), nv))
+        e[:, i] = h
+        fd[:, i] = (phi(tangent_step(model, Y[rows], e)) - phi(tangent_step(model, Y[rows], -e))) / (2 * h)
+    np.testing.assert_allclose(G, fd, rtol=0, atol=1e-6 * (1 + np.abs(fd).max()))
+    np.testing.assert_allclose(tree.site_positions_vjp(pose, np.zeros((n, 4, 3)) + 0.0), 0.0)
+
+
 def test_velocity_only_motion_matches_the_full_one():
     model = mujoco.MjModel.from_xml_string(ODD)
     layout = StateLayout.from_model(model)

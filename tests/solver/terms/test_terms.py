@@ -101,6 +101,32 @@ def test_penetration_value_and_gradient(toy_model, layout):
     check_term_gradient(term, Yr, None, None, rtol=1e-5, atol=1e-8)
 
 
+def test_penetration_tree_and_mujoco_paths_agree(toy_model, layout):
+    """The vectorized pass (`KinematicTree`) and MuJoCo point by point (the path for models the tree
+    does not cover) give the same values and gradients; a hinge model takes the MuJoCo path."""
+    import mujoco
+    from tree_models import HINGE
+
+    rng = np.random.default_rng(7)
+    Y = random_qpos(rng, layout, 40, spread=0.3)
+    Y[:, 2] = rng.uniform(0.85, 1.0, 40)  # most points with a site inside the floor, some clear
+    Y[::3, 0] = 1.5  # over the step box
+    tree, mj = Penetration(toy_model, margin=0.005), Penetration(toy_model, margin=0.005)
+    mj._tree = None
+    assert tree._tree is not None
+    a, b = tree.evaluate(None, Y, None, None), mj.evaluate(None, Y, None, None)
+    assert 0 < np.count_nonzero(a.f) < len(Y)
+    np.testing.assert_allclose(a.f, b.f, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(a.dY, b.dY, rtol=0, atol=1e-11 * np.abs(b.dY).max())
+    np.testing.assert_allclose(tree.depths(Y), mj.depths(Y), rtol=0, atol=1e-12)
+    xml = HINGE.replace('pos="0 0 1"', 'pos="0 0 .1"').replace('size=".03"/>', 'size=".03"/><site name="tip" pos=".3 0 0"/>').replace(
+        "</worldbody>", '<geom type="plane" size="5 5 .1"/></worldbody>')
+    hinge = Penetration(mujoco.MjModel.from_xml_string(xml), sites=["tip"], margin=0.0)
+    assert hinge._tree is None
+    np.testing.assert_allclose(hinge.evaluate(None, np.array([[np.pi / 2], [0.0]]), None, None).f, [0.2**2, 0.0],
+                               atol=1e-12)  # the tip swung 0.2 m below the floor, then level and clear
+
+
 def test_pointwise_terms_evaluate_the_same_on_any_split_of_the_points(layout):
     """`Term.pointwise` (the objective then evaluates the term on blocks of points): f and the
     gradients on each half of the points are the rows of the whole evaluation."""
