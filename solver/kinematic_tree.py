@@ -248,7 +248,7 @@ class KinematicTree:
         convention, as `SiteKinematics.vjp`), at the samples `rows` of a `site_positions` call.
 
         Args:
-            pose: the saved pose of `site_positions`. g_sites: (r, k, 3) [1/m of the function].
+            pose: the saved pose of `site_positions`. g_sites: (r, k, 3), d phi / d site position.
             rows: (r,) sample indices into that call (default: all of them).
         Returns:
             (r, nv) gradient (zero for joints that do not move a site).

@@ -36,13 +36,13 @@ _LUKSAN_MEMAVAIL = 1310720
 def lbfgs_storage(n: int) -> int:
     """Correction pairs nlopt's L-BFGS (Luksan's PLIS) keeps for n variables.
 
-    nlopt's default is max(MEMAVAIL // n, 10) pairs, and PLIS allocates and zeroes 2 n pairs doubles
-    on every call: ~10 MB for any n below ~1300, most of a small orientation solve's optimizer
-    overhead (~0.4 ms of a ~5 ms `orient` call, and the caches it evicts). A run uses min(iterations,
-    pairs) pairs, so a run of at most `lbfgs_storage(n)` iterations has the same iterates as with the
-    default. Here: at most 1000 pairs, and at most max(n, 200): n pairs (2n rank-one terms) can
-    already span the whole n x n inverse-Hessian update, so more only repeat older curvature. Problems
-    with n >= ~1000 variables (the figure) keep nlopt's own default.
+    nlopt's default is max(MEMAVAIL // n, 10) pairs, and PLIS allocates and zeroes 2 n doubles per pair
+    on every call: ~21 MB whatever n is; 1.9 MB for the orientation problem's ~120 variables with the
+    earlier cap of 1000 pairs, still ~0.4 ms of a ~5 ms `orient` call (with the caches it evicts). A run
+    uses min(iterations, pairs) pairs, so a run of at most `lbfgs_storage(n)` iterations has the same
+    iterates as with the default. Here: at most 1000 pairs, and at most max(n, 200): n pairs (2n
+    rank-one terms) can already span the whole n x n inverse-Hessian update, so more only repeat older
+    curvature. Problems with n >= ~1300 variables (the figure's) keep nlopt's own default.
 
     Args:
         n: number of variables, >= 1.
