@@ -220,12 +220,16 @@ class KinematicTree:
         nu = self._anc @ (k + lin)
         return dict(s=s, om=om, k=k, nu=nu)
 
-    def _sites(self, R, x, nu, om) -> dict:
-        """Site offsets ry, positions ys and velocities ysd (3, K, n)."""
+    def _site_points(self, R, x) -> tuple[np.ndarray, np.ndarray]:
+        """Site offsets ry = R_b r and positions ys = x_b + ry (3, K, n) of the sites' bodies b."""
         sb = self._site_body
         ry = mv(R[:, :, sb], self._site_pos)
-        ys = x[:, sb] + ry
-        ysd = nu[:, sb] + cross(om[:, sb], ys)  # nu is the velocity of the origin point
+        return ry, x[:, sb] + ry
+
+    def _sites(self, R, x, nu, om) -> dict:
+        """Site offsets ry, positions ys and velocities ysd (3, K, n)."""
+        ry, ys = self._site_points(R, x)
+        ysd = nu[:, self._site_body] + cross(om[:, self._site_body], ys)  # nu: velocity of the origin point
         return dict(ry=ry, ys=ys, ysd=ysd)
 
     def site_positions(self, qpos: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -238,9 +242,7 @@ class KinematicTree:
             (n, k, 3) positions [m], and the saved pose that `site_positions_vjp` reads.
         """
         pose = self._pose(np.asarray(qpos, float).T)
-        sb = self._site_body
-        pose["ry"] = mv(pose["R"][:, :, sb], self._site_pos)
-        ys = pose["x"][:, sb] + pose["ry"]
+        pose["ry"], ys = self._site_points(pose["R"], pose["x"])
         return np.ascontiguousarray(ys.transpose(2, 1, 0)), pose
 
     def site_positions_vjp(self, pose: dict, g_sites: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
