@@ -134,6 +134,13 @@ class Objective:
                        and type(self.terms[1]) is NormalizedCovariantAcceleration and self.terms[1]._single)
 
     @property
+    def fused_orientation(self) -> bool:
+        """True for the orientation objective (unit + normalized covariant acceleration of one
+        quaternion filling the state, Gauss quadrature), which `unit_and_normalized` evaluates in one
+        pass (`evaluate_path`, and `solver.round`'s component-major fast path)."""
+        return self._fused
+
+    @property
     def names(self) -> list[str]:
         return [term.name for term in self.terms]
 
