@@ -300,7 +300,8 @@ def solve(
             new = new[: max(0, options.max_frames - frames.n_variable)] if options.subdivision == "global" else new
         frames = frames.with_variable_frames(new)
         if project is not None and new.size:
-            var = np.isin(frames.times, new)
+            var = np.zeros(frames.count, bool)
+            var[np.searchsorted(frames.times, new)] = True  # the new times are among the frames' times
             vals = frames.values.copy()
             vals[var] = project(vals[var])
             frames = replace(frames, values=vals)
