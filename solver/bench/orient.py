@@ -43,6 +43,8 @@ LADDER = (
     ("global 4/interval, ftol 1e-4", dict(options=dict(subdivision="global", per_segment=4, ftol_rel=1e-4))),
     ("global 5/interval, ftol 1e-4", dict(options=dict(subdivision="global", per_segment=5, ftol_rel=1e-4))),
     ("global 6/interval, ftol 1e-4", dict(options=dict(subdivision="global", per_segment=6, ftol_rel=1e-4))),
+    ("global 7/interval, ftol 1e-4", dict(options=dict(subdivision="global", per_segment=7, ftol_rel=1e-4))),
+    ("global 8/interval, ftol 1e-4", dict(options=dict(subdivision="global", per_segment=8, ftol_rel=1e-4))),
     ("global 6/interval, ftol 1e-6", dict(options=dict(subdivision="global", per_segment=6, ftol_rel=1e-6))),
     ("default (tol 1e-3)", dict(options=dict())),
     ("tol 1e-4", dict(options=dict(), tol=1e-4)),
