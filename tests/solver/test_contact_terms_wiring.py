@@ -197,3 +197,36 @@ def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
                 "flight time [s] (capture 0.117)", "RMS friction-cone residual [N]", "peak friction-cone residual [N]"):
         assert row in text
     assert text.index("float in contact") < text.index("max |1 - |q||")
+
+
+def test_planted_with_the_engine_has_the_bits_of_the_per_contact_integrand(toy):
+    """`Planted.evaluate_deferred` (pairs of point and contact) against `_integrand` on the rows of
+    `_parts` (every contact at every contact row), bit for bit: contacts of one site that overlap (added
+    in contact order), one on the step, one on whichever surface is under the site."""
+    from solver.kinematic_tree import SiteKinematics
+    from solver.terms.contact import Planted
+
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(11)
+    n = 60
+    t = np.linspace(0, 1, n)
+    Y, Y1 = random_qpos(rng, layout, n, spread=0.2, scale=(1, 1)), rng.normal(size=(n, toy.nq))
+    Y[:, 2] = 0.95
+    sched = (Contact("l_heel", 0.1, 0.6), Contact("l_heel", 0.5, 0.8), Contact("r_toe", 0.0, 0.4, "step"),
+             Contact("l_toe", 0.3, 1.0), Contact("r_heel", 0.7, 0.9, "floor"))
+    engine = SiteKinematics(toy, CONTACT_SITES)
+    term = Planted(toy, sched, ramp=0.1, engine=engine)
+    ev = term.evaluate_deferred(t, Y, Y1, None)
+    res = ev.deferred.result
+    S, W = term._both(t)
+    rows = np.flatnonzero((S > 0).any(axis=1))
+    p, v = res.sites[rows][:, term._eidx], engine.site_velocities(res)[rows][:, term._eidx]
+    f_rows, g_p, g_v = term._integrand(p, v, S[rows], W[rows], rows, True)
+    f = np.zeros(n)
+    f[rows] = f_rows
+    g_sites, g_vel = np.zeros(res.sites.shape), np.zeros(res.sites.shape)
+    g_sites[np.ix_(rows, term._eidx)], g_vel[np.ix_(rows, term._eidx)] = g_p, g_v
+    assert np.any(f > 0) and np.any(g_vel != 0)
+    for a, b in ((ev.f, f), (ev.deferred.g_sites, g_sites), (ev.deferred.g_site_vel, g_vel),
+                 (term.evaluate_deferred(t, Y, Y1, None, grad=False).f, f)):
+        assert np.array_equal(a.view(np.int64), b.view(np.int64))
