@@ -49,11 +49,12 @@ def engine_forward(engine, tmap: TangentMap, Y: np.ndarray, Y1: np.ndarray, Y2: 
 
     Args:
         engine: `InverseDynamics`, `MujocoInverseDynamics` or `SiteKinematics`. tmap: the model's
-            `TangentMap`. Y, Y1, Y2: (n, nq) qpos and its time derivatives (Y2 unused if the engine
-            does not read qacc).
+            `TangentMap` (the engine's own `motion_map` instead if it has one: the joints it reads).
+            Y, Y1, Y2: (n, nq) qpos and its time derivatives (Y2 unused if the engine does not read qacc).
     """
     if 2 not in engine.needs:
         Y2 = None
+    tmap = getattr(engine, "motion_map", tmap)  # an engine that reads only some joints' qvel (`SiteKinematics`)
     key = (Y, Y1, Y2)
     last = getattr(engine, "_motion_cache", None)
     if last is not None and all(
