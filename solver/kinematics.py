@@ -240,7 +240,7 @@ class TangentMap:
         Returns:
             TangentMap with `partial` True (the full map itself if it keeps everything).
         """
-        keep = set(int(d) for d in np.ravel(dofs))
+        keep = {int(d) for d in np.ravel(dofs)}
         qs = [i for i, v in enumerate(self.quat_v) if all(int(d) in keep for d in v)]
         ls = [i for i, d in enumerate(self.lin_v) if int(d) in keep]
         if len(qs) == len(self.quat_v) and len(ls) == len(self.lin_v):
