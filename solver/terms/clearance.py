@@ -44,7 +44,7 @@ import numpy as np
 
 from solver.contacts import HEIGHT_ON
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES
+from solver.layout import CONTACT_SITES, index_run
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
 from solver.terms.contact_schedule import (
@@ -124,7 +124,7 @@ class Clearance(Term):
         self.lowered: dict[tuple[int, float, float], float] = {}  # (site column, a, b): swing band [m]
         self.engine = engine
         if engine is not None:  # site positions of all points from the shared engine's forward pass
-            self._eidx = _engine_index(engine, model, self.kin.names)
+            self._eidx = index_run(_engine_index(engine, model, self.kin.names))  # the figure's: a slice
             self.needs = tuple(engine.needs)
 
     def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:

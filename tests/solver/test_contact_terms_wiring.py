@@ -230,3 +230,14 @@ def test_planted_with_the_engine_has_the_bits_of_the_per_contact_integrand(toy):
     for a, b in ((ev.f, f), (ev.deferred.g_sites, g_sites), (ev.deferred.g_site_vel, g_vel),
                  (term.evaluate_deferred(t, Y, Y1, None, grad=False).f, f)):
         assert np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def test_index_run_is_a_slice_only_for_consecutive_indices():
+    from solver.layout import index_run
+
+    assert index_run([2, 3, 4]) == slice(2, 5)
+    for idx in ([0, 2, 3], [3, 2], []):
+        out = index_run(idx)
+        assert isinstance(out, np.ndarray) and out.tolist() == idx
+    a = np.arange(24.0).reshape(2, 6, 2)
+    np.testing.assert_array_equal(a[:, index_run([1, 2, 3])], a[:, [1, 2, 3]])
