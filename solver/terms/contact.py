@@ -293,7 +293,7 @@ class Planted(Term):
         if Y1 is not None:
             p, v, _, _ = self.kin.motion(Y[rows], Y1[rows], grad=False)
         else:
-            P = self.kin.positions(Y)
+            P = self.kin.dense_positions(Y)
             v = np.gradient(P, t, axis=0)[rows]
             p = P[rows]
         hh, vt, _ = self._parts(p, v, S[rows], rows)

@@ -76,8 +76,8 @@ class Penetration(Term):
         self.tmap = TangentMap.from_layout(StateLayout.from_model(model))
         self.margin = float(margin)
         self._jac = np.zeros((3, model.nv))
-        try:  # the vectorized forward and reverse pass of the sites' bodies
-            self._tree = KinematicTree(model, sites, prune=True) if engine is None else None
+        try:  # the vectorized forward and reverse pass of the sites' bodies (with an engine: `depths` only)
+            self._tree = KinematicTree(model, sites, prune=True)
         except InputError:  # joints the tree does not model: MuJoCo point by point
             self._tree = None
         self.engine = engine

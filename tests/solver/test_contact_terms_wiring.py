@@ -241,3 +241,31 @@ def test_index_run_is_a_slice_only_for_consecutive_indices():
         assert isinstance(out, np.ndarray) and out.tolist() == idx
     a = np.arange(24.0).reshape(2, 6, 2)
     np.testing.assert_array_equal(a[:, index_run([1, 2, 3])], a[:, [1, 2, 3]])
+
+
+def test_violations_from_the_vectorized_positions_match_mujocos(toy):
+    """The limit checks read site positions from one vectorized pass (`SiteMotion.dense_positions`,
+    `Penetration.depths` with an engine); MuJoCo's loop gives the same violations to rounding error."""
+    from solver.kinematic_tree import SiteKinematics
+    from solver.terms.clearance import Clearance
+    from solver.terms.contact import Planted
+    from solver.terms.penetration import Penetration
+
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(21)
+    Y = random_qpos(rng, layout, 200, spread=0.15, scale=(1, 1))
+    Y[:, 2] = 0.97 + 0.02 * np.sin(np.linspace(0, 6, 200))
+    t = np.linspace(0.0, 1.0, 200)
+    engine = SiteKinematics(toy, CONTACT_SITES)
+    sched = (Contact("l_heel", 0.0, 0.3), Contact("l_heel", 0.7, 1.0), Contact("l_toe", 0.0, 0.5),
+             Contact("r_toe", 0.2, 1.0))  # l_heel swings from 0.3 to 0.7 s
+    terms = [Planted(toy, sched, engine=engine), Clearance(toy, sched, clearance=0.1, engine=engine)]
+    dense = [term.violation(Y, t) for term in terms]
+    pen = Penetration(toy, margin=0.05, engine=engine)
+    dense.append(float(pen.depths(Y, margin=0.05).max()))
+    for term in terms:
+        term.kin.dense_positions = term.kin.positions  # MuJoCo's loop
+    pen._tree = None
+    loop = [term.violation(Y, t) for term in terms] + [float(pen.depths(Y, margin=0.05).max())]
+    assert all(v > 0 for v in loop), loop
+    np.testing.assert_allclose(dense, loop, rtol=1e-12, atol=1e-15)
