@@ -26,7 +26,8 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.inverse_dynamics_mujoco import InverseDynamicsResult
-from solver.layout import site_ids
+from solver.kinematics import TangentMap
+from solver.layout import StateLayout, site_ids
 from solver.spatial import cross, mtv, mv, qmat, qmul
 
 
@@ -335,6 +336,9 @@ class SiteKinematics(KinematicTree):
 
     def __init__(self, model, sites=()):
         super().__init__(model, sites, prune=True)  # the figure's four contact sites: 9 of its 20 bodies
+        #: the tangent map of the joints this engine reads (`engine_forward` computes qvel with it)
+        self.motion_map = TangentMap.from_layout(StateLayout.from_model(model)).subset(
+            np.concatenate([self._ang_v.ravel(), self._lin_v.ravel()]))
         self._self_check(model)
 
     def _self_check(self, model):

@@ -166,7 +166,8 @@ def _motion(tm: TangentMap, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> Pa
     a = (q * q1).sum(0)
     w = _gq(q, q1)
     n = Y.shape[0]
-    v = np.empty((tm.nv, n))
+    new = np.zeros if tm.partial else np.empty  # a partial map leaves the other components 0
+    v = new((tm.nv, n))
     v[tm.lin_v] = Y1.T[tm.lin_q]
     c2 = 2.0 / s
     v[tm.quat_v.T] = c2 * w
@@ -174,7 +175,7 @@ def _motion(tm: TangentMap, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> Pa
         return PathMotion(v.T, None, tm, q, q1, None, s, a, w, None)
     q2 = Y2.T[idx]
     z = _gq(q, q2)
-    acc = np.empty((tm.nv, n))
+    acc = new((tm.nv, n))
     acc[tm.lin_v] = Y2.T[tm.lin_q]
     acc[tm.quat_v.T] = c2 * (z - (c2 * a) * w)
     return PathMotion(v.T, acc.T, tm, q, q1, q2, s, a, w, z)
@@ -189,6 +190,9 @@ class TangentMap:
         quat_q: (s, 4) qpos indices of each quaternion.
         quat_v: (s, 3) qvel indices of its angular velocity.
         lin_q, lin_v: (l,) matching qpos/qvel indices of the linear components.
+        partial: the map covers only some joints (`subset`): `motion` leaves the other components of
+            qvel and qacc 0, and its `vjp` gives 0 for them (what the full map gives for adjoints
+            that are 0 there, up to the sign of those zeros).
     """
 
     nq: int
@@ -197,6 +201,7 @@ class TangentMap:
     quat_v: np.ndarray
     lin_q: np.ndarray
     lin_v: np.ndarray
+    partial: bool = False
 
     @classmethod
     def from_layout(cls, layout: StateLayout) -> TangentMap:
@@ -222,6 +227,26 @@ class TangentMap:
             np.array(lq, int),
             np.array(lv, int),
         )
+
+    def subset(self, dofs) -> TangentMap:
+        """The map of only the joints whose qvel components are all in `dofs` (a quaternion slot by
+        its 3, a linear component by its 1): for an engine that reads only those (the contact sites'
+        kinematics reads the legs and the root, 7 of the figure's 12 quaternions), `motion` and its
+        `vjp` skip the other joints' work. Each kept component is computed as by the full map, so
+        bit for bit the same.
+
+        Args:
+            dofs: qvel indices.
+        Returns:
+            TangentMap with `partial` True (the full map itself if it keeps everything).
+        """
+        keep = {int(d) for d in np.ravel(dofs)}
+        qs = [i for i, v in enumerate(self.quat_v) if all(int(d) in keep for d in v)]
+        ls = [i for i, d in enumerate(self.lin_v) if int(d) in keep]
+        if len(qs) == len(self.quat_v) and len(ls) == len(self.lin_v):
+            return self
+        return TangentMap(self.nq, self.nv, self.quat_q[qs].reshape(-1, 4), self.quat_v[qs].reshape(-1, 3),
+                          self.lin_q[ls], self.lin_v[ls], partial=True)
 
     def blocks(self, Y: np.ndarray) -> np.ndarray:
         """The quaternion blocks 2 G(u) / |q| of B(Y).

@@ -133,3 +133,12 @@ def site_ids(model, names) -> np.ndarray:
             )
         ids.append(i)
     return np.array(ids, int)
+
+
+def index_run(idx) -> np.ndarray | slice:
+    """`idx` (k,) as a slice if its entries are a run of consecutive indices (indexing then gives views,
+    not gathered copies, and assigning through it is plain slicing), else as an int array."""
+    idx = np.asarray(idx, int).ravel()
+    if len(idx) and np.array_equal(idx, np.arange(idx[0], idx[0] + len(idx))):
+        return slice(int(idx[0]), int(idx[0]) + len(idx))
+    return idx

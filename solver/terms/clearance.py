@@ -44,7 +44,7 @@ import numpy as np
 
 from solver.contacts import HEIGHT_ON
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES
+from solver.layout import CONTACT_SITES, index_run
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
 from solver.terms.contact_schedule import (
@@ -124,7 +124,7 @@ class Clearance(Term):
         self.lowered: dict[tuple[int, float, float], float] = {}  # (site column, a, b): swing band [m]
         self.engine = engine
         if engine is not None:  # site positions of all points from the shared engine's forward pass
-            self._eidx = _engine_index(engine, model, self.kin.names)
+            self._eidx = index_run(_engine_index(engine, model, self.kin.names))  # the figure's: a slice
             self.needs = tuple(engine.needs)
 
     def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
@@ -138,7 +138,7 @@ class Clearance(Term):
         if not grad:
             return TermEval(f)
         g_sites = np.zeros(res.sites.shape)
-        np.add.at(g_sites, (slice(None), self._eidx), gp)
+        g_sites[:, self._eidx] += gp  # distinct sites: distinct engine indices (as np.add.at, faster)
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites))
 
     def _integrand(self, p, Us, Uf, Bf, Bs, grad=True):
@@ -236,11 +236,12 @@ class Clearance(Term):
         Us, Uf, _, _ = self.split_windows(t)
         return np.maximum(Us, Uf[:, None])
 
-    def _band_depths(self, Y: np.ndarray, t: np.ndarray, lift: bool = True) -> np.ndarray:
+    def _band_depths(self, Y: np.ndarray, t: np.ndarray, lift: bool = True, dense: bool = False) -> np.ndarray:
         """(m, k) how far each site is inside the band of the window that weighs it most at times t [m]
-        (lift False: flights' bands without the ballistic lift)."""
+        (lift False: flights' bands without the ballistic lift; dense: many samples, site positions by
+        `SiteMotion.dense_positions`)."""
         Us, Uf, Bf, Bs = self.split_windows(t) if lift else self._split_windows(t, lift=False)
-        h, _ = self.below.height(self.kin.positions(Y))
+        h, _ = self.below.height(self.kin.dense_positions(Y) if dense else self.kin.positions(Y))
         return np.maximum(0.0, np.where(Us >= Uf[:, None], Bs, Bf[:, None]) - h)
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
@@ -278,5 +279,5 @@ class Clearance(Term):
         rows = np.flatnonzero((U >= FULL).any(axis=1))
         if rows.size == 0:
             return None
-        d = self._band_depths(Y[rows], t[rows])
+        d = self._band_depths(Y[rows], t[rows], dense=True)
         return float(np.max(np.where(U[rows] >= FULL, d, 0.0)))

@@ -175,26 +175,63 @@ class Planted(Term):
                 vt[on, c] = vc - np.einsum("mi,mi->m", vc, nc)[:, None] * nc
         return h, vt, nrm
 
+    def _pairs(self, t: np.ndarray):
+        """The (point, contact) pairs where a contact's height window is on, at times t (read-only, kept
+        for the last t): rows (r,) the points with any contact on; for each pair (P,), contact by
+        contact and rows ascending within one: its row in rows (local), point (glob), contact (con),
+        engine site index (site) and height and sliding windows (s, w); starts (C+1,) (contact c's
+        pairs are [starts[c], starts[c+1])); unique: 1 if no two pairs share a point and site."""
+        return last_for_times(self, "_pair_cache", t, self._make_pairs)
+
+    def _make_pairs(self, t: np.ndarray):
+        S, W = self._windows(t)
+        rows = np.flatnonzero((S > 0).any(axis=1))
+        on = [np.flatnonzero(S[rows, c] > 0) for c in range(len(self.contacts))]
+        starts = np.cumsum([0] + [len(x) for x in on])
+        local = np.concatenate(on).astype(int) if on else np.zeros(0, int)
+        con = np.repeat(np.arange(len(on)), [len(x) for x in on]).astype(int)
+        site = self._eidx[self._col[con]] if len(con) else np.zeros(0, int)
+        glob = rows[local]
+        unique = np.array([len(np.unique(glob * (site.max(initial=0) + 1) + site)) == len(glob)], int)
+        return rows, local, glob, con, site, S[glob, con], W[glob, con], starts, unique
+
     def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         """With an engine: `evaluate` at all points at once, the gradient left to the engine's reverse
-        pass (`solver.terms.dynamics.EngineGradient`); without one, `evaluate`."""
+        pass (`solver.terms.dynamics.EngineGradient`); without one, `evaluate`.
+
+        Only at the (point, contact) pairs where a contact's height window is on (`_pairs`): the same
+        arithmetic as `_integrand` on the rows of `_parts` (which also fills the other contacts' zeros
+        and adds them; heights contact by contact, as there), so the same bits, without the (r, C, 3)
+        scratch arrays."""
         if self.engine is None:
             return self.evaluate(t, Y, Y1, Y2, grad)
         from solver.terms.dynamics import EngineGradient
 
         mo, res = _engine_motion(self, Y, Y1, Y2)
-        S, W = self._both(t)
-        rows = np.flatnonzero((S > 0).any(axis=1))
+        rows, local, glob, con, site, s, w, starts, unique = self._pairs(np.asarray(t, float))
+        p, vc = res.sites[glob, site], self.engine.site_velocities(res)[glob, site]  # (P, 3)
+        h, nc = np.empty(len(glob)), np.empty((len(glob), 3))
+        for c in range(len(self.contacts)):
+            a, b = starts[c], starts[c + 1]
+            if a < b:
+                h[a:b], nc[a:b] = self.support.height(p[a:b].copy(), self._surf[c])
+        h -= self.rest_height
+        vt = vc - np.einsum("mi,mi->m", vc, nc)[:, None] * nc
+        t2 = self.tau * self.tau
+        T = np.zeros((len(rows), len(self.contacts)))  # each contact's integrand, zero where it is off
+        T[local, con] = s * h * h + w * t2 * (vt * vt).sum(-1)
         f = np.zeros(len(Y))
-        p = res.sites[rows][:, self._eidx]
-        v = self.engine.site_velocities(res)[rows][:, self._eidx]
-        f[rows], g_p, g_v = self._integrand(p, v, S[rows], W[rows], rows, grad)
+        f[rows] = T.sum(1)
         if not grad:
             return TermEval(f)
-        g_sites = np.zeros(res.sites.shape)
-        g_vel = np.zeros(res.sites.shape)
-        g_sites[np.ix_(rows, self._eidx)] = g_p
-        g_vel[np.ix_(rows, self._eidx)] = g_v
+        g_sites, g_vel = np.zeros(res.sites.shape), np.zeros(res.sites.shape)
+        gp, gv = (2.0 * s * h)[:, None] * nc, (2.0 * t2 * w)[:, None] * vt
+        if unique[0]:  # one pair per point and site: each element from +0 once, as `_integrand`'s sums
+            g_sites[glob, site] += gp
+            g_vel[glob, site] += gv
+        else:  # contacts of one site overlapping: added in contact order, as there
+            np.add.at(g_sites, (glob, site), gp)
+            np.add.at(g_vel, (glob, site), gv)
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites, g_vel))
 
     def _integrand(self, p, v, Sr, Wr, rows, grad):
@@ -256,7 +293,7 @@ class Planted(Term):
         if Y1 is not None:
             p, v, _, _ = self.kin.motion(Y[rows], Y1[rows], grad=False)
         else:
-            P = self.kin.positions(Y)
+            P = self.kin.dense_positions(Y)
             v = np.gradient(P, t, axis=0)[rows]
             p = P[rows]
         hh, vt, _ = self._parts(p, v, S[rows], rows)

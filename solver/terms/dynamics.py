@@ -44,27 +44,32 @@ def engine_forward(engine, tmap: TangentMap, Y: np.ndarray, Y1: np.ndarray, Y2: 
     """(PathMotion, engine result) of a path at its samples, computed once for all terms sharing `engine`.
 
     The motion (qvel, and qacc if the engine reads it: `engine.needs`) is cached on the engine, keyed by
-    the values of Y, Y', Y'', and the engine caches its forward pass, so every term after the first
-    pays only for two comparisons.
+    the values of Y, Y', Y'', with the engine's result for it: while that is still the engine's cached
+    forward pass (`engine._cache`, the same object), every term after the first pays only for comparing
+    Y, Y' (and Y'') with the key, not also the engine's inputs.
 
     Args:
         engine: `InverseDynamics`, `MujocoInverseDynamics` or `SiteKinematics`. tmap: the model's
-            `TangentMap`. Y, Y1, Y2: (n, nq) qpos and its time derivatives (Y2 unused if the engine
-            does not read qacc).
+            `TangentMap` (the engine's own `motion_map` instead if it has one: the joints it reads).
+            Y, Y1, Y2: (n, nq) qpos and its time derivatives (Y2 unused if the engine does not read qacc).
     """
     if 2 not in engine.needs:
         Y2 = None
+    tmap = getattr(engine, "motion_map", tmap)  # an engine that reads only some joints' qvel (`SiteKinematics`)
     key = (Y, Y1, Y2)
     last = getattr(engine, "_motion_cache", None)
     if last is not None and all(
         (a is None and b is None) or (a is not None and b is not None and a.shape == b.shape and np.array_equal(a, b))
         for a, b in zip(last[0], key, strict=True)
     ):
-        mo = last[1]
+        keys, mo = last[0], last[1]
+        if getattr(engine, "_cache", None) is last[2]:  # the engine's last forward pass is of this motion
+            return mo, last[2]
     else:
-        mo = tmap.motion(Y, Y1, Y2)
-        engine._motion_cache = (tuple(None if a is None else a.copy() for a in key), mo)
-    return mo, engine.forward(Y, mo.qvel, mo.qacc)
+        keys, mo = tuple(None if a is None else a.copy() for a in key), tmap.motion(Y, Y1, Y2)
+    res = engine.forward(Y, mo.qvel, mo.qacc)
+    engine._motion_cache = (keys, mo, res)
+    return mo, res
 
 
 class EngineGradient:

@@ -7,7 +7,7 @@ import numpy as np
 from solver.errors import InputError
 from solver.kinematic_tree import KinematicTree
 from solver.kinematics import TangentMap
-from solver.layout import CONTACT_SITES, StateLayout, site_ids
+from solver.layout import CONTACT_SITES, StateLayout, index_run, site_ids
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
 
@@ -76,8 +76,8 @@ class Penetration(Term):
         self.tmap = TangentMap.from_layout(StateLayout.from_model(model))
         self.margin = float(margin)
         self._jac = np.zeros((3, model.nv))
-        try:  # the vectorized forward and reverse pass of the sites' bodies
-            self._tree = KinematicTree(model, sites, prune=True) if engine is None else None
+        try:  # the vectorized forward and reverse pass of the sites' bodies (with an engine: `depths` only)
+            self._tree = KinematicTree(model, sites, prune=True)
         except InputError:  # joints the tree does not model: MuJoCo point by point
             self._tree = None
         self.engine = engine
@@ -85,7 +85,7 @@ class Penetration(Term):
             where = [np.flatnonzero(engine.site_ids == i) for i in self.sites]
             if any(len(w) == 0 for w in where):
                 raise InputError(f"the engine does not track the contact sites {', '.join(sites)}")
-            self._engine_index = np.array([int(w[0]) for w in where], int)
+            self._engine_index = index_run([int(w[0]) for w in where])  # the figure's: a slice
             self.needs = tuple(engine.needs)  # the engine's forward pass reads qvel (and qacc) too
 
     def depths(self, Y: np.ndarray, margin: float | None = None) -> np.ndarray:

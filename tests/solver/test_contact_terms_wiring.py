@@ -197,3 +197,75 @@ def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
                 "flight time [s] (capture 0.117)", "RMS friction-cone residual [N]", "peak friction-cone residual [N]"):
         assert row in text
     assert text.index("float in contact") < text.index("max |1 - |q||")
+
+
+def test_planted_with_the_engine_has_the_bits_of_the_per_contact_integrand(toy):
+    """`Planted.evaluate_deferred` (pairs of point and contact) against `_integrand` on the rows of
+    `_parts` (every contact at every contact row), bit for bit: contacts of one site that overlap (added
+    in contact order), one on the step, one on whichever surface is under the site."""
+    from solver.kinematic_tree import SiteKinematics
+    from solver.terms.contact import Planted
+
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(11)
+    n = 60
+    t = np.linspace(0, 1, n)
+    Y, Y1 = random_qpos(rng, layout, n, spread=0.2, scale=(1, 1)), rng.normal(size=(n, toy.nq))
+    Y[:, 2] = 0.95
+    sched = (Contact("l_heel", 0.1, 0.6), Contact("l_heel", 0.5, 0.8), Contact("r_toe", 0.0, 0.4, "step"),
+             Contact("l_toe", 0.3, 1.0), Contact("r_heel", 0.7, 0.9, "floor"))
+    engine = SiteKinematics(toy, CONTACT_SITES)
+    term = Planted(toy, sched, ramp=0.1, engine=engine)
+    ev = term.evaluate_deferred(t, Y, Y1, None)
+    res = ev.deferred.result
+    S, W = term._both(t)
+    rows = np.flatnonzero((S > 0).any(axis=1))
+    p, v = res.sites[rows][:, term._eidx], engine.site_velocities(res)[rows][:, term._eidx]
+    f_rows, g_p, g_v = term._integrand(p, v, S[rows], W[rows], rows, True)
+    f = np.zeros(n)
+    f[rows] = f_rows
+    g_sites, g_vel = np.zeros(res.sites.shape), np.zeros(res.sites.shape)
+    g_sites[np.ix_(rows, term._eidx)], g_vel[np.ix_(rows, term._eidx)] = g_p, g_v
+    assert np.any(f > 0) and np.any(g_vel != 0)
+    for a, b in ((ev.f, f), (ev.deferred.g_sites, g_sites), (ev.deferred.g_site_vel, g_vel),
+                 (term.evaluate_deferred(t, Y, Y1, None, grad=False).f, f)):
+        assert np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def test_index_run_is_a_slice_only_for_consecutive_indices():
+    from solver.layout import index_run
+
+    assert index_run([2, 3, 4]) == slice(2, 5)
+    for idx in ([0, 2, 3], [3, 2], []):
+        out = index_run(idx)
+        assert isinstance(out, np.ndarray) and out.tolist() == idx
+    a = np.arange(24.0).reshape(2, 6, 2)
+    np.testing.assert_array_equal(a[:, index_run([1, 2, 3])], a[:, [1, 2, 3]])
+
+
+def test_violations_from_the_vectorized_positions_match_mujocos(toy):
+    """The limit checks read site positions from one vectorized pass (`SiteMotion.dense_positions`,
+    `Penetration.depths` with an engine); MuJoCo's loop gives the same violations to rounding error."""
+    from solver.kinematic_tree import SiteKinematics
+    from solver.terms.clearance import Clearance
+    from solver.terms.contact import Planted
+    from solver.terms.penetration import Penetration
+
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(21)
+    Y = random_qpos(rng, layout, 200, spread=0.15, scale=(1, 1))
+    Y[:, 2] = 0.97 + 0.02 * np.sin(np.linspace(0, 6, 200))
+    t = np.linspace(0.0, 1.0, 200)
+    engine = SiteKinematics(toy, CONTACT_SITES)
+    sched = (Contact("l_heel", 0.0, 0.3), Contact("l_heel", 0.7, 1.0), Contact("l_toe", 0.0, 0.5),
+             Contact("r_toe", 0.2, 1.0))  # l_heel swings from 0.3 to 0.7 s
+    terms = [Planted(toy, sched, engine=engine), Clearance(toy, sched, clearance=0.1, engine=engine)]
+    dense = [term.violation(Y, t) for term in terms]
+    pen = Penetration(toy, margin=0.05, engine=engine)
+    dense.append(float(pen.depths(Y, margin=0.05).max()))
+    for term in terms:
+        term.kin.dense_positions = term.kin.positions  # MuJoCo's loop
+    pen._tree = None
+    loop = [term.violation(Y, t) for term in terms] + [float(pen.depths(Y, margin=0.05).max())]
+    assert all(v > 0 for v in loop), loop
+    np.testing.assert_allclose(dense, loop, rtol=1e-12, atol=1e-15)

@@ -121,6 +121,32 @@ def test_velocity_only_motion_matches_the_full_one():
         vel.vjp(g, g)
 
 
+def test_the_engines_partial_tangent_map_gives_the_full_maps_bits(model):
+    """`SiteKinematics.motion_map` (the joints the engine reads: the legs and the root) against the full
+    map: qvel (and qacc) the same bits on those joints and 0 on the others, and the same pullback of
+    adjoints that are 0 on the others (the engine's). A map of every joint is the full map itself."""
+    layout = StateLayout.from_model(model)
+    full = TangentMap.from_layout(layout)
+    part = SiteKinematics(model, CONTACT_SITES).motion_map
+    assert full.subset(np.arange(full.nv)) is full
+    assert not full.partial
+    kept = np.concatenate([part.quat_v.ravel(), part.lin_v.ravel()]).astype(int)
+    other = np.setdiff1d(np.arange(full.nv), kept)
+    rng = np.random.default_rng(14)
+    Y = random_qpos(rng, layout, 5)
+    Y1, Y2 = rng.normal(size=Y.shape), rng.normal(size=Y.shape)
+    a, b = full.motion(Y, Y1, Y2), part.motion(Y, Y1, Y2)
+    for x, y in ((a.qvel, b.qvel), (a.qacc, b.qacc)):
+        assert np.array_equal(x[:, kept].view(np.int64), y[:, kept].view(np.int64))
+        np.testing.assert_array_equal(y[:, other], 0.0)
+    g, gp = rng.normal(size=(5, full.nv)), rng.normal(size=(5, full.nv))
+    g[:, other] = gp[:, other] = 0.0
+    for x, y in zip(a.vjp(g, None, gp), b.vjp(g, None, gp), strict=True):
+        np.testing.assert_array_equal(x, y)  # values: a zero's sign may differ where the full map adds 0s
+    if part.partial:  # the figure: 7 of its 12 quaternions
+        assert len(other) and len(part.quat_q) < len(full.quat_q)
+
+
 def test_unsupported_joints_are_named():
     with pytest.raises(InputError, match="elbow.*hinge"):
         SiteKinematics(mujoco.MjModel.from_xml_string(HINGE))
