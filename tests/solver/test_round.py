@@ -62,9 +62,10 @@ def test_orientation_gradient_matches_central_differences():
     np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-7 * np.abs(fd).max())
 
 
-def test_orientation_path_stops_on_a_zero_quaternion_and_names_the_term():
-    """A trial point that puts a quadrature point's q at zero (q.q = 0: 1/a is inf) stops the round
-    with Status.NONFINITE and the term's name, as the generic path does."""
+def test_orientation_path_stops_on_a_non_finite_trial_point_and_names_the_term():
+    """A trial point with NaN components (as a line search that overflowed would give) stops the round
+    with Status.NONFINITE and names the first term whose integral is not finite, as the generic path
+    does."""
     obj, fs, pre = orientation(1.0)
     rows, Rinv = pre.whole_rows(), pre.groups[0][2]
     fun = _orientation_fun(obj, obj.basis(fs.times), fs, rows, Rinv, pre.whole_radial())
