@@ -342,7 +342,8 @@ def solve(
                               n_evals + result.n_evals)
             result = replace(retry, n_evals=result.n_evals + retry.n_evals, grad=None,  # not in z
                              trace=np.concatenate([result.trace, retry.trace]),
-                             wall_time_s=result.wall_time_s + retry.wall_time_s)
+                             wall_time_s=result.wall_time_s + retry.wall_time_s,
+                             fun_time_s=result.fun_time_s + retry.fun_time_s)
         frames = frames.with_x(result.x)
         objective.prepare(frames.times, frames.values)  # for the next round, the scores, the report
         for arr in (result.x, result.trace, scores):

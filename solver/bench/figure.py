@@ -30,7 +30,9 @@ def time_solves(model, keyframes, layout, weights: dict, options: SolveOptions, 
     Returns:
         dict: wall_median_s, wall_all_s (list) [s], cpu_median_s (CPU time of this process in the
         solves [s]: what a loaded machine's wall time is not), evals (median), per_eval_ms (median of wall / evals),
-        E_final, frames (count at the end), objective (the last Objective), solution (the last Solution).
+        objective_s and optimizer_s (medians [s, wall] of the rounds' time inside the objective and in the
+        optimizer's own work, `OptimizeResult.fun_time_s`), E_final, frames (count at the end), objective
+        (the last Objective), solution (the last Solution).
     """
     runs, cpus = [], []
     for _ in range(max(1, repeat)):
@@ -47,6 +49,8 @@ def time_solves(model, keyframes, layout, weights: dict, options: SolveOptions, 
         "cpu_median_s": statistics.median(cpus),
         "evals": int(statistics.median(evals)),
         "per_eval_ms": 1e3 * statistics.median([s.wall_time_s / max(1, s.n_evals) for s in runs]),
+        "objective_s": statistics.median(sum(r.result.fun_time_s for r in s.rounds) for s in runs),
+        "optimizer_s": statistics.median(sum(r.result.wall_time_s - r.result.fun_time_s for r in s.rounds) for s in runs),
         "E_final": runs[-1].E_final,
         "frames": runs[-1].frames.count,
         "objective": objective,

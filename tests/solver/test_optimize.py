@@ -111,3 +111,19 @@ def test_lbfgs_storage_keeps_nlopts_iterates():
     for n in (1326, 8619, 10**6):  # the figure's sizes: nlopt's max(MEMAVAIL // n, 10)
         assert lbfgs_storage(n) == max(_LUKSAN_MEMAVAIL // n, 10)
     assert lbfgs_storage(1) == 200 and lbfgs_storage(500) == 500
+
+
+def test_time_inside_the_objective_is_counted_apart_from_the_optimizers():
+    """`fun_time_s` is the wall time spent in fun: at least what fun sleeps on each call, never more
+    than the whole run; the rest is the optimizer's own work (bookkeeping, not a speed claim)."""
+    import time
+
+    def slow(x, need_grad):
+        time.sleep(0.002)
+        return rosenbrock(x, need_grad)
+
+    res = minimize(slow, np.array([-1.2, 1.0]), max_evals=15)
+    assert res.n_evals == 15
+    assert 0.002 * res.n_evals <= res.fun_time_s <= res.wall_time_s
+    empty = minimize(slow, np.zeros(0))  # no variables: one evaluation, all of it in fun
+    assert empty.fun_time_s == empty.wall_time_s >= 0.002
