@@ -20,6 +20,12 @@ Accuracy against the reference
 - site_position_cm: per contact site, |site position - reference|, mean and max.
 - accel_error_m_s2: mean |second difference of positions - reference's| * fps^2, root and sites
   (WHAM's acceleration error, METRICS.md "Smoothness").
+- flight_extra_s / flight_missed_s (`flight_mismatch`, ours): frames where the path is in flight and
+  the reference is not / where the reference is and the path is not (flight as in flight_time_s),
+  times 1/fps. Their difference is the difference of the two flight times; their sum is the flight
+  phase error, which cannot cancel: a path whose flights are each too long but whose last one is
+  missing can match the reference's flight time (35_17 keyed every 0.25 s: 0.358 s against 0.367 s,
+  with 0.075 s extra and 0.083 s missed; docs/contacts.md "fifth session").
 
 Plausibility (PhysDiff, Yuan et al. 2023, after UHC `smpl_eval.py`; on the four contact sites rather
 than mesh vertices)
@@ -120,6 +126,26 @@ def _skating_ratio(pos, h, stride, rate):
     on = (hh[1:] < GMD_HEIGHT) & (hh[:-1] < GMD_HEIGHT)
     speed = np.linalg.norm(np.diff(p[..., :2], axis=0), axis=-1) * rate
     return float(((speed > GMD_SPEED) & on).any(axis=1).mean())
+
+
+def flight_mismatch(h: np.ndarray, reference_h: np.ndarray, fps: float) -> tuple[float, float]:
+    """(extra, missed) [s]: time the path is in flight while the reference is not, and the reverse.
+
+    A frame is in flight when every site is above FLIGHT_HEIGHT (as `flight_time_s`).
+
+    Args:
+        h, reference_h: (n, s) site heights above the surface [m] of the path and of the reference, at
+            the same n frames. fps: [Hz] > 0.
+    Returns:
+        (extra, missed), each frames / fps [s].
+    Raises:
+        InputError: the shapes differ.
+    """
+    h, reference_h = np.asarray(h, float), np.asarray(reference_h, float)
+    if h.shape != reference_h.shape or h.ndim != 2:
+        raise InputError(f"heights {h.shape} and reference heights {reference_h.shape} must both be (n, sites)")
+    path, ref = (h > FLIGHT_HEIGHT).all(axis=1), (reference_h > FLIGHT_HEIGHT).all(axis=1)
+    return float((path & ~ref).sum() / fps), float((ref & ~path).sum() / fps)
 
 
 def plausibility(pos: np.ndarray, h: np.ndarray, fps: float, root: np.ndarray, ref_mask: np.ndarray,
@@ -231,6 +257,7 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         "accel_error_root_m_s2": _mean(np.linalg.norm(acc(qpos[:, :3]) - acc(ref[:, :3]), axis=-1)),
         "accel_error_sites_m_s2": _mean(np.linalg.norm(acc(pos) - acc(rpos), axis=-1)),
     }
+    error["flight_extra_s"], error["flight_missed_s"] = flight_mismatch(h, rh, fps)
     return {
         "fps": float(fps),
         "frames": int(n),

@@ -229,8 +229,9 @@ def _warn_contact_conflicts(conflicts, keyframes) -> None:
 
 
 def contact_summary_rows(motion, objective, solution) -> list:
-    """Summary rows for the feet (issue 11): float, skate, skating ratio and flight time of both paths
-    against the motion-capture reference (`motion`: metrics["motion"], the `motion_metrics` of both paths
+    """Summary rows for the feet (issue 11): float, skate, skating ratio, flight time and flight-phase
+    error (`solver.motion_metrics.flight_mismatch`, extra + missed) of both paths against the
+    motion-capture reference (`motion`: metrics["motion"], the `motion_metrics` of both paths
     at the clip's rate; the capture's own figure in the label), and the friction-cone residual when the
     cone term is on."""
     rows = []
@@ -245,6 +246,10 @@ def contact_summary_rows(motion, objective, solution) -> list:
         ):
             rows.append((f"{label} (capture {fmt.format(capture[key])})", motion["plain"]["path"][key],
                          motion["optimized"]["path"][key], fmt))
+        # flight-phase error: frames in flight in one and not the other (flight times can cancel)
+        rows.append(("flight phase error vs capture [s]",
+                     *(motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"]
+                       for p in ("plain", "optimized")), "{:.3f}"))
     if "cone" in objective.names:
         from solver.metrics import sample_times
         from solver.terms.contact_wrench import cone_metrics

@@ -8,9 +8,8 @@ times each, with the command's solve options. Printed per input: evaluations and
 both (CPU time of the process, and wall, split into the time inside the objective and the optimizer's
 own work: nlopt's L-BFGS costs O(n k) per iteration for k stored pairs) and their ratio on CPU time
 (issue 11's bound: 2x; CPU time, because wall time on a shared machine counts waiting for a core), and
-the motion metrics against the
-motion capture (float, skate, skating ratio, flight, joint and site error) of the plain spline and both
-paths.
+the motion metrics against the motion capture (float, skate, skating ratio, flight, flight extra /
+missed, joint and site error) of the plain spline and both paths.
 """
 from __future__ import annotations
 
@@ -109,6 +108,10 @@ def bench_contacts(args) -> int:
                 vals = [motion["geometric"]["plain"]["reference"][key], motion["geometric"]["plain"]["path"][key],
                         motion["geometric"]["optimized"]["path"][key], motion["contacts"]["optimized"]["path"][key]]
                 print(f"    {label:<28} " + " ".join(f"{fmt.format(v):>{w}}" for v, w in zip(vals, (8, 8, 10, 9), strict=True)))
+            errs = [motion["geometric"]["plain"]["error"], motion["geometric"]["optimized"]["error"],
+                    motion["contacts"]["optimized"]["error"]]
+            print(f"    {'flight extra / missed [s]':<28} {'':>8} " + " ".join(
+                f"{e['flight_extra_s']:.3f}/{e['flight_missed_s']:.3f}".rjust(w) for e, w in zip(errs, (8, 10, 9), strict=True)))
             for label, key in (("joint-orientation error [deg]", "joint_orientation_deg"), ("site position error [cm]", "site_position_cm")):
                 vals = [_mean_of_means(motion["geometric"]["plain"]["error"][key]),
                         _mean_of_means(motion["geometric"]["optimized"]["error"][key]),

@@ -9,7 +9,7 @@ import pytest
 
 from solver.contacts import SITES, Contact, reference_contacts
 from solver.errors import InputError
-from solver.motion_metrics import motion_metrics
+from solver.motion_metrics import FLIGHT_HEIGHT, flight_mismatch, motion_metrics
 from solver.scene_fit import FittedScene, scene_mjcf
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,6 +58,38 @@ def test_lifted_figure_floats_by_the_lift(floor_model):
     assert m["reference"]["float_contact_mm"] == pytest.approx(0, abs=1e-9)
     # the reference has no contacts: no frames to count an animator's float over
     assert motion_metrics(floor_model, q, FPS, ref, [])["path"]["float_contact_mm"] == 0.0
+
+
+def test_flight_mismatch_counts_frames_by_hand():
+    """Reference in flight on frames 10-19, the path on 13-25 except frame 22, where one site is down:
+    extra 20, 21, 23, 24, 25 (5 frames), missed 10, 11, 12 (3); extra - missed is the flight-time
+    difference, 12 - 10 frames."""
+    up, down = FLIGHT_HEIGHT + 0.01, FLIGHT_HEIGHT - 0.001
+    ref = np.full((40, 4), down)
+    ref[10:20] = up
+    path = np.full((40, 4), down)
+    path[13:26] = up
+    path[22, 2] = down
+    extra, missed = flight_mismatch(path, ref, 120.0)
+    assert (extra, missed) == (5 / 120.0, 3 / 120.0)
+    assert extra - missed == pytest.approx((path > FLIGHT_HEIGHT).all(1).sum() / 120 - 10 / 120)
+    with pytest.raises(InputError, match="must both be"):
+        flight_mismatch(path[:, :3], ref, 120.0)
+
+
+def test_shifted_flight_has_the_same_flight_time_and_a_mismatch(floor_model):
+    """The path flies frames 20-39, the reference frames 30-49 (every site 4 cm up): equal flight
+    times, 10 frames extra and 10 missed - what the flight time alone cannot see."""
+    ref = standing(floor_model)
+    q = ref.copy()
+    q[20:40, 2] += 0.04
+    ref[30:50, 2] += 0.04
+    m = motion_metrics(floor_model, q, FPS, ref, planted())
+    assert m["path"]["flight_time_s"] == m["reference"]["flight_time_s"] == pytest.approx(20 / FPS)
+    assert m["error"]["flight_extra_s"] == pytest.approx(10 / FPS)
+    assert m["error"]["flight_missed_s"] == pytest.approx(10 / FPS)
+    same = motion_metrics(floor_model, ref, FPS, ref, planted())["error"]
+    assert same["flight_extra_s"] == same["flight_missed_s"] == 0.0
 
 
 def test_sunk_figure_penetrates_by_the_depth(floor_model):
