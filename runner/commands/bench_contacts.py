@@ -78,18 +78,18 @@ def bench_contacts(args) -> int:
                 for name, w in configs.items():
                     runs[name].append(time_solves(model, keyframes, layout, w, solve_options(default_args(), w),
                                                   args.rate, 1, contacts=contacts))
-            med = {n: (statistics.median(r["cpu_median_s"] for r in rs), statistics.median(r["evals"] for r in rs),
-                       statistics.median(r["wall_median_s"] for r in rs), statistics.median(r["objective_s"] for r in rs),
-                       statistics.median(r["optimizer_s"] for r in rs)) for n, rs in runs.items()}
-            ratio = med["contacts"][0] / med["geometric"][0]
+            fields = ("cpu_median_s", "evals", "wall_median_s", "objective_s", "optimizer_s")
+            med = {n: {k: statistics.median(r[k] for r in rs) for k in fields} for n, rs in runs.items()}
+            ratio = med["contacts"]["cpu_median_s"] / med["geometric"]["cpu_median_s"]
             ratios.append(ratio)
             print(f"\n  {Path(path).name}: {keyframes.count} keyframes, {len(contacts)} contacts")
-            for n, (cpu, ev, wall, inside, own) in med.items():
-                print(f"    {n:<10} {ev:>6.0f} evaluations  {cpu:7.2f} s CPU ({wall:.2f} s wall: objective {inside:.2f} s, "
-                      f"optimizer {own:.2f} s)  ({runs[n][-1]['frames']} frames)")
+            for n, m in med.items():
+                print(f"    {n:<10} {m['evals']:>6.0f} evaluations  {m['cpu_median_s']:7.2f} s CPU ({m['wall_median_s']:.2f} s "
+                      f"wall: objective {m['objective_s']:.2f} s, optimizer {m['optimizer_s']:.2f} s)  "
+                      f"({runs[n][-1]['frames']} frames)")
             common = runs["contacts"][-1]["solution"].frames  # one frame set, so the objectives compare
             per = {n: per_eval_ms(rs[-1]["objective"], common) for n, rs in runs.items()}
-            ev_ratio = med["contacts"][1] / med["geometric"][1]
+            ev_ratio = med["contacts"]["evals"] / med["geometric"]["evals"]
             print(f"    contacts / geometric: CPU time {ratio:.2f}x, evaluations {ev_ratio:.2f}x; value + gradient on "
                   f"one frame set ({common.count} frames): geometric {per['geometric']:.1f}, contacts "
                   f"{per['contacts']:.1f} ms ({per['contacts'] / per['geometric']:.2f}x)")
