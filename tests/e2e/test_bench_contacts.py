@@ -21,6 +21,10 @@ def test_bench_contacts_on_run_and_step(capsys):
     assert set(evals) == {"geometric", "contacts"} and all(int(v) > 0 for v in evals.values())
     ratio = float(re.search(r"contacts / geometric: CPU time ([\d.]+)x", printed).group(1))
     assert 0 < ratio < 100
+    # the objective-time ratio is the two solves' printed objective times divided (to their rounding)
+    objective = dict(re.findall(r"^\s+(geometric|contacts)\s+\d+ evaluations .*?objective ([\d.]+) s", printed, re.M))
+    obj_ratio = float(re.search(r"objective time ([\d.]+)x", printed).group(1))
+    assert obj_ratio == pytest.approx(float(objective["contacts"]) / float(objective["geometric"]), rel=0.02)
     capture, plain, geometric, contacts = _row(printed, "float in contact [mm]")
     assert contacts <= 5.0 < geometric  # issue 11: mean float during contact at most 5 mm
     capture_s, plain_s, _, contacts_s = _row(printed, "skate in contact [mm/frame]")
