@@ -7,7 +7,8 @@ the default terms (which add planted and clearance where contacts are known), al
 times each, with the command's solve options. Printed per input: evaluations and optimization time of
 both (CPU time of the process, and wall, split into the time inside the objective and the optimizer's
 own work: nlopt's L-BFGS costs O(n k) per iteration for k stored pairs) and their ratio on CPU time
-(issue 11's bound: 2x; CPU time, because wall time on a shared machine counts waiting for a core), and
+(issue 11's bound: 2x; CPU time, because wall time on a shared machine counts waiting for a core) and on
+objective time (what the ratio would be if the optimizer's own work were free), and
 the motion metrics against the motion capture (float, skate, skating ratio, flight, flight extra /
 missed, joint and site error) of the plain spline and both paths.
 """
