@@ -55,17 +55,16 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     d = defaults or {}
     out = p.add_argument_group("outputs")
     out.add_argument("--out", type=Path, default=d.get("out"),
-                     help="video file (.mp4) [%(default)s]" if d.get("out") is not None else
-                     "video file (.mp4) [renders/<keyframe file name>.mp4, e.g. renders/walk.mp4 for "
-                     "walk.keyframes.json]")
+                     help=f"video file (.mp4) [{d.get('out_help') or '%(default)s'}]")
     out.add_argument("--save-path", type=Path, default=d.get("save_path"),
-                     help="optimized path (.npz; see README) [%(default)s]")
+                     help=f"optimized path (.npz; docs/saved-path.md) [{d.get('save_path_help') or '%(default)s'}]")
     out.add_argument("--no-render", action="store_true", help="skip the video")
     out.add_argument("--fps", type=positive(float), default=30.0, help="video frames per second [%(default)s]")
     out.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="video size [960x540]")
-    out.add_argument("--panels", type=_panels, default=("plain", "optimized"), metavar="LIST",
+    panels = d.get("panels", ("plain", "optimized"))
+    out.add_argument("--panels", type=_panels, default=panels, metavar="LIST",
                      help="video panels, left to right, from plain,optimized,reference (the motion capture "
-                          "the keyframes were made from) [plain,optimized]")
+                          f"the keyframes were made from) [{','.join(panels)}]")
     out.add_argument("--reference-panel", dest="panels", action="store_const",
                      const=("plain", "optimized", "reference"),
                      help="the same as --panels plain,optimized,reference")
@@ -74,18 +73,19 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
     out.add_argument("--export", type=Path, action="append", default=[], metavar="FILE",
                      help="also write the optimized path as FILE.bvh (BVH on the figure's skeleton) or FILE.glb "
                           "(animated glTF with the scene), after the path is saved; repeatable")
-    add_solve_arguments(p)
+    add_solve_arguments(p, terms_help=d.get("terms_help"))
     p.add_argument("--quiet", action="store_true",
                    help="no progress (bars or lines); results (summary, 'wrote ...') are still printed")
     p.add_argument("--no-summary", action="store_true", help="do not print the summary table")
 
 
-def add_solve_arguments(p: argparse.ArgumentParser) -> None:
-    """The "optimization" options of `add_options` (what `solve_options` reads); also `dynsplines batch`'s."""
+def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = None) -> None:
+    """The "optimization" options of `add_options` (what `solve_options` reads); also `dynsplines batch`'s.
+    `terms_help`: what --terms defaults to for this command (its help's [default])."""
     opt = p.add_argument_group("optimization")
     opt.add_argument("--terms", default=None,
                      help=f"objective terms: 'all' or a list from {','.join(term_names())} "
-                          "[the keyframe file's, else penetration,unit,bending,smooth]")
+                          f"[{terms_help or 'the keyframe file’s, else the default terms; with its contacts also planted,clearance'}]")
     opt.add_argument("--weight", type=_weight, action="append", default=[], metavar="NAME=VALUE",
                      help="weight of a term (repeatable), e.g. --weight torque=0.1")
     opt.add_argument("--max-time", type=nonnegative(float), default=_LIB.max_time_s, metavar="S",
@@ -116,6 +116,34 @@ def add_solve_arguments(p: argparse.ArgumentParser) -> None:
                      help="optimize the frame values directly instead of in the spline-acceleration metric")
     opt.add_argument("--no-renormalize", action="store_true",
                      help="use the weights as they are instead of dividing each term by its initial value (eq. 7)")
+
+
+def outputs_from_args(args, default_video: Path | None = None, **fields):
+    """`runner.run.Outputs` from the parsed `add_options` arguments, each checked before the optimization
+    (a writable folder, a video name and size, export names): a bad one is an InputError now, not after
+    minutes of solving. `default_video` is the video when --out is not given; `fields` are the
+    command's own (e.g. metrics_json).
+
+    Raises:
+        InputError: an output that cannot be written (names the option and the file).
+    """
+    from runner.files import check_writable_dir
+    from runner.render.side_by_side import VideoOptions, check_video_out
+    from runner.run import Outputs, check_exports
+
+    video = None if args.no_render else (args.out if args.out is not None else default_video)
+    for path, option in ((video, "--out"), (args.save_path, "--save-path"), (fields.get("metrics_json"), "--metrics")):
+        if path is not None:
+            check_writable_dir(path, option)
+    if video is not None:
+        check_video_out(video, args.size)
+    if args.plot is not None:
+        check_writable_dir(Path(args.plot) / "plot.png", "--plot")
+    check_exports(args.export)
+    return Outputs(save_path=args.save_path, exports=tuple(args.export), plot_dir=args.plot, video=video,
+                   video_options=VideoOptions(fps=args.fps, size=args.size, speed=args.speed, panels=args.panels),
+                   summary=not args.no_summary, quiet=args.quiet,
+                   command={k: v for k, v in vars(args).items() if k != "func"}, **fields)
 
 
 def clip_terms(args) -> dict:

@@ -1,5 +1,6 @@
 """A figure problem from files: the keyframe file, its scene (or --scene) and the motion-capture clip it
-was made from (the reference shown in the summary and the saved path)."""
+was made from (the reference shown in the summary and the saved path). `file_problem` is what
+`dynsplines animate`, `run-and-step` and the benchmarks of a keyframe file solve."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -59,3 +60,53 @@ def find_reference(info, model, quiet=False):
     with Steps(f"importing {path.name}", len(IMPORT_STAGES), quiet, unit=" stages") as bar:
         return load_bvh_reference(path, model, progress=lambda i, stage: bar.update(i, note=stage),
                                   root_scale=source.get("root_scale", 1.0))
+
+
+def file_terms(keyframes_path, info, terms: str | None, weights: dict, contacts) -> dict:
+    """The objective's {term: weight} for a keyframe file: `--terms` (with `--weight` overrides) when
+    given, else the file's "terms" (with the overrides), else the default terms.
+
+    Raises:
+        InputError: a bad --terms or --weight; a bad "terms" field names the file and the field.
+    """
+    from solver.problem import parse_terms
+
+    in_file = dict(getattr(info, "terms", None) or {})
+    if terms is not None or not in_file:
+        return parse_terms(terms, dict(weights), contacts)
+    try:
+        parse_terms(",".join(in_file), in_file, contacts)
+    except InputError as e:
+        raise InputError(f"{keyframes_path}: field 'terms': {e}; fix the file, or choose with --terms") from None
+    return parse_terms(",".join(in_file), {**in_file, **dict(weights)}, contacts)
+
+
+def file_problem(keyframes_path, scene=None, terms: str | None = None, weights: dict | None = None,
+                 rate: float | None = None, quiet: bool = True):
+    """The figure problem of a keyframe file, as `dynsplines animate` solves it.
+
+    Args:
+        keyframes_path: the keyframe file. scene: a scene MJCF overriding the file's "scene".
+        terms, weights: `--terms` and `--weight` (`file_terms`). rate: quadrature points per second.
+        quiet: no progress while the reference clip is imported.
+    Returns:
+        (problem, source): a `solver.Problem` with the file's contacts, and a `runner.run.Source` (scene
+        path, reference or None, the contacts the metrics use: the file's, else those detected on the
+        reference).
+    Raises:
+        InputError: as `load_problem`, `file_terms` and `solver.make_problem`.
+    """
+    from runner.run import Source
+    from solver.problem import make_problem
+
+    keyframes, info, model, _, scene_path = load_problem(keyframes_path, scene)
+    contacts = tuple(getattr(info, "contacts", ()) or ())
+    chosen = file_terms(keyframes_path, info, terms, weights or {}, contacts)
+    problem = make_problem(model, keyframes, ",".join(chosen), chosen, contacts, rate)
+    reference = find_reference(info, model, quiet=quiet)
+    metric_contacts = contacts
+    if reference is not None and not contacts:
+        from solver.contacts import reference_contacts
+
+        metric_contacts = tuple(reference_contacts(model, reference.qpos, reference.frame_time))
+    return problem, Source(Path(scene_path), reference, metric_contacts, label=str(keyframes_path))

@@ -2,7 +2,7 @@
 
 Fields (README "The saved path"): frame_times (m,) [s], frames (m, nq), frame_is_keyframe (m,),
 keyframe_times (k,), keyframes (k, nq), keyframe_mask (k, nq), plain_frame_times, plain_frames,
-reference_times, reference_qpos (motion capture, may be empty), scene (repository-relative path),
+reference_times, reference_qpos (motion capture, may be empty), scene (relative to the .npz's folder),
 wall_time_s, objective_trace, status, metrics_json, options_json, versions_json, and contacts (a structured
 array: site, start, end, surface; the reference's or the keyframe file's contacts, may be empty; files
 written before it have none).
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.files import atomic_output
-from runner.paths import REPO, repo_relative
+from runner.paths import REPO
 from solver.errors import InputError
 
 
@@ -55,34 +55,64 @@ def contacts_from_array(arr) -> list:
     return [Contact(str(r["site"]), float(r["start"]), float(r["end"]), str(r["surface"])) for r in arr]
 
 
-def save_path_npz(path, solution, keyframes, reference, scene_path, weights, options, metrics, args=None,
-                  contacts=None):
-    """Write the optimized path (.npz) atomically. Fields: README "The saved path"; `contacts`:
-    `solver.contacts.Contact`s (or None: an empty field)."""
-    scene_rel = repo_relative(scene_path)
-    opts = {"weights": weights, "solve": asdict(options)}
-    if args is not None:
-        opts["command"] = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
-                           if k not in ("func",)}
+def scene_reference(scene_path, npz_path) -> str:
+    """How a saved path names its scene: relative to the .npz's folder (so that a folder of outputs can be
+    moved as a whole), or absolute when no relative path leads there (another drive)."""
+    import os
+
+    scene, folder = Path(scene_path).resolve(), Path(npz_path).resolve().parent
+    try:
+        return Path(os.path.relpath(scene, folder)).as_posix()
+    except ValueError:
+        return str(scene)
+
+
+def resolve_scene(name: str, npz_path) -> Path:
+    """The scene a saved path names: absolute, or relative to the .npz's folder (files written before
+    that was the rule named it relative to the repository; those are found there)."""
+    scene = Path(name)
+    if scene.is_absolute():
+        return scene
+    beside = (Path(npz_path).parent / scene).resolve()
+    return beside if beside.is_file() or not (REPO / scene).is_file() else REPO / scene
+
+
+def save_path_npz(run, path, command: dict | None = None) -> None:
+    """Write a run's optimized path (.npz) atomically (fields: the module docstring).
+
+    Args:
+        run: a `runner.run.Run` (problem, options, solution, source, metrics).
+        path: the .npz file. command: the command's arguments, recorded in `options_json`.
+    Raises:
+        InputError: the file cannot be written (an earlier file there is unchanged).
+    """
+    solution, keyframes, reference = run.solution, run.problem.keyframes, run.source.reference
+    opts = {"weights": dict(run.problem.weights), "solve": asdict(run.options), "rate": run.problem.rate}
+    if command:
+        opts["command"] = {k: (str(v) if isinstance(v, Path) else v) for k, v in command.items() if k != "func"}
+    # the keyframes as the path meets them: quaternion signs as the plain spline's frames hold them
+    # (a keyframe file may give q or -q, the same rotation), NaN where a partial keyframe leaves a component free
+    initial = solution.initial
+    met = np.where(keyframes.mask, initial.values[initial.is_keyframe], np.nan)
     fields = dict(
         frame_times=solution.frames.times,
         frames=solution.frames.values,
         frame_is_keyframe=solution.frames.is_keyframe,
         keyframe_times=keyframes.times,
-        keyframes=keyframes.values,
+        keyframes=met,
         keyframe_mask=keyframes.mask,
-        plain_frame_times=solution.initial.times,
-        plain_frames=solution.initial.values,
+        plain_frame_times=initial.times,
+        plain_frames=initial.values,
         reference_times=reference.times if reference is not None else np.zeros(0),
         reference_qpos=reference.qpos if reference is not None else np.zeros((0, keyframes.nq)),
-        scene=np.array(scene_rel),
+        scene=np.array(scene_reference(run.source.scene_path, path)),
         wall_time_s=np.array(solution.wall_time_s),
         objective_trace=solution.trace,
         status=np.array(solution.status.value),
-        metrics_json=np.array(json.dumps(metrics, default=float)),
+        metrics_json=np.array(json.dumps(run.metrics, default=float)),
         options_json=np.array(json.dumps(opts, default=str)),
         versions_json=np.array(json.dumps(versions())),
-        contacts=contacts_array(contacts),
+        contacts=contacts_array(run.source.metric_contacts),
     )
     try:
         with atomic_output(path) as tmp, open(tmp, "wb") as fh:
@@ -112,7 +142,7 @@ class SavedPath:
         frame_times: (m,) [s]. frames: (m, nq). plain_frame_times: (p,) [s]. plain_frames: (p, nq).
         keyframe_times: (k,) [s]. keyframes: (k, nq), NaN where a partial keyframe leaves a component free.
         reference_times: (r,) [s], r = 0 without a clip. reference_qpos: (r, nq).
-        scene: the scene MJCF, resolved (a relative name is relative to the repository root).
+        scene: the scene MJCF, resolved (a relative name is relative to the .npz's folder).
         source: the .npz file.
         arrays: every array of the file by name (also `saved["name"]`).
         metrics, options, versions: the JSON fields parsed ({} when the file lacks them).
@@ -202,9 +232,7 @@ def load_saved_path(path) -> SavedPath:
     except Exception as e:  # zipfile / pickle / format errors of a user file
         raise InputError(f"{p}: not a readable .npz file ({type(e).__name__}: {e}); give the .npz written by "
                          "--save-path") from None
-    scene = Path(str(arrays["scene"]))
-    if not scene.is_absolute():
-        scene = REPO / scene
+    scene = resolve_scene(str(arrays["scene"]), p)
     try:
         f = {k: np.asarray(arrays[k], float) for k in REQUIRED if k != "scene"}
     except (TypeError, ValueError) as e:

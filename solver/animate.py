@@ -12,17 +12,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
-import numpy as np
-
 from solver.errors import InputError
 from solver.keyframes import Keyframes
-from solver.problem import CONTACT_TERMS, default_limits, figure_problem, parse_terms
+from solver.problem import CONTACT_TERMS, Problem, default_limits, make_problem
+from solver.quadrature import DEFAULT_RATE
 from solver.solve import Solution, SolveOptions, solve
 
-__all__ = ["DEFAULT_RATE", "DEFAULT_TOL", "animate", "default_options"]
-
-#: Quadrature points per second [1/s] of the figure's objective (the command's --rate).
-DEFAULT_RATE = 400.0
+__all__ = ["DEFAULT_RATE", "DEFAULT_TOL", "animate", "default_options", "solve_problem"]
 
 #: Default accuracy of the figure (`SolveOptions.tol`): adaptive rounds until the decrease of E that
 #: refinement still predicts is at most 1% of E. On the shipped clip (run-and-step) the estimate is
@@ -118,25 +114,31 @@ def animate(
             bad `options` or `rate`.
         NonFiniteError: the objective is NaN or infinite on the plain spline.
     """
-    if not isinstance(keyframes, Keyframes):
-        raise InputError(f"keyframes must be a solver.Keyframes, got {type(keyframes).__name__}")
-    nq = int(getattr(model, "nq", -1))
-    if keyframes.values.shape[1] != nq:
-        raise InputError(f"{keyframes.source}: keyframes have {keyframes.values.shape[1]} qpos components but "
-                         f"the model has nq = {nq}; are they for this scene's figure?")
-    if terms is not None and not isinstance(terms, str):
-        terms = ",".join(terms)
-    contacts = tuple(contacts or ())
-    chosen = parse_terms(terms, weights, contacts)
-    rate = DEFAULT_RATE if rate is None else float(rate)
-    if not np.isfinite(rate) or rate <= 0:
-        raise InputError(f"rate must be > 0 quadrature points per second, got {rate}")
+    problem = make_problem(model, keyframes, terms, weights, contacts, rate)
+    if tol is not None and (options is None or isinstance(options, SolveOptions)):
+        options = replace(options or default_options(dict(problem.weights)), tol=float(tol))
+    return solve_problem(problem, options, should_stop=should_stop, progress=progress)
+
+
+def solve_problem(problem: Problem, options: SolveOptions | None = None, *,
+                  should_stop: Callable[[], bool] | None = None,
+                  progress: Callable[[str, dict], None] | None = None) -> Solution:
+    """Solve a `Problem` (paper fig. 5): `solve(problem.objective, problem.initial, options)`.
+
+    Args:
+        problem: from `make_problem`.
+        options: SolveOptions; default `default_options(problem.weights)` (the command line's).
+        should_stop, progress: as for `solve`.
+    Returns:
+        Solution.
+    Raises:
+        InputError: `problem` is not a Problem, bad `options`.
+        NonFiniteError: the objective is NaN or infinite on the plain spline.
+    """
+    if not isinstance(problem, Problem):
+        raise InputError(f"problem must be a solver.Problem (from make_problem), got {type(problem).__name__}")
     if options is None:
-        options = default_options(chosen)
+        options = default_options(dict(problem.weights))
     elif not isinstance(options, SolveOptions):
-        raise InputError(f"options must be a SolveOptions (e.g. default_options(weights)), got "
-                         f"{type(options).__name__}")
-    if tol is not None:
-        options = replace(options, tol=float(tol))
-    objective, initial, _ = figure_problem(model, chosen, keyframes, rate=rate, contacts=contacts)
-    return solve(objective, initial, options, should_stop=should_stop, progress=progress)
+        raise InputError(f"options must be a SolveOptions (e.g. default_options(weights)), got {type(options).__name__}")
+    return solve(problem.objective, problem.initial, options, should_stop=should_stop, progress=progress)

@@ -10,12 +10,17 @@ during a contact), clearance (swing feet keep 2 cm, every site min(2 cm, g T^2/8
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
 import numpy as np
 
 from solver.errors import InputError
 from solver.kinematic_tree import SiteKinematics
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.objective import Objective
+from solver.quadrature import DEFAULT_RATE
 from solver.terms import CovariantAcceleration, Hyperextension, Penetration, UnitQuaternion
 
 #: The terms used when none are chosen: the geometric terms of the paper's sec. 5.
@@ -286,3 +291,77 @@ def default_limits(weights: dict[str, float]) -> tuple:
 def _named(term, name):
     term.name = name
     return term
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything that defines one figure solve, built once (`make_problem`) and read by the solver, the
+    command line, the benchmarks and the outputs alike (read-only).
+
+    Attributes:
+        model: mujoco.MjModel of the scene with the figure (loaded once by the caller; not modified).
+        keyframes: Keyframes, values (k, nq) with nq = model.nq, times (k,) [s].
+        contacts: the contact schedule the objective uses ((Contact, ...); empty: none).
+        weights: {term name: lambda_j} of the chosen terms (`parse_terms`), read-only.
+        limits: ((term name, tolerance), ...): the penalty-continuation bounds of the chosen terms
+            (`default_limits`), in each term's `violation` unit.
+        rate: quadrature points per second [1/s].
+        objective: the Objective (eq. 1; scales 1, `solve` renormalizes by eq. 7).
+        initial: FrameSet of the plain spline through the keyframes, (k, nq) values.
+        conflicts: ((kind, keyframe index, site, distance [m]), ...): keyframes that contradict the
+            contact schedule (`keyframe_conflicts`), excused from the bounds.
+    """
+
+    model: object = field(repr=False)
+    keyframes: object
+    contacts: tuple
+    weights: Mapping[str, float]
+    limits: tuple
+    rate: float
+    objective: Objective = field(repr=False)
+    initial: object = field(repr=False)
+    conflicts: tuple = ()
+
+    @property
+    def terms(self) -> tuple[str, ...]:
+        """The chosen term names, in the objective's order."""
+        return tuple(self.weights)
+
+
+def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | None = None,
+                 weights: dict[str, float] | None = None, contacts=(), rate: float | None = None) -> Problem:
+    """The one factory of a figure's `Problem`, from what the command line and the Python API have.
+
+    Args:
+        model: mujoco.MjModel of a scene holding the figure (free root, ball joints, the contact sites).
+        keyframes: Keyframes of the figure's qpos, values (k, nq), times (k,) [s].
+        terms: None (the default terms: the geometric terms of sec. 5, plus planted and clearance with a
+            contact schedule), "all", a comma-separated string or a list of names (`term_names()`).
+        weights: {term name: lambda_j >= 0} overriding the default weights; a name here also switches
+            the term on.
+        contacts: the contact schedule (`solver.contacts.Contact`s), e.g. a keyframe file's.
+        rate: quadrature points per second [1/s]; default `solver.animate.DEFAULT_RATE` (400).
+    Returns:
+        Problem.
+    Raises:
+        InputError: `keyframes` is not Keyframes or does not fit the model (nq), an unknown term, a bad
+            weight, a contact term without a schedule, a bad rate, a scene without what a term needs.
+    """
+    from solver.keyframes import Keyframes
+
+    if not isinstance(keyframes, Keyframes):
+        raise InputError(f"keyframes must be a solver.Keyframes, got {type(keyframes).__name__}")
+    nq = int(getattr(model, "nq", -1))
+    if keyframes.values.shape[1] != nq:
+        raise InputError(f"{keyframes.source}: keyframes have {keyframes.values.shape[1]} qpos components but "
+                         f"the model has nq = {nq}; are they for this scene's figure?")
+    if terms is not None and not isinstance(terms, str):
+        terms = ",".join(terms)
+    rate = DEFAULT_RATE if rate is None else float(rate)
+    if not np.isfinite(rate) or rate <= 0:
+        raise InputError(f"rate must be > 0 quadrature points per second, got {rate}")
+    contacts = tuple(contacts or ())
+    chosen = parse_terms(terms, weights, contacts)
+    objective, initial, conflicts = figure_problem(model, chosen, keyframes, rate=rate, contacts=contacts)
+    return Problem(model, keyframes, contacts, MappingProxyType(dict(chosen)), default_limits(chosen), rate,
+                   objective, initial, tuple(conflicts))

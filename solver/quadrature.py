@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+#: Quadrature points per second [1/s] of the figure's objective (the command line's --rate).
+DEFAULT_RATE = 400.0
+
 
 def quadrature_times(t0: float, t1: float, rate: float) -> tuple[np.ndarray, float]:
     """Uniform midpoint quadrature on [t0, t1] (paper, after eq. 7: "summing the values of the

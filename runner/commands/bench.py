@@ -30,7 +30,7 @@ from runner.animate_options import default_args, solve_options
 from runner.commands import bench_contacts
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
-from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
 from runner.readme_tables import Block, compare_blocks, replace_blocks, table, timing
 from solver.animate import DEFAULT_RATE
 from solver.bench import orient as orient_workload
@@ -148,26 +148,35 @@ def bench_orient(args) -> int:
     return 0
 
 
+def run_and_step_problems(terms: str | None, rate: float) -> dict:
+    """{name: Problem} that `bench run-and-step` times: the geometric terms, and `terms` when they differ -
+    each exactly what `dynsplines run-and-step --terms TERMS` solves (the keyframe file's contacts
+    included: `runner.problem_file.file_problem`)."""
+    problems = {"geometric": file_problem(RUN_AND_STEP_KEYFRAMES, terms=GEOMETRIC, rate=rate)[0]}
+    if terms is not None:
+        chosen = file_problem(RUN_AND_STEP_KEYFRAMES, terms=terms, rate=rate)[0]
+        if set(chosen.terms) != set(problems["geometric"].terms):
+            problems[terms] = chosen
+    return problems
+
+
 def bench_run_and_step(args) -> int:
     """`dynsplines bench run-and-step`: print the optimization time of the showcase clip. Returns 0."""
-    keyframes, info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
-    configs = {"geometric": parse_terms(GEOMETRIC)}
-    if args.terms is not None:
-        chosen = parse_terms(args.terms)
-        if set(chosen) != set(configs["geometric"]):
-            configs[args.terms] = chosen
+    problems = run_and_step_problems(args.terms, args.rate)
+    keyframes = problems["geometric"].keyframes
     print(f"bench run-and-step: {keyframes.count} keyframes, {args.repeat} runs per configuration, "
-          f"quadrature {args.rate:g} Hz, the command's solve options")
+          f"quadrature {args.rate:g} Hz, the command's problem and solve options")
     results = {}
-    for name, weights in configs.items():
+    for name, problem in problems.items():
+        weights = dict(problem.weights)
         options = solve_options(default_args(), weights)  # exactly what `dynsplines animate` runs
-        r = results[name] = time_solves(model, keyframes, layout, weights, options, args.rate, args.repeat)
+        r = results[name] = time_solves(problem, options, args.repeat)
         print(f"  {name:<12} terms {', '.join(f'{n}={w:g}' for n, w in weights.items())}")
         print(f"  {'':<12} optimization {r['wall_median_s']:.2f} s median (runs: "
               f"{', '.join(f'{w:.2f}' for w in r['wall_all_s'])}), {r['evals']} evaluations, "
               f"{r['per_eval_ms']:.2f} ms per evaluation in the run (wall time / evaluations, "
               f"{r['frames']} frames at the end)")
-        print_figures(model, keyframes, r["solution"], weights)
+        print_figures(problem.model, keyframes, r["solution"], weights)
     print(f"  {LEGEND}")
     # per-evaluation cost of every configuration on one frame set (the last run's result), so the
     # ratio compares the objectives and not the frame counts they ended with
@@ -236,19 +245,18 @@ REFINE_COUNTS = (14, 21, 28, 35, 42)
 
 
 class _Runs:
-    """The showcase clip's runs, made once and shared by the tables (the command's solve options)."""
+    """The showcase clip's runs, made once and shared by the tables (the command's problem and options)."""
 
     def __init__(self, rate: float):
         self.keyframes, info, self.model, self.layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
-        self.contacts = tuple(info.contacts or ())  # as the command: "all" adds the contact terms and cone
         self.rate = rate
         self._solved = {}
 
     def solved(self, terms: str) -> dict:
         if terms not in self._solved:
-            weights = parse_terms(terms, contacts=self.contacts)
-            r = time_solves(self.model, self.keyframes, self.layout, weights,
-                            solve_options(default_args(), weights), self.rate, 1, contacts=self.contacts)
+            problem = file_problem(RUN_AND_STEP_KEYFRAMES, terms=terms, rate=self.rate)[0]
+            weights = dict(problem.weights)
+            r = time_solves(problem, solve_options(default_args(), weights), 1)
             r["figures"] = path_figures(self.model, self.keyframes, r["solution"])
             r["weights"] = weights
             self._solved[terms] = r

@@ -7,7 +7,7 @@ the default terms (which add planted and clearance where contacts are known), al
 times each, with the command's solve options. Printed per input: evaluations and optimization time of
 both (CPU time of the process, and wall, split into the time inside the objective and the optimizer's
 own work: nlopt's L-BFGS costs O(n k) per iteration for k stored pairs) and their ratio on CPU time
-(issue 11's bound: 2x; CPU time, because wall time on a shared machine counts waiting for a core) and on
+(CPU time, because wall time on a shared machine counts waiting for a core) and on
 objective time (what the ratio would be if the optimizer's own work were free), and
 the motion metrics against the motion capture (float, skate, skating ratio, flight, flight extra /
 missed, joint and site error) of the plain spline and both paths.
@@ -19,11 +19,11 @@ import tempfile
 from pathlib import Path
 
 from runner.animate_options import default_args, solve_options
-from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_problem
+from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem
 from solver.bench.figure import GEOMETRIC, per_eval_ms, time_solves
 from solver.errors import InputError
 from solver.metrics import path_metrics
-from solver.problem import parse_terms
+from solver.problem import make_problem
 
 #: (label, key in the motion metrics' "path" block, format)
 ROWS = (("float in contact [mm]", "float_contact_mm", "{:.2f}"), ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
@@ -42,24 +42,23 @@ def register(bsub) -> None:
     c.set_defaults(func=bench_contacts)
 
 
-def _problem(path: Path, every: float, tmp: Path):
-    """(keyframes, info, model, layout, reference) of a keyframe file or a BVH clip."""
+def input_problem(path: Path, every: float, tmp: Path, rate: float):
+    """(problem, source) of a keyframe file (as `dynsplines animate FILE` solves it) or a BVH clip (as
+    `dynsplines mocap CLIP --every EVERY --scene auto` solves it, its files written under `tmp`)."""
     if path.suffix.lower() == ".bvh":
-        from runner.pipeline import ClipOptions, clip_keyframes
+        from runner.pipeline import ClipOptions, clip_problem
 
         out = tmp / path.stem
         out.mkdir(parents=True, exist_ok=True)
         paths = {"keyframes": out / f"{path.stem}.keyframes.json", "scene": out / f"{path.stem}.scene.xml"}
-        _, ref, model, keyframes, info = clip_keyframes(path, out, ClipOptions(every=every), paths, say=lambda *a: None)
-        return keyframes, info, model, ref
-    keyframes, info, model, _, _ = load_problem(path, None)
-    return keyframes, info, model, find_reference(info, model, quiet=True)
+        problem, source, _ = clip_problem(path, out, ClipOptions(every=every, rate=rate), paths, say=lambda *a: None)
+        return problem, source
+    return file_problem(path, rate=rate)
 
 
 def bench_contacts(args) -> int:
     """Run `bench contacts`. Returns 0; raises InputError for an input without contacts."""
-    from runner.pipeline import reference_motion_metrics
-    from solver.layout import StateLayout
+    from runner.run import reference_motion_metrics
 
     inputs = args.inputs or [RUN_AND_STEP_KEYFRAMES]
     print(f"bench contacts: {len(inputs)} input(s), {args.repeat} solve(s) per configuration, the command's "
@@ -67,18 +66,18 @@ def bench_contacts(args) -> int:
     ratios = []
     with tempfile.TemporaryDirectory(prefix="dynsplines-bench-") as tmp:
         for path in inputs:
-            keyframes, info, model, ref = _problem(Path(path), args.every, Path(tmp))
-            contacts = tuple(info.contacts or ())
+            base, source = input_problem(Path(path), args.every, Path(tmp), args.rate)
+            model, keyframes, contacts, ref = base.model, base.keyframes, base.contacts, source.reference
             if not contacts:
                 raise InputError(f"{path}: no contact schedule ('contacts'); make the keyframes with "
                                  "`dynsplines mocap` or give a BVH clip")
-            layout = StateLayout.from_model(model)
-            configs = {"geometric": parse_terms(GEOMETRIC, contacts=contacts), "contacts": parse_terms(None, contacts=contacts)}
+            configs = {"geometric": make_problem(model, keyframes, GEOMETRIC, contacts=contacts, rate=args.rate),
+                       "contacts": base}
             runs = {name: [] for name in configs}
             for _ in range(max(1, args.repeat)):  # alternate, so load on the machine hits both alike
-                for name, w in configs.items():
-                    runs[name].append(time_solves(model, keyframes, layout, w, solve_options(default_args(), w),
-                                                  args.rate, 1, contacts=contacts))
+                for name, problem in configs.items():
+                    options = solve_options(default_args(), dict(problem.weights))
+                    runs[name].append(time_solves(problem, options, 1))
             fields = ("cpu_median_s", "evals", "wall_median_s", "objective_s", "optimizer_s")
             med = {n: {k: statistics.median(r[k] for r in rs) for k in fields} for n, rs in runs.items()}
             ratio = med["contacts"]["cpu_median_s"] / med["geometric"]["cpu_median_s"]
@@ -105,7 +104,7 @@ def bench_contacts(args) -> int:
                               for lab, g in zip(("plain", "geometric", "contacts"), geo, strict=True)))
             if ref is None:
                 continue
-            motion = {n: reference_motion_metrics(model, layout, rs[-1]["solution"], ref, contacts) for n, rs in runs.items()}
+            motion = {n: reference_motion_metrics(model, rs[-1]["solution"], ref, contacts) for n, rs in runs.items()}
             print(f"    {'':<28} {'capture':>8} {'plain':>8} {'geometric':>10} {'contacts':>9}")
             for label, key, fmt in ROWS:
                 vals = [motion["geometric"]["plain"]["reference"][key], motion["geometric"]["plain"]["path"][key],

@@ -27,11 +27,13 @@ def register(sub) -> None:
                     "<stem>.keyframes.json (rerun or edit it with `dynsplines animate`), <stem>.scene.xml (with "
                     "--scene auto), <stem>.npz, <stem>.metrics.json, <stem>.mp4.")
     p.add_argument("clip", type=Path, help="BVH clip, e.g. models/cmu/127_33.bvh")
-    p.add_argument("--out-dir", type=Path, default=None, help="output folder [renders/<clip stem>/]")
+    p.add_argument("--out-dir", type=Path, default=None,
+                   help="output folder [renders/<clip stem>/ in the current folder]")
     add_clip_arguments(p)
     p.add_argument("--metrics", type=Path, default=None, metavar="FILE.json",
                    help="motion metrics and acceptance figures as JSON [<out-dir>/<stem>.metrics.json]")
-    add_options(p)
+    add_options(p, defaults={"out_help": "<out-dir>/<stem>.mp4", "save_path_help": "<out-dir>/<stem>.npz",
+                             "terms_help": "the default terms; with the clip's contacts also planted,clearance"})
     p.set_defaults(func=run)
 
 
@@ -75,9 +77,10 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
 def run(args) -> int:
     """Run `mocap`. Returns the exit code; raises InputError on bad input."""
     options = clip_options(args, PROG, out=args.out, save_path=args.save_path, metrics=args.metrics, plot=args.plot,
-                           render=not args.no_render, fps=args.fps, size=args.size, speed=args.speed, quiet=args.quiet)
+                           render=not args.no_render, fps=args.fps, size=args.size, speed=args.speed, quiet=args.quiet,
+                           exports=tuple(args.export), panels=tuple(args.panels), summary=not args.no_summary)
     out_dir = args.out_dir if args.out_dir is not None else default_out_dir(args.clip)
-    result = process_clip(args.clip, out_dir, options, say=(lambda *a: None) if args.quiet else print)
+    result = process_clip(args.clip, out_dir, options, say=print)  # --quiet: no progress bars; results printed
     if result["exit"] == "failed":
         print(f"dynsplines: warning: the optimization failed ({result['status']}); the best path before that "
               "(it meets every keyframe) is reported and written", file=sys.stderr)

@@ -2,6 +2,7 @@
 marked (`render_video`), and the check of the video's name and size made before a long optimization."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from solver.errors import InputError
@@ -26,7 +27,18 @@ def check_video_out(out, size) -> None:
 PANELS = {"plain": "plain spline", "optimized": "optimized", "reference": "motion capture"}
 
 
-def render_video(out, model, solution, keyframes, args, reference=None, contacts=(), progress=None):
+@dataclass(frozen=True)
+class VideoOptions:
+    """The video's settings: fps [frames per second of output], size (width, height) [pixels], speed
+    [x real time], panels (names from PANELS, left to right)."""
+
+    fps: float = 30.0
+    size: tuple = (960, 540)
+    speed: float = 0.5
+    panels: tuple = ("plain", "optimized")
+
+
+def render_video(out, model, solution, keyframes, args: VideoOptions, reference=None, contacts=(), progress=None):
     """Side-by-side video of the plain spline and the optimized path (and the motion capture, with
     `args.panels` holding "reference"), keyframes marked.
 

@@ -11,34 +11,34 @@ import time
 
 from solver.errors import InputError
 from solver.frames import FrameSet
-from solver.problem import figure_objective, figure_problem
+from solver.problem import figure_objective
 from solver.solve import SCORES, SolveOptions, solve
 
 #: the geometric terms (the default objective), the baseline of the dynamics terms' cost
 GEOMETRIC = "penetration,unit,bending,smooth"
 
 
-def time_solves(model, keyframes, layout, weights: dict, options: SolveOptions, rate: float, repeat: int,
-                contacts=()) -> dict:
-    """Solve `repeat` times (at least once) with `options`; the timings and the last objective.
+def time_solves(problem, options: SolveOptions, repeat: int) -> dict:
+    """Solve a problem `repeat` times (at least once) with `options`; the timings and the last solution.
 
     Args:
-        model: MjModel of the scene. keyframes: Keyframes. layout: StateLayout. weights: {term: weight}.
+        problem: a `solver.Problem` (`make_problem`; the command line's benchmarks build it with the same
+            function as the command, e.g. `runner.problem_file.file_problem`).
         options: SolveOptions (the command passes exactly what `dynsplines animate` runs).
-        rate: quadrature points per second. repeat: runs. contacts: the contact schedule (for the
-            contact terms; keyframes that contradict it are excused as `solver.animate` does).
+        repeat: runs.
     Returns:
         dict: wall_median_s, wall_all_s (list) [s], cpu_median_s (CPU time of this process in the
         solves [s]: what a loaded machine's wall time is not), evals (median), per_eval_ms (median of wall / evals),
         objective_s and optimizer_s (medians [s, wall] of the rounds' time inside the objective and in the
         optimizer's own work, `OptimizeResult.fun_time_s`), E_final, frames (count at the end), objective
-        (the last Objective), solution (the last Solution).
+        (the problem's Objective), solution (the last Solution).
     """
+    from solver.animate import solve_problem
+
     runs, cpus = [], []
     for _ in range(max(1, repeat)):
-        objective, initial, _ = figure_problem(model, weights, keyframes, rate=rate, contacts=contacts)
         c0 = time.process_time()
-        sol = solve(objective, initial, options)
+        sol = solve_problem(problem, options)
         cpus.append(time.process_time() - c0)
         runs.append(sol)
     walls = [s.wall_time_s for s in runs]
@@ -53,7 +53,7 @@ def time_solves(model, keyframes, layout, weights: dict, options: SolveOptions, 
         "optimizer_s": statistics.median(sum(r.result.wall_time_s - r.result.fun_time_s for r in s.rounds) for s in runs),
         "E_final": runs[-1].E_final,
         "frames": runs[-1].frames.count,
-        "objective": objective,
+        "objective": problem.objective,
         "solution": runs[-1],
     }
 

@@ -1,0 +1,364 @@
+"""One run of a figure problem, the one place where a problem becomes a solution, metrics and outputs.
+
+Every command that optimizes keyframes (`animate`, `run-and-step`, `mocap`, `batch`) calls `execute`:
+
+1. solve the `solver.Problem` (progress bars, Ctrl-C keeps the best path so far);
+2. the metrics of the plain spline and the optimized path (`solver.metrics.path_metrics`) and, with a
+   motion-capture reference, the motion metrics of both against it (`solver.motion_metrics`);
+3. the summary tables, then the outputs the user asked for: the saved path (.npz), exports (.bvh,
+   .glb), plots, the metrics report (.json) and the side-by-side video.
+
+The commands are argument glue: they make the problem (`runner.problem_file`, `runner.pipeline`) and an
+`Outputs` value and hand both here; benchmarks build their problems with the same functions.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from runner.console import Progress, StopRequest, motion_metrics_table, summary_table
+from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from runner.files import atomic_output
+from runner.paths import display_path
+from runner.render.side_by_side import VideoOptions
+from runner.saved_path import save_path_npz
+from solver.animate import solve_problem
+from solver.errors import InputError
+from solver.layout import StateLayout
+from solver.metrics import path_metrics
+from solver.optimize import Status
+from solver.problem import Problem
+from solver.solve import Solution, SolveOptions
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where a problem came from, for the metrics and the outputs.
+
+    Attributes:
+        scene_path: the scene MJCF the model was loaded from.
+        reference: the motion-capture reference (`runner.mocap.reference.Reference`: times (r,) [s],
+            qpos (r, nq)) the keyframes were made from, or None.
+        metric_contacts: the contacts the motion metrics judge feet by: the problem's schedule, or,
+            for a keyframe file without one, the contacts detected on the reference.
+        label: what the run is called in messages (the keyframe file or the clip).
+    """
+
+    scene_path: Path
+    reference: object | None = None
+    metric_contacts: tuple = ()
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """What a run writes (None or empty: not written); paths as the user gave them.
+
+    Attributes:
+        save_path: the saved path (.npz). exports: the optimized path as .bvh / .glb files.
+        plot_dir: folder for the plots (PNG). metrics_json: the metrics report (.json).
+        video: the side-by-side video (.mp4); `video_options` its settings.
+        summary: print the summary tables. quiet: no progress bars (results are still printed).
+        command: the command's arguments, recorded in the saved path.
+    """
+
+    save_path: Path | None = None
+    exports: tuple = ()
+    plot_dir: Path | None = None
+    metrics_json: Path | None = None
+    video: Path | None = None
+    video_options: VideoOptions = field(default_factory=VideoOptions)
+    summary: bool = True
+    quiet: bool = False
+    command: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Run:
+    """A solved problem with its metrics (read-only).
+
+    Attributes:
+        problem: the Problem solved. options: the SolveOptions used. solution: the Solution.
+        source: where the problem came from (`Source`).
+        metrics: {"plain", "optimized": `path_metrics` dicts; "motion" with a reference:
+            {"plain", "optimized": `motion_metrics` dicts}}.
+        interrupted: Ctrl-C (or a stop request) ended the solve or came while writing.
+    """
+
+    problem: Problem
+    options: SolveOptions
+    solution: Solution
+    source: Source
+    metrics: dict
+    interrupted: bool = False
+
+    @property
+    def failed(self) -> bool:
+        """The optimizer failed (the best path before that is kept)."""
+        return self.solution.status in (Status.NONFINITE, Status.FAILED)
+
+    @property
+    def exit_code(self) -> int:
+        """The command's exit code (runner/exit_codes.py)."""
+        return EXIT_INTERRUPTED if self.interrupted else EXIT_FAILED if self.failed else EXIT_OK
+
+    @property
+    def keyframes(self):
+        return self.problem.keyframes
+
+    @property
+    def model(self):
+        return self.problem.model
+
+
+def run_metrics(problem: Problem, solution: Solution, source: Source) -> dict:
+    """The metrics of a run: `path_metrics` of the plain spline and the optimized path (1000 Hz), and with
+    a reference the motion metrics of both against it (`reference_motion_metrics`)."""
+    model, keyframes = problem.model, problem.keyframes
+    metrics = {name: path_metrics(model, fs.times, fs.values, keyframes)
+               for name, fs in (("plain", solution.initial), ("optimized", solution.frames))}
+    if source.reference is not None:
+        metrics["motion"] = reference_motion_metrics(model, solution, source.reference, source.metric_contacts)
+    return metrics
+
+
+def _sample(frames, times: np.ndarray, layout: StateLayout) -> np.ndarray:
+    """The path at `times`, unit quaternions (what MuJoCo's kinematics use)."""
+    Y = frames.path(np.clip(times, frames.times[0], frames.times[-1]))
+    for slot in layout.quat_slots:
+        Y[:, slot] /= np.linalg.norm(Y[:, slot], axis=1, keepdims=True)
+    return Y
+
+
+def reference_motion_metrics(model, solution, reference, contacts) -> dict:
+    """`motion_metrics` of the plain spline and the optimized path against the reference clip, over the
+    reference's frames within the keyframes' time span (contact times shifted with them).
+
+    Returns:
+        {"plain": ..., "optimized": ...}, each a `solver.motion_metrics.motion_metrics` dict.
+    Raises:
+        InputError: fewer than 4 reference frames in the keyframes' span.
+    """
+    from solver.contacts import Contact
+    from solver.motion_metrics import motion_metrics
+
+    layout = StateLayout.from_model(model)
+    t0, t1 = solution.initial.times[0], solution.initial.times[-1]
+    tol = 2e-6  # keyframe times in a file are rounded to 1e-6 s: the end frames still count
+    keep = (reference.times >= t0 - tol) & (reference.times <= t1 + tol)
+    times, qpos = reference.times[keep], reference.qpos[keep]
+    if len(times) < 4:
+        raise InputError(f"the keyframes span {t0:g}..{t1:g} s, which holds {len(times)} frames of the reference "
+                         f"{reference.source}; motion metrics need at least 4")
+    shift = float(times[0])
+    shifted = [Contact(c.site, c.start - shift, c.end - shift, c.surface) for c in contacts
+               if c.end >= shift and c.start <= times[-1]]
+    fps = 1.0 / reference.frame_time
+    return {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted)
+            for label, fs in (("plain", solution.initial), ("optimized", solution.frames))}
+
+
+def solve_run(problem: Problem, options: SolveOptions, source: Source, *, quiet: bool = False, stop=None) -> Run:
+    """Solve `problem` with a progress bar (silent with `quiet`) and compute the run's metrics.
+
+    Args:
+        problem: from `solver.make_problem`. options: SolveOptions. source: `Source`.
+        stop: a `runner.console.StopRequest` (Ctrl-C) polled by the optimizer, or None.
+    Returns:
+        Run.
+    """
+    progress = Progress(quiet)
+    solution = solve_problem(problem, options, should_stop=stop, progress=progress)
+    progress.done()
+    interrupted = solution.status is Status.INTERRUPTED or bool(stop is not None and stop.requested)
+    return Run(problem, options, solution, source, run_metrics(problem, solution, source), interrupted)
+
+
+def execute(problem: Problem, options: SolveOptions, source: Source, outputs: Outputs, say=print) -> Run:
+    """The whole run: solve, metrics, summary and every output of `outputs` (module docstring).
+
+    Args:
+        problem, options, source: what to solve (`solve_run`). outputs: `Outputs`.
+        say: where result lines go (print; batches pass a no-op). Progress bars follow `outputs.quiet`.
+    Returns:
+        Run (`Run.exit_code` is the command's exit code; a video interrupted by Ctrl-C makes it 130).
+    Raises:
+        InputError: an output that cannot be written (named; the outputs before it are written).
+    """
+    with StopRequest(outputs.quiet) as stop:
+        run = solve_run(problem, options, source, quiet=outputs.quiet, stop=stop)
+        why = "interrupted (Ctrl-C), best path so far kept" if stop.requested else run.solution.message
+        say(f"  stopped: {why}; {run.solution.n_evals} evaluations, {run.solution.wall_time_s:.2f} s")
+        if run.failed:
+            print(f"dynsplines: warning: the optimization failed ({run.solution.message}); the best path before "
+                  "that (it meets every keyframe) is reported and written", file=sys.stderr)
+        if outputs.summary:
+            say(report(run))
+        write_results(run, outputs, say)  # Ctrl-C until they are written only sets stop.requested
+    if stop.requested and not run.interrupted:
+        run = _replace(run, interrupted=True)
+    if outputs.video is not None and not run.interrupted:
+        try:
+            info = render_with_progress(outputs.video, run, outputs.video_options, quiet=outputs.quiet)
+        except KeyboardInterrupt:  # the video is written atomically: nothing half-written is left
+            saved = f"; the path is saved in {display_path(outputs.save_path)}" if outputs.save_path else ""
+            print(f"\ndynsplines: interrupted while rendering: {display_path(outputs.video)} not written (an "
+                  f"earlier file there is unchanged){saved}", file=sys.stderr)
+            return _replace(run, interrupted=True)
+        say(f"  wrote {display_path(outputs.video)} ({info.n_frames} frames, {info.wall_time_s:.1f} s to render)")
+    elif outputs.video is None:
+        say("  no video (--no-render)")
+    return run
+
+
+def _replace(run: Run, **changes) -> Run:
+    from dataclasses import replace
+
+    return replace(run, **changes)
+
+
+def report(run: Run) -> str:
+    """The summary tables of a run: what the optimization bought (plain spline vs optimized), the motion
+    metrics against the capture, and how close the capture's own feet are to the scene."""
+    motion = run.metrics.get("motion")
+    rows = contact_summary_rows(motion, run.solution.objective, run.solution)
+    lines = [summary_table(run.metrics["plain"], run.metrics["optimized"], run.solution, dict(run.problem.weights),
+                           dict(run.solution.weights), contact_rows=rows)]
+    ref = run.source.reference
+    if ref is not None:
+        from runner.mocap.contacts import worst_contact_distance
+
+        lines.append(motion_metrics_table(motion["plain"], motion["optimized"]))
+        lines.append(f"motion capture ({display_path(ref.source)}, retargeted, {ref.count} frames): feet in contact "
+                     f"stay within {1000 * worst_contact_distance(ref, run.model):.1f} mm of the surface under them")
+    return "\n".join(lines)
+
+
+def write_results(run: Run, outputs: Outputs, say=print) -> None:
+    """The files of a run other than the video, in order: saved path, exports, metrics report, plots.
+    Each is written atomically and announced with `say("  wrote PATH")`."""
+    if outputs.save_path is not None:
+        save_path_npz(run, outputs.save_path, command=outputs.command)
+        say(f"  wrote {display_path(outputs.save_path)}")
+    if outputs.exports:
+        for res in export_results(run, outputs):
+            say(f"  wrote {res.describe()}")
+    if outputs.metrics_json is not None:
+        write_metrics_json(run, outputs.metrics_json)
+        say(f"  wrote {display_path(outputs.metrics_json)}")
+    if outputs.plot_dir is not None:
+        from runner.plots import plot_solution
+
+        for f in plot_solution(outputs.plot_dir, run.model, run.solution, run.keyframes, run.source.reference,
+                               objective=run.solution.objective, contacts=run.source.metric_contacts):
+            say(f"  wrote {display_path(f)}")
+
+
+def check_exports(exports) -> None:
+    """--export names are checked before the optimization: a known extension, a writable folder, no repeats.
+
+    Raises:
+        InputError: naming the option and the file."""
+    from runner.export import check_output_name
+    from runner.files import check_writable_dir
+
+    for out in exports:
+        check_output_name(out, "--export")
+        check_writable_dir(out, "--export")
+    seen = [Path(out).resolve() for out in exports]
+    dup = next((out for i, out in enumerate(exports) if seen[i] in seen[:i]), None)
+    if dup is not None:
+        raise InputError(f"--export {dup}: given twice; name each file once")
+
+
+def export_results(run: Run, outputs: Outputs) -> list:
+    """Write every export (the optimized path) from the saved path: `outputs.save_path` if given (already
+    written), else a temporary one. Returns the ExportResults. Raises InputError naming the failed file."""
+    import tempfile
+
+    from runner.console import Steps
+    from runner.export import export_saved_path
+
+    results = []
+    with tempfile.TemporaryDirectory(prefix="dynsplines-export-") as tmp, \
+            Steps("exporting", len(outputs.exports), outputs.quiet, unit=" files") as bar:
+        npz = outputs.save_path
+        if npz is None:
+            npz = Path(tmp) / "path.npz"
+            save_path_npz(run, npz, command=outputs.command)
+        for out in outputs.exports:
+            try:
+                results.append(export_saved_path(npz, out, "optimized", None, option="--export"))
+                bar.update(len(results), note=Path(out).name)
+            except InputError as e:
+                kept = f"; the path is saved in {display_path(outputs.save_path)}" if outputs.save_path else ""
+                raise InputError(f"--export {out}: not written: {e}{kept}") from None
+    return results
+
+
+def write_metrics_json(run: Run, path: Path, extra: dict | None = None) -> None:
+    """The metrics report (.json, atomically): the run's metrics, its status and `extra` fields."""
+    report_ = {"status": "interrupted" if run.interrupted else run.solution.status.value,
+               "exit": "interrupted" if run.interrupted else "failed" if run.failed else "ok",
+               "keyframes": run.keyframes.count, "partial": int(run.keyframes.is_partial.sum()),
+               "contacts": len(run.problem.contacts), "variable_frames": run.solution.frames.n_variable,
+               "solve_time_s": run.solution.wall_time_s, "n_evals": run.solution.n_evals,
+               "terms": dict(run.problem.weights), **(extra or {}), "metrics": run.metrics}
+    with atomic_output(path, suffix=".json") as tmp:
+        Path(tmp).write_text(json.dumps(report_, indent=1, default=float) + "\n")
+
+
+def render_with_progress(out, run: Run, video: VideoOptions, quiet: bool = False):
+    """The side-by-side video of a run (`runner.render.side_by_side.render_video`) with a progress bar over
+    its frames (`runner.console.Steps`; silent with `quiet`). Returns the render's info."""
+    from runner.console import Steps
+    from runner.render import frame_times
+    from runner.render.side_by_side import render_video
+
+    kf = run.keyframes
+    n = len(frame_times(float(kf.times[0]), float(kf.times[-1]), video.fps, video.speed))
+    with Steps(f"rendering {display_path(out)}", n, quiet, unit=" frames") as bar:
+        return render_video(out, run.model, run.solution, kf, video, run.source.reference,
+                            run.source.metric_contacts, progress=lambda i, _n: bar.update(i))
+
+
+def contact_summary_rows(motion, objective, solution) -> list:
+    """Summary rows for the feet: float, skate, skating ratio, flight time and flight-phase error
+    (`solver.motion_metrics.flight_mismatch`, extra + missed) of both paths against the motion-capture
+    reference (`motion`: metrics["motion"], the `motion_metrics` of both paths at the clip's rate; the
+    capture's own figure in the label), and the friction-cone residual when the cone term is on.
+
+    Returns:
+        [(label, plain value, optimized value, format), ...].
+    """
+    rows = []
+    if motion is not None:
+        capture = motion["plain"]["reference"]
+        for label, key, fmt in (
+            ("float in contact [mm]", "float_contact_mm", "{:.2f}"),
+            ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
+            ("skate, PhysDiff [mm/frame]", "skate_mm", "{:.2f}"),
+            ("skating ratio (contacts)", "skating_ratio_contacts", "{:.3f}"),
+            ("flight time [s]", "flight_time_s", "{:.3f}"),
+        ):
+            rows.append((f"{label} (capture {fmt.format(capture[key])})", motion["plain"]["path"][key],
+                         motion["optimized"]["path"][key], fmt))
+        # flight-phase error: frames in flight in one and not the other (flight times can cancel)
+        rows.append(("flight phase error vs capture [s]",
+                     *(motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"]
+                       for p in ("plain", "optimized")), "{:.3f}"))
+    if "cone" in objective.names:
+        from solver.metrics import sample_times
+        from solver.terms.contact_wrench import cone_metrics
+
+        term = objective.terms[objective.names.index("cone")]
+        t = sample_times(solution.initial.times[0], solution.initial.times[-1], 400.0)
+        cm = [cone_metrics(term, t, fs.path(t), fs.path(t, 1), fs.path(t, 2))
+              for fs in (solution.initial, solution.frames)]
+        rows.append(("RMS friction-cone residual [N]", cm[0]["cone_rms"], cm[1]["cone_rms"], "{:.1f}"))
+        rows.append(("peak friction-cone residual [N]", cm[0]["cone_peak"], cm[1]["cone_peak"], "{:.1f}"))
+    return rows
