@@ -1,28 +1,24 @@
-"""Where the repository's files are (a leaf): the checkout, its models and its renders."""
+"""Where the shipped files are (a leaf): the models (figure, scenes, keyframes, the CMU clip) beside the
+code, in a checkout (runner/models links to the top-level models/) and in an installed copy alike.
+Outputs never go here: they go where the user is (the commands' defaults are relative to the current
+folder)."""
 from __future__ import annotations
 
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-MODELS = REPO / "models"
-RENDERS = REPO / "renders"
+PACKAGE = Path(__file__).resolve().parent
+#: the shipped models: figure, scenes, keyframe files and the CMU clip
+MODELS = PACKAGE / "models"
+#: the checkout, when running from one (README, benchmarks' documents); in an installed copy a folder
+#: without them
+REPO = PACKAGE.parent
 
 
 def display_path(path) -> str:
-    """`path` relative to the current directory if inside it, else to the repository, else absolute."""
-    path = Path(path).resolve()
-    for base in (Path.cwd(), REPO):
-        try:
-            return str(path.relative_to(base))
-        except ValueError:
-            continue
-    return str(path)
-
-
-def repo_relative(path) -> str:
-    """`path` relative to the repository if inside it, else absolute (as stored in a saved path)."""
-    path = Path(path).resolve()
+    """`path` as the user would type it: relative to the current folder when inside it, else absolute."""
+    path = Path(path)
+    absolute = path.resolve() if path.is_absolute() or path.exists() else (Path.cwd() / path)
     try:
-        return str(path.relative_to(REPO))
+        return str(absolute.relative_to(Path.cwd().resolve()))
     except ValueError:
-        return str(path)
+        return str(path if path.is_absolute() else absolute)

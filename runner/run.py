@@ -201,7 +201,7 @@ def execute(problem: Problem, options: SolveOptions, source: Source, outputs: Ou
         write_results(run, outputs, say)  # Ctrl-C until they are written only sets stop.requested
     if stop.requested and not run.interrupted:
         run = _replace(run, interrupted=True)
-    if outputs.video is not None and not run.interrupted:
+    if outputs.video is not None:  # after a first Ctrl-C too: the video of the best path so far
         try:
             info = render_with_progress(outputs.video, run, outputs.video_options, quiet=outputs.quiet)
         except KeyboardInterrupt:  # the video is written atomically: nothing half-written is left

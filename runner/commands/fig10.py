@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
 from runner.figure10 import figure10, format_table
 from runner.orient_file import read_keyframes
-from runner.paths import MODELS, RENDERS
+from runner.paths import MODELS
 from solver.errors import InputError
 
 DEFAULT_KEYFRAMES = MODELS / "orient_example.json"
-DEFAULT_OUT = RENDERS / "fig10_euler_lagrange.png"
+DEFAULT_OUT = Path("renders") / "fig10_euler_lagrange.png"  # in the current folder
 DESCRIPTION = "Figure 10 of the paper: Euler-Lagrange deviation integrated over tenths of the path."
 
 

@@ -259,9 +259,9 @@ def test_output_is_a_folder(tmp_path, capsys):
 
 
 def test_video_name_and_size_checked_before_optimizing(tmp_path, capsys, monkeypatch):
-    import runner.commands.animate
+    import runner.run
 
-    monkeypatch.setattr(runner.commands.animate, "solve", lambda *a, **k: pytest.fail("optimized before the check"))
+    monkeypatch.setattr(runner.run, "solve_problem", lambda *a, **k: pytest.fail("optimized before the check"))
     p = write(tmp_path, small_doc())
     expect_input_error(capsys, ["animate", p, "--out", tmp_path / "x.avi"],
                        "--out", "x.avi: a video file must end in one of .mp4, .mkv, .mov")
@@ -326,12 +326,12 @@ def test_debug_shows_the_traceback(tmp_path):
 
 
 def test_internal_error_is_one_message_with_exit_1(tmp_path, capsys, monkeypatch):
-    import runner.commands.animate
+    import runner.run
 
     def bug(*a, **k):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr(runner.commands.animate, "solve", bug)
+    monkeypatch.setattr(runner.run, "solve_problem", bug)
     code, err = run(capsys, *animate(write(tmp_path, small_doc())))
     assert code == EXIT_INTERNAL
     assert err.startswith("dynsplines: internal error: ZeroDivisionError: a bug")

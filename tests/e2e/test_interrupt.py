@@ -207,14 +207,16 @@ def test_nonfinite_term_is_named_and_last_good_iterate_kept():
 
 
 def test_nonfinite_term_at_the_command_line(tmp_path, capsys, monkeypatch):
-    real = runner.commands.animate.figure_problem
+    import solver.problem
+
+    real = solver.problem.figure_problem
 
     def with_poison(*args, **kwargs):
         obj, initial, conflicts = real(*args, **kwargs)
         poisoned = Objective(obj.terms + [Poison()], np.append(obj.weights, 1.0), obj.t0, obj.t1, obj.rate)
         return poisoned, initial, conflicts
 
-    monkeypatch.setattr(runner.commands.animate, "figure_problem", with_poison)
+    monkeypatch.setattr(solver.problem, "figure_problem", with_poison)
     out = tmp_path / "p.npz"
     code = main(["animate", str(small_keyframes(tmp_path)), "--no-render", "--save-path", str(out)])
     captured = capsys.readouterr()
@@ -228,13 +230,17 @@ def test_nonfinite_term_at_the_command_line(tmp_path, capsys, monkeypatch):
 
 # ----------------------------------------------------------------------------- atomic writes
 def saved_problem(tmp_path):
-    """Arguments of `save_path_npz` for a tiny two-keyframe solve."""
-    kf = Keyframes([0.0, 0.5], [[1, 0, 0, 0], [0.9, 0.1, 0, 0]], np.ones((2, 4), bool))
+    """Arguments of `save_path_npz` (a run) for a tiny two-keyframe solve."""
+    from runner.run import Run, Source
+    from solver.problem import Problem
     from solver.terms import UnitQuaternion
 
+    kf = Keyframes([0.0, 0.5], [[1, 0, 0, 0], [0.9, 0.1, 0, 0]], np.ones((2, 4), bool))
     obj = Objective([UnitQuaternion([[0, 1, 2, 3]])], [1.0], 0.0, 0.5, rate=50)
-    sol = solve(obj, FrameSet.from_keyframes(kf, [[0, 1, 2, 3]]), SolveOptions(rounds=0))
-    return sol, kf, None, SCENE, {"unit": 1.0}, SolveOptions(rounds=0), {}
+    initial = FrameSet.from_keyframes(kf, [[0, 1, 2, 3]])
+    sol = solve(obj, initial, SolveOptions(rounds=0))
+    problem = Problem(None, kf, (), {"unit": 1.0}, (), 50.0, obj, initial)
+    return (Run(problem, SolveOptions(rounds=0), sol, Source(SCENE), {}),)
 
 
 @pytest.mark.parametrize("failure", [OSError(28, "No space left on device"), KeyboardInterrupt()],
@@ -242,7 +248,7 @@ def saved_problem(tmp_path):
 def test_failed_npz_write_leaves_the_earlier_file_intact(tmp_path, monkeypatch, failure):
     out = tmp_path / "p.npz"
     args = saved_problem(tmp_path)
-    runner.saved_path.save_path_npz(out, *args)
+    runner.saved_path.save_path_npz(*args, out)
     good = out.read_bytes()
 
     def savez_then_fail(fh, **fields):
@@ -253,10 +259,10 @@ def test_failed_npz_write_leaves_the_earlier_file_intact(tmp_path, monkeypatch, 
     if isinstance(failure, OSError):
         with pytest.raises(InputError, match=r"cannot write .*p\.npz: No space left on device; an earlier file "
                                              "there is unchanged"):
-            runner.saved_path.save_path_npz(out, *args)
+            runner.saved_path.save_path_npz(*args, out)
     else:
         with pytest.raises(KeyboardInterrupt):
-            runner.saved_path.save_path_npz(out, *args)
+            runner.saved_path.save_path_npz(*args, out)
     assert out.read_bytes() == good
     assert [p.name for p in tmp_path.iterdir()] == ["p.npz"]
 
@@ -298,14 +304,16 @@ class NaNFromTheStart(Term):
 
 
 def test_nonfinite_on_the_plain_spline_exits_3_and_writes_nothing(tmp_path, capsys, monkeypatch):
-    real = runner.commands.animate.figure_problem
+    import solver.problem
+
+    real = solver.problem.figure_problem
 
     def broken(*args, **kwargs):
         obj, initial, conflicts = real(*args, **kwargs)
         return (Objective(obj.terms + [NaNFromTheStart()], np.append(obj.weights, 1.0), obj.t0, obj.t1, obj.rate),
                 initial, conflicts)
 
-    monkeypatch.setattr(runner.commands.animate, "figure_problem", broken)
+    monkeypatch.setattr(solver.problem, "figure_problem", broken)
     out = tmp_path / "p.npz"
     code = main(["animate", str(small_keyframes(tmp_path)), "--no-render", "--save-path", str(out)])
     err = capsys.readouterr().err

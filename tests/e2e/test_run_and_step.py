@@ -17,13 +17,17 @@ from runner.cli import main
 REPO = Path(__file__).resolve().parents[2]
 
 
+RESULT_DIR = []  # the folder of the module's saved path (its scene is named relative to it)
+
+
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
     out = tmp_path_factory.mktemp("rs") / "run_and_step.npz"
+    RESULT_DIR[:] = [out.parent]
     code = main(["run-and-step", "--no-render", "--quiet", "--save-path", str(out)])
     assert code == 0
     z = np.load(out)
-    model = mujoco.MjModel.from_xml_path(str(REPO / str(z["scene"])))
+    model = mujoco.MjModel.from_xml_path(str((out.parent / str(z["scene"])).resolve()))  # relative to the .npz
     return z, model
 
 
@@ -96,6 +100,7 @@ def test_saved_path_fields(result):
     assert z["keyframes"].shape == z["keyframe_mask"].shape == (k, nq)
     assert np.all(np.diff(z["frame_times"]) > 0) and m > k
     assert z["reference_qpos"].shape == (len(z["reference_times"]), nq) and len(z["reference_times"]) > 100
-    assert str(z["scene"]) == "models/run_and_step.xml" and float(z["wall_time_s"]) > 0
+    assert (RESULT_DIR[0] / str(z["scene"])).resolve() == (REPO / "models/run_and_step.xml").resolve()
+    assert float(z["wall_time_s"]) > 0
     versions = json.loads(str(z["versions_json"]))
     assert {"dynsplines", "mujoco", "nlopt", "numpy"} <= set(versions)

@@ -45,20 +45,26 @@ def test_quiet_silences_progress_but_not_results(tmp_path, capsys):
 
 
 def test_animate_without_out_renders_to_the_default_path(tmp_path, capsys, monkeypatch):
+    """The default video is renders/<name>.mp4 in the current folder (not the checkout's), printed as
+    the user would type it."""
+    from pathlib import Path
+
+    import runner.run
     from runner.commands import animate as cmd
-    from runner.paths import RENDERS
 
     seen = []
 
     class Info:
         n_frames, wall_time_s = 3, 0.0
 
-    monkeypatch.setattr(cmd, "render_with_progress", lambda out, *a: seen.append(out) or Info())
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(runner.run, "render_with_progress", lambda out, *a, **k: seen.append(out) or Info())
     code, out, err = animate(capsys)
     assert code == 0, err
-    assert seen == [RENDERS / "run_and_step.mp4"] and "wrote renders/run_and_step.mp4" in out
-    assert cmd.default_video("walk.keyframes.json") == RENDERS / "walk.mp4"
-    assert cmd.default_video("dir/jump.json") == RENDERS / "jump.mp4"
+    assert seen == [Path("renders/run_and_step.mp4")] and "wrote renders/run_and_step.mp4" in out
+    assert (tmp_path / "renders").is_dir()  # the folder the video goes into is made where the user is
+    assert cmd.default_video("walk.keyframes.json") == Path("renders/walk.mp4")
+    assert cmd.default_video("dir/jump.json") == Path("renders/jump.mp4")
     code, out, err = animate(capsys, "--no-render")
     assert len(seen) == 1 and "no video (--no-render)" in out
 

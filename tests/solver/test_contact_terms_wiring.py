@@ -169,7 +169,7 @@ def test_a_swing_the_path_next_to_a_keyframe_keeps_on_the_floor_is_excused(toy):
 
 @pytest.mark.slow
 def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
-    from runner.commands.animate import contact_summary_rows
+    from runner.run import contact_summary_rows
     from runner.console import summary_table
     from runner.mocap.reference import load_bvh_reference
     from runner.paths import MODELS
@@ -186,9 +186,9 @@ def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
     obj = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=100.0, contacts=contacts)
     sol = solve(obj, FrameSet.from_keyframes(keyframes, layout.quat_slots),
                 SolveOptions(subdivision="none", max_evals=3))
-    from runner.pipeline import reference_motion_metrics
+    from runner.run import reference_motion_metrics
 
-    motion = reference_motion_metrics(model, layout, sol, ref, contacts)
+    motion = reference_motion_metrics(model, sol, ref, contacts)
     rows = contact_summary_rows(motion, obj, sol)
     plain = path_metrics(model, sol.initial.times, sol.initial.values, keyframes, rate=200.0)
     opt = path_metrics(model, sol.frames.times, sol.frames.values, keyframes, rate=200.0)
