@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="dynsplines",
         description="Dynamic splines with constraints for animation: keyframes in, optimized in-betweens out.",
     )
-    parser.add_argument("--debug", action="store_true", help="show the full traceback on errors")
+    parser.set_defaults(debug=False)  # `--debug` itself: OneLineParser, before or after the subcommand
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     sub.required = True
     for register in SUBCOMMANDS:

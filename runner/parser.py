@@ -8,7 +8,16 @@ from runner.exit_codes import EXIT_INPUT
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """An ArgumentParser whose usage errors are one line (and the --help hint), exit code 2."""
+    """An ArgumentParser whose usage errors are one line (and the --help hint), exit code 2, and which
+    accepts `--debug` (show the full traceback on errors) wherever it stands: before the subcommand or
+    after it (`dynsplines animate FILE --debug`). The top-level parser sets its default (False);
+    a subcommand's `--debug` only ever sets it."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        if self.add_help:  # every parser the command line builds (not argparse's internal ones)
+            self.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                              help="show the full traceback on errors")
 
     def error(self, message):
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")

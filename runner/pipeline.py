@@ -39,7 +39,7 @@ from solver.solve import SolveOptions
 FIGURE = MODELS / "humanoid39.xml"
 
 
-@dataclass
+@dataclass(frozen=True)
 class ClipOptions:
     """What `process_clip` does with a clip (the options of `dynsplines mocap`).
 
@@ -86,7 +86,6 @@ class ClipOptions:
     exports: tuple = ()
     panels: tuple = ("plain", "optimized")
     command: str = ""
-    extra: dict = field(default_factory=dict)
     root_scale: float | str = ROOT_SCALE_LEGS
 
 
