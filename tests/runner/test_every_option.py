@@ -201,7 +201,8 @@ def test_debug_is_accepted_after_the_subcommand(tmp_path, capsys):
 
 def test_mocap_help_shows_its_own_defaults(capsys, monkeypatch):
     """`mocap --help` names mocap's output files, not animate's."""
-    monkeypatch.setenv("COLUMNS", "300")  # no line breaks inside a default    with pytest.raises(SystemExit):
+    monkeypatch.setenv("COLUMNS", "300")  # no line breaks inside a default
+    with pytest.raises(SystemExit):
         build_parser().parse_args(["mocap", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "<out-dir>/<stem>.mp4" in text and "<out-dir>/<stem>.npz" in text
