@@ -62,7 +62,7 @@ def register(sub) -> None:
     m = bsub.add_parser("docs", aliases=["readme"], help="regenerate (or --check) docs/benchmarks.md's measured tables",
                         description="Regenerate the measured tables of docs/benchmarks.md (between <!-- bench:NAME "
                         "--> markers) from runs of the current code; --check compares instead (wall times "
-                        "excepted, evaluation counts within 10 %%, other figures within 2 %%).")
+                        "excepted, evaluation counts within 10 %, other figures within 2 %).")
     m.add_argument("--check", action="store_true",
                    help="compare the file's tables with fresh runs instead of writing; exit 1 if one differs")
     m.add_argument("--exact", action="store_true",

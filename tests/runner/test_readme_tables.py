@@ -135,3 +135,13 @@ def test_benchmark_tables_match_the_current_code(capsys):
     code = main(["bench", "docs", "--check", "--only", "run-and-step,terms-all"])
     out = capsys.readouterr().out
     assert code == 0, out
+
+
+def test_bench_docs_refuses_bad_options_before_running_anything(capsys):
+    """`bench docs` (alias `bench readme`): an unknown table or --exact without --check is exit 2."""
+    assert main(["bench", "readme", "--check", "--only", "xyz"]) == 2
+    assert "unknown table(s) xyz; the tables are terms-all, run-and-step, refine" in capsys.readouterr().err
+    assert main(["bench", "docs", "--exact", "--only", "terms-all"]) == 2
+    assert "--exact compares; it goes with --check" in capsys.readouterr().err
+    assert main(["bench", "docs", "--help"]) == 0
+    assert "%%" not in capsys.readouterr().out
