@@ -42,8 +42,8 @@ from solver.problem import parse_terms
 
 
 def register(sub) -> None:
-    """Add `bench` (run-and-step, refine, readme, orient, scaling, contacts) to the `dynsplines` parser."""
-    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, readme, orient, scaling, contacts")
+    """Add `bench` (run-and-step, refine, docs, orient, scaling, contacts) to the `dynsplines` parser."""
+    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, docs, orient, scaling, contacts")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
     r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip")

@@ -169,11 +169,11 @@ def test_a_swing_the_path_next_to_a_keyframe_keeps_on_the_floor_is_excused(toy):
 
 @pytest.mark.slow
 def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
-    from runner.run import contact_summary_rows
     from runner.console import summary_table
     from runner.mocap.reference import load_bvh_reference
     from runner.paths import MODELS
     from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+    from runner.run import contact_summary_rows
     from solver.contacts import reference_contacts
     from solver.frames import FrameSet
     from solver.metrics import path_metrics
