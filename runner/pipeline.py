@@ -32,6 +32,7 @@ from solver.contacts import reference_contacts
 from solver.errors import InputError
 from solver.keyframe_file import read_keyframes, write_keyframes
 from solver.layout import StateLayout
+from solver.model import check_scene
 from solver.quadrature import DEFAULT_RATE
 from solver.solve import SolveOptions
 
@@ -94,20 +95,85 @@ def default_out_dir(clip) -> Path:
     return Path("renders") / Path(clip).stem
 
 
+@dataclass(frozen=True)
+class ClipKeys:
+    """How a clip becomes a keyframe file (`write_clip_keyframes`): `dynsplines mocap`, `batch` and
+    `keyframes-from-bvh` alike.
+
+    Attributes:
+        scene: "auto" (a floor and boxes fitted to where the clip's feet rest, written to `scene_out`)
+            or a scene MJCF. figure: the figure's MJCF. root_scale: "legs" or a number (`load_bvh_reference`).
+        keys: "every" or "contacts". every: [s] key spacing (None: 0.25 with "every", no limit with
+            "contacts"). partial: the middle keyframe fixes only the root and the legs.
+        extremes: with "every", also key the root's highest and lowest frames.
+        command: the command line recorded in the file's "source".
+    """
+
+    scene: str | os.PathLike = AUTO
+    figure: str | os.PathLike = FIGURE
+    root_scale: float | str = ROOT_SCALE_LEGS
+    keys: str = "every"
+    every: float | None = None
+    partial: bool = False
+    extremes: bool = True
+    command: str = ""
+
+
+#: the stages of `write_clip_keyframes`, for a progress bar
+CLIP_STAGES = ("retargeting (and fitting the scene)", "contacts", "keyframes", "writing")
+
+
+def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, progress=None):
+    """A clip's scene (given or fitted), its retargeted reference, its contacts and keyframes picked
+    from it (`pick_keyframes`), written as the keyframe file `out` (with the contacts and a "source"
+    naming the clip relative to the file, the command and the root scale). `progress(i, stage)` is
+    called as each of CLIP_STAGES finishes (None: silent).
+
+    Returns:
+        (clip_scene result, contacts, the keyframes written).
+    Raises:
+        InputError: a missing or malformed clip, another skeleton, a scene without the figure or a floor,
+            an unwritable file.
+    """
+    def done(i):
+        if progress is not None:
+            progress(i + 1, CLIP_STAGES[i])
+
+    cs = clip_scene(clip, k.scene, k.figure, scene_out, k.root_scale)
+    ref, model = cs.reference, cs.model
+    check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
+    done(0)
+    contacts = name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time))
+    done(1)
+    every = k.every if (k.every is not None or k.keys == "contacts") else 0.25
+    keyframes = pick_keyframes(ref, model, contacts, keys=k.keys, every=every, partial=k.partial, extremes=k.extremes)
+    done(2)
+    source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
+              "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
+    write_keyframes(out, keyframes, StateLayout.from_model(model), model=k.figure, scene=cs.scene_path,
+                    source=source, contacts=contacts)
+    done(3)
+    return cs, contacts, keyframes
+
+
 def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=print):
-    """Steps 1-3 of `process_clip`: the clip's scene (given or fitted), its retargeted reference, its
-    contacts, and keyframes picked from it, written to paths["keyframes"] (and the fitted scene to
-    paths["scene"] with --scene auto) and read back as `dynsplines animate FILE` reads them.
+    """Steps 1-3 of `process_clip`: `write_clip_keyframes` to paths["keyframes"] (the fitted scene to
+    paths["scene"] with --scene auto), read back as `dynsplines animate FILE` reads it.
 
     Returns:
         (clip_scene result, reference, model, keyframes, keyframe-file info with the contacts).
     Raises:
         InputError: as `process_clip`.
     """
-    # 1-2: scene, reference, contacts
-    cs = clip_scene(clip, o.scene, o.figure, paths.get("scene", out_dir / f"{clip.stem}.scene.xml"), o.root_scale)
+    k = ClipKeys(scene=o.scene, figure=o.figure, root_scale=o.root_scale, keys=o.keys, every=o.every,
+                 partial=o.partial, command=o.command)
+    from runner.console import Steps
+
+    with Steps(f"keyframes from {clip.name}", len(CLIP_STAGES), o.quiet, unit=" stages") as bar:
+        cs, contacts, _ = write_clip_keyframes(clip, paths["keyframes"], k,
+                                               paths.get("scene", out_dir / f"{clip.stem}.scene.xml"),
+                                               progress=lambda i, stage: bar.update(i, note=stage))
     ref, model = cs.reference, cs.model
-    contacts = name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time))
     say(f"dynsplines mocap: {clip} -> {ref.count} frames at {1 / ref.frame_time:.4g} Hz ({ref.duration:.2f} s), "
         f"{len(contacts)} contacts; scene {'fitted: ' if cs.fitted is not None else ''}{display_path(cs.scene_path)}")
     if cs.fitted is not None:
@@ -115,16 +181,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
             say(f"  fitted box{i}: top {100 * (c[2] + h[2]):.1f} cm, x {100 * (c[0] - h[0]):.1f} .. "
                 f"{100 * (c[0] + h[0]):.1f} cm, y {100 * (c[1] - h[1]):.1f} .. {100 * (c[1] + h[1]):.1f} cm; "
                 f"floor {100 * cs.fitted.floor_z:.1f} cm")
-
-    # 3: keyframes, written and read back (what `dynsplines animate FILE` reads)
-    layout = StateLayout.from_model(model)
-    every = o.every if (o.every is not None or o.keys == "contacts") else 0.25
-    kf0 = pick_keyframes(ref, model, contacts, keys=o.keys, every=every, partial=o.partial)
-    source = {"clip": Path(os.path.relpath(clip.resolve(), out_dir.resolve())).as_posix(),
-              "command": o.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
-    write_keyframes(paths["keyframes"], kf0, layout, model=o.figure, scene=cs.scene_path, source=source,
-                    contacts=contacts)
-    keyframes, info = read_keyframes(paths["keyframes"], layout)
+    keyframes, info = read_keyframes(paths["keyframes"], StateLayout.from_model(model))
     say(f"  wrote {display_path(paths['keyframes'])}: {keyframes.count} keyframes ({int(keyframes.is_partial.sum())} partial) "
         f"at {', '.join(f'{t:.3f}' for t in keyframes.times)} s")
     return cs, ref, model, keyframes, info

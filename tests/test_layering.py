@@ -40,3 +40,23 @@ def test_import_contracts():
 def test_ruff():
     r = _run(_tool("ruff"), "check", "--no-cache", "solver", "runner", "tests")
     assert r.returncode == 0, f"ruff check found problems:\n{r.stdout}\n{r.stderr}"
+
+
+#: where the structure's rules hold function length to one screen: the orchestration a reader follows
+#: (the solve's outer loop, the one run, the commands' argument glue)
+SHORT_FUNCTIONS = ("runner/run.py", "runner/commands/*.py")
+MAX_FUNCTION_LINES = 80
+
+
+def test_orchestration_functions_fit_on_a_screen():
+    import ast
+
+    long = []
+    for pattern in SHORT_FUNCTIONS:
+        for path in sorted(REPO.glob(pattern)):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    n = node.end_lineno - node.lineno + 1
+                    if n > MAX_FUNCTION_LINES:
+                        long.append(f"{path.relative_to(REPO)}:{node.lineno} {node.name} ({n} lines)")
+    assert not long, "functions over 80 lines: " + ", ".join(long)

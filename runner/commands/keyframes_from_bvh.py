@@ -9,28 +9,22 @@ The written file records the command in "source" and the clip's contacts in "con
 from __future__ import annotations
 
 import argparse
-import os
 import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from runner.commands.mocap import add_root_scale_argument
+from runner.console import Steps
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
-from runner.mocap.keyframes import KEY_CHOICES, pick_keyframes
+from runner.mocap.keyframes import KEY_CHOICES
 from runner.mocap.reference import ROOT_SCALE_LEGS
-from runner.mocap.scene import AUTO, clip_scene, name_surfaces
+from runner.mocap.scene import AUTO
 from runner.parser import OneLineParser
-from runner.paths import MODELS
-from solver.contacts import reference_contacts
+from runner.pipeline import CLIP_STAGES, FIGURE, ClipKeys, write_clip_keyframes
 from solver.errors import InputError
-from solver.keyframe_file import write_keyframes
-from solver.layout import StateLayout
-from solver.model import check_scene
 
 PROG = "dynsplines keyframes-from-bvh"
-#: the figure every scene includes
-FIGURE = MODELS / "humanoid39.xml"
 
 
 def fitted_scene_path(out: Path) -> Path:
@@ -61,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "free for the optimizer); default: full keyframes")
     p.add_argument("--no-root-extremes", action="store_true",
                    help="with --keys every: do not add keys at the root's highest and lowest frames")
-    p.add_argument("--quiet", action="store_true", help="no progress; the 'wrote ...' line is still printed")
+    p.add_argument("--quiet", action="store_true", help="no progress bar; the 'wrote ...' line is still printed")
     add_root_scale_argument(p)
 
 
@@ -96,24 +90,15 @@ def run(args, command: str | None = None) -> int:
             [`command_line(args)`].
     """
     out = Path(args.out)
-    figure = Path(args.model) if args.model else FIGURE
     if not out.parent.is_dir():
         raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first")
-    cs = clip_scene(args.clip, args.scene, figure, fitted_scene_path(out), args.root_scale)
-    reference, model = cs.reference, cs.model
-    check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
-    contacts = name_surfaces(model, reference, reference_contacts(model, reference.qpos, reference.frame_time))
-    every = args.every if (args.every is not None or args.keys == "contacts") else 0.25
-    keyframes = pick_keyframes(reference, model, contacts, keys=args.keys, every=every, partial=args.partial,
-                               extremes=not args.no_root_extremes)
-    source = {
-        "clip": _relpath(Path(args.clip), out.parent),
-        "command": command or command_line(args),
-        "hand_edits": "none",
-        "root_scale": round(reference.root_scale, 6),
-    }
-    write_keyframes(out, keyframes, StateLayout.from_model(model), model=figure, scene=cs.scene_path,
-                    source=source, contacts=contacts)
+    k = ClipKeys(scene=args.scene, figure=Path(args.model) if args.model else FIGURE, root_scale=args.root_scale,
+                 keys=args.keys, every=args.every, partial=args.partial, extremes=not args.no_root_extremes,
+                 command=command or command_line(args))
+    with Steps(f"keyframes from {Path(args.clip).name}", len(CLIP_STAGES), args.quiet, unit=" stages") as bar:
+        cs, contacts, keyframes = write_clip_keyframes(Path(args.clip), out, k, fitted_scene_path(out),
+                                                       progress=lambda i, stage: bar.update(i, note=stage))
+    reference = cs.reference
     scene_note = f"fitted scene {cs.scene_path}" if cs.fitted is not None else f"scene {cs.scene_path}"
     print(
         f"wrote {args.out}: {keyframes.count} keyframes at {', '.join(f'{t:.3f}' for t in keyframes.times)} s "
@@ -148,7 +133,3 @@ def keyframes_from_bvh_main(argv: Sequence[str] | None = None, prog: str | None 
             raise
         print(f"dynsplines: error: {e}", file=sys.stderr)
         return EXIT_INPUT
-
-
-def _relpath(path: Path, start: Path) -> str:
-    return Path(os.path.relpath(path.resolve(), start.resolve())).as_posix()

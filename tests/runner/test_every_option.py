@@ -209,11 +209,61 @@ def test_mocap_help_shows_its_own_defaults(capsys, monkeypatch):
     assert "keyframe file name" not in text and "run_and_step" not in text
 
 
+@pytest.fixture(scope="module")
+def saved_npz(tmp_path_factory):
+    """A saved path of a short run-and-step solve."""
+    out = tmp_path_factory.mktemp("saved") / "p.npz"
+    assert main(["run-and-step", "--no-render", "--quiet", "--no-summary", "--subdivision", "none", "--max-evals", "5",
+                 "--save-path", str(out)]) == 0
+    return out
+
+
+def test_the_other_commands_read_every_option(tmp_path, reads, monkeypatch, saved_npz):
+    """keyframes-from-bvh, export, orient, fig10 and view, run for real (view's server replaced)."""
+    import runner.viewer.server as server
+
+    monkeypatch.setattr(server, "serve", lambda assets, port, ready=None: None)
+    clip = edit_bvh(CLIP, tmp_path / "short.bvh", seconds=0.6)
+    runs = {
+        "keyframes-from-bvh": [["keyframes-from-bvh", clip, "--out", tmp_path / "k.keyframes.json", "--every", "0.3",
+                                "--keys", "every", "--scene", "auto", "--model", MODELS / "humanoid39.xml", "--partial",
+                                "--no-root-extremes", "--quiet", "--root-scale", "1"]],
+        "export": [["export", saved_npz, "--to", tmp_path / "e.bvh", "--fps", "24", "--which", "plain", "--quiet"]],
+        "orient": [["orient", MODELS / "orient_example.json", "--out", tmp_path / "o.npz", "--subdivision", "adaptive",
+                    "--per-segment", "2", "--tol", "1e-2", "--max-frames", "30", "--plot", tmp_path / "o.png", "--quiet"],
+                   ["orient", MODELS / "orient_example.json", "--out", tmp_path / "o2.npz", "--rounds", "1",
+                    "--form", "paper", "--rate", "200", "--quiet"]],
+        "fig10": [["fig10", "--out", tmp_path / "f.png"]],
+        "view": [["view", saved_npz, "--port", "0"]],
+    }
+    for command, variants in runs.items():
+        seen = set()
+        for argv in variants:
+            code, r = reads(argv)
+            assert code == 0, argv
+            seen |= r
+        check(option_dests([command]), seen, command)
+
+
+@pytest.mark.parametrize("bench", ["run-and-step", "refine", "docs", "orient", "scaling", "contacts"])
+def test_bench_options_are_read_by_their_code(bench):
+    """The benchmarks run for minutes, so their options are checked in the source: every option's
+    `args.<dest>` appears in the benchmark commands' code (the benchmarks themselves are run by hand and
+    by the e2e tests that time them)."""
+    import inspect
+
+    import runner.commands.bench as bench_mod
+    import runner.commands.bench_contacts as contacts_mod
+
+    source = inspect.getsource(bench_mod) + inspect.getsource(contacts_mod)
+    unread = sorted(d for d in option_dests(["bench", bench]) if f"args.{d}" not in source)
+    assert not unread, f"`dynsplines bench {bench}` never reads option(s) {unread}"
+
+
 def test_every_subcommand_is_walked():
-    """The tests above cover the commands that take the figure's options; a new subcommand must be
-    added to them or to the list of the others (each of which has its own option tests)."""
+    """The tests above cover every subcommand; a new one must be added to them."""
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    covered = {"animate", "run-and-step", "mocap", "batch"}
-    elsewhere = {"keyframes-from-bvh", "export", "view", "bench", "orient", "fig10"}
-    assert set(sub.choices) == covered | elsewhere, Path(__file__).name
+    covered = {"animate", "run-and-step", "mocap", "batch", "keyframes-from-bvh", "export", "view", "bench", "orient",
+               "fig10"}
+    assert set(sub.choices) == covered, Path(__file__).name
