@@ -54,3 +54,30 @@ def test_missing_field_folder_and_not_a_zip(tmp_path):
     (tmp_path / "t.npz").write_text("hello")
     with pytest.raises(InputError, match="not a zip archive"):
         load_saved_path(tmp_path / "t.npz")
+
+
+def test_saved_keyframes_are_the_poses_the_path_meets(tmp_path):
+    """A keyframe file may give a joint's quaternion as q or -q (the same rotation); the saved `keyframes`
+    are as the path meets them, so `frames` at a keyframe time equal `keyframes` where the mask fixes a
+    component, sign included (a natural spline through the frames evaluated independently with scipy)."""
+    from scipy.interpolate import make_interp_spline
+
+    from runner.cli import main
+    from runner.paths import MODELS
+
+    doc = json.loads((MODELS / "run_and_step.keyframes.json").read_text())
+    doc["scene"] = str(MODELS / "run_and_step.xml")
+    doc["model"] = str(MODELS / "humanoid39.xml")
+    doc.pop("source", None)  # no reference clip: faster, and beside the point
+    for joint in ("l_knee", "r_hip"):  # flip the sign of two joints of keyframe 2
+        doc["keyframes"][2]["joints"][joint] = [-v for v in doc["keyframes"][2]["joints"][joint]]
+    kf = tmp_path / "flipped.keyframes.json"
+    kf.write_text(json.dumps(doc))
+    out = tmp_path / "p.npz"
+    assert main(["animate", str(kf), "--no-render", "--quiet", "--no-summary", "--subdivision", "none",
+                 "--max-evals", "3", "--save-path", str(out)]) == 0
+    z = np.load(out)
+    path = make_interp_spline(z["frame_times"], z["frames"], k=3, bc_type="natural")(z["keyframe_times"])
+    fixed = z["keyframe_mask"]
+    assert np.abs(path[fixed] - z["keyframes"][fixed]).max() < 1e-9
+    assert np.isnan(z["keyframes"][~fixed]).all()
