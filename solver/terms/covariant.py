@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.terms.base import Term, TermEval
+from solver.terms.base import Residual, Term, TermEval
 
 
 class CovariantAcceleration(Term):
@@ -45,6 +45,29 @@ class CovariantAcceleration(Term):
         dY[:, self.idx] = 2.0 * (q * r * r - q2 * r)
         dY2[:, self.lin] = 2.0 * y2
         return TermEval(f, dY=dY, dY2=dY2)
+
+    def residual(self, ctx) -> Residual:
+        """r (n, 4 s + l): per quaternion slot the covariant acceleration q'' - q a/b (a = q''.q,
+        b = q.q) [1/s^2], then the linear components' y'' [m/s^2] (f = |r|^2, as |q'' - q a/b|^2 =
+        q''.q'' - a^2/b). Dense blocks: dr/dq'' = I - q q^T/b, dr/dq = -(a/b) I - q (q''/b - 2 a q/b^2)^T,
+        d y''/d y'' = I."""
+        Y, Y2 = ctx.Y, ctx.Y2
+        n, nq = Y.shape
+        s, lin = self.idx.shape[0], self.lin
+        q, q2 = Y[:, self.idx], Y2[:, self.idx]  # (n, s, 4)
+        a = np.einsum("nsi,nsi->ns", q2, q)[..., None, None]
+        b = np.einsum("nsi,nsi->ns", q, q)[..., None, None]
+        qc, q2c = q[..., :, None], q2[..., :, None]  # columns (n, s, 4, 1)
+        eye = np.eye(4)
+        dq2 = eye - qc * q[..., None, :] / b  # (n, s, 4, 4)
+        dq = -(a / b) * eye - qc * (q2[..., None, :] / b - 2.0 * a * q[..., None, :] / (b * b))
+        r = np.concatenate([(q2c - qc * a / b)[..., 0].reshape(n, 4 * s), Y2[:, lin]], axis=1)
+        J0, J2 = np.zeros((n, 4 * s + len(lin), nq)), np.zeros((n, 4 * s + len(lin), nq))
+        for k, slot in enumerate(self.idx):
+            J0[:, 4 * k:4 * k + 4, slot] = dq[:, k]
+            J2[:, 4 * k:4 * k + 4, slot] = dq2[:, k]
+        J2[:, 4 * s + np.arange(len(lin)), lin] = 1.0
+        return Residual(r, blocks=(J0, None, J2))
 
 
 class NormalizedCovariantAcceleration(Term):
@@ -88,6 +111,11 @@ class NormalizedCovariantAcceleration(Term):
     def __init__(self, quat_slots: np.ndarray):
         self.idx = np.asarray(quat_slots, dtype=int).reshape(-1, 4)
         self._single = self.idx.shape[0] == 1 and np.array_equal(self.idx[0], np.arange(4))
+
+    @property
+    def single_quaternion(self) -> bool:
+        """True if the term's one quaternion fills qpos 0-3 (the orientation problem)."""
+        return self._single
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         single = self._single and Y.shape[1] == 4  # the single-body problem: no gather/scatter
