@@ -288,3 +288,56 @@ def test_violations_from_the_vectorized_positions_match_mujocos(toy):
     loop = [term.violation(Y, t) for term in terms] + [float(pen.depths(Y, margin=0.05).max())]
     assert all(v > 0 for v in loop), loop
     np.testing.assert_allclose(dense, loop, rtol=1e-12, atol=1e-15)
+
+
+def test_clearance_matches_mujoco_point_by_point(toy):
+    """`Clearance` (its engine's vectorized pass through a `PathContext`) against MuJoCo point by point:
+    heights from `mj_kinematics` positions (`SiteMotion.positions`), the gradient through `mj_jacSite`
+    (`SiteMotion.jacobians`) and `TangentMap.pullback`; values to 1e-12 m^2, gradients to 1e-9 of their
+    largest entry. Swings of two sites and a flight."""
+    from solver.terms.clearance import Clearance
+    from solver.terms.contact_schedule import SiteMotion
+
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(5)
+    n = 50
+    t = np.linspace(0, 1, n)
+    Y = random_qpos(rng, layout, n, spread=0.2, scale=(1, 1))
+    Y[:, 2] = 0.90 + 0.03 * rng.normal(size=n)
+    Y[::4, 0] = 1.5  # over the step box
+    sched = (Contact("l_heel", 0.0, 0.1), Contact("l_heel", 0.9, 1.0), Contact("r_toe", 0.0, 0.3),
+             Contact("r_toe", 0.5, 1.0))
+    term = Clearance(toy, sched)
+    ev = term.evaluate(t, Y, None, None)
+    kin = SiteMotion(toy, term.kin.names)
+    p, J = kin.jacobians(Y)
+    h, nrm = term.below.height(p)
+    Us, Uf, Bf, Bs = term.split_windows(t)
+    f, g_p = np.zeros(n), np.zeros(p.shape)
+    for U, band in ((Us, Bs), (np.broadcast_to(Uf[:, None], Us.shape), Bf[:, None])):
+        depth = np.maximum(0.0, band - h)
+        f += (U * depth * depth).sum(1)
+        g_p -= (2.0 * U * depth)[..., None] * nrm
+    dY = kin.tmap.pullback(Y, np.einsum("nkij,nki->nj", J, g_p))
+    assert np.count_nonzero(f) >= 4 and np.any(dY != 0)
+    np.testing.assert_allclose(ev.f, f, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ev.dY, dY, rtol=0, atol=1e-9 * np.abs(dY).max())
+
+
+def test_torque_and_root_terms_match_the_mujoco_backend(toy):
+    """The inverse-dynamics terms on their one path, with the vectorized engine and with MuJoCo's
+    (`mj_inverse` values, `mjd_inverseFD` gradients: forward differences, ~1e-6 relative): values to
+    1e-9 relative, gradients to 1e-4 of their largest entry."""
+    from solver.terms.dynamics import JointTorque, RootResidual
+
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(8)
+    Y = random_qpos(rng, layout, 5, spread=0.3)
+    Y[:, 2] = 0.97
+    Y1, Y2 = rng.normal(size=Y.shape), rng.normal(size=Y.shape)
+    for cls in (JointTorque, RootResidual):
+        a, b = cls(toy).evaluate(None, Y, Y1, Y2), cls(toy, backend="mujoco").evaluate(None, Y, Y1, Y2)
+        assert np.any(b.f > 0)
+        np.testing.assert_allclose(a.f, b.f, rtol=1e-9, atol=0)
+        for x, y in ((a.dY, b.dY), (a.dY1, b.dY1), (a.dY2, b.dY2)):
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-4 * np.abs(y).max())
