@@ -6,7 +6,7 @@ velocities (paper appendix A eq. 13 and 19) and the inverse dynamics (appendix A
 `PathContext` holds the path of one evaluation and computes each engine's forward pass once, lazily,
 on the first term that asks for it; the terms leave their gradients in the engine's variables
 (`EngineGradient`), and the objective sums those of one engine and runs its reverse pass once
-(docs/architecture.md, "terms").
+(docs/architecture.md, "Objective terms").
 
 An engine is any object with this interface (`solver.kinematic_tree.SiteKinematics`,
 `solver.inverse_dynamics.InverseDynamics`, `solver.inverse_dynamics_mujoco.MujocoInverseDynamics`,
