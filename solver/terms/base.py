@@ -68,6 +68,15 @@ class Residual:
             return self.pull(g)
         return tuple(None if J is None else np.einsum("nm,nmq->nq", g, J) for J in self.blocks)
 
+    def jvp(self, dY: np.ndarray | None, dY1: np.ndarray | None = None, dY2: np.ndarray | None = None) -> np.ndarray:
+        """(n, m) J d: the change of r along a direction d = (dY, dY1, dY2) (each (n, nq) or None = 0),
+        through the dense blocks (`jacobian`: for a term giving products only, m of them first)."""
+        out = np.zeros(self.r.shape)
+        for J, d in zip(self.jacobian(), (dY, dY1, dY2), strict=True):
+            if J is not None and d is not None:
+                out += np.einsum("nmq,nq->nm", J, d)
+        return out
+
     def jacobian(self) -> tuple:
         """(J0, J1, J2) dense per-point blocks (n, m, nq) each (None where r does not depend on that
         argument): the given `blocks`, or m vector-Jacobian products with unit vectors."""

@@ -7,7 +7,15 @@ import pytest
 
 from solver.layout import StateLayout
 from solver.path_context import PathContext
-from solver.terms import CovariantAcceleration, Hyperextension, Penetration, UnitQuaternion
+from solver.terms import (
+    CovariantAcceleration,
+    Hyperextension,
+    NormalizedCovariantAcceleration,
+    Penetration,
+    Term,
+    TermEval,
+    UnitQuaternion,
+)
 from solver.terms.clearance import Clearance
 from solver.terms.contact import Planted
 from solver.terms.contact_wrench import FrictionCone
@@ -46,6 +54,7 @@ CASES = {
                                             Contact("r_toe", 0.0, 0.3, "step")], mu=0.3, ramp=0.2), 0.95),
     "unit": (lambda m, lay: UnitQuaternion(lay.quat_slots), 1.0),
     "smooth": (lambda m, lay: CovariantAcceleration(lay.quat_slots, lay.linear_index), 1.0),
+    "covariant_normalized": (lambda m, lay: NormalizedCovariantAcceleration(lay.quat_slots), 1.0),
     "bending": (lambda m, lay: Hyperextension(lay, HINGES, tolerance=-0.3), 1.0),
     "torque": (lambda m, lay: JointTorque(m, weights={"l_knee": 2.0}), 1.0),
     "root": (lambda m, lay: RootResidual(m), 0.98),
@@ -92,12 +101,18 @@ def test_residual_squares_to_the_integrand_and_its_jacobian_matches_central_diff
             assert p is None or not np.any(p), f"{name}: d r / d Y{k} has no block but a nonzero product"
             continue
         np.testing.assert_allclose(np.einsum("nm,nmq->nq", g, J), p, rtol=1e-10, atol=1e-12 * np.abs(p).max())
+    assert float((g * res.jvp(*D)).sum()) == pytest.approx(an, rel=1e-10, abs=1e-14)  # g.(J D) = (J^T g).D
 
 
 def test_a_term_that_is_not_a_sum_of_squares_has_no_residual(toy_model):
-    """The default: `Term.residual` is None (the normalized covariant acceleration gives none)."""
-    from solver.terms import NormalizedCovariantAcceleration
+    """The default: `Term.residual` is None (a term that gives only its integrand)."""
+
+    class Speed(Term):
+        name, needs = "speed", (0, 1)
+
+        def evaluate(self, t, Y, Y1, Y2, grad=True):
+            return TermEval(np.abs(Y1).sum(1))
 
     layout = StateLayout.from_model(toy_model)
     t, Y, Y1, Y2 = _path(layout, 1, 1.0)
-    assert NormalizedCovariantAcceleration(layout.quat_slots).residual(PathContext(t, Y, Y1, Y2)) is None
+    assert Speed().residual(PathContext(t, Y, Y1, Y2)) is None
