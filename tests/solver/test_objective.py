@@ -167,3 +167,22 @@ def test_fused_orientation_objective_matches_the_two_terms():
         assert abs(a.E - b.E) <= 1e-13 * abs(b.E)
         assert a.integrals == pytest.approx(b.integrals, rel=1e-13)
         np.testing.assert_allclose(a.grad, b.grad, rtol=1e-12, atol=1e-12 * np.abs(b.grad).max())
+
+
+class Held(Value):
+    """A term that keeps something per quadrature point (`Term.fixed_points`)."""
+
+    name, fixed_points = "held", True
+
+
+def test_the_objective_reads_terms_through_their_declared_interface():
+    """`needs` is the union of the terms' (sorted), `blame` names the non-finite term (the gradient of
+    a path where only one is NaN), and Gauss quadrature refuses a term with `fixed_points`."""
+    obj = Objective([Value(), Wiggly(), Poison()], [1.0, 1.0, 1.0], 0.0, 1.0, rate=20.0)
+    assert obj.needs == (0, 1, 2)
+    basis = obj.basis(np.array([0.0, 1.0]))
+    Y = np.zeros((len(basis.t), 1))
+    assert obj.blame(basis, Y, Y, Y) == "poison"
+    assert Objective([Value()], [1.0], 0.0, 1.0, quadrature="gauss").needs == (0,)
+    with pytest.raises(InputError, match="'held' keeps per-point state"):
+        Objective([Held()], [1.0], 0.0, 1.0, quadrature="gauss")
