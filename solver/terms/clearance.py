@@ -84,6 +84,8 @@ class Clearance(Term):
             None: no lift, the band is c_f). Only with the default c_f (flight_clearance None).
         sites: the sites the term looks after (default the four contact sites).
         t_span: see `Planted`.
+        engine: the engine shared with the other terms (tracking `sites`); None: one of its own
+            (`solver.path_context.site_engine`, positions only).
     Raises:
         InputError: bad contact, no surfaces, bad parameters.
     """

@@ -43,7 +43,10 @@ second derivatives of p: because d^2 p / dY_i dY_j is symmetric,
 
 with Jdot = dJ/dt along qvel = B Y' (MuJoCo's `mj_jacDot`, exact, no finite differences) and Bdot the
 time derivative of B (on each quaternion block B = 2 G(q)/s, s = q.q:
-Bdot = 2 G(q')/s - 4 (q.q') G(q)/s^2). `SiteMotion` does this.
+Bdot = 2 G(q')/s - 4 (q.q') G(q)/s^2). The term reads v and pulls its gradient back through the
+shared engine's vectorized forward and reverse passes (`solver.path_context`: the velocity of the
+site's point of its body, appendix A eq. 19); `SiteMotion` computes the same with MuJoCo point by
+point, the tests' reference.
 
 Support surfaces. A plane supports on its free side; a box on its top face (the face whose outward
 normal points most upward), over its footprint. With `surface=""` the support is chosen per point:
@@ -81,10 +84,11 @@ __all__ = ["CONTACT_SITES", "Planted", "SiteMotion", "SupportSurfaces", "check_c
 class Planted(Term):
     """f = sum over contacts of w(t) ((h - h0)^2 + tau^2 |v_t|^2) [m^2]: feet on their surface, not sliding.
 
-    See the module docstring for the equations. The gradient with respect to Y' is B^T J^T g_v, with
-    respect to Y the site Jacobian for the height plus the second-derivative terms of the velocity
-    (`SiteMotion.pullback`); exact, no finite differences. Only quadrature points inside a contact are
-    computed.
+    See the module docstring for the equations. Site positions and velocities come from the engine's
+    forward pass on the evaluation's `PathContext`; the gradient (with respect to Y: the height's site
+    Jacobian plus the velocity's second-derivative terms; with respect to Y': B^T J^T g_v) from its
+    reverse pass, exact, no finite differences. Only the (point, contact) pairs inside a contact are
+    computed. `residual` gives r with f = |r|^2.
 
     Args:
         model: MjModel of the scene (figure + static planes/boxes).
@@ -96,8 +100,12 @@ class Planted(Term):
         footprint_margin: [m] see `SupportSurfaces`.
         t_span: (t0, t1) [s] of the keyframes: `violation(Y)` without times assumes Y sampled evenly on
             it (how `solve` checks limits).
+        engine: the engine shared with the other terms (`SiteKinematics` or `InverseDynamics`, tracking
+            the contact sites); one without site velocities (MuJoCo's), or None: one of its own
+            (`solver.path_context.site_engine`).
     Raises:
-        InputError: a bad contact (unknown site or surface, start >= end), no surfaces, bad parameters.
+        InputError: a bad contact (unknown site or surface, start >= end), no surfaces, bad parameters,
+            or (with no usable engine given) a figure the vectorized kinematics does not model.
     """
 
     name = "planted"
