@@ -186,3 +186,26 @@ def test_the_objective_reads_terms_through_their_declared_interface():
     assert Objective([Value()], [1.0], 0.0, 1.0, quadrature="gauss").needs == (0,)
     with pytest.raises(InputError, match="'held' keeps per-point state"):
         Objective([Held()], [1.0], 0.0, 1.0, quadrature="gauss")
+
+
+def test_a_term_implements_evaluate_or_evaluate_in():
+    """The base class turns either into the other: `evaluate_in` defaults to `evaluate` on the
+    context's arrays; `evaluate` defaults to `evaluate_in` on a context of its own with the deferred
+    part pulled back; a term with neither says so."""
+    from solver.path_context import PathContext
+
+    class ViaContext(Term):
+        name, needs = "via_context", (0,)
+
+        def evaluate_in(self, ctx, grad=True):
+            return TermEval(2.0 * ctx.Y[:, 0], dY=np.full(ctx.Y.shape, 2.0))
+
+    Y = np.arange(6.0).reshape(3, 2)
+    np.testing.assert_array_equal(ViaContext().evaluate(None, Y, None, None).f, 2.0 * Y[:, 0])
+    np.testing.assert_array_equal(Value().evaluate_in(PathContext(None, Y)).f, Y[:, 0])
+
+    class Neither(Term):
+        name = "neither"
+
+    with pytest.raises(NotImplementedError, match="implements neither evaluate nor evaluate_in"):
+        Neither().evaluate(None, Y, None, None)
