@@ -16,9 +16,11 @@ rotations in place of products of quaternions. Every rotation adjoint is a world
 [delta theta]x R), so the reverse pass of the chain is a subtree sum.
 
 `KinematicTree` is the shared base (the tree's index bookkeeping and the two passes);
-`SiteKinematics` is the engine the contact terms share when no dynamics term is on: the same
-interface as `InverseDynamics` (`forward`, `site_velocities`, `vjp`) without the accelerations and
-forces, about half its cost.
+`SiteKinematics` is the engine the kinematic terms (penetration, planted, clearance) share when no
+dynamics term is on: the same interface as `InverseDynamics` (`solver.path_context`: `forward`,
+`site_velocities`, `vjp`) without the accelerations and forces, about half its cost; without qvel its
+`forward` is the positions alone (eq. 13) and its `vjp` the pose's reverse pass at the rows with a
+gradient.
 """
 from __future__ import annotations
 
@@ -333,8 +335,9 @@ class KinematicTree:
 
 
 class SiteKinematics(KinematicTree):
-    """The sites' positions and velocities along a path and their reverse pass: the engine the contact
-    terms share when no dynamics term needs the forces (`InverseDynamics`' interface, tau all zero).
+    """The sites' positions and velocities along a path and their reverse pass: the engine the kinematic
+    terms share when no dynamics term needs the forces (`InverseDynamics`' interface, tau all zero;
+    positions alone when `forward` gets no qvel).
 
     Args:
         model: MjModel (loaded once by the caller; not modified). sites: site names to track.
