@@ -24,6 +24,7 @@ from solver.model import load_model
 from solver.objective import Evaluation, NonFiniteError, Objective
 from solver.optimize import OptimizeResult, Status
 from solver.orient import OrientResult, orient
+from solver.path_context import PathContext
 from solver.problem import DEFAULT_TERMS, DEFAULT_WEIGHTS, default_limits, figure_objective, parse_terms, term_names
 from solver.solve import Round, Solution, SolveOptions, solve
 from solver.spline import SplineBasis
@@ -33,11 +34,13 @@ from solver.terms import (
     JointTorque,
     NormalizedCovariantAcceleration,
     Penetration,
+    Residual,
     RootResidual,
     Term,
     TermEval,
     UnitQuaternion,
 )
+from solver.terms.registry import TermBuild, TermSpec, register_term, registered_terms, unregister_term
 
 __all__ = [
     # errors
@@ -48,7 +51,9 @@ __all__ = [
     "load_model", "read_keyframes", "write_keyframes", "KeyframeFileInfo",
     # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7)
     "Term", "TermEval", "Penetration", "UnitQuaternion", "Hyperextension", "CovariantAcceleration",
-    "NormalizedCovariantAcceleration", "JointTorque", "RootResidual",
+    "NormalizedCovariantAcceleration", "JointTorque", "RootResidual", "Residual", "PathContext",
+    # the term registry: a new term is usable by name (`animate(..., terms=...)`, `--terms`) once registered
+    "register_term", "unregister_term", "registered_terms", "TermBuild", "TermSpec",
     "Objective", "Evaluation", "figure_objective", "parse_terms", "term_names", "default_limits",
     "DEFAULT_TERMS", "DEFAULT_WEIGHTS",
     # solving (paper fig. 5)

@@ -61,8 +61,9 @@ class InverseDynamics(KinematicTree):
             `mj_inverse` on a random state (a model feature this engine does not model).
     """
 
-    #: the path derivatives `forward` reads (qpos, qvel, qacc)
+    #: the path derivatives `forward` reads (qpos, qvel, qacc), all required (`solver.path_context`)
     needs = (0, 1, 2)
+    required = (0, 1, 2)
 
     def __init__(self, model, sites=()):
         import mujoco
@@ -215,12 +216,14 @@ class InverseDynamics(KinematicTree):
 
         Args:
             res: the result of `forward` at the samples.
-            g_tau: (n, nv) d phi / d tau. g_sites: (n, k, 3) d phi / d site position, or None.
+            g_tau: (n, nv) d phi / d tau, or None (zero). g_sites: (n, k, 3) d phi / d site position, or None.
             g_site_vel: (n, k, 3) d phi / d site velocity (`site_velocities`), or None.
         Returns:
             g_pose (n, nv), g_qvel (n, nv), g_qacc (n, nv). g_qacc = M(q) g_tau (M with armature).
         """
         sv = res.saved
+        if g_tau is None:
+            g_tau = np.zeros(res.tau.shape)
         R, A, com, s, om = sv["R"], sv["A"], sv["com"], sv["s"], sv["om"]
         k, nu, as_, al = sv["k"], sv["nu"], sv["as_"], sv["al"]
         rot, free, rs = self._rot, self._free, self._rs

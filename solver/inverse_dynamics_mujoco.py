@@ -64,8 +64,12 @@ class MujocoInverseDynamics:
         eps: finite-difference step of `mjd_inverseFD`.
     """
 
-    #: the path derivatives `forward` reads (qpos, qvel, qacc)
+    #: the engine interface of `solver.path_context`: reads and requires qpos, qvel, qacc; no site
+    #: velocities; no narrower tangent map
     needs = (0, 1, 2)
+    required = (0, 1, 2)
+    has_site_velocities = False
+    motion_map = None
 
     def __init__(self, model, sites=(), eps: float = 1e-6):
         import mujoco
@@ -100,12 +104,26 @@ class MujocoInverseDynamics:
         self._cache = res
         return res
 
+    def positions(self, qpos: np.ndarray) -> np.ndarray:
+        """(n, k, 3) world positions [m] of the sites at qpos (n, nq), by `mj_kinematics`."""
+        import mujoco
+
+        m, d = self.model, self.data
+        out = np.empty((len(qpos), len(self.site_ids), 3))
+        for i, y in enumerate(qpos):
+            d.qpos[:] = y
+            mujoco.mj_kinematics(m, d)
+            out[i] = d.site_xpos[self.site_ids]
+        return out
+
     def vjp(self, res, g_tau, g_sites=None):
         """See `InverseDynamics.vjp` (DfDq, DfDv, DfDa of `mjd_inverseFD` are transposed Jacobians,
         DfDq[i, j] = d tau_j / d qpos-tangent_i, so the products are DfDq @ g_tau)."""
         import mujoco
 
         m, d = self.model, self.data
+        if g_tau is None:
+            g_tau = np.zeros(res.tau.shape)
         n = g_tau.shape[0]
         Gq, Gv, Ga = (np.zeros((n, self.nv)) for _ in range(3))
         for i in range(n):

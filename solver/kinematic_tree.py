@@ -16,9 +16,11 @@ rotations in place of products of quaternions. Every rotation adjoint is a world
 [delta theta]x R), so the reverse pass of the chain is a subtree sum.
 
 `KinematicTree` is the shared base (the tree's index bookkeeping and the two passes);
-`SiteKinematics` is the engine the contact terms share when no dynamics term is on: the same
-interface as `InverseDynamics` (`forward`, `site_velocities`, `vjp`) without the accelerations and
-forces, about half its cost.
+`SiteKinematics` is the engine the kinematic terms (penetration, planted, clearance) share when no
+dynamics term is on: the same interface as `InverseDynamics` (`solver.path_context`: `forward`,
+`site_velocities`, `vjp`) without the accelerations and forces, about half its cost; without qvel its
+`forward` is the positions alone (eq. 13) and its `vjp` the pose's reverse pass at the rows with a
+gradient.
 """
 from __future__ import annotations
 
@@ -34,6 +36,9 @@ from solver.spatial import cross, mtv, mv, qmat, qmul
 class KinematicTree:
     """Index bookkeeping of a tree of free, ball and welded bodies, and its vectorized kinematic passes.
 
+    The engines built on it (`SiteKinematics`, `solver.inverse_dynamics.InverseDynamics`) have the
+    interface of `solver.path_context` (forward, vjp, site velocities, `positions`).
+
     Args:
         model: MjModel (loaded once by the caller; not modified).
         sites: names of sites whose positions and velocities the passes track.
@@ -43,6 +48,10 @@ class KinematicTree:
         InputError: a body with several joints, a hinge or slide joint, a free joint with a nonzero
             pos (named), an unknown site or a site on a static body.
     """
+
+    #: the engine interface of `solver.path_context`: site velocities are computed; no narrower map
+    has_site_velocities = True
+    motion_map = None
 
     def __init__(self, model, sites=(), prune: bool = False):
         import mujoco
@@ -246,6 +255,11 @@ class KinematicTree:
         pose["ry"], ys = self._site_points(pose["R"], pose["x"])
         return np.ascontiguousarray(ys.transpose(2, 1, 0)), pose
 
+    def positions(self, qpos: np.ndarray) -> np.ndarray:
+        """(n, k, 3) world positions [m] of the tracked sites at qpos (n, nq) (`site_positions` without
+        the saved pose)."""
+        return self.site_positions(qpos)[0]
+
     def site_positions_vjp(self, pose: dict, g_sites: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """Gradient of sum g_sites . site positions with respect to the pose (MuJoCo's tangent
         convention, as `SiteKinematics.vjp`), at the samples `rows` of a `site_positions` call.
@@ -321,8 +335,9 @@ class KinematicTree:
 
 
 class SiteKinematics(KinematicTree):
-    """The sites' positions and velocities along a path and their reverse pass: the engine the contact
-    terms share when no dynamics term needs the forces (`InverseDynamics`' interface, tau all zero).
+    """The sites' positions and velocities along a path and their reverse pass: the engine the kinematic
+    terms share when no dynamics term needs the forces (`InverseDynamics`' interface, tau all zero;
+    positions alone when `forward` gets no qvel).
 
     Args:
         model: MjModel (loaded once by the caller; not modified). sites: site names to track.
@@ -331,8 +346,10 @@ class SiteKinematics(KinematicTree):
             (`mj_kinematics`, `mj_objectVelocity`) at a random state.
     """
 
-    #: the path derivatives `forward` reads (qpos and qvel; qacc is ignored)
+    #: the path derivatives `forward` reads (qpos and qvel; qacc is ignored), and those it cannot do
+    #: without (without qvel: the positions alone, eq. 13)
     needs = (0, 1)
+    required = (0,)
 
     def __init__(self, model, sites=()):
         super().__init__(model, sites, prune=True)  # the figure's four contact sites: 9 of its 20 bodies
@@ -364,24 +381,31 @@ class SiteKinematics(KinematicTree):
         if not err <= 1e-8 * (1.0 + np.abs(qvel).max()):
             raise InputError(f"the analytic site kinematics differs from MuJoCo's by {err:.3g} on this model")
 
-    def forward(self, qpos: np.ndarray, qvel: np.ndarray, qacc: np.ndarray | None = None) -> InverseDynamicsResult:
+    def forward(self, qpos: np.ndarray, qvel: np.ndarray | None, qacc: np.ndarray | None = None) -> InverseDynamicsResult:
         """Site positions and velocities at n samples (the last result is cached, compared by value).
 
         Args:
-            qpos: (n, nq) (quaternions need not be unit). qvel: (n, nv) [m/s, rad/s]. qacc: ignored.
+            qpos: (n, nq) (quaternions need not be unit). qvel: (n, nv) [m/s, rad/s], or None: the
+                positions alone (the forward pass of the pose, eq. 13; no `site_velocities`). qacc: ignored.
         Returns:
-            InverseDynamicsResult with sites (n, k, 3) [m], tau zeros (n, nv), qacc an empty (n, 0).
+            InverseDynamicsResult with sites (n, k, 3) [m], tau zeros (n, nv), qacc an empty (n, 0);
+            qvel an empty (n, 0) without velocities.
         """
         c = self._cache
         empty = np.zeros((qpos.shape[0], 0))
-        if c is not None and c.matches(qpos, qvel, empty):
+        key_v = empty if qvel is None else qvel
+        if c is not None and c.matches(qpos, key_v, empty):
             return c
+        if qvel is None:
+            ys, pose = self.site_positions(qpos)
+            res = InverseDynamicsResult(np.zeros((qpos.shape[0], self.nv)), ys, qpos.copy(), empty, empty, pose)
+            self._cache = res
+            return res
         pose = self._pose(qpos.T)
         vel = self._velocity(pose["R"], pose["A"], qvel.T)
         st = self._sites(pose["R"], pose["x"], vel["nu"], vel["om"])
         saved = {**pose, **vel, **st, "site_vel": np.ascontiguousarray(st["ysd"].transpose(2, 1, 0))}
-        res = InverseDynamicsResult(np.zeros((qpos.shape[0], self.nv)),
-                                    np.ascontiguousarray(st["ys"].transpose(2, 1, 0)),
+        res = InverseDynamicsResult(np.zeros((qpos.shape[0], self.nv)), np.ascontiguousarray(st["ys"].transpose(2, 1, 0)),
                                     qpos.copy(), qvel.copy(), empty, saved)
         self._cache = res
         return res
@@ -400,10 +424,17 @@ class SiteKinematics(KinematicTree):
         Args:
             res: `forward`'s result. g_sites, g_site_vel: (n, k, 3) or None.
         Returns:
-            g_pose (n, nv), g_qvel (n, nv), None (no qacc dependence).
+            g_pose (n, nv), g_qvel (n, nv) (None for a `forward` without qvel), None (no qacc dependence).
         """
         sv = res.saved
         n = res.qpos.shape[0]
+        if "s" not in sv:  # positions only: the pose's reverse pass at the rows with a gradient
+            Gq = np.zeros((n, self.nv))
+            if g_sites is not None:
+                rows = np.flatnonzero(np.any(g_sites != 0, axis=(1, 2)))
+                if rows.size:
+                    Gq[rows] = self.site_positions_vjp(sv, g_sites[rows], rows)
+            return Gq, None, None
         Gq, Gv = np.zeros((self.nv, n)), np.zeros((self.nv, n))
         xbar, nubar, wbar, gth = self._site_adjoints(sv, sv["om"], g_sites, g_site_vel)
         z = np.zeros((3, len(self.bodies), n))

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solver.errors import DynsplinesError, InputError
+from solver.path_context import PathContext
 from solver.quadrature import gauss_times, quadrature_times
 from solver.spline import SplineBasis
 from solver.terms.base import Term, TermEval
@@ -74,7 +75,8 @@ class Objective:
         rate: quadrature points per second [1/s] (uniform quadrature).
         scales: (len(terms),) divisors of each integral (1 unless `renormalize` was called).
         quadrature: one of QUADRATURES. "gauss" needs terms without per-point state (no `prepare`,
-            no deferred gradients: not the inverse-dynamics terms), since its nodes change with the frames.
+            no `Term.fixed_points`: not the contact and inverse-dynamics terms), since its nodes change
+            with the frames.
         points: Gauss-Legendre nodes per spline segment (quadrature "gauss").
         t, h: the uniform quadrature's points (n,) [s] and weight [s]; None with "gauss" (the nodes
             and weights of a frame set are its `basis(knots)`'s t and weights).
@@ -108,7 +110,7 @@ class Objective:
             if not isinstance(self.points, (int, np.integer)) or isinstance(self.points, bool) or self.points < 1:
                 raise InputError(f"Gauss quadrature points per segment must be a whole number >= 1, got {self.points!r}")
             for term in self.terms:
-                if hasattr(term, "evaluate_deferred") or type(term).prepare is not Term.prepare:
+                if term.fixed_points or type(term).prepare is not Term.prepare:
                     raise InputError(f"objective term {term.name!r} keeps per-point state, which Gauss quadrature "
                                      "(nodes moving with the frames) does not support; use quadrature='uniform'")
         if not np.isfinite(self.rate) or self.rate <= 0:
@@ -130,8 +132,8 @@ class Objective:
         # the orientation objective (unit + normalized covariant acceleration of one quaternion filling
         # the state) with Gauss quadrature: one fused pass (`unit_and_normalized`) in `evaluate_path`
         self._fused = (self.quadrature == "gauss" and len(self.terms) == 2
-                       and type(self.terms[0]) is UnitQuaternion and self.terms[0]._single
-                       and type(self.terms[1]) is NormalizedCovariantAcceleration and self.terms[1]._single)
+                       and type(self.terms[0]) is UnitQuaternion and self.terms[0].single_quaternion
+                       and type(self.terms[1]) is NormalizedCovariantAcceleration and self.terms[1].single_quaternion)
 
     @property
     def fused_orientation(self) -> bool:
@@ -142,7 +144,13 @@ class Objective:
 
     @property
     def names(self) -> list[str]:
+        """The terms' names, in order."""
         return [term.name for term in self.terms]
+
+    @property
+    def needs(self) -> tuple[int, ...]:
+        """Which spline derivatives the terms read, sorted: 0 (Y), 1 (Y'), 2 (Y'')."""
+        return self._needs
 
     def basis(self, knots: np.ndarray) -> SplineBasis:
         """The spline matrices for a frame set's knots at this objective's quadrature points (cached)."""
@@ -177,7 +185,7 @@ class Objective:
         if grad:
             G = np.zeros_like(P) if all(a is None for a in acc) else basis.pullback(*acc)
             if not np.all(np.isfinite(G)):
-                raise NonFiniteError(self._blame(basis, Y, Y1, Y2), "gradient")
+                raise NonFiniteError(self.blame(basis, Y, Y1, Y2), "gradient")
         return Evaluation(E, G, integrals)
 
     def evaluate_path(self, basis: SplineBasis, Y, Y1, Y2, grad: bool = True):
@@ -200,7 +208,8 @@ class Objective:
         E = 0.0
         integrals = {}
         acc = [None, None, None]  # dE/dY, dE/dY', dE/dY'' at the quadrature points
-        deferred = {}  # key -> summed deferred gradient (terms sharing an inverse-dynamics engine)
+        deferred = {}  # key -> summed deferred gradient (terms sharing an engine)
+        ctx = PathContext(t, Y, Y1, Y2)  # each engine's forward pass once, for every term that reads it
         terms = list(zip(self.terms, self.weights, self.scales))
         block = max(64, BLOCK_DOUBLES // max(1, Y.shape[1]))
         i = 0
@@ -212,10 +221,7 @@ class Objective:
                 evs = self._blocked(terms[i:j], block, t, Y, Y1, Y2, wq, grad, acc)
             else:
                 term, w = terms[i][:2]
-                if hasattr(term, "evaluate_deferred"):
-                    evs = [term.evaluate_deferred(t, Y, Y1, Y2, grad=grad and w != 0.0)]
-                else:
-                    evs = [term.evaluate(t, Y, Y1, Y2, grad=grad and w != 0.0)]
+                evs = [term.evaluate_in(ctx, grad=grad and w != 0.0)]
             for (term, w, s), ev in zip(terms[i:j], evs):
                 I = float(self.h * ev.f.sum()) if wq is None else float(basis.weights @ ev.f)
                 if not math.isfinite(I):
@@ -320,8 +326,13 @@ class Objective:
     def _stateful_terms(self) -> list[Term]:
         return [term for term in self.terms if type(term).prepare is not Term.prepare]
 
-    def _blame(self, basis: SplineBasis, Y, Y1, Y2) -> str:
-        """The name of the first term whose value or gradient is not finite at (Y, Y', Y'')."""
+    def blame(self, basis: SplineBasis, Y, Y1, Y2) -> str:
+        """The name of the first term whose value or gradient is not finite on a path (to name it in
+        a `NonFiniteError`), or all names joined by "+" if each alone is finite.
+
+        Args:
+            basis: `basis(knots)` of the frame set. Y, Y1, Y2: (n, nq) at basis.t (None if not needed).
+        """
         for term in self.terms:
             ev = term.evaluate(basis.t, Y, Y1, Y2, grad=True)
             if any(g is not None and not np.all(np.isfinite(g)) for g in (ev.f, ev.dY, ev.dY1, ev.dY2)):

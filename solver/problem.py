@@ -7,6 +7,8 @@ are available, torque and root (sec. 6, appendix A). With a contact schedule (is
 during a contact), clearance (swing feet keep 2 cm, every site min(2 cm, g T^2/8) in a flight of length T)
 - both on by default - and cone
 (the root wrench inside the friction cone of the feet in contact; needs the inverse dynamics, "all").
+Every term is registered in `solver.terms.registry` (name, factory, default weight, what it needs); a
+term registered there with `register_term` is accepted here and on the command line like these.
 """
 from __future__ import annotations
 
@@ -17,25 +19,21 @@ from types import MappingProxyType
 import numpy as np
 
 from solver.errors import InputError
-from solver.kinematic_tree import SiteKinematics
-from solver.layout import CONTACT_SITES, StateLayout
+from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.quadrature import DEFAULT_RATE
-from solver.terms import CovariantAcceleration, Hyperextension, Penetration, UnitQuaternion
+from solver.terms.registry import DEFAULT_WEIGHTS, TermBuild, build_term, registered_terms, term_spec
+
+__all__ = ["CONTACT_MARGIN", "CONTACT_PENETRATION_WEIGHT", "CONTACT_TERMS", "CONTACT_TERMS_BY_DEFAULT",
+           "DEFAULT_CONTACT_TERMS", "DEFAULT_LIMITS", "DEFAULT_TERMS", "DEFAULT_WEIGHTS", "MARGIN", "NEAR_KEYFRAME",
+           "Problem", "default_limits", "figure_objective", "figure_problem", "keyframe_conflicts", "make_problem",
+           "parse_terms", "term_names"]
 
 #: The terms used when none are chosen: the geometric terms of the paper's sec. 5.
 DEFAULT_TERMS = ("penetration", "unit", "bending", "smooth")
 
-#: Weight of each term when it is switched on without one (all renormalized, eq. 7, so each starts
-#: at its weight). torque and root at 1: on run-and-step (`--terms all`) that keeps every bound of the
-#: main job and gives RMS root force in flight 20 N against the plain spline's 625 N, RMS joint torque
-#: 80 N m against 103 N m; 0.1 each also meets the acceptance figures but keeps less of the gain
-#: (74 N, 93 N m) and lets the flight grow to 0.49 s (plain spline 0.25 s).
-#: planted and clearance at 10: on run-and-step (127_33, its own contacts) weight 1 with 5 mm rest height
-#: floated planted feet 7.6 mm (capture 2.4) and raised the joint-orientation error to 13.1 deg (plain
-#: 10.2); weight 10 with the 2 mm contact margin: float 3.5 mm, joint error 10.7 deg (README "Contacts").
-DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
-                   "planted": 10.0, "clearance": 10.0, "cone": 1.0}
+#: Weight of each built-in term when it is switched on without one: DEFAULT_WEIGHTS, defined with the
+#: registrations in `solver.terms.registry` (a registered term's own: its `TermSpec.default_weight`).
 
 #: The contact terms: they need a contact schedule. planted and clearance join the defaults when one is
 #: known; cone (inverse dynamics) joins "all".
@@ -52,20 +50,10 @@ DEFAULT_LIMITS = {"penetration": 0.0005, "bending": float(np.radians(1.0)), "uni
                   "planted": 0.02, "clearance": 0.01}
 
 
-def _dynamics_terms():
-    try:
-        from solver.terms import dynamics  # noqa: F401
-    except ImportError:
-        return {}
-    return {"torque": dynamics.JointTorque, "root": dynamics.RootResidual}
-
-
 def term_names() -> list[str]:
-    """Every term name this installation offers (the contact terms need a contact schedule; cone also
-    the inverse dynamics)."""
-    dyn = list(_dynamics_terms())
-    cone = ["cone"] if dyn else []
-    return ["penetration", "unit", "bending", "smooth", *dyn, "planted", "clearance", *cone]
+    """Every registered term name (`solver.terms.registry`), built-ins first; the contact terms need a
+    contact schedule."""
+    return [spec.name for spec in registered_terms()]
 
 
 def _needs_schedule(name: str) -> InputError:
@@ -110,25 +98,24 @@ def parse_terms(spec: str | None, weights: dict[str, float] | None = None, conta
     valid = term_names()
     have = bool(len(contacts or ()))
     if spec is None:
-        chosen = {n: DEFAULT_WEIGHTS[n] for n in DEFAULT_TERMS}
-        if have and CONTACT_TERMS_BY_DEFAULT:
-            chosen.update({n: DEFAULT_WEIGHTS[n] for n in DEFAULT_CONTACT_TERMS})
+        chosen = {t.name: t.default_weight for t in registered_terms()
+                  if t.default and (not t.contacts or (have and CONTACT_TERMS_BY_DEFAULT))}
     else:
-        all_ = [n for n in valid if n not in CONTACT_TERMS or (have and CONTACT_TERMS_BY_DEFAULT)]
+        all_ = [t.name for t in registered_terms() if not t.contacts or (have and CONTACT_TERMS_BY_DEFAULT)]
         names = all_ if spec.strip() == "all" else [s.strip() for s in spec.split(",") if s.strip()]
         chosen = {}
         for n in names:
             if n not in valid:
                 raise InputError(f"unknown objective term {n!r}; valid terms: {', '.join(valid)} (or 'all')")
-            if n in CONTACT_TERMS and not have:
+            if term_spec(n).contacts and not have:
                 raise _needs_schedule(n)
-            chosen[n] = DEFAULT_WEIGHTS.get(n, 1.0)
+            chosen[n] = term_spec(n).default_weight
     if "planted" in chosen and "penetration" in chosen:
         chosen["penetration"] = CONTACT_PENETRATION_WEIGHT
     for n, w in (weights or {}).items():
         if n not in valid:
             raise InputError(f"unknown objective term {n!r} in a weight; valid terms: {', '.join(valid)}")
-        if n in CONTACT_TERMS and not have:
+        if term_spec(n).contacts and not have:
             raise _needs_schedule(n)
         try:
             if isinstance(w, bool):
@@ -170,50 +157,19 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
         InputError: unknown term, a contact term without a schedule, a bad contact, or the scene lacks
             what a term needs (contact sites, surfaces).
     """
-    layout = StateLayout.from_model(model)
     contacts = tuple(contacts or ())
     if margin is None:
         margin = CONTACT_MARGIN if contacts and weights.get("planted", 0) > 0 else MARGIN
-    factories = {
-        "penetration": lambda: Penetration(model, margin=margin),
-        "unit": lambda: UnitQuaternion(layout.quat_slots),
-        "bending": lambda: Hyperextension(layout),
-        "smooth": lambda: _named(CovariantAcceleration(layout.quat_slots, layout.linear_index), "smooth"),
-    }
-    for name in CONTACT_TERMS:
-        if name in weights and not contacts:
-            raise _needs_schedule(name)
-    dyn = _dynamics_terms()
-    engine = None
-    if dyn and any(n in weights for n in ("torque", "root", *CONTACT_TERMS)):
-        from solver.terms.dynamics import make_engine
-
-        # one vectorized forward pass (site positions, velocities, inverse dynamics) at all points,
-        # shared by every term that reads it, and one reverse pass for the sum of their gradients; the
-        # kinematics alone (`SiteKinematics`, about half the cost) when no term reads the forces
-        forces = any(n in weights for n in ("torque", "root", "cone"))
-        engine = make_engine(model) if forces else SiteKinematics(model, CONTACT_SITES)
-        factories["torque"] = lambda: dyn["torque"](model, engine=engine)  # (called only if forces)
-        factories["root"] = lambda: dyn["root"](model, engine=engine)
-        factories["penetration"] = lambda: Penetration(model, margin=margin, engine=engine)
-    if contacts:
-        from solver.terms.clearance import Clearance
-        from solver.terms.contact import Planted
-
-        span = (float(t0), float(t1))
-        factories["planted"] = lambda: Planted(model, contacts, rest_height=margin, t_span=span, engine=engine)
-        factories["clearance"] = lambda: Clearance(model, contacts, t_span=span, engine=engine)
-        if engine is not None:
-            from solver.terms.contact_wrench import FrictionCone
-
-            factories["cone"] = lambda: FrictionCone(model, contacts, engine=engine, t_span=span)
-    terms, w = [], []
-    for name, weight in weights.items():
-        if name not in factories:
-            raise InputError(f"unknown objective term {name!r}; valid terms: {', '.join(factories)}")
-        terms.append(factories[name]())
-        w.append(weight)
-    return Objective(terms, np.array(w), t0, t1, rate)
+    specs = [term_spec(name) for name in weights]
+    for spec in specs:
+        if spec.contacts and not contacts:
+            raise _needs_schedule(spec.name)
+    # one engine (site positions and velocities, and the inverse dynamics if a term reads forces) shared
+    # by every term that reads it: the `PathContext` runs its forward pass once per evaluation and the
+    # objective its reverse pass once for the sum of the terms' gradients
+    build = TermBuild(model, (float(t0), float(t1)), margin, contacts, forces=any(s.forces for s in specs))
+    terms = [build_term(spec, build) for spec in specs]
+    return Objective(terms, np.array([weights[s.name] for s in specs], float), t0, t1, rate)
 
 
 #: [s] `keyframe_conflicts` with a path: a swinging site is also checked this close to each keyframe
@@ -284,13 +240,14 @@ def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 40
 
 
 def default_limits(weights: dict[str, float]) -> tuple:
-    """`SolveOptions.limits` for the chosen terms: ((name, tolerance), ...) from DEFAULT_LIMITS."""
-    return tuple((n, DEFAULT_LIMITS[n]) for n in weights if n in DEFAULT_LIMITS and weights[n] > 0)
-
-
-def _named(term, name):
-    term.name = name
-    return term
+    """`SolveOptions.limits` for the chosen terms: ((name, tolerance), ...) from DEFAULT_LIMITS (a
+    registered term's own: its `TermSpec.limit`)."""
+    out = []
+    for n in weights:
+        limit = DEFAULT_LIMITS.get(n, term_spec(n).limit if n in term_names() else None)
+        if limit is not None and weights[n] > 0:
+            out.append((n, limit))
+    return tuple(out)
 
 
 @dataclass(frozen=True)

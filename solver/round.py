@@ -48,7 +48,7 @@ def optimize_round(objective, frames, options, remaining, should_stop, progress,
     pre = AccelerationPreconditioner(objective, frames, options.radial_weight, options.quat_slots)
     rows = pre.whole_rows()
     radial = pre.whole_radial() if rows is not None else None
-    if radial is not None and len(objective._needs) == 3 and not objective.basis(knots).banded:
+    if radial is not None and len(objective.needs) == 3 and not objective.basis(knots).banded:
         # every free component belongs to whole free frames sharing one factor: fold R^-1 into the
         # spline matrices, Y = B P0 + (B[:, rows] R^-1) Z, and skip the scatter/gather of x and z
         # (the orientation problem; the figure without partial keyframes). With a radial weight the
@@ -97,7 +97,7 @@ def _whole_frames_fun(objective, basis, frames, rows, Rinv, radial):
             GX = Brows.T @ G
             g = Rinv.T @ (GX + (c * np.einsum("ri,ri->r", GX, U))[:, None] * U)
         if not np.all(np.isfinite(g)):
-            name = objective._blame(basis, *Yk)
+            name = objective.blame(basis, *Yk)
             raise Stop(Status.NONFINITE, str(NonFiniteError(name, "gradient")))
         return E, g.ravel()
 
@@ -142,7 +142,7 @@ def _orientation_fun(objective, basis, frames, rows, Rinv, radial):
         g = RinvT @ GX
         if not math.isfinite(float(g.sum())):  # a NaN or inf anywhere makes the sum one
             Y = YT.T
-            name = objective._blame(basis, Y[:n], Y[n:2 * n], Y[2 * n:])
+            name = objective.blame(basis, Y[:n], Y[n:2 * n], Y[2 * n:])
             raise Stop(Status.NONFINITE, str(NonFiniteError(name, "gradient")))
         return E, g.ravel()
 

@@ -1,5 +1,6 @@
-"""Objective terms: each returns its integrand and gradients at the quadrature points (`Term`)."""
-from solver.terms.base import Term, TermEval
+"""Objective terms: each returns its integrand and gradients at the quadrature points (`Term`), and the
+sums of squares their residuals (`Residual`); `solver.terms.registry` names them for the command line."""
+from solver.terms.base import Residual, Term, TermEval
 from solver.terms.bending import Hyperextension
 from solver.terms.covariant import CovariantAcceleration, NormalizedCovariantAcceleration
 from solver.terms.dynamics import JointTorque, RootResidual, make_engine
@@ -7,6 +8,6 @@ from solver.terms.penetration import Penetration
 from solver.terms.unit import UnitQuaternion
 
 __all__ = [
-    "Term", "TermEval", "Hyperextension", "CovariantAcceleration", "NormalizedCovariantAcceleration",
+    "Term", "TermEval", "Residual", "Hyperextension", "CovariantAcceleration", "NormalizedCovariantAcceleration",
     "Penetration", "UnitQuaternion", "JointTorque", "RootResidual", "make_engine",
 ]

@@ -3,13 +3,18 @@
 A term is an integrand f_j(Y, Y', Y'') of the objective E = sum_j lambda_j integral f_j dt (paper eq. 1),
 evaluated at the quadrature points. It returns the per-point values and their gradients with respect
 to Y, Y' and Y'' at the same points; the objective applies quadrature weights, term weights and the
-chain rule through the spline (docs/design.md).
+chain rule through the spline (docs/design.md). A term that is a sum of squares, f = |r|^2, may also
+give its residuals r and their Jacobian (`Term.residual`), which a least-squares method uses
+(Gauss-Newton: Nocedal & Wright, Numerical Optimization, 2nd ed., ch. 10).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from solver.path_context import EngineGradient, PathContext
 
 
 @dataclass
@@ -20,24 +25,76 @@ class TermEval:
         f: (n,) integrand values at the quadrature points (units: the term's docstring).
         dY, dY1, dY2: (n, nq) gradients of f with respect to Y, Y', Y''; None where f does not depend
             on that argument (saves the chain-rule product).
-        deferred: from `evaluate_deferred` only: the rest of the gradient, not yet pulled back to
-            (Y, Y', Y''), with `key`, `scaled(c)`, `plus(other, c)` and `pullback() -> (dY, dY1, dY2)`;
-            the objective sums the deferred gradients with the same key (terms sharing an
-            inverse-dynamics engine) and pulls the sum back once.
+        deferred: from `Term.evaluate_in` only: the part of the gradient left in a shared engine's
+            variables (`EngineGradient`), added to dY, dY1, dY2 by its `pullback`; the objective sums
+            the deferred gradients of one engine and pulls the sum back once.
     """
 
     f: np.ndarray
     dY: np.ndarray | None = None
     dY1: np.ndarray | None = None
     dY2: np.ndarray | None = None
-    deferred: object | None = None
+    deferred: EngineGradient | None = None
+
+    def resolved(self) -> TermEval:
+        """The same evaluation with the deferred part pulled back and added to dY, dY1, dY2."""
+        if self.deferred is None:
+            return self
+        parts = []
+        for own, pulled in zip((self.dY, self.dY1, self.dY2), self.deferred.pullback(), strict=True):
+            parts.append(pulled if own is None else own if pulled is None else own + pulled)
+        return TermEval(self.f, *parts)
+
+
+@dataclass
+class Residual:
+    """Residuals r of a term that is a sum of squares, f = |r|^2 at every point, and their Jacobian.
+
+    Attributes:
+        r: (n, m) residuals at the n quadrature points [sqrt of the term's units].
+        blocks: (J0, J1, J2), each (n, m, nq) or None: dr/dY, dr/dY', dr/dY'' point by point (dense
+            per-point blocks), or None when the term gives products only (`pull`).
+        pull: g (n, m) -> (dY, dY1, dY2), each (n, nq) or None: the vector-Jacobian product
+            sum_i g_i . dr_i / d(Y, Y', Y''), or None when `blocks` are given.
+    """
+
+    r: np.ndarray
+    blocks: tuple | None = None
+    pull: Callable | None = None
+
+    def vjp(self, g: np.ndarray) -> tuple:
+        """(dY, dY1, dY2) = g^T J at each point, each (n, nq) or None; g: (n, m)."""
+        if self.pull is not None:
+            return self.pull(g)
+        return tuple(None if J is None else np.einsum("nm,nmq->nq", g, J) for J in self.blocks)
+
+    def jvp(self, dY: np.ndarray | None, dY1: np.ndarray | None = None, dY2: np.ndarray | None = None) -> np.ndarray:
+        """(n, m) J d: the change of r along a direction d = (dY, dY1, dY2) (each (n, nq) or None = 0),
+        through the dense blocks (`jacobian`: for a term giving products only, m of them first)."""
+        out = np.zeros(self.r.shape)
+        for J, d in zip(self.jacobian(), (dY, dY1, dY2), strict=True):
+            if J is not None and d is not None:
+                out += np.einsum("nmq,nq->nm", J, d)
+        return out
+
+    def jacobian(self) -> tuple:
+        """(J0, J1, J2) dense per-point blocks (n, m, nq) each (None where r does not depend on that
+        argument): the given `blocks`, or m vector-Jacobian products with unit vectors."""
+        if self.blocks is not None:
+            return self.blocks
+        n, m = self.r.shape
+        cols = [self.vjp(np.broadcast_to(np.eye(m)[i], (n, m)).copy()) for i in range(m)]
+        return tuple(None if cols[0][k] is None else np.stack([c[k] for c in cols], axis=1) for k in range(3))
 
 
 class Term:
-    """Base class of objective terms.
+    """Base class of objective terms: the whole interface the objective and the solver use.
 
     Subclasses set `name` (the command-line name, e.g. "penetration") and `units`, and implement
-    `evaluate(t, Y, Y1, Y2, grad)`. `needs` tells the objective which spline derivatives to compute.
+    either `evaluate` (a term computed from the path arrays alone: the default `evaluate_in` calls it)
+    or `evaluate_in` (a term that reads an engine's forward pass through the `PathContext`: the default
+    `evaluate` calls it on a context of its own). `needs` tells the objective which spline derivatives
+    to compute; a term that is a sum of squares may give `residual`.
     """
 
     name: str = "term"
@@ -55,11 +112,21 @@ class Term:
     #: across points or rounds, no deferred gradient): the objective may then evaluate the term on
     #: blocks of points (`solver.objective.BLOCK_DOUBLES`), which keeps a long clip's temporaries in cache.
     pointwise: bool = False
+    #: True if the term keeps something per quadrature point (windows cached for fixed times, a
+    #: round's lagged indicator): it needs the uniform rule's fixed points, not Gauss nodes that move
+    #: with the frames (`solver.objective.Objective` refuses the combination).
+    fixed_points: bool = False
+
+    @property
+    def single_quaternion(self) -> bool:
+        """True if the term acts on one quaternion filling the whole state (qpos indices 0-3): the
+        orientation problem, which `solver.objective` may evaluate in a fused pass. Default False."""
+        return False
 
     def evaluate(
         self, t: np.ndarray, Y: np.ndarray, Y1: np.ndarray | None, Y2: np.ndarray | None, grad: bool = True
     ) -> TermEval:
-        """Integrand and gradients at the quadrature points.
+        """Integrand and its whole gradient at the quadrature points.
 
         Args:
             t: (n,) quadrature times [s].
@@ -67,9 +134,36 @@ class Term:
                 when not in `needs`).
             grad: if False the gradients may be left None (value only).
         Returns:
+            TermEval without a deferred part.
+        Raises:
+            NotImplementedError: a subclass that implements neither `evaluate` nor `evaluate_in`.
+        """
+        if type(self).evaluate_in is Term.evaluate_in:
+            raise NotImplementedError(f"term {type(self).__name__} implements neither evaluate nor evaluate_in")
+        return self.evaluate_in(PathContext(t, Y, Y1, Y2), grad).resolved()
+
+    def evaluate_in(self, ctx: PathContext, grad: bool = True) -> TermEval:
+        """Integrand and gradient on the path of an evaluation (the objective's call): the part of the
+        gradient through a shared engine may be left in `TermEval.deferred`.
+
+        Args:
+            ctx: the evaluation's `PathContext` (t, Y, Y1, Y2 and the engines' forward passes).
+            grad: compute the gradient.
+        Returns:
             TermEval.
         """
-        raise NotImplementedError
+        return self.evaluate(ctx.t, ctx.Y, ctx.Y1, ctx.Y2, grad)
+
+    def residual(self, ctx: PathContext) -> Residual | None:
+        """The residuals r with f = |r|^2 at every point, and their Jacobian, or None if the term is not
+        a sum of squares (the default).
+
+        Args:
+            ctx: a `PathContext` of the path (t, Y and the derivatives in `needs`).
+        Returns:
+            Residual, or None.
+        """
+        return None
 
     def prepare(self, t: np.ndarray, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray) -> None:
         """Called by `Objective.prepare` at the start of each optimization round with the current path

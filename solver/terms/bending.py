@@ -5,7 +5,7 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.quaternion import twist_angle, twist_angle_grad
-from solver.terms.base import Term, TermEval
+from solver.terms.base import Residual, Term, TermEval
 
 #: Flexion axes of the shipped figure (models/humanoid39.xml): a positive rotation about the axis
 #: flexes the joint; a negative one hyperextends it.
@@ -86,3 +86,15 @@ class Hyperextension(Term):
                 g = twist_angle_grad(Y[active][:, self.idx[k]], self.axes[k])
                 dY[np.ix_(active, self.idx[k])] += (-2.0 * h[active, k])[:, None] * g
         return TermEval(f, dY=dY)
+
+    def residual(self, ctx) -> Residual:
+        """r = max(0, -theta - tol) per joint (n, j) [rad] (f = |r|^2); dense blocks dr/dY = -d theta/dq
+        where the joint is past its tolerance (`twist_angle_grad`), 0 elsewhere."""
+        Y = ctx.Y
+        r = np.maximum(0.0, -self.angles(Y) - self.tol)
+        J = np.zeros((len(Y), len(self.axes), Y.shape[1]))
+        for k in range(len(self.axes)):
+            active = np.flatnonzero(r[:, k] > 0)
+            if active.size:
+                J[active[:, None], k, self.idx[k][None, :]] = -twist_angle_grad(Y[active][:, self.idx[k]], self.axes[k])
+        return Residual(r, blocks=(J, None, None))

@@ -45,14 +45,14 @@ import numpy as np
 from solver.contacts import HEIGHT_ON
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES, index_run
+from solver.path_context import EngineGradient, site_engine
 from solver.surfaces import StaticSurfaces
-from solver.terms.base import Term, TermEval
+from solver.terms.base import Residual, Term, TermEval
 from solver.terms.contact_schedule import (
     FULL,
     SiteMotion,
     SupportSurfaces,
     _engine_index,
-    _engine_motion,
     _sample_times,
     check_contacts,
     flights,
@@ -84,6 +84,8 @@ class Clearance(Term):
             None: no lift, the band is c_f). Only with the default c_f (flight_clearance None).
         sites: the sites the term looks after (default the four contact sites).
         t_span: see `Planted`.
+        engine: the engine shared with the other terms (tracking `sites`); None: one of its own
+            (`solver.path_context.site_engine`, positions only).
     Raises:
         InputError: bad contact, no surfaces, bad parameters.
     """
@@ -91,6 +93,7 @@ class Clearance(Term):
     name = "clearance"
     units = "m^2"
     needs = (0,)
+    fixed_points = True  # windows cached for the quadrature points
 
     def __init__(self, model, contacts, clearance: float = 0.02, core: float = 0.5, flight: bool = True,
                  sites=CONTACT_SITES, t_span=None, engine=None, flight_clearance: float | None = None,
@@ -122,24 +125,41 @@ class Clearance(Term):
                              else np.full(len(self.flights), float(flight_lift)))
         self.excused: list[tuple[int, float, float]] = []  # (site column, a, b): `violation` skips these
         self.lowered: dict[tuple[int, float, float], float] = {}  # (site column, a, b): swing band [m]
-        self.engine = engine
-        if engine is not None:  # site positions of all points from the shared engine's forward pass
-            self._eidx = index_run(_engine_index(engine, model, self.kin.names))  # the figure's: a slice
-            self.needs = tuple(engine.needs)
+        # site positions of all points from the engine's forward pass (shared through the `PathContext`)
+        self.engine = engine if engine is not None else site_engine(model, tuple(sites), velocities=False)
+        self._eidx = index_run(_engine_index(self.engine, model, self.kin.names))  # the figure's: a slice
+        self.needs = tuple(sorted({0, *self.engine.required}))
 
-    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        """With an engine: `evaluate` with the gradient left to the engine's reverse pass."""
-        if self.engine is None:
-            return self.evaluate(t, Y, Y1, Y2, grad)
-        from solver.terms.dynamics import EngineGradient
-
-        mo, res = _engine_motion(self, Y, Y1, Y2)
-        f, gp = self._integrand(res.sites[:, self._eidx], *self.split_windows(t), grad=grad)
+    def evaluate_in(self, ctx, grad=True) -> TermEval:
+        """`Term.evaluate_in`: the gradient left to the engine's reverse pass (`EngineGradient`)."""
+        mo, res = ctx.forward(self.engine, self.kin.tmap)
+        f, gp = self._integrand(res.sites[:, self._eidx], *self.split_windows(ctx.t), grad=grad)
         if not grad:
             return TermEval(f)
         g_sites = np.zeros(res.sites.shape)
-        g_sites[:, self._eidx] += gp  # distinct sites: distinct engine indices (as np.add.at, faster)
+        g_sites[:, self._eidx] += gp  # distinct sites: distinct engine indices
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites))
+
+    def residual(self, ctx) -> Residual:
+        """r (n, 2 k) [m]: per site, sqrt(U_s) max(0, c_s - h) (swing) and sqrt(U_f) max(0, c_f - h)
+        (flight) (f = |r|^2). Jacobian-vector products through the engine's reverse pass: d h / d p = n,
+        the normal of the surface under the site (piecewise constant)."""
+        mo, res = ctx.forward(self.engine, self.kin.tmap)
+        Us, Uf, Bf, Bs = self.split_windows(ctx.t)
+        h, nrm = self.below.height(res.sites[:, self._eidx])  # (n, k), (n, k, 3)
+        Uf = np.broadcast_to(Uf[:, None], Us.shape)
+        su, sf = np.sqrt(Us), np.sqrt(Uf)
+        ds, df = np.maximum(0.0, Bs - h), np.maximum(0.0, Bf[:, None] - h)
+        r = np.concatenate([su * ds, sf * df], axis=1)
+        k = Us.shape[1]
+
+        def pull(g):
+            gh = -(g[:, :k] * su * (ds > 0) + g[:, k:] * sf * (df > 0))  # d (g.r) / d h
+            g_sites = np.zeros(res.sites.shape)
+            g_sites[:, self._eidx] += gh[..., None] * nrm
+            return EngineGradient(self.engine, res, mo, None, g_sites).pullback()
+
+        return Residual(r, pull=pull)
 
     def _integrand(self, p, Us, Uf, Bf, Bs, grad=True):
         """f (m,) and df/dp (m, k, 3) at site positions p (m, k, 3) with swing weights Us (m, k),
@@ -243,29 +263,6 @@ class Clearance(Term):
         Us, Uf, Bf, Bs = self.split_windows(t) if lift else self._split_windows(t, lift=False)
         h, _ = self.below.height(self.kin.dense_positions(Y) if dense else self.kin.positions(Y))
         return np.maximum(0.0, np.where(Us >= Uf[:, None], Bs, Bf[:, None]) - h)
-
-    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        if self.engine is not None:
-            ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
-            return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
-        n, nq = Y.shape
-        Us, Uf, Bf, Bs = self.split_windows(t)
-        rows = np.flatnonzero((Us > 0).any(axis=1) | (Uf > 0))
-        f = np.zeros(n)
-        dY = np.zeros((n, nq)) if grad else None
-        if rows.size == 0:
-            return TermEval(f, dY)
-        p = self.kin.positions(Y[rows])
-        f[rows], gp = self._integrand(p, Us[rows], Uf[rows], Bf[rows], Bs[rows], grad)
-        if not grad:
-            return TermEval(f)
-        hit = np.flatnonzero(np.abs(gp).sum(axis=(1, 2)) > 0)
-        if hit.size:
-            Yh = Y[rows[hit]]
-            _, J = self.kin.jacobians(Yh)
-            gv = np.einsum("mkij,mki->mj", J, gp[hit])
-            dY[rows[hit]] = self.kin.tmap.pullback(Yh, gv)
-        return TermEval(f, dY)
 
     def violation(self, Y: np.ndarray, t: np.ndarray | None = None) -> float | None:
         """Deepest intrusion into the clearance band, max(c - distance, 0) [m], where a site's window is

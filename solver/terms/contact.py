@@ -43,7 +43,10 @@ second derivatives of p: because d^2 p / dY_i dY_j is symmetric,
 
 with Jdot = dJ/dt along qvel = B Y' (MuJoCo's `mj_jacDot`, exact, no finite differences) and Bdot the
 time derivative of B (on each quaternion block B = 2 G(q)/s, s = q.q:
-Bdot = 2 G(q')/s - 4 (q.q') G(q)/s^2). `SiteMotion` does this.
+Bdot = 2 G(q')/s - 4 (q.q') G(q)/s^2). The term reads v and pulls its gradient back through the
+shared engine's vectorized forward and reverse passes (`solver.path_context`: the velocity of the
+site's point of its body, appendix A eq. 19); `SiteMotion` computes the same with MuJoCo point by
+point, the tests' reference.
 
 Support surfaces. A plane supports on its free side; a box on its top face (the face whose outward
 normal points most upward), over its footprint. With `surface=""` the support is chosen per point:
@@ -56,14 +59,14 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES
+from solver.path_context import EngineGradient, site_engine
 from solver.surfaces import StaticSurfaces
-from solver.terms.base import Term, TermEval
+from solver.terms.base import Residual, Term, TermEval
 from solver.terms.contact_schedule import (
     FULL,
     SiteMotion,
     SupportSurfaces,
     _engine_index,
-    _engine_motion,
     _sample_times,
     check_contacts,
     contact_window,
@@ -81,10 +84,11 @@ __all__ = ["CONTACT_SITES", "Planted", "SiteMotion", "SupportSurfaces", "check_c
 class Planted(Term):
     """f = sum over contacts of w(t) ((h - h0)^2 + tau^2 |v_t|^2) [m^2]: feet on their surface, not sliding.
 
-    See the module docstring for the equations. The gradient with respect to Y' is B^T J^T g_v, with
-    respect to Y the site Jacobian for the height plus the second-derivative terms of the velocity
-    (`SiteMotion.pullback`); exact, no finite differences. Only quadrature points inside a contact are
-    computed.
+    See the module docstring for the equations. Site positions and velocities come from the engine's
+    forward pass on the evaluation's `PathContext`; the gradient (with respect to Y: the height's site
+    Jacobian plus the velocity's second-derivative terms; with respect to Y': B^T J^T g_v) from its
+    reverse pass, exact, no finite differences. Only the (point, contact) pairs inside a contact are
+    computed. `residual` gives r with f = |r|^2.
 
     Args:
         model: MjModel of the scene (figure + static planes/boxes).
@@ -96,13 +100,18 @@ class Planted(Term):
         footprint_margin: [m] see `SupportSurfaces`.
         t_span: (t0, t1) [s] of the keyframes: `violation(Y)` without times assumes Y sampled evenly on
             it (how `solve` checks limits).
+        engine: the engine shared with the other terms (`SiteKinematics` or `InverseDynamics`, tracking
+            the contact sites); one without site velocities (MuJoCo's), or None: one of its own
+            (`solver.path_context.site_engine`).
     Raises:
-        InputError: a bad contact (unknown site or surface, start >= end), no surfaces, bad parameters.
+        InputError: a bad contact (unknown site or surface, start >= end), no surfaces, bad parameters,
+            or (with no usable engine given) a figure the vectorized kinematics does not model.
     """
 
     name = "planted"
     units = "m^2"
     needs = (0, 1)
+    fixed_points = True  # windows and (point, contact) pairs cached for the quadrature points
 
     def __init__(self, model, contacts, velocity_time: float = 0.1, ramp: float = 0.02,
                  rest_height: float = 0.005, footprint_margin: float = 0.03, t_span=None, engine=None):
@@ -124,12 +133,12 @@ class Planted(Term):
         self._col = np.array([self.kin.names.index(c.site) for c in self.contacts], int)
         self._surf = [self.support.index(c.surface) for c in self.contacts]
         self.excused: set[int] = set()  # contacts a keyframe contradicts: `violation` skips them
-        self.engine = engine if engine is not None and hasattr(engine, "site_velocities") else None
-        if self.engine is not None:
-            # site positions and velocities at all points from the engine's vectorized forward pass
-            # (shared with penetration/torque/root/cone), gradients through its single reverse pass
-            self._eidx = _engine_index(self.engine, model, self.kin.names)
-            self.needs = tuple(self.engine.needs)  # what the engine's forward pass reads
+        # site positions and velocities at all points from the engine's vectorized forward pass (shared
+        # with penetration/torque/root/cone through the `PathContext`), gradients through its reverse
+        # pass; an engine without site velocities (MuJoCo's inverse dynamics) is not shared
+        self.engine = engine if engine is not None and engine.has_site_velocities else site_engine(model, CONTACT_SITES)
+        self._eidx = _engine_index(self.engine, model, self.kin.names)
+        self.needs = tuple(sorted({0, 1, *self.engine.required}))
 
     def knot_times(self) -> np.ndarray:
         """(2C,) every contact's start and end [s]: at touch-down and lift-off a site goes from
@@ -195,20 +204,12 @@ class Planted(Term):
         unique = np.array([len(np.unique(glob * (site.max(initial=0) + 1) + site)) == len(glob)], int)
         return rows, local, glob, con, site, S[glob, con], W[glob, con], starts, unique
 
-    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        """With an engine: `evaluate` at all points at once, the gradient left to the engine's reverse
-        pass (`solver.terms.dynamics.EngineGradient`); without one, `evaluate`.
-
-        Only at the (point, contact) pairs where a contact's height window is on (`_pairs`): the same
-        arithmetic as `_integrand` on the rows of `_parts` (which also fills the other contacts' zeros
-        and adds them; heights contact by contact, as there), so the same bits, without the (r, C, 3)
-        scratch arrays."""
-        if self.engine is None:
-            return self.evaluate(t, Y, Y1, Y2, grad)
-        from solver.terms.dynamics import EngineGradient
-
-        mo, res = _engine_motion(self, Y, Y1, Y2)
-        rows, local, glob, con, site, s, w, starts, unique = self._pairs(np.asarray(t, float))
+    def _pair_motion(self, ctx):
+        """The engine's pass and, at the (point, contact) pairs of `_pairs`: the pairs, site velocities
+        v (P, 3), heights above the rest height h (P,) [m] and surface normals nc (P, 3)."""
+        mo, res = ctx.forward(self.engine, self.kin.tmap)
+        pairs = self._pairs(np.asarray(ctx.t, float))
+        rows, local, glob, con, site, s, w, starts, unique = pairs
         p, vc = res.sites[glob, site], self.engine.site_velocities(res)[glob, site]  # (P, 3)
         h, nc = np.empty(len(glob)), np.empty((len(glob), 3))
         for c in range(len(self.contacts)):
@@ -216,64 +217,54 @@ class Planted(Term):
             if a < b:
                 h[a:b], nc[a:b] = self.support.height(p[a:b].copy(), self._surf[c])
         h -= self.rest_height
+        return mo, res, pairs, vc, h, nc
+
+    def evaluate_in(self, ctx, grad=True) -> TermEval:
+        """`Term.evaluate_in`: at all points at once, the gradient left to the engine's reverse pass
+        (`EngineGradient`). Only at the (point, contact) pairs where a contact's height window is on
+        (`_pairs`)."""
+        mo, res, pairs, vc, h, nc = self._pair_motion(ctx)
+        rows, local, glob, con, site, s, w, starts, unique = pairs
         vt = vc - np.einsum("mi,mi->m", vc, nc)[:, None] * nc
         t2 = self.tau * self.tau
         T = np.zeros((len(rows), len(self.contacts)))  # each contact's integrand, zero where it is off
         T[local, con] = s * h * h + w * t2 * (vt * vt).sum(-1)
-        f = np.zeros(len(Y))
+        f = np.zeros(len(ctx.Y))
         f[rows] = T.sum(1)
         if not grad:
             return TermEval(f)
         g_sites, g_vel = np.zeros(res.sites.shape), np.zeros(res.sites.shape)
         gp, gv = (2.0 * s * h)[:, None] * nc, (2.0 * t2 * w)[:, None] * vt
-        if unique[0]:  # one pair per point and site: each element from +0 once, as `_integrand`'s sums
+        if unique[0]:  # one pair per point and site
             g_sites[glob, site] += gp
             g_vel[glob, site] += gv
-        else:  # contacts of one site overlapping: added in contact order, as there
+        else:  # contacts of one site overlapping: added in contact order
             np.add.at(g_sites, (glob, site), gp)
             np.add.at(g_vel, (glob, site), gv)
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites, g_vel))
 
-    def _integrand(self, p, v, Sr, Wr, rows, grad):
-        """f at the contact rows (r,) from site positions p and velocities v (r, s, 3) under the height
-        and sliding windows Sr, Wr (r, C), and its gradients with respect to p and v (None without
-        grad). d|v_t|^2/dv = 2 v_t (v_t is a projection of v)."""
-        h, vt, nrm = self._parts(p, v, Sr, rows)
-        t2 = self.tau * self.tau
-        f = (Sr * h * h + Wr * t2 * (vt * vt).sum(-1)).sum(1)
-        if not grad:
-            return f, None, None
-        g_p = np.zeros(p.shape)
-        g_v = np.zeros(v.shape)
-        for c in range(len(self.contacts)):
-            k = self._col[c]
-            g_p[:, k] += (2.0 * Sr[:, c] * h[:, c])[:, None] * nrm[:, c]
-            g_v[:, k] += (2.0 * t2 * Wr[:, c])[:, None] * vt[:, c]
-        return f, g_p, g_v
+    def residual(self, ctx) -> Residual:
+        """r (n, 4 C) [m]: per contact c, sqrt(s_c) (h - h0) and sqrt(w_c) tau v_t (3 components),
+        zero where the contact's height window is off (f = |r|^2). Jacobian-vector products through
+        the engine's reverse pass: d h / d p = n, d v_t / d v = I - n n^T (n piecewise constant)."""
+        mo, res, pairs, vc, h, nc = self._pair_motion(ctx)
+        rows, local, glob, con, site, s, w, starts, unique = pairs
+        vt = vc - np.einsum("mi,mi->m", vc, nc)[:, None] * nc
+        ss, sw = np.sqrt(s), np.sqrt(w) * self.tau
+        n, C = len(ctx.Y), len(self.contacts)
+        r = np.zeros((n, C, 4))
+        r[glob, con, 0] = ss * h
+        r[glob, con, 1:] = sw[:, None] * vt
 
-    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        if self.engine is not None:
-            ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
-            return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
-        n, nq = Y.shape
-        S, W = self._both(t)
-        rows = np.flatnonzero((S > 0).any(axis=1))
-        f = np.zeros(n)
-        dY, dY1 = (np.zeros((n, nq)), np.zeros((n, nq))) if grad else (None, None)
-        if rows.size == 0:
-            return TermEval(f, dY, dY1)
-        Yr, Y1r = Y[rows], Y1[rows]
-        Sr = S[rows]
-        mask = np.zeros((rows.size, len(self.kin.names)), bool)
-        for c in range(len(self.contacts)):
-            mask[:, self._col[c]] |= Sr[:, c] > 0
-        p, v, J, Jd = self.kin.motion(Yr, Y1r, mask, grad)
-        f[rows], g_p, g_v = self._integrand(p, v, Sr, W[rows], rows, grad)
-        if not grad:
-            return TermEval(f)
-        dYr, dY1r = self.kin.pullback(Yr, Y1r, J, Jd, g_p, g_v)
-        dY[rows], dY1[rows] = dYr, dY1r
-        return TermEval(f, dY, dY1)
+        def pull(g):
+            g = g.reshape(n, C, 4)
+            gh, gv = g[glob, con, 0], sw[:, None] * g[glob, con, 1:]
+            g_sites, g_vel = np.zeros(res.sites.shape), np.zeros(res.sites.shape)
+            np.add.at(g_sites, (glob, site), (ss * gh)[:, None] * nc)
+            np.add.at(g_vel, (glob, site), gv - np.einsum("mi,mi->m", gv, nc)[:, None] * nc)
+            return EngineGradient(self.engine, res, mo, None, g_sites, g_vel).pullback()
+
+        return Residual(r.reshape(n, 4 * C), pull=pull)
 
     def residuals(self, t, Y, Y1=None):
         """Per sample and contact: height and sliding windows, height [m] and tangential speed [m/s]

@@ -50,10 +50,11 @@ import numpy as np
 from solver.errors import InputError
 from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
+from solver.path_context import EngineGradient, PathContext
 from solver.surfaces import StaticSurfaces
-from solver.terms.base import Term, TermEval
+from solver.terms.base import Residual, Term, TermEval
 from solver.terms.contact_schedule import FULL, SupportSurfaces, _sample_times, check_contacts, contact_window
-from solver.terms.dynamics import EngineGradient, figure_radius_of_gyration, make_engine
+from solver.terms.dynamics import figure_radius_of_gyration, make_engine
 
 
 def _qrot(q: np.ndarray) -> np.ndarray:
@@ -98,6 +99,7 @@ class FrictionCone(Term):
     name = "cone"
     units = "N^2"
     needs = (0, 1, 2)
+    fixed_points = True  # an inverse-dynamics term with contact windows at the quadrature points
 
     def __init__(self, model, contacts, mu: float = 0.8, ramp: float = 0.0, min_radius: float = 0.02,
                  torque_arm: float | None = None, engine=None, backend: str = "analytic",
@@ -206,14 +208,9 @@ class FrictionCone(Term):
         return dict(rows=rows, a=a, A=A, p=p, nrm=nrm, asum=asum, c=c, d_t=d_t, kstar=kstar, r=r, F=F,
                     T_loc=T_loc, R=R, T=T, lever=lever, M=M, fn=fn, Mn=Mn, uft=uft, umt=umt, e=e)
 
-    def _forward(self, Y, Y1, Y2):
-        from solver.terms.dynamics import engine_forward
-
-        return engine_forward(self.engine, self.tmap, Y, Y1, Y2)
-
     def components(self, t, Y, Y1, Y2) -> tuple[np.ndarray, np.ndarray]:
         """Per sample: A(t) (n,) and (e1, e2, e3, e4) (n, 4) [N] (0 off contact)."""
-        _, res = self._forward(Y, Y1, Y2)
+        _, res = PathContext(t, Y, Y1, Y2).forward(self.engine, self.tmap)
         A = np.zeros(len(Y))
         e = np.zeros((len(Y), 4))
         q = self._wrench(t, Y, res)
@@ -222,36 +219,53 @@ class FrictionCone(Term):
             e[q["rows"]] = q["e"]
         return A, e
 
-    def residual(self, t, Y, Y1, Y2) -> tuple[np.ndarray, np.ndarray]:
+    def residual_norm(self, t, Y, Y1, Y2) -> tuple[np.ndarray, np.ndarray]:
         """Per sample: A(t) and the residual sqrt(e1^2 + ... + e4^2) outside the cone [N] (0 off contact)."""
         A, e = self.components(t, Y, Y1, Y2)
         return A, np.linalg.norm(e, axis=1)
 
-    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
-        if ev.deferred is None:
-            return ev
-        dY, dY1, dY2 = ev.deferred.pullback()
-        return TermEval(ev.f, dY + ev.dY, dY1, dY2)
-
-    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        """`evaluate` with the wrench and site gradients left to the engine's reverse pass (shared with
-        the other dynamics terms); the root-pose lever part is returned in dY directly."""
-        mo, res = self._forward(Y, Y1, Y2)
-        n = len(Y)
-        f = np.zeros(n)
-        q = self._wrench(t, Y, res)
+    def evaluate_in(self, ctx, grad=True) -> TermEval:
+        """`Term.evaluate_in`: the wrench and site gradients left to the engine's reverse pass (shared
+        with the other dynamics terms); the root-pose lever part is returned in dY directly."""
+        mo, res = ctx.forward(self.engine, self.tmap)
+        f = np.zeros(len(ctx.Y))
+        q = self._wrench(ctx.t, ctx.Y, res)
         if q is not None:
             f[q["rows"]] = q["A"] * (q["e"] ** 2).sum(1)
         if not grad:
             return TermEval(f)
+        ge = None if q is None else 2.0 * q["A"][:, None] * q["e"]  # d f / d e (hinges: e = 0 gives 0)
+        dY, deferred = self._pull(ctx.Y, q, ge, res, mo)
+        return TermEval(f, dY=dY, deferred=deferred)
+
+    def residual(self, ctx) -> Residual:
+        """r = sqrt(A) (e1, e2, e3, e4) (n, 4) [N] (f = |r|^2); Jacobian-vector products through the
+        engine's reverse pass and the root pose (each e a hinge: its derivative is 0 where it is 0)."""
+        mo, res = ctx.forward(self.engine, self.tmap)
+        r = np.zeros((len(ctx.Y), 4))
+        q = self._wrench(ctx.t, ctx.Y, res)
+        if q is not None:
+            sA = np.sqrt(q["A"])[:, None]
+            r[q["rows"]] = sA * q["e"]
+
+        def pull(g):
+            ge = None if q is None else sA * g[q["rows"]] * (q["e"] > 0)
+            dY, deferred = self._pull(ctx.Y, q, ge, res, mo)
+            pulled = deferred.pullback()
+            return (dY + pulled[0], *pulled[1:])
+
+        return Residual(r, pull=pull)
+
+    def _pull(self, Y, q, ge, res, mo):
+        """(dY (n, nq), EngineGradient) of sum ge . e over the contact rows of `_wrench`'s q: the
+        root-pose lever part directly, the wrench and site parts left to the engine's reverse pass."""
         g_tau = np.zeros(res.tau.shape)
         g_sites = np.zeros(res.sites.shape)
         dY = np.zeros(Y.shape)
         if q is not None:
-            rows, A, e, nrm, l, mu = q["rows"], q["A"], q["e"], q["nrm"], self.torque_arm, self.mu
+            rows, e, nrm, l, mu = q["rows"], q["e"], q["nrm"], self.torque_arm, self.mu
             fn, r = q["fn"], q["r"]
-            ge = 2.0 * A[:, None] * e  # d f / d e (hinges: e = 0 gives 0)
+            ge = ge * (e > 0)  # hinges: no derivative where e = 0
             sgnMn = np.sign(q["Mn"])[:, None]
             # d f / d F, d M, d r
             gF = (-ge[:, 0, None] * nrm + ge[:, 1, None] * (q["uft"] - mu * nrm)
@@ -278,7 +292,7 @@ class FrictionCone(Term):
             g_pose[:, self.root_dofs[:3]] = g_xr
             g_pose[:, self.root_dofs[3:]] = g_theta
             dY[rows] = self.tmap.pullback(Y[rows], g_pose)
-        return TermEval(f, dY=dY, deferred=EngineGradient(self.engine, res, mo, g_tau, g_sites))
+        return dY, EngineGradient(self.engine, res, mo, g_tau, g_sites)
 
     def violation(self, Y: np.ndarray, t: np.ndarray | None = None) -> float | None:
         """Peak residual outside the cone [N] where the contact window is full; Y', Y'' by finite
@@ -288,7 +302,7 @@ class FrictionCone(Term):
             return None
         Y1 = np.gradient(Y, t, axis=0)
         Y2 = np.gradient(Y1, t, axis=0)
-        A, res = self.residual(t, Y, Y1, Y2)
+        A, res = self.residual_norm(t, Y, Y1, Y2)
         full = A >= FULL
         return float(res[full].max()) if full.any() else None
 
@@ -302,7 +316,7 @@ def cone_metrics(term: FrictionCone, t, Y, Y1, Y2) -> dict[str, float]:
         {"cone_rms": RMS of sqrt(A) * residual over the samples in contact [N] (= sqrt(mean f)),
          "cone_peak": its largest value [N], "cone_samples": number of samples in contact}.
     """
-    A, res = term.residual(t, Y, Y1, Y2)
+    A, res = term.residual_norm(t, Y, Y1, Y2)
     on = A > 0
     if not on.any():
         return {"cone_rms": 0.0, "cone_peak": 0.0, "cone_samples": 0}

@@ -6,8 +6,9 @@ the vectorized `solver.inverse_dynamics.InverseDynamics`, which matches it to ro
 the gradient back: reverse pass of the inverse dynamics to (pose tangent, qvel, qacc), then
 `PathMotion.vjp` to (Y, Y', Y'').
 
-Two terms built on one model can share an engine (`engine=`): the engine caches its last forward pass,
-so the second term only pays for its reverse pass.
+Terms built on one model share an engine (`engine=`): within an objective evaluation its forward pass
+is computed once by the `solver.path_context.PathContext`, and the objective sums the terms' gradients
+in the engine's variables and runs its reverse pass once.
 """
 from __future__ import annotations
 
@@ -17,8 +18,11 @@ from solver.errors import InputError
 from solver.inverse_dynamics import InverseDynamics, MujocoInverseDynamics
 from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
+from solver.path_context import EngineGradient, PathContext
 from solver.surfaces import StaticSurfaces
-from solver.terms.base import Term, TermEval
+from solver.terms.base import Residual, Term, TermEval
+
+__all__ = ["BACKENDS", "EngineGradient", "JointTorque", "RootResidual", "engine_forward", "make_engine"]
 
 BACKENDS = {"analytic": InverseDynamics, "mujoco": MujocoInverseDynamics}
 
@@ -41,86 +45,15 @@ def make_engine(model, sites=CONTACT_SITES, backend: str = "analytic"):
 
 
 def engine_forward(engine, tmap: TangentMap, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray | None):
-    """(PathMotion, engine result) of a path at its samples, computed once for all terms sharing `engine`.
-
-    The motion (qvel, and qacc if the engine reads it: `engine.needs`) is cached on the engine, keyed by
-    the values of Y, Y', Y'', with the engine's result for it: while that is still the engine's cached
-    forward pass (`engine._cache`, the same object), every term after the first pays only for comparing
-    Y, Y' (and Y'') with the key, not also the engine's inputs.
+    """(motion, engine result) of a path at its samples outside an objective evaluation (a query such
+    as `JointTorque.torques`): `PathContext.forward` on a context of its own. Within an evaluation the
+    terms share the context's pass instead.
 
     Args:
-        engine: `InverseDynamics`, `MujocoInverseDynamics` or `SiteKinematics`. tmap: the model's
-            `TangentMap` (the engine's own `motion_map` instead if it has one: the joints it reads).
-            Y, Y1, Y2: (n, nq) qpos and its time derivatives (Y2 unused if the engine does not read qacc).
+        engine: see `solver.path_context`. tmap: the model's `TangentMap`. Y, Y1, Y2: (n, nq) qpos and
+            its time derivatives (Y2 unused if the engine does not read qacc).
     """
-    if 2 not in engine.needs:
-        Y2 = None
-    tmap = getattr(engine, "motion_map", tmap)  # an engine that reads only some joints' qvel (`SiteKinematics`)
-    key = (Y, Y1, Y2)
-    last = getattr(engine, "_motion_cache", None)
-    if last is not None and all(
-        (a is None and b is None) or (a is not None and b is not None and a.shape == b.shape and np.array_equal(a, b))
-        for a, b in zip(last[0], key, strict=True)
-    ):
-        keys, mo = last[0], last[1]
-        if getattr(engine, "_cache", None) is last[2]:  # the engine's last forward pass is of this motion
-            return mo, last[2]
-    else:
-        keys, mo = tuple(None if a is None else a.copy() for a in key), tmap.motion(Y, Y1, Y2)
-    res = engine.forward(Y, mo.qvel, mo.qacc)
-    engine._motion_cache = (keys, mo, res)
-    return mo, res
-
-
-class EngineGradient:
-    """A term's gradient left in the inverse-dynamics engine's variables (`TermEval.deferred`).
-
-    d f / d tau (n, nv) and d f / d site positions (n, k, 3) at one forward pass of one engine. The
-    objective sums them over the terms that share the engine (they share the forward pass too: it is
-    cached) and pulls the sum back to (Y, Y', Y'') once: one reverse pass of the inverse dynamics
-    (`InverseDynamics.vjp`) and of the tangent map (`PathMotion.vjp`) instead of one per term. Both
-    are linear in the adjoints, so the result is the sum of the terms' gradients.
-    """
-
-    __slots__ = ("engine", "result", "motion", "g_tau", "g_sites", "g_site_vel")
-
-    def __init__(self, engine, result, motion, g_tau=None, g_sites=None, g_site_vel=None):
-        self.engine, self.result, self.motion = engine, result, motion
-        self.g_tau, self.g_sites, self.g_site_vel = g_tau, g_sites, g_site_vel
-
-    @property
-    def key(self):
-        return (id(self.engine), id(self.result))
-
-    def scaled(self, c: float) -> EngineGradient:
-        return EngineGradient(
-            self.engine, self.result, self.motion,
-            None if self.g_tau is None else c * self.g_tau,
-            None if self.g_sites is None else c * self.g_sites,
-            None if self.g_site_vel is None else c * self.g_site_vel,
-        )
-
-    def plus(self, other: EngineGradient, c: float) -> EngineGradient:
-        """self + c * other (a new object)."""
-
-        def add(a, b):
-            if b is None:
-                return a
-            return c * b if a is None else a + c * b
-
-        return EngineGradient(
-            self.engine, self.result, self.motion, add(self.g_tau, other.g_tau), add(self.g_sites, other.g_sites),
-            add(self.g_site_vel, other.g_site_vel),
-        )
-
-    def pullback(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(dY, dY1, dY2), each (n, nq)."""
-        g_tau = self.g_tau if self.g_tau is not None else np.zeros(self.result.tau.shape)
-        if self.g_site_vel is None:
-            g_pose, g_v, g_a = self.engine.vjp(self.result, g_tau, self.g_sites)
-        else:
-            g_pose, g_v, g_a = self.engine.vjp(self.result, g_tau, self.g_sites, self.g_site_vel)
-        return self.motion.vjp(g_v, g_a, g_pose)
+    return PathContext(None, Y, Y1, Y2).forward(engine, tmap)
 
 
 def _free_joint(model, layout: StateLayout) -> int:
@@ -155,6 +88,7 @@ class JointTorque(Term):
     name = "torque"
     units = "N^2 m^2"
     needs = (0, 1, 2)
+    fixed_points = True  # an inverse-dynamics term (its forward pass is shared through the context)
 
     def __init__(
         self, model, weights: dict[str, float] | None = None, engine=None, backend: str = "analytic"
@@ -184,19 +118,22 @@ class JointTorque(Term):
         """(n, nv) generalized forces along the path [N, N m] (the free root's 6 included)."""
         return engine_forward(self.engine, self.tmap, Y, Y1, Y2)[1].tau
 
-    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
-        return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
-
-    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        """`evaluate` with the gradient left as an `EngineGradient` (summed with other terms' by
+    def evaluate_in(self, ctx, grad=True) -> TermEval:
+        """`Term.evaluate_in`: the gradient left as an `EngineGradient` (summed with other terms' by
         the objective and pulled back once)."""
-        mo, res = engine_forward(self.engine, self.tmap, Y, Y1, Y2)
+        mo, res = ctx.forward(self.engine, self.tmap)
         wt = self.dof_weights * res.tau
         f = (wt * res.tau).sum(axis=1)
         if not grad:
             return TermEval(f)
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, 2.0 * wt))
+
+    def residual(self, ctx) -> Residual:
+        """r = sqrt(w_i) tau_i per DOF (n, nv) [N m]; Jacobian-vector products through the engine's
+        reverse pass (`InverseDynamics.vjp`)."""
+        mo, res = ctx.forward(self.engine, self.tmap)
+        sw = np.sqrt(self.dof_weights)
+        return Residual(sw * res.tau, pull=lambda g: EngineGradient(self.engine, res, mo, sw * g).pullback())
 
 
 def figure_radius_of_gyration(model, body: int) -> float:
@@ -284,6 +221,7 @@ class RootResidual(Term):
     name = "root"
     units = "N^2"
     needs = (0, 1, 2)
+    fixed_points = True  # the lagged indicator is kept per quadrature point (`prepare`)
 
     def __init__(
         self,
@@ -373,16 +311,8 @@ class RootResidual(Term):
         """(n, 6) the root's generalized forces along the path: world force [N], local torque [N m]."""
         return engine_forward(self.engine, self.tmap, Y, Y1, Y2)[1].tau[:, self.root_dofs]
 
-    def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        ev = self.evaluate_deferred(t, Y, Y1, Y2, grad)
-        return ev if ev.deferred is None else TermEval(ev.f, *ev.deferred.pullback())
-
-    def evaluate_deferred(self, t, Y, Y1, Y2, grad=True) -> TermEval:
-        """`evaluate` with the gradient left as an `EngineGradient` (see `JointTorque`)."""
-        mo, res = engine_forward(self.engine, self.tmap, Y, Y1, Y2)
-        wr = res.tau[:, self.root_dofs]
-        sw = self._scale * wr
-        r = (sw * wr).sum(axis=1)
+    def _indicator(self, t, res):
+        """phi_eff (n,) and d phi_eff / d site positions (n, k, 3) (lagged smooth max, see the class)."""
         phi, dphi = self.flight(res.sites[:, self.site_index])
         phi0 = self._fixed_phi(t)
         if phi0 is not None:  # lagged: smooth max of the round's start value and the path's own
@@ -391,6 +321,15 @@ class RootResidual(Term):
             root = np.sqrt(d * d + e * e)
             phi = 0.5 * (phi0 + phi + root - e)
             dphi = (0.5 * (1.0 + d / root))[:, None, None] * dphi
+        return phi, dphi
+
+    def evaluate_in(self, ctx, grad=True) -> TermEval:
+        """`Term.evaluate_in`: the gradient left as an `EngineGradient` (see `JointTorque`)."""
+        mo, res = ctx.forward(self.engine, self.tmap)
+        wr = res.tau[:, self.root_dofs]
+        sw = self._scale * wr
+        r = (sw * wr).sum(axis=1)
+        phi, dphi = self._indicator(ctx.t, res)
         f = phi * r
         if not grad:
             return TermEval(f)
@@ -400,3 +339,22 @@ class RootResidual(Term):
         g_sites[:, self.site_index] = r[:, None, None] * dphi
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, g_tau, g_sites))
 
+    def residual(self, ctx) -> Residual:
+        """r = sqrt(phi_eff) (F, T / l) (n, 6) [N]: f = |r|^2. sqrt(phi) is smooth where phi > 0 (each
+        factor S(c) = c^2 (3 - 2 c)); where phi_eff is 0 (a site on a surface) r is 0 and its
+        derivative through phi is taken as 0 (the one-sided limit of the indicator's flat part).
+        Jacobian-vector products through the engine's reverse pass."""
+        mo, res = ctx.forward(self.engine, self.tmap)
+        wr = res.tau[:, self.root_dofs] * np.sqrt(self._scale)
+        phi, dphi = self._indicator(ctx.t, res)
+        sp = np.sqrt(np.maximum(phi, 0.0))
+        half = np.where(sp > 0, 0.5 / np.where(sp > 0, sp, 1.0), 0.0)  # d sqrt(phi) / d phi
+
+        def pull(g):
+            g_tau = np.zeros(res.tau.shape)
+            g_tau[:, self.root_dofs] = sp[:, None] * np.sqrt(self._scale) * g
+            g_sites = np.zeros(res.sites.shape)
+            g_sites[:, self.site_index] = (half * (g * wr).sum(1))[:, None, None] * dphi
+            return EngineGradient(self.engine, res, mo, g_tau, g_sites).pullback()
+
+        return Residual(sp[:, None] * wr, pull=pull)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.terms.base import Term, TermEval
+from solver.terms.base import Residual, Term, TermEval
 
 
 class UnitQuaternion(Term):
@@ -25,6 +25,11 @@ class UnitQuaternion(Term):
         self.radial_slots = self.idx
         self._single = self.idx.shape[0] == 1 and np.array_equal(self.idx[0], np.arange(4))
 
+    @property
+    def single_quaternion(self) -> bool:
+        """True if the term's one quaternion fills qpos 0-3 (the orientation problem)."""
+        return self._single
+
     def violation(self, Y: np.ndarray) -> float:
         """Largest |1 - |q|| over samples and quaternions [1]."""
         return float(np.abs(1.0 - np.linalg.norm(Y[:, self.idx], axis=-1)).max())
@@ -41,3 +46,13 @@ class UnitQuaternion(Term):
         dY = np.zeros_like(Y)
         dY[:, self.idx] = (-4.0 * e)[..., None] * q
         return TermEval(f, dY=dY)
+
+    def residual(self, ctx) -> Residual:
+        """r = 1 - q.q per quaternion slot (n, s) [1] (f = |r|^2); dense blocks dr/dY = -2 q."""
+        Y = ctx.Y
+        q = Y[:, self.idx]  # (n, s, 4)
+        r = 1.0 - np.einsum("nsi,nsi->ns", q, q)
+        J = np.zeros((len(Y), self.idx.shape[0], Y.shape[1]))
+        for k, slot in enumerate(self.idx):
+            J[:, k, slot] = -2.0 * q[:, k]
+        return Residual(r, blocks=(J, None, None))

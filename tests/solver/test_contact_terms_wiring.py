@@ -200,10 +200,36 @@ def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
     assert text.index("float in contact") < text.index("max |1 - |q||")
 
 
-def test_planted_with_the_engine_has_the_bits_of_the_per_contact_integrand(toy):
-    """`Planted.evaluate_deferred` (pairs of point and contact) against `_integrand` on the rows of
-    `_parts` (every contact at every contact row), bit for bit: contacts of one site that overlap (added
-    in contact order), one on the step, one on whichever surface is under the site."""
+def mujoco_planted(model, term, t, Y, Y1):
+    """The reference for `Planted`: f and its gradient from MuJoCo point by point (`SiteMotion`:
+    `mj_kinematics` positions, `mj_jacSite` and `mj_jacDot` for velocities and their gradient), with
+    the integrand written out contact by contact from the module docstring."""
+    from solver.terms.contact_schedule import SiteMotion
+
+    kin = SiteMotion(model, term.kin.names)
+    S, W = term.height_windows(t), term.windows(t)
+    p, v, J, Jd = kin.motion(Y, Y1)
+    f = np.zeros(len(Y))
+    g_p, g_v = np.zeros(p.shape), np.zeros(v.shape)
+    t2 = term.tau**2
+    for c, contact in enumerate(term.contacts):
+        k = term.kin.names.index(contact.site)
+        on = S[:, c] > 0
+        h, nrm = term.support.height(p[on, k], term.support.index(contact.surface))
+        h = h - term.rest_height
+        vt = v[on, k] - np.einsum("mi,mi->m", v[on, k], nrm)[:, None] * nrm
+        f[on] += S[on, c] * h * h + W[on, c] * t2 * (vt * vt).sum(-1)
+        g_p[on, k] += (2.0 * S[on, c] * h)[:, None] * nrm
+        g_v[on, k] += (2.0 * t2 * W[on, c])[:, None] * vt
+    dY, dY1 = kin.pullback(Y, Y1, J, Jd, g_p, g_v)
+    return f, dY, dY1
+
+
+def test_planted_matches_mujoco_point_by_point(toy):
+    """`Planted` (its engine's vectorized pass through a `PathContext`, at the pairs of point and
+    contact) against MuJoCo point by point (`mujoco_planted`): values to 1e-12 m^2, gradients to 1e-8
+    of their largest entry. Contacts of one site that overlap, one on the step, one on whichever
+    surface is under the site."""
     from solver.kinematic_tree import SiteKinematics
     from solver.terms.contact import Planted
 
@@ -215,22 +241,14 @@ def test_planted_with_the_engine_has_the_bits_of_the_per_contact_integrand(toy):
     Y[:, 2] = 0.95
     sched = (Contact("l_heel", 0.1, 0.6), Contact("l_heel", 0.5, 0.8), Contact("r_toe", 0.0, 0.4, "step"),
              Contact("l_toe", 0.3, 1.0), Contact("r_heel", 0.7, 0.9, "floor"))
-    engine = SiteKinematics(toy, CONTACT_SITES)
-    term = Planted(toy, sched, ramp=0.1, engine=engine)
-    ev = term.evaluate_deferred(t, Y, Y1, None)
-    res = ev.deferred.result
-    S, W = term._both(t)
-    rows = np.flatnonzero((S > 0).any(axis=1))
-    p, v = res.sites[rows][:, term._eidx], engine.site_velocities(res)[rows][:, term._eidx]
-    f_rows, g_p, g_v = term._integrand(p, v, S[rows], W[rows], rows, True)
-    f = np.zeros(n)
-    f[rows] = f_rows
-    g_sites, g_vel = np.zeros(res.sites.shape), np.zeros(res.sites.shape)
-    g_sites[np.ix_(rows, term._eidx)], g_vel[np.ix_(rows, term._eidx)] = g_p, g_v
-    assert np.any(f > 0) and np.any(g_vel != 0)
-    for a, b in ((ev.f, f), (ev.deferred.g_sites, g_sites), (ev.deferred.g_site_vel, g_vel),
-                 (term.evaluate_deferred(t, Y, Y1, None, grad=False).f, f)):
-        assert np.array_equal(a.view(np.int64), b.view(np.int64))
+    term = Planted(toy, sched, ramp=0.1, engine=SiteKinematics(toy, CONTACT_SITES))
+    ev = term.evaluate(t, Y, Y1, None)
+    f, dY, dY1 = mujoco_planted(toy, term, t, Y, Y1)
+    assert np.any(f > 0) and np.any(dY1 != 0)
+    np.testing.assert_allclose(ev.f, f, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(term.evaluate(t, Y, Y1, None, grad=False).f, f, rtol=0, atol=1e-12)
+    for got, ref in ((ev.dY, dY), (ev.dY1, dY1)):
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-8 * np.abs(ref).max())
 
 
 def test_index_run_is_a_slice_only_for_consecutive_indices():
@@ -270,3 +288,56 @@ def test_violations_from_the_vectorized_positions_match_mujocos(toy):
     loop = [term.violation(Y, t) for term in terms] + [float(pen.depths(Y, margin=0.05).max())]
     assert all(v > 0 for v in loop), loop
     np.testing.assert_allclose(dense, loop, rtol=1e-12, atol=1e-15)
+
+
+def test_clearance_matches_mujoco_point_by_point(toy):
+    """`Clearance` (its engine's vectorized pass through a `PathContext`) against MuJoCo point by point:
+    heights from `mj_kinematics` positions (`SiteMotion.positions`), the gradient through `mj_jacSite`
+    (`SiteMotion.jacobians`) and `TangentMap.pullback`; values to 1e-12 m^2, gradients to 1e-9 of their
+    largest entry. Swings of two sites and a flight."""
+    from solver.terms.clearance import Clearance
+    from solver.terms.contact_schedule import SiteMotion
+
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(5)
+    n = 50
+    t = np.linspace(0, 1, n)
+    Y = random_qpos(rng, layout, n, spread=0.2, scale=(1, 1))
+    Y[:, 2] = 0.90 + 0.03 * rng.normal(size=n)
+    Y[::4, 0] = 1.5  # over the step box
+    sched = (Contact("l_heel", 0.0, 0.1), Contact("l_heel", 0.9, 1.0), Contact("r_toe", 0.0, 0.3),
+             Contact("r_toe", 0.5, 1.0))
+    term = Clearance(toy, sched)
+    ev = term.evaluate(t, Y, None, None)
+    kin = SiteMotion(toy, term.kin.names)
+    p, J = kin.jacobians(Y)
+    h, nrm = term.below.height(p)
+    Us, Uf, Bf, Bs = term.split_windows(t)
+    f, g_p = np.zeros(n), np.zeros(p.shape)
+    for U, band in ((Us, Bs), (np.broadcast_to(Uf[:, None], Us.shape), Bf[:, None])):
+        depth = np.maximum(0.0, band - h)
+        f += (U * depth * depth).sum(1)
+        g_p -= (2.0 * U * depth)[..., None] * nrm
+    dY = kin.tmap.pullback(Y, np.einsum("nkij,nki->nj", J, g_p))
+    assert np.count_nonzero(f) >= 4 and np.any(dY != 0)
+    np.testing.assert_allclose(ev.f, f, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ev.dY, dY, rtol=0, atol=1e-9 * np.abs(dY).max())
+
+
+def test_torque_and_root_terms_match_the_mujoco_backend(toy):
+    """The inverse-dynamics terms on their one path, with the vectorized engine and with MuJoCo's
+    (`mj_inverse` values, `mjd_inverseFD` gradients: forward differences, ~1e-6 relative): values to
+    1e-9 relative, gradients to 1e-4 of their largest entry."""
+    from solver.terms.dynamics import JointTorque, RootResidual
+
+    layout = StateLayout.from_model(toy)
+    rng = np.random.default_rng(8)
+    Y = random_qpos(rng, layout, 5, spread=0.3)
+    Y[:, 2] = 0.97
+    Y1, Y2 = rng.normal(size=Y.shape), rng.normal(size=Y.shape)
+    for cls in (JointTorque, RootResidual):
+        a, b = cls(toy).evaluate(None, Y, Y1, Y2), cls(toy, backend="mujoco").evaluate(None, Y, Y1, Y2)
+        assert np.any(b.f > 0)
+        np.testing.assert_allclose(a.f, b.f, rtol=1e-9, atol=0)
+        for x, y in ((a.dY, b.dY), (a.dY1, b.dY1), (a.dY2, b.dY2)):
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-4 * np.abs(y).max())

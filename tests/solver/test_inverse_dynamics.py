@@ -257,27 +257,32 @@ def test_terms_share_an_engine(scene):
 
 
 @pytest.mark.parametrize("kind", ["inverse dynamics", "kinematics only"])
-def test_engine_forward_reuses_the_engines_pass_only_while_it_is_the_cached_one(scene, kind):
-    """`engine_forward` with the same path (copies) returns the engine's cached pass; once the engine
-    has run on something else, it runs again on this path (same values, the engine's new cached pass)."""
+def test_a_path_context_runs_each_engine_once(scene, kind):
+    """`PathContext.forward` computes an engine's pass on the first ask and returns the same objects
+    after; a new context on the same path computes it again (equal values); a context without Y'
+    gives the kinematics engine's positions alone (equal to the full pass's)."""
     from solver.kinematic_tree import SiteKinematics
-    from solver.terms.dynamics import engine_forward
+    from solver.path_context import PathContext, PoseOnly
 
     layout, Y, Y1, Y2 = state(scene, np.random.default_rng(9))
     tm = TangentMap.from_layout(layout)
     eng = make_engine(scene) if kind == "inverse dynamics" else SiteKinematics(scene, CONTACT_SITES)
-    mo, res = engine_forward(eng, tm, Y, Y1, Y2)
-    again = engine_forward(eng, tm, Y.copy(), Y1.copy(), Y2.copy())
+    ctx = PathContext(None, Y, Y1, Y2)
+    mo, res = ctx.forward(eng, tm)
+    again = ctx.forward(eng, tm)
     assert again[0] is mo and again[1] is res
     other = tm.motion(Y[::-1].copy(), Y1, Y2)
-    eng.forward(Y[::-1].copy(), other.qvel, other.qacc)  # the engine's cache now holds another pass
-    mo2, res2 = engine_forward(eng, tm, Y.copy(), Y1.copy(), Y2.copy())
-    assert mo2 is mo and res2 is not res and res2 is eng._cache
+    eng.forward(Y[::-1].copy(), other.qvel, other.qacc)  # the engine now holds another pass
+    mo2, res2 = PathContext(None, Y.copy(), Y1.copy(), Y2.copy()).forward(eng, tm)
     np.testing.assert_array_equal(res2.sites, res.sites)
     np.testing.assert_array_equal(res2.tau, res.tau)
-    Y[0, 0] += 1e-3  # a new path: a new motion and pass
-    mo3, res3 = engine_forward(eng, tm, Y, Y1, Y2)
-    assert mo3 is not mo and not np.array_equal(res3.sites, res.sites)
+    if kind == "kinematics only":
+        mo3, res3 = PathContext(None, Y).forward(eng, tm)
+        assert isinstance(mo3, PoseOnly) and res3.qvel.size == 0
+        np.testing.assert_allclose(res3.sites, res.sites, rtol=0, atol=1e-14)
+    else:
+        with pytest.raises(ValueError, match="needs path derivative 1"):
+            PathContext(None, Y).forward(eng, tm)
 
 
 # ------------------------------------------------------------------------------ physical checks

@@ -150,3 +150,24 @@ def test_the_engines_partial_tangent_map_gives_the_full_maps_bits(model):
 def test_unsupported_joints_are_named():
     with pytest.raises(InputError, match="elbow.*hinge"):
         SiteKinematics(mujoco.MjModel.from_xml_string(HINGE))
+
+
+def test_forward_without_qvel_is_the_pose_pass(model):
+    """`SiteKinematics.forward(qpos, None)`: the positions of the full pass (to 1e-14 m), no velocities,
+    and a `vjp` of site-position adjoints (zero on some rows) equal to the full pass's pose gradient
+    (to 1e-12 of its largest entry) with no qvel gradient."""
+    rng = np.random.default_rng(21)
+    n = 6
+    Y, V = _state(model, rng, n)
+    eng = SiteKinematics(model, CONTACT_SITES)
+    full = eng.forward(Y, V)
+    pose = eng.forward(Y, None)
+    assert pose is not full and pose.qvel.size == 0
+    np.testing.assert_allclose(pose.sites, full.sites, rtol=0, atol=1e-14)
+    g = rng.normal(size=full.sites.shape)
+    g[[0, 3]] = 0.0
+    Gq_full, _, _ = eng.vjp(full, None, g)
+    Gq, Gv, Ga = eng.vjp(pose, None, g)
+    assert Gv is None and Ga is None
+    np.testing.assert_allclose(Gq, Gq_full, rtol=0, atol=1e-12 * np.abs(Gq_full).max())
+    assert not np.any(Gq[[0, 3]])

@@ -179,7 +179,7 @@ def test_lagged_flight_indicator(model, layout):
 def test_shared_engine_gives_the_same_objective_and_gradient(model, layout, keyframes):
     """`figure_objective` with the dynamics terms shares one engine: penetration reads its forward
     pass and every term's gradient goes through one reverse pass. Same value and gradient as the
-    terms on their own (penetration by MuJoCo kinematics and site Jacobians)."""
+    terms each on an engine of its own (penetration on its own site kinematics)."""
     weights = parse_terms("all")
     fs = FrameSet.from_keyframes(keyframes, layout.quat_slots).with_variable_frames([0.1, 0.6, 1.1, 1.6])
     shared = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=200.0)

@@ -167,3 +167,45 @@ def test_fused_orientation_objective_matches_the_two_terms():
         assert abs(a.E - b.E) <= 1e-13 * abs(b.E)
         assert a.integrals == pytest.approx(b.integrals, rel=1e-13)
         np.testing.assert_allclose(a.grad, b.grad, rtol=1e-12, atol=1e-12 * np.abs(b.grad).max())
+
+
+class Held(Value):
+    """A term that keeps something per quadrature point (`Term.fixed_points`)."""
+
+    name, fixed_points = "held", True
+
+
+def test_the_objective_reads_terms_through_their_declared_interface():
+    """`needs` is the union of the terms' (sorted), `blame` names the non-finite term (the gradient of
+    a path where only one is NaN), and Gauss quadrature refuses a term with `fixed_points`."""
+    obj = Objective([Value(), Wiggly(), Poison()], [1.0, 1.0, 1.0], 0.0, 1.0, rate=20.0)
+    assert obj.needs == (0, 1, 2)
+    basis = obj.basis(np.array([0.0, 1.0]))
+    Y = np.zeros((len(basis.t), 1))
+    assert obj.blame(basis, Y, Y, Y) == "poison"
+    assert Objective([Value()], [1.0], 0.0, 1.0, quadrature="gauss").needs == (0,)
+    with pytest.raises(InputError, match="'held' keeps per-point state"):
+        Objective([Held()], [1.0], 0.0, 1.0, quadrature="gauss")
+
+
+def test_a_term_implements_evaluate_or_evaluate_in():
+    """The base class turns either into the other: `evaluate_in` defaults to `evaluate` on the
+    context's arrays; `evaluate` defaults to `evaluate_in` on a context of its own with the deferred
+    part pulled back; a term with neither says so."""
+    from solver.path_context import PathContext
+
+    class ViaContext(Term):
+        name, needs = "via_context", (0,)
+
+        def evaluate_in(self, ctx, grad=True):
+            return TermEval(2.0 * ctx.Y[:, 0], dY=np.full(ctx.Y.shape, 2.0))
+
+    Y = np.arange(6.0).reshape(3, 2)
+    np.testing.assert_array_equal(ViaContext().evaluate(None, Y, None, None).f, 2.0 * Y[:, 0])
+    np.testing.assert_array_equal(Value().evaluate_in(PathContext(None, Y)).f, Y[:, 0])
+
+    class Neither(Term):
+        name = "neither"
+
+    with pytest.raises(NotImplementedError, match="implements neither evaluate nor evaluate_in"):
+        Neither().evaluate(None, Y, None, None)

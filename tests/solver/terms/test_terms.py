@@ -1,5 +1,6 @@
 """Each objective term's gradient against central finite differences, and its value against
 hand-computed cases."""
+import mujoco
 import numpy as np
 import pytest
 
@@ -101,30 +102,64 @@ def test_penetration_value_and_gradient(toy_model, layout):
     check_term_gradient(term, Yr, None, None, rtol=1e-5, atol=1e-8)
 
 
-def test_penetration_tree_and_mujoco_paths_agree(toy_model, layout):
-    """The vectorized pass (`KinematicTree`) and MuJoCo point by point (the path for models the tree
-    does not cover) give the same values and gradients; a hinge model takes the MuJoCo path."""
-    import mujoco
+def mujoco_penetration(model, Y, sites, margin):
+    """The reference: f = sum depth^2 and its gradient from MuJoCo point by point (`mj_kinematics`
+    positions, `mj_jacSite` Jacobians, mapped to qpos by `TangentMap.pullback`)."""
+    from solver.kinematics import TangentMap
+    from solver.layout import site_ids
+    from solver.surfaces import StaticSurfaces
+
+    d = mujoco.MjData(model)
+    ids = site_ids(model, sites)
+    surfaces = StaticSurfaces.from_model(model, d)
+    tmap = TangentMap.from_layout(StateLayout.from_model(model))
+    f, dY = np.zeros(len(Y)), np.zeros(Y.shape)
+    jac = np.zeros((3, model.nv))
+    for i, y in enumerate(Y):
+        d.qpos[:] = y
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        depth, ddepth = surfaces.penetration(d.site_xpos[ids][None], margin)
+        f[i] = (depth * depth).sum()
+        gv = np.zeros(model.nv)
+        for k, sid in enumerate(ids):
+            mujoco.mj_jacSite(model, d, jac, None, int(sid))
+            gv += np.einsum("s,si->i", 2.0 * depth[0, k], ddepth[0, k]) @ jac
+        dY[i] = tmap.pullback(y[None], gv[None])[0]
+    return f, dY
+
+
+def test_penetration_matches_mujoco_point_by_point(toy_model, layout):
+    """The term's one path (its engine's vectorized forward and reverse pass through a `PathContext`)
+    against MuJoCo point by point (`mujoco_penetration`): values to 1e-12 m^2, gradients to 1e-9 of
+    their largest entry; a hinge model (which the vectorized tree does not cover) gets MuJoCo's engine."""
     from tree_models import HINGE
+
+    from solver.path_context import MujocoSitePositions
 
     rng = np.random.default_rng(7)
     Y = random_qpos(rng, layout, 40, spread=0.3)
     Y[:, 2] = rng.uniform(0.85, 1.0, 40)  # most points with a site inside the floor, some clear
     Y[::3, 0] = 1.5  # over the step box
-    tree, mj = Penetration(toy_model, margin=0.005), Penetration(toy_model, margin=0.005)
-    mj._tree = None
-    assert tree._tree is not None
-    a, b = tree.evaluate(None, Y, None, None), mj.evaluate(None, Y, None, None)
-    assert 0 < np.count_nonzero(a.f) < len(Y)
-    np.testing.assert_allclose(a.f, b.f, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(a.dY, b.dY, rtol=0, atol=1e-11 * np.abs(b.dY).max())
-    np.testing.assert_allclose(tree.depths(Y), mj.depths(Y), rtol=0, atol=1e-12)
+    term = Penetration(toy_model, margin=0.005)
+    ev = term.evaluate(None, Y, None, None)
+    f, dY = mujoco_penetration(toy_model, Y, term_sites(term), 0.005)
+    assert 0 < np.count_nonzero(f) < len(Y)
+    np.testing.assert_allclose(ev.f, f, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ev.dY, dY, rtol=0, atol=1e-9 * np.abs(dY).max())
+    np.testing.assert_array_equal(term.depths(Y).max(axis=1) > 0, f > 0)  # the query reads the same engine
     xml = HINGE.replace('pos="0 0 1"', 'pos="0 0 .1"').replace('size=".03"/>', 'size=".03"/><site name="tip" pos=".3 0 0"/>').replace(
         "</worldbody>", '<geom type="plane" size="5 5 .1"/></worldbody>')
     hinge = Penetration(mujoco.MjModel.from_xml_string(xml), sites=["tip"], margin=0.0)
-    assert hinge._tree is None
+    assert isinstance(hinge.engine, MujocoSitePositions)
     np.testing.assert_allclose(hinge.evaluate(None, np.array([[np.pi / 2], [0.0]]), None, None).f, [0.2**2, 0.0],
                                atol=1e-12)  # the tip swung 0.2 m below the floor, then level and clear
+
+
+def term_sites(term):
+    """The names of the sites a penetration term reads (its engine's, in the term's order)."""
+    ids = np.asarray(term.engine.site_ids)[term.site_index]
+    return [mujoco.mj_id2name(term.model, mujoco.mjtObj.mjOBJ_SITE, int(i)) for i in np.atleast_1d(ids)]
 
 
 def test_pointwise_terms_evaluate_the_same_on_any_split_of_the_points(layout):
@@ -149,4 +184,4 @@ def test_pointwise_terms_evaluate_the_same_on_any_split_of_the_points(layout):
                 continue
             np.testing.assert_allclose(np.concatenate([getattr(p, field) for p in parts]), w, rtol=1e-15, atol=0,
                                        err_msg=f"{term.name} {field}")
-    assert not Penetration.pointwise  # keeps a MuJoCo scratch state; may defer its gradient to an engine
+    assert not Penetration.pointwise  # reads its engine's pass and defers its gradient to it
