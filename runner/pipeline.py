@@ -219,8 +219,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     weights = parse_terms(o.terms, dict(o.weights or {}), info.contacts)
     options = replace(o.solve or default_options(weights), limits=default_limits(weights))
     objective, initial, conflicts = figure_problem(model, weights, keyframes, rate=o.rate, contacts=info.contacts)
-    if conflicts:  # the clip's own keyframes against its own contacts: a heel "in contact" 3 cm up
-        say(f"  {len(conflicts)} keyframe(s) hold a site off the contact schedule (met exactly; those contacts "
+    if conflicts.found:  # the clip's own keyframes against its own contacts: a heel "in contact" 3 cm up
+        say(f"  {len(conflicts.found)} keyframe(s) hold a site off the contact schedule (met exactly; those contacts "
             "and swings are not held to the bounds)")
     progress = Progress(o.quiet)
     with StopRequest(o.quiet) as stop:

@@ -89,7 +89,7 @@ def run_animate(args) -> int:
     objective, initial, conflicts = figure_problem(model, weights, keyframes, rate=args.rate, contacts=contacts)
     options = solve_options(args, weights)
     _warn_penetrating_keyframes(model, keyframes, initial)
-    _warn_contact_conflicts(conflicts, keyframes)
+    _warn_contact_conflicts(conflicts.found, keyframes)
     say = print  # results; --quiet silences progress only
     say(f"dynsplines: {args.keyframes} -> {keyframes.count} keyframes "
         f"({int(keyframes.is_partial.sum())} partial) over {keyframes.times[-1] - keyframes.times[0]:.2f} s, "

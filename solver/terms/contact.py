@@ -56,10 +56,12 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES
+from solver.schedule_conflicts import ScheduleConflicts
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
 from solver.terms.contact_schedule import (
     FULL,
+    KEYFRAME_AT_END,
     SiteMotion,
     SupportSurfaces,
     _engine_index,
@@ -88,7 +90,8 @@ class Planted(Term):
 
     Args:
         model: MjModel of the scene (figure + static planes/boxes).
-        contacts: objects with site, start, end, surface (see module docstring).
+        contacts: a `solver.ContactSchedule`, or objects with site, start, end, surface (see module
+            docstring), checked against the scene's surfaces (`ContactSchedule.for_scene`).
         velocity_time: tau [s] > 0, weighs sliding speed against height.
         ramp: r [s] >= 0, length of the smoothstep ramp at each end of a contact's sliding window (height has none).
         rest_height: h0 [m], the height a planted site is pulled to (set it to the penetration term's
@@ -96,6 +99,8 @@ class Planted(Term):
         footprint_margin: [m] see `SupportSurfaces`.
         t_span: (t0, t1) [s] of the keyframes: `violation(Y)` without times assumes Y sampled evenly on
             it (how `solve` checks limits).
+        conflicts: `ScheduleConflicts` from `solver.problem.keyframe_conflicts`: its `planted` contacts
+            are left out of `violation` (default: none).
     Raises:
         InputError: a bad contact (unknown site or surface, start >= end), no surfaces, bad parameters.
     """
@@ -105,7 +110,8 @@ class Planted(Term):
     needs = (0, 1)
 
     def __init__(self, model, contacts, velocity_time: float = 0.1, ramp: float = 0.02,
-                 rest_height: float = 0.005, footprint_margin: float = 0.03, t_span=None, engine=None):
+                 rest_height: float = 0.005, footprint_margin: float = 0.03, t_span=None, engine=None,
+                 conflicts: ScheduleConflicts | None = None):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the planted term")
@@ -123,7 +129,10 @@ class Planted(Term):
         self.kin = SiteMotion(model, used or CONTACT_SITES[:1])
         self._col = np.array([self.kin.names.index(c.site) for c in self.contacts], int)
         self._surf = [self.support.index(c.surface) for c in self.contacts]
-        self.excused: set[int] = set()  # contacts a keyframe contradicts: `violation` skips them
+        #: what keyframes contradict (`solver.problem.keyframe_conflicts`); fixed at construction
+        self.excusals = conflicts if conflicts is not None else ScheduleConflicts()
+        #: indices of the contacts a keyframe contradicts: `violation` skips them
+        self.excused = frozenset(c for c, x in enumerate(self.contacts) if x in self.excusals.planted)
         self.engine = engine if engine is not None and hasattr(engine, "site_velocities") else None
         if self.engine is not None:
             # site positions and velocities at all points from the engine's vectorized forward pass
@@ -318,52 +327,59 @@ class Planted(Term):
         return float(np.max(np.where(full, np.maximum(np.abs(h), self.tau * speed), 0.0)))
 
     def _at_keyframes(self, times, qpos):
-        """(W (k, C) sliding windows at the keyframe times, p (k, sites, 3) site positions or None)."""
-        W = self.windows(np.asarray(times, float))
-        return W, (self.kin.positions(np.asarray(qpos, float)) if W.size else None)
+        """(S (k, C) whether each keyframe is in each contact, closed [start, end] with 1e-6 s for the
+        files' 6 decimals; W (k, C) sliding windows; p (k, sites, 3) site positions or None)."""
+        times = np.asarray(times, float)
+        W = self.windows(times)
+        S = np.zeros(W.shape, bool)
+        for c, x in enumerate(self.contacts):
+            S[:, c] = (times >= x.start - KEYFRAME_AT_END) & (times <= x.end + KEYFRAME_AT_END)
+        return S, W, (self.kin.positions(np.asarray(qpos, float)) if W.size else None)
 
-    def conflicts(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
-        """Keyframes that contradict the schedule: a keyframe at time t inside a contact's full window
-        whose site is more than `tolerance` [m] from the plant height (keyframes are met exactly, so
-        the term cannot pull that site down). excuse: also leave those contacts out of `violation`
-        (else penalty continuation would raise the weight against a bound it cannot reach).
+    def conflicts(self, times, qpos, tolerance: float = 0.01) -> ScheduleConflicts:
+        """Keyframes that contradict the schedule's heights: a keyframe at time t in a contact (its
+        closed interval [start, end], ends included, as in `slides`) whose site is more than
+        `tolerance` [m] from the plant height h0 (keyframes are met exactly, so the term cannot pull
+        that site down there). A query: the term is not changed.
+
+        Args:
+            times: (k,) keyframe times [s]. qpos: (k, nq) keyframe poses. tolerance: [m].
+        Returns:
+            ScheduleConflicts: found = (("planted", keyframe index, site, height - h0 [m]), ...), those
+            contacts in `planted` (build the term with it to leave them out of `violation`: penalty
+            continuation would raise the weight against a bound it cannot reach).
+        """
+        S, _, p = self._at_keyframes(times, qpos)
+        found, excused = [], set()
+        for c, contact in enumerate(self.contacts):
+            if not S[:, c].any():
+                continue
+            h, _ = self.support.height(p[:, self._col[c]], self._surf[c])
+            for i in np.flatnonzero(S[:, c] & (np.abs(h - self.rest_height) > tolerance)):
+                found.append(("planted", int(i), contact.site, float(h[i] - self.rest_height)))
+                excused.add(contact)
+        return ScheduleConflicts(found, planted=excused)
+
+    def slides(self, times, qpos, tolerance: float = 0.01) -> ScheduleConflicts:
+        """Keyframes that make a planted site slide: two keyframes in one contact (its closed interval
+        [start, end]: a keyframe at a contact's start or end counts, the natural way to write one) that
+        hold the site more than `tolerance` [m] apart horizontally (capture's feet roll and pivot: 2-4 cm
+        on the walk; no path can then keep the site still). A query: the term is not changed.
 
         Returns:
-            [(keyframe index, site, height - h0 [m]), ...].
+            ScheduleConflicts: found = (("sliding", index of the later keyframe, site, largest horizontal
+            distance [m]), ...), those contacts in `planted` (left out of `violation` when the term is
+            built with it; the term still pulls toward no sliding).
         """
-        W, p = self._at_keyframes(times, qpos)
-        out = []
-        if not W.size:
-            return out
+        S, _, p = self._at_keyframes(times, qpos)
+        found, excused = [], set()
         for c, contact in enumerate(self.contacts):
-            h, _ = self.support.height(p[:, self._col[c]], self._surf[c])
-            for i in np.flatnonzero((W[:, c] >= FULL) & (np.abs(h - self.rest_height) > tolerance)):
-                out.append((int(i), contact.site, float(h[i] - self.rest_height)))
-                if excuse:
-                    self.excused.add(c)
-        return out
-
-    def slides(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
-        """Keyframes that make a planted site slide: two keyframes in one contact (window > 0) that hold
-        the site more than `tolerance` [m] apart horizontally (capture's feet roll and pivot: 2-4 cm on
-        the walk; no path can then keep the site still, README "Feet that plant"). excuse: leave those
-        contacts out of `violation` (the term still pulls toward no sliding).
-
-        Returns: [(index of the later keyframe, site, largest horizontal distance [m]), ...].
-        """
-        W, p = self._at_keyframes(times, qpos)
-        out = []
-        if not W.size:
-            return out
-        for c, contact in enumerate(self.contacts):
-            inside = np.flatnonzero(W[:, c] > 0)
+            inside = np.flatnonzero(S[:, c])
             if len(inside) < 2:
                 continue
             xy = p[inside, self._col[c], :2]
             spread = float(np.max(np.linalg.norm(xy[:, None] - xy[None], axis=-1)))
             if spread > tolerance:
-                out.append((int(inside[-1]), contact.site, spread))
-                if excuse:
-                    self.excused.add(c)
-        return out
-
+                found.append(("sliding", int(inside[-1]), contact.site, spread))
+                excused.add(contact)
+        return ScheduleConflicts(found, planted=excused)

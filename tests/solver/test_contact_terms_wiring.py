@@ -119,10 +119,13 @@ def test_keyframes_that_contradict_the_schedule_are_found_and_excused(toy):
     obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=SCHEDULE)
     q = np.tile(toy.qpos0, (3, 1))
     q[:, 2] = 1.0  # sites at 5 cm above the floor: heel planted at t=0.2 is too high, r_toe swinging ok
-    found = keyframe_conflicts(obj, np.array([0.0, 0.2, 1.0]), q)
-    assert ("planted", 1, "l_heel", pytest.approx(0.05 - 0.002, abs=1e-6)) in found
+    got = keyframe_conflicts(obj, np.array([0.0, 0.2, 1.0]), q)
+    assert ("planted", 1, "l_heel", pytest.approx(0.05 - 0.002, abs=1e-6)) in got.found
+    assert Contact("l_heel", 0.0, 0.4) in got.planted
     planted = obj.terms[obj.names.index("planted")]
-    assert 0 in planted.excused
+    assert not planted.excused  # a query: the objective's terms are not changed
+    excused = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=SCHEDULE, conflicts=got)
+    assert 0 in excused.terms[excused.names.index("planted")].excused  # l_heel (0, 0.4): the first contact
 
 
 def test_keyframes_that_slide_a_planted_site_are_found_and_excused(toy):
@@ -135,14 +138,16 @@ def test_keyframes_that_slide_a_planted_site_are_found_and_excused(toy):
     q[:, 2] = 0.952  # sites near the floor (2 mm up: the planted rest height)
     q[2, 0] += 0.03  # the whole figure 3 cm along x at t = 0.3: both toes slide 3 cm
     obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched)
-    found = [c for c in keyframe_conflicts(obj, times, q) if c[0] == "sliding"]
+    got = keyframe_conflicts(obj, times, q)
+    found = [c for c in got.found if c[0] == "sliding"]
     assert sorted(found) == [("sliding", 2, "l_toe", pytest.approx(0.03, abs=1e-9)),
                              ("sliding", 2, "r_toe", pytest.approx(0.03, abs=1e-9))]
-    assert obj.terms[0].excused == {0, 1}
+    assert got.planted == set(sched)
+    assert figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched, conflicts=got).terms[0].excused == {0, 1}
     q[2, 0] -= 0.025  # 5 mm
     obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched)
-    assert not [c for c in keyframe_conflicts(obj, times, q) if c[0] == "sliding"]
-    assert not obj.terms[0].excused
+    got = keyframe_conflicts(obj, times, q)
+    assert not [c for c in got.found if c[0] == "sliding"] and not got.planted
 
 
 def test_a_swing_the_path_next_to_a_keyframe_keeps_on_the_floor_is_excused(toy):
@@ -161,10 +166,12 @@ def test_a_swing_the_path_next_to_a_keyframe_keeps_on_the_floor_is_excused(toy):
         return Y
 
     obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched)
-    assert keyframe_conflicts(obj, times, q) == []
-    found = keyframe_conflicts(obj, times, q, path=path)
-    assert found == [("clearance", 1, "l_toe", pytest.approx(0.02 - 0.002, abs=1e-6))]
-    assert (1, 0.3, 0.7) in obj.terms[0].excused  # l_toe is column 1 (l_heel, l_toe, r_heel, r_toe)
+    assert not keyframe_conflicts(obj, times, q).found
+    got = keyframe_conflicts(obj, times, q, path=path)
+    assert list(got.found) == [("clearance", 1, "l_toe", pytest.approx(0.02 - 0.002, abs=1e-6))]
+    assert ("l_toe", 0.3, 0.7) in got.swings
+    built = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched, conflicts=got)
+    assert (1, 0.3, 0.7) in built.terms[0].excused  # l_toe is column 1 (l_heel, l_toe, r_heel, r_toe)
 
 
 @pytest.mark.slow

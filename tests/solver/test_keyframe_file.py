@@ -40,7 +40,7 @@ def write_json(tmp_path, doc, name="k.json"):
 
 
 def minimal(**kf1):
-    return {"keyframes": [{"time": 0.0, "joints": {"root": [0, 0, 1, 1, 0, 0, 0]}},
+    return {"format": FORMAT, "keyframes": [{"time": 0.0, "joints": {"root": [0, 0, 1, 1, 0, 0, 0]}},
                           {"time": 0.5, "joints": {"root": [1, 0, 1, 1, 0, 0, 0], **kf1}}]}
 
 
@@ -131,10 +131,10 @@ def test_file_errors(tmp_path, layout):
     p = write_json(tmp_path, {"format": "other/2", "keyframes": []})
     with pytest.raises(InputError, match=r"field 'format' is 'other/2'; this program reads 'dynsplines.keyframes/1'"):
         read_keyframes(p, layout)
-    p = write_json(tmp_path, {"frames": []})
+    p = write_json(tmp_path, {"format": FORMAT, "frames": []})
     with pytest.raises(InputError, match=r"unknown top-level field\(s\) 'frames'"):
         read_keyframes(p, layout)
-    p = write_json(tmp_path, {"model": "x.xml"})
+    p = write_json(tmp_path, {"format": FORMAT, "model": "x.xml"})
     with pytest.raises(InputError, match=r"missing field 'keyframes'"):
         read_keyframes(p, layout)
 
@@ -211,13 +211,13 @@ def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
     text = out.read_text()
     assert '    {"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"}' in text  # one per line
     _, info = read_keyframes(out, layout)
-    assert info.contacts == tuple(contacts)
+    assert tuple(info.contacts) == tuple(contacts)
     doc = json.loads(text)
     doc["contacts"].append({"foot": "right", "start": 0.5, "end": 0.6, "surface": "box0"})
     _, info = read_keyframes(write_json(tmp_path, doc), layout)
     assert info.contacts[2:] == (Contact("r_heel", 0.5, 0.6, "box0"), Contact("r_toe", 0.5, 0.6, "box0"))
     _, info = read_keyframes(write_json(tmp_path, minimal(), "none.json"), layout)
-    assert info.contacts == ()
+    assert not info.contacts and len(info.contacts) == 0
     # times are rounded outward: a contact keeps every frame it held (frame times k * 0.0083333)
     odd = [Contact("r_toe", 3 * 0.0083333, 28 * 0.0083333)]
     write_keyframes(out, kf, layout, contacts=odd)
@@ -233,7 +233,7 @@ def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
     ([{"site": "l_toe", "foot": "left", "start": 0, "end": 1}], "exactly one of 'site'"),
     ([{"site": "l_toe", "end": 1}], "contacts[0]: missing field 'start'"),
     ([{"site": "l_toe", "start": "0", "end": 1}], "contacts[0]: 'start' is '0'; give a finite number"),
-    ([{"site": "l_toe", "start": 1, "end": 0.5}], "'end' 0.5 is before 'start' 1; swap them"),
+    ([{"site": "l_toe", "start": 1, "end": 0.5}], "contacts[0]: 'end' 0.5 is not after 'start' 1; swap them"),
     ([{"site": "l_toe", "start": 0, "end": 1, "surface": 3}], "'surface' is 3"),
     ([{"site": "l_toe", "start": 0, "end": 1, "force": 3}], "unknown field(s) 'force'"),
 ])
