@@ -277,3 +277,51 @@ def test_violations_from_the_vectorized_positions_match_mujocos(toy):
     loop = [term.violation(Y, t) for term in terms] + [float(pen.depths(Y, margin=0.05).max())]
     assert all(v > 0 for v in loop), loop
     np.testing.assert_allclose(dense, loop, rtol=1e-12, atol=1e-15)
+
+
+def _standing_jump_file(tmp_path, shift: float, contact_start: float = 0.0):
+    """A hand-written keyframe file of the figure on models/floor.xml: standing at t = 0 (heels 2 mm
+    up), the whole figure `shift` m along x at 0.4 s and again at 1.0 s; both feet in contact from
+    `contact_start` to 0.6 s (a contact written to start at the first keyframe)."""
+    import json
+
+    from runner.paths import MODELS
+    from solver.contacts import site_positions
+
+    model = mujoco.MjModel.from_xml_path(str(MODELS / "floor.xml"))
+    q = model.qpos0.copy()
+    q[2] -= site_positions(model, q)[0, :, 2].min() - 0.002  # the lowest site 2 mm above the floor
+    root = [float(v) for v in q[:7]]
+    frames = [{"time": t, "joints": {"root": [root[0] + dx, *root[1:]]}} for t, dx in ((0.0, 0.0), (0.4, shift),
+                                                                                         (1.0, shift))]
+    doc = {"format": "dynsplines.keyframes/1", "scene": str(MODELS / "floor.xml"), "keyframes": frames,
+           "contacts": [{"foot": "left", "start": contact_start, "end": 0.6},
+                        {"foot": "right", "start": contact_start, "end": 0.6}]}
+    p = tmp_path / "jump.keyframes.json"
+    p.write_text(json.dumps(doc))
+    return model, p
+
+
+@pytest.mark.parametrize("contact_start", [0.0, 0.1])
+def test_a_keyframe_at_a_contacts_start_counts_for_sliding(tmp_path, contact_start):
+    """A standing jump written by hand: contacts from 0.0 to 0.6 s, keyframes at 0.0 and 0.4 s holding
+    the feet 93.8 mm apart. The keyframe at the contact's exact start is in the contact, so the feet
+    must slide 93.8 mm: every site is reported and excused (with the contact starting at 0.1 s, after
+    the first keyframe, nothing slides). Before, only keyframes strictly inside the sliding window
+    counted, and this case got no warning (then missed the planted bound after thousands of
+    evaluations)."""
+    from solver.keyframe_file import read_keyframes
+    from solver.problem import figure_problem
+
+    model, path = _standing_jump_file(tmp_path, 0.0938, contact_start)
+    keyframes, info = read_keyframes(path, model)
+    weights = parse_terms(None, contacts=info.contacts)
+    objective, _, got = figure_problem(model, weights, keyframes, rate=50.0, contacts=info.contacts)
+    sliding = sorted(c for c in got.found if c[0] == "sliding")
+    if contact_start > 0:
+        assert sliding == [] and not got.planted
+        return
+    assert sliding == [("sliding", 1, site, pytest.approx(0.0938, abs=1e-6)) for site in sorted(CONTACT_SITES)]
+    assert got.planted == set(info.contacts)
+    planted = objective.terms[objective.names.index("planted")]
+    assert planted.excused == set(range(4))  # the objective is built with what the keyframes excuse
