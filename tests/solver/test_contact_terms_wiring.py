@@ -325,3 +325,25 @@ def test_a_keyframe_at_a_contacts_start_counts_for_sliding(tmp_path, contact_sta
     assert got.planted == set(info.contacts)
     planted = objective.terms[objective.names.index("planted")]
     assert planted.excused == set(range(4))  # the objective is built with what the keyframes excuse
+
+
+def test_the_shipped_example_contradicts_none_of_its_contacts():
+    """`dynsplines run-and-step` opens without a keyframe-conflict warning: the file's contacts are the
+    clip's (`reference_contacts`, as its recorded command writes them; no heel hovering 3 cm up over
+    its planted toe counted as planted), and no keyframe holds a site off them."""
+    from runner.mocap.reference import load_bvh_reference
+    from runner.paths import MODELS
+    from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+    from solver.contacts import reference_contacts
+    from solver.problem import figure_problem
+
+    keyframes, info, model, _, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
+    assert "--root-scale 1" in info.source["command"]
+    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model, root_scale=1.0)
+    detected = reference_contacts(model, ref.qpos, ref.frame_time)
+    assert [(c.site, c.start, c.end) for c in info.contacts] == [
+        (c.site, pytest.approx(c.start, abs=2e-6), pytest.approx(c.end, abs=2e-6)) for c in detected]
+    weights = parse_terms(None, contacts=info.contacts)
+    assert {"planted", "clearance"} <= set(weights)
+    _, _, got = figure_problem(model, weights, keyframes, contacts=info.contacts)
+    assert got.found == () and not got

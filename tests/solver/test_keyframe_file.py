@@ -242,3 +242,42 @@ def test_contact_errors_name_file_field_value_and_fix(tmp_path, layout, contacts
     with pytest.raises(InputError) as e:
         read_keyframes(p, layout)
     assert str(e.value).startswith(str(p)) and shown in str(e.value)
+
+
+def test_a_file_without_format_is_refused_naming_the_field_and_the_value_to_write(tmp_path, layout):
+    doc = minimal()
+    del doc["format"]
+    p = write_json(tmp_path, doc)
+    with pytest.raises(InputError) as e:
+        read_keyframes(p, layout)
+    assert str(e.value) == (f"{p}: missing field 'format'; add \"format\": \"{FORMAT}\" to the top-level object "
+                            "(the file format this program reads)")
+
+
+def test_an_unknown_surface_names_the_file_and_the_contacts_index(tmp_path):
+    """With the scene given to the reader, at once; with only the figure's layout, when the contact
+    terms check the schedule against their scene: either way one line naming the file and the entry."""
+    from runner.paths import MODELS
+    from solver.terms.contact import Planted
+
+    scene = mujoco.MjModel.from_xml_path(str(MODELS / "run_and_step.xml"))
+    contacts = [{"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"},
+                {"foot": "right", "start": 0.3, "end": 0.5, "surface": "stpe"}]
+    p = write_json(tmp_path, {**minimal(), "contacts": contacts})
+    with pytest.raises(InputError) as e:
+        read_keyframes(p, scene)
+    assert str(e.value).startswith(f"{p}: contacts[1]: 'surface' is 'stpe', which the scene does not have; its "
+                                   "surfaces are floor, step")
+    _, info = read_keyframes(p, StateLayout.from_model(scene))  # no scene: read, checked later
+    with pytest.raises(InputError, match=rf"^{p}: contacts\[1\]: 'surface' is 'stpe', which the scene"):
+        Planted(scene, info.contacts)
+
+
+def test_every_shipped_keyframe_file_loads(layout):
+    from runner.paths import MODELS
+
+    files = sorted(MODELS.glob("*.keyframes.json")) + sorted(Path(__file__).parents[1].rglob("*.keyframes.json"))
+    assert files
+    for f in files:
+        keyframes, info = read_keyframes(f, layout)
+        assert keyframes.count >= 2 and json.loads(f.read_text())["format"] == FORMAT

@@ -446,3 +446,21 @@ def test_objective_gradient_with_a_shared_engine(toy_model, layout):
     assert all(ev.integrals[n] > 0 for n in ("cone", "planted", "clearance")), ev.integrals
     G = fd_gradient(lambda X: obj.evaluate(knots, X, grad=False).E, P)
     assert np.abs(ev.grad - G).max() < 1e-6 * np.abs(G).max()
+
+
+def test_planted_conflicts_count_keyframes_at_a_contacts_ends_and_change_nothing(toy_model, layout):
+    """A keyframe at a contact's exact start (or end) is in it, as the height window (the closed
+    contact) says: 3 cm up there is reported; 10 ms before the start it is not. The check is a query:
+    the term keeps its violation until one is built with what it found."""
+    term = Planted(toy_model, [Contact("l_toe", 0.2, 0.6)], rest_height=0.002)
+    up = standing(layout, 1, (0.0, 0.0, FOOT + 0.032))
+    for t, hit in ((0.2, True), (0.6, True), (0.19, False), (0.4, True)):
+        got = term.conflicts(np.array([t]), up)
+        assert [(k, i, s) for k, i, s, _ in got.found] == ([("planted", 0, "l_toe")] if hit else []), t
+        if hit:
+            assert got.found[0][3] == pytest.approx(0.03, abs=1e-9) and got.planted == {term.contacts[0]}
+    t = np.linspace(0.0, 0.8, 81)
+    Y = standing(layout, len(t), (0.0, 0.0, FOOT + 0.032))
+    assert term.violation(Y, t) == pytest.approx(0.03, abs=1e-9)
+    built = Planted(toy_model, term.contacts, rest_height=0.002, conflicts=term.conflicts(np.array([0.2]), up))
+    assert built.violation(Y, t) is None  # the only contact excused
