@@ -24,14 +24,6 @@ Defaults, chosen on the three CMU clips (127_33 run and step onto a box, 16_23 w
   per site in the walk; the shortest real contacts are heel touches of a forefoot runner
   (0.058-0.092 s, kept); a swinging foot brushing past the thresholds lasts a few frames.
 
-- TOUCH_HEIGHT = 0.02 m (`reference_contacts`): a contact whose site never comes this close to its
-  surface is dropped. A forefoot runner's heel can hover just under the entry height while the toe is
-  planted (127_33 at 1.17-1.26 s: l_heel 28.8-34 mm up, never lower, at 0.2-0.4 m/s, so it entered
-  at 29.9 mm); the planted term would pull it down to its 2 mm rest height against every keyframe
-  there. 2 cm is the clearance a swinging site keeps (`solver.terms.clearance`): a site that never
-  comes lower was never in contact. Planted sites reach 2 mm (the retargeting's root-height
-  correction), heel touches 3-16 mm.
-
 Why hysteresis: with single thresholds (3 cm / 0.5 m/s, or GMD's 5 cm / 0.5 m/s) and no minimum
 duration the walk 16_23 breaks into 29-32 site contacts (19 foot stances) instead of 12 (6 stances),
 the run 35_17 into 11-14 (9 stances) instead of 6 (4); hysteresis alone already gives 12 (6).
@@ -62,8 +54,6 @@ SPEED_ON = 0.5
 SPEED_OFF = 1.0
 #: shorter contacts are dropped [s].
 MIN_DURATION = 0.05
-#: contacts whose site never comes below this height are dropped [m] (`reference_contacts`).
-TOUCH_HEIGHT = 0.02
 
 
 @dataclass(frozen=True)
@@ -119,15 +109,13 @@ def detect_contacts(
     speed_on: float = SPEED_ON,
     speed_off: float = SPEED_OFF,
     min_duration: float = MIN_DURATION,
-    touch_height: float | None = None,
 ) -> list[Contact]:
     """Contacts of each site from its height above the surface and its speed, with hysteresis.
 
     Per site, frame by frame: out of contact, the site enters when height < height_on and
     speed < speed_on; in contact, it stays while height <= height_off and speed <= speed_off.
     A contact runs from its first to its last frame (times of those frames); contacts with
-    end - start < min_duration are dropped, and with `touch_height` those whose site never comes
-    below it (a site hovering under height_on). Speeds are 3-D, central differences of `site_pos`.
+    end - start < min_duration are dropped. Speeds are 3-D, central differences of `site_pos`.
 
     Args:
         times: (n,) frame times [s], strictly increasing.
@@ -135,7 +123,7 @@ def detect_contacts(
         heights: (n, s) height [m] of each site above the surface under it (negative: below).
         sites: the s site names, in the order of the second axis.
         height_on, height_off: [m], height_on <= height_off. speed_on, speed_off: [m/s],
-            speed_on <= speed_off. min_duration: [s] >= 0. touch_height: [m] or None (no such rule).
+            speed_on <= speed_off. min_duration: [s] >= 0.
     Returns:
         contacts sorted by start time, then site order; surface "" (whichever is under the site).
     Raises:
@@ -158,8 +146,7 @@ def detect_contacts(
             if on and (i == len(times) or not stay[i, k]):
                 on = False
                 c = Contact(name, float(times[first]), float(times[i - 1]))
-                touched = touch_height is None or heights[first:i, k].min() < touch_height
-                if c.duration >= min_duration - 1e-9 and touched:
+                if c.duration >= min_duration - 1e-9:
                     out.append((c.start, k, c))
             if i < len(times) and not on and enter[i, k]:
                 on, first = True, i
@@ -251,14 +238,12 @@ def site_heights(model, site_pos: np.ndarray) -> np.ndarray:
 
 
 def reference_contacts(model, qpos: np.ndarray, frame_time: float, **thresholds) -> list[Contact]:
-    """`detect_contacts` on a motion in a scene: site positions and heights by MuJoCo kinematics;
-    contacts whose site never comes below TOUCH_HEIGHT are dropped (module docstring).
+    """`detect_contacts` on a motion in a scene: site positions and heights by MuJoCo kinematics.
 
     Args:
         model: the scene's MjModel (figure with the SITES, and static surfaces). qpos: (n, nq).
-        frame_time: [s]. thresholds: keyword arguments of `detect_contacts` (touch_height included).
+        frame_time: [s]. thresholds: keyword arguments of `detect_contacts`.
     """
     pos = site_positions(model, qpos)
     times = np.arange(len(pos)) * frame_time
-    thresholds.setdefault("touch_height", TOUCH_HEIGHT)
     return detect_contacts(times, pos, site_heights(model, pos), **thresholds)

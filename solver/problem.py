@@ -18,6 +18,7 @@ from solver.kinematic_tree import SiteKinematics
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.objective import Objective
 from solver.schedule_conflicts import ScheduleConflicts
+from solver.surfaces import StaticSurfaces
 from solver.terms import CovariantAcceleration, Hyperextension, Penetration, UnitQuaternion
 
 #: The terms used when none are chosen: the geometric terms of the paper's sec. 5.
@@ -175,7 +176,8 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
             what a term needs (contact sites, surfaces).
     """
     layout = StateLayout.from_model(model)
-    contacts = ContactSchedule.of(contacts or ())
+    found = StaticSurfaces.from_model(model)  # the schedule checked once, against this scene
+    contacts = ContactSchedule.of(contacts or (), surfaces=found.names if found.count else None)
     if margin is None:
         margin = CONTACT_MARGIN if contacts and weights.get("planted", 0) > 0 else MARGIN
     factories = {

@@ -328,22 +328,31 @@ def test_a_keyframe_at_a_contacts_start_counts_for_sliding(tmp_path, contact_sta
 
 
 def test_the_shipped_example_contradicts_none_of_its_contacts():
-    """`dynsplines run-and-step` opens without a keyframe-conflict warning: the file's contacts are the
-    clip's (`reference_contacts`, as its recorded command writes them; no heel hovering 3 cm up over
-    its planted toe counted as planted), and no keyframe holds a site off them."""
+    """`dynsplines run-and-step` opens without a keyframe-conflict warning. The file's contacts are the
+    clip's as its recorded command detects them (`reference_contacts`), less the one its hand edit
+    removed: a heel that the capture holds 28.8 mm or more above the step all through its "contact"
+    (it hovers over the planted toe; the planted term would pull it to 2 mm against keyframe 5, which
+    holds it 30 mm up). No keyframe holds a site off the remaining schedule."""
     from runner.mocap.reference import load_bvh_reference
     from runner.paths import MODELS
     from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
-    from solver.contacts import reference_contacts
+    from solver.contacts import SITES, reference_contacts, site_heights, site_positions
     from solver.problem import figure_problem
 
     keyframes, info, model, _, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
-    assert "--root-scale 1" in info.source["command"]
+    assert "--root-scale 1" in info.source["command"] and "l_heel" in info.source["hand_edits"]
     ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model, root_scale=1.0)
     detected = reference_contacts(model, ref.qpos, ref.frame_time)
+    kept = [c for c in detected if any(c.site == f.site and abs(c.start - f.start) < 2e-6 for f in info.contacts)]
     assert [(c.site, c.start, c.end) for c in info.contacts] == [
-        (c.site, pytest.approx(c.start, abs=2e-6), pytest.approx(c.end, abs=2e-6)) for c in detected]
+        (c.site, pytest.approx(c.start, abs=2e-6), pytest.approx(c.end, abs=2e-6)) for c in kept]
+    (removed,) = [c for c in detected if c not in kept]
+    h = site_heights(model, site_positions(model, ref.qpos))[:, SITES.index(removed.site)]
+    during = (ref.times >= removed.start - 1e-9) & (ref.times <= removed.end + 1e-9)
+    assert removed.site == "l_heel" and h[during].min() > 0.025  # never touched: 28.8 mm at its lowest
     weights = parse_terms(None, contacts=info.contacts)
     assert {"planted", "clearance"} <= set(weights)
     _, _, got = figure_problem(model, weights, keyframes, contacts=info.contacts)
     assert got.found == () and not got
+    _, _, before = figure_problem(model, weights, keyframes, contacts=detected)  # the heel kept: reported
+    assert [(k, i, s) for k, i, s, _ in before.found] == [("planted", 5, "l_heel")]
