@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
 from solver.keyframes import Keyframes
 from solver.problem import CONTACT_TERMS, default_limits, figure_problem, parse_terms
@@ -126,7 +127,7 @@ def animate(
                          f"the model has nq = {nq}; are they for this scene's figure?")
     if terms is not None and not isinstance(terms, str):
         terms = ",".join(terms)
-    contacts = tuple(contacts or ())
+    contacts = ContactSchedule.of(contacts or ())  # checked once; a file's schedule keeps its labels
     chosen = parse_terms(terms, weights, contacts)
     rate = DEFAULT_RATE if rate is None else float(rate)
     if not np.isfinite(rate) or rate <= 0:

@@ -35,8 +35,9 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
 
 Keyframes that hold a swinging site lower than c (the capture's toe scuffs the floor in mid-swing on a
 walk) lower that swing's band to the lowest height they hold it at (`Clearance.conflicts` finds them;
-the term built with what it found, `conflicts=`, uses the lowered band): a path that must pass through the keyframe and stay above c around it shoots the foot
-up between keyframes (16_23 keyed every 0.2 s: 35 cm, site error 52 cm).
+the term built with what it found, `conflicts=`, uses the lowered band): a path that must pass through
+the keyframe and stay above c around it shoots the foot up between keyframes (16_23 keyed every 0.2 s:
+35 cm, site error 52 cm).
 """
 from __future__ import annotations
 

@@ -327,14 +327,14 @@ class Planted(Term):
         return float(np.max(np.where(full, np.maximum(np.abs(h), self.tau * speed), 0.0)))
 
     def _at_keyframes(self, times, qpos):
-        """(S (k, C) whether each keyframe is in each contact, closed [start, end] with 1e-6 s for the
-        files' 6 decimals; W (k, C) sliding windows; p (k, sites, 3) site positions or None)."""
+        """(S (k, C) whether each keyframe is in each contact: its closed interval [start, end], give or
+        take KEYFRAME_AT_END for the files' 6 decimals; p (k, sites, 3) site positions, None if no
+        keyframe is in a contact)."""
         times = np.asarray(times, float)
-        W = self.windows(times)
-        S = np.zeros(W.shape, bool)
+        S = np.zeros((len(times), len(self.contacts)), bool)
         for c, x in enumerate(self.contacts):
             S[:, c] = (times >= x.start - KEYFRAME_AT_END) & (times <= x.end + KEYFRAME_AT_END)
-        return S, W, (self.kin.positions(np.asarray(qpos, float)) if W.size else None)
+        return S, (self.kin.positions(np.asarray(qpos, float)) if S.any() else None)
 
     def conflicts(self, times, qpos, tolerance: float = 0.01) -> ScheduleConflicts:
         """Keyframes that contradict the schedule's heights: a keyframe at time t in a contact (its
@@ -349,7 +349,7 @@ class Planted(Term):
             contacts in `planted` (build the term with it to leave them out of `violation`: penalty
             continuation would raise the weight against a bound it cannot reach).
         """
-        S, _, p = self._at_keyframes(times, qpos)
+        S, p = self._at_keyframes(times, qpos)
         found, excused = [], set()
         for c, contact in enumerate(self.contacts):
             if not S[:, c].any():
@@ -371,7 +371,7 @@ class Planted(Term):
             distance [m]), ...), those contacts in `planted` (left out of `violation` when the term is
             built with it; the term still pulls toward no sliding).
         """
-        S, _, p = self._at_keyframes(times, qpos)
+        S, p = self._at_keyframes(times, qpos)
         found, excused = [], set()
         for c, contact in enumerate(self.contacts):
             inside = np.flatnonzero(S[:, c])
