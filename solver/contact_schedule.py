@@ -134,10 +134,6 @@ class ContactSchedule:
         busy = merged((c.start, c.end) for c in self.contacts if c.site == site)
         return [(busy[i][1], busy[i + 1][0]) for i in range(len(busy) - 1)]
 
-    def of_site(self, site: str) -> tuple[Contact, ...]:
-        """The contacts of one site, in schedule order."""
-        return tuple(c for c in self.contacts if c.site == site)
-
     def feet(self) -> list[Contact]:
         """Whole-foot contacts (`solver.contacts.foot_contacts`: a foot's heel and toe merged)."""
         return foot_contacts(self.contacts)
@@ -150,12 +146,6 @@ class ContactSchedule:
         """(n, s) bool: site k in contact at times[i] (closed intervals, 1e-9 s tolerance; `sites`
         default this schedule's)."""
         return contact_mask(self.contacts, self.sites if sites is None else sites, times)
-
-    def where(self, contact: Contact) -> str:
-        """'SOURCE: LABEL' of a contact of this schedule, for messages."""
-        i = self.contacts.index(contact)
-        label = self.labels[i] if i < len(self.labels) else f"contact {i}"
-        return f"{self.source}: {label}" if self.source else label
 
 
 def _checked(c, where: str, sites: Sequence[str], surfaces: Sequence[str] | None, source: str) -> Contact:

@@ -298,7 +298,7 @@ def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 40
     objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     conflicts = keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe], path=initial.path)
-    if conflicts:  # the contact terms built again, with what the keyframes excuse
+    if conflicts.excuses:  # the contact terms built again, with what the keyframes excuse
         objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, conflicts=conflicts)
     return objective, initial, conflicts
 

@@ -55,8 +55,13 @@ class ScheduleConflicts:
         object.__setattr__(self, "lowered", _frozen(self.lowered))
         object.__setattr__(self, "lifts", _frozen(self.lifts))
 
-    def __bool__(self) -> bool:
-        """True if anything is excused or lowered (the terms differ from the schedule's own)."""
+    def __hash__(self) -> int:
+        return hash((self.found, self.planted, self.swings, tuple(sorted(self.lowered.items())),
+                     tuple(sorted(self.lifts.items()))))
+
+    @property
+    def excuses(self) -> bool:
+        """Whether anything is excused or lowered (terms built with it differ from the schedule's own)."""
         return bool(self.planted or self.swings or self.lowered or self.lifts)
 
     def merged(self, other: ScheduleConflicts) -> ScheduleConflicts:

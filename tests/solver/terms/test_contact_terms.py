@@ -286,7 +286,7 @@ def test_a_long_flights_band_is_lifted_ballistically(toy_model, layout):
     np.testing.assert_allclose(built.split_windows(np.array([0.45]))[2], [0.03], rtol=1e-9)
     # keyframes just after take-off (low in every flight: the lift is below its ceiling there) keep it
     early = term.lower_lifts(np.array([0.305]), standing(layout, 1, (0.0, 0.0, FOOT + 0.003)))
-    assert not early.lifts and not early
+    assert not early.lifts and not early.excuses
     fresh = Clearance(toy_model, hop, clearance=0.02, conflicts=early)
     np.testing.assert_allclose(fresh.split_windows(np.array([0.45]))[2], [FLIGHT_LIFT])
     with pytest.raises(InputError, match="flight_lift"):
