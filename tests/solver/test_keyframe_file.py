@@ -228,7 +228,8 @@ def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
 @pytest.mark.parametrize("contacts, shown", [
     ({"site": "l_toe"}, "list"),
     ([5], "contacts[0] is 5"),
-    ([{"site": "nose", "start": 0, "end": 1}], "contacts[0]: 'site' is 'nose'; the contact sites are l_heel"),
+    ([{"site": "nose", "start": 0, "end": 1}], "contacts[0]: 'site' is 'nose'; the figure's contact sites are l_heel"),
+    ([{"site": 3, "start": 0, "end": 1}], "contacts[0]: 'site' is 3; give a contact site's name (l_heel"),
     ([{"foot": "l", "start": 0, "end": 1}], "contacts[0]: 'foot' is 'l'; give 'left' or 'right'"),
     ([{"site": "l_toe", "foot": "left", "start": 0, "end": 1}], "exactly one of 'site'"),
     ([{"site": "l_toe", "end": 1}], "contacts[0]: missing field 'start'"),
