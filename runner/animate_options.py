@@ -151,7 +151,7 @@ def clip_terms(args) -> dict:
     `batch`): {"terms": the --terms spec, "weights": the --weight overrides, "solve": solve_options}.
     The spec is checked here (a bad name or weight is an InputError before any clip is read) as if a
     contact schedule were known; `process_clip` chooses the terms with the clip's own contacts."""
-    weights = parse_terms(args.terms, dict(args.weight), contacts=(None,))
+    weights = parse_terms(args.terms, dict(args.weight), assume_schedule=True)
     return {"terms": args.terms, "weights": dict(args.weight), "solve": solve_options(args, weights)}
 
 

@@ -270,8 +270,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = clip_paths(clip, out_dir, o)
     problem, source, cs = clip_problem(clip, out_dir, o, paths, say)
-    if problem.conflicts:  # the clip's own keyframes against its own contacts: a heel "in contact" 3 cm up
-        say(f"  {len(problem.conflicts)} keyframe(s) hold a site off the contact schedule (met exactly; those "
+    if problem.conflicts.found:  # the clip's own keyframes against its own contacts: a heel "in contact" 3 cm up
+        say(f"  {len(problem.conflicts.found)} keyframe(s) hold a site off the contact schedule (met exactly; those "
             "contacts and swings are not held to the bounds)")
     options_ = replace(o.solve or default_options(dict(problem.weights)), limits=problem.limits)
     outputs = Outputs(save_path=paths["save_path"], exports=tuple(o.exports), plot_dir=o.plot,

@@ -14,6 +14,8 @@ One call for a figure in a scene, one for a single orientation::
     result = solver.orient(times, quats)                   # paper sec. 3
 """
 from solver.animate import animate, default_options
+from solver.contact_schedule import ContactSchedule
+from solver.contacts import Contact
 from solver.errors import DynsplinesError, InputError
 from solver.frames import FrameSet
 from solver.keyframe_file import KeyframeFileInfo, read_keyframes, write_keyframes
@@ -26,6 +28,7 @@ from solver.optimize import OptimizeResult, Status
 from solver.orient import OrientResult, orient
 from solver.path_context import PathContext
 from solver.problem import DEFAULT_TERMS, DEFAULT_WEIGHTS, default_limits, figure_objective, parse_terms, term_names
+from solver.schedule_conflicts import ScheduleConflicts
 from solver.solve import Round, Solution, SolveOptions, solve
 from solver.spline import SplineBasis
 from solver.terms import (
@@ -49,6 +52,8 @@ __all__ = [
     "Keyframes", "StateLayout", "FrameSet", "SplineBasis",
     # files: an MJCF scene, the JSON keyframe file
     "load_model", "read_keyframes", "write_keyframes", "KeyframeFileInfo",
+    # the contact schedule (DESIGN.md "Contacts") and what keyframes contradict in it
+    "Contact", "ContactSchedule", "ScheduleConflicts",
     # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7)
     "Term", "TermEval", "Penetration", "UnitQuaternion", "Hyperextension", "CovariantAcceleration",
     "NormalizedCovariantAcceleration", "JointTorque", "RootResidual", "Residual", "PathContext",

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from solver.contact_schedule import ContactSchedule
 from solver.contacts import Contact
 from solver.errors import InputError
 from solver.keyframes import Keyframes
@@ -60,8 +61,8 @@ class KeyframeFileInfo:
         scene: the scene's MJCF, resolved likewise (None if absent).
         source: the "source" object (provenance), {} if absent.
         terms: the "terms" object (objective weights by term name), {} if absent; passed through.
-        contacts: the "contacts" list as `solver.contacts.Contact`s, a foot's entry expanded to its
-            heel and toe (`solver.layout.FEET`), in file order; () if absent.
+        contacts: the "contacts" list as a `ContactSchedule` (sorted by start; a foot's entry expanded
+            to its heel and toe, `solver.layout.FEET`); empty if absent.
     """
 
     path: Path
@@ -69,7 +70,7 @@ class KeyframeFileInfo:
     scene: Path | None
     source: dict = field(default_factory=dict)
     terms: dict = field(default_factory=dict)
-    contacts: tuple[Contact, ...] = ()
+    contacts: ContactSchedule = field(default_factory=ContactSchedule.empty)
 
 
 def _is_number(v: Any) -> bool:
@@ -114,26 +115,36 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
     Args:
         path: the .json keyframe file.
         layout: the figure's qpos layout, `StateLayout.from_model(model)` (joint names and sizes), or
-            the mujoco.MjModel itself.
+            the mujoco.MjModel itself (a scene with surfaces: the contacts' surface names are checked
+            against it here; else by the contact terms against theirs, naming this file and entry).
     Returns:
         (keyframes, info): solver.Keyframes with times (k,) [s], values (k, nq) (NaN where free) and
         mask (k, nq) (True where fixed), source = str(path); and the file's KeyframeFileInfo.
     Raises:
-        InputError: unreadable file; malformed JSON (line and column); not a keyframe file (format);
+        InputError: unreadable file; malformed JSON (line and column); no "format" field, or not a
+            keyframe file (format); a bad "contacts" entry (`read_contacts`);
             missing "keyframes", "time" or "joints"; an unknown field, an unknown joint (the valid ones
             are listed); a joint with the wrong number of components (the right number is given);
             NaN, infinity or a non-number value; and everything solver.Keyframes rejects (times not
             increasing or negative, fewer than two keyframes, a keyframe fixing nothing, a zero
             quaternion); a "model" field that does not name an existing file.
     """
+    surfaces = None
     if not isinstance(layout, StateLayout):
+        from solver.surfaces import StaticSurfaces
+
+        found = StaticSurfaces.from_model(layout)
+        surfaces = tuple(found.names) if found.count else None  # a figure alone: checked with its scene
         layout = StateLayout.from_model(layout)
     p = Path(path)
     src = str(path)
     doc = read_document(path)
     if not isinstance(doc, dict):
         raise InputError(f"{src}: the top level is a {type(doc).__name__}; a keyframe file is a JSON object {{...}}")
-    fmt = doc.get("format", FORMAT)
+    if "format" not in doc:
+        raise InputError(f"{src}: missing field 'format'; add \"format\": \"{FORMAT}\" to the top-level object "
+                         "(the file format this program reads)")
+    fmt = doc["format"]
     if fmt != FORMAT:
         raise InputError(f"{src}: field 'format' is {fmt!r}; this program reads {FORMAT!r} files")
     unknown = sorted(set(doc) - _TOP_KEYS)
@@ -217,24 +228,31 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
     terms = doc.get("terms", {})
     if not isinstance(terms, dict):
         raise InputError(f"{src}: field 'terms' is {terms!r}; it must be an object {{term name: weight}}")
-    contacts = read_contacts(doc.get("contacts", []), src)
+    contacts = read_contacts(doc.get("contacts", []), src, surfaces)
     keyframes = Keyframes(times, values, mask, source=src)
     return keyframes, KeyframeFileInfo(p, model, resolve("scene"), dict(source), dict(terms), contacts)
 
 
-def read_contacts(entries: Any, src: str) -> tuple[Contact, ...]:
-    """The "contacts" field of a keyframe file as Contacts (a foot expanded to its heel and toe).
+def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = None) -> ContactSchedule:
+    """The "contacts" field of a keyframe file as a `ContactSchedule` (a foot expanded to its heel and
+    toe; each contact labelled "contacts[i]" with its entry's index, for later messages).
 
     Each entry is {"site": one of CONTACT_SITES | "foot": "left" | "right", "start": s, "end": s,
     "surface": name (optional, "" = whichever surface is under the site), "comment": optional}.
 
+    Args:
+        entries: the parsed field. src: the file, for messages. surfaces: the scene's surface names, if
+            known (else the contact terms check them against their scene, naming this file and entry).
     Raises:
-        InputError: naming the file, the field ("contacts", entry index, key), the value and the fix.
+        InputError: naming the file, the field ("contacts", entry index, key), the value and the fix:
+            not a list, an entry that is not an object, an unknown key, site or foot, a time that is not
+            a finite number >= 0, end not after start, an unknown surface (with `surfaces`).
     """
     if not isinstance(entries, list):
         raise InputError(f"{src}: field 'contacts' is a {type(entries).__name__}; it must be a list of "
                          '{"site": "l_toe", "start": s, "end": s} or {"foot": "left", "start": s, "end": s}')
     out: list[Contact] = []
+    labels: list[str] = []
     for i, c in enumerate(entries):
         where = f"{src}: contacts[{i}]"
         if not isinstance(c, dict):
@@ -248,10 +266,10 @@ def read_contacts(entries: Any, src: str) -> tuple[Contact, ...]:
             raise InputError(f"{where}: give exactly one of 'site' ({', '.join(CONTACT_SITES)}) or 'foot' "
                              f"({', '.join(FEET)})")
         if "site" in c:
-            if c["site"] not in CONTACT_SITES:
-                raise InputError(f"{where}: 'site' is {c['site']!r}; the contact sites are "
-                                 f"{', '.join(CONTACT_SITES)} (or use 'foot': {' or '.join(map(repr, FEET))})")
-            sites: tuple[str, ...] = (c["site"],)
+            if not isinstance(c["site"], str):
+                raise InputError(f"{where}: 'site' is {c['site']!r}; give a contact site's name "
+                                 f"({', '.join(CONTACT_SITES)}) or use 'foot': {' or '.join(map(repr, FEET))}")
+            sites: tuple[str, ...] = (c["site"],)  # a known site: checked by the schedule
         else:
             if c["foot"] not in FEET:
                 raise InputError(f"{where}: 'foot' is {c['foot']!r}; give {' or '.join(map(repr, FEET))} "
@@ -263,14 +281,14 @@ def read_contacts(entries: Any, src: str) -> tuple[Contact, ...]:
             v = c[key]
             if not _is_number(v) or not math.isfinite(v) or v < 0:
                 raise InputError(f"{where}: {key!r} is {v!r}; give a finite number of seconds >= 0")
-        if c["end"] < c["start"]:
-            raise InputError(f"{where}: 'end' {c['end']!r} is before 'start' {c['start']!r}; swap them")
         surface = c.get("surface", "")
         if not isinstance(surface, str):
             raise InputError(f"{where}: 'surface' is {surface!r}; give a surface's name (a geom of the scene, "
                              'e.g. "floor") or leave it out')
         out += [Contact(site, float(c["start"]), float(c["end"]), surface) for site in sites]
-    return tuple(out)
+        labels += [f"contacts[{i}]"] * len(sites)
+    # start < end, the sites, and (with the scene) the surfaces: checked once, by the schedule
+    return ContactSchedule.of(out, CONTACT_SITES, surfaces, source=src, labels=labels)
 
 
 def contacts_document(contacts) -> list[dict]:

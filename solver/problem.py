@@ -18,10 +18,13 @@ from types import MappingProxyType
 
 import numpy as np
 
+from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
 from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.quadrature import DEFAULT_RATE
+from solver.schedule_conflicts import ScheduleConflicts
+from solver.surfaces import StaticSurfaces
 from solver.terms.registry import DEFAULT_WEIGHTS, TermBuild, build_term, registered_terms, term_spec
 
 __all__ = ["CONTACT_MARGIN", "CONTACT_PENETRATION_WEIGHT", "CONTACT_TERMS", "CONTACT_TERMS_BY_DEFAULT",
@@ -79,7 +82,8 @@ CONTACT_TERMS_BY_DEFAULT = True
 CONTACT_PENETRATION_WEIGHT = 100.0
 
 
-def parse_terms(spec: str | None, weights: dict[str, float] | None = None, contacts=()) -> dict[str, float]:
+def parse_terms(spec: str | None, weights: dict[str, float] | None = None, contacts=(),
+                assume_schedule: bool = False) -> dict[str, float]:
     """Term weights from a command-line list ("all", or "penetration,unit,...") and overrides.
 
     Args:
@@ -88,7 +92,10 @@ def parse_terms(spec: str | None, weights: dict[str, float] | None = None, conta
             list of term names (the contact terms need a schedule; leave them out of the list to switch
             them off).
         weights: {name: weight} overrides (a name here also switches the term on).
-        contacts: the contact schedule, if any (only whether it is empty matters here).
+        contacts: the contact schedule (`ContactSchedule` or contacts), if any (only whether it is empty
+            matters here).
+        assume_schedule: choose as if a non-empty schedule were known (check a spec before the
+            contacts are: `mocap` and `batch` detect each clip's own).
     Returns:
         {name: weight >= 0}.
     Raises:
@@ -96,7 +103,7 @@ def parse_terms(spec: str | None, weights: dict[str, float] | None = None, conta
             that is not a number, negative or non-finite.
     """
     valid = term_names()
-    have = bool(len(contacts or ()))
+    have = assume_schedule or bool(len(contacts or ()))
     if spec is None:
         chosen = {t.name: t.default_weight for t in registered_terms()
                   if t.default and (not t.contacts or (have and CONTACT_TERMS_BY_DEFAULT))}
@@ -139,7 +146,8 @@ MARGIN, CONTACT_MARGIN = 0.005, 0.002
 
 
 def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rate: float = 400.0,
-                     margin: float | None = None, contacts=()) -> Objective:
+                     margin: float | None = None, contacts=(), conflicts: ScheduleConflicts | None = None
+                     ) -> Objective:
     """The objective for a figure in a scene.
 
     Args:
@@ -149,15 +157,18 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
         margin: [m] clearance the penetration term keeps from surfaces (and the rest height of a
             planted site, so that the two terms agree); default MARGIN, CONTACT_MARGIN with the planted
             term on.
-        contacts: the contact schedule (objects with site, start, end, surface), for planted,
-            clearance and cone.
+        contacts: the contact schedule (a `ContactSchedule`, or objects with site, start, end,
+            surface), for planted, clearance and cone.
+        conflicts: what keyframes contradict in the schedule (`keyframe_conflicts`), for the planted
+            and clearance terms (default none).
     Returns:
         Objective (scales 1; `solve` renormalizes if asked).
     Raises:
         InputError: unknown term, a contact term without a schedule, a bad contact, or the scene lacks
             what a term needs (contact sites, surfaces).
     """
-    contacts = tuple(contacts or ())
+    found = StaticSurfaces.from_model(model)  # the schedule checked once, against this scene
+    contacts = ContactSchedule.of(contacts or (), surfaces=found.names if found.count else None)
     if margin is None:
         margin = CONTACT_MARGIN if contacts and weights.get("planted", 0) > 0 else MARGIN
     specs = [term_spec(name) for name in weights]
@@ -167,7 +178,8 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
     # one engine (site positions and velocities, and the inverse dynamics if a term reads forces) shared
     # by every term that reads it: the `PathContext` runs its forward pass once per evaluation and the
     # objective its reverse pass once for the sum of the terms' gradients
-    build = TermBuild(model, (float(t0), float(t1)), margin, contacts, forces=any(s.forces for s in specs))
+    build = TermBuild(model, (float(t0), float(t1)), margin, contacts, forces=any(s.forces for s in specs),
+                      conflicts=conflicts)
     terms = [build_term(spec, build) for spec in specs]
     return Objective(terms, np.array([weights[s.name] for s in specs], float), t0, t1, rate)
 
@@ -178,11 +190,12 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
 NEAR_KEYFRAME = (-0.01, -0.005, 0.005, 0.01)
 
 
-def keyframe_conflicts(objective: Objective, times, qpos, path=None) -> list[tuple[str, int, str, float]]:
+def keyframe_conflicts(objective: Objective, times, qpos, path=None) -> ScheduleConflicts:
     """Keyframes that contradict the contact schedule, from the objective's planted and clearance terms
-    (`Planted.conflicts`, `Planted.slides`, `Clearance.conflicts`); the contacts and swings concerned are left out of
-    the terms' `violation` (keyframes are met exactly, so penalty continuation could not reach the
-    bound there).
+    (`Planted.conflicts`, `Planted.slides`, `Clearance.lower_lifts`, `Clearance.conflicts`): a query,
+    the terms are not changed. Build the objective with the result (`figure_objective(...,
+    conflicts=)`, as `figure_problem` does) to leave the contacts and swings concerned out of the terms'
+    `violation` (keyframes are met exactly, so penalty continuation could not reach the bound there).
 
     Args:
         objective: from `figure_objective`. times: (k,) keyframe times [s]. qpos: (k, nq) keyframe
@@ -190,52 +203,64 @@ def keyframe_conflicts(objective: Objective, times, qpos, path=None) -> list[tup
         path: optional path(t) -> (n, nq) of the plain spline: then the clearance term is also checked
             NEAR_KEYFRAME around each keyframe (reported as that keyframe).
     Returns:
-        [(kind, keyframe index, site, distance [m]), ...]: "planted": the site's height above its plant
-        height; "sliding": two keyframes in one contact hold the site this far apart along the ground
-        (`Planted.slides`); "clearance": how far inside the clearance band.
+        ScheduleConflicts; its `found`: [(kind, keyframe index, site, distance [m]), ...]: "planted": the
+        site's height above its plant height; "sliding": two keyframes in one contact (ends included)
+        hold the site this far apart along the ground; "clearance": how far inside the clearance band.
     """
     times, qpos = np.asarray(times, float), np.asarray(qpos, float)
-    out = []
+    out = ScheduleConflicts()
     for term in objective.terms:
         if term.name == "planted":
-            out += [(term.name, *c) for c in term.conflicts(times, qpos, excuse=True)]
+            out = out.merged(term.conflicts(times, qpos)).merged(term.slides(times, qpos))
         if term.name == "clearance":
-            term.lower_lifts(times, qpos)  # keyframes only: the plain spline near them is lower
-            found = {(k, site): d for k, site, d in term.conflicts(times, qpos, excuse=True)}
-            if path is not None:  # near a keyframe: more than half the bound inside the band
-                near = (times[:, None] + np.asarray(NEAR_KEYFRAME)).ravel()
-                owner = np.repeat(np.arange(len(times)), len(NEAR_KEYFRAME))
-                keep = (near > times[0]) & (near < times[-1])
-                for i, site, d in term.conflicts(near[keep], np.asarray(path(near[keep])), excuse=True,
-                                                 tolerance=0.5 * DEFAULT_LIMITS["clearance"]):
-                    key = (int(owner[keep][i]), site)
-                    found[key] = max(found.get(key, 0.0), d)
-            out += [("clearance", k, site, d) for (k, site), d in sorted(found.items())]
-        if term.name == "planted":
-            out += [("sliding", *c) for c in term.slides(times, qpos, excuse=True)]
+            out = out.merged(_clearance_conflicts(term, times, qpos, path))
     return out
+
+
+def _clearance_conflicts(term, times, qpos, path) -> ScheduleConflicts:
+    """`keyframe_conflicts` of the clearance term: the lift ceilings at the keyframes (the plain spline
+    near them is lower), the keyframes, then with `path` the plain spline NEAR_KEYFRAME around them
+    (more than half the bound inside the band), reported as their keyframe (the largest distance)."""
+    got = term.lower_lifts(times, qpos)
+    got = got.merged(term.conflicts(times, qpos, given=got))
+    found = {(k, site): d for _, k, site, d in got.found}
+    if path is not None:
+        near = (times[:, None] + np.asarray(NEAR_KEYFRAME)).ravel()
+        owner = np.repeat(np.arange(len(times)), len(NEAR_KEYFRAME))
+        keep = (near > times[0]) & (near < times[-1])
+        more = term.conflicts(near[keep], np.asarray(path(near[keep])), given=got,
+                              tolerance=0.5 * DEFAULT_LIMITS["clearance"])
+        for _, i, site, d in more.found:
+            key = (int(owner[keep][i]), site)
+            found[key] = max(found.get(key, 0.0), d)
+        got = got.merged(more)
+    return got.with_found(("clearance", k, site, d) for (k, site), d in sorted(found.items()))
 
 
 def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 400.0, contacts=()):
     """The objective and the plain spline's frames for keyframes of a figure, with the keyframes that
-    contradict the contact schedule found and excused (`keyframe_conflicts`): what `solver.animate`,
-    the command line and the benchmarks solve.
+    contradict the contact schedule found (`keyframe_conflicts`) and the contact terms built with what
+    they excuse: what `solver.animate`, the command line and the benchmarks solve.
 
     Args:
         model: MjModel of the scene. weights: {term: lambda_j} (`parse_terms`). keyframes: Keyframes
-            (values (k, nq), times (k,) [s]). rate: quadrature points per second. contacts: the schedule.
+            (values (k, nq), times (k,) [s]). rate: quadrature points per second. contacts: the
+            schedule (`ContactSchedule`, or contacts).
     Returns:
         (objective, initial, conflicts): Objective, FrameSet (the plain spline's frames), and the
-        `keyframe_conflicts` list.
+        `keyframe_conflicts` value (`ScheduleConflicts`; `.found` lists the conflicts).
     Raises:
         InputError: as `figure_objective`.
     """
     from solver.frames import FrameSet
 
     layout = StateLayout.from_model(model)
-    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate, contacts=contacts)
+    t0, t1 = keyframes.times[0], keyframes.times[-1]
+    objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     conflicts = keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe], path=initial.path)
+    if conflicts.excuses:  # the contact terms built again, with what the keyframes excuse
+        objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, conflicts=conflicts)
     return objective, initial, conflicts
 
 
@@ -258,15 +283,15 @@ class Problem:
     Attributes:
         model: mujoco.MjModel of the scene with the figure (loaded once by the caller; not modified).
         keyframes: Keyframes, values (k, nq) with nq = model.nq, times (k,) [s].
-        contacts: the contact schedule the objective uses ((Contact, ...); empty: none).
+        contacts: the contact schedule the objective uses (`ContactSchedule`; empty: none).
         weights: {term name: lambda_j} of the chosen terms (`parse_terms`), read-only.
         limits: ((term name, tolerance), ...): the penalty-continuation bounds of the chosen terms
             (`default_limits`), in each term's `violation` unit.
         rate: quadrature points per second [1/s].
         objective: the Objective (eq. 1; scales 1, `solve` renormalizes by eq. 7).
         initial: FrameSet of the plain spline through the keyframes, (k, nq) values.
-        conflicts: ((kind, keyframe index, site, distance [m]), ...): keyframes that contradict the
-            contact schedule (`keyframe_conflicts`), excused from the bounds.
+        conflicts: `ScheduleConflicts` (`keyframe_conflicts`): what keyframes contradict in the contact
+            schedule, excused from the bounds; its `found`: ((kind, keyframe index, site, distance [m]), ...).
     """
 
     model: object = field(repr=False)
@@ -277,7 +302,7 @@ class Problem:
     rate: float
     objective: Objective = field(repr=False)
     initial: object = field(repr=False)
-    conflicts: tuple = ()
+    conflicts: ScheduleConflicts = field(default_factory=ScheduleConflicts)
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -317,8 +342,8 @@ def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | No
     rate = DEFAULT_RATE if rate is None else float(rate)
     if not np.isfinite(rate) or rate <= 0:
         raise InputError(f"rate must be > 0 quadrature points per second, got {rate}")
-    contacts = tuple(contacts or ())
+    contacts = ContactSchedule.of(contacts or ())  # checked once; a file's schedule keeps its labels
     chosen = parse_terms(terms, weights, contacts)
     objective, initial, conflicts = figure_problem(model, chosen, keyframes, rate=rate, contacts=contacts)
     return Problem(model, keyframes, contacts, MappingProxyType(dict(chosen)), default_limits(chosen), rate,
-                   objective, initial, tuple(conflicts))
+                   objective, initial, conflicts)

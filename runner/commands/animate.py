@@ -90,7 +90,7 @@ def _warn_contact_conflicts(problem) -> None:
     held up, a swing site held on the ground): keyframes are met exactly, so the contact terms cannot
     fix those."""
     keyframes = problem.keyframes
-    for name, k, site, dist in problem.conflicts:
+    for name, k, site, dist in problem.conflicts.found:
         if name == "planted":
             what = f"holds {site} {1000 * dist:+.1f} mm from where the contact schedule plants it"
         elif name == "sliding":

@@ -34,11 +34,14 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
   of the gap) are free.
 
 Keyframes that hold a swinging site lower than c (the capture's toe scuffs the floor in mid-swing on a
-walk) lower that swing's band to the lowest height they hold it at (`Clearance.conflicts` with
-excuse=True): a path that must pass through the keyframe and stay above c around it shoots the foot
-up between keyframes (16_23 keyed every 0.2 s: 35 cm, site error 52 cm).
+walk) lower that swing's band to the lowest height they hold it at (`Clearance.conflicts` finds them;
+the term built with what it found, `conflicts=`, uses the lowered band): a path that must pass through
+the keyframe and stay above c around it shoots the foot up between keyframes (16_23 keyed every 0.2 s:
+35 cm, site error 52 cm).
 """
 from __future__ import annotations
+
+from types import MappingProxyType
 
 import numpy as np
 
@@ -46,6 +49,7 @@ from solver.contacts import HEIGHT_ON
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES, index_run
 from solver.path_context import EngineGradient, site_engine
+from solver.schedule_conflicts import ScheduleConflicts
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Residual, Term, TermEval
 from solver.terms.contact_schedule import (
@@ -55,10 +59,8 @@ from solver.terms.contact_schedule import (
     _engine_index,
     _sample_times,
     check_contacts,
-    flights,
     gap_window,
     last_for_times,
-    swings,
 )
 
 GRAVITY = 9.81  # [m/s^2], for the ballistic flight clearance
@@ -74,7 +76,8 @@ class Clearance(Term):
     surface under the site) through the site Jacobian, only where a weighted site is lower than its band.
 
     Args:
-        model: MjModel of the scene. contacts: the schedule (objects with site, start, end, surface).
+        model: MjModel of the scene. contacts: the schedule (a `solver.ContactSchedule`, or objects with
+            site, start, end, surface; checked against the scene's surfaces).
         clearance: c [m] > 0 (default 2 cm).
         core: fraction in [0, 1] of each swing / flight that is fully weighted (default 0.5).
         flight: also apply to all contact sites during flights (default True).
@@ -86,6 +89,8 @@ class Clearance(Term):
         t_span: see `Planted`.
         engine: the engine shared with the other terms (tracking `sites`); None: one of its own
             (`solver.path_context.site_engine`, positions only).
+        conflicts: `ScheduleConflicts` from `solver.problem.keyframe_conflicts`: its swings are left out
+            of `violation`, its lowered bands and lift ceilings used (default: none).
     Raises:
         InputError: bad contact, no surfaces, bad parameters.
     """
@@ -97,7 +102,7 @@ class Clearance(Term):
 
     def __init__(self, model, contacts, clearance: float = 0.02, core: float = 0.5, flight: bool = True,
                  sites=CONTACT_SITES, t_span=None, engine=None, flight_clearance: float | None = None,
-                 flight_lift: float | None = FLIGHT_LIFT):
+                 flight_lift: float | None = FLIGHT_LIFT, conflicts: ScheduleConflicts | None = None):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the clearance term")
@@ -115,16 +120,25 @@ class Clearance(Term):
             raise InputError(f"flight_lift is {flight_lift}; it must be a height >= 0 [m] (or None)")
         self.clearance, self.core, self.flight, self.t_span = c, core, bool(flight), t_span
         self.kin = SiteMotion(model, tuple(sites))
-        self.swings = [swings(self.contacts, s) for s in self.kin.names]
-        self.flights = flights(self.contacts) if self.flight else []
+        self.swings = [self.contacts.swings(s) for s in self.kin.names]
+        self.flights = self.contacts.flights() if self.flight else []
         #: c_f of each flight [m]
         self.flight_bands = np.array([min(c, GRAVITY * (b - a) ** 2 / 8.0) if flight_clearance is None
                                       else float(flight_clearance) for a, b in self.flights])
-        #: ceiling of each flight's ballistic lift [m] (lowered by keyframes in `conflicts`); None: no lift
-        self.flight_lifts = (None if flight_lift is None or flight_clearance is not None
-                             else np.full(len(self.flights), float(flight_lift)))
-        self.excused: list[tuple[int, float, float]] = []  # (site column, a, b): `violation` skips these
-        self.lowered: dict[tuple[int, float, float], float] = {}  # (site column, a, b): swing band [m]
+        #: what keyframes contradict (`solver.problem.keyframe_conflicts`); fixed at construction
+        self.excusals = conflicts if conflicts is not None else ScheduleConflicts()
+        #: ceiling of each flight's ballistic lift [m] (lowered by keyframes: `conflicts.lifts`); None: no lift
+        self.flight_lifts = None
+        if flight_lift is not None and flight_clearance is None:
+            self.flight_lifts = np.array([min(float(flight_lift), self.excusals.lifts.get(ab, np.inf))
+                                          for ab in self.flights], float).reshape(-1)
+            self.flight_lifts.flags.writeable = False
+        col = {s: k for k, s in enumerate(self.kin.names)}
+        #: (site column, a, b) of the swings and flights `violation` skips (`conflicts.swings`)
+        self.excused = tuple(sorted((col[s], a, b) for s, a, b in self.excusals.swings if s in col))
+        #: (site column, a, b) -> the swing's lowered band [m] (`conflicts.lowered`)
+        self.lowered = MappingProxyType({(col[s], a, b): v for (s, a, b), v in self.excusals.lowered.items()
+                                         if s in col})
         # site positions of all points from the engine's forward pass (shared through the `PathContext`)
         self.engine = engine if engine is not None else site_engine(model, tuple(sites), velocities=False)
         self._eidx = index_run(_engine_index(self.engine, model, self.kin.names))  # the figure's: a slice
@@ -176,51 +190,68 @@ class Clearance(Term):
                 gp -= (2.0 * U * depth)[..., None] * n
         return f, gp
 
-    def conflicts(self, times, qpos, excuse: bool = False, tolerance: float = 1e-4) -> list[tuple[int, str, float]]:
+    def conflicts(self, times, qpos, tolerance: float = 1e-4,
+                  given: ScheduleConflicts | None = None) -> ScheduleConflicts:
         """Keyframes that contradict the schedule: a keyframe inside a fully weighted swing or flight
         window that holds a site more than `tolerance` [m] inside its band (keyframes are met exactly).
-        excuse: also leave that site's swing (or flight) out of `violation`, and lower the band of that
-            swing, in the objective too, to the lowest height a keyframe holds the site at in it.
-        Flights' depths are against c_f: their ballistic lift is a target, not a conflict (`lower_lifts`).
+        Flights' depths are against c_f: their ballistic lift is a target, not a conflict
+        (`lower_lifts`). A query: the term is not changed.
 
+        Args:
+            times: (k,) [s] times. qpos: (k, nq) poses there. tolerance: [m].
+            given: conflicts found before (their lowered bands are the bands checked against).
         Returns:
-            [(keyframe index, site, distance short of the clearance [m]), ...].
+            ScheduleConflicts: found = (("clearance", index into times, site, distance short of the
+            clearance [m]), ...); those sites' swings (and flights) in `swings` (left out of `violation`
+            when the term is built with it) and each such swing's band in `lowered`, down to the lowest
+            height a keyframe holds the site at in it (used in the objective too).
         """
         times, qpos = np.asarray(times, float), np.asarray(qpos, float)
+        given = given if given is not None else ScheduleConflicts()
         Us, Uf, Bf, Bs = self._split_windows(times, lift=False)  # the lift is a target, not a bound
+        lowered = {}
+        for (site, a, b), low in given.lowered.items():
+            if site in self.kin.names:
+                k, inside = self.kin.names.index(site), (times > a) & (times < b)
+                Bs[inside, k] = np.minimum(Bs[inside, k], low)
+                lowered[(site, a, b)] = low
         U = np.maximum(Us, Uf[:, None])
-        d = self._band_depths(qpos, times, lift=False)
-        height = np.where(Us >= Uf[:, None], Bs, Bf[:, None]) - d  # where d > 0: the site's height [m]
-        out = [(int(i), self.kin.names[k], float(d[i, k]))
-               for i, k in zip(*np.nonzero((U >= FULL) & (d > tolerance)), strict=True)]
-        if excuse:
-            for i, k in ((i, self.kin.names.index(site)) for i, site, _ in out):
-                for a, b in self.swings[k]:
-                    if a < times[i] < b:  # the swing's band down to the keyframe's height, for good
-                        low = min(self.lowered.get((k, a, b), self.clearance), float(height[i, k]))
-                        self.lowered[(k, a, b)] = max(0.0, low)
-                for a, b in [*self.swings[k], *self.flights]:
-                    if a < times[i] < b:
-                        self.excused.append((k, a, b))
-            self.__dict__.pop("_split_cache", None)  # the windows' bands changed
-        return out
+        band = np.where(Us >= Uf[:, None], Bs, Bf[:, None])
+        d = np.maximum(0.0, band - self.below.height(self.kin.positions(qpos))[0])
+        height = band - d  # where d > 0: the site's height [m]
+        hits = [(int(i), int(k)) for i, k in zip(*np.nonzero((U >= FULL) & (d > tolerance)), strict=True)]
+        excused, new = set(), {}
+        for i, k in hits:
+            site = self.kin.names[k]
+            for a, b in self.swings[k]:
+                if a < times[i] < b:  # the swing's band down to the keyframe's height
+                    low = min(new.get((site, a, b), lowered.get((site, a, b), self.clearance)), float(height[i, k]))
+                    new[(site, a, b)] = max(0.0, low)
+            excused |= {(site, a, b) for a, b in [*self.swings[k], *self.flights] if a < times[i] < b}
+        found = [("clearance", i, self.kin.names[k], float(d[i, k])) for i, k in hits]
+        return ScheduleConflicts(found, swings=excused, lowered=new)
 
-    def lower_lifts(self, times, qpos) -> None:
-        """Keyframes (times (k,) [s], poses qpos (k, nq)) lower each flight's lift ceiling, for good, to
-        the lowest site height they hold where the lift is at its ceiling (g/2 (t - a)(b - t) >=
-        ceiling; not just after take-off or before landing, where every flight is low): a path that must
-        pass through the keyframe and stay above the ceiling around it would bulge up between keyframes
-        (a synthetic hop into a run, whose schedule missed a touch-down: 23 cm, site error 7.2 -> 10.9 cm).
-        Call it with the keyframes only (`solver.problem.keyframe_conflicts`)."""
+    def lower_lifts(self, times, qpos) -> ScheduleConflicts:
+        """Keyframes (times (k,) [s], poses qpos (k, nq)) lower each flight's lift ceiling to the lowest
+        site height they hold where the lift is at its ceiling (g/2 (t - a)(b - t) >= ceiling; not just
+        after take-off or before landing, where every flight is low): a path that must pass through the
+        keyframe and stay above the ceiling around it would bulge up between keyframes (a synthetic hop
+        into a run, whose schedule missed a touch-down: 23 cm, site error 7.2 -> 10.9 cm). Call it with
+        the keyframes only (`solver.problem.keyframe_conflicts`). A query: the term is not changed.
+
+        Returns:
+            ScheduleConflicts with `lifts` {(a, b): the lowered ceiling [m]} for the flights lowered.
+        """
         if self.flight_lifts is None:
-            return
+            return ScheduleConflicts()
         times, qpos = np.asarray(times, float), np.asarray(qpos, float)
         low = self.below.height(self.kin.positions(qpos))[0].min(axis=1)  # (k,) lowest site [m]
+        lifts = {}
         for j, (a, b) in enumerate(self.flights):
             top = 0.5 * GRAVITY * (times - a) * (b - times) >= self.flight_lifts[j]
             if top.any():
-                self.flight_lifts[j] = min(self.flight_lifts[j], max(0.0, float(low[top].min())))
-        self.__dict__.pop("_split_cache", None)
+                lifts[(a, b)] = min(float(self.flight_lifts[j]), max(0.0, float(low[top].min())))
+        return ScheduleConflicts(lifts=lifts)
 
     def split_windows(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Us (n, k), Uf (n,), Bf (n,), Bs (n, k)): each site's swing window, the flight window, the

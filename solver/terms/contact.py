@@ -60,10 +60,12 @@ import numpy as np
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES
 from solver.path_context import EngineGradient, site_engine
+from solver.schedule_conflicts import ScheduleConflicts
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Residual, Term, TermEval
 from solver.terms.contact_schedule import (
     FULL,
+    KEYFRAME_AT_END,
     SiteMotion,
     SupportSurfaces,
     _engine_index,
@@ -92,7 +94,8 @@ class Planted(Term):
 
     Args:
         model: MjModel of the scene (figure + static planes/boxes).
-        contacts: objects with site, start, end, surface (see module docstring).
+        contacts: a `solver.ContactSchedule`, or objects with site, start, end, surface (see module
+            docstring), checked against the scene's surfaces (`ContactSchedule.for_scene`).
         velocity_time: tau [s] > 0, weighs sliding speed against height.
         ramp: r [s] >= 0, length of the smoothstep ramp at each end of a contact's sliding window (height has none).
         rest_height: h0 [m], the height a planted site is pulled to (set it to the penetration term's
@@ -103,6 +106,8 @@ class Planted(Term):
         engine: the engine shared with the other terms (`SiteKinematics` or `InverseDynamics`, tracking
             the contact sites); one without site velocities (MuJoCo's), or None: one of its own
             (`solver.path_context.site_engine`).
+        conflicts: `ScheduleConflicts` from `solver.problem.keyframe_conflicts`: its `planted` contacts
+            are left out of `violation` (default: none).
     Raises:
         InputError: a bad contact (unknown site or surface, start >= end), no surfaces, bad parameters,
             or (with no usable engine given) a figure the vectorized kinematics does not model.
@@ -114,7 +119,8 @@ class Planted(Term):
     fixed_points = True  # windows and (point, contact) pairs cached for the quadrature points
 
     def __init__(self, model, contacts, velocity_time: float = 0.1, ramp: float = 0.02,
-                 rest_height: float = 0.005, footprint_margin: float = 0.03, t_span=None, engine=None):
+                 rest_height: float = 0.005, footprint_margin: float = 0.03, t_span=None, engine=None,
+                 conflicts: ScheduleConflicts | None = None):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the planted term")
@@ -132,7 +138,10 @@ class Planted(Term):
         self.kin = SiteMotion(model, used or CONTACT_SITES[:1])
         self._col = np.array([self.kin.names.index(c.site) for c in self.contacts], int)
         self._surf = [self.support.index(c.surface) for c in self.contacts]
-        self.excused: set[int] = set()  # contacts a keyframe contradicts: `violation` skips them
+        #: what keyframes contradict (`solver.problem.keyframe_conflicts`); fixed at construction
+        self.excusals = conflicts if conflicts is not None else ScheduleConflicts()
+        #: indices of the contacts a keyframe contradicts: `violation` skips them
+        self.excused = frozenset(c for c, x in enumerate(self.contacts) if x in self.excusals.planted)
         # site positions and velocities at all points from the engine's vectorized forward pass (shared
         # with penetration/torque/root/cone through the `PathContext`), gradients through its reverse
         # pass; an engine without site velocities (MuJoCo's inverse dynamics) is not shared
@@ -309,52 +318,59 @@ class Planted(Term):
         return float(np.max(np.where(full, np.maximum(np.abs(h), self.tau * speed), 0.0)))
 
     def _at_keyframes(self, times, qpos):
-        """(W (k, C) sliding windows at the keyframe times, p (k, sites, 3) site positions or None)."""
-        W = self.windows(np.asarray(times, float))
-        return W, (self.kin.positions(np.asarray(qpos, float)) if W.size else None)
+        """(S (k, C) whether each keyframe is in each contact: its closed interval [start, end], give or
+        take KEYFRAME_AT_END for the files' 6 decimals; p (k, sites, 3) site positions, None if no
+        keyframe is in a contact)."""
+        times = np.asarray(times, float)
+        S = np.zeros((len(times), len(self.contacts)), bool)
+        for c, x in enumerate(self.contacts):
+            S[:, c] = (times >= x.start - KEYFRAME_AT_END) & (times <= x.end + KEYFRAME_AT_END)
+        return S, (self.kin.positions(np.asarray(qpos, float)) if S.any() else None)
 
-    def conflicts(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
-        """Keyframes that contradict the schedule: a keyframe at time t inside a contact's full window
-        whose site is more than `tolerance` [m] from the plant height (keyframes are met exactly, so
-        the term cannot pull that site down). excuse: also leave those contacts out of `violation`
-        (else penalty continuation would raise the weight against a bound it cannot reach).
+    def conflicts(self, times, qpos, tolerance: float = 0.01) -> ScheduleConflicts:
+        """Keyframes that contradict the schedule's heights: a keyframe at time t in a contact (its
+        closed interval [start, end], ends included, as in `slides`) whose site is more than
+        `tolerance` [m] from the plant height h0 (keyframes are met exactly, so the term cannot pull
+        that site down there). A query: the term is not changed.
+
+        Args:
+            times: (k,) keyframe times [s]. qpos: (k, nq) keyframe poses. tolerance: [m].
+        Returns:
+            ScheduleConflicts: found = (("planted", keyframe index, site, height - h0 [m]), ...), those
+            contacts in `planted` (build the term with it to leave them out of `violation`: penalty
+            continuation would raise the weight against a bound it cannot reach).
+        """
+        S, p = self._at_keyframes(times, qpos)
+        found, excused = [], set()
+        for c, contact in enumerate(self.contacts):
+            if not S[:, c].any():
+                continue
+            h, _ = self.support.height(p[:, self._col[c]], self._surf[c])
+            for i in np.flatnonzero(S[:, c] & (np.abs(h - self.rest_height) > tolerance)):
+                found.append(("planted", int(i), contact.site, float(h[i] - self.rest_height)))
+                excused.add(contact)
+        return ScheduleConflicts(found, planted=excused)
+
+    def slides(self, times, qpos, tolerance: float = 0.01) -> ScheduleConflicts:
+        """Keyframes that make a planted site slide: two keyframes in one contact (its closed interval
+        [start, end]: a keyframe at a contact's start or end counts, the natural way to write one) that
+        hold the site more than `tolerance` [m] apart horizontally (capture's feet roll and pivot: 2-4 cm
+        on the walk; no path can then keep the site still). A query: the term is not changed.
 
         Returns:
-            [(keyframe index, site, height - h0 [m]), ...].
+            ScheduleConflicts: found = (("sliding", index of the later keyframe, site, largest horizontal
+            distance [m]), ...), those contacts in `planted` (left out of `violation` when the term is
+            built with it; the term still pulls toward no sliding).
         """
-        W, p = self._at_keyframes(times, qpos)
-        out = []
-        if not W.size:
-            return out
+        S, p = self._at_keyframes(times, qpos)
+        found, excused = [], set()
         for c, contact in enumerate(self.contacts):
-            h, _ = self.support.height(p[:, self._col[c]], self._surf[c])
-            for i in np.flatnonzero((W[:, c] >= FULL) & (np.abs(h - self.rest_height) > tolerance)):
-                out.append((int(i), contact.site, float(h[i] - self.rest_height)))
-                if excuse:
-                    self.excused.add(c)
-        return out
-
-    def slides(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
-        """Keyframes that make a planted site slide: two keyframes in one contact (window > 0) that hold
-        the site more than `tolerance` [m] apart horizontally (capture's feet roll and pivot: 2-4 cm on
-        the walk; no path can then keep the site still, README "Feet that plant"). excuse: leave those
-        contacts out of `violation` (the term still pulls toward no sliding).
-
-        Returns: [(index of the later keyframe, site, largest horizontal distance [m]), ...].
-        """
-        W, p = self._at_keyframes(times, qpos)
-        out = []
-        if not W.size:
-            return out
-        for c, contact in enumerate(self.contacts):
-            inside = np.flatnonzero(W[:, c] > 0)
+            inside = np.flatnonzero(S[:, c])
             if len(inside) < 2:
                 continue
             xy = p[inside, self._col[c], :2]
             spread = float(np.max(np.linalg.norm(xy[:, None] - xy[None], axis=-1)))
             if spread > tolerance:
-                out.append((int(inside[-1]), contact.site, spread))
-                if excuse:
-                    self.excused.add(c)
-        return out
-
+                found.append(("sliding", int(inside[-1]), contact.site, spread))
+                excused.add(contact)
+        return ScheduleConflicts(found, planted=excused)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
 from solver.kinematic_tree import KinematicTree
 from solver.kinematics import TangentMap
@@ -13,6 +14,8 @@ from solver.layout import CONTACT_SITES, StateLayout, site_ids
 from solver.surfaces import StaticSurfaces
 
 FULL = 1.0 - 1e-9  # a window at least this is "fully weighted" (where `violation` looks)
+#: [s] a keyframe this close to a contact's start or end is at it (keyframe files keep 6 decimals)
+KEYFRAME_AT_END = 1e-6
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -64,52 +67,25 @@ def gap_window(t: np.ndarray, a: float, b: float, core: float) -> np.ndarray:
     return smoothstep((t - a) / r) * smoothstep((b - t) / r)
 
 
-def _merged(intervals):
-    """Sorted, merged list of (start, end) intervals."""
-    out = []
-    for s, e in sorted(intervals):
-        if out and s <= out[-1][1]:
-            out[-1] = (out[-1][0], max(out[-1][1], e))
-        else:
-            out.append((s, e))
-    return out
-
-
-def check_contacts(contacts, sites=CONTACT_SITES, surface_names=()) -> list:
-    """The contacts as a list, checked: known site, finite start < end, known surface.
+def check_contacts(contacts, sites=CONTACT_SITES, surface_names=()) -> ContactSchedule:
+    """The contacts as a `ContactSchedule` checked against the figure's sites and the scene's surface
+    names (`ContactSchedule.of`; a schedule already checked so is returned as it is).
 
     Raises:
-        InputError: naming the contact and the valid choices.
+        InputError: naming the contact (its source and label), the field and the valid choices.
     """
-    out = []
-    for c in contacts:
-        for attr in ("site", "start", "end", "surface"):
-            if not hasattr(c, attr):
-                raise InputError(f"contact {c!r} has no attribute {attr!r} (needs site, start, end, surface)")
-        if c.site not in sites:
-            raise InputError(f"contact {c!r}: unknown site {c.site!r}; contact sites are: {', '.join(sites)}")
-        s, e = float(c.start), float(c.end)
-        if not (np.isfinite(s) and np.isfinite(e) and s < e):
-            raise InputError(f"contact {c!r}: start {c.start} and end {c.end} must be finite with start < end")
-        if c.surface and c.surface not in surface_names:
-            raise InputError(
-                f"contact {c!r}: unknown surface {c.surface!r}; the scene's surfaces are: "
-                f"{', '.join(surface_names) or 'none'}"
-            )
-        out.append(c)
-    return out
+    return ContactSchedule.of(contacts, sites, surface_names)
 
 
 def flights(contacts) -> list[tuple[float, float]]:
-    """Intervals between the first and the last contact of the schedule where no site is in contact."""
-    busy = _merged([(float(c.start), float(c.end)) for c in contacts])
-    return [(busy[i][1], busy[i + 1][0]) for i in range(len(busy) - 1)]
+    """Intervals between the first and the last contact of the schedule where no site is in contact
+    (`ContactSchedule.flights`)."""
+    return ContactSchedule.of(contacts).flights()
 
 
 def swings(contacts, site: str) -> list[tuple[float, float]]:
-    """Gaps between consecutive (merged) contacts of one site."""
-    busy = _merged([(float(c.start), float(c.end)) for c in contacts if c.site == site])
-    return [(busy[i][1], busy[i + 1][0]) for i in range(len(busy) - 1)]
+    """Gaps between consecutive (merged) contacts of one site (`ContactSchedule.swings`)."""
+    return ContactSchedule.of(contacts).swings(site)
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -40,13 +40,17 @@ class TermBuild:
         model: MjModel of the scene (figure + static surfaces; not to be modified).
         layout: its StateLayout. t_span: (t0, t1) [s] the keyframe interval.
         margin: [m] the penetration margin (also a planted site's rest height, `solver.problem.MARGIN`).
-        contacts: the contact schedule (tuple of objects with site, start, end, surface; may be empty).
+        contacts: the contact schedule (a `ContactSchedule`, or a tuple of objects with site, start, end,
+            surface; may be empty).
         forces: True if a chosen term reads the inverse dynamics (then `engine` computes forces).
+        conflicts: what keyframes contradict in the schedule (`solver.problem.keyframe_conflicts`, a
+            `ScheduleConflicts`), for the contact terms to leave out of their bounds; None: nothing.
     """
 
-    def __init__(self, model, t_span, margin: float, contacts, forces: bool):
+    def __init__(self, model, t_span, margin: float, contacts, forces: bool, conflicts=None):
         self.model, self.layout = model, StateLayout.from_model(model)
-        self.t_span, self.margin, self.contacts, self.forces = t_span, float(margin), tuple(contacts), forces
+        self.t_span, self.margin, self.contacts, self.forces = t_span, float(margin), contacts, forces
+        self.conflicts = conflicts
         self._engine = None
 
     @property
@@ -180,8 +184,10 @@ def _register_builtins() -> None:
     register_term("torque", lambda b: JointTorque(b.model, engine=b.engine), w["torque"], forces=True)
     register_term("root", lambda b: RootResidual(b.model, engine=b.engine), w["root"], forces=True)
     register_term("planted", lambda b: Planted(b.model, b.contacts, rest_height=b.margin, t_span=b.t_span,
-                                               engine=b.engine), w["planted"], contacts=True, default=True)
-    register_term("clearance", lambda b: Clearance(b.model, b.contacts, t_span=b.t_span, engine=b.engine),
+                                               engine=b.engine, conflicts=b.conflicts),
+                  w["planted"], contacts=True, default=True)
+    register_term("clearance", lambda b: Clearance(b.model, b.contacts, t_span=b.t_span, engine=b.engine,
+                                                   conflicts=b.conflicts),
                   w["clearance"], contacts=True, default=True)
     register_term("cone", lambda b: FrictionCone(b.model, b.contacts, engine=b.engine, t_span=b.t_span),
                   w["cone"], contacts=True, forces=True)

@@ -113,7 +113,7 @@ def plausible(draw):
                 comps[i] = None
             joints[name] = comps
         frames.append({"time": t, "joints": joints})
-    return json.dumps({"scene": str(SCENE), "keyframes": frames}).encode()
+    return json.dumps({"format": "dynsplines.keyframes/1", "scene": str(SCENE), "keyframes": frames}).encode()
 
 
 @st.composite
@@ -180,15 +180,15 @@ def test_reader_gives_keyframes_or_a_clean_error(data):
 @pytest.mark.slow
 @settings(max_examples=EXAMPLES // 8, deadline=10000, suppress_health_check=[HealthCheck.too_slow])
 @given(data=files)
-@example(data=b'{"keyframes": [], "scene": "\\u0000"}')  # found: a NUL in a path was a ValueError
-@example(data=json.dumps({"keyframes": [  # found: a knee at a half turn with 1e-167 components: twist gradient 0/0
+@example(data=b'{"format": "dynsplines.keyframes/1", "keyframes": [], "scene": "\\u0000"}')  # found: a NUL in a path was a ValueError
+@example(data=json.dumps({"format": "dynsplines.keyframes/1", "keyframes": [  # found: a knee at a half turn with 1e-167 components: twist gradient 0/0
     {"time": 0.0, "joints": {"l_knee": [-2.2855872811881898e-167, 0.0, 8.0795528188009805e-174, 1.0]}},
     {"time": 1.0, "joints": {"root": [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]}}]}).encode())
-@example(data=json.dumps({"keyframes": [  # found: a keyframe inside the step warns before the failure line
+@example(data=json.dumps({"format": "dynsplines.keyframes/1", "keyframes": [  # found: a keyframe inside the step warns before the failure line
     {"time": 0.0, "joints": {"l_hip": [0, 0, 0, 1], "r_knee": [0, 0, 2.812893771223057e-194, 1],
                              "r_ankle": [None, 0, 0, 0]}},
     {"time": 1.0, "joints": {"l_hip": [None, 0, 0, 0]}}]}).encode())
-@example(data=json.dumps({"keyframes": [  # found: [0, null, 0, 0] lost its fixed w = 0
+@example(data=json.dumps({"format": "dynsplines.keyframes/1", "keyframes": [  # found: [0, null, 0, 0] lost its fixed w = 0
     {"time": 0.0, "joints": {"root": [0, 0, 0, 0, 0, 0, 1], "l_ankle": [0, None, 0, 0]}},
     {"time": 1.0, "joints": {"l_hip": [None, 0, 0, 0]}}]}).encode())
 def test_command_line_exits_cleanly(data):
@@ -232,7 +232,7 @@ def test_two_keyframes_with_only_partial_freedom(tmp_path):
     keyframes only. The spline is a line (Y'' = 0), so the acceleration preconditioner saw H = 0 and
     the first step overflowed; it must converge."""
     p = tmp_path / "k.json"
-    p.write_text(json.dumps({"scene": str(SCENE), "keyframes": [
+    p.write_text(json.dumps({"format": "dynsplines.keyframes/1", "scene": str(SCENE), "keyframes": [
         {"time": 0.0, "joints": {"root": [0, 0, 0, 0, 0, 0, 1], "l_hip": [0, 0, 0, 1]}},
         {"time": 1.0, "joints": {"l_hip": [None, 0, 0, 0]}}]}))
     out = tmp_path / "out.npz"

@@ -119,10 +119,13 @@ def test_keyframes_that_contradict_the_schedule_are_found_and_excused(toy):
     obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=SCHEDULE)
     q = np.tile(toy.qpos0, (3, 1))
     q[:, 2] = 1.0  # sites at 5 cm above the floor: heel planted at t=0.2 is too high, r_toe swinging ok
-    found = keyframe_conflicts(obj, np.array([0.0, 0.2, 1.0]), q)
-    assert ("planted", 1, "l_heel", pytest.approx(0.05 - 0.002, abs=1e-6)) in found
+    got = keyframe_conflicts(obj, np.array([0.0, 0.2, 1.0]), q)
+    assert ("planted", 1, "l_heel", pytest.approx(0.05 - 0.002, abs=1e-6)) in got.found
+    assert Contact("l_heel", 0.0, 0.4) in got.planted
     planted = obj.terms[obj.names.index("planted")]
-    assert 0 in planted.excused
+    assert not planted.excused  # a query: the objective's terms are not changed
+    excused = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=SCHEDULE, conflicts=got)
+    assert 0 in excused.terms[excused.names.index("planted")].excused  # l_heel (0, 0.4): the first contact
 
 
 def test_keyframes_that_slide_a_planted_site_are_found_and_excused(toy):
@@ -135,14 +138,16 @@ def test_keyframes_that_slide_a_planted_site_are_found_and_excused(toy):
     q[:, 2] = 0.952  # sites near the floor (2 mm up: the planted rest height)
     q[2, 0] += 0.03  # the whole figure 3 cm along x at t = 0.3: both toes slide 3 cm
     obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched)
-    found = [c for c in keyframe_conflicts(obj, times, q) if c[0] == "sliding"]
+    got = keyframe_conflicts(obj, times, q)
+    found = [c for c in got.found if c[0] == "sliding"]
     assert sorted(found) == [("sliding", 2, "l_toe", pytest.approx(0.03, abs=1e-9)),
                              ("sliding", 2, "r_toe", pytest.approx(0.03, abs=1e-9))]
-    assert obj.terms[0].excused == {0, 1}
+    assert got.planted == set(sched)
+    assert figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched, conflicts=got).terms[0].excused == {0, 1}
     q[2, 0] -= 0.025  # 5 mm
     obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched)
-    assert not [c for c in keyframe_conflicts(obj, times, q) if c[0] == "sliding"]
-    assert not obj.terms[0].excused
+    got = keyframe_conflicts(obj, times, q)
+    assert not [c for c in got.found if c[0] == "sliding"] and not got.planted
 
 
 def test_a_swing_the_path_next_to_a_keyframe_keeps_on_the_floor_is_excused(toy):
@@ -161,10 +166,12 @@ def test_a_swing_the_path_next_to_a_keyframe_keeps_on_the_floor_is_excused(toy):
         return Y
 
     obj = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched)
-    assert keyframe_conflicts(obj, times, q) == []
-    found = keyframe_conflicts(obj, times, q, path=path)
-    assert found == [("clearance", 1, "l_toe", pytest.approx(0.02 - 0.002, abs=1e-6))]
-    assert (1, 0.3, 0.7) in obj.terms[0].excused  # l_toe is column 1 (l_heel, l_toe, r_heel, r_toe)
+    assert not keyframe_conflicts(obj, times, q).found
+    got = keyframe_conflicts(obj, times, q, path=path)
+    assert list(got.found) == [("clearance", 1, "l_toe", pytest.approx(0.02 - 0.002, abs=1e-6))]
+    assert ("l_toe", 0.3, 0.7) in got.swings
+    built = figure_objective(toy, w, 0.0, 1.0, rate=50, contacts=sched, conflicts=got)
+    assert (1, 0.3, 0.7) in built.terms[0].excused  # l_toe is column 1 (l_heel, l_toe, r_heel, r_toe)
 
 
 @pytest.mark.slow
@@ -341,3 +348,80 @@ def test_torque_and_root_terms_match_the_mujoco_backend(toy):
         np.testing.assert_allclose(a.f, b.f, rtol=1e-9, atol=0)
         for x, y in ((a.dY, b.dY), (a.dY1, b.dY1), (a.dY2, b.dY2)):
             np.testing.assert_allclose(x, y, rtol=0, atol=1e-4 * np.abs(y).max())
+def _standing_jump_file(tmp_path, shift: float, contact_start: float = 0.0):
+    """A hand-written keyframe file of the figure on models/floor.xml: standing at t = 0 (heels 2 mm
+    up), the whole figure `shift` m along x at 0.4 s and again at 1.0 s; both feet in contact from
+    `contact_start` to 0.6 s (a contact written to start at the first keyframe)."""
+    import json
+
+    from runner.paths import MODELS
+    from solver.contacts import site_positions
+
+    model = mujoco.MjModel.from_xml_path(str(MODELS / "floor.xml"))
+    q = model.qpos0.copy()
+    q[2] -= site_positions(model, q)[0, :, 2].min() - 0.002  # the lowest site 2 mm above the floor
+    root = [float(v) for v in q[:7]]
+    frames = [{"time": t, "joints": {"root": [root[0] + dx, *root[1:]]}} for t, dx in ((0.0, 0.0), (0.4, shift),
+                                                                                         (1.0, shift))]
+    doc = {"format": "dynsplines.keyframes/1", "scene": str(MODELS / "floor.xml"), "keyframes": frames,
+           "contacts": [{"foot": "left", "start": contact_start, "end": 0.6},
+                        {"foot": "right", "start": contact_start, "end": 0.6}]}
+    p = tmp_path / "jump.keyframes.json"
+    p.write_text(json.dumps(doc))
+    return model, p
+
+
+@pytest.mark.parametrize("contact_start", [0.0, 0.1])
+def test_a_keyframe_at_a_contacts_start_counts_for_sliding(tmp_path, contact_start):
+    """A standing jump written by hand: contacts from 0.0 to 0.6 s, keyframes at 0.0 and 0.4 s holding
+    the feet 93.8 mm apart. The keyframe at the contact's exact start is in the contact, so the feet
+    must slide 93.8 mm: every site is reported and excused (with the contact starting at 0.1 s, after
+    the first keyframe, nothing slides). Before, only keyframes strictly inside the sliding window
+    counted, and this case got no warning (then missed the planted bound after thousands of
+    evaluations)."""
+    from solver.keyframe_file import read_keyframes
+    from solver.problem import figure_problem
+
+    model, path = _standing_jump_file(tmp_path, 0.0938, contact_start)
+    keyframes, info = read_keyframes(path, model)
+    weights = parse_terms(None, contacts=info.contacts)
+    objective, _, got = figure_problem(model, weights, keyframes, rate=50.0, contacts=info.contacts)
+    sliding = sorted(c for c in got.found if c[0] == "sliding")
+    if contact_start > 0:
+        assert sliding == [] and not got.planted
+        return
+    assert sliding == [("sliding", 1, site, pytest.approx(0.0938, abs=1e-6)) for site in sorted(CONTACT_SITES)]
+    assert got.planted == set(info.contacts)
+    planted = objective.terms[objective.names.index("planted")]
+    assert planted.excused == set(range(4))  # the objective is built with what the keyframes excuse
+
+
+def test_the_shipped_example_contradicts_none_of_its_contacts():
+    """`dynsplines run-and-step` opens without a keyframe-conflict warning. The file's contacts are the
+    clip's as its recorded command detects them (`reference_contacts`), less the one its hand edit
+    removed: a heel that the capture holds 28.8 mm or more above the step all through its "contact"
+    (it hovers over the planted toe; the planted term would pull it to 2 mm against keyframe 5, which
+    holds it 30 mm up). No keyframe holds a site off the remaining schedule."""
+    from runner.mocap.reference import load_bvh_reference
+    from runner.paths import MODELS
+    from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+    from solver.contacts import SITES, reference_contacts, site_heights, site_positions
+    from solver.problem import figure_problem
+
+    keyframes, info, model, _, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
+    assert "--root-scale 1" in info.source["command"] and "l_heel" in info.source["hand_edits"]
+    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model, root_scale=1.0)
+    detected = reference_contacts(model, ref.qpos, ref.frame_time)
+    kept = [c for c in detected if any(c.site == f.site and abs(c.start - f.start) < 2e-6 for f in info.contacts)]
+    assert [(c.site, c.start, c.end) for c in info.contacts] == [
+        (c.site, pytest.approx(c.start, abs=2e-6), pytest.approx(c.end, abs=2e-6)) for c in kept]
+    (removed,) = [c for c in detected if c not in kept]
+    h = site_heights(model, site_positions(model, ref.qpos))[:, SITES.index(removed.site)]
+    during = (ref.times >= removed.start - 1e-9) & (ref.times <= removed.end + 1e-9)
+    assert removed.site == "l_heel" and h[during].min() > 0.025  # never touched: 28.8 mm at its lowest
+    weights = parse_terms(None, contacts=info.contacts)
+    assert {"planted", "clearance"} <= set(weights)
+    _, _, got = figure_problem(model, weights, keyframes, contacts=info.contacts)
+    assert got.found == () and not got.excuses
+    _, _, before = figure_problem(model, weights, keyframes, contacts=detected)  # the heel kept: reported
+    assert [(k, i, s) for k, i, s, _ in before.found] == [("planted", 5, "l_heel")]

@@ -133,3 +133,76 @@ def test_127_33_touchdowns_where_the_feet_land():
             assert low[i1 + 6] > low[i1] + 0.01, (foot, t1, low[i1:i1 + 7])
     on_box = [c for c in foot_contacts(cs) if 0.8 < c.start < 1.4]
     assert len(on_box) == 2
+
+
+# ---------------------------------------------------------------------------------------------------
+# ContactSchedule
+
+
+def test_schedule_is_checked_once_sorted_and_answers_queries():
+    from solver.contact_schedule import ContactSchedule
+
+    run = ContactSchedule.of([Contact("l_toe", 0.8, 1.1), Contact("r_toe", 0.4, 0.7), Contact("l_toe", 0.0, 0.3)])
+    assert [c.start for c in run] == [0.0, 0.4, 0.8] and len(run) == 3 and run[0].site == "l_toe"
+    assert run.flights() == [(0.3, 0.4), (0.7, 0.8)]  # no site in contact, between the first and last
+    assert run.swings("l_toe") == [(0.3, 0.8)] and run.swings("r_toe") == []
+    assert run.span == (0.0, 1.1)
+    assert run.events() == ([(0.0, "l"), (0.4, "r"), (0.8, "l")], [(0.3, "l"), (0.7, "r"), (1.1, "l")])
+    mask = run.mask(np.array([0.3, 0.35, 0.5]))
+    np.testing.assert_array_equal(mask[:, SITES.index("l_toe")], [True, False, False])
+    np.testing.assert_array_equal(mask[:, SITES.index("r_toe")], [False, False, True])
+    assert ContactSchedule.of(run) is run  # already checked: the same value
+    with pytest.raises(AttributeError):
+        run.contacts = ()  # frozen
+    empty = ContactSchedule.empty()
+    assert not empty and len(empty) == 0 and empty.flights() == [] and empty.span is None
+    assert ContactSchedule.of([]) == empty
+
+
+@pytest.mark.parametrize("contacts, message", [
+    ([Contact("l_toe", 0, 1), Contact("nose", 0, 1)],
+     r"^contact 1: 'site' is 'nose'; the figure's contact sites are l_heel, l_toe, r_heel, r_toe$"),
+    ([Contact("l_toe", 1, 0.5)], r"^contact 0: 'end' 0.5 is not after 'start' 1; swap them$"),
+    ([Contact("l_toe", 1, 1)], r"^contact 0: 'end' 1 is not after 'start' 1; give the contact a duration$"),
+    ([Contact("l_toe", 0, float("nan"))], r"^contact 0: 'end' is nan; give a finite number of seconds$"),
+    ([Contact("l_toe", 0, 1, "moon")], r"^contact 0: 'surface' is 'moon', which the scene does not have; its "
+                                       r"surfaces are floor, step \(or leave 'surface' out"),
+])
+def test_schedule_errors_are_one_line_naming_the_contact_field_and_value(contacts, message):
+    from solver.contact_schedule import ContactSchedule
+
+    with pytest.raises(InputError, match=message):
+        ContactSchedule.of(contacts, surfaces=("floor", "step"))
+
+
+def test_schedule_checks_surfaces_when_a_scene_is_given_naming_its_source():
+    from solver.contact_schedule import ContactSchedule
+
+    sched = ContactSchedule.of([Contact("l_toe", 0, 1, "stpe")], source="k.json", labels=["contacts[4]"])
+    assert sched.surfaces is None  # no scene yet: the name is only a string
+    with pytest.raises(InputError, match=r"^k\.json: contacts\[4\]: 'surface' is 'stpe', which the scene does not"):
+        sched.for_scene(("floor", "step"))
+    assert ContactSchedule.of([Contact("l_toe", 0, 1, "step")]).for_scene(("floor", "step")).surfaces == ("floor",
+                                                                                                          "step")
+
+
+def test_schedule_conflicts_merge_as_a_value():
+    """Findings concatenate, excusals unite, lowered bands and lift ceilings keep the lower; the
+    mappings are read-only, and an empty value excuses nothing."""
+    from solver.schedule_conflicts import ScheduleConflicts
+
+    a = ScheduleConflicts([("planted", 1, "l_toe", 0.03)], planted={Contact("l_toe", 0, 1)},
+                          lowered={("r_toe", 0.3, 0.7): 0.012}, lifts={(0.3, 0.4): 0.03})
+    b = ScheduleConflicts([("clearance", 2, "r_toe", 0.01)], swings={("r_toe", 0.3, 0.7)},
+                          lowered={("r_toe", 0.3, 0.7): 0.008}, lifts={(0.3, 0.4): 0.031, (0.8, 0.9): 0.02})
+    m = a.merged(b)
+    assert m.found == (("planted", 1, "l_toe", 0.03), ("clearance", 2, "r_toe", 0.01))
+    assert m.planted == {Contact("l_toe", 0, 1)} and m.swings == {("r_toe", 0.3, 0.7)}
+    assert dict(m.lowered) == {("r_toe", 0.3, 0.7): 0.008}
+    assert dict(m.lifts) == {(0.3, 0.4): 0.03, (0.8, 0.9): 0.02}
+    with pytest.raises(TypeError):
+        m.lowered[("r_toe", 0.3, 0.7)] = 0.0  # read-only
+    assert dict(a.lowered) == {("r_toe", 0.3, 0.7): 0.012}  # the parts are unchanged
+    assert m.excuses and not ScheduleConflicts().excuses
+    assert not ScheduleConflicts([("planted", 0, "l_toe", 0.02)]).excuses  # a finding alone excuses nothing
+    assert m.with_found(()).found == () and m.with_found(()).swings == m.swings

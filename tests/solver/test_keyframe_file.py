@@ -40,7 +40,7 @@ def write_json(tmp_path, doc, name="k.json"):
 
 
 def minimal(**kf1):
-    return {"keyframes": [{"time": 0.0, "joints": {"root": [0, 0, 1, 1, 0, 0, 0]}},
+    return {"format": FORMAT, "keyframes": [{"time": 0.0, "joints": {"root": [0, 0, 1, 1, 0, 0, 0]}},
                           {"time": 0.5, "joints": {"root": [1, 0, 1, 1, 0, 0, 0], **kf1}}]}
 
 
@@ -131,10 +131,10 @@ def test_file_errors(tmp_path, layout):
     p = write_json(tmp_path, {"format": "other/2", "keyframes": []})
     with pytest.raises(InputError, match=r"field 'format' is 'other/2'; this program reads 'dynsplines.keyframes/1'"):
         read_keyframes(p, layout)
-    p = write_json(tmp_path, {"frames": []})
+    p = write_json(tmp_path, {"format": FORMAT, "frames": []})
     with pytest.raises(InputError, match=r"unknown top-level field\(s\) 'frames'"):
         read_keyframes(p, layout)
-    p = write_json(tmp_path, {"model": "x.xml"})
+    p = write_json(tmp_path, {"format": FORMAT, "model": "x.xml"})
     with pytest.raises(InputError, match=r"missing field 'keyframes'"):
         read_keyframes(p, layout)
 
@@ -211,13 +211,13 @@ def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
     text = out.read_text()
     assert '    {"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"}' in text  # one per line
     _, info = read_keyframes(out, layout)
-    assert info.contacts == tuple(contacts)
+    assert tuple(info.contacts) == tuple(contacts)
     doc = json.loads(text)
     doc["contacts"].append({"foot": "right", "start": 0.5, "end": 0.6, "surface": "box0"})
     _, info = read_keyframes(write_json(tmp_path, doc), layout)
     assert info.contacts[2:] == (Contact("r_heel", 0.5, 0.6, "box0"), Contact("r_toe", 0.5, 0.6, "box0"))
     _, info = read_keyframes(write_json(tmp_path, minimal(), "none.json"), layout)
-    assert info.contacts == ()
+    assert not info.contacts and len(info.contacts) == 0
     # times are rounded outward: a contact keeps every frame it held (frame times k * 0.0083333)
     odd = [Contact("r_toe", 3 * 0.0083333, 28 * 0.0083333)]
     write_keyframes(out, kf, layout, contacts=odd)
@@ -228,12 +228,13 @@ def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
 @pytest.mark.parametrize("contacts, shown", [
     ({"site": "l_toe"}, "list"),
     ([5], "contacts[0] is 5"),
-    ([{"site": "nose", "start": 0, "end": 1}], "contacts[0]: 'site' is 'nose'; the contact sites are l_heel"),
+    ([{"site": "nose", "start": 0, "end": 1}], "contacts[0]: 'site' is 'nose'; the figure's contact sites are l_heel"),
+    ([{"site": 3, "start": 0, "end": 1}], "contacts[0]: 'site' is 3; give a contact site's name (l_heel"),
     ([{"foot": "l", "start": 0, "end": 1}], "contacts[0]: 'foot' is 'l'; give 'left' or 'right'"),
     ([{"site": "l_toe", "foot": "left", "start": 0, "end": 1}], "exactly one of 'site'"),
     ([{"site": "l_toe", "end": 1}], "contacts[0]: missing field 'start'"),
     ([{"site": "l_toe", "start": "0", "end": 1}], "contacts[0]: 'start' is '0'; give a finite number"),
-    ([{"site": "l_toe", "start": 1, "end": 0.5}], "'end' 0.5 is before 'start' 1; swap them"),
+    ([{"site": "l_toe", "start": 1, "end": 0.5}], "contacts[0]: 'end' 0.5 is not after 'start' 1; swap them"),
     ([{"site": "l_toe", "start": 0, "end": 1, "surface": 3}], "'surface' is 3"),
     ([{"site": "l_toe", "start": 0, "end": 1, "force": 3}], "unknown field(s) 'force'"),
 ])
@@ -242,3 +243,42 @@ def test_contact_errors_name_file_field_value_and_fix(tmp_path, layout, contacts
     with pytest.raises(InputError) as e:
         read_keyframes(p, layout)
     assert str(e.value).startswith(str(p)) and shown in str(e.value)
+
+
+def test_a_file_without_format_is_refused_naming_the_field_and_the_value_to_write(tmp_path, layout):
+    doc = minimal()
+    del doc["format"]
+    p = write_json(tmp_path, doc)
+    with pytest.raises(InputError) as e:
+        read_keyframes(p, layout)
+    assert str(e.value) == (f"{p}: missing field 'format'; add \"format\": \"{FORMAT}\" to the top-level object "
+                            "(the file format this program reads)")
+
+
+def test_an_unknown_surface_names_the_file_and_the_contacts_index(tmp_path):
+    """With the scene given to the reader, at once; with only the figure's layout, when the contact
+    terms check the schedule against their scene: either way one line naming the file and the entry."""
+    from runner.paths import MODELS
+    from solver.terms.contact import Planted
+
+    scene = mujoco.MjModel.from_xml_path(str(MODELS / "run_and_step.xml"))
+    contacts = [{"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"},
+                {"foot": "right", "start": 0.3, "end": 0.5, "surface": "stpe"}]
+    p = write_json(tmp_path, {**minimal(), "contacts": contacts})
+    with pytest.raises(InputError) as e:
+        read_keyframes(p, scene)
+    assert str(e.value).startswith(f"{p}: contacts[1]: 'surface' is 'stpe', which the scene does not have; its "
+                                   "surfaces are floor, step")
+    _, info = read_keyframes(p, StateLayout.from_model(scene))  # no scene: read, checked later
+    with pytest.raises(InputError, match=rf"^{p}: contacts\[1\]: 'surface' is 'stpe', which the scene"):
+        Planted(scene, info.contacts)
+
+
+def test_every_shipped_keyframe_file_loads(layout):
+    from runner.paths import MODELS
+
+    files = sorted(MODELS.glob("*.keyframes.json")) + sorted(Path(__file__).parents[1].rglob("*.keyframes.json"))
+    assert files
+    for f in files:
+        keyframes, info = read_keyframes(f, layout)
+        assert keyframes.count >= 2 and json.loads(f.read_text())["format"] == FORMAT

@@ -85,8 +85,13 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
                                        np.hypot(2.56572, 7.04926) + np.hypot(2.57974, 7.08778)])
     assert info.source["root_scale"] == pytest.approx(0.84 / subject, rel=1e-5)
     assert find_reference(info, model, quiet=True).root_scale == info.source["root_scale"]
-    # a file that records no scale (made before it, like the shipped run-and-step keyframes): as captured
-    _, shipped = read_keyframes(REPO / "models" / "run_and_step.keyframes.json", layout)
+    # a file that records no scale (made before it): as captured (the shipped file without its root_scale 1)
+    doc = json.loads((REPO / "models" / "run_and_step.keyframes.json").read_text())
+    doc["source"].pop("root_scale", None)
+    doc["model"], doc["scene"] = str(REPO / "models" / "humanoid39.xml"), str(REPO / "models" / "run_and_step.xml")
+    doc["source"]["clip"] = str(REPO / "models" / "cmu" / "127_33.bvh")
+    (tmp_path / "old.keyframes.json").write_text(json.dumps(doc))
+    _, shipped = read_keyframes(tmp_path / "old.keyframes.json", layout)
     assert "root_scale" not in shipped.source and find_reference(shipped, model, quiet=True).root_scale == 1.0
     assert {c.surface for c in info.contacts} == {"floor"}
     saved = load_saved_path(out / "run.npz")

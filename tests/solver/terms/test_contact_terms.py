@@ -89,11 +89,12 @@ def test_windows_swings_and_flights():
 
 
 def test_bad_contacts_are_input_errors(toy_model):
-    with pytest.raises(InputError, match="unknown site"):
+    with pytest.raises(InputError, match=r"^contact 0: 'site' is 'nose'; the figure's contact sites are l_heel"):
         Planted(toy_model, [Contact("nose", 0, 1)])
-    with pytest.raises(InputError, match="start"):
-        Planted(toy_model, [Contact("l_toe", 1, 0.5)])
-    with pytest.raises(InputError, match="unknown surface.*floor"):
+    with pytest.raises(InputError, match=r"^contact 1: 'end' 0.5 is not after 'start' 1; swap them$"):
+        Planted(toy_model, [Contact("l_toe", 0, 1), Contact("l_toe", 1, 0.5)])
+    with pytest.raises(InputError, match=r"^contact 0: 'surface' is 'moon', which the scene does not have; its "
+                                         r"surfaces are floor"):
         Clearance(toy_model, [Contact("l_toe", 0, 1, "moon")])
 
 
@@ -225,15 +226,18 @@ def test_a_keyframe_low_in_a_swing_lowers_that_swings_band(toy_model, layout):
     Y = standing(layout, len(t), (0.0, 0.0, FOOT + z))
     before = term.evaluate(t, Y, None, None).f
     np.testing.assert_allclose(before, (c - z) ** 2, atol=1e-15)
-    found = term.conflicts(np.array([0.7]), standing(layout, 1, (0.0, 0.0, FOOT + z)), excuse=True)
-    assert [(i, s) for i, s, _ in found] == [(0, "l_toe")]
-    assert found[0][2] == pytest.approx(c - z)
-    assert not term.evaluate(t, Y, None, None).f.any()  # the path at the keyframe's height: no penalty
+    got = term.conflicts(np.array([0.7]), standing(layout, 1, (0.0, 0.0, FOOT + z)))
+    assert [(kind, i, s) for kind, i, s, _ in got.found] == [("clearance", 0, "l_toe")]
+    assert got.found[0][3] == pytest.approx(c - z)
+    assert got.swings == {("l_toe", 0.4, 1.0)} and dict(got.lowered) == {("l_toe", 0.4, 1.0): pytest.approx(z)}
+    np.testing.assert_allclose(term.evaluate(t, Y, None, None).f, before, atol=1e-15)  # a query: unchanged
+    excused = Clearance(toy_model, WALK, clearance=c, core=0.5, conflicts=got)  # built with what it found
+    assert not excused.evaluate(t, Y, None, None).f.any()  # the path at the keyframe's height: no penalty
     Y[:, 2] = FOOT + 0.002  # lower than the keyframe: penalized against the lowered band
-    np.testing.assert_allclose(term.evaluate(t, Y, None, None).f, (z - 0.002) ** 2, atol=1e-15)
-    assert term.violation(Y, t) is None  # that swing is excused from the bound
-    other = Clearance(toy_model, WALK, clearance=c, core=0.5)  # a fresh term keeps its 2 cm band
-    np.testing.assert_allclose(other.evaluate(t, Y, None, None).f, (c - 0.002) ** 2, atol=1e-15)
+    np.testing.assert_allclose(excused.evaluate(t, Y, None, None).f, (z - 0.002) ** 2, atol=1e-15)
+    assert excused.violation(Y, t) is None  # that swing is excused from the bound
+    np.testing.assert_allclose(term.evaluate(t, Y, None, None).f, (c - 0.002) ** 2, atol=1e-15)  # 2 cm band
+    assert term.violation(Y, t) == pytest.approx(c - 0.002)
 
 
 def test_clearance_keeps_flights(toy_model, layout):
@@ -274,13 +278,17 @@ def test_a_long_flights_band_is_lifted_ballistically(toy_model, layout):
     # the lift is a target, not a conflict: a keyframe at the top of the flight 3 cm up is not reported,
     # but it lowers the ceiling to 3 cm (a path held above it around the keyframe would bulge)
     key = standing(layout, 1, (0.0, 0.0, FOOT + 0.03))
-    assert term.conflicts(np.array([0.45]), key, excuse=True) == []
+    assert not term.conflicts(np.array([0.45]), key).found
     np.testing.assert_allclose(term.split_windows(np.array([0.45]))[2], [FLIGHT_LIFT])
-    term.lower_lifts(np.array([0.45]), key)
-    np.testing.assert_allclose(term.split_windows(np.array([0.45]))[2], [0.03], rtol=1e-9)
+    lowered = term.lower_lifts(np.array([0.45]), key)
+    assert dict(lowered.lifts) == {(a, b): pytest.approx(0.03, rel=1e-9)}
+    np.testing.assert_allclose(term.split_windows(np.array([0.45]))[2], [FLIGHT_LIFT])  # a query: unchanged
+    built = Clearance(toy_model, hop, clearance=0.02, conflicts=lowered)
+    np.testing.assert_allclose(built.split_windows(np.array([0.45]))[2], [0.03], rtol=1e-9)
     # keyframes just after take-off (low in every flight: the lift is below its ceiling there) keep it
-    fresh = Clearance(toy_model, hop, clearance=0.02)
-    fresh.lower_lifts(np.array([0.305]), standing(layout, 1, (0.0, 0.0, FOOT + 0.003)))
+    early = term.lower_lifts(np.array([0.305]), standing(layout, 1, (0.0, 0.0, FOOT + 0.003)))
+    assert not early.lifts and not early.excuses
+    fresh = Clearance(toy_model, hop, clearance=0.02, conflicts=early)
     np.testing.assert_allclose(fresh.split_windows(np.array([0.45]))[2], [FLIGHT_LIFT])
     with pytest.raises(InputError, match="flight_lift"):
         Clearance(toy_model, hop, flight_lift=-0.01)
@@ -439,3 +447,21 @@ def test_objective_gradient_with_a_shared_engine(toy_model, layout):
     assert all(ev.integrals[n] > 0 for n in ("cone", "planted", "clearance")), ev.integrals
     G = fd_gradient(lambda X: obj.evaluate(knots, X, grad=False).E, P)
     assert np.abs(ev.grad - G).max() < 1e-6 * np.abs(G).max()
+
+
+def test_planted_conflicts_count_keyframes_at_a_contacts_ends_and_change_nothing(toy_model, layout):
+    """A keyframe at a contact's exact start (or end) is in it, as the height window (the closed
+    contact) says: 3 cm up there is reported; 10 ms before the start it is not. The check is a query:
+    the term keeps its violation until one is built with what it found."""
+    term = Planted(toy_model, [Contact("l_toe", 0.2, 0.6)], rest_height=0.002)
+    up = standing(layout, 1, (0.0, 0.0, FOOT + 0.032))
+    for t, hit in ((0.2, True), (0.6, True), (0.19, False), (0.4, True)):
+        got = term.conflicts(np.array([t]), up)
+        assert [(k, i, s) for k, i, s, _ in got.found] == ([("planted", 0, "l_toe")] if hit else []), t
+        if hit:
+            assert got.found[0][3] == pytest.approx(0.03, abs=1e-9) and got.planted == {term.contacts[0]}
+    t = np.linspace(0.0, 0.8, 81)
+    Y = standing(layout, len(t), (0.0, 0.0, FOOT + 0.032))
+    assert term.violation(Y, t) == pytest.approx(0.03, abs=1e-9)
+    built = Planted(toy_model, term.contacts, rest_height=0.002, conflicts=term.conflicts(np.array([0.2]), up))
+    assert built.violation(Y, t) is None  # the only contact excused
