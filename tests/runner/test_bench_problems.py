@@ -36,6 +36,6 @@ def test_bench_run_and_step_solves_the_commands_problem(monkeypatch, terms):
         mine = benched[name]
         assert mine.terms == problem.terms
         assert dict(mine.weights) == dict(problem.weights) and mine.limits == problem.limits
-        assert mine.rate == problem.rate and mine.contacts == problem.contacts and len(problem.contacts) == 8
+        assert mine.rate == problem.rate and mine.contacts == problem.contacts and len(problem.contacts) > 0
     # with the file's contacts: the contact terms and the friction cone are on with "all"
     assert {"planted", "clearance", "cone", "torque", "root"} <= set(benched[terms].terms) or terms != "all"

@@ -66,7 +66,7 @@ def test_a_registered_term_acts_from_the_command_line(toy_term, tmp_path, capsys
     middle keyframe is below 0.9 m; with --terms smooth it stays at 1 m; --help lists the term."""
     from runner.cli import main
 
-    doc = {"keyframes": [{"time": 0.0, "joints": {"root": [0, 0, 1.0, 1, 0, 0, 0]}},
+    doc = {"format": "dynsplines.keyframes/1", "keyframes": [{"time": 0.0, "joints": {"root": [0, 0, 1.0, 1, 0, 0, 0]}},
                          {"time": 0.5, "joints": {"root": [0, 0, None, 1, 0, 0, 0]}},
                          {"time": 1.0, "joints": {"root": [0, 0, 1.0, 1, 0, 0, 0]}}]}
     path = tmp_path / "k.json"
