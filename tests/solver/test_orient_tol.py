@@ -16,10 +16,14 @@ TEST_SEEDS = range(1000, 1010)
 
 def test_default_options_carry_the_tolerance_unless_rounds_are_given():
     assert isinstance(default_options(), OrientOptions) and default_options().tol == DEFAULT_TOL
-    assert default_options(rounds=2).tol == 0  # explicit rounds: the fixed-rounds behaviour
-    assert default_options(subdivision="global").tol == 0
-    assert default_options("paper").tol == 0
-    assert default_options(tol=1e-5, rounds=3).tol == 1e-5
+    assert default_options().refine == "tol" and default_options().rounds is None
+    r2 = default_options(rounds=2)  # explicit rounds: the fixed-rounds mode
+    assert (r2.refine, r2.rounds, r2.tol) == ("rounds", 2, 0)
+    assert default_options(subdivision="global").refine == "rounds"
+    assert (default_options("paper").refine, default_options("paper").n_rounds) == ("rounds", 3)
+    assert (default_options("paper", tol=1e-5).refine, default_options(tol=1e-5).tol) == ("tol", 1e-5)
+    with pytest.raises(InputError, match=r"give rounds \(3, fixed rounds\) or tol \(1e-05.*not both"):
+        default_options(tol=1e-5, rounds=3)
     with pytest.raises(InputError, match="tol must be a number >= 0"):
         default_options(tol=-1.0)
 
