@@ -20,7 +20,6 @@ import copy
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import cached_property
 
 import numpy as np
 
@@ -38,6 +37,7 @@ from solver.refinement import (  # noqa: F401 (TOL_FRAMES_PER_INTERVAL, refineme
     ToTolerance,
     refinement_estimate,
 )
+from solver.solution import ROUND_KINDS, Round, Solution, round_summary  # noqa: F401 (re-exported)
 from solver.subdivide import global_times, knot_hint_times
 
 SUBDIVISIONS = ("none", "global", "adaptive")
@@ -46,8 +46,6 @@ SCORES = ("gradient", "decrease")
 REFINES = ("rounds", "tol")
 #: `SolveOptions.rounds` when not given (refine "rounds").
 DEFAULT_ROUNDS = 2
-#: `Round.kind` values.
-ROUND_KINDS = ("start", "refine", "boost", "polish")
 #: [s] `SolveOptions.term_knots`: a hinted frame closer than this to another frame is left out (30 ms:
 #: under four frames at motion capture's 120 Hz; contact times are only that accurate).
 KNOT_MIN_GAP = 0.03
@@ -198,106 +196,6 @@ def _whole(name, v):
         raise InputError(f"{name} must be a whole number >= 0, got {v!r}")
 
 
-@dataclass(frozen=True)
-class Round:
-    """One optimization round: the frames it started with and the optimizer's result (read-only).
-
-    Attributes:
-        n_frames, n_variable: frames the round optimized, and how many of them are variable frames.
-        result: the optimizer's OptimizeResult.
-        scores: (n_frames_before - 1,) the subdivision scores (`SolveOptions.score`) that chose this
-            round's new frames, on the previous round's segments; None for the first round and after a
-            penalty boost.
-        times: (n_frames,) the frame times this round optimized [s].
-        kind: why the round ran (`ROUND_KINDS`): "start" (the first), "refine" (frames were added),
-            "boost" (the same frames under weights raised by penalty continuation or by the strategy)
-            or "polish" (the same frames at a stricter stopping test).
-    """
-
-    n_frames: int
-    n_variable: int
-    result: OptimizeResult
-    scores: np.ndarray | None = None
-    times: np.ndarray | None = None
-    kind: str = "start"
-
-
-@dataclass(frozen=True)
-class Solution:
-    """The result of `solve` (read-only: a frozen dataclass whose arrays are not writeable).
-
-    Attributes:
-        frames: optimized FrameSet (the path is the natural cubic spline through it), (m, nq) values.
-        initial: the plain spline's FrameSet (a read-only copy of `solve`'s `initial`).
-        rounds: (Round, ...) per-round results.
-        status: Status of the last round (INTERRUPTED etc. end the solve early).
-        message: why it ended.
-        E_initial, E_final: objective on the plain spline and on the result, both under the final
-            weights (penalty continuation raises some) and the renormalization scales.
-        integrals_initial, integrals_final: {term: integral of f_j dt} on each (unweighted).
-        scales: {term: renormalization divisor} (eq. 7; 1 without renormalization).
-        trace: (N,) best objective after each evaluation, all rounds concatenated.
-        wall_time_s: [s], optimization and subdivision (excludes building the terms).
-        n_evals: objective evaluations in all rounds.
-        weights: {term: lambda_j} at the end: the objective's weights after penalty continuation
-            (`SolveOptions.limits`); the caller's Objective keeps its own.
-        objective: the working copy of the objective the last round optimized (final weights and
-            scales, terms prepared on the result): for scores or evaluations on the result under the
-            objective that produced it. `solve` never changes the caller's Objective.
-        refinement_estimates: the refinement strategy's estimate after each round that computed one:
-            with adaptive subdivision `refinement_estimate` (refine "rounds" with score "decrease":
-            every round but the last; refine "tol": every round); `solver.orient_refine.GapToOptimum`:
-            the estimated gap.
-        converged_to_tol: with a tolerance, whether the estimate reached it; None without one.
-        final_estimate: the last estimate of a strategy with a tolerance, NaN otherwise.
-        stalled: {term: violation} of the terms penalty continuation gave up on (a boost did not halve
-            the violation; `SolveOptions.limits`), in the term's `violation` units.
-    """
-
-    frames: FrameSet
-    initial: FrameSet
-    rounds: tuple[Round, ...]
-    status: Status
-    message: str
-    E_initial: float
-    E_final: float
-    integrals_initial: dict
-    integrals_final: dict
-    scales: dict
-    trace: np.ndarray
-    wall_time_s: float
-    n_evals: int = field(default=0)
-    weights: dict = field(default_factory=dict)
-    objective: Objective | None = field(default=None, repr=False, compare=False)
-    refinement_estimates: tuple = ()
-    converged_to_tol: bool | None = None
-    final_estimate: float = float("nan")
-    stalled: dict = field(default_factory=dict)
-
-    @cached_property
-    def refinement_estimate(self) -> float:
-        """`refinement_estimate` of the result (relative to E_final): the last round's with a
-        tolerance, else computed when first read (three gradient evaluations with a frame in every
-        segment); NaN without the objective."""
-        if np.isfinite(self.final_estimate):
-            return self.final_estimate
-        if self.objective is None:
-            return float("nan")
-        return refinement_estimate(self.objective, self.frames, self.E_final)[0]
-
-    @property
-    def round_counts(self) -> dict[str, int]:
-        """{kind: number of rounds} over `ROUND_KINDS` (`Round.kind`), kinds that did not occur left out."""
-        kinds = [r.kind for r in self.rounds]
-        return {k: kinds.count(k) for k in ROUND_KINDS if k in kinds}
-
-    @property
-    def round_summary(self) -> str:
-        """The rounds in words, e.g. "3 rounds: 1 start, 1 refine, 1 boost" (refinement rounds add frames;
-        boost and polish rounds optimize the same frames again)."""
-        return _round_summary(self.rounds)
-
-
 def solve(
     objective: Objective,
     initial: FrameSet,
@@ -359,7 +257,7 @@ def solve(
     log = _rounds(objective, frames, options, strategy, continuation, backend, t_start, should_stop, progress)
     message = strategy.final_message(log.status, log.message)
     if any(r.kind in ("boost", "polish") for r in log.rounds):
-        message += f" ({_round_summary(log.rounds)})"
+        message += f" ({round_summary(log.rounds)})"
     ev1 = objective.evaluate(log.frames.times, log.frames.values, grad=False)
     if not np.array_equal(weights0, objective.weights):  # both ends under the final weights, so they compare
         ev0 = objective.evaluate(initial.times, initial.values, grad=False)
@@ -487,13 +385,6 @@ def _record(log: _Log, objective, result: OptimizeResult, scores, kind: str, opt
     log.status, log.message = result.status, result.message
     if result.status is Status.MAX_TIME:  # the round had what was left; report the whole solve's limit
         log.message = f"time limit of {options.max_time_s:g} s reached"
-
-
-def _round_summary(rounds) -> str:
-    """"n rounds: a start, b refine, c boost, d polish" (kinds that occurred, in ROUND_KINDS order)."""
-    kinds = [r.kind for r in rounds]
-    parts = [f"{kinds.count(k)} {k}" for k in ROUND_KINDS if k in kinds]
-    return f"{len(kinds)} round{'s' if len(kinds) != 1 else ''}: " + ", ".join(parts)
 
 
 def _working_copy(objective):
