@@ -353,9 +353,11 @@ def orient(
             Neither given: Gauss with GAUSS_POINTS (`build_objective`).
         source: name for error messages. should_stop, progress: passed to `solve`.
         tol: refine adaptively until the estimated relative gap (E - E*)/E* is at most tol
-            (`OrientOptions.tol`; overrides the options' tol). Default: the options' tol (DEFAULT_TOL
-            with the default options of the normalized form; 0, fixed rounds, for options that are a
-            plain SolveOptions or give `rounds`). Normalized form only. The frames start as `options`
+            (`OrientOptions.tol`): > 0 sets the options' refine to "tol" with this tol, 0 to "rounds"
+            (their rounds, else DEFAULT_ROUNDS[form]). Default: the options' mode (refine "tol" with
+            DEFAULT_TOL in the default options of the normalized form; "rounds" in a plain SolveOptions
+            or options that give `rounds`). Normalized form only: the strategy is
+            `solver.orient_refine.GapToOptimum`, run by `solve`'s loop. The frames start as `options`
             says (`per_segment` per interval, on the unit sphere; none with subdivision "none"); the
             estimate on that starting path places the first optimized frames, and every round whose
             estimate is above tol adds more, each segment cut into as many equal pieces as the
