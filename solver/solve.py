@@ -113,8 +113,9 @@ class SolveOptions:
     Rounds: every optimization is a `Round` of `Solution.rounds`, with a `kind`: "start" (the first),
     "refine" (after adding frames), "boost" (the same frames again after penalty continuation raised
     weights) and "polish" (the same frames again at a stricter stopping test; the orientation's
-    gap strategy). So `rounds=1` with one boost gives three Rounds: start, refine, boost
-    (`Solution.round_summary` says so, and the message where there were boosts).
+    gap strategy). So `rounds=1` with one boost gives three Rounds, e.g. start, boost, refine:
+    `Solution.round_summary` counts them by kind, and so does the message where there were boost or
+    polish rounds ("... (3 rounds: 1 start, 1 refine, 1 boost)").
     Raises (on construction):
         InputError: a field out of range or unknown; refine "tol" without tol > 0; tol > 0 with
             refine "rounds"; rounds given with refine "tol".
