@@ -95,11 +95,11 @@ def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = Non
     opt.add_argument("--per-segment", type=nonnegative(int), default=_LIB.per_segment,
                      help="variable frames per keyframe interval to start with [%(default)s]")
     opt.add_argument("--rounds", type=nonnegative(int), default=None,
-                     help="a fixed number of adaptive subdivision rounds instead of the tolerance (ignored if "
-                          "--tol is given too) [rounds until --tol]")
+                     help="refine for N fixed adaptive subdivision rounds instead of to a tolerance (not "
+                          "with --tol) [rounds until --tol]")
     opt.add_argument("--tol", type=positive(float), default=None, metavar="X",
                      help="refine adaptively until the decrease of E that refinement still predicts, relative "
-                          "to E, is at most X, or the frame budget (--max-frames, else 10 per keyframe "
+                          "to E, is at most X (not with --rounds), or the frame budget (--max-frames, else 10 per keyframe "
                           f"interval) or --max-time runs out [{_LIB.tol:g}]")
     opt.add_argument("--max-frames", type=nonnegative(int), default=_LIB.max_frames, metavar="N",
                      help="at most N variable frames in total (0 = no limit; with --tol 10 per keyframe "
@@ -157,18 +157,27 @@ def clip_terms(args) -> dict:
 
 def solve_options(args, weights: dict) -> SolveOptions:
     """`solver.default_options(weights)` with the parsed `add_options` arguments applied (the command's
-    and the benchmark's settings)."""
-    if getattr(args, "tol", None) and args.subdivision != "adaptive":
-        raise InputError(f"--tol {args.tol:g} refines adaptively; it does not go with --subdivision "
+    and the benchmark's settings). `--rounds N` selects N fixed adaptive rounds (`SolveOptions.refine`
+    "rounds"), `--tol X` (or neither: the default tolerance) refinement to a tolerance ("tol").
+
+    Raises:
+        InputError: both --rounds and --tol; --tol with a subdivision other than adaptive.
+    """
+    tol, rounds = getattr(args, "tol", None), getattr(args, "rounds", None)
+    if tol is not None and rounds is not None:
+        raise InputError(f"--rounds {rounds} and --tol {tol:g} are two ways to end adaptive refinement; give "
+                         "one: --rounds N for N fixed rounds, or --tol X to refine until the estimate is at most X")
+    if tol and args.subdivision != "adaptive":
+        raise InputError(f"--tol {tol:g} refines adaptively; it does not go with --subdivision "
                          f"{args.subdivision}")
+    mode = (dict(refine="rounds", rounds=rounds, tol=0.0) if rounds is not None
+            else dict(refine="tol", rounds=None, tol=_LIB.tol if tol is None else tol))
     return replace(
         default_options(weights),
         subdivision=args.subdivision, per_segment=args.per_segment,
         renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
         max_evals=args.max_evals, max_time_s=args.max_time, precondition=not args.no_precondition,
-        score=args.score, max_frames=args.max_frames,
-        tol=args.tol if args.tol is not None else 0.0 if args.rounds is not None else _LIB.tol,
-        rounds=_LIB.rounds if args.rounds is None else args.rounds,
+        score=args.score, max_frames=args.max_frames, **mode,
     )
 
 

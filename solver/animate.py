@@ -32,8 +32,8 @@ def default_options(weights: dict[str, float]) -> SolveOptions:
 
     One variable frame per keyframe interval, then rounds of adaptive subdivision ranked by the
     decrease of E each midpoint frame predicts (paper fig. 5 and sec. 4.2) until the predicted decrease
-    still available, summed over all segments, is at most DEFAULT_TOL of E (`SolveOptions.tol`; a
-    frame budget of 10 per keyframe interval; `replace(..., tol=0)` for `rounds` fixed rounds), renormalized terms
+    still available, summed over all segments, is at most DEFAULT_TOL of E (`SolveOptions.refine` "tol"
+    with `tol`; a frame budget of 10 per keyframe interval), renormalized terms
     (eq. 7), L-BFGS preconditioned in the spline-acceleration metric (quaternions' radial directions
     weighted by the unit term's curvature: `radial_weight="auto"`; 1 with contact terms, whose
     curvature in the frame values the auto weight does not see: run-and-step with its contacts took
@@ -48,8 +48,9 @@ def default_options(weights: dict[str, float]) -> SolveOptions:
             weight matters (it chooses the limits).
     Returns:
         SolveOptions. Change fields with `dataclasses.replace(default_options(w), tol=1e-3)`; for a
-        fixed number of rounds set tol to 0: `replace(default_options(w), tol=0, rounds=4)` (with a
-        tolerance `rounds` is not used).
+        fixed number of rounds choose that mode: `replace(default_options(w), refine="rounds", tol=0,
+        rounds=4)` (a tolerance left with refine "rounds", or rounds with refine "tol", is an
+        InputError: it would be ignored).
     Raises:
         InputError: `weights` is not a mapping of term names to weights.
     """
@@ -57,10 +58,10 @@ def default_options(weights: dict[str, float]) -> SolveOptions:
         raise InputError(f"weights must be a dict {{term name: weight}} (e.g. from parse_terms), got "
                          f"{type(weights).__name__}")
     return SolveOptions(
-        subdivision="adaptive", per_segment=1, rounds=2, renormalize=True, algorithm="lbfgs", ftol_rel=1e-6,
+        subdivision="adaptive", per_segment=1, renormalize=True, algorithm="lbfgs", ftol_rel=1e-6,
         max_evals=0, max_time_s=0.0, limits=default_limits(weights), precondition=True,
         radial_weight=1.0 if any(weights.get(n, 0) > 0 for n in CONTACT_TERMS) else "auto",
-        score="decrease", tol=DEFAULT_TOL,
+        score="decrease", refine="tol", tol=DEFAULT_TOL,
     )
 
 
@@ -116,7 +117,7 @@ def animate(
     """
     problem = make_problem(model, keyframes, terms, weights, contacts, rate)
     if tol is not None and (options is None or isinstance(options, SolveOptions)):
-        options = replace(options or default_options(dict(problem.weights)), tol=float(tol))
+        options = replace(options or default_options(dict(problem.weights)), refine="tol", tol=float(tol), rounds=None)
     return solve_problem(problem, options, should_stop=should_stop, progress=progress)
 
 

@@ -31,9 +31,9 @@ from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.orient_refine import (  # noqa: F401  (measures re-exported: orient.covariant_energy, ...)
+    GapToOptimum,
     covariant_energy,
     max_norm_deviation,
-    solve_to_tol,
     unit_rows,
 )
 from solver.solve import Solution, SolveOptions, solve
@@ -96,21 +96,13 @@ DEFAULT_TOL = 1e-3
 
 @dataclass(frozen=True)
 class OrientOptions(SolveOptions):
-    """SolveOptions plus the accuracy request of `orient`.
-
-    Attributes:
-        tol: refine adaptively and re-optimize until the estimated relative gap (E - E*)/E*
-            (`estimate_gap`) is at most tol, or the frame budget (`max_frames`, default
-            TOL_FRAMES_PER_INTERVAL per keyframe interval) or the time budget (`max_time_s`) runs out.
-            0: a fixed number of adaptive `rounds` instead.
+    """SolveOptions as `orient` reads them: with refine "tol", `tol` is the estimated relative gap
+    (E - E*)/E* to reach (`estimate_gap`, `solver.orient_refine.GapToOptimum`): refine and re-optimize
+    until it is at most tol, or the frame budget (`max_frames`, default TOL_FRAMES_PER_INTERVAL per
+    keyframe interval) or the time budget (`max_time_s`) runs out. refine "rounds": a fixed number of
+    adaptive `rounds` instead.
     """
 
-    tol: float = 0.0
-
-    def __post_init__(self):
-        super().__post_init__()
-        if not (self.tol >= 0 and np.isfinite(self.tol)):
-            raise InputError(f"tol must be a number >= 0, got {self.tol!r}")
 
 LAYOUT = StateLayout.single_quaternion()
 
@@ -118,24 +110,30 @@ LAYOUT = StateLayout.single_quaternion()
 def default_options(form: str = "normalized", **changes) -> OrientOptions:
     """The solve options `orient` uses unless given others: one variable frame per keyframe interval, then
     rounds of adaptive subdivision ranked by predicted decrease (`predicted_decreases`), preconditioned
-    L-BFGS, ftol_rel 1e-6. Normalized form: rounds until the estimated gap is at most DEFAULT_TOL
-    (`OrientOptions.tol`), unless `rounds` is given (then that many rounds, tol 0) or the subdivision is
-    not adaptive; paper form: DEFAULT_ROUNDS rounds. Keyword arguments override fields
-    (`OrientOptions`). `orient` sets `renormalize` and `radial_weight` from its own arguments (they
+    L-BFGS, ftol_rel 1e-6. Normalized form: refine "tol", rounds until the estimated gap is at most
+    DEFAULT_TOL (`OrientOptions.tol`), unless `rounds` is given (then refine "rounds": that many rounds)
+    or the subdivision is not adaptive; paper form: refine "rounds", DEFAULT_ROUNDS rounds. A `tol` > 0
+    selects refine "tol". Keyword arguments override fields (`OrientOptions`; `rounds=None` is taken
+    as not given). `orient` sets `renormalize` and `radial_weight` from its own arguments (they
     belong to the objective form).
 
     Raises:
-        InputError: unknown form, or a field `SolveOptions` rejects.
+        InputError: unknown form; both rounds and tol given; a field `SolveOptions` rejects.
     """
     if form not in FORMS:
         raise InputError(f"unknown objective form {form!r}; choose one of: {', '.join(FORMS)}")
+    if changes.get("rounds") is not None and changes.get("tol"):
+        raise InputError(f"give rounds ({changes['rounds']}, fixed rounds) or tol ({changes['tol']:g}, rounds until "
+                         "the estimated gap is at most tol), not both")
     base = dict(
-        subdivision="adaptive", per_segment=1, rounds=DEFAULT_ROUNDS[form], per_round=0, max_frames=0,
-        score="decrease", precondition=True, ftol_rel=1e-6, renormalize=False, tol=0.0,
+        subdivision="adaptive", per_segment=1, per_round=0, max_frames=0,
+        score="decrease", precondition=True, ftol_rel=1e-6, renormalize=False,
     )
-    if form == "normalized" and "rounds" not in changes and changes.get("subdivision", "adaptive") == "adaptive":
-        base["tol"] = DEFAULT_TOL
-    base.update(changes)
+    refine = changes.get("refine") or ("tol" if changes.get("tol") or (
+        "tol" not in changes and form == "normalized" and changes.get("rounds") is None
+        and changes.get("subdivision", "adaptive") == "adaptive") else "rounds")
+    base.update(refine=refine, **({"tol": DEFAULT_TOL} if refine == "tol" else {"rounds": DEFAULT_ROUNDS[form]}))
+    base.update({k: v for k, v in changes.items() if not (k == "rounds" and v is None)})
     return OrientOptions(**base)
 
 
@@ -355,9 +353,11 @@ def orient(
             Neither given: Gauss with GAUSS_POINTS (`build_objective`).
         source: name for error messages. should_stop, progress: passed to `solve`.
         tol: refine adaptively until the estimated relative gap (E - E*)/E* is at most tol
-            (`OrientOptions.tol`; overrides the options' tol). Default: the options' tol (DEFAULT_TOL
-            with the default options of the normalized form; 0, fixed rounds, for options that are a
-            plain SolveOptions or give `rounds`). Normalized form only. The frames start as `options`
+            (`OrientOptions.tol`): > 0 sets the options' refine to "tol" with this tol, 0 to "rounds"
+            (their rounds, else DEFAULT_ROUNDS[form]). Default: the options' mode (refine "tol" with
+            DEFAULT_TOL in the default options of the normalized form; "rounds" in a plain SolveOptions
+            or options that give `rounds`). Normalized form only: the strategy is
+            `solver.orient_refine.GapToOptimum`, run by `solve`'s loop. The frames start as `options`
             says (`per_segment` per interval, on the unit sphere; none with subdivision "none"); the
             estimate on that starting path places the first optimized frames, and every round whose
             estimate is above tol adds more, each segment cut into as many equal pieces as the
@@ -388,23 +388,23 @@ def orient(
             and opts.per_segment * (kf.count - 1) > opts.max_frames):
         # `solve` does not cap the starting frames of adaptive subdivision; with a budget smaller than
         # they would be, let the Euler-Lagrange score place every frame instead
-        opts = replace(opts, per_segment=0, rounds=max(opts.rounds, 1))
+        opts = replace(opts, per_segment=0, rounds=max(opts.n_rounds, 1)) if opts.refine == "rounds" else replace(
+            opts, per_segment=0)
     initial = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)
     if renorm:  # eq. 7, once: the scales stay fixed through the solve (`Objective.renormalize`)
         base = initial if renorm == "keyframes" else paper_start(initial)
         obj.renormalize(base.times, base.values)
-    tol = float(getattr(opts, "tol", 0.0) if tol is None else tol)
-    if not (tol >= 0 and np.isfinite(tol)):
-        raise InputError(f"tol must be a number >= 0, got {tol!r}")
-    if tol > 0 and form != "normalized":
+    opts = _with_tol(opts, tol, form)
+    if opts.refine == "tol" and form != "normalized":
         raise InputError("tol (an estimated gap to the exact-unit optimum) is for the normalized form only; "
                          "the paper form's optimum trades smoothness for unit length (use rounds)")
-    estimates, boosts, converged, measures = (), 0, False, {}
-    if tol > 0:
-        sol, estimates, boosts, converged, measures = solve_to_tol(obj, initial, opts, tol, kf.count, should_stop,
-                                                                   progress)
-    else:
-        sol = solve(obj, initial, opts, should_stop=should_stop, progress=progress, project=unit_rows)
+    gap = GapToOptimum(opts.tol, opts) if opts.refine == "tol" else None
+    sol = solve(obj, initial, opts, should_stop=should_stop, progress=progress, project=unit_rows, refinement=gap)
+    tol = opts.tol if gap else 0.0
+    measures = gap.measures if gap else {}
+    if "frames" not in measures or not (np.array_equal(measures["frames"].times, sol.frames.times)
+                                        and np.array_equal(measures["frames"].values, sol.frames.values)):
+        measures = {}
     fr = sol.frames
     return OrientResult(
         frames=fr,
@@ -418,12 +418,29 @@ def orient(
         solution=sol,
         wall_time_s=sol.wall_time_s,
         tol=tol,
-        _objective=obj if tol == 0 else None,
-        converged_to_tol=converged if tol > 0 else None,
-        gap_estimates=tuple(float(e) for e in estimates),
-        unit_boosts=boosts,
+        _objective=obj if gap is None else None,
+        converged_to_tol=sol.converged_to_tol,
+        gap_estimates=tuple(float(e) for e in sol.refinement_estimates) if gap else (),
+        unit_boosts=gap.boosts if gap else 0,
         _measures=dict(measures) if measures else {},
     )
+
+
+def _with_tol(opts: SolveOptions, tol: float | None, form: str) -> SolveOptions:
+    """`opts` with `orient`'s tol argument applied: None keeps them; > 0 selects refine "tol" with it; 0
+    selects refine "rounds" (the options' rounds, or DEFAULT_ROUNDS[form]).
+
+    Raises:
+        InputError: tol negative or not finite.
+    """
+    if tol is None:
+        return opts
+    tol = float(tol)
+    if not (tol >= 0 and np.isfinite(tol)):
+        raise InputError(f"tol must be a number >= 0, got {tol!r}")
+    if tol > 0:
+        return replace(opts, refine="tol", tol=tol, rounds=None)
+    return replace(opts, refine="rounds", tol=0.0, rounds=DEFAULT_ROUNDS[form] if opts.rounds is None else opts.rounds)
 
 
 def paper_start(initial: FrameSet) -> FrameSet:

@@ -1,10 +1,9 @@
-"""`orient(tol=...)`: rounds of optimize -> estimate the gap -> refine until the estimated relative gap
-(E - E*)/E* (`solver.error_estimate.estimate_gap`) is at most the tolerance (issue 13, docs/orient.md
-"Accuracy on request"), and the measures of an orientation path it uses (covariant energy by Gauss
-quadrature, max |1 - |q||)."""
+"""`orient(tol=...)`: the orientation's refinement strategy for `solve`'s loop (`GapToOptimum`): optimize
+-> estimate the gap -> refine until the estimated relative gap (E - E*)/E*
+(`solver.error_estimate.estimate_gap`) is at most the tolerance (docs/orient.md "Accuracy on request"),
+and the measures of an orientation path it uses (covariant energy by Gauss quadrature, max |1 - |q||)."""
 from __future__ import annotations
 
-import time
 from dataclasses import replace
 
 import numpy as np
@@ -13,11 +12,11 @@ from solver.error_estimate import GAP_FACTOR, estimate_gap, optimization_gap
 from solver.frames import FrameSet
 from solver.layout import StateLayout
 from solver.objective import Objective
-from solver.optimize import Status
+from solver.optimize import OptimizeResult, Status
 from solver.quadrature import gauss_nodes, gauss_times
-from solver.solve import Solution, SolveOptions, solve
+from solver.refinement import Refinement, Step
 from solver.spline import interpolate_segments
-from solver.subdivide import global_times, predicted_times
+from solver.subdivide import predicted_times
 from solver.terms import NormalizedCovariantAcceleration
 
 _SINGLE = StateLayout.single_quaternion()  # one orientation: qpos = q (4,)
@@ -68,126 +67,117 @@ DRIFT_BOOSTS = 3
 
 
 
-def solve_to_tol(obj: Objective, initial: FrameSet, opts: SolveOptions, tol: float, n_keys: int,
-                  should_stop, progress) -> tuple[Solution, tuple, int, bool, dict]:
-    """Rounds of optimize -> estimate -> refine until the estimated gap is at most tol (`orient`'s tol).
+class GapToOptimum(Refinement):
+    """`solve`'s refinement strategy for `orient`'s tol: rounds of optimize -> estimate -> refine until the
+    estimated gap is at most tol / TOL_SAFETY.
 
-    Each round is one `solve` of the current frames without subdivision, at ftol_rel FTOL_FRACTION * tol
-    (or the options' if smaller). Frames are added here by `predicted_times` on the predicted decreases
-    the estimate computed: once before the first round, from the estimate on the starting path, then
-    after every round whose estimate is above tol / TOL_SAFETY. Returns (a Solution merging the rounds,
-    the estimate after each round, the number of unit-weight boosts, whether the estimate reached tol,
-    and {"energy": `covariant_energy`, "drift": `max_norm_deviation`} of the returned frames where the
-    last round computed them, else {}).
+    Each round stops the optimizer at ftol_rel FTOL_FRACTION * tol (or the options' if larger). Frames
+    are added by `predicted_times` on the predicted decreases the estimate computed: once before the
+    first round (`first_frames`, from the estimate on the starting path), then after every round whose
+    estimate is above tol / TOL_SAFETY. Where a round would be accepted, the estimate adds the
+    quadrature discrepancy and the optimizer's stationarity gap; a stationarity gap above OPT_FRACTION *
+    tol has the same frames optimized again at the options' own ftol_rel ("polish", at most POLISHES
+    times per frames and weights), and a path with max |1 - |q|| above DRIFT_LIMIT has the unit term's
+    weight (the objective's first) multiplied by DRIFT_BOOST and the same frames optimized again
+    ("boost", at most DRIFT_BOOSTS times).
+
+    Args:
+        tol: the requested estimated gap (> 0). options: the SolveOptions of the solve (ftol_rel,
+            per_round, max_frames: default TOL_FRAMES_PER_INTERVAL per keyframe interval,
+            precondition, radial_weight, quat_slots).
+    Attributes:
+        estimates, converged, final_estimate: `Refinement`'s. boosts: unit-weight boosts made.
+        measures: {"frames", "energy", "drift"} of the last round that computed them
+            (`covariant_energy`, `max_norm_deviation`), else {}.
     """
-    t_start = time.perf_counter()
-    budget = opts.max_frames or TOL_FRAMES_PER_INTERVAL * (n_keys - 1)
-    per = 0 if opts.subdivision == "none" else opts.per_segment
-    if per * (n_keys - 1) > budget:
-        per = 0
-    frames = initial
-    new = global_times(frames, per)
-    if new.size:
-        frames = frames.with_variable_frames(new)
-        var = np.isin(frames.times, new)
-        vals = frames.values.copy()
-        vals[var] = unit_rows(vals[var])
-        frames = replace(frames, values=vals)
-    ev0 = obj.evaluate(initial.times, initial.values, grad=False)
-    target = tol / TOL_SAFETY / PREDICT_MARGIN
-    per_round = opts.per_round or budget
-    E = obj.evaluate(frames.times, frames.values, grad=False).E
-    _, D = estimate_gap(obj, frames, E)  # on the starting path: where the optimized path will need frames
-    frames = frames.with_variable_frames(_place(D, E, frames, target, min(budget - frames.n_variable, per_round)))
-    round_opts = replace(opts, subdivision="none", renormalize=False, tol=0.0,
-                         ftol_rel=max(opts.ftol_rel, FTOL_FRACTION * tol))
-    rounds, traces, estimates = [], [], []
-    measures, polishes, strict = {}, 0, False
-    n_evals, boosts = 0, 0
-    status, message = Status.CONVERGED, "converged"
+
     converged = False
-    while True:
-        remaining = 0.0
-        if opts.max_time_s:
-            remaining = opts.max_time_s - (time.perf_counter() - t_start)
-            if remaining <= 0:
-                status, message = Status.MAX_TIME, f"time limit of {opts.max_time_s:g} s reached"
-                break
-        ropts = replace(round_opts, max_time_s=remaining, ftol_rel=opts.ftol_rel) if strict else replace(
-            round_opts, max_time_s=remaining)
-        strict = False
-        sol = solve(obj, frames, ropts, should_stop=should_stop, progress=progress)
-        frames = sol.frames
-        rounds += sol.rounds
-        traces.append(sol.trace)
-        n_evals += sol.n_evals
-        status, message = sol.status, sol.message
-        if status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED):
-            break
-        est, D = estimate_gap(obj, frames, sol.E_final)
-        if est <= tol / TOL_SAFETY:  # only where it may stop: ~1e-6 usually, and it costs an evaluation
+
+    def __init__(self, tol: float, options):
+        super().__init__()
+        self.tol, self.options = tol, options
+        self.boosts, self.measures = 0, {}
+        self._polishes, self._strict = 0, False
+        self._target = tol / TOL_SAFETY / PREDICT_MARGIN
+        self._budget = options.max_frames
+        self._per_round = options.per_round
+
+    def first_frames(self, objective, frames):
+        """Add frames where the estimate on the starting path asks for them (the optimized path will
+        need them there)."""
+        if not self._budget:
+            self._budget = TOL_FRAMES_PER_INTERVAL * (int(frames.is_keyframe.sum()) - 1)
+        E = objective.evaluate(frames.times, frames.values, grad=False).E
+        _, D = estimate_gap(objective, frames, E)
+        room = min(self._budget - frames.n_variable, self._per_round or self._budget)
+        return frames.with_variable_frames(_place(D, E, frames, self._target, room))
+
+    def round_options(self, options):
+        ftol = options.ftol_rel if self._strict else max(options.ftol_rel, FTOL_FRACTION * self.tol)
+        self._strict = False
+        return replace(options, ftol_rel=ftol)
+
+    def after_round(self, objective, frames, result, index, progress):
+        ev = objective.evaluate(frames.times, frames.values, grad=False)
+        est, D = estimate_gap(objective, frames, ev.E)
+        if est <= self.tol / TOL_SAFETY:  # only where it may stop: ~1e-6 usually, and it costs an evaluation
             E8 = covariant_energy(frames.times, frames.values)
-            opt = _stationarity(sol, obj, frames, opts)
-            est += quadrature_discrepancy(sol, E8) + opt
-            measures = {"frames": frames, "energy": E8, "drift": max_norm_deviation(frames.times, frames.values)}
-            if opt > OPT_FRACTION * tol and polishes < POLISHES:
+            opt = _stationarity(result, ev.E, objective, frames, self.options)
+            est += _discrepancy(ev.integrals, E8) + opt
+            self.measures = {"frames": frames, "energy": E8, "drift": max_norm_deviation(frames.times, frames.values)}
+            if opt > OPT_FRACTION * self.tol and self._polishes < POLISHES:
                 # the optimizer stopped short (a stall on its relative-decrease test): same frames again,
                 # at the options' own ftol_rel
-                estimates.append(est)
-                polishes += 1
-                strict = True
-                continue
-        estimates.append(est)
-        if est <= tol / TOL_SAFETY:
-            if boosts < DRIFT_BOOSTS and measures["drift"] > DRIFT_LIMIT:
-                # accurate enough but |q| drifts: stiffen the unit term, optimize the same frames again
-                # (early rounds are not checked: there the drift is mostly the spline's dip between
-                # frames far apart, ~theta^2/8, which only more frames remove)
-                boosts += 1
-                obj.weights[0] *= DRIFT_BOOST
-                polishes = 0  # a new objective: its optimizations may stall afresh
-                continue
-            converged = True
-            message = f"estimated gap {est:.2g} <= tol {tol:g} / {TOL_SAFETY:g}"
-            break
-        room = budget - frames.n_variable
+                self._record(est)
+                self._polishes += 1
+                self._strict = True
+                return Step("polish")
+        self._record(est)
+        if est <= self.tol / TOL_SAFETY:
+            return self._accept(objective, est)
+        room = self._budget - frames.n_variable
         if room <= 0:
-            message = f"frame budget of {budget} variable frames reached at estimated gap {est:.2g} (tol {tol:g})"
-            break
-        new = _place(D, sol.E_final, frames, target, min(room, per_round))
+            return Step("stop", message=f"frame budget of {self._budget} variable frames reached at estimated gap "
+                                        f"{est:.2g} (tol {self.tol:g})")
+        new = _place(D, ev.E, frames, self._target, min(room, self._per_round or self._budget))
         if new.size == 0:
-            message = f"no segment to refine at estimated gap {est:.2g} (tol {tol:g})"
-            break
-        frames = frames.with_variable_frames(new)
-        polishes = 0
-    if opts.max_time_s and status is Status.MAX_TIME:
-        message = f"time limit of {opts.max_time_s:g} s reached" + (
-            f" at estimated gap {estimates[-1]:.2g} (tol {tol:g})" if estimates else "")
-    if rounds and rounds[-1].times is frames.times and not boosts:  # the last solve reported these frames
-        E1, I1 = sol.E_final, sol.integrals_final
-    else:
-        ev1 = obj.evaluate(frames.times, frames.values, grad=False)
-        E1, I1 = ev1.E, ev1.integrals
-    if boosts:  # both ends under the final weights, so E_initial and E_final compare
-        ev0 = obj.evaluate(initial.times, initial.values, grad=False)
-    merged = Solution(frames, initial, rounds, status, message, ev0.E, E1, ev0.integrals, I1,
-                      dict(zip(obj.names, obj.scales.tolist())), np.concatenate(traces) if traces else np.array([ev0.E]),
-                      time.perf_counter() - t_start, n_evals)
-    if measures.get("frames") is not frames:
-        measures = {}
-    return merged, tuple(estimates), boosts, converged, measures
+            return Step("stop", message=f"no segment to refine at estimated gap {est:.2g} (tol {self.tol:g})")
+        self._polishes = 0
+        return Step("refine", new)
+
+    def _record(self, est: float) -> None:
+        self.estimates.append(est)
+        self.final_estimate = est
+
+    def _accept(self, objective, est: float) -> Step:
+        """The estimate is within tol: stop, unless |q| drifts (then stiffen the unit term and optimize the
+        same frames again; early rounds are not checked: there the drift is mostly the spline's dip
+        between frames far apart, ~theta^2/8, which only more frames remove)."""
+        if self.boosts < DRIFT_BOOSTS and self.measures["drift"] > DRIFT_LIMIT:
+            self.boosts += 1
+            objective.weights[0] *= DRIFT_BOOST
+            self._polishes = 0  # a new objective: its optimizations may stall afresh
+            return Step("boost")
+        self.converged = True
+        return Step("stop", message=f"estimated gap {est:.2g} <= tol {self.tol:g} / {TOL_SAFETY:g}")
+
+    def final_message(self, status, message):
+        if status is Status.MAX_TIME and self.options.max_time_s:
+            return f"time limit of {self.options.max_time_s:g} s reached" + (
+                f" at estimated gap {self.estimates[-1]:.2g} (tol {self.tol:g})" if self.estimates else "")
+        return message
 
 
-def _stationarity(sol: Solution, obj: Objective, frames: FrameSet, opts: SolveOptions) -> float:
+def _stationarity(result: OptimizeResult, E: float, obj: Objective, frames: FrameSet, opts) -> float:
     """`optimization_gap` of the round's result, 0.5 |g_z|^2 / E: from the gradient in z the optimizer
     evaluated at its best iterate (`OptimizeResult.grad`), or, where there is none in z (no
-    preconditioner, or the plain-variable retry of `solve`), by `optimization_gap`. The optimizer's z
-    stretches the radial directions of the frames at the round's *start* (`radial_weight`), where
-    `optimization_gap` takes them at its end; the frames turn little in a round, and this saves an
-    evaluation with a gradient and a preconditioner (~5% of a tol=1e-4 call)."""
-    g = sol.rounds[-1].result.grad if sol.rounds else None
+    preconditioner, or the plain-variable retry of `solver.backend.nlopt_backend`), by
+    `optimization_gap`. The optimizer's z stretches the radial directions of the frames at the round's
+    *start* (`radial_weight`), where `optimization_gap` takes them at its end; the frames turn little in
+    a round, and this saves an evaluation with a gradient and a preconditioner (~5% of a tol=1e-4 call)."""
+    g = result.grad
     if opts.precondition and g is not None and g.size == frames.n_free:
-        return float(0.5 * (g @ g) / sol.E_final) if sol.E_final > 0 else 0.0
+        return float(0.5 * (g @ g) / E) if E > 0 else 0.0
     return optimization_gap(obj, frames, opts.radial_weight, opts.quat_slots)
 
 
@@ -198,13 +188,19 @@ def _place(D: np.ndarray, E: float, frames: FrameSet, target: float, budget: int
     return predicted_times(GAP_FACTOR * D / E, frames, target, budget, PREDICT_RATE, PREDICT_MAX_SPLIT)
 
 
-def quadrature_discrepancy(sol: Solution, E8: float) -> float:
+def quadrature_discrepancy(sol, E8: float) -> float:
     """|E_8 - E_q| / E_8: the covariant energy E8 of the solution's path by 8 Gauss points per segment
-    (`covariant_energy`) against the objective's own quadrature (`points`, default 4). The optimizer minimizes the latter and may exploit
-    its error (a path that is smoother at the nodes than between them), which the predicted decreases,
-    computed with the same quadrature, cannot see. Usually ~1e-6; found 1.6e-3 on a generated set with
-    125-130 degree steps 0.2-0.3 s apart (docs/orient.md)."""
-    Eq = sol.integrals_final.get("covariant_normalized")
+    (`covariant_energy`) against the objective's own quadrature (`points`, default 4), from a `Solution`'s
+    `integrals_final`. The optimizer minimizes the latter and may exploit its error (a path that is
+    smoother at the nodes than between them), which the predicted decreases, computed with the same
+    quadrature, cannot see. Usually ~1e-6; found 1.6e-3 on a generated set with 125-130 degree steps
+    0.2-0.3 s apart (docs/orient.md)."""
+    return _discrepancy(sol.integrals_final, E8)
+
+
+def _discrepancy(integrals: dict, E8: float) -> float:
+    """`quadrature_discrepancy` from the term integrals {name: integral} of the path."""
+    Eq = integrals.get("covariant_normalized")
     if Eq is None:
         return 0.0
     return abs(E8 - Eq) / E8 if E8 > 0 else 0.0

@@ -1,4 +1,4 @@
-"""Optimization of one round in the preconditioned variables (`optimize_round`, used by `solve`)."""
+"""Optimization of one round in the preconditioned variables (`optimize_round`, used by `solver.backend.nlopt_backend`)."""
 from __future__ import annotations
 
 import math

@@ -1,14 +1,18 @@
 """The algorithm of the paper's figure 5, end to end: frames -> optimize -> subdivide -> optimize ...
 
-1. the plain spline through the keyframes (partial keyframes' free components filled);
-2. optional renormalization of the terms on it (eq. 7);
-3. variable frames: where a term's integrand changes character (a contact's touch-down and lift-off,
-   `Objective.knot_times`), then none, n per segment (global) or where the weak-form Euler-Lagrange
-   score is largest (adaptive), valued on the current path;
-4. nlopt moves the free components; keyframes hold exactly at every iterate;
-5. repeat 3-4 until the frame budget, the round limit or the time limit; or, with a tolerance
-   (`SolveOptions.tol`), until the decrease of E that refinement still predicts, relative to E
-   (`refinement_estimate`), is at most tol.
+`solve` composes four units:
+
+1. the starting frames: the plain spline through the keyframes (partial keyframes' free components
+   filled), optionally renormalized on (eq. 7), plus variable frames where a term's integrand changes
+   character (a contact's touch-down and lift-off, `Objective.knot_times`) and `per_segment` frames per
+   segment for "global" and "adaptive" subdivision, valued on the current path;
+2. the optimizer back end (`solver.backend`): one round moves the free components, keyframes hold
+   exactly at every iterate;
+3. penalty continuation (`solver.continuation`): a round whose path violates a limit is optimized again
+   under stiffer weights;
+4. the refinement strategy (`solver.refinement`): after each accepted round, stop or add frames where
+   the weak-form Euler-Lagrange score is largest (fixed rounds, or until a tolerance on the decrease
+   refinement still predicts; `solver.orient_refine.GapToOptimum` for the orientation's gap).
 """
 from __future__ import annotations
 
@@ -16,43 +20,36 @@ import copy
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import cached_property
 
 import numpy as np
 
+from solver.backend import Backend, nlopt_backend
+from solver.continuation import LIMIT_CHECK_RATE, STALL_FRACTION, PenaltyContinuation  # noqa: F401 (re-exported)
 from solver.errors import InputError
 from solver.frames import FrameSet
-from solver.metrics import sample_times
 from solver.objective import NonFiniteError, Objective
 from solver.optimize import ALGORITHMS, OptimizeResult, Status
-from solver.round import optimize_round
-from solver.subdivide import adaptive_times, global_times, knot_hint_times, predicted_decreases, weak_form_scores
+from solver.refinement import (  # noqa: F401 (TOL_FRAMES_PER_INTERVAL, refinement_estimate re-exported)
+    TOL_FRAMES_PER_INTERVAL,
+    FixedRounds,
+    NoRefinement,
+    Refinement,
+    ToTolerance,
+    refinement_estimate,
+)
+from solver.solution import ROUND_KINDS, Round, Solution, round_summary  # noqa: F401 (re-exported)
+from solver.subdivide import global_times, knot_hint_times
 
 SUBDIVISIONS = ("none", "global", "adaptive")
-STALL_FRACTION = 0.5  # penalty continuation: a boost must at least halve a violation (`SolveOptions.limits`)
-LIMIT_CHECK_RATE = 4000.0  # [1/s] samples per second at which `limits` are checked
 SCORES = ("gradient", "decrease")
-#: With a tolerance and no `max_frames`: the frame budget, per keyframe interval.
-TOL_FRAMES_PER_INTERVAL = 10
+#: `SolveOptions.refine`: how adaptive subdivision decides when to stop.
+REFINES = ("rounds", "tol")
+#: `SolveOptions.rounds` when not given (refine "rounds").
+DEFAULT_ROUNDS = 2
 #: [s] `SolveOptions.term_knots`: a hinted frame closer than this to another frame is left out (30 ms:
 #: under four frames at motion capture's 120 Hz; contact times are only that accurate).
 KNOT_MIN_GAP = 0.03
-
-
-def refinement_estimate(objective: Objective, frames: FrameSet, E: float | None = None) -> tuple[float, np.ndarray]:
-    """The decrease of E still available from refinement, relative to E: sum_c D_c / E, with D_c the
-    predicted decrease from a frame inserted at the midpoint of segment c and moved to its best place
-    (`predicted_decreases`, what adaptive subdivision ranks segments by). A first-order prediction of
-    what halving every segment would buy (each frame moved alone, the others held); 0 where the path
-    is optimal for its frames and no frame could lower E.
-
-    Returns:
-        (estimate, D): D (m-1,) the predicted decreases [units of E].
-    """
-    D = predicted_decreases(objective, frames)
-    if E is None:
-        E = objective.evaluate(frames.times, frames.values, grad=False).E
-    return (float(D.sum() / E) if E > 0 else 0.0), D
+_ENDS = (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED)  # statuses that end a solve
 
 
 @dataclass(frozen=True)
@@ -70,7 +67,14 @@ class SolveOptions:
             "Feet that plant").
         per_segment: variable frames per segment (of the keyframes and the term knots) for "global",
             and to start "adaptive" with.
-        rounds: adaptive rounds (each adds frames, then re-optimizes).
+        refine: how adaptive subdivision stops (with "none" and "global" it is not used):
+            "rounds" (default): after `rounds` rounds that add frames; "tol": when the decrease of E
+            refinement still predicts, relative to E (`refinement_estimate`, after each round's
+            optimization and penalty continuation), is at most `tol`, or `max_frames` (default
+            TOL_FRAMES_PER_INTERVAL per keyframe interval) or `max_time_s` runs out
+            (`Solution.converged_to_tol` False, the message says which and gives the estimate).
+        rounds: with refine "rounds", the adaptive rounds after the first (each adds frames, then
+            re-optimizes); None: DEFAULT_ROUNDS. Giving it with refine "tol" is an InputError.
         per_round: at most this many frames per adaptive round (0 = one per segment).
         max_frames: cap on variable frames in total (0 = none).
         renormalize: divide each term by its value on the plain spline (eq. 7).
@@ -93,12 +97,8 @@ class SolveOptions:
             the figure's default (`default_options`), where the unit term makes the radial directions
             stiff (about 20x the acceleration metric) and a weight of 1 leaves L-BFGS with a
             condition number of ~1e4 and an evaluation count that grows with the clip's length.
-        tol: with adaptive subdivision, > 0: rounds until the decrease of E refinement still predicts,
-            relative to E (`refinement_estimate`, after each round's optimization and penalty
-            continuation), is at most tol, instead of a fixed number of `rounds`; or until `max_frames`
-            (default TOL_FRAMES_PER_INTERVAL per keyframe interval) or `max_time_s` runs out
-            (`Solution.converged_to_tol` False, the message says which and gives the estimate).
-            0: `rounds` rounds.
+        tol: with refine "tol", the tolerance (> 0). With refine "rounds" it must be 0 (not given): an
+            InputError otherwise, since it would be ignored.
         limits: ((term name, tolerance), ...): penalty continuation. After a round, a term whose
             `violation` on the path (sampled at LIMIT_CHECK_RATE, in the term's own units, e.g. metres of
             penetration) exceeds its tolerance has its weight multiplied by `boost` and the round is
@@ -109,12 +109,22 @@ class SolveOptions:
             below STALL_FRACTION of what it was is not boosted again (the keyframes make the bound
             unreachable there: 127_33 keyed every 0.33 s took four boosts and 1550 evaluations while
             its clearance violation grew from 68 to 112 mm); `Solution.stalled` lists them.
+
+    Rounds: every optimization is a `Round` of `Solution.rounds`, with a `kind`: "start" (the first),
+    "refine" (after adding frames), "boost" (the same frames again after penalty continuation raised
+    weights) and "polish" (the same frames again at a stricter stopping test; the orientation's
+    gap strategy). So `rounds=1` with one boost gives three Rounds, e.g. start, boost, refine:
+    `Solution.round_summary` counts them by kind, and so does the message where there were boost or
+    polish rounds ("... (3 rounds: 1 start, 1 refine, 1 boost)").
+    Raises (on construction):
+        InputError: a field out of range or unknown; refine "tol" without tol > 0; tol > 0 with
+            refine "rounds"; rounds given with refine "tol".
     """
 
     subdivision: str = "adaptive"
     term_knots: bool = True
     per_segment: int = 1
-    rounds: int = 2
+    rounds: int | None = None
     per_round: int = 0
     max_frames: int = 0
     renormalize: bool = True
@@ -130,16 +140,17 @@ class SolveOptions:
     boost: float = 10.0
     max_boosts: int = 4
     tol: float = 0.0
+    refine: str = "rounds"
 
     def __post_init__(self):
         if self.subdivision not in SUBDIVISIONS:
             raise InputError(f"unknown subdivision {self.subdivision!r}; choose one of: {', '.join(SUBDIVISIONS)}")
         if self.score not in SCORES:
             raise InputError(f"unknown subdivision score {self.score!r}; choose one of: {', '.join(SCORES)}")
-        for name in ("per_segment", "rounds", "per_round", "max_frames", "max_evals", "max_boosts"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 0:
-                raise InputError(f"{name} must be a whole number >= 0, got {v!r}")
+        if self.rounds is not None:
+            _whole("rounds", self.rounds)
+        for name in ("per_segment", "per_round", "max_frames", "max_evals", "max_boosts"):
+            _whole(name, getattr(self, name))
         if self.algorithm not in ALGORITHMS:
             raise InputError(f"unknown algorithm {self.algorithm!r}; choose one of: {', '.join(ALGORITHMS)}")
         if not self.ftol_rel >= 0:
@@ -158,87 +169,32 @@ class SolveOptions:
             raise InputError(f"max_time_s must be >= 0, got {self.max_time_s}")
         if not (self.tol >= 0 and np.isfinite(self.tol)):
             raise InputError(f"tol must be a number >= 0, got {self.tol!r}")
+        self._check_refine()
+
+    def _check_refine(self):
+        """The refinement mode and its parameters agree (class docstring, `refine`)."""
+        if self.refine not in REFINES:
+            raise InputError(f"unknown refine {self.refine!r}; choose one of: {', '.join(REFINES)}")
+        if self.refine == "tol" and not self.tol > 0:
+            raise InputError(f"refine='tol' needs a tolerance tol > 0, got tol={self.tol!r}; give one (e.g. 1e-2) "
+                             "or refine='rounds'")
+        if self.refine == "tol" and self.rounds is not None:
+            raise InputError(f"rounds={self.rounds} is the parameter of refine='rounds'; with refine='tol' the "
+                             "tolerance decides the rounds: leave rounds out (None) or give refine='rounds'")
+        if self.refine == "rounds" and self.tol:
+            raise InputError(f"tol={self.tol:g} is the parameter of refine='tol'; with refine='rounds' it would "
+                             "be ignored: give refine='tol' or leave tol at 0")
+
+    @property
+    def n_rounds(self) -> int:
+        """The adaptive rounds of refine "rounds": `rounds`, or DEFAULT_ROUNDS when not given."""
+        return DEFAULT_ROUNDS if self.rounds is None else int(self.rounds)
 
 
-@dataclass(frozen=True)
-class Round:
-    """One optimization round: the frames it started with and the optimizer's result (read-only).
-
-    Attributes:
-        n_frames, n_variable: frames the round optimized, and how many of them are variable frames.
-        result: the optimizer's OptimizeResult.
-        scores: (n_frames_before - 1,) the subdivision scores (`SolveOptions.score`) that chose this
-            round's new frames, on the previous round's segments; None for the first round and after a
-            penalty boost.
-        times: (n_frames,) the frame times this round optimized [s].
-    """
-
-    n_frames: int
-    n_variable: int
-    result: OptimizeResult
-    scores: np.ndarray | None = None
-    times: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class Solution:
-    """The result of `solve` (read-only: a frozen dataclass whose arrays are not writeable).
-
-    Attributes:
-        frames: optimized FrameSet (the path is the natural cubic spline through it), (m, nq) values.
-        initial: the plain spline's FrameSet (a read-only copy of `solve`'s `initial`).
-        rounds: (Round, ...) per-round results.
-        status: Status of the last round (INTERRUPTED etc. end the solve early).
-        message: why it ended.
-        E_initial, E_final: objective on the plain spline and on the result, both under the final
-            weights (penalty continuation raises some) and the renormalization scales.
-        integrals_initial, integrals_final: {term: integral of f_j dt} on each (unweighted).
-        scales: {term: renormalization divisor} (eq. 7; 1 without renormalization).
-        trace: (N,) best objective after each evaluation, all rounds concatenated.
-        wall_time_s: [s], optimization and subdivision (excludes building the terms).
-        n_evals: objective evaluations in all rounds.
-        weights: {term: lambda_j} at the end: the objective's weights after penalty continuation
-            (`SolveOptions.limits`); the caller's Objective keeps its own.
-        objective: the working copy of the objective the last round optimized (final weights and
-            scales, terms prepared on the result): for scores or evaluations on the result under the
-            objective that produced it. `solve` never changes the caller's Objective.
-        refinement_estimates: with adaptive subdivision, `refinement_estimate` after each round that
-            computed it (every round but the last without a tolerance; every round with one).
-        converged_to_tol: with a tolerance, whether the estimate reached it; None without one.
-        stalled: {term: violation} of the terms penalty continuation gave up on (a boost did not halve
-            the violation; `SolveOptions.limits`), in the term's `violation` units.
-    """
-
-    frames: FrameSet
-    initial: FrameSet
-    rounds: tuple[Round, ...]
-    status: Status
-    message: str
-    E_initial: float
-    E_final: float
-    integrals_initial: dict
-    integrals_final: dict
-    scales: dict
-    trace: np.ndarray
-    wall_time_s: float
-    n_evals: int = field(default=0)
-    weights: dict = field(default_factory=dict)
-    objective: Objective | None = field(default=None, repr=False, compare=False)
-    refinement_estimates: tuple = ()
-    converged_to_tol: bool | None = None
-    final_estimate: float = float("nan")
-    stalled: dict = field(default_factory=dict)
-
-    @cached_property
-    def refinement_estimate(self) -> float:
-        """`refinement_estimate` of the result (relative to E_final): the last round's with a
-        tolerance, else computed when first read (three gradient evaluations with a frame in every
-        segment); NaN without the objective."""
-        if np.isfinite(self.final_estimate):
-            return self.final_estimate
-        if self.objective is None:
-            return float("nan")
-        return refinement_estimate(self.objective, self.frames, self.E_final)[0]
+def _whole(name, v):
+    """InputError unless v is a whole number >= 0 (field `name` of SolveOptions)."""
+    if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 0:
+        raise InputError(f"{name} must be a whole number >= 0, got {v!r}")
 
 
 def solve(
@@ -249,6 +205,8 @@ def solve(
     should_stop: Callable[[], bool] | None = None,
     progress: Callable[[str, dict], None] | None = None,
     project: Callable[[np.ndarray], np.ndarray] | None = None,
+    refinement: Refinement | None = None,
+    backend: Backend = nlopt_backend,
 ) -> Solution:
     """Optimize the variable frames (and partial keyframes' free components) of a frame set.
 
@@ -258,13 +216,17 @@ def solve(
         options: SolveOptions.
         should_stop: polled during optimization (Ctrl-C handler); True ends the solve, keeping the
             best path so far (it meets every keyframe).
-        progress: progress(event, info) for "round" (start of a round), "eval" (each evaluation),
-            "boost" ({"terms": {name: violation}, "boosts": n}), "stalled" ({"terms": {name:
-            violation}}: not boosted again) and "estimate" (after a round: the refinement estimate).
+        progress: progress(event, info) for "round" (start of a round: {"round", "frames", "variable",
+            "kind"}, `Round.kind`), "eval" (each evaluation), "boost" ({"terms": {name: violation},
+            "boosts": n}), "stalled" ({"terms": {name: violation}}: not boosted again) and "estimate"
+            (after a round: the refinement estimate).
         project: maps the values (r, nq) of the variable frames placed on the plain spline before the
             first round (`per_segment`) to the values to start from (e.g. `solver.orient` puts the
             quaternions back on the unit sphere); frames inserted by adaptive rounds keep the path's
             values (the path is then unchanged by the insertion).
+        refinement: the refinement strategy (a fresh `solver.refinement.Refinement`, e.g.
+            `solver.orient_refine.GapToOptimum`); default from `options` (`default_refinement`).
+        backend: the optimizer of one round (`solver.backend.Backend`); default nlopt.
     Returns:
         Solution.
     Raises:
@@ -289,134 +251,141 @@ def solve(
         ev0 = objective.evaluate(initial.times, initial.values, grad=False)
     else:  # nothing changed the objective since the input check evaluated it on the same frames
         ev0 = ev_check
-    frames = initial
-    if options.subdivision in ("global", "adaptive") and options.term_knots:
-        # frames where a term's integrand changes character (contacts' touch-down and lift-off),
-        # valued on the plain spline (the path is unchanged), before the per-segment frames
-        frames = frames.with_variable_frames(knot_hint_times(frames, objective.knot_times(), KNOT_MIN_GAP))
-    if options.subdivision in ("global", "adaptive") and options.per_segment > 0:
-        new = global_times(frames, options.per_segment)
-        if options.max_frames:
-            new = new[: max(0, options.max_frames - frames.n_variable)] if options.subdivision == "global" else new
-        frames = frames.with_variable_frames(new)
-        if project is not None and new.size:
-            var = np.zeros(frames.count, bool)
-            var[np.searchsorted(frames.times, new)] = True  # the new times are among the frames' times
-            vals = frames.values.copy()
-            vals[var] = project(vals[var])
-            frames = replace(frames, values=vals)
-    n_rounds = 1 + (options.rounds if options.subdivision == "adaptive" else 0)
-    tol = options.tol if options.subdivision == "adaptive" else 0.0
-    if tol and not options.max_frames:
-        options = replace(options, max_frames=TOL_FRAMES_PER_INTERVAL * (int(initial.is_keyframe.sum()) - 1))
-    estimates: list[float] = []
-    final_estimate, converged = float("nan"), False
-    rounds: list[Round] = []
-    traces: list[np.ndarray] = []
-    status, message = Status.CONVERGED, "converged"
-    n_evals = 0
-    boosts = 0
-    last_over: dict[str, float] = {}  # the violations that made the last boost
-    stalled: dict[str, float] = {}  # terms whose violation a boost did not halve: not boosted again
-    reported: set[str] = set()
-    r = 0
-    scores = None
-    while True:
-        if should_stop is not None and should_stop():  # e.g. Ctrl-C during subdivision
-            status, message = Status.INTERRUPTED, "stopped on request"
-            break
-        remaining = 0.0
-        if options.max_time_s:
-            remaining = options.max_time_s - (time.perf_counter() - t_start)
-            if remaining <= 0:
-                status, message = Status.MAX_TIME, f"time limit of {options.max_time_s:g} s reached"
-                break
-        if progress:
-            progress("round", {"round": len(rounds), "frames": frames.count, "variable": frames.n_variable})
-        result = optimize_round(objective, frames, options, remaining, should_stop, progress, n_evals)
-        if result.status is Status.FAILED and options.precondition:
-            # nlopt's generic failure (a line search that found no decrease) was seen with the
-            # preconditioner on extreme inputs (a root inside the floor); the plain variables recover
-            plain = replace(options, precondition=False)
-            retry = optimize_round(objective, frames.with_x(result.x), plain, remaining, should_stop, progress,
-                              n_evals + result.n_evals)
-            result = replace(retry, n_evals=result.n_evals + retry.n_evals, grad=None,  # not in z
-                             trace=np.concatenate([result.trace, retry.trace]),
-                             wall_time_s=result.wall_time_s + retry.wall_time_s,
-                             fun_time_s=result.fun_time_s + retry.fun_time_s)
-        frames = frames.with_x(result.x)
-        objective.prepare(frames.times, frames.values)  # for the next round, the scores, the report
-        for arr in (result.x, result.trace, scores):
-            _read_only(arr)
-        rounds.append(Round(frames.count, frames.n_variable, result, scores, _read_only(frames.times.copy())))
-        traces.append(result.trace)
-        n_evals += result.n_evals
-        status, message = result.status, result.message
-        if status is Status.MAX_TIME:  # the round had what was left; report the whole solve's limit
-            message = f"time limit of {options.max_time_s:g} s reached"
-        if status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED):
-            break
-        over = _over_limits(objective, frames, options.limits) if boosts < options.max_boosts else {}
-        for name in [n for n in over if n in last_over and over[n] > STALL_FRACTION * last_over[n]]:
-            stalled[name] = over[name]  # a boost that did not halve it: the bound is out of reach here
-        if stalled and progress and set(stalled) - reported:
-            progress("stalled", {"terms": {n: stalled[n] for n in set(stalled) - reported}})
-            reported |= set(stalled)
-        over = {n: v for n, v in over.items() if n not in stalled}
-        if over:  # penalty continuation: stiffen the violated terms, optimize the same frames again
-            boosts += 1
-            last_over = over
-            for name in over:
-                objective.weights[objective.names.index(name)] *= options.boost
-            if progress:
-                progress("boost", {"terms": over, "boosts": boosts})
-            scores = None
-            continue
-        last_over = {}
-        r += 1
-        if r >= n_rounds and not tol:
-            break
-        budget = options.per_round or (frames.count - 1)
-        if options.max_frames:
-            budget = min(budget, options.max_frames - frames.n_variable)
-        if budget <= 0 and not tol:
-            break
-        try:
-            if options.score == "decrease" or tol:  # the ranking and the estimate: free with "decrease"
-                est, D = refinement_estimate(objective, frames, result.fun)
-                estimates.append(est)
-                if progress:
-                    progress("estimate", {"round": len(rounds) - 1, "estimate": est, "tol": tol})
-            if tol:
-                final_estimate = est
-                if est <= tol:
-                    converged, message = True, f"refinement estimate {est:.2g} <= tol {tol:g}"
-                    break
-                if budget <= 0:
-                    message = (f"frame budget of {options.max_frames} variable frames reached at refinement "
-                               f"estimate {est:.2g} (tol {tol:g})")
-                    break
-            scores = D if options.score == "decrease" else weak_form_scores(objective, frames)
-        except NonFiniteError as e:  # keep the optimized frames; say which term failed
-            status, message = Status.NONFINITE, f"{e} while choosing new frames"
-            break
-        new = adaptive_times(scores, frames, budget)
-        if new.size == 0:
-            if tol:
-                message = f"no segment to refine at refinement estimate {est:.2g} (tol {tol:g})"
-            break
-        frames = frames.with_variable_frames(new)
-    if tol and status is Status.MAX_TIME and estimates:
-        message += f" at refinement estimate {estimates[-1]:.2g} (tol {tol:g})"
-    ev1 = objective.evaluate(frames.times, frames.values, grad=False)
-    if boosts:  # report both ends under the final weights, so E_initial and E_final compare
+    weights0 = objective.weights.copy()
+    strategy = default_refinement(options) if refinement is None else refinement
+    frames = strategy.first_frames(objective, starting_frames(objective, initial, options, project))
+    continuation = PenaltyContinuation(options.limits, options.boost, options.max_boosts)
+    log = _rounds(objective, frames, options, strategy, continuation, backend, t_start, should_stop, progress)
+    message = strategy.final_message(log.status, log.message)
+    if any(r.kind in ("boost", "polish") for r in log.rounds):
+        message += f" ({round_summary(log.rounds)})"
+    ev1 = objective.evaluate(log.frames.times, log.frames.values, grad=False)
+    if not np.array_equal(weights0, objective.weights):  # both ends under the final weights, so they compare
         ev0 = objective.evaluate(initial.times, initial.values, grad=False)
     return Solution(
-        _read_only_frames(frames), _read_only_frames(initial), tuple(rounds), status, message, ev0.E, ev1.E,
-        ev0.integrals, ev1.integrals, scales, _read_only(np.concatenate(traces) if traces else np.array([ev0.E])),
-        time.perf_counter() - t_start, n_evals, dict(zip(objective.names, objective.weights.tolist())), objective,
-        tuple(estimates), converged if tol else None, final_estimate, dict(stalled),
+        _read_only_frames(log.frames), _read_only_frames(initial), tuple(log.rounds), log.status, message, ev0.E,
+        ev1.E, ev0.integrals, ev1.integrals, scales,
+        _read_only(np.concatenate(log.traces) if log.traces else np.array([ev0.E])),
+        time.perf_counter() - t_start, log.n_evals, dict(zip(objective.names, objective.weights.tolist())),
+        objective, tuple(strategy.estimates), strategy.converged, strategy.final_estimate,
+        dict(continuation.stalled),
     )
+
+
+def default_refinement(options: SolveOptions) -> Refinement:
+    """The strategy `options` choose: adaptive subdivision with refine "rounds" -> `FixedRounds`, with
+    refine "tol" -> `ToTolerance`; subdivision "none" or "global" -> `NoRefinement`."""
+    if options.subdivision != "adaptive":
+        return NoRefinement()
+    if options.refine == "tol":
+        return ToTolerance(options.tol, options.per_round, options.max_frames, options.score)
+    return FixedRounds(options.n_rounds, options.per_round, options.max_frames, options.score)
+
+
+def starting_frames(objective: Objective, initial: FrameSet, options: SolveOptions,
+                    project: Callable[[np.ndarray], np.ndarray] | None = None) -> FrameSet:
+    """The frames of the first round: `initial`, and with "global" or "adaptive" subdivision variable
+    frames at the terms' knots (`SolveOptions.term_knots`, at least KNOT_MIN_GAP from other frames) and
+    `per_segment` per segment (for "global" at most `max_frames`), valued on the plain spline, the
+    per-segment ones mapped by `project` (`solve`). Returns a FrameSet (the same path as `initial`'s
+    where `project` is None)."""
+    frames = initial
+    if options.subdivision not in ("global", "adaptive"):
+        return frames
+    if options.term_knots:
+        frames = frames.with_variable_frames(knot_hint_times(frames, objective.knot_times(), KNOT_MIN_GAP))
+    if options.per_segment <= 0:
+        return frames
+    new = global_times(frames, options.per_segment)
+    if options.max_frames and options.subdivision == "global":
+        new = new[: max(0, options.max_frames - frames.n_variable)]
+    frames = frames.with_variable_frames(new)
+    if project is not None and new.size:
+        var = np.zeros(frames.count, bool)
+        var[np.searchsorted(frames.times, new)] = True  # the new times are among the frames' times
+        vals = frames.values.copy()
+        vals[var] = project(vals[var])
+        frames = replace(frames, values=vals)
+    return frames
+
+
+@dataclass
+class _Log:
+    """What the loop of `_rounds` accumulates."""
+
+    frames: FrameSet
+    rounds: list = field(default_factory=list)
+    traces: list = field(default_factory=list)
+    n_evals: int = 0
+    status: Status = Status.CONVERGED
+    message: str = "converged"
+
+
+def _rounds(objective, frames, options, strategy, continuation, backend, t_start, should_stop, progress) -> _Log:
+    """The outer loop: optimize a round (`backend`), then penalty continuation may have the same frames
+    optimized again ("boost"), then the strategy stops, adds frames ("refine") or has the same frames
+    optimized again ("polish", "boost"). Ends on a stop request, the time limit, a round ending in
+    INTERRUPTED, MAX_TIME, NONFINITE or FAILED, or the strategy's stop."""
+    log, kind, scores = _Log(frames), "start", None
+    while True:
+        remaining = _remaining(options, t_start, should_stop, log)
+        if remaining is None:
+            break
+        if progress:
+            progress("round", {"round": len(log.rounds), "frames": log.frames.count,
+                               "variable": log.frames.n_variable, "kind": kind})
+        result = backend(objective, log.frames, strategy.round_options(options), remaining, should_stop, progress,
+                         log.n_evals)
+        _record(log, objective, result, scores, kind, options)
+        if log.status in _ENDS:
+            break
+        if continuation.after_round(objective, log.frames, progress):
+            kind, scores = "boost", None
+            continue
+        try:
+            step = strategy.after_round(objective, log.frames, result, len(log.rounds) - 1, progress)
+        except NonFiniteError as e:  # keep the optimized frames; say which term failed
+            log.status, log.message = Status.NONFINITE, f"{e} while choosing new frames"
+            break
+        if step.message is not None:
+            log.message = step.message
+        if step.action == "stop":
+            break
+        kind, scores = step.action, step.scores
+        if step.action == "refine":
+            log.frames = log.frames.with_variable_frames(step.times)
+    return log
+
+
+def _remaining(options, t_start, should_stop, log) -> float | None:
+    """Time left for the next round [s] (0: no limit), or None (status and message set in `log`) when
+    a stop was requested or the time limit has passed."""
+    if should_stop is not None and should_stop():  # e.g. Ctrl-C during subdivision
+        log.status, log.message = Status.INTERRUPTED, "stopped on request"
+        return None
+    if not options.max_time_s:
+        return 0.0
+    remaining = options.max_time_s - (time.perf_counter() - t_start)
+    if remaining <= 0:
+        log.status, log.message = Status.MAX_TIME, f"time limit of {options.max_time_s:g} s reached"
+        return None
+    return remaining
+
+
+def _record(log: _Log, objective, result: OptimizeResult, scores, kind: str, options) -> None:
+    """Append the round's result to `log`: frames moved to result.x (the terms prepared on them for the
+    next round, the scores and the report), a read-only Round, its trace, evaluations and status."""
+    log.frames = log.frames.with_x(result.x)
+    objective.prepare(log.frames.times, log.frames.values)
+    for arr in (result.x, result.trace, scores):
+        _read_only(arr)
+    log.rounds.append(Round(log.frames.count, log.frames.n_variable, result, scores,
+                            _read_only(log.frames.times.copy()), kind))
+    log.traces.append(result.trace)
+    log.n_evals += result.n_evals
+    log.status, log.message = result.status, result.message
+    if result.status is Status.MAX_TIME:  # the round had what was left; report the whole solve's limit
+        log.message = f"time limit of {options.max_time_s:g} s reached"
 
 
 def _working_copy(objective):
@@ -464,21 +433,3 @@ def _check_inputs(objective, initial, options):
         raise InputError(
             f"the objective cannot be evaluated on frames of shape {initial.values.shape} ({e}); are the "
             "keyframes for the model the objective was built from (same nq)?") from None
-
-
-def _over_limits(objective: Objective, frames: FrameSet, limits) -> dict[str, float]:
-    """{term name: violation} for the terms whose violation on the path exceeds their limit."""
-    if not limits:
-        return {}
-    # Dense: a swing foot moves ~6 mm per ms, so a graze of a box edge can last about a millisecond;
-    # a check at the 1000 Hz of the acceptance figures would see it or not depending on phase.
-    Y = frames.path(sample_times(frames.times[0], frames.times[-1], LIMIT_CHECK_RATE))
-    over = {}
-    for name, tol in limits:
-        if name not in objective.names:
-            continue
-        term = objective.terms[objective.names.index(name)]
-        v = term.violation(Y)
-        if v is not None and v > tol and objective.weights[objective.names.index(name)] > 0:
-            over[name] = float(v)
-    return over

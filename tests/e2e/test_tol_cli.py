@@ -96,6 +96,27 @@ def test_figure_tol_needs_adaptive_subdivision(tmp_path, capsys):
     assert "--tol 0.01 refines adaptively; it does not go with --subdivision global" in capsys.readouterr().err
 
 
+def test_figure_rounds_and_tol_are_one_choice(tmp_path, capsys):
+    clip = small_clip(tmp_path)
+    code = main(["animate", clip, "--no-render", "--quiet", "--rounds", "1", "--tol", "0.01"])
+    assert code == EXIT_INPUT
+    err = capsys.readouterr().err
+    assert "--rounds 1 and --tol 0.01" in err and err.count("\n") == 1  # one line naming both options
+
+
+def test_solve_options_map_the_flags_to_the_refinement_mode():
+    from runner.animate_options import default_args, solve_options
+    from solver.animate import DEFAULT_TOL
+
+    args = default_args()
+    assert (solve_options(args, {}).refine, solve_options(args, {}).tol) == ("tol", DEFAULT_TOL)
+    args.rounds = 3
+    opts = solve_options(args, {})
+    assert (opts.refine, opts.rounds, opts.tol) == ("rounds", 3, 0.0)
+    args.rounds, args.tol = None, 1e-3
+    assert (solve_options(args, {}).refine, solve_options(args, {}).tol) == ("tol", 1e-3)
+
+
 def test_bench_orient_random(capsys):
     assert main(["bench", "orient", "--random", "2"]) == 0
     printed = capsys.readouterr().out

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import solver
+from solver.animate import DEFAULT_TOL
 from solver.errors import InputError
 
 from conftest import TOY_SCENE
@@ -47,7 +48,8 @@ def test_default_options_are_the_command_lines():
     for weights in (solver.parse_terms(None), {"unit": 1.0, "smooth": 0.05, "penetration": 0.0}):
         assert solver.default_options(weights) == solve_options(default_args(), weights)
     opts = solver.default_options({"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05})
-    assert (opts.subdivision, opts.per_segment, opts.rounds, opts.score) == ("adaptive", 1, 2, "decrease")
+    assert (opts.subdivision, opts.per_segment, opts.score) == ("adaptive", 1, "decrease")
+    assert (opts.refine, opts.tol, opts.rounds) == ("tol", DEFAULT_TOL, None)
     assert (opts.algorithm, opts.ftol_rel, opts.precondition, opts.renormalize) == ("lbfgs", 1e-6, True, True)
     assert (opts.max_evals, opts.max_time_s, opts.boost, opts.max_boosts) == (0, 0.0, 10.0, 4)
     assert dict(opts.limits) == {"penetration": 0.0005, "unit": 0.03, "bending": pytest.approx(np.pi / 180)}

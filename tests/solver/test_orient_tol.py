@@ -16,10 +16,14 @@ TEST_SEEDS = range(1000, 1010)
 
 def test_default_options_carry_the_tolerance_unless_rounds_are_given():
     assert isinstance(default_options(), OrientOptions) and default_options().tol == DEFAULT_TOL
-    assert default_options(rounds=2).tol == 0  # explicit rounds: the fixed-rounds behaviour
-    assert default_options(subdivision="global").tol == 0
-    assert default_options("paper").tol == 0
-    assert default_options(tol=1e-5, rounds=3).tol == 1e-5
+    assert default_options().refine == "tol" and default_options().rounds is None
+    r2 = default_options(rounds=2)  # explicit rounds: the fixed-rounds mode
+    assert (r2.refine, r2.rounds, r2.tol) == ("rounds", 2, 0)
+    assert default_options(subdivision="global").refine == "rounds"
+    assert (default_options("paper").refine, default_options("paper").n_rounds) == ("rounds", 3)
+    assert (default_options("paper", tol=1e-5).refine, default_options(tol=1e-5).tol) == ("tol", 1e-5)
+    with pytest.raises(InputError, match=r"give rounds \(3, fixed rounds\) or tol \(1e-05.*not both"):
+        default_options(tol=1e-5, rounds=3)
     with pytest.raises(InputError, match="tol must be a number >= 0"):
         default_options(tol=-1.0)
 
@@ -120,3 +124,75 @@ def test_accuracy_on_generated_sets(reference):
             total += 1
             within += 1 / 3 <= g / r.estimated_gap <= 3
     assert within >= 0.9 * total, rows
+
+
+def orientation_problem(seed=3):
+    """`orient`'s objective, starting frames and options for a generated set (normalized form)."""
+    from dataclasses import replace
+
+    from solver.frames import FrameSet
+    from solver.orient import LAYOUT, RADIAL_WEIGHTS, build_objective, check_keyframes
+
+    s = random_set(seed)
+    kf = check_keyframes(s.times, s.quats)
+    obj, _, _ = build_objective(kf)
+    opts = replace(default_options(), radial_weight=RADIAL_WEIGHTS["normalized"],
+                   quat_slots=tuple(tuple(int(i) for i in slot) for slot in LAYOUT.quat_slots))
+    return s, obj, FrameSet.from_keyframes(kf, LAYOUT.quat_slots), opts
+
+
+def test_gap_strategy_is_a_strategy_of_solves_loop():
+    """`orient(tol=)` is `solve` with `GapToOptimum`: the same result, round kinds start/refine (no
+    second loop), and each round's optimizer stopped at max(ftol_rel, FTOL_FRACTION tol)."""
+    from dataclasses import replace
+
+    from solver.orient_refine import FTOL_FRACTION, GapToOptimum, unit_rows
+    from solver.solve import solve
+
+    s, obj, initial, opts = orientation_problem()
+    tol = 1e-4
+    opts = replace(opts, tol=tol)
+    gap = GapToOptimum(tol, opts)
+    assert gap.round_options(opts).ftol_rel == max(opts.ftol_rel, FTOL_FRACTION * tol)
+    sol = solve(obj, initial, opts, refinement=GapToOptimum(tol, opts), project=unit_rows)
+    r = orient(s.times, s.quats, tol=tol)
+    assert sol.n_evals == r.solution.n_evals and sol.E_final == pytest.approx(r.solution.E_final, rel=1e-12)
+    assert sol.converged_to_tol is True and sol.refinement_estimates == r.gap_estimates
+    assert {rd.kind for rd in sol.rounds} <= {"start", "refine", "polish", "boost"}
+    assert sol.rounds[0].kind == "start"
+
+
+def test_gap_strategy_polishes_a_stalled_round_and_boosts_a_drifting_unit_term():
+    """A round whose optimizer stopped far from stationarity (a large gradient in z) is optimized again
+    at the options' own ftol_rel, at most POLISHES times for the same frames; an accepted round whose
+    |q| drifts by more than DRIFT_LIMIT has the unit weight multiplied by DRIFT_BOOST (at most
+    DRIFT_BOOSTS times)."""
+    from dataclasses import replace
+
+    from solver.optimize import OptimizeResult, Status
+    from solver.orient_refine import DRIFT_BOOST, DRIFT_BOOSTS, DRIFT_LIMIT, POLISHES, GapToOptimum, max_norm_deviation
+
+    _, obj, initial, opts = orientation_problem()
+    frames = initial.with_variable_frames(np.array([0.5 * (initial.times[0] + initial.times[1])]))
+    E = obj.evaluate(frames.times, frames.values, grad=False).E
+
+    def result(g):
+        return OptimizeResult(frames.x(), E, Status.CONVERGED, "ftol", 1, 1, np.array([E]), 0.0, "fake",
+                              grad=np.full(frames.n_free, g))
+
+    gap = GapToOptimum(1.0, replace(opts, tol=1.0, max_frames=20))
+    steps, ftols = [], [gap.round_options(opts).ftol_rel]
+    for i in range(POLISHES + 1):  # as solve's loop calls them: after_round, then the next round's options
+        steps.append(gap.after_round(obj, frames, result(1e3), i, None).action)
+        ftols.append(gap.round_options(opts).ftol_rel)
+    assert steps[:POLISHES] == ["polish"] * POLISHES
+    assert ftols == [0.03] + [opts.ftol_rel] * POLISHES + [0.03]  # polishes at the options' own ftol_rel
+    # then the stall counts against the estimate: not accepted
+    assert steps[-1] != "polish" and gap.converged is False and gap.estimates[-1] > 0.5
+    # the plain spline through frames far apart dips well inside the sphere
+    assert max_norm_deviation(frames.times, frames.values) > DRIFT_LIMIT
+    w0 = obj.weights[0]
+    gap = GapToOptimum(1e9, replace(opts, tol=1e9))  # any estimate is accepted
+    steps = [gap.after_round(obj, frames, result(0.0), i, None).action for i in range(DRIFT_BOOSTS + 1)]
+    assert steps == ["boost"] * DRIFT_BOOSTS + ["stop"] and gap.converged is True
+    assert obj.weights[0] == pytest.approx(w0 * DRIFT_BOOST**DRIFT_BOOSTS) and gap.boosts == DRIFT_BOOSTS

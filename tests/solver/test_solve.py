@@ -97,6 +97,8 @@ def test_penalty_continuation_boosts_on_a_copy_and_solving_twice_gives_the_same_
     np.testing.assert_array_equal(second.trace, first.trace)
     assert (second.E_initial, second.E_final, second.n_evals) == (first.E_initial, first.E_final, first.n_evals)
     assert len(first.rounds) == 1 + 1  # one round, then one boosted re-optimization of the same frames
+    assert [r.kind for r in first.rounds] == ["start", "boost"] and first.round_counts == {"start": 1, "boost": 1}
+    assert first.message.endswith("(2 rounds: 1 start, 1 boost)")  # the re-optimization is named
     # E_initial and E_final are under the final weights and the eq. 7 scales
     for sol_E, ints in ((first.E_initial, first.integrals_initial), (first.E_final, first.integrals_final)):
         assert sol_E == pytest.approx(sum(first.weights[n] * ints[n] / first.scales[n] for n in ints), rel=1e-12)
@@ -143,3 +145,17 @@ def test_results_are_read_only_and_inputs_untouched():
     np.testing.assert_array_equal(fs.times, times_before)
     np.testing.assert_array_equal(fs.values, values_before)
     assert isinstance(sol.rounds, tuple)
+
+
+def test_fixed_rounds_with_a_boost_say_which_round_was_which():
+    """`rounds=1` ran three rounds when a penalty boost re-optimized: the Rounds' kinds and the message
+    tell the refinement round from the penalty re-optimization."""
+    fs, obj, options = lift_problem()
+    events = []
+    sol = solve(obj, fs, dataclasses.replace(options, subdivision="adaptive", rounds=1),
+                progress=lambda e, i: events.append((e, i)))
+    kinds = [r.kind for r in sol.rounds]
+    assert kinds == ["start", "boost", "refine"]  # boosted once (then stalled), then the one adaptive round
+    assert [i["kind"] for e, i in events if e == "round"] == kinds
+    assert sol.rounds[2].n_variable > sol.rounds[1].n_variable  # only the refinement round added frames
+    assert sol.round_summary == "3 rounds: 1 start, 1 refine, 1 boost" and sol.round_summary in sol.message

@@ -57,7 +57,8 @@ def test_refines_until_the_estimate_is_below_tol(model):
     # the same frames by fixed rounds: the estimate computed on the result agrees
     w = solver.parse_terms("unit,smooth")
     fixed = solver.animate(model, kf, "unit,smooth",
-                           options=replace(solver.default_options(w), tol=0.0, rounds=len(est) - 1))
+                           options=replace(solver.default_options(w), refine="rounds", tol=0.0,
+                                           rounds=len(est) - 1))
     np.testing.assert_array_equal(fixed.frames.values, sol.frames.values)
     assert fixed.converged_to_tol is None and fixed.refinement_estimates == est[:-1]
     assert fixed.refinement_estimate == pytest.approx(est[-1], rel=1e-9)

@@ -1,0 +1,123 @@
+"""What `solve` returns: the rounds it ran (`Round`, with why each ran) and the `Solution`."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from solver.frames import FrameSet
+from solver.objective import Objective
+from solver.optimize import OptimizeResult, Status
+from solver.refinement import refinement_estimate
+
+#: `Round.kind` values: why a round ran.
+ROUND_KINDS = ("start", "refine", "boost", "polish")
+
+
+@dataclass(frozen=True)
+class Round:
+    """One optimization round: the frames it started with and the optimizer's result (read-only).
+
+    Attributes:
+        n_frames, n_variable: frames the round optimized, and how many of them are variable frames.
+        result: the optimizer's OptimizeResult.
+        scores: (n_frames_before - 1,) the subdivision scores (`SolveOptions.score`) that chose this
+            round's new frames, on the previous round's segments; None for the first round and after a
+            penalty boost.
+        times: (n_frames,) the frame times this round optimized [s].
+        kind: why the round ran (`ROUND_KINDS`): "start" (the first), "refine" (frames were added),
+            "boost" (the same frames under weights raised by penalty continuation or by the strategy)
+            or "polish" (the same frames at a stricter stopping test).
+    """
+
+    n_frames: int
+    n_variable: int
+    result: OptimizeResult
+    scores: np.ndarray | None = None
+    times: np.ndarray | None = None
+    kind: str = "start"
+
+
+@dataclass(frozen=True)
+class Solution:
+    """The result of `solve` (read-only: a frozen dataclass whose arrays are not writeable).
+
+    Attributes:
+        frames: optimized FrameSet (the path is the natural cubic spline through it), (m, nq) values.
+        initial: the plain spline's FrameSet (a read-only copy of `solve`'s `initial`).
+        rounds: (Round, ...) per-round results.
+        status: Status of the last round (INTERRUPTED etc. end the solve early).
+        message: why it ended.
+        E_initial, E_final: objective on the plain spline and on the result, both under the final
+            weights (penalty continuation raises some) and the renormalization scales.
+        integrals_initial, integrals_final: {term: integral of f_j dt} on each (unweighted).
+        scales: {term: renormalization divisor} (eq. 7; 1 without renormalization).
+        trace: (N,) best objective after each evaluation, all rounds concatenated.
+        wall_time_s: [s], optimization and subdivision (excludes building the terms).
+        n_evals: objective evaluations in all rounds.
+        weights: {term: lambda_j} at the end: the objective's weights after penalty continuation
+            (`SolveOptions.limits`); the caller's Objective keeps its own.
+        objective: the working copy of the objective the last round optimized (final weights and
+            scales, terms prepared on the result): for scores or evaluations on the result under the
+            objective that produced it. `solve` never changes the caller's Objective.
+        refinement_estimates: the refinement strategy's estimate after each round that computed one:
+            with adaptive subdivision `refinement_estimate` (refine "rounds" with score "decrease":
+            every round but the last; refine "tol": every round); `solver.orient_refine.GapToOptimum`:
+            the estimated gap.
+        converged_to_tol: with a tolerance, whether the estimate reached it; None without one.
+        final_estimate: the last estimate of a strategy with a tolerance, NaN otherwise.
+        stalled: {term: violation} of the terms penalty continuation gave up on (a boost did not halve
+            the violation; `SolveOptions.limits`), in the term's `violation` units.
+    """
+
+    frames: FrameSet
+    initial: FrameSet
+    rounds: tuple[Round, ...]
+    status: Status
+    message: str
+    E_initial: float
+    E_final: float
+    integrals_initial: dict
+    integrals_final: dict
+    scales: dict
+    trace: np.ndarray
+    wall_time_s: float
+    n_evals: int = field(default=0)
+    weights: dict = field(default_factory=dict)
+    objective: Objective | None = field(default=None, repr=False, compare=False)
+    refinement_estimates: tuple = ()
+    converged_to_tol: bool | None = None
+    final_estimate: float = float("nan")
+    stalled: dict = field(default_factory=dict)
+
+    @cached_property
+    def refinement_estimate(self) -> float:
+        """`refinement_estimate` of the result (relative to E_final): the last round's with a
+        tolerance, else computed when first read (three gradient evaluations with a frame in every
+        segment); NaN without the objective."""
+        if np.isfinite(self.final_estimate):
+            return self.final_estimate
+        if self.objective is None:
+            return float("nan")
+        return refinement_estimate(self.objective, self.frames, self.E_final)[0]
+
+    @property
+    def round_counts(self) -> dict[str, int]:
+        """{kind: number of rounds} over `ROUND_KINDS` (`Round.kind`), kinds that did not occur left out."""
+        kinds = [r.kind for r in self.rounds]
+        return {k: kinds.count(k) for k in ROUND_KINDS if k in kinds}
+
+    @property
+    def round_summary(self) -> str:
+        """The rounds in words, e.g. "3 rounds: 1 start, 1 refine, 1 boost" (refinement rounds add frames;
+        boost and polish rounds optimize the same frames again)."""
+        return round_summary(self.rounds)
+
+
+def round_summary(rounds) -> str:
+    """The rounds in words: "n rounds: a start, b refine, c boost, d polish" (the kinds that occurred, in
+    ROUND_KINDS order). rounds: a sequence of `Round`."""
+    kinds = [r.kind for r in rounds]
+    parts = [f"{kinds.count(k)} {k}" for k in ROUND_KINDS if k in kinds]
+    return f"{len(kinds)} round{'s' if len(kinds) != 1 else ''}: " + ", ".join(parts)

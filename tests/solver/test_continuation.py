@@ -1,0 +1,64 @@
+"""Penalty continuation (solver/continuation.py) alone, with terms whose violations are scripted."""
+import numpy as np
+import pytest
+
+from solver.continuation import STALL_FRACTION, PenaltyContinuation, over_limits
+from solver.frames import FrameSet
+from solver.objective import Objective
+from solver.terms.base import Term, TermEval
+
+
+class Scripted(Term):
+    """f = 0; violation: the next value of `script` at each check (the path does not matter)."""
+
+    needs = (0,)
+
+    def __init__(self, name, script):
+        self.name, self.script = name, list(script)
+
+    def evaluate(self, t, Y, Y1, Y2, grad=True):
+        return TermEval(np.zeros(len(t)), dY=np.zeros_like(Y) if grad else None)
+
+    def violation(self, Y):
+        return self.script.pop(0) if self.script else 0.0
+
+
+def frames():
+    t = np.array([0.0, 1.0])
+    return FrameSet(t, np.zeros((2, 1)), np.ones((2, 1), bool), np.ones(2, bool))
+
+
+def test_over_limits_skips_unknown_unweighted_and_unmeasured_terms():
+    class NoMeasure(Scripted):
+        def violation(self, Y):
+            return None
+
+    obj = Objective([Scripted("a", [2.0]), Scripted("b", [2.0]), NoMeasure("c", [])], [1.0, 0.0, 1.0], 0.0, 1.0,
+                    rate=10.0)
+    over = over_limits(obj, frames(), (("a", 1.0), ("b", 1.0), ("c", 0.0), ("zzz", 0.0)))
+    assert over == {"a": 2.0}  # b has weight 0, c no violation measure, zzz is not a term
+    assert over_limits(obj, frames(), ()) == {}
+
+
+def test_boosts_while_the_violation_falls_then_stops_at_max_boosts():
+    # the quadratic penalty's rate: each boost cuts the violation ~10x
+    obj = Objective([Scripted("a", [1.0, 0.1, 0.01, 1e-3, 1e-4])], [1.0], 0.0, 1.0, rate=10.0)
+    cont, events = PenaltyContinuation((("a", 1e-6),), boost=10.0, max_boosts=3), []
+    made = [cont.after_round(obj, frames(), lambda e, i: events.append((e, i))) for _ in range(4)]
+    assert made == [{"a": 1.0}, {"a": 0.1}, {"a": 0.01}, {}]  # the fourth check: max_boosts reached
+    assert obj.weights[0] == pytest.approx(1e3) and cont.boosts == 3 and not cont.stalled
+    assert [e for e, _ in events] == ["boost"] * 3 and events[-1][1]["boosts"] == 3
+
+
+def test_a_boost_that_does_not_cut_the_violation_enough_gives_the_term_up():
+    falls_little = 0.9  # of what it was (1.0): above STALL_FRACTION
+    assert falls_little > STALL_FRACTION
+    obj = Objective([Scripted("a", [1.0, falls_little, 0.5]), Scripted("b", [1.0, 0.01, 0.0])], [1.0, 1.0], 0.0,
+                    1.0, rate=10.0)
+    cont, events = PenaltyContinuation((("a", 1e-3), ("b", 1e-3)), boost=10.0, max_boosts=5), []
+    assert cont.after_round(obj, frames(), lambda e, i: events.append((e, i))) == {"a": 1.0, "b": 1.0}
+    assert cont.after_round(obj, frames(), lambda e, i: events.append((e, i))) == {"b": 0.01}  # a stalled
+    assert cont.stalled == {"a": pytest.approx(0.9)}
+    assert cont.after_round(obj, frames(), lambda e, i: events.append((e, i))) == {}  # a is not boosted again
+    np.testing.assert_allclose(obj.weights, [10.0, 100.0])
+    assert [e for e, _ in events] == ["boost", "stalled", "boost"]  # "stalled" said once
