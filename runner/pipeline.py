@@ -274,10 +274,10 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
             say(f"  wrote {f}")
         result["outputs"]["plot"] = str(o.plot)
     if o.render and not interrupted:
-        from types import SimpleNamespace
+        from runner.render.side_by_side import VideoOptions
 
-        args = SimpleNamespace(fps=o.fps, size=o.size, speed=o.speed, quiet=o.quiet)
-        r = render_with_progress(paths["video"], model, solution, keyframes, args, ref, info.contacts)
+        video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, quiet=o.quiet)
+        r = render_with_progress(paths["video"], model, solution, keyframes, video, ref, info.contacts)
         say(f"  wrote {paths['video']} ({r.n_frames} frames, {r.wall_time_s:.1f} s to render)")
     result["wall_time_s"] = time.perf_counter() - t_start
     result["summary"], result["table"] = summary, table
@@ -285,15 +285,16 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     return result
 
 
-def render_with_progress(out, model, solution, keyframes, args, reference=None, contacts=()):
-    """The side-by-side video (`runner.render.side_by_side.render_video`) with a progress bar over its
-    frames (`runner.console.Steps`; silent with `args.quiet`). Returns the render's info."""
+def render_with_progress(out, model, solution, keyframes, video, reference=None, contacts=()):
+    """The side-by-side video (`runner.render.side_by_side.render_video`, `video`: its `VideoOptions`)
+    with a progress bar over its frames (`runner.console.Steps`; silent with `video.quiet`). Returns the
+    render's info."""
     from runner.console import Steps
     from runner.paths import display_path
     from runner.render import frame_times
     from runner.render.side_by_side import render_video
 
-    n = len(frame_times(float(keyframes.times[0]), float(keyframes.times[-1]), args.fps, args.speed))
-    with Steps(f"rendering {display_path(out)}", n, getattr(args, "quiet", False), unit=" frames") as bar:
-        return render_video(out, model, solution, keyframes, args, reference, contacts,
+    n = len(frame_times(float(keyframes.times[0]), float(keyframes.times[-1]), video.fps, video.speed))
+    with Steps(f"rendering {display_path(out)}", n, video.quiet, unit=" frames") as bar:
+        return render_video(out, model, solution, keyframes, video, reference, contacts,
                             progress=lambda i, _n: bar.update(i))

@@ -18,6 +18,7 @@ from runner.paths import RENDERS
 from runner.paths import display_path as _rel
 from runner.pipeline import render_with_progress
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_problem
+from runner.render.side_by_side import VideoOptions
 from runner.render.side_by_side import check_video_out as _check_video_out
 from runner.saved_path import save_path_npz
 from solver.errors import InputError
@@ -147,7 +148,8 @@ def run_animate(args) -> int:
     code = EXIT_INTERRUPTED if interrupted else EXIT_FAILED if failed else EXIT_OK
     if args.out is not None and not args.no_render:
         try:
-            info_r = render_with_progress(args.out, model, solution, keyframes, args, reference, contacts)
+            info_r = render_with_progress(args.out, model, solution, keyframes, VideoOptions.from_args(args),
+                                          reference, contacts)
         except KeyboardInterrupt:  # the video is written atomically: nothing half-written is left
             saved = f"; the path is saved in {_rel(args.save_path)}" if args.save_path is not None else ""
             print(f"\ndynsplines: interrupted while rendering: {_rel(args.out)} not written (an earlier file "
