@@ -283,8 +283,9 @@ def heading_path(positions: np.ndarray, dt: float) -> np.ndarray:
     n = positions.shape[0]
     if n < 2:
         return np.zeros(n)
-    v = np.gradient(positions[:, :2], dt, axis=0)
-    v = _smooth(v, dt, HEADING_SMOOTHING)
+    # the velocity of the smoothed path: its ends are padded along the mean velocity of the last
+    # HEADING_SMOOTHING (`_smooth`), where padding the velocity itself would extrapolate a stride's sway
+    v = np.gradient(_smooth(positions[:, :2], dt, HEADING_SMOOTHING), dt, axis=0)
     speed = np.linalg.norm(v, axis=1)
     valid = speed >= HEADING_MIN_SPEED
     if not valid.any():
