@@ -27,7 +27,7 @@ class Track:
             <=0 outside), e.g. from the ground-penetration term (eq. 12). Where deeper than
             `PENETRATION_SHOWN` the site is circled in magenta and its body drawn magenta.
         sites: s site names, the columns of `penetration` (e.g. "l_heel", "l_toe", ...).
-        planted: optional (n, s) bool: the contact schedule has site k planted at times[i] (issue 11);
+        planted: optional (n, s) bool: the contact schedule has site k planted at times[i];
             such a site is marked with a green dot while planted.
 
     Raises:
