@@ -65,7 +65,8 @@ class ClipOptions:
         rate: quadrature points per second.
         out, save_path, metrics, plot: output paths (None: the defaults under the output folder:
             <stem>.mp4, <stem>.npz, <stem>.metrics.json; no plots). render: write the video.
-        fps, size, speed: video settings. quiet: no progress output. command: the command line, recorded
+        fps, size, speed, camera: video settings (camera: `VideoOptions.camera`, degrees around the
+            figure from straight ahead). quiet: no progress output. command: the command line, recorded
             in the keyframe file's "source".
         root_scale: the scale of the captured root path (`load_bvh_reference`): "legs" (the figure's
             leg length over the subject's) or a number (1: as captured); the value used is recorded in
@@ -89,6 +90,7 @@ class ClipOptions:
     fps: float = 30.0
     size: tuple[int, int] = (960, 540)
     speed: float = 0.5
+    camera: float = 90.0
     quiet: bool = False
     command: str = ""
     extra: dict = field(default_factory=dict)
@@ -276,7 +278,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     if o.render and not interrupted:
         from runner.render.side_by_side import VideoOptions
 
-        video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, quiet=o.quiet)
+        video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, camera=o.camera, quiet=o.quiet)
         r = render_with_progress(paths["video"], model, solution, keyframes, video, ref, info.contacts)
         say(f"  wrote {paths['video']} ({r.n_frames} frames, {r.wall_time_s:.1f} s to render)")
     result["wall_time_s"] = time.perf_counter() - t_start

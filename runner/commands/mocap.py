@@ -75,7 +75,8 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
 def run(args) -> int:
     """Run `mocap`. Returns the exit code; raises InputError on bad input."""
     options = clip_options(args, PROG, out=args.out, save_path=args.save_path, metrics=args.metrics, plot=args.plot,
-                           render=not args.no_render, fps=args.fps, size=args.size, speed=args.speed, quiet=args.quiet)
+                           render=not args.no_render, fps=args.fps, size=args.size, speed=args.speed, camera=args.camera,
+                           quiet=args.quiet)
     out_dir = args.out_dir if args.out_dir is not None else default_out_dir(args.clip)
     result = process_clip(args.clip, out_dir, options, say=(lambda *a: None) if args.quiet else print)
     if result["exit"] == "failed":

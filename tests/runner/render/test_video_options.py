@@ -147,3 +147,30 @@ def test_the_video_draws_no_overlapping_keyframe_numbers():
     drawn = {key[0] for key in overlay._patches}
     assert not {"9", "10"} <= drawn
     assert {"0", "11"} <= drawn
+
+
+@pytest.mark.parametrize("command", ["animate", "mocap"])
+def test_the_commands_pass_the_camera_to_the_video(command, monkeypatch, tmp_path):
+    """`--camera front` reaches `render_video` from both commands that render (no option that does nothing)."""
+    import runner.commands.animate as animate_command
+    import runner.pipeline as pipeline
+    from runner.paths import MODELS
+    from runner.render import RenderInfo
+
+    seen = []
+
+    def fake_render(out, model, solution, keyframes, video, reference=None, contacts=()):
+        seen.append(video)
+        return RenderInfo(path=out, n_frames=0, video_time_s=0.0, wall_time_s=0.0, ms_per_panel=0.0, size=video.size)
+
+    monkeypatch.setattr(animate_command, "render_with_progress", fake_render)
+    monkeypatch.setattr(pipeline, "render_with_progress", fake_render)
+    fast = ["--rounds", "0", "--max-evals", "2", "--quiet", "--no-summary", "--camera", "front", "--size", "480x270"]
+    if command == "animate":
+        args = ["animate", str(MODELS / "run_and_step.keyframes.json"), "--out", str(tmp_path / "v.mp4"),
+                "--save-path", str(tmp_path / "p.npz")]
+    else:
+        args = ["mocap", str(MODELS / "cmu" / "127_33.bvh"), "--out-dir", str(tmp_path)]
+    assert main(args + fast) == 0
+    assert len(seen) == 1 and seen[0].camera == 0.0 and seen[0].size == (480, 270)
+    assert seen[0].render_camera().azimuth == pytest.approx(180.0)
