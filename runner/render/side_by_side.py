@@ -17,7 +17,8 @@ CAMERA_SIDES = {"front": 0.0, "left": 90.0, "side": 90.0, "back": 180.0, "right"
 CAMERA_HELP = ("where the video's camera stands around the figure: side (= left: the figure's left, it "
                "moves right to left), right, front, back, or an angle in degrees from straight ahead, "
                "counter-clockwise seen from above (0 front, 90 left, 180 back, -90 right, 45 front-left). "
-               "The camera turns with the direction of travel and follows the pelvis' smoothed path [side]")
+               "The camera turns with the direction of travel (the way the figure faces if it hardly moves, "
+               "e.g. a sidestep in place) and follows the pelvis' smoothed path [side]")
 
 
 def parse_camera(text) -> float:

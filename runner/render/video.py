@@ -40,7 +40,7 @@ from runner.render.tracks import (
     lookat_path,
     parse_size,
     root_body,
-    root_positions,
+    root_poses,
     sample_track,
 )
 from solver.errors import InputError
@@ -134,9 +134,9 @@ def render_tracks(
     renderer = make_renderer(model, panel_w, panel_h, quality)
     try:
         panel = Panel(model, renderer, quality)
-        positions = root_positions(model, panel.data, qposes)
+        positions, facing = root_poses(model, panel.data, qposes)
         lookat = lookat_path(model, panel.data, qposes, speed / fps, camera, positions)
-        azimuth = azimuth_path(positions, speed / fps, camera)
+        azimuth = azimuth_path(positions, speed / fps, camera, facing)
         ghosts = ghost_data(model, tracks, kf_t, kf_q)
         currents = current_keyframes(times, kf_t, KEYFRAME_CAPTION_SECONDS * speed)
         overlay = Overlay(width, height, panel_w, len(tracks), title, t0, t1, kf_t)

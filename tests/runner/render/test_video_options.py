@@ -10,7 +10,7 @@ from runner.render import Camera
 from runner.render.gl import make_renderer
 from runner.render.overlays import Overlay, Panel, timeline_labels
 from runner.render.side_by_side import CAMERA_SIDES, VideoOptions, parse_camera
-from runner.render.tracks import azimuth_path, lookat_path
+from runner.render.tracks import azimuth_path, lookat_path, root_poses
 from solver import InputError
 
 SCENE = """
@@ -174,3 +174,21 @@ def test_the_commands_pass_the_camera_to_the_video(command, monkeypatch, tmp_pat
     assert main(args + fast) == 0
     assert len(seen) == 1 and seen[0].camera == 0.0 and seen[0].size == (480, 270)
     assert seen[0].render_camera().azimuth == pytest.approx(180.0)
+
+
+def test_a_figure_that_hardly_moves_is_seen_from_its_own_sides():
+    """A sidestep in place (0.1 m/s, under the heading's speed threshold) by a figure facing -y: "back"
+    puts the camera behind the figure (on +y), whatever way the slow drift goes."""
+    model = mujoco.MjModel.from_xml_string(SCENE)
+    data = mujoco.MjData(model)
+    t = np.arange(0.0, 2.0, 0.05)
+    q = np.tile(model.qpos0, (t.size, 1))
+    q[:, 0] = 0.1 * t  # a slow drift along +x: the figure's right when it faces -y
+    q[:, 3:7] = [np.cos(-np.pi / 4), 0.0, 0.0, np.sin(-np.pi / 4)]  # yaw -90 deg: facing -y
+    positions, facing = root_poses(model, data, [q])
+    assert facing == pytest.approx(-90.0, abs=1e-9)
+    np.testing.assert_allclose(positions[:, 0], 0.1 * t, atol=1e-12)
+    cam = VideoOptions(camera=parse_camera("back")).render_camera()
+    az = azimuth_path(positions, 0.05, cam, facing)
+    looks = np.array([np.cos(np.radians(az[0])), np.sin(np.radians(az[0]))])
+    np.testing.assert_allclose(looks, [0.0, -1.0], atol=1e-9)  # looking the way the figure faces
