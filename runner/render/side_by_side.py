@@ -14,8 +14,9 @@ from solver.metrics import sample_times
 #: the named sides of `--camera`: where the camera stands around the figure, in degrees from straight
 #: ahead (the direction of travel), counter-clockwise seen from above
 CAMERA_SIDES = {"front": 0.0, "left": 90.0, "side": 90.0, "back": 180.0, "right": -90.0}
-CAMERA_HELP = ("where the video's camera stands around the figure: side (= left: the figure's left, it "
-               "moves right to left), right, front, back, or an angle in degrees from straight ahead, "
+CAMERA_HELP = ("where the video's camera stands around the figure: side (= left: on the left of the "
+               "direction of travel, the figure moves right to left), right, front (ahead of the figure, "
+               "looking back at it), back, or an angle in degrees from straight ahead, "
                "counter-clockwise seen from above (0 front, 90 left, 180 back, -90 right, 45 front-left). "
                "The camera turns with the direction of travel (the way the figure faces if it hardly moves, "
                "e.g. a sidestep in place) and follows the pelvis' smoothed path [side]")
