@@ -7,6 +7,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from runner.parser import nonnegative, positive
+from runner.render import side_by_side
 from runner.render.side_by_side import PANELS
 from solver.animate import DEFAULT_RATE, default_options
 from solver.errors import InputError
@@ -40,6 +41,13 @@ def _panels(text: str) -> tuple[str, ...]:
     return names
 
 
+def _camera(text: str) -> float:
+    try:
+        return side_by_side.parse_camera(text)
+    except InputError as e:
+        raise argparse.ArgumentTypeError(str(e).removeprefix(f"--camera {text!r}: ")) from None
+
+
 def _weight(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     if not sep:
@@ -69,6 +77,7 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
                      const=("plain", "optimized", "reference"),
                      help="the same as --panels plain,optimized,reference")
     out.add_argument("--speed", type=positive(float), default=0.5, help="playback speed [%(default)s x real time]")
+    out.add_argument("--camera", type=_camera, default="side", metavar="SIDE|DEG", help=side_by_side.CAMERA_HELP)
     out.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write plots (PNG) to DIR")
     out.add_argument("--export", type=Path, action="append", default=[], metavar="FILE",
                      help="also write the optimized path as FILE.bvh (BVH on the figure's skeleton) or FILE.glb "
@@ -141,7 +150,7 @@ def outputs_from_args(args, default_video: Path | None = None, **fields):
         check_writable_dir(Path(args.plot) / "plot.png", "--plot")
     check_exports(args.export)
     return Outputs(save_path=args.save_path, exports=tuple(args.export), plot_dir=args.plot, video=video,
-                   video_options=VideoOptions(fps=args.fps, size=args.size, speed=args.speed, panels=args.panels),
+                   video_options=VideoOptions.from_args(args),
                    summary=not args.no_summary, quiet=args.quiet,
                    command={k: v for k, v in vars(args).items() if k != "func"}, **fields)
 

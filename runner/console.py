@@ -248,21 +248,92 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False) -> lis
     return rows
 
 
-def format_rows(rows) -> list[str]:
-    """Rows (label, plain, optimized, format[, worse]) as text lines under a header, a rule above and below."""
+#: the summary rows each objective term penalizes (what the optimizer is asked to lower), by the row
+#: label's start; a term's own "integral NAME" row is its own. Rows no chosen term penalizes are free
+#: for the optimizer to trade away: with the default terms the dynamics rows (torque, root wrench in
+#: flight), which only the dynamics terms target (`--terms all`, README "The summary").
+TERM_ROWS = {
+    "penetration": ("max penetration",),  # and the per-site rows under it (`row_targets`)
+    "unit": ("max |1 - |q||",),
+    "bending": ("max hyperextension",),
+    "torque": ("RMS joint torque", "peak joint torque"),
+    "root": ("RMS root force in flight", "peak root force in flight", "RMS root torque in flight",
+             "peak root torque in flight"),
+    "planted": ("float in contact", "skate in contact", "skate, PhysDiff", "skating ratio"),
+    "clearance": ("flight (all feet clear)", "flight time", "flight phase error"),
+    "cone": ("RMS friction-cone residual", "peak friction-cone residual"),
+}
+TARGET_LEGEND = ("target: the chosen term that penalizes the row's figure; rows without one are not "
+                 "optimized for, and the optimizer may trade them away")
+MISSING = "-"
+MISSING_LEGEND = f"{MISSING}: not defined for this path (the in-flight rows of a path with no flight phase)"
+
+
+def cell(fmt: str, value) -> str:
+    """`value` formatted with `fmt` for a table: "-" (`MISSING`) for None, NaN or inf, and never a
+    negative zero ("-0.00" is printed "0.00")."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return MISSING
+    if not np.isfinite(v):
+        return MISSING
+    text = fmt.format(v)
+    if text.startswith("-"):
+        try:
+            if float(text) == 0.0:
+                return text[1:]
+        except ValueError:
+            pass
+    return text
+
+
+def row_targets(labels, weights, sites=()) -> dict[str, str]:
+    """{row label: the chosen terms, comma-separated, that penalize the row's figure} (`TERM_ROWS`).
+
+    Args:
+        labels: the summary's row labels. weights: {term: weight} chosen (only the names matter).
+        sites: the contact sites whose "  SITE [mm]" penetration rows belong to the penetration term.
+    Returns:
+        only the labels some chosen term targets; an "  integral NAME" row belongs to NAME.
+    """
+    site_rows = {f"  {site} [mm]" for site in sites}
+    out = {}
+    for label in labels:
+        terms = [name for name in weights if name in TERM_ROWS and (
+            label.strip().startswith(TERM_ROWS[name]) or (name == "penetration" and label in site_rows))]
+        if label.startswith("  integral ") and label.split()[-1] in weights:
+            terms.append(label.split()[-1])
+        if terms:
+            out[label] = ",".join(terms)
+    return out
+
+
+def format_rows(rows, targets: dict | None = None) -> list[str]:
+    """Rows (label, plain, optimized, format[, worse]) as text lines under a header, a rule above and below.
+
+    Values go through `cell` (no "nan", no "-0.00"). With `targets` ({label: term names}, `row_targets`)
+    a "target" column names the terms that penalize each row's figure."""
     w = max(len(r[0]) for r in rows) + 2
-    lines = [f"{'':{w}}{'plain spline':>14}{'optimized':>14}", "-" * (w + 28 + len(WORSE) + 2)]
+    tw = max([len("target")] + [len(v) for v in (targets or {}).values()]) + 2 if targets is not None else 0
+    head = f"{'':{w}}{'plain spline':>14}{'optimized':>14}" + (f"  {'target':<{tw - 2}}" if tw else "")
+    rule = "-" * (w + 28 + tw + len(WORSE) + 2)
+    lines = [head.rstrip(), rule]
     for label, a, b, fmt, *flag in rows:
         mark = f"  {WORSE}" if flag and flag[0] else ""
-        lines.append(f"{label:{w}}{fmt.format(a):>14}{fmt.format(b):>14}{mark}")
-    lines.append("-" * (w + 28 + len(WORSE) + 2))
+        target = f"  {(targets or {}).get(label, ''):<{tw - 2}}" if tw else ""
+        line = f"{label:{w}}{cell(fmt, a):>14}{cell(fmt, b):>14}"
+        lines.append((line + target).rstrip() if not mark else line + target + mark)
+    lines.append(rule)
     return lines
 
 
 def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None,
                   contact_rows=()) -> str:
-    """Plain spline vs optimized, the acceptance figures, as a text table; a figure on which the optimized
-    path is worse is marked "worse" in a last column (`comparison_rows`), with a legend line.
+    """Plain spline vs optimized, the acceptance figures, as a text table; a "target" column names the
+    chosen terms that penalize each row's figure (`row_targets`), and a figure on which the optimized
+    path is worse is marked "worse" in a last column (`comparison_rows`), with legend lines. A figure
+    that is not defined (the in-flight rows of a path without flight) is printed "-", never "nan".
 
     Args:
         plain, opt: `path_metrics` of the two paths. solution: the Solution. weights: {term: weight}
@@ -278,8 +349,11 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
                      "{:.4g}"))
     extra = getattr(solution, "extra_rows", None) or []
     rows += extra
-    lines = format_rows(rows)
+    lines = format_rows(rows, row_targets([r[0] for r in rows], weights, plain["penetration_mm_by_site"]))
     lines.append(LEGEND)
+    lines.append(TARGET_LEGEND)
+    if any(cell("{}", v) == MISSING for r in rows for v in r[1:3]):
+        lines.append(MISSING_LEGEND)
     lines.append(f"frames: {solution.initial.count} keyframes + {solution.frames.n_variable} variable; "
                  f"{len(solution.rounds)} rounds, {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
     estimate = getattr(solution, "refinement_estimate", None)
@@ -349,7 +423,7 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
     rows = []
     for label, key, sub, fmt in _PLAUSIBILITY_ROWS:
         vals = [c[key][sub] if sub else c[key] for c in cols]
-        rows.append((label, [fmt.format(v) for v in vals]))
+        rows.append((label, [cell(fmt, v) for v in vals]))
     w = max(max(len(r[0]) for r in rows), 38) + 2
     head = f"{'':{w}}{'reference':>14}{'plain':>14}{'optimized':>14}"
     lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz; "
@@ -358,7 +432,8 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
     lines.append("-" * len(head))
     pairs = zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"]), strict=True)
     for (label, pm, px), (_, om, ox) in pairs:
-        cells = ["-"] + [f"{m:.2f}" + (f" / {x:.1f}" if np.isfinite(x) else "") for m, x in ((pm, px), (om, ox))]
+        cells = [MISSING] + [cell("{:.2f}", m) + (f" / {cell('{:.1f}', x)}" if np.isfinite(x) else "")
+                             for m, x in ((pm, px), (om, ox))]
         lines.append(f"{label + (' mean / max' if np.isfinite(px) else ' mean'):{w}}"
                      + "".join(f"{c:>14}" for c in cells))
     return "\n".join(lines)

@@ -56,10 +56,11 @@ class ClipOptions:
         rate: quadrature points per second.
         out, save_path, metrics, plot: output paths (None: the defaults under the output folder:
             <stem>.mp4, <stem>.npz, <stem>.metrics.json; no plots). render: write the video.
-        fps, size, speed, panels: video settings (`runner.render.side_by_side.VideoOptions`).
+        fps, size, speed, panels, camera: video settings (`runner.render.side_by_side.VideoOptions`; camera:
+            degrees around the figure from straight ahead).
         exports: the optimized path also written as these .bvh / .glb files.
-        quiet: no progress bars (results are still printed). summary: print the summary tables. command: the command line, recorded in
-            the keyframe file's "source".
+        quiet: no progress bars (results are still printed). summary: print the summary tables.
+        command: the command line, recorded in the keyframe file's "source".
         root_scale: the scale of the captured root path (`load_bvh_reference`): "legs" (the figure's
             leg length over the subject's) or a number (1: as captured); the value used is recorded in
             the keyframe file's "source".
@@ -82,6 +83,7 @@ class ClipOptions:
     fps: float = 30.0
     size: tuple[int, int] = (960, 540)
     speed: float = 0.5
+    camera: float = 90.0
     quiet: bool = False
     summary: bool = True
     exports: tuple = ()
@@ -274,9 +276,9 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         say(f"  {len(problem.conflicts.found)} keyframe(s) hold a site off the contact schedule (met exactly; those "
             "contacts and swings are not held to the bounds)")
     options_ = replace(o.solve or default_options(dict(problem.weights)), limits=problem.limits)
-    outputs = Outputs(save_path=paths["save_path"], exports=tuple(o.exports), plot_dir=o.plot,
-                      video=paths.get("video"), video_options=VideoOptions(o.fps, o.size, o.speed, o.panels),
-                      summary=o.summary, quiet=o.quiet, command={"command": o.command})
+    video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, panels=o.panels, camera=o.camera, quiet=o.quiet)
+    outputs = Outputs(save_path=paths["save_path"], exports=tuple(o.exports), plot_dir=o.plot, video=paths.get("video"),
+                      video_options=video, summary=o.summary, quiet=o.quiet, command={"command": o.command})
     run = execute(problem, options_, source, outputs, say)
     ref = source.reference
     fitted = None if cs.fitted is None else {

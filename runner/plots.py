@@ -66,6 +66,25 @@ def _shade(ax, t, mask, color, label=None):
         ax.axvspan(t[a], t[b], color=color, alpha=0.15, lw=0, label=label if i == 0 else None, zorder=0)
 
 
+def foot_height_title(surfaces: StaticSurfaces) -> str:
+    """The foot-height figure's title for the scene's surfaces: the floor only, or the floor and its
+    boxes (named), where a site's height jumps as it crosses a box's edge.
+
+    Args:
+        surfaces: the scene's `StaticSurfaces` (planes first in `names`, then boxes).
+    Returns:
+        two lines of text.
+    """
+    n_planes = len(surfaces.plane_point)
+    boxes = list(surfaces.names[n_planes:])
+    if not boxes:
+        return ("Contact-site height above the floor; below 0 = inside the floor\n"
+                "(a flat scene: heights are measured from the floor everywhere)")
+    tops = ", ".join(boxes[:4]) + (f" and {len(boxes) - 4} more" if len(boxes) > 4 else "")
+    return (f"Contact-site height above the surface below it (the floor, or the top of {tops}); below 0 = "
+            "inside it;\na jump is a site crossing the edge of a box")
+
+
 def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 500.0, contacts=()) -> Path:
     """Heights of the contact sites above the surface below them, one panel per site.
 
@@ -123,8 +142,7 @@ def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 5
                 handles.append(h_)
                 labels.append(l_)
     axes[0].legend(handles, labels, loc="upper left", ncol=5, fontsize=9, framealpha=0.9)
-    axes[0].set_title("Contact-site height above the surface below it (floor or step top); below 0 = inside "
-                      "the surface;\nthe jumps are a site crossing the step's edge", fontsize=10)
+    axes[0].set_title(foot_height_title(surfaces), fontsize=10)
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
     _savefig(fig, path)

@@ -77,8 +77,9 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
 def run(args) -> int:
     """Run `mocap`. Returns the exit code; raises InputError on bad input."""
     options = clip_options(args, PROG, out=args.out, save_path=args.save_path, metrics=args.metrics, plot=args.plot,
-                           render=not args.no_render, fps=args.fps, size=args.size, speed=args.speed, quiet=args.quiet,
-                           exports=tuple(args.export), panels=tuple(args.panels), summary=not args.no_summary)
+                           render=not args.no_render, fps=args.fps, size=args.size, speed=args.speed, camera=args.camera,
+                           quiet=args.quiet, exports=tuple(args.export), panels=tuple(args.panels),
+                           summary=not args.no_summary)
     out_dir = args.out_dir if args.out_dir is not None else default_out_dir(args.clip)
     result = process_clip(args.clip, out_dir, options, say=print)  # --quiet: no progress bars; results printed
     if result["exit"] == "failed":

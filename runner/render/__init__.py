@@ -6,8 +6,9 @@ the keyframes and the optimized path can be compared frame by frame. The keyfram
 ways: a translucent "ghost" figure at a keyframe pose in every panel, fading in and out while playback
 is within 0.3 s of that keyframe, a timeline under each panel with a tick per keyframe, and a
 "keyframe k" caption (and a yellow ghost) as playback reaches a keyframe time, gone once it has passed.
-The title sits in a band above the panels; the camera follows the root from the side of its direction
-of travel; videos smaller than 320x180 get no text. Contact sites that are inside a surface (a `Track`'s optional
+The title sits in a band above the panels; the camera follows the root's smoothed path from one side
+of its direction of travel (`Camera`; the commands' `--camera` chooses the side, `side_by_side.VideoOptions`);
+videos smaller than 320x180 get no text. Keyframes are numbered as in the keyframe file, from 0. Contact sites that are inside a surface (a `Track`'s optional
 `penetration`) are circled in magenta, on top of everything, so a foot hidden inside the step shows.
 
 Sampling: tracks come as dense samples (`times`, `qpos`) at any rate; the video frame at motion time t
@@ -19,7 +20,9 @@ docs/design.md, "State = MuJoCo qpos"). With samples much denser than the video 
 The model is passed in (loaded once). One `mujoco.Renderer` is made per call, for the one panel size,
 and reused for every panel of every frame; its offscreen buffer is made large enough for the panel
 (`<visual><global offwidth offheight>` raised while the context is created, then restored), and a
-quality preset (`QUALITIES`) trades MuJoCo's defaults for speed on a software renderer. Rendering
+quality preset (`QUALITIES`) trades MuJoCo's defaults for speed on a software renderer. Planes cast
+no shadows (nothing lies under a floor): the floor's own shadow-map self-test drew rows of black
+specks ("shadow acne") on it in every frame. Rendering
 needs an OpenGL backend; without a display that is EGL (Mesa's llvmpipe), which `runner.environment`
 selects through MUJOCO_GL before mujoco is first imported (and `_headless_fallback` if mujoco came first).
 """

@@ -16,7 +16,9 @@ PENETRATION_SHOWN = 1e-3
 """[m] a contact site deeper than this inside a surface is circled in magenta."""
 KEYFRAME_CAPTION_SECONDS = 0.25
 """[s] of video before playback reaches keyframe k during which "keyframe k" and its yellow ghost are
-shown; they go at the first frame after the keyframe (they do not linger once it has passed)."""
+shown; they go at the first frame after the keyframe (they do not linger once it has passed). Keyframes
+are numbered as in the keyframe file and its error messages: k is the index in its "keyframes" list,
+from 0."""
 GHOST_WINDOW = 0.3
 """[s] of motion time: a keyframe's ghost is drawn only while playback is within this of the keyframe,
 fading in and out (opacity 1 at the keyframe, 0 at this distance; `ghost_alphas`)."""
@@ -36,6 +38,7 @@ _PRIMITIVES = frozenset(int(t) for t in (
     mujoco.mjtGeom.mjGEOM_CYLINDER, mujoco.mjtGeom.mjGEOM_BOX))
 _GHOST_REACH = 1.1
 """[m] how far a figure reaches from its root body, for culling ghosts outside the view."""
+_PLANE = int(mujoco.mjtGeom.mjGEOM_PLANE)
 _ROUND_ENDED = frozenset(int(t) for t in (mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_CYLINDER))
 _GHOST_TEXT = (225, 235, 255)
 _PLANTED_FILL = (40, 220, 90)  # a site the contact schedule has planted
@@ -81,6 +84,9 @@ class Panel:
         model, scene = self.model, self.renderer.scene
         forward_direction(model, self.data, qpos)
         self.renderer.update_scene(self.data, self.cam, self.option)
+        for i in range(scene.ngeom):  # planes cast no shadow: no floor self-shadowing (acne)
+            if scene.geoms[i].type == _PLANE:
+                scene.geoms[i].castshadow = 0
         if len(marked_bodies):
             geom_type = int(mujoco.mjtObj.mjOBJ_GEOM)
             for i in range(scene.ngeom):
@@ -309,7 +315,7 @@ class Overlay:
             self.draw_text(im, (right, y), f"t = {t:5.2f} s  ({speed:g}x)", self.small, WHITE, anchor="ra")
             line = y + int(1.4 * fs)
             if current >= 0:
-                self.draw_text(im, (x + pad, line), f"keyframe {current + 1}  (t = {self.kf_t[current]:.2f} s)",
+                self.draw_text(im, (x + pad, line), f"keyframe {current}  (t = {self.kf_t[current]:.2f} s)",
                       self.font, _CURRENT_TEXT)
                 line += int(1.4 * fs)
             if marks[p] is not None:
@@ -336,6 +342,8 @@ class Overlay:
                 draw.ellipse([(x + px - r, py - r), (x + px + r, py + r)], outline=_PENETRATION_TEXT, width=3)
 
     def _timeline(self, im, draw, x, t, current):
+        """The timeline under a panel: a tick per keyframe, its number (from 0, as in the keyframe file)
+        where it does not overlap another (`timeline_labels`), the playback position as a white dot."""
         pad = max(6, self.fs // 2)
         y = self.height - pad - self.fs // 2
         a, b = x + 2 * pad, x + self.panel_w - 2 * pad
@@ -346,13 +354,40 @@ class Overlay:
 
         draw.line([(a, y), (b, y)], fill=(200, 200, 200), width=2)
         h = max(4, self.fs // 3)
-        for k, tk in enumerate(self.kf_t):
-            if not (self.t0 - 1e-9 <= tk <= self.t1 + 1e-9):
-                continue
-            xk = at(tk)
+        shown = [k for k, tk in enumerate(self.kf_t) if self.t0 - 1e-9 <= tk <= self.t1 + 1e-9]
+        for k in shown:
+            xk = at(self.kf_t[k])
             color = _CURRENT_TEXT if k == current else _GHOST_TEXT
             draw.line([(xk, y - h), (xk, y + h)], fill=color, width=3 if k == current else 2)
-            if self.labels:
-                self.draw_text(im, (xk, y - h - 2), str(k + 1), self.small, color, anchor="md")
+        if self.labels and shown:
+            widths = [draw.textlength(str(k), font=self.small) + 4 for k in shown]  # + the outline
+            centres = [at(self.kf_t[k]) for k in shown]
+            first = shown.index(current) if current in shown else None
+            for i in timeline_labels(centres, widths, first, gap=max(2.0, self.fs / 4)):
+                k = shown[i]
+                color = _CURRENT_TEXT if k == current else _GHOST_TEXT
+                self.draw_text(im, (centres[i], y - h - 2), str(k), self.small, color, anchor="md")
         xt = at(t)
         draw.ellipse([(xt - h, y - h), (xt + h, y + h)], fill=WHITE, outline=(0, 0, 0))
+
+
+def timeline_labels(centres, widths, first=None, gap: float = 2.0) -> list[int]:
+    """Which tick labels of a timeline to draw so that no two overlap.
+
+    Args:
+        centres: (m,) [px] the labels' horizontal centres, increasing. widths: (m,) [px] their widths.
+        first: index of a label that is always drawn (the current keyframe's), or None.
+        gap: [px] free space kept between two labels.
+    Returns:
+        the indices drawn, increasing: `first`, then greedily from left to right every label that keeps
+        `gap` from those already drawn (close keyframes keep their ticks, their numbers are thinned out).
+    """
+    kept = [] if first is None else [first]
+
+    def fits(i):
+        return all(abs(centres[i] - centres[j]) >= (widths[i] + widths[j]) / 2 + gap for j in kept)
+
+    for i in range(len(centres)):
+        if i != first and fits(i):
+            kept.append(i)
+    return sorted(kept)

@@ -27,7 +27,7 @@ class Track:
             <=0 outside), e.g. from the ground-penetration term (eq. 12). Where deeper than
             `PENETRATION_SHOWN` the site is circled in magenta and its body drawn magenta.
         sites: s site names, the columns of `penetration` (e.g. "l_heel", "l_toe", ...).
-        planted: optional (n, s) bool: the contact schedule has site k planted at times[i] (issue 11);
+        planted: optional (n, s) bool: the contact schedule has site k planted at times[i];
             such a site is marked with a green dot while planted.
 
     Raises:
@@ -101,7 +101,7 @@ class Camera:
         follow: turn with the direction of travel: the heading of the root's horizontal velocity,
             smoothed over `HEADING_SMOOTHING` (a diagonal or curved run stays seen from its side).
             Where the root moves slower than `HEADING_MIN_SPEED` the heading is held; a path that
-            never moves that fast keeps heading +x.
+            never moves that fast takes the way the figure faces (its root body's mean x axis).
     """
 
     distance: float = 4.0
@@ -248,14 +248,28 @@ def forward_direction(model, data, qpos) -> None:
 
 def root_positions(model, data, qposes: Sequence[np.ndarray]) -> np.ndarray:
     """(n, 3) [m] the root body's position averaged over the tracks, per frame (unsmoothed)."""
+    return root_poses(model, data, qposes)[0]
+
+
+def root_poses(model, data, qposes: Sequence[np.ndarray]) -> tuple[np.ndarray, float]:
+    """The root body's path and the way the figure faces.
+
+    Returns:
+        positions: (n, 3) [m] the root body's position averaged over the tracks, per frame (unsmoothed).
+        facing: [deg] from +x towards +y: the direction of the mean over all frames and tracks of the
+            root body's x axis (the figure's forward axis) on the floor; 0 if that mean vanishes.
+    """
     root = root_body(model)
     pos = np.zeros((qposes[0].shape[0], 3))
+    forward = np.zeros(2)
     for q in qposes:
         for i in range(q.shape[0]):
             data.qpos[:] = q[i]
             mujoco.mj_kinematics(model, data)
             pos[i] += data.xpos[root]
-    return pos / len(qposes)
+            forward += data.xmat[root].reshape(3, 3)[:2, 0]
+    facing = math.degrees(math.atan2(forward[1], forward[0])) if np.linalg.norm(forward) > 1e-9 else 0.0
+    return pos / len(qposes), facing
 
 
 def lookat_path(model, data, qposes: Sequence[np.ndarray], dt: float, camera: Camera,
@@ -271,24 +285,27 @@ def lookat_path(model, data, qposes: Sequence[np.ndarray], dt: float, camera: Ca
     return pos
 
 
-def heading_path(positions: np.ndarray, dt: float) -> np.ndarray:
+def heading_path(positions: np.ndarray, dt: float, facing: float = 0.0) -> np.ndarray:
     """(n,) [deg] the direction of travel: the heading of the smoothed horizontal root velocity.
 
     Args:
         positions: (n, 3) [m] root positions per video frame. dt: [s] of motion time between frames.
+        facing: [deg] the way the figure faces (`root_poses`), used when it never travels.
     Returns:
         degrees from +x towards +y, unwrapped (continuous); held where the smoothed speed is below
-        HEADING_MIN_SPEED (the first valid heading before it, 0 if the root never moves that fast).
+        HEADING_MIN_SPEED (the first valid heading before it; `facing` if the root never moves that
+        fast: a sidestep or a jump in place is seen from the figure's own sides).
     """
     n = positions.shape[0]
     if n < 2:
-        return np.zeros(n)
-    v = np.gradient(positions[:, :2], dt, axis=0)
-    v = _smooth(v, dt, HEADING_SMOOTHING)
+        return np.full(n, float(facing))
+    # the velocity of the smoothed path: its ends are padded along the mean velocity of the last
+    # HEADING_SMOOTHING (`_smooth`), where padding the velocity itself would extrapolate a stride's sway
+    v = np.gradient(_smooth(positions[:, :2], dt, HEADING_SMOOTHING), dt, axis=0)
     speed = np.linalg.norm(v, axis=1)
     valid = speed >= HEADING_MIN_SPEED
     if not valid.any():
-        return np.zeros(n)
+        return np.full(n, float(facing))
     psi = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
     idx = np.where(valid, np.arange(n), -1)
     idx = np.maximum.accumulate(idx)  # the last valid sample at or before each frame
@@ -296,10 +313,11 @@ def heading_path(positions: np.ndarray, dt: float) -> np.ndarray:
     return np.degrees(psi[idx])
 
 
-def azimuth_path(positions: np.ndarray, dt: float, camera: Camera) -> np.ndarray:
+def azimuth_path(positions: np.ndarray, dt: float, camera: Camera, facing: float = 0.0) -> np.ndarray:
     """(n,) [deg] the camera azimuth per frame: `camera.azimuth`, relative to the direction of travel
-    (`heading_path`) when `camera.follow`."""
+    (`heading_path`, with the figure's `facing` [deg] for a figure that never travels) when
+    `camera.follow`."""
     n = positions.shape[0]
     if not camera.follow:
         return np.full(n, float(camera.azimuth))
-    return heading_path(positions, dt) + camera.azimuth
+    return heading_path(positions, dt, facing) + camera.azimuth

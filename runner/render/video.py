@@ -40,7 +40,7 @@ from runner.render.tracks import (
     lookat_path,
     parse_size,
     root_body,
-    root_positions,
+    root_poses,
     sample_track,
 )
 from solver.errors import InputError
@@ -68,10 +68,11 @@ def render_tracks(
     shown over the union of the tracks' time ranges at `speed` times real time. Each panel has its
     label, the time counter and a timeline with a tick per keyframe; a translucent ghost of a keyframe
     pose is drawn in every panel while playback is within `GHOST_WINDOW` of the keyframe, fading in and
-    out (`ghost_alphas`), and the ghost turns yellow with a "keyframe k" caption (k from 1) during the
-    `KEYFRAME_CAPTION_SECONDS` of video before playback reaches keyframe k, gone once it has passed
-    (`current_keyframes`). Below `LABELS_MIN_SIZE` no text is drawn. All panels use one camera,
-    following the root body from the side of its direction of travel (see `Camera`).
+    out (`ghost_alphas`), and the ghost turns yellow with a "keyframe k" caption (k from 0: the index in
+    the keyframe file, as in its error messages) during the `KEYFRAME_CAPTION_SECONDS` of video before
+    playback reaches keyframe k, gone once it has passed (`current_keyframes`). Below `LABELS_MIN_SIZE`
+    no text is drawn. All panels use one camera, following the root body's smoothed path from a side
+    of its direction of travel (see `Camera`). Planes cast no shadows (`Panel.render`).
 
     Args:
         model: MjModel of the scene with the figure (loaded once by the caller; not changed).
@@ -133,9 +134,9 @@ def render_tracks(
     renderer = make_renderer(model, panel_w, panel_h, quality)
     try:
         panel = Panel(model, renderer, quality)
-        positions = root_positions(model, panel.data, qposes)
+        positions, facing = root_poses(model, panel.data, qposes)
         lookat = lookat_path(model, panel.data, qposes, speed / fps, camera, positions)
-        azimuth = azimuth_path(positions, speed / fps, camera)
+        azimuth = azimuth_path(positions, speed / fps, camera, facing)
         ghosts = ghost_data(model, tracks, kf_t, kf_q)
         currents = current_keyframes(times, kf_t, KEYFRAME_CAPTION_SECONDS * speed)
         overlay = Overlay(width, height, panel_w, len(tracks), title, t0, t1, kf_t)

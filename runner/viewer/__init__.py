@@ -10,6 +10,12 @@ scene graph updated per frame, for a page that only needs to play a precomputed 
 
 The server (`server.py`) binds 127.0.0.1 only and serves the static files and two generated resources:
 `scene.glb` (every motion of the path as its own figure and animation, with the contact sites as small
-spheres) and `data.json` (times, keyframe times, and per motion and sample the state of each contact
-site: clear, in contact or penetrating).
+spheres) and `data.json` (times, keyframe times, the floor's height, and per motion and sample the state
+of each contact site: clear, in contact or penetrating).
+
+The page (`static/viewer.js`) draws a 1 m grid on the floor and the figures' shadows from a sun that
+follows the optimized figure, so heights above the floor can be judged. Its address options are parsed
+by `static/query.js`: `?show=optimized,plain,reference` (or `none`) chooses the motions shown and
+leaves the keyframes and contacts alone, `?hide=keyframes,contacts` unticks those, `?t=SECONDS` sets
+the time.
 """

@@ -11,7 +11,8 @@ import numpy as np
 
 from solver.errors import InputError
 
-__all__ = ["STATIC", "CONTACT_HEIGHT", "PENETRATION", "ViewerAssets", "build_assets", "make_server", "serve"]
+__all__ = ["STATIC", "CONTACT_HEIGHT", "PENETRATION", "ViewerAssets", "build_assets", "floor_height", "make_server",
+           "serve"]
 
 STATIC = Path(__file__).resolve().parent / "static"
 #: [m] a contact site this close to a surface (or closer) is drawn "in contact".
@@ -35,7 +36,8 @@ def build_assets(npz: str | Path) -> ViewerAssets:
 
     data: {"source", "scene", "tracks": [{"name", "start", "duration", "fps", "samples",
     "sites": {site: [state per sample]}}], "keyframe_times", "sites", "states": ["clear", "contact",
-    "penetrating"], "max_penetration_mm": {track: mm}}.
+    "penetrating"], "max_penetration_mm": {track: mm}, "floor_height": [m] the height of the scene's
+    horizontal floor plane (None without one; the page draws its grid there)}.
 
     Raises:
         InputError: unreadable path or scene (see `runner.saved_path.load_saved_path`).
@@ -70,8 +72,18 @@ def build_assets(npz: str | Path) -> ViewerAssets:
     data = {"source": str(saved.source), "scene": str(saved.scene), "tracks": tracks,
             "keyframe_times": [float(t) for t in saved.keyframe_times], "sites": list(CONTACT_SITES),
             "states": ["clear", "contact", "penetrating"], "max_penetration_mm": worst,
-            "contact_height_m": CONTACT_HEIGHT, "penetration_m": PENETRATION}
+            "contact_height_m": CONTACT_HEIGHT, "penetration_m": PENETRATION, "floor_height": floor_height(model)}
     return ViewerAssets(glb_bytes(gltf), data)
+
+
+def floor_height(model) -> float | None:
+    """[m] height of the scene's floor: the lowest world plane whose normal points up (within 1 degree),
+    None if there is none."""
+    from solver.surfaces import StaticSurfaces
+
+    s = StaticSurfaces.from_model(model)
+    up = s.plane_normal[:, 2] > np.cos(np.radians(1.0)) if len(s.plane_normal) else np.zeros(0, bool)
+    return float(s.plane_point[up, 2].min()) if up.any() else None
 
 
 class _Handler(http.server.SimpleHTTPRequestHandler):

@@ -1,5 +1,6 @@
-"""The summary says where the optimized path is worse than the plain spline (issue 15 item 4), and the
-figures that come with the dynamics terms: pelvis acceleration peak and root force on the ground."""
+"""The summary says where the optimized path is worse than the plain spline, which rows the chosen terms
+target, prints no "nan" and no negative zero, and has the figures that come with the dynamics terms:
+pelvis acceleration peak and root force on the ground."""
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -7,7 +8,17 @@ import mujoco
 import numpy as np
 import pytest
 
-from runner.console import FLIGHT_CHANGE, LEGEND, WORSE, comparison_rows, summary_table
+from runner.console import (
+    FLIGHT_CHANGE,
+    LEGEND,
+    MISSING_LEGEND,
+    TARGET_LEGEND,
+    WORSE,
+    cell,
+    comparison_rows,
+    motion_metrics_table,
+    summary_table,
+)
 from solver.layout import StateLayout
 from solver.metrics import dynamics_metrics, dynamics_series
 
@@ -26,9 +37,10 @@ def metrics(**over):
 
 
 def solution():
+    names = ("penetration", "unit", "bending", "planted", "clearance")
     return SimpleNamespace(E_initial=11.05, E_final=0.06,
-                           integrals_initial={"smooth": 3613.0, "torque": 1.0, "root": 1.0},
-                           integrals_final={"smooth": 4150.0, "torque": 0.5, "root": 0.1},
+                           integrals_initial={"smooth": 3613.0, "torque": 1.0, "root": 1.0} | dict.fromkeys(names, 1.0),
+                           integrals_final={"smooth": 4150.0, "torque": 0.5, "root": 0.1} | dict.fromkeys(names, 0.0),
                            initial=SimpleNamespace(count=8),
                            frames=SimpleNamespace(n_variable=22), rounds=[1, 2], n_evals=450, wall_time_s=8.9)
 
@@ -84,3 +96,82 @@ def test_standing_still_the_ground_carries_one_body_weight_and_the_pelvis_does_n
     assert m["peak_pelvis_acceleration_ms2"] == pytest.approx(0.0, abs=1e-9)
     assert m["rms_root_force_ground_bw"] == pytest.approx(1.0, rel=1e-9)
     assert m["peak_root_force_ground_bw"] == pytest.approx(1.0, rel=1e-9)
+
+
+DEFAULT_TERMS = {"penetration": 100.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "planted": 10.0, "clearance": 10.0}
+
+
+def _row(text, label):
+    """The line of the table whose label is `label` (the label, then two spaces or more)."""
+    lines = [line for line in text.splitlines() if line.startswith(label + "  ")]
+    assert len(lines) == 1, (label, text)
+    return lines[0]
+
+
+def _target(text, label):
+    """The target column of a row: what follows the two value columns (without the worse mark)."""
+    head = next(line for line in text.splitlines() if line.rstrip().endswith("target"))
+    start = head.index("target")
+    return _row(text, label)[start:].removesuffix(WORSE).strip()
+
+
+def test_a_motion_without_flight_prints_a_dash_not_nan():
+    no_flight = dict(flight_s=0.0, rms_root_force_flight_N=float("nan"), peak_root_force_flight_N=float("nan"),
+                     rms_root_torque_flight_Nm=float("nan"), peak_root_torque_flight_Nm=float("nan"))
+    text = summary_table(metrics(**no_flight), metrics(**no_flight), solution(), {"smooth": 0.05})
+    assert "nan" not in text.lower()
+    assert _row(text, "RMS root force in flight [N]").split()[-2:] == ["-", "-"]
+    assert MISSING_LEGEND in text.splitlines()
+    assert MISSING_LEGEND not in summary_table(metrics(), metrics(), solution(), {"smooth": 0.05})
+
+
+def test_no_negative_zero_anywhere():
+    plain = metrics(max_hyperextension_deg=-0.0, keyframe_error=-0.0)
+    opt = metrics(max_hyperextension_deg=-1e-9, rms_root_torque_flight_Nm=-0.004)
+    text = summary_table(plain, opt, solution(), {"smooth": 0.05})
+    assert "-0.0" not in text and "-0.00" not in text, text
+    assert _row(text, "max hyperextension [deg]").split()[-2:] == ["0.00", "0.00"]
+    assert cell("{:.1e}", -0.0) == "0.0e+00" and cell("{:.2f}", -0.004) == "0.00"
+    assert cell("{:.2f}", -0.006) == "-0.01" and cell("{:.1f}", None) == "-" and cell("{:.1f}", float("inf")) == "-"
+
+
+def test_the_summary_says_which_rows_the_chosen_terms_target():
+    """With the default terms the dynamics rows that come out worse are rows no chosen term targets."""
+    plain = metrics()
+    opt = metrics(max_penetration_mm=0.0, penetration_mm_by_site={"l_toe": 0.0, "r_toe": 0.0},
+                  rms_joint_torque_Nm=195.6, peak_joint_torque_Nm=553.1, rms_root_force_flight_N=2197.9,
+                  peak_root_force_flight_N=3840.1, rms_root_torque_flight_Nm=282.3, peak_root_torque_flight_Nm=667.1)
+    text = summary_table(plain, opt, solution(), DEFAULT_TERMS)
+    assert TARGET_LEGEND in text.splitlines()
+    for label in ("RMS joint torque [N m]", "peak joint torque [N m]", "RMS root force in flight [N]",
+                  "peak root force in flight [N]", "RMS root torque in flight [N m]",
+                  "peak root torque in flight [N m]"):
+        assert label in marked(text)
+        assert _target(text, label) == "", label
+    assert _target(text, "max penetration [mm] (1000 Hz)") == "penetration"
+    assert _target(text, "  l_toe [mm]") == "penetration"
+    assert _target(text, "max |1 - |q||") == "unit"
+    assert _target(text, "max hyperextension [deg]") == "bending"
+    assert _target(text, "  integral smooth") == "smooth"
+    assert _target(text, "flight (all feet clear) [s]") == "clearance"  # its flight band keeps feet clear
+    assert _target(text, "keyframe error (fixed comps)") == ""  # met exactly: no term
+    with_dynamics = summary_table(plain, opt, solution(), {**DEFAULT_TERMS, "torque": 1.0, "root": 1.0})
+    assert _target(with_dynamics, "RMS joint torque [N m]") == "torque"
+    assert _target(with_dynamics, "peak root torque in flight [N m]") == "root"
+    assert _target(with_dynamics, "peak pelvis acceleration [m/s^2]") == ""
+
+
+def _motion(path_over=None):
+    block = {"penetration_mm": {"mean": 0.0, "max": 0.0}, "float_contact_mm": 2.4, "float_physdiff_mm": 5.7,
+             "skate_mm": 2.77, "skate_contact_mm": 1.81, "phys_err_mm": 8.5, "skating_ratio": 0.265,
+             "skating_ratio_contacts": 0.034, "flight_time_s": 0.0, "jerk_root_m_s3": 1250.0,
+             "jerk_sites_m_s3": 1925.0}
+    err = {"joint_orientation_deg": {"hip": {"mean": 1.0, "max": 2.0}}, "site_position_cm": {"toe": {"mean": 1.0,
+           "max": 2.0}}, "root_position_cm": {"mean": -0.0, "max": 1.0}, "accel_error_root_m_s2": float("nan"),
+           "accel_error_sites_m_s2": 3.0}
+    return {"reference": block, "path": {**block, **(path_over or {})}, "error": err, "frames": 10, "fps": 120.0}
+
+
+def test_the_motion_metrics_table_prints_no_nan_and_no_negative_zero():
+    text = motion_metrics_table(_motion({"float_contact_mm": float("nan"), "skate_mm": -0.0}), _motion())
+    assert "nan" not in text.lower() and "-0.0" not in text, text

@@ -2,6 +2,7 @@
 import * as THREE from 'three';
 import { GLTFLoader } from './GLTFLoader.js';
 import { OrbitControls } from './OrbitControls.js';
+import { parseQuery } from './query.js';
 
 const $ = (id) => document.getElementById(id);
 const TINT = { plain: 0xf0a040, reference: 0x60d080 };
@@ -12,22 +13,68 @@ const gltf = await new GLTFLoader().loadAsync('scene.glb');
 
 const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
 renderer.setPixelRatio(window.devicePixelRatio);
+renderer.shadowMap.enabled = true;
+renderer.shadowMap.type = THREE.PCFSoftShadowMap;
 $('view').appendChild(renderer.domElement);
 const scene = new THREE.Scene();
 scene.background = new THREE.Color(0x8fb0d8);
-scene.add(new THREE.HemisphereLight(0xffffff, 0x445566, 2.0));
-const sun = new THREE.DirectionalLight(0xffffff, 1.5);
-sun.position.set(-2, 6, 1);
-scene.add(sun);
+scene.add(new THREE.HemisphereLight(0xffffff, 0x445566, 1.3));
+// the sun stands almost overhead and follows the figure (frameCamera), so its shadow map stays tight
+// around it: the shadow under the feet shows how high they are
+const SUN_OFFSET = new THREE.Vector3(-1.0, 6.0, 0.6);
+const sun = new THREE.DirectionalLight(0xffffff, 2.2);
+sun.position.copy(SUN_OFFSET);
+sun.castShadow = true;
+sun.shadow.mapSize.set(2048, 2048);
+Object.assign(sun.shadow.camera, { left: -3, right: 3, top: 3, bottom: -3, near: 0.5, far: 20 });
+sun.shadow.bias = -0.0005;
+sun.shadow.normalBias = 0.02;
+scene.add(sun, sun.target);
 scene.add(gltf.scene);
-const grid = new THREE.GridHelper(40, 40, 0x404850, 0x56606a);
-grid.position.y = 0.001;
+
+const world = gltf.scene.getObjectByName('world');
+// the scene's static geoms (floor, boxes) take shadows; the figures cast them (below)
+for (const node of world.children) {
+  if (!node.name.startsWith('geom_')) continue;
+  node.traverse((o) => {
+    if (!o.isMesh) return;
+    o.receiveShadow = true;
+    o.castShadow = true;
+  });
+}
+// a grid on the floor to judge distances and heights: 1 m lines over 0.25 m ones, a texture drawn
+// here (no download) on a transparent sheet just above the floor (floor_height: data.json; glTF y =
+// MuJoCo z), so the floor's shadows show through it. Textured triangles, not GL lines: software WebGL
+// drops lines that cross the camera's plane.
+function gridTexture() {
+  const px = 256, canvas = document.createElement('canvas');
+  canvas.width = canvas.height = px;
+  const g = canvas.getContext('2d');
+  g.clearRect(0, 0, px, px);
+  g.fillStyle = 'rgba(235, 240, 250, 0.45)';
+  for (let k = 1; k < 4; k++) { g.fillRect(k * px / 4 - 1, 0, 2, px); g.fillRect(0, k * px / 4 - 1, px, 2); }
+  g.fillStyle = 'rgba(20, 28, 40, 0.85)';
+  g.fillRect(0, 0, 4, px); g.fillRect(0, 0, px, 4);
+  const tex = new THREE.CanvasTexture(canvas);
+  tex.wrapS = tex.wrapT = THREE.RepeatWrapping;
+  tex.anisotropy = renderer.capabilities.getMaxAnisotropy();
+  tex.colorSpace = THREE.SRGBColorSpace;
+  return tex;
+}
+const GRID_SIZE = 60; // [m], 1 m cells
+const gridTex = gridTexture();
+gridTex.repeat.set(GRID_SIZE, GRID_SIZE);
+const grid = new THREE.Mesh(new THREE.PlaneGeometry(GRID_SIZE, GRID_SIZE),
+                            new THREE.MeshBasicMaterial({ map: gridTex, transparent: true, depthWrite: false }));
+grid.name = 'grid';
+grid.rotation.x = -Math.PI / 2;
+grid.position.y = (data.floor_height ?? 0) + 0.002;
+grid.renderOrder = -1;
 scene.add(grid);
 
 const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 200);
 const controls = new OrbitControls(camera, renderer.domElement);
 
-const world = gltf.scene.getObjectByName('world');
 const tracks = {};
 for (const tr of data.tracks) {
   const root = gltf.scene.getObjectByName(`${tr.name}_pelvis`);
@@ -35,6 +82,7 @@ for (const tr of data.tracks) {
   const mixer = new THREE.AnimationMixer(root);
   const action = mixer.clipAction(clip);
   action.play();
+  root.traverse((o) => { if (o.isMesh && !o.name.includes('_site_')) o.castShadow = true; });
   const sites = {};
   for (const s of data.sites) {
     const node = gltf.scene.getObjectByName(`${tr.name}_site_${s}`);
@@ -64,7 +112,9 @@ const ghostMat = new THREE.MeshStandardMaterial({ color: 0xffffff, transparent: 
                                                   depthWrite: false });
 for (const kt of data.keyframe_times) {
   const copy = opt.root.clone(true);
-  copy.traverse((o) => { if (o.isMesh) { o.material = ghostMat; if (o.name.includes('_site_')) o.visible = false; } });
+  copy.traverse((o) => {
+    if (o.isMesh) { o.material = ghostMat; o.castShadow = false; if (o.name.includes('_site_')) o.visible = false; }
+  });
   const m = new THREE.AnimationMixer(copy);
   m.clipAction(opt.action.getClip()).play();
   m.setTime(Math.max(0, kt - opt.tr.start));
@@ -102,6 +152,8 @@ function visibility() {
 const pelvis = new THREE.Vector3();
 function frameCamera(first) {
   opt.root.getWorldPosition(pelvis);
+  sun.target.position.copy(pelvis);
+  sun.position.copy(pelvis).add(SUN_OFFSET);
   if (first) {
     camera.position.set(pelvis.x - 4.6, 1.4, pelvis.z + 0.3);
     controls.target.copy(pelvis);
@@ -132,14 +184,14 @@ for (const id of ['show-optimized', 'show-plain', 'show-reference', 'show-ghosts
 const pen = Object.entries(data.max_penetration_mm).map(([k, v]) => `${k} ${v.toFixed(1)} mm`).join(', ');
 $('info').textContent = `${data.source} - ${data.tracks.length} motions, ${data.keyframe_times.length} keyframes; ` +
                         `deepest contact-site penetration: ${pen}`;
-// URL options: ?show=optimized,plain,reference,ghosts,contacts (what is on) & t=SECONDS (start time)
-const params = new URLSearchParams(window.location.search);
-if (params.has('show')) {
-  const on = params.get('show').split(',');
-  for (const k of ['optimized', 'plain', 'reference', 'ghosts', 'contacts'])
-    if (!$(`show-${k}`).disabled) $(`show-${k}`).checked = on.includes(k);
+// address options (query.js): ?show= chooses the motions, ?hide= unticks keyframes or contacts, ?t= the time
+const query = parseQuery(window.location.search, t0, t1);
+if (query.motions) {
+  for (const [k, on] of Object.entries(query.motions)) if (!$(`show-${k}`).disabled) $(`show-${k}`).checked = on;
 }
-if (params.has('t')) time = Math.min(Math.max(parseFloat(params.get('t')) || t0, t0), t1);
+for (const [k, on] of Object.entries(query.overlays)) $(`show-${k === 'keyframes' ? 'ghosts' : k}`).checked = on;
+if (query.unknown.length) console.warn(`dynsplines view: unknown address options ${query.unknown.join(', ')}`);
+if (query.time !== null) time = query.time;
 visibility();
 frameCamera(true);
 window.dynsplinesReady = true;

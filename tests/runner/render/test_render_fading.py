@@ -1,4 +1,4 @@
-"""The video on a first afternoon (issue 15 item 6): keyframe ghosts only near their keyframe, fading;
+"""What a new user sees in the video: keyframe ghosts only near their keyframe, fading;
 the "keyframe k" caption gone once the keyframe has passed; the title above the panels, not across a
 divider; a camera that turns with the direction of travel; no illegible text at small sizes; the
 motion capture as a third panel."""
@@ -88,7 +88,7 @@ def test_the_keyframe_caption_does_not_linger_after_the_keyframe(pair):
     _, ghost = pair
     captions = slice(15, 40)  # the caption line under the labels (the timeline is at the bottom)
     counts = [yellow_pixels(f[captions]) for f in ghost]
-    assert counts[2] > 20, counts  # at the keyframe: "keyframe 1 (t = 0.20 s)"
+    assert counts[2] > 20, counts  # at the keyframe: "keyframe 0 (t = 0.20 s)"
     assert all(c < 10 for c in counts[3:]), counts  # gone once it has passed
 
 

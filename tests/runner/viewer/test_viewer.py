@@ -1,4 +1,5 @@
-"""`dynsplines view`: the server's resources, and the page drawn by headless Chromium (slow)."""
+"""`dynsplines view`: the server's resources, and the page drawn by headless Chromium (slow): the figure,
+a grid on the floor and the figure's shadow on it."""
 import json
 import shutil
 import subprocess
@@ -35,8 +36,10 @@ def _saved(tmp_path):
 def test_static_files_are_vendored_and_small():
     size = sum(p.stat().st_size for p in STATIC.iterdir())
     assert size < 1.5e6
-    assert {"index.html", "viewer.js", "three.module.min.js", "GLTFLoader.js", "OrbitControls.js"} <= {
+    assert {"index.html", "viewer.js", "query.js", "three.module.min.js", "GLTFLoader.js", "OrbitControls.js"} <= {
         p.name for p in STATIC.iterdir()}
+    for page in ("index.html", "viewer.js", "query.js"):  # offline: nothing is fetched from another host
+        assert "http://" not in (STATIC / page).read_text() and "https://" not in (STATIC / page).read_text()
 
 
 def test_server_serves_page_scene_and_data(tmp_path):
@@ -52,6 +55,7 @@ def test_server_serves_page_scene_and_data(tmp_path):
         assert glb[:4] == b"glTF" and glb == assets.glb
         data = json.loads(urllib.request.urlopen(url + "data.json").read())
         assert data["keyframe_times"] == [0.0, 0.5, 1.0]
+        assert data["floor_height"] == 0.0  # models/run_and_step.xml: the floor plane at z = 0
         js = urllib.request.urlopen(url + "viewer.js")
         assert js.headers["Content-Type"].startswith("text/javascript")
         with pytest.raises(InputError, match=f"--port {server.server_address[1]}: cannot listen"):
@@ -103,3 +107,39 @@ def test_headless_chromium_draws_the_figure(tmp_path):
     red_shown, red_hidden = _figure_red(shown), _figure_red(hidden)
     assert red_shown > 100, red_shown  # the figure's own colours, not a tint
     assert red_hidden < red_shown / 10, (red_shown, red_hidden)
+
+
+def _chromium_or_skip():
+    if not (shutil.which("chromium") or shutil.which("chromium-browser")):
+        pytest.skip("chromium is not installed (apt-get install chromium)")
+
+
+def _dark_runs(line, floor, drop=25):
+    """Number of runs of pixels darker than `floor` by more than `drop` along a scan line (n, 3)."""
+    dark = (floor - line.mean(axis=-1)) > drop
+    return int(np.count_nonzero(np.diff(dark.astype(int)) == 1))
+
+
+@pytest.mark.slow
+def test_the_floor_has_a_grid_and_the_figure_a_shadow(tmp_path):
+    """The grid: dark 1 m lines crossing a scan row of the floor (lines running away from the camera)
+    and a scan column (lines across the view). The shadow: floor pixels under the figure darkened by the
+    same factor in every channel (a grey floor in shade; the figure's own red, blue and skin colours do
+    not scale so), in the lower part of the image, against the same view without the figure."""
+    _chromium_or_skip()
+    server, url = serve_in_thread(build_assets(_saved(tmp_path)), 0)
+    try:
+        shown = _screenshot(url + "?show=optimized&hide=keyframes,contacts", tmp_path / "shown.png")
+        empty = _screenshot(url + "?show=none&hide=keyframes,contacts", tmp_path / "empty.png")
+    finally:
+        server.shutdown()
+        server.server_close()
+    h, w, _ = empty.shape
+    floor = float(np.median(empty[int(0.8 * h), : w // 3].mean(axis=-1)))
+    assert _dark_runs(empty[int(0.8 * h), : w // 2], floor) >= 3  # lines towards the horizon
+    assert _dark_runs(empty[int(0.5 * h): int(0.88 * h), w // 8], floor) >= 3  # lines across the view
+    ratio = (shown + 1.0) / (empty + 1.0)
+    grey = (empty.max(-1) - empty.min(-1)) < 30
+    shade = grey & (ratio.max(-1) < 0.85) & (ratio.min(-1) > 0.3) & (np.ptp(ratio, axis=-1) < 0.08)
+    shade[: int(0.55 * h)] = False
+    assert shade.sum() > 200, shade.sum()
