@@ -152,19 +152,17 @@ def test_the_video_draws_no_overlapping_keyframe_numbers():
 @pytest.mark.parametrize("command", ["animate", "mocap"])
 def test_the_commands_pass_the_camera_to_the_video(command, monkeypatch, tmp_path):
     """`--camera front` reaches `render_video` from both commands that render (no option that does nothing)."""
-    import runner.commands.animate as animate_command
-    import runner.pipeline as pipeline
+    import runner.run
     from runner.paths import MODELS
     from runner.render import RenderInfo
 
     seen = []
 
-    def fake_render(out, model, solution, keyframes, video, reference=None, contacts=()):
+    def fake_render(out, run, video, quiet=False):
         seen.append(video)
         return RenderInfo(path=out, n_frames=0, video_time_s=0.0, wall_time_s=0.0, ms_per_panel=0.0, size=video.size)
 
-    monkeypatch.setattr(animate_command, "render_with_progress", fake_render)
-    monkeypatch.setattr(pipeline, "render_with_progress", fake_render)
+    monkeypatch.setattr(runner.run, "render_with_progress", fake_render)  # the one run both commands go through
     fast = ["--rounds", "0", "--max-evals", "2", "--quiet", "--no-summary", "--camera", "front", "--size", "480x270"]
     if command == "animate":
         args = ["animate", str(MODELS / "run_and_step.keyframes.json"), "--out", str(tmp_path / "v.mp4"),
