@@ -15,6 +15,7 @@ One call for a figure in a scene, one for a single orientation::
 """
 from solver.animate import animate, default_options
 from solver.errors import DynsplinesError, InputError
+from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.keyframe_file import KeyframeFileInfo, read_keyframes, write_keyframes
 from solver.keyframes import Keyframes
@@ -44,6 +45,8 @@ __all__ = [
     "DynsplinesError", "InputError", "NonFiniteError",
     # inputs: keyframes, the figure's state layout, frames and the spline
     "Keyframes", "StateLayout", "FrameSet", "SplineBasis",
+    # the figure read from its MJCF: bodies, joints, flexion axes, feet, segments, masses, height
+    "Figure",
     # files: an MJCF scene, the JSON keyframe file
     "load_model", "read_keyframes", "write_keyframes", "KeyframeFileInfo",
     # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7)
