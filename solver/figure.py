@@ -20,11 +20,11 @@ The shipped figure is `FIGURE_FILE` (models/humanoid39.xml); `shipped_figure()` 
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from types import MappingProxyType
-from typing import Mapping
 
 import numpy as np
 
