@@ -36,13 +36,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES
+from solver.layout import CONTACT_SITES, FEET
 
-#: the contact sites of the figure, in the order of `site_pos` arrays: `solver.layout.CONTACT_SITES`
-#: (the name kept for the callers of this module).
+#: the shipped figure's contact sites, in the order of `site_pos` arrays (`solver.layout.CONTACT_SITES`,
+#: the name kept for the callers of this module); another figure's: `Figure.from_model(model).contact_sites`.
 SITES: tuple[str, ...] = CONTACT_SITES
-#: feet -> their contact sites (short foot names "l", "r": the site-name prefixes).
-FEET: dict[str, tuple[str, str]] = {"l": ("l_heel", "l_toe"), "r": ("r_heel", "r_toe")}
 
 #: a site enters contact below this height above the surface under it [m] ...
 HEIGHT_ON = 0.03

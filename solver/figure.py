@@ -155,12 +155,13 @@ class Figure:
         ids = [root] + [b for b in range(root + 1, model.nbody) if _descends(model, b, root)]
         names = tuple(_name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in ids)
         parents = np.array([-1] + [ids.index(int(model.body_parentid[b])) for b in ids[1:]], int)
-        layout = StateLayout.from_model(model)
-        joints = tuple(j for j in layout.joints if int(model.jnt_bodyid[model.joint(j.name).id]) in ids)
-        joint_bodies = {}
-        for j in joints:
-            b = ids.index(int(model.jnt_bodyid[model.joint(j.name).id]))
-            joint_bodies[j.name] = (names[parents[b]] if parents[b] >= 0 else "", names[b])
+        joints, joint_bodies = [], {}
+        for jid, j in enumerate(StateLayout.from_model(model).joints):  # joint id order
+            if int(model.jnt_bodyid[jid]) in ids:
+                b = ids.index(int(model.jnt_bodyid[jid]))
+                joints.append(j)
+                joint_bodies[j.name] = (names[parents[b]] if parents[b] >= 0 else "", names[b])
+        joints = tuple(joints)
         texts, numerics = _custom(model)
         feet = _feet(model, texts)
         sites = tuple(s for pair in feet.values() for s in pair)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import CONTACT_SITES, StateLayout
@@ -177,7 +178,7 @@ def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None,
         "max_norm_deviation": float(np.abs(1.0 - norms).max()),
     }
     try:
-        bend = Hyperextension(layout)
+        bend = Hyperextension(layout, Figure.from_model(model).flexion_axes)
         hyper = np.degrees(np.maximum(0.0, -bend.angles(Y))).max(axis=0)
         out["max_hyperextension_deg_by_joint"] = dict(zip(bend.joint_names, hyper.round(3).tolist()))
         out["max_hyperextension_deg"] = float(hyper.max())

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.errors import InputError
+from solver.figure import Figure
 from solver.kinematic_tree import SiteKinematics
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.objective import Objective
@@ -172,7 +173,7 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
     factories = {
         "penetration": lambda: Penetration(model, margin=margin),
         "unit": lambda: UnitQuaternion(layout.quat_slots),
-        "bending": lambda: Hyperextension(layout),
+        "bending": lambda: Hyperextension(layout, Figure.from_model(model).flexion_axes),
         "smooth": lambda: _named(CovariantAcceleration(layout.quat_slots, layout.linear_index), "smooth"),
     }
     for name in CONTACT_TERMS:

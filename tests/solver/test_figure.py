@@ -132,3 +132,11 @@ def test_no_feet_and_no_root_are_refused():
     with pytest.raises(InputError, match="0 free joints"):
         Figure.from_model(mujoco.MjModel.from_xml_string("<mujoco><worldbody><body><geom size='1'/></body>"
                                                          "</worldbody></mujoco>"))
+
+
+def test_deprecated_aliases_are_the_shipped_figures():
+    """solver.layout.CONTACT_SITES / FEET (default arguments without a model) name the shipped figure's."""
+    from solver.layout import CONTACT_SITES, FEET
+
+    fig = shipped_figure()
+    assert fig.contact_sites == CONTACT_SITES and dict(fig.feet) == FEET
