@@ -3,8 +3,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from solver.figure import MODELS_DIR
+
 REPO = Path(__file__).resolve().parents[1]
-MODELS = REPO / "models"
+#: the shipped models (`solver.figure.MODELS_DIR`: the figure, the scenes, the example keyframes)
+MODELS = MODELS_DIR
 RENDERS = REPO / "renders"
 
 

@@ -31,11 +31,12 @@ from runner.files import atomic_output, check_writable_dir
 from runner.mocap.keyframes import pick_keyframes
 from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO, clip_scene, name_surfaces
-from runner.paths import MODELS, RENDERS
+from runner.paths import RENDERS
 from runner.saved_path import save_path_npz
 from solver.animate import DEFAULT_RATE, default_options
 from solver.contacts import reference_contacts
 from solver.errors import InputError
+from solver.figure import FIGURE_FILE
 from solver.frames import FrameSet
 from solver.keyframe_file import read_keyframes, write_keyframes
 from solver.layout import StateLayout
@@ -46,7 +47,7 @@ from solver.problem import default_limits, figure_problem, parse_terms
 from solver.solve import SolveOptions, solve
 
 #: the figure every scene includes
-FIGURE = MODELS / "humanoid39.xml"
+FIGURE = FIGURE_FILE  # the shipped figure (solver.figure)
 
 
 @dataclass

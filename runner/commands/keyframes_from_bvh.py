@@ -21,16 +21,16 @@ from runner.mocap.keyframes import KEY_CHOICES, pick_keyframes
 from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO, clip_scene, name_surfaces
 from runner.parser import OneLineParser
-from runner.paths import MODELS
 from solver.contacts import reference_contacts
 from solver.errors import InputError
+from solver.figure import FIGURE_FILE
 from solver.keyframe_file import write_keyframes
 from solver.layout import StateLayout
 from solver.model import check_scene
 
 PROG = "dynsplines keyframes-from-bvh"
 #: the figure every scene includes
-FIGURE = MODELS / "humanoid39.xml"
+FIGURE = FIGURE_FILE  # the shipped figure (solver.figure)
 
 
 def fitted_scene_path(out: Path) -> Path:
