@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.contacts import HEIGHT_ON
+from solver.contact_thresholds import DETECT_HEIGHT_ON as HEIGHT_ON
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES, index_run
 from solver.surfaces import StaticSurfaces

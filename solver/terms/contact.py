@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.contact_thresholds import KEYFRAME_TOLERANCE
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES
 from solver.surfaces import StaticSurfaces
@@ -322,7 +323,7 @@ class Planted(Term):
         W = self.windows(np.asarray(times, float))
         return W, (self.kin.positions(np.asarray(qpos, float)) if W.size else None)
 
-    def conflicts(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
+    def conflicts(self, times, qpos, tolerance: float = KEYFRAME_TOLERANCE, excuse: bool = False) -> list[tuple[int, str, float]]:
         """Keyframes that contradict the schedule: a keyframe at time t inside a contact's full window
         whose site is more than `tolerance` [m] from the plant height (keyframes are met exactly, so
         the term cannot pull that site down). excuse: also leave those contacts out of `violation`
@@ -343,7 +344,7 @@ class Planted(Term):
                     self.excused.add(c)
         return out
 
-    def slides(self, times, qpos, tolerance: float = 0.01, excuse: bool = False) -> list[tuple[int, str, float]]:
+    def slides(self, times, qpos, tolerance: float = KEYFRAME_TOLERANCE, excuse: bool = False) -> list[tuple[int, str, float]]:
         """Keyframes that make a planted site slide: two keyframes in one contact (window > 0) that hold
         the site more than `tolerance` [m] apart horizontally (capture's feet roll and pivot: 2-4 cm on
         the walk; no path can then keep the site still, README "Feet that plant"). excuse: leave those
