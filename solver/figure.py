@@ -101,7 +101,8 @@ class Figure:
         contact_sites: (k,) the contact site names (the feet's, foot by foot).
         contact_site_ids: (k,) their MuJoCo site ids.
         feet: {side: (heel site, toe site)}.
-        segments: {body: Segment} for every body but the root.
+        segments: {body: Segment} for every body but the root that has a segment end (a single child
+            body or a ``figure:end:BODY`` site); consumers check for the ones they need.
         body_masses: (B,) [kg]. total_mass: [kg].
         standing_height: [m] top of the highest geom minus the lowest contact site, at `qpos0`
             (standing upright: the identity pose).
@@ -145,9 +146,9 @@ class Figure:
         Returns:
             the Figure.
         Raises:
-            InputError: no free joint or several; a ``figure:`` annotation missing or naming a site,
-                joint or body the model does not have, or an axis that is not 3 numbers of norm > 0; a
-                body of the figure that has neither a single child body nor a ``figure:end`` site.
+            InputError: no free joint or several; no ``figure:foot`` annotation; a ``figure:``
+                annotation naming a site, joint or body the model does not have, or an axis that is not
+                3 numbers of norm > 0; a segment of zero length.
         """
         import mujoco
 
@@ -168,6 +169,7 @@ class Figure:
         site_ids = np.array([model.site(s).id for s in sites], int)
         axes = _flexion_axes(numerics, {j.name: j for j in joints})
         segments = {names[i]: _segment(model, ids, names, i, texts) for i in range(1, len(ids))}
+        segments = {b: seg for b, seg in segments.items() if seg is not None}
         masses = np.array(model.body_mass[ids], float)
         return cls(names, np.array(ids, int), parents, joints, MappingProxyType(joint_bodies),
                    MappingProxyType(axes), sites, site_ids, MappingProxyType(feet), MappingProxyType(segments),
@@ -266,7 +268,8 @@ def _flexion_axes(numerics: dict[str, np.ndarray], joints: dict[str, Joint]) -> 
     return axes
 
 
-def _segment(model, ids: list[int], names: tuple[str, ...], i: int, texts: dict[str, str]) -> Segment:
+def _segment(model, ids: list[int], names: tuple[str, ...], i: int, texts: dict[str, str]) -> Segment | None:
+    """The segment of body `names[i]`, or None if it has neither a single child body nor an end site."""
     body = names[i]
     children = [ids[c] for c in range(len(ids)) if c > 0 and int(model.body_parentid[ids[c]]) == ids[i]]
     key = _END + body
@@ -278,8 +281,7 @@ def _segment(model, ids: list[int], names: tuple[str, ...], i: int, texts: dict[
     elif len(children) == 1:
         end = np.array(model.body_pos[children[0]], float)
     else:
-        raise InputError(f"the figure's body {body!r} has {len(children)} child bodies, so its segment has no "
-                         f'single end: add <text name="{key}" data="SITE"/> naming a site of that body')
+        return None
     if np.linalg.norm(end) == 0:
         raise InputError(f"the segment of the figure's body {body!r} has zero length; move its end away from "
                          "the joint centre")

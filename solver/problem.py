@@ -15,7 +15,7 @@ import numpy as np
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.kinematic_tree import SiteKinematics
-from solver.layout import CONTACT_SITES, StateLayout
+from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.terms import CovariantAcceleration, Hyperextension, Penetration, UnitQuaternion
 
@@ -188,7 +188,7 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
         # shared by every term that reads it, and one reverse pass for the sum of their gradients; the
         # kinematics alone (`SiteKinematics`, about half the cost) when no term reads the forces
         forces = any(n in weights for n in ("torque", "root", "cone"))
-        engine = make_engine(model) if forces else SiteKinematics(model, CONTACT_SITES)
+        engine = make_engine(model) if forces else SiteKinematics(model, Figure.from_model(model).contact_sites)
         factories["torque"] = lambda: dyn["torque"](model, engine=engine)  # (called only if forces)
         factories["root"] = lambda: dyn["root"](model, engine=engine)
         factories["penetration"] = lambda: Penetration(model, margin=margin, engine=engine)

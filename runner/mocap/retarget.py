@@ -230,14 +230,19 @@ def leg_length_ratio(clip: BvhClip, model) -> float:
 
 
 def check_figure(figure: Figure) -> Figure:
-    """`figure` if its bodies are those `BONE_MAP` drives (models/humanoid39.xml's), else InputError
-    naming the bodies missing on either side."""
+    """`figure` if its bodies are those `BONE_MAP` drives (models/humanoid39.xml's) and every limb body
+    has a segment (`Figure.segments`), else InputError naming the bodies and the fix."""
     missing = [b for b in BONE_MAP if b not in figure.bodies]
     extra = [b for b in figure.bodies if b not in BONE_MAP]
     if missing or extra:
         raise InputError(f"the figure's bodies differ from those the retargeting drives ({', '.join(BONE_MAP)}): "
                          f"missing {', '.join(missing) or 'none'}, not driven {', '.join(extra) or 'none'}; "
                          "use a figure with the bodies of models/humanoid39.xml")
+    no_end = [b for b, (_, child) in BONE_MAP.items() if child and b not in figure.segments]
+    if no_end:
+        raise InputError(f"the figure's bodies {', '.join(no_end)} have no segment end (no single child body): "
+                         f'add <text name="figure:end:{no_end[0]}" data="SITE"/> to its MJCF\'s <custom>, '
+                         "naming a site of that body where its bone ends")
     return figure
 
 

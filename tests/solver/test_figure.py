@@ -115,13 +115,23 @@ def _edit(old, new):
      "no ball joint 'l_knie'"),
     ('<numeric name="figure:flexion:l_knee" data="0 1 0"/>', '<numeric name="figure:flexion:l_knee" data="0 0 0"/>',
      "give an axis"),
-    ('<text name="figure:end:l_foot" data="l_ball"/>', "", r"'l_foot' has 0 child bodies.*figure:end:l_foot"),
     ('<text name="figure:end:l_foot" data="l_ball"/>', '<text name="figure:end:l_foot" data="r_ball"/>',
      "not on the body 'l_foot'"),
 ])
 def test_bad_annotations_name_the_element_and_the_fix(old, new, message):
     with pytest.raises(InputError, match=message):
         Figure.from_model(_edit(old, new))
+
+
+def test_a_leaf_without_an_end_has_no_segment():
+    """Without its ``figure:end`` site the foot has no segment; the retargeting, which needs it, says so."""
+    from runner.mocap.retarget import check_figure
+
+    fig = Figure.from_model(_edit('<text name="figure:end:l_foot" data="l_ball"/>', ""))
+    assert "l_foot" not in fig.segments and "r_foot" in fig.segments
+    with pytest.raises(InputError, match='l_foot have no segment end.*figure:end:l_foot'):
+        check_figure(fig)
+    check_figure(shipped_figure())
 
 
 def test_no_feet_and_no_root_are_refused():
