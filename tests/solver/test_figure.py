@@ -136,7 +136,7 @@ def test_a_leaf_without_an_end_has_no_segment():
 
 def test_no_feet_and_no_root_are_refused():
     text = FIGURE_FILE.read_text()
-    start, end = text.index("<custom>"), text.index("</custom>") + len("</custom>")
+    start, end = text.index("\n  <custom>"), text.index("</custom>") + len("</custom>")  # the element, not a comment
     with pytest.raises(InputError, match="has no feet.*figure:foot:left"):
         Figure.from_model(mujoco.MjModel.from_xml_string(text[:start] + text[end:]))
     with pytest.raises(InputError, match="0 free joints"):
