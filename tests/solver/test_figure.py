@@ -3,6 +3,7 @@ rest pose, subtree masses) and against the figure's documented proportions (mode
 import mujoco
 import numpy as np
 import pytest
+from tree_models import scaled_figure_xml
 
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE, MODELS_DIR, Figure, shipped_figure
@@ -150,3 +151,17 @@ def test_deprecated_aliases_are_the_shipped_figures():
 
     fig = shipped_figure()
     assert fig.contact_sites == CONTACT_SITES and dict(fig.feet) == FEET
+
+
+def test_a_second_figure_is_another_mjcf_and_nothing_else():
+    """A figure 10 % larger: its height, segment lengths and mass come from its file; the names, axes
+    and feet are its annotations' (nothing in the code knows the shipped figure's sizes)."""
+    big = Figure.from_model(mujoco.MjModel.from_xml_string(scaled_figure_xml(1.1)))
+    ref = shipped_figure()
+    assert big.standing_height == pytest.approx(1.1 * ref.standing_height, rel=1e-12)
+    for body, seg in ref.segments.items():
+        np.testing.assert_allclose(big.segments[body].end, 1.1 * seg.end, rtol=1e-12, atol=1e-15)
+    assert big.total_mass == pytest.approx(ref.total_mass, rel=1e-12)  # masses are given, not densities
+    assert big.contact_sites == ref.contact_sites and big.feet == ref.feet
+    assert all(np.array_equal(big.flexion_axes[j], ref.flexion_axes[j]) for j in ref.flexion_axes)
+    np.testing.assert_allclose(big.neck.top, 1.1 * ref.neck.top, rtol=1e-12)

@@ -136,3 +136,19 @@ def test_rest_armature_spans_the_standing_height(tmp_path, scene_model):
     clip = read_bvh(tmp_path / "id.bvh")
     assert list(clip.names[-2:]) == ["neck", "head"]
     np.testing.assert_allclose(clip.local_quat[:, clip.index("head")], [[1, 0, 0, 0]] * 2, atol=1e-12)
+
+
+def test_another_figures_armature_has_its_height(tmp_path):
+    """The BVH of a figure 10 % larger spans that figure's standing height (1.925 m): the skeleton comes
+    from the model, not from the shipped figure's numbers."""
+    import mujoco
+    from tree_models import scaled_figure_xml
+
+    from solver.figure import Figure
+
+    model = mujoco.MjModel.from_xml_string(scaled_figure_xml(1.1))
+    identity = np.r_[0, 0, 1.1, 1, 0, 0, 0, [1, 0, 0, 0] * 11]
+    write_bvh(tmp_path / "big.bvh", model, np.stack([identity, identity]), 30.0)
+    y = np.array([p[1] for p in rest_points((tmp_path / "big.bvh").read_text()).values()])
+    assert y.max() - y.min() == pytest.approx(Figure.from_model(model).standing_height, abs=0.02)
+    assert Figure.from_model(model).standing_height == pytest.approx(1.925, abs=1e-9)
