@@ -101,6 +101,8 @@ class Figure:
         contact_sites: (k,) the contact site names (the feet's, foot by foot).
         contact_site_ids: (k,) their MuJoCo site ids.
         feet: {side: (heel site, toe site)}.
+        leg_joints: the root joint and every joint between the root body and a foot's sites, in
+            `qpos` order (root, hips, knees, ankles): what pins the stride.
         segments: {body: Segment} for every body but the root that has a segment end (a single child
             body or a ``figure:end:BODY`` site); consumers check for the ones they need.
         body_masses: (B,) [kg]. total_mass: [kg].
@@ -119,6 +121,7 @@ class Figure:
     contact_sites: tuple[str, ...]
     contact_site_ids: np.ndarray
     feet: Mapping[str, tuple[str, str]]
+    leg_joints: tuple[str, ...]
     segments: Mapping[str, Segment]
     body_masses: np.ndarray
     total_mass: float
@@ -171,8 +174,16 @@ class Figure:
         segments = {names[i]: _segment(model, ids, names, i, texts) for i in range(1, len(ids))}
         segments = {b: seg for b, seg in segments.items() if seg is not None}
         masses = np.array(model.body_mass[ids], float)
+        legs = set()
+        for s in site_ids:
+            b = int(model.site_bodyid[s])
+            while b > 0:
+                legs.add(names[ids.index(b)])
+                b = int(model.body_parentid[b]) if b != ids[0] else 0
+        leg_joints = tuple(j.name for j in joints if joint_bodies[j.name][1] in legs)
         return cls(names, np.array(ids, int), parents, joints, MappingProxyType(joint_bodies),
-                   MappingProxyType(axes), sites, site_ids, MappingProxyType(feet), MappingProxyType(segments),
+                   MappingProxyType(axes), sites, site_ids, MappingProxyType(feet), leg_joints,
+                   MappingProxyType(segments),
                    masses, float(masses.sum()), _standing_height(model, ids, site_ids), _neck(model, ids, names))
 
 

@@ -31,6 +31,7 @@ def test_bodies_and_joints_are_the_models(model):
     assert (knee.kind, knee.qposadr, knee.nq, knee.dofadr) == ("ball", model.joint("l_knee").qposadr[0], 4,
                                                                  model.joint("l_knee").dofadr[0])
     assert fig.joint("root").kind == "free" and fig.joint_bodies["l_knee"] == ("l_thigh", "l_shin")
+    assert fig.leg_joints == ("root", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle")
     with pytest.raises(InputError, match="no joint 'neck'.*l_knee"):
         fig.joint("neck")
 
