@@ -174,17 +174,12 @@ class Figure:
         segments = {names[i]: _segment(model, ids, names, i, texts) for i in range(1, len(ids))}
         segments = {b: seg for b, seg in segments.items() if seg is not None}
         masses = np.array(model.body_mass[ids], float)
-        legs = set()
-        for s in site_ids:
-            b = int(model.site_bodyid[s])
-            while b > 0:
-                legs.add(names[ids.index(b)])
-                b = int(model.body_parentid[b]) if b != ids[0] else 0
+        legs = _leg_bodies(model, ids, names, site_ids)
         leg_joints = tuple(j.name for j in joints if joint_bodies[j.name][1] in legs)
-        return cls(names, np.array(ids, int), parents, joints, MappingProxyType(joint_bodies),
-                   MappingProxyType(axes), sites, site_ids, MappingProxyType(feet), leg_joints,
-                   MappingProxyType(segments),
-                   masses, float(masses.sum()), _standing_height(model, ids, site_ids), _neck(model, ids, names))
+        return cls(names, _frozen(ids, int), _frozen(parents, int), joints, MappingProxyType(joint_bodies),
+                   MappingProxyType(axes), sites, _frozen(site_ids, int), MappingProxyType(feet), leg_joints,
+                   MappingProxyType(segments), _frozen(masses, float), float(masses.sum()),
+                   _standing_height(model, ids, site_ids), _neck(model, ids, names))
 
 
 @lru_cache(maxsize=1)
@@ -196,6 +191,24 @@ def shipped_figure() -> Figure:
 
 
 # ----------------------------------------------------------------------------------------- reading
+def _frozen(values, dtype) -> np.ndarray:
+    """A read-only copy of `values` (the Figure is a value: its arrays do not change)."""
+    out = np.array(values, dtype)
+    out.flags.writeable = False
+    return out
+
+
+def _leg_bodies(model, ids: list[int], names: tuple[str, ...], site_ids) -> set[str]:
+    """The bodies from the root body down to the bodies holding the contact sites."""
+    legs = set()
+    for s in site_ids:
+        b = int(model.site_bodyid[s])
+        while b in ids:
+            legs.add(names[ids.index(b)])
+            b = int(model.body_parentid[b])
+    return legs
+
+
 def _name(model, kind, i: int) -> str:
     import mujoco
 
@@ -275,7 +288,7 @@ def _flexion_axes(numerics: dict[str, np.ndarray], joints: dict[str, Joint]) -> 
         if data.shape != (3,) or not np.isfinite(data).all() or np.linalg.norm(data) == 0:
             raise InputError(f'<numeric name="{key}" data="{" ".join(map(str, data))}">: give an axis, 3 numbers '
                              'not all zero, e.g. data="0 1 0"')
-        axes[name] = data / np.linalg.norm(data)
+        axes[name] = _frozen(data / np.linalg.norm(data), float)
     return axes
 
 
@@ -296,7 +309,7 @@ def _segment(model, ids: list[int], names: tuple[str, ...], i: int, texts: dict[
     if np.linalg.norm(end) == 0:
         raise InputError(f"the segment of the figure's body {body!r} has zero length; move its end away from "
                          "the joint centre")
-    return Segment(body, end)
+    return Segment(body, _frozen(end, float))
 
 
 def _standing_height(model, ids: list[int], site_ids: np.ndarray) -> float:
@@ -329,4 +342,4 @@ def _neck(model, ids: list[int], names: tuple[str, ...]) -> NeckChain | None:
     half = float(model.geom_size[g, 1]) * R.reshape(3, 3)[:, 2]
     ends = sorted((model.geom_pos[g] - half, model.geom_pos[g] + half), key=lambda p: p[2])
     body = names[ids.index(int(model.geom_bodyid[g]))]
-    return NeckChain(body, np.array(ends[0], float), np.array(ends[1], float), np.array(model.site_pos[s], float))
+    return NeckChain(body, _frozen(ends[0], float), _frozen(ends[1], float), _frozen(model.site_pos[s], float))

@@ -34,6 +34,8 @@ def test_bodies_and_joints_are_the_models(model):
     assert fig.leg_joints == ("root", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle")
     with pytest.raises(InputError, match="no joint 'neck'.*l_knee"):
         fig.joint("neck")
+    with pytest.raises(ValueError, match="read-only"):  # a value: its arrays do not change
+        fig.body_masses[0] = 1.0
 
 
 def test_contact_sites_and_feet(model):
