@@ -102,7 +102,8 @@ def figure_skeleton(model, head: bool = True) -> Skeleton:
         head: add the fixed neck and head joints (BVH); False: the bodies only (glTF, whose torso node
             holds the head's mesh).
     Raises:
-        InputError: no free joint, or a descendant body without exactly one ball joint at its origin.
+        InputError: no free joint, or a descendant body without exactly one ball joint at its origin,
+            or a figure without its annotations (`solver.figure.Figure.from_model`).
     """
     import mujoco
 
