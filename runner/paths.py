@@ -1,14 +1,16 @@
 """Where the shipped files are (a leaf): the models (figure, scenes, keyframes, the CMU clip) beside the
-code, in a checkout (runner/models links to the top-level models/) and in an installed copy alike.
+code, in a checkout (solver/models links to the top-level models/) and in an installed copy alike.
 Outputs never go here: they go where the user is (the commands' defaults are relative to the current
 folder)."""
 from __future__ import annotations
 
 from pathlib import Path
 
+from solver.figure import MODELS_DIR
+
 PACKAGE = Path(__file__).resolve().parent
-#: the shipped models: figure, scenes, keyframe files and the CMU clip
-MODELS = PACKAGE / "models"
+#: the shipped models: figure, scenes, keyframe files and the CMU clip (`solver.figure.MODELS_DIR`)
+MODELS = MODELS_DIR
 #: the checkout, when running from one (README, benchmarks' documents); in an installed copy a folder
 #: without them
 REPO = PACKAGE.parent

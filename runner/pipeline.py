@@ -26,10 +26,11 @@ from pathlib import Path
 from runner.mocap.keyframes import pick_keyframes
 from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO, clip_scene, name_surfaces
-from runner.paths import MODELS, display_path
+from runner.paths import display_path
 from solver.animate import default_options
 from solver.contacts import reference_contacts
 from solver.errors import InputError
+from solver.figure import FIGURE_FILE
 from solver.keyframe_file import read_keyframes, write_keyframes
 from solver.layout import StateLayout
 from solver.model import check_scene
@@ -37,7 +38,7 @@ from solver.quadrature import DEFAULT_RATE
 from solver.solve import SolveOptions
 
 #: the figure every scene includes
-FIGURE = MODELS / "humanoid39.xml"
+FIGURE = FIGURE_FILE  # the shipped figure (solver.figure)
 
 
 @dataclass(frozen=True)

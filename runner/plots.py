@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES, site_ids
+from solver.figure import Figure
+from solver.layout import site_ids
 from solver.metrics import dynamics_series, sample_times
 from solver.surfaces import StaticSurfaces
 from solver.terms.penetration import site_positions
@@ -103,9 +104,10 @@ def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 5
     plt = _pyplot()
     data = mujoco.MjData(model)
     surfaces = StaticSurfaces.from_model(model, data)
-    sites = site_ids(model, CONTACT_SITES)
+    names = Figure.from_model(model).contact_sites
+    sites = site_ids(model, names)
     t0, t1 = float(keyframe_times[0]), float(keyframe_times[-1])
-    fig, axes = plt.subplots(len(CONTACT_SITES), 1, figsize=(10, 8.5), sharex=True)
+    fig, axes = plt.subplots(len(names), 1, figsize=(10, 8.5), sharex=True)
     lo, hi = 0.0, 50.0  # [mm] the y range of the data, the same on every panel
     for label, track in tracks.items():
         if len(track) == 3:  # samples
@@ -121,7 +123,7 @@ def plot_foot_heights(path, model, tracks: dict, keyframe_times, rate: float = 5
             lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
         for k, ax in enumerate(axes):
             ax.plot(t, h[:, k], label=label, **STYLE.get(label, {}))
-    for k, (ax, name) in enumerate(zip(axes, CONTACT_SITES)):
+    for k, (ax, name) in enumerate(zip(axes, names)):
         ax.axhline(0.0, color="k", lw=0.8)
         ax.axhspan(-1e4, 0.0, color="#d62728", alpha=0.06, lw=0)
         _mark_keyframes(ax, keyframe_times, label=(k == 0))

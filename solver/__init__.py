@@ -17,6 +17,7 @@ from solver.animate import animate, default_options
 from solver.contact_schedule import ContactSchedule
 from solver.contacts import Contact
 from solver.errors import DynsplinesError, InputError
+from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.keyframe_file import KeyframeFileInfo, read_keyframes, write_keyframes
 from solver.keyframes import Keyframes
@@ -50,6 +51,8 @@ __all__ = [
     "DynsplinesError", "InputError", "NonFiniteError",
     # inputs: keyframes, the figure's state layout, frames and the spline
     "Keyframes", "StateLayout", "FrameSet", "SplineBasis",
+    # the figure read from its MJCF: bodies, joints, flexion axes, feet, segments, masses, height
+    "Figure",
     # files: an MJCF scene, the JSON keyframe file
     "load_model", "read_keyframes", "write_keyframes", "KeyframeFileInfo",
     # the contact schedule (DESIGN.md "Contacts") and what keyframes contradict in it

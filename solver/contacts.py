@@ -7,21 +7,22 @@ heuristics alone flicker and are known to be unreliable against pressure-insole 
 only below the tighter pair of thresholds, leaves only above the looser pair, and contacts shorter
 than `min_duration` are dropped. The animator overrides the result by writing contacts by hand.
 
-Defaults, chosen on the three CMU clips (127_33 run and step onto a box, 16_23 walk, 35_17 run;
-120 fps, retargeted by `runner/bvh_import.py`, heights above the surface under each site):
+Defaults (`solver.contact_thresholds`), chosen on the three CMU clips (127_33 run and step onto a
+box, 16_23 walk, 35_17 run; 120 fps, retargeted by `runner/bvh_import.py`, heights above the surface
+under each site):
 
-- HEIGHT_ON = 0.03 m, HEIGHT_OFF = 0.05 m. After the retargeting's root-height correction a planted
-  site sits 2 mm above its surface. A forefoot runner's heel hovers 5-10 cm up while the toe is
+- DETECT_HEIGHT_ON = 0.03 m, DETECT_HEIGHT_OFF = 0.05 m. After the retargeting's root-height
+  correction a planted site sits 2 mm above its surface. A forefoot runner's heel hovers 5-10 cm up while the toe is
   planted (127_33 frames 3-18: l_heel 8-10 cm, still at 0.2 m/s), so the entry height must stay
   under ~5 cm or that heel would count as planted; 3 cm takes the walker's heel at heel strike
   (16_23: 0.2-2.3 cm). Leaving at 5 cm is the GMD foot-contact height (../shared/METRICS.md).
-- SPEED_ON = 0.5 m/s, SPEED_OFF = 1.0 m/s (3-D speed, central differences). Planted sites move at
-  0.18-0.34 m/s (median over contact frames), 0.6-0.9 m/s at the 95th percentile (the foot rolling
+- DETECT_SPEED_ON = 0.5 m/s, DETECT_SPEED_OFF = 1.0 m/s (3-D speed, central differences). Planted
+  sites move at 0.18-0.34 m/s (median over contact frames), 0.6-0.9 m/s at the 95th percentile (the foot rolling
   over the toe at push-off, marker noise); swinging feet move at 2-10 m/s. Entering at 0.5 m/s (the
   GMD skating speed) means a site enters contact not skating by their measure; leaving at 1 m/s
   keeps a rolling toe planted through push-off.
-- MIN_DURATION = 0.05 s (6 frames at 120 fps). Stances last 0.16-0.23 s in the runs and 0.2-0.44 s
-  per site in the walk; the shortest real contacts are heel touches of a forefoot runner
+- DETECT_MIN_DURATION = 0.05 s (6 frames at 120 fps). Stances last 0.16-0.23 s in the runs and
+  0.2-0.44 s per site in the walk; the shortest real contacts are heel touches of a forefoot runner
   (0.058-0.092 s, kept); a swinging foot brushing past the thresholds lasts a few frames.
 
 Why hysteresis: with single thresholds (3 cm / 0.5 m/s, or GMD's 5 cm / 0.5 m/s) and no minimum
@@ -35,25 +36,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solver.contact_thresholds import (
+    DETECT_HEIGHT_OFF,
+    DETECT_HEIGHT_ON,
+    DETECT_MIN_DURATION,
+    DETECT_SPEED_OFF,
+    DETECT_SPEED_ON,
+)
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES
+from solver.layout import CONTACT_SITES, FEET
 
-#: the contact sites of the figure, in the order of `site_pos` arrays: `solver.layout.CONTACT_SITES`
-#: (the name kept for the callers of this module).
+#: the shipped figure's contact sites, in the order of `site_pos` arrays (`solver.layout.CONTACT_SITES`,
+#: the name kept for the callers of this module); another figure's: `Figure.from_model(model).contact_sites`.
 SITES: tuple[str, ...] = CONTACT_SITES
-#: feet -> their contact sites (short foot names "l", "r": the site-name prefixes).
-FEET: dict[str, tuple[str, str]] = {"l": ("l_heel", "l_toe"), "r": ("r_heel", "r_toe")}
 
-#: a site enters contact below this height above the surface under it [m] ...
-HEIGHT_ON = 0.03
-#: ... and leaves above this one [m].
-HEIGHT_OFF = 0.05
-#: a site enters contact below this speed [m/s] ...
-SPEED_ON = 0.5
-#: ... and leaves above this one [m/s].
-SPEED_OFF = 1.0
-#: shorter contacts are dropped [s].
-MIN_DURATION = 0.05
 
 
 @dataclass(frozen=True)
@@ -104,11 +100,11 @@ def detect_contacts(
     site_pos: np.ndarray,
     heights: np.ndarray,
     sites: Sequence[str] = SITES,
-    height_on: float = HEIGHT_ON,
-    height_off: float = HEIGHT_OFF,
-    speed_on: float = SPEED_ON,
-    speed_off: float = SPEED_OFF,
-    min_duration: float = MIN_DURATION,
+    height_on: float = DETECT_HEIGHT_ON,
+    height_off: float = DETECT_HEIGHT_OFF,
+    speed_on: float = DETECT_SPEED_ON,
+    speed_off: float = DETECT_SPEED_OFF,
+    min_duration: float = DETECT_MIN_DURATION,
 ) -> list[Contact]:
     """Contacts of each site from its height above the surface and its speed, with hysteresis.
 

@@ -40,8 +40,9 @@ import numpy as np
 from solver.contact_schedule import ContactSchedule
 from solver.contacts import Contact
 from solver.errors import InputError
+from solver.figure import Figure
 from solver.keyframes import Keyframes
-from solver.layout import CONTACT_SITES, FEET, StateLayout
+from solver.layout import FEET, StateLayout
 
 FORMAT = "dynsplines.keyframes/1"
 _TOP_KEYS = {"format", "model", "scene", "source", "terms", "contacts", "keyframes", "comment"}
@@ -115,8 +116,9 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
     Args:
         path: the .json keyframe file.
         layout: the figure's qpos layout, `StateLayout.from_model(model)` (joint names and sizes), or
-            the mujoco.MjModel itself (a scene with surfaces: the contacts' surface names are checked
-            against it here; else by the contact terms against theirs, naming this file and entry).
+            the mujoco.MjModel itself (then the contacts name that figure's feet and sites,
+            `solver.figure.Figure`, and a scene's surface names are checked here; with a layout, the
+            shipped figure's feet, and the contact terms check the surfaces, naming this file and entry).
     Returns:
         (keyframes, info): solver.Keyframes with times (k,) [s], values (k, nq) (NaN where free) and
         mask (k, nq) (True where fixed), source = str(path); and the file's KeyframeFileInfo.
@@ -129,13 +131,13 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
             increasing or negative, fewer than two keyframes, a keyframe fixing nothing, a zero
             quaternion); a "model" field that does not name an existing file.
     """
-    surfaces = None
-    if not isinstance(layout, StateLayout):
+    surfaces, mj_model = None, None if isinstance(layout, StateLayout) else layout
+    if mj_model is not None:
         from solver.surfaces import StaticSurfaces
 
-        found = StaticSurfaces.from_model(layout)
+        found = StaticSurfaces.from_model(mj_model)
         surfaces = tuple(found.names) if found.count else None  # a figure alone: checked with its scene
-        layout = StateLayout.from_model(layout)
+        layout = StateLayout.from_model(mj_model)
     p = Path(path)
     src = str(path)
     doc = read_document(path)
@@ -228,26 +230,31 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
     terms = doc.get("terms", {})
     if not isinstance(terms, dict):
         raise InputError(f"{src}: field 'terms' is {terms!r}; it must be an object {{term name: weight}}")
-    contacts = read_contacts(doc.get("contacts", []), src, surfaces)
+    feet = Figure.from_model(mj_model).feet if mj_model is not None and doc.get("contacts") else None
+    contacts = read_contacts(doc.get("contacts", []), src, surfaces, feet)
     keyframes = Keyframes(times, values, mask, source=src)
     return keyframes, KeyframeFileInfo(p, model, resolve("scene"), dict(source), dict(terms), contacts)
 
 
-def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = None) -> ContactSchedule:
+def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = None, feet=None) -> ContactSchedule:
     """The "contacts" field of a keyframe file as a `ContactSchedule` (a foot expanded to its heel and
     toe; each contact labelled "contacts[i]" with its entry's index, for later messages).
 
-    Each entry is {"site": one of CONTACT_SITES | "foot": "left" | "right", "start": s, "end": s,
+    Each entry is {"site": a contact site | "foot": a foot ("left" | "right"), "start": s, "end": s,
     "surface": name (optional, "" = whichever surface is under the site), "comment": optional}.
 
     Args:
         entries: the parsed field. src: the file, for messages. surfaces: the scene's surface names, if
             known (else the contact terms check them against their scene, naming this file and entry).
+            feet: {side: (heel, toe)}, the figure's feet (`Figure.feet`; default: the shipped
+            figure's, `solver.layout.FEET`).
     Raises:
         InputError: naming the file, the field ("contacts", entry index, key), the value and the fix:
             not a list, an entry that is not an object, an unknown key, site or foot, a time that is not
             a finite number >= 0, end not after start, an unknown surface (with `surfaces`).
     """
+    feet = FEET if feet is None else feet
+    known = tuple(s for pair in feet.values() for s in pair)
     if not isinstance(entries, list):
         raise InputError(f"{src}: field 'contacts' is a {type(entries).__name__}; it must be a list of "
                          '{"site": "l_toe", "start": s, "end": s} or {"foot": "left", "start": s, "end": s}')
@@ -263,18 +270,18 @@ def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = Non
             raise InputError(f"{where}: unknown field(s) {', '.join(map(repr, extra))}; a contact has 'site' or "
                              "'foot', 'start', 'end' and optionally 'surface' and 'comment'")
         if ("site" in c) == ("foot" in c):
-            raise InputError(f"{where}: give exactly one of 'site' ({', '.join(CONTACT_SITES)}) or 'foot' "
-                             f"({', '.join(FEET)})")
+            raise InputError(f"{where}: give exactly one of 'site' ({', '.join(known)}) or 'foot' "
+                             f"({', '.join(feet)})")
         if "site" in c:
-            if not isinstance(c["site"], str):
-                raise InputError(f"{where}: 'site' is {c['site']!r}; give a contact site's name "
-                                 f"({', '.join(CONTACT_SITES)}) or use 'foot': {' or '.join(map(repr, FEET))}")
-            sites: tuple[str, ...] = (c["site"],)  # a known site: checked by the schedule
+            if c["site"] not in known:
+                raise InputError(f"{where}: 'site' is {c['site']!r}; the contact sites are "
+                                 f"{', '.join(known)} (or use 'foot': {' or '.join(map(repr, feet))})")
+            sites: tuple[str, ...] = (c["site"],)
         else:
-            if c["foot"] not in FEET:
-                raise InputError(f"{where}: 'foot' is {c['foot']!r}; give {' or '.join(map(repr, FEET))} "
+            if c["foot"] not in feet:
+                raise InputError(f"{where}: 'foot' is {c['foot']!r}; give {' or '.join(map(repr, feet))} "
                                  "(or a 'site')")
-            sites = FEET[c["foot"]]
+            sites = feet[c["foot"]]
         for key in ("start", "end"):
             if key not in c:
                 raise InputError(f"{where}: missing field {key!r}; give the contact's {key} time in seconds")
@@ -288,7 +295,7 @@ def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = Non
         out += [Contact(site, float(c["start"]), float(c["end"]), surface) for site in sites]
         labels += [f"contacts[{i}]"] * len(sites)
     # start < end, the sites, and (with the scene) the surfaces: checked once, by the schedule
-    return ContactSchedule.of(out, CONTACT_SITES, surfaces, source=src, labels=labels)
+    return ContactSchedule.of(out, known, surfaces, source=src, labels=labels)
 
 
 def contacts_document(contacts) -> list[dict]:

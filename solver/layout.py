@@ -12,11 +12,14 @@ import numpy as np
 
 from solver.errors import InputError
 
-#: the figure's contact sites (models/humanoid39.xml): the points of the feet that meet the surfaces
-#: (penetration term, flight indicator, metrics, contacts of motion capture)
+#: Deprecated: the shipped figure's contact sites, `Figure.from_model(model).contact_sites` (read from
+#: the MJCF's ``figure:foot:*`` annotations, solver/figure.py). Kept, as the same names, for default
+#: arguments that have no model at hand; tests/solver/test_figure.py checks it equals the shipped
+#: figure's. New code reads the Figure of its model.
 CONTACT_SITES: tuple[str, ...] = ("l_heel", "l_toe", "r_heel", "r_toe")
 
-#: the contact sites grouped by foot
+#: Deprecated: the shipped figure's feet {side: (heel, toe)}, `Figure.from_model(model).feet`; kept
+#: and checked like `CONTACT_SITES`.
 FEET: dict[str, tuple[str, str]] = {"left": ("l_heel", "l_toe"), "right": ("r_heel", "r_toe")}
 
 

@@ -26,9 +26,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.keyframes import Keyframes
-from solver.layout import CONTACT_SITES, StateLayout
+from solver.layout import StateLayout
 from solver.spline import interpolate
 from solver.terms.bending import Hyperextension
 from solver.terms.penetration import Penetration
@@ -56,14 +57,14 @@ def keyframe_error(frames: FrameSet | tuple, keyframes: Keyframes, quat_slots) -
     return float(err.max()) if err.size else 0.0
 
 
-def dynamics_series(model, frame_times, frames, rate: float = 1000.0, sites=CONTACT_SITES,
+def dynamics_series(model, frame_times, frames, rate: float = 1000.0, sites=None,
                     flight_threshold: float = 0.5) -> dict:
     """Inverse dynamics along a path (the natural cubic spline through frames), sampled densely.
 
     Args:
         model: MjModel of the scene (figure with a free root and ball joints, static surfaces).
         frame_times: (m,) [s]. frames: (m, nq). rate: samples per second [1/s].
-        sites: contact sites for the flight indicator. flight_threshold: phi above which a sample is
+        sites: contact sites for the flight indicator (default: the figure's). flight_threshold: phi above which a sample is
             in flight.
     Returns:
         dict of arrays over n samples: t (n,) [s]; joint_torque (n, 33) [N m] (ball-joint DOFs in
@@ -79,6 +80,7 @@ def dynamics_series(model, frame_times, frames, rate: float = 1000.0, sites=CONT
     layout = StateLayout.from_model(model)
     t = sample_times(frame_times[0], frame_times[-1], rate)
     Y, Y1, Y2 = (interpolate(frame_times, frames, t, nu) for nu in (0, 1, 2))
+    sites = Figure.from_model(model).contact_sites if sites is None else tuple(sites)
     engine = make_engine(model, tuple(sites))
     torque = JointTorque(model, engine=engine)
     root = RootResidual(model, sites=sites, engine=engine)
@@ -150,12 +152,13 @@ def _ground_and_pelvis(series: dict, rms, peak) -> dict:
 
 
 def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None, rate: float = 1000.0,
-                 sites=CONTACT_SITES, dynamics: bool = True) -> dict:
+                 sites=None, dynamics: bool = True) -> dict:
     """Acceptance figures of a path (the natural cubic spline through frames).
 
     Args:
         model: MjModel of the scene. frame_times: (m,) [s]. frames: (m, nq).
         keyframes: to report the keyframe error (optional). rate: samples per second.
+        sites: the contact sites to measure (default: the figure's, `Figure.contact_sites`).
         dynamics: also report the inverse-dynamics figures (`dynamics_metrics`; skipped, without an
             error, for a model the analytic engine does not support).
     Returns:
@@ -164,6 +167,7 @@ def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None,
         keyframe_error (if keyframes given), samples, and the `dynamics_metrics` keys.
     """
     layout = StateLayout.from_model(model)
+    sites = Figure.from_model(model).contact_sites if sites is None else tuple(sites)
     t = sample_times(frame_times[0], frame_times[-1], rate)
     Y = interpolate(frame_times, frames, t)
     pen = Penetration(model, sites=sites, margin=0.0)
@@ -177,7 +181,7 @@ def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None,
         "max_norm_deviation": float(np.abs(1.0 - norms).max()),
     }
     try:
-        bend = Hyperextension(layout)
+        bend = Hyperextension(layout, Figure.from_model(model).flexion_axes)
         hyper = np.degrees(np.maximum(0.0, -bend.angles(Y))).max(axis=0)
         out["max_hyperextension_deg_by_joint"] = dict(zip(bend.joint_names, hyper.round(3).tolist()))
         out["max_hyperextension_deg"] = float(hyper.max())

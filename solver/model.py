@@ -76,26 +76,26 @@ def load_model(path: str | os.PathLike):
 def check_scene(model, path: str | os.PathLike) -> None:
     """Check that a scene has what the figure tools need, when it is loaded (not later, in a term).
 
-    Needs: the figure (a free root joint and the contact sites solver.layout.CONTACT_SITES) and at
-    least one static plane or box on the world body (the floor the penetration term keeps feet out of).
+    Needs: the figure (one free root joint, and its feet: the contact sites the figure's MJCF names,
+    `solver.figure.Figure`) and at least one static plane or box on the world body (the floor the
+    penetration term keeps feet out of).
 
     Raises:
         InputError: naming the scene file, what is missing and the fix.
     """
-    import mujoco
-
-    from solver.layout import CONTACT_SITES, StateLayout
+    from solver.figure import FIGURE_FILE, Figure
+    from solver.layout import StateLayout
     from solver.surfaces import StaticSurfaces
 
     layout = StateLayout.from_model(model)
     if not any(j.kind == "free" for j in layout.joints):
-        raise InputError(f"scene {path} has no free joint: does it include the figure (humanoid39.xml)? "
+        raise InputError(f"scene {path} has no free joint: does it include the figure ({FIGURE_FILE.name})? "
                          f"{SCENE_HELP[0].upper()}{SCENE_HELP[1:]}")
-    missing = [s for s in CONTACT_SITES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0]
-    if missing:
-        raise InputError(f"scene {path} has no contact site(s) {', '.join(map(repr, missing))} (the "
-                         f"figure's feet need {', '.join(CONTACT_SITES)}): does it include the figure "
-                         f"(humanoid39.xml)? {SCENE_HELP[0].upper()}{SCENE_HELP[1:]}")
+    try:
+        Figure.from_model(model)
+    except InputError as e:
+        raise InputError(f"scene {path}: {e}. Does it include the figure ({FIGURE_FILE.name})? "
+                         f"{SCENE_HELP[0].upper()}{SCENE_HELP[1:]}") from None
     if StaticSurfaces.from_model(model).count == 0:
         raise InputError(
             f"scene {path} has no static floor plane or box (a plane or box geom of the world body) for the "

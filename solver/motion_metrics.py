@@ -50,7 +50,7 @@ than mesh vertices)
   swinging feet as "in contact" (16_23 scores 0.7); skating_ratio_contacts replaces the height test
   by the REFERENCE's contacts (a site planted at both ends of a step at fps moving > 0.5 m/s).
 - flight_time_s: frames in which every site is clear (h > FLIGHT_HEIGHT = 0.03 m, the contact entry
-  height of `contacts.HEIGHT_ON`) times 1/fps.
+  height `contact_thresholds.DETECT_HEIGHT_ON`) times 1/fps. Thresholds: `solver.contact_thresholds`.
 - jerk_root_m_s3 / jerk_sites_m_s3: third finite difference of positions * fps^3, mean norm (root
   position; all contact sites), METRICS.md "Smoothness".
 """
@@ -60,19 +60,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from solver.contact_thresholds import FLIGHT_HEIGHT, FLOAT_TOL, GMD_HEIGHT, SKATE_HEIGHT
 from solver.contacts import FEET, SITES, Contact, contact_mask
 from solver.errors import InputError
 
-#: a site is on the ground for the PhysDiff skate below this height [m].
-SKATE_HEIGHT = 0.02
-#: PhysDiff float tolerance [m].
-FLOAT_TOL = 0.005
-#: GMD contact height [m], skating speed [m/s], and frame rate [Hz].
-GMD_HEIGHT = 0.05
+#: GMD skating speed [m/s] and frame rate [Hz] (its contact height: `contact_thresholds.GMD_HEIGHT`).
 GMD_SPEED = 0.5
 GMD_RATE = 20.0
-#: every site above this height: the figure is in flight [m].
-FLIGHT_HEIGHT = 0.03
 
 
 def _kinematics(model, qpos, sites):

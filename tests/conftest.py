@@ -18,6 +18,12 @@ if os.environ.get("CI"):
 
 TOY_SCENE = """
 <mujoco>
+  <custom>
+    <text name="figure:foot:left" data="l_heel l_toe"/>
+    <text name="figure:foot:right" data="r_heel r_toe"/>
+    <numeric name="figure:flexion:l_knee" data="0 1 0"/>
+    <numeric name="figure:flexion:r_knee" data="0 1 0"/>
+  </custom>
   <worldbody>
     <geom name="floor" type="plane" size="5 5 .1"/>
     <geom name="step" type="box" pos="1.5 0 .1" size=".4 1 .1"/>

@@ -1,6 +1,10 @@
 """Inline MJCF trees for the kinematics and inverse-dynamics tests, and a tangent-space step."""
+import re
+
 import mujoco
 import numpy as np
+
+from solver.figure import FIGURE_FILE
 
 # Every feature the analytic engine models: a static body carrying a ball joint, body quats, joint
 # anchors off the body origin, a welded body, damping and armature, several sites on one body.
@@ -59,3 +63,13 @@ def tangent_step(model, Y, dv):
         mujoco.mj_integratePos(model, q, v, 1.0)
         out.append(q)
     return np.array(out)
+
+
+def scaled_figure_xml(scale: float) -> str:
+    """models/humanoid39.xml with every length (pos, fromto, size) times `scale`: another figure, the
+    same annotations."""
+
+    def times(m):
+        return f'{m.group(1)}="{" ".join(repr(float(x) * scale) for x in m.group(2).split())}"'
+
+    return re.sub(r'(?<=\s)(pos|fromto|size)="([^"]+)"', times, FIGURE_FILE.read_text())

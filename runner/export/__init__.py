@@ -88,7 +88,7 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
             from runner.export.gltf import Track, write_glb
 
             write_glb(out, model, [Track(which, motion.times, motion.qpos)])
-            joints = figure_skeleton(model).count
+            joints = figure_skeleton(model, head=False).count
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
                          f"space or choose another {option}") from None

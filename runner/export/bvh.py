@@ -3,8 +3,15 @@
 Skeleton: one BVH joint per figure body (pelvis = ROOT, then the bodies with a ball joint, depth-first in
 MuJoCo's order), named after the bodies. OFFSETs are MuJoCo's `body_pos` of the loaded model (the joint
 centre: every ball joint sits at its body's origin); leaf bodies (feet, forearms) end in an `End Site`
-at the far end of their geoms. The ROOT's OFFSET is 0 0 0 and its position channels carry the root
+at the far end of their geoms, except the feet, whose end site is the toe contact site (the tip of the
+sole, `solver.figure.Figure.feet`). The ROOT's OFFSET is 0 0 0 and its position channels carry the root
 translation (world position of the pelvis frame).
+
+Neck and head: the figure's head is rigid with its torso, so the skeleton adds two joints that never
+move, ``neck`` (the base of the neck) and ``head`` (the base of the skull), under the torso, ending in
+an End Site at the top of the head (`solver.figure.NeckChain`: the geom ``neck`` and the site ``head``).
+Their rotation channels are always 0. So the rest armature spans the figure's standing height, from
+the soles to the top of the head (1.75 m for models/humanoid39.xml).
 
 Units and axes: metres and degrees. BVH axes are Y up, the figure facing +Z, its left at +X:
 (X, Y, Z)_bvh = (y, z, x)_mujoco, the axes of the CMU clips (`runner.bvh_import.BVH_TO_MUJOCO`, inverted).
@@ -28,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from solver.errors import InputError
+from solver.figure import Figure
 from solver.quaternion import align_hemispheres, conj, mul, normalize
 
 __all__ = ["MUJOCO_TO_BVH", "EULER_ORDER", "Skeleton", "figure_skeleton", "bvh_text", "write_bvh",
@@ -42,14 +50,16 @@ _DECIMALS = 9
 
 @dataclass(frozen=True)
 class Skeleton:
-    """The figure's bodies as a BVH skeleton.
+    """The figure's bodies (and its fixed neck and head joints) as a BVH skeleton.
 
     Attributes:
-        bodies: (J,) MuJoCo body ids, depth-first (root first). names: (J,) body names.
+        bodies: (J,) MuJoCo body ids, depth-first (root first), -1 for the fixed neck and head joints.
+        names: (J,) body names ("neck", "head" for the fixed joints).
         parents: (J,) index into `bodies` of each parent, -1 for the root.
         offsets: (J, 3) body_pos in the parent frame [m], MuJoCo axes (the root's: zeros).
         body_quat: (J, 4) body_quat (w x y z); the root's is the identity (the free joint replaces it).
-        qpos_quat: (J, 4) qpos indices of each body's joint quaternion (the root's: its free joint's).
+        qpos_quat: (J, 4) qpos indices of each body's joint quaternion (the root's: its free joint's;
+            zeros for the fixed joints, which `local_quat` keeps at the identity).
         root_pos: (3,) qpos indices of the root translation.
         end_sites: {index: (3,) offset [m], MuJoCo axes} for the leaf bodies.
     """
@@ -67,17 +77,33 @@ class Skeleton:
     def count(self) -> int:
         return len(self.bodies)
 
+    @property
+    def moving(self) -> np.ndarray:
+        """(J,) bool: the joint is a body of the figure (False: a fixed neck or head joint)."""
+        return self.bodies >= 0
+
     def local_quat(self, qpos: np.ndarray) -> np.ndarray:
-        """(n, J, 4) unit local rotation of every joint (parent frame <- body frame), MuJoCo axes."""
-        q = normalize(np.asarray(qpos, float)[:, self.qpos_quat])
-        return normalize(mul(np.broadcast_to(self.body_quat, q.shape), q))
+        """(n, J, 4) unit local rotation of every joint (parent frame <- body frame), MuJoCo axes; the
+        identity for the fixed joints."""
+        qpos = np.asarray(qpos, float)
+        out = np.zeros((len(qpos), self.count, 4))
+        out[..., 0] = 1.0
+        m = self.moving
+        q = normalize(qpos[:, self.qpos_quat[m]])
+        out[:, m] = normalize(mul(np.broadcast_to(self.body_quat[m], q.shape), q))
+        return out
 
 
-def figure_skeleton(model) -> Skeleton:
-    """The skeleton of the figure in `model`: the free-joint body and its descendants.
+def figure_skeleton(model, head: bool = True) -> Skeleton:
+    """The skeleton of the figure in `model`: the free-joint body and its descendants (module docstring).
 
+    Args:
+        model: MjModel holding the figure.
+        head: add the fixed neck and head joints (BVH); False: the bodies only (glTF, whose torso node
+            holds the head's mesh).
     Raises:
-        InputError: no free joint, or a descendant body without exactly one ball joint at its origin.
+        InputError: no free joint, or a descendant body without exactly one ball joint at its origin,
+            or a figure without its annotations (`solver.figure.Figure.from_model`).
     """
     import mujoco
 
@@ -105,16 +131,33 @@ def figure_skeleton(model) -> Skeleton:
     bquat = model.body_quat[bodies].copy()
     bquat[0] = (1.0, 0.0, 0.0, 0.0)
     names = tuple(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, int(b)) for b in bodies)
-    end_sites = {i: _end_site(model, int(b)) for i, b in enumerate(bodies) if i not in parents}
+    figure = Figure.from_model(model)
+    end_sites = {i: _end_site(model, int(b), figure) for i, b in enumerate(bodies) if i not in parents}
     root_pos = model.jnt_qposadr[free[0]] + np.arange(3)
-    return Skeleton(bodies, names, np.array(parents, int), offsets, bquat, np.array(qidx, int), root_pos,
-                    end_sites)
+    sk = Skeleton(bodies, names, np.array(parents, int), offsets, bquat, np.array(qidx, int), root_pos, end_sites)
+    neck = figure.neck
+    if head and neck is not None and not {"neck", "head"} & set(names):
+        sk = _with_neck(sk, names.index(neck.body), neck)
+    return sk
 
 
-def _end_site(model, body: int) -> np.ndarray:
-    """The far end of a leaf body's geoms [m], body frame: the geom end farthest from the origin."""
+def _with_neck(sk: Skeleton, torso: int, neck) -> Skeleton:
+    """`sk` with the fixed joints neck (child of `torso`) and head, and the head's End Site (module docstring)."""
+    J = sk.count
+    return Skeleton(np.r_[sk.bodies, -1, -1], sk.names + ("neck", "head"), np.r_[sk.parents, torso, J],
+                    np.vstack([sk.offsets, neck.neck, neck.skull - neck.neck]),
+                    np.vstack([sk.body_quat, [[1.0, 0, 0, 0]] * 2]), np.vstack([sk.qpos_quat, np.zeros((2, 4), int)]),
+                    sk.root_pos, {**sk.end_sites, J + 1: neck.top - neck.skull})
+
+
+def _end_site(model, body: int, figure: Figure) -> np.ndarray:
+    """A leaf body's End Site [m], body frame: a foot's toe contact site (the tip of the sole), else the
+    end of the body's geoms farthest from the origin."""
     import mujoco
 
+    for _heel, toe in figure.feet.values():
+        if int(model.site_bodyid[model.site(toe).id]) == body:
+            return np.array(model.site_pos[model.site(toe).id], float)
     best = np.zeros(3)
     for g in range(model.body_geomadr[body], model.body_geomadr[body] + model.body_geomnum[body]):
         size, kind = model.geom_size[g], int(model.geom_type[g])
@@ -196,7 +239,7 @@ def is_figure_clip(clip, model) -> bool:
     """True if `clip` (a BvhClip) is on the figure's own skeleton: it has a joint named after every figure
     body (what `write_bvh` writes), so `figure_qpos_from_bvh` reads it exactly, without retargeting."""
     names = set(clip.names)
-    return all(n in names for n in figure_skeleton(model).names)
+    return all(n in names for n in figure_skeleton(model, head=False).names)
 
 
 def figure_qpos_from_bvh(clip, model) -> np.ndarray:
@@ -210,7 +253,7 @@ def figure_qpos_from_bvh(clip, model) -> np.ndarray:
     Raises:
         InputError: a figure body is missing from the clip.
     """
-    sk = figure_skeleton(model)
+    sk = figure_skeleton(model, head=False)  # the fixed neck and head joints carry nothing
     missing = [n for n in sk.names if n not in clip.names]
     if missing:
         raise InputError(f"{clip.source}: no joint(s) {', '.join(missing)}; this clip is not on the figure's "

@@ -243,7 +243,7 @@ def figure_gltf(model, tracks: Sequence[Track], sites: Sequence[str] = (), site_
         if np.ndim(tr.qpos) != 2 or len(tr.qpos) < 1 or tr.qpos.shape[1] != model.nq or len(tr.times) != len(tr.qpos):
             raise InputError(f"track {tr.name!r}: qpos shape {np.shape(tr.qpos)} with {len(tr.times)} times; "
                              f"expected (n >= 1, {model.nq}) and n times")
-    sk = figure_skeleton(model)
+    sk = figure_skeleton(model, head=False)  # the torso node holds the head's mesh
     B = _Builder()
     name = lambda g: mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom{g}"  # noqa: E731
     meshes = {}

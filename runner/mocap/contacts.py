@@ -5,14 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from runner.mocap.retarget import Reference
-from solver.errors import InputError
-from solver.layout import FEET
+from solver.contact_thresholds import CAPTURE_HEIGHT as CONTACT_HEIGHT
+from solver.contact_thresholds import CAPTURE_SPEED as CONTACT_SPEED
+from solver.figure import Figure
 
-#: contact definition (see `contact_mask`): a foot is in contact while its lowest site is at most this
-#: high above the surface under it [m] ...
-CONTACT_HEIGHT = 0.06
-#: ... and that site moves slower than this [m/s].
-CONTACT_SPEED = 0.6
+# contact definition (see `contact_mask`): CONTACT_HEIGHT, CONTACT_SPEED (solver.contact_thresholds)
 #: the wide height window [m] in which `correct_root_height` looks for feet at rest to measure the
 #: retargeting's height error (the retargeted feet can be several cm off before the correction)
 FIT_HEIGHT = 0.15
@@ -37,17 +34,9 @@ class _SiteKinematics:
         self.model = model
         self.data = mujoco.MjData(model)
         self.surfaces = StaticSurfaces.from_model(model, self.data)
-        self.names = [s for foot in FEET.values() for s in foot]
-        ids = []
-        for s in self.names:
-            sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s)
-            if sid < 0:
-                raise InputError(
-                    f"the model has no site {s!r}; the figure needs contact sites "
-                    f"{', '.join(self.names)} (models/humanoid39.xml)"
-                )
-            ids.append(sid)
-        self.ids = np.array(ids)
+        figure = Figure.from_model(model)  # raises InputError naming a missing site
+        self.names = list(figure.contact_sites)  # foot by foot, heel then toe
+        self.ids = figure.contact_site_ids
 
     def positions(self, qpos: np.ndarray) -> np.ndarray:
         """(n, 4, 3) world positions [m] of l_heel, l_toe, r_heel, r_toe for (n, nq) qpos."""

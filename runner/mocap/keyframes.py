@@ -8,13 +8,9 @@ import numpy as np
 
 from runner.mocap.retarget import Reference
 from solver.errors import InputError
+from solver.figure import Figure
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
-
-#: joints a default partial keyframe fixes: the root and the legs; torso and arms are left free
-#: (the optimizer chooses the upper body, the animator pins the stride).
-LOWER_BODY_JOINTS: tuple[str, ...] = ("root", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle")
-
 
 #: `partial="middle"` of `keyframes_from_reference` (the command's `--partial`): the middle keyframe
 #: fixes only the root and the legs.
@@ -91,7 +87,8 @@ def keyframes_from_reference(
         model: the figure's or scene's MjModel (for the qpos layout).
         every: [s] keyframe spacing (about 0.2-0.3 s for a run).
         partial: None or {} (default): full keyframes only. "middle": the middle keyframe (index
-            k // 2) fixes only `LOWER_BODY_JOINTS` (root and legs; torso and arms free). Or a mapping
+            k // 2) fixes only the root and the legs (`Figure.leg_joints`; torso and arms are left
+            free: the optimizer chooses the upper body, the animator pins the stride). Or a mapping
             {keyframe index: joint names it fixes}.
         indices: the frames to key (strictly increasing); default `keyframe_indices(reference, every)`.
     Returns:
@@ -107,7 +104,7 @@ def keyframes_from_reference(
     if isinstance(partial, str):
         if partial != MIDDLE_LOWER_BODY:
             raise InputError(f"partial={partial!r}; give 'middle' or a mapping {{keyframe index: joint names}}")
-        partial = {k // 2: LOWER_BODY_JOINTS} if k > 2 else {}
+        partial = {k // 2: Figure.from_model(model).leg_joints} if k > 2 else {}
     values = reference.qpos[idx].copy()
     mask = np.ones_like(values, bool)
     for i, names in dict(partial).items():
@@ -132,7 +129,7 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
         keys: "every": `keyframe_indices(reference, every, extremes)`; "contacts": touch-downs,
             lift-offs, the ends and the root's extremes (`solver.keyframe_selection.contact_keyframes`),
             with `every` (or None) the largest gap [s].
-        partial: the middle keyframe fixes only the root and the legs (`LOWER_BODY_JOINTS`).
+        partial: the middle keyframe fixes only the root and the legs (`Figure.leg_joints`).
         extremes: with keys="every", also key the root's highest and lowest frames.
     """
     from solver.keyframe_selection import contact_keyframes

@@ -8,14 +8,15 @@ import numpy as np
 from runner.mocap.bvh import read_bvh
 from runner.mocap.contacts import correct_root_height
 from runner.mocap.retarget import (
-    JOINT_BODIES,
     Reference,
+    check_figure,
     clamp_hyperextension,
     leg_length_ratio,
     retarget,
     tidy_quaternions,
 )
 from solver.errors import InputError
+from solver.figure import Figure
 from solver.layout import StateLayout
 
 #: the stages of `load_bvh_reference` its `progress` callback reports
@@ -67,12 +68,11 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
         step(len(IMPORT_STAGES), "figure skeleton, read exactly")
         return Reference(np.arange(len(qpos)) * clip.frame_time, qpos, str(path), clip.frame_time)
     layout = StateLayout.from_model(model)
-    for name in ("root", *JOINT_BODIES):
-        layout.joint(name)
+    figure = check_figure(Figure.from_model(model))
     scale = _root_scale(root_scale, clip, model, path)
-    qpos = retarget(clip, layout, scale)[1:]  # frame 0 is the synthetic T-pose
+    qpos = retarget(clip, figure, layout, scale)[1:]  # frame 0 is the synthetic T-pose
     step(2, "retargeted")
-    qpos, _ = clamp_hyperextension(qpos, layout)
+    qpos, _ = clamp_hyperextension(qpos, figure)
     step(3, "clamped")
     qpos = correct_root_height(qpos, model, clip.frame_time)
     step(4, "root height")

@@ -13,7 +13,9 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    left +y. So (x, y, z)_mujoco = (Z, X, Y)_bvh, a proper rotation (`BVH_TO_MUJOCO`).
 3. Retargeting: each figure body's world orientation is the corresponding CMU bone's world orientation
    times a fixed rest-pose offset R_off (`_rest_offsets`): the smallest rotation that takes the figure
-   bone's direction at the identity pose to the CMU bone's direction in the CMU rest (T-) pose (all
+   bone's direction at the identity pose (`solver.figure.Figure.segments`: hip -> knee, knee -> ankle,
+   ankle -> ball of the foot, shoulder -> elbow, elbow -> wrist) to the CMU bone's direction in the
+   CMU rest (T-) pose (all
    channels zero). So the CMU T-pose maps to the figure with arms out sideways, and with legs and feet
    along the subject's own rest bone directions (the CMU thigh and shin bones point about 20 degrees
    outward in its rest pose, so mapping them to the identity would cross the figure's legs); the
@@ -26,7 +28,8 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    angles, would slide its planted feet (a 16_23 walk with bones scaled 1.1 and the root path left
    as captured: reference skate 2.19 instead of 1.58 mm/frame, and planting the feet moved the joints
    7.5 deg from the capture where the plain spline was 5.2 deg off).
-4. Clean-up for hard constraints: knee and elbow hyperextension (flexion < 0, see `FLEXION_AXES`) is
+4. Clean-up for hard constraints: knee and elbow hyperextension (flexion < 0 about the figure's
+   flexion axes, `solver.figure.Figure.flexion_axes`) is
    clamped to 0 by removing the twist about the hinge axis (swing-twist decomposition); then the root
    height is corrected (`correct_root_height`) so that a foot in contact has its lowest contact site
    on the surface under it, and no contact site is ever below a surface.
@@ -44,6 +47,7 @@ import numpy as np
 
 from runner.mocap.bvh import POSITION_CHANNELS, BvhClip
 from solver.errors import InputError
+from solver.figure import Figure
 from solver.layout import StateLayout
 from solver.quaternion import align_hemispheres, conj, mul, normalize, twist_angle
 
@@ -74,54 +78,6 @@ BONE_MAP: Mapping[str, tuple[str, str | None]] = MappingProxyType(
         "r_forearm": ("RightForeArm", "RightHand"),
     }
 )
-
-#: figure bone directions at the identity pose (body frame = world frame), matching BONE_MAP's CMU
-#: bone directions: hip -> knee, knee -> ankle, shoulder -> elbow, elbow -> wrist point straight down;
-#: the foot's is ankle -> ball of the foot (0.13 m forward, 0.045 m down), the analogue of the CMU
-#: LeftFoot -> LeftToeBase bone.
-FIGURE_BONE_DIRECTION: Mapping[str, tuple[float, float, float]] = MappingProxyType(
-    {
-        "l_thigh": (0.0, 0.0, -1.0),
-        "l_shin": (0.0, 0.0, -1.0),
-        "l_foot": (0.13, 0.0, -0.045),
-        "r_thigh": (0.0, 0.0, -1.0),
-        "r_shin": (0.0, 0.0, -1.0),
-        "r_foot": (0.13, 0.0, -0.045),
-        "l_upper_arm": (0.0, 0.0, -1.0),
-        "l_forearm": (0.0, 0.0, -1.0),
-        "r_upper_arm": (0.0, 0.0, -1.0),
-        "r_forearm": (0.0, 0.0, -1.0),
-    }
-)
-
-#: figure joint -> (parent body, child body). The root (free joint) drives the pelvis.
-JOINT_BODIES: Mapping[str, tuple[str, str]] = MappingProxyType(
-    {
-        "l_hip": ("pelvis", "l_thigh"),
-        "l_knee": ("l_thigh", "l_shin"),
-        "l_ankle": ("l_shin", "l_foot"),
-        "r_hip": ("pelvis", "r_thigh"),
-        "r_knee": ("r_thigh", "r_shin"),
-        "r_ankle": ("r_shin", "r_foot"),
-        "torso": ("pelvis", "torso"),
-        "l_shoulder": ("torso", "l_upper_arm"),
-        "l_elbow": ("l_upper_arm", "l_forearm"),
-        "r_shoulder": ("torso", "r_upper_arm"),
-        "r_elbow": ("r_upper_arm", "r_forearm"),
-    }
-)
-
-#: hinge-like joints and their flexion axis in the parent frame (models/humanoid39.xml): flexion is
-#: `twist_angle(q, axis)`, hyperextension is flexion < 0.
-FLEXION_AXES: Mapping[str, tuple[float, float, float]] = MappingProxyType(
-    {
-        "l_knee": (0.0, 1.0, 0.0),
-        "r_knee": (0.0, 1.0, 0.0),
-        "l_elbow": (0.0, -1.0, 0.0),
-        "r_elbow": (0.0, -1.0, 0.0),
-    }
-)
-
 
 # --------------------------------------------------------------------------------------------------
 # data
@@ -216,11 +172,12 @@ def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q)
 
 
-def _rest_offsets(clip: BvhClip) -> dict[str, np.ndarray]:
+def _rest_offsets(clip: BvhClip, figure: Figure) -> dict[str, np.ndarray]:
     """Rest-pose offset R_off (unit quaternion) per figure body: figure world = CMU world * R_off.
 
-    For a limb bone, the smallest rotation taking `FIGURE_BONE_DIRECTION` to the CMU bone direction in
-    the CMU rest pose (the child joint's OFFSET, in MuJoCo axes); identity for the pelvis and torso.
+    For a limb bone, the smallest rotation taking the figure's segment direction at the identity pose
+    (`Figure.segments`, body frame = world frame there) to the CMU bone direction in the CMU rest pose
+    (the child joint's OFFSET, in MuJoCo axes); identity for the pelvis and torso.
     """
     out = {}
     for body, (_, child) in BONE_MAP.items():
@@ -233,22 +190,23 @@ def _rest_offsets(clip: BvhClip) -> dict[str, np.ndarray]:
                 f"{clip.source}: joint {child} has a zero OFFSET, so the bone that ends there has no "
                 "direction; the retargeting needs the CMU skeleton (Hahne's BVH conversion)"
             )
-        out[body] = _swing(np.array(FIGURE_BONE_DIRECTION[body]), d_cmu)
+        out[body] = _swing(figure.segments[body].direction, d_cmu)
     return out
 
 
-#: the leg bones whose lengths give the root path's scale: (figure knee body, figure ankle body, CMU
-#: knee joint, CMU ankle joint); the bone ending at a body has that body's offset from its parent.
-LEG_BONES = (("l_shin", "l_foot", "LeftLeg", "LeftFoot"), ("r_shin", "r_foot", "RightLeg", "RightFoot"))
+#: the leg bones whose lengths give the root path's scale: (figure thigh body, figure shin body, CMU
+#: knee joint, CMU ankle joint); a figure segment runs from its body's joint to the next joint, a CMU
+#: bone's length is the OFFSET of the joint it ends at.
+LEG_BONES = (("l_thigh", "l_shin", "LeftLeg", "LeftFoot"), ("r_thigh", "r_shin", "RightLeg", "RightFoot"))
 
 
 def leg_length_ratio(clip: BvhClip, model) -> float:
     """The figure's leg length over the subject's: the scale `retarget` applies to the root path.
 
     Leg length = hip -> knee + knee -> ankle at the rest pose, the mean of both legs: for the figure
-    the norms of its knee and ankle bodies' offsets (`model.body(name).pos`: 0.42 + 0.42 m for
-    humanoid39.xml), for the subject the norms of the CMU OFFSETs of the knee and ankle joints in
-    metres (0.836 m for the subject of 16_23, 0.865 m for 35_17, 0.863 m for 127_33).
+    the lengths of its thigh and shin segments (`Figure.segments`: 0.42 + 0.42 m for humanoid39.xml),
+    for the subject the norms of the CMU OFFSETs of the knee and ankle joints in metres (0.836 m for
+    the subject of 16_23, 0.865 m for 35_17, 0.863 m for 127_33).
 
     Args:
         clip: a parsed clip with the CMU leg joints. model: the scene's MjModel (the figure's bodies).
@@ -256,22 +214,36 @@ def leg_length_ratio(clip: BvhClip, model) -> float:
         the ratio, > 0 [1].
     Raises:
         InputError: the clip is not the CMU skeleton (`check_skeleton`), a leg joint has a zero OFFSET,
-            or the model lacks a leg body.
+            or the figure lacks a leg body (`check_figure`).
     """
     check_skeleton(clip)
+    segments = check_figure(Figure.from_model(model)).segments
     figure, subject = [], []
-    for knee, ankle, cmu_knee, cmu_ankle in LEG_BONES:
-        try:
-            figure.append(float(np.linalg.norm(model.body(knee).pos) + np.linalg.norm(model.body(ankle).pos)))
-        except KeyError as e:
-            raise InputError(f"the figure has no body {e}; the retargeting needs models/humanoid39.xml's "
-                             f"{', '.join(b for leg in LEG_BONES for b in leg[:2])}") from None
+    for thigh, shin, cmu_knee, cmu_ankle in LEG_BONES:
+        figure.append(segments[thigh].length + segments[shin].length)
         bones = [np.linalg.norm(clip.offsets[clip.index(j)]) * UNIT_TO_METRES for j in (cmu_knee, cmu_ankle)]
         if min(bones) <= 1e-9:
             raise InputError(f"{clip.source}: joint {cmu_knee} or {cmu_ankle} has a zero OFFSET, so the leg "
                              "has no length; the retargeting needs the CMU skeleton (Hahne's BVH conversion)")
         subject.append(float(sum(bones)))
     return float(np.mean(figure) / np.mean(subject))
+
+
+def check_figure(figure: Figure) -> Figure:
+    """`figure` if its bodies are those `BONE_MAP` drives (models/humanoid39.xml's) and every limb body
+    has a segment (`Figure.segments`), else InputError naming the bodies and the fix."""
+    missing = [b for b in BONE_MAP if b not in figure.bodies]
+    extra = [b for b in figure.bodies if b not in BONE_MAP]
+    if missing or extra:
+        raise InputError(f"the figure's bodies differ from those the retargeting drives ({', '.join(BONE_MAP)}): "
+                         f"missing {', '.join(missing) or 'none'}, not driven {', '.join(extra) or 'none'}; "
+                         "use a figure with the bodies of models/humanoid39.xml")
+    no_end = [b for b, (_, child) in BONE_MAP.items() if child and b not in figure.segments]
+    if no_end:
+        raise InputError(f"the figure's bodies {', '.join(no_end)} have no segment end (no single child body): "
+                         f'add <text name="figure:end:{no_end[0]}" data="SITE"/> to its MJCF\'s <custom>, '
+                         "naming a site of that body where its bone ends")
+    return figure
 
 
 def _required_joints() -> list[str]:
@@ -302,7 +274,7 @@ def check_skeleton(clip: BvhClip) -> None:
         )
 
 
-def retarget(clip: BvhClip, layout: StateLayout, root_scale: float = 1.0) -> np.ndarray:
+def retarget(clip: BvhClip, figure: Figure, layout: StateLayout, root_scale: float = 1.0) -> np.ndarray:
     """Retarget every frame of a clip onto the figure: `qpos` before any clean-up.
 
     Root position = root_scale times the CMU Hips position [m] (scaled about the capture's origin);
@@ -311,25 +283,28 @@ def retarget(clip: BvhClip, layout: StateLayout, root_scale: float = 1.0) -> np.
     first with w >= 0.
 
     Args:
-        clip: a parsed clip (all frames). layout: the figure's qpos layout.
+        clip: a parsed clip (all frames). figure: the figure (`Figure.from_model`; its segments and
+            joints). layout: the scene's qpos layout.
         root_scale: scale of the root path, > 0 (`leg_length_ratio` for the figure's legs; 1: as captured).
     Returns:
         (n, nq) qpos.
     Raises:
         InputError: a joint the retargeting needs is missing from the clip, or the Hips has no
-            position channels (`check_skeleton`).
+            position channels (`check_skeleton`); the figure's bodies are not `BONE_MAP`'s (`check_figure`).
     """
     check_skeleton(clip)
+    check_figure(figure)
     qw, pw = cmu_world(clip)
-    offsets = _rest_offsets(clip)
+    offsets = _rest_offsets(clip, figure)
     body_q = {b: mul(qw[:, clip.index(j)], offsets[b]) for b, (j, _) in BONE_MAP.items()}
     n = len(qw)
     qpos = np.zeros((n, layout.nq))
-    root = layout.joint("root")
+    root = figure.joints[0]  # the free joint: the root body's
     qpos[:, root.qposadr : root.qposadr + 3] = root_scale * pw[:, clip.index("Hips")]
-    qpos[:, root.qposadr + 3 : root.qposadr + 7] = body_q["pelvis"]
-    for name, (parent, child) in JOINT_BODIES.items():
-        qpos[:, layout.joint(name).qpos_slice] = mul(conj(body_q[parent]), body_q[child])
+    qpos[:, root.qposadr + 3 : root.qposadr + 7] = body_q[figure.root]
+    for joint in figure.joints[1:]:
+        parent, child = figure.joint_bodies[joint.name]
+        qpos[:, joint.qpos_slice] = mul(conj(body_q[parent]), body_q[child])
     return tidy_quaternions(qpos, layout)
 
 
@@ -344,23 +319,24 @@ def tidy_quaternions(qpos: np.ndarray, layout: StateLayout) -> np.ndarray:
     return out
 
 
-def clamp_hyperextension(qpos: np.ndarray, layout: StateLayout) -> tuple[np.ndarray, int]:
+def clamp_hyperextension(qpos: np.ndarray, figure: Figure) -> tuple[np.ndarray, int]:
     """Clamp knee and elbow hyperextension to zero flexion.
 
-    Flexion is `twist_angle(q, axis)` with the axes of `FLEXION_AXES`. Where it is negative, the twist
-    about the hinge axis is removed: q = s t (swing-twist decomposition, t = normalize(w, (v.a) a)),
-    q <- s = q conj(t), which has twist angle exactly 0 and the same swing. Other joints are unchanged.
+    Flexion is `twist_angle(q, axis)` with the figure's flexion axes (`Figure.flexion_axes`). Where it
+    is negative, the twist about the hinge axis is removed: q = s t (swing-twist decomposition,
+    t = normalize(w, (v.a) a)), q <- s = q conj(t), which has twist angle exactly 0 and the same swing.
+    Other joints are unchanged.
 
     Args:
-        qpos: (n, nq) with unit quaternions. layout: the figure's layout.
+        qpos: (n, nq) with unit quaternions. figure: the figure (its flexion axes and joints).
     Returns:
         (clamped qpos (n, nq), number of joint-frames changed).
     """
     out = qpos.copy()
     changed = 0
-    for name, axis in FLEXION_AXES.items():
+    for name, axis in figure.flexion_axes.items():
         a = np.array(axis)
-        sl = layout.joint(name).qpos_slice
+        sl = figure.joint(name).qpos_slice
         q = out[:, sl]
         bad = twist_angle(q, a) < 0
         if not bad.any():

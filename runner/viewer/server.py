@@ -9,14 +9,13 @@ from pathlib import Path
 
 import numpy as np
 
+from solver.contact_thresholds import VIEWER_HEIGHT as CONTACT_HEIGHT  # drawn "in contact" at most this high
 from solver.errors import InputError
 
 __all__ = ["STATIC", "CONTACT_HEIGHT", "PENETRATION", "ViewerAssets", "build_assets", "floor_height", "make_server",
            "serve"]
 
 STATIC = Path(__file__).resolve().parent / "static"
-#: [m] a contact site this close to a surface (or closer) is drawn "in contact".
-CONTACT_HEIGHT = 0.01
 #: [m] a contact site deeper than this inside a surface is drawn "penetrating".
 PENETRATION = 0.0005
 #: [Hz] sample rate of the motions in the viewer when the path has no reference clip (else the clip's).
@@ -45,7 +44,8 @@ def build_assets(npz: str | Path) -> ViewerAssets:
     from runner.export.gltf import Track, figure_gltf, glb_bytes
     from runner.export.sampling import default_fps, sample_motion
     from runner.saved_path import load_saved_path
-    from solver.layout import CONTACT_SITES, StateLayout
+    from solver.figure import Figure
+    from solver.layout import StateLayout
     from solver.model import load_model
     from solver.terms.penetration import Penetration
 
@@ -56,9 +56,10 @@ def build_assets(npz: str | Path) -> ViewerAssets:
                          "the path was made for another figure")
     fps = default_fps(saved) if saved.has_reference else VIEW_FPS
     slots = StateLayout.from_model(model).quat_slots
+    sites = Figure.from_model(model).contact_sites
     names = ["optimized", "plain"] + (["reference"] if saved.has_reference else [])
     motions = [sample_motion(saved, w, fps, slots) for w in names]
-    pen = Penetration(model, margin=0.0)
+    pen = Penetration(model, sites=sites, margin=0.0)
     tracks, worst = [], {}
     for m in motions:
         depth = pen.depths(m.qpos, margin=0.0)  # (n, 4) [m]
@@ -66,11 +67,11 @@ def build_assets(npz: str | Path) -> ViewerAssets:
         state = np.where(depth > PENETRATION, 2, np.where(near, 1, 0))
         tracks.append({"name": m.name, "start": float(m.times[0]), "duration": float(m.times[-1] - m.times[0]),
                        "fps": m.fps, "samples": len(m.times),
-                       "sites": {s: state[:, i].tolist() for i, s in enumerate(CONTACT_SITES)}})
+                       "sites": {s: state[:, i].tolist() for i, s in enumerate(sites)}})
         worst[m.name] = round(1000.0 * float(depth.max()), 3)
-    gltf = figure_gltf(model, [Track(m.name, m.times, m.qpos) for m in motions], sites=CONTACT_SITES)
+    gltf = figure_gltf(model, [Track(m.name, m.times, m.qpos) for m in motions], sites=sites)
     data = {"source": str(saved.source), "scene": str(saved.scene), "tracks": tracks,
-            "keyframe_times": [float(t) for t in saved.keyframe_times], "sites": list(CONTACT_SITES),
+            "keyframe_times": [float(t) for t in saved.keyframe_times], "sites": list(sites),
             "states": ["clear", "contact", "penetrating"], "max_penetration_mm": worst,
             "contact_height_m": CONTACT_HEIGHT, "penetration_m": PENETRATION, "floor_height": floor_height(model)}
     return ViewerAssets(glb_bytes(gltf), data)

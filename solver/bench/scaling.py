@@ -37,9 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
+from solver.figure import FIGURE_FILE
 from solver.keyframes import Keyframes
 
-FIGURE = Path(__file__).resolve().parents[2] / "models" / "humanoid39.xml"
+FIGURE = FIGURE_FILE  # the shipped figure
 
 #: The scene of the scaling workload: the figure and a floor, nothing else.
 FLOOR_SCENE = """<mujoco model="floor_only">

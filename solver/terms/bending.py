@@ -4,17 +4,9 @@ from __future__ import annotations
 import numpy as np
 
 from solver.errors import InputError
+from solver.figure import shipped_figure
 from solver.quaternion import twist_angle, twist_angle_grad
 from solver.terms.base import Residual, Term, TermEval
-
-#: Flexion axes of the shipped figure (models/humanoid39.xml): a positive rotation about the axis
-#: flexes the joint; a negative one hyperextends it.
-FIGURE_HINGES = {
-    "l_knee": (0.0, 1.0, 0.0),
-    "r_knee": (0.0, 1.0, 0.0),
-    "l_elbow": (0.0, -1.0, 0.0),
-    "r_elbow": (0.0, -1.0, 0.0),
-}
 
 
 def flexion_angles(Y: np.ndarray, quat_index: np.ndarray, axes: np.ndarray) -> np.ndarray:
@@ -39,7 +31,8 @@ class Hyperextension(Term):
 
     Args:
         layout: StateLayout of the figure.
-        hinges: {joint name: flexion axis (3,)} (default: the figure's knees and elbows).
+        hinges: {joint name: flexion axis (3,)}: the figure's `Figure.flexion_axes` (default: the
+            shipped figure's knees and elbows).
         tolerance: [rad] hyperextension allowed without penalty (default 0).
     Raises:
         InputError: a joint name that is not a ball joint of the layout.
@@ -51,7 +44,7 @@ class Hyperextension(Term):
     pointwise = True
 
     def __init__(self, layout, hinges: dict | None = None, tolerance: float = 0.0):
-        hinges = FIGURE_HINGES if hinges is None else hinges
+        hinges = shipped_figure().flexion_axes if hinges is None else hinges
         idx, axes = [], []
         for name, axis in hinges.items():
             j = layout.joint(name)

@@ -45,7 +45,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from solver.contacts import HEIGHT_ON
+from solver.contact_thresholds import DETECT_HEIGHT_ON as HEIGHT_ON
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES, index_run
 from solver.path_context import EngineGradient, site_engine

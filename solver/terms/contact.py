@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.contact_thresholds import KEYFRAME_TOLERANCE
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES
 from solver.path_context import EngineGradient, site_engine
@@ -327,7 +328,7 @@ class Planted(Term):
             S[:, c] = (times >= x.start - KEYFRAME_AT_END) & (times <= x.end + KEYFRAME_AT_END)
         return S, (self.kin.positions(np.asarray(qpos, float)) if S.any() else None)
 
-    def conflicts(self, times, qpos, tolerance: float = 0.01) -> ScheduleConflicts:
+    def conflicts(self, times, qpos, tolerance: float = KEYFRAME_TOLERANCE) -> ScheduleConflicts:
         """Keyframes that contradict the schedule's heights: a keyframe at time t in a contact (its
         closed interval [start, end], ends included, as in `slides`) whose site is more than
         `tolerance` [m] from the plant height h0 (keyframes are met exactly, so the term cannot pull
@@ -351,7 +352,7 @@ class Planted(Term):
                 excused.add(contact)
         return ScheduleConflicts(found, planted=excused)
 
-    def slides(self, times, qpos, tolerance: float = 0.01) -> ScheduleConflicts:
+    def slides(self, times, qpos, tolerance: float = KEYFRAME_TOLERANCE) -> ScheduleConflicts:
         """Keyframes that make a planted site slide: two keyframes in one contact (its closed interval
         [start, end]: a keyframe at a contact's start or end counts, the natural way to write one) that
         hold the site more than `tolerance` [m] apart horizontally (capture's feet roll and pivot: 2-4 cm

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.contact_thresholds import FLIGHT_CLEARANCE
 from solver.errors import InputError
 from solver.inverse_dynamics import InverseDynamics, MujocoInverseDynamics
 from solver.kinematics import TangentMap
@@ -227,7 +228,7 @@ class RootResidual(Term):
         self,
         model,
         surfaces: StaticSurfaces | None = None,
-        contact_distance: float = 0.05,
+        contact_distance: float = FLIGHT_CLEARANCE,
         sites=CONTACT_SITES,
         torque_arm: float | None = None,
         engine=None,

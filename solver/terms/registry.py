@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES, StateLayout
+from solver.layout import StateLayout
 from solver.terms.base import Term
 
 #: Weight of each built-in term when it is switched on without one (all renormalized, eq. 7, so each
@@ -38,7 +38,7 @@ class TermBuild:
 
     Attributes:
         model: MjModel of the scene (figure + static surfaces; not to be modified).
-        layout: its StateLayout. t_span: (t0, t1) [s] the keyframe interval.
+        layout: its StateLayout. figure: its `solver.figure.Figure` (contact sites, flexion axes, ...). t_span: (t0, t1) [s] the keyframe interval.
         margin: [m] the penetration margin (also a planted site's rest height, `solver.problem.MARGIN`).
         contacts: the contact schedule (a `ContactSchedule`, or a tuple of objects with site, start, end,
             surface; may be empty).
@@ -48,7 +48,9 @@ class TermBuild:
     """
 
     def __init__(self, model, t_span, margin: float, contacts, forces: bool, conflicts=None):
-        self.model, self.layout = model, StateLayout.from_model(model)
+        from solver.figure import Figure
+
+        self.model, self.layout, self.figure = model, StateLayout.from_model(model), Figure.from_model(model)
         self.t_span, self.margin, self.contacts, self.forces = t_span, float(margin), contacts, forces
         self.conflicts = conflicts
         self._engine = None
@@ -66,7 +68,7 @@ class TermBuild:
             else:
                 from solver.path_context import site_engine
 
-                self._engine = site_engine(self.model, CONTACT_SITES, velocities=False)
+                self._engine = site_engine(self.model, self.figure.contact_sites, velocities=False)
         return self._engine
 
 
@@ -179,7 +181,7 @@ def _register_builtins() -> None:
     register_term("penetration", lambda b: Penetration(b.model, margin=b.margin, engine=b.engine),
                   w["penetration"], default=True)
     register_term("unit", lambda b: UnitQuaternion(b.layout.quat_slots), w["unit"], default=True)
-    register_term("bending", lambda b: Hyperextension(b.layout), w["bending"], default=True)
+    register_term("bending", lambda b: Hyperextension(b.layout, b.figure.flexion_axes), w["bending"], default=True)
     register_term("smooth", smooth, w["smooth"], default=True)
     register_term("torque", lambda b: JointTorque(b.model, engine=b.engine), w["torque"], forces=True)
     register_term("root", lambda b: RootResidual(b.model, engine=b.engine), w["root"], forces=True)

@@ -214,8 +214,8 @@ def test_scene_without_contact_sites(tmp_path, capsys):
     scene = write(tmp_path, '<mujoco><worldbody><body><freejoint/><geom size=".1"/><site name="l_toe"/>'
                             '</body></worldbody></mujoco>', "s.xml")
     expect_input_error(capsys, animate(write(tmp_path, small_doc()), "--scene", scene),
-                       "s.xml has no contact site(s) 'l_heel', 'r_heel', 'r_toe'",
-                       "the figure's feet need l_heel, l_toe, r_heel, r_toe")
+                       "s.xml: the figure has no feet", 'text name="figure:foot:left" data="l_heel l_toe"',
+                       "Does it include the figure (humanoid39.xml)?")
 
 
 # ------------------------------------------------------------------------- objective terms

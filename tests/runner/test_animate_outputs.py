@@ -22,7 +22,7 @@ def test_export_writes_each_file_after_the_path(tmp_path, capsys):
     assert code == 0, err
     assert (tmp_path / "a.glb").read_bytes()[:4] == b"glTF"
     clip = read_bvh(tmp_path / "a.bvh")
-    assert len(clip.names) == 12 and clip.frame_time == pytest.approx(1 / 120, rel=1e-4)
+    assert len(clip.names) == 14 and clip.frame_time == pytest.approx(1 / 120, rel=1e-4)  # 12 bodies, fixed neck and head
     assert f"wrote {tmp_path / 'a.bvh'} (BVH, optimized:" in out and f"wrote {tmp_path / 'a.glb'} (glTF" in out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bvh", "a.glb"]  # no temporary path left
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from solver.contacts import (
+    FEET,
     SITES,
     Contact,
     contact_mask,
@@ -95,9 +96,9 @@ def test_mask_events_and_feet():
     assert m[:, 0].tolist() == [True, True, True] + [False] * 8
     assert m[:, 1].tolist() == [False, True, True, True, True] + [False] * 6
     assert m[:, 3].tolist() == [False] * 5 + [True] * 3 + [False] * 3
-    assert foot_contacts(cs) == [Contact("l", 0.0, 0.4), Contact("r", 0.5, 0.7)]
+    assert foot_contacts(cs) == [Contact("left", 0.0, 0.4), Contact("right", 0.5, 0.7)]
     td, lo = touchdowns_liftoffs(cs)
-    assert td == [(0.0, "l"), (0.5, "r")] and lo == [(0.4, "l"), (0.7, "r")]
+    assert td == [(0.0, "left"), (0.5, "right")] and lo == [(0.4, "left"), (0.7, "right")]
     td, lo = touchdowns_liftoffs(cs, per_foot=False)
     assert len(td) == 3 and lo[0] == (0.2, "l_heel")
     with pytest.raises(InputError, match="nose"):
@@ -120,9 +121,9 @@ def test_127_33_touchdowns_where_the_feet_land():
         print(f"{c.site:7s} {c.start:.3f}-{c.end:.3f} s")
     print("touch-downs", td, "\nlift-offs", lo)
     # the run: six stances alternating feet, two of them on the box (0.85-1.37 s)
-    assert [f for _, f in td] == ["l", "r", "l", "r", "l", "r"]
+    assert [f for _, f in td] == ["left", "right"] * 3
     for (t0, foot), (t1, _) in zip(td, lo):
-        ks = [SITES.index(s) for s in SITES if s.startswith(foot)]
+        ks = [SITES.index(s) for s in FEET[foot]]
         i0, i1 = int(round(t0 / ref.frame_time)), int(round(t1 / ref.frame_time))
         low = h[:, ks].min(axis=1)
         assert low[i0:i1 + 1].max() < 0.05          # down throughout the stance

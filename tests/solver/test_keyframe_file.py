@@ -225,6 +225,22 @@ def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
     assert back.start <= odd[0].start and back.end >= odd[0].end and back.end - odd[0].end < 1e-6
 
 
+def test_contacts_name_the_given_figures_feet(tmp_path, layout):
+    """With the model, the contacts are checked against that figure's feet (its MJCF annotations): a
+    figure whose left toe site is called l_tip accepts it and expands 'left' to it."""
+    from solver.contacts import Contact
+
+    text = (MODELS / "humanoid39.xml").read_text().replace('"l_toe"', '"l_tip"').replace("l_heel l_toe", "l_heel l_tip")
+    model = mujoco.MjModel.from_xml_string(text)
+    doc = minimal()
+    doc["contacts"] = [{"site": "l_tip", "start": 0, "end": 1}, {"foot": "left", "start": 2, "end": 3}]
+    path = write_json(tmp_path, doc)
+    _, info = read_keyframes(path, model)
+    assert info.contacts == (Contact("l_tip", 0, 1), Contact("l_heel", 2, 3), Contact("l_tip", 2, 3))
+    with pytest.raises(InputError, match="'site' is 'l_tip'; the contact sites are l_heel, l_toe"):
+        read_keyframes(path, layout)  # a layout alone: the shipped figure's feet
+
+
 @pytest.mark.parametrize("contacts, shown", [
     ({"site": "l_toe"}, "list"),
     ([5], "contacts[0] is 5"),

@@ -27,7 +27,7 @@ def test_bvh_and_glb_are_written(tmp_path, saved_npz, capsys):
 
 def test_default_fps_is_the_reference_rate(tmp_path, saved_npz):
     res = export_saved_path(saved_npz, tmp_path / "r.bvh", "reference")
-    assert res.fps == pytest.approx(120.0) and res.frames == 121 and res.joints == 12
+    assert res.fps == pytest.approx(120.0) and res.frames == 121 and res.joints == 14  # 12 bodies, the fixed neck and head
 
 
 @pytest.mark.parametrize("to, match", [("x.fbx", r"--to .*x\.fbx: extension '\.fbx'.*\.bvh, \.glb"),

@@ -1,0 +1,51 @@
+"""When a contact site counts as "in contact": one named threshold per purpose, all in one place.
+
+Heights are a site's height above the surface under it [m] (`solver.surfaces.StaticSurfaces`), speeds
+its 3-D speed [m/s]. Each purpose has its own value for a reason given beside it; the modules that
+apply them import them from here and define none of their own.
+"""
+from __future__ import annotations
+
+# -- detecting a contact schedule from a motion (`solver.contacts.detect_contacts`, with hysteresis;
+#    the values are measured in the solver/contacts.py docstring)
+#: a site enters contact below this height [m] ...
+DETECT_HEIGHT_ON = 0.03
+#: ... and leaves above this one [m].
+DETECT_HEIGHT_OFF = 0.05
+#: a site enters contact below this speed [m/s] ...
+DETECT_SPEED_ON = 0.5
+#: ... and leaves above this one [m/s].
+DETECT_SPEED_OFF = 1.0
+#: detected contacts shorter than this are dropped [s].
+DETECT_MIN_DURATION = 0.05
+
+# -- placing a retargeted capture on its surfaces (`runner.mocap.contacts`: the root-height correction,
+#    and the "feet in contact stay within ... mm" figure of a reference)
+#: a foot is in contact while its lowest site is at most this high [m] ...
+CAPTURE_HEIGHT = 0.06
+#: ... and that site moves slower than this [m/s].
+CAPTURE_SPEED = 0.6
+
+# -- metrics of a motion (`solver.motion_metrics`), as the published metrics define them
+#: PhysDiff skate: a site is on the ground at most this high [m].
+SKATE_HEIGHT = 0.02
+#: PhysDiff float: the lowest site counts as floating above this height [m].
+FLOAT_TOL = 0.005
+#: Guided Motion Diffusion's skating ratio: a site is in contact below this height [m].
+GMD_HEIGHT = 0.05
+#: flight time: every site above this height [m] (the detection's entry height).
+FLIGHT_HEIGHT = DETECT_HEIGHT_ON
+
+# -- the root-residual term's flight indicator phi (`solver.terms.dynamics.RootResidual`)
+#: a site at least this clear of every surface is in the air (phi = 1), one touching a surface is not
+#: (phi = 0), smooth in between [m].
+FLIGHT_CLEARANCE = 0.05
+
+# -- keyframes against the contact schedule (`solver.terms.contact.Planted.conflicts` and `slides`)
+#: a keyframe inside a contact that holds its site farther than this from the plant height, or two
+#: keyframes in one contact that hold it farther than this apart horizontally, contradict it [m].
+KEYFRAME_TOLERANCE = 0.01
+
+# -- the browser viewer (`runner.viewer.server`)
+#: a site this close to a surface, or closer, is drawn "in contact" [m].
+VIEWER_HEIGHT = 0.01
