@@ -292,6 +292,7 @@ class Problem:
         initial: FrameSet of the plain spline through the keyframes, (k, nq) values.
         conflicts: `ScheduleConflicts` (`keyframe_conflicts`): what keyframes contradict in the contact
             schedule, excused from the bounds; its `found`: ((kind, keyframe index, site, distance [m]), ...).
+        figure: the model's `solver.figure.Figure` (contact sites, feet, flexion axes, segments, masses).
     """
 
     model: object = field(repr=False)
@@ -303,6 +304,7 @@ class Problem:
     objective: Objective = field(repr=False)
     initial: object = field(repr=False)
     conflicts: ScheduleConflicts = field(default_factory=ScheduleConflicts)
+    figure: object = field(default=None, repr=False)
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -345,5 +347,7 @@ def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | No
     contacts = ContactSchedule.of(contacts or ())  # checked once; a file's schedule keeps its labels
     chosen = parse_terms(terms, weights, contacts)
     objective, initial, conflicts = figure_problem(model, chosen, keyframes, rate=rate, contacts=contacts)
+    from solver.figure import Figure
+
     return Problem(model, keyframes, contacts, MappingProxyType(dict(chosen)), default_limits(chosen), rate,
-                   objective, initial, conflicts)
+                   objective, initial, conflicts, Figure.from_model(model))

@@ -12,7 +12,6 @@ from runner.paths import display_path
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem
 from runner.run import execute
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES
 
 #: where the commands write when no output is named: relative to the current folder
 OUTPUT_DIR = Path("renders")
@@ -76,10 +75,10 @@ def _warn_penetrating_keyframes(problem) -> None:
     from solver.terms.penetration import Penetration
 
     model, keyframes, initial = problem.model, problem.keyframes, problem.initial
-    depth = Penetration(model, margin=0.0).depths(initial.values[initial.is_keyframe])  # (k, 4) [m]
+    depth = Penetration(model, problem.figure.contact_sites, margin=0.0).depths(initial.values[initial.is_keyframe])
     for k, row in enumerate(depth):
         if row.max() > 0.001:
-            site = CONTACT_SITES[int(np.argmax(row))]
+            site = problem.figure.contact_sites[int(np.argmax(row))]
             print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) puts "
                   f"{site} {1000 * row.max():.1f} mm inside a surface; keyframes are met exactly, so that "
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)

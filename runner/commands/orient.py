@@ -41,8 +41,8 @@ def register(sub) -> None:
                    "is at most GAP, or the frame budget (--max-frames, else 40 per keyframe interval) runs "
                    "out (normalized form only) [1e-3 unless --rounds is given]")
     p.add_argument("--rounds", type=nonnegative(int), default=None, metavar="N",
-                   help="a fixed number of adaptive subdivision rounds instead of a tolerance (ignored if "
-                   "--tol is given too) [normalized form: rounds until the estimated gap is at most --tol; "
+                   help="a fixed number of adaptive subdivision rounds instead of a tolerance (not with "
+                   "--tol) [normalized form: rounds until the estimated gap is at most --tol; "
                    "3 with --form paper]")
     p.add_argument("--max-frames", type=nonnegative(int), default=0, metavar="N",
                    help="at most N variable frames in total (0 = no limit) [0]")
@@ -69,6 +69,9 @@ def run(args) -> int:
         if plot.suffix.lower() != ".png":
             raise InputError(f"--plot {plot}: give a file name ending in .png")
         check_writable_dir(plot, option="--plot")
+    if args.rounds is not None and args.tol is not None:
+        raise InputError(f"--rounds {args.rounds} and --tol {args.tol:g}: give one: --rounds for a fixed number of "
+                         "adaptive rounds, --tol for rounds until the estimated gap is at most GAP")
     times, quats = read_keyframes(args.keyframes)
     changes = dict(subdivision=args.subdivision, per_segment=args.per_segment, max_frames=args.max_frames)
     if args.rounds is not None:

@@ -8,7 +8,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES
 from solver.metrics import sample_times
 
 #: the named sides of `--camera`: where the camera stands around the figure, in degrees from straight
@@ -120,16 +119,18 @@ def render_video(out, model, solution, keyframes, video: VideoOptions, reference
         InputError: a "reference" panel without `reference`; what `render_tracks` raises.
     """
     from runner.render import Track, render_tracks, sample_track
+    from solver.figure import Figure
     from solver.terms.penetration import Penetration
 
     t = sample_times(keyframes.times[0], keyframes.times[-1], 240.0)
-    pen = Penetration(model, margin=0.0)
+    sites = Figure.from_model(model).contact_sites
+    pen = Penetration(model, margin=0.0, sites=sites)
     tracks = []
     planted = None
     if contacts:
         from solver.contacts import contact_mask
 
-        planted = contact_mask(contacts, CONTACT_SITES, t)
+        planted = contact_mask(contacts, sites, t)
     for name in video.panels:
         if name == "reference":  # over the keyframes' time span, like the other panels
             if reference is None:
@@ -138,7 +139,7 @@ def render_video(out, model, solution, keyframes, video: VideoOptions, reference
             Y = sample_track(Track("reference", reference.times, reference.qpos), t)
         else:
             Y = (solution.initial if name == "plain" else solution.frames).path(t)
-        tracks.append(Track(PANELS[name], t, Y, penetration=pen.depths(Y), sites=CONTACT_SITES, planted=planted))
+        tracks.append(Track(PANELS[name], t, Y, penetration=pen.depths(Y), sites=sites, planted=planted))
     # keyframes with free components filled: the poses the animator set
     kq = solution.initial.values[solution.initial.is_keyframe]
     return render_tracks(model, tracks, out, fps=video.fps, size=video.size, speed=video.speed,

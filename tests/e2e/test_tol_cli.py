@@ -104,6 +104,17 @@ def test_figure_rounds_and_tol_are_one_choice(tmp_path, capsys):
     assert "--rounds 1 and --tol 0.01" in err and err.count("\n") == 1  # one line naming both options
 
 
+def test_orient_rounds_and_tol_are_one_choice(tmp_path, capsys):
+    from runner.paths import MODELS
+
+    code = main(["orient", str(MODELS / "orient_example.json"), "--out", str(tmp_path / "o.npz"), "--rounds", "2",
+                 "--tol", "1e-4"])
+    assert code == EXIT_INPUT
+    err = capsys.readouterr().err
+    assert "--rounds 2 and --tol 0.0001" in err and err.count("\n") == 1  # one line naming both options
+    assert not (tmp_path / "o.npz").exists()
+
+
 def test_solve_options_map_the_flags_to_the_refinement_mode():
     from runner.animate_options import default_args, solve_options
     from solver.animate import DEFAULT_TOL
