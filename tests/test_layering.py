@@ -44,7 +44,7 @@ def test_ruff():
 
 #: where the structure's rules hold function length to one screen: the orchestration a reader follows
 #: (the solve's outer loop, the one run, the commands' argument glue)
-SHORT_FUNCTIONS = ("runner/run.py", "runner/commands/*.py")
+SHORT_FUNCTIONS = ("solver/solve.py", "runner/run.py", "runner/commands/*.py")
 MAX_FUNCTION_LINES = 80
 
 
