@@ -251,7 +251,7 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False) -> lis
 #: the summary rows each objective term penalizes (what the optimizer is asked to lower), by the row
 #: label's start; a term's own "integral NAME" row is its own. Rows no chosen term penalizes are free
 #: for the optimizer to trade away: with the default terms the dynamics rows (torque, root wrench in
-#: flight), which only the dynamics terms target (`--terms all`, README "The summary").
+#: flight), which only the dynamics terms target (`--terms all`, README "Reading the summary").
 TERM_ROWS = {
     "penetration": ("max penetration",),  # and the per-site rows under it (`row_targets`)
     "unit": ("max |1 - |q||",),
@@ -427,7 +427,7 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
     w = max(max(len(r[0]) for r in rows), 38) + 2
     head = f"{'':{w}}{'reference':>14}{'plain':>14}{'optimized':>14}"
     lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz; "
-             "README \"Motion metrics\")", head, "-" * len(head)]
+             "docs/contacts.md \"Motion metrics\")", head, "-" * len(head)]
     lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in vals) for label, vals in rows]
     lines.append("-" * len(head))
     pairs = zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"]), strict=True)

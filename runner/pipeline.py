@@ -1,7 +1,7 @@
 """From a motion-capture clip to a video, a saved path and a metrics report: `process_clip`, the work of
 `dynsplines mocap` (the command module is argument glue) and of a batch of clips.
 
-Steps (docs/contacts.md "Where runner/mocap should call these"):
+Steps (docs/architecture.md; the contact steps: docs/contacts.md):
 
 1. Scene: the given MJCF, or (`"auto"`) a floor and boxes fitted to where the clip's feet rest, written
    next to the outputs as `<stem>.scene.xml` (`runner.mocap.scene.clip_scene`); the clip retargeted

@@ -1,6 +1,6 @@
 """The saved path (`--save-path FILE.npz`): writing it, the versions recorded in it, and reading it back.
 
-Fields (README "The saved path"): frame_times (m,) [s], frames (m, nq), frame_is_keyframe (m,),
+Fields (docs/saved-path.md): frame_times (m,) [s], frames (m, nq), frame_is_keyframe (m,),
 keyframe_times (k,), keyframes (k, nq), keyframe_mask (k, nq), plain_frame_times, plain_frames,
 reference_times, reference_qpos (motion capture, may be empty), scene (relative to the .npz's folder),
 wall_time_s, objective_trace, status, metrics_json, options_json, versions_json, and contacts (a structured

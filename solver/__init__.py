@@ -13,7 +13,7 @@ One call for a figure in a scene, one for a single orientation::
     solution = solver.animate(model, keyframes)            # the command line's settings
     result = solver.orient(times, quats)                   # paper sec. 3
 """
-from solver.animate import animate, default_options
+from solver.animate import animate, default_options, solve_problem
 from solver.contact_schedule import ContactSchedule
 from solver.contacts import Contact
 from solver.errors import DynsplinesError, InputError
@@ -28,7 +28,16 @@ from solver.objective import Evaluation, NonFiniteError, Objective
 from solver.optimize import OptimizeResult, Status
 from solver.orient import OrientResult, orient
 from solver.path_context import PathContext
-from solver.problem import DEFAULT_TERMS, DEFAULT_WEIGHTS, default_limits, figure_objective, parse_terms, term_names
+from solver.problem import (
+    DEFAULT_TERMS,
+    DEFAULT_WEIGHTS,
+    Problem,
+    default_limits,
+    figure_objective,
+    make_problem,
+    parse_terms,
+    term_names,
+)
 from solver.schedule_conflicts import ScheduleConflicts
 from solver.solve import Round, Solution, SolveOptions, solve
 from solver.spline import SplineBasis
@@ -55,7 +64,7 @@ __all__ = [
     "Figure",
     # files: an MJCF scene, the JSON keyframe file
     "load_model", "read_keyframes", "write_keyframes", "KeyframeFileInfo",
-    # the contact schedule (DESIGN.md "Contacts") and what keyframes contradict in it
+    # the contact schedule (docs/contacts.md "Contact schedules") and what keyframes contradict in it
     "Contact", "ContactSchedule", "ScheduleConflicts",
     # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7)
     "Term", "TermEval", "Penetration", "UnitQuaternion", "Hyperextension", "CovariantAcceleration",
@@ -66,6 +75,8 @@ __all__ = [
     "DEFAULT_TERMS", "DEFAULT_WEIGHTS",
     # solving (paper fig. 5)
     "SolveOptions", "Solution", "Round", "Status", "OptimizeResult", "solve",
+    # a figure problem built once (`make_problem`) and solved (`solve_problem`), as the command line does
+    "Problem", "make_problem", "solve_problem",
     # one-call APIs
     "animate", "default_options", "orient", "OrientResult",
     # acceptance figures

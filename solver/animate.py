@@ -22,8 +22,8 @@ __all__ = ["DEFAULT_RATE", "DEFAULT_TOL", "animate", "default_options", "solve_p
 
 #: Default accuracy of the figure (`SolveOptions.tol`): adaptive rounds until the decrease of E that
 #: refinement still predicts is at most 1% of E. On the shipped clip (run-and-step) the estimate is
-#: 3.4%, 1.3% and 0.47% after the starting round and the two adaptive rounds, so this stops where the
-#: previous default of 2 fixed rounds did, with the same frames and path (docs/orient.md, "the figure").
+#: 3.4%, 1.3% and 0.47% after the starting round and the two adaptive rounds, so this stops after two
+#: adaptive rounds (docs/orient.md "At the command line, and on the figure").
 DEFAULT_TOL = 1e-2
 
 
@@ -102,7 +102,7 @@ def animate(
             budget runs out (`Solution.converged_to_tol`, `Solution.refinement_estimate`).
         contacts: the contact schedule (`solver.contacts.Contact`s: site, start, end [s], surface), e.g.
             `KeyframeFileInfo.contacts` or `reference_contacts`. With one, the default terms add planted
-            and clearance and "all" adds cone too (issue 11; `terms="penetration,unit,bending,smooth"`
+            and clearance and "all" adds cone too (docs/contacts.md "Contact schedules"; `terms="penetration,unit,bending,smooth"`
             leaves them out); without one, naming them is an InputError. Keyframes that contradict it
             are excused from the bounds (`solver.problem.keyframe_conflicts`).
     Returns:

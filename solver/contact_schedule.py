@@ -1,7 +1,7 @@
 """The contact schedule: which contact site rests on which surface of the scene, and when.
 
 A `ContactSchedule` is a checked, immutable, sorted tuple of `solver.contacts.Contact`s (site, start,
-end [s], surface; DESIGN.md "Contacts") with the queries the contact terms, the keyframe checks and the
+end [s], surface; docs/contacts.md "Contact schedules") with the queries the contact terms, the keyframe checks and the
 metrics ask of it: the flights (no site in contact), each site's swings (between two of its contacts),
 touch-downs and lift-offs, and which site is in contact at given times. It is checked once, when it is
 made; every later user trusts it. The empty schedule is a valid value (a motion with no known

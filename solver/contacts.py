@@ -1,6 +1,6 @@
 """Foot contacts: which contact site rests on a surface, and when.
 
-A contact is (site, surface, [start, end]) (DESIGN.md "Contacts"). `detect_contacts` labels them from
+A contact is (site, surface, [start, end]) (docs/contacts.md "Contact schedules"). `detect_contacts` labels them from
 a reference motion with height and speed thresholds, hysteresis and a minimum duration: threshold
 heuristics alone flicker and are known to be unreliable against pressure-insole ground truth
 (UnderPressure, Mourot et al. 2022; ../shared/METRICS.md "Contact labels"), so a site enters contact

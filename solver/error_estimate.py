@@ -1,4 +1,5 @@
-"""A-posteriori estimate of the relative energy gap (E - E*)/E* of an orientation path (issue 13).
+"""A-posteriori estimate of the relative energy gap (E - E*)/E* of an orientation path
+(docs/orient.md "Accuracy on request: tol and the gap estimate").
 
 E is the covariant energy of the normalized path, E* that of the exact optimum (the natural Riemannian
 cubic spline on S^3 through the keyframes), which is not known while solving. The estimate:
@@ -11,7 +12,7 @@ Euler-Lagrange gradient g_c of the new frame and its curvature, |g_c|^4 / (2 g_c
 over every segment, and E the objective on the current (optimized) path.
 
 Why this estimates the gap. Halving every segment turns the path into one of the next refinement level,
-whose gap is 2^-p of this one (p = 5-6 measured: docs/orient.md), so the decrease that refinement buys is
+whose gap is 2^-p of this one (p = 5-6 measured: docs/orient.md "Two objective forms"), so the decrease that refinement buys is
 (1 - 2^-p) ~ 97-98% of the current gap. sum_c D_c predicts that decrease to first order: each D_c is the
 decrease of moving its frame alone, the others held (a Newton step on the diagonal block of the
 quadratic model). It misses (i) the coupling between new frames and the re-optimization of the old

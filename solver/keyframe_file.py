@@ -1,6 +1,6 @@
 """Keyframe files: human-readable JSON with named joints (format "dynsplines.keyframes/1").
 
-Format (models/README.md has a full example)::
+Format (docs/keyframe-format.md has a full example)::
 
     {
       "format": "dynsplines.keyframes/1",

@@ -25,7 +25,7 @@ Accuracy against the reference
   times 1/fps. Their difference is the difference of the two flight times; their sum is the flight
   phase error, which cannot cancel: a path whose flights are each too long but whose last one is
   missing can match the reference's flight time (35_17 keyed every 0.25 s: 0.358 s against 0.367 s,
-  with 0.075 s extra and 0.083 s missed; docs/contacts.md "fifth session").
+  with 0.075 s extra and 0.083 s missed; docs/contacts.md "Motion metrics").
 
 Plausibility (PhysDiff, Yuan et al. 2023, after UHC `smpl_eval.py`; on the four contact sites rather
 than mesh vertices)

@@ -93,8 +93,8 @@ class OptimizeResult:
             another evaluation (`solver.orient_refine`).
         fun_time_s: [s] wall time spent in `fun` (value and gradient, in the optimizer's variables).
             wall_time_s - fun_time_s is the optimizer's own work and this wrapper's: for nlopt's L-BFGS
-            O(n k) per iteration with k <= `lbfgs_storage(n)` stored pairs, ~5 ms an iteration at
-            n = 1326, k = 300 (docs/contacts.md, "fifth session").
+            O(n k) per iteration with k <= `lbfgs_storage(n)` stored pairs (measured: ~5 ms an iteration
+            at n = 1326, k = 300; docs/contacts.md "Known limits").
     """
 
     x: np.ndarray

@@ -1,6 +1,6 @@
 """Covariant interpolation of one orientation (paper sec. 3): keyframe quaternions in, a smooth path out.
 
-The path is the natural cubic spline through the keyframes and variable frames in R^4 (the main job's
+The path is the natural cubic spline through the keyframes and variable frames in R^4 (the figure's
 `FrameSet`, `Objective`, `solve`); the optimizer moves the variable frames to minimize angular
 acceleration. Two objective forms:
 
@@ -89,7 +89,8 @@ RENORMALIZE_ON = "start"
 #: 1.1-3.0e-4; docs/orient.md).
 DEFAULT_ROUNDS = {"normalized": 2, "paper": 3}
 
-#: Default accuracy of the normalized form (issue 13): adaptive rounds until the estimated relative gap
+#: Default accuracy of the normalized form (docs/orient.md "Accuracy on request: tol and the gap
+#: estimate"): adaptive rounds until the estimated relative gap
 #: (E - E*)/E* (`solver.error_estimate.estimate_gap`) is at most DEFAULT_TOL / TOL_SAFETY. It replaces a
 #: fixed number of rounds (DEFAULT_ROUNDS, still the paper form's default: its optimum is not E*).
 DEFAULT_TOL = 1e-3

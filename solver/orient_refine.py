@@ -1,6 +1,6 @@
 """`orient(tol=...)`: the orientation's refinement strategy for `solve`'s loop (`GapToOptimum`): optimize
 -> estimate the gap -> refine until the estimated relative gap (E - E*)/E*
-(`solver.error_estimate.estimate_gap`) is at most the tolerance (docs/orient.md "Accuracy on request"),
+(`solver.error_estimate.estimate_gap`) is at most the tolerance (docs/orient.md "Accuracy on request: tol and the gap estimate"),
 and the measures of an orientation path it uses (covariant energy by Gauss quadrature, max |1 - |q||)."""
 from __future__ import annotations
 
@@ -31,8 +31,8 @@ TOL_SAFETY = 2.0
 #: PREDICT_RATE, brings the estimate to tol / TOL_SAFETY / PREDICT_MARGIN with the fewest frames. The
 #: first placement is made before any optimization, from the estimate on the starting path (one frame
 #: per keyframe interval, on the unit sphere): its shares put the frames where the optimized path will
-#: need them, so one optimization round usually meets the tolerance (previously: 4-6 rounds of midpoint
-#: frames, each re-optimized and re-estimated). Chosen on tuning seeds 0-49 (docs/orient.md, "Accuracy on
+#: need them, so one optimization round usually meets the tolerance (rather than several rounds of
+#: midpoint frames, each re-optimized and re-estimated). Chosen on tuning seeds 0-49 (docs/orient.md, "Accuracy on
 #: request"): rate 4 and margin 2 met tol = 1e-4 in one round on 39 of 50 sets (rate 5: fewer frames but
 #: a second round on half the sets; margins 1.5-3 took the same time), the estimate accepted in the first
 #: round within 0.59-1.53x of the true gap.
@@ -194,7 +194,7 @@ def quadrature_discrepancy(sol, E8: float) -> float:
     `integrals_final`. The optimizer minimizes the latter and may exploit its error (a path that is
     smoother at the nodes than between them), which the predicted decreases, computed with the same
     quadrature, cannot see. Usually ~1e-6; found 1.6e-3 on a generated set with 125-130 degree steps
-    0.2-0.3 s apart (docs/orient.md)."""
+    0.2-0.3 s apart (docs/orient.md "Accuracy on request: tol and the gap estimate")."""
     return _discrepancy(sol.integrals_final, E8)
 
 
@@ -209,7 +209,7 @@ def _discrepancy(integrals: dict, E8: float) -> float:
 def unit_rows(values: np.ndarray) -> np.ndarray:
     """Starting values of the first variable frames: the plain spline's values put back on the unit
     sphere. Between keyframes theta apart the spline dips by ~theta^2/8; the spline through the
-    projected values is nearer the optimum (L-BFGS needs 10-25% fewer evaluations, docs/orient.md)."""
+    projected values is nearer the optimum (L-BFGS needs 10-25% fewer evaluations, docs/orient.md "Defaults, and what they deliver")."""
     return values / np.linalg.norm(values, axis=1, keepdims=True)
 
 

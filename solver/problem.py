@@ -2,7 +2,7 @@
 
 Term names: penetration (eq. 12), unit (eq. 9 f1), bending (sec. 5), smooth (covariant acceleration of
 every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
-are available, torque and root (sec. 6, appendix A). With a contact schedule (issue 11,
+are available, torque and root (sec. 6, appendix A). With a contact schedule (docs/contacts.md "The contact terms";
 `solver.contacts.Contact`s: site, start, end, surface): planted (feet on their surface and not sliding
 during a contact), clearance (swing feet keep 2 cm, every site min(2 cm, g T^2/8) in a flight of length T)
 - both on by default - and cone
@@ -68,17 +68,17 @@ def _needs_schedule(name: str) -> InputError:
 #: Whether a contact schedule switches the contact terms on by default (planted and clearance; cone
 #: joins "all"). On: with variable frames at every touch-down and lift-off (`SolveOptions.term_knots`),
 #: the penetration weight CONTACT_PENETRATION_WEIGHT and the kinematics-only engine (`SiteKinematics`)
-#: the solve with them takes 0.58-1.63x the evaluations and 1.05-2.62x the CPU time of the solve
-#: without on the four inputs of README "Feet that plant" (run-and-step: 257 vs 336 evaluations; without
-#: the frames 1633, penalty continuation boosting the penetration term four times because a spline with
-#: one frame per keyframe interval cannot both hold a foot still and keep the other sites up).
+#: the solve with them costs about as many evaluations as the solve without (docs/benchmarks.md "Contact
+#: terms on four inputs"). The frames at touch-down and lift-off matter: a spline with one frame per
+#: keyframe interval cannot both hold a foot still and keep the other sites up, and penalty continuation
+#: then boosts the penetration term round after round (docs/contacts.md "The contact terms").
 CONTACT_TERMS_BY_DEFAULT = True
 
 #: The penetration term's weight with the planted term on (DEFAULT_WEIGHTS' 1 otherwise). The weights
 #: are renormalized by the plain spline's integrals (eq. 7), and the plain spline's feet go 10 cm into
 #: the floor or a step, so at weight 1 a planted foot held at the surface buys mm of depth for almost
-#: nothing: penalty continuation then boosted the weight to 100 in two extra rounds (run-and-step: 485
-#: evaluations; starting at 100: 257, the same bounds).
+#: nothing: penalty continuation would boost the weight to 100 in two extra rounds; starting at 100
+#: meets the same bounds in one (docs/contacts.md "The contact terms").
 CONTACT_PENETRATION_WEIGHT = 100.0
 
 

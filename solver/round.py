@@ -111,7 +111,7 @@ def _orientation_fun(objective, basis, frames, rows, Rinv, radial):
     The path is formed transposed, Y^T = Y0^T + X^T B_rows^T (4, 3n), so that its (3, 4, n) view is
     what `unit_and_normalized` reads, and the kernel's (3, 4, n) gradient goes back as one (4, 3n) x
     (3n, r) product: no transposed copies of Y, Y', Y'' in and out, no per-term bookkeeping of
-    `evaluate_path` (the same E and gradient to rounding; ~15% of an evaluation, docs/orient.md).
+    `evaluate_path` (the same E and gradient to rounding; ~15% of an evaluation, docs/orient.md "Speed against the earlier methods").
     """
     U, c = radial
     Brows = basis.B[:, rows]  # (3n, r)

@@ -62,9 +62,9 @@ class SolveOptions:
         term_knots: with "global" or "adaptive", first place variable frames where a term says its
             integrand changes character (`Objective.knot_times`: the contacts' touch-downs and
             lift-offs), at least KNOT_MIN_GAP from other frames; `per_segment` then splits every
-            segment of that set. Without contact terms there are none. On run-and-step with its
-            contacts (penetration weight 1) this took the solve from 1633 to 485 evaluations (README
-            "Feet that plant").
+            segment of that set. Without contact terms there are none. With contacts, a frame at each
+            touch-down and lift-off lets the path hold a foot still without pulling the other sites
+            down (docs/contacts.md "The contact terms").
         per_segment: variable frames per segment (of the keyframes and the term knots) for "global",
             and to start "adaptive" with.
         refine: how adaptive subdivision stops (with "none" and "global" it is not used):
@@ -92,7 +92,7 @@ class SolveOptions:
             relative to the other directions (1: all alike). An objective that depends on q/|q| (the
             normalized covariant acceleration) has little radial curvature (its unit term's): there
             0.1 saves 25-40% of the evaluations on the orientation test sets (`solver.orient`,
-            docs/orient.md). "auto": from the curvatures the objective's terms declare, on the slots
+            docs/orient.md "Defaults, and what they deliver"). "auto": from the curvatures the objective's terms declare, on the slots
             the unit term acts on (`solver.precondition.auto_radial_weight`; `quat_slots` unused):
             the figure's default (`default_options`), where the unit term makes the radial directions
             stiff (about 20x the acceleration metric) and a weight of 1 leaves L-BFGS with a

@@ -1,5 +1,5 @@
 """Hand edits of a BVH clip for tests: another frame rate, another Euler order, renamed joints, scaled
-bones, fewer frames: the clips a user of another capture session would bring."""
+bones, fewer frames: the clips a user of another capture would bring."""
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,9 +1,8 @@
 """The layering and lint contracts of docs/architecture.md, run as tests: import-linter (contracts in
 pyproject.toml [tool.importlinter]) and ruff (rules in [tool.ruff]).
 
-EXPECTED TO FAIL until the restructure of issue 9 lands: the contracts name the target layout
-(runner/commands/, runner/mocap/, runner/render/, runner/console.py, ..., solver/bench/sphere_reference/),
-and `ruff check` reports findings that the lead fixes with `ruff check --fix` after merging. Each test
+The contracts name the layout (runner/commands/, runner/mocap/, runner/render/, runner/console.py, ...,
+solver/bench/sphere_reference/) and `ruff check` must report nothing. Each test
 skips, with the reason, when its tool is not installed (`pip install -e ".[test]"` installs both).
 """
 import shutil

@@ -1,6 +1,6 @@
 """Sample a saved path (`runner.saved_path.load_saved_path`) at a frame rate: the motion an exporter writes.
 
-A saved path holds three motions of the figure (README "Files"):
+A saved path holds three motions of the figure (docs/saved-path.md):
 
 * ``optimized``: the natural cubic spline through ``frame_times``/``frames`` (keyframes + variable frames);
 * ``plain``: the natural cubic spline through ``plain_frame_times``/``plain_frames`` (the keyframes alone);

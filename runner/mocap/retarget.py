@@ -35,7 +35,7 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    on the surface under it, and no contact site is ever below a surface.
 
 The synthetic T-pose first frame of the cgspeed BVH conversion is dropped (see
-/work/shared/data/cmu/README.md). Data: CMU Graphics Lab Motion Capture Database, mocap.cs.cmu.edu.
+models/cmu/README.md). Data: CMU Graphics Lab Motion Capture Database, mocap.cs.cmu.edu.
 """
 from __future__ import annotations
 

@@ -124,7 +124,7 @@ def compare_refinement(model, keyframes, layout, weights: dict, counts, scores=(
 
 def path_figures(model, keyframes, solution) -> dict:
     """The acceptance figures (`solver.metrics.path_metrics`, 1000 Hz) of a solution's plain spline and
-    optimized path, for the README's tables and `dynsplines bench run-and-step`.
+    optimized path, for docs/benchmarks.md's tables and `dynsplines bench run-and-step`.
 
     Returns:
         dict: plain, optimized (path_metrics dicts), evals, frames (count at the end), variable,

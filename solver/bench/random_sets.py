@@ -137,9 +137,9 @@ def exact_energy(ref, times, quats, method: str = "discrete", ref_tol: float = 1
     """E* of the exact optimum by the reference module: "discrete" (`discrete_sphere_reference`, fine
     discretization on the sphere with Richardson extrapolation, 1-5 s a set) or "bvp"
     (`riemannian_cubic_reference`, solve_bvp at `ref_tol`), falling back to the discrete one when
-    solve_bvp fails. On this issue's acceptance sets the two agreed to 6e-11-1.4e-9 relative where both
+    solve_bvp fails. On the acceptance sets the two agreed to 6e-11-1.4e-9 relative where both
     ran; solve_bvp took from seconds to minutes a set on the loaded 2-core machine and ran out of memory
-    on seed 1012 (docs/orient.md)."""
+    on one set (docs/orient.md "Accuracy on request: tol and the gap estimate")."""
     if method == "bvp":
         try:
             return ref.riemannian_cubic_reference(times, quats, tol=ref_tol).E_star

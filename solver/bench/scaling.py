@@ -1,4 +1,4 @@
-"""Cost against clip length (issue 14 part 3): the run-and-step gait tiled 1x, 2x, 4x, 8x.
+"""Cost against clip length (docs/scaling.md "The scaling workload"): the run-and-step gait tiled 1x, 2x, 4x, 8x.
 
     python -m solver.bench.scaling [--factors 1,2,4,8] [--dense] [--per-eval]
 

@@ -1,4 +1,5 @@
-"""Swing feet that clear the ground (issue 11): the clearance term of a contact schedule.
+"""Swing feet that clear the ground: the clearance term of a contact schedule (docs/contacts.md "The contact
+terms").
 
 `Clearance` (name "clearance", m^2): a site that is not in contact keeps a clearance c (default 2 cm)
 from every surface in the middle of its swing, and every site keeps c_f in the middle of a flight,
@@ -16,9 +17,8 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
           lands at b (its feet with it, as in a hop), H = `flight_lift` (FLIGHT_LIFT = 3.5 cm: the
           contact entry height 3 cm, which is also the flight metric's height, and 5 mm for the
           penalty's give). Without the lift c_f = 2 cm is under the 3 cm that makes a flight in the
-          metric (`solver.motion_metrics.FLIGHT_HEIGHT`), and the feet sank to it long before the
-          landing: a 15 cm, 0.35 s hop of 16_23 flew 58 ms less than the capture (0.258 / 0.317 s), now
-          0.317 s (docs/contacts.md "Hops and jumps"). Flights shorter than 0.13 s are not lifted
+          metric (`solver.motion_metrics.FLIGHT_HEIGHT`), and the feet would sink to it long before
+          the landing, shortening a hop's flight (docs/contacts.md "The contact terms"). Flights shorter than 0.13 s are not lifted
           (g T^2 / 8 <= c); a run's (0.16-0.18 s) only in their middle. The lift is a target, not a
           bound for `conflicts`; keyframes where it is at its ceiling lower the ceiling to the lowest
           site they hold (`lower_lifts`),
@@ -65,7 +65,7 @@ from solver.terms.contact_schedule import (
 
 GRAVITY = 9.81  # [m/s^2], for the ballistic flight clearance
 #: ceiling of the ballistic lift of a flight's band [m]: the contact entry height (3 cm, also the flight
-#: height of `solver.motion_metrics.FLIGHT_HEIGHT`) and 5 mm for the penalty's give (docs/contacts.md)
+#: height of `solver.motion_metrics.FLIGHT_HEIGHT`) and 5 mm for the penalty's give (docs/contacts.md "The contact terms")
 FLIGHT_LIFT = HEIGHT_ON + 0.005
 
 
@@ -82,7 +82,7 @@ class Clearance(Term):
         core: fraction in [0, 1] of each swing / flight that is fully weighted (default 0.5).
         flight: also apply to all contact sites during flights (default True).
         flight_clearance: c_f [m] > 0, the clearance during flights; default None: min(c, g T^2 / 8)
-            per flight of duration T (module docstring, docs/contacts.md).
+            per flight of duration T (module docstring, docs/contacts.md "The contact terms").
         flight_lift: ceiling [m] of the ballistic lift of the flight band (default FLIGHT_LIFT, 3.5 cm;
             None: no lift, the band is c_f). Only with the default c_f (flight_clearance None).
         sites: the sites the term looks after (default the four contact sites).

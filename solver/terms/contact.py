@@ -1,4 +1,4 @@
-"""Feet that plant (issue 11): a contact schedule turned into objective terms.
+"""Feet that plant: a contact schedule turned into objective terms (docs/contacts.md "The contact terms").
 
 A contact is any object with attributes `site` (a contact site name, e.g. l_heel), `start`, `end` [s]
 and `surface` (a `StaticSurfaces` name, "" = whichever surface is under the site; `solver.contacts.Contact`
@@ -23,12 +23,11 @@ has that shape). One term here, one in `solver.terms.clearance` and one in
   sliding ramps tolerate contact times a frame or two off: the capture's sites still move at touch-down
   and lift-off (contacts start below 0.5 m/s and end above 1 m/s, `solver.contacts`). Height has no ramp:
   a site in contact is on its surface from touch-down to lift-off (the capture's sites are 2-13 mm up at
-  a contact's first and last frames), and the float metric (`solver.motion_metrics`; issue 11: mean
-  float in reference contact <= 5 mm) counts every frame of the contact. With the height ramped as
-  well, the optimized feet came down 2-3 frames late and left 2-4 frames early, 1-3 cm up at the
-  contact's ends: on 127_33 keyed every 0.33 s the 24 % of contact frames inside the ramps made 2.5 of
-  its 5.2 mm mean float, on 35_17 keyed so 3.1 of 5.5 mm (docs/contacts.md "Float at the ends of
-  contacts"). A ramp outside the contact (pulling a foot that is still in the air) cut more float but
+  a contact's first and last frames), and the float metric (`solver.motion_metrics`, docs/contacts.md
+  "Motion metrics": mean float in reference contact) counts every frame of the contact. With the height
+  ramped as well, the optimized feet come down 2-3 frames late and leave 2-4 frames early, 1-3 cm up
+  at the contact's ends, and the frames inside the ramps make about half the mean float
+  (docs/contacts.md "The contact terms"). A ramp outside the contact (pulling a foot that is still in the air) cut more float but
   shortened flights by up to 0.11 s. The step in s_c is harmless to the quadrature: the solve puts a
   frame at every touch-down and lift-off (`knot_times`; not within 30 ms of another frame), and the
   quadrature points are fixed, so the objective stays a smooth function of the frames.

@@ -1,4 +1,4 @@
-"""Friction-cone residual (issue 11): during contact the feet must be able to supply the root wrench.
+"""Friction-cone residual (docs/contacts.md "The contact terms"): during contact the feet must be able to supply the root wrench.
 
 Inverse dynamics of the path (the machinery of `solver.terms.dynamics.RootResidual`) gives the free
 root's generalized force: the world force F [N] and the torque T_loc [N m] about the root body's origin

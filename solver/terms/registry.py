@@ -23,12 +23,12 @@ from solver.terms.base import Term
 
 #: Weight of each built-in term when it is switched on without one (all renormalized, eq. 7, so each
 #: starts at its weight). torque and root at 1: on run-and-step (`--terms all`) that keeps every bound of
-#: the main job and gives RMS root force in flight 20 N against the plain spline's 625 N, RMS joint
+#: the default run and gives RMS root force in flight 20 N against the plain spline's 625 N, RMS joint
 #: torque 80 N m against 103 N m; 0.1 each also meets the acceptance figures but keeps less of the gain
 #: (74 N, 93 N m) and lets the flight grow to 0.49 s (plain spline 0.25 s).
 #: planted and clearance at 10: on run-and-step (127_33, its own contacts) weight 1 with 5 mm rest height
 #: floated planted feet 7.6 mm (capture 2.4) and raised the joint-orientation error to 13.1 deg (plain
-#: 10.2); weight 10 with the 2 mm contact margin: float 3.5 mm, joint error 10.7 deg (README "Contacts").
+#: 10.2); weight 10 with the 2 mm contact margin: float 3.5 mm, joint error 10.7 deg (docs/contacts.md "The contact terms").
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
                    "planted": 10.0, "clearance": 10.0, "cone": 1.0}
 
@@ -162,7 +162,7 @@ def build_term(spec: TermSpec, build: TermBuild) -> Term:
 
 def _register_builtins() -> None:
     """The figure's terms: sec. 5 (penetration, unit, bending, smooth), sec. 6 (torque, root) and the
-    contact terms (planted, clearance, cone; docs/contacts.md)."""
+    contact terms (planted, clearance, cone; docs/contacts.md "The contact terms")."""
     from solver.terms.bending import Hyperextension
     from solver.terms.clearance import Clearance
     from solver.terms.contact import Planted

@@ -32,9 +32,9 @@ def test_run_and_step_with_contacts_floats_and_skates_less():
 @pytest.mark.slow
 def test_sparse_keys_float_under_5_mm(tmp_path):
     """127_33 keyed every 0.33 s (a keying the defaults were not chosen on) as `dynsplines mocap CLIP
-    --every 0.33 --scene auto` makes it: mean float in the capture's contacts at most 5 mm (issue 11).
-    With the planted term's height ramped at the contacts' ends like its sliding it was 5.15-5.19 mm
-    (docs/contacts.md "Float at the ends of contacts"); now 4.47-4.61 mm."""
+    --every 0.33 --scene auto` makes it: mean float in the capture's contacts at most 5 mm.
+    The planted term's height is not ramped at the contacts' ends (docs/contacts.md "The contact
+    terms"): ramped like its sliding, the float on this input exceeds 5 mm."""
     import json
 
     from runner.cli import main

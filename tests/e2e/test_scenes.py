@@ -1,4 +1,4 @@
-"""Writing one's own scene (issue 15 item 2): the shipped flat-floor scene, a copied scene that loses its
+"""Writing one's own scene (models/README.md "Writing a scene"): the shipped flat-floor scene, a copied scene that loses its
 included figure, a scene without a floor, and a keyframe file whose "model" is not there - each a clear
 one-line error naming the file and the fix, reported when the scene or file is read."""
 import json

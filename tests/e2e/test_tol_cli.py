@@ -1,4 +1,4 @@
-"""Accuracy on request at the command line (issue 13): `dynsplines orient --tol`, the figure commands'
+"""Accuracy on request at the command line (docs/orient.md "At the command line, and on the figure"): `dynsplines orient --tol`, the figure commands'
 `--tol` and `dynsplines bench orient --random N`, on tiny problems."""
 import json
 from pathlib import Path

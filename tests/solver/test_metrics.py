@@ -1,4 +1,4 @@
-"""Physical plausibility (issue 4): the inverse-dynamics figures of `solver.metrics` against physical
+"""Physical plausibility (paper sec. 6, docs/design.md "Judging a result"): the inverse-dynamics figures of `solver.metrics` against physical
 expectations and MuJoCo, the lagged flight indicator of the root term, the shared reverse pass of
 the dynamics terms, adaptive against global refinement, the plots, and the run-and-step regression
 with every term on (`dynsplines run-and-step --terms all`).

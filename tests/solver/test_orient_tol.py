@@ -1,4 +1,4 @@
-"""Accuracy on request (issue 13): `orient(tol=...)`, the a-posteriori gap estimate, budgets, |q| drift.
+"""Accuracy on request (docs/orient.md "Accuracy on request: tol and the gap estimate"): `orient(tol=...)`, the a-posteriori gap estimate, budgets, |q| drift.
 
 The acceptance test runs the default and tol=1e-4 on generated keyframe sets (solver/bench/random_sets.py)
 against the exact optimum of the independent reference (solver/bench/sphere_reference/).

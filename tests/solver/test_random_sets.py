@@ -1,4 +1,4 @@
-"""solver/bench/random_sets.py: the seeded keyframe-set generator of issue 13."""
+"""solver/bench/random_sets.py: the seeded keyframe-set generator of the orientation benchmarks (docs/orient.md)."""
 import numpy as np
 
 from solver.bench.random_sets import (

@@ -1,4 +1,4 @@
-"""SplineBasis's banded evaluation (the tridiagonal moment system, issue 14 part 3) against the dense
+"""SplineBasis's banded evaluation (the tridiagonal moment system, docs/scaling.md) against the dense
 matrices, an independent spline (scipy CubicSpline, natural ends) and its own transpose, at thousands
 of frames."""
 import numpy as np

@@ -518,7 +518,7 @@ def test_root_without_position_channels(tmp_path, scene):
         load_bvh_reference(p, scene)
 
 
-# ---- clips of other sessions: other Euler orders, frame rates, bone lengths; another skeleton ----------
+# ---- clips of other captures: other Euler orders, frame rates, bone lengths; another skeleton ----------
 
 
 def test_other_channel_order_frame_rate_and_bone_lengths_give_the_same_motion(tmp_path, scene, layout):

@@ -97,7 +97,7 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
     saved = load_saved_path(out / "run.npz")
     assert contacts_from_array(saved["contacts"]) == list(info.contacts)
     assert set(saved.metrics) == {"plain", "optimized", "motion"}
-    # the clip's contacts switch the contact terms on (issue 11), with their penalty-continuation bounds
+    # the clip's contacts switch the contact terms on (docs/contacts.md "Contact schedules"), with their penalty-continuation bounds
     assert {"planted", "clearance"} <= set(saved.options["weights"])
     assert {"planted", "clearance"} <= {name for name, _ in saved.options["solve"]["limits"]}
     report = json.loads((tmp_path / "m.json").read_text())
@@ -119,11 +119,10 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
 
 @pytest.mark.slow
 def test_a_hops_flight_keeps_its_length(tmp_path):
-    """Issue 11's flight bound on a synthetic 15 cm, 0.35 s hop of the walk 16_23 (`edit_bvh` hop, 2.5 s,
+    """The flight bound on a synthetic 15 cm, 0.35 s hop of the walk 16_23 (`edit_bvh` hop, 2.5 s,
     keys every 0.25 s, fitted scene): the optimized path's flight (every contact site above 3 cm) within 30 ms
-    of the capture's. It was 58 ms short (0.317 / 0.258 s) when the flight band was 2 cm, under the
-    flight metric's 3 cm: the feet sank to it well before the landing (docs/contacts.md "Hops and
-    jumps")."""
+    of the capture's. With a flight band of 2 cm, under the flight metric's 3 cm, the feet would sink to
+    it well before the landing (docs/contacts.md "The contact terms", clearance's ballistic lift)."""
     src = REPO.parent / "shared" / "data" / "cmu" / "16_23.bvh"
     if not src.exists():
         pytest.skip("no shared clip ../shared/data/cmu/16_23.bvh")

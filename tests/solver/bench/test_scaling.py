@@ -1,5 +1,5 @@
 """The scaling workload (solver.bench.scaling): the tiled gait is exact copies, and the optimizer's
-evaluation count does not grow much with the length (issue 14: cost linear in clip length)."""
+evaluation count does not grow much with the length (docs/scaling.md: cost linear in clip length)."""
 from dataclasses import replace
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Contact-schedule terms (issue 11): planted, clearance, friction cone. Gradients against central
+"""Contact-schedule terms (docs/contacts.md "The contact terms"): planted, clearance, friction cone. Gradients against central
 finite differences (Y, Y', Y''), values against hand-built cases on the toy figure of conftest.py.
 
 Toy figure at identity rotations with the root at (x, y, z): l_heel at (x - .05, y + .1, z - .95),
