@@ -273,8 +273,11 @@ def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = Non
             raise InputError(f"{where}: give exactly one of 'site' ({', '.join(known)}) or 'foot' "
                              f"({', '.join(feet)})")
         if "site" in c:
+            if not isinstance(c["site"], str):
+                raise InputError(f"{where}: 'site' is {c['site']!r}; give a contact site's name "
+                                 f"({', '.join(known)}) or use 'foot': {' or '.join(map(repr, feet))}")
             if c["site"] not in known:
-                raise InputError(f"{where}: 'site' is {c['site']!r}; the contact sites are "
+                raise InputError(f"{where}: 'site' is {c['site']!r}; the figure's contact sites are "
                                  f"{', '.join(known)} (or use 'foot': {' or '.join(map(repr, feet))})")
             sites: tuple[str, ...] = (c["site"],)
         else:

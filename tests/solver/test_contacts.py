@@ -148,7 +148,7 @@ def test_schedule_is_checked_once_sorted_and_answers_queries():
     assert run.flights() == [(0.3, 0.4), (0.7, 0.8)]  # no site in contact, between the first and last
     assert run.swings("l_toe") == [(0.3, 0.8)] and run.swings("r_toe") == []
     assert run.span == (0.0, 1.1)
-    assert run.events() == ([(0.0, "l"), (0.4, "r"), (0.8, "l")], [(0.3, "l"), (0.7, "r"), (1.1, "l")])
+    assert run.events() == ([(0.0, "left"), (0.4, "right"), (0.8, "left")], [(0.3, "left"), (0.7, "right"), (1.1, "left")])
     mask = run.mask(np.array([0.3, 0.35, 0.5]))
     np.testing.assert_array_equal(mask[:, SITES.index("l_toe")], [True, False, False])
     np.testing.assert_array_equal(mask[:, SITES.index("r_toe")], [False, False, True])
