@@ -51,7 +51,8 @@ def input_problem(path: Path, every: float, tmp: Path, rate: float):
         out = tmp / path.stem
         out.mkdir(parents=True, exist_ok=True)
         paths = {"keyframes": out / f"{path.stem}.keyframes.json", "scene": out / f"{path.stem}.scene.xml"}
-        problem, source, _ = clip_problem(path, out, ClipOptions(every=every, rate=rate), paths, say=lambda *a: None)
+        problem, source, _ = clip_problem(path, out, ClipOptions(every=every, rate=rate, quiet=True), paths,
+                                          say=lambda *a: None)
         return problem, source
     return file_problem(path, rate=rate)
 
