@@ -106,15 +106,9 @@ class MujocoInverseDynamics:
 
     def positions(self, qpos: np.ndarray) -> np.ndarray:
         """(n, k, 3) world positions [m] of the sites at qpos (n, nq), by `mj_kinematics`."""
-        import mujoco
+        from solver.kinematics import mujoco_site_positions
 
-        m, d = self.model, self.data
-        out = np.empty((len(qpos), len(self.site_ids), 3))
-        for i, y in enumerate(qpos):
-            d.qpos[:] = y
-            mujoco.mj_kinematics(m, d)
-            out[i] = d.site_xpos[self.site_ids]
-        return out
+        return mujoco_site_positions(self.model, self.data, self.site_ids, qpos)
 
     def vjp(self, res, g_tau, g_sites=None):
         """See `InverseDynamics.vjp` (DfDq, DfDv, DfDa of `mjd_inverseFD` are transposed Jacobians,

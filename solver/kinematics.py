@@ -314,3 +314,16 @@ class TangentMap:
             (n, nv) qacc [m/s^2, rad/s^2] in MuJoCo's convention (what `mj_inverse` reads).
         """
         return _motion(self, Y, Y1, Y2).qacc
+
+
+def mujoco_site_positions(model, data, site_ids, qpos: np.ndarray) -> np.ndarray:
+    """(n, k, 3) world positions [m] of sites `site_ids` (k,) at qpos (n, nq), by MuJoCo's `mj_kinematics`
+    (the reference the vectorized kinematics is checked against; `data` is overwritten)."""
+    import mujoco
+
+    out = np.empty((len(qpos), len(site_ids), 3))
+    for i, y in enumerate(qpos):
+        data.qpos[:] = y
+        mujoco.mj_kinematics(model, data)
+        out[i] = data.site_xpos[site_ids]
+    return out

@@ -192,15 +192,9 @@ class MujocoSitePositions:
 
     def positions(self, qpos: np.ndarray) -> np.ndarray:
         """(n, k, 3) world positions [m] of the sites at qpos (n, nq)."""
-        import mujoco
+        from solver.kinematics import mujoco_site_positions
 
-        m, d = self.model, self.data
-        out = np.empty((len(qpos), len(self.site_ids), 3))
-        for i, y in enumerate(qpos):
-            d.qpos[:] = y
-            mujoco.mj_kinematics(m, d)
-            out[i] = d.site_xpos[self.site_ids]
-        return out
+        return mujoco_site_positions(self.model, self.data, self.site_ids, qpos)
 
     def forward(self, qpos, qvel=None, qacc=None) -> InverseDynamicsResult:
         """The sites' positions at qpos (n, nq) (qvel, qacc ignored); tau is an empty (n, 0)."""

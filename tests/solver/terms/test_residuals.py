@@ -1,10 +1,10 @@
 """The residual form of the terms that are sums of squares (`Term.residual`): |r|^2 is the integrand,
 and the Jacobian (dense blocks or vector-Jacobian products) agrees with central finite differences of r."""
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
+from solver.contacts import Contact
 from solver.layout import StateLayout
 from solver.path_context import PathContext
 from solver.terms import (
@@ -27,12 +27,6 @@ N = 12
 HINGES = {"l_knee": (0, 1, 0), "r_knee": (0, -1, 0)}
 
 
-@dataclass(frozen=True)
-class Contact:
-    site: str
-    start: float
-    end: float
-    surface: str = ""
 
 
 def _path(layout, seed, height, spread=0.3):
