@@ -216,14 +216,9 @@ def site_positions(model, qpos: np.ndarray, sites: Sequence[str] = SITES) -> np.
         if sid < 0:
             raise InputError(f"the model has no site {s!r}; contact sites needed: {', '.join(sites)}")
         ids.append(sid)
-    data = mujoco.MjData(model)
-    qpos = np.atleast_2d(np.asarray(qpos, float))
-    out = np.empty((len(qpos), len(ids), 3))
-    for i, q in enumerate(qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        out[i] = data.site_xpos[ids]
-    return out
+    from solver.kinematics import mujoco_site_positions
+
+    return mujoco_site_positions(model, mujoco.MjData(model), ids, np.atleast_2d(np.asarray(qpos, float)))
 
 
 def site_heights(model, site_pos: np.ndarray) -> np.ndarray:
