@@ -27,9 +27,12 @@ TIMING = "\x00t"
 """Prefix of a table cell that is a wall time (stripped when written, masked when checked)."""
 COUNT_RTOL = 0.10
 """Relative tolerance of an integer figure (evaluations, frames) in `compare_blocks`: 10 %."""
-VALUE_RTOL = 0.02
-"""Relative tolerance of a decimal figure in `compare_blocks`: 2 % (or one unit in the last printed
-digit, whichever is larger: 0.01 against 0.00 passes)."""
+VALUE_RTOL = 0.20
+"""Relative tolerance of a decimal figure in `compare_blocks`: 20 % (or one unit in the last printed
+digit, whichever is larger: 0.01 against 0.00 passes). An optimized figure follows the optimizer's path,
+which another CPU's BLAS kernels change through rounding: the peak root force in flight of `--terms all`
+moves 13 % between OpenBLAS's SkylakeX and Sandybridge kernels while the evaluation count moves 3 %.
+What the check guards against is a changed result (a flight 43 % longer), not the last digits."""
 _BLOCK = re.compile(r"(<!-- bench:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /bench:(?P=name) -->)", re.S)
 _NUMBER = re.compile(r"(?<![\w.])-?\d+(?:\.\d+)?(?:e[-+]?\d+)?(?![\w.])")
 
