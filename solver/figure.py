@@ -29,7 +29,7 @@ from types import MappingProxyType
 import numpy as np
 
 from solver.errors import InputError
-from solver.layout import Joint, StateLayout
+from solver.layout import Joint, StateLayout, find_joint
 
 __all__ = ["MODELS_DIR", "FIGURE_FILE", "Figure", "Segment", "NeckChain", "shipped_figure"]
 
@@ -136,10 +136,7 @@ class Figure:
 
     def joint(self, name: str) -> Joint:
         """The figure's joint called `name`. Raises InputError listing the joints."""
-        for j in self.joints:
-            if j.name == name:
-                return j
-        raise InputError(f"the figure has no joint {name!r}; its joints are: {', '.join(j.name for j in self.joints)}")
+        return find_joint(self.joints, name)
 
     @classmethod
     def from_model(cls, model) -> Figure:

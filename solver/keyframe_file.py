@@ -140,6 +140,30 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
         layout = StateLayout.from_model(mj_model)
     p = Path(path)
     src = str(path)
+    doc = _checked_document(path)
+    times, values, mask = _keyframe_table(doc["keyframes"], layout, src)
+    model = _relative_path(doc, "model", p)
+    if model is not None and not model.is_file():
+        raise InputError(
+            f"{src}: field 'model' is {doc['model']!r}, but {model} is not a file (the path is relative to "
+            f"the keyframe file's folder); write the figure's path relative to {p.parent.resolve()} (e.g. the "
+            "humanoid39.xml the scene includes) or remove the field"
+        )
+    source = doc.get("source", {})
+    if not isinstance(source, dict):
+        raise InputError(f"{src}: field 'source' is {source!r}; it must be an object (provenance notes)")
+    terms = doc.get("terms", {})
+    if not isinstance(terms, dict):
+        raise InputError(f"{src}: field 'terms' is {terms!r}; it must be an object {{term name: weight}}")
+    feet = Figure.from_model(mj_model).feet if mj_model is not None and doc.get("contacts") else None
+    contacts = read_contacts(doc.get("contacts", []), src, surfaces, feet)
+    keyframes = Keyframes(times, values, mask, source=src)
+    return keyframes, KeyframeFileInfo(p, model, _relative_path(doc, "scene", p), dict(source), dict(terms), contacts)
+
+
+def _checked_document(path) -> dict:
+    """The keyframe file's top-level object, with its format and fields checked (`read_keyframes`)."""
+    src = str(path)
     doc = read_document(path)
     if not isinstance(doc, dict):
         raise InputError(f"{src}: the top level is a {type(doc).__name__}; a keyframe file is a JSON object {{...}}")
@@ -157,10 +181,13 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
         )
     if "keyframes" not in doc:
         raise InputError(f"{src}: missing field 'keyframes'; add a list of {{\"time\": ..., \"joints\": {{...}}}}")
-    frames = doc["keyframes"]
-    if not isinstance(frames, list):
-        raise InputError(f"{src}: field 'keyframes' is a {type(frames).__name__}; it must be a list of keyframes")
+    if not isinstance(doc["keyframes"], list):
+        raise InputError(f"{src}: field 'keyframes' is a {type(doc['keyframes']).__name__}; it must be a list of keyframes")
+    return doc
 
+
+def _keyframe_table(frames: list, layout, src: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The "keyframes" list as times (k,) [s], values (k, nq) (NaN where free) and mask (k, nq)."""
     times = np.empty(len(frames))
     values = np.full((len(frames), layout.nq), np.nan)
     mask = np.zeros((len(frames), layout.nq), bool)
@@ -186,54 +213,43 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
         if not isinstance(joints, dict):
             raise InputError(f"{where} (t={t} s): 'joints' is a {type(joints).__name__}; it must be an object {{name: [values]}}")
         for name, comps in joints.items():
-            try:
-                jt = layout.joint(name)
-            except InputError as e:
-                raise InputError(f"{where} (t={t} s), joints: {e}") from None
-            what = "x y z qw qx qy qz" if jt.kind == "free" else ("qw qx qy qz" if jt.kind == "ball" else "value")
-            if not isinstance(comps, list) or len(comps) != jt.nq:
-                got = f"has {len(comps)} components" if isinstance(comps, list) else "is not a list"
-                raise InputError(
-                    f"{where} (t={t} s), joint {name!r}: {comps!r} {got}; a {jt.kind} joint "
-                    f"takes a list of {jt.nq} ({what}), null for a free component"
-                )
-            for c, v in enumerate(comps):
-                if v is None:
-                    continue
-                if not _is_number(v) or not math.isfinite(v):
-                    raise InputError(
-                        f"{where} (t={t} s), joint {name!r}, component {c} ({what.split()[c]}): {v!r} is not a "
-                        "finite number; give a number, or null to leave it free"
-                    )
-                values[i, jt.qposadr + c] = v
-                mask[i, jt.qposadr + c] = True
+            _joint_values(layout, f"{where} (t={t} s)", name, comps, values[i], mask[i])
+    return times, values, mask
 
-    def resolve(key):
-        v = doc.get(key)
-        if v is None:
-            return None
-        if not isinstance(v, str) or not v or "\x00" in v:
-            raise InputError(f"{src}: field {key!r} is {v!r}; give a path relative to the keyframe file")
-        return (p.parent / v).resolve()
 
-    model = resolve("model")
-    if model is not None and not model.is_file():
+def _joint_values(layout, where: str, name: str, comps, values: np.ndarray, mask: np.ndarray) -> None:
+    """One joint's components of a keyframe into its row of `values` and `mask` (free: None)."""
+    try:
+        jt = layout.joint(name)
+    except InputError as e:
+        raise InputError(f"{where}, joints: {e}") from None
+    what = "x y z qw qx qy qz" if jt.kind == "free" else ("qw qx qy qz" if jt.kind == "ball" else "value")
+    if not isinstance(comps, list) or len(comps) != jt.nq:
+        got = f"has {len(comps)} components" if isinstance(comps, list) else "is not a list"
         raise InputError(
-            f"{src}: field 'model' is {doc['model']!r}, but {model} is not a file (the path is relative to "
-            f"the keyframe file's folder); write the figure's path relative to {p.parent.resolve()} (e.g. the "
-            "humanoid39.xml the scene includes) or remove the field"
+            f"{where}, joint {name!r}: {comps!r} {got}; a {jt.kind} joint "
+            f"takes a list of {jt.nq} ({what}), null for a free component"
         )
+    for c, v in enumerate(comps):
+        if v is None:
+            continue
+        if not _is_number(v) or not math.isfinite(v):
+            raise InputError(
+                f"{where}, joint {name!r}, component {c} ({what.split()[c]}): {v!r} is not a "
+                "finite number; give a number, or null to leave it free"
+            )
+        values[jt.qposadr + c] = v
+        mask[jt.qposadr + c] = True
 
-    source = doc.get("source", {})
-    if not isinstance(source, dict):
-        raise InputError(f"{src}: field 'source' is {source!r}; it must be an object (provenance notes)")
-    terms = doc.get("terms", {})
-    if not isinstance(terms, dict):
-        raise InputError(f"{src}: field 'terms' is {terms!r}; it must be an object {{term name: weight}}")
-    feet = Figure.from_model(mj_model).feet if mj_model is not None and doc.get("contacts") else None
-    contacts = read_contacts(doc.get("contacts", []), src, surfaces, feet)
-    keyframes = Keyframes(times, values, mask, source=src)
-    return keyframes, KeyframeFileInfo(p, model, resolve("scene"), dict(source), dict(terms), contacts)
+
+def _relative_path(doc: dict, key: str, p: Path) -> Path | None:
+    """A path field of the file, resolved against the file's folder (None when absent)."""
+    v = doc.get(key)
+    if v is None:
+        return None
+    if not isinstance(v, str) or not v or "\x00" in v:
+        raise InputError(f"{p}: field {key!r} is {v!r}; give a path relative to the keyframe file")
+    return (p.parent / v).resolve()
 
 
 def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = None, feet=None) -> ContactSchedule:

@@ -99,10 +99,7 @@ class StateLayout:
 
     def joint(self, name: str) -> Joint:
         """The joint called `name`. Raises InputError listing the valid names."""
-        for j in self.joints:
-            if j.name == name:
-                return j
-        raise InputError(f"unknown joint {name!r}; the figure's joints are: {', '.join(self.names)}")
+        return find_joint(self.joints, name)
 
     @property
     def linear_index(self) -> np.ndarray:
@@ -145,3 +142,11 @@ def index_run(idx) -> np.ndarray | slice:
     if len(idx) and np.array_equal(idx, np.arange(idx[0], idx[0] + len(idx))):
         return slice(int(idx[0]), int(idx[0]) + len(idx))
     return idx
+
+
+def find_joint(joints, name: str) -> Joint:
+    """The joint called `name` among `joints` (a figure's `Joint`s). Raises InputError listing the names."""
+    for j in joints:
+        if j.name == name:
+            return j
+    raise InputError(f"unknown joint {name!r}; the figure's joints are: {', '.join(j.name for j in joints)}")
