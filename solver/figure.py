@@ -136,7 +136,10 @@ class Figure:
 
     def joint(self, name: str) -> Joint:
         """The figure's joint called `name`. Raises InputError listing the joints."""
-        return find_joint(self.joints, name)
+        found = find_joint(self.joints, name)
+        if found is None:
+            raise InputError(f"the figure has no joint {name!r}; its joints are: {', '.join(j.name for j in self.joints)}")
+        return found
 
     @classmethod
     def from_model(cls, model) -> Figure:

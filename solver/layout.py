@@ -99,7 +99,10 @@ class StateLayout:
 
     def joint(self, name: str) -> Joint:
         """The joint called `name`. Raises InputError listing the valid names."""
-        return find_joint(self.joints, name)
+        found = find_joint(self.joints, name)
+        if found is None:
+            raise InputError(f"unknown joint {name!r}; the figure's joints are: {', '.join(self.names)}")
+        return found
 
     @property
     def linear_index(self) -> np.ndarray:
@@ -144,9 +147,6 @@ def index_run(idx) -> np.ndarray | slice:
     return idx
 
 
-def find_joint(joints, name: str) -> Joint:
-    """The joint called `name` among `joints` (a figure's `Joint`s). Raises InputError listing the names."""
-    for j in joints:
-        if j.name == name:
-            return j
-    raise InputError(f"unknown joint {name!r}; the figure's joints are: {', '.join(j.name for j in joints)}")
+def find_joint(joints, name: str) -> Joint | None:
+    """The joint called `name` among `joints` (a figure's `Joint`s), or None."""
+    return next((j for j in joints if j.name == name), None)
