@@ -254,15 +254,14 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "interrupted"), "frames" (reference frames), "fps", "keyframes" (count), "partial", "contacts"
         (count), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "metrics"
         ({"plain", "optimized": path_metrics; "motion": {"plain", "optimized": motion_metrics}}),
-        "scene_fitted" (floor_z, boxes as centre/half lists, or None), "outputs" ({name: path}),
-        "summary" (the printed tables)}.
+        "scene_fitted" (floor_z, boxes as centre/half lists, or None), "outputs" ({name: path})}.
     Raises:
         InputError: a missing or malformed clip, another skeleton (the missing joints named), an
             unwritable output, a bad option.
     """
     from runner.mocap.contacts import worst_contact_distance
     from runner.render.side_by_side import VideoOptions
-    from runner.run import Outputs, execute, report, write_metrics_json
+    from runner.run import Outputs, execute, write_metrics_json
 
     t_start = time.perf_counter()
     o = options or ClipOptions()
@@ -303,7 +302,6 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     write_metrics_json(run, paths["metrics"], extra=extra)
     say(f"  wrote {display_path(paths['metrics'])}")
     result["wall_time_s"] = time.perf_counter() - t_start
-    result["summary"] = report(run)
     say(f"  wall time {result['wall_time_s']:.1f} s")
     return result
 
