@@ -95,6 +95,8 @@ class Reference:
         source: the BVH file it came from.
         frame_time: [s] time between frames of the clip.
         root_scale: the scale applied to the captured root path (`retarget`; 1: as captured).
+        captured_root: the root path is the captured one, height included (the subject's own figure:
+            no height correction, `runner.mocap.reference.load_bvh_reference`).
     """
 
     times: np.ndarray
@@ -102,6 +104,7 @@ class Reference:
     source: str
     frame_time: float
     root_scale: float = 1.0
+    captured_root: bool = False
 
     @property
     def count(self) -> int:
