@@ -147,8 +147,12 @@ def clip_figure_scene(clip: Path, k: ClipKeys, scene_out: Path):
     to retarget onto: "auto", or the given scene with that figure (`scene_with_figure`, written to
     `scene_out` when the figure differs from the scene's own; with the default figure, the given scene
     as it is)."""
-    figure = choose_figure(k.figure, clip, figure_path_for(scene_out), k.mass)
     scene = k.scene
+    if str(scene) != AUTO and not is_default(k.figure):
+        from solver.model import load_model
+
+        check_scene(load_model(scene), scene)  # the user's scene first: a floor, the figure (file and fix named)
+    figure = choose_figure(k.figure, clip, figure_path_for(scene_out), k.mass)
     if str(scene) != AUTO and not is_default(k.figure):
         scene = scene_with_figure(scene, figure, scene_out)
     return figure, scene
