@@ -65,28 +65,13 @@ def choose_figure(figure, clip, out: Path, mass: float | None = None) -> Path:
     return path
 
 
-def _is_figure_file(path: Path) -> bool:
-    """True if the MJCF file `path` annotates a figure (`<custom><text name="figure:foot:...">`)."""
-    try:
-        root = ET.parse(path).getroot()
-    except (OSError, ET.ParseError):
-        return False
-    return any((t.get("name") or "").startswith("figure:foot:") for t in root.iter("text"))
-
-
 def figure_include(scene) -> Path | None:
     """The figure file the scene MJCF `scene` includes (an `<include file=...>` of a file with the
     figure's annotations), resolved; None if it holds the figure inline or cannot be read."""
-    scene = Path(scene)
-    try:
-        root = ET.parse(scene).getroot()
-    except (OSError, ET.ParseError):
-        return None
-    for inc in root.iter("include"):
-        path = (scene.parent / inc.get("file", "")).resolve()
-        if path.is_file() and _is_figure_file(path):
-            return path
-    return None
+    from runner.saved_path import scene_figure
+
+    found = scene_figure(scene)
+    return Path(found) if found else None
 
 
 def scene_with_figure(scene, figure, out) -> Path:

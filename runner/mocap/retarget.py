@@ -12,7 +12,7 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    MuJoCo axes: BVH is Y up with the figure facing +Z and its left at +X; MuJoCo is z up, facing +x,
    left +y. So (x, y, z)_mujoco = (Z, X, Y)_bvh, a proper rotation (`BVH_TO_MUJOCO`).
 3. Retargeting: each figure body's world orientation is the corresponding CMU bone's world orientation
-   times a fixed rest-pose offset R_off (`_rest_offsets`): the smallest rotation that takes the figure
+   times a fixed rest-pose offset R_off (`rest_offsets`): the smallest rotation that takes the figure
    bone's direction at the identity pose (`solver.figure.Figure.segments`: hip -> knee, knee -> ankle,
    ankle -> ball of the foot, shoulder -> elbow, elbow -> wrist) to the CMU bone's direction in the
    CMU rest (T-) pose (all
@@ -175,7 +175,7 @@ def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q)
 
 
-def _rest_offsets(clip: BvhClip, figure: Figure) -> dict[str, np.ndarray]:
+def rest_offsets(clip: BvhClip, figure: Figure) -> dict[str, np.ndarray]:
     """Rest-pose offset R_off (unit quaternion) per figure body: figure world = CMU world * R_off.
 
     For a limb bone, the smallest rotation taking the figure's segment direction at the identity pose
@@ -298,7 +298,7 @@ def retarget(clip: BvhClip, figure: Figure, layout: StateLayout, root_scale: flo
     check_skeleton(clip)
     check_figure(figure)
     qw, pw = cmu_world(clip)
-    offsets = _rest_offsets(clip, figure)
+    offsets = rest_offsets(clip, figure)
     body_q = {b: mul(qw[:, clip.index(j)], offsets[b]) for b, (j, _) in BONE_MAP.items()}
     n = len(qw)
     qpos = np.zeros((n, layout.nq))
