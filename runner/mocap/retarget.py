@@ -20,8 +20,14 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    along the subject's own rest bone directions (the CMU thigh and shin bones point about 20 degrees
    outward in its rest pose, so mapping them to the identity would cross the figure's legs); the
    pelvis and the torso have R_off = identity. Local joint quaternions follow as
-   q_joint = conj(q_parent_world) q_child_world, unit, w x y z, hemisphere-consistent over time. The
-   figure keeps its own bone lengths; the root position is the CMU Hips position scaled by the ratio
+   q_joint = conj(q_parent_world) q_child_world, unit, w x y z, hemisphere-consistent over time.
+   Joints the figure merges are composed, not dropped: a body's world orientation includes every
+   rotation above its driving joint (the torso's is LowerBack Spine Spine1; the thigh's includes
+   LHipJoint), so the joint quaternion between two bodies is the chain's composition (docs/mocap.md,
+   "What the figure keeps"). On the subject's own figure (runner/mocap/subject_figure.py: the figure's
+   segments are the subject's bones, its ball site the toe joint) the hip, knee, ankle and toe-joint
+   positions relative to the hips are the capture's, and the root path is the captured one. On another
+   figure, which keeps its own bone lengths, the root position is the CMU Hips position scaled by the ratio
    of the figure's leg length to the subject's (`leg_length_ratio`), as humanoid retargeting scales
    root motion by the hips' height (Unity's `Animator.humanScale`): a subject 10% taller than the
    figure covers 10% more ground per stride, and the figure's shorter legs, at the subject's joint
