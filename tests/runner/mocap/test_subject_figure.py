@@ -132,3 +132,25 @@ def test_keyframe_file_names_the_figure_and_animate_finds_it(tmp_path, capsys):
     assert model2.nq == model.nq and not (tmp_path / "d.figure.xml").exists()
     assert Figure.from_model(model2).segments["l_thigh"].length == pytest.approx(0.42)
     assert not find_reference(info2, model2, quiet=True).captured_root
+
+
+@pytest.mark.parametrize("extra, words", [(["--figure", "default", "--mass", "70"], ["--mass", "--figure subject"]),
+                                          (["--figure", "nope.xml"], ["--figure nope.xml", "no such file"])])
+def test_bad_figure_options_are_one_line(tmp_path, capsys, extra, words):
+    out = tmp_path / "k.keyframes.json"
+    rc = main(["keyframes-from-bvh", str(SHIPPED_CLIP), "--out", str(out), "--quiet", *extra])
+    err = capsys.readouterr().err
+    assert rc == EXIT_INPUT and err.count("\n") == 1 and all(w in err for w in words), err
+    assert not out.exists()
+
+
+def test_a_scene_holding_its_figure_inline_cannot_take_the_subjects(tmp_path, capsys):
+    """A scene with the figure written inline (no include to replace): one line with the fix."""
+    text = (REPO / "models" / "humanoid39.xml").read_text()
+    inline = text.replace("</worldbody>", '<geom name="floor" type="plane" size="0 0 0.05"/></worldbody>')
+    scene = tmp_path / "inline.xml"
+    scene.write_text(inline)
+    rc = main(["keyframes-from-bvh", str(SHIPPED_CLIP), "--out", str(tmp_path / "k.json"), "--scene", str(scene),
+               "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == EXIT_INPUT and err.count("\n") == 1 and "inline" in err and "--figure default" in err, err
