@@ -105,7 +105,7 @@ def test_keyframes_from_bvh_records_a_model_that_exists(tmp_path):
                                                                  f'file="{MODELS / "humanoid39.xml"}"'))
     out = tmp_path / "k.json"
     assert main(["keyframes-from-bvh", str(MODELS / "cmu" / "127_33.bvh"), "--out", str(out), "--scene", str(scene),
-                 "--every", "0.5"]) == 0
+                 "--every", "0.5", "--figure", "default"]) == 0
     doc = json.loads(out.read_text())
     assert (out.parent / doc["model"]).resolve().is_file()
     assert (out.parent / doc["scene"]).resolve() == scene.resolve()
