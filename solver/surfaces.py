@@ -120,9 +120,11 @@ class StaticSurfaces:
     def surface_below(self, points: np.ndarray) -> np.ndarray:
         """Height of the highest static surface under each point (floor planes, tops of boxes).
 
-        A plane counts everywhere (its height at the point's x, y; a vertical plane, a wall, has none);
-        a box counts where the point's x, y lie within its footprint, with its top face as the surface.
-        Boxes are assumed upright (any rotation about z only), as the step box of models/run_and_step.xml is.
+        A plane counts everywhere (its height at the point's x, y; a vertical plane, a wall, has none).
+        A box counts where the vertical line through the point crosses its top face (the face whose
+        outward normal points most upward), with that face's height there: exact for a box rotated
+        about z only (a level top) and for one tilted with a tilted floor (`solver.scene_fit`); a box
+        standing on an edge (no face more than 1e-6 from vertical) has no top.
 
         Args:
             points: (..., 3) positions [m].
@@ -134,13 +136,20 @@ class StaticSurfaces:
         for p0, nrm in zip(self.plane_point, self.plane_normal):
             if abs(nrm[2]) < 1e-6:
                 continue  # a vertical plane (a wall) has no height
-            z = p0[2] - (nrm[0] * (pts[..., 0] - p0[0]) + nrm[1] * (pts[..., 1] - p0[1])) / nrm[2]
-            h = np.maximum(h, z)
+            h = np.maximum(h, _plane_height(pts, p0, nrm))
         for c, rot, half in zip(self.box_center, self.box_rot, self.box_half):
-            local = (pts - c) @ rot  # box coordinates
-            inside = (np.abs(local[..., 0]) <= half[0]) & (np.abs(local[..., 1]) <= half[1])
-            top = c[2] + np.abs(rot[2]) @ half
-            h = np.where(inside, np.maximum(h, top), h)
+            a = int(np.argmax(np.abs(rot[2])))  # the box axis nearest to vertical
+            n = rot[:, a] * np.sign(rot[2, a])  # outward normal of the top face
+            if n[2] < 1e-6:
+                continue
+            z = _plane_height(pts, c + half[a] * n, n)
+            on_top = np.concatenate([pts[..., :2], z[..., None]], axis=-1)
+            local = (on_top - c) @ rot  # box coordinates of the point of the top face under the point
+            inside = np.ones(z.shape, bool)
+            for b in range(3):
+                if b != a:
+                    inside &= np.abs(local[..., b]) <= half[b]
+            h = np.where(inside, np.maximum(h, z), h)
         return h
 
     def height_above(self, points: np.ndarray) -> np.ndarray:
@@ -155,3 +164,8 @@ class StaticSurfaces:
         """
         pts = np.asarray(points, float)
         return pts[..., 2] - self.surface_below(pts)
+
+
+def _plane_height(pts: np.ndarray, p0: np.ndarray, nrm: np.ndarray) -> np.ndarray:
+    """(...,) height [m] at the x, y of (..., 3) points of the plane through p0 with normal nrm (nrm[2] != 0)."""
+    return p0[2] - (nrm[0] * (pts[..., 0] - p0[0]) + nrm[1] * (pts[..., 1] - p0[1])) / nrm[2]

@@ -56,12 +56,9 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     if str(scene) != AUTO:
         model = load_model(scene)
         return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, Path(scene))
-    with tempfile.TemporaryDirectory(prefix="dynsplines-floor-") as tmp:
-        floor = Path(tmp) / "floor.xml"
-        floor.write_text(scene_mjcf(FittedScene(0.0), figure))
-        first = load_bvh_reference(clip, load_model(floor), root_scale=root_scale)
-        floor_model = load_model(floor)
-    pos = site_positions(floor_model, first.qpos)
+    bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
+    first = load_bvh_reference(clip, bare, root_scale=root_scale)
+    pos = site_positions(bare, first.qpos)
     fitted = fit_scene(first.times, pos, fit_contacts(first.times, pos))
     out = Path(fitted_out)
     if not out.parent.is_dir():
