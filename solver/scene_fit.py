@@ -1,32 +1,53 @@
-"""Fit the static scene (floor height, raised boxes) to where the feet of a reference motion rest.
+"""Fit the static scene (a floor plane, raised boxes) to where the feet of a reference motion rest.
 
 Motion capture records where the feet stood, not the props. `fit_scene` turns the contact-site
-positions during contacts into a floor height and axis-aligned boxes, `scene_mjcf` writes them as a
-MuJoCo scene around the figure.
+positions during contacts into a floor plane and boxes standing on it, `scene_mjcf` writes them as a
+MuJoCo scene around the figure (docs/contacts.md "Fitted scenes").
 
 Method:
 1. Stances: a foot's site contacts that overlap in time form one stance (`contacts.foot_contacts`).
    Its rest height is the lowest of its sites' median heights over their contacts (the sole rests on
-   its lowest site; a forefoot runner's heel hovers above). Its footprint is the x-y bounding box of
-   all its sites during their contacts.
-2. Floor: the median rest height of the stances within RAISED (0.05 m) of the lowest one.
-3. Raised stances (rest height > floor + RAISED) are clustered by single linkage: two stances join
-   when their rest heights differ by at most HEIGHT_TOL (0.08 m) and their footprints are at most
-   LINK (1.0 m) apart in x-y. 0.08 m: on 127_33 retargeted onto a floor-only scene the two stances on
-   the box rest at 0.227 and 0.271 m (the retargeting's root-height correction cannot see the box, so
-   it interpolates across it), one box. 1.0 m: the two stances on the box are 0.5 m apart; a gap of
-   a metre or more between stances at one height is more likely two props.
-4. Box per cluster: top = the mean rest height of its stances (each stance counts once, however
-   long); bottom = the floor; x-y extent = the cluster's footprint padded by MARGIN (0.2 m) on every
-   side: the sites mark only heel and toe, the sole reaches a few cm past them, and an optimized
-   path moves planted feet by a few cm; 0.2 m is also the spare the hand-made scene
-   models/run_and_step.xml gives its step. Where the padding would put a floor-level contact
-   point under the box, that side is pulled back to halfway between the footprint and the point.
+   its lowest site; a forefoot runner's heel hovers above), at that site's median x, y. Its footprint
+   is the x-y bounding box of all its sites during their contacts.
+2. Floor: a plane z = a + b x + c y through the rest points of the floor stances, fitted by least
+   squares with a soft-L1 loss (scale PLANE_SCALE, 5 mm: a stance resting a few cm off, a foot not
+   quite down, pulls the plane by its sign, not its size). The floor stances start as those within
+   RAISED (0.05 m) of the lowest one and are then those within RAISED above the plane fitted to them,
+   until they no longer change (a floor rising 5 cm along the clip keeps its far end).
+   - The slope is fitted only along the principal directions of the floor stances' x, y in which they
+     extend over MIN_SPAN (1 m) or more, and only with MIN_STANCES (4) of them or more: across a
+     straight walk the stances spread 0.2-0.3 m, where a left-right difference of the sole heights
+     (13 mm on 16_23's source feet) would pass for a 5 % cross slope; with fewer than 4 rests a plane
+     follows their scatter.
+   - A slope steeper than MAX_SLOPE (0.05, about 3 degrees) is not a capture floor's tilt (the shared
+     clips tilt by 0.4-1.1 degrees): the floor is fitted level instead.
+   - A tilt that moves the floor by less than LEVEL_TOL (5 mm) across the floor stances is written
+     level: the stances' rest heights scatter about the fitted floor by 2-7 mm (standard deviation,
+     the source feet of the six shared clips), so such a tilt is not told from level.
+   A floor that rises along the clip is modelled as tilted in space, not drifting in time: on 07_04
+   (a walk whose floor rises 5.5 cm over 2.8 m) a foot flat and still on the floor rises at 0-4 mm/s
+   (frame-weighted mean 3.6 mm/s, like the standing feet of the level clips 75_03 and 83_02, 1-4 mm/s),
+   where a drift in time would raise it at 19 mm/s; a tilted plane fits its six stances to 2 mm
+   (standard deviation), a level one to 23 mm.
+3. Boxes, in the floor's frame (`FittedScene.rotation`; heights above the floor plane): raised stances
+   (rest > RAISED) are clustered by single linkage: two stances join when their rest heights differ by
+   at most HEIGHT_TOL (0.08 m) and their footprints are at most LINK (1.0 m) apart. 0.08 m: on 127_33
+   the two stances on the box rest 3-4 cm apart in height (a forefoot runner on a 25 cm box: one box).
+   1.0 m: those two stances are 0.5 m apart; a gap of a metre or more between stances at one height is
+   more likely two props.
+4. Box per cluster: top = the mean rest height of its stances above the floor (each stance counts
+   once, however long); bottom = the floor; extent = the cluster's footprint padded by MARGIN (0.2 m)
+   on every side: the sites mark only heel and toe, the sole reaches a few cm past them, and an
+   optimized path moves planted feet by a few cm; 0.2 m is also the spare the hand-made scene
+   models/run_and_step.xml gives its step. Where the padding would put a floor-level contact point
+   under the box, that side is pulled back to halfway between the footprint and the point. A box on a
+   tilted floor is tilted with it (a capture floor is tilted by the calibration, the props on it too).
 
-Limits: the floor is horizontal (no slopes), boxes are axis-aligned (no rotation about z) and stand
-on the floor, one box per cluster (an L-shaped platform becomes one bounding box), and an edge no
-foot came near is set by the margin, not by data (only the contacts bound it: an edge lies between
-the last contact on the box and the first on the floor). A surface nobody stood on is not found.
+Limits: one floor plane (a floor that bends or steps is fitted by the best plane, its stances
+scattering about it); no drift in time; boxes are square to the floor (no rotation about its normal)
+and stand on it; one box per cluster (an L-shaped platform becomes one bounding box); an edge no foot
+came near is set by the margin, not by data (only the contacts bound it: an edge lies between the last
+contact on the box and the first on the floor). A surface nobody stood on is not found.
 """
 from __future__ import annotations
 
@@ -54,6 +75,8 @@ MIN_SPAN = 1.0
 LEVEL_TOL = 0.005
 #: a fitted slope steeper than this [m/m] (about 3 degrees) is not a tilted capture floor.
 MAX_SLOPE = 0.05
+#: the floor's slope is fitted only through at least this many floor stances.
+MIN_STANCES = 4
 #: scale of the soft-L1 loss of the floor plane fit [m]: residuals beyond it count linearly.
 PLANE_SCALE = 0.005
 #: `fit_contacts`: a "rest" whose site falls faster than this [m/s^2] (half of gravity) is the top of
@@ -156,7 +179,7 @@ def _plane(at: np.ndarray, rest: np.ndarray, min_span: float, scale: float) -> t
 
     mid = at.mean(axis=0)
     free = np.zeros((2, 0))
-    if len(at) >= 3:
+    if len(at) >= MIN_STANCES:
         _, _, vt = np.linalg.svd(at - mid, full_matrices=False)
         spans = np.ptp((at - mid) @ vt.T, axis=0)
         free = vt[spans >= min_span].T  # (2, f) directions with a slope
@@ -166,7 +189,7 @@ def _plane(at: np.ndarray, rest: np.ndarray, min_span: float, scale: float) -> t
         return p[0] + d @ p[1:] - rest
 
     start = np.r_[np.median(rest), np.zeros(free.shape[1])]
-    p = least_squares(resid, start, loss="soft_l1", f_scale=scale).x
+    p = least_squares(resid, start, loss="soft_l1", f_scale=scale, xtol=1e-12, ftol=1e-12, gtol=1e-12).x
     g = free @ p[1:]
     return float(p[0] - mid @ g), g
 
