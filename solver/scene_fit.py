@@ -119,6 +119,14 @@ class FittedScene:
         """[deg] angle between the floor's normal and world z."""
         return float(np.degrees(np.arctan(np.hypot(*self.floor_slope))))
 
+    def describe_floor(self) -> str:
+        """One line for the user: the floor's height at the origin and, if tilted, by how much and which way."""
+        if self.level:
+            return f"floor level at {100 * self.floor_z:.1f} cm"
+        b, c = self.floor_slope
+        return (f"floor tilted {self.tilt_deg():.2f} deg ({100 * b:+.2f} cm per m along x, {100 * c:+.2f} along y), "
+                f"{100 * self.floor_z:.1f} cm at x = y = 0")
+
     def box_tops(self) -> list[float]:
         """[m] world height of the centre of each box's top face."""
         n = self.rotation()[:, 2]
