@@ -20,19 +20,19 @@ Method:
      (13 mm on 16_23's source feet) would pass for a 5 % cross slope; with fewer than 4 rests a plane
      follows their scatter.
    - A slope steeper than MAX_SLOPE (0.05, about 3 degrees) is not a capture floor's tilt (the shared
-     clips tilt by 0.4-1.1 degrees): the floor is fitted level instead.
+     clips that tilt, three of six, by 0.6-1.1 degrees): the floor is fitted level instead.
    - A tilt that moves the floor by less than LEVEL_TOL (5 mm) across the floor stances is written
      level: the stances' rest heights scatter about the fitted floor by 2-7 mm (standard deviation,
-     the source feet of the six shared clips), so such a tilt is not told from level.
+     the source feet of the shared clips), so such a tilt is not told from level.
    A floor that rises along the clip is modelled as tilted in space, not drifting in time: on 07_04
-   (a walk whose floor rises 5.5 cm over 2.8 m) a foot flat and still on the floor rises at 0-4 mm/s
+   (a walk whose floor rises 2 cm per metre) a foot flat and still on the floor rises at 0-4 mm/s
    (frame-weighted mean 3.6 mm/s, like the standing feet of the level clips 75_03 and 83_02, 1-4 mm/s),
    where a drift in time would raise it at 19 mm/s; a tilted plane fits its six stances to 2 mm
    (standard deviation), a level one to 23 mm.
 3. Boxes, in the floor's frame (`FittedScene.rotation`; heights above the floor plane): raised stances
    (rest > RAISED) are clustered by single linkage: two stances join when their rest heights differ by
    at most HEIGHT_TOL (0.08 m) and their footprints are at most LINK (1.0 m) apart. 0.08 m: on 127_33
-   the two stances on the box rest 3-4 cm apart in height (a forefoot runner on a 25 cm box: one box).
+   the two stances on the box rest 1-4 cm apart in height (a forefoot runner on a 25 cm box: one box).
    1.0 m: those two stances are 0.5 m apart; a gap of a metre or more between stances at one height is
    more likely two props.
 4. Box per cluster: top = the mean rest height of its stances above the floor (each stance counts
