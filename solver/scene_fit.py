@@ -203,7 +203,7 @@ def _plane(at: np.ndarray, rest: np.ndarray, min_span: float, scale: float) -> t
 
 
 def _fit_floor(stances, raised, min_span, level_tol, max_slope, scale):
-    """Floor plane (a, g) and the stances on it (module doc, step 2)."""
+    """The floor plane z = a + g . (x, y) through the floor stances: (a [m], g (2,) [m/m]) (module doc, step 2)."""
     rest = np.array([s.rest for s in stances])
     at = np.array([s.at for s in stances])
     on = rest <= rest.min() + raised
