@@ -86,22 +86,22 @@ def twist_angle(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
 
     Args:
         q: (..., 4) quaternions.
-        axis: (3,) unit axis in the joint's parent frame.
+        axis: (3,) unit axis in the joint's parent frame (or (..., 3), broadcast against q's vector part).
     Returns:
         (...,) angles in (-2 pi, 2 pi]; in (-pi, pi] for w >= 0.
     """
-    return 2.0 * np.arctan2(q[..., 1:] @ axis, q[..., 0])
+    return 2.0 * np.arctan2(np.sum(q[..., 1:] * axis, axis=-1), q[..., 0])
 
 
 def twist_angle_grad(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """Gradient of `twist_angle(q, axis)` with respect to the 4 components of q.
 
     Args:
-        q: (..., 4) quaternions; axis: (3,) unit vector.
+        q: (..., 4) quaternions; axis: (3,) unit vector (or (..., 3), broadcast).
     Returns:
         (..., 4) d theta / d q.
     """
-    s = q[..., 1:] @ axis
+    s = np.sum(q[..., 1:] * axis, axis=-1)
     w = q[..., 0]
     den = w * w + s * s
     # where w and the twist component both vanish (a half turn about an axis normal to `axis`, or
@@ -122,13 +122,14 @@ def swing_twist(q: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray
     (w^2 + p^2, w v_perp - p v x axis) / sqrt(w^2 + p^2), v_perp = v - p axis, so |s| = |q|.
 
     Args:
-        q: (..., 4) quaternions (any norm). axis: (3,) unit axis in the frame q's vector part is in.
+        q: (..., 4) quaternions (any norm). axis: (..., 3) unit axes (broadcast against q's vector
+            part), in the frame of q's vector part.
     Returns:
         (swing (..., 4) with |swing| = |q|, twist (..., 4) unit). Where w = p = 0 (a half turn about an
         axis normal to `axis`) the twist is undefined: NaN there.
     """
     w, v = q[..., 0], q[..., 1:]
-    p = v @ axis
+    p = np.sum(v * axis, axis=-1)
     n = np.sqrt(w * w + p * p)
     with np.errstate(invalid="ignore", divide="ignore"):
         twist = np.concatenate([(w / n)[..., None], (p / n)[..., None] * axis], axis=-1)
@@ -144,12 +145,12 @@ def swing_angle(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     the swing's scalar part is sqrt(w^2 + p^2)). Scale- and sign-invariant (q and -q give the same).
 
     Args:
-        q: (..., 4) quaternions. axis: (3,) unit vector.
+        q: (..., 4) quaternions. axis: (..., 3) unit vectors (broadcast).
     Returns:
         (...,) angles in [0, pi]; 0 for a rotation about `axis` alone.
     """
     w, v = q[..., 0], q[..., 1:]
-    p = v @ axis
+    p = np.sum(v * axis, axis=-1)
     m = np.linalg.norm(v - p[..., None] * axis, axis=-1)
     return 2.0 * np.arctan2(m, np.sqrt(w * w + p * p))
 
@@ -161,13 +162,13 @@ def swing_angle_grad(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     dm/dv = v_perp / m, dn/dw = w / n, dn/dv = p axis / n.
 
     Args:
-        q: (..., 4) quaternions; axis: (3,) unit vector.
+        q: (..., 4) quaternions; axis: (..., 3) unit vectors (broadcast).
     Returns:
         (..., 4) d phi / d q; 0 where phi is not differentiable (m = 0: no swing, the apex of the cone
         phi = |swing|; n = 0: a half-turn swing).
     """
     w, v = q[..., 0], q[..., 1:]
-    p = v @ axis
+    p = np.sum(v * axis, axis=-1)
     v_perp = v - p[..., None] * axis
     m = np.linalg.norm(v_perp, axis=-1)
     n = np.sqrt(w * w + p * p)
@@ -191,7 +192,7 @@ def swing_about(q: np.ndarray, axis: np.ndarray, e: np.ndarray) -> np.ndarray:
     quadratic in q, so scale- and sign-invariant).
 
     Args:
-        q: (..., 4) quaternions. axis, e: (3,) unit vectors, axis . e = 0.
+        q: (..., 4) quaternions. axis, e: (..., 3) unit vectors (broadcast), axis . e = 0.
     Returns:
         (...,) angles in [-pi, pi].
     """
@@ -201,8 +202,8 @@ def swing_about(q: np.ndarray, axis: np.ndarray, e: np.ndarray) -> np.ndarray:
 
 def _swing_about_parts(q, axis, e):
     w, v = q[..., 0], q[..., 1:]
-    p = v @ axis
-    return w * (v @ e) - p * (v @ np.cross(axis, e)), w * w + p * p
+    p = np.sum(v * axis, axis=-1)
+    return w * np.sum(v * e, axis=-1) - p * np.sum(v * np.cross(axis, e), axis=-1), w * w + p * p
 
 
 def swing_about_grad(q: np.ndarray, axis: np.ndarray, e: np.ndarray) -> np.ndarray:
@@ -212,13 +213,13 @@ def swing_about_grad(q: np.ndarray, axis: np.ndarray, e: np.ndarray) -> np.ndarr
     (b = axis x e), dD/dw = 2 w, dD/dv = 2 (v . axis) axis.
 
     Args:
-        q: (..., 4) quaternions; axis, e: (3,) unit vectors, axis . e = 0.
+        q: (..., 4) quaternions; axis, e: (..., 3) unit vectors (broadcast), axis . e = 0.
     Returns:
         (..., 4) d alpha / d q; 0 where N = D = 0 (a half-turn swing: alpha undefined).
     """
     w, v = q[..., 0], q[..., 1:]
     b = np.cross(axis, e)
-    p, ve, vb = v @ axis, v @ e, v @ b
+    p, ve, vb = (np.sum(v * u, axis=-1) for u in (axis, e, b))
     N, D = w * ve - p * vb, w * w + p * p
     den = N * N + D * D
     ok = den > 1e-24 * np.sum(q * q, axis=-1) ** 2

@@ -15,7 +15,7 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.quaternion import swing_angle_grad
-from solver.terms.anatomy_table import motion_angle_grads, motion_angles, off_hinge_angles, range_of_motion
+from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
 from solver.terms.base import Residual, Term, TermEval
 
 __all__ = ["DEFAULT_ALLOWANCE", "Hinge", "PLAIN_RATE", "RangeOfMotion", "plain_samples"]
@@ -85,12 +85,16 @@ class Hinge(Term):
         if not grad:
             return TermEval(f)
         dY = np.zeros_like(Y)
-        for k in range(len(self.axes)):
-            active = np.flatnonzero(h[:, k] > 0)
-            if active.size:
-                g = swing_angle_grad(Y[active][:, self.idx[k]], self.axes[k])
-                dY[active[:, None], self.idx[k][None, :]] += (2.0 * h[active, k])[:, None] * g
+        dY[:, self.idx] = (2.0 * h)[..., None] * self._grads(Y, h)
         return TermEval(f, dY=dY)
+
+    def _grads(self, Y, h):
+        """(n, j, 4) d phi / dq where h > 0, else 0."""
+        g = np.zeros(h.shape + (4,))
+        rows, cols = np.nonzero(h > 0)
+        if rows.size:
+            g[rows, cols] = swing_angle_grad(Y[rows[:, None], self.idx[cols]], self.axes[cols])
+        return g
 
     def residual(self, ctx) -> Residual:
         """r = max(0, phi - a_j) per joint (n, j) [rad] (f = |r|^2); dense blocks dr/dY = d phi/dq where
@@ -98,10 +102,9 @@ class Hinge(Term):
         Y = ctx.Y
         r = self._excess(Y)
         J = np.zeros((len(Y), len(self.axes), Y.shape[1]))
+        g = self._grads(Y, r)
         for k in range(len(self.axes)):
-            active = np.flatnonzero(r[:, k] > 0)
-            if active.size:
-                J[active[:, None], k, self.idx[k][None, :]] = swing_angle_grad(Y[active][:, self.idx[k]], self.axes[k])
+            J[:, k, self.idx[k]] = g[:, k]
         return Residual(r, blocks=(J, None, None))
 
 
@@ -132,12 +135,15 @@ class RangeOfMotion(Term):
             x = self.angles_of(np.asarray(reference, float), motions)
             motions = tuple(m.widened(lo, hi) for m, lo, hi in zip(motions, x.min(axis=0), x.max(axis=0), strict=True))
         self.motions = motions
+        self.arrays = motion_axes(motions)
         self.lo = np.array([m.lo for m in motions])
         self.hi = np.array([m.hi for m in motions])
 
     def angles_of(self, Y: np.ndarray, motions=None) -> np.ndarray:
         """(n, c) angles [rad] of the term's motions (or `motions`, in the term's joint order)."""
-        return motion_angles(Y, self.idx, self.motions if motions is None else motions)
+        if motions is None:
+            return motion_angles(Y, self.idx, self.motions, self.arrays)
+        return motion_angles(Y, self.idx, motions)
 
     def excess(self, Y: np.ndarray) -> np.ndarray:
         """(n, c) signed amount beyond the range [rad]: x - hi above it, x - lo below it, 0 inside."""
@@ -154,11 +160,10 @@ class RangeOfMotion(Term):
         if not grad:
             return TermEval(f)
         dY = np.zeros_like(Y)
-        for k in range(len(self.motions)):
-            active = np.flatnonzero(r[:, k] != 0)
-            if active.size:
-                g = motion_angle_grads(Y[active], self.idx, self.motions, k)
-                dY[active[:, None], self.idx[k][None, :]] += (2.0 * r[active, k])[:, None] * g
+        rows, cols = np.nonzero(r)
+        if rows.size:
+            g = (2.0 * r[rows, cols])[:, None] * motion_angle_grads(Y, self.idx, self.motions, rows, cols, self.arrays)
+            np.add.at(dY, (rows[:, None], self.idx[cols]), g)
         return TermEval(f, dY=dY)
 
     def residual(self, ctx) -> Residual:
@@ -167,10 +172,10 @@ class RangeOfMotion(Term):
         Y = ctx.Y
         r = self.excess(Y)
         J = np.zeros((len(Y), len(self.motions), Y.shape[1]))
-        for k in range(len(self.motions)):
-            active = np.flatnonzero(r[:, k] != 0)
-            if active.size:
-                J[active[:, None], k, self.idx[k][None, :]] = motion_angle_grads(Y[active], self.idx, self.motions, k)
+        rows, cols = np.nonzero(r)
+        if rows.size:
+            J[rows[:, None], cols[:, None], self.idx[cols]] = motion_angle_grads(Y, self.idx, self.motions, rows, cols,
+                                                                                 self.arrays)
         return Residual(r, blocks=(J, None, None))
 
 

@@ -44,9 +44,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.quaternion import swing_about, swing_about_grad, swing_angle, twist_angle, twist_angle_grad
+from solver.quaternion import swing_about_grad, swing_angle, twist_angle_grad
 
-__all__ = ["BoundedMotion", "ROM_SOURCE", "range_of_motion", "motion_angles", "motion_angle_grads",
+__all__ = ["BoundedMotion", "ROM_SOURCE", "motion_axes", "range_of_motion", "motion_angles", "motion_angle_grads",
            "off_hinge_angles"]
 
 ROM_SOURCE = ('AAOS, "Joint Motion: Method of Measuring and Recording" (1965); Greene & Heckman, '
@@ -139,33 +139,58 @@ def range_of_motion(figure) -> tuple[BoundedMotion, ...]:
     return tuple(out)
 
 
-def motion_angles(Y: np.ndarray, idx: np.ndarray, motions) -> np.ndarray:
-    """The angle of each bounded motion along a path [rad] (module docstring, "Decomposition").
+def motion_axes(motions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The motions as arrays: (twist axes (c, 3), swing directions (c, 3) (for a twist any unit normal to
+    its axis, unused), twist mask (c,) bool)."""
+    axes = np.array([m.axis for m in motions], float).reshape(-1, 3)
+    twist = np.array([m.kind == "twist" for m in motions], bool)
+    es = np.array([np.cross(m.axis, _X if abs(m.axis[0]) < 0.9 else _Y) if m.e is None else m.e for m in motions],
+                  float).reshape(-1, 3)
+    return axes, es / np.linalg.norm(es, axis=1, keepdims=True), twist
+
+
+def motion_angles(Y: np.ndarray, idx: np.ndarray, motions, arrays=None) -> np.ndarray:
+    """The angle of each bounded motion along a path [rad] (module docstring, "Decomposition"):
+    `solver.quaternion.twist_angle` (on the quaternion with w >= 0) or `swing_about`, for all motions
+    at once.
 
     Args:
         Y: (n, nq) qpos. idx: (c, 4) qpos indices of each motion's joint quaternion. motions: (c,)
-            BoundedMotion.
+            BoundedMotion. arrays: `motion_axes(motions)` if the caller keeps it (else computed).
     Returns:
-        (n, c) angles [rad]; twists taken on the quaternion with w >= 0, in (-pi, pi].
+        (n, c) angles [rad]; twists in (-pi, pi].
     """
-    out = np.empty((len(Y), len(motions)))
-    for k, m in enumerate(motions):
-        q = Y[:, idx[k]]
-        if m.kind == "twist":
-            out[:, k] = twist_angle(q * np.where(q[:, :1] < 0, -1.0, 1.0), m.axis)
-        else:
-            out[:, k] = swing_about(q, m.axis, m.e)
+    axes, es, twist = motion_axes(motions) if arrays is None else arrays
+    q = Y[:, idx]  # (n, c, 4)
+    w, v = q[..., 0], q[..., 1:]
+    p = np.einsum("nci,ci->nc", v, axes)
+    out = np.empty(p.shape)
+    if twist.any():
+        sign = np.where(w[:, twist] < 0, -1.0, 1.0)
+        out[:, twist] = 2.0 * np.arctan2(sign * p[:, twist], sign * w[:, twist])
+    sw = ~twist
+    if sw.any():
+        ps, ws, vs = p[:, sw], w[:, sw], v[:, sw]
+        N = ws * np.einsum("nci,ci->nc", vs, es[sw]) - ps * np.einsum("nci,ci->nc", vs, np.cross(axes[sw], es[sw]))
+        out[:, sw] = 2.0 * np.arctan2(N, ws * ws + ps * ps)
     return out
 
 
-def motion_angle_grads(Y: np.ndarray, idx: np.ndarray, motions, k: int) -> np.ndarray:
-    """d angle / d q of motion k at every row of Y: (n, 4), with respect to qpos[idx[k]]."""
-    m = motions[k]
-    q = Y[:, idx[k]]
-    if m.kind == "twist":
-        sign = np.where(q[:, :1] < 0, -1.0, 1.0)
-        return sign * twist_angle_grad(q * sign, m.axis)
-    return swing_about_grad(q, m.axis, m.e)
+def motion_angle_grads(Y: np.ndarray, idx: np.ndarray, motions, rows: np.ndarray, cols: np.ndarray,
+                       arrays=None) -> np.ndarray:
+    """d angle / d q of motion cols[i] at sample rows[i] (`motion_angles`, same arguments), with respect
+    to that motion's qpos[idx[cols[i]]]: `twist_angle_grad` (sign-corrected) or `swing_about_grad`.
+
+    Args:
+        rows, cols: (m,) int, the (sample, motion) pairs wanted (the active ones of a penalty).
+    Returns:
+        (m, 4); 0 where the angle is not differentiable (a half-turn swing).
+    """
+    axes, es, twist = motion_axes(motions) if arrays is None else arrays
+    q = Y[rows[:, None], np.asarray(idx)[cols]]  # (m, 4)
+    sign = np.where(q[:, :1] < 0, -1.0, 1.0)
+    a, e = axes[cols], es[cols]
+    return np.where(twist[cols][:, None], sign * twist_angle_grad(q * sign, a), swing_about_grad(q, a, e))
 
 
 def off_hinge_angles(Y: np.ndarray, idx: np.ndarray, axes: np.ndarray) -> np.ndarray:
@@ -176,4 +201,4 @@ def off_hinge_angles(Y: np.ndarray, idx: np.ndarray, axes: np.ndarray) -> np.nda
     Returns:
         (n, j) angles in [0, pi].
     """
-    return np.stack([swing_angle(Y[:, idx[k]], axes[k]) for k in range(len(axes))], axis=1).reshape(len(Y), -1)
+    return swing_angle(Y[:, np.asarray(idx, int).reshape(-1, 4)], np.asarray(axes, float).reshape(-1, 3))
