@@ -32,8 +32,9 @@ __all__ = ["CONTACT_MARGIN", "CONTACT_PENETRATION_WEIGHT", "CONTACT_TERMS", "CON
            "Problem", "default_limits", "figure_objective", "figure_problem", "keyframe_conflicts", "make_problem",
            "parse_terms", "term_names"]
 
-#: The terms used when none are chosen: the geometric terms of the paper's sec. 5.
-DEFAULT_TERMS = ("penetration", "unit", "bending", "smooth")
+#: The terms used when none are chosen: the geometric terms of the paper's sec. 5, with the anatomical
+#: limits (hinge, rom: docs/anatomy.md).
+DEFAULT_TERMS = ("penetration", "unit", "bending", "smooth", "hinge", "rom")
 
 #: Weight of each built-in term when it is switched on without one: DEFAULT_WEIGHTS, defined with the
 #: registrations in `solver.terms.registry` (a registered term's own: its `TermSpec.default_weight`).
