@@ -261,3 +261,29 @@ def test_default_terms_allow_what_the_keyframes_show(layout):
     Y = values[1:2].copy()
     Y[0, layout.joint("l_hip").quat_index] = quat(Y_, -135.0)
     assert np.degrees(rom.violation(Y)) == pytest.approx(5.0, abs=1e-6)
+
+
+# -------------------------------------------------------------------------------------- metrics
+def test_anatomy_figures_of_a_hand_built_motion(figure_model, layout):
+    """Three poses: the left knee 10 degrees off its hinge, the right elbow 30 degrees off its hinge
+    (flexed 60), the left hip flexed 130 degrees (10 past the table): the figures read those maxima,
+    name the motion, and the summary rows show plain, optimized and the capture's own figure."""
+    from runner.run import anatomy_summary_rows
+    from solver.motion_metrics import anatomy_figures
+
+    Y = identity(layout, 3)
+    Y[0, layout.joint("l_knee").quat_index] = mul(quat(X, 10.0), quat(Y_, 20.0))
+    Y[1, layout.joint("r_elbow").quat_index] = mul(quat(Z, 30.0), quat(-Y_, 60.0))
+    Y[2, layout.joint("l_hip").quat_index] = quat(Y_, -130.0)
+    got = anatomy_figures(figure_model, 2.0 * Y)
+    assert got["off_hinge_knee_deg"] == pytest.approx(10.0) and got["off_hinge_elbow_deg"] == pytest.approx(30.0)
+    assert got["off_hinge_deg"]["r_knee"] == pytest.approx(0.0, abs=1e-6)
+    assert got["rom_excess_deg"] == pytest.approx(10.0) and got["rom_excess_motion"] == "l_hip flexion / extension"
+    still = anatomy_figures(figure_model, identity(layout, 2))
+    assert still["rom_excess_deg"] == 0.0 and still["rom_excess_motion"] == "" and still["off_hinge_knee_deg"] == 0.0
+    motion = {"plain": {"path": still, "reference": got}, "optimized": {"path": got}}
+    rows = anatomy_summary_rows(motion)
+    assert [r[0] for r in rows] == ["knee rotation off the hinge [deg] (capture 10.0)",
+                                    "elbow rotation off the hinge [deg] (capture 30.0)",
+                                    "beyond range of motion [deg] (capture 10.0)"]
+    assert [r[1:3] for r in rows] == [(0.0, pytest.approx(10.0)), (0.0, pytest.approx(30.0)), (0.0, pytest.approx(10.0))]
