@@ -18,13 +18,18 @@ from solver.quaternion import swing_angle_grad
 from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
 from solver.terms.base import Residual, Term, TermEval
 
-__all__ = ["DEFAULT_ALLOWANCE", "Hinge", "PLAIN_RATE", "RangeOfMotion", "plain_samples"]
+__all__ = ["DEFAULT_ALLOWANCE", "Hinge", "PLAIN_RATE", "RangeOfMotion", "WIDEN_MARGIN", "plain_samples"]
 
 #: [rad] rotation off the hinge allowed without penalty where the reference shows less (2 degrees: the
 #: acceptance bound is the capture's + 3 degrees, and the continuation limit 0.5 degree on top of this)
 DEFAULT_ALLOWANCE = float(np.radians(2.0))
 #: [1/s] samples per second of the reference path the allowances are widened by
 PLAIN_RATE = 1000.0
+#: [rad] margin on a limit widened to the reference's own extreme (0.1 degree): the reference is sampled
+#: at PLAIN_RATE, the objective's quadrature points fall between the samples, and a plain spline over its
+#: widened limit by 1e-10 rad there would give the term a plain-spline integral of 1e-19, and eq. 7 a
+#: weight of 1e19 (the optimizer fails at once)
+WIDEN_MARGIN = float(np.radians(0.1))
 
 
 def _quat_index(layout, name: str, term: str) -> np.ndarray:
@@ -39,7 +44,7 @@ class Hinge(Term):
 
     phi is the swing angle of the joint's quaternion about its flexion axis (`swing_angle`, the
     swing-twist decomposition: 0 for a pure rotation about the axis); a_j the joint's allowance:
-    max(`allowance`, the largest phi of the joint on `reference`). C1 in phi; where the term is
+    max(`allowance`, the largest phi of the joint on `reference` + WIDEN_MARGIN). C1 in phi; where the term is
     active phi > a_j > 0, where phi is differentiable.
 
     Args:
@@ -64,7 +69,8 @@ class Hinge(Term):
         self.axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
         self.allowance = np.full(len(self.axes), float(allowance))
         if reference is not None and len(reference) and len(self.axes):
-            self.allowance = np.maximum(self.allowance, self.angles(np.asarray(reference, float)).max(axis=0))
+            own = self.angles(np.asarray(reference, float)).max(axis=0)
+            self.allowance = np.maximum(self.allowance, own + WIDEN_MARGIN)
 
     def angles(self, Y: np.ndarray) -> np.ndarray:
         """(n, j) rotation off the hinge [rad] of the term's joints."""
@@ -113,7 +119,7 @@ class RangeOfMotion(Term):
 
     x is each motion's angle (`anatomy_table.motion_angles`: a twist about the segment or a signed
     swing), [lo, hi] its published range (`anatomy_table.range_of_motion`, AAOS 1965) widened to the
-    angles `reference` shows. C1 in x.
+    angles `reference` shows (and WIDEN_MARGIN beyond). C1 in x.
 
     Args:
         layout: StateLayout of the figure. figure: its `solver.figure.Figure`.
@@ -133,7 +139,8 @@ class RangeOfMotion(Term):
         self.idx = np.array([_quat_index(layout, m.joint, "rom") for m in motions], int).reshape(-1, 4)
         if reference is not None and len(reference) and motions:
             x = self.angles_of(np.asarray(reference, float), motions)
-            motions = tuple(m.widened(lo, hi) for m, lo, hi in zip(motions, x.min(axis=0), x.max(axis=0), strict=True))
+            lo, hi = x.min(axis=0) - WIDEN_MARGIN, x.max(axis=0) + WIDEN_MARGIN
+            motions = tuple(m.widened(a, b) for m, a, b in zip(motions, lo, hi, strict=True))
         self.motions = motions
         self.arrays = motion_axes(motions)
         self.lo = np.array([m.lo for m in motions])
