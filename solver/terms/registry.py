@@ -29,6 +29,10 @@ from solver.terms.base import Term
 #: planted and clearance at 10: on run-and-step (127_33, its own contacts) weight 1 with 5 mm rest height
 #: floated planted feet 7.6 mm (capture 2.4) and raised the joint-orientation error to 13.1 deg (plain
 #: 10.2); weight 10 with the 2 mm contact margin: float 3.5 mm, joint error 10.7 deg (docs/contacts.md "The contact terms").
+#: hinge and rom at 100: zero on the plain spline (they allow what it shows), so not renormalized (eq. 7);
+#: at 10 the tuning clips (run-and-step, 127_33, 16_23, 35_17 keyed every 0.25 s) needed a penalty boost
+#: and 14-50 % more evaluations; at 100 none did, at 4 % more evaluations than without the terms
+#: (docs/anatomy.md).
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
                    "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0}
 #: Penalty-continuation bounds of the anatomical terms [rad] (their `TermSpec.limit`): rotation off the
