@@ -256,6 +256,8 @@ TERM_ROWS = {
     "penetration": ("max penetration",),  # and the per-site rows under it (`row_targets`)
     "unit": ("max |1 - |q||",),
     "bending": ("max hyperextension",),
+    "hinge": ("knee rotation off the hinge", "elbow rotation off the hinge"),
+    "rom": ("beyond range of motion",),
     "torque": ("RMS joint torque", "peak joint torque"),
     "root": ("RMS root force in flight", "peak root force in flight", "RMS root torque in flight",
              "peak root torque in flight"),

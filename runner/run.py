@@ -233,6 +233,9 @@ def report(run: Run) -> str:
         from runner.mocap.contacts import worst_contact_distance
 
         lines.append(motion_metrics_table(motion["plain"], motion["optimized"]))
+        worst = [motion["plain"]["path"], motion["optimized"]["path"], motion["plain"]["reference"]]
+        lines.append("beyond range of motion (AAOS 1965, docs/anatomy.md), worst: " + "; ".join(
+            f"{who} {w['rom_excess_motion'] or 'none'}" for who, w in zip(("plain", "optimized", "capture"), worst)))
         lines.append(f"motion capture ({display_path(ref.source)}, retargeted, {ref.count} frames): feet in contact "
                      f"stay within {1000 * worst_contact_distance(ref, run.model):.1f} mm of the surface under them")
     return "\n".join(lines)
@@ -326,11 +329,31 @@ def render_with_progress(out, run: Run, video: VideoOptions, quiet: bool = False
                             run.source.metric_contacts, progress=lambda i, _n: bar.update(i))
 
 
+#: the anatomy rows of the summary (`anatomy_summary_rows`): (label, `anatomy_figures` key, format)
+ANATOMY_ROWS = (("knee rotation off the hinge [deg]", "off_hinge_knee_deg", "{:.1f}"),
+                ("elbow rotation off the hinge [deg]", "off_hinge_elbow_deg", "{:.1f}"),
+                ("beyond range of motion [deg]", "rom_excess_deg", "{:.1f}"))
+
+
+def anatomy_summary_rows(motion) -> list:
+    """Summary rows for the anatomical limits (`solver.motion_metrics.anatomy_figures`, docs/anatomy.md):
+    the largest knee and elbow rotation off the hinge and the largest angle beyond the published range of
+    motion, plain spline and optimized at the capture's frames, the capture's own in the label.
+
+    Returns:
+        [(label, plain value, optimized value, format), ...].
+    """
+    capture = motion["plain"]["reference"]
+    return [(f"{label} (capture {fmt.format(capture[key])})", motion["plain"]["path"][key],
+             motion["optimized"]["path"][key], fmt) for label, key, fmt in ANATOMY_ROWS]
+
+
 def contact_summary_rows(motion, objective, solution) -> list:
     """Summary rows for the feet: float, skate, skating ratio, flight time and flight-phase error
     (`solver.motion_metrics.flight_mismatch`, extra + missed) of both paths against the motion-capture
     reference (`motion`: metrics["motion"], the `motion_metrics` of both paths at the clip's rate; the
-    capture's own figure in the label), and the friction-cone residual when the cone term is on.
+    capture's own figure in the label), then the anatomy rows (`anatomy_summary_rows`), and the
+    friction-cone residual when the cone term is on.
 
     Returns:
         [(label, plain value, optimized value, format), ...].
@@ -351,6 +374,7 @@ def contact_summary_rows(motion, objective, solution) -> list:
         rows.append(("flight phase error vs capture [s]",
                      *(motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"]
                        for p in ("plain", "optimized")), "{:.3f}"))
+        rows += anatomy_summary_rows(motion)
     if "cone" in objective.names:
         from solver.metrics import sample_times
         from solver.terms.contact_wrench import cone_metrics

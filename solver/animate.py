@@ -89,7 +89,7 @@ def animate(
         model: mujoco.MjModel of a scene holding the figure (one free root joint, ball joints, the
             contact sites l_heel, l_toe, r_heel, r_toe) and its floor/boxes. Not modified.
         keyframes: Keyframes of the figure's qpos, values (k, nq) with nq = model.nq, times (k,) [s].
-        terms: which objective terms: None (penetration, unit, bending, smooth), "all", a
+        terms: which objective terms: None (penetration, unit, bending, smooth, hinge, rom), "all", a
             comma-separated string or a list of names from `term_names()`.
         weights: {term name: lambda_j >= 0} overriding the default weights (`DEFAULT_WEIGHTS`); a name
             here also switches the term on.

@@ -53,6 +53,15 @@ than mesh vertices)
   height `contact_thresholds.DETECT_HEIGHT_ON`) times 1/fps. Thresholds: `solver.contact_thresholds`.
 - jerk_root_m_s3 / jerk_sites_m_s3: third finite difference of positions * fps^3, mean norm (root
   position; all contact sites), METRICS.md "Smoothness".
+
+Anatomy (`anatomy_figures`; the decomposition and the table: `solver.terms.anatomy_table`, docs/anatomy.md)
+- off_hinge_deg: per knee and elbow, the largest rotation off its hinge over the frames (the swing angle
+  of the joint quaternion about its flexion axis); off_hinge_knee_deg / off_hinge_elbow_deg: the larger
+  of the two knees' / elbows'. The figure's elbow also carries the forearm's pronation and supination
+  (the capture's elbows show tens of degrees off the hinge).
+- rom_excess_deg: the largest angle by which any joint motion leaves the published range of motion
+  (AAOS 1965, not widened to the keyframes as the rom term's is), and rom_excess_motion: which
+  ("l_ankle dorsiflexion / plantarflexion"; "" when none does); rom_excess_deg_by_joint per joint.
 """
 from __future__ import annotations
 
@@ -188,6 +197,43 @@ def plausibility(pos: np.ndarray, h: np.ndarray, fps: float, root: np.ndarray, r
     return out
 
 
+def anatomy_figures(model, qpos: np.ndarray) -> dict:
+    """The anatomy figures of the module docstring for one motion.
+
+    Args:
+        model: an MjModel with the figure (its flexion axes, `Figure.flexion_axes`). qpos: (n, nq) the
+            motion (quaternions of any norm: the angles are scale-invariant).
+    Returns:
+        a dict of floats and strings (JSON-serializable); the knee / elbow figure is NaN for a figure
+        without flexion axes on joints of that kind.
+    """
+    from solver.figure import Figure
+    from solver.layout import StateLayout
+    from solver.terms.anatomy_table import FIGURE_JOINTS, motion_angles, off_hinge_angles, range_of_motion
+
+    qpos = np.atleast_2d(np.asarray(qpos, float))
+    figure, layout = Figure.from_model(model), StateLayout.from_model(model)
+    names = list(figure.flexion_axes)
+    idx = np.array([layout.joint(n).quat_index for n in names], int).reshape(-1, 4)
+    off = np.degrees(off_hinge_angles(qpos, idx, np.array([figure.flexion_axes[n] for n in names]).reshape(-1, 3)))
+    off = off.max(axis=0) if len(qpos) else np.zeros(len(names))
+    out = {"off_hinge_deg": {n: float(v) for n, v in zip(names, off)}}
+    for kind in ("knee", "elbow"):
+        vals = [v for n, v in zip(names, off) if FIGURE_JOINTS.get(n, ("", 0))[0] == kind]
+        out[f"off_hinge_{kind}_deg"] = float(max(vals)) if vals else float("nan")
+    motions = range_of_motion(figure)
+    midx = np.array([layout.joint(m.joint).quat_index for m in motions], int).reshape(-1, 4)
+    x = motion_angles(qpos, midx, motions)
+    lo, hi = np.array([m.lo for m in motions]), np.array([m.hi for m in motions])
+    excess = np.degrees(np.abs(x - np.clip(x, lo, hi))).max(axis=0) if len(qpos) else np.zeros(len(motions))
+    k = int(np.argmax(excess)) if len(motions) else -1
+    out["rom_excess_deg"] = float(excess[k]) if k >= 0 else 0.0
+    out["rom_excess_motion"] = f"{motions[k].joint} {motions[k].motion}" if k >= 0 and excess[k] > 0 else ""
+    out["rom_excess_deg_by_joint"] = {m.joint: float(max(e for mm, e in zip(motions, excess) if mm.joint == m.joint))
+                                      for m in motions}
+    return out
+
+
 def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarray,
                    reference_contacts: Sequence[Contact], sites: Sequence[str] = SITES) -> dict:
     """Accuracy of a path against the reference, and the plausibility of both (module docstring).
@@ -200,7 +246,7 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         sites: contact site names.
     Returns:
         JSON-serializable dict: {"fps", "frames", "sites", "error": {...}, "path": {...},
-        "reference": {...}}; "path" and "reference" hold `plausibility` figures.
+        "reference": {...}}; "path" and "reference" hold `plausibility` and `anatomy_figures` figures.
     Raises:
         InputError: shapes disagree, fps not positive, a site missing in the model, no floor plane.
     """
@@ -257,6 +303,6 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         "frames": int(n),
         "sites": list(sites),
         "error": error,
-        "path": plausibility(pos, h, fps, qpos[:, :3], mask, sites),
-        "reference": plausibility(rpos, rh, fps, ref[:, :3], mask, sites),
+        "path": {**plausibility(pos, h, fps, qpos[:, :3], mask, sites), **anatomy_figures(model, qpos)},
+        "reference": {**plausibility(rpos, rh, fps, ref[:, :3], mask, sites), **anatomy_figures(model, ref)},
     }

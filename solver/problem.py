@@ -1,7 +1,7 @@
 """The figure's objective from term names and weights (command line, keyframe files, API).
 
-Term names: penetration (eq. 12), unit (eq. 9 f1), bending (sec. 5), smooth (covariant acceleration of
-every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
+Term names: penetration (eq. 12), unit (eq. 9 f1), bending (sec. 5), hinge and rom (sec. 5, docs/anatomy.md),
+smooth (covariant acceleration of every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
 are available, torque and root (sec. 6, appendix A). With a contact schedule (docs/contacts.md "The contact terms";
 `solver.contacts.Contact`s: site, start, end, surface): planted (feet on their surface and not sliding
 during a contact), clearance (swing feet keep 2 cm, every site min(2 cm, g T^2/8) in a flight of length T)
@@ -32,8 +32,9 @@ __all__ = ["CONTACT_MARGIN", "CONTACT_PENETRATION_WEIGHT", "CONTACT_TERMS", "CON
            "Problem", "default_limits", "figure_objective", "figure_problem", "keyframe_conflicts", "make_problem",
            "parse_terms", "term_names"]
 
-#: The terms used when none are chosen: the geometric terms of the paper's sec. 5.
-DEFAULT_TERMS = ("penetration", "unit", "bending", "smooth")
+#: The terms used when none are chosen: the geometric terms of the paper's sec. 5, with the anatomical
+#: limits (hinge, rom: docs/anatomy.md).
+DEFAULT_TERMS = ("penetration", "unit", "bending", "smooth", "hinge", "rom")
 
 #: Weight of each built-in term when it is switched on without one: DEFAULT_WEIGHTS, defined with the
 #: registrations in `solver.terms.registry` (a registered term's own: its `TermSpec.default_weight`).
@@ -146,8 +147,8 @@ MARGIN, CONTACT_MARGIN = 0.005, 0.002
 
 
 def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rate: float = 400.0,
-                     margin: float | None = None, contacts=(), conflicts: ScheduleConflicts | None = None
-                     ) -> Objective:
+                     margin: float | None = None, contacts=(), conflicts: ScheduleConflicts | None = None,
+                     plain=None) -> Objective:
     """The objective for a figure in a scene.
 
     Args:
@@ -161,6 +162,8 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
             surface), for planted, clearance and cone.
         conflicts: what keyframes contradict in the schedule (`keyframe_conflicts`), for the planted
             and clearance terms (default none).
+        plain: the plain spline's FrameSet, whose own joint angles the anatomical terms allow
+            (`TermBuild.plain`; default none: the published ranges alone).
     Returns:
         Objective (scales 1; `solve` renormalizes if asked).
     Raises:
@@ -179,7 +182,7 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
     # by every term that reads it: the `PathContext` runs its forward pass once per evaluation and the
     # objective its reverse pass once for the sum of the terms' gradients
     build = TermBuild(model, (float(t0), float(t1)), margin, contacts, forces=any(s.forces for s in specs),
-                      conflicts=conflicts)
+                      conflicts=conflicts, plain=plain)
     terms = [build_term(spec, build) for spec in specs]
     return Objective(terms, np.array([weights[s.name] for s in specs], float), t0, t1, rate)
 
@@ -256,11 +259,12 @@ def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 40
 
     layout = StateLayout.from_model(model)
     t0, t1 = keyframes.times[0], keyframes.times[-1]
-    objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts)
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, plain=initial)
     conflicts = keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe], path=initial.path)
     if conflicts.excuses:  # the contact terms built again, with what the keyframes excuse
-        objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, conflicts=conflicts)
+        objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, conflicts=conflicts,
+                                     plain=initial)
     return objective, initial, conflicts
 
 

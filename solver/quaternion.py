@@ -86,22 +86,22 @@ def twist_angle(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
 
     Args:
         q: (..., 4) quaternions.
-        axis: (3,) unit axis in the joint's parent frame.
+        axis: (3,) unit axis in the joint's parent frame (or (..., 3), broadcast against q's vector part).
     Returns:
         (...,) angles in (-2 pi, 2 pi]; in (-pi, pi] for w >= 0.
     """
-    return 2.0 * np.arctan2(q[..., 1:] @ axis, q[..., 0])
+    return 2.0 * np.arctan2(np.sum(q[..., 1:] * axis, axis=-1), q[..., 0])
 
 
 def twist_angle_grad(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """Gradient of `twist_angle(q, axis)` with respect to the 4 components of q.
 
     Args:
-        q: (..., 4) quaternions; axis: (3,) unit vector.
+        q: (..., 4) quaternions; axis: (3,) unit vector (or (..., 3), broadcast).
     Returns:
         (..., 4) d theta / d q.
     """
-    s = q[..., 1:] @ axis
+    s = np.sum(q[..., 1:] * axis, axis=-1)
     w = q[..., 0]
     den = w * w + s * s
     # where w and the twist component both vanish (a half turn about an axis normal to `axis`, or
@@ -111,4 +111,121 @@ def twist_angle_grad(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     g = np.zeros(q.shape)
     g[..., 0] = np.where(ok, -2.0 * s / safe, 0.0)
     g[..., 1:] = np.where(ok, 2.0 * w / safe, 0.0)[..., None] * axis
+    return g
+
+
+def swing_twist(q: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Swing-twist decomposition q = s t about a unit `axis`: t rotates about `axis`, s about an axis
+    normal to it (Dobrowolski, "Swing-twist decomposition in Clifford algebra", arXiv:1506.05481, 2015).
+
+    With q = (w, v) and p = v . axis: t = (w, p axis) / sqrt(w^2 + p^2) (unit) and s = q conj(t) =
+    (w^2 + p^2, w v_perp - p v x axis) / sqrt(w^2 + p^2), v_perp = v - p axis, so |s| = |q|.
+
+    Args:
+        q: (..., 4) quaternions (any norm). axis: (..., 3) unit axes (broadcast against q's vector
+            part), in the frame of q's vector part.
+    Returns:
+        (swing (..., 4) with |swing| = |q|, twist (..., 4) unit). Where w = p = 0 (a half turn about an
+        axis normal to `axis`) the twist is undefined: NaN there.
+    """
+    w, v = q[..., 0], q[..., 1:]
+    p = np.sum(v * axis, axis=-1)
+    n = np.sqrt(w * w + p * p)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        twist = np.concatenate([(w / n)[..., None], (p / n)[..., None] * axis], axis=-1)
+        v_perp = v - p[..., None] * axis
+        sv = (w[..., None] * v_perp - p[..., None] * np.cross(v, axis)) / n[..., None]
+    return np.concatenate([n[..., None], sv], axis=-1), twist
+
+
+def swing_angle(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Angle [rad] of the swing of q about a unit `axis` (`swing_twist`): how far q turns `axis` itself.
+
+    phi = 2 atan2(|v_perp|, sqrt(w^2 + p^2)) with p = v . axis, v_perp = v - p axis (|swing| = |q| and
+    the swing's scalar part is sqrt(w^2 + p^2)). Scale- and sign-invariant (q and -q give the same).
+
+    Args:
+        q: (..., 4) quaternions. axis: (..., 3) unit vectors (broadcast).
+    Returns:
+        (...,) angles in [0, pi]; 0 for a rotation about `axis` alone.
+    """
+    w, v = q[..., 0], q[..., 1:]
+    p = np.sum(v * axis, axis=-1)
+    m = np.linalg.norm(v - p[..., None] * axis, axis=-1)
+    return 2.0 * np.arctan2(m, np.sqrt(w * w + p * p))
+
+
+def swing_angle_grad(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Gradient of `swing_angle(q, axis)` with respect to the 4 components of q.
+
+    With m = |v_perp|, n = sqrt(w^2 + p^2), |q|^2 = m^2 + n^2: d phi = 2 (n dm - m dn) / |q|^2,
+    dm/dv = v_perp / m, dn/dw = w / n, dn/dv = p axis / n.
+
+    Args:
+        q: (..., 4) quaternions; axis: (..., 3) unit vectors (broadcast).
+    Returns:
+        (..., 4) d phi / d q; 0 where phi is not differentiable (m = 0: no swing, the apex of the cone
+        phi = |swing|; n = 0: a half-turn swing).
+    """
+    w, v = q[..., 0], q[..., 1:]
+    p = np.sum(v * axis, axis=-1)
+    v_perp = v - p[..., None] * axis
+    m = np.linalg.norm(v_perp, axis=-1)
+    n = np.sqrt(w * w + p * p)
+    r2 = m * m + n * n
+    ok = (m > 1e-12 * np.sqrt(r2)) & (n > 1e-12 * np.sqrt(r2))
+    m_, n_, r2_ = (np.where(ok, x, 1.0) for x in (m, n, r2))
+    g = np.zeros(q.shape)
+    g[..., 0] = np.where(ok, -2.0 * m_ * w / (n_ * r2_), 0.0)
+    g[..., 1:] = np.where(ok, 2.0 / r2_, 0.0)[..., None] * (
+        (n_ / m_)[..., None] * v_perp - (m_ * p / n_)[..., None] * axis)
+    return g
+
+
+def swing_about(q: np.ndarray, axis: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Signed swing of q about a unit direction `e` normal to the twist `axis` [rad]: 2 atan2(s_v . e, s_w)
+    of the swing s of `swing_twist` (a swing of angle a about e gives a; a swing about another direction
+    u normal to `axis` gives about a (u . e) for small a, the component a clinical goniometer reads in
+    the plane normal to e).
+
+    2 atan2(N, D) with N = w (v . e) - (v . axis)(v . (axis x e)), D = w^2 + (v . axis)^2 (both
+    quadratic in q, so scale- and sign-invariant).
+
+    Args:
+        q: (..., 4) quaternions. axis, e: (..., 3) unit vectors (broadcast), axis . e = 0.
+    Returns:
+        (...,) angles in [-pi, pi].
+    """
+    N, D = _swing_about_parts(q, axis, e)
+    return 2.0 * np.arctan2(N, D)
+
+
+def _swing_about_parts(q, axis, e):
+    w, v = q[..., 0], q[..., 1:]
+    p = np.sum(v * axis, axis=-1)
+    return w * np.sum(v * e, axis=-1) - p * np.sum(v * np.cross(axis, e), axis=-1), w * w + p * p
+
+
+def swing_about_grad(q: np.ndarray, axis: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Gradient of `swing_about(q, axis, e)` with respect to the 4 components of q.
+
+    d alpha = 2 (D dN - N dD) / (N^2 + D^2); dN/dw = v . e, dN/dv = w e - (v . b) axis - (v . axis) b
+    (b = axis x e), dD/dw = 2 w, dD/dv = 2 (v . axis) axis.
+
+    Args:
+        q: (..., 4) quaternions; axis, e: (..., 3) unit vectors (broadcast), axis . e = 0.
+    Returns:
+        (..., 4) d alpha / d q; 0 where N = D = 0 (a half-turn swing: alpha undefined).
+    """
+    w, v = q[..., 0], q[..., 1:]
+    b = np.cross(axis, e)
+    p, ve, vb = (np.sum(v * u, axis=-1) for u in (axis, e, b))
+    N, D = w * ve - p * vb, w * w + p * p
+    den = N * N + D * D
+    ok = den > 1e-24 * np.sum(q * q, axis=-1) ** 2
+    c = np.where(ok, 2.0 / np.where(ok, den, 1.0), 0.0)
+    g = np.empty(q.shape)
+    g[..., 0] = c * (D * ve - N * 2.0 * w)
+    dN = w[..., None] * e - vb[..., None] * axis - p[..., None] * b
+    g[..., 1:] = c[..., None] * (D[..., None] * dN - (N * 2.0 * p)[..., None] * axis)
     return g

@@ -55,7 +55,7 @@ from runner.mocap.bvh import POSITION_CHANNELS, BvhClip
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.layout import StateLayout
-from solver.quaternion import align_hemispheres, conj, mul, normalize, twist_angle
+from solver.quaternion import align_hemispheres, conj, mul, normalize, swing_twist, twist_angle
 
 # constants
 # --------------------------------------------------------------------------------------------------
@@ -333,7 +333,7 @@ def clamp_hyperextension(qpos: np.ndarray, figure: Figure) -> tuple[np.ndarray, 
 
     Flexion is `twist_angle(q, axis)` with the figure's flexion axes (`Figure.flexion_axes`). Where it
     is negative, the twist about the hinge axis is removed: q = s t (swing-twist decomposition,
-    t = normalize(w, (v.a) a)), q <- s = q conj(t), which has twist angle exactly 0 and the same swing.
+    `solver.quaternion.swing_twist`), q <- s = q conj(t), which has twist angle exactly 0 and the same swing.
     Other joints are unchanged.
 
     Args:
@@ -350,8 +350,7 @@ def clamp_hyperextension(qpos: np.ndarray, figure: Figure) -> tuple[np.ndarray, 
         bad = twist_angle(q, a) < 0
         if not bad.any():
             continue
-        t = np.concatenate([q[bad, :1], (q[bad, 1:] @ a)[:, None] * a], axis=1)
-        t = normalize(t)
-        out[np.flatnonzero(bad), sl] = normalize(mul(q[bad], conj(t)))
+        swing, _ = swing_twist(q[bad], a)
+        out[np.flatnonzero(bad), sl] = normalize(swing)
         changed += int(bad.sum())
     return out, changed

@@ -29,8 +29,16 @@ from solver.terms.base import Term
 #: planted and clearance at 10: on run-and-step (127_33, its own contacts) weight 1 with 5 mm rest height
 #: floated planted feet 7.6 mm (capture 2.4) and raised the joint-orientation error to 13.1 deg (plain
 #: 10.2); weight 10 with the 2 mm contact margin: float 3.5 mm, joint error 10.7 deg (docs/contacts.md "The contact terms").
+#: hinge and rom at 100: zero on the plain spline (they allow what it shows), so not renormalized (eq. 7);
+#: at 10 the tuning clips (run-and-step, 127_33, 16_23, 35_17 keyed every 0.25 s) needed a penalty boost
+#: and 14-50 % more evaluations; at 100 none did, at 4 % more evaluations than without the terms
+#: (docs/anatomy.md).
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
-                   "planted": 10.0, "clearance": 10.0, "cone": 1.0}
+                   "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0}
+#: Penalty-continuation bounds of the anatomical terms [rad] (their `TermSpec.limit`): rotation off the
+#: hinge beyond the allowance (acceptance: the capture's + 3 deg; the allowance is 2 deg) and angle
+#: beyond the range of motion (docs/anatomy.md).
+ANATOMY_LIMITS = {"hinge": float(np.radians(0.5)), "rom": float(np.radians(1.0))}
 
 
 class TermBuild:
@@ -45,15 +53,30 @@ class TermBuild:
         forces: True if a chosen term reads the inverse dynamics (then `engine` computes forces).
         conflicts: what keyframes contradict in the schedule (`solver.problem.keyframe_conflicts`, a
             `ScheduleConflicts`), for the contact terms to leave out of their bounds; None: nothing.
+        plain: the plain spline through the keyframes (a `FrameSet`), or None: the anatomical terms
+            allow what it shows (`plain_samples`; docs/anatomy.md).
     """
 
-    def __init__(self, model, t_span, margin: float, contacts, forces: bool, conflicts=None):
+    def __init__(self, model, t_span, margin: float, contacts, forces: bool, conflicts=None, plain=None):
         from solver.figure import Figure
 
         self.model, self.layout, self.figure = model, StateLayout.from_model(model), Figure.from_model(model)
         self.t_span, self.margin, self.contacts, self.forces = t_span, float(margin), contacts, forces
-        self.conflicts = conflicts
+        self.conflicts, self.plain = conflicts, plain
         self._engine = None
+        self._plain_samples = None
+
+    @property
+    def plain_samples(self) -> np.ndarray | None:
+        """(n, nq) the plain spline (`plain`) sampled at `solver.terms.anatomy.PLAIN_RATE` with its
+        keyframes' times, computed on first use; None without a plain spline."""
+        if self.plain is None:
+            return None
+        if self._plain_samples is None:
+            from solver.terms.anatomy import plain_samples
+
+            self._plain_samples = plain_samples(self.plain)
+        return self._plain_samples
 
     @property
     def engine(self):
@@ -161,8 +184,10 @@ def build_term(spec: TermSpec, build: TermBuild) -> Term:
 
 
 def _register_builtins() -> None:
-    """The figure's terms: sec. 5 (penetration, unit, bending, smooth), sec. 6 (torque, root) and the
-    contact terms (planted, clearance, cone; docs/contacts.md "The contact terms")."""
+    """The figure's terms: sec. 5 (penetration, unit, bending, smooth, and the anatomical limits hinge and
+    rom: docs/anatomy.md), sec. 6 (torque, root) and the contact terms (planted, clearance, cone;
+    docs/contacts.md "The contact terms")."""
+    from solver.terms.anatomy import Hinge, RangeOfMotion
     from solver.terms.bending import Hyperextension
     from solver.terms.clearance import Clearance
     from solver.terms.contact import Planted
@@ -183,6 +208,10 @@ def _register_builtins() -> None:
     register_term("unit", lambda b: UnitQuaternion(b.layout.quat_slots), w["unit"], default=True)
     register_term("bending", lambda b: Hyperextension(b.layout, b.figure.flexion_axes), w["bending"], default=True)
     register_term("smooth", smooth, w["smooth"], default=True)
+    register_term("hinge", lambda b: Hinge(b.layout, b.figure.flexion_axes, reference=b.plain_samples), w["hinge"],
+                  default=True, limit=ANATOMY_LIMITS["hinge"])
+    register_term("rom", lambda b: RangeOfMotion(b.layout, b.figure, reference=b.plain_samples), w["rom"],
+                  default=True, limit=ANATOMY_LIMITS["rom"])
     register_term("torque", lambda b: JointTorque(b.model, engine=b.engine), w["torque"], forces=True)
     register_term("root", lambda b: RootResidual(b.model, engine=b.engine), w["root"], forces=True)
     register_term("planted", lambda b: Planted(b.model, b.contacts, rest_height=b.margin, t_span=b.t_span,

@@ -184,9 +184,11 @@ def test_shared_engine_gives_the_same_objective_and_gradient(model, layout, keyf
     fs = FrameSet.from_keyframes(keyframes, layout.quat_slots).with_variable_frames([0.1, 0.6, 1.1, 1.6])
     shared = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=200.0)
     alone = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=200.0)
-    alone.terms = [Penetration(model, margin=0.005), *alone.terms[1:4],
-                   type(alone.terms[4])(model), RootResidual(model)]
-    assert shared.terms[0].engine is shared.terms[4].engine is shared.terms[5].engine
+    own = {"penetration": lambda t: Penetration(model, margin=0.005), "torque": lambda t: type(t)(model),
+           "root": lambda t: RootResidual(model)}
+    alone.terms = [own.get(n, lambda t: t)(t) for n, t in zip(alone.names, alone.terms)]
+    torque, root = shared.names.index("torque"), shared.names.index("root")
+    assert shared.terms[0].engine is shared.terms[torque].engine is shared.terms[root].engine
     fs = FrameSet(fs.times, fs.values + np.where(fs.fixed, 0, 0.02), fs.fixed, fs.is_keyframe)
     for obj in (shared, alone):
         obj.prepare(fs.times, fs.values)
@@ -244,8 +246,8 @@ def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms)
     assert opt["flight_s"] >= 0.5 * plain["flight_s"]
     opts = json.loads(str(z["options_json"]))
     # "all" with the file's contact schedule: the dynamics terms, the contact terms and the cone
-    assert set(opts["weights"]) == {"penetration", "unit", "bending", "smooth", "torque", "root", "planted",
-                                    "clearance", "cone"}
+    assert set(opts["weights"]) == {"penetration", "unit", "bending", "smooth", "hinge", "rom", "torque", "root",
+                                    "planted", "clearance", "cone"}
 
 
 @pytest.mark.slow
