@@ -108,7 +108,24 @@ def pytest_runtest_makereport(item, call):
     did not run. Locally these tests skip, naming what to install (README "Full test suite")."""
     outcome = yield
     report = outcome.get_result()
-    if report.skipped and not hasattr(report, "wasxfail") and item.get_closest_marker("client") and in_ci():
+    if not item.get_closest_marker("client"):
+        return
+    if report.skipped and not hasattr(report, "wasxfail") and in_ci():
         reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
         report.outcome = "failed"
         report.longrepr = f"a real-client test skipped in CI (CI={os.environ['CI']}): {reason}"
+    seen = _CLIENT_TESTS.setdefault(item.nodeid, ["passed", 0.0])
+    seen[1] += report.duration
+    if report.outcome != "passed":
+        seen[0] = report.outcome
+
+
+_CLIENT_TESTS: dict = {}  # node id -> [outcome, seconds over setup, call and teardown]
+
+
+def pytest_terminal_summary(terminalreporter):
+    """One line per `client` test that ran: its outcome and time, so a log shows the clients were used."""
+    if _CLIENT_TESTS:
+        terminalreporter.section("real-client tests (Chromium, glTF validator, Blender)")
+        for nodeid, (outcome, seconds) in _CLIENT_TESTS.items():
+            terminalreporter.write_line(f"{outcome:8} {seconds:6.1f} s  {nodeid}")
