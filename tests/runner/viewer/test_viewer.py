@@ -1,6 +1,8 @@
-"""`dynsplines view`: the server's resources, and the page drawn by headless Chromium (slow): the figure,
-a grid on the floor and the figure's shadow on it."""
+"""`dynsplines view`: the server's resources, and the page drawn by headless Chromium (slow, `client`): the
+figure, drawn with no host but the local server reachable and nothing requested elsewhere; a grid on the
+floor and the figure's shadow on it; `?t=` poses the figure at that time."""
 import json
+import os
 import shutil
 import subprocess
 import tempfile
@@ -135,8 +137,8 @@ def test_headless_chromium_draws_the_figure_offline(tmp_path):
     assert shown.shape == (540, 960, 3)
     background = shown[5, shown.shape[1] // 2]
     assert np.abs(shown - background).sum(axis=-1).max() > 100  # something is drawn over the sky
-    shutil.copy(tmp_path / "shown.png", "/tmp/export_view_test.png") if __import__("os").environ.get(
-        "KEEP_VIEWER_SCREENSHOT") else None
+    if os.environ.get("KEEP_VIEWER_SCREENSHOT"):  # a file to look at: KEEP_VIEWER_SCREENSHOT=out.png
+        shutil.copy(tmp_path / "shown.png", os.environ["KEEP_VIEWER_SCREENSHOT"])
     h, w, _ = shown.shape
     changed = np.abs(shown - hidden)[h // 10: 9 * h // 10, w // 4: 3 * w // 4].sum(axis=-1) > 60
     assert changed.sum() > 2000, changed.sum()  # the figure (and its ghosts) cover the middle region
