@@ -55,7 +55,8 @@ def exported(request, tmp_path_factory):
     """Folder with path.npz (the saved path), path.bvh and path.glb exported from it by `dynsplines export`."""
     if not BPY_PYTHON.is_file():
         pytest.skip(f"Blender's bpy is not installed ({BPY_PYTHON} missing): python3 -m venv .venv-bpy && "
-                    ".venv-bpy/bin/pip install bpy, or set DYNSPLINES_BPY_PYTHON to a Python that imports bpy")
+                    ".venv-bpy/bin/pip install bpy==5.0.1, or set DYNSPLINES_BPY_PYTHON to a Python that imports bpy; "
+                    'README "Full test suite"')
     out = tmp_path_factory.mktemp(request.param)
     _dynsplines(*CLIPS[request.param], cwd=out)
     for ext in ("bvh", "glb"):

@@ -130,10 +130,10 @@ def test_khronos_validator_reports_no_errors_or_warnings(tmp_path, saved_npz, sc
     """Needs node and `npm install gltf-validator` in $GLTF_VALIDATOR_DIR (default .gltf-validator/ in the
     checkout; .ci/run installs it there)."""
     if shutil.which("node") is None:
-        pytest.skip("node is not installed (apt-get install nodejs npm)")
+        pytest.skip("node is not installed (apt-get install nodejs npm; README \"Full test suite\")")
     if not (VALIDATOR_DIR / "node_modules" / "gltf-validator").is_dir():
         pytest.skip(f"gltf-validator not installed in {VALIDATOR_DIR} (npm install --prefix {VALIDATOR_DIR} "
-                    "gltf-validator, or set GLTF_VALIDATOR_DIR)")
+                    "gltf-validator, or set GLTF_VALIDATOR_DIR; README \"Full test suite\")")
     saved = load_saved_path(saved_npz)
     slots = StateLayout.from_model(scene_model).quat_slots
     m = sample_motion(saved, "optimized", default_fps(saved), slots)

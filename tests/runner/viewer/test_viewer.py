@@ -76,7 +76,7 @@ def _chromium():
     """Debian's chromium (or chromium-browser) on PATH; skips without it (a failure in CI: conftest.py)."""
     exe = shutil.which("chromium") or shutil.which("chromium-browser")
     if exe is None:
-        pytest.skip("chromium is not installed (apt-get install chromium)")
+        pytest.skip("chromium is not installed (apt-get install chromium; README \"Full test suite\")")
     return exe
 
 
