@@ -1,0 +1,205 @@
+"""Blender opens the exports as a user would: `dynsplines export` of run-and-step (the shipped keyframes)
+and of a motion-capture clip to BVH and glb, each imported with Blender's default importer (BVH with
+"Update Scene FPS", docs/export.md) by `blender_import.py` in Blender's own Python (`bpy` from PyPI, in
+its own virtual environment: it pins its Python and numpy).
+
+What is checked, against references that do not come from the exporter:
+* names: the armature's bones are the BVH file's ROOT/JOINT names; the glb's objects are its node names;
+* time: the keyed frames over the scene's frame rate are the file's sample times (BVH: `Frames` and
+  `Frame Time`; glb: the animation's input accessor);
+* the figure on the floor: its lowest point over the animation within 2 cm of z = 0;
+* size: the BVH rest armature's height is the file's (OFFSETs summed along the Y-up chains) and a
+  person's, in metres; the glb figure's vertical extent at each key is MuJoCo's for the path at that time
+  (the exact extent of each capsule and ellipsoid, `mj_kinematics`);
+* the motion: the pelvis' displacement from its start at each key is the saved path's root displacement
+  (the natural cubic spline through the saved frames, scipy), within 1 cm.
+
+Blender's interpreter: $DYNSPLINES_BPY_PYTHON, else .venv-bpy/bin/python in the checkout (.ci/run and the
+README's "Full test suite" install it).
+"""
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pygltflib
+import pytest
+from scipy.interpolate import CubicSpline
+
+ROOT = Path(__file__).resolve().parents[2]
+BPY_PYTHON = Path(os.environ.get("DYNSPLINES_BPY_PYTHON", ROOT / ".venv-bpy" / "bin" / "python"))
+SCRIPT = Path(__file__).with_name("blender_import.py")
+FIGURE = ROOT / "models" / "humanoid39.xml"
+
+pytestmark = [pytest.mark.slow, pytest.mark.client]
+
+# cheap paths: few evaluations (Blender's import is under test, not the optimizer)
+_SOLVE = ["--no-render", "--quiet", "--no-summary", "--max-evals", "10", "--rounds", "1", "--save-path", "path.npz"]
+CLIPS = {
+    "run-and-step": ["run-and-step", *_SOLVE],
+    "mocap": ["mocap", str(ROOT / "models" / "cmu" / "127_33.bvh"), "--every", "0.5", "--out-dir", "mocap", *_SOLVE],
+}
+
+
+def _dynsplines(*args, cwd):
+    res = subprocess.run([sys.executable, "-m", "runner", *args], cwd=cwd, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, f"dynsplines {' '.join(args)}:\n{res.stdout}\n{res.stderr}"
+
+
+@pytest.fixture(scope="module", params=sorted(CLIPS))
+def exported(request, tmp_path_factory):
+    """Folder with path.npz (the saved path), path.bvh and path.glb exported from it by `dynsplines export`."""
+    if not BPY_PYTHON.is_file():
+        pytest.skip(f"Blender's bpy is not installed ({BPY_PYTHON} missing): python3 -m venv .venv-bpy && "
+                    ".venv-bpy/bin/pip install bpy==5.0.1, or set DYNSPLINES_BPY_PYTHON to a Python that imports bpy; "
+                    'README "Full test suite"')
+    out = tmp_path_factory.mktemp(request.param)
+    _dynsplines(*CLIPS[request.param], cwd=out)
+    for ext in ("bvh", "glb"):
+        _dynsplines("export", "path.npz", "--to", f"path.{ext}", cwd=out)
+    return out
+
+
+def blender_import(path):
+    """What `blender_import.py` printed for one file (a dict, see there)."""
+    res = subprocess.run([str(BPY_PYTHON), str(SCRIPT), str(path)], capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, f"Blender could not import {path}:\n{res.stderr[-3000:]}"
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def root_spline(npz):
+    """(t0, spline of the root position (3,) [m] in MuJoCo axes): the optimized path's root."""
+    with np.load(npz) as z:
+        times, frames = z["frame_times"], z["frames"]
+    return float(times[0]), CubicSpline(times, frames[:, :3], bc_type="natural")
+
+
+def assert_root_travel(pelvis, t, npz):
+    """pelvis: (n, 3) [m] world positions in Blender at times t (n,) [s] from the path's start."""
+    t0, spline = root_spline(npz)
+    ref = spline(t0 + t)
+    got_d = np.linalg.norm(pelvis - pelvis[0], axis=1)
+    ref_d = np.linalg.norm(ref - ref[0], axis=1)
+    assert ref_d[-1] > 0.5, ref_d[-1]  # the clips travel: a test of a standing figure would prove little
+    assert abs(got_d[-1] - ref_d[-1]) < 0.01, (got_d[-1], ref_d[-1])  # the travel
+    assert np.abs(got_d - ref_d).max() < 0.01, np.abs(got_d - ref_d).max()  # and at every key
+    assert np.abs((pelvis[:, 2] - pelvis[0, 2]) - (ref[:, 2] - ref[0, 2])).max() < 0.01  # up is up
+
+
+# ------------------------------------------------------------------------------------------------ BVH
+def read_bvh(path):
+    """Joint names (file order), frame count, frame time [s] and the rest skeleton's vertical extent
+    (min, max) of Y (the BVH's up axis) over joints and end sites, from the file's text."""
+    text = Path(path).read_text()
+    head, motion = text.split("MOTION", 1)
+    names, stack, ys = [], [np.zeros(3)], []
+    for line in head.splitlines():
+        words = line.split()
+        if not words:
+            continue
+        if words[0] in ("ROOT", "JOINT"):
+            names.append(words[1])
+        elif words[0] == "OFFSET":
+            pos = stack[-1] + np.array(words[1:4], float)
+            stack.append(pos)
+            ys.append(pos[1])
+        elif words[0] == "}":
+            stack.pop()
+    frames = int(re.search(r"Frames:\s*(\d+)", motion).group(1))
+    frame_time = float(re.search(r"Frame Time:\s*([0-9.eE+-]+)", motion).group(1))
+    return names, frames, frame_time, (min(ys), max(ys))
+
+
+def test_blender_imports_the_bvh(exported):
+    path = exported / "path.bvh"
+    names, n, dt, (ylo, yhi) = read_bvh(path)
+    got = blender_import(path)
+    [(arm, bones)] = got["bones"].items()
+    assert bones == names  # the armature's bones are the file's joints, whichever skeleton it writes
+    assert got["frame_ranges"] == [[1.0, float(n)]] and got["frames"] == [float(f) for f in range(1, n + 1)]
+    assert abs(got["fps"] * dt - 1.0) < 1e-4, (got["fps"], dt)
+    lowest = min(got["zmin"][arm])
+    assert abs(lowest) < 0.02, lowest  # the figure stands on the floor, neither under it nor above it
+    lo, hi = got["rest"][arm]
+    assert abs((hi - lo) - (yhi - ylo)) < 1e-3, (hi - lo, yhi - ylo)  # upright: the file's Y is Blender's Z
+    assert 1.5 < hi - lo < 2.0, hi - lo  # a person's height in metres
+    pelvis = np.array(got["bone_heads"][f"{arm}/{names[0]}"])
+    assert_root_travel(pelvis, np.arange(n) * dt, exported / "path.npz")
+
+
+# ------------------------------------------------------------------------------------------------ glb
+def _accessor(gltf, i):
+    a = gltf.accessors[i]
+    v = gltf.bufferViews[a.bufferView]
+    width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4}[a.type]
+    return np.frombuffer(gltf.binary_blob(), np.float32, a.count * width, v.byteOffset + (a.byteOffset or 0))
+
+
+def mujoco_extent(model, data, qpos, geoms):
+    """(zmin, zmax) [m] of the given geoms (capsules, ellipsoids, spheres, boxes) at qpos: exact
+    support functions along z of the posed primitives (`mj_kinematics` normalizes the quaternions)."""
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    lo, hi = np.inf, -np.inf
+    T = mujoco.mjtGeom
+    for g in geoms:
+        Rz = data.geom_xmat[g].reshape(3, 3)[2]  # z components of the geom's axes
+        s = model.geom_size[g]
+        kind = model.geom_type[g]
+        if kind == T.mjGEOM_CAPSULE:
+            h = abs(Rz[2]) * s[1] + s[0]
+        elif kind == T.mjGEOM_ELLIPSOID:
+            h = float(np.sqrt(np.sum((Rz * s) ** 2)))
+        elif kind == T.mjGEOM_SPHERE:
+            h = s[0]
+        elif kind == T.mjGEOM_BOX:
+            h = float(np.abs(Rz * s).sum())
+        else:
+            raise AssertionError(f"geom type {kind} has no reference extent here")
+        z = data.geom_xpos[g][2]
+        lo, hi = min(lo, z - h), max(hi, z + h)
+    return lo, hi
+
+
+def test_blender_imports_the_glb(exported):
+    path = exported / "path.glb"
+    gltf = pygltflib.GLTF2.load_binary(str(path))
+    anim = gltf.animations[0]
+    times = _accessor(gltf, anim.samplers[0].input).astype(float)
+    [root] = [c.target.node for c in anim.channels if c.target.path == "translation"]
+    figure, todo = [], [root]
+    while todo:  # the figure: the animated root node and its descendants
+        i = todo.pop()
+        figure.append(i)
+        todo += gltf.nodes[i].children or []
+    meshes = [gltf.nodes[i].name for i in figure if gltf.nodes[i].mesh is not None]
+
+    got = blender_import(path)
+    assert set(got["objects"]) == {n.name for n in gltf.nodes}  # one object per node, named after it
+    assert not got["bones"]  # a node tree without skin: empties and meshes, no armature
+    fps = got["fps"]
+    assert np.abs(np.array(got["frames"]) / fps - times).max() < 1e-4  # keys at the file's times [s]
+    [(f0, f1)] = got["frame_ranges"]
+    assert abs(f0 / fps - times[0]) < 1e-4 and abs(f1 / fps - times[-1]) < 1e-4, (f0, f1, fps)
+
+    zmin = np.min([got["zmin"][m] for m in meshes], axis=0)
+    zmax = np.max([got["zmax"][m] for m in meshes], axis=0)
+    assert abs(zmin.min()) < 0.02, zmin.min()  # on the floor at some time, never deeper than 2 cm
+    model = mujoco.MjModel.from_xml_path(str(FIGURE))
+    data = mujoco.MjData(model)
+    geoms = [g for g in range(model.ngeom) if f"geom_{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}" in meshes]
+    assert len(geoms) == len(meshes), "the glb's figure meshes are the figure's geoms"
+    with np.load(exported / "path.npz") as z:
+        qpos = CubicSpline(z["frame_times"], z["frames"], bc_type="natural")(z["frame_times"][0] + times)
+    ref = np.array([mujoco_extent(model, data, q, geoms) for q in qpos])
+    # tolerance: the meshes are 20-gons inscribed in the exact surfaces (at most 1.3 % of a radius inside)
+    assert np.abs(zmin - ref[:, 0]).max() < 3e-3, np.abs(zmin - ref[:, 0]).max()
+    assert np.abs(zmax - ref[:, 1]).max() < 3e-3, np.abs(zmax - ref[:, 1]).max()
+    height = zmax[0] - zmin[0]
+    assert 1.3 < height < 2.2, height  # metres (a running figure, a little under its standing 1.75 m)
+    pelvis = np.array(got["positions"][gltf.nodes[root].name])
+    assert_root_travel(pelvis, times, exported / "path.npz")
