@@ -28,6 +28,7 @@ import numpy as np
 
 from runner.mocap.bvh import POSITION_CHANNELS, BvhClip, read_bvh
 from runner.mocap.retarget import BONE_MAP, BVH_TO_MUJOCO, UNIT_TO_METRES, check_figure, check_skeleton, rest_offsets
+from runner.mocap.subject_figure import figure_skeleton_digest, skeleton_digest
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.quaternion import conj, mul, normalize
@@ -216,10 +217,19 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
     fmt, saved, model, motion = prepare_export(npz, out, which, fps)
     if fmt != "BVH":
         raise InputError(f"--to {out}: --skeleton source writes BVH only; give a .bvh file or --skeleton figure")
-    if source_clip(saved) is None:
+    clip = source_clip(saved)
+    if clip is None:
         if required:
             raise InputError(f"{npz}: the path was not made from a BVH clip, so it has no source skeleton; "
                              "give --skeleton figure")
+        return None
+    if figure_skeleton_digest(model) != skeleton_digest(clip):
+        # another figure (the shipped one, a hand-made file's): its bone lengths and root path are not the
+        # source's, so on the source skeleton its planted feet would slide
+        if required:
+            raise InputError(f"{npz}: the path's figure is not the subject's own figure of {Path(clip.source).name} "
+                             "(made with --figure default or a hand-made file), so its motion does not fit the source "
+                             "skeleton; give --skeleton figure, or redo the clip with --figure subject")
         return None
     try:
         clip = write_source_bvh(out, saved, model, motion.qpos, motion.times, motion.fps)

@@ -34,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[2]
 BPY_PYTHON = Path(os.environ.get("DYNSPLINES_BPY_PYTHON", ROOT / ".venv-bpy" / "bin" / "python"))
 SCRIPT = Path(__file__).with_name("blender_import.py")
 FIGURE = ROOT / "models" / "humanoid39.xml"
+UNIT = 0.0254 / 0.45  # metres per unit of the CMU BVH clips (models/cmu/README.md "Units")
 
 pytestmark = [pytest.mark.slow, pytest.mark.client]
 
@@ -114,6 +115,12 @@ def read_bvh(path):
     return names, frames, frame_time, (min(ys), max(ys))
 
 
+def _source_text(npz):
+    """The source clip's text stored in a saved path ("" for a path not made from a clip)."""
+    with np.load(npz) as z:
+        return str(z["clip_text"]) if "clip_text" in z.files else ""
+
+
 def test_blender_imports_the_bvh(exported):
     path = exported / "path.bvh"
     names, n, dt, (ylo, yhi) = read_bvh(path)
@@ -122,13 +129,28 @@ def test_blender_imports_the_bvh(exported):
     assert bones == names  # the armature's bones are the file's joints, whichever skeleton it writes
     assert got["frame_ranges"] == [[1.0, float(n)]] and got["frames"] == [float(f) for f in range(1, n + 1)]
     assert abs(got["fps"] * dt - 1.0) < 1e-4, (got["fps"], dt)
-    lowest = min(got["zmin"][arm])
-    assert abs(lowest) < 0.02, lowest  # the figure stands on the floor, neither under it nor above it
     lo, hi = got["rest"][arm]
     assert abs((hi - lo) - (yhi - ylo)) < 1e-3, (hi - lo, yhi - ylo)  # upright: the file's Y is Blender's Z
-    assert 1.5 < hi - lo < 2.0, hi - lo  # a person's height in metres
-    pelvis = np.array(got["bone_heads"][f"{arm}/{names[0]}"])
-    assert_root_travel(pelvis, np.arange(n) * dt, exported / "path.npz")
+    lowest = min(got["zmin"][arm])
+    source = _source_text(exported / "path.npz")
+    if source:  # on the source skeleton (docs/export.md): it imports in place of the source clip
+        (exported / "source.bvh").write_text(source)
+        src_names, _, src_dt, _ = read_bvh(exported / "source.bvh")
+        assert names == src_names and abs(dt - src_dt) < 1e-9  # same joints, same frame rate
+        src = blender_import(exported / "source.bvh")
+        [src_arm] = src["bones"]
+        assert np.allclose(got["rest"][arm], src["rest"][src_arm], atol=1e-3)  # the same rest pose
+        # on the capture's floor: the lowest point over the animation within 2 cm of the source's [m]
+        src_lowest = min(src["zmin"][src_arm])
+        assert abs(lowest - src_lowest) * UNIT < 0.02, (lowest * UNIT, src_lowest * UNIT)
+        scale = UNIT  # the source's units, as a user who imports the source sees them
+    else:
+        assert abs(lowest) < 0.02, lowest  # the figure stands on the floor, neither under it nor above it
+        scale = 1.0
+    assert 1.4 < (hi - lo) * scale < 2.1, (hi - lo) * scale  # a person's height in metres
+    pelvis = np.array(got["bone_heads"][f"{arm}/{names[0]}"]) * scale
+    skip = 1 if source else 0  # on the source skeleton the first frame is the source's T-pose, as in the clip
+    assert_root_travel(pelvis[skip:], np.arange(n - skip) * dt, exported / "path.npz")
 
 
 # ------------------------------------------------------------------------------------------------ glb
@@ -189,7 +211,9 @@ def test_blender_imports_the_glb(exported):
     zmin = np.min([got["zmin"][m] for m in meshes], axis=0)
     zmax = np.max([got["zmax"][m] for m in meshes], axis=0)
     assert abs(zmin.min()) < 0.02, zmin.min()  # on the floor at some time, never deeper than 2 cm
-    model = mujoco.MjModel.from_xml_path(str(FIGURE))
+    with np.load(exported / "path.npz") as z:  # the path's own figure (a subject's, for a clip)
+        figure = exported / str(z["figure"]) if "figure" in z.files and str(z["figure"]) else FIGURE
+    model = mujoco.MjModel.from_xml_path(str(figure))
     data = mujoco.MjData(model)
     geoms = [g for g in range(model.ngeom) if f"geom_{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}" in meshes]
     assert len(geoms) == len(meshes), "the glb's figure meshes are the figure's geoms"
