@@ -166,3 +166,67 @@ def project_points(glcam, points: np.ndarray, width: int, height: int) -> np.nda
     out = np.stack([px, py], axis=1)
     out[z <= 0] = np.nan
     return out
+
+
+_PLANE = int(mujoco.mjtGeom.mjGEOM_PLANE)
+_MAX_PLANE_GRID = 200
+"""MuJoCo's `mjMAXPLANEGRID`: an infinite plane's display list is a 200 x 200 grid of quads."""
+
+
+def coarse_floor(model, scene) -> None:
+    """Draw the scene's infinite planes as one large quad each instead of MuJoCo's 200 x 200 grid.
+
+    `mjr_makeContext` builds an infinite plane (size 0 0) as a 200 x 200 grid of quads (40,000) whose
+    extent reaches past the far clipping plane. A software renderer (llvmpipe) transforms all of them
+    in every pass (the lit pass, and again for each shadow-casting light): about a third of a panel's
+    render time on the shipped scenes. After `mjv_updateScene` this turns each such plane into a
+    finite plane of the same extent, drawn with MuJoCo's default plane list (`numquads` x
+    `numquads` quads, one in the "fast" preset), and appends a zero-size copy of it, which draws
+    nothing but keeps MuJoCo's horizon haze (drawn for the first infinite plane of the scene).
+
+    The picture is unchanged (within rounding): the lighting of a plane does not vary over it (the
+    scenes' lights are directional), and the texture keeps its place: with `texuniform` the default
+    list repeats the texture every 2 / texrepeat [m] from a corner of the plane, so the half-size is
+    rounded up to a whole number of repeats and the centre moved by half a repeat (as MuJoCo's own
+    grid, whose texture is repeated from the plane's centre, `mjr_render`'s `settexture`). Planes
+    with a texture that is not `texuniform` (repeated per plane, not per metre) are left as they are.
+
+    Args:
+        model: the MjModel (`vis.map.zfar`, `stat.extent`: MuJoCo's extent of an infinite plane).
+        scene: the MjvScene, right after `mjv_updateScene` (changed in place; needs one free geom per
+            infinite plane, else that plane is left as it is).
+    """
+    zfar = model.vis.map.zfar * model.stat.extent
+    n = scene.ngeom
+    for i in range(n):
+        g = scene.geoms[i]
+        if g.type != _PLANE or g.dataid < 0 or g.size[0] != 0 or g.size[1] != 0 or scene.ngeom >= scene.maxgeom:
+            continue
+        textured, uniform, repeat = _plane_texture(model, g)
+        if textured and not uniform:
+            continue
+        period = np.where(repeat > 0, 2.0 / np.where(repeat > 0, repeat, 1.0), 2.1 * zfar / (_MAX_PLANE_GRID - 2))
+        half = (2.1 * zfar + 2 * period) / 2  # MuJoCo's grid extent, from the plane's centre
+        size = np.ceil(half / period) * period
+        haze = scene.geoms[scene.ngeom]  # zero size: invisible, but MuJoCo draws the haze for it
+        mujoco.mjv_initGeom(haze, _PLANE, np.zeros(3), np.asarray(g.pos, float),
+                            np.asarray(g.mat, float).ravel(), np.asarray(g.rgba, np.float32))
+        haze.dataid, haze.castshadow, haze.reflectance = -1, 0, 0.0
+        haze.objtype, haze.objid, haze.segid, haze.category = g.objtype, g.objid, g.segid, g.category
+        scene.ngeom += 1
+        g.dataid = -1
+        g.size[0], g.size[1] = size
+        if textured:
+            mat = np.asarray(g.mat, float).reshape(3, 3)
+            g.pos[:] = np.asarray(g.pos, float) + mat[:, :2] @ (period / 2)
+
+
+def _plane_texture(model, g) -> tuple[bool, bool, np.ndarray]:
+    """(has a texture, texuniform, texrepeat (2,)) of a scene geom (MuJoCo < 3.3: from its material)."""
+    if hasattr(g, "texid"):
+        return g.texid >= 0, bool(g.texuniform), np.asarray(g.texrepeat, float)
+    m = g.matid
+    if m < 0:
+        return False, False, np.zeros(2)
+    return (bool(np.max(model.mat_texid[m]) >= 0), bool(model.mat_texuniform[m]),
+            np.asarray(model.mat_texrepeat[m], float))

@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw
 
-from runner.render.gl import QUALITIES, load_font, project_points
+from runner.render.gl import QUALITIES, coarse_floor, load_font, project_points
 from runner.render.tracks import Camera, Track, forward_direction, root_body, sample_track
 from solver.errors import InputError
 
@@ -84,6 +84,7 @@ class Panel:
         model, scene = self.model, self.renderer.scene
         forward_direction(model, self.data, qpos)
         self.renderer.update_scene(self.data, self.cam, self.option)
+        coarse_floor(model, scene)
         for i in range(scene.ngeom):  # planes cast no shadow: no floor self-shadowing (acne)
             if scene.geoms[i].type == _PLANE:
                 scene.geoms[i].castshadow = 0
