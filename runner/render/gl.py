@@ -184,8 +184,9 @@ def coarse_floor(model, scene) -> None:
     `numquads` quads, one in the "fast" preset), and appends a zero-size copy of it, which draws
     nothing but keeps MuJoCo's horizon haze (drawn for the first infinite plane of the scene).
 
-    The picture is unchanged (within rounding): the lighting of a plane does not vary over it (the
-    scenes' lights are directional), and the texture keeps its place: with `texuniform` the default
+    The picture is unchanged (within rounding): OpenGL's fixed-function lighting is computed at the
+    vertices, which for a flat plane lit by directional lights only gives the same colour everywhere
+    (scenes with a spot or point light, or fog, keep MuJoCo's grid), and the texture keeps its place: with `texuniform` the default
     list repeats the texture every 2 / texrepeat [m] from a corner of the plane, so the half-size is
     rounded up to a whole number of repeats and the centre moved by half a repeat (as MuJoCo's own
     grid, whose texture is repeated from the plane's centre, `mjr_render`'s `settexture`). Planes
@@ -196,6 +197,8 @@ def coarse_floor(model, scene) -> None:
         scene: the MjvScene, right after `mjv_updateScene` (changed in place; needs one free geom per
             infinite plane, else that plane is left as it is).
     """
+    if not _uniform_light(scene):
+        return
     zfar = model.vis.map.zfar * model.stat.extent
     n = scene.ngeom
     for i in range(n):
@@ -230,3 +233,19 @@ def _plane_texture(model, g) -> tuple[bool, bool, np.ndarray]:
         return False, False, np.zeros(2)
     return (bool(np.max(model.mat_texid[m]) >= 0), bool(model.mat_texuniform[m]),
             np.asarray(model.mat_texrepeat[m], float))
+
+
+def _uniform_light(scene) -> bool:
+    """Whether a plane is lit the same at every vertex: every light of the scene (the headlight
+    included) is directional, and there is no fog."""
+    if scene.flags[mujoco.mjtRndFlag.mjRND_FOG]:
+        return False
+    directional = int(mujoco.mjtLightType.mjLIGHT_DIRECTIONAL) if hasattr(mujoco, "mjtLightType") else None
+    for i in range(scene.nlight):
+        light = scene.lights[i]
+        if directional is not None and hasattr(light, "type"):
+            if int(light.type) != directional:
+                return False
+        elif not getattr(light, "directional", False):
+            return False
+    return True
