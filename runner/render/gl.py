@@ -1,6 +1,7 @@
 """The OpenGL side: quality presets, the offscreen renderer and its headless fallback, projection."""
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 
@@ -43,12 +44,13 @@ def check_quality(quality: str) -> None:
         raise InputError(f"unknown render quality {quality!r}; choose one of {list(QUALITIES)}")
 
 
-def make_renderer(model, width: int, height: int, quality: str = "fast"):
+def make_renderer(model, width: int, height: int, quality: str = "fast", shadow_size: int | None = None):
     """A `mujoco.Renderer` of width x height with the `quality` preset's GL context settings.
 
     The model's offscreen buffer size (raised to the image size) and `<visual><quality>` fields
     (capped by the preset) are changed only while the rendering context is made, then restored: the
-    caller's model is unchanged.
+    caller's model is unchanged. shadow_size: [px] a lower cap for the shadow map of a preset that
+    caps it ("fast"), e.g. `shadow_map_size`; None: the preset's.
 
     Raises:
         InputError: unknown quality; the OpenGL backend cannot be initialized (no EGL/OSMesa, bad
@@ -61,7 +63,10 @@ def make_renderer(model, width: int, height: int, quality: str = "fast"):
     saved_quality = {name: getattr(vis.quality, name) for name in QUALITIES[quality].caps}
     vis.global_.offwidth = max(width, vis.global_.offwidth)
     vis.global_.offheight = max(height, vis.global_.offheight)
-    for name, cap in QUALITIES[quality].caps.items():
+    caps = dict(QUALITIES[quality].caps)
+    if shadow_size is not None and "shadowsize" in caps:
+        caps["shadowsize"] = min(caps["shadowsize"], int(shadow_size))
+    for name, cap in caps.items():
         setattr(vis.quality, name, min(cap, getattr(vis.quality, name)))
     try:
         renderer_cls = getattr(mujoco, "Renderer", None)
@@ -77,6 +82,22 @@ def make_renderer(model, width: int, height: int, quality: str = "fast"):
         vis.global_.offwidth, vis.global_.offheight = saved_size
         for name, value in saved_quality.items():
             setattr(vis.quality, name, value)
+
+
+def shadow_map_size(model, panel_height: int, distance: float) -> int:
+    """[px] the smallest shadow map (a power of two, 256 to 4096) whose texels are no larger than a
+    pixel of the panel at the camera's look-at distance, for directional lights.
+
+    `mjr_render` renders a directional light's shadow map over a square of half-width
+    `vis.map.shadowclip * stat.extent` [m] (its `glOrtho`); a panel of `panel_height` px shows
+    2 distance tan(fovy / 2) [m] at the look-at point. A larger map is not seen, only paid for (at
+    960x540 and the default camera a 512 px map draws the shipped scene's shadows as a 1024 px one);
+    a closer camera or a taller video gets a larger one.
+    """
+    clip = model.vis.map.shadowclip * model.stat.extent
+    pixel = 2.0 * distance * math.tan(math.radians(model.vis.global_.fovy) / 2) / max(int(panel_height), 1)
+    need = 2.0 * clip / max(pixel, 1e-9)
+    return int(min(4096, 2 ** math.ceil(math.log2(max(need, 256.0)))))
 
 
 _GLFW_CHOICES = ("", "glfw", "enable", "enabled", "on", "true", "1")

@@ -11,7 +11,7 @@ from PIL import Image, ImageDraw
 
 from runner.files import atomic_output, check_writable_dir
 from runner.render.encode import FrameEncoder
-from runner.render.gl import check_quality, load_font, make_renderer
+from runner.render.gl import check_quality, load_font, make_renderer, shadow_map_size
 from runner.render.overlays import (
     KEYFRAME_CAPTION_SECONDS,
     WHITE,
@@ -132,7 +132,7 @@ def render_tracks(
     plants = [None if tr.planted is None else
               interpolate_samples(tr.times, tr.planted.astype(float), times) > 0.5 for tr in tracks]
 
-    renderer = make_renderer(model, panel_w, panel_h, quality)
+    renderer = make_renderer(model, panel_w, panel_h, quality, shadow_map_size(model, panel_h, camera.distance))
     try:
         panel = Panel(model, renderer, quality)
         positions, facing = root_poses(model, panel.data, qposes)
