@@ -272,6 +272,8 @@ class Overlay:
         self.font = load_font(self.fs)
         self.small = load_font(max(9, int(self.fs * 0.75)))
         self._patches = {}
+        self._background = np.empty((height, width, 3), np.uint8)
+        self._background[:] = _PAD_COLOR
 
     def draw_text(self, im, xy, s, font, fill, anchor="la"):
         """Draw outlined text; each (text, font, colour, anchor) is rasterized once and pasted after
@@ -293,8 +295,7 @@ class Overlay:
         side by side, each with its label, time, caption, rings and timeline (no text below
         LABELS_MIN_SIZE); green dots at the projected sites of `planted` (per panel an (m, 2) array of
         pixel positions, or None)."""
-        frame = np.empty((self.height, self.width, 3), np.uint8)
-        frame[:] = _PAD_COLOR
+        frame = self._background.copy()  # a copy is ~30x faster than filling with a colour tuple
         for p, img in enumerate(images):
             x = self.x0 + p * self.panel_w
             frame[self.band:, x:x + self.panel_w] = img
