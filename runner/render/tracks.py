@@ -148,9 +148,9 @@ class RenderInfo:
         return self.n_frames / self.wall_time_s if self.wall_time_s > 0 else math.inf
 
     def summary(self) -> str:
-        """One line for the command's output, e.g. "103 frames in 3.1 s (33 fps, CPU 5.0 s)"."""
+        """One line for the command's output, e.g. "103 frames in 3.1 s, 33 fps, CPU 5.0 s"."""
         cpu = f", CPU {self.cpu_time_s:.1f} s" if math.isfinite(self.cpu_time_s) else ""
-        return f"{self.n_frames} frames in {self.wall_time_s:.1f} s ({self.fps:.0f} fps{cpu})"
+        return f"{self.n_frames} frames in {self.wall_time_s:.1f} s, {self.fps:.0f} fps{cpu}"
 
 
 def parse_size(size) -> tuple[int, int]:
