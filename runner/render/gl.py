@@ -31,11 +31,12 @@ QUALITIES = {
                     reflections=False),
     "high": Quality({}, reflections=True),
 }
-"""Render presets. "fast" (the default) renders a 480x540 panel of the run-and-step scene with 8
-keyframe ghosts in about 30 ms of CPU on Mesa's software renderer (llvmpipe), half of what MuJoCo's
-defaults take: no multisampling, a 1024 px shadow map, coarser capsules and spheres (invisible at
-these sizes), no reflections. "high" uses the model's own `<visual><quality>` settings (MuJoCo's
-defaults: 4x MSAA, 4096 px shadows, reflections), several times slower."""
+"""Render presets. "fast" (the default) takes about half of what MuJoCo's defaults take on Mesa's
+software renderer (llvmpipe): no multisampling, a shadow map of at most 1024 px (`render_tracks`
+takes the smaller `shadow_map_size` where that draws the same shadow), coarser capsules and spheres
+(invisible at these sizes), no reflections. "high" uses the model's own `<visual><quality>` settings
+(MuJoCo's defaults: 4x MSAA, 4096 px shadows, reflections), several times slower. Both draw an
+infinite floor lit by directional lights as one quad (`coarse_floor`)."""
 
 
 def check_quality(quality: str) -> None:
