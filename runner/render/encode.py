@@ -32,6 +32,7 @@ class FrameEncoder:
 
     Attributes:
         child_cpu_s: [s] CPU time of the ffmpeg process (user + system), known after `close`.
+        compose_s: [s] wall time the thread spent in `compose`.
     """
 
     def __init__(self, path, fps: float, compose: Callable[..., np.ndarray]):
