@@ -20,23 +20,26 @@ class Quality:
         caps: upper bounds for fields of the model's `<visual><quality>` (MSAA samples, shadow map
             size [px], tessellation of round geoms and planes), applied while the GL context is made.
         reflections: draw reflections in reflective materials (the floor): renders the scene twice.
+        coarse_floor: draw an infinite floor lit by directional lights as one quad (`coarse_floor`).
     """
 
     caps: dict
     reflections: bool
+    coarse_floor: bool = False
 
 
 QUALITIES = {
     "fast": Quality({"offsamples": 0, "shadowsize": 1024, "numslices": 12, "numstacks": 6, "numquads": 1},
-                    reflections=False),
+                    reflections=False, coarse_floor=True),
     "high": Quality({}, reflections=True),
 }
 """Render presets. "fast" (the default) takes about half of what MuJoCo's defaults take on Mesa's
 software renderer (llvmpipe): no multisampling, a shadow map of at most 1024 px (`render_tracks`
 takes the smaller `shadow_map_size` where that draws the same shadow), coarser capsules and spheres
 (invisible at these sizes), no reflections. "high" uses the model's own `<visual><quality>` settings
-(MuJoCo's defaults: 4x MSAA, 4096 px shadows, reflections), several times slower. Both draw an
-infinite floor lit by directional lights as one quad (`coarse_floor`)."""
+(MuJoCo's defaults: 4x MSAA, 4096 px shadows, reflections), several times slower. "fast" draws an
+infinite floor lit by directional lights as one quad (`coarse_floor`; with reflections, as in
+"high", the floor's brightness would change by about one level of 255)."""
 
 
 def check_quality(quality: str) -> None:

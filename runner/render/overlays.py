@@ -59,6 +59,7 @@ class Panel:
         self.renderer = renderer
         if not QUALITIES[quality].reflections:
             renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+        self.coarse_floor = QUALITIES[quality].coarse_floor
         self.data = mujoco.MjData(model)
         self.root = root_body(model)
         self.option = mujoco.MjvOption()
@@ -84,7 +85,8 @@ class Panel:
         model, scene = self.model, self.renderer.scene
         forward_direction(model, self.data, qpos)
         self.renderer.update_scene(self.data, self.cam, self.option)
-        coarse_floor(model, scene)
+        if self.coarse_floor:
+            coarse_floor(model, scene)
         for i in range(scene.ngeom):  # planes cast no shadow: no floor self-shadowing (acne)
             if scene.geoms[i].type == _PLANE:
                 scene.geoms[i].castshadow = 0

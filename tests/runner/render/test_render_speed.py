@@ -73,11 +73,11 @@ def test_the_smaller_shadow_map_draws_the_same_shadow():
     assert diff.mean() < 0.1 and np.percentile(diff, 99.9) <= 2, (diff.mean(), np.percentile(diff, 99.9))
 
 
-def _panel_images(model, size=(240, 260)):
+def _panel_images(model, size=(240, 260), quality="fast"):
     """(image with coarse_floor, image with MuJoCo's grid, the scene's floor geom after coarse_floor)."""
-    renderer = make_renderer(model, *size, "fast")
+    renderer = make_renderer(model, *size, quality)
     try:
-        panel = overlays.Panel(model, renderer, "fast")
+        panel = overlays.Panel(model, renderer, quality)
         q = _pose(model)
         forward_direction(model, panel.data, q)
         panel.set_camera(Camera(), panel.data.xpos[root_body(model)].copy(), -70.0)
@@ -116,6 +116,13 @@ def test_a_floor_under_a_spot_light_keeps_mujocos_grid():
     coarse, grid, (dataid, _, ngeom) = _panel_images(model)
     assert dataid >= 0 and ngeom == model.ngeom
     assert np.abs(coarse - grid).max() == 0
+
+
+def test_the_high_quality_keeps_mujocos_grid():
+    """With reflections ("high") one quad would change the floor's brightness a little: grid kept."""
+    model = mujoco.MjModel.from_xml_path(str(MODELS / "run_and_step.xml"))
+    coarse, grid, (dataid, _, ngeom) = _panel_images(model, quality="high")
+    assert dataid >= 0 and ngeom == model.ngeom and np.abs(coarse - grid).max() == 0
 
 
 def test_coarse_floor_needs_a_free_scene_geom():
