@@ -96,9 +96,13 @@ def _panel_images(model, size=(240, 260), quality="fast"):
     return coarse, grid, floor
 
 
-@pytest.mark.parametrize("scene", ["run_and_step.xml", "floor.xml"])
-def test_the_one_quad_floor_looks_like_mujocos_grid(scene):
+@pytest.mark.parametrize("scene, repeat", [("run_and_step.xml", None), ("floor.xml", None),
+                                           ("run_and_step.xml", (2.0, 3.0)), ("floor.xml", (0.5, 0.5))])
+def test_the_one_quad_floor_looks_like_mujocos_grid(scene, repeat):
     model = mujoco.MjModel.from_xml_path(str(MODELS / scene))
+    if repeat is not None:  # the floor texture repeated 2 and 3 times per 2 m, or once per 4 m
+        floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+        model.mat_texrepeat[model.geom_matid[floor]] = repeat
     coarse, grid, (dataid, half, ngeom) = _panel_images(model)
     zfar = model.vis.map.zfar * model.stat.extent
     assert dataid == -1 and half >= 1.05 * zfar  # replaced, reaching as far as MuJoCo's grid (2.1 zfar / 2)
