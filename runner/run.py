@@ -209,7 +209,7 @@ def execute(problem: Problem, options: SolveOptions, source: Source, outputs: Ou
             print(f"\ndynsplines: interrupted while rendering: {display_path(outputs.video)} not written (an "
                   f"earlier file there is unchanged){saved}", file=sys.stderr)
             return _replace(run, interrupted=True)
-        say(f"  wrote {display_path(outputs.video)} ({info.n_frames} frames, {info.wall_time_s:.1f} s to render)")
+        say(f"  wrote {display_path(outputs.video)} ({info.summary()})")
     elif outputs.video is None:
         say("  no video (--no-render)")
     return run

@@ -20,7 +20,10 @@ docs/design.md, "State = MuJoCo qpos"). With samples much denser than the video 
 The model is passed in (loaded once). One `mujoco.Renderer` is made per call, for the one panel size,
 and reused for every panel of every frame; its offscreen buffer is made large enough for the panel
 (`<visual><global offwidth offheight>` raised while the context is created, then restored), and a
-quality preset (`QUALITIES`) trades MuJoCo's defaults for speed on a software renderer. Planes cast
+quality preset (`QUALITIES`) trades MuJoCo's defaults for speed on a software renderer. In "fast"
+an infinite floor under directional light is drawn as one quad (`gl.coarse_floor`: MuJoCo's own
+200 x 200 grid was a third of the render time, for the same picture), and each frame's overlays are
+drawn and encoded in a background thread while the next frame renders (`encode.FrameEncoder`). Planes cast
 no shadows (nothing lies under a floor): the floor's own shadow-map self-test drew rows of black
 specks ("shadow acne") on it in every frame. Rendering
 needs an OpenGL backend; without a display that is EGL (Mesa's llvmpipe), which `runner.environment`

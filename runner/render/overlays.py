@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw
 
-from runner.render.gl import QUALITIES, load_font, project_points
+from runner.render.gl import QUALITIES, coarse_floor, load_font, project_points
 from runner.render.tracks import Camera, Track, forward_direction, root_body, sample_track
 from solver.errors import InputError
 
@@ -59,6 +59,7 @@ class Panel:
         self.renderer = renderer
         if not QUALITIES[quality].reflections:
             renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+        self.coarse_floor = QUALITIES[quality].coarse_floor
         self.data = mujoco.MjData(model)
         self.root = root_body(model)
         self.option = mujoco.MjvOption()
@@ -84,6 +85,8 @@ class Panel:
         model, scene = self.model, self.renderer.scene
         forward_direction(model, self.data, qpos)
         self.renderer.update_scene(self.data, self.cam, self.option)
+        if self.coarse_floor:
+            coarse_floor(model, scene)
         for i in range(scene.ngeom):  # planes cast no shadow: no floor self-shadowing (acne)
             if scene.geoms[i].type == _PLANE:
                 scene.geoms[i].castshadow = 0
@@ -271,6 +274,8 @@ class Overlay:
         self.font = load_font(self.fs)
         self.small = load_font(max(9, int(self.fs * 0.75)))
         self._patches = {}
+        self._background = np.empty((height, width, 3), np.uint8)
+        self._background[:] = _PAD_COLOR
 
     def draw_text(self, im, xy, s, font, fill, anchor="la"):
         """Draw outlined text; each (text, font, colour, anchor) is rasterized once and pasted after
@@ -292,8 +297,7 @@ class Overlay:
         side by side, each with its label, time, caption, rings and timeline (no text below
         LABELS_MIN_SIZE); green dots at the projected sites of `planted` (per panel an (m, 2) array of
         pixel positions, or None)."""
-        frame = np.empty((self.height, self.width, 3), np.uint8)
-        frame[:] = _PAD_COLOR
+        frame = self._background.copy()  # a copy is ~30x faster than filling with a colour tuple
         for p, img in enumerate(images):
             x = self.x0 + p * self.panel_w
             frame[self.band:, x:x + self.panel_w] = img

@@ -130,6 +130,8 @@ class RenderInfo:
         wall_time_s: [s] time the call took.
         ms_per_panel: [ms] mean time to pose, render and read back one panel (excludes encoding).
         size: (width, height) [px] of the video.
+        cpu_time_s: [s] CPU time of the call: this process (all its threads, the software
+            renderer's included) and the ffmpeg encoder (NaN if unknown).
     """
 
     path: Path
@@ -138,6 +140,17 @@ class RenderInfo:
     wall_time_s: float
     ms_per_panel: float
     size: tuple[int, int]
+    cpu_time_s: float = math.nan
+
+    @property
+    def fps(self) -> float:
+        """[1/s] video frames rendered and encoded per second of wall time."""
+        return self.n_frames / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+    def summary(self) -> str:
+        """One line for the command's output, e.g. "103 frames in 3.1 s, 33 fps, CPU 5.0 s"."""
+        cpu = f", CPU {self.cpu_time_s:.1f} s" if math.isfinite(self.cpu_time_s) else ""
+        return f"{self.n_frames} frames in {self.wall_time_s:.1f} s, {self.fps:.0f} fps{cpu}"
 
 
 def parse_size(size) -> tuple[int, int]:

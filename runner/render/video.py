@@ -10,7 +10,8 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from runner.files import atomic_output, check_writable_dir
-from runner.render.gl import check_quality, load_font, make_renderer
+from runner.render.encode import FrameEncoder
+from runner.render.gl import check_quality, load_font, make_renderer, shadow_map_size
 from runner.render.overlays import (
     KEYFRAME_CAPTION_SECONDS,
     WHITE,
@@ -99,7 +100,7 @@ def render_tracks(
             folder that cannot be written; tracks whose nq does not match the model; keyframe arrays
             of the wrong shape; no working OpenGL backend (set MUJOCO_GL=egl or osmesa).
     """
-    wall0 = time.perf_counter()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     out_path = Path(out_path)
     width, height = parse_size(size)
     fps, speed = positive(fps, "fps"), positive(speed, "speed")
@@ -131,7 +132,7 @@ def render_tracks(
     plants = [None if tr.planted is None else
               interpolate_samples(tr.times, tr.planted.astype(float), times) > 0.5 for tr in tracks]
 
-    renderer = make_renderer(model, panel_w, panel_h, quality)
+    renderer = make_renderer(model, panel_w, panel_h, quality, shadow_map_size(model, panel_h, camera.distance))
     try:
         panel = Panel(model, renderer, quality)
         positions, facing = root_poses(model, panel.data, qposes)
@@ -140,46 +141,51 @@ def render_tracks(
         ghosts = ghost_data(model, tracks, kf_t, kf_q)
         currents = current_keyframes(times, kf_t, KEYFRAME_CAPTION_SECONDS * speed)
         overlay = Overlay(width, height, panel_w, len(tracks), title, t0, t1, kf_t)
+        labels = [tr.label for tr in tracks]
 
         render_seconds = 0.0
-        with atomic_output(out_path) as tmp:
-            writer = iio.get_writer(
-                tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=8,
-                macro_block_size=1, ffmpeg_log_level="error", output_params=["-preset", "veryfast"])
-            try:
-                for i in range(n):
-                    current = int(currents[i])
-                    alphas = ghost_alphas(times[i], kf_t)
-                    images, marks, dots = [], [], []
-                    r0 = time.perf_counter()
-                    for p in range(len(tracks)):
-                        panel.set_camera(camera, lookat[i], azimuth[i])
-                        deep = deep_sites(depths[p], i, site_ids[p])
-                        marked_bodies = {int(model.site_bodyid[s]) for s, _ in deep}
-                        images.append(panel.render(qposes[p][i], ghosts[p], current, marked_bodies,
-                                                   alphas if len(ghosts[p]) else None))
-                        if deep:
-                            xy = panel.project(np.array([panel.data.site_xpos[s] for s, _ in deep]))
-                            marks.append((xy, max(d for _, d in deep)))
-                        else:
-                            marks.append(None)
-                        on = [] if plants[p] is None else [
-                            int(s) for s, o in zip(site_ids[p], plants[p][i], strict=True) if o]
-                        dots.append(panel.project(np.array([panel.data.site_xpos[s] for s in on])) if on else None)
-                    render_seconds += time.perf_counter() - r0
-                    frame = overlay.compose(images, [tr.label for tr in tracks], times[i], speed,
-                                            current, marks, planted=dots)
-                    writer.append_data(frame)
-                    if progress is not None:
-                        progress(i + 1, n)
-            finally:
-                writer.close()
+        with atomic_output(out_path) as tmp, FrameEncoder(tmp, fps, overlay.compose) as encoder:
+            for i in range(n):
+                r0 = time.perf_counter()
+                current = int(currents[i])
+                alphas = ghost_alphas(times[i], kf_t)
+                images, marks, dots = [], [], []
+                for p in range(len(tracks)):
+                    panel.set_camera(camera, lookat[i], azimuth[i])
+                    image, mark, dot = _panel_frame(panel, qposes[p][i], ghosts[p], current, alphas,
+                                                    depths[p], plants[p], site_ids[p], i)
+                    images.append(image)
+                    marks.append(mark)
+                    dots.append(dot)
+                render_seconds += time.perf_counter() - r0
+                encoder.put(images, labels, times[i], speed, current, marks, dots)
+                if progress is not None:
+                    progress(i + 1, n)
     finally:
         renderer.close()
     return RenderInfo(
         path=out_path, n_frames=n, video_time_s=n / fps,
         wall_time_s=time.perf_counter() - wall0,
-        ms_per_panel=1000.0 * render_seconds / (n * len(tracks)), size=(width, height))
+        ms_per_panel=1000.0 * render_seconds / (n * len(tracks)), size=(width, height),
+        cpu_time_s=time.process_time() - cpu0 + encoder.child_cpu_s)
+
+
+def _panel_frame(panel: Panel, qpos, ghosts, current: int, alphas, depth, planted, site_ids, i: int):
+    """One panel of video frame i: (image (h, w, 3) uint8, magenta mark or None, green dots or None).
+
+    The mark is (pixel positions (k, 2) of the sites deeper than `PENETRATION_SHOWN`, the deepest
+    depth [m]); their bodies are drawn magenta. The dots are the pixel positions (k, 2) of the sites
+    the contact schedule has planted (`planted`: (n, s) bool per frame, or None)."""
+    model = panel.model
+    deep = deep_sites(depth, i, site_ids)
+    marked_bodies = {int(model.site_bodyid[s]) for s, _ in deep}
+    image = panel.render(qpos, ghosts, current, marked_bodies, alphas if len(ghosts) else None)
+    mark = None
+    if deep:
+        mark = (panel.project(np.array([panel.data.site_xpos[s] for s, _ in deep])), max(d for _, d in deep))
+    on = [] if planted is None else [int(s) for s, o in zip(site_ids, planted[i], strict=True) if o]
+    dots = panel.project(np.array([panel.data.site_xpos[s] for s in on])) if on else None
+    return image, mark, dots
 
 
 def render_still(

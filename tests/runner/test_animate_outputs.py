@@ -57,6 +57,9 @@ def test_animate_without_out_renders_to_the_default_path(tmp_path, capsys, monke
     class Info:
         n_frames, wall_time_s = 3, 0.0
 
+        def summary(self):
+            return "3 frames in 0.0 s"
+
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(runner.run, "render_with_progress", lambda out, *a, **k: seen.append(out) or Info())
     code, out, err = animate(capsys)
