@@ -1,0 +1,264 @@
+"""The Gauss-Newton normal equations of `solve`'s objective, banded: J^T J and J^T r in local spline
+coordinates, for the Levenberg-Marquardt back end (`solver.gauss_newton`).
+
+The objective is a weighted sum of integrals of squares (paper eq. 1 with f_j = |r_j|^2, `Term.residual`),
+so by quadrature E = sum_j (lambda_j / s_j) sum_i q_i |r_j(t_i)|^2 = |rho|^2 with the weighted residuals
+rho_ij = sqrt(q_i lambda_j / s_j) r_j(t_i) (q_i the quadrature weights, s_j the renormalization
+scales of eq. 7). Gauss-Newton (Nocedal & Wright, Numerical Optimization, 2nd ed., sec. 10.3) needs
+J^T J and J^T rho, J = d rho / d x over the free frame components x.
+
+Why not in the frame values. The natural spline through the frames is a global map (each quadrature
+point depends on every frame value: `solver.spline`), so J in the frame values is dense and J^T J
+with it (n_free^2 entries, a dense factorization O(n_free^3)). The same path space has a local basis:
+the cubic B-splines on the frame times with natural ends (de Boor, A Practical Guide to Splines,
+ch. IX-X). Y(t) = sum_u c_u N_u(t), and a point in frame segment s reads only the coefficients
+s..s+3. The keyframes (the fixed components) and the natural end conditions are linear equations on
+c; each free frame component gets the coefficient of its own frame (the "centre" u = f + 1, u = 0 and
+m + 1 at the ends) as a free parameter xi, and the other coefficients follow from the equations
+(`LocalSpline`: c = c_0 + Z xi, Z local: a run of fixed frames depends only on the free coefficients
+on either side of it). In xi, J = (per-point blocks d rho / d(Y, Y', Y'')) x (4 B-spline values per
+point) x Z is block sparse and J^T J is banded (ordered by frame, bandwidth about four frames of
+components), factored with LAPACK's banded Cholesky (scipy.linalg.cholesky_banded): O(n_free b^2)
+work for bandwidth b, linear in the clip's length. A step dxi moves the free frame values by
+dx = E dxi (E: the spline's values at the free frames), so every iterate is again a frame set that
+meets the keyframes exactly; Gauss-Newton's step is invariant under this change of variables, and
+the Levenberg-Marquardt damping uses diag(J^T J) (Marquardt's scaling, which is invariant to scaling
+the variables; Nocedal & Wright sec. 10.3, "Implementation of the Levenberg-Marquardt method").
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.interpolate import BSpline
+from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.sparse.linalg import splu
+
+from solver.frames import FrameSet
+from solver.path_context import PathContext
+
+
+class NoResidualError(ValueError):
+    """An objective term with a nonzero weight gives no residual form (`Term.residual` is None)."""
+
+
+class LocalSpline:
+    """The cubic B-spline basis on a frame set's times with natural ends, at the quadrature points,
+    and the free parametrization c = c_0 + Z xi of the frame set's spline (module docstring).
+
+    Args:
+        frames: FrameSet (times (m,), fixed (m, nq)). t: (n,) quadrature times [s], sorted.
+    Attributes:
+        seg: (n,) frame segment of each point (its coefficients are seg..seg+3).
+        vals: (3, n, 4) the 4 B-spline values, first and second derivatives at each point [1, 1/s, 1/s^2].
+        Z: sparse ((m+2) nq, n_free) d c / d xi (c flattened coefficient-major: u nq + component).
+        E: sparse (n_free, n_free) d x / d xi: the free frame values' change per unit xi.
+        n_free: number of free components (`FrameSet.n_free`), in the order of `FrameSet.x`.
+    """
+
+    def __init__(self, frames: FrameSet, t: np.ndarray):
+        x = np.asarray(frames.times, float)
+        m, nq = frames.values.shape
+        knots = np.r_[[x[0]] * 3, x, [x[-1]] * 3]
+        self.m, self.nq, self.t = m, nq, np.asarray(t, float)
+        self.seg = np.clip(np.searchsorted(x, self.t, side="right") - 1, 0, m - 2)
+        cols = self.seg[:, None] + np.arange(4)
+        eye = np.eye(m + 2)
+        self.vals = np.stack([np.take_along_axis(BSpline(knots, eye, 3)(self.t, nu=k), cols, axis=1) for k in range(3)])
+        at_frames = BSpline(knots, eye, 3)(x)  # (m, m+2) interpolation rows
+        ends = BSpline(knots, eye, 3)(x[[0, -1]], nu=2)  # (2, m+2) natural end conditions
+        free = frames.free
+        self.n_free = int(free.sum())
+        xi_index = np.full(free.shape, -1)
+        xi_index[free] = np.arange(self.n_free)
+        centre = np.r_[0, np.arange(2, m), m + 1]  # the coefficient each frame's value is tied to
+        zr, zc, zv, er, ec, ev = [], [], [], [], [], []
+        patterns: dict[bytes, tuple] = {}
+        for comp in range(nq):
+            f = free[:, comp]
+            key = f.tobytes()
+            if key not in patterns:
+                patterns[key] = _null_space(at_frames, ends, f, centre)
+            Zc = patterns[key]  # dense (m+2, r) for the r free frames of this component, exact zeros kept
+            Ec = at_frames[f] @ Zc  # (r, r) values at the free frames per unit xi
+            fi = xi_index[f, comp]
+            u, j = np.nonzero(Zc)
+            zr.append(u * nq + comp), zc.append(fi[j]), zv.append(Zc[u, j])
+            a, b = np.nonzero(Ec)
+            er.append(fi[a]), ec.append(fi[b]), ev.append(Ec[a, b])
+        cat = np.concatenate
+        self.Z = sp.csr_matrix((cat(zv), (cat(zr), cat(zc))), shape=((m + 2) * nq, self.n_free))
+        self.E = sp.csr_matrix((cat(ev), (cat(er), cat(ec))), shape=(self.n_free, self.n_free))
+
+
+def _null_space(at_frames: np.ndarray, ends: np.ndarray, free: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Z (m+2, r) with c = Z xi spanning the coefficients whose spline is zero at the fixed frames
+    and has natural ends, xi the centre coefficients of the r free frames (sparse LU: structural zeros
+    stay exact, so Z is local)."""
+    m2 = at_frames.shape[1]
+    F = centre[free]
+    D = np.setdiff1d(np.arange(m2), F)
+    C = np.vstack([at_frames[~free], ends])  # (m + 2 - r, m + 2)
+    Z = np.zeros((m2, len(F)))
+    Z[F, np.arange(len(F))] = 1.0
+    if len(D):
+        lu = splu(sp.csc_matrix(C[:, D]))
+        Z[D] = -lu.solve(np.ascontiguousarray(C[:, F]))
+    return Z
+
+
+@dataclass
+class NormalEquations:
+    """J^T J (banded, lower form for `cholesky_banded`) and J^T rho in xi, and |rho|^2.
+
+    Attributes:
+        ab: (b + 1, n_free) lower band of J^T J (ab[i - j, j] = (J^T J)[i, j], i >= j).
+        g: (n_free,) J^T rho. E: |rho|^2 (the objective's value).
+    """
+
+    ab: np.ndarray
+    g: np.ndarray
+    E: float
+
+    def solve(self, mu: float) -> np.ndarray:
+        """The damped Gauss-Newton step h: (J^T J + mu diag(J^T J)) h = -J^T rho (Marquardt's scaling;
+        zero diagonal entries, directions no residual sees, get the mean diagonal as their scale).
+
+        Raises:
+            numpy.linalg.LinAlgError: the damped matrix is not positive definite (mu too small).
+        """
+        d = self.ab[0]
+        scale = np.where(d > 0, d, d[d > 0].mean() if (d > 0).any() else 1.0)
+        ab = self.ab.copy()
+        ab[0] += mu * scale
+        return -cho_solve_banded((cholesky_banded(ab, lower=True), True), self.g)
+
+    def model_decrease(self, h: np.ndarray) -> float:
+        """L(0) - L(h) of the Gauss-Newton model L(h) = |rho + J h|^2 = E + 2 h.g + h^T J^T J h."""
+        return -(2.0 * h @ self.g + h @ _band_matvec(self.ab, h))
+
+
+def _band_matvec(ab: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """A v for symmetric A in lower band form ab."""
+    out = ab[0] * v
+    for d in range(1, len(ab)):
+        out[d:] += ab[d, :-d] * v[:-d]
+        out[:-d] += ab[d, :-d] * v[d:]
+    return out
+
+
+def term_residuals(objective, basis, Y, Y1, Y2):
+    """[(term, c_j = lambda_j / s_j, Residual), ...] of the terms with a nonzero weight, on one shared
+    `PathContext` (each engine's forward pass once).
+
+    Raises:
+        NoResidualError: a weighted term gives no residual form (names it).
+    """
+    ctx = PathContext(basis.t, Y, Y1, Y2)
+    out = []
+    for term, w, s in zip(objective.terms, objective.weights, objective.scales):
+        if w == 0.0:
+            continue
+        res = term.residual(ctx)
+        if res is None:
+            raise NoResidualError(f"objective term {term.name!r} is not a sum of squares (no residual form)")
+        out.append((term, w / s, res))
+    return out
+
+
+def normal_equations(objective, frames: FrameSet, local: LocalSpline) -> NormalEquations:
+    """J^T J, J^T rho and |rho|^2 of `objective` at `frames` in the free coefficients xi of `local`.
+
+    Args:
+        objective: Objective whose weighted terms all give `Term.residual`. frames: FrameSet.
+        local: `LocalSpline(frames, objective.basis(frames.times).t)`.
+    Returns:
+        NormalEquations.
+    Raises:
+        NoResidualError: a weighted term without a residual form.
+    """
+    basis = objective.basis(frames.times)
+    Y, Y1, Y2 = basis.evaluate(frames.values, objective.needs)
+    q = (np.full(len(basis.t), objective.h) if basis.weights is None else basis.weights)
+    nq, m = local.nq, local.m
+    band = np.zeros((m + 2, 4, nq, nq))  # band[u, d] = d^2/dc_u dc_(u+d) block of J^T J in c
+    gc = np.zeros((m + 2, nq))
+    E = 0.0
+    for term, c, res in term_residuals(objective, basis, Y, Y1, Y2):
+        w = np.sqrt(c * q)  # (n,) row weights
+        rho = res.r * w[:, None]
+        E += float((rho * rho).sum())
+        blocks = res.jacobian()
+        for rows, comps in _groups(blocks):
+            _add_group(band, gc, local, w, rho[:, rows], [None if J is None else J[:, rows][:, :, comps] for J in blocks],
+                       comps)
+    Zs = local.Z
+    A = _band_to_sparse(band, m, nq)
+    H = (Zs.T @ (A @ Zs)).tocoo()
+    g = Zs.T @ gc.ravel()
+    lower = H.row >= H.col
+    i, j, v = H.row[lower], H.col[lower], H.data[lower]
+    b = int((i - j).max(initial=0))
+    ab = np.zeros((b + 1, local.n_free))
+    np.add.at(ab, (i - j, j), v)
+    return NormalEquations(ab, np.asarray(g), E)
+
+
+def _groups(blocks):
+    """Residual columns grouped by the components their Jacobian rows read (any order, any point):
+    [(rows (m_g,), comps (c_g,)), ...]; columns that read nothing are left out."""
+    support = None
+    for J in blocks:
+        if J is not None:
+            s = np.any(J != 0, axis=0)  # (m, nq)
+            support = s if support is None else support | s
+    if support is None:
+        return []
+    pats, inv = np.unique(support, axis=0, return_inverse=True)
+    inv = np.asarray(inv).reshape(-1)
+    return [(np.flatnonzero(inv == p), np.flatnonzero(pats[p])) for p in range(len(pats)) if pats[p].any()]
+
+
+def _add_group(band, gc, local, w, rho, blocks, comps):
+    """Add one residual group's J^T J and J^T rho (rows weighted by w) into `band` and `gc`."""
+    n, mg = rho.shape
+    cs = len(comps)
+    JB = np.zeros((n, mg, 4, cs))
+    for k, J in enumerate(blocks):
+        if J is not None:
+            JB += (J * w[:, None, None])[:, :, None, :] * local.vals[k][:, None, :, None]
+    JB = JB.reshape(n, mg, 4 * cs)
+    act = np.flatnonzero(np.any(JB != 0, axis=(1, 2)))
+    if not act.size:
+        return
+    X, r, seg = JB[act], rho[act], local.seg[act]
+    G = np.matmul(X.transpose(0, 2, 1), X)  # (p, 4cs, 4cs)
+    gx = np.einsum("pma,pm->pa", X, r)  # (p, 4cs)
+    starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])
+    G, gx, s = np.add.reduceat(G, starts, axis=0), np.add.reduceat(gx, starts, axis=0), seg[starts]
+    G = G.reshape(len(s), 4, cs, 4, cs)
+    gx = gx.reshape(len(s), 4, cs)
+    ci, cj = comps[None, :, None], comps[None, None, :]
+    for a in range(4):
+        np.add.at(gc, ((s + a)[:, None], comps[None, :]), gx[:, a])
+        for bb in range(a, 4):
+            band[(s + a)[:, None, None], bb - a, ci, cj] += G[:, a, :, bb, :]
+
+
+def _band_to_sparse(band, m, nq):
+    """The symmetric sparse ((m+2) nq)^2 matrix of the blocks band[u, d] (block (u, u+d) and its transpose)."""
+    rows, cols, vals = [], [], []
+    ii, jj = np.meshgrid(np.arange(nq), np.arange(nq), indexing="ij")
+    for d in range(4):
+        u = np.arange(m + 2 - d)
+        B = band[u, d]  # (len(u), nq, nq)
+        r = (u[:, None, None] * nq + ii).ravel()
+        c = ((u + d)[:, None, None] * nq + jj).ravel()
+        v = B.ravel()
+        keep = v != 0
+        rows.append(r[keep]), cols.append(c[keep]), vals.append(v[keep])
+        if d:
+            rows.append(c[keep]), cols.append(r[keep]), vals.append(v[keep])
+    N = (m + 2) * nq
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(N, N))
