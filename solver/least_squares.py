@@ -182,17 +182,16 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline) -> NormalE
     Y, Y1, Y2 = basis.evaluate(frames.values, objective.needs)
     q = (np.full(len(basis.t), objective.h) if basis.weights is None else basis.weights)
     nq, m = local.nq, local.m
-    band = np.zeros((m + 2, 4, nq, nq))  # band[u, d] = d^2/dc_u dc_(u+d) block of J^T J in c
-    gc = np.zeros((m + 2, nq))
+    gram = np.zeros((m - 1, 4 * nq, 4 * nq))  # per frame segment: J^T J in its 4 coefficients' blocks
+    gseg = np.zeros((m - 1, 4 * nq))
     E = 0.0
-    for term, c, res in term_residuals(objective, basis, Y, Y1, Y2):
+    for _, c, res in term_residuals(objective, basis, Y, Y1, Y2):
         w = np.sqrt(c * q)  # (n,) row weights
         rho = res.r * w[:, None]
         E += float((rho * rho).sum())
-        blocks = res.jacobian()
-        for rows, comps in _groups(blocks):
-            _add_group(band, gc, local, w, rho[:, rows], [None if J is None else J[:, rows][:, :, comps] for J in blocks],
-                       comps)
+        for batch in _batches(res.groups()):
+            _add_batch(gram, gseg, local, w, rho, batch)
+    band, gc = _coefficient_blocks(gram, gseg, m, nq)
     Zs = local.Z
     A = _band_to_sparse(band, m, nq)
     H = (Zs.T @ (A @ Zs)).tocoo()
@@ -205,45 +204,67 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline) -> NormalE
     return NormalEquations(ab, np.asarray(g), E)
 
 
-def _groups(blocks):
-    """Residual columns grouped by the components their Jacobian rows read (any order, any point):
-    [(rows (m_g,), comps (c_g,)), ...]; columns that read nothing are left out."""
-    support = None
-    for J in blocks:
-        if J is not None:
-            s = np.any(J != 0, axis=0)  # (m, nq)
-            support = s if support is None else support | s
-    if support is None:
-        return []
-    pats, inv = np.unique(support, axis=0, return_inverse=True)
-    inv = np.asarray(inv).reshape(-1)
-    return [(np.flatnonzero(inv == p), np.flatnonzero(pats[p])) for p in range(len(pats)) if pats[p].any()]
+def _batches(groups):
+    """`Residual.groups` in batches of the same shape (columns, components, orders) and disjoint
+    components, each added in one pass (`_add_batch`): a term's per-joint groups (the covariant
+    acceleration's 4 x 4 blocks of every quaternion) go together."""
+    batches: dict[tuple, list] = {}
+    out = []
+    for g in groups:
+        cols, comps, Js = g
+        key = (len(cols), len(comps), tuple(J is not None for J in Js))
+        b = batches.setdefault(key, [])
+        if b and np.isin(comps, np.concatenate([x[1] for x in b])).any():
+            out.append(b)
+            b = batches[key] = []
+        b.append(g)
+    return out + [b for b in batches.values() if b]
 
 
-def _add_group(band, gc, local, w, rho, blocks, comps):
-    """Add one residual group's J^T J and J^T rho (rows weighted by w) into `band` and `gc`."""
-    n, mg = rho.shape
-    cs = len(comps)
-    JB = np.zeros((n, mg, 4, cs))
-    for k, J in enumerate(blocks):
-        if J is not None:
-            JB += (J * w[:, None, None])[:, :, None, :] * local.vals[k][:, None, :, None]
-    JB = JB.reshape(n, mg, 4 * cs)
-    act = np.flatnonzero(np.any(JB != 0, axis=(1, 2)))
+def _add_batch(gram, gseg, local, w, rho, batch):
+    """Add residual groups' J^T J and J^T rho (rows weighted by w (n,)) into the segment blocks `gram`
+    ((m-1, 4 nq, 4 nq)) and `gseg` ((m-1, 4 nq)). `batch`: groups (columns, comps, (J0, J1, J2)) of
+    one shape with disjoint comps (`_batches`), J (n, m_g, c_g) or None. Only points where a group's
+    Jacobian is nonzero are used; the points of one segment are stacked into one product (padded to
+    the longest segment)."""
+    nq = local.nq
+    orders = [k for k in range(3) if batch[0][2][k] is not None]
+    Js = {k: np.stack([g[2][k] for g in batch]) for k in orders}  # (b, n, m_g, c_g)
+    act = np.flatnonzero(np.any(np.stack([np.any(J != 0, axis=(0, 2, 3)) for J in Js.values()]), axis=0))
     if not act.size:
         return
-    X, r, seg = JB[act], rho[act], local.seg[act]
-    G = np.matmul(X.transpose(0, 2, 1), X)  # (p, 4cs, 4cs)
-    gx = np.einsum("pma,pm->pa", X, r)  # (p, 4cs)
+    nb, (mg, cs), p = len(batch), Js[orders[0]].shape[2:], len(act)
+    X = np.zeros((nb, p, mg, 4, cs))
+    for k in orders:
+        X += Js[k][:, act, :, None, :] * (w[act, None] * local.vals[k][act])[None, :, None, :, None]
+    seg = local.seg[act]
     starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])
-    G, gx, s = np.add.reduceat(G, starts, axis=0), np.add.reduceat(gx, starts, axis=0), seg[starts]
-    G = G.reshape(len(s), 4, cs, 4, cs)
-    gx = gx.reshape(len(s), 4, cs)
-    ci, cj = comps[None, :, None], comps[None, None, :]
+    counts = np.diff(np.r_[starts, p])
+    s = seg[starts]
+    where = (np.repeat(np.arange(len(s)), counts), np.arange(p) - np.repeat(starts, counts))
+    Xp = np.zeros((nb, len(s), counts.max(), mg, 4 * cs))
+    Xp[:, where[0], where[1]] = X.reshape(nb, p, mg, 4 * cs)
+    Xp = Xp.reshape(nb, len(s), -1, 4 * cs)
+    Rp = np.zeros((nb, len(s), counts.max(), mg))
+    Rp[:, where[0], where[1]] = np.stack([rho[act][:, g[0]] for g in batch])
+    comps = np.stack([g[1] for g in batch])  # (b, c_g)
+    idx = (np.arange(4)[None, :, None] * nq + comps[:, None, :]).reshape(nb, 1, 4 * cs)  # into 4 nq
+    S = s[None, :, None]
+    gram[S[..., None], idx[..., None], idx[:, :, None, :]] += np.matmul(Xp.transpose(0, 1, 3, 2), Xp)
+    gseg[S, idx] += np.matmul(Rp.reshape(nb, len(s), 1, -1), Xp)[:, :, 0]
+
+
+def _coefficient_blocks(gram, gseg, m, nq):
+    """The segment blocks summed into the coefficients': band (m+2, 4, nq, nq), band[u, d] the block
+    (u, u + d) of J^T J in c, and gc (m+2, nq) J^T rho in c."""
+    band = np.zeros((m + 2, 4, nq, nq))
+    gc = np.zeros((m + 2, nq))
+    G = gram.reshape(m - 1, 4, nq, 4, nq)
     for a in range(4):
-        np.add.at(gc, ((s + a)[:, None], comps[None, :]), gx[:, a])
-        for bb in range(a, 4):
-            band[(s + a)[:, None, None], bb - a, ci, cj] += G[:, a, :, bb, :]
+        gc[a:a + m - 1] += gseg[:, a * nq:(a + 1) * nq]
+        for b in range(a, 4):
+            band[a:a + m - 1, b - a] += G[:, a, :, b, :]
+    return band, gc
 
 
 def _band_to_sparse(band, m, nq):

@@ -91,8 +91,8 @@ def test_normal_equations_match_finite_differences_with_every_residual_term(toy)
     local = LocalSpline(frames, objective.basis(frames.times).t)
     ne = normal_equations(objective, frames, local)
     rho = _rho(objective, frames)
-    assert ne.E == pytest.approx(objective.evaluate(frames.times, frames.values, grad=False).E, rel=1e-10)
-    assert ne.E == pytest.approx(rho @ rho, rel=1e-10)
+    assert pytest.approx(objective.evaluate(frames.times, frames.values, grad=False).E, rel=1e-10) == ne.E
+    assert pytest.approx(rho @ rho, rel=1e-10) == ne.E
     J = _fd_jacobian(objective, frames, local.E.toarray())  # d rho / d xi (x = x0 + E xi)
     H = _dense(ne.ab)
     scale = np.abs(J.T @ J).max()
@@ -186,8 +186,8 @@ def test_lm_keeps_the_best_iterate_and_honours_budgets_and_stop_requests(contact
 
 
 def test_an_objective_without_residuals_falls_back_to_nlopt(contact_problem, monkeypatch):
-    from solver.terms.covariant import CovariantAcceleration
     from solver.terms.base import Term
+    from solver.terms.covariant import CovariantAcceleration
 
     monkeypatch.setattr(CovariantAcceleration, "residual", Term.residual)
     assert not has_residuals(contact_problem.objective)
