@@ -73,7 +73,9 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
         should_stop: polled between evaluations; True ends the run (INTERRUPTED, best x kept).
         callback: callback(n_evals, E) after every evaluation, or None.
         timings: if a dict, receives the seconds spent in "jacobian" (residuals, Jacobian blocks and
-            the assembly of J^T J), "factor" (damped solves) and "trial" (value evaluations at steps).
+            the assembly of J^T J; wall), "factor" (damped solves) and "trial" (value evaluations at
+            steps), and the CPU seconds of the assembly's parts (`normal_equations`: "residuals",
+            "blocks", "gram", "band").
     Returns:
         OptimizeResult with x (n_free,) the best frame values found, algorithm "lm".
     Raises:
@@ -101,7 +103,7 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
 
     def jacobian(xv):
         t0 = time.perf_counter()
-        ne = normal_equations(objective, frames.with_x(xv), local)
+        ne = normal_equations(objective, frames.with_x(xv), local, timings)
         clock["jacobian"] += time.perf_counter() - t0
         count(ne.E if math.isfinite(ne.E) else math.inf)
         return ne

@@ -27,6 +27,7 @@ the variables; Nocedal & Wright sec. 10.3, "Implementation of the Levenberg-Marq
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,7 @@ from scipy.sparse.linalg import splu
 
 from solver.frames import FrameSet
 from solver.path_context import PathContext
+from solver.site_jacobian import cached_site_jacobians, supports
 
 
 class NoResidualError(ValueError):
@@ -167,12 +169,16 @@ def term_residuals(objective, basis, Y, Y1, Y2):
     return out
 
 
-def normal_equations(objective, frames: FrameSet, local: LocalSpline) -> NormalEquations:
+def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: dict | None = None) -> NormalEquations:
     """J^T J, J^T rho and |rho|^2 of `objective` at `frames` in the free coefficients xi of `local`.
 
     Args:
         objective: Objective whose weighted terms all give `Term.residual`. frames: FrameSet.
         local: `LocalSpline(frames, objective.basis(frames.times).t)`.
+        timings: if a dict, CPU seconds (time.process_time) are added to its "residuals" (the terms'
+            residuals and their engines' forward passes), "blocks" (the Jacobian blocks: the terms'
+            groups, the site Jacobians), "gram" (J^T J per segment) and "band" (into the free
+            coefficients, banded).
     Returns:
         NormalEquations.
     Raises:
@@ -185,12 +191,26 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline) -> NormalE
     gram = np.zeros((m - 1, 4 * nq, 4 * nq))  # per frame segment: J^T J in its 4 coefficients' blocks
     gseg = np.zeros((m - 1, 4 * nq))
     E = 0.0
-    for _, c, res in term_residuals(objective, basis, Y, Y1, Y2):
+    clock = _Clock(timings)
+    site_rows = []  # site terms, summed site by site (`_add_sites`)
+    residuals = term_residuals(objective, basis, Y, Y1, Y2)
+    clock("residuals")
+    for _, c, res in residuals:
         w = np.sqrt(c * q)  # (n,) row weights
         rho = res.r * w[:, None]
         E += float((rho * rho).sum())
-        for batch in _batches(res.groups()):
+        if res.compact is None and res.blocks is None and res.sites is not None and supports(res.sites.engine):
+            site_rows.append((res.sites, w, rho))
+            cached_site_jacobians(res.sites.ctx, res.sites.engine, res.sites.result)
+            clock("blocks")
+            continue
+        groups = res.groups()
+        clock("blocks")
+        for batch in _batches(groups):
             _add_batch(gram, gseg, local, w, rho, batch)
+        clock("gram")
+    _add_sites(gram, gseg, local, site_rows)
+    clock("gram")
     band, gc = _coefficient_blocks(gram, gseg, m, nq)
     Zs = local.Z
     A = _band_to_sparse(band, m, nq)
@@ -201,7 +221,21 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline) -> NormalE
     b = int((i - j).max(initial=0))
     ab = np.zeros((b + 1, local.n_free))
     np.add.at(ab, (i - j, j), v)
+    clock("band")
     return NormalEquations(ab, np.asarray(g), E)
+
+
+class _Clock:
+    """clock(name): adds the CPU time since the last call to timings[name] (a no-op without a dict)."""
+
+    def __init__(self, timings):
+        self.timings, self.t = timings, time.process_time()
+
+    def __call__(self, name):
+        if self.timings is not None:
+            t = time.process_time()
+            self.timings[name] = self.timings.get(name, 0.0) + t - self.t
+            self.t = t
 
 
 def _batches(groups):
@@ -237,21 +271,88 @@ def _add_batch(gram, gseg, local, w, rho, batch):
     X = np.zeros((nb, p, mg, 4, cs))
     for k in orders:
         X += Js[k][:, act, :, None, :] * (w[act, None] * local.vals[k][act])[None, :, None, :, None]
+    X = X.reshape(nb, p, mg, 4 * cs)
+    R = np.stack([rho[act][:, g[0]] for g in batch])  # (b, p, m_g)
+    _accumulate(gram, gseg, local, act, X, np.einsum("bpma,bpm->bpa", X, R), np.stack([g[1] for g in batch]))
+
+
+def _add_sites(gram, gseg, local, site_rows):
+    """Add the site terms' J^T J and J^T rho site by site: every residual row reading site k is
+    c_r . (p, v) (`SiteRows`, c_r (6,) weighted), so their rows' J^T J over the site's components is
+    M^T C M with C = sum_r c_r c_r^T (6 x 6 per point) and M the site's Jacobian in the segment's
+    coefficients ((d p, d v) / d c: `solver.site_jacobian`), and J^T rho = M^T sum_r c_r rho_r. C is
+    factored per point (C = L L^T, symmetric eigen-decomposition) into at most 6 rows L^T M: one
+    product per site for all its terms instead of one per residual column."""
+    by_engine: dict[int, list] = {}
+    for rows, w, rho in site_rows:
+        by_engine.setdefault(id(rows.engine), []).append((rows, w, rho))
+    for parts in by_engine.values():
+        first = parts[0][0]
+        jac = cached_site_jacobians(first.ctx, first.engine, first.result)
+        vel = any(rows.dv is not None for rows, _, _ in parts)
+        for k, (comps, Jp, Jv) in enumerate(jac):
+            coef, res = [], []
+            for rows, w, rho in parts:
+                cols = np.flatnonzero(rows.site == k)
+                if not cols.size:
+                    continue
+                cp = np.zeros((len(w), len(cols), 6 if vel else 3))
+                if rows.dp is not None:
+                    cp[:, :, :3] = rows.dp[:, cols]
+                if rows.dv is not None:
+                    cp[:, :, 3:] = rows.dv[:, cols]
+                coef.append(cp * w[:, None, None])
+                res.append(rho[:, cols])
+            if not coef:
+                continue
+            cr, rr = np.concatenate(coef, axis=1), np.concatenate(res, axis=1)
+            act = np.flatnonzero(np.any(cr != 0, axis=(1, 2)))
+            if not act.size:
+                continue
+            cr, rr = cr[act], rr[act]
+            C = np.einsum("pri,prj->pij", cr, cr)
+            b = np.einsum("pri,pr->pi", cr, rr)
+            v0, v1 = local.vals[0][act], local.vals[1][act]  # (p, 4)
+            Jpa = Jp[act]
+            M = [Jpa[:, :, None, :] * v0[:, None, :, None]]  # (p, 3, 4, c): d p / d c
+            if vel:
+                M.append(Jv[act][:, :, None, :] * v0[:, None, :, None] + Jpa[:, :, None, :] * v1[:, None, :, None])
+            M = np.concatenate(M, axis=1).reshape(len(act), C.shape[1], -1)  # (p, d, 4c)
+            e, U = np.linalg.eigh(C)
+            LT = (U * np.sqrt(np.maximum(e, 0.0))[:, None, :]).transpose(0, 2, 1)  # C = LT^T LT
+            X = np.matmul(LT, M)[None]
+            gx = np.einsum("pi,pia->pa", b, M)[None]
+            _accumulate(gram, gseg, local, act, X, gx, np.asarray(comps)[None])
+
+
+def _accumulate(gram, gseg, local, act, X, gx, comps):
+    """gram[seg] += sum over a segment's points of X^T X, gseg[seg] += sum of gx, for batches of
+    disjoint component sets: act (p,) the points, X (b, p, r, 4 c) rows in the segment's 4
+    coefficients x c components comps (b, c), gx (b, p, 4 c). The points of one segment are stacked
+    into one product (padded to the longest segment)."""
+    nb, p, mg, width = X.shape
+    nq = local.nq
     seg = local.seg[act]
-    starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])
+    starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])  # the segments' runs of points
     counts = np.diff(np.r_[starts, p])
     s = seg[starts]
-    where = (np.repeat(np.arange(len(s)), counts), np.arange(p) - np.repeat(starts, counts))
-    Xp = np.zeros((nb, len(s), counts.max(), mg, 4 * cs))
-    Xp[:, where[0], where[1]] = X.reshape(nb, p, mg, 4 * cs)
-    Xp = Xp.reshape(nb, len(s), -1, 4 * cs)
-    Rp = np.zeros((nb, len(s), counts.max(), mg))
-    Rp[:, where[0], where[1]] = np.stack([rho[act][:, g[0]] for g in batch])
-    comps = np.stack([g[1] for g in batch])  # (b, c_g)
+    # chunks of at most the mean run's length (segments differ in length: padding every run to the
+    # longest would multiply the work by their ratio, 2.5 on 127_33); a segment's chunks are summed after
+    size = max(1, int(np.ceil(counts.mean())))
+    pos = np.arange(p) - np.repeat(starts, counts)
+    key = np.repeat(np.cumsum(np.r_[0, np.ceil(counts[:-1] / size)]).astype(int), counts) + pos // size
+    cstart = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])  # chunk starts (points)
+    first = np.searchsorted(cstart, starts)  # each segment's first chunk
+    Xp = np.zeros((nb, key[-1] + 1, size, mg, width))
+    Xp[:, key, pos % size] = X
+    Xp = Xp.reshape(nb, key[-1] + 1, -1, width)
+    G = np.add.reduceat(np.matmul(Xp.transpose(0, 1, 3, 2), Xp), first, axis=1) if len(first) < key[-1] + 1 \
+        else np.matmul(Xp.transpose(0, 1, 3, 2), Xp)
+    cs = comps.shape[1]
     idx = (np.arange(4)[None, :, None] * nq + comps[:, None, :]).reshape(nb, 1, 4 * cs)  # into 4 nq
     S = s[None, :, None]
-    gram[S[..., None], idx[..., None], idx[:, :, None, :]] += np.matmul(Xp.transpose(0, 1, 3, 2), Xp)
-    gseg[S, idx] += np.matmul(Rp.reshape(nb, len(s), 1, -1), Xp)[:, :, 0]
+    gram[S[..., None], idx[..., None], idx[:, :, None, :]] += G
+    gseg[S, idx] += np.add.reduceat(gx, starts, axis=1)
 
 
 def _coefficient_blocks(gram, gseg, m, nq):
