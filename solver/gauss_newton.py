@@ -34,6 +34,11 @@ from solver.terms.base import Term
 TAU = 1e-3
 #: Damping beyond which a failed step means no descent is left at rounding level.
 MU_MAX = 1e16
+MIN_FACTOR = 1.0 / 3.0
+#: The relative-decrease test stops only after a step damped at most this much (with Marquardt's
+#: scaling, mu = 1 halves the Gauss-Newton step along every eigendirection of equal curvature): a small
+#: decrease of a heavily damped step says that the step was short, not that E is near its minimum.
+MU_CONVERGED = 1.0
 
 
 def has_residuals(objective) -> bool:
@@ -146,12 +151,13 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
         clock["trial"] += time.perf_counter() - t0
         count(F_new if math.isfinite(F_new) else math.inf)
         gain = (F - F_new) / pred if math.isfinite(F_new) else -math.inf
+        step_mu = mu
         if gain > 0:
             decrease = F - F_new
             x, F, improvements = x_new, F_new, improvements + 1
-            mu *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
+            mu *= max(MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3)
             nu = 2.0
-            if decrease <= ftol_rel * abs(F + decrease):
+            if decrease <= ftol_rel * abs(F + decrease) and step_mu <= MU_CONVERGED:
                 break
             if _budget(len(trace), max_evals, t_start, max_time_s, should_stop) is not None:
                 continue  # the loop's test reports it

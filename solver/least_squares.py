@@ -261,7 +261,6 @@ def _add_batch(gram, gseg, local, w, rho, batch):
     one shape with disjoint comps (`_batches`), J (n, m_g, c_g) or None. Only points where a group's
     Jacobian is nonzero are used; the points of one segment are stacked into one product (padded to
     the longest segment)."""
-    nq = local.nq
     orders = [k for k in range(3) if batch[0][2][k] is not None]
     Js = {k: np.stack([g[2][k] for g in batch]) for k in orders}  # (b, n, m_g, c_g)
     act = np.flatnonzero(np.any(np.stack([np.any(J != 0, axis=(0, 2, 3)) for J in Js.values()]), axis=0))

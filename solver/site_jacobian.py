@@ -48,8 +48,8 @@ def site_jacobians(engine, res, Y: np.ndarray, Y1: np.ndarray | None = None) -> 
     rot = list(np.atleast_1d(np.arange(len(engine.bodies))[engine._rs]))
     slot_of = {int(b): i for i, b in enumerate(rot)}
     free_of = {int(b): i for i, b in enumerate(engine._free)}
-    ys = sv["ys"] if "ys" in sv else None
-    if ys is None:
+    ys = sv.get("ys")
+    if ys is None:  # a positions-only pass keeps no ys
         ys = res.sites.transpose(2, 1, 0)
     out = []
     for k, sb in enumerate(engine._site_body):

@@ -157,16 +157,17 @@ def contact_problem(toy):
     return make_problem(model, kf, None, contacts=SCHEDULE, rate=40.0)
 
 
-def test_lm_solve_reaches_nlopts_objective_in_fewer_evaluations(contact_problem):
+@pytest.mark.slow
+def test_lm_solve_reaches_nlopts_objective(contact_problem):
     # the toy's feet are deep in the floor: hinge residuals (penetration, clearance) switch on and off
-    # along every long step, which costs a Gauss-Newton model its accuracy; within 0.5 % of L-BFGS
+    # along every long step, which costs a Gauss-Newton model its accuracy (docs/solvers.md "Choosing
+    # the default"): many short steps, but to within 0.5 % of L-BFGS's E
     options = replace(solver.default_options(dict(contact_problem.weights)), limits=())
     lbfgs = solve(contact_problem.objective, contact_problem.initial, options)
     lm = solve(contact_problem.objective, contact_problem.initial, replace(options, backend="lm"))
     assert lm.status is Status.CONVERGED and lbfgs.status is Status.CONVERGED
     assert all(r.result.algorithm == "lm" for r in lm.rounds)
     assert lm.E_final <= lbfgs.E_final * (1 + 5e-3)
-    assert lm.n_evals < lbfgs.n_evals
     np.testing.assert_array_equal(lm.frames.values[lm.frames.fixed], lm.initial.values[lm.initial.fixed])
 
 
@@ -200,3 +201,23 @@ def test_an_objective_without_residuals_falls_back_to_nlopt(contact_problem, mon
 def test_backend_option_is_checked():
     with pytest.raises(InputError, match="unknown backend 'gn'; choose one of: nlopt, lm"):
         SolveOptions(backend="gn")
+
+
+def test_a_term_zero_up_to_rounding_on_the_plain_spline_keeps_scale_1():
+    from solver.objective import RENORMALIZE_FLOOR, Objective
+    from solver.terms.base import Term, TermEval
+
+    class Constant(Term):
+        def __init__(self, name, value):
+            self.name, self.value = name, value
+
+        def evaluate(self, t, Y, Y1, Y2, grad=True):
+            return TermEval(np.full(len(t), self.value), dY=np.zeros_like(Y))
+
+    # integrals over 1 s: 1e-31 (rounding: a penetration of 1e-16 m squared) and 1e-6 (a real one)
+    obj = Objective([Constant("noise", 1e-31), Constant("real", 1e-6)], np.ones(2), 0.0, 1.0, rate=50.0)
+    P = np.zeros((2, 1))
+    scales = obj.renormalize(np.array([0.0, 1.0]), P)
+    assert scales["noise"] == 1.0 and 1e-31 < RENORMALIZE_FLOOR
+    assert scales["real"] == pytest.approx(1e-6, rel=1e-12)
+    assert obj.evaluate(np.array([0.0, 1.0]), P, grad=False).E == pytest.approx(1.0 + 1e-31, rel=1e-12)
