@@ -65,9 +65,8 @@ class LocalSpline:
         knots = np.r_[[x[0]] * 3, x, [x[-1]] * 3]
         self.m, self.nq, self.t = m, nq, np.asarray(t, float)
         self.seg = np.clip(np.searchsorted(x, self.t, side="right") - 1, 0, m - 2)
-        cols = self.seg[:, None] + np.arange(4)
+        self.vals = _local_values(knots, self.t, self.seg)
         eye = np.eye(m + 2)
-        self.vals = np.stack([np.take_along_axis(BSpline(knots, eye, 3)(self.t, nu=k), cols, axis=1) for k in range(3)])
         at_frames = BSpline(knots, eye, 3)(x)  # (m, m+2) interpolation rows
         ends = BSpline(knots, eye, 3)(x[[0, -1]], nu=2)  # (2, m+2) natural end conditions
         free = frames.free
@@ -92,6 +91,28 @@ class LocalSpline:
         cat = np.concatenate
         self.Z = sp.csr_matrix((cat(zv), (cat(zr), cat(zc))), shape=((m + 2) * nq, self.n_free))
         self.E = sp.csr_matrix((cat(ev), (cat(er), cat(ec))), shape=(self.n_free, self.n_free))
+
+
+def _local_values(knots: np.ndarray, t: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """(3, n, 4): the values, first and second derivatives of the 4 cubic B-splines seg..seg+3 that
+    are nonzero at each time t, from sparse design matrices (O(n), nothing (n, m) dense): the
+    derivative of sum c_i N_i,k is sum k (c_i+1 - c_i) / (t_i+k+1 - t_i+1) N_i,k-1 on the knots
+    without their ends (de Boor, A Practical Guide to Splines, ch. X)."""
+    n = len(t)
+    rows, out = np.repeat(np.arange(n), 4), np.zeros((3, n, 4))
+    cols = (seg[:, None] + np.arange(4)).ravel()
+    D = sp.identity(len(knots) - 4, format="csr")  # coefficients of the spline itself
+    kn = knots
+    for order in range(3):
+        k = 3 - order
+        B = BSpline.design_matrix(t, kn, k)  # (n, len(kn) - k - 1), degree k
+        out[order] = np.asarray((B @ D)[rows, cols]).reshape(n, 4)
+        # d/dx: coefficients of degree k - 1 on kn[1:-1]
+        span = kn[k + 1:-1] - kn[1:-k - 1]
+        nc = len(kn) - k - 1
+        step = sp.diags([-k / span, k / span], [0, 1], shape=(nc - 1, nc), format="csr")
+        D, kn = step @ D, kn[1:-1]
+    return out
 
 
 def _null_space(at_frames: np.ndarray, ends: np.ndarray, free: np.ndarray, centre: np.ndarray) -> np.ndarray:

@@ -218,6 +218,6 @@ def test_a_term_zero_up_to_rounding_on_the_plain_spline_keeps_scale_1():
     obj = Objective([Constant("noise", 1e-31), Constant("real", 1e-6)], np.ones(2), 0.0, 1.0, rate=50.0)
     P = np.zeros((2, 1))
     scales = obj.renormalize(np.array([0.0, 1.0]), P)
-    assert scales["noise"] == 1.0 and 1e-31 < RENORMALIZE_FLOOR
+    assert scales["noise"] == 1.0 and RENORMALIZE_FLOOR > 1e-31
     assert scales["real"] == pytest.approx(1e-6, rel=1e-12)
-    assert obj.evaluate(np.array([0.0, 1.0]), P, grad=False).E == pytest.approx(1.0 + 1e-31, rel=1e-12)
+    assert pytest.approx(1.0 + 1e-31, rel=1e-12) == obj.evaluate(np.array([0.0, 1.0]), P, grad=False).E
