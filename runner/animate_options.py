@@ -13,7 +13,7 @@ from solver.animate import DEFAULT_RATE, default_options
 from solver.errors import InputError
 from solver.optimize import ALGORITHMS
 from solver.problem import parse_terms, term_names
-from solver.solve import SCORES, SUBDIVISIONS, SolveOptions
+from solver.solve import BACKENDS, SCORES, SUBDIVISIONS, SolveOptions
 
 #: the library's settings (`solver.default_options`): the command's defaults are these, not its own
 _LIB = default_options({})
@@ -113,7 +113,11 @@ def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = Non
     opt.add_argument("--max-frames", type=nonnegative(int), default=_LIB.max_frames, metavar="N",
                      help="at most N variable frames in total (0 = no limit; with --tol 10 per keyframe "
                           "interval) [%(default)s]")
-    opt.add_argument("--algorithm", choices=list(ALGORITHMS), default=_LIB.algorithm, help="nlopt algorithm [%(default)s]")
+    opt.add_argument("--backend", choices=BACKENDS, default=_LIB.backend,
+                     help="optimizer of each round: nlopt (--algorithm) or lm (Levenberg-Marquardt on the terms' "
+                          "residuals; docs/solvers.md) [%(default)s]")
+    opt.add_argument("--algorithm", choices=list(ALGORITHMS), default=_LIB.algorithm,
+                     help="nlopt algorithm (--backend nlopt) [%(default)s]")
     opt.add_argument("--ftol", type=nonnegative(float), default=_LIB.ftol_rel, help="relative objective tolerance [%(default)s]")
     opt.add_argument("--max-evals", type=nonnegative(int), default=_LIB.max_evals, help="evaluations per round [no limit]")
     opt.add_argument("--rate", type=positive(float), default=DEFAULT_RATE,
@@ -185,6 +189,7 @@ def solve_options(args, weights: dict) -> SolveOptions:
         default_options(weights),
         subdivision=args.subdivision, per_segment=args.per_segment,
         renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
+        backend=getattr(args, "backend", _LIB.backend),
         max_evals=args.max_evals, max_time_s=args.max_time, precondition=not args.no_precondition,
         score=args.score, max_frames=args.max_frames, **mode,
     )

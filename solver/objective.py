@@ -36,6 +36,12 @@ MAX_QUADRATURE_POINTS = 100_000
 #: 128-1024 points within noise of each other; 2 MB L2; docs/scaling.md).
 BLOCK_DOUBLES = 1 << 14
 
+#: Plain-spline integrals below this keep their term's scale 1 in `Objective.renormalize` (as a term
+#: that is zero there does): a term that is zero up to rounding on the plain spline (a penetration of
+#: 1e-16 m, an integral ~1e-31) would otherwise be divided by its rounding error and weigh ~1e30 times
+#: its weight. 1e-12 [the term's units x s]: a residual of 1e-6 (1 micrometre, 1e-6 rad) over 1 s.
+RENORMALIZE_FLOOR = 1e-12
+
 #: Quadrature rules: "uniform" (midpoint rule at `rate` points per second, the paper's) and "gauss"
 #: (Gauss-Legendre with `points` nodes on every spline segment; the nodes move with the frames).
 QUADRATURES = ("uniform", "gauss")
@@ -349,5 +355,5 @@ class Objective:
             {term name: scale}.
         """
         ints = self.evaluate(knots, P, grad=False).integrals
-        self.scales = np.array([ints[n] if ints[n] > 1e-300 else 1.0 for n in self.names])
+        self.scales = np.array([ints[n] if ints[n] > RENORMALIZE_FLOOR else 1.0 for n in self.names])
         return dict(zip(self.names, self.scales.tolist()))

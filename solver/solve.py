@@ -27,6 +27,7 @@ from solver.backend import Backend, nlopt_backend
 from solver.continuation import LIMIT_CHECK_RATE, STALL_FRACTION, PenaltyContinuation  # noqa: F401 (re-exported)
 from solver.errors import InputError
 from solver.frames import FrameSet
+from solver.gauss_newton import lm_backend
 from solver.objective import NonFiniteError, Objective
 from solver.optimize import ALGORITHMS, OptimizeResult, Status
 from solver.refinement import (  # noqa: F401 (TOL_FRAMES_PER_INTERVAL, refinement_estimate re-exported)
@@ -42,6 +43,9 @@ from solver.subdivide import global_times, knot_hint_times
 
 SUBDIVISIONS = ("none", "global", "adaptive")
 SCORES = ("gradient", "decrease")
+#: `SolveOptions.backend`: the optimizer of each round (`solver.backend`): nlopt ("nlopt", with
+#: `algorithm`) or Levenberg-Marquardt on the terms' residuals ("lm", `solver.gauss_newton`).
+BACKENDS = ("nlopt", "lm")
 #: `SolveOptions.refine`: how adaptive subdivision decides when to stop.
 REFINES = ("rounds", "tol")
 #: `SolveOptions.rounds` when not given (refine "rounds").
@@ -78,7 +82,12 @@ class SolveOptions:
         per_round: at most this many frames per adaptive round (0 = one per segment).
         max_frames: cap on variable frames in total (0 = none).
         renormalize: divide each term by its value on the plain spline (eq. 7).
-        algorithm, ftol_rel, max_evals (per round), max_time_s (whole solve): optimizer settings.
+        backend: the optimizer of each round, one of BACKENDS: "nlopt" (`algorithm` in the
+            preconditioned variables, `solver.backend.nlopt_backend`) or "lm" (Levenberg-Marquardt on the
+            terms' residuals, `solver.gauss_newton.lm_backend`; an objective with a term that is not a
+            sum of squares falls back to nlopt; docs/solvers.md).
+        algorithm, ftol_rel, max_evals (per round), max_time_s (whole solve): optimizer settings
+            (algorithm: nlopt's; ftol_rel and max_evals apply to both back ends).
         score: what ranks segments for adaptive subdivision: "gradient" (|dE/dP| of a midpoint frame,
             `weak_form_scores`) or "decrease" (the decrease of E that frame predicts,
             `predicted_decreases`; does not favour short segments).
@@ -141,8 +150,11 @@ class SolveOptions:
     max_boosts: int = 4
     tol: float = 0.0
     refine: str = "rounds"
+    backend: str = "nlopt"
 
     def __post_init__(self):
+        if self.backend not in BACKENDS:
+            raise InputError(f"unknown backend {self.backend!r}; choose one of: {', '.join(BACKENDS)}")
         if self.subdivision not in SUBDIVISIONS:
             raise InputError(f"unknown subdivision {self.subdivision!r}; choose one of: {', '.join(SUBDIVISIONS)}")
         if self.score not in SCORES:
@@ -206,7 +218,7 @@ def solve(
     progress: Callable[[str, dict], None] | None = None,
     project: Callable[[np.ndarray], np.ndarray] | None = None,
     refinement: Refinement | None = None,
-    backend: Backend = nlopt_backend,
+    backend: Backend | None = None,
 ) -> Solution:
     """Optimize the variable frames (and partial keyframes' free components) of a frame set.
 
@@ -226,7 +238,8 @@ def solve(
             values (the path is then unchanged by the insertion).
         refinement: the refinement strategy (a fresh `solver.refinement.Refinement`, e.g.
             `solver.orient_refine.GapToOptimum`); default from `options` (`default_refinement`).
-        backend: the optimizer of one round (`solver.backend.Backend`); default nlopt.
+        backend: the optimizer of one round (`solver.backend.Backend`); default the one
+            `options.backend` names.
     Returns:
         Solution.
     Raises:
@@ -241,6 +254,8 @@ def solve(
     """
     objective = _working_copy(objective)
     ev_check = _check_inputs(objective, initial, options)
+    if backend is None:
+        backend = lm_backend if options.backend == "lm" else nlopt_backend
     t_start = time.perf_counter()
     objective.prepare(initial.times, initial.values)  # terms' per-round state from the plain spline
     if options.renormalize:

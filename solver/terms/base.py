@@ -47,6 +47,50 @@ class TermEval:
 
 
 @dataclass
+class SiteRows:
+    """How a term's residual columns read the contact sites of an engine: column j is a function of the
+    position and velocity of site `site[j]`, with derivatives `dp[:, j]` and `dv[:, j]` (the Jacobian
+    rows are then dp J_p + dv J_v, `solver.site_jacobian`, without a reverse pass per column).
+
+    Attributes:
+        ctx: the `PathContext` of the evaluation (its site Jacobians are computed once and shared).
+        engine, result: the engine and its forward pass on ctx.
+        site: (m,) engine site index of each residual column.
+        dp: (n, m, 3) d r / d site position [units of r per m], or None.
+        dv: (n, m, 3) d r / d site velocity [units of r per m/s], or None.
+    """
+
+    ctx: object
+    engine: object
+    result: object
+    site: np.ndarray
+    dp: np.ndarray | None = None
+    dv: np.ndarray | None = None
+
+    def blocks(self, nq: int) -> list[tuple]:
+        """[(columns (m_g,), comps (c_g,), (J0, J1, None)), ...]: per site, the Jacobian blocks
+        (n, m_g, c_g) of its columns over the qpos components that move it."""
+        from solver.site_jacobian import cached_site_jacobians
+
+        jac = cached_site_jacobians(self.ctx, self.engine, self.result)
+        out = []
+        for k in np.unique(self.site):
+            cols = np.flatnonzero(self.site == k)
+            comps, Jp, Jv = jac[k]
+            J0 = J1 = None
+            if self.dp is not None:
+                J0 = np.einsum("nmi,nic->nmc", self.dp[:, cols], Jp)
+            if self.dv is not None:
+                if Jv is None:
+                    raise ValueError("the engine's pass has no site velocities for a residual that reads them")
+                dv = self.dv[:, cols]
+                J0 = np.einsum("nmi,nic->nmc", dv, Jv) + (0.0 if J0 is None else J0)
+                J1 = np.einsum("nmi,nic->nmc", dv, Jp)
+            out.append((cols, comps, (J0, J1, None)))
+        return out
+
+
+@dataclass
 class Residual:
     """Residuals r of a term that is a sum of squares, f = |r|^2 at every point, and their Jacobian.
 
@@ -56,17 +100,61 @@ class Residual:
             per-point blocks), or None when the term gives products only (`pull`).
         pull: g (n, m) -> (dY, dY1, dY2), each (n, nq) or None: the vector-Jacobian product
             sum_i g_i . dr_i / d(Y, Y', Y''), or None when `blocks` are given.
+        sites: `SiteRows` (with `pull`): the columns as functions of site positions and velocities,
+            from which `groups` and `jacobian` build the blocks through the engine's site Jacobians
+            (`solver.site_jacobian`, a `KinematicTree` engine) instead of m reverse passes.
+        compact: the Jacobian as `groups` gives it, [(columns, comps, (J0, J1, J2)), ...] (instead of
+            `blocks`: a term whose columns each read a few components, e.g. one quaternion), with
+            nq the state's width.
     """
 
     r: np.ndarray
     blocks: tuple | None = None
     pull: Callable | None = None
+    sites: SiteRows | None = None
+    compact: list | None = None
+    nq: int | None = None
+
+    def _site_blocks(self):
+        """`SiteRows.blocks`, or None if there are none or the engine's pass cannot give them."""
+        from solver.site_jacobian import supports
+
+        if self.sites is None or not supports(self.sites.engine):
+            return None
+        return self.sites.blocks(self.sites.ctx.Y.shape[1])
+
+    def groups(self) -> list[tuple]:
+        """The Jacobian in compact blocks: [(columns (m_g,), comps (c_g,), (J0, J1, J2)), ...], each J
+        (n, m_g, c_g) or None: columns m_g of r depend only on the components c_g (any order, any
+        point); columns that depend on nothing are left out. From `sites` where given, else grouped
+        from the dense blocks (`jacobian`) by the components each column reads."""
+        if self.compact is not None:
+            return self.compact
+        site = self._site_blocks()
+        if site is not None:
+            return site
+        blocks = self.jacobian()
+        support = None
+        for J in blocks:
+            if J is not None:
+                z = np.any(J != 0, axis=0)  # (m, nq)
+                support = z if support is None else support | z
+        if support is None:
+            return []
+        pats, inv = np.unique(support, axis=0, return_inverse=True)
+        inv = np.asarray(inv).reshape(-1)
+        out = []
+        for p in range(len(pats)):
+            if pats[p].any():
+                cols, comps = np.flatnonzero(inv == p), np.flatnonzero(pats[p])
+                out.append((cols, comps, tuple(None if J is None else J[:, cols][:, :, comps] for J in blocks)))
+        return out
 
     def vjp(self, g: np.ndarray) -> tuple:
         """(dY, dY1, dY2) = g^T J at each point, each (n, nq) or None; g: (n, m)."""
         if self.pull is not None:
             return self.pull(g)
-        return tuple(None if J is None else np.einsum("nm,nmq->nq", g, J) for J in self.blocks)
+        return tuple(None if J is None else np.einsum("nm,nmq->nq", g, J) for J in self.jacobian())
 
     def jvp(self, dY: np.ndarray | None, dY1: np.ndarray | None = None, dY2: np.ndarray | None = None) -> np.ndarray:
         """(n, m) J d: the change of r along a direction d = (dY, dY1, dY2) (each (n, nq) or None = 0),
@@ -83,6 +171,17 @@ class Residual:
         if self.blocks is not None:
             return self.blocks
         n, m = self.r.shape
+        site = self.compact if self.compact is not None else self._site_blocks()
+        if site is not None:
+            nq = self.nq if self.compact is not None else self.sites.ctx.Y.shape[1]
+            out = [None, None, None]
+            for cols, comps, Js in site:
+                for k, J in enumerate(Js):
+                    if J is not None:
+                        if out[k] is None:
+                            out[k] = np.zeros((n, m, nq))
+                        out[k][:, cols[:, None], comps[None, :]] = J
+            return tuple(out)
         cols = [self.vjp(np.broadcast_to(np.eye(m)[i], (n, m)).copy()) for i in range(m)]
         return tuple(None if cols[0][k] is None else np.stack([c[k] for c in cols], axis=1) for k in range(3))
 

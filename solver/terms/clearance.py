@@ -51,7 +51,7 @@ from solver.layout import CONTACT_SITES, index_run
 from solver.path_context import EngineGradient, site_engine
 from solver.schedule_conflicts import ScheduleConflicts
 from solver.surfaces import StaticSurfaces
-from solver.terms.base import Residual, Term, TermEval
+from solver.terms.base import Residual, SiteRows, Term, TermEval
 from solver.terms.contact_schedule import (
     FULL,
     SiteMotion,
@@ -173,7 +173,9 @@ class Clearance(Term):
             g_sites[:, self._eidx] += gh[..., None] * nrm
             return EngineGradient(self.engine, res, mo, None, g_sites).pullback()
 
-        return Residual(r, pull=pull)
+        site = np.tile(np.arange(len(self.engine.site_ids))[self._eidx], 2)
+        dp = -np.concatenate([(su * (ds > 0))[..., None] * nrm, (sf * (df > 0))[..., None] * nrm], axis=1)
+        return Residual(r, pull=pull, sites=SiteRows(ctx, self.engine, res, site, dp=dp))
 
     def _integrand(self, p, Us, Uf, Bf, Bs, grad=True):
         """f (m,) and df/dp (m, k, 3) at site positions p (m, k, 3) with swing weights Us (m, k),

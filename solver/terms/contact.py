@@ -62,7 +62,7 @@ from solver.layout import CONTACT_SITES
 from solver.path_context import EngineGradient, site_engine
 from solver.schedule_conflicts import ScheduleConflicts
 from solver.surfaces import StaticSurfaces
-from solver.terms.base import Residual, Term, TermEval
+from solver.terms.base import Residual, SiteRows, Term, TermEval
 from solver.terms.contact_schedule import (
     FULL,
     KEYFRAME_AT_END,
@@ -273,7 +273,14 @@ class Planted(Term):
             np.add.at(g_vel, (glob, site), gv - np.einsum("mi,mi->m", gv, nc)[:, None] * nc)
             return EngineGradient(self.engine, res, mo, None, g_sites, g_vel).pullback()
 
-        return Residual(r.reshape(n, 4 * C), pull=pull)
+        dp, dv = np.zeros((n, C, 4, 3)), np.zeros((n, C, 4, 3))
+        dp[glob, con, 0] = ss[:, None] * nc
+        dv[glob, con, 1:] = sw[:, None, None] * (np.eye(3) - nc[:, :, None] * nc[:, None, :])
+        sites = np.zeros(C, int)
+        sites[con] = site  # each contact's engine site
+        rows = SiteRows(ctx, self.engine, res, np.repeat(sites, 4), dp=dp.reshape(n, 4 * C, 3),
+                        dv=dv.reshape(n, 4 * C, 3))
+        return Residual(r.reshape(n, 4 * C), pull=pull, sites=rows)
 
     def residuals(self, t, Y, Y1=None):
         """Per sample and contact: height and sliding windows, height [m] and tangential speed [m/s]

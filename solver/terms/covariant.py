@@ -49,7 +49,7 @@ class CovariantAcceleration(Term):
     def residual(self, ctx) -> Residual:
         """r (n, 4 s + l): per quaternion slot the covariant acceleration q'' - q a/b (a = q''.q,
         b = q.q) [1/s^2], then the linear components' y'' [m/s^2] (f = |r|^2, as |q'' - q a/b|^2 =
-        q''.q'' - a^2/b). Dense blocks: dr/dq'' = I - q q^T/b, dr/dq = -(a/b) I - q (q''/b - 2 a q/b^2)^T,
+        q''.q'' - a^2/b). Blocks per slot (`Residual.compact`): dr/dq'' = I - q q^T/b, dr/dq = -(a/b) I - q (q''/b - 2 a q/b^2)^T,
         d y''/d y'' = I."""
         Y, Y2 = ctx.Y, ctx.Y2
         n, nq = Y.shape
@@ -62,12 +62,12 @@ class CovariantAcceleration(Term):
         dq2 = eye - qc * q[..., None, :] / b  # (n, s, 4, 4)
         dq = -(a / b) * eye - qc * (q2[..., None, :] / b - 2.0 * a * q[..., None, :] / (b * b))
         r = np.concatenate([(q2c - qc * a / b)[..., 0].reshape(n, 4 * s), Y2[:, lin]], axis=1)
-        J0, J2 = np.zeros((n, 4 * s + len(lin), nq)), np.zeros((n, 4 * s + len(lin), nq))
-        for k, slot in enumerate(self.idx):
-            J0[:, 4 * k:4 * k + 4, slot] = dq[:, k]
-            J2[:, 4 * k:4 * k + 4, slot] = dq2[:, k]
-        J2[:, 4 * s + np.arange(len(lin)), lin] = 1.0
-        return Residual(r, blocks=(J0, None, J2))
+        groups = [(np.arange(4 * k, 4 * k + 4), np.asarray(slot), (dq[:, k], None, dq2[:, k]))
+                  for k, slot in enumerate(self.idx)]
+        if len(lin):
+            eye = np.broadcast_to(np.eye(len(lin)), (n, len(lin), len(lin)))
+            groups.append((4 * s + np.arange(len(lin)), np.asarray(lin), (None, None, eye)))
+        return Residual(r, compact=groups, nq=Y.shape[1])
 
 
 class NormalizedCovariantAcceleration(Term):

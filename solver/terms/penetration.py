@@ -8,7 +8,7 @@ from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.path_context import EngineGradient, engine_sites, site_engine
 from solver.surfaces import StaticSurfaces
-from solver.terms.base import Residual, Term, TermEval
+from solver.terms.base import Residual, SiteRows, Term, TermEval
 
 
 def site_positions(model, data, Y: np.ndarray, sites: np.ndarray) -> np.ndarray:
@@ -115,4 +115,6 @@ class Penetration(Term):
             g_sites[:, self.site_index] = np.einsum("nks,nksi->nki", g.reshape(n, k, S), ddepth)
             return EngineGradient(self.engine, res, mo, None, g_sites).pullback()
 
-        return Residual(depth.reshape(n, k * S), pull=pull)
+        site = np.repeat(np.arange(len(self.engine.site_ids))[self.site_index], S)
+        rows = SiteRows(ctx, self.engine, res, site, dp=ddepth.reshape(n, k * S, 3))
+        return Residual(depth.reshape(n, k * S), pull=pull, sites=rows)

@@ -48,11 +48,11 @@ class UnitQuaternion(Term):
         return TermEval(f, dY=dY)
 
     def residual(self, ctx) -> Residual:
-        """r = 1 - q.q per quaternion slot (n, s) [1] (f = |r|^2); dense blocks dr/dY = -2 q."""
+        """r = 1 - q.q per quaternion slot (n, s) [1] (f = |r|^2); blocks dr/dY = -2 q per slot
+        (`Residual.compact`)."""
         Y = ctx.Y
         q = Y[:, self.idx]  # (n, s, 4)
         r = 1.0 - np.einsum("nsi,nsi->ns", q, q)
-        J = np.zeros((len(Y), self.idx.shape[0], Y.shape[1]))
-        for k, slot in enumerate(self.idx):
-            J[:, k, slot] = -2.0 * q[:, k]
-        return Residual(r, blocks=(J, None, None))
+        groups = [(np.array([k]), np.asarray(slot), (-2.0 * q[:, k, None, :], None, None))
+                  for k, slot in enumerate(self.idx)]
+        return Residual(r, compact=groups, nq=Y.shape[1])

@@ -1,0 +1,192 @@
+"""The Levenberg-Marquardt back end of `solve` (`lm_backend`, `SolveOptions.backend = "lm"`).
+
+Gauss-Newton on the terms' residuals (`Term.residual`) with Levenberg-Marquardt damping, in the free
+B-spline coefficients of `solver.least_squares` (a banded J^T J); iterates are frame sets, so every
+iterate meets the keyframes exactly, and the best one is kept (a step is only taken when it lowers E).
+
+Each iteration solves (J^T J + mu D) h = -J^T rho with D = diag(J^T J) (Marquardt's scaling), evaluates
+E at the step (value only) and compares the actual decrease with the model's, the gain ratio
+rho_g = (E(x) - E(x + h)) / (L(0) - L(h)). The damping update is Nielsen's (Madsen, Nielsen & Tingleff,
+"Methods for non-linear least squares problems", 2nd ed. 2004, sec. 3.2, eq. 3.15 and algorithm
+3.16): on a decrease mu *= max(1/3, 1 - (2 rho_g - 1)^3) and nu = 2; otherwise mu *= nu, nu *= 2.
+A step that makes E non-finite counts as a failed step. Stopping (Madsen et al. sec. 3.2 eq. 3.16
+and Nocedal & Wright sec. 10.3 use the same tests): an accepted step that lowered E by at most
+`ftol_rel` of E (the relative-decrease test nlopt's L-BFGS uses, so `--ftol` means the same for both
+back ends), a step shorter than 1e-12 of |x|, damping grown past 1e16 without a decrease (no
+descent left at rounding level), the evaluation or time budget, or a stop request.
+
+Evaluations: each value evaluation at a trial step counts one, and each residual-and-Jacobian
+evaluation at an accepted point counts one (`OptimizeResult.n_evals`).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from solver.objective import NonFiniteError
+from solver.optimize import OptimizeResult, Status
+from solver.terms.base import Term
+
+#: Initial damping relative to diag(J^T J) (Madsen et al. 2004 sec. 3.2: tau = 1e-3 when the start
+#: may be far from the minimum).
+TAU = 1e-3
+#: Damping beyond which a failed step means no descent is left at rounding level.
+MU_MAX = 1e16
+MIN_FACTOR = 1.0 / 3.0
+#: The relative-decrease test stops only after a step damped at most this much (with Marquardt's
+#: scaling, mu = 1 halves the Gauss-Newton step along every eigendirection of equal curvature): a small
+#: decrease of a heavily damped step says that the step was short, not that E is near its minimum.
+MU_CONVERGED = 1.0
+
+
+def has_residuals(objective) -> bool:
+    """True if every weighted term of `objective` gives a residual form (`Term.residual` overridden)
+    and the objective is not the orientation problem's fused pass (which `solve` leaves to nlopt)."""
+    if getattr(objective, "fused_orientation", False):
+        return False
+    return all(type(t).residual is not Term.residual for t, w in zip(objective.terms, objective.weights) if w != 0)
+
+
+def lm_backend(objective, frames, options, remaining, should_stop, progress, evals_before) -> OptimizeResult:
+    """`solver.backend.Backend`: `levenberg_marquardt` on the round; objectives with a term that is not
+    a sum of squares (or the orientation problem) go to `nlopt_backend` instead.
+
+    Returns: OptimizeResult (see `Backend`); `algorithm` "lm" (or nlopt's where it fell back).
+    """
+    from solver.backend import nlopt_backend
+
+    if not has_residuals(objective):
+        return nlopt_backend(objective, frames, options, remaining, should_stop, progress, evals_before)
+
+    def report(n, f):
+        progress("eval", {"evals": evals_before + n, "E": f})
+
+    return levenberg_marquardt(objective, frames, ftol_rel=options.ftol_rel, max_evals=options.max_evals,
+                               max_time_s=remaining, should_stop=should_stop, callback=report if progress else None)
+
+
+def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: int = 0, max_time_s: float = 0.0,
+                        should_stop=None, callback=None, timings: dict | None = None) -> OptimizeResult:
+    """Minimize `objective` over the free components of `frames` by Levenberg-Marquardt (module docstring).
+
+    Args:
+        objective: Objective whose weighted terms all give `Term.residual`. frames: FrameSet (start).
+        ftol_rel: stop after an accepted step that lowered E by at most this fraction of E.
+        max_evals: evaluation budget (0 = none). max_time_s: [s] time budget (0 = none).
+        should_stop: polled between evaluations; True ends the run (INTERRUPTED, best x kept).
+        callback: callback(n_evals, E) after every evaluation, or None.
+        timings: if a dict, receives the seconds spent in "jacobian" (residuals, Jacobian blocks and
+            the assembly of J^T J; wall), "factor" (damped solves) and "trial" (value evaluations at
+            steps), and the CPU seconds of the assembly's parts (`normal_equations`: "residuals",
+            "blocks", "gram", "band").
+    Returns:
+        OptimizeResult with x (n_free,) the best frame values found, algorithm "lm".
+    Raises:
+        solver.least_squares.NoResidualError: a weighted term without a residual form.
+    """
+    from numpy.linalg import LinAlgError
+
+    from solver.least_squares import LocalSpline, normal_equations
+
+    t_start = time.perf_counter()
+    clock = {"jacobian": 0.0, "factor": 0.0, "trial": 0.0}
+    x = frames.x()
+    if x.size == 0:
+        return OptimizeResult(x, math.nan, Status.NOTHING_TO_DO, "no free variables", 0, 0, np.zeros(0), 0.0, "lm")
+    knots = frames.times
+    local = LocalSpline(frames, objective.basis(knots).t)
+    trace: list[float] = []
+    state = {"best": math.inf}
+
+    def count(E):
+        state["best"] = min(state["best"], E)
+        trace.append(state["best"])
+        if callback is not None:
+            callback(len(trace), E)
+
+    def jacobian(xv):
+        t0 = time.perf_counter()
+        ne = normal_equations(objective, frames.with_x(xv), local, timings)
+        clock["jacobian"] += time.perf_counter() - t0
+        count(ne.E if math.isfinite(ne.E) else math.inf)
+        return ne
+
+    ne = jacobian(x)
+    F, improvements = ne.E, 0
+    if not (math.isfinite(F) and np.all(np.isfinite(ne.g))):
+        return _result(x, F, Status.NONFINITE, "the residuals are not finite at the start", trace, improvements,
+                       t_start, clock, timings)
+    mu, nu = TAU, 2.0
+    status, message = Status.CONVERGED, "converged"
+    while True:
+        stop = _budget(len(trace), max_evals, t_start, max_time_s, should_stop)
+        if stop is not None:
+            status, message = stop
+            break
+        t0 = time.perf_counter()
+        try:
+            h = ne.solve(mu)
+        except (LinAlgError, ValueError):
+            h = None
+        clock["factor"] += time.perf_counter() - t0
+        pred = ne.model_decrease(h) if h is not None else 0.0
+        if h is None or not pred > 0:
+            mu, nu = mu * nu, nu * 2.0
+            if mu > MU_MAX:
+                message = "converged (no descent left at this damping)"
+                break
+            continue
+        dx = local.E @ h
+        if np.linalg.norm(dx) <= 1e-12 * (np.linalg.norm(x) + 1e-12):
+            message = "converged (step below rounding)"
+            break
+        x_new = x + dx
+        t0 = time.perf_counter()
+        try:
+            F_new = objective.evaluate(knots, frames.values_from_x(x_new), grad=False).E
+        except NonFiniteError:
+            F_new = math.inf
+        clock["trial"] += time.perf_counter() - t0
+        count(F_new if math.isfinite(F_new) else math.inf)
+        gain = (F - F_new) / pred if math.isfinite(F_new) else -math.inf
+        step_mu = mu
+        if gain > 0:
+            decrease = F - F_new
+            x, F, improvements = x_new, F_new, improvements + 1
+            mu *= max(MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3)
+            nu = 2.0
+            if decrease <= ftol_rel * abs(F + decrease) and step_mu <= MU_CONVERGED:
+                break
+            if _budget(len(trace), max_evals, t_start, max_time_s, should_stop) is not None:
+                continue  # the loop's test reports it
+            ne = jacobian(x)
+            if not (math.isfinite(ne.E) and np.all(np.isfinite(ne.g))):
+                status, message = Status.NONFINITE, "the residuals' Jacobian is not finite"
+                break
+        else:
+            mu, nu = mu * nu, nu * 2.0
+            if mu > MU_MAX:
+                message = "converged (no decrease left at this damping)"
+                break
+    return _result(x, F, status, message, trace, improvements, t_start, clock, timings)
+
+
+def _budget(n_evals, max_evals, t_start, max_time_s, should_stop):
+    """(status, message) if a budget is spent or a stop was requested, else None."""
+    if should_stop is not None and should_stop():
+        return Status.INTERRUPTED, "stopped on request"
+    if max_evals and n_evals >= max_evals:
+        return Status.MAX_EVALS, f"{max_evals} evaluations reached"
+    if max_time_s and time.perf_counter() - t_start >= max_time_s:
+        return Status.MAX_TIME, f"time limit of {max_time_s:g} s reached"
+    return None
+
+
+def _result(x, F, status, message, trace, improvements, t_start, clock, timings) -> OptimizeResult:
+    if timings is not None:
+        timings.update(clock)
+    wall = time.perf_counter() - t_start
+    return OptimizeResult(np.array(x), float(F), status, message, len(trace), improvements, np.array(trace), wall,
+                          "lm", None, clock["jacobian"] + clock["trial"])

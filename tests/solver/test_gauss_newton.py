@@ -1,0 +1,223 @@
+"""The Levenberg-Marquardt back end (`solver.gauss_newton`) and its banded normal equations
+(`solver.least_squares`): J^T J and J^T rho against central finite differences of the weighted
+residuals, the damped step against a dense reference solve, and whole solves against nlopt's."""
+from dataclasses import replace
+
+import mujoco
+import numpy as np
+import pytest
+
+import solver
+from solver.contacts import Contact
+from solver.errors import InputError
+from solver.frames import FrameSet
+from solver.gauss_newton import has_residuals, levenberg_marquardt
+from solver.least_squares import LocalSpline, normal_equations, term_residuals
+from solver.optimize import Status
+from solver.problem import make_problem
+from solver.solve import SolveOptions, solve
+
+from conftest import TOY_SCENE
+
+SCHEDULE = (Contact("l_heel", 0.0, 0.45), Contact("l_toe", 0.0, 0.5), Contact("r_toe", 0.55, 1.2))
+
+
+@pytest.fixture(scope="module")
+def toy():
+    """The toy figure with four keyframes low over the floor (feet in it: penetration, planted and
+    clearance act), the third partial (its root height free), and a contact schedule."""
+    model = mujoco.MjModel.from_xml_string(TOY_SCENE)
+    layout = solver.StateLayout.from_model(model)
+    V = np.zeros((4, model.nq))
+    V[:, 0], V[:, 2] = [0.0, 0.3, 0.7, 1.0], [0.9, 0.95, 0.92, 0.9]
+    V[:, layout.quat_slots[:, 0]] = 1.0
+    V[1, layout.quat_slots[1]] = [np.cos(0.3), np.sin(0.3), 0, 0]
+    V[2, layout.quat_slots[3]] = [np.cos(0.4), 0, np.sin(0.4), 0]
+    V[3, layout.quat_slots[2]] = [np.cos(0.2), 0, 0, np.sin(0.2)]
+    mask = np.ones_like(V, bool)
+    mask[2, 2] = False
+    kf = solver.Keyframes(np.array([0.0, 0.35, 0.8, 1.2]), V, mask)
+    return model, layout, kf
+
+
+def _moved(problem, seed=3):
+    """The problem's frames with a variable frame in every segment, the free components moved at random
+    (residuals of every kind nonzero), the objective renormalized and prepared there."""
+    objective = problem.objective
+    frames = problem.initial.with_midpoints()
+    rng = np.random.default_rng(seed)
+    frames = frames.with_x(frames.x() + 0.03 * rng.normal(size=frames.n_free))
+    objective.prepare(frames.times, frames.values)
+    objective.renormalize(problem.initial.times, problem.initial.values)
+    return objective, frames
+
+
+def _rho(objective, frames):
+    """All weighted residuals rho (E = |rho|^2) as one vector, from the terms' residual forms."""
+    basis = objective.basis(frames.times)
+    Y, Y1, Y2 = basis.evaluate(frames.values, objective.needs)
+    q = np.full(len(basis.t), objective.h) if basis.weights is None else basis.weights
+    return np.concatenate([(res.r * np.sqrt(c * q)[:, None]).ravel()
+                           for _, c, res in term_residuals(objective, basis, Y, Y1, Y2)])
+
+
+def _fd_jacobian(objective, frames, directions, h=1e-6):
+    """d rho / d s along each column of `directions` (n_free, k) of the free components, central
+    differences."""
+    x = frames.x()
+    cols = [(_rho(objective, frames.with_x(x + h * d)) - _rho(objective, frames.with_x(x - h * d))) / (2 * h)
+            for d in directions.T]
+    return np.stack(cols, axis=1)
+
+
+def _dense(ab):
+    n = ab.shape[1]
+    A = np.zeros((n, n))
+    for d in range(len(ab)):
+        i = np.arange(d, n)
+        A[i, i - d] = ab[d, : n - d]
+        A[i - d, i] = ab[d, : n - d]
+    return A
+
+
+@pytest.mark.slow
+def test_normal_equations_match_finite_differences_with_every_residual_term(toy):
+    model, _, kf = toy
+    problem = make_problem(model, kf, "all", contacts=SCHEDULE, rate=40.0)
+    assert set(problem.terms) >= {"penetration", "unit", "bending", "smooth", "torque", "root", "planted",
+                                  "clearance", "cone"}
+    objective, frames = _moved(problem)
+    assert has_residuals(objective)
+    local = LocalSpline(frames, objective.basis(frames.times).t)
+    ne = normal_equations(objective, frames, local)
+    rho = _rho(objective, frames)
+    assert pytest.approx(objective.evaluate(frames.times, frames.values, grad=False).E, rel=1e-10) == ne.E
+    assert pytest.approx(rho @ rho, rel=1e-10) == ne.E
+    J = _fd_jacobian(objective, frames, local.E.toarray())  # d rho / d xi (x = x0 + E xi)
+    H = _dense(ne.ab)
+    scale = np.abs(J.T @ J).max()
+    np.testing.assert_allclose(H, J.T @ J, atol=1e-5 * scale)
+    np.testing.assert_allclose(ne.g, J.T @ rho, atol=1e-5 * np.abs(J.T @ rho).max())
+    # the objective's own gradient (dE/dx, its chain rule through the spline) agrees: dE/dxi = E^T dE/dx
+    gx = objective.evaluate(frames.times, frames.values, grad=True).grad[frames.free]
+    np.testing.assert_allclose(local.E.T @ gx, 2 * ne.g, atol=1e-8 * np.abs(gx).max())
+
+
+def test_local_coefficients_reproduce_the_spline_and_keep_the_keyframes(toy):
+    model, _, kf = toy
+    problem = make_problem(model, kf, "unit,smooth", rate=40.0)
+    frames = problem.initial.with_midpoints()
+    basis = problem.objective.basis(frames.times)
+    local = LocalSpline(frames, basis.t)
+    rng = np.random.default_rng(0)
+    xi = rng.normal(size=local.n_free)
+    moved = frames.with_x(frames.x() + local.E @ xi)
+    # the keyframes' fixed components are untouched, the partial keyframe's free one moved
+    np.testing.assert_array_equal(moved.values[frames.fixed], frames.values[frames.fixed])
+    assert moved.values[4, 2] != frames.values[4, 2]
+    # the B-spline values of c = Z xi are the natural spline's change through the moved frames
+    dY = basis.evaluate(moved.values - frames.values, (0, 1, 2))
+    dc = (local.Z @ xi).reshape(local.m + 2, local.nq)[local.seg[:, None] + np.arange(4)]
+    for k in range(3):
+        got = np.einsum("na,naq->nq", local.vals[k], dc)
+        np.testing.assert_allclose(got, dY[k], atol=1e-9 * np.abs(dY[k]).max())
+    # Z is local: a free coefficient moves only the coefficients of the frames beside it (here, keyframes
+    # and variable frames alternating: at most 2 on either side), not the whole spline as a frame value does
+    Z = local.Z.tocsc()
+    for j in range(local.n_free):
+        u = Z.indices[Z.indptr[j]:Z.indptr[j + 1]] // local.nq
+        assert u.max() - u.min() <= 4
+    assert np.count_nonzero(np.abs(basis.W) > 1e-12) > 0.9 * basis.W.size
+
+
+def test_damped_step_is_the_dense_least_squares_step(toy):
+    model, _, kf = toy
+    problem = make_problem(model, kf, "penetration,unit,bending,smooth,planted,clearance", contacts=SCHEDULE,
+                           rate=40.0)
+    objective, frames = _moved(problem, seed=5)
+    local = LocalSpline(frames, objective.basis(frames.times).t)
+    ne = normal_equations(objective, frames, local)
+    rho = _rho(objective, frames)
+    # in the frame values themselves: the Gauss-Newton step is invariant to the change of variables
+    Jx = _fd_jacobian(objective, frames, np.eye(frames.n_free))
+    dx_ref = np.linalg.lstsq(Jx, -rho, rcond=None)[0]
+    dx = local.E @ ne.solve(0.0)
+    np.testing.assert_allclose(dx, dx_ref, atol=1e-5 * np.abs(dx_ref).max())
+    # damped: (J^T J + mu diag(J^T J)) h = -J^T rho, dense
+    H = _dense(ne.ab)
+    h_ref = np.linalg.solve(H + 0.1 * np.diag(np.diag(H)), -ne.g)
+    np.testing.assert_allclose(ne.solve(0.1), h_ref, rtol=1e-8, atol=1e-12 * np.abs(h_ref).max())
+    assert ne.model_decrease(h_ref) == pytest.approx(rho @ rho - np.sum((rho + Jx @ (local.E @ h_ref)) ** 2),
+                                                     rel=1e-5)
+
+
+@pytest.fixture(scope="module")
+def contact_problem(toy):
+    model, _, kf = toy
+    return make_problem(model, kf, None, contacts=SCHEDULE, rate=40.0)
+
+
+@pytest.mark.slow
+def test_lm_solve_reaches_nlopts_objective(contact_problem):
+    # the toy's feet are deep in the floor: hinge residuals (penetration, clearance) switch on and off
+    # along every long step, which costs a Gauss-Newton model its accuracy (docs/solvers.md "Choosing
+    # the default"): many short steps, but to within 0.5 % of L-BFGS's E
+    options = replace(solver.default_options(dict(contact_problem.weights)), limits=())
+    lbfgs = solve(contact_problem.objective, contact_problem.initial, options)
+    lm = solve(contact_problem.objective, contact_problem.initial, replace(options, backend="lm"))
+    assert lm.status is Status.CONVERGED and lbfgs.status is Status.CONVERGED
+    assert all(r.result.algorithm == "lm" for r in lm.rounds)
+    assert lm.E_final <= lbfgs.E_final * (1 + 5e-3)
+    np.testing.assert_array_equal(lm.frames.values[lm.frames.fixed], lm.initial.values[lm.initial.fixed])
+
+
+def test_lm_keeps_the_best_iterate_and_honours_budgets_and_stop_requests(contact_problem):
+    objective, frames = _moved(contact_problem, seed=1)
+    E0 = objective.evaluate(frames.times, frames.values, grad=False).E
+    seen = []
+    r = levenberg_marquardt(objective, frames, max_evals=4, callback=lambda n, E: seen.append((n, E)))
+    assert r.status is Status.MAX_EVALS and r.n_evals == 4 and [n for n, _ in seen] == [1, 2, 3, 4]
+    assert r.fun == pytest.approx(objective.evaluate(frames.times, frames.values_from_x(r.x), grad=False).E)
+    assert r.fun <= E0 and np.all(np.diff(r.trace) <= 0) and r.trace[-1] == r.fun
+    calls = []
+    r = levenberg_marquardt(objective, frames, should_stop=lambda: calls.append(1) or len(calls) > 2)
+    assert r.status is Status.INTERRUPTED and r.fun <= E0
+    empty = FrameSet(frames.times, frames.values, np.ones_like(frames.fixed), frames.is_keyframe)
+    assert levenberg_marquardt(objective, empty).status is Status.NOTHING_TO_DO
+
+
+def test_an_objective_without_residuals_falls_back_to_nlopt(contact_problem, monkeypatch):
+    from solver.terms.base import Term
+    from solver.terms.covariant import CovariantAcceleration
+
+    monkeypatch.setattr(CovariantAcceleration, "residual", Term.residual)
+    assert not has_residuals(contact_problem.objective)
+    options = replace(solver.default_options(dict(contact_problem.weights)), limits=(), backend="lm",
+                      refine="rounds", rounds=0, tol=0.0)
+    sol = solve(contact_problem.objective, contact_problem.initial, options)
+    assert sol.rounds[0].result.algorithm == "lbfgs"
+
+
+def test_backend_option_is_checked():
+    with pytest.raises(InputError, match="unknown backend 'gn'; choose one of: nlopt, lm"):
+        SolveOptions(backend="gn")
+
+
+def test_a_term_zero_up_to_rounding_on_the_plain_spline_keeps_scale_1():
+    from solver.objective import RENORMALIZE_FLOOR, Objective
+    from solver.terms.base import Term, TermEval
+
+    class Constant(Term):
+        def __init__(self, name, value):
+            self.name, self.value = name, value
+
+        def evaluate(self, t, Y, Y1, Y2, grad=True):
+            return TermEval(np.full(len(t), self.value), dY=np.zeros_like(Y))
+
+    # integrals over 1 s: 1e-31 (rounding: a penetration of 1e-16 m squared) and 1e-6 (a real one)
+    obj = Objective([Constant("noise", 1e-31), Constant("real", 1e-6)], np.ones(2), 0.0, 1.0, rate=50.0)
+    P = np.zeros((2, 1))
+    scales = obj.renormalize(np.array([0.0, 1.0]), P)
+    assert scales["noise"] == 1.0 and RENORMALIZE_FLOOR > 1e-31
+    assert scales["real"] == pytest.approx(1e-6, rel=1e-12)
+    assert pytest.approx(1.0 + 1e-31, rel=1e-12) == obj.evaluate(np.array([0.0, 1.0]), P, grad=False).E
