@@ -329,7 +329,9 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions | Sequence[
 
     def finished(i, row, bar):
         rows[i] = row
-        msg = f"  {Path(row['clip']).name}: {row['status']}, {row['wall_time_s']:.1f} s"
+        name = Path(row["clip"]).name
+        name = row["folder"] if row.get("folder") and row["folder"] != Path(row["clip"]).stem else name
+        msg = f"  {name}: {row['status']}, {row['wall_time_s']:.1f} s"
         msg += f": {row['error']}" if row.get("error") else ""
         (bar.bar.write if bar.bar is not None else say)(msg)  # above a terminal's bar, not through it
         note(bar)
