@@ -68,9 +68,9 @@ def parse_every(text: str) -> tuple[float, ...]:
         try:
             v = float(word)
         except ValueError:
-            raise ValueError(f"--every {text!r}: {word!r} is not a number; give spacings in s, e.g. 0.2,0.25") from None
+            raise ValueError(f"{text!r}: {word!r} is not a number; give spacings in s, e.g. 0.2,0.25") from None
         if not v > 0:
-            raise ValueError(f"--every {text!r}: {word} is not a positive spacing in s")
+            raise ValueError(f"{text!r}: {word} is not a positive spacing in s")
         out.append(v)
     return tuple(dict.fromkeys(out))
 
@@ -84,7 +84,7 @@ def parse_keys(text: str) -> tuple[str, ...]:
     names = tuple(dict.fromkeys(w.strip() for w in text.split(",") if w.strip()))
     bad = [n for n in names if n not in KEYS]
     if bad or not names:
-        raise ValueError(f"--keys {text!r}: expected a list from {','.join(KEYS)}")
+        raise ValueError(f"{text!r}: expected a list from {','.join(KEYS)}, e.g. every,contacts")
     return names
 
 

@@ -144,9 +144,9 @@ def test_keyings_and_their_parsing():
     assert parse_every("0.2, 0.25,0.33,0.25") == (0.2, 0.25, 0.33)
     assert parse_keys("contacts,every") == ("contacts", "every")
     for bad in ("0.2,x", "0.2,-1", "0"):
-        with pytest.raises(ValueError, match="--every"):
+        with pytest.raises(ValueError, match="not a (number|positive)"):
             parse_every(bad)
-    with pytest.raises(ValueError, match="--keys"):
+    with pytest.raises(ValueError, match="expected a list from every,contacts"):
         parse_keys("every,hops")
     ks = keyings(("every", "contacts"), (0.2, 0.25))
     assert [k.label for k in ks] == ["every 0.2", "every 0.25", "contacts"]
