@@ -85,10 +85,16 @@ def failing_lines(results: Sequence[dict]) -> list[str]:
         missed = [c for c in r["checks"] if c["held"] is False]
         if not missed:
             continue
+        n = r["figures"].get("keyframe_conflicts", 0)
         what = "; ".join(f"{c['bound']} {number(c['value'])} (limit {number(c['limit'])}): "
-                         f"{', '.join(c['causes']) or NOT_TOLD}" for c in missed)
+                         + (", ".join(_cause(k, n) for k in c["causes"]) or NOT_TOLD) for c in missed)
         lines.append(f"- {_pair_name(r)} ({r['set']}): {what}")
     return lines
+
+
+def _cause(name: str, conflicts: int) -> str:
+    """A cause category, with the count of keyframe conflicts for "keyframes contradict the schedule"."""
+    return f"{name} ({conflicts})" if name == "keyframes contradict the schedule" else name
 
 
 def markdown_report(results: Sequence[dict], rates: dict, meta: dict) -> str:

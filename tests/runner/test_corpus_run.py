@@ -69,3 +69,28 @@ def test_bad_keyings_are_one_line(tmp_path, capsys, option, value):
 def test_a_missing_clip_is_one_line(tmp_path, capsys):
     assert main(["bench", "corpus", str(tmp_path / "none.bvh"), "--out", str(tmp_path / "o")]) == EXIT_INPUT
     assert "none.bvh: no such clip or folder" in capsys.readouterr().err
+
+
+def test_the_command_hands_its_options_to_the_corpus(tmp_path, monkeypatch):
+    """The argument glue: keyings, workers, engine, scene and the optimization options reach `run_corpus`
+    (which is replaced by a recorder: no solve)."""
+    import runner.corpus
+
+    seen = {}
+
+    def record(clips, out, keyings_, base, **kw):
+        seen.update(clips=clips, out=out, keyings=keyings_, base=base, **kw)
+        return {"markdown": "", "paths": (out / "corpus.md", out / "corpus.json"), "batch": {
+            "interrupted": False, "totals": {"counts": {"failed": 0}}}}
+
+    monkeypatch.setattr(runner.corpus, "run_corpus", record)
+    scene = REPO / "models" / "floor.xml"
+    assert main(["bench", "corpus", str(CLIP), "--every", "0.2,0.33", "--keys", "every,contacts", "--workers", "2",
+                 "--out", str(tmp_path), "--scene", str(scene), "--terms", "penetration,unit,bending,smooth",
+                 "--max-evals", "7", "--rate", "200", "--quiet"]) == EXIT_OK
+    assert seen["clips"] == [CLIP] and seen["out"] == tmp_path and seen["workers"] == 2 and seen["engine"] == "local"
+    assert [k.label for k in seen["keyings"]] == ["every 0.2", "every 0.33", "contacts"]
+    base = seen["base"]
+    assert (base.scene, base.terms, base.solve.max_evals, base.rate) == (str(scene), "penetration,unit,bending,smooth",
+                                                                        7, 200.0)
+    assert seen["quiet"] is True
