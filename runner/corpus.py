@@ -123,9 +123,11 @@ def pair_options(base: ClipOptions, keying: Keying) -> ClipOptions:
 
 def read_pair(pair: Pair, row: dict, folder: Path) -> dict:
     """A pair's result from its batch row and, when it ran, its metrics report and keyframe file:
-    {"clip", "keying", "set", "folder", "status", "error", "figures", "checks" (`check_pair`)}."""
+    {"clip", "keying", "set", "folder", "status", "error", "wall_time_s" (this run's; 0 when skipped),
+    "variable_frames", "figures", "checks" (`check_pair`)}."""
     out = {"clip": str(pair.clip), "keying": pair.keying.label, "set": pair.set, "folder": pair.folder,
-           "status": row.get("status"), "error": row.get("error") or "", "figures": {}, "checks": []}
+           "status": row.get("status"), "error": row.get("error") or "", "wall_time_s": row.get("wall_time_s"),
+           "variable_frames": row.get("variable_frames"), "figures": {}, "checks": []}
     if row.get("status") not in ("ok", "skipped"):
         return out
     try:
