@@ -3,10 +3,13 @@
 
 Steps (docs/architecture.md; the contact steps: docs/contacts.md):
 
-1. Scene: the given MJCF, or (`"auto"`) a floor and boxes fitted to where the clip's feet rest, written
-   next to the outputs as `<stem>.scene.xml` (`runner.mocap.scene.clip_scene`); the clip retargeted
-   onto it (`load_bvh_reference`: the synthetic first frame dropped, channel orders and frame time read
-   from the file, the figure keeping its bone lengths).
+1. Figure and scene: the figure (`--figure`: by default the subject's own, made from the clip's
+   HIERARCHY and written next to the outputs as `<stem>.figure.xml`, runner/mocap/figure_choice.py);
+   the given scene MJCF (with the chosen figure included), or (`"auto"`) a floor and boxes fitted to
+   where the clip's feet rest, written next to the outputs as `<stem>.scene.xml`
+   (`runner.mocap.scene.clip_scene`); the clip retargeted onto it (`load_bvh_reference`: the synthetic
+   first frame dropped, channel orders and frame time read from the file; on the subject's figure
+   without loss, docs/mocap.md).
 2. Contacts of the reference (`solver.contacts.reference_contacts`, surfaces named).
 3. Keyframes (`runner.mocap.keyframes.pick_keyframes`): evenly spaced plus the root's extremes, or at
    the contact events; written as `<stem>.keyframes.json` with the contacts (a user can edit it and
@@ -23,6 +26,7 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from runner.mocap.figure_choice import SUBJECT, choose_figure, is_default, scene_with_figure
 from runner.mocap.keyframes import pick_keyframes
 from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO, clip_scene, name_surfaces
@@ -49,7 +53,9 @@ class ClipOptions:
         keys: "every" (evenly spaced plus the root's extremes) or "contacts" (contact events).
         every: [s] key spacing (default 0.25 with "every"; with "contacts" the largest gap, None = none).
         partial: the middle keyframe fixes only the root and the legs.
-        scene: "auto" (fitted) or an MJCF file. figure: the figure's MJCF.
+        scene: "auto" (fitted) or an MJCF file. figure: "subject" (the subject's own figure, made from the
+            clip), "default" (the shipped figure) or a figure MJCF. mass: [kg] the subject's body mass
+            (None: from the stature; "subject" only).
         terms: the objective terms as for `solver.problem.parse_terms` (None: the default terms, which
             add the contact terms when the clip has contacts). weights: {term: weight} overrides.
             solve: SolveOptions (None: default_options); its `limits` follow the terms chosen for the
@@ -71,7 +77,8 @@ class ClipOptions:
     every: float | None = None
     partial: bool = False
     scene: str | os.PathLike = AUTO
-    figure: str | os.PathLike = FIGURE
+    figure: str | os.PathLike = SUBJECT
+    mass: float | None = None
     terms: str | None = None
     weights: dict = field(default_factory=dict)
     solve: SolveOptions | None = None
@@ -105,7 +112,9 @@ class ClipKeys:
 
     Attributes:
         scene: "auto" (a floor and boxes fitted to where the clip's feet rest, written to `scene_out`)
-            or a scene MJCF. figure: the figure's MJCF. root_scale: "legs" or a number (`load_bvh_reference`).
+            or a scene MJCF. figure: "subject", "default" or a figure MJCF (`choose_figure`; a subject
+            figure is written to `figure_out`). mass: [kg] the subject's body mass (None: from the stature).
+            root_scale: "legs" or a number (`load_bvh_reference`).
         keys: "every" or "contacts". every: [s] key spacing (None: 0.25 with "every", no limit with
             "contacts"). partial: the middle keyframe fixes only the root and the legs.
         extremes: with "every", also key the root's highest and lowest frames.
@@ -113,7 +122,8 @@ class ClipKeys:
     """
 
     scene: str | os.PathLike = AUTO
-    figure: str | os.PathLike = FIGURE
+    figure: str | os.PathLike = SUBJECT
+    mass: float | None = None
     root_scale: float | str = ROOT_SCALE_LEGS
     keys: str = "every"
     every: float | None = None
@@ -126,11 +136,33 @@ class ClipKeys:
 CLIP_STAGES = ("retargeting (and fitting the scene)", "contacts", "keyframes", "writing")
 
 
+def figure_path_for(scene_out: Path) -> Path:
+    """Where the subject's figure is written: beside the scene, `<stem>.figure.xml` for `<stem>.scene.xml`."""
+    name = scene_out.name
+    return scene_out.with_name(f"{name[:-len('.scene.xml')] if name.endswith('.scene.xml') else scene_out.stem}.figure.xml")
+
+
+def clip_figure_scene(clip: Path, k: ClipKeys, scene_out: Path):
+    """The figure file (`choose_figure`, a subject figure written beside `scene_out`), and the scene
+    to retarget onto: "auto", or the given scene with that figure (`scene_with_figure`, written to
+    `scene_out` when the figure differs from the scene's own; with the default figure, the given scene
+    as it is)."""
+    scene = k.scene
+    if str(scene) != AUTO and not is_default(k.figure):
+        from solver.model import load_model
+
+        check_scene(load_model(scene), scene)  # the user's scene first: a floor, the figure (file and fix named)
+    figure = choose_figure(k.figure, clip, figure_path_for(scene_out), k.mass)
+    if str(scene) != AUTO and not is_default(k.figure):
+        scene = scene_with_figure(scene, figure, scene_out)
+    return figure, scene
+
+
 def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, progress=None):
-    """A clip's scene (given or fitted), its retargeted reference, its contacts and keyframes picked
-    from it (`pick_keyframes`), written as the keyframe file `out` (with the contacts and a "source"
-    naming the clip relative to the file, the command and the root scale). `progress(i, stage)` is
-    called as each of CLIP_STAGES finishes (None: silent).
+    """A clip's figure and scene (given or fitted), its retargeted reference, its contacts and keyframes
+    picked from it (`pick_keyframes`), written as the keyframe file `out` (with the contacts, the figure
+    as "model" and a "source" naming the clip relative to the file, the command and the root scale).
+    `progress(i, stage)` is called as each of CLIP_STAGES finishes (None: silent).
 
     Returns:
         (clip_scene result, contacts, the keyframes written).
@@ -142,7 +174,8 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
         if progress is not None:
             progress(i + 1, CLIP_STAGES[i])
 
-    cs = clip_scene(clip, k.scene, k.figure, scene_out, k.root_scale)
+    figure, scene = clip_figure_scene(clip, k, scene_out)
+    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale)
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
     done(0)
@@ -153,7 +186,7 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
     done(2)
     source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
               "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
-    write_keyframes(out, keyframes, StateLayout.from_model(model), model=k.figure, scene=cs.scene_path,
+    write_keyframes(out, keyframes, StateLayout.from_model(model), model=figure, scene=cs.scene_path,
                     source=source, contacts=contacts)
     done(3)
     return cs, contacts, keyframes
@@ -168,7 +201,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
     Raises:
         InputError: as `process_clip`.
     """
-    k = ClipKeys(scene=o.scene, figure=o.figure, root_scale=o.root_scale, keys=o.keys, every=o.every,
+    k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, keys=o.keys, every=o.every,
                  partial=o.partial, command=o.command)
     from runner.console import Steps
 
@@ -180,6 +213,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
     say(f"dynsplines mocap: {clip} -> {ref.count} frames at {1 / ref.frame_time:.4g} Hz ({ref.duration:.2f} s), "
         f"{len(contacts)} contacts; scene {'fitted: ' if cs.fitted is not None else ''}{display_path(cs.scene_path)}")
     if cs.fitted is not None:
+        say(f"  fitted {cs.fitted.describe_floor()}")
         for i, (c, h) in enumerate(cs.fitted.boxes):
             say(f"  fitted box{i}: top {100 * (c[2] + h[2]):.1f} cm, x {100 * (c[0] - h[0]):.1f} .. "
                 f"{100 * (c[0] + h[0]):.1f} cm, y {100 * (c[1] - h[1]):.1f} .. {100 * (c[1] + h[1]):.1f} cm; "
@@ -235,8 +269,10 @@ def clip_paths(clip: Path, out_dir: Path, o: ClipOptions) -> dict:
         from runner.run import check_exports
 
         check_exports(o.exports)
-    if str(o.scene) == AUTO:
+    if str(o.scene) == AUTO or not is_default(o.figure):
         paths["scene"] = out_dir / f"{stem}.scene.xml"
+    if str(o.figure) == SUBJECT:
+        paths["figure"] = out_dir / f"{stem}.figure.xml"
     return paths
 
 
@@ -255,7 +291,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         (count), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
         that hold a site off the contact schedule), "stalled" ({term: violation} out of reach), "metrics"
         ({"plain", "optimized": path_metrics; "motion": {"plain", "optimized": motion_metrics}}),
-        "scene_fitted" (floor_z, boxes as centre/half lists, or None), "outputs" ({name: path})}.
+        "scene_fitted" (floor_z, floor_slope, boxes as centre/half lists, or None), "outputs" ({name: path})}.
     Raises:
         InputError: a missing or malformed clip, another skeleton (the missing joints named), an
             unwritable output, a bad option.
@@ -283,7 +319,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     run = execute(problem, options_, source, outputs, say)
     ref = source.reference
     fitted = None if cs.fitted is None else {
-        "floor_z": cs.fitted.floor_z,
+        "floor_z": cs.fitted.floor_z, "floor_slope": list(cs.fitted.floor_slope),
         "boxes": [{"center": c.tolist(), "half": h.tolist()} for c, h in cs.fitted.boxes]}
     status = "interrupted" if run.interrupted else run.solution.status.value
     result = {

@@ -5,7 +5,10 @@ keyframe_times (k,), keyframes (k, nq), keyframe_mask (k, nq), plain_frame_times
 reference_times, reference_qpos (motion capture, may be empty), scene (relative to the .npz's folder),
 wall_time_s, objective_trace, status, metrics_json, options_json, versions_json, and contacts (a structured
 array: site, start, end, surface; the reference's or the keyframe file's contacts, may be empty; files
-written before it have none).
+written before it have none). A path made from a BVH clip also has clip (the clip's path, relative to the
+.npz's folder like the scene) and clip_text (the clip's whole text, so that `dynsplines export` writes onto
+the source skeleton even when the clip has moved); every path has figure (the figure MJCF the scene
+includes, relative likewise; "" when the scene holds it inline).
 """
 from __future__ import annotations
 
@@ -67,6 +70,34 @@ def scene_reference(scene_path, npz_path) -> str:
         return str(scene)
 
 
+def scene_figure(scene_path) -> str | None:
+    """The figure file a scene MJCF includes (an `<include>` of a file with `figure:foot:` annotations),
+    resolved, or None when the scene holds its figure inline or cannot be read."""
+    import xml.etree.ElementTree as ET
+
+    scene = Path(scene_path)
+    try:
+        includes = [(scene.parent / i.get("file", "")).resolve() for i in ET.parse(scene).getroot().iter("include")]
+    except (OSError, ET.ParseError):
+        return None
+    for inc in includes:
+        try:
+            texts = ET.parse(inc).getroot().iter("text")
+            if any((t.get("name") or "").startswith("figure:foot:") for t in texts):
+                return str(inc)
+        except (OSError, ET.ParseError):
+            continue
+    return None
+
+
+def _clip_fields(reference, npz_path) -> dict:
+    """{"clip", "clip_text"} of a reference read from a BVH file (empty strings otherwise)."""
+    src = Path(reference.source) if reference is not None and reference.source else None
+    if src is None or src.suffix.lower() != ".bvh" or not src.is_file():
+        return {"clip": np.array(""), "clip_text": np.array("")}
+    return {"clip": np.array(scene_reference(src, npz_path)), "clip_text": np.array(src.read_text(encoding="utf-8"))}
+
+
 def resolve_scene(name: str, npz_path) -> Path:
     """The scene a saved path names: absolute, or relative to the .npz's folder (files written before
     that was the rule named it relative to the repository; those are found there)."""
@@ -113,6 +144,8 @@ def save_path_npz(run, path, command: dict | None = None) -> None:
         options_json=np.array(json.dumps(opts, default=str)),
         versions_json=np.array(json.dumps(versions())),
         contacts=contacts_array(run.source.metric_contacts),
+        figure=np.array(scene_reference(fig, path) if (fig := scene_figure(run.source.scene_path)) else ""),
+        **_clip_fields(reference, path),
     )
     try:
         with atomic_output(path) as tmp, open(tmp, "wb") as fh:

@@ -1,32 +1,53 @@
-"""Fit the static scene (floor height, raised boxes) to where the feet of a reference motion rest.
+"""Fit the static scene (a floor plane, raised boxes) to where the feet of a reference motion rest.
 
 Motion capture records where the feet stood, not the props. `fit_scene` turns the contact-site
-positions during contacts into a floor height and axis-aligned boxes, `scene_mjcf` writes them as a
-MuJoCo scene around the figure.
+positions during contacts into a floor plane and boxes standing on it, `scene_mjcf` writes them as a
+MuJoCo scene around the figure (docs/contacts.md "Fitted scenes").
 
 Method:
 1. Stances: a foot's site contacts that overlap in time form one stance (`contacts.foot_contacts`).
    Its rest height is the lowest of its sites' median heights over their contacts (the sole rests on
-   its lowest site; a forefoot runner's heel hovers above). Its footprint is the x-y bounding box of
-   all its sites during their contacts.
-2. Floor: the median rest height of the stances within RAISED (0.05 m) of the lowest one.
-3. Raised stances (rest height > floor + RAISED) are clustered by single linkage: two stances join
-   when their rest heights differ by at most HEIGHT_TOL (0.08 m) and their footprints are at most
-   LINK (1.0 m) apart in x-y. 0.08 m: on 127_33 retargeted onto a floor-only scene the two stances on
-   the box rest at 0.227 and 0.271 m (the retargeting's root-height correction cannot see the box, so
-   it interpolates across it), one box. 1.0 m: the two stances on the box are 0.5 m apart; a gap of
-   a metre or more between stances at one height is more likely two props.
-4. Box per cluster: top = the mean rest height of its stances (each stance counts once, however
-   long); bottom = the floor; x-y extent = the cluster's footprint padded by MARGIN (0.2 m) on every
-   side: the sites mark only heel and toe, the sole reaches a few cm past them, and an optimized
-   path moves planted feet by a few cm; 0.2 m is also the spare the hand-made scene
-   models/run_and_step.xml gives its step. Where the padding would put a floor-level contact
-   point under the box, that side is pulled back to halfway between the footprint and the point.
+   its lowest site; a forefoot runner's heel hovers above), at that site's median x, y. Its footprint
+   is the x-y bounding box of all its sites during their contacts.
+2. Floor: a plane z = a + b x + c y through the rest points of the floor stances, fitted by least
+   squares with a soft-L1 loss (scale PLANE_SCALE, 5 mm: a stance resting a few cm off, a foot not
+   quite down, pulls the plane by its sign, not its size). The floor stances start as those within
+   RAISED (0.05 m) of the lowest one and are then those within RAISED above the plane fitted to them,
+   until they no longer change (a floor rising 5 cm along the clip keeps its far end).
+   - The slope is fitted only along the principal directions of the floor stances' x, y in which they
+     extend over MIN_SPAN (1 m) or more, and only with MIN_STANCES (4) of them or more: across a
+     straight walk the stances spread 0.2-0.3 m, where a left-right difference of the sole heights
+     (13 mm on 16_23's source feet) would pass for a 5 % cross slope; with fewer than 4 rests a plane
+     follows their scatter.
+   - A slope steeper than MAX_SLOPE (0.05, about 3 degrees) is not a capture floor's tilt (the shared
+     clips that tilt, three of six, by 0.6-1.1 degrees): the floor is fitted level instead.
+   - A tilt that moves the floor by less than LEVEL_TOL (5 mm) across the floor stances is written
+     level: the stances' rest heights scatter about the fitted floor by 2-7 mm (standard deviation,
+     the source feet of the shared clips), so such a tilt is not told from level.
+   A floor that rises along the clip is modelled as tilted in space, not drifting in time: on 07_04
+   (a walk whose floor rises 2 cm per metre) a foot flat and still on the floor rises at 0-4 mm/s
+   (frame-weighted mean 3.6 mm/s, like the standing feet of the level clips 75_03 and 83_02, 1-4 mm/s),
+   where a drift in time would raise it at 19 mm/s; a tilted plane fits its six stances to 2 mm
+   (standard deviation), a level one to 23 mm.
+3. Boxes, in the floor's frame (`FittedScene.rotation`; heights above the floor plane): raised stances
+   (rest > RAISED) are clustered by single linkage: two stances join when their rest heights differ by
+   at most HEIGHT_TOL (0.08 m) and their footprints are at most LINK (1.0 m) apart. 0.08 m: on 127_33
+   the two stances on the box rest 1-4 cm apart in height (a forefoot runner on a 25 cm box: one box).
+   1.0 m: those two stances are 0.5 m apart; a gap of a metre or more between stances at one height is
+   more likely two props.
+4. Box per cluster: top = the mean rest height of its stances above the floor (each stance counts
+   once, however long); bottom = the floor; extent = the cluster's footprint padded by MARGIN (0.2 m)
+   on every side: the sites mark only heel and toe, the sole reaches a few cm past them, and an
+   optimized path moves planted feet by a few cm; 0.2 m is also the spare the hand-made scene
+   models/run_and_step.xml gives its step. Where the padding would put a floor-level contact point
+   under the box, that side is pulled back to halfway between the footprint and the point. A box on a
+   tilted floor is tilted with it (a capture floor is tilted by the calibration, the props on it too).
 
-Limits: the floor is horizontal (no slopes), boxes are axis-aligned (no rotation about z) and stand
-on the floor, one box per cluster (an L-shaped platform becomes one bounding box), and an edge no
-foot came near is set by the margin, not by data (only the contacts bound it: an edge lies between
-the last contact on the box and the first on the floor). A surface nobody stood on is not found.
+Limits: one floor plane (a floor that bends or steps is fitted by the best plane, its stances
+scattering about it); no drift in time; boxes are square to the floor (no rotation about its normal)
+and stand on it; one box per cluster (an L-shaped platform becomes one bounding box); an edge no foot
+came near is set by the margin, not by data (only the contacts bound it: an edge lies between the last
+contact on the box and the first on the floor). A surface nobody stood on is not found.
 """
 from __future__ import annotations
 
@@ -48,6 +69,16 @@ HEIGHT_TOL = 0.08
 LINK = 1.0
 #: padding of a box's footprint on every side [m].
 MARGIN = 0.2
+#: the floor's slope is fitted only along directions in which its stances spread over this much [m].
+MIN_SPAN = 1.0
+#: a fitted tilt that moves the floor by less than this across its stances is written level [m].
+LEVEL_TOL = 0.005
+#: a fitted slope steeper than this [m/m] (about 3 degrees) is not a tilted capture floor.
+MAX_SLOPE = 0.05
+#: the floor's slope is fitted only through at least this many floor stances.
+MIN_STANCES = 4
+#: scale of the soft-L1 loss of the floor plane fit [m]: residuals beyond it count linearly.
+PLANE_SCALE = 0.005
 #: `fit_contacts`: a "rest" whose site falls faster than this [m/s^2] (half of gravity) is the top of
 #: a hop or jump, not a rest on a surface
 BALLISTIC = 0.5 * 9.81
@@ -55,20 +86,62 @@ BALLISTIC = 0.5 * 9.81
 
 @dataclass(frozen=True)
 class FittedScene:
-    """A floor plane z = floor_z and axis-aligned boxes standing on it.
+    """A floor plane z = floor_z + slope . (x, y) and boxes standing on it, square to it.
 
     Attributes:
-        floor_z: [m] height of the floor.
-        boxes: ((center (3,), half (3,)), ...) [m]: box i spans center - half .. center + half; its
-            top center[2] + half[2] is where the feet rested.
+        floor_z: [m] height of the floor at x = y = 0.
+        boxes: ((center (3,), half (3,)), ...) [m]: box i spans center +- half along the floor's axes
+            (`rotation`: the world axes when the floor is level); its top face, parallel to the floor
+            at the distance 2 half[2] above it, is where the feet rested.
+        floor_slope: (dz/dx, dz/dy) of the floor [m/m]; (0, 0): level.
     """
 
     floor_z: float
     boxes: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
+    floor_slope: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def level(self) -> bool:
+        """True when the floor is horizontal (floor_slope == (0, 0))."""
+        return not any(self.floor_slope)
+
+    def floor_height(self, x, y) -> np.ndarray:
+        """[m] height of the floor plane at world x, y [m] (arrays broadcast)."""
+        b, c = self.floor_slope
+        return self.floor_z + b * np.asarray(x, float) + c * np.asarray(y, float)
+
+    def rotation(self) -> np.ndarray:
+        """(3, 3) the floor's frame: columns x', y', n (n the floor's upward unit normal); the shortest
+        rotation taking world z to n (Rodrigues' formula), the identity when the floor is level."""
+        return _tilt_rotation(*self.floor_slope)
+
+    def tilt_deg(self) -> float:
+        """[deg] angle between the floor's normal and world z."""
+        return float(np.degrees(np.arctan(np.hypot(*self.floor_slope))))
+
+    def describe_floor(self) -> str:
+        """One line for the user: the floor's height at the origin and, if tilted, by how much and which way."""
+        if self.level:
+            return f"floor level at {100 * self.floor_z:.1f} cm"
+        b, c = self.floor_slope
+        return (f"floor tilted {self.tilt_deg():.2f} deg ({100 * b:+.2f} cm per m along x, {100 * c:+.2f} along y), "
+                f"{100 * self.floor_z:.1f} cm at x = y = 0")
 
     def box_tops(self) -> list[float]:
-        """[m] top height of each box."""
-        return [float(c[2] + h[2]) for c, h in self.boxes]
+        """[m] world height of the centre of each box's top face."""
+        n = self.rotation()[:, 2]
+        return [float(c[2] + h[2] * n[2]) for c, h in self.boxes]
+
+    def box_heights(self) -> list[float]:
+        """[m] height of each box's top above the floor, along the floor's normal (2 half[2])."""
+        return [float(2 * h[2]) for _, h in self.boxes]
+
+
+def _tilt_rotation(b: float, c: float) -> np.ndarray:
+    """(3, 3) shortest rotation taking z to the unit normal of the plane z = b x + c y (Rodrigues)."""
+    n = np.array([-b, -c, 1.0]) / np.sqrt(1.0 + b * b + c * c)
+    k = np.array([[0.0, 0.0, n[0]], [0.0, 0.0, n[1]], [-n[0], -n[1], 0.0]])  # cross-product matrix of z x n
+    return np.eye(3) + k + k @ k / (1.0 + n[2])
 
 
 @dataclass(frozen=True)
@@ -76,6 +149,7 @@ class _Stance:
     rest: float          # [m]
     lo: np.ndarray       # (2,) footprint min x, y
     hi: np.ndarray       # (2,) footprint max x, y
+    at: np.ndarray       # (2,) x, y of the rest: the resting (lowest) site's median position [m]
 
 
 def _stances(times, site_pos, contacts, sites):
@@ -83,17 +157,19 @@ def _stances(times, site_pos, contacts, sites):
     feet = {f: tuple(s for s in members if s in sites) for f, members in FEET.items()}
     out = []
     for st in foot_contacts(contacts, feet):
-        rests, pts = [], []
+        rests, ats, pts = [], [], []
         for c in contacts:
             if c.site in feet[st.site] and c.start >= st.start - 1e-9 and c.end <= st.end + 1e-9:
                 k = list(sites).index(c.site)
                 rows = mask[:, k] & (times >= c.start - 1e-9) & (times <= c.end + 1e-9)
                 if rows.any():
                     rests.append(float(np.median(site_pos[rows, k, 2])))
+                    ats.append(np.median(site_pos[rows, k, :2], axis=0))
                     pts.append(site_pos[rows, k, :2])
         if rests:
             p = np.concatenate(pts)
-            out.append(_Stance(min(rests), p.min(axis=0), p.max(axis=0)))
+            k = int(np.argmin(rests))
+            out.append(_Stance(rests[k], p.min(axis=0), p.max(axis=0), ats[k]))
     return out
 
 
@@ -102,40 +178,54 @@ def _rect_gap(a: _Stance, b: _Stance) -> float:
     return float(np.linalg.norm(d))
 
 
-def fit_scene(
-    times: np.ndarray,
-    site_pos: np.ndarray,
-    contacts: Sequence[Contact],
-    sites: Sequence[str] = SITES,
-    raised: float = RAISED,
-    height_tol: float = HEIGHT_TOL,
-    link: float = LINK,
-    margin: float = MARGIN,
-) -> FittedScene:
-    """Floor height and raised boxes from the contact-site positions during contacts (module doc).
+def _plane(at: np.ndarray, rest: np.ndarray, min_span: float, scale: float) -> tuple[float, np.ndarray]:
+    """Robust plane z = a + g . (x, y) through rest points (soft-L1 least squares, scale `scale` [m]).
 
-    Args:
-        times: (n,) [s]. site_pos: (n, s, 3) [m] site positions (world, z up). contacts: site
-            contacts (e.g. `fit_contacts`, or hand-written). sites: the s site names.
-        raised, height_tol, link, margin: [m], see the module constants.
-    Returns:
-        FittedScene; boxes sorted by their center x.
-    Raises:
-        InputError: no contact at all (nothing to fit), or shapes disagree.
-    """
-    times = np.asarray(times, float)
-    site_pos = np.asarray(site_pos, float)
-    if site_pos.shape != (len(times), len(sites), 3):
-        raise InputError(f"site_pos must have shape ({len(times)}, {len(sites)}, 3); got {site_pos.shape}")
-    stances = _stances(times, site_pos, contacts, sites)
-    if not stances:
-        raise InputError("no contacts: a scene is fitted to where the feet rest, and they never do")
+    The slope is fitted only along the principal directions of the points' x, y in which they extend
+    over at least `min_span` [m] (0 across a straight walk). Returns (a, g (2,))."""
+    from scipy.optimize import least_squares
+
+    mid = at.mean(axis=0)
+    free = np.zeros((2, 0))
+    if len(at) >= MIN_STANCES:
+        _, _, vt = np.linalg.svd(at - mid, full_matrices=False)
+        spans = np.ptp((at - mid) @ vt.T, axis=0)
+        free = vt[spans >= min_span].T  # (2, f) directions with a slope
+    d = (at - mid) @ free  # (m, f)
+
+    def resid(p):
+        return p[0] + d @ p[1:] - rest
+
+    start = np.r_[np.median(rest), np.zeros(free.shape[1])]
+    p = least_squares(resid, start, loss="soft_l1", f_scale=scale, xtol=1e-12, ftol=1e-12, gtol=1e-12).x
+    g = free @ p[1:]
+    return float(p[0] - mid @ g), g
+
+
+def _fit_floor(stances, raised, min_span, level_tol, max_slope, scale):
+    """The floor plane z = a + g . (x, y) through the floor stances: (a [m], g (2,) [m/m]) (module doc, step 2)."""
     rest = np.array([s.rest for s in stances])
-    floor_z = float(np.median(rest[rest <= rest.min() + raised]))
-    low = [s for s in stances if s.rest <= floor_z + raised]
-    high = [s for s in stances if s.rest > floor_z + raised]
-    # single-linkage clusters of the raised stances
-    label = list(range(len(high)))
+    at = np.array([s.at for s in stances])
+    on = rest <= rest.min() + raised
+    for _ in range(10):  # the floor stances: within `raised` above the plane fitted to them
+        a, g = _plane(at[on], rest[on], min_span, scale)
+        if np.hypot(*g) > max_slope:
+            a, g = _plane(at[on], rest[on], np.inf, scale)
+        new = rest - (a + at @ g) <= raised
+        if (new == on).all():
+            break
+        on = new | (rest == rest.min())
+    across = float(np.ptp(at[on] @ g)) if on.any() else 0.0
+    if across < level_tol:
+        a, g = _plane(at[on], rest[on], np.inf, scale)
+    return a, g
+
+
+def _fit_boxes(stances, raised, height_tol, link, margin):
+    """Boxes (center, half) in the floor's frame (floor at z = 0) from the stances (module doc, 3-4)."""
+    low = [s for s in stances if s.rest <= raised]
+    high = [s for s in stances if s.rest > raised]
+    label = list(range(len(high)))  # single-linkage clusters of the raised stances
 
     def root(i):
         while label[i] != i:
@@ -162,11 +252,51 @@ def fit_scene(
                     lo[side] = (flo[side] + p[side]) / 2
                 elif side >= 2 and out_hi[side - 2] > 0:
                     hi[side - 2] = (fhi[side - 2] + p[side - 2]) / 2
-        center = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (floor_z + top) / 2])
-        half = np.array([(hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2, (top - floor_z) / 2])
+        center = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, top / 2])
+        half = np.array([(hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2, top / 2])
         boxes.append((center, half))
+    return boxes
+
+
+def fit_scene(
+    times: np.ndarray,
+    site_pos: np.ndarray,
+    contacts: Sequence[Contact],
+    sites: Sequence[str] = SITES,
+    raised: float = RAISED,
+    height_tol: float = HEIGHT_TOL,
+    link: float = LINK,
+    margin: float = MARGIN,
+    min_span: float = MIN_SPAN,
+    level_tol: float = LEVEL_TOL,
+    max_slope: float = MAX_SLOPE,
+) -> FittedScene:
+    """Floor plane and raised boxes from the contact-site positions during contacts (module doc).
+
+    Args:
+        times: (n,) [s]. site_pos: (n, s, 3) [m] site positions (world, z up). contacts: site
+            contacts (e.g. `fit_contacts`, or hand-written). sites: the s site names.
+        raised, height_tol, link, margin, min_span, level_tol: [m]; max_slope: [m/m]; see the
+            module constants.
+    Returns:
+        FittedScene; boxes sorted by their center x.
+    Raises:
+        InputError: no contact at all (nothing to fit), or shapes disagree.
+    """
+    times = np.asarray(times, float)
+    site_pos = np.asarray(site_pos, float)
+    if site_pos.shape != (len(times), len(sites), 3):
+        raise InputError(f"site_pos must have shape ({len(times)}, {len(sites)}, 3); got {site_pos.shape}")
+    stances = _stances(times, site_pos, contacts, sites)
+    if not stances:
+        raise InputError("no contacts: a scene is fitted to where the feet rest, and they never do")
+    a, g = _fit_floor(stances, raised, min_span, level_tol, max_slope, PLANE_SCALE)
+    floor = FittedScene(a, (), (float(g[0]), float(g[1])))
+    rot, origin = floor.rotation(), np.array([0.0, 0.0, a])
+    local = _stances(times, (site_pos - origin) @ rot, contacts, sites)  # the floor's frame: floor at z = 0
+    boxes = [(origin + rot @ c, h) for c, h in _fit_boxes(local, raised, height_tol, link, margin)]
     boxes.sort(key=lambda b: b[0][0])
-    return FittedScene(floor_z, tuple(boxes))
+    return FittedScene(a, tuple(boxes), floor.floor_slope)
 
 
 def fit_contacts(times: np.ndarray, site_pos: np.ndarray, sites: Sequence[str] = SITES,
@@ -240,7 +370,7 @@ _SCENE = """<mujoco model="{model}">
            diffuse="0.7 0.7 0.7" specular="0.2 0.2 0.2"/>
     <light name="fill" pos="4 4 4" dir="-1 -1 -1" directional="true" castshadow="false"
            diffuse="0.25 0.25 0.25"/>
-    <geom name="floor" type="plane" pos="0 0 {floor_z:.6f}" size="0 0 0.05" material="floor"
+    <geom name="floor" type="plane" pos="0 0 {floor_z:.6f}"{quat} size="0 0 0.05" material="floor"
           contype="1" conaffinity="1"/>
 {boxes}    <camera name="side" mode="trackcom" pos="0 -5 1.2" xyaxes="1 0 0 0 0.25 1"/>
   </worldbody>
@@ -266,9 +396,19 @@ def scene_mjcf(fitted: FittedScene, figure_path: str | os.PathLike, relative_to:
     if not fig.is_file():
         raise InputError(f"figure_path {str(figure_path)!r} is not a file; give e.g. models/humanoid39.xml")
     inc = os.path.relpath(fig, Path(relative_to).resolve()) if relative_to is not None else str(fig)
+    quat = "" if fitted.level else ' quat="{:.9f} {:.9f} {:.9f} {:.9f}"'.format(*_quat(fitted.rotation()))
     boxes = "".join(
-        f'    <geom name="box{i}" type="box" pos="{c[0]:.6f} {c[1]:.6f} {c[2]:.6f}" '
+        f'    <geom name="box{i}" type="box" pos="{c[0]:.6f} {c[1]:.6f} {c[2]:.6f}"{quat} '
         f'size="{h[0]:.6f} {h[1]:.6f} {h[2]:.6f}" material="step" contype="1" conaffinity="1"/>\n'
         for i, (c, h) in enumerate(fitted.boxes)
     )
-    return _SCENE.format(model=model, figure=inc, floor_z=fitted.floor_z, boxes=boxes)
+    return _SCENE.format(model=model, figure=inc, floor_z=fitted.floor_z, quat=quat, boxes=boxes)
+
+
+def _quat(rot: np.ndarray) -> np.ndarray:
+    """(4,) unit quaternion w x y z of a rotation matrix (MuJoCo's mju_mat2Quat)."""
+    import mujoco
+
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(rot, float).ravel())
+    return q

@@ -1,7 +1,10 @@
 """Static surfaces of a scene (floor planes, boxes) and the signed distance of points to them.
 
 Used by the ground-penetration term (paper eq. 12, generalized from the plane y = 0 to every static
-plane and box of the scene) and by contact indicators.
+plane and box of the scene) and by contact indicators. Planes and boxes may have any orientation
+(a fitted scene's floor and boxes are tilted with the capture's floor, `solver.scene_fit`); heights
+"above the surface" are vertical distances (for a floor tilted by 1 degree they differ from distances
+along its normal by 0.015 %).
 """
 from __future__ import annotations
 
@@ -120,9 +123,12 @@ class StaticSurfaces:
     def surface_below(self, points: np.ndarray) -> np.ndarray:
         """Height of the highest static surface under each point (floor planes, tops of boxes).
 
-        A plane counts everywhere (its height at the point's x, y; a vertical plane, a wall, has none);
-        a box counts where the point's x, y lie within its footprint, with its top face as the surface.
-        Boxes are assumed upright (any rotation about z only), as the step box of models/run_and_step.xml is.
+        A plane counts everywhere (its height at the point's x, y; a vertical plane, a wall, has none).
+        A box counts where the vertical line through the point crosses its top face (the face whose
+        outward normal points most upward), with that face's height there: exact for a box rotated
+        about z only (a level top) and for one tilted with a tilted floor (`solver.scene_fit`). Beside
+        a tilted box's edge its side wall leans out by up to its height times the tilt; a point over
+        that band is over the floor here (a wall is no surface to stand on).
 
         Args:
             points: (..., 3) positions [m].
@@ -134,14 +140,33 @@ class StaticSurfaces:
         for p0, nrm in zip(self.plane_point, self.plane_normal):
             if abs(nrm[2]) < 1e-6:
                 continue  # a vertical plane (a wall) has no height
-            z = p0[2] - (nrm[0] * (pts[..., 0] - p0[0]) + nrm[1] * (pts[..., 1] - p0[1])) / nrm[2]
-            h = np.maximum(h, z)
-        for c, rot, half in zip(self.box_center, self.box_rot, self.box_half):
-            local = (pts - c) @ rot  # box coordinates
-            inside = (np.abs(local[..., 0]) <= half[0]) & (np.abs(local[..., 1]) <= half[1])
-            top = c[2] + np.abs(rot[2]) @ half
-            h = np.where(inside, np.maximum(h, top), h)
+            h = np.maximum(h, _plane_height(pts, p0, nrm))
+        if len(self.box_center):
+            h = np.maximum(h, self.box_tops_below(pts).max(axis=-1))
         return h
+
+    def box_tops_below(self, points: np.ndarray) -> np.ndarray:
+        """Height of each box's top face under each point (`surface_below`), -inf where it is not under it.
+
+        Args:
+            points: (..., 3) positions [m].
+        Returns:
+            (..., b) heights [m], boxes in `box_center` order.
+        """
+        pts = np.asarray(points, float)
+        out = np.full(pts.shape[:-1] + (len(self.box_center),), -np.inf)
+        for i, (c, rot, half) in enumerate(zip(self.box_center, self.box_rot, self.box_half)):
+            a = int(np.argmax(np.abs(rot[2])))  # the box axis nearest to vertical
+            n = rot[:, a] * np.sign(rot[2, a])  # outward normal of the top face
+            z = _plane_height(pts, c + half[a] * n, n)
+            on_top = np.concatenate([pts[..., :2], z[..., None]], axis=-1)
+            local = (on_top - c) @ rot  # box coordinates of the point of the top face under the point
+            inside = np.ones(z.shape, bool)
+            for b in range(3):
+                if b != a:
+                    inside &= np.abs(local[..., b]) <= half[b]
+            out[..., i] = np.where(inside, z, -np.inf)
+        return out
 
     def height_above(self, points: np.ndarray) -> np.ndarray:
         """Height of points above the surface below them [m] (negative: inside or under it).
@@ -155,3 +180,8 @@ class StaticSurfaces:
         """
         pts = np.asarray(points, float)
         return pts[..., 2] - self.surface_below(pts)
+
+
+def _plane_height(pts: np.ndarray, p0: np.ndarray, nrm: np.ndarray) -> np.ndarray:
+    """(...,) height [m] at the x, y of (..., 3) points of the plane through p0 with normal nrm (nrm[2] != 0)."""
+    return p0[2] - (nrm[0] * (pts[..., 0] - p0[0]) + nrm[1] * (pts[..., 1] - p0[1])) / nrm[2]

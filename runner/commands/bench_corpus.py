@@ -9,6 +9,7 @@ from pathlib import Path
 
 from runner.animate_options import add_solve_arguments, clip_terms
 from runner.batch import ENGINES, find_clips
+from runner.commands.mocap import add_figure_arguments, add_root_scale_argument
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.parser import positive
 from runner.paths import REPO
@@ -56,6 +57,8 @@ def register(bsub) -> None:
     c.add_argument("--out", type=Path, default=Path("renders") / "corpus", metavar="DIR",
                    help="output folder [renders/corpus]")
     c.add_argument("--scene", default=AUTO, help="scene MJCF, or 'auto' (a scene fitted per clip) [auto]")
+    add_figure_arguments(c)
+    add_root_scale_argument(c)
     add_solve_arguments(c, terms_help="the default terms; with the clip's contacts also planted,clearance")
     c.add_argument("--quiet", action="store_true", help="no progress bar or per-pair lines")
     c.set_defaults(func=run)
@@ -70,7 +73,8 @@ def run(args) -> int:
     if args.ray_address is not None and args.engine != "ray":
         raise InputError(f"--ray-address {args.ray_address} goes with --engine ray")
     clips = find_clips(args.clips or [CORPUS])
-    base = ClipOptions(scene=args.scene, command=PROG, **clip_terms(args), rate=args.rate)
+    base = ClipOptions(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale, command=PROG,
+                       **clip_terms(args), rate=args.rate)
     say = (lambda *a: None) if args.quiet else print
     r = run_corpus(clips, args.out, keyings(args.keys, args.every), base, workers=args.workers, engine=args.engine,
                    ray_address=args.ray_address, say=say, quiet=args.quiet)

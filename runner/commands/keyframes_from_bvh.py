@@ -1,8 +1,9 @@
 """`dynsplines keyframes-from-bvh CLIP --out FILE`: a keyframe file made from a BVH motion-capture clip.
 
 Arguments: CLIP (a .bvh file), --out FILE (.keyframes.json), --every SECONDS (0.25), --keys every|contacts,
---scene auto|MJCF (auto: a floor and boxes fitted to the clip, written next to --out), --model MJCF (the
-figure, default models/humanoid39.xml), --partial, --no-root-extremes.
+--scene auto|MJCF (auto: a floor and boxes fitted to the clip, written next to --out), --figure
+subject|default|MJCF (default: the subject's own figure, written next to --out as NAME.figure.xml),
+--mass KG, --partial, --no-root-extremes.
 The written file records the command in "source" and the clip's contacts in "contacts"
 (solver/keyframe_file.py format).
 """
@@ -14,14 +15,15 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from runner.commands.mocap import add_root_scale_argument
+from runner.commands.mocap import add_figure_arguments, add_root_scale_argument
 from runner.console import Steps
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
+from runner.mocap.figure_choice import SUBJECT
 from runner.mocap.keyframes import KEY_CHOICES
 from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO
 from runner.parser import OneLineParser
-from runner.pipeline import CLIP_STAGES, FIGURE, ClipKeys, write_clip_keyframes
+from runner.pipeline import CLIP_STAGES, ClipKeys, write_clip_keyframes
 from solver.errors import InputError
 
 PROG = "dynsplines keyframes-from-bvh"
@@ -49,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scene", default=AUTO,
                    help="scene MJCF (figure + surfaces), or 'auto' (default): a floor and boxes fitted to where "
                         "the clip's feet rest, written next to --out as NAME.scene.xml")
-    p.add_argument("--model", default=None, help="figure MJCF [models/humanoid39.xml]")
+    add_figure_arguments(p)
     p.add_argument("--partial", action="store_true",
                    help="make the middle keyframe partial: it fixes only the root and the legs (torso and arms "
                         "free for the optimizer); default: full keyframes")
@@ -74,8 +76,10 @@ def command_line(args) -> str:
     if args.every is not None:
         words += ["--every", f"{args.every:g}"]
     words += ["--keys", args.keys, "--scene", args.scene]
-    if args.model:
-        words += ["--model", args.model]
+    if str(args.figure) != SUBJECT:
+        words += ["--figure", args.figure]
+    if args.mass is not None:
+        words += ["--mass", f"{args.mass:g}"]
     words += ["--partial"] * bool(args.partial) + ["--no-root-extremes"] * bool(args.no_root_extremes)
     if args.root_scale != ROOT_SCALE_LEGS:
         words += ["--root-scale", f"{args.root_scale:g}"]
@@ -92,7 +96,7 @@ def run(args, command: str | None = None) -> int:
     out = Path(args.out)
     if not out.parent.is_dir():
         raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first")
-    k = ClipKeys(scene=args.scene, figure=Path(args.model) if args.model else FIGURE, root_scale=args.root_scale,
+    k = ClipKeys(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale,
                  keys=args.keys, every=args.every, partial=args.partial, extremes=not args.no_root_extremes,
                  command=command or command_line(args))
     with Steps(f"keyframes from {Path(args.clip).name}", len(CLIP_STAGES), args.quiet, unit=" stages") as bar:

@@ -12,7 +12,7 @@ from runner.mocap.keyframes import KEY_CHOICES
 from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO
 from runner.parser import positive, positive_or
-from runner.pipeline import FIGURE, ClipOptions, default_out_dir, process_clip
+from runner.pipeline import ClipOptions, default_out_dir, process_clip
 
 PROG = "dynsplines mocap"
 
@@ -50,16 +50,30 @@ def add_clip_arguments(p) -> None:
     p.add_argument("--scene", default=AUTO,
                    help="scene MJCF, or 'auto' (default): a floor and boxes fitted to where the clip's feet rest, "
                         "written next to the outputs as <stem>.scene.xml")
-    p.add_argument("--model", type=Path, default=FIGURE, help="figure MJCF [models/humanoid39.xml]")
+    add_figure_arguments(p)
     add_root_scale_argument(p)
+
+
+def add_figure_arguments(p) -> None:
+    """`--figure subject|default|FILE.xml` (with its older name `--model FILE.xml`) and `--mass KG`
+    (`mocap`, `batch`, `keyframes-from-bvh`)."""
+    from runner.mocap.figure_choice import SUBJECT
+
+    p.add_argument("--figure", "--model", dest="figure", default=SUBJECT, metavar="subject|default|FILE.xml",
+                   help="the figure the clip is retargeted onto: 'subject' (default) the subject's own, made from "
+                        "the clip's skeleton and written next to the outputs as <stem>.figure.xml (no loss, the root "
+                        "path as captured); 'default' the shipped figure (models/humanoid39.xml, fixed proportions); "
+                        "or a figure MJCF file (--model FILE is the older name)")
+    p.add_argument("--mass", type=positive(float), default=None, metavar="KG",
+                   help="body mass of the subject's figure [kg] [from the stature: 22.9 kg/m^2 x stature^2]")
 
 
 def add_root_scale_argument(p) -> None:
     """`--root-scale legs|X` (`mocap`, `batch`, `keyframes-from-bvh`)."""
     p.add_argument("--root-scale", type=positive_or(ROOT_SCALE_LEGS), default=ROOT_SCALE_LEGS, metavar="legs|X",
                    help="scale of the captured root path: 'legs' (default) the figure's leg length over the "
-                        "subject's, so that its strides cover the subject's ground; a number, e.g. 1 for the "
-                        "path as captured (a scene built around the capture's coordinates)")
+                        "subject's, so that its strides cover the subject's ground (1 on the subject's own figure); "
+                        "a number, e.g. 1 for the path as captured (a scene built around the capture's coordinates)")
 
 
 def clip_options(args, prog: str, **fields) -> ClipOptions:
@@ -67,8 +81,8 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
     command line recorded as `prog` plus its arguments; `fields` are the command's own (outputs, render)."""
     name = prog.split()[-1]
     return ClipOptions(
-        keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.model,
-        root_scale=args.root_scale,
+        keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.figure,
+        mass=args.mass, root_scale=args.root_scale,
         **clip_terms(args), rate=args.rate,
         command=f"{prog} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == [name] else prog, **fields,
     )

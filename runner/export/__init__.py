@@ -13,7 +13,7 @@ from pathlib import Path
 
 from solver.errors import InputError
 
-__all__ = ["FORMATS", "ExportResult", "export_saved_path", "check_output_name"]
+__all__ = ["FORMATS", "ExportResult", "export_saved_path", "check_output_name", "prepare_export"]
 
 #: output file extension -> format.
 FORMATS = {".bvh": "BVH", ".glb": "glTF binary"}
@@ -50,15 +50,15 @@ def check_output_name(out: str | Path, option: str = "--to") -> str:
     return FORMATS[suffix]
 
 
-def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized",
-                      fps: float | None = None, option: str = "--to") -> ExportResult:
-    """Sample motion `which` of saved path `npz` at `fps` [Hz] (default: the reference clip's rate, else
-    30) and write it to `out` (.bvh or .glb, chosen by the extension), atomically. `option` is the
-    command-line option that named `out` (for messages).
+def prepare_export(npz: str | Path, out: str | Path, which: str = "optimized", fps: float | None = None,
+                   option: str = "--to"):
+    """What every export needs: the output format, the saved path, its scene and the motion sampled.
 
+    Returns:
+        (format, SavedPath, MjModel, `runner.export.sampling.Motion`).
     Raises:
-        InputError: unknown extension, unwritable folder, unreadable path or scene, unknown or absent
-            motion, bad fps, or a failed write (an earlier file at `out` is then unchanged).
+        InputError: unknown extension, unwritable folder, unreadable path or scene, a scene for another
+            figure, unknown or absent motion, bad fps.
     """
     from runner.export.sampling import WHICH, default_fps, sample_motion
     from runner.files import check_writable_dir
@@ -66,7 +66,6 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
     from solver.layout import StateLayout
     from solver.model import load_model
 
-    t0 = time.perf_counter()
     fmt = check_output_name(out, option)
     if which not in WHICH:
         raise InputError(f"--which {which!r}: unknown motion; choose one of {', '.join(WHICH)}")
@@ -77,7 +76,22 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
         raise InputError(f"{npz}: frames have {saved.nq} columns but the scene {saved.scene} has nq = {model.nq}; "
                          "the path was made for another figure")
     rate = default_fps(saved) if fps is None else float(fps)
-    motion = sample_motion(saved, which, rate, StateLayout.from_model(model).quat_slots)
+    return fmt, saved, model, sample_motion(saved, which, rate, StateLayout.from_model(model).quat_slots)
+
+
+def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized",
+                      fps: float | None = None, option: str = "--to") -> ExportResult:
+    """Sample motion `which` of saved path `npz` at `fps` [Hz] (default: the reference clip's rate, else
+    30) and write it to `out` (.bvh on the figure's own skeleton, or .glb, chosen by the extension),
+    atomically. `option` is the command-line option that named `out` (for messages). The source
+    skeleton of a path made from a clip: `runner.mocap.source_export`.
+
+    Raises:
+        InputError: unknown extension, unwritable folder, unreadable path or scene, unknown or absent
+            motion, bad fps, or a failed write (an earlier file at `out` is then unchanged).
+    """
+    t0 = time.perf_counter()
+    fmt, saved, model, motion = prepare_export(npz, out, which, fps, option)
     try:
         if fmt == "BVH":
             from runner.export.bvh import write_bvh

@@ -9,7 +9,7 @@ quaternions (the pipeline: runner/mocap/retarget.py).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +35,9 @@ class BvhClip:
             channels where a joint has them).
         frame_time: [s] time between frames.
         source: the file.
+        end_sites: {joint index: (3,) End Site OFFSET [BVH units]} for the leaf joints (those without
+            child joints; the BVH grammar gives a leaf an End Site).
+        raw: (n, C) the MOTION section's numbers as written, C = total channel count (file order).
     """
 
     names: tuple[str, ...]
@@ -45,6 +48,8 @@ class BvhClip:
     local_pos: np.ndarray
     frame_time: float
     source: str
+    end_sites: dict = field(default_factory=dict)
+    raw: np.ndarray | None = None
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -291,6 +296,7 @@ def read_bvh(path: str | Path) -> BvhClip:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise InputError(f"{src}: joint name(s) {', '.join(dup)} appear more than once; joint names must be unique")
+    end_sites = {j: np.array(list(joint.EndSite), float) for j, joint in enumerate(joints) if not joint.Children}
     n = len(joints[0].Keyframes)
     quat = np.empty((n, len(joints), 4))
     pos = np.empty((n, len(joints), 3))
@@ -306,4 +312,14 @@ def read_bvh(path: str | Path) -> BvhClip:
         pos,
         float(container.FrameTime),
         src,
+        end_sites,
+        _motion_numbers(text),
     )
+
+
+def _motion_numbers(text: str) -> np.ndarray:
+    """(n, C) the numbers of the MOTION section's frame lines (already checked by `_check_bvh_text`)."""
+    lines = text.splitlines()
+    m = next(i for i, ln in enumerate(lines) if ln.split()[:1] == ["MOTION"])
+    rows = [ln.split() for ln in lines[m + 1:] if ln.strip()][2:]  # after "Frames:" and "Frame Time:"
+    return np.array(rows, float)

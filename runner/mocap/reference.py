@@ -1,4 +1,9 @@
-"""A BVH clip as a reference motion of the figure: parsed, retargeted, cleaned up (runner/mocap/retarget.py)."""
+"""A BVH clip as a reference motion of the figure: parsed, retargeted, cleaned up (runner/mocap/retarget.py).
+
+On the subject's own figure (runner/mocap/subject_figure.py: made from this clip's skeleton) the
+retargeting is lossless: the root path is the captured one (no scale, no height correction), and the
+modelled joints' positions are the capture's (docs/mocap.md, "What the figure keeps").
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -15,6 +20,7 @@ from runner.mocap.retarget import (
     retarget,
     tidy_quaternions,
 )
+from runner.mocap.subject_figure import figure_skeleton_digest, skeleton_digest
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.layout import StateLayout
@@ -50,9 +56,14 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
             the subject's, `leg_length_ratio`, so that the figure's strides cover the ground the
             subject's did) or a number > 0 (1: the root path as captured, e.g. for a scene built around
             the capture's own coordinates, or a keyframe file made before the scaling).
+    On the subject's own figure (the model's figure records this clip's skeleton,
+    `runner.mocap.subject_figure.figure_skeleton_digest`) "legs" is 1 (the figure's legs are the
+    subject's) and the root height is not corrected: the root path is the captured one, so that the
+    reference reproduces the capture (the scene is fitted to the captured feet instead).
+
     Returns:
         Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s],
-        root_scale; n = frames in the file - 1.
+        root_scale, captured_root; n = frames in the file - 1.
     Raises:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
             joint the retargeting needs is missing, the model lacks a joint or site it needs, or
@@ -69,17 +80,19 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
         return Reference(np.arange(len(qpos)) * clip.frame_time, qpos, str(path), clip.frame_time)
     layout = StateLayout.from_model(model)
     figure = check_figure(Figure.from_model(model))
-    scale = _root_scale(root_scale, clip, model, path)
+    own = figure_skeleton_digest(model) == skeleton_digest(clip)  # the subject's own figure
+    scale = 1.0 if own and root_scale == ROOT_SCALE_LEGS else _root_scale(root_scale, clip, model, path)
     qpos = retarget(clip, figure, layout, scale)[1:]  # frame 0 is the synthetic T-pose
     step(2, "retargeted")
     qpos, _ = clamp_hyperextension(qpos, figure)
     step(3, "clamped")
-    qpos = correct_root_height(qpos, model, clip.frame_time)
+    if not own:
+        qpos = correct_root_height(qpos, model, clip.frame_time)
     step(4, "root height")
     qpos = tidy_quaternions(qpos, layout)
     step(5, "done")
     times = np.arange(len(qpos)) * clip.frame_time
-    return Reference(times, qpos, str(path), clip.frame_time, scale)
+    return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own)
 
 
 def _root_scale(root_scale, clip, model, path) -> float:

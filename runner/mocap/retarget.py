@@ -12,7 +12,7 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    MuJoCo axes: BVH is Y up with the figure facing +Z and its left at +X; MuJoCo is z up, facing +x,
    left +y. So (x, y, z)_mujoco = (Z, X, Y)_bvh, a proper rotation (`BVH_TO_MUJOCO`).
 3. Retargeting: each figure body's world orientation is the corresponding CMU bone's world orientation
-   times a fixed rest-pose offset R_off (`_rest_offsets`): the smallest rotation that takes the figure
+   times a fixed rest-pose offset R_off (`rest_offsets`): the smallest rotation that takes the figure
    bone's direction at the identity pose (`solver.figure.Figure.segments`: hip -> knee, knee -> ankle,
    ankle -> ball of the foot, shoulder -> elbow, elbow -> wrist) to the CMU bone's direction in the
    CMU rest (T-) pose (all
@@ -20,8 +20,14 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    along the subject's own rest bone directions (the CMU thigh and shin bones point about 20 degrees
    outward in its rest pose, so mapping them to the identity would cross the figure's legs); the
    pelvis and the torso have R_off = identity. Local joint quaternions follow as
-   q_joint = conj(q_parent_world) q_child_world, unit, w x y z, hemisphere-consistent over time. The
-   figure keeps its own bone lengths; the root position is the CMU Hips position scaled by the ratio
+   q_joint = conj(q_parent_world) q_child_world, unit, w x y z, hemisphere-consistent over time.
+   Joints the figure merges are composed, not dropped: a body's world orientation includes every
+   rotation above its driving joint (the torso's is LowerBack Spine Spine1; the thigh's includes
+   LHipJoint), so the joint quaternion between two bodies is the chain's composition (docs/mocap.md,
+   "What the figure keeps"). On the subject's own figure (runner/mocap/subject_figure.py: the figure's
+   segments are the subject's bones, its ball site the toe joint) the hip, knee, ankle and toe-joint
+   positions relative to the hips are the capture's, and the root path is the captured one. On another
+   figure, which keeps its own bone lengths, the root position is the CMU Hips position scaled by the ratio
    of the figure's leg length to the subject's (`leg_length_ratio`), as humanoid retargeting scales
    root motion by the hips' height (Unity's `Animator.humanScale`): a subject 10% taller than the
    figure covers 10% more ground per stride, and the figure's shorter legs, at the subject's joint
@@ -95,6 +101,8 @@ class Reference:
         source: the BVH file it came from.
         frame_time: [s] time between frames of the clip.
         root_scale: the scale applied to the captured root path (`retarget`; 1: as captured).
+        captured_root: the root path is the captured one, height included (the subject's own figure:
+            no height correction, `runner.mocap.reference.load_bvh_reference`).
     """
 
     times: np.ndarray
@@ -102,6 +110,7 @@ class Reference:
     source: str
     frame_time: float
     root_scale: float = 1.0
+    captured_root: bool = False
 
     @property
     def count(self) -> int:
@@ -172,7 +181,7 @@ def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q)
 
 
-def _rest_offsets(clip: BvhClip, figure: Figure) -> dict[str, np.ndarray]:
+def rest_offsets(clip: BvhClip, figure: Figure) -> dict[str, np.ndarray]:
     """Rest-pose offset R_off (unit quaternion) per figure body: figure world = CMU world * R_off.
 
     For a limb bone, the smallest rotation taking the figure's segment direction at the identity pose
@@ -295,7 +304,7 @@ def retarget(clip: BvhClip, figure: Figure, layout: StateLayout, root_scale: flo
     check_skeleton(clip)
     check_figure(figure)
     qw, pw = cmu_world(clip)
-    offsets = _rest_offsets(clip, figure)
+    offsets = rest_offsets(clip, figure)
     body_q = {b: mul(qw[:, clip.index(j)], offsets[b]) for b, (j, _) in BONE_MAP.items()}
     n = len(qw)
     qpos = np.zeros((n, layout.nq))

@@ -1,8 +1,8 @@
 """The scene a clip is retargeted onto: a given MJCF file, or one fitted to where the clip's feet rest
-(`--scene auto`: a floor and boxes, solver/scene_fit.py), written next to the outputs."""
+(`--scene auto`: a floor plane, tilted if the capture's is, and boxes; solver/scene_fit.py), written
+next to the outputs."""
 from __future__ import annotations
 
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,10 +41,13 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
                root_scale: float | str = ROOT_SCALE_LEGS) -> ClipScene:
     """Retarget `clip` onto `scene`, or with scene == "auto" onto a scene fitted to it.
 
-    Fitting (docs/contacts.md): retarget onto a floor-only scene, find where the feet rest
-    (`fit_contacts`), fit a floor and boxes (`fit_scene`), write the scene MJCF to `fitted_out` (its
-    include of the figure relative to that folder, so it loads from where it is saved), and retarget
-    again onto it (the height correction then stands the feet on the fitted boxes).
+    Fitting (docs/contacts.md "Fitted scenes"): retarget onto the figure alone (no surfaces, so no
+    root-height correction: the feet stay at the heights the capture gives them, a floor that rises
+    along the clip included; a correction onto a level floor would flatten it frame by frame, and
+    hides a box it cannot see), find where the feet rest (`fit_contacts`), fit a floor plane and boxes
+    (`fit_scene`), write the scene MJCF to `fitted_out` (its include of the figure relative to that
+    folder, so it loads from where it is saved), and retarget again onto it (the height correction
+    then stands the feet on the fitted floor and boxes).
 
     Args:
         clip: the BVH file. scene: an MJCF file or "auto". figure: the figure's MJCF
@@ -56,12 +59,9 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     if str(scene) != AUTO:
         model = load_model(scene)
         return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, Path(scene))
-    with tempfile.TemporaryDirectory(prefix="dynsplines-floor-") as tmp:
-        floor = Path(tmp) / "floor.xml"
-        floor.write_text(scene_mjcf(FittedScene(0.0), figure))
-        first = load_bvh_reference(clip, load_model(floor), root_scale=root_scale)
-        floor_model = load_model(floor)
-    pos = site_positions(floor_model, first.qpos)
+    bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
+    first = load_bvh_reference(clip, bare, root_scale=root_scale)
+    pos = site_positions(bare, first.qpos)
     fitted = fit_scene(first.times, pos, fit_contacts(first.times, pos))
     out = Path(fitted_out)
     if not out.parent.is_dir():
@@ -82,12 +82,9 @@ def name_surfaces(model, reference: Reference, contacts: list[Contact]) -> list[
     for c in contacts:
         i = int(np.clip(round((c.start + c.end) / 2 / reference.frame_time), 0, reference.count - 1))
         p = site_positions(model, reference.qpos[i:i + 1], (c.site,))[0, 0]
-        name, top = (planes[0] if planes else ""), -np.inf
-        boxes = zip(surfaces.box_center, surfaces.box_rot, surfaces.box_half, strict=True)
-        for b, (ctr, rot, half) in enumerate(boxes):
-            local = (p - ctr) @ rot
-            z = ctr[2] + np.abs(rot[2]) @ half
-            if abs(local[0]) <= half[0] and abs(local[1]) <= half[1] and z > top:
-                name, top = surfaces.names[n_planes + b], z
+        tops = surfaces.box_tops_below(p)
+        name = planes[0] if planes else ""
+        if np.isfinite(tops).any():
+            name = surfaces.names[n_planes + int(np.argmax(tops))]
         out.append(Contact(c.site, c.start, c.end, name))
     return out

@@ -105,7 +105,44 @@ def test_keyframes_from_bvh_records_a_model_that_exists(tmp_path):
                                                                  f'file="{MODELS / "humanoid39.xml"}"'))
     out = tmp_path / "k.json"
     assert main(["keyframes-from-bvh", str(MODELS / "cmu" / "127_33.bvh"), "--out", str(out), "--scene", str(scene),
-                 "--every", "0.5"]) == 0
+                 "--every", "0.5", "--figure", "default"]) == 0
     doc = json.loads(out.read_text())
     assert (out.parent / doc["model"]).resolve().is_file()
     assert (out.parent / doc["scene"]).resolve() == scene.resolve()
+
+
+def test_a_capture_floor_that_rises_along_the_walk_is_fitted_tilted(tmp_path):
+    """07_04 (a slow walk whose capture floor rises about 5 cm along the walk, ../shared/data/cmu/README.md):
+    `keyframes-from-bvh --scene auto` writes a floor tilted the way the source's own feet rise. The
+    independent reference: a straight line through the heights of the source's toe-base joints (its
+    own forward kinematics) at the frames they are still, against x; the fitted floor's slope along x
+    within 0.004 of it (20 %), no cross slope (the stances spread 0.25 m across the walk), and the
+    written plane geom's normal tilted by that slope (MuJoCo's geom pose)."""
+    import mujoco
+    import numpy as np
+
+    from runner.mocap.bvh import read_bvh
+    from runner.mocap.retarget import cmu_world
+
+    src = REPO.parent / "shared" / "data" / "cmu" / "07_04.bvh"
+    if not src.exists():
+        pytest.skip("no shared clip ../shared/data/cmu/07_04.bvh")
+    clip = read_bvh(src)
+    _, p = cmu_world(clip)
+    x, z = [], []
+    for joint in ("LeftToeBase", "RightToeBase"):
+        q = p[1:, clip.index(joint)]
+        still = np.linalg.norm(np.gradient(q, clip.frame_time, axis=0), axis=1) < 0.2
+        x.append(q[still, 0])
+        z.append(q[still, 2])
+    source_slope = np.polyfit(np.concatenate(x), np.concatenate(z), 1)[0]
+    assert source_slope > 0.01  # the clip does rise: more than 1 cm per metre
+
+    out = tmp_path / "k.json"
+    assert main(["keyframes-from-bvh", str(src), "--out", str(out), "--scene", "auto", "--quiet"]) == 0
+    scene = out.parent / json.loads(out.read_text())["scene"]
+    surfaces = StaticSurfaces.from_model(mujoco.MjModel.from_xml_path(str(scene)))
+    (n,) = surfaces.plane_normal
+    slope = -n[:2] / n[2]
+    assert slope[0] == pytest.approx(source_slope, abs=0.004)
+    assert abs(slope[1]) < 0.002

@@ -132,7 +132,7 @@ def test_clip_commands_read_every_option(command, tmp_path, reads, monkeypatch):
         "totals": {"status": "done", "counts": {"failed": 0}}, "wall_time_s": 0.0, "summary": ("a", "b"),
         "interrupted": False})
     clip_glue = ["--keys", "contacts", "--every", "0.3", "--partial", "--scene", MODELS / "run_and_step.xml",
-                 "--model", MODELS / "humanoid39.xml", "--root-scale", "1"]
+                 "--figure", MODELS / "humanoid39.xml", "--mass", "65", "--root-scale", "1"]
     if command == "mocap":
         variants = [["mocap", CLIP, "--out-dir", tmp_path / "o", "--metrics", tmp_path / "m.json", *clip_glue,
                      *output_glue(tmp_path, render), *solve_glue(tmp_path)] for render in (True, False)]
@@ -227,8 +227,11 @@ def test_the_other_commands_read_every_option(tmp_path, reads, monkeypatch, save
     runs = {
         "keyframes-from-bvh": [["keyframes-from-bvh", clip, "--out", tmp_path / "k.keyframes.json", "--every", "0.3",
                                 "--keys", "every", "--scene", "auto", "--model", MODELS / "humanoid39.xml", "--partial",
-                                "--no-root-extremes", "--quiet", "--root-scale", "1"]],
-        "export": [["export", saved_npz, "--to", tmp_path / "e.bvh", "--fps", "24", "--which", "plain", "--quiet"]],
+                                "--no-root-extremes", "--quiet", "--root-scale", "1"],
+                               ["keyframes-from-bvh", clip, "--out", tmp_path / "s.keyframes.json", "--figure", "subject",
+                                "--mass", "65", "--quiet"]],
+        "export": [["export", saved_npz, "--to", tmp_path / "e.bvh", "--fps", "24", "--which", "plain", "--quiet",
+                    "--skeleton", "figure"]],
         "orient": [["orient", MODELS / "orient_example.json", "--out", tmp_path / "o.npz", "--subdivision", "adaptive",
                     "--per-segment", "2", "--tol", "1e-2", "--max-frames", "30", "--plot", tmp_path / "o.png", "--quiet"],
                    ["orient", MODELS / "orient_example.json", "--out", tmp_path / "o2.npz", "--rounds", "1",

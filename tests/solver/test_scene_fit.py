@@ -13,7 +13,7 @@ import pytest
 
 from solver.contacts import SITES, Contact, site_positions
 from solver.errors import InputError
-from solver.scene_fit import MARGIN, FittedScene, fit_contacts, fit_scene, scene_mjcf
+from solver.scene_fit import LEVEL_TOL, MARGIN, MAX_SLOPE, FittedScene, fit_contacts, fit_scene, scene_mjcf
 from solver.surfaces import StaticSurfaces
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -199,3 +199,99 @@ def test_fit_contacts_drops_a_heel_that_rises_while_its_toe_falls():
     cs = fit_contacts(times, pos)
     assert all(c.end <= 0.5 + 1e-9 or c.start >= 0.5 + up - 1e-9 for c in cs), cs
     assert fit_scene(times, pos, cs).boxes == ()
+
+
+# -- tilted floors ----------------------------------------------------------------------------------
+
+
+def plane_stances(slope, z0=0.03, box=None, lr=0.0, back=False):
+    """Hand-built walk: 8 stances of alternating feet along x (0.6 m apart, feet 0.2 m apart in y),
+    the toe resting exactly on the plane z = z0 + slope . (x, y) (left feet `lr` higher), the heel 5 cm
+    above it (a hovering heel: the toe is the rest). back: and 8 more walking back at y = 1.5 (the
+    stances then spread in y too). box = (x0, x1, height): stances with x0 <= x <= x1 rest that far
+    above the plane, along the vertical (the box is tilted with the floor)."""
+    spec = []
+    for lane, y0 in enumerate((0.0, 1.5) if back else (0.0,)):
+        for i in range(8):
+            x, y = -2.0 + 0.6 * i, y0 + (0.1 if i % 2 else -0.1)
+            site = "l_toe" if i % 2 else "r_toe"
+            z = z0 + slope[0] * x + slope[1] * y + (lr if i % 2 else 0.0)
+            if box is not None and box[0] <= x <= box[1] and lane == 0:
+                z += box[2]
+            t = 0.25 * (i + 8 * lane)
+            spec.append((site, t, t + 0.2, x, y, z))
+    times, pos, cs = stances(spec)
+    return times, pos, cs
+
+
+def test_tilted_floor_and_box_with_known_answer():
+    slope = (0.02, -0.01)
+    times, pos, cs = plane_stances(slope, box=(-0.5, 0.5, 0.25), back=True)
+    f = fit_scene(times, pos, cs)
+    np.testing.assert_allclose(f.floor_slope, slope, atol=1e-6)
+    assert f.floor_z == pytest.approx(0.03, abs=1e-6)
+    assert f.tilt_deg() == pytest.approx(np.degrees(np.arctan(np.hypot(*slope))), abs=1e-4)
+    # the box is square to the floor; its top, 0.25 m above the floor along the vertical, is 0.25 cos(tilt)
+    # along the floor's normal
+    assert f.box_heights() == pytest.approx([0.25 / np.sqrt(1 + np.dot(slope, slope))], abs=1e-6)
+    # every rest point lies on the surface under it in the written scene (MuJoCo's own geom poses)
+    model = mujoco.MjModel.from_xml_string(scene_mjcf(f, FIGURE))
+    s = StaticSurfaces.from_model(model)
+    np.testing.assert_allclose(s.plane_normal[0], [-slope[0], -slope[1], 1] / np.sqrt(1 + np.dot(slope, slope)),
+                               atol=1e-9)
+    rests = np.array([pos[np.searchsorted(times, c.start), SITES.index(c.site)] for c in cs])
+    np.testing.assert_allclose(s.height_above(rests), 0.0, atol=1e-6)
+
+
+def test_a_straight_walk_gets_no_cross_slope():
+    """Stances 0.2 m apart across the walk, the left feet 1 cm higher: no 5 % cross slope; the slope
+    along the walk (the stances' principal direction, a little off x as the feet alternate) still found,
+    to within what the offset does to it (the left feet stand 0.3 m further along x on average than the
+    right ones: a 1 cm offset correlates with x)."""
+    times, pos, cs = plane_stances((0.02, 0.0), lr=0.01)
+    f = fit_scene(times, pos, cs)
+    assert abs(f.floor_slope[1]) < 1e-3
+    assert f.floor_slope[0] == pytest.approx(0.02, abs=2e-3)
+    both = fit_scene(times, pos, cs, min_span=0.1, max_slope=1.0)  # a cross slope fitted anyway
+    assert both.floor_slope[1] == pytest.approx(0.05, abs=5e-3)
+
+
+def test_a_tilt_within_the_rest_scatter_is_written_level():
+    """1 mm/m over the 4.2 m of the stances moves the floor 4.2 mm < LEVEL_TOL: level, no quat written."""
+    assert LEVEL_TOL > 0.001 * 4.2
+    times, pos, cs = plane_stances((0.001, 0.0))
+    f = fit_scene(times, pos, cs)
+    assert f.level and f.floor_slope == (0.0, 0.0)
+    assert f.floor_z == pytest.approx(0.03, abs=2.2e-3)  # the middle of the ramp's 4.2 mm
+    assert "quat" not in scene_mjcf(f, FIGURE)
+
+
+def test_a_ramp_steeper_than_max_slope_is_not_a_tilt():
+    times, pos, cs = plane_stances((2 * MAX_SLOPE, 0.0))
+    f = fit_scene(times, pos, cs)
+    assert f.level
+
+
+def test_surface_below_matches_mujoco_rays_on_a_tilted_scene():
+    """surface_below against MuJoCo's own ray casting (mj_ray straight down) on a scene with a floor
+    tilted in x and y and a box tilted with it, at points around the box's edges (away from the figure).
+    Points within 1 cm of the box's side walls are left out: a tilted box's wall leans out by up to
+    its height times the tilt (5 mm here), and a ray there meets the wall, which is no surface to stand on."""
+    slope = (0.03, -0.02)
+    rot = FittedScene(0.0, (), slope).rotation()
+    box = (np.array([2.0, 1.0, 0.0]) + rot @ np.array([0.0, 0.0, 0.15]), np.array([0.5, 0.3, 0.15]))
+    f = FittedScene(0.05, ((box[0] + [0, 0, 0.05], box[1]),), slope)
+    model = mujoco.MjModel.from_xml_string(scene_mjcf(f, FIGURE))
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    s = StaticSurfaces.from_model(model, data)
+    rng = np.random.default_rng(0)
+    pts = np.c_[rng.uniform(1.3, 2.7, 400), rng.uniform(0.5, 1.5, 400), np.full(400, 1.0)]
+    geom = np.zeros(1, np.int32)
+    top = s.box_center[0, 2] + s.box_half[0, 2]
+    local = np.abs((np.c_[pts[:, :2], np.full(len(pts), top)] - s.box_center[0]) @ s.box_rot[0])
+    pts = pts[np.all(np.abs(local[:, :2] - s.box_half[0, :2]) > 0.01, axis=1)]
+    assert len(pts) > 300
+    for p in pts:
+        dist = mujoco.mj_ray(model, data, p, np.array([0.0, 0.0, -1.0]), None, 1, -1, geom)
+        assert s.surface_below(p) == pytest.approx(p[2] - dist, abs=1e-9)

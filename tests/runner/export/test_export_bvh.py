@@ -1,10 +1,17 @@
-"""BVH export: the file reads back with our own reader and reproduces the sampled qpos."""
+"""BVH export: the file reads back with our own reader and reproduces the sampled qpos; onto the source
+skeleton, it reproduces the source clip (tests/bvh_fk.py: an independent reader)."""
+from pathlib import Path
+
 import numpy as np
 import pytest
+from bvh_edit import edit_bvh
+from bvh_fk import UNIT, local_rotations, parse
 
+from runner.cli import main
 from runner.export.bvh import EULER_ORDER, figure_qpos_from_bvh, figure_skeleton, write_bvh
 from runner.export.sampling import WHICH, default_fps, sample_motion
 from runner.mocap.bvh import read_bvh
+from runner.paths import MODELS
 from runner.saved_path import load_saved_path
 from solver.errors import InputError
 from solver.layout import StateLayout
@@ -152,3 +159,103 @@ def test_another_figures_armature_has_its_height(tmp_path):
     y = np.array([p[1] for p in rest_points((tmp_path / "big.bvh").read_text()).values()])
     assert y.max() - y.min() == pytest.approx(Figure.from_model(model).standing_height, abs=0.02)
     assert Figure.from_model(model).standing_height == pytest.approx(1.925, abs=1e-9)
+
+
+# ---- onto the source skeleton -------------------------------------------------------------------------
+
+CMU = Path("/work/shared/data/cmu")
+SOURCE_CLIPS = sorted(CMU.glob("*.bvh")) if CMU.is_dir() else [MODELS / "cmu" / "127_33.bvh"]
+
+
+def rotation_angles_deg(a, b):
+    """(n, J) angle [deg] of R_a^T R_b for (n, J, 3, 3) rotation matrices."""
+    cos = (np.einsum("njab,njab->nj", a, b) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def reference_path(tmp_path, src, seconds=0.5):
+    """A saved path whose frames are the reference on the subject's figure at every captured frame of the
+    first `seconds` of `src` (its clip embedded), and the clip."""
+    from runner.mocap.bvh import read_bvh
+    from runner.mocap.reference import load_bvh_reference
+    from runner.mocap.subject_figure import write_subject_figure
+    from solver.model import load_model
+    from solver.scene_fit import FittedScene, scene_mjcf
+
+    clip = edit_bvh(src, tmp_path / "c.bvh", seconds=seconds)
+    figure = write_subject_figure(read_bvh(clip), tmp_path / "c.figure.xml")
+    scene = tmp_path / "c.scene.xml"
+    scene.write_text(scene_mjcf(FittedScene(0.0), figure, relative_to=tmp_path))
+    ref = load_bvh_reference(clip, load_model(scene))
+    npz = tmp_path / "ref.npz"
+    ends = ref.qpos[[0, -1]]
+    np.savez(npz, frame_times=ref.times, frames=ref.qpos, keyframe_times=ref.times[[0, -1]], keyframes=ends,
+             plain_frame_times=ref.times[[0, -1]], plain_frames=ends, reference_times=ref.times,
+             reference_qpos=ref.qpos, scene=np.array("c.scene.xml"), clip=np.array("c.bvh"),
+             clip_text=np.array(clip.read_text()))
+    return npz, clip
+
+
+def same_pose(src, out, frames_src, frames_out):
+    """Worst joint rotation [deg] and root distance [m] between frames of two files on one skeleton
+    (parsed and converted by tests/bvh_fk.py)."""
+    a, b = parse(src), parse(out)
+    ra, rb = local_rotations(a)[frames_src], local_rotations(b)[frames_out]
+    root = [a.channels[0].index(c) for c in ("Xposition", "Yposition", "Zposition")]
+    dist = np.linalg.norm(a.values[frames_src][:, root] - b.values[frames_out][:, root], axis=1) * UNIT
+    return rotation_angles_deg(ra, rb).max(), dist.max()
+
+
+@pytest.mark.parametrize("src", SOURCE_CLIPS, ids=lambda p: p.stem)
+def test_the_reference_exported_on_the_source_skeleton_is_the_source(tmp_path, src):
+    npz, clip = reference_path(tmp_path, src)
+    out = tmp_path / "out.bvh"
+    assert main(["export", str(npz), "--to", str(out), "--quiet"]) == 0
+    text, source = out.read_text().splitlines(), clip.read_text().splitlines()
+    m = source.index("MOTION")
+    assert text[:m + 3] == source[:m + 3]  # hierarchy, names, offsets, channel order; frame count and time
+    n = int(source[m + 1].split()[1])
+    angle, dist = same_pose(clip, out, np.arange(n), np.arange(n))
+    assert angle < 0.01 and dist < 1e-4, (angle, dist)
+
+
+def test_source_skeleton_needs_a_clip(tmp_path, saved_npz, capsys):
+    assert main(["export", str(saved_npz), "--to", str(tmp_path / "f.bvh"), "--quiet"]) == 0  # the figure's
+    assert "JOINT l_thigh" in (tmp_path / "f.bvh").read_text()
+    assert main(["export", str(saved_npz), "--to", str(tmp_path / "s.bvh"), "--skeleton", "source"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not made from a BVH clip" in err and "--skeleton figure" in err
+
+
+def test_other_rates_resample_the_unmodelled_joints(tmp_path):
+    """At 60 fps every other captured frame; at 40 fps the source's unmodelled joints are slerped."""
+    npz, clip = reference_path(tmp_path, MODELS / "cmu" / "127_33.bvh", seconds=0.3)
+    out = tmp_path / "o.bvh"
+    assert main(["export", str(npz), "--to", str(out), "--fps", "60", "--quiet"]) == 0
+    n = (len(parse(out).values) - 1)
+    angle, dist = same_pose(clip, out, 1 + 2 * np.arange(n), 1 + np.arange(n))
+    assert angle < 0.01 and dist < 1e-4 and "Frame Time: 0.016666667" in out.read_text()
+    assert main(["export", str(npz), "--to", str(out), "--fps", "40", "--quiet"]) == 0
+    b, a = parse(out), parse(clip)
+    toe = a.index("LeftToeBase")
+    ra, rb = local_rotations(a)[:, toe], local_rotations(b)[:, toe]
+    # frame 1 + k at t = k / 40 s = 3 k captured frames: the captured toe rotation exactly
+    assert rotation_angles_deg(ra[1::3][None], rb[1:][None][:, :len(ra[1::3])]).max() < 0.01
+
+
+@pytest.mark.slow
+def test_an_optimized_path_meets_the_source_at_its_keyframes(tmp_path):
+    """mocap on a short clip, then export: at every keyframe time the exported pose is the source's."""
+    src = edit_bvh(MODELS / "cmu" / "127_33.bvh", tmp_path / "run.bvh", seconds=0.6)
+    assert main(["mocap", str(src), "--out-dir", str(tmp_path / "o"), "--no-render", "--rounds", "0",
+                 "--max-evals", "40", "--quiet", "--no-summary"]) == 0
+    out = tmp_path / "opt.bvh"
+    assert main(["export", str(tmp_path / "o" / "run.npz"), "--to", str(out), "--quiet"]) == 0
+    saved = load_saved_path(tmp_path / "o" / "run.npz")
+    k = np.rint(saved.keyframe_times * 120.0).astype(int)
+    assert len(k) >= 3
+    angle, dist = same_pose(src, out, 1 + k, 1 + k)
+    assert angle < 0.01 and dist < 1e-4, (angle, dist)
+    # between the keyframes the path differs from the capture (it is not a copy)
+    between = np.setdiff1d(np.arange(1, k[-1]), k)
+    assert same_pose(src, out, 1 + between, 1 + between)[0] > 0.01

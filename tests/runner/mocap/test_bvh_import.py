@@ -198,13 +198,21 @@ def test_shipped_keyframes_match_the_clip_and_show_the_problem(reference, scene,
 
 def test_main_writes_a_keyframe_file(tmp_path, layout, capsys):
     out = tmp_path / "k.json"
-    rc = keyframes_from_bvh_main([str(CLIP), "--out", str(out), "--every", "0.3",
+    rc = keyframes_from_bvh_main([str(CLIP), "--out", str(out), "--every", "0.3", "--figure", "default",
                                   "--scene", str(MODELS / "run_and_step.xml")], prog="dynsplines keyframes-from-bvh")
     assert rc == 0
     kf, info = read_keyframes(out, layout)
     assert kf.count == 7 and info.scene == (MODELS / "run_and_step.xml").resolve()
     assert info.source["command"].startswith("dynsplines keyframes-from-bvh ")
     assert "7 keyframes" in capsys.readouterr().out
+    # the subject's figure (the default) in a given scene: a copy of the scene beside the file includes it
+    rc = keyframes_from_bvh_main([str(CLIP), "--out", str(out), "--every", "0.3",
+                                  "--scene", str(MODELS / "run_and_step.xml")], prog="dynsplines keyframes-from-bvh")
+    assert rc == 0
+    kf, info = read_keyframes(out, layout)
+    assert info.scene == (tmp_path / "k.scene.xml").resolve() and info.model == (tmp_path / "k.figure.xml").resolve()
+    assert '"k.figure.xml"' in info.scene.read_text() and "step" in info.scene.read_text()
+    capsys.readouterr()
     rc = keyframes_from_bvh_main([str(tmp_path / "nope.bvh"), "--out", str(out)])
     assert rc == 2
     assert "nope.bvh" in capsys.readouterr().err

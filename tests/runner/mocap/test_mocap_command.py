@@ -79,11 +79,14 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
     layout = StateLayout.from_model(model)
     kf, info = read_keyframes(out / "run.keyframes.json", layout)
     assert info.scene == scene.resolve() and info.contacts and kf.count >= 3 and not kf.is_partial.any()
-    # the root path scaled by the figure's leg length (0.42 + 0.42 m) over the subject's (127_33's knee
-    # and ankle OFFSETs, 1 unit = 0.0254 / 0.45 m), recorded so that `animate` retargets the same way
-    subject = 0.0254 / 0.45 * np.mean([np.hypot(2.58040, 7.08960) + np.hypot(2.64719, 7.27309),
-                                       np.hypot(2.56572, 7.04926) + np.hypot(2.57974, 7.08778)])
-    assert info.source["root_scale"] == pytest.approx(0.84 / subject, rel=1e-5)
+    # the subject's own figure (the default): written beside the outputs, named by the keyframe file, its
+    # legs the subject's (127_33's knee OFFSET, 1 unit = 0.0254 / 0.45 m); the root path as captured
+    assert info.model == (out / "run.figure.xml").resolve()
+    from solver.figure import Figure
+
+    thigh = Figure.from_model(model).segments["l_thigh"].length
+    assert thigh == pytest.approx(0.0254 / 0.45 * np.hypot(2.58040, 7.08960), rel=2e-5)
+    assert info.source["root_scale"] == 1.0 and find_reference(info, model, quiet=True).captured_root
     assert find_reference(info, model, quiet=True).root_scale == info.source["root_scale"]
     # a file that records no scale (made before it): as captured (the shipped file without its root_scale 1)
     doc = json.loads((REPO / "models" / "run_and_step.keyframes.json").read_text())
@@ -102,8 +105,11 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
     assert {"planted", "clearance"} <= {name for name, _ in saved.options["solve"]["limits"]}
     report = json.loads((tmp_path / "m.json").read_text())
     assert report["keyframes"] == kf.count and report["frames"] == 73 and report["fps"] == pytest.approx(120, rel=1e-4)
-    ref = report["metrics"]["motion"]["optimized"]["reference"]
-    assert ref["penetration_mm"]["max"] == 0.0
+    # the reference the metrics compare with is the capture itself: its root path is the clip's Hips path
+    from bvh_fk import parse, world
+
+    _, hips = world(parse(short_clip))
+    assert np.allclose(saved.reference_qpos[:, :3], hips[1:, 0], atol=1e-9)
     assert report["metrics"]["optimized"]["keyframe_error"] < 1e-9
     # the keyframe file reruns with animate (the reference found through its "source" "clip")
     assert main(["animate", str(out / "run.keyframes.json"), "--no-render", "--rounds", "0", "--max-evals", "20",
