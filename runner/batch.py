@@ -274,10 +274,17 @@ def _submitter(engine: str, workers: int, ray_address: str | None):
     return (lambda fn, *a: remote.remote(*a), wait_ray, ray.get, cancel_ray, lambda cancel: ray.shutdown())
 
 
-def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers: int = 1, engine: str = "local",
-              ray_address: str | None = None, say: Callable = print, quiet: bool = False) -> dict:
+def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions | Sequence[ClipOptions], *, workers: int = 1,
+              engine: str = "local", ray_address: str | None = None, say: Callable = print, quiet: bool = False,
+              folders: Sequence[str] | None = None, name: str = "dynsplines batch") -> dict:
     """Run `run_clip` on every clip not already done (see the module docstring).
 
+    Args:
+        clips: the .bvh files; one may come several times with different options (`bench corpus`).
+        out: the output folder. options: one ClipOptions for all, or one per clip.
+        workers, engine, ray_address: where the clips run (`dynsplines batch --help`).
+        folders: each clip's folder name under `out` [`clip_folders`: the stems, made unique].
+        name: what the first line calls the run.
     Returns:
         {"rows" (COLUMNS per clip, in the clips' order), "totals", "interrupted", "summary" (the two paths),
         "wall_time_s"}.
@@ -285,8 +292,11 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
     t0 = time.perf_counter()
     out = Path(out)
     check_writable_dir(out / "summary.json", "--out")
-    fingerprint = options_fingerprint(options)
-    folders = clip_folders(clips, out)
+    per_clip = [options] * len(clips) if isinstance(options, ClipOptions) else list(options)
+    if len(per_clip) != len(clips) or (folders is not None and len(folders) != len(clips)):
+        raise ValueError(f"{len(clips)} clips, {len(per_clip)} options, {len(folders or clips)} folders")
+    prints = [options_fingerprint(o) for o in per_clip]
+    folders = clip_folders(clips, out) if folders is None else [out / f for f in folders]
     rows: list[dict | None] = [None] * len(clips)
     todo = []
     for i, (clip, folder) in enumerate(zip(clips, folders)):
@@ -296,14 +306,14 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
             rows[i] = dict.fromkeys(COLUMNS) | dict(clip=str(clip), folder=folder.name, status="failed",
                                                    error=f"{clip}: cannot read ({e.strerror})", wall_time_s=0.0)
             continue
-        done = read_done(folder, sha, fingerprint)
+        done = read_done(folder, sha, prints[i])
         if done is not None:
             rows[i] = {**done, "status": "skipped", "wall_time_s": 0.0}
         else:
             todo.append((i, clip, folder, sha))
     todo = longest_first(todo, [clip_duration(t[1]) for t in todo])
     n_skip = sum(r is not None and r["status"] == "skipped" for r in rows)
-    say(f"dynsplines batch: {len(clips)} clips -> {out}: {n_skip} already done, {len(todo)} to run "
+    say(f"{name}: {len(clips)} clips -> {out}: {n_skip} already done, {len(todo)} to run "
         f"({engine}, {workers} worker{'s' if workers != 1 else ''})")
     interrupted = False
     run_t0 = time.perf_counter()
@@ -319,7 +329,9 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
 
     def finished(i, row, bar):
         rows[i] = row
-        msg = f"  {Path(row['clip']).name}: {row['status']}, {row['wall_time_s']:.1f} s"
+        name = Path(row["clip"]).name
+        name = row["folder"] if row.get("folder") and row["folder"] != Path(row["clip"]).stem else name
+        msg = f"  {name}: {row['status']}, {row['wall_time_s']:.1f} s"
         msg += f": {row['error']}" if row.get("error") else ""
         (bar.bar.write if bar.bar is not None else say)(msg)  # above a terminal's bar, not through it
         note(bar)
@@ -331,7 +343,7 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
         note(bar)
         if todo and engine == "local" and workers == 1:  # in this process: no start-up cost
             for i, clip, folder, sha in todo:
-                row = run_clip(clip, folder, options, fingerprint, sha)
+                row = run_clip(clip, folder, per_clip[i], prints[i], sha)
                 finished(i, row, bar)
                 if row["status"] == "interrupted":
                     interrupted = True
@@ -344,7 +356,7 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
                     nxt = next(queue, None)
                     if nxt is None:
                         return
-                    h = submit(run_clip, nxt[1], nxt[2], options, fingerprint, nxt[3])
+                    h = submit(run_clip, nxt[1], nxt[2], per_clip[nxt[0]], prints[nxt[0]], nxt[3])
                     handles[h] = nxt[0]
                     pending.add(h)
 
@@ -392,6 +404,6 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions, *, workers
     wall = time.perf_counter() - t0
     total = totals(rows, wall)
     meta = {"out": str(out), "engine": engine, "workers": workers, "interrupted": interrupted,
-            "wall_time_s": wall, "options": fingerprint}
+            "wall_time_s": wall, "options": prints[0] if isinstance(options, ClipOptions) else prints}
     summary = write_summary(out, rows, total, meta)
     return {"rows": rows, "totals": total, "interrupted": interrupted, "summary": summary, "wall_time_s": wall}

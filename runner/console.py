@@ -202,8 +202,63 @@ _DYNAMICS_TERMS_ROWS = [
 #: spline's by more than this fraction (and 0.01 s), longer or shorter
 FLIGHT_CHANGE = 0.2
 WORSE = "worse"
-LEGEND = (f"{WORSE}: the optimized path is worse than the plain spline there (higher by > 1%; flight: "
-          f"changed by > {FLIGHT_CHANGE:.0%})")
+LEGEND = (f"{WORSE}: the optimized path is worse than the plain spline there (higher by > 1% and the row's "
+          f"last printed digit; flight: changed by > {FLIGHT_CHANGE:.0%})")
+
+
+#: the motion rows (the summary's feet rows and the motion-metrics table against the capture): the
+#: optimized figure is marked worse when it exceeds the plain spline's by more than 1 % (figures move by
+#: less between machines) and the row's absolute floor, here with its reason: {metrics key: (floor, reason)}
+MOTION_MARGINS = {
+    "penetration_mm": (0.1, "mm; a tenth of the 1 mm penetration bound"),
+    "float_contact_mm": (0.1, "mm; a fiftieth of the 5 mm float bound"),
+    "float_physdiff_mm": (0.1, "mm; as float in contact"),
+    "skate_mm": (0.05, "mm/frame; a tenth of the 0.5 mm/frame skate margin"),
+    "skate_contact_mm": (0.05, "mm/frame; as skate"),
+    "phys_err_mm": (0.2, "mm; the sum of a penetration, a float and a skate floor"),
+    "skating_ratio": (0.01, "one step in a hundred"),
+    "skating_ratio_contacts": (0.01, "one step in a hundred"),
+    "flight_phase_error_s": (None, "s; one frame of the capture: flight is counted in whole frames"),
+    "root_position_cm": (0.05, "cm; half a printed digit of the mean"),
+    "joint_orientation_deg": (0.05, "deg; half a printed digit of the mean"),
+    "site_position_cm": (0.05, "cm; half a printed digit of the mean"),
+    "accel_error_root_m_s2": (0.05, "m/s^2; half a printed digit"),
+    "accel_error_sites_m_s2": (0.05, "m/s^2; half a printed digit"),
+    "cone_rms": (0.1, "N; the printed digit"),
+    "cone_peak": (0.1, "N; the printed digit"),
+    "off_hinge_knee_deg": (3.0, "deg; the corpus bound: off the hinge by at most 3 deg more than the capture"),
+    "off_hinge_elbow_deg": (3.0, "deg; as the knees"),
+    "rom_excess_deg": (0.5, "deg; the hyperextension bound's half degree"),
+}
+#: rows whose figure the capture itself shows at a higher level (the spline is smoother than any real
+#: motion): worse only above both the plain spline's and the capture's, by 1 %
+CAPTURE_LEVEL_ROWS = ("jerk_root_m_s3", "jerk_sites_m_s3")
+MOTION_LEGEND = (f"{WORSE}: higher than the plain spline's by > 1% and a floor per row (float, penetration 0.1 mm; "
+                 "skate 0.05 mm/frame; skating ratio 0.01; errors half a printed digit); flight time: further from "
+                 "the capture's by more than one frame; jerk: above the plain spline's and the capture's")
+
+
+def motion_worse(key: str, plain: float, opt: float, frame_s: float = 0.0, capture: float | None = None) -> bool:
+    """Whether the optimized path's motion figure `opt` (metrics key `key`) is worse than the plain
+    spline's `plain` beyond the row's margin (`MOTION_MARGINS`, `CAPTURE_LEVEL_ROWS`); flight time
+    ("flight_time_s") is worse when further from the capture's `capture` by more than one frame
+    (`frame_s` [s]); a key without a margin is never marked.
+
+    Args:
+        key: the motion-metrics key. plain, opt: the two paths' figures (units of the key).
+        frame_s: [s] the capture's frame time. capture: the capture's own figure (flight, jerk).
+    """
+    a, b = float(plain), float(opt)
+    if not (np.isfinite(a) and np.isfinite(b)):
+        return False
+    if key == "flight_time_s":
+        return capture is not None and abs(b - capture) > abs(a - capture) * 1.01 + frame_s
+    if key in CAPTURE_LEVEL_ROWS:
+        return b > max(a, capture if capture is not None else a) * 1.01
+    if key not in MOTION_MARGINS:
+        return False
+    floor = MOTION_MARGINS[key][0]
+    return b > a * 1.01 + (frame_s if floor is None else floor)
 
 
 def is_worse(plain: float, opt: float, atol: float | None, fmt: str) -> bool:
@@ -340,7 +395,8 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
     Args:
         plain, opt: `path_metrics` of the two paths. solution: the Solution. weights: {term: weight}
             chosen. final_weights: {term: weight} at the end (penalty continuation raises some).
-        contact_rows: (label, plain, optimized, format) rows about the feet, printed after penetration.
+        contact_rows: (label, plain, optimized, format[, worse]) rows about the feet, printed after
+            penetration (`runner.run.contact_summary_rows`, marked by `motion_worse`).
     """
     rows = comparison_rows(plain, opt, dynamics_terms=bool({"torque", "root"} & set(weights)))
     n_pen = 1 + len(plain["penetration_mm_by_site"])  # the feet rows go after the penetration rows
@@ -353,6 +409,8 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
     rows += extra
     lines = format_rows(rows, row_targets([r[0] for r in rows], weights, plain["penetration_mm_by_site"]))
     lines.append(LEGEND)
+    if contact_rows:
+        lines.append("feet rows: " + MOTION_LEGEND)
     lines.append(TARGET_LEGEND)
     if any(cell("{}", v) == MISSING for r in rows for v in r[1:3]):
         lines.append(MISSING_LEGEND)
@@ -395,47 +453,54 @@ _PLAUSIBILITY_ROWS = (
 )
 
 
-def _accuracy_rows(error: dict) -> list[tuple[str, float, float]]:
-    """(label, mean, max) of the accuracy figures of one `motion_metrics` "error" block."""
+def _accuracy_rows(error: dict) -> list[tuple[str, str, float, float]]:
+    """(label, metrics key, mean, max) of the accuracy figures of one `motion_metrics` "error" block."""
     joints = error["joint_orientation_deg"]
     sites = error["site_position_cm"]
     return [
-        ("root position error [cm]", error["root_position_cm"]["mean"], error["root_position_cm"]["max"]),
-        ("joint angle error [deg]", float(np.mean([v["mean"] for v in joints.values()])),
+        ("root position error [cm]", "root_position_cm", error["root_position_cm"]["mean"],
+         error["root_position_cm"]["max"]),
+        ("joint angle error [deg]", "joint_orientation_deg", float(np.mean([v["mean"] for v in joints.values()])),
          max(v["max"] for v in joints.values())),
-        ("contact-site error [cm]", float(np.mean([v["mean"] for v in sites.values()])),
+        ("contact-site error [cm]", "site_position_cm", float(np.mean([v["mean"] for v in sites.values()])),
          max(v["max"] for v in sites.values())),
-        ("acceleration error root [m/s^2]", error["accel_error_root_m_s2"], float("nan")),
-        ("acceleration error sites [m/s^2]", error["accel_error_sites_m_s2"], float("nan")),
+        ("acceleration error root [m/s^2]", "accel_error_root_m_s2", error["accel_error_root_m_s2"], float("nan")),
+        ("acceleration error sites [m/s^2]", "accel_error_sites_m_s2", error["accel_error_sites_m_s2"], float("nan")),
     ]
 
 
 def motion_metrics_table(plain: dict, optimized: dict) -> str:
-    """The motion metrics against the reference (`solver.motion_metrics`), reference | plain | optimized.
+    """The motion metrics against the reference (`solver.motion_metrics`), reference | plain | optimized,
+    a row marked "worse" where the optimized path is worse than the plain spline (`motion_worse`).
 
     Args:
         plain, optimized: `motion_metrics(...)` of the plain spline and of the optimized path, both
             sampled at the reference's frames; the "reference" column is their (equal) "reference" block.
     Returns:
         the table as text: plausibility rows for all three, then the accuracy rows (mean, max over
-        frames; the joint angle is the mean over joints of each joint's mean, and the largest max).
+        frames; the joint angle is the mean over joints of each joint's mean, and the largest max; worse
+        when the mean or the max is), then the legend of the mark.
     """
     ref = plain["reference"]
+    frame_s = 1.0 / float(plain["fps"])
     cols = (ref, plain["path"], optimized["path"])
     rows = []
     for label, key, sub, fmt in _PLAUSIBILITY_ROWS:
         vals = [c[key][sub] if sub else c[key] for c in cols]
-        rows.append((label, [cell(fmt, v) for v in vals]))
+        rows.append((label, [cell(fmt, v) for v in vals], motion_worse(key, vals[1], vals[2], frame_s, vals[0])))
     w = max(max(len(r[0]) for r in rows), 38) + 2
     head = f"{'':{w}}{'reference':>14}{'plain':>14}{'optimized':>14}"
     lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz; "
-             "docs/contacts.md \"Motion metrics\")", head, "-" * len(head)]
-    lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in vals) for label, vals in rows]
-    lines.append("-" * len(head))
+             "docs/contacts.md \"Motion metrics\")", head, "-" * (len(head) + len(WORSE) + 2)]
+    lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in vals) + (f"  {WORSE}" if bad else "")
+              for label, vals, bad in rows]
+    lines.append("-" * (len(head) + len(WORSE) + 2))
     pairs = zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"]), strict=True)
-    for (label, pm, px), (_, om, ox) in pairs:
+    for (label, key, pm, px), (_, _, om, ox) in pairs:
         cells = [MISSING] + [cell("{:.2f}", m) + (f" / {cell('{:.1f}', x)}" if np.isfinite(x) else "")
                              for m, x in ((pm, px), (om, ox))]
+        bad = motion_worse(key, pm, om) or motion_worse(key, px, ox)
         lines.append(f"{label + (' mean / max' if np.isfinite(px) else ' mean'):{w}}"
-                     + "".join(f"{c:>14}" for c in cells))
+                     + "".join(f"{c:>14}" for c in cells) + (f"  {WORSE}" if bad else ""))
+    lines.append(MOTION_LEGEND)
     return "\n".join(lines)

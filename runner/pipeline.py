@@ -288,7 +288,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     Returns:
         {"clip", "status" (solver Status value, or "interrupted"), "exit" ("ok" | "failed" |
         "interrupted"), "frames" (reference frames), "fps", "keyframes" (count), "partial", "contacts"
-        (count), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "metrics"
+        (count), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
+        that hold a site off the contact schedule), "stalled" ({term: violation} out of reach), "metrics"
         ({"plain", "optimized": path_metrics; "motion": {"plain", "optimized": motion_metrics}}),
         "scene_fitted" (floor_z, floor_slope, boxes as centre/half lists, or None), "outputs" ({name: path})}.
     Raises:
@@ -330,6 +331,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "max_penetration_mm": run.metrics["optimized"]["max_penetration_mm"],
         "keyframe_error": run.metrics["optimized"].get("keyframe_error"),
         "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
+        "keyframe_conflicts": len(problem.conflicts.found), "stalled": dict(run.solution.stalled or {}),
         "metrics": run.metrics, "scene_fitted": fitted, "outputs": {k: str(v) for k, v in paths.items()},
     }
     if o.plot is not None:

@@ -341,11 +341,16 @@ def anatomy_summary_rows(motion) -> list:
     motion, plain spline and optimized at the capture's frames, the capture's own in the label.
 
     Returns:
-        [(label, plain value, optimized value, format), ...].
+        [(label, plain value, optimized value, format, worse), ...] (`runner.console.motion_worse`).
     """
+    from runner.console import motion_worse
+
     capture = motion["plain"]["reference"]
-    return [(f"{label} (capture {fmt.format(capture[key])})", motion["plain"]["path"][key],
-             motion["optimized"]["path"][key], fmt) for label, key, fmt in ANATOMY_ROWS]
+    rows = []
+    for label, key, fmt in ANATOMY_ROWS:
+        a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
+        rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt, motion_worse(key, a, b)))
+    return rows
 
 
 def contact_summary_rows(motion, objective, solution) -> list:
@@ -353,14 +358,18 @@ def contact_summary_rows(motion, objective, solution) -> list:
     (`solver.motion_metrics.flight_mismatch`, extra + missed) of both paths against the motion-capture
     reference (`motion`: metrics["motion"], the `motion_metrics` of both paths at the clip's rate; the
     capture's own figure in the label), then the anatomy rows (`anatomy_summary_rows`), and the
-    friction-cone residual when the cone term is on.
+    friction-cone residual when the cone term is on; each marked where the optimized path is worse than
+    the plain spline (`runner.console.motion_worse`).
 
     Returns:
-        [(label, plain value, optimized value, format), ...].
+        [(label, plain value, optimized value, format, worse), ...].
     """
+    from runner.console import motion_worse
+
     rows = []
     if motion is not None:
         capture = motion["plain"]["reference"]
+        frame_s = 1.0 / float(motion["plain"]["fps"])
         for label, key, fmt in (
             ("float in contact [mm]", "float_contact_mm", "{:.2f}"),
             ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
@@ -368,12 +377,12 @@ def contact_summary_rows(motion, objective, solution) -> list:
             ("skating ratio (contacts)", "skating_ratio_contacts", "{:.3f}"),
             ("flight time [s]", "flight_time_s", "{:.3f}"),
         ):
-            rows.append((f"{label} (capture {fmt.format(capture[key])})", motion["plain"]["path"][key],
-                         motion["optimized"]["path"][key], fmt))
+            a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
+            rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt,
+                         motion_worse(key, a, b, frame_s, capture[key])))
         # flight-phase error: frames in flight in one and not the other (flight times can cancel)
-        rows.append(("flight phase error vs capture [s]",
-                     *(motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"]
-                       for p in ("plain", "optimized")), "{:.3f}"))
+        a, b = (motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"] for p in ("plain", "optimized"))
+        rows.append(("flight phase error vs capture [s]", a, b, "{:.3f}", motion_worse("flight_phase_error_s", a, b, frame_s)))
         rows += anatomy_summary_rows(motion)
     if "cone" in objective.names:
         from solver.metrics import sample_times
@@ -383,6 +392,6 @@ def contact_summary_rows(motion, objective, solution) -> list:
         t = sample_times(solution.initial.times[0], solution.initial.times[-1], 400.0)
         cm = [cone_metrics(term, t, fs.path(t), fs.path(t, 1), fs.path(t, 2))
               for fs in (solution.initial, solution.frames)]
-        rows.append(("RMS friction-cone residual [N]", cm[0]["cone_rms"], cm[1]["cone_rms"], "{:.1f}"))
-        rows.append(("peak friction-cone residual [N]", cm[0]["cone_peak"], cm[1]["cone_peak"], "{:.1f}"))
+        for label, key in (("RMS friction-cone residual [N]", "cone_rms"), ("peak friction-cone residual [N]", "cone_peak")):
+            rows.append((label, cm[0][key], cm[1][key], "{:.1f}", motion_worse(key, cm[0][key], cm[1][key])))
     return rows

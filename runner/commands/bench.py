@@ -28,7 +28,7 @@ from __future__ import annotations
 import argparse
 
 from runner.animate_options import default_args, solve_options
-from runner.commands import bench_contacts, bench_solvers
+from runner.commands import bench_contacts, bench_corpus, bench_solvers
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
@@ -42,8 +42,8 @@ from solver.problem import parse_terms
 
 
 def register(sub) -> None:
-    """Add `bench` (run-and-step, refine, docs, orient, scaling, contacts) to the `dynsplines` parser."""
-    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, docs, orient, scaling, contacts, solvers")
+    """Add `bench` (run-and-step, refine, docs, orient, scaling, contacts, solvers, corpus) to the `dynsplines` parser."""
+    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, docs, orient, scaling, contacts, solvers, corpus")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
     r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip")
@@ -88,6 +88,7 @@ def register(sub) -> None:
     c.set_defaults(func=bench_scaling)
     bench_contacts.register(bsub)
     bench_solvers.register(bsub)
+    bench_corpus.register(bsub)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

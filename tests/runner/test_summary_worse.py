@@ -12,11 +12,14 @@ from runner.console import (
     FLIGHT_CHANGE,
     LEGEND,
     MISSING_LEGEND,
+    MOTION_LEGEND,
+    MOTION_MARGINS,
     TARGET_LEGEND,
     WORSE,
     cell,
     comparison_rows,
     motion_metrics_table,
+    motion_worse,
     summary_table,
 )
 from solver.layout import StateLayout
@@ -175,3 +178,106 @@ def _motion(path_over=None):
 def test_the_motion_metrics_table_prints_no_nan_and_no_negative_zero():
     text = motion_metrics_table(_motion({"float_contact_mm": float("nan"), "skate_mm": -0.0}), _motion())
     assert "nan" not in text.lower() and "-0.0" not in text, text
+
+
+# --- the motion rows: feet rows of the summary and the motion-metrics table against the capture ---
+
+@pytest.mark.parametrize("key, plain, ok, bad", [
+    ("float_contact_mm", 5.0, 5.0 * 1.01 + 0.1 - 1e-6, 5.0 * 1.01 + 0.1 + 1e-3),  # 1 % and 0.1 mm
+    ("float_contact_mm", 0.0, 0.099, 0.101),  # the floor rules near zero
+    ("skate_contact_mm", 2.0, 2.02 + 0.049, 2.02 + 0.051),
+    ("skating_ratio_contacts", 0.1, 0.111 - 1e-6, 0.111 + 1e-3),
+    ("joint_orientation_deg", 24.0, 24.24 + 0.049, 73.5),  # the ledge clip's max: 24 -> 73.5 deg
+    ("cone_peak", 100.0, 101.09, 101.11),
+])
+def test_motion_rows_are_worse_beyond_one_percent_and_their_floor(key, plain, ok, bad):
+    assert not motion_worse(key, plain, ok)
+    assert motion_worse(key, plain, bad)
+    assert not motion_worse(key, plain, plain * 0.5)  # lower is never worse
+    assert MOTION_MARGINS[key][1]  # every floor states its reason
+
+
+def test_flight_time_is_worse_when_further_from_the_capture_by_more_than_a_frame():
+    frame = 1 / 120
+    # the issue's jog: capture 0.450 s, plain 0.342 s, optimized 0.750 s
+    assert motion_worse("flight_time_s", 0.342, 0.750, frame, capture=0.450)
+    assert not motion_worse("flight_time_s", 0.342, 0.450 + 0.100, frame, capture=0.450)  # 0.100 s off, not 0.108
+    assert motion_worse("flight_time_s", 0.440, 0.440 - 0.02, frame, capture=0.450)  # shorter and further away
+    assert not motion_worse("flight_time_s", 0.440, 0.450 + 0.01 * 1.01 + frame - 1e-6, frame, capture=0.450)
+    assert not motion_worse("flight_time_s", 0.342, 0.9, frame, capture=None)  # no capture: not judged
+    # flight-phase error (extra + missed): higher is worse beyond one frame
+    assert motion_worse("flight_phase_error_s", 0.05, 0.05 * 1.01 + frame + 1e-4, frame)
+    assert not motion_worse("flight_phase_error_s", 0.05, 0.05 * 1.01 + frame - 1e-4, frame)
+
+
+def test_jerk_is_worse_only_above_the_captures_own():
+    assert not motion_worse("jerk_root_m_s3", 36.0, 477.0, capture=4126.0)
+    assert motion_worse("jerk_root_m_s3", 36.0, 4126.0 * 1.02, capture=4126.0)
+    assert not motion_worse("unknown_key", 1.0, 100.0)  # a row without a margin is never marked
+
+
+def _motion_pair():
+    """metrics["motion"] of run-and-step-like figures: the optimized path's feet better, its flight longer
+    than the capture's and its joint angles further off."""
+    plain = _motion({"float_contact_mm": 5.7, "skate_contact_mm": 5.30, "skate_mm": 21.58,
+                     "skating_ratio_contacts": 0.404, "flight_time_s": 0.342})
+    opt = _motion({"float_contact_mm": 3.5, "skate_contact_mm": 0.07, "skate_mm": 6.95,
+                   "skating_ratio_contacts": 0.0, "flight_time_s": 0.750})
+    for m in (plain, opt):
+        m["reference"]["flight_time_s"] = 0.450
+    plain["error"].update(flight_extra_s=0.0, flight_missed_s=0.108)
+    opt["error"].update(flight_extra_s=0.300, flight_missed_s=0.0)
+    opt["error"]["joint_orientation_deg"] = {"hip": {"mean": 1.0, "max": 5.0}}  # max 2 -> 5 deg
+    return {"plain": plain, "optimized": opt}
+
+
+def test_the_feet_rows_of_the_summary_are_marked_with_their_legend():
+    from runner.run import contact_summary_rows
+
+    rows = contact_summary_rows(_motion_pair(), SimpleNamespace(names=()), None)
+    worse = {r[0].split(" (capture")[0]: r[4] for r in rows}
+    assert worse == {"float in contact [mm]": False, "skate in contact [mm/frame]": False,
+                     "skate, PhysDiff [mm/frame]": False, "skating ratio (contacts)": False,
+                     "flight time [s]": True, "flight phase error vs capture [s]": True}
+    text = summary_table(metrics(), metrics(), solution(), DEFAULT_TERMS, contact_rows=rows)
+    assert {"flight time [s] (capture 0.450)", "flight phase error vs capture [s]"} <= marked(text)
+    assert "feet rows: " + MOTION_LEGEND in text.splitlines()
+    assert _target(text, "flight time [s] (capture 0.450)") == "clearance"
+    assert _target(text, "float in contact [mm] (capture 2.40)") == "planted"
+
+
+def test_the_motion_metrics_table_has_a_worse_column():
+    m = _motion_pair()
+    text = motion_metrics_table(m["plain"], m["optimized"])
+    rows = {line.split("  ")[0]: line.endswith(f"  {WORSE}") for line in text.splitlines()[3:] if "  " in line}
+    assert rows["flight time [s]"] and rows["joint angle error [deg] mean / max"]  # the max: 2 -> 5 deg
+    assert not rows["float, ref. contacts [mm]"] and not rows["skate, ref. contacts [mm]"]
+    assert not rows["contact-site error [cm] mean / max"] and not rows["jerk root [m/s^3]"]
+    assert text.splitlines()[-1] == MOTION_LEGEND
+    same = motion_metrics_table(m["plain"], m["plain"])
+    assert not any(line.endswith(f"  {WORSE}") for line in same.splitlines())
+
+
+def test_every_term_targets_rows_the_summary_prints():
+    """The target column is complete: every registered term but smooth (whose row is its own integral)
+    names the rows it penalizes, and each of those rows is printed with that term as its target."""
+    from runner.console import TERM_ROWS
+    from runner.run import contact_summary_rows
+    from solver.terms.registry import registered_terms
+
+    names = [t.name for t in registered_terms()]
+    assert set(names) - {"smooth"} <= set(TERM_ROWS), "a term without summary rows: add it to TERM_ROWS"
+    weights = dict.fromkeys(names, 1.0)
+    sol = solution()
+    sol.integrals_initial.update(dict.fromkeys(names, 1.0))
+    sol.integrals_final.update(dict.fromkeys(names, 0.5))
+    cone = [("RMS friction-cone residual [N]", 1.0, 1.0, "{:.1f}", False),
+            ("peak friction-cone residual [N]", 2.0, 2.0, "{:.1f}", False)]
+    rows = contact_summary_rows(_motion_pair(), SimpleNamespace(names=()), None) + cone
+    text = summary_table(metrics(), metrics(), sol, weights, contact_rows=rows)
+    labels = [line.split("  ")[0] for line in text.splitlines()]
+    for term, prefixes in TERM_ROWS.items():
+        for prefix in prefixes:
+            label = next((lab for lab in labels if lab.strip().startswith(prefix)), None)
+            assert label is not None, (term, prefix)
+            assert term in _target(text, label).split(","), (term, label)

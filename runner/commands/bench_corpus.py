@@ -1,0 +1,85 @@
+"""`dynsplines bench corpus [CLIPS or FOLDERS] [--every 0.2,0.25,0.33] [--keys every,contacts] [--workers N]
+[--engine local|ray] [--out DIR]`: every (clip, keying) pair solved as `dynsplines mocap` solves it and held
+to the acceptance bounds, tuning and validation clips apart (the work is `runner.corpus.run_corpus`;
+this module is argument glue; docs/corpus.md)."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from runner.animate_options import add_solve_arguments, clip_terms
+from runner.batch import ENGINES, find_clips
+from runner.commands.mocap import add_figure_arguments, add_root_scale_argument
+from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from runner.parser import positive
+from runner.paths import REPO
+
+PROG = "dynsplines bench corpus"
+#: the shipped corpus
+CORPUS = REPO / "models" / "cmu"
+
+
+def _type(parse):
+    """An argparse type from a parser that raises ValueError with the whole message."""
+    def convert(text):
+        try:
+            return parse(text)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+    return convert
+
+
+def register(bsub) -> None:
+    """Add `bench corpus` to the `dynsplines bench` subparsers."""
+    from runner.corpus import DEFAULT_EVERY, parse_every, parse_keys
+    from runner.mocap.scene import AUTO
+
+    c = bsub.add_parser(
+        "corpus", help="every (clip, keying) pair held to the acceptance bounds, tuning and validation apart",
+        description="Solve every (clip, keying) pair as `dynsplines mocap` does (keys every S for each S of --every, "
+                    "and --keys contacts), check each against the acceptance bounds (docs/corpus.md) and report a "
+                    "held / not-held table per pair, the pass rate per bound and the failing pairs with a cause, for "
+                    "the tuning clips (the defaults were chosen on them) and the validation clips apart. A batch "
+                    "underneath: worker processes or Ray, resumable (a rerun skips the pairs already done). Writes "
+                    "DIR/corpus.md, DIR/corpus.json and DIR/<clip>.<keying>/ per pair. Exit 0 when every pair ran "
+                    "(whatever the bounds), 3 if one failed to run, 130 on Ctrl-C.")
+    c.add_argument("clips", nargs="*", type=Path, metavar="CLIP_OR_FOLDER",
+                   help=".bvh clips or folders of them [models/cmu/, the shipped corpus]")
+    c.add_argument("--every", type=_type(parse_every), default=DEFAULT_EVERY, metavar="S,S,...",
+                   help=f"key spacings [s] of the 'every' keying [{','.join(f'{v:g}' for v in DEFAULT_EVERY)}]")
+    c.add_argument("--keys", type=_type(parse_keys), default=("every", "contacts"), metavar="every,contacts",
+                   help="keyings: every (one pair per --every spacing), contacts (keys at the contact events) "
+                        "[every,contacts]")
+    c.add_argument("--workers", type=positive(int), default=1, metavar="N", help="pairs solved at once [%(default)s]")
+    c.add_argument("--engine", choices=ENGINES, default="local",
+                   help="local: processes on this machine; ray: Ray tasks (pip install -e \".[cluster]\") [%(default)s]")
+    c.add_argument("--ray-address", default=None, metavar="ADDR", help="Ray cluster address for --engine ray")
+    c.add_argument("--out", type=Path, default=Path("renders") / "corpus", metavar="DIR",
+                   help="output folder [renders/corpus]")
+    c.add_argument("--scene", default=AUTO, help="scene MJCF, or 'auto' (a scene fitted per clip) [auto]")
+    add_figure_arguments(c)
+    add_root_scale_argument(c)
+    add_solve_arguments(c, terms_help="the default terms; with the clip's contacts also planted,clearance")
+    c.add_argument("--quiet", action="store_true", help="no progress bar or per-pair lines")
+    c.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run `bench corpus`. Returns the exit code; raises InputError on bad input."""
+    from runner.corpus import keyings, run_corpus
+    from runner.pipeline import ClipOptions
+    from solver.errors import InputError
+
+    if args.ray_address is not None and args.engine != "ray":
+        raise InputError(f"--ray-address {args.ray_address} goes with --engine ray")
+    clips = find_clips(args.clips or [CORPUS])
+    base = ClipOptions(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale, command=PROG,
+                       **clip_terms(args), rate=args.rate)
+    say = (lambda *a: None) if args.quiet else print
+    r = run_corpus(clips, args.out, keyings(args.keys, args.every), base, workers=args.workers, engine=args.engine,
+                   ray_address=args.ray_address, say=say, quiet=args.quiet)
+    print(r["markdown"])
+    print(f"{PROG}: wrote {r['paths'][0]}, {r['paths'][1]}")
+    if r["batch"]["interrupted"]:
+        return EXIT_INTERRUPTED
+    return EXIT_FAILED if r["batch"]["totals"]["counts"]["failed"] else EXIT_OK

@@ -1,0 +1,251 @@
+"""The acceptance bounds of `dynsplines bench corpus`: one record per bound, the figures they read, and
+why a pair misses one (docs/corpus.md).
+
+A (clip, keying) pair is solved as `dynsplines mocap` solves it (`runner.pipeline.process_clip`); its
+metrics report (`<stem>.metrics.json`) and keyframe file give the flat *figures* of `pair_figures`
+(`FIGURES`: each a path into the report, or a function of it), and every `Bound` compares one figure
+with a limit made from another (the capture's, the plain spline's) or a constant:
+
+    rule "le":     held when value <= factor * reference + margin   (reference 0 when None)
+    rule "lt":     held when value <  factor * reference + margin
+    rule "within": held when |value - reference| <= max(margin, factor * |reference|)
+
+A bound whose figures are missing (a metric this build does not compute) is "n/a", never held or
+missed. The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
+fit the capture (the capture misses a surface bound itself) and a bound out of reach (the capture misses
+another bound); see `causes`.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+#: the cause categories of a missed bound (`causes`), with what in the data tells each
+CAUSES = {
+    "scene fit": "the retargeted capture itself misses the bound against the fitted scene (its feet are not "
+                 "on the surfaces fitted to them)",
+    "contact detection": "the flight time is missed the way the schedule errs: its gaps (frames where no site "
+                         "is scheduled in contact) are longer than the capture's flight (every site 3 cm clear) "
+                         "by more than the flight bound and the path flies too long, or shorter and too short",
+    "keyframes contradict the schedule": "a keyframe holds a site off its contact schedule (the pipeline's "
+                                         "keyframe conflicts)",
+    "bound out of reach": "penalty continuation gave up on the term that targets the bound (a x10 boost did "
+                          "not halve it), or the capture itself misses the bound",
+}
+NOT_TOLD = "not told by the data"
+
+
+@dataclass(frozen=True)
+class Bound:
+    """One acceptance bound of the corpus (module docstring).
+
+    Attributes:
+        name: short id, the column of the tables. label: what it says, with units.
+        value: the figure measured (a `FIGURES` key). reference: the figure the limit is made from, or None
+            (the limit is `margin`). rule: "le", "lt" or "within" (module docstring). factor, margin: the
+            rule's numbers, in the figure's units (margin) or dimensionless (factor).
+        capture: the capture's own figure of the same quantity (for `causes`), or None.
+        terms: the objective terms that target the bound (a stalled one: "bound out of reach").
+        kind: "surface" (feet against the scene), "contact" (the schedule decides it) or "motion".
+        source: the sentence of the acceptance list it implements.
+    """
+
+    name: str
+    label: str
+    value: str
+    reference: str | None
+    rule: str
+    factor: float
+    margin: float
+    capture: str | None
+    terms: tuple[str, ...]
+    kind: str
+    source: str
+
+    def limit(self, figures: dict) -> float | None:
+        """The limit for the pair's `figures` [the value's units; for "within": on |value - reference|],
+        or None when a figure it needs is missing."""
+        ref = 0.0 if self.reference is None else figures.get(self.reference)
+        if ref is None or not math.isfinite(ref):
+            return None
+        if self.rule == "within":
+            return max(self.margin, self.factor * abs(ref))
+        return self.factor * ref + self.margin
+
+    def measured(self, figures: dict, value_key: str | None = None) -> float | None:
+        """The figure compared with the limit (for "within": |value - reference|), None when missing.
+        `value_key` replaces `value` (the capture's own figure, for `causes`)."""
+        v = figures.get(value_key or self.value)
+        if v is None or not math.isfinite(v):
+            return None
+        if self.rule == "within":
+            ref = figures.get(self.reference)
+            return None if ref is None else abs(v - ref)
+        return v
+
+    def held(self, figures: dict, value_key: str | None = None) -> bool | None:
+        """True / False, or None ("n/a") when a figure is missing."""
+        v, lim = self.measured(figures, value_key), self.limit(figures)
+        if v is None or lim is None:
+            return None
+        return v < lim if self.rule == "lt" else v <= lim
+
+
+#: the acceptance list, one record per bound (docs/corpus.md "Bounds")
+BOUNDS: tuple[Bound, ...] = (
+    Bound("penetration", "max penetration [mm]", "penetration_mm", None, "le", 0.0, 1.0, "capture_penetration_mm",
+          ("penetration",), "surface", "Per pair: max penetration <= 1 mm."),
+    Bound("keyframes", "keyframe error", "keyframe_error", None, "le", 0.0, 1e-9, None, (), "motion",
+          "keyframes met to 1e-9."),
+    Bound("float", "float in stance [mm]", "float_mm", None, "le", 0.0, 5.0, "capture_float_mm", ("planted",),
+          "surface", "float during the capture's stance <= 5 mm."),
+    Bound("skate_capture", "skate vs capture [mm/frame]", "skate_mm", "capture_skate_mm", "le", 1.0, 0.5, None,
+          ("planted",), "contact", "skate <= the capture's + 0.5 mm/frame"),
+    Bound("skate_plain", "skate vs plain [mm/frame]", "skate_mm", "plain_skate_mm", "le", 0.5, 0.0,
+          "capture_skate_mm", ("planted",), "contact", "and <= half the plain spline's;"),
+    Bound("flight", "flight time vs capture [s]", "flight_s", "capture_flight_s", "within", 0.10, 0.030, None,
+          ("clearance",), "contact", "flight time within 30 ms or 10 % of the capture's, whichever is larger;"),
+    Bound("joint_error", "joint-angle error [deg]", "joint_error_deg", "plain_joint_error_deg", "le", 1.10, 0.0, None,
+          (), "motion", "joint-angle error <= the plain spline's + 10 %;"),
+    Bound("site_error", "contact-site error [cm]", "site_error_cm", "plain_site_error_cm", "lt", 1.0, 0.0, None,
+          ("planted",), "motion", "contact-site error below the plain spline's;"),
+    Bound("off_hinge", "knee/elbow off the hinge, beyond the capture's [deg]", "off_hinge_deg", "capture_off_hinge_deg", "le", 1.0, 3.0,
+          None, ("hinge",), "motion", "knee and elbow rotation off the hinge <= the capture's + 3 degrees;"),
+    Bound("hyperextension", "hyperextension [deg]", "hyperextension_deg", "plain_hyperextension_deg", "le", 1.0, 0.5,
+          None, ("bending",), "motion", "hyperextension <= the plain spline's + 0.5 degree."),
+)
+
+
+def _at(*keys) -> Callable[[dict], float | None]:
+    """A figure at `keys` in the metrics report (None when absent)."""
+    def get(doc):
+        for k in keys:
+            if not isinstance(doc, dict) or k not in doc:
+                return None
+            doc = doc[k]
+        return None if doc is None else float(doc)
+    return get
+
+
+def _mean_of_means(*keys) -> Callable[[dict], float | None]:
+    """The mean over joints (or sites) of each one's mean, at `keys` (the summary's "mean" column)."""
+    def get(doc):
+        for k in keys:
+            if not isinstance(doc, dict) or k not in doc:
+                return None
+            doc = doc[k]
+        return float(np.mean([v["mean"] for v in doc.values()])) if doc else None
+    return get
+
+
+_M = ("metrics", "motion")
+
+
+def _off_hinge_excess(doc: dict) -> float | None:
+    """[deg] the largest, over knees and elbows, of the optimized path's rotation off the hinge minus the
+    capture's at the same joint (None when the report has no anatomy figures)."""
+    try:
+        opt = doc["metrics"]["motion"]["optimized"]["path"]["off_hinge_deg"]
+        cap = doc["metrics"]["motion"]["plain"]["reference"]["off_hinge_deg"]
+    except (KeyError, TypeError):
+        return None
+    return float(max(opt[j] - cap[j] for j in opt)) if opt else None
+#: the figures of a pair: {name: function of the metrics report}; the motion metrics are over the
+#: reference's frames (`runner.run.reference_motion_metrics`), float and skate over the schedule's contacts.
+FIGURES: dict[str, Callable[[dict], float | None]] = {
+    "penetration_mm": _at("metrics", "optimized", "max_penetration_mm"),
+    "capture_penetration_mm": _at(*_M, "plain", "reference", "penetration_mm", "max"),
+    "keyframe_error": _at("metrics", "optimized", "keyframe_error"),
+    # float on the schedule's contacts; the capture's stance mask plugs in here when the motion metrics
+    # report float on it (then: _at(*_M, "optimized", "path", "<float on the capture's stance>"))
+    "float_mm": _at(*_M, "optimized", "path", "float_contact_mm"),
+    "capture_float_mm": _at(*_M, "plain", "reference", "float_contact_mm"),
+    "skate_mm": _at(*_M, "optimized", "path", "skate_contact_mm"),
+    "plain_skate_mm": _at(*_M, "plain", "path", "skate_contact_mm"),
+    "capture_skate_mm": _at(*_M, "plain", "reference", "skate_contact_mm"),
+    "flight_s": _at(*_M, "optimized", "path", "flight_time_s"),
+    "plain_flight_s": _at(*_M, "plain", "path", "flight_time_s"),
+    "capture_flight_s": _at(*_M, "plain", "reference", "flight_time_s"),
+    "joint_error_deg": _mean_of_means(*_M, "optimized", "error", "joint_orientation_deg"),
+    "plain_joint_error_deg": _mean_of_means(*_M, "plain", "error", "joint_orientation_deg"),
+    "site_error_cm": _mean_of_means(*_M, "optimized", "error", "site_position_cm"),
+    "plain_site_error_cm": _mean_of_means(*_M, "plain", "error", "site_position_cm"),
+    # knee/elbow rotation off the hinge: each joint's excess over the capture's own at that joint
+    # (`solver.motion_metrics.anatomy_figures`), so the bound is "<= the capture's + 3 deg" joint by joint
+    "off_hinge_deg": lambda doc: _off_hinge_excess(doc),
+    "capture_off_hinge_deg": lambda doc: None if _off_hinge_excess(doc) is None else 0.0,
+    "hyperextension_deg": _at("metrics", "optimized", "max_hyperextension_deg"),
+    "plain_hyperextension_deg": _at("metrics", "plain", "max_hyperextension_deg"),
+}
+
+
+def schedule_flight_s(contacts, sites, t0: float, frames: int, fps: float) -> float:
+    """[s] the time in which the schedule has no site in contact, counted on the reference's frames
+    t0 + i / fps, i < frames (as the motion metrics count the capture's flight).
+
+    Args:
+        contacts: `solver.contacts.Contact`s (times [s] on the clip's clock). sites: the contact sites.
+        t0: [s] the first keyframe's time. frames: the motion metrics' frame count. fps: [Hz].
+    """
+    from solver.contacts import contact_mask
+
+    times = t0 + np.arange(int(frames)) / float(fps)
+    mask = contact_mask(contacts, sites, times)
+    return float((~mask.any(axis=1)).sum() / fps)
+
+
+def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
+    """The flat figures of one pair (`FIGURES`, missing ones left out) from its metrics report (the
+    `<stem>.metrics.json` that `process_clip` writes), with the schedule's flight time [s]
+    (`schedule_flight_s`), the keyframe conflicts and the stalled terms when known."""
+    out = {}
+    for name, get in FIGURES.items():
+        v = get(report)
+        if v is not None and math.isfinite(v):
+            out[name] = v
+    if schedule_flight is not None:
+        out["schedule_flight_s"] = float(schedule_flight)
+    out["keyframe_conflicts"] = int(report.get("keyframe_conflicts") or 0)
+    out["stalled"] = sorted((report.get("stalled") or {}).keys())
+    return out
+
+
+def causes(bound: Bound, figures: dict) -> list[str]:
+    """The cause categories (`CAUSES`) of a missed `bound` that the pair's `figures` show; empty when the
+    data does not tell.
+
+    scene fit: a surface bound the capture itself misses. contact detection: the flight bound missed the
+    way the schedule errs (its gaps, which the clearance term lifts both feet through, are longer than
+    the capture's flight by more than the flight bound and the path's flight is too long, or shorter and
+    too short). keyframes contradict the schedule: a surface or contact bound missed on a pair whose
+    keyframes hold a site off the schedule. bound out of reach: the bound's term stalled, or the
+    capture itself misses a bound that is not about surfaces.
+    """
+    out = []
+    capture_misses = bound.capture is not None and bound.held(figures, bound.capture) is False
+    if capture_misses and bound.kind == "surface":
+        out.append("scene fit")
+    if bound.name == "flight" and {"schedule_flight_s", "capture_flight_s", "flight_s"} <= set(figures):
+        capture, lim = figures["capture_flight_s"], bound.limit(figures)
+        gap_error = figures["schedule_flight_s"] - capture
+        if abs(gap_error) > lim and (gap_error > 0) == (figures["flight_s"] > capture):
+            out.append("contact detection")
+    if bound.kind in ("surface", "contact") and figures.get("keyframe_conflicts", 0) > 0:
+        out.append("keyframes contradict the schedule")
+    if set(bound.terms) & set(figures.get("stalled", ())) or (capture_misses and bound.kind != "surface"):
+        out.append("bound out of reach")
+    return out
+
+
+def check_pair(figures: dict) -> list[dict]:
+    """Every bound on one pair: [{"bound", "held" (True / False / None = n/a), "value", "limit", "causes"}],
+    in `BOUNDS` order ("causes" only for a missed bound)."""
+    rows = []
+    for b in BOUNDS:
+        held = b.held(figures)
+        rows.append({"bound": b.name, "held": held, "value": b.measured(figures), "limit": b.limit(figures),
+                     "causes": causes(b, figures) if held is False else []})
+    return rows

@@ -1,0 +1,120 @@
+"""The tables of `dynsplines bench corpus` (`runner.corpus`) as Markdown: per set (tuning, validation) a
+held / not-held table per pair, the pass rate per bound, and the failing pairs with the bound missed and
+its cause (`runner.corpus_bounds.causes`). docs/corpus.md explains how to read them."""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+from runner.corpus_bounds import BOUNDS, CAUSES, NOT_TOLD
+from runner.corpus_sets import SETS, TUNING_SET
+
+#: what each set is, in the report
+SET_TITLES = {
+    TUNING_SET: "Tuning clips (the defaults were chosen on these)",
+    "validation": "Validation clips (never used to choose a default)",
+}
+#: the pass rates the acceptance list asks for, per set
+REQUIRED = {TUNING_SET: 0.95, "validation": 0.90}
+NA = "n/a"
+
+
+def number(v: float | None) -> str:
+    """A figure for a table: 3 significant digits, scientific below 1e-3 (keyframe errors); "n/a" for None."""
+    if v is None or not math.isfinite(v):
+        return NA
+    if v != 0 and abs(v) < 1e-3:
+        return f"{v:.1e}"
+    return f"{v:.3g}"
+
+
+def check_cell(check: dict) -> str:
+    """"0.31 <= 1" (held), "**3.2 > 1**" (missed; "<" for a strict bound), or "n/a"."""
+    if check["held"] is None:
+        return NA
+    v, lim = number(check["value"]), number(check["limit"])
+    if check["held"]:
+        return f"{v} <= {lim}"
+    return f"**{v} > {lim}**"
+
+
+def _pair_name(r: dict) -> str:
+    return f"{Path(r['clip']).stem} {r['keying']}"
+
+
+def pair_table(results: Sequence[dict]) -> list[str]:
+    """A row per pair, a column per bound: value and limit, missed ones in bold; a pair that did not run
+    shows its status."""
+    head = "| pair | " + " | ".join(b.name for b in BOUNDS) + " | all |"
+    lines = [head, "|---|" + "---|" * (len(BOUNDS) + 1)]
+    for r in results:
+        if not r["checks"]:
+            lines.append(f"| {_pair_name(r)} | {r['status']}: {r['error']} |" + " |" * len(BOUNDS))
+            continue
+        cells = [check_cell(c) for c in r["checks"]]
+        missed = sum(c["held"] is False for c in r["checks"])
+        lines.append(f"| {_pair_name(r)} | " + " | ".join(cells) + f" | {'held' if not missed else f'{missed} missed'} |")
+    return lines
+
+
+def rate_table(rates: dict) -> list[str]:
+    """Pass rate per bound and of whole pairs, a column per set."""
+    lines = ["| bound | " + " | ".join(SETS) + " |", "|---|" + "---|" * len(SETS)]
+    for b in BOUNDS:
+        cells = []
+        for s in SETS:
+            held, n = rates[s][b.name]
+            cells.append(f"{held}/{n} ({held / n:.0%})" if n else NA)
+        lines.append(f"| {b.name}: {b.source} | " + " | ".join(cells) + " |")
+    cells = []
+    for s in SETS:
+        n, ok = rates[s]["pairs"], rates[s]["held_all"]
+        cells.append(f"**{ok}/{n} ({ok / n:.0%})**, required {REQUIRED[s]:.0%}" if n else NA)
+    lines.append("| **every bound held (pairs)** | " + " | ".join(cells) + " |")
+    return lines
+
+
+def failing_lines(results: Sequence[dict]) -> list[str]:
+    """One line per failing pair: each bound missed with its value, limit and cause categories."""
+    lines = []
+    for r in results:
+        if not r["checks"]:
+            lines.append(f"- {_pair_name(r)} ({r['set']}): did not run ({r['status']}): {r['error']}")
+            continue
+        missed = [c for c in r["checks"] if c["held"] is False]
+        if not missed:
+            continue
+        n = r["figures"].get("keyframe_conflicts", 0)
+        what = "; ".join(f"{c['bound']} {number(c['value'])} (limit {number(c['limit'])}): "
+                         + (", ".join(_cause(k, n) for k in c["causes"]) or NOT_TOLD) for c in missed)
+        lines.append(f"- {_pair_name(r)} ({r['set']}): {what}")
+    return lines
+
+
+def _cause(name: str, conflicts: int) -> str:
+    """A cause category, with the count of keyframe conflicts for "keyframes contradict the schedule"."""
+    return f"{name} ({conflicts})" if name == "keyframes contradict the schedule" else name
+
+
+def markdown_report(results: Sequence[dict], rates: dict, meta: dict) -> str:
+    """The whole report: a line on the run, the pass rates of both sets, then per set the pair table and
+    the failing pairs, then the bounds' limits and the cause categories."""
+    n_na = [b.name for b in BOUNDS if all(c["held"] is None for r in results for c in r["checks"]
+                                          if c["bound"] == b.name)]
+    lines = [f"# Corpus: {len(results)} pairs ({', '.join(meta.get('keyings', []))}), "
+             f"{meta.get('workers', 1)} worker(s), {meta.get('engine', 'local')}, {meta.get('wall_time_s', 0):.0f} s",
+             "", "Pass rate per bound (pairs where the bound could be measured) and of whole pairs:", "",
+             *rate_table(rates)]
+    if n_na:
+        lines += ["", f"n/a: not measured by this build ({', '.join(n_na)})."]
+    for s in SETS:
+        rs = [r for r in results if r["set"] == s]
+        if not rs:
+            continue
+        clips = sorted({Path(r["clip"]).stem for r in rs})
+        lines += ["", f"## {SET_TITLES[s]}: {', '.join(clips)}", "", *pair_table(rs), ""]
+        failing = failing_lines(rs)
+        lines += ["Failing pairs:", "", *(failing or ["- none"])]
+    lines += ["", "Causes: " + "; ".join(f"*{k}*: {v}" for k, v in CAUSES.items()) + f"; *{NOT_TOLD}*: none of these."]
+    return "\n".join(lines) + "\n"

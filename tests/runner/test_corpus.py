@@ -1,0 +1,196 @@
+"""`bench corpus`'s bounds, figures, causes, clip sets and report on hand-built figures (no solve): each rule
+held and missed on either side of its limit, "n/a" when a figure is missing, the causes the data tells."""
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from runner.corpus import Keying, corpus_pairs, keyings, parse_every, parse_keys, pass_rates
+from runner.corpus_bounds import BOUNDS, FIGURES, causes, check_pair, pair_figures, schedule_flight_s
+from runner.corpus_report import check_cell, failing_lines, markdown_report, number
+from runner.corpus_sets import TUNING, clip_set
+from solver.contacts import Contact
+from solver.errors import InputError
+
+REPO = Path(__file__).resolve().parents[2]
+CMU = REPO / "models" / "cmu"
+BOUND = {b.name: b for b in BOUNDS}
+
+
+def figures(**over):
+    """A pair that holds every bound: capture, plain spline and optimized figures in their units."""
+    f = {"penetration_mm": 0.4, "capture_penetration_mm": 0.0, "keyframe_error": 2e-16, "float_mm": 3.0,
+         "capture_float_mm": 2.0, "skate_mm": 1.0, "plain_skate_mm": 4.0, "capture_skate_mm": 2.0, "flight_s": 0.35,
+         "plain_flight_s": 0.40, "capture_flight_s": 0.34, "joint_error_deg": 5.0, "plain_joint_error_deg": 5.0,
+         "site_error_cm": 4.0, "plain_site_error_cm": 5.0, "hyperextension_deg": 0.3, "plain_hyperextension_deg": 0.0,
+         "schedule_flight_s": 0.36, "keyframe_conflicts": 0, "stalled": []}
+    return {**f, **over}
+
+
+def held(name, **over):
+    return BOUND[name].held(figures(**over))
+
+
+def test_a_pair_within_every_bound_holds_them_all_and_the_unmeasured_one_is_na():
+    checks = {c["bound"]: c for c in check_pair(figures())}
+    assert set(checks) == set(BOUND)
+    assert all(c["held"] for name, c in checks.items() if name != "off_hinge")
+    assert checks["off_hinge"]["held"] is None and checks["off_hinge"]["value"] is None  # metric not in this build
+    assert check_cell(checks["off_hinge"]) == "n/a"
+
+
+@pytest.mark.parametrize("name, ok, bad", [
+    ("penetration", {"penetration_mm": 1.0}, {"penetration_mm": 1.01}),
+    ("keyframes", {"keyframe_error": 1e-9}, {"keyframe_error": 2e-9}),
+    ("float", {"float_mm": 5.0}, {"float_mm": 5.1}),
+    # capture's 2.0 + 0.5 mm/frame; half the plain spline's 6.0 is 3.0, not the tighter one here
+    ("skate_capture", {"skate_mm": 2.5, "plain_skate_mm": 6.0}, {"skate_mm": 2.6, "plain_skate_mm": 6.0}),
+    ("skate_plain", {"skate_mm": 2.0}, {"skate_mm": 2.1}),  # half of 4.0
+    # 10 % of 0.5 s = 50 ms is above the 30 ms floor, either way
+    ("flight", {"flight_s": 0.549, "capture_flight_s": 0.5}, {"flight_s": 0.551, "capture_flight_s": 0.5}),
+    ("flight", {"flight_s": 0.451, "capture_flight_s": 0.5}, {"flight_s": 0.449, "capture_flight_s": 0.5}),
+    # 10 % of 0.2 s = 20 ms: the 30 ms floor rules
+    ("flight", {"flight_s": 0.229, "capture_flight_s": 0.2}, {"flight_s": 0.231, "capture_flight_s": 0.2}),
+    ("joint_error", {"joint_error_deg": 5.5}, {"joint_error_deg": 5.51}),  # plain 5.0 + 10 %
+    ("site_error", {"site_error_cm": 4.99}, {"site_error_cm": 5.0}),  # strictly below the plain 5.0
+    ("hyperextension", {"hyperextension_deg": 0.5}, {"hyperextension_deg": 0.51}),  # plain 0 + 0.5 deg
+    ("off_hinge", {"off_hinge_deg": 7.0, "capture_off_hinge_deg": 4.0},
+     {"off_hinge_deg": 7.1, "capture_off_hinge_deg": 4.0}),  # capture + 3 deg, once the metric is plugged in
+])
+def test_each_bound_holds_at_its_limit_and_misses_beyond_it(name, ok, bad):
+    assert held(name, **ok) is True
+    assert held(name, **bad) is False
+
+
+def test_a_missing_reference_figure_makes_the_bound_na_not_missed():
+    f = figures()
+    del f["plain_joint_error_deg"]
+    assert BOUND["joint_error"].held(f) is None and BOUND["joint_error"].limit(f) is None
+    assert BOUND["flight"].held(figures(flight_s=float("nan"))) is None
+
+
+def test_figures_are_read_from_the_metrics_report():
+    def motion(float_mm, joint_means, site_means, flight):
+        block = {"float_contact_mm": float_mm, "skate_contact_mm": 1.5, "flight_time_s": flight,
+                 "penetration_mm": {"mean": 0.1, "max": 0.3}}
+        return {"path": block, "reference": {**block, "float_contact_mm": 2.5, "flight_time_s": 0.3},
+                "error": {"joint_orientation_deg": {f"j{i}": {"mean": m, "max": 9.0} for i, m in enumerate(joint_means)},
+                          "site_position_cm": {f"s{i}": {"mean": m, "max": 9.0} for i, m in enumerate(site_means)}}}
+    report = {"keyframe_conflicts": 3, "stalled": {"planted": 2e-6},
+              "metrics": {"plain": {"max_penetration_mm": 40.0, "keyframe_error": 0.0, "max_hyperextension_deg": 0.2},
+                          "optimized": {"max_penetration_mm": 0.5, "keyframe_error": 1e-16,
+                                        "max_hyperextension_deg": 0.6},
+                          "motion": {"plain": motion(6.0, [2.0, 4.0], [3.0], 0.5),
+                                     "optimized": motion(4.0, [1.0, 2.0, 6.0], [1.0, 2.0], 0.35)}}}
+    f = pair_figures(report, schedule_flight=0.42)
+    assert f["penetration_mm"] == 0.5 and f["plain_hyperextension_deg"] == 0.2 and f["hyperextension_deg"] == 0.6
+    assert f["float_mm"] == 4.0 and f["capture_float_mm"] == 2.5 and f["capture_penetration_mm"] == 0.3
+    assert f["joint_error_deg"] == pytest.approx(3.0) and f["plain_joint_error_deg"] == pytest.approx(3.0)
+    assert f["site_error_cm"] == pytest.approx(1.5) and f["plain_site_error_cm"] == pytest.approx(3.0)
+    assert f["flight_s"] == 0.35 and f["plain_flight_s"] == 0.5 and f["capture_flight_s"] == 0.3
+    assert f["schedule_flight_s"] == 0.42 and f["keyframe_conflicts"] == 3 and f["stalled"] == ["planted"]
+    assert "off_hinge_deg" not in f  # not measured: left out, so its bound is n/a
+    assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled"} <= set(FIGURES)
+
+
+def test_the_schedule_flight_counts_frames_with_no_site_in_contact():
+    # 10 frames at 10 Hz from t0 = 1.0 s: contacts cover 1.0-1.3 s (frames 0-3) and 1.6-1.9 s (frames 6-9)
+    contacts = [Contact("l_toe", 1.0, 1.3), Contact("r_heel", 1.6, 1.85), Contact("r_toe", 1.7, 2.5)]
+    assert schedule_flight_s(contacts, ("l_heel", "l_toe", "r_heel", "r_toe"), 1.0, 10, 10.0) == pytest.approx(0.2)
+
+
+def test_causes_the_data_tells():
+    # the capture's own feet float 7 mm over the fitted floor: the scene does not fit the capture
+    assert causes(BOUND["float"], figures(float_mm=6.0, capture_float_mm=7.0)) == ["scene fit"]
+    assert causes(BOUND["float"], figures(float_mm=6.0)) == []
+    # schedule gaps 0.2 s longer than the capture's flight, and the path flies too long: detection
+    long_gaps = figures(flight_s=0.45, capture_flight_s=0.34, schedule_flight_s=0.54)
+    assert causes(BOUND["flight"], long_gaps) == ["contact detection"]
+    # the same gaps but a path that flies too short: not what the schedule's error would do
+    assert causes(BOUND["flight"], {**long_gaps, "flight_s": 0.25}) == []
+    assert causes(BOUND["flight"], {**long_gaps, "keyframe_conflicts": 2}) == ["contact detection",
+                                                                             "keyframes contradict the schedule"]
+    # the planted term stalled: its bounds are out of reach; a motion bound is not the schedule's doing
+    assert causes(BOUND["skate_plain"], figures(skate_mm=3.0, stalled=["planted"])) == ["bound out of reach"]
+    assert causes(BOUND["joint_error"], figures(joint_error_deg=9.0, keyframe_conflicts=4)) == []
+
+
+def test_clip_sets_are_the_sha256_table_not_the_names(tmp_path):
+    assert {clip_set(CMU / f"{c}.bvh") for c in ("127_33", "16_23", "35_17")} == {"tuning"}
+    assert {clip_set(CMU / f"{c}.bvh") for c in ("75_03", "83_02", "07_04")} == {"validation"}
+    renamed = shutil.copy(CMU / "35_17.bvh", tmp_path / "my_run.bvh")
+    assert clip_set(renamed) == "tuning"
+    edited = tmp_path / "127_33.bvh"
+    edited.write_text((CMU / "35_17.bvh").read_text() + "\n")
+    assert clip_set(edited) == "validation"
+
+
+def test_the_models_readme_table_agrees_with_the_sets():
+    lines = (CMU / "README.md").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("| File |") and line.rstrip().endswith("| Set |"))
+    rows = []
+    for line in lines[start + 2:]:
+        if not re.match(r"\| `[\w]+\.bvh` \|", line):
+            break
+        rows.append(line.split("|"))
+    listed = {r[1].strip().strip("`"): r[-2].strip() for r in rows}
+    shipped = {p.name for p in CMU.glob("*.bvh")}
+    assert shipped <= set(listed), "every shipped clip has a row"
+    for name, which in listed.items():
+        assert which == clip_set(CMU / name), name
+        prefix = next(c.strip().strip("`") for c in rows[list(listed).index(name)] if re.fullmatch(r" `[0-9a-f]{16}` ", c))
+        assert (name in (f"{v}.bvh" for v in TUNING.values())) == (which == "tuning")
+        assert any(sha.startswith(prefix) for sha in TUNING) == (which == "tuning")
+
+
+def test_keyings_and_their_parsing():
+    assert parse_every("0.2, 0.25,0.33,0.25") == (0.2, 0.25, 0.33)
+    assert parse_keys("contacts,every") == ("contacts", "every")
+    for bad in ("0.2,x", "0.2,-1", "0"):
+        with pytest.raises(ValueError, match="not a (number|positive)"):
+            parse_every(bad)
+    with pytest.raises(ValueError, match="expected a list from every,contacts"):
+        parse_keys("every,hops")
+    ks = keyings(("every", "contacts"), (0.2, 0.25))
+    assert [k.label for k in ks] == ["every 0.2", "every 0.25", "contacts"]
+    assert [k.slug for k in ks] == ["every0.2", "every0.25", "contacts"]
+    assert keyings(("contacts",), (0.2,)) == [Keying("contacts")]
+
+
+def test_pairs_name_their_folders_and_refuse_clashing_stems(tmp_path):
+    pairs = corpus_pairs([CMU / "35_17.bvh", CMU / "75_03.bvh"], keyings(("every", "contacts"), (0.25,)))
+    assert [(p.folder, p.set) for p in pairs] == [("35_17.every0.25", "tuning"), ("35_17.contacts", "tuning"),
+                                                  ("75_03.every0.25", "validation"), ("75_03.contacts", "validation")]
+    (tmp_path / "x").mkdir()
+    twin = shutil.copy(CMU / "35_17.bvh", tmp_path / "x" / "35_17.bvh")
+    with pytest.raises(InputError, match="two clips named 35_17"):
+        corpus_pairs([CMU / "35_17.bvh", Path(twin)], keyings(("every",), (0.25,)))
+
+
+def _result(clip, which, **over):
+    checks = check_pair(figures(**over))
+    return {"clip": clip, "keying": "every 0.25", "set": which, "folder": "", "status": "ok", "error": "",
+            "figures": figures(**over), "checks": checks}
+
+
+def test_pass_rates_and_the_report_list_failing_pairs_with_their_causes():
+    results = [_result("a.bvh", "tuning"), _result("b.bvh", "tuning", penetration_mm=2.0),
+               _result("c.bvh", "validation", flight_s=0.45, schedule_flight_s=0.54),
+               {"clip": "d.bvh", "keying": "contacts", "set": "validation", "folder": "", "status": "failed",
+                "error": "d.bvh: no such clip", "figures": {}, "checks": []}]
+    rates = pass_rates(results)
+    assert rates["tuning"]["pairs"] == 2 and rates["tuning"]["held_all"] == 1
+    assert rates["tuning"]["penetration"] == [1, 2] and rates["tuning"]["off_hinge"] == [0, 0]
+    assert rates["validation"]["pairs"] == 2 and rates["validation"]["held_all"] == 0
+    assert rates["validation"]["flight"] == [0, 1]  # the pair that did not run is not measured
+    lines = failing_lines(results)
+    assert lines == ["- b every 0.25 (tuning): penetration 2 (limit 1): not told by the data",
+                     "- c every 0.25 (validation): flight 0.11 (limit 0.034): contact detection",
+                     "- d contacts (validation): did not run (failed): d.bvh: no such clip"]
+    text = markdown_report(results, rates, {"keyings": ["every 0.25"], "workers": 2})
+    assert "Tuning clips" in text and "Validation clips" in text and "required 90%" in text
+    assert "**1/2 (50%)**, required 95%" in text and "**2 > 1**" in text
+    assert number(1.1e-16) == "1.1e-16" and number(0.0) == "0" and number(None) == "n/a"
+    assert np.isfinite(float(number(0.0337)))
