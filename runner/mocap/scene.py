@@ -11,8 +11,8 @@ import numpy as np
 from runner.files import atomic_output
 from runner.mocap.reference import ROOT_SCALE_LEGS, load_bvh_reference
 from runner.mocap.retarget import Reference
-from solver.contacts import Contact, site_positions
 from solver.capture_frame import CaptureFrame
+from solver.contacts import Contact, site_positions
 from solver.errors import InputError
 from solver.model import load_model
 from solver.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
