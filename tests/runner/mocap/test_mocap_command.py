@@ -105,11 +105,16 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
     assert {"planted", "clearance"} <= {name for name, _ in saved.options["solve"]["limits"]}
     report = json.loads((tmp_path / "m.json").read_text())
     assert report["keyframes"] == kf.count and report["frames"] == 73 and report["fps"] == pytest.approx(120, rel=1e-4)
-    # the reference the metrics compare with is the capture itself: its root path is the clip's Hips path
+    # the reference the metrics compare with is the capture itself: its root path is the clip's Hips path,
+    # in the levelled frame of the fitted scene (the rigid transform the scene records: its floor at z = 0)
     from bvh_fk import parse, world
 
+    from solver.capture_frame import CaptureFrame
+
     _, hips = world(parse(short_clip))
-    assert np.allclose(saved.reference_qpos[:, :3], hips[1:, 0], atol=1e-9)
+    frame = CaptureFrame.from_model(model)
+    assert not frame.is_identity
+    assert np.allclose(saved.reference_qpos[:, :3], frame.points(hips[1:, 0]), atol=1e-9)
     assert report["metrics"]["optimized"]["keyframe_error"] < 1e-9
     # the keyframe file reruns with animate (the reference found through its "source" "clip")
     assert main(["animate", str(out / "run.keyframes.json"), "--no-render", "--rounds", "0", "--max-evals", "20",
