@@ -43,6 +43,12 @@ Method:
    under the box, that side is pulled back to halfway between the footprint and the point. A box on a
    tilted floor is tilted with it (a capture floor is tilted by the calibration, the props on it too).
 
+5. Levelling (`FittedScene.levelling`, `FittedScene.levelled`; solver/capture_frame.py): a tilted
+   capture floor is a calibration error of the capture volume, so `runner.mocap.scene.clip_scene`
+   writes the scene in the frame where the fitted floor is z = 0 (the shortest rotation taking its
+   normal to +z, then a vertical shift), the boxes square to the world axes, and records that rigid
+   transform in the scene for the clip's import (and its inverse for the export onto the source).
+
 Limits: one floor plane (a floor that bends or steps is fitted by the best plane, its stances
 scattering about it); no drift in time; boxes are square to the floor (no rotation about its normal)
 and stand on it; one box per cluster (an L-shaped platform becomes one bounding box); an edge no foot
