@@ -93,8 +93,9 @@ class CaptureFrame:
         return f'  <custom>\n    <numeric name="{CAPTURE_FRAME}" data="{data}"/>\n  </custom>\n'
 
     @classmethod
-    def from_model(cls, model) -> CaptureFrame:
+    def from_model(cls, model, where: str = "the scene") -> CaptureFrame:
         """The transform a scene's MjModel records (`CAPTURE_FRAME`), or the identity when it has none.
+        `where` names the scene in the error (its file).
 
         Raises:
             InputError: the numeric has not 7 values, or its quaternion is not of unit length (1e-6).
@@ -107,6 +108,6 @@ class CaptureFrame:
         adr, size = int(model.numeric_adr[i]), int(model.numeric_size[i])
         data = np.array(model.numeric_data[adr:adr + size], float)
         if size != 7 or not np.all(np.isfinite(data)) or abs(np.linalg.norm(data[:4]) - 1.0) > 1e-6:
-            raise InputError(f'the scene\'s <numeric name="{CAPTURE_FRAME}"> is {data.tolist()}; it needs 7 values '
+            raise InputError(f'{where}: <numeric name="{CAPTURE_FRAME}"> is {data.tolist()}; it needs 7 values '
                              '"w x y z tx ty tz" with a unit quaternion (or remove it: no transform)')
         return cls(data[:4] / np.linalg.norm(data[:4]), data[4:])

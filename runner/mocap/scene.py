@@ -70,8 +70,8 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     """
     if str(scene) != AUTO:
         model = load_model(scene)
-        return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, Path(scene),
-                         frame=CaptureFrame.from_model(model))
+        frame = CaptureFrame.from_model(model, str(scene))  # a malformed record named with its file
+        return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, Path(scene), frame=frame)
     bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
     first = load_bvh_reference(clip, bare, root_scale=root_scale)
     pos = site_positions(bare, first.qpos)
