@@ -213,7 +213,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
     say(f"dynsplines mocap: {clip} -> {ref.count} frames at {1 / ref.frame_time:.4g} Hz ({ref.duration:.2f} s), "
         f"{len(contacts)} contacts; scene {'fitted: ' if cs.fitted is not None else ''}{display_path(cs.scene_path)}")
     if cs.fitted is not None:
-        say(f"  fitted {cs.fitted.describe_floor()}")
+        say(f"  fitted capture {cs.capture_floor.describe_floor()}; levelled: the scene's floor is z = 0")
         for i, (c, h) in enumerate(cs.fitted.boxes):
             say(f"  fitted box{i}: top {100 * (c[2] + h[2]):.1f} cm, x {100 * (c[0] - h[0]):.1f} .. "
                 f"{100 * (c[0] + h[0]):.1f} cm, y {100 * (c[1] - h[1]):.1f} .. {100 * (c[1] + h[1]):.1f} cm; "
@@ -291,7 +291,9 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         (count), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
         that hold a site off the contact schedule), "stalled" ({term: violation} out of reach), "metrics"
         ({"plain", "optimized": path_metrics; "motion": {"plain", "optimized": motion_metrics}}),
-        "scene_fitted" (floor_z, floor_slope, boxes as centre/half lists, or None), "outputs" ({name: path})}.
+        "scene_fitted" (the capture floor's floor_z and floor_slope, capture_frame (w x y z tx ty tz: the
+        transform to the levelled frame), boxes in that frame as centre/half lists, or None), "outputs"
+        ({name: path})}.
     Raises:
         InputError: a missing or malformed clip, another skeleton (the missing joints named), an
             unwritable output, a bad option.
@@ -319,7 +321,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     run = execute(problem, options_, source, outputs, say)
     ref = source.reference
     fitted = None if cs.fitted is None else {
-        "floor_z": cs.fitted.floor_z, "floor_slope": list(cs.fitted.floor_slope),
+        "floor_z": cs.capture_floor.floor_z, "floor_slope": list(cs.capture_floor.floor_slope),
+        "capture_frame": [*cs.frame.quat.tolist(), *cs.frame.shift.tolist()],
         "boxes": [{"center": c.tolist(), "half": h.tolist()} for c, h in cs.fitted.boxes]}
     status = "interrupted" if run.interrupted else run.solution.status.value
     result = {

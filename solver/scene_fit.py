@@ -43,6 +43,12 @@ Method:
    under the box, that side is pulled back to halfway between the footprint and the point. A box on a
    tilted floor is tilted with it (a capture floor is tilted by the calibration, the props on it too).
 
+5. Levelling (`FittedScene.levelling`, `FittedScene.levelled`; solver/capture_frame.py): a tilted
+   capture floor is a calibration error of the capture volume, so `runner.mocap.scene.clip_scene`
+   writes the scene in the frame where the fitted floor is z = 0 (the shortest rotation taking its
+   normal to +z, then a vertical shift), the boxes square to the world axes, and records that rigid
+   transform in the scene for the clip's import (and its inverse for the export onto the source).
+
 Limits: one floor plane (a floor that bends or steps is fitted by the best plane, its stances
 scattering about it); no drift in time; boxes are square to the floor (no rotation about its normal)
 and stand on it; one box per cluster (an L-shaped platform becomes one bounding box); an edge no foot
@@ -58,6 +64,7 @@ from pathlib import Path
 
 import numpy as np
 
+from solver.capture_frame import CaptureFrame
 from solver.contacts import FEET, SITES, Contact, contact_mask, detect_contacts, foot_contacts
 from solver.errors import InputError
 
@@ -135,6 +142,18 @@ class FittedScene:
     def box_heights(self) -> list[float]:
         """[m] height of each box's top above the floor, along the floor's normal (2 half[2])."""
         return [float(2 * h[2]) for _, h in self.boxes]
+
+    def levelling(self) -> CaptureFrame:
+        """The rigid transform taking this floor to the plane z = 0 by the shortest rotation
+        (`solver.capture_frame`); a level floor at 0 gives the identity."""
+        return CaptureFrame.levelling(self.floor_z, self.floor_slope)
+
+    def levelled(self) -> FittedScene:
+        """This scene in its levelled frame (`levelling`): the floor level at z = 0, each box's centre
+        moved by the transform, its half sizes kept (a box square to the floor becomes square to the
+        world axes)."""
+        t = self.levelling()
+        return FittedScene(0.0, tuple((t.points(c), h.copy()) for c, h in self.boxes))
 
 
 def _tilt_rotation(b: float, c: float) -> np.ndarray:
@@ -379,16 +398,18 @@ _SCENE = """<mujoco model="{model}">
 
 
 def scene_mjcf(fitted: FittedScene, figure_path: str | os.PathLike, relative_to: str | os.PathLike | None = None,
-               model: str = "fitted_scene") -> str:
+               model: str = "fitted_scene", capture: CaptureFrame | None = None) -> str:
     """MJCF text of the fitted scene: the figure included, a floor plane "floor", boxes "box0", ...
 
-    Materials, lights and camera as models/run_and_step.xml. The include path is absolute unless
+    Materials, lights and camera as models/run_and_step.xml. `capture` (the transform from the
+    capture's coordinates to the scene's, `FittedScene.levelling`), when given, is recorded as the
+    scene's `<custom><numeric name="capture:frame">` (`solver.capture_frame`). The include path is absolute unless
     `relative_to` (the directory the scene will be saved in) is given, then relative to it; either way
     the scene loads from where it is saved (MuJoCo resolves includes against the main file's folder).
 
     Args:
         fitted: the scene. figure_path: the figure's MJCF (models/humanoid39.xml).
-        relative_to: optional folder of the saved scene. model: the model name.
+        relative_to: optional folder of the saved scene. model: the model name. capture: see above.
     Raises:
         InputError: figure_path does not exist.
     """
@@ -402,7 +423,8 @@ def scene_mjcf(fitted: FittedScene, figure_path: str | os.PathLike, relative_to:
         f'size="{h[0]:.6f} {h[1]:.6f} {h[2]:.6f}" material="step" contype="1" conaffinity="1"/>\n'
         for i, (c, h) in enumerate(fitted.boxes)
     )
-    return _SCENE.format(model=model, figure=inc, floor_z=fitted.floor_z, quat=quat, boxes=boxes)
+    text = _SCENE.format(model=model, figure=inc, floor_z=fitted.floor_z, quat=quat, boxes=boxes)
+    return text if capture is None else text.replace("</mujoco>", capture.mjcf() + "</mujoco>")
 
 
 def _quat(rot: np.ndarray) -> np.ndarray:

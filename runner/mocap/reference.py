@@ -21,6 +21,7 @@ from runner.mocap.retarget import (
     tidy_quaternions,
 )
 from runner.mocap.subject_figure import figure_skeleton_digest, skeleton_digest
+from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.layout import StateLayout
@@ -41,7 +42,9 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
 
     Steps (runner/mocap/retarget.py docstring): parse (bvhio), drop the synthetic T-pose first frame, forward kinematics
     in metres and MuJoCo axes, rest-offset retargeting of body orientations, local joint quaternions
-    (unit, w x y z, hemisphere-consistent), knee/elbow hyperextension clamped to 0 flexion
+    (unit, w x y z, hemisphere-consistent), the root's position and orientation moved into the scene's
+    levelled capture frame (the rigid transform its MJCF records, `solver.capture_frame.CaptureFrame.
+    from_model`: a fitted scene's floor is z = 0 there; the identity for a scene that records none), knee/elbow hyperextension clamped to 0 flexion
     (`clamp_hyperextension`), root height corrected so feet in contact stand on the floor or the box
     and no contact site is ever below a surface (`correct_root_height`).
 
@@ -66,8 +69,8 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
         root_scale, captured_root; n = frames in the file - 1.
     Raises:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
-            joint the retargeting needs is missing, the model lacks a joint or site it needs, or
-            root_scale is neither "legs" nor a number > 0.
+            joint the retargeting needs is missing, the model lacks a joint or site it needs, a malformed
+            capture frame in the scene, or root_scale is neither "legs" nor a number > 0.
     """
     from runner.export.bvh import figure_qpos_from_bvh, is_figure_clip
 
@@ -83,6 +86,7 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     own = figure_skeleton_digest(model) == skeleton_digest(clip)  # the subject's own figure
     scale = 1.0 if own and root_scale == ROOT_SCALE_LEGS else _root_scale(root_scale, clip, model, path)
     qpos = retarget(clip, figure, layout, scale)[1:]  # frame 0 is the synthetic T-pose
+    qpos = CaptureFrame.from_model(model).root(qpos, figure.joints[0].qpos_slice.start)  # the levelled frame
     step(2, "retargeted")
     qpos, _ = clamp_hyperextension(qpos, figure)
     step(3, "clamped")

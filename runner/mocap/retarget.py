@@ -97,7 +97,8 @@ class Reference:
     Attributes:
         times: (n,) frame times [s], starting at 0, spaced `frame_time`.
         qpos: (n, nq) MuJoCo `qpos` per frame: root position [m], unit quaternions (w x y z),
-            hemisphere-consistent over time per joint.
+            hemisphere-consistent over time per joint; the root in the scene's frame (the levelled
+            capture frame of a fitted scene, `solver.capture_frame`).
         source: the BVH file it came from.
         frame_time: [s] time between frames of the clip.
         root_scale: the scale applied to the captured root path (`retarget`; 1: as captured).

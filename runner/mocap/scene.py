@@ -1,9 +1,9 @@
 """The scene a clip is retargeted onto: a given MJCF file, or one fitted to where the clip's feet rest
 (`--scene auto`: a floor plane, tilted if the capture's is, and boxes; solver/scene_fit.py), written
-next to the outputs."""
+next to the outputs in the levelled capture frame (the fitted floor at z = 0, solver/capture_frame.py)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +11,7 @@ import numpy as np
 from runner.files import atomic_output
 from runner.mocap.reference import ROOT_SCALE_LEGS, load_bvh_reference
 from runner.mocap.retarget import Reference
+from solver.capture_frame import CaptureFrame
 from solver.contacts import Contact, site_positions
 from solver.errors import InputError
 from solver.model import load_model
@@ -26,15 +27,23 @@ class ClipScene:
     """A clip retargeted onto its scene.
 
     Attributes:
-        reference: the retargeted clip (root height corrected onto the scene's surfaces).
+        reference: the retargeted clip, in the scene's frame (root height corrected onto the scene's
+            surfaces, except on the subject's own figure).
         model: the scene's MjModel. scene_path: its MJCF file.
-        fitted: the fitted floor and boxes (None for a given scene).
+        fitted: the fitted floor and boxes as the scene has them: in the levelled capture frame, the floor
+            level at z = 0 (None for a given scene).
+        capture_floor: the same fit in the capture's own coordinates (a floor tilted or off z = 0 by
+            the capture's calibration; None for a given scene).
+        frame: the rigid transform from the capture's coordinates to the scene's (`capture_floor.
+            levelling()`; the identity for a given scene without one).
     """
 
     reference: Reference
     model: object
     scene_path: Path
     fitted: FittedScene | None = None
+    capture_floor: FittedScene | None = None
+    frame: CaptureFrame = field(default_factory=CaptureFrame.identity)
 
 
 def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_out: str | Path,
@@ -45,9 +54,12 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     root-height correction: the feet stay at the heights the capture gives them, a floor that rises
     along the clip included; a correction onto a level floor would flatten it frame by frame, and
     hides a box it cannot see), find where the feet rest (`fit_contacts`), fit a floor plane and boxes
-    (`fit_scene`), write the scene MJCF to `fitted_out` (its include of the figure relative to that
-    folder, so it loads from where it is saved), and retarget again onto it (the height correction
-    then stands the feet on the fitted floor and boxes).
+    (`fit_scene`), level it (`FittedScene.levelling`: the rigid transform taking the fitted floor to
+    z = 0, so that gravity is normal to it; a tilted capture floor is a calibration error of the capture
+    volume), write the levelled scene MJCF with that transform recorded in it to `fitted_out` (its include
+    of the figure relative to that folder, so it loads from where it is saved), and retarget again onto
+    it: `load_bvh_reference` moves the root into the levelled frame, and on another figure than the
+    subject's the height correction then stands the feet on the fitted floor and boxes.
 
     Args:
         clip: the BVH file. scene: an MJCF file or "auto". figure: the figure's MJCF
@@ -58,18 +70,20 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     """
     if str(scene) != AUTO:
         model = load_model(scene)
-        return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, Path(scene))
+        frame = CaptureFrame.from_model(model, str(scene))  # a malformed record named with its file
+        return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, Path(scene), frame=frame)
     bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
     first = load_bvh_reference(clip, bare, root_scale=root_scale)
     pos = site_positions(bare, first.qpos)
-    fitted = fit_scene(first.times, pos, fit_contacts(first.times, pos))
+    capture = fit_scene(first.times, pos, fit_contacts(first.times, pos))
+    frame, fitted = capture.levelling(), capture.levelled()
     out = Path(fitted_out)
     if not out.parent.is_dir():
         raise InputError(f"{out}: the folder {out.parent} does not exist; create it first")
     with atomic_output(out, suffix=".xml") as tmp_path:
-        Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem))
+        Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem, capture=frame))
     model = load_model(out)
-    return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, out, fitted)
+    return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, out, fitted, capture, frame)
 
 
 def name_surfaces(model, reference: Reference, contacts: list[Contact]) -> list[Contact]:

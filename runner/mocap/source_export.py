@@ -11,7 +11,10 @@ at t = k / fps. Per joint:
   world x R_off^-1). A merged chain is split back by keeping the source's inner joints and solving the
   last one: with LowerBack and Spine resampled from the source, Spine1's local rotation is the one
   whose composition with them gives the torso's world orientation; likewise LHipJoint before the
-  thigh, LeftShoulder before the arm. The root translation is the path's root position.
+  thigh, LeftShoulder before the arm. The root translation is the path's root position. Both are taken
+  back from the scene's levelled frame into the capture's coordinates first (the inverse of the rigid
+  transform the scene records, `solver.capture_frame`; docs/mocap.md), so the file lies where the
+  source does.
 * **not modelled** (neck and head, toes, hands, fingers, thumbs, and the inner joints above): the
   source's local rotations, resampled to the export times (spherical linear interpolation between the
   neighbouring captured frames, `scipy.spatial.transform.Slerp`; at the captured times, the source's own).
@@ -29,6 +32,7 @@ import numpy as np
 from runner.mocap.bvh import POSITION_CHANNELS, BvhClip, read_bvh
 from runner.mocap.retarget import BONE_MAP, BVH_TO_MUJOCO, UNIT_TO_METRES, check_figure, check_skeleton, rest_offsets
 from runner.mocap.subject_figure import figure_skeleton_digest, skeleton_digest
+from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.quaternion import conj, mul, normalize
@@ -105,18 +109,21 @@ def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray) -> 
     """The source skeleton's local rotations and root translation for a figure motion (module docstring).
 
     Args:
-        clip: the source clip (CMU skeleton). model: the scene (its figure). qpos: (n, nq) the motion.
+        clip: the source clip (CMU skeleton). model: the scene (its figure, and the transform from the
+            capture's coordinates to the scene's that it records). qpos: (n, nq) the motion, in the scene.
         times: (n,) [s] its sample times, 0 at the clip's first frame after the T-pose.
     Returns:
         local: (n, J, 4) unit local rotations (w x y z) in BVH axes; root: (n, 3) root translation [BVH
         units]; trans: (n, J, 3) the source's local translations, resampled [BVH units].
     Raises:
-        InputError: the clip is not the CMU skeleton or the figure not the one the retargeting drives.
+        InputError: the clip is not the CMU skeleton, the figure not the one the retargeting drives, or
+            the scene's capture frame is malformed.
     """
     check_skeleton(clip)
     figure = check_figure(Figure.from_model(model))
+    qpos = CaptureFrame.from_model(model).inverse().root(qpos, figure.joints[0].qpos_slice.start)
     local, pos = _slerp_source(clip, np.asarray(times, float))
-    fig_world = _figure_world(model, figure, np.asarray(qpos, float))
+    fig_world = _figure_world(model, figure, qpos)
     off = rest_offsets(clip, figure)
     # the source world orientation each modelled joint must have, in BVH axes (R_bvh = M^T R M)
     target = {}

@@ -44,9 +44,6 @@ CLIPS = {
     "run-and-step": ["run-and-step", *_SOLVE],
     "mocap": ["mocap", str(ROOT / "models" / "cmu" / "127_33.bvh"), "--every", "0.5", "--out-dir", "mocap", *_SOLVE],
 }
-# the skeleton `dynsplines export --to FILE.bvh` writes by default (docs/export.md): the source clip's for a
-# path made on the subject's own figure; the figure's for run-and-step (hand-made keyframes, shipped figure)
-ON_SOURCE = {"run-and-step": False, "mocap": True}
 
 
 def _dynsplines(*args, cwd):
@@ -82,10 +79,23 @@ def root_spline(npz):
     return float(times[0]), CubicSpline(times, frames[:, :3], bc_type="natural")
 
 
-def assert_root_travel(pelvis, t, npz):
-    """pelvis: (n, 3) [m] world positions in Blender at times t (n,) [s] from the path's start."""
+def capture_frame(npz):
+    """The transform from the capture's coordinates to the saved path's scene (`solver.capture_frame`)."""
+    import mujoco
+
+    from runner.saved_path import load_saved_path
+    from solver.capture_frame import CaptureFrame
+
+    return CaptureFrame.from_model(mujoco.MjModel.from_xml_path(str(load_saved_path(npz).scene_path)))
+
+
+def assert_root_travel(pelvis, t, npz, in_capture=False):
+    """pelvis: (n, 3) [m] world positions in Blender at times t (n,) [s] from the path's start; in_capture:
+    the file is in the capture's coordinates (the source skeleton), the path in its scene's levelled frame."""
     t0, spline = root_spline(npz)
     ref = spline(t0 + t)
+    if in_capture:
+        ref = capture_frame(npz).inverse().points(ref)
     got_d = np.linalg.norm(pelvis - pelvis[0], axis=1)
     ref_d = np.linalg.norm(ref - ref[0], axis=1)
     assert ref_d[-1] > 0.5, ref_d[-1]  # the clips travel: a test of a standing figure would prove little
@@ -135,11 +145,16 @@ def test_blender_imports_the_bvh(exported):
     lo, hi = got["rest"][arm]
     assert abs((hi - lo) - (yhi - ylo)) < 1e-3, (hi - lo, yhi - ylo)  # upright: the file's Y is Blender's Z
     lowest = min(got["zmin"][arm])
-    source = _source_text(exported / "path.npz") if ON_SOURCE[exported.name.rstrip("0123456789")] else ""
-    if source:  # on the source skeleton (docs/export.md): it imports in place of the source clip
+    source = _source_text(exported / "path.npz")
+    if source:
         (exported / "source.bvh").write_text(source)
         src_names, _, src_dt, _ = read_bvh(exported / "source.bvh")
-        assert names == src_names and abs(dt - src_dt) < 1e-9  # same joints, same frame rate
+        # a clip's path on the subject's figure goes onto the source skeleton; run-and-step's (the shipped
+        # figure, its keyframes made from a clip) onto the figure's own (docs/export.md)
+        assert (names == src_names) == exported.name.startswith("mocap"), (names[:3], src_names[:3])
+        source = source if names == src_names else ""
+    if source:  # on the source skeleton (docs/export.md): it imports in place of the source clip
+        assert abs(dt - src_dt) < 1e-9  # same joints, same frame rate
         src = blender_import(exported / "source.bvh")
         [src_arm] = src["bones"]
         assert np.allclose(got["rest"][arm], src["rest"][src_arm], atol=1e-3)  # the same rest pose
@@ -153,7 +168,7 @@ def test_blender_imports_the_bvh(exported):
     assert 1.4 < (hi - lo) * scale < 2.1, (hi - lo) * scale  # a person's height in metres
     pelvis = np.array(got["bone_heads"][f"{arm}/{names[0]}"]) * scale
     skip = 1 if source else 0  # on the source skeleton the first frame is the source's T-pose, as in the clip
-    assert_root_travel(pelvis[skip:], np.arange(n - skip) * dt, exported / "path.npz")
+    assert_root_travel(pelvis[skip:], np.arange(n - skip) * dt, exported / "path.npz", in_capture=bool(source))
 
 
 # ------------------------------------------------------------------------------------------------ glb

@@ -111,38 +111,46 @@ def test_keyframes_from_bvh_records_a_model_that_exists(tmp_path):
     assert (out.parent / doc["scene"]).resolve() == scene.resolve()
 
 
-def test_a_capture_floor_that_rises_along_the_walk_is_fitted_tilted(tmp_path):
+def test_a_capture_floor_that_rises_along_the_walk_is_levelled(tmp_path):
     """07_04 (a slow walk whose capture floor rises about 5 cm along the walk, ../shared/data/cmu/README.md):
-    `keyframes-from-bvh --scene auto` writes a floor tilted the way the source's own feet rise. The
-    independent reference: a straight line through the heights of the source's toe-base joints (its
-    own forward kinematics) at the frames they are still, against x; the fitted floor's slope along x
-    within 0.004 of it (20 %), no cross slope (the stances spread 0.25 m across the walk), and the
-    written plane geom's normal tilted by that slope (MuJoCo's geom pose)."""
+    `keyframes-from-bvh --scene auto` fits the tilted floor and writes the scene in the levelled frame.
+    The independent reference: a straight line through the heights of the source's toe-base joints (its
+    own forward kinematics) at the frames they are still, against x. The transform the scene records
+    takes a floor of that slope (within 0.004, 20 %; no cross slope: the stances spread 0.25 m across the
+    walk) to +z; the written floor is the plane z = 0 (MuJoCo's geom pose); and the same still toes,
+    moved by the transform, no longer rise (slope within 0.004 of 0) and are 0-6 cm above z = 0."""
     import mujoco
     import numpy as np
 
     from runner.mocap.bvh import read_bvh
     from runner.mocap.retarget import cmu_world
+    from solver.capture_frame import CaptureFrame
 
     src = REPO.parent / "shared" / "data" / "cmu" / "07_04.bvh"
     if not src.exists():
         pytest.skip("no shared clip ../shared/data/cmu/07_04.bvh")
     clip = read_bvh(src)
     _, p = cmu_world(clip)
-    x, z = [], []
+    still = []
     for joint in ("LeftToeBase", "RightToeBase"):
         q = p[1:, clip.index(joint)]
-        still = np.linalg.norm(np.gradient(q, clip.frame_time, axis=0), axis=1) < 0.2
-        x.append(q[still, 0])
-        z.append(q[still, 2])
-    source_slope = np.polyfit(np.concatenate(x), np.concatenate(z), 1)[0]
+        still.append(q[np.linalg.norm(np.gradient(q, clip.frame_time, axis=0), axis=1) < 0.2])
+    still = np.concatenate(still)
+    source_slope = np.polyfit(still[:, 0], still[:, 2], 1)[0]
     assert source_slope > 0.01  # the clip does rise: more than 1 cm per metre
 
     out = tmp_path / "k.json"
     assert main(["keyframes-from-bvh", str(src), "--out", str(out), "--scene", "auto", "--quiet"]) == 0
     scene = out.parent / json.loads(out.read_text())["scene"]
-    surfaces = StaticSurfaces.from_model(mujoco.MjModel.from_xml_path(str(scene)))
-    (n,) = surfaces.plane_normal
+    model = mujoco.MjModel.from_xml_path(str(scene))
+    surfaces = StaticSurfaces.from_model(model)
+    np.testing.assert_allclose(surfaces.plane_normal, [[0.0, 0.0, 1.0]], atol=1e-12)
+    assert surfaces.height_above(np.zeros((1, 3)))[0] == pytest.approx(0.0, abs=1e-12)
+    t = CaptureFrame.from_model(model)
+    n = t.matrix().T @ [0.0, 0.0, 1.0]  # the capture floor's normal, in the capture's coordinates
     slope = -n[:2] / n[2]
     assert slope[0] == pytest.approx(source_slope, abs=0.004)
     assert abs(slope[1]) < 0.002
+    level = t.points(still)
+    assert abs(np.polyfit(level[:, 0], level[:, 2], 1)[0]) < 0.004
+    assert 0.0 < np.median(level[:, 2]) < 0.06  # the toe joints' centres, a few cm above the sole on the floor

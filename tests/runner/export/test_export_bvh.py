@@ -173,9 +173,10 @@ def rotation_angles_deg(a, b):
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
-def reference_path(tmp_path, src, seconds=0.5):
+def reference_path(tmp_path, src, seconds=0.5, capture=None):
     """A saved path whose frames are the reference on the subject's figure at every captured frame of the
-    first `seconds` of `src` (its clip embedded), and the clip."""
+    first `seconds` of `src` (its clip embedded), and the clip. `capture`: the scene's transform from the
+    capture's coordinates (`solver.capture_frame.CaptureFrame`; None: none recorded, the identity)."""
     from runner.mocap.bvh import read_bvh
     from runner.mocap.reference import load_bvh_reference
     from runner.mocap.subject_figure import write_subject_figure
@@ -185,7 +186,7 @@ def reference_path(tmp_path, src, seconds=0.5):
     clip = edit_bvh(src, tmp_path / "c.bvh", seconds=seconds)
     figure = write_subject_figure(read_bvh(clip), tmp_path / "c.figure.xml")
     scene = tmp_path / "c.scene.xml"
-    scene.write_text(scene_mjcf(FittedScene(0.0), figure, relative_to=tmp_path))
+    scene.write_text(scene_mjcf(FittedScene(0.0), figure, relative_to=tmp_path, capture=capture))
     ref = load_bvh_reference(clip, load_model(scene))
     npz = tmp_path / "ref.npz"
     ends = ref.qpos[[0, -1]]
@@ -215,6 +216,33 @@ def test_the_reference_exported_on_the_source_skeleton_is_the_source(tmp_path, s
     m = source.index("MOTION")
     assert text[:m + 3] == source[:m + 3]  # hierarchy, names, offsets, channel order; frame count and time
     n = int(source[m + 1].split()[1])
+    angle, dist = same_pose(clip, out, np.arange(n), np.arange(n))
+    assert angle < 0.01 and dist < 1e-4, (angle, dist)
+
+
+def test_a_levelled_reference_exports_back_into_the_sources_coordinates(tmp_path):
+    """A scene recording a levelling transform (a capture floor tilted by 1.3 degrees, 4 cm up): the
+    reference lives in the levelled frame (its root is the source's Hips moved by T), and the export takes
+    it back by T^-1: the source file again, every joint within 0.01 degree, the root within 0.1 mm."""
+    import mujoco
+
+    from runner.mocap.bvh import read_bvh
+    from runner.mocap.retarget import BVH_TO_MUJOCO, UNIT_TO_METRES
+    from runner.saved_path import load_saved_path
+    from solver.capture_frame import CaptureFrame
+
+    t = CaptureFrame.levelling(0.04, (0.02, -0.01))
+    npz, clip = reference_path(tmp_path, MODELS / "cmu" / "127_33.bvh", seconds=0.3, capture=t)
+    saved = load_saved_path(npz)
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "c.scene.xml"))
+    src = read_bvh(clip)
+    hips = src.local_pos[1:, 0] @ BVH_TO_MUJOCO.T * UNIT_TO_METRES  # the captured root, MuJoCo axes [m]
+    np.testing.assert_allclose(saved.arrays["frames"][:, :3], t.points(hips), atol=1e-9)
+    assert np.abs(t.points(hips) - hips).max() > 0.01  # the transform does move it (2 cm here)
+    assert CaptureFrame.from_model(model).quat == pytest.approx(t.quat, abs=1e-12)
+    out = tmp_path / "out.bvh"
+    assert main(["export", str(npz), "--to", str(out), "--quiet"]) == 0
+    n = len(src.local_quat)
     angle, dist = same_pose(clip, out, np.arange(n), np.arange(n))
     assert angle < 0.01 and dist < 1e-4, (angle, dist)
 

@@ -55,6 +55,16 @@ def test_missing_scene_and_bad_video_name(tmp_path, short_clip, capsys):
     assert "v.txt" in err
 
 
+def test_a_malformed_capture_frame_in_the_scene_is_one_line(tmp_path, short_clip, capsys):
+    scene = tmp_path / "mine.xml"
+    text = (REPO / "models" / "floor.xml").read_text().replace('file="humanoid39.xml"',
+                                                                 f'file="{REPO / "models" / "humanoid39.xml"}"')
+    scene.write_text(text.replace("</mujoco>", '<custom><numeric name="capture:frame" data="1 0 0 0 0"/></custom></mujoco>'))
+    err = one_line_error(capsys, ["mocap", str(short_clip), "--out-dir", str(tmp_path / "o"), "--scene", str(scene),
+                                  "--figure", "default", *FAST])
+    assert "mine.xml" in err and "capture:frame" in err and "w x y z tx ty tz" in err
+
+
 def test_bad_root_scale_is_one_line(tmp_path, short_clip, capsys):
     assert main(["mocap", str(short_clip), "--root-scale", "0", *FAST]) == EXIT_INPUT
     err = capsys.readouterr().err
@@ -105,11 +115,18 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
     assert {"planted", "clearance"} <= {name for name, _ in saved.options["solve"]["limits"]}
     report = json.loads((tmp_path / "m.json").read_text())
     assert report["keyframes"] == kf.count and report["frames"] == 73 and report["fps"] == pytest.approx(120, rel=1e-4)
-    # the reference the metrics compare with is the capture itself: its root path is the clip's Hips path
+    # the reference the metrics compare with is the capture itself: its root path is the clip's Hips path,
+    # in the levelled frame of the fitted scene (the rigid transform the scene records: its floor at z = 0)
     from bvh_fk import parse, world
 
+    from solver.capture_frame import CaptureFrame
+
     _, hips = world(parse(short_clip))
-    assert np.allclose(saved.reference_qpos[:, :3], hips[1:, 0], atol=1e-9)
+    frame = CaptureFrame.from_model(model)
+    assert not frame.is_identity
+    assert np.allclose(saved.reference_qpos[:, :3], frame.points(hips[1:, 0]), atol=1e-9)
+    # `animate` of the keyframe file imports the clip into the same frame (it reads the transform with the scene)
+    assert np.allclose(find_reference(info, model, quiet=True).qpos[:, :3], saved.reference_qpos[:, :3], atol=1e-9)
     assert report["metrics"]["optimized"]["keyframe_error"] < 1e-9
     # the keyframe file reruns with animate (the reference found through its "source" "clip")
     assert main(["animate", str(out / "run.keyframes.json"), "--no-render", "--rounds", "0", "--max-evals", "20",
