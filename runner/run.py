@@ -348,6 +348,8 @@ def anatomy_summary_rows(motion) -> list:
     capture = motion["plain"]["reference"]
     rows = []
     for label, key, fmt in ANATOMY_ROWS:
+        if key not in capture:  # metrics written without the anatomy figures
+            continue
         a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
         rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt, motion_worse(key, a, b)))
     return rows

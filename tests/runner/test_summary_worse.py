@@ -168,7 +168,7 @@ def _motion(path_over=None):
     block = {"penetration_mm": {"mean": 0.0, "max": 0.0}, "float_contact_mm": 2.4, "float_physdiff_mm": 5.7,
              "skate_mm": 2.77, "skate_contact_mm": 1.81, "phys_err_mm": 8.5, "skating_ratio": 0.265,
              "skating_ratio_contacts": 0.034, "flight_time_s": 0.0, "jerk_root_m_s3": 1250.0,
-             "jerk_sites_m_s3": 1925.0}
+             "jerk_sites_m_s3": 1925.0, "off_hinge_knee_deg": 0.0, "off_hinge_elbow_deg": 30.0, "rom_excess_deg": 1.0}
     err = {"joint_orientation_deg": {"hip": {"mean": 1.0, "max": 2.0}}, "site_position_cm": {"toe": {"mean": 1.0,
            "max": 2.0}}, "root_position_cm": {"mean": -0.0, "max": 1.0}, "accel_error_root_m_s2": float("nan"),
            "accel_error_sites_m_s2": 3.0}
@@ -238,12 +238,30 @@ def test_the_feet_rows_of_the_summary_are_marked_with_their_legend():
     worse = {r[0].split(" (capture")[0]: r[4] for r in rows}
     assert worse == {"float in contact [mm]": False, "skate in contact [mm/frame]": False,
                      "skate, PhysDiff [mm/frame]": False, "skating ratio (contacts)": False,
-                     "flight time [s]": True, "flight phase error vs capture [s]": True}
+                     "flight time [s]": True, "flight phase error vs capture [s]": True,
+                     "knee rotation off the hinge [deg]": False, "elbow rotation off the hinge [deg]": False,
+                     "beyond range of motion [deg]": False}
     text = summary_table(metrics(), metrics(), solution(), DEFAULT_TERMS, contact_rows=rows)
     assert {"flight time [s] (capture 0.450)", "flight phase error vs capture [s]"} <= marked(text)
     assert "feet rows: " + MOTION_LEGEND in text.splitlines()
     assert _target(text, "flight time [s] (capture 0.450)") == "clearance"
     assert _target(text, "float in contact [mm] (capture 2.40)") == "planted"
+
+
+def test_the_anatomy_rows_are_marked_beyond_their_bounds():
+    from runner.run import anatomy_summary_rows
+
+    m = _motion_pair()
+    for p, (knee, rom) in {"plain": (0.0, 2.0), "optimized": (3.2, 2.4)}.items():
+        m[p]["path"].update(off_hinge_knee_deg=knee, off_hinge_elbow_deg=40.0, rom_excess_deg=rom)
+        m[p]["reference"].update(off_hinge_knee_deg=0.0, off_hinge_elbow_deg=41.0, rom_excess_deg=3.0)
+    worse = {r[0].split(" (capture")[0]: r[4] for r in anatomy_summary_rows(m)}
+    # knees 3.2 deg off the hinge where the plain spline has 0: beyond the 3 deg bound; elbows unchanged;
+    # 0.4 deg further beyond the range of motion: inside the half degree
+    assert worse == {"knee rotation off the hinge [deg]": True, "elbow rotation off the hinge [deg]": False,
+                     "beyond range of motion [deg]": False}
+    m["optimized"]["path"]["rom_excess_deg"] = 2.0 * 1.01 + 0.51
+    assert {r[0].split(" (capture")[0]: r[4] for r in anatomy_summary_rows(m)}["beyond range of motion [deg]"]
 
 
 def test_the_motion_metrics_table_has_a_worse_column():
