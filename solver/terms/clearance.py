@@ -15,17 +15,16 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
     the flight's band, with the default c_f, is lifted: max(c_f, `flight_lift`(t)) over the flight
           (a, b), a lift that rises linearly to H = `flight_lift` (FLIGHT_LIFT = 3.5 cm: the contact
           entry height 3 cm, which is also the flight metric's height, and 5 mm for the penalty's give)
-          in TAKEOFF_RISE = 12 ms after take-off and falls back to 0 over the LANDING_DESCENT = 55 ms
+          in TAKEOFF_RISE = 35 ms after take-off and falls back to 0 over the LANDING_DESCENT = 50 ms
           before landing. The captured feet of a schedule's flight are above the 3 cm flight height
-          from 8-17 ms after its lift-off to 33-58 ms before its touch-down, in short flights as in long
-          ones (a run's 0.083 s flights reach 4-5 cm), so the lifted band keeps a flight of T seconds
-          in the air for T - 0.057 s whatever T (docs/contacts.md "The contact terms"). The ballistic
-          body's g/2 (t - a)(b - t) it replaces never reached 3 cm in a flight under 0.156 s (a short
-          hop lost its flight) and reached it 19-40 ms after take-off in flights of 0.19-0.34 s.
-          Without the lift c_f <= 2 cm is under the 3 cm that makes a flight in the metric
-          (`solver.motion_metrics.FLIGHT_HEIGHT`). The lift is a target, not a bound for
-          `conflicts`; keyframes where it is at its ceiling lower the ceiling to the lowest site they
-          hold (`lower_lifts`),
+          from 25-42 ms after its lift-off to 33-67 ms before its touch-down, in short flights as in
+          long ones (a run's 0.10 s flights reach 3.5-5 cm), so the lifted band keeps a flight of T
+          seconds in the air for T - 73 ms whatever T (docs/contacts.md "The contact terms"). The
+          ballistic body's g/2 (t - a)(b - t) it replaces never reached 3 cm in a flight under 0.156 s
+          (a short hop lost its flight). Without the lift c_f <= 2 cm is under the 3 cm that makes a
+          flight in the metric (`solver.motion_metrics.FLIGHT_HEIGHT`). The lift is a target, not a
+          bound for `conflicts`; keyframes where it is at its ceiling lower the ceiling to the lowest
+          site they hold (`lower_lifts`),
     u_k = the swing window of site k, u_f = the flight window:
       swing: each gap [a, b] between consecutive contacts of site k (not before its first or after its
              last contact: there the schedule says nothing). u rises by a smoothstep from 0 at a to 1 at
@@ -71,13 +70,13 @@ GRAVITY = 9.81  # [m/s^2], for the ballistic flight clearance c_f
 #: ceiling of the lift of a flight's band [m]: the contact entry height (3 cm, also the flight height of
 #: `solver.motion_metrics.FLIGHT_HEIGHT`) and 5 mm for the penalty's give (docs/contacts.md "The contact terms")
 FLIGHT_LIFT = HEIGHT_ON + 0.005
-#: the lift's rise after a flight's take-off [s]: the schedule's contact ends only once its site is above
-#: 5 cm or faster than 1 m/s, so the captured feet are 2-4 cm up at lift-off and cross the flight height
-#: 8-17 ms later (tuning clips 127_33 and 35_17, 8 flights).
-TAKEOFF_RISE = 0.012
+#: the lift's rise after a flight's take-off [s]: the captured feet cross the 3 cm flight height 25-42 ms
+#: (mean 30 ms) after the schedule's lift-off (tuning clips 127_33 and 35_17 on the shipped figure and
+#: floor, feet planted 2 mm up: 7 flights), so the lift reaches 3 cm 30 ms after take-off.
+TAKEOFF_RISE = 0.035
 #: the lift's descent before a flight's landing [s]: a landing foot comes down below the flight height
-#: 33-58 ms (mean 47 ms) before its contact begins, gliding in at more than 0.5 m/s (the same clips).
-LANDING_DESCENT = 0.055
+#: 33-67 ms (mean 44 ms) before its contact begins, gliding in at more than 0.5 m/s (the same flights).
+LANDING_DESCENT = 0.05
 
 
 def flight_lift(t: np.ndarray, a: float, b: float, ceiling: float, rise: float = TAKEOFF_RISE,
@@ -87,10 +86,9 @@ def flight_lift(t: np.ndarray, a: float, b: float, ceiling: float, rise: float =
 
     Linear ramps: the band is above h (< ceiling) from a + rise h / ceiling to b - descent h / ceiling,
     so with the default ramps and ceiling (FLIGHT_LIFT) a flight of T seconds keeps the feet above the
-    3 cm flight height for T - 0.057 s, as the captured feet are (tuning clips: T - 0.04 to T - 0.07 s
-    in flights of 0.083-0.192 s). It does not depend on T otherwise: the feet of a short hop of a run
-    rise as high as a long one's (4.1-6.2 cm in the tuning clips' 0.083-0.125 s flights), where a
-    ballistic body's g T^2 / 8 stays under the flight height below 0.156 s.
+    3 cm flight height for T - 73 ms, as the captured feet are (tuning clips: T - 58 to T - 92 ms in
+    flights of 0.10-0.175 s; none in a 0.067 s one). A ballistic body's g/2 (t - a)(b - t) stays under
+    the flight height in every flight under 0.156 s, where the captured feet of a run rise 3.5-5.8 cm.
 
     Args:
         t: (n,) times [s]. a < b: the flight [s]. ceiling: [m] >= 0. rise, descent: [s] > 0.
