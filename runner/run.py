@@ -143,6 +143,7 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     Raises:
         InputError: fewer than 4 reference frames in the keyframes' span.
     """
+    from runner.mocap.stance import capture_stance
     from solver.contacts import Contact
     from solver.motion_metrics import motion_metrics
 
@@ -158,7 +159,9 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     shifted = [Contact(c.site, c.start - shift, c.end - shift, c.surface) for c in contacts
                if c.end >= shift and c.start <= times[-1]]
     fps = 1.0 / reference.frame_time
-    return {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted)
+    # the capture's own stance (runner/mocap/stance.py), over the whole clip so its hysteresis starts there
+    stance = capture_stance(model, reference.qpos, reference.frame_time)[keep]
+    return {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted, stance=stance)
             for label, fs in (("plain", solution.initial), ("optimized", solution.frames))}
 
 
@@ -374,14 +377,17 @@ def contact_summary_rows(motion, objective, solution) -> list:
         frame_s = 1.0 / float(motion["plain"]["fps"])
         for label, key, fmt in (
             ("float in contact [mm]", "float_contact_mm", "{:.2f}"),
+            ("float in capture stance [mm]", "float_stance_mm", "{:.2f}"),
+            ("flight in capture stance [s]", "flight_in_stance_s", "{:.3f}"),
             ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
             ("skate, PhysDiff [mm/frame]", "skate_mm", "{:.2f}"),
             ("skating ratio (contacts)", "skating_ratio_contacts", "{:.3f}"),
             ("flight time [s]", "flight_time_s", "{:.3f}"),
         ):
-            a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
-            rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt,
-                         motion_worse(key, a, b, frame_s, capture[key])))
+            if key in capture:
+                a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
+                rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt,
+                             motion_worse(key, a, b, frame_s, capture[key])))
         # flight-phase error: frames in flight in one and not the other (flight times can cancel)
         a, b = (motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"] for p in ("plain", "optimized"))
         rows.append(("flight phase error vs capture [s]", a, b, "{:.3f}", motion_worse("flight_phase_error_s", a, b, frame_s)))

@@ -16,8 +16,28 @@ DETECT_HEIGHT_OFF = 0.05
 DETECT_SPEED_ON = 0.5
 #: ... and leaves above this one [m/s].
 DETECT_SPEED_OFF = 1.0
-#: detected contacts shorter than this are dropped [s].
+#: detected contacts shorter than this are dropped [s] by `detect_contacts` when asked
+#: (`min_duration`; the scene fit's resting feet). The contact schedule of a reference keeps every
+#: contact (`SCHEDULE_MIN_DURATION`): a hop's or a hopscotch's 10-40 ms touch-down is a real one.
 DETECT_MIN_DURATION = 0.05
+#: the contact schedule of a reference (`solver.contacts.reference_contacts`): no contact is dropped [s].
+SCHEDULE_MIN_DURATION = 0.0
+
+# -- the capture's own stance (`runner.mocap.stance.capture_stance`): a foot rests on a surface while
+#    its lowest contact site is near the surface under it and nearly still, with hysteresis and no
+#    minimum duration. Speeds after the kinematic gait-event rules validated against pressure insoles
+#    (Ghoussayni et al. 2004, Gait & Posture 20:266, 0.5 m/s; Bonci et al. 2022, Front. Bioeng.
+#    Biotechnol. 10:868928: 3-D heel or forefoot speed under 0.5 m/s at initial contact, forefoot
+#    speed over 1.0 m/s at final contact).
+#: a foot enters stance when its lowest site is below this height [m]: the flight height, so a stance
+#: never begins in a frame the flight metric counts as airborne ...
+STANCE_HEIGHT_ON = 0.03
+#: ... and leaves above this one [m] (Guided Motion Diffusion's foot-contact height, ../shared/METRICS.md).
+STANCE_HEIGHT_OFF = 0.05
+#: a foot enters stance when its lowest site moves slower than this [m/s] (3-D speed) ...
+STANCE_SPEED_ON = 0.5
+#: ... and leaves when it moves faster than this [m/s].
+STANCE_SPEED_OFF = 1.0
 
 # -- placing a retargeted capture on its surfaces (`runner.mocap.contacts`: the root-height correction,
 #    and the "feet in contact stay within ... mm" figure of a reference)

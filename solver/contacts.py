@@ -4,8 +4,8 @@ A contact is (site, surface, [start, end]) (docs/contacts.md "Contact schedules"
 a reference motion with height and speed thresholds, hysteresis and a minimum duration: threshold
 heuristics alone flicker and are known to be unreliable against pressure-insole ground truth
 (UnderPressure, Mourot et al. 2022; ../shared/METRICS.md "Contact labels"), so a site enters contact
-only below the tighter pair of thresholds, leaves only above the looser pair, and contacts shorter
-than `min_duration` are dropped. The animator overrides the result by writing contacts by hand.
+only below the tighter pair of thresholds and leaves only above the looser pair; contacts shorter
+than `min_duration` can be dropped. The animator overrides the result by writing contacts by hand.
 
 Defaults (`solver.contact_thresholds`), chosen on the three CMU clips (127_33 run and step onto a
 box, 16_23 walk, 35_17 run; 120 fps, retargeted by `runner/bvh_import.py`, heights above the surface
@@ -21,9 +21,13 @@ under each site):
   over the toe at push-off, marker noise); swinging feet move at 2-10 m/s. Entering at 0.5 m/s (the
   GMD skating speed) means a site enters contact not skating by their measure; leaving at 1 m/s
   keeps a rolling toe planted through push-off.
-- DETECT_MIN_DURATION = 0.05 s (6 frames at 120 fps). Stances last 0.16-0.23 s in the runs and
-  0.2-0.44 s per site in the walk; the shortest real contacts are heel touches of a forefoot runner
-  (0.058-0.092 s, kept); a swinging foot brushing past the thresholds lasts a few frames.
+- No minimum duration for a reference's schedule (`reference_contacts`: SCHEDULE_MIN_DURATION = 0):
+  judged against the capture's own stance (`runner.mocap.stance`, per foot, no minimum duration),
+  the 0.05 s minimum dropped real touch-downs (75_03: the right toe's 4-frame touch at take-off, so
+  the schedule's flight began early) and kept nothing the stance rejects on the tuning clips; the
+  hysteresis alone keeps a swinging foot from flickering (below). `detect_contacts` still takes a
+  `min_duration` (DETECT_MIN_DURATION = 0.05 s, 6 frames at 120 fps) for callers that want resting
+  feet only (the scene fit).
 
 Why hysteresis: with single thresholds (3 cm / 0.5 m/s, or GMD's 5 cm / 0.5 m/s) and no minimum
 duration the walk 16_23 breaks into 29-32 site contacts (19 foot stances) instead of 12 (6 stances),
@@ -42,6 +46,7 @@ from solver.contact_thresholds import (
     DETECT_MIN_DURATION,
     DETECT_SPEED_OFF,
     DETECT_SPEED_ON,
+    SCHEDULE_MIN_DURATION,
 )
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES, FEET
@@ -110,8 +115,9 @@ def detect_contacts(
 
     Per site, frame by frame: out of contact, the site enters when height < height_on and
     speed < speed_on; in contact, it stays while height <= height_off and speed <= speed_off.
-    A contact runs from its first to its last frame (times of those frames); contacts with
-    end - start < min_duration are dropped. Speeds are 3-D, central differences of `site_pos`.
+    A contact runs from its first to its last frame (times of those frames; a one-frame contact
+    half a frame either side, within `times`); contacts with end - start < min_duration are dropped
+    (0: none). Speeds are 3-D, central differences of `site_pos`.
 
     Args:
         times: (n,) frame times [s], strictly increasing.
@@ -141,13 +147,24 @@ def detect_contacts(
         for i in range(len(times) + 1):
             if on and (i == len(times) or not stay[i, k]):
                 on = False
-                c = Contact(name, float(times[first]), float(times[i - 1]))
-                if c.duration >= min_duration - 1e-9:
+                c = _contact(name, times, first, i - 1)
+                if c is not None and c.duration >= min_duration - 1e-9:
                     out.append((c.start, k, c))
             if i < len(times) and not on and enter[i, k]:
                 on, first = True, i
     out.sort(key=lambda t: (t[0], t[1]))
     return [c for _, _, c in out]
+
+
+def _contact(site: str, times: np.ndarray, first: int, last: int) -> Contact | None:
+    """The contact of `site` over frames first..last: from the first frame's time to the last's; a
+    one-frame contact spans half a frame either side (within the motion), so that it is an interval;
+    None for the one frame of a one-frame motion."""
+    if last > first:
+        return Contact(site, float(times[first]), float(times[last]))
+    start = (times[first - 1] + times[first]) / 2 if first > 0 else times[first]
+    end = (times[last] + times[last + 1]) / 2 if last + 1 < len(times) else times[last]
+    return Contact(site, float(start), float(end)) if end > start else None
 
 
 def contact_mask(contacts: Sequence[Contact], sites: Sequence[str], times: np.ndarray) -> np.ndarray:
@@ -229,7 +246,9 @@ def site_heights(model, site_pos: np.ndarray) -> np.ndarray:
 
 
 def reference_contacts(model, qpos: np.ndarray, frame_time: float, **thresholds) -> list[Contact]:
-    """`detect_contacts` on a motion in a scene: site positions and heights by MuJoCo kinematics.
+    """The contact schedule of a motion in a scene: `detect_contacts` on its site positions and heights
+    (MuJoCo kinematics), keeping every contact (`min_duration` SCHEDULE_MIN_DURATION = 0 unless given:
+    a hop's 10-40 ms touch-down is a contact, and dropping it would make its frames a flight).
 
     Args:
         model: the scene's MjModel (figure with the SITES, and static surfaces). qpos: (n, nq).
@@ -237,4 +256,5 @@ def reference_contacts(model, qpos: np.ndarray, frame_time: float, **thresholds)
     """
     pos = site_positions(model, qpos)
     times = np.arange(len(pos)) * frame_time
+    thresholds.setdefault("min_duration", SCHEDULE_MIN_DURATION)
     return detect_contacts(times, pos, site_heights(model, pos), **thresholds)

@@ -35,6 +35,13 @@ than mesh vertices)
   foot's lowest site height max(0, h) (what an animator calls a floating foot), mean over those
   (foot, frame) pairs. float_physdiff_mm: PhysDiff's all-frame variant, per frame the lowest site's
   h counted when above 5 mm (else 0), mean over all frames.
+- float_stance_mm / float_stance_max_mm (with a `stance` mask): the same as float_contact_mm over
+  the (foot, frame) pairs of the CAPTURE's own stance (`runner.mocap.stance.capture_stance`: the
+  foot's lowest site near its surface and nearly still, no minimum duration), mean and max: a
+  foot the schedule leaves out of contact (a gap it counts as a flight) is still judged where the
+  capture stood on it. flight_in_stance_s: frames in which the path is in flight (every site above
+  FLIGHT_HEIGHT) while the capture has a foot in stance, times 1/fps (0 for the capture itself,
+  whose stance never begins above FLIGHT_HEIGHT).
 - skate_mm / skate_speed_m_s: PhysDiff skate: mean horizontal displacement between consecutive
   frames of sites on the ground (h <= SKATE_HEIGHT = 0.02 m) in both frames; as a speed (* fps).
   skate_contact_mm / skate_contact_speed_m_s: the same over the sites the REFERENCE has in contact in
@@ -151,27 +158,43 @@ def flight_mismatch(h: np.ndarray, reference_h: np.ndarray, fps: float) -> tuple
     return float((path & ~ref).sum() / fps), float((ref & ~path).sum() / fps)
 
 
+def _foot_floats(h: np.ndarray, on: np.ndarray, sites: Sequence[str]) -> np.ndarray:
+    """max(0, lowest site height) [m] of each foot (`contacts.FEET`) in the frames where on[:, f] holds,
+    all feet's values concatenated. on: (n, feet) bool."""
+    floats = []
+    for f, members in enumerate(FEET.values()):
+        ks = [list(sites).index(s) for s in members if s in sites]
+        if ks:
+            floats.append(np.maximum(0.0, h[on[:, f]][:, ks].min(axis=1)))
+    return np.concatenate(floats) if floats else np.zeros(0)
+
+
+def _feet_mask(ref_mask: np.ndarray, sites: Sequence[str]) -> np.ndarray:
+    """(n, feet) bool: a foot in contact when any of its sites is (ref_mask (n, s))."""
+    cols = []
+    for members in FEET.values():
+        ks = [list(sites).index(s) for s in members if s in sites]
+        cols.append(ref_mask[:, ks].any(axis=1) if ks else np.zeros(len(ref_mask), bool))
+    return np.stack(cols, axis=1)
+
+
 def plausibility(pos: np.ndarray, h: np.ndarray, fps: float, root: np.ndarray, ref_mask: np.ndarray,
-                 sites: Sequence[str] = SITES) -> dict:
+                 sites: Sequence[str] = SITES, stance: np.ndarray | None = None) -> dict:
     """The plausibility figures of the module docstring for one motion.
 
     Args:
         pos: (n, s, 3) site positions [m]. h: (n, s) heights above the surface [m]. fps: [Hz].
         root: (n, 3) root positions [m]. ref_mask: (n, s) bool, the reference's contacts.
         sites: the s site names (feet grouped by `contacts.FEET`).
+        stance: (n, feet) bool, the capture's stance per foot in `contacts.FEET` order (left, right);
+            None: no float_stance / flight_in_stance figures.
     Returns:
         a dict of floats (JSON-serializable).
     """
     n = len(pos)
     lowest = h.min(axis=1)
     pen = np.maximum(0.0, -lowest)
-    floats = []
-    for members in FEET.values():
-        ks = [list(sites).index(s) for s in members if s in sites]
-        if ks:
-            foot_on = ref_mask[:, ks].any(axis=1)
-            floats.append(np.maximum(0.0, h[foot_on][:, ks].min(axis=1)))
-    float_contact = np.concatenate(floats) if floats else np.zeros(0)
+    float_contact = _foot_floats(h, _feet_mask(ref_mask, sites), sites)
     float_all = np.where(lowest > FLOAT_TOL, lowest, 0.0)
     disp = np.linalg.norm(np.diff(pos[..., :2], axis=0), axis=-1)  # (n-1, s)
     ground = (h[1:] <= SKATE_HEIGHT) & (h[:-1] <= SKATE_HEIGHT)
@@ -193,6 +216,12 @@ def plausibility(pos: np.ndarray, h: np.ndarray, fps: float, root: np.ndarray, r
         "jerk_root_m_s3": _jerk(root, fps),
         "jerk_sites_m_s3": float(np.mean([_jerk(pos[:, k], fps) for k in range(pos.shape[1])])),
     }
+    if stance is not None:
+        stance = np.asarray(stance, bool)
+        float_stance = _foot_floats(h, stance, sites)
+        out["float_stance_mm"] = _mean(float_stance, 1e3)
+        out["float_stance_max_mm"] = float(float_stance.max() * 1e3) if float_stance.size else 0.0
+        out["flight_in_stance_s"] = float(((h > FLIGHT_HEIGHT).all(axis=1) & stance.any(axis=1)).sum() / fps)
     out["phys_err_mm"] = out["penetration_mm"]["mean"] + out["float_physdiff_mm"] + out["skate_mm"]
     return out
 
@@ -235,7 +264,8 @@ def anatomy_figures(model, qpos: np.ndarray) -> dict:
 
 
 def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarray,
-                   reference_contacts: Sequence[Contact], sites: Sequence[str] = SITES) -> dict:
+                   reference_contacts: Sequence[Contact], sites: Sequence[str] = SITES,
+                   stance: np.ndarray | None = None) -> dict:
     """Accuracy of a path against the reference, and the plausibility of both (module docstring).
 
     Args:
@@ -244,6 +274,8 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         fps: [Hz] frame rate, > 0. reference_qpos: (n, nq) the reference motion.
         reference_contacts: the reference's contacts (times in [s] from frame 0).
         sites: contact site names.
+        stance: (n, 2) bool, the reference's own stance per foot (left, right; e.g.
+            `runner.mocap.stance.capture_stance`); None: no stance figures.
     Returns:
         JSON-serializable dict: {"fps", "frames", "sites", "error": {...}, "path": {...},
         "reference": {...}}; "path" and "reference" hold `plausibility` and `anatomy_figures` figures.
@@ -271,6 +303,9 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
     h = surfaces.height_above(pos)
     rh = surfaces.height_above(rpos)
     mask = contact_mask(reference_contacts, sites, times)
+    if stance is not None and np.shape(stance) != (n, len(FEET)):
+        raise InputError(f"stance has shape {np.shape(stance)}; give one column per foot, (n, {len(FEET)}) "
+                         f"with n = {n} frames")
 
     joints = {}
     for j in range(model.njnt):
@@ -303,6 +338,6 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         "frames": int(n),
         "sites": list(sites),
         "error": error,
-        "path": {**plausibility(pos, h, fps, qpos[:, :3], mask, sites), **anatomy_figures(model, qpos)},
-        "reference": {**plausibility(rpos, rh, fps, ref[:, :3], mask, sites), **anatomy_figures(model, ref)},
+        "path": {**plausibility(pos, h, fps, qpos[:, :3], mask, sites, stance), **anatomy_figures(model, qpos)},
+        "reference": {**plausibility(rpos, rh, fps, ref[:, :3], mask, sites, stance), **anatomy_figures(model, ref)},
     }

@@ -202,7 +202,8 @@ def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
     text = summary_table(plain, opt, sol, weights, contact_rows=rows)
     for row in ("float in contact [mm] (capture 2.4", "skate in contact [mm/frame]", "skating ratio (contacts)",
                 "flight time [s] (capture 0.117)", "flight phase error vs capture [s]",
-                "RMS friction-cone residual [N]", "peak friction-cone residual [N]"):
+                "RMS friction-cone residual [N]", "peak friction-cone residual [N]",
+                "float in capture stance [mm]", "flight in capture stance [s] (capture 0.000)"):
         assert row in text
     assert text.index("float in contact") < text.index("max |1 - |q||")
 

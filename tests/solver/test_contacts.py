@@ -207,3 +207,40 @@ def test_schedule_conflicts_merge_as_a_value():
     assert m.excuses and not ScheduleConflicts().excuses
     assert not ScheduleConflicts([("planted", 0, "l_toe", 0.02)]).excuses  # a finding alone excuses nothing
     assert m.with_found(()).found == () and m.with_found(()).swings == m.swings
+
+
+def test_a_one_frame_contact_spans_half_a_frame_either_side():
+    z = np.full(30, 0.2)
+    z[10] = 0.0  # one frame on the ground (height alone decides)
+    times, pos, h = one_site(z)
+    cs = detect_contacts(times, pos, h, sites=("l_toe",), speed_on=1e9, speed_off=1e9, min_duration=0.0)
+    assert cs == [Contact("l_toe", pytest.approx(0.095), pytest.approx(0.105))]
+    assert contact_mask(cs, ("l_toe",), times)[:, 0].tolist() == [i == 10 for i in range(30)]
+    z = np.full(30, 0.2)
+    z[0] = z[-1] = 0.0  # at the ends: from / to the end frame
+    times, pos, h = one_site(z)
+    cs = detect_contacts(times, pos, h, sites=("l_toe",), speed_on=1e9, speed_off=1e9, min_duration=0.0)
+    assert [(c.start, c.end) for c in cs] == [(0.0, pytest.approx(0.005)), (pytest.approx(0.285), pytest.approx(0.29))]
+
+
+def test_reference_contacts_keep_a_short_touch_down(toy_model):
+    """The toy figure (soles 0.95 m under the root) hops: standing, a 42 ms touch-down between two
+    flights, standing. The schedule keeps the touch-down (it was dropped under a 50 ms minimum) and
+    so has two flights, not one."""
+    n, ft = 110, 1 / 120
+    qpos = np.zeros((n, toy_model.nq))
+    qpos[:, 3] = 1.0
+    qpos[:, 7::4] = 1.0
+    t = np.arange(n) * ft
+    lift = np.zeros(n)
+    for a, b in ((20, 50), (55, 85)):  # flights of 0.25 s (7.7 cm high); frames 50..55 on the ground
+        s = t[a:b + 1] - t[a]
+        lift[a:b + 1] = 9.81 / 2 * s * (t[b] - t[a] - s)  # ballistic: up and down in (b - a) frames
+    qpos[:, 2] = 0.952 + lift
+    cs = reference_contacts(toy_model, qpos, ft)
+    from solver.contact_schedule import ContactSchedule
+
+    flights = ContactSchedule.of(cs).flights()
+    assert len(flights) == 2, flights
+    assert any(c.start <= t[52] <= c.end and c.duration < 0.05 for c in cs)  # in contact mid touch-down
+    assert flights[0][1] - flights[0][0] > 0.2 and flights[1][1] - flights[1][0] > 0.2

@@ -157,3 +157,28 @@ def test_127_33_reference_own_metrics():
     assert r["float_contact_mm"] < 5.0                   # planted toes sit 2 mm up
     assert 0.05 < r["flight_time_s"] < 0.3               # a run has short flights
     assert r["skate_contact_speed_m_s"] < 0.5
+
+
+def test_float_and_flight_on_the_capture_stance(floor_model):
+    """A schedule with a gap (no contact in frames 20..39) cannot hide a foot floating there: the path
+    is lifted 4 cm in those frames; the capture stands throughout (its stance: both feet, every frame)."""
+    ref = standing(floor_model)
+    q = ref.copy()
+    q[20:40, 2] += 0.04
+    gap = [Contact(s, 0.0, 19 / FPS) for s in SITES] + [Contact(s, 40 / FPS, (N - 1) / FPS) for s in SITES]
+    stance = np.ones((N, 2), bool)
+    m = motion_metrics(floor_model, q, FPS, ref, gap, stance=stance)
+    p = m["path"]
+    assert p["float_contact_mm"] == pytest.approx(0.0, abs=1e-9)  # the schedule's frames: on the floor
+    assert p["float_stance_mm"] == pytest.approx(40.0 * 20 / N)  # 20 of N frames 40 mm up, both feet
+    assert p["float_stance_max_mm"] == pytest.approx(40.0)
+    assert p["flight_in_stance_s"] == pytest.approx(20 / FPS)  # airborne where the capture stood
+    assert m["reference"]["float_stance_mm"] == pytest.approx(0.0, abs=1e-9)
+    assert m["reference"]["flight_in_stance_s"] == 0.0
+    # only the right foot in stance in the lifted frames: the left foot's float there is not counted
+    stance[20:40, 0] = False
+    p = motion_metrics(floor_model, q, FPS, ref, gap, stance=stance)["path"]
+    assert p["float_stance_mm"] == pytest.approx(40.0 * 20 / (2 * N - 20))
+    assert "float_stance_mm" not in motion_metrics(floor_model, q, FPS, ref, gap)["path"]
+    with pytest.raises(InputError, match="stance"):
+        motion_metrics(floor_model, q, FPS, ref, gap, stance=np.ones((N, 4), bool))

@@ -13,7 +13,7 @@ import pytest
 from solver.errors import InputError
 from solver.layout import StateLayout
 from solver.path_context import PathContext
-from solver.terms.clearance import FLIGHT_LIFT, GRAVITY, Clearance
+from solver.terms.clearance import FLIGHT_LIFT, Clearance
 from solver.terms.contact import Planted, contact_window, flights, smoothstep, swings
 from solver.terms.contact_wrench import FrictionCone, cone_metrics
 
@@ -245,12 +245,18 @@ def test_clearance_keeps_flights(toy_model, layout):
     t = np.array([0.35])  # the middle of the flight: every site counts
     Y = standing(layout, 1, (0.0, 0.0, FOOT))
     term = Clearance(toy_model, run, clearance=0.02)
-    # the flight lasts 0.1 s: a ballistic body rises g T^2 / 8 = 12.3 mm in it, the band (< c = 2 cm)
+    # the flight lasts 0.1 s: a ballistic body rises g T^2 / 8 = 12.3 mm in it (c_f, < c = 2 cm), but
+    # the feet of a run's short flight rise above the 3 cm flight height: the lift, 50 ms after take-off
+    # and before landing, is FLIGHT_LIFT * min(1, 0.05 / 0.035, 0.05 / 0.05) = 3.5 cm
     cf = 9.81 * 0.1**2 / 8
-    assert term.evaluate(t, Y, None, None).f[0] == pytest.approx(4 * cf**2, rel=1e-12)
+    np.testing.assert_allclose(term.flight_bands, [cf], rtol=1e-12)
+    lift = FLIGHT_LIFT
+    assert term.evaluate(t, Y, None, None).f[0] == pytest.approx(4 * lift**2, rel=1e-12)
+    short = Clearance(toy_model, run, clearance=0.02, flight_lift=None)  # no lift: the band is c_f
+    assert short.evaluate(t, Y, None, None).f[0] == pytest.approx(4 * cf**2, rel=1e-12)
     long = Clearance(toy_model, [Contact("l_toe", 0.0, 0.3), Contact("r_toe", 0.6, 0.7)], clearance=0.02)
     np.testing.assert_allclose(long.flight_bands, [0.02])  # 0.3 s: g T^2 / 8 = 11 cm, capped at c
-    # ... and lifted to the ballistic height g/2 (t - a)(b - t) (11 cm at 0.45 s) up to FLIGHT_LIFT
+    # ... and lifted up to FLIGHT_LIFT in its middle
     assert long.evaluate(np.array([0.45]), Y, None, None).f[0] == pytest.approx(4 * FLIGHT_LIFT**2, rel=1e-12)
     unlifted = Clearance(toy_model, long.contacts, clearance=0.02, flight_lift=None)
     assert unlifted.evaluate(np.array([0.45]), Y, None, None).f[0] == pytest.approx(4 * 0.02**2, rel=1e-12)
@@ -260,19 +266,21 @@ def test_clearance_keeps_flights(toy_model, layout):
     assert nofl.evaluate(t, Y, None, None).f[0] == 0.0
 
 
-def test_a_long_flights_band_is_lifted_ballistically(toy_model, layout):
-    """A flight (0.3, 0.65) of 0.35 s (a hop): the band is max(c_f, min(FLIGHT_LIFT, g/2 (t - a)(b - t))),
-    the height of a body that leaves the floor at a and lands at b, up to 3.5 cm (above the 3 cm of the
-    flight metric): for 12 ms after take-off it is c_f (2 cm), then the parabola, then the ceiling."""
+def test_a_flights_band_is_lifted(toy_model, layout):
+    """A flight (0.3, 0.65) of 0.35 s (a hop): the band is max(c_f, FLIGHT_LIFT * min(1, (t - a) / 35 ms,
+    (b - t) / 50 ms)), up to 3.5 cm (above the 3 cm of the flight metric): c_f (2 cm) just after take-off
+    and just before landing, the linear ramps, and the ceiling in between."""
     hop = [Contact("l_toe", 0.0, 0.3), Contact("r_toe", 0.65, 0.9)]
     term = Clearance(toy_model, hop, clearance=0.02)
     a, b = 0.3, 0.65
-    t = np.array([0.301, 0.306, 0.32, 0.45, 0.64, 0.645])
+    t = np.array([0.301, 0.31, 0.33, 0.34, 0.45, 0.615, 0.635, 0.645])
     Y = standing(layout, len(t), (0.0, 0.0, FOOT))
     _, Uf, Bf, _ = term.split_windows(t)
-    expected = np.maximum(0.02, np.minimum(FLIGHT_LIFT, 0.5 * GRAVITY * (t - a) * (b - t)))
+    ramp = np.clip(np.minimum(np.minimum((t - a) / 0.035, (b - t) / 0.05), 1.0), 0.0, None)
+    expected = np.maximum(0.02, FLIGHT_LIFT * ramp)
     np.testing.assert_allclose(Bf, expected, rtol=1e-12)
-    assert Bf[0] == 0.02 and 0.02 < Bf[2] < FLIGHT_LIFT and Bf[3] == FLIGHT_LIFT
+    assert Bf[0] == Bf[1] == Bf[6] == Bf[7] == 0.02 and Bf[3] == Bf[4] == FLIGHT_LIFT
+    assert 0.02 < Bf[2] < FLIGHT_LIFT and 0.02 < Bf[5] < FLIGHT_LIFT
     np.testing.assert_allclose(term.evaluate(t, Y, None, None).f, 4 * Uf * expected**2, rtol=1e-12)
     assert term.violation(Y, np.array([0.45])) == pytest.approx(FLIGHT_LIFT)
     # the lift is a target, not a conflict: a keyframe at the top of the flight 3 cm up is not reported,
@@ -292,6 +300,20 @@ def test_a_long_flights_band_is_lifted_ballistically(toy_model, layout):
     np.testing.assert_allclose(fresh.split_windows(np.array([0.45]))[2], [FLIGHT_LIFT])
     with pytest.raises(InputError, match="flight_lift"):
         Clearance(toy_model, hop, flight_lift=-0.01)
+
+
+@pytest.mark.parametrize("T", [0.083, 0.1, 0.125, 0.2, 0.35])
+def test_short_and_long_flights_keep_the_band_above_the_flight_height(toy_model, T):
+    """Every flight's band is above the flight metric's 3 cm for T - (35 + 50 ms) * 3 / 3.5 (the time
+    the captured feet of a run's flights are up: T - 58..92 ms), short hops included (a ballistic band
+    never reached 3 cm under 0.156 s)."""
+    from solver.contact_thresholds import FLIGHT_HEIGHT
+
+    a = 0.3
+    term = Clearance(toy_model, [Contact("l_toe", 0.0, a), Contact("r_toe", a + T, a + T + 0.2)], clearance=0.02)
+    t = np.linspace(a, a + T, 20001)
+    above = (term.split_windows(t)[2] > FLIGHT_HEIGHT).mean() * T
+    assert above == pytest.approx(max(0.0, T - 0.085 * FLIGHT_HEIGHT / FLIGHT_LIFT), abs=2 * T / 20000)
 
 
 def test_flight_clearance_is_its_own_band(toy_model, layout):
