@@ -8,12 +8,13 @@ from runner.problem_file import RUN_AND_STEP_KEYFRAMES
 
 
 def test_inputs_come_from_the_models_then_the_clips_folder(tmp_path):
-    (tmp_path / "16_23.bvh").write_text("HIERARCHY\n")
-    found, missing = find_inputs(["run-and-step", "127_33", "16_23", "99_99"], tmp_path)
+    (tmp_path / "12_34.bvh").write_text("HIERARCHY\n")  # a clip that models/cmu does not ship
+    (tmp_path / "127_33.bvh").write_text("HIERARCHY\n")  # a shipped one: the shipped copy comes first
+    found, missing = find_inputs(["run-and-step", "127_33", "12_34", "99_99"], tmp_path)
     assert found == [("run-and-step", RUN_AND_STEP_KEYFRAMES), ("127_33", MODELS / "cmu" / "127_33.bvh"),
-                     ("16_23", tmp_path / "16_23.bvh")]
+                     ("12_34", tmp_path / "12_34.bvh")]
     assert missing == ["99_99"]
-    assert find_inputs([str(tmp_path / "16_23.bvh")], None)[0] == [("16_23", Path(tmp_path / "16_23.bvh"))]
+    assert find_inputs([str(tmp_path / "12_34.bvh")], None)[0] == [("12_34", Path(tmp_path / "12_34.bvh"))]
 
 
 def test_a_metric_passes_within_2_percent_or_the_absolute_tolerance_or_better():
