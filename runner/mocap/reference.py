@@ -1,8 +1,11 @@
 """A BVH clip as a reference motion of the figure: parsed, retargeted, cleaned up (runner/mocap/retarget.py).
 
 On the subject's own figure (runner/mocap/subject_figure.py: made from this clip's skeleton) the
-retargeting is lossless: the root path is the captured one (no scale, no height correction), and the
-modelled joints' positions are the capture's (docs/mocap.md, "What the figure keeps").
+retargeting is lossless: the root path is the captured one (no scale), and the modelled joints' positions
+relative to the root are the capture's (docs/mocap.md, "What the figure keeps"). In a scene with surfaces
+the root height is still corrected per frame by up to ~2 cm (`correct_root_height`), so that the feet in
+contact stand on the fitted surfaces instead of sinking into them; the export onto the source skeleton
+takes that correction off again (runner/mocap/source_export.py).
 """
 from __future__ import annotations
 
@@ -61,12 +64,17 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
             the capture's own coordinates, or a keyframe file made before the scaling).
     On the subject's own figure (the model's figure records this clip's skeleton,
     `runner.mocap.subject_figure.figure_skeleton_digest`) "legs" is 1 (the figure's legs are the
-    subject's) and the root height is not corrected: the root path is the captured one, so that the
-    reference reproduces the capture (the scene is fitted to the captured feet instead).
+    subject's): the root path is the captured one in the levelled frame plus the per-frame vertical
+    height correction c(t) (up to ~2 cm, `correct_root_height`; none without surfaces). A capture floor is
+    never flat to the millimetre, so without c(t) a foot in contact sinks into the fitted floor at some
+    frames; the keyframes, taken from the reference and met exactly, would then violate the
+    penetration bound. The export onto the source skeleton subtracts c(t)
+    (`runner.mocap.source_export.root_correction`), so the exported reference is the source again.
 
     Returns:
         Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s],
-        root_scale, captured_root; n = frames in the file - 1.
+        root_scale, captured_root (the subject's own figure: root unscaled, only its height corrected);
+        n = frames in the file - 1.
     Raises:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
             joint the retargeting needs is missing, the model lacks a joint or site it needs, a malformed
@@ -90,8 +98,9 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     step(2, "retargeted")
     qpos, _ = clamp_hyperextension(qpos, figure)
     step(3, "clamped")
-    if not own:
-        qpos = correct_root_height(qpos, model, clip.frame_time)
+    # feet in contact on the surfaces, nothing below one (a no-op without surfaces); on the subject's
+    # figure too, where it only takes up the captured feet's deviation (up to ~2 cm) from the fitted scene
+    qpos = correct_root_height(qpos, model, clip.frame_time)
     step(4, "root height")
     qpos = tidy_quaternions(qpos, layout)
     step(5, "done")

@@ -102,8 +102,9 @@ class Reference:
         source: the BVH file it came from.
         frame_time: [s] time between frames of the clip.
         root_scale: the scale applied to the captured root path (`retarget`; 1: as captured).
-        captured_root: the root path is the captured one, height included (the subject's own figure:
-            no height correction, `runner.mocap.reference.load_bvh_reference`).
+        captured_root: the root path is the captured one, unscaled, up to the per-frame height
+            correction that stands the feet on the scene's surfaces (the subject's own figure,
+            `runner.mocap.reference.load_bvh_reference`; the source-skeleton export takes it off).
     """
 
     times: np.ndarray

@@ -11,10 +11,13 @@ at t = k / fps. Per joint:
   world x R_off^-1). A merged chain is split back by keeping the source's inner joints and solving the
   last one: with LowerBack and Spine resampled from the source, Spine1's local rotation is the one
   whose composition with them gives the torso's world orientation; likewise LHipJoint before the
-  thigh, LeftShoulder before the arm. The root translation is the path's root position. Both are taken
-  back from the scene's levelled frame into the capture's coordinates first (the inverse of the rigid
-  transform the scene records, `solver.capture_frame`; docs/mocap.md), so the file lies where the
-  source does.
+  thigh, LeftShoulder before the arm. The root translation is the path's root position minus the
+  reference's height correction c(t) (`root_correction`: the import stands the captured feet on the
+  fitted surfaces by moving the root up to ~2 cm up or down per frame, `runner.mocap.contacts.
+  correct_root_height`; the export takes that off again). Both are taken back from the scene's levelled
+  frame into the capture's coordinates first (the inverse of the rigid transform the scene records,
+  `solver.capture_frame`; docs/mocap.md), so the file lies where the source does: the reference itself
+  exports to the source's root path, and an optimized path to it at its keyframes.
 * **not modelled** (neck and head, toes, hands, fingers, thumbs, and the inner joints above): the
   source's local rotations, resampled to the export times (spherical linear interpolation between the
   neighbouring captured frames, `scipy.spatial.transform.Slerp`; at the captured times, the source's own).
@@ -37,7 +40,7 @@ from solver.errors import InputError
 from solver.figure import Figure
 from solver.quaternion import conj, mul, normalize
 
-__all__ = ["source_clip", "source_motion", "source_bvh_text", "write_source_bvh", "export_on_source"]
+__all__ = ["source_clip", "root_correction", "source_motion", "source_bvh_text", "write_source_bvh", "export_on_source"]
 
 _DECIMALS = 6
 
@@ -105,13 +108,47 @@ def _figure_world(model, figure: Figure, qpos: np.ndarray) -> dict[str, np.ndarr
     return world
 
 
-def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, ...]:
+def root_correction(clip: BvhClip, model, reference, times: np.ndarray) -> np.ndarray:
+    """The reference's root correction c(t) at `times`, in the capture's coordinates [BVH units].
+
+    c = R^T (reference root - T(captured root)) at the reference's frames, with T: x' = R x + shift the
+    scene's capture frame (`solver.capture_frame`), i.e. the reference root taken back to the capture's
+    coordinates minus the clip's own root (its `Hips` translation); on the subject's own figure that is
+    the per-frame height correction of the import (`runner.mocap.contacts.correct_root_height`, a few
+    mm, vertical in the levelled frame). Linear between the reference's frames, held before the first and
+    after the last.
+
+    Args:
+        clip: the source clip. model: the scene (its figure and capture frame).
+        reference: (times (r,) [s], qpos (r, nq)) the reference motion the path was made against (the
+            saved path's `reference_times`, `reference_qpos`), or None.
+        times: (n,) [s] the export times, 0 at the clip's first frame after the T-pose.
+    Returns:
+        (n, 3) c [BVH units] in BVH axes; zeros without a reference (fewer than 2 frames).
+    Raises:
+        InputError: the scene's capture frame is malformed.
+    """
+    times = np.asarray(times, float)
+    if reference is None or len(reference[0]) < 2:
+        return np.zeros((len(times), 3))
+    ref_t, ref_q = np.asarray(reference[0], float), np.asarray(reference[1], float)
+    adr = check_figure(Figure.from_model(model)).joints[0].qpos_slice.start
+    back = CaptureFrame.from_model(model).inverse().points(ref_q[:, adr:adr + 3])
+    ref_root = back @ BVH_TO_MUJOCO / UNIT_TO_METRES  # the reference root in the capture's coordinates, BVH axes
+    _, trans = _slerp_source(clip, ref_t)
+    c = ref_root - trans[:, 0]
+    return np.stack([np.interp(times, ref_t, c[:, k]) for k in range(3)], axis=-1)
+
+
+def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray, reference=None) -> tuple[np.ndarray, ...]:
     """The source skeleton's local rotations and root translation for a figure motion (module docstring).
 
     Args:
         clip: the source clip (CMU skeleton). model: the scene (its figure, and the transform from the
             capture's coordinates to the scene's that it records). qpos: (n, nq) the motion, in the scene.
         times: (n,) [s] its sample times, 0 at the clip's first frame after the T-pose.
+        reference: (times (r,) [s], qpos (r, nq)) the reference the path was made against, whose root
+            correction is taken off the root (`root_correction`); None: none (the root as the path has it).
     Returns:
         local: (n, J, 4) unit local rotations (w x y z) in BVH axes; root: (n, 3) root translation [BVH
         units]; trans: (n, J, 3) the source's local translations, resampled [BVH units].
@@ -138,7 +175,7 @@ def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray) -> 
             local[:, j] = target[j] if par < 0 else normalize(mul(conj(world[:, par]), target[j]))
         world[:, j] = local[:, j] if par < 0 else normalize(mul(world[:, par], local[:, j]))
     root = qpos[:, figure.joints[0].qpos_slice][:, :3] @ BVH_TO_MUJOCO / UNIT_TO_METRES
-    return local, root, pos
+    return local, root - root_correction(clip, model, reference, times), pos
 
 
 def _euler(q: np.ndarray, order: str) -> np.ndarray:
@@ -153,14 +190,16 @@ def _euler(q: np.ndarray, order: str) -> np.ndarray:
     return np.degrees(np.unwrap(np.radians(ang), axis=0))
 
 
-def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np.ndarray, fps: float) -> str:
+def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np.ndarray, fps: float,
+                    reference=None) -> str:
     """The BVH file of a figure motion on the source skeleton (module docstring).
 
     Args:
         clip: the source clip, parsed. text: its file's text (the HIERARCHY and T-pose frame are copied).
         model: the scene. qpos: (n, nq). times: (n,) [s]. fps: [Hz] the samples' rate.
+        reference: (times, qpos) of the reference the path was made against, or None (`source_motion`).
     """
-    local, root, trans = source_motion(clip, model, qpos, times)
+    local, root, trans = source_motion(clip, model, qpos, times, reference)
     cols = []
     for j, chans in enumerate(clip.channels):
         rot = [c[0] for c in chans if c.endswith("rotation")]
@@ -184,7 +223,8 @@ def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np
 
 
 def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.ndarray, fps: float) -> BvhClip:
-    """Write a motion of saved path `saved` onto its source skeleton (`source_bvh_text`), atomically.
+    """Write a motion of saved path `saved` onto its source skeleton (`source_bvh_text`), atomically; the
+    root correction of the path's reference (`root_correction`) is taken off the root.
 
     Returns:
         the source clip (its joints are the file's).
@@ -198,7 +238,8 @@ def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.
         raise InputError(f"{saved.source}: the path was not made from a BVH clip, so it has no source skeleton; "
                          "give --skeleton figure")
     text = str(saved.arrays["clip_text"]) if str(saved.arrays.get("clip_text", "")) else Path(clip.source).read_text()
-    body = source_bvh_text(clip, text, model, qpos, times, fps)
+    reference = (saved.reference_times, saved.reference_qpos) if saved.has_reference else None
+    body = source_bvh_text(clip, text, model, qpos, times, fps, reference)
     with atomic_output(out) as tmp:
         Path(tmp).write_text(body, encoding="utf-8")
     return clip

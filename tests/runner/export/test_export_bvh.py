@@ -207,9 +207,25 @@ def same_pose(src, out, frames_src, frames_out):
     return rotation_angles_deg(ra, rb).max(), dist.max()
 
 
+def root_correction_m(npz, clip, capture=None):
+    """(n, 3) [m] the reference's root minus the clip's own Hips path (tests/bvh_fk.py forward kinematics,
+    MuJoCo axes) moved by the scene's transform `capture` (None: the identity)."""
+    from bvh_fk import world
+
+    from solver.capture_frame import CaptureFrame
+
+    _, pw = world(parse(clip))
+    return np.load(npz)["frames"][:, :3] - (capture or CaptureFrame.identity()).points(pw[1:, 0])
+
+
 @pytest.mark.parametrize("src", SOURCE_CLIPS, ids=lambda p: p.stem)
 def test_the_reference_exported_on_the_source_skeleton_is_the_source(tmp_path, src):
+    """The reference's root is the Hips path raised or lowered per frame so that its feet stand on the
+    scene's floor (here z = 0 of the capture, a few cm off the captured feet); the export takes that
+    height correction off again: the source file, every joint within 0.01 degree, the root within 0.1 mm."""
     npz, clip = reference_path(tmp_path, src)
+    c = root_correction_m(npz, clip)
+    assert np.abs(c[:, :2]).max() < 1e-6 and np.abs(c[:, 2]).max() > 0.002  # vertical (1 um), and there to undo
     out = tmp_path / "out.bvh"
     assert main(["export", str(npz), "--to", str(out), "--quiet"]) == 0
     text, source = out.read_text().splitlines(), clip.read_text().splitlines()
@@ -222,8 +238,9 @@ def test_the_reference_exported_on_the_source_skeleton_is_the_source(tmp_path, s
 
 def test_a_levelled_reference_exports_back_into_the_sources_coordinates(tmp_path):
     """A scene recording a levelling transform (a capture floor tilted by 1.3 degrees, 4 cm up): the
-    reference lives in the levelled frame (its root is the source's Hips moved by T), and the export takes
-    it back by T^-1: the source file again, every joint within 0.01 degree, the root within 0.1 mm."""
+    reference lives in the levelled frame (its root is the source's Hips moved by T, plus the vertical
+    height correction that stands its feet on the floor), and the export takes the correction off and
+    the root back by T^-1: the source file again, every joint within 0.01 degree, the root within 0.1 mm."""
     import mujoco
 
     from runner.mocap.bvh import read_bvh
@@ -233,11 +250,12 @@ def test_a_levelled_reference_exports_back_into_the_sources_coordinates(tmp_path
 
     t = CaptureFrame.levelling(0.04, (0.02, -0.01))
     npz, clip = reference_path(tmp_path, MODELS / "cmu" / "127_33.bvh", seconds=0.3, capture=t)
-    saved = load_saved_path(npz)
+    assert load_saved_path(npz).has_reference  # the export finds there the correction to take off
     model = mujoco.MjModel.from_xml_path(str(tmp_path / "c.scene.xml"))
     src = read_bvh(clip)
     hips = src.local_pos[1:, 0] @ BVH_TO_MUJOCO.T * UNIT_TO_METRES  # the captured root, MuJoCo axes [m]
-    np.testing.assert_allclose(saved.arrays["frames"][:, :3], t.points(hips), atol=1e-9)
+    c = root_correction_m(npz, clip, t)
+    assert np.abs(c[:, :2]).max() < 1e-6 and np.abs(c[:, 2]).max() > 0.002  # a vertical correction to undo
     assert np.abs(t.points(hips) - hips).max() > 0.01  # the transform does move it (2 cm here)
     assert CaptureFrame.from_model(model).quat == pytest.approx(t.quat, abs=1e-12)
     out = tmp_path / "out.bvh"

@@ -40,7 +40,8 @@ def point(model, data, name):
 @pytest.mark.parametrize("clip", CLIPS, ids=lambda p: p.stem)
 def test_legs_relative_to_the_hips_are_the_captures(clip):
     """Hip, knee, ankle and toe joints relative to the hips within 5 mm of the clip's own forward
-    kinematics at every frame; the root is the captured Hips path (no scale, no height change)."""
+    kinematics at every frame; on the figure alone (no surfaces to stand on) the root is the captured
+    Hips path (no scale, no height change)."""
     model = figure_model(clip)
     ref = load_bvh_reference(clip, model)
     assert ref.captured_root and ref.root_scale == 1.0
@@ -59,6 +60,33 @@ def test_legs_relative_to_the_hips_are_the_captures(clip):
             err = np.linalg.norm((point(model, data, name) - root) - (pw[i, b.index(joint)] - hips[i]))
             worst = max(worst, err)
     assert worst < 0.005, f"{clip.name}: {1000 * worst:.2f} mm"
+
+
+@pytest.mark.parametrize("clip", CLIPS, ids=lambda p: p.stem)
+def test_on_a_fitted_scene_the_feet_stand_on_it(tmp_path, clip):
+    """On the scene fitted to the clip (`clip_scene` "auto"), the reference's root is the captured Hips
+    path in the scene's levelled frame plus a vertical correction c(t) of at most 25 mm (the capture's
+    floor is not flat to the mm: 14-23 mm on the six shared clips), and no contact site of any frame is
+    below the fitted floor or box (MuJoCo's site positions against the scene's geoms)."""
+    from runner.mocap.scene import clip_scene
+    from runner.mocap.subject_figure import write_subject_figure
+    from solver.capture_frame import CaptureFrame
+    from solver.surfaces import StaticSurfaces
+
+    figure = write_subject_figure(read_bvh(clip), tmp_path / "c.figure.xml")
+    cs = clip_scene(clip, "auto", figure, tmp_path / "c.scene.xml")
+    b = parse(clip)
+    _, pw = world(b)
+    c = cs.reference.qpos[:, :3] - CaptureFrame.from_model(cs.model).points(pw[1:, b.index("Hips")])
+    assert np.abs(c[:, :2]).max() < 1e-6 and 0.001 < np.abs(c[:, 2]).max() < 0.025
+    model, data = cs.model, mujoco.MjData(cs.model)
+    sites = Figure.from_model(model).contact_site_ids
+    lowest = np.inf
+    for q in cs.reference.qpos[::4]:
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        lowest = min(lowest, StaticSurfaces.from_model(model, data).height_above(data.site_xpos[sites]).min())
+    assert lowest > 0.0015  # 2 mm clearance (runner.mocap.contacts.CONTACT_CLEARANCE), within 0.5 mm
 
 
 def test_figure_proportions_masses_and_soles():
