@@ -51,7 +51,10 @@ def test_a_corpus_of_two_clips_reports_tuning_and_validation_apart(tmp_path, cap
         checks = {c["bound"]: c for c in p["checks"]}
         assert checks["penetration"]["limit"] == 1.0
         assert checks["penetration"]["held"] == (report["metrics"]["optimized"]["max_penetration_mm"] <= 1.0)
-        assert checks["off_hinge"]["held"] is None
+        # off the hinge: each knee and elbow against the capture's own at that joint (the anatomy figures)
+        path, cap = (report["metrics"]["motion"][k][w]["off_hinge_deg"] for k, w in (("optimized", "path"), ("plain", "reference")))
+        excess = max(path[j] - cap[j] for j in path)
+        assert checks["off_hinge"]["held"] == (excess <= 3.0)
     # a rerun solves nothing: every pair is skipped, the report is the same
     assert main(args) == EXIT_OK
     again = json.loads((out / "corpus.json").read_text())
