@@ -127,11 +127,10 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
             break
         t0 = time.perf_counter()
         try:
-            h = ne.solve(mu)
+            h, pred = ne.step(mu)
         except (LinAlgError, ValueError):
-            h = None
+            h, pred = None, 0.0
         clock["factor"] += time.perf_counter() - t0
-        pred = ne.model_decrease(h) if h is not None else 0.0
         if h is None or not pred > 0:
             mu, nu = mu * nu, nu * 2.0
             if mu > MU_MAX:
