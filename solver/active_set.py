@@ -49,17 +49,26 @@ class HingeRows:
 
     P: sp.csr_matrix
     s: np.ndarray
+    on: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.on is None:
+            self.on = self.s > 0
 
     def predict(self, h: np.ndarray) -> np.ndarray:
         """(r,) s + P h: the linearized signed values after the step h (n_free,)."""
         return self.s + self.P @ h
 
     def correction(self, h: np.ndarray) -> float:
-        """L_hinge(h) - L_quad(h): what the piecewise model adds to the plain Gauss-Newton model at h (the
-        plain one keeps the rows on now on, and the others off, whatever their prediction)."""
-        p = self.predict(h)
-        on = self.s > 0
+        """L_hinge(h) - L_quad(h): what the piecewise model adds to the quadratic model at h that keeps
+        the rows `on` on and the others off whatever their prediction (`NormalEquations.ab` and `g`)."""
+        p, on = self.predict(h), self.on
         return float(np.sum(p[~on & (p > 0)] ** 2) - np.sum(p[on & (p <= 0)] ** 2))
+
+    def moved(self, h: np.ndarray) -> HingeRows:
+        """The rows after the step h (the signed values moved by their linearization, the rows and the
+        set the quadratic model keeps on unchanged): for a step that keeps the last Jacobian."""
+        return HingeRows(self.P, self.predict(h), self.on)
 
 
 def hinge_rows(local, parts, nq: int) -> HingeRows | None:
@@ -102,12 +111,12 @@ def active_set_step(ne, hinge: HingeRows, mu: float) -> np.ndarray:
     even where the active set has not settled within `MAX_SWITCHES` steps).
 
     Args:
-        ne: `NormalEquations` (its band ab and g hold the rows on now; `ne.damped(ab, g, mu)` solves,
+        ne: `NormalEquations` (its band ab and g hold the rows `hinge.on`; `ne.damped(ab, g, mu)` solves,
             `ne.damped_matvec(v, mu)` multiplies by J^T J + mu D). hinge: HingeRows. mu: damping.
     Returns:
         h (n_free,). Raises numpy.linalg.LinAlgError where `ne.damped` does.
     """
-    on = hinge.s > 0
+    on = hinge.on
     h = np.zeros(len(ne.g))
     active = on
     for _ in range(MAX_SWITCHES):

@@ -182,7 +182,26 @@ class NormalEquations:
             h = self.solve(mu)
             return h, self.model_decrease(h)
         h = active_set_step(self, self.hinge, mu)
-        return h, self.model_decrease(h) - self.hinge.correction(h)
+        return h, self.model_decrease(h) + self.hinge.correction(np.zeros_like(h)) - self.hinge.correction(h)
+
+    def lagged(self, h: np.ndarray, g: np.ndarray, E: float) -> NormalEquations:
+        """The normal equations after the step h with the same J^T J and the exact gradient there: a
+        step that keeps the last Jacobian (`solver.gauss_newton`).
+
+        Args:
+            h: (n_free,) the step taken. g: (n_free,) J^T rho at the new point (half of dE / d xi,
+                from the objective's own gradient). E: the objective there.
+        Returns:
+            NormalEquations whose quadratic model has the new gradient; the hinge rows' signed values
+            moved by their linearization, g corrected so that the rows the band keeps on
+            (`HingeRows.on`) enter the gradient with those values.
+        """
+        if self.hinge is None:
+            return NormalEquations(self.ab, g, E)
+        hinge = self.hinge.moved(h)
+        s = hinge.s
+        g = g + hinge.P.T @ (s * (hinge.on.astype(float) - (s > 0)))
+        return NormalEquations(self.ab, g, E, hinge)
 
     def model_decrease(self, h: np.ndarray) -> float:
         """L(0) - L(h) of the Gauss-Newton model L(h) = |rho + J h|^2 = E + 2 h.g + h^T J^T J h."""
@@ -370,10 +389,15 @@ def _add_sites(gram, gseg, local, site_rows):
                 M.append(Jv[act][:, :, None, :] * v0[:, None, :, None] + Jpa[:, :, None, :] * v1[:, None, :, None])
             M = np.concatenate(M, axis=1).reshape(len(act), C.shape[1], -1)  # (p, d, 4c)
             e, U = np.linalg.eigh(C)
-            LT = (U * np.sqrt(np.maximum(e, 0.0))[:, None, :]).transpose(0, 2, 1)  # C = LT^T LT
-            X = np.matmul(LT, M)[None]
-            gx = np.einsum("pi,pia->pa", b, M)[None]
-            _accumulate(gram, gseg, local, act, X, gx, np.asarray(comps)[None])
+            # C = LT^T LT with one row per nonzero eigenvalue (a point's rank is that of its terms' rows:
+            # 1 for a surface's depth, 3-4 with a planted foot's height and sliding), points' rows stacked
+            keep = (e > 1e-12 * e.max(initial=0.0)) | (e == e.max(axis=1, keepdims=True))
+            pt, ev = np.nonzero(keep)
+            X = np.einsum("ri,ria->ra", U[pt, :, ev] * np.sqrt(e[pt, ev])[:, None], M[pt])
+            gx = np.zeros(X.shape)
+            first = np.r_[True, pt[1:] != pt[:-1]] if len(pt) else np.zeros(0, bool)
+            gx[first] = np.einsum("pi,pia->pa", b, M)[pt[first]]
+            _accumulate(gram, gseg, local, act[pt], X[None, :, None, :], gx[None], np.asarray(comps)[None])
 
 
 def _accumulate(gram, gseg, local, act, X, gx, comps):
