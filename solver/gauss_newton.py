@@ -39,6 +39,10 @@ MIN_FACTOR = 1.0 / 3.0
 #: scaling, mu = 1 halves the Gauss-Newton step along every eigendirection of equal curvature): a small
 #: decrease of a heavily damped step says that the step was short, not that E is near its minimum.
 MU_CONVERGED = 1.0
+#: After an accepted step whose gain ratio is at least LAG_GAIN, the next step keeps J^T J and takes the
+#: exact gradient of the trial evaluation (at most MAX_LAG steps in a row; module docstring).
+LAG_GAIN = 0.5
+MAX_LAG = 4
 
 
 def has_residuals(objective) -> bool:
@@ -79,7 +83,7 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
         callback: callback(n_evals, E) after every evaluation, or None.
         timings: if a dict, receives the seconds spent in "jacobian" (residuals, Jacobian blocks and
             the assembly of J^T J; wall), "factor" (damped solves) and "trial" (value evaluations at
-            steps), and the CPU seconds of the assembly's parts (`normal_equations`: "residuals",
+            steps), "n_jacobians" (how many), and the CPU seconds of the assembly's parts (`normal_equations`: "residuals",
             "blocks", "gram", "band").
     Returns:
         OptimizeResult with x (n_free,) the best frame values found, algorithm "lm".
@@ -91,7 +95,7 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
     from solver.least_squares import LocalSpline, normal_equations
 
     t_start = time.perf_counter()
-    clock = {"jacobian": 0.0, "factor": 0.0, "trial": 0.0}
+    clock = {"jacobian": 0.0, "factor": 0.0, "trial": 0.0, "n_jacobians": 0}
     x = frames.x()
     if x.size == 0:
         return OptimizeResult(x, math.nan, Status.NOTHING_TO_DO, "no free variables", 0, 0, np.zeros(0), 0.0, "lm")
@@ -110,6 +114,7 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
         t0 = time.perf_counter()
         ne = normal_equations(objective, frames.with_x(xv), local, timings)
         clock["jacobian"] += time.perf_counter() - t0
+        clock["n_jacobians"] += 1
         count(ne.E if math.isfinite(ne.E) else math.inf)
         return ne
 
@@ -118,7 +123,7 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
     if not (math.isfinite(F) and np.all(np.isfinite(ne.g))):
         return _result(x, F, Status.NONFINITE, "the residuals are not finite at the start", trace, improvements,
                        t_start, clock, timings)
-    mu, nu = TAU, 2.0
+    mu, nu, lag = TAU, 2.0, 0
     status, message = Status.CONVERGED, "converged"
     while True:
         stop = _budget(len(trace), max_evals, t_start, max_time_s, should_stop)
@@ -127,12 +132,14 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
             break
         t0 = time.perf_counter()
         try:
-            h = ne.solve(mu)
+            h, pred = ne.step(mu)
         except (LinAlgError, ValueError):
-            h = None
+            h, pred = None, 0.0
         clock["factor"] += time.perf_counter() - t0
-        pred = ne.model_decrease(h) if h is not None else 0.0
         if h is None or not pred > 0:
+            if lag:  # the kept J^T J may be what fails: a fresh Jacobian first
+                ne, lag = jacobian(x), 0
+                continue
             mu, nu = mu * nu, nu * 2.0
             if mu > MU_MAX:
                 message = "converged (no descent left at this damping)"
@@ -144,12 +151,9 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
             break
         x_new = x + dx
         t0 = time.perf_counter()
-        try:
-            F_new = objective.evaluate(knots, frames.values_from_x(x_new), grad=False).E
-        except NonFiniteError:
-            F_new = math.inf
+        F_new, g_new = _trial(objective, frames, x_new, local)
         clock["trial"] += time.perf_counter() - t0
-        count(F_new if math.isfinite(F_new) else math.inf)
+        count(F_new)
         gain = (F - F_new) / pred if math.isfinite(F_new) else -math.inf
         step_mu = mu
         if gain > 0:
@@ -161,16 +165,33 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
                 break
             if _budget(len(trace), max_evals, t_start, max_time_s, should_stop) is not None:
                 continue  # the loop's test reports it
-            ne = jacobian(x)
+            if gain >= LAG_GAIN and lag < MAX_LAG:
+                ne, lag = ne.lagged(h, g_new, F), lag + 1
+                continue
+            ne, lag = jacobian(x), 0
             if not (math.isfinite(ne.E) and np.all(np.isfinite(ne.g))):
                 status, message = Status.NONFINITE, "the residuals' Jacobian is not finite"
                 break
+        elif lag:
+            ne, lag = jacobian(x), 0
         else:
             mu, nu = mu * nu, nu * 2.0
             if mu > MU_MAX:
                 message = "converged (no decrease left at this damping)"
                 break
     return _result(x, F, status, message, trace, improvements, t_start, clock, timings)
+
+
+def _trial(objective, frames, x, local) -> tuple[float, np.ndarray | None]:
+    """(E, J^T rho in the free coefficients (half of dE / d xi)) at the free values x; (inf, None)
+    where E or its gradient is not finite."""
+    try:
+        ev = objective.evaluate(frames.times, frames.values_from_x(x), grad=True)
+    except NonFiniteError:
+        return math.inf, None
+    if not math.isfinite(ev.E):
+        return math.inf, None
+    return ev.E, 0.5 * (local.E.T @ ev.grad[frames.free])
 
 
 def _budget(n_evals, max_evals, t_start, max_time_s, should_stop):

@@ -36,6 +36,7 @@ from scipy.interpolate import BSpline
 from scipy.linalg import cho_solve_banded, cholesky_banded
 from scipy.sparse.linalg import splu
 
+from solver.active_set import HingeRows, active_set_step, hinge_rows
 from solver.frames import FrameSet
 from solver.path_context import PathContext
 from solver.site_jacobian import cached_site_jacobians, supports
@@ -143,6 +144,7 @@ class NormalEquations:
     ab: np.ndarray
     g: np.ndarray
     E: float
+    hinge: HingeRows | None = None
 
     def solve(self, mu: float) -> np.ndarray:
         """The damped Gauss-Newton step h: (J^T J + mu diag(J^T J)) h = -J^T rho (Marquardt's scaling;
@@ -151,11 +153,55 @@ class NormalEquations:
         Raises:
             numpy.linalg.LinAlgError: the damped matrix is not positive definite (mu too small).
         """
+        return self.damped(self.ab, self.g, mu)
+
+    def scale(self) -> np.ndarray:
+        """(n_free,) D: diag(J^T J), zero entries replaced by the mean of the positive ones."""
         d = self.ab[0]
-        scale = np.where(d > 0, d, d[d > 0].mean() if (d > 0).any() else 1.0)
-        ab = self.ab.copy()
-        ab[0] += mu * scale
-        return -cho_solve_banded((cholesky_banded(ab, lower=True), True), self.g)
+        return np.where(d > 0, d, d[d > 0].mean() if (d > 0).any() else 1.0)
+
+    def damped(self, ab: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
+        """-(A + mu D)^-1 g for A in lower band form ab (J^T J or a low-rank change of it), D = `scale`."""
+        ab = ab.copy()
+        ab[0] += mu * self.scale()
+        return -cho_solve_banded((cholesky_banded(ab, lower=True), True), g)
+
+    def damped_matvec(self, v: np.ndarray, mu: float) -> np.ndarray:
+        """(J^T J + mu D) v."""
+        return _band_matvec(self.ab, v) + mu * self.scale() * v
+
+    def step(self, mu: float) -> tuple[np.ndarray, float]:
+        """(h, L(0) - L(h)): the damped step of the model that keeps the hinge residuals' max(0, .)
+        (`solver.active_set`), and its predicted decrease; without hinge rows near switching, `solve`
+        and `model_decrease`.
+
+        Raises:
+            numpy.linalg.LinAlgError: a damped matrix is not positive definite (mu too small).
+        """
+        if self.hinge is None:
+            h = self.solve(mu)
+            return h, self.model_decrease(h)
+        h = active_set_step(self, self.hinge, mu)
+        return h, self.model_decrease(h) + self.hinge.correction(np.zeros_like(h)) - self.hinge.correction(h)
+
+    def lagged(self, h: np.ndarray, g: np.ndarray, E: float) -> NormalEquations:
+        """The normal equations after the step h with the same J^T J and the exact gradient there: a
+        step that keeps the last Jacobian (`solver.gauss_newton`).
+
+        Args:
+            h: (n_free,) the step taken. g: (n_free,) J^T rho at the new point (half of dE / d xi,
+                from the objective's own gradient). E: the objective there.
+        Returns:
+            NormalEquations whose quadratic model has the new gradient; the hinge rows' signed values
+            moved by their linearization, g corrected so that the rows the band keeps on
+            (`HingeRows.on`) enter the gradient with those values.
+        """
+        if self.hinge is None:
+            return NormalEquations(self.ab, g, E)
+        hinge = self.hinge.moved(h)
+        s = hinge.s
+        g = g + hinge.P.T @ (s * (hinge.on.astype(float) - (s > 0)))
+        return NormalEquations(self.ab, g, E, hinge)
 
     def model_decrease(self, h: np.ndarray) -> float:
         """L(0) - L(h) of the Gauss-Newton model L(h) = |rho + J h|^2 = E + 2 h.g + h^T J^T J h."""
@@ -214,6 +260,7 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
     E = 0.0
     clock = _Clock(timings)
     site_rows = []  # site terms, summed site by site (`_add_sites`)
+    hinge_parts = []  # their hinge columns (`solver.active_set`)
     residuals = term_residuals(objective, basis, Y, Y1, Y2)
     clock("residuals")
     for _, c, res in residuals:
@@ -222,6 +269,8 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
         E += float((rho * rho).sum())
         if res.compact is None and res.blocks is None and res.sites is not None and supports(res.sites.engine):
             site_rows.append((res.sites, w, rho))
+            if res.sites.signed is not None and res.sites.dv is None:
+                hinge_parts.append((res.sites, w))
             cached_site_jacobians(res.sites.ctx, res.sites.engine, res.sites.result)
             clock("blocks")
             continue
@@ -242,8 +291,9 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
     b = int((i - j).max(initial=0))
     ab = np.zeros((b + 1, local.n_free))
     np.add.at(ab, (i - j, j), v)
+    hinge = hinge_rows(local, hinge_parts, nq) if hinge_parts else None
     clock("band")
-    return NormalEquations(ab, np.asarray(g), E)
+    return NormalEquations(ab, np.asarray(g), E, hinge)
 
 
 class _Clock:
@@ -339,10 +389,15 @@ def _add_sites(gram, gseg, local, site_rows):
                 M.append(Jv[act][:, :, None, :] * v0[:, None, :, None] + Jpa[:, :, None, :] * v1[:, None, :, None])
             M = np.concatenate(M, axis=1).reshape(len(act), C.shape[1], -1)  # (p, d, 4c)
             e, U = np.linalg.eigh(C)
-            LT = (U * np.sqrt(np.maximum(e, 0.0))[:, None, :]).transpose(0, 2, 1)  # C = LT^T LT
-            X = np.matmul(LT, M)[None]
-            gx = np.einsum("pi,pia->pa", b, M)[None]
-            _accumulate(gram, gseg, local, act, X, gx, np.asarray(comps)[None])
+            # C = LT^T LT with one row per nonzero eigenvalue (a point's rank is that of its terms' rows:
+            # 1 for a surface's depth, 3-4 with a planted foot's height and sliding), points' rows stacked
+            keep = (e > 1e-12 * e.max(initial=0.0)) | (e == e.max(axis=1, keepdims=True))
+            pt, ev = np.nonzero(keep)
+            X = np.einsum("ri,ria->ra", U[pt, :, ev] * np.sqrt(e[pt, ev])[:, None], M[pt])
+            gx = np.zeros(X.shape)
+            first = np.r_[True, pt[1:] != pt[:-1]] if len(pt) else np.zeros(0, bool)
+            gx[first] = np.einsum("pi,pia->pa", b, M)[pt[first]]
+            _accumulate(gram, gseg, local, act[pt], X[None, :, None, :], gx[None], np.asarray(comps)[None])
 
 
 def _accumulate(gram, gseg, local, act, X, gx, comps):

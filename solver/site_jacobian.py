@@ -51,45 +51,55 @@ def site_jacobians(engine, res, Y: np.ndarray, Y1: np.ndarray | None = None) -> 
     ys = sv.get("ys")
     if ys is None:  # a positions-only pass keeps no ys
         ys = res.sites.transpose(2, 1, 0)
-    out = []
+    n = ys.shape[-1]
+    # every (site, rotating ancestor) pair at once: the per-pair arrays are small, one pass over all
+    pk, pb, layout = [], [], []
     for k, sb in enumerate(engine._site_body):
-        chain = np.flatnonzero(engine._anc[sb])  # the site's body and its ancestors
-        p = ys[:, k]  # (3, n)
-        cols, Jp, Jv = [], [], []
-        vp = sv["ysd"][:, k] if vel else None
-        for b in chain:
+        cols, spans = [], []
+        for b in np.flatnonzero(engine._anc[sb]):  # the site's body and its ancestors
             if b in free_of:
+                spans.append(("lin", len(cols)))
                 cols.append(engine._lin_q[free_of[b]])
-                eye = np.broadcast_to(np.eye(3)[:, :, None], (3, 3, p.shape[1]))
-                Jp.append(eye)
-                if vel:
-                    Jv.append(np.zeros((3, 3, p.shape[1])))
-            if b not in slot_of:
-                continue
-            qi = engine._quat_q[slot_of[b]]
-            q = Y[:, qi]  # (n, 4)
-            s = (q * q).sum(1)
-            G = vec_of_conj_product(q)  # (n, 3, 4)
-            Bq = 2.0 * G / s[:, None, None]
-            r = p - A[:, b]  # (3, n)
-            Rb = R[:, :, b]  # (3, 3, n): columns the joint's local axes in the world
-            Jw = np.cross(Rb, r[:, None, :], axis=0)  # (3, 3, n): column a = R_b e_a x r
-            Jp.append(np.einsum("ian,naj->ijn", Jw, Bq))
-            cols.append(qi)
-            if vel:
-                q1 = Y1[:, qi]
-                om, nu = sv["om"][:, b], sv["nu"][:, b]
-                vA = nu + np.cross(om, A[:, b], axis=0)
-                dRb = np.cross(om[:, None, :], Rb, axis=0)  # omega x (R_b e_a)
-                dJw = np.cross(dRb, r[:, None, :], axis=0) + np.cross(Rb, (vp - vA)[:, None, :], axis=0)
-                dB = 2.0 * vec_of_conj_product(q1) / s[:, None, None] \
-                    - (4.0 * (q * q1).sum(1) / (s * s))[:, None, None] * G
-                Jv.append(np.einsum("ian,naj->ijn", dJw, Bq) + np.einsum("ian,naj->ijn", Jw, dB))
-        comps = np.concatenate(cols)
-        Jp_k = np.concatenate(Jp, axis=1).transpose(2, 0, 1)  # (n, 3, c)
-        Jv_k = np.concatenate(Jv, axis=1).transpose(2, 0, 1) if vel else None
-        out.append((comps, Jp_k, Jv_k))
+            if b in slot_of:
+                spans.append(("rot", len(pk)))
+                cols.append(engine._quat_q[slot_of[b]])
+                pk.append(k), pb.append(b)
+        layout.append((np.concatenate(cols), spans))
+    pk, pb = np.array(pk, int), np.array(pb, int)
+    qi = np.stack([engine._quat_q[slot_of[int(b)]] for b in pb])  # (P, 4)
+    q = Y[:, qi]  # (n, P, 4)
+    s2 = (q * q).sum(-1)  # (n, P)
+    G = vec_of_conj_product(q)  # (n, P, 3, 4)
+    Bq = 2.0 * G / s2[..., None, None]
+    r = ys[:, pk] - A[:, pb]  # (3, P, n)
+    Rb = R[:, :, pb]  # (3, 3, P, n): columns the joint's local axes in the world
+    Jw = _cross0(Rb, r[:, None])  # (3, 3, P, n): column a = R_b e_a x r
+    Jp = np.einsum("iapn,npaj->ijpn", Jw, Bq)  # (3, 4, P, n)
+    Jv = None
+    if vel:
+        q1 = Y1[:, qi]
+        om, nu = sv["om"][:, pb], sv["nu"][:, pb]  # (3, P, n)
+        vA = nu + _cross0(om, A[:, pb])
+        dRb = _cross0(om[:, None], Rb)  # omega x (R_b e_a)
+        dJw = _cross0(dRb, r[:, None]) + _cross0(Rb, (sv["ysd"][:, pk] - vA)[:, None])
+        dB = 2.0 * vec_of_conj_product(q1) / s2[..., None, None] \
+            - (4.0 * (q * q1).sum(-1) / (s2 * s2))[..., None, None] * G
+        Jv = np.einsum("iapn,npaj->ijpn", dJw, Bq) + np.einsum("iapn,npaj->ijpn", Jw, dB)
+    out = []
+    eye = np.broadcast_to(np.eye(3)[:, :, None], (3, 3, n))
+    for comps, spans in layout:
+        Jp_k = np.concatenate([eye if kind == "lin" else Jp[:, :, i] for kind, i in spans], axis=1)
+        Jv_k = None
+        if vel:
+            Jv_k = np.concatenate([np.zeros((3, 3, n)) if kind == "lin" else Jv[:, :, i] for kind, i in spans], axis=1)
+            Jv_k = Jv_k.transpose(2, 0, 1)
+        out.append((comps, Jp_k.transpose(2, 0, 1), Jv_k))
     return out
+
+
+def _cross0(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b over axis 0 (3 components), broadcasting the other axes (np.cross without its axis moves)."""
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def cached_site_jacobians(ctx, engine, res) -> list[tuple]:

@@ -58,6 +58,11 @@ class SiteRows:
         site: (m,) engine site index of each residual column.
         dp: (n, m, 3) d r / d site position [units of r per m], or None.
         dv: (n, m, 3) d r / d site velocity [units of r per m/s], or None.
+        signed: (n, m) for one-sided (hinge) columns r = max(0, signed): the value before the max, also
+            where r is 0 (how far a clear site is from switching its column on), -inf where it has no
+            linearization; None for columns that are not hinges. The Gauss-Newton back end's model
+            sees the columns a step would switch on through it (`solver.active_set`).
+        dsigned: (n, m, 3) d signed / d site position everywhere `signed` is finite, or None.
     """
 
     ctx: object
@@ -66,6 +71,8 @@ class SiteRows:
     site: np.ndarray
     dp: np.ndarray | None = None
     dv: np.ndarray | None = None
+    signed: np.ndarray | None = None
+    dsigned: np.ndarray | None = None
 
     def blocks(self, nq: int) -> list[tuple]:
         """[(columns (m_g,), comps (c_g,), (J0, J1, None)), ...]: per site, the Jacobian blocks

@@ -206,7 +206,11 @@ class Clearance(Term):
 
         site = np.tile(np.arange(len(self.engine.site_ids))[self._eidx], 2)
         dp = -np.concatenate([(su * (ds > 0))[..., None] * nrm, (sf * (df > 0))[..., None] * nrm], axis=1)
-        return Residual(r, pull=pull, sites=SiteRows(ctx, self.engine, res, site, dp=dp))
+        signed = np.concatenate([su * (Bs - h), sf * (Bf[:, None] - h)], axis=1)
+        signed[~np.isfinite(signed) | (np.concatenate([su, sf], axis=1) == 0)] = -np.inf  # nothing below / unweighted
+        dsigned = -np.concatenate([su[..., None] * nrm, sf[..., None] * nrm], axis=1)
+        return Residual(r, pull=pull, sites=SiteRows(ctx, self.engine, res, site, dp=dp, signed=signed,
+                                                     dsigned=dsigned))
 
     def _integrand(self, p, Us, Uf, Bf, Bs, grad=True):
         """f (m,) and df/dp (m, k, 3) at site positions p (m, k, 3) with swing weights Us (m, k),

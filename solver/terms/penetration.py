@@ -116,5 +116,48 @@ class Penetration(Term):
             return EngineGradient(self.engine, res, mo, None, g_sites).pullback()
 
         site = np.repeat(np.arange(len(self.engine.site_ids))[self.site_index], S)
-        rows = SiteRows(ctx, self.engine, res, site, dp=ddepth.reshape(n, k * S, 3))
+        signed, dsigned = signed_depths(self.surfaces, res.sites[:, self.site_index], self.margin)
+        rows = SiteRows(ctx, self.engine, res, site, dp=ddepth.reshape(n, k * S, 3),
+                        signed=signed.reshape(n, k * S), dsigned=dsigned.reshape(n, k * S, 3))
         return Residual(depth.reshape(n, k * S), pull=pull, sites=rows)
+
+
+def signed_depths(surfaces: StaticSurfaces, points: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """The penetration depth before its max(0, .): how far points are inside (> 0) or clear of (< 0)
+    each surface grown by `margin`, with its gradient, for a Gauss-Newton model of the hinge
+    (`solver.active_set`).
+
+    Plane: margin - n.(p - p0), gradient -n (everywhere). Box: inside, the depth of
+    `StaticSurfaces.penetration` (the nearest face); outside across exactly one face's slab (the other
+    two axes within the grown box), minus the distance to that face, gradient its inward normal;
+    elsewhere (beyond an edge or corner) -inf, gradient 0 (no linearization: the surface is not
+    planar there).
+
+    Args:
+        surfaces: StaticSurfaces. points: (..., 3) [m]. margin: [m].
+    Returns:
+        signed (..., S) [m] (planes then boxes, as `StaticSurfaces.penetration`), grad (..., S, 3).
+    """
+    pts = np.asarray(points, float)
+    shape = pts.shape[:-1]
+    vals, grads = [], []
+    if len(surfaces.plane_point):
+        s = np.einsum("...pk,pk->...p", pts[..., None, :] - surfaces.plane_point, surfaces.plane_normal)
+        vals.append(margin - s)
+        grads.append(np.broadcast_to(-surfaces.plane_normal, shape + surfaces.plane_normal.shape))
+    if len(surfaces.box_center):
+        local = np.einsum("bji,...bj->...bi", surfaces.box_rot, pts[..., None, :] - surfaces.box_center)
+        gap = surfaces.box_half + margin - np.abs(local)  # (..., b, 3): > 0 inside along that axis
+        outside = (gap <= 0).sum(axis=-1)
+        axis = np.where(outside == 1, np.argmin(gap, axis=-1), np.argmin(np.abs(gap), axis=-1))
+        d = np.take_along_axis(gap, axis[..., None], -1)[..., 0]
+        d = np.where(outside <= 1, d, -np.inf)
+        sign = np.sign(np.take_along_axis(local, axis[..., None], -1)[..., 0])
+        sign = np.where(sign == 0, 1.0, sign)
+        axes = np.broadcast_to(np.swapaxes(surfaces.box_rot, -1, -2), local.shape[:-1] + (3, 3))
+        outward = np.take_along_axis(axes, axis[..., None, None], -2)[..., 0, :] * sign[..., None]
+        vals.append(d)
+        grads.append(np.where(np.isfinite(d)[..., None], -outward, 0.0))
+    if not vals:
+        return np.zeros(shape + (0,)), np.zeros(shape + (0, 3))
+    return np.concatenate(vals, axis=-1), np.concatenate(grads, axis=-2)

@@ -221,3 +221,98 @@ def test_a_term_zero_up_to_rounding_on_the_plain_spline_keeps_scale_1():
     assert scales["noise"] == 1.0 and RENORMALIZE_FLOOR > 1e-31
     assert scales["real"] == pytest.approx(1e-6, rel=1e-12)
     assert pytest.approx(1.0 + 1e-31, rel=1e-12) == obj.evaluate(np.array([0.0, 1.0]), P, grad=False).E
+
+
+def _piecewise_system(seed=0, n=12, n_other=20, n_hinge=30):
+    """A linear least-squares system with hinge rows: rho_o + J_o h (other rows) and max(0, s + a h),
+    as `NormalEquations` sees it (the rows on now, s > 0, in J^T J and J^T rho), and its exact model
+    L(h) (the residuals are linear, so L is E itself)."""
+    import scipy.sparse as sp
+
+    from solver.active_set import HingeRows
+    from solver.least_squares import NormalEquations
+
+    rng = np.random.default_rng(seed)
+    Jo, ro = rng.normal(size=(n_other, n)), rng.normal(size=n_other)
+    A, s = rng.normal(size=(n_hinge, n)), rng.normal(size=n_hinge)
+
+    def L(h):
+        return np.sum((ro + Jo @ h) ** 2) + np.sum(np.maximum(0.0, s + A @ h) ** 2)
+
+    def grad(h):
+        return Jo.T @ (ro + Jo @ h) + A.T @ np.maximum(0.0, s + A @ h)
+
+    on = s > 0
+    H = Jo.T @ Jo + A[on].T @ A[on]
+    ab = np.stack([np.r_[np.diag(H, -d), np.zeros(d)] for d in range(n)])
+    ne = NormalEquations(ab, grad(np.zeros(n)), L(np.zeros(n)), HingeRows(sp.csr_matrix(A), s))
+    return ne, L, grad, np.diag(H), (Jo, ro, A, s)
+
+
+@pytest.mark.parametrize("mu", [1e-3, 0.3])
+def test_active_set_step_minimizes_the_one_sided_model(mu):
+    # the step minimizes L(h) + mu h^T D h, L keeping max(0, .) on the hinge rows (checked with scipy's
+    # L-BFGS-B on the model written out), and its predicted decrease is L(0) - L(h)
+    from scipy.optimize import minimize
+
+    ne, L, grad, D, _ = _piecewise_system()
+    h, pred = ne.step(mu)
+    ref = minimize(lambda v: (L(v) + mu * v @ (D * v), 2 * grad(v) + 2 * mu * D * v), np.zeros(len(D)), jac=True,
+                   method="L-BFGS-B", options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 10000})
+    np.testing.assert_allclose(h, ref.x, atol=1e-6 * np.abs(ref.x).max())
+    assert pred == pytest.approx(L(np.zeros(len(D))) - L(h), rel=1e-10)
+    # the plain Gauss-Newton step (rows switched on or off by the step ignored) predicts a decrease that
+    # the one-sided model does not have
+    plain = ne.solve(mu)
+    assert ne.model_decrease(plain) - (L(np.zeros(len(D))) - L(plain)) > 1e-3 * abs(pred)
+
+
+def test_a_step_that_keeps_the_jacobian_is_exact_for_linear_residuals():
+    # the residuals are linear: J^T J kept and the exact gradient at the new point give the same step
+    # and prediction as the normal equations built afresh there (a changed set of rows on included)
+    import scipy.sparse as sp
+
+    from solver.active_set import HingeRows
+    from solver.least_squares import NormalEquations
+
+    ne, L, grad, D, (Jo, ro, A, s) = _piecewise_system(seed=4)
+    h, _ = ne.step(1e-3)
+    moved = ne.lagged(h, grad(h), L(h))
+    s1 = s + A @ h
+    assert np.any((s1 > 0) != (s > 0))
+    on = s1 > 0
+    H = Jo.T @ Jo + A[on].T @ A[on]
+    ab = np.stack([np.r_[np.diag(H, -d), np.zeros(d)] for d in range(len(D))])
+    fresh = NormalEquations(ab, grad(h), L(h), HingeRows(sp.csr_matrix(A), s1))
+    # the same model, so the same minimizer under the same damping matrix
+    fresh.scale = moved.scale = lambda: D
+    h2, p2 = moved.step(0.1)
+    h3, p3 = fresh.step(0.1)
+    np.testing.assert_allclose(h2, h3, atol=1e-8 * np.abs(h3).max())
+    assert p2 == pytest.approx(p3, rel=1e-8) and p2 == pytest.approx(L(h) - L(h + h2), rel=1e-8)
+
+
+def test_signed_depths_extend_the_penetration_depth():
+    # max(0, signed) is the penetration depth (`StaticSurfaces.penetration`), its gradient matches
+    # central differences, and points beyond a box's edge have no linearization (-inf)
+    from solver.surfaces import StaticSurfaces
+    from solver.terms.penetration import signed_depths
+
+    c, s = np.cos(0.3), np.sin(0.3)
+    surfaces = StaticSurfaces(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.1]]),
+                              np.array([[[c, -s, 0], [s, c, 0], [0, 0, 1]]]), np.array([[0.3, 0.2, 0.1]]),
+                              ("floor", "box"))
+    rng = np.random.default_rng(2)
+    pts = np.array([1.0, 0.0, 0.1]) + rng.uniform(-0.5, 0.5, size=(400, 3))
+    signed, grad = signed_depths(surfaces, pts, 0.005)
+    depth, _ = surfaces.penetration(pts, 0.005)
+    ok = np.isfinite(signed)
+    np.testing.assert_allclose(np.maximum(0.0, signed[ok]), depth[ok], atol=1e-15)
+    assert np.all(depth[~ok] == 0) and 50 < np.count_nonzero(~ok[:, 1]) < 350 and np.all(ok[:, 0])
+    e = 1e-7
+    with np.errstate(invalid="ignore"):  # -inf - -inf beyond the box's edges
+        fd = np.stack([(signed_depths(surfaces, pts + e * d, 0.005)[0]
+                        - signed_depths(surfaces, pts - e * d, 0.005)[0]) / (2 * e) for d in np.eye(3)], axis=-1)
+    same = ok & np.isfinite(fd).all(-1) & (np.abs(fd - grad).max(-1) < 1.0)  # not across a face switch
+    assert same.sum() > 0.9 * ok.sum()
+    np.testing.assert_allclose(fd[same], grad[same], atol=1e-6)
