@@ -162,7 +162,7 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
             mu *= max(MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3)
             nu = 2.0
             if decrease <= ftol_rel * abs(F + decrease) and step_mu <= MU_CONVERGED:
-                break
+                break  # on a kept J^T J's step too, as nlopt's test on L-BFGS's steps (an approximate Hessian)
             if _budget(len(trace), max_evals, t_start, max_time_s, should_stop) is not None:
                 continue  # the loop's test reports it
             if gain >= LAG_GAIN and lag < MAX_LAG:

@@ -34,6 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.interpolate import BSpline
 from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.linalg.blas import dsbmv
 from scipy.sparse.linalg import splu
 
 from solver.active_set import HingeRows, active_set_step, hinge_rows
@@ -209,12 +210,8 @@ class NormalEquations:
 
 
 def _band_matvec(ab: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """A v for symmetric A in lower band form ab."""
-    out = ab[0] * v
-    for d in range(1, len(ab)):
-        out[d:] += ab[d, :-d] * v[:-d]
-        out[:-d] += ab[d, :-d] * v[d:]
-    return out
+    """A v for symmetric A in lower band form ab (BLAS dsbmv)."""
+    return dsbmv(len(ab) - 1, 1.0, np.asfortranarray(ab), v, lower=1)
 
 
 def term_residuals(objective, basis, Y, Y1, Y2):

@@ -250,12 +250,21 @@ def _piecewise_system(seed=0, n=12, n_other=20, n_hinge=30):
 
 
 @pytest.mark.parametrize("mu", [1e-3, 0.3])
-def test_active_set_step_minimizes_the_one_sided_model(mu):
-    # the step minimizes L(h) + mu h^T D h, L keeping max(0, .) on the hinge rows (checked with scipy's
-    # L-BFGS-B on the model written out), and its predicted decrease is L(0) - L(h)
+def test_active_set_step_minimizes_the_one_sided_model(mu, monkeypatch):
+    # let the active set settle: the step minimizes L(h) + mu h^T D h, L keeping max(0, .) on the hinge
+    # rows (checked with scipy's L-BFGS-B on the model written out), and its predicted decrease is
+    # L(0) - L(h); with the default single change of the set (the step along the plain Gauss-Newton
+    # direction, cut at the model's minimum) the damped model still decreases
     from scipy.optimize import minimize
 
+    from solver import active_set
+
     ne, L, grad, D, _ = _piecewise_system()
+    h1, pred1 = ne.step(mu)
+    assert 0 < pred1 == pytest.approx(L(np.zeros(len(D))) - L(h1), rel=1e-10)
+    assert L(h1) + mu * h1 @ (D * h1) < L(np.zeros(len(D)))
+    ne.hinge.last = None
+    monkeypatch.setattr(active_set, "MAX_SWITCHES", 50)
     h, pred = ne.step(mu)
     ref = minimize(lambda v: (L(v) + mu * v @ (D * v), 2 * grad(v) + 2 * mu * D * v), np.zeros(len(D)), jac=True,
                    method="L-BFGS-B", options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 10000})
@@ -267,16 +276,18 @@ def test_active_set_step_minimizes_the_one_sided_model(mu):
     assert ne.model_decrease(plain) - (L(np.zeros(len(D))) - L(plain)) > 1e-3 * abs(pred)
 
 
-def test_a_step_that_keeps_the_jacobian_is_exact_for_linear_residuals():
+def test_a_step_that_keeps_the_jacobian_is_exact_for_linear_residuals(monkeypatch):
     # the residuals are linear: J^T J kept and the exact gradient at the new point give the same step
     # and prediction as the normal equations built afresh there (a changed set of rows on included)
     import scipy.sparse as sp
 
+    from solver import active_set
     from solver.active_set import HingeRows
     from solver.least_squares import NormalEquations
 
     ne, L, grad, D, (Jo, ro, A, s) = _piecewise_system(seed=4)
     h, _ = ne.step(1e-3)
+    monkeypatch.setattr(active_set, "MAX_SWITCHES", 50)
     moved = ne.lagged(h, grad(h), L(h))
     s1 = s + A @ h
     assert np.any((s1 > 0) != (s > 0))
