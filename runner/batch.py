@@ -24,9 +24,9 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from runner.console import Steps
 from runner.files import atomic_output, check_writable_dir
 from runner.pipeline import ClipOptions, process_clip
+from runner.progress import Steps
 from solver.errors import InputError
 
 ENGINES = ("local", "ray")

@@ -203,7 +203,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
     """
     k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, keys=o.keys, every=o.every,
                  partial=o.partial, command=o.command)
-    from runner.console import Steps
+    from runner.progress import Steps
 
     with Steps(f"keyframes from {clip.name}", len(CLIP_STAGES), o.quiet, unit=" stages") as bar:
         cs, contacts, _ = write_clip_keyframes(clip, paths["keyframes"], k,

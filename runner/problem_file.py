@@ -55,7 +55,7 @@ def find_reference(info, model, quiet=False):
     path = Path(info.path).parent / clip if hasattr(info, "path") else MODELS / clip
     if not path.is_file():
         return None
-    from runner.console import Steps
+    from runner.progress import Steps
 
     with Steps(f"importing {path.name}", len(IMPORT_STAGES), quiet, unit=" stages") as bar:
         return load_bvh_reference(path, model, progress=lambda i, stage: bar.update(i, note=stage),

@@ -20,10 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.console import Progress, StopRequest, motion_metrics_table, summary_table
+from runner.console import motion_metrics_table, summary_table
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.files import atomic_output
 from runner.paths import display_path
+from runner.progress import Progress, StopRequest
 from runner.render.side_by_side import VideoOptions
 from runner.saved_path import save_path_npz
 from solver.animate import solve_problem
@@ -170,7 +171,7 @@ def solve_run(problem: Problem, options: SolveOptions, source: Source, *, quiet:
 
     Args:
         problem: from `solver.make_problem`. options: SolveOptions. source: `Source`.
-        stop: a `runner.console.StopRequest` (Ctrl-C) polled by the optimizer, or None.
+        stop: a `runner.progress.StopRequest` (Ctrl-C) polled by the optimizer, or None.
     Returns:
         Run.
     """
@@ -286,8 +287,8 @@ def export_results(run: Run, outputs: Outputs) -> list:
     written), else a temporary one. Returns the ExportResults. Raises InputError naming the failed file."""
     import tempfile
 
-    from runner.console import Steps
     from runner.export import export_saved_path
+    from runner.progress import Steps
 
     results = []
     with tempfile.TemporaryDirectory(prefix="dynsplines-export-") as tmp, \
@@ -320,8 +321,8 @@ def write_metrics_json(run: Run, path: Path, extra: dict | None = None) -> None:
 
 def render_with_progress(out, run: Run, video: VideoOptions, quiet: bool = False):
     """The side-by-side video of a run (`runner.render.side_by_side.render_video`) with a progress bar over
-    its frames (`runner.console.Steps`; silent with `quiet`). Returns the render's info."""
-    from runner.console import Steps
+    its frames (`runner.progress.Steps`; silent with `quiet`). Returns the render's info."""
+    from runner.progress import Steps
     from runner.render import frame_times
     from runner.render.side_by_side import render_video
 

@@ -90,96 +90,117 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
     Raises:
         solver.least_squares.NoResidualError: a weighted term without a residual form.
     """
-    from numpy.linalg import LinAlgError
-
-    from solver.least_squares import LocalSpline, normal_equations
+    from solver.least_squares import LocalSpline
 
     t_start = time.perf_counter()
-    clock = {"jacobian": 0.0, "factor": 0.0, "trial": 0.0, "n_jacobians": 0}
     x = frames.x()
     if x.size == 0:
         return OptimizeResult(x, math.nan, Status.NOTHING_TO_DO, "no free variables", 0, 0, np.zeros(0), 0.0, "lm")
-    knots = frames.times
-    local = LocalSpline(frames, objective.basis(knots).t)
-    trace: list[float] = []
-    state = {"best": math.inf}
-
-    def count(E):
-        state["best"] = min(state["best"], E)
-        trace.append(state["best"])
-        if callback is not None:
-            callback(len(trace), E)
-
-    def jacobian(xv):
-        t0 = time.perf_counter()
-        ne = normal_equations(objective, frames.with_x(xv), local, timings)
-        clock["jacobian"] += time.perf_counter() - t0
-        clock["n_jacobians"] += 1
-        count(ne.E if math.isfinite(ne.E) else math.inf)
-        return ne
-
-    ne = jacobian(x)
+    run = _Run(objective, frames, LocalSpline(frames, objective.basis(frames.times).t), callback, timings)
+    ne = run.jacobian(x)
     F, improvements = ne.E, 0
     if not (math.isfinite(F) and np.all(np.isfinite(ne.g))):
-        return _result(x, F, Status.NONFINITE, "the residuals are not finite at the start", trace, improvements,
-                       t_start, clock, timings)
+        return run.result(x, F, Status.NONFINITE, "the residuals are not finite at the start", improvements, t_start)
     mu, nu, lag = TAU, 2.0, 0
     status, message = Status.CONVERGED, "converged"
     while True:
-        stop = _budget(len(trace), max_evals, t_start, max_time_s, should_stop)
+        stop = _budget(len(run.trace), max_evals, t_start, max_time_s, should_stop)
         if stop is not None:
             status, message = stop
             break
-        t0 = time.perf_counter()
-        try:
-            h, pred = ne.step(mu)
-        except (LinAlgError, ValueError):
-            h, pred = None, 0.0
-        clock["factor"] += time.perf_counter() - t0
+        h, pred = run.step(ne, mu)
         if h is None or not pred > 0:
             if lag:  # the kept J^T J may be what fails: a fresh Jacobian first
-                ne, lag = jacobian(x), 0
+                ne, lag = run.jacobian(x), 0
                 continue
             mu, nu = mu * nu, nu * 2.0
             if mu > MU_MAX:
                 message = "converged (no descent left at this damping)"
                 break
             continue
-        dx = local.E @ h
+        dx = run.local.E @ h
         if np.linalg.norm(dx) <= 1e-12 * (np.linalg.norm(x) + 1e-12):
             message = "converged (step below rounding)"
             break
-        x_new = x + dx
-        t0 = time.perf_counter()
-        F_new, g_new = _trial(objective, frames, x_new, local)
-        clock["trial"] += time.perf_counter() - t0
-        count(F_new)
+        F_new, g_new = run.trial(x + dx)
         gain = (F - F_new) / pred if math.isfinite(F_new) else -math.inf
-        step_mu = mu
         if gain > 0:
-            decrease = F - F_new
-            x, F, improvements = x_new, F_new, improvements + 1
-            mu *= max(MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3)
-            nu = 2.0
+            decrease, step_mu = F - F_new, mu
+            x, F, improvements = x + dx, F_new, improvements + 1
+            mu, nu = mu * max(MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3), 2.0
             if decrease <= ftol_rel * abs(F + decrease) and step_mu <= MU_CONVERGED:
                 break  # on a kept J^T J's step too, as nlopt's test on L-BFGS's steps (an approximate Hessian)
-            if _budget(len(trace), max_evals, t_start, max_time_s, should_stop) is not None:
+            if _budget(len(run.trace), max_evals, t_start, max_time_s, should_stop) is not None:
                 continue  # the loop's test reports it
             if gain >= LAG_GAIN and lag < MAX_LAG:
                 ne, lag = ne.lagged(h, g_new, F), lag + 1
                 continue
-            ne, lag = jacobian(x), 0
+            ne, lag = run.jacobian(x), 0
             if not (math.isfinite(ne.E) and np.all(np.isfinite(ne.g))):
                 status, message = Status.NONFINITE, "the residuals' Jacobian is not finite"
                 break
         elif lag:
-            ne, lag = jacobian(x), 0
+            ne, lag = run.jacobian(x), 0
         else:
             mu, nu = mu * nu, nu * 2.0
             if mu > MU_MAX:
                 message = "converged (no decrease left at this damping)"
                 break
-    return _result(x, F, status, message, trace, improvements, t_start, clock, timings)
+    return run.result(x, F, status, message, improvements, t_start)
+
+
+class _Run:
+    """The bookkeeping of one `levenberg_marquardt` call: the evaluation trace (best E after each
+    evaluation), the callback, and the time spent in Jacobians, damped solves and trial evaluations."""
+
+    def __init__(self, objective, frames, local, callback, timings):
+        self.objective, self.frames, self.local = objective, frames, local
+        self.callback, self.timings = callback, timings
+        self.clock = {"jacobian": 0.0, "factor": 0.0, "trial": 0.0, "n_jacobians": 0}
+        self.trace: list[float] = []
+
+    def count(self, E: float) -> None:
+        self.trace.append(min(self.trace[-1], E) if self.trace else E)
+        if self.callback is not None:
+            self.callback(len(self.trace), E)
+
+    def jacobian(self, x):
+        """The normal equations (`solver.least_squares.normal_equations`) at the free values x; counts one."""
+        from solver.least_squares import normal_equations
+
+        t0 = time.perf_counter()
+        ne = normal_equations(self.objective, self.frames.with_x(x), self.local, self.timings)
+        self.clock["jacobian"] += time.perf_counter() - t0
+        self.clock["n_jacobians"] += 1
+        self.count(ne.E if math.isfinite(ne.E) else math.inf)
+        return ne
+
+    def step(self, ne, mu: float):
+        """(h, predicted decrease) of the damped step, or (None, 0) where the damped system cannot be solved."""
+        from numpy.linalg import LinAlgError
+
+        t0 = time.perf_counter()
+        try:
+            h, pred = ne.step(mu)
+        except (LinAlgError, ValueError):
+            h, pred = None, 0.0
+        self.clock["factor"] += time.perf_counter() - t0
+        return h, pred
+
+    def trial(self, x):
+        """`_trial` at the free values x, timed and counted."""
+        t0 = time.perf_counter()
+        F, g = _trial(self.objective, self.frames, x, self.local)
+        self.clock["trial"] += time.perf_counter() - t0
+        self.count(F)
+        return F, g
+
+    def result(self, x, F, status, message, improvements, t_start) -> OptimizeResult:
+        if self.timings is not None:
+            self.timings.update(self.clock)
+        wall = time.perf_counter() - t_start
+        return OptimizeResult(np.array(x), float(F), status, message, len(self.trace), improvements,
+                              np.array(self.trace), wall, "lm", None, self.clock["jacobian"] + self.clock["trial"])
 
 
 def _trial(objective, frames, x, local) -> tuple[float, np.ndarray | None]:
@@ -203,11 +224,3 @@ def _budget(n_evals, max_evals, t_start, max_time_s, should_stop):
     if max_time_s and time.perf_counter() - t_start >= max_time_s:
         return Status.MAX_TIME, f"time limit of {max_time_s:g} s reached"
     return None
-
-
-def _result(x, F, status, message, trace, improvements, t_start, clock, timings) -> OptimizeResult:
-    if timings is not None:
-        timings.update(clock)
-    wall = time.perf_counter() - t_start
-    return OptimizeResult(np.array(x), float(F), status, message, len(trace), improvements, np.array(trace), wall,
-                          "lm", None, clock["jacobian"] + clock["trial"])

@@ -16,7 +16,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from runner.commands.mocap import add_figure_arguments, add_root_scale_argument
-from runner.console import Steps
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
 from runner.mocap.figure_choice import SUBJECT
 from runner.mocap.keyframes import KEY_CHOICES
@@ -24,6 +23,7 @@ from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO
 from runner.parser import OneLineParser
 from runner.pipeline import CLIP_STAGES, ClipKeys, write_clip_keyframes
+from runner.progress import Steps
 from solver.errors import InputError
 
 PROG = "dynsplines keyframes-from-bvh"

@@ -83,12 +83,12 @@ class Clock:
 def test_progress_off_a_terminal_prints_rounds_once_and_a_still_line_every_5_s(monkeypatch):
     import io
 
-    import runner.console as console
+    import runner.progress as progress
 
     clock = Clock()
-    monkeypatch.setattr(console.time, "perf_counter", clock)
+    monkeypatch.setattr(progress.time, "perf_counter", clock)
     stream = io.StringIO()  # not a terminal
-    p = console.Progress(stream=stream)
+    p = progress.Progress(stream=stream)
     p("round", {"round": 0, "frames": 15, "variable": 7})
     for i in range(1, 121):  # 12 s of evaluations, 10 a second
         clock.t = i / 10
@@ -101,18 +101,18 @@ def test_progress_off_a_terminal_prints_rounds_once_and_a_still_line_every_5_s(m
         "round 1", "round 1 (still optimizing)", "round 1 (still optimizing)", "round 1", "round 2", "round 2"]
     assert "started" in lines[0] and "done, 120 evaluations" in lines[3] and "started" in lines[4]
     assert "done, 0 evaluations" in lines[5]
-    assert console.Progress(quiet=True, stream=stream) is not None
+    assert progress.Progress(quiet=True, stream=stream) is not None
 
 
 def test_steps_off_a_terminal_start_still_and_end_lines(monkeypatch):
     import io
 
-    import runner.console as console
+    import runner.progress as progress
 
     clock = Clock()
-    monkeypatch.setattr(console.time, "perf_counter", clock)
+    monkeypatch.setattr(progress.time, "perf_counter", clock)
     stream = io.StringIO()
-    with console.Steps("rendering a.mp4", 100, stream=stream, unit=" frames") as bar:
+    with progress.Steps("rendering a.mp4", 100, stream=stream, unit=" frames") as bar:
         for i in range(1, 101):
             clock.t = i / 10
             bar.update(i)
@@ -120,7 +120,7 @@ def test_steps_off_a_terminal_start_still_and_end_lines(monkeypatch):
     assert lines[0] == "  rendering a.mp4: 0/100" and lines[-1].startswith("  rendering a.mp4: 100/100 done")
     assert len(lines) == 3 and "(still working): 50/100" in lines[1]
     quiet = io.StringIO()
-    with console.Steps("x", 3, quiet=True, stream=quiet) as bar:
+    with progress.Steps("x", 3, quiet=True, stream=quiet) as bar:
         bar.update(3)
     assert quiet.getvalue() == ""
 

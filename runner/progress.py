@@ -1,0 +1,173 @@
+"""Progress on the console: tqdm bars on a terminal, plain lines otherwise, and Ctrl-C during an
+optimization (the tables are `runner.console`)."""
+from __future__ import annotations
+
+import signal
+import sys
+import time
+
+
+class StopRequest:
+    """Ctrl-C during the optimization sets a flag (the solver returns its best path); a second
+    Ctrl-C aborts at once."""
+
+    def __init__(self, quiet=False):
+        self.requested = False
+        self.quiet = quiet
+
+    def __enter__(self):
+        self._old = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        signal.signal(signal.SIGINT, self._old)
+
+    def _handle(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        print("\nstopping: keeping the best path so far (Ctrl-C again to abort)", file=sys.stderr, flush=True)
+
+    def __call__(self) -> bool:
+        return self.requested
+
+
+#: [s] off a terminal, a running round or task prints a "(still ...)" line at most this often
+QUIET_INTERVAL = 5.0
+
+
+def _bar(stream, **kw):
+    """A tqdm bar on `stream` (a terminal), redrawn at most 10 times a second."""
+    from tqdm import tqdm
+
+    return tqdm(file=stream, mininterval=0.1, dynamic_ncols=True, leave=True, **kw)
+
+
+class Progress:
+    """Progress of an optimization (`solver.solve`'s progress callback).
+
+    On a terminal: a tqdm bar per round (evaluations, the current objective E, elapsed time). Off a terminal
+    (a log, a pipe): plain lines, one when a round starts, one when it ends, and in between at most one every
+    `QUIET_INTERVAL` seconds, worded "(still optimizing)" so it does not read as a new round. `quiet`:
+    nothing.
+    """
+
+    def __init__(self, quiet=False, stream=None, interval=QUIET_INTERVAL):
+        self.quiet, self.stream = quiet, sys.stdout if stream is None else stream
+        self.tty = self.stream.isatty()
+        self.interval = interval
+        self.t0 = self.last = time.perf_counter()
+        self.round = None  # {"round", "frames", "variable", "evals0", "t0"} of the running round
+        self.evals, self.E = 0, None
+        self.bar = None
+
+    def _line(self, text):
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def _E(self):
+        return "E -" if self.E is None else f"E {self.E:.6g}"
+
+    def __call__(self, event, info):
+        if self.quiet:
+            return
+        if event == "round":
+            self._end_round()
+            self.round = {**info, "evals0": self.evals, "t0": time.perf_counter()}
+            head = (f"round {info.get('round', 0) + 1}: {info.get('frames', 0)} frames "
+                    f"({info.get('variable', 0)} variable)")
+            if self.tty:
+                self.bar = _bar(self.stream, desc="  " + head, unit=" evals")
+            else:
+                self._line(f"  {head}: started, {time.perf_counter() - self.t0:.1f} s")
+                self.last = time.perf_counter()
+        elif event == "eval":
+            self.evals = info.get("evals", self.evals)
+            self.E = info.get("E", self.E)
+            if self.bar is not None:
+                self.bar.update(self.evals - self.round["evals0"] - self.bar.n)
+                self.bar.set_postfix_str(self._E(), refresh=False)
+            elif self.round is not None and time.perf_counter() - self.last >= self.interval:
+                self.last = time.perf_counter()
+                self._line(f"  round {self.round.get('round', 0) + 1} (still optimizing): "
+                           f"{self.evals - self.round['evals0']} evaluations, {self._E()}, "
+                           f"{self.last - self.t0:.1f} s")
+        elif event == "boost":
+            self._end_round()
+            worst = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
+            self._line(f"  over the limit ({worst}): weight x10, again")
+        elif event == "stalled":
+            self._end_round()
+            what = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
+            self._line(f"  a boost did not halve it ({what}): out of reach with these keyframes, not boosted again")
+        elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
+            self._end_round()
+            tol = f" (tol {info['tol']:g})" if info.get("tol") else ""
+            self._line(f"  round {info['round'] + 1}: refinement estimate {info['estimate']:.3g} of E still "
+                       f"available{tol}")
+
+    def _end_round(self):
+        if self.round is None:
+            return
+        if self.bar is not None:
+            self.bar.set_postfix_str(self._E(), refresh=False)
+            self.bar.close()
+            self.bar = None
+        else:
+            r = self.round
+            self._line(f"  round {r.get('round', 0) + 1}: done, {self.evals - r['evals0']} evaluations, {self._E()}, "
+                       f"{time.perf_counter() - r['t0']:.1f} s")
+        self.round = None
+
+    def done(self):
+        """The optimization ended: close the running round."""
+        if not self.quiet:
+            self._end_round()
+
+
+class Steps:
+    """Progress of a task of `total` steps (frames to render, files to export, stages of an import):
+    a tqdm bar on a terminal; off a terminal a line when it starts, at most one every `QUIET_INTERVAL`
+    seconds "(still ...)", and one when it ends; nothing when `quiet`. Use as a context manager;
+    `update(i)` sets the steps done so far."""
+
+    def __init__(self, desc, total, quiet=False, stream=None, unit=" steps", interval=QUIET_INTERVAL):
+        self.desc, self.total, self.quiet, self.unit = desc, int(total), quiet, unit
+        self.stream = sys.stdout if stream is None else stream
+        self.tty = self.stream.isatty()
+        self.interval, self.done_steps, self.bar = interval, 0, None
+
+    def __enter__(self):
+        self.t0 = self.last = time.perf_counter()
+        if self.quiet:
+            return self
+        if self.tty:
+            self.bar = _bar(self.stream, desc="  " + self.desc, total=self.total, unit=self.unit)
+        else:
+            self._line(f"  {self.desc}: 0/{self.total}")
+        return self
+
+    def _line(self, text):
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def update(self, done, note=None):
+        self.done_steps = done
+        if self.quiet:
+            return
+        if self.bar is not None:
+            if note is not None:
+                self.bar.set_postfix_str(note, refresh=False)
+            self.bar.update(done - self.bar.n)
+        elif done < self.total and time.perf_counter() - self.last >= self.interval:
+            self.last = time.perf_counter()
+            self._line(f"  {self.desc} (still working): {done}/{self.total}"
+                       f"{f' ({note})' if note else ''}, {self.last - self.t0:.1f} s")
+
+    def __exit__(self, *exc):
+        if self.quiet:
+            return
+        if self.bar is not None:
+            self.bar.close()
+        elif exc[0] is None:
+            self._line(f"  {self.desc}: {self.done_steps}/{self.total} done, {time.perf_counter() - self.t0:.1f} s")
