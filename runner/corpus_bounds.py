@@ -119,25 +119,28 @@ BOUNDS: tuple[Bound, ...] = (
 )
 
 
+def _dig(doc, keys):
+    """The value at `keys` in the nested dict `doc`, or None where a key is missing."""
+    for k in keys:
+        if not isinstance(doc, dict) or k not in doc:
+            return None
+        doc = doc[k]
+    return doc
+
+
 def _at(*keys) -> Callable[[dict], float | None]:
     """A figure at `keys` in the metrics report (None when absent)."""
     def get(doc):
-        for k in keys:
-            if not isinstance(doc, dict) or k not in doc:
-                return None
-            doc = doc[k]
-        return None if doc is None else float(doc)
+        v = _dig(doc, keys)
+        return None if v is None else float(v)
     return get
 
 
 def _mean_of_means(*keys) -> Callable[[dict], float | None]:
     """The mean over joints (or sites) of each one's mean, at `keys` (the summary's "mean" column)."""
     def get(doc):
-        for k in keys:
-            if not isinstance(doc, dict) or k not in doc:
-                return None
-            doc = doc[k]
-        return float(np.mean([v["mean"] for v in doc.values()])) if doc else None
+        v = _dig(doc, keys)
+        return float(np.mean([j["mean"] for j in v.values()])) if v else None
     return get
 
 
@@ -147,12 +150,9 @@ _M = ("metrics", "motion")
 def _off_hinge_excess(doc: dict) -> float | None:
     """[deg] the largest, over knees and elbows, of the optimized path's rotation off the hinge minus the
     capture's at the same joint (None when the report has no anatomy figures)."""
-    try:
-        opt = doc["metrics"]["motion"]["optimized"]["path"]["off_hinge_deg"]
-        cap = doc["metrics"]["motion"]["plain"]["reference"]["off_hinge_deg"]
-    except (KeyError, TypeError):
-        return None
-    return float(max(opt[j] - cap[j] for j in opt)) if opt else None
+    opt = _dig(doc, (*_M, "optimized", "path", "off_hinge_deg"))
+    cap = _dig(doc, (*_M, "plain", "reference", "off_hinge_deg"))
+    return float(max(opt[j] - cap[j] for j in opt)) if opt and cap else None
 #: the figures of a pair: {name: function of the metrics report}; the motion metrics are over the
 #: reference's frames (`runner.run.reference_motion_metrics`), float and skate over the schedule's contacts.
 FIGURES: dict[str, Callable[[dict], float | None]] = {

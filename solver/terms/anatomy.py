@@ -80,7 +80,7 @@ class Hinge(Term):
         """Largest rotation off the hinge beyond a joint's allowance [rad] (0 if none)."""
         if not len(self.axes):
             return 0.0
-        return float(np.maximum(0.0, self.angles(Y) - self.allowance).max())
+        return float(self._excess(Y).max())
 
     def _excess(self, Y):
         return np.maximum(0.0, self.angles(Y) - self.allowance)
