@@ -570,9 +570,7 @@ def test_default_scene_is_fitted_to_the_clip_not_the_step(tmp_path, capsys):
     its box). Now the scene is fitted to the clip and written next to --out."""
     from bvh_edit import edit_bvh
 
-    src = REPO.parent / "shared" / "data" / "cmu" / "16_23.bvh"
-    if not src.exists():
-        pytest.skip("no shared clip ../shared/data/cmu/16_23.bvh")
+    src = REPO / "models" / "cmu" / "16_23.bvh"  # shipped with its attribution (models/cmu/README.md)
     walk = edit_bvh(src, tmp_path / "walk.bvh", seconds=0.8)
     out = tmp_path / "walk.keyframes.json"
     assert keyframes_from_bvh_main([str(walk), "--out", str(out)]) == 0

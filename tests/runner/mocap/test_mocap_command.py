@@ -157,9 +157,7 @@ def test_a_hops_flight_keeps_its_length(tmp_path):
     keys every 0.25 s, fitted scene): the optimized path's flight (every contact site above 3 cm) within 30 ms
     of the capture's. With a flight band of 2 cm, under the flight metric's 3 cm, the feet would sink to
     it well before the landing (docs/contacts.md "The contact terms", clearance's ballistic lift)."""
-    src = REPO.parent / "shared" / "data" / "cmu" / "16_23.bvh"
-    if not src.exists():
-        pytest.skip("no shared clip ../shared/data/cmu/16_23.bvh")
+    src = REPO / "models" / "cmu" / "16_23.bvh"  # shipped with its attribution (models/cmu/README.md)
     hop = edit_bvh(src, tmp_path / "hop.bvh", hop=(0.25, 0.35, 0.15))
     report = tmp_path / "m.json"
     assert main(["mocap", str(hop), "--out-dir", str(tmp_path / "out"), "--every", "0.25", "--scene", "auto",
