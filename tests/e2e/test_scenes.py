@@ -112,7 +112,7 @@ def test_keyframes_from_bvh_records_a_model_that_exists(tmp_path):
 
 
 def test_a_capture_floor_that_rises_along_the_walk_is_levelled(tmp_path):
-    """07_04 (a slow walk whose capture floor rises about 5 cm along the walk, ../shared/data/cmu/README.md):
+    """07_04 (a slow walk whose capture floor rises about 5 cm along the walk, models/cmu/README.md):
     `keyframes-from-bvh --scene auto` fits the tilted floor and writes the scene in the levelled frame.
     The independent reference: a straight line through the heights of the source's toe-base joints (its
     own forward kinematics) at the frames they are still, against x. The transform the scene records
@@ -126,9 +126,7 @@ def test_a_capture_floor_that_rises_along_the_walk_is_levelled(tmp_path):
     from runner.mocap.retarget import cmu_world
     from solver.capture_frame import CaptureFrame
 
-    src = REPO.parent / "shared" / "data" / "cmu" / "07_04.bvh"
-    if not src.exists():
-        pytest.skip("no shared clip ../shared/data/cmu/07_04.bvh")
+    src = REPO / "models" / "cmu" / "07_04.bvh"  # shipped with its attribution (models/cmu/README.md)
     clip = read_bvh(src)
     _, p = cmu_world(clip)
     still = []
