@@ -178,7 +178,9 @@ def test_lm_keeps_the_best_iterate_and_honours_budgets_and_stop_requests(contact
     r = levenberg_marquardt(objective, frames, max_evals=4, callback=lambda n, E: seen.append((n, E)))
     assert r.status is Status.MAX_EVALS and r.n_evals == 4 and [n for n, _ in seen] == [1, 2, 3, 4]
     assert r.fun == pytest.approx(objective.evaluate(frames.times, frames.values_from_x(r.x), grad=False).E)
-    assert r.fun <= E0 and np.all(np.diff(r.trace) <= 0) and r.trace[-1] == r.fun
+    # the trace's last entry may come from the residual sum at the same point (the Jacobian's pass): equal
+    # to the objective's value up to round-off
+    assert r.fun <= E0 and np.all(np.diff(r.trace) <= 0) and r.trace[-1] == pytest.approx(r.fun, rel=1e-12)
     calls = []
     r = levenberg_marquardt(objective, frames, should_stop=lambda: calls.append(1) or len(calls) > 2)
     assert r.status is Status.INTERRUPTED and r.fun <= E0
