@@ -274,6 +274,137 @@ def _submitter(engine: str, workers: int, ray_address: str | None):
     return (lambda fn, *a: remote.remote(*a), wait_ray, ray.get, cancel_ray, lambda cancel: ray.shutdown())
 
 
+@dataclasses.dataclass
+class _Plan:
+    """What a batch will do: per clip its options, fingerprint, folder and row (set for the clips that
+    are done before anything runs: skipped or unreadable), and the clips to run, longest first."""
+
+    clips: list[Path]
+    per_clip: list[ClipOptions]
+    prints: list[dict]
+    folders: list[Path]
+    rows: list[dict | None]
+    todo: list[tuple[int, Path, Path, str]]
+
+    @property
+    def skipped(self) -> int:
+        return sum(r is not None and r["status"] == "skipped" for r in self.rows)
+
+    def failed_row(self, i: int, error: str, status: str = "failed") -> dict:
+        row = dict.fromkeys(COLUMNS) | dict(clip=str(self.clips[i]), folder=self.folders[i].name,
+                                            status=status, error=error)
+        return row | {"wall_time_s": 0.0} if status == "failed" else row
+
+
+def _plan(clips: Sequence[Path], out: Path, options, folders: Sequence[str] | None) -> _Plan:
+    """The clips' options, folders and done rows (`read_done`); raises ValueError on mismatched lengths."""
+    per_clip = [options] * len(clips) if isinstance(options, ClipOptions) else list(options)
+    if len(per_clip) != len(clips) or (folders is not None and len(folders) != len(clips)):
+        raise ValueError(f"{len(clips)} clips, {len(per_clip)} options, {len(folders or clips)} folders")
+    paths = clip_folders(clips, out) if folders is None else [out / f for f in folders]
+    plan = _Plan(list(clips), per_clip, [options_fingerprint(o) for o in per_clip], paths, [None] * len(clips), [])
+    for i, (clip, folder) in enumerate(zip(clips, paths)):
+        try:
+            sha = file_sha256(clip)
+        except OSError as e:
+            plan.rows[i] = plan.failed_row(i, f"{clip}: cannot read ({e.strerror})")
+            continue
+        done = read_done(folder, sha, plan.prints[i])
+        if done is not None:
+            plan.rows[i] = {**done, "status": "skipped", "wall_time_s": 0.0}
+        else:
+            plan.todo.append((i, clip, folder, sha))
+    plan.todo = longest_first(plan.todo, [clip_duration(t[1]) for t in plan.todo])
+    return plan
+
+
+class _Tracker:
+    """Records finished clips into the plan's rows and shows them above the progress bar."""
+
+    def __init__(self, plan: _Plan, bar, say: Callable):
+        self.plan, self.bar, self.say = plan, bar, say
+        self.t0 = time.perf_counter()
+        self.interrupted = False
+
+    def note(self) -> None:
+        rows = self.plan.rows
+        n_done = sum(r is not None for r in rows)
+        failed = sum(r is not None and r["status"] == "failed" for r in rows)
+        ran, left = n_done - self.plan.skipped, len(rows) - n_done
+        elapsed = time.perf_counter() - self.t0
+        eta = f", ETA {elapsed / ran * left:.0f} s" if ran and left else ""
+        self.bar.update(n_done, f"{failed} failed, {left} left, {elapsed:.0f} s{eta}")
+
+    def finished(self, i: int, row: dict) -> None:
+        self.plan.rows[i] = row
+        name = Path(row["clip"]).name
+        name = row["folder"] if row.get("folder") and row["folder"] != Path(row["clip"]).stem else name
+        msg = f"  {name}: {row['status']}, {row['wall_time_s']:.1f} s"
+        msg += f": {row['error']}" if row.get("error") else ""
+        (self.bar.bar.write if self.bar.bar is not None else self.say)(msg)  # above a terminal's bar
+        self.interrupted |= row["status"] == "interrupted"
+        self.note()
+
+
+def _run_here(plan: _Plan, track: _Tracker) -> None:
+    """The clips one after the other in this process (no start-up cost); stops at an interrupted clip."""
+    for i, clip, folder, sha in plan.todo:
+        track.finished(i, run_clip(clip, folder, plan.per_clip[i], plan.prints[i], sha))
+        if track.interrupted:
+            return
+
+
+def _run_pool(plan: _Plan, track: _Tracker, workers: int, pool: tuple, say: Callable) -> None:
+    """The clips on `pool` (`_submitter`'s five functions), at most `workers` in flight, so that after
+    Ctrl-C none is queued to start; the running ones then keep their best path."""
+    submit, wait, result, cancel, close = pool
+    queue, handles, pending = iter(plan.todo), {}, set()
+
+    def hand_out():
+        while len(pending) < workers and not track.interrupted:
+            nxt = next(queue, None)
+            if nxt is None:
+                return
+            i = nxt[0]
+            h = submit(run_clip, nxt[1], nxt[2], plan.per_clip[i], plan.prints[i], nxt[3])
+            handles[h] = i
+            pending.add(h)
+
+    def drain(stopping: bool) -> None:
+        """Record clips as they finish, handing out the next; with `stopping` (after Ctrl-C) a
+        cancelled or dead clip stays "not run"."""
+        while pending:
+            done, still = wait(pending)
+            pending.clear()
+            pending.update(still)
+            for h in done:
+                try:
+                    row = result(h)
+                except KeyboardInterrupt:
+                    raise
+                except BaseException as e:  # noqa: BLE001 - a worker that died: the clip's row
+                    if stopping:
+                        continue
+                    row = plan.failed_row(handles[h], _one_line(e))
+                track.finished(handles[h], row)
+            hand_out()
+
+    try:
+        hand_out()
+        drain(stopping=False)
+        close(False)
+    except KeyboardInterrupt:
+        track.interrupted = True
+        cancel(pending)
+        say("stopping: no new clips; waiting for the running ones to keep their best path "
+            "(Ctrl-C again to stop waiting)")
+        try:
+            drain(stopping=True)
+        except KeyboardInterrupt:
+            pass
+        close(True)
+
+
 def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions | Sequence[ClipOptions], *, workers: int = 1,
               engine: str = "local", ray_address: str | None = None, say: Callable = print, quiet: bool = False,
               folders: Sequence[str] | None = None, name: str = "dynsplines batch") -> dict:
@@ -288,122 +419,31 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions | Sequence[
     Returns:
         {"rows" (COLUMNS per clip, in the clips' order), "totals", "interrupted", "summary" (the two paths),
         "wall_time_s"}.
+    Raises:
+        InputError: `out` is not writable; --engine ray without Ray installed.
     """
     t0 = time.perf_counter()
     out = Path(out)
     check_writable_dir(out / "summary.json", "--out")
-    per_clip = [options] * len(clips) if isinstance(options, ClipOptions) else list(options)
-    if len(per_clip) != len(clips) or (folders is not None and len(folders) != len(clips)):
-        raise ValueError(f"{len(clips)} clips, {len(per_clip)} options, {len(folders or clips)} folders")
-    prints = [options_fingerprint(o) for o in per_clip]
-    folders = clip_folders(clips, out) if folders is None else [out / f for f in folders]
-    rows: list[dict | None] = [None] * len(clips)
-    todo = []
-    for i, (clip, folder) in enumerate(zip(clips, folders)):
-        try:
-            sha = file_sha256(clip)
-        except OSError as e:
-            rows[i] = dict.fromkeys(COLUMNS) | dict(clip=str(clip), folder=folder.name, status="failed",
-                                                   error=f"{clip}: cannot read ({e.strerror})", wall_time_s=0.0)
-            continue
-        done = read_done(folder, sha, prints[i])
-        if done is not None:
-            rows[i] = {**done, "status": "skipped", "wall_time_s": 0.0}
-        else:
-            todo.append((i, clip, folder, sha))
-    todo = longest_first(todo, [clip_duration(t[1]) for t in todo])
-    n_skip = sum(r is not None and r["status"] == "skipped" for r in rows)
-    say(f"{name}: {len(clips)} clips -> {out}: {n_skip} already done, {len(todo)} to run "
+    plan = _plan(clips, out, options, folders)
+    say(f"{name}: {len(clips)} clips -> {out}: {plan.skipped} already done, {len(plan.todo)} to run "
         f"({engine}, {workers} worker{'s' if workers != 1 else ''})")
-    interrupted = False
-    run_t0 = time.perf_counter()
-
-    def note(bar):
-        n_done = sum(r is not None for r in rows)
-        failed = sum(r is not None and r["status"] == "failed" for r in rows)
-        ran = n_done - n_skip
-        left = len(clips) - n_done
-        elapsed = time.perf_counter() - run_t0
-        eta = f", ETA {elapsed / ran * left:.0f} s" if ran and left else ""
-        bar.update(n_done, f"{failed} failed, {left} left, {elapsed:.0f} s{eta}")
-
-    def finished(i, row, bar):
-        rows[i] = row
-        name = Path(row["clip"]).name
-        name = row["folder"] if row.get("folder") and row["folder"] != Path(row["clip"]).stem else name
-        msg = f"  {name}: {row['status']}, {row['wall_time_s']:.1f} s"
-        msg += f": {row['error']}" if row.get("error") else ""
-        (bar.bar.write if bar.bar is not None else say)(msg)  # above a terminal's bar, not through it
-        note(bar)
-
-    parallel = bool(todo) and not (engine == "local" and workers == 1)
+    serial = engine == "local" and workers == 1
     # workers start before the progress bar (whose monitor thread would rule out forking them)
-    submit, wait, result, cancel, close = _submitter(engine, workers, ray_address) if parallel else (None,) * 5
+    pool = _submitter(engine, workers, ray_address) if plan.todo and not serial else None
     with Steps("clips", len(clips), quiet, unit=" clips") as bar:
-        note(bar)
-        if todo and engine == "local" and workers == 1:  # in this process: no start-up cost
-            for i, clip, folder, sha in todo:
-                row = run_clip(clip, folder, per_clip[i], prints[i], sha)
-                finished(i, row, bar)
-                if row["status"] == "interrupted":
-                    interrupted = True
-                    break
-        elif todo:
-            queue, handles, pending = iter(todo), {}, set()
-
-            def hand_out():  # at most `workers` clips in flight: after Ctrl-C none is queued to start
-                while len(pending) < workers and not interrupted:
-                    nxt = next(queue, None)
-                    if nxt is None:
-                        return
-                    h = submit(run_clip, nxt[1], nxt[2], per_clip[nxt[0]], prints[nxt[0]], nxt[3])
-                    handles[h] = nxt[0]
-                    pending.add(h)
-
-            def drain(stopping: bool) -> None:
-                """Record the clips in flight as they finish, handing out the next ones (none once
-                interrupted); with `stopping` (after Ctrl-C) a cancelled or dead clip stays "not run"."""
-                nonlocal interrupted
-                while pending:
-                    done, still = wait(pending)
-                    pending.clear()
-                    pending.update(still)
-                    for h in done:
-                        try:
-                            row = result(h)
-                        except KeyboardInterrupt:
-                            raise
-                        except BaseException as e:  # noqa: BLE001 - a worker that died: the clip's row
-                            if stopping:
-                                continue
-                            row = dict.fromkeys(COLUMNS) | dict(clip=str(clips[handles[h]]),
-                                                                folder=folders[handles[h]].name, status="failed",
-                                                                error=_one_line(e), wall_time_s=0.0)
-                        finished(handles[h], row, bar)
-                        interrupted |= row["status"] == "interrupted"
-                    hand_out()
-
-            try:
-                hand_out()
-                drain(stopping=False)
-                close(False)
-            except KeyboardInterrupt:
-                interrupted = True
-                cancel(pending)
-                say("stopping: no new clips; waiting for the running ones to keep their best path "
-                    "(Ctrl-C again to stop waiting)")
-                try:
-                    drain(stopping=True)
-                except KeyboardInterrupt:
-                    pass
-                close(True)
-    for i, r in enumerate(rows):
-        if r is None:
-            rows[i] = dict.fromkeys(COLUMNS) | dict(clip=str(clips[i]), folder=folders[i].name, status="not run",
-                                                   error="not started: the batch was interrupted")
+        track = _Tracker(plan, bar, say)
+        track.note()
+        if plan.todo and serial:
+            _run_here(plan, track)
+        elif plan.todo:
+            _run_pool(plan, track, workers, pool, say)
+    rows = [r if r is not None else plan.failed_row(i, "not started: the batch was interrupted", "not run")
+            for i, r in enumerate(plan.rows)]
     wall = time.perf_counter() - t0
     total = totals(rows, wall)
-    meta = {"out": str(out), "engine": engine, "workers": workers, "interrupted": interrupted,
-            "wall_time_s": wall, "options": prints[0] if isinstance(options, ClipOptions) else prints}
+    meta = {"out": str(out), "engine": engine, "workers": workers, "interrupted": track.interrupted,
+            "wall_time_s": wall, "options": plan.prints[0] if isinstance(options, ClipOptions) else plan.prints}
     summary = write_summary(out, rows, total, meta)
-    return {"rows": rows, "totals": total, "interrupted": interrupted, "summary": summary, "wall_time_s": wall}
+    return {"rows": rows, "totals": total, "interrupted": track.interrupted, "summary": summary,
+            "wall_time_s": wall}
