@@ -125,6 +125,79 @@ class Stop(Exception):
         self.message = message
 
 
+class _Guarded:
+    """nlopt's objective around `fun`: applies the limits and the stop request, keeps the best iterate
+    and the trace, and turns an exception into a forced stop (nlopt cannot unwind a Python exception)."""
+
+    def __init__(self, fun, opt, t_start: float, max_evals: int, max_time_s: float, should_stop, callback):
+        self.fun, self.opt, self.t_start = fun, opt, t_start
+        self.max_evals, self.max_time_s = max_evals, max_time_s
+        self.should_stop, self.callback = should_stop, callback
+        self.best = {"x": None, "f": np.inf, "n": 0, "imp": 0, "t": 0.0}
+        self.trace: list[float] = []
+        self.stop: dict = {}
+
+    def _checked(self, x, need_grad: bool):
+        if self.should_stop is not None and self.should_stop():
+            raise Stop(Status.INTERRUPTED, "stopped on request")
+        if self.max_time_s and time.perf_counter() - self.t_start > self.max_time_s:
+            raise Stop(Status.MAX_TIME, f"time limit of {self.max_time_s:g} s reached")
+        if self.max_evals and self.best["n"] >= self.max_evals:
+            raise Stop(Status.MAX_EVALS, f"evaluation limit of {self.max_evals} reached")
+        t_fun = time.perf_counter()
+        f, g = self.fun(x, need_grad)  # under errstate(all="ignore"), set around opt.optimize
+        self.best["t"] += time.perf_counter() - t_fun
+        if not math.isfinite(f) or (need_grad and not np.isfinite(g).all()):
+            raise Stop(Status.NONFINITE, "the objective or its gradient is not finite")
+        return f, g
+
+    def __call__(self, x, grad):
+        best = self.best
+        if not self.stop:
+            try:
+                f, g = self._checked(x, grad.size > 0)
+            except Stop as s:
+                self.stop["status"], self.stop["message"] = s.status, s.message
+            except BaseException as e:  # noqa: BLE001 - re-raised after nlopt unwinds
+                self.stop["status"], self.stop["message"], self.stop["error"] = Status.FAILED, repr(e), e
+        if self.stop:
+            self.opt.force_stop()
+            return best["f"] if np.isfinite(best["f"]) else 0.0
+        if grad.size:
+            grad[:] = g
+        best["n"] += 1
+        if f < best["f"]:
+            best["f"], best["x"], best["imp"] = float(f), x.copy(), best["imp"] + 1
+            best["g"] = grad.copy() if grad.size else None
+        self.trace.append(best["f"])
+        if self.callback is not None:
+            self.callback(best["n"], best["f"])
+        return float(f)
+
+
+def _run_nlopt(opt, x0: np.ndarray, algorithm: str, max_evals: int, max_time_s: float) -> tuple[Status, str]:
+    """opt.optimize(x0) and nlopt's ending as (Status, message); a forced stop reads as converged here
+    (the caller replaces it with the guard's reason)."""
+    try:
+        # a trial point may overflow: reported by status (NONFINITE), not as numpy warnings. Set once
+        # here, not per evaluation (the context manager costs ~3 us, a few % of a small evaluation)
+        with np.errstate(all="ignore"):
+            opt.optimize(x0)
+        code = opt.last_optimize_result()
+        status = _NLOPT_STATUS.get(code, Status.FAILED)
+        return status, {Status.CONVERGED: "converged (tolerance reached)", Status.MAX_EVALS:
+                        f"evaluation limit of {max_evals} reached", Status.MAX_TIME:
+                        f"time limit of {max_time_s:g} s reached"}.get(status, f"nlopt code {code}")
+    except nlopt.RoundoffLimited:
+        return Status.CONVERGED, "converged (no further progress possible: roundoff-limited)"
+    except nlopt.ForcedStop:
+        return Status.CONVERGED, "converged"
+    except Exception as e:  # nlopt's SWIG runtime_error is not a RuntimeError subclass
+        detail = f" ({e})" if str(e) else ""
+        return Status.FAILED, (f"nlopt {algorithm} stopped with a generic failure "
+                               f"({type(e).__name__}{detail}); another algorithm may get further")
+
+
 def minimize(
     fun: Callable[[np.ndarray, bool], tuple[float, np.ndarray | None]],
     x0: np.ndarray,
@@ -168,73 +241,14 @@ def minimize(
     opt = nlopt.opt(ALGORITHMS[algorithm], x0.size)
     if algorithm == "lbfgs":
         opt.set_vector_storage(lbfgs_storage(x0.size))
-    best = {"x": x0.copy(), "f": np.inf, "n": 0, "imp": 0, "t": 0.0}
-    trace: list[float] = []
-    stop: dict = {}
-
-    def objective(x, grad):
-        if stop:
-            opt.force_stop()
-            return best["f"] if np.isfinite(best["f"]) else 0.0
-        try:
-            if should_stop is not None and should_stop():
-                raise Stop(Status.INTERRUPTED, "stopped on request")
-            if max_time_s and time.perf_counter() - t_start > max_time_s:
-                raise Stop(Status.MAX_TIME, f"time limit of {max_time_s:g} s reached")
-            if max_evals and best["n"] >= max_evals:
-                raise Stop(Status.MAX_EVALS, f"evaluation limit of {max_evals} reached")
-            t_fun = time.perf_counter()
-            f, g = fun(x, grad.size > 0)  # under errstate(all="ignore"), set around opt.optimize
-            best["t"] += time.perf_counter() - t_fun
-            if not math.isfinite(f) or (grad.size and not np.isfinite(g).all()):
-                raise Stop(Status.NONFINITE, "the objective or its gradient is not finite")
-        except Stop as s:
-            stop["status"], stop["message"] = s.status, s.message
-        except BaseException as e:  # noqa: BLE001 - re-raised after nlopt unwinds
-            stop["status"], stop["message"], stop["error"] = Status.FAILED, repr(e), e
-        if stop:
-            opt.force_stop()
-            return best["f"] if np.isfinite(best["f"]) else 0.0
-        if grad.size:
-            grad[:] = g
-        best["n"] += 1
-        if f < best["f"]:
-            best["f"], best["x"], best["imp"] = float(f), x.copy(), best["imp"] + 1
-            best["g"] = grad.copy() if grad.size else None
-        trace.append(best["f"])
-        if callback is not None:
-            callback(best["n"], best["f"])
-        return float(f)
-
-    opt.set_min_objective(objective)
-    if ftol_rel:
-        opt.set_ftol_rel(ftol_rel)
-    if xtol_rel:
-        opt.set_xtol_rel(xtol_rel)
-    if max_evals:
-        opt.set_maxeval(int(max_evals))
-    if max_time_s:
-        opt.set_maxtime(float(max_time_s))
-    status, message = Status.CONVERGED, "converged"
-    try:
-        # a trial point may overflow: reported by status (NONFINITE), not as numpy warnings. Set once
-        # here, not per evaluation (the context manager costs ~3 us, a few % of a small evaluation)
-        with np.errstate(all="ignore"):
-            opt.optimize(x0)
-        code = opt.last_optimize_result()
-        status = _NLOPT_STATUS.get(code, Status.FAILED)
-        message = {Status.CONVERGED: "converged (tolerance reached)", Status.MAX_EVALS:
-                   f"evaluation limit of {max_evals} reached", Status.MAX_TIME:
-                   f"time limit of {max_time_s:g} s reached"}.get(status, f"nlopt code {code}")
-    except nlopt.RoundoffLimited:
-        status, message = Status.CONVERGED, "converged (no further progress possible: roundoff-limited)"
-    except nlopt.ForcedStop:
-        pass
-    except Exception as e:  # nlopt's SWIG runtime_error is not a RuntimeError subclass
-        if not stop:
-            detail = f" ({e})" if str(e) else ""
-            status, message = Status.FAILED, (f"nlopt {algorithm} stopped with a generic failure "
-                                              f"({type(e).__name__}{detail}); another algorithm may get further")
+    guard = _Guarded(fun, opt, t_start, max_evals, max_time_s, should_stop, callback)
+    opt.set_min_objective(guard)
+    for setter, value in ((opt.set_ftol_rel, ftol_rel), (opt.set_xtol_rel, xtol_rel),
+                          (opt.set_maxeval, int(max_evals)), (opt.set_maxtime, float(max_time_s))):
+        if value:
+            setter(value)
+    status, message = _run_nlopt(opt, x0, algorithm, max_evals, max_time_s)
+    stop, best = guard.stop, guard.best
     if stop:
         status, message = stop["status"], stop["message"]
         if "error" in stop:
@@ -242,4 +256,4 @@ def minimize(
     if not np.isfinite(best["f"]):  # not a single finite evaluation: report x0 as it is
         best["x"] = x0
     return OptimizeResult(best["x"], best["f"], status, message, best["n"], best["imp"],
-                          np.array(trace), time.perf_counter() - t_start, algorithm, best.get("g"), best["t"])
+                          np.array(guard.trace), time.perf_counter() - t_start, algorithm, best.get("g"), best["t"])
