@@ -381,27 +381,21 @@ def orient(
         renorm = RENORMALIZE_ON
     if renorm not in (False, "start", "keyframes"):
         raise InputError(f"renormalize must be True, False, 'start' or 'keyframes', got {renormalize!r}")
-    opts = default_options(form) if options is None else options
-    radial = RADIAL_WEIGHTS[form] if radial_weight is None else float(radial_weight)
-    opts = replace(opts, renormalize=False, radial_weight=radial,
-                   quat_slots=tuple(tuple(int(i) for i in slot) for slot in LAYOUT.quat_slots))
-    if (opts.subdivision == "adaptive" and opts.max_frames
-            and opts.per_segment * (kf.count - 1) > opts.max_frames):
-        # `solve` does not cap the starting frames of adaptive subdivision; with a budget smaller than
-        # they would be, let the Euler-Lagrange score place every frame instead
-        opts = replace(opts, per_segment=0, rounds=max(opts.n_rounds, 1)) if opts.refine == "rounds" else replace(
-            opts, per_segment=0)
+    opts = _orient_options(kf, form, options, radial_weight)
     initial = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)
     if renorm:  # eq. 7, once: the scales stay fixed through the solve (`Objective.renormalize`)
         base = initial if renorm == "keyframes" else paper_start(initial)
         obj.renormalize(base.times, base.values)
     opts = _with_tol(opts, tol, form)
-    if opts.refine == "tol" and form != "normalized":
-        raise InputError("tol (an estimated gap to the exact-unit optimum) is for the normalized form only; "
-                         "the paper form's optimum trades smoothness for unit length (use rounds)")
     gap = GapToOptimum(opts.tol, opts) if opts.refine == "tol" else None
     sol = solve(obj, initial, opts, should_stop=should_stop, progress=progress, project=unit_rows, refinement=gap)
-    tol = opts.tol if gap else 0.0
+    return _orient_result(sol, initial, obj, form, w, renorm, gap)
+
+
+def _orient_result(sol, initial: FrameSet, obj, form: str, w, renorm, gap) -> OrientResult:
+    """The OrientResult of a solve: the frames, the keyframes, the objective's settings and, with a
+    tolerance (`gap`), its estimates and the measures of the final frames (dropped if they are stale)."""
+    tol = gap.tol if gap else 0.0
     measures = gap.measures if gap else {}
     if "frames" not in measures or not (np.array_equal(measures["frames"].times, sol.frames.times)
                                         and np.array_equal(measures["frames"].values, sol.frames.values)):
@@ -427,21 +421,40 @@ def orient(
     )
 
 
+def _orient_options(kf, form: str, options: SolveOptions | None, radial_weight: float | None) -> SolveOptions:
+    """`orient`'s SolveOptions: the form's defaults or the caller's, with its radial weight and the
+    quaternion slots; an adaptive budget smaller than the starting frames places none of them."""
+    opts = default_options(form) if options is None else options
+    radial = RADIAL_WEIGHTS[form] if radial_weight is None else float(radial_weight)
+    opts = replace(opts, renormalize=False, radial_weight=radial,
+                   quat_slots=tuple(tuple(int(i) for i in slot) for slot in LAYOUT.quat_slots))
+    if (opts.subdivision == "adaptive" and opts.max_frames
+            and opts.per_segment * (kf.count - 1) > opts.max_frames):
+        # `solve` does not cap the starting frames of adaptive subdivision; with a budget smaller than
+        # they would be, let the Euler-Lagrange score place every frame instead
+        opts = replace(opts, per_segment=0, rounds=max(opts.n_rounds, 1)) if opts.refine == "rounds" else replace(
+            opts, per_segment=0)
+    return opts
+
+
 def _with_tol(opts: SolveOptions, tol: float | None, form: str) -> SolveOptions:
     """`opts` with `orient`'s tol argument applied: None keeps them; > 0 selects refine "tol" with it; 0
     selects refine "rounds" (the options' rounds, or DEFAULT_ROUNDS[form]).
 
     Raises:
-        InputError: tol negative or not finite.
+        InputError: tol negative or not finite; refine "tol" with the paper form.
     """
-    if tol is None:
-        return opts
-    tol = float(tol)
-    if not (tol >= 0 and np.isfinite(tol)):
-        raise InputError(f"tol must be a number >= 0, got {tol!r}")
-    if tol > 0:
-        return replace(opts, refine="tol", tol=tol, rounds=None)
-    return replace(opts, refine="rounds", tol=0.0, rounds=DEFAULT_ROUNDS[form] if opts.rounds is None else opts.rounds)
+    if tol is not None:
+        tol = float(tol)
+        if not (tol >= 0 and np.isfinite(tol)):
+            raise InputError(f"tol must be a number >= 0, got {tol!r}")
+        rounds = DEFAULT_ROUNDS[form] if opts.rounds is None else opts.rounds
+        opts = (replace(opts, refine="tol", tol=tol, rounds=None) if tol > 0
+                else replace(opts, refine="rounds", tol=0.0, rounds=rounds))
+    if opts.refine == "tol" and form != "normalized":
+        raise InputError("tol (an estimated gap to the exact-unit optimum) is for the normalized form only; "
+                         "the paper form's optimum trades smoothness for unit length (use rounds)")
+    return opts
 
 
 def paper_start(initial: FrameSet) -> FrameSet:
