@@ -140,6 +140,85 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
     return frames, channels
 
 
+class _Grammar:
+    """Recursive descent over the HIERARCHY's rows (see `_check_hierarchy`); counts the channels."""
+
+    def __init__(self, rows: list[tuple[int, list[str]]], src: str):
+        self.rows, self.src, self.total = rows, src, 0
+
+    def row(self, i: int) -> tuple[int, list[str]]:
+        if i >= len(self.rows):
+            raise InputError(
+                f"{self.src}: the file ends inside the HIERARCHY (truncated?); close every joint with '}}' and "
+                "add the MOTION section"
+            )
+        return self.rows[i]
+
+    def fail(self, i: int, expected: str):
+        ln, t = self.row(i)
+        found = " ".join(t)[:60]
+        raise InputError(f"{self.src}: line {ln}: expected {expected}, found {found!r}; fix the HIERARCHY there")
+
+    def offset(self, i: int) -> None:
+        ln, t = self.row(i)
+        if t[0] != "OFFSET":
+            self.fail(i, "'OFFSET x y z'")
+        if len(t) != 4 or not all(_is_float(v) for v in t[1:]):
+            raise InputError(f"{self.src}: line {ln}: {' '.join(t)!r}: OFFSET takes three numbers, "
+                             "e.g. 'OFFSET 0 -7.5 0'")
+
+    def channels(self, i: int) -> int:
+        ln, t = self.row(i)
+        if t[0] != "CHANNELS":
+            self.fail(i, "'CHANNELS n ...' after the OFFSET")
+        try:
+            count = int(t[1])
+        except (IndexError, ValueError):
+            raise InputError(
+                f"{self.src}: line {ln}: CHANNELS needs a count, got {' '.join(t)!r}; "
+                "write e.g. 'CHANNELS 3 Zrotation Yrotation Xrotation'"
+            ) from None
+        names = t[2:]
+        if count != len(names):
+            raise InputError(
+                f"{self.src}: line {ln}: CHANNELS says {count} channels but lists {len(names)} "
+                f"({' '.join(names)}); make the count match the names"
+            )
+        for name in names:
+            if name not in POSITION_CHANNELS + ROTATION_CHANNELS:
+                raise InputError(
+                    f"{self.src}: line {ln}: unknown channel {name!r}; channels are "
+                    f"{', '.join(POSITION_CHANNELS + ROTATION_CHANNELS)}"
+                )
+        return count
+
+    def end_site(self, i: int) -> int:
+        if self.row(i + 1)[1] != ["{"]:
+            self.fail(i + 1, "'{' opening the End Site")
+        self.offset(i + 2)
+        if self.row(i + 3)[1] != ["}"]:
+            self.fail(i + 3, "'}' closing the End Site")
+        return i + 4
+
+    def joint(self, i: int) -> int:
+        """The joint whose '{' is rows[i]; returns the index after its '}'."""
+        if self.row(i)[1] != ["{"]:
+            self.fail(i, "'{' opening the joint")
+        self.offset(i + 1)
+        self.total += self.channels(i + 2)
+        i += 3
+        while True:
+            _, t = self.row(i)
+            if t[0] == "JOINT" and len(t) == 2:
+                i = self.joint(i + 1)
+            elif t == ["End", "Site"]:
+                i = self.end_site(i)
+            elif t == ["}"]:
+                return i + 1
+            else:
+                self.fail(i, "'JOINT <name>', 'End Site' or '}'")
+
+
 def _check_hierarchy(rows: list[tuple[int, list[str]]], src: str) -> tuple[int, int]:
     """Check the HIERARCHY grammar (recursive descent over the non-empty lines' tokens).
 
@@ -154,85 +233,18 @@ def _check_hierarchy(rows: list[tuple[int, list[str]]], src: str) -> tuple[int, 
     Raises:
         InputError: naming the line, what was found and what was expected.
     """
-    total = 0
-    k = 1  # rows[1] is "ROOT name", checked by the caller
-
-    def row(i):
-        if i >= len(rows):
-            raise InputError(
-                f"{src}: the file ends inside the HIERARCHY (truncated?); close every joint with '}}' and "
-                "add the MOTION section"
-            )
-        return rows[i]
-
-    def fail(i, expected):
-        ln, t = row(i)
-        found = " ".join(t)[:60]
-        raise InputError(f"{src}: line {ln}: expected {expected}, found {found!r}; fix the HIERARCHY there")
-
-    def offset(i):
-        ln, t = row(i)
-        if t[0] != "OFFSET":
-            fail(i, "'OFFSET x y z'")
-        if len(t) != 4 or not all(_is_float(v) for v in t[1:]):
-            raise InputError(f"{src}: line {ln}: {' '.join(t)!r}: OFFSET takes three numbers, e.g. 'OFFSET 0 -7.5 0'")
-
-    def joint(i):
-        nonlocal total
-        if row(i)[1] != ["{"]:
-            fail(i, "'{' opening the joint")
-        offset(i + 1)
-        ln, t = row(i + 2)
-        if t[0] != "CHANNELS":
-            fail(i + 2, "'CHANNELS n ...' after the OFFSET")
-        try:
-            count = int(t[1])
-        except (IndexError, ValueError):
-            raise InputError(
-                f"{src}: line {ln}: CHANNELS needs a count, got {' '.join(t)!r}; "
-                "write e.g. 'CHANNELS 3 Zrotation Yrotation Xrotation'"
-            ) from None
-        names = t[2:]
-        if count != len(names):
-            raise InputError(
-                f"{src}: line {ln}: CHANNELS says {count} channels but lists {len(names)} "
-                f"({' '.join(names)}); make the count match the names"
-            )
-        for name in names:
-            if name not in POSITION_CHANNELS + ROTATION_CHANNELS:
-                raise InputError(
-                    f"{src}: line {ln}: unknown channel {name!r}; channels are "
-                    f"{', '.join(POSITION_CHANNELS + ROTATION_CHANNELS)}"
-                )
-        total += count
-        i += 3
-        while True:
-            ln, t = row(i)
-            if t[0] == "JOINT" and len(t) == 2:
-                i = joint(i + 1)
-            elif t == ["End", "Site"]:
-                if row(i + 1)[1] != ["{"]:
-                    fail(i + 1, "'{' opening the End Site")
-                offset(i + 2)
-                if row(i + 3)[1] != ["}"]:
-                    fail(i + 3, "'}' closing the End Site")
-                i += 4
-            elif t == ["}"]:
-                return i + 1
-            else:
-                fail(i, "'JOINT <name>', 'End Site' or '}'")
-
-    k = joint(k + 1)
-    if k >= len(rows) or rows[k][1][:1] != ["MOTION"]:
-        if k >= len(rows):
-            raise InputError(
-                f"{src}: no MOTION line after the HIERARCHY (file truncated?); a BVH file needs "
-                "'MOTION', 'Frames: N', 'Frame Time: T' and N lines of numbers"
-            )
-        fail(k, "'MOTION' after the ROOT joint's closing '}'")
+    grammar = _Grammar(rows, src)
+    k = grammar.joint(2)  # rows[1] is "ROOT name", checked by the caller
+    if k >= len(rows):
+        raise InputError(
+            f"{src}: no MOTION line after the HIERARCHY (file truncated?); a BVH file needs "
+            "'MOTION', 'Frames: N', 'Frame Time: T' and N lines of numbers"
+        )
+    if rows[k][1][:1] != ["MOTION"]:
+        grammar.fail(k, "'MOTION' after the ROOT joint's closing '}'")
     if rows[k][1] != ["MOTION"]:
-        fail(k, "'MOTION' alone on its line")
-    return total, k
+        grammar.fail(k, "'MOTION' alone on its line")
+    return grammar.total, k
 
 
 def _is_float(s: str) -> bool:
