@@ -225,6 +225,24 @@ def _is_identity(q) -> bool:
     return bool(np.allclose(q, (1, 0, 0, 0)))
 
 
+def _track_animation(B, sk, tr, nodes: list, qpos: np.ndarray, local: np.ndarray):
+    """The glTF Animation of one track: the root node's translation and every joint node's rotation,
+    sampled at the track's times from 0 and interpolated linearly (glTF 2.0 sec. 3.11)."""
+    times = np.asarray(tr.times, float)
+    inp = B.accessor(times - times[0], "SCALAR", bounds=True)
+    samplers = [B.g.AnimationSampler(input=inp, output=B.accessor(qpos[:, sk.root_pos], "VEC3"),
+                                     interpolation="LINEAR")]
+    channels = [B.g.AnimationChannel(sampler=0, target=B.g.AnimationChannelTarget(node=nodes[0],
+                                                                                  path="translation"))]
+    for j in range(sk.count):
+        q = local[:, j][:, [1, 2, 3, 0]]
+        samplers.append(B.g.AnimationSampler(input=inp, output=B.accessor(q, "VEC4"), interpolation="LINEAR"))
+        channels.append(B.g.AnimationChannel(sampler=len(samplers) - 1, target=B.g.AnimationChannelTarget(
+            node=nodes[j], path="rotation")))
+    return B.g.Animation(name=tr.name, samplers=samplers, channels=channels,
+                         extras={"start_time_s": float(times[0]), "samples": len(times)})
+
+
 def figure_gltf(model, tracks: Sequence[Track], sites: Sequence[str] = (), site_radius: float = 0.025):
     """A `pygltflib.GLTF2` of the scene and one animated figure per track (module docstring), with its
     binary blob set (`gltf.binary_blob()`).
@@ -288,19 +306,7 @@ def figure_gltf(model, tracks: Sequence[Track], sites: Sequence[str] = (), site_
             nodes[j] = B.node(name=f"{prefix}{sk.names[j]}", children=children or None,
                               translation=[float(x) for x in t], rotation=_xyzw(local[0, j]))
         world_children.append(nodes[0])
-        times = np.asarray(tr.times, float)
-        inp = B.accessor(times - times[0], "SCALAR", bounds=True)
-        samplers = [B.g.AnimationSampler(input=inp, output=B.accessor(qpos[:, sk.root_pos], "VEC3"),
-                                         interpolation="LINEAR")]
-        channels = [B.g.AnimationChannel(sampler=0, target=B.g.AnimationChannelTarget(node=nodes[0],
-                                                                                      path="translation"))]
-        for j in range(sk.count):
-            q = local[:, j][:, [1, 2, 3, 0]]
-            samplers.append(B.g.AnimationSampler(input=inp, output=B.accessor(q, "VEC4"), interpolation="LINEAR"))
-            channels.append(B.g.AnimationChannel(sampler=len(samplers) - 1, target=B.g.AnimationChannelTarget(
-                node=nodes[j], path="rotation")))
-        animations.append(B.g.Animation(name=tr.name, samplers=samplers, channels=channels,
-                                        extras={"start_time_s": float(times[0]), "samples": len(times)}))
+        animations.append(_track_animation(B, sk, tr, nodes, qpos, local))
     world = B.node(name="world", rotation=list(WORLD_ROTATION), children=world_children)
     B.gltf.animations = animations
     B.gltf.scenes = [B.g.Scene(name="dynsplines", nodes=[world])]
