@@ -62,44 +62,14 @@ class KinematicTree:
         data = mujoco.MjData(model)
         mujoco.mj_kinematics(model, data)
 
-        nb = model.nbody
         parent = model.body_parentid
-        has_joint = model.body_jntnum > 0
-        moving = np.zeros(nb, bool)
-        for b in range(1, nb):
-            moving[b] = has_joint[b] or moving[parent[b]]
-        if prune:  # only the sites' bodies and their ancestors (the figure's feet: the legs and the root)
-            needed = np.zeros(nb, bool)
-            for b in model.site_bodyid[site_ids(model, sites)]:
-                b = int(b)
-                while b > 0:
-                    needed[b] = True
-                    b = int(parent[b])
-            moving &= needed
+        moving = _moving(model, sites, prune)
         bodies = np.flatnonzero(moving)
         index = {int(b): i for i, b in enumerate(bodies)}
         B = len(bodies)
         self.bodies = bodies
         par = np.array([index.get(int(parent[b]), -1) for b in bodies], int)
-        kind = np.zeros(B, int)  # 0 weld, 1 ball, 2 free
-        quat_q = np.zeros((B, 4), int)
-        ang_v = np.zeros((B, 3), int)
-        lin_q = np.zeros((B, 3), int)
-        lin_v = np.zeros((B, 3), int)
-        jpos = np.zeros((B, 3))
-        for i, b in enumerate(bodies):
-            if not has_joint[b]:
-                continue
-            j = int(model.body_jntadr[b])
-            qa, da = int(model.jnt_qposadr[j]), int(model.jnt_dofadr[j])
-            jpos[i] = model.jnt_pos[j]
-            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-                kind[i] = 2
-                lin_q[i], lin_v[i] = range(qa, qa + 3), range(da, da + 3)
-                quat_q[i], ang_v[i] = range(qa + 3, qa + 7), range(da + 3, da + 6)
-            else:
-                kind[i] = 1
-                quat_q[i], ang_v[i] = range(qa, qa + 4), range(da, da + 3)
+        kind, quat_q, ang_v, lin_q, lin_v, jpos = _joint_slots(model, bodies)
         self.kind = kind
         rot = np.flatnonzero(kind > 0)
         # a slice when every moving body has a rotational joint (the figure): views, not gathers
@@ -132,21 +102,8 @@ class KinematicTree:
         self._d_top = d[self._top].T[:, :, None]
         self._jpos = jpos.T[:, :, None]
         self._has_jpos = bool(np.any(jpos != 0))
-        # tree matrices: anc[b, a] = 1 if a is b or an ancestor of b (moving bodies only)
-        anc = np.zeros((B, B))
-        for i in range(B):
-            a = i
-            while a >= 0:
-                anc[i, a] = 1.0
-                a = par[a]
-        self._anc = anc
-        self._desc = np.ascontiguousarray(anc.T)
-        P = np.zeros((B, B))  # P[p, i] = 1 if p is the parent of i
-        for i in self._child:
-            P[par[i], i] = 1.0
-        self._parent_mat = np.ascontiguousarray(P[:, self._child])
-        depth = anc.sum(1).astype(int)
-        self._levels = [np.flatnonzero(depth == k) for k in range(2, int(depth.max()) + 1)] if B else []
+        self._anc, self._parent_mat, self._levels = _tree_matrices(par, self._child)
+        self._desc = np.ascontiguousarray(self._anc.T)
         # sites
         self.site_ids = site_ids(model, sites)
         sb = model.site_bodyid[self.site_ids]
@@ -441,3 +398,67 @@ class SiteKinematics(KinematicTree):
         zs = [z if isinstance(a, float) else a for a in (nubar, wbar, xbar, gth)]
         self._reverse(sv, zs[0], z, z, z.copy(), zs[1], zs[2], zs[3], Gq, Gv)
         return Gq.T, Gv.T, None
+
+
+def _moving(model, sites, prune: bool) -> np.ndarray:
+    """(nbody,) bool: bodies that move (a joint on them or an ancestor); with `prune`, only the sites'
+    bodies and their ancestors (the figure's feet: the legs and the root)."""
+    nb = model.nbody
+    parent = model.body_parentid
+    has_joint = model.body_jntnum > 0
+    moving = np.zeros(nb, bool)
+    for b in range(1, nb):
+        moving[b] = has_joint[b] or moving[parent[b]]
+    if prune:
+        needed = np.zeros(nb, bool)
+        for b in model.site_bodyid[site_ids(model, sites)]:
+            b = int(b)
+            while b > 0:
+                needed[b] = True
+                b = int(parent[b])
+        moving &= needed
+    return moving
+
+
+def _joint_slots(model, bodies: np.ndarray):
+    """Per moving body: kind (B,) (0 weld, 1 ball, 2 free), its quaternion's qpos indices (B, 4), angular
+    dof indices (B, 3), the free joint's position qpos and dof indices (B, 3) each, joint anchor (B, 3)."""
+    import mujoco
+
+    B = len(bodies)
+    kind = np.zeros(B, int)
+    quat_q, ang_v = np.zeros((B, 4), int), np.zeros((B, 3), int)
+    lin_q, lin_v = np.zeros((B, 3), int), np.zeros((B, 3), int)
+    jpos = np.zeros((B, 3))
+    for i, b in enumerate(bodies):
+        if model.body_jntnum[b] == 0:
+            continue
+        j = int(model.body_jntadr[b])
+        qa, da = int(model.jnt_qposadr[j]), int(model.jnt_dofadr[j])
+        jpos[i] = model.jnt_pos[j]
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+            kind[i] = 2
+            lin_q[i], lin_v[i] = range(qa, qa + 3), range(da, da + 3)
+            quat_q[i], ang_v[i] = range(qa + 3, qa + 7), range(da + 3, da + 6)
+        else:
+            kind[i] = 1
+            quat_q[i], ang_v[i] = range(qa, qa + 4), range(da, da + 3)
+    return kind, quat_q, ang_v, lin_q, lin_v, jpos
+
+
+def _tree_matrices(par: np.ndarray, child: np.ndarray):
+    """anc (B, B): anc[b, a] = 1 if a is b or an ancestor of b; the parent matrix restricted to the
+    bodies with a moving parent (B, c); the bodies by depth, from depth 2 down (a list of index arrays)."""
+    B = len(par)
+    anc = np.zeros((B, B))
+    for i in range(B):
+        a = i
+        while a >= 0:
+            anc[i, a] = 1.0
+            a = par[a]
+    P = np.zeros((B, B))  # P[p, i] = 1 if p is the parent of i
+    for i in child:
+        P[par[i], i] = 1.0
+    depth = anc.sum(1).astype(int)
+    levels = [np.flatnonzero(depth == k) for k in range(2, int(depth.max()) + 1)] if B else []
+    return anc, np.ascontiguousarray(P[:, child]), levels
