@@ -1,0 +1,149 @@
+"""forces: the ground force and the pelvis acceleration held within what a body shows (docs/dynamics.md).
+
+The root term (sec. 6, appendix A) asks for a ballistic flight; without a bound the cheapest way there
+is a push-off and a landing no body makes. This soft constraint (the paper's penalty form, sec. 5) is a
+one-sided quadratic penalty on each quadrature point's excess over the problem's `PeakBounds`
+(`solver.peak_bounds`: the larger of the plain spline's and the filtered capture's peaks):
+
+    f = e_F^2 + e_a^2,   e_F = max(0, |F| / W - B_F),   e_a = max(0, |x''| - B_a) / g   [body weights^2]
+
+with F the contact-free root force (the free root's first 3 generalized forces of the inverse dynamics,
+world frame) [N], W = m g the figure's weight [N], x'' the root position's second derivative [m/s^2],
+g = |gravity|: an acceleration counts in g, so 1 g of excess costs as much as one body weight.
+The force part applies on the ground and in flight alike (in flight the root term asks for F = 0, far
+below the bound): no flight indicator the optimizer could lift the feet to switch off. f is C1 (a
+squared hinge). It is zero on the plain spline, so it keeps its own units (eq. 7's renormalization
+leaves it at scale 1) and its weight is absolute.
+
+Gradients: e_F through the shared inverse-dynamics engine's reverse pass (deferred, summed with the
+torque, root and cone terms' adjoints), e_a directly in Y''. `residual` gives r = (e_F, e_a) (n, 2) for
+the least-squares back end.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.errors import InputError
+from solver.kinematics import TangentMap
+from solver.layout import StateLayout
+from solver.path_context import EngineGradient, PathContext
+from solver.terms.base import Residual, Term, TermEval
+from solver.terms.contact_schedule import _sample_times
+
+#: [1/s] `violation` reads the peaks at about this rate (the summary's acceptance figures are at 1000 Hz)
+VIOLATION_RATE = 1000.0
+
+
+class PeakForces(Term):
+    """f = e_F^2 + e_a^2 [body weights^2]: root force and pelvis acceleration beyond their bounds (module
+    docstring).
+
+    Args:
+        model: MjModel of the scene (a figure with a free root; gravity not zero).
+        bounds: `solver.peak_bounds.PeakBounds` (ground_force_bw [body weights], pelvis_acceleration_ms2
+            [m/s^2]), or None: the peaks of the path the solve starts from (the plain spline), read at the
+            quadrature points by the first `prepare` (until then the term is 0 and has no violation).
+        engine: an inverse-dynamics engine (`solver.terms.dynamics.make_engine`) to share with the other
+            dynamics terms; default a new one.
+        t_span: (t0, t1) [s] the keyframe interval (for `violation` on evenly spaced samples).
+    Raises:
+        InputError: no free joint, no gravity, bounds that are not finite and >= 0.
+    """
+
+    name = "forces"
+    units = "body weights^2"
+    needs = (0, 1, 2)
+    fixed_points = True  # an inverse-dynamics term (its forward pass is shared through the context)
+
+    def __init__(self, model, bounds, engine=None, t_span=None):
+        from solver.terms.dynamics import _free_joint, make_engine
+
+        self.layout = StateLayout.from_model(model)
+        self.tmap = TangentMap.from_layout(self.layout)
+        root = _free_joint(model, self.layout)
+        adr, qadr = int(model.jnt_dofadr[root]), int(model.jnt_qposadr[root])
+        self.force_dofs = np.arange(adr, adr + 3)
+        self.root_pos = np.arange(qadr, qadr + 3)
+        self.g = float(np.linalg.norm(model.opt.gravity))
+        if not self.g > 0:
+            raise InputError("the forces term measures force in body weights; the model's gravity is zero")
+        self.weight_N = float(np.sum(model.body_mass)) * self.g
+        for label, value in (() if bounds is None else (("ground force", bounds.ground_force_bw),
+                                                         ("pelvis acceleration", bounds.pelvis_acceleration_ms2))):
+            if not (np.isfinite(value) and value >= 0):
+                raise InputError(f"the forces term's {label} bound is {value}; it must be finite and >= 0")
+        self.bounds = bounds
+        self.engine = engine if engine is not None else make_engine(model, ())
+        self.t_span = t_span
+
+    def peaks(self, t, Y, Y1, Y2) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample: |F| / W [body weights] and |x''| [m/s^2] ((n,) each; t (n,) [s], Y* (n, nq))."""
+        _, res = PathContext(t, Y, Y1, Y2).forward(self.engine, self.tmap)
+        F = res.tau[:, self.force_dofs]
+        return np.linalg.norm(F, axis=1) / self.weight_N, np.linalg.norm(Y2[:, self.root_pos], axis=1)
+
+    def prepare(self, t, Y, Y1, Y2) -> None:
+        """Without bounds: take the peaks of this path (the first round's start, the plain spline) at the
+        quadrature points t (n,) [s], Y* (n, nq) as the bounds; with bounds: nothing."""
+        if self.bounds is None:
+            from solver.peak_bounds import PeakBounds
+
+            force, acc = self.peaks(t, Y, Y1, Y2)
+            self.bounds = PeakBounds(float(force.max()), float(acc.max()), float(force.max()), float(acc.max()))
+
+    def _excess(self, ctx):
+        """(motion, result, e (n, 2), unit directions dF (n, 3) of F and da (n, 3) of x'')."""
+        mo, res = ctx.forward(self.engine, self.tmap)
+        F = res.tau[:, self.force_dofs]
+        a = ctx.Y2[:, self.root_pos]
+        nF, na = np.linalg.norm(F, axis=1), np.linalg.norm(a, axis=1)
+        bF, ba = (np.inf, np.inf) if self.bounds is None else (self.bounds.ground_force_bw,
+                                                              self.bounds.pelvis_acceleration_ms2)
+        e = np.stack([np.maximum(nF / self.weight_N - bF, 0.0), np.maximum(na - ba, 0.0) / self.g], axis=1)
+        uF = F / np.where(nF > 0, nF, 1.0)[:, None]
+        ua = a / np.where(na > 0, na, 1.0)[:, None]
+        return mo, res, e, uF, ua
+
+    def _pull(self, ctx, mo, res, ge, uF, ua):
+        """(dY2 (n, nq), EngineGradient) of sum ge . e, ge (n, 2) (zero where e is 0)."""
+        g_tau = np.zeros(res.tau.shape)
+        g_tau[:, self.force_dofs] = (ge[:, 0] / self.weight_N)[:, None] * uF
+        dY2 = np.zeros(ctx.Y.shape)
+        dY2[:, self.root_pos] = (ge[:, 1] / self.g)[:, None] * ua
+        return dY2, EngineGradient(self.engine, res, mo, g_tau)
+
+    def evaluate_in(self, ctx, grad=True) -> TermEval:
+        """`Term.evaluate_in`: the force part's gradient left to the engine's reverse pass."""
+        mo, res, e, uF, ua = self._excess(ctx)
+        f = (e * e).sum(axis=1)
+        if not grad:
+            return TermEval(f)
+        dY2, deferred = self._pull(ctx, mo, res, 2.0 * e, uF, ua)
+        return TermEval(f, dY2=dY2, deferred=deferred)
+
+    def residual(self, ctx) -> Residual:
+        """r = (e_F, e_a) (n, 2) [body weights] (f = |r|^2); vector-Jacobian products through the
+        engine's reverse pass (force) and Y'' (acceleration); a hinge's derivative is 0 where it is 0."""
+        mo, res, e, uF, ua = self._excess(ctx)
+
+        def pull(g):
+            dY2, deferred = self._pull(ctx, mo, res, np.asarray(g) * (e > 0), uF, ua)
+            dY, dY1, dY2e = deferred.pullback()
+            return dY, dY1, dY2 if dY2e is None else dY2 + dY2e
+
+        return Residual(e, pull=pull)
+
+    def violation(self, Y: np.ndarray, t: np.ndarray | None = None) -> float | None:
+        """The largest excess over the bounds [body weights; the acceleration's in g]: max over the
+        samples of max(e_F, e_a), read at about VIOLATION_RATE; Y', Y'' by finite differences of the
+        samples (times: `t`, else even on `t_span`; None if unknown)."""
+        t = _sample_times(Y, t, self.t_span)
+        if t is None or len(Y) < 3 or self.bounds is None:
+            return None
+        Y1 = np.gradient(Y, t, axis=0, edge_order=2)
+        Y2 = np.gradient(Y1, t, axis=0, edge_order=2)
+        step = max(1, int(round((len(t) - 1) / max(t[-1] - t[0], 1e-12) / VIOLATION_RATE)))
+        sel = slice(None, None, step)
+        force, acc = self.peaks(t[sel], Y[sel], Y1[sel], Y2[sel])
+        return float(max(np.max(force) - self.bounds.ground_force_bw,
+                         (np.max(acc) - self.bounds.pelvis_acceleration_ms2) / self.g, 0.0))
