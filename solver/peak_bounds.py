@@ -120,17 +120,39 @@ def filter_capture(times: np.ndarray, qpos: np.ndarray, layout: StateLayout,
     return out
 
 
+def _series(model, frame_times, frames, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """|F| / (m g) [body weights], |x''| [m/s^2] and the flight flag (n,) each, of the natural cubic
+    spline through (frame_times, frames) at times t (n,): the figures of `solver.metrics.dynamics_series`
+    (flight: the root term's indicator phi > 0.5) at any times."""
+    from solver.figure import Figure
+    from solver.spline import interpolate
+    from solver.terms.dynamics import RootResidual, _free_joint, make_engine
+
+    Y, Y1, Y2 = (interpolate(frame_times, frames, t, nu) for nu in (0, 1, 2))
+    sites = Figure.from_model(model).contact_sites
+    engine = make_engine(model, tuple(sites))
+    root = RootResidual(model, sites=sites, engine=engine)
+    motion = root.tmap.motion(Y, Y1, Y2)
+    res = engine.forward(Y, motion.qvel, motion.qacc)
+    phi, _ = root.flight(res.sites[:, root.site_index])
+    weight = float(np.sum(model.body_mass) * np.linalg.norm(model.opt.gravity))
+    force = np.linalg.norm(res.tau[:, root.root_dofs[:3]], axis=1) / weight
+    adr = int(model.jnt_qposadr[_free_joint(model, root.layout)])
+    return force, np.linalg.norm(Y2[:, adr:adr + 3], axis=1), phi > 0.5
+
+
 def _peaks(model, frame_times, frames, window=None, flight_too: bool = False) -> tuple[float, float]:
     """(peak ground force [body weights], peak pelvis acceleration [m/s^2]) of the natural cubic spline
-    through (frame_times, frames), over samples in `window` = (t0, t1) (default all); with flight_too
+    through (frame_times, frames), at `RATE` samples per second and at the frame times (where the
+    spline's x'', linear between them, peaks), over `window` = (t0, t1) (default all); with flight_too
     the force peak is over every sample, not only those on the ground."""
-    from solver.metrics import dynamics_series
+    from solver.metrics import sample_times
 
-    s = dynamics_series(model, np.asarray(frame_times, float), np.asarray(frames, float), RATE)
-    keep = np.ones(len(s["t"]), bool) if window is None else (s["t"] >= window[0] - 1e-9) & (s["t"] <= window[1] + 1e-9)
-    on = keep if flight_too else keep & ~s["flight"]
-    force = np.linalg.norm(s["root_force"][on], axis=1) / s["body_weight_N"]
-    acc = np.linalg.norm(s["pelvis_acceleration"][keep], axis=1)
+    frame_times, frames = np.asarray(frame_times, float), np.asarray(frames, float)
+    t0, t1 = (frame_times[0], frame_times[-1]) if window is None else window
+    t = np.union1d(sample_times(t0, t1, RATE), frame_times[(frame_times >= t0) & (frame_times <= t1)])
+    force, acc, flight = _series(model, frame_times, frames, t)
+    force = force if flight_too else force[~flight]
     return (float(force.max()) if force.size else float("nan"), float(acc.max()) if acc.size else float("nan"))
 
 

@@ -77,13 +77,16 @@ def test_gradient_and_residual_match_central_differences(toy_model):
     t = np.linspace(0.0, 1.0, n)
     Y = random_qpos(rng, layout, n, spread=0.3)
     Y1, Y2 = rng.normal(size=Y.shape), 4.0 * rng.normal(size=Y.shape)
-    term = PeakForces(toy_model, PeakBounds(1.0, 5.0, 0.0, 0.0))
+    term = PeakForces(toy_model, PeakBounds(1.0, 9.0, 0.0, 0.0))
+    term.set_knots(np.array([0.0, 0.5, 1.0]))
+    term.prepare(t, Y, Y1, Y2)  # a knot slack at the points next to 0.5 s, fixed during the evaluations
+    assert np.any(term._slack_at(t) > 0)
     ev = term.evaluate(t, Y, Y1, Y2)
     r = term.residual(PathContext(t, Y, Y1, Y2))
     for col in r.r.T:  # each part above its bound at some points and within it at others
         assert np.any(col > 0) and np.any(col == 0), "the check checks nothing"
     np.testing.assert_allclose((r.r ** 2).sum(1), ev.f, rtol=1e-12)
-    for k, (grad, args) in enumerate(zip((ev.dY, ev.dY1, ev.dY2), ((0,), (1,), (2,)))):
+    for k, grad in enumerate((ev.dY, ev.dY1, ev.dY2)):
         def total(Z, k=k):
             moved = [Y, Y1, Y2]
             moved[k] = Z
@@ -174,3 +177,56 @@ def test_make_problem_carries_the_bounds_with_the_term(figure):
 
     assert ev.integrals["forces"] < RENORMALIZE_FLOOR  # zero up to rounding: eq. 7 leaves its scale at 1
     assert make_problem(model, keyframes, "unit,smooth", rate=100.0).force_bounds is None
+
+
+def test_the_summary_prints_the_bounds_and_marks_the_rows_above_them():
+    """The two bounded rows carry "<= B" in their label; a figure above B by more than 1 % and the printed
+    digit is marked "over bound" (with "worse" when also worse than the plain spline); within: unmarked."""
+    from types import SimpleNamespace
+
+    from runner.console import BOUND_LEGEND, OVER, WORSE, summary_table
+
+    base = {"max_penetration_mm": 0.0, "penetration_mm_by_site": {"l_toe": 0.0}, "max_norm_deviation": 0.0,
+            "max_hyperextension_deg": 0.0, "keyframe_error": 0.0, "rms_joint_torque_Nm": 100.0,
+            "peak_joint_torque_Nm": 150.0, "flight_s": 0.2, "rms_root_force_flight_N": 600.0,
+            "peak_root_force_flight_N": 700.0, "rms_root_torque_flight_Nm": 40.0, "peak_root_torque_flight_Nm": 70.0,
+            "rms_root_force_ground_bw": 1.1, "peak_root_force_ground_bw": 1.72, "peak_pelvis_acceleration_ms2": 5.9}
+    sol = SimpleNamespace(E_initial=1.0, E_final=0.5, integrals_initial={"forces": 0.0, "torque": 1.0},
+                          integrals_final={"forces": 0.1, "torque": 1.0}, initial=SimpleNamespace(count=8),
+                          frames=SimpleNamespace(n_variable=8), rounds=[1], n_evals=10, wall_time_s=1.0)
+    bounds = PeakBounds(2.54, 16.4, 1.72, 5.9, 2.54, 16.4)
+    opt = {**base, "peak_root_force_ground_bw": 2.56, "peak_pelvis_acceleration_ms2": 48.7}
+    lines = summary_table(base, opt, sol, {"forces": 1000.0}, force_bounds=bounds).splitlines()
+    pelvis = next(x for x in lines if x.startswith("peak pelvis acceleration [m/s^2] <= 16.4"))
+    force = next(x for x in lines if x.startswith("peak root force on ground [body wt] <= 2.54"))
+    assert pelvis.endswith(f"{WORSE}, {OVER}") and "forces" in pelvis
+    assert not force.endswith(OVER)  # 2.56 is within 1 % and 0.01 of 2.54
+    assert BOUND_LEGEND in lines and bounds.describe() in lines
+    within = {**base, "peak_root_force_ground_bw": 2.4}
+    text = summary_table(base, within, sol, {"forces": 1000.0}, force_bounds=bounds)
+    assert OVER not in text.replace(BOUND_LEGEND, "")
+    assert "<=" not in summary_table(base, opt, sol, {"torque": 1.0})  # no forces term: no bounds
+
+
+def test_knot_slack_reaches_the_kink_of_a_piecewise_linear_signal():
+    """x(t) piecewise linear with kinks at the knots (as the spline's x''): each knot's neighbouring
+    points carry |x(knot)| - |x(point)|, so |x| + slack is the kink's value there; far points carry 0."""
+    from solver.terms.force_bounds import knot_slack
+
+    knots = np.array([0.0, 0.1013, 0.2, 0.3])
+    h = 0.0025
+    t = np.arange(h / 2, 0.3, h)
+    peak = {0.0: 0.0, 0.1013: 5.0, 0.2: -2.0, 0.3: 1.0}
+
+    def x_of(s):
+        z = np.interp(s, knots, [peak[k] for k in knots])
+        return np.stack([z, 0.5 * z, np.zeros_like(z)], axis=1)
+
+    x = x_of(t)
+    slack = knot_slack(t, knots, (x, 2.0 * x))
+    norm = np.linalg.norm(x, axis=1)
+    for k in (0.1013, 0.2):
+        for near in (np.flatnonzero(t < k)[-1], np.flatnonzero(t > k)[0]):
+            assert norm[near] + slack[near, 0] == pytest.approx(np.linalg.norm(x_of(np.array([k]))[0]), rel=1e-9)
+            assert slack[near, 1] == pytest.approx(2.0 * slack[near, 0], rel=1e-9)
+    assert np.all(slack[np.abs(t - 0.15) < 0.02] == 0.0) and np.all(slack >= 0.0)
