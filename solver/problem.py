@@ -2,7 +2,8 @@
 
 Term names: penetration (eq. 12), unit (eq. 9 f1), bending (sec. 5), hinge and rom (sec. 5, docs/anatomy.md),
 smooth (covariant acceleration of every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
-are available, torque and root (sec. 6, appendix A). With a contact schedule (docs/contacts.md "The contact terms";
+are available, torque and root (sec. 6, appendix A) and forces (the peak ground force and pelvis acceleration
+within the plain spline's and the capture's, `solver.peak_bounds`; docs/dynamics.md). With a contact schedule (docs/contacts.md "The contact terms";
 `solver.contacts.Contact`s: site, start, end, surface): planted (feet on their surface and not sliding
 during a contact), clearance (swing feet keep 2 cm, every site min(2 cm, g T^2/8) in a flight of length T)
 - both on by default - and cone

@@ -19,7 +19,9 @@ from solver.terms import (
 from solver.terms.clearance import Clearance
 from solver.terms.contact import Planted
 from solver.terms.contact_wrench import FrictionCone
+from solver.peak_bounds import PeakBounds
 from solver.terms.dynamics import JointTorque, RootResidual
+from solver.terms.force_bounds import PeakForces
 
 from conftest import random_qpos
 
@@ -52,6 +54,7 @@ CASES = {
     "bending": (lambda m, lay: Hyperextension(lay, HINGES, tolerance=-0.3), 1.0),
     "torque": (lambda m, lay: JointTorque(m, weights={"l_knee": 2.0}), 1.0),
     "root": (lambda m, lay: RootResidual(m), 0.98),
+    "forces": (lambda m, lay: PeakForces(m, PeakBounds(1.0, 0.5, 0.0, 0.0)), 1.0),
 }
 
 
