@@ -165,7 +165,8 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
             and clearance terms (default none).
         plain: the plain spline's FrameSet, whose own joint angles the anatomical terms allow
             (`TermBuild.plain`; default none: the published ranges alone).
-        peaks: the forces term's `solver.peak_bounds.PeakBounds` (default: the plain spline's own).
+        peaks: the forces term's `solver.peak_bounds.PeakBounds` (default: the plain spline's own, with
+            `plain`; without either, the peaks of the path the solve starts from, `PeakForces.prepare`).
     Returns:
         Objective (scales 1; `solve` renormalizes if asked).
     Raises:
@@ -177,6 +178,10 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
     if margin is None:
         margin = CONTACT_MARGIN if contacts and weights.get("planted", 0) > 0 else MARGIN
     specs = [term_spec(name) for name in weights]
+    if peaks is None and plain is not None and weights.get("forces", 0) > 0:
+        from solver.peak_bounds import peak_bounds
+
+        peaks = peak_bounds(model, plain)  # the plain spline's own peaks (no capture)
     for spec in specs:
         if spec.contacts and not contacts:
             raise _needs_schedule(spec.name)
@@ -263,6 +268,10 @@ def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 40
     layout = StateLayout.from_model(model)
     t0, t1 = keyframes.times[0], keyframes.times[-1]
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    if peaks is None and weights.get("forces", 0) > 0:  # once, for both objectives below
+        from solver.peak_bounds import peak_bounds
+
+        peaks = peak_bounds(model, initial)
     objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, plain=initial, peaks=peaks)
     conflicts = keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe], path=initial.path)
     if conflicts.excuses:  # the contact terms built again, with what the keyframes excuse

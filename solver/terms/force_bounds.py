@@ -30,6 +30,8 @@ the least-squares back end.
 """
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass
+
 import numpy as np
 
 from solver.errors import InputError
@@ -40,13 +42,52 @@ from solver.terms.base import Residual, Term, TermEval
 from solver.terms.contact_schedule import _sample_times
 
 
+@dataclass(frozen=True)
+class PeakBounds:
+    """The largest ground force and pelvis acceleration one problem's optimized path may show.
+
+    Attributes:
+        ground_force_bw: bound on the root force |F| / (m g) [body weights]: the larger of the plain
+            spline's peak and the capture's peak on the ground.
+        pelvis_acceleration_ms2: bound on |x''| of the root [m/s^2], the larger of the two peaks.
+        plain_ground_force_bw: the plain spline's peak |F| / (m g) over all its samples (on the ground,
+            and in flight, where the root term asks for 0: so that the `forces` term is zero on the
+            plain spline and keeps its own units, eq. 7).
+        plain_pelvis_acceleration_ms2: the plain spline's peak [m/s^2].
+        capture_ground_force_bw, capture_pelvis_acceleration_ms2: the filtered capture's peaks on the
+            ground and over the keyframes' span, or None without a capture.
+        cutoff_hz: the capture filter's cutoff [Hz].
+    """
+
+    ground_force_bw: float
+    pelvis_acceleration_ms2: float
+    plain_ground_force_bw: float
+    plain_pelvis_acceleration_ms2: float
+    capture_ground_force_bw: float | None = None
+    capture_pelvis_acceleration_ms2: float | None = None
+    cutoff_hz: float = 6.0
+
+    def as_dict(self) -> dict:
+        """The fields as a JSON-ready dict."""
+        return asdict(self)
+
+    def describe(self) -> str:
+        """One line: the two bounds and where they come from."""
+        cap = ("no capture" if self.capture_ground_force_bw is None else
+               f"capture {self.capture_ground_force_bw:.2f} body wt, {self.capture_pelvis_acceleration_ms2:.1f} m/s^2 "
+               f"(filtered at {self.cutoff_hz:g} Hz)")
+        return (f"force bounds: ground {self.ground_force_bw:.2f} body wt, pelvis {self.pelvis_acceleration_ms2:.1f} "
+                f"m/s^2 = max(plain {self.plain_ground_force_bw:.2f} body wt, {self.plain_pelvis_acceleration_ms2:.1f} "
+                f"m/s^2; {cap})")
+
+
 class PeakForces(Term):
     """f = e_F^2 + e_a^2 [body weights^2]: root force and pelvis acceleration beyond their bounds (module
     docstring).
 
     Args:
         model: MjModel of the scene (a figure with a free root; gravity not zero).
-        bounds: `solver.peak_bounds.PeakBounds` (ground_force_bw [body weights], pelvis_acceleration_ms2
+        bounds: `PeakBounds` (`solver.peak_bounds.peak_bounds`: ground_force_bw [body weights], pelvis_acceleration_ms2
             [m/s^2]), or None: the peaks of the path the solve starts from (the plain spline), read at the
             quadrature points by the first `prepare` (until then the term is 0 and has no violation).
         engine: an inverse-dynamics engine (`solver.terms.dynamics.make_engine`) to share with the other
@@ -102,8 +143,6 @@ class PeakForces(Term):
         _, res = PathContext(t, Y, Y1, Y2).forward(self.engine, self.tmap)
         X = (res.tau[:, self.force_dofs] / self.weight_N, Y2[:, self.root_pos])
         if self.bounds is None:
-            from solver.peak_bounds import PeakBounds
-
             force, acc = (float(np.linalg.norm(x, axis=1).max()) for x in X)
             self.bounds = PeakBounds(force, acc, force, acc)
         self._slack = (np.array(t, float), knot_slack(np.asarray(t, float), self._knots, X))

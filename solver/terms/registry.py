@@ -63,8 +63,7 @@ class TermBuild:
             `ScheduleConflicts`), for the contact terms to leave out of their bounds; None: nothing.
         plain: the plain spline through the keyframes (a `FrameSet`), or None: the anatomical terms
             allow what it shows (`plain_samples`; docs/anatomy.md).
-        peaks: the problem's `solver.peak_bounds.PeakBounds` for the forces term, or None: computed from
-            the plain spline alone on first use (`force_bounds`).
+        peaks: the problem's `PeakBounds` for the forces term (`solver.peak_bounds`), or None.
     """
 
     def __init__(self, model, t_span, margin: float, contacts, forces: bool, conflicts=None, plain=None,
@@ -91,12 +90,9 @@ class TermBuild:
 
     @property
     def force_bounds(self):
-        """The forces term's `PeakBounds`: the given `peaks`, else the plain spline's own (no capture),
-        else None (the term then reads them on the path the solve starts from, `PeakForces.prepare`)."""
-        if self._peaks is None and self.plain is not None:
-            from solver.peak_bounds import peak_bounds
-
-            self._peaks = peak_bounds(self.model, self.plain)
+        """The forces term's `PeakBounds` (`solver.problem.figure_objective` computes them from the plain
+        spline when it is given and no bounds are), or None: the term then reads them on the path the
+        solve starts from (`PeakForces.prepare`)."""
         return self._peaks
 
     @property

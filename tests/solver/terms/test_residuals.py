@@ -7,6 +7,7 @@ import pytest
 from solver.contacts import Contact
 from solver.layout import StateLayout
 from solver.path_context import PathContext
+from solver.peak_bounds import PeakBounds
 from solver.terms import (
     CovariantAcceleration,
     Hyperextension,
@@ -19,7 +20,6 @@ from solver.terms import (
 from solver.terms.clearance import Clearance
 from solver.terms.contact import Planted
 from solver.terms.contact_wrench import FrictionCone
-from solver.peak_bounds import PeakBounds
 from solver.terms.dynamics import JointTorque, RootResidual
 from solver.terms.force_bounds import PeakForces
 
