@@ -34,7 +34,9 @@ from solver.terms.base import Term
 #: and 14-50 % more evaluations; at 100 none did, at 4 % more evaluations than without the terms
 #: (docs/anatomy.md).
 #: forces: zero on the plain spline (its bounds allow the plain spline's peaks), so not renormalized:
-#: the weight is in 1 / (body weight^2 s) (docs/dynamics.md "Forces a body can make").
+#: the weight is in 1 / (body weight^2 s) (docs/dynamics.md). Chosen on two tuning clips with --terms all
+#: (run-and-step; 35_17 keyed every 0.25 s): at 1000 both end within both bounds after one or two boosts;
+#: at 10^4 and 10^5 run-and-step also needed boosts of penetration and clearance, and more evaluations.
 FORCES_WEIGHT = 1000.0
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
                    "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0,
