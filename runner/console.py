@@ -21,7 +21,8 @@ _DYNAMICS = [
     ("RMS root torque in flight [N m]", "rms_root_torque_flight_Nm", "{:.1f}", 0.1),
     ("peak root torque in flight [N m]", "peak_root_torque_flight_Nm", "{:.1f}", 0.1),
 ]
-#: with the dynamics terms (`--terms all`): what the root term's price is paid in
+#: with the dynamics terms (`--terms all`): what the root term's price is paid in (the two peaks are the
+#: forces term's, printed with its bound: `solver.peak_bounds`)
 _DYNAMICS_TERMS_ROWS = [
     ("peak pelvis acceleration [m/s^2]", "peak_pelvis_acceleration_ms2", "{:.1f}", 0.1),
     ("RMS root force on ground [body wt]", "rms_root_force_ground_bw", "{:.2f}", 0.01),
@@ -33,6 +34,11 @@ FLIGHT_CHANGE = 0.2
 WORSE = "worse"
 LEGEND = (f"{WORSE}: the optimized path is worse than the plain spline there (higher by > 1% and the row's "
           f"last printed digit; flight: changed by > {FLIGHT_CHANGE:.0%})")
+OVER = "over bound"
+#: the rows the forces term bounds: {metrics key: `solver.peak_bounds.PeakBounds` field}
+BOUNDED_ROWS = {"peak_pelvis_acceleration_ms2": "pelvis_acceleration_ms2", "peak_root_force_ground_bw": "ground_force_bw"}
+BOUND_LEGEND = (f"<= B: the forces term's bound on the row (the larger of the plain spline's and the capture's "
+                f"filtered peak); {OVER}: the optimized path is above it by > 1% and the row's last printed digit")
 
 
 #: the motion rows (the summary's feet rows and the motion-metrics table against the capture): the
@@ -100,7 +106,17 @@ def is_worse(plain: float, opt: float, atol: float | None, fmt: str) -> bool:
     return b > a * 1.01 + atol
 
 
-def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False) -> list[tuple]:
+def _bound_mark(worse: bool, value: float, bound: float | None, atol: float, fmt: str) -> bool | str:
+    """The last column of a bounded row: `OVER` (with `WORSE` if also worse) when `value` is above
+    `bound` by more than 1 % and `atol` (and prints differently), else `worse` as it is."""
+    if bound is None or not np.isfinite(float(value)) or fmt.format(value) == fmt.format(bound):
+        return worse
+    if float(value) > float(bound) * 1.01 + atol:
+        return f"{WORSE}, {OVER}" if worse else OVER
+    return worse
+
+
+def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False, bounds=None) -> list[tuple]:
     """The acceptance figures of two `path_metrics`, plain spline and optimized, each marked when the
     optimized path is worse.
 
@@ -108,10 +124,13 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False) -> lis
         plain, opt: `solver.metrics.path_metrics` of the two paths.
         dynamics_terms: also the rows that matter with the dynamics terms (pelvis acceleration, root
             force on the ground in body weights).
+        bounds: the forces term's `solver.peak_bounds.PeakBounds`, or None: its two rows (`BOUNDED_ROWS`)
+            then print the bound in the label ("<= B") and are marked `OVER` above it.
     Returns:
-        list of (label, plain value, optimized value, format, worse: bool), rows whose key is missing
-        from either dict left out. Worse: for every figure but flight, higher by more than 1% (and a
-        per-row round-off tolerance); for flight, changed by more than FLIGHT_CHANGE (the gait).
+        list of (label, plain value, optimized value, format, mark), rows whose key is missing from
+        either dict left out; mark: worse (bool), or a text (`OVER`, "worse, over bound"). Worse: for
+        every figure but flight, higher by more than 1% (and a per-row round-off tolerance); for
+        flight, changed by more than FLIGHT_CHANGE (the gait).
     """
     specs = [("max penetration [mm] (1000 Hz)", "max_penetration_mm", "{:.2f}", 0.01)]
     rows = []
@@ -128,7 +147,11 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False) -> lis
             a, b = plain[key], opt[key]
         else:
             continue
-        rows.append((label, a, b, fmt, is_worse(a, b, atol, fmt)))
+        mark = is_worse(a, b, atol, fmt)
+        if bounds is not None and key in BOUNDED_ROWS:
+            bound = float(getattr(bounds, BOUNDED_ROWS[key]))
+            label, mark = f"{label} <= {cell(fmt, bound)}", _bound_mark(mark, b, bound, atol, fmt)
+        rows.append((label, a, b, fmt, mark))
     return rows
 
 
@@ -148,6 +171,7 @@ TERM_ROWS = {
     "planted": ("float in contact", "skate in contact", "skate, PhysDiff", "skating ratio"),
     "clearance": ("flight (all feet clear)", "flight time", "flight phase error"),
     "cone": ("RMS friction-cone residual", "peak friction-cone residual"),
+    "forces": ("peak pelvis acceleration", "peak root force on ground"),
 }
 TARGET_LEGEND = ("target: the chosen term that penalizes the row's figure; rows without one are not "
                  "optimized for, and the optimizer may trade them away")
@@ -206,7 +230,7 @@ def format_rows(rows, targets: dict | None = None) -> list[str]:
     rule = "-" * (w + 28 + tw + len(WORSE) + 2)
     lines = [head.rstrip(), rule]
     for label, a, b, fmt, *flag in rows:
-        mark = f"  {WORSE}" if flag and flag[0] else ""
+        mark = f"  {flag[0] if isinstance(flag[0], str) else WORSE}" if flag and flag[0] else ""
         target = f"  {(targets or {}).get(label, ''):<{tw - 2}}" if tw else ""
         line = f"{label:{w}}{cell(fmt, a):>14}{cell(fmt, b):>14}"
         lines.append((line + target).rstrip() if not mark else line + target + mark)
@@ -215,7 +239,7 @@ def format_rows(rows, targets: dict | None = None) -> list[str]:
 
 
 def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None,
-                  contact_rows=()) -> str:
+                  contact_rows=(), force_bounds=None) -> str:
     """Plain spline vs optimized, the acceptance figures, as a text table; a "target" column names the
     chosen terms that penalize each row's figure (`row_targets`), and a figure on which the optimized
     path is worse is marked "worse" in a last column (`comparison_rows`), with legend lines. A figure
@@ -226,8 +250,11 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
             chosen. final_weights: {term: weight} at the end (penalty continuation raises some).
         contact_rows: (label, plain, optimized, format[, worse]) rows about the feet, printed after
             penetration (`runner.run.contact_summary_rows`, marked by `motion_worse`).
+        force_bounds: the problem's `solver.peak_bounds.PeakBounds` (with the forces term), or None:
+            printed with the two rows it bounds (`comparison_rows`) and described under the table.
     """
-    rows = comparison_rows(plain, opt, dynamics_terms=bool({"torque", "root"} & set(weights)))
+    rows = comparison_rows(plain, opt, dynamics_terms=bool({"torque", "root", "forces"} & set(weights)),
+                           bounds=force_bounds)
     n_pen = 1 + len(plain["penetration_mm_by_site"])  # the feet rows go after the penetration rows
     rows[n_pen:n_pen] = list(contact_rows)
     rows.append(("objective E", solution.E_initial, solution.E_final, "{:.5g}"))
@@ -238,6 +265,8 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
     rows += extra
     lines = format_rows(rows, row_targets([r[0] for r in rows], weights, plain["penetration_mm_by_site"]))
     lines.append(LEGEND)
+    if force_bounds is not None:
+        lines += [BOUND_LEGEND, force_bounds.describe()]
     if contact_rows:
         lines.append("feet rows: " + MOTION_LEGEND)
     lines.append(TARGET_LEGEND)

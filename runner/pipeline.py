@@ -239,7 +239,8 @@ def clip_problem(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=pri
 
     cs, ref, model, keyframes, info = clip_keyframes(clip, out_dir, o, paths, say)
     contacts = tuple(info.contacts or ())
-    problem = make_problem(model, keyframes, o.terms, dict(o.weights or {}), contacts, o.rate)
+    problem = make_problem(model, keyframes, o.terms, dict(o.weights or {}), contacts, o.rate,
+                           capture=(ref.times, ref.qpos))
     return problem, Source(Path(cs.scene_path), ref, contacts, label=str(clip)), cs
 
 

@@ -102,8 +102,9 @@ def file_problem(keyframes_path, scene=None, terms: str | None = None, weights: 
     keyframes, info, model, _, scene_path = load_problem(keyframes_path, scene)
     contacts = tuple(getattr(info, "contacts", ()) or ())
     chosen = file_terms(keyframes_path, info, terms, weights or {}, contacts)
-    problem = make_problem(model, keyframes, ",".join(chosen), chosen, contacts, rate)
     reference = find_reference(info, model, quiet=quiet)
+    capture = None if reference is None else (reference.times, reference.qpos)  # the forces term's bounds
+    problem = make_problem(model, keyframes, ",".join(chosen), chosen, contacts, rate, capture=capture)
     metric_contacts = contacts
     if reference is not None and not contacts:
         from solver.contacts import reference_contacts

@@ -124,6 +124,8 @@ def run_metrics(problem: Problem, solution: Solution, source: Source) -> dict:
                for name, fs in (("plain", solution.initial), ("optimized", solution.frames))}
     if source.reference is not None:
         metrics["motion"] = reference_motion_metrics(model, solution, source.reference, source.metric_contacts)
+    if problem.force_bounds is not None:  # the forces term's bounds (solver.peak_bounds)
+        metrics["force_bounds"] = problem.force_bounds.as_dict()
     return metrics
 
 
@@ -231,7 +233,7 @@ def report(run: Run) -> str:
     motion = run.metrics.get("motion")
     rows = contact_summary_rows(motion, run.solution.objective, run.solution)
     lines = [summary_table(run.metrics["plain"], run.metrics["optimized"], run.solution, dict(run.problem.weights),
-                           dict(run.solution.weights), contact_rows=rows)]
+                           dict(run.solution.weights), contact_rows=rows, force_bounds=run.problem.force_bounds)]
     ref = run.source.reference
     if ref is not None:
         from runner.mocap.contacts import worst_contact_distance

@@ -313,6 +313,8 @@ class Objective:
         basis = self.basis(knots)
         Y, Y1, Y2 = basis.evaluate(P, (0, 1, 2))
         for term in terms:
+            if hasattr(term, "set_knots"):  # a term that reads the spline's knots (`PeakForces`)
+                term.set_knots(knots)
             term.prepare(basis.t, Y, Y1, Y2)
 
     def knot_times(self) -> np.ndarray:
@@ -349,11 +351,13 @@ class Objective:
         """Set each term's scale to its integral on the path (knots, P): paper eq. 7.
 
         Call once on the initial (plain spline) path and keep the scales through subdivision, so the
-        objective stays the same function. Terms that are zero there keep scale 1.
+        objective stays the same function. Terms that are zero there keep scale 1, and so do terms
+        whose weight is absolute (a term's `renormalized` False: a bound, zero there up to rounding).
 
         Returns:
             {term name: scale}.
         """
         ints = self.evaluate(knots, P, grad=False).integrals
-        self.scales = np.array([ints[n] if ints[n] > RENORMALIZE_FLOOR else 1.0 for n in self.names])
+        self.scales = np.array([ints[n] if ints[n] > RENORMALIZE_FLOOR and getattr(term, "renormalized", True)
+                                else 1.0 for n, term in zip(self.names, self.terms)])
         return dict(zip(self.names, self.scales.tolist()))

@@ -2,7 +2,8 @@
 
 Term names: penetration (eq. 12), unit (eq. 9 f1), bending (sec. 5), hinge and rom (sec. 5, docs/anatomy.md),
 smooth (covariant acceleration of every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
-are available, torque and root (sec. 6, appendix A). With a contact schedule (docs/contacts.md "The contact terms";
+are available, torque and root (sec. 6, appendix A) and forces (the peak ground force and pelvis acceleration
+within the plain spline's and the capture's, `solver.peak_bounds`; docs/dynamics.md). With a contact schedule (docs/contacts.md "The contact terms";
 `solver.contacts.Contact`s: site, start, end, surface): planted (feet on their surface and not sliding
 during a contact), clearance (swing feet keep 2 cm, every site min(2 cm, g T^2/8) in a flight of length T)
 - both on by default - and cone
@@ -148,7 +149,7 @@ MARGIN, CONTACT_MARGIN = 0.005, 0.002
 
 def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rate: float = 400.0,
                      margin: float | None = None, contacts=(), conflicts: ScheduleConflicts | None = None,
-                     plain=None) -> Objective:
+                     plain=None, peaks=None) -> Objective:
     """The objective for a figure in a scene.
 
     Args:
@@ -164,6 +165,8 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
             and clearance terms (default none).
         plain: the plain spline's FrameSet, whose own joint angles the anatomical terms allow
             (`TermBuild.plain`; default none: the published ranges alone).
+        peaks: the forces term's `solver.peak_bounds.PeakBounds` (default: the plain spline's own, with
+            `plain`; without either, the peaks of the path the solve starts from, `PeakForces.prepare`).
     Returns:
         Objective (scales 1; `solve` renormalizes if asked).
     Raises:
@@ -175,6 +178,10 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
     if margin is None:
         margin = CONTACT_MARGIN if contacts and weights.get("planted", 0) > 0 else MARGIN
     specs = [term_spec(name) for name in weights]
+    if peaks is None and plain is not None and weights.get("forces", 0) > 0:
+        from solver.peak_bounds import peak_bounds
+
+        peaks = peak_bounds(model, plain)  # the plain spline's own peaks (no capture)
     for spec in specs:
         if spec.contacts and not contacts:
             raise _needs_schedule(spec.name)
@@ -182,7 +189,7 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
     # by every term that reads it: the `PathContext` runs its forward pass once per evaluation and the
     # objective its reverse pass once for the sum of the terms' gradients
     build = TermBuild(model, (float(t0), float(t1)), margin, contacts, forces=any(s.forces for s in specs),
-                      conflicts=conflicts, plain=plain)
+                      conflicts=conflicts, plain=plain, peaks=peaks)
     terms = [build_term(spec, build) for spec in specs]
     return Objective(terms, np.array([weights[s.name] for s in specs], float), t0, t1, rate)
 
@@ -240,7 +247,7 @@ def _clearance_conflicts(term, times, qpos, path) -> ScheduleConflicts:
     return got.with_found(("clearance", k, site, d) for (k, site), d in sorted(found.items()))
 
 
-def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 400.0, contacts=()):
+def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 400.0, contacts=(), peaks=None):
     """The objective and the plain spline's frames for keyframes of a figure, with the keyframes that
     contradict the contact schedule found (`keyframe_conflicts`) and the contact terms built with what
     they excuse: what `solver.animate`, the command line and the benchmarks solve.
@@ -248,7 +255,8 @@ def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 40
     Args:
         model: MjModel of the scene. weights: {term: lambda_j} (`parse_terms`). keyframes: Keyframes
             (values (k, nq), times (k,) [s]). rate: quadrature points per second. contacts: the
-            schedule (`ContactSchedule`, or contacts).
+            schedule (`ContactSchedule`, or contacts). peaks: the forces term's `PeakBounds` (default:
+            the plain spline's own).
     Returns:
         (objective, initial, conflicts): Objective, FrameSet (the plain spline's frames), and the
         `keyframe_conflicts` value (`ScheduleConflicts`; `.found` lists the conflicts).
@@ -260,11 +268,15 @@ def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 40
     layout = StateLayout.from_model(model)
     t0, t1 = keyframes.times[0], keyframes.times[-1]
     initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
-    objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, plain=initial)
+    if peaks is None and weights.get("forces", 0) > 0:  # once, for both objectives below
+        from solver.peak_bounds import peak_bounds
+
+        peaks = peak_bounds(model, initial)
+    objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, plain=initial, peaks=peaks)
     conflicts = keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe], path=initial.path)
     if conflicts.excuses:  # the contact terms built again, with what the keyframes excuse
         objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, conflicts=conflicts,
-                                     plain=initial)
+                                     plain=initial, peaks=peaks)
     return objective, initial, conflicts
 
 
@@ -297,6 +309,9 @@ class Problem:
         conflicts: `ScheduleConflicts` (`keyframe_conflicts`): what keyframes contradict in the contact
             schedule, excused from the bounds; its `found`: ((kind, keyframe index, site, distance [m]), ...).
         figure: the model's `solver.figure.Figure` (contact sites, feet, flexion axes, segments, masses).
+        force_bounds: the forces term's `solver.peak_bounds.PeakBounds` (peak ground force and pelvis
+            acceleration: the larger of the plain spline's and the filtered capture's), or None when the
+            term is not chosen.
     """
 
     model: object = field(repr=False)
@@ -309,6 +324,7 @@ class Problem:
     initial: object = field(repr=False)
     conflicts: ScheduleConflicts = field(default_factory=ScheduleConflicts)
     figure: object = field(default=None, repr=False)
+    force_bounds: object = None
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -317,7 +333,8 @@ class Problem:
 
 
 def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | None = None,
-                 weights: dict[str, float] | None = None, contacts=(), rate: float | None = None) -> Problem:
+                 weights: dict[str, float] | None = None, contacts=(), rate: float | None = None,
+                 capture=None) -> Problem:
     """The one factory of a figure's `Problem`, from what the command line and the Python API have.
 
     Args:
@@ -329,6 +346,9 @@ def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | No
             the term on.
         contacts: the contact schedule (`solver.contacts.Contact`s), e.g. a keyframe file's.
         rate: quadrature points per second [1/s]; default `solver.animate.DEFAULT_RATE` (400).
+        capture: None, or (times (n,) [s] on the keyframes' clock, qpos (n, nq)): the retargeted motion
+            capture the keyframes were made from, whose filtered peaks join the forces term's bounds
+            (`solver.peak_bounds`; only read when the term is chosen).
     Returns:
         Problem.
     Raises:
@@ -350,8 +370,16 @@ def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | No
         raise InputError(f"rate must be > 0 quadrature points per second, got {rate}")
     contacts = ContactSchedule.of(contacts or ())  # checked once; a file's schedule keeps its labels
     chosen = parse_terms(terms, weights, contacts)
-    objective, initial, conflicts = figure_problem(model, chosen, keyframes, rate=rate, contacts=contacts)
+    peaks = None
+    if chosen.get("forces", 0) > 0:
+        from solver.frames import FrameSet
+        from solver.peak_bounds import peak_bounds
+
+        plain = FrameSet.from_keyframes(keyframes, StateLayout.from_model(model).quat_slots)
+        peaks = peak_bounds(model, plain, capture)
+    objective, initial, conflicts = figure_problem(model, chosen, keyframes, rate=rate, contacts=contacts,
+                                                   peaks=peaks)
     from solver.figure import Figure
 
     return Problem(model, keyframes, contacts, MappingProxyType(dict(chosen)), default_limits(chosen), rate,
-                   objective, initial, conflicts, Figure.from_model(model))
+                   objective, initial, conflicts, Figure.from_model(model), peaks)

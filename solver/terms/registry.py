@@ -33,12 +33,22 @@ from solver.terms.base import Term
 #: at 10 the tuning clips (run-and-step, 127_33, 16_23, 35_17 keyed every 0.25 s) needed a penalty boost
 #: and 14-50 % more evaluations; at 100 none did, at 4 % more evaluations than without the terms
 #: (docs/anatomy.md).
+#: forces: zero on the plain spline (its bounds allow the plain spline's peaks), so not renormalized:
+#: the weight is in 1 / (body weight^2 s) (docs/dynamics.md). Chosen on two tuning clips with --terms all
+#: (run-and-step; 35_17 keyed every 0.25 s): at 1000 both end within both bounds after one or two boosts;
+#: at 10^4 and 10^5 run-and-step also needed boosts of penetration and clearance, and more evaluations.
+FORCES_WEIGHT = 1000.0
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
-                   "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0}
+                   "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0,
+                   "forces": FORCES_WEIGHT}
 #: Penalty-continuation bounds of the anatomical terms [rad] (their `TermSpec.limit`): rotation off the
 #: hinge beyond the allowance (acceptance: the capture's + 3 deg; the allowance is 2 deg) and angle
 #: beyond the range of motion (docs/anatomy.md).
 ANATOMY_LIMITS = {"hinge": float(np.radians(0.5)), "rom": float(np.radians(1.0))}
+#: Penalty-continuation bound of the forces term: excess over its bounds in body weights (the
+#: acceleration's in g): 1 % of body weight (7 N for 70 kg), 0.1 m/s^2, within the summary's mark
+#: (over the bound by 1 % and the printed digit).
+FORCES_LIMIT = 0.01
 
 
 class TermBuild:
@@ -55,14 +65,16 @@ class TermBuild:
             `ScheduleConflicts`), for the contact terms to leave out of their bounds; None: nothing.
         plain: the plain spline through the keyframes (a `FrameSet`), or None: the anatomical terms
             allow what it shows (`plain_samples`; docs/anatomy.md).
+        peaks: the problem's `PeakBounds` for the forces term (`solver.peak_bounds`), or None.
     """
 
-    def __init__(self, model, t_span, margin: float, contacts, forces: bool, conflicts=None, plain=None):
+    def __init__(self, model, t_span, margin: float, contacts, forces: bool, conflicts=None, plain=None,
+                 peaks=None):
         from solver.figure import Figure
 
         self.model, self.layout, self.figure = model, StateLayout.from_model(model), Figure.from_model(model)
         self.t_span, self.margin, self.contacts, self.forces = t_span, float(margin), contacts, forces
-        self.conflicts, self.plain = conflicts, plain
+        self.conflicts, self.plain, self._peaks = conflicts, plain, peaks
         self._engine = None
         self._plain_samples = None
 
@@ -77,6 +89,13 @@ class TermBuild:
 
             self._plain_samples = plain_samples(self.plain)
         return self._plain_samples
+
+    @property
+    def force_bounds(self):
+        """The forces term's `PeakBounds` (`solver.problem.figure_objective` computes them from the plain
+        spline when it is given and no bounds are), or None: the term then reads them on the path the
+        solve starts from (`PeakForces.prepare`)."""
+        return self._peaks
 
     @property
     def engine(self):
@@ -185,7 +204,8 @@ def build_term(spec: TermSpec, build: TermBuild) -> Term:
 
 def _register_builtins() -> None:
     """The figure's terms: sec. 5 (penetration, unit, bending, smooth, and the anatomical limits hinge and
-    rom: docs/anatomy.md), sec. 6 (torque, root) and the contact terms (planted, clearance, cone;
+    rom: docs/anatomy.md), sec. 6 (torque, root, and forces: the peaks
+    they may ask of the body, docs/dynamics.md) and the contact terms (planted, clearance, cone;
     docs/contacts.md "The contact terms")."""
     from solver.terms.anatomy import Hinge, RangeOfMotion
     from solver.terms.bending import Hyperextension
@@ -194,6 +214,7 @@ def _register_builtins() -> None:
     from solver.terms.contact_wrench import FrictionCone
     from solver.terms.covariant import CovariantAcceleration
     from solver.terms.dynamics import JointTorque, RootResidual
+    from solver.terms.force_bounds import PeakForces
     from solver.terms.penetration import Penetration
     from solver.terms.unit import UnitQuaternion
 
@@ -214,6 +235,8 @@ def _register_builtins() -> None:
                   default=True, limit=ANATOMY_LIMITS["rom"])
     register_term("torque", lambda b: JointTorque(b.model, engine=b.engine), w["torque"], forces=True)
     register_term("root", lambda b: RootResidual(b.model, engine=b.engine), w["root"], forces=True)
+    register_term("forces", lambda b: PeakForces(b.model, b.force_bounds, engine=b.engine, t_span=b.t_span),
+                  w["forces"], forces=True, limit=FORCES_LIMIT)
     register_term("planted", lambda b: Planted(b.model, b.contacts, rest_height=b.margin, t_span=b.t_span,
                                                engine=b.engine, conflicts=b.conflicts),
                   w["planted"], contacts=True, default=True)

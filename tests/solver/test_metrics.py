@@ -244,10 +244,16 @@ def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms)
     assert opt["rms_joint_torque_Nm"] < plain["rms_joint_torque_Nm"]
     # ... without ending the flight phases (the figure still runs: 0.23 s vs the plain 0.25 s)
     assert opt["flight_s"] >= 0.5 * plain["flight_s"]
+    # ... and without forces the body does not make: within the forces term's bounds (docs/dynamics.md),
+    # to the summary's "over bound" margin (1 % and the printed digit)
+    bounds = metrics["force_bounds"]
+    assert bounds["capture_ground_force_bw"] is not None  # the keyframe file names its clip
+    assert opt["peak_pelvis_acceleration_ms2"] <= 1.01 * bounds["pelvis_acceleration_ms2"] + 0.1
+    assert opt["peak_root_force_ground_bw"] <= 1.01 * bounds["ground_force_bw"] + 0.01
     opts = json.loads(str(z["options_json"]))
     # "all" with the file's contact schedule: the dynamics terms, the contact terms and the cone
     assert set(opts["weights"]) == {"penetration", "unit", "bending", "smooth", "hinge", "rom", "torque", "root",
-                                    "planted", "clearance", "cone"}
+                                    "forces", "planted", "clearance", "cone"}
 
 
 @pytest.mark.slow

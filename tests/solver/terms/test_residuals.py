@@ -7,6 +7,7 @@ import pytest
 from solver.contacts import Contact
 from solver.layout import StateLayout
 from solver.path_context import PathContext
+from solver.peak_bounds import PeakBounds
 from solver.terms import (
     CovariantAcceleration,
     Hyperextension,
@@ -20,6 +21,7 @@ from solver.terms.clearance import Clearance
 from solver.terms.contact import Planted
 from solver.terms.contact_wrench import FrictionCone
 from solver.terms.dynamics import JointTorque, RootResidual
+from solver.terms.force_bounds import PeakForces
 
 from conftest import random_qpos
 
@@ -52,6 +54,7 @@ CASES = {
     "bending": (lambda m, lay: Hyperextension(lay, HINGES, tolerance=-0.3), 1.0),
     "torque": (lambda m, lay: JointTorque(m, weights={"l_knee": 2.0}), 1.0),
     "root": (lambda m, lay: RootResidual(m), 0.98),
+    "forces": (lambda m, lay: PeakForces(m, PeakBounds(1.0, 0.5, 0.0, 0.0)), 1.0),
 }
 
 
