@@ -230,3 +230,22 @@ def stance_agreement(schedule_mask: np.ndarray, capture_mask: np.ndarray) -> Sta
     feet = tuple((_ratio(both[:, f].sum(), c[:, f].sum()), _ratio(both[:, f].sum(), s[:, f].sum()))
                  for f in range(s.shape[1]))
     return StanceAgreement(_ratio(both.sum(), c.sum()), _ratio(both.sum(), s.sum()), feet, int(c.sum()), int(s.sum()))
+
+
+def schedule_agreement(model, qpos: np.ndarray, frame_time: float, contacts) -> StanceAgreement:
+    """A contact schedule judged against the stance of the motion it was made for: `stance_agreement` of
+    `schedule_stance(contacts, frame times)` and `capture_stance(model, qpos, frame_time)`.
+
+    Args:
+        model: the scene's MjModel. qpos: (n, nq) the motion (a reference), frame i at i * frame_time [s].
+        contacts: `Contact`s or a `ContactSchedule` on the same time axis.
+    Returns:
+        StanceAgreement.
+    Raises:
+        InputError: as `capture_stance`, or a contact names a site no foot has.
+    """
+    from solver.figure import Figure
+
+    stance = capture_stance(model, qpos, frame_time)
+    times = np.arange(len(stance)) * float(frame_time)
+    return stance_agreement(schedule_stance(contacts, times, Figure.from_model(model).feet), stance)
