@@ -360,6 +360,9 @@ def fit_contacts(times: np.ndarray, site_pos: np.ndarray, sites: Sequence[str] =
         ks = [list(sites).index(s) for s in members if s in sites]
         if ks:
             h[:, ks] = site_pos[:, ks, 2] - site_pos[:, ks, 2].min(axis=1, keepdims=True)
+    # per site (feet=None): heights here are above the foot's lowest site, which is always at 0, so a
+    # still site is a rest by itself; the lowest site's own speed says nothing about where it rests
+    thresholds.setdefault("feet", None)
     found = detect_contacts(times, site_pos, h, sites, **thresholds)
     falling = []
     for c in found:

@@ -114,7 +114,6 @@ def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict) -> SoleFit
     Raises:
         InputError: the figure lacks a contact site, or the feet never rest (nothing to fit a scene to).
     """
-    from solver.contacts import site_positions
     from solver.scene_fit import fit_contacts, fit_scene
 
     figure = Figure.from_model(model)
