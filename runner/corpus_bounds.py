@@ -157,6 +157,8 @@ def _off_hinge_excess(doc: dict) -> float | None:
 #: reference's frames (`runner.run.reference_motion_metrics`), float and skate over the schedule's contacts.
 FIGURES: dict[str, Callable[[dict], float | None]] = {
     "penetration_mm": _at("metrics", "optimized", "max_penetration_mm"),
+    "stance_recall": _at("stance_agreement", "recall"),
+    "stance_precision": _at("stance_agreement", "precision"),
     "capture_penetration_mm": _at(*_M, "plain", "reference", "penetration_mm", "max"),
     "keyframe_error": _at("metrics", "optimized", "keyframe_error"),
     # float on the schedule's contacts; the capture's stance mask plugs in here when the motion metrics

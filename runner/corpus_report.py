@@ -97,6 +97,20 @@ def _cause(name: str, conflicts: int) -> str:
     return f"{name} ({conflicts})" if name == "keyframes contradict the schedule" else name
 
 
+def stance_lines(results: Sequence[dict]) -> list[str]:
+    """Per clip, the contact schedule's recall and precision of the capture's stance frames
+    (`runner.mocap.stance.schedule_agreement`; the schedule is the clip's, whatever the keying)."""
+    seen = {}
+    for r in results:
+        f = r["figures"]
+        if "stance_recall" in f and "stance_precision" in f:
+            seen.setdefault(Path(r["clip"]).stem, (f["stance_recall"], f["stance_precision"]))
+    if not seen:
+        return []
+    return ["Contact schedule against the capture's stance (recall / precision of stance frames): "
+            + ", ".join(f"{c} {rc:.3f} / {pr:.3f}" for c, (rc, pr) in sorted(seen.items())) + "."]
+
+
 def markdown_report(results: Sequence[dict], rates: dict, meta: dict) -> str:
     """The whole report: a line on the run, the pass rates of both sets, then per set the pair table and
     the failing pairs, then the bounds' limits and the cause categories."""
@@ -116,5 +130,6 @@ def markdown_report(results: Sequence[dict], rates: dict, meta: dict) -> str:
         lines += ["", f"## {SET_TITLES[s]}: {', '.join(clips)}", "", *pair_table(rs), ""]
         failing = failing_lines(rs)
         lines += ["Failing pairs:", "", *(failing or ["- none"])]
+        lines += ["", *stance_lines(rs)]
     lines += ["", "Causes: " + "; ".join(f"*{k}*: {v}" for k, v in CAUSES.items()) + f"; *{NOT_TOLD}*: none of these."]
     return "\n".join(lines) + "\n"

@@ -335,6 +335,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "max_penetration_mm": run.metrics["optimized"]["max_penetration_mm"],
         "keyframe_error": run.metrics["optimized"].get("keyframe_error"),
         "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
+        "stance_agreement": _agreement(problem, ref),
         "keyframe_conflicts": len(problem.conflicts.found), "stalled": dict(run.solution.stalled or {}),
         "metrics": run.metrics, "scene_fitted": fitted, "outputs": {k: str(v) for k, v in paths.items()},
     }
@@ -348,3 +349,10 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     return result
 
 
+def _agreement(problem, ref) -> dict:
+    """The contact schedule's recall and precision of the capture's stance frames (runner/mocap/stance.py)."""
+    from runner.mocap.stance import schedule_agreement
+
+    a = schedule_agreement(problem.model, ref.qpos, ref.frame_time, problem.contacts)
+    return {"recall": a.recall, "precision": a.precision, "stance_frames": a.stance_frames,
+            "schedule_frames": a.schedule_frames}

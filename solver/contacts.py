@@ -110,11 +110,13 @@ def detect_contacts(
     speed_on: float = DETECT_SPEED_ON,
     speed_off: float = DETECT_SPEED_OFF,
     min_duration: float = DETECT_MIN_DURATION,
+    feet: dict[str, tuple[str, ...]] | None = FEET,
 ) -> list[Contact]:
     """Contacts of each site from its height above the surface and its speed, with hysteresis.
 
     Per site, frame by frame: out of contact, the site enters when height < height_on and
-    speed < speed_on; in contact, it stays while height <= height_off and speed <= speed_off.
+    speed < speed_on, and so does the lowest site of its foot (`feet`; None: sites alone); in
+    contact, it stays while height <= height_off and speed <= speed_off.
     A contact runs from its first to its last frame (times of those frames; a one-frame contact
     half a frame either side, within `times`); contacts with end - start < min_duration are dropped
     (0: none). Speeds are 3-D, central differences of `site_pos`.
@@ -126,6 +128,7 @@ def detect_contacts(
         sites: the s site names, in the order of the second axis.
         height_on, height_off: [m], height_on <= height_off. speed_on, speed_off: [m/s],
             speed_on <= speed_off. min_duration: [s] >= 0.
+        feet: {foot: its site names} (default the shipped figure's; sites of no foot enter alone).
     Returns:
         contacts sorted by start time, then site order; surface "" (whichever is under the site).
     Raises:
@@ -138,7 +141,7 @@ def detect_contacts(
             f"height {height_on}/{height_off} m, speed {speed_on}/{speed_off} m/s, min {min_duration} s"
         )
     speed = site_speeds(times, site_pos)
-    enter = (heights < height_on) & (speed < speed_on)
+    enter = _foot_entry((heights < height_on) & (speed < speed_on), heights, sites, feet)
     stay = (heights <= height_off) & (speed <= speed_off)
     out: list[tuple[float, int, Contact]] = []
     for k, name in enumerate(sites):
@@ -154,6 +157,20 @@ def detect_contacts(
                 on, first = True, i
     out.sort(key=lambda t: (t[0], t[1]))
     return [c for _, _, c in out]
+
+
+def _foot_entry(enter: np.ndarray, heights: np.ndarray, sites: Sequence[str], feet) -> np.ndarray:
+    """(n, s) `enter` where a site may also enter only while its foot's lowest site may: a foot touches
+    down with its lowest site (the capture's stance, `runner.mocap.stance`); a toe held still 2-3 cm
+    up while the heel under it still sweeps in at 0.5-1.2 m/s is not yet on the floor."""
+    out = enter.copy()
+    rows = np.arange(len(enter))
+    for members in (feet or {}).values():
+        ks = [list(sites).index(m) for m in members if m in sites]
+        if len(ks) > 1:
+            low = np.asarray(ks)[np.argmin(heights[:, ks], axis=1)]
+            out[:, ks] &= enter[rows, low][:, None]
+    return out
 
 
 def _contact(site: str, times: np.ndarray, first: int, last: int) -> Contact | None:

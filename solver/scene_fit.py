@@ -143,6 +143,18 @@ class FittedScene:
         """[m] height of each box's top above the floor, along the floor's normal (2 half[2])."""
         return [float(2 * h[2]) for _, h in self.boxes]
 
+    def surfaces(self):
+        """The floor and boxes as `solver.surfaces.StaticSurfaces` (names "floor", "box0", ...), for
+        heights above them (`StaticSurfaces.height_above`) without writing a scene file."""
+        from solver.surfaces import StaticSurfaces
+
+        rot = self.rotation()
+        return StaticSurfaces(np.array([[0.0, 0.0, self.floor_z]]), rot[:, 2][None].copy(),
+                              np.array([c for c, _ in self.boxes], float).reshape(-1, 3),
+                              np.repeat(rot[None], len(self.boxes), axis=0),
+                              np.array([h for _, h in self.boxes], float).reshape(-1, 3),
+                              ("floor",) + tuple(f"box{i}" for i in range(len(self.boxes))))
+
     def levelling(self) -> CaptureFrame:
         """The rigid transform taking this floor to the plane z = 0 by the shortest rotation
         (`solver.capture_frame`); a level floor at 0 gives the identity."""
@@ -348,6 +360,9 @@ def fit_contacts(times: np.ndarray, site_pos: np.ndarray, sites: Sequence[str] =
         ks = [list(sites).index(s) for s in members if s in sites]
         if ks:
             h[:, ks] = site_pos[:, ks, 2] - site_pos[:, ks, 2].min(axis=1, keepdims=True)
+    # per site (feet=None): heights here are above the foot's lowest site, which is always at 0, so a
+    # still site is a rest by itself; the lowest site's own speed says nothing about where it rests
+    thresholds.setdefault("feet", None)
     found = detect_contacts(times, site_pos, h, sites, **thresholds)
     falling = []
     for c in found:

@@ -1,15 +1,14 @@
-"""Feet and surfaces: when a foot of a motion is in contact, and the root height correction that puts
-a foot in contact on the surface under it (and no contact site below a surface)."""
+"""Feet and surfaces: the root height correction that puts a resting foot on the surface under it (and no
+contact site below a surface), and how far resting feet are from their surfaces (`runner.mocap.stance`
+says when a foot rests)."""
 from __future__ import annotations
 
 import numpy as np
 
 from runner.mocap.retarget import Reference
-from solver.contact_thresholds import CAPTURE_HEIGHT as CONTACT_HEIGHT
-from solver.contact_thresholds import CAPTURE_SPEED as CONTACT_SPEED
+from solver.contact_thresholds import STANCE_SPEED_ON
 from solver.figure import Figure
 
-# contact definition (see `contact_mask`): CONTACT_HEIGHT, CONTACT_SPEED (solver.contact_thresholds)
 #: the wide height window [m] in which `correct_root_height` looks for feet at rest to measure the
 #: retargeting's height error (the retargeted feet can be several cm off before the correction)
 FIT_HEIGHT = 0.15
@@ -36,6 +35,7 @@ class _SiteKinematics:
         self.surfaces = StaticSurfaces.from_model(model, self.data)
         figure = Figure.from_model(model)  # raises InputError naming a missing site
         self.names = list(figure.contact_sites)  # foot by foot, heel then toe
+        self.feet = dict(figure.feet)
         self.ids = figure.contact_site_ids
 
     def positions(self, qpos: np.ndarray) -> np.ndarray:
@@ -55,82 +55,46 @@ class _SiteKinematics:
         return self.surfaces.height_above(pos)
 
 
-def _foot_contact(pos: np.ndarray, clear: np.ndarray, frame_time: float, height: float, speed: float):
-    """Per foot: the lowest site's clearance, and whether the foot is in contact.
+def worst_contact_distance(reference: Reference, model) -> float:
+    """Acceptance figure: the worst |clearance| of a foot's lowest contact site while the foot rests.
 
-    Returns:
-        lowest: (n, 2) clearance [m] of each foot's lowest site (feet in FEET order).
-        contact: (n, 2) bool, lowest clearance < `height` and that site's speed < `speed`.
-    """
-    vel = np.gradient(pos, frame_time, axis=0) if len(pos) > 1 else np.zeros_like(pos)
-    spd = np.linalg.norm(vel, axis=-1)  # (n, 4)
-    lowest = np.empty((len(pos), 2))
-    contact = np.empty((len(pos), 2), bool)
-    for f in range(2):
-        c = clear[:, 2 * f : 2 * f + 2]
-        k = np.argmin(c, axis=1)
-        rows = np.arange(len(pos))
-        lowest[:, f] = c[rows, k]
-        contact[:, f] = (lowest[:, f] < height) & (spd[:, 2 * f : 2 * f + 2][rows, k] < speed)
-    return lowest, contact
-
-
-def contact_mask(qpos: np.ndarray, model, frame_time: float, height: float = CONTACT_HEIGHT,
-                 speed: float = CONTACT_SPEED) -> tuple[np.ndarray, np.ndarray]:
-    """Which foot is in contact in each frame of a dense motion, and its lowest site's clearance.
-
-    Contact definition: a foot (heel and toe site) is in contact while its lowest site is less than
-    `height` above the surface under it (floor, or the top of a box whose footprint contains the site;
-    `StaticSurfaces.height_above`) and that site moves slower than `speed` (central differences over frames).
+    Over the frames in which a foot rests on a surface (`runner.mocap.stance.capture_rest`: in the
+    capture's stance, its lowest site below the flight height and still), the largest distance between
+    that site (heel or toe) and the surface under it, above or below (docs/contacts.md, "Feet on their
+    surfaces").
 
     Args:
-        qpos: (n, nq) motion sampled every `frame_time` seconds. model: the scene's MjModel (figure
-            plus static surfaces). frame_time: [s]. height: [m]. speed: [m/s].
+        reference: the motion. model: the scene's MjModel.
     Returns:
-        contact: (n, 2) bool, left and right foot.
-        lowest: (n, 2) clearance [m] of each foot's lowest site (negative: below the surface).
+        distance [m]; 0.0 if no foot ever rests.
     Raises:
-        InputError: the model lacks the contact sites.
+        InputError: the model lacks the contact sites or the feet.
     """
-    kin = _SiteKinematics(model)
-    pos = kin.positions(qpos)
-    lowest, contact = _foot_contact(pos, kin.clearance(pos), frame_time, height, speed)
-    return contact, lowest
+    from runner.mocap.stance import capture_rest
 
-
-def worst_contact_distance(reference: Reference, model, height: float = CONTACT_HEIGHT,
-                           speed: float = CONTACT_SPEED) -> float:
-    """Acceptance figure: the worst |clearance| of a foot's lowest contact site while it is in contact.
-
-    Over all frames and both feet in contact (`contact_mask`), the largest distance between the foot's
-    lowest site (heel or toe) and the surface under it, above or below. Should be <= 0.03 m.
-
-    Args:
-        reference: the motion. model: the scene's MjModel. height [m], speed [m/s]: the contact
-            definition of `contact_mask`.
-    Returns:
-        distance [m]; 0.0 if no foot is ever in contact.
-    """
-    contact, lowest = contact_mask(reference.qpos, model, reference.frame_time, height, speed)
-    if not contact.any():
+    rest, lowest = capture_rest(model, reference.qpos, reference.frame_time)
+    if not rest.any():
         return 0.0
-    return float(np.max(np.abs(lowest[contact])))
+    return float(np.max(np.abs(lowest[rest])))
 
 
 def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarray:
     """Shift the root height per frame so feet in contact stand on the surfaces, and nothing sinks.
 
     1. The retargeting's height error: the retargeted feet can be several cm off before the
-       correction (another subject's bone lengths), nearly the same offset all through a clip. It is
-       the median, over the frames where a foot is provisionally in contact (`_foot_contact` with a
-       wide height window of `FIT_HEIGHT`), of CONTACT_CLEARANCE - the lowest clearance of the feet
-       in contact.
-    2. Contact frames: the feet in contact by the standard definition (`contact_mask`: CONTACT_HEIGHT,
-       CONTACT_SPEED) once that offset is applied. Only these are put on their surfaces: a foot near
-       the top of a small hop is slow (its vertical speed passes through 0) and within the wide
-       window, and putting it on the floor would pull the whole figure down and erase the flight
-       (a 15 cm hop kept 3 cm of its height before this step). dz = CONTACT_CLEARANCE - lowest
-       clearance of the feet in contact, so the lowest contact site of a standing foot ends
+       correction (another subject's bone lengths, the shipped figure), nearly the same offset all
+       through a clip. It is the median, over the frames where a foot is provisionally at rest (its
+       lowest site within the wide window `FIT_HEIGHT` of the surface and slower than STANCE_SPEED_ON),
+       of CONTACT_CLEARANCE - the lowest clearance of those feet.
+    2. Contact frames: the frames in which a foot rests once that offset is applied, by the one
+       definition the detection is judged against and the acceptance figure uses (`runner.mocap.
+       stance`: the capture's stance, and in it the lowest site below the flight height and still,
+       `resting`). Only these are put on their surfaces: a foot near the top of a small hop is slow
+       (its vertical speed passes through 0) and within the wide window, and putting it on the floor
+       would pull the whole figure down and erase the flight (a 15 cm hop kept 3 cm of its height);
+       a foot rolling off its toes is in the stance's way out, up to 5 cm high, and putting it on
+       the floor would pull the other foot into the surface. dz = CONTACT_CLEARANCE - lowest
+       clearance of the resting feet, so the lowest contact site of a standing foot ends
        `CONTACT_CLEARANCE` above its surface.
     3. Frames without contact (flight): dz interpolated linearly between the neighbouring contact
        frames (held constant before the first and after the last; the offset of step 1 if no frame
@@ -143,21 +107,26 @@ def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarra
     Returns:
         (n, nq) qpos with the root z changed.
     """
+    from runner.mocap.stance import lowest_sites, resting, stance_mask
+
     kin = _SiteKinematics(model)
     pos = kin.positions(qpos)
     clear = kin.clearance(pos)
-    lowest, provisional = _foot_contact(pos, clear, frame_time, height=FIT_HEIGHT, speed=CONTACT_SPEED)
     n = len(qpos)
+    times = np.arange(n) * frame_time
+    lowest, speed = lowest_sites(times, pos, clear, kin.feet, kin.names)
+    provisional = (lowest < FIT_HEIGHT) & (speed < STANCE_SPEED_ON)
     frames = np.arange(n)
     dz = np.zeros(n)
     if provisional.any():
         offset = float(np.median((CONTACT_CLEARANCE - np.where(provisional, lowest, np.inf).min(axis=1))[
             provisional.any(axis=1)]))
         # the same site is the lowest of each foot with or without the uniform offset: `lowest` stays
-        _, contact = _foot_contact(pos, clear + offset, frame_time, height=CONTACT_HEIGHT, speed=CONTACT_SPEED)
-        on = contact.any(axis=1)
+        stance = stance_mask(times, pos, clear + offset, kin.feet, kin.names)
+        rest = resting(stance, lowest + offset, speed)
+        on = rest.any(axis=1)
         if on.any():
-            target = CONTACT_CLEARANCE - np.where(contact, lowest, np.inf).min(axis=1)
+            target = CONTACT_CLEARANCE - np.where(rest, lowest, np.inf).min(axis=1)
             dz = np.interp(frames, frames[on], target[on])
         else:
             dz = np.full(n, offset)

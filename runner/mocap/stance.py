@@ -88,14 +88,38 @@ def stance_mask(times: np.ndarray, site_pos: np.ndarray, heights: np.ndarray,
     if not (height_on <= height_off and speed_on <= speed_off):
         raise InputError(f"stance thresholds need height_on <= height_off and speed_on <= speed_off; got "
                          f"height {height_on}/{height_off} m, speed {speed_on}/{speed_off} m/s")
+    h, v = lowest_sites(times, site_pos, heights, feet, sites)
+    out = np.zeros(h.shape, bool)
+    for f in range(h.shape[1]):
+        out[:, f] = _hysteresis((h[:, f] < height_on) & (v[:, f] < speed_on), (h[:, f] <= height_off) & (v[:, f] <= speed_off))
+    return out
+
+
+def lowest_sites(times: np.ndarray, site_pos: np.ndarray, heights: np.ndarray,
+                 feet: Mapping[str, Sequence[str]] = FEET, sites: Sequence[str] = CONTACT_SITES
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame and foot, the height [m] above the surface under it and the 3-D speed [m/s] (central
+    differences) of the foot's lowest contact site: (n, f) and (n, f), arguments as `stance_mask`."""
     speed = site_speeds(times, site_pos)
-    rows = np.arange(n)
-    out = np.zeros((n, len(feet)), bool)
+    rows = np.arange(len(times))
+    h, v = np.empty((len(times), len(feet))), np.empty((len(times), len(feet)))
     for f, ks in enumerate(_columns(feet, sites)):
         low = np.argmin(heights[:, ks], axis=1)  # the foot's lowest site in each frame
-        h, v = heights[:, ks][rows, low], speed[:, ks][rows, low]
-        out[:, f] = _hysteresis((h < height_on) & (v < speed_on), (h <= height_off) & (v <= speed_off))
-    return out
+        h[:, f], v[:, f] = heights[:, ks][rows, low], speed[:, ks][rows, low]
+    return h, v
+
+
+def resting(stance: np.ndarray, lowest: np.ndarray, speed: np.ndarray, height_on: float = STANCE_HEIGHT_ON,
+            speed_on: float = STANCE_SPEED_ON) -> np.ndarray:
+    """The frames of a stance in which the foot rests by the stance's own entry condition: (n, f) bool.
+
+    The hysteresis of `stance_mask` keeps a foot in stance while it rolls off its toes and lifts (up to
+    STANCE_HEIGHT_OFF, 5 cm, and STANCE_SPEED_OFF, 1 m/s), so that a detection does not flicker; those
+    frames are the stance's way out, not a foot resting. A foot rests in a frame of its stance where its
+    lowest site is below `height_on` [m] and slower than `speed_on` [m/s], the condition a stance begins
+    with (module docstring). `lowest`, `speed`: (n, f) from `lowest_sites`.
+    """
+    return np.asarray(stance, bool) & (lowest < height_on) & (speed < speed_on)
 
 
 def capture_stance(model, qpos: np.ndarray, frame_time: float, **thresholds) -> np.ndarray:
@@ -120,6 +144,30 @@ def capture_stance(model, qpos: np.ndarray, frame_time: float, **thresholds) -> 
     pos = site_positions(model, qpos, figure.contact_sites)
     times = np.arange(len(qpos)) * float(frame_time)
     return stance_mask(times, pos, site_heights(model, pos), figure.feet, figure.contact_sites, **thresholds)
+
+
+def capture_rest(model, qpos: np.ndarray, frame_time: float) -> tuple[np.ndarray, np.ndarray]:
+    """The frames in which each foot of a motion rests on a surface (`resting` within `capture_stance`),
+    and the height of its lowest contact site above the surface under it.
+
+    Args: as `capture_stance` (default thresholds).
+    Returns:
+        rest: (n, f) bool. lowest: (n, f) [m] (negative: below the surface). Feet as `capture_stance`.
+    Raises:
+        InputError: as `capture_stance`.
+    """
+    from solver.figure import Figure
+
+    if not (np.isfinite(frame_time) and frame_time > 0):
+        raise InputError(f"frame_time is {frame_time!r}; give the time between frames in seconds (> 0)")
+    figure = Figure.from_model(model)
+    qpos = np.atleast_2d(np.asarray(qpos, float))
+    pos = site_positions(model, qpos, figure.contact_sites)
+    times = np.arange(len(qpos)) * float(frame_time)
+    heights = site_heights(model, pos)
+    stance = stance_mask(times, pos, heights, figure.feet, figure.contact_sites)
+    low, speed = lowest_sites(times, pos, heights, figure.feet, figure.contact_sites)
+    return resting(stance, low, speed), low
 
 
 def schedule_stance(contacts, times: np.ndarray, feet: Mapping[str, Sequence[str]] = FEET) -> np.ndarray:
@@ -182,3 +230,22 @@ def stance_agreement(schedule_mask: np.ndarray, capture_mask: np.ndarray) -> Sta
     feet = tuple((_ratio(both[:, f].sum(), c[:, f].sum()), _ratio(both[:, f].sum(), s[:, f].sum()))
                  for f in range(s.shape[1]))
     return StanceAgreement(_ratio(both.sum(), c.sum()), _ratio(both.sum(), s.sum()), feet, int(c.sum()), int(s.sum()))
+
+
+def schedule_agreement(model, qpos: np.ndarray, frame_time: float, contacts) -> StanceAgreement:
+    """A contact schedule judged against the stance of the motion it was made for: `stance_agreement` of
+    `schedule_stance(contacts, frame times)` and `capture_stance(model, qpos, frame_time)`.
+
+    Args:
+        model: the scene's MjModel. qpos: (n, nq) the motion (a reference), frame i at i * frame_time [s].
+        contacts: `Contact`s or a `ContactSchedule` on the same time axis.
+    Returns:
+        StanceAgreement.
+    Raises:
+        InputError: as `capture_stance`, or a contact names a site no foot has.
+    """
+    from solver.figure import Figure
+
+    stance = capture_stance(model, qpos, frame_time)
+    times = np.arange(len(stance)) * float(frame_time)
+    return stance_agreement(schedule_stance(contacts, times, Figure.from_model(model).feet), stance)

@@ -38,7 +38,7 @@ import numpy as np
 
 from runner.mocap.bvh import BvhClip
 from solver.errors import InputError
-from solver.figure import FIGURE_FILE
+from solver.figure import FIGURE_FILE, Figure
 
 __all__ = ["ANKLE_HEIGHT", "HIP_HEIGHT", "HEEL_BACK", "DEFAULT_BMI", "SKELETON_TEXT", "SubjectMeasures",
            "rest_positions", "skeleton_digest", "subject_measures", "subject_figure_xml", "write_subject_figure",
@@ -201,7 +201,7 @@ def _local(rest: dict, rot: dict, body: str, point: np.ndarray) -> np.ndarray:
     return rot[body].T @ (np.asarray(point, float) - rest[BODY_JOINT[body]])
 
 
-def subject_figure_xml(clip: BvhClip, mass: float | None = None) -> str:
+def subject_figure_xml(clip: BvhClip, mass: float | None = None, soles: bool = True) -> str:
     """The MJCF text of the subject's figure of `clip` (module docstring), made with `mujoco.MjSpec`
     from the shipped figure.
 
@@ -232,6 +232,8 @@ def subject_figure_xml(clip: BvhClip, mass: float | None = None) -> str:
     spec.body("pelvis").pos = [0.0, 0.0, m.pelvis_height]  # the identity pose stands on z = 0
     for g in spec.geoms:
         g.mass = g.mass * m.mass / SHIPPED_MASS
+    if soles:
+        _fit_soles(spec, clip, m)
     spec.add_text(name=SKELETON_TEXT, data=skeleton_digest(clip))
     return spec.to_xml()
 
@@ -257,11 +259,40 @@ def _leg(spec, side: str, cmu: str, m: SubjectMeasures, rot: dict, s: float) -> 
     h = m.ankle_height
     heel = -HEEL_BACK * m.foot_length * forward + [0, 0, -h]
     toe = np.r_[ball[:2], -h]
+    spec.site(f"{side}_ball").pos = ball
+    _sole(spec, side, heel, toe, h / 2)
+
+
+def _sole(spec, side: str, heel: np.ndarray, toe: np.ndarray, r: float) -> None:
+    """The foot's heel and toe sites at `heel`, `toe` (foot frame [m]) and its capsule of radius r over them."""
     spec.site(f"{side}_heel").pos = heel
     spec.site(f"{side}_toe").pos = toe
-    spec.site(f"{side}_ball").pos = ball
-    r = h / 2
-    _capsule(spec, foot, heel + r * forward + [0, 0, r], toe - 0.5 * r * forward + [0, 0, r], r)
+    forward = np.r_[toe[:2] - heel[:2], 0.0]
+    forward /= np.linalg.norm(forward)
+    _capsule(spec, f"{side}_foot", heel + r * forward + [0, 0, r], toe - 0.5 * r * forward + [0, 0, r], r)
+
+
+def _fit_soles(spec, clip: BvhClip, m: SubjectMeasures) -> None:
+    """Move the heel and toe sites (and the foot capsules) to the subject's soles measured on the clip
+    (`runner.mocap.soles.fit_soles`); the published places stay if the feet never rest long enough."""
+    from runner.mocap.retarget import clamp_hyperextension, retarget
+    from runner.mocap.soles import fit_soles
+    from solver.layout import StateLayout
+
+    model = spec.compile()
+    figure = Figure.from_model(model)
+    qpos, _ = clamp_hyperextension(retarget(clip, figure, StateLayout.from_model(model))[1:], figure)
+    tips = {}
+    for foot, (heel, _) in figure.feet.items():
+        cmu = "Left" if heel.startswith("l") else "Right"
+        end = m.rest.get(f"{cmu}ToeBase/end", m.rest[f"{cmu}ToeBase"])
+        tips[foot] = end - m.rest[f"{cmu}Foot"]  # the foot's frame is parallel to the rest pose's
+    try:
+        fit = fit_soles(model, qpos, clip.frame_time, tips)
+    except InputError:  # the feet never rest: nothing to measure
+        return
+    for heel, toe in figure.feet.values():
+        _sole(spec, heel[0], fit.sites[heel], fit.sites[toe], m.ankle_height / 2)
 
 
 def _arm(spec, side: str, cmu: str, m: SubjectMeasures, rot: dict, s: float) -> None:

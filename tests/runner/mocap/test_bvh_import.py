@@ -185,7 +185,11 @@ def test_shipped_keyframes_match_the_clip_and_show_the_problem(reference, scene,
                                      indices=keyframe_indices(reference, 0.25, extremes=False))
     assert np.array_equal(kf.mask, fresh.mask)
     assert kf.times == pytest.approx(fresh.times, abs=1e-6)
-    assert np.nan_to_num(kf.values) == pytest.approx(np.nan_to_num(fresh.values), abs=2e-6)
+    # and before the root-height correction put only resting feet on the floor (docs/mocap.md, "The
+    # reference"): the root height (column 2) moved by up to 3 mm at some keyframes, nothing else
+    others = np.arange(kf.values.shape[1]) != 2
+    assert np.nan_to_num(kf.values[:, others]) == pytest.approx(np.nan_to_num(fresh.values[:, others]), abs=2e-6)
+    assert kf.values[:, 2] == pytest.approx(fresh.values[:, 2], abs=0.003)
     vals = kf.initial_values(layout.quat_slots)
     assert clearance(scene, site_positions(scene, vals)).min() > 0.0
     t = np.arange(kf.times[0], kf.times[-1], 1e-3)
@@ -594,7 +598,7 @@ def test_a_small_hop_keeps_its_height(tmp_path, reference, scene):
     between the feet), so 12 cm is what a correct hop keeps here."""
     from bvh_edit import edit_bvh
 
-    from runner.mocap.contacts import contact_mask
+    from runner.mocap.stance import capture_rest
 
     start, duration, height = 0.25, 0.35, 0.15
     hop = load_bvh_reference(edit_bvh(CLIP, tmp_path / "hop.bvh", hop=(start, duration, height)), scene)
@@ -605,5 +609,5 @@ def test_a_small_hop_keeps_its_height(tmp_path, reference, scene):
     assert lift[top] >= 0.75 * height, lift[top]
     away = (t < start - 0.1) | (t > start + duration + 0.1)
     assert np.abs(lift[away]).max() <= 0.005
-    contact, _ = contact_mask(hop.qpos, scene, hop.frame_time)
-    assert not contact[np.abs(s - 0.5) < 0.2].any()  # a flight at the top of the hop
+    rest, _ = capture_rest(scene, hop.qpos, hop.frame_time)
+    assert not rest[np.abs(s - 0.5) < 0.2].any()  # a flight at the top of the hop

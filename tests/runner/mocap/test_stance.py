@@ -8,6 +8,8 @@ import pytest
 from runner.mocap.stance import (
     StanceAgreement,
     capture_stance,
+    lowest_sites,
+    resting,
     schedule_stance,
     stance_agreement,
     stance_mask,
@@ -147,3 +149,75 @@ def test_127_33_schedule_matches_the_capture_stance():
     a = stance_agreement(sched, cap)
     assert a.stance_frames > 0.4 * 2 * ref.count * 0.5  # both feet stand a good part of the clip
     assert a.recall >= 0.97 and a.precision >= 0.97, a
+
+
+def test_a_foot_hovering_40_mm_at_touch_down_does_not_rest():
+    """A flat foot lowered slowly (0.1 m/s, under every speed threshold) that stops 40 mm up for 0.2 s
+    before it lands: no frame above the 3 cm entry height is in stance or rests; after landing every
+    frame rests (heights and speeds known by construction)."""
+    z = np.r_[np.linspace(0.10, 0.04, 61), np.full(20, 0.04), np.linspace(0.04, 0.0, 41), np.zeros(30)]
+    times, pos, h = foot(z, z)
+    stance = stance_mask(times, pos, h, ONE_FOOT, SITES)
+    low, speed = lowest_sites(times, pos, h, ONE_FOOT, SITES)
+    rest = resting(stance, low, speed)
+    assert not stance[z >= 0.03].any() and not rest[z >= 0.03].any()
+    assert rest[-30:, 0].all()
+    np.testing.assert_allclose(speed[-30:-1, 0], 0.0, atol=1e-12)
+
+
+def test_rolling_off_the_toes_is_stance_but_not_rest():
+    """The stance's hysteresis keeps a lifting toe (0.8 m/s, up to 5 cm) in stance so detection does not
+    flicker; it is the stance's way out, not a foot resting: the resting frames end where the toe passes
+    0.5 m/s (the entry speed) - here, where it starts to lift."""
+    z = np.r_[np.zeros(30), 0.008 * np.arange(1, 11)]  # 8 mm per frame at 100 fps: 0.8 m/s
+    times, pos, h = foot(z + 0.05, z)
+    stance = stance_mask(times, pos, h, ONE_FOOT, SITES)
+    low, speed = lowest_sites(times, pos, h, ONE_FOOT, SITES)
+    rest = resting(stance, low, speed)
+    assert stance[:35, 0].all()  # lifting at 0.8 m/s, up to 40 mm: still in stance
+    assert rest[:29, 0].all() and not rest[30:, 0].any()
+
+
+def test_a_foot_resting_on_a_tilted_floor_rests():
+    """A foot standing still at four places on a floor tilted 1 degree (heights from the fitted scene's
+    surfaces, not from z): every frame rests, and its lowest site is on the floor."""
+    from solver.scene_fit import FittedScene
+
+    slope = np.tan(np.radians(1.0))
+    floor = FittedScene(0.01, (), (slope, 0.0)).surfaces()
+    pos = np.zeros((80, 2, 3))
+    for i, x in enumerate((-1.5, -0.5, 0.5, 1.5)):
+        rows = slice(20 * i + 5, 20 * i + 20)  # 5 frames of step between the places (fast: not resting)
+        pos[rows, 0, 0], pos[rows, 1, 0] = x, x + 0.2
+        pos[rows, :, 2] = 0.01 + slope * pos[rows, :, 0]
+    for i in range(4):  # the steps: the foot lifted 10 cm and moved 1 m
+        a = 20 * i
+        pos[a:a + 5] = pos[a + 5] if i == 0 else np.linspace(pos[a - 1], pos[a + 5], 7)[1:-1] + [0, 0, 0.1]
+    times = np.arange(80) / FPS
+    h = floor.height_above(pos)
+    stance = stance_mask(times, pos, h, ONE_FOOT, SITES)
+    low, speed = lowest_sites(times, pos, h, ONE_FOOT, SITES)
+    rest = resting(stance, low, speed)
+    still = np.zeros(80, bool)
+    for i in range(4):
+        still[20 * i + 6:20 * i + 19] = True  # away from the steps' central differences
+    assert rest[still, 0].all()
+    np.testing.assert_allclose(low[still, 0], 0.0, atol=1e-12)
+
+
+def test_a_site_enters_contact_with_its_foots_lowest_site():
+    """Detection judged against the stance: a toe held still 26 mm up while the heel under it still
+    sweeps in at 1 m/s does not enter contact until the heel (the foot's lowest site) is slow; the heel
+    sweeping alone never enters. With feet=None the toe enters alone (the old per-site rule)."""
+    from solver.contacts import detect_contacts
+
+    n = 40
+    heel_x = np.r_[1.0 * np.arange(20) / FPS, np.full(n - 20, 0.19)]  # 1 m/s until frame 19, then still
+    times, pos, h = foot(np.full(n, 0.005), np.full(n, 0.026), heel_x=heel_x, toe_x=np.full(n, 0.0))
+    found = detect_contacts(times, pos, h, SITES, min_duration=0.0, feet=dict(ONE_FOOT))
+    starts = {c.site: c.start for c in found}
+    assert starts["l_heel"] == pytest.approx(times[20]) and starts["l_toe"] == pytest.approx(times[20])
+    alone = detect_contacts(times, pos, h, SITES, min_duration=0.0, feet=None)
+    assert min(c.start for c in alone if c.site == "l_toe") == pytest.approx(0.0)
+    mask = schedule_stance(found, times, ONE_FOOT)
+    assert stance_agreement(mask, stance_mask(times, pos, h, ONE_FOOT, SITES)).precision == 1.0
