@@ -39,13 +39,6 @@ STANCE_SPEED_ON = 0.5
 #: ... and leaves when it moves faster than this [m/s].
 STANCE_SPEED_OFF = 1.0
 
-# -- placing a retargeted capture on its surfaces (`runner.mocap.contacts`: the root-height correction,
-#    and the "feet in contact stay within ... mm" figure of a reference)
-#: a foot is in contact while its lowest site is at most this high [m] ...
-CAPTURE_HEIGHT = 0.06
-#: ... and that site moves slower than this [m/s].
-CAPTURE_SPEED = 0.6
-
 # -- metrics of a motion (`solver.motion_metrics`), as the published metrics define them
 #: PhysDiff skate: a site is on the ground at most this high [m].
 SKATE_HEIGHT = 0.02
