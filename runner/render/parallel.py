@@ -1,0 +1,177 @@
+"""The video's frames drawn by several threads at once, each with its own OpenGL context.
+
+Mesa's software renderer (llvmpipe) does much of a frame's work on the thread that issues the draw
+calls (vertex processing, primitive setup, the wait for the shadow map before the lit pass reads it):
+only the final rasterization is spread over llvmpipe's own threads, so one drawing thread keeps a
+2-core machine about 1.5 cores busy. MuJoCo's Python bindings release the GIL in `mjr_render` and
+`mjr_readPixels`, so `render_threaded` draws with `workers` threads in this process, each with its own
+`mujoco.Renderer` (its own OpenGL context and scene) made from the same `FramePlan`: thread j draws
+frames j, j + workers, j + 2 workers, ... (frame i is the same picture whichever thread draws it),
+and this thread hands them to the one encoder in frame order (`FrameEncoder`: overlays and H.264 in
+its own thread, ffmpeg in its own process). Threads rather than processes: no interpreter to start,
+nothing to copy, one encoder and one file; a thread costs one more OpenGL context (its shaders
+compiled once more by llvmpipe), a few tenths of a second of CPU, so short videos use one
+(`worker_count`).
+
+Errors: an error in a drawing thread (no OpenGL backend, a bad frame) is raised here, in frame order;
+Ctrl-C (KeyboardInterrupt, delivered to this thread) stops the drawing threads, which free their
+contexts, and the encoder drops its frames (no partial video: the caller's `atomic_output`).
+"""
+from __future__ import annotations
+
+import os
+import queue
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from runner.render.encode import FrameEncoder
+from runner.render.frames import FramePlan, FrameWriter
+
+MAX_WORKERS = 4
+"""Drawing threads at most: each holds an OpenGL context (and llvmpipe's rasterizer threads); beyond
+the number of cores more only compete for them."""
+MIN_PARALLEL_FRAMES = 24
+"""Videos shorter than this (0.8 s at 30 fps) are drawn by one thread: a second OpenGL context and its
+shader compilation (about 0.1-0.3 s of CPU) would cost more than it saves."""
+QUEUE_FRAMES = 2
+"""Frames a drawing thread may be ahead of the encoder (each about 1.5 MB at 960x540)."""
+_POLL_S = 0.1
+"""[s] how often a waiting thread looks at the stop flag (and this thread at a dead drawing thread)."""
+_CONTEXT_LOCK = threading.Lock()
+"""`make_renderer` changes the model's `vis` fields while a context is made: one at a time."""
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the OS tells it, else os.cpu_count())."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def worker_count(n_frames: int, requested: int | None = None) -> int:
+    """How many threads draw a video of `n_frames` frames.
+
+    Args:
+        n_frames: frames of the video.
+        requested: a number asked for (>= 1), or None for the default: `available_cores()` up to
+            `MAX_WORKERS`, and 1 below `MIN_PARALLEL_FRAMES` frames.
+    Returns:
+        between 1 and max(1, n_frames).
+    """
+    if requested is None:
+        want = 1 if n_frames < MIN_PARALLEL_FRAMES else min(MAX_WORKERS, available_cores())
+    else:
+        want = int(requested)
+    return max(1, min(want, n_frames))
+
+
+@dataclass
+class DrawStats:
+    """What the drawing threads did: render_s [s] wall time posing, rendering and reading back panels
+    (summed over the threads), panels drawn."""
+
+    render_s: float = 0.0
+    panels: int = 0
+
+
+class _Stopped(Exception):
+    """Raised in a drawing thread when this thread has asked them to stop."""
+
+
+def render_threaded(plan: FramePlan, path, workers: int,
+                    progress: Callable[[int, int], None] | None = None) -> DrawStats:
+    """Write the video of `plan` to `path` (H.264), its frames drawn by `workers` threads.
+
+    Args:
+        plan: the frames (`FramePlan`). path: the video file (.mp4, .mkv, .mov).
+        workers: drawing threads, >= 1.
+        progress: called as progress(frames_done, n_frames) after each frame is handed to the encoder.
+    Returns:
+        `DrawStats`.
+    Raises:
+        what a drawing thread raised (InputError: no OpenGL backend), in frame order; OSError: the
+        video cannot be written (the encoder's error).
+    """
+    n = plan.n_frames
+    stop = threading.Event()
+    ready = threading.Barrier(workers)
+    outs = [queue.Queue(maxsize=QUEUE_FRAMES) for _ in range(workers)]
+    stats = [DrawStats() for _ in range(workers)]
+    threads = [threading.Thread(target=_draw, args=(plan, range(j, n, workers), outs[j], stop, ready, stats[j]),
+                                name=f"dynsplines-video-draw-{j}", daemon=True) for j in range(workers)]
+    for t in threads:
+        t.start()
+    labels = [tr.label for tr in plan.tracks]
+    try:
+        with FrameEncoder(path, plan.fps, _compose_of(plan)) as encoder:
+            for i in range(n):
+                images, marks, dots = _next(outs[i % workers], threads[i % workers])
+                encoder.put(images, labels, plan.times[i], plan.speed, int(plan.currents[i]), marks, dots)
+                if progress is not None:
+                    progress(i + 1, n)
+    finally:
+        stop.set()
+        for t in threads:
+            t.join()
+    return DrawStats(sum(s.render_s for s in stats), sum(s.panels for s in stats))
+
+
+def _compose_of(plan: FramePlan):
+    """The overlay composer of the plan's frames (`Overlay.compose`)."""
+    from runner.render.overlays import Overlay
+
+    return Overlay(plan.width, plan.height, plan.panel_w, len(plan.tracks), plan.title, plan.t0, plan.t1,
+                   plan.kf_t).compose
+
+
+def _next(out: queue.Queue, thread: threading.Thread):
+    """The next frame's panels from a drawing thread's queue; raises what the thread raised."""
+    while True:
+        try:
+            kind, payload = out.get(timeout=_POLL_S)
+        except queue.Empty:
+            if not thread.is_alive() and out.empty():
+                raise RuntimeError(f"{thread.name} ended without drawing its frames") from None
+            continue
+        if kind == "error":
+            raise payload
+        return payload
+
+
+def _draw(plan: FramePlan, frames: range, out: queue.Queue, stop: threading.Event, ready: threading.Barrier,
+          stats: DrawStats) -> None:
+    """A drawing thread: make its renderer (one at a time), wait for the others, draw `frames` in order
+    into `out`; an exception is put in `out` in place of the frame. The renderer is freed here, in the
+    thread whose OpenGL context it is."""
+    def put(item) -> None:
+        while True:
+            if stop.is_set():
+                raise _Stopped
+            try:
+                out.put(item, timeout=_POLL_S)
+                return
+            except queue.Full:
+                continue
+
+    writer = None
+    try:
+        try:
+            with _CONTEXT_LOCK:
+                writer = FrameWriter(plan)
+        finally:
+            ready.wait()  # all contexts are made before any thread draws (model.vis is then left alone)
+        for i in frames:
+            put(("ok", writer.frame(i)))
+    except (_Stopped, threading.BrokenBarrierError):
+        pass
+    except BaseException as e:  # noqa: BLE001  (raised in the encoding thread, in frame order)
+        try:
+            put(("error", e))
+        except _Stopped:
+            pass
+    finally:
+        if writer is not None:
+            stats.render_s, stats.panels = writer.render_s, writer.panels
+            writer.close()
