@@ -3,6 +3,7 @@
 thread or in several drawing threads (`runner.render.parallel`)."""
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -122,7 +123,9 @@ class FrameWriter:
     """Draws frames of a `FramePlan` and encodes ranges of them into video files (H.264).
 
     Owns one OpenGL renderer of the panel size (made on construction, freed by `close`; use as a
-    context manager), reused for every panel of every frame it draws.
+    context manager), reused for every panel of every frame it draws. The renderer is made from a
+    copy of the model (`make_renderer` changes the model's `vis` fields while it makes the context),
+    so writers can be made in one thread while others draw.
 
     Attributes:
         render_s: [s] wall time spent posing, rendering and reading back panels (not encoding).
@@ -135,7 +138,7 @@ class FrameWriter:
 
     def __init__(self, plan: FramePlan):
         self.plan = plan
-        self.renderer = make_renderer(plan.model, plan.panel_w, plan.panel_h, plan.quality, plan.shadow_size)
+        self.renderer = make_renderer(copy.copy(plan.model), plan.panel_w, plan.panel_h, plan.quality, plan.shadow_size)
         try:
             self.panel = Panel(plan.model, self.renderer, plan.quality)
             self.ghosts = ghost_data(plan.model, plan.tracks, plan.kf_t, plan.kf_q)

@@ -38,8 +38,6 @@ QUEUE_FRAMES = 2
 """Frames a drawing thread may be ahead of the encoder (each about 1.5 MB at 960x540)."""
 _POLL_S = 0.1
 """[s] how often a waiting thread looks at the stop flag (and this thread at a dead drawing thread)."""
-_CONTEXT_LOCK = threading.Lock()
-"""`make_renderer` changes the model's `vis` fields while a context is made: one at a time."""
 
 
 def available_cores() -> int:
@@ -96,10 +94,9 @@ def render_threaded(plan: FramePlan, path, workers: int,
     """
     n = plan.n_frames
     stop = threading.Event()
-    ready = threading.Barrier(workers)
     outs = [queue.Queue(maxsize=QUEUE_FRAMES) for _ in range(workers)]
     stats = [DrawStats() for _ in range(workers)]
-    threads = [threading.Thread(target=_draw, args=(plan, range(j, n, workers), outs[j], stop, ready, stats[j]),
+    threads = [threading.Thread(target=_draw, args=(plan, range(j, n, workers), outs[j], stop, stats[j]),
                                 name=f"dynsplines-video-draw-{j}", daemon=True) for j in range(workers)]
     for t in threads:
         t.start()
@@ -140,11 +137,10 @@ def _next(out: queue.Queue, thread: threading.Thread):
         return payload
 
 
-def _draw(plan: FramePlan, frames: range, out: queue.Queue, stop: threading.Event, ready: threading.Barrier,
-          stats: DrawStats) -> None:
-    """A drawing thread: make its renderer (one at a time), wait for the others, draw `frames` in order
-    into `out`; an exception is put in `out` in place of the frame. The renderer is freed here, in the
-    thread whose OpenGL context it is."""
+def _draw(plan: FramePlan, frames: range, out: queue.Queue, stop: threading.Event, stats: DrawStats) -> None:
+    """A drawing thread: make its renderer (`FrameWriter`, from its own copy of the model), draw
+    `frames` in order into `out`; an exception is put in `out` in place of the frame. The renderer is
+    freed here, in the thread whose OpenGL context it is."""
     def put(item) -> None:
         while True:
             if stop.is_set():
@@ -157,14 +153,10 @@ def _draw(plan: FramePlan, frames: range, out: queue.Queue, stop: threading.Even
 
     writer = None
     try:
-        try:
-            with _CONTEXT_LOCK:
-                writer = FrameWriter(plan)
-        finally:
-            ready.wait()  # all contexts are made before any thread draws (model.vis is then left alone)
+        writer = FrameWriter(plan)
         for i in frames:
             put(("ok", writer.frame(i)))
-    except (_Stopped, threading.BrokenBarrierError):
+    except _Stopped:
         pass
     except BaseException as e:  # noqa: BLE001  (raised in the encoding thread, in frame order)
         try:
