@@ -24,8 +24,8 @@ reused for every panel of every frame. A frame's picture depends on that frame o
 before the scene is updated, so MuJoCo's infinite floor is placed under this frame's camera, not the
 previous one's). That lets several threads draw (`parallel.render_threaded`, one per core up to 4):
 Mesa's llvmpipe does much of a frame's work on the thread issuing the draw calls and MuJoCo releases
-the GIL while it renders, so thread j draws frames j, j + k, ... with its own context and this thread
-hands them to one encoder in frame order: the same frames as one thread draws. Each
+the GIL while it renders, so each thread draws the next frame not yet taken with its own context,
+and this thread hands them to one encoder in frame order: the same frames as one thread draws. Each
 frame's overlays are drawn and encoded in a background thread (`encode.FrameEncoder`, ffmpeg in its
 own process). A quality preset (`QUALITIES`) trades MuJoCo's defaults for speed on a software
 renderer. In "fast" an infinite floor under directional light is drawn as one quad

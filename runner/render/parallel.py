@@ -5,13 +5,14 @@ calls (vertex processing, primitive setup, the wait for the shadow map before th
 only the final rasterization is spread over llvmpipe's own threads, so one drawing thread keeps a
 2-core machine about 1.5 cores busy. MuJoCo's Python bindings release the GIL in `mjr_render` and
 `mjr_readPixels`, so `render_threaded` draws with `workers` threads in this process, each with its own
-`mujoco.Renderer` (its own OpenGL context and scene) made from the same `FramePlan`: thread j draws
-frames j, j + workers, j + 2 workers, ... (frame i is the same picture whichever thread draws it),
-and this thread hands them to the one encoder in frame order (`FrameEncoder`: overlays and H.264 in
-its own thread, ffmpeg in its own process). Threads rather than processes: no interpreter to start,
-nothing to copy, one encoder and one file; a thread costs one more OpenGL context (its shaders
-compiled once more by llvmpipe), a few tenths of a second of CPU, so short videos use one
-(`worker_count`).
+`mujoco.Renderer` (its own OpenGL context and scene) made from the same `FramePlan`. Each thread
+takes the next frame not yet taken (at most `AHEAD_FRAMES` per thread past the one the encoder waits
+for, so a thread the OS holds up does not stall the others), frame i is the same picture whichever
+thread draws it, and this thread hands the frames to the one encoder in frame order (`FrameEncoder`:
+overlays and H.264 in its own thread, ffmpeg in its own process). Threads rather than processes: no
+interpreter to start, nothing to copy, one encoder and one file; a thread costs one more OpenGL
+context (its shaders compiled once more by llvmpipe), a few tenths of a second of CPU, so short
+videos use one (`worker_count`).
 
 Errors: an error in a drawing thread (no OpenGL backend, a bad frame) is raised here, in frame order;
 Ctrl-C (KeyboardInterrupt, delivered to this thread) stops the drawing threads, which free their
@@ -20,7 +21,6 @@ contexts, and the encoder drops its frames (no partial video: the caller's `atom
 from __future__ import annotations
 
 import os
-import queue
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,10 +34,12 @@ the number of cores more only compete for them."""
 MIN_PARALLEL_FRAMES = 24
 """Videos shorter than this (0.8 s at 30 fps) are drawn by one thread: a second OpenGL context and its
 shader compilation (about 0.1-0.3 s of CPU) would cost more than it saves."""
-QUEUE_FRAMES = 2
-"""Frames a drawing thread may be ahead of the encoder (each about 1.5 MB at 960x540)."""
+AHEAD_FRAMES = 2
+"""Frames per drawing thread that may be drawn ahead of the one the encoder waits for (each about
+1.5 MB at 960x540): a thread held up by the OS does not hold up the others until they are this far
+ahead."""
 _POLL_S = 0.1
-"""[s] how often a waiting thread looks at the stop flag (and this thread at a dead drawing thread)."""
+"""[s] how often the encoding thread, waiting for a frame, checks that a drawing thread is alive."""
 
 
 def available_cores() -> int:
@@ -74,10 +76,6 @@ class DrawStats:
     panels: int = 0
 
 
-class _Stopped(Exception):
-    """Raised in a drawing thread when this thread has asked them to stop."""
-
-
 def render_threaded(plan: FramePlan, path, workers: int,
                     progress: Callable[[int, int], None] | None = None) -> DrawStats:
     """Write the video of `plan` to `path` (H.264), its frames drawn by `workers` threads.
@@ -93,23 +91,22 @@ def render_threaded(plan: FramePlan, path, workers: int,
         video cannot be written (the encoder's error).
     """
     n = plan.n_frames
-    stop = threading.Event()
-    outs = [queue.Queue(maxsize=QUEUE_FRAMES) for _ in range(workers)]
+    frames = _Frames(n, AHEAD_FRAMES * workers)
     stats = [DrawStats() for _ in range(workers)]
-    threads = [threading.Thread(target=_draw, args=(plan, range(j, n, workers), outs[j], stop, stats[j]),
-                                name=f"dynsplines-video-draw-{j}", daemon=True) for j in range(workers)]
+    threads = [threading.Thread(target=_draw, args=(plan, frames, stats[j]), name=f"dynsplines-video-draw-{j}",
+                                daemon=True) for j in range(workers)]
     for t in threads:
         t.start()
     labels = [tr.label for tr in plan.tracks]
     try:
         with FrameEncoder(path, plan.fps, _compose_of(plan)) as encoder:
             for i in range(n):
-                images, marks, dots = _next(outs[i % workers], threads[i % workers])
+                images, marks, dots = frames.get(i, threads)
                 encoder.put(images, labels, plan.times[i], plan.speed, int(plan.currents[i]), marks, dots)
                 if progress is not None:
                     progress(i + 1, n)
     finally:
-        stop.set()
+        frames.stop()
         for t in threads:
             t.join()
     return DrawStats(sum(s.render_s for s in stats), sum(s.panels for s in stats))
@@ -123,46 +120,70 @@ def _compose_of(plan: FramePlan):
                    plan.kf_t).compose
 
 
-def _next(out: queue.Queue, thread: threading.Thread):
-    """The next frame's panels from a drawing thread's queue; raises what the thread raised."""
-    while True:
-        try:
-            kind, payload = out.get(timeout=_POLL_S)
-        except queue.Empty:
-            if not thread.is_alive() and out.empty():
-                raise RuntimeError(f"{thread.name} ended without drawing its frames") from None
-            continue
+class _Frames:
+    """The frames between the drawing threads and the encoder: a drawing thread takes the next frame
+    not yet taken (`take`; at most `ahead` frames past the one the encoder waits for), puts its panels
+    (or the exception it raised) under its index (`put`); the encoding thread gets them in order (`get`)."""
+
+    def __init__(self, n: int, ahead: int):
+        self.n, self.ahead = n, max(1, ahead)
+        self.cond = threading.Condition()
+        self.taken = 0  # frames 0 .. taken-1 are taken
+        self.wanted = 0  # the frame the encoder waits for
+        self.done: dict[int, tuple] = {}
+        self.stopped = False
+
+    def take(self) -> int | None:
+        """The next frame to draw, or None when all are taken or `stop` was called."""
+        with self.cond:
+            while not self.stopped and self.taken < self.n and self.taken >= self.wanted + self.ahead:
+                self.cond.wait()
+            if self.stopped or self.taken >= self.n:
+                return None
+            self.taken += 1
+            return self.taken - 1
+
+    def put(self, i: int, kind: str, payload) -> None:
+        with self.cond:
+            self.done[i] = (kind, payload)
+            self.cond.notify_all()
+
+    def get(self, i: int, threads):
+        """Frame i's panels (frames are got in order); raises what its drawing thread raised."""
+        with self.cond:
+            while i not in self.done:
+                if not any(t.is_alive() for t in threads):
+                    raise RuntimeError(f"the drawing threads ended without drawing frame {i}")
+                self.cond.wait(timeout=_POLL_S)
+            kind, payload = self.done.pop(i)
+            self.wanted = i + 1
+            self.cond.notify_all()
         if kind == "error":
             raise payload
         return payload
 
+    def stop(self) -> None:
+        """Drawing threads take no more frames."""
+        with self.cond:
+            self.stopped = True
+            self.cond.notify_all()
 
-def _draw(plan: FramePlan, frames: range, out: queue.Queue, stop: threading.Event, stats: DrawStats) -> None:
-    """A drawing thread: make its renderer (`FrameWriter`, from its own copy of the model), draw
-    `frames` in order into `out`; an exception is put in `out` in place of the frame. The renderer is
-    freed here, in the thread whose OpenGL context it is."""
-    def put(item) -> None:
-        while True:
-            if stop.is_set():
-                raise _Stopped
-            try:
-                out.put(item, timeout=_POLL_S)
-                return
-            except queue.Full:
-                continue
 
-    writer = None
+def _draw(plan: FramePlan, frames: _Frames, stats: DrawStats) -> None:
+    """A drawing thread: make its renderer (`FrameWriter`, from its own copy of the model), then draw
+    the frames it takes until none is left; an exception is put in place of the frame it was drawing
+    (or of the next frame, if the renderer could not be made). The renderer is freed here, in the
+    thread whose OpenGL context it is."""
+    writer, i = None, None
     try:
         writer = FrameWriter(plan)
-        for i in frames:
-            put(("ok", writer.frame(i)))
-    except _Stopped:
-        pass
+        while (i := frames.take()) is not None:
+            frames.put(i, "ok", writer.frame(i))
     except BaseException as e:  # noqa: BLE001  (raised in the encoding thread, in frame order)
-        try:
-            put(("error", e))
-        except _Stopped:
-            pass
+        if i is None:
+            i = frames.take()
+        if i is not None:
+            frames.put(i, "error", e)
     finally:
         if writer is not None:
             stats.render_s, stats.panels = writer.render_s, writer.panels
