@@ -91,7 +91,7 @@ def render_threaded(plan: FramePlan, path, workers: int,
         video cannot be written (the encoder's error).
     """
     n = plan.n_frames
-    frames = _Frames(n, AHEAD_FRAMES * workers)
+    frames = _Frames(n, AHEAD_FRAMES * workers, workers)
     stats = [DrawStats() for _ in range(workers)]
     threads = [threading.Thread(target=_draw, args=(plan, frames, stats[j]), name=f"dynsplines-video-draw-{j}",
                                 daemon=True) for j in range(workers)]
@@ -125,8 +125,9 @@ class _Frames:
     not yet taken (`take`; at most `ahead` frames past the one the encoder waits for), puts its panels
     (or the exception it raised) under its index (`put`); the encoding thread gets them in order (`get`)."""
 
-    def __init__(self, n: int, ahead: int):
-        self.n, self.ahead = n, max(1, ahead)
+    def __init__(self, n: int, ahead: int, workers: int):
+        self.n, self.ahead, self.workers = n, max(1, ahead), workers
+        self.failed = 0  # drawing threads that could not make their renderer
         self.cond = threading.Condition()
         self.taken = 0  # frames 0 .. taken-1 are taken
         self.wanted = 0  # the frame the encoder waits for
@@ -162,6 +163,12 @@ class _Frames:
             raise payload
         return payload
 
+    def could_not_start(self) -> bool:
+        """A drawing thread could not make its renderer: True if it is the last one (no thread draws)."""
+        with self.cond:
+            self.failed += 1
+            return self.failed >= self.workers
+
     def stop(self) -> None:
         """Drawing threads take no more frames."""
         with self.cond:
@@ -171,12 +178,18 @@ class _Frames:
 
 def _draw(plan: FramePlan, frames: _Frames, stats: DrawStats) -> None:
     """A drawing thread: make its renderer (`FrameWriter`, from its own copy of the model), then draw
-    the frames it takes until none is left; an exception is put in place of the frame it was drawing
-    (or of the next frame, if the renderer could not be made). The renderer is freed here, in the
-    thread whose OpenGL context it is."""
+    the frames it takes until none is left; an exception is put in place of the frame it was drawing.
+    A thread whose renderer cannot be made ends and leaves the frames to the others; the last one to
+    fail so puts its exception in place of the next frame. The renderer is freed here, in the thread
+    whose OpenGL context it is."""
     writer, i = None, None
     try:
-        writer = FrameWriter(plan)
+        try:
+            writer = FrameWriter(plan)
+        except BaseException as e:  # noqa: BLE001  (the others draw; raised if none could start)
+            if not frames.could_not_start():
+                return
+            raise e
         while (i := frames.take()) is not None:
             frames.put(i, "ok", writer.frame(i))
     except BaseException as e:  # noqa: BLE001  (raised in the encoding thread, in frame order)

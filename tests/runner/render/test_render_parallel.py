@@ -119,6 +119,33 @@ def test_an_error_in_a_drawing_thread_reaches_the_caller(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == [] and _no_drawing_threads()
 
 
+def test_a_thread_without_a_renderer_leaves_its_frames_to_the_others(tmp_path, monkeypatch):
+    """One of two threads cannot make its OpenGL context: the other draws every frame (the video of
+    one thread); when none can, the error reaches the caller."""
+    model = mujoco.MjModel.from_xml_string(SCENE)
+    t, q = _walk(model)
+    original, made, lock = frames.FrameWriter.__init__, [], threading.Lock()
+
+    def init(self, plan, fail_first=1):
+        with lock:
+            made.append(1)
+            fail = len(made) <= fail_first
+        if fail:
+            raise InputError("offscreen rendering failed (test)")
+        original(self, plan)
+
+    args = dict(fps=15, size=(160, 120), speed=1.0)
+    one = render_tracks(model, [Track("a", t, q)], tmp_path / "one.mp4", workers=1, **args)
+    monkeypatch.setattr(frames.FrameWriter, "__init__", init)
+    two = render_tracks(model, [Track("a", t, q)], tmp_path / "two.mp4", workers=2, **args)
+    assert len(made) == 2 and two.n_frames == one.n_frames
+    assert np.abs(_video(one.path) - _video(two.path)).mean() < 0.2
+    monkeypatch.setattr(frames.FrameWriter, "__init__", lambda self, plan: init(self, plan, fail_first=99))
+    with pytest.raises(InputError, match="offscreen rendering failed"):
+        render_tracks(model, [Track("a", t, q)], tmp_path / "none.mp4", workers=2, **args)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one.mp4", "two.mp4"] and _no_drawing_threads()
+
+
 def test_ctrl_c_stops_the_drawing_threads(tmp_path):
     model = mujoco.MjModel.from_xml_string(SCENE)
     t, q = _walk(model)
