@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 from runner.render.encode import FrameEncoder
 from runner.render.frames import FramePlan, FrameWriter
+from runner.render.overlays import Overlay
 
 MAX_WORKERS = 4
 """Drawing threads at most: each holds an OpenGL context (and llvmpipe's rasterizer threads); beyond
@@ -114,8 +115,6 @@ def render_threaded(plan: FramePlan, path, workers: int,
 
 def _compose_of(plan: FramePlan):
     """The overlay composer of the plan's frames (`Overlay.compose`)."""
-    from runner.render.overlays import Overlay
-
     return Overlay(plan.width, plan.height, plan.panel_w, len(plan.tracks), plan.title, plan.t0, plan.t1,
                    plan.kf_t).compose
 
