@@ -17,15 +17,21 @@ sample outside its time range). Quaternions are interpolated component-wise and 
 MuJoCo normalizes them when it computes the kinematics, as it does for the spline's own values (see
 docs/design.md, "State = MuJoCo qpos"). With samples much denser than the video this is exact to the eye.
 
-The model is passed in (loaded once). One `mujoco.Renderer` is made per call, for the one panel size,
-and reused for every panel of every frame; its offscreen buffer is made large enough for the panel
-(`<visual><global offwidth offheight>` raised while the context is created, then restored), and a
-quality preset (`QUALITIES`) trades MuJoCo's defaults for speed on a software renderer. In "fast"
-an infinite floor under directional light is drawn as one quad (`gl.coarse_floor`: MuJoCo's own
-200 x 200 grid was a third of the render time, for the same picture), and each frame's overlays are
-drawn and encoded in a background thread while the next frame renders (`encode.FrameEncoder`). Planes cast
-no shadows (nothing lies under a floor): the floor's own shadow-map self-test drew rows of black
-specks ("shadow acne") on it in every frame. Rendering
+The model is passed in (loaded once). What every frame shows is computed once (`frames.FramePlan`);
+a `frames.FrameWriter` draws frames from it with one `mujoco.Renderer` of the panel size (its own
+OpenGL context, made from a copy of the model whose offscreen buffer is raised to the panel size),
+reused for every panel of every frame. A frame's picture depends on that frame only (the camera is set
+before the scene is updated, so MuJoCo's infinite floor is placed under this frame's camera, not the
+previous one's). That lets several threads draw (`parallel.render_threaded`, one per core up to 4):
+Mesa's llvmpipe does much of a frame's work on the thread issuing the draw calls and MuJoCo releases
+the GIL while it renders, so each thread draws the next frame not yet taken with its own context,
+and this thread hands them to one encoder in frame order: the same frames as one thread draws. Each
+frame's overlays are drawn and encoded in a background thread (`encode.FrameEncoder`, ffmpeg in its
+own process). A quality preset (`QUALITIES`) trades MuJoCo's defaults for speed on a software
+renderer. In "fast" an infinite floor under directional light is drawn as one quad
+(`gl.coarse_floor`: MuJoCo's own 200 x 200 grid was a third of the render time, for the same
+picture). Planes cast no shadows (nothing lies under a floor): the floor's own shadow-map self-test
+drew rows of black specks ("shadow acne") on it in every frame. Rendering
 needs an OpenGL backend; without a display that is EGL (Mesa's llvmpipe), which `runner.environment`
 selects through MUJOCO_GL before mujoco is first imported (and `_headless_fallback` if mujoco came first).
 """

@@ -41,7 +41,7 @@ class FrameEncoder:
         self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_FRAMES)
         self._error: BaseException | None = None
         self._abort = False
-        self._children0 = _children_cpu()
+        self._children0 = children_cpu()
         self.child_cpu_s = 0.0
         self.compose_s = 0.0
         self._writer = iio.get_writer(
@@ -84,7 +84,7 @@ class FrameEncoder:
         try:
             self._writer.close()
         finally:
-            self.child_cpu_s = _children_cpu() - self._children0
+            self.child_cpu_s = children_cpu() - self._children0
         if self._error is not None and not abort:
             raise self._error
 
@@ -101,7 +101,7 @@ class FrameEncoder:
             pass
 
 
-def _children_cpu() -> float:
+def children_cpu() -> float:
     """[s] user + system CPU time of this process's finished (waited-for) child processes; 0 where
     the `resource` module is missing (Windows)."""
     try:

@@ -84,6 +84,9 @@ class Panel:
         a ghost at 0 is not drawn."""
         model, scene = self.model, self.renderer.scene
         forward_direction(model, self.data, qpos)
+        # mjv_updateScene places an infinite plane under the scene's camera of the previous update: set
+        # this camera first, so the picture depends on this frame only (not on what was drawn before)
+        mujoco.mjv_updateCamera(model, self.data, self.cam, scene)
         self.renderer.update_scene(self.data, self.cam, self.option)
         if self.coarse_floor:
             coarse_floor(model, scene)

@@ -132,6 +132,7 @@ class RenderInfo:
         size: (width, height) [px] of the video.
         cpu_time_s: [s] CPU time of the call: this process (all its threads, the software
             renderer's included) and the ffmpeg encoder (NaN if unknown).
+        threads: threads that drew the frames (`runner.render.parallel`).
     """
 
     path: Path
@@ -141,6 +142,7 @@ class RenderInfo:
     ms_per_panel: float
     size: tuple[int, int]
     cpu_time_s: float = math.nan
+    threads: int = 1
 
     @property
     def fps(self) -> float:

@@ -10,39 +10,29 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from runner.files import atomic_output, check_writable_dir
-from runner.render.encode import FrameEncoder
+from runner.render.encode import children_cpu
+from runner.render.frames import FramePlan, FrameWriter
 from runner.render.gl import check_quality, load_font, make_renderer, shadow_map_size
 from runner.render.overlays import (
-    KEYFRAME_CAPTION_SECONDS,
     WHITE,
-    Overlay,
     Panel,
     check_keyframes,
     check_model_fit,
-    current_keyframes,
-    deep_sites,
     draw_text,
-    ghost_alphas,
-    ghost_data,
     labels_shown,
     positive,
     title_band,
 )
+from runner.render.parallel import render_threaded, worker_count
 from runner.render.tracks import (
     IMAGE_SUFFIXES,
     VIDEO_SUFFIXES,
     Camera,
     RenderInfo,
     Track,
-    azimuth_path,
     forward_direction,
-    frame_times,
-    interpolate_samples,
-    lookat_path,
     parse_size,
     root_body,
-    root_poses,
-    sample_track,
 )
 from solver.errors import InputError
 
@@ -61,6 +51,7 @@ def render_tracks(
     camera: Camera = Camera(),  # noqa: B008 (a frozen dataclass: an immutable default)
     quality: str = "fast",
     progress: Callable[[int, int], None] | None = None,
+    workers: int | None = None,
 ) -> RenderInfo:
     """Write a video of the tracks side by side, keyframes marked (paper figures 11, 12).
 
@@ -91,14 +82,20 @@ def render_tracks(
         camera: camera distance, angles and smoothing.
         quality: "fast" or "high", see `QUALITIES`.
         progress: optional callback, called after each frame as progress(frames_done, n_frames).
+        workers: threads that draw the frames (`runner.render.parallel`: each with its own OpenGL
+            context, frames handed to one encoder in order); None: one per core up to `MAX_WORKERS`,
+            one for videos under `MIN_PARALLEL_FRAMES` frames (`worker_count`). The video is the
+            same whatever the number.
 
     Returns:
-        RenderInfo (path, n_frames, video_time_s, wall_time_s, ms_per_panel, size).
+        RenderInfo (path, n_frames, video_time_s, wall_time_s, ms_per_panel, size, cpu_time_s,
+        threads).
 
     Raises:
         InputError: bad size, fps or speed; an output suffix other than .mp4/.mkv/.mov; an output
             folder that cannot be written; tracks whose nq does not match the model; keyframe arrays
-            of the wrong shape; no working OpenGL backend (set MUJOCO_GL=egl or osmesa).
+            of the wrong shape; workers < 1; no working OpenGL backend (set MUJOCO_GL=egl or osmesa).
+        OSError: the video cannot be written (ffmpeg failed, a full disk).
     """
     wall0, cpu0 = time.perf_counter(), time.process_time()
     out_path = Path(out_path)
@@ -108,6 +105,8 @@ def render_tracks(
     if not tracks:
         raise InputError("render_tracks needs at least one track")
     check_quality(quality)
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise InputError(f"workers must be a whole number >= 1 (or None: one per core); got {workers!r}")
     if out_path.suffix.lower() not in VIDEO_SUFFIXES:
         raise InputError(f"video file must end in one of {list(VIDEO_SUFFIXES)}; got {str(out_path)!r}")
     if width % 2 or height % 2:
@@ -123,69 +122,26 @@ def render_tracks(
     kf_t, kf_q = check_keyframes(model, keyframe_times, keyframe_qpos)
     check_writable_dir(out_path)
 
-    t0 = min(float(tr.times[0]) for tr in tracks)
-    t1 = max(float(tr.times[-1]) for tr in tracks)
-    times = frame_times(t0, t1, fps, speed)
-    n = times.size
-    qposes = [sample_track(tr, times) for tr in tracks]
-    depths = [None if tr.penetration is None else interpolate_samples(tr.times, tr.penetration, times) for tr in tracks]
-    plants = [None if tr.planted is None else
-              interpolate_samples(tr.times, tr.planted.astype(float), times) > 0.5 for tr in tracks]
-
-    renderer = make_renderer(model, panel_w, panel_h, quality, shadow_map_size(model, panel_h, camera.distance))
-    try:
-        panel = Panel(model, renderer, quality)
-        positions, facing = root_poses(model, panel.data, qposes)
-        lookat = lookat_path(model, panel.data, qposes, speed / fps, camera, positions)
-        azimuth = azimuth_path(positions, speed / fps, camera, facing)
-        ghosts = ghost_data(model, tracks, kf_t, kf_q)
-        currents = current_keyframes(times, kf_t, KEYFRAME_CAPTION_SECONDS * speed)
-        overlay = Overlay(width, height, panel_w, len(tracks), title, t0, t1, kf_t)
-        labels = [tr.label for tr in tracks]
-
-        render_seconds = 0.0
-        with atomic_output(out_path) as tmp, FrameEncoder(tmp, fps, overlay.compose) as encoder:
-            for i in range(n):
-                r0 = time.perf_counter()
-                current = int(currents[i])
-                alphas = ghost_alphas(times[i], kf_t)
-                images, marks, dots = [], [], []
-                for p in range(len(tracks)):
-                    panel.set_camera(camera, lookat[i], azimuth[i])
-                    image, mark, dot = _panel_frame(panel, qposes[p][i], ghosts[p], current, alphas,
-                                                    depths[p], plants[p], site_ids[p], i)
-                    images.append(image)
-                    marks.append(mark)
-                    dots.append(dot)
-                render_seconds += time.perf_counter() - r0
-                encoder.put(images, labels, times[i], speed, current, marks, dots)
-                if progress is not None:
-                    progress(i + 1, n)
-    finally:
-        renderer.close()
+    plan = FramePlan.build(model, tracks, site_ids, kf_t, kf_q, fps=fps, speed=speed, camera=camera,
+                           quality=quality, shadow_size=shadow_map_size(model, panel_h, camera.distance),
+                           size=(width, height), panel_size=(panel_w, panel_h), title=title)
+    n = plan.n_frames
+    threads = worker_count(n, workers)
+    children0 = children_cpu()
+    with atomic_output(out_path) as tmp:
+        if threads > 1:
+            stats = render_threaded(plan, tmp, threads, progress)
+            render_s, panels = stats.render_s, stats.panels
+        else:
+            with FrameWriter(plan) as writer:
+                done = iter(range(1, n + 1))
+                writer.write(range(n), tmp, None if progress is None else lambda: progress(next(done), n))
+            render_s, panels = writer.render_s, writer.panels
     return RenderInfo(
         path=out_path, n_frames=n, video_time_s=n / fps,
         wall_time_s=time.perf_counter() - wall0,
-        ms_per_panel=1000.0 * render_seconds / (n * len(tracks)), size=(width, height),
-        cpu_time_s=time.process_time() - cpu0 + encoder.child_cpu_s)
-
-
-def _panel_frame(panel: Panel, qpos, ghosts, current: int, alphas, depth, planted, site_ids, i: int):
-    """One panel of video frame i: (image (h, w, 3) uint8, magenta mark or None, green dots or None).
-
-    The mark is (pixel positions (k, 2) of the sites deeper than `PENETRATION_SHOWN`, the deepest
-    depth [m]); their bodies are drawn magenta. The dots are the pixel positions (k, 2) of the sites
-    the contact schedule has planted (`planted`: (n, s) bool per frame, or None)."""
-    model = panel.model
-    deep = deep_sites(depth, i, site_ids)
-    marked_bodies = {int(model.site_bodyid[s]) for s, _ in deep}
-    image = panel.render(qpos, ghosts, current, marked_bodies, alphas if len(ghosts) else None)
-    mark = None
-    if deep:
-        mark = (panel.project(np.array([panel.data.site_xpos[s] for s, _ in deep])), max(d for _, d in deep))
-    on = [] if planted is None else [int(s) for s, o in zip(site_ids, planted[i], strict=True) if o]
-    dots = panel.project(np.array([panel.data.site_xpos[s] for s in on])) if on else None
-    return image, mark, dots
+        ms_per_panel=1000.0 * render_s / max(panels, 1), size=(width, height),
+        cpu_time_s=time.process_time() - cpu0 + children_cpu() - children0, threads=threads)
 
 
 def render_still(
