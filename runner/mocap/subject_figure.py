@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.mocap.bvh import BvhClip
+from solver.contacts import RADIUS_PREFIX
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE, Figure
 
@@ -263,10 +264,14 @@ def _leg(spec, side: str, cmu: str, m: SubjectMeasures, rot: dict, s: float) -> 
     _sole(spec, side, heel, toe, h / 2)
 
 
-def _sole(spec, side: str, heel: np.ndarray, toe: np.ndarray, r: float) -> None:
-    """The foot's heel and toe sites at `heel`, `toe` (foot frame [m]) and its capsule of radius r over them."""
+def _sole(spec, side: str, heel: np.ndarray, toe: np.ndarray, r: float, heel_radius: float = 0.0,
+          toe_radius: float = 0.0) -> None:
+    """The foot's heel and toe sites at `heel`, `toe` (foot frame [m]; the centres of their spheres of the
+    given radii [m]) and its capsule of radius r over the sole under them."""
     spec.site(f"{side}_heel").pos = heel
     spec.site(f"{side}_toe").pos = toe
+    heel = heel - [0, 0, heel_radius]  # the sole: the spheres' lowest points with the foot flat
+    toe = toe - [0, 0, toe_radius]
     forward = np.r_[toe[:2] - heel[:2], 0.0]
     forward /= np.linalg.norm(forward)
     _capsule(spec, f"{side}_foot", heel + r * forward + [0, 0, r], toe - 0.5 * r * forward + [0, 0, r], r)
@@ -292,7 +297,10 @@ def _fit_soles(spec, clip: BvhClip, m: SubjectMeasures) -> None:
     except InputError:  # the feet never rest: nothing to measure
         return
     for heel, toe in figure.feet.values():
-        _sole(spec, heel[0], fit.sites[heel], fit.sites[toe], m.ankle_height / 2)
+        _sole(spec, heel[0], fit.sites[heel], fit.sites[toe], m.ankle_height / 2, fit.radii[heel], fit.radii[toe])
+        for site in (heel, toe):
+            if fit.radii[site] > 0:
+                spec.add_numeric(name=RADIUS_PREFIX + site, data=[float(fit.radii[site])])
 
 
 def _arm(spec, side: str, cmu: str, m: SubjectMeasures, rot: dict, s: float) -> None:
