@@ -15,7 +15,9 @@ annotations"), with
   OFFSETs); the foot is the subject's foot at rest (ball of the foot = the toe joint, flat sole);
 * **the sole** `ANKLE_HEIGHT` x stature below the ankle, the heel site `HEEL_BACK` x foot length behind
   the ankle, the toe site on the sole under the ball of the foot (where the foot pivots at push-off:
-  the figure's foot is rigid and the subject's toes are not), the ball site at the toe joint;
+  the figure's foot is rigid and the subject's toes are not), the ball site at the toe joint; then
+  both moved to the soles measured on the clip, and the heel rounded to a sphere of the radius measured
+  there (`runner.mocap.soles`; written as ``<numeric name="figure:radius:l_heel">``);
 * **stature** H from the leg: the hip joint is `HIP_HEIGHT` x H above the sole (Winter 2009, fig. 4.1,
   after Drillis & Contini 1966), so H = (thigh + shin) / (HIP_HEIGHT - ANKLE_HEIGHT);
 * **masses** from the shipped figure's segment fractions (de Leva 1996, J. Biomech. 29(9):1223-1230,
