@@ -13,6 +13,7 @@ from runner.mocap.contacts import worst_contact_distance
 from solver.contacts import RADIUS_PREFIX, contact_points, contact_radii, lowest_points, site_heights, site_positions
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE, Figure
+from solver.layout import CONTACT_SITES
 
 FPS = 120.0
 RADIUS = 0.035  # [m] the heel's sphere
@@ -112,3 +113,24 @@ def test_lowest_points_and_malformed_radius():
     shipped = mujoco.MjModel.from_xml_path(str(FIGURE_FILE))
     assert not contact_radii(shipped, Figure.from_model(shipped).contact_sites).any()  # the shipped figure: points
     np.testing.assert_allclose(contact_points(shipped, shipped.qpos0[None]), site_positions(shipped, shipped.qpos0[None]))
+
+
+def test_penetration_term_measures_the_sphere():
+    """The penetration term's true depth of the heel sphere lowered 1 cm into the floor is 1 cm (its
+    centre, RADIUS - 1 cm up, is outside: the point site would read 0), and 0 where the sphere just
+    touches; the shipped figure's point sites read their own depth."""
+    from solver.terms.penetration import Penetration
+
+    model = _scene({"l_heel": RADIUS, "r_heel": RADIUS})
+    q = model.qpos0.copy()
+    term = Penetration(model)
+    assert term.violation(q[None]) < 1e-9
+    q[2] -= 0.01
+    heel = list(CONTACT_SITES).index("l_heel")
+    np.testing.assert_allclose(term.depths(q[None], margin=0.0)[0, heel], 0.01, rtol=1e-6)
+    spec = mujoco.MjSpec.from_file(str(FIGURE_FILE))
+    spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[5, 5, 0.1])
+    shipped = spec.compile()
+    p = shipped.qpos0.copy()
+    p[2] -= 0.01
+    np.testing.assert_allclose(Penetration(shipped).violation(p[None]), 0.01, rtol=1e-6)
