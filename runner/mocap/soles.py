@@ -30,8 +30,7 @@ follow (a point behind and below the ankle dips as the foot pitches up). The hee
 whose lowest point, centre - r z, is what touches a surface whatever the foot's pitch; h_heel above is
 that point's height. The fit takes r from 0 (a point) to `HEEL_RADIUS` times the ankle's height above
 the sole (the centre stays below the ankle), with the centre r above the heel's sole point so that a
-flat foot rests where it did. On a clip whose heel does not roll (a runner landing on the forefoot)
-the fitted r stays near 0. The toe stays a point: a sphere about the ball (the toes rolling under
+flat foot rests where it did. The toe stays a point: a sphere about the ball (the toes rolling under
 it at push-off) made the flat-foot fit of the forefoot worse on the shared clips (docs/mocap.md, "The
 soles"). A site that is never
 the lower one while its foot rests (a forefoot runner's heel) keeps its place. Scene and soles are fitted
