@@ -255,23 +255,76 @@ def site_positions(model, qpos: np.ndarray, sites: Sequence[str] = SITES) -> np.
     return mujoco_site_positions(model, mujoco.MjData(model), ids, np.atleast_2d(np.asarray(qpos, float)))
 
 
+#: the MJCF annotation of a contact site's radius: ``<numeric name="figure:radius:SITE" data="R"/>``
+RADIUS_PREFIX = "figure:radius:"
+
+
+def contact_radii(model, sites: Sequence[str] = SITES) -> np.ndarray:
+    """(s,) radius [m] of each contact site's sphere: 0 (a point) unless the figure's MJCF annotates it.
+
+    A contact site may stand for a rounded part of the sole, a sphere centred on the site (a heel that
+    rolls on its round back edge at heel strike, the forefoot rolling over the toes at push-off;
+    docs/contacts.md, "Rounded contacts"): ``<custom><numeric name="figure:radius:l_heel"
+    data="0.04"/></custom>``. The shipped figure has none (every site a point).
+
+    Raises:
+        InputError: a radius is not one finite number >= 0.
+    """
+    out = np.zeros(len(sites))
+    for k, s in enumerate(sites):
+        try:
+            data = np.asarray(model.numeric(RADIUS_PREFIX + s).data, float)
+        except KeyError:
+            continue
+        if data.shape != (1,) or not np.isfinite(data[0]) or data[0] < 0:
+            raise InputError(f'<numeric name="{RADIUS_PREFIX}{s}" data="{" ".join(map(str, data))}">: give the '
+                             'radius of the site\'s sphere, one number >= 0 in metres, e.g. data="0.04"')
+        out[k] = data[0]
+    return out
+
+
+def lowest_points(site_pos: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """(..., s, 3) the lowest points [m] of the contact spheres centred on (..., s, 3) sites with (s,) radii [m].
+
+    The point of a sphere of radius r nearest to a surface with upward unit normal n is c - r n,
+    whatever the foot's orientation; this takes c - r z. Its height above the surface under it
+    (`StaticSurfaces.height_above`, a vertical distance) is the centre's minus r, and differs from
+    the height of c - r n by r (1/n_z - 1): 0.2 micrometres for r = 4 cm on a floor tilted by 1 degree.
+    The speed of the point is the centre's (a constant shift). With radii 0 the sites themselves.
+    """
+    pos = np.array(site_pos, float)
+    pos[..., 2] -= np.asarray(radii, float)
+    return pos
+
+
+def contact_points(model, qpos: np.ndarray, sites: Sequence[str] = SITES) -> np.ndarray:
+    """(n, s, 3) the lowest points [m] of the named contact sites' spheres (`lowest_points` of
+    `site_positions` with `contact_radii`): where heights above a surface are measured.
+
+    Raises:
+        InputError: the model lacks a site, or a radius annotation is malformed.
+    """
+    return lowest_points(site_positions(model, qpos, sites), contact_radii(model, sites))
+
+
 def site_heights(model, site_pos: np.ndarray) -> np.ndarray:
-    """(n, s) height [m] of each site above the surface under it in the model's scene."""
+    """(n, s) height [m] of each point above the surface under it in the model's scene (give the contact
+    points, `contact_points`, for a figure whose sites are rounded)."""
     from solver.surfaces import StaticSurfaces
 
     return StaticSurfaces.from_model(model).height_above(site_pos)
 
 
 def reference_contacts(model, qpos: np.ndarray, frame_time: float, **thresholds) -> list[Contact]:
-    """The contact schedule of a motion in a scene: `detect_contacts` on its site positions and heights
-    (MuJoCo kinematics), keeping every contact (`min_duration` SCHEDULE_MIN_DURATION = 0 unless given:
+    """The contact schedule of a motion in a scene: `detect_contacts` on its contact points and their
+    heights (`contact_points`: MuJoCo kinematics, rounded sites' lowest points), keeping every contact (`min_duration` SCHEDULE_MIN_DURATION = 0 unless given:
     a hop's 10-40 ms touch-down is a contact, and dropping it would make its frames a flight).
 
     Args:
         model: the scene's MjModel (figure with the SITES, and static surfaces). qpos: (n, nq).
         frame_time: [s]. thresholds: keyword arguments of `detect_contacts`.
     """
-    pos = site_positions(model, qpos)
+    pos = contact_points(model, qpos)
     times = np.arange(len(pos)) * frame_time
     thresholds.setdefault("min_duration", SCHEDULE_MIN_DURATION)
     return detect_contacts(times, pos, site_heights(model, pos), **thresholds)

@@ -77,7 +77,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from solver.contact_thresholds import FLIGHT_HEIGHT, FLOAT_TOL, GMD_HEIGHT, SKATE_HEIGHT
-from solver.contacts import FEET, SITES, Contact, contact_mask
+from solver.contacts import FEET, SITES, Contact, contact_mask, contact_radii, lowest_points
 from solver.errors import InputError
 
 #: GMD skating speed [m/s] and frame rate [Hz] (its contact height: `contact_thresholds.GMD_HEIGHT`).
@@ -300,6 +300,8 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
                          "surfaces (add a plane, e.g. scene_fit.scene_mjcf)")
     pos, xq = _kinematics(model, qpos, sites)
     rpos, rxq = _kinematics(model, ref, sites)
+    radii = contact_radii(model, sites)  # a rounded site is measured at its sphere's bottom
+    pos, rpos = lowest_points(pos, radii), lowest_points(rpos, radii)
     h = surfaces.height_above(pos)
     rh = surfaces.height_above(rpos)
     mask = contact_mask(reference_contacts, sites, times)

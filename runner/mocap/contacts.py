@@ -7,6 +7,7 @@ import numpy as np
 
 from runner.mocap.retarget import Reference
 from solver.contact_thresholds import STANCE_SPEED_ON
+from solver.contacts import contact_radii, lowest_points
 from solver.figure import Figure
 
 #: the wide height window [m] in which `correct_root_height` looks for feet at rest to measure the
@@ -23,7 +24,7 @@ CONTACT_CLEARANCE = 0.002
 
 
 class _SiteKinematics:
-    """Contact-site positions of the figure over a motion, by MuJoCo forward kinematics."""
+    """Contact points of the figure over a motion, by MuJoCo forward kinematics."""
 
     def __init__(self, model):
         import mujoco
@@ -37,9 +38,11 @@ class _SiteKinematics:
         self.names = list(figure.contact_sites)  # foot by foot, heel then toe
         self.feet = dict(figure.feet)
         self.ids = figure.contact_site_ids
+        self.radii = contact_radii(model, self.names)
 
     def positions(self, qpos: np.ndarray) -> np.ndarray:
-        """(n, 4, 3) world positions [m] of l_heel, l_toe, r_heel, r_toe for (n, nq) qpos."""
+        """(n, 4, 3) world positions [m] of the contact points of l_heel, l_toe, r_heel, r_toe (the lowest
+        points of rounded sites' spheres, `solver.contacts.lowest_points`) for (n, nq) qpos."""
         import mujoco
 
         qpos = np.atleast_2d(qpos)
@@ -48,7 +51,7 @@ class _SiteKinematics:
             self.data.qpos[:] = q
             mujoco.mj_kinematics(self.model, self.data)
             out[i] = self.data.site_xpos[self.ids]
-        return out
+        return lowest_points(out, self.radii)
 
     def clearance(self, pos: np.ndarray) -> np.ndarray:
         """(n, 4) height [m] of each site above the surface under it (negative: below the surface)."""

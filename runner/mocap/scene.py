@@ -12,7 +12,7 @@ from runner.files import atomic_output
 from runner.mocap.reference import ROOT_SCALE_LEGS, load_bvh_reference
 from runner.mocap.retarget import Reference
 from solver.capture_frame import CaptureFrame
-from solver.contacts import Contact, site_positions
+from solver.contacts import Contact, contact_points
 from solver.errors import InputError
 from solver.model import load_model
 from solver.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
@@ -74,7 +74,7 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
         return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, Path(scene), frame=frame)
     bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
     first = load_bvh_reference(clip, bare, root_scale=root_scale)
-    pos = site_positions(bare, first.qpos)
+    pos = contact_points(bare, first.qpos)  # rounded sites: their spheres' lowest points
     capture = fit_scene(first.times, pos, fit_contacts(first.times, pos))
     frame, fitted = capture.levelling(), capture.levelled()
     out = Path(fitted_out)
@@ -95,7 +95,7 @@ def name_surfaces(model, reference: Reference, contacts: list[Contact]) -> list[
     out = []
     for c in contacts:
         i = int(np.clip(round((c.start + c.end) / 2 / reference.frame_time), 0, reference.count - 1))
-        p = site_positions(model, reference.qpos[i:i + 1], (c.site,))[0, 0]
+        p = contact_points(model, reference.qpos[i:i + 1], (c.site,))[0, 0]
         tops = surfaces.box_tops_below(p)
         name = planes[0] if planes else ""
         if np.isfinite(tops).any():

@@ -21,7 +21,18 @@ scene_fit`) and rho the soft-L1 loss with scale `SCALE` (5 mm): a frame whose fo
 while the detection still counts it pulls by its sign, not its size. The heel stays within `REACH` of
 the published place; the toe site moves from the ball forward at most to the toe tip (the toe joint's
 End Site) and within `REACH` in height: the figure's foot is rigid, and once the heel is up the
-subject's foot pivots about its toes, ahead of the ball (their joint flexes). A site that is never
+subject's foot pivots about its toes, ahead of the ball (their joint flexes).
+
+The heel is rounded: a walker's heel lands with the foot 20-35 degrees toes-up and rolls on the round
+back edge of the heel bone and its pad onto the flat foot, which one point fixed in the foot cannot
+follow (a point behind and below the ankle dips as the foot pitches up). The heel contact is a sphere
+(the site is its centre, its radius r an annotation of the figure, `solver.contacts.contact_radii`)
+whose lowest point, centre - r z, is what touches a surface whatever the foot's pitch; h_heel above is
+that point's height. The fit takes r from 0 (a point) to `HEEL_RADIUS` times the ankle's height above
+the sole (the centre stays below the ankle), with the centre r above the heel's sole point so that a
+flat foot rests where it did. The toe stays a point: a sphere about the ball (the toes rolling under
+it at push-off) made the flat-foot fit of the forefoot worse on the shared clips (docs/mocap.md, "The
+soles"). A site that is never
 the lower one while its foot rests (a forefoot runner's heel) keeps its place. Scene and soles are fitted
 in turn (`ROUNDS`): the floor is fitted through the lowest sites' rests, the soles to that floor.
 """
@@ -31,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.contacts import contact_mask
+from solver.contacts import contact_mask, lowest_points
 from solver.figure import Figure
 
 #: the soft-L1 scale of the fit [m]: residuals beyond it count linearly (as the floor fit's, solver/scene_fit.py)
@@ -40,6 +51,9 @@ SCALE = 0.005
 REACH = 0.03
 #: scene fit and sole fit alternate this many times
 ROUNDS = 2
+#: the largest radius of the heel's sphere, as a fraction of the ankle's height above the (published) sole:
+#: its centre stays below the ankle
+HEEL_RADIUS = 1.0
 #: a foot resting fewer frames than this keeps its published sole (too little to measure)
 MIN_FRAMES = 12
 
@@ -49,13 +63,15 @@ class SoleFit:
     """The fitted contact sites.
 
     Attributes:
-        sites: {site name: (3,) position in its foot body's frame [m]}.
+        sites: {site name: (3,) position in its foot body's frame [m]: the centre of its sphere}.
+        radii: {site name: the sphere's radius [m]} (0: a point).
         before, after: {foot: RMS [m] over the foot's resting frames of its lowest site's height above the
             surface under it, with the published and the fitted sites}.
         frames: {foot: the number of frames it rests}.
     """
 
     sites: dict
+    radii: dict
     before: dict
     after: dict
     frames: dict
@@ -76,39 +92,53 @@ def _foot_frames(model, qpos: np.ndarray, bodies: list[int]) -> tuple[np.ndarray
     return org, rot
 
 
-def _lowest(org, rot, heel, toe, surfaces) -> np.ndarray:
-    """(m,) height [m] of the lower of two foot-frame points above the surfaces, per frame."""
-    h = surfaces.height_above(np.stack([org + rot @ heel, org + rot @ toe], axis=1))
-    return h.min(axis=1)
+def _lowest(org, rot, heel, toe, radii, surfaces) -> np.ndarray:
+    """(m,) height [m] above the surfaces of the lower of two foot-frame spheres (centres `heel`, `toe`,
+    radii (2,)), per frame: each sphere's lowest point is its centre minus its radius, vertically."""
+    centres = np.stack([org + rot @ heel, org + rot @ toe], axis=1)
+    return (surfaces.height_above(centres) - np.asarray(radii, float)).min(axis=1)
 
 
-def _fit_foot(org, rot, heel, toe, forward, tip, surfaces) -> tuple[np.ndarray, np.ndarray]:
-    """The foot's heel and toe site (foot frame) minimising the module docstring's objective, within the
-    bounds around the published places `heel`, `toe`."""
+def _fit_foot(org, rot, heel, toe, forward, tip, surfaces, rmax: float = 0.0
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The foot's heel sphere and toe point (centres in the foot frame, radii (2,), the toe's 0)
+    minimising the module docstring's objective, within the bounds around the published places `heel`,
+    `toe` (on the sole): a sole point moves by (forward, up) offsets; the heel's sphere, of radius 0 to
+    `rmax` [m], has its centre r above its sole point, so that a flat foot rests on the same point."""
     from scipy.optimize import least_squares
 
     up = np.array([0.0, 0.0, 1.0])
 
-    def sites(p):
-        return heel + p[0] * forward + p[1] * up, toe + p[2] * forward + p[3] * up
-
-    def resid(p):
-        return _lowest(org, rot, *sites(p), surfaces)
+    def spheres(p):
+        return heel + p[0] * forward + (p[1] + p[2]) * up, toe + p[3] * forward + p[4] * up, np.array([p[2], 0.0])
 
     reach = max(float((tip - toe) @ forward), 1e-6)
-    lo, hi = [-REACH, -REACH, 0.0, -REACH], [REACH, REACH, reach, REACH]
-    start = np.array([0.0, 0.0, 0.5 * reach, 0.0])  # inside the bounds: from a bound the first step can stall
-    p = least_squares(resid, start, bounds=(lo, hi), loss="soft_l1", f_scale=SCALE, x_scale=REACH).x
-    return sites(p)
+    lo = np.array([-REACH, -REACH, 0.0, 0.0, -REACH])
+    hi = np.array([REACH, REACH, rmax, reach, REACH])
+    # inside the bounds: from a bound the first step can stall
+    start = np.array([0.0, 0.0, 0.5 * rmax, 0.5 * reach, 0.0])
+    free = np.array([True, True, rmax > 0, True, True])
+
+    def full(x):
+        p = start.copy()
+        p[free] = x
+        return p
+
+    x = least_squares(lambda x: _lowest(org, rot, *spheres(full(x)), surfaces), start[free], bounds=(lo[free], hi[free]),
+                      loss="soft_l1", f_scale=SCALE, x_scale=REACH).x
+    return spheres(full(x))
 
 
-def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict) -> SoleFit:
-    """Fit the figure's heel and toe sites to the motion's resting feet (module docstring).
+def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict, rounded: bool = True) -> SoleFit:
+    """Fit the figure's heel and toe sites (and with `rounded` the heel sphere's radius) to the motion's
+    resting feet (module docstring).
 
     Args:
         model: the figure alone (no surfaces): a subject figure's MjModel. qpos: (n, nq) the clip
             retargeted onto it (root as captured). frame_time: [s].
         tips: {foot: (3,) the toe tip in the foot body's frame [m]} (the End Site of the toe joint).
+        rounded: fit the heel as a sphere (radius from 0 to the ankle's height above the sole); False:
+            a point (radius 0). The toe is a point.
     Returns:
         SoleFit.
     Raises:
@@ -120,14 +150,16 @@ def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict) -> SoleFit
     names = list(figure.contact_sites)
     published = {s: model.site_pos[model.site(s).id].copy() for s in names}
     local = dict(published)
+    radius = dict.fromkeys(names, 0.0)
     feet = {f: (h, t) for f, (h, t) in figure.feet.items()}
     body = {f: int(model.site_bodyid[model.site(h).id]) for f, (h, _) in feet.items()}
     org, rot = _foot_frames(model, qpos, list(body.values()))
     times = np.arange(len(qpos)) * frame_time
     before, after, frames = {}, {}, {}
     for _ in range(ROUNDS):
-        pos = np.stack([org[:, list(body).index(f)] + rot[:, list(body).index(f)] @ local[s]
-                        for f, pair in feet.items() for s in pair], axis=1)
+        pos = lowest_points(np.stack([org[:, list(body).index(f)] + rot[:, list(body).index(f)] @ local[s]
+                                      for f, pair in feet.items() for s in pair], axis=1),
+                            [radius[s] for s in names])
         contacts = fit_contacts(times, pos, tuple(names))
         surfaces = fit_scene(times, pos, contacts, tuple(names)).surfaces()
         mask = contact_mask(contacts, names, times)
@@ -135,15 +167,16 @@ def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict) -> SoleFit
             rest = mask[:, [names.index(h), names.index(t)]].any(axis=1)
             frames[f] = int(rest.sum())
             o, r = org[rest, j], rot[rest, j]
-            before.setdefault(f, _rms(_lowest(o, r, local[h], local[t], surfaces)))
+            before.setdefault(f, _rms(_lowest(o, r, published[h], published[t], (0.0, 0.0), surfaces)))
             if frames[f] < MIN_FRAMES:
-                after[f] = before[f]
+                after[f] = _rms(_lowest(o, r, local[h], local[t], (radius[h], radius[t]), surfaces))
                 continue
             fwd = np.r_[local[t][:2] - local[h][:2], 0.0]
-            local[h], local[t] = _fit_foot(o, r, published[h], published[t], fwd / np.linalg.norm(fwd), tips[f],
-                                           surfaces)
-            after[f] = _rms(_lowest(o, r, local[h], local[t], surfaces))
-    return SoleFit(local, before, after, frames)
+            rmax = HEEL_RADIUS * -float(published[h][2]) if rounded else 0.0
+            local[h], local[t], (radius[h], radius[t]) = _fit_foot(
+                o, r, published[h], published[t], fwd / np.linalg.norm(fwd), tips[f], surfaces, rmax)
+            after[f] = _rms(_lowest(o, r, local[h], local[t], (radius[h], radius[t]), surfaces))
+    return SoleFit(local, radius, before, after, frames)
 
 
 def _rms(x: np.ndarray) -> float:

@@ -5,8 +5,8 @@ labelling with its own purposes (per site, for the planted and clearance terms).
 what it is judged against (docs/contacts.md "Contact schedules"):
 
     a foot rests on a surface in frame i while its lowest contact site (heel or toe, the one nearest
-    the surface under it, `solver.surfaces.StaticSurfaces.height_above`) is near that surface and
-    nearly still;
+    the surface under it, `solver.surfaces.StaticSurfaces.height_above`; of a rounded site the lowest
+    point of its sphere, `solver.contacts.contact_points`) is near that surface and nearly still;
 
 with hysteresis, per foot: the foot enters stance when the lowest site is below STANCE_HEIGHT_ON
 (3 cm, the flight height: a stance never begins in a frame the flight metric counts as airborne) and
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.contact_thresholds import STANCE_HEIGHT_OFF, STANCE_HEIGHT_ON, STANCE_SPEED_OFF, STANCE_SPEED_ON
-from solver.contacts import contact_mask, site_heights, site_positions, site_speeds
+from solver.contacts import contact_mask, contact_points, site_heights, site_speeds
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES, FEET
 
@@ -141,7 +141,7 @@ def capture_stance(model, qpos: np.ndarray, frame_time: float, **thresholds) -> 
         raise InputError(f"frame_time is {frame_time!r}; give the time between frames in seconds (> 0)")
     figure = Figure.from_model(model)
     qpos = np.atleast_2d(np.asarray(qpos, float))
-    pos = site_positions(model, qpos, figure.contact_sites)
+    pos = contact_points(model, qpos, figure.contact_sites)
     times = np.arange(len(qpos)) * float(frame_time)
     return stance_mask(times, pos, site_heights(model, pos), figure.feet, figure.contact_sites, **thresholds)
 
@@ -162,7 +162,7 @@ def capture_rest(model, qpos: np.ndarray, frame_time: float) -> tuple[np.ndarray
         raise InputError(f"frame_time is {frame_time!r}; give the time between frames in seconds (> 0)")
     figure = Figure.from_model(model)
     qpos = np.atleast_2d(np.asarray(qpos, float))
-    pos = site_positions(model, qpos, figure.contact_sites)
+    pos = contact_points(model, qpos, figure.contact_sites)
     times = np.arange(len(qpos)) * float(frame_time)
     heights = site_heights(model, pos)
     stance = stance_mask(times, pos, heights, figure.feet, figure.contact_sites)

@@ -15,7 +15,9 @@ annotations"), with
   OFFSETs); the foot is the subject's foot at rest (ball of the foot = the toe joint, flat sole);
 * **the sole** `ANKLE_HEIGHT` x stature below the ankle, the heel site `HEEL_BACK` x foot length behind
   the ankle, the toe site on the sole under the ball of the foot (where the foot pivots at push-off:
-  the figure's foot is rigid and the subject's toes are not), the ball site at the toe joint;
+  the figure's foot is rigid and the subject's toes are not), the ball site at the toe joint; then
+  both moved to the soles measured on the clip, and the heel rounded to a sphere of the radius measured
+  there (`runner.mocap.soles`; written as ``<numeric name="figure:radius:l_heel">``);
 * **stature** H from the leg: the hip joint is `HIP_HEIGHT` x H above the sole (Winter 2009, fig. 4.1,
   after Drillis & Contini 1966), so H = (thigh + shin) / (HIP_HEIGHT - ANKLE_HEIGHT);
 * **masses** from the shipped figure's segment fractions (de Leva 1996, J. Biomech. 29(9):1223-1230,
@@ -37,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.mocap.bvh import BvhClip
+from solver.contacts import RADIUS_PREFIX
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE, Figure
 
@@ -263,10 +266,14 @@ def _leg(spec, side: str, cmu: str, m: SubjectMeasures, rot: dict, s: float) -> 
     _sole(spec, side, heel, toe, h / 2)
 
 
-def _sole(spec, side: str, heel: np.ndarray, toe: np.ndarray, r: float) -> None:
-    """The foot's heel and toe sites at `heel`, `toe` (foot frame [m]) and its capsule of radius r over them."""
+def _sole(spec, side: str, heel: np.ndarray, toe: np.ndarray, r: float, heel_radius: float = 0.0,
+          toe_radius: float = 0.0) -> None:
+    """The foot's heel and toe sites at `heel`, `toe` (foot frame [m]; the centres of their spheres of the
+    given radii [m]) and its capsule of radius r over the sole under them."""
     spec.site(f"{side}_heel").pos = heel
     spec.site(f"{side}_toe").pos = toe
+    heel = heel - [0, 0, heel_radius]  # the sole: the spheres' lowest points with the foot flat
+    toe = toe - [0, 0, toe_radius]
     forward = np.r_[toe[:2] - heel[:2], 0.0]
     forward /= np.linalg.norm(forward)
     _capsule(spec, f"{side}_foot", heel + r * forward + [0, 0, r], toe - 0.5 * r * forward + [0, 0, r], r)
@@ -292,7 +299,10 @@ def _fit_soles(spec, clip: BvhClip, m: SubjectMeasures) -> None:
     except InputError:  # the feet never rest: nothing to measure
         return
     for heel, toe in figure.feet.values():
-        _sole(spec, heel[0], fit.sites[heel], fit.sites[toe], m.ankle_height / 2)
+        _sole(spec, heel[0], fit.sites[heel], fit.sites[toe], m.ankle_height / 2, fit.radii[heel], fit.radii[toe])
+        for site in (heel, toe):
+            if fit.radii[site] > 0:
+                spec.add_numeric(name=RADIUS_PREFIX + site, data=[float(fit.radii[site])])
 
 
 def _arm(spec, side: str, cmu: str, m: SubjectMeasures, rot: dict, s: float) -> None:

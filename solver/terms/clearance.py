@@ -49,6 +49,7 @@ from types import MappingProxyType
 import numpy as np
 
 from solver.contact_thresholds import DETECT_HEIGHT_ON as HEIGHT_ON
+from solver.contacts import contact_radii
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES, index_run
 from solver.path_context import EngineGradient, site_engine
@@ -151,6 +152,7 @@ class Clearance(Term):
             raise InputError(f"flight_lift is {flight_lift}; it must be a height >= 0 [m] (or None)")
         self.clearance, self.core, self.flight, self.t_span = c, core, bool(flight), t_span
         self.kin = SiteMotion(model, tuple(sites))
+        self.radii = contact_radii(model, self.kin.names)  # (k,) [m]: 0 unless the figure rounds a site
         self.swings = [self.contacts.swings(s) for s in self.kin.names]
         self.flights = self.contacts.flights() if self.flight else []
         #: c_f of each flight [m]
@@ -175,6 +177,13 @@ class Clearance(Term):
         self._eidx = index_run(_engine_index(self.engine, model, self.kin.names))  # the figure's: a slice
         self.needs = tuple(sorted({0, *self.engine.required}))
 
+    def _heights(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Heights (..., k) [m] of the sites' contact points (a rounded site's sphere bottom, its centre
+        minus its radius: `solver.contacts.lowest_points`) above the surface under them, and that
+        surface's normals (..., k, 3) (`SupportSurfaces.height`), for site positions p (..., k, 3)."""
+        h, nrm = self.below.height(p)
+        return h - self.radii, nrm
+
     def evaluate_in(self, ctx, grad=True) -> TermEval:
         """`Term.evaluate_in`: the gradient left to the engine's reverse pass (`EngineGradient`)."""
         mo, res = ctx.forward(self.engine, self.kin.tmap)
@@ -191,7 +200,7 @@ class Clearance(Term):
         the normal of the surface under the site (piecewise constant)."""
         mo, res = ctx.forward(self.engine, self.kin.tmap)
         Us, Uf, Bf, Bs = self.split_windows(ctx.t)
-        h, nrm = self.below.height(res.sites[:, self._eidx])  # (n, k), (n, k, 3)
+        h, nrm = self._heights(res.sites[:, self._eidx])  # (n, k), (n, k, 3)
         Uf = np.broadcast_to(Uf[:, None], Us.shape)
         su, sf = np.sqrt(Us), np.sqrt(Uf)
         ds, df = np.maximum(0.0, Bs - h), np.maximum(0.0, Bf[:, None] - h)
@@ -215,7 +224,7 @@ class Clearance(Term):
     def _integrand(self, p, Us, Uf, Bf, Bs, grad=True):
         """f (m,) and df/dp (m, k, 3) at site positions p (m, k, 3) with swing weights Us (m, k),
         flight weights Uf (m,) and flight bands Bf (m,) [m]."""
-        h, n = self.below.height(p)  # (m, k) height above the surface under each site, (m, k, 3) its normal
+        h, n = self._heights(p)  # (m, k) height above the surface under each site, (m, k, 3) its normal
         f = np.zeros(len(p))
         gp = np.zeros(p.shape) if grad else None
         for U, band in ((Us, Bs), (np.broadcast_to(Uf[:, None], Us.shape), Bf[:, None])):
@@ -254,7 +263,7 @@ class Clearance(Term):
                 lowered[(site, a, b)] = low
         U = np.maximum(Us, Uf[:, None])
         band = np.where(Us >= Uf[:, None], Bs, Bf[:, None])
-        d = np.maximum(0.0, band - self.below.height(self.kin.positions(qpos))[0])
+        d = np.maximum(0.0, band - self._heights(self.kin.positions(qpos))[0])
         height = band - d  # where d > 0: the site's height [m]
         hits = [(int(i), int(k)) for i, k in zip(*np.nonzero((U >= FULL) & (d > tolerance)), strict=True)]
         excused, new = set(), {}
@@ -282,7 +291,7 @@ class Clearance(Term):
         if self.flight_lifts is None:
             return ScheduleConflicts()
         times, qpos = np.asarray(times, float), np.asarray(qpos, float)
-        low = self.below.height(self.kin.positions(qpos))[0].min(axis=1)  # (k,) lowest site [m]
+        low = self._heights(self.kin.positions(qpos))[0].min(axis=1)  # (k,) lowest site [m]
         lifts = {}
         for j, (a, b) in enumerate(self.flights):
             top = flight_lift(times, a, b, 1.0) >= 1.0  # the lift at its ceiling
@@ -328,7 +337,7 @@ class Clearance(Term):
         (lift False: flights' bands without the ballistic lift; dense: many samples, site positions by
         `SiteMotion.dense_positions`)."""
         Us, Uf, Bf, Bs = self.split_windows(t) if lift else self._split_windows(t, lift=False)
-        h, _ = self.below.height(self.kin.dense_positions(Y) if dense else self.kin.positions(Y))
+        h, _ = self._heights(self.kin.dense_positions(Y) if dense else self.kin.positions(Y))
         return np.maximum(0.0, np.where(Us >= Uf[:, None], Bs, Bf[:, None]) - h)
 
     def violation(self, Y: np.ndarray, t: np.ndarray | None = None) -> float | None:

@@ -57,6 +57,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.contact_thresholds import KEYFRAME_TOLERANCE
+from solver.contacts import contact_radii
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES
 from solver.path_context import EngineGradient, site_engine
@@ -138,6 +139,9 @@ class Planted(Term):
         self.kin = SiteMotion(model, used or CONTACT_SITES[:1])
         self._col = np.array([self.kin.names.index(c.site) for c in self.contacts], int)
         self._surf = [self.support.index(c.surface) for c in self.contacts]
+        #: (C,) each contact's plant height of its site [m]: `rest_height` for the site's contact point, so
+        #: the site's own height plus its radius if the figure rounds it (`solver.contacts.contact_radii`)
+        self._h0 = self.rest_height + contact_radii(model, self.kin.names)[self._col]
         #: what keyframes contradict (`solver.problem.keyframe_conflicts`); fixed at construction
         self.excusals = conflicts if conflicts is not None else ScheduleConflicts()
         #: indices of the contacts a keyframe contradicts: `violation` skips them
@@ -186,7 +190,7 @@ class Planted(Term):
             on = np.flatnonzero(S[:, c] > 0)
             pc = p[on, self._col[c]]
             hc, nc = self.support.height(pc, self._surf[c])
-            h[on, c] = hc - self.rest_height
+            h[on, c] = hc - self._h0[c]
             nrm[on, c] = nc
             if v is not None:
                 vc = v[on, self._col[c]]
@@ -225,7 +229,7 @@ class Planted(Term):
             a, b = starts[c], starts[c + 1]
             if a < b:
                 h[a:b], nc[a:b] = self.support.height(p[a:b].copy(), self._surf[c])
-        h -= self.rest_height
+        h -= self._h0[con]
         return mo, res, pairs, vc, h, nc
 
     def evaluate_in(self, ctx, grad=True) -> TermEval:
@@ -353,8 +357,8 @@ class Planted(Term):
             if not S[:, c].any():
                 continue
             h, _ = self.support.height(p[:, self._col[c]], self._surf[c])
-            for i in np.flatnonzero(S[:, c] & (np.abs(h - self.rest_height) > tolerance)):
-                found.append(("planted", int(i), contact.site, float(h[i] - self.rest_height)))
+            for i in np.flatnonzero(S[:, c] & (np.abs(h - self._h0[c]) > tolerance)):
+                found.append(("planted", int(i), contact.site, float(h[i] - self._h0[c])))
                 excused.add(contact)
         return ScheduleConflicts(found, planted=excused)
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.contacts import contact_radii, lowest_points
 from solver.errors import InputError
 from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
@@ -75,12 +76,15 @@ class Penetration(Term):
         self.margin = float(margin)
         self.engine = engine if engine is not None else site_engine(model, sites, velocities=False)
         self.site_index = engine_sites(self.engine, model, sites)  # the figure's: a slice
+        # a rounded site's sphere penetrates with its bottom (its centre minus its radius): the point
+        # taken for the site (`solver.contacts.lowest_points`; a constant shift, same gradient)
+        self.radii = contact_radii(model, sites)
         self.needs = tuple(sorted({0, *self.engine.required}))
 
     def depths(self, Y: np.ndarray, margin: float | None = None) -> np.ndarray:
         """(n, k) deepest penetration of each contact site over all surfaces [m] (0 = clear), at the
         poses Y (n, nq)."""
-        p = self.engine.positions(np.asarray(Y, float))[:, self.site_index]
+        p = lowest_points(self.engine.positions(np.asarray(Y, float))[:, self.site_index], self.radii)
         d, _ = self.surfaces.penetration(p, self.margin if margin is None else margin)
         return d.max(axis=-1)
 
@@ -91,7 +95,7 @@ class Penetration(Term):
     def _depths(self, ctx):
         """(motion, engine result, depth (n, k, S) [m], d depth / d site position (n, k, S, 3))."""
         mo, res = ctx.forward(self.engine, self.tmap)
-        depth, ddepth = self.surfaces.penetration(res.sites[:, self.site_index], self.margin)
+        depth, ddepth = self.surfaces.penetration(lowest_points(res.sites[:, self.site_index], self.radii), self.margin)
         return mo, res, depth, ddepth
 
     def evaluate_in(self, ctx, grad=True) -> TermEval:
@@ -116,7 +120,8 @@ class Penetration(Term):
             return EngineGradient(self.engine, res, mo, None, g_sites).pullback()
 
         site = np.repeat(np.arange(len(self.engine.site_ids))[self.site_index], S)
-        signed, dsigned = signed_depths(self.surfaces, res.sites[:, self.site_index], self.margin)
+        signed, dsigned = signed_depths(self.surfaces, lowest_points(res.sites[:, self.site_index], self.radii),
+                                        self.margin)
         rows = SiteRows(ctx, self.engine, res, site, dp=ddepth.reshape(n, k * S, 3),
                         signed=signed.reshape(n, k * S), dsigned=dsigned.reshape(n, k * S, 3))
         return Residual(depth.reshape(n, k * S), pull=pull, sites=rows)
