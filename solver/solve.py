@@ -230,7 +230,8 @@ def solve(
             best path so far (it meets every keyframe).
         progress: progress(event, info) for "round" (start of a round: {"round", "frames", "variable",
             "kind"}, `Round.kind`), "eval" (each evaluation), "boost" ({"terms": {name: violation},
-            "boosts": n}), "stalled" ({"terms": {name: violation}}: not boosted again) and "estimate"
+            "boosts": n}), "stalled" ({"terms": {name: violation}}: not boosted again), "undo" (a boost
+            whose terms all stalled undone: `PenaltyContinuation.after_round`) and "estimate"
             (after a round: the refinement estimate).
         project: maps the values (r, nq) of the variable frames placed on the plain spline before the
             first round (`per_segment`) to the values to start from (e.g. `solver.orient` puts the
@@ -354,7 +355,11 @@ def _rounds(objective, frames, options, strategy, continuation, backend, t_start
         _record(log, objective, result, scores, kind, options)
         if log.status in _ENDS:
             break
-        if continuation.after_round(objective, log.frames, progress):
+        boosted = continuation.after_round(objective, log.frames, progress, result)
+        if continuation.restored is not None:  # a stalled boost undone: on from the round before it
+            log.frames, result = continuation.restored
+            objective.prepare(log.frames.times, log.frames.values)
+        if boosted:
             kind, scores = "boost", None
             continue
         try:
