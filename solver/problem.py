@@ -1,7 +1,8 @@
 """The figure's objective from term names and weights (command line, keyframe files, API).
 
 Term names: penetration (eq. 12), unit (eq. 9 f1), bending (sec. 5), hinge and rom (sec. 5, docs/anatomy.md),
-near (the departure from the plain spline through the keyframes, `solver.terms.near`), smooth (covariant acceleration of every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
+near (the departure from the plain spline through the keyframes, `solver.terms.near`), smooth (covariant
+acceleration of every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
 are available, torque and root (sec. 6, appendix A). With a contact schedule (docs/contacts.md "The contact terms";
 `solver.contacts.Contact`s: site, start, end, surface): planted (feet on their surface and not sliding
 during a contact), clearance (swing feet keep 2 cm, every site min(2 cm, g T^2/8) in a flight of length T)

@@ -278,7 +278,8 @@ def test_the_motion_metrics_table_has_a_worse_column():
 
 def test_every_term_targets_rows_the_summary_prints():
     """The target column is complete: every registered term but smooth and near (whose rows are their
-    own integrals; near's is the departure from the plain spline) names the rows it penalizes, and each of those rows is printed with that term as its target."""
+    own integrals; near's is the departure from the plain spline) names the rows it penalizes,
+    and each of those rows is printed with that term as its target."""
     from runner.console import TERM_ROWS
     from runner.run import contact_summary_rows
     from solver.terms.registry import registered_terms
