@@ -275,6 +275,8 @@ def solve(
     message = strategy.final_message(log.status, log.message)
     if any(r.kind in ("boost", "polish") for r in log.rounds):
         message += f" ({round_summary(log.rounds)})"
+    if continuation.undone:  # the path is the one from before those boosts
+        message += f"; {continuation.undone} boost{'s' if continuation.undone > 1 else ''} undone (bought nothing)"
     ev1 = objective.evaluate(log.frames.times, log.frames.values, grad=False)
     if not np.array_equal(weights0, objective.weights):  # both ends under the final weights, so they compare
         ev0 = objective.evaluate(initial.times, initial.values, grad=False)
