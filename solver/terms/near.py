@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.errors import InputError
-from solver.quaternion import vec_of_conj_product
+from solver.quaternion import conj, mul, vec_of_conj_product
 from solver.terms.base import Residual, Term, TermEval
 
 __all__ = ["NearPlain", "reference_length"]
@@ -103,7 +103,8 @@ class NearPlain(Term):
 
     def _parts(self, t, Y):
         """Residuals (n, m) [rad] and what their Jacobian needs: per slot the unit quaternion u
-        (n, s, 4), |q| (n, s, 1), the signed G(p) (n, s, 3, 4)."""
+        (n, s, 4), |q| (n, s, 1), the reference's unit quaternion p (n, s, 4), the factor k (n, s) =
+        2 s / sqrt(T) and the slot's residual rows k vec(conj(p) u) (n, s, 3)."""
         Yr = self._ref(t)
         c = 1.0 / np.sqrt(self.T)
         r_lin = c * (Y[:, self.linear] - Yr[:, self.linear]) * self.scale
@@ -111,43 +112,40 @@ class NearPlain(Term):
         norm = np.linalg.norm(q, axis=-1, keepdims=True)
         u = q / norm
         p = p / np.linalg.norm(p, axis=-1, keepdims=True)
-        s = np.where(np.einsum("nsi,nsi->ns", p, u) < 0, -1.0, 1.0)
-        G = (2.0 * c) * s[..., None, None] * vec_of_conj_product(p)  # (n, s, 3, 4)
-        r_rot = np.einsum("nsij,nsj->nsi", G, u).reshape(len(Y), -1)
-        return np.concatenate([r_lin, r_rot], axis=1), u, norm, G
-
-    def _rot_jac(self, u, norm, G):
-        """(n, s, 3, 4) d r / d q per slot: G(p) (I - u u^T) / |q|."""
-        return (G - np.einsum("nsij,nsj,nsk->nsik", G, u, u)) / norm[..., None]
+        k = np.where(np.einsum("nsi,nsi->ns", p, u) < 0, -2.0 * c, 2.0 * c)
+        Gu = k[..., None] * mul(conj(p), u)[..., 1:]
+        return np.concatenate([r_lin, Gu.reshape(len(Y), -1)], axis=1), u, norm, p, k, Gu
 
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         if self.reference is None:
             return TermEval(np.zeros(len(Y)), dY=np.zeros_like(Y) if grad else None)
-        r, u, norm, G = self._parts(t, Y)
+        r, u, norm, p, k, Gu = self._parts(t, Y)
         f = np.einsum("nm,nm->n", r, r)
         if not grad:
             return TermEval(f)
         dY = np.zeros_like(Y)
         nl = len(self.linear)
         dY[:, self.linear] = 2.0 * r[:, :nl] * (self.scale / np.sqrt(self.T))
-        if len(self.slots):
-            rr = r[:, nl:].reshape(len(Y), -1, 3)
-            dY[:, self.slots] = 2.0 * np.einsum("nsi,nsij->nsj", rr, self._rot_jac(u, norm, G))
+        if len(self.slots):  # 2 r^T G (I - u u^T) / |q| with G = k G(p), r = G u; G(p)^T v = p (0, v)
+            rG = k[..., None] * mul(p, np.concatenate([np.zeros(Gu.shape[:-1] + (1,)), Gu], axis=-1))
+            rr = np.einsum("nsi,nsi->ns", Gu, Gu)
+            dY[:, self.slots] = 2.0 * (rG - rr[..., None] * u) / norm
         return TermEval(f, dY=dY)
 
     def residual(self, ctx) -> Residual:
         """r as in the class docstring, (n, m) with m = (linear components) + 3 x (quaternion slots)
         [rad]; compact blocks: each linear component's own, and per slot the 3 rows over its 4 qpos
-        components (`_rot_jac`)."""
+        components, G(p) (I - u u^T) / |q| with u = q/|q|."""
         Y = ctx.Y
         if self.reference is None:
             return Residual(np.zeros((len(Y), 0)), compact=[], nq=Y.shape[1])
-        r, u, norm, G = self._parts(ctx.t, Y)
+        r, u, norm, p, k, Gu = self._parts(ctx.t, Y)
+        G = k[..., None, None] * vec_of_conj_product(p)  # (n, s, 3, 4)
         n, nl = len(Y), len(self.linear)
         c = self.scale / np.sqrt(self.T)
         groups = [(np.array([i]), np.array([k]), (np.full((n, 1, 1), c[i]), None, None))
                   for i, k in enumerate(self.linear)]
-        J = self._rot_jac(u, norm, G)
+        J = (G - Gu[..., :, None] * u[..., None, :]) / norm[..., None]  # G(p) (I - u u^T) / |q|
         for k, slot in enumerate(self.slots):
             groups.append((nl + 3 * k + np.arange(3), np.asarray(slot), (J[:, k], None, None)))
         return Residual(r, compact=groups, nq=Y.shape[1])
