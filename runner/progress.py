@@ -100,6 +100,9 @@ class Progress:
             self._end_round()
             what = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
             self._line(f"  a boost did not halve it ({what}): out of reach with these keyframes, not boosted again")
+        elif event == "undo":
+            self._end_round()
+            self._line("  that boost bought nothing: the path and weights from before it are restored")
         elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
             self._end_round()
             tol = f" (tol {info['tol']:g})" if info.get("tol") else ""

@@ -96,7 +96,7 @@ def animate(
         options: SolveOptions; default `default_options(weights)` (the command line's).
         rate: quadrature points per second [1/s]; default DEFAULT_RATE.
         should_stop: polled during the optimization; True ends it, keeping the best path so far.
-        progress: progress(event, info) for "round", "eval", "boost", "stalled" and "estimate" (see `solve`).
+        progress: progress(event, info) for "round", "eval", "boost", "stalled", "undo" and "estimate" (see `solve`).
         tol: refine adaptively until the decrease of E refinement still predicts, relative to E, is at
             most tol (`SolveOptions.tol`, replacing the options' fixed rounds), or a frame or time
             budget runs out (`Solution.converged_to_tol`, `Solution.refinement_estimate`).

@@ -1,7 +1,8 @@
 """The figure's objective from term names and weights (command line, keyframe files, API).
 
 Term names: penetration (eq. 12), unit (eq. 9 f1), bending (sec. 5), hinge and rom (sec. 5, docs/anatomy.md),
-smooth (covariant acceleration of every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
+near (the departure from the plain spline through the keyframes, `solver.terms.near`), smooth (covariant
+acceleration of every quaternion plus the root's linear acceleration, eq. 9 f2), and, when the inverse-dynamics terms
 are available, torque and root (sec. 6, appendix A) and forces (the peak ground force and pelvis acceleration
 within the plain spline's and the capture's, `solver.peak_bounds`; docs/dynamics.md). With a contact schedule (docs/contacts.md "The contact terms";
 `solver.contacts.Contact`s: site, start, end, surface): planted (feet on their surface and not sliding
@@ -34,8 +35,9 @@ __all__ = ["CONTACT_MARGIN", "CONTACT_PENETRATION_WEIGHT", "CONTACT_TERMS", "CON
            "parse_terms", "term_names"]
 
 #: The terms used when none are chosen: the geometric terms of the paper's sec. 5, with the anatomical
-#: limits (hinge, rom: docs/anatomy.md).
-DEFAULT_TERMS = ("penetration", "unit", "bending", "smooth", "hinge", "rom")
+#: limits (hinge, rom: docs/anatomy.md) and the departure from the plain spline (near: docs/corpus.md
+#: "Near the plain spline").
+DEFAULT_TERMS = ("penetration", "unit", "bending", "smooth", "hinge", "rom", "near")
 
 #: Weight of each built-in term when it is switched on without one: DEFAULT_WEIGHTS, defined with the
 #: registrations in `solver.terms.registry` (a registered term's own: its `TermSpec.default_weight`).

@@ -230,7 +230,8 @@ def solve(
             best path so far (it meets every keyframe).
         progress: progress(event, info) for "round" (start of a round: {"round", "frames", "variable",
             "kind"}, `Round.kind`), "eval" (each evaluation), "boost" ({"terms": {name: violation},
-            "boosts": n}), "stalled" ({"terms": {name: violation}}: not boosted again) and "estimate"
+            "boosts": n}), "stalled" ({"terms": {name: violation}}: not boosted again), "undo" (a boost
+            whose terms all stalled undone: `PenaltyContinuation.after_round`) and "estimate"
             (after a round: the refinement estimate).
         project: maps the values (r, nq) of the variable frames placed on the plain spline before the
             first round (`per_segment`) to the values to start from (e.g. `solver.orient` puts the
@@ -274,6 +275,8 @@ def solve(
     message = strategy.final_message(log.status, log.message)
     if any(r.kind in ("boost", "polish") for r in log.rounds):
         message += f" ({round_summary(log.rounds)})"
+    if continuation.undone:  # the path is the one from before those boosts
+        message += f"; {continuation.undone} boost{'s' if continuation.undone > 1 else ''} undone (bought nothing)"
     ev1 = objective.evaluate(log.frames.times, log.frames.values, grad=False)
     if not np.array_equal(weights0, objective.weights):  # both ends under the final weights, so they compare
         ev0 = objective.evaluate(initial.times, initial.values, grad=False)
@@ -354,7 +357,11 @@ def _rounds(objective, frames, options, strategy, continuation, backend, t_start
         _record(log, objective, result, scores, kind, options)
         if log.status in _ENDS:
             break
-        if continuation.after_round(objective, log.frames, progress):
+        boosted = continuation.after_round(objective, log.frames, progress, result)
+        if continuation.restored is not None:  # a stalled boost undone: on from the round before it
+            log.frames, result = continuation.restored
+            objective.prepare(log.frames.times, log.frames.values)
+        if boosted:
             kind, scores = "boost", None
             continue
         try:

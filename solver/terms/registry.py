@@ -38,8 +38,11 @@ from solver.terms.base import Term
 #: (run-and-step; 35_17 keyed every 0.25 s): at 1000 both end within both bounds after one or two boosts;
 #: at 10^4 and 10^5 run-and-step also needed boosts of penetration and clearance, and more evaluations.
 FORCES_WEIGHT = 1000.0
+#: near: the departure from the plain spline (`solver.terms.near`), zero on the plain spline so not
+#: renormalized; its weight prices one rad^2 of mean squared departure summed over the joints
+#: (docs/corpus.md "Near the plain spline": chosen on the tuning clips).
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
-                   "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0,
+                   "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0, "near": 1.0,
                    "forces": FORCES_WEIGHT}
 #: Penalty-continuation bounds of the anatomical terms [rad] (their `TermSpec.limit`): rotation off the
 #: hinge beyond the allowance (acceptance: the capture's + 3 deg; the allowance is 2 deg) and angle
@@ -202,6 +205,15 @@ def build_term(spec: TermSpec, build: TermBuild) -> Term:
     return term
 
 
+def _near(b: TermBuild):
+    """The near term (`solver.terms.near.NearPlain`) toward the plain spline `b.plain`, with the
+    root's length scale from the figure (`reference_length`). A build without the plain spline (an
+    objective made without keyframes) gets a term without a reference, which is zero."""
+    from solver.terms.near import NearPlain, reference_length
+
+    return NearPlain(b.layout, None if b.plain is None else b.plain.path, b.t_span, length=reference_length(b.figure))
+
+
 def _register_builtins() -> None:
     """The figure's terms: sec. 5 (penetration, unit, bending, smooth, and the anatomical limits hinge and
     rom: docs/anatomy.md), sec. 6 (torque, root, and forces: the peaks
@@ -233,6 +245,7 @@ def _register_builtins() -> None:
                   default=True, limit=ANATOMY_LIMITS["hinge"])
     register_term("rom", lambda b: RangeOfMotion(b.layout, b.figure, reference=b.plain_samples), w["rom"],
                   default=True, limit=ANATOMY_LIMITS["rom"])
+    register_term("near", _near, w["near"], default=True)
     register_term("torque", lambda b: JointTorque(b.model, engine=b.engine), w["torque"], forces=True)
     register_term("root", lambda b: RootResidual(b.model, engine=b.engine), w["root"], forces=True)
     register_term("forces", lambda b: PeakForces(b.model, b.force_bounds, engine=b.engine, t_span=b.t_span),

@@ -62,3 +62,34 @@ def test_a_boost_that_does_not_cut_the_violation_enough_gives_the_term_up():
     assert cont.after_round(obj, frames(), lambda e, i: events.append((e, i))) == {}  # a is not boosted again
     np.testing.assert_allclose(obj.weights, [10.0, 100.0])
     assert [e for e, _ in events] == ["boost", "stalled", "boost"]  # "stalled" said once
+
+
+def test_a_boost_whose_every_term_stalled_is_undone():
+    # a: 1.0 -> 0.9 after its boost (stalled); on the restored path it reads 1.0 again and stays given up
+    obj = Objective([Scripted("a", [1.0, 0.9, 1.0]), Scripted("b", [0.0, 0.0, 0.0])], [1.0, 1.0], 0.0, 1.0,
+                    rate=10.0)
+    cont, events = PenaltyContinuation((("a", 1e-3), ("b", 1e-3)), boost=10.0, max_boosts=5), []
+    before, boosted = frames(), frames()
+    assert cont.after_round(obj, before, lambda e, i: events.append((e, i)), result="round 0") == {"a": 1.0}
+    np.testing.assert_allclose(obj.weights, [10.0, 1.0])
+    assert cont.after_round(obj, boosted, lambda e, i: events.append((e, i)), result="round 1") == {}
+    assert cont.restored is not None and cont.restored[0] is before and cont.restored[1] == "round 0"
+    np.testing.assert_allclose(obj.weights, [1.0, 1.0])  # the weights from before the boost
+    assert cont.undone == 1 and cont.stalled == {"a": pytest.approx(0.9)}
+    assert [e for e, _ in events] == ["boost", "stalled", "undo"]
+
+
+def test_a_boost_that_halved_one_of_its_terms_stands():
+    obj = Objective([Scripted("a", [1.0, 0.9]), Scripted("b", [1.0, 0.1])], [1.0, 1.0], 0.0, 1.0, rate=10.0)
+    cont = PenaltyContinuation((("a", 1e-3), ("b", 1e-3)), boost=10.0, max_boosts=5)
+    cont.after_round(obj, frames())
+    assert cont.after_round(obj, frames()) == {"b": 0.1} and cont.restored is None and cont.undone == 0
+    np.testing.assert_allclose(obj.weights, [10.0, 100.0])
+
+
+def test_undo_can_be_switched_off():
+    obj = Objective([Scripted("a", [1.0, 0.9])], [1.0], 0.0, 1.0, rate=10.0)
+    cont = PenaltyContinuation((("a", 1e-3),), undo_stalled=False)
+    cont.after_round(obj, frames())
+    assert cont.after_round(obj, frames()) == {} and cont.restored is None
+    np.testing.assert_allclose(obj.weights, [10.0])
