@@ -258,6 +258,7 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
     clock = _Clock(timings)
     site_rows = []  # site terms, summed site by site (`_add_sites`)
     hinge_parts = []  # their hinge columns (`solver.active_set`)
+    term_hinges = []  # the hinge columns of other terms (`solver.terms.base.OneSided`)
     residuals = term_residuals(objective, basis, Y, Y1, Y2)
     clock("residuals")
     for _, c, res in residuals:
@@ -271,6 +272,8 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
             cached_site_jacobians(res.sites.ctx, res.sites.engine, res.sites.result)
             clock("blocks")
             continue
+        if res.one_sided is not None:
+            term_hinges.append((res.one_sided, w))
         groups = res.groups()
         clock("blocks")
         for batch in _batches(groups):
@@ -288,7 +291,7 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
     b = int((i - j).max(initial=0))
     ab = np.zeros((b + 1, local.n_free))
     np.add.at(ab, (i - j, j), v)
-    hinge = hinge_rows(local, hinge_parts, nq) if hinge_parts else None
+    hinge = hinge_rows(local, hinge_parts, nq, term_hinges) if hinge_parts or term_hinges else None
     clock("band")
     return NormalEquations(ab, np.asarray(g), E, hinge)
 
