@@ -161,6 +161,10 @@ class NormalEquations:
         d = self.ab[0]
         return np.where(d > 0, d, d[d > 0].mean() if (d > 0).any() else 1.0)
 
+    def scaled_norm(self, h: np.ndarray) -> float:
+        """|D^1/2 h|, D = `scale`: the step's length in Marquardt's scaling (the trust-region norm)."""
+        return float(np.sqrt(h @ (self.scale() * h)))
+
     def damped(self, ab: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
         """-(A + mu D)^-1 g for A in lower band form ab (J^T J or a low-rank change of it), D = `scale`."""
         ab = ab.copy()
@@ -423,11 +427,13 @@ def _accumulate(gram, gseg, local, act, X, gx, comps):
     Xp = Xp.reshape(nb, key[-1] + 1, -1, width)
     G = np.add.reduceat(np.matmul(Xp.transpose(0, 1, 3, 2), Xp), first, axis=1) if len(first) < key[-1] + 1 \
         else np.matmul(Xp.transpose(0, 1, 3, 2), Xp)
-    cs = comps.shape[1]
+    cs, w4 = comps.shape[1], 4 * nq
     idx = (np.arange(4)[None, :, None] * nq + comps[:, None, :]).reshape(nb, 1, 4 * cs)  # into 4 nq
-    S = s[None, :, None]
-    gram[S[..., None], idx[..., None], idx[:, :, None, :]] += G
-    gseg[S, idx] += np.add.reduceat(gx, starts, axis=1)
+    # one flat index per entry (faster than broadcasting three index arrays; the entries are distinct:
+    # distinct segments, disjoint components within a batch)
+    flat = (s[None, :, None, None] * w4 + idx[..., None]) * w4 + idx[:, :, None, :]
+    gram.reshape(-1)[flat.ravel()] += G.ravel()
+    gseg[s[None, :, None], idx] += np.add.reduceat(gx, starts, axis=1)
 
 
 def _coefficient_blocks(gram, gseg, m, nq):
