@@ -40,6 +40,9 @@ BAND = 0.05
 #: (the set it predicts is where the next retry starts). Letting the set settle (up to 2, 3, 6 solves)
 #: cost 1.3-2.6x the CPU time of a whole contact solve on 127_33 and 16_23, for an E 0.1 % lower.
 MAX_SWITCHES = 1
+#: `BAND` for the hinge columns of the anatomy terms (`solver.terms.base.OneSided`), in radians of joint
+#: angle: 0.1 rad moves a point 5 cm at half a metre from the joint, as `BAND` does a site.
+ANGLE_BAND = 0.1
 
 
 @dataclass
@@ -78,17 +81,28 @@ class HingeRows:
         return HingeRows(self.P, self.predict(h), self.on)
 
 
-def hinge_rows(local, parts, nq: int) -> HingeRows | None:
-    """The rows of the hinge columns within `BAND` of switching on, in the free coefficients.
+def hinge_rows(local, parts, nq: int, term_parts=()) -> HingeRows | None:
+    """The rows of the hinge columns within `BAND` (sites) or `ANGLE_BAND` (the anatomy terms' angles)
+    of switching on, in the free coefficients.
 
     Args:
         local: `solver.least_squares.LocalSpline`. parts: [(SiteRows with `signed`, w (n,) row
             weights)]: positions-only site columns. nq: the state's width.
+        term_parts: [(`solver.terms.base.OneSided`, w (n,) row weights)]: hinge columns of a term read
+            from a few qpos components (positions only).
     Returns:
         HingeRows, or None if no row is near.
     """
     rid, cid, val, svals = [], [], [], []
-    count = 0
+
+    def add(ii, comps, coef, s):  # rows at points ii: coef (r, c) d s / d Y[comps] (weighted), s (r,)
+        v = coef[:, None, :] * local.vals[0][ii][:, :, None]  # (r, 4, c): the 4 B-splines
+        cols = (local.seg[ii][:, None, None] + np.arange(4)[None, :, None]) * nq + comps[:, None, :]
+        start = sum(len(x) for x in svals)
+        rid.append(np.broadcast_to((start + np.arange(len(ii)))[:, None, None], v.shape).ravel())
+        cid.append(np.broadcast_to(cols, v.shape).ravel()), val.append(v.ravel())
+        svals.append(s)
+
     for rows, w in parts:
         jac = cached_site_jacobians(rows.ctx, rows.engine, rows.result)
         near = (rows.signed > -BAND) & (w[:, None] > 0)
@@ -98,15 +112,15 @@ def hinge_rows(local, parts, nq: int) -> HingeRows | None:
             ii, jj = i[mk], j[mk]
             comps, Jp, _ = jac[k]
             coef = w[ii, None] * np.einsum("ri,ric->rc", rows.dsigned[ii, jj], Jp[ii])  # (r, c)
-            v = coef[:, None, :] * local.vals[0][ii][:, :, None]  # (r, 4, c): the 4 B-splines
-            cols = (local.seg[ii][:, None, None] + np.arange(4)[None, :, None]) * nq + comps[None, None, :]
-            rid.append(np.broadcast_to((count + np.arange(len(ii)))[:, None, None], v.shape).ravel())
-            cid.append(cols.ravel()), val.append(v.ravel())
-            svals.append(w[ii] * rows.signed[ii, jj])
-            count += len(ii)
-    if not count:
+            add(ii, np.asarray(comps)[None, :], coef, w[ii] * rows.signed[ii, jj])
+    for one, w in term_parts:
+        ii, jj = np.nonzero((one.signed > -ANGLE_BAND) & (w[:, None] > 0))
+        if len(ii):
+            add(ii, np.asarray(one.comps)[jj], w[ii, None] * one.grad(ii, jj), w[ii] * one.signed[ii, jj])
+    if not svals:
         return None
     cat = np.concatenate
+    count = sum(len(x) for x in svals)
     Rc = sp.csr_matrix((cat(val), (cat(rid), cat(cid))), shape=(count, local.Z.shape[0]))
     return HingeRows((Rc @ local.Z).tocsr(), cat(svals))
 

@@ -43,6 +43,12 @@ MU_CONVERGED = 1.0
 #: exact gradient of the trial evaluation (at most MAX_LAG steps in a row; module docstring).
 LAG_GAIN = 0.5
 MAX_LAG = 4
+#: After a failed step the damping is raised until the step is at most this fraction of the failed one's
+#: length (in the scaled norm |D^1/2 h|) before E is evaluated again: the trust-region reduction of
+#: Moré ("The Levenberg-Marquardt algorithm: implementation and theory", 1978, sec. 7, the radius cut to
+#: between 1/10 and 1/2 of the failed step); a raise that leaves the step as it was (mu far below the
+#: curvature) costs a damped solve, not an evaluation.
+SHRINK = 0.5
 
 
 def has_residuals(objective) -> bool:
@@ -101,7 +107,7 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
     F, improvements = ne.E, 0
     if not (math.isfinite(F) and np.all(np.isfinite(ne.g))):
         return run.result(x, F, Status.NONFINITE, "the residuals are not finite at the start", improvements, t_start)
-    mu, nu, lag = TAU, 2.0, 0
+    mu, nu, lag, failed = TAU, 2.0, 0, math.inf  # failed: scaled length of the last failed step
     status, message = Status.CONVERGED, "converged"
     while True:
         stop = _budget(len(run.trace), max_evals, t_start, max_time_s, should_stop)
@@ -109,10 +115,11 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
             status, message = stop
             break
         h, pred = run.step(ne, mu)
-        if h is None or not pred > 0:
-            if lag:  # the kept J^T J may be what fails: a fresh Jacobian first
-                ne, lag = run.jacobian(x), 0
-                continue
+        if lag and (h is None or not 0 < pred < F):  # the kept J^T J's model is no least-squares model here
+            ne, lag = run.jacobian(x), 0
+            continue
+        length = ne.scaled_norm(h) if h is not None else math.inf
+        if h is None or not pred > 0 or length > SHRINK * failed:  # not solvable, or not yet shorter
             mu, nu = mu * nu, nu * 2.0
             if mu > MU_MAX:
                 message = "converged (no descent left at this damping)"
@@ -125,7 +132,7 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
         F_new, g_new = run.trial(x + dx)
         gain = (F - F_new) / pred if math.isfinite(F_new) else -math.inf
         if gain > 0:
-            decrease, step_mu = F - F_new, mu
+            decrease, step_mu, failed = F - F_new, mu, math.inf
             x, F, improvements = x + dx, F_new, improvements + 1
             mu, nu = mu * max(MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3), 2.0
             if decrease <= ftol_rel * abs(F + decrease) and step_mu <= MU_CONVERGED:
@@ -142,7 +149,7 @@ def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: in
         elif lag:
             ne, lag = run.jacobian(x), 0
         else:
-            mu, nu = mu * nu, nu * 2.0
+            failed, mu, nu = length, mu * nu, nu * 2.0
             if mu > MU_MAX:
                 message = "converged (no decrease left at this damping)"
                 break

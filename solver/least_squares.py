@@ -161,6 +161,10 @@ class NormalEquations:
         d = self.ab[0]
         return np.where(d > 0, d, d[d > 0].mean() if (d > 0).any() else 1.0)
 
+    def scaled_norm(self, h: np.ndarray) -> float:
+        """|D^1/2 h|, D = `scale`: the step's length in Marquardt's scaling (the trust-region norm)."""
+        return float(np.sqrt(h @ (self.scale() * h)))
+
     def damped(self, ab: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
         """-(A + mu D)^-1 g for A in lower band form ab (J^T J or a low-rank change of it), D = `scale`."""
         ab = ab.copy()
@@ -258,6 +262,7 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
     clock = _Clock(timings)
     site_rows = []  # site terms, summed site by site (`_add_sites`)
     hinge_parts = []  # their hinge columns (`solver.active_set`)
+    term_hinges = []  # the hinge columns of other terms (`solver.terms.base.OneSided`)
     residuals = term_residuals(objective, basis, Y, Y1, Y2)
     clock("residuals")
     for _, c, res in residuals:
@@ -271,6 +276,8 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
             cached_site_jacobians(res.sites.ctx, res.sites.engine, res.sites.result)
             clock("blocks")
             continue
+        if res.one_sided is not None:
+            term_hinges.append((res.one_sided, w))
         groups = res.groups()
         clock("blocks")
         for batch in _batches(groups):
@@ -288,7 +295,7 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
     b = int((i - j).max(initial=0))
     ab = np.zeros((b + 1, local.n_free))
     np.add.at(ab, (i - j, j), v)
-    hinge = hinge_rows(local, hinge_parts, nq) if hinge_parts else None
+    hinge = hinge_rows(local, hinge_parts, nq, term_hinges) if hinge_parts or term_hinges else None
     clock("band")
     return NormalEquations(ab, np.asarray(g), E, hinge)
 
@@ -420,11 +427,13 @@ def _accumulate(gram, gseg, local, act, X, gx, comps):
     Xp = Xp.reshape(nb, key[-1] + 1, -1, width)
     G = np.add.reduceat(np.matmul(Xp.transpose(0, 1, 3, 2), Xp), first, axis=1) if len(first) < key[-1] + 1 \
         else np.matmul(Xp.transpose(0, 1, 3, 2), Xp)
-    cs = comps.shape[1]
+    cs, w4 = comps.shape[1], 4 * nq
     idx = (np.arange(4)[None, :, None] * nq + comps[:, None, :]).reshape(nb, 1, 4 * cs)  # into 4 nq
-    S = s[None, :, None]
-    gram[S[..., None], idx[..., None], idx[:, :, None, :]] += G
-    gseg[S, idx] += np.add.reduceat(gx, starts, axis=1)
+    # one flat index per entry (faster than broadcasting three index arrays; the entries are distinct:
+    # distinct segments, disjoint components within a batch)
+    flat = (s[None, :, None, None] * w4 + idx[..., None]) * w4 + idx[:, :, None, :]
+    gram.reshape(-1)[flat.ravel()] += G.ravel()
+    gseg[s[None, :, None], idx] += np.add.reduceat(gx, starts, axis=1)
 
 
 def _coefficient_blocks(gram, gseg, m, nq):

@@ -84,6 +84,8 @@ def register(sub) -> None:
     c.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
     c.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every length")
     c.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table, dense vs banded")
+    c.add_argument("--backend", choices=("nlopt", "lm", "both"), default="nlopt",
+                   help="optimizer of the rounds (solve --backend); both: one table per back end [nlopt]")
     c.add_argument("--repeat", type=int, default=3,
                    help="solves per length, the lengths alternating; the table gives medians [3]")
     c.set_defaults(func=bench_scaling)
@@ -398,5 +400,5 @@ def bench_scaling(args) -> int:
         raise InputError(f"--repeat must be at least 1, got {args.repeat}")
     argv = ["--factors", args.factors, "--per-segment", str(args.per_segment), "--rate", str(args.rate),
             "--repeat", str(args.repeat)]
-    argv += ["--dense"] * args.dense + ["--per-eval"] * args.per_eval
+    argv += ["--dense"] * args.dense + ["--per-eval"] * args.per_eval + ["--backend", args.backend]
     return scaling.main(argv)

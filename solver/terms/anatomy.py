@@ -16,7 +16,7 @@ import numpy as np
 from solver.errors import InputError
 from solver.quaternion import swing_angle_grad
 from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
-from solver.terms.base import Residual, Term, TermEval
+from solver.terms.base import OneSided, Residual, Term, TermEval
 
 __all__ = ["DEFAULT_ALLOWANCE", "Hinge", "PLAIN_RATE", "RangeOfMotion", "WIDEN_MARGIN", "plain_samples"]
 
@@ -104,14 +104,19 @@ class Hinge(Term):
 
     def residual(self, ctx) -> Residual:
         """r = max(0, phi - a_j) per joint (n, j) [rad] (f = |r|^2); dense blocks dr/dY = d phi/dq where
-        the joint is past its allowance (`swing_angle_grad`), 0 elsewhere."""
+        the joint is past its allowance (`swing_angle_grad`), 0 elsewhere; `OneSided` phi - a_j."""
         Y = ctx.Y
-        r = self._excess(Y)
+        signed = self.angles(Y) - self.allowance
+        r = np.maximum(0.0, signed)
         J = np.zeros((len(Y), len(self.axes), Y.shape[1]))
         g = self._grads(Y, r)
         for k in range(len(self.axes)):
             J[:, k, self.idx[k]] = g[:, k]
-        return Residual(r, blocks=(J, None, None))
+
+        def grad(rows, cols):
+            return swing_angle_grad(Y[rows[:, None], self.idx[cols]], self.axes[cols])
+
+        return Residual(r, blocks=(J, None, None), one_sided=OneSided(signed, self.idx, grad))
 
 
 class RangeOfMotion(Term):
@@ -175,15 +180,25 @@ class RangeOfMotion(Term):
 
     def residual(self, ctx) -> Residual:
         """r = x - clip(x, lo, hi) per motion (n, c) [rad] (f = |r|^2); dense blocks dr/dY = dx/dq where
-        the motion is outside its range, 0 elsewhere."""
+        the motion is outside its range, 0 elsewhere; `OneSided` max(x - hi, lo - x), the signed
+        distance past the nearer limit (r = +-max(0, it))."""
         Y = ctx.Y
-        r = self.excess(Y)
+        x = self.angles_of(Y)
+        r = x - np.clip(x, self.lo, self.hi)
+        signed = np.maximum(x - self.hi, self.lo - x)
+        upper = x - self.hi >= self.lo - x
+
+        def grad(rows, cols):
+            sign = np.where(upper[rows, cols], 1.0, -1.0)[:, None]
+            return sign * motion_angle_grads(Y, self.idx, self.motions, rows, cols, self.arrays)
+
+        one_sided = OneSided(signed, self.idx, grad)
         J = np.zeros((len(Y), len(self.motions), Y.shape[1]))
         rows, cols = np.nonzero(r)
         if rows.size:
             J[rows[:, None], cols[:, None], self.idx[cols]] = motion_angle_grads(Y, self.idx, self.motions, rows, cols,
                                                                                  self.arrays)
-        return Residual(r, blocks=(J, None, None))
+        return Residual(r, blocks=(J, None, None), one_sided=one_sided)
 
 
 def plain_samples(plain, rate: float = PLAIN_RATE) -> np.ndarray:

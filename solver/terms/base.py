@@ -98,6 +98,25 @@ class SiteRows:
 
 
 @dataclass
+class OneSided:
+    """One-sided (hinge) columns of a term read from a few path components: r_j = +-max(0, signed_j)
+    (so r_j^2 = max(0, signed_j)^2), as `SiteRows.signed` for site columns. The Gauss-Newton back end's
+    model sees the columns a step would switch on through it (`solver.active_set`).
+
+    Attributes:
+        signed: (n, m) the value before the max, also where r is 0 (how far column j is from switching
+            on at each point) [units of r].
+        comps: (m, c) int: the qpos components column j's signed value reads (positions only).
+        grad: grad(rows (p,), cols (p,)) -> (p, c): d signed / d Y[rows, comps[cols]] at those (point,
+            column) pairs [units of r per unit qpos]; 0 where it is not differentiable.
+    """
+
+    signed: np.ndarray
+    comps: np.ndarray
+    grad: Callable
+
+
+@dataclass
 class Residual:
     """Residuals r of a term that is a sum of squares, f = |r|^2 at every point, and their Jacobian.
 
@@ -113,6 +132,8 @@ class Residual:
         compact: the Jacobian as `groups` gives it, [(columns, comps, (J0, J1, J2)), ...] (instead of
             `blocks`: a term whose columns each read a few components, e.g. one quaternion), with
             nq the state's width.
+        one_sided: `OneSided` when the columns are hinges of a few components (the anatomy terms'
+            limits), else None.
     """
 
     r: np.ndarray
@@ -121,6 +142,7 @@ class Residual:
     sites: SiteRows | None = None
     compact: list | None = None
     nq: int | None = None
+    one_sided: OneSided | None = None
 
     def _site_blocks(self):
         """`SiteRows.blocks`, or None if there are none or the engine's pass cannot give them."""

@@ -329,3 +329,41 @@ def test_signed_depths_extend_the_penetration_depth():
     same = ok & np.isfinite(fd).all(-1) & (np.abs(fd - grad).max(-1) < 1.0)  # not across a face switch
     assert same.sum() > 0.9 * ok.sum()
     np.testing.assert_allclose(fd[same], grad[same], atol=1e-6)
+
+
+def test_anatomy_hinge_rows_are_the_signed_angles_and_their_derivatives(toy):
+    # the one-sided model's rows of the anatomy terms (`OneSided`): s = the weighted signed angle (its
+    # positive part the weighted residual), rows a = d s / d xi against central differences of s
+    from solver.active_set import ANGLE_BAND
+
+    model, _, kf = toy
+    problem = make_problem(model, kf, None, contacts=SCHEDULE, rate=40.0)
+    objective, frames = _moved(problem, seed=5)
+    objective.weights[[t.name not in ("hinge", "rom") for t in objective.terms]] = 0.0
+    rom = next(t for t in objective.terms if t.name == "rom")  # half the motions near their lower limit
+    x = rom.angles_of(objective.basis(frames.times).evaluate(frames.values, (0,))[0])
+    rom.lo, rom.hi = rom.lo.copy(), rom.hi.copy()
+    rom.lo[::2], rom.hi[::2] = x[:, ::2].min(axis=0) + 0.02, np.pi
+    local = LocalSpline(frames, objective.basis(frames.times).t)
+    ne = normal_equations(objective, frames, local)
+
+    def signed(fr, near=None):
+        basis = objective.basis(fr.times)
+        Y, Y1, Y2 = basis.evaluate(fr.values, objective.needs)
+        q = np.full(len(basis.t), objective.h) if basis.weights is None else basis.weights
+        out, masks = [], []
+        for k, (_, c, res) in enumerate(term_residuals(objective, basis, Y, Y1, Y2)):
+            w = np.sqrt(c * q)
+            mask = (res.one_sided.signed > -ANGLE_BAND) & (w[:, None] > 0) if near is None else near[k]
+            np.testing.assert_allclose(np.abs(res.r), np.maximum(0.0, res.one_sided.signed), atol=1e-14)
+            out.append((w[:, None] * res.one_sided.signed)[mask]), masks.append(mask)
+        return np.concatenate(out), masks
+
+    s, near = signed(frames)
+    assert ne.hinge is not None and len(s) > 20 and np.count_nonzero(s > 0) > 0
+    np.testing.assert_allclose(ne.hinge.s, s, atol=1e-14)
+    x, e, E = frames.x(), 1e-6, local.E.toarray()
+    fd = np.stack([(signed(frames.with_x(x + e * d), near)[0] - signed(frames.with_x(x - e * d), near)[0]) / (2 * e)
+                   for d in E.T], axis=1)
+    P = ne.hinge.P.toarray()
+    np.testing.assert_allclose(P, fd, atol=1e-5 * np.abs(fd).max())
