@@ -24,7 +24,8 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
           (a short hop lost its flight). Without the lift c_f <= 2 cm is under the 3 cm that makes a
           flight in the metric (`solver.motion_metrics.FLIGHT_HEIGHT`). The lift is a target, not a
           bound for `conflicts`; keyframes where it is at its ceiling lower the ceiling to the lowest
-          site they hold (`lower_lifts`),
+          site they hold (`lower_lifts`). The band's corners are knots of the solve (`knot_times`): the
+          feet rise to the flight height in TAKEOFF_RISE, a bend a spline follows only with a knot there,
     u_k = the swing window of site k, u_f = the flight window:
       swing: each gap [a, b] between consecutive contacts of site k (not before its first or after its
              last contact: there the schedule says nothing). u rises by a smoothstep from 0 at a to 1 at
@@ -183,6 +184,27 @@ class Clearance(Term):
         surface's normals (..., k, 3) (`SupportSurfaces.height`), for site positions p (..., k, 3)."""
         h, nrm = self.below.height(p)
         return h - self.radii, nrm
+
+    def knot_times(self) -> np.ndarray:
+        """(r,) the corners of each lifted flight's band [s] (`Term.knot_times`): TAKEOFF_RISE after
+        its take-off and LANDING_DESCENT before its landing, where the lift (`flight_lift`) reaches and
+        leaves its ceiling; in a flight too short for both (T < TAKEOFF_RISE + LANDING_DESCENT) the top
+        of its ramps. The feet go from the ground to above the flight height in those 35 ms, a bend a
+        spline can only follow with a knot there: a hop keyed on its take-off, next frame 0.1 s later,
+        left the optimized feet 7-10 mm under the ramp, the flight two frames short at its start.
+        Flights whose lift is off or lowered to c_f (`lower_lifts`) have none.
+
+        Returns:
+            (r,) times [s], r <= 2 x the number of flights.
+        """
+        if self.flight_lifts is None:
+            return np.zeros(0)
+        knots = []
+        for (a, b), top, cf in zip(self.flights, self.flight_lifts, self.flight_bands, strict=True):
+            if top > cf:
+                up, down = a + TAKEOFF_RISE, b - LANDING_DESCENT
+                knots += [up, down] if up < down else [a + (b - a) * TAKEOFF_RISE / (TAKEOFF_RISE + LANDING_DESCENT)]
+        return np.array(knots, float)
 
     def evaluate_in(self, ctx, grad=True) -> TermEval:
         """`Term.evaluate_in`: the gradient left to the engine's reverse pass (`EngineGradient`)."""
