@@ -3,7 +3,8 @@
 Where a feet-driven motion is keyed by hand, the keys sit at touch-downs and lift-offs (the contact
 and passing poses of a walk or run cycle) and at the body's highest and lowest points in between
 (a jump's apex, the compression after a landing). `contact_keyframes` picks those frames from the
-contacts and the root height; evenly spaced keys (`every`) only fill gaps longer than `every`.
+contacts and the root height, then keys where the plain spline through them strays from the capture
+(`CaptureError`, `add_keys_to_tolerance`); evenly spaced keys (`every`) only fill gaps longer than `every`.
 """
 from __future__ import annotations
 
@@ -19,11 +20,16 @@ from solver.spline import interpolate
 
 #: contact events closer than this many frames merge into one key (at their mean frame).
 MERGE_FRAMES = 4
-#: [deg] mean joint-angle error of the plain spline at a frame that `CaptureError` counts as 1.
+#: [deg] mean joint-angle error of the plain spline at a frame that `CaptureError` counts as 1, and
+#: [cm] the same for the mean contact-site error. Chosen on the tuning clips (127_33, 16_23, 35_17):
+#: below the mean errors of the plain spline keyed every 0.25 s there (5.2-9.1 deg, 6.4-12.3 cm), so
+#: no frame of the contact keying's plain spline is further from the capture than the evenly keyed
+#: one's average frame. There they add 2, 5 and 0 keys to the events and extremes (16, 17, 16 keys);
+#: 4 deg / 2 cm and 6 deg / 4 cm give the same keys on 127_33 and 35_17 and 23 and 20 on 16_23.
 KEY_JOINT_DEG = 5.0
-#: [cm] mean contact-site error of the plain spline at a frame that `CaptureError` counts as 1.
 KEY_SITE_CM = 3.0
-#: [s] an added key is at least this far from the keys beside it (`add_keys_to_tolerance`).
+#: [s] an added key is at least this far from the keys beside it (`add_keys_to_tolerance`): keys
+#: closer than a tenth of a second would key the capture's jitter rather than its poses.
 KEY_MIN_GAP = 0.1
 
 
