@@ -3,19 +3,34 @@
 Where a feet-driven motion is keyed by hand, the keys sit at touch-downs and lift-offs (the contact
 and passing poses of a walk or run cycle) and at the body's highest and lowest points in between
 (a jump's apex, the compression after a landing). `contact_keyframes` picks those frames from the
-contacts and the root height; evenly spaced keys (`every`) only fill gaps longer than `every`.
+contacts and the root height, then keys where the plain spline through them strays from the capture
+(`CaptureError`, `add_keys_to_tolerance`); evenly spaced keys (`every`) only fill gaps longer than `every`.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from solver.contacts import Contact, touchdowns_liftoffs
 from solver.errors import InputError
+from solver.keyframes import Keyframes
+from solver.layout import CONTACT_SITES, StateLayout
+from solver.spline import interpolate
 
 #: contact events closer than this many frames merge into one key (at their mean frame).
 MERGE_FRAMES = 4
+#: [deg] mean joint-angle error of the plain spline at a frame that `CaptureError` counts as 1, and
+#: [cm] the same for the mean contact-site error. Chosen on the tuning clips (127_33, 16_23, 35_17):
+#: below the mean errors of the plain spline keyed every 0.25 s there (5.2-9.1 deg, 6.4-12.3 cm), so
+#: no frame of the contact keying's plain spline is further from the capture than the evenly keyed
+#: one's average frame. There they add 2, 5 and 0 keys to the events and extremes (16, 17, 16 keys);
+#: 4 deg / 2 cm and 6 deg / 4 cm give the same keys on 127_33 and 35_17 and 23 and 20 on 16_23.
+KEY_JOINT_DEG = 5.0
+KEY_SITE_CM = 3.0
+#: [s] an added key is at least this far from the keys beside it (`add_keys_to_tolerance`): keys
+#: closer than a tenth of a second would key the capture's jitter rather than its poses.
+KEY_MIN_GAP = 0.1
 
 
 def _merge(idx: list[int], gap: int, fixed: set[int]) -> list[int]:
@@ -35,7 +50,9 @@ def _merge(idx: list[int], gap: int, fixed: set[int]) -> list[int]:
 
 
 def contact_keyframes(times: np.ndarray, contacts: Sequence[Contact], root_z: np.ndarray,
-                      every: float | None = None, merge_frames: int = MERGE_FRAMES) -> np.ndarray:
+                      every: float | None = None, merge_frames: int = MERGE_FRAMES,
+                      error: Callable[[Sequence[int]], np.ndarray] | None = None,
+                      min_gap: float = KEY_MIN_GAP) -> np.ndarray:
     """Frame indices of keyframes at the contact events and the root's extremes.
 
     1. Touch-downs and lift-offs of the feet (`touchdowns_liftoffs`, heel and toe of a foot merged),
@@ -45,13 +62,21 @@ def contact_keyframes(times: np.ndarray, contacts: Sequence[Contact], root_z: np
     3. Between consecutive keys of 1-2, the frames of the highest and the lowest root_z, unless
        they fall within `merge_frames` of a key already there (then the interval has no extreme
        of its own: the root rises or falls monotonically).
-    4. With `every` [s]: while two consecutive keys are more than `every` apart, the gap is split
+    4. With `error` (a `CaptureError`): the frame where the plain spline through the keys strays
+       furthest from the capture becomes a key, while that error is above 1 there
+       (`add_keys_to_tolerance`; added keys at least `min_gap` from the others). The events and
+       extremes alone leave long stretches unkeyed where nothing starts or ends (a 0.7 s step onto a
+       ledge, the crouch after a landing); the plain spline cuts across them and the optimizer, with
+       one free frame per interval, strays further still.
+    5. With `every` [s]: while two consecutive keys are more than `every` apart, the gap is split
        evenly with the fewest keys that make every gap at most `every`.
 
     Args:
         times: (n,) frame times [s], increasing. contacts: site contacts (times in [s]).
         root_z: (n,) root height [m]. every: optional maximum spacing [s], > 0.
         merge_frames: events closer than this many frames merge (>= 1).
+        error: None, or callable(keys) -> (n,) per-frame error of the plain spline through `keys`,
+            1 = at tolerance (`CaptureError`). min_gap: [s] the least spacing of a key added for it.
     Returns:
         (k,) strictly increasing int indices, first 0 and last n - 1 (k = 1 when n = 1).
     Raises:
@@ -76,6 +101,8 @@ def contact_keyframes(times: np.ndarray, contacts: Sequence[Contact], root_z: np
             if i - a >= merge_frames and b - i >= merge_frames:
                 extremes.append(i)
     keys = sorted(set(keys) | set(extremes))
+    if error is not None:
+        keys = add_keys_to_tolerance(keys, error, times, min_gap)
     if every is not None:
         filled = [keys[0]]
         for a, b in zip(keys[:-1], keys[1:]):
@@ -85,3 +112,97 @@ def contact_keyframes(times: np.ndarray, contacts: Sequence[Contact], root_z: np
             filled.append(b)
         keys = sorted(set(filled))
     return np.array(keys, dtype=int)
+
+
+class CaptureError:
+    """Per-frame distance of the plain spline through a set of keys from the capture it keys.
+
+    The plain spline is the natural cubic spline through the capture's poses at the keys, quaternions
+    hemisphere-aligned (`Keyframes.initial_values`), i.e. the path `dynsplines` starts from. At each frame
+    the error is the larger of two ratios: the mean over the ball and free joints of the angle between
+    the spline's and the capture's joint quaternion, over `joint_deg`, and the mean over the contact
+    sites of the distance between the spline's and the capture's site, over `site_cm`: the per-frame
+    forms of the corpus' joint-angle and contact-site error (`solver.motion_metrics`, docs/corpus.md).
+
+    Args:
+        model: the scene's MjModel (the figure's qpos layout and contact sites).
+        times: (n,) frame times [s], increasing. qpos: (n, nq) the capture's poses.
+        joint_deg: [deg] > 0, the mean joint-angle error counted as 1. site_cm: [cm] > 0, the mean
+            contact-site error counted as 1.
+        sites: the contact sites.
+    Raises:
+        InputError: shapes disagree, a tolerance is not positive, a site is missing.
+    """
+
+    def __init__(self, model, times, qpos, joint_deg: float = KEY_JOINT_DEG, site_cm: float = KEY_SITE_CM,
+                 sites=CONTACT_SITES):
+        from solver.kinematic_tree import SiteKinematics
+
+        self.times = np.asarray(times, float)
+        self.qpos = np.asarray(qpos, float)
+        if self.qpos.shape != (len(self.times), model.nq):
+            raise InputError(f"qpos has shape {self.qpos.shape}; give one pose per frame time, "
+                             f"({len(self.times)}, nq={model.nq})")
+        for name, v in (("joint_deg", joint_deg), ("site_cm", site_cm)):
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise InputError(f"{name}={v!r}; give a positive tolerance")
+        self.joint_deg, self.site_cm = float(joint_deg), float(site_cm)
+        layout = StateLayout.from_model(model)
+        self.quat_slots = layout.quat_slots
+        self.engine = SiteKinematics(model, sites)
+        self.ref_sites = self.engine.positions(self.qpos)
+        self.ref_quats = _unit(self.qpos[:, self.quat_slots])
+
+    def plain(self, keys: Sequence[int]) -> np.ndarray:
+        """(n, nq) the plain spline through the capture's poses at `keys` (frame indices), at every frame."""
+        idx = np.asarray(keys, int)
+        kf = Keyframes(self.times[idx], self.qpos[idx], np.ones((len(idx), self.qpos.shape[1]), bool))
+        return interpolate(self.times[idx], kf.initial_values(self.quat_slots), self.times)
+
+    def __call__(self, keys: Sequence[int]) -> np.ndarray:
+        """(n,) the error at every frame of the plain spline through `keys` (1 = at a tolerance)."""
+        Y = self.plain(keys)
+        dot = np.abs(np.einsum("nsk,nsk->ns", _unit(Y[:, self.quat_slots]), self.ref_quats))
+        joint = np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0))).mean(axis=1)
+        site = 100.0 * np.linalg.norm(self.engine.positions(Y) - self.ref_sites, axis=-1).mean(axis=1)
+        return np.maximum(joint / self.joint_deg, site / self.site_cm)
+
+
+def _unit(q: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) scaled to unit length."""
+    return q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
+
+
+def add_keys_to_tolerance(keys: Sequence[int], error, times: np.ndarray, min_gap: float = KEY_MIN_GAP,
+                          max_keys: int | None = None) -> list[int]:
+    """Keys added where the plain spline strays furthest from the capture, until it is within tolerance.
+
+    Greedy curve simplification in reverse (the key-posture extraction of Lim and Thalmann, "Key-posture
+    extraction out of human motion data by curve simplification", EMBS 2001, with the animator's
+    keys as the start): the frame of largest `error` becomes a key, as long as it is at least `min_gap`
+    from the keys around it, and the error is measured again, until no frame that could become a key
+    has error above 1 (or `max_keys` is reached).
+
+    Args:
+        keys: sorted frame indices, the first and last frames among them.
+        error: callable(keys) -> (n,) per-frame error, 1 = at tolerance (a `CaptureError`).
+        times: (n,) frame times [s]. min_gap: [s] >= 0, the least spacing of an added key from the
+            others. max_keys: at most this many keys in all (None: no cap).
+    Returns:
+        sorted frame indices, a superset of `keys`.
+    """
+    keys = sorted({int(k) for k in keys})
+    times = np.asarray(times, float)
+    while max_keys is None or len(keys) < max_keys:
+        e = np.array(error(keys), float)
+        k = np.asarray(keys)
+        right = np.searchsorted(k, np.arange(len(times)))  # index of the first key at or after each frame
+        right = np.clip(right, 1, len(k) - 1)
+        ok = (times - times[k[right - 1]] >= min_gap - 1e-9) & (times[k[right]] - times >= min_gap - 1e-9)
+        ok[k] = False
+        e = np.where(ok, e, -np.inf)
+        i = int(np.argmax(e))
+        if not e[i] > 1.0:
+            break
+        keys = sorted(keys + [i])
+    return keys

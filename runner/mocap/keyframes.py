@@ -127,17 +127,19 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
     Args:
         reference: the retargeted clip. model: the scene's MjModel. contacts: the clip's contacts.
         keys: "every": `keyframe_indices(reference, every, extremes)`; "contacts": touch-downs,
-            lift-offs, the ends and the root's extremes (`solver.keyframe_selection.contact_keyframes`),
-            with `every` (or None) the largest gap [s].
+            lift-offs, the ends and the root's extremes, then keys where the plain spline through
+            them strays from the capture (`solver.keyframe_selection.contact_keyframes` with a
+            `CaptureError`), with `every` (or None) the largest gap [s].
         partial: the middle keyframe fixes only the root and the legs (`Figure.leg_joints`).
         extremes: with keys="every", also key the root's highest and lowest frames.
     """
-    from solver.keyframe_selection import contact_keyframes
+    from solver.keyframe_selection import CaptureError, contact_keyframes
 
     if keys == "contacts":
         if every is not None and not (isinstance(every, (int, float)) and math.isfinite(every) and every > 0):
             raise InputError(f"keyframe spacing every={every!r}; give a positive number of seconds, e.g. 0.25")
-        idx = contact_keyframes(reference.times, contacts, reference.qpos[:, 2], every=every)
+        error = CaptureError(model, reference.times, reference.qpos)
+        idx = contact_keyframes(reference.times, contacts, reference.qpos[:, 2], every=every, error=error)
     elif keys == "every":
         idx = keyframe_indices(reference, 0.25 if every is None else every, extremes=extremes)
     else:

@@ -7,8 +7,12 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
     f(t) = sum over sites k of  u_k(t) max(0, c - h_k(t))^2 + u_f(t) max(0, c_f - h_k(t))^2,
     h_k = height of site k above the surface under it (a box's top face over its footprint, else the
           floor; `SupportSurfaces` with no footprint margin): clearance above the ground under the
-          foot, so a toe passing a step's edge on its way up is not pushed sideways (the penetration
-          term keeps it out of the box),
+          foot, so a toe passing a step's wall on its way up is not pushed sideways (the penetration
+          term keeps it out of the box); beside a box's footprint, the distance to its top face where
+          that is nearer (`rounded_edges`: the band wraps round the top's edge as a quarter cylinder
+          of radius c, so the height, and the term, are continuous across the edge; a height that
+          jumped there by the box's height left the optimizer a penalty its gradient could not see
+          the end of, and rounds ended where they began, docs/contacts.md "The contact terms"),
     c_f = min(c, g T^2 / 8) for a flight of duration T (default): the height a ballistic body rises in
           a flight that long (g = 9.81 m/s^2), so a short hop's feet are not lifted more than the body
           is (a 0.08 s flight: 8 mm; 0.13 s and longer: c); or a fixed `flight_clearance`,
@@ -140,7 +144,7 @@ class Clearance(Term):
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the clearance term")
         #: the surface under a site: the boxes' top faces over their footprints exactly, else the floor
-        self.below = SupportSurfaces(surfaces, footprint_margin=0.0)
+        self.below = SupportSurfaces(surfaces, footprint_margin=0.0, rounded_edges=True)
         self.contacts = check_contacts(contacts, CONTACT_SITES, surfaces.names)
         c, core = float(clearance), float(core)
         if not np.isfinite(c) or c <= 0:

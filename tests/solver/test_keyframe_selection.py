@@ -7,7 +7,7 @@ import pytest
 
 from solver.contacts import Contact, reference_contacts, touchdowns_liftoffs
 from solver.errors import InputError
-from solver.keyframe_selection import contact_keyframes
+from solver.keyframe_selection import KEY_MIN_GAP, CaptureError, add_keys_to_tolerance, contact_keyframes
 
 ROOT = Path(__file__).resolve().parents[2]
 FPS = 100.0
@@ -62,3 +62,113 @@ def test_127_33_keys_at_the_landings():
         assert np.min(np.abs(ref.times[keys] - time)) <= 4 * ref.frame_time
     assert keys[0] == 0 and keys[-1] == ref.count - 1
     assert np.all(np.diff(keys) > 0)
+
+
+# --- keys added where the plain spline strays from the capture ------------------------------------
+
+
+def _linear_error(t, f, tol):
+    """error(keys) = |f - piecewise-linear interpolation of f at the keys| / tol: a hand-built stand-in
+    for `CaptureError` whose worst frame is known in closed form."""
+    def error(keys):
+        k = np.asarray(keys)
+        return np.abs(f - np.interp(t, t[k], f[k])) / tol
+    return error
+
+
+def test_added_keys_bring_every_eligible_frame_within_tolerance():
+    t = np.arange(201) / FPS                      # 2 s
+    f = np.sin(2 * np.pi * t)                     # one period: the chord 0-2 s misses by 1 at 0.25 s
+    error = _linear_error(t, f, 0.05)
+    keys = add_keys_to_tolerance([0, 200], error, t, min_gap=0.1)
+    assert keys[0] == 0 and keys[-1] == 200 and keys == sorted(set(keys))
+    gaps = np.diff(t[keys])
+    assert gaps.min() >= 0.1 - 1e-9
+    e = error(keys)
+    # a frame still above tolerance is within min_gap of a key (it could not become one)
+    for i in np.flatnonzero(e > 1.0):
+        assert np.min(np.abs(t[keys] - t[i])) < 0.1
+    # the first key added is the frame furthest from the chord: a peak of the sine (0.25 or 1.25 s)
+    first = add_keys_to_tolerance([0, 200], error, t, min_gap=0.1, max_keys=3)
+    assert len(first) == 3 and first[1] in (25, 125)
+
+
+def test_no_key_added_where_the_spline_is_within_tolerance():
+    t = np.arange(101) / FPS
+    f = 0.3 * t                                    # a straight line: the chord is exact
+    assert add_keys_to_tolerance([0, 100], _linear_error(t, f, 1e-3), t) == [0, 100]
+
+
+def test_contact_keyframes_key_a_long_gap_the_events_leave():
+    """One contact from 0 to 0.2 s, then 1.8 s with no event and a flat root: events and extremes key
+    nothing in it; a capture that bends there gets keys from the error."""
+    t = np.arange(201) / FPS
+    cs = [Contact("l_toe", 0.0, 0.2)]
+    z = np.full(201, 0.9)
+    f = np.where(t > 0.2, np.sin(np.pi * (t - 0.2) / 1.8), 0.0)
+    without = contact_keyframes(t, cs, z)
+    assert without.tolist() == [0, 20, 200]
+    keys = contact_keyframes(t, cs, z, error=_linear_error(t, f, 0.1))
+    assert set(without) <= set(keys.tolist()) and len(keys) > 3
+    miss = np.abs(f - np.interp(t, t[keys], f[keys])) / 0.1
+    far = np.array([np.min(np.abs(t[keys] - x)) >= KEY_MIN_GAP for x in t])  # frames that could be keys
+    assert np.all(miss[far] <= 1.0)
+
+
+def _figure():
+    return mujoco.MjModel.from_xml_path(str(ROOT / "models" / "floor.xml"))
+
+
+def test_capture_error_joint_term_is_the_normalized_lerp_angle():
+    """Keys at the ends of a knee turning at a constant rate: the plain spline is the straight line
+    between the two quaternions (a natural spline through two knots), normalized; its angle is
+    2 atan2(s sin(phi/2), 1 - s + s cos(phi/2)) at s = t / T, against the capture's phi s."""
+    model = _figure()
+    n, phi = 61, 1.4
+    t = np.linspace(0.0, 0.6, n)
+    s = t / t[-1]
+    q = np.tile(model.qpos0, (n, 1))
+    a = int(model.jnt_qposadr[model.joint("r_knee").id])
+    q[:, a:a + 4] = np.stack([np.cos(phi * s / 2), np.sin(phi * s / 2), 0 * s, 0 * s], axis=1)
+    err = CaptureError(model, t, q, joint_deg=1.0, site_cm=1e12)
+    kinds = (int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_FREE))
+    slots = sum(int(model.jnt_type[j]) in kinds for j in range(model.njnt))
+    nlerp = 2.0 * np.arctan2(s * np.sin(phi / 2), 1.0 - s + s * np.cos(phi / 2))
+    expected = np.degrees(np.abs(nlerp - phi * s)) / slots
+    np.testing.assert_allclose(err([0, n - 1]), expected, atol=1e-9)
+    assert np.all(err(list(range(n))) < 1e-9)      # keyed everywhere: no error
+
+
+def test_capture_error_site_term_is_the_mean_site_distance_by_mujoco():
+    model = _figure()
+    data = mujoco.MjData(model)
+    n = 41
+    t = np.linspace(0.0, 0.4, n)
+    q = np.tile(model.qpos0, (n, 1))
+    a = int(model.jnt_qposadr[model.joint("l_hip").id])
+    ang = 0.8 * np.sin(np.pi * t / 0.4)            # a hip swing out and back: the chord of the ends is still
+    q[:, a:a + 4] = np.stack([np.cos(ang / 2), 0 * t, np.sin(ang / 2), 0 * t], axis=1)
+    err = CaptureError(model, t, q, joint_deg=1e12, site_cm=2.0)
+    Y = err.plain([0, n - 1])
+    ids = [model.site(s).id for s in ("l_heel", "l_toe", "r_heel", "r_toe")]
+
+    def sites(qpos):
+        out = []
+        for row in qpos:
+            data.qpos[:] = row
+            mujoco.mj_kinematics(model, data)
+            out.append(data.site_xpos[ids].copy())
+        return np.array(out)
+
+    expected = 100.0 * np.linalg.norm(sites(Y) - sites(q), axis=-1).mean(axis=1) / 2.0
+    np.testing.assert_allclose(err([0, n - 1]), expected, rtol=1e-9, atol=1e-9)
+    assert expected.max() > 1.0                    # the test means something: the swing is missed
+
+
+def test_capture_error_rejects_bad_input():
+    model = _figure()
+    t = np.linspace(0, 1, 5)
+    with pytest.raises(InputError, match="qpos has shape"):
+        CaptureError(model, t, np.zeros((4, model.nq)))
+    with pytest.raises(InputError, match="joint_deg"):
+        CaptureError(model, t, np.tile(model.qpos0, (5, 1)), joint_deg=0.0)
