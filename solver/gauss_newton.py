@@ -24,6 +24,7 @@ import math
 import time
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from solver.objective import NonFiniteError
 from solver.optimize import OptimizeResult, Status
@@ -73,8 +74,10 @@ def lm_backend(objective, frames, options, remaining, should_stop, progress, eva
     def report(n, f):
         progress("eval", {"evals": evals_before + n, "E": f})
 
-    return levenberg_marquardt(objective, frames, ftol_rel=options.ftol_rel, max_evals=options.max_evals,
-                               max_time_s=remaining, should_stop=should_stop, callback=report if progress else None)
+    with threadpool_limits(1):  # the Jacobian's dense products are small: BLAS threads only add contention
+        return levenberg_marquardt(objective, frames, ftol_rel=options.ftol_rel, max_evals=options.max_evals,
+                                   max_time_s=remaining, should_stop=should_stop,
+                                   callback=report if progress else None)
 
 
 def levenberg_marquardt(objective, frames, ftol_rel: float = 1e-7, max_evals: int = 0, max_time_s: float = 0.0,

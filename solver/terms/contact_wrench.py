@@ -48,6 +48,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.errors import InputError
+from solver.id_jacobian import tau_jacobian
 from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.path_context import EngineGradient, PathContext
@@ -254,7 +255,18 @@ class FrictionCone(Term):
             pulled = deferred.pullback()
             return (dY + pulled[0], *pulled[1:])
 
-        return Residual(r, pull=pull)
+        tj = tau_jacobian(ctx, self.engine, self.tmap)
+        if tj is None or q is None:
+            return Residual(r, pull=pull)
+        cols = []  # the adjoints of each column (`_pull` with a unit weight on it)
+        for c in range(r.shape[1]):
+            unit = np.zeros((len(q["rows"]), r.shape[1]))
+            unit[:, c] = sA[:, 0] * (q["e"][:, c] > 0)
+            cols.append(self._pull(ctx.Y, q, unit, res, mo))
+        g_tau = np.stack([eg.g_tau for _, eg in cols], axis=1)
+        g_sites = np.stack([eg.g_sites for _, eg in cols], axis=1)
+        direct = np.stack([dY for dY, _ in cols], axis=1)
+        return Residual(r, blocks=tj.blocks(g_tau, g_sites, direct), pull=pull)
 
     def _pull(self, Y, q, ge, res, mo):
         """(dY (n, nq), EngineGradient) of sum ge . e over the contact rows of `_wrench`'s q: the

@@ -16,6 +16,7 @@ import numpy as np
 
 from solver.contact_thresholds import FLIGHT_CLEARANCE
 from solver.errors import InputError
+from solver.id_jacobian import tau_jacobian
 from solver.inverse_dynamics import InverseDynamics, MujocoInverseDynamics
 from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
@@ -134,7 +135,16 @@ class JointTorque(Term):
         reverse pass (`InverseDynamics.vjp`)."""
         mo, res = ctx.forward(self.engine, self.tmap)
         sw = np.sqrt(self.dof_weights)
-        return Residual(sw * res.tau, pull=lambda g: EngineGradient(self.engine, res, mo, sw * g).pullback())
+        pull = lambda g: EngineGradient(self.engine, res, mo, sw * g).pullback()  # noqa: E731
+        tj = tau_jacobian(ctx, self.engine, self.tmap)
+        if tj is None:
+            return Residual(sw * res.tau, pull=pull)
+        rows = np.flatnonzero(sw)
+        n, nv = res.tau.shape
+        blocks = tuple(np.zeros((n, nv, tj.nq)) for _ in range(3))
+        for J, T in zip(blocks, tj.rows(rows), strict=True):  # d tau / d(Y, Y', Y''), the weighted rows
+            J[:, rows] = sw[rows, None] * T
+        return Residual(sw * res.tau, blocks=blocks, pull=pull)
 
 
 def figure_radius_of_gyration(model, body: int) -> float:
@@ -358,4 +368,12 @@ class RootResidual(Term):
             g_sites[:, self.site_index] = (half * (g * wr).sum(1))[:, None, None] * dphi
             return EngineGradient(self.engine, res, mo, g_tau, g_sites).pullback()
 
-        return Residual(sp[:, None] * wr, pull=pull)
+        tj = tau_jacobian(ctx, self.engine, self.tmap)
+        if tj is None:
+            return Residual(sp[:, None] * wr, pull=pull)
+        n, m = len(ctx.Y), len(self.root_dofs)  # the adjoints of each column (`pull` with a unit g)
+        g_tau = np.zeros((n, m, res.tau.shape[1]))
+        g_tau[:, np.arange(m), self.root_dofs] = sp[:, None] * np.sqrt(self._scale)
+        g_sites = np.zeros((n, m) + res.sites.shape[1:])
+        g_sites[:, :, self.site_index] = (half[:, None] * wr)[:, :, None, None] * dphi[:, None]
+        return Residual(sp[:, None] * wr, blocks=tj.blocks(g_tau, g_sites), pull=pull)
