@@ -203,13 +203,15 @@ def test_shared_engine_gives_the_same_objective_and_gradient(model, layout, keyf
 
 @pytest.mark.slow
 def test_adaptive_refinement_beats_global_at_equal_frame_counts(model, layout, keyframes):
-    """The first four keyframes of the clip, every term on, 6 variable frames: adaptive subdivision
-    ranked by the predicted decrease ends lower than 2 frames in each interval (measured 0.75 vs
-    1.01), with the same fixed weights and scales."""
+    """The first four keyframes of the clip, every term on but `forces`, 6 variable frames: adaptive
+    subdivision ranked by the predicted decrease ends lower than 2 frames in each interval, with the
+    same fixed weights and scales (measured 33.9 vs 42.2). `forces` is left out: the predicted decrease
+    does not see its peak excess, which a frame anywhere near a peak changes (with it 38.3 vs 42.3)."""
     from solver.bench.figure import compare_refinement
 
     kf = Keyframes(keyframes.times[:4], keyframes.values[:4], keyframes.mask[:4])
-    (row,) = compare_refinement(model, kf, layout, parse_terms("all"), [6], scores=("decrease",), rate=400.0)
+    weights = {name: w for name, w in parse_terms("all").items() if name != "forces"}
+    (row,) = compare_refinement(model, kf, layout, weights, [6], scores=("decrease",), rate=400.0)
     g, a = row["global"], row["adaptive-decrease"]
     assert g["variable"] == a["variable"] == 6
     assert g["E_initial"] == a["E_initial"]  # the same objective
@@ -252,8 +254,8 @@ def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms)
     assert opt["peak_root_force_ground_bw"] <= 1.01 * bounds["ground_force_bw"] + 0.01
     opts = json.loads(str(z["options_json"]))
     # "all" with the file's contact schedule: the dynamics terms, the contact terms and the cone
-    assert set(opts["weights"]) == {"penetration", "unit", "bending", "smooth", "hinge", "rom", "torque", "root",
-                                    "forces", "planted", "clearance", "cone"}
+    assert set(opts["weights"]) == {"penetration", "unit", "bending", "smooth", "hinge", "rom", "near", "torque",
+                                    "root", "forces", "planted", "clearance", "cone"}
 
 
 @pytest.mark.slow
