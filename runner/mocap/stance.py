@@ -122,6 +122,20 @@ def resting(stance: np.ndarray, lowest: np.ndarray, speed: np.ndarray, height_on
     return np.asarray(stance, bool) & (lowest < height_on) & (speed < speed_on)
 
 
+def _foot_motion(model, qpos, frame_time: float):
+    """(figure, times (n,) [s], contact points (n, k, 3) [m], their heights above the surfaces (n, k)
+    [m]) of a motion sampled every frame_time; raises InputError when frame_time is not > 0."""
+    from solver.figure import Figure
+
+    if not (np.isfinite(frame_time) and frame_time > 0):
+        raise InputError(f"frame_time is {frame_time!r}; give the time between frames in seconds (> 0)")
+    figure = Figure.from_model(model)
+    qpos = np.atleast_2d(np.asarray(qpos, float))
+    pos = contact_points(model, qpos, figure.contact_sites)
+    times = np.arange(len(qpos)) * float(frame_time)
+    return figure, times, pos, site_heights(model, pos)
+
+
 def capture_stance(model, qpos: np.ndarray, frame_time: float, **thresholds) -> np.ndarray:
     """The stance of a motion in its scene (`stance_mask`; sites and feet of the model's figure).
 
@@ -135,15 +149,8 @@ def capture_stance(model, qpos: np.ndarray, frame_time: float, **thresholds) -> 
     Raises:
         InputError: the figure has no feet or lacks a site, frame_time not > 0, bad thresholds.
     """
-    from solver.figure import Figure
-
-    if not (np.isfinite(frame_time) and frame_time > 0):
-        raise InputError(f"frame_time is {frame_time!r}; give the time between frames in seconds (> 0)")
-    figure = Figure.from_model(model)
-    qpos = np.atleast_2d(np.asarray(qpos, float))
-    pos = contact_points(model, qpos, figure.contact_sites)
-    times = np.arange(len(qpos)) * float(frame_time)
-    return stance_mask(times, pos, site_heights(model, pos), figure.feet, figure.contact_sites, **thresholds)
+    figure, times, pos, heights = _foot_motion(model, qpos, frame_time)
+    return stance_mask(times, pos, heights, figure.feet, figure.contact_sites, **thresholds)
 
 
 def capture_rest(model, qpos: np.ndarray, frame_time: float) -> tuple[np.ndarray, np.ndarray]:
@@ -156,15 +163,7 @@ def capture_rest(model, qpos: np.ndarray, frame_time: float) -> tuple[np.ndarray
     Raises:
         InputError: as `capture_stance`.
     """
-    from solver.figure import Figure
-
-    if not (np.isfinite(frame_time) and frame_time > 0):
-        raise InputError(f"frame_time is {frame_time!r}; give the time between frames in seconds (> 0)")
-    figure = Figure.from_model(model)
-    qpos = np.atleast_2d(np.asarray(qpos, float))
-    pos = contact_points(model, qpos, figure.contact_sites)
-    times = np.arange(len(qpos)) * float(frame_time)
-    heights = site_heights(model, pos)
+    figure, times, pos, heights = _foot_motion(model, qpos, frame_time)
     stance = stance_mask(times, pos, heights, figure.feet, figure.contact_sites)
     low, speed = lowest_sites(times, pos, heights, figure.feet, figure.contact_sites)
     return resting(stance, low, speed), low
