@@ -37,6 +37,39 @@ from runner.render.tracks import (
 from solver.errors import InputError
 
 
+def _layout(size, n_tracks: int, title: str | None, out_path: Path, quality: str, workers):
+    """`render_tracks`' checked (width, height, panel width, panel height) [px]; raises its InputErrors."""
+    width, height = parse_size(size)
+    if not n_tracks:
+        raise InputError("render_tracks needs at least one track")
+    check_quality(quality)
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise InputError(f"workers must be a whole number >= 1 (or None: one per core); got {workers!r}")
+    if out_path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise InputError(f"video file must end in one of {list(VIDEO_SUFFIXES)}; got {str(out_path)!r}")
+    if width % 2 or height % 2:
+        raise InputError(f"video size must be even in both directions (H.264 4:2:0); got {width}x{height}")
+    panel_w = width // n_tracks
+    panel_h = height - title_band(height, title if labels_shown(width, height) else None)
+    if panel_w < 16 or panel_h < 16:
+        raise InputError(
+            f"size {width}x{height} leaves panels of {panel_w}x{panel_h} px for {n_tracks} tracks; "
+            "each panel needs at least 16x16")
+    return width, height, panel_w, panel_h
+
+
+def _draw(plan: FramePlan, path, threads: int, progress) -> tuple[float, int]:
+    """Draw and encode every frame of `plan` into `path` on `threads` threads; (render time [s], panels)."""
+    if threads > 1:
+        stats = render_threaded(plan, path, threads, progress)
+        return stats.render_s, stats.panels
+    n = plan.n_frames
+    with FrameWriter(plan) as writer:
+        done = iter(range(1, n + 1))
+        writer.write(range(n), path, None if progress is None else lambda: progress(next(done), n))
+    return writer.render_s, writer.panels
+
+
 def render_tracks(
     model,
     tracks: Sequence[Track],
@@ -99,25 +132,9 @@ def render_tracks(
     """
     wall0, cpu0 = time.perf_counter(), time.process_time()
     out_path = Path(out_path)
-    width, height = parse_size(size)
-    fps, speed = positive(fps, "fps"), positive(speed, "speed")
     tracks = list(tracks)
-    if not tracks:
-        raise InputError("render_tracks needs at least one track")
-    check_quality(quality)
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-        raise InputError(f"workers must be a whole number >= 1 (or None: one per core); got {workers!r}")
-    if out_path.suffix.lower() not in VIDEO_SUFFIXES:
-        raise InputError(f"video file must end in one of {list(VIDEO_SUFFIXES)}; got {str(out_path)!r}")
-    if width % 2 or height % 2:
-        raise InputError(f"video size must be even in both directions (H.264 4:2:0); got {width}x{height}")
-    panel_w = width // len(tracks)
-    band = title_band(height, title if labels_shown(width, height) else None)
-    panel_h = height - band
-    if panel_w < 16 or panel_h < 16:
-        raise InputError(
-            f"size {width}x{height} leaves panels of {panel_w}x{panel_h} px for {len(tracks)} tracks; "
-            "each panel needs at least 16x16")
+    fps, speed = positive(fps, "fps"), positive(speed, "speed")
+    width, height, panel_w, panel_h = _layout(size, len(tracks), title, out_path, quality, workers)
     site_ids = [check_model_fit(model, tr) for tr in tracks]
     kf_t, kf_q = check_keyframes(model, keyframe_times, keyframe_qpos)
     check_writable_dir(out_path)
@@ -129,14 +146,7 @@ def render_tracks(
     threads = worker_count(n, workers)
     children0 = children_cpu()
     with atomic_output(out_path) as tmp:
-        if threads > 1:
-            stats = render_threaded(plan, tmp, threads, progress)
-            render_s, panels = stats.render_s, stats.panels
-        else:
-            with FrameWriter(plan) as writer:
-                done = iter(range(1, n + 1))
-                writer.write(range(n), tmp, None if progress is None else lambda: progress(next(done), n))
-            render_s, panels = writer.render_s, writer.panels
+        render_s, panels = _draw(plan, tmp, threads, progress)
     return RenderInfo(
         path=out_path, n_frames=n, video_time_s=n / fps,
         wall_time_s=time.perf_counter() - wall0,
