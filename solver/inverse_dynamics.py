@@ -224,18 +224,31 @@ class InverseDynamics(KinematicTree):
         sv = res.saved
         if g_tau is None:
             g_tau = np.zeros(res.tau.shape)
-        R, A, com, s, om = sv["R"], sv["A"], sv["com"], sv["s"], sv["om"]
-        k, nu, as_, al = sv["k"], sv["nu"], sv["as_"], sv["al"]
-        rot, free, rs = self._rot, self._free, self._rs
-        n = g_tau.shape[0]
-        B = len(self.bodies)
-        anc, desc = self._anc, self._desc
         gT = g_tau.T
         Ga = self._armature[:, None] * gT
         Gv = self._damping[:, None] * gT
-        Gq = np.zeros((self.nv, n))
+        Gq = np.zeros((self.nv, gT.shape[1]))
+        gth, Abar, cbar, wbar, albar, nudbar, nubar = self._force_adjoints(sv, gT)
+        sx, snu, sw, sth = self._site_adjoints(sv, sv["om"], g_sites, g_site_vel)
+        xbar = cbar + sx
+        nubar = nubar + snu
+        wbar += sw
+        gth += sth
+        Abar, wbar, kbar, nubar, sbar, gth, Gl_a = self._acceleration_adjoints(
+            sv, nudbar, albar, Abar, wbar, nubar, gth, Ga)
+        # velocities and pose (`KinematicTree._reverse`)
+        self._reverse(sv, nubar, kbar, Abar, sbar, wbar, xbar, gth, Gq, Gv)
+        Ga[self._lin_v.T] += Gl_a
+        return Gq.T, Gv.T, Ga.T
 
-        tbar = np.zeros((3, B, n))
+    def _force_adjoints(self, sv: dict, gT: np.ndarray) -> tuple:
+        """Reverse pass of `forward`'s backward (force) sweep and of the bodies' momentum rates, for
+        `vjp`: from d phi / d tau (nv, n) to the adjoints (3, B, n) of the joint rotations (gth), the
+        joint axes' world motion (Abar), the bodies' COM positions (cbar), angular velocities (wbar),
+        angular and linear accelerations (albar, nudbar) and linear velocities (nubar)."""
+        R, A, com, om = sv["R"], sv["A"], sv["com"], sv["om"]
+        rot, free, anc = self._rot, self._free, self._anc
+        tbar = np.zeros((3, len(self.bodies), gT.shape[1]))
         tbar[:, rot] = gT[self._ang_v.T]
         What = mv(R, tbar)
         gth = cross(What, sv["Wt"])
@@ -244,39 +257,40 @@ class InverseDynamics(KinematicTree):
         Abar = cross(What, sv["Ff"])
         nbar = anc @ What  # wrench adjoint of each body: sum over its ancestors' joints
         fbar = anc @ Ffbar
-        f = sv["f"]
-        cbar = cross(f, nbar)
+        cbar = cross(sv["f"], nbar)
         fbar += cross(nbar, com)
         gth += cross(sv["nw"], nbar)
         nlbar = mtv(R, nbar)
         Ic = self._Ic
-        wl = sv["wl"]
         albar_l = mv(Ic, nlbar)
-        hbar = cross(nlbar, wl)
+        hbar = cross(nlbar, sv["wl"])
         wlbar = cross(sv["h"], nlbar) + mv(Ic, hbar)
         wbar = mv(R, wlbar)
         gth += cross(wbar, om)
         albar = mv(R, albar_l)
-        gth += cross(albar, al)
+        gth += cross(albar, sv["al"])
         acbar = self._mass * fbar
-        vc = sv["vc"]
         nudbar = acbar
         albar += cross(com, acbar)
-        cbar += cross(acbar, al)
-        wbar += cross(vc, acbar)
+        cbar += cross(acbar, sv["al"])
+        wbar += cross(sv["vc"], acbar)
         vcbar = cross(acbar, om)
         nubar = vcbar
         wbar += cross(com, vcbar)
         cbar += cross(vcbar, om)
         gth += cross(sv["cx"], cbar)
-        sx, snu, sw, sth = self._site_adjoints(sv, om, g_sites, g_site_vel)
-        xbar = cbar + sx
-        nubar = nubar + snu
-        wbar += sw
-        gth += sth
+        return gth, Abar, cbar, wbar, albar, nudbar, nubar
+
+    def _acceleration_adjoints(self, sv, nudbar, albar, Abar, wbar, nubar, gth, Ga) -> tuple:
+        """Reverse pass of `forward`'s acceleration sweep, for `vjp`: adds the joint accelerations'
+        part to Ga (nv, n) in place and returns the updated adjoints and the free joints' linear
+        acceleration adjoint Gl_a."""
+        R, A, om = sv["R"], sv["A"], sv["om"]
+        k, nu, s, as_ = sv["k"], sv["nu"], sv["s"], sv["as_"]
+        desc, rs = self._desc, self._rs
         # nudot = anc(z), z = A x as + om x k + nu x s + lin_acc
         zbar = desc @ nudbar
-        Gl_a = zbar[:, free]
+        Gl_a = zbar[:, self._free]
         Abar += cross(as_, zbar)
         asbar = cross(zbar, A)
         wbar += cross(k, zbar)
@@ -291,7 +305,4 @@ class InverseDynamics(KinematicTree):
         # as = R a_local
         Ga[self._ang_v.T] += mtv(R[:, :, rs], asbar[:, rs])
         gth += cross(as_, asbar)
-        # velocities and pose (`KinematicTree._reverse`)
-        self._reverse(sv, nubar, kbar, Abar, sbar, wbar, xbar, gth, Gq, Gv)
-        Ga[self._lin_v.T] += Gl_a
-        return Gq.T, Gv.T, Ga.T
+        return Abar, wbar, kbar, nubar, sbar, gth, Gl_a
