@@ -7,29 +7,14 @@ import imageio.v2 as iio
 import mujoco
 import numpy as np
 import pytest
+from render_scenes import one_leg_scene
 
 import runner.render as render
 from runner.render import Camera, Track, frame_times, parse_size, render_still, render_tracks, sample_track
 from solver import InputError
 
-SCENE = """
-<mujoco>
-  <visual><global offwidth="64" offheight="64"/></visual>
-  <worldbody>
-    <light pos="0 0 4" dir="0 0 -1"/>
-    <geom name="floor" type="plane" size="5 5 .1" rgba=".3 .4 .5 1"/>
-    <body name="pelvis" pos="0 0 1">
-      <freejoint name="root"/>
-      <geom type="capsule" fromto="0 0 0 0 0 .5" size=".1" rgba=".8 .6 .4 1"/>
-      <body name="leg">
-        <joint name="hip" type="ball"/>
-        <geom type="capsule" fromto="0 0 0 0 0 -.9" size=".07" rgba=".6 .6 .6 1"/>
-        <site name="toe" pos=".1 0 -.95"/>
-      </body>
-    </body>
-  </worldbody>
-</mujoco>
-"""
+SCENE = one_leg_scene(toe_site=True, floor_size="5 5 .1",
+                      visual='<visual><global offwidth="64" offheight="64"/></visual>')
 SIZE = (160, 120)  # two panels of 80 x 120
 BODY_ROWS = slice(40, 100)  # rows between the captions at the top and the timeline at the bottom
 

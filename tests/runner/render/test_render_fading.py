@@ -9,28 +9,14 @@ import imageio.v2 as iio
 import mujoco
 import numpy as np
 import pytest
+from render_scenes import one_leg_scene
 
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT
 from runner.render import Camera, Track, render_tracks
 from runner.render import tracks as tracks_module
 
-SCENE = """
-<mujoco>
-  <worldbody>
-    <light pos="0 0 4" dir="0 0 -1"/>
-    <geom name="floor" type="plane" size="0 0 .1" rgba=".3 .4 .5 1"/>
-    <body name="pelvis" pos="0 0 1">
-      <freejoint name="root"/>
-      <geom type="capsule" fromto="0 0 0 0 0 .5" size=".1" rgba=".8 .6 .4 1"/>
-      <body name="leg">
-        <joint name="hip" type="ball"/>
-        <geom type="capsule" fromto="0 0 0 0 0 -.9" size=".07" rgba=".6 .6 .6 1"/>
-      </body>
-    </body>
-  </worldbody>
-</mujoco>
-"""
+SCENE = one_leg_scene()
 SIZE = (480, 270)  # labels shown (LABELS_MIN_SIZE is 320x180)
 REPO = Path(__file__).resolve().parents[3]
 MODELS = REPO / "models"

@@ -13,6 +13,7 @@ import imageio.v2 as iio
 import mujoco
 import numpy as np
 import pytest
+from render_scenes import one_leg_scene
 
 import runner.render.frames as frames
 from runner.paths import MODELS
@@ -22,22 +23,7 @@ from runner.render.overlays import check_keyframes, check_model_fit
 from runner.render.parallel import MAX_WORKERS, MIN_PARALLEL_FRAMES, worker_count
 from solver import InputError
 
-SCENE = """
-<mujoco>
-  <worldbody>
-    <light pos="0 0 4" dir="0 0 -1" directional="true"/>
-    <geom name="floor" type="plane" size="0 0 .1" rgba=".3 .4 .5 1"/>
-    <body name="pelvis" pos="0 0 1">
-      <freejoint name="root"/>
-      <geom type="capsule" fromto="0 0 0 0 0 .5" size=".1" rgba=".8 .6 .4 1"/>
-      <body name="leg">
-        <joint name="hip" type="ball"/>
-        <geom type="capsule" fromto="0 0 0 0 0 -.9" size=".07" rgba=".6 .6 .6 1"/>
-      </body>
-    </body>
-  </worldbody>
-</mujoco>
-"""
+SCENE = one_leg_scene(light='directional="true"')
 
 
 def _walk(model, n=11, distance=1.0, swing=0.6):

@@ -11,29 +11,13 @@ import imageio.v2 as iio
 import mujoco
 import numpy as np
 import pytest
+from render_scenes import one_leg_scene
 
 import runner.render.overlays as overlays
 from runner.paths import MODELS
 from runner.render import Camera, Track, render_tracks
 from runner.render.gl import coarse_floor, make_renderer, shadow_map_size
 from runner.render.tracks import forward_direction, root_body
-
-SCENE = """
-<mujoco>
-  <worldbody>
-    <light pos="0 0 4" dir="0 0 -1" {light}/>
-    <geom name="floor" type="plane" size="0 0 .1" rgba=".3 .4 .5 1"/>
-    <body name="pelvis" pos="0 0 1">
-      <freejoint name="root"/>
-      <geom type="capsule" fromto="0 0 0 0 0 .5" size=".1" rgba=".8 .6 .4 1"/>
-      <body name="leg">
-        <joint name="hip" type="ball"/>
-        <geom type="capsule" fromto="0 0 0 0 0 -.9" size=".07" rgba=".6 .6 .6 1"/>
-      </body>
-    </body>
-  </worldbody>
-</mujoco>
-"""
 
 
 def _pose(model):
@@ -116,7 +100,7 @@ def test_the_one_quad_floor_looks_like_mujocos_grid(scene, repeat):
 def test_a_floor_under_a_spot_light_keeps_mujocos_grid():
     """Under a spot light the floor's (per-vertex) lighting varies over it: one quad would lose the
     pool of light, so the grid stays."""
-    model = mujoco.MjModel.from_xml_string(SCENE.format(light=""))
+    model = mujoco.MjModel.from_xml_string(one_leg_scene())
     coarse, grid, (dataid, _, ngeom) = _panel_images(model)
     assert dataid >= 0 and ngeom == model.ngeom
     assert np.abs(coarse - grid).max() == 0
@@ -130,7 +114,7 @@ def test_the_high_quality_keeps_mujocos_grid():
 
 
 def test_coarse_floor_needs_a_free_scene_geom():
-    model = mujoco.MjModel.from_xml_string(SCENE.format(light='directional="true"'))
+    model = mujoco.MjModel.from_xml_string(one_leg_scene(light='directional="true"'))
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     scene = mujoco.MjvScene(model, maxgeom=model.ngeom)
@@ -150,7 +134,7 @@ def _timeline_dot_x(frame, panel_x0, panel_w):
 
 
 def test_every_frame_arrives_in_order_with_its_overlays(tmp_path):
-    model = mujoco.MjModel.from_xml_string(SCENE.format(light='directional="true"'))
+    model = mujoco.MjModel.from_xml_string(one_leg_scene(light='directional="true"'))
     t = np.linspace(0.0, 1.0, 11)
     q = np.zeros((11, model.nq))
     q[:, 0], q[:, 2], q[:, 3], q[:, 7] = t, 1.0, 1.0, 1.0
@@ -168,7 +152,7 @@ def test_every_frame_arrives_in_order_with_its_overlays(tmp_path):
 
 
 def test_an_encoder_error_reaches_the_caller_and_leaves_no_file(tmp_path, monkeypatch):
-    model = mujoco.MjModel.from_xml_string(SCENE.format(light='directional="true"'))
+    model = mujoco.MjModel.from_xml_string(one_leg_scene(light='directional="true"'))
     t = np.linspace(0.0, 1.0, 11)
     q = np.zeros((11, model.nq))
     q[:, 2], q[:, 3], q[:, 7] = 1.0, 1.0, 1.0

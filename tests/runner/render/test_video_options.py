@@ -3,6 +3,7 @@ chosen side, keyframe numbers as in the keyframe file (from 0), and timeline lab
 import mujoco
 import numpy as np
 import pytest
+from render_scenes import one_leg_scene
 
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT
@@ -13,18 +14,7 @@ from runner.render.side_by_side import CAMERA_SIDES, VideoOptions, parse_camera
 from runner.render.tracks import azimuth_path, lookat_path, root_poses
 from solver import InputError
 
-SCENE = """
-<mujoco>
-  <worldbody>
-    <light pos="0 0 4" dir="0 0 -1"/>
-    <geom name="floor" type="plane" size="0 0 .1" rgba=".3 .4 .5 1"/>
-    <body name="pelvis" pos="0 0 1">
-      <freejoint name="root"/>
-      <geom type="capsule" fromto="0 0 0 0 0 .5" size=".1" rgba=".8 .6 .4 1"/>
-    </body>
-  </worldbody>
-</mujoco>
-"""
+SCENE = one_leg_scene(leg=False)
 
 
 @pytest.mark.parametrize("text, deg", [("side", 90.0), ("left", 90.0), ("right", -90.0), ("front", 0.0),
