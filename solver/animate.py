@@ -77,6 +77,7 @@ def animate(
     progress: Callable[[str, dict], None] | None = None,
     tol: float | None = None,
     contacts=(),
+    capture=None,
 ) -> Solution:
     """Optimize the in-betweens of a figure's keyframes in a scene (paper sec. 2-6, fig. 5).
 
@@ -105,6 +106,9 @@ def animate(
             and clearance and "all" adds cone too (docs/contacts.md "Contact schedules"; `terms="penetration,unit,bending,smooth"`
             leaves them out); without one, naming them is an InputError. Keyframes that contradict it
             are excused from the bounds (`solver.problem.keyframe_conflicts`).
+        capture: None, or (times (n,) [s] on the keyframes' clock, qpos (n, nq)): the motion capture the
+            keyframes were made from; with the `forces` term its peak ground force and pelvis
+            acceleration, low-pass filtered, join the term's bounds (`make_problem`, docs/dynamics.md).
     Returns:
         Solution: `frames` (the optimized FrameSet, values (m, nq) qpos at times (m,) [s]; the path is
         the spline through them, `frames.path(t)`), `initial` (the plain spline's), E and the term
@@ -115,7 +119,7 @@ def animate(
             bad `options` or `rate`.
         NonFiniteError: the objective is NaN or infinite on the plain spline.
     """
-    problem = make_problem(model, keyframes, terms, weights, contacts, rate)
+    problem = make_problem(model, keyframes, terms, weights, contacts, rate, capture=capture)
     if tol is not None and (options is None or isinstance(options, SolveOptions)):
         options = replace(options or default_options(dict(problem.weights)), refine="tol", tol=float(tol), rounds=None)
     return solve_problem(problem, options, should_stop=should_stop, progress=progress)

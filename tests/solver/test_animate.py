@@ -98,3 +98,20 @@ def test_animate_refuses_inputs_it_cannot_use(toy):
         solver.animate(model, kf, "unit", rate=0.0)
     with pytest.raises(InputError, match="keyframes must be a solver.Keyframes"):
         solver.animate(model, kf.values)
+
+
+def test_animate_hands_the_capture_to_the_problem(toy, monkeypatch):
+    """`capture=` reaches `make_problem` (where the forces term's bounds read it), unchanged."""
+    animate_module = sys.modules["solver.animate"]  # the module (solver.animate is the function)
+    model, layout, kf = toy
+    seen = {}
+    real = animate_module.make_problem
+
+    def spy(*args, **kwargs):
+        seen.update(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(animate_module, "make_problem", spy)
+    capture = (np.linspace(0.0, 1.0, 5), np.tile(model.qpos0, (5, 1)))
+    solver.animate(model, kf, "unit", options=solver.default_options({"unit": 1.0}), capture=capture, tol=0.5)
+    assert seen["capture"] is capture
