@@ -23,17 +23,35 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: the schedule agrees with the capture's stance when the recall and the precision of its stance frames are
+#: both at least this (`runner.mocap.stance.stance_agreement`); below it a flight missed the way the schedule's
+#: gaps err is put down to the detection
+STANCE_AGREES = 0.95
+#: [cm] the root's position error must grow by more than this for "the optimizer moved the root": the
+#: contact-site error's scale (the tuning clips' plain splines: 0.3-3 cm of root error, 0.8-12 cm at the sites)
+ROOT_MOVED_CM = 1.0
 #: the cause categories of a missed bound (`causes`), with what in the data tells each
 CAUSES = {
     "scene fit": "the retargeted capture itself misses the bound against the fitted scene (its feet are not "
                  "on the surfaces fitted to them)",
     "contact detection": "the flight time is missed the way the schedule errs: its gaps (frames where no site "
                          "is scheduled in contact) are longer than the capture's flight (every site 3 cm clear) "
-                         "by more than the flight bound and the path flies too long, or shorter and too short",
+                         "by more than the flight bound and the path flies too long, or shorter and too short, "
+                         "and the schedule disagrees with the capture's stance (recall or precision of its stance "
+                         f"frames under {STANCE_AGREES:.0%})",
+    "gaps the capture does not fly": "the flight time is missed as above, but the schedule agrees with the "
+                                     "capture's stance: in its gaps the capture's feet are below the 3 cm flight "
+                                     "height without resting (a landing foot gliding in, a heel sliding onto a "
+                                     "step), and the clearance term lifts every site through the whole gap",
     "keyframes contradict the schedule": "a keyframe holds a site off its contact schedule (the pipeline's "
                                          "keyframe conflicts)",
     "bound out of reach": "penalty continuation gave up on the term that targets the bound (a x10 boost did "
                           "not halve it), or the capture itself misses the bound",
+    "the optimizer moved the root": "a joint-angle or contact-site error missed while the root's position error "
+                                    f"grew by more than {ROOT_MOVED_CM:g} cm and by a larger factor than the "
+                                    "joint-angle error (a root shift moves every site with it)",
+    "joints traded for the feet": "the joint-angle error missed while the contact-site error is below the plain "
+                                  "spline's: the contact terms bought the feet with the joints",
 }
 NOT_TOLD = "not told by the data"
 
@@ -131,6 +149,9 @@ BOUNDS: tuple[Bound, ...] = (
 )
 
 
+BOUND_BY_NAME = {b.name: b for b in BOUNDS}
+
+
 def _dig(doc, keys):
     """The value at `keys` in the nested dict `doc`, or None where a key is missing."""
     for k in keys:
@@ -192,6 +213,8 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     "capture_flight_s": _at(*_M, "plain", "reference", "flight_time_s"),
     "joint_error_deg": _mean_of_means(*_M, "optimized", "error", "joint_orientation_deg"),
     "plain_joint_error_deg": _mean_of_means(*_M, "plain", "error", "joint_orientation_deg"),
+    "root_error_cm": _at(*_M, "optimized", "error", "root_position_cm", "mean"),
+    "plain_root_error_cm": _at(*_M, "plain", "error", "root_position_cm", "mean"),
     "site_error_cm": _mean_of_means(*_M, "optimized", "error", "site_position_cm"),
     "plain_site_error_cm": _mean_of_means(*_M, "plain", "error", "site_position_cm"),
     # knee/elbow rotation off the hinge: each joint's excess over the capture's own at that joint
@@ -229,9 +252,42 @@ def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
             out[name] = v
     if schedule_flight is not None:
         out["schedule_flight_s"] = float(schedule_flight)
+    rise = _largest_joint_rise(report)
+    if rise is not None:
+        out["joint_rise"] = rise
     out["keyframe_conflicts"] = int(report.get("keyframe_conflicts") or 0)
     out["stalled"] = sorted((report.get("stalled") or {}).keys())
     return out
+
+
+def _largest_joint_rise(report: dict) -> list | None:
+    """[joint, deg]: the joint whose mean angle error grew most from the plain spline to the optimized path
+    (None when the report has no joint errors)."""
+    opt = _dig(report, (*_M, "optimized", "error", "joint_orientation_deg"))
+    plain = _dig(report, (*_M, "plain", "error", "joint_orientation_deg"))
+    if not opt or not plain:
+        return None
+    name = max((j for j in opt if j in plain), key=lambda j: opt[j]["mean"] - plain[j]["mean"], default=None)
+    return None if name is None else [name, float(opt[name]["mean"] - plain[name]["mean"])]
+
+
+def _root_moved(figures: dict) -> bool:
+    """The root's position error grew by more than ROOT_MOVED_CM and by a larger factor than the joint-angle
+    error (`CAUSES`); False when a figure is missing."""
+    keys = ("root_error_cm", "plain_root_error_cm", "joint_error_deg", "plain_joint_error_deg")
+    if not set(keys) <= set(figures):
+        return False
+    r1, r0, j1, j0 = (figures[k] for k in keys)
+    return r1 - r0 > ROOT_MOVED_CM and r1 * j0 > j1 * r0  # r1 / r0 > j1 / j0 without dividing by 0
+
+
+def _gaps_err(bound: Bound, figures: dict) -> bool:
+    """The flight bound missed the way the schedule's gaps err (`CAUSES` "contact detection")."""
+    if bound.name != "flight" or not {"schedule_flight_s", "capture_flight_s", "flight_s"} <= set(figures):
+        return False
+    capture, lim = figures["capture_flight_s"], bound.limit(figures)
+    gap_error = figures["schedule_flight_s"] - capture
+    return abs(gap_error) > lim and (gap_error > 0) == (figures["flight_s"] > capture)
 
 
 def causes(bound: Bound, figures: dict) -> list[str]:
@@ -241,23 +297,29 @@ def causes(bound: Bound, figures: dict) -> list[str]:
     scene fit: a surface bound the capture itself misses. contact detection: the flight bound missed the
     way the schedule errs (its gaps, which the clearance term lifts both feet through, are longer than
     the capture's flight by more than the flight bound and the path's flight is too long, or shorter and
-    too short). keyframes contradict the schedule: a surface or contact bound missed on a pair whose
+    too short) where the schedule disagrees with the capture's stance (recall or precision under
+    STANCE_AGREES; unknown agreement counts as disagreeing); gaps the capture does not fly: the same where
+    it agrees. keyframes contradict the schedule: a surface or contact bound missed on a pair whose
     keyframes hold a site off the schedule. bound out of reach: the bound's term stalled, or the
-    capture itself misses a bound that is not about surfaces.
+    capture itself misses a bound that is not about surfaces. the optimizer moved the root: a joint or
+    site error missed while the root error grew more (`_root_moved`). joints traded for the feet: the
+    joint error missed while the site error is below the plain spline's.
     """
     out = []
     capture_misses = bound.capture is not None and bound.held(figures, bound.capture) is False
     if capture_misses and bound.kind == "surface":
         out.append("scene fit")
-    if bound.name == "flight" and {"schedule_flight_s", "capture_flight_s", "flight_s"} <= set(figures):
-        capture, lim = figures["capture_flight_s"], bound.limit(figures)
-        gap_error = figures["schedule_flight_s"] - capture
-        if abs(gap_error) > lim and (gap_error > 0) == (figures["flight_s"] > capture):
-            out.append("contact detection")
+    if _gaps_err(bound, figures):
+        agrees = min(figures.get("stance_recall", 0.0), figures.get("stance_precision", 0.0)) >= STANCE_AGREES
+        out.append("gaps the capture does not fly" if agrees else "contact detection")
     if bound.kind in ("surface", "contact") and figures.get("keyframe_conflicts", 0) > 0:
         out.append("keyframes contradict the schedule")
     if set(bound.terms) & set(figures.get("stalled", ())) or (capture_misses and bound.kind != "surface"):
         out.append("bound out of reach")
+    if bound.name in ("joint_error", "site_error") and _root_moved(figures):
+        out.append("the optimizer moved the root")
+    if bound.name == "joint_error" and BOUND_BY_NAME["site_error"].held(figures):
+        out.append("joints traded for the feet")
     return out
 
 

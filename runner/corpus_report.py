@@ -87,9 +87,19 @@ def failing_lines(results: Sequence[dict]) -> list[str]:
             continue
         n = r["figures"].get("keyframe_conflicts", 0)
         what = "; ".join(f"{c['bound']} {number(c['value'])} (limit {number(c['limit'])}): "
-                         + (", ".join(_cause(k, n) for k in c["causes"]) or NOT_TOLD) for c in missed)
+                         + (", ".join(_cause(k, n) for k in c["causes"]) or NOT_TOLD) + _where(c, r["figures"])
+                         for c in missed)
         lines.append(f"- {_pair_name(r)} ({r['set']}): {what}")
     return lines
+
+
+def _where(check: dict, figures: dict) -> str:
+    """For a missed joint-angle error, the joint whose mean error grew most (`corpus_bounds.pair_figures`
+    "joint_rise"): " (largest rise: r_hip +2.3 deg)"; "" otherwise."""
+    rise = figures.get("joint_rise")
+    if check["bound"] != "joint_error" or not rise:
+        return ""
+    return f" (largest rise: {rise[0]} {rise[1]:+.1f} deg)"
 
 
 def _cause(name: str, conflicts: int) -> str:

@@ -77,31 +77,34 @@ def test_a_missing_reference_figure_makes_the_bound_na_not_missed():
 
 
 def test_figures_are_read_from_the_metrics_report():
-    def motion(float_mm, joint_means, site_means, flight):
+    def motion(float_mm, joint_means, site_means, flight, root_cm):
         # float on the capture's stance 1 mm above the schedule's (a foot floating in a gap of the schedule)
         block = {"float_contact_mm": float_mm, "float_stance_mm": float_mm + 1.0, "skate_contact_mm": 1.5,
                  "flight_time_s": flight, "flight_in_stance_s": flight / 10, "penetration_mm": {"mean": 0.1, "max": 0.3}}
         return {"path": block, "reference": {**block, "float_contact_mm": 2.5, "float_stance_mm": 2.7,
                                              "flight_time_s": 0.3, "flight_in_stance_s": 0.0},
-                "error": {"joint_orientation_deg": {f"j{i}": {"mean": m, "max": 9.0} for i, m in enumerate(joint_means)},
+                "error": {"root_position_cm": {"mean": root_cm, "max": 9.0},
+                          "joint_orientation_deg": {f"j{i}": {"mean": m, "max": 9.0} for i, m in enumerate(joint_means)},
                           "site_position_cm": {f"s{i}": {"mean": m, "max": 9.0} for i, m in enumerate(site_means)}}}
     report = {"keyframe_conflicts": 3, "stalled": {"planted": 2e-6},
               "metrics": {"plain": {"max_penetration_mm": 40.0, "keyframe_error": 0.0, "max_hyperextension_deg": 0.2},
                           "optimized": {"max_penetration_mm": 0.5, "keyframe_error": 1e-16,
                                         "max_hyperextension_deg": 0.6},
-                          "motion": {"plain": motion(6.0, [2.0, 4.0], [3.0], 0.5),
-                                     "optimized": motion(4.0, [1.0, 2.0, 6.0], [1.0, 2.0], 0.35)}}}
+                          "motion": {"plain": motion(6.0, [2.0, 4.0, 1.0], [3.0], 0.5, 1.0),
+                                     "optimized": motion(4.0, [1.0, 2.0, 6.0], [1.0, 2.0], 0.35, 2.5)}}}
     f = pair_figures(report, schedule_flight=0.42)
     assert f["penetration_mm"] == 0.5 and f["plain_hyperextension_deg"] == 0.2 and f["hyperextension_deg"] == 0.6
     assert f["float_mm"] == 5.0 and f["capture_float_mm"] == 2.7 and f["capture_penetration_mm"] == 0.3
     assert f["float_schedule_mm"] == 4.0 and f["capture_float_schedule_mm"] == 2.5 and f["plain_float_mm"] == 7.0
     assert f["flight_in_stance_s"] == pytest.approx(0.035) and f["capture_flight_in_stance_s"] == 0.0
-    assert f["joint_error_deg"] == pytest.approx(3.0) and f["plain_joint_error_deg"] == pytest.approx(3.0)
+    assert f["joint_error_deg"] == pytest.approx(3.0) and f["plain_joint_error_deg"] == pytest.approx(7 / 3)
+    assert f["joint_rise"] == ["j2", 5.0]  # the joint whose mean error grew most
+    assert f["root_error_cm"] == 2.5 and f["plain_root_error_cm"] == 1.0
     assert f["site_error_cm"] == pytest.approx(1.5) and f["plain_site_error_cm"] == pytest.approx(3.0)
     assert f["flight_s"] == 0.35 and f["plain_flight_s"] == 0.5 and f["capture_flight_s"] == 0.3
     assert f["schedule_flight_s"] == 0.42 and f["keyframe_conflicts"] == 3 and f["stalled"] == ["planted"]
     assert "off_hinge_deg" not in f  # not measured: left out, so its bound is n/a
-    assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled"} <= set(FIGURES)
+    assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled", "joint_rise"} <= set(FIGURES)
 
 
 def test_the_figures_beside_the_bounds_are_shown_but_do_not_fail_a_pair():
@@ -126,16 +129,30 @@ def test_causes_the_data_tells():
     # the capture's own feet float 7 mm over the fitted floor: the scene does not fit the capture
     assert causes(BOUND["float"], figures(float_mm=6.0, capture_float_mm=7.0)) == ["scene fit"]
     assert causes(BOUND["float"], figures(float_mm=6.0)) == []
-    # schedule gaps 0.2 s longer than the capture's flight, and the path flies too long: detection
+    # schedule gaps 0.2 s longer than the capture's flight, and the path flies too long: detection, where the
+    # schedule disagrees with the capture's stance (or the agreement is not known)
     long_gaps = figures(flight_s=0.45, capture_flight_s=0.34, schedule_flight_s=0.54)
     assert causes(BOUND["flight"], long_gaps) == ["contact detection"]
+    assert causes(BOUND["flight"], {**long_gaps, "stance_recall": 0.94, "stance_precision": 1.0}) == ["contact detection"]
+    # the same gaps from a schedule that matches the capture's stance: gaps the capture does not fly
+    assert causes(BOUND["flight"], {**long_gaps, "stance_recall": 0.95, "stance_precision": 1.0}) == [
+        "gaps the capture does not fly"]
     # the same gaps but a path that flies too short: not what the schedule's error would do
     assert causes(BOUND["flight"], {**long_gaps, "flight_s": 0.25}) == []
     assert causes(BOUND["flight"], {**long_gaps, "keyframe_conflicts": 2}) == ["contact detection",
                                                                              "keyframes contradict the schedule"]
     # the planted term stalled: its bounds are out of reach; a motion bound is not the schedule's doing
     assert causes(BOUND["skate_plain"], figures(skate_mm=3.0, stalled=["planted"])) == ["bound out of reach"]
-    assert causes(BOUND["joint_error"], figures(joint_error_deg=9.0, keyframe_conflicts=4)) == []
+    assert causes(BOUND["joint_error"], figures(joint_error_deg=9.0, keyframe_conflicts=4, site_error_cm=5.0)) == []
+    # the contact-site error below the plain spline's while the joints missed: the feet bought with the joints
+    assert causes(BOUND["joint_error"], figures(joint_error_deg=9.0)) == ["joints traded for the feet"]
+    # the root error grew 1.0 -> 2.5 cm (x2.5), the joints 5.0 -> 6.0 deg (x1.2): the optimizer moved the root
+    moved = figures(site_error_cm=6.0, joint_error_deg=6.0, plain_root_error_cm=1.0, root_error_cm=2.5)
+    assert causes(BOUND["site_error"], moved) == ["the optimizer moved the root"]
+    assert causes(BOUND["joint_error"], moved) == ["the optimizer moved the root"]
+    # ... but not by 1 cm or less, nor by a smaller factor than the joints
+    assert causes(BOUND["site_error"], {**moved, "root_error_cm": 2.0}) == []
+    assert causes(BOUND["site_error"], {**moved, "joint_error_deg": 15.0}) == []
 
 
 def test_clip_sets_are_the_sha256_table_not_the_names(tmp_path):
@@ -197,7 +214,8 @@ def _result(clip, which, **over):
 
 
 def test_pass_rates_and_the_report_list_failing_pairs_with_their_causes():
-    results = [_result("a.bvh", "tuning"), _result("b.bvh", "tuning", penetration_mm=2.0),
+    results = [_result("a.bvh", "tuning"),
+               _result("b.bvh", "tuning", penetration_mm=2.0, joint_error_deg=6.0, joint_rise=["r_hip", 2.31]),
                _result("c.bvh", "validation", flight_s=0.45, schedule_flight_s=0.54),
                {"clip": "d.bvh", "keying": "contacts", "set": "validation", "folder": "", "status": "failed",
                 "error": "d.bvh: no such clip", "figures": {}, "checks": []}]
@@ -207,7 +225,8 @@ def test_pass_rates_and_the_report_list_failing_pairs_with_their_causes():
     assert rates["validation"]["pairs"] == 2 and rates["validation"]["held_all"] == 0
     assert rates["validation"]["flight"] == [0, 1]  # the pair that did not run is not measured
     lines = failing_lines(results)
-    assert lines == ["- b every 0.25 (tuning): penetration 2 (limit 1): not told by the data",
+    assert lines == ["- b every 0.25 (tuning): penetration 2 (limit 1): not told by the data; joint_error 6 (limit 5.5): "
+                     "joints traded for the feet (largest rise: r_hip +2.3 deg)",
                      "- c every 0.25 (validation): flight 0.11 (limit 0.034): contact detection",
                      "- d contacts (validation): did not run (failed): d.bvh: no such clip"]
     text = markdown_report(results, rates, {"keyings": ["every 0.25"], "workers": 2})
