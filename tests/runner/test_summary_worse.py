@@ -168,7 +168,8 @@ def _motion(path_over=None):
     block = {"penetration_mm": {"mean": 0.0, "max": 0.0}, "float_contact_mm": 2.4, "float_physdiff_mm": 5.7,
              "skate_mm": 2.77, "skate_contact_mm": 1.81, "phys_err_mm": 8.5, "skating_ratio": 0.265,
              "skating_ratio_contacts": 0.034, "flight_time_s": 0.0, "jerk_root_m_s3": 1250.0,
-             "jerk_sites_m_s3": 1925.0, "float_stance_mm": 2.5, "flight_in_stance_s": 0.0, "off_hinge_knee_deg": 0.0, "off_hinge_elbow_deg": 30.0, "rom_excess_deg": 1.0}
+             "jerk_sites_m_s3": 1925.0, "float_stance_mm": 2.5, "flight_in_stance_s": 0.0,
+             "off_hinge_knee_deg": 0.0, "off_hinge_elbow_deg": 30.0, "rom_excess_deg": 1.0}
     err = {"joint_orientation_deg": {"hip": {"mean": 1.0, "max": 2.0}}, "site_position_cm": {"toe": {"mean": 1.0,
            "max": 2.0}}, "root_position_cm": {"mean": -0.0, "max": 1.0}, "accel_error_root_m_s2": float("nan"),
            "accel_error_sites_m_s2": 3.0}
