@@ -170,7 +170,7 @@ TERM_ROWS = {
     "torque": ("RMS joint torque", "peak joint torque"),
     "root": ("RMS root force in flight", "peak root force in flight", "RMS root torque in flight",
              "peak root torque in flight"),
-    "planted": ("float in contact", "float in capture stance", "skate in contact", "skate, PhysDiff", "skating ratio"),
+    "planted": ("float in contact", "float in capture stance", "flight in capture stance", "skate in contact", "skate, PhysDiff", "skating ratio"),
     "clearance": ("flight (all feet clear)", "flight time", "flight phase error"),
     "cone": ("RMS friction-cone residual", "peak friction-cone residual"),
     "forces": ("peak pelvis acceleration", "peak root force on ground"),
