@@ -11,7 +11,8 @@ with a limit made from another (the capture's, the plain spline's) or a constant
     rule "within": held when |value - reference| <= max(margin, factor * |reference|)
 
 A bound whose figures are missing (a metric this build does not compute) is "n/a", never held or
-missed. The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
+missed. Two records are figures shown beside the bounds (`Bound.counted` False: the float on the
+schedule's contacts and the flight while the capture stands): checked the same way, never failing a pair. The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
 fit the capture (the capture misses a surface bound itself) and a bound out of reach (the capture misses
 another bound); see `causes`.
 """
@@ -244,7 +245,8 @@ def schedule_flight_s(contacts, sites, t0: float, frames: int, fps: float) -> fl
 def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
     """The flat figures of one pair (`FIGURES`, missing ones left out) from its metrics report (the
     `<stem>.metrics.json` that `process_clip` writes), with the schedule's flight time [s]
-    (`schedule_flight_s`), the keyframe conflicts and the stalled terms when known."""
+    (`schedule_flight_s`), the keyframe conflicts, the stalled terms when known and "joint_rise" ([joint,
+    deg]: the joint whose mean angle error grew most from the plain spline, for the failing-pairs list)."""
     out = {}
     for name, get in FIGURES.items():
         v = get(report)
