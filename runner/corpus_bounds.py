@@ -12,7 +12,8 @@ with a limit made from another (the capture's, the plain spline's) or a constant
 
 A bound whose figures are missing (a metric this build does not compute) is "n/a", never held or
 missed. Two records are figures shown beside the bounds (`Bound.counted` False: the float on the
-schedule's contacts and the flight while the capture stands): checked the same way, never failing a pair. The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
+schedule's contacts and the flight while the capture stands): checked the same way, never failing a pair.
+The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
 fit the capture (the capture misses a surface bound itself) and a bound out of reach (the capture misses
 another bound); see `causes`.
 """
