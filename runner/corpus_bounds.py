@@ -11,7 +11,9 @@ with a limit made from another (the capture's, the plain spline's) or a constant
     rule "within": held when |value - reference| <= max(margin, factor * |reference|)
 
 A bound whose figures are missing (a metric this build does not compute) is "n/a", never held or
-missed. The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
+missed. Two records are figures shown beside the bounds (`Bound.counted` False: the float on the
+schedule's contacts and the flight while the capture stands): checked the same way, never failing a pair.
+The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
 fit the capture (the capture misses a surface bound itself) and a bound out of reach (the capture misses
 another bound); see `causes`.
 """
@@ -23,17 +25,35 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: the schedule agrees with the capture's stance when the recall and the precision of its stance frames are
+#: both at least this (`runner.mocap.stance.stance_agreement`); below it a flight missed the way the schedule's
+#: gaps err is put down to the detection
+STANCE_AGREES = 0.95
+#: [cm] the root's position error must grow by more than this for "the optimizer moved the root": the
+#: contact-site error's scale (the tuning clips' plain splines: 0.3-3 cm of root error, 0.8-12 cm at the sites)
+ROOT_MOVED_CM = 1.0
 #: the cause categories of a missed bound (`causes`), with what in the data tells each
 CAUSES = {
     "scene fit": "the retargeted capture itself misses the bound against the fitted scene (its feet are not "
                  "on the surfaces fitted to them)",
     "contact detection": "the flight time is missed the way the schedule errs: its gaps (frames where no site "
                          "is scheduled in contact) are longer than the capture's flight (every site 3 cm clear) "
-                         "by more than the flight bound and the path flies too long, or shorter and too short",
+                         "by more than the flight bound and the path flies too long, or shorter and too short, "
+                         "and the schedule disagrees with the capture's stance (recall or precision of its stance "
+                         f"frames under {STANCE_AGREES:.0%})",
+    "gaps the capture does not fly": "the flight time is missed as above, but the schedule agrees with the "
+                                     "capture's stance: in its gaps the capture's feet are below the 3 cm flight "
+                                     "height without resting (a landing foot gliding in, a heel sliding onto a "
+                                     "step), and the clearance term lifts every site through the whole gap",
     "keyframes contradict the schedule": "a keyframe holds a site off its contact schedule (the pipeline's "
                                          "keyframe conflicts)",
     "bound out of reach": "penalty continuation gave up on the term that targets the bound (a x10 boost did "
                           "not halve it), or the capture itself misses the bound",
+    "the optimizer moved the root": "a joint-angle or contact-site error missed while the root's position error "
+                                    f"grew by more than {ROOT_MOVED_CM:g} cm and by a larger factor than the "
+                                    "joint-angle error (a root shift moves every site with it)",
+    "joints traded for the feet": "the joint-angle error missed while the contact-site error is below the plain "
+                                  "spline's: the contact terms bought the feet with the joints",
 }
 NOT_TOLD = "not told by the data"
 
@@ -50,7 +70,10 @@ class Bound:
         capture: the capture's own figure of the same quantity (for `causes`), or None.
         terms: the objective terms that target the bound (a stalled one: "bound out of reach").
         kind: "surface" (feet against the scene), "contact" (the schedule decides it) or "motion".
-        source: the sentence of the acceptance list it implements.
+        source: the sentence of the acceptance list (or of the issue's "What to build") it implements.
+        counted: False for a figure shown beside the bounds but not one of the acceptance list's (the
+            schedule's own float, the flight while the capture stands): reported held / missed, left out of
+            "every bound held" and of the failing pairs.
     """
 
     name: str
@@ -64,6 +87,7 @@ class Bound:
     terms: tuple[str, ...]
     kind: str
     source: str
+    counted: bool = True
 
     def limit(self, figures: dict) -> float | None:
         """The limit for the pair's `figures` [the value's units; for "within": on |value - reference|],
@@ -94,14 +118,22 @@ class Bound:
         return v < lim if self.rule == "lt" else v <= lim
 
 
-#: the acceptance list, one record per bound (docs/corpus.md "Bounds")
+#: the issue's sentence the two figures beside the float bound implement (`Bound.counted` False)
+_STANCE_AND_SCHEDULE = ("float and flight measured on the capture's stance frames as well as on the schedule's, "
+                        "so a gap in the schedule cannot hide a floating foot (shown, not counted).")
+#: the acceptance list, one record per bound (docs/corpus.md "Bounds"), and the figures shown beside it
 BOUNDS: tuple[Bound, ...] = (
     Bound("penetration", "max penetration [mm]", "penetration_mm", None, "le", 0.0, 1.0, "capture_penetration_mm",
           ("penetration",), "surface", "Per pair: max penetration <= 1 mm."),
     Bound("keyframes", "keyframe error", "keyframe_error", None, "le", 0.0, 1e-9, None, (), "motion",
           "keyframes met to 1e-9."),
-    Bound("float", "float in stance [mm]", "float_mm", None, "le", 0.0, 5.0, "capture_float_mm", ("planted",),
-          "surface", "float during the capture's stance <= 5 mm."),
+    Bound("float", "float in the capture's stance [mm]", "float_mm", None, "le", 0.0, 5.0, "capture_float_mm",
+          ("planted",), "surface", "float during the capture's stance <= 5 mm."),
+    Bound("float_schedule", "float on the schedule's contacts [mm]", "float_schedule_mm", None, "le", 0.0, 5.0,
+          "capture_float_schedule_mm", ("planted",), "surface", _STANCE_AND_SCHEDULE, counted=False),
+    Bound("flight_in_stance", "flight while the capture stands [s]", "flight_in_stance_s",
+          "capture_flight_in_stance_s", "le", 1.0, 0.030, None, ("planted",), "contact", _STANCE_AND_SCHEDULE,
+          counted=False),
     Bound("skate_capture", "skate vs capture [mm/frame]", "skate_mm", "capture_skate_mm", "le", 1.0, 0.5, None,
           ("planted",), "contact", "skate <= the capture's + 0.5 mm/frame"),
     Bound("skate_plain", "skate vs plain [mm/frame]", "skate_mm", "plain_skate_mm", "le", 0.5, 0.0,
@@ -117,6 +149,9 @@ BOUNDS: tuple[Bound, ...] = (
     Bound("hyperextension", "hyperextension [deg]", "hyperextension_deg", "plain_hyperextension_deg", "le", 1.0, 0.5,
           None, ("bending",), "motion", "hyperextension <= the plain spline's + 0.5 degree."),
 )
+
+
+BOUND_BY_NAME = {b.name: b for b in BOUNDS}
 
 
 def _dig(doc, keys):
@@ -154,17 +189,24 @@ def _off_hinge_excess(doc: dict) -> float | None:
     cap = _dig(doc, (*_M, "plain", "reference", "off_hinge_deg"))
     return float(max(opt[j] - cap[j] for j in opt)) if opt and cap else None
 #: the figures of a pair: {name: function of the metrics report}; the motion metrics are over the
-#: reference's frames (`runner.run.reference_motion_metrics`), float and skate over the schedule's contacts.
+#: reference's frames (`runner.run.reference_motion_metrics`); float over the capture's stance (and the
+#: schedule's contacts beside it), skate over the schedule's contacts.
 FIGURES: dict[str, Callable[[dict], float | None]] = {
     "penetration_mm": _at("metrics", "optimized", "max_penetration_mm"),
     "stance_recall": _at("stance_agreement", "recall"),
     "stance_precision": _at("stance_agreement", "precision"),
     "capture_penetration_mm": _at(*_M, "plain", "reference", "penetration_mm", "max"),
     "keyframe_error": _at("metrics", "optimized", "keyframe_error"),
-    # float on the schedule's contacts; the capture's stance mask plugs in here when the motion metrics
-    # report float on it (then: _at(*_M, "optimized", "path", "<float on the capture's stance>"))
-    "float_mm": _at(*_M, "optimized", "path", "float_contact_mm"),
-    "capture_float_mm": _at(*_M, "plain", "reference", "float_contact_mm"),
+    # float on the capture's own stance frames (`runner.mocap.stance.capture_stance`): a foot the schedule
+    # leaves out of contact is still judged where the capture stood on it; beside it the schedule's
+    "float_mm": _at(*_M, "optimized", "path", "float_stance_mm"),
+    "plain_float_mm": _at(*_M, "plain", "path", "float_stance_mm"),
+    "capture_float_mm": _at(*_M, "plain", "reference", "float_stance_mm"),
+    "float_schedule_mm": _at(*_M, "optimized", "path", "float_contact_mm"),
+    "capture_float_schedule_mm": _at(*_M, "plain", "reference", "float_contact_mm"),
+    # time airborne (every site 3 cm clear) while the capture has a foot in stance
+    "flight_in_stance_s": _at(*_M, "optimized", "path", "flight_in_stance_s"),
+    "capture_flight_in_stance_s": _at(*_M, "plain", "reference", "flight_in_stance_s"),
     "skate_mm": _at(*_M, "optimized", "path", "skate_contact_mm"),
     "plain_skate_mm": _at(*_M, "plain", "path", "skate_contact_mm"),
     "capture_skate_mm": _at(*_M, "plain", "reference", "skate_contact_mm"),
@@ -173,6 +215,8 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     "capture_flight_s": _at(*_M, "plain", "reference", "flight_time_s"),
     "joint_error_deg": _mean_of_means(*_M, "optimized", "error", "joint_orientation_deg"),
     "plain_joint_error_deg": _mean_of_means(*_M, "plain", "error", "joint_orientation_deg"),
+    "root_error_cm": _at(*_M, "optimized", "error", "root_position_cm", "mean"),
+    "plain_root_error_cm": _at(*_M, "plain", "error", "root_position_cm", "mean"),
     "site_error_cm": _mean_of_means(*_M, "optimized", "error", "site_position_cm"),
     "plain_site_error_cm": _mean_of_means(*_M, "plain", "error", "site_position_cm"),
     # knee/elbow rotation off the hinge: each joint's excess over the capture's own at that joint
@@ -202,7 +246,8 @@ def schedule_flight_s(contacts, sites, t0: float, frames: int, fps: float) -> fl
 def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
     """The flat figures of one pair (`FIGURES`, missing ones left out) from its metrics report (the
     `<stem>.metrics.json` that `process_clip` writes), with the schedule's flight time [s]
-    (`schedule_flight_s`), the keyframe conflicts and the stalled terms when known."""
+    (`schedule_flight_s`), the keyframe conflicts, the stalled terms when known and "joint_rise" ([joint,
+    deg]: the joint whose mean angle error grew most from the plain spline, for the failing-pairs list)."""
     out = {}
     for name, get in FIGURES.items():
         v = get(report)
@@ -210,9 +255,42 @@ def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
             out[name] = v
     if schedule_flight is not None:
         out["schedule_flight_s"] = float(schedule_flight)
+    rise = _largest_joint_rise(report)
+    if rise is not None:
+        out["joint_rise"] = rise
     out["keyframe_conflicts"] = int(report.get("keyframe_conflicts") or 0)
     out["stalled"] = sorted((report.get("stalled") or {}).keys())
     return out
+
+
+def _largest_joint_rise(report: dict) -> list | None:
+    """[joint, deg]: the joint whose mean angle error grew most from the plain spline to the optimized path
+    (None when the report has no joint errors)."""
+    opt = _dig(report, (*_M, "optimized", "error", "joint_orientation_deg"))
+    plain = _dig(report, (*_M, "plain", "error", "joint_orientation_deg"))
+    if not opt or not plain:
+        return None
+    name = max((j for j in opt if j in plain), key=lambda j: opt[j]["mean"] - plain[j]["mean"], default=None)
+    return None if name is None else [name, float(opt[name]["mean"] - plain[name]["mean"])]
+
+
+def _root_moved(figures: dict) -> bool:
+    """The root's position error grew by more than ROOT_MOVED_CM and by a larger factor than the joint-angle
+    error (`CAUSES`); False when a figure is missing."""
+    keys = ("root_error_cm", "plain_root_error_cm", "joint_error_deg", "plain_joint_error_deg")
+    if not set(keys) <= set(figures):
+        return False
+    r1, r0, j1, j0 = (figures[k] for k in keys)
+    return r1 - r0 > ROOT_MOVED_CM and r1 * j0 > j1 * r0  # r1 / r0 > j1 / j0 without dividing by 0
+
+
+def _gaps_err(bound: Bound, figures: dict) -> bool:
+    """The flight bound missed the way the schedule's gaps err (`CAUSES` "contact detection")."""
+    if bound.name != "flight" or not {"schedule_flight_s", "capture_flight_s", "flight_s"} <= set(figures):
+        return False
+    capture, lim = figures["capture_flight_s"], bound.limit(figures)
+    gap_error = figures["schedule_flight_s"] - capture
+    return abs(gap_error) > lim and (gap_error > 0) == (figures["flight_s"] > capture)
 
 
 def causes(bound: Bound, figures: dict) -> list[str]:
@@ -222,32 +300,38 @@ def causes(bound: Bound, figures: dict) -> list[str]:
     scene fit: a surface bound the capture itself misses. contact detection: the flight bound missed the
     way the schedule errs (its gaps, which the clearance term lifts both feet through, are longer than
     the capture's flight by more than the flight bound and the path's flight is too long, or shorter and
-    too short). keyframes contradict the schedule: a surface or contact bound missed on a pair whose
+    too short) where the schedule disagrees with the capture's stance (recall or precision under
+    STANCE_AGREES; unknown agreement counts as disagreeing); gaps the capture does not fly: the same where
+    it agrees. keyframes contradict the schedule: a surface or contact bound missed on a pair whose
     keyframes hold a site off the schedule. bound out of reach: the bound's term stalled, or the
-    capture itself misses a bound that is not about surfaces.
+    capture itself misses a bound that is not about surfaces. the optimizer moved the root: a joint or
+    site error missed while the root error grew more (`_root_moved`). joints traded for the feet: the
+    joint error missed while the site error is below the plain spline's.
     """
     out = []
     capture_misses = bound.capture is not None and bound.held(figures, bound.capture) is False
     if capture_misses and bound.kind == "surface":
         out.append("scene fit")
-    if bound.name == "flight" and {"schedule_flight_s", "capture_flight_s", "flight_s"} <= set(figures):
-        capture, lim = figures["capture_flight_s"], bound.limit(figures)
-        gap_error = figures["schedule_flight_s"] - capture
-        if abs(gap_error) > lim and (gap_error > 0) == (figures["flight_s"] > capture):
-            out.append("contact detection")
+    if _gaps_err(bound, figures):
+        agrees = min(figures.get("stance_recall", 0.0), figures.get("stance_precision", 0.0)) >= STANCE_AGREES
+        out.append("gaps the capture does not fly" if agrees else "contact detection")
     if bound.kind in ("surface", "contact") and figures.get("keyframe_conflicts", 0) > 0:
         out.append("keyframes contradict the schedule")
     if set(bound.terms) & set(figures.get("stalled", ())) or (capture_misses and bound.kind != "surface"):
         out.append("bound out of reach")
+    if bound.name in ("joint_error", "site_error") and _root_moved(figures):
+        out.append("the optimizer moved the root")
+    if bound.name == "joint_error" and BOUND_BY_NAME["site_error"].held(figures):
+        out.append("joints traded for the feet")
     return out
 
 
 def check_pair(figures: dict) -> list[dict]:
-    """Every bound on one pair: [{"bound", "held" (True / False / None = n/a), "value", "limit", "causes"}],
-    in `BOUNDS` order ("causes" only for a missed bound)."""
+    """Every bound on one pair: [{"bound", "held" (True / False / None = n/a), "value", "limit", "causes",
+    "counted" (`Bound.counted`)}], in `BOUNDS` order ("causes" only for a missed bound)."""
     rows = []
     for b in BOUNDS:
         held = b.held(figures)
         rows.append({"bound": b.name, "held": held, "value": b.measured(figures), "limit": b.limit(figures),
-                     "causes": causes(b, figures) if held is False else []})
+                     "causes": causes(b, figures) if held is False else [], "counted": b.counted})
     return rows

@@ -168,7 +168,8 @@ def _motion(path_over=None):
     block = {"penetration_mm": {"mean": 0.0, "max": 0.0}, "float_contact_mm": 2.4, "float_physdiff_mm": 5.7,
              "skate_mm": 2.77, "skate_contact_mm": 1.81, "phys_err_mm": 8.5, "skating_ratio": 0.265,
              "skating_ratio_contacts": 0.034, "flight_time_s": 0.0, "jerk_root_m_s3": 1250.0,
-             "jerk_sites_m_s3": 1925.0, "off_hinge_knee_deg": 0.0, "off_hinge_elbow_deg": 30.0, "rom_excess_deg": 1.0}
+             "jerk_sites_m_s3": 1925.0, "float_stance_mm": 2.5, "flight_in_stance_s": 0.0,
+             "off_hinge_knee_deg": 0.0, "off_hinge_elbow_deg": 30.0, "rom_excess_deg": 1.0}
     err = {"joint_orientation_deg": {"hip": {"mean": 1.0, "max": 2.0}}, "site_position_cm": {"toe": {"mean": 1.0,
            "max": 2.0}}, "root_position_cm": {"mean": -0.0, "max": 1.0}, "accel_error_root_m_s2": float("nan"),
            "accel_error_sites_m_s2": 3.0}
@@ -219,10 +220,11 @@ def test_jerk_is_worse_only_above_the_captures_own():
 def _motion_pair():
     """metrics["motion"] of run-and-step-like figures: the optimized path's feet better, its flight longer
     than the capture's and its joint angles further off."""
-    plain = _motion({"float_contact_mm": 5.7, "skate_contact_mm": 5.30, "skate_mm": 21.58,
-                     "skating_ratio_contacts": 0.404, "flight_time_s": 0.342})
-    opt = _motion({"float_contact_mm": 3.5, "skate_contact_mm": 0.07, "skate_mm": 6.95,
-                   "skating_ratio_contacts": 0.0, "flight_time_s": 0.750})
+    plain = _motion({"float_contact_mm": 5.7, "float_stance_mm": 5.9, "skate_contact_mm": 5.30, "skate_mm": 21.58,
+                     "skating_ratio_contacts": 0.404, "flight_time_s": 0.342, "flight_in_stance_s": 0.0})
+    # a foot floating in a gap of the schedule: the capture-stance float worse, the schedule's not
+    opt = _motion({"float_contact_mm": 3.5, "float_stance_mm": 6.2, "skate_contact_mm": 0.07, "skate_mm": 6.95,
+                   "skating_ratio_contacts": 0.0, "flight_time_s": 0.750, "flight_in_stance_s": 0.05})
     for m in (plain, opt):
         m["reference"]["flight_time_s"] = 0.450
     plain["error"].update(flight_extra_s=0.0, flight_missed_s=0.108)
@@ -236,7 +238,8 @@ def test_the_feet_rows_of_the_summary_are_marked_with_their_legend():
 
     rows = contact_summary_rows(_motion_pair(), SimpleNamespace(names=()), None)
     worse = {r[0].split(" (capture")[0]: r[4] for r in rows}
-    assert worse == {"float in contact [mm]": False, "skate in contact [mm/frame]": False,
+    assert worse == {"float in contact [mm]": False, "float in capture stance [mm]": True,
+                     "flight in capture stance [s]": True, "skate in contact [mm/frame]": False,
                      "skate, PhysDiff [mm/frame]": False, "skating ratio (contacts)": False,
                      "flight time [s]": True, "flight phase error vs capture [s]": True,
                      "knee rotation off the hinge [deg]": False, "elbow rotation off the hinge [deg]": False,
