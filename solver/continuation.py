@@ -53,6 +53,21 @@ def over_limits(objective, frames, limits) -> dict[str, float]:
     return over
 
 
+def boost_terms(objective, names, factor: float) -> None:
+    """Multiply the weights of the terms `names` in `objective.weights` by `factor` (in place); a term with
+    parts its `violation` leaves out (a `for_boost(factor)` method, e.g. `Planted`: contacts the keyframes
+    contradict) is replaced in a new `objective.terms` list by the term `for_boost` gives, which keeps
+    those parts' effective weight (module docstring). The old list and its terms are not changed."""
+    terms = list(objective.terms)
+    for name in names:
+        i = objective.names.index(name)
+        objective.weights[i] *= factor
+        hook = getattr(terms[i], "for_boost", None)
+        if hook is not None:
+            terms[i] = hook(factor)
+    objective.terms = terms
+
+
 class PenaltyContinuation:
     """The continuation state of one solve: boosts made, the last boost's violations, the stalled terms.
 
@@ -108,7 +123,7 @@ class PenaltyContinuation:
             progress("stalled", {"terms": {n: self.stalled[n] for n in fresh}})
             self._reported |= fresh
         if self.undo_stalled and self._before is not None and self._last and all(n in self.stalled for n in self._last):
-            frames, weights, result = self._before
+            frames, weights, result, objective.terms = self._before
             objective.weights[:] = weights
             self.restored, self._before, self.undone = (frames, result), None, self.undone + 1
             if progress:
@@ -121,9 +136,8 @@ class PenaltyContinuation:
         if not over:
             return {}
         self.boosts += 1
-        self._before = (frames, objective.weights.copy(), result)
-        for name in over:
-            objective.weights[objective.names.index(name)] *= self.boost
+        self._before = (frames, objective.weights.copy(), result, objective.terms)
+        boost_terms(objective, over, self.boost)
         if progress:
             progress("boost", {"terms": over, "boosts": self.boosts})
         return over
