@@ -15,6 +15,14 @@ raising the joint-angle error against the capture from 4.5 to 5.8 degrees, the p
 bent a knee 4 degrees backward, which took two more boosts). Such a boost is undone
 (`PenaltyContinuation.after_round`, `undo_stalled`): the path, weights and round result from before it are restored, and the
 solve goes on from there with the stalled terms given up on (docs/corpus.md "Near the plain spline").
+
+A boost stiffens only the parts of a term its violation measures (`boost_terms`). The contact terms leave
+out of their violation the contacts the keyframes contradict (`solver.schedule_conflicts`): no weight
+reaches a bound there. Multiplying the whole term's weight pulled ten times harder on those as well, and
+the optimizer bent the legs between the keyframes to bring the excused sites down (a knee turned
+backward under a heel the keyframes hold up; tests/solver/test_continuation_excused.py). A term with
+such parts gives, with `for_boost(factor)`, the term to use under the boosted weight, which keeps their
+effective weight (docs/contacts.md "The contact terms").
 """
 from __future__ import annotations
 
