@@ -15,6 +15,14 @@ raising the joint-angle error against the capture from 4.5 to 5.8 degrees, the p
 bent a knee 4 degrees backward, which took two more boosts). Such a boost is undone
 (`PenaltyContinuation.after_round`, `undo_stalled`): the path, weights and round result from before it are restored, and the
 solve goes on from there with the stalled terms given up on (docs/corpus.md "Near the plain spline").
+
+A boost stiffens only the parts of a term its violation measures (`boost_terms`). The contact terms leave
+out of their violation the contacts the keyframes contradict (`solver.schedule_conflicts`): no weight
+reaches a bound there. Multiplying the whole term's weight pulled ten times harder on those as well, and
+the optimizer bent the legs between the keyframes to bring the excused sites down (a knee turned
+backward under a heel the keyframes hold up; tests/solver/test_continuation_excused.py). A term with
+such parts gives, with `for_boost(factor)`, the term to use under the boosted weight, which keeps their
+effective weight (docs/contacts.md "The contact terms").
 """
 from __future__ import annotations
 
@@ -51,6 +59,21 @@ def over_limits(objective, frames, limits) -> dict[str, float]:
         if v is not None and v > tol and objective.weights[i] > 0:
             over[name] = float(v)
     return over
+
+
+def boost_terms(objective, names, factor: float) -> None:
+    """Multiply the weights of the terms `names` in `objective.weights` by `factor` (in place); a term with
+    parts its `violation` leaves out (a `for_boost(factor)` method, e.g. `Planted`: contacts the keyframes
+    contradict) is replaced in a new `objective.terms` list by the term `for_boost` gives, which keeps
+    those parts' effective weight (module docstring). The old list and its terms are not changed."""
+    terms = list(objective.terms)
+    for name in names:
+        i = objective.names.index(name)
+        objective.weights[i] *= factor
+        hook = getattr(terms[i], "for_boost", None)
+        if hook is not None:
+            terms[i] = hook(factor)
+    objective.terms = terms
 
 
 class PenaltyContinuation:
@@ -108,7 +131,7 @@ class PenaltyContinuation:
             progress("stalled", {"terms": {n: self.stalled[n] for n in fresh}})
             self._reported |= fresh
         if self.undo_stalled and self._before is not None and self._last and all(n in self.stalled for n in self._last):
-            frames, weights, result = self._before
+            frames, weights, result, objective.terms = self._before
             objective.weights[:] = weights
             self.restored, self._before, self.undone = (frames, result), None, self.undone + 1
             if progress:
@@ -121,9 +144,8 @@ class PenaltyContinuation:
         if not over:
             return {}
         self.boosts += 1
-        self._before = (frames, objective.weights.copy(), result)
-        for name in over:
-            objective.weights[objective.names.index(name)] *= self.boost
+        self._before = (frames, objective.weights.copy(), result, objective.terms)
+        boost_terms(objective, over, self.boost)
         if progress:
             progress("boost", {"terms": over, "boosts": self.boosts})
         return over

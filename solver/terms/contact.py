@@ -54,6 +54,8 @@ site, the one nearest in |height|. `SupportSurfaces` does this.
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from solver.contact_thresholds import KEYFRAME_TOLERANCE
@@ -146,12 +148,30 @@ class Planted(Term):
         self.excusals = conflicts if conflicts is not None else ScheduleConflicts()
         #: indices of the contacts a keyframe contradicts: `violation` skips them
         self.excused = frozenset(c for c, x in enumerate(self.contacts) if x in self.excusals.planted)
+        #: (C,) factor on each contact's integrand: 1, and for the excused contacts 1 / (the product of the
+        #: boosts the term's weight was given: `for_boost`), so that their effective weight stays put
+        self.gain = np.ones(len(self.contacts))
         # site positions and velocities at all points from the engine's vectorized forward pass (shared
         # with penetration/torque/root/cone through the `PathContext`), gradients through its reverse
         # pass; an engine without site velocities (MuJoCo's inverse dynamics) is not shared
         self.engine = engine if engine is not None and engine.has_site_velocities else site_engine(model, CONTACT_SITES)
         self._eidx = _engine_index(self.engine, model, self.kin.names)
         self.needs = tuple(sorted({0, 1, *self.engine.required}))
+
+    def for_boost(self, factor: float) -> Planted:
+        """The term to use once penalty continuation multiplies its weight by `factor` (> 0): a shallow copy
+        whose excused contacts' integrands are divided by `factor` (`gain`), so that only the contacts
+        `violation` measures are stiffened (`solver.continuation`, module docstring). The keyframes hold an
+        excused contact's site off its surface; a stiffer pull toward the surface there cannot reach the
+        bound, and bends the leg between the keyframes to bring the site down (a knee straightened past
+        its limit). The same term (`self`) when nothing is excused. Does not change `self`.
+        """
+        if not self.excused:
+            return self
+        new = copy.copy(self)
+        new.gain = self.gain.copy()
+        new.gain[sorted(self.excused)] /= float(factor)
+        return new
 
     def knot_times(self) -> np.ndarray:
         """(2C,) every contact's start and end [s]: at touch-down and lift-off a site goes from
@@ -240,6 +260,7 @@ class Planted(Term):
         rows, local, glob, con, site, s, w, starts, unique = pairs
         vt = vc - np.einsum("mi,mi->m", vc, nc)[:, None] * nc
         t2 = self.tau * self.tau
+        s, w = s * self.gain[con], w * self.gain[con]  # the excused contacts' gain (`for_boost`)
         T = np.zeros((len(rows), len(self.contacts)))  # each contact's integrand, zero where it is off
         T[local, con] = s * h * h + w * t2 * (vt * vt).sum(-1)
         f = np.zeros(len(ctx.Y))
@@ -263,7 +284,8 @@ class Planted(Term):
         mo, res, pairs, vc, h, nc = self._pair_motion(ctx)
         rows, local, glob, con, site, s, w, starts, unique = pairs
         vt = vc - np.einsum("mi,mi->m", vc, nc)[:, None] * nc
-        ss, sw = np.sqrt(s), np.sqrt(w) * self.tau
+        gain = self.gain[con]  # the excused contacts' gain (`for_boost`)
+        ss, sw = np.sqrt(s * gain), np.sqrt(w * gain) * self.tau
         n, C = len(ctx.Y), len(self.contacts)
         r = np.zeros((n, C, 4))
         r[glob, con, 0] = ss * h

@@ -93,3 +93,29 @@ def test_undo_can_be_switched_off():
     cont.after_round(obj, frames())
     assert cont.after_round(obj, frames()) == {} and cont.restored is None
     np.testing.assert_allclose(obj.weights, [10.0])
+
+
+class Excusing(Scripted):
+    """A scripted term with parts its violation leaves out: `for_boost` gives a copy with `kept` divided
+    by the factor (the protocol of `solver.terms.contact.Planted.for_boost`)."""
+
+    kept = 1.0
+
+    def for_boost(self, factor):
+        new = Excusing(self.name, self.script)
+        new.kept = self.kept / factor
+        return new
+
+
+def test_a_boost_keeps_the_excused_parts_weight_and_an_undo_restores_the_terms():
+    term = Excusing("a", [1.0, 0.9, 1.0])
+    obj = Objective([term, Scripted("b", [0.0] * 3)], [1.0, 1.0], 0.0, 1.0, rate=10.0)
+    caller_terms = obj.terms
+    cont = PenaltyContinuation((("a", 1e-3),), boost=10.0, max_boosts=5)
+    assert cont.after_round(obj, frames()) == {"a": 1.0}
+    np.testing.assert_allclose(obj.weights, [10.0, 1.0])
+    assert obj.terms[0] is not term and obj.terms[0].kept == pytest.approx(0.1)  # weight x kept stays 1
+    assert caller_terms[0] is term and term.kept == 1.0  # the old list and term are not changed
+    assert cont.after_round(obj, frames()) == {} and cont.undone == 1  # stalled (1.0 -> 0.9): undone
+    assert obj.terms[0] is term and obj.terms[1] is caller_terms[1]
+    np.testing.assert_allclose(obj.weights, [1.0, 1.0])

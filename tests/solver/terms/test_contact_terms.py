@@ -4,7 +4,7 @@ finite differences (Y, Y', Y''), values against hand-built cases on the toy figu
 Toy figure at identity rotations with the root at (x, y, z): l_heel at (x - .05, y + .1, z - .95),
 l_toe at (x + .15, y + .1, z - .95), r_* at y - .1. Floor plane z = 0, box "step" with top z = .2 over
 x in [1.1, 1.9]."""
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -487,3 +487,34 @@ def test_planted_conflicts_count_keyframes_at_a_contacts_ends_and_change_nothing
     assert term.violation(Y, t) == pytest.approx(0.03, abs=1e-9)
     built = Planted(toy_model, term.contacts, rest_height=0.002, conflicts=term.conflicts(np.array([0.2]), up))
     assert built.violation(Y, t) is None  # the only contact excused
+
+
+def test_a_boosted_planted_term_keeps_its_excused_contacts_weight(toy_model, layout):
+    """`Planted.for_boost(k)`: the integrand of the contacts `violation` measures as it was, the excused
+    contacts' divided by k, so that the weight times k leaves their effective weight where it was. The
+    reference: single-contact terms built apart."""
+    rng = np.random.default_rng(5)
+    n = 9
+    Y = random_qpos(rng, layout, n)
+    Y1, Y2 = rng.normal(size=Y.shape), rng.normal(size=Y.shape)
+    t = np.linspace(0, 1, n)
+    measured, held = Contact("l_heel", 0.0, 0.8), Contact("r_toe", 0.1, 1.0)
+    plain = Planted(toy_model, [measured, held])
+    # a keyframe holding r_toe 5 cm up inside its contact: that contact is excused
+    conflicts = plain.conflicts(np.array([0.5]), standing(layout, 1, (0.0, 0.0, FOOT + 0.05)))
+    conflicts = replace(conflicts, planted=frozenset(c for c in conflicts.planted if c.site == "r_toe"))
+    assert len(conflicts.planted) == 1
+    term = Planted(toy_model, [measured, held], conflicts=conflicts)
+    boosted = term.for_boost(10.0)
+    assert boosted is not term and np.all(term.gain == 1.0)  # the term itself is not changed
+    f_measured = Planted(toy_model, [measured]).evaluate(t, Y, Y1, Y2, grad=False).f
+    f_held = Planted(toy_model, [held]).evaluate(t, Y, Y1, Y2, grad=False).f
+    assert np.abs(f_held).max() > 0 and np.abs(f_measured).max() > 0
+    np.testing.assert_allclose(boosted.evaluate(t, Y, Y1, Y2, grad=False).f, f_measured + f_held / 10.0, rtol=1e-12)
+    np.testing.assert_allclose(boosted.for_boost(10.0).evaluate(t, Y, Y1, Y2, grad=False).f,
+                               f_measured + f_held / 100.0, rtol=1e-12)  # boosts compound
+    check_gradient(boosted, t, Y, Y1, Y2)
+    ctx = PathContext(t, Y, Y1, Y2)  # the residuals agree: f = |r|^2
+    r = boosted.residual(ctx).r
+    np.testing.assert_allclose((r * r).sum(axis=1), f_measured + f_held / 10.0, rtol=1e-10, atol=1e-15)
+    assert Planted(toy_model, [measured, held]).for_boost(10.0).gain.tolist() == [1.0, 1.0]  # nothing excused
