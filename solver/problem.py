@@ -363,7 +363,7 @@ def capture_airborne(model, times, qpos) -> tuple[tuple[float, float], ...]:
 
 def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | None = None,
                  weights: dict[str, float] | None = None, contacts=(), rate: float | None = None,
-                 capture=None) -> Problem:
+                 capture=None, airborne=None) -> Problem:
     """The one factory of a figure's `Problem`, from what the command line and the Python API have.
 
     Args:
@@ -380,6 +380,9 @@ def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | No
             (`solver.peak_bounds`; only read when the term is chosen) and whose flights (every site above
             the flight height, `capture_airborne`) are the clearance term's (docs/contacts.md "The
             contact terms"; only read when the term is chosen).
+        airborne: ((start, end), ...) [s], the flights of the motion the keyframes came from (a keyframe
+            file's "flights"), used instead of the capture's; None: the capture's, or without a capture
+            every gap of the schedule is a flight.
     Returns:
         Problem.
     Raises:
@@ -408,8 +411,7 @@ def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | No
 
         plain = FrameSet.from_keyframes(keyframes, StateLayout.from_model(model).quat_slots)
         peaks = peak_bounds(model, plain, capture)
-    airborne = None
-    if capture is not None and chosen.get("clearance", 0) > 0:
+    if airborne is None and capture is not None and chosen.get("clearance", 0) > 0:
         airborne = capture_airborne(model, *capture)
     objective, initial, conflicts = figure_problem(model, chosen, keyframes, rate=rate, contacts=contacts,
                                                    peaks=peaks, airborne=airborne)

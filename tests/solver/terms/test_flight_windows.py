@@ -123,6 +123,10 @@ def test_make_problem_takes_the_flights_from_the_capture(toy_model):
     (a, b), = next(term for term in with_capture.objective.terms if term.name == "clearance").flights
     assert a == pytest.approx((HOP[0] - 0.5) / FPS - LEAD, abs=1e-9) and b == pytest.approx(0.9)
     assert next(term for term in plain.objective.terms if term.name == "clearance").flights == [(0.3, 0.5), (0.7, 0.9)]
+    # flights stated (a keyframe file's "flights") are used instead of the capture's: [] = never flies
+    stated = make_problem(toy_model, kf, "clearance", contacts=SCHEDULE, rate=40.0, capture=(t, pose(layout, h)),
+                          airborne=[])
+    assert next(term for term in stated.objective.terms if term.name == "clearance").flights == []
 
 
 @pytest.mark.parametrize("bad", [[(0.5, 0.4)], [("x", 1.0)], [(0.1,)], [(0.1, np.inf)]])
