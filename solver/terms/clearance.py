@@ -39,11 +39,10 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
              applies to all contact sites, so the flight of a run stays a flight (a walk has none).
              With the capture's own flights (`airborne`: the intervals where the motion the keyframes
              came from has every site above the 3 cm flight height) only the parts of a gap the capture
-             flies through are flights (`flight_windows`): each airborne interval widened by the ramps'
-             run-up to the flight height (30 ms before it, 43 ms after it, within the gap), so the lifted
-             band crosses 3 cm where the capture does; the rest of the gap is plain swing. A gap where
-             the captured feet glide in low (a landing foot below 3 cm 33-83 ms before its contact, a
-             heel sliding onto a step) is no flight, and the band does not hold the foot up there.
+             flies through are flights (`flight_windows`), with the lift's ramps inside them; the rest of
+             the gap is plain swing. A gap where the captured feet glide in low (a landing foot below 3 cm
+             33-83 ms before its contact, a heel sliding onto a step) is no flight, and the band does not
+             hold the foot up there.
 
   So scuffing along the floor through the swing does not pay, while lift-off and touchdown (the ends
   of the gap) are free.
@@ -116,27 +115,25 @@ def airborne_intervals(times: np.ndarray, heights: np.ndarray, height: float = H
     return tuple((float(t[i] - half), float(t[j] + half)) for i, j in zip(starts, ends, strict=True))
 
 
-def flight_windows(gaps, airborne, rise: float = TAKEOFF_RISE, descent: float = LANDING_DESCENT,
-                   ceiling: float = FLIGHT_LIFT, height: float = HEIGHT_ON) -> list[tuple[float, float]]:
-    """The flights of a schedule that follow the capture's own: in each gap (a, b) of the schedule, each
-    airborne interval (s, e) of the capture that overlaps it, widened so that the lift (`flight_lift`,
-    ramps `rise` and `descent` up to `ceiling`) crosses `height` at s and e, and clipped to the gap:
-    (max(a, s - rise h / ceiling), min(b, e + descent h / ceiling)), overlapping windows merged. With the
-    defaults: 30 ms before s and 43 ms after e, the run-up the schedule's own flights have (the captured
-    feet cross 3 cm 25-42 ms after lift-off: `TAKEOFF_RISE`). A gap the capture does not fly through
-    has no window (its sites keep their swing bands).
+def flight_windows(gaps, airborne) -> list[tuple[float, float]]:
+    """The flights of a schedule that follow the capture's own: in each gap (a, b) of the schedule, the
+    parts of the capture's airborne intervals (s, e) inside it, (max(a, s), min(b, e)), touching ones
+    merged; the lift (`flight_lift`) rises and falls inside each. A gap the capture does not fly through
+    has none: its sites keep their swing bands. The ramps are not widened out of the airborne interval
+    (so that the band would cross 3 cm where the capture does): the site whose descent ends the
+    capture's flight is the landing one, already low, and a lift past the interval held it up (a heel
+    that lands on a step's top: 3.5-5 cm for 40 ms; tuning clips 127_33 and 35_17 keyed every 0.25 and
+    0.33 s: optimized flight within 30 ms of the capture's in 2 of 4 pairs widened, 4 of 4 not).
 
     Args:
         gaps: ((a, b), ...) [s] the schedule's flights (`ContactSchedule.flights`).
         airborne: ((s, e), ...) [s] the capture's airborne intervals (`airborne_intervals`).
-        rise, descent: [s] > 0. ceiling: [m] > 0. height: [m] in [0, ceiling].
     Returns:
         [(start, end), ...] [s] sorted, each inside one gap.
     """
-    lead, lag = rise * height / ceiling, descent * height / ceiling
     out: list[tuple[float, float]] = []
     for a, b in gaps:
-        inside = sorted((max(a, s - lead), min(b, e + lag)) for s, e in airborne if s < b and e > a)
+        inside = sorted((max(a, s), min(b, e)) for s, e in airborne if s < b and e > a)
         for s, e in inside:
             if out and s <= out[-1][1]:
                 out[-1] = (out[-1][0], max(out[-1][1], e))
