@@ -39,8 +39,8 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
              applies to all contact sites, so the flight of a run stays a flight (a walk has none).
              With the capture's own flights (`airborne`: the intervals where the motion the keyframes
              came from has every site above the 3 cm flight height) only the parts of a gap the capture
-             flies through are flights (`flight_windows`), with the lift's ramps inside them; the rest of
-             the gap is plain swing. A gap where the captured feet glide in low (a landing foot below 3 cm
+             flies through are flights (`flight_windows`: a ballistic one widened so that the lifted band
+             crosses 3 cm where the capture does); the rest of the gap is plain swing. A gap where the captured feet glide in low (a landing foot below 3 cm
              33-83 ms before its contact, a heel sliding onto a step) is no flight, and the band does not
              hold the foot up there.
 
@@ -115,25 +115,37 @@ def airborne_intervals(times: np.ndarray, heights: np.ndarray, height: float = H
     return tuple((float(t[i] - half), float(t[j] + half)) for i, j in zip(starts, ends, strict=True))
 
 
-def flight_windows(gaps, airborne) -> list[tuple[float, float]]:
-    """The flights of a schedule that follow the capture's own: in each gap (a, b) of the schedule, the
-    parts of the capture's airborne intervals (s, e) inside it, (max(a, s), min(b, e)), touching ones
-    merged; the lift (`flight_lift`) rises and falls inside each. A gap the capture does not fly through
-    has none: its sites keep their swing bands. The ramps are not widened out of the airborne interval
-    (so that the band would cross 3 cm where the capture does): the site whose descent ends the
-    capture's flight is the landing one, already low, and a lift past the interval held it up (a heel
-    that lands on a step's top: 3.5-5 cm for 40 ms; tuning clips 127_33 and 35_17 keyed every 0.25 and
-    0.33 s: optimized flight within 30 ms of the capture's in 2 of 4 pairs widened, 4 of 4 not).
+def flight_windows(gaps, airborne, rise: float = TAKEOFF_RISE, descent: float = LANDING_DESCENT,
+                   ceiling: float = FLIGHT_LIFT, height: float = HEIGHT_ON) -> list[tuple[float, float]]:
+    """The flights of a schedule that follow the capture's own: in each gap (a, b) of the schedule, each
+    airborne interval (s, e) of the capture that overlaps it, clipped to the gap, touching ones merged.
+
+    An interval at least as long as the lift's ramps (e - s >= rise + descent: 85 ms) is a ballistic
+    flight: it is widened so that the lift (`flight_lift`) crosses `height` at s and e, (s - rise h /
+    ceiling, e + descent h / ceiling), 30 ms and 43 ms with the defaults (the captured feet cross 3 cm
+    25-42 ms after a schedule's lift-off; a synthetic 0.31 s hop kept its flight to 17 ms widened, lost
+    50 ms with the lift inside it). A shorter one is the feet grazing the flight height between a glide
+    and a landing (127_33: 8-33 ms, one ending where a heel passes a step's edge and lands on its top):
+    the lift stays inside it, since the site that ends it is the landing one, already down, and a lift
+    past it held that heel 3.5-5 cm up for 40 ms (127_33 keyed every 0.25 s: 0.108 s of flight against
+    the capture's 0.058, 0.058 with the lift inside). A gap the capture does not fly through has no
+    window: its sites keep their swing bands.
 
     Args:
         gaps: ((a, b), ...) [s] the schedule's flights (`ContactSchedule.flights`).
         airborne: ((s, e), ...) [s] the capture's airborne intervals (`airborne_intervals`).
+        rise, descent: [s] > 0. ceiling: [m] > 0. height: [m] in [0, ceiling].
     Returns:
         [(start, end), ...] [s] sorted, each inside one gap.
     """
+    lead, lag = rise * height / ceiling, descent * height / ceiling
+
+    def widened(s, e):
+        return (s - lead, e + lag) if e - s >= rise + descent else (s, e)
+
     out: list[tuple[float, float]] = []
     for a, b in gaps:
-        inside = sorted((max(a, s), min(b, e)) for s, e in airborne if s < b and e > a)
+        inside = sorted((max(a, s), min(b, e)) for s, e in (widened(*se) for se in airborne) if s < b and e > a)
         for s, e in inside:
             if out and s <= out[-1][1]:
                 out[-1] = (out[-1][0], max(out[-1][1], e))

@@ -21,6 +21,8 @@ from solver.terms.clearance import (
 )
 
 FOOT = 0.95  # root height minus site height at identity rotations
+LEAD = TAKEOFF_RISE * FLIGHT_HEIGHT / FLIGHT_LIFT  # 30 ms: the lift is at 3 cm this long after its start
+LAG = LANDING_DESCENT * FLIGHT_HEIGHT / FLIGHT_LIFT  # 42.9 ms: ... and this long before its end
 
 
 @dataclass(frozen=True)
@@ -68,13 +70,21 @@ def test_airborne_intervals_are_the_runs_of_frames_with_every_site_clear():
 
 
 def test_flight_windows_are_the_capture_flights_inside_the_gaps():
-    gaps = [(0.3, 0.5), (0.7, 0.9), (1.2, 1.4)]
-    airborne = [(0.75, 0.80), (0.80, 0.84), (0.86, 0.95), (1.19, 1.41), (1.6, 1.7)]
+    gaps = [(0.3, 0.5), (0.7, 0.9), (1.2, 1.4), (2.0, 2.5)]
+    # grazes shorter than the ramps (85 ms): the lift stays inside them
+    airborne = [(0.75, 0.80), (0.80, 0.84), (0.86, 0.93), (1.19, 1.25), (1.6, 1.7)]
     got = flight_windows(gaps, airborne)
-    # the glide has none; the hop's touching runs merge, the one over its landing and the third are
-    # clipped to their gaps; the last is in no gap (the schedule has the capture in contact there)
-    np.testing.assert_allclose(got, [(0.75, 0.84), (0.86, 0.9), (1.2, 1.4)], atol=1e-12)
+    # the glide has none; the touching runs merge, the one over the landing and the one over the
+    # take-off are clipped to their gaps; the last is in no gap (the schedule has the capture in contact)
+    np.testing.assert_allclose(got, [(0.75, 0.84), (0.86, 0.9), (1.2, 1.25)], atol=1e-12)
     assert flight_windows(gaps, []) == []
+    # a ballistic flight (>= 85 ms) is widened so that the lift crosses the flight height where it does
+    from solver.terms.clearance import flight_lift
+
+    (a, b), = flight_windows(gaps, [(2.1, 2.3)])
+    assert (a, b) == pytest.approx((2.1 - LEAD, 2.3 + LAG), abs=1e-12)
+    np.testing.assert_allclose(flight_lift(np.array([2.1, 2.3]), a, b, FLIGHT_LIFT), FLIGHT_HEIGHT, rtol=1e-12)
+    assert flight_windows(gaps, [(2.0, 2.47)]) == [(2.0, 2.5)]  # clipped to the gap
 
 
 def test_only_the_gap_the_capture_flies_through_is_a_flight(toy_model):
@@ -83,7 +93,7 @@ def test_only_the_gap_the_capture_flies_through_is_a_flight(toy_model):
     airborne = capture_airborne(toy_model, t, pose(layout, h))
     np.testing.assert_allclose(airborne, [((HOP[0] - 0.5) / FPS, (HOP[-1] + 0.5) / FPS)], atol=1e-9)
     term = Clearance(toy_model, SCHEDULE, clearance=0.02, airborne=airborne)
-    window = ((HOP[0] - 0.5) / FPS, (HOP[-1] + 0.5) / FPS)  # the capture's airborne frames
+    window = ((HOP[0] - 0.5) / FPS - LEAD, 0.9)  # 125 ms in the air: widened, up to the landing (0.863 + 43 ms)
     np.testing.assert_allclose(term.flights, [window], atol=1e-9)
     np.testing.assert_allclose(term.knot_times(), [window[0] + TAKEOFF_RISE, window[1] - LANDING_DESCENT])
     swing_only = Clearance(toy_model, SCHEDULE, clearance=0.02, flight=False)
@@ -97,8 +107,7 @@ def test_only_the_gap_the_capture_flies_through_is_a_flight(toy_model):
     assert term.evaluate(glide, Y[:1], None, None).f[0] == pytest.approx(
         swing_only.evaluate(glide, Y[:1], None, None).f[0], rel=1e-12)
     assert everywhere.evaluate(glide, Y[:1], None, None).f[0] > swing_only.evaluate(glide, Y[:1], None, None).f[0]
-    # the hop's middle (the lift's top: 0.738 + 35 ms .. 0.863 - 50 ms): every site lifted to FLIGHT_LIFT,
-    # on top of l_toe's swing band
+    # the hop's middle: every site lifted to FLIGHT_LIFT, on top of l_toe's swing band
     hop = np.array([0.8])
     _, Uf, Bf, _ = term.split_windows(hop)
     assert Uf[0] == 1.0 and Bf[0] == pytest.approx(FLIGHT_LIFT, rel=1e-12)
@@ -116,7 +125,7 @@ def test_make_problem_takes_the_flights_from_the_capture(toy_model):
                                 capture=(t, pose(layout, h)))
     plain = make_problem(toy_model, kf, "clearance", contacts=SCHEDULE, rate=40.0)
     (a, b), = next(term for term in with_capture.objective.terms if term.name == "clearance").flights
-    assert a == pytest.approx((HOP[0] - 0.5) / FPS, abs=1e-9) and b == pytest.approx((HOP[-1] + 0.5) / FPS)
+    assert a == pytest.approx((HOP[0] - 0.5) / FPS - LEAD, abs=1e-9) and b == pytest.approx(0.9)
     assert next(term for term in plain.objective.terms if term.name == "clearance").flights == [(0.3, 0.5), (0.7, 0.9)]
     # flights stated (a keyframe file's "flights") are used instead of the capture's: [] = never flies
     stated = make_problem(toy_model, kf, "clearance", contacts=SCHEDULE, rate=40.0, capture=(t, pose(layout, h)),
