@@ -160,7 +160,8 @@ def clip_figure_scene(clip: Path, k: ClipKeys, scene_out: Path):
 
 def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, progress=None):
     """A clip's figure and scene (given or fitted), its retargeted reference, its contacts and keyframes
-    picked from it (`pick_keyframes`), written as the keyframe file `out` (with the contacts, the figure
+    picked from it (`pick_keyframes`), written as the keyframe file `out` (with the contacts and the
+    capture's flights, `solver.problem.capture_airborne`, the figure
     as "model" and a "source" naming the clip relative to the file, the command and the root scale).
     `progress(i, stage)` is called as each of CLIP_STAGES finishes (None: silent).
 
@@ -186,8 +187,10 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
     done(2)
     source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
               "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
+    from solver.problem import capture_airborne
+
     write_keyframes(out, keyframes, StateLayout.from_model(model), model=figure, scene=cs.scene_path,
-                    source=source, contacts=contacts)
+                    source=source, contacts=contacts, flights=capture_airborne(model, ref.times, ref.qpos))
     done(3)
     return cs, contacts, keyframes
 
@@ -240,7 +243,7 @@ def clip_problem(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=pri
     cs, ref, model, keyframes, info = clip_keyframes(clip, out_dir, o, paths, say)
     contacts = tuple(info.contacts or ())
     problem = make_problem(model, keyframes, o.terms, dict(o.weights or {}), contacts, o.rate,
-                           capture=(ref.times, ref.qpos))
+                           capture=(ref.times, ref.qpos), airborne=info.flights)
     return problem, Source(Path(cs.scene_path), ref, contacts, label=str(clip)), cs
 
 

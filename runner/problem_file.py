@@ -104,7 +104,8 @@ def file_problem(keyframes_path, scene=None, terms: str | None = None, weights: 
     chosen = file_terms(keyframes_path, info, terms, weights or {}, contacts)
     reference = find_reference(info, model, quiet=quiet)
     capture = None if reference is None else (reference.times, reference.qpos)  # the forces term's bounds
-    problem = make_problem(model, keyframes, ",".join(chosen), chosen, contacts, rate, capture=capture)
+    problem = make_problem(model, keyframes, ",".join(chosen), chosen, contacts, rate, capture=capture,
+                           airborne=getattr(info, "flights", None))
     metric_contacts = contacts
     if reference is not None and not contacts:
         from solver.contacts import reference_contacts

@@ -12,6 +12,7 @@ Format (docs/keyframe-format.md has a full example)::
         {"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"},
         {"foot": "right", "start": 0.3, "end": 0.5}             # a foot: its heel and its toe
       ],
+      "flights": [[0.22, 0.31]],            # optional: where the motion flies (every site 3 cm clear), s
       "keyframes": [
         {"time": 0.0, "joints": {"root": [x, y, z, qw, qx, qy, qz], "l_hip": [qw, qx, qy, qz], ...}},
         {"time": 0.25, "joints": {"root": [x, y, z, qw, qx, qy, qz], "l_knee": [qw, null, null, null]}}
@@ -45,7 +46,7 @@ from solver.keyframes import Keyframes
 from solver.layout import FEET, StateLayout
 
 FORMAT = "dynsplines.keyframes/1"
-_TOP_KEYS = {"format", "model", "scene", "source", "terms", "contacts", "keyframes", "comment"}
+_TOP_KEYS = {"format", "model", "scene", "source", "terms", "contacts", "flights", "keyframes", "comment"}
 _CONTACT_KEYS = {"site", "foot", "start", "end", "surface", "comment"}
 _KEYFRAME_KEYS = {"time", "joints", "comment"}
 _JSON_CONSTANTS = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
@@ -64,6 +65,9 @@ class KeyframeFileInfo:
         terms: the "terms" object (objective weights by term name), {} if absent; passed through.
         contacts: the "contacts" list as a `ContactSchedule` (sorted by start; a foot's entry expanded
             to its heel and toe, `solver.layout.FEET`); empty if absent.
+        flights: the "flights" list as ((start, end), ...) [s]: where the motion the keyframes came from
+            flies, for the clearance term (docs/contacts.md "The contact terms"); None if absent (every
+            gap of the contacts is a flight).
     """
 
     path: Path
@@ -72,6 +76,7 @@ class KeyframeFileInfo:
     source: dict = field(default_factory=dict)
     terms: dict = field(default_factory=dict)
     contacts: ContactSchedule = field(default_factory=ContactSchedule.empty)
+    flights: tuple[tuple[float, float], ...] | None = None
 
 
 def _is_number(v: Any) -> bool:
@@ -158,7 +163,9 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
     feet = Figure.from_model(mj_model).feet if mj_model is not None and doc.get("contacts") else None
     contacts = read_contacts(doc.get("contacts", []), src, surfaces, feet)
     keyframes = Keyframes(times, values, mask, source=src)
-    return keyframes, KeyframeFileInfo(p, model, _relative_path(doc, "scene", p), dict(source), dict(terms), contacts)
+    flights = read_flights(doc["flights"], src) if "flights" in doc else None
+    return keyframes, KeyframeFileInfo(p, model, _relative_path(doc, "scene", p), dict(source), dict(terms), contacts,
+                                       flights)
 
 
 def _checked_document(path) -> dict:
@@ -317,6 +324,26 @@ def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = Non
     return ContactSchedule.of(out, known, surfaces, source=src, labels=labels)
 
 
+def read_flights(entries: Any, src: str) -> tuple[tuple[float, float], ...]:
+    """The "flights" field of a keyframe file: [[start, end], ...] [s], the intervals where the motion the
+    keyframes came from has every contact site above the flight height (docs/keyframe-format.md).
+
+    Raises:
+        InputError: naming the file, the entry and the value: not a list, an entry that is not two
+            finite numbers of seconds with start < end.
+    """
+    if not isinstance(entries, list):
+        raise InputError(f"{src}: field 'flights' is a {type(entries).__name__}; it must be a list of "
+                         "[start, end] pairs in seconds")
+    out = []
+    for i, e in enumerate(entries):
+        ok = isinstance(e, list) and len(e) == 2 and all(_is_number(v) and math.isfinite(v) for v in e)
+        if not ok or not e[0] < e[1]:
+            raise InputError(f"{src}: flights[{i}] is {e!r}; it must be [start, end] in seconds with start < end")
+        out.append((float(e[0]), float(e[1])))
+    return tuple(sorted(out))
+
+
 def contacts_document(contacts) -> list[dict]:
     """The "contacts" field for Contacts: one entry per site contact, times rounded outward to 6 decimals
     (start down, end up), so a contact read back still holds every frame it held."""
@@ -343,7 +370,7 @@ def _format(doc_head: Mapping[str, Any], keyframes: Keyframes, layout: StateLayo
     """The file's text: one line per joint, so the file reads (and diffs) like a table."""
     lines = ["{"]
     for key, value in doc_head.items():
-        if key == "contacts" and value:  # one contact per line
+        if key in ("contacts", "flights") and value:  # one contact (flight) per line
             items = ",\n".join(f"    {json.dumps(v, ensure_ascii=False)}" for v in value)
             lines.append(f"  {json.dumps(key)}: [\n{items}\n  ],")
             continue
@@ -376,6 +403,7 @@ def write_keyframes(
     source: Mapping[str, Any] | None = None,
     terms: Mapping[str, Any] | None = None,
     contacts=None,
+    flights=None,
 ) -> None:
     """Write keyframes as a keyframe file, atomically (a temporary file in the same folder, then
     `os.replace`), so a reader never sees half a file.
@@ -392,6 +420,8 @@ def write_keyframes(
         terms: optional objective weights {term name: weight}.
         contacts: optional `solver.contacts.Contact`s, written as the "contacts" list (one entry per
             site; checked as `read_keyframes` checks them).
+        flights: optional ((start, end), ...) [s], written as the "flights" list (start rounded down,
+            end up, to 6 decimals).
     Raises:
         InputError: keyframes and layout disagree in size, the folder does not exist or is not writable,
             or source/terms are not JSON-serializable.
@@ -413,6 +443,11 @@ def write_keyframes(
     if contacts is not None:
         head["contacts"] = contacts_document(contacts)
         read_contacts(head["contacts"], str(p))
+    if flights is not None:
+        scale = 10.0**_DIGITS
+        head["flights"] = [[math.floor(round(a * scale, 3)) / scale, math.ceil(round(b * scale, 3)) / scale]
+                           for a, b in flights]
+        read_flights(head["flights"], str(p))
     try:
         text = _format(head, keyframes, layout)
     except (TypeError, ValueError) as e:

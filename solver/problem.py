@@ -151,7 +151,7 @@ MARGIN, CONTACT_MARGIN = 0.005, 0.002
 
 def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rate: float = 400.0,
                      margin: float | None = None, contacts=(), conflicts: ScheduleConflicts | None = None,
-                     plain=None, peaks=None) -> Objective:
+                     plain=None, peaks=None, airborne=None) -> Objective:
     """The objective for a figure in a scene.
 
     Args:
@@ -169,6 +169,8 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
             (`TermBuild.plain`; default none: the published ranges alone).
         peaks: the forces term's `solver.peak_bounds.PeakBounds` (default: the plain spline's own, with
             `plain`; without either, the peaks of the path the solve starts from, `PeakForces.prepare`).
+        airborne: ((start, end), ...) [s] where the capture flies (`capture_airborne`), for the
+            clearance term: its flights follow the capture's; None: every gap of the schedule is a flight.
     Returns:
         Objective (scales 1; `solve` renormalizes if asked).
     Raises:
@@ -191,7 +193,7 @@ def figure_objective(model, weights: dict[str, float], t0: float, t1: float, rat
     # by every term that reads it: the `PathContext` runs its forward pass once per evaluation and the
     # objective its reverse pass once for the sum of the terms' gradients
     build = TermBuild(model, (float(t0), float(t1)), margin, contacts, forces=any(s.forces for s in specs),
-                      conflicts=conflicts, plain=plain, peaks=peaks)
+                      conflicts=conflicts, plain=plain, peaks=peaks, airborne=airborne)
     terms = [build_term(spec, build) for spec in specs]
     return Objective(terms, np.array([weights[s.name] for s in specs], float), t0, t1, rate)
 
@@ -249,7 +251,8 @@ def _clearance_conflicts(term, times, qpos, path) -> ScheduleConflicts:
     return got.with_found(("clearance", k, site, d) for (k, site), d in sorted(found.items()))
 
 
-def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 400.0, contacts=(), peaks=None):
+def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 400.0, contacts=(), peaks=None,
+                   airborne=None):
     """The objective and the plain spline's frames for keyframes of a figure, with the keyframes that
     contradict the contact schedule found (`keyframe_conflicts`) and the contact terms built with what
     they excuse: what `solver.animate`, the command line and the benchmarks solve.
@@ -258,7 +261,8 @@ def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 40
         model: MjModel of the scene. weights: {term: lambda_j} (`parse_terms`). keyframes: Keyframes
             (values (k, nq), times (k,) [s]). rate: quadrature points per second. contacts: the
             schedule (`ContactSchedule`, or contacts). peaks: the forces term's `PeakBounds` (default:
-            the plain spline's own).
+            the plain spline's own). airborne: the capture's flights for the clearance term
+            (`figure_objective`).
     Returns:
         (objective, initial, conflicts): Objective, FrameSet (the plain spline's frames), and the
         `keyframe_conflicts` value (`ScheduleConflicts`; `.found` lists the conflicts).
@@ -274,11 +278,12 @@ def figure_problem(model, weights: dict[str, float], keyframes, rate: float = 40
         from solver.peak_bounds import peak_bounds
 
         peaks = peak_bounds(model, initial)
-    objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, plain=initial, peaks=peaks)
+    objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, plain=initial, peaks=peaks,
+                                 airborne=airborne)
     conflicts = keyframe_conflicts(objective, keyframes.times, initial.values[initial.is_keyframe], path=initial.path)
     if conflicts.excuses:  # the contact terms built again, with what the keyframes excuse
         objective = figure_objective(model, weights, t0, t1, rate=rate, contacts=contacts, conflicts=conflicts,
-                                     plain=initial, peaks=peaks)
+                                     plain=initial, peaks=peaks, airborne=airborne)
     return objective, initial, conflicts
 
 
@@ -334,9 +339,31 @@ class Problem:
         return tuple(self.weights)
 
 
+def capture_airborne(model, times, qpos) -> tuple[tuple[float, float], ...]:
+    """The intervals [s] where a motion in the model's scene is airborne: every contact site's lowest
+    point (`solver.contacts.contact_points`) above the flight metric's 3 cm over the surface under it
+    (`solver.terms.clearance.airborne_intervals`; `solver.motion_metrics` "flight_time_s").
+
+    Args:
+        model: MjModel of the scene with the figure. times: (n,) increasing frame times [s], n >= 2.
+        qpos: (n, nq) the motion (the retargeted capture).
+    Returns:
+        ((start, end), ...) [s], sorted and disjoint.
+    Raises:
+        InputError: shapes that disagree (`airborne_intervals`).
+    """
+    from solver.contacts import contact_points, site_heights
+    from solver.terms.clearance import airborne_intervals
+
+    qpos = np.atleast_2d(np.asarray(qpos, float))
+    if qpos.shape[1] != int(model.nq):
+        raise InputError(f"capture qpos has {qpos.shape[1]} components but the model has nq = {model.nq}")
+    return airborne_intervals(times, site_heights(model, contact_points(model, qpos)))
+
+
 def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | None = None,
                  weights: dict[str, float] | None = None, contacts=(), rate: float | None = None,
-                 capture=None) -> Problem:
+                 capture=None, airborne=None) -> Problem:
     """The one factory of a figure's `Problem`, from what the command line and the Python API have.
 
     Args:
@@ -350,7 +377,12 @@ def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | No
         rate: quadrature points per second [1/s]; default `solver.animate.DEFAULT_RATE` (400).
         capture: None, or (times (n,) [s] on the keyframes' clock, qpos (n, nq)): the retargeted motion
             capture the keyframes were made from, whose filtered peaks join the forces term's bounds
-            (`solver.peak_bounds`; only read when the term is chosen).
+            (`solver.peak_bounds`; only read when the term is chosen) and whose flights (every site above
+            the flight height, `capture_airborne`) are the clearance term's (docs/contacts.md "The
+            contact terms"; only read when the term is chosen).
+        airborne: ((start, end), ...) [s], the flights of the motion the keyframes came from (a keyframe
+            file's "flights"), used instead of the capture's; None: the capture's, or without a capture
+            every gap of the schedule is a flight.
     Returns:
         Problem.
     Raises:
@@ -379,8 +411,10 @@ def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | No
 
         plain = FrameSet.from_keyframes(keyframes, StateLayout.from_model(model).quat_slots)
         peaks = peak_bounds(model, plain, capture)
+    if airborne is None and capture is not None and chosen.get("clearance", 0) > 0:
+        airborne = capture_airborne(model, *capture)
     objective, initial, conflicts = figure_problem(model, chosen, keyframes, rate=rate, contacts=contacts,
-                                                   peaks=peaks)
+                                                   peaks=peaks, airborne=airborne)
     from solver.figure import Figure
 
     return Problem(model, keyframes, contacts, MappingProxyType(dict(chosen)), default_limits(chosen), rate,

@@ -37,6 +37,12 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
              `core` (default 0.5: the central half of the swing is fully weighted).
       flight: the same shape on each interval inside the schedule where no site is in contact; it
              applies to all contact sites, so the flight of a run stays a flight (a walk has none).
+             With the capture's own flights (`airborne`: the intervals where the motion the keyframes
+             came from has every site above the 3 cm flight height) only the parts of a gap the capture
+             flies through are flights (`flight_windows`: a ballistic one widened so that the lifted band
+             crosses 3 cm where the capture does); the rest of the gap is plain swing. A gap where the captured feet glide in low (a landing foot below 3 cm
+             33-83 ms before its contact, a heel sliding onto a step) is no flight, and the band does not
+             hold the foot up there.
 
   So scuffing along the floor through the swing does not pay, while lift-off and touchdown (the ends
   of the gap) are free.
@@ -85,6 +91,85 @@ TAKEOFF_RISE = 0.035
 LANDING_DESCENT = 0.05
 
 
+def airborne_intervals(times: np.ndarray, heights: np.ndarray, height: float = HEIGHT_ON) -> tuple[tuple[float, float], ...]:
+    """The intervals where a motion is airborne: every site higher than `height` (the flight metric's
+    3 cm, `solver.motion_metrics.FLIGHT_HEIGHT`), a run of such frames i..j as (t_i - dt/2, t_j + dt/2)
+    with dt the median frame spacing, so an interval lasts as long as the metric counts its frames.
+
+    Args:
+        times: (n,) increasing frame times [s], n >= 2. heights: (n, k) height of each site above the
+            surface under it [m] (`solver.contacts.site_heights` of `contact_points`). height: [m].
+    Returns:
+        ((start, end), ...) [s], sorted and disjoint; () when no frame is airborne.
+    Raises:
+        InputError: shapes that disagree, fewer than two frames, times not increasing.
+    """
+    t, h = np.asarray(times, float), np.asarray(heights, float)
+    if t.ndim != 1 or len(t) < 2 or h.ndim != 2 or len(h) != len(t):
+        raise InputError(f"airborne_intervals: times {t.shape} and heights {h.shape} must be (n,) and (n, k), n >= 2")
+    if not np.all(np.diff(t) > 0):
+        raise InputError("airborne_intervals: frame times must increase")
+    half = 0.5 * float(np.median(np.diff(t)))
+    up = np.concatenate([[False], (h > height).all(axis=1), [False]]).astype(np.int8)
+    starts, ends = np.flatnonzero(np.diff(up) == 1), np.flatnonzero(np.diff(up) == -1) - 1
+    return tuple((float(t[i] - half), float(t[j] + half)) for i, j in zip(starts, ends, strict=True))
+
+
+def flight_windows(gaps, airborne, rise: float = TAKEOFF_RISE, descent: float = LANDING_DESCENT,
+                   ceiling: float = FLIGHT_LIFT, height: float = HEIGHT_ON) -> list[tuple[float, float]]:
+    """The flights of a schedule that follow the capture's own: in each gap (a, b) of the schedule, each
+    airborne interval (s, e) of the capture that overlaps it, clipped to the gap, touching ones merged.
+
+    An interval at least as long as the lift's ramps (e - s >= rise + descent: 85 ms) is a ballistic
+    flight: it is widened so that the lift (`flight_lift`) crosses `height` at s and e, (s - rise h /
+    ceiling, e + descent h / ceiling), 30 ms and 43 ms with the defaults (the captured feet cross 3 cm
+    25-42 ms after a schedule's lift-off; a synthetic 0.31 s hop kept its flight to 17 ms widened, lost
+    50 ms with the lift inside it). A shorter one is the feet grazing the flight height between a glide
+    and a landing (127_33: 8-33 ms, one ending where a heel passes a step's edge and lands on its top):
+    the lift stays inside it, since the site that ends it is the landing one, already down, and a lift
+    past it held that heel 3.5-5 cm up for 40 ms (127_33 keyed every 0.25 s: 0.108 s of flight against
+    the capture's 0.058, 0.058 with the lift inside). A gap the capture does not fly through has no
+    window: its sites keep their swing bands.
+
+    Args:
+        gaps: ((a, b), ...) [s] the schedule's flights (`ContactSchedule.flights`).
+        airborne: ((s, e), ...) [s] the capture's airborne intervals (`airborne_intervals`).
+        rise, descent: [s] > 0. ceiling: [m] > 0. height: [m] in [0, ceiling].
+    Returns:
+        [(start, end), ...] [s] sorted, each inside one gap.
+    """
+    lead, lag = rise * height / ceiling, descent * height / ceiling
+
+    def widened(s, e):
+        return (s - lead, e + lag) if e - s >= rise + descent else (s, e)
+
+    out: list[tuple[float, float]] = []
+    for a, b in gaps:
+        inside = sorted((max(a, s), min(b, e)) for s, e in (widened(*se) for se in airborne) if s < b and e > a)
+        for s, e in inside:
+            if out and s <= out[-1][1]:
+                out[-1] = (out[-1][0], max(out[-1][1], e))
+            elif e > s:
+                out.append((s, e))
+    return out
+
+
+def _checked_airborne(airborne) -> tuple[tuple[float, float], ...] | None:
+    """`airborne` as ((start, end), ...) [s], checked; None stays None."""
+    if airborne is None:
+        return None
+    out = []
+    for i, ab in enumerate(airborne):
+        try:
+            s, e = (float(v) for v in ab)
+        except (TypeError, ValueError):
+            raise InputError(f"airborne[{i}] is {ab!r}; give each flight as (start, end) in seconds") from None
+        if not (np.isfinite(s) and np.isfinite(e) and s < e):
+            raise InputError(f"airborne[{i}] is ({s}, {e}); a flight needs finite start < end [s]")
+        out.append((s, e))
+    return tuple(sorted(out))
+
+
 def flight_lift(t: np.ndarray, a: float, b: float, ceiling: float, rise: float = TAKEOFF_RISE,
                 descent: float = LANDING_DESCENT) -> np.ndarray:
     """The lifted flight band over a flight (a, b): ceiling * min(1, (t - a) / rise, (b - t) / descent),
@@ -126,6 +211,10 @@ class Clearance(Term):
         t_span: see `Planted`.
         engine: the engine shared with the other terms (tracking `sites`); None: one of its own
             (`solver.path_context.site_engine`, positions only).
+        airborne: ((start, end), ...) [s], the intervals where the capture the keyframes came from has
+            every site above the flight height (`airborne_intervals`; `solver.problem.capture_airborne`):
+            the flights are then only where the capture flies (`flight_windows`); None (default): every
+            gap of the schedule is a flight.
         conflicts: `ScheduleConflicts` from `solver.problem.keyframe_conflicts`: its swings are left out
             of `violation`, its lowered bands and lift ceilings used (default: none).
     Raises:
@@ -139,7 +228,8 @@ class Clearance(Term):
 
     def __init__(self, model, contacts, clearance: float = 0.02, core: float = 0.5, flight: bool = True,
                  sites=CONTACT_SITES, t_span=None, engine=None, flight_clearance: float | None = None,
-                 flight_lift: float | None = FLIGHT_LIFT, conflicts: ScheduleConflicts | None = None):
+                 flight_lift: float | None = FLIGHT_LIFT, conflicts: ScheduleConflicts | None = None,
+                 airborne=None):
         surfaces = StaticSurfaces.from_model(model)
         if surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the clearance term")
@@ -159,7 +249,10 @@ class Clearance(Term):
         self.kin = SiteMotion(model, tuple(sites))
         self.radii = contact_radii(model, self.kin.names)  # (k,) [m]: 0 unless the figure rounds a site
         self.swings = [self.contacts.swings(s) for s in self.kin.names]
-        self.flights = self.contacts.flights() if self.flight else []
+        #: the capture's airborne intervals [s], or None (unknown: every gap of the schedule is a flight)
+        self.airborne = _checked_airborne(airborne)
+        gaps = self.contacts.flights() if self.flight else []
+        self.flights = gaps if self.airborne is None else flight_windows(gaps, self.airborne)
         #: c_f of each flight [m]
         self.flight_bands = np.array([min(c, GRAVITY * (b - a) ** 2 / 8.0) if flight_clearance is None
                                       else float(flight_clearance) for a, b in self.flights])

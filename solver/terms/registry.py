@@ -69,15 +69,17 @@ class TermBuild:
         plain: the plain spline through the keyframes (a `FrameSet`), or None: the anatomical terms
             allow what it shows (`plain_samples`; docs/anatomy.md).
         peaks: the problem's `PeakBounds` for the forces term (`solver.peak_bounds`), or None.
+        airborne: ((start, end), ...) [s] where the capture the keyframes came from flies (every site
+            above the flight height), for the clearance term's flights; None: no capture.
     """
 
     def __init__(self, model, t_span, margin: float, contacts, forces: bool, conflicts=None, plain=None,
-                 peaks=None):
+                 peaks=None, airborne=None):
         from solver.figure import Figure
 
         self.model, self.layout, self.figure = model, StateLayout.from_model(model), Figure.from_model(model)
         self.t_span, self.margin, self.contacts, self.forces = t_span, float(margin), contacts, forces
-        self.conflicts, self.plain, self._peaks = conflicts, plain, peaks
+        self.conflicts, self.plain, self._peaks, self.airborne = conflicts, plain, peaks, airborne
         self._engine = None
         self._plain_samples = None
 
@@ -254,7 +256,7 @@ def _register_builtins() -> None:
                                                engine=b.engine, conflicts=b.conflicts),
                   w["planted"], contacts=True, default=True)
     register_term("clearance", lambda b: Clearance(b.model, b.contacts, t_span=b.t_span, engine=b.engine,
-                                                   conflicts=b.conflicts),
+                                                   conflicts=b.conflicts, airborne=b.airborne),
                   w["clearance"], contacts=True, default=True)
     register_term("cone", lambda b: FrictionCone(b.model, b.contacts, engine=b.engine, t_span=b.t_span),
                   w["cone"], contacts=True, forces=True)

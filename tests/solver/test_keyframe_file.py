@@ -298,3 +298,27 @@ def test_every_shipped_keyframe_file_loads(layout):
     for f in files:
         keyframes, info = read_keyframes(f, layout)
         assert keyframes.count >= 2 and json.loads(f.read_text())["format"] == FORMAT
+
+
+def test_flights_round_trip_rounded_outward_and_absent_is_none(tmp_path, layout):
+    kf = sample_keyframes(layout, np.random.default_rng(1))
+    out = tmp_path / "f.json"
+    write_keyframes(out, kf, layout, flights=[(0.2541666666, 0.2708333333), (0.75, 0.7625)])
+    _, info = read_keyframes(out, layout)
+    # 6 decimals, start rounded down and end up: the interval read back still holds the one written
+    assert info.flights == ((0.254166, 0.270834), (0.75, 0.7625))
+    write_keyframes(out, kf, layout, flights=[])
+    assert read_keyframes(out, layout)[1].flights == ()  # stated: the motion never flies
+    assert read_keyframes(write_json(tmp_path, minimal()), layout)[1].flights is None  # not stated
+
+
+@pytest.mark.parametrize("flights, shown", [
+    ({"a": 1}, "field 'flights' is a dict"),
+    ([[0.3, 0.2]], r"flights\[0\] is \[0.3, 0.2\]"),
+    ([[0.1, 0.2], [0.3]], r"flights\[1\] is \[0.3\]"),
+    ([["0.1", 0.2]], r"flights\[0\]"),
+])
+def test_flight_errors_name_file_entry_and_value(tmp_path, layout, flights, shown):
+    p = write_json(tmp_path, {**minimal(), "flights": flights})
+    with pytest.raises(InputError, match=f"k.json: {shown}"):
+        read_keyframes(p, layout)

@@ -89,6 +89,11 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
     layout = StateLayout.from_model(model)
     kf, info = read_keyframes(out / "run.keyframes.json", layout)
     assert info.scene == scene.resolve() and info.contacts and kf.count >= 3 and not kf.is_partial.any()
+    # the capture's flights are written (the clearance term's, docs/contacts.md "Flights where the capture
+    # flies"): as long in all as the flight metric counts them on the capture (6 decimals, rounded outward)
+    captured = json.loads((tmp_path / "m.json").read_text())["metrics"]["motion"]["optimized"]["reference"]
+    assert info.flights and sum(b - a for a, b in info.flights) == pytest.approx(
+        captured["flight_time_s"], abs=2e-6 * len(info.flights))
     # the subject's own figure (the default): written beside the outputs, named by the keyframe file, its
     # legs the subject's (127_33's knee OFFSET, 1 unit = 0.0254 / 0.45 m); the root path as captured
     assert info.model == (out / "run.figure.xml").resolve()
