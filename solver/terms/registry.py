@@ -42,7 +42,7 @@ FORCES_WEIGHT = 1000.0
 #: renormalized; its weight prices one rad^2 of mean squared departure summed over the joints
 #: (docs/corpus.md "Near the plain spline": chosen on the tuning clips).
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
-                   "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0, "near": 1.0,
+                   "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0, "near": 1.0, "near_sites": 1.0,
                    "forces": FORCES_WEIGHT}
 #: Penalty-continuation bounds of the anatomical terms [rad] (their `TermSpec.limit`): rotation off the
 #: hinge beyond the allowance (acceptance: the capture's + 3 deg; the allowance is 2 deg) and angle
@@ -214,6 +214,14 @@ def _near(b: TermBuild):
     return NearPlain(b.layout, None if b.plain is None else b.plain.path, b.t_span, length=reference_length(b.figure))
 
 
+def _near_sites(b: TermBuild):
+    """The near_sites term (`solver.terms.near_sites.NearSites`): the contact sites toward the plain
+    spline `b.plain`'s, on the engine shared with the contact terms, scaled like planted (eq. 7)."""
+    from solver.terms.near_sites import NearSites
+
+    return NearSites(b.model, None if b.plain is None else b.plain.path, engine=b.engine)
+
+
 def _register_builtins() -> None:
     """The figure's terms: sec. 5 (penetration, unit, bending, smooth, and the anatomical limits hinge and
     rom: docs/anatomy.md), sec. 6 (torque, root, and forces: the peaks
@@ -256,6 +264,7 @@ def _register_builtins() -> None:
     register_term("clearance", lambda b: Clearance(b.model, b.contacts, t_span=b.t_span, engine=b.engine,
                                                    conflicts=b.conflicts),
                   w["clearance"], contacts=True, default=True)
+    register_term("near_sites", _near_sites, w["near_sites"], contacts=True, default=True)
     register_term("cone", lambda b: FrictionCone(b.model, b.contacts, engine=b.engine, t_span=b.t_span),
                   w["cone"], contacts=True, forces=True)
 
