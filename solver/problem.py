@@ -224,6 +224,8 @@ def keyframe_conflicts(objective: Objective, times, qpos, path=None) -> Schedule
     for term in objective.terms:
         if term.name == "planted":
             out = out.merged(term.conflicts(times, qpos)).merged(term.slides(times, qpos))
+            if path is not None:
+                out = out.merged(term.held(times, qpos, path))
         if term.name == "clearance":
             out = out.merged(_clearance_conflicts(term, times, qpos, path))
     return out

@@ -35,6 +35,7 @@ import numpy as np
 from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.path_context import EngineGradient, engine_sites, site_engine
+from solver.site_jacobian import supports
 from solver.terms.base import Residual, SiteRows, Term, TermEval
 
 __all__ = ["NearSites"]
@@ -67,12 +68,16 @@ class NearSites(Term):
         self.renormalize_like = renormalize_like
         self.engine = engine if engine is not None else site_engine(model, list(sites), velocities=False)
         self._idx = engine_sites(self.engine, model, list(sites))
+        layout = StateLayout.from_model(model)
+        #: qpos indices of the root's position (a free root's first three; none for a fixed root)
+        self._root = np.array([i for j in layout.joints if j.kind == "free" for i in range(j.qposadr, j.qposadr + 3)][:3], int)
         self._tmap = TangentMap.from_layout(StateLayout.from_model(model))
         self.needs = tuple(sorted({0, *self.engine.required}))
         self._cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
-    def _ref(self, t: np.ndarray) -> np.ndarray:
-        """(n, k, 3) the reference's site positions at t [m], kept for the next evaluation at the same t."""
+    def _ref(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reference's site positions (n, k, 3) and root position (n, r) at t [m], kept for the next
+        evaluation at the same t."""
         t = np.asarray(t, float)
         key = (len(t), float(t[0]), float(t[-1])) if len(t) else (0,)
         hit = self._cache.get(key)
@@ -80,43 +85,57 @@ class NearSites(Term):
             return hit[1]
         Yr = np.asarray(self.reference(t), float)
         res = self.engine.forward(Yr, np.zeros((len(t), self._tmap.nv)) if 1 in self.engine.required else None, None)
-        P = np.array(res.sites[:, self._idx])
+        P = (np.array(res.sites[:, self._idx]), Yr[:, self._root])
         if len(self._cache) >= _CACHE:
             self._cache.clear()
         self._cache[key] = (np.array(t), P)
         return P
 
     def _diff(self, ctx):
+        """(motion, engine result, site differences (n, k, 3), root differences (n, r) [m])."""
         mo, res = ctx.forward(self.engine, self._tmap)
-        return mo, res, res.sites[:, self._idx] - self._ref(ctx.t)
+        sites, root = self._ref(ctx.t)
+        return mo, res, res.sites[:, self._idx] - sites, ctx.Y[:, self._root] - root
 
     def evaluate_in(self, ctx, grad=True) -> TermEval:
-        """`Term.evaluate_in`: the gradient 2 (p - p_ref) left to the engine's reverse pass."""
+        """`Term.evaluate_in`: the sites' gradient 2 (p - p_ref) left to the engine's reverse pass, the
+        root's 2 (y - y_ref) in dY."""
         if self.reference is None:
             return TermEval(np.zeros(len(ctx.Y)), dY=np.zeros_like(ctx.Y) if grad else None)
-        mo, res, d = self._diff(ctx)
-        f = np.einsum("nki,nki->n", d, d)
+        mo, res, d, e = self._diff(ctx)
+        f = np.einsum("nki,nki->n", d, d) + np.einsum("ni,ni->n", e, e)
         if not grad:
             return TermEval(f)
         g = np.zeros(res.sites.shape)
         g[:, self._idx] = 2.0 * d
-        return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g, None))
+        dY = np.zeros_like(ctx.Y)
+        dY[:, self._root] = 2.0 * e
+        return TermEval(f, dY=dY, deferred=EngineGradient(self.engine, res, mo, None, g, None))
 
     def residual(self, ctx) -> Residual:
-        """r (n, 3 k) [m]: the components of p_k - p_ref,k (f = |r|^2); d r / d p = I per site."""
+        """r (n, 3 k + r) [m]: the components of p_k - p_ref,k, then of the root's y - y_ref
+        (f = |r|^2); d r / d p = I per site, d r / d y = I for the root."""
         Y = ctx.Y
         if self.reference is None:
             return Residual(np.zeros((len(Y), 0)), compact=[], nq=Y.shape[1])
-        mo, res, d = self._diff(ctx)
+        mo, res, d, e = self._diff(ctx)
         n, k = d.shape[:2]
+        m_s, nr = 3 * k, len(self._root)
         idx = np.arange(res.sites.shape[1])[self._idx]
 
         def pull(g):
             gs = np.zeros(res.sites.shape)
-            gs[:, idx] = g.reshape(n, k, 3)
-            return EngineGradient(self.engine, res, mo, None, gs, None).pullback()
+            gs[:, idx] = g[:, :m_s].reshape(n, k, 3)
+            dY, dY1, dY2 = EngineGradient(self.engine, res, mo, None, gs, None).pullback()
+            dY = np.array(dY)
+            dY[:, self._root] += g[:, m_s:]
+            return dY, dY1, dY2
 
-        dp = np.zeros((n, 3 * k, 3))
-        dp[:, np.arange(3 * k), np.tile(np.arange(3), k)] = 1.0
+        r = np.concatenate([d.reshape(n, m_s), e], axis=1)
+        dp = np.zeros((n, m_s, 3))
+        dp[:, np.arange(m_s), np.tile(np.arange(3), k)] = 1.0
         rows = SiteRows(ctx, self.engine, res, np.repeat(idx, 3), dp=dp)
-        return Residual(d.reshape(n, 3 * k), pull=pull, sites=rows)
+        if not supports(self.engine):
+            return Residual(r, pull=pull)
+        root = (m_s + np.arange(nr), self._root, (np.broadcast_to(np.eye(nr), (n, nr, nr)).copy(), None, None))
+        return Residual(r, pull=pull, compact=rows.blocks(Y.shape[1]) + [root], nq=Y.shape[1])
