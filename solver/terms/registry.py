@@ -211,7 +211,8 @@ def _near(b: TermBuild):
     objective made without keyframes) gets a term without a reference, which is zero."""
     from solver.terms.near import NearPlain, reference_length
 
-    return NearPlain(b.layout, None if b.plain is None else b.plain.path, b.t_span, length=reference_length(b.figure))
+    return NearPlain(b.layout, None if b.plain is None else b.plain.path, b.t_span, length=reference_length(b.figure),
+                     renormalize_like="planted" if len(b.contacts) else None)
 
 
 def _near_sites(b: TermBuild):
