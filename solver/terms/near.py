@@ -23,6 +23,15 @@ measures it, in radians and metres):
   standing height, about the leg's: a hip rotation of delta rad moves the foot by about length x
   delta, a root translation by dp moves it by dp, so both are priced by how far they move the feet);
   hinge joints in radians.
+
+With a contact schedule the term is priced like the planted term (`renormalize_like="planted"`,
+`Objective.renormalize`): each residual is multiplied by `length` instead of 1/sqrt(T), so a rotation of
+delta rad costs what moving a point `length` x delta away for as long costs in the planted term's
+currency (m^2 s over planted's plain-spline integral, eq. 7), and the root's translation is in metres.
+The constraint terms are renormalized by their plain-spline values, which are tiny where the plain
+spline through a capture's keys nearly meets them; an absolute weight per rad^2 was then hundreds of
+times cheaper than a millimetre of their violation, and the optimizer turned the pelvis and hips by
+10-15 degrees to buy one (docs/corpus.md "Near the plain spline").
 """
 from __future__ import annotations
 
@@ -59,6 +68,8 @@ class NearPlain(Term):
             reference path (e.g. `FrameSet.path` of the plain spline), or None: no reference, the term
             is zero (an objective built without keyframes, `figure_objective` without `plain`). t_span: (t0, t1) [s], T = t1 - t0.
         length: [m] > 0, the root translation's length scale (`reference_length`).
+        renormalize_like: None (f averaged over the clip, weight per rad^2), or the name of the term
+            whose eq. 7 scale this one takes (then r is multiplied by `length`, f in m^2; module docstring).
     Raises:
         InputError: a length that is not > 0, an empty interval.
     """

@@ -10,13 +10,13 @@ violation, while a whole-body shift of 16 cm that moves the swing foot 40 cm for
 irreducible there) with such shifts, 20-86 cm of swing-foot error where the plain spline had 1-7 cm.
 
 `NearSites` (name "near_sites", m^2) measures the departure where those terms act and where the
-site-error metric looks: the contact sites' positions,
+site-error metric looks: the contact sites' positions, and the root's,
 
-    f(t) = sum over the contact sites k of |p_k(t) - p_ref,k(t)|^2,
+    f(t) = sum over the contact sites k of |p_k(t) - p_ref,k(t)|^2 + |y(t) - y_ref(t)|^2,
 
 p_k the site's world position [m] on the path, p_ref,k on the reference path (the plain spline) at the
-same instant. It is zero on the plain spline, so eq. 7 cannot scale it by its own value; it is scaled
-by the planted term's plain-spline integral instead (`renormalize_like`, `Objective.renormalize`), so
+same instant, y the root's position [m] (a free root's first three qpos). It is zero on the plain
+spline, so eq. 7 cannot scale it by its own value; it is scaled by the planted term's plain-spline integral instead (`renormalize_like`, `Objective.renormalize`), so
 that a square metre-second of site departure and one of planted violation are in the same currency
 whatever the clip and keying: at weight 1 against planted 10, a site moved by d for a while costs a
 tenth of a site held d off its plant for as long. A correction the constraints ask for moves a site by
@@ -45,7 +45,8 @@ _CACHE = 16
 
 
 class NearSites(Term):
-    """f(t) = sum_k |p_k(t) - p_ref,k(t)|^2 [m^2] over the contact sites (module docstring).
+    """f(t) = sum_k |p_k(t) - p_ref,k(t)|^2 + |y(t) - y_ref(t)|^2 [m^2] over the contact sites and the
+    root's position (module docstring).
 
     Args:
         model: MjModel of the scene (the figure with its contact sites).

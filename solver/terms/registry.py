@@ -38,9 +38,11 @@ from solver.terms.base import Term
 #: (run-and-step; 35_17 keyed every 0.25 s): at 1000 both end within both bounds after one or two boosts;
 #: at 10^4 and 10^5 run-and-step also needed boosts of penetration and clearance, and more evaluations.
 FORCES_WEIGHT = 1000.0
-#: near: the departure from the plain spline (`solver.terms.near`), zero on the plain spline so not
-#: renormalized; its weight prices one rad^2 of mean squared departure summed over the joints
-#: (docs/corpus.md "Near the plain spline": chosen on the tuning clips).
+#: near: the departure from the plain spline (`solver.terms.near`), zero on the plain spline; without a
+#: contact schedule its weight prices one rad^2 of mean squared departure summed over the joints, with one
+#: it and near_sites (`solver.terms.near_sites`) take the planted term's eq. 7 scale, so weight 1 prices a
+#: departure at a tenth of an equal planted violation (docs/corpus.md "Near the plain spline": chosen on
+#: the tuning clips).
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
                    "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0, "near": 1.0, "near_sites": 1.0,
                    "forces": FORCES_WEIGHT}

@@ -10,9 +10,9 @@ from solver.inverse_dynamics import InverseDynamics
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.problem import (
     CONTACT_TERMS_BY_DEFAULT,
+    DEFAULT_CONTACT_TERMS,
     DEFAULT_TERMS,
     default_limits,
-    DEFAULT_CONTACT_TERMS,
     figure_objective,
     keyframe_conflicts,
     parse_terms,
