@@ -16,14 +16,14 @@ site-error metric looks: the contact sites' positions, and the root's,
 
 p_k the site's world position [m] on the path, p_ref,k on the reference path (the plain spline) at the
 same instant, y the root's position [m] (a free root's first three qpos). It is zero on the plain
-spline, so eq. 7 cannot scale it by its own value; it is scaled by the planted term's plain-spline integral instead (`renormalize_like`, `Objective.renormalize`), so
-that a square metre-second of site departure and one of planted violation are in the same currency
-whatever the clip and keying: at weight 1 against planted 10, a site moved by d for a while costs a
-tenth of a site held d off its plant for as long. A correction the constraints ask for moves a site by
-millimetres (a toe 3 mm inside the floor, a heel sliding 1-2 cm) and still pays tenfold; a shift of
-decimetres costs hundreds of times what it buys. A proximal (Tikhonov) term in the space of the
-constrained points (Nocedal & Wright, Numerical Optimization, 2nd ed., sec. 10.3; Parikh & Boyd,
-Proximal Algorithms, 2014, sec. 1.1).
+spline, so eq. 7 cannot scale it by its own value; it is scaled by the planted term's plain-spline
+integral instead (`renormalize_like`, `Objective.renormalize`), so that a square metre-second of site
+departure and one of planted violation are in the same currency whatever the clip and keying: at weight
+1 against planted 10, a site moved by d for a while costs a tenth of a site held d off its plant for as
+long. A correction the constraints ask for moves a site by millimetres (a toe 3 mm inside the floor, a
+heel sliding 1-2 cm) and still pays tenfold; a shift of decimetres costs hundreds of times what it buys.
+A proximal (Tikhonov) term in the space of the constrained points (Nocedal & Wright, Numerical
+Optimization, 2nd ed., sec. 10.3; Parikh & Boyd, Proximal Algorithms, 2014, sec. 1.1).
 
 Site positions and their reverse pass come from the engine shared with the contact terms
 (`solver.path_context`), exact, no finite differences.
