@@ -353,6 +353,8 @@ class Objective:
         Call once on the initial (plain spline) path and keep the scales through subdivision, so the
         objective stays the same function. Terms that are zero there keep scale 1, and so do terms
         whose weight is absolute (a term's `renormalized` False: a bound, zero there up to rounding).
+        A term with `renormalize_like` naming another term of the objective takes that term's scale
+        (`solver.terms.near_sites`: a departure priced in the planted term's currency).
 
         Returns:
             {term name: scale}.
@@ -360,4 +362,8 @@ class Objective:
         ints = self.evaluate(knots, P, grad=False).integrals
         self.scales = np.array([ints[n] if ints[n] > RENORMALIZE_FLOOR and getattr(term, "renormalized", True)
                                 else 1.0 for n, term in zip(self.names, self.terms)])
+        for i, term in enumerate(self.terms):  # a term zero on the plain spline may borrow another's scale
+            like = getattr(term, "renormalize_like", None)
+            if like in self.names:
+                self.scales[i] = self.scales[self.names.index(like)]
         return dict(zip(self.names, self.scales.tolist()))

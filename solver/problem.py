@@ -43,9 +43,10 @@ DEFAULT_TERMS = ("penetration", "unit", "bending", "smooth", "hinge", "rom", "ne
 #: registrations in `solver.terms.registry` (a registered term's own: its `TermSpec.default_weight`).
 
 #: The contact terms: they need a contact schedule. planted and clearance join the defaults when one is
-#: known; cone (inverse dynamics) joins "all".
+#: known, with near_sites (the contact sites near the plain spline's, `solver.terms.near_sites`); cone
+#: (inverse dynamics) joins "all".
 CONTACT_TERMS = ("planted", "clearance", "cone")
-DEFAULT_CONTACT_TERMS = ("planted", "clearance")
+DEFAULT_CONTACT_TERMS = ("planted", "clearance", "near_sites")
 
 #: Penalty-continuation bounds (`SolveOptions.limits`), in each term's `violation` unit, set inside the
 #: acceptance bounds (penetration <= 1 mm, hyperextension <= 2 deg, |1 - |q|| <= 5 %) with headroom.
@@ -226,6 +227,8 @@ def keyframe_conflicts(objective: Objective, times, qpos, path=None) -> Schedule
     for term in objective.terms:
         if term.name == "planted":
             out = out.merged(term.conflicts(times, qpos)).merged(term.slides(times, qpos))
+            if path is not None:
+                out = out.merged(term.held(times, qpos, path))
         if term.name == "clearance":
             out = out.merged(_clearance_conflicts(term, times, qpos, path))
     return out

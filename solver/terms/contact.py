@@ -190,12 +190,19 @@ class Planted(Term):
     def _both(self, t: np.ndarray):
         return last_for_times(self, "_window_cache", t, self._windows)
 
+    def _span(self, c) -> tuple[float, float]:
+        """[s] the part of contact c the term pulls: the contact, or the part a keyframe leaves to it
+        (`held`; empty when lo >= hi)."""
+        return self.excusals.held.get(c, (float(c.start), float(c.end)))
+
     def _windows(self, t: np.ndarray):
         if not self.contacts:
             return np.zeros((len(t), 0)), np.zeros((len(t), 0))
         # heights: the closed contact [start, end] (ramp 0); sliding: smoothstep ramps inside it
-        S = np.stack([contact_window(t, float(c.start), float(c.end), 0.0) for c in self.contacts], 1)
-        W = np.stack([contact_window(t, float(c.start), float(c.end), self.ramp) for c in self.contacts], 1)
+        spans = [self._span(c) for c in self.contacts]
+        zero = np.zeros(len(t))
+        S = np.stack([contact_window(t, a, b, 0.0) if b > a else zero for a, b in spans], 1)
+        W = np.stack([contact_window(t, a, b, self.ramp) if b > a else zero for a, b in spans], 1)
         return S, W
 
     def _parts(self, p, v, S, rows):
@@ -383,6 +390,50 @@ class Planted(Term):
                 found.append(("planted", int(i), contact.site, float(h[i] - self._h0[c])))
                 excused.add(contact)
         return ScheduleConflicts(found, planted=excused)
+
+    def held(self, times, qpos, path, tolerance: float = KEYFRAME_TOLERANCE, rate: float = 480.0) -> ScheduleConflicts:
+        """The part of each contact the keyframes leave to the term: where a keyframe inside a contact
+        holds its site more than `tolerance` above or below the plant height (`conflicts`), the site is
+        on its way up there (when the path through the keyframes rests longer before it than after it
+        within the contact) or down (otherwise) - a heel
+        rising through heel-off while its toe still pushes, which contact detection keeps in the contact
+        up to 5 cm. The pull then stops where the path through the keyframes (the plain spline) leaves
+        the tolerance on the way to that keyframe: pulling the site down right beside a keyframe that
+        holds it up cannot succeed, and the optimizer paid for the attempt by turning the pelvis and
+        legs elsewhere (docs/contacts.md "The contact terms"). A query: the term is not changed.
+
+        Args:
+            times: (k,) keyframe times [s]. qpos: (k, nq) keyframe poses. path: callable t (n,) ->
+                (n, nq), the plain spline. tolerance: [m]. rate: [1/s] samples of the path per second.
+        Returns:
+            ScheduleConflicts: held = {contact: (lo, hi) [s]} for the contacts a keyframe contradicts
+            (lo >= hi: nothing of the contact is left to the term).
+        """
+        S, p = self._at_keyframes(times, qpos)
+        held = {}
+        times = np.asarray(times, float)
+        for c, contact in enumerate(self.contacts):
+            keys = np.flatnonzero(S[:, c])
+            if not len(keys):
+                continue
+            h, _ = self.support.height(p[keys, self._col[c]], self._surf[c])
+            off = keys[np.abs(h - self._h0[c]) > tolerance]
+            if not len(off):
+                continue
+            a, b = float(contact.start), float(contact.end)
+            ts = np.linspace(a, b, max(3, int(np.ceil((b - a) * rate)) + 1))
+            hs, _ = self.support.height(self.kin.positions(np.asarray(path(ts), float))[:, self._col[c]], self._surf[c])
+            ok = np.abs(hs - self._h0[c]) <= tolerance
+            lo, hi = a, b
+            for k in off:
+                tk = float(times[k])
+                before, after = ts[(ts < tk) & ok], ts[(ts > tk) & ok]
+                if len(before) >= len(after):  # on its way up: the pull ends where the path last rests
+                    hi = min(hi, float(before.max()) if len(before) else a)
+                else:  # on its way down: it starts where the path first rests after the keyframe
+                    lo = max(lo, float(after.min()))
+            held[contact] = (lo, hi)
+        return ScheduleConflicts(held=held)
 
     def slides(self, times, qpos, tolerance: float = KEYFRAME_TOLERANCE) -> ScheduleConflicts:
         """Keyframes that make a planted site slide: two keyframes in one contact (its closed interval

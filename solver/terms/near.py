@@ -23,6 +23,15 @@ measures it, in radians and metres):
   standing height, about the leg's: a hip rotation of delta rad moves the foot by about length x
   delta, a root translation by dp moves it by dp, so both are priced by how far they move the feet);
   hinge joints in radians.
+
+With a contact schedule the term is priced like the planted term (`renormalize_like="planted"`,
+`Objective.renormalize`): each residual is multiplied by `length` instead of 1/sqrt(T), so a rotation of
+delta rad costs what moving a point `length` x delta away for as long costs in the planted term's
+currency (m^2 s over planted's plain-spline integral, eq. 7), and the root's translation is in metres.
+The constraint terms are renormalized by their plain-spline values, which are tiny where the plain
+spline through a capture's keys nearly meets them; an absolute weight per rad^2 was then hundreds of
+times cheaper than a millimetre of their violation, and the optimizer turned the pelvis and hips by
+10-15 degrees to buy one (docs/corpus.md "Near the plain spline").
 """
 from __future__ import annotations
 
@@ -59,6 +68,8 @@ class NearPlain(Term):
             reference path (e.g. `FrameSet.path` of the plain spline), or None: no reference, the term
             is zero (an objective built without keyframes, `figure_objective` without `plain`). t_span: (t0, t1) [s], T = t1 - t0.
         length: [m] > 0, the root translation's length scale (`reference_length`).
+        renormalize_like: None (f averaged over the clip, weight per rad^2), or the name of the term
+            whose eq. 7 scale this one takes (then r is multiplied by `length`, f in m^2; module docstring).
     Raises:
         InputError: a length that is not > 0, an empty interval.
     """
@@ -68,13 +79,17 @@ class NearPlain(Term):
     needs = (0,)
     pointwise = True
 
-    def __init__(self, layout, reference, t_span, length: float = 0.85):
+    def __init__(self, layout, reference, t_span, length: float = 0.85, renormalize_like: str | None = None):
         T = float(t_span[1]) - float(t_span[0])
         if not (np.isfinite(length) and length > 0):
             raise InputError(f"near term: length {length} m; it must be > 0 (e.g. half the figure's height)")
         if not (np.isfinite(T) and T > 0):
             raise InputError(f"near term: the keyframe interval {t_span} s is empty")
         self.reference, self.length, self.T = reference, float(length), T
+        self.renormalize_like = renormalize_like
+        #: residual factor: 1/sqrt(T) (the mean over the clip, absolute weight) or, priced like another
+        #: term, `length` (a rotation of delta rad costs as a site moved length x delta for as long)
+        self._c = 1.0 / np.sqrt(T) if renormalize_like is None else self.length
         self.slots = np.asarray(layout.quat_slots, int).reshape(-1, 4)
         lin, scale = [], []
         for j in layout.joints:
@@ -106,7 +121,7 @@ class NearPlain(Term):
         (n, s, 4), |q| (n, s, 1), the reference's unit quaternion p (n, s, 4), the factor k (n, s) =
         2 s / sqrt(T) and the slot's residual rows k vec(conj(p) u) (n, s, 3)."""
         Yr = self._ref(t)
-        c = 1.0 / np.sqrt(self.T)
+        c = self._c
         r_lin = c * (Y[:, self.linear] - Yr[:, self.linear]) * self.scale
         q, p = Y[:, self.slots], Yr[:, self.slots]
         norm = np.linalg.norm(q, axis=-1, keepdims=True)
@@ -125,7 +140,7 @@ class NearPlain(Term):
             return TermEval(f)
         dY = np.zeros_like(Y)
         nl = len(self.linear)
-        dY[:, self.linear] = 2.0 * r[:, :nl] * (self.scale / np.sqrt(self.T))
+        dY[:, self.linear] = 2.0 * r[:, :nl] * (self.scale * self._c)
         if len(self.slots):  # 2 r^T G (I - u u^T) / |q| with G = k G(p), r = G u; G(p)^T v = p (0, v)
             rG = k[..., None] * mul(p, np.concatenate([np.zeros(Gu.shape[:-1] + (1,)), Gu], axis=-1))
             rr = np.einsum("nsi,nsi->ns", Gu, Gu)
@@ -142,7 +157,7 @@ class NearPlain(Term):
         r, u, norm, p, k, Gu = self._parts(ctx.t, Y)
         G = k[..., None, None] * vec_of_conj_product(p)  # (n, s, 3, 4)
         n, nl = len(Y), len(self.linear)
-        c = self.scale / np.sqrt(self.T)
+        c = self.scale * self._c
         groups = [(np.array([i]), np.array([k]), (np.full((n, 1, 1), c[i]), None, None))
                   for i, k in enumerate(self.linear)]
         J = (G - Gu[..., :, None] * u[..., None, :]) / norm[..., None]  # G(p) (I - u u^T) / |q|

@@ -38,11 +38,13 @@ from solver.terms.base import Term
 #: (run-and-step; 35_17 keyed every 0.25 s): at 1000 both end within both bounds after one or two boosts;
 #: at 10^4 and 10^5 run-and-step also needed boosts of penetration and clearance, and more evaluations.
 FORCES_WEIGHT = 1000.0
-#: near: the departure from the plain spline (`solver.terms.near`), zero on the plain spline so not
-#: renormalized; its weight prices one rad^2 of mean squared departure summed over the joints
-#: (docs/corpus.md "Near the plain spline": chosen on the tuning clips).
+#: near: the departure from the plain spline (`solver.terms.near`), zero on the plain spline; without a
+#: contact schedule its weight prices one rad^2 of mean squared departure summed over the joints, with one
+#: it and near_sites (`solver.terms.near_sites`) take the planted term's eq. 7 scale, so weight 1 prices a
+#: departure at a tenth of an equal planted violation (docs/corpus.md "Near the plain spline": chosen on
+#: the tuning clips).
 DEFAULT_WEIGHTS = {"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "torque": 1.0, "root": 1.0,
-                   "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0, "near": 1.0,
+                   "planted": 10.0, "clearance": 10.0, "cone": 1.0, "hinge": 100.0, "rom": 100.0, "near": 1.0, "near_sites": 1.0,
                    "forces": FORCES_WEIGHT}
 #: Penalty-continuation bounds of the anatomical terms [rad] (their `TermSpec.limit`): rotation off the
 #: hinge beyond the allowance (acceptance: the capture's + 3 deg; the allowance is 2 deg) and angle
@@ -213,7 +215,16 @@ def _near(b: TermBuild):
     objective made without keyframes) gets a term without a reference, which is zero."""
     from solver.terms.near import NearPlain, reference_length
 
-    return NearPlain(b.layout, None if b.plain is None else b.plain.path, b.t_span, length=reference_length(b.figure))
+    return NearPlain(b.layout, None if b.plain is None else b.plain.path, b.t_span, length=reference_length(b.figure),
+                     renormalize_like="planted" if len(b.contacts) else None)
+
+
+def _near_sites(b: TermBuild):
+    """The near_sites term (`solver.terms.near_sites.NearSites`): the contact sites toward the plain
+    spline `b.plain`'s, on the engine shared with the contact terms, scaled like planted (eq. 7)."""
+    from solver.terms.near_sites import NearSites
+
+    return NearSites(b.model, None if b.plain is None else b.plain.path, engine=b.engine)
 
 
 def _register_builtins() -> None:
@@ -258,6 +269,7 @@ def _register_builtins() -> None:
     register_term("clearance", lambda b: Clearance(b.model, b.contacts, t_span=b.t_span, engine=b.engine,
                                                    conflicts=b.conflicts, airborne=b.airborne),
                   w["clearance"], contacts=True, default=True)
+    register_term("near_sites", _near_sites, w["near_sites"], contacts=True, default=True)
     register_term("cone", lambda b: FrictionCone(b.model, b.contacts, engine=b.engine, t_span=b.t_span),
                   w["cone"], contacts=True, forces=True)
 

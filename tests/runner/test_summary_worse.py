@@ -280,15 +280,15 @@ def test_the_motion_metrics_table_has_a_worse_column():
 
 
 def test_every_term_targets_rows_the_summary_prints():
-    """The target column is complete: every registered term but smooth and near (whose rows are their
-    own integrals; near's is the departure from the plain spline) names the rows it penalizes,
+    """The target column is complete: every registered term but smooth, near and near_sites (whose rows
+    are their own integrals; near's and near_sites' are the departure from the plain spline) names the rows it penalizes,
     and each of those rows is printed with that term as its target."""
     from runner.console import TERM_ROWS
     from runner.run import contact_summary_rows
     from solver.terms.registry import registered_terms
 
     names = [t.name for t in registered_terms()]
-    assert set(names) - {"smooth", "near"} <= set(TERM_ROWS), "a term without summary rows: add it to TERM_ROWS"
+    assert set(names) - {"smooth", "near", "near_sites"} <= set(TERM_ROWS), "a term without summary rows: add it to TERM_ROWS"
     weights = dict.fromkeys(names, 1.0)
     sol = solution()
     sol.integrals_initial.update(dict.fromkeys(names, 1.0))

@@ -10,6 +10,7 @@ from solver.inverse_dynamics import InverseDynamics
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.problem import (
     CONTACT_TERMS_BY_DEFAULT,
+    DEFAULT_CONTACT_TERMS,
     DEFAULT_TERMS,
     default_limits,
     figure_objective,
@@ -32,7 +33,8 @@ def test_contact_terms_are_on_by_default_with_a_schedule_and_can_be_switched_off
     assert CONTACT_TERMS_BY_DEFAULT
     assert {"planted", "clearance", "cone"} <= set(term_names())
     assert tuple(parse_terms(None)) == DEFAULT_TERMS
-    assert tuple(parse_terms(None, contacts=SCHEDULE)) == (*DEFAULT_TERMS, "planted", "clearance")
+    assert tuple(parse_terms(None, contacts=SCHEDULE)) == (*DEFAULT_TERMS, *DEFAULT_CONTACT_TERMS)
+    assert DEFAULT_CONTACT_TERMS == ("planted", "clearance", "near_sites")
     assert not {"planted", "clearance", "cone"} & set(parse_terms("all"))
     assert {"planted", "clearance", "cone"} <= set(parse_terms("all", contacts=SCHEDULE))
     assert tuple(parse_terms(",".join(DEFAULT_TERMS), contacts=SCHEDULE)) == DEFAULT_TERMS  # --terms: off

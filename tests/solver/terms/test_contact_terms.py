@@ -518,3 +518,33 @@ def test_a_boosted_planted_term_keeps_its_excused_contacts_weight(toy_model, lay
     r = boosted.residual(ctx).r
     np.testing.assert_allclose((r * r).sum(axis=1), f_measured + f_held / 10.0, rtol=1e-10, atol=1e-15)
     assert Planted(toy_model, [measured, held]).for_boost(10.0).gain.tolist() == [1.0, 1.0]  # nothing excused
+
+
+def test_a_keyframe_holding_a_site_up_ends_its_contacts_pull_where_the_path_last_rests(toy_model, layout):
+    """A toe in contact from 0.2 to 0.8 s whose path rests at the plant height until 0.6 s and then
+    rises 3 cm by 0.8 s, where a keyframe holds it (28 mm off, over the 10 mm tolerance): the pull
+    ends where the path last rests within 10 mm, 0.6 + 0.2/3 s (to the 1/480 s sampling); the mirror
+    case (a keyframe at the start holding it up, the path coming down by 0.4 s) starts it there. A
+    keyframe within the tolerance changes nothing, and the term built with what was found has no
+    height window after the end it was given."""
+    h0 = 0.002
+    contact = Contact("l_toe", 0.2, 0.8)
+    term = Planted(toy_model, [contact], rest_height=h0)
+
+    def path(rise):
+        return lambda t: standing(layout, len(t)) + np.outer(h0 + rise(np.asarray(t)), np.eye(layout.nq)[2])
+
+    up_late = path(lambda t: 0.03 * np.clip((t - 0.6) / 0.2, 0, 1))
+    got = term.held(np.array([0.2, 0.8]), up_late(np.array([0.2, 0.8])), up_late)
+    lo, hi = got.held[term.contacts[0]]
+    assert lo == pytest.approx(0.2) and hi == pytest.approx(0.6 + 0.2 / 3, abs=1 / 480)
+    built = Planted(toy_model, [contact], rest_height=h0, conflicts=got)
+    t = np.array([0.3, 0.65, 0.7, 0.75])
+    np.testing.assert_array_equal(built.height_windows(t)[:, 0], [1, 1, 0, 0])
+
+    down_early = path(lambda t: 0.03 * np.clip((0.4 - t) / 0.2, 0, 1))
+    lo, hi = term.held(np.array([0.2, 0.8]), down_early(np.array([0.2, 0.8])), down_early).held[term.contacts[0]]
+    assert lo == pytest.approx(0.4 - 0.2 / 3, abs=1 / 480) and hi == pytest.approx(0.8)
+
+    small = path(lambda t: 0.008 * np.clip((t - 0.6) / 0.2, 0, 1))
+    assert not term.held(np.array([0.2, 0.8]), small(np.array([0.2, 0.8])), small).held

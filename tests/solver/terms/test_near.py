@@ -89,6 +89,26 @@ def test_gradient_and_residual_jacobian_match_central_differences(toy_model):
     np.testing.assert_allclose(res.jvp(D), dr, atol=1e-6 * np.abs(dr).max())
 
 
+def test_priced_like_another_term_a_rotation_costs_as_the_length_it_moves(toy_model):
+    """With `renormalize_like`, f is not averaged over the clip: a knee 20 degrees off and the root 6 cm
+    away give f = (L 2 sin 10 deg)^2 + 0.06^2 [m^2] at every instant, so that the integral is in the
+    borrowed term's units (m^2 s); the gradient still matches central differences."""
+    layout = StateLayout.from_model(toy_model)
+    ref = np.array(toy_model.qpos0, float)
+    Y0 = ref.copy()
+    Y0[:3] += [0.0, 0.06, 0.0]
+    Y0[layout.joint("l_knee").quat_index] = _wxyz(Rotation.from_euler("y", 20, degrees=True))
+    L = 0.8
+    term = NearPlain(layout, _constant(ref), (0.0, 2.0), length=L, renormalize_like="planted")
+    assert term.renormalize_like == "planted"
+    t = np.linspace(0.0, 2.0, 5)
+    Y = np.repeat(Y0[None], len(t), axis=0)
+    ev = term.evaluate(t, Y, None, None)
+    np.testing.assert_allclose(ev.f, (L * 2 * np.sin(np.radians(10))) ** 2 + 0.06 ** 2, rtol=1e-12)
+    fd = fd_gradient(lambda Z: term.evaluate(t, Z, None, None, grad=False).f.sum(), Y)
+    np.testing.assert_allclose(ev.dY, fd, atol=1e-6 * np.abs(fd).max())
+
+
 def test_reference_length_is_half_the_standing_height():
     class Fig:
         standing_height = 1.7
