@@ -85,7 +85,9 @@ class NearSites(Term):
         if hit is not None and np.array_equal(hit[0], t):
             return hit[1]
         Yr = np.asarray(self.reference(t), float)
-        res = self.engine.forward(Yr, np.zeros((len(t), self._tmap.nv)) if 1 in self.engine.required else None, None)
+        still = np.zeros((len(t), self._tmap.nv))  # positions only: velocities and accelerations do not move sites
+        req = self.engine.required
+        res = self.engine.forward(Yr, still if 1 in req else None, still if 2 in req else None)
         P = (np.array(res.sites[:, self._idx]), Yr[:, self._root])
         if len(self._cache) >= _CACHE:
             self._cache.clear()
