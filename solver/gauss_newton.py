@@ -36,16 +36,15 @@ TAU = 1e-3
 #: Damping beyond which a failed step means no descent is left at rounding level.
 MU_MAX = 1e16
 MIN_FACTOR = 1.0 / 3.0
-#: After an accepted step whose gain ratio is between LAG_GAIN and LAG_MAX_GAIN, the next step keeps
-#: J^T J and takes the exact gradient of the trial evaluation (at most MAX_LAG steps in a row; module
-#: docstring). A gain well above 1 says the kept model's curvature is too high (hinge rows it keeps on
-#: have switched off): its next steps are short.
-LAG_GAIN = 0.5
-LAG_MAX_GAIN = 1.5
-#: A step of the kept J^T J is evaluated only if its model predicts at least this fraction of the last
-#: step's decrease (a Jacobian costs about 10 evaluations; where the last step reached the kept model's
-#: minimum, its next steps predict 1e-2 to 1e-6 of that step's decrease).
-LAG_MIN_PREDICTION = 0.1
+#: After an accepted step whose gain ratio is at least LAG_GAIN, the next step keeps J^T J and takes the
+#: exact gradient of the trial evaluation (at most MAX_LAG steps in a row; module docstring), if its
+#: model predicts a decrease of at least LAG_MIN_PREDICTION of the last fresh Jacobian's step (a
+#: Jacobian costs 10-20 evaluations) and of at least the round's tolerance.
+LAG_GAIN = 0.25
+MAX_LAG = 20
+LAG_MIN_PREDICTION = 0.05
+#: Secant pairs of the last accepted steps that correct the Gauss-Newton model (`secant_solve`); 0: none.
+SECANT_PAIRS = 5
 MAX_LAG = 4
 #: After a failed step the damping is raised until the step is at most this fraction of the failed one's
 #: length (in the scaled norm |D^1/2 h|) before E is evaluated again: the trust-region reduction of
@@ -135,7 +134,19 @@ class _State:
     def __init__(self, x, F, ne, tail):
         self.x, self.F, self.ne, self.tail = x, F, ne, tail
         self.mu, self.nu, self.lag, self.failed, self.improvements = TAU, 2.0, 0, math.inf, 0
-        self.last_decrease = 0.0  # of the last accepted step
+        self.fresh_decrease = 0.0  # of the last accepted step taken with a fresh Jacobian
+        self.grad = ne.g  # J^T rho at x (exact: from the Jacobian or the trial evaluation)
+        self.pairs: list = []  # secant pairs (step, change of J^T rho), oldest first
+
+    def secant(self, h, g_old, g_new):
+        """Keep the pair (h, g_new - g_old) of an accepted step if its curvature is positive (at most
+        SECANT_PAIRS); g_new None (no gradient) keeps nothing."""
+        if g_new is None or not SECANT_PAIRS:
+            return
+        y = g_new - g_old
+        if y @ h > 1e-12 * np.sqrt((y @ y) * (h @ h)):
+            self.pairs = [*self.pairs, (h, y)][-SECANT_PAIRS:]
+        self.grad = g_new
         self.budget = lambda: None  # (status, message) once a budget is spent or a stop requested
 
     def raise_damping(self):
@@ -148,7 +159,7 @@ def _iterate(run, st):
     """One damped step of `levenberg_marquardt` from `st` (updated in place). Returns None to go on,
     or (status, message) to stop."""
     h, pred = run.step(st.ne, st.mu)
-    if st.lag and (h is None or not LAG_MIN_PREDICTION * st.last_decrease <= pred < st.F):
+    if st.lag and (h is None or not max(LAG_MIN_PREDICTION * st.fresh_decrease, st.tail.tol * st.F) <= pred < st.F):
         return _refresh(run, st)  # the kept model is no least-squares model here, or it predicts little
     length = st.ne.scaled_norm(h) if h is not None else math.inf
     if h is None or not pred > 0 or length > SHRINK * st.failed:  # not solvable, or not yet shorter
@@ -157,6 +168,7 @@ def _iterate(run, st):
     if np.linalg.norm(dx) <= 1e-12 * (np.linalg.norm(st.x) + 1e-12):
         return Status.CONVERGED, "converged (step below rounding)"
     F_new, g_new = run.trial(st.x + dx)
+    grad_old = st.grad
     gain = (st.F - F_new) / pred if math.isfinite(F_new) else -math.inf
     run.note(F=st.F, F_new=F_new, pred=pred, mu=st.mu, gain=gain, lag=st.lag)
     if not gain > 0:
@@ -164,10 +176,14 @@ def _iterate(run, st):
             return _refresh(run, st)
         st.failed = length
         return (Status.CONVERGED, "converged (no decrease left at this damping)") if st.raise_damping() else None
-    st.x, st.F, st.improvements, st.failed, st.last_decrease = st.x + dx, F_new, st.improvements + 1, math.inf, st.F - F_new
+    if not st.lag:
+        st.fresh_decrease = st.F - F_new
+    st.x, st.F, st.improvements, st.failed = st.x + dx, F_new, st.improvements + 1, math.inf
+    st.secant(h, grad_old, g_new)
     st.mu, st.nu = st.mu * max(MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3), 2.0
-    if LAG_GAIN <= gain <= LAG_MAX_GAIN and st.lag < MAX_LAG:
+    if gain >= LAG_GAIN and st.lag < MAX_LAG:
         st.ne, st.lag = st.ne.lagged(h, g_new, F_new), st.lag + 1
+        st.ne.pairs = tuple(st.pairs)
         return None
     return _refresh(run, st)
 
@@ -184,6 +200,7 @@ def _refresh(run, st):
     st.ne, st.lag = run.jacobian(st.x), 0
     if not (math.isfinite(st.ne.E) and np.all(np.isfinite(st.ne.g))):
         return Status.NONFINITE, "the residuals' Jacobian is not finite"
+    st.grad, st.ne.pairs = st.ne.g, tuple(st.pairs)
     st.tail.jacobian(st.F)
     return None
 
