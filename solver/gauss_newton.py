@@ -135,6 +135,7 @@ class _State:
         self.x, self.F, self.ne, self.tail = x, F, ne, tail
         self.mu, self.nu, self.lag, self.failed, self.improvements = TAU, 2.0, 0, math.inf, 0
         self.fresh_decrease = 0.0  # of the last accepted step taken with a fresh Jacobian
+        self.budget = lambda: None  # (status, message) once a budget is spent or a stop requested
         self.grad = ne.g  # J^T rho at x (exact: from the Jacobian or the trial evaluation)
         self.pairs: list = []  # secant pairs (step, change of J^T rho), oldest first
 
@@ -147,7 +148,6 @@ class _State:
         if y @ h > 1e-12 * np.sqrt((y @ y) * (h @ h)):
             self.pairs = [*self.pairs, (h, y)][-SECANT_PAIRS:]
         self.grad = g_new
-        self.budget = lambda: None  # (status, message) once a budget is spent or a stop requested
 
     def raise_damping(self):
         """mu *= nu, nu *= 2 (Madsen et al. algorithm 3.16); True if mu passed MU_MAX."""
