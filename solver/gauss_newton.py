@@ -9,11 +9,19 @@ E at the step (value only) and compares the actual decrease with the model's, th
 rho_g = (E(x) - E(x + h)) / (L(0) - L(h)). The damping update is Nielsen's (Madsen, Nielsen & Tingleff,
 "Methods for non-linear least squares problems", 2nd ed. 2004, sec. 3.2, eq. 3.15 and algorithm
 3.16): on a decrease mu *= max(1/3, 1 - (2 rho_g - 1)^3) and nu = 2; otherwise mu *= nu, nu *= 2.
-A step that makes E non-finite counts as a failed step. Stopping (Madsen et al. sec. 3.2 eq. 3.16
-and Nocedal & Wright sec. 10.3 use the same tests): an accepted step that lowered E by at most
-`ftol_rel` of E (the relative-decrease test nlopt's L-BFGS uses, so `--ftol` means the same for both
-back ends), a step shorter than 1e-12 of |x|, damping grown past 1e16 without a decrease (no
-descent left at rounding level), the evaluation or time budget, or a stop request.
+A step that makes E non-finite counts as a failed step.
+
+Kept Jacobians and secant pairs: after an accepted step with gain ratio >= LAG_GAIN the next step keeps
+J^T J and takes the exact gradient of the trial evaluation, while its model predicts enough (LAG_...);
+every accepted step's (step, change of the exact gradient) pair corrects the model by limited-memory
+BFGS seeded with (J^T J + mu D)^-1 (`solver.least_squares.secant_solve`; Madsen et al. sec. 3.5, the
+hybrid for residuals that stay large, where Gauss-Newton alone converges only linearly).
+
+Stopping (`Tail`): the decrease still to come, predicted from the decreases between the last Jacobians
+(a geometric tail), at most `ftol_rel` of E (the round's tolerance, the one nlopt's L-BFGS gets, so
+`--ftol` means the same for both back ends); damping grown past MU_MAX without a decrease (no descent
+left at rounding level); a step shorter than 1e-12 of |x| (Madsen et al.'s small-step test); the
+evaluation or time budget (their iteration limit), or a stop request.
 
 Evaluations: each value evaluation at a trial step counts one, and each residual-and-Jacobian
 evaluation at an accepted point counts one (`OptimizeResult.n_evals`).

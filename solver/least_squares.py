@@ -28,7 +28,7 @@ the variables; Nocedal & Wright sec. 10.3, "Implementation of the Levenberg-Marq
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -146,7 +146,14 @@ class NormalEquations:
     g: np.ndarray
     E: float
     hinge: HingeRows | None = None
-    pairs: tuple = ()
+    pairs: tuple = ()  # secant pairs (s, y) oldest first (`secant_solve`); () for plain Gauss-Newton
+    _abf: np.ndarray | None = field(default=None, repr=False, compare=False)  # ab in Fortran order
+
+    def matvec(self, v: np.ndarray) -> np.ndarray:
+        """(J^T J) v (BLAS dsbmv on a Fortran-ordered copy of ab, made once)."""
+        if self._abf is None:
+            self._abf = np.asfortranarray(self.ab)
+        return dsbmv(len(self._abf) - 1, 1.0, self._abf, v, lower=1)
 
     def solve(self, mu: float) -> np.ndarray:
         """The damped Gauss-Newton step h: (J^T J + mu diag(J^T J)) h = -J^T rho (Marquardt's scaling;
@@ -177,7 +184,7 @@ class NormalEquations:
 
     def damped_matvec(self, v: np.ndarray, mu: float) -> np.ndarray:
         """(J^T J + mu D) v."""
-        return _band_matvec(self.ab, v) + mu * self.scale() * v
+        return self.matvec(v) + mu * self.scale() * v
 
     def step(self, mu: float) -> tuple[np.ndarray, float]:
         """(h, L(0) - L(h)): the damped step of the model that keeps the hinge residuals' max(0, .)
@@ -206,15 +213,15 @@ class NormalEquations:
             (`HingeRows.on`) enter the gradient with those values.
         """
         if self.hinge is None:
-            return NormalEquations(self.ab, g, E, None, self.pairs)
+            return NormalEquations(self.ab, g, E, None, self.pairs, self._abf)
         hinge = self.hinge.moved(h)
         s = hinge.s
         g = g + hinge.P.T @ (s * (hinge.on.astype(float) - (s > 0)))
-        return NormalEquations(self.ab, g, E, hinge, self.pairs)
+        return NormalEquations(self.ab, g, E, hinge, self.pairs, self._abf)
 
     def model_decrease(self, h: np.ndarray) -> float:
         """L(0) - L(h) of the Gauss-Newton model L(h) = |rho + J h|^2 = E + 2 h.g + h^T J^T J h."""
-        return -(2.0 * h @ self.g + h @ _band_matvec(self.ab, h))
+        return -(2.0 * h @ self.g + h @ self.matvec(h))
 
 
 def secant_solve(h0, g: np.ndarray, pairs) -> np.ndarray:
@@ -233,11 +240,6 @@ def secant_solve(h0, g: np.ndarray, pairs) -> np.ndarray:
     for (s, y), a in zip(pairs, reversed(alphas)):
         r += s * (a - (y @ r) / (y @ s))
     return r
-
-
-def _band_matvec(ab: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """A v for symmetric A in lower band form ab (BLAS dsbmv)."""
-    return dsbmv(len(ab) - 1, 1.0, np.asfortranarray(ab), v, lower=1)
 
 
 def term_residuals(objective, basis, Y, Y1, Y2):
