@@ -28,7 +28,7 @@ the variables; Nocedal & Wright sec. 10.3, "Implementation of the Levenberg-Marq
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -146,6 +146,14 @@ class NormalEquations:
     g: np.ndarray
     E: float
     hinge: HingeRows | None = None
+    pairs: tuple = ()  # secant pairs (s, y) oldest first (`secant_solve`); () for plain Gauss-Newton
+    _abf: np.ndarray | None = field(default=None, repr=False, compare=False)  # ab in Fortran order
+
+    def matvec(self, v: np.ndarray) -> np.ndarray:
+        """(J^T J) v (BLAS dsbmv on a Fortran-ordered copy of ab, made once)."""
+        if self._abf is None:
+            self._abf = np.asfortranarray(self.ab)
+        return dsbmv(len(self._abf) - 1, 1.0, self._abf, v, lower=1)
 
     def solve(self, mu: float) -> np.ndarray:
         """The damped Gauss-Newton step h: (J^T J + mu diag(J^T J)) h = -J^T rho (Marquardt's scaling;
@@ -166,14 +174,17 @@ class NormalEquations:
         return float(np.sqrt(h @ (self.scale() * h)))
 
     def damped(self, ab: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
-        """-(A + mu D)^-1 g for A in lower band form ab (J^T J or a low-rank change of it), D = `scale`."""
+        """-(A + mu D)^-1 g for A in lower band form ab (J^T J or a low-rank change of it), D = `scale`;
+        with secant `pairs`, -H g with H the limited-memory BFGS inverse seeded with (A + mu D)^-1
+        (`secant_solve`)."""
         ab = ab.copy()
         ab[0] += mu * self.scale()
-        return -cho_solve_banded((cholesky_banded(ab, lower=True), True), g)
+        factor = cholesky_banded(ab, lower=True)
+        return -secant_solve(lambda v: cho_solve_banded((factor, True), v), g, self.pairs)
 
     def damped_matvec(self, v: np.ndarray, mu: float) -> np.ndarray:
         """(J^T J + mu D) v."""
-        return _band_matvec(self.ab, v) + mu * self.scale() * v
+        return self.matvec(v) + mu * self.scale() * v
 
     def step(self, mu: float) -> tuple[np.ndarray, float]:
         """(h, L(0) - L(h)): the damped step of the model that keeps the hinge residuals' max(0, .)
@@ -202,20 +213,33 @@ class NormalEquations:
             (`HingeRows.on`) enter the gradient with those values.
         """
         if self.hinge is None:
-            return NormalEquations(self.ab, g, E)
+            return NormalEquations(self.ab, g, E, None, self.pairs, self._abf)
         hinge = self.hinge.moved(h)
         s = hinge.s
         g = g + hinge.P.T @ (s * (hinge.on.astype(float) - (s > 0)))
-        return NormalEquations(self.ab, g, E, hinge)
+        return NormalEquations(self.ab, g, E, hinge, self.pairs, self._abf)
 
     def model_decrease(self, h: np.ndarray) -> float:
         """L(0) - L(h) of the Gauss-Newton model L(h) = |rho + J h|^2 = E + 2 h.g + h^T J^T J h."""
-        return -(2.0 * h @ self.g + h @ _band_matvec(self.ab, h))
+        return -(2.0 * h @ self.g + h @ self.matvec(h))
 
 
-def _band_matvec(ab: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """A v for symmetric A in lower band form ab (BLAS dsbmv)."""
-    return dsbmv(len(ab) - 1, 1.0, np.asfortranarray(ab), v, lower=1)
+def secant_solve(h0, g: np.ndarray, pairs) -> np.ndarray:
+    """H g by the two-loop recursion of limited-memory BFGS with the initial inverse h0 (a callable:
+    v -> H0 v) and the secant pairs [(s, y), ...] oldest first, y . s > 0 (Nocedal & Wright, Numerical
+    Optimization, 2nd ed., algorithm 7.4). H satisfies H y = s for the newest pair and agrees with H0
+    on the directions no pair has seen: seeded with the Gauss-Newton (J^T J + mu D)^-1, it adds the
+    curvature the residuals' second derivatives give (Madsen, Nielsen & Tingleff 2004, sec. 3.5, a
+    hybrid of Levenberg-Marquardt and quasi-Newton for problems whose residuals stay large)."""
+    q, alphas = np.array(g, float), []
+    for s, y in reversed(pairs):
+        a = (s @ q) / (y @ s)
+        q -= a * y
+        alphas.append(a)
+    r = h0(q)
+    for (s, y), a in zip(pairs, reversed(alphas)):
+        r += s * (a - (y @ r) / (y @ s))
+    return r
 
 
 def term_residuals(objective, basis, Y, Y1, Y2):

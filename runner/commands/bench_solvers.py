@@ -4,7 +4,7 @@ Each input (run-and-step's keyframe file; BVH clips keyed every 0.25 s with thei
 scene, as `dynsplines mocap CLIP --every 0.25 --scene auto` makes them) is solved with the geometric
 terms, the default terms (with the contact terms) and `--terms all`, each by nlopt's L-BFGS and by
 Levenberg-Marquardt (`--backend lm`), alternating, with the command's solve options. Printed per solve:
-evaluations, CPU time (time.process_time), final E and the motion metrics (max penetration, and against
+evaluations, CPU time (time.process_time, one BLAS thread for both), final E and the motion metrics (max penetration, and against
 the motion capture: float and skate in contact, the flight time's error, joint-orientation error); per
 pair the ratios LM / L-BFGS and whether every metric is within 2 % (or 0.2 mm, 0.002 s, 0.02 deg) of
 L-BFGS's or better; at the end the acceptance verdicts (docs/solvers.md "Choosing the default").
@@ -87,10 +87,13 @@ def _metrics(problem, solution, reference) -> dict:
 
 
 def _solve(problem, options) -> dict:
+    from threadpoolctl import threadpool_limits
+
     from solver.animate import solve_problem
 
     c0 = time.process_time()
-    sol = solve_problem(problem, options)
+    with threadpool_limits(1):  # as the lm back end runs: BLAS threads spinning would count as CPU time
+        sol = solve_problem(problem, options)
     return {"cpu": time.process_time() - c0, "evals": sol.n_evals, "E": sol.E_final, "solution": sol}
 
 
