@@ -78,6 +78,7 @@ def animate(
     tol: float | None = None,
     contacts=(),
     capture=None,
+    airborne=None,
 ) -> Solution:
     """Optimize the in-betweens of a figure's keyframes in a scene (paper sec. 2-6, fig. 5).
 
@@ -109,6 +110,9 @@ def animate(
         capture: None, or (times (n,) [s] on the keyframes' clock, qpos (n, nq)): the motion capture the
             keyframes were made from; with the `forces` term its peak ground force and pelvis
             acceleration, low-pass filtered, join the term's bounds (`make_problem`, docs/dynamics.md).
+        airborne: None, or ((start, end), ...) [s] where the motion flies, e.g. `KeyframeFileInfo.flights`:
+            the clearance term lifts the feet only there (docs/contacts.md "Flights where the capture
+            flies"); None: computed from `capture` when given, else every gap of the schedule is a flight.
     Returns:
         Solution: `frames` (the optimized FrameSet, values (m, nq) qpos at times (m,) [s]; the path is
         the spline through them, `frames.path(t)`), `initial` (the plain spline's), E and the term
@@ -119,7 +123,8 @@ def animate(
             bad `options` or `rate`.
         NonFiniteError: the objective is NaN or infinite on the plain spline.
     """
-    problem = make_problem(model, keyframes, terms, weights, contacts, rate, capture=capture)
+    problem = make_problem(model, keyframes, terms, weights, contacts, rate, capture=capture,
+                           airborne=airborne)
     if tol is not None and (options is None or isinstance(options, SolveOptions)):
         options = replace(options or default_options(dict(problem.weights)), refine="tol", tol=float(tol), rounds=None)
     return solve_problem(problem, options, should_stop=should_stop, progress=progress)

@@ -212,19 +212,23 @@ def build_term(spec: TermSpec, build: TermBuild) -> Term:
 def _near(b: TermBuild):
     """The near term (`solver.terms.near.NearPlain`) toward the plain spline `b.plain`, with the
     root's length scale from the figure (`reference_length`). A build without the plain spline (an
-    objective made without keyframes) gets a term without a reference, which is zero."""
+    objective made without keyframes) gets a term without a reference, which is zero. Priced like planted
+    with a contact schedule, but not beside the inverse-dynamics terms: those ask the path to leave the
+    plain spline wherever it needs a hand of god (in flight), so there near keeps its absolute weight."""
     from solver.terms.near import NearPlain, reference_length
 
     return NearPlain(b.layout, None if b.plain is None else b.plain.path, b.t_span, length=reference_length(b.figure),
-                     renormalize_like="planted" if len(b.contacts) else None)
+                     renormalize_like="planted" if len(b.contacts) and not b.forces else None)
 
 
 def _near_sites(b: TermBuild):
     """The near_sites term (`solver.terms.near_sites.NearSites`): the contact sites toward the plain
-    spline `b.plain`'s, on the engine shared with the contact terms, scaled like planted (eq. 7)."""
+    spline `b.plain`'s, on the engine shared with the contact terms, scaled like planted (eq. 7); beside
+    the inverse-dynamics terms an absolute weight per m^2 instead, as `_near` says why."""
     from solver.terms.near_sites import NearSites
 
-    return NearSites(b.model, None if b.plain is None else b.plain.path, engine=b.engine)
+    return NearSites(b.model, None if b.plain is None else b.plain.path, engine=b.engine,
+                     renormalize_like=None if b.forces else "planted")
 
 
 def _register_builtins() -> None:

@@ -255,7 +255,7 @@ def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms)
     opts = json.loads(str(z["options_json"]))
     # "all" with the file's contact schedule: the dynamics terms, the contact terms and the cone
     assert set(opts["weights"]) == {"penetration", "unit", "bending", "smooth", "hinge", "rom", "near", "torque",
-                                    "root", "forces", "planted", "clearance", "cone"}
+                                    "root", "forces", "planted", "clearance", "cone", "near_sites"}
 
 
 @pytest.mark.slow
