@@ -139,7 +139,7 @@ def test_sigint_while_rendering_leaves_no_partial_video(tmp_path):
     video, path = tmp_path / "rs.mp4", tmp_path / "rs.npz"
     video.write_bytes(b"an earlier video")
     cmd = Command("run-and-step", "--save-path", path, "--out", video, "--size", "160x96", "--fps", "60",
-                  "--speed", "0.1", *LONG)
+                  "--speed", "0.02", *LONG)
     cmd.wait_for(optimizing)
     cmd.interrupt()  # first: stop optimizing, keep the best path, go on to write the outputs
     cmd.wait_for(lambda text: re.search(r"rendering .*: [1-9]\d*/", text) is not None)  # frames are being written
