@@ -8,11 +8,11 @@ floor, all through a contact of both right sites. The heel's contact contradicts
 planted, can only turn the shin forward: the knee bends backward (hyperextension), the mechanism that
 a planted boost against a clip's excused contacts showed.
 """
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
+from solver.contacts import Contact
 from solver.continuation import boost_terms
 from solver.frames import FrameSet
 from solver.layout import StateLayout
@@ -28,13 +28,6 @@ T = 0.4  # [s] the two keyframes' interval
 HIP = 20.0  # [deg] the right thigh turned back about the knee's flexion axis (y)
 BOOST = 10.0
 
-
-@dataclass(frozen=True)
-class Contact:
-    site: str
-    start: float
-    end: float
-    surface: str = "floor"
 
 
 def keyframes(layout, planted):

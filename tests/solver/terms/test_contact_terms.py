@@ -4,12 +4,13 @@ finite differences (Y, Y', Y''), values against hand-built cases on the toy figu
 Toy figure at identity rotations with the root at (x, y, z): l_heel at (x - .05, y + .1, z - .95),
 l_toe at (x + .15, y + .1, z - .95), r_* at y - .1. Floor plane z = 0, box "step" with top z = .2 over
 x in [1.1, 1.9]."""
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import mujoco
 import numpy as np
 import pytest
 
+from solver.contacts import Contact
 from solver.errors import InputError
 from solver.layout import StateLayout
 from solver.path_context import PathContext
@@ -21,13 +22,6 @@ from conftest import fd_gradient, random_qpos
 
 FOOT = 0.95  # root height minus site height at identity rotations
 
-
-@dataclass(frozen=True)
-class Contact:
-    site: str
-    start: float
-    end: float
-    surface: str = ""
 
 
 @pytest.fixture(scope="module")

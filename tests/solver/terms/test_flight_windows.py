@@ -1,13 +1,12 @@
 """The clearance term's flights follow the capture's own (docs/contacts.md "The contact terms"): hand-built
 heights and motions of the toy figure of conftest.py (identity pose, root at z = FOOT + h: every contact
 site h above the floor), checked against intervals and windows computed by hand."""
-from dataclasses import dataclass
-
 import numpy as np
 import pytest
 
 import solver
 from solver.contact_thresholds import FLIGHT_HEIGHT
+from solver.contacts import Contact
 from solver.errors import InputError
 from solver.layout import StateLayout
 from solver.problem import capture_airborne, make_problem
@@ -23,14 +22,6 @@ from solver.terms.clearance import (
 FOOT = 0.95  # root height minus site height at identity rotations
 LEAD = TAKEOFF_RISE * FLIGHT_HEIGHT / FLIGHT_LIFT  # 30 ms: the lift is at 3 cm this long after its start
 LAG = LANDING_DESCENT * FLIGHT_HEIGHT / FLIGHT_LIFT  # 42.9 ms: ... and this long before its end
-
-
-@dataclass(frozen=True)
-class Contact:
-    site: str
-    start: float
-    end: float
-    surface: str = ""
 
 
 #: a glide (0.3, 0.5): the capture's feet stay 1.5 cm up; a hop (0.7, 0.9): they rise to 10 cm
