@@ -71,6 +71,32 @@ class Contact:
         return self.end - self.start
 
 
+def checked_intervals(entries, label: str) -> tuple[tuple[float, float], ...]:
+    """Time intervals given as pairs of seconds (a keyframe file's "flights", `Clearance`'s `airborne`),
+    checked and sorted.
+
+    Args:
+        entries: a sequence of (start, end) pairs [s]. label: what the pairs are called in an error
+            (e.g. "k.json: flights").
+    Returns:
+        ((start, end), ...) [s] sorted by start.
+    Raises:
+        InputError: naming `label[i]` and its value: not two finite numbers (not strings or booleans)
+            with start < end.
+    """
+    out = []
+    for i, e in enumerate(entries):
+        pair = list(e) if isinstance(e, (list, tuple, np.ndarray)) else None
+        ok = pair is not None and len(pair) == 2 and all(
+            isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and np.isfinite(v)
+            for v in pair)
+        if not ok or not pair[0] < pair[1]:
+            raise InputError(f"{label}[{i}] is {pair if pair is not None else e!r}; it must be [start, end] in "
+                             "seconds with start < end")
+        out.append((float(pair[0]), float(pair[1])))
+    return tuple(sorted(out))
+
+
 def site_speeds(times: np.ndarray, site_pos: np.ndarray) -> np.ndarray:
     """(n, s) 3-D speed [m/s] of each site by central differences (one-sided at the ends).
 

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from solver.contact_schedule import ContactSchedule
-from solver.contacts import Contact
+from solver.contacts import Contact, checked_intervals
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.keyframes import Keyframes
@@ -335,13 +335,7 @@ def read_flights(entries: Any, src: str) -> tuple[tuple[float, float], ...]:
     if not isinstance(entries, list):
         raise InputError(f"{src}: field 'flights' is a {type(entries).__name__}; it must be a list of "
                          "[start, end] pairs in seconds")
-    out = []
-    for i, e in enumerate(entries):
-        ok = isinstance(e, list) and len(e) == 2 and all(_is_number(v) and math.isfinite(v) for v in e)
-        if not ok or not e[0] < e[1]:
-            raise InputError(f"{src}: flights[{i}] is {e!r}; it must be [start, end] in seconds with start < end")
-        out.append((float(e[0]), float(e[1])))
-    return tuple(sorted(out))
+    return checked_intervals(entries, f"{src}: flights")
 
 
 def contacts_document(contacts) -> list[dict]:

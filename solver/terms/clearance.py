@@ -40,9 +40,9 @@ from every surface in the middle of its swing, and every site keeps c_f in the m
              With the capture's own flights (`airborne`: the intervals where the motion the keyframes
              came from has every site above the 3 cm flight height) only the parts of a gap the capture
              flies through are flights (`flight_windows`: a ballistic one widened so that the lifted band
-             crosses 3 cm where the capture does); the rest of the gap is plain swing. A gap where the captured feet glide in low (a landing foot below 3 cm
-             33-83 ms before its contact, a heel sliding onto a step) is no flight, and the band does not
-             hold the foot up there.
+             crosses 3 cm where the capture does); the rest of the gap is plain swing. A gap where the
+             captured feet glide in low (a landing foot below 3 cm before its contact, a heel sliding
+             onto a step) is no flight, and the band does not hold the foot up there.
 
   So scuffing along the floor through the swing does not pay, while lift-off and touchdown (the ends
   of the gap) are free.
@@ -60,7 +60,7 @@ from types import MappingProxyType
 import numpy as np
 
 from solver.contact_thresholds import DETECT_HEIGHT_ON as HEIGHT_ON
-from solver.contacts import contact_radii
+from solver.contacts import checked_intervals, contact_radii
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES, index_run
 from solver.path_context import EngineGradient, site_engine
@@ -122,14 +122,12 @@ def flight_windows(gaps, airborne, rise: float = TAKEOFF_RISE, descent: float = 
 
     An interval at least as long as the lift's ramps (e - s >= rise + descent: 85 ms) is a ballistic
     flight: it is widened so that the lift (`flight_lift`) crosses `height` at s and e, (s - rise h /
-    ceiling, e + descent h / ceiling), 30 ms and 43 ms with the defaults (the captured feet cross 3 cm
-    25-42 ms after a schedule's lift-off; a synthetic 0.31 s hop kept its flight to 17 ms widened, lost
-    50 ms with the lift inside it). A shorter one is the feet grazing the flight height between a glide
-    and a landing (127_33: 8-33 ms, one ending where a heel passes a step's edge and lands on its top):
-    the lift stays inside it, since the site that ends it is the landing one, already down, and a lift
-    past it held that heel 3.5-5 cm up for 40 ms (127_33 keyed every 0.25 s: 0.108 s of flight against
-    the capture's 0.058, 0.058 with the lift inside). A gap the capture does not fly through has no
-    window: its sites keep their swing bands.
+    ceiling, e + descent h / ceiling), 30 ms and 43 ms with the defaults, so that a hop keeps its whole
+    flight (a lift kept inside it would put the feet over 3 cm only after its ramps). A shorter one is
+    the feet grazing the flight height between a glide and a landing: the lift stays inside it, since
+    the site that ends it is the landing one, already low, and a lift widened past its end would hold
+    that foot up while the capture's lands (docs/contacts.md "Flights where the capture flies"). A gap
+    the capture does not fly through has no window: its sites keep their swing bands.
 
     Args:
         gaps: ((a, b), ...) [s] the schedule's flights (`ContactSchedule.flights`).
@@ -155,19 +153,8 @@ def flight_windows(gaps, airborne, rise: float = TAKEOFF_RISE, descent: float = 
 
 
 def _checked_airborne(airborne) -> tuple[tuple[float, float], ...] | None:
-    """`airborne` as ((start, end), ...) [s], checked; None stays None."""
-    if airborne is None:
-        return None
-    out = []
-    for i, ab in enumerate(airborne):
-        try:
-            s, e = (float(v) for v in ab)
-        except (TypeError, ValueError):
-            raise InputError(f"airborne[{i}] is {ab!r}; give each flight as (start, end) in seconds") from None
-        if not (np.isfinite(s) and np.isfinite(e) and s < e):
-            raise InputError(f"airborne[{i}] is ({s}, {e}); a flight needs finite start < end [s]")
-        out.append((s, e))
-    return tuple(sorted(out))
+    """`airborne` as ((start, end), ...) [s], checked (`checked_intervals`); None stays None."""
+    return None if airborne is None else checked_intervals(airborne, "airborne")
 
 
 def flight_lift(t: np.ndarray, a: float, b: float, ceiling: float, rise: float = TAKEOFF_RISE,

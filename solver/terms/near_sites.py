@@ -3,11 +3,11 @@
 `NearPlain` (`solver.terms.near`) measures the departure from the plain spline in joint angles, with an
 absolute weight: a mean departure of 1 rad^2 costs one unit of E. The contact terms are renormalized by
 their plain-spline values (eq. 7), and the plain spline through a capture's keys plants its feet to
-within millimetres, so their weights per square metre are huge: on the walk 16_23 keyed at its contact
-events, planted weight 10 over a plain integral of 2.5e-3 m^2 s is 4,000 units of E per m^2 s of
-violation, while a whole-body shift of 16 cm that moves the swing foot 40 cm for 0.15 s costs `near`
-0.01. The optimizer bought a unit of planted or clearance (whose residual the keyframes make
-irreducible there) with such shifts, 20-86 cm of swing-foot error where the plain spline had 1-7 cm.
+within millimetres, so their weights per square metre are huge (planted weight 10 over a plain
+integral of a few 1e-3 m^2 s is thousands of units of E per m^2 s of violation), while a whole-body
+shift of decimetres costs `near` a hundredth of a unit. The optimizer bought a little of planted or
+clearance (whose residual the keyframes can make irreducible) with such shifts, moving the swing feet
+decimetres from where the plain spline had them.
 
 `NearSites` (name "near_sites", m^2) measures the departure where those terms act and where the
 site-error metric looks: the contact sites' positions, and the root's,
@@ -72,7 +72,7 @@ class NearSites(Term):
         layout = StateLayout.from_model(model)
         #: qpos indices of the root's position (a free root's first three; none for a fixed root)
         self._root = np.array([i for j in layout.joints if j.kind == "free" for i in range(j.qposadr, j.qposadr + 3)][:3], int)
-        self._tmap = TangentMap.from_layout(StateLayout.from_model(model))
+        self._tmap = TangentMap.from_layout(layout)
         self.needs = tuple(sorted({0, *self.engine.required}))
         self._cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
