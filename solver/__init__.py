@@ -40,7 +40,7 @@ from solver.problem import (
 )
 from solver.schedule_conflicts import ScheduleConflicts
 from solver.solve import Round, Solution, SolveOptions, solve
-from solver.spline import SplineBasis
+from solver.spline_basis import SplineBasis
 from solver.terms import (
     CovariantAcceleration,
     Hyperextension,

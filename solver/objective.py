@@ -19,7 +19,7 @@ import numpy as np
 from solver.errors import DynsplinesError, InputError
 from solver.path_context import PathContext
 from solver.quadrature import gauss_times, quadrature_times
-from solver.spline import SplineBasis
+from solver.spline_basis import SplineBasis
 from solver.terms.base import Term, TermEval
 from solver.terms.covariant import NormalizedCovariantAcceleration, unit_and_normalized
 from solver.terms.unit import UnitQuaternion

@@ -254,7 +254,7 @@ def per_eval_spline(sizes, nq: int = 51, needs=(0, 2), reps_budget: float = 2e5)
     Returns:
         one dict per size: points, frames, entries, dense_us, banded_us (best of 5 repeats).
     """
-    from solver.spline import SplineBasis
+    from solver.spline_basis import SplineBasis
 
     rng = np.random.default_rng(0)
     rows = []
@@ -280,10 +280,10 @@ def per_eval_spline(sizes, nq: int = 51, needs=(0, 2), reps_budget: float = 2e5)
 
 
 def _worker(args) -> int:
-    import solver.spline as spline
+    import solver.spline_basis as spline_basis
 
     if args.dense:  # the comparison run: dense matrices at every size
-        spline.DENSE_MAX_ENTRIES = 1 << 62
+        spline_basis.DENSE_MAX_ENTRIES = 1 << 62
     d = np.load(args.worker)
     kf = Keyframes(d["times"], d["values"], d["mask"])
     print(json.dumps(solve_one(kf, Path(args.figure), args.rate, args.per_segment, args.backend)))

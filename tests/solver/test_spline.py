@@ -4,7 +4,8 @@ import pytest
 
 from solver.errors import InputError
 from solver.quadrature import quadrature_times
-from solver.spline import SplineBasis, interpolate, spline_matrices
+from solver.spline import interpolate, spline_matrices
+from solver.spline_basis import SplineBasis
 
 
 def naive_natural_spline(x, y, t):

@@ -7,7 +7,7 @@ from scipy.interpolate import CubicSpline
 
 from solver.errors import InputError
 from solver.quadrature import gauss_times, quadrature_times
-from solver.spline import DENSE_MAX_ENTRIES, SplineBasis
+from solver.spline_basis import DENSE_MAX_ENTRIES, SplineBasis
 
 
 def knots_and_points(m, n, seed=0, rate=None):
