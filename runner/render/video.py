@@ -104,15 +104,13 @@ def render_tracks(
         tracks: the paths, one panel each, left to right.
         out_path: the video file (.mp4, .mkv or .mov; H.264). Written atomically: on any error an
             earlier file there is left intact.
-        fps: [1/s] video frame rate, > 0.
+        fps: [1/s] video frame rate, > 0. speed: playback speed, > 0 (0.5: a 1.7 s motion lasts 3.4 s).
         size: (width, height) [px] or "WxH" of the whole video, both even (H.264 with 4:2:0 colour).
-        speed: playback speed, > 0 (0.5: half speed, so a 1.7 s motion lasts 3.4 s).
         keyframe_times: (m,) [s] keyframe times, or None for no keyframe marks.
         keyframe_qpos: (m, nq) keyframe poses for the ghosts, the same in every panel; None: each
             panel's ghosts are its own track at `keyframe_times` (for full keyframes the same poses;
             for partial keyframes it shows how each track completes them).
-        title: optional caption at the top centre of the video.
-        camera: camera distance, angles and smoothing.
+        title: optional caption at the top centre of the video. camera: distance, angles and smoothing.
         quality: "fast" or "high", see `QUALITIES`.
         progress: optional callback, called after each frame as progress(frames_done, n_frames).
         workers: threads that draw the frames (`runner.render.parallel`: each with its own OpenGL
@@ -121,8 +119,7 @@ def render_tracks(
             same whatever the number.
 
     Returns:
-        RenderInfo (path, n_frames, video_time_s, wall_time_s, ms_per_panel, size, cpu_time_s,
-        threads).
+        RenderInfo (path, frames, video and wall time, ms per panel, size, CPU time, threads).
 
     Raises:
         InputError: bad size, fps or speed; an output suffix other than .mp4/.mkv/.mov; an output

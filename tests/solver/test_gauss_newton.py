@@ -6,9 +6,9 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 import pytest
+from toy_problem import SCHEDULE, moved, toy_keyframes
 
 import solver
-from solver.contacts import Contact
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.gauss_newton import has_residuals, levenberg_marquardt
@@ -19,37 +19,13 @@ from solver.solve import SolveOptions, solve
 
 from conftest import TOY_SCENE
 
-SCHEDULE = (Contact("l_heel", 0.0, 0.45), Contact("l_toe", 0.0, 0.5), Contact("r_toe", 0.55, 1.2))
-
 
 @pytest.fixture(scope="module")
 def toy():
-    """The toy figure with four keyframes low over the floor (feet in it: penetration, planted and
-    clearance act), the third partial (its root height free), and a contact schedule."""
+    """The toy figure with four keyframes low over the floor (tests/toy_problem.py), the third partial (its
+    root height free)."""
     model = mujoco.MjModel.from_xml_string(TOY_SCENE)
-    layout = solver.StateLayout.from_model(model)
-    V = np.zeros((4, model.nq))
-    V[:, 0], V[:, 2] = [0.0, 0.3, 0.7, 1.0], [0.9, 0.95, 0.92, 0.9]
-    V[:, layout.quat_slots[:, 0]] = 1.0
-    V[1, layout.quat_slots[1]] = [np.cos(0.3), np.sin(0.3), 0, 0]
-    V[2, layout.quat_slots[3]] = [np.cos(0.4), 0, np.sin(0.4), 0]
-    V[3, layout.quat_slots[2]] = [np.cos(0.2), 0, 0, np.sin(0.2)]
-    mask = np.ones_like(V, bool)
-    mask[2, 2] = False
-    kf = solver.Keyframes(np.array([0.0, 0.35, 0.8, 1.2]), V, mask)
-    return model, layout, kf
-
-
-def _moved(problem, seed=3):
-    """The problem's frames with a variable frame in every segment, the free components moved at random
-    (residuals of every kind nonzero), the objective renormalized and prepared there."""
-    objective = problem.objective
-    frames = problem.initial.with_midpoints()
-    rng = np.random.default_rng(seed)
-    frames = frames.with_x(frames.x() + 0.03 * rng.normal(size=frames.n_free))
-    objective.prepare(frames.times, frames.values)
-    objective.renormalize(problem.initial.times, problem.initial.values)
-    return objective, frames
+    return model, solver.StateLayout.from_model(model), toy_keyframes(model, turn_last=True, partial=True)
 
 
 def _rho(objective, frames):
@@ -86,7 +62,7 @@ def test_normal_equations_match_finite_differences_with_every_residual_term(toy)
     problem = make_problem(model, kf, "all", contacts=SCHEDULE, rate=40.0)
     assert set(problem.terms) >= {"penetration", "unit", "bending", "smooth", "torque", "root", "planted",
                                   "clearance", "cone"}
-    objective, frames = _moved(problem)
+    objective, frames = moved(problem)
     assert has_residuals(objective)
     local = LocalSpline(frames, objective.basis(frames.times).t)
     ne = normal_equations(objective, frames, local)
@@ -134,7 +110,7 @@ def test_damped_step_is_the_dense_least_squares_step(toy):
     model, _, kf = toy
     problem = make_problem(model, kf, "penetration,unit,bending,smooth,planted,clearance", contacts=SCHEDULE,
                            rate=40.0)
-    objective, frames = _moved(problem, seed=5)
+    objective, frames = moved(problem, seed=5)
     local = LocalSpline(frames, objective.basis(frames.times).t)
     ne = normal_equations(objective, frames, local)
     rho = _rho(objective, frames)
@@ -172,7 +148,7 @@ def test_lm_solve_reaches_nlopts_objective(contact_problem):
 
 
 def test_lm_keeps_the_best_iterate_and_honours_budgets_and_stop_requests(contact_problem):
-    objective, frames = _moved(contact_problem, seed=1)
+    objective, frames = moved(contact_problem, seed=1)
     E0 = objective.evaluate(frames.times, frames.values, grad=False).E
     seen = []
     r = levenberg_marquardt(objective, frames, max_evals=4, callback=lambda n, E: seen.append((n, E)))
@@ -338,7 +314,7 @@ def test_anatomy_hinge_rows_are_the_signed_angles_and_their_derivatives(toy):
 
     model, _, kf = toy
     problem = make_problem(model, kf, None, contacts=SCHEDULE, rate=40.0)
-    objective, frames = _moved(problem, seed=5)
+    objective, frames = moved(problem, seed=5)
     objective.weights[[t.name not in ("hinge", "rom") for t in objective.terms]] = 0.0
     rom = next(t for t in objective.terms if t.name == "rom")  # half the motions near their lower limit
     x = rom.angles_of(objective.basis(frames.times).evaluate(frames.values, (0,))[0])

@@ -7,9 +7,8 @@ import math
 import mujoco
 import numpy as np
 import pytest
+from toy_problem import SCHEDULE, moved, toy_keyframes
 
-import solver
-from solver.contacts import Contact
 from solver.gauss_newton import Tail, levenberg_marquardt
 from solver.least_squares import secant_solve
 from solver.optimize import Status
@@ -20,29 +19,10 @@ from conftest import TOY_SCENE
 
 @pytest.fixture(scope="module")
 def contact_problem():
-    """The toy figure keyed low over the floor (its feet in it) with a contact schedule: penetration,
-    planted and clearance act, hinge rows switch along the steps."""
+    """The toy figure keyed low over the floor (its feet in it) with a contact schedule
+    (tests/toy_problem.py): penetration, planted and clearance act, hinge rows switch along the steps."""
     model = mujoco.MjModel.from_xml_string(TOY_SCENE)
-    layout = solver.StateLayout.from_model(model)
-    V = np.zeros((4, model.nq))
-    V[:, 0], V[:, 2] = [0.0, 0.3, 0.7, 1.0], [0.9, 0.95, 0.92, 0.9]
-    V[:, layout.quat_slots[:, 0]] = 1.0
-    V[1, layout.quat_slots[1]] = [np.cos(0.3), np.sin(0.3), 0, 0]
-    V[2, layout.quat_slots[3]] = [np.cos(0.4), 0, np.sin(0.4), 0]
-    kf = solver.Keyframes(np.array([0.0, 0.35, 0.8, 1.2]), V, np.ones_like(V, bool))
-    schedule = (Contact("l_heel", 0.0, 0.45), Contact("l_toe", 0.0, 0.5), Contact("r_toe", 0.55, 1.2))
-    return make_problem(model, kf, None, contacts=schedule, rate=40.0)
-
-
-def _moved(problem, seed):
-    """The problem's objective (renormalized, prepared) and its frames with a variable frame per segment,
-    the free components moved at random."""
-    objective = problem.objective
-    frames = problem.initial.with_midpoints()
-    frames = frames.with_x(frames.x() + 0.03 * np.random.default_rng(seed).normal(size=frames.n_free))
-    objective.prepare(frames.times, frames.values)
-    objective.renormalize(problem.initial.times, problem.initial.values)
-    return objective, frames
+    return make_problem(model, toy_keyframes(model), None, contacts=SCHEDULE, rate=40.0)
 
 
 @pytest.mark.parametrize("c", [0.1, 0.5, 0.9])
@@ -113,7 +93,7 @@ def test_a_round_stops_close_to_where_a_tight_continuation_ends(contact_problem)
     # test predicts at most ftol of E; 10x that is allowed. A stop on a short step (a kept Jacobian's, a
     # heavily damped one's) leaves more (here 1.7e-5 with the relative-decrease test at damping <= 1;
     # on 127_33 such stops ended rounds 12 % to 4x above their optimum)
-    objective, frames = _moved(contact_problem, seed=2)
+    objective, frames = moved(contact_problem, seed=2)
     r = levenberg_marquardt(objective, frames, ftol_rel=1e-6)
     assert r.status is Status.CONVERGED and "predicted decrease" in r.message
     tight = levenberg_marquardt(objective, frames.with_x(r.x), ftol_rel=1e-12, max_evals=200)
@@ -121,7 +101,7 @@ def test_a_round_stops_close_to_where_a_tight_continuation_ends(contact_problem)
 
 
 def test_the_time_budget_ends_a_round_with_its_best_point(contact_problem):
-    objective, frames = _moved(contact_problem, seed=1)
+    objective, frames = moved(contact_problem, seed=1)
     E0 = objective.evaluate(frames.times, frames.values, grad=False).E
     r = levenberg_marquardt(objective, frames, max_time_s=1e-9)
     assert r.status is Status.MAX_TIME and r.n_evals == 1 and r.fun <= E0 * (1 + 1e-12)
