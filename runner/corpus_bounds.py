@@ -44,7 +44,8 @@ CAUSES = {
     "gaps the capture does not fly": "the flight time is missed as above, but the schedule agrees with the "
                                      "capture's stance: in its gaps the capture's feet are below the 3 cm flight "
                                      "height without resting (a landing foot gliding in, a heel sliding onto a "
-                                     "step), and the clearance term lifts every site through the whole gap",
+                                     "step); the flight band lifts the sites only where the capture flies, and the "
+                                     "extra flight comes from the swing bands and the spline between keyframes",
     "keyframes contradict the schedule": "a keyframe holds a site off its contact schedule (the pipeline's "
                                          "keyframe conflicts)",
     "bound out of reach": "penalty continuation gave up on the term that targets the bound (a x10 boost did "
