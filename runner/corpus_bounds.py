@@ -48,6 +48,10 @@ CAUSES = {
                                      "extra flight comes from the swing bands and the spline between keyframes",
     "keyframes contradict the schedule": "a keyframe holds a site off its contact schedule (the pipeline's "
                                          "keyframe conflicts)",
+    "keyframes force the skate": "the keyframes alone force more skate than the limit: in each contact a site "
+                                 "passes through its keyed positions, so it slides at least the distance between "
+                                 "consecutive ones (`solver.motion_metrics.forced_skate_mm`); no path through the "
+                                 "keyframes holds the bound",
     "bound out of reach": "penalty continuation gave up on the term that targets the bound (a x10 boost did "
                           "not halve it), or the capture itself misses the bound",
     "the optimizer moved the root": "a joint-angle or contact-site error missed while the root's position error "
@@ -57,6 +61,8 @@ CAUSES = {
                                   "spline's: the contact terms bought the feet with the joints",
 }
 NOT_TOLD = "not told by the data"
+#: the cause of a skate bound below what the keyframes force (`forced_out_of_reach`)
+FORCED = "keyframes force the skate"
 
 
 @dataclass(frozen=True)
@@ -211,6 +217,8 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     "skate_mm": _at(*_M, "optimized", "path", "skate_contact_mm"),
     "plain_skate_mm": _at(*_M, "plain", "path", "skate_contact_mm"),
     "capture_skate_mm": _at(*_M, "plain", "reference", "skate_contact_mm"),
+    # the skate every path through the keyframes has (a lower bound, `solver.motion_metrics.forced_skate_mm`)
+    "forced_skate_mm": _at(*_M, "keyframes", "forced_skate_contact_mm"),
     "flight_s": _at(*_M, "optimized", "path", "flight_time_s"),
     "plain_flight_s": _at(*_M, "plain", "path", "flight_time_s"),
     "capture_flight_s": _at(*_M, "plain", "reference", "flight_time_s"),
@@ -294,6 +302,13 @@ def _gaps_err(bound: Bound, figures: dict) -> bool:
     return abs(gap_error) > lim and (gap_error > 0) == (figures["flight_s"] > capture)
 
 
+def forced_out_of_reach(bound: Bound, figures: dict) -> bool:
+    """True for a skate bound whose limit is below the skate the keyframes alone force ("forced_skate_mm"):
+    no path through the keyframes holds it (`CAUSES` "keyframes force the skate")."""
+    lim, forced = bound.limit(figures), figures.get("forced_skate_mm")
+    return bound.value == "skate_mm" and lim is not None and forced is not None and forced > lim
+
+
 def causes(bound: Bound, figures: dict) -> list[str]:
     """The cause categories (`CAUSES`) of a missed `bound` that the pair's `figures` show; empty when the
     data does not tell.
@@ -304,7 +319,8 @@ def causes(bound: Bound, figures: dict) -> list[str]:
     too short) where the schedule disagrees with the capture's stance (recall or precision under
     STANCE_AGREES; unknown agreement counts as disagreeing); gaps the capture does not fly: the same where
     it agrees. keyframes contradict the schedule: a surface or contact bound missed on a pair whose
-    keyframes hold a site off the schedule. bound out of reach: the bound's term stalled, or the
+    keyframes hold a site off the schedule. keyframes force the skate: a skate limit below what every path
+    through the keyframes slides (`forced_out_of_reach`). bound out of reach: the bound's term stalled, or the
     capture itself misses a bound that is not about surfaces. the optimizer moved the root: a joint or
     site error missed while the root error grew more (`_root_moved`). joints traded for the feet: the
     joint error missed while the site error is below the plain spline's.
@@ -318,6 +334,8 @@ def causes(bound: Bound, figures: dict) -> list[str]:
         out.append("gaps the capture does not fly" if agrees else "contact detection")
     if bound.kind in ("surface", "contact") and figures.get("keyframe_conflicts", 0) > 0:
         out.append("keyframes contradict the schedule")
+    if forced_out_of_reach(bound, figures):
+        out.append(FORCED)
     if set(bound.terms) & set(figures.get("stalled", ())) or (capture_misses and bound.kind != "surface"):
         out.append("bound out of reach")
     if bound.name in ("joint_error", "site_error") and _root_moved(figures):

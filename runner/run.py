@@ -139,16 +139,18 @@ def _sample(frames, times: np.ndarray, layout: StateLayout) -> np.ndarray:
 
 def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     """`motion_metrics` of the plain spline and the optimized path against the reference clip, over the
-    reference's frames within the keyframes' time span (contact times shifted with them).
+    reference's frames within the keyframes' time span (contact times shifted with them), and what the
+    keyframes alone force on any path (`solver.motion_metrics.forced_skate_mm`, over the full keyframes).
 
     Returns:
-        {"plain": ..., "optimized": ...}, each a `solver.motion_metrics.motion_metrics` dict.
+        {"plain": ..., "optimized": ...}, each a `solver.motion_metrics.motion_metrics` dict, and
+        "keyframes": {"forced_skate_contact_mm": lower bound of skate_contact_mm [mm/frame]}.
     Raises:
         InputError: fewer than 4 reference frames in the keyframes' span.
     """
     from runner.mocap.stance import capture_stance
     from solver.contacts import Contact
-    from solver.motion_metrics import motion_metrics
+    from solver.motion_metrics import forced_skate_mm, motion_metrics
 
     layout = StateLayout.from_model(model)
     t0, t1 = solution.initial.times[0], solution.initial.times[-1]
@@ -164,8 +166,13 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     fps = 1.0 / reference.frame_time
     # the capture's own stance (runner/mocap/stance.py), over the whole clip so its hysteresis starts there
     stance = capture_stance(model, reference.qpos, reference.frame_time)[keep]
-    return {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted, stance=stance)
-            for label, fs in (("plain", solution.initial), ("optimized", solution.frames))}
+    out = {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted, stance=stance)
+           for label, fs in (("plain", solution.initial), ("optimized", solution.frames))}
+    keys = solution.initial
+    full = keys.is_keyframe & keys.fixed.all(axis=1)
+    out["keyframes"] = {"forced_skate_contact_mm": forced_skate_mm(model, keys.times[full] - shift, keys.values[full],
+                                                                   fps, shifted, len(times))}
+    return out
 
 
 def solve_run(problem: Problem, options: SolveOptions, source: Source, *, quiet: bool = False, stop=None) -> Run:
@@ -239,6 +246,10 @@ def report(run: Run) -> str:
         from runner.mocap.contacts import worst_contact_distance
 
         lines.append(motion_metrics_table(motion["plain"], motion["optimized"]))
+        forced = motion.get("keyframes", {}).get("forced_skate_contact_mm")
+        if forced is not None:
+            lines.append(f"skate, ref. contacts, that the keyframes force on any path through them: {forced:.2f} mm "
+                         "(a lower bound: the distance between a site's keyed positions inside each contact)")
         worst = [motion["plain"]["path"], motion["optimized"]["path"], motion["plain"]["reference"]]
         lines.append("beyond range of motion (AAOS 1965, docs/anatomy.md), worst: " + "; ".join(
             f"{who} {w['rom_excess_motion'] or 'none'}" for who, w in zip(("plain", "optimized", "capture"), worst)))

@@ -343,3 +343,48 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         "path": {**plausibility(pos, h, fps, qpos[:, :3], mask, sites, stance), **anatomy_figures(model, qpos)},
         "reference": {**plausibility(rpos, rh, fps, ref[:, :3], mask, sites, stance), **anatomy_figures(model, ref)},
     }
+
+
+def forced_skate_mm(model, key_times: np.ndarray, key_qpos: np.ndarray, fps: float, contacts: Sequence[Contact],
+                    frames: int, sites: Sequence[str] = SITES) -> float:
+    """[mm/frame] A lower bound on `skate_contact_mm` that every path through the keyframes has.
+
+    `skate_contact_mm` is the mean, over the (frame step, site) pairs in contact at both ends, of the
+    site's horizontal displacement in the step. Inside one run of such steps the site passes through its
+    positions at the keyframes that fall on the run's frames, so by the triangle inequality its summed
+    displacement is at least the summed horizontal distance between consecutive keyed positions; the
+    bound is that sum over every site and run, over the number of (step, site) pairs in contact. It
+    holds for any path, optimized or not: a skate limit below it cannot be met without moving a keyframe.
+
+    Args:
+        model: MjModel with the contact sites. key_times: (k,) [s] on the metrics' clock (frame i at
+            i / fps). key_qpos: (k, nq) the keyframes, every component fixed (pass only full keyframes:
+            a partial one does not fix its sites). fps: [Hz] the metrics' frame rate, > 0.
+        contacts: the contacts the skate figure is measured on (times [s] on the same clock).
+        frames: n, the metrics' frame count. sites: contact site names.
+    Returns:
+        the bound [mm per frame]; 0 when no step is in contact or no two keys share a run. Keys more
+        than 1e-4 s from a frame time are left out (a subset of the keys still gives a lower bound).
+    Raises:
+        InputError: a contact or site the model does not have.
+    """
+    times = np.arange(int(frames)) / float(fps)
+    mask = contact_mask(contacts, sites, times)
+    planted = mask[1:] & mask[:-1]  # (n-1, s)
+    if not planted.any() or len(key_times) < 2:
+        return 0.0
+    idx = np.rint(np.asarray(key_times, float) * fps).astype(int)
+    on = (np.abs(idx / fps - key_times) < 1e-4) & (idx >= 0) & (idx < len(times))
+    pos = _kinematics(model, np.asarray(key_qpos, float)[on], sites)[0][..., :2]  # (k', s, 2)
+    idx = idx[on]
+    order = np.argsort(idx, kind="stable")
+    idx, pos = idx[order], pos[order]
+    # run r of site k: a maximal block of contact steps; its frames a..b share one label
+    step = np.vstack([np.zeros((1, len(sites)), bool), planted])  # step[i]: step i-1 -> i in contact
+    run = np.cumsum(~step, axis=0)  # frames a..b of one run share a label; a frame outside runs has its own
+    total = 0.0
+    for k in range(len(sites)):
+        lab = run[idx, k]
+        same = lab[1:] == lab[:-1]  # consecutive keys in one run of site k
+        total += float(np.linalg.norm(np.diff(pos[:, k], axis=0), axis=1)[same].sum())
+    return 1e3 * total / planted.sum()

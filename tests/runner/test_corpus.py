@@ -91,7 +91,8 @@ def test_figures_are_read_from_the_metrics_report():
                           "optimized": {"max_penetration_mm": 0.5, "keyframe_error": 1e-16,
                                         "max_hyperextension_deg": 0.6},
                           "motion": {"plain": motion(6.0, [2.0, 4.0, 1.0], [3.0], 0.5, 1.0),
-                                     "optimized": motion(4.0, [1.0, 2.0, 6.0], [1.0, 2.0], 0.35, 2.5)}}}
+                                     "optimized": motion(4.0, [1.0, 2.0, 6.0], [1.0, 2.0], 0.35, 2.5),
+                                     "keyframes": {"forced_skate_contact_mm": 0.7}}}}
     f = pair_figures(report, schedule_flight=0.42)
     assert f["penetration_mm"] == 0.5 and f["plain_hyperextension_deg"] == 0.2 and f["hyperextension_deg"] == 0.6
     assert f["float_mm"] == 5.0 and f["capture_float_mm"] == 2.7 and f["capture_penetration_mm"] == 0.3
@@ -103,6 +104,7 @@ def test_figures_are_read_from_the_metrics_report():
     assert f["site_error_cm"] == pytest.approx(1.5) and f["plain_site_error_cm"] == pytest.approx(3.0)
     assert f["flight_s"] == 0.35 and f["plain_flight_s"] == 0.5 and f["capture_flight_s"] == 0.3
     assert f["schedule_flight_s"] == 0.42 and f["keyframe_conflicts"] == 3 and f["stalled"] == ["planted"]
+    assert f["forced_skate_mm"] == 0.7
     assert "off_hinge_deg" not in f  # not measured: left out, so its bound is n/a
     assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled", "joint_rise"} <= set(FIGURES)
 
@@ -265,3 +267,22 @@ def test_the_float_bound_reads_the_capture_stance_where_the_schedule_has_a_gap()
     checks = {c["bound"]: c for c in check_pair(f)}
     assert checks["float"]["held"] is False and checks["float_schedule"]["held"] is True
     assert causes(BOUND["float"], f) == []  # the capture's own feet are on the floor: not the scene fit
+
+
+def test_a_skate_limit_below_what_the_keyframes_force_is_out_of_reach():
+    from runner.corpus import held_but_forced
+
+    # plain spline 1.6 mm/frame: the limit is 0.8, and the keyframes alone force 0.9 (the capture slides 0.8)
+    slide = {"skate_mm": 1.2, "plain_skate_mm": 1.6, "capture_skate_mm": 0.8, "forced_skate_mm": 0.9}
+    f = figures(**slide)
+    assert causes(BOUND["skate_plain"], f) == ["keyframes force the skate"]
+    assert causes(BOUND["skate_plain"], {**f, "forced_skate_mm": 0.7}) == []  # in reach: the optimizer's miss
+    forced = _result("e.bvh", "validation", **slide)
+    also = _result("f.bvh", "validation", **slide, penetration_mm=3.0)
+    assert not held_all(forced) and held_but_forced(forced) and not held_but_forced(also)
+    assert held_but_forced(_result("g.bvh", "validation"))
+    rates = pass_rates([forced, also, _result("g.bvh", "validation")])
+    assert rates["validation"]["held_all"] == 1 and rates["validation"]["held_but_forced"] == 2
+    assert failing_lines([forced]) == ["- e every 0.25 (validation): skate_plain 1.2 (limit 0.8): keyframes force the "
+                                       "skate (the keyframes force 0.9)"]
+    assert "| every bound held that the keyframes leave in reach" in markdown_report([forced], pass_rates([forced]), {})

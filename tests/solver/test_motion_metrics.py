@@ -182,3 +182,48 @@ def test_float_and_flight_on_the_capture_stance(floor_model):
     assert "float_stance_mm" not in motion_metrics(floor_model, q, FPS, ref, gap)["path"]
     with pytest.raises(InputError, match="stance"):
         motion_metrics(floor_model, q, FPS, ref, gap, stance=np.ones((N, 4), bool))
+
+
+def _slid(model, xs):
+    """(len(xs), nq) the standing figure with the pelvis moved to x = xs [m]: every site slides with it."""
+    q = standing(model, len(xs))
+    q[:, 0] = xs
+    return q
+
+
+def test_forced_skate_is_the_keyed_slide_over_the_contact_steps(floor_model):
+    from solver.motion_metrics import forced_skate_mm
+
+    keys = np.array([0, 30, 60])
+    xk = np.array([0.0, 0.06, 0.06])  # 6 cm between the first two keys, none after
+    forced = forced_skate_mm(floor_model, keys / FPS, _slid(floor_model, xk), FPS, planted(), N)
+    # by hand: each of the 4 sites slides at least 60 mm in the 60 steps it is in contact
+    assert forced == pytest.approx(1.0, rel=1e-9)
+    # the path that slides at constant speed between the keys attains it (motion_metrics' own skate)
+    line = np.interp(np.arange(N), keys, xk)
+    m = motion_metrics(floor_model, _slid(floor_model, line), FPS, standing(floor_model), planted())
+    assert m["path"]["skate_contact_mm"] == pytest.approx(forced, rel=1e-9)
+    # any other path through the keys slides more
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        wiggle = line + rng.normal(0, 0.004, N)
+        wiggle[keys] = xk
+        m = motion_metrics(floor_model, _slid(floor_model, wiggle), FPS, standing(floor_model), planted())
+        assert m["path"]["skate_contact_mm"] >= forced - 1e-9
+
+
+def test_forced_skate_links_keys_only_inside_one_contact(floor_model):
+    from solver.motion_metrics import forced_skate_mm
+
+    # two contacts, frames 0-20 and 40-60; keys at 0, 20, 40, 60 move 1, 5 and 2 cm: the 5 cm between frames
+    # 20 and 40 lie in a gap of every site (a swing), where sliding is not skating
+    contacts = [Contact(s, a / FPS, b / FPS) for s in SITES for a, b in ((0, 20), (40, 60))]
+    keys = np.array([0, 20, 40, 60])
+    xk = np.array([0.0, 0.01, 0.06, 0.08])
+    forced = forced_skate_mm(floor_model, keys / FPS, _slid(floor_model, xk), FPS, contacts, N)
+    assert forced == pytest.approx((10.0 + 20.0) / 40, rel=1e-9)  # 40 contact steps per site
+    # a key off the frame grid (1 ms late) is left out; the bound can only fall
+    late = forced_skate_mm(floor_model, (keys + np.r_[0, 0, 0, 0.12]) / FPS, _slid(floor_model, xk), FPS,
+                           contacts, N)
+    assert late == pytest.approx(10.0 / 40, rel=1e-9)
+    assert forced_skate_mm(floor_model, keys[:1] / FPS, _slid(floor_model, xk[:1]), FPS, contacts, N) == 0.0
