@@ -11,8 +11,9 @@ with a limit made from another (the capture's, the plain spline's) or a constant
     rule "within": held when |value - reference| <= max(margin, factor * |reference|)
 
 A bound whose figures are missing (a metric this build does not compute) is "n/a", never held or
-missed. Two records are figures shown beside the bounds (`Bound.counted` False: the float on the
-schedule's contacts and the flight while the capture stands): checked the same way, never failing a pair.
+missed. Three records are figures shown beside the bounds (`Bound.counted` False: the float on the
+schedule's contacts, the flight while the capture stands, the skate above what the keyframes force):
+checked the same way, never failing a pair.
 The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
 fit the capture (the capture misses a surface bound itself) and a bound out of reach (the capture misses
 another bound); see `causes`.
@@ -128,6 +129,9 @@ class Bound:
 #: the issue's sentence the two figures beside the float bound implement (`Bound.counted` False)
 _STANCE_AND_SCHEDULE = ("float and flight measured on the capture's stance frames as well as on the schedule's, "
                         "so a gap in the schedule cannot hide a floating foot (shown, not counted).")
+#: the figure beside skate_plain (`Bound.counted` False): the same halving, of the skate a path can remove
+_EXCESS = ("skate above what the keyframes force <= half the plain spline's above it (shown, not counted: "
+           "skate_plain with the skate no path through the keyframes avoids taken off both sides).")
 #: the acceptance list, one record per bound (docs/corpus.md "Bounds"), and the figures shown beside it
 BOUNDS: tuple[Bound, ...] = (
     Bound("penetration", "max penetration [mm]", "penetration_mm", None, "le", 0.0, 1.0, "capture_penetration_mm",
@@ -145,6 +149,8 @@ BOUNDS: tuple[Bound, ...] = (
           ("planted",), "contact", "skate <= the capture's + 0.5 mm/frame"),
     Bound("skate_plain", "skate vs plain [mm/frame]", "skate_mm", "plain_skate_mm", "le", 0.5, 0.0,
           "capture_skate_mm", ("planted",), "contact", "and <= half the plain spline's;"),
+    Bound("skate_excess", "skate above what the keyframes force, vs plain [mm/frame]", "skate_excess_mm",
+          "plain_skate_excess_mm", "le", 0.5, 0.0, None, ("planted",), "contact", _EXCESS, counted=False),
     Bound("flight", "flight time vs capture [s]", "flight_s", "capture_flight_s", "within", 0.10, 0.030, None,
           ("clearance",), "contact", "flight time within 30 ms or 10 % of the capture's, whichever is larger;"),
     Bound("joint_error", "joint-angle error [deg]", "joint_error_deg", "plain_joint_error_deg", "le", 1.10, 0.0, None,
@@ -195,6 +201,14 @@ def _off_hinge_excess(doc: dict) -> float | None:
     opt = _dig(doc, (*_M, "optimized", "path", "off_hinge_deg"))
     cap = _dig(doc, (*_M, "plain", "reference", "off_hinge_deg"))
     return float(max(opt[j] - cap[j] for j in opt)) if opt and cap else None
+def _above_forced(doc: dict, which: str) -> float | None:
+    """[mm/frame] the path's skate in contact minus the skate its keyframes force (None when either is
+    missing)."""
+    v = _dig(doc, (*_M, which, "path", "skate_contact_mm"))
+    forced = _dig(doc, (*_M, "keyframes", "forced_skate_contact_mm"))
+    return None if v is None or forced is None else float(v) - float(forced)
+
+
 #: the figures of a pair: {name: function of the metrics report}; the motion metrics are over the
 #: reference's frames (`runner.run.reference_motion_metrics`); float over the capture's stance (and the
 #: schedule's contacts beside it), skate over the schedule's contacts.
@@ -217,8 +231,11 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     "skate_mm": _at(*_M, "optimized", "path", "skate_contact_mm"),
     "plain_skate_mm": _at(*_M, "plain", "path", "skate_contact_mm"),
     "capture_skate_mm": _at(*_M, "plain", "reference", "skate_contact_mm"),
-    # the skate every path through the keyframes has (a lower bound, `solver.motion_metrics.forced_skate_mm`)
+    # the skate every path through the keyframes has (a lower bound, `solver.motion_metrics.forced_skate_mm`),
+    # and each path's skate above it
     "forced_skate_mm": _at(*_M, "keyframes", "forced_skate_contact_mm"),
+    "skate_excess_mm": lambda doc: _above_forced(doc, "optimized"),
+    "plain_skate_excess_mm": lambda doc: _above_forced(doc, "plain"),
     "flight_s": _at(*_M, "optimized", "path", "flight_time_s"),
     "plain_flight_s": _at(*_M, "plain", "path", "flight_time_s"),
     "capture_flight_s": _at(*_M, "plain", "reference", "flight_time_s"),

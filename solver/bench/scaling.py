@@ -13,7 +13,9 @@ Each length is solved in its own subprocess (one BLAS thread), so that its peak 
 peak minus the resident size just before the solve (the solve's own memory: arrays, the spline bases,
 the optimizer; the interpreter, numpy, scipy and MuJoCo are the same at every length).
 
-Solve options: those of `dynsplines animate` (`default_options`: ftol 1e-6, preconditioner with the
+The problem is built as `dynsplines animate` builds it (`solver.problem.figure_problem`: the anatomical
+terms allow the plain spline's own joint angles, as the keyframes hold them). Solve options: those of
+`dynsplines animate` (`default_options`: ftol 1e-6, preconditioner with the
 radial weight from the terms, renormalization, the default penalty-continuation limits) except the
 subdivision: *global*, 2 variable frames per keyframe interval,
 one optimization round. Adaptive subdivision picks frames by a score threshold and per-round budgets,
@@ -107,17 +109,14 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, 
         calls of, `Objective.evaluate` during the solve: `_objective_cpu`).
     """
     from solver.animate import default_options
-    from solver.frames import FrameSet
-    from solver.layout import StateLayout
     from solver.metrics import path_metrics
-    from solver.problem import figure_objective, parse_terms
+    from solver.problem import figure_problem, parse_terms
     from solver.solve import solve
 
     model = floor_model(figure)
-    layout = StateLayout.from_model(model)
     weights = parse_terms(None)
-    objective = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=rate)
-    initial = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    # built as `solver.animate` builds it: the anatomical terms allow the plain spline's own angles
+    objective, initial, _ = figure_problem(model, weights, keyframes, rate=rate)
     options = replace(default_options(weights), subdivision="global", per_segment=per_segment, backend=backend)
     rss_before = _rss_mb()
     r0 = resource.getrusage(resource.RUSAGE_SELF)

@@ -26,7 +26,8 @@ def figures(**over):
          "plain_flight_s": 0.40, "capture_flight_s": 0.34, "joint_error_deg": 5.0, "plain_joint_error_deg": 5.0,
          "site_error_cm": 4.0, "plain_site_error_cm": 5.0, "hyperextension_deg": 0.3, "plain_hyperextension_deg": 0.0,
          "schedule_flight_s": 0.36, "keyframe_conflicts": 0, "stalled": [], "float_schedule_mm": 2.8,
-         "capture_float_schedule_mm": 2.0, "flight_in_stance_s": 0.0, "capture_flight_in_stance_s": 0.0}
+         "capture_float_schedule_mm": 2.0, "flight_in_stance_s": 0.0, "capture_flight_in_stance_s": 0.0,
+         "forced_skate_mm": 0.2, "skate_excess_mm": 0.8, "plain_skate_excess_mm": 3.8}
     return {**f, **over}
 
 
@@ -104,7 +105,8 @@ def test_figures_are_read_from_the_metrics_report():
     assert f["site_error_cm"] == pytest.approx(1.5) and f["plain_site_error_cm"] == pytest.approx(3.0)
     assert f["flight_s"] == 0.35 and f["plain_flight_s"] == 0.5 and f["capture_flight_s"] == 0.3
     assert f["schedule_flight_s"] == 0.42 and f["keyframe_conflicts"] == 3 and f["stalled"] == ["planted"]
-    assert f["forced_skate_mm"] == 0.7
+    assert f["forced_skate_mm"] == 0.7 and f["skate_excess_mm"] == pytest.approx(0.8)
+    assert f["plain_skate_excess_mm"] == pytest.approx(0.8)
     assert "off_hinge_deg" not in f  # not measured: left out, so its bound is n/a
     assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled", "joint_rise"} <= set(FIGURES)
 
@@ -286,3 +288,8 @@ def test_a_skate_limit_below_what_the_keyframes_force_is_out_of_reach():
     assert failing_lines([forced]) == ["- e every 0.25 (validation): skate_plain 1.2 (limit 0.8): keyframes force the "
                                        "skate (the keyframes force 0.9)"]
     assert "| every bound held that the keyframes leave in reach" in markdown_report([forced], pass_rates([forced]), {})
+    # beside it, not counted: the halving of the skate a path can remove (1.2 - 0.9 <= (1.6 - 0.9) / 2)
+    excess = check_pair(figures(**slide, skate_excess_mm=0.3, plain_skate_excess_mm=0.7))
+    row = next(c for c in excess if c["bound"] == "skate_excess")
+    assert row["held"] is True and row["counted"] is False and row["limit"] == pytest.approx(0.35)
+    assert BOUND["skate_excess"].held(figures(skate_excess_mm=0.4, plain_skate_excess_mm=0.7)) is False
