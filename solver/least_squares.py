@@ -43,6 +43,10 @@ from solver.path_context import PathContext
 from solver.site_jacobian import cached_site_jacobians, supports
 
 
+#: quadrature points whose Jacobian rows `_add_batch` forms at a time (about 1-2 MB of rows per block)
+BLOCK_POINTS = 512
+
+
 class NoResidualError(ValueError):
     """An objective term with a nonzero weight gives no residual form (`Term.residual` is None)."""
 
@@ -280,8 +284,9 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
     Y, Y1, Y2 = basis.evaluate(frames.values, objective.needs)
     q = (np.full(len(basis.t), objective.h) if basis.weights is None else basis.weights)
     nq, m = local.nq, local.m
-    gram = np.zeros((m - 1, 4 * nq, 4 * nq))  # per frame segment: J^T J in its 4 coefficients' blocks
-    gseg = np.zeros((m - 1, 4 * nq))
+    # J^T J in the B-spline coefficients, banded: band[u, d] the block (u, u + d), d = 0..3 (a point of
+    # segment s reads coefficients s..s+3); gc: J^T rho in the coefficients
+    band, gc = np.zeros((m + 2, 4, nq, nq)), np.zeros((m + 2, nq))
     E = 0.0
     clock = _Clock(timings)
     site_rows = []  # site terms, summed site by site (`_add_sites`)
@@ -305,11 +310,10 @@ def normal_equations(objective, frames: FrameSet, local: LocalSpline, timings: d
         groups = res.groups()
         clock("blocks")
         for batch in _batches(groups):
-            _add_batch(gram, gseg, local, w, rho, batch)
+            _add_batch(band, gc, local, w, rho, batch)
         clock("gram")
-    _add_sites(gram, gseg, local, site_rows)
+    _add_sites(band, gc, local, site_rows)
     clock("gram")
-    band, gc = _coefficient_blocks(gram, gseg, m, nq)
     Zs = local.Z
     A = _band_to_sparse(band, m, nq)
     H = (Zs.T @ (A @ Zs)).tocoo()
@@ -354,27 +358,32 @@ def _batches(groups):
     return out + [b for b in batches.values() if b]
 
 
-def _add_batch(gram, gseg, local, w, rho, batch):
-    """Add residual groups' J^T J and J^T rho (rows weighted by w (n,)) into the segment blocks `gram`
-    ((m-1, 4 nq, 4 nq)) and `gseg` ((m-1, 4 nq)). `batch`: groups (columns, comps, (J0, J1, J2)) of
+def _add_batch(band, gc, local, w, rho, batch):
+    """Add residual groups' J^T J and J^T rho (rows weighted by w (n,)) into the coefficient band `band`
+    ((m+2, 4, nq, nq)) and `gc` ((m+2, nq)) (`_accumulate`). `batch`: groups (columns, comps, (J0, J1, J2)) of
     one shape with disjoint comps (`_batches`), J (n, m_g, c_g) or None. Only points where a group's
-    Jacobian is nonzero are used; the points of one segment are stacked into one product (padded to
-    the longest segment)."""
+    Jacobian is nonzero are used, BLOCK_POINTS at a time (the rows' temporaries stay in cache: on a long
+    clip they would be tens of MB)."""
     orders = [k for k in range(3) if batch[0][2][k] is not None]
-    Js = {k: np.stack([g[2][k] for g in batch]) for k in orders}  # (b, n, m_g, c_g)
-    act = np.flatnonzero(np.any(np.stack([np.any(J != 0, axis=(0, 2, 3)) for J in Js.values()]), axis=0))
-    if not act.size:
-        return
-    nb, (mg, cs), p = len(batch), Js[orders[0]].shape[2:], len(act)
-    X = np.zeros((nb, p, mg, 4, cs))
+    nonzero = np.zeros(len(w), bool)
     for k in orders:
-        X += Js[k][:, act, :, None, :] * (w[act, None] * local.vals[k][act])[None, :, None, :, None]
-    X = X.reshape(nb, p, mg, 4 * cs)
-    R = np.stack([rho[act][:, g[0]] for g in batch])  # (b, p, m_g)
-    _accumulate(gram, gseg, local, act, X, np.einsum("bpma,bpm->bpa", X, R), np.stack([g[1] for g in batch]))
+        for g in batch:
+            nonzero |= np.any(g[2][k] != 0, axis=(1, 2))
+    act_all = np.flatnonzero(nonzero)
+    comps = np.stack([g[1] for g in batch])
+    nb, (mg, cs) = len(batch), batch[0][2][orders[0]].shape[1:]
+    for lo in range(0, len(act_all), BLOCK_POINTS):
+        act = act_all[lo:lo + BLOCK_POINTS]
+        X = np.zeros((nb, len(act), mg, 4, cs))
+        for k in orders:
+            Jk = np.stack([g[2][k][act] for g in batch])  # (b, p, m_g, c_g)
+            X += Jk[:, :, :, None, :] * (w[act, None] * local.vals[k][act])[None, :, None, :, None]
+        X = X.reshape(nb, len(act), mg, 4 * cs)
+        R = np.stack([rho[act][:, g[0]] for g in batch])  # (b, p, m_g)
+        _accumulate(band, gc, local, act, X, np.einsum("bpma,bpm->bpa", X, R), comps)
 
 
-def _add_sites(gram, gseg, local, site_rows):
+def _add_sites(band, gc, local, site_rows):
     """Add the site terms' J^T J and J^T rho site by site: every residual row reading site k is
     c_r . (p, v) (`SiteRows`, c_r (6,) weighted), so their rows' J^T J over the site's components is
     M^T C M with C = sum_r c_r c_r^T (6 x 6 per point) and M the site's Jacobian in the segment's
@@ -425,22 +434,25 @@ def _add_sites(gram, gseg, local, site_rows):
             gx = np.zeros(X.shape)
             first = np.r_[True, pt[1:] != pt[:-1]] if len(pt) else np.zeros(0, bool)
             gx[first] = np.einsum("pi,pia->pa", b, M)[pt[first]]
-            _accumulate(gram, gseg, local, act[pt], X[None, :, None, :], gx[None], np.asarray(comps)[None])
+            _accumulate(band, gc, local, act[pt], X[None, :, None, :], gx[None], np.asarray(comps)[None])
 
 
-def _accumulate(gram, gseg, local, act, X, gx, comps):
-    """gram[seg] += sum over a segment's points of X^T X, gseg[seg] += sum of gx, for batches of
-    disjoint component sets: act (p,) the points, X (b, p, r, 4 c) rows in the segment's 4
-    coefficients x c components comps (b, c), gx (b, p, 4 c). The points of one segment are stacked
-    into one product (padded to the longest segment)."""
+def _accumulate(band, gc, local, act, X, gx, comps):
+    """band[u, d] += the blocks (u, u + d) of the sum over the points of X^T X, gc[u] += the sums of gx,
+    for batches of disjoint component sets: act (p,) the points, X (b, p, r, 4 c) rows in the 4
+    coefficients of each point's segment s (s..s+3) x c components comps (b, c), gx (b, p, 4 c).
+
+    A segment's points are stacked into one product per chunk (chunks of at most the mean run's length:
+    segments differ in length, and padding every run to the longest would multiply the work by their
+    ratio, 2.5 on 127_33), the chunks summed per segment, and each segment's 4 x 4 coefficient blocks
+    added into the band directly (the upper ones: J^T J is symmetric), one coefficient slot a at a time:
+    for one a the targets u = s + a are distinct, so one indexed add per slot."""
     nb, p, mg, width = X.shape
     nq = local.nq
     seg = local.seg[act]
     starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])  # the segments' runs of points
     counts = np.diff(np.r_[starts, p])
     s = seg[starts]
-    # chunks of at most the mean run's length (segments differ in length: padding every run to the
-    # longest would multiply the work by their ratio, 2.5 on 127_33); a segment's chunks are summed after
     size = max(1, int(np.ceil(counts.mean())))
     pos = np.arange(p) - np.repeat(starts, counts)
     key = np.repeat(np.cumsum(np.r_[0, np.ceil(counts[:-1] / size)]).astype(int), counts) + pos // size
@@ -451,26 +463,16 @@ def _accumulate(gram, gseg, local, act, X, gx, comps):
     Xp = Xp.reshape(nb, key[-1] + 1, -1, width)
     G = np.add.reduceat(np.matmul(Xp.transpose(0, 1, 3, 2), Xp), first, axis=1) if len(first) < key[-1] + 1 \
         else np.matmul(Xp.transpose(0, 1, 3, 2), Xp)
-    cs, w4 = comps.shape[1], 4 * nq
-    idx = (np.arange(4)[None, :, None] * nq + comps[:, None, :]).reshape(nb, 1, 4 * cs)  # into 4 nq
-    # one flat index per entry (faster than broadcasting three index arrays; the entries are distinct:
-    # distinct segments, disjoint components within a batch)
-    flat = (s[None, :, None, None] * w4 + idx[..., None]) * w4 + idx[:, :, None, :]
-    gram.reshape(-1)[flat.ravel()] += G.ravel()
-    gseg[s[None, :, None], idx] += np.add.reduceat(gx, starts, axis=1)
-
-
-def _coefficient_blocks(gram, gseg, m, nq):
-    """The segment blocks summed into the coefficients': band (m+2, 4, nq, nq), band[u, d] the block
-    (u, u + d) of J^T J in c, and gc (m+2, nq) J^T rho in c."""
-    band = np.zeros((m + 2, 4, nq, nq))
-    gc = np.zeros((m + 2, nq))
-    G = gram.reshape(m - 1, 4, nq, 4, nq)
+    cs = comps.shape[1]
+    G = G.reshape(nb, len(s), 4, cs, 4, cs)
+    gs = np.add.reduceat(gx, starts, axis=1).reshape(nb, len(s), 4, cs)
+    flat, ci, cj = band.reshape(-1), comps[:, None, None, :, None], comps[:, None, None, None, :]
     for a in range(4):
-        gc[a:a + m - 1] += gseg[:, a * nq:(a + 1) * nq]
-        for b in range(a, 4):
-            band[a:a + m - 1, b - a] += G[:, a, :, b, :]
-    return band, gc
+        u = (s + a)[None, :, None, None, None]
+        d = np.arange(4 - a)[None, None, :, None, None]
+        idx = ((u * 4 + d) * nq + ci) * nq + cj  # (b, segments, 4 - a, c, c): distinct entries
+        flat[idx.ravel()] += G[:, :, a, :, a:, :].transpose(0, 1, 3, 2, 4).ravel()
+        gc[(s + a)[None, :, None], comps[:, None, :]] += gs[:, :, a]
 
 
 def _band_to_sparse(band, m, nq):
