@@ -42,7 +42,6 @@ from solver.frames import FrameSet
 from solver.path_context import PathContext
 from solver.site_jacobian import cached_site_jacobians, supports
 
-
 #: quadrature points whose Jacobian rows `_add_batch` forms at a time (about 1-2 MB of rows per block)
 BLOCK_POINTS = 512
 
