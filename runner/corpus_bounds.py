@@ -201,6 +201,8 @@ def _off_hinge_excess(doc: dict) -> float | None:
     opt = _dig(doc, (*_M, "optimized", "path", "off_hinge_deg"))
     cap = _dig(doc, (*_M, "plain", "reference", "off_hinge_deg"))
     return float(max(opt[j] - cap[j] for j in opt)) if opt and cap else None
+
+
 def _above_forced(doc: dict, which: str) -> float | None:
     """[mm/frame] the path's skate in contact minus the skate its keyframes force (None when either is
     missing)."""

@@ -382,9 +382,6 @@ def forced_skate_mm(model, key_times: np.ndarray, key_qpos: np.ndarray, fps: flo
     # run r of site k: a maximal block of contact steps; its frames a..b share one label
     step = np.vstack([np.zeros((1, len(sites)), bool), planted])  # step[i]: step i-1 -> i in contact
     run = np.cumsum(~step, axis=0)  # frames a..b of one run share a label; a frame outside runs has its own
-    total = 0.0
-    for k in range(len(sites)):
-        lab = run[idx, k]
-        same = lab[1:] == lab[:-1]  # consecutive keys in one run of site k
-        total += float(np.linalg.norm(np.diff(pos[:, k], axis=0), axis=1)[same].sum())
-    return 1e3 * total / planted.sum()
+    lab = run[idx]  # (k', s)
+    same = lab[1:] == lab[:-1]  # consecutive keys in one run of the site
+    return 1e3 * float(np.linalg.norm(np.diff(pos, axis=0), axis=-1)[same].sum()) / planted.sum()
