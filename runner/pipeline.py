@@ -7,9 +7,10 @@ Steps (docs/architecture.md; the contact steps: docs/contacts.md):
    HIERARCHY and written next to the outputs as `<stem>.figure.xml`, runner/mocap/figure_choice.py);
    the given scene MJCF (with the chosen figure included), or (`"auto"`) a floor and boxes fitted to
    where the clip's feet rest, written next to the outputs as `<stem>.scene.xml`
-   (`runner.mocap.scene.clip_scene`); the clip retargeted onto it (`load_bvh_reference`: the synthetic
-   first frame dropped, channel orders and frame time read from the file; on the subject's figure
-   without loss, docs/mocap.md).
+   (`runner.mocap.scene.clip_scene`); the clip's skeleton recognised (runner/mocap/skeleton.py, or named
+   by `--skeleton-map FILE`) and the clip retargeted onto the figure (`load_bvh_reference`: a leading rest
+   frame dropped, channel orders and frame time read from the file; on the subject's figure without
+   loss, docs/mocap.md).
 2. Contacts of the reference (`solver.contacts.reference_contacts`, surfaces named).
 3. Keyframes (`runner.mocap.keyframes.pick_keyframes`): evenly spaced plus the root's extremes, or at
    the contact events; written as `<stem>.keyframes.json` with the contacts (a user can edit it and
@@ -21,6 +22,7 @@ Steps (docs/architecture.md; the contact steps: docs/contacts.md):
 """
 from __future__ import annotations
 
+import json
 import os
 import time
 from dataclasses import dataclass, field, replace
@@ -71,6 +73,8 @@ class ClipOptions:
         root_scale: the scale of the captured root path (`load_bvh_reference`): "legs" (the figure's
             leg length over the subject's) or a number (1: as captured); the value used is recorded in
             the keyframe file's "source".
+        skeleton_map: a skeleton map file naming the joints of roles the recogniser cannot find
+            (`--skeleton-map`; runner/mocap/skeleton_map.py), or None.
     """
 
     keys: str = "every"
@@ -98,6 +102,7 @@ class ClipOptions:
     panels: tuple = ("plain", "optimized")
     command: str = ""
     root_scale: float | str = ROOT_SCALE_LEGS
+    skeleton_map: str | os.PathLike | None = None
 
 
 def default_out_dir(clip) -> Path:
@@ -119,6 +124,8 @@ class ClipKeys:
             "contacts"). partial: the middle keyframe fixes only the root and the legs.
         extremes: with "every", also key the root's highest and lowest frames.
         command: the command line recorded in the file's "source".
+        skeleton_map: a skeleton map file (`--skeleton-map`), or None; the skeleton as read is recorded
+            in the file's "source" "skeleton" (so `animate` reads the clip again with it).
     """
 
     scene: str | os.PathLike = AUTO
@@ -130,6 +137,7 @@ class ClipKeys:
     partial: bool = False
     extremes: bool = True
     command: str = ""
+    skeleton_map: str | os.PathLike | None = None
 
 
 #: the stages of `write_clip_keyframes`, for a progress bar
@@ -152,10 +160,19 @@ def clip_figure_scene(clip: Path, k: ClipKeys, scene_out: Path):
         from solver.model import load_model
 
         check_scene(load_model(scene), scene)  # the user's scene first: a floor, the figure (file and fix named)
-    figure = choose_figure(k.figure, clip, figure_path_for(scene_out), k.mass)
+    figure = choose_figure(k.figure, clip, figure_path_for(scene_out), k.mass, _skeleton_map(k))
     if str(scene) != AUTO and not is_default(k.figure):
         scene = scene_with_figure(scene, figure, scene_out)
     return figure, scene
+
+
+def _skeleton_map(k: ClipKeys):
+    """The `SkeletonMap` of `k.skeleton_map` (read and checked), or None."""
+    if k.skeleton_map is None:
+        return None
+    from runner.mocap.skeleton_map import read_skeleton_map
+
+    return read_skeleton_map(k.skeleton_map)
 
 
 def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, progress=None):
@@ -176,7 +193,8 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
             progress(i + 1, CLIP_STAGES[i])
 
     figure, scene = clip_figure_scene(clip, k, scene_out)
-    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale)
+    smap = _skeleton_map(k)
+    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, smap)
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
     done(0)
@@ -187,6 +205,8 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
     done(2)
     source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
               "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
+    if ref.skeleton is not None:  # read again by `animate` as read here
+        source["skeleton"] = json.loads(ref.skeleton.skeleton_map().text())
     from solver.problem import capture_airborne
 
     write_keyframes(out, keyframes, StateLayout.from_model(model), model=figure, scene=cs.scene_path,
@@ -205,7 +225,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
         InputError: as `process_clip`.
     """
     k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, keys=o.keys, every=o.every,
-                 partial=o.partial, command=o.command)
+                 partial=o.partial, command=o.command, skeleton_map=o.skeleton_map)
     from runner.progress import Steps
 
     with Steps(f"keyframes from {clip.name}", len(CLIP_STAGES), o.quiet, unit=" stages") as bar:

@@ -73,7 +73,8 @@ def run(args) -> int:
     if args.ray_address is not None and args.engine != "ray":
         raise InputError(f"--ray-address {args.ray_address} goes with --engine ray")
     clips = find_clips(args.clips or [CORPUS])
-    base = ClipOptions(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale, command=PROG,
+    base = ClipOptions(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale,
+                       skeleton_map=args.skeleton_map, command=PROG,
                        **clip_terms(args), rate=args.rate)
     say = (lambda *a: None) if args.quiet else print
     r = run_corpus(clips, args.out, keyings(args.keys, args.every), base, workers=args.workers, engine=args.engine,

@@ -3,7 +3,7 @@
 Arguments: CLIP (a .bvh file), --out FILE (.keyframes.json), --every SECONDS (0.25), --keys every|contacts,
 --scene auto|MJCF (auto: a floor and boxes fitted to the clip, written next to --out), --figure
 subject|default|MJCF (default: the subject's own figure, written next to --out as NAME.figure.xml),
---mass KG, --partial, --no-root-extremes.
+--mass KG, --skeleton-map FILE, --partial, --no-root-extremes.
 The written file records the command in "source" and the clip's contacts in "contacts"
 (solver/keyframe_file.py format).
 """
@@ -41,7 +41,7 @@ def fitted_scene_path(out: Path) -> Path:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The arguments of the command (also used by `keyframes_from_bvh_main`)."""
-    p.add_argument("clip", help="BVH clip (CMU skeleton), e.g. models/cmu/127_33.bvh")
+    p.add_argument("clip", help="BVH clip (a human skeleton of any common convention), e.g. models/cmu/127_33.bvh")
     p.add_argument("--out", required=True, help="keyframe file to write (.keyframes.json)")
     p.add_argument("--every", type=float, default=None,
                    help="keyframe spacing [s] (default 0.25); with --keys contacts the largest gap (default none)")
@@ -64,7 +64,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def register(sub) -> None:
     """Add `keyframes-from-bvh` to the `dynsplines` parser."""
     p = sub.add_parser("keyframes-from-bvh", help="make a keyframe file from a BVH motion-capture clip",
-                       description="Make a keyframe file from a CMU BVH clip retargeted onto the figure. "
+                       description="Make a keyframe file from a BVH clip retargeted onto the figure. "
                                    "Without --scene, the scene is fitted to the clip (--scene auto).")
     add_arguments(p)
     p.set_defaults(func=run)
@@ -80,6 +80,8 @@ def command_line(args) -> str:
         words += ["--figure", args.figure]
     if args.mass is not None:
         words += ["--mass", f"{args.mass:g}"]
+    if args.skeleton_map is not None:
+        words += ["--skeleton-map", args.skeleton_map]
     words += ["--partial"] * bool(args.partial) + ["--no-root-extremes"] * bool(args.no_root_extremes)
     if args.root_scale != ROOT_SCALE_LEGS:
         words += ["--root-scale", f"{args.root_scale:g}"]
@@ -97,6 +99,7 @@ def run(args, command: str | None = None) -> int:
     if not out.parent.is_dir():
         raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first")
     k = ClipKeys(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale,
+                 skeleton_map=args.skeleton_map,
                  keys=args.keys, every=args.every, partial=args.partial, extremes=not args.no_root_extremes,
                  command=command or command_line(args))
     with Steps(f"keyframes from {Path(args.clip).name}", len(CLIP_STAGES), args.quiet, unit=" stages") as bar:
@@ -124,7 +127,7 @@ def keyframes_from_bvh_main(argv: Sequence[str] | None = None, prog: str | None 
     """
     argv = list(sys.argv[1:] if argv is None else argv)
     ap = OneLineParser(prog=prog or PROG,
-                       description="Make a keyframe file from a CMU BVH clip retargeted onto the figure.")
+                       description="Make a keyframe file from a BVH clip retargeted onto the figure.")
     add_arguments(ap)
     try:
         args = ap.parse_args(argv)

@@ -21,7 +21,7 @@ def register(sub) -> None:
     """Add `mocap` to the `dynsplines` parser."""
     p = sub.add_parser(
         "mocap", help="a motion-capture clip in, an optimized path, a video and metrics out",
-        description="Retarget a BVH clip (CMU skeleton) onto the figure, fit the scene to where its feet rest, "
+        description="Retarget a BVH clip (a human skeleton of any common convention) onto the figure, fit the scene to where its feet rest, "
                     "pick keyframes, optimize the in-betweens and compare the plain spline and the optimized path "
                     "with the clip (motion metrics). Outputs go to renders/<clip stem>/ unless given: "
                     "<stem>.keyframes.json (rerun or edit it with `dynsplines animate`), <stem>.scene.xml (with "
@@ -54,9 +54,17 @@ def add_clip_arguments(p) -> None:
     add_root_scale_argument(p)
 
 
+def add_skeleton_map_argument(p) -> None:
+    """`--skeleton-map FILE` (`mocap`, `batch`, `keyframes-from-bvh`)."""
+    p.add_argument("--skeleton-map", type=Path, default=None, metavar="FILE.json",
+                   help="a JSON file naming the joint of each role the recogniser cannot find, and optionally the "
+                        "unit and up axis, e.g. {\"hips\": \"pelvis\", \"l_foot\": \"foot_l\", \"unit\": \"cm\"} "
+                        "(docs/mocap.md, \"Skeleton map\") [none: every role recognised]")
+
+
 def add_figure_arguments(p) -> None:
-    """`--figure subject|default|FILE.xml` (with its older name `--model FILE.xml`) and `--mass KG`
-    (`mocap`, `batch`, `keyframes-from-bvh`)."""
+    """`--figure subject|default|FILE.xml` (with its older name `--model FILE.xml`), `--mass KG` and
+    `--skeleton-map FILE` (`mocap`, `batch`, `keyframes-from-bvh`)."""
     from runner.mocap.figure_choice import SUBJECT
 
     p.add_argument("--figure", "--model", dest="figure", default=SUBJECT, metavar="subject|default|FILE.xml",
@@ -66,6 +74,7 @@ def add_figure_arguments(p) -> None:
                         "or a figure MJCF file (--model FILE is the older name)")
     p.add_argument("--mass", type=positive(float), default=None, metavar="KG",
                    help="body mass of the subject's figure [kg] [from the stature: 22.9 kg/m^2 x stature^2]")
+    add_skeleton_map_argument(p)
 
 
 def add_root_scale_argument(p) -> None:
@@ -82,7 +91,7 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
     name = prog.split()[-1]
     return ClipOptions(
         keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.figure,
-        mass=args.mass, root_scale=args.root_scale,
+        mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map,
         **clip_terms(args), rate=args.rate,
         command=f"{prog} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == [name] else prog, **fields,
     )

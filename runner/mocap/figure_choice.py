@@ -36,23 +36,25 @@ def is_default(figure) -> bool:
     return str(figure) != SUBJECT and Path(figure).resolve() == FIGURE_FILE.resolve()
 
 
-def choose_figure(figure, clip, out: Path, mass: float | None = None) -> Path:
+def choose_figure(figure, clip, out: Path, mass: float | None = None, skeleton_map=None) -> Path:
     """The figure MJCF file for `--figure` value `figure` (module docstring).
 
     Args:
         figure: "subject", "default" or a path. clip: the BVH file. out: where a subject figure is written.
         mass: [kg] the subject's body mass (None: from the stature; only for "subject").
+        skeleton_map: a `runner.mocap.skeleton_map.SkeletonMap` naming roles the recogniser cannot find
+            (None: none; only for "subject").
     Returns:
         the figure file.
     Raises:
-        InputError: a figure file that does not exist; with "subject", a clip that cannot be read, is
-            not of the CMU skeleton or has a degenerate OFFSET (file and joint named).
+        InputError: a figure file that does not exist; with "subject", a clip that cannot be read, whose
+            skeleton cannot be recognised or has a degenerate OFFSET (file and joint named).
     """
     if str(figure) == SUBJECT:
         from runner.mocap.bvh import read_bvh
         from runner.mocap.subject_figure import write_subject_figure
 
-        return write_subject_figure(read_bvh(clip), out, mass)
+        return write_subject_figure(read_bvh(clip), out, mass, skeleton_map)
     if mass is not None:
         raise InputError(f"--mass {mass:g}: only the subject's figure (--figure subject) takes a body mass; "
                          f"the figure {figure} has its own masses")

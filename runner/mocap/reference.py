@@ -15,6 +15,7 @@ import numpy as np
 
 from runner.mocap.bvh import read_bvh
 from runner.mocap.contacts import correct_root_height
+from runner.mocap.figure_record import clip_skeleton
 from runner.mocap.retarget import (
     Reference,
     check_figure,
@@ -23,7 +24,7 @@ from runner.mocap.retarget import (
     retarget,
     tidy_quaternions,
 )
-from runner.mocap.subject_figure import figure_skeleton_digest, skeleton_digest
+from runner.mocap.skeleton_map import SkeletonMap
 from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure
@@ -37,14 +38,17 @@ IMPORT_STAGES = ("parse", "retarget", "clamp", "root height", "tidy")
 ROOT_SCALE_LEGS = "legs"
 
 
-def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS) -> Reference:
-    """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
+def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS,
+                       skeleton_map: SkeletonMap | None = None, rest_pose: bool = False) -> Reference:
+    """Read a BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
     figure's own skeleton (written by `dynsplines export --to FILE.bvh` or `--export FILE.bvh`: a joint
     named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
     every frame, no retargeting, no clamping, no root-height correction.
 
-    Steps (runner/mocap/retarget.py docstring): parse (bvhio), drop the synthetic T-pose first frame, forward kinematics
-    in metres and MuJoCo axes, rest-offset retargeting of body orientations, local joint quaternions
+    Steps (runner/mocap/retarget.py docstring): parse (bvhio), recognise the skeleton (roles, unit, up axis;
+    `runner.mocap.figure_record.clip_skeleton`), drop a leading rest frame (the synthetic T-pose of CMU's
+    cgspeed conversion), forward kinematics in metres and MuJoCo axes, body-offset retargeting of body
+    orientations, local joint quaternions
     (unit, w x y z, hemisphere-consistent), the root's position and orientation moved into the scene's
     levelled capture frame (the rigid transform its MJCF records, `solver.capture_frame.CaptureFrame.
     from_model`: a fitted scene's floor is z = 0 there; the identity for a scene that records none), knee/elbow hyperextension clamped to 0 flexion
@@ -52,8 +56,7 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     and no contact site is ever below a surface (`correct_root_height`).
 
     Args:
-        path: a BVH file with the CMU skeleton (Hahne's cgspeed conversion, 31 joints, 1 unit =
-            0.05644 m, first frame a T-pose).
+        path: a BVH file of a human skeleton of any convention (runner/mocap/skeleton.py).
         model: the scene's MjModel (figure + floor + step box), e.g. models/run_and_step.xml; its
             figure must be models/humanoid39.xml (joint and site names). With a model that has no
             static surfaces (the figure alone) the root height is left as retargeted.
@@ -62,8 +65,12 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
             the subject's, `leg_length_ratio`, so that the figure's strides cover the ground the
             subject's did) or a number > 0 (1: the root path as captured, e.g. for a scene built around
             the capture's own coordinates, or a keyframe file made before the scaling).
+        skeleton_map: roles, unit or up axis that win over the recognised ones (`--skeleton-map`; on the
+            figure made for this skeleton its recorded ones are used).
+        rest_pose: the figure's bodies on the skeleton's rest pose, as keyframe files made before the
+            bodies were measured on the clip (`runner.mocap.body_frames.rest_pose_frames`).
     On the subject's own figure (the model's figure records this clip's skeleton,
-    `runner.mocap.subject_figure.figure_skeleton_digest`) "legs" is 1 (the figure's legs are the
+    `runner.mocap.figure_record`) "legs" is 1 (the figure's legs are the
     subject's): the root path is the captured one in the levelled frame plus the per-frame vertical
     height correction c(t) (up to ~2 cm, `correct_root_height`; none without surfaces). A capture floor is
     never flat to the millimetre, so without c(t) a foot in contact sinks into the fitted floor at some
@@ -73,11 +80,12 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
 
     Returns:
         Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s],
-        root_scale, captured_root (the subject's own figure: root unscaled, only its height corrected);
-        n = frames in the file - 1.
+        root_scale, captured_root (the subject's own figure: root unscaled, only its height corrected),
+        skeleton (the recognised skeleton);
+        n = frames in the file minus its rest frames.
     Raises:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
-            joint the retargeting needs is missing, the model lacks a joint or site it needs, a malformed
+            role the retargeting needs is not found, the model lacks a joint or site it needs, a malformed
             capture frame in the scene, or root_scale is neither "legs" nor a number > 0.
     """
     from runner.export.bvh import figure_qpos_from_bvh, is_figure_clip
@@ -91,9 +99,9 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
         return Reference(np.arange(len(qpos)) * clip.frame_time, qpos, str(path), clip.frame_time)
     layout = StateLayout.from_model(model)
     figure = check_figure(Figure.from_model(model))
-    own = figure_skeleton_digest(model) == skeleton_digest(clip)  # the subject's own figure
-    scale = 1.0 if own and root_scale == ROOT_SCALE_LEGS else _root_scale(root_scale, clip, model, path)
-    qpos = retarget(clip, figure, layout, scale)[1:]  # frame 0 is the synthetic T-pose
+    skel, frames, own = clip_skeleton(clip, model, skeleton_map, rest_pose)  # own: the subject's own figure
+    scale = 1.0 if own and root_scale == ROOT_SCALE_LEGS else _root_scale(root_scale, clip, skel, model, path)
+    qpos = retarget(clip, skel, frames, figure, layout, scale)[skel.rest_frames:]
     qpos = CaptureFrame.from_model(model).root(qpos, figure.joints[0].qpos_slice.start)  # the levelled frame
     step(2, "retargeted")
     qpos, _ = clamp_hyperextension(qpos, figure)
@@ -105,13 +113,13 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     qpos = tidy_quaternions(qpos, layout)
     step(5, "done")
     times = np.arange(len(qpos)) * clip.frame_time
-    return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own)
+    return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own, skeleton=skel)
 
 
-def _root_scale(root_scale, clip, model, path) -> float:
+def _root_scale(root_scale, clip, skel, model, path) -> float:
     """The number `root_scale` stands for (`load_bvh_reference`). Raises InputError naming a bad value."""
     if isinstance(root_scale, str) and root_scale == ROOT_SCALE_LEGS:
-        return leg_length_ratio(clip, model)
+        return leg_length_ratio(clip, skel, model)
     try:
         value = float(root_scale)
     except (TypeError, ValueError):

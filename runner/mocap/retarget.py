@@ -1,57 +1,52 @@
-"""Retargeting: a CMU BVH clip onto the 39-DOF figure (the reference motion), and its clean-up.
+"""Retargeting: a BVH clip of any skeleton convention onto the 39-DOF figure (the reference motion), and
+its clean-up.
 
 The pipeline (one concept: from a BVH file to a reference motion and keyframes on *our* figure):
 
-1. Parse the BVH file with `bvhio` (hierarchy, channels, Euler angles -> local quaternions), after a
-   check of the text (`_check_bvh_text`: the HIERARCHY grammar, the MOTION header, every data line)
-   that gives exact line-numbered errors for user mistakes and protects against two `bvhio` 1.5.4
-   defects: its line reader loops forever at end of file (a truncated file would hang it), and the line
-   numbers in its SyntaxErrors are wrong inside nested joints.
-2. Forward kinematics of the CMU skeleton (BVH convention: local rotation R = Rz Ry Rx for the channel
-   order Z Y X, applied to column vectors), in metres (1 unit = 0.05644 m, the ASF `length 0.45`) and in
-   MuJoCo axes: BVH is Y up with the figure facing +Z and its left at +X; MuJoCo is z up, facing +x,
-   left +y. So (x, y, z)_mujoco = (Z, X, Y)_bvh, a proper rotation (`BVH_TO_MUJOCO`).
-3. Retargeting: each figure body's world orientation is the corresponding CMU bone's world orientation
-   times a fixed rest-pose offset R_off (`rest_offsets`): the smallest rotation that takes the figure
-   bone's direction at the identity pose (`solver.figure.Figure.segments`: hip -> knee, knee -> ankle,
-   ankle -> ball of the foot, shoulder -> elbow, elbow -> wrist) to the CMU bone's direction in the
-   CMU rest (T-) pose (all
-   channels zero). So the CMU T-pose maps to the figure with arms out sideways, and with legs and feet
-   along the subject's own rest bone directions (the CMU thigh and shin bones point about 20 degrees
-   outward in its rest pose, so mapping them to the identity would cross the figure's legs); the
-   pelvis and the torso have R_off = identity. Local joint quaternions follow as
+1. Parse the BVH file with `bvhio` (runner/mocap/bvh.py, after a check of its text that gives
+   line-numbered errors) and recognise its skeleton (runner/mocap/skeleton.py): which joint plays which
+   role (hips, spine, chest, neck, head, and per side upper leg, lower leg, foot, toe, upper arm,
+   forearm, hand), the length unit, the up axis, and a leading rest frame (CMU's cgspeed conversion
+   starts with a synthetic T-pose), or take them from a skeleton map file.
+2. Forward kinematics (BVH convention: a joint's local rotation R = R1 R2 R3 for its rotation channels
+   listed 1 2 3, applied to column vectors; a joint's translation is its OFFSET or its position
+   channels), in metres and in MuJoCo axes (z up; the file's up axis to z by a cyclic permutation of
+   the axes: for Y-up files (x, y, z) = (Z, X, Y), as `BVH_TO_MUJOCO`).
+3. Retargeting: each figure body's world orientation is its driving joint's world orientation times a
+   constant offset R_off (runner/mocap/body_frames.py: the body's anatomical frame in the joint's frame,
+   measured on the clip, or recorded in the subject's figure). Local joint quaternions follow as
    q_joint = conj(q_parent_world) q_child_world, unit, w x y z, hemisphere-consistent over time.
    Joints the figure merges are composed, not dropped: a body's world orientation includes every
-   rotation above its driving joint (the torso's is LowerBack Spine Spine1; the thigh's includes
-   LHipJoint), so the joint quaternion between two bodies is the chain's composition (docs/mocap.md,
-   "What the figure keeps"). On the subject's own figure (runner/mocap/subject_figure.py: the figure's
-   segments are the subject's bones, its ball site the toe joint) the hip, knee, ankle and toe-joint
-   positions relative to the hips are the capture's, and the root path is the captured one. On another
-   figure, which keeps its own bone lengths, the root position is the CMU Hips position scaled by the ratio
-   of the figure's leg length to the subject's (`leg_length_ratio`), as humanoid retargeting scales
-   root motion by the hips' height (Unity's `Animator.humanScale`): a subject 10% taller than the
-   figure covers 10% more ground per stride, and the figure's shorter legs, at the subject's joint
-   angles, would slide its planted feet (a 16_23 walk with bones scaled 1.1 and the root path left
-   as captured: reference skate 2.19 instead of 1.58 mm/frame, and planting the feet moved the joints
-   7.5 deg from the capture where the plain spline was 5.2 deg off).
+   rotation above its driving joint (the torso's is every spine joint's; the thigh's includes a hip
+   offset joint such as CMU's LHipJoint), so the joint quaternion between two bodies is the chain's
+   composition (docs/mocap.md, "What the figure keeps"). On the subject's own figure
+   (runner/mocap/subject_figure.py: the figure's segments are the subject's bones, its ball site the toe
+   joint) the hip, knee, ankle and toe-joint positions relative to the hips are the capture's, and the
+   root path is the captured one. On another figure, which keeps its own bone lengths, the root
+   position is the hips' position scaled by the ratio of the figure's leg length to the subject's
+   (`leg_length_ratio`), as humanoid retargeting scales root motion by the hips' height (Unity's
+   `Animator.humanScale`): a subject 10% taller than the figure covers 10% more ground per stride, and
+   the figure's shorter legs, at the subject's joint angles, would slide its planted feet (a 16_23
+   walk with bones scaled 1.1 and the root path left as captured: reference skate 2.19 instead of 1.58
+   mm/frame, and planting the feet moved the joints 7.5 deg from the capture where the plain spline
+   was 5.2 deg off).
 4. Clean-up for hard constraints: knee and elbow hyperextension (flexion < 0 about the figure's
-   flexion axes, `solver.figure.Figure.flexion_axes`) is
-   clamped to 0 by removing the twist about the hinge axis (swing-twist decomposition); then the root
-   height is corrected (`correct_root_height`) so that a foot in contact has its lowest contact site
-   on the surface under it, and no contact site is ever below a surface.
+   flexion axes, `solver.figure.Figure.flexion_axes`) is clamped to 0 by removing the twist about the
+   hinge axis (swing-twist decomposition); then the root height is corrected (`correct_root_height`)
+   so that a foot in contact has its lowest contact site on the surface under it, and no contact site
+   is ever below a surface.
 
-The synthetic T-pose first frame of the cgspeed BVH conversion is dropped (see
-models/cmu/README.md). Data: CMU Graphics Lab Motion Capture Database, mocap.cs.cmu.edu.
+Data of the shipped clips: CMU Graphics Lab Motion Capture Database, mocap.cs.cmu.edu (models/cmu/README.md).
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from types import MappingProxyType
 
 import numpy as np
 
-from runner.mocap.bvh import POSITION_CHANNELS, BvhClip
+from runner.mocap.body_frames import DRIVERS, BodyFrames
+from runner.mocap.bvh import BvhClip
+from runner.mocap.skeleton import RecognisedSkeleton, skeleton_world
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.layout import StateLayout
@@ -60,30 +55,12 @@ from solver.quaternion import align_hemispheres, conj, mul, normalize, swing_twi
 # constants
 # --------------------------------------------------------------------------------------------------
 
-#: metres per CMU ASF length unit (ASF `length 0.45`: 1 unit = 1/0.45 inch).
+#: metres per CMU ASF length unit (ASF `length 0.45`: 1 unit = 1/0.45 inch): the shipped clips' unit
 UNIT_TO_METRES = 0.0254 / 0.45
 
-#: (3, 3) rotation taking BVH axes (Y up, facing +Z, left +X) to MuJoCo axes (z up, facing +x, left +y).
+#: (3, 3) rotation taking Y-up BVH axes (Y up; CMU's subjects face +Z, their left at +X) to MuJoCo axes
+#: (z up, x forward, y left): the shipped clips' axes
 BVH_TO_MUJOCO = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-
-#: figure body -> (CMU joint whose world orientation drives it, CMU child joint giving the bone
-#: direction, or None for an identity rest offset).
-BONE_MAP: Mapping[str, tuple[str, str | None]] = MappingProxyType(
-    {
-        "pelvis": ("Hips", None),
-        "l_thigh": ("LeftUpLeg", "LeftLeg"),
-        "l_shin": ("LeftLeg", "LeftFoot"),
-        "l_foot": ("LeftFoot", "LeftToeBase"),
-        "r_thigh": ("RightUpLeg", "RightLeg"),
-        "r_shin": ("RightLeg", "RightFoot"),
-        "r_foot": ("RightFoot", "RightToeBase"),
-        "torso": ("Spine1", None),
-        "l_upper_arm": ("LeftArm", "LeftForeArm"),
-        "l_forearm": ("LeftForeArm", "LeftHand"),
-        "r_upper_arm": ("RightArm", "RightForeArm"),
-        "r_forearm": ("RightForeArm", "RightHand"),
-    }
-)
 
 # --------------------------------------------------------------------------------------------------
 # data
@@ -105,6 +82,7 @@ class Reference:
         captured_root: the root path is the captured one, unscaled, up to the per-frame height
             correction that stands the feet on the scene's surfaces (the subject's own figure,
             `runner.mocap.reference.load_bvh_reference`; the source-skeleton export takes it off).
+        skeleton: the clip's recognised skeleton (None: a clip on the figure's own skeleton, read exactly).
     """
 
     times: np.ndarray
@@ -113,6 +91,7 @@ class Reference:
     frame_time: float
     root_scale: float = 1.0
     captured_root: bool = False
+    skeleton: RecognisedSkeleton | None = None
 
     @property
     def count(self) -> int:
@@ -125,131 +104,50 @@ class Reference:
 
 
 # --------------------------------------------------------------------------------------------------
-# kinematics of the CMU skeleton and retargeting
+# retargeting
 # --------------------------------------------------------------------------------------------------
 
 
-def _to_mujoco_quat(q: np.ndarray) -> np.ndarray:
-    """Express (..., 4) rotations given in BVH axes in MuJoCo axes: R' = M R M^T, i.e. v' = M v."""
-    out = np.array(q, float, copy=True)
-    out[..., 1:] = q[..., 1:] @ BVH_TO_MUJOCO.T
-    return out
+def leg_lengths(clip: BvhClip, skel: RecognisedSkeleton) -> np.ndarray:
+    """(2,) [m] the subject's left and right leg: hip -> knee + knee -> ankle joint centres, the mean
+    over the clip's frames (the bones' lengths; 0.836 m for the subject of 16_23, 0.865 m for 35_17)."""
+    _, p = skeleton_world(clip, skel)
+    out = []
+    for s in "lr":
+        hip, knee, ankle = (p[:, skel.index(clip, f"{s}_{r}")] for r in ("upper_leg", "lower_leg", "foot"))
+        out.append(np.linalg.norm(knee - hip, axis=-1).mean() + np.linalg.norm(ankle - knee, axis=-1).mean())
+    return np.array(out)
 
 
-def cmu_world(clip: BvhClip) -> tuple[np.ndarray, np.ndarray]:
-    """World orientation and position of every CMU joint, in MuJoCo axes and metres.
-
-    Forward kinematics: q_world[j] = q_world[parent] q_local[j], p_world[j] = p_world[parent] +
-    R(q_world[parent]) p_local[j] (BVH convention, column vectors), then the BVH -> MuJoCo axes change
-    and the unit scale `UNIT_TO_METRES`.
-
-    Args:
-        clip: a parsed clip.
-    Returns:
-        quat: (n, J, 4) world orientations (w x y z) in MuJoCo axes.
-        pos: (n, J, 3) world joint positions [m] in MuJoCo axes.
-    """
-    n, J = clip.local_quat.shape[:2]
-    q = np.empty((n, J, 4))
-    p = np.empty((n, J, 3))
-    for j in range(J):
-        par = clip.parents[j]
-        if par < 0:
-            q[:, j] = clip.local_quat[:, j]
-            p[:, j] = clip.local_pos[:, j]
-        else:
-            q[:, j] = mul(q[:, par], clip.local_quat[:, j])
-            p[:, j] = p[:, par] + _rotate(q[:, par], clip.local_pos[:, j])
-    return _to_mujoco_quat(q), (p @ BVH_TO_MUJOCO.T) * UNIT_TO_METRES
-
-
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate (..., 3) vectors by (..., 4) unit quaternions."""
-    qv = np.concatenate([np.zeros(v.shape[:-1] + (1,)), v], axis=-1)
-    return mul(mul(q, qv), conj(q))[..., 1:]
-
-
-def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The smallest rotation (unit quaternion) taking direction a to direction b (both (3,))."""
-    a = a / np.linalg.norm(a)
-    b = b / np.linalg.norm(b)
-    c = float(a @ b)
-    if c < -1.0 + 1e-12:  # opposite: any perpendicular axis
-        axis = np.cross(a, [1.0, 0.0, 0.0])
-        if np.linalg.norm(axis) < 1e-6:
-            axis = np.cross(a, [0.0, 1.0, 0.0])
-        return np.r_[0.0, axis / np.linalg.norm(axis)]
-    q = np.r_[1.0 + c, np.cross(a, b)]
-    return q / np.linalg.norm(q)
-
-
-def rest_offsets(clip: BvhClip, figure: Figure) -> dict[str, np.ndarray]:
-    """Rest-pose offset R_off (unit quaternion) per figure body: figure world = CMU world * R_off.
-
-    For a limb bone, the smallest rotation taking the figure's segment direction at the identity pose
-    (`Figure.segments`, body frame = world frame there) to the CMU bone direction in the CMU rest pose
-    (the child joint's OFFSET, in MuJoCo axes); identity for the pelvis and torso.
-    """
-    out = {}
-    for body, (_, child) in BONE_MAP.items():
-        if child is None:
-            out[body] = np.array([1.0, 0.0, 0.0, 0.0])
-            continue
-        d_cmu = BVH_TO_MUJOCO @ clip.offsets[clip.index(child)]
-        if np.linalg.norm(d_cmu) < 1e-9:
-            raise InputError(
-                f"{clip.source}: joint {child} has a zero OFFSET, so the bone that ends there has no "
-                "direction; the retargeting needs the CMU skeleton (Hahne's BVH conversion)"
-            )
-        out[body] = _swing(figure.segments[body].direction, d_cmu)
-    return out
-
-
-#: the leg bones whose lengths give the root path's scale: (figure thigh body, figure shin body, CMU
-#: knee joint, CMU ankle joint); a figure segment runs from its body's joint to the next joint, a CMU
-#: bone's length is the OFFSET of the joint it ends at.
-LEG_BONES = (("l_thigh", "l_shin", "LeftLeg", "LeftFoot"), ("r_thigh", "r_shin", "RightLeg", "RightFoot"))
-
-
-def leg_length_ratio(clip: BvhClip, model) -> float:
+def leg_length_ratio(clip: BvhClip, skel: RecognisedSkeleton, model) -> float:
     """The figure's leg length over the subject's: the scale `retarget` applies to the root path.
 
-    Leg length = hip -> knee + knee -> ankle at the rest pose, the mean of both legs: for the figure
-    the lengths of its thigh and shin segments (`Figure.segments`: 0.42 + 0.42 m for humanoid39.xml),
-    for the subject the norms of the CMU OFFSETs of the knee and ankle joints in metres (0.836 m for
-    the subject of 16_23, 0.865 m for 35_17, 0.863 m for 127_33).
+    Leg length = hip -> knee + knee -> ankle, the mean of both legs: for the figure the lengths of its
+    thigh and shin segments (`Figure.segments`: 0.42 + 0.42 m for humanoid39.xml), for the subject
+    `leg_lengths`.
 
-    Args:
-        clip: a parsed clip with the CMU leg joints. model: the scene's MjModel (the figure's bodies).
-    Returns:
-        the ratio, > 0 [1].
     Raises:
-        InputError: the clip is not the CMU skeleton (`check_skeleton`), a leg joint has a zero OFFSET,
-            or the figure lacks a leg body (`check_figure`).
+        InputError: a leg of zero length, or the figure lacks a leg body (`check_figure`).
     """
-    check_skeleton(clip)
     segments = check_figure(Figure.from_model(model)).segments
-    figure, subject = [], []
-    for thigh, shin, cmu_knee, cmu_ankle in LEG_BONES:
-        figure.append(segments[thigh].length + segments[shin].length)
-        bones = [np.linalg.norm(clip.offsets[clip.index(j)]) * UNIT_TO_METRES for j in (cmu_knee, cmu_ankle)]
-        if min(bones) <= 1e-9:
-            raise InputError(f"{clip.source}: joint {cmu_knee} or {cmu_ankle} has a zero OFFSET, so the leg "
-                             "has no length; the retargeting needs the CMU skeleton (Hahne's BVH conversion)")
-        subject.append(float(sum(bones)))
-    return float(np.mean(figure) / np.mean(subject))
+    figure = np.mean([segments[f"{s}_thigh"].length + segments[f"{s}_shin"].length for s in "lr"])
+    subject = float(leg_lengths(clip, skel).mean())
+    if subject <= 1e-9:
+        raise InputError(f"{clip.source}: the legs ({skel.joint('l_upper_leg')} to {skel.joint('l_foot')}) have no "
+                         "length; check the HIERARCHY's OFFSETs")
+    return float(figure / subject)
 
 
 def check_figure(figure: Figure) -> Figure:
-    """`figure` if its bodies are those `BONE_MAP` drives (models/humanoid39.xml's) and every limb body
-    has a segment (`Figure.segments`), else InputError naming the bodies and the fix."""
-    missing = [b for b in BONE_MAP if b not in figure.bodies]
-    extra = [b for b in figure.bodies if b not in BONE_MAP]
+    """`figure` if its bodies are those the retargeting drives (`DRIVERS`, models/humanoid39.xml's) and every
+    limb body has a segment (`Figure.segments`), else InputError naming the bodies and the fix."""
+    missing = [b for b in DRIVERS if b not in figure.bodies]
+    extra = [b for b in figure.bodies if b not in DRIVERS]
     if missing or extra:
-        raise InputError(f"the figure's bodies differ from those the retargeting drives ({', '.join(BONE_MAP)}): "
+        raise InputError(f"the figure's bodies differ from those the retargeting drives ({', '.join(DRIVERS)}): "
                          f"missing {', '.join(missing) or 'none'}, not driven {', '.join(extra) or 'none'}; "
                          "use a figure with the bodies of models/humanoid39.xml")
-    no_end = [b for b, (_, child) in BONE_MAP.items() if child and b not in figure.segments]
+    no_end = [b for b in DRIVERS if b != "pelvis" and b != "torso" and b not in figure.segments]
     if no_end:
         raise InputError(f"the figure's bodies {', '.join(no_end)} have no segment end (no single child body): "
                          f'add <text name="figure:end:{no_end[0]}" data="SITE"/> to its MJCF\'s <custom>, '
@@ -257,61 +155,32 @@ def check_figure(figure: Figure) -> Figure:
     return figure
 
 
-def _required_joints() -> list[str]:
-    req = []
-    for joint, child in BONE_MAP.values():
-        req += [joint] + ([child] if child else [])
-    return list(dict.fromkeys(req))
-
-
-def check_skeleton(clip: BvhClip) -> None:
-    """Raises InputError (naming the file, the joints or channels and the fix) unless the clip has the
-    CMU joints the retargeting needs, the root Hips, and the root's position channels."""
-    missing = [j for j in _required_joints() if j not in clip.names]
-    if missing:
-        raise InputError(
-            f"{clip.source}: the skeleton has no joint(s) {', '.join(missing)}; the retargeting needs the "
-            f"CMU skeleton's {', '.join(_required_joints())} (the cgspeed BVH conversion of "
-            "mocap.cs.cmu.edu). Rename the joints of your skeleton to these names"
-        )
-    if clip.names[0] != "Hips":
-        raise InputError(f"{clip.source}: the ROOT joint is {clip.names[0]!r}; the CMU skeleton's root is 'Hips'")
-    missing_pos = [c for c in POSITION_CHANNELS if c not in clip.channels[0]]
-    if missing_pos:
-        raise InputError(
-            f"{clip.source}: the ROOT joint Hips has no {', '.join(missing_pos)} channel(s) (it has "
-            f"{' '.join(clip.channels[0]) or 'none'}); the root path needs 'CHANNELS 6 Xposition Yposition "
-            "Zposition Zrotation Yrotation Xrotation'"
-        )
-
-
-def retarget(clip: BvhClip, figure: Figure, layout: StateLayout, root_scale: float = 1.0) -> np.ndarray:
+def retarget(clip: BvhClip, skel: RecognisedSkeleton, frames: BodyFrames, figure: Figure, layout: StateLayout,
+             root_scale: float = 1.0) -> np.ndarray:
     """Retarget every frame of a clip onto the figure: `qpos` before any clean-up.
 
-    Root position = root_scale times the CMU Hips position [m] (scaled about the capture's origin);
-    body orientations = CMU bone orientations times the rest offsets (module docstring, step 3); joint
-    quaternions relative to the parent body; each joint's quaternions hemisphere-aligned over time, the
-    first with w >= 0.
+    Root position = root_scale times the hips' world position [m] (scaled about the capture's origin);
+    body orientations = the driving joints' world orientations times the body offsets (module docstring,
+    step 3); joint quaternions relative to the parent body; each joint's quaternions hemisphere-aligned
+    over time, the first with w >= 0.
 
     Args:
-        clip: a parsed clip (all frames). figure: the figure (`Figure.from_model`; its segments and
-            joints). layout: the scene's qpos layout.
+        clip: a parsed clip (all frames, the rest frames included). skel: its recognised skeleton.
+        frames: the figure's bodies on it (`runner.mocap.body_frames.body_frames`, or a subject figure's
+            record). figure: the figure. layout: the scene's qpos layout.
         root_scale: scale of the root path, > 0 (`leg_length_ratio` for the figure's legs; 1: as captured).
     Returns:
-        (n, nq) qpos.
+        (n, nq) qpos, a row per frame of the file.
     Raises:
-        InputError: a joint the retargeting needs is missing from the clip, or the Hips has no
-            position channels (`check_skeleton`); the figure's bodies are not `BONE_MAP`'s (`check_figure`).
+        InputError: the figure's bodies are not `DRIVERS`' (`check_figure`).
     """
-    check_skeleton(clip)
     check_figure(figure)
-    qw, pw = cmu_world(clip)
-    offsets = rest_offsets(clip, figure)
-    body_q = {b: mul(qw[:, clip.index(j)], offsets[b]) for b, (j, _) in BONE_MAP.items()}
-    n = len(qw)
-    qpos = np.zeros((n, layout.nq))
+    qw, pw = skeleton_world(clip, skel)
+    body_q = {b: mul(qw[:, skel.index(clip, role)], np.broadcast_to(frames.offsets[b], qw[:, 0].shape))
+              for b, role in DRIVERS.items()}
+    qpos = np.zeros((len(qw), layout.nq))
     root = figure.joints[0]  # the free joint: the root body's
-    qpos[:, root.qposadr : root.qposadr + 3] = root_scale * pw[:, clip.index("Hips")]
+    qpos[:, root.qposadr : root.qposadr + 3] = root_scale * pw[:, skel.index(clip, "hips")]
     qpos[:, root.qposadr + 3 : root.qposadr + 7] = body_q[figure.root]
     for joint in figure.joints[1:]:
         parent, child = figure.joint_bodies[joint.name]

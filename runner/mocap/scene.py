@@ -47,7 +47,7 @@ class ClipScene:
 
 
 def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_out: str | Path,
-               root_scale: float | str = ROOT_SCALE_LEGS) -> ClipScene:
+               root_scale: float | str = ROOT_SCALE_LEGS, skeleton_map=None) -> ClipScene:
     """Retarget `clip` onto `scene`, or with scene == "auto" onto a scene fitted to it.
 
     Fitting (docs/contacts.md "Fitted scenes"): retarget onto the figure alone (no surfaces, so no
@@ -65,15 +65,17 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
         clip: the BVH file. scene: an MJCF file or "auto". figure: the figure's MJCF
             (models/humanoid39.xml). fitted_out: where the fitted scene is written (only for "auto").
         root_scale: the root path's scale (`load_bvh_reference`: "legs" or a number).
+        skeleton_map: a `runner.mocap.skeleton_map.SkeletonMap` or None (`load_bvh_reference`).
     Raises:
         InputError: the clip or a scene cannot be read, or the clip's skeleton lacks a joint.
     """
     if str(scene) != AUTO:
         model = load_model(scene)
         frame = CaptureFrame.from_model(model, str(scene))  # a malformed record named with its file
-        return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, Path(scene), frame=frame)
+        ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map)
+        return ClipScene(ref, model, Path(scene), frame=frame)
     bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
-    first = load_bvh_reference(clip, bare, root_scale=root_scale)
+    first = load_bvh_reference(clip, bare, root_scale=root_scale, skeleton_map=skeleton_map)
     pos = contact_points(bare, first.qpos)  # rounded sites: their spheres' lowest points
     capture = fit_scene(first.times, pos, fit_contacts(first.times, pos))
     frame, fitted = capture.levelling(), capture.levelled()
@@ -83,7 +85,8 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     with atomic_output(out, suffix=".xml") as tmp_path:
         Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem, capture=frame))
     model = load_model(out)
-    return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, out, fitted, capture, frame)
+    ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map)
+    return ClipScene(ref, model, out, fitted, capture, frame)
 
 
 def name_surfaces(model, reference: Reference, contacts: list[Contact]) -> list[Contact]:

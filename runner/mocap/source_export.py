@@ -2,25 +2,30 @@
 FILE.bvh`, docs/export.md "Onto the source skeleton").
 
 The file has the source's HIERARCHY verbatim (joint names, OFFSETs, channel order, units) and its frame
-rate, and starts, like the source, with the source's synthetic T-pose frame; frame k + 1 is the path
-at t = k / fps. Per joint:
+rate, and starts, like the source, with the source's leading rest frames (the synthetic T-pose of CMU's
+cgspeed conversion; none in most files); frame k + rest is the path at t = k / fps. The skeleton is
+read as the import read it (the roles, unit, axes and body frames the subject's figure records,
+runner/mocap/figure_record.py). Per joint:
 
-* **modelled** (the joint that drives a figure body, `runner.mocap.retarget.BONE_MAP`: Hips, the
-  UpLegs, Legs, Feet, Spine1, Arms, ForeArms): its world orientation is the figure body's times the
-  inverse rest offset (`rest_offsets`: figure world = source world x R_off, so source world = figure
-  world x R_off^-1). A merged chain is split back by keeping the source's inner joints and solving the
-  last one: with LowerBack and Spine resampled from the source, Spine1's local rotation is the one
-  whose composition with them gives the torso's world orientation; likewise LHipJoint before the
-  thigh, LeftShoulder before the arm. The root translation is the path's root position minus the
-  reference's height correction c(t) (`root_correction`: the import stands the captured feet on the
-  fitted surfaces by moving the root up to ~2 cm up or down per frame, `runner.mocap.contacts.
-  correct_root_height`; the export takes that off again). Both are taken back from the scene's levelled
-  frame into the capture's coordinates first (the inverse of the rigid transform the scene records,
-  `solver.capture_frame`; docs/mocap.md), so the file lies where the source does: the reference itself
-  exports to the source's root path, and an optimized path to it at its keyframes.
-* **not modelled** (neck and head, toes, hands, fingers, thumbs, and the inner joints above): the
-  source's local rotations, resampled to the export times (spherical linear interpolation between the
-  neighbouring captured frames, `scipy.spatial.transform.Slerp`; at the captured times, the source's own).
+* **driving a figure body** (`runner.mocap.body_frames.DRIVERS`: the hips, upper and lower legs, feet,
+  chest, upper arms and forearms): its world orientation is the figure body's times the inverse body
+  offset (figure world = source world x R_off, so source world = figure world x R_off^-1). A merged
+  chain is split back by keeping the source's inner joints and solving the last one: with the spine
+  joints below the chest resampled from the source, the chest's local rotation is the one whose
+  composition with them gives the torso's world orientation; likewise a hip offset joint before the
+  thigh, a clavicle before the arm. At a keyframe, where the path is the reference and the reference
+  the retargeted source, this gives every source joint back. The hips' world position is the path's root
+  position minus the reference's height correction c(t) (`root_correction`: the import stands the
+  captured feet on the fitted surfaces by moving the root up to ~2 cm up or down per frame,
+  `runner.mocap.contacts.correct_root_height`; the export takes that off again), written into the
+  position channels of the hips (or of the nearest joint above them that has some) given the source's
+  joints above. Both are taken back from the scene's levelled frame into the capture's coordinates first
+  (the inverse of the rigid transform the scene records, `solver.capture_frame`; docs/mocap.md), so
+  the file lies where the source does.
+* **not modelled** (neck and head, toes, hands, fingers, and the inner joints above; any position
+  channels but those above): the source's local rotations and translations, resampled to the export
+  times (spherical linear interpolation between the neighbouring captured frames,
+  `scipy.spatial.transform.Slerp`; at the captured times, the source's own).
 
 Local rotations become each joint's Euler channels in its own order (R = R1 R2 R3 for channels listed
 1 2 3, intrinsic: the BVH convention), unwrapped over time.
@@ -32,9 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
+from runner.mocap.body_frames import DRIVERS
 from runner.mocap.bvh import POSITION_CHANNELS, BvhClip, read_bvh
-from runner.mocap.retarget import BONE_MAP, BVH_TO_MUJOCO, UNIT_TO_METRES, check_figure, check_skeleton, rest_offsets
-from runner.mocap.subject_figure import figure_skeleton_digest, skeleton_digest
+from runner.mocap.figure_record import clip_skeleton, figure_skeleton_digest, skeleton_digest
+from runner.mocap.retarget import check_figure
+from runner.mocap.skeleton import RecognisedSkeleton, rotate
 from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure
@@ -76,12 +83,13 @@ def _renamed(clip: BvhClip, source: str) -> BvhClip:
     return replace(clip, source=source)
 
 
-def _slerp_source(clip: BvhClip, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The source's local rotations (n, J, 4) (w x y z, BVH axes) and translations (n, J, 3) [units] at
-    `times` [s] (t = 0 at the first frame after the T-pose), slerp and linear between captured frames."""
+def _slerp_source(clip: BvhClip, first: int, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The source's local rotations (n, J, 4) (w x y z, file axes) and translations (n, J, 3) [units] at
+    `times` [s] (t = 0 at frame `first`, the first after the rest frames), slerp and linear between
+    captured frames."""
     from scipy.spatial.transform import Rotation, Slerp
 
-    quat, pos = clip.local_quat[1:], clip.local_pos[1:]
+    quat, pos = clip.local_quat[first:], clip.local_pos[first:]
     t_src = np.arange(len(quat)) * clip.frame_time
     t = np.clip(times, 0.0, t_src[-1])
     out_q = np.empty((len(t), quat.shape[1], 4))
@@ -108,23 +116,37 @@ def _figure_world(model, figure: Figure, qpos: np.ndarray) -> dict[str, np.ndarr
     return world
 
 
-def root_correction(clip: BvhClip, model, reference, times: np.ndarray) -> np.ndarray:
-    """The reference's root correction c(t) at `times`, in the capture's coordinates [BVH units].
+def _world(clip: BvhClip, local: np.ndarray, trans: np.ndarray, upto: int) -> tuple[np.ndarray, np.ndarray]:
+    """World orientations (n, K, 4) and positions (n, K, 3) [units], file axes, of joint `upto` and its
+    ancestors (indexed as the clip's joints, the others left zero) from local rotations and translations."""
+    chain = [upto]
+    while clip.parents[chain[-1]] >= 0:
+        chain.append(int(clip.parents[chain[-1]]))
+    q, p = np.zeros(local.shape), np.zeros(trans.shape)
+    for j in reversed(chain):
+        par = clip.parents[j]
+        q[:, j] = local[:, j] if par < 0 else mul(q[:, par], local[:, j])
+        p[:, j] = trans[:, j] if par < 0 else p[:, par] + rotate(q[:, par], trans[:, j])
+    return q, p
 
-    c = R^T (reference root - T(captured root)) at the reference's frames, with T: x' = R x + shift the
-    scene's capture frame (`solver.capture_frame`), i.e. the reference root taken back to the capture's
-    coordinates minus the clip's own root (its `Hips` translation); on the subject's own figure that is
-    the per-frame height correction of the import (`runner.mocap.contacts.correct_root_height`, a few
-    mm, vertical in the levelled frame). Linear between the reference's frames, held before the first and
-    after the last.
+
+def root_correction(clip: BvhClip, skel: RecognisedSkeleton, model, reference, times: np.ndarray) -> np.ndarray:
+    """The reference's root correction c(t) at `times`, in the capture's coordinates [file units, axes].
+
+    c = A^T (R^T (reference root - shift)) / unit - hips, at the reference's frames: the reference root
+    taken back by the inverse of the scene's capture frame (x' = R x + shift, `solver.capture_frame`)
+    and into the file's axes (A = skel.axes) and units, minus the source's own hips (forward kinematics
+    of the clip). On the subject's own figure that is the per-frame height correction of the import
+    (`runner.mocap.contacts.correct_root_height`, a few mm, vertical in the levelled frame). Linear
+    between the reference's frames, held before the first and after the last.
 
     Args:
-        clip: the source clip. model: the scene (its figure and capture frame).
+        clip: the source clip. skel: its recognised skeleton. model: the scene (its figure and capture frame).
         reference: (times (r,) [s], qpos (r, nq)) the reference motion the path was made against (the
             saved path's `reference_times`, `reference_qpos`), or None.
-        times: (n,) [s] the export times, 0 at the clip's first frame after the T-pose.
+        times: (n,) [s] the export times, 0 at the clip's first frame after its rest frames.
     Returns:
-        (n, 3) c [BVH units] in BVH axes; zeros without a reference (fewer than 2 frames).
+        (n, 3) c [file units] in file axes; zeros without a reference (fewer than 2 frames).
     Raises:
         InputError: the scene's capture frame is malformed.
     """
@@ -134,48 +156,62 @@ def root_correction(clip: BvhClip, model, reference, times: np.ndarray) -> np.nd
     ref_t, ref_q = np.asarray(reference[0], float), np.asarray(reference[1], float)
     adr = check_figure(Figure.from_model(model)).joints[0].qpos_slice.start
     back = CaptureFrame.from_model(model).inverse().points(ref_q[:, adr:adr + 3])
-    ref_root = back @ BVH_TO_MUJOCO / UNIT_TO_METRES  # the reference root in the capture's coordinates, BVH axes
-    _, trans = _slerp_source(clip, ref_t)
-    c = ref_root - trans[:, 0]
+    ref_root = back @ skel.axes / skel.unit  # the reference root in the capture's coordinates, file axes
+    local, trans = _slerp_source(clip, skel.rest_frames, ref_t)
+    hips = skel.index(clip, "hips")
+    c = ref_root - _world(clip, local, trans, hips)[1][:, hips]
     return np.stack([np.interp(times, ref_t, c[:, k]) for k in range(3)], axis=-1)
 
 
 def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray, reference=None) -> tuple[np.ndarray, ...]:
-    """The source skeleton's local rotations and root translation for a figure motion (module docstring).
+    """The source skeleton's local rotations and translations for a figure motion (module docstring).
 
     Args:
-        clip: the source clip (CMU skeleton). model: the scene (its figure, and the transform from the
-            capture's coordinates to the scene's that it records). qpos: (n, nq) the motion, in the scene.
-        times: (n,) [s] its sample times, 0 at the clip's first frame after the T-pose.
+        clip: the source clip. model: the scene (its figure, made for the clip's skeleton, and the
+            transform from the capture's coordinates to the scene's that it records). qpos: (n, nq)
+            the motion, in the scene. times: (n,) [s] its sample times, 0 at the clip's first frame
+            after its rest frames.
         reference: (times (r,) [s], qpos (r, nq)) the reference the path was made against, whose root
             correction is taken off the root (`root_correction`); None: none (the root as the path has it).
     Returns:
-        local: (n, J, 4) unit local rotations (w x y z) in BVH axes; root: (n, 3) root translation [BVH
-        units]; trans: (n, J, 3) the source's local translations, resampled [BVH units].
+        local: (n, J, 4) unit local rotations (w x y z) in file axes; trans: (n, J, 3) local
+        translations [file units]: the source's, resampled, but where the hips' position is solved.
     Raises:
-        InputError: the clip is not the CMU skeleton, the figure not the one the retargeting drives, or
-            the scene's capture frame is malformed.
+        InputError: the skeleton cannot be recognised, the figure is not the one the retargeting drives,
+            or the scene's capture frame is malformed.
     """
-    check_skeleton(clip)
+    skel, frames, _ = clip_skeleton(clip, model)
     figure = check_figure(Figure.from_model(model))
     qpos = CaptureFrame.from_model(model).inverse().root(qpos, figure.joints[0].qpos_slice.start)
-    local, pos = _slerp_source(clip, np.asarray(times, float))
+    local, trans = _slerp_source(clip, skel.rest_frames, np.asarray(times, float))
     fig_world = _figure_world(model, figure, qpos)
-    off = rest_offsets(clip, figure)
-    # the source world orientation each modelled joint must have, in BVH axes (R_bvh = M^T R M)
-    target = {}
-    for body, (joint, _) in BONE_MAP.items():
-        q = mul(fig_world[body], np.broadcast_to(conj(off[body]), fig_world[body].shape))
-        q = np.array(q)
-        q[:, 1:] = q[:, 1:] @ BVH_TO_MUJOCO  # v_bvh = M^T v_mujoco
-        target[clip.index(joint)] = normalize(q)
+    target = {}  # the source world orientation each driving joint must have, in file axes (R = A^T R' A)
+    for body, role in DRIVERS.items():
+        q = np.array(mul(fig_world[body], np.broadcast_to(conj(frames.offsets[body]), fig_world[body].shape)))
+        q[:, 1:] = q[:, 1:] @ skel.axes
+        target[skel.index(clip, role)] = normalize(q)
     world = np.empty_like(local)
     for j, par in enumerate(clip.parents):
         if j in target:
             local[:, j] = target[j] if par < 0 else normalize(mul(conj(world[:, par]), target[j]))
         world[:, j] = local[:, j] if par < 0 else normalize(mul(world[:, par], local[:, j]))
-    root = qpos[:, figure.joints[0].qpos_slice][:, :3] @ BVH_TO_MUJOCO / UNIT_TO_METRES
-    return local, root - root_correction(clip, model, reference, times), pos
+    hips = skel.index(clip, "hips")
+    root = qpos[:, figure.joints[0].qpos_slice][:, :3] @ skel.axes / skel.unit
+    _place_hips(clip, skel, local, trans, root - root_correction(clip, skel, model, reference, times), hips)
+    return local, trans
+
+
+def _place_hips(clip: BvhClip, skel: RecognisedSkeleton, local, trans, hips_world: np.ndarray, hips: int) -> None:
+    """Set, in `trans`, the translation of the hips, or of the nearest joint above them with position
+    channels, so that the hips are at `hips_world` (n, 3) [file units] given the joints above."""
+    k = hips
+    while clip.names[k] not in skel.position_joints:
+        k = int(clip.parents[k])
+    q, p = _world(clip, local, trans, hips)
+    below = p[:, hips] - p[:, k]  # from joint k to the hips (zero if k is the hips)
+    at_k = hips_world - below
+    par = int(clip.parents[k])
+    trans[:, k] = at_k if par < 0 else rotate(conj(q[:, par]), at_k - p[:, par])
 
 
 def _euler(q: np.ndarray, order: str) -> np.ndarray:
@@ -195,19 +231,19 @@ def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np
     """The BVH file of a figure motion on the source skeleton (module docstring).
 
     Args:
-        clip: the source clip, parsed. text: its file's text (the HIERARCHY and T-pose frame are copied).
+        clip: the source clip, parsed. text: its file's text (the HIERARCHY and rest frames are copied).
         model: the scene. qpos: (n, nq). times: (n,) [s]. fps: [Hz] the samples' rate.
         reference: (times, qpos) of the reference the path was made against, or None (`source_motion`).
     """
-    local, root, trans = source_motion(clip, model, qpos, times, reference)
+    local, trans = source_motion(clip, model, qpos, times, reference)
+    first = clip_skeleton(clip, model)[0].rest_frames
     cols = []
     for j, chans in enumerate(clip.channels):
         rot = [c[0] for c in chans if c.endswith("rotation")]
         angles = dict(zip(rot, _euler(local[:, j], "".join(rot)).T, strict=True)) if rot else {}
         for c in chans:
             if c in POSITION_CHANNELS:
-                k = POSITION_CHANNELS.index(c)
-                cols.append(root[:, k] if j == 0 else trans[:, j, k])
+                cols.append(trans[:, j, POSITION_CHANNELS.index(c)])
             else:
                 cols.append(angles[c[0]])
     rows = np.stack(cols, axis=1) + 0.0
@@ -216,7 +252,8 @@ def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np
     data = [ln for ln in lines[m + 1:] if ln.strip()]
     same_rate = abs(fps * clip.frame_time - 1.0) < 1e-6
     frame_time = data[1].split(":", 1)[1].strip() if same_rate else f"{1.0 / fps:.9f}"
-    out = lines[:m] + ["MOTION", f"Frames: {len(rows) + 1}", f"Frame Time: {frame_time}", data[2].strip()]
+    out = lines[:m] + ["MOTION", f"Frames: {len(rows) + first}", f"Frame Time: {frame_time}"]
+    out += [ln.strip() for ln in data[2:2 + first]]
     fmt = f"{{:.{_DECIMALS}f}}"
     out += [" ".join(fmt.format(v) for v in row) for row in rows]
     return "\n".join(out) + "\n"

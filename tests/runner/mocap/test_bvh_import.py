@@ -36,8 +36,9 @@ def layout(scene):
 
 @pytest.fixture(scope="module")
 def reference(scene):
-    # the root path as captured: the shipped keyframe file was made so (it records no root_scale)
-    return load_bvh_reference(CLIP, scene, root_scale=1.0)
+    # as the shipped keyframe file was made (it records no root_scale and no skeleton): the root path as
+    # captured, the figure's bodies on the CMU skeleton's rest pose
+    return load_bvh_reference(CLIP, scene, root_scale=1.0, rest_pose=True)
 
 
 # ---- independent helpers: forward kinematics and the box straight from MuJoCo --------------------
@@ -223,6 +224,8 @@ def test_main_writes_a_keyframe_file(tmp_path, layout, capsys):
 
 
 # ---- a tiny hand-written clip with known rotations ---------------------------------------------------
+# (its trunk joint is named LowerBack, a name only the CMU skeleton uses: the clip is read as CMU's, in
+# CMU's length unit and with a synthetic T-pose first frame)
 
 TINY_HIERARCHY = """HIERARCHY
 ROOT Hips
@@ -277,7 +280,7 @@ ROOT Hips
       }
     }
   }
-  JOINT Spine1
+  JOINT LowerBack
   {
     OFFSET 0 4 0
     CHANNELS 3 Zrotation Yrotation Xrotation
@@ -319,13 +322,27 @@ ROOT Hips
         }
       }
     }
+    JOINT Neck
+    {
+      OFFSET 0 2 0
+      CHANNELS 3 Zrotation Yrotation Xrotation
+      JOINT Head
+      {
+        OFFSET 0 1.5 0
+        CHANNELS 3 Zrotation Yrotation Xrotation
+        End Site
+        {
+          OFFSET 0 3 0
+        }
+      }
+    }
   }
 }
 """
 # channel order: Hips (X Y Z position, Z Y X rotation), then Z Y X rotation of each joint in file order
 TINY_JOINTS = ["LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "RightUpLeg", "RightLeg", "RightFoot",
-               "RightToeBase", "Spine1", "LeftArm", "LeftForeArm", "LeftHand", "RightArm", "RightForeArm",
-               "RightHand"]
+               "RightToeBase", "LowerBack", "LeftArm", "LeftForeArm", "LeftHand", "RightArm", "RightForeArm",
+               "RightHand", "Neck", "Head"]
 
 
 def tiny_frame(hips_pos=(1.0, 17.0, 10.0), hips_zyx=(0, 0, 0), **zyx):
@@ -460,7 +477,7 @@ def test_wrong_value_count(tmp_path, scene):
     frames = [tiny_frame(), tiny_frame(), tiny_frame() + " 7"]
     p = write(tmp_path, tiny_bvh(frames))
     line = TINY_HIERARCHY.count("\n") + 3 + 3  # hierarchy, MOTION/Frames/Frame Time, third frame
-    with pytest.raises(InputError, match=rf"line {line}: frame 3 has 52 values but the HIERARCHY declares 51 channels"):
+    with pytest.raises(InputError, match=rf"line {line}: frame 3 has 58 values but the HIERARCHY declares 57 channels"):
         load_bvh_reference(p, scene)
 
 
@@ -513,11 +530,19 @@ def test_malformed_hierarchy(tmp_path, scene):
         load_bvh_reference(p, scene)
 
 
-def test_missing_joint(tmp_path, scene):
-    text = tiny_bvh([tiny_frame(), tiny_frame()]).replace("JOINT LeftForeArm", "JOINT LeftElbow")
+def test_a_skeleton_without_a_head_names_the_roles(tmp_path, scene):
+    """The chest is where the arms and the neck branch off: without a head there is no such joint, and the
+    one-line error names the roles not found and the skeleton map that would name them."""
+    lines = tiny_bvh([tiny_frame(), tiny_frame()]).splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.strip() == "JOINT Neck")
+    lines = lines[:at] + lines[at + 14:]  # the Neck and Head block
+    frame = " ".join(tiny_frame().split()[:-6])
+    text = "\n".join(lines[:lines.index("MOTION") + 3] + [frame, frame]) + "\n"
     p = write(tmp_path, text)
-    with pytest.raises(InputError, match=r"bad\.bvh: the skeleton has no joint\(s\) LeftForeArm; .*Rename"):
+    with pytest.raises(InputError, match=r"bad\.bvh: cannot recognise the skeleton's chest, head, l_upper_arm.*"
+                                         r"skeleton map.*--skeleton-map FILE") as e:
         load_bvh_reference(p, scene)
+    assert "\n" not in str(e.value)
 
 
 def test_root_without_position_channels(tmp_path, scene):
@@ -526,7 +551,8 @@ def test_root_without_position_channels(tmp_path, scene):
         "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation", "CHANNELS 3 Zrotation Yrotation Xrotation"
     ).replace(frame, " ".join(frame.split()[3:]))
     p = write(tmp_path, text)
-    with pytest.raises(InputError, match=r"the ROOT joint Hips has no Xposition, Yposition, Zposition channel\(s\)"):
+    with pytest.raises(InputError, match=r"bad\.bvh: neither the hips \(Hips\) nor a joint above them has position "
+                                         r"channels"):
         load_bvh_reference(p, scene)
 
 
@@ -556,17 +582,18 @@ def test_other_channel_order_frame_rate_and_bone_lengths_give_the_same_motion(tm
         assert d.min() > 1 - 1e-9
 
 
-def test_another_skeleton_is_one_line_naming_the_missing_joints(tmp_path, scene, capsys):
+def test_joints_of_other_names_are_recognised_by_the_hierarchy(tmp_path, scene):
+    """Joints renamed to names of no family (LThigh, RUpperArm, Torso7) play the same roles: the
+    hierarchy and the bone lengths say which joint is which, the L/R prefixes the side; the reference is
+    the original's."""
     from bvh_edit import edit_bvh
 
-    clip = edit_bvh(CLIP, tmp_path / "other.bvh", seconds=0.2, rename={"LeftUpLeg": "LThigh", "RightArm": "RUpperArm"})
-    with pytest.raises(InputError) as e:
-        load_bvh_reference(clip, scene)
-    msg = str(e.value)
-    assert "\n" not in msg and "LeftUpLeg" in msg and "RightArm" in msg and "no joint(s)" in msg
-    rc = keyframes_from_bvh_main([str(clip), "--out", str(tmp_path / "k.json")])
-    err = capsys.readouterr().err
-    assert rc == 2 and err.count("\n") == 1 and "LeftUpLeg, RightArm" in err
+    base = load_bvh_reference(edit_bvh(CLIP, tmp_path / "base.bvh", seconds=0.2), scene)
+    clip = edit_bvh(CLIP, tmp_path / "other.bvh", seconds=0.2,
+                    rename={"LeftUpLeg": "LThigh", "RightArm": "RUpperArm", "Spine1": "Torso7"})
+    other = load_bvh_reference(clip, scene)
+    assert np.abs(other.qpos - base.qpos).max() < 1e-9
+    assert other.skeleton.roles["l_upper_leg"] == "LThigh" and other.skeleton.roles["chest"] == "Torso7"
 
 
 def test_default_scene_is_fitted_to_the_clip_not_the_step(tmp_path, capsys):
@@ -588,7 +615,7 @@ def test_default_scene_is_fitted_to_the_clip_not_the_step(tmp_path, capsys):
     assert kf.values[:, 2].max() < 1.2  # the walker is not lifted onto a box
 
 
-def test_a_small_hop_keeps_its_height(tmp_path, reference, scene):
+def test_a_small_hop_keeps_its_height(tmp_path, scene):
     """The clip with the figure lifted 15 cm over 0.35 s around the right foot's stance (`edit_bvh`
     hop): the root-height correction must not put the lifted foot back on the floor where it slows at
     the top of the hop (it did: 6-7 cm of the 15 were left, and the foot was "in contact" at 5 cm),
@@ -601,10 +628,12 @@ def test_a_small_hop_keeps_its_height(tmp_path, reference, scene):
     from runner.mocap.stance import capture_rest
 
     start, duration, height = 0.25, 0.35, 0.15
-    hop = load_bvh_reference(edit_bvh(CLIP, tmp_path / "hop.bvh", hop=(start, duration, height)), scene)
+    base = load_bvh_reference(CLIP, scene, root_scale=1.0)
+    hop = load_bvh_reference(edit_bvh(CLIP, tmp_path / "hop.bvh", hop=(start, duration, height)), scene,
+                             root_scale=1.0)
     t = hop.times
     s = np.clip((t - start) / duration, 0.0, 1.0)
-    lift = hop.qpos[:, 2] - reference.qpos[:, 2]
+    lift = hop.qpos[:, 2] - base.qpos[:, 2]
     top = np.argmin(np.abs(s - 0.5))
     assert lift[top] >= 0.75 * height, lift[top]
     away = (t < start - 0.1) | (t > start + duration + 0.1)

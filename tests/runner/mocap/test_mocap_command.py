@@ -40,10 +40,23 @@ def test_missing_clip(tmp_path, capsys):
     assert "nope.bvh" in err and "no such" in err
 
 
-def test_another_skeleton_names_the_missing_joints(tmp_path, capsys):
-    clip = edit_bvh(CLIP, tmp_path / "other.bvh", seconds=0.2, rename={"LeftFoot": "LAnkle", "Spine1": "Chest"})
-    err = one_line_error(capsys, ["mocap", str(clip), "--out-dir", str(tmp_path / "o"), *FAST])
-    assert "LeftFoot" in err and "Spine1" in err
+def test_a_bad_skeleton_map_is_one_line(tmp_path, capsys):
+    """`--skeleton-map FILE`: a joint the clip lacks, an unknown key, a file that is not JSON: one line
+    naming the file, the key and the value."""
+    clip = edit_bvh(CLIP, tmp_path / "c.bvh", seconds=0.2)
+    smap = tmp_path / "map.json"
+    smap.write_text('{"l_foot": "LAnkle"}')
+    err = one_line_error(capsys, ["mocap", str(clip), "--out-dir", str(tmp_path / "o"), "--skeleton-map", str(smap),
+                                  *FAST])
+    assert "map.json" in err and '"l_foot"' in err and "LAnkle" in err and "not a joint" in err
+    smap.write_text('{"left_foot": "LeftFoot"}')
+    err = one_line_error(capsys, ["keyframes-from-bvh", str(clip), "--out", str(tmp_path / "k.keyframes.json"),
+                                  "--skeleton-map", str(smap)])
+    assert "map.json" in err and "unknown key" in err and "left_foot" in err
+    smap.write_text("hips: Hips")
+    err = one_line_error(capsys, ["mocap", str(clip), "--out-dir", str(tmp_path / "o"), "--skeleton-map", str(smap),
+                                  *FAST])
+    assert "map.json" in err and "not JSON" in err
 
 
 def test_missing_scene_and_bad_video_name(tmp_path, short_clip, capsys):
