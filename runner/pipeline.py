@@ -335,6 +335,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = clip_paths(clip, out_dir, o)
     problem, source, cs = clip_problem(clip, out_dir, o, paths, say)
+    on_source = keyframes_on_source_report(clip, cs, problem.keyframes.times, say)
     if problem.conflicts.found:  # the clip's own keyframes against its own contacts: a heel "in contact" 3 cm up
         say(f"  {len(problem.conflicts.found)} keyframe(s) hold a site off the contact schedule (met exactly; those "
             "contacts and swings are not held to the bounds)")
@@ -360,6 +361,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
         "stance_agreement": _agreement(problem, ref),
         "keyframe_conflicts": len(problem.conflicts.found), "stalled": dict(run.solution.stalled or {}),
+        "keyframes_on_source": on_source,
         "metrics": run.metrics, "scene_fitted": fitted, "outputs": {k: str(v) for k, v in paths.items()},
     }
     if o.plot is not None:
@@ -370,6 +372,51 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     result["wall_time_s"] = time.perf_counter() - t_start
     say(f"  wall time {result['wall_time_s']:.1f} s")
     return result
+
+
+#: [m] a source joint this near the clip's own place at a keyframe counts as the clip's (optical
+#: capture's marker jitter is 1-5 mm)
+ON_SOURCE = 0.005
+
+
+def keyframes_on_source_report(clip: Path, cs, times, say=print) -> dict | None:
+    """How far the keyframes, written back onto the source skeleton (`dynsplines export --to FILE.bvh`),
+    are from the clip's own pose (`runner.mocap.source_export.keyframes_on_source`), said in one line
+    that names the correction responsible beyond `ON_SOURCE` (the knee and elbow hyperextension clamp:
+    the root-height correction and the levelling are taken off by the export). Only on the subject's own
+    figure (another figure's bones are not the source's).
+
+    Returns:
+        {"max_mm", "joint", "time_s", "keys_moved" (keys with a joint beyond ON_SOURCE), "clamped_deg"
+        ({knee or elbow: [deg] hyperextension removed at that key})}, or None (another figure).
+    """
+    import numpy as np
+
+    from runner.mocap.bvh import read_bvh
+    from runner.mocap.source_export import keyframes_on_source
+
+    ref = cs.reference
+    if not ref.captured_root or ref.skeleton is None:
+        return None
+    src = read_bvh(clip)
+    times = np.asarray(times, float)
+    d = keyframes_on_source(src, cs.model, ref, times)
+    k, j = np.unravel_index(int(np.argmax(d)), d.shape)
+    frame = int(np.clip(np.rint(times[k] / ref.frame_time), 0, ref.count - 1))
+    clamped = {name: round(float(a[frame]), 2) for name, a in (ref.clamped or {}).items() if a[frame] > 0}
+    out = {"max_mm": round(1000.0 * float(d.max()), 2), "joint": src.names[j], "time_s": round(float(times[k]), 4),
+           "keys_moved": int((d.max(axis=1) > ON_SOURCE).sum()), "clamped_deg": clamped}
+    line = "  keyframes on the source skeleton (export --to FILE.bvh): every joint within "
+    if d.max() <= ON_SOURCE:
+        line += f"{out['max_mm']:.1f} mm of the clip's"
+    else:
+        why = ", ".join(f"{n} {a:.1f} deg" for n, a in clamped.items()) or "none at that key"
+        line += (f"{1000 * ON_SOURCE:.0f} mm of the clip's at {len(times) - out['keys_moved']} of {len(times)} keys; at "
+                 f"{out['keys_moved']} the knee and elbow hyperextension clamp moved joints, most {src.names[j]} by "
+                 f"{out['max_mm']:.0f} mm at {times[k]:.2f} s (hyperextension removed: {why}; docs/mocap.md \"Back onto "
+                 "the source skeleton\")")
+    say(line)
+    return out
 
 
 def _agreement(problem, ref) -> dict:

@@ -1,6 +1,8 @@
 """An independent forward kinematics of a BVH file for tests: the text read here (not by bvhio), each
 joint's rotation channels turned into a matrix by scipy (intrinsic rotations in the listed order, the
-BVH convention), world positions and rotations by the matrix chain, in metres and MuJoCo axes."""
+BVH convention), a joint's translation its OFFSET or, where it has position channels, their values (as
+Blender's importer reads them), world positions and rotations by the matrix chain, in metres and MuJoCo
+axes (by default CMU's: 1 unit = 0.0254 / 0.45 m, Y up)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,6 +14,9 @@ from scipy.spatial.transform import Rotation
 #: metres per CMU unit (ASF `length 0.45`: 1 unit = 1/0.45 inch), and (x, y, z)_mujoco = (Z, X, Y)_bvh
 UNIT = 0.0254 / 0.45
 AXES = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+#: a Z-up file's axes: (x, y, z)_mujoco = (X, Y, Z)
+Z_UP = np.eye(3)
+POSITIONS = ("Xposition", "Yposition", "Zposition")
 
 
 @dataclass
@@ -79,24 +84,39 @@ def local_rotations(b: BvhText) -> np.ndarray:
     for j, chans in enumerate(b.channels):
         rot = [(c[0], col + k) for k, c in enumerate(chans) if c.endswith("rotation")]
         order = "".join(a for a, _ in rot)
-        out[:, j] = Rotation.from_euler(order, b.values[:, [k for _, k in rot]], degrees=True).as_matrix()
+        out[:, j] = Rotation.from_euler(order, b.values[:, [k for _, k in rot]], degrees=True).as_matrix() if rot \
+            else np.eye(3)
         col += len(chans)
     return out
 
 
-def world(b: BvhText) -> tuple[np.ndarray, np.ndarray]:
-    """World rotations (n, J, 3, 3) and positions (n, J, 3) [m], MuJoCo axes, every frame of the file."""
+def translations(b: BvhText) -> np.ndarray:
+    """(n, J, 3) each joint's translation from its parent [units]: its position channels where it has
+    them, else its OFFSET."""
+    n = len(b.values)
+    out = np.broadcast_to(b.offsets, (n,) + b.offsets.shape).copy()
+    col = 0
+    for j, chans in enumerate(b.channels):
+        for k, c in enumerate(chans):
+            if c in POSITIONS:
+                out[:, j, POSITIONS.index(c)] = b.values[:, col + k]
+        col += len(chans)
+    return out
+
+
+def world(b: BvhText, unit: float = UNIT, axes: np.ndarray = AXES) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations (n, J, 3, 3) and positions (n, J, 3) [m], MuJoCo axes, every frame of the file;
+    `unit` [m per file unit] and `axes` (file -> MuJoCo) the file's."""
     R = local_rotations(b)
+    t = translations(b)
     n, J = R.shape[:2]
     Rw = np.empty_like(R)
     pw = np.empty((n, J, 3))
-    root = b.channels[0]
-    pos = b.values[:, [root.index(c) for c in ("Xposition", "Yposition", "Zposition")]]
     for j in range(J):
         par = b.parents[j]
         if par < 0:
-            Rw[:, j], pw[:, j] = R[:, j], pos
+            Rw[:, j], pw[:, j] = R[:, j], t[:, j]
         else:
             Rw[:, j] = Rw[:, par] @ R[:, j]
-            pw[:, j] = pw[:, par] + np.einsum("nab,b->na", Rw[:, par], b.offsets[j])
-    return AXES @ Rw @ AXES.T, pw @ AXES.T * UNIT
+            pw[:, j] = pw[:, par] + np.einsum("nab,nb->na", Rw[:, par], t[:, j])
+    return axes @ Rw @ axes.T, pw @ axes.T * unit

@@ -20,6 +20,7 @@ from runner.mocap.retarget import (
     Reference,
     check_figure,
     clamp_hyperextension,
+    hyperextension,
     leg_length_ratio,
     retarget,
     tidy_quaternions,
@@ -104,6 +105,7 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     qpos = retarget(clip, skel, frames, figure, layout, scale)[skel.rest_frames:]
     qpos = CaptureFrame.from_model(model).root(qpos, figure.joints[0].qpos_slice.start)  # the levelled frame
     step(2, "retargeted")
+    clamped = hyperextension(qpos, figure)
     qpos, _ = clamp_hyperextension(qpos, figure)
     step(3, "clamped")
     # feet in contact on the surfaces, nothing below one (a no-op without surfaces); on the subject's
@@ -113,7 +115,8 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     qpos = tidy_quaternions(qpos, layout)
     step(5, "done")
     times = np.arange(len(qpos)) * clip.frame_time
-    return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own, skeleton=skel)
+    return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own, skeleton=skel,
+                     clamped=clamped)
 
 
 def _root_scale(root_scale, clip, skel, model, path) -> float:

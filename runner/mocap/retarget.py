@@ -83,6 +83,8 @@ class Reference:
             correction that stands the feet on the scene's surfaces (the subject's own figure,
             `runner.mocap.reference.load_bvh_reference`; the source-skeleton export takes it off).
         skeleton: the clip's recognised skeleton (None: a clip on the figure's own skeleton, read exactly).
+        clamped: {knee or elbow joint: (n,) [deg]} the hyperextension the clean-up removed per frame
+            (`hyperextension`), or None.
     """
 
     times: np.ndarray
@@ -92,6 +94,7 @@ class Reference:
     root_scale: float = 1.0
     captured_root: bool = False
     skeleton: RecognisedSkeleton | None = None
+    clamped: dict | None = None
 
     @property
     def count(self) -> int:
@@ -197,6 +200,13 @@ def tidy_quaternions(qpos: np.ndarray, layout: StateLayout) -> np.ndarray:
             q = -q
         out[:, slot] = align_hemispheres(q)
     return out
+
+
+def hyperextension(qpos: np.ndarray, figure: Figure) -> dict[str, np.ndarray]:
+    """{knee or elbow joint: (n,) [deg]} how far each frame bends the joint backwards: minus its flexion
+    (`twist_angle` about the figure's flexion axis) where that is negative, else 0."""
+    return {name: np.degrees(np.maximum(-twist_angle(qpos[:, figure.joint(name).qpos_slice], np.array(axis)), 0.0))
+            for name, axis in figure.flexion_axes.items()}
 
 
 def clamp_hyperextension(qpos: np.ndarray, figure: Figure) -> tuple[np.ndarray, int]:

@@ -40,7 +40,7 @@ from runner.mocap.skeleton_map import OPTIONAL, ROLES, UNITS, SkeletonMap
 from solver.errors import InputError
 from solver.quaternion import conj, mul
 
-__all__ = ["RecognisedSkeleton", "recognise", "file_world", "skeleton_world", "tip_positions", "rotate"]
+__all__ = ["RecognisedSkeleton", "recognise", "forward", "file_world", "skeleton_world", "tip_positions", "rotate"]
 
 #: [m] a person's leg, hip to ankle joint centre, is 0.491 of stature (Winter, "Biomechanics and Motor
 #: Control of Human Movement", 2009, fig. 4.1: hip 0.530 H, ankle 0.039 H above the sole)
@@ -113,23 +113,27 @@ def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return mul(mul(q, qv), conj(q))[..., 1:]
 
 
-def file_world(clip: BvhClip) -> tuple[np.ndarray, np.ndarray]:
-    """World orientation (n, J, 4) and position (n, J, 3) [file units] of every joint, file axes.
-
-    BVH forward kinematics (column vectors): q_world[j] = q_world[parent] q_local[j], p_world[j] =
-    p_world[parent] + R(q_world[parent]) t[j], t the OFFSET or, where the joint has position channels,
-    their values (bvhio's reading, as Blender's importer).
-    """
-    n, J = clip.local_quat.shape[:2]
+def forward(parents, local_quat: np.ndarray, local_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """BVH forward kinematics (column vectors): world orientations (n, J, 4) and positions (n, J, 3) from
+    local rotations (n, J, 4) (w x y z) and translations (n, J, 3): q_world[j] = q_world[parent] q_local[j],
+    p_world[j] = p_world[parent] + R(q_world[parent]) t[j]. Parents precede their children."""
+    n, J = local_quat.shape[:2]
     q, p = np.empty((n, J, 4)), np.empty((n, J, 3))
     for j in range(J):
-        par = clip.parents[j]
+        par = parents[j]
         if par < 0:
-            q[:, j], p[:, j] = clip.local_quat[:, j], clip.local_pos[:, j]
+            q[:, j], p[:, j] = local_quat[:, j], local_pos[:, j]
         else:
-            q[:, j] = mul(q[:, par], clip.local_quat[:, j])
-            p[:, j] = p[:, par] + rotate(q[:, par], clip.local_pos[:, j])
+            q[:, j] = mul(q[:, par], local_quat[:, j])
+            p[:, j] = p[:, par] + rotate(q[:, par], local_pos[:, j])
     return q, p
+
+
+def file_world(clip: BvhClip) -> tuple[np.ndarray, np.ndarray]:
+    """World orientation (n, J, 4) and position (n, J, 3) [file units] of every joint, file axes, every
+    frame (`forward`; a joint's translation is its OFFSET or, where it has position channels, their
+    values: bvhio's reading, as Blender's importer)."""
+    return forward(clip.parents, clip.local_quat, clip.local_pos)
 
 
 def skeleton_world(clip: BvhClip, skel: RecognisedSkeleton) -> tuple[np.ndarray, np.ndarray]:

@@ -41,13 +41,14 @@ from runner.mocap.body_frames import DRIVERS
 from runner.mocap.bvh import POSITION_CHANNELS, BvhClip, read_bvh
 from runner.mocap.figure_record import clip_skeleton, figure_skeleton_digest, skeleton_digest
 from runner.mocap.retarget import check_figure
-from runner.mocap.skeleton import RecognisedSkeleton, rotate
+from runner.mocap.skeleton import RecognisedSkeleton, file_world, forward, rotate
 from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.quaternion import conj, mul, normalize
 
-__all__ = ["source_clip", "root_correction", "source_motion", "source_bvh_text", "write_source_bvh", "export_on_source"]
+__all__ = ["source_clip", "root_correction", "source_motion", "keyframes_on_source", "source_bvh_text",
+           "write_source_bvh", "export_on_source"]
 
 _DECIMALS = 6
 
@@ -199,6 +200,26 @@ def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray, ref
     root = qpos[:, figure.joints[0].qpos_slice][:, :3] @ skel.axes / skel.unit
     _place_hips(clip, skel, local, trans, root - root_correction(clip, skel, model, reference, times), hips)
     return local, trans
+
+
+def keyframes_on_source(clip: BvhClip, model, reference, times: np.ndarray) -> np.ndarray:
+    """(K, J) [m] how far each source joint is, at the keyframe times, from the clip's own: the reference
+    at those times (which a path meets exactly there) written onto the source skeleton (`source_motion`,
+    the import's root-height correction and levelling taken off) against the clip's forward kinematics.
+    What is left is what the import's other clean-up changed: the knee and elbow hyperextension clamp
+    (docs/mocap.md, "Back onto the source skeleton").
+
+    Args:
+        clip: the source clip. model: the scene (the subject's own figure). reference: the clip's
+            `runner.mocap.retarget.Reference`. times: (K,) [s] keyframe times, on the reference's frames.
+    """
+    skel, _, _ = clip_skeleton(clip, model)
+    times = np.asarray(times, float)
+    frames = np.clip(np.rint(times / reference.frame_time).astype(int), 0, reference.count - 1)
+    local, trans = source_motion(clip, model, reference.qpos[frames], times, (reference.times, reference.qpos))
+    _, out = forward(clip.parents, local, trans)
+    _, src = file_world(clip)
+    return np.linalg.norm(out - src[skel.rest_frames + frames], axis=-1) * skel.unit
 
 
 def _place_hips(clip: BvhClip, skel: RecognisedSkeleton, local, trans, hips_world: np.ndarray, hips: int) -> None:
