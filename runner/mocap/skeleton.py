@@ -13,8 +13,8 @@ with every channel zero):
   the first joint whose name says so (LeftLeg, LowerLeg_L, Calf, Knee; ForeArm, LowerArm_L, Elbow);
   without such a name the upper and lower bone are the two consecutive bones of the largest summed
   length (thigh + shin, upper arm + forearm), so that a hip offset or a clavicle before them is passed
-  over; the foot and toe (the hand) follow. End joints (a leaf named ...End, ...Nub, ...Tip, ...Top or
-  with a zero End Site) only mark where a bone ends. Left and right come from the names (Left, _L, L_, l...) or, where the names do not say,
+  over; the foot and toe (the hand) follow. End joints (a leaf named ...End, ...Nub, ...Tip or ...Top)
+  only mark where a bone ends. Left and right come from the names (Left, _L, L_, l...) or, where the names do not say,
   from the geometry: the left limb is on the side of up x forward, forward being where the feet point.
 * **the length unit** from the legs: of metres, centimetres, millimetres, inches (and, for the CMU
   skeleton's names, the CMU ASF unit), the one whose stature (leg / 0.491, Winter 2009 fig. 4.1) is a
@@ -50,9 +50,9 @@ STATURES = (0.8, 2.4, 1.75)
 #: a first frame is a separate (rest) pose when some joint moves, relative to the hips, this many times
 #: farther between it and the next frame than in 99 % of the clip's later frame steps
 REST_JUMP = 5.0
-#: names only the CMU skeleton (cgspeed's conversion, CMU's ASF) uses: they allow its length unit
-CMU_NAMES = frozenset({"lhipjoint", "rhipjoint", "lowerback", "leftfingerbase", "rightfingerbase", "lthumb",
-                       "rthumb", "lfingers", "rfingers"})
+#: names, as written, that only the CMU skeleton's BVH files use (cgspeed's conversion): they allow its
+#: length unit, and mark a first frame as the conversion's synthetic T-pose
+CMU_NAMES = frozenset({"LHipJoint", "RHipJoint", "LowerBack", "LeftFingerBase", "RightFingerBase"})
 _END = re.compile(r"(end|nub|tip|top|site)$", re.IGNORECASE)
 _UPPER = re.compile(r"spine|back|chest|torso|thorax|abdomen|neck|head|clav|collar|arm", re.IGNORECASE)
 _HEADLIKE = re.compile(r"neck|head|skull", re.IGNORECASE)
@@ -182,12 +182,11 @@ def _children(clip: BvhClip) -> list[list[int]]:
 
 
 def _is_end(clip: BvhClip, j: int) -> bool:
-    """An end joint: a leaf that only marks where its parent's bone ends (a name ending End, Nub, Tip,
-    Top or Site, or a zero End Site)."""
+    """An end joint: a leaf that only marks where its parent's bone ends, named so (...End, ...Nub, ...Tip,
+    ...Top, ...Site: HeadTop_End, LeftToe_End, Bip01 L Toe0Nub)."""
     if j in np.asarray(clip.parents) or clip.parents[j] < 0:
         return False
-    end = clip.end_sites.get(j)
-    return bool(_END.search(clip.names[j])) or end is None or float(np.linalg.norm(end)) == 0.0
+    return bool(_END.search(clip.names[j]))
 
 
 def _bone(clip: BvhClip, j: int) -> float:
@@ -332,7 +331,7 @@ def _unit(clip: BvhClip, p: np.ndarray, legs: list[dict[str, int]]) -> tuple[flo
     """(metres per unit, name) whose stature is a person's (module docstring); None if none is."""
     leg = np.mean([np.linalg.norm(p[:, lg["lower_leg"]] - p[:, lg["upper_leg"]], axis=-1).mean()
                    + np.linalg.norm(p[:, lg["foot"]] - p[:, lg["lower_leg"]], axis=-1).mean() for lg in legs])
-    cmu = any(n.lower() in CMU_NAMES for n in clip.names)
+    cmu = bool(CMU_NAMES & set(clip.names))
     lo, hi, typical = STATURES
     fits = [(abs(np.log(leg * u / LEG_OF_STATURE / typical)), u, name) for name, u in UNITS.items()
             if (name != "cmu" or cmu) and lo <= leg * u / LEG_OF_STATURE <= hi]
@@ -342,7 +341,7 @@ def _unit(clip: BvhClip, p: np.ndarray, legs: list[dict[str, int]]) -> tuple[flo
 def _rest_frames(clip: BvhClip, p: np.ndarray, hips: int) -> int:
     """1 if the first frame is a separate pose (`REST_JUMP`) or the clip has CMU's names (the cgspeed
     conversion always starts with a synthetic T-pose), else 0."""
-    if any(n.lower() in CMU_NAMES for n in clip.names):
+    if CMU_NAMES & set(clip.names):
         return 1
     if len(p) < 4:
         return 0
