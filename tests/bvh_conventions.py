@@ -1,10 +1,10 @@
-"""A CMU clip written onto the skeleton conventions of other captures, for tests: the same motion with
+"""A CMU clip written onto the skeleton conventions of other captures and engines, for tests: the same motion with
 other joint names, hierarchies, joint frames, axes, units, rotation orders, channels and frame rates.
 
 The clip is read by tests/bvh_fk.py (not by the code under test) into local rotation matrices and
 translations; each edit changes the convention and keeps every kept joint's world rotation, and - unless
 it says otherwise - its world position, so the known answer of a re-export is the CMU clip's own forward
-kinematics (the joints renamed, the lengths scaled by the unit). `CONVENTIONS` builds five of them:
+kinematics (the joints renamed, the lengths scaled by the unit). `CONVENTIONS` builds six of them:
 
 * ``lafan1``: Ubisoft LAFAN1's - centimetres, Y up, Z Y X, names LeftUpLeg ... LeftToe, Spine/Spine1/
   Spine2, no hip offset joints or fingers, every bone along its joint's local +X (so the rest pose, every
@@ -21,6 +21,10 @@ kinematics (the joints renamed, the lengths scaled by the unit). `CONVENTIONS` b
 * ``max3ds``: a 3ds Max-style skeleton - Hips -> Spine -> Head (CMU's three spine and two neck joints
   merged: the kept joints' world rotations are the clip's, but where the merged joints bent, the
   positions above them are not), L_Thigh, L_Calf, L_Clavicle, L_UpperArm ..., inches, Z X Y.
+* ``ue5``: an Unreal-style skeleton - a static root above the pelvis with IK target joints hung from
+  it (ik_foot_root, ik_hand_root -> ik_hand_gun -> ik_hand_l), twist joints beside the thigh and
+  upper arm, names pelvis, spine_01..03, thigh_l, calf_l, ball_l, upperarm_l, lowerarm_l, bones along
+  local +X, Z up, centimetres, X Y Z.
 """
 from __future__ import annotations
 
@@ -375,7 +379,39 @@ def max3ds(c: Clip) -> tuple[Clip, dict]:
     return without_rest_frame(c), {"unit": INCH, "axes": "y", "merged": ("Spine", "Head")}
 
 
-CONVENTIONS = {"lafan1": lafan1, "bandai": bandai, "vicon": vicon, "rokoko": rokoko, "max3ds": max3ds}
+def ue5(c: Clip) -> tuple[Clip, dict]:
+    for j in ("LHipJoint", "RHipJoint"):
+        c = drop(c, j)
+    for j in _CMU_FINGERS:
+        c = prune(c, j)
+    c = rename(c, {"Hips": "pelvis", "LowerBack": "spine_01", "Spine": "spine_02", "Spine1": "spine_03", "Neck": "neck_01",
+                   "Neck1": "neck_02", "Head": "head", "LeftShoulder": "clavicle_l", "LeftArm": "upperarm_l",
+                   "LeftForeArm": "lowerarm_l", "LeftHand": "hand_l", "LeftUpLeg": "thigh_l", "LeftLeg": "calf_l",
+                   "LeftFoot": "foot_l", "LeftToeBase": "ball_l", "RightShoulder": "clavicle_r", "RightArm": "upperarm_r",
+                   "RightForeArm": "lowerarm_r", "RightHand": "hand_r", "RightUpLeg": "thigh_r", "RightLeg": "calf_r",
+                   "RightFoot": "foot_r", "RightToeBase": "ball_r"})
+    for bone, child in (("upperarm", "lowerarm"), ("thigh", "calf")):  # twist joints hung beside the next bone
+        for side in "lr":
+            half = 0.5 * c.offsets[c.index(f"{child}_{side}")]
+            c = _add(c, c.index(f"{bone}_{side}"), f"{bone}_twist_01_{side}", half, np.eye(3), np.zeros(3))
+    c = reframe(c, bones_along_x(c))
+    c = static_root(c, "root")
+    ground = np.array([0.0, 0.0, 0.0])
+    c = _add(c, 0, "ik_foot_root", ground, np.eye(3), np.zeros(3))
+    for side in "lr":
+        c = _add(c, c.index("ik_foot_root"), f"ik_foot_{side}", c.offsets[c.index(f"thigh_{side}")], np.eye(3),
+                 np.zeros(3))
+    c = _add(c, 0, "ik_hand_root", ground, np.eye(3), np.zeros(3))
+    c = _add(c, c.index("ik_hand_root"), "ik_hand_gun", np.array([0.0, 20.0, 5.0]), np.eye(3), np.zeros(3))
+    for side in "lr":
+        c = _add(c, c.index("ik_hand_gun"), f"ik_hand_{side}", np.array([1.0, 0.0, 0.0]), np.eye(3), np.zeros(3))
+    c = reframe(c, np.broadcast_to(Y_TO_Z.T, (len(c.names), 3, 3)), axes=Y_TO_Z)
+    c = scale(c, UNIT / CM)
+    c = replace(c, orders=["XYZ"] * len(c.names))
+    return without_rest_frame(c), {"unit": CM, "axes": "z", "to_cmu": Y_TO_Z.T}
+
+
+CONVENTIONS = {"lafan1": lafan1, "bandai": bandai, "vicon": vicon, "rokoko": rokoko, "max3ds": max3ds, "ue5": ue5}
 
 
 def convention(src, name: str, out) -> tuple[Path, Clip, dict]:

@@ -6,8 +6,9 @@ many conventions is not a standing pose: LAFAN1's and Bandai Namco's bones all l
 with every channel zero):
 
 * **the roles** (runner/mocap/skeleton_map.py `ROLES`) from the tree: the hips are the first joint from
-  the root with more than one child (a static extra root above them is passed through); of their
-  branches the one with the most end points is the upper body, the others hold the legs; the chest
+  the root whose branches are an upper body (the branch with the most end points) and two legs (two
+  consecutive bones of comparable length; a static extra root above them, or IK targets hung from the
+  root, are passed through); the chest
   is the upper body's first branching joint, its two farthest-reaching branches are the arms and the
   remaining one (or the one named neck or head) the neck and head. Along a limb the knee or elbow is
   the first joint whose name says so (LeftLeg, LowerLeg_L, Calf, Knee; ForeArm, LowerArm_L, Elbow);
@@ -21,7 +22,7 @@ with every channel zero):
   person's, 0.8-2.4 m, nearest 1.75 m.
 * **the up axis**: the file axis nearest the mean direction from the ankles to the chest over the clip.
 * **leading rest frames**: a first frame that jumps to another pose (a T-pose the exporter put
-  before the motion, as CMU's cgspeed conversion does) is not part of the motion.
+  before the motion, as CMU's cgspeed conversion does) is not part of the motion (`REST_JUMP`).
 
 A skeleton map file (`--skeleton-map FILE`) names the joint of any role, the unit or the up axis, and
 wins over what is found. What cannot be found is one line naming the roles and the fix.
@@ -248,23 +249,52 @@ def _is_lower(name: str, leg: bool) -> bool:
         "arm" in t and "lower" in t)
 
 
+def _limb_like(clip: BvhClip, chain: list[int]) -> bool:
+    """The chain has two consecutive bones of comparable length (the shorter at least half the longer),
+    as a thigh and shin: not a helper chain (an IK target hung from the root, a prop)."""
+    lengths = [_bone(clip, j) for j in chain[1:]]
+    return any(min(a, b) > 0 and min(a, b) >= 0.5 * max(a, b) for a, b in zip(lengths, lengths[1:]))
+
+
+def _hips(clip: BvhClip, children) -> tuple[int, int, list[int]] | None:
+    """(hips, the upper body's branch, the two legs' branches): going down from the root, the first joint
+    with two limb-like branches besides the one with the most end points (the upper body); a joint whose
+    other branches are not limbs (IK targets, props hung from a root) is passed down into that branch.
+    Without any, the first joint with two branches besides the upper body's (a degenerate leg is then
+    named by the bone checks of runner/mocap/body_frames.py)."""
+    score = lambda c: (_leaves(children, c), bool(_UPPER.search(clip.names[c])), _reach(clip, children, c))  # noqa: E731
+
+    def split(node):
+        upper = max(children[node], key=score)
+        rest = [c for c in children[node] if c != upper]
+        if len(rest) == 1:  # the legs branch off a joint of their own below the hips
+            rest = children[_descend(children, rest[0])]
+        return upper, sorted(rest, key=lambda c: _reach(clip, children, c), reverse=True)[:2]
+
+    node = first = _descend(children, 0)
+    while len(children[node]) >= 2:
+        upper, legs = split(node)
+        if len(legs) == 2 and _leaves(children, upper) >= 3 and all(
+                _limb_like(clip, _chain(clip, children, c)) for c in legs):  # the upper body ends in hands and head
+            return node, upper, legs
+        node = _descend(children, upper)
+    if len(children[first]) < 2:
+        return None
+    upper, legs = split(first)
+    return (first, upper, legs) if len(legs) == 2 else None
+
+
 def _structure(clip: BvhClip) -> tuple[dict[str, int], list[dict[str, int]], list[dict[str, int]]]:
     """The trunk roles {role: joint} and the two legs' and two arms' roles, unsided (module docstring);
     what is not found is left out."""
     children = _children(clip)
     trunk: dict[str, int] = {}
-    hips = _descend(children, 0)
-    branches = children[hips]
-    if len(branches) < 2:
+    found = _hips(clip, children)
+    if found is None:
         return trunk, [], []
+    hips, upper, legs = found
     trunk["hips"] = hips
-    score = lambda c: (_leaves(children, c), bool(_UPPER.search(clip.names[c])), _reach(clip, children, c))  # noqa: E731
-    upper = max(branches, key=score)
-    rest = [c for c in branches if c != upper]
-    if len(rest) == 1:  # the legs branch off a joint of their own below the hips
-        rest = children[_descend(children, rest[0])]
-    legs = sorted(rest, key=lambda c: _reach(clip, children, c), reverse=True)[:2]
-    legs = [_limb(clip, children, _chain(clip, children, c), leg=True) for c in legs] if len(legs) == 2 else []
+    legs = [_limb(clip, children, _chain(clip, children, c), leg=True) for c in legs]
     chest = _descend(children, upper)
     arms: list[dict[str, int]] = []
     if len(children[chest]) >= 3:
@@ -339,15 +369,14 @@ def _unit(clip: BvhClip, p: np.ndarray, legs: list[dict[str, int]]) -> tuple[flo
 
 
 def _rest_frames(clip: BvhClip, p: np.ndarray, hips: int) -> int:
-    """1 if the first frame is a separate pose (`REST_JUMP`) or the clip has CMU's names (the cgspeed
-    conversion always starts with a synthetic T-pose), else 0."""
-    if CMU_NAMES & set(clip.names):
-        return 1
+    """1 if the first frame is a separate pose (`REST_JUMP`), else 0; a clip too short to tell (fewer than
+    4 frames) has one if it has CMU's names (the cgspeed conversion starts with a synthetic T-pose)."""
     if len(p) < 4:
-        return 0
+        return int(bool(CMU_NAMES & set(clip.names)))
     rel = p - p[:, hips:hips + 1]
-    steps = np.linalg.norm(np.diff(rel, axis=0), axis=-1).max(axis=1)
-    return int(steps[0] > REST_JUMP * np.quantile(steps[1:], 0.99))
+    step = np.linalg.norm(np.diff(rel, axis=0), axis=-1).max(axis=1)
+    change = np.linalg.norm(rel[:-2] - 2.0 * rel[1:-1] + rel[2:], axis=-1).max(axis=1)
+    return int(step[0] > REST_JUMP * np.quantile(step[1:], 0.99) or change[0] > REST_JUMP * np.quantile(change[1:], 0.99))
 
 
 # --------------------------------------------------------------------------------------------------
