@@ -48,7 +48,9 @@ def find_reference(info, model, quiet=False):
     when the file names no clip or the clip is not there. Progress of the import unless `quiet`. The root
     path is scaled as the file's keyframes were made: its "source" "root_scale", or 1 (as captured) for a
     file that records none (made before the scaling, like the shipped run_and_step.keyframes.json), and
-    the clip's skeleton read with the skeleton map the file records ("skeleton_map"), if any."""
+    the clip's skeleton read as the file records it ("skeleton": roles, unit, up axis); a file that records
+    none was made with the CMU skeleton's rest pose as the figure's (`runner.mocap.body_frames.
+    rest_pose_frames`) and is read so."""
     source = getattr(info, "source", None) or {}
     clip = source.get("clip")
     if not clip:
@@ -61,11 +63,11 @@ def find_reference(info, model, quiet=False):
     from runner.mocap.skeleton_map import parse_skeleton_map
     from runner.progress import Steps
 
-    recorded = source.get("skeleton_map")
-    smap = parse_skeleton_map(json.dumps(recorded), f"{info.path}: source.skeleton_map") if recorded else None
+    recorded = source.get("skeleton")
+    smap = parse_skeleton_map(json.dumps(recorded), f"{info.path}: source.skeleton") if recorded else None
     with Steps(f"importing {path.name}", len(IMPORT_STAGES), quiet, unit=" stages") as bar:
         return load_bvh_reference(path, model, progress=lambda i, stage: bar.update(i, note=stage),
-                                  root_scale=source.get("root_scale", 1.0), skeleton_map=smap)
+                                  root_scale=source.get("root_scale", 1.0), skeleton_map=smap, rest_pose=not recorded)
 
 
 def file_terms(keyframes_path, info, terms: str | None, weights: dict, contacts) -> dict:

@@ -12,9 +12,9 @@ with every channel zero):
   is the upper body's first branching joint, its two farthest-reaching branches are the arms and the
   remaining one (or the one named neck or head) the neck and head. Along a limb the knee or elbow is
   the first joint whose name says so (LeftLeg, LowerLeg_L, Calf, Knee; ForeArm, LowerArm_L, Elbow);
-  without such a name the upper and lower bone are the two consecutive bones of the largest summed
-  length (thigh + shin, upper arm + forearm), so that a hip offset or a clavicle before them is passed
-  over; the foot and toe (the hand) follow. End joints (a leaf named ...End, ...Nub, ...Tip or ...Top)
+  without such a name the hand is where the fingers branch off, or else the upper and lower bone are
+  the two consecutive bones of the largest summed length (thigh + shin, upper arm + forearm), so that a
+  hip offset or a clavicle before them is passed over; the foot and toe (the hand) follow. End joints (a leaf named ...End, ...Nub, ...Tip or ...Top)
   only mark where a bone ends. Left and right come from the names (Left, _L, L_, l...) or, where the names do not say,
   from the geometry: the left limb is on the side of up x forward, forward being where the feet point.
 * **the length unit** from the legs: of metres, centimetres, millimetres, inches (and, for the CMU
@@ -22,7 +22,8 @@ with every channel zero):
   person's, 0.8-2.4 m, nearest 1.75 m.
 * **the up axis**: the file axis nearest the mean direction from the ankles to the chest over the clip.
 * **leading rest frames**: a first frame that jumps to another pose (a T-pose the exporter put
-  before the motion, as CMU's cgspeed conversion does) is not part of the motion (`REST_JUMP`).
+  before the motion, as CMU's cgspeed conversion does: always, for a clip with its names) is not part
+  of the motion (`REST_JUMP`).
 
 A skeleton map file (`--skeleton-map FILE`) names the joint of any role, the unit or the up axis, and
 wins over what is found. What cannot be found is one line naming the roles and the fix.
@@ -48,15 +49,18 @@ __all__ = ["RecognisedSkeleton", "recognise", "forward", "file_world", "skeleton
 LEG_OF_STATURE = 0.491
 #: [m] the statures a performer may have (a small child to the tallest adults) and the typical one
 STATURES = (0.8, 2.4, 1.75)
-#: a first frame is a separate (rest) pose when some joint moves, relative to the hips, this many times
-#: farther between it and the next frame than in 99 % of the clip's later frame steps
-REST_JUMP = 5.0
+#: a first frame is a separate pose (a T-pose put before the motion) when its step to the next frame, or
+#: the change of step there (relative to the hips, the largest over the joints), is more than this many
+#: times the clip's 99th percentile: a synthetic T-pose gives 7-100 at 120 fps and 2.1-47 at 15-30 fps
+#: on the shipped clips, a first frame of motion at most 0.8
+REST_JUMP = 2.0
 #: names, as written, that only the CMU skeleton's BVH files use (cgspeed's conversion): they allow its
 #: length unit, and mark a first frame as the conversion's synthetic T-pose
 CMU_NAMES = frozenset({"LHipJoint", "RHipJoint", "LowerBack", "LeftFingerBase", "RightFingerBase"})
 _END = re.compile(r"(end|nub|tip|top|site)$", re.IGNORECASE)
 _UPPER = re.compile(r"spine|back|chest|torso|thorax|abdomen|neck|head|clav|collar|arm", re.IGNORECASE)
 _HEADLIKE = re.compile(r"neck|head|skull", re.IGNORECASE)
+_TWIST = re.compile(r"twist|roll", re.IGNORECASE)
 _BONES = ("femur|tibia|foot|toes?|clavicle|humerus|radius|wrist|hand|hip|knee|ankle|shoulder|elbow|thigh|"
           "upleg|leg|arm|forearm|collar|calf|shin|fingers|thumb")
 _LEFT = re.compile(rf"^(left.*|l|lft|l({_BONES}).*)$")
@@ -224,13 +228,17 @@ def _chain(clip: BvhClip, children, j: int) -> list[int]:
 
 def _limb(clip: BvhClip, children, chain: list[int], leg: bool) -> dict[str, int]:
     """Upper, lower, foot|hand (and toe) joints of a limb chain: the lower joint is the first whose name
-    says knee or forearm (`_is_lower`); without such a name the upper and lower bones are the two
-    consecutive ones of the largest summed length."""
+    says knee or forearm (`_is_lower`); without such a name, on an arm, the hand is the first joint where
+    fingers branch off (twist joints beside a bone not counted); else the upper and lower bones are the
+    two consecutive ones of the largest summed length."""
     if len(chain) < 3:
         return {}
     named = [k for k, j in enumerate(chain) if _is_lower(clip.names[j], leg)]
+    fingers = [k for k, j in enumerate(chain) if len([c for c in children[j] if not _TWIST.search(clip.names[c])]) > 1]
     if named and 1 <= named[0] <= len(chain) - 2:
         i = named[0] - 1
+    elif not leg and fingers and fingers[0] >= 2:  # the hand: where the fingers branch off
+        i = fingers[0] - 2
     else:
         lengths = [_bone(clip, chain[k + 1]) for k in range(len(chain) - 1)]
         i = max(range(len(chain) - 2), key=lambda k: lengths[k] + lengths[k + 1])
@@ -368,12 +376,16 @@ def _unit(clip: BvhClip, p: np.ndarray, legs: list[dict[str, int]]) -> tuple[flo
     return min(fits)[1:] if fits else None
 
 
-def _rest_frames(clip: BvhClip, p: np.ndarray, hips: int) -> int:
-    """1 if the first frame is a separate pose (`REST_JUMP`), else 0; a clip too short to tell (fewer than
-    4 frames) has one if it has CMU's names (the cgspeed conversion starts with a synthetic T-pose)."""
+def _rest_frames(clip: BvhClip, p: np.ndarray, hips: int, joints: list[int]) -> int:
+    """1 if the clip has CMU's names (the cgspeed conversion always starts with a synthetic T-pose, and
+    a one-frame glitch near the start of a short clip can hide its jump) or the first frame is a
+    separate pose (`REST_JUMP`, over the role `joints`: not fingers a capture may leave uncaptured),
+    else 0 (also for a clip too short to tell, fewer than 4 frames)."""
+    if CMU_NAMES & set(clip.names):
+        return 1
     if len(p) < 4:
-        return int(bool(CMU_NAMES & set(clip.names)))
-    rel = p - p[:, hips:hips + 1]
+        return 0
+    rel = p[:, joints] - p[:, hips:hips + 1]
     step = np.linalg.norm(np.diff(rel, axis=0), axis=-1).max(axis=1)
     change = np.linalg.norm(rel[:-2] - 2.0 * rel[1:-1] + rel[2:], axis=-1).max(axis=1)
     return int(step[0] > REST_JUMP * np.quantile(step[1:], 0.99) or change[0] > REST_JUMP * np.quantile(change[1:], 0.99))
@@ -431,7 +443,8 @@ def recognise(clip: BvhClip, skeleton_map: SkeletonMap | None = None) -> Recogni
     how = "the hierarchy and names" + (f", and the skeleton map {smap.source}" if smap.roles or smap.unit or smap.up
                                        else "")
     return RecognisedSkeleton(MappingProxyType(roles), float(unit[0]), str(unit[1]), axes, up, positions,
-                              tuple(above), _rest_frames(clip, p * unit[0], hips), how, clip.source)
+                              tuple(above), _rest_frames(clip, p * unit[0], hips, sorted(set(idx.values()))), how,
+                              clip.source)
 
 
 def _check_root_path(clip: BvhClip, hips: int, positions: tuple[str, ...]) -> None:

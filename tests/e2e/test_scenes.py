@@ -121,14 +121,13 @@ def test_a_capture_floor_that_rises_along_the_walk_is_levelled(tmp_path):
     moved by the transform, no longer rise (slope within 0.004 of 0) and are 0-6 cm above z = 0."""
     import mujoco
     import numpy as np
+    from bvh_fk import parse, world
 
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.retarget import cmu_world
     from solver.capture_frame import CaptureFrame
 
     src = REPO / "models" / "cmu" / "07_04.bvh"  # shipped with its attribution (models/cmu/README.md)
-    clip = read_bvh(src)
-    _, p = cmu_world(clip)
+    clip = parse(src)
+    _, p = world(clip)
     still = []
     for joint in ("LeftToeBase", "RightToeBase"):
         q = p[1:, clip.index(joint)]

@@ -19,13 +19,11 @@ RESULTS = ("status", "keyframes", "variable_frames", "solver_status", "max_penet
            "optimized_float_contact_mm", "plain_skate_mm", "optimized_skate_mm")
 
 
-def short_bvh(dst: Path, frames: int = 60, rename: dict | None = None) -> Path:
+def short_bvh(dst: Path, frames: int = 60) -> Path:
     """127_33's header and its first `frames` frames (0.5 s at 120 Hz)."""
     lines = CLIP.read_text().splitlines()
     m = next(i for i, ln in enumerate(lines) if ln.strip() == "MOTION")
     head = "\n".join(lines[:m + 1])
-    for old, new in (rename or {}).items():
-        head = head.replace(f"JOINT {old}\n", f"JOINT {new}\n").replace(f"JOINT {old} ", f"JOINT {new} ")
     dst.write_text("\n".join([head, f"Frames: {frames}", lines[m + 2], *lines[m + 3:m + 3 + frames]]) + "\n")
     return dst
 
@@ -71,14 +69,18 @@ def test_ray_without_ray_or_bad_address_is_one_line(tmp_path, clips, capsys):
 @pytest.mark.slow
 def test_summary_failures_and_resumption(tmp_path, clips, capsys):
     (clips / "corrupt.bvh").write_text(short_bvh(tmp_path / "c.bvh").read_text()[:3000])
-    short_bvh(clips / "renamed.bvh", rename={"LeftFoot": "LAnkle"})
+    bad = short_bvh(clips / "degenerate.bvh").read_text().splitlines()  # a shin of zero length
+    at = next(i for i, ln in enumerate(bad) if ln.split() == ["JOINT", "LeftFoot"]) + 2
+    bad[at] = bad[at][: bad[at].index("OFFSET")] + "OFFSET 0 0 0"
+    (clips / "degenerate.bvh").write_text("\n".join(bad) + "\n")
     out = tmp_path / "out"
     assert main(["batch", str(clips), "--out", str(out), *FAST]) == EXIT_FAILED
     rows = read_csv(out / "summary.csv")
     assert tuple(rows[0]) == COLUMNS
     by = {Path(r["clip"]).name: r for r in rows[:-1]}
-    assert [by[n]["status"] for n in ("a.bvh", "b.bvh", "corrupt.bvh", "renamed.bvh")] == ["ok", "ok", "failed", "failed"]
-    assert "HIERARCHY" in by["corrupt.bvh"]["error"] and "LeftFoot" in by["renamed.bvh"]["error"]
+    assert [by[n]["status"] for n in ("a.bvh", "b.bvh", "corrupt.bvh", "degenerate.bvh")] == ["ok", "ok", "failed",
+                                                                                                "failed"]
+    assert "HIERARCHY" in by["corrupt.bvh"]["error"] and "LeftFoot" in by["degenerate.bvh"]["error"]
     assert all("\n" not in r["error"] for r in rows)
     assert int(by["a.bvh"]["keyframes"]) >= 3 and float(by["a.bvh"]["optimized_skate_mm"]) >= 0
     total = rows[-1]

@@ -189,7 +189,7 @@ def test_summary_prints_the_feet_rows_and_the_cone_with_a_schedule():
     from solver.solve import SolveOptions, solve
 
     keyframes, _info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
-    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model, root_scale=1.0)  # as the file's keyframes
+    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model, root_scale=1.0, rest_pose=True)  # as the file's keyframes
     contacts = tuple(reference_contacts(model, ref.qpos, ref.frame_time))
     weights = parse_terms("penetration,unit,bending,smooth,torque,root,cone", contacts=contacts)
     obj = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=100.0, contacts=contacts)
@@ -409,15 +409,13 @@ def test_the_shipped_example_contradicts_none_of_its_contacts():
     removed: a heel that the capture holds 28.8 mm or more above the step all through its "contact"
     (it hovers over the planted toe; the planted term would pull it to 2 mm against keyframe 5, which
     holds it 30 mm up). No keyframe holds a site off the remaining schedule."""
-    from runner.mocap.reference import load_bvh_reference
-    from runner.paths import MODELS
-    from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
+    from runner.problem_file import RUN_AND_STEP_KEYFRAMES, find_reference, load_problem
     from solver.contacts import SITES, reference_contacts, site_heights, site_positions
     from solver.problem import figure_problem
 
     keyframes, info, model, _, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
     assert "--root-scale 1" in info.source["command"] and "l_heel" in info.source["hand_edits"]
-    ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", model, root_scale=1.0)
+    ref = find_reference(info, model, quiet=True)  # the clip as the file was made from it (docs/mocap.md)
     detected = reference_contacts(model, ref.qpos, ref.frame_time)
     kept = [c for c in detected if any(c.site == f.site and abs(c.start - f.start) < 2e-6 for f in info.contacts)]
     assert [(c.site, c.start, c.end) for c in info.contacts] == [
