@@ -57,12 +57,12 @@ def edit_bvh(src, dst, *, seconds: float | None = None, stride: int = 1, order: 
         if scale != 1.0:
             new[:, pos] = data[:, pos] * scale
         if hop is not None and "Yposition" in names and not cols:  # the root's height
-            from runner.mocap.retarget import UNIT_TO_METRES
+            from bvh_fk import UNIT
 
             start, duration, height = hop
             s = (np.arange(len(data)) - 1) * frame_time - start
             s = np.where((s > 0) & (s < duration), s / duration, 0.0)
-            new[:, col + names.index("Yposition")] += 4.0 * height * s * (1.0 - s) / UNIT_TO_METRES
+            new[:, col + names.index("Yposition")] += 4.0 * height * s * (1.0 - s) / UNIT
         if order is not None and rot:
             seq = "".join(names[i - col][0] for i in rot)
             r = Rotation.from_euler(seq.upper(), data[:, rot], degrees=True)  # intrinsic: R = R1 R2 R3

@@ -45,7 +45,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from runner.mocap.bvh import BvhClip
-from runner.mocap.skeleton import RecognisedSkeleton, rotate, skeleton_world, tip_positions
+from runner.mocap.kinematics import rotate, tip_positions
+from runner.mocap.skeleton import RecognisedSkeleton, skeleton_world
 from solver.errors import InputError
 from solver.quaternion import conj, mul, normalize
 

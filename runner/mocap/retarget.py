@@ -11,7 +11,7 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
 2. Forward kinematics (BVH convention: a joint's local rotation R = R1 R2 R3 for its rotation channels
    listed 1 2 3, applied to column vectors; a joint's translation is its OFFSET or its position
    channels), in metres and in MuJoCo axes (z up; the file's up axis to z by a cyclic permutation of
-   the axes: for Y-up files (x, y, z) = (Z, X, Y), as `BVH_TO_MUJOCO`).
+   the axes: for Y-up files (x, y, z) = (Z, X, Y), as for CMU's clips).
 3. Retargeting: each figure body's world orientation is its driving joint's world orientation times a
    constant offset R_off (runner/mocap/body_frames.py: the body's anatomical frame in the joint's frame,
    measured on the clip, or recorded in the subject's figure). Local joint quaternions follow as
@@ -51,16 +51,6 @@ from solver.errors import InputError
 from solver.figure import Figure
 from solver.layout import StateLayout
 from solver.quaternion import align_hemispheres, conj, mul, normalize, swing_twist, twist_angle
-
-# constants
-# --------------------------------------------------------------------------------------------------
-
-#: metres per CMU ASF length unit (ASF `length 0.45`: 1 unit = 1/0.45 inch): the shipped clips' unit
-UNIT_TO_METRES = 0.0254 / 0.45
-
-#: (3, 3) rotation taking Y-up BVH axes (Y up; CMU's subjects face +Z, their left at +X) to MuJoCo axes
-#: (z up, x forward, y left): the shipped clips' axes
-BVH_TO_MUJOCO = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 # --------------------------------------------------------------------------------------------------
 # data

@@ -38,11 +38,11 @@ from types import MappingProxyType
 import numpy as np
 
 from runner.mocap.bvh import POSITION_CHANNELS, BvhClip
+from runner.mocap.kinematics import bone_length, file_world, reach, tip_positions, to_mujoco
 from runner.mocap.skeleton_map import OPTIONAL, ROLES, UNITS, SkeletonMap
 from solver.errors import InputError
-from solver.quaternion import conj, mul
 
-__all__ = ["RecognisedSkeleton", "recognise", "forward", "file_world", "skeleton_world", "tip_positions", "rotate"]
+__all__ = ["RecognisedSkeleton", "recognise", "skeleton_world", "name_side"]
 
 #: [m] a person's leg, hip to ankle joint centre, is 0.491 of stature (Winter, "Biomechanics and Motor
 #: Control of Human Movement", 2009, fig. 4.1: hip 0.530 H, ankle 0.039 H above the sole)
@@ -107,69 +107,11 @@ class RecognisedSkeleton:
         return SkeletonMap(dict(self.roles), self.unit, self.unit_name, self.up, self.source)
 
 
-# --------------------------------------------------------------------------------------------------
-# forward kinematics
-# --------------------------------------------------------------------------------------------------
-
-
-def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate (..., 3) vectors by (..., 4) unit quaternions (w x y z)."""
-    qv = np.concatenate([np.zeros(v.shape[:-1] + (1,)), v], axis=-1)
-    return mul(mul(q, qv), conj(q))[..., 1:]
-
-
-def forward(parents, local_quat: np.ndarray, local_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """BVH forward kinematics (column vectors): world orientations (n, J, 4) and positions (n, J, 3) from
-    local rotations (n, J, 4) (w x y z) and translations (n, J, 3): q_world[j] = q_world[parent] q_local[j],
-    p_world[j] = p_world[parent] + R(q_world[parent]) t[j]. Parents precede their children."""
-    n, J = local_quat.shape[:2]
-    q, p = np.empty((n, J, 4)), np.empty((n, J, 3))
-    for j in range(J):
-        par = parents[j]
-        if par < 0:
-            q[:, j], p[:, j] = local_quat[:, j], local_pos[:, j]
-        else:
-            q[:, j] = mul(q[:, par], local_quat[:, j])
-            p[:, j] = p[:, par] + rotate(q[:, par], local_pos[:, j])
-    return q, p
-
-
-def file_world(clip: BvhClip) -> tuple[np.ndarray, np.ndarray]:
-    """World orientation (n, J, 4) and position (n, J, 3) [file units] of every joint, file axes, every
-    frame (`forward`; a joint's translation is its OFFSET or, where it has position channels, their
-    values: bvhio's reading, as Blender's importer)."""
-    return forward(clip.parents, clip.local_quat, clip.local_pos)
-
-
 def skeleton_world(clip: BvhClip, skel: RecognisedSkeleton) -> tuple[np.ndarray, np.ndarray]:
     """World orientation (n, J, 4) (w x y z) and position (n, J, 3) [m] of every joint, in MuJoCo axes
     (z up): R' = A R A^T, p' = unit A p with A = skel.axes. Every frame of the file."""
     q, p = file_world(clip)
-    return _to_mujoco(q, skel.axes), (p @ skel.axes.T) * skel.unit
-
-
-def _to_mujoco(q: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    out = np.array(q, float, copy=True)
-    out[..., 1:] = q[..., 1:] @ axes.T
-    return out
-
-
-def tip_positions(clip: BvhClip, world: tuple[np.ndarray, np.ndarray], joint: int, axes=None, unit=1.0) -> np.ndarray:
-    """(n, 3) where the chain from `joint` ends: the End Site of the leaf its longest path reaches (a
-    leaf without one: the leaf itself), from world = (orientations, positions) in the frame of `axes`
-    (None: the file's) and `unit` [m per file unit]."""
-    children: list[list[int]] = [[] for _ in clip.names]
-    for c, par in enumerate(clip.parents):
-        if par >= 0:
-            children[par].append(c)
-    j = joint
-    while children[j]:
-        j = max(children[j], key=lambda c: _bone(clip, c) + _reach(clip, children, c))
-    q, p = world
-    end = np.asarray(clip.end_sites.get(j, np.zeros(3)), float)
-    if axes is not None:
-        end = axes @ end
-    return p[:, j] + rotate(q[:, j], np.broadcast_to(end * unit, p[:, j].shape))
+    return to_mujoco(q, skel.axes), (p @ skel.axes.T) * skel.unit
 
 
 # --------------------------------------------------------------------------------------------------
@@ -194,19 +136,6 @@ def _is_end(clip: BvhClip, j: int) -> bool:
     return bool(_END.search(clip.names[j]))
 
 
-def _bone(clip: BvhClip, j: int) -> float:
-    """[file units] the length of the bone ending at joint j: its mean translation from its parent."""
-    return float(np.linalg.norm(clip.local_pos[:, j].mean(axis=0)))
-
-
-def _reach(clip: BvhClip, children, j: int) -> float:
-    """[file units] the longest path from joint j down to an end (its End Site included)."""
-    if not children[j]:
-        end = clip.end_sites.get(j)
-        return float(np.linalg.norm(end)) if end is not None else 0.0
-    return max(_bone(clip, c) + _reach(clip, children, c) for c in children[j])
-
-
 def _leaves(children, j: int) -> int:
     return 1 if not children[j] else sum(_leaves(children, c) for c in children[j])
 
@@ -222,7 +151,7 @@ def _chain(clip: BvhClip, children, j: int) -> list[int]:
     """The joints from j along its longest path to an end."""
     out = [j]
     while children[out[-1]]:
-        out.append(max(children[out[-1]], key=lambda c: _bone(clip, c) + _reach(clip, children, c)))
+        out.append(max(children[out[-1]], key=lambda c: bone_length(clip, c) + reach(clip, children, c)))
     return out
 
 
@@ -240,7 +169,7 @@ def _limb(clip: BvhClip, children, chain: list[int], leg: bool) -> dict[str, int
     elif not leg and fingers and fingers[0] >= 2:  # the hand: where the fingers branch off
         i = fingers[0] - 2
     else:
-        lengths = [_bone(clip, chain[k + 1]) for k in range(len(chain) - 1)]
+        lengths = [bone_length(clip, chain[k + 1]) for k in range(len(chain) - 1)]
         i = max(range(len(chain) - 2), key=lambda k: lengths[k] + lengths[k + 1])
     names = ("upper_leg", "lower_leg", "foot", "toe") if leg else ("upper_arm", "forearm", "hand")
     return {name: chain[i + k] for k, name in enumerate(names) if i + k < len(chain)}
@@ -260,7 +189,7 @@ def _is_lower(name: str, leg: bool) -> bool:
 def _limb_like(clip: BvhClip, chain: list[int]) -> bool:
     """The chain has two consecutive bones of comparable length (the shorter at least half the longer),
     as a thigh and shin: not a helper chain (an IK target hung from the root, a prop)."""
-    lengths = [_bone(clip, j) for j in chain[1:]]
+    lengths = [bone_length(clip, j) for j in chain[1:]]
     return any(min(a, b) > 0 and min(a, b) >= 0.5 * max(a, b) for a, b in zip(lengths, lengths[1:]))
 
 
@@ -270,14 +199,14 @@ def _hips(clip: BvhClip, children) -> tuple[int, int, list[int]] | None:
     other branches are not limbs (IK targets, props hung from a root) is passed down into that branch.
     Without any, the first joint with two branches besides the upper body's (a degenerate leg is then
     named by the bone checks of runner/mocap/body_frames.py)."""
-    score = lambda c: (_leaves(children, c), bool(_UPPER.search(clip.names[c])), _reach(clip, children, c))  # noqa: E731
+    score = lambda c: (_leaves(children, c), bool(_UPPER.search(clip.names[c])), reach(clip, children, c))  # noqa: E731
 
     def split(node):
         upper = max(children[node], key=score)
         rest = [c for c in children[node] if c != upper]
         if len(rest) == 1:  # the legs branch off a joint of their own below the hips
             rest = children[_descend(children, rest[0])]
-        return upper, sorted(rest, key=lambda c: _reach(clip, children, c), reverse=True)[:2]
+        return upper, sorted(rest, key=lambda c: reach(clip, children, c), reverse=True)[:2]
 
     node = first = _descend(children, 0)
     while len(children[node]) >= 2:
@@ -307,7 +236,7 @@ def _structure(clip: BvhClip) -> tuple[dict[str, int], list[dict[str, int]], lis
     arms: list[dict[str, int]] = []
     if len(children[chest]) >= 3:
         named = [c for c in children[chest] if _HEADLIKE.search(clip.names[c])]
-        by_reach = sorted(children[chest], key=lambda c: _reach(clip, children, c), reverse=True)
+        by_reach = sorted(children[chest], key=lambda c: reach(clip, children, c), reverse=True)
         head = named[0] if len(named) == 1 else by_reach[2]
         arms = [_limb(clip, children, _chain(clip, children, c), leg=False) for c in by_reach if c != head][:2]
         head_chain = _chain(clip, children, head)

@@ -34,7 +34,11 @@ flat foot rests where it did. The toe stays a point: a sphere about the ball (th
 it at push-off) made the flat-foot fit of the forefoot worse on the shared clips (docs/mocap.md, "The
 soles"). A site that is never
 the lower one while its foot rests (a forefoot runner's heel) keeps its place. Scene and soles are fitted
-in turn (`ROUNDS`): the floor is fitted through the lowest sites' rests, the soles to that floor.
+in turn (`ROUNDS`): the floor is fitted through the lowest sites' rests, the soles to that floor. A
+direction the rests leave undetermined (a flat foot's heel slid along the sole, a heel radius traded
+against its centre's height) is fixed by a small pull of the offsets towards their start (Tikhonov
+regularization, `REGULARIZE`), so that two files of one motion (another convention, the numbers
+rounded otherwise) give the same soles, not wherever the solver happened to stop.
 """
 from __future__ import annotations
 
@@ -56,6 +60,10 @@ ROUNDS = 2
 HEEL_RADIUS = 1.0
 #: a foot resting fewer frames than this keeps its published sole (too little to measure)
 MIN_FRAMES = 12
+#: [1] the weight of the pull of the fitted offsets towards their starting values: a 1 cm offset costs
+#: 0.1 mm of residual, far below one resting frame's (the capture's noise, a few mm), so it decides only
+#: directions the rests leave undetermined
+REGULARIZE = 0.01
 
 
 @dataclass(frozen=True)
@@ -124,8 +132,13 @@ def _fit_foot(org, rot, heel, toe, forward, tip, surfaces, rmax: float = 0.0
         p[free] = x
         return p
 
-    x = least_squares(lambda x: _lowest(org, rot, *spheres(full(x)), surfaces), start[free], bounds=(lo[free], hi[free]),
-                      loss="soft_l1", f_scale=SCALE, x_scale=REACH).x
+    def residuals(x):
+        # the rests' heights, and a small pull towards the start (Tikhonov): a direction the rests leave
+        # free (a flat foot's heel slid along the sole) is fixed there, not wherever the solver stops
+        return np.r_[_lowest(org, rot, *spheres(full(x)), surfaces), REGULARIZE * (x - start[free])]
+
+    x = least_squares(residuals, start[free], bounds=(lo[free], hi[free]), loss="soft_l1", f_scale=SCALE,
+                      x_scale=REACH).x
     return spheres(full(x))
 
 

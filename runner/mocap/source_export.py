@@ -40,8 +40,9 @@ import numpy as np
 from runner.mocap.body_frames import DRIVERS
 from runner.mocap.bvh import POSITION_CHANNELS, BvhClip, read_bvh
 from runner.mocap.figure_record import clip_skeleton, figure_skeleton_digest, skeleton_digest
+from runner.mocap.kinematics import file_world, forward, rotate
 from runner.mocap.retarget import check_figure
-from runner.mocap.skeleton import RecognisedSkeleton, file_world, forward, rotate
+from runner.mocap.skeleton import RecognisedSkeleton
 from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure

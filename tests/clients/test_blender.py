@@ -92,14 +92,18 @@ def capture_frame(npz):
 def root_correction_m(npz, t):
     """(n, 3) [m] MuJoCo axes: the reference's root height correction at times t that the export onto the
     source skeleton takes off the root (`runner.mocap.source_export.root_correction`)."""
-    from runner.mocap.retarget import BVH_TO_MUJOCO, UNIT_TO_METRES
+    from bvh_fk import AXES, UNIT
+
+    from runner.mocap.figure_record import clip_skeleton
     from runner.mocap.source_export import root_correction, source_clip
     from runner.saved_path import load_saved_path
 
     saved = load_saved_path(npz)
     model = mujoco.MjModel.from_xml_path(str(saved.scene_path))
-    c = root_correction(source_clip(saved), model, (saved.reference_times, saved.reference_qpos), t)
-    return c @ BVH_TO_MUJOCO.T * UNIT_TO_METRES
+    clip = source_clip(saved)
+    skel = clip_skeleton(clip, model)[0]  # a CMU clip: its axes and unit are bvh_fk's AXES and UNIT
+    c = root_correction(clip, skel, model, (saved.reference_times, saved.reference_qpos), t)
+    return c @ AXES.T * UNIT
 
 
 def assert_root_travel(pelvis, t, npz, in_capture=False):

@@ -242,9 +242,9 @@ def test_a_levelled_reference_exports_back_into_the_sources_coordinates(tmp_path
     height correction that stands its feet on the floor), and the export takes the correction off and
     the root back by T^-1: the source file again, every joint within 0.01 degree, the root within 0.1 mm."""
     import mujoco
+    from bvh_fk import AXES, UNIT
 
     from runner.mocap.bvh import read_bvh
-    from runner.mocap.retarget import BVH_TO_MUJOCO, UNIT_TO_METRES
     from runner.saved_path import load_saved_path
     from solver.capture_frame import CaptureFrame
 
@@ -253,7 +253,7 @@ def test_a_levelled_reference_exports_back_into_the_sources_coordinates(tmp_path
     assert load_saved_path(npz).has_reference  # the export finds there the correction to take off
     model = mujoco.MjModel.from_xml_path(str(tmp_path / "c.scene.xml"))
     src = read_bvh(clip)
-    hips = src.local_pos[1:, 0] @ BVH_TO_MUJOCO.T * UNIT_TO_METRES  # the captured root, MuJoCo axes [m]
+    hips = src.local_pos[1:, 0] @ AXES.T * UNIT  # the captured root, MuJoCo axes [m]
     c = root_correction_m(npz, clip, t)
     assert np.abs(c[:, :2]).max() < 1e-6 and np.abs(c[:, 2]).max() > 0.002  # a vertical correction to undo
     assert np.abs(t.points(hips) - hips).max() > 0.01  # the transform does move it (2 cm here)
