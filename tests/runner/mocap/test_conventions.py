@@ -110,9 +110,11 @@ def contacts_and_legs(clip, folder):
     layout = StateLayout.from_model(model)
     legs = np.concatenate([ref.qpos[:, layout.joint(j).qpos_slice] for j in ("l_hip", "l_knee", "l_ankle", "r_hip",
                                                                             "r_knee", "r_ankle")], axis=1)
-    fig = Figure.from_model(mujoco.MjModel.from_xml_path(str(figure)))
+    fm = mujoco.MjModel.from_xml_path(str(figure))
+    fig = Figure.from_model(fm)
     lengths = [fig.segments[b].length for b in ("l_thigh", "l_shin", "r_thigh", "r_shin", "l_upper_arm", "l_forearm")]
-    return [(c.site, c.start, c.end, c.surface) for c in contacts], legs, ref.qpos[:, 2], np.array(lengths)
+    soles = np.concatenate([fm.site_pos[fm.site(s).id] for s in fig.contact_sites])  # the fitted soles
+    return [(c.site, c.start, c.end, c.surface) for c in contacts], legs, ref.qpos[:, 2], np.r_[lengths, soles]
 
 
 @pytest.mark.slow
@@ -120,7 +122,7 @@ def contacts_and_legs(clip, folder):
 def test_the_same_figure_reference_and_contacts_as_the_cmu_clip(source, conventions, name, tmp_path):
     """What `mocap` finds on a re-export is what it finds on the CMU clip of the same performer size and
     frame rate: the same contacts (sites, times, surfaces), the same leg motion on the figure, the same
-    root height (the root's heading may differ with the file's axes), the same bones. (Where the
+    root height (the root's heading may differ with the file's axes), the same bones and soles. (Where the
     convention merges spine joints, the trunk's mean direction differs, and with it the pelvis's frame
     and the hip joints' rotations: there the knees and ankles.)"""
     path, _, notes = conventions[name]
