@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.mocap.bvh import read_bvh
-from runner.mocap.contacts import correct_root_height
+from runner.mocap.contacts import check_root_correction, correct_root_height
 from runner.mocap.retarget import (
     Reference,
     check_figure,
@@ -100,7 +100,10 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     step(3, "clamped")
     # feet in contact on the surfaces, nothing below one (a no-op without surfaces); on the subject's
     # figure too, where it only takes up the captured feet's deviation (up to ~2 cm) from the fitted scene
-    qpos = correct_root_height(qpos, model, clip.frame_time)
+    corrected = correct_root_height(qpos, model, clip.frame_time)
+    if own:  # the capture's own root: only moved a little, smoothly, or the clip is refused
+        check_root_correction(corrected[:, 2] - qpos[:, 2], clip.frame_time, str(path))
+    qpos = corrected
     step(4, "root height")
     qpos = tidy_quaternions(qpos, layout)
     step(5, "done")
