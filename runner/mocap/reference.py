@@ -37,7 +37,8 @@ IMPORT_STAGES = ("parse", "retarget", "clamp", "root height", "tidy")
 ROOT_SCALE_LEGS = "legs"
 
 
-def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS) -> Reference:
+def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS,
+                       fitted: bool = False) -> Reference:
     """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
     figure's own skeleton (written by `dynsplines export --to FILE.bvh` or `--export FILE.bvh`: a joint
     named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
@@ -62,6 +63,9 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
             the subject's, `leg_length_ratio`, so that the figure's strides cover the ground the
             subject's did) or a number > 0 (1: the root path as captured, e.g. for a scene built around
             the capture's own coordinates, or a keyframe file made before the scaling).
+        fitted: the scene was fitted to this clip (`runner.mocap.scene.clip_scene`): on the subject's own
+            figure, a root correction beyond its bound is refused (`check_root_correction`: the fit
+            missed where the feet rest). In a scene of your own the correction is what the scene needs.
     On the subject's own figure (the model's figure records this clip's skeleton,
     `runner.mocap.subject_figure.figure_skeleton_digest`) "legs" is 1 (the figure's legs are the
     subject's): the root path is the captured one in the levelled frame plus the per-frame vertical
@@ -78,7 +82,8 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     Raises:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
             joint the retargeting needs is missing, the model lacks a joint or site it needs, a malformed
-            capture frame in the scene, or root_scale is neither "legs" nor a number > 0.
+            capture frame in the scene, root_scale is neither "legs" nor a number > 0, or (`fitted`) the
+            root correction is beyond its bound.
     """
     from runner.export.bvh import figure_qpos_from_bvh, is_figure_clip
 
@@ -101,7 +106,7 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     # feet in contact on the surfaces, nothing below one (a no-op without surfaces); on the subject's
     # figure too, where it only takes up the captured feet's deviation (up to ~2 cm) from the fitted scene
     corrected = correct_root_height(qpos, model, clip.frame_time)
-    if own:  # the capture's own root: only moved a little, smoothly, or the clip is refused
+    if own and fitted:  # the capture's own root on its fitted scene: only moved a little, smoothly, or refused
         check_root_correction(corrected[:, 2] - qpos[:, 2], clip.frame_time, str(path))
     qpos = corrected
     step(4, "root height")

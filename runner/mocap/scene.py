@@ -83,7 +83,8 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     with atomic_output(out, suffix=".xml") as tmp_path:
         Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem, capture=frame))
     model = load_model(out)
-    return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale), model, out, fitted, capture, frame)
+    return ClipScene(load_bvh_reference(clip, model, root_scale=root_scale, fitted=True), model, out, fitted, capture,
+                     frame)
 
 
 def name_surfaces(model, reference: Reference, contacts: list[Contact]) -> list[Contact]:
