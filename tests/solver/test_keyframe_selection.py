@@ -233,7 +233,7 @@ def test_turn_keys_leave_slow_turns_alone_and_reject_bad_input():
     slow = list(range(0, 481, 60))
     assert turn_keys(slow, q) == slow
     loop = turn_keys([0, 480], q)                     # a whole turn between two keys of the same orientation
-    assert 0 < loop[1] and 5 <= len(loop) <= 6        # split at its far point, then in halves again
+    assert loop[1] > 0 and 5 <= len(loop) <= 6        # split at its far point, then in halves again
     assert all(b - a <= 121 for a, b in zip(loop[:-1], loop[1:]))   # <= 90 deg (120 frames) apart
     half = np.array([[[1.0, 0, 0, 0]], [[0.0, 0, 0, 1]]])                       # 180 deg in one frame
     assert turn_keys([0, 1], half) == [0, 1]          # two adjacent frames are never split
