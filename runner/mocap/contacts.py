@@ -105,8 +105,8 @@ def check_root_correction(correction: np.ndarray, frame_time: float, source: str
     """
     c = np.asarray(correction, float)
     i = int(np.argmax(np.abs(c))) if len(c) else 0
-    fix = ("the scene is not where the subject's feet rest; give the scene they stood on with --scene FILE.xml "
-           "(docs/contacts.md, \"Fitted scenes\")")
+    fix = ("the fitted floor and boxes are not where the subject's feet rest (a ramp or uneven ground is not "
+           "fitted: docs/contacts.md, \"Fitted scenes\"); give the scene they stood on with --scene FILE.xml")
     if len(c) and abs(c[i]) > ROOT_CORRECTION_MAX:
         raise InputError(f"{source}: the feet would need the root moved {1000 * c[i]:+.0f} mm at t = {i * frame_time:.3f} s "
                          f"to stand on the surfaces (at most {1000 * ROOT_CORRECTION_MAX:.0f} mm): {fix}")
