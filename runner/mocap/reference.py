@@ -3,7 +3,7 @@
 On the subject's own figure (runner/mocap/subject_figure.py: made from this clip's skeleton) the
 retargeting is lossless: the root path is the captured one (no scale), and the modelled joints' positions
 relative to the root are the capture's (docs/mocap.md, "What the figure keeps"). In a scene with surfaces
-the root height is still corrected per frame by up to ~2 cm (`correct_root_height`), so that the feet in
+the root height is still corrected per frame by at most 3 cm (`correct_root_height`), so that the feet in
 contact stand on the fitted surfaces instead of sinking into them; the export onto the source skeleton
 takes that correction off again (runner/mocap/source_export.py).
 """
@@ -69,7 +69,7 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     On the subject's own figure (the model's figure records this clip's skeleton,
     `runner.mocap.subject_figure.figure_skeleton_digest`) "legs" is 1 (the figure's legs are the
     subject's): the root path is the captured one in the levelled frame plus the per-frame vertical
-    height correction c(t) (up to ~2 cm, `correct_root_height`; none without surfaces). A capture floor is
+    height correction c(t) (at most 3 cm, `correct_root_height`; none without surfaces). A capture floor is
     never flat to the millimetre, so without c(t) a foot in contact sinks into the fitted floor at some
     frames; the keyframes, taken from the reference and met exactly, would then violate the
     penetration bound. The export onto the source skeleton subtracts c(t)
