@@ -12,7 +12,7 @@ the heel site of a flat, still foot rests 3 to 30 mm above or below its toe site
 surface touches it with its lowest point; with a rigid foot whose sole is the segment from the heel
 site to the toe site, in every frame the foot rests the lower of its two sites is on the surface. The
 fit moves each site in the foot's sagittal plane (forward and along the foot's vertical axis; its
-lateral position is kept) to minimise, over the frames the foot rests,
+lateral position is kept) to minimise, over the frames each foot rests, of both feet at once,
 
     sum_i rho( min(h_heel,i, h_toe,i) )
 
@@ -21,7 +21,12 @@ scene_fit`) and rho the soft-L1 loss with scale `SCALE` (5 mm): a frame whose fo
 while the detection still counts it pulls by its sign, not its size. The heel stays within `REACH` of
 the published place; the toe site moves from the ball forward at most to the toe tip (the toe joint's
 End Site) and within `REACH` in height: the figure's foot is rigid, and once the heel is up the
-subject's foot pivots about its toes, ahead of the ball (their joint flexes).
+subject's foot pivots about its toes, ahead of the ball (their joint flexes). The two feet are mirror
+images: they share one sole (the same moves from each foot's published places, the toe the same
+fraction of the way to its tip), and only their heights may differ, by up to `REACH` (the capture's
+joint centres of the two feet sit differently above their soles). Fitted apart, each foot followed its
+own few rests (07_04: a 4.4 cm heel sphere on the left, a point on the right), and a foot resting too
+briefly kept the published sole.
 
 The heel is rounded: a walker's heel lands with the foot 20-35 degrees toes-up and rolls on the round
 back edge of the heel bone and its pad onto the flat foot, which one point fixed in the foot cannot
