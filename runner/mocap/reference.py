@@ -3,7 +3,7 @@
 On the subject's own figure (runner/mocap/subject_figure.py: made from this clip's skeleton) the
 retargeting is lossless: the root path is the captured one (no scale), and the modelled joints' positions
 relative to the root are the capture's (docs/mocap.md, "What the figure keeps"). In a scene with surfaces
-the root height is still corrected per frame by up to ~2 cm (`correct_root_height`), so that the feet in
+the root height is still corrected per frame by at most 3 cm (`correct_root_height`), so that the feet in
 contact stand on the fitted surfaces instead of sinking into them; the export onto the source skeleton
 takes that correction off again (runner/mocap/source_export.py).
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.mocap.bvh import read_bvh
-from runner.mocap.contacts import correct_root_height
+from runner.mocap.contacts import check_root_correction, correct_root_height
 from runner.mocap.retarget import (
     Reference,
     check_figure,
@@ -37,7 +37,8 @@ IMPORT_STAGES = ("parse", "retarget", "clamp", "root height", "tidy")
 ROOT_SCALE_LEGS = "legs"
 
 
-def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS) -> Reference:
+def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS,
+                       fitted: bool = False) -> Reference:
     """Read a CMU BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
     figure's own skeleton (written by `dynsplines export --to FILE.bvh` or `--export FILE.bvh`: a joint
     named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
@@ -62,10 +63,13 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
             the subject's, `leg_length_ratio`, so that the figure's strides cover the ground the
             subject's did) or a number > 0 (1: the root path as captured, e.g. for a scene built around
             the capture's own coordinates, or a keyframe file made before the scaling).
+        fitted: the scene was fitted to this clip (`runner.mocap.scene.clip_scene`): on the subject's own
+            figure, a root correction beyond its bound is refused (`check_root_correction`: the fit
+            missed where the feet rest). In a scene of your own the correction is what the scene needs.
     On the subject's own figure (the model's figure records this clip's skeleton,
     `runner.mocap.subject_figure.figure_skeleton_digest`) "legs" is 1 (the figure's legs are the
     subject's): the root path is the captured one in the levelled frame plus the per-frame vertical
-    height correction c(t) (up to ~2 cm, `correct_root_height`; none without surfaces). A capture floor is
+    height correction c(t) (at most 3 cm, `correct_root_height`; none without surfaces). A capture floor is
     never flat to the millimetre, so without c(t) a foot in contact sinks into the fitted floor at some
     frames; the keyframes, taken from the reference and met exactly, would then violate the
     penetration bound. The export onto the source skeleton subtracts c(t)
@@ -78,7 +82,8 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     Raises:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
             joint the retargeting needs is missing, the model lacks a joint or site it needs, a malformed
-            capture frame in the scene, or root_scale is neither "legs" nor a number > 0.
+            capture frame in the scene, root_scale is neither "legs" nor a number > 0, or (`fitted`) the
+            root correction is beyond its bound.
     """
     from runner.export.bvh import figure_qpos_from_bvh, is_figure_clip
 
@@ -100,7 +105,10 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     step(3, "clamped")
     # feet in contact on the surfaces, nothing below one (a no-op without surfaces); on the subject's
     # figure too, where it only takes up the captured feet's deviation (up to ~2 cm) from the fitted scene
-    qpos = correct_root_height(qpos, model, clip.frame_time)
+    corrected = correct_root_height(qpos, model, clip.frame_time)
+    if own and fitted:  # the capture's own root on its fitted scene: only moved a little, smoothly, or refused
+        check_root_correction(corrected[:, 2] - qpos[:, 2], clip.frame_time, str(path))
+    qpos = corrected
     step(4, "root height")
     qpos = tidy_quaternions(qpos, layout)
     step(5, "done")

@@ -13,7 +13,7 @@ at t = k / fps. Per joint:
   whose composition with them gives the torso's world orientation; likewise LHipJoint before the
   thigh, LeftShoulder before the arm. The root translation is the path's root position minus the
   reference's height correction c(t) (`root_correction`: the import stands the captured feet on the
-  fitted surfaces by moving the root up to ~2 cm up or down per frame, `runner.mocap.contacts.
+  fitted surfaces by moving the root at most 3 cm up or down per frame, `runner.mocap.contacts.
   correct_root_height`; the export takes that off again). Both are taken back from the scene's levelled
   frame into the capture's coordinates first (the inverse of the rigid transform the scene records,
   `solver.capture_frame`; docs/mocap.md), so the file lies where the source does: the reference itself
