@@ -70,9 +70,15 @@ MOTION_MARGINS = {
 #: rows whose figure the capture itself shows at a higher level (the spline is smoother than any real
 #: motion): worse only above both the plain spline's and the capture's, by 1 %
 CAPTURE_LEVEL_ROWS = ("jerk_root_m_s3", "jerk_sites_m_s3")
+#: [deg] a joint (the root's orientation included) further than this from the capture at some frame has
+#: lost the capture's motion: keys no more than a quarter turn apart (`solver.keyframe_selection.turn_keys`)
+#: leave no in-between that far from it unless the path goes round the other way (a full turn joined the
+#: short way is 174 deg off); the joint-angle row is then marked even if the plain spline is as far off
+LOST_TURN_DEG = 90.0
 MOTION_LEGEND = (f"{WORSE}: higher than the plain spline's by > 1% and a floor per row (float, penetration 0.1 mm; "
                  "skate 0.05 mm/frame; skating ratio 0.01; errors half a printed digit); flight time: further from "
-                 "the capture's by more than one frame; jerk: above the plain spline's and the capture's")
+                 "the capture's by more than one frame; jerk: above the plain spline's and the capture's; joint "
+                 f"angle: also a max over {LOST_TURN_DEG:g} deg (the path went round the other way)")
 
 
 def motion_worse(key: str, plain: float, opt: float, frame_s: float = 0.0, capture: float | None = None) -> bool:
@@ -359,7 +365,8 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
     for (label, key, pm, px), (_, _, om, ox) in pairs:
         cells = [MISSING] + [cell("{:.2f}", m) + (f" / {cell('{:.1f}', x)}" if np.isfinite(x) else "")
                              for m, x in ((pm, px), (om, ox))]
-        bad = motion_worse(key, pm, om) or motion_worse(key, px, ox)
+        bad = motion_worse(key, pm, om) or motion_worse(key, px, ox) or (key == "joint_orientation_deg"
+                                                                            and ox > LOST_TURN_DEG)
         lines.append(f"{label + (' mean / max' if np.isfinite(px) else ' mean'):{w}}"
                      + "".join(f"{c:>14}" for c in cells) + (f"  {WORSE}" if bad else ""))
     lines.append(MOTION_LEGEND)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 import math
 
 from runner.exit_codes import EXIT_INPUT
@@ -21,6 +22,38 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+    def parse_args(self, args=None, namespace=None):
+        """As argparse's, but arguments no parser knows are reported by the subcommand that was given
+        (its prog and its --help), with the nearest option of that subcommand for a mistyped one
+        (`dynsplines mocap clip.bvh --evry 0.25`: "did you mean --every?")."""
+        namespace, extras = self.parse_known_args(args, namespace)
+        if extras:
+            parser = self.chosen_subcommand(namespace)
+            message = f"unrecognized arguments: {' '.join(extras)}"
+            near = parser.nearest_option(extras)
+            parser.error(f"{message}; did you mean {near}?" if near else message)
+        return namespace
+
+    def chosen_subcommand(self, namespace) -> OneLineParser:
+        """The innermost parser of the subcommand (and sub-subcommand, e.g. `bench corpus`) chosen in
+        `namespace`; this parser when none was."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                chosen = action.choices.get(getattr(namespace, action.dest, None) or "")
+                if isinstance(chosen, OneLineParser):
+                    return chosen.chosen_subcommand(namespace)
+        return self
+
+    def nearest_option(self, extras) -> str | None:
+        """This parser's long option nearest to the first unknown option among `extras` (`--name` or
+        `--name=value`) by difflib's similarity ratio (at least 0.6, its default cutoff), or None."""
+        options = [s for a in self._actions for s in a.option_strings if s.startswith("--")]
+        for word in extras:
+            if word.startswith("--"):
+                near = difflib.get_close_matches(word.split("=", 1)[0], options, n=1)
+                return near[0] if near else None
+        return None
 
 
 def _bounded(kind, ok, requirement: str):

@@ -312,7 +312,10 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     Returns:
         {"clip", "status" (solver Status value, or "interrupted"), "exit" ("ok" | "failed" |
         "interrupted"), "frames" (reference frames), "fps", "keyframes" (count), "partial", "contacts"
-        (count), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
+        (count), "reference_contact_distance_mm" and "reference_feet_disagreement_mm" (the retargeted clip's
+        resting feet from the surfaces and the capture's own disagreement, `runner.mocap.contacts.feet_line`;
+        None off the subject's figure), "keyframes_on_source" (`keyframes_on_source_report`; None off the
+        subject's figure), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
         that hold a site off the contact schedule), "stalled" ({term: violation} out of reach), "metrics"
         ({"plain", "optimized": path_metrics; "motion": {"plain", "optimized": motion_metrics}}),
         "scene_fitted" (the capture floor's floor_z and floor_slope, capture_frame (w x y z tx ty tz: the
@@ -322,7 +325,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         InputError: a missing or malformed clip, another skeleton (the missing joints named), an
             unwritable output, a bad option.
     """
-    from runner.mocap.contacts import worst_contact_distance
+    from runner.mocap.contacts import feet_disagreement, worst_contact_distance
     from runner.render.side_by_side import VideoOptions
     from runner.run import Outputs, execute, write_metrics_json
 
@@ -359,6 +362,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "max_penetration_mm": run.metrics["optimized"]["max_penetration_mm"],
         "keyframe_error": run.metrics["optimized"].get("keyframe_error"),
         "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
+        "reference_feet_disagreement_mm": _mm(feet_disagreement(ref, problem.model)),
         "stance_agreement": _agreement(problem, ref),
         "keyframe_conflicts": len(problem.conflicts.found), "stalled": dict(run.solution.stalled or {}),
         "keyframes_on_source": on_source,
@@ -372,6 +376,11 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     result["wall_time_s"] = time.perf_counter() - t_start
     say(f"  wall time {result['wall_time_s']:.1f} s")
     return result
+
+
+def _mm(metres: float | None) -> float | None:
+    """[mm] of a length in metres, None kept."""
+    return None if metres is None else 1000.0 * metres
 
 
 #: [m] a source joint this near the clip's own place at a keyframe counts as the clip's (optical

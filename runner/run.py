@@ -243,7 +243,7 @@ def report(run: Run) -> str:
                            dict(run.solution.weights), contact_rows=rows, force_bounds=run.problem.force_bounds)]
     ref = run.source.reference
     if ref is not None:
-        from runner.mocap.contacts import worst_contact_distance
+        from runner.mocap.contacts import feet_line
 
         lines.append(motion_metrics_table(motion["plain"], motion["optimized"]))
         forced = motion.get("keyframes", {}).get("forced_skate_contact_mm")
@@ -253,8 +253,8 @@ def report(run: Run) -> str:
         worst = [motion["plain"]["path"], motion["optimized"]["path"], motion["plain"]["reference"]]
         lines.append("beyond range of motion (AAOS 1965, docs/anatomy.md), worst: " + "; ".join(
             f"{who} {w['rom_excess_motion'] or 'none'}" for who, w in zip(("plain", "optimized", "capture"), worst)))
-        lines.append(f"motion capture ({display_path(ref.source)}, retargeted, {ref.count} frames): feet in contact "
-                     f"stay within {1000 * worst_contact_distance(ref, run.model):.1f} mm of the surface under them")
+        lines.append(f"motion capture ({display_path(ref.source)}, retargeted, {ref.count} frames): "
+                     + feet_line(ref, run.model))
     return "\n".join(lines)
 
 

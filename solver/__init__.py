@@ -8,8 +8,8 @@ rendering, no command line, no printing, and no process-wide side effects: impor
 One call for a figure in a scene, one for a single orientation::
 
     import solver
-    model = solver.load_model("models/run_and_step.xml")
-    keyframes, info = solver.read_keyframes("models/run_and_step.keyframes.json", model)
+    model = solver.load_model(solver.shipped("run_and_step.xml"))  # a shipped scene, from any folder
+    keyframes, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
     solution = solver.animate(model, keyframes)            # the command line's settings
     result = solver.orient(times, quats)                   # paper sec. 3
 """
@@ -39,6 +39,7 @@ from solver.problem import (
     term_names,
 )
 from solver.schedule_conflicts import ScheduleConflicts
+from solver.shipped import shipped
 from solver.solve import Round, Solution, SolveOptions, solve
 from solver.spline_basis import SplineBasis
 from solver.terms import (
@@ -64,6 +65,8 @@ __all__ = [
     "Figure",
     # files: an MJCF scene, the JSON keyframe file
     "load_model", "read_keyframes", "write_keyframes", "KeyframeFileInfo",
+    # the shipped figure, scenes, keyframe files and clips, from any folder
+    "shipped",
     # the contact schedule (docs/contacts.md "Contact schedules") and what keyframes contradict in it
     "Contact", "ContactSchedule", "ScheduleConflicts",
     # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7)

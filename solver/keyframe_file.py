@@ -97,6 +97,11 @@ def read_document(path: str | os.PathLike) -> Any:
     try:
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
+        from solver.shipped import shipped_hint
+
+        hint = shipped_hint(p)
+        if hint:
+            raise InputError(f"{src}: no such keyframe file{hint}") from None
         raise InputError(f"{src}: no such keyframe file (current folder: {Path.cwd()}); check the path") from None
     except IsADirectoryError:
         raise InputError(f"{src}: is a folder; give the path of a .json keyframe file") from None

@@ -5,6 +5,8 @@ and passing poses of a walk or run cycle) and at the body's highest and lowest p
 (a jump's apex, the compression after a landing). `contact_keyframes` picks those frames from the
 contacts and the root height, then keys where the plain spline through them strays from the capture
 (`CaptureError`, `add_keys_to_tolerance`); evenly spaced keys (`every`) only fill gaps longer than `every`.
+Whatever keys are chosen, `turn_keys` then adds keys where the root or a joint turns far between two keys
+in the capture, so that the plain spline cannot join them the short way round.
 """
 from __future__ import annotations
 
@@ -31,6 +33,14 @@ KEY_SITE_CM = 3.0
 #: [s] an added key is at least this far from the keys beside it (`add_keys_to_tolerance`): keys
 #: closer than a tenth of a second would key the capture's jitter rather than its poses.
 KEY_MIN_GAP = 0.1
+#: [deg] the farthest the capture may take the root or any joint from its pose at a key before the next
+#: key (rotation angle, `turn_keys`). The plain spline joins two keyed orientations the short way round
+#: (hemisphere-aligned quaternions): it cannot tell a turn by A from one by A - 360 deg, so a capture
+#: that turns 188 deg between keys is joined by a -172 deg turn. Rotations within 90 deg of one
+#: orientation form a convex ball of SO(3) (geodesic balls of radius under 90 deg are convex), so the
+#: spline's short way between two keys in it stays in it, as does the capture's path: they are the same
+#: way round, with 90 deg to spare before the ambiguity at 180 deg; keys added later keep that.
+KEY_TURN_DEG = 90.0
 
 
 def _merge(idx: list[int], gap: int, fixed: set[int]) -> list[int]:
@@ -206,3 +216,57 @@ def add_keys_to_tolerance(keys: Sequence[int], error, times: np.ndarray, min_gap
             break
         keys = sorted(keys + [i])
     return keys
+
+
+def _angles(q: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """[deg] rotation angle between unit quaternions q (..., s, 4) and ref (s, 4), per joint, either sign."""
+    dot = np.abs(np.einsum("...sk,sk->...s", q, ref))
+    return np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))
+
+
+def turn_keys(keys: Sequence[int], quats: np.ndarray, limit_deg: float = KEY_TURN_DEG) -> list[int]:
+    """Keys added until, between any two consecutive keys, the capture keeps the root and every joint
+    within `limit_deg` of its orientation at the first of them (`KEY_TURN_DEG` says why).
+
+    An interval [a, b] whose frames stray further is split where the joint that strays furthest has
+    done half of its turning (its frame-to-frame rotation angles summed from a: the middle of a turn,
+    the far point of a turn out and back), and each half is checked again. A full turn keyed every
+    0.25 s (360 deg in 0.5 s, up to 245 deg between keys) gets a key halfway through each interval
+    that turns more than 90 deg. An interval of two adjacent frames is never split (the capture itself
+    turns that far in one frame).
+
+    Args:
+        keys: sorted frame indices, the first and last frames among them.
+        quats: (n, s, 4) the capture's orientations per frame: the root's and each ball joint's unit
+            quaternion (w x y z, either sign), e.g. qpos[:, layout.quat_slots].
+        limit_deg: [deg] in (0, 180).
+    Returns:
+        sorted frame indices, a superset of `keys`.
+    Raises:
+        InputError: quats is not (n, s, 4), a key is outside 0..n-1, or limit_deg is out of range.
+    """
+    q = np.asarray(quats, float)
+    if q.ndim != 3 or q.shape[-1] != 4:
+        raise InputError(f"quats must have shape (n, s, 4); got {q.shape}")
+    if not (isinstance(limit_deg, (int, float)) and 0.0 < limit_deg < 180.0):
+        raise InputError(f"limit_deg={limit_deg!r}; give an angle in degrees between 0 and 180, e.g. {KEY_TURN_DEG}")
+    q = _unit(q)
+    out = sorted({int(k) for k in keys})
+    if out and (out[0] < 0 or out[-1] >= len(q)):
+        raise InputError(f"keys {out[0]}..{out[-1]} fall outside the {len(q)} frames of quats")
+    todo = list(zip(out[:-1], out[1:]))
+    while todo:
+        a, b = todo.pop()
+        if b - a < 2:
+            continue
+        from_a = _angles(q[a:b + 1], q[a])  # (b - a + 1, s)
+        if from_a.max() <= limit_deg:
+            continue
+        joint = int(np.argmax(from_a.max(axis=0)))
+        dot = np.abs(np.einsum("nk,nk->n", q[a + 1:b + 1, joint], q[a:b, joint]))
+        step = np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))  # (b - a,) its rotation frame to frame
+        arc = np.concatenate([[0.0], np.cumsum(step)])  # (b - a + 1,) turning done from a
+        c = a + 1 + int(np.argmin(np.abs(arc[1:-1] - arc[-1] / 2)))
+        out.append(c)
+        todo += [(a, c), (c, b)]
+    return sorted(out)

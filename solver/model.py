@@ -49,7 +49,8 @@ def load_model(path: str | os.PathLike):
     Returns:
         mujoco.MjModel.
     Raises:
-        InputError: the file does not exist, it includes a file that is not there (MuJoCo resolves
+        InputError: the file does not exist (for a relative path naming a shipped scene, the message
+            says where that is: `solver.shipped`), it includes a file that is not there (MuJoCo resolves
             includes against the scene's folder: a copy of a scene saved elsewhere loses the figure),
             or MuJoCo cannot load it; the message names the file and says how to fix it.
     """
@@ -57,7 +58,9 @@ def load_model(path: str | os.PathLike):
 
     path = Path(path)
     if not path.is_file():
-        raise InputError(f"scene file {path} does not exist; give an MJCF file with --scene")
+        from solver.shipped import shipped_hint
+
+        raise InputError(f"scene file {path} does not exist{shipped_hint(path)}; give an MJCF file with --scene")
     missing = _missing_includes(path)
     if missing:
         name = missing[0]

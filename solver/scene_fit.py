@@ -29,19 +29,25 @@ Method:
    (frame-weighted mean 3.6 mm/s, like the standing feet of the level clips 75_03 and 83_02, 1-4 mm/s),
    where a drift in time would raise it at 19 mm/s; a tilted plane fits its six stances to 2 mm
    (standard deviation), a level one to 23 mm.
-3. Boxes, in the floor's frame (`FittedScene.rotation`; heights above the floor plane): raised stances
-   (rest > RAISED) are clustered by single linkage: two stances join when their rest heights differ by
-   at most HEIGHT_TOL (0.08 m) and their footprints are at most LINK (1.0 m) apart. 0.08 m: on 127_33
-   the two stances on the box rest 1-4 cm apart in height (a forefoot runner on a 25 cm box: one box).
-   1.0 m: those two stances are 0.5 m apart; a gap of a metre or more between stances at one height is
-   more likely two props.
+3. Levels and boxes, in the floor's frame (`FittedScene.rotation`; heights above the floor plane): the
+   raised stances (rest > RAISED) are sorted by rest height and split into levels wherever two
+   consecutive rests differ by more than HEIGHT_TOL (5 cm; a 1-D single-linkage clustering): the rests
+   of one surface scatter by up to 3 cm (on 127_33 the two stances on the box rest 1-4 cm apart; two
+   feet of one capture disagree by up to 3 cm, docs/mocap.md), and a rise of more than RAISED is
+   another surface, as it is from the floor. Within a level, stances join when their footprints are at
+   most LINK (1.0 m) apart: a gap of a metre or more between stances at one height is more likely two
+   props. Each cluster is one box.
 4. Box per cluster: top = the mean rest height of its stances above the floor (each stance counts
    once, however long); bottom = the floor; extent = the cluster's footprint padded by MARGIN (0.2 m)
-   on every side: the sites mark only heel and toe, the sole reaches a few cm past them, and an
+   on every side (the sites mark only heel and toe, the sole reaches a few cm past them, and an
    optimized path moves planted feet by a few cm; 0.2 m is also the spare the hand-made scene
-   models/run_and_step.xml gives its step. Where the padding would put a floor-level contact point
-   under the box, that side is pulled back to halfway between the footprint and the point. A box on a
-   tilted floor is tilted with it (a capture floor is tilted by the calibration, the props on it too).
+   models/run_and_step.xml gives its step), except that no box covers a footprint of another height
+   or prop: where the padded box would cover a floor stance's footprint, or overlap another box
+   padded likewise, its side facing that footprint is pulled back to halfway between the two
+   footprints (on the axis along which they lie furthest apart; two boxes stop at the same line). So
+   the boxes of a stair are side by side, none inside another, each under the rests it was fitted to,
+   and a contact is on the surface under its site. A box on a tilted floor is tilted with it (a
+   capture floor is tilted by the calibration, the props on it too).
 
 5. Levelling (`FittedScene.levelling`, `FittedScene.levelled`; solver/capture_frame.py): a tilted
    capture floor is a calibration error of the capture volume, so `runner.mocap.scene.clip_scene`
@@ -53,7 +59,8 @@ Limits: one floor plane (a floor that bends or steps is fitted by the best plane
 scattering about it); no drift in time; boxes are square to the floor (no rotation about its normal)
 and stand on it; one box per cluster (an L-shaped platform becomes one bounding box); an edge no foot
 came near is set by the margin, not by data (only the contacts bound it: an edge lies between the last
-contact on the box and the first on the floor). A surface nobody stood on is not found.
+contact on the box and the first on the floor or the next step); rises of 5 cm or less are not told
+apart (a ramp becomes one box at its mean height). A surface nobody stood on is not found.
 """
 from __future__ import annotations
 
@@ -70,8 +77,9 @@ from solver.errors import InputError
 
 #: a stance resting more than this above the floor is on a raised surface [m].
 RAISED = 0.05
-#: stances on one box differ in rest height by at most this [m].
-HEIGHT_TOL = 0.08
+#: [m] rest heights closer than this (sorted, consecutive) are one level: the rests of one surface scatter
+#: by up to 3 cm, and a rise of more than RAISED is another surface, as it is from the floor (module doc, 3).
+HEIGHT_TOL = RAISED
 #: stances on one box have footprints at most this far apart in x-y [m].
 LINK = 1.0
 #: padding of a box's footprint on every side [m].
@@ -252,11 +260,39 @@ def _fit_floor(stances, raised, min_span, level_tol, max_slope, scale):
     return a, g
 
 
+def _levels(rests: np.ndarray, tol: float) -> np.ndarray:
+    """(m,) level label of each rest height [m]: sorted, a gap of more than `tol` starts a new level
+    (1-D single linkage), labels counted from the lowest."""
+    order = np.argsort(rests)
+    label = np.empty(len(rests), int)
+    label[order] = np.concatenate([[0], np.cumsum(np.diff(rests[order]) > tol)]) if len(rests) else []
+    return label
+
+
+def _cut(lo: np.ndarray, hi: np.ndarray, own: tuple, other: tuple, reach: float) -> None:
+    """Pull the rectangle [lo, hi] (around the footprint `own` = (lo, hi)) back from the footprint
+    `other` where it overlaps that footprint padded by `reach` [m]: on the axis along which the two
+    footprints lie furthest apart, the facing side moves to halfway between them. Two boxes cut against
+    each other stop at the same line. In place."""
+    olo, ohi = other[0] - reach, other[1] + reach
+    if np.any(lo > ohi) or np.any(hi < olo):
+        return  # apart (a footprint on the edge counts as covered)
+    olo, ohi = other
+    flo, fhi = own
+    gaps = np.concatenate([olo - fhi, flo - ohi])  # > 0: other beyond own on that side (+x, +y, -x, -y)
+    k = int(np.argmax(gaps))
+    if k < 2:
+        hi[k] = min(hi[k], (fhi[k] + olo[k]) / 2)
+    else:
+        lo[k - 2] = max(lo[k - 2], (flo[k - 2] + ohi[k - 2]) / 2)
+
+
 def _fit_boxes(stances, raised, height_tol, link, margin):
     """Boxes (center, half) in the floor's frame (floor at z = 0) from the stances (module doc, 3-4)."""
     low = [s for s in stances if s.rest <= raised]
     high = [s for s in stances if s.rest > raised]
-    label = list(range(len(high)))  # single-linkage clusters of the raised stances
+    level = _levels(np.array([s.rest for s in high]), height_tol)
+    label = list(range(len(high)))  # single-linkage clusters of the raised stances, within a level
 
     def root(i):
         while label[i] != i:
@@ -265,24 +301,18 @@ def _fit_boxes(stances, raised, height_tol, link, margin):
 
     for i in range(len(high)):
         for j in range(i + 1, len(high)):
-            if abs(high[i].rest - high[j].rest) <= height_tol and _rect_gap(high[i], high[j]) <= link:
+            if level[i] == level[j] and _rect_gap(high[i], high[j]) <= link:
                 label[root(j)] = root(i)
-    floor_pts = [(s.lo + s.hi) / 2 for s in low] + [s.lo for s in low] + [s.hi for s in low]
+    clusters = [[high[i] for i in range(len(high)) if root(i) == r] for r in sorted({root(i) for i in range(len(high))})]
+    prints = [(np.min([m.lo for m in c], axis=0), np.max([m.hi for m in c], axis=0)) for c in clusters]
     boxes = []
-    for r in sorted({root(i) for i in range(len(high))}):
-        members = [high[i] for i in range(len(high)) if root(i) == r]
+    for i, members in enumerate(clusters):
         top = float(np.mean([m.rest for m in members]))
-        flo = np.min([m.lo for m in members], axis=0)
-        fhi = np.max([m.hi for m in members], axis=0)
-        lo, hi = flo - margin, fhi + margin
-        for p in floor_pts:
-            if np.all(p >= lo) and np.all(p <= hi):
-                out_lo, out_hi = flo - p, p - fhi  # > 0: p beyond the footprint on that side
-                side = int(np.argmax(np.concatenate([out_lo, out_hi])))
-                if side < 2 and out_lo[side] > 0:
-                    lo[side] = (flo[side] + p[side]) / 2
-                elif side >= 2 and out_hi[side - 2] > 0:
-                    hi[side - 2] = (fhi[side - 2] + p[side - 2]) / 2
+        lo, hi = prints[i][0] - margin, prints[i][1] + margin
+        # no surface covers where a foot rested at another height or on another prop: each side facing
+        # such a footprint stops halfway to it (both boxes of a pair stop at the same line)
+        for other, reach in [((s.lo, s.hi), 0.0) for s in low] + [(f, margin) for j, f in enumerate(prints) if j != i]:
+            _cut(lo, hi, prints[i], other, reach)
         center = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, top / 2])
         half = np.array([(hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2, top / 2])
         boxes.append((center, half))

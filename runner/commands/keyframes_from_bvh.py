@@ -112,6 +112,10 @@ def run(args, command: str | None = None) -> int:
         f"({int(keyframes.is_partial.sum())} partial), {len(contacts)} contacts, from {reference.count} frames "
         f"of {args.clip}; {scene_note}"
     )
+    if cs.fitted is not None or reference.captured_root:
+        from runner.mocap.contacts import feet_line
+
+        print(f"  retargeted clip: {feet_line(reference, cs.model)}")
     return EXIT_OK
 
 

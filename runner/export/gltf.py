@@ -1,22 +1,31 @@
-"""glTF 2.0 binary (.glb) export: the figure as a node tree with TRS animation, and the static scene.
+"""glTF 2.0 binary (.glb) export: the figure as an armature (a skin) with TRS animation, and the static scene.
 
 Nodes: ``world`` (a fixed rotation from MuJoCo axes, z up and the figure facing +x, to glTF axes, Y up
 and the asset facing +Z: (X, Y, Z)_gltf = (y, z, x)_mujoco) holds the static geoms of the scene's world
-body (floor plane as a finite quad, boxes, ...) and one figure per track. A figure is a node per body
-(named after the body; with several tracks ``<track>_<body>``; geom nodes ``geom_<name>``) whose local transform is MuJoCo's: the
-root node's translation and rotation are the free joint's `qpos`, every other body node has its
-`body_pos` as translation and `body_quat` times its ball joint's quaternion as rotation. Each geom is a
-child node (`geom_pos`, `geom_quat`) with a triangle mesh: capsules, spheres, ellipsoids and cylinders
-as latitude-longitude meshes, boxes and planes as quads. Optionally, sites (e.g. the contact sites) are
-small spheres named ``site_<name>`` (``<track>_site_<name>``), for a viewer to colour.
+body (floor plane as a finite quad, boxes, ...) and one figure per track. A figure is a joint node per
+body (named after the body; with several tracks ``<track>_<body>``), parented as MuJoCo's body tree, whose
+local transform is MuJoCo's: the root node's translation and rotation are the free joint's `qpos`, every
+other body node has its `body_pos` as translation and `body_quat` times its ball joint's quaternion as
+rotation. Geoms are triangle meshes (`runner.export.meshes`) named ``geom_<name>``; optionally, sites
+(e.g. the contact sites) are small spheres named ``site_<name>`` (``<track>_site_<name>``).
+
+Skinned (the default; glTF 2.0 sec. 3.7.3): the body nodes are the joints of a skin (named after the
+track, its `skeleton` the root body's node), and each geom or site is a mesh node at the scene root (a
+skinned mesh is not moved by its parents' transforms) whose vertices are bound rigidly to their body's
+joint (JOINTS_0 = that joint, WEIGHTS_0 = (1, 0, 0, 0)). The bind pose is the model's `qpos0` (ball
+joints at identity): bind-pose vertices are the geom's mesh placed by MuJoCo's forward kinematics at
+qpos0, in glTF world axes, and joint j's inverse bind matrix is the inverse of its node's world matrix
+there, so that at any time a vertex lands at joint world matrix x inverse bind matrix x bind vertex,
+where MuJoCo puts the geom. Blender and game engines import this as an armature with one bone per body.
+Rigid (``skinned=False``, the viewer): each geom or site is a child node of its body's node
+(`geom_pos`, `geom_quat`) with the mesh in the geom's own frame.
 
 Animation: one per track, named after it: root translation and every body's rotation, LINEAR, one key
 per sample (times from 0 [s]; the path's start time is in the animation's `extras`). Units: metres.
-Colours: the geom's material `rgba` (times the mean colour of its texture, if any), else `geom_rgba`.
+Colours: `runner.export.meshes.geom_colour`.
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,20 +33,17 @@ from pathlib import Path
 import numpy as np
 
 from runner.export.bvh import MUJOCO_TO_BVH, figure_skeleton
+from runner.export.meshes import geom_colour, geom_mesh, sphere_mesh
 from solver.errors import InputError
 
-__all__ = ["MUJOCO_TO_GLTF", "WORLD_ROTATION", "Track", "figure_gltf", "glb_bytes", "write_glb", "geom_mesh"]
+__all__ = ["MUJOCO_TO_GLTF", "WORLD_ROTATION", "Track", "figure_gltf", "glb_bytes", "write_glb"]
 
 #: (3, 3) axis change MuJoCo -> glTF (the same as for BVH: Y up, facing +Z, left +X).
 MUJOCO_TO_GLTF = MUJOCO_TO_BVH
 #: the `world` node's rotation (x, y, z, w): the rotation whose matrix is MUJOCO_TO_GLTF.
 WORLD_ROTATION = (-0.5, -0.5, -0.5, 0.5)
-#: [m] half size of the quad drawn for an infinite plane.
-PLANE_HALF = 20.0
-_SEGMENTS = 20  # around an axis
-_RINGS = 8  # per quarter circle
 
-_FLOAT, _USHORT, _UINT = 5126, 5123, 5125
+_UBYTE, _USHORT, _UINT, _FLOAT = 5121, 5123, 5125, 5126
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 
 
@@ -48,115 +54,6 @@ class Track:
     name: str
     times: np.ndarray
     qpos: np.ndarray
-
-
-# ------------------------------------------------------------------------------------------- meshes
-def _rings_piece(rings, segments=_SEGMENTS):
-    """Triangles joining rings (radius, z, normal radial part, normal z part), top to bottom; a ring of
-    radius 0 is a pole (one vertex). Outward normals, counter-clockwise seen from outside."""
-    th = 2 * math.pi * np.arange(segments) / segments
-    c, s = np.cos(th), np.sin(th)
-    pos, nrm, idx, starts = [], [], [], []
-    for r, z, nr, nz in rings:
-        starts.append(len(pos))
-        if r == 0.0:
-            pos.append((0.0, 0.0, z))
-            nrm.append((0.0, 0.0, nz))
-        else:
-            pos += list(zip(r * c, r * s, np.full(segments, z)))
-            nrm += list(zip(nr * c, nr * s, np.full(segments, nz)))
-    for k in range(len(rings) - 1):
-        a, b = starts[k], starts[k + 1]
-        pa, pb = rings[k][0] == 0.0, rings[k + 1][0] == 0.0
-        for i in range(segments):
-            j = (i + 1) % segments
-            if pa and not pb:
-                idx += [a, b + i, b + j]
-            elif pb and not pa:
-                idx += [a + i, b, a + j]
-            elif not pa and not pb:
-                idx += [a + i, b + i, b + j, a + i, b + j, a + j]
-    return np.array(pos, float), np.array(nrm, float), np.array(idx, int)
-
-
-def _sphere_rings(radius, z_offset=0.0, lo=0.0, hi=math.pi, n=2 * _RINGS):
-    out = []
-    for phi in np.linspace(lo, hi, n + 1):
-        sr, cr = math.sin(phi), math.cos(phi)
-        r = 0.0 if sr < 1e-12 else radius * sr
-        out.append((r, radius * cr + z_offset, sr, cr))
-    return out
-
-
-def _quad(center, u, v):
-    """Face center +- u +- v with normal u x v (unit), counter-clockwise seen from the normal side."""
-    n = np.cross(u, v)
-    n = n / np.linalg.norm(n)
-    pos = np.array([center - u - v, center + u - v, center + u + v, center - u + v])
-    return pos, np.tile(n, (4, 1)), np.array([0, 1, 2, 0, 2, 3])
-
-
-def _join(pieces):
-    pos, nrm, idx, off = [], [], [], 0
-    for p, n, i in pieces:
-        pos.append(p)
-        nrm.append(n)
-        idx.append(i + off)
-        off += len(p)
-    return np.concatenate(pos), np.concatenate(nrm), np.concatenate(idx)
-
-
-def geom_mesh(model, g: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Triangle mesh of geom g in its own frame: positions (v, 3) [m], unit normals (v, 3), indices (3t,).
-    None for geom types without a primitive mesh here (meshes, height fields)."""
-    import mujoco
-
-    T = mujoco.mjtGeom
-    kind, size = int(model.geom_type[g]), model.geom_size[g]
-    if kind == int(T.mjGEOM_SPHERE):
-        return _rings_piece(_sphere_rings(size[0]))
-    if kind == int(T.mjGEOM_CAPSULE):
-        r, h = size[0], size[1]
-        rings = _sphere_rings(r, h, 0.0, math.pi / 2, _RINGS) + _sphere_rings(r, -h, math.pi / 2, math.pi, _RINGS)
-        return _rings_piece(rings)
-    if kind == int(T.mjGEOM_ELLIPSOID):
-        p, n, i = _rings_piece(_sphere_rings(1.0))
-        n = n / size
-        return p * size, n / np.linalg.norm(n, axis=1, keepdims=True), i
-    if kind == int(T.mjGEOM_CYLINDER):
-        r, h = size[0], size[1]
-        return _join([_rings_piece([(0.0, h, 0, 1), (r, h, 0, 1)]),
-                      _rings_piece([(r, h, 1, 0), (r, -h, 1, 0)]),
-                      _rings_piece([(r, -h, 0, -1), (0.0, -h, 0, -1)])])
-    if kind == int(T.mjGEOM_BOX):
-        e = np.eye(3) * size
-        faces = []
-        for a in range(3):
-            b, c = e[(a + 1) % 3], e[(a + 2) % 3]
-            faces.append(_quad(e[a], b, c))
-            faces.append(_quad(-e[a], c, b))
-        return _join(faces)
-    if kind == int(T.mjGEOM_PLANE):
-        hx = size[0] if size[0] > 0 else PLANE_HALF
-        hy = size[1] if size[1] > 0 else PLANE_HALF
-        return _quad(np.zeros(3), np.array([hx, 0.0, 0.0]), np.array([0.0, hy, 0.0]))
-    return None
-
-
-def _geom_colour(model, g: int) -> tuple[float, float, float, float]:
-    m = int(model.geom_matid[g])
-    if m < 0:
-        return tuple(float(x) for x in model.geom_rgba[g])
-    rgba = np.array(model.mat_rgba[m], float)
-    texids = np.atleast_1d(model.mat_texid[m])
-    tex = [int(t) for t in texids if t >= 0]
-    if tex:
-        t = tex[0]
-        nch = int(model.tex_nchannel[t])
-        n = int(model.tex_width[t] * model.tex_height[t] * nch)
-        data = np.asarray(model.tex_data[model.tex_adr[t]:model.tex_adr[t] + n], float).reshape(-1, nch)
-        rgba[:3] *= data[:, :3].mean(axis=0) / 255.0
-    return tuple(float(x) for x in rgba)
 
 
 # -------------------------------------------------------------------------------------------- glTF
@@ -178,7 +75,7 @@ class _Builder:
         return len(self.gltf.bufferViews) - 1
 
     def accessor(self, array, kind, component=_FLOAT, target=None, bounds=False) -> int:
-        dtype = {_FLOAT: np.float32, _USHORT: np.uint16, _UINT: np.uint32}[component]
+        dtype = {_FLOAT: np.float32, _UBYTE: np.uint8, _USHORT: np.uint16, _UINT: np.uint32}[component]
         a = np.ascontiguousarray(array, dtype=dtype)
         view = self.view(a.tobytes(), target)
         flat = a.reshape(len(a), -1)
@@ -201,11 +98,17 @@ class _Builder:
             self.materials[key] = len(self.gltf.materials) - 1
         return self.materials[key]
 
-    def mesh(self, name, pos, nrm, idx, rgba) -> int:
+    def mesh(self, name, pos, nrm, idx, rgba, joint: int | None = None) -> int:
+        """A mesh of one primitive; with `joint`, its vertices bound to that skin joint with weight 1."""
         n = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
         big = len(pos) > 65535
         attrs = self.g.Attributes(POSITION=self.accessor(pos, "VEC3", target=_ARRAY_BUFFER, bounds=True),
                                   NORMAL=self.accessor(n, "VEC3", target=_ARRAY_BUFFER))
+        if joint is not None:
+            attrs.JOINTS_0 = self.accessor(np.tile([joint, 0, 0, 0], (len(pos), 1)), "VEC4",
+                                           _UBYTE if joint < 256 else _USHORT, target=_ARRAY_BUFFER)
+            attrs.WEIGHTS_0 = self.accessor(np.tile([1.0, 0.0, 0.0, 0.0], (len(pos), 1)), "VEC4",
+                                            target=_ARRAY_BUFFER)
         ind = self.accessor(idx, "SCALAR", _UINT if big else _USHORT, target=_ELEMENT_ARRAY_BUFFER)
         prim = self.g.Primitive(attributes=attrs, indices=ind, material=self.material(rgba))
         self.gltf.meshes.append(self.g.Mesh(name=name, primitives=[prim]))
@@ -243,18 +146,104 @@ def _track_animation(B, sk, tr, nodes: list, qpos: np.ndarray, local: np.ndarray
                          extras={"start_time_s": float(times[0]), "samples": len(times)})
 
 
-def figure_gltf(model, tracks: Sequence[Track], sites: Sequence[str] = (), site_radius: float = 0.025):
+@dataclass(frozen=True)
+class _Part:
+    """A mesh of the figure rigid with one body: joint = the body's index in the skeleton, name (node
+    name without the track's prefix), pos (3,) [m] and quat (w, x, y, z) in the body's frame, the mesh in
+    its own frame (positions (v, 3), normals (v, 3), indices), rgba; kind ('geom' or 'site') and its id."""
+
+    joint: int
+    name: str
+    pos: np.ndarray
+    quat: np.ndarray
+    mesh: tuple
+    rgba: tuple
+    kind: str
+    id: int
+
+
+def _figure_parts(model, sk, sites: Sequence[str], site_radius: float) -> list[_Part]:
+    """The figure's geoms (those with a mesh) and the named sites (spheres of site_radius [m]), body by body.
+    Raises InputError for an unknown site."""
+    import mujoco
+
+    site_ids = []
+    for s in sites:
+        i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s)
+        if i < 0:
+            raise InputError(f"site {s!r} is not in the scene; sites: "
+                             + ", ".join(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, k) for k in range(model.nsite)))
+        site_ids.append(i)
+    sphere = sphere_mesh(site_radius) if sites else None
+    parts = []
+    for j, b in enumerate(int(b) for b in sk.bodies):
+        for g in range(model.body_geomadr[b], model.body_geomadr[b] + model.body_geomnum[b]):
+            mesh = geom_mesh(model, g)
+            if mesh is not None:
+                parts.append(_Part(j, f"geom_{_geom_name(model, g)}", model.geom_pos[g], model.geom_quat[g], mesh,
+                                   geom_colour(model, g), "geom", g))
+        parts += [_Part(j, f"site_{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, s)}", model.site_pos[s],
+                        np.array([1.0, 0.0, 0.0, 0.0]), sphere, (1.0, 1.0, 0.0, 1.0), "site", s)
+                  for s in site_ids if model.site_bodyid[s] == b]
+    return parts
+
+
+def _geom_name(model, g: int) -> str:
+    import mujoco
+
+    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom{g}"
+
+
+def _bind_pose(model):
+    """MjData posed at the bind pose, the model's `qpos0` (`mj_kinematics`)."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    data.qpos[:] = model.qpos0
+    mujoco.mj_kinematics(model, data)
+    return data
+
+
+def _bound_mesh(part: _Part, bind) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A part's mesh placed where MuJoCo puts it at the bind pose, in glTF world axes: (v, 3), (v, 3), idx."""
+    pos, nrm, idx = part.mesh
+    xpos, xmat = ((bind.geom_xpos, bind.geom_xmat) if part.kind == "geom" else (bind.site_xpos, bind.site_xmat))
+    R = MUJOCO_TO_GLTF @ xmat[part.id].reshape(3, 3)
+    return pos @ R.T + MUJOCO_TO_GLTF @ xpos[part.id], nrm @ R.T, idx
+
+
+def _skin(B, sk, nodes: list, bind, name: str) -> int:
+    """A glTF Skin over the joint nodes (skeleton order) with inverse bind matrices (MAT4, column-major):
+    the inverse of each body's world matrix at the bind pose, glTF world axes (module docstring)."""
+    ibm = np.zeros((sk.count, 4, 4))
+    for j, b in enumerate(int(b) for b in sk.bodies):
+        R = MUJOCO_TO_GLTF @ bind.xmat[b].reshape(3, 3)
+        p = MUJOCO_TO_GLTF @ bind.xpos[b]
+        ibm[j, :3, :3], ibm[j, :3, 3], ibm[j, 3, 3] = R.T, -R.T @ p, 1.0
+    acc = B.accessor(ibm.transpose(0, 2, 1), "MAT4")  # column-major
+    B.gltf.skins.append(B.g.Skin(name=name, joints=list(nodes), skeleton=nodes[0], inverseBindMatrices=acc))
+    return len(B.gltf.skins) - 1
+
+
+def _rigid_trs(part: _Part) -> dict:
+    kw = dict(translation=[float(x) for x in part.pos]) if np.any(part.pos) else {}
+    if not _is_identity(part.quat):
+        kw["rotation"] = _xyzw(part.quat)
+    return kw
+
+
+def figure_gltf(model, tracks: Sequence[Track], sites: Sequence[str] = (), site_radius: float = 0.025,
+                skinned: bool = True):
     """A `pygltflib.GLTF2` of the scene and one animated figure per track (module docstring), with its
     binary blob set (`gltf.binary_blob()`).
 
     Args:
         model: MjModel of the scene with the figure. tracks: the motions (each n >= 1 samples).
         sites: names of sites to draw as small spheres (e.g. the contact sites), site_radius [m].
+        skinned: the figure as a skin (an armature) with skinned meshes; False: meshes in child nodes.
     Raises:
         InputError: no tracks, a track with no samples or a qpos width other than model.nq, unknown site.
     """
-    import mujoco
-
     if not tracks:
         raise InputError("no motion to export; give at least one track")
     for tr in tracks:
@@ -263,53 +252,38 @@ def figure_gltf(model, tracks: Sequence[Track], sites: Sequence[str] = (), site_
                              f"expected (n >= 1, {model.nq}) and n times")
     sk = figure_skeleton(model, head=False)  # the torso node holds the head's mesh
     B = _Builder()
-    name = lambda g: mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom{g}"  # noqa: E731
-    meshes = {}
-    for g in range(model.ngeom):
+    world_children = []
+    for g in range(model.body_geomadr[0], model.body_geomadr[0] + model.body_geomnum[0]):
         mesh = geom_mesh(model, g)
         if mesh is not None:
-            meshes[g] = B.mesh(name(g), *mesh, _geom_colour(model, g))
-    site_ids = []
-    for s in sites:
-        i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s)
-        if i < 0:
-            raise InputError(f"site {s!r} is not in the scene; sites: "
-                             + ", ".join(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, k) for k in range(model.nsite)))
-        site_ids.append(i)
-    site_mesh = B.mesh("site", *_rings_piece(_sphere_rings(site_radius)), (1.0, 1.0, 0.0, 1.0)) if sites else None
-
-    def geom_nodes(body, prefix):
-        out = []
-        for g in range(model.body_geomadr[body], model.body_geomadr[body] + model.body_geomnum[body]):
-            if g in meshes:
-                kw = dict(translation=[float(x) for x in model.geom_pos[g]]) if np.any(model.geom_pos[g]) else {}
-                if not _is_identity(model.geom_quat[g]):
-                    kw["rotation"] = _xyzw(model.geom_quat[g])
-                out.append(B.node(name=f"{prefix}geom_{name(g)}", mesh=meshes[g], **kw))
-        return out
-
-    world_children = geom_nodes(0, "")
-    animations = []
+            p = _Part(0, f"geom_{_geom_name(model, g)}", model.geom_pos[g], model.geom_quat[g], mesh,
+                      geom_colour(model, g), "geom", g)
+            world_children.append(B.node(name=p.name, mesh=B.mesh(_geom_name(model, g), *mesh, p.rgba), **_rigid_trs(p)))
+    parts = _figure_parts(model, sk, sites, site_radius)
+    bind = _bind_pose(model) if skinned else None
+    meshes = [B.mesh(p.name, *(_bound_mesh(p, bind) if skinned else p.mesh), p.rgba, p.joint if skinned else None)
+              for p in parts]
+    roots, animations = [], []
     for tr in tracks:
         prefix = f"{tr.name}_" if len(tracks) > 1 else ""
         qpos = np.asarray(tr.qpos, float)
         local = sk.local_quat(qpos)  # (n, J, 4)
         nodes = [0] * sk.count
         for j in reversed(range(sk.count)):  # children first: a node lists its children by index
-            b = int(sk.bodies[j])
-            children = geom_nodes(b, prefix)
-            children += [B.node(name=f"{prefix}site_{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, s)}",
-                                mesh=site_mesh, translation=[float(x) for x in model.site_pos[s]])
-                         for s in site_ids if model.site_bodyid[s] == b]
+            children = [] if skinned else [B.node(name=prefix + p.name, mesh=m, **_rigid_trs(p))
+                                           for p, m in zip(parts, meshes) if p.joint == j]
             children += [nodes[c] for c in range(sk.count) if sk.parents[c] == j]
             t = qpos[0, sk.root_pos] if j == 0 else sk.offsets[j]
             nodes[j] = B.node(name=f"{prefix}{sk.names[j]}", children=children or None,
                               translation=[float(x) for x in t], rotation=_xyzw(local[0, j]))
-        world_children.append(nodes[0])
+        roots.append(B.node(name=tr.name, rotation=list(WORLD_ROTATION), children=[nodes[0]]))
+        if skinned:
+            skin = _skin(B, sk, nodes, bind, tr.name)
+            roots += [B.node(name=prefix + p.name, mesh=m, skin=skin) for p, m in zip(parts, meshes)]
         animations.append(_track_animation(B, sk, tr, nodes, qpos, local))
-    world = B.node(name="world", rotation=list(WORLD_ROTATION), children=world_children)
+    world = B.node(name="world", rotation=list(WORLD_ROTATION), children=world_children or None)
     B.gltf.animations = animations
-    B.gltf.scenes = [B.g.Scene(name="dynsplines", nodes=[world])]
+    B.gltf.scenes = [B.g.Scene(name="dynsplines", nodes=[world, *roots])]
     B.gltf.scene = 0
     while len(B.blob) % 4:
         B.blob.append(0)

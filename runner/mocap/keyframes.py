@@ -129,11 +129,14 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
         keys: "every": `keyframe_indices(reference, every, extremes)`; "contacts": touch-downs,
             lift-offs, the ends and the root's extremes, then keys where the plain spline through
             them strays from the capture (`solver.keyframe_selection.contact_keyframes` with a
-            `CaptureError`), with `every` (or None) the largest gap [s].
+            `CaptureError`), with `every` (or None) the largest gap [s]. Either way, then keys
+            where the root or a joint turns more than 90 deg between two keys in the capture
+            (`solver.keyframe_selection.turn_keys`: else the plain spline joins them the short way
+            round, and a full turn keyed every 0.25 s is lost).
         partial: the middle keyframe fixes only the root and the legs (`Figure.leg_joints`).
         extremes: with keys="every", also key the root's highest and lowest frames.
     """
-    from solver.keyframe_selection import CaptureError, contact_keyframes
+    from solver.keyframe_selection import CaptureError, contact_keyframes, turn_keys
 
     if keys == "contacts":
         if every is not None and not (isinstance(every, (int, float)) and math.isfinite(every) and every > 0):
@@ -144,5 +147,6 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
         idx = keyframe_indices(reference, 0.25 if every is None else every, extremes=extremes)
     else:
         raise InputError(f"keys={keys!r}; give one of {', '.join(KEY_CHOICES)}")
+    idx = np.asarray(turn_keys(idx, reference.qpos[:, StateLayout.from_model(model).quat_slots]), int)
     return keyframes_from_reference(reference, model, indices=idx,
                                     partial=MIDDLE_LOWER_BODY if partial else None)

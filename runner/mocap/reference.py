@@ -3,7 +3,7 @@
 On the subject's own figure (runner/mocap/subject_figure.py: made from this clip's skeleton) the
 retargeting is lossless: the root path is the captured one (no scale), and the modelled joints' positions
 relative to the root are the capture's (docs/mocap.md, "What the figure keeps"). In a scene with surfaces
-the root height is still corrected per frame by up to ~2 cm (`correct_root_height`), so that the feet in
+the root height is still corrected per frame by at most 3 cm (`correct_root_height`), so that the feet in
 contact stand on the fitted surfaces instead of sinking into them; the export onto the source skeleton
 takes that correction off again (runner/mocap/source_export.py).
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.mocap.bvh import read_bvh
-from runner.mocap.contacts import correct_root_height
+from runner.mocap.contacts import check_root_correction, correct_root_height
 from runner.mocap.figure_record import clip_skeleton
 from runner.mocap.retarget import (
     Reference,
@@ -40,7 +40,8 @@ ROOT_SCALE_LEGS = "legs"
 
 
 def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS,
-                       skeleton_map: SkeletonMap | None = None, rest_pose: bool = False) -> Reference:
+                       skeleton_map: SkeletonMap | None = None, rest_pose: bool = False,
+                       fitted: bool = False) -> Reference:
     """Read a BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
     figure's own skeleton (written by `dynsplines export --to FILE.bvh` or `--export FILE.bvh`: a joint
     named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
@@ -70,10 +71,13 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
             figure made for this skeleton its recorded ones are used).
         rest_pose: the figure's bodies on the skeleton's rest pose, as keyframe files made before the
             bodies were measured on the clip (`runner.mocap.body_frames.rest_pose_frames`).
+        fitted: the scene was fitted to this clip (`runner.mocap.scene.clip_scene`): on the subject's own
+            figure, a root correction beyond its bound is refused (`check_root_correction`: the fit
+            missed where the feet rest). In a scene of your own the correction is what the scene needs.
     On the subject's own figure (the model's figure records this clip's skeleton,
     `runner.mocap.figure_record`) "legs" is 1 (the figure's legs are the
     subject's): the root path is the captured one in the levelled frame plus the per-frame vertical
-    height correction c(t) (up to ~2 cm, `correct_root_height`; none without surfaces). A capture floor is
+    height correction c(t) (at most 3 cm, `correct_root_height`; none without surfaces). A capture floor is
     never flat to the millimetre, so without c(t) a foot in contact sinks into the fitted floor at some
     frames; the keyframes, taken from the reference and met exactly, would then violate the
     penetration bound. The export onto the source skeleton subtracts c(t)
@@ -87,7 +91,8 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     Raises:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
             role the retargeting needs is not found, the model lacks a joint or site it needs, a malformed
-            capture frame in the scene, or root_scale is neither "legs" nor a number > 0.
+            capture frame in the scene, root_scale is neither "legs" nor a number > 0, or (`fitted`) the
+            root correction is beyond its bound.
     """
     from runner.export.bvh import figure_qpos_from_bvh, is_figure_clip
 
@@ -109,8 +114,11 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     qpos, _ = clamp_hyperextension(qpos, figure)
     step(3, "clamped")
     # feet in contact on the surfaces, nothing below one (a no-op without surfaces); on the subject's
-    # figure too, where it only takes up the captured feet's deviation (up to ~2 cm) from the fitted scene
-    qpos = correct_root_height(qpos, model, clip.frame_time)
+    # figure too, where it only takes up the captured feet's deviation (at most 3 cm) from the fitted scene
+    corrected = correct_root_height(qpos, model, clip.frame_time)
+    if own and fitted:  # the capture's own root on its fitted scene: only moved a little, smoothly, or refused
+        check_root_correction(corrected[:, 2] - qpos[:, 2], clip.frame_time, str(path))
+    qpos = corrected
     step(4, "root height")
     qpos = tidy_quaternions(qpos, layout)
     step(5, "done")

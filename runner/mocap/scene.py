@@ -59,7 +59,8 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     volume), write the levelled scene MJCF with that transform recorded in it to `fitted_out` (its include
     of the figure relative to that folder, so it loads from where it is saved), and retarget again onto
     it: `load_bvh_reference` moves the root into the levelled frame, and the height correction then
-    stands the feet on the fitted floor and boxes (up to ~2 cm per frame on the subject's own figure).
+    stands the feet on the fitted floor and boxes (at most 3 cm on the subject's own figure, or the clip is
+    refused: `runner.mocap.contacts.check_root_correction`).
 
     Args:
         clip: the BVH file. scene: an MJCF file or "auto". figure: the figure's MJCF
@@ -85,7 +86,7 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     with atomic_output(out, suffix=".xml") as tmp_path:
         Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem, capture=frame))
     model = load_model(out)
-    ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map)
+    ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, fitted=True)
     return ClipScene(ref, model, out, fitted, capture, frame)
 
 

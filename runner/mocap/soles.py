@@ -12,7 +12,7 @@ the heel site of a flat, still foot rests 3 to 30 mm above or below its toe site
 surface touches it with its lowest point; with a rigid foot whose sole is the segment from the heel
 site to the toe site, in every frame the foot rests the lower of its two sites is on the surface. The
 fit moves each site in the foot's sagittal plane (forward and along the foot's vertical axis; its
-lateral position is kept) to minimise, over the frames the foot rests,
+lateral position is kept) to minimise, over the frames each foot rests, of both feet at once,
 
     sum_i rho( min(h_heel,i, h_toe,i) )
 
@@ -21,7 +21,12 @@ scene_fit`) and rho the soft-L1 loss with scale `SCALE` (5 mm): a frame whose fo
 while the detection still counts it pulls by its sign, not its size. The heel stays within `REACH` of
 the published place; the toe site moves from the ball forward at most to the toe tip (the toe joint's
 End Site) and within `REACH` in height: the figure's foot is rigid, and once the heel is up the
-subject's foot pivots about its toes, ahead of the ball (their joint flexes).
+subject's foot pivots about its toes, ahead of the ball (their joint flexes). The two feet are mirror
+images: they share one sole (the same moves from each foot's published places, the toe the same
+fraction of the way to its tip), and only their heights may differ, by up to `REACH` (the capture's
+joint centres of the two feet sit differently above their soles). Fitted apart, each foot followed its
+own few rests (07_04: a 4.4 cm heel sphere on the left, a point on the right), and a foot resting too
+briefly kept the published sole.
 
 The heel is rounded: a walker's heel lands with the foot 20-35 degrees toes-up and rolls on the round
 back edge of the heel bone and its pad onto the flat foot, which one point fixed in the foot cannot
@@ -37,8 +42,10 @@ the lower one while its foot rests (a forefoot runner's heel) keeps its place. S
 in turn (`ROUNDS`): the floor is fitted through the lowest sites' rests, the soles to that floor. A
 direction the rests leave undetermined (a flat foot's heel slid along the sole, a heel radius traded
 against its centre's height) is fixed by a small pull of the offsets towards their start (Tikhonov
-regularization, `REGULARIZE`), so that two files of one motion (another convention, the numbers
-rounded otherwise) give the same soles, not wherever the solver happened to stop.
+regularization, `REGULARIZE`), so that two files of one motion (another convention, the numbers rounded
+otherwise) give the same soles, not wherever the solver happened to stop. One sole for both feet still
+leaves such directions: without the pull the sites of 09_03, 35_17, 83_65 and 127_33 end 11-19 mm
+elsewhere on the same rests.
 """
 from __future__ import annotations
 
@@ -58,9 +65,10 @@ ROUNDS = 2
 #: the largest radius of the heel's sphere, as a fraction of the ankle's height above the (published) sole:
 #: its centre stays below the ankle
 HEEL_RADIUS = 1.0
-#: a foot resting fewer frames than this keeps its published sole (too little to measure)
-MIN_FRAMES = 12
-#: [1] the weight of the pull of the fitted offsets towards their starting values: a 1 cm offset costs
+#: [s] the feet resting less than this in all keep their published soles (too little to measure; 12 frames at
+#: 120 Hz), and the height difference between the two feet is fitted only when each rests that long
+MIN_REST_S = 0.1
+#: [1] the weight of the pull of the fitted offsets [m] towards their starting values: a 1 cm offset costs
 #: 0.1 mm of residual, far below one resting frame's (the capture's noise, a few mm), so it decides only
 #: directions the rests leave undetermined
 REGULARIZE = 0.01
@@ -107,44 +115,59 @@ def _lowest(org, rot, heel, toe, radii, surfaces) -> np.ndarray:
     return (surfaces.height_above(centres) - np.asarray(radii, float)).min(axis=1)
 
 
-def _fit_foot(org, rot, heel, toe, forward, tip, surfaces, rmax: float = 0.0
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The foot's heel sphere and toe point (centres in the foot frame, radii (2,), the toe's 0)
-    minimising the module docstring's objective, within the bounds around the published places `heel`,
-    `toe` (on the sole): a sole point moves by (forward, up) offsets; the heel's sphere, of radius 0 to
-    `rmax` [m], has its centre r above its sole point, so that a flat foot rests on the same point."""
+def _fit_feet(feet: list, rmax: float, both: bool) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Both feet's heel spheres and toe points (centres in each foot's frame, radii (2,), the toe's 0)
+    minimising the module docstring's objective over the resting frames of both feet at once, with
+    one sole for the two feet: the same offsets from each foot's published places (a subject's feet are
+    mirror images), and, with `both` (each foot rests long enough), one height difference between them
+    (half up on the left, half down on the right: the capture's joint centres of the two feet can sit
+    at different heights above their soles).
+
+    Args:
+        feet: per foot (org (m, 3), rot (m, 3, 3) of its resting frames, heel, toe (3,) published places
+            on the sole, forward (3,) unit, tip (3,) the toe tip, surfaces, side +1 left / -1 right).
+        rmax: [m] the largest heel radius (0: a point heel). both: fit the height difference.
+    """
     from scipy.optimize import least_squares
 
     up = np.array([0.0, 0.0, 1.0])
+    reach = [max(float((tip - toe) @ fwd), 1e-6) for _, _, _, toe, fwd, tip, _, _ in feet]
 
-    def spheres(p):
-        return heel + p[0] * forward + (p[1] + p[2]) * up, toe + p[3] * forward + p[4] * up, np.array([p[2], 0.0])
+    def spheres(p, k):
+        _, _, heel, toe, fwd, _, _, side = feet[k]
+        lift = side * p[5] / 2
+        return (heel + p[0] * fwd + (p[1] + p[2] + lift) * up, toe + p[3] * reach[k] * fwd + (p[4] + lift) * up,
+                np.array([p[2], 0.0]))
 
-    reach = max(float((tip - toe) @ forward), 1e-6)
-    lo = np.array([-REACH, -REACH, 0.0, 0.0, -REACH])
-    hi = np.array([REACH, REACH, rmax, reach, REACH])
-    # inside the bounds: from a bound the first step can stall
-    start = np.array([0.0, 0.0, 0.5 * rmax, 0.5 * reach, 0.0])
-    free = np.array([True, True, rmax > 0, True, True])
+    # heel forward, heel up, heel radius, toe from the ball to the tip (fraction), toe up, left-right height
+    lo = np.array([-REACH, -REACH, 0.0, 0.0, -REACH, -REACH])
+    hi = np.array([REACH, REACH, max(rmax, 1e-9), 1.0, REACH, REACH])
+    start = np.array([0.0, 0.0, 0.5 * rmax, 0.5, 0.0, 0.0])  # inside the bounds: from a bound a step can stall
+    free = np.array([True, True, rmax > 0, True, True, both])
 
     def full(x):
         p = start.copy()
         p[free] = x
         return p
 
-    def residuals(x):
+    # [m] per unit of each offset: the toe's is a fraction of the way from the ball to the tip
+    metres = np.array([1.0, 1.0, 1.0, float(np.mean(reach)), 1.0, 1.0])[free]
+
+    def resid(x):
         # the rests' heights, and a small pull towards the start (Tikhonov): a direction the rests leave
         # free (a flat foot's heel slid along the sole) is fixed there, not wherever the solver stops
-        return np.r_[_lowest(org, rot, *spheres(full(x)), surfaces), REGULARIZE * (x - start[free])]
+        p = full(x)
+        return np.concatenate([_lowest(f[0], f[1], *spheres(p, k), f[6]) for k, f in enumerate(feet)]
+                              + [REGULARIZE * metres * (x - start[free])])
 
-    x = least_squares(residuals, start[free], bounds=(lo[free], hi[free]), loss="soft_l1", f_scale=SCALE,
-                      x_scale=REACH).x
-    return spheres(full(x))
+    scale = np.array([REACH, REACH, REACH, 0.5, REACH, REACH])[free]
+    x = least_squares(resid, start[free], bounds=(lo[free], hi[free]), loss="soft_l1", f_scale=SCALE, x_scale=scale).x
+    return [spheres(full(x), k) for k in range(len(feet))]
 
 
 def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict, rounded: bool = True) -> SoleFit:
     """Fit the figure's heel and toe sites (and with `rounded` the heel sphere's radius) to the motion's
-    resting feet (module docstring).
+    resting feet (module docstring): one sole for both feet, and the height difference between them.
 
     Args:
         model: the figure alone (no surfaces): a subject figure's MjModel. qpos: (n, nq) the clip
@@ -168,6 +191,7 @@ def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict, rounded: b
     body = {f: int(model.site_bodyid[model.site(h).id]) for f, (h, _) in feet.items()}
     org, rot = _foot_frames(model, qpos, list(body.values()))
     times = np.arange(len(qpos)) * frame_time
+    least = int(np.ceil(MIN_REST_S / frame_time - 1e-9))
     before, after, frames = {}, {}, {}
     for _ in range(ROUNDS):
         pos = lowest_points(np.stack([org[:, list(body).index(f)] + rot[:, list(body).index(f)] @ local[s]
@@ -176,19 +200,22 @@ def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict, rounded: b
         contacts = fit_contacts(times, pos, tuple(names))
         surfaces = fit_scene(times, pos, contacts, tuple(names)).surfaces()
         mask = contact_mask(contacts, names, times)
+        data = []
         for j, (f, (h, t)) in enumerate(feet.items()):
             rest = mask[:, [names.index(h), names.index(t)]].any(axis=1)
             frames[f] = int(rest.sum())
             o, r = org[rest, j], rot[rest, j]
             before.setdefault(f, _rms(_lowest(o, r, published[h], published[t], (0.0, 0.0), surfaces)))
-            if frames[f] < MIN_FRAMES:
-                after[f] = _rms(_lowest(o, r, local[h], local[t], (radius[h], radius[t]), surfaces))
-                continue
-            fwd = np.r_[local[t][:2] - local[h][:2], 0.0]
-            rmax = HEEL_RADIUS * -float(published[h][2]) if rounded else 0.0
-            local[h], local[t], (radius[h], radius[t]) = _fit_foot(
-                o, r, published[h], published[t], fwd / np.linalg.norm(fwd), tips[f], surfaces, rmax)
-            after[f] = _rms(_lowest(o, r, local[h], local[t], (radius[h], radius[t]), surfaces))
+            fwd = np.r_[published[t][:2] - published[h][:2], 0.0]
+            data.append((o, r, published[h], published[t], fwd / np.linalg.norm(fwd), tips[f], surfaces,
+                         1.0 if h.startswith("l") else -1.0))
+        if sum(frames.values()) >= least:
+            rmax = HEEL_RADIUS * -float(np.mean([published[h][2] for h, _ in feet.values()])) if rounded else 0.0
+            fitted = _fit_feet(data, rmax, both=min(frames.values()) >= least)
+            for (h, t), (heel, toe, radii) in zip(feet.values(), fitted, strict=True):
+                local[h], local[t], (radius[h], radius[t]) = heel, toe, radii
+        for (f, (h, t)), d in zip(feet.items(), data, strict=True):
+            after[f] = _rms(_lowest(d[0], d[1], local[h], local[t], (radius[h], radius[t]), surfaces))
     return SoleFit(local, radius, before, after, frames)
 
 

@@ -16,7 +16,7 @@ runner/mocap/figure_record.py). Per joint:
   thigh, a clavicle before the arm. At a keyframe, where the path is the reference and the reference
   the retargeted source, this gives every source joint back. The hips' world position is the path's root
   position minus the reference's height correction c(t) (`root_correction`: the import stands the
-  captured feet on the fitted surfaces by moving the root up to ~2 cm up or down per frame,
+  captured feet on the fitted surfaces by moving the root at most 3 cm up or down per frame,
   `runner.mocap.contacts.correct_root_height`; the export takes that off again), written into the
   position channels of the hips (or of the nearest joint above them that has some) given the source's
   joints above. Both are taken back from the scene's levelled frame into the capture's coordinates first

@@ -46,6 +46,8 @@ _CURRENT_TEXT = (255, 217, 64)
 _PENETRATION_TEXT = (255, 40, 230)
 WHITE = (255, 255, 255)
 _PAD_COLOR = (24, 24, 28)
+#: the video's legend of the ghosts (`Overlay._legend`): (text, colour) drawn one after the other
+LEGEND = (("ghosts: keyframe poses", _GHOST_TEXT), ("  yellow: the next", _CURRENT_TEXT))
 
 
 class Panel:
@@ -275,7 +277,8 @@ class Overlay:
         self.kf_t = kf_t if kf_t is not None else np.zeros(0)
         self.fs = max(10, height // 28)
         self.font = load_font(self.fs)
-        self.small = load_font(max(9, int(self.fs * 0.75)))
+        self.small_px = max(9, int(self.fs * 0.75))
+        self.small = load_font(self.small_px)
         self._patches = {}
         self._background = np.empty((height, width, 3), np.uint8)
         self._background[:] = _PAD_COLOR
@@ -337,9 +340,28 @@ class Overlay:
                         py = py + self.band
                         draw.ellipse([(x + px - r, py - r), (x + px + r, py + r)], fill=_PLANTED_FILL)
             self._timeline(im, draw, x, t, current)
+            if p == 0:
+                self._legend(im, draw, x)
         if self.title:
             self.draw_text(im, (self.width // 2, self.band // 2), self.title, self.font, WHITE, anchor="mm")
         return np.asarray(im)
+
+    def _legend(self, im, draw, x):
+        """What the ghosts are, in their colours, at the left of the first panel just above its timeline:
+        "ghosts: keyframe poses" (white, the keyframes within `GHOST_WINDOW` of the playback time) and
+        "yellow: the next" (the keyframe playback is about to reach); only the parts that fit the panel,
+        and only with keyframes on the timeline."""
+        if not len(self.kf_t):
+            return
+        pad = max(6, self.fs // 2)
+        y = self.height - pad - self.fs // 2 - max(4, self.fs // 3) - self.small_px - 6  # above the tick numbers
+        xk = x + 2 * pad
+        for text, colour in LEGEND:
+            w = draw.textlength(text, font=self.small) + 4  # + the outline
+            if xk + w > x + self.panel_w - 2 * pad:
+                return
+            self.draw_text(im, (xk, y), text, self.small, colour, anchor="ld")
+            xk += w
 
     def _rings(self, draw, x, xy):
         r = max(6, self.height // 36)

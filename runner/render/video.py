@@ -95,7 +95,8 @@ def render_tracks(
     pose is drawn in every panel while playback is within `GHOST_WINDOW` of the keyframe, fading in and
     out (`ghost_alphas`), and the ghost turns yellow with a "keyframe k" caption (k from 0: the index in
     the keyframe file, as in its error messages) during the `KEYFRAME_CAPTION_SECONDS` of video before
-    playback reaches keyframe k, gone once it has passed (`current_keyframes`). Below `LABELS_MIN_SIZE`
+    playback reaches keyframe k, gone once it has passed (`current_keyframes`); a legend above the first
+    panel's timeline says so ("ghosts: keyframe poses, yellow: the next"). Below `LABELS_MIN_SIZE`
     no text is drawn. All panels use one camera, following the root body's smoothed path from a side
     of its direction of travel (see `Camera`). Planes cast no shadows (`Panel.render`).
 

@@ -2,8 +2,9 @@
 
 Choice: a self-contained page that plays a .glb with three.js, served by the standard library's
 `http.server`, rather than viser. It reuses the glTF export (`runner.export.gltf`: the figure, its
-scene, one animation per motion), so the viewer shows exactly what `dynsplines export --to FILE.glb`
-writes, and it needs no Python dependency at all: three.js r160 is vendored under `static/` (the minified
+scene, one animation per motion), so the viewer shows the poses `dynsplines export --to FILE.glb` writes
+(there as an armature with skinned meshes, here as rigid meshes in the body nodes, which the page copies
+for the keyframe ghosts), and it needs no Python dependency at all: three.js r160 is vendored under `static/` (the minified
 module build, GLTFLoader, BufferGeometryUtils and OrbitControls: 0.84 MB, MIT licence in
 `static/LICENSE.three.txt`), and the page runs offline. viser would add websockets and a server-side
 scene graph updated per frame, for a page that only needs to play a precomputed animation.

@@ -69,7 +69,7 @@ def build_assets(npz: str | Path) -> ViewerAssets:
                        "fps": m.fps, "samples": len(m.times),
                        "sites": {s: state[:, i].tolist() for i, s in enumerate(sites)}})
         worst[m.name] = round(1000.0 * float(depth.max()), 3)
-    gltf = figure_gltf(model, [Track(m.name, m.times, m.qpos) for m in motions], sites=sites)
+    gltf = figure_gltf(model, [Track(m.name, m.times, m.qpos) for m in motions], sites=sites, skinned=False)
     data = {"source": str(saved.source), "scene": str(saved.scene), "tracks": tracks,
             "keyframe_times": [float(t) for t in saved.keyframe_times], "sites": list(sites),
             "states": ["clear", "contact", "penetrating"], "max_penetration_mm": worst,

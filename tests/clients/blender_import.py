@@ -1,7 +1,10 @@
 """Import one BVH or glb file into an empty Blender scene with Blender's default importer and print, as
-JSON on the last line of stdout, what a user would see: object and bone names, the scene's frame rate,
-the animation's frame range, the rest armature's extent and, at every keyed frame, each object's world
-position and vertical extent (mesh vertices, or an armature's bone heads and tails) [m, Blender's Z up].
+JSON on the last line of stdout, what a user would see: object and bone names (and each bone's parent),
+the scene's frame rate, the animation's frame range, the rest armature's extent and, at every keyed
+frame, each object's world position and vertical extent (mesh vertices as drawn, i.e. after modifiers
+such as an armature's skinning, or an armature's bone heads and tails) and each bone's world head [m,
+Blender's Z up]. Objects the glTF importer makes for its own use (its bone display shape, in the
+collection "glTF_not_exported") are left out.
 
 Run with Blender's Python module (`bpy`), not the project's interpreter:
     BPY_PYTHON blender_import.py FILE.bvh|FILE.glb
@@ -33,8 +36,11 @@ def _points(obj):
     """(k, 3) world-space points of an object at the current frame: mesh vertices, bone heads and tails, or its origin."""
     M = np.array(obj.matrix_world)
     if obj.type == "MESH":
-        co = np.empty(3 * len(obj.data.vertices))
-        obj.data.vertices.foreach_get("co", co)
+        evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())  # skinned: the deformed mesh
+        mesh = evaluated.to_mesh()
+        co = np.empty(3 * len(mesh.vertices))
+        mesh.vertices.foreach_get("co", co)
+        evaluated.to_mesh_clear()
         local = co.reshape(-1, 3)
     elif obj.type == "ARMATURE":
         local = np.array([p for pb in obj.pose.bones for p in (pb.head, pb.tail)])
@@ -50,12 +56,14 @@ def main(path):
         bpy.ops.import_anim.bvh(filepath=path, update_scene_fps=True)
     else:
         bpy.ops.import_scene.gltf(filepath=path)
-    objects = list(scene.objects)
+    objects = [o for o in scene.objects if "glTF_not_exported" not in {c.name for c in o.users_collection}]
     out = {
         "blender": bpy.app.version_string,
         "fps": scene.render.fps / scene.render.fps_base,
         "objects": {o.name: o.type for o in objects},
         "bones": {o.name: [b.name for b in o.data.bones] for o in objects if o.type == "ARMATURE"},
+        "bone_parents": {o.name: {b.name: b.parent.name if b.parent else None for b in o.data.bones}
+                         for o in objects if o.type == "ARMATURE"},
         "frame_ranges": [list(a.frame_range) for a in bpy.data.actions],
         "rest": {},
         "frames": [],

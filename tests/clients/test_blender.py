@@ -4,7 +4,8 @@ and of a motion-capture clip to BVH and glb, each imported with Blender's defaul
 its own virtual environment: it pins its Python and numpy).
 
 What is checked, against references that do not come from the exporter:
-* names: the armature's bones are the BVH file's ROOT/JOINT names; the glb's objects are its node names;
+* names: the armature's bones are the BVH file's ROOT/JOINT names; the glb imports as an armature whose
+  bones are the figure's bodies (the MJCF's), parented as its body tree, and objects for its other nodes;
 * time: the keyed frames over the scene's frame rate are the file's sample times (BVH: `Frames` and
   `Frame Time`; glb: the animation's input accessor);
 * the figure on the floor: its lowest point over the animation within 2 cm of z = 0;
@@ -12,7 +13,9 @@ What is checked, against references that do not come from the exporter:
   person's, in metres; the glb figure's vertical extent at each key is MuJoCo's for the path at that time
   (the exact extent of each capsule and ellipsoid, `mj_kinematics`);
 * the motion: the pelvis' displacement from its start at each key is the saved path's root displacement
-  (the natural cubic spline through the saved frames, scipy), within 1 cm.
+  (the natural cubic spline through the saved frames, scipy), within 1 cm; the glb's bones at each key
+  are where MuJoCo puts the bodies for the path at that time (within 1 mm), and its skinned meshes as
+  Blender deforms them have MuJoCo's vertical extent.
 
 Blender's interpreter: $DYNSPLINES_BPY_PYTHON, else .venv-bpy/bin/python in the checkout (.ci/run and the
 README's "Full test suite" install it).
@@ -222,43 +225,63 @@ def mujoco_extent(model, data, qpos, geoms):
     return lo, hi
 
 
+#: (3, 3) MuJoCo world -> Blender world after the glTF round trip: both are z up; the figure's forward,
+#: MuJoCo +x, is glTF +Z (docs/export.md) and Blender -Y (Blender's importer: glTF +Y up -> +Z, +Z -> -Y).
+MUJOCO_TO_BLENDER = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _figure_model(exported):
+    """The path's own figure (a subject's, for a clip): its MJCF as MuJoCo reads it, and the path's
+    optimized qpos spline."""
+    with np.load(exported / "path.npz") as z:
+        figure = exported / str(z["figure"]) if "figure" in z.files and str(z["figure"]) else FIGURE
+        spline = CubicSpline(z["frame_times"], z["frames"], bc_type="natural")
+        t0 = float(z["frame_times"][0])
+    return mujoco.MjModel.from_xml_path(str(figure)), lambda t: spline(t0 + t)
+
+
 def test_blender_imports_the_glb(exported):
     path = exported / "path.glb"
     gltf = pygltflib.GLTF2.load_binary(str(path))
     anim = gltf.animations[0]
     times = _accessor(gltf, anim.samplers[0].input).astype(float)
-    [root] = [c.target.node for c in anim.channels if c.target.path == "translation"]
-    figure, todo = [], [root]
-    while todo:  # the figure: the animated root node and its descendants
-        i = todo.pop()
-        figure.append(i)
-        todo += gltf.nodes[i].children or []
-    meshes = [gltf.nodes[i].name for i in figure if gltf.nodes[i].mesh is not None]
+    model, qpos_at = _figure_model(exported)
+    body = lambda b: mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, int(b))  # noqa: E731
+    tree = {body(b): body(model.body_parentid[b]) if model.body_parentid[b] else None for b in range(1, model.nbody)}
 
     got = blender_import(path)
-    assert set(got["objects"]) == {n.name for n in gltf.nodes}  # one object per node, named after it
-    assert not got["bones"]  # a node tree without skin: empties and meshes, no armature
+    [(arm, bones)] = got["bones"].items()  # one armature: the skin, its bones the figure's bodies
+    assert len(bones) == len(tree) == 12 and got["bone_parents"][arm] == tree, got["bone_parents"]
+    skinned = [n.name for n in gltf.nodes if n.skin is not None]
+    assert skinned and all(got["objects"][m] == "MESH" for m in skinned)
+    joints = {gltf.nodes[j].name for skin in gltf.skins for j in skin.joints}
+    assert set(got["objects"]) == {n.name for n in gltf.nodes} - joints  # the other nodes are objects
     fps = got["fps"]
     assert np.abs(np.array(got["frames"]) / fps - times).max() < 1e-4  # keys at the file's times [s]
     [(f0, f1)] = got["frame_ranges"]
     assert abs(f0 / fps - times[0]) < 1e-4 and abs(f1 / fps - times[-1]) < 1e-4, (f0, f1, fps)
 
-    zmin = np.min([got["zmin"][m] for m in meshes], axis=0)
-    zmax = np.max([got["zmax"][m] for m in meshes], axis=0)
-    assert abs(zmin.min()) < 0.02, zmin.min()  # on the floor at some time, never deeper than 2 cm
-    with np.load(exported / "path.npz") as z:  # the path's own figure (a subject's, for a clip)
-        figure = exported / str(z["figure"]) if "figure" in z.files and str(z["figure"]) else FIGURE
-    model = mujoco.MjModel.from_xml_path(str(figure))
     data = mujoco.MjData(model)
-    geoms = [g for g in range(model.ngeom) if f"geom_{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}" in meshes]
-    assert len(geoms) == len(meshes), "the glb's figure meshes are the figure's geoms"
-    with np.load(exported / "path.npz") as z:
-        qpos = CubicSpline(z["frame_times"], z["frames"], bc_type="natural")(z["frame_times"][0] + times)
+    qpos = qpos_at(times)
+    heads = np.array([got["bone_heads"][f"{arm}/{b}"] for b in bones]).transpose(1, 0, 2)  # (n, 12, 3)
+    ref_heads = []
+    for q in qpos:  # the bodies' origins (the bones' heads) where MuJoCo puts them
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        ref_heads.append([MUJOCO_TO_BLENDER @ data.xpos[model.body(b).id] for b in bones])
+    assert np.abs(heads - np.array(ref_heads)).max() < 1e-3, np.abs(heads - np.array(ref_heads)).max()
+    feet = np.linalg.norm(heads[:, bones.index("l_foot")] - heads[:, bones.index("r_foot")], axis=1)
+    assert np.ptp(feet) > 0.1, np.ptp(feet)  # the bones move relative to each other: the legs swing [m]
+
+    zmin = np.min([got["zmin"][m] for m in skinned], axis=0)
+    zmax = np.max([got["zmax"][m] for m in skinned], axis=0)
+    assert abs(zmin.min()) < 0.02, zmin.min()  # on the floor at some time, never deeper than 2 cm
+    geoms = [g for g in range(model.ngeom) if f"geom_{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}" in skinned]
+    assert len(geoms) == len(skinned), "the glb's figure meshes are the figure's geoms"
     ref = np.array([mujoco_extent(model, data, q, geoms) for q in qpos])
     # tolerance: the meshes are 20-gons inscribed in the exact surfaces (at most 1.3 % of a radius inside)
     assert np.abs(zmin - ref[:, 0]).max() < 3e-3, np.abs(zmin - ref[:, 0]).max()
     assert np.abs(zmax - ref[:, 1]).max() < 3e-3, np.abs(zmax - ref[:, 1]).max()
     height = zmax[0] - zmin[0]
     assert 1.3 < height < 2.2, height  # metres (a running figure, a little under its standing 1.75 m)
-    pelvis = np.array(got["positions"][gltf.nodes[root].name])
-    assert_root_travel(pelvis, times, exported / "path.npz")
+    assert_root_travel(heads[:, bones.index("pelvis")], times, exported / "path.npz")

@@ -299,6 +299,20 @@ def test_bad_option_values(tmp_path, capsys, argv, fragment):
     assert msg.startswith("dynsplines animate: error: ") and msg.endswith("(see 'dynsplines animate --help')")
 
 
+@pytest.mark.parametrize("argv, prog, fragment", [
+    (["mocap", "clip.bvh", "--evry", "0.25"], "mocap", "unrecognized arguments: --evry 0.25; did you mean --every?"),
+    (["mocap", "clip.bvh", "--evry=0.25"], "mocap", "unrecognized arguments: --evry=0.25; did you mean --every?"),
+    (["animate", "k.json", "--no-rendr"], "animate", "did you mean --no-render?"),
+    (["bench", "corpus", "--evry", "0.2"], "bench corpus", "did you mean --every?"),
+    (["animate", "k.json", "--zzz"], "animate", "unrecognized arguments: --zzz (see"),  # nothing near: no guess
+    (["export", "a.npz", "b.npz", "--to", "x.glb"], "export", "unrecognized arguments: b.npz (see"),
+])
+def test_an_unknown_option_is_the_subcommands_with_the_nearest_one(capsys, argv, prog, fragment):
+    """Arguments no parser knows are reported by the subcommand given, which points to its own --help."""
+    msg = expect_input_error(capsys, argv, fragment)
+    assert msg.startswith(f"dynsplines {prog}: error: ") and msg.endswith(f"(see 'dynsplines {prog} --help')"), msg
+
+
 def test_unknown_command_and_missing_argument(capsys):
     expect_input_error(capsys, ["animat"], "invalid choice: 'animat'", "(see 'dynsplines --help')")
     expect_input_error(capsys, ["animate"], "the following arguments are required: keyframes")

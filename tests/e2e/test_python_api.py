@@ -1,5 +1,6 @@
-"""The README's Python API snippet, run exactly as written, gives the command line's path bit for bit
-(after `runner.environment.apply_defaults()`, which the snippet calls first and says why)."""
+"""The README's Python API snippet, run exactly as written from a folder other than the checkout, gives the
+command line's path bit for bit (after `runner.environment.apply_defaults()`, which the snippet calls first
+and says why)."""
 import re
 from pathlib import Path
 
@@ -28,7 +29,9 @@ def test_readme_snippet_is_one_import_and_one_call():
 def test_readme_snippet_gives_the_command_lines_frames(tmp_path, monkeypatch):
     out = tmp_path / "cli.npz"
     assert main(["run-and-step", "--no-render", "--quiet", "--save-path", str(out)]) == 0
-    monkeypatch.chdir(REPO)  # the snippet's paths are relative to the repository root
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)  # not the checkout: the snippet's shipped files are found from any folder
     scope: dict = {}
     exec(compile(readme_snippet(), "README.md", "exec"), scope)
     solution = scope["solution"]

@@ -303,3 +303,19 @@ def test_every_term_targets_rows_the_summary_prints():
             label = next((lab for lab in labels if lab.strip().startswith(prefix)), None)
             assert label is not None, (term, prefix)
             assert term in _target(text, label).split(","), (term, label)
+
+
+def test_a_lost_turn_marks_the_joint_angle_row_and_a_root_that_strays_marks_the_root_row():
+    plain, opt = _motion(), _motion()
+    for m in (plain, opt):   # a full turn joined the short way by both paths: 174 deg off at the root
+        m["error"]["joint_orientation_deg"] = {"root": {"mean": 40.0, "max": 174.0}, "hip": {"mean": 1.0, "max": 2.0}}
+    rows = {line.split("  ")[0].strip(): line for line in motion_metrics_table(plain, opt).splitlines()}
+    assert rows["joint angle error [deg] mean / max"].endswith(f"  {WORSE}")
+    assert not rows["root position error [cm] mean / max"].endswith(f"  {WORSE}")
+    opt["error"]["root_position_cm"] = {"mean": 3.0, "max": 9.0}   # the optimizer moved the root off
+    rows = {line.split("  ")[0].strip(): line for line in motion_metrics_table(plain, opt).splitlines()}
+    assert rows["root position error [cm] mean / max"].endswith(f"  {WORSE}")
+    for m in (plain, opt):   # a quarter turn off or less: only the comparison with the plain spline
+        m["error"]["joint_orientation_deg"] = {"root": {"mean": 40.0, "max": 89.0}}
+    rows = {line.split("  ")[0].strip(): line for line in motion_metrics_table(plain, opt).splitlines()}
+    assert not rows["joint angle error [deg] mean / max"].endswith(f"  {WORSE}")

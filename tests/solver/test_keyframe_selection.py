@@ -172,3 +172,74 @@ def test_capture_error_rejects_bad_input():
         CaptureError(model, t, np.zeros((4, model.nq)))
     with pytest.raises(InputError, match="joint_deg"):
         CaptureError(model, t, np.tile(model.qpos0, (5, 1)), joint_deg=0.0)
+
+
+# --- keys where the capture turns far between keys ------------------------------------------------
+
+
+def _full_turn(fps=120.0, seconds=1.0):
+    """A root that turns once about z (360 deg, smoothstep in time between 0.1 and 0.6 s, up to 1080
+    deg/s, as a jump with a full turn) while a second joint stays still: (times (n,), yaw (n,) [rad],
+    quats (n, 2, 4))."""
+    t = np.arange(int(round(seconds * fps)) + 1) / fps
+    s = np.clip((t - 0.1) / 0.5, 0.0, 1.0)
+    yaw = 2.0 * np.pi * s * s * (3.0 - 2.0 * s)
+    q = np.zeros((len(t), 2, 4))
+    q[:, 0, 0], q[:, 0, 3] = np.cos(yaw / 2), np.sin(yaw / 2)
+    q[:, 1, 0] = 1.0
+    return t, yaw, q
+
+
+def _plain_heading(t, q, keys):
+    """[rad] yaw of the natural cubic spline through the quaternions at `keys`, hemisphere-aligned as the
+    solver starts from (`Keyframes.initial_values`), normalized at every frame."""
+    from solver.keyframes import Keyframes
+    from solver.spline import interpolate
+
+    k = np.asarray(keys)
+    vals = q[k].reshape(len(k), -1)
+    kf = Keyframes(t[k], vals, np.ones(vals.shape, bool))
+    y = interpolate(t[k], kf.initial_values(np.array([[0, 1, 2, 3], [4, 5, 6, 7]])), t)[:, :4]
+    return 2.0 * np.arctan2(y[:, 3], y[:, 0])
+
+
+def _wrapped(a):
+    return np.abs((a + np.pi) % (2 * np.pi) - np.pi)
+
+
+def test_a_full_turn_keyed_every_quarter_second_is_kept():
+    from solver.keyframe_selection import KEY_TURN_DEG, turn_keys
+
+    t, yaw, q = _full_turn()
+    every = [0, 30, 60, 90, 120]                      # 0.25 s apart: 0, 78, 323, 360, 360 deg
+    lost = _wrapped(_plain_heading(t, q, every) - yaw).max()
+    assert np.degrees(lost) > 90.0                    # the short way round: the turn is lost without the rule
+    keys = turn_keys(every, q)
+    assert set(every) <= set(keys)
+    for a, b in zip(keys[:-1], keys[1:]):             # every interval within 90 deg of its first key
+        assert np.degrees(_wrapped(yaw[a:b + 1] - yaw[a])).max() <= KEY_TURN_DEG + 1e-9
+    assert np.degrees(_wrapped(_plain_heading(t, q, keys) - yaw).max()) < 30.0
+    assert len(keys) <= len(every) + 4                # 360 deg needs at most 4 more keys of <= 90 deg
+    flipped = q * np.where(np.arange(len(t)) % 3 == 0, -1.0, 1.0)[:, None, None]
+    assert turn_keys(every, flipped) == keys          # either sign of a quaternion is the same orientation
+
+
+def test_turn_keys_leave_slow_turns_alone_and_reject_bad_input():
+    from solver.keyframe_selection import turn_keys
+
+    t = np.arange(481) / 120.0                        # 4 s: one turn at 90 deg/s, 45 deg between keys 0.5 s apart
+    q = np.zeros((len(t), 1, 4))
+    q[:, 0, 0], q[:, 0, 3] = np.cos(np.pi * t / 4), np.sin(np.pi * t / 4)
+    slow = list(range(0, 481, 60))
+    assert turn_keys(slow, q) == slow
+    loop = turn_keys([0, 480], q)                     # a whole turn between two keys of the same orientation
+    assert loop[1] > 0 and 5 <= len(loop) <= 6        # split at its far point, then in halves again
+    assert all(b - a <= 121 for a, b in zip(loop[:-1], loop[1:]))   # <= 90 deg (120 frames) apart
+    half = np.array([[[1.0, 0, 0, 0]], [[0.0, 0, 0, 1]]])                       # 180 deg in one frame
+    assert turn_keys([0, 1], half) == [0, 1]          # two adjacent frames are never split
+    with pytest.raises(InputError, match="shape"):
+        turn_keys([0, 10], q[:, 0])
+    with pytest.raises(InputError, match="between 0 and 180"):
+        turn_keys([0, 10], q, limit_deg=200.0)
+    with pytest.raises(InputError, match="outside"):
+        turn_keys([0, len(t)], q)

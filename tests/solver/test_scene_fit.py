@@ -74,6 +74,34 @@ def test_two_heights_and_far_apart_make_separate_boxes():
     assert [round(t, 3) for t in f.box_tops()] == [0.3, 0.6, 0.3]
 
 
+def _overlap(a, b):
+    """Whether two fitted boxes (center, half) overlap in volume (touching faces do not count)."""
+    (ca, ha), (cb, hb) = a, b
+    return bool(np.all(np.abs(ca - cb) < ha + hb - 1e-9))
+
+
+def test_two_steps_onto_a_platform_are_two_boxes_side_by_side():
+    """A walk up two 18 cm steps (treads 0.3 m deep) onto a platform: the floor, step 1 and the
+    step-2 platform become the floor and two boxes at the rest heights, neither inside the other, and
+    every rest lies on the box fitted to it (not on a higher one padded over it)."""
+    spec = [("r_toe", 0.0, 0.2, 0.00, -0.1, 0.00), ("r_heel", 0.0, 0.2, -0.20, -0.1, 0.00),  # floor
+            ("l_toe", 0.3, 0.5, 0.55, 0.1, 0.18), ("l_heel", 0.3, 0.5, 0.38, 0.1, 0.18),    # step 1
+            ("r_toe", 0.6, 0.8, 0.85, -0.1, 0.36), ("r_heel", 0.6, 0.8, 0.68, -0.1, 0.36),  # step 2
+            ("l_toe", 0.9, 1.1, 0.87, 0.1, 0.37), ("l_heel", 0.9, 1.1, 0.70, 0.1, 0.37)]
+    times, pos, cs = stances(spec)
+    f = fit_scene(times, pos, cs)
+    assert f.floor_z == pytest.approx(0.0)
+    assert sorted(round(t, 3) for t in f.box_tops()) == [0.18, 0.365]
+    assert not _overlap(*f.boxes)
+    surfaces = f.surfaces()
+    for site, t0, _, x, y, z in spec:   # each rest is on the surface at its own height
+        assert abs(surfaces.height_above(np.array([x, y, z]))) <= 0.005 + 1e-9, (site, t0)   # top: the mean rest
+    (c1, h1), (c2, h2) = sorted(f.boxes, key=lambda b: b[0][2])
+    assert c1[0] + h1[0] == pytest.approx(c2[0] - h2[0])        # the steps meet halfway between the rests
+    assert c1[0] + h1[0] == pytest.approx((0.55 + 0.68) / 2)
+    assert c1[0] - h1[0] == pytest.approx(0.38 - MARGIN)        # padded where no other rest is near
+
+
 def test_no_contacts_is_an_error():
     times, pos, _ = stances([("l_toe", 0.0, 0.2, 0, 0, 0)])
     with pytest.raises(InputError, match="no contacts"):

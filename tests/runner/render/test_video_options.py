@@ -180,3 +180,21 @@ def test_a_figure_that_hardly_moves_is_seen_from_its_own_sides():
     az = azimuth_path(positions, 0.05, cam, facing)
     looks = np.array([np.cos(np.radians(az[0])), np.sin(np.radians(az[0]))])
     np.testing.assert_allclose(looks, [0.0, -1.0], atol=1e-9)  # looking the way the figure faces
+
+
+def test_a_legend_says_what_the_ghosts_are():
+    """With keyframes, the first panel (only) says in the ghosts' colours that they are keyframe poses
+    and that the yellow one is the next, between the picture and its timeline; without, no legend."""
+    def yellow(img):
+        r, g, b = (img[..., i].astype(int) for i in range(3))
+        return int(np.count_nonzero((r > 150) & (g > 110) & (b < 100) & (r - b > 80)))
+
+    for kf_t, expected in ((np.array([0.0, 0.5, 1.0]), True), (np.zeros(0), False)):
+        overlay = Overlay(480, 270, 240, 2, None, 0.0, 1.0, kf_t)
+        panel = np.full((270, 240, 3), 90, np.uint8)
+        f = overlay.compose([panel, panel], ["a", "b"], 0.2, 1.0, current=-1, marks=[None, None])
+        drawn = {key[0] for key in overlay._patches}
+        assert ("ghosts: keyframe poses" in drawn) == expected
+        above_timeline = f[200:250]  # no keyframe is current: nothing else there is yellow
+        assert (yellow(above_timeline[:, :240]) > 20) == expected, yellow(above_timeline[:, :240])
+        assert yellow(above_timeline[:, 240:]) == 0
