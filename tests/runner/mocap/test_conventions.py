@@ -147,10 +147,11 @@ def key_distances(src, out, npz, unit, axes, rest_frames):
     return np.linalg.norm(pa[k] - pb[k], axis=-1), k
 
 
-def way_back(path, folder):
-    """`mocap` (a short solve: the keyframes are met whatever the optimizer does) and `export --to`."""
+def way_back(path, folder, scene=()):
+    """`mocap` (a short solve: the keyframes are met whatever the optimizer does; `scene`: its --scene
+    option, or the fitted scene) and `export --to`."""
     out_dir = folder / path.stem
-    assert main(["mocap", str(path), "--out-dir", str(out_dir), *FAST]) == 0
+    assert main(["mocap", str(path), "--out-dir", str(out_dir), *scene, *FAST]) == 0
     npz = out_dir / f"{path.stem}.npz"
     out = folder / f"{path.stem}.back.bvh"
     assert main(["export", str(npz), "--to", str(out), "--quiet"]) == 0
@@ -186,6 +187,12 @@ REAL_CLIPS = {
 }
 
 
+#: the scene a real clip is given: the dancer holds a foot up (13 cm for 0.8 s, then a kick held at 1.1 m), which
+#: the fitted scene takes for boxes, and the root correction those would need is refused (docs/mocap.md, "The
+#: reference"); a scene of one's own is the way on there, the floor the dance was captured on
+REAL_SCENES = {"rokoko_jesse_dance.bvh": ("--scene", str(REPO / "models" / "floor.xml"))}
+
+
 @pytest.mark.parametrize("name", sorted(REAL_CLIPS))
 def test_real_clips_of_other_captures_are_recognised(name):
     unit, up, rest, roles = REAL_CLIPS[name]
@@ -199,6 +206,6 @@ def test_real_clips_of_other_captures_are_recognised(name):
 def test_real_clips_of_other_captures_come_back_at_the_keyframes(name, tmp_path):
     unit, _, rest, _ = REAL_CLIPS[name]
     path = REAL / name
-    npz, out = way_back(path, tmp_path)
+    npz, out = way_back(path, tmp_path, REAL_SCENES.get(name, ()))
     d, k = key_distances(path, out, npz, unit, AXES, rest)  # distances: any axes
     assert len(k) >= 4 and d.max() < KEY_TOLERANCE, (name, d.max())
