@@ -128,8 +128,9 @@ def test_127_33_touchdowns_where_the_feet_land():
         low = h[:, ks].min(axis=1)
         assert low[i0:i1 + 1].max() < 0.05          # down throughout the stance
         assert 0.1 <= t1 - t0 <= 0.3                  # a running stance
-        if i0 >= 6:                                   # landing: the foot was coming down
-            assert low[i0 - 6] > low[i0] + 0.01, (foot, t0, low[i0 - 6:i0 + 1])
+        mean = h[:, ks].mean(axis=1)                  # heel and toe together: the whole foot
+        if i0 >= 6:                                   # landing: the foot was coming down (a heel
+            assert mean[i0 - 6] > mean[i0] + 0.01, (foot, t0, mean[i0 - 6:i0 + 1])  # may skim in low)
         if i1 + 6 < len(low):                         # lift-off: the foot goes up after
             assert low[i1 + 6] > low[i1] + 0.01, (foot, t1, low[i1:i1 + 7])
     on_box = [c for c in foot_contacts(cs) if 0.8 < c.start < 1.4]
