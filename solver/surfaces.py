@@ -120,6 +120,43 @@ class StaticSurfaces:
             return np.zeros(shape + (0,)), np.zeros(shape + (0, 3))
         return np.concatenate(depths, axis=-1), np.concatenate(grads, axis=-2)
 
+    def signed_distances(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance of points to each surface (negative inside), and its gradient.
+
+        Plane: n.(p - p0). Box: the exact signed distance of a box (outside: the distance to it, inside:
+        minus the distance to the nearest face; Quilez, "Distance functions", 2008), continuously
+        differentiable outside; its gradient is the unit vector from the nearest point of the box (the
+        nearest face's outward normal inside).
+
+        Args:
+            points: (..., 3) world positions [m].
+        Returns:
+            distance: (..., S) [m] for the S surfaces (planes then boxes). grad: (..., S, 3).
+        """
+        pts = np.asarray(points, float)
+        shape = pts.shape[:-1]
+        out, grads = [], []
+        if len(self.plane_point):
+            out.append(np.einsum("...pk,pk->...p", pts[..., None, :] - self.plane_point, self.plane_normal))
+            grads.append(np.broadcast_to(self.plane_normal, shape + self.plane_normal.shape))
+        if len(self.box_center):
+            local = np.einsum("bji,...bj->...bi", self.box_rot, pts[..., None, :] - self.box_center)
+            sign = np.where(local < 0, -1.0, 1.0)
+            q = np.abs(local) - self.box_half  # (..., b, 3)
+            qo = np.maximum(q, 0.0)
+            outside = np.sqrt((qo * qo).sum(-1))
+            inner = np.minimum(q.max(-1), 0.0)
+            d = outside + inner
+            axis = np.argmax(q, axis=-1)
+            g_in = np.zeros(q.shape)
+            np.put_along_axis(g_in, axis[..., None], 1.0, -1)
+            g_local = np.where((outside > 0)[..., None], qo / np.maximum(outside, 1e-300)[..., None], g_in) * sign
+            out.append(d)
+            grads.append(np.einsum("bij,...bj->...bi", self.box_rot, g_local))
+        if not out:
+            return np.zeros(shape + (0,)), np.zeros(shape + (0, 3))
+        return np.concatenate(out, axis=-1), np.concatenate(grads, axis=-2)
+
     def surface_below(self, points: np.ndarray) -> np.ndarray:
         """Height of the highest static surface under each point (floor planes, tops of boxes).
 

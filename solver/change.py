@@ -1,0 +1,92 @@
+"""The measure of change: how much a path differs from the reference motion, in units that price a jolt.
+
+    D(Y) = integral of  (a - a_ref)^T M (a - a_ref)  +  omega^4 (dq)^T M (dq)  dt        [kg m^2 / s^3]
+
+a, a_ref: MuJoCo's `qacc` of the path and of the reference (`solver.reference.ReferenceMotion`); dq: the
+pose difference in MuJoCo's tangent space (root position difference; for each quaternion the rotation
+vector 2 vec(conj(u_ref) u) of the unit quaternions, exact to first order); M: the joint-space mass
+matrix on the reference (a fixed metric: the path differs from the reference by centimetres, and M
+changes little over that). The first part is the mass-weighted change of the generalized
+accelerations: changing the pelvis's acceleration by 1 m/s^2 costs the whole body's mass, a hand's
+the hand's, so a solve buys a foot's contact with the leg rather than with a jolt of the body. It is
+the spacetime-constraints objective of Witkin & Kass ("Spacetime constraints", SIGGRAPH 1988), measured
+as a change from a motion to keep, as Gleicher poses motion editing ("Motion editing with spacetime
+constraints", I3D 1997). The pose part makes the problem well posed where accelerations leave a
+change free (a partial keyframe's free component at the path's ends may drift linearly); omega =
+pi / T for a path of length T prices the slowest change a path pinned at both ends can make (a half
+sine over T) as much by its displacement as by its acceleration, and every faster change less, so it
+does not compete with the acceleration part anywhere else.
+
+Quadrature: the reference's points and weights (uniform, paper after eq. 7).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.kinematics import TangentMap, _gq, _gt
+from solver.path_state import PathState
+from solver.reference import ReferenceMotion
+
+__all__ = ["MeasureOfChange"]
+
+
+class MeasureOfChange:
+    """D (module docstring) with its gradient, on the quadrature points of `reference`.
+
+    Args:
+        reference: ReferenceMotion (points, weights, qpos, qacc, mass-matrix factors).
+        tmap: the model's TangentMap.
+        omega: [rad/s] the pose part's frequency; default pi / T.
+    """
+
+    units = "kg m^2/s^3"
+
+    def __init__(self, reference: ReferenceMotion, tmap: TangentMap, omega: float | None = None):
+        self.ref = reference
+        self.tmap = tmap
+        self.omega = float(np.pi / reference.duration if omega is None else omega)
+        self._qref = reference.qpos[:, tmap.quat_q].transpose(2, 1, 0)  # (4, s, n)
+        self._uref = self._qref / np.linalg.norm(self._qref, axis=0)
+        self._M = reference.chol @ reference.chol.transpose(0, 2, 1)  # (n, nv, nv) M(q_ref)
+        import os
+        self._diag_pose = os.environ.get("POSEDIAG", "1") == "1"
+        self._Md = np.einsum("nii->ni", self._M).copy()  # (n, nv) diag M
+
+    def _pose_difference(self, Y: np.ndarray):
+        """(dq (n, nv), q (4, s, n), |q| (s, n)): the tangent-space pose difference from the reference."""
+        tm = self.tmap
+        n = len(Y)
+        d = np.zeros((tm.nv, n))
+        d[tm.lin_v] = (Y[:, tm.lin_q] - self.ref.qpos[:, tm.lin_q]).T
+        q = Y[:, tm.quat_q].transpose(2, 1, 0)
+        r = np.linalg.norm(q, axis=0)
+        d[tm.quat_v.T] = 2.0 * _gq(self._uref, q) / r
+        return d.T, q, r
+
+    def evaluate(self, state: PathState, grad: bool = True) -> float:
+        """D [kg m^2/s^3] on the state's path; with `grad` its gradient is added to the state's adjoints.
+
+        Args:
+            state: the evaluation's PathState at the reference's quadrature points.
+            grad: add the gradient to `state`.
+        """
+        w = self.ref.weights
+        dq, q, r = self._pose_difference(state.Y)
+        X = np.stack([state.motion.qacc - self.ref.qacc, dq], axis=2)  # (n, nv, 2)
+        MX = self._M @ X
+        if self._diag_pose:
+            MX[:, :, 1] = self._Md * dq
+        w4 = self.omega ** 4
+        e = (X * MX).sum(1)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T M dq
+        D = float(w @ e[:, 0] + w4 * (w @ e[:, 1]))
+        if grad:
+            state.add_acceleration(2.0 * w[:, None] * MX[:, :, 0])
+            g = 2.0 * w4 * w[:, None] * MX[:, :, 1]  # dD/d(dq) (n, nv)
+            tm = self.tmap
+            state.gY[:, tm.lin_q] += g[:, tm.lin_v]
+            gq = g.T[tm.quat_v.T]  # (3, s, n)
+            v = _gt(self._uref, gq) * (2.0 / r)  # G(u_ref)^T g * 2/|q|, then minus the radial part
+            u = q / r
+            v -= (v * u).sum(0) * u
+            state.gY[:, tm.quat_q] += v.transpose(2, 1, 0)
+        return D

@@ -1,0 +1,431 @@
+"""The figure's constraints for one problem, each a function with its unit and tolerance (docs/design.md).
+
+    penetration  every contact site at or above the surface under it, at every point  h >= 0          1 mm
+    planted      over each foot contact, the support site's mean height                mean h <= 0     2 mm
+    slide        over each foot contact, the distance the support site slides           <= SLIDE_DISTANCE 2 mm
+    flight       in a flight, every site clear (the field's flight height)            h >= 3.1 cm     1 mm
+    hinge        knees and elbows turn about their flexion axis                        phi <= limit    1 deg
+    hyperextension  knees and elbows do not bend backwards                              -theta <= limit 0.5 deg
+    rom          every joint motion inside its published range (AAOS 1965)             lo <= x <= hi   1 deg
+
+A foot contact is a foot's sites' contacts merged; at each point of one the support site is the foot's
+site that the schedule has in contact there and the reference motion holds lowest: a walking foot
+rolls from its heel onto its toe, and the toe carries it while the heel rises (the float metric of the
+field is the foot's lowest point, ../shared/METRICS.md). Planted and slide are integrals over the foot
+contact (its mean height, the distance it slides): a contact detected on a capture begins and ends
+with the site still moving (entry below 0.5 m/s and 3 cm, exit above 1 m/s or 5 cm: solver.contacts),
+so a bound at every point would have the site held still to the contact's end and then thrown off it.
+
+What the keyframes force. Keyframes are met exactly, so a constraint a keyframe breaks cannot be met
+there; the problem is made well posed instead of excused:
+
+* Where a full keyframe breaks a height bound (a keyed toe below the floor, a keyed heel 2 cm up on
+  its support), the plain spline through the keyframes breaks it on an interval around the keyframe
+  (its excursion: the quadrature points of that site around the keyframe where it breaks it). There the
+  limit becomes the plain spline's own value (for a mean, the excursion's share of it): the path may do
+  better, never worse, and the plain spline meets every limit, so the problem stays feasible.
+* Two full keyframes in one foot contact that hold its support site a distance d apart along the
+  surface make it slide at least d between them (the triangle inequality; the skate the keyframes
+  force, `solver.motion_metrics.forced_skate_mm`, is the same bound): the slide limit is
+  SLIDE_DISTANCE plus the sum of those d.
+* The anatomical limits are widened to the reference's own worst angle (`solver.constraints.anatomy`).
+
+Each relaxation is reported (`Relaxation`: which constraint, site or joint, keyframe, where, how much),
+so a user sees where the keyframes, not the optimizer, decide.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from solver.constraints.acceleration import AccelerationBound
+from solver.constraints.anatomy import AngleBound
+from solver.constraints.sites import HeightBound, Penetration, SupportHeight, SupportSlide, site_heights
+from solver.contact_thresholds import FLIGHT_HEIGHT
+from solver.contacts import contact_radii
+from solver.path_state import PathState
+from solver.quaternion import swing_angle_grad, twist_angle_grad
+from solver.surfaces import StaticSurfaces
+from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
+from solver.terms.bending import flexion_angles
+from solver.terms.contact_schedule import SupportSurfaces
+
+_GROUND = os.environ.get('GROUND', '1') == '1'
+__all__ = ["TOLERANCES", "Relaxation", "figure_constraints"]
+
+#: [m] how far a planted foot may slide over one contact: 5 mm, under what the eye sees (a tenth of the
+#: 40-100 mm the captured clips' own sites move in theirs)
+SLIDE_DISTANCE = float(os.environ.get('SLIDE', '5e-3'))
+FLOAT_LIMIT = float(os.environ.get('FLOATLIM', '0'))
+#: [m/s] the width of the Huber function that smooths a sliding speed at 0 (`SupportSlide`): 1 cm/s,
+#: where a site's slide is within the capture's marker noise (about 1 mm per frame at 120 fps)
+SLIDE_SMOOTHING = 1e-2
+#: each constraint's tolerance [SI]: a pair is met when c <= tolerance (the acceptance bounds' units:
+#: penetration 1 mm; float 2 mm, under the 5 mm of PhysDiff's float; slide 2 mm; flight 1 mm above the
+#: field's 3 cm flight height; angles 1 deg, hyperextension 0.5 deg as the acceptance list)
+#: the no-jolt bounds' tolerance, relative to each bound: 5 %
+ACCELERATION_TOLERANCE = 0.05
+TOLERANCES = {"penetration": 1e-3, "planted": 2e-3, "slide": 2e-3, "flight": 1e-3,
+              "hinge": float(np.radians(1.0)), "hyperextension": float(np.radians(0.5)), "rom": float(np.radians(1.0))}
+
+
+@dataclass(frozen=True)
+class Relaxation:
+    """Where the keyframes decide a constraint (module docstring).
+
+    Attributes:
+        constraint: its name. label: the site or joint. keyframe: index of the keyframe (-1: several).
+        start, end: [s] the span relaxed. amount: [SI] the largest amount the limit was raised by.
+    """
+
+    constraint: str
+    label: str
+    keyframe: int
+    start: float
+    end: float
+    amount: float
+
+
+def _pairs_in(t: np.ndarray, a: float, b: float) -> np.ndarray:
+    """Indices of quadrature points in the closed interval [a, b]."""
+    return np.flatnonzero((t >= a) & (t <= b))
+
+
+def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None):
+    """The constraints of a figure's problem (module docstring).
+
+    Args:
+        model: MjModel of the scene. figure: its `solver.figure.Figure`. reference: `ReferenceMotion` (the
+            quadrature points). plain: the plain spline's FrameSet (keyframes: the full ones pin sites).
+        contacts: `solver.contacts.Contact`s. flights: ((start, end), ...) [s]. engine: the contact
+            sites' `SiteKinematics` (figure.contact_sites, in that order).
+    Returns:
+        (constraints, relaxations): a list of `Constraint`s and a list of `Relaxation`s.
+    """
+    from solver.layout import StateLayout
+
+    t = reference.t
+    n = len(t)
+    sites = tuple(figure.contact_sites)
+    surfaces = StaticSurfaces.from_model(model)
+    support = SupportSurfaces(surfaces, footprint_margin=0.0, rounded_edges=True)
+    radii = contact_radii(model, sites)
+    out = []
+    if engine is not None and surfaces.count:
+        out.append(Penetration(surfaces, radii, n, sites, TOLERANCES["penetration"]))
+        feet = _foot_support(model, figure, reference, plain, contacts, engine, support, radii)
+        if feet is not None:
+            args, limit_h, limit_s, reports = feet
+            height = SupportHeight(*args, limit=limit_h, tolerance=TOLERANCES["planted"])
+            height.reports = reports
+            out.append(height)
+            if os.environ.get("SLIDEMODE", "support") == "site":
+                sargs, slim = _site_slides(model, reference, plain, contacts, support, radii, sites)
+                out.append(SupportSlide(*sargs, limit=slim, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING))
+            else:
+                out.append(SupportSlide(*args, limit=limit_s, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING))
+        out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
+    out += _anatomy(figure, StateLayout.from_model(model), reference)
+    out.append(_accelerations(model, reference, capture))
+    relaxations = []
+    if engine is not None:
+        state = _reference_state(model, reference, plain, engine)
+        relaxations = _relax_heights(out, state, plain, model, sites, support, radii, flights)
+        relaxations += [r for c in out if isinstance(c, SupportHeight) for r in c.reports]
+    return out, relaxations
+
+
+def _reference_state(model, reference, plain, engine) -> PathState:
+    """The plain spline (the reference) at the quadrature points, as an evaluation sees a path."""
+    from solver.kinematics import TangentMap
+    from solver.layout import StateLayout
+    from solver.spline import interpolate
+
+    Y1, Y2 = interpolate(plain.times, plain.values, reference.t, (1, 2))
+    return PathState(reference.t, reference.qpos, Y1, Y2, TangentMap.from_layout(StateLayout.from_model(model)), engine)
+
+
+def _capture_state(model, reference, capture, engine) -> PathState:
+    """The capture (times, qpos) as a path at the quadrature points (the natural spline through its frames)."""
+    from solver.kinematics import TangentMap
+    from solver.layout import StateLayout
+    from solver.spline import interpolate
+
+    Y, Y1, Y2 = interpolate(np.asarray(capture[0], float), np.asarray(capture[1], float), reference.t, (0, 1, 2))
+    return PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(StateLayout.from_model(model)), engine)
+
+
+def _full_keyframes(plain):
+    """(indices, times, values) of the keyframes that fix every component (they pin every site)."""
+    full = np.flatnonzero(plain.is_keyframe & plain.fixed.all(axis=1))
+    return full, plain.times[full], plain.values[full]
+
+
+def _run(values: np.ndarray, j: int) -> slice:
+    """The run of consecutive positive entries of `values` around index j (empty if values[j] <= 0)."""
+    if values[j] <= 0:
+        return slice(j, j)
+    lo, hi = j, j
+    while lo > 0 and values[lo - 1] > 0:
+        lo -= 1
+    while hi < len(values) - 1 and values[hi + 1] > 0:
+        hi += 1
+    return slice(lo, hi + 1)
+
+
+def _relax_heights(constraints, state, plain, model, sites, support, radii, flights) -> list[Relaxation]:
+    """Raise the pointwise limits (penetration, flight, ground) a full keyframe breaks by more than the
+    tolerance to the plain spline's own values on its excursion (module docstring); the reports. The
+    keyframe's value is the plain spline's at the quadrature point nearest it (within half a spacing)."""
+    index, times, _ = _full_keyframes(plain)
+    t = state.t
+    half = 0.5 * (t[1] - t[0]) + 1e-9
+    out = []
+    for c in constraints:
+        if c.name not in ("penetration", "flight", "ground"):
+            continue
+        v = c.values(state)
+        for key in np.unique(c.series):
+            pairs = np.flatnonzero(c.series == key)
+            pairs = pairs[np.argsort(c.rows[pairs], kind="stable")]
+            rows = c.rows[pairs]
+            tp = t[rows]
+            for k, tk in zip(index, times):
+                i = int(np.argmin(np.abs(tp - tk)))
+                if abs(tp[i] - tk) > half or v[pairs[i]] <= c.tolerance:
+                    continue  # no pair at the keyframe, or the keyframe meets the bound
+                lo = hi = i
+                while lo > 0 and rows[lo - 1] == rows[lo] - 1 and v[pairs[lo - 1]] > 0:
+                    lo -= 1
+                while hi < len(rows) - 1 and rows[hi + 1] == rows[hi] + 1 and v[pairs[hi + 1]] > 0:
+                    hi += 1
+                at = pairs[lo:hi + 1]
+                amount = float(v[pairs[i]])
+                c.limit[at] = c.limit[at] + v[at]
+                v[at] = 0.0
+                out.append(Relaxation(c.name, str(c.labels[pairs[i]]), int(k), float(tp[lo]), float(tp[hi]), amount))
+    return out
+
+
+def _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture=None) -> list:
+    """flight: every site at least FLIGHT_HEIGHT + tol up in the flights; ground: elsewhere, the site the
+    reference holds lowest at most FLIGHT_HEIGHT - tol up (module docstring)."""
+    n, K = len(t), len(sites)
+    flying = np.zeros(n, bool)
+    for a, b in flights:
+        flying |= (t > a) & (t < b)
+    out = []
+    tol = TOLERANCES["flight"]
+    if flying.any():
+        on = np.flatnonzero(flying)
+        rows, cols = np.repeat(on, K), np.tile(np.arange(K), len(on))
+        out.append(HeightBound("flight", support, radii, rows, cols, -np.ones(len(rows), int),
+                               np.full(len(rows), FLIGHT_HEIGHT + tol), False, tol, np.array(sites, object)[cols]))
+    on = np.flatnonzero(~flying)
+    if on.size and _GROUND:
+        state = _reference_state(model, reference, plain, engine) if capture is None else _capture_state(model, reference, capture, engine)
+        h, _ = site_heights(state, support, radii, np.repeat(on, K), np.tile(np.arange(K), len(on)),
+                            -np.ones(len(on) * K, int))
+        cols = np.argmin(h.reshape(len(on), K), axis=1)
+        out.append(HeightBound("ground", support, radii, on, cols, -np.ones(len(on), int),
+                               np.full(len(on), FLIGHT_HEIGHT - tol), True, tol, np.array(sites, object)[cols]))
+    return out
+
+
+def _site_slides(model, reference, plain, contacts, support, radii, sites):
+    """Slide pairs per site contact (the site's own contact), limits SLIDE_DISTANCE + the keyed distances."""
+    from solver.contacts import site_positions
+
+    t, w = reference.t, reference.weights
+    index, times, values = _full_keyframes(plain)
+    keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else None
+    cols_, pts, surf, pair, ww, span, rows, labels, limits = [], [], [], [], [], [], [], [], []
+    for c in contacts:
+        on = _pairs_in(t, c.start, c.end)
+        if not on.size:
+            continue
+        col = sites.index(c.site)
+        k = len(limits)
+        pts.append(on)
+        cols_.append(np.full(len(on), col))
+        surf.append(np.full(len(on), -1 if not c.surface else support.index(c.surface)))
+        pair.append(np.full(len(on), k))
+        ww.append(w[on])
+        span.append(float(w[on].sum()))
+        rows.append(int(on[len(on) // 2]))
+        labels.append(c.site)
+        inside = np.flatnonzero((times >= c.start - 1e-6) & (times <= c.end + 1e-6))
+        forced = sum(float(np.linalg.norm(keyed_xy[b, col] - keyed_xy[a, col])) for a, b in zip(inside[:-1], inside[1:]))
+        limits.append(SLIDE_DISTANCE + forced)
+    args = (support, radii, np.concatenate(pts), np.concatenate(cols_), np.concatenate(surf), np.concatenate(pair),
+            np.concatenate(ww), np.array(span), np.array(rows), np.array(labels, object))
+    return args, np.array(limits)
+
+
+def _foot_support(model, figure, reference, plain, contacts, engine, support, radii):
+    """The foot contacts' support points (`solver.constraints.sites._FootSupport`) and their limits
+    relaxed where the keyframes force (module docstring), or None without contacts.
+
+    Returns:
+        (args of `_FootSupport`, planted limits (p,) [m], slide limits (p,) [m], relaxation reports).
+    """
+    from solver.contacts import foot_contacts, site_positions
+
+    sites = tuple(figure.contact_sites)
+    t, w = reference.t, reference.weights
+    state = _reference_state(model, reference, plain, engine)
+    index, times, values = _full_keyframes(plain)
+    keyed_pts = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
+    keyed_xy = keyed_pts[..., :2]
+    keyed_low = keyed_pts.copy()
+    keyed_low[..., 2] -= radii  # the contact points (lowest points of the sites' spheres)
+    args = tuple([] for _ in range(8))
+    limits_h, limits_s, reports = [], [], []
+    feet = {s: name for name, pair in figure.feet.items() for s in pair}
+    for F in foot_contacts(list(contacts), dict(figure.feet)):
+        mine = [c for c in contacts if feet.get(c.site) == F.site and c.end >= F.start and c.start <= F.end]
+        on = _pairs_in(t, F.start, F.end)
+        if not on.size:
+            continue
+        cand = np.full((len(on), len(sites)), np.inf)  # reference height of each site in contact there
+        surf = np.full((len(on), len(sites)), -1, int)
+        for c in mine:
+            col = sites.index(c.site)
+            inside = (t[on] >= c.start) & (t[on] <= c.end)
+            si = -1 if not c.surface else support.index(c.surface)
+            h, _ = site_heights(state, support, radii, on[inside], np.full(inside.sum(), col),
+                                np.full(inside.sum(), si), None)
+            better = h < cand[inside, col]
+            cand[np.flatnonzero(inside)[better], col] = h[better]
+            surf[np.flatnonzero(inside)[better], col] = si
+        cols = np.argmin(cand, axis=1)
+        ok = np.isfinite(cand[np.arange(len(on)), cols])
+        on, cols = on[ok], cols[ok]
+        if not on.size:
+            continue
+        surfaces = surf[np.flatnonzero(ok), cols]
+        href = cand[np.flatnonzero(ok), cols]
+        p = len(limits_h)
+        span = float(w[on].sum())
+        limit_h, limit_s = FLOAT_LIMIT, SLIDE_DISTANCE
+        done = np.zeros(len(on), bool)
+        for j, (k, tk) in enumerate(zip(index, times)):  # keyframes inside the foot contact
+            if not (F.start - 1e-6 <= tk <= F.end + 1e-6):
+                continue
+            i = int(np.argmin(np.abs(t[on] - tk)))
+            keyed, _ = support.height(keyed_low[j, cols[i]][None], None if surfaces[i] < 0 else int(surfaces[i]))
+            if keyed[0] - FLOAT_LIMIT <= TOLERANCES["planted"] or done[i]:
+                continue  # the keyframe meets the bound
+            run = _run(href - FLOAT_LIMIT, i)
+            if run.stop > run.start:
+                done[run] = True
+                extra = float(w[on[run]] @ (href[run] - FLOAT_LIMIT)) / span
+                limit_h += extra
+                reports.append(Relaxation("planted", F.site, int(k), float(t[on[run.start]]), float(t[on[run.stop - 1]]),
+                                          float(keyed[0])))
+        inside = np.flatnonzero((times >= F.start - 1e-6) & (times <= F.end + 1e-6))
+        for a, b in zip(inside[:-1], inside[1:]):
+            ca = cols[int(np.argmin(np.abs(t[on] - times[a])))]
+            cb = cols[int(np.argmin(np.abs(t[on] - times[b])))]
+            if ca == cb:
+                d = float(np.linalg.norm(keyed_xy[b, ca] - keyed_xy[a, ca]))
+                limit_s += d
+                if d > SLIDE_DISTANCE:
+                    reports.append(Relaxation("slide", str(sites[ca]), int(index[b]), float(times[a]), float(times[b]), d))
+        for lst, val in zip(args, (on, cols, surfaces, np.full(len(on), p), w[on], [span], [int(on[len(on) // 2])], [F.site])):
+            lst.append(np.asarray(val))
+        limits_h.append(limit_h)
+        limits_s.append(limit_s)
+    if not limits_h:
+        return None
+    support_args = (support, radii, *(np.concatenate(a) for a in args))
+    return support_args, np.array(limits_h), np.array(limits_s), reports
+
+
+def _accelerations(model, reference, capture) -> AccelerationBound:
+    """The no-jolt bounds (`solver.constraints.acceleration`): the reference's peaks and, with a capture
+    ((times, qpos)), the filtered capture's over the same span, joint by joint."""
+    from solver.kinematics import TangentMap
+    from solver.layout import StateLayout
+    from solver.peak_bounds import PAD_S, filter_capture
+    from solver.spline import interpolate
+
+    layout = StateLayout.from_model(model)
+    free = [j for j in layout.joints if j.kind == "free"]
+    balls = [j for j in layout.joints if j.kind == "ball"]
+    dofs = [[f.dofadr, f.dofadr + 1, f.dofadr + 2] for f in free] + [[b.dofadr + i for i in range(3)] for b in balls]
+    labels = [f"{f.name} (linear)" for f in free] + [b.name for b in balls]
+    dofs = np.array(dofs, int).reshape(-1, 3)
+    peaks = np.linalg.norm(reference.qacc[:, dofs], axis=-1).max(axis=0)
+    if capture is not None:
+        times, qpos = np.asarray(capture[0], float), np.asarray(capture[1], float)
+        smooth = filter_capture(times, qpos, layout)
+        keep = (times >= reference.span[0] - PAD_S) & (times <= reference.span[1] + PAD_S)
+        Y, Y1, Y2 = interpolate(times[keep], smooth[keep], reference.t, (0, 1, 2))
+        qacc = TangentMap.from_layout(layout).motion(Y, Y1, Y2).qacc
+        peaks = np.maximum(peaks, np.linalg.norm(qacc[:, dofs], axis=-1).max(axis=0))
+    peaks = np.maximum(peaks, 1e-6)
+    return AccelerationBound(len(reference.t), dofs, peaks, ACCELERATION_TOLERANCE * peaks, labels)
+
+
+def _anatomy(figure, layout, reference) -> list:
+    """hinge, hyperextension and rom (`solver.constraints.anatomy`), limits widened to the reference."""
+    n = len(reference.t)
+    Yr = reference.qpos
+    out = []
+    hinges = dict(figure.flexion_axes)
+    if hinges:
+        names = list(hinges)
+        idx = np.array([layout.joint(j).quat_index for j in names], int).reshape(-1, 4)
+        axes = np.array([hinges[j] for j in names], float).reshape(-1, 3)
+        axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+
+        def off(Y, idx=idx, axes=axes):
+            return off_hinge_angles(Y, idx, axes)
+
+        def off_grad(Y, rows, cols, idx=idx, axes=axes):
+            return swing_angle_grad(Y[rows[:, None], idx[cols]], axes[cols])
+
+        tol = TOLERANCES["hinge"]
+        limits = np.maximum(off(Yr).max(axis=0), tol)
+        out.append(AngleBound("hinge", n, off, off_grad, idx, limits, np.ones(len(names), bool), tol, names))
+
+        def minus_flex(Y, idx=idx, axes=axes):
+            return -flexion_angles(Y, idx, axes)
+
+        def minus_flex_grad(Y, rows, cols, idx=idx, axes=axes):
+            q = Y[rows[:, None], idx[cols]]
+            sign = np.where(q[:, :1] < 0, -1.0, 1.0)
+            return -sign * twist_angle_grad(q * sign, axes[cols])
+
+        limits = np.maximum(minus_flex(Yr).max(axis=0), 0.0)
+        out.append(AngleBound("hyperextension", n, minus_flex, minus_flex_grad, idx, limits,
+                              np.ones(len(names), bool), TOLERANCES["hyperextension"], names))
+    motions = range_of_motion(figure)
+    if motions:
+        idx = np.array([layout.joint(m.joint).quat_index for m in motions], int).reshape(-1, 4)
+        arrays = motion_axes(motions)
+
+        def ang(Y, idx=idx, motions=motions, arrays=arrays):
+            return motion_angles(Y, idx, motions, arrays)
+
+        x = ang(Yr)
+        hi = np.maximum([m.hi for m in motions], x.max(axis=0))
+        lo = np.minimum([m.lo for m in motions], x.min(axis=0))
+        both = np.concatenate([np.arange(len(motions))] * 2)
+        upper = np.r_[np.ones(len(motions), bool), np.zeros(len(motions), bool)]
+        keep = np.isfinite(np.r_[hi, lo])
+        sel = both[keep]
+        labels = [f"{m.joint} {m.motion}" for m in motions]
+
+        def ang2(Y, sel=sel, ang=ang):
+            return ang(Y)[:, sel]
+
+        def ang2_grad(Y, rows, cols, sel=sel, idx=idx, motions=motions, arrays=arrays):
+            return motion_angle_grads(Y, idx, motions, rows, sel[cols], arrays)
+
+        out.append(AngleBound("rom", n, ang2, ang2_grad, idx[sel], np.r_[hi, lo][keep], upper[keep],
+                              TOLERANCES["rom"], np.array(labels, object)[sel]))
+    return out

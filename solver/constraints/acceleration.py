@@ -1,0 +1,55 @@
+"""No jolts: the pelvis and every ball joint accelerate no harder than the reference motion does at its hardest.
+
+    |x''_pelvis(t)| <= A_pelvis   [m/s^2],     |alpha_j(t)| <= A_j   [rad/s^2]   at every point,
+
+alpha_j the joint's angular acceleration (MuJoCo's `qacc` of a ball joint, in the child's frame) and A
+the larger of the reference's own peak (the plain spline through the keyframes) and, when the keyframes
+come from a capture, the capture's peak after the low-pass filter biomechanics applies before
+differentiating captured kinematics (6 Hz, Winter 2009; `solver.peak_bounds.filter_capture`). The
+eye sees a jolt as an acceleration the motion it was given never has; the measure of change
+(`solver.change`) then picks the least change among the paths that have none.
+
+Written smooth as c = (|a|^2 - A^2) / (2 A) (zero at |a| = A with slope 1 in |a| there, no kink at a = 0).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.constraints.base import Constraint
+
+__all__ = ["AccelerationBound"]
+
+
+class AccelerationBound(Constraint):
+    """|a_j(t)| <= A_j for acceleration columns j (pelvis linear, ball joints' angular) at every point.
+
+    Args:
+        n_points: quadrature points. dofs: (j, 3) qvel indices of each column. limits: (j,) A_j > 0 [m/s^2 or
+            rad/s^2]. tolerance: (j,) [same units]. labels: (j,) column names.
+    """
+
+    name, unit, scale = "acceleration", "m/s^2 | rad/s^2", 1.0
+
+    def __init__(self, n_points: int, dofs: np.ndarray, limits: np.ndarray, tolerance: np.ndarray, labels):
+        self.dofs = np.asarray(dofs, int).reshape(-1, 3)
+        j = len(self.dofs)
+        self.limits = np.asarray(limits, float).reshape(j)
+        self.rows = np.repeat(np.arange(n_points), j)
+        self._cols = np.tile(np.arange(j), n_points)
+        self.tolerance = np.asarray(tolerance, float).reshape(j)[self._cols]
+        self.labels = np.asarray(labels, object)[self._cols]
+        self.limit = np.zeros(len(self.rows))  # the smooth form's own bound is 0 (module docstring)
+
+    def measure(self, state):
+        a = state.motion.qacc[:, self.dofs]  # (n, j, 3)
+        return (((a * a).sum(-1) - self.limits ** 2) / (2.0 * self.limits)).ravel()
+
+    def pull(self, state, g):
+        n = state.motion.qacc.shape[0]
+        G = g.reshape(n, -1) / self.limits  # (n, j)
+        if not G.any():
+            return
+        a = state.motion.qacc[:, self.dofs]
+        ga = np.zeros(state.motion.qacc.shape)
+        ga[:, self.dofs] = G[..., None] * a
+        state.add_acceleration(ga)

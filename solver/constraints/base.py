@@ -1,0 +1,57 @@
+"""The one interface of a constraint: c(path) <= 0 at fixed (quadrature point, column) pairs, in a unit.
+
+A constraint is what a user states as a limit: a foot on the floor, a knee within its range. Each is a
+function of the path with its own unit, sampled at the quadrature points where it applies (its pairs:
+a point and a column, e.g. a contact site or a joint), written as c = measure - limit <= 0 in SI units
+(`measure` signed so that the bound is an upper one), with a tolerance in the same unit: a pair is met
+when c <= tolerance. `values` gives c at every pair; `pull` adds g^T dc/d(path) for weights g at the
+pairs to the evaluation's adjoints (`solver.path_state.PathState`). The method of multipliers
+(`solver.lagrangian`) reads nothing else; a limit raised where the keyframes or the frames cannot meet
+it is `limit` changed, nothing else.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.path_state import PathState
+
+__all__ = ["Constraint"]
+
+
+class Constraint:
+    """Base class (module docstring).
+
+    Subclasses set `name`, `unit` (as shown to users), `scale` (SI per shown unit: 1e-3 for mm),
+    `tolerance` [SI] (a number or (p,)), `limit` (p,) [SI], `rows` (p,) the quadrature point of each pair
+    and `labels` (p,) its column's name, and implement `measure` and `pull`.
+    """
+
+    name: str = "constraint"
+    unit: str = ""
+    scale: float = 1.0
+    tolerance: float = 1.0
+    rows: np.ndarray = np.zeros(0, int)
+    labels: np.ndarray = np.zeros(0, object)
+
+    @property
+    def size(self) -> int:
+        """p, the number of pairs."""
+        return len(self.rows)
+
+    def pair_weights(self, weights: np.ndarray) -> np.ndarray:
+        """(p,) the time each pair stands for [s], from the quadrature weights (n,) [s]: a pointwise
+        constraint's pair stands for its point's weight (the default); an integral constraint's pair for
+        its interval's length."""
+        return weights[self.rows]
+
+    def measure(self, state: PathState) -> np.ndarray:
+        """(p,) the constrained quantity at the pairs [SI], signed so that the bound is measure <= limit."""
+        raise NotImplementedError
+
+    def values(self, state: PathState) -> np.ndarray:
+        """(p,) c = measure - limit [SI] at the pairs (<= 0: met)."""
+        return self.measure(state) - self.limit
+
+    def pull(self, state: PathState, g: np.ndarray) -> None:
+        """Add sum_p g_p dc_p/d(path) to the state's adjoints. g: (p,)."""
+        raise NotImplementedError

@@ -1,0 +1,269 @@
+"""The method of multipliers: the least change that meets the constraints, by unconstrained subproblems.
+
+    minimize D(P) / D0   subject to   c_p(P) <= 0  (every pair p of every constraint, `solver.constraints`)
+
+is solved as a sequence of unconstrained problems in the free frame values P (the keyframes are not
+variables, so every iterate meets them: the paper's central point), the Powell-Hestenes-Rockafellar
+augmented Lagrangian (Nocedal & Wright, Numerical Optimization, 2nd ed., sec. 17.4; Birgin & Martinez,
+Practical Augmented Lagrangian Methods for Constrained Optimization, SIAM 2014, Algorithm 4.1):
+
+    Phi(P) = D(P)/D0 + (rho/2) sum_j sum_p (w_p/T) [ max(0, lam_p/rho + c_p/tol_j)^2 - (lam_p/rho)^2 ]
+
+with each constraint scaled by its tolerance tol_j (so c/tol is dimensionless and 1 means "at the
+tolerance"), w_p the quadrature weight of the pair's point over the path's length T (a constraint is an
+integral over time, so the penalty does not grow with the quadrature rate), and D0 = m g^2 T (the
+whole body's mass, gravity's acceleration, the path's length: D in units of a change of the body's
+acceleration by g sustained over the path). After each subproblem, lam_p <- max(0, lam_p + rho c_p/tol_j)
+(the first-order multiplier update), and rho grows by GAMMA when the infeasibility-complementarity
+measure V = max_p |min(-c_p/tol_j, lam_p/rho)| did not fall below TAU of its last value (Birgin &
+Martinez's rule, their defaults gamma = 10, tau = 0.5).
+
+A subproblem is L-BFGS (nlopt) in preconditioned variables: z with x = x0 + R^-1 z, R^T R the
+Gauss-Newton Hessian of D/D0 alone with the time-averaged mass matrix in place of M(t) and each degree
+of freedom on its own (the spline's Gram matrix of second derivatives, scaled by the dof's mass), which
+removes the spline's ill-conditioning (its curvature grows like 1/h^3 in the frame spacing h).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solver.frames import FrameSet
+from solver.manifold import FrameVariables
+from solver.optimize import OptimizeResult, Status, minimize
+from solver.path_state import PathState
+
+__all__ = ["AugmentedLagrangian", "Preconditioner"]
+
+#: Birgin & Martinez (2014), Algorithm 4.1: rho grows by GAMMA when V did not fall below TAU of its last value
+GAMMA = 10.0
+TAU = 0.5
+
+
+class AugmentedLagrangian:
+    """Phi, its gradient and the multipliers of one problem (module docstring).
+
+    Args:
+        change: `solver.change.MeasureOfChange`. constraints: the `Constraint`s. tmap: TangentMap.
+        engine: the site engine (None without site constraints). gravity_scale: D0 [kg m^2/s^3].
+        rho: the starting penalty parameter (dimensionless).
+    """
+
+    def __init__(self, change, constraints, tmap, engine, d0: float, rho: float = 1.0):
+        self.change, self.constraints, self.tmap, self.engine = change, list(constraints), tmap, engine
+        ref = change.ref
+        self.t, self.T = ref.t, ref.duration
+        self.d0 = float(d0)
+        self.w = [c.pair_weights(ref.weights) / self.T for c in self.constraints]
+        self.lam = [np.zeros(c.size) for c in self.constraints]
+        self.rho = float(rho)
+        self.V = np.inf
+
+    def state(self, basis, P: np.ndarray) -> PathState:
+        """The PathState of frame values P (m, nq) through `basis` (a `SplineBasis` at the points)."""
+        Y, Y1, Y2 = basis.evaluate(P, (0, 1, 2))
+        return PathState(self.t, Y, Y1, Y2, self.tmap, self.engine)
+
+    def evaluate(self, basis, P: np.ndarray, grad: bool = True):
+        """(Phi, dPhi/dP (m, nq) or None, D [kg m^2/s^3])."""
+        st = self.state(basis, P)
+        D = self.change.evaluate(st, grad)
+        if grad:
+            for a in ("gY", "gY1", "gY2"):
+                setattr(st, a, getattr(st, a) / self.d0)
+            st.g_acc = None if st.g_acc is None else st.g_acc / self.d0
+        phi = D / self.d0
+        rho = self.rho
+        for c, w, lam in zip(self.constraints, self.w, self.lam):
+            ch = c.values(st) / c.tolerance
+            s = np.maximum(0.0, lam + rho * ch)
+            phi += float(w @ (s * s - lam * lam)) / (2.0 * rho)
+            if grad and s.any():
+                c.pull(st, w * s / c.tolerance)
+        if not grad:
+            return phi, None, D
+        dY, dY1, dY2 = st.pullback()
+        return phi, basis.pullback(dY, dY1, dY2), D
+
+    def scaled_values(self, basis, P: np.ndarray) -> list[np.ndarray]:
+        """c_p / tol_j at every pair of every constraint, on the path of P."""
+        st = self.state(basis, P)
+        return [c.values(st) / c.tolerance for c in self.constraints]
+
+    def update(self, scaled: list[np.ndarray]) -> float:
+        """The multiplier and penalty updates after a subproblem (module docstring); returns V."""
+        V = 0.0
+        for j, ch in enumerate(scaled):
+            if ch.size:
+                V = max(V, float(np.abs(np.minimum(-ch, self.lam[j] / self.rho)).max()))
+            self.lam[j] = np.maximum(0.0, self.lam[j] + self.rho * ch)
+        if V > TAU * self.V:
+            self.rho *= GAMMA
+        self.V = V
+        return V
+
+
+class Preconditioner:
+    """x = x0 + R^-1 z with R^T R the Gauss-Newton Hessian of D/D0 (module docstring).
+
+    The Hessian of the acceleration part is sum_i w_i (W2[i] (x) I)^T M_i (W2[i] (x) I) over the
+    quadrature points; with the time-averaged mass matrix Mbar in place of M_i it is the Kronecker
+    product K (x) Mbar, K = W2^T diag(w) W2 (+ omega^4 W^T diag(w) W for the pose part), over the frames
+    where the degrees of freedom are free: R^-1 = R_K^-1 (x) R_M^-1 with the Cholesky factors of each
+    (Van Loan, "The ubiquitous Kronecker product", J. Comput. Appl. Math. 123, 2000). Degrees of freedom
+    free at the same frames (all of them in a variable frame) share a block; a partial keyframe's free
+    components form blocks of their own.
+
+    Args:
+        variables: FrameVariables. basis: the frame set's `SplineBasis` at the quadrature points.
+        change: MeasureOfChange (weights, mass-matrix factors, omega). tmap: TangentMap. d0: D0.
+    """
+
+    def __init__(self, variables: FrameVariables, basis, change, tmap, d0: float):
+        ref = change.ref
+        w = ref.weights
+        Mbar = np.einsum("n,nik,njk->ij", w, ref.chol, ref.chol) / w.sum()  # time-averaged M (nv, nv)
+        K = (basis.gram(2, w) + change.omega ** 4 * basis.gram(0, w)) * (2.0 / d0)  # (m, m)
+        frames, dofs = _variable_dofs(variables, tmap)
+        by_dof = {}
+        for d in np.unique(dofs):
+            at = np.flatnonzero(dofs == d)
+            at = at[np.argsort(frames[at], kind="stable")]
+            by_dof.setdefault(frames[at].tobytes(), []).append((d, at))
+        self.groups = []  # (index (f, k) into x, R_K^-1 (f, f), R_M^-1 (k, k))
+        for key, members in by_dof.items():
+            F = np.frombuffer(key, dtype=frames.dtype)
+            D = np.array([d for d, _ in members])
+            index = np.stack([at for _, at in members], axis=1)  # (f, k)
+            self.groups.append((index, _inverse_factor(K[np.ix_(F, F)]), _inverse_factor(Mbar[np.ix_(D, D)])))
+
+    def apply(self, z: np.ndarray) -> np.ndarray:
+        """R^-1 z."""
+        out = np.empty_like(z)
+        for index, RK, RM in self.groups:
+            out[index] = RK @ z[index] @ RM.T
+        return out
+
+    def apply_transpose(self, g: np.ndarray) -> np.ndarray:
+        """R^-T g (a gradient in x as one in z)."""
+        out = np.empty_like(g)
+        for index, RK, RM in self.groups:
+            out[index] = RK.T @ g[index] @ RM
+        return out
+
+
+def _inverse_factor(H: np.ndarray) -> np.ndarray:
+    """R^-1 for R upper triangular with R^T R = H + a relative ridge of 1e-12 (H symmetric positive
+    semidefinite: a spline through two frames has no curvature)."""
+    H = H.copy()
+    H.flat[:: len(H) + 1] += 1e-12 * np.trace(H) / len(H) + 1e-300
+    return np.linalg.inv(np.linalg.cholesky(H).T)
+
+
+def initial_penalty(al: AugmentedLagrangian, basis, variables: FrameVariables, pre: Preconditioner,
+                    iterations: int = 8, seed: int = 0) -> float:
+    """rho_0 = 1 / lambda_max(A^T A): A the Jacobian of the broken constraints (c/tol, each pair weighted
+    by sqrt(w_p/T)) in the preconditioned variables, where D/D0's Hessian is about the identity; so the
+    first subproblem's penalty is as stiff as the objective in its stiffest direction (a linearized
+    subproblem then halves the violation along it) and no stiffer. lambda_max by power iteration
+    (Golub & Van Loan, Matrix Computations, sec. 8.2.1), A v by central differences of the constraint
+    values, A^T u by the constraints' own reverse pass.
+
+    Returns:
+        rho_0 > 0 (1 where no constraint is broken).
+    """
+    P0 = variables.values(np.zeros(variables.size))
+    broken = [ch > 0 for ch in al.scaled_values(basis, P0)]
+    if not any(b.any() for b in broken):
+        return 1.0
+    sq = [np.sqrt(w) * b for w, b in zip(al.w, broken)]
+
+    def A(v):
+        eps = 1e-6 / max(1e-300, float(np.abs(pre.apply(v)).max()))
+        hi = al.scaled_values(basis, variables.values(eps * pre.apply(v)))
+        lo = al.scaled_values(basis, variables.values(-eps * pre.apply(v)))
+        return [q * (a - b) / (2 * eps) for q, a, b in zip(sq, hi, lo)]
+
+    def At(u):
+        st = al.state(basis, P0)
+        for c, q, uj in zip(al.constraints, sq, u):
+            if q.any():
+                c.pull(st, q * uj / c.tolerance)
+        G = basis.pullback(*st.pullback())
+        return pre.apply_transpose(variables.pullback(np.zeros(variables.size), G))
+
+    v = np.random.default_rng(seed).normal(size=variables.size)
+    v /= np.linalg.norm(v)
+    lam = 0.0
+    for _ in range(iterations):
+        w = At(A(v))
+        lam = float(np.linalg.norm(w))
+        if lam == 0:
+            return 1.0
+        v = w / lam
+    return 1.0 / lam
+
+
+def _variable_dofs(variables: FrameVariables, tmap) -> tuple[np.ndarray, np.ndarray]:
+    """(frame (n,), dof (n,)) of each variable: its frame and the qvel component it moves."""
+    lin = variables.linear_mask()
+    fr, comp = np.nonzero(lin)
+    dof = np.empty(len(comp), int)
+    qv = {int(q): int(v) for q, v in zip(tmap.lin_q, tmap.lin_v)}
+    for qq, vv in zip(tmap.quat_q, tmap.quat_v):
+        for q in qq:
+            qv.setdefault(int(q), int(vv[0]))
+    for i, c in enumerate(comp):
+        dof[i] = qv[int(c)]
+    rows, slots = variables.quaternion_frames()
+    qfr = np.repeat(rows, 3)
+    qdof = tmap.quat_v[slots].ravel()
+    return np.r_[fr, qfr].astype(int), np.r_[dof, qdof].astype(int)
+
+
+@dataclass
+class SubproblemResult:
+    """One subproblem's outcome: the frames, the optimizer's result and the time it took."""
+
+    frames: FrameSet
+    result: OptimizeResult
+    seconds: float
+    D: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, ftol_rel: float = 1e-6,
+                     max_evals: int = 0, max_time_s: float = 0.0, should_stop=None, callback=None,
+                     basis=None) -> SubproblemResult:
+    """Minimize Phi over the free values of `frames` (L-BFGS in the preconditioned variables).
+
+    Args:
+        al: AugmentedLagrangian (multipliers and rho as they are). frames: FrameSet to start from.
+        quat_slots: (s, 4) the layout's quaternion slots. ftol_rel, max_evals, max_time_s,
+            should_stop, callback: as `solver.optimize.minimize`. basis: the frames' SplineBasis.
+    Returns:
+        SubproblemResult (frames at the best iterate).
+    """
+    t0 = time.perf_counter()
+    var = FrameVariables(frames, quat_slots)
+    pre = Preconditioner(var, basis, al.change, al.tmap, al.d0)
+    x0 = np.zeros(var.size)
+
+    def fun(z, need_grad):
+        x = x0 + pre.apply(z)
+        P = var.values(x)
+        phi, G, _ = al.evaluate(basis, P, need_grad)
+        if not need_grad:
+            return phi, None
+        return phi, pre.apply_transpose(var.pullback(x, G))
+
+    res = minimize(fun, np.zeros(var.size), algorithm="lbfgs", ftol_rel=ftol_rel, max_evals=max_evals,
+                   max_time_s=max_time_s, should_stop=should_stop, callback=callback)
+    x = x0 + pre.apply(res.x)
+    out = var.frame_set(x)
+    return SubproblemResult(out, res, time.perf_counter() - t0)
+
+
+__all__ += ["SubproblemResult", "solve_subproblem", "Status"]

@@ -1,0 +1,85 @@
+"""One evaluation's path at the quadrature points, what is computed from it, and the adjoints that flow back.
+
+The objective and every constraint read the same things: the path Y, Y', Y'' (the spline at the
+quadrature points, paper eq. 6), MuJoCo's `qvel` and `qacc` of it (`solver.kinematics.PathMotion`), and
+the contact sites' positions and velocities (`solver.kinematic_tree.SiteKinematics`, paper appendix A
+eq. 13 and 19). `PathState` computes each once per evaluation; every function adds its gradient to the
+state's adjoints (with respect to Y, Y', Y'' directly, to qacc and the pose in MuJoCo's tangent space, to
+the site positions and velocities), and `pullback` runs each reverse pass once for their sum.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.kinematics import TangentMap
+
+__all__ = ["PathState"]
+
+
+class PathState:
+    """The path of one evaluation and its adjoints (module docstring).
+
+    Args:
+        t: (n,) quadrature times [s]. Y, Y1, Y2: (n, nq) the path and its first and second derivatives.
+        tmap: the model's TangentMap. engine: a `SiteKinematics` of the contact sites, or None.
+    Attributes:
+        motion: `PathMotion` (qvel, qacc (n, nv) and their reverse pass).
+    """
+
+    def __init__(self, t: np.ndarray, Y: np.ndarray, Y1: np.ndarray, Y2: np.ndarray, tmap: TangentMap,
+                 engine=None):
+        self.t, self.Y, self.Y1, self.Y2 = t, Y, Y1, Y2
+        self.motion = tmap.motion(Y, Y1, Y2)
+        self.engine = engine
+        self._res = None
+        n, nq = Y.shape
+        self.gY = np.zeros((n, nq))
+        self.gY1 = np.zeros((n, nq))
+        self.gY2 = np.zeros((n, nq))
+        self.g_acc: np.ndarray | None = None
+        self.g_sites: np.ndarray | None = None
+        self.g_site_vel: np.ndarray | None = None
+        #: what a function computes for its value and reuses for its gradient (keyed by the function)
+        self.cache: dict = {}
+
+    def _pass(self):
+        if self._res is None:
+            self._res = self.engine.forward(self.Y, np.ascontiguousarray(self.motion.qvel))
+        return self._res
+
+    @property
+    def sites(self) -> np.ndarray:
+        """(n, k, 3) world positions [m] of the engine's sites."""
+        return self._pass().sites
+
+    @property
+    def site_velocities(self) -> np.ndarray:
+        """(n, k, 3) world velocities [m/s] of the engine's sites."""
+        return self.engine.site_velocities(self._pass())
+
+    def add_acceleration(self, g: np.ndarray) -> None:
+        """Add g (n, nv) = d f / d qacc."""
+        self.g_acc = g.copy() if self.g_acc is None else self.g_acc + g
+
+    def add_sites(self, g_pos: np.ndarray | None, g_vel: np.ndarray | None = None) -> None:
+        """Add d f / d site positions and velocities, each (n, k, 3) or None."""
+        if g_pos is not None:
+            self.g_sites = g_pos.copy() if self.g_sites is None else self.g_sites + g_pos
+        if g_vel is not None:
+            self.g_site_vel = g_vel.copy() if self.g_site_vel is None else self.g_site_vel + g_vel
+
+    def pullback(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(dY, dY1, dY2), each (n, nq): the sum of every adjoint added, pulled back to the path."""
+        dY, dY1, dY2 = self.gY.copy(), self.gY1.copy(), self.gY2.copy()
+        g_pose = g_vel = None
+        if self.g_sites is not None or self.g_site_vel is not None:
+            res = self._pass()
+            z = np.zeros(res.sites.shape)
+            g_pose, g_vel, _ = self.engine.vjp(res, None, z if self.g_sites is None else self.g_sites,
+                                               z if self.g_site_vel is None else self.g_site_vel)
+        if g_pose is not None or g_vel is not None or self.g_acc is not None:
+            a, b, c = self.motion.vjp(g_vel, self.g_acc, g_pose)
+            dY += a
+            dY1 += b
+            dY2 += c
+        return dY, dY1, dY2
