@@ -11,10 +11,13 @@ from runner.render import side_by_side
 from runner.render.side_by_side import PANELS
 from solver.animate import DEFAULT_RATE, default_options
 from solver.errors import InputError
+from solver.least_change import LeastChangeOptions
 from solver.optimize import ALGORITHMS
 from solver.problem import parse_terms, term_names
 from solver.solve import BACKENDS, SCORES, SUBDIVISIONS, SolveOptions
 
+#: the solve methods of --method (docs/design.md)
+METHODS = ("least-change", "penalty")
 #: the library's settings (`solver.default_options`): the command's defaults are these, not its own
 _LIB = default_options({})
 
@@ -92,6 +95,10 @@ def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = Non
     """The "optimization" options of `add_options` (what `solve_options` reads); also `dynsplines batch`'s.
     `terms_help`: what --terms defaults to for this command (its help's [default])."""
     opt = p.add_argument_group("optimization")
+    opt.add_argument("--method", choices=METHODS, default=None,
+                     help="least-change: the least change to the plain spline that meets the constraints "
+                          "(docs/design.md); penalty: the weighted terms of paper eq. 1 (--terms, --weight) "
+                          "[least-change; penalty when --terms or --weight is given]")
     opt.add_argument("--terms", default=None,
                      help=f"objective terms: 'all' or a list from {','.join(term_names())} "
                           f"[{terms_help or 'the keyframe file’s, else the default terms; with its contacts also planted,clearance'}]")
@@ -168,15 +175,33 @@ def clip_terms(args) -> dict:
     return {"terms": args.terms, "weights": dict(args.weight), "solve": solve_options(args, weights)}
 
 
-def solve_options(args, weights: dict) -> SolveOptions:
-    """`solver.default_options(weights)` with the parsed `add_options` arguments applied (the command's
-    and the benchmark's settings). `--rounds N` selects N fixed adaptive rounds (`SolveOptions.refine`
-    "rounds"), `--tol X` (or neither: the default tolerance) refinement to a tolerance ("tol").
+def method(args) -> str:
+    """The solve method of the parsed arguments: --method, else penalty when --terms or --weight names
+    terms, else least-change."""
+    chosen = getattr(args, "method", None)
+    if chosen is not None:
+        return chosen
+    return "penalty" if getattr(args, "terms", None) or getattr(args, "weight", None) else "least-change"
+
+
+def solve_options(args, weights: dict) -> SolveOptions | LeastChangeOptions:
+    """The solve options of the parsed `add_options` arguments (the command's and the benchmark's
+    settings). least-change (`method`): `LeastChangeOptions` with --tol and --max-time. penalty:
+    `solver.default_options(weights)` with the arguments applied; `--rounds N` selects N fixed adaptive
+    rounds (`SolveOptions.refine` "rounds"), `--tol X` (or neither: the default tolerance) refinement to
+    a tolerance ("tol").
 
     Raises:
-        InputError: both --rounds and --tol; --tol with a subdivision other than adaptive.
+        InputError: both --rounds and --tol; --tol with a subdivision other than adaptive; --terms or
+            --weight with --method least-change.
     """
     tol, rounds = getattr(args, "tol", None), getattr(args, "rounds", None)
+    if method(args) == "least-change":
+        if getattr(args, "terms", None) or getattr(args, "weight", None):
+            raise InputError("--terms and --weight choose the penalty method's terms; drop them, or add "
+                             "--method penalty")
+        lc = LeastChangeOptions()
+        return replace(lc, tol=lc.tol if tol is None else tol, max_time_s=getattr(args, "max_time", 0.0) or 0.0)
     if tol is not None and rounds is not None:
         raise InputError(f"--rounds {rounds} and --tol {tol:g} are two ways to end adaptive refinement; give "
                          "one: --rounds N for N fixed rounds, or --tol X to refine until the estimate is at most X")

@@ -266,9 +266,9 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
     n_pen = 1 + len(plain["penetration_mm_by_site"])  # the feet rows go after the penetration rows
     rows[n_pen:n_pen] = list(contact_rows)
     rows.append(("objective E", solution.E_initial, solution.E_final, "{:.5g}"))
-    for name in weights:
-        rows.append((f"  integral {name}", solution.integrals_initial[name], solution.integrals_final[name],
-                     "{:.4g}"))
+    for name in solution.integrals_final:  # a term's integral, or a constraint's worst value / tolerance
+        label = f"  integral {name}" if name in weights else f"  {name}: worst / tolerance"
+        rows.append((label, solution.integrals_initial[name], solution.integrals_final[name], "{:.4g}"))
     extra = getattr(solution, "extra_rows", None) or []
     rows += extra
     lines = format_rows(rows, row_targets([r[0] for r in rows], weights, plain["penetration_mm_by_site"]))
@@ -293,9 +293,16 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
     for name, w0 in weights.items():
         w1 = final.get(name, w0)
         terms.append(f"{name} {w0:g}" + (f" -> {w1:g}" if w1 != w0 else ""))
-    lines.append("terms (weight; -> after penalty continuation): " + ", ".join(terms))
+    if terms:
+        lines.append("terms (weight; -> after penalty continuation): " + ", ".join(terms))
+    else:
+        lines.append("least change (docs/design.md): objective E = D / (m g^2 T), the mass-weighted change of the "
+                     "accelerations; a constraint row is its worst value over its tolerance (met at <= 1)")
     stalled = getattr(solution, "stalled", None) or {}
-    if stalled:
+    if stalled and not terms:
+        lines.append("constraints the keyframes leave out of reach (limit raised to what the path reaches), by [SI]: "
+                     + ", ".join(f"{k} {v:.3g}" for k, v in stalled.items()))
+    elif stalled:
         lines.append("bounds out of reach (a x10 boost did not halve the violation; not boosted again): "
                      + ", ".join(f"{k} {v:.3g}" for k, v in stalled.items()))
     return "\n".join(lines)

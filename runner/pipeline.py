@@ -342,7 +342,9 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     if problem.conflicts.found:  # the clip's own keyframes against its own contacts: a heel "in contact" 3 cm up
         say(f"  {len(problem.conflicts.found)} keyframe(s) hold a site off the contact schedule (met exactly; those "
             "contacts and swings are not held to the bounds)")
-    options_ = replace(o.solve or default_options(dict(problem.weights)), limits=problem.limits)
+    options_ = o.solve or default_options(dict(problem.weights))
+    if isinstance(options_, SolveOptions):
+        options_ = replace(options_, limits=problem.limits)
     video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, panels=o.panels, camera=o.camera, quiet=o.quiet)
     outputs = Outputs(save_path=paths["save_path"], exports=tuple(o.exports), plot_dir=o.plot, video=paths.get("video"),
                       video_options=video, summary=o.summary, quiet=o.quiet, command={"command": o.command})

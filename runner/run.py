@@ -239,7 +239,8 @@ def report(run: Run) -> str:
     metrics against the capture, and how close the capture's own feet are to the scene."""
     motion = run.metrics.get("motion")
     rows = contact_summary_rows(motion, run.solution.objective, run.solution)
-    lines = [summary_table(run.metrics["plain"], run.metrics["optimized"], run.solution, dict(run.problem.weights),
+    weights = {} if run.solution.objective is None else dict(run.problem.weights)  # None: least change
+    lines = [summary_table(run.metrics["plain"], run.metrics["optimized"], run.solution, weights,
                            dict(run.solution.weights), contact_rows=rows, force_bounds=run.problem.force_bounds)]
     ref = run.source.reference
     if ref is not None:
@@ -406,7 +407,7 @@ def contact_summary_rows(motion, objective, solution) -> list:
         a, b = (motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"] for p in ("plain", "optimized"))
         rows.append(("flight phase error vs capture [s]", a, b, "{:.3f}", motion_worse("flight_phase_error_s", a, b, frame_s)))
         rows += anatomy_summary_rows(motion)
-    if "cone" in objective.names:
+    if objective is not None and "cone" in objective.names:
         from solver.metrics import sample_times
         from solver.terms.contact_wrench import cone_metrics
 

@@ -14,6 +14,7 @@ from dataclasses import replace
 
 from solver.errors import InputError
 from solver.keyframes import Keyframes
+from solver.least_change import LeastChangeOptions
 from solver.problem import CONTACT_TERMS, Problem, default_limits, make_problem
 from solver.quadrature import DEFAULT_RATE
 from solver.solve import Solution, SolveOptions, solve
@@ -133,11 +134,13 @@ def animate(
 def solve_problem(problem: Problem, options: SolveOptions | None = None, *,
                   should_stop: Callable[[], bool] | None = None,
                   progress: Callable[[str, dict], None] | None = None) -> Solution:
-    """Solve a `Problem` (paper fig. 5): `solve(problem.objective, problem.initial, options)`.
+    """Solve a `Problem`: with `LeastChangeOptions`, the least change to the plain spline that meets the
+    figure's constraints (`solver.least_change`, docs/design.md); with SolveOptions, the penalty
+    objective of paper eq. 1 (`solve(problem.objective, problem.initial, options)`, paper fig. 5).
 
     Args:
         problem: from `make_problem`.
-        options: SolveOptions; default `default_options(problem.weights)` (the command line's).
+        options: LeastChangeOptions or SolveOptions; default `default_options(problem.weights)`.
         should_stop, progress: as for `solve`.
     Returns:
         Solution.
@@ -147,6 +150,12 @@ def solve_problem(problem: Problem, options: SolveOptions | None = None, *,
     """
     if not isinstance(problem, Problem):
         raise InputError(f"problem must be a solver.Problem (from make_problem), got {type(problem).__name__}")
+    if isinstance(options, LeastChangeOptions):
+        from solver.least_change import build_least_change, solve_least_change
+
+        lc = build_least_change(problem.model, problem.keyframes, contacts=tuple(problem.contacts),
+                                flights=problem.airborne, capture=problem.capture, rate=problem.rate)
+        return solve_least_change(lc, options, should_stop=should_stop, progress=progress)
     if options is None:
         options = default_options(dict(problem.weights))
     elif not isinstance(options, SolveOptions):

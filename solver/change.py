@@ -1,6 +1,6 @@
 """The measure of change: how much a path differs from the reference motion, in units that price a jolt.
 
-    D(Y) = integral of  (a - a_ref)^T M (a - a_ref)  +  omega^4 (dq)^T M (dq)  dt        [kg m^2 / s^3]
+    D(Y) = integral of  (a - a_ref)^T M (a - a_ref)  +  omega^4 (dq)^T diag(M) (dq)  dt    [kg m^2 / s^3]
 
 a, a_ref: MuJoCo's `qacc` of the path and of the reference (`solver.reference.ReferenceMotion`); dq: the
 pose difference in MuJoCo's tangent space (root position difference; for each quaternion the rotation
@@ -11,8 +11,9 @@ accelerations: changing the pelvis's acceleration by 1 m/s^2 costs the whole bod
 the hand's, so a solve buys a foot's contact with the leg rather than with a jolt of the body. It is
 the spacetime-constraints objective of Witkin & Kass ("Spacetime constraints", SIGGRAPH 1988), measured
 as a change from a motion to keep, as Gleicher poses motion editing ("Motion editing with spacetime
-constraints", I3D 1997). The pose part makes the problem well posed where accelerations leave a
-change free (a partial keyframe's free component at the path's ends may drift linearly); omega =
+constraints", I3D 1997). The pose part (each degree of freedom weighted by its own inertia, diag(M), so
+that the pose of one joint is not traded against another's through the mass matrix's coupling) makes
+the problem well posed where accelerations leave a change free (a partial keyframe's free component at the path's ends may drift linearly); omega =
 pi / T for a path of length T prices the slowest change a path pinned at both ends can make (a half
 sine over T) as much by its displacement as by its acceleration, and every faster change less, so it
 does not compete with the acceleration part anywhere else.
@@ -48,8 +49,6 @@ class MeasureOfChange:
         self._qref = reference.qpos[:, tmap.quat_q].transpose(2, 1, 0)  # (4, s, n)
         self._uref = self._qref / np.linalg.norm(self._qref, axis=0)
         self._M = reference.chol @ reference.chol.transpose(0, 2, 1)  # (n, nv, nv) M(q_ref)
-        import os
-        self._diag_pose = os.environ.get("POSEDIAG", "1") == "1"
         self._Md = np.einsum("nii->ni", self._M).copy()  # (n, nv) diag M
 
     def _pose_difference(self, Y: np.ndarray):
@@ -74,8 +73,7 @@ class MeasureOfChange:
         dq, q, r = self._pose_difference(state.Y)
         X = np.stack([state.motion.qacc - self.ref.qacc, dq], axis=2)  # (n, nv, 2)
         MX = self._M @ X
-        if self._diag_pose:
-            MX[:, :, 1] = self._Md * dq
+        MX[:, :, 1] = self._Md * dq
         w4 = self.omega ** 4
         e = (X * MX).sum(1)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T M dq
         D = float(w @ e[:, 0] + w4 * (w @ e[:, 1]))

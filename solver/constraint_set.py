@@ -35,7 +35,6 @@ so a user sees where the keyframes, not the optimizer, decide.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,13 +51,14 @@ from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion
 from solver.terms.bending import flexion_angles
 from solver.terms.contact_schedule import SupportSurfaces
 
-_GROUND = os.environ.get('GROUND', '1') == '1'
 __all__ = ["TOLERANCES", "Relaxation", "figure_constraints"]
 
-#: [m] how far a planted foot may slide over one contact: 5 mm, under what the eye sees (a tenth of the
-#: 40-100 mm the captured clips' own sites move in theirs)
-SLIDE_DISTANCE = float(os.environ.get('SLIDE', '5e-3'))
-FLOAT_LIMIT = float(os.environ.get('FLOATLIM', '0'))
+#: [m] how far a planted site may slide over one contact: 1 cm, under what the eye sees at a body's
+#: scale (a fifth of the 40-100 mm the captured clips' own sites move in theirs)
+SLIDE_DISTANCE = 1e-2
+#: [m] a planted foot's mean height over its contact: 2 mm (with the 2 mm tolerance, under the 5 mm float
+#: of PhysDiff's metric, ../shared/METRICS.md; a sole resting on a floor sits about that high in a capture)
+FLOAT_LIMIT = 2e-3
 #: [m/s] the width of the Huber function that smooths a sliding speed at 0 (`SupportSlide`): 1 cm/s,
 #: where a site's slide is within the capture's marker noise (about 1 mm per frame at 120 fps)
 SLIDE_SMOOTHING = 1e-2
@@ -121,11 +121,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             height = SupportHeight(*args, limit=limit_h, tolerance=TOLERANCES["planted"])
             height.reports = reports
             out.append(height)
-            if os.environ.get("SLIDEMODE", "support") == "site":
-                sargs, slim = _site_slides(model, reference, plain, contacts, support, radii, sites)
-                out.append(SupportSlide(*sargs, limit=slim, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING))
-            else:
-                out.append(SupportSlide(*args, limit=limit_s, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING))
+            sargs, slim = _site_slides(model, reference, plain, contacts, support, radii, sites)
+            out.append(SupportSlide(*sargs, limit=slim, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING))
         out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     out += _anatomy(figure, StateLayout.from_model(model), reference)
     out.append(_accelerations(model, reference, capture))
@@ -224,7 +221,7 @@ def _flight_and_ground(model, reference, plain, engine, support, radii, flights,
         out.append(HeightBound("flight", support, radii, rows, cols, -np.ones(len(rows), int),
                                np.full(len(rows), FLIGHT_HEIGHT + tol), False, tol, np.array(sites, object)[cols]))
     on = np.flatnonzero(~flying)
-    if on.size and _GROUND:
+    if on.size:
         state = _reference_state(model, reference, plain, engine) if capture is None else _capture_state(model, reference, capture, engine)
         h, _ = site_heights(state, support, radii, np.repeat(on, K), np.tile(np.arange(K), len(on)),
                             -np.ones(len(on) * K, int))

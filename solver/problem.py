@@ -322,6 +322,8 @@ class Problem:
         force_bounds: the forces term's `solver.peak_bounds.PeakBounds` (peak ground force and pelvis
             acceleration: the larger of the plain spline's and the filtered capture's), or None when the
             term is not chosen.
+        capture: None or (times (n,) [s], qpos (n, nq)): the motion capture the keyframes came from.
+        airborne: None or ((start, end), ...) [s]: the flights given or found on the capture.
     """
 
     model: object = field(repr=False)
@@ -335,6 +337,8 @@ class Problem:
     conflicts: ScheduleConflicts = field(default_factory=ScheduleConflicts)
     figure: object = field(default=None, repr=False)
     force_bounds: object = None
+    capture: tuple | None = field(default=None, repr=False)
+    airborne: tuple | None = None
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -421,4 +425,12 @@ def make_problem(model, keyframes, terms: str | list[str] | tuple[str, ...] | No
     from solver.figure import Figure
 
     return Problem(model, keyframes, contacts, MappingProxyType(dict(chosen)), default_limits(chosen), rate,
-                   objective, initial, conflicts, Figure.from_model(model), peaks)
+                   objective, initial, conflicts, Figure.from_model(model), peaks, capture,
+                   _flights(model, airborne, capture))
+
+
+def _flights(model, airborne, capture) -> tuple | None:
+    """((start, end), ...) [s]: the flights given, else the capture's (`capture_airborne`), else None."""
+    if airborne is None and capture is not None:
+        airborne = capture_airborne(model, *capture)
+    return None if airborne is None else tuple((float(a), float(b)) for a, b in airborne)

@@ -12,6 +12,7 @@ from runner.paths import display_path
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem
 from runner.run import execute
 from solver.errors import InputError
+from solver.solve import SolveOptions
 
 #: where the commands write when no output is named: relative to the current folder
 OUTPUT_DIR = Path("renders")
@@ -63,9 +64,12 @@ def run_animate(args) -> int:
     kf = problem.keyframes
     print(f"dynsplines: {display_path(args.keyframes)} -> {kf.count} keyframes ({int(kf.is_partial.sum())} partial) "
           f"over {kf.times[-1] - kf.times[0]:.2f} s, scene {display_path(source.scene_path)}")
-    print(f"  terms: {', '.join(f'{n}={w:g}' for n, w in problem.weights.items())}"
-          f"{' (renormalized, eq. 7)' if options.renormalize else ''}; subdivision {options.subdivision}; "
-          f"nlopt {options.algorithm}")
+    if isinstance(options, SolveOptions):
+        print(f"  terms: {', '.join(f'{n}={w:g}' for n, w in problem.weights.items())}"
+              f"{' (renormalized, eq. 7)' if options.renormalize else ''}; subdivision {options.subdivision}; "
+              f"nlopt {options.algorithm}")
+    else:
+        print("  the least change to the plain spline that meets the constraints (docs/design.md)")
     return execute(problem, options, source, outputs).exit_code
 
 

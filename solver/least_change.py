@@ -1,0 +1,266 @@
+"""The least change that meets the constraints (docs/design.md): build the problem and solve it.
+
+    minimize D(P)   over the free frame values P   subject to   c_p(P) <= 0 for every pair p
+
+D is the mass-weighted change of the path's accelerations from the reference motion's
+(`solver.change`), the constraints are each a function with its unit and tolerance
+(`solver.constraint_set`), and the method of multipliers (`solver.lagrangian`) turns the problem into a
+sequence of unconstrained subproblems whose variables are the free values of the frames: the keyframes
+are not variables, so every iterate meets them exactly and is a path (paper sec. 2). Between
+subproblems the multipliers and the penalty are updated; when a subproblem on the current frames is
+done (the constraints met, or no longer improving), variable frames are added where the Euler-Lagrange
+residual of the augmented integrand predicts the largest decrease (`solver.least_change_refine`, paper
+sec. 4.2 and fig. 5), never closer than `min_gap` to another frame.
+
+A pair the method cannot meet on any frame set (it stalls before and after refining) is reported, with
+where and by how much, and its limit is raised to what the path reaches (its multiplier reset), so the
+rest of the problem is solved as posed (`Solution.stalled`, in the constraint's SI unit).
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solver.change import MeasureOfChange
+from solver.constraint_set import figure_constraints
+from solver.contact_schedule import ContactSchedule
+from solver.errors import InputError
+from solver.figure import Figure
+from solver.frames import FrameSet
+from solver.kinematic_tree import SiteKinematics
+from solver.kinematics import TangentMap
+from solver.lagrangian import GAMMA, AugmentedLagrangian, Preconditioner, initial_penalty, solve_subproblem
+from solver.layout import StateLayout
+from solver.least_change_refine import doerfler_times, predicted_decreases
+from solver.manifold import FrameVariables
+from solver.optimize import Status
+from solver.quadrature import quadrature_times
+from solver.reference import ReferenceMotion
+from solver.solution import Round, Solution
+from solver.spline_basis import SplineBasis
+from solver.subdivide import knot_hint_times
+
+__all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "solve_least_change"]
+
+#: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
+STANDARD_GRAVITY = 9.80665
+#: a subproblem whose penalty grew stalls when it cut the infeasibility V by under 10 %; two in a row
+#: on one frame set send it to refinement, two more after refining report the pairs as unmet
+STALL_RATIO = 0.9
+
+
+@dataclass(frozen=True)
+class LeastChangeOptions:
+    """How the least-change problem is solved (read-only).
+
+    Attributes:
+        tol: refinement stops when the decrease of Phi it still predicts is at most tol * Phi and every
+            constraint is met (dimensionless; 1 %: the paper's fig. 5 "good enough" test as a fraction).
+        min_gap: [s] no two frames closer: 1/48 s, half a frame of 24 fps film; a cubic spline through
+            frames closer than that kinks between them (its second derivative grows like 1/h^2).
+        max_subproblems: subproblems in all (each an L-BFGS run), a guard against a method that cycles.
+        per_level: subproblems on one frame set before refining it anyway (the multipliers converge
+            linearly; refining is cheaper than more updates on too few frames).
+        ftol_rel: each subproblem's relative tolerance on Phi (nlopt's ftol_rel).
+        max_evals: evaluations per subproblem (0: no limit): a subproblem far from its multipliers'
+            solution need not be solved tightly (Birgin & Martinez 2014, sec. 4.1: inexact subproblems).
+        max_time_s: [s] stop after this much time in all, keeping the path so far (0: no limit).
+    """
+
+    tol: float = 1e-2
+    min_gap: float = 1.0 / 48.0
+    max_subproblems: int = 40
+    per_level: int = 8
+    ftol_rel: float = 1e-6
+    max_evals: int = 200
+    max_time_s: float = 0.0
+
+    def __post_init__(self):
+        for name in ("tol", "min_gap", "ftol_rel", "max_time_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
+                raise InputError(f"LeastChangeOptions.{name} must be a number >= 0, got {v!r}")
+        for name in ("max_subproblems", "per_level", "max_evals"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or v < 0:
+                raise InputError(f"LeastChangeOptions.{name} must be an integer >= 0, got {v!r}")
+
+
+@dataclass
+class LeastChange:
+    """One built least-change problem (`build_least_change`).
+
+    Attributes:
+        model: mujoco.MjModel. layout: its StateLayout. figure: its Figure. plain: FrameSet of the plain
+        spline through the keyframes (the reference motion). al: the AugmentedLagrangian (D, the
+        constraints, multipliers, penalty). relaxations: the `solver.constraint_set.Relaxation`s the
+        keyframes force. knots: (r,) [s] times where a contact starts or ends (frames go there first).
+    """
+
+    model: object = field(repr=False)
+    layout: StateLayout = field(repr=False)
+    figure: Figure = field(repr=False)
+    plain: FrameSet = field(repr=False)
+    al: AugmentedLagrangian = field(repr=False)
+    relaxations: tuple = ()
+    knots: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = 400.0) -> LeastChange:
+    """Build the problem: the plain spline as the reference motion, D, the figure's constraints.
+
+    Args:
+        model: mujoco.MjModel of the scene with the figure. keyframes: Keyframes (k, nq) at times (k,) [s].
+        contacts: the contact schedule (`Contact`s). flights: ((start, end), ...) [s] where every site
+            is clear; None: the schedule's gaps. capture: None or (times (n,) [s], qpos (n, nq)), the
+            motion capture the keyframes came from (its filtered peaks bound the accelerations).
+        rate: quadrature points per second [1/s].
+    Returns:
+        LeastChange.
+    Raises:
+        InputError: fewer than two keyframes.
+    """
+    if keyframes.count < 2:
+        raise InputError(f"{keyframes.source}: a path needs at least two keyframes, got {keyframes.count}")
+    layout = StateLayout.from_model(model)
+    figure = Figure.from_model(model)
+    tmap = TangentMap.from_layout(layout)
+    plain = FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    t0, t1 = float(plain.times[0]), float(plain.times[-1])
+    t, h = quadrature_times(t0, t1, rate)
+    reference = ReferenceMotion.from_frames(model, plain, t, np.full(len(t), h))
+    engine = SiteKinematics(model, figure.contact_sites) if figure.contact_sites else None
+    schedule = ContactSchedule.of(contacts or ())
+    flights = tuple(schedule.flights()) if flights is None else tuple(flights)
+    constraints, relaxations = figure_constraints(model, figure, reference, plain, tuple(schedule), flights,
+                                                  engine, capture=capture)
+    # the pose part's frequency: the keyframes' own Nyquist frequency (a change slower than the keyframe
+    # spacing is priced by its pose, a faster one by its acceleration)
+    omega = np.pi / float(np.mean(np.diff(keyframes.times)))
+    change = MeasureOfChange(reference, tmap, omega=omega)
+    d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)
+    al = AugmentedLagrangian(change, constraints, tmap, engine, d0)
+    knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
+    return LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots)
+
+
+def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
+    """The plain spline's frames with variable frames at the contacts' ends and in every segment."""
+    frames = lc.plain.with_variable_frames(knot_hint_times(lc.plain, lc.knots, min_gap))
+    mids = 0.5 * (frames.times[:-1] + frames.times[1:])
+    return frames.with_variable_frames(mids[np.diff(frames.times) >= 2 * min_gap])
+
+
+def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list) -> dict:
+    """Raise the limit of every pair still broken to what the path reaches and reset its multiplier;
+    returns {constraint: largest amount [SI]}."""
+    state = al.state(basis, frames.values)
+    unmet = {}
+    for j, (c, ch) in enumerate(zip(al.constraints, scaled)):
+        bad = ch > 1.0
+        if bad.any():
+            v = c.values(state)
+            unmet[c.name] = max(unmet.get(c.name, 0.0), float(v[bad].max()))
+            c.limit = c.limit.copy()
+            c.limit[bad] += v[bad]
+            al.lam[j] = np.where(bad, 0.0, al.lam[j])
+    al.rho /= GAMMA ** 2
+    al.V = np.inf
+    return unmet
+
+
+def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = None, *,
+                       should_stop: Callable[[], bool] | None = None,
+                       progress: Callable[[str, dict], None] | None = None) -> Solution:
+    """Solve a built problem by the method of multipliers with adaptive variable frames (module docstring).
+
+    Args:
+        lc: from `build_least_change` (its multipliers change). options: LeastChangeOptions.
+        should_stop: polled during each subproblem; True ends the solve with the path so far.
+        progress: progress(event, info): "round" (a subproblem starts: round, frames, variable), "eval"
+            (evals, E = Phi), "estimate" (round, estimate: the predicted decrease over Phi, tol).
+    Returns:
+        Solution: frames, initial (the plain spline's), one Round per subproblem, status, E = D/D0
+        before (0) and after, `integrals_*` the largest constraint value over its tolerance per
+        constraint, `stalled` {constraint: amount [SI]} of the pairs it could not meet.
+    """
+    o = options or LeastChangeOptions()
+    al, quat = lc.al, lc.layout.quat_slots
+    start = time.perf_counter()
+    frames = _start_frames(lc, o.min_gap)
+    basis = SplineBasis(frames.times, al.t)
+    al.rho = initial_penalty(al, basis, FrameVariables(frames, quat),
+                             Preconditioner(FrameVariables(frames, quat), basis, al.change, al.tmap, al.d0))
+    rounds, trace, unmet = [], [], {}
+    evals, level_its, stall, stalled_before, kind = 0, 0, 0, False, "start"
+    status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
+    for k in range(o.max_subproblems):
+        left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
+        if o.max_time_s and left <= 0:
+            status, message = Status.MAX_TIME, f"the time limit of {o.max_time_s:g} s ran out"
+            break
+        if progress:
+            progress("round", {"round": k, "frames": frames.count, "variable": frames.n_variable})
+        cb = None if progress is None else (lambda n, best, e0=evals: progress("eval", {"evals": e0 + n, "E": best}))
+        r = solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=basis, max_evals=o.max_evals,
+                             max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb)
+        frames, evals = r.frames, evals + r.result.n_evals
+        rounds.append(Round(frames.count, frames.n_variable, r.result, None, frames.times.copy(), kind))
+        trace.append(np.asarray(r.result.trace))
+        if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE):
+            status, message = r.result.status, r.result.message
+            break
+        scaled = al.scaled_values(basis, frames.values)
+        V_prev, rho_prev = al.V, al.rho
+        V = al.update(scaled)
+        met = max((float(s.max()) for s in scaled if s.size), default=0.0) <= 1.0 and V <= 1.0
+        stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
+        level_its += 1
+        kind = "boost"
+        if stall >= 2 and stalled_before:
+            for name, amount in _relax_unmet(al, basis, frames, scaled).items():
+                unmet[name] = max(unmet.get(name, 0.0), amount)
+            stall, stalled_before = 0, False
+            continue
+        if not (met or stall >= 2 or level_its >= o.per_level):
+            continue
+        stalled_before = stalled_before or stall >= 2
+        dec, phi = predicted_decreases(al, frames, quat, o.min_gap)
+        evals += 3
+        if progress:
+            progress("estimate", {"round": k, "estimate": float(dec.sum() / max(phi, 1e-300)), "tol": o.tol})
+        if met and dec.sum() <= o.tol * phi:
+            break
+        new = doerfler_times(dec, frames)
+        if new.size == 0:
+            if met or stall >= 2:
+                message = "no segment predicts a decrease" if met else "constraints left unmet"
+                break
+            continue
+        rho_div = GAMMA if stall >= 2 else 1.0
+        frames = frames.with_variable_frames(new)
+        basis = SplineBasis(frames.times, al.t)
+        al.rho /= rho_div
+        stall, level_its, kind = 0, 0, "refine"
+    else:
+        status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
+    return _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, time.perf_counter() - start)
+
+
+def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, seconds) -> Solution:
+    """The Solution of a solve (`solve_least_change`'s Returns)."""
+    al = lc.al
+    plain_basis = SplineBasis(lc.plain.times, al.t)
+    _, _, D = al.evaluate(basis, frames.values, grad=False)
+
+    def worst(b, P):
+        return {c.name: float(s.max()) if s.size else 0.0 for c, s in zip(al.constraints, al.scaled_values(b, P))}
+
+    if unmet:
+        message = message + "; unmet: " + ", ".join(f"{k} by {v:.3g}" for k, v in unmet.items())
+    return Solution(frames, lc.plain, tuple(rounds), status, message, 0.0, D / al.d0,
+                    worst(plain_basis, lc.plain.values), worst(basis, frames.values), {},
+                    np.concatenate(trace) if trace else np.zeros(0), seconds, evals, stalled=dict(unmet))
