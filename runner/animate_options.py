@@ -97,8 +97,9 @@ def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = Non
     opt = p.add_argument_group("optimization")
     opt.add_argument("--method", choices=METHODS, default=None,
                      help="least-change: the least change to the plain spline that meets the constraints "
-                          "(docs/design.md); penalty: the weighted terms of paper eq. 1 (--terms, --weight) "
-                          "[least-change; penalty when --terms or --weight is given]")
+                          "(docs/design.md; with --tol, --max-time, --max-evals); penalty: the weighted terms "
+                          "of paper eq. 1 (every other option below) [least-change; penalty when an option "
+                          "only it has is given]")
     opt.add_argument("--terms", default=None,
                      help=f"objective terms: 'all' or a list from {','.join(term_names())} "
                           f"[{terms_help or 'the keyframe file’s, else the default terms; with its contacts also planted,clearance'}]")
@@ -175,13 +176,21 @@ def clip_terms(args) -> dict:
     return {"terms": args.terms, "weights": dict(args.weight), "solve": solve_options(args, weights)}
 
 
+#: the options only the penalty method has, with their defaults (one of them given chooses it)
+PENALTY_ONLY = {"terms": None, "weight": [], "subdivision": _LIB.subdivision, "per_segment": _LIB.per_segment,
+                "rounds": None, "max_frames": _LIB.max_frames, "backend": _LIB.backend, "algorithm": _LIB.algorithm,
+                "score": _LIB.score, "no_precondition": False, "no_renormalize": False}
+
+
 def method(args) -> str:
-    """The solve method of the parsed arguments: --method, else penalty when --terms or --weight names
-    terms, else least-change."""
+    """The solve method of the parsed arguments: --method, else penalty when an option only the penalty
+    method has is given (--terms, --weight, --subdivision, --rounds, ...: `PENALTY_ONLY`), else
+    least-change."""
     chosen = getattr(args, "method", None)
     if chosen is not None:
         return chosen
-    return "penalty" if getattr(args, "terms", None) or getattr(args, "weight", None) else "least-change"
+    given = [k for k, default in PENALTY_ONLY.items() if getattr(args, k, default) != default]
+    return "penalty" if given else "least-change"
 
 
 def solve_options(args, weights: dict) -> SolveOptions | LeastChangeOptions:
@@ -197,11 +206,13 @@ def solve_options(args, weights: dict) -> SolveOptions | LeastChangeOptions:
     """
     tol, rounds = getattr(args, "tol", None), getattr(args, "rounds", None)
     if method(args) == "least-change":
-        if getattr(args, "terms", None) or getattr(args, "weight", None):
-            raise InputError("--terms and --weight choose the penalty method's terms; drop them, or add "
-                             "--method penalty")
+        given = [k for k, default in PENALTY_ONLY.items() if getattr(args, k, default) != default]
+        if given:
+            flags = ", ".join("--" + k.replace("_", "-") for k in given)
+            raise InputError(f"{flags}: options of the penalty method; drop them, or use --method penalty")
         lc = LeastChangeOptions()
-        return replace(lc, tol=lc.tol if tol is None else tol, max_time_s=getattr(args, "max_time", 0.0) or 0.0)
+        return replace(lc, tol=lc.tol if tol is None else tol, max_time_s=getattr(args, "max_time", 0.0) or 0.0,
+                       max_evals=getattr(args, "max_evals", 0) or 0)
     if tol is not None and rounds is not None:
         raise InputError(f"--rounds {rounds} and --tol {tol:g} are two ways to end adaptive refinement; give "
                          "one: --rounds N for N fixed rounds, or --tol X to refine until the estimate is at most X")
@@ -220,8 +231,9 @@ def solve_options(args, weights: dict) -> SolveOptions | LeastChangeOptions:
     )
 
 
-def default_args() -> argparse.Namespace:
-    """The options `animate` uses when none are given."""
+def default_args(method: str | None = None) -> argparse.Namespace:
+    """The options `animate` uses when none are given; `method` as --method (the benchmarks of term
+    sets choose "penalty": a term set is what `animate --terms` solves)."""
     p = argparse.ArgumentParser()
     add_options(p)
-    return p.parse_args([])
+    return p.parse_args([] if method is None else ["--method", method])

@@ -22,6 +22,7 @@ from solver.frames import FrameSet
 from solver.keyframe_file import KeyframeFileInfo, read_keyframes, write_keyframes
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
+from solver.least_change import LeastChangeOptions
 from solver.metrics import path_metrics
 from solver.model import load_model
 from solver.objective import Evaluation, NonFiniteError, Objective
@@ -79,7 +80,7 @@ __all__ = [
     # solving (paper fig. 5)
     "SolveOptions", "Solution", "Round", "Status", "OptimizeResult", "solve",
     # a figure problem built once (`make_problem`) and solved (`solve_problem`), as the command line does
-    "Problem", "make_problem", "solve_problem",
+    "Problem", "make_problem", "solve_problem", "LeastChangeOptions",
     # one-call APIs
     "animate", "default_options", "orient", "OrientResult",
     # acceptance figures

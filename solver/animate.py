@@ -96,7 +96,10 @@ def animate(
             comma-separated string or a list of names from `term_names()`.
         weights: {term name: lambda_j >= 0} overriding the default weights (`DEFAULT_WEIGHTS`); a name
             here also switches the term on.
-        options: SolveOptions; default `default_options(weights)` (the command line's).
+        options: LeastChangeOptions (the least change that meets the figure's constraints,
+            docs/design.md) or SolveOptions (the weighted terms); default: LeastChangeOptions when
+            neither `terms` nor `weights` is given (the command line's default), else
+            `default_options(weights)`.
         rate: quadrature points per second [1/s]; default DEFAULT_RATE.
         should_stop: polled during the optimization; True ends it, keeping the best path so far.
         progress: progress(event, info) for "round", "eval", "boost", "stalled", "undo" and "estimate" (see `solve`).
@@ -126,6 +129,8 @@ def animate(
     """
     problem = make_problem(model, keyframes, terms, weights, contacts, rate, capture=capture,
                            airborne=airborne)
+    if options is None and terms is None and weights is None:  # the command line's default method
+        options = LeastChangeOptions() if tol is None else LeastChangeOptions(tol=float(tol))
     if tol is not None and (options is None or isinstance(options, SolveOptions)):
         options = replace(options or default_options(dict(problem.weights)), refine="tol", tol=float(tol), rounds=None)
     return solve_problem(problem, options, should_stop=should_stop, progress=progress)

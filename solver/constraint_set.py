@@ -1,12 +1,15 @@
 """The figure's constraints for one problem, each a function with its unit and tolerance (docs/design.md).
 
-    penetration  every contact site at or above the surface under it, at every point  h >= 0          1 mm
-    planted      over each foot contact, the support site's mean height                mean h <= 0     2 mm
-    slide        over each foot contact, the distance the support site slides           <= SLIDE_DISTANCE 2 mm
-    flight       in a flight, every site clear (the field's flight height)            h >= 3.1 cm     1 mm
-    hinge        knees and elbows turn about their flexion axis                        phi <= limit    1 deg
-    hyperextension  knees and elbows do not bend backwards                              -theta <= limit 0.5 deg
-    rom          every joint motion inside its published range (AAOS 1965)             lo <= x <= hi   1 deg
+    penetration  every contact site's lowest point outside every plane and box (1600 samples/s)  d >= 0     1 mm
+    planted      over each foot contact, the support site's mean height                 mean h <= FLOAT_LIMIT 2 mm
+    slide        over each site contact, the distance the site slides                    <= SLIDE_DISTANCE 2 mm
+    flight       in a flight, every site clear (the field's flight height)             h >= 3.1 cm      1 mm
+    ground       outside flights, the site the reference holds lowest is down          h <= 2.9 cm      1 mm
+    hinge        knees and elbows turn about their flexion axis                         phi <= limit     1 deg
+    hyperextension  knees and elbows do not bend backwards                               -theta <= limit  0.5 deg
+    rom          every joint motion inside its published range (AAOS 1965)              lo <= x <= hi    1 deg
+    acceleration no jolts: pelvis and ball joints no harder than the reference's peak   |a| <= A         5 %
+    unit         quaternions near unit norm between the frames                          ||q| - 1| <= 0.03  0.01
 
 A foot contact is a foot's sites' contacts merged; at each point of one the support site is the foot's
 site that the schedule has in contact there and the reference motion holds lowest: a walking foot
@@ -42,6 +45,7 @@ import numpy as np
 from solver.constraints.acceleration import AccelerationBound
 from solver.constraints.anatomy import AngleBound
 from solver.constraints.sites import HeightBound, Penetration, SupportHeight, SupportSlide, site_heights
+from solver.constraints.unit import UnitNorm
 from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.contacts import contact_radii
 from solver.path_state import PathState
@@ -64,11 +68,12 @@ FLOAT_LIMIT = 2e-3
 SLIDE_SMOOTHING = 1e-2
 #: each constraint's tolerance [SI]: a pair is met when c <= tolerance (the acceptance bounds' units:
 #: penetration 1 mm; float 2 mm, under the 5 mm of PhysDiff's float; slide 2 mm; flight 1 mm above the
-#: field's 3 cm flight height; angles 1 deg, hyperextension 0.5 deg as the acceptance list)
+#: field's 3 cm flight height; angles 1 deg, hyperextension 0.5 deg as the acceptance list; unit norm 0.01,
+#: a third of its limit)
 #: the no-jolt bounds' tolerance, relative to each bound: 5 %
 ACCELERATION_TOLERANCE = 0.05
 TOLERANCES = {"penetration": 1e-3, "planted": 2e-3, "slide": 2e-3, "flight": 1e-3,
-              "hinge": float(np.radians(1.0)), "hyperextension": float(np.radians(0.5)), "rom": float(np.radians(1.0))}
+              "hinge": float(np.radians(1.0)), "hyperextension": float(np.radians(0.5)), "rom": float(np.radians(1.0)), "unit": 0.01}
 
 
 @dataclass(frozen=True)
@@ -107,14 +112,13 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     from solver.layout import StateLayout
 
     t = reference.t
-    n = len(t)
     sites = tuple(figure.contact_sites)
     surfaces = StaticSurfaces.from_model(model)
     support = SupportSurfaces(surfaces, footprint_margin=0.0, rounded_edges=True)
     radii = contact_radii(model, sites)
     out = []
     if engine is not None and surfaces.count:
-        out.append(Penetration(surfaces, radii, n, sites, TOLERANCES["penetration"]))
+        out.append(Penetration(surfaces, radii, t, sites, TOLERANCES["penetration"]))
         feet = _foot_support(model, figure, reference, plain, contacts, engine, support, radii)
         if feet is not None:
             args, limit_h, limit_s, reports = feet
@@ -124,7 +128,10 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             sargs, slim = _site_slides(model, reference, plain, contacts, support, radii, sites)
             out.append(SupportSlide(*sargs, limit=slim, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING))
         out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
-    out += _anatomy(figure, StateLayout.from_model(model), reference)
+    layout = StateLayout.from_model(model)
+    out += _anatomy(figure, layout, reference)
+    quats = [j for j in layout.joints if j.quat_index is not None]
+    out.append(UnitNorm(len(t), np.array([j.quat_index for j in quats]), [j.name for j in quats], TOLERANCES["unit"]))
     out.append(_accelerations(model, reference, capture))
     relaxations = []
     if engine is not None:

@@ -179,7 +179,7 @@ def bench_run_and_step(args) -> int:
     results = {}
     for name, problem in problems.items():
         weights = dict(problem.weights)
-        options = solve_options(default_args(), weights)  # exactly what `dynsplines animate` runs
+        options = solve_options(default_args("penalty"), weights)  # exactly what `dynsplines animate` runs
         r = results[name] = time_solves(problem, options, args.repeat)
         print(f"  {name:<12} terms {', '.join(f'{n}={w:g}' for n, w in weights.items())}")
         print(f"  {'':<12} optimization {r['wall_median_s']:.2f} s median (runs: "
@@ -266,7 +266,7 @@ class _Runs:
         if terms not in self._solved:
             problem = file_problem(RUN_AND_STEP_KEYFRAMES, terms=terms, rate=self.rate)[0]
             weights = dict(problem.weights)
-            r = time_solves(problem, solve_options(default_args(), weights), 1)
+            r = time_solves(problem, solve_options(default_args("penalty"), weights), 1)
             r["figures"] = path_figures(self.model, self.keyframes, r["solution"])
             r["weights"] = weights
             self._solved[terms] = r

@@ -77,7 +77,7 @@ def bench_contacts(args) -> int:
             runs = {name: [] for name in configs}
             for _ in range(max(1, args.repeat)):  # alternate, so load on the machine hits both alike
                 for name, problem in configs.items():
-                    options = solve_options(default_args(), dict(problem.weights))
+                    options = solve_options(default_args("penalty"), dict(problem.weights))
                     runs[name].append(time_solves(problem, options, 1))
             fields = ("cpu_median_s", "evals", "wall_median_s", "objective_s", "optimizer_s")
             med = {n: {k: statistics.median(r[k] for r in rs) for k in fields} for n, rs in runs.items()}

@@ -127,7 +127,7 @@ def bench_solvers(args) -> int:
                     continue
                 problem = base if terms is None else make_problem(base.model, base.keyframes, terms,
                                                                   contacts=base.contacts, rate=args.rate)
-                options = solve_options(default_args(), dict(problem.weights))
+                options = solve_options(default_args("penalty"), dict(problem.weights))
                 runs = {}
                 for backend in ("nlopt", "lm"):
                     run = _solve(problem, replace(options, backend=backend))

@@ -23,6 +23,10 @@ import numpy as np
 from solver.constraints.base import Constraint
 from solver.path_state import PathState
 
+#: points between two quadrature points where penetration is also checked (`Penetration`): 3, so 1600
+#: samples a second at 400 Hz, finer than the 1000 Hz the metrics sample at
+SUBSAMPLES = 3
+
 __all__ = ["HeightBound", "Penetration", "SupportHeight", "SupportSlide", "site_heights"]
 
 
@@ -97,35 +101,59 @@ class HeightBound(_SitePairs):
 
 
 class Penetration(Constraint):
-    """-d <= 0 at every (point, site, surface): d the signed distance of the site's contact point to the
+    """-d <= 0 at every (sample, site, surface): d the signed distance of the site's contact point to the
     surface (`StaticSurfaces.signed_distances`: a plane's free side, a box's outside), paper eq. 12 for
     every plane and box of the scene, a box's sides included.
 
+    Sampled at the quadrature points and SUBSAMPLES points between each two, placed by cubic Hermite
+    interpolation of the sites' positions and velocities at the points (exact for a site moving on a
+    cubic; its error is h^4/384 max |p''''|, microns at 400 Hz): a toe crossing a box's edge at 3 m/s
+    moves 7.5 mm between two points 2.5 ms apart and would clip the corner unseen.
+
     Args:
-        surfaces: StaticSurfaces. radii: (k,) [m]. n_points: quadrature points. sites: (k,) names.
+        surfaces: StaticSurfaces. radii: (k,) [m]. t: (n,) quadrature points [s]. sites: (k,) names.
         tolerance: [m].
     """
 
     name, unit, scale = "penetration", "mm", 1e-3
 
-    def __init__(self, surfaces, radii, n_points: int, sites, tolerance: float):
+    def __init__(self, surfaces, radii, t: np.ndarray, sites, tolerance: float):
         self.surfaces, self.radii = surfaces, np.asarray(radii, float)
-        K, S = len(sites), surfaces.count
-        self.shape = (n_points, K, S)
-        self.rows = np.repeat(np.arange(n_points), K * S)
-        self.cols = np.tile(np.repeat(np.arange(K), S), n_points)
-        self.series = np.tile(np.arange(K * S), n_points)  # one time series per (site, surface)
+        n, K, S = len(t), len(sites), surfaces.count
+        u = np.arange(1, SUBSAMPLES + 1) / (SUBSAMPLES + 1)  # (j,) fractions of a spacing
+        self.hermite = np.stack([2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2], 1)
+        self.dt = np.diff(np.asarray(t, float))  # (n - 1,)
+        m = n + SUBSAMPLES * (n - 1)  # samples: the points, then each fraction's n - 1 samples
+        sample_row = np.r_[np.arange(n), np.tile(np.arange(n - 1), SUBSAMPLES)]
+        sample_series = np.r_[np.zeros(n, int), np.repeat(np.arange(1, SUBSAMPLES + 1), n - 1)]
+        self.shape = (m, K, S)
+        self.rows = np.repeat(sample_row, K * S)
+        self.cols = np.tile(np.repeat(np.arange(K), S), m)
+        # one time series per (fraction, site, surface), consecutive rows within it
+        self.series = np.repeat(sample_series, K * S) * (K * S) + np.tile(np.arange(K * S), m)
         self.labels = np.asarray(sites, object)[self.cols]
         self.limit = np.zeros(len(self.rows))
         self.tolerance = float(tolerance)
+
+    def pair_weights(self, weights: np.ndarray) -> np.ndarray:
+        """Each sample stands for an equal share of its point's weight [s]."""
+        return weights[self.rows] / (SUBSAMPLES + 1)
+
+    def _samples(self, state) -> np.ndarray:
+        """(m, k, 3) the lowest points of the sites at the samples [m]."""
+        p, v = state.sites, state.site_velocities
+        H = self.hermite[:, :, None, None, None]
+        dt = self.dt[None, :, None, None]
+        sub = H[:, 0] * p[None, :-1] + H[:, 1] * dt * v[None, :-1] + H[:, 2] * p[None, 1:] + H[:, 3] * dt * v[None, 1:]
+        out = np.concatenate([p, sub.reshape(-1, *p.shape[1:])], axis=0)
+        out[..., 2] -= self.radii
+        return out
 
     def _distances(self, state):
         key = ("distances", id(self))
         hit = state.cache.get(key)
         if hit is None:
-            p = state.sites.copy()
-            p[..., 2] -= self.radii
-            hit = state.cache[key] = self.surfaces.signed_distances(p)  # (n, K, S), (n, K, S, 3)
+            hit = state.cache[key] = self.surfaces.signed_distances(self._samples(state))  # (m, K, S), (m, K, S, 3)
         return hit
 
     def measure(self, state):
@@ -138,9 +166,17 @@ class Penetration(Constraint):
             return
         _, grad = self._distances(state)
         i, k, s = np.unravel_index(on, self.shape)
-        gp = np.zeros(state.sites.shape)
-        np.add.at(gp, (i, k), -g[on, None] * grad[i, k, s])
-        state.add_sites(gp)
+        gs = np.zeros(self.shape[:2] + (3,))
+        np.add.at(gs, (i, k), -g[on, None] * grad[i, k, s])
+        n = len(self.dt) + 1
+        gp, gv = gs[:n].copy(), np.zeros((n,) + gs.shape[1:])
+        sub = gs[n:].reshape(SUBSAMPLES, n - 1, *gs.shape[1:])
+        H, dt = self.hermite, self.dt[None, :, None, None]
+        gp[:-1] += np.einsum("j,jnkc->nkc", H[:, 0], sub)
+        gp[1:] += np.einsum("j,jnkc->nkc", H[:, 2], sub)
+        gv[:-1] += np.einsum("j,jnkc->nkc", H[:, 1], dt * sub)
+        gv[1:] += np.einsum("j,jnkc->nkc", H[:, 3], dt * sub)
+        state.add_sites(gp, gv)
 
 
 class _FootSupport(Constraint):

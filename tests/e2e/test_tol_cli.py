@@ -119,7 +119,7 @@ def test_solve_options_map_the_flags_to_the_refinement_mode():
     from runner.animate_options import default_args, solve_options
     from solver.animate import DEFAULT_TOL
 
-    args = default_args()
+    args = default_args("penalty")
     assert (solve_options(args, {}).refine, solve_options(args, {}).tol) == ("tol", DEFAULT_TOL)
     args.rounds = 3
     opts = solve_options(args, {})

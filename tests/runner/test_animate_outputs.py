@@ -1,6 +1,8 @@
 """What `animate` / `run-and-step` write and say: --export, --quiet (progress only), the default video,
 progress lines off a terminal. The optimization is cut short (--rounds 0 --max-evals 3) and the renderer
 is replaced where a video would be made, to keep these fast."""
+import re
+
 import pytest
 
 from runner.cli import main
@@ -41,7 +43,7 @@ def test_quiet_silences_progress_but_not_results(tmp_path, capsys):
     assert "wrote" in out and "p.npz" in out and "stopped:" in out
     assert "round 1" not in out and "importing" not in out  # progress
     code, out, _ = animate(capsys, "--no-render", "--no-summary")
-    assert "objective E" not in out and "round 1: 8 frames (0 variable): started" in out
+    assert "objective E" not in out and re.search(r"round 1: \d+ frames \(\d+ variable\): started", out)
 
 
 def test_animate_without_out_renders_to_the_default_path(tmp_path, capsys, monkeypatch):
