@@ -42,11 +42,12 @@ def test_every_public_name_exists_once():
 
 def test_default_options_are_the_command_lines():
     """The settings `dynsplines animate` uses without options (runner/animate_options.py: add_options and
-    solve_options), field by field."""
+    solve_options), field by field: the least change by default, the penalty method's with --method penalty."""
     from runner.animate_options import default_args, solve_options
 
+    assert solve_options(default_args(), solver.parse_terms(None)) == solver.LeastChangeOptions()
     for weights in (solver.parse_terms(None), {"unit": 1.0, "smooth": 0.05, "penetration": 0.0}):
-        assert solver.default_options(weights) == solve_options(default_args(), weights)
+        assert solver.default_options(weights) == solve_options(default_args("penalty"), weights)
     opts = solver.default_options({"penetration": 1.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05})
     assert (opts.subdivision, opts.per_segment, opts.score) == ("adaptive", 1, "decrease")
     assert (opts.refine, opts.tol, opts.rounds) == ("tol", DEFAULT_TOL, None)
