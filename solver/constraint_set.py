@@ -8,7 +8,7 @@
     hinge        knees and elbows turn about their flexion axis                         phi <= limit     1 deg
     hyperextension  knees and elbows do not bend backwards                               -theta <= limit  0.5 deg
     rom          every joint motion inside its published range (AAOS 1965)              lo <= x <= hi    1 deg
-    acceleration no jolts: pelvis and ball joints no harder than the reference's peak   |a| <= A         5 %
+    acceleration no jolts: pelvis and ball joints no harder than the capture's (6 Hz) or the plain spline's peak  5 %
     unit         quaternions near unit norm between the frames                          ||q| - 1| <= 0.03  0.01
 
 A foot contact is a foot's sites' contacts merged; at each point of one the support site is the foot's
@@ -32,6 +32,11 @@ there; the problem is made well posed instead of excused:
   force, `solver.motion_metrics.forced_skate_mm`, is the same bound): the slide limit is
   SLIDE_DISTANCE plus the sum of those d.
 * The anatomical limits are widened to the reference's own worst angle (`solver.constraints.anatomy`).
+* No jolts is a bound only with a capture (keyframes made from motion capture): then A is the larger of
+  the capture's filtered peak and the plain spline's. The plain spline's peak alone is no bound: sparse
+  keyframes give a spline smoother than any motion that meets its contacts (run-and-step without its
+  capture cannot land on the step within it), and the measure of change already prices every change of
+  acceleration.
 
 Each relaxation is reported (`Relaxation`: which constraint, site or joint, keyframe, where, how much),
 so a user sees where the keyframes, not the optimizer, decide.
@@ -132,7 +137,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     out += _anatomy(figure, layout, reference)
     quats = [j for j in layout.joints if j.quat_index is not None]
     out.append(UnitNorm(len(t), np.array([j.quat_index for j in quats]), [j.name for j in quats], TOLERANCES["unit"]))
-    out.append(_accelerations(model, reference, capture))
+    if capture is not None:  # no jolts: bounded by what the captured motion does (module docstring)
+        out.append(_accelerations(model, reference, capture))
     relaxations = []
     if engine is not None:
         state = _reference_state(model, reference, plain, engine)

@@ -21,7 +21,9 @@ UNIT_LIMIT = 0.03
 
 
 class UnitNorm(Constraint):
-    """| |q| - 1 | - UNIT_LIMIT <= 0 at every (point, quaternion) (module docstring).
+    """| |q| - 1 | <= UNIT_LIMIT at every (point, quaternion) (module docstring), written smooth as
+    c = ((|q| - 1)^2 - UNIT_LIMIT^2) / (2 UNIT_LIMIT) (zero at the limit with slope 1 in | |q| - 1 |
+    there, no kink at |q| = 1; as `solver.constraints.acceleration`).
 
     Args:
         n_points: quadrature points. quat_q: (s, 4) qpos indices of the quaternions. labels: (s,) names.
@@ -35,15 +37,15 @@ class UnitNorm(Constraint):
         s = len(self.quat_q)
         self.rows = np.repeat(np.arange(n_points), s)
         self.labels = np.asarray(labels, object)[np.tile(np.arange(s), n_points)]
-        self.limit = np.full(len(self.rows), UNIT_LIMIT)
+        self.limit = np.zeros(len(self.rows))  # the smooth form's own bound is 0
         self.tolerance = float(tolerance)
 
     def measure(self, state):
         r = np.linalg.norm(state.Y[:, self.quat_q], axis=-1)  # (n, s)
-        return np.abs(r - 1.0).ravel()
+        return (((r - 1.0) ** 2 - UNIT_LIMIT ** 2) / (2.0 * UNIT_LIMIT)).ravel()
 
     def pull(self, state, g):
         q = state.Y[:, self.quat_q]  # (n, s, 4)
         r = np.linalg.norm(q, axis=-1, keepdims=True)
-        G = g.reshape(q.shape[:2])[..., None] * np.sign(r - 1.0) * q / r
+        G = g.reshape(q.shape[:2])[..., None] * ((r - 1.0) / UNIT_LIMIT) * q / r
         np.add.at(state.gY, (slice(None), self.quat_q), G)

@@ -1,0 +1,180 @@
+"""The least-change problem (solver.least_change, docs/design.md): every constraint's and the measure of
+change's gradient against central finite differences on the shipped clip's problem, the mass matrix
+against MuJoCo, the measure of change on hand-built changes with known values, the preconditioner's
+transpose, and solves whose answers are known (a figure standing still; the shipped clip's keyframes
+met exactly and every constraint within its tolerance)."""
+from dataclasses import replace
+
+import mujoco
+import numpy as np
+import pytest
+
+import solver
+from solver.change import MeasureOfChange
+from solver.kinematics import TangentMap
+from solver.lagrangian import Preconditioner
+from solver.layout import StateLayout
+from solver.least_change import LeastChangeOptions, _start_frames, build_least_change, solve_least_change
+from solver.manifold import FrameVariables
+from solver.reference import ReferenceMotion
+from solver.spline_basis import SplineBasis
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    model = solver.load_model(solver.shipped("run_and_step.xml"))
+    keyframes, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
+    return model, keyframes, info
+
+
+@pytest.fixture(scope="module")
+def problem(shipped):
+    model, keyframes, info = shipped
+    lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights, rate=200.0)
+    frames = _start_frames(lc, LeastChangeOptions().min_gap)
+    return lc, frames, SplineBasis(frames.times, lc.al.t)
+
+
+def _perturbed(lc, frames, seed=1, size=1e-2):
+    """Frame values moved off the plain spline (m or rad of `size`), so that every constraint has
+    broken and met pairs."""
+    var = FrameVariables(frames, lc.layout.quat_slots)
+    return var.values(np.random.default_rng(seed).normal(size=var.size) * size)
+
+
+def test_every_constraints_gradient_matches_finite_differences(problem):
+    lc, frames, basis = problem
+    al = lc.al
+    P = _perturbed(lc, frames)
+    rng = np.random.default_rng(2)
+    free = ~frames.fixed
+    for c in al.constraints:
+        g = rng.normal(size=c.size)
+
+        def f(Q, c=c, g=g):
+            return float(g @ c.values(al.state(basis, Q)))
+
+        st = al.state(basis, P)
+        c.values(st)
+        c.pull(st, g.copy())
+        G = basis.pullback(*st.pullback())
+        for trial in range(2):
+            d = rng.normal(size=P.shape) * free
+            eps = 1e-7
+            num = (f(P + eps * d) - f(P - eps * d)) / (2 * eps)
+            ana = float((G * d).sum())
+            # central differences: truncation O(eps^2) and round-off ~1e-16 |f| / eps; a kink of a max()
+            # inside an eps step is rare at random pairs
+            assert ana == pytest.approx(num, rel=2e-4, abs=1e-6 * (1 + abs(f(P)))), (c.name, trial)
+
+
+def test_measure_of_change_and_phi_gradients_match_finite_differences(problem):
+    lc, frames, basis = problem
+    al = lc.al
+    al.lam = [np.random.default_rng(3).uniform(0, 1, c.size) for c in al.constraints]
+    al.rho = 3.0
+    var = FrameVariables(frames, lc.layout.quat_slots)
+    x = np.random.default_rng(4).normal(size=var.size) * 1e-3
+    phi, G, _ = al.evaluate(basis, var.values(x))
+    g = var.pullback(x, G)
+    for seed in range(3):
+        d = np.random.default_rng(10 + seed).normal(size=var.size)
+        eps = 1e-6
+        fp = al.evaluate(basis, var.values(x + eps * d), grad=False)[0]
+        fm = al.evaluate(basis, var.values(x - eps * d), grad=False)[0]
+        assert g @ d == pytest.approx((fp - fm) / (2 * eps), rel=1e-5)
+    al.lam = [np.zeros(c.size) for c in al.constraints]
+
+
+def test_reference_mass_matrix_is_mujocos(shipped):
+    model, keyframes, _ = shipped
+    plain = solver.FrameSet.from_keyframes(keyframes, StateLayout.from_model(model).quat_slots)
+    t = np.linspace(plain.times[0], plain.times[-1], 7)
+    ref = ReferenceMotion.from_frames(model, plain, t, np.full(7, 0.1))
+    data = mujoco.MjData(model)
+    for i in (0, 3, 6):
+        data.qpos[:] = ref.qpos[i]
+        mujoco.mj_forward(model, data)
+        M = np.zeros((model.nv, model.nv))
+        for j in range(model.nv):  # column by column: M e_j (mj_mulM), not the factor the code reads
+            e = np.zeros(model.nv)
+            e[j] = 1.0
+            col = np.zeros(model.nv)
+            mujoco.mj_mulM(model, data, col, e)
+            M[:, j] = col
+        np.testing.assert_allclose(ref.chol[i] @ ref.chol[i].T, M, rtol=1e-10, atol=1e-12)
+
+
+def test_measure_of_change_of_a_known_change(shipped):
+    """D of the reference is 0; moving the root by x(t) = A sin(pi (t - t0) / T) along x changes the
+    root's acceleration by a(t) = -A (pi/T)^2 sin(...) and its position by x(t): D = sum_i w_i (a_i^2 +
+    omega^4 x_i^2) M_xx(t_i), M_xx the whole body's mass (a translation of the free root moves every body)."""
+    model, keyframes, _ = shipped
+    layout = StateLayout.from_model(model)
+    tmap = TangentMap.from_layout(layout)
+    plain = solver.FrameSet.from_keyframes(keyframes, layout.quat_slots)
+    t0, t1 = plain.times[0], plain.times[-1]
+    n = 400
+    h = (t1 - t0) / n
+    t = t0 + h * (np.arange(n) + 0.5)
+    ref = ReferenceMotion.from_frames(model, plain, t, np.full(n, h))
+    omega = 3.0
+    change = MeasureOfChange(ref, tmap, omega=omega)
+    from solver.path_state import PathState
+    from solver.spline import interpolate
+
+    Y, Y1, Y2 = interpolate(plain.times, plain.values, t, (0, 1, 2))
+    assert change.evaluate(PathState(t, Y, Y1, Y2, tmap), grad=False) == pytest.approx(0.0, abs=1e-9)
+    A, k = 0.01, np.pi / (t1 - t0)
+    s = np.sin(k * (t - t0))
+    Yc, Y1c, Y2c = Y.copy(), Y1.copy(), Y2.copy()
+    Yc[:, 0] += A * s
+    Y1c[:, 0] += A * k * np.cos(k * (t - t0))
+    Y2c[:, 0] += -A * k * k * s
+    mass = float(np.sum(model.body_mass))
+    expected = float(np.sum(h * ((A * k * k * s) ** 2 + omega ** 4 * (A * s) ** 2) * mass))
+    assert change.evaluate(PathState(t, Yc, Y1c, Y2c, tmap), grad=False) == pytest.approx(expected, rel=1e-9)
+
+
+def test_preconditioner_transpose(problem):
+    lc, frames, basis = problem
+    var = FrameVariables(frames, lc.layout.quat_slots)
+    pre = Preconditioner(var, basis, lc.al.change, lc.al.tmap, lc.al.d0)
+    rng = np.random.default_rng(5)
+    u, v = rng.normal(size=var.size), rng.normal(size=var.size)
+    assert pre.apply(u) @ v == pytest.approx(u @ pre.apply_transpose(v), rel=1e-10)
+
+
+def test_standing_still_is_left_alone():
+    """Keyframes of a figure standing on the floor: the plain spline meets every constraint, so the least
+    change is no change (D = 0)."""
+    model = solver.load_model(solver.shipped("run_and_step.xml"))
+    keyframes, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
+    q = keyframes.values[0].copy()
+    for slot in StateLayout.from_model(model).quat_slots:  # the file's 6 digits leave norms 1e-6 off
+        q[slot] /= np.linalg.norm(q[slot])
+    still = replace(keyframes, times=np.array([0.0, 0.4, 0.8]), values=np.tile(q, (3, 1)),
+                    mask=np.ones((3, model.nq), bool))
+    lc = build_least_change(model, still, rate=200.0)
+    sol = solve_least_change(lc, LeastChangeOptions())
+    assert sol.E_final == pytest.approx(0.0, abs=1e-12) and not sol.stalled
+    np.testing.assert_allclose(sol.frames.path(np.linspace(0, 0.8, 9)), np.tile(q, (9, 1)), atol=1e-9)
+
+
+@pytest.mark.slow
+def test_shipped_clip_meets_keyframes_and_constraints(shipped):
+    """The shipped clip with its capture (the acceleration bounds are the capture's), as the command
+    line solves it."""
+    from runner.problem_file import find_reference
+
+    model, keyframes, info = shipped
+    ref = find_reference(info, model, quiet=True)
+    lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights,
+                            capture=(ref.times, ref.qpos))
+    sol = solve_least_change(lc, LeastChangeOptions())
+    at = np.flatnonzero(sol.frames.is_keyframe)
+    fixed = keyframes.mask
+    assert np.abs(sol.frames.values[at][fixed] - keyframes.values[fixed]).max() <= 1e-12
+    assert not sol.stalled and all(v <= 1.0 for v in sol.integrals_final.values()), sol.integrals_final
+    m = solver.path_metrics(model, sol.frames.times, sol.frames.values, keyframes)
+    assert m["max_penetration_mm"] <= 1.0  # the penetration constraint's tolerance, at 1000 Hz
