@@ -40,6 +40,9 @@ BOUNDED_ROWS = {"peak_pelvis_acceleration_ms2": "pelvis_acceleration_ms2", "peak
 BOUND_LEGEND = (f"<= B: the forces term's bound on the row (the larger of the plain spline's and the capture's "
                 f"filtered peak); {OVER}: the optimized path is above it by > 1% and the row's last printed digit")
 
+#: relaxations listed under the summary table (the rest counted)
+RELAXATIONS_SHOWN = 6
+
 
 #: the motion rows (the summary's feet rows and the motion-metrics table against the capture): the
 #: optimized figure is marked worse when it exceeds the plain spline's by more than 1 % (figures move by
@@ -298,6 +301,12 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
     else:
         lines.append("least change (docs/design.md): objective E = D / (m g^2 T), the mass-weighted change of the "
                      "accelerations; a constraint row is its worst value over its tolerance (met at <= 1)")
+    relaxed = getattr(solution, "relaxations", ()) or ()
+    if relaxed:
+        shown = ", ".join(f"{r.constraint} {r.label} at keyframe {r.keyframe} ({r.start:.2f}-{r.end:.2f} s, "
+                          f"{r.amount * 1e3:.1f} mm)" for r in relaxed[:RELAXATIONS_SHOWN])
+        more = f" and {len(relaxed) - RELAXATIONS_SHOWN} more" if len(relaxed) > RELAXATIONS_SHOWN else ""
+        lines.append(f"where the keyframes decide (limit set to what they force): {shown}{more}")
     stalled = getattr(solution, "stalled", None) or {}
     if stalled and not terms:
         lines.append("constraints the keyframes leave out of reach (limit raised to what the path reaches), by [SI]: "

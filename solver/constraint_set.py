@@ -126,11 +126,11 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         out.append(Penetration(surfaces, radii, t, sites, TOLERANCES["penetration"]))
         feet = _foot_support(model, figure, reference, plain, contacts, engine, support, radii)
         if feet is not None:
-            args, limit_h, limit_s, reports = feet
+            args, limit_h, reports = feet
             height = SupportHeight(*args, limit=limit_h, tolerance=TOLERANCES["planted"])
-            height.reports = reports
+            sargs, slim, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites)
+            height.reports = reports + slide_reports
             out.append(height)
-            sargs, slim = _site_slides(model, reference, plain, contacts, support, radii, sites)
             out.append(SupportSlide(*sargs, limit=slim, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING))
         out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     layout = StateLayout.from_model(model)
@@ -245,13 +245,14 @@ def _flight_and_ground(model, reference, plain, engine, support, radii, flights,
 
 
 def _site_slides(model, reference, plain, contacts, support, radii, sites):
-    """Slide pairs per site contact (the site's own contact), limits SLIDE_DISTANCE + the keyed distances."""
+    """Slide pairs per site contact (the site's own contact), limits SLIDE_DISTANCE + the keyed distances
+    (the triangle inequality: module docstring), and the relaxations worth reporting."""
     from solver.contacts import site_positions
 
     t, w = reference.t, reference.weights
     index, times, values = _full_keyframes(plain)
     keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else None
-    cols_, pts, surf, pair, ww, span, rows, labels, limits = [], [], [], [], [], [], [], [], []
+    cols_, pts, surf, pair, ww, span, rows, labels, limits, reports = [], [], [], [], [], [], [], [], [], []
     for c in contacts:
         on = _pairs_in(t, c.start, c.end)
         if not on.size:
@@ -269,9 +270,12 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites):
         inside = np.flatnonzero((times >= c.start - 1e-6) & (times <= c.end + 1e-6))
         forced = sum(float(np.linalg.norm(keyed_xy[b, col] - keyed_xy[a, col])) for a, b in zip(inside[:-1], inside[1:]))
         limits.append(SLIDE_DISTANCE + forced)
+        if forced > 0.5 * SLIDE_DISTANCE:  # worth saying: the keyframes take half the allowance or more
+            reports.append(Relaxation("slide", c.site, int(index[inside[-1]]), float(times[inside[0]]),
+                                      float(times[inside[-1]]), forced))
     args = (support, radii, np.concatenate(pts), np.concatenate(cols_), np.concatenate(surf), np.concatenate(pair),
             np.concatenate(ww), np.array(span), np.array(rows), np.array(labels, object))
-    return args, np.array(limits)
+    return args, np.array(limits), reports
 
 
 def _foot_support(model, figure, reference, plain, contacts, engine, support, radii):
@@ -279,7 +283,7 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
     relaxed where the keyframes force (module docstring), or None without contacts.
 
     Returns:
-        (args of `_FootSupport`, planted limits (p,) [m], slide limits (p,) [m], relaxation reports).
+        (args of `_FootSupport`, planted limits (p,) [m], relaxation reports).
     """
     from solver.contacts import foot_contacts, site_positions
 
@@ -288,11 +292,10 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
     state = _reference_state(model, reference, plain, engine)
     index, times, values = _full_keyframes(plain)
     keyed_pts = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
-    keyed_xy = keyed_pts[..., :2]
     keyed_low = keyed_pts.copy()
     keyed_low[..., 2] -= radii  # the contact points (lowest points of the sites' spheres)
     args = tuple([] for _ in range(8))
-    limits_h, limits_s, reports = [], [], []
+    limits_h, reports = [], []
     feet = {s: name for name, pair in figure.feet.items() for s in pair}
     for F in foot_contacts(list(contacts), dict(figure.feet)):
         mine = [c for c in contacts if feet.get(c.site) == F.site and c.end >= F.start and c.start <= F.end]
@@ -319,7 +322,7 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
         href = cand[np.flatnonzero(ok), cols]
         p = len(limits_h)
         span = float(w[on].sum())
-        limit_h, limit_s = FLOAT_LIMIT, SLIDE_DISTANCE
+        limit_h = FLOAT_LIMIT
         done = np.zeros(len(on), bool)
         for j, (k, tk) in enumerate(zip(index, times)):  # keyframes inside the foot contact
             if not (F.start - 1e-6 <= tk <= F.end + 1e-6):
@@ -335,23 +338,13 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
                 limit_h += extra
                 reports.append(Relaxation("planted", F.site, int(k), float(t[on[run.start]]), float(t[on[run.stop - 1]]),
                                           float(keyed[0])))
-        inside = np.flatnonzero((times >= F.start - 1e-6) & (times <= F.end + 1e-6))
-        for a, b in zip(inside[:-1], inside[1:]):
-            ca = cols[int(np.argmin(np.abs(t[on] - times[a])))]
-            cb = cols[int(np.argmin(np.abs(t[on] - times[b])))]
-            if ca == cb:
-                d = float(np.linalg.norm(keyed_xy[b, ca] - keyed_xy[a, ca]))
-                limit_s += d
-                if d > SLIDE_DISTANCE:
-                    reports.append(Relaxation("slide", str(sites[ca]), int(index[b]), float(times[a]), float(times[b]), d))
         for lst, val in zip(args, (on, cols, surfaces, np.full(len(on), p), w[on], [span], [int(on[len(on) // 2])], [F.site])):
             lst.append(np.asarray(val))
         limits_h.append(limit_h)
-        limits_s.append(limit_s)
     if not limits_h:
         return None
     support_args = (support, radii, *(np.concatenate(a) for a in args))
-    return support_args, np.array(limits_h), np.array(limits_s), reports
+    return support_args, np.array(limits_h), reports
 
 
 def _accelerations(model, reference, capture) -> AccelerationBound:

@@ -289,4 +289,4 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, s
                     worst(plain_basis, lc.plain.values), worst(basis, frames.values), {},
                     np.concatenate(trace) if trace else np.zeros(0), seconds, evals, stalled=dict(unmet),
                     converged_to_tol=bool(np.isfinite(estimate) and estimate <= tol and not unmet),
-                    final_estimate=estimate)
+                    final_estimate=estimate, relaxations=tuple(lc.relaxations))

@@ -68,7 +68,10 @@ class Solution:
         converged_to_tol: with a tolerance, whether the estimate reached it; None without one.
         final_estimate: the last estimate of a strategy with a tolerance, NaN otherwise.
         stalled: {term: violation} of the terms penalty continuation gave up on (a boost did not halve
-            the violation; `SolveOptions.limits`), in the term's `violation` units.
+            the violation; `SolveOptions.limits`), in the term's `violation` units; for the least change
+            {constraint: amount [SI]} of the pairs it could not meet (`solver.least_change`).
+        relaxations: the least change's `solver.constraint_set.Relaxation`s: where the keyframes decide a
+            constraint (which, site or joint, keyframe, span [s], amount [SI]); () for the penalty method.
     """
 
     frames: FrameSet
@@ -90,6 +93,7 @@ class Solution:
     converged_to_tol: bool | None = None
     final_estimate: float = float("nan")
     stalled: dict = field(default_factory=dict)
+    relaxations: tuple = ()
 
     @cached_property
     def refinement_estimate(self) -> float:
