@@ -335,6 +335,37 @@ _PLAUSIBILITY_ROWS = (
 )
 
 
+#: the no-jolt rows of `motion_metrics_table` (`solver.jolts`: finite differences at the capture's frames,
+#: torques by mj_inverse; the reference column is the capture low-pass filtered at 6 Hz): (label, key in a
+#: motion-metrics block, format, the `bench corpus` bound that marks the row `OVER`)
+_JOLT_ROWS = (
+    ("peak pelvis acceleration [m/s^2]", "peak_pelvis_acceleration_m_s2", "{:.1f}", "pelvis_acc"),
+    ("peak joint ang. acceleration [rad/s^2]", "peak_angular_acceleration_max_rad_s2", "{:.0f}", "joint_acc"),
+    ("RMS joint torque [N m]", "rms_joint_torque_Nm", "{:.1f}", "torque_rms"),
+)
+JOLT_LEGEND = (f"{OVER}: a no-jolt row above its `bench corpus` bound (peaks 1.5x, torque 1.25x the larger of the "
+               "plain spline's and the capture's, per joint for the joints; reference column: the capture filtered "
+               "at 6 Hz)")
+
+
+def _over_jolt_bound(bound: str, key: str, cols: tuple[dict, dict, dict]) -> bool:
+    """Whether the optimized path misses the no-jolt `bound` (`runner.corpus_bounds`) on the blocks `cols`
+    (reference, plain, optimized); False when a figure is missing."""
+    from runner.corpus_bounds import BOUND_BY_NAME
+    from solver.jolts import worst_joint_ratio
+
+    b = BOUND_BY_NAME[bound]
+    ref, plain, opt = cols
+    if bound == "joint_acc":
+        peaks = [c.get("peak_angular_acceleration_rad_s2") for c in (opt, plain, ref)]
+        worst = worst_joint_ratio(*peaks) if all(peaks) else None
+        return worst is not None and b.held({b.value: worst[1]}) is False
+    vals = [c.get(key) for c in cols]
+    if any(v is None for v in vals):
+        return False
+    return b.held({b.value: float(vals[2]), b.reference: max(float(vals[0]), float(vals[1]))}) is False
+
+
 def _accuracy_rows(error: dict) -> list[tuple[str, str, float, float]]:
     """(label, metrics key, mean, max) of the accuracy figures of one `motion_metrics` "error" block."""
     joints = error["joint_orientation_deg"]
@@ -359,7 +390,8 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
         plain, optimized: `motion_metrics(...)` of the plain spline and of the optimized path, both
             sampled at the reference's frames; the "reference" column is their (equal) "reference" block.
     Returns:
-        the table as text: plausibility rows for all three, then the accuracy rows (mean, max over
+        the table as text: plausibility rows for all three, the no-jolt rows (`_JOLT_ROWS`, when the blocks
+        have them; marked `OVER` beyond the corpus's bound), then the accuracy rows (mean, max over
         frames; the joint angle is the mean over joints of each joint's mean, and the largest max; worse
         when the mean or the max is), then the legend of the mark.
     """
@@ -370,12 +402,15 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
     for label, key, sub, fmt in _PLAUSIBILITY_ROWS:
         vals = [c[key][sub] if sub else c[key] for c in cols]
         rows.append((label, [cell(fmt, v) for v in vals], motion_worse(key, vals[1], vals[2], frame_s, vals[0])))
+    jolts = [row for row in _JOLT_ROWS if any(row[1] in c for c in cols)]
+    for label, key, fmt, bound in jolts:
+        rows.append((label, [cell(fmt, c.get(key)) for c in cols], OVER if _over_jolt_bound(bound, key, cols) else ""))
     w = max(max(len(r[0]) for r in rows), 38) + 2
     head = f"{'':{w}}{'reference':>14}{'plain':>14}{'optimized':>14}"
     lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz; "
              "docs/contacts.md \"Motion metrics\")", head, "-" * (len(head) + len(WORSE) + 2)]
-    lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in vals) + (f"  {WORSE}" if bad else "")
-              for label, vals, bad in rows]
+    lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in vals) + (f"  {bad if isinstance(bad, str) else WORSE}"
+                                                                     if bad else "") for label, vals, bad in rows]
     lines.append("-" * (len(head) + len(WORSE) + 2))
     pairs = zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"]), strict=True)
     for (label, key, pm, px), (_, _, om, ox) in pairs:
@@ -385,5 +420,7 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
                                                                             and ox > LOST_TURN_DEG)
         lines.append(f"{label + (' mean / max' if np.isfinite(px) else ' mean'):{w}}"
                      + "".join(f"{c:>14}" for c in cells) + (f"  {WORSE}" if bad else ""))
+    if jolts:
+        lines.append(JOLT_LEGEND)
     lines.append(MOTION_LEGEND)
     return "\n".join(lines)

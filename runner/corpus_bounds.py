@@ -11,9 +11,14 @@ with a limit made from another (the capture's, the plain spline's) or a constant
     rule "within": held when |value - reference| <= max(margin, factor * |reference|)
 
 A bound whose figures are missing (a metric this build does not compute) is "n/a", never held or
-missed. Three records are figures shown beside the bounds (`Bound.counted` False: the float on the
-schedule's contacts, the flight while the capture stands, the skate above what the keyframes force):
-checked the same way, never failing a pair.
+missed. Two records are figures shown beside the bounds (`Bound.counted` False: the float on the
+schedule's contacts, the flight while the capture stands): checked the same way, never failing a pair.
+
+The skate against the plain spline's is held on the skate above what the keyframes force
+(`skate_excess`): the part no path through the keyframes avoids is not the optimizer's. The no-jolt
+bounds (`pelvis_acc`, `joint_acc`, `torque_rms`) read the jolt figures of the motion metrics
+(`solver.jolts`: finite differences at the capture's frames, torques by `mj_inverse`), the capture's
+low-pass filtered at 6 Hz (Winter) before it is differentiated.
 The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
 fit the capture (the capture misses a surface bound itself) and a bound out of reach (the capture misses
 another bound); see `causes`.
@@ -129,9 +134,8 @@ class Bound:
 #: the issue's sentence the two figures beside the float bound implement (`Bound.counted` False)
 _STANCE_AND_SCHEDULE = ("float and flight measured on the capture's stance frames as well as on the schedule's, "
                         "so a gap in the schedule cannot hide a floating foot (shown, not counted).")
-#: the figure beside skate_plain (`Bound.counted` False): the same halving, of the skate a path can remove
-_EXCESS = ("skate above what the keyframes force <= half the plain spline's above it (shown, not counted: "
-           "skate_plain with the skate no path through the keyframes avoids taken off both sides).")
+#: the issue's sentences of the no-jolt bounds (their figures: `solver.jolts`)
+_NO_JOLTS = "no jolts, against the larger of the plain spline's and the capture's (filtered at 6 Hz, Winter):"
 #: the acceptance list, one record per bound (docs/corpus.md "Bounds"), and the figures shown beside it
 BOUNDS: tuple[Bound, ...] = (
     Bound("penetration", "max penetration [mm]", "penetration_mm", None, "le", 0.0, 1.0, "capture_penetration_mm",
@@ -147,10 +151,9 @@ BOUNDS: tuple[Bound, ...] = (
           counted=False),
     Bound("skate_capture", "skate vs capture [mm/frame]", "skate_mm", "capture_skate_mm", "le", 1.0, 0.5, None,
           ("planted",), "contact", "skate <= the capture's + 0.5 mm/frame"),
-    Bound("skate_plain", "skate vs plain [mm/frame]", "skate_mm", "plain_skate_mm", "le", 0.5, 0.0,
-          "capture_skate_mm", ("planted",), "contact", "and <= half the plain spline's;"),
     Bound("skate_excess", "skate above what the keyframes force, vs plain [mm/frame]", "skate_excess_mm",
-          "plain_skate_excess_mm", "le", 0.5, 0.0, None, ("planted",), "contact", _EXCESS, counted=False),
+          "plain_skate_excess_mm", "le", 0.5, 0.0, None, ("planted",), "contact",
+          "and the skate above what the keyframes force <= half the plain spline's above it;"),
     Bound("flight", "flight time vs capture [s]", "flight_s", "capture_flight_s", "within", 0.10, 0.030, None,
           ("clearance",), "contact", "flight time within 30 ms or 10 % of the capture's, whichever is larger;"),
     Bound("joint_error", "joint-angle error [deg]", "joint_error_deg", "plain_joint_error_deg", "le", 1.10, 0.0, None,
@@ -161,6 +164,14 @@ BOUNDS: tuple[Bound, ...] = (
           None, ("hinge",), "motion", "knee and elbow rotation off the hinge <= the capture's + 3 degrees;"),
     Bound("hyperextension", "hyperextension [deg]", "hyperextension_deg", "plain_hyperextension_deg", "le", 1.0, 0.5,
           None, ("bending",), "motion", "hyperextension <= the plain spline's + 0.5 degree."),
+    Bound("pelvis_acc", "peak pelvis acceleration [m/s^2]", "pelvis_acc_m_s2", "pelvis_acc_reference_m_s2", "le",
+          1.5, 0.0, None, ("acceleration", "forces"), "motion",
+          f"{_NO_JOLTS} peak pelvis linear acceleration <= 1.5x;"),
+    Bound("joint_acc", "peak angular acceleration over the reference's, worst ball joint", "joint_acc_ratio", None,
+          "le", 0.0, 1.5, None, ("acceleration",), "motion",
+          f"{_NO_JOLTS} each ball joint's peak angular acceleration <= 1.5x;"),
+    Bound("torque_rms", "RMS joint torque [N m]", "torque_rms_Nm", "torque_rms_reference_Nm", "le", 1.25, 0.0, None,
+          ("torque",), "motion", f"{_NO_JOLTS} RMS joint torque <= 1.25x."),
 )
 
 
@@ -211,6 +222,36 @@ def _above_forced(doc: dict, which: str) -> float | None:
     return None if v is None or forced is None else float(v) - float(forced)
 
 
+def _larger(*keys) -> Callable[[dict], float | None]:
+    """The larger of the figures at each of `keys` (tuples of keys into the report); None when one is
+    missing: a limit made from "the larger of the plain spline's and the capture's" needs both."""
+    def get(doc):
+        vals = [_dig(doc, k) for k in keys]
+        return None if any(v is None for v in vals) else float(max(vals))
+    return get
+
+
+_PLAIN, _OPT, _CAPTURE = (*_M, "plain", "path"), (*_M, "optimized", "path"), (*_M, "plain", "reference")
+#: the jolt figures' keys in a motion-metrics block (`solver.jolts.jolt_figures`)
+_PELVIS, _JOINTS, _TORQUE = ("peak_pelvis_acceleration_m_s2", "peak_angular_acceleration_rad_s2",
+                             "rms_joint_torque_Nm")
+
+
+def _worst_joint(doc: dict) -> list | None:
+    """[joint, its ratio, the optimized path's peak, the plain spline's, the capture's [rad/s^2], when the
+    optimized path peaks [s]] of the ball joint whose peak angular acceleration is largest against the larger
+    of the plain spline's and the capture's (`solver.jolts.worst_joint_ratio`); None when a block lacks them."""
+    from solver.jolts import worst_joint_ratio
+
+    opt, plain, cap = (_dig(doc, (*b, _JOINTS)) for b in (_OPT, _PLAIN, _CAPTURE))
+    worst = worst_joint_ratio(opt, plain, cap) if opt and plain and cap else None
+    if worst is None:
+        return None
+    j = worst[0]
+    when = _dig(doc, (*_OPT, "peak_angular_acceleration_t_s", j))
+    return [j, worst[1], opt[j], plain[j], cap[j], None if when is None else float(when)]
+
+
 #: the figures of a pair: {name: function of the metrics report}; the motion metrics are over the
 #: reference's frames (`runner.run.reference_motion_metrics`); float over the capture's stance (and the
 #: schedule's contacts beside it), skate over the schedule's contacts.
@@ -253,6 +294,19 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     "capture_off_hinge_deg": lambda doc: None if _off_hinge_excess(doc) is None else 0.0,
     "hyperextension_deg": _at("metrics", "optimized", "max_hyperextension_deg"),
     "plain_hyperextension_deg": _at("metrics", "plain", "max_hyperextension_deg"),
+    # no jolts (`solver.jolts`): each path's figures at the capture's frames, the capture's filtered at 6 Hz;
+    # the limits are made from the larger of the plain spline's and the capture's
+    "pelvis_acc_m_s2": _at(*_OPT, _PELVIS),
+    "pelvis_acc_t_s": _at(*_OPT, "peak_pelvis_acceleration_t_s"),
+    "plain_pelvis_acc_m_s2": _at(*_PLAIN, _PELVIS),
+    "capture_pelvis_acc_m_s2": _at(*_CAPTURE, _PELVIS),
+    "pelvis_acc_reference_m_s2": _larger((*_PLAIN, _PELVIS), (*_CAPTURE, _PELVIS)),
+    # per ball joint: the optimized path's peak over the larger of the two at that joint, the worst joint's
+    "joint_acc_ratio": lambda doc: None if (w := _worst_joint(doc)) is None else w[1],
+    "torque_rms_Nm": _at(*_OPT, _TORQUE),
+    "plain_torque_rms_Nm": _at(*_PLAIN, _TORQUE),
+    "capture_torque_rms_Nm": _at(*_CAPTURE, _TORQUE),
+    "torque_rms_reference_Nm": _larger((*_PLAIN, _TORQUE), (*_CAPTURE, _TORQUE)),
 }
 
 
@@ -274,8 +328,9 @@ def schedule_flight_s(contacts, sites, t0: float, frames: int, fps: float) -> fl
 def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
     """The flat figures of one pair (`FIGURES`, missing ones left out) from its metrics report (the
     `<stem>.metrics.json` that `process_clip` writes), with the schedule's flight time [s]
-    (`schedule_flight_s`), the keyframe conflicts, the stalled terms when known and "joint_rise" ([joint,
-    deg]: the joint whose mean angle error grew most from the plain spline, for the failing-pairs list)."""
+    (`schedule_flight_s`), the keyframe conflicts, the stalled terms when known, "joint_rise" ([joint,
+    deg]: the joint whose mean angle error grew most from the plain spline) and "joint_acc_worst" (the
+    ball joint of "joint_acc_ratio" with its peaks, `_worst_joint`), both for the failing-pairs list."""
     out = {}
     for name, get in FIGURES.items():
         v = get(report)
@@ -286,6 +341,9 @@ def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
     rise = _largest_joint_rise(report)
     if rise is not None:
         out["joint_rise"] = rise
+    worst = _worst_joint(report)
+    if worst is not None:
+        out["joint_acc_worst"] = worst
     out["keyframe_conflicts"] = int(report.get("keyframe_conflicts") or 0)
     out["stalled"] = sorted((report.get("stalled") or {}).keys())
     return out

@@ -97,15 +97,38 @@ def failing_lines(results: Sequence[dict]) -> list[str]:
 
 
 def _where(check: dict, figures: dict) -> str:
-    """For a missed joint-angle error, the joint whose mean error grew most (`corpus_bounds.pair_figures`
-    "joint_rise"): " (largest rise: r_hip +2.3 deg)"; for a missed skate bound, the skate the keyframes
-    force (`solver.motion_metrics.forced_skate_mm`); "" otherwise."""
+    """What a missed bound's figure was made of, for the failing-pairs list: for the joint-angle error the
+    joint whose mean error grew most (`corpus_bounds.pair_figures` "joint_rise": " (largest rise: r_hip +2.3
+    deg)"); for a skate bound the skate the keyframes force (`solver.motion_metrics.forced_skate_mm`); for a
+    no-jolt bound the optimized path's peak (when, which joint) and the plain spline's and the capture's
+    figures its limit is the larger of (`_jolt_where`); "" otherwise."""
     rise, forced = figures.get("joint_rise"), figures.get("forced_skate_mm")
     if check["bound"].startswith("skate") and forced is not None:
         return f" (the keyframes force {number(forced)})"
+    if check["bound"] in ("pelvis_acc", "joint_acc", "torque_rms"):
+        return _jolt_where(check["bound"], figures)
     if check["bound"] != "joint_error" or not rise:
         return ""
     return f" (largest rise: {rise[0]} {rise[1]:+.1f} deg)"
+
+
+def _jolt_where(bound: str, figures: dict) -> str:
+    """" (peak 31.2 m/s^2 at 1.23 s; plain 12.1, capture 19.8)", " (l_knee 412 rad/s^2 at 1.23 s; plain 180,
+    capture 275)", " (plain 95.1, capture 110 N m)"; "" when the figures are missing."""
+    if bound == "joint_acc":
+        worst = figures.get("joint_acc_worst")
+        if not worst:
+            return ""
+        joint, _, peak, plain, capture, when = worst
+        at = "" if when is None else f" at {when:.3g} s"
+        return f" ({joint} {number(peak)} rad/s^2{at}; plain {number(plain)}, capture {number(capture)})"
+    if bound == "pelvis_acc":
+        plain, capture = figures.get("plain_pelvis_acc_m_s2"), figures.get("capture_pelvis_acc_m_s2")
+        when = figures.get("pelvis_acc_t_s")
+        at = "" if when is None else f" at {when:.3g} s"
+        return f" (peak{at}; plain {number(plain)}, capture {number(capture)} m/s^2)"
+    plain, capture = figures.get("plain_torque_rms_Nm"), figures.get("capture_torque_rms_Nm")
+    return f" (plain {number(plain)}, capture {number(capture)} N m)"
 
 
 def _cause(name: str, conflicts: int) -> str:

@@ -143,7 +143,8 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     keyframes alone force on any path (`solver.motion_metrics.forced_skate_mm`, over the full keyframes).
 
     Returns:
-        {"plain": ..., "optimized": ...}, each a `solver.motion_metrics.motion_metrics` dict, and
+        {"plain": ..., "optimized": ...}, each a `solver.motion_metrics.motion_metrics` dict (the reference's
+        jolt figures of the capture filtered over the whole clip, `_filtered_capture`), and
         "keyframes": {"forced_skate_contact_mm": lower bound of skate_contact_mm [mm/frame]}.
     Raises:
         InputError: fewer than 4 reference frames in the keyframes' span.
@@ -166,13 +167,27 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     fps = 1.0 / reference.frame_time
     # the capture's own stance (runner/mocap/stance.py), over the whole clip so its hysteresis starts there
     stance = capture_stance(model, reference.qpos, reference.frame_time)[keep]
-    out = {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted, stance=stance)
+    smooth = _filtered_capture(reference, layout)[keep]  # the capture's jolt figures (solver.jolts)
+    out = {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted, stance=stance,
+                                 capture_filtered=smooth)
            for label, fs in (("plain", solution.initial), ("optimized", solution.frames))}
     keys = solution.initial
     full = keys.is_keyframe & keys.fixed.all(axis=1)
     out["keyframes"] = {"forced_skate_contact_mm": forced_skate_mm(model, keys.times[full] - shift, keys.values[full],
                                                                    fps, shifted, len(times))}
     return out
+
+
+def _filtered_capture(reference, layout: StateLayout) -> np.ndarray:
+    """The reference's qpos low-pass filtered over the whole clip (`solver.jolts.filter_capture`, 6 Hz, Winter),
+    so the filter's ends lie outside the keyframes' span where the clip extends beyond it; a clip too short
+    to filter (under 13 frames) is returned as it is."""
+    from solver.jolts import filter_capture
+
+    try:
+        return filter_capture(reference.times, reference.qpos, layout)
+    except InputError:
+        return np.array(reference.qpos, float)
 
 
 def solve_run(problem: Problem, options: SolveOptions, source: Source, *, quiet: bool = False, stop=None) -> Run:

@@ -69,6 +69,12 @@ Anatomy (`anatomy_figures`; the decomposition and the table: `solver.terms.anato
 - rom_excess_deg: the largest angle by which any joint motion leaves the published range of motion
   (AAOS 1965, not widened to the keyframes as the rom term's is), and rom_excess_motion: which
   ("l_ankle dorsiflexion / plantarflexion"; "" when none does); rom_excess_deg_by_joint per joint.
+
+Jolts (`solver.jolts.jolt_figures`: finite differences at fps, torques by `mj_inverse`)
+- peak_pelvis_acceleration_m_s2, peak_angular_acceleration_rad_s2 (per ball joint; the largest:
+  peak_angular_acceleration_max_rad_s2), rms_joint_torque_Nm, with the times of the peaks. The
+  reference's are of the motion given as `capture_filtered` (the capture low-pass filtered at 6 Hz before
+  it is differentiated, `solver.jolts.filter_capture`), else of the reference as given.
 """
 from __future__ import annotations
 
@@ -265,7 +271,7 @@ def anatomy_figures(model, qpos: np.ndarray) -> dict:
 
 def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarray,
                    reference_contacts: Sequence[Contact], sites: Sequence[str] = SITES,
-                   stance: np.ndarray | None = None) -> dict:
+                   stance: np.ndarray | None = None, capture_filtered: np.ndarray | None = None) -> dict:
     """Accuracy of a path against the reference, and the plausibility of both (module docstring).
 
     Args:
@@ -276,9 +282,13 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         sites: contact site names.
         stance: (n, 2) bool, the reference's own stance per foot (left, right; e.g.
             `runner.mocap.stance.capture_stance`); None: no stance figures.
+        capture_filtered: (n, nq) the reference low-pass filtered (`solver.jolts.filter_capture`, over the
+            whole clip and cut to these frames), the motion of the reference's jolt figures; None: the
+            reference as given.
     Returns:
         JSON-serializable dict: {"fps", "frames", "sites", "error": {...}, "path": {...},
-        "reference": {...}}; "path" and "reference" hold `plausibility` and `anatomy_figures` figures.
+        "reference": {...}}; "path" and "reference" hold `plausibility`, `anatomy_figures` and
+        `solver.jolts.jolt_figures` figures (no jolt figures for fewer than 3 frames).
     Raises:
         InputError: shapes disagree, fps not positive, a site missing in the model, no floor plane.
     """
@@ -305,6 +315,9 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
     h = surfaces.height_above(pos)
     rh = surfaces.height_above(rpos)
     mask = contact_mask(reference_contacts, sites, times)
+    smooth = ref if capture_filtered is None else np.atleast_2d(np.asarray(capture_filtered, float))
+    if smooth.shape != ref.shape:
+        raise InputError(f"capture_filtered {smooth.shape} must be shaped as reference_qpos {ref.shape}")
     if stance is not None and np.shape(stance) != (n, len(FEET)):
         raise InputError(f"stance has shape {np.shape(stance)}; give one column per foot, (n, {len(FEET)}) "
                          f"with n = {n} frames")
@@ -340,9 +353,18 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         "frames": int(n),
         "sites": list(sites),
         "error": error,
-        "path": {**plausibility(pos, h, fps, qpos[:, :3], mask, sites, stance), **anatomy_figures(model, qpos)},
-        "reference": {**plausibility(rpos, rh, fps, ref[:, :3], mask, sites, stance), **anatomy_figures(model, ref)},
+        "path": {**plausibility(pos, h, fps, qpos[:, :3], mask, sites, stance), **anatomy_figures(model, qpos),
+                 **_jolts(model, qpos, fps)},
+        "reference": {**plausibility(rpos, rh, fps, ref[:, :3], mask, sites, stance), **anatomy_figures(model, ref),
+                      **_jolts(model, smooth, fps)},
     }
+
+
+def _jolts(model, qpos: np.ndarray, fps: float) -> dict:
+    """`solver.jolts.jolt_figures` of (n, nq) frames, {} for fewer than 3."""
+    from solver.jolts import jolt_figures
+
+    return jolt_figures(model, qpos, fps) if len(qpos) >= 3 else {}
 
 
 def forced_skate_mm(model, key_times: np.ndarray, key_qpos: np.ndarray, fps: float, contacts: Sequence[Contact],

@@ -27,7 +27,10 @@ def figures(**over):
          "site_error_cm": 4.0, "plain_site_error_cm": 5.0, "hyperextension_deg": 0.3, "plain_hyperextension_deg": 0.0,
          "schedule_flight_s": 0.36, "keyframe_conflicts": 0, "stalled": [], "float_schedule_mm": 2.8,
          "capture_float_schedule_mm": 2.0, "flight_in_stance_s": 0.0, "capture_flight_in_stance_s": 0.0,
-         "forced_skate_mm": 0.2, "skate_excess_mm": 0.8, "plain_skate_excess_mm": 3.8}
+         "forced_skate_mm": 0.2, "skate_excess_mm": 0.8, "plain_skate_excess_mm": 3.8,
+         "pelvis_acc_m_s2": 12.0, "plain_pelvis_acc_m_s2": 10.0, "capture_pelvis_acc_m_s2": 8.0,
+         "pelvis_acc_reference_m_s2": 10.0, "joint_acc_ratio": 1.2, "torque_rms_Nm": 100.0,
+         "plain_torque_rms_Nm": 90.0, "capture_torque_rms_Nm": 80.0, "torque_rms_reference_Nm": 90.0}
     return {**f, **over}
 
 
@@ -53,7 +56,8 @@ def test_a_pair_within_every_bound_holds_them_all_and_the_unmeasured_one_is_na()
      {"flight_in_stance_s": 0.048, "capture_flight_in_stance_s": 0.017}),
     # capture's 2.0 + 0.5 mm/frame; half the plain spline's 6.0 is 3.0, not the tighter one here
     ("skate_capture", {"skate_mm": 2.5, "plain_skate_mm": 6.0}, {"skate_mm": 2.6, "plain_skate_mm": 6.0}),
-    ("skate_plain", {"skate_mm": 2.0}, {"skate_mm": 2.1}),  # half of 4.0
+    # above the 0.2 mm/frame the keyframes force: half the plain spline's 3.8 is 1.9
+    ("skate_excess", {"skate_excess_mm": 1.9}, {"skate_excess_mm": 1.91}),
     # 10 % of 0.5 s = 50 ms is above the 30 ms floor, either way
     ("flight", {"flight_s": 0.549, "capture_flight_s": 0.5}, {"flight_s": 0.551, "capture_flight_s": 0.5}),
     ("flight", {"flight_s": 0.451, "capture_flight_s": 0.5}, {"flight_s": 0.449, "capture_flight_s": 0.5}),
@@ -64,10 +68,25 @@ def test_a_pair_within_every_bound_holds_them_all_and_the_unmeasured_one_is_na()
     ("hyperextension", {"hyperextension_deg": 0.5}, {"hyperextension_deg": 0.51}),  # plain 0 + 0.5 deg
     ("off_hinge", {"off_hinge_deg": 7.0, "capture_off_hinge_deg": 4.0},
      {"off_hinge_deg": 7.1, "capture_off_hinge_deg": 4.0}),  # capture + 3 deg, once the metric is plugged in
+    # no jolts: 1.5x the larger of the plain spline's 10 and the capture's 8 m/s^2; then of the capture's 14
+    ("pelvis_acc", {"pelvis_acc_m_s2": 15.0}, {"pelvis_acc_m_s2": 15.01}),
+    ("pelvis_acc", {"pelvis_acc_m_s2": 21.0, "pelvis_acc_reference_m_s2": 14.0},
+     {"pelvis_acc_m_s2": 21.01, "pelvis_acc_reference_m_s2": 14.0}),
+    ("joint_acc", {"joint_acc_ratio": 1.5}, {"joint_acc_ratio": 1.51}),  # the worst joint's peak over its reference's
+    ("torque_rms", {"torque_rms_Nm": 112.5}, {"torque_rms_Nm": 112.6}),  # 1.25x the plain spline's 90 N m
 ])
 def test_each_bound_holds_at_its_limit_and_misses_beyond_it(name, ok, bad):
     assert held(name, **ok) is True
     assert held(name, **bad) is False
+
+
+def test_skate_excess_replaces_skate_plain_and_every_bound_counts():
+    assert "skate_plain" not in BOUND and BOUND["skate_excess"].counted
+    assert {b.name for b in BOUNDS if not b.counted} == {"float_schedule", "flight_in_stance"}
+    # the plain spline's skate halved, but not the part above what the keyframes force: missed
+    f = figures(skate_mm=2.0, plain_skate_mm=4.0, forced_skate_mm=1.0, skate_excess_mm=1.0, plain_skate_excess_mm=3.0)
+    assert BOUND["skate_excess"].held(f) is True
+    assert BOUND["skate_excess"].held({**f, "skate_excess_mm": 1.6}) is False
 
 
 def test_a_missing_reference_figure_makes_the_bound_na_not_missed():
@@ -87,6 +106,11 @@ def test_figures_are_read_from_the_metrics_report():
                 "error": {"root_position_cm": {"mean": root_cm, "max": 9.0},
                           "joint_orientation_deg": {f"j{i}": {"mean": m, "max": 9.0} for i, m in enumerate(joint_means)},
                           "site_position_cm": {f"s{i}": {"mean": m, "max": 9.0} for i, m in enumerate(site_means)}}}
+    def jolts(pelvis, joints, torque):
+        return {"peak_pelvis_acceleration_m_s2": pelvis, "peak_pelvis_acceleration_t_s": 0.5,
+                "peak_angular_acceleration_rad_s2": dict(zip(("l_knee", "r_hip"), joints)),
+                "peak_angular_acceleration_t_s": {"l_knee": 1.25, "r_hip": 0.75}, "rms_joint_torque_Nm": torque}
+
     report = {"keyframe_conflicts": 3, "stalled": {"planted": 2e-6},
               "metrics": {"plain": {"max_penetration_mm": 40.0, "keyframe_error": 0.0, "max_hyperextension_deg": 0.2},
                           "optimized": {"max_penetration_mm": 0.5, "keyframe_error": 1e-16,
@@ -108,7 +132,23 @@ def test_figures_are_read_from_the_metrics_report():
     assert f["forced_skate_mm"] == 0.7 and f["skate_excess_mm"] == pytest.approx(0.8)
     assert f["plain_skate_excess_mm"] == pytest.approx(0.8)
     assert "off_hinge_deg" not in f  # not measured: left out, so its bound is n/a
-    assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled", "joint_rise"} <= set(FIGURES)
+    assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled", "joint_rise", "joint_acc_worst"} <= set(FIGURES)
+    assert "pelvis_acc_m_s2" not in f and "joint_acc_ratio" not in f  # a report without jolt figures: n/a
+    # the jolt figures: each path's, the capture's (the "reference" block), the limit from the larger of two
+    motion = report["metrics"]["motion"]
+    motion["plain"]["path"].update(jolts(10.0, (100.0, 40.0), 90.0))
+    motion["plain"]["reference"].update(jolts(12.0, (80.0, 60.0), 80.0))
+    motion["optimized"]["path"].update(jolts(16.0, (150.0, 100.0), 95.0))
+    f = pair_figures(report, schedule_flight=0.42)
+    assert f["pelvis_acc_m_s2"] == 16.0 and f["pelvis_acc_t_s"] == 0.5 and f["plain_pelvis_acc_m_s2"] == 10.0
+    assert f["capture_pelvis_acc_m_s2"] == 12.0 and f["pelvis_acc_reference_m_s2"] == 12.0
+    # l_knee 150 / max(100, 80) = 1.5, r_hip 100 / max(40, 60) = 1.67: the hip is the worst joint
+    assert f["joint_acc_ratio"] == pytest.approx(100 / 60)
+    assert f["joint_acc_worst"] == ["r_hip", pytest.approx(100 / 60), 100.0, 40.0, 60.0, 0.75]
+    assert f["torque_rms_Nm"] == 95.0 and f["torque_rms_reference_Nm"] == 90.0
+    checks = {c["bound"]: c for c in check_pair(f)}
+    assert checks["pelvis_acc"]["held"] is True and checks["pelvis_acc"]["limit"] == pytest.approx(18.0)
+    assert checks["joint_acc"]["held"] is False and checks["torque_rms"]["held"] is True
 
 
 def test_the_figures_beside_the_bounds_are_shown_but_do_not_fail_a_pair():
@@ -146,7 +186,10 @@ def test_causes_the_data_tells():
     assert causes(BOUND["flight"], {**long_gaps, "keyframe_conflicts": 2}) == ["contact detection",
                                                                              "keyframes contradict the schedule"]
     # the planted term stalled: its bounds are out of reach; a motion bound is not the schedule's doing
-    assert causes(BOUND["skate_plain"], figures(skate_mm=3.0, stalled=["planted"])) == ["bound out of reach"]
+    assert causes(BOUND["skate_excess"], figures(skate_excess_mm=3.0, stalled=["planted"])) == ["bound out of reach"]
+    # the acceleration bound (least change) or the forces term left out of reach: so is the jolt bound
+    assert causes(BOUND["pelvis_acc"], figures(pelvis_acc_m_s2=20.0, stalled=["acceleration"])) == ["bound out of reach"]
+    assert causes(BOUND["joint_acc"], figures(joint_acc_ratio=2.0)) == []
     assert causes(BOUND["joint_error"], figures(joint_error_deg=9.0, keyframe_conflicts=4, site_error_cm=5.0)) == []
     # the contact-site error below the plain spline's while the joints missed: the feet bought with the joints
     assert causes(BOUND["joint_error"], figures(joint_error_deg=9.0)) == ["joints traded for the feet"]
@@ -274,22 +317,36 @@ def test_the_float_bound_reads_the_capture_stance_where_the_schedule_has_a_gap()
 def test_a_skate_limit_below_what_the_keyframes_force_is_out_of_reach():
     from runner.corpus import held_but_forced
 
-    # plain spline 1.6 mm/frame: the limit is 0.8, and the keyframes alone force 0.9 (the capture slides 0.8)
-    slide = {"skate_mm": 1.2, "plain_skate_mm": 1.6, "capture_skate_mm": 0.8, "forced_skate_mm": 0.9}
+    # the capture slides 0.2 mm/frame: the limit is 0.7, and the keyframes alone force 0.9; the skate above
+    # what they force, 0.3, is within half the plain spline's 0.7
+    slide = {"skate_mm": 1.2, "plain_skate_mm": 1.6, "capture_skate_mm": 0.2, "forced_skate_mm": 0.9,
+             "skate_excess_mm": 0.3, "plain_skate_excess_mm": 0.7}
     f = figures(**slide)
-    assert causes(BOUND["skate_plain"], f) == ["keyframes force the skate"]
-    assert causes(BOUND["skate_plain"], {**f, "forced_skate_mm": 0.7}) == []  # in reach: the optimizer's miss
+    assert causes(BOUND["skate_capture"], f) == ["keyframes force the skate"]
+    assert causes(BOUND["skate_capture"], {**f, "forced_skate_mm": 0.6}) == []  # in reach: the optimizer's miss
+    assert BOUND["skate_excess"].held(f) is True
     forced = _result("e.bvh", "validation", **slide)
     also = _result("f.bvh", "validation", **slide, penetration_mm=3.0)
     assert not held_all(forced) and held_but_forced(forced) and not held_but_forced(also)
     assert held_but_forced(_result("g.bvh", "validation"))
     rates = pass_rates([forced, also, _result("g.bvh", "validation")])
     assert rates["validation"]["held_all"] == 1 and rates["validation"]["held_but_forced"] == 2
-    assert failing_lines([forced]) == ["- e every 0.25 (validation): skate_plain 1.2 (limit 0.8): keyframes force the "
-                                       "skate (the keyframes force 0.9)"]
+    assert failing_lines([forced]) == ["- e every 0.25 (validation): skate_capture 1.2 (limit 0.7): keyframes force "
+                                       "the skate (the keyframes force 0.9)"]
     assert "| every bound held that the keyframes leave in reach" in markdown_report([forced], pass_rates([forced]), {})
-    # beside it, not counted: the halving of the skate a path can remove (1.2 - 0.9 <= (1.6 - 0.9) / 2)
-    excess = check_pair(figures(**slide, skate_excess_mm=0.3, plain_skate_excess_mm=0.7))
-    row = next(c for c in excess if c["bound"] == "skate_excess")
-    assert row["held"] is True and row["counted"] is False and row["limit"] == pytest.approx(0.35)
-    assert BOUND["skate_excess"].held(figures(skate_excess_mm=0.4, plain_skate_excess_mm=0.7)) is False
+
+
+def test_a_failing_jolt_bound_is_listed_with_its_figures():
+    worst = ["l_knee", 2.0, 300.0, 150.0, 120.0, 1.25]
+    results = [_result("h.bvh", "tuning", joint_acc_ratio=2.0, joint_acc_worst=worst),
+               _result("i.bvh", "validation", pelvis_acc_m_s2=16.0, pelvis_acc_t_s=0.5, torque_rms_Nm=120.0),
+               _result("j.bvh", "validation")]
+    rates = pass_rates(results)
+    assert rates["tuning"]["joint_acc"] == [0, 1] and rates["validation"]["pelvis_acc"] == [1, 2]
+    assert rates["validation"]["torque_rms"] == [1, 2] and rates["validation"]["held_all"] == 1
+    lines = failing_lines(results)
+    assert lines == ["- h every 0.25 (tuning): joint_acc 2 (limit 1.5): not told by the data (l_knee 300 rad/s^2 at "
+                     "1.25 s; plain 150, capture 120)",
+                     "- i every 0.25 (validation): pelvis_acc 16 (limit 15): not told by the data (peak at 0.5 s; "
+                     "plain 10, capture 8 m/s^2); torque_rms 120 (limit 112): not told by the data (plain 90, "
+                     "capture 80 N m)"]

@@ -55,6 +55,11 @@ def test_a_corpus_of_two_clips_reports_tuning_and_validation_apart(tmp_path, cap
         path, cap = (report["metrics"]["motion"][k][w]["off_hinge_deg"] for k, w in (("optimized", "path"), ("plain", "reference")))
         excess = max(path[j] - cap[j] for j in path)
         assert checks["off_hinge"]["held"] == (excess <= 3.0)
+        # no jolts: the optimized path's RMS torque against the larger of the plain spline's and the capture's
+        mm = report["metrics"]["motion"]
+        limit = 1.25 * max(mm["plain"]["path"]["rms_joint_torque_Nm"], mm["plain"]["reference"]["rms_joint_torque_Nm"])
+        assert checks["torque_rms"]["held"] == (mm["optimized"]["path"]["rms_joint_torque_Nm"] <= limit)
+        assert all(checks[b]["held"] is not None for b in ("pelvis_acc", "joint_acc", "torque_rms"))
     # a rerun solves nothing: every pair is skipped, the report is the same
     assert main(args) == EXIT_OK
     again = json.loads((out / "corpus.json").read_text())

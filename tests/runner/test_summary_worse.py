@@ -319,3 +319,33 @@ def test_a_lost_turn_marks_the_joint_angle_row_and_a_root_that_strays_marks_the_
         m["error"]["joint_orientation_deg"] = {"root": {"mean": 40.0, "max": 89.0}}
     rows = {line.split("  ")[0].strip(): line for line in motion_metrics_table(plain, opt).splitlines()}
     assert not rows["joint angle error [deg] mean / max"].endswith(f"  {WORSE}")
+
+
+def test_the_no_jolt_rows_are_marked_over_the_corpus_bound():
+    from runner.console import JOLT_LEGEND, OVER
+
+    def jolts(pelvis, knee, hip, torque):
+        return {"peak_pelvis_acceleration_m_s2": pelvis, "rms_joint_torque_Nm": torque,
+                "peak_angular_acceleration_rad_s2": {"l_knee": knee, "r_hip": hip},
+                "peak_angular_acceleration_max_rad_s2": max(knee, hip)}
+
+    plain, opt = _motion(jolts(10.0, 100.0, 40.0, 90.0)), _motion(jolts(15.0, 150.0, 90.0, 112.5))
+    for m in (plain, opt):
+        m["reference"].update(jolts(8.0, 80.0, 60.0, 80.0))  # the filtered capture
+
+    def marks():
+        rows = {line.split("  ")[0]: line for line in motion_metrics_table(plain, opt).splitlines()}
+        return {k: rows[k].endswith(f"  {OVER}") for k in ("peak pelvis acceleration [m/s^2]",
+                                                            "peak joint ang. acceleration [rad/s^2]",
+                                                            "RMS joint torque [N m]")}
+
+    # at 1.5x the plain spline's pelvis peak, each joint at 1.5x its larger reference, torque at 1.25x: held
+    assert marks() == dict.fromkeys(marks(), False)
+    text = motion_metrics_table(plain, opt)
+    assert text.splitlines()[-2:] == [JOLT_LEGEND, MOTION_LEGEND]
+    # the hip 91 rad/s^2 against its larger reference, the capture's 60: over 1.5x, though the largest peak
+    # (the knee's 150) is not
+    opt["path"].update(jolts(15.1, 150.0, 91.0, 112.6))
+    assert marks() == dict.fromkeys(marks(), True)
+    # blocks without jolt figures (an older report): no rows, no legend
+    assert "peak pelvis acceleration [m/s^2]" not in motion_metrics_table(_motion(), _motion())
