@@ -129,7 +129,8 @@ def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = Non
     opt.add_argument("--ftol", type=nonnegative(float), default=_LIB.ftol_rel, help="relative objective tolerance [%(default)s]")
     opt.add_argument("--max-evals", type=nonnegative(int), default=_LIB.max_evals, help="evaluations per round [no limit]")
     opt.add_argument("--rate", type=positive(float), default=DEFAULT_RATE,
-                     help="quadrature points per second [%(default)s]")
+                     help="quadrature points per second [%(default)s; least-change: "
+                          f"{LeastChangeOptions().rate:g}]")
     opt.add_argument("--score", choices=SCORES, default=_LIB.score,
                      help="how adaptive subdivision ranks segments: the decrease of E a midpoint frame "
                           "predicts, or the raw weak-form Euler-Lagrange gradient [%(default)s]")
@@ -211,8 +212,9 @@ def solve_options(args, weights: dict) -> SolveOptions | LeastChangeOptions:
             flags = ", ".join("--" + k.replace("_", "-") for k in given)
             raise InputError(f"{flags}: options of the penalty method; drop them, or use --method penalty")
         lc = LeastChangeOptions()
+        rate = getattr(args, "rate", DEFAULT_RATE)
         return replace(lc, tol=lc.tol if tol is None else tol, max_time_s=getattr(args, "max_time", 0.0) or 0.0,
-                       max_evals=getattr(args, "max_evals", 0) or 0)
+                       max_evals=getattr(args, "max_evals", 0) or 0, rate=lc.rate if rate == DEFAULT_RATE else rate)
     if tol is not None and rounds is not None:
         raise InputError(f"--rounds {rounds} and --tol {tol:g} are two ways to end adaptive refinement; give "
                          "one: --rounds N for N fixed rounds, or --tol X to refine until the estimate is at most X")

@@ -188,8 +188,14 @@ def _run(values: np.ndarray, j: int) -> slice:
 def _relax_heights(constraints, state, plain, model, sites, support, radii, flights) -> list[Relaxation]:
     """Raise the pointwise limits (penetration, flight, ground) a full keyframe breaks by more than the
     tolerance to the plain spline's own values on its excursion (module docstring); the reports. The
-    keyframe's value is the plain spline's at the quadrature point nearest it (within half a spacing)."""
-    index, times, _ = _full_keyframes(plain)
+    keyframe's value is the plain spline's at the sample nearest it (a constraint sampled between the
+    quadrature points, `Penetration`, has one within a fraction of a spacing); every time series of the
+    same site (and surface) is relaxed on its own run of broken pairs around the keyframe."""
+    from solver.contacts import site_positions
+
+    index, times, values = _full_keyframes(plain)
+    keyed = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
+    keyed[..., 2] -= radii  # the contact points, as `Penetration` samples them
     t = state.t
     half = 0.5 * (t[1] - t[0]) + 1e-9
     out = []
@@ -197,26 +203,42 @@ def _relax_heights(constraints, state, plain, model, sites, support, radii, flig
         if c.name not in ("penetration", "flight", "ground"):
             continue
         v = c.values(state)
-        for key in np.unique(c.series):
-            pairs = np.flatnonzero(c.series == key)
-            pairs = pairs[np.argsort(c.rows[pairs], kind="stable")]
-            rows = c.rows[pairs]
-            tp = t[rows]
-            for k, tk in zip(index, times):
-                i = int(np.argmin(np.abs(tp - tk)))
-                if abs(tp[i] - tk) > half or v[pairs[i]] <= c.tolerance:
+        ptimes = c.pair_times(t) if hasattr(c, "pair_times") else t[c.rows]
+        groups = getattr(c, "group", c.series)
+        # penetration at the keyframes themselves (the first quadrature point is half a spacing after one)
+        depth = -c.surfaces.signed_distances(keyed)[0] if c.name == "penetration" else None  # (k, K, S)
+        for g in np.unique(groups):
+            in_g = np.flatnonzero(groups == g)
+            for j, (k, tk) in enumerate(zip(index, times)):
+                near = in_g[int(np.argmin(np.abs(ptimes[in_g] - tk)))]
+                at_key = v[near] if depth is None else depth[j].ravel()[g] - c.limit[near]
+                if abs(ptimes[near] - tk) > half or at_key <= c.tolerance:
                     continue  # no pair at the keyframe, or the keyframe meets the bound
-                lo = hi = i
-                while lo > 0 and rows[lo - 1] == rows[lo] - 1 and v[pairs[lo - 1]] > 0:
-                    lo -= 1
-                while hi < len(rows) - 1 and rows[hi + 1] == rows[hi] + 1 and v[pairs[hi + 1]] > 0:
-                    hi += 1
-                at = pairs[lo:hi + 1]
-                amount = float(v[pairs[i]])
-                c.limit[at] = c.limit[at] + v[at]
-                v[at] = 0.0
-                out.append(Relaxation(c.name, str(c.labels[pairs[i]]), int(k), float(tp[lo]), float(tp[hi]), amount))
+                amount = float(at_key)
+                spans = [_relax_run(c, v, ptimes, in_g[c.series[in_g] == key], tk) for key in np.unique(c.series[in_g])]
+                spans = [sp for sp in spans if sp is not None]
+                out.append(Relaxation(c.name, str(c.labels[near]), int(k), min(a for a, _ in spans),
+                                      max(b for _, b in spans), amount))
     return out
+
+
+def _relax_run(c, v: np.ndarray, ptimes: np.ndarray, pairs: np.ndarray, tk: float):
+    """Raise the limit of one time series' run of broken pairs around time tk to the values there (v set
+    to 0 on it); returns the run's (start, end) [s], or None when the pair nearest tk is not broken."""
+    pairs = pairs[np.argsort(c.rows[pairs], kind="stable")]
+    rows, tp = c.rows[pairs], ptimes[pairs]
+    i = int(np.argmin(np.abs(tp - tk)))
+    if v[pairs[i]] <= 0:
+        return None
+    lo = hi = i
+    while lo > 0 and rows[lo - 1] == rows[lo] - 1 and v[pairs[lo - 1]] > 0:
+        lo -= 1
+    while hi < len(rows) - 1 and rows[hi + 1] == rows[hi] + 1 and v[pairs[hi + 1]] > 0:
+        hi += 1
+    at = pairs[lo:hi + 1]
+    c.limit[at] = c.limit[at] + v[at]
+    v[at] = 0.0
+    return float(tp[lo]), float(tp[hi])
 
 
 def _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture=None) -> list:

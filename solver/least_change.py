@@ -70,6 +70,9 @@ class LeastChangeOptions:
             and met fewer bounds on the corpus.
         max_evals: evaluations per subproblem (0: no limit).
         max_time_s: [s] stop after this much time in all, keeping the path so far (0: no limit).
+        rate: [1/s] quadrature points per second: 200, at least four points in the shortest segment
+            (min_gap) for the integrals; penetration is sampled finer between them
+            (`solver.constraints.sites.PENETRATION_RATE`).
     """
 
     tol: float = 1e-2
@@ -79,8 +82,11 @@ class LeastChangeOptions:
     ftol_rel: float = 1e-3
     max_evals: int = 0
     max_time_s: float = 0.0
+    rate: float = 200.0
 
     def __post_init__(self):
+        if not (isinstance(self.rate, (int, float)) and np.isfinite(self.rate) and self.rate > 0):
+            raise InputError(f"LeastChangeOptions.rate must be > 0 points per second, got {self.rate!r}")
         for name in ("tol", "min_gap", "ftol_rel", "max_time_s"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
@@ -111,7 +117,7 @@ class LeastChange:
     knots: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = 400.0) -> LeastChange:
+def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = 200.0) -> LeastChange:
     """Build the problem: the plain spline as the reference motion, D, the figure's constraints.
 
     Args:

@@ -23,9 +23,9 @@ import numpy as np
 from solver.constraints.base import Constraint
 from solver.path_state import PathState
 
-#: points between two quadrature points where penetration is also checked (`Penetration`): 3, so 1600
-#: samples a second at 400 Hz, finer than the 1000 Hz the metrics sample at
-SUBSAMPLES = 3
+#: [1/s] penetration is checked at least this often (`Penetration`): 1600 samples a second, finer than
+#: the 1000 Hz the metrics sample at, so a corner clipped between two samples is under the tolerance
+PENETRATION_RATE = 1600.0
 
 __all__ = ["HeightBound", "Penetration", "SupportHeight", "SupportSlide", "site_heights"]
 
@@ -105,7 +105,7 @@ class Penetration(Constraint):
     surface (`StaticSurfaces.signed_distances`: a plane's free side, a box's outside), paper eq. 12 for
     every plane and box of the scene, a box's sides included.
 
-    Sampled at the quadrature points and SUBSAMPLES points between each two, placed by cubic Hermite
+    Sampled at the quadrature points and enough points between each two for PENETRATION_RATE, placed by cubic Hermite
     interpolation of the sites' positions and velocities at the points (exact for a site moving on a
     cubic; its error is h^4/384 max |p''''|, microns at 400 Hz): a toe crossing a box's edge at 3 m/s
     moves 7.5 mm between two points 2.5 ms apart and would clip the corner unseen.
@@ -120,24 +120,31 @@ class Penetration(Constraint):
     def __init__(self, surfaces, radii, t: np.ndarray, sites, tolerance: float):
         self.surfaces, self.radii = surfaces, np.asarray(radii, float)
         n, K, S = len(t), len(sites), surfaces.count
-        u = np.arange(1, SUBSAMPLES + 1) / (SUBSAMPLES + 1)  # (j,) fractions of a spacing
-        self.hermite = np.stack([2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2], 1)
         self.dt = np.diff(np.asarray(t, float))  # (n - 1,)
-        m = n + SUBSAMPLES * (n - 1)  # samples: the points, then each fraction's n - 1 samples
-        sample_row = np.r_[np.arange(n), np.tile(np.arange(n - 1), SUBSAMPLES)]
-        sample_series = np.r_[np.zeros(n, int), np.repeat(np.arange(1, SUBSAMPLES + 1), n - 1)]
+        self.sub = sub = max(0, int(np.ceil(PENETRATION_RATE * float(self.dt.max(initial=0.0)) - 1e-9)) - 1)
+        u = np.arange(1, sub + 1) / (sub + 1)  # (j,) fractions of a spacing
+        self.hermite = np.stack([2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2], 1)
+        m = n + sub * (n - 1)  # samples: the points, then each fraction's n - 1 samples
+        sample_row = np.r_[np.arange(n), np.tile(np.arange(n - 1), sub)]
+        sample_series = np.r_[np.zeros(n, int), np.repeat(np.arange(1, sub + 1), n - 1)]
         self.shape = (m, K, S)
         self.rows = np.repeat(sample_row, K * S)
         self.cols = np.tile(np.repeat(np.arange(K), S), m)
-        # one time series per (fraction, site, surface), consecutive rows within it
-        self.series = np.repeat(sample_series, K * S) * (K * S) + np.tile(np.arange(K * S), m)
+        # one time series per (fraction, site, surface), consecutive rows within it; a group per (site, surface)
+        self.group = np.tile(np.arange(K * S), m)
+        self.series = np.repeat(sample_series, K * S) * (K * S) + self.group
+        self._frac = np.repeat(np.r_[np.zeros(n), np.repeat(u, n - 1)], K * S)  # each pair's fraction of its spacing
         self.labels = np.asarray(sites, object)[self.cols]
         self.limit = np.zeros(len(self.rows))
         self.tolerance = float(tolerance)
 
+    def pair_times(self, t: np.ndarray) -> np.ndarray:
+        """(p,) the time [s] of each pair's sample, from the quadrature points t (n,)."""
+        return t[self.rows] + self._frac * np.append(self.dt, 0.0)[self.rows]
+
     def pair_weights(self, weights: np.ndarray) -> np.ndarray:
         """Each sample stands for an equal share of its point's weight [s]."""
-        return weights[self.rows] / (SUBSAMPLES + 1)
+        return weights[self.rows] / (self.sub + 1)
 
     def _samples(self, state) -> np.ndarray:
         """(m, k, 3) the lowest points of the sites at the samples [m]."""
@@ -170,7 +177,7 @@ class Penetration(Constraint):
         np.add.at(gs, (i, k), -g[on, None] * grad[i, k, s])
         n = len(self.dt) + 1
         gp, gv = gs[:n].copy(), np.zeros((n,) + gs.shape[1:])
-        sub = gs[n:].reshape(SUBSAMPLES, n - 1, *gs.shape[1:])
+        sub = gs[n:].reshape(self.sub, n - 1, *gs.shape[1:])
         H, dt = self.hermite, self.dt[None, :, None, None]
         gp[:-1] += np.einsum("j,jnkc->nkc", H[:, 0], sub)
         gp[1:] += np.einsum("j,jnkc->nkc", H[:, 2], sub)
