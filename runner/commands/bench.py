@@ -21,6 +21,9 @@
         evaluation count are not compared; frame counts within 10 %, other figures within 20 %; --exact:
         every figure as printed).
         `bench readme` is the same command under its former name.
+    dynsplines bench speed [--baseline REV] [--repeat N] [--only mocap-default,run-and-step-all]
+        the command line's default solves against a baseline commit, alternating runs in fresh
+        processes: solve time, CPU and peak memory, the ratio and its bound (runner/commands/bench_speed.py).
 
 The workloads are in solver/bench/; here: parse, load the showcase clip, call, format, print.
 """
@@ -29,7 +32,7 @@ from __future__ import annotations
 import argparse
 
 from runner.animate_options import default_args, solve_options
-from runner.commands import bench_contacts, bench_corpus, bench_solvers
+from runner.commands import bench_contacts, bench_corpus, bench_solvers, bench_speed
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
@@ -43,8 +46,8 @@ from solver.problem import parse_terms
 
 
 def register(sub) -> None:
-    """Add `bench` (run-and-step, refine, docs, orient, scaling, contacts, solvers, corpus) to the `dynsplines` parser."""
-    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, docs, orient, scaling, contacts, solvers, corpus")
+    """Add `bench` (run-and-step, refine, docs, orient, scaling, contacts, solvers, corpus, speed) to the `dynsplines` parser."""
+    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, docs, orient, scaling, contacts, solvers, corpus, speed")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
     r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip")
@@ -92,6 +95,7 @@ def register(sub) -> None:
     bench_contacts.register(bsub)
     bench_solvers.register(bsub)
     bench_corpus.register(bsub)
+    bench_speed.register(bsub)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -1,0 +1,134 @@
+"""`dynsplines bench speed`: the command line's solves against a baseline commit, side by side.
+
+Each workload runs as the user would run it (a fresh `python -m runner` process, `--no-render`), in a
+temporary worktree of the baseline revision and in this checkout, alternately (baseline, current,
+baseline, ...: load drift on a shared machine hits both), `--repeat` times each. Per run: the solve's
+time as the run records it (`solve_time_s` of `--metrics`, or of the saved path), and the whole
+process's CPU time and peak memory (`resource.getrusage` of the child). The table gives medians, the
+ratio current / baseline of each, and the bound the issue set for it.
+"""
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from runner.paths import REPO
+from solver.errors import InputError
+
+#: the commit before the least change (issue 40's "today")
+BASELINE = "7624574"
+
+
+@dataclass(frozen=True)
+class Workload:
+    """One command line to time: its arguments after `python -m runner`, and the bound on its ratio."""
+
+    name: str
+    args: tuple
+    bound: float
+
+
+WORKLOADS = (
+    Workload("mocap-default", ("mocap", "models/cmu/127_33.bvh", "--every", "0.25"), 0.25),
+    Workload("run-and-step-all", ("run-and-step", "--terms", "all"), 0.5),
+)
+
+
+def register(bsub) -> None:
+    """Add `bench speed` to the `dynsplines bench` subparsers."""
+    c = bsub.add_parser("speed", help="the command line's solves against a baseline commit, side by side",
+                        description=__doc__.split("\n\n")[1].replace("\n", " "))
+    c.add_argument("--baseline", default=BASELINE, help=f"the revision to compare with [{BASELINE}]")
+    c.add_argument("--repeat", type=int, default=3, help="runs of each workload in each checkout [3]")
+    c.add_argument("--only", default=None, help=f"comma-separated workloads of {','.join(w.name for w in WORKLOADS)}")
+    c.set_defaults(func=bench_speed)
+
+
+def baseline_worktree(revision: str, where: Path) -> Path:
+    """A detached git worktree of `revision` at `where`; raises InputError naming the revision."""
+    if not (REPO / ".git").exists():
+        raise InputError(f"{REPO} is not a git checkout; bench speed needs one to check out --baseline {revision}")
+    r = subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(where), revision],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        raise InputError(f"--baseline {revision}: git cannot check it out ({r.stderr.strip().splitlines()[-1]}); "
+                         "give a commit of this repository")
+    return where
+
+
+def time_run(root: Path, workload: Workload, out: Path) -> dict:
+    """Run the workload with `root`'s packages (PYTHONPATH) in a fresh process; its solve time [s], the
+    process's CPU time [s] and peak memory [MB]."""
+    out.mkdir(parents=True, exist_ok=True)
+    args = [*workload.args, "--no-render", "--quiet"]
+    args += ["--out-dir", str(out), "--metrics", str(out / "m.json")] if args[0] == "mocap" else \
+        ["--save-path", str(out / "p.npz")]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "runner", *args], cwd=root, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        raise RuntimeError(f"{workload.name} in {root} failed: {r.stderr.strip()[-400:]}")
+    if args[0] == "mocap":
+        solve = json.loads((out / "m.json").read_text())["solve_time_s"]
+    else:
+        with np.load(out / "p.npz") as z:
+            solve = float(z["wall_time_s"])
+    return {"solve_s": float(solve), "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
+            "wall_s": wall, "peak_mb": after.ru_maxrss / 1024.0}
+
+
+def ratio_rows(runs: dict) -> list:
+    """Rows (workload, baseline median, current median, ratio, per-run ratios, bound) of the solve time,
+    from runs {(workload name, "baseline" | "current"): [run dicts]} and the workloads' bounds."""
+    rows = []
+    for w in WORKLOADS:
+        base, cur = runs.get((w.name, "baseline")), runs.get((w.name, "current"))
+        if not base or not cur:
+            continue
+        b = np.array([x["solve_s"] for x in base])
+        c = np.array([x["solve_s"] for x in cur])
+        per_run = (c[: len(b)] / b[: len(c)]).tolist()
+        rows.append((w.name, float(np.median(b)), float(np.median(c)), float(np.median(c) / np.median(b)), per_run,
+                     w.bound, float(np.median([x["cpu_s"] for x in base])), float(np.median([x["cpu_s"] for x in cur])),
+                     max(x["peak_mb"] for x in base), max(x["peak_mb"] for x in cur)))
+    return rows
+
+
+def bench_speed(args) -> int:
+    """`dynsplines bench speed`: print the table (module docstring). Returns 0."""
+    chosen = [w for w in WORKLOADS if args.only is None or w.name in args.only.split(",")]
+    if not chosen:
+        raise InputError(f"--only {args.only}: no such workload; choose from {', '.join(w.name for w in WORKLOADS)}")
+    runs: dict = {}
+    with tempfile.TemporaryDirectory(prefix="dynsplines-speed-") as tmp:
+        base = baseline_worktree(args.baseline, Path(tmp) / "baseline")
+        try:
+            for i in range(args.repeat):
+                for w in chosen:
+                    for label, root in (("baseline", base), ("current", REPO)):
+                        r = time_run(root, w, Path(tmp) / f"{label}-{w.name}-{i}")
+                        runs.setdefault((w.name, label), []).append(r)
+                        print(f"  {w.name} {label} run {i + 1}: solve {r['solve_s']:.2f} s, CPU {r['cpu_s']:.2f} s",
+                              flush=True)
+        finally:
+            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(base)], capture_output=True)
+    print(f"bench speed: {args.baseline} (baseline) against this checkout, {args.repeat} alternating runs each")
+    print(f"  {'workload':<18} {'solve base':>10} {'current':>8} {'ratio':>6} {'bound':>6}  per run        "
+          f"{'CPU base':>8} {'current':>8} {'peak MB':>15}")
+    for name, b, c, ratio, per_run, bound, cb, cc, mb, mc in ratio_rows(runs):
+        held = "held" if ratio <= bound else "NOT held"
+        print(f"  {name:<18} {b:>9.2f}s {c:>7.2f}s {ratio:>6.3f} {bound:>6.2f}  "
+              f"{', '.join(f'{x:.3f}' for x in per_run):<14} {cb:>7.2f}s {cc:>7.2f}s {mb:>6.0f} / {mc:<6.0f} {held}")
+    return 0

@@ -1,0 +1,26 @@
+"""`dynsplines bench speed`'s pure parts: the ratio table from given runs, and a clear error for a revision
+git does not know (timing itself is measured by the command, never asserted)."""
+import pytest
+
+from runner.commands.bench_speed import WORKLOADS, baseline_worktree, ratio_rows
+from solver.errors import InputError
+
+
+def _run(solve, cpu=None, mb=100.0):
+    return {"solve_s": solve, "cpu_s": solve + 1.0 if cpu is None else cpu, "wall_s": solve + 2.0, "peak_mb": mb}
+
+
+def test_ratio_rows_are_medians_and_per_run_ratios():
+    name = WORKLOADS[0].name
+    runs = {(name, "baseline"): [_run(20.0), _run(18.0), _run(22.0)],
+            (name, "current"): [_run(4.0), _run(3.0), _run(5.5, mb=250.0)]}
+    (row,) = ratio_rows(runs)
+    assert row[0] == name and row[1] == 20.0 and row[2] == 4.0  # medians of (20, 18, 22) and (4, 3, 5.5)
+    assert row[3] == pytest.approx(0.2) and row[4] == pytest.approx([0.2, 3.0 / 18.0, 5.5 / 22.0])
+    assert row[5] == WORKLOADS[0].bound and row[9] == 250.0  # the larger peak of the current runs
+    assert ratio_rows({(name, "baseline"): [_run(1.0)]}) == []  # no current runs: no row
+
+
+def test_an_unknown_revision_is_one_clear_error(tmp_path):
+    with pytest.raises(InputError, match="--baseline no-such-rev"):
+        baseline_worktree("no-such-rev", tmp_path / "b")
