@@ -101,7 +101,9 @@ def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = Non
                           "of paper eq. 1 (every other option below) [least-change; penalty when an option "
                           "only it has is given]")
     opt.add_argument("--terms", default=None,
-                     help=f"objective terms: 'all' or a list from {','.join(term_names())} "
+                     help="'all': the least change with the force bounds too (ballistic flights, the friction "
+                          "cone, the peak ground force; docs/design.md); a list of terms from "
+                          f"{','.join(term_names())}: the penalty method "
                           f"[{terms_help or 'the keyframe file’s, else the default terms; with its contacts also planted,clearance'}]")
     opt.add_argument("--weight", type=_weight, action="append", default=[], metavar="NAME=VALUE",
                      help="weight of a term (repeatable), e.g. --weight torque=0.1")
@@ -185,13 +187,19 @@ PENALTY_ONLY = {"terms": None, "weight": [], "subdivision": _LIB.subdivision, "p
 
 def method(args) -> str:
     """The solve method of the parsed arguments: --method, else penalty when an option only the penalty
-    method has is given (--terms, --weight, --subdivision, --rounds, ...: `PENALTY_ONLY`), else
-    least-change."""
+    method has is given (--terms other than all, --weight, --subdivision, --rounds, ...: `PENALTY_ONLY`),
+    else least-change."""
     chosen = getattr(args, "method", None)
     if chosen is not None:
         return chosen
-    given = [k for k, default in PENALTY_ONLY.items() if getattr(args, k, default) != default]
-    return "penalty" if given else "least-change"
+    return "penalty" if _penalty_options(args) else "least-change"
+
+
+def _penalty_options(args) -> list[str]:
+    """The `PENALTY_ONLY` options given; `--terms all` is not one of them: the least change with every
+    constraint, the force bounds too (`solver.constraints.forces`)."""
+    return [k for k, default in PENALTY_ONLY.items() if getattr(args, k, default) != default
+            and not (k == "terms" and getattr(args, k) == "all")]
 
 
 def solve_options(args, weights: dict) -> SolveOptions | LeastChangeOptions:
@@ -207,7 +215,7 @@ def solve_options(args, weights: dict) -> SolveOptions | LeastChangeOptions:
     """
     tol, rounds = getattr(args, "tol", None), getattr(args, "rounds", None)
     if method(args) == "least-change":
-        given = [k for k, default in PENALTY_ONLY.items() if getattr(args, k, default) != default]
+        given = _penalty_options(args)
         if given:
             flags = ", ".join("--" + k.replace("_", "-") for k in given)
             raise InputError(f"{flags}: options of the penalty method; drop them, or use --method penalty")

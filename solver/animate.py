@@ -159,7 +159,8 @@ def solve_problem(problem: Problem, options: SolveOptions | None = None, *,
         from solver.least_change import build_least_change, solve_least_change
 
         lc = build_least_change(problem.model, problem.keyframes, contacts=tuple(problem.contacts),
-                                flights=problem.airborne, capture=problem.capture, rate=options.rate)
+                                flights=problem.airborne, capture=problem.capture, rate=options.rate,
+                                forces=problem.weights.get("forces", 0) > 0)
         return solve_least_change(lc, options, should_stop=should_stop, progress=progress)
     if options is None:
         options = default_options(dict(problem.weights))

@@ -11,6 +11,10 @@
     acceleration no jolts: pelvis and ball joints no harder than the capture's (6 Hz) or the plain spline's peak  5 %
     unit         quaternions near unit norm between the frames                          ||q| - 1| <= 0.03  0.01
 
+With `--terms all` the force bounds join them (`solver.constraints.forces`, added by
+`solver.least_change.build_least_change`): no external wrench in flight, the friction cone and the peak
+ground force on the ground.
+
 A foot contact is a foot's sites' contacts merged; at each point of one the support site is the foot's
 site that the schedule has in contact there and the reference motion holds lowest: a walking foot
 rolls from its heel onto its toe, and the toe carries it while the heel rises (the float metric of the

@@ -65,6 +65,9 @@ class InverseDynamics(KinematicTree):
     needs = (0, 1, 2)
     required = (0, 1, 2)
 
+    #: the engine computes generalized forces (`solver.path_state.PathState` passes it qacc)
+    forces = True
+
     def __init__(self, model, sites=()):
         import mujoco
 

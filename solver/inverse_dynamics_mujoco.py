@@ -71,6 +71,9 @@ class MujocoInverseDynamics:
     has_site_velocities = False
     motion_map = None
 
+    #: the engine computes generalized forces (`solver.path_state.PathState` passes it qacc)
+    forces = True
+
     def __init__(self, model, sites=(), eps: float = 1e-6):
         import mujoco
 

@@ -308,6 +308,9 @@ class SiteKinematics(KinematicTree):
     needs = (0, 1)
     required = (0,)
 
+    #: no generalized forces (`InverseDynamics.forces`)
+    forces = False
+
     def __init__(self, model, sites=()):
         super().__init__(model, sites, prune=True)  # the figure's four contact sites: 9 of its 20 bodies
         #: the tangent map of the joints this engine reads (`engine_forward` computes qvel with it)

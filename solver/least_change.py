@@ -26,10 +26,12 @@ import numpy as np
 
 from solver.change import MeasureOfChange
 from solver.constraint_set import figure_constraints
+from solver.constraints.forces import figure_forces
 from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.frames import FrameSet
+from solver.inverse_dynamics import InverseDynamics
 from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
 from solver.lagrangian import GAMMA, AugmentedLagrangian, Preconditioner, initial_penalty, solve_subproblem
@@ -37,6 +39,7 @@ from solver.layout import StateLayout
 from solver.least_change_refine import doerfler_times, predicted_decreases
 from solver.manifold import FrameVariables
 from solver.optimize import Status
+from solver.peak_bounds import peak_bounds
 from solver.quadrature import quadrature_times
 from solver.reference import ReferenceMotion
 from solver.solution import Round, Solution
@@ -117,7 +120,8 @@ class LeastChange:
     knots: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = 200.0) -> LeastChange:
+def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = 200.0,
+                       forces: bool = False) -> LeastChange:
     """Build the problem: the plain spline as the reference motion, D, the figure's constraints.
 
     Args:
@@ -125,7 +129,9 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
         contacts: the contact schedule (`Contact`s). flights: ((start, end), ...) [s] where every site
             is clear; None: the schedule's gaps. capture: None or (times (n,) [s], qpos (n, nq)), the
             motion capture the keyframes came from (its filtered peaks bound the accelerations).
-        rate: quadrature points per second [1/s].
+        rate: quadrature points per second [1/s]. forces: add the force bounds
+            (`solver.constraints.forces`: ballistic flights, the friction cone, with a capture the peak
+            ground force), computed by the inverse dynamics.
     Returns:
         LeastChange.
     Raises:
@@ -140,11 +146,17 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     t0, t1 = float(plain.times[0]), float(plain.times[-1])
     t, h = quadrature_times(t0, t1, rate)
     reference = ReferenceMotion.from_frames(model, plain, t, np.full(len(t), h))
-    engine = SiteKinematics(model, figure.contact_sites) if figure.contact_sites else None
+    if forces:
+        engine = InverseDynamics(model, figure.contact_sites)
+    else:
+        engine = SiteKinematics(model, figure.contact_sites) if figure.contact_sites else None
     schedule = ContactSchedule.of(contacts or ())
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)
     constraints, relaxations = figure_constraints(model, figure, reference, plain, tuple(schedule), flights,
                                                   engine, capture=capture)
+    if forces:
+        peak = None if capture is None else peak_bounds(model, plain, capture).ground_force_bw
+        constraints += figure_forces(model, t, flights, peak)
     # the pose part's frequency: the keyframes' own Nyquist frequency (a change slower than the keyframe
     # spacing is priced by its pose, a faster one by its acceleration)
     omega = np.pi / float(np.mean(np.diff(keyframes.times)))

@@ -3,7 +3,8 @@
 The objective and every constraint read the same things: the path Y, Y', Y'' (the spline at the
 quadrature points, paper eq. 6), MuJoCo's `qvel` and `qacc` of it (`solver.kinematics.PathMotion`), and
 the contact sites' positions and velocities (`solver.kinematic_tree.SiteKinematics`, paper appendix A
-eq. 13 and 19). `PathState` computes each once per evaluation; every function adds its gradient to the
+eq. 13 and 19) and, with an inverse-dynamics engine (`solver.inverse_dynamics.InverseDynamics`), the
+generalized forces that make the motion (appendix A eq. 18-21). `PathState` computes each once per evaluation; every function adds its gradient to the
 state's adjoints (with respect to Y, Y', Y'' directly, to qacc and the pose in MuJoCo's tangent space, to
 the site positions and velocities), and `pullback` runs each reverse pass once for their sum.
 """
@@ -21,7 +22,8 @@ class PathState:
 
     Args:
         t: (n,) quadrature times [s]. Y, Y1, Y2: (n, nq) the path and its first and second derivatives.
-        tmap: the model's TangentMap. engine: a `SiteKinematics` of the contact sites, or None.
+        tmap: the model's TangentMap. engine: a `SiteKinematics` of the contact sites, an
+            `InverseDynamics` (sites and forces), or None.
     Attributes:
         motion: `PathMotion` (qvel, qacc (n, nv) and their reverse pass).
     """
@@ -39,13 +41,24 @@ class PathState:
         self.g_acc: np.ndarray | None = None
         self.g_sites: np.ndarray | None = None
         self.g_site_vel: np.ndarray | None = None
+        self.g_tau: np.ndarray | None = None
         #: what a function computes for its value and reuses for its gradient (keyed by the function)
         self.cache: dict = {}
 
     def _pass(self):
         if self._res is None:
-            self._res = self.engine.forward(self.Y, np.ascontiguousarray(self.motion.qvel))
+            qvel = np.ascontiguousarray(self.motion.qvel)
+            if self.engine.forces:
+                self._res = self.engine.forward(self.Y, qvel, np.ascontiguousarray(self.motion.qacc))
+            else:
+                self._res = self.engine.forward(self.Y, qvel)
         return self._res
+
+    @property
+    def tau(self) -> np.ndarray:
+        """(n, nv) generalized forces [N, N m] that make the motion (contact-free `mj_inverse`); needs an
+        inverse-dynamics engine."""
+        return self._pass().tau
 
     @property
     def sites(self) -> np.ndarray:
@@ -61,6 +74,10 @@ class PathState:
         """Add g (n, nv) = d f / d qacc."""
         self.g_acc = g.copy() if self.g_acc is None else self.g_acc + g
 
+    def add_tau(self, g: np.ndarray) -> None:
+        """Add g (n, nv) = d f / d tau."""
+        self.g_tau = g.copy() if self.g_tau is None else self.g_tau + g
+
     def add_sites(self, g_pos: np.ndarray | None, g_vel: np.ndarray | None = None) -> None:
         """Add d f / d site positions and velocities, each (n, k, 3) or None."""
         if g_pos is not None:
@@ -72,13 +89,16 @@ class PathState:
         """(dY, dY1, dY2), each (n, nq): the sum of every adjoint added, pulled back to the path."""
         dY, dY1, dY2 = self.gY.copy(), self.gY1.copy(), self.gY2.copy()
         g_pose = g_vel = None
-        if self.g_sites is not None or self.g_site_vel is not None:
+        g_acc = self.g_acc
+        if self.g_sites is not None or self.g_site_vel is not None or self.g_tau is not None:
             res = self._pass()
             z = np.zeros(res.sites.shape)
-            g_pose, g_vel, _ = self.engine.vjp(res, None, z if self.g_sites is None else self.g_sites,
-                                               z if self.g_site_vel is None else self.g_site_vel)
-        if g_pose is not None or g_vel is not None or self.g_acc is not None:
-            a, b, c = self.motion.vjp(g_vel, self.g_acc, g_pose)
+            g_pose, g_vel, g_qacc = self.engine.vjp(res, self.g_tau, z if self.g_sites is None else self.g_sites,
+                                                    z if self.g_site_vel is None else self.g_site_vel)
+            if g_qacc is not None and self.g_tau is not None:
+                g_acc = g_qacc if g_acc is None else g_acc + g_qacc
+        if g_pose is not None or g_vel is not None or g_acc is not None:
+            a, b, c = self.motion.vjp(g_vel, g_acc, g_pose)
             dY += a
             dY1 += b
             dY2 += c
