@@ -14,7 +14,7 @@ from solver.errors import InputError
 from solver.least_change import LeastChangeOptions
 from solver.optimize import ALGORITHMS
 from solver.problem import parse_terms, term_names
-from solver.solve import BACKENDS, SCORES, SUBDIVISIONS, SolveOptions
+from solver.solve import SCORES, SUBDIVISIONS, SolveOptions
 
 #: the solve methods of --method (docs/design.md)
 METHODS = ("least-change", "penalty")
@@ -123,11 +123,8 @@ def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = Non
     opt.add_argument("--max-frames", type=nonnegative(int), default=_LIB.max_frames, metavar="N",
                      help="at most N variable frames in total (0 = no limit; with --tol 10 per keyframe "
                           "interval) [%(default)s]")
-    opt.add_argument("--backend", choices=BACKENDS, default=_LIB.backend,
-                     help="optimizer of each round: nlopt (--algorithm) or lm (Levenberg-Marquardt on the terms' "
-                          "residuals; docs/solvers.md) [%(default)s]")
     opt.add_argument("--algorithm", choices=list(ALGORITHMS), default=_LIB.algorithm,
-                     help="nlopt algorithm (--backend nlopt) [%(default)s]")
+                     help="nlopt algorithm of each round [%(default)s]")
     opt.add_argument("--ftol", type=nonnegative(float), default=_LIB.ftol_rel, help="relative objective tolerance [%(default)s]")
     opt.add_argument("--max-evals", type=nonnegative(int), default=_LIB.max_evals, help="evaluations per round [no limit]")
     opt.add_argument("--rate", type=positive(float), default=DEFAULT_RATE,
@@ -181,7 +178,7 @@ def clip_terms(args) -> dict:
 
 #: the options only the penalty method has, with their defaults (one of them given chooses it)
 PENALTY_ONLY = {"terms": None, "weight": [], "subdivision": _LIB.subdivision, "per_segment": _LIB.per_segment,
-                "rounds": None, "max_frames": _LIB.max_frames, "backend": _LIB.backend, "algorithm": _LIB.algorithm,
+                "rounds": None, "max_frames": _LIB.max_frames, "algorithm": _LIB.algorithm,
                 "score": _LIB.score, "no_precondition": False, "no_renormalize": False}
 
 
@@ -235,7 +232,6 @@ def solve_options(args, weights: dict) -> SolveOptions | LeastChangeOptions:
         default_options(weights),
         subdivision=args.subdivision, per_segment=args.per_segment,
         renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
-        backend=getattr(args, "backend", _LIB.backend),
         max_evals=args.max_evals, max_time_s=args.max_time, precondition=not args.no_precondition,
         score=args.score, max_frames=args.max_frames, **mode,
     )

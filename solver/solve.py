@@ -27,7 +27,6 @@ from solver.backend import Backend, nlopt_backend
 from solver.continuation import LIMIT_CHECK_RATE, STALL_FRACTION, PenaltyContinuation  # noqa: F401 (re-exported)
 from solver.errors import InputError
 from solver.frames import FrameSet
-from solver.gauss_newton import lm_backend
 from solver.objective import NonFiniteError, Objective
 from solver.optimize import ALGORITHMS, OptimizeResult, Status
 from solver.refinement import (  # noqa: F401 (TOL_FRAMES_PER_INTERVAL, refinement_estimate re-exported)
@@ -43,9 +42,6 @@ from solver.subdivide import global_times, knot_hint_times
 
 SUBDIVISIONS = ("none", "global", "adaptive")
 SCORES = ("gradient", "decrease")
-#: `SolveOptions.backend`: the optimizer of each round (`solver.backend`): nlopt ("nlopt", with
-#: `algorithm`) or Levenberg-Marquardt on the terms' residuals ("lm", `solver.gauss_newton`).
-BACKENDS = ("nlopt", "lm")
 #: `SolveOptions.refine`: how adaptive subdivision decides when to stop.
 REFINES = ("rounds", "tol")
 #: `SolveOptions.rounds` when not given (refine "rounds").
@@ -82,12 +78,8 @@ class SolveOptions:
         per_round: at most this many frames per adaptive round (0 = one per segment).
         max_frames: cap on variable frames in total (0 = none).
         renormalize: divide each term by its value on the plain spline (eq. 7).
-        backend: the optimizer of each round, one of BACKENDS: "nlopt" (`algorithm` in the
-            preconditioned variables, `solver.backend.nlopt_backend`) or "lm" (Levenberg-Marquardt on the
-            terms' residuals, `solver.gauss_newton.lm_backend`; an objective with a term that is not a
-            sum of squares falls back to nlopt; docs/solvers.md).
-        algorithm, ftol_rel, max_evals (per round), max_time_s (whole solve): optimizer settings
-            (algorithm: nlopt's; ftol_rel and max_evals apply to both back ends).
+        algorithm, ftol_rel, max_evals (per round), max_time_s (whole solve): the nlopt optimizer's
+            settings (each round in the preconditioned variables, `solver.backend.nlopt_backend`).
         score: what ranks segments for adaptive subdivision: "gradient" (|dE/dP| of a midpoint frame,
             `weak_form_scores`) or "decrease" (the decrease of E that frame predicts,
             `predicted_decreases`; does not favour short segments).
@@ -150,11 +142,8 @@ class SolveOptions:
     max_boosts: int = 4
     tol: float = 0.0
     refine: str = "rounds"
-    backend: str = "nlopt"
 
     def __post_init__(self):
-        if self.backend not in BACKENDS:
-            raise InputError(f"unknown backend {self.backend!r}; choose one of: {', '.join(BACKENDS)}")
         if self.subdivision not in SUBDIVISIONS:
             raise InputError(f"unknown subdivision {self.subdivision!r}; choose one of: {', '.join(SUBDIVISIONS)}")
         if self.score not in SCORES:
@@ -239,8 +228,8 @@ def solve(
             values (the path is then unchanged by the insertion).
         refinement: the refinement strategy (a fresh `solver.refinement.Refinement`, e.g.
             `solver.orient_refine.GapToOptimum`); default from `options` (`default_refinement`).
-        backend: the optimizer of one round (`solver.backend.Backend`); default the one
-            `options.backend` names.
+        backend: the optimizer of one round (`solver.backend.Backend`); default nlopt
+            (`solver.backend.nlopt_backend`).
     Returns:
         Solution.
     Raises:
@@ -256,7 +245,7 @@ def solve(
     objective = _working_copy(objective)
     ev_check = _check_inputs(objective, initial, options)
     if backend is None:
-        backend = lm_backend if options.backend == "lm" else nlopt_backend
+        backend = nlopt_backend
     t_start = time.perf_counter()
     objective.prepare(initial.times, initial.values)  # terms' per-round state from the plain spline
     if options.renormalize:

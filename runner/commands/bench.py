@@ -32,7 +32,7 @@ from __future__ import annotations
 import argparse
 
 from runner.animate_options import default_args, solve_options
-from runner.commands import bench_contacts, bench_corpus, bench_solvers, bench_speed
+from runner.commands import bench_contacts, bench_corpus, bench_speed
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
@@ -46,8 +46,8 @@ from solver.problem import parse_terms
 
 
 def register(sub) -> None:
-    """Add `bench` (run-and-step, refine, docs, orient, scaling, contacts, solvers, corpus, speed) to the `dynsplines` parser."""
-    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, docs, orient, scaling, contacts, solvers, corpus, speed")
+    """Add `bench` (run-and-step, refine, docs, orient, scaling, contacts, corpus, speed) to the `dynsplines` parser."""
+    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, docs, orient, scaling, contacts, corpus, speed")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
     r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip")
@@ -87,13 +87,10 @@ def register(sub) -> None:
     c.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
     c.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every length")
     c.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table, dense vs banded")
-    c.add_argument("--backend", choices=("nlopt", "lm", "both"), default="nlopt",
-                   help="optimizer of the rounds (solve --backend); both: one table per back end [nlopt]")
     c.add_argument("--repeat", type=int, default=3,
                    help="solves per length, the lengths alternating; the table gives medians [3]")
     c.set_defaults(func=bench_scaling)
     bench_contacts.register(bsub)
-    bench_solvers.register(bsub)
     bench_corpus.register(bsub)
     bench_speed.register(bsub)
 
@@ -406,5 +403,5 @@ def bench_scaling(args) -> int:
         raise InputError(f"--repeat must be at least 1, got {args.repeat}")
     argv = ["--factors", args.factors, "--per-segment", str(args.per_segment), "--rate", str(args.rate),
             "--repeat", str(args.repeat)]
-    argv += ["--dense"] * args.dense + ["--per-eval"] * args.per_eval + ["--backend", args.backend]
+    argv += ["--dense"] * args.dense + ["--per-eval"] * args.per_eval
     return scaling.main(argv)

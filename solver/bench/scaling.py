@@ -95,10 +95,8 @@ def tile_keyframes(keyframes: Keyframes, copies: int, root_xy=(0, 1)) -> Keyfram
                      source=f"{keyframes.source} x{copies}")
 
 
-def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, per_segment: int = 2,
-              backend: str = "nlopt") -> dict:
-    """Solve the tiled clip once in this process with the optimizer `backend` ("nlopt" or "lm",
-    `SolveOptions.backend`); returns timings, memory and result figures.
+def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, per_segment: int = 2) -> dict:
+    """Solve the tiled clip once in this process; returns timings, memory and result figures.
 
     Returns:
         dict: keyframes, frames, points (quadrature), wall_s, cpu_s (user + system of the solve),
@@ -117,7 +115,7 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, 
     weights = parse_terms(None)
     # built as `solver.animate` builds it: the anatomical terms allow the plain spline's own angles
     objective, initial, _ = figure_problem(model, weights, keyframes, rate=rate)
-    options = replace(default_options(weights), subdivision="global", per_segment=per_segment, backend=backend)
+    options = replace(default_options(weights), subdivision="global", per_segment=per_segment)
     rss_before = _rss_mb()
     r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
@@ -175,7 +173,7 @@ def _rss_mb() -> float:
 
 
 def scaling(keyframes: Keyframes, factors=(1, 2, 4, 8), dense: bool = False, figure: Path = FIGURE,
-            rate: float = 400.0, per_segment: int = 2, repeat: int = 1, backend: str = "nlopt") -> list[dict]:
+            rate: float = 400.0, per_segment: int = 2, repeat: int = 1) -> list[dict]:
     """The workload: per length factor, `solve_one` on the tiled clip in a fresh subprocess.
 
     Args:
@@ -183,7 +181,6 @@ def scaling(keyframes: Keyframes, factors=(1, 2, 4, 8), dense: bool = False, fig
             at every size (the cost before the banded evaluation, for comparison).
         repeat: solves per length, the lengths alternating (1x, 2x, .., 1x, 2x, ..), so that a slow
             or fast spell of a shared machine falls on every length (`median_rows` combines them).
-        backend: the optimizer of the rounds ("nlopt" or "lm", `SolveOptions.backend`).
     Returns:
         one `solve_one` dict per factor and repeat, plus "factor" and "repeat", in the order run.
     """
@@ -198,7 +195,7 @@ def scaling(keyframes: Keyframes, factors=(1, 2, 4, 8), dense: bool = False, fig
         for rep in range(max(1, int(repeat))):
             for f in factors:
                 cmd = [sys.executable, "-m", "solver.bench.scaling", "--worker", str(paths[f]), "--figure",
-                       str(figure), "--rate", str(rate), "--per-segment", str(per_segment), "--backend", backend]
+                       str(figure), "--rate", str(rate), "--per-segment", str(per_segment)]
                 cmd += ["--dense"] if dense else []
                 res = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
                 if res.returncode != 0:
@@ -285,7 +282,7 @@ def _worker(args) -> int:
         spline_basis.DENSE_MAX_ENTRIES = 1 << 62
     d = np.load(args.worker)
     kf = Keyframes(d["times"], d["values"], d["mask"])
-    print(json.dumps(solve_one(kf, Path(args.figure), args.rate, args.per_segment, args.backend)))
+    print(json.dumps(solve_one(kf, Path(args.figure), args.rate, args.per_segment)))
     return 0
 
 
@@ -325,8 +322,6 @@ def main(argv=None) -> int:
     p.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every size")
     p.add_argument("--repeat", type=int, default=3, help="solves per length, alternating; medians reported [3]")
     p.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table")
-    p.add_argument("--backend", default="nlopt", choices=("nlopt", "lm", "both"),
-                   help="the optimizer of the rounds; both: one table each [nlopt]")
     p.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
@@ -351,13 +346,11 @@ def main(argv=None) -> int:
           f"tiled {args.factors}x, floor-only scene, quadrature {args.rate:g} Hz, global subdivision "
           f"{args.per_segment} per interval, otherwise animate's options (default_options); one subprocess per length, one BLAS "
           "thread; peak MB = maxrss - RSS before the solve")
-    backends = ("nlopt", "lm") if args.backend == "both" else (args.backend,)
     runs = [(False, "spline: auto (dense up to DENSE_MAX_ENTRIES, banded above)"),
             (True, "spline: dense at every size (before)")][:1 + args.dense]
-    for (dense, title), backend in ((r, b) for r in runs for b in backends):
-        title = f"backend {backend}; {title}"
+    for dense, title in runs:
         rows = scaling(keyframes, factors, dense=dense, figure=args.figure, rate=args.rate,
-                       per_segment=args.per_segment, repeat=args.repeat, backend=backend)
+                       per_segment=args.per_segment, repeat=args.repeat)
         if args.repeat > 1:
             title += f"; times and memory: median of {args.repeat} runs per length, the lengths alternating"
         print_table(median_rows(rows), title)

@@ -60,8 +60,7 @@ class SiteRows:
         dv: (n, m, 3) d r / d site velocity [units of r per m/s], or None.
         signed: (n, m) for one-sided (hinge) columns r = max(0, signed): the value before the max, also
             where r is 0 (how far a clear site is from switching its column on), -inf where it has no
-            linearization; None for columns that are not hinges. The Gauss-Newton back end's model
-            sees the columns a step would switch on through it (`solver.active_set`).
+            linearization; None for columns that are not hinges.
         dsigned: (n, m, 3) d signed / d site position everywhere `signed` is finite, or None.
     """
 
@@ -100,8 +99,7 @@ class SiteRows:
 @dataclass
 class OneSided:
     """One-sided (hinge) columns of a term read from a few path components: r_j = +-max(0, signed_j)
-    (so r_j^2 = max(0, signed_j)^2), as `SiteRows.signed` for site columns. The Gauss-Newton back end's
-    model sees the columns a step would switch on through it (`solver.active_set`).
+    (so r_j^2 = max(0, signed_j)^2), as `SiteRows.signed` for site columns.
 
     Attributes:
         signed: (n, m) the value before the max, also where r is 0 (how far column j is from switching

@@ -129,8 +129,7 @@ class Penetration(Term):
 
 def signed_depths(surfaces: StaticSurfaces, points: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """The penetration depth before its max(0, .): how far points are inside (> 0) or clear of (< 0)
-    each surface grown by `margin`, with its gradient, for a Gauss-Newton model of the hinge
-    (`solver.active_set`).
+    each surface grown by `margin`, with its gradient (the hinge's linearization).
 
     Plane: margin - n.(p - p0), gradient -n (everywhere). Box: inside, the depth of
     `StaticSurfaces.penetration` (the nearest face); outside across exactly one face's slab (the other
