@@ -144,8 +144,7 @@ def _departure_deg(solution, layout):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("backend", ["nlopt", "lm"])
-def test_a_motion_with_nothing_violated_stays_the_plain_spline(toy_model, backend):
+def test_a_motion_with_nothing_violated_stays_the_plain_spline(toy_model):
     """No surface near and every joint inside its limits: the only term that wants a change is the
     covariant acceleration (which is not the plain spline's Euclidean one), here at weight 1 (20x its
     default) so that it wants a visible one. With the near term at its default weight the optimized path
@@ -158,7 +157,7 @@ def test_a_motion_with_nothing_violated_stays_the_plain_spline(toy_model, backen
         terms = "penetration,unit,bending,smooth" + ("" if near is None else ",near")
         weights = {"smooth": 1.0, **({} if near is None else {"near": near})}
         problem = make_problem(toy_model, kf, terms, weights, rate=200.0)
-        options = replace(default_options(dict(problem.weights)), backend=backend, max_evals=400)
+        options = replace(default_options(dict(problem.weights)), max_evals=400)
         got[near] = _departure_deg(solve_problem(problem, options), layout)
     assert got[1.0] <= 1.5, f"with the near term the path left the plain spline by {got[1.0]:.2f} deg"
     assert got[100.0] < 0.5 * got[None], f"near at 100: {got[100.0]:.2f} deg, without it {got[None]:.2f}"
