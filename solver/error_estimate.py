@@ -19,7 +19,7 @@ quadratic model). It misses (i) the coupling between new frames and the re-optim
 ones, which the joint optimum exploits (the sum underestimates: true/sum 0.57-5.0, median 1.34, 90%
 within 0.97-2.3, over rounds 1-6 of adaptive refinement on 18 tuning sets), and (ii) the part of the gap the optimizer's tolerance leaves (ftol_rel 1e-6: a
 few 1e-6 relative, negligible above a 1e-5 target). GAP_FACTOR calibrates (i) on the tuning sets
-(solver/bench/random_sets.py seeds 0-49).
+(runner/bench/random_sets.py seeds 0-49).
 
 Assumptions: the path is optimized for its frames (the estimate is of the discretization gap: it is
 computed after every round's optimization; ftol_rel 1e-6 leaves below 1e-5 of E), the path is in the

@@ -29,7 +29,7 @@ def _csr_accumulate(A, X: np.ndarray, out: np.ndarray) -> None:
 #: At or below this many entries per matrix (quadrature points x frames) `SplineBasis` stores W, W1, W2
 #: densely and evaluates with whole-matrix products; above it, it evaluates through the tridiagonal
 #: moment system (O(points + frames) work and memory per evaluation). Measured (value + pullback, one
-#: thread, `python -m solver.bench.scaling --per-eval`): the two cost the same near 21000 entries for the
+#: thread, `python -m runner.bench.scaling --per-eval`): the two cost the same near 21000 entries for the
 #: figure (51 components; 700 points x 30 frames: 0.36 ms each), banded 2.2x faster at 84000 (1400 x 60)
 #: and 17x at 5.4e6; for 4 components (orientation) dense is 2x faster up to 21000 and even at 84000.
 DENSE_MAX_ENTRIES = 32768

@@ -2,7 +2,7 @@
 pyproject.toml [tool.importlinter]) and ruff (rules in [tool.ruff]).
 
 The contracts name the layout (runner/commands/, runner/mocap/, runner/render/, runner/console.py, ...,
-solver/bench/sphere_reference/) and `ruff check` must report nothing. Each test
+runner/bench/sphere_reference/) and `ruff check` must report nothing. Each test
 skips, with the reason, when its tool is not installed (`pip install -e ".[test]"` installs both).
 """
 import shutil
@@ -29,8 +29,8 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
 
 
 def test_import_contracts():
-    """solver never imports runner; solver.bench.sphere_reference imports nothing else from solver;
-    runner's layers (docs/architecture.md); no cycles."""
+    """solver never imports runner; runner.bench.sphere_reference imports nothing from solver nor
+    anything else from runner; runner's layers (docs/architecture.md); no cycles."""
     r = _run(_tool("lint-imports"), "--no-cache")
     assert r.returncode == 0, f"lint-imports failed:\n{r.stdout}\n{r.stderr}"
     assert "0 broken" in r.stdout, r.stdout

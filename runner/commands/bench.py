@@ -7,13 +7,13 @@
     dynsplines bench refine [--terms all] [--counts 14,21,28] [--scores gradient,decrease]
         adaptive (weak-form Euler-Lagrange, each score) against global subdivision at equal
         variable-frame counts on the run-and-step clip: final objective, evaluations, wall time
-        (solver.bench.figure.compare_refinement).
+        (runner.bench.figure.compare_refinement).
     dynsplines bench orient [--speed-random N]
-        the single-body problem against the Barr-92 and constrained B-spline baselines (solver.bench.orient);
+        the single-body problem against the Barr-92 and constrained B-spline baselines (runner.bench.orient);
         with --speed-random N also the time to gap 1e-4 against Barr-92 on N generated sets.
     dynsplines bench orient --random N [--bvp] [--first-seed SEED]
         accuracy on request: true and estimated gap, frames, time and |q| drift of the default and
-        tol=1e-4 over N generated keyframe sets (solver.bench.random_sets).
+        tol=1e-4 over N generated keyframe sets (runner.bench.random_sets).
     dynsplines bench docs [--check [--exact]] [--only NAME,...] [--file docs/benchmarks.md]
         regenerate the measured tables of docs/benchmarks.md (between `<!-- bench:NAME -->` and
         `<!-- /bench:NAME -->`) from runs of the current code (runner/readme_tables.py); --check
@@ -25,21 +25,21 @@
         the command line's default solves against a baseline commit, alternating runs in fresh
         processes: solve time, CPU and peak memory, the ratio and its bound (runner/commands/bench_speed.py).
 
-The workloads are in solver/bench/; here: parse, load the showcase clip, call, format, print.
+The workloads are in runner/bench/; here: parse, load the showcase clip, call, format, print.
 """
 from __future__ import annotations
 
 import argparse
 
 from runner.animate_options import default_args, solve_options
+from runner.bench import orient as orient_workload
+from runner.bench.figure import GEOMETRIC, compare_refinement, path_figures, per_eval_ms, time_solves
 from runner.commands import bench_contacts, bench_corpus, bench_speed
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
 from runner.readme_tables import Block, compare_blocks, replace_blocks, table, timing
 from solver.animate import DEFAULT_RATE
-from solver.bench import orient as orient_workload
-from solver.bench.figure import GEOMETRIC, compare_refinement, path_figures, per_eval_ms, time_solves
 from solver.errors import InputError
 from solver.metrics import path_metrics
 from solver.problem import parse_terms
@@ -81,7 +81,7 @@ def register(sub) -> None:
     c = bsub.add_parser("scaling", help="cost against clip length: run-and-step's gait tiled 1x..8x",
                         description="The shipped clip's keyframes tiled end to end (root carried forward) on a "
                         "floor-only scene: optimization time, evaluations, time per evaluation and peak memory "
-                        "of each length, one subprocess per length (solver.bench.scaling, docs/scaling.md).")
+                        "of each length, one subprocess per length (runner.bench.scaling, docs/scaling.md).")
     c.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the clip [1,2,4,8]")
     c.add_argument("--per-segment", type=int, default=2, help="variable frames per keyframe interval [2]")
     c.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
@@ -98,7 +98,7 @@ def register(sub) -> None:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the options of `dynsplines bench orient` to a parser."""
     p.add_argument("--sets", default=orient_workload.DEFAULT_SETS,
-                   help="comma-separated keyframe sets (solver/bench/sphere_reference/) [the three large sets]")
+                   help="comma-separated keyframe sets (runner/bench/sphere_reference/) [the three large sets]")
     p.add_argument("--methods", default="dynsplines,barr92,bspline", help="comma-separated methods")
     p.add_argument("--budget", type=float, default=60.0, help="seconds per baseline and set [60]")
     p.add_argument("--repeat", type=int, default=7,
@@ -396,8 +396,8 @@ def bench_readme(args) -> int:
 
 
 def bench_scaling(args) -> int:
-    """`dynsplines bench scaling`: solver.bench.scaling's table for the given lengths."""
-    from solver.bench import scaling
+    """`dynsplines bench scaling`: runner.bench.scaling's table for the given lengths."""
+    from runner.bench import scaling
 
     if args.repeat < 1:
         raise InputError(f"--repeat must be at least 1, got {args.repeat}")

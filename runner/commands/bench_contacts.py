@@ -19,8 +19,8 @@ import tempfile
 from pathlib import Path
 
 from runner.animate_options import default_args, solve_options
+from runner.bench.figure import GEOMETRIC, per_eval_ms, time_solves
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem
-from solver.bench.figure import GEOMETRIC, per_eval_ms, time_solves
 from solver.errors import InputError
 from solver.metrics import path_metrics
 from solver.problem import make_problem

@@ -141,7 +141,7 @@ def test_bench_orient_random(capsys):
 def test_speed_random_rows():
     """`bench orient --speed-random`: one row per generated set; with a tiny budget Barr-92 does not reach
     the gap and the ratio is printed as a lower bound."""
-    from solver.bench.orient import SPEED_GAP, speed_random
+    from runner.bench.orient import SPEED_GAP, speed_random
 
     lines = []
     rows = speed_random(1, budget=0.2, repeat=1, out=lines.append)

@@ -27,7 +27,7 @@ def command_problem(monkeypatch, *argv):
 def test_bench_run_and_step_solves_the_commands_problem(monkeypatch, terms):
     """Each configuration `bench run-and-step --terms TERMS` times ("geometric" and TERMS) is what
     `run-and-step --terms <its terms>` solves."""
-    from solver.bench.figure import GEOMETRIC
+    from runner.bench.figure import GEOMETRIC
 
     benched = run_and_step_problems(terms, 400.0)
     assert set(benched) == {"geometric", terms}

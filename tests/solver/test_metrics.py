@@ -207,7 +207,7 @@ def test_adaptive_refinement_beats_global_at_equal_frame_counts(model, layout, k
     subdivision ranked by the predicted decrease ends lower than 2 frames in each interval, with the
     same fixed weights and scales (measured 33.9 vs 42.2). `forces` is left out: the predicted decrease
     does not see its peak excess, which a frame anywhere near a peak changes (with it 38.3 vs 42.3)."""
-    from solver.bench.figure import compare_refinement
+    from runner.bench.figure import compare_refinement
 
     kf = Keyframes(keyframes.times[:4], keyframes.values[:4], keyframes.mask[:4])
     weights = {name: w for name, w in parse_terms("all").items() if name != "forces"}

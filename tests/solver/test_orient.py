@@ -1,5 +1,5 @@
 """The single-body orientation problem (paper sec. 3, solver/orient.py, solver/euler_lagrange.py,
-`dynsplines orient`) against the exact optimum computed independently in solver/bench/sphere_reference/.
+`dynsplines orient`) against the exact optimum computed independently in runner/bench/sphere_reference/.
 
 Acceptance-style checks: keyframes met exactly, relative gap (E - E*)/E* < 1e-3 with default settings on
 the large-rotation sets (E = integral |covariant acceleration of q/|q||^2 dt, measured by the reference
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-from solver.bench.sphere_reference import (
+from runner.bench.sphere_reference import (
     align,
     covariant_energy,
     great_circle_set,

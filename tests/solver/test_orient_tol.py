@@ -1,12 +1,12 @@
 """Accuracy on request (docs/orient.md "Accuracy on request: tol and the gap estimate"): `orient(tol=...)`, the a-posteriori gap estimate, budgets, |q| drift.
 
-The acceptance test runs the default and tol=1e-4 on generated keyframe sets (solver/bench/random_sets.py)
-against the exact optimum of the independent reference (solver/bench/sphere_reference/).
+The acceptance test runs the default and tol=1e-4 on generated keyframe sets (runner/bench/random_sets.py)
+against the exact optimum of the independent reference (runner/bench/sphere_reference/).
 """
 import numpy as np
 import pytest
 
-from solver.bench.random_sets import random_set, true_energy
+from runner.bench.random_sets import random_set, true_energy
 from solver.errors import InputError
 from solver.orient import DEFAULT_TOL, OrientOptions, default_options, orient
 
@@ -101,7 +101,7 @@ def test_a_stalled_round_is_optimized_again(monkeypatch):
 
 @pytest.fixture(scope="module")
 def reference():
-    from solver.bench import sphere_reference
+    from runner.bench import sphere_reference
 
     return sphere_reference
 

@@ -1,4 +1,4 @@
-"""Shared pieces of the baselines (solver/bench/barr92.py, solver/bench/bspline.py): the result, the input
+"""Shared pieces of the baselines (runner/bench/barr92.py, runner/bench/bspline.py): the result, the input
 check, the normalized path energy and the time-limited SLSQP driver."""
 from __future__ import annotations
 

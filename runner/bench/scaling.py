@@ -1,6 +1,6 @@
 """Cost against clip length (docs/scaling.md "The scaling workload"): the run-and-step gait tiled 1x, 2x, 4x, 8x.
 
-    python -m solver.bench.scaling [--factors 1,2,4,8] [--dense] [--per-eval]
+    python -m runner.bench.scaling [--factors 1,2,4,8] [--dense] [--per-eval]
 
 The workload (`scaling`) takes a Keyframes object (the driver, `main`, reads the shipped clip) and
 repeats it end to end (`tile_keyframes`): copy r starts where copy r-1 ends, with the root's x and y
@@ -194,7 +194,7 @@ def scaling(keyframes: Keyframes, factors=(1, 2, 4, 8), dense: bool = False, fig
         env = {**os.environ, **SINGLE_THREAD}
         for rep in range(max(1, int(repeat))):
             for f in factors:
-                cmd = [sys.executable, "-m", "solver.bench.scaling", "--worker", str(paths[f]), "--figure",
+                cmd = [sys.executable, "-m", "runner.bench.scaling", "--worker", str(paths[f]), "--figure",
                        str(figure), "--rate", str(rate), "--per-segment", str(per_segment)]
                 cmd += ["--dense"] if dense else []
                 res = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
@@ -313,7 +313,7 @@ def print_table(rows: list[dict], title: str) -> None:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m solver.bench.scaling", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m runner.bench.scaling", description=__doc__.splitlines()[0])
     p.add_argument("--keyframes", type=Path, default=FIGURE.parent / "run_and_step.keyframes.json")
     p.add_argument("--figure", type=Path, default=FIGURE)
     p.add_argument("--factors", default="1,2,4,8")

@@ -7,7 +7,7 @@ method is measured on its *continuous, normalized* path u(t) = q(t)/|q(t)|:
     E(u) = integral_{t_0}^{t_{K-1}} |u'' - u (u''.u)|^2 dt                                   [1/s^3]
 
 and the relative gap (E - E*)/E* against the exact optimum E* (a natural Riemannian cubic spline on
-S^3, computed independently in solver/bench/sphere_reference/).
+S^3, computed independently in runner/bench/sphere_reference/).
 
 (a) `barr92_discrete` - Barr, Currin, Gabriel & Hughes 1992 ("Smooth interpolation of orientations
     with angular velocity constraints using quaternions", SIGGRAPH '92): the unknowns are quaternions
@@ -35,9 +35,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from solver.bench.barr92 import BarrProblem, barr92_discrete
-from solver.bench.bspline import BSplineProblem, bspline_coefficients
-from solver.bench.common import BaselineResult, normalized_path_energy
+from runner.bench.barr92 import BarrProblem, barr92_discrete
+from runner.bench.bspline import BSplineProblem, bspline_coefficients
+from runner.bench.common import BaselineResult, normalized_path_energy
 
 __all__ = [
     "BaselineResult",
@@ -77,7 +77,7 @@ def baseline_time_to_gap(
 
     Args:
         method: "barr92", "bspline", or a callable (times, quats, resolution, max_time_s) -> BaselineResult.
-        times, quats: the keyframes; E_star: the exact optimum [1/s^3] (solver/bench/sphere_reference/).
+        times, quats: the keyframes; E_star: the exact optimum [1/s^3] (runner/bench/sphere_reference/).
         gaps: relative-gap levels (E - E*)/E*.
         max_time_s: total wall-time budget [s].
         log: if a list is given, one dict per run is appended (resolution, gap, wall_time_s, status).

@@ -1,5 +1,5 @@
 """(b) Cohen 1992 style: cubic B-spline coefficients in R^4, eq. 9 with a plain weight
-(the problem and the comparison: solver/bench/baselines.py)."""
+(the problem and the comparison: runner/bench/baselines.py)."""
 from __future__ import annotations
 
 import time
@@ -7,7 +7,7 @@ import time
 import numpy as np
 from scipy.interpolate import BSpline, CubicSpline
 
-from solver.bench.common import BaselineResult, check_inputs, dense_path, normalized_path_energy, run_slsqp
+from runner.bench.common import BaselineResult, check_inputs, dense_path, normalized_path_energy, run_slsqp
 
 # ----------------------------------------------------------------------------------------------------
 # (b) Cohen 1992 style: B-spline coefficients, keyframes as linear equality constraints

@@ -6,8 +6,8 @@ exp(uniform(-ln 5, ln 5)), kept within [0.2, 3] s). Deterministic per seed (nump
 
 `evaluate(seeds, ...)`: runs `orient` on each set (default settings and `tol=1e-4`, or other runs
 given) and measures the true relative gap (E - E*)/E* against the exact optimum E* (the natural
-Riemannian cubic spline on S^3, computed independently by `solver.bench.sphere_reference`, which imports
-nothing else from solver; another reference module may be passed in or loaded from a path), with the
+Riemannian cubic spline on S^3, computed independently by `runner.bench.sphere_reference`, which imports
+nothing from solver; another reference module may be passed in or loaded from a path), with the
 estimate the result reports, frames, wall time and max |1 - |q||.
 
 Seeds: tune on 0-49 (`TUNING_SEEDS`), report acceptance on 1000-1049 (`ACCEPTANCE_SEEDS`), never used
@@ -67,7 +67,7 @@ def random_set(seed: int) -> RandomSet:
 
 def load_reference(path: str | Path):
     """A sphere reference module loaded from a file path (the default reference is the package
-    `solver.bench.sphere_reference`; this is for another implementation of the same functions)."""
+    `runner.bench.sphere_reference`; this is for another implementation of the same functions)."""
     path = Path(path)
     name = "_dynsplines_sphere_reference"
     if name in sys.modules:
@@ -157,7 +157,7 @@ def evaluate(seeds=ACCEPTANCE_SEEDS, reference=None, runs=RUNS, method: str = "d
     Args:
         seeds: iterable of ints (`random_set`).
         reference: the sphere reference module, or a path to one (`load_reference`); default
-            `solver.bench.sphere_reference`.
+            `runner.bench.sphere_reference`.
         runs: ((label, orient keyword arguments), ...).
         method, ref_tol: how E* is computed (`exact_energy`).
     Returns:
@@ -166,7 +166,7 @@ def evaluate(seeds=ACCEPTANCE_SEEDS, reference=None, runs=RUNS, method: str = "d
     from solver.orient import orient
 
     if reference is None:
-        from solver.bench import sphere_reference as reference
+        from runner.bench import sphere_reference as reference
     ref = load_reference(reference) if isinstance(reference, (str, Path)) else reference
     out = {label: Distribution(label) for label, _ in runs}
     for seed in seeds:
@@ -184,7 +184,7 @@ def evaluate(seeds=ACCEPTANCE_SEEDS, reference=None, runs=RUNS, method: str = "d
 
 
 def main(argv=None) -> int:
-    """python -m solver.bench.random_sets [N] [--tuning] [--bvp]: the distribution over N sets (default
+    """python -m runner.bench.random_sets [N] [--tuning] [--bvp]: the distribution over N sets (default
     50) of the acceptance seeds (or the tuning seeds); E* by the discrete reference (or solve_bvp)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     base = TUNING_SEEDS if "--tuning" in argv else ACCEPTANCE_SEEDS

@@ -1,7 +1,7 @@
 """Independent reference for the single-body orientation problem (paper sec. 3): the exact optimum E*.
 
-Shared by the tests and the benchmark (solver/bench/). It shares no code with the rest of `solver/`
-(nor with B-splines): the exact-unit limit of the paper's covariant-interpolation problem (eq. 9 with
+Shared by the tests and the benchmark (runner/bench/). It shares no code with `solver/` (nor
+with B-splines): the exact-unit limit of the paper's covariant-interpolation problem (eq. 9 with
 lambda -> infinity, or the "normalized" objective) is the *natural Riemannian cubic spline on S^3*
 (Noakes, Heinzinger & Paden 1989, "Cubic splines on curved spaces", IMA J. Math. Control Inf. 6;
 Crouch & Silva Leite 1995): the path u(t) on the unit sphere S^3 in R^4 that passes through the
@@ -24,7 +24,7 @@ Two independent computations of E*:
    moved by the exponential map so the unit constraint holds exactly (Gauss-Newton/Levenberg-Marquardt
    on a banded system), then Richardson extrapolation in N (the error is O(h^2)).
 
-They agree to ~1e-9 relative on the test sets (measured 5e-10 to 3e-9; tests/test_sphere_reference.py
+They agree to ~1e-9 relative on the test sets (measured 5e-10 to 3e-9; tests/runner/bench/test_sphere_reference.py
 asserts 1e-6), and both reproduce the exact 1-D answer for keyframes on one great circle.
 
 `covariant_energy` measures E for any densely sampled path, without any of the project's code.

@@ -1,4 +1,4 @@
-"""Tests of the independent reference (solver/bench/sphere_reference/): the natural Riemannian cubic on S^3."""
+"""Tests of the independent reference (runner/bench/sphere_reference/): the natural Riemannian cubic on S^3."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from solver.bench import sphere_reference as sr
+from runner.bench import sphere_reference as sr
 
 
 def _orthonormal(seed, k):

@@ -5,10 +5,10 @@
     dynsplines bench orient --random N [--bvp]      accuracy of the default and tol=1e-4 on N generated sets
     dynsplines bench orient --speed-random N       also: time to gap 1e-4, ours vs Barr-92, on N generated sets
 
-For each keyframe set (7 keyframes, 30-150 degrees between them; solver/bench/sphere_reference/) the exact
+For each keyframe set (7 keyframes, 30-150 degrees between them; runner/bench/sphere_reference/) the exact
 optimum E* is the natural Riemannian cubic spline on S^3 (solve_bvp). Every method runs a ladder of
 settings of increasing accuracy (ours: `LADDER` below; the baselines: their resolution ladder,
-solver.bench.baselines.baseline_time_to_gap); the time to a gap level is the wall time of the single run of
+runner.bench.baselines.baseline_time_to_gap); the time to a gap level is the wall time of the single run of
 the fastest setting that reached it (what a user who knew that setting would spend), or the best gap
 reached within the budget. The gap of every method's *normalized continuous path* is measured by the
 same independent code (sphere_reference.covariant_energy for ours, the baselines' own
@@ -23,8 +23,8 @@ import time
 
 import numpy as np
 
-from solver.bench import random_sets, sphere_reference
-from solver.bench.baselines import baseline_time_to_gap
+from runner.bench import random_sets, sphere_reference
+from runner.bench.baselines import baseline_time_to_gap
 from solver.errors import InputError
 from solver.orient import default_options, orient
 

@@ -1,10 +1,10 @@
-"""The scaling workload (solver.bench.scaling): the tiled gait is exact copies; the cost's growth with
+"""The scaling workload (runner.bench.scaling): the tiled gait is exact copies; the cost's growth with
 length is measured by `dynsplines bench scaling` (docs/scaling.md), not asserted here."""
 
 import numpy as np
 import pytest
 
-from solver.bench.scaling import FIGURE, floor_model, tile_keyframes
+from runner.bench.scaling import FIGURE, floor_model, tile_keyframes
 from solver.keyframe_file import read_keyframes
 from solver.layout import StateLayout
 
@@ -35,7 +35,7 @@ def _row(factor, repeat, cpu, evals=100):
 
 
 def test_median_rows_and_repeat_ratios():
-    from solver.bench.scaling import median_rows, repeat_ratios
+    from runner.bench.scaling import median_rows, repeat_ratios
 
     rows = [_row(1, 0, 1.0), _row(8, 0, 9.0), _row(1, 1, 2.0), _row(8, 1, 16.0), _row(1, 2, 1.5), _row(8, 2, 11.0)]
     med = median_rows(rows)

@@ -1,4 +1,4 @@
-"""(a) Barr et al. 1992: discrete samples, hard unit-norm constraints (see solver/bench/baselines.py)."""
+"""(a) Barr et al. 1992: discrete samples, hard unit-norm constraints (see runner/bench/baselines.py)."""
 from __future__ import annotations
 
 import time
@@ -6,7 +6,7 @@ import time
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from solver.bench.common import BaselineResult, check_inputs, dense_path, normalized_path_energy, run_slsqp
+from runner.bench.common import BaselineResult, check_inputs, dense_path, normalized_path_energy, run_slsqp
 
 
 class BarrProblem:

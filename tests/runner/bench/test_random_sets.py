@@ -1,7 +1,7 @@
-"""solver/bench/random_sets.py: the seeded keyframe-set generator of the orientation benchmarks (docs/orient.md)."""
+"""runner/bench/random_sets.py: the seeded keyframe-set generator of the orientation benchmarks (docs/orient.md)."""
 import numpy as np
 
-from solver.bench.random_sets import (
+from runner.bench.random_sets import (
     ACCEPTANCE_SEEDS,
     ANGLE_DEG,
     KEYFRAMES,

@@ -1,4 +1,4 @@
-"""Tests of the two baselines (solver/bench/) against the independent reference."""
+"""Tests of the two baselines (runner/bench/) against the independent reference."""
 from __future__ import annotations
 
 import types
@@ -6,9 +6,9 @@ import types
 import numpy as np
 import pytest
 
-from solver.bench import barr92, common
-from solver.bench import baselines as bl
-from solver.bench import sphere_reference as sr
+from runner.bench import barr92, common
+from runner.bench import baselines as bl
+from runner.bench import sphere_reference as sr
 
 MOD = sr.moderate_rotation_set()
 LARGE = sr.large_rotation_sets()[1]
