@@ -1,5 +1,5 @@
 """The options of `dynsplines animate` and `run-and-step` (also what `dynsplines bench` runs): the parser
-arguments and the SolveOptions they make."""
+arguments and the LeastChangeOptions they make."""
 from __future__ import annotations
 
 import argparse
@@ -9,17 +9,9 @@ from pathlib import Path
 from runner.parser import nonnegative, positive
 from runner.render import side_by_side
 from runner.render.side_by_side import PANELS
-from solver.animate import DEFAULT_RATE, default_options
 from solver.errors import InputError
 from solver.least_change import LeastChangeOptions
-from solver.optimize import ALGORITHMS
-from solver.problem import parse_terms, term_names
-from solver.solve import SCORES, SUBDIVISIONS, SolveOptions
-
-#: the solve methods of --method (docs/design.md)
-METHODS = ("least-change", "penalty")
-#: the library's settings (`solver.default_options`): the command's defaults are these, not its own
-_LIB = default_options({})
+from solver.problem import forces_of
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -49,16 +41,6 @@ def _camera(text: str) -> float:
         return side_by_side.parse_camera(text)
     except InputError as e:
         raise argparse.ArgumentTypeError(str(e).removeprefix(f"--camera {text!r}: ")) from None
-
-
-def _weight(text: str) -> tuple[str, float]:
-    name, sep, value = text.partition("=")
-    if not sep:
-        raise argparse.ArgumentTypeError(f"--weight {text!r}: expected NAME=VALUE, e.g. torque=0.1")
-    try:
-        return name.strip(), float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--weight {text!r}: {value!r} is not a number") from None
 
 
 def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> None:
@@ -94,49 +76,23 @@ def add_options(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> 
 def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = None) -> None:
     """The "optimization" options of `add_options` (what `solve_options` reads); also `dynsplines batch`'s.
     `terms_help`: what --terms defaults to for this command (its help's [default])."""
-    opt = p.add_argument_group("optimization")
-    opt.add_argument("--method", choices=METHODS, default=None,
-                     help="least-change: the least change to the plain spline that meets the constraints "
-                          "(docs/design.md; with --tol, --max-time, --max-evals); penalty: the weighted terms "
-                          "of paper eq. 1 (every other option below) [least-change; penalty when an option "
-                          "only it has is given]")
-    opt.add_argument("--terms", default=None,
-                     help="'all': the least change with the force bounds too (ballistic flights, the friction "
-                          "cone, the peak ground force; docs/design.md); a list of terms from "
-                          f"{','.join(term_names())}: the penalty method "
-                          f"[{terms_help or 'the keyframe file’s, else the default terms; with its contacts also planted,clearance'}]")
-    opt.add_argument("--weight", type=_weight, action="append", default=[], metavar="NAME=VALUE",
-                     help="weight of a term (repeatable), e.g. --weight torque=0.1")
-    opt.add_argument("--max-time", type=nonnegative(float), default=_LIB.max_time_s, metavar="S",
-                     help="stop optimizing after S seconds, keeping the best path so far [no limit]")
-    opt.add_argument("--subdivision", choices=SUBDIVISIONS, default=_LIB.subdivision,
-                     help="where to add variable frames [%(default)s]")
-    opt.add_argument("--per-segment", type=nonnegative(int), default=_LIB.per_segment,
-                     help="variable frames per keyframe interval to start with [%(default)s]")
-    opt.add_argument("--rounds", type=nonnegative(int), default=None,
-                     help="refine for N fixed adaptive subdivision rounds instead of to a tolerance (not "
-                          "with --tol) [rounds until --tol]")
+    lc = LeastChangeOptions()
+    opt = p.add_argument_group("optimization: the least change to the plain spline that meets the constraints "
+                               "(docs/design.md)")
+    opt.add_argument("--terms", default=None, metavar="SET",
+                     help="'default': the figure's constraints (penetration, planted feet, clearance, hinges, "
+                          "range of motion, no jolts); 'all': also the force bounds (no wrench in flight, the "
+                          "friction cone, the peak ground force) "
+                          f"[{terms_help or 'the keyframe file’s, else default'}]")
     opt.add_argument("--tol", type=positive(float), default=None, metavar="X",
-                     help="refine adaptively until the decrease of E that refinement still predicts, relative "
-                          "to E, is at most X (not with --rounds), or the frame budget (--max-frames, else 10 per keyframe "
-                          f"interval) or --max-time runs out [{_LIB.tol:g}]")
-    opt.add_argument("--max-frames", type=nonnegative(int), default=_LIB.max_frames, metavar="N",
-                     help="at most N variable frames in total (0 = no limit; with --tol 10 per keyframe "
-                          "interval) [%(default)s]")
-    opt.add_argument("--algorithm", choices=list(ALGORITHMS), default=_LIB.algorithm,
-                     help="nlopt algorithm of each round [%(default)s]")
-    opt.add_argument("--ftol", type=nonnegative(float), default=_LIB.ftol_rel, help="relative objective tolerance [%(default)s]")
-    opt.add_argument("--max-evals", type=nonnegative(int), default=_LIB.max_evals, help="evaluations per round [no limit]")
-    opt.add_argument("--rate", type=positive(float), default=DEFAULT_RATE,
-                     help="quadrature points per second [%(default)s; least-change: "
-                          f"{LeastChangeOptions().rate:g}]")
-    opt.add_argument("--score", choices=SCORES, default=_LIB.score,
-                     help="how adaptive subdivision ranks segments: the decrease of E a midpoint frame "
-                          "predicts, or the raw weak-form Euler-Lagrange gradient [%(default)s]")
-    opt.add_argument("--no-precondition", action="store_true",
-                     help="optimize the frame values directly instead of in the spline-acceleration metric")
-    opt.add_argument("--no-renormalize", action="store_true",
-                     help="use the weights as they are instead of dividing each term by its initial value (eq. 7)")
+                     help="add variable frames until the decrease of the measure of change that refinement "
+                          f"still predicts, relative to it, is at most X and every constraint holds [{lc.tol:g}]")
+    opt.add_argument("--max-time", type=nonnegative(float), default=0.0, metavar="S",
+                     help="stop optimizing after S seconds, keeping the best path so far [no limit]")
+    opt.add_argument("--max-evals", type=nonnegative(int), default=0, metavar="N",
+                     help="evaluations per subproblem [no limit]")
+    opt.add_argument("--rate", type=positive(float), default=lc.rate,
+                     help="quadrature points per second [%(default)s]")
 
 
 def outputs_from_args(args, default_video: Path | None = None, **fields):
@@ -168,78 +124,26 @@ def outputs_from_args(args, default_video: Path | None = None, **fields):
 
 
 def clip_terms(args) -> dict:
-    """`ClipOptions` fields for the objective of clips whose contacts are not known yet (`mocap`,
-    `batch`): {"terms": the --terms spec, "weights": the --weight overrides, "solve": solve_options}.
-    The spec is checked here (a bad name or weight is an InputError before any clip is read) as if a
-    contact schedule were known; `process_clip` chooses the terms with the clip's own contacts."""
-    weights = parse_terms(args.terms, dict(args.weight), assume_schedule=True)
-    return {"terms": args.terms, "weights": dict(args.weight), "solve": solve_options(args, weights)}
-
-
-#: the options only the penalty method has, with their defaults (one of them given chooses it)
-PENALTY_ONLY = {"terms": None, "weight": [], "subdivision": _LIB.subdivision, "per_segment": _LIB.per_segment,
-                "rounds": None, "max_frames": _LIB.max_frames, "algorithm": _LIB.algorithm,
-                "score": _LIB.score, "no_precondition": False, "no_renormalize": False}
-
-
-def method(args) -> str:
-    """The solve method of the parsed arguments: --method, else penalty when an option only the penalty
-    method has is given (--terms other than all, --weight, --subdivision, --rounds, ...: `PENALTY_ONLY`),
-    else least-change."""
-    chosen = getattr(args, "method", None)
-    if chosen is not None:
-        return chosen
-    return "penalty" if _penalty_options(args) else "least-change"
-
-
-def _penalty_options(args) -> list[str]:
-    """The `PENALTY_ONLY` options given; `--terms all` is not one of them: the least change with every
-    constraint, the force bounds too (`solver.constraints.forces`)."""
-    return [k for k, default in PENALTY_ONLY.items() if getattr(args, k, default) != default
-            and not (k == "terms" and getattr(args, k) == "all")]
-
-
-def solve_options(args, weights: dict) -> SolveOptions | LeastChangeOptions:
-    """The solve options of the parsed `add_options` arguments (the command's and the benchmark's
-    settings). least-change (`method`): `LeastChangeOptions` with --tol and --max-time. penalty:
-    `solver.default_options(weights)` with the arguments applied; `--rounds N` selects N fixed adaptive
-    rounds (`SolveOptions.refine` "rounds"), `--tol X` (or neither: the default tolerance) refinement to
-    a tolerance ("tol").
+    """`ClipOptions` fields of the parsed arguments (`mocap`, `batch`, `bench corpus`): {"forces": whether
+    --terms all, "solve": `solve_options`}, checked before any clip is read.
 
     Raises:
-        InputError: both --rounds and --tol; --tol with a subdivision other than adaptive; --terms or
-            --weight with --method least-change.
+        InputError: a --terms other than default or all.
     """
-    tol, rounds = getattr(args, "tol", None), getattr(args, "rounds", None)
-    if method(args) == "least-change":
-        given = _penalty_options(args)
-        if given:
-            flags = ", ".join("--" + k.replace("_", "-") for k in given)
-            raise InputError(f"{flags}: options of the penalty method; drop them, or use --method penalty")
-        lc = LeastChangeOptions()
-        rate = getattr(args, "rate", DEFAULT_RATE)
-        return replace(lc, tol=lc.tol if tol is None else tol, max_time_s=getattr(args, "max_time", 0.0) or 0.0,
-                       max_evals=getattr(args, "max_evals", 0) or 0, rate=lc.rate if rate == DEFAULT_RATE else rate)
-    if tol is not None and rounds is not None:
-        raise InputError(f"--rounds {rounds} and --tol {tol:g} are two ways to end adaptive refinement; give "
-                         "one: --rounds N for N fixed rounds, or --tol X to refine until the estimate is at most X")
-    if tol and args.subdivision != "adaptive":
-        raise InputError(f"--tol {tol:g} refines adaptively; it does not go with --subdivision "
-                         f"{args.subdivision}")
-    mode = (dict(refine="rounds", rounds=rounds, tol=0.0) if rounds is not None
-            else dict(refine="tol", rounds=None, tol=_LIB.tol if tol is None else tol))
-    return replace(
-        default_options(weights),
-        subdivision=args.subdivision, per_segment=args.per_segment,
-        renormalize=not args.no_renormalize, algorithm=args.algorithm, ftol_rel=args.ftol,
-        max_evals=args.max_evals, max_time_s=args.max_time, precondition=not args.no_precondition,
-        score=args.score, max_frames=args.max_frames, **mode,
-    )
+    return {"forces": forces_of(args.terms, "--terms"), "solve": solve_options(args)}
 
 
-def default_args(method: str | None = None) -> argparse.Namespace:
-    """The options `animate` uses when none are given; `method` as --method (the benchmarks of term
-    sets choose "penalty": a term set is what `animate --terms` solves)."""
+def solve_options(args) -> LeastChangeOptions:
+    """The solve options of the parsed `add_options` arguments (the command's and the benchmarks'
+    settings): `LeastChangeOptions` with --tol, --max-time, --max-evals and --rate applied."""
+    lc = LeastChangeOptions()
+    tol = getattr(args, "tol", None)
+    return replace(lc, tol=lc.tol if tol is None else tol, max_time_s=getattr(args, "max_time", 0.0) or 0.0,
+                   max_evals=getattr(args, "max_evals", 0) or 0, rate=getattr(args, "rate", lc.rate))
+
+
+def default_args() -> argparse.Namespace:
+    """The options `animate` uses when none are given."""
     p = argparse.ArgumentParser()
     add_options(p)
-    return p.parse_args([] if method is None else ["--method", method])
+    return p.parse_args([])

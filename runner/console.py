@@ -13,6 +13,7 @@ _GEOMETRY = [
 ]
 #: solver.metrics: contact-free inverse dynamics; flight = every contact site ~3 cm clear
 _DYNAMICS = [
+    ("peak pelvis acceleration [m/s^2]", "peak_pelvis_acceleration_ms2", "{:.1f}", 0.1),  # no jolts: always bounded
     ("RMS joint torque [N m]", "rms_joint_torque_Nm", "{:.1f}", 0.1),
     ("peak joint torque [N m]", "peak_joint_torque_Nm", "{:.1f}", 0.1),
     ("flight (all feet clear) [s]", "flight_s", "{:.3f}", None),  # worse: changed (see FLIGHT_CHANGE)
@@ -21,10 +22,9 @@ _DYNAMICS = [
     ("RMS root torque in flight [N m]", "rms_root_torque_flight_Nm", "{:.1f}", 0.1),
     ("peak root torque in flight [N m]", "peak_root_torque_flight_Nm", "{:.1f}", 0.1),
 ]
-#: with the dynamics terms (`--terms all`): what the root term's price is paid in (the two peaks are the
-#: forces term's, printed with its bound: `solver.peak_bounds`)
+#: with the force bounds (`--terms all`): the ground force (its peak printed with its bound:
+#: `solver.peak_bounds`)
 _DYNAMICS_TERMS_ROWS = [
-    ("peak pelvis acceleration [m/s^2]", "peak_pelvis_acceleration_ms2", "{:.1f}", 0.1),
     ("RMS root force on ground [body wt]", "rms_root_force_ground_bw", "{:.2f}", 0.01),
     ("peak root force on ground [body wt]", "peak_root_force_ground_bw", "{:.2f}", 0.01),
 ]
@@ -35,9 +35,9 @@ WORSE = "worse"
 LEGEND = (f"{WORSE}: the optimized path is worse than the plain spline there (higher by > 1% and the row's "
           f"last printed digit; flight: changed by > {FLIGHT_CHANGE:.0%})")
 OVER = "over bound"
-#: the rows the forces term bounds: {metrics key: `solver.peak_bounds.PeakBounds` field}
+#: the rows the force bounds limit: {metrics key: `solver.peak_bounds.PeakBounds` field}
 BOUNDED_ROWS = {"peak_pelvis_acceleration_ms2": "pelvis_acceleration_ms2", "peak_root_force_ground_bw": "ground_force_bw"}
-BOUND_LEGEND = (f"<= B: the forces term's bound on the row (the larger of the plain spline's and the capture's "
+BOUND_LEGEND = (f"<= B: the force bounds' limit on the row (the larger of the plain spline's and the capture's "
                 f"filtered peak); {OVER}: the optimized path is above it by > 1% and the row's last printed digit")
 
 #: relaxations listed under the summary table (the rest counted)
@@ -173,19 +173,20 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False, bounds
 TERM_ROWS = {
     "penetration": ("max penetration",),  # and the per-site rows under it (`row_targets`)
     "unit": ("max |1 - |q||",),
-    "bending": ("max hyperextension",),
+    "hyperextension": ("max hyperextension",),
     "hinge": ("knee rotation off the hinge", "elbow rotation off the hinge"),
     "rom": ("beyond range of motion",),
-    "torque": ("RMS joint torque", "peak joint torque"),
-    "root": ("RMS root force in flight", "peak root force in flight", "RMS root torque in flight",
-             "peak root torque in flight"),
-    "planted": ("float in contact", "float in capture stance", "flight in capture stance", "skate in contact", "skate, PhysDiff", "skating ratio"),
-    "clearance": ("flight (all feet clear)", "flight time", "flight phase error"),
-    "cone": ("RMS friction-cone residual", "peak friction-cone residual"),
-    "forces": ("peak pelvis acceleration", "peak root force on ground"),
+    "acceleration": ("peak pelvis acceleration",),
+    "flight wrench": ("RMS root force in flight", "peak root force in flight", "RMS root torque in flight",
+                      "peak root torque in flight"),
+    "planted": ("float in contact", "float in capture stance", "flight in capture stance"),
+    "slide": ("skate in contact", "skate, PhysDiff", "skating ratio"),
+    "flight": ("flight (all feet clear)", "flight time", "flight phase error"),
+    "ground": ("flight (all feet clear)", "flight time", "flight phase error"),
+    "ground force": ("peak root force on ground",),
 }
-TARGET_LEGEND = ("target: the chosen term that penalizes the row's figure; rows without one are not "
-                 "optimized for, and the optimizer may trade them away")
+TARGET_LEGEND = ("target: the constraint that bounds the row's figure; rows without one are not constrained, "
+                 "and the least change may trade them away")
 MISSING = "-"
 MISSING_LEGEND = f"{MISSING}: not defined for this path (the in-flight rows of a path with no flight phase)"
 
@@ -210,21 +211,23 @@ def cell(fmt: str, value) -> str:
 
 
 def row_targets(labels, weights, sites=()) -> dict[str, str]:
-    """{row label: the chosen terms, comma-separated, that penalize the row's figure} (`TERM_ROWS`).
+    """{row label: the constraints, comma-separated, that bound the row's figure} (`TERM_ROWS`).
 
     Args:
-        labels: the summary's row labels. weights: {term: weight} chosen (only the names matter).
-        sites: the contact sites whose "  SITE [mm]" penetration rows belong to the penetration term.
+        labels: the summary's row labels. weights: the constraint names of the solve (an iterable or
+            a dict; only the names matter).
+        sites: the contact sites whose "  SITE [mm]" penetration rows belong to the penetration constraint.
     Returns:
-        only the labels some chosen term targets; an "  integral NAME" row belongs to NAME.
+        only the labels some constraint bounds; a "  NAME: worst / tolerance" row belongs to NAME.
     """
     site_rows = {f"  {site} [mm]" for site in sites}
     out = {}
     for label in labels:
         terms = [name for name in weights if name in TERM_ROWS and (
             label.strip().startswith(TERM_ROWS[name]) or (name == "penetration" and label in site_rows))]
-        if label.startswith("  integral ") and label.split()[-1] in weights:
-            terms.append(label.split()[-1])
+        own = label.strip().removesuffix(": worst / tolerance")
+        if label.endswith(": worst / tolerance") and own in weights:
+            terms.append(own)
         if terms:
             out[label] = ",".join(terms)
     return out
@@ -249,32 +252,30 @@ def format_rows(rows, targets: dict | None = None) -> list[str]:
     return lines
 
 
-def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights: dict | None = None,
-                  contact_rows=(), force_bounds=None) -> str:
+def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bounds=None) -> str:
     """Plain spline vs optimized, the acceptance figures, as a text table; a "target" column names the
-    chosen terms that penalize each row's figure (`row_targets`), and a figure on which the optimized
-    path is worse is marked "worse" in a last column (`comparison_rows`), with legend lines. A figure
-    that is not defined (the in-flight rows of a path without flight) is printed "-", never "nan".
+    constraints that bound each row's figure (`row_targets`), and a figure on which the optimized path is
+    worse is marked "worse" in a last column (`comparison_rows`), with legend lines. A figure that is
+    not defined (the in-flight rows of a path without flight) is printed "-", never "nan".
 
     Args:
-        plain, opt: `path_metrics` of the two paths. solution: the Solution. weights: {term: weight}
-            chosen. final_weights: {term: weight} at the end (penalty continuation raises some).
+        plain, opt: `path_metrics` of the two paths. solution: the least change's Solution (its
+            `integrals_*`: each constraint's worst value over its tolerance).
         contact_rows: (label, plain, optimized, format[, worse]) rows about the feet, printed after
             penetration (`runner.run.contact_summary_rows`, marked by `motion_worse`).
-        force_bounds: the problem's `solver.peak_bounds.PeakBounds` (with the forces term), or None:
+        force_bounds: the problem's `solver.peak_bounds.PeakBounds` (with the force bounds), or None:
             printed with the two rows it bounds (`comparison_rows`) and described under the table.
     """
-    rows = comparison_rows(plain, opt, dynamics_terms=bool({"torque", "root", "forces"} & set(weights)),
-                           bounds=force_bounds)
+    rows = comparison_rows(plain, opt, dynamics_terms=force_bounds is not None, bounds=force_bounds)
     n_pen = 1 + len(plain["penetration_mm_by_site"])  # the feet rows go after the penetration rows
     rows[n_pen:n_pen] = list(contact_rows)
-    rows.append(("objective E", solution.E_initial, solution.E_final, "{:.5g}"))
-    for name in solution.integrals_final:  # a term's integral, or a constraint's worst value / tolerance
-        label = f"  integral {name}" if name in weights else f"  {name}: worst / tolerance"
-        rows.append((label, solution.integrals_initial[name], solution.integrals_final[name], "{:.4g}"))
-    extra = getattr(solution, "extra_rows", None) or []
-    rows += extra
-    lines = format_rows(rows, row_targets([r[0] for r in rows], weights, plain["penetration_mm_by_site"]))
+    rows.append(("change E = D / (m g^2 T)", solution.E_initial, solution.E_final, "{:.5g}"))
+    constraints = list(solution.integrals_final)
+    for name in constraints:  # a constraint's worst value over its tolerance
+        rows.append((f"  {name}: worst / tolerance", solution.integrals_initial[name], solution.integrals_final[name],
+                     "{:.4g}"))
+    rows += getattr(solution, "extra_rows", None) or []
+    lines = format_rows(rows, row_targets([r[0] for r in rows], constraints, plain["penetration_mm_by_site"]))
     lines.append(LEGEND)
     if force_bounds is not None:
         lines += [BOUND_LEGEND, force_bounds.describe()]
@@ -285,37 +286,24 @@ def summary_table(plain: dict, opt: dict, solution, weights: dict, final_weights
         lines.append(MISSING_LEGEND)
     lines.append(f"frames: {solution.initial.count} keyframes + {solution.frames.n_variable} variable; "
                  f"{len(solution.rounds)} rounds, {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
-    estimate = getattr(solution, "refinement_estimate", None)
+    estimate = getattr(solution, "final_estimate", None)
     if estimate is not None and np.isfinite(estimate):
         ok = getattr(solution, "converged_to_tol", None)
-        how = ("fixed rounds, no tolerance" if ok is None else f"tolerance met ({solution.message})" if ok
-               else f"tolerance NOT met: {solution.message}")
+        how = f"tolerance met ({solution.message})" if ok else f"tolerance NOT met: {solution.message}"
         lines.append(f"refinement estimate (decrease of E still predicted, relative to E): {estimate:.3g}; {how}")
-    final = final_weights or {}
-    terms = []
-    for name, w0 in weights.items():
-        w1 = final.get(name, w0)
-        terms.append(f"{name} {w0:g}" + (f" -> {w1:g}" if w1 != w0 else ""))
-    if terms:
-        lines.append("terms (weight; -> after penalty continuation): " + ", ".join(terms))
-    else:
-        lines.append("least change (docs/design.md): objective E = D / (m g^2 T), the mass-weighted change of the "
-                     "accelerations; a constraint row is its worst value over its tolerance (met at <= 1)")
+    lines.append("least change (docs/design.md): E = D / (m g^2 T), the mass-weighted change of the accelerations; "
+                 "a constraint row is its worst value over its tolerance (met at <= 1)")
     relaxed = getattr(solution, "relaxations", ()) or ()
     if relaxed:
         shown = ", ".join(f"{r.constraint} {r.label} at keyframe {r.keyframe} ({r.start:.2f}-{r.end:.2f} s, "
                           f"{r.amount * 1e3:.1f} mm)" for r in relaxed[:RELAXATIONS_SHOWN])
         more = f" and {len(relaxed) - RELAXATIONS_SHOWN} more" if len(relaxed) > RELAXATIONS_SHOWN else ""
         lines.append(f"where the keyframes decide (limit set to what they force): {shown}{more}")
-    stalled = getattr(solution, "stalled", None) or {}
-    if stalled and not terms:
+    unmet = getattr(solution, "unmet", None) or {}
+    if unmet:
         lines.append("constraints the keyframes leave out of reach (limit raised to what the path reaches), by [SI]: "
-                     + ", ".join(f"{k} {v:.3g}" for k, v in stalled.items()))
-    elif stalled:
-        lines.append("bounds out of reach (a x10 boost did not halve the violation; not boosted again): "
-                     + ", ".join(f"{k} {v:.3g}" for k, v in stalled.items()))
+                     + ", ".join(f"{k} {v:.3g}" for k, v in unmet.items()))
     return "\n".join(lines)
-
 
 
 #: rows of `motion_metrics_table`: (label, key in a `plausibility` block, sub-key or None, format)

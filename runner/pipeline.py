@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 from runner.mocap.figure_choice import SUBJECT, choose_figure, is_default, scene_with_figure
@@ -33,15 +33,13 @@ from runner.mocap.keyframes import pick_keyframes
 from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO, clip_scene, name_surfaces
 from runner.paths import display_path
-from solver.animate import default_options
 from solver.contacts import reference_contacts
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE
 from solver.keyframe_file import read_keyframes, write_keyframes
 from solver.layout import StateLayout
+from solver.least_change import LeastChangeOptions
 from solver.model import check_scene
-from solver.quadrature import DEFAULT_RATE
-from solver.solve import SolveOptions
 
 #: the figure every scene includes
 FIGURE = FIGURE_FILE  # the shipped figure (solver.figure)
@@ -58,11 +56,8 @@ class ClipOptions:
         scene: "auto" (fitted) or an MJCF file. figure: "subject" (the subject's own figure, made from the
             clip), "default" (the shipped figure) or a figure MJCF. mass: [kg] the subject's body mass
             (None: from the stature; "subject" only).
-        terms: the objective terms as for `solver.problem.parse_terms` (None: the default terms, which
-            add the contact terms when the clip has contacts). weights: {term: weight} overrides.
-            solve: SolveOptions (None: default_options); its `limits` follow the terms chosen for the
-            clip (`default_limits`), which are known only once its contacts are.
-        rate: quadrature points per second.
+        forces: also the force bounds (`--terms all`, `solver.ProblemSpec.forces`).
+        solve: LeastChangeOptions (None: the defaults).
         out, save_path, metrics, plot: output paths (None: the defaults under the output folder:
             <stem>.mp4, <stem>.npz, <stem>.metrics.json; no plots). render: write the video.
         fps, size, speed, panels, camera: video settings (`runner.render.side_by_side.VideoOptions`; camera:
@@ -83,10 +78,8 @@ class ClipOptions:
     scene: str | os.PathLike = AUTO
     figure: str | os.PathLike = SUBJECT
     mass: float | None = None
-    terms: str | None = None
-    weights: dict = field(default_factory=dict)
-    solve: SolveOptions | None = None
-    rate: float = DEFAULT_RATE
+    forces: bool = False
+    solve: LeastChangeOptions | None = None
     out: Path | None = None
     save_path: Path | None = None
     metrics: Path | None = None
@@ -248,8 +241,8 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
 
 
 def clip_problem(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=print):
-    """Steps 1-3 of `process_clip` and the problem they make: `clip_keyframes`, then the objective with the
-    clip's contacts (`solver.make_problem`), as `dynsplines animate` would make it from the keyframe file
+    """Steps 1-3 of `process_clip` and the problem they make: `clip_keyframes`, then the problem with the
+    clip's contacts and capture (`solver.build_problem`), as `dynsplines animate` would make it from the keyframe file
     written here. What `mocap`, `batch` and `bench contacts` solve for a clip.
 
     Returns:
@@ -258,12 +251,11 @@ def clip_problem(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=pri
         InputError: as `process_clip`.
     """
     from runner.run import Source
-    from solver.problem import make_problem
+    from solver.problem import ProblemSpec, build_problem
 
     cs, ref, model, keyframes, info = clip_keyframes(clip, out_dir, o, paths, say)
     contacts = tuple(info.contacts or ())
-    problem = make_problem(model, keyframes, o.terms, dict(o.weights or {}), contacts, o.rate,
-                           capture=(ref.times, ref.qpos), airborne=info.flights)
+    problem = build_problem(model, ProblemSpec(keyframes, contacts, o.forces, (ref.times, ref.qpos), info.flights))
     return problem, Source(Path(cs.scene_path), ref, contacts, label=str(clip)), cs
 
 
@@ -316,7 +308,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         resting feet from the surfaces and the capture's own disagreement, `runner.mocap.contacts.feet_line`;
         None off the subject's figure), "keyframes_on_source" (`keyframes_on_source_report`; None off the
         subject's figure), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
-        that hold a site off the contact schedule), "stalled" ({term: violation} out of reach), "metrics"
+        where the keyframes decide a constraint, `Solution.relaxations`), "stalled" ({constraint: amount [SI]}
+        the keyframes leave out of reach, `Solution.unmet`), "metrics"
         ({"plain", "optimized": path_metrics; "motion": {"plain", "optimized": motion_metrics}}),
         "scene_fitted" (the capture floor's floor_z and floor_slope, capture_frame (w x y z tx ty tz: the
         transform to the levelled frame), boxes in that frame as centre/half lists, or None), "outputs"
@@ -339,12 +332,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     paths = clip_paths(clip, out_dir, o)
     problem, source, cs = clip_problem(clip, out_dir, o, paths, say)
     on_source = keyframes_on_source_report(clip, cs, problem.keyframes.times, say)
-    if problem.conflicts.found:  # the clip's own keyframes against its own contacts: a heel "in contact" 3 cm up
-        say(f"  {len(problem.conflicts.found)} keyframe(s) hold a site off the contact schedule (met exactly; those "
-            "contacts and swings are not held to the bounds)")
-    options_ = o.solve or default_options(dict(problem.weights))
-    if isinstance(options_, SolveOptions):
-        options_ = replace(options_, limits=problem.limits)
+    options_ = o.solve or LeastChangeOptions()
     video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, panels=o.panels, camera=o.camera, quiet=o.quiet)
     outputs = Outputs(save_path=paths["save_path"], exports=tuple(o.exports), plot_dir=o.plot, video=paths.get("video"),
                       video_options=video, summary=o.summary, quiet=o.quiet, command={"command": o.command})
@@ -366,7 +354,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
         "reference_feet_disagreement_mm": _mm(feet_disagreement(ref, problem.model)),
         "stance_agreement": _agreement(problem, ref),
-        "keyframe_conflicts": len(problem.conflicts.found), "stalled": dict(run.solution.stalled or {}),
+        "keyframe_conflicts": len(run.solution.relaxations), "stalled": dict(run.solution.unmet or {}),
         "keyframes_on_source": on_source,
         "metrics": run.metrics, "scene_fitted": fitted, "outputs": {k: str(v) for k, v in paths.items()},
     }

@@ -4,7 +4,7 @@
                         plain spline, optimized, motion capture; keyframe times marked, contacts shaded
     dynamics.png        joint torque and root residual force over time (plain vs optimized), flight
                         phases shaded (the definitions of `solver.metrics`)
-    objective.png       the objective E after each evaluation, rounds and weight boosts marked
+    objective.png       the measure of change E after each evaluation, subproblems marked
     euler_lagrange.png  the weak-form Euler-Lagrange score per segment before and after refinement
 
 Only drawing here: the numbers come from `solver.metrics` and `solver.subdivide`.
@@ -191,7 +191,8 @@ def plot_dynamics(path, series: dict, keyframe_times) -> Path:
 
 
 def plot_objective(path, solution) -> Path:
-    """The objective E (best so far) after each evaluation, rounds and penalty boosts marked.
+    """The measure of change E (best so far) after each evaluation, subproblems marked (each an L-BFGS
+    run of the method of multipliers; between them the multipliers, the penalty or the frames change).
 
     Args:
         path: output PNG. solution: `solver.solve.Solution`.
@@ -199,23 +200,19 @@ def plot_objective(path, solution) -> Path:
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(10, 4.8))
     start = 0
-    prev_vars = None
     for i, rnd in enumerate(solution.rounds):
         tr = np.asarray(rnd.result.trace)
         x = start + np.arange(1, len(tr) + 1)
-        boosted = prev_vars is not None and rnd.n_variable == prev_vars
-        what = "weights boosted" if boosted else f"{rnd.n_variable} variable frames"
-        ax.plot(x, tr, lw=1.6, label=f"round {i + 1}: {what}")
+        ax.plot(x, tr, lw=1.6, label=f"subproblem {i + 1}: {rnd.n_variable} variable frames")
         if i:
             ax.axvline(start + 0.5, color="0.6", lw=0.8, ls=":")
         start += len(tr)
-        prev_vars = rnd.n_variable
     ax.set_yscale("log")
     ax.set_xlabel("objective evaluation")
-    ax.set_ylabel("objective E (renormalized, eq. 7)")
-    ax.set_title("Objective during the optimization (best so far after each evaluation)\n"
-                 "between rounds the objective itself changes: boosted weights (penalty continuation), "
-                 "updated flight indicator", fontsize=10)
+    ax.set_ylabel("augmented Lagrangian (E + multiplier terms)")
+    ax.set_title("The least change during the optimization (best so far after each evaluation)\n"
+                 "between subproblems the multipliers and the penalty are updated, or frames are added",
+                 fontsize=10)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()

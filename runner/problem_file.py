@@ -11,6 +11,7 @@ from solver.errors import InputError
 from solver.keyframe_file import read_document, read_keyframes
 from solver.layout import StateLayout
 from solver.model import check_scene, load_model
+from solver.problem import forces_of
 
 RUN_AND_STEP_KEYFRAMES = MODELS / "run_and_step.keyframes.json"
 
@@ -70,50 +71,41 @@ def find_reference(info, model, quiet=False):
                                   root_scale=source.get("root_scale", 1.0), skeleton_map=smap, rest_pose=not recorded)
 
 
-def file_terms(keyframes_path, info, terms: str | None, weights: dict, contacts) -> dict:
-    """The objective's {term: weight} for a keyframe file: `--terms` (with `--weight` overrides) when
-    given, else the file's "terms" (with the overrides), else the default terms.
+def file_forces(keyframes_path, info, terms: str | None) -> bool:
+    """Whether the force bounds are on for a keyframe file: `--terms` when given, else the file's
+    "terms" ("default" or "all"), else not.
 
     Raises:
-        InputError: a bad --terms or --weight; a bad "terms" field names the file and the field.
+        InputError: a bad --terms; a bad "terms" field names the file and the field.
     """
-    from solver.problem import parse_terms
-
-    in_file = dict(getattr(info, "terms", None) or {})
-    if terms is not None or not in_file:
-        return parse_terms(terms, dict(weights), contacts)
-    try:
-        parse_terms(",".join(in_file), in_file, contacts)
-    except InputError as e:
-        raise InputError(f"{keyframes_path}: field 'terms': {e}; fix the file, or choose with --terms") from None
-    return parse_terms(",".join(in_file), {**in_file, **dict(weights)}, contacts)
+    if terms is not None:
+        return forces_of(terms, "--terms")
+    in_file = getattr(info, "terms", None) or None
+    return forces_of(in_file, f"{keyframes_path}: field 'terms'")
 
 
-def file_problem(keyframes_path, scene=None, terms: str | None = None, weights: dict | None = None,
-                 rate: float | None = None, quiet: bool = True):
+def file_problem(keyframes_path, scene=None, terms: str | None = None, quiet: bool = True):
     """The figure problem of a keyframe file, as `dynsplines animate` solves it.
 
     Args:
         keyframes_path: the keyframe file. scene: a scene MJCF overriding the file's "scene".
-        terms, weights: `--terms` and `--weight` (`file_terms`). rate: quadrature points per second.
-        quiet: no progress while the reference clip is imported.
+        terms: `--terms` (`file_forces`). quiet: no progress while the reference clip is imported.
     Returns:
         (problem, source): a `solver.Problem` with the file's contacts, and a `runner.run.Source` (scene
         path, reference or None, the contacts the metrics use: the file's, else those detected on the
         reference).
     Raises:
-        InputError: as `load_problem`, `file_terms` and `solver.make_problem`.
+        InputError: as `load_problem`, `file_forces` and `solver.build_problem`.
     """
     from runner.run import Source
-    from solver.problem import make_problem
+    from solver.problem import ProblemSpec, build_problem
 
     keyframes, info, model, _, scene_path = load_problem(keyframes_path, scene)
     contacts = tuple(getattr(info, "contacts", ()) or ())
-    chosen = file_terms(keyframes_path, info, terms, weights or {}, contacts)
+    forces = file_forces(keyframes_path, info, terms)
     reference = find_reference(info, model, quiet=quiet)
-    capture = None if reference is None else (reference.times, reference.qpos)  # the forces term's bounds
-    problem = make_problem(model, keyframes, ",".join(chosen), chosen, contacts, rate, capture=capture,
-                           airborne=getattr(info, "flights", None))
+    capture = None if reference is None else (reference.times, reference.qpos)  # the no-jolt and force bounds
+    problem = build_problem(model, ProblemSpec(keyframes, contacts, forces, capture, getattr(info, "flights", None)))
     metric_contacts = contacts
     if reference is not None and not contacts:
         from solver.contacts import reference_contacts

@@ -92,17 +92,6 @@ class Progress:
                 self._line(f"  round {self.round.get('round', 0) + 1} (still optimizing): "
                            f"{self.evals - self.round['evals0']} evaluations, {self._E()}, "
                            f"{self.last - self.t0:.1f} s")
-        elif event == "boost":
-            self._end_round()
-            worst = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
-            self._line(f"  over the limit ({worst}): weight x10, again")
-        elif event == "stalled":
-            self._end_round()
-            what = ", ".join(f"{k} {v:.3g}" for k, v in info["terms"].items())
-            self._line(f"  a boost did not halve it ({what}): out of reach with these keyframes, not boosted again")
-        elif event == "undo":
-            self._end_round()
-            self._line("  that boost bought nothing: the path and weights from before it are restored")
         elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
             self._end_round()
             tol = f" (tol {info['tol']:g})" if info.get("tol") else ""

@@ -30,10 +30,11 @@ from runner.saved_path import save_path_npz
 from solver.animate import solve_problem
 from solver.errors import InputError
 from solver.layout import StateLayout
+from solver.least_change import LeastChangeOptions
 from solver.metrics import path_metrics
 from solver.optimize import Status
 from solver.problem import Problem
-from solver.solve import Solution, SolveOptions
+from solver.solution import Solution
 
 
 @dataclass(frozen=True)
@@ -83,7 +84,7 @@ class Run:
     """A solved problem with its metrics (read-only).
 
     Attributes:
-        problem: the Problem solved. options: the SolveOptions used. solution: the Solution.
+        problem: the Problem solved. options: the LeastChangeOptions used. solution: the Solution.
         source: where the problem came from (`Source`).
         metrics: {"plain", "optimized": `path_metrics` dicts; "motion" with a reference:
             {"plain", "optimized": `motion_metrics` dicts}}.
@@ -91,7 +92,7 @@ class Run:
     """
 
     problem: Problem
-    options: SolveOptions
+    options: LeastChangeOptions
     solution: Solution
     source: Source
     metrics: dict
@@ -124,7 +125,7 @@ def run_metrics(problem: Problem, solution: Solution, source: Source) -> dict:
                for name, fs in (("plain", solution.initial), ("optimized", solution.frames))}
     if source.reference is not None:
         metrics["motion"] = reference_motion_metrics(model, solution, source.reference, source.metric_contacts)
-    if problem.force_bounds is not None:  # the forces term's bounds (solver.peak_bounds)
+    if problem.force_bounds is not None:  # the force bounds (solver.peak_bounds)
         metrics["force_bounds"] = problem.force_bounds.as_dict()
     return metrics
 
@@ -190,11 +191,11 @@ def _filtered_capture(reference, layout: StateLayout) -> np.ndarray:
         return np.array(reference.qpos, float)
 
 
-def solve_run(problem: Problem, options: SolveOptions, source: Source, *, quiet: bool = False, stop=None) -> Run:
+def solve_run(problem: Problem, options: LeastChangeOptions, source: Source, *, quiet: bool = False, stop=None) -> Run:
     """Solve `problem` with a progress bar (silent with `quiet`) and compute the run's metrics.
 
     Args:
-        problem: from `solver.make_problem`. options: SolveOptions. source: `Source`.
+        problem: from `solver.build_problem`. options: LeastChangeOptions. source: `Source`.
         stop: a `runner.progress.StopRequest` (Ctrl-C) polled by the optimizer, or None.
     Returns:
         Run.
@@ -206,7 +207,7 @@ def solve_run(problem: Problem, options: SolveOptions, source: Source, *, quiet:
     return Run(problem, options, solution, source, run_metrics(problem, solution, source), interrupted)
 
 
-def execute(problem: Problem, options: SolveOptions, source: Source, outputs: Outputs, say=print) -> Run:
+def execute(problem: Problem, options: LeastChangeOptions, source: Source, outputs: Outputs, say=print) -> Run:
     """The whole run: solve, metrics, summary and every output of `outputs` (module docstring).
 
     Args:
@@ -253,10 +254,9 @@ def report(run: Run) -> str:
     """The summary tables of a run: what the optimization bought (plain spline vs optimized), the motion
     metrics against the capture, and how close the capture's own feet are to the scene."""
     motion = run.metrics.get("motion")
-    rows = contact_summary_rows(motion, run.solution.objective, run.solution)
-    weights = {} if run.solution.objective is None else dict(run.problem.weights)  # None: least change
-    lines = [summary_table(run.metrics["plain"], run.metrics["optimized"], run.solution, weights,
-                           dict(run.solution.weights), contact_rows=rows, force_bounds=run.problem.force_bounds)]
+    rows = contact_summary_rows(motion)
+    lines = [summary_table(run.metrics["plain"], run.metrics["optimized"], run.solution, contact_rows=rows,
+                           force_bounds=run.problem.force_bounds)]
     ref = run.source.reference
     if ref is not None:
         from runner.mocap.contacts import feet_line
@@ -343,7 +343,7 @@ def write_metrics_json(run: Run, path: Path, extra: dict | None = None) -> None:
                "keyframes": run.keyframes.count, "partial": int(run.keyframes.is_partial.sum()),
                "contacts": len(run.problem.contacts), "variable_frames": run.solution.frames.n_variable,
                "solve_time_s": run.solution.wall_time_s, "n_evals": run.solution.n_evals,
-               "terms": dict(run.problem.weights), **(extra or {}), "metrics": run.metrics}
+               "terms": run.problem.terms, **(extra or {}), "metrics": run.metrics}
     with atomic_output(path, suffix=".json") as tmp:
         Path(tmp).write_text(json.dumps(report_, indent=1, default=float) + "\n")
 
@@ -388,12 +388,11 @@ def anatomy_summary_rows(motion) -> list:
     return rows
 
 
-def contact_summary_rows(motion, objective, solution) -> list:
+def contact_summary_rows(motion) -> list:
     """Summary rows for the feet: float, skate, skating ratio, flight time and flight-phase error
     (`solver.motion_metrics.flight_mismatch`, extra + missed) of both paths against the motion-capture
     reference (`motion`: metrics["motion"], the `motion_metrics` of both paths at the clip's rate; the
-    capture's own figure in the label), then the anatomy rows (`anatomy_summary_rows`), and the
-    friction-cone residual when the cone term is on; each marked where the optimized path is worse than
+    capture's own figure in the label), then the anatomy rows (`anatomy_summary_rows`); each marked where the optimized path is worse than
     the plain spline (`runner.console.motion_worse`).
 
     Returns:
@@ -422,14 +421,4 @@ def contact_summary_rows(motion, objective, solution) -> list:
         a, b = (motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"] for p in ("plain", "optimized"))
         rows.append(("flight phase error vs capture [s]", a, b, "{:.3f}", motion_worse("flight_phase_error_s", a, b, frame_s)))
         rows += anatomy_summary_rows(motion)
-    if objective is not None and "cone" in objective.names:
-        from solver.metrics import sample_times
-        from solver.terms.contact_wrench import cone_metrics
-
-        term = objective.terms[objective.names.index("cone")]
-        t = sample_times(solution.initial.times[0], solution.initial.times[-1], 400.0)
-        cm = [cone_metrics(term, t, fs.path(t), fs.path(t, 1), fs.path(t, 2))
-              for fs in (solution.initial, solution.frames)]
-        for label, key in (("RMS friction-cone residual [N]", "cone_rms"), ("peak friction-cone residual [N]", "cone_peak")):
-            rows.append((label, cm[0][key], cm[1][key], "{:.1f}", motion_worse(key, cm[0][key], cm[1][key])))
     return rows

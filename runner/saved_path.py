@@ -4,7 +4,7 @@ Fields (docs/saved-path.md): frame_times (m,) [s], frames (m, nq), frame_is_keyf
 keyframe_times (k,), keyframes (k, nq), keyframe_mask (k, nq), plain_frame_times, plain_frames,
 reference_times, reference_qpos (motion capture, may be empty), scene (relative to the .npz's folder),
 wall_time_s, objective_trace, status, unmet_json ({constraint or term: amount}: what the solve reports out of
-reach, `Solution.stalled`), metrics_json, options_json, versions_json, and contacts (a structured
+reach, `Solution.unmet`), metrics_json, options_json, versions_json, and contacts (a structured
 array: site, start, end, surface; the reference's or the keyframe file's contacts, may be empty; files
 written before it have none). A path made from a BVH clip also has clip (the clip's path, relative to the
 .npz's folder like the scene) and clip_text (the clip's whole text, so that `dynsplines export` writes onto
@@ -119,7 +119,7 @@ def save_path_npz(run, path, command: dict | None = None) -> None:
         InputError: the file cannot be written (an earlier file there is unchanged).
     """
     solution, keyframes, reference = run.solution, run.problem.keyframes, run.source.reference
-    opts = {"weights": dict(run.problem.weights), "solve": asdict(run.options), "rate": run.problem.rate}
+    opts = {"terms": run.problem.terms, "solve": asdict(run.options), "rate": run.options.rate}
     if command:
         opts["command"] = {k: (str(v) if isinstance(v, Path) else v) for k, v in command.items() if k != "func"}
     # the keyframes as the path meets them: quaternion signs as the plain spline's frames hold them
@@ -141,7 +141,7 @@ def save_path_npz(run, path, command: dict | None = None) -> None:
         wall_time_s=np.array(solution.wall_time_s),
         objective_trace=solution.trace,
         status=np.array(solution.status.value),
-        unmet_json=np.array(json.dumps(dict(solution.stalled or {}), default=float)),
+        unmet_json=np.array(json.dumps(dict(solution.unmet or {}), default=float)),
         metrics_json=np.array(json.dumps(run.metrics, default=float)),
         options_json=np.array(json.dumps(opts, default=str)),
         versions_json=np.array(json.dumps(versions())),

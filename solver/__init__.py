@@ -10,10 +10,10 @@ One call for a figure in a scene, one for a single orientation::
     import solver
     model = solver.load_model(solver.shipped("run_and_step.xml"))  # a shipped scene, from any folder
     keyframes, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
-    solution = solver.animate(model, keyframes)            # the command line's settings
+    solution = solver.animate(model, keyframes, contacts=info.contacts)  # the command line's settings
     result = solver.orient(times, quats)                   # paper sec. 3
 """
-from solver.animate import animate, default_options, solve_problem
+from solver.animate import animate, solve_problem
 from solver.contact_schedule import ContactSchedule
 from solver.contacts import Contact
 from solver.errors import DynsplinesError, InputError
@@ -29,17 +29,7 @@ from solver.objective import Evaluation, NonFiniteError, Objective
 from solver.optimize import OptimizeResult, Status
 from solver.orient import OrientResult, orient
 from solver.path_context import PathContext
-from solver.problem import (
-    DEFAULT_TERMS,
-    DEFAULT_WEIGHTS,
-    Problem,
-    default_limits,
-    figure_objective,
-    make_problem,
-    parse_terms,
-    term_names,
-)
-from solver.schedule_conflicts import ScheduleConflicts
+from solver.problem import Problem, ProblemSpec, build_problem
 from solver.shipped import shipped
 from solver.solve import Round, Solution, SolveOptions, solve
 from solver.spline_basis import SplineBasis
@@ -55,7 +45,6 @@ from solver.terms import (
     TermEval,
     UnitQuaternion,
 )
-from solver.terms.registry import TermBuild, TermSpec, register_term, registered_terms, unregister_term
 
 __all__ = [
     # errors
@@ -68,21 +57,20 @@ __all__ = [
     "load_model", "read_keyframes", "write_keyframes", "KeyframeFileInfo",
     # the shipped figure, scenes, keyframe files and clips, from any folder
     "shipped",
-    # the contact schedule (docs/contacts.md "Contact schedules") and what keyframes contradict in it
-    "Contact", "ContactSchedule", "ScheduleConflicts",
-    # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7)
+    # the contact schedule (docs/contacts.md "Contact schedules")
+    "Contact", "ContactSchedule",
+    # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7) of
+    # the orientation problem (sec. 3) and of `solve`
     "Term", "TermEval", "Penetration", "UnitQuaternion", "Hyperextension", "CovariantAcceleration",
     "NormalizedCovariantAcceleration", "JointTorque", "RootResidual", "Residual", "PathContext",
-    # the term registry: a new term is usable by name (`animate(..., terms=...)`, `--terms`) once registered
-    "register_term", "unregister_term", "registered_terms", "TermBuild", "TermSpec",
-    "Objective", "Evaluation", "figure_objective", "parse_terms", "term_names", "default_limits",
-    "DEFAULT_TERMS", "DEFAULT_WEIGHTS",
-    # solving (paper fig. 5)
+    "Objective", "Evaluation",
+    # solving a weighted objective (paper fig. 5)
     "SolveOptions", "Solution", "Round", "Status", "OptimizeResult", "solve",
-    # a figure problem built once (`make_problem`) and solved (`solve_problem`), as the command line does
-    "Problem", "make_problem", "solve_problem", "LeastChangeOptions",
+    # a figure problem built once from its spec (`build_problem`) and solved (`solve_problem`): the least
+    # change to the plain spline that meets the constraints, as the command line does
+    "Problem", "ProblemSpec", "build_problem", "solve_problem", "LeastChangeOptions",
     # one-call APIs
-    "animate", "default_options", "orient", "OrientResult",
+    "animate", "orient", "OrientResult",
     # acceptance figures
     "path_metrics",
 ]

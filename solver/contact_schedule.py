@@ -8,8 +8,7 @@ made; every later user trusts it. The empty schedule is a valid value (a motion 
 contacts: the contact terms cannot be chosen).
 
 Keyframe files (`solver.keyframe_file`) and contact detection (`solver.contacts.reference_contacts`)
-make one; the contact terms (`solver.terms.contact`, `solver.terms.clearance`) check it against their
-scene's surfaces (`for_scene`).
+make one; `solver.problem.build_problem` checks it against its scene's surfaces (`for_scene`).
 """
 from __future__ import annotations
 

@@ -354,3 +354,27 @@ def reference_contacts(model, qpos: np.ndarray, frame_time: float, **thresholds)
     times = np.arange(len(pos)) * frame_time
     thresholds.setdefault("min_duration", SCHEDULE_MIN_DURATION)
     return detect_contacts(times, pos, site_heights(model, pos), **thresholds)
+
+
+def airborne_intervals(times: np.ndarray, heights: np.ndarray, height: float = DETECT_HEIGHT_ON) -> tuple[tuple[float, float], ...]:
+    """The intervals where a motion is airborne: every site higher than `height` (the flight metric's
+    3 cm, `solver.motion_metrics.FLIGHT_HEIGHT`), a run of such frames i..j as (t_i - dt/2, t_j + dt/2)
+    with dt the median frame spacing, so an interval lasts as long as the metric counts its frames.
+
+    Args:
+        times: (n,) increasing frame times [s], n >= 2. heights: (n, k) height of each site above the
+            surface under it [m] (`solver.contacts.site_heights` of `contact_points`). height: [m].
+    Returns:
+        ((start, end), ...) [s], sorted and disjoint; () when no frame is airborne.
+    Raises:
+        InputError: shapes that disagree, fewer than two frames, times not increasing.
+    """
+    t, h = np.asarray(times, float), np.asarray(heights, float)
+    if t.ndim != 1 or len(t) < 2 or h.ndim != 2 or len(h) != len(t):
+        raise InputError(f"airborne_intervals: times {t.shape} and heights {h.shape} must be (n,) and (n, k), n >= 2")
+    if not np.all(np.diff(t) > 0):
+        raise InputError("airborne_intervals: frame times must increase")
+    half = 0.5 * float(np.median(np.diff(t)))
+    up = np.concatenate([[False], (h > height).all(axis=1), [False]]).astype(np.int8)
+    starts, ends = np.flatnonzero(np.diff(up) == 1), np.flatnonzero(np.diff(up) == -1) - 1
+    return tuple((float(t[i] - half), float(t[j] + half)) for i, j in zip(starts, ends, strict=True))

@@ -7,7 +7,7 @@ Format (docs/keyframe-format.md has a full example)::
       "model": "humanoid39.xml",            # the figure, relative to this file
       "scene": "run_and_step.xml",          # the scene (figure + floor + boxes), relative to this file
       "source": {"clip": ..., "command": ..., "hand_edits": ...},   # provenance, free-form strings
-      "terms": {"penetration": 1.0},        # optional objective weights, passed through
+      "terms": "all",                       # optional: "default" (the constraints) or "all" (also forces)
       "contacts": [                         # optional: contact sites on surfaces over [start, end] s
         {"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"},
         {"foot": "right", "start": 0.3, "end": 0.5}             # a foot: its heel and its toe
@@ -62,11 +62,11 @@ class KeyframeFileInfo:
         model: the figure's MJCF, resolved against the file's folder (None if the file has no "model").
         scene: the scene's MJCF, resolved likewise (None if absent).
         source: the "source" object (provenance), {} if absent.
-        terms: the "terms" object (objective weights by term name), {} if absent; passed through.
+        terms: the "terms" value, "default" or "all" (also the force bounds), None if absent.
         contacts: the "contacts" list as a `ContactSchedule` (sorted by start; a foot's entry expanded
             to its heel and toe, `solver.layout.FEET`); empty if absent.
         flights: the "flights" list as ((start, end), ...) [s]: where the motion the keyframes came from
-            flies, for the clearance term (docs/contacts.md "The contact terms"); None if absent (every
+            flies, for the clearance constraint (docs/contacts.md); None if absent (every
             gap of the contacts is a flight).
     """
 
@@ -74,7 +74,7 @@ class KeyframeFileInfo:
     model: Path | None
     scene: Path | None
     source: dict = field(default_factory=dict)
-    terms: dict = field(default_factory=dict)
+    terms: str | None = None
     contacts: ContactSchedule = field(default_factory=ContactSchedule.empty)
     flights: tuple[tuple[float, float], ...] | None = None
 
@@ -162,14 +162,15 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
     source = doc.get("source", {})
     if not isinstance(source, dict):
         raise InputError(f"{src}: field 'source' is {source!r}; it must be an object (provenance notes)")
-    terms = doc.get("terms", {})
-    if not isinstance(terms, dict):
-        raise InputError(f"{src}: field 'terms' is {terms!r}; it must be an object {{term name: weight}}")
+    terms = doc.get("terms")
+    if terms is not None and terms not in ("default", "all"):
+        raise InputError(f"{src}: field 'terms' is {terms!r}; give \"default\" (the constraints) or \"all\" (the "
+                         "constraints and the force bounds), or remove the field")
     feet = Figure.from_model(mj_model).feet if mj_model is not None and doc.get("contacts") else None
     contacts = read_contacts(doc.get("contacts", []), src, surfaces, feet)
     keyframes = Keyframes(times, values, mask, source=src)
     flights = read_flights(doc["flights"], src) if "flights" in doc else None
-    return keyframes, KeyframeFileInfo(p, model, _relative_path(doc, "scene", p), dict(source), dict(terms), contacts,
+    return keyframes, KeyframeFileInfo(p, model, _relative_path(doc, "scene", p), dict(source), terms, contacts,
                                        flights)
 
 
@@ -400,7 +401,7 @@ def write_keyframes(
     model: str | os.PathLike | None = None,
     scene: str | os.PathLike | None = None,
     source: Mapping[str, Any] | None = None,
-    terms: Mapping[str, Any] | None = None,
+    terms: str | None = None,
     contacts=None,
     flights=None,
 ) -> None:
@@ -416,14 +417,14 @@ def write_keyframes(
         layout: the figure's qpos layout (joint names).
         model, scene: paths of the figure and scene MJCF files; written relative to the file's folder.
         source: provenance (clip, command, hand edits), JSON-serializable.
-        terms: optional objective weights {term name: weight}.
+        terms: optional "default" or "all" (`KeyframeFileInfo.terms`).
         contacts: optional `solver.contacts.Contact`s, written as the "contacts" list (one entry per
             site; checked as `read_keyframes` checks them).
         flights: optional ((start, end), ...) [s], written as the "flights" list (start rounded down,
             end up, to 6 decimals).
     Raises:
         InputError: keyframes and layout disagree in size, the folder does not exist or is not writable,
-            or source/terms are not JSON-serializable.
+            or source is not JSON-serializable; terms other than "default" or "all".
     """
     p = Path(path)
     if keyframes.nq != layout.nq:
@@ -438,7 +439,9 @@ def write_keyframes(
         head["scene"] = Path(os.path.relpath(Path(scene).resolve(), folder.resolve())).as_posix()
     head["source"] = dict(source or {})
     if terms is not None:
-        head["terms"] = dict(terms)
+        if terms not in ("default", "all"):
+            raise InputError(f"{p}: terms is {terms!r}; give 'default' or 'all'")
+        head["terms"] = terms
     if contacts is not None:
         head["contacts"] = contacts_document(contacts)
         read_contacts(head["contacts"], str(p))
@@ -450,7 +453,7 @@ def write_keyframes(
     try:
         text = _format(head, keyframes, layout)
     except (TypeError, ValueError) as e:
-        raise InputError(f"{p}: source or terms cannot be written as JSON ({e}); use strings and numbers") from None
+        raise InputError(f"{p}: source cannot be written as JSON ({e}); use strings and numbers") from None
     try:
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{p.name}.", suffix=".tmp")
     except OSError as e:

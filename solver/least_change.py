@@ -14,7 +14,7 @@ sec. 4.2 and fig. 5), never closer than `min_gap` to another frame.
 
 A pair the method cannot meet on any frame set (it stalls before and after refining) is reported, with
 where and by how much, and its limit is raised to what the path reaches (its multiplier reset), so the
-rest of the problem is solved as posed (`Solution.stalled`, in the constraint's SI unit).
+rest of the problem is solved as posed (`Solution.unmet`, in the constraint's SI unit).
 """
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ from solver.least_change_refine import doerfler_times, predicted_decreases
 from solver.manifold import FrameVariables
 from solver.optimize import Status
 from solver.peak_bounds import peak_bounds
-from solver.quadrature import quadrature_times
+from solver.quadrature import check_points, quadrature_times
 from solver.reference import ReferenceMotion
 from solver.solution import Round, Solution
 from solver.spline_basis import SplineBasis
@@ -144,6 +144,7 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     tmap = TangentMap.from_layout(layout)
     plain = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     t0, t1 = float(plain.times[0]), float(plain.times[-1])
+    check_points(t0, t1, rate)
     t, h = quadrature_times(t0, t1, rate)
     reference = ReferenceMotion.from_frames(model, plain, t, np.full(len(t), h))
     if forces:
@@ -305,6 +306,6 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, s
         message = message + "; unmet: " + ", ".join(f"{k} by {v:.3g}" for k, v in unmet.items())
     return Solution(frames, lc.plain, tuple(rounds), status, message, 0.0, D / al.d0,
                     worst(plain_basis, lc.plain.values), worst(basis, frames.values), {},
-                    np.concatenate(trace) if trace else np.zeros(0), seconds, evals, stalled=dict(unmet),
+                    np.concatenate(trace) if trace else np.zeros(0), seconds, evals, unmet=dict(unmet),
                     converged_to_tol=bool(np.isfinite(estimate) and estimate <= tol and not unmet),
                     final_estimate=estimate, relaxations=tuple(lc.relaxations))

@@ -18,16 +18,11 @@ import numpy as np
 
 from solver.errors import DynsplinesError, InputError
 from solver.path_context import PathContext
-from solver.quadrature import gauss_times, quadrature_times
+from solver.quadrature import check_points, gauss_times, quadrature_times
 from solver.spline_basis import SplineBasis
 from solver.terms.base import Term, TermEval
 from solver.terms.covariant import NormalizedCovariantAcceleration, unit_and_normalized
 from solver.terms.unit import UnitQuaternion
-
-#: Largest quadrature (points on the keyframe interval) an Objective accepts: the spline matrices are
-#: dense (points x frames), so a clip minutes long at the default rate, or keyframe times in frames
-#: instead of seconds, would exhaust memory instead of failing clearly.
-MAX_QUADRATURE_POINTS = 100_000
 
 #: Doubles (points x nq) per block of the pointwise terms (`Term.pointwise`) on long paths (more than
 #: 4 blocks' worth; shorter paths are evaluated whole): a block's arrays (128 KB each; 321 points of
@@ -121,12 +116,8 @@ class Objective:
                                      "(nodes moving with the frames) does not support; use quadrature='uniform'")
         if not np.isfinite(self.rate) or self.rate <= 0:
             raise InputError(f"quadrature rate {self.rate} must be > 0 points per second")
-        n = (self.t1 - self.t0) * self.rate if self.quadrature == "uniform" else 0
-        if n > MAX_QUADRATURE_POINTS:
-            raise InputError(
-                f"the keyframes span {self.t1 - self.t0:g} s; at {self.rate:g} quadrature points per second "
-                f"that is {n:.3g} points (at most {MAX_QUADRATURE_POINTS}); check the keyframe times "
-                "(seconds, not frames) or lower the rate (--rate)")
+        if self.quadrature == "uniform":
+            check_points(self.t0, self.t1, self.rate)
         if self.scales is None:
             self.scales = np.ones(len(self.terms))
         if self.quadrature == "uniform":
@@ -353,8 +344,6 @@ class Objective:
         Call once on the initial (plain spline) path and keep the scales through subdivision, so the
         objective stays the same function. Terms that are zero there keep scale 1, and so do terms
         whose weight is absolute (a term's `renormalized` False: a bound, zero there up to rounding).
-        A term with `renormalize_like` naming another term of the objective takes that term's scale
-        (`solver.terms.near_sites`: a departure priced in the planted term's currency).
 
         Returns:
             {term name: scale}.
@@ -362,8 +351,4 @@ class Objective:
         ints = self.evaluate(knots, P, grad=False).integrals
         self.scales = np.array([ints[n] if ints[n] > RENORMALIZE_FLOOR and getattr(term, "renormalized", True)
                                 else 1.0 for n, term in zip(self.names, self.terms)])
-        for i, term in enumerate(self.terms):  # a term zero on the plain spline may borrow another's scale
-            like = getattr(term, "renormalize_like", None)
-            if like in self.names:
-                self.scales[i] = self.scales[self.names.index(like)]
         return dict(zip(self.names, self.scales.tolist()))

@@ -1,8 +1,8 @@
-"""The peak forces a motion may ask of the body: bounds for the `forces` term (docs/dynamics.md).
+"""The peak forces a motion may ask of the body: bounds of the no-jolt and force constraints (docs/dynamics.md).
 
-A path solved with the dynamics terms can buy a ballistic flight with a push-off and a landing no body
-makes (run-and-step with `--terms all` asked 6.8 body weights of ground force and 65 m/s^2 of pelvis
-acceleration where the capture needs 1.7 and 5.9). `PeakBounds` holds, for one problem, the largest
+A path with ballistic flights can buy them with a push-off and a landing no body makes (run-and-step
+asked 6.8 body weights of ground force and 65 m/s^2 of pelvis acceleration where the capture needs 1.7
+and 5.9). `PeakBounds` holds, for one problem, the largest
 ground force and pelvis acceleration the optimized path may show: the larger of
 
 * the plain spline's own peaks (the keyframes' motion, which the optimizer starts from), and
@@ -20,11 +20,12 @@ included; peaks over time at `RATE` samples per second.
 """
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass
+
 import numpy as np
 
 from solver.errors import InputError
 from solver.layout import StateLayout
-from solver.terms.force_bounds import PeakBounds
 
 __all__ = ["CUTOFF_HZ", "PeakBounds", "capture_peaks", "filter_capture", "peak_bounds"]
 
@@ -38,6 +39,45 @@ RATE = 1000.0
 #: [s] capture frames kept on each side of the keyframes' span for the spline through the filtered
 #: capture (its natural end conditions then lie outside the span the peaks are read on)
 PAD_S = 0.1
+
+
+
+@dataclass(frozen=True)
+class PeakBounds:
+    """The largest ground force and pelvis acceleration one problem's optimized path may show.
+
+    Attributes:
+        ground_force_bw: bound on the root force |F| / (m g) [body weights]: the larger of the plain
+            spline's peak and the capture's peak on the ground.
+        pelvis_acceleration_ms2: bound on |x''| of the root [m/s^2], the larger of the two peaks.
+        plain_ground_force_bw: the plain spline's peak |F| / (m g) over all its samples (on the ground
+            and in flight), so that the plain spline itself meets the bound.
+        plain_pelvis_acceleration_ms2: the plain spline's peak [m/s^2].
+        capture_ground_force_bw, capture_pelvis_acceleration_ms2: the filtered capture's peaks on the
+            ground and over the keyframes' span, or None without a capture.
+        cutoff_hz: the capture filter's cutoff [Hz].
+    """
+
+    ground_force_bw: float
+    pelvis_acceleration_ms2: float
+    plain_ground_force_bw: float
+    plain_pelvis_acceleration_ms2: float
+    capture_ground_force_bw: float | None = None
+    capture_pelvis_acceleration_ms2: float | None = None
+    cutoff_hz: float = 6.0
+
+    def as_dict(self) -> dict:
+        """The fields as a JSON-ready dict."""
+        return asdict(self)
+
+    def describe(self) -> str:
+        """One line: the two bounds and where they come from."""
+        cap = ("no capture" if self.capture_ground_force_bw is None else
+               f"capture {self.capture_ground_force_bw:.2f} body wt, {self.capture_pelvis_acceleration_ms2:.1f} m/s^2 "
+               f"(filtered at {self.cutoff_hz:g} Hz)")
+        return (f"force bounds: ground {self.ground_force_bw:.2f} body wt, pelvis {self.pelvis_acceleration_ms2:.1f} "
+                f"m/s^2 = max(plain {self.plain_ground_force_bw:.2f} body wt, {self.plain_pelvis_acceleration_ms2:.1f} "
+                f"m/s^2; {cap})")
 
 
 def filter_capture(times: np.ndarray, qpos: np.ndarray, layout: StateLayout,

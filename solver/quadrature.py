@@ -8,6 +8,30 @@ import numpy as np
 DEFAULT_RATE = 400.0
 
 
+#: Largest quadrature (points on the keyframe interval) a problem accepts: the spline matrices are
+#: points x frames, so a clip minutes long at the default rate, or keyframe times in frames instead of
+#: seconds, would exhaust memory instead of failing clearly.
+MAX_QUADRATURE_POINTS = 100_000
+
+
+def check_points(t0: float, t1: float, rate: float) -> None:
+    """Raise InputError when [t0, t1] at `rate` points per second needs more than MAX_QUADRATURE_POINTS.
+
+    Args:
+        t0, t1: the keyframe interval [s]. rate: quadrature points per second [1/s].
+    Raises:
+        InputError: too many points (names the span, the rate and the fix).
+    """
+    from solver.errors import InputError
+
+    n = (t1 - t0) * rate
+    if n > MAX_QUADRATURE_POINTS:
+        raise InputError(
+            f"the keyframes span {t1 - t0:g} s; at {rate:g} quadrature points per second that is {n:.3g} "
+            f"points (at most {MAX_QUADRATURE_POINTS}); check the keyframe times (seconds, not frames) or "
+            "lower the rate (--rate)")
+
+
 def quadrature_times(t0: float, t1: float, rate: float) -> tuple[np.ndarray, float]:
     """Uniform midpoint quadrature on [t0, t1] (paper, after eq. 7: "summing the values of the
     integrand at uniformly distributed points and multiplying by the time interval each represents").

@@ -23,12 +23,11 @@ class Round:
         n_frames, n_variable: frames the round optimized, and how many of them are variable frames.
         result: the optimizer's OptimizeResult.
         scores: (n_frames_before - 1,) the subdivision scores (`SolveOptions.score`) that chose this
-            round's new frames, on the previous round's segments; None for the first round and after a
-            penalty boost.
+            round's new frames, on the previous round's segments; None for the first round, a boost and a polish.
         times: (n_frames,) the frame times this round optimized [s].
         kind: why the round ran (`ROUND_KINDS`): "start" (the first), "refine" (frames were added),
-            "boost" (the same frames under weights raised by penalty continuation or by the strategy)
-            or "polish" (the same frames at a stricter stopping test).
+            "boost" (the same frames under a weight the strategy raised: the orientation's unit term,
+            `solver.orient_refine.GapToOptimum`) or "polish" (the same frames at a stricter stopping test).
     """
 
     n_frames: int
@@ -41,7 +40,8 @@ class Round:
 
 @dataclass(frozen=True)
 class Solution:
-    """The result of `solve` (read-only: a frozen dataclass whose arrays are not writeable).
+    """The result of `solve` and of the least change (read-only: a frozen dataclass whose arrays are not
+    writeable).
 
     Attributes:
         frames: optimized FrameSet (the path is the natural cubic spline through it), (m, nq) values.
@@ -49,15 +49,14 @@ class Solution:
         rounds: (Round, ...) per-round results.
         status: Status of the last round (INTERRUPTED etc. end the solve early).
         message: why it ended.
-        E_initial, E_final: objective on the plain spline and on the result, both under the final
-            weights (penalty continuation raises some) and the renormalization scales.
+        E_initial, E_final: objective on the plain spline and on the result, both under the
+            renormalization scales (the least change: Phi, the measure of change).
         integrals_initial, integrals_final: {term: integral of f_j dt} on each (unweighted).
         scales: {term: renormalization divisor} (eq. 7; 1 without renormalization).
         trace: (N,) best objective after each evaluation, all rounds concatenated.
         wall_time_s: [s], optimization and subdivision (excludes building the terms).
         n_evals: objective evaluations in all rounds.
-        weights: {term: lambda_j} at the end: the objective's weights after penalty continuation
-            (`SolveOptions.limits`); the caller's Objective keeps its own.
+        weights: {term: lambda_j} of the objective (`solve`); {} for the least change.
         objective: the working copy of the objective the last round optimized (final weights and
             scales, terms prepared on the result): for scores or evaluations on the result under the
             objective that produced it. `solve` never changes the caller's Objective.
@@ -67,11 +66,10 @@ class Solution:
             the estimated gap.
         converged_to_tol: with a tolerance, whether the estimate reached it; None without one.
         final_estimate: the last estimate of a strategy with a tolerance, NaN otherwise.
-        stalled: {term: violation} of the terms penalty continuation gave up on (a boost did not halve
-            the violation; `SolveOptions.limits`), in the term's `violation` units; for the least change
-            {constraint: amount [SI]} of the pairs it could not meet (`solver.least_change`).
+        unmet: {constraint: amount [SI]} of the constraints the least change could not meet
+            (`solver.least_change`); {} for `solve`.
         relaxations: the least change's `solver.constraint_set.Relaxation`s: where the keyframes decide a
-            constraint (which, site or joint, keyframe, span [s], amount [SI]); () for the penalty method.
+            constraint (which, site or joint, keyframe, span [s], amount [SI]); () for `solve`.
     """
 
     frames: FrameSet
@@ -92,7 +90,7 @@ class Solution:
     refinement_estimates: tuple = ()
     converged_to_tol: bool | None = None
     final_estimate: float = float("nan")
-    stalled: dict = field(default_factory=dict)
+    unmet: dict = field(default_factory=dict)
     relaxations: tuple = ()
 
     @cached_property
@@ -114,7 +112,7 @@ class Solution:
 
     @property
     def round_summary(self) -> str:
-        """The rounds in words, e.g. "3 rounds: 1 start, 1 refine, 1 boost" (refinement rounds add frames;
+        """The rounds in words, e.g. "3 rounds: 1 start, 1 refine, 1 polish" (refinement rounds add frames;
         boost and polish rounds optimize the same frames again)."""
         return round_summary(self.rounds)
 

@@ -1,6 +1,6 @@
 """The algorithm of the paper's figure 5, end to end: frames -> optimize -> subdivide -> optimize ...
 
-`solve` composes four units:
+`solve` composes three units:
 
 1. the starting frames: the plain spline through the keyframes (partial keyframes' free components
    filled), optionally renormalized on (eq. 7), plus variable frames where a term's integrand changes
@@ -8,9 +8,7 @@
    segment for "global" and "adaptive" subdivision, valued on the current path;
 2. the optimizer back end (`solver.backend`): one round moves the free components, keyframes hold
    exactly at every iterate;
-3. penalty continuation (`solver.continuation`): a round whose path violates a limit is optimized again
-   under stiffer weights;
-4. the refinement strategy (`solver.refinement`): after each accepted round, stop or add frames where
+3. the refinement strategy (`solver.refinement`): after each accepted round, stop or add frames where
    the weak-form Euler-Lagrange score is largest (fixed rounds, or until a tolerance on the decrease
    refinement still predicts; `solver.orient_refine.GapToOptimum` for the orientation's gap).
 """
@@ -24,7 +22,6 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from solver.backend import Backend, nlopt_backend
-from solver.continuation import LIMIT_CHECK_RATE, STALL_FRACTION, PenaltyContinuation  # noqa: F401 (re-exported)
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.objective import NonFiniteError, Objective
@@ -70,7 +67,7 @@ class SolveOptions:
         refine: how adaptive subdivision stops (with "none" and "global" it is not used):
             "rounds" (default): after `rounds` rounds that add frames; "tol": when the decrease of E
             refinement still predicts, relative to E (`refinement_estimate`, after each round's
-            optimization and penalty continuation), is at most `tol`, or `max_frames` (default
+            optimization), is at most `tol`, or `max_frames` (default
             TOL_FRAMES_PER_INTERVAL per keyframe interval) or `max_time_s` runs out
             (`Solution.converged_to_tol` False, the message says which and gives the estimate).
         rounds: with refine "rounds", the adaptive rounds after the first (each adds frames, then
@@ -95,28 +92,14 @@ class SolveOptions:
             0.1 saves 25-40% of the evaluations on the orientation test sets (`solver.orient`,
             docs/orient.md "Defaults, and what they deliver"). "auto": from the curvatures the objective's terms declare, on the slots
             the unit term acts on (`solver.precondition.auto_radial_weight`; `quat_slots` unused):
-            the figure's default (`default_options`), where the unit term makes the radial directions
-            stiff (about 20x the acceleration metric) and a weight of 1 leaves L-BFGS with a
+            the default for an objective whose unit term makes the radial directions stiff (about
+            20x the acceleration metric), where a weight of 1 leaves L-BFGS with a
             condition number of ~1e4 and an evaluation count that grows with the clip's length.
         tol: with refine "tol", the tolerance (> 0). With refine "rounds" it must be 0 (not given): an
             InputError otherwise, since it would be ignored.
-        limits: ((term name, tolerance), ...): penalty continuation. After a round, a term whose
-            `violation` on the path (sampled at LIMIT_CHECK_RATE, in the term's own units, e.g. metres of
-            penetration) exceeds its tolerance has its weight multiplied by `boost` and the round is
-            optimized again, at most `max_boosts` times in a solve: the quadratic-penalty method's
-            schedule (Nocedal & Wright, Numerical Optimization, sec. 17.1), which drives a soft
-            constraint's violation to a stated bound without a constrained optimizer. A quadratic
-            penalty's violation falls about as 1/weight; a term whose violation a boost did not cut
-            below STALL_FRACTION of what it was is not boosted again (the keyframes make the bound
-            unreachable there: 127_33 keyed every 0.33 s took four boosts and 1550 evaluations while
-            its clearance violation grew from 68 to 112 mm); `Solution.stalled` lists them.
-
     Rounds: every optimization is a `Round` of `Solution.rounds`, with a `kind`: "start" (the first),
-    "refine" (after adding frames), "boost" (the same frames again after penalty continuation raised
-    weights) and "polish" (the same frames again at a stricter stopping test; the orientation's
-    gap strategy). So `rounds=1` with one boost gives three Rounds, e.g. start, boost, refine:
-    `Solution.round_summary` counts them by kind, and so does the message where there were boost or
-    polish rounds ("... (3 rounds: 1 start, 1 refine, 1 boost)").
+    "refine" (after adding frames), "boost" and "polish" (the same frames again under a raised weight or
+    at a stricter stopping test: the orientation's gap strategy); `Solution.round_summary` counts them.
     Raises (on construction):
         InputError: a field out of range or unknown; refine "tol" without tol > 0; tol > 0 with
             refine "rounds"; rounds given with refine "tol".
@@ -137,9 +120,6 @@ class SolveOptions:
     precondition: bool = False
     radial_weight: float | str = 1.0
     quat_slots: tuple = ()
-    limits: tuple = ()
-    boost: float = 10.0
-    max_boosts: int = 4
     tol: float = 0.0
     refine: str = "rounds"
 
@@ -150,7 +130,7 @@ class SolveOptions:
             raise InputError(f"unknown subdivision score {self.score!r}; choose one of: {', '.join(SCORES)}")
         if self.rounds is not None:
             _whole("rounds", self.rounds)
-        for name in ("per_segment", "per_round", "max_frames", "max_evals", "max_boosts"):
+        for name in ("per_segment", "per_round", "max_frames", "max_evals"):
             _whole(name, getattr(self, name))
         if self.algorithm not in ALGORITHMS:
             raise InputError(f"unknown algorithm {self.algorithm!r}; choose one of: {', '.join(ALGORITHMS)}")
@@ -161,11 +141,6 @@ class SolveOptions:
             raise InputError(f"radial_weight must be a number > 0 or 'auto', got {self.radial_weight!r}")
         if any(len(slot) != 4 for slot in self.quat_slots):
             raise InputError(f"quat_slots must be groups of 4 qpos indices, got {self.quat_slots!r}")
-        if not self.boost >= 1:
-            raise InputError(f"boost must be >= 1, got {self.boost}")
-        for lim in self.limits:
-            if len(lim) != 2 or not lim[1] >= 0:
-                raise InputError(f"limits must be (term name, tolerance >= 0) pairs, got {lim!r}")
         if not self.max_time_s >= 0:
             raise InputError(f"max_time_s must be >= 0, got {self.max_time_s}")
         if not (self.tol >= 0 and np.isfinite(self.tol)):
@@ -218,10 +193,8 @@ def solve(
         should_stop: polled during optimization (Ctrl-C handler); True ends the solve, keeping the
             best path so far (it meets every keyframe).
         progress: progress(event, info) for "round" (start of a round: {"round", "frames", "variable",
-            "kind"}, `Round.kind`), "eval" (each evaluation), "boost" ({"terms": {name: violation},
-            "boosts": n}), "stalled" ({"terms": {name: violation}}: not boosted again), "undo" (a boost
-            whose terms all stalled undone: `PenaltyContinuation.after_round`) and "estimate"
-            (after a round: the refinement estimate).
+            "kind"}, `Round.kind`), "eval" (each evaluation) and "estimate" (after a round: the refinement
+            estimate).
         project: maps the values (r, nq) of the variable frames placed on the plain spline before the
             first round (`per_segment`) to the values to start from (e.g. `solver.orient` puts the
             quaternions back on the unit sphere); frames inserted by adaptive rounds keep the path's
@@ -238,7 +211,7 @@ def solve(
             (their nq does not fit the objective's model).
         NonFiniteError: the objective is NaN or infinite on the initial path (nothing to keep).
 
-    `objective` is not changed: renormalization (eq. 7) and penalty continuation act on a copy
+    `objective` is not changed: renormalization (eq. 7) acts on a copy
     (`Solution.objective`), so solving twice with the same inputs gives the same result. The copy
     shares the terms, whose per-round state (`Term.prepare`) `solve` sets afresh from `initial`.
     """
@@ -256,26 +229,20 @@ def solve(
         ev0 = objective.evaluate(initial.times, initial.values, grad=False)
     else:  # nothing changed the objective since the input check evaluated it on the same frames
         ev0 = ev_check
-    weights0 = objective.weights.copy()
     strategy = default_refinement(options) if refinement is None else refinement
     frames = strategy.first_frames(objective, starting_frames(objective, initial, options, project))
-    continuation = PenaltyContinuation(options.limits, options.boost, options.max_boosts)
-    log = _rounds(objective, frames, options, strategy, continuation, backend, t_start, should_stop, progress)
+    log = _rounds(objective, frames, options, strategy, backend, t_start, should_stop, progress)
     message = strategy.final_message(log.status, log.message)
     if any(r.kind in ("boost", "polish") for r in log.rounds):
         message += f" ({round_summary(log.rounds)})"
-    if continuation.undone:  # the path is the one from before those boosts
-        message += f"; {continuation.undone} boost{'s' if continuation.undone > 1 else ''} undone (bought nothing)"
     ev1 = objective.evaluate(log.frames.times, log.frames.values, grad=False)
-    if not np.array_equal(weights0, objective.weights):  # both ends under the final weights, so they compare
-        ev0 = objective.evaluate(initial.times, initial.values, grad=False)
     return Solution(
         _read_only_frames(log.frames), _read_only_frames(initial), tuple(log.rounds), log.status, message, ev0.E,
         ev1.E, ev0.integrals, ev1.integrals, scales,
         _read_only(np.concatenate(log.traces) if log.traces else np.array([ev0.E])),
         time.perf_counter() - t_start, log.n_evals, dict(zip(objective.names, objective.weights.tolist())),
         objective, tuple(strategy.estimates), strategy.converged, strategy.final_estimate,
-        dict(continuation.stalled),
+        {},
     )
 
 
@@ -328,10 +295,9 @@ class _Log:
     message: str = "converged"
 
 
-def _rounds(objective, frames, options, strategy, continuation, backend, t_start, should_stop, progress) -> _Log:
-    """The outer loop: optimize a round (`backend`), then penalty continuation may have the same frames
-    optimized again ("boost"), then the strategy stops, adds frames ("refine") or has the same frames
-    optimized again ("polish", "boost"). Ends on a stop request, the time limit, a round ending in
+def _rounds(objective, frames, options, strategy, backend, t_start, should_stop, progress) -> _Log:
+    """The outer loop: optimize a round (`backend`), then the strategy stops, adds frames ("refine") or
+    has the same frames optimized again ("boost", "polish"). Ends on a stop request, the time limit, a round ending in
     INTERRUPTED, MAX_TIME, NONFINITE or FAILED, or the strategy's stop."""
     log, kind, scores = _Log(frames), "start", None
     while True:
@@ -346,13 +312,6 @@ def _rounds(objective, frames, options, strategy, continuation, backend, t_start
         _record(log, objective, result, scores, kind, options)
         if log.status in _ENDS:
             break
-        boosted = continuation.after_round(objective, log.frames, progress, result)
-        if continuation.restored is not None:  # a stalled boost undone: on from the round before it
-            log.frames, result = continuation.restored
-            objective.prepare(log.frames.times, log.frames.values)
-        if boosted:
-            kind, scores = "boost", None
-            continue
         try:
             step = strategy.after_round(objective, log.frames, result, len(log.rounds) - 1, progress)
         except NonFiniteError as e:  # keep the optimized frames; say which term failed
@@ -432,7 +391,7 @@ def _check_inputs(objective, initial, options):
     if not isinstance(options, SolveOptions):
         raise InputError(f"options must be a SolveOptions, got {type(options).__name__}")
     if not isinstance(objective, Objective):
-        raise InputError(f"objective must be an Objective (e.g. from figure_objective), got {type(objective).__name__}")
+        raise InputError(f"objective must be an Objective (e.g. `solver.orient`'s), got {type(objective).__name__}")
     t0, t1 = float(initial.times[0]), float(initial.times[-1])
     if abs(objective.t0 - t0) > 1e-9 * max(1.0, abs(t0)) or abs(objective.t1 - t1) > 1e-9 * max(1.0, abs(t1)):
         raise InputError(

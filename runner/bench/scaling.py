@@ -13,15 +13,12 @@ Each length is solved in its own subprocess (one BLAS thread), so that its peak 
 peak minus the resident size just before the solve (the solve's own memory: arrays, the spline bases,
 the optimizer; the interpreter, numpy, scipy and MuJoCo are the same at every length).
 
-The problem is built as `dynsplines animate` builds it (`solver.problem.figure_problem`: the anatomical
-terms allow the plain spline's own joint angles, as the keyframes hold them). Solve options: those of
-`dynsplines animate` (`default_options`: ftol 1e-6, preconditioner with the
-radial weight from the terms, renormalization, the default penalty-continuation limits) except the
-subdivision: *global*, 2 variable frames per keyframe interval,
-one optimization round. Adaptive subdivision picks frames by a score threshold and per-round budgets,
-so the number of frames and rounds need not be proportional to the length, and the comparison would
-mix the cost of a different problem into the cost of a longer one; with a fixed subdivision the
-problem at 8x is exactly 8 copies of the problem at 1x (plus 7 joins).
+The problem is built and solved as `dynsplines animate` builds and solves it (`solver.build_problem`,
+`solver.solve_problem`: the least change to the plain spline that meets the constraints, with the
+command's `LeastChangeOptions`). The keyframes have no contact schedule here (the shipped schedule
+names the step box), so the constraints are penetration, the anatomical limits, the unit norm and the
+no-jolt bounds; refinement is the command's (frames where the predicted decrease is largest, until it
+is below the tolerance), so the frame count at 8x need not be 8 times the count at 1x.
 """
 from __future__ import annotations
 
@@ -34,7 +31,6 @@ import sys
 import tempfile
 import time
 from contextlib import contextmanager
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -95,58 +91,61 @@ def tile_keyframes(keyframes: Keyframes, copies: int, root_xy=(0, 1)) -> Keyfram
                      source=f"{keyframes.source} x{copies}")
 
 
-def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float = 400.0, per_segment: int = 2) -> dict:
+def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float | None = None) -> dict:
     """Solve the tiled clip once in this process; returns timings, memory and result figures.
 
+    Args:
+        keyframes: the tiled clip. figure: the figure MJCF. rate: quadrature points per second [1/s]
+            (None: `LeastChangeOptions`' default).
     Returns:
         dict: keyframes, frames, points (quadrature), wall_s, cpu_s (user + system of the solve),
         evals, ms_per_eval (wall / evals), rss_before_mb, maxrss_mb (peak resident size of the
         process after the solve), peak_mb (the difference), E_initial, E_final, status,
-        max_penetration_mm, keyframe_error (path_metrics at 1000 Hz), banded (the solve's spline
-        bases evaluated through the tridiagonal system), obj_cpu_s and obj_calls (CPU time in, and
-        calls of, `Objective.evaluate` during the solve: `_objective_cpu`).
+        max_penetration_mm, keyframe_error (path_metrics at 1000 Hz), banded (the spline bases of the
+        final frames are evaluated through the tridiagonal system), obj_cpu_s and obj_calls (CPU time
+        in, and calls of, `AugmentedLagrangian.evaluate` during the solve: `_objective_cpu`).
     """
-    from solver.animate import default_options
+    from solver.animate import solve_problem
+    from solver.least_change import LeastChangeOptions
     from solver.metrics import path_metrics
-    from solver.problem import figure_problem, parse_terms
-    from solver.solve import solve
+    from solver.problem import ProblemSpec, build_problem
+    from solver.quadrature import quadrature_times
+    from solver.spline_basis import SplineBasis
 
     model = floor_model(figure)
-    weights = parse_terms(None)
-    # built as `solver.animate` builds it: the anatomical terms allow the plain spline's own angles
-    objective, initial, _ = figure_problem(model, weights, keyframes, rate=rate)
-    options = replace(default_options(weights), subdivision="global", per_segment=per_segment)
+    options = LeastChangeOptions() if rate is None else LeastChangeOptions(rate=rate)
+    problem = build_problem(model, ProblemSpec(keyframes))
     rss_before = _rss_mb()
     r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
     with _objective_cpu() as obj:
-        sol = solve(objective, initial, options)
+        sol = solve_problem(problem, options)
     wall = time.perf_counter() - t0
     r1 = resource.getrusage(resource.RUSAGE_SELF)
     maxrss = r1.ru_maxrss / 1024.0  # Linux: kilobytes
-    banded = objective.basis(sol.frames.times).banded
+    t, _ = quadrature_times(float(keyframes.times[0]), float(keyframes.times[-1]), options.rate)
     metrics = path_metrics(model, sol.frames.times, sol.frames.values, keyframes, rate=1000.0, dynamics=False)
     return {
-        "keyframes": keyframes.count, "frames": sol.frames.count, "points": len(objective.t),
+        "keyframes": keyframes.count, "frames": sol.frames.count, "points": len(t),
         "wall_s": wall, "cpu_s": (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime),
         "solve_wall_s": sol.wall_time_s, "evals": sol.n_evals, "ms_per_eval": 1e3 * wall / max(1, sol.n_evals),
         "rss_before_mb": rss_before, "maxrss_mb": maxrss, "peak_mb": maxrss - rss_before,
         "E_initial": sol.E_initial, "E_final": sol.E_final, "status": sol.status.name,
         "max_penetration_mm": metrics["max_penetration_mm"], "keyframe_error": metrics["keyframe_error"],
-        "banded": bool(banded), "obj_cpu_s": obj["cpu_s"], "obj_calls": obj["calls"],
+        "banded": bool(SplineBasis(sol.frames.times, t).banded), "obj_cpu_s": obj["cpu_s"], "obj_calls": obj["calls"],
     }
 
 
 @contextmanager
 def _objective_cpu():
-    """Within the block, CPU time [s] and calls of `Objective.evaluate` (every evaluation of E: the
-    optimizer's, the input check's, renormalization's, the subdivision's), collected in the dict it
-    yields: "cpu_s", "calls". The rest of a solve's CPU time is the optimizer's own work (nlopt's
-    L-BFGS, the preconditioner's maps) and the setup (spline bases, preconditioner, limit checks)."""
-    from solver.objective import Objective
+    """Within the block, CPU time [s] and calls of `AugmentedLagrangian.evaluate` (every evaluation of
+    the augmented Lagrangian: the subproblems' and the refinement's), collected in the dict it yields:
+    "cpu_s", "calls". The rest of a solve's CPU time is the optimizer's own work (nlopt's L-BFGS, the
+    preconditioner's maps) and the setup (reference motion, constraints, spline bases)."""
+    from solver.lagrangian import AugmentedLagrangian
 
     acc = {"cpu_s": 0.0, "calls": 0}
-    evaluate = Objective.evaluate
+    evaluate = AugmentedLagrangian.evaluate
 
     def timed(self, *args, **kwargs):
         t = time.process_time()
@@ -156,11 +155,11 @@ def _objective_cpu():
             acc["cpu_s"] += time.process_time() - t
             acc["calls"] += 1
 
-    Objective.evaluate = timed
+    AugmentedLagrangian.evaluate = timed
     try:
         yield acc
     finally:
-        Objective.evaluate = evaluate
+        AugmentedLagrangian.evaluate = evaluate
 
 
 def _rss_mb() -> float:
@@ -173,12 +172,12 @@ def _rss_mb() -> float:
 
 
 def scaling(keyframes: Keyframes, factors=(1, 2, 4, 8), dense: bool = False, figure: Path = FIGURE,
-            rate: float = 400.0, per_segment: int = 2, repeat: int = 1) -> list[dict]:
+            rate: float | None = None, repeat: int = 1) -> list[dict]:
     """The workload: per length factor, `solve_one` on the tiled clip in a fresh subprocess.
 
     Args:
         keyframes: the clip to tile. factors: length multiples. dense: force the dense spline matrices
-            at every size (the cost before the banded evaluation, for comparison).
+            at every size (the cost before the banded evaluation, for comparison). rate: as `solve_one`.
         repeat: solves per length, the lengths alternating (1x, 2x, .., 1x, 2x, ..), so that a slow
             or fast spell of a shared machine falls on every length (`median_rows` combines them).
     Returns:
@@ -194,8 +193,8 @@ def scaling(keyframes: Keyframes, factors=(1, 2, 4, 8), dense: bool = False, fig
         env = {**os.environ, **SINGLE_THREAD}
         for rep in range(max(1, int(repeat))):
             for f in factors:
-                cmd = [sys.executable, "-m", "runner.bench.scaling", "--worker", str(paths[f]), "--figure",
-                       str(figure), "--rate", str(rate), "--per-segment", str(per_segment)]
+                cmd = [sys.executable, "-m", "runner.bench.scaling", "--worker", str(paths[f]), "--figure", str(figure)]
+                cmd += [] if rate is None else ["--rate", str(rate)]
                 cmd += ["--dense"] if dense else []
                 res = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
                 if res.returncode != 0:
@@ -282,7 +281,7 @@ def _worker(args) -> int:
         spline_basis.DENSE_MAX_ENTRIES = 1 << 62
     d = np.load(args.worker)
     kf = Keyframes(d["times"], d["values"], d["mask"])
-    print(json.dumps(solve_one(kf, Path(args.figure), args.rate, args.per_segment)))
+    print(json.dumps(solve_one(kf, Path(args.figure), args.rate)))
     return 0
 
 
@@ -317,8 +316,7 @@ def main(argv=None) -> int:
     p.add_argument("--keyframes", type=Path, default=FIGURE.parent / "run_and_step.keyframes.json")
     p.add_argument("--figure", type=Path, default=FIGURE)
     p.add_argument("--factors", default="1,2,4,8")
-    p.add_argument("--rate", type=float, default=400.0)
-    p.add_argument("--per-segment", type=int, default=2)
+    p.add_argument("--rate", type=float, default=None, help="quadrature points per second [the command's]")
     p.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every size")
     p.add_argument("--repeat", type=int, default=3, help="solves per length, alternating; medians reported [3]")
     p.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table")
@@ -343,14 +341,13 @@ def main(argv=None) -> int:
     keyframes, _ = read_keyframes(args.keyframes, StateLayout.from_model(floor_model(args.figure)))
     factors = [int(f) for f in args.factors.split(",")]
     print(f"scaling: {args.keyframes.name} ({keyframes.count} keyframes, {keyframes.times[-1] - keyframes.times[0]:.2f} s) "
-          f"tiled {args.factors}x, floor-only scene, quadrature {args.rate:g} Hz, global subdivision "
-          f"{args.per_segment} per interval, otherwise animate's options (default_options); one subprocess per length, one BLAS "
+          f"tiled {args.factors}x, floor-only scene, the command's least change (LeastChangeOptions"
+          f"{'' if args.rate is None else f', quadrature {args.rate:g} Hz'}); one subprocess per length, one BLAS "
           "thread; peak MB = maxrss - RSS before the solve")
     runs = [(False, "spline: auto (dense up to DENSE_MAX_ENTRIES, banded above)"),
             (True, "spline: dense at every size (before)")][:1 + args.dense]
     for dense, title in runs:
-        rows = scaling(keyframes, factors, dense=dense, figure=args.figure, rate=args.rate,
-                       per_segment=args.per_segment, repeat=args.repeat)
+        rows = scaling(keyframes, factors, dense=dense, figure=args.figure, rate=args.rate, repeat=args.repeat)
         if args.repeat > 1:
             title += f"; times and memory: median of {args.repeat} runs per length, the lengths alternating"
         print_table(median_rows(rows), title)

@@ -12,7 +12,6 @@ from runner.paths import display_path
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem
 from runner.run import execute
 from solver.errors import InputError
-from solver.solve import SolveOptions
 
 #: where the commands write when no output is named: relative to the current folder
 OUTPUT_DIR = Path("renders")
@@ -53,23 +52,17 @@ def default_video(keyframes) -> Path:
 def run_animate(args) -> int:
     """Run `animate` / `run-and-step`. Returns the exit code."""
     outputs = outputs_from_args(args, default_video=default_video(args.keyframes))  # checked before solving
-    problem, source = file_problem(args.keyframes, args.scene, args.terms, dict(args.weight), args.rate,
-                                   quiet=args.quiet)
+    problem, source = file_problem(args.keyframes, args.scene, args.terms, quiet=args.quiet)
     if "reference" in outputs.video_options.panels and outputs.video is not None and source.reference is None:
         raise InputError(f"--panels reference: {args.keyframes} names no motion-capture clip that is there "
                          "(its \"source\": {\"clip\": ...}, relative to the file); drop the reference panel")
-    options = solve_options(args, dict(problem.weights))
+    options = solve_options(args)
     _warn_penetrating_keyframes(problem)
-    _warn_contact_conflicts(problem)
     kf = problem.keyframes
     print(f"dynsplines: {display_path(args.keyframes)} -> {kf.count} keyframes ({int(kf.is_partial.sum())} partial) "
           f"over {kf.times[-1] - kf.times[0]:.2f} s, scene {display_path(source.scene_path)}")
-    if isinstance(options, SolveOptions):
-        print(f"  terms: {', '.join(f'{n}={w:g}' for n, w in problem.weights.items())}"
-              f"{' (renormalized, eq. 7)' if options.renormalize else ''}; subdivision {options.subdivision}; "
-              f"nlopt {options.algorithm}")
-    else:
-        print("  the least change to the plain spline that meets the constraints (docs/design.md)")
+    print("  the least change to the plain spline that meets the constraints"
+          f"{' and the force bounds' if problem.forces else ''} (docs/design.md)")
     return execute(problem, options, source, outputs).exit_code
 
 
@@ -86,21 +79,3 @@ def _warn_penetrating_keyframes(problem) -> None:
             print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) puts "
                   f"{site} {1000 * row.max():.1f} mm inside a surface; keyframes are met exactly, so that "
                   "stays - raise the keyframe's root or bend its leg to fix it", file=sys.stderr)
-
-
-def _warn_contact_conflicts(problem) -> None:
-    """Keyframes that contradict the contact schedule (`keyframe_conflicts`: a site the schedule plants
-    held up, a swing site held on the ground): keyframes are met exactly, so the contact terms cannot
-    fix those."""
-    keyframes = problem.keyframes
-    for name, k, site, dist in problem.conflicts.found:
-        if name == "planted":
-            what = f"holds {site} {1000 * dist:+.1f} mm from where the contact schedule plants it"
-        elif name == "sliding":
-            what = (f"and an earlier keyframe in the same contact hold {site} {1000 * dist:.1f} mm apart along "
-                    "the ground (it must slide)")
-        else:
-            what = f"holds {site} {1000 * dist:.1f} mm inside the clearance band where the schedule swings it"
-        print(f"dynsplines: warning: {keyframes.source}: keyframe {k} (t={keyframes.times[k]:g} s) {what}; "
-              "keyframes are met exactly, so that stays (not held to the bound) - edit the keyframe or the "
-              "contact's times", file=sys.stderr)

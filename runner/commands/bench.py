@@ -1,13 +1,9 @@
 """`dynsplines bench ...`: speed measured, not asserted in tests.
 
-    dynsplines bench run-and-step [--terms all] [--repeat N]
-        optimization wall time (median of N runs), evaluations, time per evaluation, and the acceptance
-        figures of the plain and the optimized path (the summary's rows, "worse" marked); with dynamics
-        terms, the geometric-only objective is run side by side in the same process for the ratio.
-    dynsplines bench refine [--terms all] [--counts 14,21,28] [--scores gradient,decrease]
-        adaptive (weak-form Euler-Lagrange, each score) against global subdivision at equal
-        variable-frame counts on the run-and-step clip: final objective, evaluations, wall time
-        (runner.bench.figure.compare_refinement).
+    dynsplines bench run-and-step [--repeat N]
+        the least change with the default constraints and with the force bounds (`--terms all`), side
+        by side in one process: optimization wall and CPU time (median of N runs), evaluations, and the
+        acceptance figures of the plain and the optimized path (the summary's rows, "worse" marked).
     dynsplines bench orient [--speed-random N]
         the single-body problem against the Barr-92 and constrained B-spline baselines (runner.bench.orient);
         with --speed-random N also the time to gap 1e-4 against Barr-92 on N generated sets.
@@ -33,36 +29,24 @@ import argparse
 
 from runner.animate_options import default_args, solve_options
 from runner.bench import orient as orient_workload
-from runner.bench.figure import GEOMETRIC, compare_refinement, path_figures, per_eval_ms, time_solves
+from runner.bench.figure import path_figures, time_solves
 from runner.commands import bench_contacts, bench_corpus, bench_speed
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
 from runner.readme_tables import Block, compare_blocks, replace_blocks, table, timing
-from solver.animate import DEFAULT_RATE
 from solver.errors import InputError
 from solver.metrics import path_metrics
-from solver.problem import parse_terms
 
 
 def register(sub) -> None:
-    """Add `bench` (run-and-step, refine, docs, orient, scaling, contacts, corpus, speed) to the `dynsplines` parser."""
-    p = sub.add_parser("bench", help="benchmarks: run-and-step, refine, docs, orient, scaling, contacts, corpus, speed")
+    """Add `bench` (run-and-step, docs, orient, scaling, contacts, corpus, speed) to the `dynsplines` parser."""
+    p = sub.add_parser("bench", help="benchmarks: run-and-step, docs, orient, scaling, contacts, corpus, speed")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
-    r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip")
-    r.add_argument("--terms", default=None, help="objective terms as for `animate` ('all' adds the dynamics terms)")
+    r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip, default and --terms all")
     r.add_argument("--repeat", type=int, default=3, help="runs per configuration; the median is reported [3]")
-    r.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
     r.set_defaults(func=bench_run_and_step)
-    f = bsub.add_parser("refine", help="adaptive vs global subdivision at equal variable-frame counts")
-    f.add_argument("--terms", default=None, help="objective terms as for `animate` [the default terms]")
-    f.add_argument("--counts", default="14,21,28",
-                   help="variable-frame counts, multiples of the keyframe intervals (7 on run-and-step) [14,21,28]")
-    f.add_argument("--scores", default="gradient,decrease",
-                   help="adaptive subdivision scores to run (SolveOptions.score) [gradient,decrease]")
-    f.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
-    f.set_defaults(func=bench_refine)
     m = bsub.add_parser("docs", aliases=["readme"], help="regenerate (or --check) docs/benchmarks.md's measured tables",
                         description="Regenerate the measured tables of docs/benchmarks.md (between <!-- bench:NAME "
                         "--> markers) from runs of the current code; --check compares instead (wall times and "
@@ -83,8 +67,7 @@ def register(sub) -> None:
                         "floor-only scene: optimization time, evaluations, time per evaluation and peak memory "
                         "of each length, one subprocess per length (runner.bench.scaling, docs/scaling.md).")
     c.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the clip [1,2,4,8]")
-    c.add_argument("--per-segment", type=int, default=2, help="variable frames per keyframe interval [2]")
-    c.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
+    c.add_argument("--rate", type=float, default=None, help="quadrature points per second [the command's]")
     c.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every length")
     c.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table, dense vs banded")
     c.add_argument("--repeat", type=int, default=3,
@@ -159,121 +142,67 @@ def bench_orient(args) -> int:
     return 0
 
 
-def run_and_step_problems(terms: str | None, rate: float) -> dict:
-    """{name: Problem} that `bench run-and-step` times: the geometric terms, and `terms` when they differ -
-    each exactly what `dynsplines run-and-step --terms TERMS` solves (the keyframe file's contacts
-    included: `runner.problem_file.file_problem`)."""
-    problems = {"geometric": file_problem(RUN_AND_STEP_KEYFRAMES, terms=GEOMETRIC, rate=rate)[0]}
-    if terms is not None:
-        chosen = file_problem(RUN_AND_STEP_KEYFRAMES, terms=terms, rate=rate)[0]
-        if set(chosen.terms) != set(problems["geometric"].terms):
-            problems[terms] = chosen
-    return problems
+def run_and_step_problems() -> dict:
+    """{name: Problem} that `bench run-and-step` times: "default" and "all" (with the force bounds), each
+    exactly what `dynsplines run-and-step [--terms all]` solves (`runner.problem_file.file_problem`)."""
+    return {terms: file_problem(RUN_AND_STEP_KEYFRAMES, terms=terms)[0] for terms in ("default", "all")}
 
 
 def bench_run_and_step(args) -> int:
     """`dynsplines bench run-and-step`: print the optimization time of the showcase clip. Returns 0."""
-    problems = run_and_step_problems(args.terms, args.rate)
-    keyframes = problems["geometric"].keyframes
-    print(f"bench run-and-step: {keyframes.count} keyframes, {args.repeat} runs per configuration, "
-          f"quadrature {args.rate:g} Hz, the command's problem and solve options")
-    results = {}
-    for name, problem in problems.items():
-        weights = dict(problem.weights)
-        options = solve_options(default_args("penalty"), weights)  # exactly what `dynsplines animate` runs
-        r = results[name] = time_solves(problem, options, args.repeat)
-        print(f"  {name:<12} terms {', '.join(f'{n}={w:g}' for n, w in weights.items())}")
-        print(f"  {'':<12} optimization {r['wall_median_s']:.2f} s median (runs: "
-              f"{', '.join(f'{w:.2f}' for w in r['wall_all_s'])}), {r['evals']} evaluations, "
-              f"{r['per_eval_ms']:.2f} ms per evaluation in the run (wall time / evaluations, "
-              f"{r['frames']} frames at the end)")
-        print_figures(problem.model, keyframes, r["solution"], weights)
+    import statistics
+
+    problems = run_and_step_problems()
+    keyframes = problems["default"].keyframes
+    options = solve_options(default_args())  # exactly what `dynsplines run-and-step` runs
+    print(f"bench run-and-step: {keyframes.count} keyframes, {args.repeat} runs per configuration, alternating, "
+          f"the command's problem and solve options (the least change, quadrature {options.rate:g} Hz)")
+    runs = {name: [] for name in problems}
+    for _ in range(max(1, args.repeat)):  # alternate, so load on the machine hits both alike
+        for name, problem in problems.items():
+            runs[name].append(time_solves(problem, options, 1))
+    for name, rs in runs.items():
+        walls, cpus = [r["wall_median_s"] for r in rs], [r["cpu_median_s"] for r in rs]
+        print(f"  --terms {name:<8} optimization {statistics.median(walls):.2f} s wall median (runs: "
+              f"{', '.join(f'{w:.2f}' for w in walls)}), {statistics.median(cpus):.2f} s CPU, "
+              f"{rs[-1]['evals']} evaluations, {rs[-1]['frames']} frames at the end")
+        print_figures(problems[name].model, keyframes, rs[-1]["solution"], forces=problems[name].forces)
     print(f"  {LEGEND}")
-    # per-evaluation cost of every configuration on one frame set (the last run's result), so the
-    # ratio compares the objectives and not the frame counts they ended with
-    common = results[list(results)[-1]]["solution"].frames
-    direct = {name: per_eval_ms(r["objective"], common) for name, r in results.items()}
-    pts = len(results["geometric"]["objective"].t)
-    print(f"  value + gradient, median of 30, on one frame set ({common.count} frames, {pts} quadrature "
-          f"points): " + ", ".join(f"{name} {ms:.2f} ms" for name, ms in direct.items()))
-    if len(results) > 1:
-        name = list(results)[1]
-        g, other = results["geometric"], results[name]
-        ratio = direct[name] / direct["geometric"]
-        print(f"  {name} / geometric per evaluation: {ratio:.2f}x (the dynamics terms add "
-              f"{direct[name] - direct['geometric']:.2f} ms, {ratio - 1:.2f}x the geometric terms' cost); "
-              f"optimization wall time {other['wall_median_s'] / g['wall_median_s']:.2f}x, evaluations "
-              f"{other['evals'] / max(1, g['evals']):.2f}x")
     return 0
 
 
-def print_figures(model, keyframes, solution, weights, indent: str = "  ") -> None:
+def print_figures(model, keyframes, solution, forces: bool = False, indent: str = "  ") -> None:
     """The acceptance figures of the plain spline and of an optimized path (the summary's rows, marked
     where the optimized path is worse), so a benchmark run tracks what the time bought."""
     plain = path_metrics(model, solution.initial.times, solution.initial.values, keyframes)
     opt = path_metrics(model, solution.frames.times, solution.frames.values, keyframes)
-    rows = comparison_rows(plain, opt, dynamics_terms=bool({"torque", "root"} & set(weights)))
-    for line in format_rows(rows):
+    for line in format_rows(comparison_rows(plain, opt, dynamics_terms=forces)):
         print(indent + line)
-
-
-def bench_refine(args) -> int:
-    """`dynsplines bench refine`: print adaptive vs global subdivision at equal frame counts. Returns 0;
-    raises InputError for a malformed --counts or --scores."""
-    keyframes, info, model, layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
-    weights = parse_terms(args.terms)
-    try:
-        counts = [int(c) for c in args.counts.split(",") if c.strip()]
-    except ValueError:
-        raise InputError(f"--counts {args.counts!r}: expected a comma-separated list of integers, e.g. 14,21,28") from None
-    scores = [s.strip() for s in args.scores.split(",") if s.strip()]
-    print(f"bench refine: run-and-step, terms {', '.join(f'{n}={w:g}' for n, w in weights.items())}\n"
-          f"  renormalized on the plain spline, fixed weights (no penalty continuation); final objective E, "
-          f"evaluations, seconds")
-    rows = compare_refinement(model, keyframes, layout, weights, counts, scores, args.rate)
-    print(f"  objective on the plain spline: {rows[0]['global']['E_initial']:.6g}")
-    methods = [m for m in rows[0] if m != "count"]
-    print(f"  {'variable frames':>15}" + "".join(f"  {m:>26}" for m in methods))
-    for r in rows:
-        cells = []
-        for m in methods:
-            c = r[m]
-            ratio = "" if m == "global" else f" ({c['E'] / r['global']['E']:.3f}x)"
-            frames = "" if c["variable"] == r["count"] else f" [{c['variable']} frames]"
-            cells.append(f"{c['E']:.5g}{ratio}{frames} {c['evals']}/{c['wall_s']:.1f}s".rjust(26))
-        print(f"  {r['count']:>15}" + "".join(f"  {c}" for c in cells))
-    return 0
 
 
 # ----------------------------------------------------------------- docs/benchmarks.md tables
 #: the measured tables of docs/benchmarks.md, in the order they are made: name -> what it shows
 README_TABLES = {
     "terms-all": "run-and-step, plain spline vs `--terms all` (the least change with the force bounds)",
-    "run-and-step": "bench run-and-step --terms all: both objectives' evaluations and times",
-    "refine": "bench refine --terms all: adaptive vs global subdivision, final objective",
+    "run-and-step": "bench run-and-step: the least change with and without the force bounds, evaluations and times",
 }
-REFINE_COUNTS = (14, 21, 28, 35, 42)
 
 
 class _Runs:
     """The showcase clip's runs, made once and shared by the tables (the command's problem and options)."""
 
-    def __init__(self, rate: float):
+    def __init__(self):
         self.keyframes, info, self.model, self.layout, _ = load_problem(RUN_AND_STEP_KEYFRAMES, None)
-        self.rate = rate
         self._solved = {}
 
-    def solved(self, terms: str, method: str = "penalty") -> dict:
-        """The solve of `terms` by `method` ("penalty": the weighted terms; "least-change": as
-        `run-and-step --terms all` solves it)."""
-        if (terms, method) not in self._solved:
-            problem = file_problem(RUN_AND_STEP_KEYFRAMES, terms=terms, rate=self.rate)[0]
-            weights = dict(problem.weights)
-            r = time_solves(problem, solve_options(default_args(method), weights), 1)
+    def solved(self, terms: str) -> dict:
+        """The solve of `run-and-step --terms TERMS` ("default" or "all")."""
+        if terms not in self._solved:
+            problem = file_problem(RUN_AND_STEP_KEYFRAMES, terms=terms)[0]
+            r = time_solves(problem, solve_options(default_args()), 1)
             r["figures"] = path_figures(self.model, self.keyframes, r["solution"])
-            r["weights"] = weights
-            self._solved[terms, method] = r
-        return self._solved[terms, method]
+            self._solved[terms] = r
+        return self._solved[terms]
 
 
 def _kf_error(v: float) -> str:
@@ -281,7 +210,7 @@ def _kf_error(v: float) -> str:
 
 
 def _terms_all_block(runs: _Runs) -> Block:
-    r = runs.solved("all", "least-change")
+    r = runs.solved("all")
     f = r["figures"]
     p, o = f["plain"], f["optimized"]
     worse = {label: flag for label, _, _, _, flag in comparison_rows(p, o, dynamics_terms=True)}
@@ -326,36 +255,15 @@ def _terms_all_block(runs: _Runs) -> Block:
 
 def _run_and_step_block(runs: _Runs) -> Block:
     rows = []
-    common = runs.solved("all")["solution"].frames
-    for name, terms in (("geometric (no contact terms)", GEOMETRIC), ("all terms (with the file's contacts)", "all")):
-        r = runs.solved(terms)
-        f = r["figures"]
-        rows.append([name, timing(str(f["evals"])), str(f["frames"]), f"{f['E_final']:.5g}",
-                     timing(f"{f['wall_s']:.1f}"), timing(f"{per_eval_ms(r['objective'], common):.1f}")])
-    header = ["objective", "evaluations", "frames at the end", "final objective E",
-              "optimization [s]", f"value + gradient on one frame set ({common.count} frames) [ms]"]
+    for name, terms in (("the constraints (default)", "default"), ("and the force bounds (`--terms all`)", "all")):
+        f = runs.solved(terms)["figures"]
+        rows.append([name, timing(str(f["evals"])), str(f["frames"]), f"{f['E_final']:.3g}",
+                     timing(f"{f['wall_s']:.1f}")])
+    header = ["the least change with", "evaluations", "frames at the end", "change E at the end", "optimization [s]"]
     return Block("run-and-step", table(header, rows))
 
 
-def _refine_block(runs: _Runs) -> Block:
-    weights = parse_terms("all")
-    out = compare_refinement(runs.model, runs.keyframes, runs.layout, weights, REFINE_COUNTS,
-                             ("gradient", "decrease"), 400.0)
-    methods = ["global", "adaptive-gradient", "adaptive-decrease"]
-    rows = []
-    for r in out:
-        cells = [str(r["count"])]
-        for m in methods:
-            c = r[m]
-            frames = "" if c["variable"] == r["count"] else f" ({c['variable']} frames)"
-            cells.append(f"{c['E']:.3f}{frames}")
-        rows.append(cells)
-    header = [f"variable frames (plain spline: {out[0]['global']['E_initial']:.3g})", "global",
-              'adaptive, score "gradient"', 'adaptive, score "decrease" (default)']
-    return Block("refine", table(header, rows))
-
-
-_MAKERS = {"terms-all": _terms_all_block, "run-and-step": _run_and_step_block, "refine": _refine_block}
+_MAKERS = {"terms-all": _terms_all_block, "run-and-step": _run_and_step_block}
 
 
 def bench_readme(args) -> int:
@@ -377,7 +285,7 @@ def bench_readme(args) -> int:
     path = Path(args.file)
     if not path.is_file():
         raise InputError(f"--file {path}: no such file")
-    runs = _Runs(DEFAULT_RATE)
+    runs = _Runs()
     blocks = []
     for n in names:
         print(f"bench docs: {n}: {README_TABLES[n]} ...", flush=True)
@@ -401,7 +309,7 @@ def bench_scaling(args) -> int:
 
     if args.repeat < 1:
         raise InputError(f"--repeat must be at least 1, got {args.repeat}")
-    argv = ["--factors", args.factors, "--per-segment", str(args.per_segment), "--rate", str(args.rate),
-            "--repeat", str(args.repeat)]
+    argv = ["--factors", args.factors, "--repeat", str(args.repeat)]
+    argv += [] if args.rate is None else ["--rate", str(args.rate)]
     argv += ["--dense"] * args.dense + ["--per-eval"] * args.per_eval
     return scaling.main(argv)

@@ -1,9 +1,9 @@
-"""`dynsplines bench contacts`: what the contact terms cost and buy, clip by clip, in one run.
+"""`dynsplines bench contacts`: what the contact constraints cost and buy, clip by clip, in one run.
 
 For each input (a keyframe file with a contact schedule, or a BVH clip whose keyframes, contacts and
 fitted scene are made as `dynsplines mocap CLIP --every 0.25 --scene auto` makes them), the same
-keyframes are solved with the geometric terms only (`--terms penetration,unit,bending,smooth`) and with
-the default terms (which add planted and clearance where contacts are known), alternating, `--repeat`
+keyframes are solved as the least change without a contact schedule (no planted feet, no swing or
+flight clearance: "geometric") and with the input's schedule ("contacts"), alternating, `--repeat`
 times each, with the command's solve options. Printed per input: evaluations and optimization time of
 both (CPU time of the process, and wall, split into the time inside the objective and the optimizer's
 own work: nlopt's L-BFGS costs O(n k) per iteration for k stored pairs) and their ratio on CPU time
@@ -19,11 +19,11 @@ import tempfile
 from pathlib import Path
 
 from runner.animate_options import default_args, solve_options
-from runner.bench.figure import GEOMETRIC, per_eval_ms, time_solves
+from runner.bench.figure import time_solves
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem
 from solver.errors import InputError
 from solver.metrics import path_metrics
-from solver.problem import make_problem
+from solver.problem import ProblemSpec, build_problem
 
 #: (label, key in the motion metrics' "path" block, format)
 ROWS = (("float in contact [mm]", "float_contact_mm", "{:.2f}"), ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
@@ -32,17 +32,16 @@ ROWS = (("float in contact [mm]", "float_contact_mm", "{:.2f}"), ("skate in cont
 
 def register(bsub) -> None:
     """Add `bench contacts` to the `dynsplines bench` subparsers."""
-    c = bsub.add_parser("contacts", help="the contact terms' cost and effect, clip by clip",
+    c = bsub.add_parser("contacts", help="the contact constraints' cost and effect, clip by clip",
                         description=__doc__.split("\n\n")[1].replace("\n", " "))
     c.add_argument("inputs", nargs="*", type=Path,
                    help="keyframe files (.json, with 'contacts') or BVH clips [run-and-step's keyframe file]")
     c.add_argument("--repeat", type=int, default=1, help="solves per configuration; medians reported [1]")
     c.add_argument("--every", type=float, default=0.25, help="key spacing [s] for BVH clips [0.25]")
-    c.add_argument("--rate", type=float, default=400.0, help="quadrature points per second [400]")
     c.set_defaults(func=bench_contacts)
 
 
-def input_problem(path: Path, every: float, tmp: Path, rate: float):
+def input_problem(path: Path, every: float, tmp: Path):
     """(problem, source) of a keyframe file (as `dynsplines animate FILE` solves it) or a BVH clip (as
     `dynsplines mocap CLIP --every EVERY --scene auto` solves it, its files written under `tmp`)."""
     if path.suffix.lower() == ".bvh":
@@ -51,10 +50,10 @@ def input_problem(path: Path, every: float, tmp: Path, rate: float):
         out = tmp / path.stem
         out.mkdir(parents=True, exist_ok=True)
         paths = {"keyframes": out / f"{path.stem}.keyframes.json", "scene": out / f"{path.stem}.scene.xml"}
-        problem, source, _ = clip_problem(path, out, ClipOptions(every=every, rate=rate, quiet=True), paths,
+        problem, source, _ = clip_problem(path, out, ClipOptions(every=every, quiet=True), paths,
                                           say=lambda *a: None)
         return problem, source
-    return file_problem(path, rate=rate)
+    return file_problem(path)
 
 
 def bench_contacts(args) -> int:
@@ -63,21 +62,21 @@ def bench_contacts(args) -> int:
 
     inputs = args.inputs or [RUN_AND_STEP_KEYFRAMES]
     print(f"bench contacts: {len(inputs)} input(s), {args.repeat} solve(s) per configuration, the command's "
-          f"solve options; geometric = {GEOMETRIC}, contacts = the default terms with the input's schedule")
+          "solve options; geometric = the least change without a contact schedule, contacts = with the input's")
     ratios = []
     with tempfile.TemporaryDirectory(prefix="dynsplines-bench-") as tmp:
         for path in inputs:
-            base, source = input_problem(Path(path), args.every, Path(tmp), args.rate)
+            base, source = input_problem(Path(path), args.every, Path(tmp))
             model, keyframes, contacts, ref = base.model, base.keyframes, base.contacts, source.reference
             if not contacts:
                 raise InputError(f"{path}: no contact schedule ('contacts'); make the keyframes with "
                                  "`dynsplines mocap` or give a BVH clip")
-            configs = {"geometric": make_problem(model, keyframes, GEOMETRIC, contacts=contacts, rate=args.rate),
-                       "contacts": base}
+            bare = ProblemSpec(keyframes, (), base.forces, base.capture, base.airborne)
+            configs = {"geometric": build_problem(model, bare), "contacts": base}
             runs = {name: [] for name in configs}
             for _ in range(max(1, args.repeat)):  # alternate, so load on the machine hits both alike
                 for name, problem in configs.items():
-                    options = solve_options(default_args("penalty"), dict(problem.weights))
+                    options = solve_options(default_args())
                     runs[name].append(time_solves(problem, options, 1))
             fields = ("cpu_median_s", "evals", "wall_median_s", "objective_s", "optimizer_s")
             med = {n: {k: statistics.median(r[k] for r in rs) for k in fields} for n, rs in runs.items()}
@@ -88,14 +87,10 @@ def bench_contacts(args) -> int:
                 print(f"    {n:<10} {m['evals']:>6.0f} evaluations  {m['cpu_median_s']:7.2f} s CPU ({m['wall_median_s']:.2f} s "
                       f"wall: objective {m['objective_s']:.2f} s, optimizer {m['optimizer_s']:.2f} s)  "
                       f"({runs[n][-1]['frames']} frames)")
-            common = runs["contacts"][-1]["solution"].frames  # one frame set, so the objectives compare
-            per = {n: per_eval_ms(rs[-1]["objective"], common) for n, rs in runs.items()}
             ev_ratio = med["contacts"]["evals"] / med["geometric"]["evals"]
             obj_ratio = med["contacts"]["objective_s"] / max(med["geometric"]["objective_s"], 1e-12)
             print(f"    contacts / geometric: CPU time {ratio:.2f}x, evaluations {ev_ratio:.2f}x, objective time "
-                  f"{obj_ratio:.2f}x (the CPU ratio if the optimizer's own work were free); value + gradient on "
-                  f"one frame set ({common.count} frames): geometric {per['geometric']:.1f}, contacts "
-                  f"{per['contacts']:.1f} ms ({per['contacts'] / per['geometric']:.2f}x)")
+                  f"{obj_ratio:.2f}x (the CPU ratio if the optimizer's own work were free)")
             plain_fs = runs["geometric"][-1]["solution"].initial
             geo = [path_metrics(model, fs.times, fs.values, keyframes, dynamics=False) for fs in
                    (plain_fs, runs["geometric"][-1]["solution"].frames, runs["contacts"][-1]["solution"].frames)]

@@ -75,7 +75,7 @@ def run(args) -> int:
     clips = find_clips(args.clips or [CORPUS])
     base = ClipOptions(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale,
                        skeleton_map=args.skeleton_map, command=PROG,
-                       **clip_terms(args), rate=args.rate)
+                       **clip_terms(args))
     say = (lambda *a: None) if args.quiet else print
     r = run_corpus(clips, args.out, keyings(args.keys, args.every), base, workers=args.workers, engine=args.engine,
                    ray_address=args.ray_address, say=say, quiet=args.quiet)

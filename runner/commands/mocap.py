@@ -92,7 +92,7 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
     return ClipOptions(
         keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.figure,
         mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map,
-        **clip_terms(args), rate=args.rate,
+        **clip_terms(args),
         command=f"{prog} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == [name] else prog, **fields,
     )
 

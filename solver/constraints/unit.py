@@ -16,7 +16,7 @@ from solver.constraints.base import Constraint
 __all__ = ["UNIT_LIMIT", "UnitNorm"]
 
 #: [1] how far a quaternion's norm may leave 1 between the frames: 0.03, a 3 % change of speed within
-#: a segment once normalized (the penalty method's bound on the same figure, `solver.problem.default_limits`)
+#: a segment once normalized; within the summary's 5 % mark on |1 - |q||
 UNIT_LIMIT = 0.03
 
 

@@ -1,5 +1,6 @@
 """Objective terms: each returns its integrand and gradients at the quadrature points (`Term`), and the
-sums of squares their residuals (`Residual`); `solver.terms.registry` names them for the command line."""
+sums of squares their residuals (`Residual`): the objective of the orientation problem (paper sec. 3)
+and the measures `solver.metrics` reports."""
 from solver.terms.base import Residual, Term, TermEval
 from solver.terms.bending import Hyperextension
 from solver.terms.covariant import CovariantAcceleration, NormalizedCovariantAcceleration

@@ -42,7 +42,7 @@ UNIT = 0.0254 / 0.45  # metres per unit of the CMU BVH clips (models/cmu/README.
 pytestmark = [pytest.mark.slow, pytest.mark.client]
 
 # cheap paths: few evaluations (Blender's import is under test, not the optimizer)
-_SOLVE = ["--no-render", "--quiet", "--no-summary", "--max-evals", "10", "--rounds", "1", "--save-path", "path.npz"]
+_SOLVE = ["--no-render", "--quiet", "--no-summary", "--max-evals", "10", "--save-path", "path.npz"]
 CLIPS = {
     "run-and-step": ["run-and-step", *_SOLVE],
     "mocap": ["mocap", str(ROOT / "models" / "cmu" / "127_33.bvh"), "--every", "0.5", "--out-dir", "mocap", *_SOLVE],

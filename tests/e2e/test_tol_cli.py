@@ -4,7 +4,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT
@@ -74,34 +73,10 @@ def test_figure_tol(tmp_path, capsys):
     common = ["animate", clip, "--no-render", "--max-evals", "15", "--save-path", str(out)]
     assert main([*common, "--tol", "0.05"]) == 0
     printed = capsys.readouterr().out
-    assert "refinement estimate" in printed and "of E still available (tol 0.05)" in printed  # every round
+    assert "refinement estimate" in printed
     assert "tolerance met (refinement estimate" in printed or "tolerance NOT met" in printed
     solve_opts = json.loads(str(np.load(out)["options_json"]))["solve"]
     assert solve_opts["tol"] == 0.05
-    # a frame budget that runs out
-    assert main([*common, "--tol", "1e-9", "--max-frames", "3"]) == 0
-    printed = capsys.readouterr().out
-    assert "tolerance NOT met: frame budget of 3 variable frames reached at refinement estimate" in printed
-    # --rounds alone: fixed rounds, the estimate still reported
-    assert main([*common, "--rounds", "0"]) == 0
-    printed = capsys.readouterr().out
-    assert "fixed rounds, no tolerance" in printed
-    assert json.loads(str(np.load(out)["options_json"]))["solve"]["tol"] == 0.0
-
-
-def test_figure_tol_needs_adaptive_subdivision(tmp_path, capsys):
-    clip = small_clip(tmp_path)
-    code = main(["animate", clip, "--no-render", "--quiet", "--tol", "0.01", "--subdivision", "global"])
-    assert code == EXIT_INPUT
-    assert "--tol 0.01 refines adaptively; it does not go with --subdivision global" in capsys.readouterr().err
-
-
-def test_figure_rounds_and_tol_are_one_choice(tmp_path, capsys):
-    clip = small_clip(tmp_path)
-    code = main(["animate", clip, "--no-render", "--quiet", "--rounds", "1", "--tol", "0.01"])
-    assert code == EXIT_INPUT
-    err = capsys.readouterr().err
-    assert "--rounds 1 and --tol 0.01" in err and err.count("\n") == 1  # one line naming both options
 
 
 def test_orient_rounds_and_tol_are_one_choice(tmp_path, capsys):
@@ -115,38 +90,11 @@ def test_orient_rounds_and_tol_are_one_choice(tmp_path, capsys):
     assert not (tmp_path / "o.npz").exists()
 
 
-def test_solve_options_map_the_flags_to_the_refinement_mode():
+def test_solve_options_map_the_flags_to_the_least_change_options():
     from runner.animate_options import default_args, solve_options
-    from solver.animate import DEFAULT_TOL
+    from solver.least_change import LeastChangeOptions
 
-    args = default_args("penalty")
-    assert (solve_options(args, {}).refine, solve_options(args, {}).tol) == ("tol", DEFAULT_TOL)
-    args.rounds = 3
-    opts = solve_options(args, {})
-    assert (opts.refine, opts.rounds, opts.tol) == ("rounds", 3, 0.0)
-    args.rounds, args.tol = None, 1e-3
-    assert (solve_options(args, {}).refine, solve_options(args, {}).tol) == ("tol", 1e-3)
-
-
-def test_bench_orient_random(capsys):
-    assert main(["bench", "orient", "--random", "2"]) == 0
-    printed = capsys.readouterr().out
-    assert "acceptance seeds 1000-1001" in printed and "discrete solver" in printed
-    for label in ("default: 2 sets", "tol=1e-4: 2 sets"):
-        line = next(ln for ln in printed.splitlines() if label in ln)
-        for field in ("true gap", "estimated", "true/est", "frames", "time [ms]", "max|1-|q||"):
-            assert field in line, (field, line)
-
-
-def test_speed_random_rows():
-    """`bench orient --speed-random`: one row per generated set; with a tiny budget Barr-92 does not reach
-    the gap and the ratio is printed as a lower bound."""
-    from runner.bench.orient import SPEED_GAP, speed_random
-
-    lines = []
-    rows = speed_random(1, budget=0.2, repeat=1, out=lines.append)
-    (row,) = rows
-    assert row["seed"] == 1000 and row["tol"][2] <= SPEED_GAP and row["tol"][0] > 0
-    assert row["barr"][0] is None and row["r_tol"] == pytest.approx(0.2 / row["tol"][0])
-    text = "\n".join(lines)
-    assert "Barr-92 / orient(tol=1e-4): median" in text and "lower bounds" in text
+    args = default_args()
+    assert solve_options(args) == LeastChangeOptions()
+    args.tol, args.max_time, args.max_evals, args.rate = 1e-3, 30.0, 50, 300.0
+    assert solve_options(args) == LeastChangeOptions(tol=1e-3, max_time_s=30.0, max_evals=50, rate=300.0)

@@ -198,7 +198,7 @@ def test_command_line_exits_cleanly(data):
         stderr = io.StringIO()
         with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(io.StringIO()):
             code = main(["animate", str(p), "--scene", str(SCENE), "--no-render", "--quiet", "--max-evals", "2",
-                         "--rounds", "0", "--subdivision", "none", "--save-path", os.path.join(d, "out.npz")])
+                         "--save-path", os.path.join(d, "out.npz")])
         err = stderr.getvalue()
         assert "Traceback" not in err and "internal error" not in err, err
         assert code in (EXIT_OK, EXIT_INPUT, EXIT_FAILED), (code, err)
@@ -237,7 +237,7 @@ def test_two_keyframes_with_only_partial_freedom(tmp_path):
         {"time": 1.0, "joints": {"l_hip": [None, 0, 0, 0]}}]}))
     out = tmp_path / "out.npz"
     with contextlib.redirect_stdout(io.StringIO()):
-        code = main(["animate", str(p), "--no-render", "--quiet", "--subdivision", "none", "--save-path", str(out)])
+        code = main(["animate", str(p), "--no-render", "--quiet", "--save-path", str(out)])
     assert code == EXIT_OK
     z = np.load(out)
     assert str(z["status"]) == "converged" and keyframe_error(z) <= 1e-9

@@ -1,5 +1,5 @@
 """What `animate` / `run-and-step` write and say: --export, --quiet (progress only), the default video,
-progress lines off a terminal. The optimization is cut short (--rounds 0 --max-evals 3) and the renderer
+progress lines off a terminal. The optimization is cut short (--max-evals 3) and the renderer
 is replaced where a video would be made, to keep these fast."""
 import re
 
@@ -10,7 +10,7 @@ from runner.exit_codes import EXIT_INPUT
 from runner.mocap.bvh import read_bvh
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES
 
-FAST = ["--rounds", "0", "--max-evals", "3", "--subdivision", "none"]
+FAST = ["--max-evals", "3"]
 
 
 def animate(capsys, *argv):
@@ -39,11 +39,11 @@ def test_bad_export_name_fails_before_optimizing(tmp_path, capsys, name, fragmen
 def test_quiet_silences_progress_but_not_results(tmp_path, capsys):
     code, out, err = animate(capsys, "--no-render", "--quiet", "--save-path", tmp_path / "p.npz")
     assert code == 0, err
-    assert "plain spline" in out and "objective E" in out  # the summary table
+    assert "plain spline" in out and "change E" in out  # the summary table
     assert "wrote" in out and "p.npz" in out and "stopped:" in out
     assert "round 1" not in out and "importing" not in out  # progress
     code, out, _ = animate(capsys, "--no-render", "--no-summary")
-    assert "objective E" not in out and re.search(r"round 1: \d+ frames \(\d+ variable\): started", out)
+    assert "change E" not in out and re.search(r"round 1: \d+ frames \(\d+ variable\): started", out)
 
 
 def test_animate_without_out_renders_to_the_default_path(tmp_path, capsys, monkeypatch):

@@ -13,7 +13,7 @@ from solver.errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
 CLIP = REPO / "models" / "cmu" / "127_33.bvh"
-FAST = ["--every", "0.25", "--rounds", "0", "--max-evals", "30", "--quiet"]
+FAST = ["--every", "0.25", "--max-evals", "30", "--quiet"]
 #: per-clip figures that must not depend on the worker count
 RESULTS = ("status", "keyframes", "variable_frames", "solver_status", "max_penetration_mm", "plain_float_contact_mm",
            "optimized_float_contact_mm", "plain_skate_mm", "optimized_skate_mm")

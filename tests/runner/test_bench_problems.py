@@ -1,6 +1,6 @@
-"""A benchmark that names a workload solves exactly the problem the command solves: the same terms
-(the keyframe file's contacts included), weights, limits and quadrature."""
-import pytest
+"""A benchmark that names a workload solves exactly the problem the command solves: the same keyframes,
+contacts (the keyframe file's), flights, capture, constraint set and options."""
+import numpy as np
 
 import runner.commands.animate as animate_cmd
 from runner.cli import main
@@ -23,19 +23,19 @@ def command_problem(monkeypatch, *argv):
     return seen["problem"], seen["options"]
 
 
-@pytest.mark.parametrize("terms", ["all", "penetration,unit,planted"])
-def test_bench_run_and_step_solves_the_commands_problem(monkeypatch, terms):
-    """Each configuration `bench run-and-step --terms TERMS` times ("geometric" and TERMS) is what
-    `run-and-step --terms <its terms>` solves."""
-    from runner.bench.figure import GEOMETRIC
+def test_bench_run_and_step_solves_the_commands_problem(monkeypatch):
+    """Each configuration `bench run-and-step` times ("default", "all") is what `run-and-step --terms
+    <it>` solves, with the same options."""
+    from runner.animate_options import default_args, solve_options
 
-    benched = run_and_step_problems(terms, 400.0)
-    assert set(benched) == {"geometric", terms}
-    for name, spec in (("geometric", GEOMETRIC), (terms, terms)):
-        problem, _ = command_problem(monkeypatch, "run-and-step", "--terms", spec)
+    benched = run_and_step_problems()
+    assert set(benched) == {"default", "all"}
+    for name in ("default", "all"):
+        problem, options = command_problem(monkeypatch, "run-and-step", "--terms", name)
         mine = benched[name]
-        assert mine.terms == problem.terms
-        assert dict(mine.weights) == dict(problem.weights) and mine.limits == problem.limits
-        assert mine.rate == problem.rate and mine.contacts == problem.contacts and len(problem.contacts) > 0
-    # with the file's contacts: the contact terms and the friction cone are on with "all"
-    assert {"planted", "clearance", "cone", "torque", "root"} <= set(benched[terms].terms) or terms != "all"
+        assert mine.forces == problem.forces == (name == "all") and mine.terms == problem.terms == name
+        assert mine.contacts == problem.contacts and len(problem.contacts) > 0
+        assert mine.airborne == problem.airborne
+        np.testing.assert_array_equal(mine.keyframes.values, problem.keyframes.values)
+        np.testing.assert_array_equal(mine.capture[1], problem.capture[1])
+        assert options == solve_options(default_args())

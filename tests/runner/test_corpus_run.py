@@ -13,7 +13,7 @@ from solver.contacts import SITES
 
 REPO = Path(__file__).resolve().parents[2]
 CLIP = REPO / "models" / "cmu" / "35_17.bvh"
-FAST = ["--rounds", "0", "--max-evals", "30", "--quiet"]
+FAST = ["--max-evals", "30", "--quiet"]
 
 
 def cut(dst: Path, frames: int) -> Path:
@@ -94,13 +94,12 @@ def test_the_command_hands_its_options_to_the_corpus(tmp_path, monkeypatch):
     monkeypatch.setattr(runner.corpus, "run_corpus", record)
     scene = REPO / "models" / "floor.xml"
     assert main(["bench", "corpus", str(CLIP), "--every", "0.2,0.33", "--keys", "every,contacts", "--workers", "2",
-                 "--out", str(tmp_path), "--scene", str(scene), "--terms", "penetration,unit,bending,smooth",
+                 "--out", str(tmp_path), "--scene", str(scene), "--terms", "all",
                  "--max-evals", "7", "--rate", "200", "--figure", "default", "--mass", "60", "--root-scale", "1",
                  "--quiet"]) == EXIT_OK
     assert seen["clips"] == [CLIP] and seen["out"] == tmp_path and seen["workers"] == 2 and seen["engine"] == "local"
     assert [k.label for k in seen["keyings"]] == ["every 0.2", "every 0.33", "contacts"]
     base = seen["base"]
-    assert (base.scene, base.terms, base.solve.max_evals, base.rate) == (str(scene), "penetration,unit,bending,smooth",
-                                                                        7, 200.0)
+    assert (base.scene, base.forces, base.solve.max_evals, base.solve.rate) == (str(scene), True, 7, 200.0)
     assert (base.figure, base.mass, base.root_scale) == ("default", 60.0, 1.0)
     assert seen["quiet"] is True

@@ -92,7 +92,7 @@ def test_missing_markers_are_named(tmp_path):
 
 def test_benchmarks_doc_has_the_generated_tables():
     blocks = read_blocks(REPO / "docs" / "benchmarks.md")
-    assert set(blocks) >= {"terms-all", "run-and-step", "refine"}
+    assert set(blocks) >= {"terms-all", "run-and-step"}
     assert all(body.strip() for body in blocks.values())  # regenerated, not empty
     assert read_blocks(REPO / "README.md") == {}  # the README is a manual: no measured tables
 
@@ -130,8 +130,7 @@ def test_readme_and_docs_hold_no_session_logs():
 def test_benchmark_tables_match_the_current_code(capsys):
     """Runs the run-and-step and --terms all workloads (under a minute): fails when those tables of
     docs/benchmarks.md no longer match the code within the stated tolerances; fix with `dynsplines
-    bench docs`. The refine table (tens of solves, many minutes on 2 cores) is checked by `dynsplines
-    bench docs --check --only refine`, not here."""
+    bench docs`."""
     code = main(["bench", "docs", "--check", "--only", "run-and-step,terms-all"])
     out = capsys.readouterr().out
     assert code == 0, out
@@ -140,7 +139,7 @@ def test_benchmark_tables_match_the_current_code(capsys):
 def test_bench_docs_refuses_bad_options_before_running_anything(capsys):
     """`bench docs` (alias `bench readme`): an unknown table or --exact without --check is exit 2."""
     assert main(["bench", "readme", "--check", "--only", "xyz"]) == 2
-    assert "unknown table(s) xyz; the tables are terms-all, run-and-step, refine" in capsys.readouterr().err
+    assert "unknown table(s) xyz; the tables are terms-all, run-and-step" in capsys.readouterr().err
     assert main(["bench", "docs", "--exact", "--only", "terms-all"]) == 2
     assert "--exact compares; it goes with --check" in capsys.readouterr().err
     assert main(["bench", "docs", "--help"]) == 0

@@ -74,8 +74,7 @@ def test_saved_keyframes_are_the_poses_the_path_meets(tmp_path):
     kf = tmp_path / "flipped.keyframes.json"
     kf.write_text(json.dumps(doc))
     out = tmp_path / "p.npz"
-    assert main(["animate", str(kf), "--no-render", "--quiet", "--no-summary", "--subdivision", "none",
-                 "--max-evals", "3", "--save-path", str(out)]) == 0
+    assert main(["animate", str(kf), "--no-render", "--quiet", "--no-summary", "--max-evals", "3", "--save-path", str(out)]) == 0
     z = np.load(out)
     path = make_interp_spline(z["frame_times"], z["frames"], k=3, bc_type="natural")(z["keyframe_times"])
     fixed = z["keyframe_mask"]

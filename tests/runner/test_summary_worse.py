@@ -1,6 +1,6 @@
-"""The summary says where the optimized path is worse than the plain spline, which rows the chosen terms
-target, prints no "nan" and no negative zero, and has the figures that come with the dynamics terms:
-pelvis acceleration peak and root force on the ground."""
+"""The summary says where the optimized path is worse than the plain spline, which rows the constraints
+bound, prints no "nan" and no negative zero, and has the figures that come with the force bounds: the
+root force on the ground."""
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -39,11 +39,16 @@ def metrics(**over):
     return {**m, **over}
 
 
-def solution():
-    names = ("penetration", "unit", "bending", "planted", "clearance")
-    return SimpleNamespace(E_initial=11.05, E_final=0.06,
-                           integrals_initial={"smooth": 3613.0, "torque": 1.0, "root": 1.0} | dict.fromkeys(names, 1.0),
-                           integrals_final={"smooth": 4150.0, "torque": 0.5, "root": 0.1} | dict.fromkeys(names, 0.0),
+#: the constraints of the least change (`solver.constraint_set`; with --terms all also FORCE_CONSTRAINTS)
+CONSTRAINTS = ("penetration", "planted", "slide", "flight", "ground", "hinge", "hyperextension", "rom", "unit",
+               "acceleration")
+FORCE_CONSTRAINTS = ("flight wrench", "ground force")
+
+
+def solution(names=CONSTRAINTS):
+    """A least-change Solution's fields the summary reads: each constraint's worst value / tolerance."""
+    return SimpleNamespace(E_initial=0.0, E_final=0.4,
+                           integrals_initial=dict.fromkeys(names, 3.0), integrals_final=dict.fromkeys(names, 0.5),
                            initial=SimpleNamespace(count=8),
                            frames=SimpleNamespace(n_variable=22), rounds=[1, 2], n_evals=450, wall_time_s=8.9)
 
@@ -60,13 +65,13 @@ def test_rows_where_the_optimized_path_is_worse_are_marked_with_a_legend():
                   rms_root_force_flight_N=842.2, peak_root_force_flight_N=1715.1,
                   rms_root_torque_flight_Nm=120.1, peak_root_torque_flight_Nm=71.9,
                   max_hyperextension_deg=1.5)
-    text = summary_table(plain, opt, solution(), {"smooth": 0.05})
+    text = summary_table(plain, opt, solution())
     assert marked(text) == {"RMS joint torque [N m]", "flight (all feet clear) [s]", "RMS root force in flight [N]",
                             "peak root force in flight [N]", "RMS root torque in flight [N m]",
                             "max hyperextension [deg]"}
     assert LEGEND in text.splitlines()
-    # an objective integral that grows by design is not an acceptance figure
-    assert not any(line.endswith(WORSE) for line in text.splitlines() if "integral" in line)
+    # a constraint's worst value over its tolerance is not an acceptance figure
+    assert not any(line.endswith(WORSE) for line in text.splitlines() if "worst / tolerance" in line)
 
 
 def test_flight_is_worse_when_it_changes_either_way():
@@ -75,13 +80,16 @@ def test_flight_is_worse_when_it_changes_either_way():
         assert rows["flight (all feet clear) [s]"] is worse, flight
 
 
-def test_dynamics_terms_add_pelvis_acceleration_and_root_force_on_the_ground():
+def test_the_force_bounds_add_the_ground_rows_with_their_bound():
+    from solver.peak_bounds import PeakBounds
+
     plain, opt = metrics(), metrics(peak_pelvis_acceleration_ms2=45.0, peak_root_force_ground_bw=4.2)
-    geometric = summary_table(plain, opt, solution(), {"smooth": 0.05})
-    assert "pelvis" not in geometric and "on ground" not in geometric
-    text = summary_table(plain, opt, solution(), {"smooth": 0.05, "torque": 1.0, "root": 1.0})
-    assert {"peak pelvis acceleration [m/s^2]", "peak root force on ground [body wt]"} <= marked(text)
-    assert "RMS root force on ground [body wt]" in text
+    default = summary_table(plain, opt, solution())
+    assert "peak pelvis acceleration [m/s^2]" in marked(default) and "on ground" not in default  # no jolts: always
+    bounds = PeakBounds(3.0, 30.0, 2.5, 20.0)
+    text = summary_table(plain, opt, solution(CONSTRAINTS + FORCE_CONSTRAINTS), force_bounds=bounds)
+    assert "RMS root force on ground [body wt]" in text and bounds.describe() in text.splitlines()
+    assert _row(text, "peak root force on ground [body wt] <= 3.00").endswith("over bound")
 
 
 @pytest.fixture(scope="module")
@@ -101,7 +109,6 @@ def test_standing_still_the_ground_carries_one_body_weight_and_the_pelvis_does_n
     assert m["peak_root_force_ground_bw"] == pytest.approx(1.0, rel=1e-9)
 
 
-DEFAULT_TERMS = {"penetration": 100.0, "unit": 1.0, "bending": 1.0, "smooth": 0.05, "planted": 10.0, "clearance": 10.0}
 
 
 def _row(text, label):
@@ -121,30 +128,30 @@ def _target(text, label):
 def test_a_motion_without_flight_prints_a_dash_not_nan():
     no_flight = dict(flight_s=0.0, rms_root_force_flight_N=float("nan"), peak_root_force_flight_N=float("nan"),
                      rms_root_torque_flight_Nm=float("nan"), peak_root_torque_flight_Nm=float("nan"))
-    text = summary_table(metrics(**no_flight), metrics(**no_flight), solution(), {"smooth": 0.05})
+    text = summary_table(metrics(**no_flight), metrics(**no_flight), solution())
     assert "nan" not in text.lower()
     assert _row(text, "RMS root force in flight [N]").split()[-2:] == ["-", "-"]
     assert MISSING_LEGEND in text.splitlines()
-    assert MISSING_LEGEND not in summary_table(metrics(), metrics(), solution(), {"smooth": 0.05})
+    assert MISSING_LEGEND not in summary_table(metrics(), metrics(), solution())
 
 
 def test_no_negative_zero_anywhere():
     plain = metrics(max_hyperextension_deg=-0.0, keyframe_error=-0.0)
     opt = metrics(max_hyperextension_deg=-1e-9, rms_root_torque_flight_Nm=-0.004)
-    text = summary_table(plain, opt, solution(), {"smooth": 0.05})
+    text = summary_table(plain, opt, solution())
     assert "-0.0" not in text and "-0.00" not in text, text
-    assert _row(text, "max hyperextension [deg]").split()[-2:] == ["0.00", "0.00"]
+    assert _row(text, "max hyperextension [deg]").split()[-3:-1] == ["0.00", "0.00"]  # then the target
     assert cell("{:.1e}", -0.0) == "0.0e+00" and cell("{:.2f}", -0.004) == "0.00"
     assert cell("{:.2f}", -0.006) == "-0.01" and cell("{:.1f}", None) == "-" and cell("{:.1f}", float("inf")) == "-"
 
 
-def test_the_summary_says_which_rows_the_chosen_terms_target():
-    """With the default terms the dynamics rows that come out worse are rows no chosen term targets."""
+def test_the_summary_says_which_rows_the_constraints_bound():
+    """Without the force bounds the dynamics rows that come out worse are rows no constraint bounds."""
     plain = metrics()
     opt = metrics(max_penetration_mm=0.0, penetration_mm_by_site={"l_toe": 0.0, "r_toe": 0.0},
                   rms_joint_torque_Nm=195.6, peak_joint_torque_Nm=553.1, rms_root_force_flight_N=2197.9,
                   peak_root_force_flight_N=3840.1, rms_root_torque_flight_Nm=282.3, peak_root_torque_flight_Nm=667.1)
-    text = summary_table(plain, opt, solution(), DEFAULT_TERMS)
+    text = summary_table(plain, opt, solution())
     assert TARGET_LEGEND in text.splitlines()
     for label in ("RMS joint torque [N m]", "peak joint torque [N m]", "RMS root force in flight [N]",
                   "peak root force in flight [N]", "RMS root torque in flight [N m]",
@@ -154,14 +161,14 @@ def test_the_summary_says_which_rows_the_chosen_terms_target():
     assert _target(text, "max penetration [mm] (1000 Hz)") == "penetration"
     assert _target(text, "  l_toe [mm]") == "penetration"
     assert _target(text, "max |1 - |q||") == "unit"
-    assert _target(text, "max hyperextension [deg]") == "bending"
-    assert _target(text, "  integral smooth") == "smooth"
-    assert _target(text, "flight (all feet clear) [s]") == "clearance"  # its flight band keeps feet clear
-    assert _target(text, "keyframe error (fixed comps)") == ""  # met exactly: no term
-    with_dynamics = summary_table(plain, opt, solution(), {**DEFAULT_TERMS, "torque": 1.0, "root": 1.0})
-    assert _target(with_dynamics, "RMS joint torque [N m]") == "torque"
-    assert _target(with_dynamics, "peak root torque in flight [N m]") == "root"
-    assert _target(with_dynamics, "peak pelvis acceleration [m/s^2]") == ""
+    assert _target(text, "max hyperextension [deg]") == "hyperextension"
+    assert _target(text, "  penetration: worst / tolerance") == "penetration"
+    assert _target(text, "flight (all feet clear) [s]") == "flight,ground"
+    assert _target(text, "peak pelvis acceleration [m/s^2]") == "acceleration"
+    assert _target(text, "keyframe error (fixed comps)") == ""  # met exactly: no constraint
+    with_forces = summary_table(plain, opt, solution(CONSTRAINTS + FORCE_CONSTRAINTS))
+    assert _target(with_forces, "peak root torque in flight [N m]") == "flight wrench"
+    assert _target(with_forces, "RMS joint torque [N m]") == ""
 
 
 def _motion(path_over=None):
@@ -236,7 +243,7 @@ def _motion_pair():
 def test_the_feet_rows_of_the_summary_are_marked_with_their_legend():
     from runner.run import contact_summary_rows
 
-    rows = contact_summary_rows(_motion_pair(), SimpleNamespace(names=()), None)
+    rows = contact_summary_rows(_motion_pair())
     worse = {r[0].split(" (capture")[0]: r[4] for r in rows}
     assert worse == {"float in contact [mm]": False, "float in capture stance [mm]": True,
                      "flight in capture stance [s]": True, "skate in contact [mm/frame]": False,
@@ -244,10 +251,11 @@ def test_the_feet_rows_of_the_summary_are_marked_with_their_legend():
                      "flight time [s]": True, "flight phase error vs capture [s]": True,
                      "knee rotation off the hinge [deg]": False, "elbow rotation off the hinge [deg]": False,
                      "beyond range of motion [deg]": False}
-    text = summary_table(metrics(), metrics(), solution(), DEFAULT_TERMS, contact_rows=rows)
+    text = summary_table(metrics(), metrics(), solution(), contact_rows=rows)
     assert {"flight time [s] (capture 0.450)", "flight phase error vs capture [s]"} <= marked(text)
     assert "feet rows: " + MOTION_LEGEND in text.splitlines()
-    assert _target(text, "flight time [s] (capture 0.450)") == "clearance"
+    assert _target(text, "flight time [s] (capture 0.450)") == "flight,ground"
+    assert _target(text, "skate in contact [mm/frame] (capture 1.81)") == "slide"
     assert _target(text, "float in contact [mm] (capture 2.40)") == "planted"
 
 
@@ -279,30 +287,29 @@ def test_the_motion_metrics_table_has_a_worse_column():
     assert not any(line.endswith(f"  {WORSE}") for line in same.splitlines())
 
 
-def test_every_term_targets_rows_the_summary_prints():
-    """The target column is complete: every registered term but smooth, near and near_sites (whose rows
-    are their own integrals; near's and near_sites' are the departure from the plain spline) names the rows it penalizes,
-    and each of those rows is printed with that term as its target."""
+def test_every_constraint_bounds_rows_the_summary_prints():
+    """The target column is complete: every constraint the least change builds on run-and-step with the
+    force bounds names the rows it bounds, and each of those rows is printed with it as its target."""
+    import solver
     from runner.console import TERM_ROWS
     from runner.run import contact_summary_rows
-    from solver.terms.registry import registered_terms
+    from solver.least_change import build_least_change
 
-    names = [t.name for t in registered_terms()]
-    assert set(names) - {"smooth", "near", "near_sites"} <= set(TERM_ROWS), "a term without summary rows: add it to TERM_ROWS"
-    weights = dict.fromkeys(names, 1.0)
-    sol = solution()
-    sol.integrals_initial.update(dict.fromkeys(names, 1.0))
-    sol.integrals_final.update(dict.fromkeys(names, 0.5))
-    cone = [("RMS friction-cone residual [N]", 1.0, 1.0, "{:.1f}", False),
-            ("peak friction-cone residual [N]", 2.0, 2.0, "{:.1f}", False)]
-    rows = contact_summary_rows(_motion_pair(), SimpleNamespace(names=()), None) + cone
-    text = summary_table(metrics(), metrics(), sol, weights, contact_rows=rows)
+    model = solver.load_model(solver.shipped("run_and_step.xml"))
+    kf, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
+    lc = build_least_change(model, kf, contacts=tuple(info.contacts), forces=True)
+    names = {c.name for c in lc.al.constraints}
+    assert names <= set(TERM_ROWS), f"a constraint without summary rows: add it to TERM_ROWS: {names - set(TERM_ROWS)}"
+    from solver.peak_bounds import PeakBounds
+
+    text = summary_table(metrics(), metrics(), solution(tuple(TERM_ROWS)), contact_rows=contact_summary_rows(_motion_pair()),
+                         force_bounds=PeakBounds(3.0, 30.0, 2.5, 20.0))
     labels = [line.split("  ")[0] for line in text.splitlines()]
-    for term, prefixes in TERM_ROWS.items():
+    for name, prefixes in TERM_ROWS.items():
         for prefix in prefixes:
             label = next((lab for lab in labels if lab.strip().startswith(prefix)), None)
-            assert label is not None, (term, prefix)
-            assert term in _target(text, label).split(","), (term, label)
+            assert label is not None, (name, prefix)
+            assert name in _target(text, label).split(","), (name, label)
 
 
 def test_a_lost_turn_marks_the_joint_angle_row_and_a_root_that_strays_marks_the_root_row():

@@ -188,28 +188,6 @@ def test_schedule_checks_surfaces_when_a_scene_is_given_naming_its_source():
                                                                                                           "step")
 
 
-def test_schedule_conflicts_merge_as_a_value():
-    """Findings concatenate, excusals unite, lowered bands and lift ceilings keep the lower; the
-    mappings are read-only, and an empty value excuses nothing."""
-    from solver.schedule_conflicts import ScheduleConflicts
-
-    a = ScheduleConflicts([("planted", 1, "l_toe", 0.03)], planted={Contact("l_toe", 0, 1)},
-                          lowered={("r_toe", 0.3, 0.7): 0.012}, lifts={(0.3, 0.4): 0.03})
-    b = ScheduleConflicts([("clearance", 2, "r_toe", 0.01)], swings={("r_toe", 0.3, 0.7)},
-                          lowered={("r_toe", 0.3, 0.7): 0.008}, lifts={(0.3, 0.4): 0.031, (0.8, 0.9): 0.02})
-    m = a.merged(b)
-    assert m.found == (("planted", 1, "l_toe", 0.03), ("clearance", 2, "r_toe", 0.01))
-    assert m.planted == {Contact("l_toe", 0, 1)} and m.swings == {("r_toe", 0.3, 0.7)}
-    assert dict(m.lowered) == {("r_toe", 0.3, 0.7): 0.008}
-    assert dict(m.lifts) == {(0.3, 0.4): 0.03, (0.8, 0.9): 0.02}
-    with pytest.raises(TypeError):
-        m.lowered[("r_toe", 0.3, 0.7)] = 0.0  # read-only
-    assert dict(a.lowered) == {("r_toe", 0.3, 0.7): 0.012}  # the parts are unchanged
-    assert m.excuses and not ScheduleConflicts().excuses
-    assert not ScheduleConflicts([("planted", 0, "l_toe", 0.02)]).excuses  # a finding alone excuses nothing
-    assert m.with_found(()).found == () and m.with_found(()).swings == m.swings
-
-
 def test_a_one_frame_contact_spans_half_a_frame_either_side():
     z = np.full(30, 0.2)
     z[10] = 0.0  # one frame on the ground (height alone decides)

@@ -3,12 +3,10 @@ passes against MuJoCo's `mjd_inverseFD` and against central differences of tau a
 shared tau Jacobian for the torque, root and friction-cone residuals."""
 import numpy as np
 
-from solver.contacts import Contact
 from solver.id_jacobian import analytic_tau_jacobian, mujoco_tau_jacobian, tau_jacobian
 from solver.inverse_dynamics import InverseDynamics
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.path_context import PathContext
-from solver.terms.contact_wrench import FrictionCone
 from solver.terms.dynamics import JointTorque, RootResidual, make_engine
 
 from conftest import random_qpos
@@ -68,13 +66,11 @@ def test_tau_jacobian_matches_central_differences_along_the_path(toy_model):
 
 
 def test_the_dynamics_terms_share_one_tau_jacobian(toy_model, monkeypatch):
-    """Torque, root and cone residuals on one context cost nv reverse passes in all (the tau rows are
-    computed once and shared), not nv + 6 + 4; and their blocks are the Jacobian their own
+    """Torque and root residuals on one context cost nv reverse passes in all (the tau rows are
+    computed once and shared), not nv + 6; and their blocks are the Jacobian their own
     vector-Jacobian products give (`pull`), row by row."""
     engine = make_engine(toy_model, CONTACT_SITES)
-    terms = [JointTorque(toy_model, engine=engine), RootResidual(toy_model, engine=engine),
-             FrictionCone(toy_model, [Contact("l_heel", 0.0, 0.7), Contact("r_toe", 0.2, 1.0)], mu=0.3,
-                          engine=engine)]
+    terms = [JointTorque(toy_model, engine=engine), RootResidual(toy_model, engine=engine)]
     t, Y, Y1, Y2 = _path(toy_model, seed=11, height=0.93)
     ctx = PathContext(t, Y, Y1, Y2)
     calls = []

@@ -50,7 +50,7 @@ def test_round_trip(tmp_path, layout):
     out = tmp_path / "sub" / "clip.keyframes.json"
     source = {"clip": "cmu/x.bvh", "command": "python -c 'x' --out y", "hand_edits": "none"}
     write_keyframes(out, kf, layout, model=MODELS / "humanoid39.xml", scene=MODELS / "run_and_step.xml",
-                    source=source, terms={"penetration": 2.0, "bending": 0.5})
+                    source=source, terms="all")
     assert sorted(p.name for p in out.parent.iterdir()) == ["clip.keyframes.json"]  # no temporary left
     back, info = read_keyframes(out, layout)
     assert back.times == pytest.approx(kf.times)
@@ -60,7 +60,7 @@ def test_round_trip(tmp_path, layout):
     assert back.source == str(out)
     assert info.model == (MODELS / "humanoid39.xml").resolve()
     assert info.scene == (MODELS / "run_and_step.xml").resolve()
-    assert info.source == source and info.terms == {"penetration": 2.0, "bending": 0.5}
+    assert info.source == source and info.terms == "all"
     doc = json.loads(out.read_text())
     assert doc["format"] == FORMAT
     assert not Path(doc["model"]).is_absolute()  # relative to the keyframe file
@@ -85,7 +85,7 @@ def test_reads_hand_written_file(tmp_path, layout):
     assert kf.count == 2 and kf.is_partial.all()
     assert kf.mask[1].sum() == 2 and kf.values[1, 0] == 1.0
     assert info.model == (tmp_path / "humanoid39.xml").resolve() and info.scene is None
-    assert info.source == {} and info.terms == {}
+    assert info.source == {} and info.terms is None
 
 
 @pytest.mark.parametrize("umask", [0o022, 0o077])
@@ -273,9 +273,9 @@ def test_a_file_without_format_is_refused_naming_the_field_and_the_value_to_writ
 
 def test_an_unknown_surface_names_the_file_and_the_contacts_index(tmp_path):
     """With the scene given to the reader, at once; with only the figure's layout, when the contact
-    terms check the schedule against their scene: either way one line naming the file and the entry."""
+    problem is built on its scene: either way one line naming the file and the entry."""
     from runner.paths import MODELS
-    from solver.terms.contact import Planted
+    from solver.problem import ProblemSpec, build_problem
 
     scene = mujoco.MjModel.from_xml_path(str(MODELS / "run_and_step.xml"))
     contacts = [{"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"},
@@ -285,9 +285,9 @@ def test_an_unknown_surface_names_the_file_and_the_contacts_index(tmp_path):
         read_keyframes(p, scene)
     assert str(e.value).startswith(f"{p}: contacts[1]: 'surface' is 'stpe', which the scene does not have; its "
                                    "surfaces are floor, step")
-    _, info = read_keyframes(p, StateLayout.from_model(scene))  # no scene: read, checked later
+    kf, info = read_keyframes(p, StateLayout.from_model(scene))  # no scene: read, checked later
     with pytest.raises(InputError, match=rf"^{p}: contacts\[1\]: 'surface' is 'stpe', which the scene"):
-        Planted(scene, info.contacts)
+        build_problem(scene, ProblemSpec(kf, info.contacts))
 
 
 def test_every_shipped_keyframe_file_loads(layout):

@@ -157,7 +157,7 @@ def test_standing_still_is_left_alone():
                     mask=np.ones((3, model.nq), bool))
     lc = build_least_change(model, still, rate=200.0)
     sol = solve_least_change(lc, LeastChangeOptions())
-    assert sol.E_final == pytest.approx(0.0, abs=1e-12) and not sol.stalled
+    assert sol.E_final == pytest.approx(0.0, abs=1e-12) and not sol.unmet
     np.testing.assert_allclose(sol.frames.path(np.linspace(0, 0.8, 9)), np.tile(q, (9, 1)), atol=1e-9)
 
 
@@ -175,6 +175,6 @@ def test_shipped_clip_meets_keyframes_and_constraints(shipped):
     at = np.flatnonzero(sol.frames.is_keyframe)
     fixed = keyframes.mask
     assert np.abs(sol.frames.values[at][fixed] - keyframes.values[fixed]).max() <= 1e-12
-    assert not sol.stalled and all(v <= 1.0 for v in sol.integrals_final.values()), sol.integrals_final
+    assert not sol.unmet and all(v <= 1.0 for v in sol.integrals_final.values()), sol.integrals_final
     m = solver.path_metrics(model, sol.frames.times, sol.frames.values, keyframes)
     assert m["max_penetration_mm"] <= 1.0  # the penetration constraint's tolerance, at 1000 Hz

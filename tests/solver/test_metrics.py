@@ -13,12 +13,9 @@ import pytest
 from runner.cli import main
 from solver.frames import FrameSet
 from solver.inverse_dynamics import constraint_free_copy
-from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.metrics import dynamics_metrics, dynamics_series, path_metrics
-from solver.problem import figure_objective, parse_terms
 from solver.terms.dynamics import RootResidual
-from solver.terms.penetration import Penetration
 
 from conftest import fd_gradient
 
@@ -176,48 +173,6 @@ def test_lagged_flight_indicator(model, layout):
         RootResidual(model, flight="sometimes")
 
 
-def test_shared_engine_gives_the_same_objective_and_gradient(model, layout, keyframes):
-    """`figure_objective` with the dynamics terms shares one engine: penetration reads its forward
-    pass and every term's gradient goes through one reverse pass. Same value and gradient as the
-    terms each on an engine of its own (penetration on its own site kinematics)."""
-    weights = parse_terms("all")
-    fs = FrameSet.from_keyframes(keyframes, layout.quat_slots).with_variable_frames([0.1, 0.6, 1.1, 1.6])
-    shared = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=200.0)
-    alone = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=200.0)
-    own = {"penetration": lambda t: Penetration(model, margin=0.005), "torque": lambda t: type(t)(model),
-           "root": lambda t: RootResidual(model)}
-    alone.terms = [own.get(n, lambda t: t)(t) for n, t in zip(alone.names, alone.terms)]
-    torque, root = shared.names.index("torque"), shared.names.index("root")
-    assert shared.terms[0].engine is shared.terms[torque].engine is shared.terms[root].engine
-    fs = FrameSet(fs.times, fs.values + np.where(fs.fixed, 0, 0.02), fs.fixed, fs.is_keyframe)
-    for obj in (shared, alone):
-        obj.prepare(fs.times, fs.values)
-    a, b = shared.evaluate(fs.times, fs.values), alone.evaluate(fs.times, fs.values)
-    assert pytest.approx(b.E, rel=1e-12) == a.E
-    assert a.integrals["penetration"] > 0  # the path is inside the floor somewhere: the term is active
-    np.testing.assert_allclose(a.grad, b.grad, rtol=0, atol=1e-10 * np.abs(b.grad).max())
-
-
-# ------------------------------------------------------------------------------ refinement
-
-
-@pytest.mark.slow
-def test_adaptive_refinement_beats_global_at_equal_frame_counts(model, layout, keyframes):
-    """The first four keyframes of the clip, every term on but `forces`, 6 variable frames: adaptive
-    subdivision ranked by the predicted decrease ends lower than 2 frames in each interval, with the
-    same fixed weights and scales (measured 33.9 vs 42.2). `forces` is left out: the predicted decrease
-    does not see its peak excess, which a frame anywhere near a peak changes (with it 38.3 vs 42.3)."""
-    from runner.bench.figure import compare_refinement
-
-    kf = Keyframes(keyframes.times[:4], keyframes.values[:4], keyframes.mask[:4])
-    weights = {name: w for name, w in parse_terms("all").items() if name != "forces"}
-    (row,) = compare_refinement(model, kf, layout, weights, [6], scores=("decrease",), rate=400.0)
-    g, a = row["global"], row["adaptive-decrease"]
-    assert g["variable"] == a["variable"] == 6
-    assert g["E_initial"] == a["E_initial"]  # the same objective
-    assert a["E"] < 0.9 * g["E"]
-
-
 # ------------------------------------------------------------------------------ run-and-step --terms all
 
 
@@ -258,32 +213,35 @@ def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms)
     assert opt["peak_root_force_ground_bw"] <= 1.05 * bounds["ground_force_bw"]
     assert opt["peak_pelvis_acceleration_ms2"] <= 1.05 * bounds["pelvis_acceleration_ms2"]
     opts = json.loads(str(z["options_json"]))
-    assert "forces" in opts["weights"] and "min_gap" in opts["solve"]  # --terms all, solved by the least change
+    assert opts["terms"] == "all" and "min_gap" in opts["solve"]  # --terms all, solved by the least change
 
 
 @pytest.mark.slow
 def test_plots_are_written(all_terms):
     _, _, plots = all_terms
     names = sorted(p.name for p in plots.glob("*.png"))
-    # the Euler-Lagrange scores figure is the penalty objective's (`--method penalty`); `--terms all` is the least change
     assert names == ["dynamics.png", "foot_heights.png", "objective.png"]
     for p in plots.glob("*.png"):
         assert p.stat().st_size > 20_000  # a real figure, not an empty canvas
 
 
-def test_summary_lists_the_dynamics_rows_and_the_weights(model, layout, keyframes, capsys):
+def test_summary_lists_the_dynamics_rows_and_the_constraints(model, layout, keyframes):
+    """With the force bounds the summary has the dynamics rows, the bound rows and each constraint's
+    worst value over its tolerance, a target column naming them."""
+    import solver
     from runner.console import summary_table
-    from solver.solve import SolveOptions, solve
+    from solver.keyframe_file import read_keyframes
 
-    weights = parse_terms("all")
-    obj = figure_objective(model, weights, keyframes.times[0], keyframes.times[-1], rate=100.0)
-    sol = solve(obj, FrameSet.from_keyframes(keyframes, layout.quat_slots),
-                SolveOptions(subdivision="none", max_evals=3))
+    contacts = read_keyframes(KEYFRAMES, layout)[1].contacts  # the flights between them: the flight wrench
+    problem = solver.build_problem(model, solver.ProblemSpec(keyframes, contacts, forces=True))
+    sol = solver.solve_problem(problem, solver.LeastChangeOptions(max_subproblems=1, max_evals=3))
     plain = path_metrics(model, sol.initial.times, sol.initial.values, keyframes, rate=200.0)
     opt = path_metrics(model, sol.frames.times, sol.frames.values, keyframes, rate=200.0)
-    text = summary_table(plain, opt, sol, weights, {**weights, "penetration": 100.0})
+    text = summary_table(plain, opt, sol, force_bounds=problem.force_bounds)
     for row in ("RMS joint torque [N m]", "peak joint torque [N m]", "flight (all feet clear) [s]",
                 "RMS root force in flight [N]", "peak root force in flight [N]",
-                "RMS root torque in flight [N m]", "peak root torque in flight [N m]"):
-        assert row in text
-    assert "penetration 1 -> 100" in text and "torque 1," in text and "root 1" in text
+                "RMS root torque in flight [N m]", "peak root torque in flight [N m]",
+                "peak root force on ground [body wt]", "penetration: worst / tolerance",
+                "flight wrench: worst / tolerance"):
+        assert row in text, row
+    assert "force bounds: ground" in text and "target: the constraint" in text

@@ -1,5 +1,5 @@
-"""`solve` (solver/solve.py, paper fig. 5) on problems with known optima, penalty continuation, and
-the immutability of its inputs and results."""
+"""`solve` (solver/solve.py, paper fig. 5) on problems with known optima, and the immutability of its
+inputs and results."""
 import dataclasses
 
 import numpy as np
@@ -34,8 +34,7 @@ class Bending(Term):
 
 
 class Lift(Term):
-    """f = (Y_0 - 1)^2, a soft constraint Y_0 = 1 with violation max |Y_0 - 1|: keyframes at Y_0 = 0
-    keep it from ever holding, so penalty continuation boosts it every time it may."""
+    """f = (Y_0 - 1)^2, a soft preference Y_0 = 1 that keyframes at Y_0 = 0 keep from ever holding."""
 
     name, needs = "lift", (0,)
 
@@ -45,8 +44,6 @@ class Lift(Term):
         dY[:, 0] = 2 * r
         return TermEval(r**2, dY=dY if grad else None)
 
-    def violation(self, Y):
-        return float(np.abs(Y[:, 0] - 1.0).max())
 
 
 def perturbed_line_frames(seed=0):
@@ -77,64 +74,30 @@ def lift_problem():
     is_key = np.array([True, True, True])
     fs = FrameSet(times, values, np.ones((3, 2), bool), is_key)
     obj = Objective([Lift(), Bending()], [1.0, 1.0], 0.0, 2.0, rate=50.0)
-    options = SolveOptions(subdivision="global", per_segment=2, limits=(("lift", 1e-3),), boost=10.0,
-                           max_boosts=3, ftol_rel=1e-10)
+    options = SolveOptions(subdivision="global", per_segment=2, ftol_rel=1e-10)
     return fs, obj, options
 
 
-def test_penalty_continuation_boosts_on_a_copy_and_solving_twice_gives_the_same_result():
+def test_solving_twice_gives_the_same_result_and_leaves_the_objective_alone():
     fs, obj, options = lift_problem()
     weights, scales = obj.weights.copy(), obj.scales.copy()
     first = solve(obj, fs, options)
-    # the violation cannot fall below 1 (keyframes hold Y_0 = 0 everywhere): one boost, which does not
-    # halve it, and penalty continuation gives the term up and undoes the boost: the start round's path
-    # and weights are the result
-    assert first.weights == {"lift": 1.0, "bend": 1.0}
-    assert first.stalled == {"lift": pytest.approx(1.0)}
-    np.testing.assert_array_equal(first.frames.values[~first.frames.fixed],
-                                  first.rounds[0].result.x)
     np.testing.assert_array_equal(obj.weights, weights)  # the caller's objective is as it was
     np.testing.assert_array_equal(obj.scales, scales)
     second = solve(obj, fs, options)
     np.testing.assert_array_equal(second.frames.values, first.frames.values)
     np.testing.assert_array_equal(second.trace, first.trace)
     assert (second.E_initial, second.E_final, second.n_evals) == (first.E_initial, first.E_final, first.n_evals)
-    assert len(first.rounds) == 1 + 1  # one round, then one boosted re-optimization of the same frames
-    assert [r.kind for r in first.rounds] == ["start", "boost"] and first.round_counts == {"start": 1, "boost": 1}
-    assert first.message.endswith("(2 rounds: 1 start, 1 boost); 1 boost undone (bought nothing)")
-    # E_initial and E_final are under the final weights and the eq. 7 scales
+    assert [r.kind for r in first.rounds] == ["start"] and first.round_counts == {"start": 1}
+    # E_initial and E_final are under the weights and the eq. 7 scales
     for sol_E, ints in ((first.E_initial, first.integrals_initial), (first.E_final, first.integrals_final)):
         assert sol_E == pytest.approx(sum(first.weights[n] * ints[n] / first.scales[n] for n in ints), rel=1e-12)
-
-
-class MidLift(Lift):
-    """Lift whose violation is measured in the middle half of the path (the keyframes hold Y_0 = 1 at
-    the ends, so it can be met there; `TrackLine` pulls the other way, so the violation falls as
-    about 1/weight, the quadratic penalty's rate)."""
-
-    def violation(self, Y):
-        n = len(Y)
-        return float(np.abs(Y[n // 4 : 3 * n // 4, 0] - 1.0).max())
-
-
-def test_penalty_continuation_boosts_while_the_violation_falls():
-    times = np.array([0.0, 2.0])
-    values = np.array([[1.0, 0.0], [1.0, 0.0]])
-    fs = FrameSet(times, values, np.ones((2, 2), bool), np.array([True, True]))
-    obj = Objective([MidLift(), TrackLine()], [1.0, 1.0], 0.0, 2.0, rate=50.0)
-    options = SolveOptions(subdivision="global", per_segment=3, limits=(("lift", 1e-3),), boost=10.0,
-                           max_boosts=6, ftol_rel=1e-12, renormalize=False)
-    sol = solve(obj, fs, options)
-    assert not sol.stalled
-    assert sol.weights["lift"] >= 1e3  # boosted at least three times: each boost cut the violation ~10x
-    Y = sol.frames.path(np.linspace(0.0, 2.0, 801))
-    assert MidLift().violation(Y) <= 1e-3
 
 
 def test_results_are_read_only_and_inputs_untouched():
     fs, obj, options = lift_problem()
     times_before, values_before = fs.times.copy(), fs.values.copy()
-    sol = solve(obj, fs, dataclasses.replace(options, max_boosts=0))
+    sol = solve(obj, fs, options)
     with pytest.raises(dataclasses.FrozenInstanceError):
         sol.E_final = 0.0
     with pytest.raises(dataclasses.FrozenInstanceError):
@@ -150,15 +113,15 @@ def test_results_are_read_only_and_inputs_untouched():
     assert isinstance(sol.rounds, tuple)
 
 
-def test_fixed_rounds_with_a_boost_say_which_round_was_which():
-    """`rounds=1` ran three rounds when a penalty boost re-optimized: the Rounds' kinds and the message
-    tell the refinement round from the penalty re-optimization."""
+def test_fixed_rounds_say_which_round_was_which():
+    """`rounds=1`: the start round, then one adaptive round that adds frames; the progress events name
+    the same kinds."""
     fs, obj, options = lift_problem()
     events = []
     sol = solve(obj, fs, dataclasses.replace(options, subdivision="adaptive", rounds=1),
                 progress=lambda e, i: events.append((e, i)))
     kinds = [r.kind for r in sol.rounds]
-    assert kinds == ["start", "boost", "refine"]  # boosted once (then stalled), then the one adaptive round
+    assert kinds == ["start", "refine"]
     assert [i["kind"] for e, i in events if e == "round"] == kinds
-    assert sol.rounds[2].n_variable > sol.rounds[1].n_variable  # only the refinement round added frames
-    assert sol.round_summary == "3 rounds: 1 start, 1 refine, 1 boost" and sol.round_summary in sol.message
+    assert sol.rounds[1].n_variable > sol.rounds[0].n_variable  # the refinement round added frames
+    assert sol.round_summary == "2 rounds: 1 start, 1 refine"

@@ -1,16 +1,19 @@
-"""The figure's accuracy request (`SolveOptions.tol`, `solver.animate(tol=)`): the decrease of E that
-refinement still predicts, relative to E (`refinement_estimate`), on cases with a known answer."""
+"""The accuracy request of `solve` (`SolveOptions.tol`) on a figure's soft preferences (covariant
+acceleration, the unit term; paper eq. 9): the decrease of E that refinement still predicts, relative to E
+(`refinement_estimate`), on cases with a known answer."""
 from dataclasses import replace
 
 import mujoco
 import numpy as np
 import pytest
 
-import solver
 from solver.errors import InputError
+from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
-from solver.solve import SolveOptions, refinement_estimate
+from solver.objective import Objective
+from solver.solve import SolveOptions, refinement_estimate, solve
+from solver.terms import CovariantAcceleration, UnitQuaternion
 
 from conftest import TOY_SCENE
 
@@ -27,6 +30,23 @@ def keyframes(model, rotate: bool) -> Keyframes:
     return Keyframes(np.array([0.0, 0.4, 1.0]), V, np.ones_like(V, bool))
 
 
+#: the settings of a figure solve: one frame per interval, adaptive rounds ranked by the predicted decrease,
+#: renormalized terms (eq. 7), L-BFGS in the spline-acceleration metric
+OPTIONS = SolveOptions(subdivision="adaptive", per_segment=1, renormalize=True, ftol_rel=1e-6, precondition=True,
+                       radial_weight="auto", score="decrease", refine="tol", tol=1e-2)
+
+
+def figure_solve(model, kf, terms: str, progress=None, **changes):
+    """`solve` on the figure with "smooth" (the covariant acceleration with the root's linear part) and
+    optionally "unit" (weights 0.05 and 1)."""
+    layout = StateLayout.from_model(model)
+    smooth = CovariantAcceleration(layout.quat_slots, layout.linear_index)
+    chosen = [(smooth, 0.05)] + ([(UnitQuaternion(layout.quat_slots), 1.0)] if "unit" in terms else [])
+    objective = Objective([t for t, _ in chosen], [w for _, w in chosen], kf.times[0], kf.times[-1], rate=400.0)
+    return solve(objective, FrameSet.from_keyframes(kf, layout.quat_slots), replace(OPTIONS, **changes),
+                  progress=progress)
+
+
 @pytest.fixture(scope="module")
 def model():
     return mujoco.MjModel.from_xml_string(TOY_SCENE)
@@ -36,7 +56,7 @@ def test_nothing_to_gain_estimates_zero(model):
     """Only the root moves and every joint stays at identity: the smoothness term is then integral |x''|^2
     of the root, which the natural cubic spline through the keyframes already minimizes. No frame can
     lower E: the estimate is ~0 and the tolerance is met after the first round."""
-    sol = solver.animate(model, keyframes(model, rotate=False), "smooth", tol=1e-6)
+    sol = figure_solve(model, keyframes(model, rotate=False), "smooth", tol=1e-6)
     assert sol.converged_to_tol is True and len(sol.rounds) == 1
     assert sol.refinement_estimate < 1e-8 and sol.refinement_estimates == (sol.refinement_estimate,)
     assert "refinement estimate" in sol.message and "<= tol 1e-06" in sol.message
@@ -48,17 +68,14 @@ def test_refines_until_the_estimate_is_below_tol(model):
     rounds report the same estimate for the same frames (computed when read)."""
     kf = keyframes(model, rotate=True)
     events = []
-    sol = solver.animate(model, kf, "unit,smooth", tol=1e-3, progress=lambda e, i: events.append((e, i)))
+    sol = figure_solve(model, kf, "unit,smooth", tol=1e-3, progress=lambda e, i: events.append((e, i)))
     est = sol.refinement_estimates
     assert sol.converged_to_tol is True and len(est) >= 2
     assert est[0] > 1e-3 >= est[-1] == sol.refinement_estimate
     assert sol.frames.n_variable > 2  # frames were added beyond the starting one per interval
     assert [i["estimate"] for e, i in events if e == "estimate"] == list(est)  # reported after every round
     # the same frames by fixed rounds: the estimate computed on the result agrees
-    w = solver.parse_terms("unit,smooth")
-    fixed = solver.animate(model, kf, "unit,smooth",
-                           options=replace(solver.default_options(w), refine="rounds", tol=0.0,
-                                           rounds=len(est) - 1))
+    fixed = figure_solve(model, kf, "unit,smooth", refine="rounds", tol=0.0, rounds=len(est) - 1)
     np.testing.assert_array_equal(fixed.frames.values, sol.frames.values)
     assert fixed.converged_to_tol is None and fixed.refinement_estimates == est[:-1]
     assert fixed.refinement_estimate == pytest.approx(est[-1], rel=1e-9)
@@ -68,8 +85,7 @@ def test_refines_until_the_estimate_is_below_tol(model):
 
 def test_budgets_end_the_refinement_and_say_so(model):
     kf = keyframes(model, rotate=True)
-    sol = solver.animate(model, kf, "unit,smooth", tol=1e-9,
-                         options=replace(solver.default_options(solver.parse_terms("unit,smooth")), max_frames=4))
+    sol = figure_solve(model, kf, "unit,smooth", tol=1e-9, max_frames=4)
     assert sol.converged_to_tol is False and sol.frames.n_variable <= 4
     assert "frame budget of 4 variable frames reached at refinement estimate" in sol.message
     assert sol.refinement_estimate > 1e-9
@@ -80,6 +96,3 @@ def test_tol_option_checks():
         SolveOptions(tol=-1.0)
     with pytest.raises(InputError, match="tol must be a number >= 0"):
         SolveOptions(tol=float("inf"))
-    from solver.animate import DEFAULT_TOL
-
-    assert solver.default_options({}).tol == DEFAULT_TOL

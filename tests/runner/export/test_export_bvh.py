@@ -293,8 +293,7 @@ def test_other_rates_resample_the_unmodelled_joints(tmp_path):
 def test_an_optimized_path_meets_the_source_at_its_keyframes(tmp_path):
     """mocap on a short clip, then export: at every keyframe time the exported pose is the source's."""
     src = edit_bvh(MODELS / "cmu" / "127_33.bvh", tmp_path / "run.bvh", seconds=0.6)
-    assert main(["mocap", str(src), "--out-dir", str(tmp_path / "o"), "--no-render", "--rounds", "0",
-                 "--max-evals", "40", "--quiet", "--no-summary"]) == 0
+    assert main(["mocap", str(src), "--out-dir", str(tmp_path / "o"), "--no-render", "--max-evals", "40", "--quiet", "--no-summary"]) == 0
     out = tmp_path / "opt.bvh"
     assert main(["export", str(tmp_path / "o" / "run.npz"), "--to", str(out), "--quiet"]) == 0
     saved = load_saved_path(tmp_path / "o" / "run.npz")

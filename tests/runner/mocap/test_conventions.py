@@ -26,7 +26,7 @@ CLIP = REPO / "models" / "cmu" / "35_17.bvh"
 REAL = REPO / "tests" / "data" / "bvh"
 #: [m] a joint of the way back this near the source's at a keyframe is the source's
 KEY_TOLERANCE = 0.005
-FAST = ["--no-render", "--rounds", "0", "--max-evals", "5", "--quiet", "--no-summary"]
+FAST = ["--no-render", "--max-evals", "5", "--quiet", "--no-summary"]
 #: the roles of the legs: a convention that merges spine joints keeps these joints' places exactly
 LEG_JOINTS = ("Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "RightUpLeg", "RightLeg", "RightFoot",
               "RightToeBase")

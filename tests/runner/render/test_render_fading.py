@@ -133,8 +133,7 @@ def test_reference_panel_needs_a_clip(tmp_path, capsys):
 def test_reference_panel_is_rendered(tmp_path):
     out = tmp_path / "v.mp4"
     assert main(["animate", str(small_keyframes(tmp_path)), "--reference-panel", "--out", str(out),
-                 "--size", "480x270", "--fps", "4", "--speed", "1", "--subdivision", "none",
-                 "--max-evals", "2", "--quiet"]) == 0
+                 "--size", "480x270", "--fps", "4", "--speed", "1", "--max-evals", "2", "--quiet"]) == 0
     f = frames(out)
     assert f.shape[1:] == (270, 480, 3)
     w = 160  # three panels

@@ -153,7 +153,7 @@ def test_the_commands_pass_the_camera_to_the_video(command, monkeypatch, tmp_pat
         return RenderInfo(path=out, n_frames=0, video_time_s=0.0, wall_time_s=0.0, ms_per_panel=0.0, size=video.size)
 
     monkeypatch.setattr(runner.run, "render_with_progress", fake_render)  # the one run both commands go through
-    fast = ["--rounds", "0", "--max-evals", "2", "--quiet", "--no-summary", "--camera", "front", "--size", "480x270"]
+    fast = ["--max-evals", "2", "--quiet", "--no-summary", "--camera", "front", "--size", "480x270"]
     if command == "animate":
         args = ["animate", str(MODELS / "run_and_step.keyframes.json"), "--out", str(tmp_path / "v.mp4"),
                 "--save-path", str(tmp_path / "p.npz")]

@@ -4,10 +4,8 @@ and the Jacobian (dense blocks or vector-Jacobian products) agrees with central 
 import numpy as np
 import pytest
 
-from solver.contacts import Contact
 from solver.layout import StateLayout
 from solver.path_context import PathContext
-from solver.peak_bounds import PeakBounds
 from solver.terms import (
     CovariantAcceleration,
     Hyperextension,
@@ -17,11 +15,7 @@ from solver.terms import (
     TermEval,
     UnitQuaternion,
 )
-from solver.terms.clearance import Clearance
-from solver.terms.contact import Planted
-from solver.terms.contact_wrench import FrictionCone
 from solver.terms.dynamics import JointTorque, RootResidual
-from solver.terms.force_bounds import PeakForces
 
 from conftest import random_qpos
 
@@ -41,20 +35,12 @@ def _path(layout, seed, height, spread=0.3):
 # name -> (factory(model, layout), root height [m] of the test path: the feet inside or near surfaces)
 CASES = {
     "penetration": (lambda m, lay: Penetration(m, margin=0.005), 0.93),
-    "planted": (lambda m, lay: Planted(m, [Contact("l_heel", 0.1, 0.6), Contact("l_heel", 0.5, 0.8),
-                                          Contact("r_toe", 0.0, 0.4, "step"), Contact("l_toe", 0.3, 1.0)],
-                                       ramp=0.1), 0.95),
-    "clearance": (lambda m, lay: Clearance(m, [Contact("l_heel", 0.0, 0.1), Contact("l_heel", 0.9, 1.0),
-                                              Contact("r_toe", 0.0, 0.3), Contact("r_toe", 0.5, 1.0)]), 0.9),
-    "cone": (lambda m, lay: FrictionCone(m, [Contact("l_heel", 0.1, 0.7), Contact("l_toe", 0.1, 0.7),
-                                            Contact("r_toe", 0.0, 0.3, "step")], mu=0.3, ramp=0.2), 0.95),
     "unit": (lambda m, lay: UnitQuaternion(lay.quat_slots), 1.0),
     "smooth": (lambda m, lay: CovariantAcceleration(lay.quat_slots, lay.linear_index), 1.0),
     "covariant_normalized": (lambda m, lay: NormalizedCovariantAcceleration(lay.quat_slots), 1.0),
     "bending": (lambda m, lay: Hyperextension(lay, HINGES, tolerance=-0.3), 1.0),
     "torque": (lambda m, lay: JointTorque(m, weights={"l_knee": 2.0}), 1.0),
     "root": (lambda m, lay: RootResidual(m), 0.98),
-    "forces": (lambda m, lay: PeakForces(m, PeakBounds(1.0, 0.5, 0.0, 0.0)), 1.0),
 }
 
 
