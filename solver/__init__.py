@@ -39,7 +39,6 @@ from solver.terms import (
     JointTorque,
     NormalizedCovariantAcceleration,
     Penetration,
-    Residual,
     RootResidual,
     Term,
     TermEval,
@@ -62,7 +61,7 @@ __all__ = [
     # objective terms (paper eq. 9, 12, sec. 5, sec. 6 / appendix A) and the objective (eq. 1, eq. 7) of
     # the orientation problem (sec. 3) and of `solve`
     "Term", "TermEval", "Penetration", "UnitQuaternion", "Hyperextension", "CovariantAcceleration",
-    "NormalizedCovariantAcceleration", "JointTorque", "RootResidual", "Residual", "PathContext",
+    "NormalizedCovariantAcceleration", "JointTorque", "RootResidual", "PathContext",
     "Objective", "Evaluation",
     # solving a weighted objective (paper fig. 5)
     "SolveOptions", "Solution", "Round", "Status", "OptimizeResult", "solve",

@@ -136,7 +136,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             height.reports = reports + slide_reports
             out.append(height)
             out.append(SupportSlide(*sargs, limit=slim, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING))
-        out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
+        if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
+            out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     layout = StateLayout.from_model(model)
     out += _anatomy(figure, layout, reference)
     quats = [j for j in layout.joints if j.quat_index is not None]

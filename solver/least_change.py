@@ -302,8 +302,9 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, s
     def worst(b, P):
         return {c.name: float(s.max()) if s.size else 0.0 for c, s in zip(al.constraints, al.scaled_values(b, P))}
 
-    if unmet:
-        message = message + "; unmet: " + ", ".join(f"{k} by {v:.3g}" for k, v in unmet.items())
+    if unmet:  # the limits were raised to what the path reaches: "met" is within those
+        message = (message.replace("every constraint met", "every constraint met within reach")
+                   + "; out of reach (limit raised by [SI]): " + ", ".join(f"{k} {v:.3g}" for k, v in unmet.items()))
     return Solution(frames, lc.plain, tuple(rounds), status, message, 0.0, D / al.d0,
                     worst(plain_basis, lc.plain.values), worst(basis, frames.values), {},
                     np.concatenate(trace) if trace else np.zeros(0), seconds, evals, unmet=dict(unmet),

@@ -308,15 +308,6 @@ class Objective:
                 term.set_knots(knots)
             term.prepare(basis.t, Y, Y1, Y2)
 
-    def knot_times(self) -> np.ndarray:
-        """The sorted, distinct `Term.knot_times` of the terms with a nonzero weight, inside (t0, t1) [s]."""
-        ts = [np.asarray(term.knot_times(), float).ravel() for term, w in zip(self.terms, self.weights) if w > 0]
-        ts = [t for t in ts if t.size]
-        if not ts:  # most objectives: no term has knots (no sort, no comparisons)
-            return np.zeros(0)
-        t = np.unique(np.concatenate(ts))
-        return t[(t > self.t0) & (t < self.t1)]
-
     @property
     def keeps_state(self) -> bool:
         """True if a term fixes something per round (`Term.prepare`): `prepare` can change E."""

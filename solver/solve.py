@@ -3,9 +3,8 @@
 `solve` composes three units:
 
 1. the starting frames: the plain spline through the keyframes (partial keyframes' free components
-   filled), optionally renormalized on (eq. 7), plus variable frames where a term's integrand changes
-   character (a contact's touch-down and lift-off, `Objective.knot_times`) and `per_segment` frames per
-   segment for "global" and "adaptive" subdivision, valued on the current path;
+   filled), optionally renormalized on (eq. 7), plus `per_segment` frames per segment for "global" and
+   "adaptive" subdivision, valued on the current path;
 2. the optimizer back end (`solver.backend`): one round moves the free components, keyframes hold
    exactly at every iterate;
 3. the refinement strategy (`solver.refinement`): after each accepted round, stop or add frames where
@@ -35,7 +34,7 @@ from solver.refinement import (  # noqa: F401 (TOL_FRAMES_PER_INTERVAL, refineme
     refinement_estimate,
 )
 from solver.solution import ROUND_KINDS, Round, Solution, round_summary  # noqa: F401 (re-exported)
-from solver.subdivide import global_times, knot_hint_times
+from solver.subdivide import global_times
 
 SUBDIVISIONS = ("none", "global", "adaptive")
 SCORES = ("gradient", "decrease")
@@ -43,9 +42,6 @@ SCORES = ("gradient", "decrease")
 REFINES = ("rounds", "tol")
 #: `SolveOptions.rounds` when not given (refine "rounds").
 DEFAULT_ROUNDS = 2
-#: [s] `SolveOptions.term_knots`: a hinted frame closer than this to another frame is left out (30 ms:
-#: under four frames at motion capture's 120 Hz; contact times are only that accurate).
-KNOT_MIN_GAP = 0.03
 _ENDS = (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED)  # statuses that end a solve
 
 
@@ -56,13 +52,7 @@ class SolveOptions:
     Attributes:
         subdivision: "none" (only the frames given), "global" (`per_segment` frames in every segment,
             once) or "adaptive" (rounds of weak-form Euler-Lagrange subdivision).
-        term_knots: with "global" or "adaptive", first place variable frames where a term says its
-            integrand changes character (`Objective.knot_times`: the contacts' touch-downs and
-            lift-offs), at least KNOT_MIN_GAP from other frames; `per_segment` then splits every
-            segment of that set. Without contact terms there are none. With contacts, a frame at each
-            touch-down and lift-off lets the path hold a foot still without pulling the other sites
-            down (docs/contacts.md "The contact terms").
-        per_segment: variable frames per segment (of the keyframes and the term knots) for "global",
+        per_segment: variable frames per segment (of the keyframes) for "global",
             and to start "adaptive" with.
         refine: how adaptive subdivision stops (with "none" and "global" it is not used):
             "rounds" (default): after `rounds` rounds that add frames; "tol": when the decrease of E
@@ -106,7 +96,6 @@ class SolveOptions:
     """
 
     subdivision: str = "adaptive"
-    term_knots: bool = True
     per_segment: int = 1
     rounds: int | None = None
     per_round: int = 0
@@ -258,16 +247,13 @@ def default_refinement(options: SolveOptions) -> Refinement:
 
 def starting_frames(objective: Objective, initial: FrameSet, options: SolveOptions,
                     project: Callable[[np.ndarray], np.ndarray] | None = None) -> FrameSet:
-    """The frames of the first round: `initial`, and with "global" or "adaptive" subdivision variable
-    frames at the terms' knots (`SolveOptions.term_knots`, at least KNOT_MIN_GAP from other frames) and
+    """The frames of the first round: `initial`, and with "global" or "adaptive" subdivision variable frames,
     `per_segment` per segment (for "global" at most `max_frames`), valued on the plain spline, the
     per-segment ones mapped by `project` (`solve`). Returns a FrameSet (the same path as `initial`'s
     where `project` is None)."""
     frames = initial
     if options.subdivision not in ("global", "adaptive"):
         return frames
-    if options.term_knots:
-        frames = frames.with_variable_frames(knot_hint_times(frames, objective.knot_times(), KNOT_MIN_GAP))
     if options.per_segment <= 0:
         return frames
     new = global_times(frames, options.per_segment)

@@ -36,8 +36,8 @@ def global_times(frames: FrameSet, per_segment: int) -> np.ndarray:
 
 
 def knot_hint_times(frames: FrameSet, hints: np.ndarray, min_gap: float) -> np.ndarray:
-    """The hinted times (`Objective.knot_times`) at least `min_gap` from every frame and from each
-    other (earlier hints win), strictly inside the path.
+    """The hinted times (the contacts' touch-downs and lift-offs, `solver.least_change`) at least `min_gap`
+    from every frame and from each other (earlier hints win), strictly inside the path.
 
     Args:
         frames: current frame set. hints: (r,) times [s]. min_gap: [s] >= 0.

@@ -6,7 +6,7 @@ import numpy as np
 from solver.errors import InputError
 from solver.figure import shipped_figure
 from solver.quaternion import twist_angle, twist_angle_grad
-from solver.terms.base import Residual, Term, TermEval
+from solver.terms.base import Term, TermEval
 
 
 def flexion_angles(Y: np.ndarray, quat_index: np.ndarray, axes: np.ndarray) -> np.ndarray:
@@ -62,10 +62,6 @@ class Hyperextension(Term):
         """(n, j) flexion angles [rad] of the term's joints."""
         return flexion_angles(Y, self.idx, self.axes)
 
-    def violation(self, Y: np.ndarray) -> float:
-        """Largest hyperextension of any joint [rad] (0 if none bends the wrong way)."""
-        return float(np.maximum(0.0, -self.angles(Y)).max())
-
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         theta = self.angles(Y)
         h = np.maximum(0.0, -theta - self.tol)
@@ -80,14 +76,3 @@ class Hyperextension(Term):
                 dY[np.ix_(active, self.idx[k])] += (-2.0 * h[active, k])[:, None] * g
         return TermEval(f, dY=dY)
 
-    def residual(self, ctx) -> Residual:
-        """r = max(0, -theta - tol) per joint (n, j) [rad] (f = |r|^2); dense blocks dr/dY = -d theta/dq
-        where the joint is past its tolerance (`twist_angle_grad`), 0 elsewhere."""
-        Y = ctx.Y
-        r = np.maximum(0.0, -self.angles(Y) - self.tol)
-        J = np.zeros((len(Y), len(self.axes), Y.shape[1]))
-        for k in range(len(self.axes)):
-            active = np.flatnonzero(r[:, k] > 0)
-            if active.size:
-                J[active[:, None], k, self.idx[k][None, :]] = -twist_angle_grad(Y[active][:, self.idx[k]], self.axes[k])
-        return Residual(r, blocks=(J, None, None))

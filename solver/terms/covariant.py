@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.terms.base import Residual, Term, TermEval
+from solver.terms.base import Term, TermEval
 
 
 class CovariantAcceleration(Term):
@@ -45,30 +45,6 @@ class CovariantAcceleration(Term):
         dY[:, self.idx] = 2.0 * (q * r * r - q2 * r)
         dY2[:, self.lin] = 2.0 * y2
         return TermEval(f, dY=dY, dY2=dY2)
-
-    def residual(self, ctx) -> Residual:
-        """r (n, 4 s + l): per quaternion slot the covariant acceleration q'' - q a/b (a = q''.q,
-        b = q.q) [1/s^2], then the linear components' y'' [m/s^2] (f = |r|^2, as |q'' - q a/b|^2 =
-        q''.q'' - a^2/b). Blocks per slot (`Residual.compact`): dr/dq'' = I - q q^T/b, dr/dq = -(a/b) I - q (q''/b - 2 a q/b^2)^T,
-        d y''/d y'' = I."""
-        Y, Y2 = ctx.Y, ctx.Y2
-        n, nq = Y.shape
-        s, lin = self.idx.shape[0], self.lin
-        q, q2 = Y[:, self.idx], Y2[:, self.idx]  # (n, s, 4)
-        a = np.einsum("nsi,nsi->ns", q2, q)[..., None, None]
-        b = np.einsum("nsi,nsi->ns", q, q)[..., None, None]
-        qc, q2c = q[..., :, None], q2[..., :, None]  # columns (n, s, 4, 1)
-        eye = np.eye(4)
-        dq2 = eye - qc * q[..., None, :] / b  # (n, s, 4, 4)
-        dq = -(a / b) * eye - qc * (q2[..., None, :] / b - 2.0 * a * q[..., None, :] / (b * b))
-        r = np.concatenate([(q2c - qc * a / b)[..., 0].reshape(n, 4 * s), Y2[:, lin]], axis=1)
-        groups = [(np.arange(4 * k, 4 * k + 4), np.asarray(slot), (dq[:, k], None, dq2[:, k]))
-                  for k, slot in enumerate(self.idx)]
-        if len(lin):
-            eye = np.broadcast_to(np.eye(len(lin)), (n, len(lin), len(lin)))
-            groups.append((4 * s + np.arange(len(lin)), np.asarray(lin), (None, None, eye)))
-        return Residual(r, compact=groups, nq=Y.shape[1])
-
 
 class NormalizedCovariantAcceleration(Term):
     """f2 of the orientation actually shown: |A|^2 with A the covariant acceleration of u = q/|q| [1/s^4].
@@ -147,50 +123,6 @@ class NormalizedCovariantAcceleration(Term):
         dY, dY1, dY2 = np.zeros_like(Y), np.zeros_like(Y), np.zeros_like(Y)
         dY[:, self.idx], dY1[:, self.idx], dY2[:, self.idx] = D[0], D[1], D[2]
         return TermEval(f, dY=dY, dY1=dY1, dY2=dY2)
-
-
-    def residual(self, ctx) -> Residual:
-        """r = A per quaternion slot (n, 4 s) [1/s^2], the covariant acceleration of u = q/|q| (f = |A|^2),
-        with dense blocks from the class docstring's vector form (sigma = |q|, m = u.v, P = I - u u^T):
-
-            du/dq = P/sigma,  dv/dq = -v u^T/sigma,  dv/dq' = I/sigma,  da/dq = -a u^T/sigma,  da/dq'' = I/sigma,
-            dm/dq = (v^T P - m u^T)/sigma,  dm/dq' = u^T/sigma,   w = a - 2 m v,   A = w - u (u.w),
-            dA/dX = dw/dX - u (u^T dw/dX + w^T du/dX) - (u.w) du/dX.
-        """
-        Y, Y1, Y2 = ctx.Y, ctx.Y1, ctx.Y2
-        n, nq = Y.shape
-        q, q1, q2 = Y[:, self.idx], Y1[:, self.idx], Y2[:, self.idx]  # (n, s, 4)
-        sig = np.sqrt(np.einsum("nsi,nsi->ns", q, q))[..., None]
-        u, v, a = q / sig, q1 / sig, q2 / sig
-        m = np.einsum("nsi,nsi->ns", u, v)[..., None]
-        w = a - 2.0 * m * v
-        uw = np.einsum("nsi,nsi->ns", u, w)[..., None, None]
-        A = w - u * uw[..., 0]
-        eye = np.eye(4)
-        P = eye - np.einsum("nsi,nsj->nsij", u, u)
-        isg = 1.0 / sig[..., None]
-        du = (P * isg, None, None)  # d u / d (q, q', q'')
-        dv = (-np.einsum("nsi,nsj->nsij", v, u) * isg, eye * isg, None)
-        da = (-np.einsum("nsi,nsj->nsij", a, u) * isg, None, eye * isg)
-        dm = ((np.einsum("nsi,nsij->nsj", v, P) - m * u)[..., None, :] * isg, (u[..., None, :] * isg), None)
-        blocks = []
-        for k in range(3):
-            dw = np.zeros(P.shape)
-            if da[k] is not None:
-                dw = dw + da[k]
-            if dm[k] is not None:
-                dw = dw - 2.0 * v[..., :, None] * dm[k]
-            if dv[k] is not None:
-                dw = dw - 2.0 * m[..., None] * dv[k]
-            dA = dw - u[..., :, None] * np.einsum("nsi,nsij->nsj", u, dw)[..., None, :]
-            if du[k] is not None:
-                dA = dA - u[..., :, None] * np.einsum("nsi,nsij->nsj", w, du[k])[..., None, :] - uw * du[k]
-            J = np.zeros((n, 4 * len(self.idx), nq))
-            for j, slot in enumerate(self.idx):
-                J[:, 4 * j:4 * j + 4, slot] = dA[:, j]
-            blocks.append(J)
-        return Residual(A.reshape(n, -1), blocks=tuple(blocks))
-
 
 def unit_and_normalized(X: np.ndarray, w: np.ndarray, c_unit: float, c_cov: float, grad: bool = True):
     """`UnitQuaternion` and `NormalizedCovariantAcceleration` of one quaternion filling the state (the

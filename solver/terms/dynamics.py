@@ -16,13 +16,12 @@ import numpy as np
 
 from solver.contact_thresholds import FLIGHT_CLEARANCE
 from solver.errors import InputError
-from solver.id_jacobian import tau_jacobian
 from solver.inverse_dynamics import InverseDynamics, MujocoInverseDynamics
 from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.path_context import EngineGradient, PathContext
 from solver.surfaces import StaticSurfaces
-from solver.terms.base import Residual, Term, TermEval
+from solver.terms.base import Term, TermEval
 
 __all__ = ["BACKENDS", "EngineGradient", "JointTorque", "RootResidual", "engine_forward", "make_engine"]
 
@@ -129,23 +128,6 @@ class JointTorque(Term):
         if not grad:
             return TermEval(f)
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, 2.0 * wt))
-
-    def residual(self, ctx) -> Residual:
-        """r = sqrt(w_i) tau_i per DOF (n, nv) [N m]; Jacobian-vector products through the engine's
-        reverse pass (`InverseDynamics.vjp`)."""
-        mo, res = ctx.forward(self.engine, self.tmap)
-        sw = np.sqrt(self.dof_weights)
-        pull = lambda g: EngineGradient(self.engine, res, mo, sw * g).pullback()  # noqa: E731
-        tj = tau_jacobian(ctx, self.engine, self.tmap)
-        if tj is None:
-            return Residual(sw * res.tau, pull=pull)
-        rows = np.flatnonzero(sw)
-        n, nv = res.tau.shape
-        blocks = tuple(np.zeros((n, nv, tj.nq)) for _ in range(3))
-        for J, T in zip(blocks, tj.rows(rows), strict=True):  # d tau / d(Y, Y', Y''), the weighted rows
-            J[:, rows] = sw[rows, None] * T
-        return Residual(sw * res.tau, blocks=blocks, pull=pull)
-
 
 def figure_radius_of_gyration(model, body: int) -> float:
     """sqrt(trace(I_c) / (3 m)) [m] of the subtree of `body` at `qpos0`: I_c its inertia about its
@@ -350,30 +332,3 @@ class RootResidual(Term):
         g_sites[:, self.site_index] = r[:, None, None] * dphi
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, g_tau, g_sites))
 
-    def residual(self, ctx) -> Residual:
-        """r = sqrt(phi_eff) (F, T / l) (n, 6) [N]: f = |r|^2. sqrt(phi) is smooth where phi > 0 (each
-        factor S(c) = c^2 (3 - 2 c)); where phi_eff is 0 (a site on a surface) r is 0 and its
-        derivative through phi is taken as 0 (the one-sided limit of the indicator's flat part).
-        Jacobian-vector products through the engine's reverse pass."""
-        mo, res = ctx.forward(self.engine, self.tmap)
-        wr = res.tau[:, self.root_dofs] * np.sqrt(self._scale)
-        phi, dphi = self._indicator(ctx.t, res)
-        sp = np.sqrt(np.maximum(phi, 0.0))
-        half = np.where(sp > 0, 0.5 / np.where(sp > 0, sp, 1.0), 0.0)  # d sqrt(phi) / d phi
-
-        def pull(g):
-            g_tau = np.zeros(res.tau.shape)
-            g_tau[:, self.root_dofs] = sp[:, None] * np.sqrt(self._scale) * g
-            g_sites = np.zeros(res.sites.shape)
-            g_sites[:, self.site_index] = (half * (g * wr).sum(1))[:, None, None] * dphi
-            return EngineGradient(self.engine, res, mo, g_tau, g_sites).pullback()
-
-        tj = tau_jacobian(ctx, self.engine, self.tmap)
-        if tj is None:
-            return Residual(sp[:, None] * wr, pull=pull)
-        n, m = len(ctx.Y), len(self.root_dofs)  # the adjoints of each column (`pull` with a unit g)
-        g_tau = np.zeros((n, m, res.tau.shape[1]))
-        g_tau[:, np.arange(m), self.root_dofs] = sp[:, None] * np.sqrt(self._scale)
-        g_sites = np.zeros((n, m) + res.sites.shape[1:])
-        g_sites[:, :, self.site_index] = (half[:, None] * wr)[:, :, None, None] * dphi[:, None]
-        return Residual(sp[:, None] * wr, blocks=tj.blocks(g_tau, g_sites), pull=pull)

@@ -9,7 +9,7 @@ from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
 from solver.path_context import EngineGradient, engine_sites, site_engine
 from solver.surfaces import StaticSurfaces
-from solver.terms.base import Residual, SiteRows, Term, TermEval
+from solver.terms.base import Term, TermEval
 
 
 def site_positions(model, data, Y: np.ndarray, sites: np.ndarray) -> np.ndarray:
@@ -88,10 +88,6 @@ class Penetration(Term):
         d, _ = self.surfaces.penetration(p, self.margin if margin is None else margin)
         return d.max(axis=-1)
 
-    def violation(self, Y: np.ndarray) -> float:
-        """Deepest true penetration (margin 0) of any contact site into any surface [m]."""
-        return float(self.depths(Y, margin=0.0).max())
-
     def _depths(self, ctx):
         """(motion, engine result, depth (n, k, S) [m], d depth / d site position (n, k, S, 3))."""
         mo, res = ctx.forward(self.engine, self.tmap)
@@ -107,25 +103,6 @@ class Penetration(Term):
         g_sites = np.zeros(res.sites.shape)
         g_sites[:, self.site_index] = np.einsum("nks,nksi->nki", 2.0 * depth, ddepth)
         return TermEval(f, deferred=EngineGradient(self.engine, res, mo, None, g_sites))
-
-    def residual(self, ctx) -> Residual:
-        """r = the depths (n, k S) [m] of every site in every surface (f = |r|^2); Jacobian-vector
-        products through the engine's reverse pass."""
-        mo, res, depth, ddepth = self._depths(ctx)
-        n, k, S = depth.shape
-
-        def pull(g):
-            g_sites = np.zeros(res.sites.shape)
-            g_sites[:, self.site_index] = np.einsum("nks,nksi->nki", g.reshape(n, k, S), ddepth)
-            return EngineGradient(self.engine, res, mo, None, g_sites).pullback()
-
-        site = np.repeat(np.arange(len(self.engine.site_ids))[self.site_index], S)
-        signed, dsigned = signed_depths(self.surfaces, lowest_points(res.sites[:, self.site_index], self.radii),
-                                        self.margin)
-        rows = SiteRows(ctx, self.engine, res, site, dp=ddepth.reshape(n, k * S, 3),
-                        signed=signed.reshape(n, k * S), dsigned=dsigned.reshape(n, k * S, 3))
-        return Residual(depth.reshape(n, k * S), pull=pull, sites=rows)
-
 
 def signed_depths(surfaces: StaticSurfaces, points: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """The penetration depth before its max(0, .): how far points are inside (> 0) or clear of (< 0)

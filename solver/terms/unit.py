@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.terms.base import Residual, Term, TermEval
+from solver.terms.base import Term, TermEval
 
 
 class UnitQuaternion(Term):
@@ -30,10 +30,6 @@ class UnitQuaternion(Term):
         """True if the term's one quaternion fills qpos 0-3 (the orientation problem)."""
         return self._single
 
-    def violation(self, Y: np.ndarray) -> float:
-        """Largest |1 - |q|| over samples and quaternions [1]."""
-        return float(np.abs(1.0 - np.linalg.norm(Y[:, self.idx], axis=-1)).max())
-
     def evaluate(self, t, Y, Y1, Y2, grad=True) -> TermEval:
         if self._single and Y.shape[1] == 4:  # the single-body problem: no gather/scatter
             e = 1.0 - np.einsum("ni,ni->n", Y, Y)
@@ -47,12 +43,3 @@ class UnitQuaternion(Term):
         dY[:, self.idx] = (-4.0 * e)[..., None] * q
         return TermEval(f, dY=dY)
 
-    def residual(self, ctx) -> Residual:
-        """r = 1 - q.q per quaternion slot (n, s) [1] (f = |r|^2); blocks dr/dY = -2 q per slot
-        (`Residual.compact`)."""
-        Y = ctx.Y
-        q = Y[:, self.idx]  # (n, s, 4)
-        r = 1.0 - np.einsum("nsi,nsi->ns", q, q)
-        groups = [(np.array([k]), np.asarray(slot), (-2.0 * q[:, k, None, :], None, None))
-                  for k, slot in enumerate(self.idx)]
-        return Residual(r, compact=groups, nq=Y.shape[1])

@@ -182,10 +182,8 @@ def test_short_clip_end_to_end(tmp_path, short_clip, capsys):
 def test_a_hops_flight_keeps_its_length(tmp_path):
     """The flight bound on a synthetic 15 cm, 0.35 s hop of the walk 16_23 (`edit_bvh` hop, 2.5 s,
     keys every 0.25 s, fitted scene): the optimized path's flight (every contact site above 3 cm) within 30 ms
-    of the capture's. With a flight band of 2 cm, under the flight metric's 3 cm, the feet would sink to
-    it well before the landing (docs/contacts.md "The contact terms", clearance's ballistic lift); without
-    knots at the lift's corners (`Clearance.knot_times`) the keyed take-off leaves the feet under the
-    lift's ramp and the flight starts late."""
+    of the capture's (the least change's flight constraint: every site above the flight height where the
+    capture flies)."""
     src = REPO / "models" / "cmu" / "16_23.bvh"  # shipped with its attribution (models/cmu/README.md)
     hop = edit_bvh(src, tmp_path / "hop.bvh", hop=(0.25, 0.35, 0.15))
     report = tmp_path / "m.json"
