@@ -52,19 +52,21 @@ CAUSES = {
                                      "height without resting (a landing foot gliding in, a heel sliding onto a "
                                      "step); the flight band lifts the sites only where the capture flies, and the "
                                      "extra flight comes from the swing bands and the spline between keyframes",
-    "keyframes contradict the schedule": "a keyframe holds a site off its contact schedule (the pipeline's "
-                                         "keyframe conflicts)",
+    "keyframes contradict the schedule": "a keyframe decides a contact constraint: it holds a site off its "
+                                         "contact schedule, and the limit is set to what it forces "
+                                         "(`Solution.relaxations`)",
     "keyframes force the skate": "the keyframes alone force more skate than the limit: in each contact a site "
                                  "passes through its keyed positions, so it slides at least the distance between "
                                  "consecutive ones (`solver.motion_metrics.forced_skate_mm`); no path through the "
                                  "keyframes holds the bound",
-    "bound out of reach": "penalty continuation gave up on the term that targets the bound (a x10 boost did "
-                          "not halve it), or the capture itself misses the bound",
+    "bound out of reach": "the least change could not meet the constraint that bounds the figure (its limit "
+                          "raised to what the path reaches, `Solution.unmet`), or the capture itself misses "
+                          "the bound",
     "the optimizer moved the root": "a joint-angle or contact-site error missed while the root's position error "
                                     f"grew by more than {ROOT_MOVED_CM:g} cm and by a larger factor than the "
                                     "joint-angle error (a root shift moves every site with it)",
     "joints traded for the feet": "the joint-angle error missed while the contact-site error is below the plain "
-                                  "spline's: the contact terms bought the feet with the joints",
+                                  "spline's: the contact constraints bought the feet with the joints",
 }
 NOT_TOLD = "not told by the data"
 #: the cause of a skate bound below what the keyframes force (`forced_out_of_reach`)
@@ -81,7 +83,8 @@ class Bound:
             (the limit is `margin`). rule: "le", "lt" or "within" (module docstring). factor, margin: the
             rule's numbers, in the figure's units (margin) or dimensionless (factor).
         capture: the capture's own figure of the same quantity (for `causes`), or None.
-        terms: the objective terms that target the bound (a stalled one: "bound out of reach").
+        terms: the constraints that bound the figure (one the solve left out of reach, `Solution.unmet`:
+            "bound out of reach").
         kind: "surface" (feet against the scene), "contact" (the schedule decides it) or "motion".
         source: the sentence of the acceptance list (or of the issue's "What to build") it implements.
         counted: False for a figure shown beside the bounds but not one of the acceptance list's (the
@@ -150,28 +153,28 @@ BOUNDS: tuple[Bound, ...] = (
           "capture_flight_in_stance_s", "le", 1.0, 0.030, None, ("planted",), "contact", _STANCE_AND_SCHEDULE,
           counted=False),
     Bound("skate_capture", "skate vs capture [mm/frame]", "skate_mm", "capture_skate_mm", "le", 1.0, 0.5, None,
-          ("planted",), "contact", "skate <= the capture's + 0.5 mm/frame"),
+          ("slide",), "contact", "skate <= the capture's + 0.5 mm/frame"),
     Bound("skate_excess", "skate above what the keyframes force, vs plain [mm/frame]", "skate_excess_mm",
-          "plain_skate_excess_mm", "le", 0.5, 0.0, None, ("planted",), "contact",
+          "plain_skate_excess_mm", "le", 0.5, 0.0, None, ("slide",), "contact",
           "and the skate above what the keyframes force <= half the plain spline's above it;"),
     Bound("flight", "flight time vs capture [s]", "flight_s", "capture_flight_s", "within", 0.10, 0.030, None,
-          ("clearance",), "contact", "flight time within 30 ms or 10 % of the capture's, whichever is larger;"),
+          ("flight", "ground"), "contact", "flight time within 30 ms or 10 % of the capture's, whichever is larger;"),
     Bound("joint_error", "joint-angle error [deg]", "joint_error_deg", "plain_joint_error_deg", "le", 1.10, 0.0, None,
           (), "motion", "joint-angle error <= the plain spline's + 10 %;"),
     Bound("site_error", "contact-site error [cm]", "site_error_cm", "plain_site_error_cm", "lt", 1.0, 0.0, None,
-          ("planted",), "motion", "contact-site error below the plain spline's;"),
+          ("planted", "slide"), "motion", "contact-site error below the plain spline's;"),
     Bound("off_hinge", "knee/elbow off the hinge, beyond the capture's [deg]", "off_hinge_deg", "capture_off_hinge_deg", "le", 1.0, 3.0,
           None, ("hinge",), "motion", "knee and elbow rotation off the hinge <= the capture's + 3 degrees;"),
     Bound("hyperextension", "hyperextension [deg]", "hyperextension_deg", "plain_hyperextension_deg", "le", 1.0, 0.5,
-          None, ("bending",), "motion", "hyperextension <= the plain spline's + 0.5 degree."),
+          None, ("hyperextension",), "motion", "hyperextension <= the plain spline's + 0.5 degree."),
     Bound("pelvis_acc", "peak pelvis acceleration [m/s^2]", "pelvis_acc_m_s2", "pelvis_acc_reference_m_s2", "le",
-          1.5, 0.0, None, ("acceleration", "forces"), "motion",
+          1.5, 0.0, None, ("acceleration",), "motion",
           f"{_NO_JOLTS} peak pelvis linear acceleration <= 1.5x;"),
     Bound("joint_acc", "peak angular acceleration over the reference's, worst ball joint", "joint_acc_ratio", None,
           "le", 0.0, 1.5, None, ("acceleration",), "motion",
           f"{_NO_JOLTS} each ball joint's peak angular acceleration <= 1.5x;"),
     Bound("torque_rms", "RMS joint torque [N m]", "torque_rms_Nm", "torque_rms_reference_Nm", "le", 1.25, 0.0, None,
-          ("torque",), "motion", f"{_NO_JOLTS} RMS joint torque <= 1.25x."),
+          (), "motion", f"{_NO_JOLTS} RMS joint torque <= 1.25x."),
 )
 
 

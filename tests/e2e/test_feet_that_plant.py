@@ -19,8 +19,7 @@ def test_run_and_step_with_contacts_floats_and_skates_less():
     on = ref.times <= keyframes.times[-1] + 1e-9
     got = {}
     for label, cs in (("without", ()), ("with", contacts)):
-        terms = "penetration,unit,bending,smooth" + (",planted,clearance" if cs else "")
-        sol = animate(model, keyframes, terms=terms, contacts=cs)
+        sol = animate(model, keyframes, contacts=cs)  # with a schedule: planted, slide, flight and ground
         got[label] = motion_metrics(model, sol.frames.path(ref.times[on]), 1 / ref.frame_time, ref.qpos[on],
                                     contacts)["path"]
     assert got["with"]["float_contact_mm"] < got["without"]["float_contact_mm"]
@@ -35,8 +34,7 @@ def test_sparse_keys_float_under_5_mm(tmp_path):
     --every 0.33 --scene auto --figure default` makes it: mean float in the capture's contacts at most
     5.5 mm (on the shipped figure, whose reference stands on the fitted scene frame by frame; the fitted
     floor is tilted by 1 degree, as the source's own feet show, solver/scene_fit.py).
-    The planted term's height is not ramped at the contacts' ends (docs/contacts.md "The contact
-    terms"): ramped like its sliding, the float on this input exceeds 5 mm."""
+    """
     import json
 
     from runner.cli import main

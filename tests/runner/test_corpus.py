@@ -186,7 +186,7 @@ def test_causes_the_data_tells():
     assert causes(BOUND["flight"], {**long_gaps, "keyframe_conflicts": 2}) == ["contact detection",
                                                                              "keyframes contradict the schedule"]
     # the planted term stalled: its bounds are out of reach; a motion bound is not the schedule's doing
-    assert causes(BOUND["skate_excess"], figures(skate_excess_mm=3.0, stalled=["planted"])) == ["bound out of reach"]
+    assert causes(BOUND["skate_excess"], figures(skate_excess_mm=3.0, stalled=["slide"])) == ["bound out of reach"]
     # the acceleration bound (least change) or the forces term left out of reach: so is the jolt bound
     assert causes(BOUND["pelvis_acc"], figures(pelvis_acc_m_s2=20.0, stalled=["acceleration"])) == ["bound out of reach"]
     assert causes(BOUND["joint_acc"], figures(joint_acc_ratio=2.0)) == []
