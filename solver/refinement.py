@@ -1,6 +1,6 @@
 """Refinement strategies of `solve`'s outer loop (paper fig. 5: optimize -> subdivide -> optimize ...).
 
-After each round that penalty continuation accepts, `solve` asks its strategy what next: stop, add
+After each round, `solve` asks its strategy what next: stop, add
 frames (`Step.times`) and optimize again, or optimize the same frames again (a "polish" at a stricter
 stopping test, or a "boost" after the strategy changed the objective's weights). The strategies:
 

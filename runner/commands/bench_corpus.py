@@ -59,7 +59,7 @@ def register(bsub) -> None:
     c.add_argument("--scene", default=AUTO, help="scene MJCF, or 'auto' (a scene fitted per clip) [auto]")
     add_figure_arguments(c)
     add_root_scale_argument(c)
-    add_solve_arguments(c, terms_help="the default terms; with the clip's contacts also planted,clearance")
+    add_solve_arguments(c, terms_help="default")
     c.add_argument("--quiet", action="store_true", help="no progress bar or per-pair lines")
     c.set_defaults(func=run)
 

@@ -33,7 +33,7 @@ def register(sub) -> None:
     p.add_argument("--metrics", type=Path, default=None, metavar="FILE.json",
                    help="motion metrics and acceptance figures as JSON [<out-dir>/<stem>.metrics.json]")
     add_options(p, defaults={"out_help": "<out-dir>/<stem>.mp4", "save_path_help": "<out-dir>/<stem>.npz",
-                             "terms_help": "the default terms; with the clip's contacts also planted,clearance"})
+                             "terms_help": "default"})
     p.set_defaults(func=run)
 
 
