@@ -5,7 +5,8 @@
     dynamics.png        joint torque and root residual force over time (plain vs optimized), flight
                         phases shaded (the definitions of `solver.metrics`)
     objective.png       the measure of change E after each evaluation, subproblems marked
-    euler_lagrange.png  the weak-form Euler-Lagrange score per segment before and after refinement
+    euler_lagrange.png  the Euler-Lagrange residual per segment before and after refinement (the weighted
+                        objective's weak-form score, or the least change's predicted decrease)
 
 Only drawing here: the numbers come from `solver.metrics` and `solver.subdivide`.
 """
@@ -221,31 +222,50 @@ def plot_objective(path, solution) -> Path:
     return Path(path)
 
 
-def plot_euler_lagrange(path, before: tuple, after: tuple, keyframe_times, chosen=None) -> Path:
-    """Weak-form Euler-Lagrange score per segment, before and after refinement (bars over segments).
+#: the Euler-Lagrange figure's floor, relative to its largest bar (dimensionless): eight decades show
+#: where refinement pays; below them a segment is as good as optimal (or too short to split)
+FLOOR_RATIO = 1e-8
+#: the axis and title of the Euler-Lagrange figure: the weighted objective's scores (`solve`), the least
+#: change's predicted decreases
+EL_LABELS = {
+    "solve": ("|dE/dP| of a midpoint frame\n[E per unit of qpos]",
+              "Weak-form Euler-Lagrange score per segment (solver.subdivide.weak_form_scores):\n"
+              "how fast E would fall if a frame were added at the segment's midpoint"),
+    "least change": ("predicted decrease of Phi\nby a midpoint frame [1]",
+                     "Euler-Lagrange residual of the augmented integrand per segment (solver.least_change_refine):\n"
+                     "the decrease of Phi a frame at the segment's midpoint predicts"),
+}
+
+
+def plot_euler_lagrange(path, before: tuple, after: tuple, keyframe_times, chosen=None, kind: str = "solve") -> Path:
+    """The Euler-Lagrange residual per segment, before and after refinement (bars over segments).
 
     Args:
         path: output PNG.
         before, after: (frame_times (m,), scores (m-1,)) of the two frame sets.
         keyframe_times: (k,) [s]. chosen: times of the frames the refinement added (marked).
+        kind: "solve" (weak-form scores of the weighted objective) or "least change" (predicted
+            decreases of Phi), for the axis and title (`EL_LABELS`).
     """
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(10, 4.8))
+    top = max([float(np.max(sc)) for _, sc in (before, after) if len(sc)] + [1e-300])
+    floor = FLOOR_RATIO * top  # a segment too short to split (or already optimal) is drawn at the floor
     for (times, scores), label, color in ((before, "before refinement", "#d62728"),
                                           (after, "after refinement", "#1f77b4")):
         times = np.asarray(times)
-        scores = np.maximum(np.asarray(scores), 1e-300)
+        scores = np.maximum(np.asarray(scores), floor)
         ax.stairs(scores, times, label=f"{label} ({len(times)} frames)", color=color, lw=1.8,
                   baseline=None)
     _mark_keyframes(ax, keyframe_times)
     ax.set_yscale("log")
+    ax.set_ylim(bottom=floor)
     if chosen is not None and len(chosen):
         ax.plot(chosen, np.zeros(len(chosen)), "^", color="k", ms=7, clip_on=False,
                 transform=ax.get_xaxis_transform(), label="frames added by refinement")
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("|dE/dP| of a midpoint frame\n[E per unit of qpos]")
-    ax.set_title("Weak-form Euler-Lagrange score per segment (solver.subdivide.weak_form_scores):\n"
-                 "how fast E would fall if a frame were added at the segment's midpoint")
+    ax.set_ylabel(EL_LABELS[kind][0])
+    ax.set_title(EL_LABELS[kind][1])
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=9)
     fig.tight_layout()
@@ -260,8 +280,9 @@ def plot_solution(directory, model, solution, keyframes, reference=None, objecti
     Args:
         directory: output folder. model: the scene's MjModel. solution: `solver.solve.Solution`.
         keyframes: the keyframes. reference: motion capture (`.times`, `.qpos`) or None.
-        objective: the solved Objective, for the Euler-Lagrange scores after refinement (the figure
-            is skipped without it). contacts: Contacts shaded in the foot-height plot.
+        objective: the solved Objective, for the Euler-Lagrange scores after refinement; without it
+            the least change's own (`Solution.segment_decreases`: the first check against the last on
+            the final frames; the figure is skipped when there is neither). contacts: Contacts shaded in the foot-height plot.
     Returns:
         the written paths.
     """
@@ -294,5 +315,19 @@ def plot_solution(directory, model, solution, keyframes, reference=None, objecti
         added = np.setdiff1d(solution.frames.times, before[0])
         after = (solution.frames.times, weak_form_scores(objective, solution.frames))
         out.append(plot_euler_lagrange(d / "euler_lagrange.png", before, after, keyframes.times, added))
+    elif _least_change_checks(solution) is not None:
+        before, after = _least_change_checks(solution)
+        added = np.setdiff1d(solution.frames.times, before[0])
+        out.append(plot_euler_lagrange(d / "euler_lagrange.png", before, after, keyframes.times, added,
+                                       kind="least change"))
     return out
+
+
+def _least_change_checks(solution):
+    """(before, after) of the least change's refinement checks: the first, and the last when it was made
+    on the final frames; None with fewer than two such checks."""
+    checks = getattr(solution, "segment_decreases", ()) or ()
+    if len(checks) < 2 or not np.array_equal(checks[-1][0], solution.frames.times):
+        return None
+    return checks[0], checks[-1]
 

@@ -228,7 +228,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     basis = SplineBasis(frames.times, al.t)
     al.rho = initial_penalty(al, basis, FrameVariables(frames, quat),
                              Preconditioner(FrameVariables(frames, quat), basis, al.change, al.tmap, al.d0))
-    rounds, trace, unmet, estimate = [], [], {}, float("nan")
+    rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
     evals, level_its, stall, stalled_before, kind = 0, 0, 0, False, "start"
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
@@ -242,7 +242,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         r = solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=basis, max_evals=o.max_evals,
                              max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb)
         frames, evals = r.frames, evals + r.result.n_evals
-        rounds.append(Round(frames.count, frames.n_variable, r.result, None, frames.times.copy(), kind))
+        rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
+        scores = None
         trace.append(np.asarray(r.result.trace))
         if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE):
             status, message = r.result.status, r.result.message
@@ -264,7 +265,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         if not (met or stall >= 2 or level_its >= o.per_level):
             continue
         stalled_before = stalled_before or stall >= 2
-        new, estimate = _refinement(al, frames, quat, o, k, progress)
+        new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
+        decreases.append((frames.times.copy(), dec))
         evals += 3
         if met and estimate <= o.tol:
             message = f"refinement estimate {estimate:.3g} <= tol {o.tol:g}, every constraint met"
@@ -274,26 +276,28 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
                 message = "no segment predicts a decrease" if met else "constraints left unmet"
                 break
             continue
-        frames = _with_frames(frames, new, quat)
+        frames, scores = _with_frames(frames, new, quat), dec
         basis = SplineBasis(frames.times, al.t)
         al.rho /= GAMMA if stall >= 2 else 1.0  # a stalled penalty starts the finer frames one step softer
         stall, level_its, kind = 0, 0, "refine"
     else:
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
     return _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, time.perf_counter() - start,
-                     estimate, o.tol)
+                     estimate, o.tol, tuple(decreases))
 
 
-def _refinement(al, frames, quat, o: LeastChangeOptions, k: int, progress) -> tuple[np.ndarray, float]:
-    """(times of new variable frames, the predicted decrease of Phi over Phi) on `frames`."""
+def _refinement(al, frames, quat, o: LeastChangeOptions, k: int, progress) -> tuple[np.ndarray, float, np.ndarray]:
+    """(times of new variable frames, the predicted decrease of Phi over Phi, (m - 1,) each segment's
+    predicted decrease) on `frames`."""
     dec, phi = predicted_decreases(al, frames, quat, o.min_gap)
     estimate = float(dec.sum() / max(phi, 1e-300))
     if progress:
         progress("estimate", {"round": k, "estimate": estimate, "tol": o.tol})
-    return doerfler_times(dec, frames), estimate
+    return doerfler_times(dec, frames), estimate, dec
 
 
-def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, seconds, estimate, tol) -> Solution:
+def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, seconds, estimate, tol,
+              decreases=()) -> Solution:
     """The Solution of a solve (`solve_least_change`'s Returns)."""
     al = lc.al
     plain_basis = SplineBasis(lc.plain.times, al.t)
@@ -309,4 +313,4 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, s
                     worst(plain_basis, lc.plain.values), worst(basis, frames.values), {},
                     np.concatenate(trace) if trace else np.zeros(0), seconds, evals, unmet=dict(unmet),
                     converged_to_tol=bool(np.isfinite(estimate) and estimate <= tol and not unmet),
-                    final_estimate=estimate, relaxations=tuple(lc.relaxations))
+                    final_estimate=estimate, relaxations=tuple(lc.relaxations), segment_decreases=decreases)

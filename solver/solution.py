@@ -22,8 +22,9 @@ class Round:
     Attributes:
         n_frames, n_variable: frames the round optimized, and how many of them are variable frames.
         result: the optimizer's OptimizeResult.
-        scores: (n_frames_before - 1,) the subdivision scores (`SolveOptions.score`) that chose this
-            round's new frames, on the previous round's segments; None for the first round, a boost and a polish.
+        scores: (n_frames_before - 1,) the subdivision scores (`SolveOptions.score`; the least change:
+            the predicted decreases, `Solution.segment_decreases`) that chose this round's new frames,
+            on the previous round's segments; None for the first round, a boost and a polish.
         times: (n_frames,) the frame times this round optimized [s].
         kind: why the round ran (`ROUND_KINDS`): "start" (the first), "refine" (frames were added),
             "boost" (the same frames under a weight the strategy raised: the orientation's unit term,
@@ -70,6 +71,9 @@ class Solution:
             (`solver.least_change`); {} for `solve`.
         relaxations: the least change's `solver.constraint_set.Relaxation`s: where the keyframes decide a
             constraint (which, site or joint, keyframe, span [s], amount [SI]); () for `solve`.
+        segment_decreases: the least change's refinement checks, in order: ((frame times (m,) [s],
+            (m - 1,) the decrease of Phi a midpoint frame predicts in each segment: the Euler-Lagrange
+            residual of the augmented integrand, `solver.least_change_refine`), ...); () for `solve`.
     """
 
     frames: FrameSet
@@ -92,6 +96,7 @@ class Solution:
     final_estimate: float = float("nan")
     unmet: dict = field(default_factory=dict)
     relaxations: tuple = ()
+    segment_decreases: tuple = ()
 
     @cached_property
     def refinement_estimate(self) -> float:

@@ -178,3 +178,23 @@ def test_shipped_clip_meets_keyframes_and_constraints(shipped):
     assert not sol.unmet and all(v <= 1.0 for v in sol.integrals_final.values()), sol.integrals_final
     m = solver.path_metrics(model, sol.frames.times, sol.frames.values, keyframes)
     assert m["max_penetration_mm"] <= 1.0  # the penetration constraint's tolerance, at 1000 Hz
+
+
+def test_refinement_checks_are_recorded_where_they_chose_frames(shipped):
+    """`Solution.segment_decreases`: each check's predicted decreases, one per segment of the frames it was
+    made on; a refine round's scores are the check that chose its frames, on the frames before it; the
+    last check is on the final frames (the solve stopped there), and its sum over Phi is the estimate."""
+    model, keyframes, info = shipped
+    lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights)
+    sol = solve_least_change(lc, LeastChangeOptions())
+    checks = sol.segment_decreases
+    assert len(checks) >= 2
+    for times, dec in checks:
+        assert dec.shape == (len(times) - 1,) and np.all(dec >= 0.0)
+    refined = [r for r in sol.rounds if r.kind == "refine"]
+    assert refined and all(r.scores is not None for r in refined)
+    for r in refined:  # the check made on the frames just before the new ones were inserted
+        before = next(times for times, dec in checks if dec is r.scores)
+        assert set(before) < set(r.times)
+    np.testing.assert_array_equal(checks[-1][0], sol.frames.times)
+    assert sol.final_estimate <= LeastChangeOptions().tol

@@ -220,7 +220,7 @@ def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms)
 def test_plots_are_written(all_terms):
     _, _, plots = all_terms
     names = sorted(p.name for p in plots.glob("*.png"))
-    assert names == ["dynamics.png", "foot_heights.png", "objective.png"]
+    assert names == ["dynamics.png", "euler_lagrange.png", "foot_heights.png", "objective.png"]
     for p in plots.glob("*.png"):
         assert p.stat().st_size > 20_000  # a real figure, not an empty canvas
 
