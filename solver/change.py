@@ -50,6 +50,10 @@ class MeasureOfChange:
         self._uref = self._qref / np.linalg.norm(self._qref, axis=0)
         self._M = reference.chol @ reference.chol.transpose(0, 2, 1)  # (n, nv, nv) M(q_ref)
         self._Md = np.einsum("nii->ni", self._M).copy()  # (n, nv) diag M
+        w = reference.weights
+        #: (nv, nv) the time-averaged mass matrix sum_i w_i M(q_ref,i) / sum_i w_i [kg m^2]: the
+        #: preconditioner's and the refinement's curvature (`solver.lagrangian.Preconditioner`), made once
+        self.mbar = np.tensordot(w, self._M, axes=1) / w.sum()
 
     def _pose_difference(self, Y: np.ndarray):
         """(dq (n, nv), q (4, s, n), |q| (s, n)): the tangent-space pose difference from the reference."""

@@ -122,9 +122,8 @@ class Preconditioner:
     """
 
     def __init__(self, variables: FrameVariables, basis, change, tmap, d0: float):
-        ref = change.ref
-        w = ref.weights
-        Mbar = np.einsum("n,nik,njk->ij", w, ref.chol, ref.chol) / w.sum()  # time-averaged M (nv, nv)
+        w = change.ref.weights
+        Mbar = change.mbar  # time-averaged M (nv, nv)
         K = (basis.gram(2, w) + change.omega ** 4 * basis.gram(0, w)) * (2.0 / d0)  # (m, m)
         frames, dofs = _variable_dofs(variables, tmap)
         by_dof = {}

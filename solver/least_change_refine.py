@@ -47,7 +47,7 @@ def predicted_decreases(al: AugmentedLagrangian, frames: FrameSet, quat_slots: n
     g = var.pullback(np.zeros(var.size), G)
     ref = al.change.ref
     w = ref.weights
-    Mbar = np.einsum("n,nik,njk->ij", w, ref.chol, ref.chol) / w.sum()
+    Mbar = al.change.mbar
     K = (basis.gram(2, w) + al.change.omega ** 4 * basis.gram(0, w)) * (2.0 / al.d0)
     mids = np.flatnonzero(np.arange(cand.count) % 2 == 1)
     at = [np.flatnonzero(fr == c) for c in mids]
