@@ -254,7 +254,9 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         V_prev, rho_prev = al.V, al.rho
         V = al.update(scaled)
         met = max((float(s.max()) for s in scaled if s.size), default=0.0) <= 1.0 and V <= 1.0
-        stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
+        # a subproblem cut short by the evaluation budget says nothing of what the frames can reach
+        cut = r.result.status is Status.MAX_EVALS
+        stall = stall + 1 if (not cut and STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
         level_its += 1
         kind = "boost"
         if stall >= 2 and stalled_before:
