@@ -59,10 +59,10 @@ from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.contacts import contact_radii
 from solver.path_state import PathState
 from solver.quaternion import swing_angle_grad, twist_angle_grad
+from solver.support import SupportSurfaces
 from solver.surfaces import StaticSurfaces
 from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
 from solver.terms.bending import flexion_angles
-from solver.terms.contact_schedule import SupportSurfaces
 
 __all__ = ["TOLERANCES", "Relaxation", "figure_constraints"]
 

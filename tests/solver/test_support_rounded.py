@@ -2,8 +2,8 @@
 import mujoco
 import numpy as np
 
+from solver.support import SupportSurfaces
 from solver.surfaces import StaticSurfaces
-from solver.terms.contact_schedule import SupportSurfaces
 
 LEDGE = """<mujoco><worldbody>
   <geom name="floor" type="plane" size="5 5 0.1"/>
