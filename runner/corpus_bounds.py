@@ -348,6 +348,8 @@ def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
     if worst is not None:
         out["joint_acc_worst"] = worst
     out["keyframe_conflicts"] = int(report.get("keyframe_conflicts") or 0)
+    if "relaxed" in report:  # {constraint: count}; reports written before it name none
+        out["relaxed"] = sorted(report["relaxed"])
     out["stalled"] = sorted((report.get("stalled") or {}).keys())
     return out
 
@@ -399,7 +401,7 @@ def causes(bound: Bound, figures: dict) -> list[str]:
     too short) where the schedule disagrees with the capture's stance (recall or precision under
     STANCE_AGREES; unknown agreement counts as disagreeing); gaps the capture does not fly: the same where
     it agrees. keyframes contradict the schedule: a surface or contact bound missed on a pair whose
-    keyframes hold a site off the schedule. keyframes force the skate: a skate limit below what every path
+    keyframes decide the bound's own constraint (`_keyframes_decide`). keyframes force the skate: a skate limit below what every path
     through the keyframes slides (`forced_out_of_reach`). bound out of reach: the bound's term stalled, or the
     capture itself misses a bound that is not about surfaces. the optimizer moved the root: a joint or
     site error missed while the root error grew more (`_root_moved`). joints traded for the feet: the
@@ -412,7 +414,7 @@ def causes(bound: Bound, figures: dict) -> list[str]:
     if _gaps_err(bound, figures):
         agrees = min(figures.get("stance_recall", 0.0), figures.get("stance_precision", 0.0)) >= STANCE_AGREES
         out.append("gaps the capture does not fly" if agrees else "contact detection")
-    if bound.kind in ("surface", "contact") and figures.get("keyframe_conflicts", 0) > 0:
+    if bound.kind in ("surface", "contact") and _keyframes_decide(bound, figures):
         out.append("keyframes contradict the schedule")
     if forced_out_of_reach(bound, figures):
         out.append(FORCED)
@@ -434,3 +436,11 @@ def check_pair(figures: dict) -> list[dict]:
         rows.append({"bound": b.name, "held": held, "value": b.measured(figures), "limit": b.limit(figures),
                      "causes": causes(b, figures) if held is False else [], "counted": b.counted})
     return rows
+
+
+def _keyframes_decide(bound: Bound, figures: dict) -> bool:
+    """Whether the keyframes set the limit of a constraint that bounds `bound` (the pair's relaxations,
+    `figures["relaxed"]`); for a report that does not list them, whether there was any relaxation."""
+    if "relaxed" in figures:
+        return bool(set(bound.terms) & set(figures["relaxed"]))
+    return figures.get("keyframe_conflicts", 0) > 0

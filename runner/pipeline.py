@@ -308,7 +308,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         resting feet from the surfaces and the capture's own disagreement, `runner.mocap.contacts.feet_line`;
         None off the subject's figure), "keyframes_on_source" (`keyframes_on_source_report`; None off the
         subject's figure), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
-        where the keyframes decide a constraint, `Solution.relaxations`), "stalled" ({constraint: amount [SI]}
+        where the keyframes decide a constraint, `Solution.relaxations`), "relaxed" ({constraint: count} of
+        those relaxations), "stalled" ({constraint: amount [SI]}
         the keyframes leave out of reach, `Solution.unmet`), "metrics"
         ({"plain", "optimized": path_metrics; "motion": {"plain", "optimized": motion_metrics}}),
         "scene_fitted" (the capture floor's floor_z and floor_slope, capture_frame (w x y z tx ty tz: the
@@ -354,7 +355,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
         "reference_feet_disagreement_mm": _mm(feet_disagreement(ref, problem.model)),
         "stance_agreement": _agreement(problem, ref),
-        "keyframe_conflicts": len(run.solution.relaxations), "stalled": dict(run.solution.unmet or {}),
+        "keyframe_conflicts": len(run.solution.relaxations), "relaxed": _relaxed(run.solution),
+        "stalled": dict(run.solution.unmet or {}),
         "keyframes_on_source": on_source,
         "metrics": run.metrics, "scene_fitted": fitted, "outputs": {k: str(v) for k, v in paths.items()},
     }
@@ -425,3 +427,11 @@ def _agreement(problem, ref) -> dict:
     a = schedule_agreement(problem.model, ref.qpos, ref.frame_time, problem.contacts)
     return {"recall": a.recall, "precision": a.precision, "stance_frames": a.stance_frames,
             "schedule_frames": a.schedule_frames}
+
+
+def _relaxed(solution) -> dict:
+    """{constraint name: how many relaxations the keyframes forced on it} (`Solution.relaxations`)."""
+    out: dict = {}
+    for r in getattr(solution, "relaxations", ()) or ():
+        out[r.constraint] = out.get(r.constraint, 0) + 1
+    return out

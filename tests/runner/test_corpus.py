@@ -185,6 +185,12 @@ def test_causes_the_data_tells():
     assert causes(BOUND["flight"], {**long_gaps, "flight_s": 0.25}) == []
     assert causes(BOUND["flight"], {**long_gaps, "keyframe_conflicts": 2}) == ["contact detection",
                                                                              "keyframes contradict the schedule"]
+    # with the relaxations named (`relaxed`), only those of the bound's own constraints are the keyframes' doing
+    assert causes(BOUND["flight"], {**long_gaps, "keyframe_conflicts": 2, "relaxed": ["slide"]}) == ["contact detection"]
+    assert causes(BOUND["flight"], {**long_gaps, "keyframe_conflicts": 2, "relaxed": ["ground"]}) == [
+        "contact detection", "keyframes contradict the schedule"]
+    assert causes(BOUND["float"], figures(float_mm=6.0, keyframe_conflicts=3, relaxed=["planted"])) == [
+        "keyframes contradict the schedule"]
     # the planted term stalled: its bounds are out of reach; a motion bound is not the schedule's doing
     assert causes(BOUND["skate_excess"], figures(skate_excess_mm=3.0, stalled=["slide"])) == ["bound out of reach"]
     # the acceleration bound (least change) or the forces term left out of reach: so is the jolt bound
