@@ -121,7 +121,7 @@ class LeastChange:
 
 
 def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = 200.0,
-                       forces: bool = False) -> LeastChange:
+                       forces: bool = False, peaks=None) -> LeastChange:
     """Build the problem: the plain spline as the reference motion, D, the figure's constraints.
 
     Args:
@@ -131,7 +131,8 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
             motion capture the keyframes came from (its filtered peaks bound the accelerations).
         rate: quadrature points per second [1/s]. forces: add the force bounds
             (`solver.constraints.forces`: ballistic flights, the friction cone, with a capture the peak
-            ground force), computed by the inverse dynamics.
+            ground force), computed by the inverse dynamics. peaks: with `forces`, the problem's
+            `solver.peak_bounds.PeakBounds` when already made (`Problem.force_bounds`); None: made here.
     Returns:
         LeastChange.
     Raises:
@@ -156,7 +157,10 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     constraints, relaxations = figure_constraints(model, figure, reference, plain, tuple(schedule), flights,
                                                   engine, capture=capture)
     if forces:
-        peak = None if capture is None else peak_bounds(model, plain, capture).ground_force_bw
+        if capture is None:
+            peak = None
+        else:
+            peak = (peaks if peaks is not None else peak_bounds(model, plain, capture)).ground_force_bw
         constraints += figure_forces(model, t, flights, peak)
     # the pose part's frequency: the keyframes' own Nyquist frequency (a change slower than the keyframe
     # spacing is priced by its pose, a faster one by its acceleration)
@@ -271,7 +275,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         decreases.append((frames.times.copy(), dec))
         evals += 3
         if met and estimate <= o.tol:
-            message = f"refinement estimate {estimate:.3g} <= tol {o.tol:g}, every constraint met"
+            message = (f"refinement estimate {estimate:.3g} <= tol {o.tol:g}, every constraint met"
+                       + (" within reach" if unmet else ""))
             break
         if new.size == 0:
             if met or stall >= 2:
@@ -308,9 +313,8 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, s
     def worst(b, P):
         return {c.name: float(s.max()) if s.size else 0.0 for c, s in zip(al.constraints, al.scaled_values(b, P))}
 
-    if unmet:  # the limits were raised to what the path reaches: "met" is within those
-        message = (message.replace("every constraint met", "every constraint met within reach")
-                   + "; out of reach (limit raised by [SI]): " + ", ".join(f"{k} {v:.3g}" for k, v in unmet.items()))
+    if unmet:  # the limits were raised to what the path reaches
+        message += "; out of reach (limit raised by [SI]): " + ", ".join(f"{k} {v:.3g}" for k, v in unmet.items())
     return Solution(frames, lc.plain, tuple(rounds), status, message, 0.0, D / al.d0,
                     worst(plain_basis, lc.plain.values), worst(basis, frames.values), {},
                     np.concatenate(trace) if trace else np.zeros(0), seconds, evals, unmet=dict(unmet),

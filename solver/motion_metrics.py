@@ -269,6 +269,31 @@ def anatomy_figures(model, qpos: np.ndarray) -> dict:
     return out
 
 
+def _orientation_errors(model, qpos, ref, xq, rxq) -> dict:
+    """{"joint_orientation_deg": per ball or free joint, "body_orientation_deg": per body}: the `_stats` of
+    the angle [deg] between the path's and the reference's rotation at every frame (`motion_metrics`).
+
+    Args:
+        model: MjModel. qpos, ref: (n, nq) the path and the reference. xq, rxq: (n, nbody, 4) their
+            bodies' world quaternions (`_kinematics`).
+    """
+    import mujoco
+
+    joints = {}
+    for j in range(model.njnt):
+        t = int(model.jnt_type[j])
+        if t not in (int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_FREE)):
+            continue
+        a = int(model.jnt_qposadr[j]) + (3 if t == int(mujoco.mjtJoint.mjJNT_FREE) else 0)
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
+        joints[name] = _stats(_angle_deg(qpos[:, a:a + 4], ref[:, a:a + 4]))
+    bodies = {}
+    for b in range(1, model.nbody):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
+        bodies[name] = _stats(_angle_deg(xq[:, b], rxq[:, b]))
+    return {"joint_orientation_deg": joints, "body_orientation_deg": bodies}
+
+
 def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarray,
                    reference_contacts: Sequence[Contact], sites: Sequence[str] = SITES,
                    stance: np.ndarray | None = None, capture_filtered: np.ndarray | None = None) -> dict:
@@ -292,8 +317,6 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
     Raises:
         InputError: shapes disagree, fps not positive, a site missing in the model, no floor plane.
     """
-    import mujoco
-
     from solver.surfaces import StaticSurfaces
 
     qpos = np.atleast_2d(np.asarray(qpos, float))
@@ -322,25 +345,11 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         raise InputError(f"stance has shape {np.shape(stance)}; give one column per foot, (n, {len(FEET)}) "
                          f"with n = {n} frames")
 
-    joints = {}
-    for j in range(model.njnt):
-        t = int(model.jnt_type[j])
-        if t not in (int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_FREE)):
-            continue
-        a = int(model.jnt_qposadr[j]) + (3 if t == int(mujoco.mjtJoint.mjJNT_FREE) else 0)
-        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
-        joints[name] = _stats(_angle_deg(qpos[:, a:a + 4], ref[:, a:a + 4]))
-    bodies = {}
-    for b in range(1, model.nbody):
-        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
-        bodies[name] = _stats(_angle_deg(xq[:, b], rxq[:, b]))
-
     def acc(p):
         return np.diff(p, n=2, axis=0) * fps**2 if len(p) >= 3 else np.zeros((0,) + p.shape[1:])
 
     error = {
-        "joint_orientation_deg": joints,
-        "body_orientation_deg": bodies,
+        **_orientation_errors(model, qpos, ref, xq, rxq),
         "root_position_cm": _stats(np.linalg.norm(qpos[:, :3] - ref[:, :3], axis=1), 100.0),
         "site_position_cm": {s: _stats(np.linalg.norm(pos[:, k] - rpos[:, k], axis=1), 100.0)
                              for k, s in enumerate(sites)},

@@ -74,14 +74,8 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
         fitted: the scene was fitted to this clip (`runner.mocap.scene.clip_scene`): on the subject's own
             figure, a root correction beyond its bound is refused (`check_root_correction`: the fit
             missed where the feet rest). In a scene of your own the correction is what the scene needs.
-    On the subject's own figure (the model's figure records this clip's skeleton,
-    `runner.mocap.figure_record`) "legs" is 1 (the figure's legs are the
-    subject's): the root path is the captured one in the levelled frame plus the per-frame vertical
-    height correction c(t) (at most 3 cm, `correct_root_height`; none without surfaces). A capture floor is
-    never flat to the millimetre, so without c(t) a foot in contact sinks into the fitted floor at some
-    frames; the keyframes, taken from the reference and met exactly, would then violate the
-    penetration bound. The export onto the source skeleton subtracts c(t)
-    (`runner.mocap.source_export.root_correction`), so the exported reference is the source again.
+    On the subject's own figure (the model's figure records this clip's skeleton) "legs" is 1: see the
+    module docstring for why the root height is still corrected and how the export takes it off.
 
     Returns:
         Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s],
