@@ -210,12 +210,11 @@ def cell(fmt: str, value) -> str:
     return text
 
 
-def row_targets(labels, weights, sites=()) -> dict[str, str]:
+def row_targets(labels, constraints, sites=()) -> dict[str, str]:
     """{row label: the constraints, comma-separated, that bound the row's figure} (`TERM_ROWS`).
 
     Args:
-        labels: the summary's row labels. weights: the constraint names of the solve (an iterable or
-            a dict; only the names matter).
+        labels: the summary's row labels. constraints: the constraint names of the solve.
         sites: the contact sites whose "  SITE [mm]" penetration rows belong to the penetration constraint.
     Returns:
         only the labels some constraint bounds; a "  NAME: worst / tolerance" row belongs to NAME.
@@ -223,10 +222,10 @@ def row_targets(labels, weights, sites=()) -> dict[str, str]:
     site_rows = {f"  {site} [mm]" for site in sites}
     out = {}
     for label in labels:
-        terms = [name for name in weights if name in TERM_ROWS and (
+        terms = [name for name in constraints if name in TERM_ROWS and (
             label.strip().startswith(TERM_ROWS[name]) or (name == "penetration" and label in site_rows))]
         own = label.strip().removesuffix(": worst / tolerance")
-        if label.endswith(": worst / tolerance") and own in weights:
+        if label.endswith(": worst / tolerance") and own in constraints:
             terms.append(own)
         if terms:
             out[label] = ",".join(terms)
