@@ -35,6 +35,7 @@ from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
 from runner.readme_tables import Block, compare_blocks, replace_blocks, table, timing
+from solver.constraint_set import TOLERANCES
 from solver.errors import InputError
 from solver.metrics import path_metrics
 
@@ -222,12 +223,15 @@ def _terms_all_block(runs: _Runs) -> Block:
         return f"{fmt.format(d[key_rms])} / {fmt.format(d[key_peak])}"
 
     def geometry(d):
-        return (f"{d['max_penetration_mm']:.2f} / {_kf_error(d['keyframe_error'])} / {d['max_norm_deviation']:.4f} / "
-                f"{d['max_hyperextension_deg']:.2f}")
+        return f"{_kf_error(d['keyframe_error'])} / {d['max_norm_deviation']:.4f} / {d['max_hyperextension_deg']:.2f}"
 
     rows = [
-        ["max penetration [mm] / keyframe error / max \\|1-\\|q\\|\\| / hyperextension [deg]", geometry(p),
-         geometry(o) + mark("max penetration [mm] (1000 Hz)", "max |1 - |q||", "max hyperextension [deg]")],
+        # the optimized penetration sits at its constraint's tolerance (1 mm), and where in it the solve stops
+        # follows the machine's round-off (0.73 and 1.26 mm on two machines): machine-dependent, as a wall time
+        [f"max penetration [mm] (the constraint's tolerance: {TOLERANCES['penetration'] * 1e3:g} mm)", f"{p['max_penetration_mm']:.2f}",
+         timing(f"{o['max_penetration_mm']:.2f}" + mark("max penetration [mm] (1000 Hz)"))],
+        ["keyframe error / max \\|1-\\|q\\|\\| / hyperextension [deg]", geometry(p),
+         geometry(o) + mark("max |1 - |q||", "max hyperextension [deg]")],
         ["RMS / peak joint torque [N m]", pair("rms_joint_torque_Nm", "peak_joint_torque_Nm", "{:.1f}", p),
          pair("rms_joint_torque_Nm", "peak_joint_torque_Nm", "{:.1f}", o)
          + mark("RMS joint torque [N m]", "peak joint torque [N m]")],
