@@ -74,7 +74,7 @@ MOTION_MARGINS = {
 #: motion): worse only above both the plain spline's and the capture's, by 1 %
 CAPTURE_LEVEL_ROWS = ("jerk_root_m_s3", "jerk_sites_m_s3")
 #: [deg] a joint (the root's orientation included) further than this from the capture at some frame has
-#: lost the capture's motion: keys no more than a quarter turn apart (`solver.keyframe_selection.turn_keys`)
+#: lost the capture's motion: keys no more than a quarter turn apart (`runner.mocap.keyframe_selection.turn_keys`)
 #: leave no in-between that far from it unless the path goes round the other way (a full turn joined the
 #: short way is 174 deg off); the joint-angle row is then marked even if the plain spline is as far off
 LOST_TURN_DEG = 90.0
@@ -322,7 +322,7 @@ _PLAUSIBILITY_ROWS = (
 )
 
 
-#: the no-jolt rows of `motion_metrics_table` (`solver.jolts`: finite differences at the capture's frames,
+#: the no-jolt rows of `motion_metrics_table` (`runner.jolts`: finite differences at the capture's frames,
 #: torques by mj_inverse; the reference column is the capture low-pass filtered at 6 Hz): (label, key in a
 #: motion-metrics block, format, the `bench corpus` bound that marks the row `OVER`)
 _JOLT_ROWS = (
@@ -339,7 +339,7 @@ def _over_jolt_bound(bound: str, key: str, cols: tuple[dict, dict, dict]) -> boo
     """Whether the optimized path misses the no-jolt `bound` (`runner.corpus_bounds`) on the blocks `cols`
     (reference, plain, optimized); False when a figure is missing."""
     from runner.corpus_bounds import BOUND_BY_NAME
-    from solver.jolts import worst_joint_ratio
+    from runner.jolts import worst_joint_ratio
 
     b = BOUND_BY_NAME[bound]
     ref, plain, opt = cols
@@ -370,7 +370,7 @@ def _accuracy_rows(error: dict) -> list[tuple[str, str, float, float]]:
 
 
 def motion_metrics_table(plain: dict, optimized: dict) -> str:
-    """The motion metrics against the reference (`solver.motion_metrics`), reference | plain | optimized,
+    """The motion metrics against the reference (`runner.motion_metrics`), reference | plain | optimized,
     a row marked "worse" where the optimized path is worse than the plain spline (`motion_worse`).
 
     Args:

@@ -17,7 +17,7 @@ schedule's contacts, the flight while the capture stands): checked the same way,
 The skate against the plain spline's is held on the skate above what the keyframes force
 (`skate_excess`): the part no path through the keyframes avoids is not the optimizer's. The no-jolt
 bounds (`pelvis_acc`, `joint_acc`, `torque_rms`) read the jolt figures of the motion metrics
-(`solver.jolts`: finite differences at the capture's frames, torques by `mj_inverse`), the capture's
+(`runner.jolts`: finite differences at the capture's frames, torques by `mj_inverse`), the capture's
 low-pass filtered at 6 Hz (Winter) before it is differentiated.
 The capture's own figure for the same quantity (`Bound.capture`) tells a scene that does not
 fit the capture (the capture misses a surface bound itself) and a bound out of reach (the capture misses
@@ -57,7 +57,7 @@ CAUSES = {
                                          "(`Solution.relaxations`)",
     "keyframes force the skate": "the keyframes alone force more skate than the limit: in each contact a site "
                                  "passes through its keyed positions, so it slides at least the distance between "
-                                 "consecutive ones (`solver.motion_metrics.forced_skate_mm`); no path through the "
+                                 "consecutive ones (`runner.motion_metrics.forced_skate_mm`); no path through the "
                                  "keyframes holds the bound",
     "bound out of reach": "the least change could not meet the constraint that bounds the figure (its limit "
                           "raised to what the path reaches, `Solution.unmet`), or the capture itself misses "
@@ -137,7 +137,7 @@ class Bound:
 #: the issue's sentence the two figures beside the float bound implement (`Bound.counted` False)
 _STANCE_AND_SCHEDULE = ("float and flight measured on the capture's stance frames as well as on the schedule's, "
                         "so a gap in the schedule cannot hide a floating foot (shown, not counted).")
-#: the issue's sentences of the no-jolt bounds (their figures: `solver.jolts`)
+#: the issue's sentences of the no-jolt bounds (their figures: `runner.jolts`)
 _NO_JOLTS = "no jolts, against the larger of the plain spline's and the capture's (filtered at 6 Hz, Winter):"
 #: the acceptance list, one record per bound (docs/corpus.md "Bounds"), and the figures shown beside it
 BOUNDS: tuple[Bound, ...] = (
@@ -235,7 +235,7 @@ def _larger(*keys) -> Callable[[dict], float | None]:
 
 
 _PLAIN, _OPT, _CAPTURE = (*_M, "plain", "path"), (*_M, "optimized", "path"), (*_M, "plain", "reference")
-#: the jolt figures' keys in a motion-metrics block (`solver.jolts.jolt_figures`)
+#: the jolt figures' keys in a motion-metrics block (`runner.jolts.jolt_figures`)
 _PELVIS, _JOINTS, _TORQUE = ("peak_pelvis_acceleration_m_s2", "peak_angular_acceleration_rad_s2",
                              "rms_joint_torque_Nm")
 
@@ -243,8 +243,8 @@ _PELVIS, _JOINTS, _TORQUE = ("peak_pelvis_acceleration_m_s2", "peak_angular_acce
 def _worst_joint(doc: dict) -> list | None:
     """[joint, its ratio, the optimized path's peak, the plain spline's, the capture's [rad/s^2], when the
     optimized path peaks [s]] of the ball joint whose peak angular acceleration is largest against the larger
-    of the plain spline's and the capture's (`solver.jolts.worst_joint_ratio`); None when a block lacks them."""
-    from solver.jolts import worst_joint_ratio
+    of the plain spline's and the capture's (`runner.jolts.worst_joint_ratio`); None when a block lacks them."""
+    from runner.jolts import worst_joint_ratio
 
     opt, plain, cap = (_dig(doc, (*b, _JOINTS)) for b in (_OPT, _PLAIN, _CAPTURE))
     worst = worst_joint_ratio(opt, plain, cap) if opt and plain and cap else None
@@ -277,7 +277,7 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     "skate_mm": _at(*_M, "optimized", "path", "skate_contact_mm"),
     "plain_skate_mm": _at(*_M, "plain", "path", "skate_contact_mm"),
     "capture_skate_mm": _at(*_M, "plain", "reference", "skate_contact_mm"),
-    # the skate every path through the keyframes has (a lower bound, `solver.motion_metrics.forced_skate_mm`),
+    # the skate every path through the keyframes has (a lower bound, `runner.motion_metrics.forced_skate_mm`),
     # and each path's skate above it
     "forced_skate_mm": _at(*_M, "keyframes", "forced_skate_contact_mm"),
     "skate_excess_mm": lambda doc: _above_forced(doc, "optimized"),
@@ -292,12 +292,12 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     "site_error_cm": _mean_of_means(*_M, "optimized", "error", "site_position_cm"),
     "plain_site_error_cm": _mean_of_means(*_M, "plain", "error", "site_position_cm"),
     # knee/elbow rotation off the hinge: each joint's excess over the capture's own at that joint
-    # (`solver.motion_metrics.anatomy_figures`), so the bound is "<= the capture's + 3 deg" joint by joint
+    # (`runner.motion_metrics.anatomy_figures`), so the bound is "<= the capture's + 3 deg" joint by joint
     "off_hinge_deg": lambda doc: _off_hinge_excess(doc),
     "capture_off_hinge_deg": lambda doc: None if _off_hinge_excess(doc) is None else 0.0,
     "hyperextension_deg": _at("metrics", "optimized", "max_hyperextension_deg"),
     "plain_hyperextension_deg": _at("metrics", "plain", "max_hyperextension_deg"),
-    # no jolts (`solver.jolts`): each path's figures at the capture's frames, the capture's filtered at 6 Hz;
+    # no jolts (`runner.jolts`): each path's figures at the capture's frames, the capture's filtered at 6 Hz;
     # the limits are made from the larger of the plain spline's and the capture's
     "pelvis_acc_m_s2": _at(*_OPT, _PELVIS),
     "pelvis_acc_t_s": _at(*_OPT, "peak_pelvis_acceleration_t_s"),

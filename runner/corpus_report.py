@@ -99,7 +99,7 @@ def failing_lines(results: Sequence[dict]) -> list[str]:
 def _where(check: dict, figures: dict) -> str:
     """What a missed bound's figure was made of, for the failing-pairs list: for the joint-angle error the
     joint whose mean error grew most (`corpus_bounds.pair_figures` "joint_rise": " (largest rise: r_hip +2.3
-    deg)"); for a skate bound the skate the keyframes force (`solver.motion_metrics.forced_skate_mm`); for a
+    deg)"); for a skate bound the skate the keyframes force (`runner.motion_metrics.forced_skate_mm`); for a
     no-jolt bound the optimized path's peak (when, which joint) and the plain spline's and the capture's
     figures its limit is the larger of (`_jolt_where`); "" otherwise."""
     rise, forced = figures.get("joint_rise"), figures.get("forced_skate_mm")

@@ -6,7 +6,7 @@ Four paths through the same keyframes (default models/orient_example.json), as i
 the initial spline (keyframes only, dotted), one variable frame per keyframe interval (dashed), three
 per interval (solid), and adaptive subdivision with only a few frames placed where the Euler-Lagrange
 score is highest (dash-dot). For each, the strong-form residual of eq. 10-11 on the orientation shown
-(u = q/|q|, tangential part; solver.euler_lagrange) is integrated over each tenth of the path.
+(u = q/|q|, tangential part; runner.euler_lagrange) is integrated over each tenth of the path.
 `dynsplines orient ... --plot FILE.png` draws the same panel for its keyframes, with its own result added.
 """
 from __future__ import annotations
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from runner.euler_lagrange import deviation_by_region
 from runner.files import atomic_output
-from solver.euler_lagrange import deviation_by_region
 from solver.orient import check_keyframes, default_options, orient
 
 #: variable frames of the adaptive curve (the paper's used 2)

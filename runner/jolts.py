@@ -2,7 +2,7 @@
 for, measured the way an independent checker would (docs/corpus.md "Bounds").
 
 The motion is given as frames sampled at a fixed rate (the capture's, 120 Hz for the CMU clips), as the
-motion metrics sample a path (`solver.motion_metrics`); nothing of the spline or the objective is used:
+motion metrics sample a path (`runner.motion_metrics`); nothing of the spline or the objective is used:
 
 * velocities at the half steps by MuJoCo's `mj_differentiatePos` (positions: (q[i+1] - q[i]) fps; a ball
   joint: the rotation vector of q[i]^-1 q[i+1] times fps, in the child's frame), and at the frames i = 1..n-2

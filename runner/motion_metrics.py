@@ -57,7 +57,7 @@ than mesh vertices)
   swinging feet as "in contact" (16_23 scores 0.7); skating_ratio_contacts replaces the height test
   by the REFERENCE's contacts (a site planted at both ends of a step at fps moving > 0.5 m/s).
 - flight_time_s: frames in which every site is clear (h > FLIGHT_HEIGHT = 0.03 m, the contact entry
-  height `contact_thresholds.DETECT_HEIGHT_ON`) times 1/fps. Thresholds: `solver.contact_thresholds`.
+  height `solver.contact_thresholds.FLIGHT_HEIGHT`) times 1/fps. Thresholds: below.
 - jerk_root_m_s3 / jerk_sites_m_s3: third finite difference of positions * fps^3, mean norm (root
   position; all contact sites), METRICS.md "Smoothness".
 
@@ -70,11 +70,11 @@ Anatomy (`anatomy_figures`; the decomposition and the table: `solver.terms.anato
   (AAOS 1965, not widened to the keyframes as the rom term's is), and rom_excess_motion: which
   ("l_ankle dorsiflexion / plantarflexion"; "" when none does); rom_excess_deg_by_joint per joint.
 
-Jolts (`solver.jolts.jolt_figures`: finite differences at fps, torques by `mj_inverse`)
+Jolts (`runner.jolts.jolt_figures`: finite differences at fps, torques by `mj_inverse`)
 - peak_pelvis_acceleration_m_s2, peak_angular_acceleration_rad_s2 (per ball joint; the largest:
   peak_angular_acceleration_max_rad_s2), rms_joint_torque_Nm, with the times of the peaks. The
   reference's are of the motion given as `capture_filtered` (the capture low-pass filtered at 6 Hz before
-  it is differentiated, `solver.jolts.filter_capture`), else of the reference as given.
+  it is differentiated, `runner.jolts.filter_capture`), else of the reference as given.
 """
 from __future__ import annotations
 
@@ -82,11 +82,18 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from solver.contact_thresholds import FLIGHT_HEIGHT, FLOAT_TOL, GMD_HEIGHT, SKATE_HEIGHT
+from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.contacts import FEET, SITES, Contact, contact_mask, contact_radii, lowest_points
 from solver.errors import InputError
 
-#: GMD skating speed [m/s] and frame rate [Hz] (its contact height: `contact_thresholds.GMD_HEIGHT`).
+# -- the published metrics' own thresholds, as they define them (../shared/METRICS.md)
+#: PhysDiff skate: a site is on the ground at most this high [m].
+SKATE_HEIGHT = 0.02
+#: PhysDiff float: the lowest site counts as floating above this height [m].
+FLOAT_TOL = 0.005
+#: Guided Motion Diffusion's skating ratio: a site is in contact below this height [m].
+GMD_HEIGHT = 0.05
+#: GMD skating speed [m/s] and frame rate [Hz].
 GMD_SPEED = 0.5
 GMD_RATE = 20.0
 
@@ -307,13 +314,13 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         sites: contact site names.
         stance: (n, 2) bool, the reference's own stance per foot (left, right; e.g.
             `runner.mocap.stance.capture_stance`); None: no stance figures.
-        capture_filtered: (n, nq) the reference low-pass filtered (`solver.jolts.filter_capture`, over the
+        capture_filtered: (n, nq) the reference low-pass filtered (`runner.jolts.filter_capture`, over the
             whole clip and cut to these frames), the motion of the reference's jolt figures; None: the
             reference as given.
     Returns:
         JSON-serializable dict: {"fps", "frames", "sites", "error": {...}, "path": {...},
         "reference": {...}}; "path" and "reference" hold `plausibility`, `anatomy_figures` and
-        `solver.jolts.jolt_figures` figures (no jolt figures for fewer than 3 frames).
+        `runner.jolts.jolt_figures` figures (no jolt figures for fewer than 3 frames).
     Raises:
         InputError: shapes disagree, fps not positive, a site missing in the model, no floor plane.
     """
@@ -370,8 +377,8 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
 
 
 def _jolts(model, qpos: np.ndarray, fps: float) -> dict:
-    """`solver.jolts.jolt_figures` of (n, nq) frames, {} for fewer than 3."""
-    from solver.jolts import jolt_figures
+    """`runner.jolts.jolt_figures` of (n, nq) frames, {} for fewer than 3."""
+    from runner.jolts import jolt_figures
 
     return jolt_figures(model, qpos, fps) if len(qpos) >= 3 else {}
 

@@ -17,7 +17,7 @@ Steps (docs/architecture.md; the contact steps: docs/contacts.md):
    rerun `dynsplines animate` on it), and read back, so the solve is the one `animate` would do.
 4. Solve (solver.solve), acceptance figures of the plain spline and the optimized path
    (`solver.metrics.path_metrics`), and the motion metrics of both and of the reference, at the
-   reference's frames (`solver.motion_metrics`).
+   reference's frames (`runner.motion_metrics`).
 5. Outputs: the saved path (.npz, with `metrics_json` and `contacts`), the metrics (.json), plots, video.
 """
 from __future__ import annotations

@@ -4,7 +4,7 @@ Every command that optimizes keyframes (`animate`, `run-and-step`, `mocap`, `bat
 
 1. solve the `solver.Problem` (progress bars, Ctrl-C keeps the best path so far);
 2. the metrics of the plain spline and the optimized path (`solver.metrics.path_metrics`) and, with a
-   motion-capture reference, the motion metrics of both against it (`solver.motion_metrics`);
+   motion-capture reference, the motion metrics of both against it (`runner.motion_metrics`);
 3. the summary tables, then the outputs the user asked for: the saved path (.npz), exports (.bvh,
    .glb), plots, the metrics report (.json) and the side-by-side video.
 
@@ -141,18 +141,18 @@ def _sample(frames, times: np.ndarray, layout: StateLayout) -> np.ndarray:
 def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     """`motion_metrics` of the plain spline and the optimized path against the reference clip, over the
     reference's frames within the keyframes' time span (contact times shifted with them), and what the
-    keyframes alone force on any path (`solver.motion_metrics.forced_skate_mm`, over the full keyframes).
+    keyframes alone force on any path (`runner.motion_metrics.forced_skate_mm`, over the full keyframes).
 
     Returns:
-        {"plain": ..., "optimized": ...}, each a `solver.motion_metrics.motion_metrics` dict (the reference's
+        {"plain": ..., "optimized": ...}, each a `runner.motion_metrics.motion_metrics` dict (the reference's
         jolt figures of the capture filtered over the whole clip, `_filtered_capture`), and
         "keyframes": {"forced_skate_contact_mm": lower bound of skate_contact_mm [mm/frame]}.
     Raises:
         InputError: fewer than 4 reference frames in the keyframes' span.
     """
     from runner.mocap.stance import capture_stance
+    from runner.motion_metrics import forced_skate_mm, motion_metrics
     from solver.contacts import Contact
-    from solver.motion_metrics import forced_skate_mm, motion_metrics
 
     layout = StateLayout.from_model(model)
     t0, t1 = solution.initial.times[0], solution.initial.times[-1]
@@ -168,7 +168,7 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     fps = 1.0 / reference.frame_time
     # the capture's own stance (runner/mocap/stance.py), over the whole clip so its hysteresis starts there
     stance = capture_stance(model, reference.qpos, reference.frame_time)[keep]
-    smooth = _filtered_capture(reference, layout)[keep]  # the capture's jolt figures (solver.jolts)
+    smooth = _filtered_capture(reference, layout)[keep]  # the capture's jolt figures (runner.jolts)
     out = {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted, stance=stance,
                                  capture_filtered=smooth)
            for label, fs in (("plain", solution.initial), ("optimized", solution.frames))}
@@ -180,10 +180,10 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
 
 
 def _filtered_capture(reference, layout: StateLayout) -> np.ndarray:
-    """The reference's qpos low-pass filtered over the whole clip (`solver.jolts.filter_capture`, 6 Hz, Winter),
+    """The reference's qpos low-pass filtered over the whole clip (`runner.jolts.filter_capture`, 6 Hz, Winter),
     so the filter's ends lie outside the keyframes' span where the clip extends beyond it; a clip too short
     to filter (under 13 frames) is returned as it is."""
-    from solver.jolts import filter_capture
+    from runner.jolts import filter_capture
 
     try:
         return filter_capture(reference.times, reference.qpos, layout)
@@ -369,7 +369,7 @@ ANATOMY_ROWS = (("knee rotation off the hinge [deg]", "off_hinge_knee_deg", "{:.
 
 
 def anatomy_summary_rows(motion) -> list:
-    """Summary rows for the anatomical limits (`solver.motion_metrics.anatomy_figures`, docs/anatomy.md):
+    """Summary rows for the anatomical limits (`runner.motion_metrics.anatomy_figures`, docs/anatomy.md):
     the largest knee and elbow rotation off the hinge and the largest angle beyond the published range of
     motion, plain spline and optimized at the capture's frames, the capture's own in the label.
 
@@ -390,7 +390,7 @@ def anatomy_summary_rows(motion) -> list:
 
 def contact_summary_rows(motion) -> list:
     """Summary rows for the feet: float, skate, skating ratio, flight time and flight-phase error
-    (`solver.motion_metrics.flight_mismatch`, extra + missed) of both paths against the motion-capture
+    (`runner.motion_metrics.flight_mismatch`, extra + missed) of both paths against the motion-capture
     reference (`motion`: metrics["motion"], the `motion_metrics` of both paths at the clip's rate; the
     capture's own figure in the label), then the anatomy rows (`anatomy_summary_rows`); each marked where the optimized path is worse than
     the plain spline (`runner.console.motion_worse`).

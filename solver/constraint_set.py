@@ -33,7 +33,7 @@ there; the problem is made well posed instead of excused:
   better, never worse, and the plain spline meets every limit, so the problem stays feasible.
 * Two full keyframes in one foot contact that hold its support site a distance d apart along the
   surface make it slide at least d between them (the triangle inequality; the skate the keyframes
-  force, `solver.motion_metrics.forced_skate_mm`, is the same bound): the slide limit is
+  force, `runner.motion_metrics.forced_skate_mm`, is the same bound): the slide limit is
   SLIDE_DISTANCE plus the sum of those d.
 * The anatomical limits are widened to the reference's own worst angle (`solver.constraints.anatomy`).
 * No jolts is a bound only with a capture (keyframes made from motion capture): then A is the larger of
@@ -123,7 +123,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     t = reference.t
     sites = tuple(figure.contact_sites)
     surfaces = StaticSurfaces.from_model(model)
-    support = SupportSurfaces(surfaces, footprint_margin=0.0, rounded_edges=True)
+    support = SupportSurfaces(surfaces, rounded_edges=True)
     radii = contact_radii(model, sites)
     out = []
     if engine is not None and surfaces.count:

@@ -358,7 +358,7 @@ def reference_contacts(model, qpos: np.ndarray, frame_time: float, **thresholds)
 
 def airborne_intervals(times: np.ndarray, heights: np.ndarray, height: float = DETECT_HEIGHT_ON) -> tuple[tuple[float, float], ...]:
     """The intervals where a motion is airborne: every site higher than `height` (the flight metric's
-    3 cm, `solver.motion_metrics.FLIGHT_HEIGHT`), a run of such frames i..j as (t_i - dt/2, t_j + dt/2)
+    3 cm, `runner.motion_metrics.FLIGHT_HEIGHT`), a run of such frames i..j as (t_i - dt/2, t_j + dt/2)
     with dt the median frame spacing, so an interval lasts as long as the metric counts its frames.
 
     Args:

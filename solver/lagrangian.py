@@ -233,7 +233,7 @@ class SubproblemResult:
     extra: dict = field(default_factory=dict)
 
 
-def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, ftol_rel: float = 1e-6,
+def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, ftol_rel: float,
                      max_evals: int = 0, max_time_s: float = 0.0, should_stop=None, callback=None,
                      basis=None) -> SubproblemResult:
     """Minimize Phi over the free values of `frames` (L-BFGS in the preconditioned variables).

@@ -120,7 +120,7 @@ class LeastChange:
     knots: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = 200.0,
+def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = LeastChangeOptions.rate,
                        forces: bool = False, peaks=None) -> LeastChange:
     """Build the problem: the plain spline as the reference motion, D, the figure's constraints.
 

@@ -34,6 +34,10 @@ from solver.spline import interpolate
 from solver.terms.bending import Hyperextension
 from solver.terms.penetration import Penetration
 
+#: [1/s] samples per second of a path's acceptance figures and of the peaks that bound it
+#: (`solver.peak_bounds`): 1 ms resolves the 10-25 ms spikes beside keyframes a jolt shows.
+SAMPLE_RATE = 1000.0
+
 
 def sample_times(t0: float, t1: float, rate: float) -> np.ndarray:
     """(n,) times from t0 to t1 inclusive at `rate` samples per second [s]."""
@@ -57,7 +61,7 @@ def keyframe_error(frames: FrameSet | tuple, keyframes: Keyframes, quat_slots) -
     return float(err.max()) if err.size else 0.0
 
 
-def dynamics_series(model, frame_times, frames, rate: float = 1000.0, sites=None,
+def dynamics_series(model, frame_times, frames, rate: float = SAMPLE_RATE, sites=None,
                     flight_threshold: float = 0.5) -> dict:
     """Inverse dynamics along a path (the natural cubic spline through frames), sampled densely.
 
@@ -151,7 +155,7 @@ def _ground_and_pelvis(series: dict, rms, peak) -> dict:
     return out
 
 
-def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None, rate: float = 1000.0,
+def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None, rate: float = SAMPLE_RATE,
                  sites=None, dynamics: bool = True) -> dict:
     """Acceptance figures of a path (the natural cubic spline through frames).
 

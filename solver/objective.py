@@ -18,18 +18,12 @@ import numpy as np
 
 from solver.errors import DynsplinesError, InputError
 from solver.path_context import PathContext
-from solver.quadrature import check_points, gauss_times, quadrature_times
+from solver.quadrature import GAUSS_POINTS, check_points, gauss_times, quadrature_times
+from solver.spline import BLOCK_DOUBLES
 from solver.spline_basis import SplineBasis
 from solver.terms.base import Term, TermEval
 from solver.terms.covariant import NormalizedCovariantAcceleration, unit_and_normalized
 from solver.terms.unit import UnitQuaternion
-
-#: Doubles (points x nq) per block of the pointwise terms (`Term.pointwise`) on long paths (more than
-#: 4 blocks' worth; shorter paths are evaluated whole): a block's arrays (128 KB each; 321 points of
-#: the figure's 51 components) and a term's temporaries stay in a core's L2 cache, a long clip's do
-#: not. Run-and-step's gait tiled 8x (5440 points): 60-65 -> 54-60 ms per evaluation (6-11%; blocks of
-#: 128-1024 points within noise of each other; 2 MB L2; docs/scaling.md).
-BLOCK_DOUBLES = 1 << 14
 
 #: Plain-spline integrals below this keep their term's scale 1 in `Objective.renormalize` (as a term
 #: that is zero there does): a term that is zero up to rounding on the plain spline (a penetration of
@@ -94,7 +88,7 @@ class Objective:
     rate: float = 400.0
     scales: np.ndarray = field(default=None)
     quadrature: str = "uniform"
-    points: int = 4
+    points: int = GAUSS_POINTS
 
     def __post_init__(self):
         self.weights = np.asarray(self.weights, dtype=float).reshape(-1)

@@ -36,6 +36,7 @@ from solver.orient_refine import (  # noqa: F401  (measures re-exported: orient.
     max_norm_deviation,
     unit_rows,
 )
+from solver.quadrature import GAUSS_POINTS
 from solver.solve import Solution, SolveOptions, solve
 from solver.subdivide import global_times
 from solver.terms import CovariantAcceleration, NormalizedCovariantAcceleration, UnitQuaternion
@@ -50,13 +51,6 @@ UNIT_WEIGHT = 0.1
 
 #: The paper's weights (sec. 3, figure 9): lambda_1 : lambda_2 = 2 : 5 on renormalized terms (eq. 7).
 PAPER_WEIGHTS = (2.0, 5.0)
-
-#: Default quadrature: Gauss-Legendre with GAUSS_POINTS nodes on every spline segment. The integrand is
-#: smooth inside a segment (the spline is one cubic there), so 4 nodes per segment integrate it to ~1e-6
-#: relative on the default frames of the test sets (1e-9 with 5 frames per keyframe interval), where the
-#: paper's uniform rule needed 80-120 points per second for a gap of 1e-4; 3 nodes change the default
-#: result (docs/orient.md). Every segment, however short, has its own nodes.
-GAUSS_POINTS = 4
 
 #: Uniform quadrature (`rate=` given, or `default_rate`): at least this many points per second, and at
 #: least MIN_POINTS_PER_KEY_INTERVAL points in the shortest keyframe interval (so a frame inserted there

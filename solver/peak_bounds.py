@@ -16,7 +16,7 @@ ground force and pelvis acceleration the optimized path may show: the larger of
 The figures are those of `solver.metrics` (`dynamics_series`, `dynamics_metrics`): ground force = the
 contact-free root force |F| on the samples where the flight indicator says the figure is on the ground,
 in body weights |F| / (m g); pelvis acceleration = |x''| of the root position [m/s^2], gravity not
-included; peaks over time at `RATE` samples per second.
+included; peaks over time at `solver.metrics.SAMPLE_RATE` samples per second.
 """
 from __future__ import annotations
 
@@ -34,8 +34,6 @@ CUTOFF_HZ = 6.0
 #: Winter's correction of a two-pass (zero-lag) 2nd-order Butterworth: design at cutoff / 0.802 so that
 #: the -3 dB frequency of the two passes is the cutoff ((2^(1/2) - 1)^(1/4) = 0.802)
 TWO_PASS_CORRECTION = 0.802
-#: [1/s] samples per second of the peaks (the summary's acceptance figures are at 1000 Hz)
-RATE = 1000.0
 #: [s] capture frames kept on each side of the keyframes' span for the spline through the filtered
 #: capture (its natural end conditions then lie outside the span the peaks are read on)
 PAD_S = 0.1
@@ -64,7 +62,7 @@ class PeakBounds:
     plain_pelvis_acceleration_ms2: float
     capture_ground_force_bw: float | None = None
     capture_pelvis_acceleration_ms2: float | None = None
-    cutoff_hz: float = 6.0
+    cutoff_hz: float = CUTOFF_HZ
 
     def as_dict(self) -> dict:
         """The fields as a JSON-ready dict."""
@@ -145,14 +143,14 @@ def _series(model, frame_times, frames, t) -> tuple[np.ndarray, np.ndarray, np.n
 
 def _peaks(model, frame_times, frames, window=None, flight_too: bool = False) -> tuple[float, float]:
     """(peak ground force [body weights], peak pelvis acceleration [m/s^2]) of the natural cubic spline
-    through (frame_times, frames), at `RATE` samples per second and at the frame times (where the
+    through (frame_times, frames), at `SAMPLE_RATE` samples per second and at the frame times (where the
     spline's x'', linear between them, peaks), over `window` = (t0, t1) (default all); with flight_too
     the force peak is over every sample, not only those on the ground."""
-    from solver.metrics import sample_times
+    from solver.metrics import SAMPLE_RATE, sample_times
 
     frame_times, frames = np.asarray(frame_times, float), np.asarray(frames, float)
     t0, t1 = (frame_times[0], frame_times[-1]) if window is None else window
-    t = np.union1d(sample_times(t0, t1, RATE), frame_times[(frame_times >= t0) & (frame_times <= t1)])
+    t = np.union1d(sample_times(t0, t1, SAMPLE_RATE), frame_times[(frame_times >= t0) & (frame_times <= t1)])
     force, acc, flight = _series(model, frame_times, frames, t)
     force = force if flight_too else force[~flight]
     return (float(force.max()) if force.size else float("nan"), float(acc.max()) if acc.size else float("nan"))

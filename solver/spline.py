@@ -163,7 +163,7 @@ def interpolate(frame_times: np.ndarray, frames: np.ndarray, t: np.ndarray, nu: 
     out = [np.empty((tt.size, y.shape[1])) for _ in orders]
     # blocks of samples: the gathered rows and the temporaries of a block stay in a core's cache (a
     # long path's whole (n, nq) temporaries do not: a limit check samples 17 s at 4000 Hz)
-    rows = max(64, _BLOCK_DOUBLES // max(1, y.shape[1]))
+    rows = max(64, BLOCK_DOUBLES // max(1, y.shape[1]))
     for s0 in range(0, tt.size, rows):
         sl = slice(s0, s0 + rows)
         k, a, b, h = _segments(x, tt[sl])
@@ -175,8 +175,12 @@ def interpolate(frame_times: np.ndarray, frames: np.ndarray, t: np.ndarray, nu: 
     return tuple(out) if isinstance(nu, tuple) else out[0]
 
 
-#: Doubles (samples x components) per block of `interpolate` (as `solver.objective.BLOCK_DOUBLES`).
-_BLOCK_DOUBLES = 1 << 14
+#: Doubles (points x components) per block of points on long paths, here and in the pointwise terms
+#: (`Term.pointwise`, more than 4 blocks' worth; shorter paths are evaluated whole): a block's arrays
+#: (128 KB each; 321 points of the figure's 51 components) and a term's temporaries stay in a core's L2
+#: cache, a long clip's do not. Run-and-step's gait tiled 8x (5440 points): 60-65 -> 54-60 ms per
+#: evaluation (6-11%; blocks of 128-1024 points within noise of each other; 2 MB L2; docs/scaling.md).
+BLOCK_DOUBLES = 1 << 14
 
 
 def _order(order, a, b, h, yk, yk1, Mk, Mk1):

@@ -143,8 +143,8 @@ def adaptive_times(scores: np.ndarray, frames: FrameSet, budget: int, ratio: flo
     return np.sort(mids[keep])
 
 
-def predicted_times(shares: np.ndarray, frames: FrameSet, target: float, budget: int, rate: float = 4.0,
-                    max_split: int = 8) -> np.ndarray:
+def predicted_times(shares: np.ndarray, frames: FrameSet, target: float, budget: int, rate: float,
+                    max_split: int) -> np.ndarray:
     """Times of the new frames that should bring an estimated error to `target` in one round: segment c,
     whose share of the estimate is e_c, is cut into k_c equal pieces (k_c - 1 new frames).
 

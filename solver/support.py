@@ -14,7 +14,6 @@ class SupportSurfaces:
 
     Args:
         surfaces: StaticSurfaces of the scene.
-        footprint_margin: [m] a box supports a point whose projection is within this of its top face.
         rounded_edges: with surfaces chosen per point, a point beside a box's footprint is at its
             Euclidean distance from the top face (the rectangle) rather than unsupported by the box:
             sqrt(out^2 + v^2), out the horizontal distance past the footprint's edge, v the height
@@ -28,7 +27,7 @@ class SupportSurfaces:
             Analysis, ex. 2.25 and th. 2.26).
     """
 
-    def __init__(self, surfaces: StaticSurfaces, footprint_margin: float = 0.03, rounded_edges: bool = False):
+    def __init__(self, surfaces: StaticSurfaces, rounded_edges: bool = False):
         self.surfaces = surfaces
         self.rounded_edges = bool(rounded_edges)
         self.names = surfaces.names
@@ -50,7 +49,7 @@ class SupportSurfaces:
             is_box.append(True)
             others = [b for b in range(3) if b != a]
             tang.append(R[:, others])
-            half2.append(h[others] + footprint_margin)
+            half2.append(h[others])
         self.point = np.array(pts, float).reshape(-1, 3)
         self.normal = np.array(nrm, float).reshape(-1, 3)
         self.is_box = np.array(is_box, bool)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from runner.mocap.retarget import Reference
-from solver.contact_thresholds import STANCE_SPEED_ON
+from solver.contact_thresholds import DETECT_SPEED_ON
 from solver.contacts import contact_radii, lowest_points
 from solver.errors import InputError
 from solver.figure import Figure
@@ -19,7 +19,7 @@ FIT_HEIGHT = 0.15
 CONTACT_CLEARANCE = 0.002
 #: [m] the most the reference's root may be moved on the subject's own figure (`check_root_correction`): a
 #: larger correction moves the feet by more than the 3 cm below which a foot counts as resting
-#: (STANCE_HEIGHT_ON), so the scene is not where the capture's feet rest and the clip is refused
+#: (DETECT_HEIGHT_ON), so the scene is not where the capture's feet rest and the clip is refused
 ROOT_CORRECTION_MAX = 0.03
 #: [m] the most that correction may change between two frames 1/120 s apart: the 30 mm of the bound above,
 #: which the smoothing (`SMOOTH_S`) keeps to a fifth of that; a jump is a surface that appears under a foot
@@ -135,7 +135,7 @@ def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarra
     1. The retargeting's height error: the retargeted feet can be several cm off before the
        correction (another subject's bone lengths, the shipped figure), nearly the same offset all
        through a clip. It is the median, over the frames where a foot is provisionally at rest (its
-       lowest site within the wide window `FIT_HEIGHT` of the surface and slower than STANCE_SPEED_ON),
+       lowest site within the wide window `FIT_HEIGHT` of the surface and slower than DETECT_SPEED_ON),
        of CONTACT_CLEARANCE - the lowest clearance of those feet.
     2. Contact frames: the frames in which a foot rests once that offset is applied, by the one
        definition the detection is judged against and the acceptance figure uses (`runner.mocap.
@@ -167,7 +167,7 @@ def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarra
     n = len(qpos)
     times = np.arange(n) * frame_time
     lowest, speed = lowest_sites(times, pos, clear, kin.feet, kin.names)
-    provisional = (lowest < FIT_HEIGHT) & (speed < STANCE_SPEED_ON)
+    provisional = (lowest < FIT_HEIGHT) & (speed < DETECT_SPEED_ON)
     frames = np.arange(n)
     dz = np.zeros(n)
     if provisional.any():

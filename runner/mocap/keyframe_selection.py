@@ -132,7 +132,7 @@ class CaptureError:
     the error is the larger of two ratios: the mean over the ball and free joints of the angle between
     the spline's and the capture's joint quaternion, over `joint_deg`, and the mean over the contact
     sites of the distance between the spline's and the capture's site, over `site_cm`: the per-frame
-    forms of the corpus' joint-angle and contact-site error (`solver.motion_metrics`, docs/corpus.md).
+    forms of the corpus' joint-angle and contact-site error (`runner.motion_metrics`, docs/corpus.md).
 
     Args:
         model: the scene's MjModel (the figure's qpos layout and contact sites).

@@ -128,15 +128,15 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
         reference: the retargeted clip. model: the scene's MjModel. contacts: the clip's contacts.
         keys: "every": `keyframe_indices(reference, every, extremes)`; "contacts": touch-downs,
             lift-offs, the ends and the root's extremes, then keys where the plain spline through
-            them strays from the capture (`solver.keyframe_selection.contact_keyframes` with a
+            them strays from the capture (`runner.mocap.keyframe_selection.contact_keyframes` with a
             `CaptureError`), with `every` (or None) the largest gap [s]. Either way, then keys
             where the root or a joint turns more than 90 deg between two keys in the capture
-            (`solver.keyframe_selection.turn_keys`: else the plain spline joins them the short way
+            (`runner.mocap.keyframe_selection.turn_keys`: else the plain spline joins them the short way
             round, and a full turn keyed every 0.25 s is lost).
         partial: the middle keyframe fixes only the root and the legs (`Figure.leg_joints`).
         extremes: with keys="every", also key the root's highest and lowest frames.
     """
-    from solver.keyframe_selection import CaptureError, contact_keyframes, turn_keys
+    from runner.mocap.keyframe_selection import CaptureError, contact_keyframes, turn_keys
 
     if keys == "contacts":
         if every is not None and not (isinstance(every, (int, float)) and math.isfinite(every) and every > 0):

@@ -1,5 +1,5 @@
 """The scene a clip is retargeted onto: a given MJCF file, or one fitted to where the clip's feet rest
-(`--scene auto`: a floor plane, tilted if the capture's is, and boxes; solver/scene_fit.py), written
+(`--scene auto`: a floor plane, tilted if the capture's is, and boxes; runner/mocap/scene_fit.py), written
 next to the outputs in the levelled capture frame (the fitted floor at z = 0, solver/capture_frame.py)."""
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ import numpy as np
 from runner.files import atomic_output
 from runner.mocap.reference import ROOT_SCALE_LEGS, load_bvh_reference
 from runner.mocap.retarget import Reference
+from runner.mocap.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
 from solver.capture_frame import CaptureFrame
 from solver.contacts import Contact, contact_points
 from solver.errors import InputError
 from solver.model import load_model
-from solver.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
 from solver.surfaces import StaticSurfaces
 
 #: `--scene auto`: fit the scene to the clip

@@ -56,7 +56,7 @@ import numpy as np
 from solver.contacts import contact_mask, lowest_points
 from solver.figure import Figure
 
-#: the soft-L1 scale of the fit [m]: residuals beyond it count linearly (as the floor fit's, solver/scene_fit.py)
+#: the soft-L1 scale of the fit [m]: residuals beyond it count linearly (as the floor fit's, runner/mocap/scene_fit.py)
 SCALE = 0.005
 #: a site moves at most this far from its published place in height, and the heel forward or back [m]
 REACH = 0.03
@@ -180,7 +180,7 @@ def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict, rounded: b
     Raises:
         InputError: the figure lacks a contact site, or the feet never rest (nothing to fit a scene to).
     """
-    from solver.scene_fit import fit_contacts, fit_scene
+    from runner.mocap.scene_fit import fit_contacts, fit_scene
 
     figure = Figure.from_model(model)
     names = list(figure.contact_sites)

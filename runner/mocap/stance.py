@@ -8,11 +8,11 @@ what it is judged against (docs/contacts.md "Contact schedules"):
     the surface under it, `solver.surfaces.StaticSurfaces.height_above`; of a rounded site the lowest
     point of its sphere, `solver.contacts.contact_points`) is near that surface and nearly still;
 
-with hysteresis, per foot: the foot enters stance when the lowest site is below STANCE_HEIGHT_ON
+with hysteresis, per foot: the foot enters stance when the lowest site is below DETECT_HEIGHT_ON
 (3 cm, the flight height: a stance never begins in a frame the flight metric counts as airborne) and
-moves slower than STANCE_SPEED_ON (0.5 m/s, 3-D speed by central differences); it stays while the
-lowest site is at most STANCE_HEIGHT_OFF (5 cm, Guided Motion Diffusion's foot-contact height) and
-at most STANCE_SPEED_OFF (1.0 m/s) fast. The speeds are the kinematic gait-event rules validated
+moves slower than DETECT_SPEED_ON (0.5 m/s, 3-D speed by central differences); it stays while the
+lowest site is at most DETECT_HEIGHT_OFF (5 cm, Guided Motion Diffusion's foot-contact height) and
+at most DETECT_SPEED_OFF (1.0 m/s) fast. The speeds are the kinematic gait-event rules validated
 against pressure insoles (Ghoussayni et al. 2004, Gait & Posture 20:266-272; Bonci et al. 2022,
 Front. Bioeng. Biotechnol. 10:868928: 3-D heel or forefoot speed under 0.5 m/s at initial contact,
 forefoot speed over 1.0 m/s at final contact). There is NO minimum duration: a 10-40 ms touch-down
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.contact_thresholds import STANCE_HEIGHT_OFF, STANCE_HEIGHT_ON, STANCE_SPEED_OFF, STANCE_SPEED_ON
+from solver.contact_thresholds import DETECT_HEIGHT_OFF, DETECT_HEIGHT_ON, DETECT_SPEED_OFF, DETECT_SPEED_ON
 from solver.contacts import contact_mask, contact_points, site_heights, site_speeds
 from solver.errors import InputError
 from solver.layout import CONTACT_SITES, FEET
@@ -61,8 +61,8 @@ def _columns(feet: Mapping[str, Sequence[str]], sites: Sequence[str]) -> list[li
 
 def stance_mask(times: np.ndarray, site_pos: np.ndarray, heights: np.ndarray,
                 feet: Mapping[str, Sequence[str]] = FEET, sites: Sequence[str] = CONTACT_SITES,
-                height_on: float = STANCE_HEIGHT_ON, height_off: float = STANCE_HEIGHT_OFF,
-                speed_on: float = STANCE_SPEED_ON, speed_off: float = STANCE_SPEED_OFF) -> np.ndarray:
+                height_on: float = DETECT_HEIGHT_ON, height_off: float = DETECT_HEIGHT_OFF,
+                speed_on: float = DETECT_SPEED_ON, speed_off: float = DETECT_SPEED_OFF) -> np.ndarray:
     """Per frame and foot, whether the foot rests on a surface (the module docstring's definition).
 
     Args:
@@ -109,12 +109,12 @@ def lowest_sites(times: np.ndarray, site_pos: np.ndarray, heights: np.ndarray,
     return h, v
 
 
-def resting(stance: np.ndarray, lowest: np.ndarray, speed: np.ndarray, height_on: float = STANCE_HEIGHT_ON,
-            speed_on: float = STANCE_SPEED_ON) -> np.ndarray:
+def resting(stance: np.ndarray, lowest: np.ndarray, speed: np.ndarray, height_on: float = DETECT_HEIGHT_ON,
+            speed_on: float = DETECT_SPEED_ON) -> np.ndarray:
     """The frames of a stance in which the foot rests by the stance's own entry condition: (n, f) bool.
 
     The hysteresis of `stance_mask` keeps a foot in stance while it rolls off its toes and lifts (up to
-    STANCE_HEIGHT_OFF, 5 cm, and STANCE_SPEED_OFF, 1 m/s), so that a detection does not flicker; those
+    DETECT_HEIGHT_OFF, 5 cm, and DETECT_SPEED_OFF, 1 m/s), so that a detection does not flicker; those
     frames are the stance's way out, not a foot resting. A foot rests in a frame of its stance where its
     lowest site is below `height_on` [m] and slower than `speed_on` [m/s], the condition a stance begins
     with (module docstring). `lowest`, `speed`: (n, f) from `lowest_sites`.

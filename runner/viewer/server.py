@@ -9,13 +9,15 @@ from pathlib import Path
 
 import numpy as np
 
-from solver.contact_thresholds import VIEWER_HEIGHT as CONTACT_HEIGHT  # drawn "in contact" at most this high
 from solver.errors import InputError
 
 __all__ = ["STATIC", "CONTACT_HEIGHT", "PENETRATION", "ViewerAssets", "build_assets", "floor_height", "make_server",
            "serve"]
 
 STATIC = Path(__file__).resolve().parent / "static"
+#: a contact site this close to a surface, or closer, is drawn "in contact" [m] (1 cm: a resting foot
+#: within the 2 mm keyed clearance and the capture's own mm-scale jitter, a lifting one not yet).
+CONTACT_HEIGHT = 0.01
 #: [m] a contact site deeper than this inside a surface is drawn "penetrating".
 PENETRATION = 0.0005
 #: [Hz] sample rate of the motions in the viewer when the path has no reference clip (else the clip's).

@@ -66,7 +66,7 @@ class Term:
     radial_slots: np.ndarray | None = None
     #: True if f and its gradients at a point depend only on that point's t, Y, Y', Y'' (no state kept
     #: across points or rounds, no deferred gradient): the objective may then evaluate the term on
-    #: blocks of points (`solver.objective.BLOCK_DOUBLES`), which keeps a long clip's temporaries in cache.
+    #: blocks of points (`solver.spline.BLOCK_DOUBLES`), which keeps a long clip's temporaries in cache.
     pointwise: bool = False
     #: True if the term keeps something per quadrature point (windows cached for fixed times, a
     #: round's lagged indicator): it needs the uniform rule's fixed points, not Gauss nodes that move

@@ -51,9 +51,10 @@ class Penetration(Term):
     Args:
         model: MjModel of the scene (figure + static floor planes/boxes), loaded once by the caller.
         sites: contact site names (default heel and toe of each foot).
-        margin: [m] clearance counted as penetration (default 5 mm). At 400 quadrature points per
-            second a swing foot (~6 m/s) moves ~15 mm between points and can cut a box corner between
-            two of them; 5 mm of margin absorbs that (2 mm left 0.5-0.9 mm grazes on the shipped clip).
+        margin: [m] clearance counted as penetration (default none: the depth itself). A weighted
+            objective whose converged path should clear the surface between its quadrature points
+            passes one: at 400 points per second a swing foot (~6 m/s) moves ~15 mm between points
+            and can cut a box corner between two of them; 5 mm absorbed that on the shipped clip.
         engine: the engine to read the site positions from, shared with other terms (an inverse-dynamics
             engine from `solver.terms.dynamics.make_engine`, or `SiteKinematics`); default one of its own
             (`solver.path_context.site_engine`).
@@ -66,7 +67,7 @@ class Penetration(Term):
     units = "m^2"
     needs = (0,)
 
-    def __init__(self, model, sites=CONTACT_SITES, margin: float = 0.005, engine=None):
+    def __init__(self, model, sites=CONTACT_SITES, margin: float = 0.0, engine=None):
         self.model = model
         self.surfaces = StaticSurfaces.from_model(model)
         if self.surfaces.count == 0:

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from runner.mocap.reference import load_bvh_reference
+from runner.motion_metrics import motion_metrics
 from runner.paths import MODELS
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
 from solver.animate import animate
 from solver.contacts import reference_contacts
-from solver.motion_metrics import motion_metrics
 
 
 @pytest.mark.slow
@@ -35,7 +35,7 @@ def test_sparse_keys_float_under_5_mm(tmp_path):
     """127_33 keyed every 0.33 s (a keying the defaults were not chosen on) as `dynsplines mocap CLIP
     --every 0.33 --scene auto --figure default` makes it: mean float in the capture's contacts at most
     5.5 mm (on the shipped figure, whose reference stands on the fitted scene frame by frame; the fitted
-    floor is tilted by 1 degree, as the source's own feet show, solver/scene_fit.py).
+    floor is tilted by 1 degree, as the source's own feet show, runner/mocap/scene_fit.py).
     """
     import json
 

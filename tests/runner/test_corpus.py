@@ -296,9 +296,9 @@ def test_the_float_bound_reads_the_capture_stance_where_the_schedule_has_a_gap()
     the bound missed; on the schedule's contacts 0 mm, held."""
     import mujoco
 
+    from runner.mocap.scene_fit import FittedScene, scene_mjcf
     from runner.mocap.stance import capture_stance
-    from solver.motion_metrics import motion_metrics
-    from solver.scene_fit import FittedScene, scene_mjcf
+    from runner.motion_metrics import motion_metrics
 
     model = mujoco.MjModel.from_xml_string(scene_mjcf(FittedScene(0.0), REPO / "models" / "humanoid39.xml"))
     n, fps = 61, 120.0

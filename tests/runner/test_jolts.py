@@ -1,4 +1,4 @@
-"""solver.jolts on hand-built motions of the figure with known answers: a pelvis on a sine, a ball joint at
+"""runner.jolts on hand-built motions of the figure with known answers: a pelvis on a sine, a ball joint at
 constant angular acceleration under a turning root, a figure standing still (torques against statics and
 MuJoCo's own inverse dynamics), the capture's 6 Hz low-pass filter against the Butterworth response."""
 import copy
@@ -8,13 +8,13 @@ import mujoco
 import numpy as np
 import pytest
 
+from runner.jolts import filter_capture, jolt_figures, worst_joint_ratio
+from runner.mocap.scene_fit import FittedScene, scene_mjcf
+from runner.motion_metrics import motion_metrics
 from solver.contacts import SITES, Contact
 from solver.errors import InputError
-from solver.jolts import filter_capture, jolt_figures, worst_joint_ratio
 from solver.layout import StateLayout
-from solver.motion_metrics import motion_metrics
 from solver.peak_bounds import CUTOFF_HZ, TWO_PASS_CORRECTION
-from solver.scene_fit import FittedScene, scene_mjcf
 
 ROOT = Path(__file__).resolve().parents[2]
 FPS = 120.0

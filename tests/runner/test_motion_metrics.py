@@ -1,4 +1,4 @@
-"""solver.motion_metrics on hand-built motions of the figure with known answers, and the reference's
+"""runner.motion_metrics on hand-built motions of the figure with known answers, and the reference's
 own figures on 127_33."""
 import json
 from pathlib import Path
@@ -7,11 +7,11 @@ import mujoco
 import numpy as np
 import pytest
 
+from runner.mocap.scene_fit import FittedScene, scene_mjcf
+from runner.motion_metrics import FLIGHT_HEIGHT, flight_mismatch, motion_metrics
 from solver.contact_schedule import ContactSchedule
 from solver.contacts import SITES, Contact, reference_contacts
 from solver.errors import InputError
-from solver.motion_metrics import FLIGHT_HEIGHT, flight_mismatch, motion_metrics
-from solver.scene_fit import FittedScene, scene_mjcf
 
 ROOT = Path(__file__).resolve().parents[2]
 FPS = 120.0
@@ -195,7 +195,7 @@ def _slid(model, xs):
 
 
 def test_forced_skate_is_the_keyed_slide_over_the_contact_steps(floor_model):
-    from solver.motion_metrics import forced_skate_mm
+    from runner.motion_metrics import forced_skate_mm
 
     keys = np.array([0, 30, 60])
     xk = np.array([0.0, 0.06, 0.06])  # 6 cm between the first two keys, none after
@@ -216,7 +216,7 @@ def test_forced_skate_is_the_keyed_slide_over_the_contact_steps(floor_model):
 
 
 def test_forced_skate_links_keys_only_inside_one_contact(floor_model):
-    from solver.motion_metrics import forced_skate_mm
+    from runner.motion_metrics import forced_skate_mm
 
     # two contacts, frames 0-20 and 40-60; keys at 0, 20, 40, 60 move 1, 5 and 2 cm: the 5 cm between frames
     # 20 and 40 lie in a gap of every site (a swing), where sliding is not skating

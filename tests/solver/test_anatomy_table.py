@@ -190,8 +190,8 @@ def test_anatomy_figures_of_a_hand_built_motion(figure_model, layout):
     """Three poses: the left knee 10 degrees off its hinge, the right elbow 30 degrees off its hinge
     (flexed 60), the left hip flexed 130 degrees (10 past the table): the figures read those maxima,
     name the motion, and the summary rows show plain, optimized and the capture's own figure."""
+    from runner.motion_metrics import anatomy_figures
     from runner.run import anatomy_summary_rows
-    from solver.motion_metrics import anatomy_figures
 
     Y = identity(layout, 3)
     Y[0, layout.joint("l_knee").quat_index] = mul(quat(X, 10.0), quat(Y_, 20.0))

@@ -7,10 +7,10 @@ import mujoco
 import numpy as np
 import pytest
 
+from runner.mocap.scene_fit import FittedScene, fit_scene, scene_mjcf
 from solver.capture_frame import CAPTURE_FRAME, CaptureFrame
 from solver.contacts import SITES, Contact
 from solver.errors import InputError
-from solver.scene_fit import FittedScene, fit_scene, scene_mjcf
 from solver.surfaces import StaticSurfaces
 
 ROOT = Path(__file__).resolve().parents[2]

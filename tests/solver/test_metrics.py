@@ -190,7 +190,7 @@ def all_terms(tmp_path_factory):
 @pytest.mark.slow
 def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms):
     """`--terms all` solves the least change with the force bounds (solver/constraints/forces.py),
-    judged by the independent metrics (solver/metrics.py at 1000 Hz, solver/jolts.py)."""
+    judged by the independent metrics (solver/metrics.py at 1000 Hz, runner/jolts.py)."""
     metrics, z, _ = all_terms
     plain, opt = metrics["plain"], metrics["optimized"]
     stalled = json.loads(str(z["unmet_json"]))  # what the solve reports out of reach [SI]

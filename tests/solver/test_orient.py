@@ -1,4 +1,4 @@
-"""The single-body orientation problem (paper sec. 3, solver/orient.py, solver/euler_lagrange.py,
+"""The single-body orientation problem (paper sec. 3, solver/orient.py, runner/euler_lagrange.py,
 `dynsplines orient`) against the exact optimum computed independently in runner/bench/sphere_reference/.
 
 Acceptance-style checks: keyframes met exactly, relative gap (E - E*)/E* < 1e-3 with default settings on
@@ -21,8 +21,8 @@ from runner.bench.sphere_reference import (
     natural_spline_energy_1d,
     riemannian_cubic_reference,
 )
+from runner.euler_lagrange import deviation_by_region, el_lhs, residual, spline_residual
 from solver.errors import InputError
-from solver.euler_lagrange import deviation_by_region, el_lhs, residual, spline_residual
 from solver.orient import check_keyframes, default_options, orient
 from solver.terms import NormalizedCovariantAcceleration
 

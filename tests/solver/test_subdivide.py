@@ -290,9 +290,9 @@ def test_predicted_times_respect_budget_and_cap():
     kf, _ = orient_problem()
     fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)
     shares = np.array([1e-2, 1e-4, 0.0, 3e-3])
-    assert predicted_times(shares, fs, 1e-4, budget=5).size <= 5
-    assert predicted_times(shares, fs, 1e-4, budget=1).size == 1  # the largest share gets it
-    assert fs.times[0] < predicted_times(shares, fs, 1e-4, budget=1)[0] < fs.times[1]
-    assert predicted_times(shares, fs, 1e-12, budget=1000, max_split=3).size <= 3 * 2
-    assert predicted_times(np.zeros(4), fs, 1e-4, budget=10).size == 0
-    assert predicted_times(shares, fs, 1e-4, budget=0).size == 0
+    assert predicted_times(shares, fs, 1e-4, budget=5, rate=4.0, max_split=8).size <= 5
+    assert predicted_times(shares, fs, 1e-4, budget=1, rate=4.0, max_split=8).size == 1  # the largest share gets it
+    assert fs.times[0] < predicted_times(shares, fs, 1e-4, budget=1, rate=4.0, max_split=8)[0] < fs.times[1]
+    assert predicted_times(shares, fs, 1e-12, budget=1000, rate=4.0, max_split=3).size <= 3 * 2
+    assert predicted_times(np.zeros(4), fs, 1e-4, budget=10, rate=4.0, max_split=8).size == 0
+    assert predicted_times(shares, fs, 1e-4, budget=0, rate=4.0, max_split=8).size == 0

@@ -12,7 +12,7 @@ LEDGE = """<mujoco><worldbody>
 
 
 def _support(rounded):
-    return SupportSurfaces(StaticSurfaces.from_model(mujoco.MjModel.from_xml_string(LEDGE)), 0.0, rounded)
+    return SupportSurfaces(StaticSurfaces.from_model(mujoco.MjModel.from_xml_string(LEDGE)), rounded)
 
 
 def test_height_is_continuous_across_the_edge_and_matches_the_distance_to_the_top():

@@ -179,9 +179,9 @@ def reference_path(tmp_path, src, seconds=0.5, capture=None):
     capture's coordinates (`solver.capture_frame.CaptureFrame`; None: none recorded, the identity)."""
     from runner.mocap.bvh import read_bvh
     from runner.mocap.reference import load_bvh_reference
+    from runner.mocap.scene_fit import FittedScene, scene_mjcf
     from runner.mocap.subject_figure import write_subject_figure
     from solver.model import load_model
-    from solver.scene_fit import FittedScene, scene_mjcf
 
     clip = edit_bvh(src, tmp_path / "c.bvh", seconds=seconds)
     figure = write_subject_figure(read_bvh(clip), tmp_path / "c.figure.xml")

@@ -1,15 +1,15 @@
-"""solver.keyframe_selection: keys at contact events, ends and the root's extremes."""
+"""runner.mocap.keyframe_selection: keys at contact events, ends and the root's extremes."""
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
 
+from runner.mocap.keyframe_selection import KEY_MIN_GAP, CaptureError, add_keys_to_tolerance, contact_keyframes
 from solver.contacts import Contact, reference_contacts, touchdowns_liftoffs
 from solver.errors import InputError
-from solver.keyframe_selection import KEY_MIN_GAP, CaptureError, add_keys_to_tolerance, contact_keyframes
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 FPS = 100.0
 
 
@@ -208,7 +208,7 @@ def _wrapped(a):
 
 
 def test_a_full_turn_keyed_every_quarter_second_is_kept():
-    from solver.keyframe_selection import KEY_TURN_DEG, turn_keys
+    from runner.mocap.keyframe_selection import KEY_TURN_DEG, turn_keys
 
     t, yaw, q = _full_turn()
     every = [0, 30, 60, 90, 120]                      # 0.25 s apart: 0, 78, 323, 360, 360 deg
@@ -225,7 +225,7 @@ def test_a_full_turn_keyed_every_quarter_second_is_kept():
 
 
 def test_turn_keys_leave_slow_turns_alone_and_reject_bad_input():
-    from solver.keyframe_selection import turn_keys
+    from runner.mocap.keyframe_selection import turn_keys
 
     t = np.arange(481) / 120.0                        # 4 s: one turn at 90 deg/s, 45 deg between keys 0.5 s apart
     q = np.zeros((len(t), 1, 4))

@@ -106,7 +106,7 @@ def test_feet_disagreement_from_the_source_is_the_references_own(platform):
 
 
 def test_a_full_turn_keyed_every_quarter_second_keeps_the_heading(tmp_path):
-    from solver.keyframe_selection import CaptureError
+    from runner.mocap.keyframe_selection import CaptureError
 
     cs, _, keyframes = _keyed("83_65", tmp_path)
     ref = cs.reference

@@ -1,4 +1,4 @@
-"""solver.scene_fit: floor and boxes from where the feet rest; the MJCF loads from where it is saved.
+"""runner.mocap.scene_fit: floor and boxes from where the feet rest; the MJCF loads from where it is saved.
 
 The independent check: 127_33 retargeted onto a FLOOR-ONLY scene (so the hand-made box cannot leak
 into the reference through the root-height correction) must give back the step of
@@ -11,12 +11,12 @@ import mujoco
 import numpy as np
 import pytest
 
+from runner.mocap.scene_fit import LEVEL_TOL, MARGIN, MAX_SLOPE, FittedScene, fit_contacts, fit_scene, scene_mjcf
 from solver.contacts import SITES, Contact, site_positions
 from solver.errors import InputError
-from solver.scene_fit import LEVEL_TOL, MARGIN, MAX_SLOPE, FittedScene, fit_contacts, fit_scene, scene_mjcf
 from solver.surfaces import StaticSurfaces
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 FIGURE = ROOT / "models" / "humanoid39.xml"
 
 

@@ -133,10 +133,10 @@ def test_the_way_back_names_the_hyperextension_clamp(tmp_path):
     about the knee away from the clip's (2 sin 10 deg x the 7.5-unit shin) and the toe further; every
     other joint and keyframe is the clip's."""
     from runner.mocap.reference import load_bvh_reference
+    from runner.mocap.scene_fit import FittedScene, scene_mjcf
     from runner.mocap.source_export import keyframes_on_source
     from runner.mocap.subject_figure import write_subject_figure
     from solver.model import load_model
-    from solver.scene_fit import FittedScene, scene_mjcf
 
     from .test_bvh_import import tiny_bvh, tiny_frame
 

@@ -181,7 +181,7 @@ def test_rolling_off_the_toes_is_stance_but_not_rest():
 def test_a_foot_resting_on_a_tilted_floor_rests():
     """A foot standing still at four places on a floor tilted 1 degree (heights from the fitted scene's
     surfaces, not from z): every frame rests, and its lowest site is on the floor."""
-    from solver.scene_fit import FittedScene
+    from runner.mocap.scene_fit import FittedScene
 
     slope = np.tan(np.radians(1.0))
     floor = FittedScene(0.01, (), (slope, 0.0)).surfaces()
