@@ -168,8 +168,8 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False, bounds
 
 #: the summary rows each objective term penalizes (what the optimizer is asked to lower), by the row
 #: label's start; a term's own "integral NAME" row is its own. Rows no chosen term penalizes are free
-#: for the optimizer to trade away: with the default terms the dynamics rows (torque, root wrench in
-#: flight), which only the dynamics terms target (`--terms all`, README "Reading the summary").
+#: for the optimizer to trade away: the peak torque, and with the default terms the root wrench in
+#: flight, which only the force bounds target (`--terms all`, README "Reading the summary").
 TERM_ROWS = {
     "penetration": ("max penetration",),  # and the per-site rows under it (`row_targets`)
     "unit": ("max |1 - |q||",),
@@ -177,6 +177,7 @@ TERM_ROWS = {
     "hinge": ("knee rotation off the hinge", "elbow rotation off the hinge"),
     "rom": ("beyond range of motion",),
     "acceleration": ("peak pelvis acceleration",),
+    "effort": ("RMS joint torque",),
     "flight wrench": ("RMS root force in flight", "peak root force in flight", "RMS root torque in flight",
                       "peak root torque in flight"),
     "planted": ("float in contact", "float in capture stance", "flight in capture stance"),

@@ -9,6 +9,7 @@
     hyperextension  knees and elbows do not bend backwards                               -theta <= limit  0.5 deg
     rom          every joint motion inside its published range (AAOS 1965)              lo <= x <= hi    1 deg
     acceleration no jolts: pelvis and ball joints no harder than the capture's (6 Hz) or the plain spline's peak  5 %
+    effort       with a capture: RMS joint torque no more than the capture's (6 Hz) or the plain spline's     5 %
     unit         quaternions near unit norm between the frames                          ||q| - 1| <= 0.03  0.01
 
 With `--terms all` the force bounds join them (`solver.constraints.forces`, added by
@@ -41,6 +42,9 @@ there; the problem is made well posed instead of excused:
   keyframes give a spline smoother than any motion that meets its contacts (run-and-step without its
   capture cannot land on the step within it), and the measure of change already prices every change of
   acceleration.
+* The effort bound (`solver.constraints.effort`) is, for the same reason, a bound only with a capture: the
+  larger of the capture's filtered RMS joint torque and the plain spline's. It needs the inverse
+  dynamics (`solver.inverse_dynamics.InverseDynamics`), which a capture's problem then uses as its engine.
 
 Each relaxation is reported (`Relaxation`: which constraint, site or joint, keyframe, where, how much),
 so a user sees where the keyframes, not the optimizer, decide.
@@ -53,6 +57,7 @@ import numpy as np
 
 from solver.constraints.acceleration import AccelerationBound
 from solver.constraints.anatomy import AngleBound
+from solver.constraints.effort import TorqueRMS, rms_torque
 from solver.constraints.sites import HeightBound, Penetration, SupportHeight, SupportSlide, site_heights
 from solver.constraints.unit import UnitNorm
 from solver.contact_thresholds import FLIGHT_HEIGHT
@@ -144,6 +149,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     out.append(UnitNorm(len(t), np.array([j.quat_index for j in quats]), [j.name for j in quats], TOLERANCES["unit"]))
     if capture is not None:  # no jolts: bounded by what the captured motion does (module docstring)
         out.append(_accelerations(model, reference, capture))
+        if engine is not None and getattr(engine, "forces", False):
+            out.append(_effort(model, reference, plain, capture, engine))
     relaxations = []
     if engine is not None:
         state = _reference_state(model, reference, plain, engine)
@@ -374,13 +381,24 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
     return support_args, np.array(limits_h), reports
 
 
+def _filtered_capture(model, reference, capture):
+    """The capture ((times, qpos)) low-pass filtered (`solver.peak_bounds.filter_capture`, 6 Hz) as a path at
+    the quadrature points: the natural spline through its frames within PAD_S of the span, (Y, Y1, Y2)."""
+    from solver.layout import StateLayout
+    from solver.peak_bounds import PAD_S, filter_capture
+    from solver.spline import interpolate
+
+    times, qpos = np.asarray(capture[0], float), np.asarray(capture[1], float)
+    smooth = filter_capture(times, qpos, StateLayout.from_model(model))
+    keep = (times >= reference.span[0] - PAD_S) & (times <= reference.span[1] + PAD_S)
+    return interpolate(times[keep], smooth[keep], reference.t, (0, 1, 2))
+
+
 def _accelerations(model, reference, capture) -> AccelerationBound:
     """The no-jolt bounds (`solver.constraints.acceleration`): the reference's peaks and, with a capture
     ((times, qpos)), the filtered capture's over the same span, joint by joint."""
     from solver.kinematics import TangentMap
     from solver.layout import StateLayout
-    from solver.peak_bounds import PAD_S, filter_capture
-    from solver.spline import interpolate
 
     layout = StateLayout.from_model(model)
     free = [j for j in layout.joints if j.kind == "free"]
@@ -390,14 +408,26 @@ def _accelerations(model, reference, capture) -> AccelerationBound:
     dofs = np.array(dofs, int).reshape(-1, 3)
     peaks = np.linalg.norm(reference.qacc[:, dofs], axis=-1).max(axis=0)
     if capture is not None:
-        times, qpos = np.asarray(capture[0], float), np.asarray(capture[1], float)
-        smooth = filter_capture(times, qpos, layout)
-        keep = (times >= reference.span[0] - PAD_S) & (times <= reference.span[1] + PAD_S)
-        Y, Y1, Y2 = interpolate(times[keep], smooth[keep], reference.t, (0, 1, 2))
-        qacc = TangentMap.from_layout(layout).motion(Y, Y1, Y2).qacc
+        qacc = TangentMap.from_layout(layout).motion(*_filtered_capture(model, reference, capture)).qacc
         peaks = np.maximum(peaks, np.linalg.norm(qacc[:, dofs], axis=-1).max(axis=0))
     peaks = np.maximum(peaks, 1e-6)
     return AccelerationBound(len(reference.t), dofs, peaks, ACCELERATION_TOLERANCE * peaks, labels)
+
+
+def _effort(model, reference, plain, capture, engine) -> TorqueRMS:
+    """The effort bound (`solver.constraints.effort`): the larger of the plain spline's RMS joint torque and
+    the filtered capture's over the same span, with the no-jolt bounds' relative tolerance."""
+    from solver.kinematics import TangentMap
+    from solver.layout import StateLayout
+
+    layout = StateLayout.from_model(model)
+    dofs = np.array([j.dofadr + i for j in layout.joints if j.kind != "free" for i in range(j.nv)], int)
+    w = reference.weights
+    Y, Y1, Y2 = _filtered_capture(model, reference, capture)
+    captured = PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(layout), engine)
+    bound = max(rms_torque(_reference_state(model, reference, plain, engine).tau, w, dofs),
+                rms_torque(captured.tau, w, dofs))
+    return TorqueRMS(w, dofs, bound, ACCELERATION_TOLERANCE * bound)
 
 
 def _anatomy(figure, layout, reference) -> list:

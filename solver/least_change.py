@@ -148,7 +148,7 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     check_points(t0, t1, rate)
     t, h = quadrature_times(t0, t1, rate)
     reference = ReferenceMotion.from_frames(model, plain, t, np.full(len(t), h))
-    if forces:
+    if forces or capture is not None:  # the force bounds, or the effort bound of a capture's keyframes
         engine = InverseDynamics(model, figure.contact_sites)
     else:
         engine = SiteKinematics(model, figure.contact_sites) if figure.contact_sites else None
@@ -194,12 +194,17 @@ def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) ->
 
 def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list) -> dict:
     """Raise the limit of every pair still broken to what the path reaches and reset its multiplier;
-    returns {constraint: largest amount [SI]}."""
+    returns {constraint: largest amount [SI]}. While a bound relative to the reference motion
+    (`Constraint.relative`: the no-jolt and effort bounds) is broken, only those are raised: they measure
+    the path against what the capture or the plain spline does, the others are limits of the body and
+    the scene (a foot in the floor), which give only if the solve stalls again."""
     state = al.state(basis, frames.values)
     unmet = {}
+    broken = [bool((ch > 1.0).any()) for ch in scaled]
+    first = any(b and c.relative for b, c in zip(broken, al.constraints))
     for j, (c, ch) in enumerate(zip(al.constraints, scaled)):
         bad = ch > 1.0
-        if bad.any():
+        if bad.any() and (c.relative or not first):
             v = c.values(state)
             unmet[c.name] = max(unmet.get(c.name, 0.0), float(v[bad].max()))
             c.limit = c.limit.copy()

@@ -29,6 +29,7 @@ class AccelerationBound(Constraint):
     """
 
     name, unit, scale = "acceleration", "m/s^2 | rad/s^2", 1.0
+    relative = True
 
     def __init__(self, n_points: int, dofs: np.ndarray, limits: np.ndarray, tolerance: np.ndarray, labels):
         self.dofs = np.asarray(dofs, int).reshape(-1, 3)

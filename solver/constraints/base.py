@@ -32,6 +32,9 @@ class Constraint:
     tolerance: float = 1.0
     rows: np.ndarray = np.zeros(0, int)
     labels: np.ndarray = np.zeros(0, object)
+    #: a bound relative to the reference motion (what the capture or the plain spline does), not a limit of the
+    #: body or the scene: where the constraints cannot all be met, these are raised first
+    relative: bool = False
 
     @property
     def size(self) -> int:
