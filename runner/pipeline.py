@@ -11,7 +11,7 @@ Steps (docs/architecture.md; the contact steps: docs/contacts.md):
    by `--skeleton-map FILE`) and the clip retargeted onto the figure (`load_bvh_reference`: a leading rest
    frame dropped, channel orders and frame time read from the file; on the subject's figure without
    loss, docs/mocap.md).
-2. Contacts of the reference (`solver.contacts.reference_contacts`, surfaces named).
+2. Contacts of the reference (`runner.mocap.contact_detection.reference_contacts`, surfaces named).
 3. Keyframes (`runner.mocap.keyframes.pick_keyframes`): evenly spaced plus the root's extremes, or at
    the contact events; written as `<stem>.keyframes.json` with the contacts (a user can edit it and
    rerun `dynsplines animate` on it), and read back, so the solve is the one `animate` would do.
@@ -28,12 +28,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from runner.mocap.contact_detection import reference_contacts
 from runner.mocap.figure_choice import SUBJECT, choose_figure, is_default, scene_with_figure
 from runner.mocap.keyframes import pick_keyframes
 from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO, clip_scene, name_surfaces
 from runner.paths import display_path
-from solver.contacts import reference_contacts
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE
 from solver.keyframe_file import read_keyframes, write_keyframes

@@ -108,7 +108,7 @@ def file_problem(keyframes_path, scene=None, terms: str | None = None, quiet: bo
     problem = build_problem(model, ProblemSpec(keyframes, contacts, forces, capture, getattr(info, "flights", None)))
     metric_contacts = contacts
     if reference is not None and not contacts:
-        from solver.contacts import reference_contacts
+        from runner.mocap.contact_detection import reference_contacts
 
         metric_contacts = tuple(reference_contacts(model, reference.qpos, reference.frame_time))
     return problem, Source(Path(scene_path), reference, metric_contacts, label=str(keyframes_path))

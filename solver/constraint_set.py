@@ -57,6 +57,7 @@ import numpy as np
 
 from solver.constraints.acceleration import AccelerationBound
 from solver.constraints.anatomy import AngleBound
+from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.constraints.effort import TorqueRMS, rms_torque
 from solver.constraints.sites import HeightBound, Penetration, SupportHeight, SupportSlide, site_heights
 from solver.constraints.unit import UnitNorm
@@ -84,8 +85,6 @@ SLIDE_SMOOTHING = 1e-2
 #: penetration 1 mm; float 2 mm, under the 5 mm of PhysDiff's float; slide 2 mm; flight 1 mm above the
 #: field's 3 cm flight height; angles 1 deg, hyperextension 0.5 deg as the acceptance list; unit norm 0.01,
 #: a third of its limit)
-#: the no-jolt bounds' tolerance, relative to each bound: 5 %
-ACCELERATION_TOLERANCE = 0.05
 TOLERANCES = {"penetration": 1e-3, "planted": 2e-3, "slide": 2e-3, "flight": 1e-3,
               "hinge": float(np.radians(1.0)), "hyperextension": float(np.radians(0.5)), "rom": float(np.radians(1.0)), "unit": 0.01}
 
@@ -411,7 +410,7 @@ def _accelerations(model, reference, capture) -> AccelerationBound:
         qacc = TangentMap.from_layout(layout).motion(*_filtered_capture(model, reference, capture)).qacc
         peaks = np.maximum(peaks, np.linalg.norm(qacc[:, dofs], axis=-1).max(axis=0))
     peaks = np.maximum(peaks, 1e-6)
-    return AccelerationBound(len(reference.t), dofs, peaks, ACCELERATION_TOLERANCE * peaks, labels)
+    return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels)
 
 
 def _effort(model, reference, plain, capture, engine) -> TorqueRMS:
@@ -427,7 +426,7 @@ def _effort(model, reference, plain, capture, engine) -> TorqueRMS:
     captured = PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(layout), engine)
     bound = max(rms_torque(_reference_state(model, reference, plain, engine).tau, w, dofs),
                 rms_torque(captured.tau, w, dofs))
-    return TorqueRMS(w, dofs, bound, ACCELERATION_TOLERANCE * bound)
+    return TorqueRMS(w, dofs, bound, RELATIVE_TOLERANCE * bound)
 
 
 def _anatomy(figure, layout, reference) -> list:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from runner.mocap.contact_detection import DETECT_SPEED_ON
 from runner.mocap.retarget import Reference
-from solver.contact_thresholds import DETECT_SPEED_ON
 from solver.contacts import contact_radii, lowest_points
 from solver.errors import InputError
 from solver.figure import Figure

@@ -71,8 +71,9 @@ from pathlib import Path
 
 import numpy as np
 
+from runner.mocap.contact_detection import detect_contacts
 from solver.capture_frame import CaptureFrame
-from solver.contacts import FEET, SITES, Contact, contact_mask, detect_contacts, foot_contacts
+from solver.contacts import FEET, SITES, Contact, contact_mask, foot_contacts
 from solver.errors import InputError
 
 #: a stance resting more than this above the floor is on a raised surface [m].

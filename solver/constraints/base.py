@@ -15,7 +15,12 @@ import numpy as np
 
 from solver.path_state import PathState
 
-__all__ = ["Constraint"]
+__all__ = ["RELATIVE_TOLERANCE", "Constraint"]
+
+#: the tolerance of a bound set by a reference motion's own figure (the no-jolt peaks, the effort, the peak
+#: ground force), relative to that bound: 5 %, one value for every such bound (a figure read off a
+#: low-pass-filtered capture is not known more precisely than that)
+RELATIVE_TOLERANCE = 0.05
 
 
 class Constraint:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.constraints.base import Constraint
+from solver.constraints.base import RELATIVE_TOLERANCE, Constraint
 
 __all__ = ["FORCE_TOLERANCE", "FRICTION", "FlightWrench", "GroundForce", "figure_forces"]
 
@@ -31,8 +31,6 @@ FORCE_TOLERANCE = 0.01
 #: static friction coefficient of a shoe on a floor: 0.8, inside the 0.5-1.0 measured for footwear on
 #: dry floors (Chang et al. 2001, "The role of friction in the measurement of slipperiness", Ergonomics 44)
 FRICTION = 0.8
-#: the peak ground force bound's tolerance, relative to the bound: 5 %, as the no-jolt bounds'
-PEAK_TOLERANCE = 0.05
 
 
 def _smooth_norm(v: np.ndarray, delta: float) -> tuple[np.ndarray, np.ndarray]:
@@ -99,7 +97,7 @@ class GroundForce(Constraint):
         self.rows = np.repeat(np.asarray(rows, int), k)
         self.labels = np.array(list(self.kinds) * p, object)
         self.delta = FORCE_TOLERANCE * weight
-        tol = [self.delta, self.delta] + ([PEAK_TOLERANCE * bound] if bound is not None else [])
+        tol = [self.delta, self.delta] + ([RELATIVE_TOLERANCE * bound] if bound is not None else [])
         self.tolerance = np.tile(tol, p)
         self.limit = np.tile([0.0, 0.0] + ([bound] if bound is not None else []), p)
         self.root, self.up = root, np.asarray(up, float)

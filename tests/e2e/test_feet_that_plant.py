@@ -3,12 +3,12 @@ optimized path's planted feet float and skate less than the same solve without i
 import numpy as np
 import pytest
 
+from runner.mocap.contact_detection import reference_contacts
 from runner.mocap.reference import load_bvh_reference
 from runner.motion_metrics import motion_metrics
 from runner.paths import MODELS
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
 from solver.animate import animate
-from solver.contacts import reference_contacts
 
 
 @pytest.mark.slow

@@ -7,10 +7,11 @@ import mujoco
 import numpy as np
 import pytest
 
+from runner.mocap.contact_detection import reference_contacts
 from runner.mocap.scene_fit import FittedScene, scene_mjcf
 from runner.motion_metrics import FLIGHT_HEIGHT, flight_mismatch, motion_metrics
 from solver.contact_schedule import ContactSchedule
-from solver.contacts import SITES, Contact, reference_contacts
+from solver.contacts import SITES, Contact
 from solver.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[2]

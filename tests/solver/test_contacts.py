@@ -1,4 +1,5 @@
-"""solver.contacts: hysteresis, minimum duration, masks and events on hand-built site paths, and the
+"""solver.contacts and the capture's contact detection (runner.mocap.contact_detection): hysteresis,
+minimum duration, masks and events on hand-built site paths, and the
 shipped clip 127_33 (touch-downs where the foot-height trace lands)."""
 from pathlib import Path
 
@@ -6,14 +7,13 @@ import mujoco
 import numpy as np
 import pytest
 
+from runner.mocap.contact_detection import detect_contacts, reference_contacts
 from solver.contacts import (
     FEET,
     SITES,
     Contact,
     contact_mask,
-    detect_contacts,
     foot_contacts,
-    reference_contacts,
     site_heights,
     site_positions,
     touchdowns_liftoffs,

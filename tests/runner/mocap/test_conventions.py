@@ -97,9 +97,9 @@ def contacts_and_legs(clip, folder):
     end, surface), the leg joints' quaternions, the root height, the figure's leg and arm segments."""
     import mujoco
 
+    from runner.mocap.contact_detection import reference_contacts
     from runner.mocap.scene import clip_scene, name_surfaces
     from runner.mocap.subject_figure import write_subject_figure
-    from solver.contacts import reference_contacts
     from solver.figure import Figure
     from solver.layout import StateLayout
 

@@ -5,8 +5,9 @@ import mujoco
 import numpy as np
 import pytest
 
+from runner.mocap.contact_detection import reference_contacts
 from runner.mocap.keyframe_selection import KEY_MIN_GAP, CaptureError, add_keys_to_tolerance, contact_keyframes
-from solver.contacts import Contact, reference_contacts, touchdowns_liftoffs
+from solver.contacts import Contact, touchdowns_liftoffs
 from solver.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -139,8 +139,8 @@ def test_127_33_schedule_matches_the_capture_stance():
     frame by frame (recall and precision at least 0.97; measured 1.00 / 1.00 on this clip)."""
     import mujoco
 
+    from runner.mocap.contact_detection import reference_contacts
     from runner.mocap.reference import load_bvh_reference
-    from solver.contacts import reference_contacts
 
     model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))
     ref = load_bvh_reference(ROOT / "models" / "cmu" / "127_33.bvh", model)
@@ -209,7 +209,7 @@ def test_a_site_enters_contact_with_its_foots_lowest_site():
     """Detection judged against the stance: a toe held still 26 mm up while the heel under it still
     sweeps in at 1 m/s does not enter contact until the heel (the foot's lowest site) is slow; the heel
     sweeping alone never enters. With feet=None the toe enters alone (the old per-site rule)."""
-    from solver.contacts import detect_contacts
+    from runner.mocap.contact_detection import detect_contacts
 
     n = 40
     heel_x = np.r_[1.0 * np.arange(20) / FPS, np.full(n - 20, 0.19)]  # 1 m/s until frame 19, then still
