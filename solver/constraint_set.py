@@ -149,7 +149,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     if capture is not None:  # no jolts: bounded by what the captured motion does (module docstring)
         out.append(_accelerations(model, reference, capture))
         if engine is not None and getattr(engine, "forces", False):
-            out.append(_effort(model, reference, plain, capture, engine))
+            out += _effort(model, reference, plain, capture, engine)
     relaxations = []
     if engine is not None:
         state = _reference_state(model, reference, plain, engine)
@@ -413,9 +413,10 @@ def _accelerations(model, reference, capture) -> AccelerationBound:
     return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels)
 
 
-def _effort(model, reference, plain, capture, engine) -> TorqueRMS:
-    """The effort bound (`solver.constraints.effort`): the larger of the plain spline's RMS joint torque and
-    the filtered capture's over the same span, with the no-jolt bounds' relative tolerance."""
+def _effort(model, reference, plain, capture, engine) -> list:
+    """[the effort bound] (`solver.constraints.effort`): the larger of the plain spline's RMS joint torque and
+    the filtered capture's over the same span, with the no-jolt bounds' relative tolerance; [] for a figure
+    whose joints carry no torque in either (no joints besides the root: nothing to bound)."""
     from solver.kinematics import TangentMap
     from solver.layout import StateLayout
 
@@ -426,7 +427,7 @@ def _effort(model, reference, plain, capture, engine) -> TorqueRMS:
     captured = PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(layout), engine)
     bound = max(rms_torque(_reference_state(model, reference, plain, engine).tau, w, dofs),
                 rms_torque(captured.tau, w, dofs))
-    return TorqueRMS(w, dofs, bound, RELATIVE_TOLERANCE * bound)
+    return [TorqueRMS(w, dofs, bound, RELATIVE_TOLERANCE * bound)] if bound > 0 else []
 
 
 def _anatomy(figure, layout, reference) -> list:
