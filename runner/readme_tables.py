@@ -6,13 +6,14 @@
 
 `replace_blocks` writes new blocks; `compare_blocks` checks a file's blocks against freshly generated
 ones. A `Block` is Markdown text plus the cells that are machine-dependent figures: wall times, and the
-evaluation counts of a solve (an optimizer's path follows the round-off of the CPU's BLAS kernels: a
-`--terms all` solve took 850 evaluations here and 1024 with OpenBLAS's Sandybridge kernels, to the
-same final E), and an optimized figure that sits at its constraint's tolerance (where in the tolerance
-the solve stops follows the same round-off). Those differ from machine to machine, so the check skips them. Every other figure is compared within a tolerance,
-because the same code gives slightly different figures on another CPU (BLAS kernels, library
-versions change the round-off, and an optimizer's path follows it): integers (evaluation and frame
-counts) within `COUNT_RTOL`, other numbers within `VALUE_RTOL` or one unit in their last printed
+evaluation and frame counts of a solve (an optimizer's path follows the round-off of the CPU's BLAS
+kernels: a `--terms all` solve took 850 evaluations here and 1024 with OpenBLAS's Sandybridge kernels,
+to the same final E, and ended with 43 frames on one kernel and 38 on another: the refinement places
+frames where each subproblem stopped), and an optimized figure that sits inside its constraint's bound
+(where in it the solve stops follows the same round-off). Those differ from machine to machine, so
+the check skips them. Every other figure is compared within a tolerance, because the same code gives
+slightly different figures on another CPU (BLAS kernels, library versions change the round-off, and an
+optimizer's path follows it): integers within `COUNT_RTOL`, other numbers within `VALUE_RTOL` or one unit in their last printed
 digit, whichever is larger, both relative to the file's figure; the words around them must match exactly. `exact=True` compares every
 figure as printed (a manual check on the machine that wrote the tables). `dynsplines bench docs
 [--check] [--exact]` (runner/commands/bench.py) runs the workloads and uses these; the tables live in
