@@ -14,7 +14,7 @@ from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.optimize import OptimizeResult, Status
 from solver.quadrature import gauss_nodes, gauss_times
-from solver.refinement import Refinement, Step
+from solver.refinement import TOL_FRAMES_PER_INTERVAL, Refinement, Step
 from solver.spline import interpolate_segments
 from solver.subdivide import predicted_times
 from solver.terms import NormalizedCovariantAcceleration
@@ -41,21 +41,19 @@ PREDICT_MARGIN = 2.0
 #: ... at most this many pieces per segment in one round.
 PREDICT_MAX_SPLIT = 8
 
-#: With a tolerance, each round's optimizer stops at ftol_rel = max(the options' ftol_rel, FTOL_FRACTION *
-#: tol) (on the tuning seeds 0-49: evaluations to the default tolerance 32 -> 12 in median, to 1e-4
-#: 26 -> 19). A relative-decrease test can stop L-BFGS on a stall far from the optimum (seen once at
-#: 3e-5: true gap 1.6e-3 at an estimate of 1.1e-4), so a round that would be accepted is checked with
-#: `optimization_gap`: above OPT_FRACTION * tol its frames are optimized again at the options' own
-#: ftol_rel (at most POLISHES times for the same frames and weights), and the check is added to the
-#: estimate. On the tuning seeds the check was at most 0.013 x tol on converged rounds (default
-#: tolerance); on the stalled round, 0.1 x tol. (The count was once for the whole loop: on acceptance
-#: seed 1028 the unit weight, boosted 1000x, left stalls the spent count could not polish.)
-FTOL_FRACTION = 0.03
-OPT_FRACTION = 0.03
+#: The share of tol the optimizer's own error may take: each round's optimizer stops at ftol_rel =
+#: max(the options' ftol_rel, OPTIMIZER_SHARE * tol) (on the tuning seeds 0-49: evaluations to the
+#: default tolerance 32 -> 12 in median, to 1e-4 26 -> 19), and a round that would be accepted is
+#: checked against the same share: a relative-decrease test can stop L-BFGS on a stall far from the
+#: optimum (seen once at 3e-5: true gap 1.6e-3 at an estimate of 1.1e-4), so where `optimization_gap`
+#: (the relative decrease a Newton step would still make) is above OPTIMIZER_SHARE * tol the frames are
+#: optimized again at the options' own ftol_rel (at most POLISHES times for the same frames and
+#: weights), and the check is added to the estimate. On the tuning seeds the check was at most 0.013 x
+#: tol on converged rounds (default tolerance); on the stalled round, 0.1 x tol. (The count was once for
+#: the whole loop: on acceptance seed 1028 the unit weight, boosted 1000x, left stalls the spent count
+#: could not polish.)
+OPTIMIZER_SHARE = 0.03
 POLISHES = 2
-
-#: With a tolerance and no `max_frames`: the frame budget, per keyframe interval.
-TOL_FRAMES_PER_INTERVAL = 40
 
 #: With a tolerance: when a round reaches it but the path has max |1 - |q|| above DRIFT_LIMIT, the unit
 #: term's weight is multiplied by DRIFT_BOOST and the same frames are optimized again, and refined on if
@@ -71,11 +69,11 @@ class GapToOptimum(Refinement):
     """`solve`'s refinement strategy for `orient`'s tol: rounds of optimize -> estimate -> refine until the
     estimated gap is at most tol / TOL_SAFETY.
 
-    Each round stops the optimizer at ftol_rel FTOL_FRACTION * tol (or the options' if larger). Frames
+    Each round stops the optimizer at ftol_rel OPTIMIZER_SHARE * tol (or the options' if larger). Frames
     are added by `predicted_times` on the predicted decreases the estimate computed: once before the
     first round (`first_frames`, from the estimate on the starting path), then after every round whose
     estimate is above tol / TOL_SAFETY. Where a round would be accepted, the estimate adds the
-    quadrature discrepancy and the optimizer's stationarity gap; a stationarity gap above OPT_FRACTION *
+    quadrature discrepancy and the optimizer's stationarity gap; a stationarity gap above OPTIMIZER_SHARE *
     tol has the same frames optimized again at the options' own ftol_rel ("polish", at most POLISHES
     times per frames and weights), and a path with max |1 - |q|| above DRIFT_LIMIT has the unit term's
     weight (the objective's first) multiplied by DRIFT_BOOST and the same frames optimized again
@@ -113,7 +111,7 @@ class GapToOptimum(Refinement):
         return frames.with_variable_frames(_place(D, E, frames, self._target, room))
 
     def round_options(self, options):
-        ftol = options.ftol_rel if self._strict else max(options.ftol_rel, FTOL_FRACTION * self.tol)
+        ftol = options.ftol_rel if self._strict else max(options.ftol_rel, OPTIMIZER_SHARE * self.tol)
         self._strict = False
         return replace(options, ftol_rel=ftol)
 
@@ -125,7 +123,7 @@ class GapToOptimum(Refinement):
             opt = _stationarity(result, ev.E, objective, frames, self.options)
             est += _discrepancy(ev.integrals, E8) + opt
             self.measures = {"frames": frames, "energy": E8, "drift": max_norm_deviation(frames.times, frames.values)}
-            if opt > OPT_FRACTION * self.tol and self._polishes < POLISHES:
+            if opt > OPTIMIZER_SHARE * self.tol and self._polishes < POLISHES:
                 # the optimizer stopped short (a stall on its relative-decrease test): same frames again,
                 # at the options' own ftol_rel
                 self._record(est)

@@ -23,8 +23,10 @@ from solver.frames import FrameSet
 from solver.optimize import OptimizeResult, Status
 from solver.subdivide import adaptive_times, predicted_decreases, weak_form_scores
 
-#: `ToTolerance` without `max_frames`: the frame budget, per keyframe interval.
-TOL_FRAMES_PER_INTERVAL = 10
+#: With a tolerance (`ToTolerance`, the orientation's `GapToOptimum`) and no `max_frames`: the frame budget,
+#: per keyframe interval, a guard against a tolerance the frames cannot reach. 40 frames cut an interval into
+#: pieces 1/41 as long (docs/orient.md, "The loop").
+TOL_FRAMES_PER_INTERVAL = 40
 #: `Step.action` values: what the loop does after a round.
 ACTIONS = ("stop", "refine", "polish", "boost")
 
