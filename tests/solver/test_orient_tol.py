@@ -3,6 +3,8 @@
 The acceptance test runs the default and tol=1e-4 on generated keyframe sets (runner/bench/random_sets.py)
 against the exact optimum of the independent reference (runner/bench/sphere_reference/).
 """
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -89,9 +91,11 @@ def test_optimization_gap_against_the_decrease_left():
 def test_a_stalled_round_is_optimized_again(monkeypatch):
     """With a relative-decrease test so loose that L-BFGS stops early, the tolerance loop sees the
     optimizer's gap and optimizes the same frames again at the options' ftol_rel."""
-    import solver.orient_refine as refine
+    from solver.orient_refine import GapToOptimum
 
-    monkeypatch.setattr(refine, "FTOL_FRACTION", 100.0)  # ftol_rel 0.1 at tol 1e-3: L-BFGS stops after 2 evaluations
+    loose = GapToOptimum.round_options  # ftol_rel 0.1 on the first round: L-BFGS stops after 2 evaluations
+    monkeypatch.setattr(GapToOptimum, "round_options",
+                        lambda self, o: replace(loose(self, o), ftol_rel=0.1) if not self.estimates else loose(self, o))
     s = random_set(3)
     r = orient(s.times, s.quats, tol=1e-3)
     counts = [rd.n_variable for rd in r.solution.rounds]
@@ -128,7 +132,6 @@ def test_accuracy_on_generated_sets(reference):
 
 def orientation_problem(seed=3):
     """`orient`'s objective, starting frames and options for a generated set (normalized form)."""
-    from dataclasses import replace
 
     from solver.frames import FrameSet
     from solver.orient import LAYOUT, RADIAL_WEIGHTS, build_objective, check_keyframes
@@ -143,17 +146,17 @@ def orientation_problem(seed=3):
 
 def test_gap_strategy_is_a_strategy_of_solves_loop():
     """`orient(tol=)` is `solve` with `GapToOptimum`: the same result, round kinds start/refine (no
-    second loop), and each round's optimizer stopped at max(ftol_rel, FTOL_FRACTION tol)."""
+    second loop), and each round's optimizer stopped at max(ftol_rel, OPTIMIZER_SHARE tol)."""
     from dataclasses import replace
 
-    from solver.orient_refine import FTOL_FRACTION, GapToOptimum, unit_rows
+    from solver.orient_refine import OPTIMIZER_SHARE, GapToOptimum, unit_rows
     from solver.solve import solve
 
     s, obj, initial, opts = orientation_problem()
     tol = 1e-4
     opts = replace(opts, tol=tol)
     gap = GapToOptimum(tol, opts)
-    assert gap.round_options(opts).ftol_rel == max(opts.ftol_rel, FTOL_FRACTION * tol)
+    assert gap.round_options(opts).ftol_rel == max(opts.ftol_rel, OPTIMIZER_SHARE * tol)
     sol = solve(obj, initial, opts, refinement=GapToOptimum(tol, opts), project=unit_rows)
     r = orient(s.times, s.quats, tol=tol)
     assert sol.n_evals == r.solution.n_evals and sol.E_final == pytest.approx(r.solution.E_final, rel=1e-12)
