@@ -29,6 +29,11 @@ ALGORITHMS = {
 }
 
 
+#: The relative-decrease stopping test of a plain `minimize` (and of `solve`'s rounds unless the options
+#: say otherwise): 1e-7, of the order of the square root of double precision's 2.2e-16, the usual floor of
+#: a relative-decrease test (Gill, Murray & Wright, Practical Optimization, 1981, ch. 8, termination criteria).
+FTOL_REL = 1e-7
+
 #: nlopt's luksan/luksan.h MEMAVAIL: doubles of scratch memory its L-BFGS sizes its default storage by.
 _LUKSAN_MEMAVAIL = 1310720
 
@@ -203,7 +208,7 @@ def minimize(
     x0: np.ndarray,
     *,
     algorithm: str = "lbfgs",
-    ftol_rel: float = 1e-7,
+    ftol_rel: float = FTOL_REL,
     xtol_rel: float = 0.0,
     max_evals: int = 0,
     max_time_s: float = 0.0,

@@ -24,7 +24,7 @@ from solver.backend import Backend, nlopt_backend
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.objective import NonFiniteError, Objective
-from solver.optimize import ALGORITHMS, OptimizeResult, Status
+from solver.optimize import ALGORITHMS, FTOL_REL, OptimizeResult, Status
 from solver.refinement import (  # noqa: F401 (TOL_FRAMES_PER_INTERVAL, refinement_estimate re-exported)
     TOL_FRAMES_PER_INTERVAL,
     FixedRounds,
@@ -102,7 +102,7 @@ class SolveOptions:
     max_frames: int = 0
     renormalize: bool = True
     algorithm: str = "lbfgs"
-    ftol_rel: float = 1e-7
+    ftol_rel: float = FTOL_REL
     max_evals: int = 0
     max_time_s: float = 0.0
     score: str = "decrease"
