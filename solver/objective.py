@@ -67,7 +67,7 @@ class Objective:
         terms: the objective terms.
         weights: (len(terms),) lambda_j >= 0.
         t0, t1: time interval [s] (the first and last keyframe).
-        rate: quadrature points per second [1/s] (uniform quadrature).
+        rate: quadrature points per second [1/s]; uniform quadrature needs it, Gauss quadrature ignores it.
         scales: (len(terms),) divisors of each integral (1 unless `renormalize` was called).
         quadrature: one of QUADRATURES. "gauss" needs terms without per-point state (no `prepare`,
             no `Term.fixed_points`: not the contact and inverse-dynamics terms), since its nodes change
@@ -85,7 +85,7 @@ class Objective:
     weights: np.ndarray
     t0: float
     t1: float
-    rate: float = 400.0
+    rate: float | None = None
     scales: np.ndarray = field(default=None)
     quadrature: str = "uniform"
     points: int = GAUSS_POINTS
@@ -108,9 +108,11 @@ class Objective:
                 if term.fixed_points or type(term).prepare is not Term.prepare:
                     raise InputError(f"objective term {term.name!r} keeps per-point state, which Gauss quadrature "
                                      "(nodes moving with the frames) does not support; use quadrature='uniform'")
-        if not np.isfinite(self.rate) or self.rate <= 0:
-            raise InputError(f"quadrature rate {self.rate} must be > 0 points per second")
         if self.quadrature == "uniform":
+            if self.rate is None:
+                raise InputError("uniform quadrature needs rate= (points per second, e.g. 400), or use quadrature='gauss'")
+            if not np.isfinite(self.rate) or self.rate <= 0:
+                raise InputError(f"quadrature rate {self.rate} must be > 0 points per second")
             check_points(self.t0, self.t1, self.rate)
         if self.scales is None:
             self.scales = np.ones(len(self.terms))

@@ -404,7 +404,7 @@ def test_solve_options_api(kwargs, fragment):
 def test_solve_api_checks(model, problem):
     kf, layout = problem
     def objective(t0, t1):
-        return Objective([UnitQuaternion(layout.quat_slots)], [1.0], t0, t1)
+        return Objective([UnitQuaternion(layout.quat_slots)], [1.0], t0, t1, rate=400.0)
 
     obj = objective(kf.times[0], kf.times[-1])
     fs = FrameSet.from_keyframes(kf, layout.quat_slots)

@@ -203,7 +203,8 @@ def test_nonfinite_term_is_named_and_last_good_iterate_kept():
     with tempfile.TemporaryDirectory() as d:
         kf, _ = read_keyframes(small_keyframes(Path(d)), layout)
     smooth = CovariantAcceleration(layout.quat_slots, layout.linear_index)
-    obj = Objective([UnitQuaternion(layout.quat_slots), smooth, Poison()], [1.0, 0.05, 1.0], kf.times[0], kf.times[-1])
+    obj = Objective([UnitQuaternion(layout.quat_slots), smooth, Poison()], [1.0, 0.05, 1.0], kf.times[0], kf.times[-1],
+                    rate=400.0)
     initial = FrameSet.from_keyframes(kf, layout.quat_slots)
     sol = solve(obj, initial, SolveOptions(rounds=1))
     assert sol.status is Status.NONFINITE

@@ -95,7 +95,7 @@ def test_renormalized_terms_start_at_their_weights():
     rng = np.random.default_rng(4)
     knots = np.array([0.0, 0.5, 1.0, 1.5])
     P = rng.normal(size=(4, 2)) + 3.0  # Value's integral is positive here
-    obj = Objective([Wiggly(), Value(), Zero()], [0.25, 4.0, 9.0], 0.0, 1.5)
+    obj = Objective([Wiggly(), Value(), Zero()], [0.25, 4.0, 9.0], 0.0, 1.5, rate=400.0)
     scales = obj.renormalize(knots, P)
     assert scales["zero"] == 1.0
     assert pytest.approx(0.25 + 4.0, rel=1e-12) == obj.evaluate(knots, P, grad=False).E
@@ -106,7 +106,9 @@ def test_invalid_weights_and_nonfinite_terms_are_named():
         Objective([Value()], [-1.0], 0.0, 1.0)
     with pytest.raises(InputError, match="1 objective terms but 2 weights"):
         Objective([Value()], [1.0, 2.0], 0.0, 1.0)
-    obj = Objective([Value(), Poison()], [1.0, 1.0], 0.0, 1.0)
+    with pytest.raises(InputError, match="uniform quadrature needs rate="):
+        Objective([Value()], [1.0], 0.0, 1.0)
+    obj = Objective([Value(), Poison()], [1.0, 1.0], 0.0, 1.0, rate=400.0)
     with pytest.raises(NonFiniteError, match="'poison'") as e:
         obj.evaluate(np.array([0.0, 1.0]), np.zeros((2, 1)))
     assert e.value.term == "poison"
