@@ -18,6 +18,7 @@ import numpy as np
 
 from solver.frames import FrameSet
 from solver.objective import Objective
+from solver.quadrature import GAUSS_POINTS
 
 
 def global_times(frames: FrameSet, per_segment: int) -> np.ndarray:
@@ -71,7 +72,7 @@ def weak_form_scores(objective: Objective, frames: FrameSet) -> np.ndarray:
     return np.linalg.norm(ev.grad[is_mid], axis=1)
 
 
-def predicted_decreases(objective: Objective, frames: FrameSet, min_points: int = 4) -> np.ndarray:
+def predicted_decreases(objective: Objective, frames: FrameSet, min_points: int = GAUSS_POINTS) -> np.ndarray:
     """Predicted decrease of E from a variable frame inserted at each segment midpoint.
 
     The weak-form score g_c = dE/dP_c (`weak_form_scores`) is a slope: it grows as segments shrink
@@ -84,9 +85,10 @@ def predicted_decreases(objective: Objective, frames: FrameSet, min_points: int 
     every segment (neighbours of one parity are two knots apart; their coupling through the natural
     spline is a few percent).
 
-    Segments too short for the uniform quadrature (a half with fewer than `min_points` quadrature points)
-    score 0: a frame there would be under-determined by the integral (it could wiggle between the
-    points). Gauss quadrature puts nodes in every segment, so there every segment may be split.
+    Segments too short for the uniform quadrature (a half with fewer than `min_points` quadrature points,
+    by default as many as the Gauss rule gives every cubic piece, `GAUSS_POINTS`) score 0: a frame there
+    would be under-determined by the integral (it could wiggle between the points). Gauss quadrature
+    puts nodes in every segment, so there every segment may be split.
 
     Args:
         objective: the objective (scales already set).
