@@ -90,7 +90,7 @@ def add_solve_arguments(p: argparse.ArgumentParser, terms_help: str | None = Non
     opt.add_argument("--max-time", type=nonnegative(float), default=0.0, metavar="S",
                      help="stop optimizing after S seconds, keeping the best path so far [no limit]")
     opt.add_argument("--max-evals", type=nonnegative(int), default=0, metavar="N",
-                     help="evaluations per subproblem [no limit]")
+                     help="evaluations of the whole solve; when they are spent, keep the best path so far [no limit]")
     opt.add_argument("--rate", type=positive(float), default=lc.rate,
                      help="quadrature points per second [%(default)s]")
 

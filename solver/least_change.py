@@ -71,7 +71,8 @@ class LeastChangeOptions:
             need not be solved tightly while its multipliers are still estimates (inexact subproblems,
             Birgin & Martinez 2014, sec. 4.1); a tighter 1e-6 with a cap of 200 evaluations was slower
             and met fewer bounds on the corpus.
-        max_evals: evaluations per subproblem (0: no limit).
+        max_evals: evaluations of the whole solve, subproblems and refinement estimates (0: no limit): when
+            they are spent the solve ends with the path so far (status MAX_EVALS), as with `max_time_s`.
         max_time_s: [s] stop after this much time in all, keeping the path so far (0: no limit).
         rate: [1/s] quadrature points per second: 200, at least four points in the shortest segment
             (min_gap) for the integrals; penetration is sampled finer between them
@@ -245,27 +246,31 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         if o.max_time_s and left <= 0:
             status, message = Status.MAX_TIME, f"time limit of {o.max_time_s:g} s reached"
             break
+        if o.max_evals and evals >= o.max_evals:
+            status, message = Status.MAX_EVALS, f"evaluation budget of {o.max_evals} spent"
+            break
         if progress:
             progress("round", {"round": k, "frames": frames.count, "variable": frames.n_variable})
         cb = None if progress is None else (lambda n, best, e0=evals: progress("eval", {"evals": e0 + n, "E": best}))
-        r = solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=basis, max_evals=o.max_evals,
+        r = solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=basis,
+                             max_evals=o.max_evals - evals if o.max_evals else 0,
                              max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb)
         frames, evals = r.frames, evals + r.result.n_evals
         rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
         scores = None
         trace.append(np.asarray(r.result.trace))
-        if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE):
+        if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
             status, message = r.result.status, r.result.message
             if status is Status.MAX_TIME:
                 message = f"time limit of {o.max_time_s:g} s reached"
+            if status is Status.MAX_EVALS:
+                message = f"evaluation budget of {o.max_evals} spent"
             break
         scaled = al.scaled_values(basis, frames.values)
         V_prev, rho_prev = al.V, al.rho
         V = al.update(scaled)
         met = max((float(s.max()) for s in scaled if s.size), default=0.0) <= 1.0 and V <= 1.0
-        # a subproblem cut short by the evaluation budget says nothing of what the frames can reach
-        cut = r.result.status is Status.MAX_EVALS
-        stall = stall + 1 if (not cut and STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
+        stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
         level_its += 1
         kind = "boost"
         if stall >= 2 and stalled_before:

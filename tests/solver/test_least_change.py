@@ -198,3 +198,20 @@ def test_refinement_checks_are_recorded_where_they_chose_frames(shipped):
         assert set(before) < set(r.times)
     np.testing.assert_array_equal(checks[-1][0], sol.frames.times)
     assert sol.final_estimate <= LeastChangeOptions().tol
+
+
+def test_the_evaluation_budget_is_for_the_whole_solve(shipped):
+    """`max_evals` caps the solve's evaluations in all, not each subproblem's: a budget smaller than one
+    subproblem's first run ends the solve with status MAX_EVALS, within the budget (plus the 3 of a
+    refinement estimate at most), the keyframes met and the path so far kept."""
+    from solver.optimize import Status
+
+    model, keyframes, info = shipped
+    lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights)
+    budget = 25
+    sol = solve_least_change(lc, LeastChangeOptions(max_evals=budget))
+    assert sol.status is Status.MAX_EVALS and "evaluation budget of 25" in sol.message
+    assert sum(r.result.n_evals for r in sol.rounds) <= budget
+    assert sol.n_evals <= budget + 3
+    at = np.flatnonzero(sol.frames.is_keyframe)
+    assert np.abs(sol.frames.values[at][keyframes.mask] - keyframes.values[keyframes.mask]).max() <= 1e-12
