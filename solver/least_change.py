@@ -328,5 +328,6 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, s
     return Solution(frames, lc.plain, tuple(rounds), status, message, 0.0, D / al.d0,
                     worst(plain_basis, lc.plain.values), worst(basis, frames.values), {},
                     np.concatenate(trace) if trace else np.zeros(0), seconds, evals, unmet=dict(unmet),
-                    converged_to_tol=bool(np.isfinite(estimate) and estimate <= tol and not unmet),
+                    converged_to_tol=bool(status is Status.CONVERGED and np.isfinite(estimate) and estimate <= tol
+                                          and not unmet),
                     final_estimate=estimate, relaxations=tuple(lc.relaxations), segment_decreases=decreases)

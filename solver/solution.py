@@ -65,7 +65,8 @@ class Solution:
             with adaptive subdivision `refinement_estimate` (refine "rounds" with score "decrease":
             every round but the last; refine "tol": every round); `solver.orient_refine.GapToOptimum`:
             the estimated gap.
-        converged_to_tol: with a tolerance, whether the estimate reached it; None without one.
+        converged_to_tol: with a tolerance, whether the solve ended because the estimate reached it (the
+            least change: with every constraint met; not after a budget or a stop request); None without one.
         final_estimate: the last estimate of a strategy with a tolerance, NaN otherwise.
         unmet: {constraint: amount [SI]} of the constraints the least change could not meet
             (`solver.least_change`); {} for `solve`.

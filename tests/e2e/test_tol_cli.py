@@ -70,11 +70,12 @@ def small_clip(tmp_path, n=3):
 
 def test_figure_tol(tmp_path, capsys):
     clip, out = small_clip(tmp_path), tmp_path / "path.npz"
-    common = ["animate", clip, "--no-render", "--max-evals", "15", "--save-path", str(out)]
+    common = ["animate", clip, "--no-render", "--max-evals", "400", "--save-path", str(out)]
     assert main([*common, "--tol", "0.05"]) == 0
     printed = capsys.readouterr().out
     assert "refinement estimate" in printed
-    assert "tolerance met (refinement estimate" in printed or "tolerance NOT met" in printed
+    # the budget (about half of what the clip takes) ends the solve, and the summary says so
+    assert "tolerance NOT met: evaluation budget of 400 spent" in printed
     solve_opts = json.loads(str(np.load(out)["options_json"]))["solve"]
     assert solve_opts["tol"] == 0.05
 
