@@ -243,11 +243,9 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
         left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
-        if o.max_time_s and left <= 0:
-            status, message = Status.MAX_TIME, f"time limit of {o.max_time_s:g} s reached"
-            break
-        if o.max_evals and evals >= o.max_evals:
-            status, message = Status.MAX_EVALS, f"evaluation budget of {o.max_evals} spent"
+        spent = Status.MAX_TIME if o.max_time_s and left <= 0 else Status.MAX_EVALS if o.max_evals and evals >= o.max_evals else None
+        if spent:
+            status, message = spent, _stop_message(spent, "", o)
             break
         if progress:
             progress("round", {"round": k, "frames": frames.count, "variable": frames.n_variable})
@@ -260,11 +258,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         scores = None
         trace.append(np.asarray(r.result.trace))
         if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
-            status, message = r.result.status, r.result.message
-            if status is Status.MAX_TIME:
-                message = f"time limit of {o.max_time_s:g} s reached"
-            if status is Status.MAX_EVALS:
-                message = f"evaluation budget of {o.max_evals} spent"
+            status, message = r.result.status, _stop_message(r.result.status, r.result.message, o)
             break
         scaled = al.scaled_values(basis, frames.values)
         V_prev, rho_prev = al.V, al.rho
@@ -301,6 +295,16 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
     return _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, time.perf_counter() - start,
                      estimate, o.tol, tuple(decreases))
+
+
+def _stop_message(status: Status, message: str, o: LeastChangeOptions) -> str:
+    """Why a solve ended on `status`: the whole solve's budget for MAX_TIME and MAX_EVALS (a subproblem
+    reports only its own share), else the subproblem's `message`."""
+    if status is Status.MAX_TIME:
+        return f"time limit of {o.max_time_s:g} s reached"
+    if status is Status.MAX_EVALS:
+        return f"evaluation budget of {o.max_evals} spent"
+    return message
 
 
 def _refinement(al, frames, quat, o: LeastChangeOptions, k: int, progress) -> tuple[np.ndarray, float, np.ndarray]:
