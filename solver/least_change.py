@@ -194,18 +194,20 @@ def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) ->
 
 
 def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list) -> dict:
-    """Raise the limit of every pair still broken to what the path reaches and reset its multiplier;
-    returns {constraint: largest amount [SI]}. While a bound relative to the reference motion
-    (`Constraint.relative`: the no-jolt and effort bounds) is broken, only those are raised: they measure
-    the path against what the capture or the plain spline does, the others are limits of the body and
-    the scene (a foot in the floor), which give only if the solve stalls again."""
+    """Raise the limit of every pair still broken of the lowest `Constraint.priority` broken to what the
+    path reaches and reset its multiplier; returns {constraint: largest amount [SI]}. So the bounds set by
+    the reference motion (no jolts, effort) give first, the contact schedule's wishes (planted, slide,
+    clearance) next, and the limits of the body, the scene and physics (a foot in the floor, a knee bent
+    backwards) only if the solve stalls with nothing else broken: a lexicographic order of the
+    constraints, as in prioritized inverse kinematics (Kanoun, Lamiraux & Wieber, "Kinematic control of
+    redundant manipulators: generalizing the task-priority framework to inequality tasks", IEEE T-RO 27,
+    2011)."""
     state = al.state(basis, frames.values)
     unmet = {}
-    broken = [bool((ch > 1.0).any()) for ch in scaled]
-    first = any(b and c.relative for b, c in zip(broken, al.constraints))
+    level = min((c.priority for c, ch in zip(al.constraints, scaled) if (ch > 1.0).any()), default=None)
     for j, (c, ch) in enumerate(zip(al.constraints, scaled)):
         bad = ch > 1.0
-        if bad.any() and (c.relative or not first):
+        if bad.any() and c.priority == level:
             v = c.values(state)
             unmet[c.name] = max(unmet.get(c.name, 0.0), float(v[bad].max()))
             c.limit = c.limit.copy()

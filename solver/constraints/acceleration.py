@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.constraints.base import Constraint
+from solver.constraints.base import RELATIVE, Constraint
 
 __all__ = ["AccelerationBound"]
 
@@ -29,7 +29,7 @@ class AccelerationBound(Constraint):
     """
 
     name, unit, scale = "acceleration", "m/s^2 | rad/s^2", 1.0
-    relative = True
+    priority = RELATIVE
 
     def __init__(self, n_points: int, dofs: np.ndarray, limits: np.ndarray, tolerance: np.ndarray, labels):
         self.dofs = np.asarray(dofs, int).reshape(-1, 3)

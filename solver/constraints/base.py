@@ -15,12 +15,15 @@ import numpy as np
 
 from solver.path_state import PathState
 
-__all__ = ["RELATIVE_TOLERANCE", "Constraint"]
+__all__ = ["LIMIT", "RELATIVE", "RELATIVE_TOLERANCE", "SCHEDULE", "Constraint"]
 
 #: the tolerance of a bound set by a reference motion's own figure (the no-jolt peaks, the effort, the peak
 #: ground force), relative to that bound: 5 %, one value for every such bound (a figure read off a
 #: low-pass-filtered capture is not known more precisely than that)
 RELATIVE_TOLERANCE = 0.05
+
+#: `Constraint.priority` values, lowest first to give
+RELATIVE, SCHEDULE, LIMIT = range(3)
 
 
 class Constraint:
@@ -37,9 +40,12 @@ class Constraint:
     tolerance: float = 1.0
     rows: np.ndarray = np.zeros(0, int)
     labels: np.ndarray = np.zeros(0, object)
-    #: a bound relative to the reference motion (what the capture or the plain spline does), not a limit of the
-    #: body or the scene: where the constraints cannot all be met, these are raised first
-    relative: bool = False
+    #: the order in which limits give where the constraints cannot all be met (`solver.least_change`): a
+    #: broken pair of the lowest priority broken is raised first. RELATIVE (0): a bound set by the reference
+    #: motion (what the capture or the plain spline does); SCHEDULE (1): a wish of the contact schedule (a
+    #: foot planted, a site clear), an estimate from the capture or the animator; LIMIT (2): a limit of
+    #: the body, the scene or physics (a foot in the floor, a knee bent backwards, a wrench in flight)
+    priority: int = 2
 
     @property
     def size(self) -> int:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.constraints.base import Constraint
+from solver.constraints.base import RELATIVE, Constraint
 
 __all__ = ["TorqueRMS", "rms_torque"]
 
@@ -41,7 +41,7 @@ class TorqueRMS(Constraint):
     """
 
     name, unit, scale = "effort", "N m", 1.0
-    relative = True
+    priority = RELATIVE
 
     def __init__(self, weights: np.ndarray, dofs: np.ndarray, bound: float, tolerance: float):
         self.w = np.asarray(weights, float)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.constraints.base import Constraint
+from solver.constraints.base import SCHEDULE, Constraint
 from solver.path_state import PathState
 
 #: [1/s] penetration is checked at least this often (`Penetration`): 1600 samples a second, finer than
@@ -57,6 +57,8 @@ def site_heights(state: PathState, support, radii: np.ndarray, rows: np.ndarray,
 
 class _SitePairs(Constraint):
     """Pairs of (quadrature point, engine site, surface) and the heights there."""
+
+    priority = SCHEDULE  # its subclass HeightBound: a flight's clearance, the ground outside flights
 
     def __init__(self, support, radii, rows, cols, surfaces, labels):
         self.support, self.radii = support, np.asarray(radii, float)
@@ -198,6 +200,8 @@ class _FootSupport(Constraint):
             contact's length [s]. rows: (p,) a quadrature point inside each (for reports). labels: (p,)
             the foot's name.
     """
+
+    priority = SCHEDULE
 
     def __init__(self, support, radii, points, cols, surfaces, pair, w, span, rows, labels):
         self.support, self.radii = support, np.asarray(radii, float)

@@ -215,3 +215,29 @@ def test_the_evaluation_budget_is_for_the_whole_solve(shipped):
     assert sol.n_evals <= budget + 3
     at = np.flatnonzero(sol.frames.is_keyframe)
     assert np.abs(sol.frames.values[at][keyframes.mask] - keyframes.values[keyframes.mask]).max() <= 1e-12
+
+
+def test_out_of_reach_limits_give_one_priority_at_a_time(shipped):
+    """A solve that stalls raises the broken pairs of the lowest `Constraint.priority` only (the contact
+    schedule's wishes before the limits of the body and the scene), to exactly what the path reaches
+    (c = 0 there), and leaves every other constraint's limit as it was; the next stall raises the next."""
+    from solver.constraints.base import LIMIT, SCHEDULE
+    from solver.least_change import _relax_unmet
+
+    model, keyframes, info = shipped
+    lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights, rate=200.0)
+    frames = _start_frames(lc, LeastChangeOptions().min_gap)
+    basis = SplineBasis(frames.times, lc.al.t)
+    frames = replace(frames, values=_perturbed(lc, frames, size=5e-2))
+    al = lc.al
+    broken = {c.priority for c, s in zip(al.constraints, al.scaled_values(basis, frames.values)) if (s > 1).any()}
+    assert {SCHEDULE, LIMIT} <= broken
+    for level in (SCHEDULE, LIMIT):
+        before = [(c.limit.copy(), sc > 1.0) for c, sc in zip(al.constraints, al.scaled_values(basis, frames.values))]
+        raised = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values))
+        assert raised and {c.priority for c in al.constraints if c.name in raised} == {level}
+        for c, sc, (old, bad) in zip(al.constraints, al.scaled_values(basis, frames.values), before):
+            if c.priority == level:  # raised to exactly what the path reaches where broken, elsewhere as it was
+                assert np.abs(sc[bad]).max(initial=0.0) <= 1e-9 and np.array_equal(c.limit[~bad], old[~bad]), c.name
+            else:
+                assert np.array_equal(c.limit, old), c.name
