@@ -48,8 +48,9 @@ class Progress:
 
     On a terminal: a tqdm bar per round (evaluations, the current objective E, elapsed time). Off a terminal
     (a log, a pipe): plain lines, one when a round starts, one when it ends, and in between at most one every
-    `QUIET_INTERVAL` seconds, worded "(still optimizing)" so it does not read as a new round. `quiet`:
-    nothing.
+    `QUIET_INTERVAL` seconds, worded "(still optimizing)" so it does not read as a new round. A round of the
+    least change ends with its worst constraint ("worst flight wrench 10.9 x tol": the constraint the solve
+    is fighting, met at <= 1). `quiet`: nothing.
     """
 
     def __init__(self, quiet=False, stream=None, interval=QUIET_INTERVAL):
@@ -92,6 +93,8 @@ class Progress:
                 self._line(f"  round {self.round.get('round', 0) + 1} (still optimizing): "
                            f"{self.evals - self.round['evals0']} evaluations, {self._E()}, "
                            f"{self.last - self.t0:.1f} s")
+        elif event == "constraints" and self.round is not None:  # after a subproblem: the worst constraint
+            self.round["worst"] = f"worst {info['worst']} {info['value']:.3g} x tol" if info.get("worst") else ""
         elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
             self._end_round()
             tol = f" (tol {info['tol']:g})" if info.get("tol") else ""
@@ -101,14 +104,15 @@ class Progress:
     def _end_round(self):
         if self.round is None:
             return
+        worst = f", {self.round['worst']}" if self.round.get("worst") else ""
         if self.bar is not None:
-            self.bar.set_postfix_str(self._E(), refresh=False)
+            self.bar.set_postfix_str(self._E() + worst, refresh=False)
             self.bar.close()
             self.bar = None
         else:
             r = self.round
-            self._line(f"  round {r.get('round', 0) + 1}: done, {self.evals - r['evals0']} evaluations, {self._E()}, "
-                       f"{time.perf_counter() - r['t0']:.1f} s")
+            self._line(f"  round {r.get('round', 0) + 1}: done, {self.evals - r['evals0']} evaluations, {self._E()}"
+                       f"{worst}, {time.perf_counter() - r['t0']:.1f} s")
         self.round = None
 
     def done(self):

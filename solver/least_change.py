@@ -227,7 +227,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         lc: from `build_least_change` (its multipliers change). options: LeastChangeOptions.
         should_stop: polled during each subproblem; True ends the solve with the path so far.
         progress: progress(event, info): "round" (a subproblem starts: round, frames, variable), "eval"
-            (evals, E = Phi), "estimate" (round, estimate: the predicted decrease over Phi, tol).
+            (evals, E = Phi), "constraints" (it ended: round, worst, value as `_worst`, rho: the next
+            penalty), "estimate" (round, estimate: the predicted decrease over Phi, tol).
     Returns:
         Solution: frames, initial (the plain spline's), one Round per subproblem, status, E = D/D0
         before (0) and after, `integrals_*` the largest constraint value over its tolerance per
@@ -238,8 +239,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     start = time.perf_counter()
     frames = _start_frames(lc, o.min_gap)
     basis = SplineBasis(frames.times, al.t)
-    al.rho = initial_penalty(al, basis, FrameVariables(frames, quat),
-                             Preconditioner(FrameVariables(frames, quat), basis, al.change, al.tmap, al.d0))
+    var = FrameVariables(frames, quat)
+    al.rho = initial_penalty(al, basis, var, Preconditioner(var, basis, al.change, al.tmap, al.d0))
     rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
     evals, level_its, stall, stalled_before, kind = 0, 0, 0, False, "start"
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
@@ -257,7 +258,6 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
                              max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb)
         frames, evals = r.frames, evals + r.result.n_evals
         rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
-        scores = None
         trace.append(np.asarray(r.result.trace))
         if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
             status, message = r.result.status, _stop_message(r.result.status, r.result.message, o)
@@ -265,10 +265,11 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         scaled = al.scaled_values(basis, frames.values)
         V_prev, rho_prev = al.V, al.rho
         V = al.update(scaled)
+        if progress:
+            progress("constraints", {"round": k, **_worst(al, scaled), "rho": al.rho})
         met = max((float(s.max()) for s in scaled if s.size), default=0.0) <= 1.0 and V <= 1.0
         stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
-        level_its += 1
-        kind = "boost"
+        level_its, kind, scores = level_its + 1, "boost", None
         if stall >= 2 and stalled_before:
             for name, amount in _relax_unmet(al, basis, frames, scaled).items():
                 unmet[name] = max(unmet.get(name, 0.0), amount)
@@ -297,6 +298,13 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
     return _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, time.perf_counter() - start,
                      estimate, o.tol, tuple(decreases))
+
+
+def _worst(al: AugmentedLagrangian, scaled: list) -> dict:
+    """{"worst": the name of the constraint furthest over its tolerance ("" without one), "value": its
+    largest c/tol (met at <= 1)}."""
+    value, name = max(((float(s.max()), c.name) for c, s in zip(al.constraints, scaled) if s.size), default=(0.0, ""))
+    return {"worst": name, "value": value}
 
 
 def _stop_message(status: Status, message: str, o: LeastChangeOptions) -> str:

@@ -95,6 +95,7 @@ def test_progress_off_a_terminal_prints_rounds_once_and_a_still_line_every_5_s(m
     for i in range(1, 121):  # 12 s of evaluations, 10 a second
         clock.t = i / 10
         p("eval", {"evals": i, "E": 1.0 / i})
+    p("constraints", {"round": 0, "worst": "flight wrench", "value": 10.9123, "rho": 0.84})
     p("round", {"round": 1, "frames": 20, "variable": 12})
     clock.t = 13.0
     p.done()
@@ -102,7 +103,8 @@ def test_progress_off_a_terminal_prints_rounds_once_and_a_still_line_every_5_s(m
     assert [line.split(":")[0].strip() for line in lines] == [
         "round 1", "round 1 (still optimizing)", "round 1 (still optimizing)", "round 1", "round 2", "round 2"]
     assert "started" in lines[0] and "done, 120 evaluations" in lines[3] and "started" in lines[4]
-    assert "done, 0 evaluations" in lines[5]
+    assert "worst flight wrench 10.9 x tol" in lines[3]
+    assert "done, 0 evaluations" in lines[5] and "worst" not in lines[5]
     assert progress.Progress(quiet=True, stream=stream) is not None
 
 

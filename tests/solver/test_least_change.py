@@ -164,14 +164,20 @@ def test_standing_still_is_left_alone():
 @pytest.mark.slow
 def test_shipped_clip_meets_keyframes_and_constraints(shipped):
     """The shipped clip with its capture (the acceleration bounds are the capture's), as the command
-    line solves it."""
+    line solves it. Each subproblem reports its worst constraint; the last report is the final path's
+    worst c/tol (`Solution.integrals_final`)."""
     from runner.problem_file import find_reference
 
     model, keyframes, info = shipped
     ref = find_reference(info, model, quiet=True)
     lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights,
                             capture=(ref.times, ref.qpos))
-    sol = solve_least_change(lc, LeastChangeOptions())
+    events = []
+    sol = solve_least_change(lc, LeastChangeOptions(), progress=lambda e, i: events.append((e, i)))
+    reports = [i for e, i in events if e == "constraints"]
+    assert len(reports) == len(sol.rounds)
+    worst = max(sol.integrals_final.items(), key=lambda kv: kv[1])
+    assert reports[-1]["worst"] == worst[0] and reports[-1]["value"] == pytest.approx(worst[1], rel=1e-9)
     at = np.flatnonzero(sol.frames.is_keyframe)
     fixed = keyframes.mask
     assert np.abs(sol.frames.values[at][fixed] - keyframes.values[fixed]).max() <= 1e-12
