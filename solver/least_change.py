@@ -180,6 +180,17 @@ def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
     return _with_frames(frames, mids[np.diff(frames.times) >= 2 * min_gap], lc.layout.quat_slots)
 
 
+def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, SplineBasis]:
+    """The starting frames (`_start_frames`) and their SplineBasis; sets the starting penalty rho_0 on
+    `lc.al` (`solver.lagrangian.initial_penalty`)."""
+    al = lc.al
+    frames = _start_frames(lc, min_gap)
+    basis = SplineBasis(frames.times, al.t)
+    var = FrameVariables(frames, lc.layout.quat_slots)
+    al.rho = initial_penalty(al, basis, var, Preconditioner(var, basis, al.change, al.tmap, al.d0))
+    return frames, basis
+
+
 def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) -> FrameSet:
     """`frames.with_variable_frames(times)` with every free quaternion made unit: a frame inserted on the
     path takes its chord's shorter quaternion (norm cos(theta/2) between two frames theta apart), and the
@@ -237,10 +248,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     o = options or LeastChangeOptions()
     al, quat = lc.al, lc.layout.quat_slots
     start = time.perf_counter()
-    frames = _start_frames(lc, o.min_gap)
-    basis = SplineBasis(frames.times, al.t)
-    var = FrameVariables(frames, quat)
-    al.rho = initial_penalty(al, basis, var, Preconditioner(var, basis, al.change, al.tmap, al.d0))
+    frames, basis = _start(lc, o.min_gap)
     rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
     evals, level_its, stall, stalled_before, kind = 0, 0, 0, False, "start"
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
@@ -265,9 +273,10 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         scaled = al.scaled_values(basis, frames.values)
         V_prev, rho_prev = al.V, al.rho
         V = al.update(scaled)
+        worst = _worst(al, scaled)
         if progress:
-            progress("constraints", {"round": k, **_worst(al, scaled), "rho": al.rho})
-        met = max((float(s.max()) for s in scaled if s.size), default=0.0) <= 1.0 and V <= 1.0
+            progress("constraints", {"round": k, **worst, "rho": al.rho})
+        met = worst["value"] <= 1.0 and V <= 1.0
         stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
         level_its, kind, scores = level_its + 1, "boost", None
         if stall >= 2 and stalled_before:

@@ -45,7 +45,7 @@ class Constraint:
     #: motion (what the capture or the plain spline does); SCHEDULE (1): a wish of the contact schedule (a
     #: foot planted, a site clear), an estimate from the capture or the animator; LIMIT (2): a limit of
     #: the body, the scene or physics (a foot in the floor, a knee bent backwards, a wrench in flight)
-    priority: int = 2
+    priority: int = LIMIT
 
     @property
     def size(self) -> int:
