@@ -1,6 +1,6 @@
 """The figure's constraints for one problem, each a function with its unit and tolerance (docs/design.md).
 
-    penetration  every contact site's lowest point outside every plane and box (1600 samples/s)  d >= 0     1 mm
+    penetration  every contact site's lowest point outside every plane and box, at every instant  d >= 0     1 mm
     planted      over each foot contact, the support site's mean height                 mean h <= FLOAT_LIMIT 2 mm
     slide        over each site contact, the distance the site slides                    <= SLIDE_DISTANCE 2 mm
     flight       in a flight, every site clear (the field's flight height)             h >= 3.1 cm      1 mm
@@ -59,7 +59,8 @@ from solver.constraints.acceleration import AccelerationBound
 from solver.constraints.anatomy import AngleBound
 from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.constraints.effort import TorqueRMS, rms_torque
-from solver.constraints.sites import HeightBound, Penetration, SupportHeight, SupportSlide, site_heights
+from solver.constraints.penetration import Penetration
+from solver.constraints.sites import HeightBound, SupportHeight, SupportSlide, site_heights
 from solver.constraints.unit import UnitNorm
 from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.contacts import contact_radii
@@ -199,8 +200,8 @@ def _run(values: np.ndarray, j: int) -> slice:
 def _relax_heights(constraints, state, plain, model, sites, support, radii, flights) -> list[Relaxation]:
     """Raise the pointwise limits (penetration, flight, ground) a full keyframe breaks by more than the
     tolerance to the plain spline's own values on its excursion (module docstring); the reports. The
-    keyframe's value is the plain spline's at the sample nearest it (a constraint sampled between the
-    quadrature points, `Penetration`, has one within a fraction of a spacing); every time series of the
+    keyframe's value is the plain spline's at the pair nearest it (`Penetration`'s pairs stand for the
+    intervals between quadrature points, at their midpoints); every time series of the
     same site (and surface) is relaxed on its own run of broken pairs around the keyframe."""
     from solver.contacts import site_positions
 

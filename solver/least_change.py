@@ -75,8 +75,8 @@ class LeastChangeOptions:
             they are spent the solve ends with the path so far (status MAX_EVALS), as with `max_time_s`.
         max_time_s: [s] stop after this much time in all, keeping the path so far (0: no limit).
         rate: [1/s] quadrature points per second: 200, at least four points in the shortest segment
-            (min_gap) for the integrals; penetration is sampled finer between them
-            (`solver.constraints.sites.PENETRATION_RATE`).
+            (min_gap) for the integrals; penetration holds between them too (its deepest point over each
+            interval, `solver.constraints.penetration`).
     """
 
     tol: float = 1e-2

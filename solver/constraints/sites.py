@@ -6,7 +6,6 @@ surface (`SupportSurfaces`: a plane, or a box's top over its footprint), with dh
 unit normal (where the support is chosen per point, the rounded distance to a box's top: continuously
 differentiable across its edge). A `HeightBound` pair holds h <= limit (upper) or h >= limit (lower):
 
-    penetration   h >= 0 at every point, every site, against the surface under it       [m]
     planted       h <= limit during a contact, above the contact's surface               [m]
     flight        h >= limit in a flight, every site                                     [m]
 
@@ -23,11 +22,7 @@ import numpy as np
 from solver.constraints.base import SCHEDULE, Constraint
 from solver.path_state import PathState
 
-#: [1/s] penetration is checked at least this often (`Penetration`): 1600 samples a second, finer than
-#: the 1000 Hz the metrics sample at, so a corner clipped between two samples is under the tolerance
-PENETRATION_RATE = 1600.0
-
-__all__ = ["HeightBound", "Penetration", "SupportHeight", "SupportSlide", "site_heights"]
+__all__ = ["HeightBound", "SupportHeight", "SupportSlide", "site_heights"]
 
 
 def site_heights(state: PathState, support, radii: np.ndarray, rows: np.ndarray, cols: np.ndarray,
@@ -100,92 +95,6 @@ class HeightBound(_SitePairs):
         gp = np.zeros(state.sites.shape)
         np.add.at(gp, (self.rows, self.cols), (self.sign * g)[:, None] * n)
         state.add_sites(gp)
-
-
-class Penetration(Constraint):
-    """-d <= 0 at every (sample, site, surface): d the signed distance of the site's contact point to the
-    surface (`StaticSurfaces.signed_distances`: a plane's free side, a box's outside), paper eq. 12 for
-    every plane and box of the scene, a box's sides included.
-
-    Sampled at the quadrature points and enough points between each two for PENETRATION_RATE, placed by cubic Hermite
-    interpolation of the sites' positions and velocities at the points (exact for a site moving on a
-    cubic; its error is h^4/384 max |p''''|, microns at 400 Hz): a toe crossing a box's edge at 3 m/s
-    moves 7.5 mm between two points 2.5 ms apart and would clip the corner unseen.
-
-    Args:
-        surfaces: StaticSurfaces. radii: (k,) [m]. t: (n,) quadrature points [s]. sites: (k,) names.
-        tolerance: [m].
-    """
-
-    name, unit, scale = "penetration", "mm", 1e-3
-
-    def __init__(self, surfaces, radii, t: np.ndarray, sites, tolerance: float):
-        self.surfaces, self.radii = surfaces, np.asarray(radii, float)
-        n, K, S = len(t), len(sites), surfaces.count
-        self.dt = np.diff(np.asarray(t, float))  # (n - 1,)
-        self.sub = sub = max(0, int(np.ceil(PENETRATION_RATE * float(self.dt.max(initial=0.0)) - 1e-9)) - 1)
-        u = np.arange(1, sub + 1) / (sub + 1)  # (j,) fractions of a spacing
-        self.hermite = np.stack([2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2], 1)
-        m = n + sub * (n - 1)  # samples: the points, then each fraction's n - 1 samples
-        sample_row = np.r_[np.arange(n), np.tile(np.arange(n - 1), sub)]
-        sample_series = np.r_[np.zeros(n, int), np.repeat(np.arange(1, sub + 1), n - 1)]
-        self.shape = (m, K, S)
-        self.rows = np.repeat(sample_row, K * S)
-        self.cols = np.tile(np.repeat(np.arange(K), S), m)
-        # one time series per (fraction, site, surface), consecutive rows within it; a group per (site, surface)
-        self.group = np.tile(np.arange(K * S), m)
-        self.series = np.repeat(sample_series, K * S) * (K * S) + self.group
-        self._frac = np.repeat(np.r_[np.zeros(n), np.repeat(u, n - 1)], K * S)  # each pair's fraction of its spacing
-        self.labels = np.asarray(sites, object)[self.cols]
-        self.limit = np.zeros(len(self.rows))
-        self.tolerance = float(tolerance)
-
-    def pair_times(self, t: np.ndarray) -> np.ndarray:
-        """(p,) the time [s] of each pair's sample, from the quadrature points t (n,)."""
-        return t[self.rows] + self._frac * np.append(self.dt, 0.0)[self.rows]
-
-    def pair_weights(self, weights: np.ndarray) -> np.ndarray:
-        """Each sample stands for an equal share of its point's weight [s]."""
-        return weights[self.rows] / (self.sub + 1)
-
-    def _samples(self, state) -> np.ndarray:
-        """(m, k, 3) the lowest points of the sites at the samples [m]."""
-        p, v = state.sites, state.site_velocities
-        H = self.hermite[:, :, None, None, None]
-        dt = self.dt[None, :, None, None]
-        sub = H[:, 0] * p[None, :-1] + H[:, 1] * dt * v[None, :-1] + H[:, 2] * p[None, 1:] + H[:, 3] * dt * v[None, 1:]
-        out = np.concatenate([p, sub.reshape(-1, *p.shape[1:])], axis=0)
-        out[..., 2] -= self.radii
-        return out
-
-    def _distances(self, state):
-        key = ("distances", id(self))
-        hit = state.cache.get(key)
-        if hit is None:
-            hit = state.cache[key] = self.surfaces.signed_distances(self._samples(state))  # (m, K, S), (m, K, S, 3)
-        return hit
-
-    def measure(self, state):
-        d, _ = self._distances(state)
-        return -d.ravel()
-
-    def pull(self, state, g):
-        on = np.flatnonzero(g)
-        if not on.size:
-            return
-        _, grad = self._distances(state)
-        i, k, s = np.unravel_index(on, self.shape)
-        gs = np.zeros(self.shape[:2] + (3,))
-        np.add.at(gs, (i, k), -g[on, None] * grad[i, k, s])
-        n = len(self.dt) + 1
-        gp, gv = gs[:n].copy(), np.zeros((n,) + gs.shape[1:])
-        sub = gs[n:].reshape(self.sub, n - 1, *gs.shape[1:])
-        H, dt = self.hermite, self.dt[None, :, None, None]
-        gp[:-1] += np.einsum("j,jnkc->nkc", H[:, 0], sub)
-        gp[1:] += np.einsum("j,jnkc->nkc", H[:, 2], sub)
-        gv[:-1] += np.einsum("j,jnkc->nkc", H[:, 1], dt * sub)
-        gv[1:] += np.einsum("j,jnkc->nkc", H[:, 3], dt * sub)
-        state.add_sites(gp, gv)
 
 
 class _FootSupport(Constraint):
