@@ -30,8 +30,10 @@ there; the problem is made well posed instead of excused:
 * Where a full keyframe breaks a height bound (a keyed toe below the floor, a keyed heel 2 cm up on
   its support), the plain spline through the keyframes breaks it on an interval around the keyframe
   (its excursion: the quadrature points of that site around the keyframe where it breaks it). There the
-  limit becomes the plain spline's own value (for a mean, the excursion's share of it): the path may do
-  better, never worse, and the plain spline meets every limit, so the problem stays feasible.
+  limit becomes the plain spline's own value: the path may do better, never worse, and the plain spline
+  meets those limits. Where a keyframe holds a foot up inside a contact, the planted limit (a mean over
+  the contact) becomes the mean height of a known path through the keyframes over the contact: the
+  capture they came from, else the plain spline (its witness: a path that meets it).
 * Two full keyframes in one foot contact that hold its support site a distance d apart along the
   surface make it slide at least d between them (the triangle inequality; the skate the keyframes
   force, `runner.motion_metrics.forced_skate_mm`, is the same bound): the slide limit is
@@ -133,7 +135,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     out = []
     if engine is not None and surfaces.count:
         out.append(Penetration(surfaces, radii, t, sites, TOLERANCES["penetration"]))
-        feet = _foot_support(model, figure, reference, plain, contacts, engine, support, radii)
+        witness = None if capture is None else _capture_state(model, reference, capture, engine)
+        feet = _foot_support(model, figure, reference, plain, contacts, engine, support, radii, witness)
         if feet is not None:
             args, limit_h, reports = feet
             height = SupportHeight(*args, limit=limit_h, tolerance=TOLERANCES["planted"])
@@ -312,9 +315,11 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites):
     return args, np.array(limits), reports
 
 
-def _foot_support(model, figure, reference, plain, contacts, engine, support, radii):
+def _foot_support(model, figure, reference, plain, contacts, engine, support, radii, witness=None):
     """The foot contacts' support points (`solver.constraints.sites._FootSupport`) and their limits
-    relaxed where the keyframes force (module docstring), or None without contacts.
+    relaxed where the keyframes force (module docstring), or None without contacts. The relaxation is
+    what a known path through the keyframes does around the keyframe: `witness` (the capture they came
+    from, a PathState at the quadrature points), else the plain spline.
 
     Returns:
         (args of `_FootSupport`, planted limits (p,) [m], relaxation reports).
@@ -354,24 +359,24 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
             continue
         surfaces = surf[np.flatnonzero(ok), cols]
         href = cand[np.flatnonzero(ok), cols]
+        if witness is not None:
+            href = site_heights(witness, support, radii, on, cols, surfaces, None)[0]
         p = len(limits_h)
         span = float(w[on].sum())
         limit_h = FLOAT_LIMIT
-        done = np.zeros(len(on), bool)
         for j, (k, tk) in enumerate(zip(index, times)):  # keyframes inside the foot contact
             if not (F.start - 1e-6 <= tk <= F.end + 1e-6):
                 continue
             i = int(np.argmin(np.abs(t[on] - tk)))
             keyed, _ = support.height(keyed_low[j, cols[i]][None], None if surfaces[i] < 0 else int(surfaces[i]))
-            if keyed[0] - FLOAT_LIMIT <= TOLERANCES["planted"] or done[i]:
+            if keyed[0] - FLOAT_LIMIT <= TOLERANCES["planted"]:
                 continue  # the keyframe meets the bound
+            # the keyframe holds the foot up: the contact is met where it floats no more than the witness
+            limit_h = max(limit_h, float(w[on] @ href) / span - TOLERANCES["planted"])
             run = _run(href - FLOAT_LIMIT, i)
-            if run.stop > run.start:
-                done[run] = True
-                extra = float(w[on[run]] @ (href[run] - FLOAT_LIMIT)) / span
-                limit_h += extra
-                reports.append(Relaxation("planted", F.site, int(k), float(t[on[run.start]]), float(t[on[run.stop - 1]]),
-                                          float(keyed[0])))
+            run = run if run.stop > run.start else slice(i, i + 1)
+            reports.append(Relaxation("planted", F.site, int(k), float(t[on[run.start]]), float(t[on[run.stop - 1]]),
+                                      float(keyed[0])))
         for lst, val in zip(args, (on, cols, surfaces, np.full(len(on), p), w[on], [span], [int(on[len(on) // 2])], [F.site])):
             lst.append(np.asarray(val))
         limits_h.append(limit_h)
