@@ -1,0 +1,87 @@
+"""What a keyframe forces on a planted foot (solver.constraint_set): where a keyframe holds a foot up inside
+its contact, the planted limit becomes the mean height over the contact of a known path through the
+keyframes - the capture they came from, else the plain spline - less the tolerance. Checked against
+heights computed independently: MuJoCo's forward kinematics of that path at the quadrature points and the
+height of the surface under each contact point."""
+from dataclasses import replace
+
+import mujoco
+import numpy as np
+import pytest
+
+import solver
+from solver.constraint_set import FLOAT_LIMIT, TOLERANCES
+from solver.contacts import contact_radii
+from solver.least_change import build_least_change
+from solver.spline import interpolate
+from solver.surfaces import StaticSurfaces
+
+LIFT = 0.03  # [m] how far the keyframe holds the figure up
+
+
+@pytest.fixture(scope="module")
+def lifted():
+    """The shipped keyframes with the figure held LIFT up at the keyframe inside the left toe's contact
+    (0.58-0.74 s), and a capture through those keyframes that is the plain spline of the originals except
+    for a narrow bump (+-80 ms) up to the lifted keyframe: it floats less over the contact than the plain
+    spline through the lifted keyframes."""
+    model = solver.load_model(solver.shipped("run_and_step.xml"))
+    keyframes, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
+    k = int(np.argmin(np.abs(keyframes.times - 0.725)))
+    assert keyframes.mask[k].all()  # a full keyframe: it pins the sites
+    values = keyframes.values.copy()
+    values[k, 2] += LIFT
+    lifted = replace(keyframes, values=values)
+    plain = build_least_change(model, keyframes).plain  # the originals, the partial one completed
+    times = np.arange(keyframes.times[0], keyframes.times[-1] + 1e-9, 1.0 / 120.0)
+    qpos = interpolate(plain.times, plain.values, times)
+    qpos[:, 2] += LIFT * np.clip(1.0 - np.abs(times - keyframes.times[k]) / 0.08, 0.0, None)
+    return model, lifted, info, (times, qpos), k
+
+
+def _expected_limits(model, planted, path_times, path_qpos, t):
+    """Each foot contact's limit from a path: its support sites' heights above the surface under them,
+    by MuJoCo's kinematics at the quadrature points t, averaged over the contact, less the tolerance."""
+    Y = interpolate(path_times, path_qpos, t)
+    data = mujoco.MjData(model)
+    surfaces = StaticSurfaces.from_model(model)
+    sites = solver.Figure.from_model(model).contact_sites
+    ids = [model.site(s).id for s in sites]
+    radii = contact_radii(model, sites)
+    h = np.empty(len(planted.points))
+    for j, (i, col) in enumerate(zip(planted.points, planted.cols)):
+        data.qpos[:] = Y[i]
+        mujoco.mj_kinematics(model, data)
+        p = data.site_xpos[ids[col]].copy()
+        p[2] -= radii[col]
+        h[j] = surfaces.height_above(p)
+    mean = np.bincount(planted.pair, planted.w * h) / planted.span
+    return np.maximum(FLOAT_LIMIT, mean - TOLERANCES["planted"])
+
+
+@pytest.mark.parametrize("with_capture", [True, False])
+def test_a_keyframe_holding_a_foot_up_sets_its_contacts_limit_to_a_witness(lifted, with_capture):
+    model, keyframes, info, capture, k = lifted
+    lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights,
+                            capture=capture if with_capture else None)
+    planted = next(c for c in lc.al.constraints if c.name == "planted")
+    relaxed = planted.limit > FLOAT_LIMIT
+    assert relaxed.sum() == 1 and planted.labels[relaxed][0] == "left"
+    assert any(r.constraint == "planted" and r.keyframe == k for r in lc.relaxations)
+    if with_capture:
+        witness = capture
+    else:
+        witness = (lc.plain.times, lc.plain.values)
+    expected = _expected_limits(model, planted, *witness, lc.al.t)
+    # heights by MuJoCo against the solver's own kinematic tree: the same to round-off
+    np.testing.assert_allclose(planted.limit[relaxed], expected[relaxed], atol=1e-9)
+    np.testing.assert_array_equal(planted.limit[~relaxed], FLOAT_LIMIT)
+
+
+def test_the_capture_floats_less_than_the_plain_spline_so_its_limit_is_tighter(lifted):
+    model, keyframes, info, capture, _ = lifted
+    limits = []
+    for cap in (capture, None):
+        lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights, capture=cap)
+        limits.append(next(c for c in lc.al.constraints if c.name == "planted").limit.max())
+    assert FLOAT_LIMIT < limits[0] < limits[1]
