@@ -37,7 +37,9 @@ there; the problem is made well posed instead of excused:
 * Two full keyframes in one foot contact that hold its support site a distance d apart along the
   surface make it slide at least d between them (the triangle inequality; the skate the keyframes
   force, `runner.motion_metrics.forced_skate_mm`, is the same bound): the slide limit is
-  SLIDE_DISTANCE plus the sum of those d.
+  SLIDE_DISTANCE plus the sum of those d; with the capture the keyframes came from, the allowance beyond
+  that sum is the capture's own slide beyond it where that is less than SLIDE_DISTANCE (a known path
+  through the keyframes slides that little there).
 * The anatomical limits are widened to the reference's own worst angle (`solver.constraints.anatomy`).
 * No jolts is a bound only with a capture (keyframes made from motion capture): then A is the larger of
   the capture's filtered peak and the plain spline's. The plain spline's peak alone is no bound: sparse
@@ -143,7 +145,11 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             sargs, slim, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites)
             height.reports = reports + slide_reports
             out.append(height)
-            out.append(SupportSlide(*sargs, limit=slim, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING))
+            slide = SupportSlide(*sargs, limit=slim, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING)
+            if witness is not None:  # beyond what the keyframes force: 1 cm, or less where the capture slides less
+                forced = slim - SLIDE_DISTANCE
+                slide.limit = forced + np.minimum(SLIDE_DISTANCE, np.maximum(0.0, slide.measure(witness) - forced))
+            out.append(slide)
         if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
             out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     layout = StateLayout.from_model(model)

@@ -1,8 +1,9 @@
-"""What a keyframe forces on a planted foot (solver.constraint_set): where a keyframe holds a foot up inside
-its contact, the planted limit becomes the mean height over the contact of a known path through the
-keyframes - the capture they came from, else the plain spline - less the tolerance. Checked against
-heights computed independently: MuJoCo's forward kinematics of that path at the quadrature points and the
-height of the surface under each contact point."""
+"""A planted foot's limits from a known path through the keyframes (solver.constraint_set). Where a keyframe
+holds a foot up inside its contact, the planted limit becomes the mean height over the contact of the
+capture the keyframes came from (else the plain spline), less the tolerance: checked against heights from
+MuJoCo's forward kinematics of that path and the surface under each contact point. With a capture, a
+site's slide allowance beyond what the keyframes force is the capture's own slide where that is under
+1 cm: checked on a capture gliding at a known speed, whose slide has a closed form."""
 from dataclasses import replace
 
 import mujoco
@@ -85,3 +86,26 @@ def test_the_capture_floats_less_than_the_plain_spline_so_its_limit_is_tighter(l
         lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights, capture=cap)
         limits.append(next(c for c in lc.al.constraints if c.name == "planted").limit.max())
     assert FLOAT_LIMIT < limits[0] < limits[1]
+
+
+def test_a_capture_that_slides_less_than_a_centimetre_tightens_the_slide_limit(lifted):
+    # a capture of the figure in one pose gliding at 5 mm/s along x: every site slides at v = 5 mm/s,
+    # under the Huber width b (1 cm/s), so its slide over a contact of length T is T v^2 / (2 b)
+    from solver.constraint_set import SLIDE_DISTANCE, SLIDE_SMOOTHING
+
+    model, keyframes, info, _, _ = lifted
+    plain = build_least_change(model, keyframes).plain
+    v = 0.005
+    times = np.arange(keyframes.times[0] - 0.2, keyframes.times[-1] + 0.2, 1.0 / 120.0)
+    qpos = np.tile(plain.values[0], (len(times), 1))
+    qpos[:, 0] += v * times
+    slides = []
+    for cap in (None, (times, qpos)):
+        lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights, capture=cap)
+        slides.append(next(c for c in lc.al.constraints if c.name == "slide"))
+    forced = slides[0].limit - SLIDE_DISTANCE  # without a capture: 1 cm beyond what the keyframes force
+    captured = slides[1].span * v * v / (2 * SLIDE_SMOOTHING)
+    assert (captured < SLIDE_DISTANCE).all()
+    expected = forced + np.minimum(SLIDE_DISTANCE, np.maximum(0.0, captured - forced))
+    np.testing.assert_allclose(slides[1].limit, expected, rtol=1e-9, atol=1e-12)
+    assert (slides[1].limit < slides[0].limit).all()
