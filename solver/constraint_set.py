@@ -394,15 +394,14 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
 
 def _filtered_capture(model, reference, capture):
     """The capture ((times, qpos)) low-pass filtered (`solver.peak_bounds.filter_capture`, 6 Hz) as a path at
-    the quadrature points: the natural spline through its frames within PAD_S of the span, (Y, Y1, Y2)."""
+    the quadrature points: the natural spline through all its frames, (Y, Y1, Y2)."""
     from solver.layout import StateLayout
-    from solver.peak_bounds import PAD_S, filter_capture
+    from solver.peak_bounds import filter_capture
     from solver.spline import interpolate
 
     times, qpos = np.asarray(capture[0], float), np.asarray(capture[1], float)
     smooth = filter_capture(times, qpos, StateLayout.from_model(model))
-    keep = (times >= reference.span[0] - PAD_S) & (times <= reference.span[1] + PAD_S)
-    return interpolate(times[keep], smooth[keep], reference.t, (0, 1, 2))
+    return interpolate(times, smooth, reference.t, (0, 1, 2))
 
 
 def _accelerations(model, reference, capture) -> AccelerationBound:

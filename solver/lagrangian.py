@@ -161,48 +161,37 @@ def _inverse_factor(H: np.ndarray) -> np.ndarray:
     return np.linalg.inv(np.linalg.cholesky(H).T)
 
 
-def initial_penalty(al: AugmentedLagrangian, basis, variables: FrameVariables, pre: Preconditioner,
-                    iterations: int = 8, seed: int = 0) -> float:
-    """rho_0 = 1 / lambda_max(A^T A): A the Jacobian of the broken constraints (c/tol, each pair weighted
-    by sqrt(w_p/T)) in the preconditioned variables, where D/D0's Hessian is about the identity; so the
-    first subproblem's penalty is as stiff as the objective in its stiffest direction (a linearized
-    subproblem then halves the violation along it) and no stiffer. lambda_max by power iteration
-    (Golub & Van Loan, Matrix Computations, sec. 8.2.1), A v by central differences of the constraint
-    values, A^T u by the constraints' own reverse pass.
+def initial_penalty(al: AugmentedLagrangian, basis, variables: FrameVariables, pre: Preconditioner) -> float:
+    """rho_0 = |g|^2 / |A g|^2: A the Jacobian of the broken constraints (c/tol, each pair weighted by
+    sqrt(w_p/T)) in the preconditioned variables, where D/D0's Hessian is about the identity, and
+    g = A^T r the gradient of the violations' half square |r|^2 / 2 there: the penalty's Gauss-Newton
+    curvature along the direction that most reduces the violation (a Rayleigh quotient of A^T A; Golub &
+    Van Loan, Matrix Computations, sec. 8.2) is then the objective's, so the first subproblem's step
+    along it weighs both alike. A g by central differences of the constraint values, A^T r by the
+    constraints' own reverse pass.
 
     Returns:
         rho_0 > 0 (1 where no constraint is broken).
     """
     P0 = variables.values(np.zeros(variables.size))
-    broken = [ch > 0 for ch in al.scaled_values(basis, P0)]
-    if not any(b.any() for b in broken):
+    scaled = al.scaled_values(basis, P0)
+    if not any((ch > 0).any() for ch in scaled):
         return 1.0
-    sq = [np.sqrt(w) * b for w, b in zip(al.w, broken)]
-
-    def A(v):
-        eps = 1e-6 / max(1e-300, float(np.abs(pre.apply(v)).max()))
-        hi = al.scaled_values(basis, variables.values(eps * pre.apply(v)))
-        lo = al.scaled_values(basis, variables.values(-eps * pre.apply(v)))
-        return [q * (a - b) / (2 * eps) for q, a, b in zip(sq, hi, lo)]
-
-    def At(u):
-        st = al.state(basis, P0)
-        for c, q, uj in zip(al.constraints, sq, u):
-            if q.any():
-                c.pull(st, q * uj / c.tolerance)
-        G = basis.pullback(*st.pullback())
-        return pre.apply_transpose(variables.pullback(np.zeros(variables.size), G))
-
-    v = np.random.default_rng(seed).normal(size=variables.size)
-    v /= np.linalg.norm(v)
-    lam = 0.0
-    for _ in range(iterations):
-        w = At(A(v))
-        lam = float(np.linalg.norm(w))
-        if lam == 0:
-            return 1.0
-        v = w / lam
-    return 1.0 / lam
+    sq = [np.sqrt(w) * (ch > 0) for w, ch in zip(al.w, scaled)]
+    st = al.state(basis, P0)
+    for c, q, ch in zip(al.constraints, sq, scaled):
+        if q.any():
+            c.pull(st, q * q * np.maximum(ch, 0.0) / c.tolerance)
+    g = pre.apply_transpose(variables.pullback(np.zeros(variables.size), basis.pullback(*st.pullback())))
+    gg = float(g @ g)
+    if gg == 0:
+        return 1.0
+    step = pre.apply(g)
+    eps = 1e-6 / max(1e-300, float(np.abs(step).max()))
+    hi = al.scaled_values(basis, variables.values(eps * step))
+    lo = al.scaled_values(basis, variables.values(-eps * step))
+    Ag2 = sum(float(((q * (a - b)) ** 2).sum()) for q, a, b in zip(sq, hi, lo)) / (2 * eps) ** 2
+    return gg / Ag2 if Ag2 > 0 else 1.0
 
 
 def _variable_dofs(variables: FrameVariables, tmap) -> tuple[np.ndarray, np.ndarray]:

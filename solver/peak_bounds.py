@@ -34,10 +34,6 @@ CUTOFF_HZ = 6.0
 #: Winter's correction of a two-pass (zero-lag) 2nd-order Butterworth: design at cutoff / 0.802 so that
 #: the -3 dB frequency of the two passes is the cutoff ((2^(1/2) - 1)^(1/4) = 0.802)
 TWO_PASS_CORRECTION = 0.802
-#: [s] capture frames kept on each side of the keyframes' span for the spline through the filtered
-#: capture (its natural end conditions then lie outside the span the peaks are read on)
-PAD_S = 0.1
-
 
 
 @dataclass(frozen=True)
@@ -158,8 +154,8 @@ def _peaks(model, frame_times, frames, window=None, flight_too: bool = False) ->
 
 def capture_peaks(model, times, qpos, t_span, cutoff_hz: float = CUTOFF_HZ) -> tuple[float | None, float | None]:
     """The filtered capture's peak ground force [body weights] and pelvis acceleration [m/s^2] over
-    t_span (module docstring; the capture filtered over its whole length, the spline through its frames
-    within PAD_S of the span).
+    t_span (module docstring; the capture filtered over its whole length, the spline through all its frames,
+    so that its natural end conditions lie at the capture's ends, not inside the span).
 
     Args:
         model: MjModel of the scene. times: (n,) frame times [s], the keyframes' clock. qpos: (n, nq)
@@ -171,11 +167,11 @@ def capture_peaks(model, times, qpos, t_span, cutoff_hz: float = CUTOFF_HZ) -> t
     """
     times = np.asarray(times, float)
     smooth = filter_capture(times, qpos, StateLayout.from_model(model), cutoff_hz)
-    keep = (times >= t_span[0] - PAD_S) & (times <= t_span[1] + PAD_S)
-    if keep.sum() < 4:
-        raise InputError(f"the keyframes span {t_span[0]:g}..{t_span[1]:g} s, which holds {int(keep.sum())} frames "
+    inside = int(((times >= t_span[0]) & (times <= t_span[1])).sum())
+    if inside < 4:
+        raise InputError(f"the keyframes span {t_span[0]:g}..{t_span[1]:g} s, which holds {inside} frames "
                          "of the capture; its force peaks need at least 4")
-    force, acc = _peaks(model, times[keep], smooth[keep], window=t_span)
+    force, acc = _peaks(model, times, smooth, window=t_span)
     return (None if not np.isfinite(force) else force), acc
 
 

@@ -35,9 +35,6 @@ PENETRATION_RATE = 1600.0
 #: golden-section steps within the best sample's two spacings: each keeps 0.618 of the bracket, so 8
 #: leave 2 % of it, enough to hold one kink, which the tangent lines then place exactly
 GOLDEN_STEPS = 8
-#: Newton steps on a kink (two faces' distances equal) from where the bracket's tangent lines meet: the
-#: difference is a cubic in u with a simple root, three steps reach it to round-off
-KINK_NEWTON_STEPS = 3
 
 
 def _hermite(u: np.ndarray, order: int = 0) -> np.ndarray:
@@ -123,9 +120,8 @@ def _golden(C: np.ndarray, a: np.ndarray, b: np.ndarray, distance) -> tuple[np.n
 
 def _kinks(C: np.ndarray, u: np.ndarray, a: np.ndarray, b: np.ndarray, distance) -> tuple[np.ndarray, ...]:
     """(u, d, grad d) at each curve's (power coefficients C, `_power`) lowest point found at u (q,) in the
-    bracket [a, b]: where the
-    distance falls into the bracket on one box face and rises out of it on another (both planes there), the
-    point where the two faces' distances are equal, by Newton's method on their difference; elsewhere u."""
+    bracket [a, b]: where the distance falls into the bracket on one box face and rises out of it on
+    another (both planes there), the point where the two faces' distances are equal; elsewhere u."""
     d, g = distance(_curve(C, u))
     a, b = np.minimum(a, u), np.maximum(b, u)
     fa, ga = distance(_curve(C, a))
@@ -138,11 +134,13 @@ def _kinks(C: np.ndarray, u: np.ndarray, a: np.ndarray, b: np.ndarray, distance)
     Ck, ga, gb, a, b = C[:, kink], ga[kink], gb[kink], a[kink], b[kink]
     ka = np.einsum("qc,qc->q", ga, _curve(Ck, a)) - fa[kink]  # each face's distance: d = g . q - k
     kb = np.einsum("qc,qc->q", gb, _curve(Ck, b)) - fb[kink]
-    uk = u[kink]
-    for _ in range(KINK_NEWTON_STEPS):
-        gap = np.einsum("qc,qc->q", ga - gb, _curve(Ck, uk)) - (ka - kb)
-        slope = np.einsum("qc,qc->q", ga - gb, _curve(Ck, uk, 1))
-        uk = np.clip(uk - gap / np.where(slope != 0, slope, 1.0), a, b)
+    # one Newton step from where the two faces' tangent lines at the bracket's ends meet: the faces'
+    # difference is a cubic in u, so the step's error is of the order of the bracket's width squared
+    sa_, sb_ = sa[kink], sb[kink]
+    uk = np.clip((fa[kink] - fb[kink] - sa_ * a + sb_ * b) / (sb_ - sa_), a, b)
+    gap = np.einsum("qc,qc->q", ga - gb, _curve(Ck, uk)) - (ka - kb)
+    slope = np.einsum("qc,qc->q", ga - gb, _curve(Ck, uk, 1))
+    uk = np.clip(uk - gap / np.where(slope != 0, slope, 1.0), a, b)
     q1 = _curve(Ck, uk, 1)
     s1, s2 = np.einsum("qc,qc->q", ga, q1), np.einsum("qc,qc->q", gb, q1)
     mu = np.clip(s2 / np.where(s2 > s1, s2 - s1, 1.0), 0.0, 1.0)
