@@ -93,6 +93,10 @@ def worst_contact_distance(reference: Reference, model) -> float:
     return float(np.max(np.abs(lowest[rest])))
 
 
+class RootCorrectionRefused(InputError):
+    """The root correction a fitted scene needs is beyond its bound (`check_root_correction`)."""
+
+
 def check_root_correction(correction: np.ndarray, frame_time: float, source: str) -> None:
     """Refuse a reference whose root the correction moves too far or too suddenly (on the subject's own
     figure the correction is the only change to the capture, docs/mocap.md "The reference").
@@ -100,20 +104,20 @@ def check_root_correction(correction: np.ndarray, frame_time: float, source: str
     Args:
         correction: (n,) [m] the height correction c(t) of each frame. frame_time: [s]. source: the clip.
     Raises:
-        InputError: |c| above ROOT_CORRECTION_MAX, or c changing by more than ROOT_STEP_MAX in 1/120 s,
-            naming the clip, the time and the fix.
+        RootCorrectionRefused (an InputError): |c| above ROOT_CORRECTION_MAX, or c changing by more than
+            ROOT_STEP_MAX in 1/120 s, naming the clip, the time and the fix.
     """
     c = np.asarray(correction, float)
     i = int(np.argmax(np.abs(c))) if len(c) else 0
     fix = ("the fitted floor and boxes are not where the subject's feet rest (a ramp or uneven ground is not "
            "fitted: docs/contacts.md, \"Fitted scenes\"); give the scene they stood on with --scene FILE.xml")
     if len(c) and abs(c[i]) > ROOT_CORRECTION_MAX:
-        raise InputError(f"{source}: the feet would need the root moved {1000 * c[i]:+.0f} mm at t = {i * frame_time:.3f} s "
+        raise RootCorrectionRefused(f"{source}: the feet would need the root moved {1000 * c[i]:+.0f} mm at t = {i * frame_time:.3f} s "
                          f"to stand on the surfaces (at most {1000 * ROOT_CORRECTION_MAX:.0f} mm): {fix}")
     step = np.abs(np.diff(c)) / (120.0 * frame_time)  # per 1/120 s
     if len(step) and step.max() > ROOT_STEP_MAX:
         j = int(np.argmax(step))
-        raise InputError(f"{source}: the root correction jumps {1000 * step[j]:.0f} mm in 1/120 s at t = {j * frame_time:.3f} s "
+        raise RootCorrectionRefused(f"{source}: the root correction jumps {1000 * step[j]:.0f} mm in 1/120 s at t = {j * frame_time:.3f} s "
                          f"(at most {1000 * ROOT_STEP_MAX:.0f} mm): {fix}")
 
 

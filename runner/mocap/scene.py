@@ -3,12 +3,13 @@
 next to the outputs in the levelled capture frame (the fitted floor at z = 0, solver/capture_frame.py)."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from runner.files import atomic_output
+from runner.mocap.contacts import RootCorrectionRefused
 from runner.mocap.reference import ROOT_SCALE_LEGS, load_bvh_reference
 from runner.mocap.retarget import Reference
 from runner.mocap.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
@@ -36,6 +37,7 @@ class ClipScene:
             the capture's calibration; None for a given scene).
         frame: the rigid transform from the capture's coordinates to the scene's (`capture_floor.
             levelling()`; the identity for a given scene without one).
+        notes: what the fit changed to make the clip fit its scene (a user should know), one line each.
     """
 
     reference: Reference
@@ -44,6 +46,7 @@ class ClipScene:
     fitted: FittedScene | None = None
     capture_floor: FittedScene | None = None
     frame: CaptureFrame = field(default_factory=CaptureFrame.identity)
+    notes: tuple[str, ...] = ()
 
 
 def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_out: str | Path,
@@ -79,14 +82,33 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     first = load_bvh_reference(clip, bare, root_scale=root_scale, skeleton_map=skeleton_map)
     pos = contact_points(bare, first.qpos)  # rounded sites: their spheres' lowest points
     capture = fit_scene(first.times, pos, fit_contacts(first.times, pos))
-    frame, fitted = capture.levelling(), capture.levelled()
     out = Path(fitted_out)
     if not out.parent.is_dir():
         raise InputError(f"{out}: the folder {out.parent} does not exist; create it first")
+    try:
+        return _onto_fitted(clip, capture, figure, out, root_scale, skeleton_map)
+    except RootCorrectionRefused as refused:
+        notes = []
+        if capture.boxes:  # boxes no foot rests on (a foot held still in the air, fitted as a prop): the floor alone
+            notes.append(f"{len(capture.boxes)} fitted box(es) dropped, the scene is the floor alone: with them, {refused}")
+            capture = FittedScene(capture.floor_z, (), capture.floor_slope)
+            try:
+                return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map), notes=tuple(notes))
+            except RootCorrectionRefused as again:
+                refused = again
+        notes.append(f"{refused}; the root is corrected by that much all the same, and the result is only as good as the "
+                     "fitted floor under those feet")
+        return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, check=False), notes=tuple(notes))
+
+
+def _onto_fitted(clip, capture: FittedScene, figure, out: Path, root_scale, skeleton_map, check: bool = True) -> ClipScene:
+    """The clip retargeted onto the scene `capture` (in the capture's coordinates), levelled and written to
+    `out` (`clip_scene`); with `check`, a root correction beyond its bound raises RootCorrectionRefused."""
+    frame, fitted = capture.levelling(), capture.levelled()
     with atomic_output(out, suffix=".xml") as tmp_path:
         Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem, capture=frame))
     model = load_model(out)
-    ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, fitted=True)
+    ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, fitted=check)
     return ClipScene(ref, model, out, fitted, capture, frame)
 
 

@@ -44,7 +44,9 @@ Method:
    models/run_and_step.xml gives its step), except that no box covers a footprint of another height
    or prop: where the padded box would cover a floor stance's footprint, or overlap another box
    padded likewise, its side facing that footprint is pulled back to halfway between the two
-   footprints (on the axis along which they lie furthest apart; two boxes stop at the same line). So
+   footprints (on the axis along which they lie furthest apart; two boxes stop at the same line), and
+   likewise where a contact site of any frame passed more than RAISED below its top beside the rests (a
+   swinging foot under the padding). So
    the boxes of a stair are side by side, none inside another, each under the rests it was fitted to,
    and a contact is on the surface under its site. A box on a tilted floor is tilted with it (a
    capture floor is tilted by the calibration, the props on it too).
@@ -288,8 +290,15 @@ def _cut(lo: np.ndarray, hi: np.ndarray, own: tuple, other: tuple, reach: float)
         lo[k - 2] = max(lo[k - 2], (flo[k - 2] + ohi[k - 2]) / 2)
 
 
-def _fit_boxes(stances, raised, height_tol, link, margin):
-    """Boxes (center, half) in the floor's frame (floor at z = 0) from the stances (module doc, 3-4)."""
+def _within(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(p,) bool: the points' x, y inside the rectangle [lo, hi]."""
+    return ((points[:, :2] >= lo) & (points[:, :2] <= hi)).all(axis=1)
+
+
+def _fit_boxes(stances, raised, height_tol, link, margin, passing=np.zeros((0, 3))):
+    """Boxes (center, half) in the floor's frame (floor at z = 0) from the stances (module doc, 3-4);
+    `passing` (p, 3): the contact sites at every frame, which no box may hold more than `raised` inside it.
+    """
     low = [s for s in stances if s.rest <= raised]
     high = [s for s in stances if s.rest > raised]
     level = _levels(np.array([s.rest for s in high]), height_tol)
@@ -314,6 +323,11 @@ def _fit_boxes(stances, raised, height_tol, link, margin):
         # such a footprint stops halfway to it (both boxes of a pair stop at the same line)
         for other, reach in [((s.lo, s.hi), 0.0) for s in low] + [(f, margin) for j, f in enumerate(prints) if j != i]:
             _cut(lo, hi, prints[i], other, reach)
+        # nor where a foot passed more than `raised` below its top beside the rests (a swinging foot
+        # under the padding): the side facing such a point stops halfway to it
+        below = passing[passing[:, 2] < top - raised]
+        for p in below[_within(below, lo, hi) & ~_within(below, *prints[i])]:
+            _cut(lo, hi, prints[i], (p[:2], p[:2]), 0.0)
         center = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, top / 2])
         half = np.array([(hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2, top / 2])
         boxes.append((center, half))
@@ -355,8 +369,10 @@ def fit_scene(
     a, g = _fit_floor(stances, raised, min_span, level_tol, max_slope, PLANE_SCALE)
     floor = FittedScene(a, (), (float(g[0]), float(g[1])))
     rot, origin = floor.rotation(), np.array([0.0, 0.0, a])
-    local = _stances(times, (site_pos - origin) @ rot, contacts, sites)  # the floor's frame: floor at z = 0
-    boxes = [(origin + rot @ c, h) for c, h in _fit_boxes(local, raised, height_tol, link, margin)]
+    in_floor = (site_pos - origin) @ rot  # the floor's frame: floor at z = 0
+    local = _stances(times, in_floor, contacts, sites)
+    boxes = [(origin + rot @ c, h) for c, h in _fit_boxes(local, raised, height_tol, link, margin,
+                                                          in_floor.reshape(-1, 3))]
     boxes.sort(key=lambda b: b[0][0])
     return FittedScene(a, tuple(boxes), floor.floor_slope)
 

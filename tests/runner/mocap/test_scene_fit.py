@@ -323,3 +323,51 @@ def test_surface_below_matches_mujoco_rays_on_a_tilted_scene():
     for p in pts:
         dist = mujoco.mj_ray(model, data, p, np.array([0.0, 0.0, -1.0]), None, 1, -1, geom)
         assert s.surface_below(p) == pytest.approx(p[2] - dist, abs=1e-9)
+
+
+def test_a_foot_passing_low_beside_a_box_pulls_its_side_back():
+    # a box rested on at x 1.2..1.5, 0.3 m up; a heel swings by at x = 1.0, 0.1 m up, inside the padding and
+    # more than RAISED below the top: the side facing it stops halfway (1.1), the far side keeps its margin
+    times, pos, cs = stances([
+        ("l_toe", 0.0, 0.2, 0.0, 0.0, 0.0),
+        ("r_toe", 0.3, 0.5, 1.2, 0.0, 0.3),
+        ("l_toe", 0.6, 0.8, 1.5, 0.0, 0.3),
+    ])
+    pos[(times >= 0.55) & (times <= 0.58), SITES.index("r_heel")] = (1.0, 0.0, 0.1)
+    (c, h), = fit_scene(times, pos, cs).boxes
+    assert c[0] - h[0] == pytest.approx(1.1)
+    assert c[0] + h[0] == pytest.approx(1.5 + MARGIN)
+
+
+def test_a_scene_whose_boxes_need_too_much_root_correction_falls_back_to_the_floor(tmp_path, monkeypatch):
+    """`clip_scene` "auto": when the fitted boxes need a root correction beyond its bound, they are dropped
+    and the clip is retargeted onto the fitted floor alone, with a note that says so; when even the floor
+    needs more, the correction is made all the same, with a note (the clip is not refused)."""
+    import runner.mocap.scene as scene
+    from runner.mocap.bvh import read_bvh
+    from runner.mocap.contacts import RootCorrectionRefused
+    from runner.mocap.subject_figure import write_subject_figure
+
+    clip = ROOT / "models" / "cmu" / "127_33.bvh"  # a run over a step: the fit has one box
+    figure = write_subject_figure(read_bvh(clip), tmp_path / "c.figure.xml")
+    real = scene.load_bvh_reference
+
+    def refuse_boxes(clip, model, **kw):  # as if the fitted box were where no foot rests
+        if kw.get("fitted") and StaticSurfaces.from_model(model).box_center.size:
+            raise RootCorrectionRefused("the feet would need the root moved +99 mm")
+        return real(clip, model, **kw)
+
+    monkeypatch.setattr(scene, "load_bvh_reference", refuse_boxes)
+    cs = scene.clip_scene(clip, "auto", figure, tmp_path / "c.scene.xml")
+    assert cs.fitted.boxes == () and StaticSurfaces.from_model(cs.model).box_center.size == 0
+    assert len(cs.notes) == 1 and "box(es) dropped" in cs.notes[0] and "+99 mm" in cs.notes[0]
+
+    def refuse_all(clip, model, **kw):
+        if kw.get("fitted"):
+            raise RootCorrectionRefused("the feet would need the root moved +77 mm")
+        return real(clip, model, **kw)
+
+    monkeypatch.setattr(scene, "load_bvh_reference", refuse_all)
+    cs = scene.clip_scene(clip, "auto", figure, tmp_path / "d.scene.xml")
+    assert cs.fitted.boxes == () and len(cs.notes) == 2 and "+77 mm" in cs.notes[1]
+    assert cs.reference.qpos.shape[0] > 0
