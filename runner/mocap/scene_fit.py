@@ -295,7 +295,7 @@ def _within(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return ((points[:, :2] >= lo) & (points[:, :2] <= hi)).all(axis=1)
 
 
-def _fit_boxes(stances, raised, height_tol, link, margin, passing=np.zeros((0, 3))):
+def _fit_boxes(stances, raised, height_tol, link, margin, passing):
     """Boxes (center, half) in the floor's frame (floor at z = 0) from the stances (module doc, 3-4);
     `passing` (p, 3): the contact sites at every frame, which no box may hold more than `raised` inside it.
     """
