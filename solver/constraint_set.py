@@ -67,9 +67,13 @@ from solver.constraints.penetration import Penetration
 from solver.constraints.sites import HeightBound, SupportHeight, SupportSlide, site_heights
 from solver.constraints.unit import UnitNorm
 from solver.contact_thresholds import FLIGHT_HEIGHT
-from solver.contacts import contact_radii
+from solver.contacts import contact_radii, foot_contacts, site_positions
+from solver.kinematics import TangentMap
+from solver.layout import StateLayout
 from solver.path_state import PathState
+from solver.peak_bounds import filter_capture
 from solver.quaternion import swing_angle_grad, twist_angle_grad
+from solver.spline import interpolate
 from solver.support import SupportSurfaces
 from solver.surfaces import StaticSurfaces
 from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
@@ -102,7 +106,6 @@ class Relaxation:
         constraint: its name. label: the site or joint. keyframe: index of the keyframe (-1: several).
         start, end: [s] the span relaxed. amount: [SI] the largest amount the limit was raised by.
     """
-
     constraint: str
     label: str
     keyframe: int
@@ -127,8 +130,6 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     Returns:
         (constraints, relaxations): a list of `Constraint`s and a list of `Relaxation`s.
     """
-    from solver.layout import StateLayout
-
     t = reference.t
     sites = tuple(figure.contact_sites)
     surfaces = StaticSurfaces.from_model(model)
@@ -142,14 +143,9 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         if feet is not None:
             args, limit_h, reports = feet
             height = SupportHeight(*args, limit=limit_h, tolerance=TOLERANCES["planted"])
-            sargs, slim, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites)
+            slide, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites, witness)
             height.reports = reports + slide_reports
-            out.append(height)
-            slide = SupportSlide(*sargs, limit=slim, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING)
-            if witness is not None:  # beyond what the keyframes force: 1 cm, or less where the capture slides less
-                forced = slim - SLIDE_DISTANCE
-                slide.limit = forced + np.minimum(SLIDE_DISTANCE, np.maximum(0.0, slide.measure(witness) - forced))
-            out.append(slide)
+            out += [height, slide]
         if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
             out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     layout = StateLayout.from_model(model)
@@ -170,20 +166,12 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
 
 def _reference_state(model, reference, plain, engine) -> PathState:
     """The plain spline (the reference) at the quadrature points, as an evaluation sees a path."""
-    from solver.kinematics import TangentMap
-    from solver.layout import StateLayout
-    from solver.spline import interpolate
-
     Y1, Y2 = interpolate(plain.times, plain.values, reference.t, (1, 2))
     return PathState(reference.t, reference.qpos, Y1, Y2, TangentMap.from_layout(StateLayout.from_model(model)), engine)
 
 
 def _capture_state(model, reference, capture, engine) -> PathState:
     """The capture (times, qpos) as a path at the quadrature points (the natural spline through its frames)."""
-    from solver.kinematics import TangentMap
-    from solver.layout import StateLayout
-    from solver.spline import interpolate
-
     Y, Y1, Y2 = interpolate(np.asarray(capture[0], float), np.asarray(capture[1], float), reference.t, (0, 1, 2))
     return PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(StateLayout.from_model(model)), engine)
 
@@ -212,8 +200,6 @@ def _relax_heights(constraints, state, plain, model, sites, support, radii, flig
     keyframe's value is the plain spline's at the pair nearest it (`Penetration`'s pairs stand for the
     intervals between quadrature points, at their midpoints); every time series of the
     same site (and surface) is relaxed on its own run of broken pairs around the keyframe."""
-    from solver.contacts import site_positions
-
     index, times, values = _full_keyframes(plain)
     keyed = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
     keyed[..., 2] -= radii  # the contact points, as `Penetration` samples them
@@ -287,21 +273,20 @@ def _flight_and_ground(model, reference, plain, engine, support, radii, flights,
     return out
 
 
-def _site_slides(model, reference, plain, contacts, support, radii, sites):
-    """Slide pairs per site contact (the site's own contact), limits SLIDE_DISTANCE + the keyed distances
-    (the triangle inequality: module docstring), and the relaxations worth reporting."""
-    from solver.contacts import site_positions
-
+def _site_slides(model, reference, plain, contacts, support, radii, sites, witness=None):
+    """The slide constraint (`SupportSlide`), a pair per site contact (the site's own contact), its limit the
+    keyed distances (the triangle inequality: module docstring) plus SLIDE_DISTANCE, or the `witness`'s own
+    slide beyond them where that is less; and the relaxations worth reporting."""
     t, w = reference.t, reference.weights
     index, times, values = _full_keyframes(plain)
     keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else None
-    cols_, pts, surf, pair, ww, span, rows, labels, limits, reports = [], [], [], [], [], [], [], [], [], []
+    cols_, pts, surf, pair, ww, span, rows, labels, keyed, reports = [], [], [], [], [], [], [], [], [], []
     for c in contacts:
         on = _pairs_in(t, c.start, c.end)
         if not on.size:
             continue
         col = sites.index(c.site)
-        k = len(limits)
+        k = len(keyed)
         pts.append(on)
         cols_.append(np.full(len(on), col))
         surf.append(np.full(len(on), -1 if not c.surface else support.index(c.surface)))
@@ -312,26 +297,28 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites):
         labels.append(c.site)
         inside = np.flatnonzero((times >= c.start - 1e-6) & (times <= c.end + 1e-6))
         forced = sum(float(np.linalg.norm(keyed_xy[b, col] - keyed_xy[a, col])) for a, b in zip(inside[:-1], inside[1:]))
-        limits.append(SLIDE_DISTANCE + forced)
+        keyed.append(forced)
         if forced > 0.5 * SLIDE_DISTANCE:  # worth saying: the keyframes take half the allowance or more
             reports.append(Relaxation("slide", c.site, int(index[inside[-1]]), float(times[inside[0]]),
                                       float(times[inside[-1]]), forced))
     args = (support, radii, np.concatenate(pts), np.concatenate(cols_), np.concatenate(surf), np.concatenate(pair),
             np.concatenate(ww), np.array(span), np.array(rows), np.array(labels, object))
-    return args, np.array(limits), reports
+    forced = np.array(keyed)
+    slide = SupportSlide(*args, limit=forced + SLIDE_DISTANCE, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING)
+    if witness is not None:
+        slide.limit = forced + np.minimum(SLIDE_DISTANCE, np.maximum(0.0, slide.measure(witness) - forced))
+    return slide, reports
 
 
 def _foot_support(model, figure, reference, plain, contacts, engine, support, radii, witness=None):
     """The foot contacts' support points (`solver.constraints.sites._FootSupport`) and their limits
-    relaxed where the keyframes force (module docstring), or None without contacts. The relaxation is
-    what a known path through the keyframes does around the keyframe: `witness` (the capture they came
-    from, a PathState at the quadrature points), else the plain spline.
+    relaxed where the keyframes force (module docstring), or None without contacts. Where a keyframe holds
+    a foot up, the limit is what a known path through the keyframes does over the contact: `witness` (the
+    capture they came from, a PathState at the quadrature points), else the plain spline.
 
     Returns:
         (args of `_FootSupport`, planted limits (p,) [m], relaxation reports).
     """
-    from solver.contacts import foot_contacts, site_positions
-
     sites = tuple(figure.contact_sites)
     t, w = reference.t, reference.weights
     state = _reference_state(model, reference, plain, engine)
@@ -367,9 +354,8 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
         href = cand[np.flatnonzero(ok), cols]
         if witness is not None:
             href = site_heights(witness, support, radii, on, cols, surfaces, None)[0]
-        p = len(limits_h)
+        p, held_up = len(limits_h), len(reports)
         span = float(w[on].sum())
-        limit_h = FLOAT_LIMIT
         for j, (k, tk) in enumerate(zip(index, times)):  # keyframes inside the foot contact
             if not (F.start - 1e-6 <= tk <= F.end + 1e-6):
                 continue
@@ -377,12 +363,13 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
             keyed, _ = support.height(keyed_low[j, cols[i]][None], None if surfaces[i] < 0 else int(surfaces[i]))
             if keyed[0] - FLOAT_LIMIT <= TOLERANCES["planted"]:
                 continue  # the keyframe meets the bound
-            # the keyframe holds the foot up: the contact is met where it floats no more than the witness
-            limit_h = max(limit_h, float(w[on] @ href) / span - TOLERANCES["planted"])
             run = _run(href - FLOAT_LIMIT, i)
             run = run if run.stop > run.start else slice(i, i + 1)
             reports.append(Relaxation("planted", F.site, int(k), float(t[on[run.start]]), float(t[on[run.stop - 1]]),
                                       float(keyed[0])))
+        limit_h = FLOAT_LIMIT
+        if len(reports) > held_up:  # a keyframe holds the foot up: met where it floats no more than the witness
+            limit_h = max(FLOAT_LIMIT, float(w[on] @ href) / span - TOLERANCES["planted"])
         for lst, val in zip(args, (on, cols, surfaces, np.full(len(on), p), w[on], [span], [int(on[len(on) // 2])], [F.site])):
             lst.append(np.asarray(val))
         limits_h.append(limit_h)
@@ -395,10 +382,6 @@ def _foot_support(model, figure, reference, plain, contacts, engine, support, ra
 def _filtered_capture(model, reference, capture):
     """The capture ((times, qpos)) low-pass filtered (`solver.peak_bounds.filter_capture`, 6 Hz) as a path at
     the quadrature points: the natural spline through all its frames, (Y, Y1, Y2)."""
-    from solver.layout import StateLayout
-    from solver.peak_bounds import filter_capture
-    from solver.spline import interpolate
-
     times, qpos = np.asarray(capture[0], float), np.asarray(capture[1], float)
     smooth = filter_capture(times, qpos, StateLayout.from_model(model))
     return interpolate(times, smooth, reference.t, (0, 1, 2))
@@ -407,9 +390,6 @@ def _filtered_capture(model, reference, capture):
 def _accelerations(model, reference, capture) -> AccelerationBound:
     """The no-jolt bounds (`solver.constraints.acceleration`): the reference's peaks and, with a capture
     ((times, qpos)), the filtered capture's over the same span, joint by joint."""
-    from solver.kinematics import TangentMap
-    from solver.layout import StateLayout
-
     layout = StateLayout.from_model(model)
     free = [j for j in layout.joints if j.kind == "free"]
     balls = [j for j in layout.joints if j.kind == "ball"]
@@ -428,9 +408,6 @@ def _effort(model, reference, plain, capture, engine) -> list:
     """[the effort bound] (`solver.constraints.effort`): the larger of the plain spline's RMS joint torque and
     the filtered capture's over the same span, with the no-jolt bounds' relative tolerance; [] for a figure
     whose joints carry no torque in either (no joints besides the root: nothing to bound)."""
-    from solver.kinematics import TangentMap
-    from solver.layout import StateLayout
-
     layout = StateLayout.from_model(model)
     dofs = np.array([j.dofadr + i for j in layout.joints if j.kind != "free" for i in range(j.nv)], int)
     w = reference.weights

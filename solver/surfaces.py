@@ -140,9 +140,9 @@ class StaticSurfaces:
             out.append(np.einsum("...pk,pk->...p", pts[..., None, :] - self.plane_point, self.plane_normal))
             grads.append(np.broadcast_to(self.plane_normal, shape + self.plane_normal.shape))
         if len(self.box_center):
-            d, g = _box_distances(pts[..., None, :], self.box_center, self.box_rot, self.box_half)
-            out.append(d)
-            grads.append(g)
+            each = [_box_distance(pts, c, r, h) for c, r, h in zip(self.box_center, self.box_rot, self.box_half)]
+            out.append(np.stack([d for d, _ in each], axis=-1))
+            grads.append(np.stack([g for _, g in each], axis=-2))
         if not out:
             return np.zeros(shape + (0,)), np.zeros(shape + (0, 3))
         return np.concatenate(out, axis=-1), np.concatenate(grads, axis=-2)
@@ -155,15 +155,7 @@ class StaticSurfaces:
         Returns:
             distance: (...,) [m]. grad: (..., 3).
         """
-        rot = self.box_rot[b]
-        local = (np.asarray(points, float) - self.box_center[b]) @ rot
-        sign = np.where(local < 0, -1.0, 1.0)
-        q = np.abs(local) - self.box_half[b]
-        qo = np.maximum(q, 0.0)
-        outside = np.sqrt((qo * qo).sum(-1))
-        d = outside + np.minimum(q.max(-1), 0.0)
-        g_local = np.where((outside > 0)[..., None], qo / np.maximum(outside, 1e-300)[..., None], np.eye(3)[np.argmax(q, axis=-1)])
-        return d, (g_local * sign) @ rot.T
+        return _box_distance(np.asarray(points, float), self.box_center[b], self.box_rot[b], self.box_half[b])
 
     def surface_below(self, points: np.ndarray) -> np.ndarray:
         """Height of the highest static surface under each point (floor planes, tops of boxes).
@@ -232,17 +224,14 @@ def _plane_height(pts: np.ndarray, p0: np.ndarray, nrm: np.ndarray) -> np.ndarra
     return p0[2] - (nrm[0] * (pts[..., 0] - p0[0]) + nrm[1] * (pts[..., 1] - p0[1])) / nrm[2]
 
 
-def _box_distances(pts: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The exact signed distance (..., b) of (..., b, 3) points (broadcast) to b boxes and its gradient
-    (..., b, 3) (`StaticSurfaces.signed_distances`)."""
-    local = np.einsum("bji,...bj->...bi", rot, pts - center)
+def _box_distance(pts: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The exact signed distance (...,) of (..., 3) points to one box (centre (3,), axes the columns of rot
+    (3, 3), half sizes (3,)) and its gradient (..., 3) (`StaticSurfaces.signed_distances`)."""
+    local = (pts - center) @ rot
     sign = np.where(local < 0, -1.0, 1.0)
-    q = np.abs(local) - half  # (..., b, 3)
+    q = np.abs(local) - half
     qo = np.maximum(q, 0.0)
     outside = np.sqrt((qo * qo).sum(-1))
     d = outside + np.minimum(q.max(-1), 0.0)
-    axis = np.argmax(q, axis=-1)
-    g_in = np.zeros(q.shape)
-    np.put_along_axis(g_in, axis[..., None], 1.0, -1)
-    g_local = np.where((outside > 0)[..., None], qo / np.maximum(outside, 1e-300)[..., None], g_in) * sign
-    return d, np.einsum("bij,...bj->...bi", rot, g_local)
+    g_local = np.where((outside > 0)[..., None], qo / np.maximum(outside, 1e-300)[..., None], np.eye(3)[np.argmax(q, axis=-1)])
+    return d, (g_local * sign) @ rot.T

@@ -23,6 +23,8 @@ min-max: Bertsekas, Nonlinear Programming, 2nd ed., 1999, prop. B.25).
 """
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from solver.constraints.base import Constraint
@@ -37,14 +39,16 @@ PENETRATION_RATE = 1600.0
 GOLDEN_STEPS = 8
 
 
-def _hermite(u: np.ndarray, order: int = 0) -> np.ndarray:
-    """The cubic Hermite basis (H00, H10, H01, H11) at u, or its order-th derivative in u: (4, *u.shape)."""
+def _hermite(u: np.ndarray) -> np.ndarray:
+    """The cubic Hermite basis (H00, H10, H01, H11) at u: (4, *u.shape)."""
     u = np.asarray(u, float)
-    if order == 0:
-        return np.stack([2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2])
-    if order == 1:
-        return np.stack([6 * u**2 - 6 * u, 3 * u**2 - 4 * u + 1, -6 * u**2 + 6 * u, 3 * u**2 - 2 * u])
-    return np.stack([12 * u - 6, 6 * u - 4, -12 * u + 6, 6 * u - 2])
+    return np.stack([2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2])
+
+
+def _bezier(C: np.ndarray) -> np.ndarray:
+    """(4, ..., 3) the Bezier points p_i, p_i + h v_i / 3, p_i+1 - h v_i+1 / 3, p_i+1 of the Hermite curves
+    C (4, ..., 3): each curve lies in their convex hull."""
+    return np.stack([C[0], C[0] + C[1] / 3, C[2] - C[3] / 3, C[2]])
 
 
 def _power(C: np.ndarray) -> np.ndarray:
@@ -76,12 +80,12 @@ def plane_minimum(C: np.ndarray, point: np.ndarray, normal: np.ndarray) -> tuple
     """
     c3, c2, c1, c0 = np.einsum("j...c,c->j...", _power(C), normal)  # the distance's power coefficients
     c0 = c0 - normal @ point
-    # d'(u) = 3 c3 u^2 + 2 c2 u + c1: its roots in [0, 1] and the two ends are the candidates
-    disc = np.maximum(c2 * c2 - 3 * c3 * c1, 0.0)
-    lin = np.abs(c3) < 1e-12 * (np.abs(c2) + np.abs(c1) + 1e-300)
+    # d'(u) = 3 c3 u^2 + 2 c2 u + c1: its roots in [0, 1] and the two ends are the candidates, the roots
+    # in the form that stays exact as c3 -> 0 (Press et al., Numerical Recipes, 3rd ed., sec. 5.6); a
+    # candidate that is no root (no real roots, a root outside [0, 1], clipped) is never lower than the minimum
+    q = -(c2 + np.where(c2 >= 0, 1.0, -1.0) * np.sqrt(np.maximum(c2 * c2 - 3 * c3 * c1, 0.0)))
     with np.errstate(divide="ignore", invalid="ignore"):
-        r1 = np.where(lin, -c1 / (2 * c2), (-c2 - np.sqrt(disc)) / (3 * c3))
-        r2 = np.where(lin, -c1 / (2 * c2), (-c2 + np.sqrt(disc)) / (3 * c3))
+        r1, r2 = q / (3 * c3), c1 / q
     cand = np.stack([np.zeros_like(c1), np.ones_like(c1), np.nan_to_num(r1), np.nan_to_num(r2)])
     cand = np.clip(cand, 0.0, 1.0)
     values = ((c3 * cand + c2) * cand + c1) * cand + c0
@@ -91,9 +95,7 @@ def plane_minimum(C: np.ndarray, point: np.ndarray, normal: np.ndarray) -> tuple
 
 def _golden(C: np.ndarray, a: np.ndarray, b: np.ndarray, distance) -> tuple[np.ndarray, ...]:
     """(u, d, a, b) the lowest point of each curve (power coefficients C (4, q, 3), `_power`) on [a, b] (q,),
-    the distance unimodal there,
-    and the final bracket:
-    golden-section search (Kiefer, "Sequential minimax search for a maximum", Proc. AMS 4, 1953), then the
+    the distance unimodal there, and the final bracket: golden-section search (Kiefer, "Sequential minimax search for a maximum", Proc. AMS 4, 1953), then the
     vertex of the parabola through the best point and its neighbours, which places a smooth minimum to
     third order in the bracket (so that it moves continuously with the curve)."""
     r = 0.5 * (np.sqrt(5.0) - 1.0)
@@ -128,7 +130,7 @@ def _kinks(C: np.ndarray, u: np.ndarray, a: np.ndarray, b: np.ndarray, distance)
     fb, gb = distance(_curve(C, b))
     sa = np.einsum("qc,qc->q", ga, _curve(C, a, 1))
     sb = np.einsum("qc,qc->q", gb, _curve(C, b, 1))
-    kink = np.flatnonzero((sa < 0) & (sb > 0) & (fa < 0) & (fb < 0) & (np.abs(ga - gb).max(axis=1) > 1e-9))
+    kink = np.flatnonzero((sa < 0) & (sb > 0) & (fa < 0) & (fb < 0) & (ga != gb).any(axis=1))
     if not kink.size:
         return u, d, g
     Ck, ga, gb, a, b = C[:, kink], ga[kink], gb[kink], a[kink], b[kink]
@@ -168,8 +170,7 @@ def box_minimum(C: np.ndarray, grid: np.ndarray, distance) -> tuple[np.ndarray, 
     step = 1.0 / (len(grid) - 1)
     # |d'| <= |q'| <= 3 times the longest leg of the Bezier polygon: a sample's basin reaches at most that
     # times a spacing below it, so the local minima that cannot beat the best sample are not searched
-    bez = np.stack([C[0], C[0] + C[1] / 3, C[2] - C[3] / 3, C[2]])
-    slope = 3 * np.linalg.norm(np.diff(bez, axis=0), axis=-1).max(axis=0)
+    slope = 3 * np.linalg.norm(np.diff(_bezier(C), axis=0), axis=-1).max(axis=0)
     local = (samples <= padded[:-2]) & (samples <= padded[2:]) & (samples <= samples.min(axis=0) + slope * step)
     j, q = np.nonzero(local)
     us, ds, a, b = _golden(W[:, q], np.maximum(grid[j] - step, 0.0), np.minimum(grid[j] + step, 1.0), distance)
@@ -229,28 +230,32 @@ class Penetration(Constraint):
         for j, (point, normal) in enumerate(zip(s.plane_point, s.plane_normal)):
             u[..., j], d[..., j] = plane_minimum(C, point, normal)
             g[..., j, :] = normal
+        if len(s.box_center):
+            self._boxes(C, u, d, g)
+        state.cache[key] = hit = (u, d, g)
+        return hit
+
+    def _boxes(self, C: np.ndarray, u: np.ndarray, d: np.ndarray, g: np.ndarray) -> None:
+        """Fill the box pairs of u, d, g (`_minimum`) from the Hermite curves C (4, m, K, 3). In place."""
+        s = self.surfaces
         flat = C.reshape(4, -1, 3)
-        # the curve lies in the hull of its Bezier points p_i, p_i + h v_i / 3, p_i+1 - h v_i+1 / 3, p_i+1:
-        # within `reach` of their mean, so (d being 1-Lipschitz) at least d(mean) - reach from a box
-        bez = np.stack([flat[0], flat[0] + flat[1] / 3, flat[2] - flat[3] / 3, flat[2]])
+        # a curve lies within `reach` of the mean of its Bezier points, so (d being 1-Lipschitz) at least
+        # d(mean) - reach from a box
+        bez = _bezier(flat)
         mean = bez.mean(axis=0)
         reach = np.linalg.norm(bez - mean, axis=-1).max(axis=0)
         half = np.full(len(mean), 0.5)
+        middle = _curve(_power(flat), half)
         for b in range(len(s.box_center)):
             j = len(s.plane_point) + b
-
-            def distance(x, b=b):
-                return s.box_distance(x, b)
-
+            distance = partial(s.box_distance, b=b)
             # a curve farther than the tolerance from the box is met with a margin and cannot be active:
             # its midpoint's distance stands for it; the rest are searched
-            ub, (db, gb) = half.copy(), distance(_curve(_power(flat), half))
+            ub, (db, gb) = half.copy(), distance(middle)
             near = np.flatnonzero(distance(mean)[0] - reach <= self.tolerance)
             if near.size:
                 ub[near], db[near], gb[near] = box_minimum(flat[:, near], self.grid, distance)
             u[..., j], d[..., j], g[..., j, :] = ub.reshape(self.shape[:2]), db.reshape(self.shape[:2]), gb.reshape(self.shape[:2] + (3,))
-        state.cache[key] = hit = (u, d, g)
-        return hit
 
     def measure(self, state):
         return -self._minimum(state)[1].ravel()
