@@ -13,8 +13,12 @@ residual of the augmented integrand predicts the largest decrease (`solver.least
 sec. 4.2 and fig. 5), never closer than `min_gap` to another frame.
 
 A pair the method cannot meet on any frame set (it stalls before and after refining) is reported, with
-where and by how much, and its limit is raised to what the path reaches (its multiplier reset), so the
-rest of the problem is solved as posed (`Solution.unmet`, in the constraint's SI unit).
+where and by how much, and its limit is raised to what the path reaches, so the rest of the problem is
+solved as posed (`Solution.unmet`, in the constraint's SI unit). The multipliers and the penalty go back
+to their values before the stall: on an infeasible problem the first-order estimates of every
+constraint in the conflict grow without bound, and carried past the relaxation they would push the path
+away from the point the raised limits were read at (safeguarded multipliers, Birgin & Martinez 2014,
+sec. 4.1 and ch. 5: bounded estimates keep the method convergent to a least-infeasible point).
 """
 from __future__ import annotations
 
@@ -204,9 +208,10 @@ def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) ->
     return FrameSet(frames.times, values, frames.fixed, frames.is_keyframe)
 
 
-def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list) -> dict:
+def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list, before: tuple) -> dict:
     """Raise the limit of every pair still broken of the lowest `Constraint.priority` broken to what the
-    path reaches and reset its multiplier; returns {constraint: largest amount [SI]}. So the bounds set by
+    path reaches, reset its multiplier and the others and the penalty to `before` ((multipliers, rho)
+    after the last subproblem that still cut V: module docstring); returns {constraint: largest amount [SI]}. So the bounds set by
     the reference motion (no jolts, effort) give first, the contact schedule's wishes (planted, slide,
     clearance) next, and the limits of the body, the scene and physics (a foot in the floor, a knee bent
     backwards) only if the solve stalls with nothing else broken: a lexicographic order of the
@@ -214,6 +219,7 @@ def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list)
     redundant manipulators: generalizing the task-priority framework to inequality tasks", IEEE T-RO 27,
     2011)."""
     state = al.state(basis, frames.values)
+    al.lam, al.rho = [lam.copy() for lam in before[0]], before[1]
     unmet = {}
     level = min((c.priority for c, ch in zip(al.constraints, scaled) if (ch > 1.0).any()), default=None)
     for j, (c, ch) in enumerate(zip(al.constraints, scaled)):
@@ -224,7 +230,6 @@ def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list)
             c.limit = c.limit.copy()
             c.limit[bad] += v[bad]
             al.lam[j] = np.where(bad, 0.0, al.lam[j])
-    al.rho /= GAMMA ** 2
     al.V = np.inf
     return unmet
 
@@ -251,6 +256,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     frames, basis = _start(lc, o.min_gap)
     rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
     evals, level_its, stall, stalled_before, kind = 0, 0, 0, False, "start"
+    before = ([lam.copy() for lam in al.lam], al.rho)  # the multipliers and penalty before a stall
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
         left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
@@ -278,9 +284,11 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             progress("constraints", {"round": k, **worst, "rho": al.rho})
         met = worst["value"] <= 1.0 and V <= 1.0
         stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
+        if STALL_RATIO * V_prev >= V:
+            before = ([lam.copy() for lam in al.lam], al.rho)
         level_its, kind, scores = level_its + 1, "boost", None
         if stall >= 2 and stalled_before:
-            for name, amount in _relax_unmet(al, basis, frames, scaled).items():
+            for name, amount in _relax_unmet(al, basis, frames, scaled, before).items():
                 unmet[name] = max(unmet.get(name, 0.0), amount)
             stall, stalled_before = 0, False
             continue

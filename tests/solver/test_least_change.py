@@ -226,7 +226,8 @@ def test_the_evaluation_budget_is_for_the_whole_solve(shipped):
 def test_out_of_reach_limits_give_one_priority_at_a_time(shipped):
     """A solve that stalls raises the broken pairs of the lowest `Constraint.priority` only (the contact
     schedule's wishes before the limits of the body and the scene), to exactly what the path reaches
-    (c = 0 there), and leaves every other constraint's limit as it was; the next stall raises the next."""
+    (c = 0 there), and leaves every other constraint's limit as it was; the next stall raises the next.
+    The multipliers and the penalty go back to the ones before the stall, a raised pair's multiplier to 0."""
     from solver.constraints.base import LIMIT, SCHEDULE
     from solver.least_change import _relax_unmet
 
@@ -240,10 +241,16 @@ def test_out_of_reach_limits_give_one_priority_at_a_time(shipped):
     assert {SCHEDULE, LIMIT} <= broken
     for level in (SCHEDULE, LIMIT):
         before = [(c.limit.copy(), sc > 1.0) for c, sc in zip(al.constraints, al.scaled_values(basis, frames.values))]
-        raised = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values))
+        al.lam, al.rho = [np.full(c.size, 1e6) for c in al.constraints], 1e9  # what a stall inflates
+        stored = ([np.arange(c.size, dtype=float) + 1.0 for c in al.constraints], 3.0)
+        raised = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored)
         assert raised and {c.priority for c in al.constraints if c.name in raised} == {level}
-        for c, sc, (old, bad) in zip(al.constraints, al.scaled_values(basis, frames.values), before):
+        assert al.rho == 3.0
+        for c, sc, (old, bad), lam, lam0 in zip(al.constraints, al.scaled_values(basis, frames.values), before,
+                                                al.lam, stored[0]):
             if c.priority == level:  # raised to exactly what the path reaches where broken, elsewhere as it was
                 assert np.abs(sc[bad]).max(initial=0.0) <= 1e-9 and np.array_equal(c.limit[~bad], old[~bad]), c.name
+                assert np.array_equal(lam, np.where(bad, 0.0, lam0)), c.name
             else:
-                assert np.array_equal(c.limit, old), c.name
+                assert np.array_equal(c.limit, old) and np.array_equal(lam, lam0), c.name
+            assert lam is not lam0  # copies: a later update does not write into the stored estimates
