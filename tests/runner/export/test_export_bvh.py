@@ -1,6 +1,5 @@
 """BVH export: the file reads back with our own reader and reproduces the sampled qpos; onto the source
 skeleton, it reproduces the source clip (tests/bvh_fk.py: an independent reader)."""
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -163,8 +162,7 @@ def test_another_figures_armature_has_its_height(tmp_path):
 
 # ---- onto the source skeleton -------------------------------------------------------------------------
 
-CMU = Path("/work/shared/data/cmu")
-SOURCE_CLIPS = sorted(CMU.glob("*.bvh")) if CMU.is_dir() else [MODELS / "cmu" / "127_33.bvh"]
+SOURCE_CLIPS = sorted((MODELS / "cmu").glob("*.bvh"))  # the shipped CMU clips (models/cmu/README.md: source, licence)
 
 
 def rotation_angles_deg(a, b):

@@ -17,8 +17,7 @@ from solver.errors import InputError
 from solver.figure import Figure, shipped_figure
 
 REPO = Path(__file__).resolve().parents[3]
-CMU = Path("/work/shared/data/cmu")
-CLIPS = sorted(CMU.glob("*.bvh")) if CMU.is_dir() else [REPO / "models" / "cmu" / "127_33.bvh"]
+CLIPS = sorted((REPO / "models" / "cmu").glob("*.bvh"))  # the shipped CMU clips (models/cmu/README.md: source, licence)
 SHIPPED_CLIP = REPO / "models" / "cmu" / "127_33.bvh"
 #: figure point (body origin or site) -> the CMU joint at that place
 LEG_POINTS = {"l_thigh": "LeftUpLeg", "l_shin": "LeftLeg", "l_foot": "LeftFoot", "l_ball": "LeftToeBase",
