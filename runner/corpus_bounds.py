@@ -62,6 +62,8 @@ CAUSES = {
     "bound out of reach": "the least change could not meet the constraint that bounds the figure (its limit "
                           "raised to what the path reaches, `Solution.unmet`), or the capture itself misses "
                           "the bound",
+    "the solve stopped short": "the solve ended (its subproblems, evaluations or time spent) with the bound's "
+                               "constraint still beyond its tolerance (`Solution.integrals_final` above 1)",
     "the optimizer moved the root": "a joint-angle or contact-site error missed while the root's position error "
                                     f"grew by more than {ROOT_MOVED_CM:g} cm and by a larger factor than the "
                                     "joint-angle error (a root shift moves every site with it)",
@@ -351,6 +353,7 @@ def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
     if "relaxed" in report:  # {constraint: count}; reports written before it name none
         out["relaxed"] = sorted(report["relaxed"])
     out["stalled"] = sorted((report.get("stalled") or {}).keys())
+    out["unmet_at_end"] = sorted((report.get("unmet_at_end") or {}).keys())
     return out
 
 
@@ -403,7 +406,8 @@ def causes(bound: Bound, figures: dict) -> list[str]:
     it agrees. keyframes contradict the schedule: a surface or contact bound missed on a pair whose
     keyframes decide the bound's own constraint (`_keyframes_decide`). keyframes force the skate: a skate limit below what every path
     through the keyframes slides (`forced_out_of_reach`). bound out of reach: the bound's term stalled, or the
-    capture itself misses a bound that is not about surfaces. the optimizer moved the root: a joint or
+    capture itself misses a bound that is not about surfaces. the solve stopped short: the bound's term was
+    still beyond its tolerance when the solve ended (the report's "unmet_at_end"). the optimizer moved the root: a joint or
     site error missed while the root error grew more (`_root_moved`). joints traded for the feet: the
     joint error missed while the site error is below the plain spline's.
     """
@@ -420,6 +424,8 @@ def causes(bound: Bound, figures: dict) -> list[str]:
         out.append(FORCED)
     if set(bound.terms) & set(figures.get("stalled", ())) or (capture_misses and bound.kind != "surface"):
         out.append("bound out of reach")
+    if set(bound.terms) & set(figures.get("unmet_at_end", ())):
+        out.append("the solve stopped short")
     if bound.name in ("joint_error", "site_error") and _root_moved(figures):
         out.append("the optimizer moved the root")
     if bound.name == "joint_error" and BOUND_BY_NAME["site_error"].held(figures):

@@ -312,7 +312,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         subject's figure), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
         where the keyframes decide a constraint, `Solution.relaxations`), "relaxed" ({constraint: count} of
         those relaxations), "stalled" ({constraint: amount [SI]}
-        the keyframes leave out of reach, `Solution.unmet`), "metrics"
+        the keyframes leave out of reach, `Solution.unmet`), "unmet_at_end" ({constraint: worst value over
+        its tolerance} of those still beyond it when the solve ended, `Solution.integrals_final`), "metrics"
         ({"plain", "optimized": path_metrics; "motion": {"plain", "optimized": motion_metrics}}),
         "scene_fitted" (the capture floor's floor_z and floor_slope, capture_frame (w x y z tx ty tz: the
         transform to the levelled frame), boxes in that frame as centre/half lists, or None), "outputs"
@@ -359,6 +360,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "stance_agreement": _agreement(problem, ref),
         "keyframe_conflicts": len(run.solution.relaxations), "relaxed": _relaxed(run.solution),
         "stalled": dict(run.solution.unmet or {}),
+        "unmet_at_end": {k: v for k, v in run.solution.integrals_final.items() if v > 1.0},
         "keyframes_on_source": on_source,
         "metrics": run.metrics, "scene_fitted": fitted, "outputs": {k: str(v) for k, v in paths.items()},
     }

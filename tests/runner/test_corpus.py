@@ -111,7 +111,7 @@ def test_figures_are_read_from_the_metrics_report():
                 "peak_angular_acceleration_rad_s2": dict(zip(("l_knee", "r_hip"), joints)),
                 "peak_angular_acceleration_t_s": {"l_knee": 1.25, "r_hip": 0.75}, "rms_joint_torque_Nm": torque}
 
-    report = {"keyframe_conflicts": 3, "stalled": {"planted": 2e-6},
+    report = {"keyframe_conflicts": 3, "stalled": {"planted": 2e-6}, "unmet_at_end": {"penetration": 4.8},
               "metrics": {"plain": {"max_penetration_mm": 40.0, "keyframe_error": 0.0, "max_hyperextension_deg": 0.2},
                           "optimized": {"max_penetration_mm": 0.5, "keyframe_error": 1e-16,
                                         "max_hyperextension_deg": 0.6},
@@ -132,7 +132,9 @@ def test_figures_are_read_from_the_metrics_report():
     assert f["forced_skate_mm"] == 0.7 and f["skate_excess_mm"] == pytest.approx(0.8)
     assert f["plain_skate_excess_mm"] == pytest.approx(0.8)
     assert "off_hinge_deg" not in f  # not measured: left out, so its bound is n/a
-    assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled", "joint_rise", "joint_acc_worst"} <= set(FIGURES)
+    assert f["unmet_at_end"] == ["penetration"]
+    assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled", "unmet_at_end", "joint_rise",
+                     "joint_acc_worst"} <= set(FIGURES)
     assert "pelvis_acc_m_s2" not in f and "joint_acc_ratio" not in f  # a report without jolt figures: n/a
     # the jolt figures: each path's, the capture's (the "reference" block), the limit from the larger of two
     motion = report["metrics"]["motion"]
@@ -193,6 +195,10 @@ def test_causes_the_data_tells():
         "keyframes contradict the schedule"]
     # the planted term stalled: its bounds are out of reach; a motion bound is not the schedule's doing
     assert causes(BOUND["skate_excess"], figures(skate_excess_mm=3.0, stalled=["slide"])) == ["bound out of reach"]
+    # the solve ended with the bound's own constraint still beyond its tolerance; another's does not count
+    assert causes(BOUND["penetration"], figures(penetration_mm=4.8, unmet_at_end=["penetration"])) == [
+        "the solve stopped short"]
+    assert causes(BOUND["penetration"], figures(penetration_mm=4.8, unmet_at_end=["slide"])) == []
     # the acceleration bound (least change) or the forces term left out of reach: so is the jolt bound
     assert causes(BOUND["pelvis_acc"], figures(pelvis_acc_m_s2=20.0, stalled=["acceleration"])) == ["bound out of reach"]
     assert causes(BOUND["joint_acc"], figures(joint_acc_ratio=2.0)) == []
