@@ -16,9 +16,7 @@ whole body's mass, gravity's acceleration, the path's length: D in units of a ch
 acceleration by g sustained over the path). After each subproblem, lam_p <- max(0, lam_p + rho c_p/tol_j)
 (the first-order multiplier update), and rho grows by GAMMA when the infeasibility-complementarity
 measure V = max_p |min(-c_p/tol_j, lam_p/rho)| did not fall below TAU of its last value (Birgin &
-Martinez's rule, their defaults gamma = 10, tau = 0.5), unless V <= 1: the problem is solved to each
-constraint's tolerance, and a larger penalty once every pair is within it would only worsen the
-conditioning of the subproblems that refinement still runs.
+Martinez's rule, their defaults gamma = 10, tau = 0.5).
 
 A subproblem is L-BFGS (nlopt) in preconditioned variables: z with x = x0 + R^-1 z, R^T R the
 Gauss-Newton Hessian of D/D0 alone with the time-averaged mass matrix in place of M(t) and each degree
@@ -101,7 +99,7 @@ class AugmentedLagrangian:
             if ch.size:
                 V = max(V, float(np.abs(np.minimum(-ch, self.lam[j] / self.rho)).max()))
             self.lam[j] = np.maximum(0.0, self.lam[j] + self.rho * ch)
-        if V > 1.0 and V > TAU * self.V:  # every pair within its tolerance (V <= 1): rho stays
+        if V > TAU * self.V:
             self.rho *= GAMMA
         self.V = V
         return V
