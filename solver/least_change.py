@@ -69,7 +69,7 @@ class LeastChangeOptions:
         min_gap: [s] no two frames closer: 1/48 s, half a frame of 24 fps film; a cubic spline through
             frames closer than that kinks between them (its second derivative grows like 1/h^2).
         max_subproblems: subproblems in all (each an L-BFGS run), a guard against a method that cycles:
-            100, above the most a converging solve was measured to need (57: 83_02 keyed at its contacts;
+            100, above the most a converging solve was measured to need (55: 83_02 keyed at its contacts;
             67: AnimatedDrawings' 26 s zombie walk keyed at its contacts, each relaxation and refinement
             level costing a few).
         per_level: subproblems on one frame set before refining it anyway (the multipliers converge
