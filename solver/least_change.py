@@ -213,9 +213,9 @@ def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) ->
 
 def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list, before: tuple) -> dict:
     """Raise the limit of every pair still broken of the lowest `Constraint.priority` broken to what the
-    path reaches, reset its multiplier and the others and the penalty to `before` ((multipliers, rho)
-    after the last subproblem that still cut V: module docstring); returns {constraint: largest amount [SI]}. So the bounds set by
-    the reference motion (no jolts, effort) give first, the contact schedule's wishes (planted, slide,
+    path reaches and set its multiplier to 0, the other multipliers and the penalty back to `before`
+    ((multipliers, rho) after the last subproblem that still cut V: module docstring); returns
+    {constraint: largest amount [SI]}. So the bounds set by the reference motion (no jolts, effort) give first, the contact schedule's wishes (planted, slide,
     clearance) next, and the limits of the body, the scene and physics (a foot in the floor, a knee bent
     backwards) only if the solve stalls with nothing else broken: a lexicographic order of the
     constraints, as in prioritized inverse kinematics (Kanoun, Lamiraux & Wieber, "Kinematic control of
