@@ -157,7 +157,7 @@ BOUNDS: tuple[Bound, ...] = (
     Bound("skate_capture", "skate vs capture [mm/frame]", "skate_mm", "capture_skate_mm", "le", 1.0, 0.5, None,
           ("slide",), "contact", "skate <= the capture's + 0.5 mm/frame"),
     Bound("skate_excess", "skate above what the keyframes force, vs plain [mm/frame]", "skate_excess_mm",
-          "plain_skate_excess_mm", "le", 0.5, 0.0, None, ("slide",), "contact",
+          "plain_skate_excess_mm", "le", 0.5, 0.0, "capture_skate_excess_mm", ("slide",), "contact",
           "and the skate above what the keyframes force <= half the plain spline's above it;"),
     Bound("flight", "flight time vs capture [s]", "flight_s", "capture_flight_s", "within", 0.10, 0.030, None,
           ("flight", "ground"), "contact", "flight time within 30 ms or 10 % of the capture's, whichever is larger;"),
@@ -219,10 +219,10 @@ def _off_hinge_excess(doc: dict) -> float | None:
     return float(max(opt[j] - cap[j] for j in opt)) if opt and cap else None
 
 
-def _above_forced(doc: dict, which: str) -> float | None:
-    """[mm/frame] the path's skate in contact minus the skate its keyframes force (None when either is
-    missing)."""
-    v = _dig(doc, (*_M, which, "path", "skate_contact_mm"))
+def _above_forced(doc: dict, which: str, part: str = "path") -> float | None:
+    """[mm/frame] the skate in contact of `which`'s `part` ("path"; the capture: "plain", "reference")
+    minus the skate the keyframes force (None when either is missing)."""
+    v = _dig(doc, (*_M, which, part, "skate_contact_mm"))
     forced = _dig(doc, (*_M, "keyframes", "forced_skate_contact_mm"))
     return None if v is None or forced is None else float(v) - float(forced)
 
@@ -284,6 +284,7 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     "forced_skate_mm": _at(*_M, "keyframes", "forced_skate_contact_mm"),
     "skate_excess_mm": lambda doc: _above_forced(doc, "optimized"),
     "plain_skate_excess_mm": lambda doc: _above_forced(doc, "plain"),
+    "capture_skate_excess_mm": lambda doc: _above_forced(doc, "plain", "reference"),
     "flight_s": _at(*_M, "optimized", "path", "flight_time_s"),
     "plain_flight_s": _at(*_M, "plain", "path", "flight_time_s"),
     "capture_flight_s": _at(*_M, "plain", "reference", "flight_time_s"),

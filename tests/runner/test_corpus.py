@@ -102,7 +102,8 @@ def test_figures_are_read_from_the_metrics_report():
         block = {"float_contact_mm": float_mm, "float_stance_mm": float_mm + 1.0, "skate_contact_mm": 1.5,
                  "flight_time_s": flight, "flight_in_stance_s": flight / 10, "penetration_mm": {"mean": 0.1, "max": 0.3}}
         return {"path": block, "reference": {**block, "float_contact_mm": 2.5, "float_stance_mm": 2.7,
-                                             "flight_time_s": 0.3, "flight_in_stance_s": 0.0},
+                                             "flight_time_s": 0.3, "flight_in_stance_s": 0.0,
+                                             "skate_contact_mm": 1.2},
                 "error": {"root_position_cm": {"mean": root_cm, "max": 9.0},
                           "joint_orientation_deg": {f"j{i}": {"mean": m, "max": 9.0} for i, m in enumerate(joint_means)},
                           "site_position_cm": {f"s{i}": {"mean": m, "max": 9.0} for i, m in enumerate(site_means)}}}
@@ -131,6 +132,7 @@ def test_figures_are_read_from_the_metrics_report():
     assert f["schedule_flight_s"] == 0.42 and f["keyframe_conflicts"] == 3 and f["stalled"] == ["planted"]
     assert f["forced_skate_mm"] == 0.7 and f["skate_excess_mm"] == pytest.approx(0.8)
     assert f["plain_skate_excess_mm"] == pytest.approx(0.8)
+    assert f["capture_skate_mm"] == 1.2 and f["capture_skate_excess_mm"] == pytest.approx(0.5)
     assert "off_hinge_deg" not in f  # not measured: left out, so its bound is n/a
     assert f["unmet_at_end"] == ["penetration"]
     assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled", "unmet_at_end", "joint_rise",
@@ -195,6 +197,10 @@ def test_causes_the_data_tells():
         "keyframes contradict the schedule"]
     # the planted term stalled: its bounds are out of reach; a motion bound is not the schedule's doing
     assert causes(BOUND["skate_excess"], figures(skate_excess_mm=3.0, stalled=["slide"])) == ["bound out of reach"]
+    # the capture (a path through every keyframe) above the limit itself: out of reach for it too
+    assert causes(BOUND["skate_excess"], figures(skate_excess_mm=3.0, capture_skate_excess_mm=2.5)) == [
+        "bound out of reach"]
+    assert causes(BOUND["skate_excess"], figures(skate_excess_mm=3.0, capture_skate_excess_mm=1.5)) == []
     # the solve ended with the bound's own constraint still beyond its tolerance; another's does not count
     assert causes(BOUND["penetration"], figures(penetration_mm=4.8, unmet_at_end=["penetration"])) == [
         "the solve stopped short"]
