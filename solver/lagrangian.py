@@ -92,6 +92,10 @@ class AugmentedLagrangian:
         st = self.state(basis, P)
         return [c.values(st) / c.tolerance for c in self.constraints]
 
+    def estimates(self) -> tuple[list[np.ndarray], float]:
+        """(a copy of the multipliers, rho): what `solver.least_change` goes back to after a stall."""
+        return [lam.copy() for lam in self.lam], self.rho
+
     def update(self, scaled: list[np.ndarray]) -> float:
         """The multiplier and penalty updates after a subproblem (module docstring); returns V."""
         V = 0.0

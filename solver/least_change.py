@@ -215,12 +215,12 @@ def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list,
     """Raise the limit of every pair still broken of the lowest `Constraint.priority` broken to what the
     path reaches and set its multiplier to 0, the other multipliers and the penalty back to `before`
     ((multipliers, rho) after the last subproblem that still cut V: module docstring); returns
-    {constraint: largest amount [SI]}. So the bounds set by the reference motion (no jolts, effort) give first, the contact schedule's wishes (planted, slide,
-    clearance) next, and the limits of the body, the scene and physics (a foot in the floor, a knee bent
-    backwards) only if the solve stalls with nothing else broken: a lexicographic order of the
-    constraints, as in prioritized inverse kinematics (Kanoun, Lamiraux & Wieber, "Kinematic control of
-    redundant manipulators: generalizing the task-priority framework to inequality tasks", IEEE T-RO 27,
-    2011)."""
+    {constraint: largest amount [SI]}. So the bounds set by the reference motion (no jolts, effort) give
+    first, the contact schedule's wishes (planted, slide, clearance) next, and the limits of the body, the
+    scene and physics (a foot in the floor, a knee bent backwards) only if the solve stalls with nothing
+    else broken: a lexicographic order of the constraints, as in prioritized inverse kinematics (Kanoun,
+    Lamiraux & Wieber, "Kinematic control of redundant manipulators: generalizing the task-priority
+    framework to inequality tasks", IEEE T-RO 27, 2011)."""
     state = al.state(basis, frames.values)
     al.lam, al.rho = [lam.copy() for lam in before[0]], before[1]
     unmet = {}
@@ -259,7 +259,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     frames, basis = _start(lc, o.min_gap)
     rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
     evals, level_its, stall, stalled_before, kind = 0, 0, 0, False, "start"
-    before = ([lam.copy() for lam in al.lam], al.rho)  # the multipliers and penalty before a stall
+    before = al.estimates()  # the multipliers and penalty before a stall
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
         left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
@@ -287,8 +287,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             progress("constraints", {"round": k, **worst, "rho": al.rho})
         met = worst["value"] <= 1.0 and V <= 1.0
         stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
-        if STALL_RATIO * V_prev >= V:
-            before = ([lam.copy() for lam in al.lam], al.rho)
+        before = al.estimates() if STALL_RATIO * V_prev >= V else before
         level_its, kind, scores = level_its + 1, "boost", None
         if stall >= 2 and stalled_before:
             for name, amount in _relax_unmet(al, basis, frames, scaled, before).items():

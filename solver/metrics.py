@@ -69,7 +69,7 @@ def dynamics_series(model, frame_times, frames, rate: float = SAMPLE_RATE, sites
         model: MjModel of the scene (figure with a free root and ball joints, static surfaces).
         frame_times: (m,) [s]. frames: (m, nq). rate: samples per second [1/s].
         sites: contact sites for the flight indicator (default: the figure's). flight_threshold: phi above which a sample is
-            in flight.
+            in flight (phi in [0, 1]; 0.5: the indicator's midpoint, where a site is as much up as down).
     Returns:
         dict of arrays over n samples: t (n,) [s]; joint_torque (n, 33) [N m] (ball-joint DOFs in
         qvel order, child-frame components); joint_names (11,) and joint_torque_norm (n, 11) [N m]

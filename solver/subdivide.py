@@ -133,7 +133,9 @@ def adaptive_times(scores: np.ndarray, frames: FrameSet, budget: int, ratio: flo
 
     Args:
         scores: (m-1,) from `weak_form_scores`. frames: the frame set scored.
-        budget: maximum number of new frames. ratio: threshold relative to the largest score.
+        budget: maximum number of new frames. ratio: threshold relative to the largest score
+            (dimensionless; 0.25: a round refines the segments within a factor of four of the worst, the
+            paper's "regions where EL > epsilon" with epsilon set by the worst, not every segment at once).
     Returns:
         (r,) midpoint times [s], sorted.
     """
