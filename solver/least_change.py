@@ -69,9 +69,9 @@ class LeastChangeOptions:
         min_gap: [s] no two frames closer: 1/48 s, half a frame of 24 fps film; a cubic spline through
             frames closer than that kinks between them (its second derivative grows like 1/h^2).
         max_subproblems: subproblems in all (each an L-BFGS run), a guard against a method that cycles:
-            100, above the most a converging solve was measured to need (55: 83_02 keyed at its contacts;
-            67: AnimatedDrawings' 26 s zombie walk keyed at its contacts, each relaxation and refinement
-            level costing a few).
+            100, above the most a converging solve was measured to need (24 on the corpus: 83_02 keyed at
+            its contacts; 81: a Bandai-Namco walk backwards keyed every 0.2 s, its acceleration limits raised
+            one stall at a time, each relaxation and refinement level costing a few).
         per_level: subproblems on one frame set before refining it anyway (the multipliers converge
             linearly; refining is cheaper than more updates on too few frames).
         ftol_rel: each subproblem's relative tolerance on Phi (nlopt's ftol_rel): 1e-3, a subproblem
