@@ -34,12 +34,16 @@ there; the problem is made well posed instead of excused:
   meets those limits. Where a keyframe holds a foot up inside a contact, the planted limit (a mean over
   the contact) becomes the mean height of a known path through the keyframes over the contact: the
   capture they came from, else the plain spline (its witness: a path that meets it).
-* Two full keyframes in one foot contact that hold its support site a distance d apart along the
-  surface make it slide at least d between them (the triangle inequality; the skate the keyframes
-  force, `runner.motion_metrics.forced_skate_mm`, is the same bound): the slide limit is
-  SLIDE_DISTANCE plus the sum of those d; with the capture the keyframes came from, the allowance beyond
-  that sum is the capture's own slide beyond it where that is less than SLIDE_DISTANCE (a known path
-  through the keyframes slides that little there).
+* Two full keyframes dt apart in one foot contact that hold its support site a distance d apart along
+  the surface make it slide at least d between them (the triangle inequality; the skate the keyframes
+  force, `runner.motion_metrics.forced_skate_mm`, is that bound). The slide constraint measures the
+  integral of huber_b(|v|) (`SupportSlide`), convex and nondecreasing in the speed, so in its own measure
+  the keyframes force at least dt huber_b(d / dt) (Jensen's inequality; a constant speed meets it). The
+  slide limit is SLIDE_DISTANCE plus the sum of those; with the capture the keyframes came from, the
+  allowance beyond that sum is the capture's own slide beyond it where that is less than SLIDE_DISTANCE
+  (a known path through the keyframes slides that little there). The distance d itself is no bound on
+  the measure, which is below it at speeds under b: a standing clip's keys, a capture's marker noise
+  apart, summed 1.8-2.9 mm of "forced" slide, and a solve used it as a slow drift.
 * The anatomical limits are widened to the reference's own worst angle (`solver.constraints.anatomy`).
 * No jolts is a bound only with a capture (keyframes made from motion capture): then A is the larger of
   the capture's filtered peak and the plain spline's. The plain spline's peak alone is no bound: sparse
@@ -64,7 +68,7 @@ from solver.constraints.anatomy import AngleBound
 from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.constraints.effort import TorqueRMS, rms_torque
 from solver.constraints.penetration import Penetration
-from solver.constraints.sites import HeightBound, SupportHeight, SupportSlide, site_heights
+from solver.constraints.sites import HeightBound, SupportHeight, SupportSlide, huber, site_heights
 from solver.constraints.unit import UnitNorm
 from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.contacts import contact_radii, foot_contacts, site_positions
@@ -275,8 +279,9 @@ def _flight_and_ground(model, reference, plain, engine, support, radii, flights,
 
 def _site_slides(model, reference, plain, contacts, support, radii, sites, witness=None):
     """The slide constraint (`SupportSlide`), a pair per site contact (the site's own contact), its limit the
-    keyed distances (the triangle inequality: module docstring) plus SLIDE_DISTANCE, or the `witness`'s own
-    slide beyond them where that is less; and the relaxations worth reporting."""
+    slide the keyframes force in its own measure (Jensen's inequality: module docstring) plus
+    SLIDE_DISTANCE, or the `witness`'s own slide beyond that where that is less; and the relaxations worth
+    reporting."""
     t, w = reference.t, reference.weights
     index, times, values = _full_keyframes(plain)
     keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else None
@@ -296,7 +301,9 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites, witne
         rows.append(int(on[len(on) // 2]))
         labels.append(c.site)
         inside = np.flatnonzero((times >= c.start - 1e-6) & (times <= c.end + 1e-6))
-        forced = sum(float(np.linalg.norm(keyed_xy[b, col] - keyed_xy[a, col])) for a, b in zip(inside[:-1], inside[1:]))
+        d = np.linalg.norm(np.diff(keyed_xy[inside, col], axis=0), axis=-1)  # [m] between consecutive keys
+        dt = np.diff(times[inside])
+        forced = float(dt @ huber(d / dt, SLIDE_SMOOTHING)) if len(d) else 0.0  # Jensen: the slide's own measure
         keyed.append(forced)
         if forced > 0.5 * SLIDE_DISTANCE:  # worth saying: the keyframes take half the allowance or more
             reports.append(Relaxation("slide", c.site, int(index[inside[-1]]), float(times[inside[0]]),

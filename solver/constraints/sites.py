@@ -151,6 +151,13 @@ class SupportHeight(_FootSupport):
         state.add_sites(gp)
 
 
+def huber(s: np.ndarray, b: float) -> np.ndarray:
+    """The Huber function of a speed s >= 0 [m/s] with width b [m/s]: s^2 / (2 b) below b, s - b/2 above
+    (Huber, "Robust estimation of a location parameter", 1964): convex and nondecreasing, smooth at 0."""
+    s = np.asarray(s, float)
+    return np.where(s <= b, 0.5 * s * s / b, s - 0.5 * b)
+
+
 class SupportSlide(_FootSupport):
     """Distance the support site slides along its surface over each foot contact, integral of
     huber_b(|v_t|) dt, <= limit [m] (`_FootSupport`; b the Huber width [m/s])."""
@@ -174,9 +181,7 @@ class SupportSlide(_FootSupport):
 
     def measure(self, state):
         vt = self._tangential(state)
-        s = np.sqrt((vt * vt).sum(1))
-        hub = np.where(s <= self.b, 0.5 * s * s / self.b, s - 0.5 * self.b)
-        return self._sum(hub)
+        return self._sum(huber(np.sqrt((vt * vt).sum(1)), self.b))
 
     def pull(self, state, g):
         vt = self._tangential(state)

@@ -15,6 +15,7 @@ from solver.constraint_set import FLOAT_LIMIT, TOLERANCES
 from solver.contacts import contact_radii
 from solver.least_change import build_least_change
 from solver.spline import interpolate
+from solver.spline_basis import SplineBasis
 from solver.surfaces import StaticSurfaces
 
 LIFT = 0.03  # [m] how far the keyframe holds the figure up
@@ -109,3 +110,33 @@ def test_a_capture_that_slides_less_than_a_centimetre_tightens_the_slide_limit(l
     expected = forced + np.minimum(SLIDE_DISTANCE, np.maximum(0.0, captured - forced))
     np.testing.assert_allclose(slides[1].limit, expected, rtol=1e-9, atol=1e-12)
     assert (slides[1].limit < slides[0].limit).all()
+
+
+@pytest.mark.parametrize("v", [0.005, 0.05])  # [m/s] under and over the Huber width b (1 cm/s)
+def test_the_slide_keyframes_force_is_in_the_slides_own_measure(lifted, v):
+    """Keyframes of the figure in one pose gliding at v along x: every site moves v dt between keys dt
+    apart. In the slide's measure (the integral of huber_b(speed)) that forces at least dt huber_b(v) per
+    key interval (Jensen), which the plain spline, linear in time here, meets with equality over the keyed
+    span: huber_b(v) = v^2 / (2 b) under b, v - b/2 over it. Summed distances (v dt each) would overstate
+    it 2b/v = 4 times at 5 mm/s."""
+    from solver.constraint_set import SLIDE_DISTANCE, SLIDE_SMOOTHING
+
+    model, keyframes, info, _, _ = lifted
+    pose = build_least_change(model, keyframes).plain.values[0]
+    values = np.tile(pose, (len(keyframes.times), 1))
+    values[:, 0] += v * keyframes.times
+    gliding = replace(keyframes, values=values, mask=np.ones_like(keyframes.mask))
+    lc = build_least_change(model, gliding, contacts=info.contacts, flights=info.flights)
+    slide = next(c for c in lc.al.constraints if c.name == "slide")
+    b = SLIDE_SMOOTHING
+    huber_v = v * v / (2 * b) if v <= b else v - b / 2
+    expected = []
+    for c in info.contacts:
+        if not ((lc.al.t >= c.start) & (lc.al.t <= c.end)).any():
+            continue  # no quadrature point: no pair
+        keyed = keyframes.times[(keyframes.times >= c.start - 1e-6) & (keyframes.times <= c.end + 1e-6)]
+        expected.append((keyed[-1] - keyed[0]) * huber_v if len(keyed) > 1 else 0.0)
+    np.testing.assert_allclose(slide.limit - SLIDE_DISTANCE, expected, rtol=1e-6, atol=1e-12)
+    # a lower bound: the plain spline (a path through the keyframes) slides at least that much
+    measured = slide.measure(lc.al.state(SplineBasis(lc.plain.times, lc.al.t), lc.plain.values))
+    assert (measured >= np.array(expected) - 1e-9).all()
