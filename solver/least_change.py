@@ -55,7 +55,8 @@ __all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "solve_lea
 #: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
 STANDARD_GRAVITY = 9.80665
 #: a subproblem whose penalty grew stalls when it cut the infeasibility V by under 10 %; two in a row
-#: on one frame set send it to refinement, two more after refining report the pairs as unmet
+#: on one frame set send it to refinement, two more after refining report the pairs as unmet (and a
+#: relaxation after which V did not fall by 10 % by the next passes the next to a higher priority)
 STALL_RATIO = 0.9
 
 
@@ -211,12 +212,16 @@ def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) ->
     return FrameSet(frames.times, values, frames.fixed, frames.is_keyframe)
 
 
-def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list, before: tuple) -> dict:
-    """Raise the limit of every pair still broken of the lowest `Constraint.priority` broken to what the
-    path reaches and set its multiplier to 0, the other multipliers and the penalty back to `before`
-    ((multipliers, rho) after the last subproblem that still cut V: module docstring); returns
-    {constraint: largest amount [SI]}. So the bounds set by the reference motion (no jolts, effort) give
-    first, the contact schedule's wishes (planted, slide, clearance) next, and the limits of the body, the
+def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list, before: tuple,
+                 above: int = -1) -> tuple[dict, int]:
+    """Raise the limit of every pair still broken of the lowest `Constraint.priority` broken above `above`
+    (of the lowest broken if none is) to what the path reaches and set its multiplier to 0, the other
+    multipliers and the penalty back to `before` ((multipliers, rho) after the last subproblem that still
+    cut V: module docstring); returns ({constraint: largest amount [SI]}, the priority raised). The loop
+    passes the priority it raised at the last stall as `above` when V has not fallen since: raising it
+    again would not end the conflict (83_02 at its contacts raised its acceleration bounds at 14 stalls
+    in a row while its slide stayed 3.9 tolerances over). So the bounds set by the reference motion (no
+    jolts, effort) give first, the contact schedule's wishes (planted, slide, clearance) next, and the limits of the body, the
     scene and physics (a foot in the floor, a knee bent backwards) only if the solve stalls with nothing
     else broken: a lexicographic order of the constraints, as in prioritized inverse kinematics (Kanoun,
     Lamiraux & Wieber, "Kinematic control of redundant manipulators: generalizing the task-priority
@@ -224,7 +229,8 @@ def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list,
     state = al.state(basis, frames.values)
     al.lam, al.rho = [lam.copy() for lam in before[0]], before[1]
     unmet = {}
-    level = min((c.priority for c, ch in zip(al.constraints, scaled) if (ch > 1.0).any()), default=None)
+    broken = [c.priority for c, ch in zip(al.constraints, scaled) if (ch > 1.0).any()]
+    level = min((p for p in broken if p > above), default=min(broken, default=None))
     for j, (c, ch) in enumerate(zip(al.constraints, scaled)):
         bad = ch > 1.0
         if bad.any() and c.priority == level:
@@ -234,7 +240,7 @@ def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list,
             c.limit[bad] += v[bad]
             al.lam[j] = np.where(bad, 0.0, al.lam[j])
     al.V = np.inf
-    return unmet
+    return unmet, level
 
 
 def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = None, *,
@@ -254,11 +260,10 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         constraint, `stalled` {constraint: amount [SI]} of the pairs it could not meet.
     """
     o = options or LeastChangeOptions()
-    al, quat = lc.al, lc.layout.quat_slots
-    start = time.perf_counter()
+    al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
     frames, basis = _start(lc, o.min_gap)
     rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
-    evals, level_its, stall, stalled_before, kind = 0, 0, 0, False, "start"
+    evals, level_its, stall, stalled_before, kind, last = 0, 0, 0, False, "start", None
     before = al.estimates()  # the multipliers and penalty before a stall
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
@@ -289,10 +294,11 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
         before = al.estimates() if STALL_RATIO * V_prev >= V else before
         level_its, kind, scores = level_its + 1, "boost", None
-        if stall >= 2 and stalled_before:
-            for name, amount in _relax_unmet(al, basis, frames, scaled, before).items():
-                unmet[name] = max(unmet.get(name, 0.0), amount)
-            stall, stalled_before = 0, False
+        if stall >= 2 and stalled_before:  # out of reach: raise one priority's limits (_relax_unmet)
+            above = last[0] if last and STALL_RATIO * last[1] < V else -1
+            raised, level = _relax_unmet(al, basis, frames, scaled, before, above)
+            unmet.update({name: max(unmet.get(name, 0.0), amount) for name, amount in raised.items()})
+            stall, stalled_before, last = 0, False, (level, V)
             continue
         if not (met or stall >= 2 or level_its >= o.per_level):
             continue

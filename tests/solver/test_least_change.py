@@ -243,8 +243,8 @@ def test_out_of_reach_limits_give_one_priority_at_a_time(shipped):
         before = [(c.limit.copy(), sc > 1.0) for c, sc in zip(al.constraints, al.scaled_values(basis, frames.values))]
         al.lam, al.rho = [np.full(c.size, 1e6) for c in al.constraints], 1e9  # what a stall inflates
         stored = ([np.arange(c.size, dtype=float) + 1.0 for c in al.constraints], 3.0)
-        raised = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored)
-        assert raised and {c.priority for c in al.constraints if c.name in raised} == {level}
+        raised, raised_level = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored)
+        assert raised and {c.priority for c in al.constraints if c.name in raised} == {level} == {raised_level}
         assert al.rho == 3.0
         for c, sc, (old, bad), lam, lam0 in zip(al.constraints, al.scaled_values(basis, frames.values), before,
                                                 al.lam, stored[0]):
@@ -254,3 +254,24 @@ def test_out_of_reach_limits_give_one_priority_at_a_time(shipped):
             else:
                 assert np.array_equal(c.limit, old) and np.array_equal(lam, lam0), c.name
             assert lam is not lam0  # copies: a later update does not write into the stored estimates
+
+
+@pytest.mark.parametrize("above, expected", [(-1, "schedule"), ("schedule", "limit"), ("limit", "schedule")])
+def test_a_priority_raised_without_progress_passes_the_stall_on(shipped, above, expected):
+    """`above`: the priority the last stall raised when V has not fallen since. The next stall raises the
+    lowest priority broken above it (the conflict is not in the one raised already), and the lowest
+    broken when none above is."""
+    from solver.constraints.base import LIMIT, SCHEDULE
+    from solver.least_change import _relax_unmet
+
+    levels = {"schedule": SCHEDULE, "limit": LIMIT, -1: -1}
+    model, keyframes, info = shipped
+    lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights, rate=200.0)
+    frames = _start_frames(lc, LeastChangeOptions().min_gap)
+    basis = SplineBasis(frames.times, lc.al.t)
+    frames = replace(frames, values=_perturbed(lc, frames, size=5e-2))
+    al = lc.al
+    stored = ([np.zeros(c.size) for c in al.constraints], 1.0)
+    raised, level = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored, levels[above])
+    assert level == levels[expected]
+    assert raised and {c.priority for c in al.constraints if c.name in raised} == {levels[expected]}
