@@ -213,7 +213,7 @@ def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) ->
 
 
 def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list, before: tuple,
-                 above: int = -1) -> tuple[dict, int]:
+                 above: int | None = None) -> tuple[dict, int]:
     """Raise the limit of every pair still broken of the lowest `Constraint.priority` broken above `above`
     (of the lowest broken if none is) to what the path reaches and set its multiplier to 0, the other
     multipliers and the penalty back to `before` ((multipliers, rho) after the last subproblem that still
@@ -230,7 +230,7 @@ def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list,
     al.lam, al.rho = [lam.copy() for lam in before[0]], before[1]
     unmet = {}
     broken = [c.priority for c, ch in zip(al.constraints, scaled) if (ch > 1.0).any()]
-    level = min((p for p in broken if p > above), default=min(broken, default=None))
+    level = min((p for p in broken if above is None or p > above), default=min(broken, default=None))
     for j, (c, ch) in enumerate(zip(al.constraints, scaled)):
         bad = ch > 1.0
         if bad.any() and c.priority == level:
@@ -295,7 +295,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         before = al.estimates() if STALL_RATIO * V_prev >= V else before
         level_its, kind, scores = level_its + 1, "boost", None
         if stall >= 2 and stalled_before:  # out of reach: raise one priority's limits (_relax_unmet)
-            above = last[0] if last and STALL_RATIO * last[1] < V else -1
+            above = last[0] if last and STALL_RATIO * last[1] < V else None
             raised, level = _relax_unmet(al, basis, frames, scaled, before, above)
             unmet.update({name: max(unmet.get(name, 0.0), amount) for name, amount in raised.items()})
             stall, stalled_before, last = 0, False, (level, V)
