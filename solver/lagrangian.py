@@ -191,11 +191,17 @@ def initial_penalty(al: AugmentedLagrangian, basis, variables: FrameVariables, p
     if gg == 0:
         return 1.0
     step = pre.apply(g)
-    eps = 1e-6 / max(1e-300, float(np.abs(step).max()))
+    eps = _probe_length(step)
     hi = al.scaled_values(basis, variables.values(eps * step))
     lo = al.scaled_values(basis, variables.values(-eps * step))
     Ag2 = sum(float(((q * (a - b)) ** 2).sum()) for q, a, b in zip(sq, hi, lo)) / (2 * eps) ** 2
     return gg / Ag2 if Ag2 > 0 else 1.0
+
+
+def _probe_length(dx: np.ndarray) -> float:
+    """The multiple h of a direction dx (in x) whose largest component moves 1e-6 [m or rad]: a finite
+    difference's step, 1e-6 of a body's scale (truncation error ~1e-6 relative, round-off ~1e-10)."""
+    return 1e-6 / max(1e-300, float(np.abs(dx).max()))
 
 
 def _variable_dofs(variables: FrameVariables, tmap) -> tuple[np.ndarray, np.ndarray]:
@@ -242,25 +248,36 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
     var = FrameVariables(frames, quat_slots)
     pre = Preconditioner(var, basis, al.change, al.tmap, al.d0)
 
+    start = {}  # Phi and its gradient at z = 0, where first_step_scale and L-BFGS both begin
+    evals = [0]
+
     def preconditioned(z, need_grad):
+        if need_grad and start and not z.any():
+            return start["at"]
+        evals[0] += 1
         x = pre.apply(z)
         phi, G, _ = al.evaluate(basis, var.values(x), need_grad)
-        return phi, (pre.apply_transpose(var.pullback(x, G)) if need_grad else None)
+        out = phi, (pre.apply_transpose(var.pullback(x, G)) if need_grad else None)
+        if need_grad and not z.any():
+            start["at"] = out
+        return out
 
-    c, evals = first_step_scale(preconditioned, pre, var.size)
+    # the scale's probe counts against the budget; with two evaluations or fewer left it would spend it
+    c = first_step_scale(preconditioned, pre, var.size) if max_evals == 0 or max_evals > 2 else 1.0
+    probe = evals[0] - bool(start)  # evaluations beyond the one at z = 0 that L-BFGS reuses
 
     def fun(z, need_grad):
         phi, g = preconditioned(c * z, need_grad)
         return phi, (None if g is None else c * g)
 
-    res = minimize(fun, np.zeros(var.size), algorithm="lbfgs", ftol_rel=ftol_rel, max_evals=max_evals,
+    res = minimize(fun, np.zeros(var.size), algorithm="lbfgs", ftol_rel=ftol_rel, max_evals=max_evals and max_evals - probe,
                    max_time_s=max_time_s, should_stop=should_stop, callback=callback)
-    res = replace(res, n_evals=res.n_evals + evals)
+    res = replace(res, n_evals=evals[0])  # its own and first_step_scale's, the one at z = 0 made once
     out = var.frame_set(pre.apply(c * res.x))
     return SubproblemResult(out, res, time.perf_counter() - t0)
 
 
-def first_step_scale(fun, pre: Preconditioner, n: int) -> tuple[float, int]:
+def first_step_scale(fun, pre: Preconditioner, n: int) -> float:
     """The scale c <= 1 of the subproblem's variables z = c z' that makes L-BFGS's first step the right
     length: gamma = s^T y / y^T y, the inverse curvature along the steepest-descent direction from one
     gradient difference (y) over a short step (s), the scaling of the initial inverse Hessian H0 = gamma I
@@ -277,21 +294,21 @@ def first_step_scale(fun, pre: Preconditioner, n: int) -> tuple[float, int]:
         fun: fun(z, need_grad) -> (Phi, dPhi/dz) in the preconditioned variables. pre: the Preconditioner
             (the step's length in x). n: the number of variables.
     Returns:
-        (c in (0, 1], 1 when the gradient vanishes or the curvature is not positive; the evaluations made).
+        c in (0, 1] (1 when the gradient vanishes or the curvature is not positive).
     """
     if n == 0:
-        return 1.0, 0
+        return 1.0
     _, g0 = fun(np.zeros(n), True)
     gn = float(np.linalg.norm(g0))
     if gn == 0 or not np.isfinite(gn):
-        return 1.0, 1
+        return 1.0
     d = -g0 / gn
-    h = 1e-6 / max(1e-300, float(np.abs(pre.apply(d)).max()))  # a step of 1e-6 [m or rad] in x: initial_penalty's
+    h = _probe_length(pre.apply(d))
     _, g1 = fun(h * d, True)
     y = g1 - g0
     yy, sy = float(y @ y), float(h * (d @ y))
     gamma = sy / yy if yy > 0 and sy > 0 else 1.0
-    return (float(np.sqrt(gamma)) if gamma < 1.0 else 1.0), 2
+    return float(np.sqrt(gamma)) if gamma < 1.0 else 1.0
 
 
 __all__ += ["SubproblemResult", "solve_subproblem", "Status"]

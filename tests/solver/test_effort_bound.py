@@ -123,7 +123,7 @@ def test_bounds_relative_to_the_reference_give_before_the_scenes(captured):
     before = [c.limit.copy() for c in lc.al.constraints]
     scaled = [np.zeros(c.size) for c in lc.al.constraints]
     scaled[acc][0] = scaled[pen][0] = 2.0  # both broken at twice their tolerance
-    stored = ([lam.copy() for lam in lc.al.lam], lc.al.rho)
+    stored = lc.al.estimates()
     unmet, _ = _relax_unmet(lc.al, basis, frames, scaled, stored)
     assert list(unmet) == ["acceleration"]
     assert np.array_equal(lc.al.constraints[pen].limit, before[pen])
