@@ -1,6 +1,6 @@
 """The measure of change: how much a path differs from the reference motion, in units that price a jolt.
 
-    D(Y) = integral of  (a - a_ref)^T M (a - a_ref)  +  omega^4 (dq)^T diag(M) (dq)  dt    [kg m^2 / s^3]
+    D(Y) = integral of  (a - a_ref)^T M (a - a_ref)  +  omega^4 (dq)^T P (dq)  dt    [kg m^2 / s^3]
 
 a, a_ref: MuJoCo's `qacc` of the path and of the reference (`solver.reference.ReferenceMotion`); dq: the
 pose difference in MuJoCo's tangent space (root position difference; for each quaternion the rotation
@@ -11,12 +11,20 @@ accelerations: changing the pelvis's acceleration by 1 m/s^2 costs the whole bod
 the hand's, so a solve buys a foot's contact with the leg rather than with a jolt of the body. It is
 the spacetime-constraints objective of Witkin & Kass ("Spacetime constraints", SIGGRAPH 1988), measured
 as a change from a motion to keep, as Gleicher poses motion editing ("Motion editing with spacetime
-constraints", I3D 1997). The pose part (each degree of freedom weighted by its own inertia, diag(M), so
-that the pose of one joint is not traded against another's through the mass matrix's coupling) makes
-the problem well posed where accelerations leave a change free (a partial keyframe's free component at the path's ends may drift linearly); omega =
-pi / T for a path of length T prices the slowest change a path pinned at both ends can make (a half
-sine over T) as much by its displacement as by its acceleration, and every faster change less, so it
-does not compete with the acceleration part anywhere else.
+constraints", I3D 1997).
+
+The pose part P is diagonal. The root's position and orientation keep their own inertia (diag(M): the
+body's mass, its inertia about the pelvis): moving the whole figure is priced by what it moves. Every
+articulated joint's rotation (ball and hinge joints) is priced alike, by the mean of their diag(M) at
+that point: a pose is seen by its joint angles, which is what an animator keys and what the field's
+joint-angle error measures, and Gleicher's displacement norm weights every parameter alike. Weighted by
+its own inertia instead, an ankle's rotation cost about a hundredth of a hip's, and a solve met every
+foot contact by turning the ankles away from the motion to keep (docs/design.md, "The measure of
+change"). The pose part makes the problem well posed where accelerations leave a change free (a partial
+keyframe's free component at the path's ends may drift linearly); omega = pi / T for a path of length T
+prices the slowest change a path pinned at both ends can make (a half sine over T) as much by its
+displacement as by its acceleration, and every faster change less, so it does not compete with the
+acceleration part anywhere else.
 
 Quadrature: the reference's points and weights (uniform, paper after eq. 7).
 """
@@ -38,22 +46,29 @@ class MeasureOfChange:
         reference: ReferenceMotion (points, weights, qpos, qacc, mass-matrix factors).
         tmap: the model's TangentMap.
         omega: [rad/s] the pose part's frequency; default pi / T.
+        joints: (k,) qvel indices of the articulated joints' rotations (ball and hinge joints), priced
+            alike by the pose part; default none (every degree of freedom by its own inertia).
     """
 
     units = "kg m^2/s^3"
 
-    def __init__(self, reference: ReferenceMotion, tmap: TangentMap, omega: float | None = None):
+    def __init__(self, reference: ReferenceMotion, tmap: TangentMap, omega: float | None = None,
+                 joints: np.ndarray | None = None):
         self.ref = reference
         self.tmap = tmap
         self.omega = float(np.pi / reference.duration if omega is None else omega)
         self._qref = reference.qpos[:, tmap.quat_q].transpose(2, 1, 0)  # (4, s, n)
         self._uref = self._qref / np.linalg.norm(self._qref, axis=0)
         self._M = reference.chol @ reference.chol.transpose(0, 2, 1)  # (n, nv, nv) M(q_ref)
-        self._Md = np.einsum("nii->ni", self._M).copy()  # (n, nv) diag M
+        self._P = np.einsum("nii->ni", self._M).copy()  # (n, nv) the pose part's diagonal P
+        if joints is not None and len(joints):
+            self._P[:, joints] = self._P[:, joints].mean(axis=1, keepdims=True)
         w = reference.weights
         #: (nv, nv) the time-averaged mass matrix sum_i w_i M(q_ref,i) / sum_i w_i [kg m^2]: the
         #: preconditioner's and the refinement's curvature (`solver.lagrangian.Preconditioner`), made once
         self.mbar = np.tensordot(w, self._M, axes=1) / w.sum()
+        #: (nv,) the pose part's diagonal P averaged the same way [kg m^2]
+        self.pbar = w @ self._P / w.sum()
 
     def _pose_difference(self, Y: np.ndarray):
         """(dq (n, nv), q (4, s, n), |q| (s, n)): the tangent-space pose difference from the reference."""
@@ -77,7 +92,7 @@ class MeasureOfChange:
         dq, q, r = self._pose_difference(state.Y)
         X = np.stack([state.motion.qacc - self.ref.qacc, dq], axis=2)  # (n, nv, 2)
         MX = self._M @ X
-        MX[:, :, 1] = self._Md * dq
+        MX[:, :, 1] = self._P * dq
         w4 = self.omega ** 4
         e = (X * MX).sum(1)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T M dq
         D = float(w @ e[:, 0] + w4 * (w @ e[:, 1]))

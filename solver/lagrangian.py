@@ -29,6 +29,7 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import scipy.linalg
 
 from solver.frames import FrameSet
 from solver.manifold import FrameVariables
@@ -114,55 +115,63 @@ class Preconditioner:
 
     The Hessian of the acceleration part is sum_i w_i (W2[i] (x) I)^T M_i (W2[i] (x) I) over the
     quadrature points; with the time-averaged mass matrix Mbar in place of M_i it is the Kronecker
-    product K (x) Mbar, K = W2^T diag(w) W2 (+ omega^4 W^T diag(w) W for the pose part), over the frames
-    where the degrees of freedom are free: R^-1 = R_K^-1 (x) R_M^-1 with the Cholesky factors of each
-    (Van Loan, "The ubiquitous Kronecker product", J. Comput. Appl. Math. 123, 2000). Degrees of freedom
-    free at the same frames (all of them in a variable frame) share a block; a partial keyframe's free
+    product K2 (x) Mbar, K2 = W2^T diag(w) W2, and the pose part's is K0 (x) Pbar, K0 = omega^4 W^T diag(w)
+    W and Pbar the time-averaged diagonal of the pose part, over the frames where the degrees of freedom
+    are free. The sum of the two is diagonalized by the Kronecker product of the generalized
+    eigenvectors of the pairs (K2, K0) and (Mbar, Pbar) (V^T K0 V = I, V^T K2 V = diag(lambda); U^T Pbar U =
+    I, U^T Mbar U = diag(sigma)): H = (V (x) U)^-T diag(lambda_f sigma_k + 1) (V (x) U)^-1, so
+    R^-1 = (V (x) U) diag(lambda_f sigma_k + 1)^(-1/2) (Van Loan, "The ubiquitous Kronecker product",
+    J. Comput. Appl. Math. 123, 2000, sec. 4: Sylvester-type Kronecker sums). Degrees of freedom free at
+    the same frames (all of them in a variable frame) share a block; a partial keyframe's free
     components form blocks of their own.
 
     Args:
         variables: FrameVariables. basis: the frame set's `SplineBasis` at the quadrature points.
-        change: MeasureOfChange (weights, mass-matrix factors, omega). tmap: TangentMap. d0: D0.
+        change: MeasureOfChange (weights, mbar, pbar, omega). tmap: TangentMap. d0: D0.
     """
 
     def __init__(self, variables: FrameVariables, basis, change, tmap, d0: float):
         w = change.ref.weights
-        Mbar = change.mbar  # time-averaged M (nv, nv)
-        K = (basis.gram(2, w) + change.omega ** 4 * basis.gram(0, w)) * (2.0 / d0)  # (m, m)
+        K2 = basis.gram(2, w) * (2.0 / d0)  # (m, m)
+        K0 = change.omega ** 4 * basis.gram(0, w) * (2.0 / d0)
         frames, dofs = _variable_dofs(variables, tmap)
         by_dof = {}
         for d in np.unique(dofs):
             at = np.flatnonzero(dofs == d)
             at = at[np.argsort(frames[at], kind="stable")]
             by_dof.setdefault(frames[at].tobytes(), []).append((d, at))
-        self.groups = []  # (index (f, k) into x, R_K^-1 (f, f), R_M^-1 (k, k))
+        self.groups = []  # (index (f, k) into x, V (f, f), U (k, k), diag(lambda sigma + 1)^(-1/2) (f, k))
         for key, members in by_dof.items():
             F = np.frombuffer(key, dtype=frames.dtype)
             D = np.array([d for d, _ in members])
             index = np.stack([at for _, at in members], axis=1)  # (f, k)
-            self.groups.append((index, _inverse_factor(K[np.ix_(F, F)]), _inverse_factor(Mbar[np.ix_(D, D)])))
+            lam, V = _pair_basis(K2[np.ix_(F, F)], K0[np.ix_(F, F)])
+            sig, U = _pair_basis(change.mbar[np.ix_(D, D)], np.diag(change.pbar[D]))
+            self.groups.append((index, V, U, 1.0 / np.sqrt(np.outer(lam, sig) + 1.0)))
 
     def apply(self, z: np.ndarray) -> np.ndarray:
         """R^-1 z."""
         out = np.empty_like(z)
-        for index, RK, RM in self.groups:
-            out[index] = RK @ z[index] @ RM.T
+        for index, V, U, S in self.groups:
+            out[index] = V @ (z[index] * S) @ U.T
         return out
 
     def apply_transpose(self, g: np.ndarray) -> np.ndarray:
         """R^-T g (a gradient in x as one in z)."""
         out = np.empty_like(g)
-        for index, RK, RM in self.groups:
-            out[index] = RK.T @ g[index] @ RM
+        for index, V, U, S in self.groups:
+            out[index] = (V.T @ g[index] @ U) * S
         return out
 
 
-def _inverse_factor(H: np.ndarray) -> np.ndarray:
-    """R^-1 for R upper triangular with R^T R = H + a relative ridge of 1e-12 (H symmetric positive
-    semidefinite: a spline through two frames has no curvature)."""
-    H = H.copy()
-    H.flat[:: len(H) + 1] += 1e-12 * np.trace(H) / len(H) + 1e-300
-    return np.linalg.inv(np.linalg.cholesky(H).T)
+def _pair_basis(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lambda (n,), V (n, n)) with V^T B V = I and V^T A V = diag(lambda), lambda >= 0: the generalized
+    eigenvectors of A v = lambda B v (A symmetric positive semidefinite, B positive definite up to a
+    relative ridge of 1e-12, as a spline through two frames has no curvature; LAPACK's sygvd)."""
+    B = B.copy()
+    B.flat[:: len(B) + 1] += 1e-12 * np.trace(B) / len(B) + 1e-300
+    lam, V = scipy.linalg.eigh(A, B)
+    return np.maximum(lam, 0.0), V
 
 
 def initial_penalty(al: AugmentedLagrangian, basis, variables: FrameVariables, pre: Preconditioner) -> float:

@@ -105,6 +105,13 @@ class StateLayout:
         return found
 
     @property
+    def articulated_dofs(self) -> np.ndarray:
+        """(k,) qvel indices of the articulated joints' rotations: ball and hinge joints, not the free
+        root and not slides (`solver.change.MeasureOfChange` prices their poses alike)."""
+        return np.array([d for j in self.joints if j.kind in ("ball", "hinge")
+                         for d in range(j.dofadr, j.dofadr + j.nv)], int)
+
+    @property
     def linear_index(self) -> np.ndarray:
         """qpos indices that are not quaternion components (root position, hinges, slides)."""
         mask = np.ones(self.nq, bool)

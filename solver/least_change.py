@@ -174,7 +174,7 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     # the pose part's frequency: the keyframes' own Nyquist frequency (a change slower than the keyframe
     # spacing is priced by its pose, a faster one by its acceleration)
     omega = np.pi / float(np.mean(np.diff(keyframes.times)))
-    change = MeasureOfChange(reference, tmap, omega=omega)
+    change = MeasureOfChange(reference, tmap, omega=omega, joints=layout.articulated_dofs)
     d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)
     al = AugmentedLagrangian(change, constraints, tmap, engine, d0)
     knots = np.array([x for c in schedule for x in (c.start, c.end)], float)

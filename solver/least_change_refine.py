@@ -5,7 +5,7 @@ A candidate frame at the midpoint of each segment, where the spline through the 
 passes (so adding it leaves the path unchanged), has gradient g_c = dPhi/dx_c: the weak-form
 Euler-Lagrange residual of Phi's integrand tested with that frame's basis function (paper sec. 4.2:
 "the Euler-Lagrange equations are furthest from holding"). A Newton step in that frame alone, d_c =
--H_c^-1 g_c with H_c the measure of change's own curvature there (the preconditioner's K_cc Mbar block,
+-H_c^-1 g_c with H_c the measure of change's own curvature there (the preconditioner's block of frame c,
 `solver.lagrangian.Preconditioner`), predicts the decrease (g_c . d_c)^2 / (2 d_c^T H_true d_c), the
 true curvature along d_c measured by one gradient difference (all even and all odd midpoints at once:
 their basis functions barely overlap). Segments are marked by Doerfler's bulk criterion (Doerfler,
@@ -47,15 +47,17 @@ def predicted_decreases(al: AugmentedLagrangian, frames: FrameSet, quat_slots: n
     g = var.pullback(np.zeros(var.size), G)
     ref = al.change.ref
     w = ref.weights
-    Mbar = al.change.mbar
-    K = (basis.gram(2, w) + al.change.omega ** 4 * basis.gram(0, w)) * (2.0 / al.d0)
+    ch = al.change
+    K2 = basis.gram(2, w) * (2.0 / al.d0)
+    K0 = ch.omega ** 4 * basis.gram(0, w) * (2.0 / al.d0)
     mids = np.flatnonzero(np.arange(cand.count) % 2 == 1)
     at = [np.flatnonzero(fr == c) for c in mids]
     d = np.zeros(var.size)
     for c, idx in zip(mids, at):
         if idx.size:
             D = dof[idx]
-            d[idx] = -np.linalg.solve(K[c, c] * Mbar[np.ix_(D, D)], g[idx])
+            H = K2[c, c] * ch.mbar[np.ix_(D, D)] + np.diag(K0[c, c] * ch.pbar[D])  # D/D0's, as the preconditioner's
+            d[idx] = -np.linalg.solve(H, g[idx])
     gd = np.array([g[idx] @ d[idx] for idx in at])
     curv = np.zeros(len(mids))
     for parity in (0, 1):

@@ -12,7 +12,7 @@ import pytest
 import solver
 from solver.change import MeasureOfChange
 from solver.kinematics import TangentMap
-from solver.lagrangian import Preconditioner
+from solver.lagrangian import Preconditioner, _variable_dofs
 from solver.layout import StateLayout
 from solver.least_change import LeastChangeOptions, _start_frames, build_least_change, solve_least_change
 from solver.manifold import FrameVariables
@@ -136,6 +136,57 @@ def test_measure_of_change_of_a_known_change(shipped):
     assert change.evaluate(PathState(t, Yc, Y1c, Y2c, tmap), grad=False) == pytest.approx(expected, rel=1e-9)
 
 
+def _quat_mul(a, b):
+    """Hamilton products a b of (n, 4) quaternions (w x y z)."""
+    w1, v1, w2, v2 = a[:, :1], a[:, 1:], b[:, :1], b[:, 1:]
+    return np.hstack([w1 * w2 - (v1 * v2).sum(1, keepdims=True), w1 * v2 + w2 * v1 + np.cross(v1, v2)])
+
+
+@pytest.mark.parametrize("joint", ["l_ankle", "torso"])
+def test_pose_part_prices_every_joint_angle_alike(shipped, joint):
+    """A still figure, one joint turned by theta(t) = A sin(pi (t - t0) / T) about its child's x axis: the
+    joint's angular acceleration is theta'' x (the reference is still) and its pose difference
+    2 sin(theta / 2) x, so D = sum_i w_i (M_jj theta''_i^2 + omega^4 I (2 sin(theta_i / 2))^2), with M from
+    MuJoCo's mj_fullM at the still pose and I the mean of diag(M) over the ball joints' 3 x 11 degrees of
+    freedom: an ankle's pose costs what the torso's does, though its inertia about x is 1/270 of the torso's."""
+    model, keyframes, _ = shipped
+    layout = StateLayout.from_model(model)
+    tmap = TangentMap.from_layout(layout)
+    q = keyframes.values[0].copy()
+    for slot in layout.quat_slots:
+        q[slot] /= np.linalg.norm(q[slot])
+    t0, t1, n = 0.0, 0.8, 400
+    h = (t1 - t0) / n
+    t = t0 + h * (np.arange(n) + 0.5)
+    ref = ReferenceMotion.from_samples(model, np.array([t0, 0.4, t1]), np.tile(q, (3, 1)), t, np.full(n, h))
+    omega = 4.0
+    change = MeasureOfChange(ref, tmap, omega=omega, joints=layout.articulated_dofs)
+    data = mujoco.MjData(model)
+    data.qpos[:] = q
+    mujoco.mj_forward(model, data)
+    M = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, M)
+    balls = [j for j in layout.joints if j.kind == "ball"]
+    inertia = np.mean([M[d, d] for j in balls for d in range(j.dofadr, j.dofadr + 3)])
+    jt = layout.joint(joint)
+    A, k = 0.3, np.pi / (t1 - t0)
+    th, th1, th2 = A * np.sin(k * t), A * k * np.cos(k * t), -A * k * k * np.sin(k * t)
+    c, s_ = np.cos(th / 2)[:, None], np.sin(th / 2)[:, None]
+    x = np.array([1.0, 0.0, 0.0])
+    u0 = np.tile(q[jt.qposadr:jt.qposadr + 4], (n, 1))
+    e = np.hstack([c, s_ * x])  # exp(theta x / 2) and its derivatives in t
+    e1 = np.hstack([-s_, c * x]) * (th1 / 2)[:, None]
+    e2 = np.hstack([-c, -s_ * x]) * ((th1 / 2) ** 2)[:, None] + np.hstack([-s_, c * x]) * (th2 / 2)[:, None]
+    Y, Y1, Y2 = np.tile(q, (n, 1)), np.zeros((n, model.nq)), np.zeros((n, model.nq))
+    sl = slice(jt.qposadr, jt.qposadr + 4)
+    Y[:, sl], Y1[:, sl], Y2[:, sl] = _quat_mul(u0, e), _quat_mul(u0, e1), _quat_mul(u0, e2)
+    from solver.path_state import PathState
+
+    d = jt.dofadr
+    expected = float(np.sum(h * (M[d, d] * th2 ** 2 + omega ** 4 * inertia * (2 * np.sin(th / 2)) ** 2)))
+    assert change.evaluate(PathState(t, Y, Y1, Y2, tmap), grad=False) == pytest.approx(expected, rel=1e-6)
+
+
 def test_preconditioner_transpose(problem):
     lc, frames, basis = problem
     var = FrameVariables(frames, lc.layout.quat_slots)
@@ -143,6 +194,30 @@ def test_preconditioner_transpose(problem):
     rng = np.random.default_rng(5)
     u, v = rng.normal(size=var.size), rng.normal(size=var.size)
     assert pre.apply(u) @ v == pytest.approx(u @ pre.apply_transpose(v), rel=1e-10)
+
+
+def test_preconditioner_whitens_the_time_averaged_hessian(problem):
+    """R^-T H R^-1 = I for each block of degrees of freedom free at the same frames, H built directly:
+    (2 / D0) (W2^T diag(w) W2 (x) Mbar + omega^4 W^T diag(w) W (x) diag(Pbar)) on the block's frames F
+    and degrees of freedom D, with W, W2 the spline's values and second derivatives at the quadrature
+    points (`SplineBasis.gram`)."""
+    lc, frames, basis = problem
+    var = FrameVariables(frames, lc.layout.quat_slots)
+    ch = lc.al.change
+    pre = Preconditioner(var, basis, ch, lc.al.tmap, lc.al.d0)
+    w = ch.ref.weights
+    K2, K0 = basis.gram(2, w) * (2.0 / lc.al.d0), ch.omega ** 4 * basis.gram(0, w) * (2.0 / lc.al.d0)
+    fr, dof = _variable_dofs(var, lc.al.tmap)
+    index = max((g[0] for g in pre.groups), key=np.size)  # the variable frames' block
+    F, D = fr[index[:, 0]], dof[index[0]]
+    H = np.kron(K2[np.ix_(F, F)], ch.mbar[np.ix_(D, D)]) + np.kron(K0[np.ix_(F, F)], np.diag(ch.pbar[D]))
+    Rinv = np.zeros((index.size, index.size))
+    for col in range(index.size):
+        z = np.zeros(var.size)
+        z[index.ravel()[col]] = 1.0
+        Rinv[:, col] = pre.apply(z)[index.ravel()]
+    assert len(F) > 10 and np.ptp(ch.pbar[D]) > 0  # many frames; a pose diagonal that is not M's
+    np.testing.assert_allclose(Rinv.T @ H @ Rinv, np.eye(index.size), atol=1e-8)
 
 
 def test_standing_still_is_left_alone():
