@@ -70,14 +70,15 @@ def small_clip(tmp_path, n=3):
 
 def test_figure_tol(tmp_path, capsys):
     clip, out = small_clip(tmp_path), tmp_path / "path.npz"
-    common = ["animate", clip, "--no-render", "--max-evals", "400", "--save-path", str(out)]
-    assert main([*common, "--tol", "0.05"]) == 0
-    printed = capsys.readouterr().out
-    assert "refinement estimate" in printed
-    # the budget (about half of what the clip takes) ends the solve, and the summary says so
-    assert "tolerance NOT met: evaluation budget of 400 spent" in printed
+    common = ["animate", clip, "--no-render", "--tol", "0.05", "--save-path", str(out)]
+    assert main(common) == 0
+    assert "refinement estimate" in capsys.readouterr().out
+    needs = len(np.load(out)["objective_trace"])  # (evaluations,), docs/saved-path.md
+    # half of what the clip takes ends the solve, and the summary says so
+    assert main([*common, "--max-evals", str(needs // 2)]) == 0
+    assert f"tolerance NOT met: evaluation budget of {needs // 2} spent" in capsys.readouterr().out
     solve_opts = json.loads(str(np.load(out)["options_json"]))["solve"]
-    assert solve_opts["tol"] == 0.05
+    assert solve_opts["tol"] == 0.05 and solve_opts["max_evals"] == needs // 2
 
 
 def test_orient_rounds_and_tol_are_one_choice(tmp_path, capsys):
