@@ -269,9 +269,9 @@ def _run_and_step_block(runs: _Runs) -> Block:
     for name, terms in (("the constraints (default)", "default"), ("and the force bounds (`--terms all`)", "all")):
         f = runs.solved(terms)["figures"]
         # where the solve stops, so its change E, follows the CPU's round-off: with the force bounds a limit
-        # is out of reach (raised to what the path reaches, `Solution.unmet`), 2.5-3.2 here and under
-        # OpenBLAS's Sandybridge kernels; without them one kernel takes one more penalty increase before
-        # every constraint is met (docs/solvers.md "Known limitation"): 0.524 here, 0.384 under Sandybridge
+        # is out of reach (raised to what the path reaches, `Solution.unmet`); without them two kernels
+        # stop after different refinement rounds (docs/solvers.md "Known limitation"): 0.65 here, 0.70
+        # under OpenBLAS's Sandybridge kernels
         E = f"{f['E_final']:.3g}"
         rows.append([name, timing(str(f["evals"])), timing(str(f["frames"])), timing(E), timing(f"{f['wall_s']:.1f}")])
     header = ["the least change with", "evaluations", "frames at the end", "change E at the end", "optimization [s]"]
