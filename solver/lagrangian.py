@@ -19,9 +19,10 @@ measure V = max_p |min(-c_p/tol_j, lam_p/rho)| did not fall below TAU of its las
 Martinez's rule, their defaults gamma = 10, tau = 0.5).
 
 A subproblem is L-BFGS (nlopt) in preconditioned variables: z with x = x0 + R^-1 z, R^T R the
-Gauss-Newton Hessian of D/D0 alone with the time-averaged mass matrix in place of M(t) and each degree
-of freedom on its own (the spline's Gram matrix of second derivatives, scaled by the dof's mass), which
-removes the spline's ill-conditioning (its curvature grows like 1/h^3 in the frame spacing h).
+Gauss-Newton Hessian of D/D0 alone with the time-averaged mass matrix and pose diagonal in place of
+M(t) and P(t) (`Preconditioner`: the spline's Gram matrices of second derivatives and of values times
+those, inverted exactly), which removes the spline's ill-conditioning (its curvature grows like 1/h^3 in
+the frame spacing h).
 """
 from __future__ import annotations
 
