@@ -94,7 +94,7 @@ class MeasureOfChange:
         MX = self._M @ X
         MX[:, :, 1] = self._P * dq
         w4 = self.omega ** 4
-        e = (X * MX).sum(1)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T M dq
+        e = (X * MX).sum(1)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T P dq
         D = float(w @ e[:, 0] + w4 * (w @ e[:, 1]))
         if grad:
             state.add_acceleration(2.0 * w[:, None] * MX[:, :, 0])

@@ -122,7 +122,7 @@ class Preconditioner:
     eigenvectors of the pairs (K2, K0) and (Mbar, Pbar) (V^T K0 V = I, V^T K2 V = diag(lambda); U^T Pbar U =
     I, U^T Mbar U = diag(sigma)): H = (V (x) U)^-T diag(lambda_f sigma_k + 1) (V (x) U)^-1, so
     R^-1 = (V (x) U) diag(lambda_f sigma_k + 1)^(-1/2) (Van Loan, "The ubiquitous Kronecker product",
-    J. Comput. Appl. Math. 123, 2000, sec. 4: Sylvester-type Kronecker sums). Degrees of freedom free at
+    J. Comput. Appl. Math. 123, 2000, on sums of Kronecker products). Degrees of freedom free at
     the same frames (all of them in a variable frame) share a block; a partial keyframe's free
     components form blocks of their own.
 
