@@ -132,9 +132,7 @@ class Preconditioner:
     """
 
     def __init__(self, variables: FrameVariables, basis, change, tmap, d0: float):
-        w = change.ref.weights
-        K2 = basis.gram(2, w) * (2.0 / d0)  # (m, m)
-        K0 = change.omega ** 4 * basis.gram(0, w) * (2.0 / d0)
+        K2, K0 = _frame_grams(basis, change, d0)
         frames, dofs = _variable_dofs(variables, tmap)
         by_dof = {}
         for d in np.unique(dofs):
@@ -163,6 +161,13 @@ class Preconditioner:
         for index, V, U, S in self.groups:
             out[index] = (V.T @ g[index] @ U) * S
         return out
+
+
+def _frame_grams(basis, change, d0: float) -> tuple[np.ndarray, np.ndarray]:
+    """(K2, K0), each (m, m) over the frames: D/D0's Gauss-Newton Hessian is K2 (x) Mbar + K0 (x) Pbar
+    (`Preconditioner`), K2 = (2/D0) W2^T diag(w) W2 and K0 = (2/D0) omega^4 W^T diag(w) W."""
+    w = change.ref.weights
+    return basis.gram(2, w) * (2.0 / d0), change.omega ** 4 * basis.gram(0, w) * (2.0 / d0)
 
 
 def _pair_basis(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.frames import FrameSet
-from solver.lagrangian import AugmentedLagrangian, _variable_dofs
+from solver.lagrangian import AugmentedLagrangian, _frame_grams, _variable_dofs
 from solver.manifold import FrameVariables
 from solver.spline_basis import SplineBasis
 
@@ -45,11 +45,8 @@ def predicted_decreases(al: AugmentedLagrangian, frames: FrameSet, quat_slots: n
     fr, dof = _variable_dofs(var, al.tmap)
     phi, G, _ = al.evaluate(basis, cand.values)
     g = var.pullback(np.zeros(var.size), G)
-    ref = al.change.ref
-    w = ref.weights
     ch = al.change
-    K2 = basis.gram(2, w) * (2.0 / al.d0)
-    K0 = ch.omega ** 4 * basis.gram(0, w) * (2.0 / al.d0)
+    K2, K0 = _frame_grams(basis, ch, al.d0)
     mids = np.flatnonzero(np.arange(cand.count) % 2 == 1)
     at = [np.flatnonzero(fr == c) for c in mids]
     d = np.zeros(var.size)
