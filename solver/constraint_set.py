@@ -39,9 +39,10 @@ there; the problem is made well posed instead of excused:
   force, `runner.motion_metrics.forced_skate_mm`, is that bound). The slide constraint measures the
   integral of huber_b(|v|) (`SupportSlide`), convex and nondecreasing in the speed, so in its own measure
   the keyframes force at least dt huber_b(d / dt) (Jensen's inequality; a constant speed meets it). The
-  slide limit is SLIDE_DISTANCE plus the sum of those; with the capture the keyframes came from, the
-  allowance beyond that sum is the capture's own slide beyond it where that is less than SLIDE_DISTANCE
-  (a known path through the keyframes slides that little there). The distance d itself is no bound on
+  slide limit is the sum of those plus an allowance: SLIDE_DISTANCE, or the plain spline's own slide
+  beyond that sum where that is less, and likewise the capture's when the keyframes came from one (a
+  known path through the keyframes slides that little there: the path may do better, never worse, as
+  with the heights). The distance d itself is no bound on
   the measure, which is below it at speeds under b: a standing clip's keys, a capture's marker noise
   apart, summed 1.8-2.9 mm of "forced" slide, and a solve used it as a slow drift.
 * The anatomical limits are widened to the reference's own worst angle (`solver.constraints.anatomy`).
@@ -140,14 +141,15 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     support = SupportSurfaces(surfaces, rounded_edges=True)
     radii = contact_radii(model, sites)
     out = []
+    state = None if engine is None else _reference_state(model, reference, plain, engine)  # the plain spline's
     if engine is not None and surfaces.count:
         out.append(Penetration(surfaces, radii, t, sites, TOLERANCES["penetration"]))
         witness = None if capture is None else _capture_state(model, reference, capture, engine)
-        feet = _foot_support(model, figure, reference, plain, contacts, engine, support, radii, witness)
+        feet = _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness)
         if feet is not None:
             args, limit_h, reports = feet
             height = SupportHeight(*args, limit=limit_h, tolerance=TOLERANCES["planted"])
-            slide, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites, witness)
+            slide, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness)
             height.reports = reports + slide_reports
             out += [height, slide]
         if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
@@ -162,7 +164,6 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             out += _effort(model, reference, plain, capture, engine)
     relaxations = []
     if engine is not None:
-        state = _reference_state(model, reference, plain, engine)
         relaxations = _relax_heights(out, state, plain, model, sites, support, radii, flights)
         relaxations += [r for c in out if isinstance(c, SupportHeight) for r in c.reports]
     return out, relaxations
@@ -277,11 +278,11 @@ def _flight_and_ground(model, reference, plain, engine, support, radii, flights,
     return out
 
 
-def _site_slides(model, reference, plain, contacts, support, radii, sites, witness=None):
+def _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness=None):
     """The slide constraint (`SupportSlide`), a pair per site contact (the site's own contact), its limit the
-    slide the keyframes force in its own measure (Jensen's inequality: module docstring) plus
-    SLIDE_DISTANCE, or the `witness`'s own slide beyond that where that is less; and the relaxations worth
-    reporting."""
+    slide the keyframes force in its own measure (Jensen's inequality: module docstring) plus an allowance:
+    SLIDE_DISTANCE, or less where the plain spline (`state`, the reference) or the `witness` slides less
+    beyond that; and the relaxations worth reporting."""
     t, w = reference.t, reference.weights
     index, times, values = _full_keyframes(plain)
     keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else None
@@ -311,24 +312,26 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites, witne
     args = (support, radii, np.concatenate(pts), np.concatenate(cols_), np.concatenate(surf), np.concatenate(pair),
             np.concatenate(ww), np.array(span), np.array(rows), np.array(labels, object))
     forced = np.array(keyed)
-    slide = SupportSlide(*args, limit=forced + SLIDE_DISTANCE, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING)
-    if witness is not None:
-        slide.limit = forced + np.minimum(SLIDE_DISTANCE, np.maximum(0.0, slide.measure(witness) - forced))
+    slide = SupportSlide(*args, limit=forced, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING, forced=forced)
+    allowance = np.full(len(forced), SLIDE_DISTANCE)
+    for path in (state, witness):  # a known path through the keyframes: the path may do better, never worse
+        if path is not None:
+            allowance = np.minimum(allowance, np.maximum(0.0, slide.measure(path) - forced))
+    slide.limit = forced + allowance
     return slide, reports
 
 
-def _foot_support(model, figure, reference, plain, contacts, engine, support, radii, witness=None):
+def _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness=None):
     """The foot contacts' support points (`solver.constraints.sites._FootSupport`) and their limits
     relaxed where the keyframes force (module docstring), or None without contacts. Where a keyframe holds
     a foot up, the limit is what a known path through the keyframes does over the contact: `witness` (the
-    capture they came from, a PathState at the quadrature points), else the plain spline.
+    capture they came from, a PathState at the quadrature points), else the plain spline (`state`).
 
     Returns:
         (args of `_FootSupport`, planted limits (p,) [m], relaxation reports).
     """
     sites = tuple(figure.contact_sites)
     t, w = reference.t, reference.weights
-    state = _reference_state(model, reference, plain, engine)
     index, times, values = _full_keyframes(plain)
     keyed_pts = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
     keyed_low = keyed_pts.copy()

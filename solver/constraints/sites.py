@@ -160,13 +160,15 @@ def huber(s: np.ndarray, b: float) -> np.ndarray:
 
 class SupportSlide(_FootSupport):
     """Distance the support site slides along its surface over each foot contact, integral of
-    huber_b(|v_t|) dt, <= limit [m] (`_FootSupport`; b the Huber width [m/s])."""
+    huber_b(|v_t|) dt, <= limit [m] (`_FootSupport`; b the Huber width [m/s]). `forced` (p,) [m]: the
+    part of the limit the keyframes force (`solver.constraint_set`; 0 when not given)."""
 
     name, unit, scale = "slide", "mm", 1e-3
 
-    def __init__(self, *args, limit, tolerance: float, width: float):
+    def __init__(self, *args, limit, tolerance: float, width: float, forced=None):
         super().__init__(*args)
         self.limit = np.asarray(limit, float)
+        self.forced = np.zeros(len(self.span)) if forced is None else np.asarray(forced, float)
         self.tolerance, self.b = float(tolerance), float(width)
 
     def _tangential(self, state):
