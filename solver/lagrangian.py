@@ -89,6 +89,12 @@ class AugmentedLagrangian:
         dY, dY1, dY2 = st.pullback()
         return phi, basis.pullback(dY, dY1, dY2), D
 
+    def shift(self) -> float:
+        """sum_j sum_p (w_p/T) lam_p^2 / (2 rho): the part of Phi no path changes, with the sign that makes
+        Phi + shift = D/D0 + (1/(2 rho)) sum w max(0, lam + rho c/tol)^2 >= 0 (PHR's Phi itself can be
+        negative where multipliers stand on met constraints)."""
+        return sum(float(w @ (lam * lam)) for w, lam in zip(self.w, self.lam)) / (2.0 * self.rho)
+
     def scaled_values(self, basis, P: np.ndarray) -> list[np.ndarray]:
         """c_p / tol_j at every pair of every constraint, on the path of P."""
         st = self.state(basis, P)

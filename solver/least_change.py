@@ -65,8 +65,9 @@ class LeastChangeOptions:
     """How the least-change problem is solved (read-only).
 
     Attributes:
-        tol: refinement stops when the decrease of Phi it still predicts is at most tol * Phi and every
-            constraint is met (dimensionless; 1 %: the paper's fig. 5 "good enough" test as a fraction).
+        tol: refinement stops when the decrease of Phi it still predicts is at most tol times Phi's
+            nonnegative part (`AugmentedLagrangian.shift`) and every constraint is met (dimensionless;
+            1 %: the paper's fig. 5 "good enough" test as a fraction).
         min_gap: [s] no two frames closer: 1/48 s, half a frame of 24 fps film; a cubic spline through
             frames closer than that kinks between them (its second derivative grows like 1/h^2).
         max_subproblems: subproblems in all (each an L-BFGS run), a guard against a method that cycles:
@@ -343,10 +344,10 @@ def _stop_message(status: Status, message: str, o: LeastChangeOptions) -> str:
 
 
 def _refinement(al, frames, quat, o: LeastChangeOptions, k: int, progress) -> tuple[np.ndarray, float, np.ndarray]:
-    """(times of new variable frames, the predicted decrease of Phi over Phi, (m - 1,) each segment's
+    """(times of new variable frames, the predicted decrease of Phi over Phi + shift, (m - 1,) each segment's
     predicted decrease) on `frames`."""
     dec, phi = predicted_decreases(al, frames, quat, o.min_gap)
-    estimate = float(dec.sum() / max(phi, 1e-300))
+    estimate = float(dec.sum() / max(phi + al.shift(), 1e-300))  # Phi itself can be <= 0 (PHR)
     if progress:
         progress("estimate", {"round": k, "estimate": estimate, "tol": o.tol})
     return doerfler_times(dec, frames), estimate, dec

@@ -86,6 +86,27 @@ def test_measure_of_change_and_phi_gradients_match_finite_differences(problem):
     al.lam = [np.zeros(c.size) for c in al.constraints]
 
 
+def test_phi_without_its_constant_part_is_never_negative(problem):
+    """PHR's Phi is negative where multipliers stand on met constraints: at the plain spline (D = 0) every
+    met pair with lam > 0 adds -lam^2/(2 rho) (the starting frames are the plain spline's, their inserted
+    quaternions made unit: D/D0 ~ 1e-3). Phi + shift() is D/D0 plus the penalty's squares, here summed
+    from the constraint values: what refinement's estimate is relative to."""
+    lc, frames, basis = problem
+    al = lc.al
+    saved = al.estimates()
+    try:
+        al.rho = rho = 3.0
+        scaled = al.scaled_values(basis, frames.values)
+        al.lam = [np.where(ch < 0, 1e3, 0.0) for ch in scaled]  # large multipliers on the met pairs only
+        phi, _, D = al.evaluate(basis, frames.values, grad=False)
+        squares = sum(float(w @ np.maximum(0.0, lam + rho * ch) ** 2) for w, lam, ch in zip(al.w, al.lam, scaled))
+        assert phi < 0
+        assert phi + al.shift() == pytest.approx(D / al.d0 + squares / (2 * rho), rel=1e-9)
+        assert phi + al.shift() >= 0
+    finally:
+        al.lam, al.rho = saved
+
+
 def test_reference_mass_matrix_is_mujocos(shipped):
     model, keyframes, _ = shipped
     plain = solver.FrameSet.from_keyframes(keyframes, StateLayout.from_model(model).quat_slots)
