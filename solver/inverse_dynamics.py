@@ -222,11 +222,12 @@ class InverseDynamics(KinematicTree):
             g_tau: (n, nv) d phi / d tau, or None (zero). g_sites: (n, k, 3) d phi / d site position, or None.
             g_site_vel: (n, k, 3) d phi / d site velocity (`site_velocities`), or None.
         Returns:
-            g_pose (n, nv), g_qvel (n, nv), g_qacc (n, nv). g_qacc = M(q) g_tau (M with armature).
+            g_pose (n, nv), g_qvel (n, nv), g_qacc (n, nv) (None when g_tau is None: the forces' reverse
+            pass is skipped, the sites' alone made). g_qacc = M(q) g_tau (M with armature).
         """
         sv = res.saved
         if g_tau is None:
-            g_tau = np.zeros(res.tau.shape)
+            return (*self._sites_vjp(sv, res.qpos.shape[0], g_sites, g_site_vel), None)
         gT = g_tau.T
         Ga = self._armature[:, None] * gT
         Gv = self._damping[:, None] * gT

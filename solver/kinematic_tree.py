@@ -290,6 +290,16 @@ class KinematicTree:
         theta = desc @ gth
         Gq[self._ang_v.T] = mtv(R[:, :, rs], theta[:, rs])
 
+    def _sites_vjp(self, sv: dict, n: int, g_sites, g_site_vel) -> tuple[np.ndarray, np.ndarray]:
+        """(g_pose (n, nv), g_qvel (n, nv)): the reverse pass of the site positions and velocities alone
+        (a `forward` with velocities saved `sv`; g_sites, g_site_vel (n, k, 3) or None)."""
+        Gq, Gv = np.zeros((self.nv, n)), np.zeros((self.nv, n))
+        xbar, nubar, wbar, gth = self._site_adjoints(sv, sv["om"], g_sites, g_site_vel)
+        z = np.zeros((3, len(self.bodies), n))
+        zs = [z if isinstance(a, float) else a for a in (nubar, wbar, xbar, gth)]
+        self._reverse(sv, zs[0], z, z, z.copy(), zs[1], zs[2], zs[3], Gq, Gv)
+        return Gq.T, Gv.T
+
 
 class SiteKinematics(KinematicTree):
     """The sites' positions and velocities along a path and their reverse pass: the engine the kinematic
@@ -395,12 +405,7 @@ class SiteKinematics(KinematicTree):
                 if rows.size:
                     Gq[rows] = self.site_positions_vjp(sv, g_sites[rows], rows)
             return Gq, None, None
-        Gq, Gv = np.zeros((self.nv, n)), np.zeros((self.nv, n))
-        xbar, nubar, wbar, gth = self._site_adjoints(sv, sv["om"], g_sites, g_site_vel)
-        z = np.zeros((3, len(self.bodies), n))
-        zs = [z if isinstance(a, float) else a for a in (nubar, wbar, xbar, gth)]
-        self._reverse(sv, zs[0], z, z, z.copy(), zs[1], zs[2], zs[3], Gq, Gv)
-        return Gq.T, Gv.T, None
+        return (*self._sites_vjp(sv, n, g_sites, g_site_vel), None)
 
 
 def _moving(model, sites, prune: bool) -> np.ndarray:

@@ -1,5 +1,6 @@
 """The kinematics-only engine (`SiteKinematics`): site positions and velocities against MuJoCo
-(mj_kinematics, mj_objectVelocity), its reverse pass against central differences, the velocity-only
+(mj_kinematics, mj_objectVelocity), its reverse pass (and the inverse dynamics' without a torque
+gradient) against central differences, the velocity-only
 `PathMotion`, and the contact terms on it against the same terms on the full inverse dynamics."""
 from pathlib import Path
 
@@ -9,6 +10,7 @@ import pytest
 from tree_models import HINGE, ODD, tangent_step
 
 from solver.errors import InputError
+from solver.inverse_dynamics import InverseDynamics
 from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
 from solver.layout import CONTACT_SITES, StateLayout
@@ -50,17 +52,21 @@ def test_sites_match_mujoco(model):
     assert eng.forward(Y.copy(), V.copy()) is res  # cached by value
 
 
-def test_vjp_matches_central_differences(model):
+@pytest.mark.parametrize("engine", [SiteKinematics, InverseDynamics])
+def test_vjp_matches_central_differences(model, engine):
+    """The sites' reverse pass: SiteKinematics's, and InverseDynamics's without a torque gradient (g_tau
+    None: its forces' reverse pass is skipped)."""
     rng = np.random.default_rng(12)
     n, nv = 3, model.nv
     Y, V = _state(model, rng, n)
-    eng = SiteKinematics(model, CONTACT_SITES)
+    A = rng.normal(size=(n, nv))  # read by the inverse dynamics only
+    eng = engine(model, CONTACT_SITES)
     gs, gv = rng.normal(size=(n, 4, 3)), rng.normal(size=(n, 4, 3))
-    Gq, Gv, Ga = eng.vjp(eng.forward(Y, V), None, gs, gv)
+    Gq, Gv, Ga = eng.vjp(eng.forward(Y, V, A), None, gs, gv)
     assert Ga is None
 
     def phi(Y_, V_):
-        r = eng.forward(Y_, V_)
+        r = eng.forward(Y_, V_, A)
         return (r.sites * gs).sum((1, 2)) + (eng.site_velocities(r) * gv).sum((1, 2))
 
     h = 1e-6
