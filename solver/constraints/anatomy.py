@@ -20,7 +20,7 @@ from collections.abc import Callable
 import numpy as np
 
 from solver.constraints.base import Constraint
-from solver.path_state import PathState
+from solver.path_state import PathState, add_at
 
 __all__ = ["AngleBound"]
 
@@ -59,4 +59,4 @@ class AngleBound(Constraint):
             return
         rows, cols = self.rows[on], self._cols[on]
         d = self.grads(state.Y, rows, cols) * (g[on] * self.sign[cols])[:, None]
-        np.add.at(state.gY, (rows[:, None], self.idx[cols]), d)
+        add_at(state.gY, (rows[:, None], self.idx[cols]), d)

@@ -28,6 +28,7 @@ from functools import partial
 import numpy as np
 
 from solver.constraints.base import Constraint
+from solver.path_state import add_at
 
 __all__ = ["GOLDEN_STEPS", "PENETRATION_RATE", "Penetration"]
 
@@ -271,8 +272,8 @@ class Penetration(Constraint):
         n = len(self.dt) + 1
         gp, gv = np.zeros((n, self.shape[1], 3)), np.zeros((n, self.shape[1], 3))
         h = self.dt[i, None]
-        np.add.at(gp, (i, k), H[0][:, None] * gq)
-        np.add.at(gv, (i, k), H[1][:, None] * h * gq)
-        np.add.at(gp, (i + 1, k), H[2][:, None] * gq)
-        np.add.at(gv, (i + 1, k), H[3][:, None] * h * gq)
+        add_at(gp, (i, k), H[0][:, None] * gq)
+        add_at(gv, (i, k), H[1][:, None] * h * gq)
+        add_at(gp, (i + 1, k), H[2][:, None] * gq)
+        add_at(gv, (i + 1, k), H[3][:, None] * h * gq)
         state.add_sites(gp, gv)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.constraints.base import SCHEDULE, Constraint
-from solver.path_state import PathState
+from solver.path_state import PathState, add_at
 
 __all__ = ["HeightBound", "SupportHeight", "SupportSlide", "site_heights"]
 
@@ -93,7 +93,7 @@ class HeightBound(_SitePairs):
     def pull(self, state, g):
         _, n = self.heights(state)
         gp = np.zeros(state.sites.shape)
-        np.add.at(gp, (self.rows, self.cols), (self.sign * g)[:, None] * n)
+        add_at(gp, (self.rows, self.cols), (self.sign * g)[:, None] * n)
         state.add_sites(gp)
 
 
@@ -147,7 +147,7 @@ class SupportHeight(_FootSupport):
     def pull(self, state, g):
         _, n = self.heights(state)
         gp = np.zeros(state.sites.shape)
-        np.add.at(gp, (self.points, self.cols), (g[self.pair] * self.w / self.span[self.pair])[:, None] * n)
+        add_at(gp, (self.points, self.cols), (g[self.pair] * self.w / self.span[self.pair])[:, None] * n)
         state.add_sites(gp)
 
 
@@ -190,5 +190,5 @@ class SupportSlide(_FootSupport):
         s = np.sqrt((vt * vt).sum(1))
         dc = np.where(s <= self.b, 1.0 / self.b, 1.0 / np.maximum(s, 1e-300))
         gv = np.zeros(state.sites.shape)
-        np.add.at(gv, (self.points, self.cols), (g[self.pair] * self.w * dc)[:, None] * vt)
+        add_at(gv, (self.points, self.cols), (g[self.pair] * self.w * dc)[:, None] * vt)
         state.add_sites(None, gv)

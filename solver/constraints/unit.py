@@ -48,4 +48,4 @@ class UnitNorm(Constraint):
         q = state.Y[:, self.quat_q]  # (n, s, 4)
         r = np.linalg.norm(q, axis=-1, keepdims=True)
         G = g.reshape(q.shape[:2])[..., None] * ((r - 1.0) / UNIT_LIMIT) * q / r
-        np.add.at(state.gY, (slice(None), self.quat_q), G)
+        state.gY[:, self.quat_q] += G  # each quaternion component once: no repeats
