@@ -90,15 +90,15 @@ class MeasureOfChange:
         """
         w = self.ref.weights
         dq, q, r = self._pose_difference(state.Y)
-        da = state.motion.qacc - self.ref.qacc  # (n, nv)
-        Mda = np.einsum("nij,nj->ni", self._M, da)
-        Pdq = self._P * dq
+        X = np.stack([state.motion.qacc - self.ref.qacc, dq], axis=2)  # (n, nv, 2)
+        MX = self._M @ X
+        MX[:, :, 1] = self._P * dq
         w4 = self.omega ** 4
-        # (a - a_ref)^T M (a - a_ref) and dq^T P dq at each point
-        D = float(w @ np.einsum("ni,ni->n", da, Mda) + w4 * (w @ np.einsum("ni,ni->n", dq, Pdq)))
+        e = (X * MX).sum(1)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T P dq
+        D = float(w @ e[:, 0] + w4 * (w @ e[:, 1]))
         if grad:
-            state.add_acceleration(2.0 * w[:, None] * Mda)
-            g = 2.0 * w4 * w[:, None] * Pdq  # dD/d(dq) (n, nv)
+            state.add_acceleration(2.0 * w[:, None] * MX[:, :, 0])
+            g = 2.0 * w4 * w[:, None] * MX[:, :, 1]  # dD/d(dq) (n, nv)
             tm = self.tmap
             state.gY[:, tm.lin_q] += g[:, tm.lin_v]
             gq = g.T[tm.quat_v.T]  # (3, s, n)
