@@ -14,7 +14,7 @@ import numpy as np
 
 from solver.kinematics import TangentMap
 
-__all__ = ["PathState"]
+__all__ = ["PathState", "add_at"]
 
 
 def add_at(target: np.ndarray, index: tuple, values: np.ndarray) -> None:
@@ -22,8 +22,9 @@ def add_at(target: np.ndarray, index: tuple, values: np.ndarray) -> None:
     component over the flat positions (np.add.at is unbuffered, several times slower on the pulls' sizes).
 
     Args:
-        target: C-contiguous array, changed in place. index: integer arrays (broadcast together) for its
-            leading axes. values: broadcast to the selection's shape, then target's trailing axes.
+        target: the array changed in place (a non-contiguous one goes through np.add.at). index: integer
+            arrays (broadcast together) for its leading axes. values: broadcast to the selection's shape,
+            then target's trailing axes.
     """
     sel = np.broadcast_arrays(*index)
     lead, tail = target.shape[:len(sel)], target.shape[len(sel):]
