@@ -308,7 +308,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "interrupted"), "frames" (reference frames), "fps", "keyframes" (count), "partial", "contacts"
         (count), "reference_contact_distance_mm" and "reference_feet_disagreement_mm" (the retargeted clip's
         resting feet from the surfaces and the capture's own disagreement, `runner.mocap.contacts.feet_line`;
-        None off the subject's figure), "keyframes_on_source" (`keyframes_on_source_report`; None off the
+        None off the subject's figure), "reference_footplant_mm" (`FootPlant.largest_mm`: the most each foot
+        and the root were lowered to put resting feet on their surfaces), "keyframes_on_source" (`keyframes_on_source_report`; None off the
         subject's figure), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
         where the keyframes decide a constraint, `Solution.relaxations`), "relaxed" ({constraint: count} of
         those relaxations), "stalled" ({constraint: amount [SI]}
@@ -357,6 +358,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "keyframe_error": run.metrics["optimized"].get("keyframe_error"),
         "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
         "reference_feet_disagreement_mm": _mm(feet_disagreement(ref, problem.model)),
+        "reference_footplant_mm": ref.plant.largest_mm() if ref.plant is not None else None,
         "stance_agreement": _agreement(problem, ref),
         "keyframe_conflicts": len(run.solution.relaxations), "relaxed": _relaxed(run.solution),
         "stalled": dict(run.solution.unmet or {}),
@@ -387,13 +389,14 @@ ON_SOURCE = 0.005
 def keyframes_on_source_report(clip: Path, cs, times, say=print) -> dict | None:
     """How far the keyframes, written back onto the source skeleton (`dynsplines export --to FILE.bvh`),
     are from the clip's own pose (`runner.mocap.source_export.keyframes_on_source`), said in one line
-    that names the correction responsible beyond `ON_SOURCE` (the knee and elbow hyperextension clamp:
-    the root-height correction and the levelling are taken off by the export). Only on the subject's own
+    that names the corrections responsible beyond `ON_SOURCE` (the knee and elbow hyperextension clamp and
+    the footplant: the root-height correction and the levelling are taken off by the export). Only on the subject's own
     figure (another figure's bones are not the source's).
 
     Returns:
         {"max_mm", "joint", "time_s", "keys_moved" (keys with a joint beyond ON_SOURCE), "clamped_deg"
-        ({knee or elbow: [deg] hyperextension removed at that key})}, or None (another figure).
+        ({knee or elbow: [deg] hyperextension removed at that key}), "planted_mm" ({foot: [mm] the footplant
+        lowered it at that key})}, or None (another figure).
     """
     import numpy as np
 
@@ -409,17 +412,22 @@ def keyframes_on_source_report(clip: Path, cs, times, say=print) -> dict | None:
     k, j = np.unravel_index(int(np.argmax(d)), d.shape)
     frame = int(np.clip(np.rint(times[k] / ref.frame_time), 0, ref.count - 1))
     clamped = {name: round(float(a[frame]), 2) for name, a in (ref.clamped or {}).items() if a[frame] > 0}
+    planted = {} if ref.plant is None else {
+        foot: round(-1000.0 * float(ref.plant.foot_dz[frame, i]), 1) for i, foot in enumerate(ref.plant.feet)
+        if ref.plant.foot_dz[frame, i] < 0}
     out = {"max_mm": round(1000.0 * float(d.max()), 2), "joint": src.names[j], "time_s": round(float(times[k]), 4),
-           "keys_moved": int((d.max(axis=1) > ON_SOURCE).sum()), "clamped_deg": clamped}
+           "keys_moved": int((d.max(axis=1) > ON_SOURCE).sum()), "clamped_deg": clamped, "planted_mm": planted}
     line = "  keyframes on the source skeleton (export --to FILE.bvh): every joint within "
     if d.max() <= ON_SOURCE:
         line += f"{out['max_mm']:.1f} mm of the clip's"
     else:
-        why = ", ".join(f"{n} {a:.1f} deg" for n, a in clamped.items()) or "none at that key"
+        why = ", ".join([f"{n} {a:.1f} deg" for n, a in clamped.items()] +
+                        [f"{foot} foot lowered {mm:.1f} mm" for foot, mm in planted.items()]) or "none at that key"
         line += (f"{1000 * ON_SOURCE:.0f} mm of the clip's at {len(times) - out['keys_moved']} of {len(times)} keys; at "
-                 f"{out['keys_moved']} the knee and elbow hyperextension clamp moved joints, most {src.names[j]} by "
-                 f"{out['max_mm']:.0f} mm at {times[k]:.2f} s (hyperextension removed: {why}; docs/mocap.md \"Back onto "
-                 "the source skeleton\")")
+                 f"{out['keys_moved']} the import's clean-up (the knee and elbow hyperextension clamp, the footplant) "
+                 "moved "
+                 f"joints, most {src.names[j]} by {out['max_mm']:.0f} mm at {times[k]:.2f} s ({why}; docs/mocap.md "
+                 "\"Back onto the source skeleton\")")
     say(line)
     return out
 

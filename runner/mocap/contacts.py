@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from runner.mocap.clearance import CONTACT_CLEARANCE, ContactClearance, moving_average, smoothing_width
 from runner.mocap.contact_detection import DETECT_SPEED_ON
 from runner.mocap.retarget import Reference
 from solver.contacts import contact_radii, lowest_points
@@ -14,60 +15,13 @@ from solver.figure import Figure
 #: the wide height window [m] in which `correct_root_height` looks for feet at rest to measure the
 #: retargeting's height error (the retargeted feet can be several cm off before the correction)
 FIT_HEIGHT = 0.15
-#: clearance of the lowest site of a foot in contact after the height correction [m]: a small positive
-#: margin so that keyframes, rounded to 6 decimals in a JSON file, never touch below the surface.
-CONTACT_CLEARANCE = 0.002
 #: [m] the most the reference's root may be moved on the subject's own figure (`check_root_correction`): a
 #: larger correction moves the feet by more than the 3 cm below which a foot counts as resting
 #: (DETECT_HEIGHT_ON), so the scene is not where the capture's feet rest and the clip is refused
 ROOT_CORRECTION_MAX = 0.03
 #: [m] the most that correction may change between two frames 1/120 s apart: the 30 mm of the bound above,
-#: which the smoothing (`SMOOTH_S`) keeps to a fifth of that; a jump is a surface that appears under a foot
+#: which the smoothing (`runner.mocap.clearance.SMOOTH_S`) keeps to a fifth of that; a jump is a surface that appears under a foot
 ROOT_STEP_MAX = 0.03
-#: [s] the moving average that smooths the height correction: 9 frames at 120 Hz, so that a correction
-#: switching from one resting foot to the other changes over about as long as weight takes to shift, not
-#: in one frame; a duration, so that a 60 Hz clip is smoothed over the same time (5 frames)
-SMOOTH_S = 0.075
-
-
-# --------------------------------------------------------------------------------------------------
-# feet and surfaces
-# --------------------------------------------------------------------------------------------------
-
-
-class _SiteKinematics:
-    """Contact points of the figure over a motion, by MuJoCo forward kinematics."""
-
-    def __init__(self, model):
-        import mujoco
-
-        from solver.surfaces import StaticSurfaces
-
-        self.model = model
-        self.data = mujoco.MjData(model)
-        self.surfaces = StaticSurfaces.from_model(model, self.data)
-        figure = Figure.from_model(model)  # raises InputError naming a missing site
-        self.names = list(figure.contact_sites)  # foot by foot, heel then toe
-        self.feet = dict(figure.feet)
-        self.ids = figure.contact_site_ids
-        self.radii = contact_radii(model, self.names)
-
-    def positions(self, qpos: np.ndarray) -> np.ndarray:
-        """(n, 4, 3) world positions [m] of the contact points of l_heel, l_toe, r_heel, r_toe (the lowest
-        points of rounded sites' spheres, `solver.contacts.lowest_points`) for (n, nq) qpos."""
-        import mujoco
-
-        qpos = np.atleast_2d(qpos)
-        out = np.empty((len(qpos), len(self.ids), 3))
-        for i, q in enumerate(qpos):
-            self.data.qpos[:] = q
-            mujoco.mj_kinematics(self.model, self.data)
-            out[i] = self.data.site_xpos[self.ids]
-        return lowest_points(out, self.radii)
-
-    def clearance(self, pos: np.ndarray) -> np.ndarray:
-        """(n, 4) height [m] of each site above the surface under it (negative: below the surface)."""
-        return self.surfaces.height_above(pos)
 
 
 def worst_contact_distance(reference: Reference, model) -> float:
@@ -123,13 +77,18 @@ def check_root_correction(correction: np.ndarray, frame_time: float, source: str
 
 def feet_line(reference: Reference, model) -> str:
     """The printed acceptance figures of a retargeted clip: how far resting feet are from the surfaces
-    (`worst_contact_distance`) and, on the subject's own figure, how far the capture's own feet disagree
-    (`feet_disagreement`)."""
+    (`worst_contact_distance`), on the subject's own figure how far the capture's own feet disagree
+    (`feet_disagreement`), and what the footplant moved to put them there (`Reference.plant`)."""
     line = f"feet in contact stay within {1000 * worst_contact_distance(reference, model):.1f} mm of the surface under them"
     d = feet_disagreement(reference, model)
     if d is not None:
         line += (f"; the capture's own feet disagree by up to {1000 * d:.1f} mm (by its forward kinematics: a resting "
                  "foot that far above the other foot's lowest point)")
+    moved = reference.plant.largest_mm() if reference.plant is not None else {}
+    if any(v > 0 for v in moved.values()):
+        feet = ", ".join(f"the {foot} foot {mm:.1f} mm" for foot, mm in moved.items() if foot != "root")
+        line += (f"; the footplant lowered resting feet onto their surfaces, at most {feet}, by the legs and the root "
+                 f"(lowered at most {moved['root']:.1f} mm; docs/mocap.md \"The keyframes' feet\")")
     return line
 
 
@@ -165,7 +124,7 @@ def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarra
     """
     from runner.mocap.stance import lowest_sites, resting, stance_mask
 
-    kin = _SiteKinematics(model)
+    kin = ContactClearance(model)
     pos = kin.positions(qpos)
     clear = kin.clearance(pos)
     n = len(qpos)
@@ -186,20 +145,10 @@ def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarra
             dz = np.interp(frames, frames[on], target[on])
         else:
             dz = np.full(n, offset)
-    width = min(2 * int(SMOOTH_S / (2 * frame_time)) + 1, n if n % 2 else n - 1)
-    dz = np.maximum(_moving(dz, width), CONTACT_CLEARANCE - clear.min(axis=1))
+    dz = np.maximum(moving_average(dz, smoothing_width(n, frame_time)), CONTACT_CLEARANCE - clear.min(axis=1))
     out = qpos.copy()
     out[:, 2] += dz
     return out
-
-
-def _moving(x: np.ndarray, width: int) -> np.ndarray:
-    """(n,) the mean of x over a centred window of `width` frames (odd), the ends padded with the end
-    values; x itself when width < 3."""
-    if width < 3:
-        return x
-    pad = width // 2
-    return np.convolve(np.pad(x, pad, mode="edge"), np.ones(width) / width, mode="valid")
 
 
 def feet_disagreement(reference: Reference, model) -> float | None:

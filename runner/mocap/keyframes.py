@@ -50,7 +50,7 @@ def keyframe_indices(reference: Reference, every: float = 0.25, extremes: bool =
     idx = np.rint(np.linspace(0.0, T, intervals + 1) / reference.frame_time).astype(int)
     idx = np.unique(np.clip(idx, 0, reference.count - 1))
     if extremes:
-        z = reference.qpos[:, 2]
+        z = reference.keyed().qpos[:, 2]  # the keyed motion's root (`Reference.keyed`)
         for e in (int(np.argmax(z)), int(np.argmin(z))):
             if e in (0, reference.count - 1):
                 continue
@@ -78,9 +78,10 @@ def keyframes_from_reference(
 ) -> Keyframes:
     """Keyframes from a dense reference motion, as an animator would set them.
 
-    Full keyframes at `indices` (default `keyframe_indices(reference, every)`); the keyframes listed in
-    `partial` fix only the named joints (all components of each), the rest of the figure is free for
-    the optimizer.
+    Full keyframes at `indices` (default `keyframe_indices(reference, every)`), with the values of the
+    capture with its resting feet planted (`Reference.keyed`, docs/mocap.md "The keyframes' feet"); the
+    keyframes listed in `partial` fix only the named joints (all components of each), the rest of the
+    figure is free for the optimizer.
 
     Args:
         reference: the dense motion (`load_bvh_reference`).
@@ -105,7 +106,7 @@ def keyframes_from_reference(
         if partial != MIDDLE_LOWER_BODY:
             raise InputError(f"partial={partial!r}; give 'middle' or a mapping {{keyframe index: joint names}}")
         partial = {k // 2: Figure.from_model(model).leg_joints} if k > 2 else {}
-    values = reference.qpos[idx].copy()
+    values = reference.keyed().qpos[idx].copy()  # the capture with its resting feet planted
     mask = np.ones_like(values, bool)
     for i, names in dict(partial).items():
         if not (isinstance(i, (int, np.integer)) and 0 <= i < k):
@@ -138,6 +139,7 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
     """
     from runner.mocap.keyframe_selection import CaptureError, contact_keyframes, turn_keys
 
+    reference = reference.keyed()  # keys are chosen on the motion they take their values from
     if keys == "contacts":
         if every is not None and not (isinstance(every, (int, float)) and math.isfinite(every) and every > 0):
             raise InputError(f"keyframe spacing every={every!r}; give a positive number of seconds, e.g. 0.25")

@@ -9,6 +9,7 @@ takes that correction off again (runner/mocap/source_export.py).
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ import numpy as np
 from runner.mocap.bvh import read_bvh
 from runner.mocap.contacts import check_root_correction, correct_root_height
 from runner.mocap.figure_record import clip_skeleton
+from runner.mocap.foot_plant import plant_feet
 from runner.mocap.retarget import (
     Reference,
     check_figure,
@@ -32,7 +34,7 @@ from solver.figure import Figure
 from solver.layout import StateLayout
 
 #: the stages of `load_bvh_reference` its `progress` callback reports
-IMPORT_STAGES = ("parse", "retarget", "clamp", "root height", "tidy")
+IMPORT_STAGES = ("parse", "retarget", "clamp", "root height", "footplant", "tidy")
 
 
 #: `load_bvh_reference`'s default root scale: the figure's leg length over the subject's
@@ -53,9 +55,11 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     orientations, local joint quaternions
     (unit, w x y z, hemisphere-consistent), the root's position and orientation moved into the scene's
     levelled capture frame (the rigid transform its MJCF records, `solver.capture_frame.CaptureFrame.
-    from_model`: a fitted scene's floor is z = 0 there; the identity for a scene that records none), knee/elbow hyperextension clamped to 0 flexion
-    (`clamp_hyperextension`), root height corrected so feet in contact stand on the floor or the box
-    and no contact site is ever below a surface (`correct_root_height`).
+    from_model`: a fitted scene's floor is z = 0 there; the identity for a scene that records none),
+    knee/elbow hyperextension clamped to 0 flexion (`clamp_hyperextension`), root
+    height corrected so feet in contact stand on the floor or the box and no contact site is ever below a
+    surface (`correct_root_height`); and, for the keyframes, the resting feet planted on their surfaces
+    (`runner.mocap.foot_plant.plant_feet`, `Reference.plant`, `Reference.keyed`).
 
     Args:
         path: a BVH file of a human skeleton of any convention (runner/mocap/skeleton.py).
@@ -112,13 +116,15 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     corrected = correct_root_height(qpos, model, clip.frame_time)
     if own and fitted:  # the capture's own root on its fitted scene: only moved a little, smoothly, or refused
         check_root_correction(corrected[:, 2] - qpos[:, 2], clip.frame_time, str(path))
-    qpos = corrected
     step(4, "root height")
-    qpos = tidy_quaternions(qpos, layout)
-    step(5, "done")
+    plant = plant_feet(corrected, model, clip.frame_time)  # the keyframes' feet on their surfaces, by the legs
+    plant = replace(plant, qpos=tidy_quaternions(plant.qpos, layout))
+    step(5, "footplant")
+    qpos = tidy_quaternions(corrected, layout)
+    step(6, "done")
     times = np.arange(len(qpos)) * clip.frame_time
     return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own, skeleton=skel,
-                     clamped=clamped)
+                     clamped=clamped, plant=plant)
 
 
 def _root_scale(root_scale, clip, skel, model, path) -> float:

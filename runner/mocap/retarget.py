@@ -40,7 +40,8 @@ Data of the shipped clips: CMU Graphics Lab Motion Capture Database, mocap.cs.cm
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,6 +52,9 @@ from solver.errors import InputError
 from solver.figure import Figure
 from solver.layout import StateLayout
 from solver.quaternion import align_hemispheres, conj, mul, normalize, swing_twist, twist_angle
+
+if TYPE_CHECKING:
+    from runner.mocap.foot_plant import FootPlant
 
 # --------------------------------------------------------------------------------------------------
 # data
@@ -75,6 +79,9 @@ class Reference:
         skeleton: the clip's recognised skeleton (None: a clip on the figure's own skeleton, read exactly).
         clamped: {knee or elbow joint: (n,) [deg]} the hyperextension the clean-up removed per frame
             (`hyperextension`), or None.
+        plant: the capture with its resting feet planted on their surfaces, which the keyframes are taken
+            from (`runner.mocap.foot_plant.FootPlant`: its qpos, and what it moved), or None (a clip on the
+            figure's own skeleton). `qpos` stays the capture: the motion metrics judge against it.
     """
 
     times: np.ndarray
@@ -85,6 +92,7 @@ class Reference:
     captured_root: bool = False
     skeleton: RecognisedSkeleton | None = None
     clamped: dict | None = None
+    plant: FootPlant | None = None
 
     @property
     def count(self) -> int:
@@ -94,6 +102,11 @@ class Reference:
     def duration(self) -> float:
         """[s] time of the last frame."""
         return float(self.times[-1])
+
+    def keyed(self) -> Reference:
+        """The motion keyframes are chosen on and take their values from: the capture with its resting feet
+        planted (`plant.qpos`, docs/mocap.md "The keyframes' feet"), or this reference when not planted."""
+        return self if self.plant is None else replace(self, qpos=self.plant.qpos, plant=None)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -204,11 +204,12 @@ def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray, ref
 
 
 def keyframes_on_source(clip: BvhClip, model, reference, times: np.ndarray) -> np.ndarray:
-    """(K, J) [m] how far each source joint is, at the keyframe times, from the clip's own: the reference
-    at those times (which a path meets exactly there) written onto the source skeleton (`source_motion`,
-    the import's root-height correction and levelling taken off) against the clip's forward kinematics.
-    What is left is what the import's other clean-up changed: the knee and elbow hyperextension clamp
-    (docs/mocap.md, "Back onto the source skeleton").
+    """(K, J) [m] how far each source joint is, at the keyframe times, from the clip's own: the keyframes'
+    values at those times (`Reference.keyed`, which a path meets exactly there) written onto the source
+    skeleton (`source_motion`, the import's root-height correction and levelling taken off) against the
+    clip's forward kinematics.
+    What is left is what the import's other clean-up changed: the knee and elbow hyperextension clamp and
+    the footplant (docs/mocap.md, "Back onto the source skeleton").
 
     Args:
         clip: the source clip. model: the scene (the subject's own figure). reference: the clip's
@@ -217,7 +218,8 @@ def keyframes_on_source(clip: BvhClip, model, reference, times: np.ndarray) -> n
     skel, _, _ = clip_skeleton(clip, model)
     times = np.asarray(times, float)
     frames = np.clip(np.rint(times / reference.frame_time).astype(int), 0, reference.count - 1)
-    local, trans = source_motion(clip, model, reference.qpos[frames], times, (reference.times, reference.qpos))
+    keyed = reference.keyed().qpos[frames]  # the keyframes' values: the capture with its resting feet planted
+    local, trans = source_motion(clip, model, keyed, times, (reference.times, reference.qpos))
     _, out = forward(clip.parents, local, trans)
     _, src = file_world(clip)
     return np.linalg.norm(out - src[skel.rest_frames + frames], axis=-1) * skel.unit

@@ -1,5 +1,6 @@
 """BVH import and retargeting (runner/mocap/), checked against physical expectations and
 hand-computed rotations, plus every malformed-input error."""
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -181,9 +182,10 @@ def test_shipped_keyframes_match_the_clip_and_show_the_problem(reference, scene,
     assert info.model == (MODELS / "humanoid39.xml").resolve()
     assert info.source["clip"] == "cmu/127_33.bvh" and "--out models/run_and_step.keyframes.json" in info.source["command"]
     # made before --partial and the root extremes: the command of models/README.md with
-    # --partial --no-root-extremes
-    fresh = keyframes_from_reference(reference, scene, partial="middle",
-                                     indices=keyframe_indices(reference, 0.25, extremes=False))
+    # --partial --no-root-extremes; and before the footplant: keyed from the capture itself
+    unplanted = dataclasses.replace(reference, plant=None)
+    fresh = keyframes_from_reference(unplanted, scene, partial="middle",
+                                     indices=keyframe_indices(unplanted, 0.25, extremes=False))
     assert np.array_equal(kf.mask, fresh.mask)
     assert kf.times == pytest.approx(fresh.times, abs=1e-6)
     # and before the root-height correction put only resting feet on the floor (docs/mocap.md, "The
