@@ -309,7 +309,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         (count), "reference_contact_distance_mm" and "reference_feet_disagreement_mm" (the retargeted clip's
         resting feet from the surfaces and the capture's own disagreement, `runner.mocap.contacts.feet_line`;
         None off the subject's figure), "reference_footplant_mm" (`FootPlant.largest_mm`: the most each foot
-        and the root were lowered to put resting feet on their surfaces), "keyframes_on_source" (`keyframes_on_source_report`; None off the
+        and the root were lowered to put resting feet on their surfaces), "reference_glitches" (the tracking glitches
+        repaired, `runner.mocap.glitches.Glitch`), "keyframes_on_source" (`keyframes_on_source_report`; None off the
         subject's figure), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
         where the keyframes decide a constraint, `Solution.relaxations`), "relaxed" ({constraint: count} of
         those relaxations), "stalled" ({constraint: amount [SI]}
@@ -359,6 +360,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
         "reference_feet_disagreement_mm": _mm(feet_disagreement(ref, problem.model)),
         "reference_footplant_mm": ref.plant.largest_mm() if ref.plant is not None else None,
+        "reference_glitches": [str(g) for g in ref.glitches],
         "stance_agreement": _agreement(problem, ref),
         "keyframe_conflicts": len(run.solution.relaxations), "relaxed": _relaxed(run.solution),
         "stalled": dict(run.solution.unmet or {}),
@@ -389,8 +391,9 @@ ON_SOURCE = 0.005
 def keyframes_on_source_report(clip: Path, cs, times, say=print) -> dict | None:
     """How far the keyframes, written back onto the source skeleton (`dynsplines export --to FILE.bvh`),
     are from the clip's own pose (`runner.mocap.source_export.keyframes_on_source`), said in one line
-    that names the corrections responsible beyond `ON_SOURCE` (the knee and elbow hyperextension clamp and
-    the footplant: the root-height correction and the levelling are taken off by the export). Only on the subject's own
+    that names the corrections responsible beyond `ON_SOURCE` (the knee and elbow hyperextension clamp, the
+    footplant, the repair of tracking glitches: the root-height correction and the levelling are taken off
+    by the export). Only on the subject's own
     figure (another figure's bones are not the source's).
 
     Returns:
@@ -421,11 +424,13 @@ def keyframes_on_source_report(clip: Path, cs, times, say=print) -> dict | None:
     if d.max() <= ON_SOURCE:
         line += f"{out['max_mm']:.1f} mm of the clip's"
     else:
+        glitched = [g.joint for g in ref.glitches if g.start - 1e-9 <= times[k] <= g.end + 1e-9]
         why = ", ".join([f"{n} {a:.1f} deg" for n, a in clamped.items()] +
-                        [f"{foot} foot lowered {mm:.1f} mm" for foot, mm in planted.items()]) or "none at that key"
+                        [f"{foot} foot lowered {mm:.1f} mm" for foot, mm in planted.items()] +
+                        [f"{j} glitch repaired" for j in glitched]) or "none at that key"
         line += (f"{1000 * ON_SOURCE:.0f} mm of the clip's at {len(times) - out['keys_moved']} of {len(times)} keys; at "
-                 f"{out['keys_moved']} the import's clean-up (the knee and elbow hyperextension clamp, the footplant) "
-                 "moved "
+                 f"{out['keys_moved']} the import's clean-up (the knee and elbow hyperextension clamp, the footplant, "
+                 "the repair of tracking glitches) moved "
                  f"joints, most {src.names[j]} by {out['max_mm']:.0f} mm at {times[k]:.2f} s ({why}; docs/mocap.md "
                  "\"Back onto the source skeleton\")")
     say(line)

@@ -260,6 +260,7 @@ def report(run: Run) -> str:
     ref = run.source.reference
     if ref is not None:
         from runner.mocap.contacts import feet_line
+        from runner.mocap.glitches import glitches_line
 
         lines.append(motion_metrics_table(motion["plain"], motion["optimized"]))
         forced = motion.get("keyframes", {}).get("forced_skate_contact_mm")
@@ -271,6 +272,8 @@ def report(run: Run) -> str:
             f"{who} {w['rom_excess_motion'] or 'none'}" for who, w in zip(("plain", "optimized", "capture"), worst)))
         lines.append(f"motion capture ({display_path(ref.source)}, retargeted, {ref.count} frames): "
                      + feet_line(ref, run.model))
+        if (glitch := glitches_line(getattr(ref, "glitches", ()))) is not None:
+            lines.append(glitch)
     return "\n".join(lines)
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 from runner.commands.mocap import add_figure_arguments, add_root_scale_argument
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
 from runner.mocap.figure_choice import SUBJECT
+from runner.mocap.glitches import glitches_line
 from runner.mocap.keyframes import KEY_CHOICES
 from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.mocap.scene import AUTO
@@ -116,6 +117,8 @@ def run(args, command: str | None = None) -> int:
         from runner.mocap.contacts import feet_line
 
         print(f"  retargeted clip: {feet_line(reference, cs.model)}")
+    if (glitch := glitches_line(reference.glitches)) is not None:
+        print(f"  {glitch}")
     return EXIT_OK
 
 

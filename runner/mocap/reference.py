@@ -18,6 +18,7 @@ from runner.mocap.bvh import read_bvh
 from runner.mocap.contacts import check_root_correction, correct_root_height
 from runner.mocap.figure_record import clip_skeleton
 from runner.mocap.foot_plant import plant_feet
+from runner.mocap.glitches import repair_glitches
 from runner.mocap.retarget import (
     Reference,
     check_figure,
@@ -34,7 +35,7 @@ from solver.figure import Figure
 from solver.layout import StateLayout
 
 #: the stages of `load_bvh_reference` its `progress` callback reports
-IMPORT_STAGES = ("parse", "retarget", "clamp", "root height", "footplant", "tidy")
+IMPORT_STAGES = ("parse", "retarget", "glitches", "clamp", "root height", "footplant", "tidy")
 
 
 #: `load_bvh_reference`'s default root scale: the figure's leg length over the subject's
@@ -55,8 +56,9 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     orientations, local joint quaternions
     (unit, w x y z, hemisphere-consistent), the root's position and orientation moved into the scene's
     levelled capture frame (the rigid transform its MJCF records, `solver.capture_frame.CaptureFrame.
-    from_model`: a fitted scene's floor is z = 0 there; the identity for a scene that records none),
-    knee/elbow hyperextension clamped to 0 flexion (`clamp_hyperextension`), root
+    from_model`: a fitted scene's floor is z = 0 there; the identity for a scene that records none), tracking
+    glitches repaired (`runner.mocap.glitches.repair_glitches`: a joint turning faster than any human joint
+    between two frames), knee/elbow hyperextension clamped to 0 flexion (`clamp_hyperextension`), root
     height corrected so feet in contact stand on the floor or the box and no contact site is ever below a
     surface (`correct_root_height`); and, for the keyframes, the resting feet planted on their surfaces
     (`runner.mocap.foot_plant.plant_feet`, `Reference.plant`, `Reference.keyed`).
@@ -108,23 +110,25 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     qpos = retarget(clip, skel, frames, figure, layout, scale)[skel.rest_frames:]
     qpos = CaptureFrame.from_model(model).root(qpos, figure.joints[0].qpos_slice.start)  # the levelled frame
     step(2, "retargeted")
+    qpos, glitches = repair_glitches(qpos, layout, clip.frame_time)  # a joint turning faster than any human's
+    step(3, "glitches")
     clamped = hyperextension(qpos, figure)
     qpos, _ = clamp_hyperextension(qpos, figure)
-    step(3, "clamped")
+    step(4, "clamped")
     # feet in contact on the surfaces, nothing below one (a no-op without surfaces); on the subject's
     # figure too, where it only takes up the captured feet's deviation (at most 3 cm) from the fitted scene
     corrected = correct_root_height(qpos, model, clip.frame_time)
     if own and fitted:  # the capture's own root on its fitted scene: only moved a little, smoothly, or refused
         check_root_correction(corrected[:, 2] - qpos[:, 2], clip.frame_time, str(path))
-    step(4, "root height")
+    step(5, "root height")
     plant = plant_feet(corrected, model, clip.frame_time)  # the keyframes' feet on their surfaces, by the legs
     plant = replace(plant, qpos=tidy_quaternions(plant.qpos, layout))
-    step(5, "footplant")
+    step(6, "footplant")
     qpos = tidy_quaternions(corrected, layout)
-    step(6, "done")
+    step(7, "done")
     times = np.arange(len(qpos)) * clip.frame_time
     return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own, skeleton=skel,
-                     clamped=clamped, plant=plant)
+                     clamped=clamped, plant=plant, glitches=glitches)
 
 
 def _root_scale(root_scale, clip, skel, model, path) -> float:

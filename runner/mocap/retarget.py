@@ -55,6 +55,7 @@ from solver.quaternion import align_hemispheres, conj, mul, normalize, swing_twi
 
 if TYPE_CHECKING:
     from runner.mocap.foot_plant import FootPlant
+    from runner.mocap.glitches import Glitch
 
 # --------------------------------------------------------------------------------------------------
 # data
@@ -82,6 +83,8 @@ class Reference:
         plant: the capture with its resting feet planted on their surfaces, which the keyframes are taken
             from (`runner.mocap.foot_plant.FootPlant`: its qpos, and what it moved), or None (a clip on the
             figure's own skeleton). `qpos` stays the capture: the motion metrics judge against it.
+        glitches: the capture's tracking glitches repaired in `qpos` (`runner.mocap.glitches.Glitch`: a joint
+            turning faster than any human joint between two frames).
     """
 
     times: np.ndarray
@@ -93,6 +96,7 @@ class Reference:
     skeleton: RecognisedSkeleton | None = None
     clamped: dict | None = None
     plant: FootPlant | None = None
+    glitches: tuple[Glitch, ...] = ()
 
     @property
     def count(self) -> int:

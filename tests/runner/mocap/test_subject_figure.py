@@ -39,8 +39,9 @@ def point(model, data, name):
 @pytest.mark.parametrize("clip", CLIPS, ids=lambda p: p.stem)
 def test_legs_relative_to_the_hips_are_the_captures(clip):
     """Hip, knee, ankle and toe joints relative to the hips within 5 mm of the clip's own forward
-    kinematics at every frame; on the figure alone (no surfaces to stand on) the root is the captured
-    Hips path (no scale, no height change)."""
+    kinematics at every frame but those of a repaired tracking glitch (74_05's right ankle, 16_23's right
+    shoulder: runner.mocap.glitches); on the figure alone (no surfaces to stand on) the root is the
+    captured Hips path (no scale, no height change)."""
     model = figure_model(clip)
     ref = load_bvh_reference(clip, model)
     assert ref.captured_root and ref.root_scale == 1.0
@@ -50,11 +51,14 @@ def test_legs_relative_to_the_hips_are_the_captures(clip):
     hips = pw[:, b.index("Hips")]
     data = mujoco.MjData(model)
     worst = 0.0
+    glitched = {i for g in ref.glitches for i in range(round(g.start / ref.frame_time), round(g.end / ref.frame_time) + 1)}
     for i in range(0, ref.count):
         data.qpos[:] = ref.qpos[i]
         mujoco.mj_kinematics(model, data)
         root = data.body("pelvis").xpos
         assert np.allclose(root, hips[i], atol=1e-6)
+        if i in glitched:
+            continue
         for name, joint in LEG_POINTS.items():
             err = np.linalg.norm((point(model, data, name) - root) - (pw[i, b.index(joint)] - hips[i]))
             worst = max(worst, err)
