@@ -221,8 +221,8 @@ def test_causes_the_data_tells():
 
 
 def test_clip_sets_are_the_sha256_table_not_the_names(tmp_path):
-    assert {clip_set(CMU / f"{c}.bvh") for c in ("127_33", "16_23", "35_17")} == {"tuning"}
-    assert {clip_set(CMU / f"{c}.bvh") for c in ("75_03", "83_02", "07_04")} == {"validation"}
+    assert {clip_set(CMU / f"{c}.bvh") for c in ("127_33", "16_23", "35_17", "83_02", "74_05")} == {"tuning"}
+    assert {clip_set(CMU / f"{c}.bvh") for c in ("75_03", "118_03", "07_04")} == {"validation"}
     renamed = shutil.copy(CMU / "35_17.bvh", tmp_path / "my_run.bvh")
     assert clip_set(renamed) == "tuning"
     edited = tmp_path / "127_33.bvh"
