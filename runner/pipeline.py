@@ -344,10 +344,6 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
                       video_options=video, summary=o.summary, quiet=o.quiet, command={"command": o.command})
     run = execute(problem, options_, source, outputs, say)
     ref = source.reference
-    fitted = None if cs.fitted is None else {
-        "floor_z": cs.capture_floor.floor_z, "floor_slope": list(cs.capture_floor.floor_slope),
-        "capture_frame": [*cs.frame.quat.tolist(), *cs.frame.shift.tolist()],
-        "boxes": [{"center": c.tolist(), "half": h.tolist()} for c, h in cs.fitted.boxes], "notes": list(cs.notes)}
     status = "interrupted" if run.interrupted else run.solution.status.value
     result = {
         "clip": str(clip), "status": status,
@@ -366,7 +362,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "stalled": dict(run.solution.unmet or {}),
         "unmet_at_end": {k: v for k, v in run.solution.integrals_final.items() if v > 1.0},
         "keyframes_on_source": on_source,
-        "metrics": run.metrics, "scene_fitted": fitted, "outputs": {k: str(v) for k, v in paths.items()},
+        "metrics": run.metrics, "scene_fitted": _scene_fitted(cs), "outputs": {k: str(v) for k, v in paths.items()},
     }
     if o.plot is not None:
         result["outputs"]["plot"] = str(o.plot)
@@ -376,6 +372,14 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     result["wall_time_s"] = time.perf_counter() - t_start
     say(f"  wall time {result['wall_time_s']:.1f} s")
     return result
+
+
+def _scene_fitted(cs) -> dict | None:
+    """The metrics report's "scene_fitted" of a clip's scene (`process_clip`), None when not fitted."""
+    return None if cs.fitted is None else {
+        "floor_z": cs.capture_floor.floor_z, "floor_slope": list(cs.capture_floor.floor_slope),
+        "capture_frame": [*cs.frame.quat.tolist(), *cs.frame.shift.tolist()],
+        "boxes": [{"center": c.tolist(), "half": h.tolist()} for c, h in cs.fitted.boxes], "notes": list(cs.notes)}
 
 
 def _mm(metres: float | None) -> float | None:

@@ -272,7 +272,7 @@ def report(run: Run) -> str:
             f"{who} {w['rom_excess_motion'] or 'none'}" for who, w in zip(("plain", "optimized", "capture"), worst)))
         lines.append(f"motion capture ({display_path(ref.source)}, retargeted, {ref.count} frames): "
                      + feet_line(ref, run.model))
-        if (glitch := glitches_line(getattr(ref, "glitches", ()))) is not None:
+        if (glitch := glitches_line(ref.glitches)) is not None:
             lines.append(glitch)
     return "\n".join(lines)
 

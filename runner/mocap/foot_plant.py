@@ -53,7 +53,8 @@ class FootPlant:
         qpos: (n, nq) the motion with its resting feet on their surfaces.
         foot_dz: (n, f) [m] how far each foot was moved in the world (its leg's move and the root's), + up
             (f feet, `Figure.feet` order).
-        root_dz: (n,) [m] how far the root was moved, + up (never up in all: the footplant lowers it).
+        root_dz: (n,) [m] how far the root was moved, + up: down where a straight knee leaves a resting foot
+            out of reach, back up only where a leg cannot lift its foot out of a surface.
         feet: the f foot names.
     """
 
@@ -91,8 +92,8 @@ def _settled(above: np.ndarray, rest: np.ndarray) -> np.ndarray:
 
 
 def _feet_heights(kin: ContactClearance, qpos: np.ndarray, times: np.ndarray):
-    """(lowest (n, f) [m] each foot's lowest contact point above its surface, rest (n, f) bool, or None for
-    `rest` when not asked) of the motion."""
+    """(lowest (n, f) [m] each foot's lowest contact point above its surface, rest (n, f) bool: the foot
+    rests, `runner.mocap.stance.resting`) of the motion."""
     from runner.mocap.stance import lowest_sites, resting, stance_mask
 
     pos = kin.positions(qpos)

@@ -57,13 +57,12 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """(k, 4) spherical interpolation from unit a (u = 0) to unit b (u = 1) at (k,) u, the short way round."""
-    if a @ b < 0:
-        b = -b
-    theta = np.arccos(min(1.0, float(a @ b)))
-    if theta < 1e-12:
-        return np.repeat(a[None], len(u), axis=0)
-    return (np.sin((1 - u) * theta)[:, None] * a + np.sin(u * theta)[:, None] * b) / np.sin(theta)
+    """(k, 4) unit quaternions (w x y z) from a (u = 0) to b (u = 1) at (k,) u, the short way round
+    (`scipy.spatial.transform.Slerp`), in a's hemisphere."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    q = Slerp([0.0, 1.0], Rotation.from_quat(np.stack([a, b])[:, [1, 2, 3, 0]]))(u).as_quat()[:, [3, 0, 1, 2]]
+    return q * np.where(q @ a < 0, -1.0, 1.0)[:, None]
 
 
 def _repair_one(q: np.ndarray, step: float) -> tuple[np.ndarray, list[tuple[int, int, float]]]:

@@ -43,6 +43,7 @@ class LegChain:
         pelvis, thigh, shin, foot: MuJoCo body ids (pelvis: the thigh's parent).
         hip, knee, ankle: qpos slices of the three ball joints (w x y z quaternions).
         knee_axis: (3,) the knee's unit flexion axis in the shin's (the joint's) frame.
+        joints: the MuJoCo joint ids of the hip, the knee and the ankle.
     """
 
     side: str
@@ -54,6 +55,7 @@ class LegChain:
     knee: slice
     ankle: slice
     knee_axis: np.ndarray
+    joints: tuple[int, int, int]
 
 
 def leg_chain(model, figure: Figure, side: str) -> LegChain:
@@ -68,7 +70,7 @@ def leg_chain(model, figure: Figure, side: str) -> LegChain:
     foot = int(model.site_bodyid[heel])
     shin = int(model.body_parentid[foot])
     thigh = int(model.body_parentid[shin])
-    slices = []
+    slices, ids = [], []
     for body in (thigh, shin, foot):
         joints = [j for j in range(model.njnt) if model.jnt_bodyid[j] == body
                   and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL]
@@ -78,12 +80,13 @@ def leg_chain(model, figure: Figure, side: str) -> LegChain:
                              "give the hip, knee and ankle a ball joint each (models/README.md)")
         adr = int(model.jnt_qposadr[joints[0]])
         slices.append(slice(adr, adr + 4))
-    knee = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, int(np.flatnonzero(model.jnt_bodyid == shin)[0]))
+        ids.append(int(joints[0]))
+    knee = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, ids[1])
     if knee not in figure.flexion_axes:
         raise InputError(f'the figure has no flexion axis for its knee {knee!r}: add <numeric name="figure:flexion:'
                          f'{knee}" data="x y z"/> (models/README.md)')
     return LegChain(side, int(model.body_parentid[thigh]), thigh, shin, foot, *slices,
-                    np.asarray(figure.flexion_axes[knee], float))
+                    np.asarray(figure.flexion_axes[knee], float), tuple(ids))
 
 
 def _axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -142,11 +145,10 @@ def move_foot(model, leg: LegChain, qpos: np.ndarray, dz: np.ndarray) -> tuple[n
     data = mujoco.MjData(model)
     pts = np.empty((len(rows), 3, 3))  # hip, knee, ankle joint centres
     rot = np.empty((len(rows), 4, 4))  # pelvis, thigh, shin, foot world orientations
-    joint = [int(np.flatnonzero(model.jnt_bodyid == b)[0]) for b in (leg.thigh, leg.shin, leg.foot)]
     for i, r in enumerate(rows):
         data.qpos[:] = qpos[r]
         mujoco.mj_kinematics(model, data)
-        pts[i] = data.xanchor[joint]
+        pts[i] = data.xanchor[list(leg.joints)]
         rot[i] = data.xquat[[leg.pelvis, leg.thigh, leg.shin, leg.foot]]
     H, K, A = pts[:, 0], pts[:, 1], pts[:, 2]
     up = np.array([0.0, 0.0, 1.0])

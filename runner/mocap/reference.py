@@ -115,20 +115,31 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     clamped = hyperextension(qpos, figure)
     qpos, _ = clamp_hyperextension(qpos, figure)
     step(4, "clamped")
-    # feet in contact on the surfaces, nothing below one (a no-op without surfaces); on the subject's
-    # figure too, where it only takes up the captured feet's deviation (at most 3 cm) from the fitted scene
-    corrected = correct_root_height(qpos, model, clip.frame_time)
-    if own and fitted:  # the capture's own root on its fitted scene: only moved a little, smoothly, or refused
-        check_root_correction(corrected[:, 2] - qpos[:, 2], clip.frame_time, str(path))
-    step(5, "root height")
-    plant = plant_feet(corrected, model, clip.frame_time)  # the keyframes' feet on their surfaces, by the legs
-    plant = replace(plant, qpos=tidy_quaternions(plant.qpos, layout))
-    step(6, "footplant")
-    qpos = tidy_quaternions(corrected, layout)
+    qpos, plant = _on_the_surfaces(qpos, model, layout, clip.frame_time, str(path), own and fitted, step)
     step(7, "done")
     times = np.arange(len(qpos)) * clip.frame_time
     return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own, skeleton=skel,
                      clamped=clamped, plant=plant, glitches=glitches)
+
+
+def _on_the_surfaces(qpos, model, layout, frame_time: float, source: str, bounded: bool, step):
+    """The import's last clean-up (`load_bvh_reference` steps 5-6): the root height corrected so that feet
+    in contact stand on the surfaces and nothing is below one (a no-op without surfaces; on the subject's
+    own figure it only takes up the captured feet's deviation, at most 3 cm, from the fitted scene, and
+    with `bounded` a larger or sudden correction is refused), then the keyframes' footplant.
+
+    Returns:
+        (qpos (n, nq) tidied, `FootPlant` with its qpos tidied).
+    Raises:
+        RootCorrectionRefused: `bounded` and the correction beyond its bound (`check_root_correction`).
+    """
+    corrected = correct_root_height(qpos, model, frame_time)
+    if bounded:
+        check_root_correction(corrected[:, 2] - qpos[:, 2], frame_time, source)
+    step(5, "root height")
+    plant = plant_feet(corrected, model, frame_time)  # the keyframes' feet on their surfaces, by the legs
+    step(6, "footplant")
+    return tidy_quaternions(corrected, layout), replace(plant, qpos=tidy_quaternions(plant.qpos, layout))
 
 
 def _root_scale(root_scale, clip, skel, model, path) -> float:
