@@ -9,6 +9,7 @@ A user mistake prints one line, "dynsplines: error: ...", never a traceback; --d
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import sys
 
 from runner.commands.animate import register as register_animate
@@ -44,8 +45,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _crash_tracebacks() -> None:
+    """A crash in native code (a segmentation fault in a GL driver, say) prints every thread's Python
+    stack to stderr (`faulthandler`) before the process dies, so that a report says where it was; left
+    alone where it is already on (pytest) or stderr has no file descriptor."""
+    if not faulthandler.is_enabled():
+        try:
+            faulthandler.enable()
+        except (OSError, ValueError):  # a captured stderr without fileno()
+            pass
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line. Returns the exit code (see the module docstring)."""
+    _crash_tracebacks()
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser()
     try:

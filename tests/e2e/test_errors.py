@@ -429,3 +429,20 @@ def test_keyframe_inside_a_surface_is_warned_about(tmp_path, capsys):
     assert code == 0
     assert "keyframe 1 (t=0.241666 s) puts" in err and "mm inside a surface" in err
     assert "keyframe 0" not in err and "keyframe 2" not in err
+
+
+def test_a_crash_in_native_code_prints_where_each_thread_was():
+    """A segmentation fault (here a read of address 0, as a GL driver's would be) is no user mistake and
+    cannot be caught: the command line has `faulthandler` print every thread's Python stack first, so
+    that a report of the crash says where it was."""
+    import subprocess
+    import sys
+
+    code = ("import ctypes, runner.cli as cli\n"
+            "cli._crash_tracebacks()\n"
+            "def where_it_crashed():\n"
+            "    ctypes.string_at(0)\n"
+            "where_it_crashed()\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert done.returncode != 0
+    assert "Fatal Python error" in done.stderr and "where_it_crashed" in done.stderr
