@@ -69,8 +69,16 @@ CAUSES = {
                                     "joint-angle error (a root shift moves every site with it)",
     "joints traded for the feet": "the joint-angle error missed while the contact-site error is below the plain "
                                   "spline's: the contact constraints bought the feet with the joints",
+    "the plain spline met the constraints": "a bound against the plain spline (joint-angle or contact-site error, "
+                                            "skate above the forced) missed where the plain spline already met "
+                                            "every constraint within its tolerance: the least change only "
+                                            "moved it toward the limits, by less than their tolerances, and "
+                                            "it tracks neither the capture nor slides that small",
 }
 NOT_TOLD = "not told by the data"
+#: the bounds made from the plain spline's own figure that no constraint bounds at that scale (the cause
+#: "the plain spline met the constraints")
+PLAIN_RELATIVE = ("joint_error", "site_error", "skate_excess")
 #: the cause of a skate bound below what the keyframes force (`forced_out_of_reach`)
 FORCED = "keyframes force the skate"
 
@@ -355,6 +363,9 @@ def pair_figures(report: dict, schedule_flight: float | None = None) -> dict:
         out["relaxed"] = sorted(report["relaxed"])
     out["stalled"] = sorted((report.get("stalled") or {}).keys())
     out["unmet_at_end"] = sorted((report.get("unmet_at_end") or {}).keys())
+    plain = report.get("plain_constraints")
+    if plain:  # reports written before it do not say
+        out["plain_worst_constraint"] = max(float(v) for v in plain.values())
     return out
 
 
@@ -410,7 +421,9 @@ def causes(bound: Bound, figures: dict) -> list[str]:
     capture itself misses a bound that is not about surfaces. the solve stopped short: the bound's term was
     still beyond its tolerance when the solve ended (the report's "unmet_at_end"). the optimizer moved the root: a joint or
     site error missed while the root error grew more (`_root_moved`). joints traded for the feet: the
-    joint error missed while the site error is below the plain spline's.
+    joint error missed while the site error is below the plain spline's. the plain spline met the
+    constraints: a `PLAIN_RELATIVE` bound missed where the plain spline's worst constraint is within its
+    tolerance ("plain_worst_constraint" <= 1).
     """
     out = []
     capture_misses = bound.capture is not None and bound.held(figures, bound.capture) is False
@@ -431,6 +444,8 @@ def causes(bound: Bound, figures: dict) -> list[str]:
         out.append("the optimizer moved the root")
     if bound.name == "joint_error" and BOUND_BY_NAME["site_error"].held(figures):
         out.append("joints traded for the feet")
+    if bound.name in PLAIN_RELATIVE and figures.get("plain_worst_constraint", math.inf) <= 1.0:
+        out.append("the plain spline met the constraints")
     return out
 
 

@@ -315,7 +315,9 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         where the keyframes decide a constraint, `Solution.relaxations`), "relaxed" ({constraint: count} of
         those relaxations), "stalled" ({constraint: amount [SI]}
         the keyframes leave out of reach, `Solution.unmet`), "unmet_at_end" ({constraint: worst value over
-        its tolerance} of those still beyond it when the solve ended, `Solution.integrals_final`), "metrics"
+        its tolerance} of those still beyond it when the solve ended, `Solution.integrals_final`),
+        "plain_constraints" ({constraint: worst value over its tolerance} on the plain spline,
+        `Solution.integrals_initial`), "metrics"
         ({"plain", "optimized": path_metrics; "motion": {"plain", "optimized": motion_metrics}}),
         "scene_fitted" (the capture floor's floor_z and floor_slope, capture_frame (w x y z tx ty tz: the
         transform to the levelled frame), boxes in that frame as centre/half lists, or None), "outputs"
@@ -350,7 +352,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "exit": "interrupted" if run.interrupted else "failed" if run.failed else "ok",
         "frames": ref.count, "fps": 1.0 / ref.frame_time, "keyframes": problem.keyframes.count,
         "partial": int(problem.keyframes.is_partial.sum()), "contacts": len(problem.contacts),
-        "variable_frames": run.solution.frames.n_variable, "solve_time_s": run.solution.wall_time_s,
+        **_solve_fields(run.solution),
         "max_penetration_mm": run.metrics["optimized"]["max_penetration_mm"],
         "keyframe_error": run.metrics["optimized"].get("keyframe_error"),
         "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
@@ -358,9 +360,6 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "reference_footplant_mm": ref.plant.largest_mm() if ref.plant is not None else None,
         "reference_glitches": [str(g) for g in ref.glitches],
         "stance_agreement": _agreement(problem, ref),
-        "keyframe_conflicts": len(run.solution.relaxations), "relaxed": _relaxed(run.solution),
-        "stalled": dict(run.solution.unmet or {}),
-        "unmet_at_end": {k: v for k, v in run.solution.integrals_final.items() if v > 1.0},
         "keyframes_on_source": on_source,
         "metrics": run.metrics, "scene_fitted": _scene_fitted(cs), "outputs": {k: str(v) for k, v in paths.items()},
     }
@@ -448,6 +447,16 @@ def _agreement(problem, ref) -> dict:
     a = schedule_agreement(problem.model, ref.qpos, ref.frame_time, problem.contacts)
     return {"recall": a.recall, "precision": a.precision, "stance_frames": a.stance_frames,
             "schedule_frames": a.schedule_frames}
+
+
+def _solve_fields(solution) -> dict:
+    """The solve's fields of `process_clip`'s result: its frames, time, relaxations, the constraints out of
+    reach or unmet at the end, and each constraint's worst value over its tolerance on the plain spline."""
+    return {"variable_frames": solution.frames.n_variable, "solve_time_s": solution.wall_time_s,
+            "keyframe_conflicts": len(solution.relaxations), "relaxed": _relaxed(solution),
+            "stalled": dict(solution.unmet or {}),
+            "unmet_at_end": {k: v for k, v in solution.integrals_final.items() if v > 1.0},
+            "plain_constraints": dict(solution.integrals_initial)}
 
 
 def _relaxed(solution) -> dict:

@@ -137,6 +137,9 @@ def test_figures_are_read_from_the_metrics_report():
     assert f["unmet_at_end"] == ["penetration"]
     assert set(f) - {"schedule_flight_s", "keyframe_conflicts", "stalled", "unmet_at_end", "joint_rise",
                      "joint_acc_worst"} <= set(FIGURES)
+    assert "plain_worst_constraint" not in f  # a report that does not say how the plain spline met them
+    assert pair_figures({**report, "plain_constraints": {"planted": 0.26, "slide": -0.5, "penetration": 1.4}})[
+        "plain_worst_constraint"] == 1.4  # the worst constraint, over its tolerance
     assert "pelvis_acc_m_s2" not in f and "joint_acc_ratio" not in f  # a report without jolt figures: n/a
     # the jolt figures: each path's, the capture's (the "reference" block), the limit from the larger of two
     motion = report["metrics"]["motion"]
@@ -218,6 +221,14 @@ def test_causes_the_data_tells():
     # ... but not by 1 cm or less, nor by a smaller factor than the joints
     assert causes(BOUND["site_error"], {**moved, "root_error_cm": 2.0}) == []
     assert causes(BOUND["site_error"], {**moved, "joint_error_deg": 15.0}) == []
+    # the plain spline met every constraint within its tolerance: a bound against its own figure is not
+    # what the least change solves for; a constraint beyond its tolerance on it, or a bound the
+    # constraints do bound (float), is another matter
+    still = figures(site_error_cm=5.2, skate_excess_mm=2.0, plain_worst_constraint=0.26)
+    assert causes(BOUND["site_error"], still) == ["the plain spline met the constraints"]
+    assert causes(BOUND["skate_excess"], still) == ["the plain spline met the constraints"]
+    assert causes(BOUND["site_error"], {**still, "plain_worst_constraint": 1.3}) == []
+    assert causes(BOUND["float"], {**still, "float_mm": 6.0}) == []
 
 
 def test_clip_sets_are_the_sha256_table_not_the_names(tmp_path):
