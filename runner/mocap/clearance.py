@@ -20,7 +20,12 @@ SMOOTH_S = 0.075
 
 
 class ContactClearance:
-    """Contact points of the figure over a motion, by MuJoCo forward kinematics."""
+    """Contact points of the figure over a motion, by MuJoCo forward kinematics.
+
+    Attributes:
+        figure: the model's `Figure`. names: its contact sites, foot by foot. feet: {foot: its sites}.
+        surfaces: the scene's `StaticSurfaces`.
+    """
 
     def __init__(self, model):
         import mujoco
@@ -30,10 +35,10 @@ class ContactClearance:
         self.model = model
         self.data = mujoco.MjData(model)
         self.surfaces = StaticSurfaces.from_model(model, self.data)
-        figure = Figure.from_model(model)  # raises InputError naming a missing site
-        self.names = list(figure.contact_sites)  # foot by foot, heel then toe
-        self.feet = dict(figure.feet)
-        self.ids = figure.contact_site_ids
+        self.figure = Figure.from_model(model)  # raises InputError naming a missing site
+        self.names = list(self.figure.contact_sites)  # foot by foot, heel then toe
+        self.feet = dict(self.figure.feet)
+        self.ids = self.figure.contact_site_ids
         self.radii = contact_radii(model, self.names)
 
     def positions(self, qpos: np.ndarray) -> np.ndarray:

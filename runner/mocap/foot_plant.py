@@ -40,7 +40,7 @@ import numpy as np
 
 from runner.mocap.clearance import CONTACT_CLEARANCE, ContactClearance, moving_average, smoothing_width
 from runner.mocap.leg_ik import MOVE_TOL, leg_chain, move_foot
-from solver.figure import Figure
+from runner.mocap.stance import capture_rest
 
 __all__ = ["FootPlant", "plant_feet"]
 
@@ -91,17 +91,6 @@ def _settled(above: np.ndarray, rest: np.ndarray) -> np.ndarray:
     return out
 
 
-def _feet_heights(kin: ContactClearance, qpos: np.ndarray, times: np.ndarray):
-    """(lowest (n, f) [m] each foot's lowest contact point above its surface, rest (n, f) bool: the foot
-    rests, `runner.mocap.stance.resting`) of the motion."""
-    from runner.mocap.stance import lowest_sites, resting, stance_mask
-
-    pos = kin.positions(qpos)
-    clear = kin.clearance(pos)
-    lowest, speed = lowest_sites(times, pos, clear, kin.feet, kin.names)
-    return lowest, resting(stance_mask(times, pos, clear, kin.feet, kin.names), lowest, speed)
-
-
 def plant_feet(qpos: np.ndarray, model, frame_time: float) -> FootPlant:
     """Put every resting foot of a motion on the surface under it (module docstring).
 
@@ -120,13 +109,11 @@ def plant_feet(qpos: np.ndarray, model, frame_time: float) -> FootPlant:
     unchanged = FootPlant(qpos, np.zeros((n, len(feet))), np.zeros(n), feet)
     if kin.surfaces.count == 0 or n < 2:
         return unchanged
-    times = np.arange(n) * frame_time
     width = smoothing_width(n, frame_time)
-    lowest, rest = _feet_heights(kin, qpos, times)
+    rest, lowest = capture_rest(model, qpos, frame_time)
     if not rest.any():
         return unchanged
-    figure = Figure.from_model(model)
-    legs = [leg_chain(model, figure, side) for side in feet]
+    legs = [leg_chain(model, kin.figure, side) for side in feet]
     above = np.maximum(0.0, lowest - CONTACT_CLEARANCE)  # (n, f): each foot's height over the clearance
     settled = np.stack([_settled(above[:, f], rest[:, f]) for f in range(len(feet))], axis=1)
     # 1. the root's share: what a resting foot's leg cannot reach (its knee straight), the most over the feet
@@ -145,7 +132,7 @@ def plant_feet(qpos: np.ndarray, model, frame_time: float) -> FootPlant:
         world = np.maximum(-moving_average(_spread(settled[:, f], rest[:, f]), width), -above[:, f])
         out, foot_dz[:, f] = move_foot(model, leg, out, world - root_dz)
     # 3. nothing below the clearance: a foot lifted by its leg, and where the leg cannot, the root goes up
-    lowest, _ = _feet_heights(kin, out, times)
+    _, lowest = capture_rest(model, out, frame_time)
     for f, leg in enumerate(legs):
         out, lifted = move_foot(model, leg, out, np.maximum(0.0, CONTACT_CLEARANCE - lowest[:, f]))
         foot_dz[:, f] += lifted
