@@ -78,13 +78,14 @@ Jolts (`runner.jolts.jolt_figures`: finite differences at fps, torques by `mj_in
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from solver.contact_thresholds import FLIGHT_HEIGHT
-from solver.contacts import FEET, SITES, Contact, contact_mask, contact_radii, lowest_points
+from solver.contacts import Contact, contact_mask, contact_radii, figure_sites, lowest_points
 from solver.errors import InputError
+from solver.figure import foot_sites
 
 # -- the published metrics' own thresholds, as they define them (../shared/METRICS.md)
 #: PhysDiff skate: a site is on the ground at most this high [m].
@@ -171,35 +172,37 @@ def flight_mismatch(h: np.ndarray, reference_h: np.ndarray, fps: float) -> tuple
     return float((path & ~ref).sum() / fps), float((ref & ~path).sum() / fps)
 
 
-def _foot_floats(h: np.ndarray, on: np.ndarray, sites: Sequence[str]) -> np.ndarray:
-    """max(0, lowest site height) [m] of each foot (`contacts.FEET`) in the frames where on[:, f] holds,
-    all feet's values concatenated. on: (n, feet) bool."""
+def _foot_floats(h: np.ndarray, on: np.ndarray, feet: Mapping[str, Sequence[str]]) -> np.ndarray:
+    """max(0, lowest site height) [m] of each foot (`feet`, the columns of `h` their sites) in the frames
+    where on[:, f] holds, all feet's values concatenated. on: (n, feet) bool."""
+    sites = foot_sites(feet)
     floats = []
-    for f, members in enumerate(FEET.values()):
+    for f, members in enumerate(feet.values()):
         ks = [list(sites).index(s) for s in members if s in sites]
         if ks:
             floats.append(np.maximum(0.0, h[on[:, f]][:, ks].min(axis=1)))
     return np.concatenate(floats) if floats else np.zeros(0)
 
 
-def _feet_mask(ref_mask: np.ndarray, sites: Sequence[str]) -> np.ndarray:
-    """(n, feet) bool: a foot in contact when any of its sites is (ref_mask (n, s))."""
+def _feet_mask(ref_mask: np.ndarray, feet: Mapping[str, Sequence[str]]) -> np.ndarray:
+    """(n, feet) bool: a foot in contact when any of its sites is (ref_mask (n, s), columns `foot_sites(feet)`)."""
+    sites = foot_sites(feet)
     cols = []
-    for members in FEET.values():
+    for members in feet.values():
         ks = [list(sites).index(s) for s in members if s in sites]
         cols.append(ref_mask[:, ks].any(axis=1) if ks else np.zeros(len(ref_mask), bool))
     return np.stack(cols, axis=1)
 
 
 def plausibility(pos: np.ndarray, h: np.ndarray, fps: float, root: np.ndarray, ref_mask: np.ndarray,
-                 sites: Sequence[str] = SITES, stance: np.ndarray | None = None) -> dict:
+                 feet: Mapping[str, Sequence[str]], stance: np.ndarray | None = None) -> dict:
     """The plausibility figures of the module docstring for one motion.
 
     Args:
         pos: (n, s, 3) site positions [m]. h: (n, s) heights above the surface [m]. fps: [Hz].
         root: (n, 3) root positions [m]. ref_mask: (n, s) bool, the reference's contacts.
-        sites: the s site names (feet grouped by `contacts.FEET`).
-        stance: (n, feet) bool, the capture's stance per foot in `contacts.FEET` order (left, right);
+        feet: {foot: its sites}, the figure's (`Figure.feet`); the s columns are their sites, foot by foot.
+        stance: (n, feet) bool, the capture's stance per foot in `feet` order (left, right);
             None: no float_stance / flight_in_stance figures.
     Returns:
         a dict of floats (JSON-serializable).
@@ -207,7 +210,7 @@ def plausibility(pos: np.ndarray, h: np.ndarray, fps: float, root: np.ndarray, r
     n = len(pos)
     lowest = h.min(axis=1)
     pen = np.maximum(0.0, -lowest)
-    float_contact = _foot_floats(h, _feet_mask(ref_mask, sites), sites)
+    float_contact = _foot_floats(h, _feet_mask(ref_mask, feet), feet)
     float_all = np.where(lowest > FLOAT_TOL, lowest, 0.0)
     disp = np.linalg.norm(np.diff(pos[..., :2], axis=0), axis=-1)  # (n-1, s)
     ground = (h[1:] <= SKATE_HEIGHT) & (h[:-1] <= SKATE_HEIGHT)
@@ -231,7 +234,7 @@ def plausibility(pos: np.ndarray, h: np.ndarray, fps: float, root: np.ndarray, r
     }
     if stance is not None:
         stance = np.asarray(stance, bool)
-        float_stance = _foot_floats(h, stance, sites)
+        float_stance = _foot_floats(h, stance, feet)
         out["float_stance_mm"] = _mean(float_stance, 1e3)
         out["float_stance_max_mm"] = float(float_stance.max() * 1e3) if float_stance.size else 0.0
         out["flight_in_stance_s"] = float(((h > FLIGHT_HEIGHT).all(axis=1) & stance.any(axis=1)).sum() / fps)
@@ -302,8 +305,7 @@ def _orientation_errors(model, qpos, ref, xq, rxq) -> dict:
 
 
 def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarray,
-                   reference_contacts: Sequence[Contact], sites: Sequence[str] = SITES,
-                   stance: np.ndarray | None = None, capture_filtered: np.ndarray | None = None) -> dict:
+                   reference_contacts: Sequence[Contact], stance: np.ndarray | None = None, capture_filtered: np.ndarray | None = None) -> dict:
     """Accuracy of a path against the reference, and the plausibility of both (module docstring).
 
     Args:
@@ -311,7 +313,6 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         qpos: (n, nq) the path sampled at the reference's frames (times i / fps).
         fps: [Hz] frame rate, > 0. reference_qpos: (n, nq) the reference motion.
         reference_contacts: the reference's contacts (times in [s] from frame 0).
-        sites: contact site names.
         stance: (n, 2) bool, the reference's own stance per foot (left, right; e.g.
             `runner.mocap.stance.capture_stance`); None: no stance figures.
         capture_filtered: (n, nq) the reference low-pass filtered (`runner.jolts.filter_capture`, over the
@@ -324,8 +325,11 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
     Raises:
         InputError: shapes disagree, fps not positive, a site missing in the model, no floor plane.
     """
+    from solver.figure import model_feet
     from solver.surfaces import StaticSurfaces
 
+    feet = model_feet(model)  # the figure's contact sites, foot by foot
+    sites = foot_sites(feet)
     qpos = np.atleast_2d(np.asarray(qpos, float))
     ref = np.atleast_2d(np.asarray(reference_qpos, float))
     if qpos.shape != ref.shape or qpos.shape[1] != model.nq:
@@ -348,8 +352,8 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
     smooth = ref if capture_filtered is None else np.atleast_2d(np.asarray(capture_filtered, float))
     if smooth.shape != ref.shape:
         raise InputError(f"capture_filtered {smooth.shape} must be shaped as reference_qpos {ref.shape}")
-    if stance is not None and np.shape(stance) != (n, len(FEET)):
-        raise InputError(f"stance has shape {np.shape(stance)}; give one column per foot, (n, {len(FEET)}) "
+    if stance is not None and np.shape(stance) != (n, len(feet)):
+        raise InputError(f"stance has shape {np.shape(stance)}; give one column per foot, (n, {len(feet)}) "
                          f"with n = {n} frames")
 
     def acc(p):
@@ -369,9 +373,9 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         "frames": int(n),
         "sites": list(sites),
         "error": error,
-        "path": {**plausibility(pos, h, fps, qpos[:, :3], mask, sites, stance), **anatomy_figures(model, qpos),
+        "path": {**plausibility(pos, h, fps, qpos[:, :3], mask, feet, stance), **anatomy_figures(model, qpos),
                  **_jolts(model, qpos, fps)},
-        "reference": {**plausibility(rpos, rh, fps, ref[:, :3], mask, sites, stance), **anatomy_figures(model, ref),
+        "reference": {**plausibility(rpos, rh, fps, ref[:, :3], mask, feet, stance), **anatomy_figures(model, ref),
                       **_jolts(model, smooth, fps)},
     }
 
@@ -384,7 +388,7 @@ def _jolts(model, qpos: np.ndarray, fps: float) -> dict:
 
 
 def forced_skate_mm(model, key_times: np.ndarray, key_qpos: np.ndarray, fps: float, contacts: Sequence[Contact],
-                    frames: int, sites: Sequence[str] = SITES) -> float:
+                    frames: int, sites: Sequence[str] | None = None) -> float:
     """[mm/frame] A lower bound on `skate_contact_mm` that every path through the keyframes has.
 
     `skate_contact_mm` is the mean, over the (frame step, site) pairs in contact at both ends, of the
@@ -399,13 +403,15 @@ def forced_skate_mm(model, key_times: np.ndarray, key_qpos: np.ndarray, fps: flo
             i / fps). key_qpos: (k, nq) the keyframes, every component fixed (pass only full keyframes:
             a partial one does not fix its sites). fps: [Hz] the metrics' frame rate, > 0.
         contacts: the contacts the skate figure is measured on (times [s] on the same clock).
-        frames: n, the metrics' frame count. sites: contact site names.
+        frames: n, the metrics' frame count. sites: contact site names (default the model's figure's,
+            `solver.contacts.figure_sites`).
     Returns:
         the bound [mm per frame]; 0 when no step is in contact or no two keys share a run. Keys more
         than 1e-4 s from a frame time are left out (a subset of the keys still gives a lower bound).
     Raises:
         InputError: a contact or site the model does not have.
     """
+    sites = figure_sites(model, sites)
     times = np.arange(int(frames)) / float(fps)
     mask = contact_mask(contacts, sites, times)
     planted = mask[1:] & mask[:-1]  # (n-1, s)

@@ -236,7 +236,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
                 f"floor {100 * cs.fitted.floor_z:.1f} cm")
     for note in cs.notes:
         say(f"  warning: {note}")
-    keyframes, info = read_keyframes(paths["keyframes"], StateLayout.from_model(model))
+    keyframes, info = read_keyframes(paths["keyframes"], model)
     say(f"  wrote {display_path(paths['keyframes'])}: {keyframes.count} keyframes ({int(keyframes.is_partial.sum())} partial) "
         f"at {', '.join(f'{t:.3f}' for t in keyframes.times)} s")
     return cs, ref, model, keyframes, info

@@ -32,7 +32,7 @@ def load_problem(keyframes_path: Path, scene: Path | None):
     model = load_model(scene_path)
     check_scene(model, scene_path)
     layout = StateLayout.from_model(model)
-    keyframes, info = read_keyframes(keyframes_path, layout)
+    keyframes, info = read_keyframes(keyframes_path, model)
     return keyframes, info, model, layout, scene_path
 
 

@@ -13,14 +13,13 @@ make one; `solver.problem.build_problem` checks it against its scene's surfaces 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from solver.contacts import Contact, contact_mask, foot_contacts, touchdowns_liftoffs
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES
 
 
 def merged(intervals: Iterable[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -52,7 +51,7 @@ class ContactSchedule:
     """
 
     contacts: tuple[Contact, ...] = ()
-    sites: tuple[str, ...] = CONTACT_SITES
+    sites: tuple[str, ...] = ()
     surfaces: tuple[str, ...] | None = None
     source: str = field(default="", compare=False)
     labels: tuple[str, ...] = field(default=(), compare=False)
@@ -63,7 +62,7 @@ class ContactSchedule:
         return cls()
 
     @classmethod
-    def of(cls, contacts: Iterable, sites: Sequence[str] = CONTACT_SITES, surfaces: Sequence[str] | None = None,
+    def of(cls, contacts: Iterable, sites: Sequence[str], surfaces: Sequence[str] | None = None,
            source: str = "", labels: Sequence[str] | None = None) -> ContactSchedule:
         """The checked, sorted schedule of `contacts`; a ContactSchedule is returned as it is when it
         was checked against the same sites and (if `surfaces` is given) the same surfaces.
@@ -133,13 +132,15 @@ class ContactSchedule:
         busy = merged((c.start, c.end) for c in self.contacts if c.site == site)
         return [(busy[i][1], busy[i + 1][0]) for i in range(len(busy) - 1)]
 
-    def feet(self) -> list[Contact]:
-        """Whole-foot contacts (`solver.contacts.foot_contacts`: a foot's heel and toe merged)."""
-        return foot_contacts(self.contacts)
+    def feet(self, feet: Mapping[str, Sequence[str]]) -> list[Contact]:
+        """Whole-foot contacts (`solver.contacts.foot_contacts`: a foot's heel and toe merged); feet: the
+        figure's {foot: its sites} (`Figure.feet`)."""
+        return foot_contacts(self.contacts, feet)
 
-    def events(self, per_foot: bool = True) -> tuple[list[tuple[float, str]], list[tuple[float, str]]]:
-        """(touch-downs, lift-offs): [(time [s], foot or site name)] (`solver.contacts.touchdowns_liftoffs`)."""
-        return touchdowns_liftoffs(self.contacts, per_foot)
+    def events(self, feet: Mapping[str, Sequence[str]] | None) -> tuple[list[tuple[float, str]], list[tuple[float, str]]]:
+        """(touch-downs, lift-offs): [(time [s], foot or site name)] (`solver.contacts.touchdowns_liftoffs`);
+        feet: the figure's {foot: its sites} for a foot's events, None for each site's."""
+        return touchdowns_liftoffs(self.contacts, feet)
 
     def mask(self, times: np.ndarray, sites: Sequence[str] | None = None) -> np.ndarray:
         """(n, s) bool: site k in contact at times[i] (closed intervals, 1e-9 s tolerance; `sites`

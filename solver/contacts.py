@@ -7,25 +7,19 @@ radii and heights above the scene's surfaces.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES, FEET
-
-#: the shipped figure's contact sites, in the order of `site_pos` arrays (`solver.layout.CONTACT_SITES`,
-#: the name kept for the callers of this module); another figure's: `Figure.from_model(model).contact_sites`.
-SITES: tuple[str, ...] = CONTACT_SITES
-
 
 
 @dataclass(frozen=True)
 class Contact:
     """A contact site on a surface of the scene over [start, end] [s]."""
-    site: str        # one of l_heel, l_toe, r_heel, r_toe
+    site: str        # one of the figure's contact sites (`Figure.contact_sites`), e.g. l_heel
     start: float     # [s]
     end: float       # [s]
     surface: str = ""  # name of the StaticSurfaces surface ("" = whichever is under the site)
@@ -80,11 +74,12 @@ def contact_mask(contacts: Sequence[Contact], sites: Sequence[str], times: np.nd
     return mask
 
 
-def foot_contacts(contacts: Sequence[Contact], feet: dict[str, tuple[str, ...]] = FEET) -> list[Contact]:
+def foot_contacts(contacts: Sequence[Contact], feet: Mapping[str, Sequence[str]]) -> list[Contact]:
     """Contacts of whole feet: the union of the intervals of a foot's sites, site = the foot's name.
 
     Overlapping or touching intervals of the heel and the toe of one foot merge into one contact
-    (a heel strike rolling onto the toe is one stance).
+    (a heel strike rolling onto the toe is one stance). feet: {foot: its sites}, the figure's
+    (`Figure.feet`).
     """
     out = []
     for foot, members in feet.items():
@@ -99,29 +94,45 @@ def foot_contacts(contacts: Sequence[Contact], feet: dict[str, tuple[str, ...]] 
     return sorted(out, key=lambda c: (c.start, c.site))
 
 
-def touchdowns_liftoffs(contacts: Sequence[Contact], per_foot: bool = True
+def touchdowns_liftoffs(contacts: Sequence[Contact], feet: Mapping[str, Sequence[str]] | None
                         ) -> tuple[list[tuple[float, str]], list[tuple[float, str]]]:
     """Touch-down and lift-off events, sorted by time.
 
     Args:
-        contacts: site contacts. per_foot: merge a foot's heel and toe first (`foot_contacts`), so an
-            event is a foot landing or leaving; else one event per site contact.
+        contacts: site contacts. feet: {foot: its sites} (`Figure.feet`): merge a foot's heel and toe
+            first (`foot_contacts`), so an event is a foot landing or leaving; None: one event per site
+            contact.
     Returns:
         touchdowns: [(time [s], foot or site name)] at contact starts.
         liftoffs: [(time [s], foot or site name)] at contact ends.
     """
-    cs = foot_contacts(contacts) if per_foot else list(contacts)
+    cs = foot_contacts(contacts, feet) if feet is not None else list(contacts)
     return (sorted((c.start, c.site) for c in cs), sorted((c.end, c.site) for c in cs))
 
 
-def site_positions(model, qpos: np.ndarray, sites: Sequence[str] = SITES) -> np.ndarray:
-    """(n, s, 3) world positions [m] of the named sites for (n, nq) qpos (mj_kinematics, site_xpos).
+def figure_sites(model, sites: Sequence[str] | None) -> tuple[str, ...]:
+    """`sites`, or the contact sites of the model's figure (`solver.figure.model_contact_sites`) when None.
+
+    Raises:
+        InputError: `sites` is None and the model's figure has no feet annotation.
+    """
+    if sites is not None:
+        return tuple(sites)
+    from solver.figure import model_contact_sites
+
+    return model_contact_sites(model)
+
+
+def site_positions(model, qpos: np.ndarray, sites: Sequence[str] | None = None) -> np.ndarray:
+    """(n, s, 3) world positions [m] of the named sites for (n, nq) qpos (mj_kinematics, site_xpos);
+    sites None: the model's figure's contact sites (`figure_sites`).
 
     Raises:
         InputError: the model lacks a site.
     """
     import mujoco
 
+    sites = figure_sites(model, sites)
     ids = []
     for s in sites:
         sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s)
@@ -137,8 +148,9 @@ def site_positions(model, qpos: np.ndarray, sites: Sequence[str] = SITES) -> np.
 RADIUS_PREFIX = "figure:radius:"
 
 
-def contact_radii(model, sites: Sequence[str] = SITES) -> np.ndarray:
-    """(s,) radius [m] of each contact site's sphere: 0 (a point) unless the figure's MJCF annotates it.
+def contact_radii(model, sites: Sequence[str] | None = None) -> np.ndarray:
+    """(s,) radius [m] of each contact site's sphere: 0 (a point) unless the figure's MJCF annotates it;
+    sites None: the model's figure's contact sites (`figure_sites`).
 
     A contact site may stand for a rounded part of the sole, a sphere centred on the site (a heel that
     rolls on its round back edge at heel strike, the forefoot rolling over the toes at push-off;
@@ -148,6 +160,7 @@ def contact_radii(model, sites: Sequence[str] = SITES) -> np.ndarray:
     Raises:
         InputError: a radius is not one finite number >= 0.
     """
+    sites = figure_sites(model, sites)
     out = np.zeros(len(sites))
     for k, s in enumerate(sites):
         try:
@@ -175,13 +188,15 @@ def lowest_points(site_pos: np.ndarray, radii: np.ndarray) -> np.ndarray:
     return pos
 
 
-def contact_points(model, qpos: np.ndarray, sites: Sequence[str] = SITES) -> np.ndarray:
+def contact_points(model, qpos: np.ndarray, sites: Sequence[str] | None = None) -> np.ndarray:
     """(n, s, 3) the lowest points [m] of the named contact sites' spheres (`lowest_points` of
-    `site_positions` with `contact_radii`): where heights above a surface are measured.
+    `site_positions` with `contact_radii`): where heights above a surface are measured; sites None: the
+    model's figure's contact sites (`figure_sites`).
 
     Raises:
         InputError: the model lacks a site, or a radius annotation is malformed.
     """
+    sites = figure_sites(model, sites)
     return lowest_points(site_positions(model, qpos, sites), contact_radii(model, sites))
 
 

@@ -20,7 +20,7 @@ The shipped figure is `FIGURE_FILE` (models/humanoid39.xml); `shipped_figure()` 
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -31,7 +31,7 @@ import numpy as np
 from solver.errors import InputError
 from solver.layout import Joint, StateLayout, find_joint
 
-__all__ = ["MODELS_DIR", "FIGURE_FILE", "Figure", "Segment", "NeckChain", "shipped_figure"]
+__all__ = ["MODELS_DIR", "FIGURE_FILE", "Figure", "Segment", "NeckChain", "foot_sites", "model_contact_sites", "model_feet", "shipped_figure"]
 
 #: the folder of the shipped models (figure, scenes, example keyframe files, the CMU clip): beside this
 #: package, where a checkout links the top-level models/ (solver/models) and an installation copies it
@@ -169,7 +169,7 @@ class Figure:
         joints = tuple(joints)
         texts, numerics = _custom(model)
         feet = _feet(model, texts)
-        sites = tuple(s for pair in feet.values() for s in pair)
+        sites = foot_sites(feet)
         site_ids = np.array([model.site(s).id for s in sites], int)
         axes = _flexion_axes(numerics, {j.name: j for j in joints})
         segments = {names[i]: _segment(model, ids, names, i, texts) for i in range(1, len(ids))}
@@ -181,6 +181,32 @@ class Figure:
                    MappingProxyType(axes), sites, _frozen(site_ids, int), MappingProxyType(feet), leg_joints,
                    MappingProxyType(segments), _frozen(masses, float), float(masses.sum()),
                    _standing_height(model, ids, site_ids), _neck(model, ids, names))
+
+
+def foot_sites(feet: Mapping[str, Sequence[str]]) -> tuple[str, ...]:
+    """The contact sites of `feet` ({foot: its sites}, `Figure.feet`), foot by foot: the figure's contact
+    sites (`Figure.contact_sites`) and the columns of its `site_pos` arrays."""
+    return tuple(s for members in feet.values() for s in members)
+
+
+def model_feet(model) -> dict[str, tuple[str, str]]:
+    """The feet of the figure in an MjModel, {side: (heel site, toe site)}, from its ``figure:foot:SIDE``
+    annotations alone (what `Figure.from_model(model).feet` holds, without reading the rest of the figure).
+
+    Raises:
+        InputError: no ``figure:foot`` annotation, one that does not name two sites, or names a site the
+            model does not have.
+    """
+    return _feet(model, _custom(model)[0])
+
+
+def model_contact_sites(model) -> tuple[str, ...]:
+    """The contact sites of the figure in an MjModel, foot by foot (`Figure.contact_sites`, `model_feet`).
+
+    Raises:
+        InputError: as `model_feet`.
+    """
+    return foot_sites(model_feet(model))
 
 
 @lru_cache(maxsize=1)

@@ -41,9 +41,9 @@ import numpy as np
 from solver.contact_schedule import ContactSchedule
 from solver.contacts import Contact, checked_intervals
 from solver.errors import InputError
-from solver.figure import Figure
+from solver.figure import Figure, foot_sites
 from solver.keyframes import Keyframes
-from solver.layout import FEET, StateLayout
+from solver.layout import StateLayout
 
 FORMAT = "dynsplines.keyframes/1"
 _TOP_KEYS = {"format", "model", "scene", "source", "terms", "contacts", "flights", "keyframes", "comment"}
@@ -64,7 +64,7 @@ class KeyframeFileInfo:
         source: the "source" object (provenance), {} if absent.
         terms: the "terms" value, "default" or "all" (also the force bounds), None if absent.
         contacts: the "contacts" list as a `ContactSchedule` (sorted by start; a foot's entry expanded
-            to its heel and toe, `solver.layout.FEET`); empty if absent.
+            to its heel and toe, the figure's `Figure.feet`); empty if absent.
         flights: the "flights" list as ((start, end), ...) [s]: where the motion the keyframes came from
             flies, for the clearance constraint (docs/contacts.md); None if absent (every
             gap of the contacts is a flight).
@@ -127,8 +127,9 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
         path: the .json keyframe file.
         layout: the figure's qpos layout, `StateLayout.from_model(model)` (joint names and sizes), or
             the mujoco.MjModel itself (then the contacts name that figure's feet and sites,
-            `solver.figure.Figure`, and a scene's surface names are checked here; with a layout, the
-            shipped figure's feet, and the contact terms check the surfaces, naming this file and entry).
+            `solver.figure.Figure`, and a scene's surface names are checked here; with a layout, a
+            contact's site and surface are checked when its problem is built, `solver.build_problem`,
+            naming this file and entry, and a "foot" entry is an error: give the model).
     Returns:
         (keyframes, info): solver.Keyframes with times (k,) [s], values (k, nq) (NaN where free) and
         mask (k, nq) (True where fixed), source = str(path); and the file's KeyframeFileInfo.
@@ -166,7 +167,7 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
     if terms is not None and terms not in ("default", "all"):
         raise InputError(f"{src}: field 'terms' is {terms!r}; give \"default\" (the constraints) or \"all\" (the "
                          "constraints and the force bounds), or remove the field")
-    feet = Figure.from_model(mj_model).feet if mj_model is not None and doc.get("contacts") else None
+    feet = Figure.from_model(mj_model).feet if mj_model is not None and doc.get("contacts") else None  # else no figure
     contacts = read_contacts(doc.get("contacts", []), src, surfaces, feet)
     keyframes = Keyframes(times, values, mask, source=src)
     flights = read_flights(doc["flights"], src) if "flights" in doc else None
@@ -275,15 +276,18 @@ def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = Non
     Args:
         entries: the parsed field. src: the file, for messages. surfaces: the scene's surface names, if
             known (else the contact terms check them against their scene, naming this file and entry).
-            feet: {side: (heel, toe)}, the figure's feet (`Figure.feet`; default: the shipped
-            figure's, `solver.layout.FEET`).
+            feet: {side: (heel, toe)}, the figure's feet (`Figure.feet`); None: no figure at hand, a
+            "site" is kept as written (`build_problem` checks it against the figure, naming this file and
+            entry) and a "foot" entry raises.
     Raises:
         InputError: naming the file, the field ("contacts", entry index, key), the value and the fix:
             not a list, an entry that is not an object, an unknown key, site or foot, a time that is not
             a finite number >= 0, end not after start, an unknown surface (with `surfaces`).
     """
-    feet = FEET if feet is None else feet
-    known = tuple(s for pair in feet.values() for s in pair)
+    named = {} if feet is None else feet
+    known = foot_sites(named)
+    sites_hint = ", ".join(known) or "a contact site of the figure, e.g. l_toe"
+    feet_hint = " or ".join(map(repr, named)) or "a foot of the figure, e.g. 'left'"
     if not isinstance(entries, list):
         raise InputError(f"{src}: field 'contacts' is a {type(entries).__name__}; it must be a list of "
                          '{"site": "l_toe", "start": s, "end": s} or {"foot": "left", "start": s, "end": s}')
@@ -299,20 +303,21 @@ def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = Non
             raise InputError(f"{where}: unknown field(s) {', '.join(map(repr, extra))}; a contact has 'site' or "
                              "'foot', 'start', 'end' and optionally 'surface' and 'comment'")
         if ("site" in c) == ("foot" in c):
-            raise InputError(f"{where}: give exactly one of 'site' ({', '.join(known)}) or 'foot' "
-                             f"({', '.join(feet)})")
+            raise InputError(f"{where}: give exactly one of 'site' ({sites_hint}) or 'foot' ({feet_hint})")
         if "site" in c:
             if not isinstance(c["site"], str):
                 raise InputError(f"{where}: 'site' is {c['site']!r}; give a contact site's name "
-                                 f"({', '.join(known)}) or use 'foot': {' or '.join(map(repr, feet))}")
-            if c["site"] not in known:
+                                 f"({sites_hint}) or use 'foot': {feet_hint}")
+            if feet is not None and c["site"] not in known:
                 raise InputError(f"{where}: 'site' is {c['site']!r}; the figure's contact sites are "
-                                 f"{', '.join(known)} (or use 'foot': {' or '.join(map(repr, feet))})")
+                                 f"{sites_hint} (or use 'foot': {feet_hint})")
             sites: tuple[str, ...] = (c["site"],)
         else:
+            if feet is None:
+                raise InputError(f"{where}: 'foot' is {c['foot']!r}, but the contacts were read without the "
+                                 "figure; read the file with its model (read_keyframes(path, model)) or give a 'site'")
             if c["foot"] not in feet:
-                raise InputError(f"{where}: 'foot' is {c['foot']!r}; give {' or '.join(map(repr, feet))} "
-                                 "(or a 'site')")
+                raise InputError(f"{where}: 'foot' is {c['foot']!r}; give {feet_hint} (or a 'site')")
             sites = feet[c["foot"]]
         for key in ("start", "end"):
             if key not in c:
@@ -327,6 +332,8 @@ def read_contacts(entries: Any, src: str, surfaces: tuple[str, ...] | None = Non
         out += [Contact(site, float(c["start"]), float(c["end"]), surface) for site in sites]
         labels += [f"contacts[{i}]"] * len(sites)
     # start < end, the sites, and (with the scene) the surfaces: checked once, by the schedule
+    if feet is None:  # the sites as written, checked against the figure by `build_problem`
+        known = tuple(dict.fromkeys(c.site for c in out))
     return ContactSchedule.of(out, known, surfaces, source=src, labels=labels)
 
 

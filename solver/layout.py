@@ -12,16 +12,6 @@ import numpy as np
 
 from solver.errors import InputError
 
-#: Deprecated: the shipped figure's contact sites, `Figure.from_model(model).contact_sites` (read from
-#: the MJCF's ``figure:foot:*`` annotations, solver/figure.py). Kept, as the same names, for default
-#: arguments that have no model at hand; tests/solver/test_figure.py checks it equals the shipped
-#: figure's. New code reads the Figure of its model.
-CONTACT_SITES: tuple[str, ...] = ("l_heel", "l_toe", "r_heel", "r_toe")
-
-#: Deprecated: the shipped figure's feet {side: (heel, toe)}, `Figure.from_model(model).feet`; kept
-#: and checked like `CONTACT_SITES`.
-FEET: dict[str, tuple[str, str]] = {"left": ("l_heel", "l_toe"), "right": ("r_heel", "r_toe")}
-
 
 @dataclass(frozen=True)
 class Joint:

@@ -162,7 +162,7 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
         engine = InverseDynamics(model, figure.contact_sites)
     else:
         engine = SiteKinematics(model, figure.contact_sites) if figure.contact_sites else None
-    schedule = ContactSchedule.of(contacts or ())
+    schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)
     constraints, relaxations = figure_constraints(model, figure, reference, plain, tuple(schedule), flights,
                                                   engine, capture=capture)

@@ -100,8 +100,8 @@ class Problem:
 
 
 def capture_airborne(model, times, qpos) -> tuple[tuple[float, float], ...]:
-    """The intervals [s] where a motion in the model's scene is airborne: every contact site's lowest
-    point (`solver.contacts.contact_points`) above the flight metric's 3 cm over the surface under it
+    """The intervals [s] where a motion in the model's scene is airborne: every contact site's (the model's
+    figure's) lowest point (`solver.contacts.contact_points`) above the flight metric's 3 cm over the surface under it
     (`solver.contacts.airborne_intervals`; `runner.motion_metrics` "flight_time_s").
 
     Args:
@@ -148,7 +148,8 @@ def build_problem(model, spec: ProblemSpec) -> Problem:
         raise InputError(f"{keyframes.source}: keyframes have {keyframes.values.shape[1]} qpos components but "
                          f"the model has nq = {nq}; are they for this scene's figure?")
     found = StaticSurfaces.from_model(model)
-    contacts = ContactSchedule.of(spec.contacts or (), surfaces=found.names if found.count else None)
+    figure = Figure.from_model(model)
+    contacts = ContactSchedule.of(spec.contacts or (), figure.contact_sites, found.names if found.count else None)
     initial = FrameSet.from_keyframes(keyframes, StateLayout.from_model(model).quat_slots)
     peaks = None
     if spec.forces:
@@ -159,5 +160,5 @@ def build_problem(model, spec: ProblemSpec) -> Problem:
     if airborne is None and spec.capture is not None:
         airborne = capture_airborne(model, *spec.capture)
     airborne = None if airborne is None else tuple((float(a), float(b)) for a, b in airborne)
-    return Problem(model, keyframes, contacts, bool(spec.forces), initial, Figure.from_model(model), peaks,
+    return Problem(model, keyframes, contacts, bool(spec.forces), initial, figure, peaks,
                    spec.capture, airborne)

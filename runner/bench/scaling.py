@@ -335,10 +335,12 @@ def main(argv=None) -> int:
                       f"{r['banded_us']:>9.1f} {r['dense_us'] / r['banded_us']:>12.2f}")
         return 0
     # the driver: the shipped clip, read as the command line reads it (runner is imported only here)
-    from solver.keyframe_file import read_keyframes
-    from solver.layout import StateLayout
+    import mujoco
 
-    keyframes, _ = read_keyframes(args.keyframes, StateLayout.from_model(floor_model(args.figure)))
+    from solver.keyframe_file import read_keyframes
+
+    # the keyframes alone, read against the figure (its feet name the contacts; their surfaces are the file's scene's)
+    keyframes, _ = read_keyframes(args.keyframes, mujoco.MjModel.from_xml_path(str(args.figure)))
     factors = [int(f) for f in args.factors.split(",")]
     print(f"scaling: {args.keyframes.name} ({keyframes.count} keyframes, {keyframes.times[-1] - keyframes.times[0]:.2f} s) "
           f"tiled {args.factors}x, floor-only scene, the command's least change (LeastChangeOptions"

@@ -35,14 +35,14 @@ the run 35_17 into 11-14 (9 stances) instead of 6 (4); hysteresis alone already 
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from solver.contact_thresholds import FLIGHT_HEIGHT
-from solver.contacts import SITES, Contact, contact_points, site_heights
+from solver.contacts import Contact, contact_points, site_heights
 from solver.errors import InputError
-from solver.layout import FEET
+from solver.figure import foot_sites
 
 __all__ = ["DETECT_HEIGHT_OFF", "DETECT_HEIGHT_ON", "DETECT_MIN_DURATION", "DETECT_SPEED_OFF", "DETECT_SPEED_ON",
            "detect_contacts", "reference_contacts", "site_speeds"]
@@ -103,13 +103,13 @@ def detect_contacts(
     times: np.ndarray,
     site_pos: np.ndarray,
     heights: np.ndarray,
-    sites: Sequence[str] = SITES,
+    sites: Sequence[str],
     height_on: float = DETECT_HEIGHT_ON,
     height_off: float = DETECT_HEIGHT_OFF,
     speed_on: float = DETECT_SPEED_ON,
     speed_off: float = DETECT_SPEED_OFF,
     min_duration: float = DETECT_MIN_DURATION,
-    feet: dict[str, tuple[str, ...]] | None = FEET,
+    feet: Mapping[str, Sequence[str]] | None = None,
 ) -> list[Contact]:
     """Contacts of each site from its height above the surface and its speed, with hysteresis.
 
@@ -127,7 +127,8 @@ def detect_contacts(
         sites: the s site names, in the order of the second axis.
         height_on, height_off: [m], height_on <= height_off. speed_on, speed_off: [m/s],
             speed_on <= speed_off. min_duration: [s] >= 0.
-        feet: {foot: its site names} (default the shipped figure's; sites of no foot enter alone).
+        feet: {foot: its site names} (the figure's, `Figure.feet`); None, and sites of no foot: each site
+            enters alone.
     Returns:
         contacts sorted by start time, then site order; surface "" (whichever is under the site).
     Raises:
@@ -189,10 +190,15 @@ def reference_contacts(model, qpos: np.ndarray, frame_time: float, **thresholds)
     a hop's 10-40 ms touch-down is a contact, and dropping it would make its frames a flight).
 
     Args:
-        model: the scene's MjModel (figure with the SITES, and static surfaces). qpos: (n, nq).
-        frame_time: [s]. thresholds: keyword arguments of `detect_contacts`.
+        model: the scene's MjModel (the figure with its feet annotated, `solver.figure.Figure`, and static
+            surfaces). qpos: (n, nq). frame_time: [s]. thresholds: keyword arguments of `detect_contacts`.
     """
-    pos = contact_points(model, qpos)
+    from solver.figure import model_feet
+
+    feet = model_feet(model)
+    sites = foot_sites(feet)
+    pos = contact_points(model, qpos, sites)
     times = np.arange(len(pos)) * frame_time
     thresholds.setdefault("min_duration", SCHEDULE_MIN_DURATION)
-    return detect_contacts(times, pos, site_heights(model, pos), **thresholds)
+    thresholds.setdefault("feet", feet)
+    return detect_contacts(times, pos, site_heights(model, pos), sites, **thresholds)

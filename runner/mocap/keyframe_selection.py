@@ -10,14 +10,14 @@ in the capture, so that the plain spline cannot join them the short way round.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from solver.contacts import Contact, touchdowns_liftoffs
+from solver.contacts import Contact, figure_sites, touchdowns_liftoffs
 from solver.errors import InputError
 from solver.keyframes import Keyframes
-from solver.layout import CONTACT_SITES, StateLayout
+from solver.layout import StateLayout
 from solver.spline import interpolate
 
 #: contact events closer than this many frames merge into one key (at their mean frame).
@@ -60,7 +60,7 @@ def _merge(idx: list[int], gap: int, fixed: set[int]) -> list[int]:
 
 
 def contact_keyframes(times: np.ndarray, contacts: Sequence[Contact], root_z: np.ndarray,
-                      every: float | None = None, merge_frames: int = MERGE_FRAMES,
+                      feet: Mapping[str, Sequence[str]], every: float | None = None, merge_frames: int = MERGE_FRAMES,
                       error: Callable[[Sequence[int]], np.ndarray] | None = None,
                       min_gap: float = KEY_MIN_GAP) -> np.ndarray:
     """Frame indices of keyframes at the contact events and the root's extremes.
@@ -83,7 +83,8 @@ def contact_keyframes(times: np.ndarray, contacts: Sequence[Contact], root_z: np
 
     Args:
         times: (n,) frame times [s], increasing. contacts: site contacts (times in [s]).
-        root_z: (n,) root height [m]. every: optional maximum spacing [s], > 0.
+        root_z: (n,) root height [m]. feet: {foot: its sites}, the figure's (`Figure.feet`).
+        every: optional maximum spacing [s], > 0.
         merge_frames: events closer than this many frames merge (>= 1).
         error: None, or callable(keys) -> (n,) per-frame error of the plain spline through `keys`,
             1 = at tolerance (`CaptureError`). min_gap: [s] the least spacing of a key added for it.
@@ -99,7 +100,7 @@ def contact_keyframes(times: np.ndarray, contacts: Sequence[Contact], root_z: np
         raise InputError(f"times (n,) and root_z (n,) must match and be non-empty; got {times.shape}, {root_z.shape}")
     if every is not None and not (every > 0):
         raise InputError(f"every must be a positive number of seconds or None; got {every!r}")
-    td, lo = touchdowns_liftoffs(contacts)
+    td, lo = touchdowns_liftoffs(contacts, feet)
     events = [int(np.argmin(np.abs(times - t))) for t, _ in td + lo]
     keys = _merge(events + [0, n - 1], merge_frames, {0, n - 1})
     extremes = []
@@ -139,13 +140,13 @@ class CaptureError:
         times: (n,) frame times [s], increasing. qpos: (n, nq) the capture's poses.
         joint_deg: [deg] > 0, the mean joint-angle error counted as 1. site_cm: [cm] > 0, the mean
             contact-site error counted as 1.
-        sites: the contact sites.
+        sites: the contact sites (default the model's figure's, `solver.contacts.figure_sites`).
     Raises:
         InputError: shapes disagree, a tolerance is not positive, a site is missing.
     """
 
     def __init__(self, model, times, qpos, joint_deg: float = KEY_JOINT_DEG, site_cm: float = KEY_SITE_CM,
-                 sites=CONTACT_SITES):
+                 sites=None):
         from solver.kinematic_tree import SiteKinematics
 
         self.times = np.asarray(times, float)
@@ -159,7 +160,7 @@ class CaptureError:
         self.joint_deg, self.site_cm = float(joint_deg), float(site_cm)
         layout = StateLayout.from_model(model)
         self.quat_slots = layout.quat_slots
-        self.engine = SiteKinematics(model, sites)
+        self.engine = SiteKinematics(model, figure_sites(model, sites))
         self.ref_sites = self.engine.positions(self.qpos)
         self.ref_quats = _unit(self.qpos[:, self.quat_slots])
 

@@ -138,13 +138,15 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
         extremes: with keys="every", also key the root's highest and lowest frames.
     """
     from runner.mocap.keyframe_selection import CaptureError, contact_keyframes, turn_keys
+    from solver.figure import model_feet
 
     reference = reference.keyed()  # keys are chosen on the motion they take their values from
     if keys == "contacts":
         if every is not None and not (isinstance(every, (int, float)) and math.isfinite(every) and every > 0):
             raise InputError(f"keyframe spacing every={every!r}; give a positive number of seconds, e.g. 0.25")
         error = CaptureError(model, reference.times, reference.qpos)
-        idx = contact_keyframes(reference.times, contacts, reference.qpos[:, 2], every=every, error=error)
+        idx = contact_keyframes(reference.times, contacts, reference.qpos[:, 2], model_feet(model), every=every,
+                                error=error)
     elif keys == "every":
         idx = keyframe_indices(reference, 0.25 if every is None else every, extremes=extremes)
     else:

@@ -16,6 +16,7 @@ from runner.mocap.scene_fit import FittedScene, fit_contacts, fit_scene, scene_m
 from solver.capture_frame import CaptureFrame
 from solver.contacts import Contact, contact_points
 from solver.errors import InputError
+from solver.figure import model_feet
 from solver.model import load_model
 from solver.surfaces import StaticSurfaces
 
@@ -80,8 +81,9 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
         return ClipScene(ref, model, Path(scene), frame=frame)
     bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
     first = load_bvh_reference(clip, bare, root_scale=root_scale, skeleton_map=skeleton_map)
-    pos = contact_points(bare, first.qpos)  # rounded sites: their spheres' lowest points
-    capture = fit_scene(first.times, pos, fit_contacts(first.times, pos))
+    feet = model_feet(bare)
+    pos = contact_points(bare, first.qpos)  # the figure's sites, foot by foot; rounded: their spheres' lowest points
+    capture = fit_scene(first.times, pos, fit_contacts(first.times, pos, feet), feet)
     out = Path(fitted_out)
     if not out.parent.is_dir():
         raise InputError(f"{out}: the folder {out.parent} does not exist; create it first")

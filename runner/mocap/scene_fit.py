@@ -67,7 +67,7 @@ apart (a ramp becomes one box at its mean height). A surface nobody stood on is 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -75,8 +75,9 @@ import numpy as np
 
 from runner.mocap.contact_detection import detect_contacts
 from solver.capture_frame import CaptureFrame
-from solver.contacts import FEET, SITES, Contact, contact_mask, foot_contacts
+from solver.contacts import Contact, contact_mask, foot_contacts
 from solver.errors import InputError
+from solver.figure import foot_sites
 
 #: a stance resting more than this above the floor is on a raised surface [m].
 RAISED = 0.05
@@ -194,9 +195,9 @@ class _Stance:
     at: np.ndarray       # (2,) x, y of the rest: the resting (lowest) site's median position [m]
 
 
-def _stances(times, site_pos, contacts, sites):
+def _stances(times, site_pos, contacts, feet):
+    sites = foot_sites(feet)
     mask = contact_mask(contacts, sites, times)
-    feet = {f: tuple(s for s in members if s in sites) for f, members in FEET.items()}
     out = []
     for st in foot_contacts(contacts, feet):
         rests, ats, pts = [], [], []
@@ -338,7 +339,7 @@ def fit_scene(
     times: np.ndarray,
     site_pos: np.ndarray,
     contacts: Sequence[Contact],
-    sites: Sequence[str] = SITES,
+    feet: Mapping[str, Sequence[str]],
     raised: float = RAISED,
     height_tol: float = HEIGHT_TOL,
     link: float = LINK,
@@ -351,7 +352,8 @@ def fit_scene(
 
     Args:
         times: (n,) [s]. site_pos: (n, s, 3) [m] site positions (world, z up). contacts: site
-            contacts (e.g. `fit_contacts`, or hand-written). sites: the s site names.
+            contacts (e.g. `fit_contacts`, or hand-written). feet: {foot: its sites}, the figure's
+            (`Figure.feet`); the s columns of `site_pos` are their sites, foot by foot.
         raised, height_tol, link, margin, min_span, level_tol: [m]; max_slope: [m/m]; see the
             module constants.
     Returns:
@@ -361,23 +363,24 @@ def fit_scene(
     """
     times = np.asarray(times, float)
     site_pos = np.asarray(site_pos, float)
+    sites = foot_sites(feet)
     if site_pos.shape != (len(times), len(sites), 3):
         raise InputError(f"site_pos must have shape ({len(times)}, {len(sites)}, 3); got {site_pos.shape}")
-    stances = _stances(times, site_pos, contacts, sites)
+    stances = _stances(times, site_pos, contacts, feet)
     if not stances:
         raise InputError("no contacts: a scene is fitted to where the feet rest, and they never do")
     a, g = _fit_floor(stances, raised, min_span, level_tol, max_slope, PLANE_SCALE)
     floor = FittedScene(a, (), (float(g[0]), float(g[1])))
     rot, origin = floor.rotation(), np.array([0.0, 0.0, a])
     in_floor = (site_pos - origin) @ rot  # the floor's frame: floor at z = 0
-    local = _stances(times, in_floor, contacts, sites)
+    local = _stances(times, in_floor, contacts, feet)
     boxes = [(origin + rot @ c, h) for c, h in _fit_boxes(local, raised, height_tol, link, margin,
                                                           in_floor.reshape(-1, 3))]
     boxes.sort(key=lambda b: b[0][0])
     return FittedScene(a, tuple(boxes), floor.floor_slope)
 
 
-def fit_contacts(times: np.ndarray, site_pos: np.ndarray, sites: Sequence[str] = SITES,
+def fit_contacts(times: np.ndarray, site_pos: np.ndarray, feet: Mapping[str, Sequence[str]],
                  ballistic: float = BALLISTIC, **thresholds) -> list[Contact]:
     """Contacts for fitting a scene that is not known yet: heights relative to the foot's lowest site.
 
@@ -397,13 +400,15 @@ def fit_contacts(times: np.ndarray, site_pos: np.ndarray, sites: Sequence[str] =
     still in the air (not falling) still counts as resting on something; the clips have none.
 
     Args:
-        times: (n,) [s]. site_pos: (n, s, 3) [m]. sites: names. ballistic: [m/s^2] > 0.
+        times: (n,) [s]. site_pos: (n, s, 3) [m]. feet: {foot: its sites}, the figure's (`Figure.feet`);
+            the s columns of `site_pos` are their sites, foot by foot. ballistic: [m/s^2] > 0.
         thresholds: of `detect_contacts`.
     """
     site_pos = np.asarray(site_pos, float)
     times = np.asarray(times, float)
+    sites = foot_sites(feet)
     h = np.empty(site_pos.shape[:2])
-    for members in FEET.values():
+    for members in feet.values():
         ks = [list(sites).index(s) for s in members if s in sites]
         if ks:
             h[:, ks] = site_pos[:, ks, 2] - site_pos[:, ks, 2].min(axis=1, keepdims=True)
@@ -420,7 +425,7 @@ def fit_contacts(times: np.ndarray, site_pos: np.ndarray, sites: Sequence[str] =
                 falling.append(c)
     # a foot whose one site falls is in the air: its other site's "rest" at the same time is no rest
     # either (its own motion can hide the fall: a push-off lifts the heel while the toe falls)
-    foot = {s: f for f, members in FEET.items() for s in members}
+    foot = {s: f for f, members in feet.items() for s in members}
     return [c for c in found if not any(foot.get(c.site) == foot.get(b.site) and c.start < b.end and b.start < c.end
                                         for b in falling)]
 

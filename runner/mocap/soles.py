@@ -197,8 +197,8 @@ def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict, rounded: b
         pos = lowest_points(np.stack([org[:, list(body).index(f)] + rot[:, list(body).index(f)] @ local[s]
                                       for f, pair in feet.items() for s in pair], axis=1),
                             [radius[s] for s in names])
-        contacts = fit_contacts(times, pos, tuple(names))
-        surfaces = fit_scene(times, pos, contacts, tuple(names)).surfaces()
+        contacts = fit_contacts(times, pos, feet)
+        surfaces = fit_scene(times, pos, contacts, feet).surfaces()
         mask = contact_mask(contacts, names, times)
         data = []
         for j, (f, (h, t)) in enumerate(feet.items()):

@@ -34,7 +34,7 @@ import numpy as np
 from runner.mocap.contact_detection import DETECT_HEIGHT_OFF, DETECT_HEIGHT_ON, DETECT_SPEED_OFF, DETECT_SPEED_ON, site_speeds
 from solver.contacts import contact_mask, contact_points, site_heights
 from solver.errors import InputError
-from solver.layout import CONTACT_SITES, FEET
+from solver.figure import foot_sites
 
 
 def _hysteresis(enter: np.ndarray, stay: np.ndarray) -> np.ndarray:
@@ -60,7 +60,7 @@ def _columns(feet: Mapping[str, Sequence[str]], sites: Sequence[str]) -> list[li
 
 
 def stance_mask(times: np.ndarray, site_pos: np.ndarray, heights: np.ndarray,
-                feet: Mapping[str, Sequence[str]] = FEET, sites: Sequence[str] = CONTACT_SITES,
+                feet: Mapping[str, Sequence[str]], sites: Sequence[str],
                 height_on: float = DETECT_HEIGHT_ON, height_off: float = DETECT_HEIGHT_OFF,
                 speed_on: float = DETECT_SPEED_ON, speed_off: float = DETECT_SPEED_OFF) -> np.ndarray:
     """Per frame and foot, whether the foot rests on a surface (the module docstring's definition).
@@ -69,7 +69,7 @@ def stance_mask(times: np.ndarray, site_pos: np.ndarray, heights: np.ndarray,
         times: (n,) frame times [s], strictly increasing.
         site_pos: (n, s, 3) contact-site positions [m] (world, z up).
         heights: (n, s) height [m] of each site above the surface under it (negative: below).
-        feet: {foot: its site names}, in column order of the result (default the shipped figure's).
+        feet: {foot: its site names}, in column order of the result (the figure's, `Figure.feet`).
         sites: the s site names of the second axis.
         height_on <= height_off [m], speed_on <= speed_off [m/s]: the hysteresis thresholds.
     Returns:
@@ -96,8 +96,7 @@ def stance_mask(times: np.ndarray, site_pos: np.ndarray, heights: np.ndarray,
 
 
 def lowest_sites(times: np.ndarray, site_pos: np.ndarray, heights: np.ndarray,
-                 feet: Mapping[str, Sequence[str]] = FEET, sites: Sequence[str] = CONTACT_SITES
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 feet: Mapping[str, Sequence[str]], sites: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """Per frame and foot, the height [m] above the surface under it and the 3-D speed [m/s] (central
     differences) of the foot's lowest contact site: (n, f) and (n, f), arguments as `stance_mask`."""
     speed = site_speeds(times, site_pos)
@@ -169,7 +168,7 @@ def capture_rest(model, qpos: np.ndarray, frame_time: float) -> tuple[np.ndarray
     return resting(stance, low, speed), low
 
 
-def schedule_stance(contacts, times: np.ndarray, feet: Mapping[str, Sequence[str]] = FEET) -> np.ndarray:
+def schedule_stance(contacts, times: np.ndarray, feet: Mapping[str, Sequence[str]]) -> np.ndarray:
     """Per frame and foot, whether a contact schedule has the foot on a surface (any of its sites in a
     contact, closed intervals: `solver.contacts.contact_mask`).
 
@@ -181,7 +180,7 @@ def schedule_stance(contacts, times: np.ndarray, feet: Mapping[str, Sequence[str
     Raises:
         InputError: a contact names a site no foot has.
     """
-    sites = [s for members in feet.values() for s in members]
+    sites = foot_sites(feet)
     mask = contact_mask(list(contacts), sites, np.asarray(times, float))
     return np.stack([mask[:, ks].any(axis=1) for ks in _columns(feet, sites)], axis=1)
 

@@ -15,10 +15,11 @@ from __future__ import annotations
 import numpy as np
 
 from solver.contact_thresholds import FLIGHT_CLEARANCE
+from solver.contacts import figure_sites
 from solver.errors import InputError
 from solver.inverse_dynamics import InverseDynamics, MujocoInverseDynamics
 from solver.kinematics import TangentMap
-from solver.layout import CONTACT_SITES, StateLayout
+from solver.layout import StateLayout
 from solver.path_context import EngineGradient, PathContext
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
@@ -28,11 +29,11 @@ __all__ = ["BACKENDS", "EngineGradient", "JointTorque", "RootResidual", "engine_
 BACKENDS = {"analytic": InverseDynamics, "mujoco": MujocoInverseDynamics}
 
 
-def make_engine(model, sites=CONTACT_SITES, backend: str = "analytic"):
+def make_engine(model, sites, backend: str = "analytic"):
     """An inverse-dynamics engine for `model` that also tracks `sites`, to share between terms.
 
     Args:
-        model: MjModel. sites: site names. backend: "analytic" (vectorized recursive Newton-Euler,
+        model: MjModel. sites: site names (the figure's, `Figure.contact_sites`; () none). backend: "analytic" (vectorized recursive Newton-Euler,
             fast) or "mujoco" (`mj_inverse` + `mjd_inverseFD`, general, ~100x slower).
     Raises:
         InputError: unknown backend (lists the valid ones), unknown site, or a model the analytic
@@ -198,7 +199,7 @@ class RootResidual(Term):
         model: MjModel of the scene (figure + static surfaces), loaded once by the caller.
         surfaces: StaticSurfaces of the scene; default `StaticSurfaces.from_model(model)`.
         contact_distance: d [m] > 0, the clearance above which a site counts as in the air.
-        sites: contact site names (default heel and toe of each foot).
+        sites: contact site names (default the model's figure's, `solver.contacts.figure_sites`).
         torque_arm: l [m] > 0; default the radius of gyration of the root's subtree at qpos0.
         engine: an engine from `make_engine` (must track `sites`) to share; default a new one.
         backend: "analytic" or "mujoco" when no engine is given.
@@ -221,7 +222,7 @@ class RootResidual(Term):
         model,
         surfaces: StaticSurfaces | None = None,
         contact_distance: float = FLIGHT_CLEARANCE,
-        sites=CONTACT_SITES,
+        sites=None,
         torque_arm: float | None = None,
         engine=None,
         backend: str = "analytic",
@@ -243,7 +244,8 @@ class RootResidual(Term):
         if not np.isfinite(d) or d <= 0:
             raise InputError(f"contact_distance is {contact_distance}; it must be a distance > 0 [m]")
         self.contact_distance = d
-        self.engine = engine if engine is not None else make_engine(model, tuple(sites), backend)
+        sites = figure_sites(model, sites)
+        self.engine = engine if engine is not None else make_engine(model, sites, backend)
         ids = []
         for name in sites:
             sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.contacts import contact_radii, lowest_points
+from solver.contacts import contact_radii, figure_sites, lowest_points
 from solver.errors import InputError
 from solver.kinematics import TangentMap
-from solver.layout import CONTACT_SITES, StateLayout
+from solver.layout import StateLayout
 from solver.path_context import EngineGradient, engine_sites, site_engine
 from solver.surfaces import StaticSurfaces
 from solver.terms.base import Term, TermEval
@@ -50,7 +50,7 @@ class Penetration(Term):
 
     Args:
         model: MjModel of the scene (figure + static floor planes/boxes), loaded once by the caller.
-        sites: contact site names (default heel and toe of each foot).
+        sites: contact site names (default the model's figure's, `solver.contacts.figure_sites`).
         margin: [m] clearance counted as penetration (default none: the depth itself). A weighted
             objective whose converged path should clear the surface between its quadrature points
             passes one: at 400 points per second a swing foot (~6 m/s) moves ~15 mm between points
@@ -67,8 +67,9 @@ class Penetration(Term):
     units = "m^2"
     needs = (0,)
 
-    def __init__(self, model, sites=CONTACT_SITES, margin: float = 0.0, engine=None):
+    def __init__(self, model, sites=None, margin: float = 0.0, engine=None):
         self.model = model
+        sites = figure_sites(model, sites)
         self.surfaces = StaticSurfaces.from_model(model)
         if self.surfaces.count == 0:
             raise InputError("the scene has no static floor plane or box for the penetration term; use "

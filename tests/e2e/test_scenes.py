@@ -49,8 +49,17 @@ def test_floor_scene_is_the_figure_on_a_flat_floor():
 
 
 def test_floor_scene_works_with_the_shipped_keyframes(tmp_path):
-    keyframes, _info, _model, _layout, scene = load_problem(small_keyframes(tmp_path, MODELS / "floor.xml"), None)
-    assert scene == MODELS / "floor.xml" and keyframes.count == 3
+    """The shipped keyframes on the flat floor: their contacts read against the floor scene's figure and
+    surfaces; one on the shipped scene's step is refused at once, naming the file and the entry."""
+    path = small_keyframes(tmp_path, MODELS / "floor.xml")
+    with pytest.raises(InputError, match=rf"^{path}: contacts\[\d+\]: 'surface' is 'step', which the scene does not have"):
+        load_problem(path, None)
+    doc = json.loads(path.read_text())
+    for c in doc["contacts"]:
+        c.pop("surface", None)  # whichever surface is under the site
+    path.write_text(json.dumps(doc))
+    keyframes, info, _model, _layout, scene = load_problem(path, None)
+    assert scene == MODELS / "floor.xml" and keyframes.count == 3 and len(info.contacts) == len(doc["contacts"])
 
 
 def test_a_copied_scene_names_the_missing_include_and_the_fix(tmp_path, capsys):

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from shipped_sites import SITES
 
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
-from solver.contacts import SITES
 
 REPO = Path(__file__).resolve().parents[2]
 CLIP = REPO / "models" / "cmu" / "35_17.bvh"

@@ -7,11 +7,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from shipped_sites import SITES
 
 from runner.jolts import filter_capture, jolt_figures, worst_joint_ratio
 from runner.mocap.scene_fit import FittedScene, scene_mjcf
 from runner.motion_metrics import motion_metrics
-from solver.contacts import SITES, Contact
+from solver.contacts import Contact
 from solver.errors import InputError
 from solver.layout import StateLayout
 from solver.peak_bounds import CUTOFF_HZ, TWO_PASS_CORRECTION

@@ -6,12 +6,13 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from shipped_sites import SITES
 
 from runner.mocap.contact_detection import reference_contacts
 from runner.mocap.scene_fit import FittedScene, scene_mjcf
 from runner.motion_metrics import FLIGHT_HEIGHT, flight_mismatch, motion_metrics
 from solver.contact_schedule import ContactSchedule
-from solver.contacts import SITES, Contact
+from solver.contacts import Contact
 from solver.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -158,7 +159,7 @@ def test_127_33_reference_own_metrics():
     assert r["penetration_mm"]["max"] < 1e-6            # the retargeting keeps sites out of surfaces
     assert r["float_contact_mm"] < 5.0                   # planted toes sit 2 mm up
     # a run has short flights: every site 3 cm clear for part of the gaps between contacts, never longer
-    gaps = sum(b - a for a, b in ContactSchedule.of(cs).flights())
+    gaps = sum(b - a for a, b in ContactSchedule.of(cs, SITES).flights())
     assert 0.0 < r["flight_time_s"] <= gaps + ref.frame_time
     assert r["skate_contact_speed_m_s"] < 0.5
 

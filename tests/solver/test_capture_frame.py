@@ -6,10 +6,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from shipped_sites import FEET, SITES
 
 from runner.mocap.scene_fit import FittedScene, fit_scene, scene_mjcf
 from solver.capture_frame import CAPTURE_FRAME, CaptureFrame
-from solver.contacts import SITES, Contact
+from solver.contacts import Contact
 from solver.errors import InputError
 from solver.surfaces import StaticSurfaces
 
@@ -87,7 +88,7 @@ def tilted_stances():
 
 def test_the_levelled_scene_is_level_at_z0_with_every_rest_on_its_surface():
     times, pos, contacts, rests = tilted_stances()
-    capture = fit_scene(times, pos, contacts)
+    capture = fit_scene(times, pos, contacts, FEET)
     assert not capture.level
     t, level = capture.levelling(), capture.levelled()
     assert level.level and level.floor_z == 0.0

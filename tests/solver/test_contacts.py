@@ -6,11 +6,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from shipped_sites import FEET, SITES
 
 from runner.mocap.contact_detection import detect_contacts, reference_contacts
 from solver.contacts import (
-    FEET,
-    SITES,
     Contact,
     contact_mask,
     foot_contacts,
@@ -81,7 +80,7 @@ def test_minimum_duration_drops_a_brush():
 def test_validation():
     times, pos, h = one_site(np.zeros(10))
     with pytest.raises(InputError, match="site_pos"):
-        detect_contacts(times, pos, h)  # default 4 sites, 1 given
+        detect_contacts(times, pos, h, SITES)  # 4 sites, 1 given
     with pytest.raises(InputError, match="height_on"):
         detect_contacts(times, pos, h, sites=("l_toe",), height_on=0.1, height_off=0.05)
     with pytest.raises(InputError, match="increasing"):
@@ -96,10 +95,10 @@ def test_mask_events_and_feet():
     assert m[:, 0].tolist() == [True, True, True] + [False] * 8
     assert m[:, 1].tolist() == [False, True, True, True, True] + [False] * 6
     assert m[:, 3].tolist() == [False] * 5 + [True] * 3 + [False] * 3
-    assert foot_contacts(cs) == [Contact("left", 0.0, 0.4), Contact("right", 0.5, 0.7)]
-    td, lo = touchdowns_liftoffs(cs)
+    assert foot_contacts(cs, FEET) == [Contact("left", 0.0, 0.4), Contact("right", 0.5, 0.7)]
+    td, lo = touchdowns_liftoffs(cs, FEET)
     assert td == [(0.0, "left"), (0.5, "right")] and lo == [(0.4, "left"), (0.7, "right")]
-    td, lo = touchdowns_liftoffs(cs, per_foot=False)
+    td, lo = touchdowns_liftoffs(cs, None)
     assert len(td) == 3 and lo[0] == (0.2, "l_heel")
     with pytest.raises(InputError, match="nose"):
         contact_mask([Contact("nose", 0, 1)], SITES, times)
@@ -116,7 +115,7 @@ def test_127_33_touchdowns_where_the_feet_land():
     cs = reference_contacts(model, ref.qpos, ref.frame_time)
     pos = site_positions(model, ref.qpos)
     h = site_heights(model, pos)
-    td, lo = touchdowns_liftoffs(cs)
+    td, lo = touchdowns_liftoffs(cs, FEET)
     for c in cs:
         print(f"{c.site:7s} {c.start:.3f}-{c.end:.3f} s")
     print("touch-downs", td, "\nlift-offs", lo)
@@ -133,7 +132,7 @@ def test_127_33_touchdowns_where_the_feet_land():
             assert mean[i0 - 6] > mean[i0] + 0.01, (foot, t0, mean[i0 - 6:i0 + 1])  # may skim in low)
         if i1 + 6 < len(low):                         # lift-off: the foot goes up after
             assert low[i1 + 6] > low[i1] + 0.01, (foot, t1, low[i1:i1 + 7])
-    on_box = [c for c in foot_contacts(cs) if 0.8 < c.start < 1.4]
+    on_box = [c for c in foot_contacts(cs, FEET) if 0.8 < c.start < 1.4]
     assert len(on_box) == 2
 
 
@@ -144,21 +143,21 @@ def test_127_33_touchdowns_where_the_feet_land():
 def test_schedule_is_checked_once_sorted_and_answers_queries():
     from solver.contact_schedule import ContactSchedule
 
-    run = ContactSchedule.of([Contact("l_toe", 0.8, 1.1), Contact("r_toe", 0.4, 0.7), Contact("l_toe", 0.0, 0.3)])
+    run = ContactSchedule.of([Contact("l_toe", 0.8, 1.1), Contact("r_toe", 0.4, 0.7), Contact("l_toe", 0.0, 0.3)], SITES)
     assert [c.start for c in run] == [0.0, 0.4, 0.8] and len(run) == 3 and run[0].site == "l_toe"
     assert run.flights() == [(0.3, 0.4), (0.7, 0.8)]  # no site in contact, between the first and last
     assert run.swings("l_toe") == [(0.3, 0.8)] and run.swings("r_toe") == []
     assert run.span == (0.0, 1.1)
-    assert run.events() == ([(0.0, "left"), (0.4, "right"), (0.8, "left")], [(0.3, "left"), (0.7, "right"), (1.1, "left")])
+    assert run.events(FEET) == ([(0.0, "left"), (0.4, "right"), (0.8, "left")], [(0.3, "left"), (0.7, "right"), (1.1, "left")])
     mask = run.mask(np.array([0.3, 0.35, 0.5]))
     np.testing.assert_array_equal(mask[:, SITES.index("l_toe")], [True, False, False])
     np.testing.assert_array_equal(mask[:, SITES.index("r_toe")], [False, False, True])
-    assert ContactSchedule.of(run) is run  # already checked: the same value
+    assert ContactSchedule.of(run, SITES) is run  # already checked: the same value
     with pytest.raises(AttributeError):
         run.contacts = ()  # frozen
     empty = ContactSchedule.empty()
     assert not empty and len(empty) == 0 and empty.flights() == [] and empty.span is None
-    assert ContactSchedule.of([]) == empty
+    assert ContactSchedule.of([], ()) == empty
 
 
 @pytest.mark.parametrize("contacts, message", [
@@ -174,17 +173,17 @@ def test_schedule_errors_are_one_line_naming_the_contact_field_and_value(contact
     from solver.contact_schedule import ContactSchedule
 
     with pytest.raises(InputError, match=message):
-        ContactSchedule.of(contacts, surfaces=("floor", "step"))
+        ContactSchedule.of(contacts, SITES, ("floor", "step"))
 
 
 def test_schedule_checks_surfaces_when_a_scene_is_given_naming_its_source():
     from solver.contact_schedule import ContactSchedule
 
-    sched = ContactSchedule.of([Contact("l_toe", 0, 1, "stpe")], source="k.json", labels=["contacts[4]"])
+    sched = ContactSchedule.of([Contact("l_toe", 0, 1, "stpe")], SITES, source="k.json", labels=["contacts[4]"])
     assert sched.surfaces is None  # no scene yet: the name is only a string
     with pytest.raises(InputError, match=r"^k\.json: contacts\[4\]: 'surface' is 'stpe', which the scene does not"):
         sched.for_scene(("floor", "step"))
-    assert ContactSchedule.of([Contact("l_toe", 0, 1, "step")]).for_scene(("floor", "step")).surfaces == ("floor",
+    assert ContactSchedule.of([Contact("l_toe", 0, 1, "step")], SITES).for_scene(("floor", "step")).surfaces == ("floor",
                                                                                                           "step")
 
 
@@ -219,7 +218,7 @@ def test_reference_contacts_keep_a_short_touch_down(toy_model):
     cs = reference_contacts(toy_model, qpos, ft)
     from solver.contact_schedule import ContactSchedule
 
-    flights = ContactSchedule.of(cs).flights()
+    flights = ContactSchedule.of(cs, SITES).flights()
     assert len(flights) == 2, flights
     assert any(c.start <= t[52] <= c.end and c.duration < 0.05 for c in cs)  # in contact mid touch-down
     assert flights[0][1] - flights[0][0] > 0.2 and flights[1][1] - flights[1][0] > 0.2

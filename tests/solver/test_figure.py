@@ -148,14 +148,6 @@ def test_no_feet_and_no_root_are_refused():
                                                          "</worldbody></mujoco>"))
 
 
-def test_deprecated_aliases_are_the_shipped_figures():
-    """solver.layout.CONTACT_SITES / FEET (default arguments without a model) name the shipped figure's."""
-    from solver.layout import CONTACT_SITES, FEET
-
-    fig = shipped_figure()
-    assert fig.contact_sites == CONTACT_SITES and dict(fig.feet) == FEET
-
-
 def test_a_second_figure_is_another_mjcf_and_nothing_else():
     """A figure 10 % larger: its height, segment lengths and mass come from its file; the names, axes
     and feet are its annotations' (nothing in the code knows the shipped figure's sizes)."""

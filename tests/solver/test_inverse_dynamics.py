@@ -7,6 +7,7 @@ import mujoco
 import numpy as np
 import pytest
 from scipy.interpolate import make_interp_spline
+from shipped_sites import SITES as CONTACT_SITES
 from tree_models import HINGE, ODD, tangent_step
 
 from solver.errors import InputError
@@ -14,7 +15,7 @@ from solver.inverse_dynamics import InverseDynamics, MujocoInverseDynamics, cons
 from solver.kinematics import TangentMap
 from solver.layout import StateLayout
 from solver.surfaces import StaticSurfaces
-from solver.terms.dynamics import CONTACT_SITES, JointTorque, RootResidual, make_engine
+from solver.terms.dynamics import JointTorque, RootResidual, make_engine
 
 from conftest import fd_gradient, random_qpos
 
@@ -247,7 +248,7 @@ def test_root_residual_value_and_gradient_through_the_flight_indicator(scene):
 def test_terms_share_an_engine(scene):
     rng = np.random.default_rng(7)
     _, Y, Y1, Y2 = state(scene, rng, n=3)
-    eng = make_engine(scene)
+    eng = make_engine(scene, CONTACT_SITES)
     shared = [JointTorque(scene, engine=eng), RootResidual(scene, engine=eng)]
     alone = [JointTorque(scene), RootResidual(scene)]
     for a, b in zip(shared, alone):
@@ -266,7 +267,7 @@ def test_a_path_context_runs_each_engine_once(scene, kind):
 
     layout, Y, Y1, Y2 = state(scene, np.random.default_rng(9))
     tm = TangentMap.from_layout(layout)
-    eng = make_engine(scene) if kind == "inverse dynamics" else SiteKinematics(scene, CONTACT_SITES)
+    eng = make_engine(scene, CONTACT_SITES) if kind == "inverse dynamics" else SiteKinematics(scene, CONTACT_SITES)
     ctx = PathContext(None, Y, Y1, Y2)
     mo, res = ctx.forward(eng, tm)
     again = ctx.forward(eng, tm)
@@ -370,7 +371,7 @@ def test_bad_arguments_name_the_fix(scene):
     with pytest.raises(InputError, match="free root"):
         JointTorque(scene, weights={layout.joints[0].name: 1.0})
     with pytest.raises(InputError, match="analytic, mujoco"):
-        make_engine(scene, backend="magic")
+        make_engine(scene, CONTACT_SITES, backend="magic")
     with pytest.raises(InputError, match="contact_distance"):
         RootResidual(scene, contact_distance=0.0)
     with pytest.raises(InputError, match="not tracked by the engine"):

@@ -15,8 +15,14 @@ MODELS = Path(__file__).resolve().parents[2] / "models"
 
 
 @pytest.fixture(scope="module")
-def layout():
-    return StateLayout.from_model(mujoco.MjModel.from_xml_path(str(MODELS / "humanoid39.xml")))
+def figure():
+    """The shipped figure's model alone (no scene): contacts are checked against its feet."""
+    return mujoco.MjModel.from_xml_path(str(MODELS / "humanoid39.xml"))
+
+
+@pytest.fixture(scope="module")
+def layout(figure):
+    return StateLayout.from_model(figure)
 
 
 def sample_keyframes(layout, rng):
@@ -201,7 +207,7 @@ def test_checks_of_solver_keyframes_name_the_file(tmp_path, layout):
         read_keyframes(write_json(tmp_path, doc), layout)
 
 
-def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
+def test_contacts_round_trip_and_feet_expand(tmp_path, layout, figure):
     from solver.contacts import Contact
 
     kf = sample_keyframes(layout, np.random.default_rng(1))
@@ -210,24 +216,25 @@ def test_contacts_round_trip_and_feet_expand(tmp_path, layout):
     write_keyframes(out, kf, layout, contacts=contacts)
     text = out.read_text()
     assert '    {"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"}' in text  # one per line
-    _, info = read_keyframes(out, layout)
+    _, info = read_keyframes(out, figure)
     assert tuple(info.contacts) == tuple(contacts)
     doc = json.loads(text)
     doc["contacts"].append({"foot": "right", "start": 0.5, "end": 0.6, "surface": "box0"})
-    _, info = read_keyframes(write_json(tmp_path, doc), layout)
+    _, info = read_keyframes(write_json(tmp_path, doc), figure)
     assert info.contacts[2:] == (Contact("r_heel", 0.5, 0.6, "box0"), Contact("r_toe", 0.5, 0.6, "box0"))
     _, info = read_keyframes(write_json(tmp_path, minimal(), "none.json"), layout)
     assert not info.contacts and len(info.contacts) == 0
     # times are rounded outward: a contact keeps every frame it held (frame times k * 0.0083333)
     odd = [Contact("r_toe", 3 * 0.0083333, 28 * 0.0083333)]
     write_keyframes(out, kf, layout, contacts=odd)
-    back = read_keyframes(out, layout)[1].contacts[0]
+    back = read_keyframes(out, figure)[1].contacts[0]
     assert back.start <= odd[0].start and back.end >= odd[0].end and back.end - odd[0].end < 1e-6
 
 
-def test_contacts_name_the_given_figures_feet(tmp_path, layout):
+def test_contacts_name_the_given_figures_feet(tmp_path, layout, figure):
     """With the model, the contacts are checked against that figure's feet (its MJCF annotations): a
-    figure whose left toe site is called l_tip accepts it and expands 'left' to it."""
+    figure whose left toe site is called l_tip accepts it and expands 'left' to it, the shipped figure
+    refuses it; with a layout alone no figure is assumed: a 'foot' entry asks for the model."""
     from solver.contacts import Contact
 
     text = (MODELS / "humanoid39.xml").read_text().replace('"l_toe"', '"l_tip"').replace("l_heel l_toe", "l_heel l_tip")
@@ -238,7 +245,11 @@ def test_contacts_name_the_given_figures_feet(tmp_path, layout):
     _, info = read_keyframes(path, model)
     assert tuple(info.contacts) == (Contact("l_tip", 0, 1), Contact("l_heel", 2, 3), Contact("l_tip", 2, 3))
     with pytest.raises(InputError, match="'site' is 'l_tip'; the figure's contact sites are l_heel, l_toe"):
-        read_keyframes(path, layout)  # a layout alone: the shipped figure's feet
+        read_keyframes(path, figure)
+    with pytest.raises(InputError, match=r"contacts\[1\]: 'foot' is 'left', but the contacts were read without the figure"):
+        read_keyframes(path, layout)
+    doc["contacts"] = doc["contacts"][:1]  # a site alone is read as written, for build_problem to check
+    assert tuple(read_keyframes(write_json(tmp_path, doc), layout)[1].contacts) == (Contact("l_tip", 0, 1),)
 
 
 @pytest.mark.parametrize("contacts, shown", [
@@ -254,10 +265,10 @@ def test_contacts_name_the_given_figures_feet(tmp_path, layout):
     ([{"site": "l_toe", "start": 0, "end": 1, "surface": 3}], "'surface' is 3"),
     ([{"site": "l_toe", "start": 0, "end": 1, "force": 3}], "unknown field(s) 'force'"),
 ])
-def test_contact_errors_name_file_field_value_and_fix(tmp_path, layout, contacts, shown):
+def test_contact_errors_name_file_field_value_and_fix(tmp_path, figure, contacts, shown):
     p = write_json(tmp_path, {**minimal(), "contacts": contacts})
     with pytest.raises(InputError) as e:
-        read_keyframes(p, layout)
+        read_keyframes(p, figure)
     assert str(e.value).startswith(str(p)) and shown in str(e.value)
 
 
@@ -279,7 +290,7 @@ def test_an_unknown_surface_names_the_file_and_the_contacts_index(tmp_path):
 
     scene = mujoco.MjModel.from_xml_path(str(MODELS / "run_and_step.xml"))
     contacts = [{"site": "l_toe", "start": 0.0, "end": 0.2, "surface": "floor"},
-                {"foot": "right", "start": 0.3, "end": 0.5, "surface": "stpe"}]
+                {"site": "r_toe", "start": 0.3, "end": 0.5, "surface": "stpe"}]
     p = write_json(tmp_path, {**minimal(), "contacts": contacts})
     with pytest.raises(InputError) as e:
         read_keyframes(p, scene)
@@ -290,13 +301,13 @@ def test_an_unknown_surface_names_the_file_and_the_contacts_index(tmp_path):
         build_problem(scene, ProblemSpec(kf, info.contacts))
 
 
-def test_every_shipped_keyframe_file_loads(layout):
+def test_every_shipped_keyframe_file_loads(figure):
     from runner.paths import MODELS
 
     files = sorted(MODELS.glob("*.keyframes.json")) + sorted(Path(__file__).parents[1].rglob("*.keyframes.json"))
     assert files
     for f in files:
-        keyframes, info = read_keyframes(f, layout)
+        keyframes, info = read_keyframes(f, figure)
         assert keyframes.count >= 2 and json.loads(f.read_text())["format"] == FORMAT
 
 

@@ -7,13 +7,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from shipped_sites import SITES as CONTACT_SITES
 from tree_models import HINGE, ODD, tangent_step
 
 from solver.errors import InputError
 from solver.inverse_dynamics import InverseDynamics
 from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
-from solver.layout import CONTACT_SITES, StateLayout
+from solver.layout import StateLayout
 
 from conftest import random_qpos
 

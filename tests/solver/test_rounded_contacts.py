@@ -8,12 +8,12 @@ import mujoco
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from shipped_sites import SITES as CONTACT_SITES
 
 from runner.mocap.contacts import worst_contact_distance
 from solver.contacts import RADIUS_PREFIX, contact_points, contact_radii, lowest_points, site_heights, site_positions
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE, Figure
-from solver.layout import CONTACT_SITES
 
 FPS = 120.0
 RADIUS = 0.035  # [m] the heel's sphere

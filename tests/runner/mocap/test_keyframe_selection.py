@@ -4,6 +4,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from shipped_sites import FEET
 
 from runner.mocap.contact_detection import reference_contacts
 from runner.mocap.keyframe_selection import KEY_MIN_GAP, CaptureError, add_keys_to_tolerance, contact_keyframes
@@ -28,27 +29,27 @@ def broad_jump():
 
 def test_broad_jump_keys_contacts_apex_and_crouches():
     t, cs, z = broad_jump()
-    keys = contact_keyframes(t, cs, z)
+    keys = contact_keyframes(t, cs, z, FEET)
     assert keys.tolist() == [0, 15, 30, 50, 70, 85, 100]
 
 
 def test_close_events_merge_and_ends_stay():
     t = np.arange(101) / FPS
     cs = [Contact("l_toe", 0.02, 0.40), Contact("r_toe", 0.42, 0.98)]   # lift-off 2 frames before touch-down
-    keys = contact_keyframes(t, cs, np.full(101, 0.9))
+    keys = contact_keyframes(t, cs, np.full(101, 0.9), FEET)
     assert keys.tolist() == [0, 41, 100]
 
 
 def test_every_fills_long_gaps_only():
     t, cs, z = broad_jump()
-    keys = contact_keyframes(t, cs, z, every=0.1)
+    keys = contact_keyframes(t, cs, z, FEET, every=0.1)
     assert np.all(np.diff(t[keys]) <= 0.1 + 1e-9)
     assert {0, 15, 30, 50, 70, 85, 100} <= set(keys.tolist())
     assert len(keys) == 13      # each of the six gaps (0.15 or 0.2 s) split in two
     with pytest.raises(InputError, match="every"):
-        contact_keyframes(t, cs, z, every=0)
+        contact_keyframes(t, cs, z, FEET, every=0)
     with pytest.raises(InputError, match="root_z"):
-        contact_keyframes(t, cs, z[:-1])
+        contact_keyframes(t, cs, z[:-1], FEET)
 
 
 def test_127_33_keys_at_the_landings():
@@ -56,9 +57,9 @@ def test_127_33_keys_at_the_landings():
     model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))
     ref = load_bvh_reference(ROOT / "models" / "cmu" / "127_33.bvh", model)
     cs = reference_contacts(model, ref.qpos, ref.frame_time)
-    keys = contact_keyframes(ref.times, cs, ref.qpos[:, 2])
+    keys = contact_keyframes(ref.times, cs, ref.qpos[:, 2], FEET)
     print("keys", keys.tolist(), "times", np.round(ref.times[keys], 3).tolist())
-    td, lo = touchdowns_liftoffs(cs)
+    td, lo = touchdowns_liftoffs(cs, FEET)
     for time, _ in td + lo:     # every contact event has a key within the merge distance
         assert np.min(np.abs(ref.times[keys] - time)) <= 4 * ref.frame_time
     assert keys[0] == 0 and keys[-1] == ref.count - 1
@@ -107,9 +108,9 @@ def test_contact_keyframes_key_a_long_gap_the_events_leave():
     cs = [Contact("l_toe", 0.0, 0.2)]
     z = np.full(201, 0.9)
     f = np.where(t > 0.2, np.sin(np.pi * (t - 0.2) / 1.8), 0.0)
-    without = contact_keyframes(t, cs, z)
+    without = contact_keyframes(t, cs, z, FEET)
     assert without.tolist() == [0, 20, 200]
-    keys = contact_keyframes(t, cs, z, error=_linear_error(t, f, 0.1))
+    keys = contact_keyframes(t, cs, z, FEET, error=_linear_error(t, f, 0.1))
     assert set(without) <= set(keys.tolist()) and len(keys) > 3
     miss = np.abs(f - np.interp(t, t[keys], f[keys])) / 0.1
     far = np.array([np.min(np.abs(t[keys] - x)) >= KEY_MIN_GAP for x in t])  # frames that could be keys

@@ -10,9 +10,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from shipped_sites import FEET, SITES
 
 from runner.mocap.scene_fit import LEVEL_TOL, MARGIN, MAX_SLOPE, FittedScene, fit_contacts, fit_scene, scene_mjcf
-from solver.contacts import SITES, Contact, site_positions
+from solver.contacts import Contact, site_positions
 from solver.errors import InputError
 from solver.surfaces import StaticSurfaces
 
@@ -42,7 +43,7 @@ def test_floor_and_one_box_with_known_answer():
         ("l_toe", 0.6, 0.8, 1.8, 0.1, 0.29),    # on the box, 2 cm lower
         ("r_toe", 0.9, 1.1, 3.0, -0.1, 0.01),
     ])
-    f = fit_scene(times, pos, cs)
+    f = fit_scene(times, pos, cs, FEET)
     assert f.floor_z == pytest.approx(0.01)
     assert len(f.boxes) == 1
     c, h = f.boxes[0]
@@ -58,7 +59,7 @@ def test_padding_stops_halfway_to_a_floor_contact():
         ("r_toe", 0.3, 0.5, 1.2, 0.0, 0.3),
         ("l_toe", 0.6, 0.8, 1.5, 0.0, 0.3),
     ])
-    (c, h), = fit_scene(times, pos, cs).boxes
+    (c, h), = fit_scene(times, pos, cs, FEET).boxes
     assert c[0] - h[0] == pytest.approx(1.1)   # halfway between the floor toe (1.0) and the box (1.2)
     assert c[0] + h[0] == pytest.approx(1.5 + MARGIN)
 
@@ -70,7 +71,7 @@ def test_two_heights_and_far_apart_make_separate_boxes():
         ("l_toe", 0.6, 0.8, 1.5, 0.0, 0.6),     # 30 cm higher: another box
         ("r_toe", 0.9, 1.1, 5.0, 0.0, 0.3),     # same height as the first, 3.5 m away
     ])
-    f = fit_scene(times, pos, cs)
+    f = fit_scene(times, pos, cs, FEET)
     assert [round(t, 3) for t in f.box_tops()] == [0.3, 0.6, 0.3]
 
 
@@ -89,7 +90,7 @@ def test_two_steps_onto_a_platform_are_two_boxes_side_by_side():
             ("r_toe", 0.6, 0.8, 0.85, -0.1, 0.36), ("r_heel", 0.6, 0.8, 0.68, -0.1, 0.36),  # step 2
             ("l_toe", 0.9, 1.1, 0.87, 0.1, 0.37), ("l_heel", 0.9, 1.1, 0.70, 0.1, 0.37)]
     times, pos, cs = stances(spec)
-    f = fit_scene(times, pos, cs)
+    f = fit_scene(times, pos, cs, FEET)
     assert f.floor_z == pytest.approx(0.0)
     assert sorted(round(t, 3) for t in f.box_tops()) == [0.18, 0.365]
     assert not _overlap(*f.boxes)
@@ -105,7 +106,7 @@ def test_two_steps_onto_a_platform_are_two_boxes_side_by_side():
 def test_no_contacts_is_an_error():
     times, pos, _ = stances([("l_toe", 0.0, 0.2, 0, 0, 0)])
     with pytest.raises(InputError, match="no contacts"):
-        fit_scene(times, pos, [])
+        fit_scene(times, pos, [], FEET)
 
 
 def test_scene_mjcf_loads_from_where_it_is_saved(tmp_path, monkeypatch):
@@ -133,8 +134,8 @@ def test_127_33_step_from_a_floor_only_retarget():
     floor_only = mujoco.MjModel.from_xml_string(scene_mjcf(FittedScene(0.0), FIGURE))
     ref = load_clip("127_33", floor_only)
     pos = site_positions(floor_only, ref.qpos)
-    cs = fit_contacts(ref.times, pos)
-    f = fit_scene(ref.times, pos, cs)
+    cs = fit_contacts(ref.times, pos, FEET)
+    f = fit_scene(ref.times, pos, cs, FEET)
     hand = StaticSurfaces.from_model(mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml")))
     hc, hh = hand.box_center[0], hand.box_half[0]
     (c, h), = f.boxes
@@ -172,10 +173,10 @@ def test_fit_contacts_ignores_a_heel_hovering_over_a_planted_toe():
     pos[:, 0] = (0.0, 0.1, 0.33)       # l_heel still, 8 cm above its toe: not resting
     pos[:, 2] = (0.0, -0.1, 0.30)      # right foot flat and still at 30 cm: both sites rest
     pos[:, 3] = (0.25, -0.1, 0.30)
-    cs = fit_contacts(times, pos)
+    cs = fit_contacts(times, pos, FEET)
     assert sorted(c.site for c in cs) == ["l_toe", "r_heel", "r_toe"]
     pos[:, 3, 0] += 2.0 * times        # right toe swinging: fast, not resting
-    assert sorted(c.site for c in fit_contacts(times, pos)) == ["l_toe", "r_heel"]
+    assert sorted(c.site for c in fit_contacts(times, pos, FEET)) == ["l_toe", "r_heel"]
 
 
 def test_fit_contacts_drops_the_top_of_a_hop():
@@ -193,13 +194,13 @@ def test_fit_contacts_drops_the_top_of_a_hop():
         pos[:, k] = (x, y, 0.0)
         pos[:, k, 2] = z
     assert z.max() == pytest.approx(0.12, abs=1e-3)
-    cs = fit_contacts(times, pos)
+    cs = fit_contacts(times, pos, FEET)
     assert cs and all(c.end <= 0.5 + 1e-9 or c.start >= 0.5 + up - 1e-9 for c in cs), cs
-    assert fit_scene(times, pos, cs).boxes == ()
+    assert fit_scene(times, pos, cs, FEET).boxes == ()
     held = pos.copy()  # the same, but the feet stop at the top and stay there (standing on a box)
     top = s >= up / 2
     held[top, :, 2] = 0.12
-    boxes = fit_scene(times, held, fit_contacts(times, held)).boxes
+    boxes = fit_scene(times, held, fit_contacts(times, held, FEET), FEET).boxes
     assert len(boxes) == 1 and boxes[0][0][2] + boxes[0][1][2] == pytest.approx(0.12, abs=1e-3)
 
 
@@ -208,7 +209,6 @@ def test_fit_contacts_drops_a_heel_that_rises_while_its_toe_falls():
     the toe, as in a push-off), so the heel alone does not fall faster than g/2 there while its toe
     does: the foot is in the air, and neither site's slow moment is a rest (a 12 cm hop of the run
     35_17 got a 12 cm box under the heel)."""
-    from solver.contacts import SITES
 
     g, rate = 9.81, 120.0
     times = np.arange(int(1.2 * rate)) / rate
@@ -224,9 +224,9 @@ def test_fit_contacts_drops_a_heel_that_rises_while_its_toe_falls():
     heel = [SITES.index("l_heel"), SITES.index("r_heel")]
     top = air & (np.abs(s - up / 2) < 0.04)
     assert np.polyfit(s[top], pos[top, heel[0], 2], 2)[0] * 2 > -0.5 * g  # the heel alone: no fall
-    cs = fit_contacts(times, pos)
+    cs = fit_contacts(times, pos, FEET)
     assert all(c.end <= 0.5 + 1e-9 or c.start >= 0.5 + up - 1e-9 for c in cs), cs
-    assert fit_scene(times, pos, cs).boxes == ()
+    assert fit_scene(times, pos, cs, FEET).boxes == ()
 
 
 # -- tilted floors ----------------------------------------------------------------------------------
@@ -255,7 +255,7 @@ def plane_stances(slope, z0=0.03, box=None, lr=0.0, back=False):
 def test_tilted_floor_and_box_with_known_answer():
     slope = (0.02, -0.01)
     times, pos, cs = plane_stances(slope, box=(-0.5, 0.5, 0.25), back=True)
-    f = fit_scene(times, pos, cs)
+    f = fit_scene(times, pos, cs, FEET)
     np.testing.assert_allclose(f.floor_slope, slope, atol=1e-6)
     assert f.floor_z == pytest.approx(0.03, abs=1e-6)
     assert f.tilt_deg() == pytest.approx(np.degrees(np.arctan(np.hypot(*slope))), abs=1e-4)
@@ -277,10 +277,10 @@ def test_a_straight_walk_gets_no_cross_slope():
     to within what the offset does to it (the left feet stand 0.3 m further along x on average than the
     right ones: a 1 cm offset correlates with x)."""
     times, pos, cs = plane_stances((0.02, 0.0), lr=0.01)
-    f = fit_scene(times, pos, cs)
+    f = fit_scene(times, pos, cs, FEET)
     assert abs(f.floor_slope[1]) < 1e-3
     assert f.floor_slope[0] == pytest.approx(0.02, abs=2e-3)
-    both = fit_scene(times, pos, cs, min_span=0.1, max_slope=1.0)  # a cross slope fitted anyway
+    both = fit_scene(times, pos, cs, FEET, min_span=0.1, max_slope=1.0)  # a cross slope fitted anyway
     assert both.floor_slope[1] == pytest.approx(0.05, abs=5e-3)
 
 
@@ -288,7 +288,7 @@ def test_a_tilt_within_the_rest_scatter_is_written_level():
     """1 mm/m over the 4.2 m of the stances moves the floor 4.2 mm < LEVEL_TOL: level, no quat written."""
     assert LEVEL_TOL > 0.001 * 4.2
     times, pos, cs = plane_stances((0.001, 0.0))
-    f = fit_scene(times, pos, cs)
+    f = fit_scene(times, pos, cs, FEET)
     assert f.level and f.floor_slope == (0.0, 0.0)
     assert f.floor_z == pytest.approx(0.03, abs=2.2e-3)  # the middle of the ramp's 4.2 mm
     assert "quat" not in scene_mjcf(f, FIGURE)
@@ -296,7 +296,7 @@ def test_a_tilt_within_the_rest_scatter_is_written_level():
 
 def test_a_ramp_steeper_than_max_slope_is_not_a_tilt():
     times, pos, cs = plane_stances((2 * MAX_SLOPE, 0.0))
-    f = fit_scene(times, pos, cs)
+    f = fit_scene(times, pos, cs, FEET)
     assert f.level
 
 
@@ -334,7 +334,7 @@ def test_a_foot_passing_low_beside_a_box_pulls_its_side_back():
         ("l_toe", 0.6, 0.8, 1.5, 0.0, 0.3),
     ])
     pos[(times >= 0.55) & (times <= 0.58), SITES.index("r_heel")] = (1.0, 0.0, 0.1)
-    (c, h), = fit_scene(times, pos, cs).boxes
+    (c, h), = fit_scene(times, pos, cs, FEET).boxes
     assert c[0] - h[0] == pytest.approx(1.1)
     assert c[0] + h[0] == pytest.approx(1.5 + MARGIN)
 

@@ -20,6 +20,7 @@ from solver.errors import InputError
 ROOT = Path(__file__).resolve().parents[3]
 FPS = 100.0
 ONE_FOOT = {"left": ("l_heel", "l_toe")}
+FEET = {"left": ("l_heel", "l_toe"), "right": ("r_heel", "r_toe")}  # the shipped figure's
 SITES = ("l_heel", "l_toe")
 
 
@@ -107,7 +108,7 @@ def test_capture_stance_on_the_toy_figure(toy_model):
 def test_schedule_stance_and_agreement():
     times = np.arange(10) / 10
     contacts = [Contact("l_heel", 0.0, 0.2), Contact("l_toe", 0.2, 0.4), Contact("r_toe", 0.6, 0.9)]
-    s = schedule_stance(contacts, times)
+    s = schedule_stance(contacts, times, FEET)
     assert np.flatnonzero(s[:, 0]).tolist() == [0, 1, 2, 3, 4]
     assert np.flatnonzero(s[:, 1]).tolist() == [6, 7, 8, 9]
     c = np.zeros_like(s)
@@ -145,7 +146,7 @@ def test_127_33_schedule_matches_the_capture_stance():
     model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))
     ref = load_bvh_reference(ROOT / "models" / "cmu" / "127_33.bvh", model)
     cap = capture_stance(model, ref.qpos, ref.frame_time)
-    sched = schedule_stance(reference_contacts(model, ref.qpos, ref.frame_time), ref.times)
+    sched = schedule_stance(reference_contacts(model, ref.qpos, ref.frame_time), ref.times, FEET)
     a = stance_agreement(sched, cap)
     assert a.stance_frames > 0.4 * 2 * ref.count * 0.5  # both feet stand a good part of the clip
     assert a.recall >= 0.97 and a.precision >= 0.97, a
