@@ -172,26 +172,22 @@ def flight_mismatch(h: np.ndarray, reference_h: np.ndarray, fps: float) -> tuple
     return float((path & ~ref).sum() / fps), float((ref & ~path).sum() / fps)
 
 
+def _foot_columns(feet: Mapping[str, Sequence[str]]) -> list[list[int]]:
+    """Per foot, the columns of its sites in `foot_sites(feet)` (the figure's sites, foot by foot)."""
+    sizes = np.cumsum([0] + [len(members) for members in feet.values()])
+    return [list(range(a, b)) for a, b in zip(sizes[:-1], sizes[1:])]
+
+
 def _foot_floats(h: np.ndarray, on: np.ndarray, feet: Mapping[str, Sequence[str]]) -> np.ndarray:
     """max(0, lowest site height) [m] of each foot (`feet`, the columns of `h` their sites) in the frames
     where on[:, f] holds, all feet's values concatenated. on: (n, feet) bool."""
-    sites = foot_sites(feet)
-    floats = []
-    for f, members in enumerate(feet.values()):
-        ks = [list(sites).index(s) for s in members if s in sites]
-        if ks:
-            floats.append(np.maximum(0.0, h[on[:, f]][:, ks].min(axis=1)))
+    floats = [np.maximum(0.0, h[on[:, f]][:, ks].min(axis=1)) for f, ks in enumerate(_foot_columns(feet))]
     return np.concatenate(floats) if floats else np.zeros(0)
 
 
 def _feet_mask(ref_mask: np.ndarray, feet: Mapping[str, Sequence[str]]) -> np.ndarray:
     """(n, feet) bool: a foot in contact when any of its sites is (ref_mask (n, s), columns `foot_sites(feet)`)."""
-    sites = foot_sites(feet)
-    cols = []
-    for members in feet.values():
-        ks = [list(sites).index(s) for s in members if s in sites]
-        cols.append(ref_mask[:, ks].any(axis=1) if ks else np.zeros(len(ref_mask), bool))
-    return np.stack(cols, axis=1)
+    return np.stack([ref_mask[:, ks].any(axis=1) for ks in _foot_columns(feet)], axis=1)
 
 
 def plausibility(pos: np.ndarray, h: np.ndarray, fps: float, root: np.ndarray, ref_mask: np.ndarray,

@@ -41,7 +41,7 @@ import numpy as np
 from solver.contact_schedule import ContactSchedule
 from solver.contacts import Contact, checked_intervals
 from solver.errors import InputError
-from solver.figure import Figure, foot_sites
+from solver.figure import foot_sites, model_feet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 
@@ -167,7 +167,7 @@ def read_keyframes(path: str | os.PathLike, layout) -> tuple[Keyframes, Keyframe
     if terms is not None and terms not in ("default", "all"):
         raise InputError(f"{src}: field 'terms' is {terms!r}; give \"default\" (the constraints) or \"all\" (the "
                          "constraints and the force bounds), or remove the field")
-    feet = Figure.from_model(mj_model).feet if mj_model is not None and doc.get("contacts") else None  # else no figure
+    feet = model_feet(mj_model) if mj_model is not None and doc.get("contacts") else None
     contacts = read_contacts(doc.get("contacts", []), src, surfaces, feet)
     keyframes = Keyframes(times, values, mask, source=src)
     flights = read_flights(doc["flights"], src) if "flights" in doc else None

@@ -39,7 +39,8 @@ from solver.path_state import PathState
 
 __all__ = ["AugmentedLagrangian", "Preconditioner"]
 
-#: Birgin & Martinez (2014), Algorithm 4.1: rho grows by GAMMA when V did not fall below TAU of its last value
+#: [1] Birgin & Martinez (2014), Algorithm 4.1, their values: rho grows by GAMMA when the infeasibility V did
+#: not fall below TAU of its last value
 GAMMA = 10.0
 TAU = 0.5
 

@@ -52,7 +52,7 @@ UNIT_WEIGHT = 0.1
 #: The paper's weights (sec. 3, figure 9): lambda_1 : lambda_2 = 2 : 5 on renormalized terms (eq. 7).
 PAPER_WEIGHTS = (2.0, 5.0)
 
-#: Uniform quadrature (`rate=` given, or `default_rate`): at least this many points per second, and at
+#: Uniform quadrature (`rate=` given, or `default_rate`): at least MIN_RATE points per second [Hz], and at
 #: least MIN_POINTS_PER_KEY_INTERVAL points in the shortest keyframe interval (so a frame inserted there
 #: is determined by the integral).
 MIN_RATE = 40.0

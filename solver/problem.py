@@ -100,9 +100,9 @@ class Problem:
 
 
 def capture_airborne(model, times, qpos) -> tuple[tuple[float, float], ...]:
-    """The intervals [s] where a motion in the model's scene is airborne: every contact site's (the model's
-    figure's) lowest point (`solver.contacts.contact_points`) above the flight metric's 3 cm over the surface under it
-    (`solver.contacts.airborne_intervals`; `runner.motion_metrics` "flight_time_s").
+    """The intervals [s] where a motion in the model's scene is airborne: the lowest point of every contact
+    site of the model's figure (`solver.contacts.contact_points`) above the flight metric's 3 cm over the
+    surface under it (`solver.contacts.airborne_intervals`; `runner.motion_metrics` "flight_time_s").
 
     Args:
         model: MjModel of the scene with the figure. times: (n,) increasing frame times [s], n >= 2.

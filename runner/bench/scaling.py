@@ -339,7 +339,7 @@ def main(argv=None) -> int:
 
     from solver.keyframe_file import read_keyframes
 
-    # the keyframes alone, read against the figure (its feet name the contacts; their surfaces are the file's scene's)
+    # the keyframes, read against the figure alone: its feet name the contacts, whose surfaces are not this scene's
     keyframes, _ = read_keyframes(args.keyframes, mujoco.MjModel.from_xml_path(str(args.figure)))
     factors = [int(f) for f in args.factors.split(",")]
     print(f"scaling: {args.keyframes.name} ({keyframes.count} keyframes, {keyframes.times[-1] - keyframes.times[0]:.2f} s) "

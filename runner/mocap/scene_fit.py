@@ -361,9 +361,7 @@ def fit_scene(
     Raises:
         InputError: no contact at all (nothing to fit), or shapes disagree.
     """
-    times = np.asarray(times, float)
-    site_pos = np.asarray(site_pos, float)
-    sites = foot_sites(feet)
+    times, site_pos, sites = np.asarray(times, float), np.asarray(site_pos, float), foot_sites(feet)
     if site_pos.shape != (len(times), len(sites), 3):
         raise InputError(f"site_pos must have shape ({len(times)}, {len(sites)}, 3); got {site_pos.shape}")
     stances = _stances(times, site_pos, contacts, feet)
@@ -400,18 +398,14 @@ def fit_contacts(times: np.ndarray, site_pos: np.ndarray, feet: Mapping[str, Seq
     still in the air (not falling) still counts as resting on something; the clips have none.
 
     Args:
-        times: (n,) [s]. site_pos: (n, s, 3) [m]. feet: {foot: its sites}, the figure's (`Figure.feet`);
-            the s columns of `site_pos` are their sites, foot by foot. ballistic: [m/s^2] > 0.
+        times, site_pos, feet: as `fit_scene`. ballistic: [m/s^2] > 0.
         thresholds: of `detect_contacts`.
     """
-    site_pos = np.asarray(site_pos, float)
-    times = np.asarray(times, float)
-    sites = foot_sites(feet)
+    times, site_pos, sites = np.asarray(times, float), np.asarray(site_pos, float), foot_sites(feet)
     h = np.empty(site_pos.shape[:2])
     for members in feet.values():
-        ks = [list(sites).index(s) for s in members if s in sites]
-        if ks:
-            h[:, ks] = site_pos[:, ks, 2] - site_pos[:, ks, 2].min(axis=1, keepdims=True)
+        ks = [sites.index(s) for s in members]
+        h[:, ks] = site_pos[:, ks, 2] - site_pos[:, ks, 2].min(axis=1, keepdims=True)
     # per site (feet=None): heights here are above the foot's lowest site, which is always at 0, so a
     # still site is a rest by itself; the lowest site's own speed says nothing about where it rests
     thresholds.setdefault("feet", None)
@@ -421,7 +415,7 @@ def fit_contacts(times: np.ndarray, site_pos: np.ndarray, feet: Mapping[str, Seq
         rows = (times >= c.start - 1e-9) & (times <= c.end + 1e-9)
         if rows.sum() >= 3:
             t = times[rows] - times[rows].mean()
-            if 2.0 * np.polyfit(t, site_pos[rows, list(sites).index(c.site), 2], 2)[0] < -ballistic:
+            if 2.0 * np.polyfit(t, site_pos[rows, sites.index(c.site), 2], 2)[0] < -ballistic:
                 falling.append(c)
     # a foot whose one site falls is in the air: its other site's "rest" at the same time is no rest
     # either (its own motion can hide the fall: a push-off lifts the heel while the toe falls)

@@ -33,8 +33,9 @@ def make_engine(model, sites, backend: str = "analytic"):
     """An inverse-dynamics engine for `model` that also tracks `sites`, to share between terms.
 
     Args:
-        model: MjModel. sites: site names (the figure's, `Figure.contact_sites`; () none). backend: "analytic" (vectorized recursive Newton-Euler,
-            fast) or "mujoco" (`mj_inverse` + `mjd_inverseFD`, general, ~100x slower).
+        model: MjModel. sites: site names (the figure's, `Figure.contact_sites`; () none).
+        backend: "analytic" (vectorized recursive Newton-Euler, fast) or "mujoco" (`mj_inverse` +
+            `mjd_inverseFD`, general, ~100x slower).
     Raises:
         InputError: unknown backend (lists the valid ones), unknown site, or a model the analytic
             backend does not support.
