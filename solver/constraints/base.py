@@ -15,7 +15,7 @@ import numpy as np
 
 from solver.path_state import PathState
 
-__all__ = ["LIMIT", "RELATIVE", "RELATIVE_TOLERANCE", "SCHEDULE", "Constraint"]
+__all__ = ["LIMIT", "RELATIVE", "RELATIVE_TOLERANCE", "REPRESENTATION", "SCHEDULE", "Constraint"]
 
 #: the tolerance of a bound set by a reference motion's own figure (the no-jolt peaks, the effort, the peak
 #: ground force), relative to that bound: 5 %, one value for every such bound (a figure read off a
@@ -23,7 +23,7 @@ __all__ = ["LIMIT", "RELATIVE", "RELATIVE_TOLERANCE", "SCHEDULE", "Constraint"]
 RELATIVE_TOLERANCE = 0.05
 
 #: `Constraint.priority` values, lowest first to give
-RELATIVE, SCHEDULE, LIMIT = range(3)
+REPRESENTATION, RELATIVE, SCHEDULE, LIMIT = range(4)
 
 
 class Constraint:
@@ -41,9 +41,10 @@ class Constraint:
     rows: np.ndarray = np.zeros(0, int)
     labels: np.ndarray = np.zeros(0, object)
     #: the order in which limits give where the constraints cannot all be met (`solver.least_change`): a
-    #: broken pair of the lowest priority broken is raised first. RELATIVE (0): a bound set by the reference
-    #: motion (what the capture or the plain spline does); SCHEDULE (1): a wish of the contact schedule (a
-    #: foot planted, a site clear), an estimate from the capture or the animator; LIMIT (2): a limit of
+    #: broken pair of the lowest priority broken is raised first. REPRESENTATION (0): a bound of the spline's
+    #: own representation, not of the motion (unit quaternions between the frames); RELATIVE (1): a bound set by the reference
+    #: motion (what the capture or the plain spline does); SCHEDULE (2): a wish of the contact schedule (a
+    #: foot planted, a site clear), an estimate from the capture or the animator; LIMIT (3): a limit of
     #: the body, the scene or physics (a foot in the floor, a knee bent backwards, a wrench in flight)
     priority: int = LIMIT
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.constraints.base import Constraint
+from solver.constraints.base import REPRESENTATION, Constraint
 
 __all__ = ["UNIT_LIMIT", "UnitNorm"]
 
@@ -31,6 +31,7 @@ class UnitNorm(Constraint):
     """
 
     name, unit, scale = "unit", "1", 1.0
+    priority = REPRESENTATION
 
     def __init__(self, n_points: int, quat_q: np.ndarray, labels, tolerance: float):
         self.quat_q = np.asarray(quat_q, int).reshape(-1, 4)

@@ -357,6 +357,34 @@ def test_out_of_reach_limits_give_one_priority_at_a_time(shipped):
             assert lam is not lam0  # copies: a later update does not write into the stored estimates
 
 
+def test_the_unit_bound_gives_before_the_motion_and_the_scene(shipped):
+    """A free frame turned half a turn off its neighbours breaks the unit-norm bound between them (their
+    chords pass near the origin of R^4) beside the schedule's and the body's broken pairs: a stall raises
+    the unit bound alone (the spline's representation gives first, `REPRESENTATION`), and the next stall
+    the contact schedule's wishes, with the unit pairs' limits as the first stall left them."""
+    from solver.constraints.base import REPRESENTATION, SCHEDULE
+    from solver.least_change import _relax_unmet
+
+    al, basis, frames = _stalled(shipped)
+    values = frames.values.copy()
+    slot = np.asarray(StateLayout.from_model(shipped[0]).quat_slots)[1]  # the first ball joint's quaternion
+    k = int(np.flatnonzero(~frames.fixed[:, slot].any(axis=1))[0])
+    q = values[k, slot]
+    values[k, slot] = np.array([-q[1], q[0], -q[3], q[2]])  # q times the unit quaternion i: 180 deg about x
+    frames = replace(frames, values=values)
+    scaled = al.scaled_values(basis, frames.values)
+    broken = {c.name for c, s in zip(al.constraints, scaled) if (s > 1).any()}
+    assert "unit" in broken and len(broken) > 1
+    stored = ([np.zeros(c.size) for c in al.constraints], 1.0)
+    raised, level = _relax_unmet(al, basis, frames, scaled, stored)
+    assert level == REPRESENTATION and set(raised) == {"unit"}
+    unit = next(c for c in al.constraints if c.name == "unit")
+    after_first = unit.limit.copy()
+    raised, level = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored)
+    assert level == SCHEDULE and "unit" not in raised
+    assert np.array_equal(unit.limit, after_first)
+
+
 @pytest.mark.parametrize("above, expected", [(None, "schedule"), ("schedule", "limit"), ("limit", "schedule")])
 def test_a_priority_raised_without_progress_passes_the_stall_on(shipped, above, expected):
     """`above`: the priority the last stall raised when V has not fallen since. The next stall raises the
