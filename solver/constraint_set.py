@@ -47,7 +47,8 @@ there; the problem is made well posed instead of excused:
   still to the contact's end and flung it off at twice the capture's speed. The distance d itself is no bound on
   the measure, which is below it at speeds under b: a standing clip's keys, a capture's marker noise
   apart, summed 1.8-2.9 mm of "forced" slide, and a solve used it as a slow drift.
-* The anatomical limits are widened to the reference's own worst angle (`solver.constraints.anatomy`).
+* The anatomical limits are widened (docs/anatomy.md): off the hinge to what the keyframes force or the
+  capture does (not the plain spline's overshoot between keys); the others to the reference's own worst.
 * No jolts is a bound only with a capture (keyframes made from motion capture): then A is the larger of
   the capture's filtered peak and the plain spline's. The plain spline's peak alone is no bound: sparse
   keyframes give a spline smoother than any motion that meets its contacts (run-and-step without its
@@ -67,7 +68,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.constraints.acceleration import AccelerationBound
-from solver.constraints.anatomy import AngleBound
+from solver.constraints.anatomy import anatomy_constraints
 from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.constraints.effort import TorqueRMS, rms_torque
 from solver.constraints.penetration import Penetration
@@ -79,12 +80,9 @@ from solver.kinematics import TangentMap
 from solver.layout import StateLayout
 from solver.path_state import PathState
 from solver.peak_bounds import filter_capture
-from solver.quaternion import swing_angle_grad, twist_angle_grad
 from solver.spline import interpolate
 from solver.support import SupportSurfaces
 from solver.surfaces import StaticSurfaces
-from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
-from solver.terms.bending import flexion_angles
 
 __all__ = ["TOLERANCES", "Relaxation", "figure_constraints"]
 
@@ -157,7 +155,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
             out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     layout = StateLayout.from_model(model)
-    out += _anatomy(figure, layout, reference)
+    out += anatomy_constraints(figure, layout, reference, plain, capture, TOLERANCES)
     quats = [j for j in layout.joints if j.quat_index is not None]
     out.append(UnitNorm(len(t), np.array([j.quat_index for j in quats]), [j.name for j in quats], TOLERANCES["unit"]))
     if capture is not None:  # no jolts: bounded by what the captured motion does (module docstring)
@@ -428,64 +426,3 @@ def _effort(model, reference, plain, capture, engine) -> list:
     bound = max(rms_torque(_reference_state(model, reference, plain, engine).tau, w, dofs),
                 rms_torque(captured.tau, w, dofs))
     return [TorqueRMS(w, dofs, bound, RELATIVE_TOLERANCE * bound)] if bound > 0 else []
-
-
-def _anatomy(figure, layout, reference) -> list:
-    """hinge, hyperextension and rom (`solver.constraints.anatomy`), limits widened to the reference."""
-    n = len(reference.t)
-    Yr = reference.qpos
-    out = []
-    hinges = dict(figure.flexion_axes)
-    if hinges:
-        names = list(hinges)
-        idx = np.array([layout.joint(j).quat_index for j in names], int).reshape(-1, 4)
-        axes = np.array([hinges[j] for j in names], float).reshape(-1, 3)
-        axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-
-        def off(Y, idx=idx, axes=axes):
-            return off_hinge_angles(Y, idx, axes)
-
-        def off_grad(Y, rows, cols, idx=idx, axes=axes):
-            return swing_angle_grad(Y[rows[:, None], idx[cols]], axes[cols])
-
-        tol = TOLERANCES["hinge"]
-        limits = np.maximum(off(Yr).max(axis=0), tol)
-        out.append(AngleBound("hinge", n, off, off_grad, idx, limits, np.ones(len(names), bool), tol, names))
-
-        def minus_flex(Y, idx=idx, axes=axes):
-            return -flexion_angles(Y, idx, axes)
-
-        def minus_flex_grad(Y, rows, cols, idx=idx, axes=axes):
-            q = Y[rows[:, None], idx[cols]]
-            sign = np.where(q[:, :1] < 0, -1.0, 1.0)
-            return -sign * twist_angle_grad(q * sign, axes[cols])
-
-        limits = np.maximum(minus_flex(Yr).max(axis=0), 0.0)
-        out.append(AngleBound("hyperextension", n, minus_flex, minus_flex_grad, idx, limits,
-                              np.ones(len(names), bool), TOLERANCES["hyperextension"], names))
-    motions = range_of_motion(figure)
-    if motions:
-        idx = np.array([layout.joint(m.joint).quat_index for m in motions], int).reshape(-1, 4)
-        arrays = motion_axes(motions)
-
-        def ang(Y, idx=idx, motions=motions, arrays=arrays):
-            return motion_angles(Y, idx, motions, arrays)
-
-        x = ang(Yr)
-        hi = np.maximum([m.hi for m in motions], x.max(axis=0))
-        lo = np.minimum([m.lo for m in motions], x.min(axis=0))
-        both = np.concatenate([np.arange(len(motions))] * 2)
-        upper = np.r_[np.ones(len(motions), bool), np.zeros(len(motions), bool)]
-        keep = np.isfinite(np.r_[hi, lo])
-        sel = both[keep]
-        labels = [f"{m.joint} {m.motion}" for m in motions]
-
-        def ang2(Y, sel=sel, ang=ang):
-            return ang(Y)[:, sel]
-
-        def ang2_grad(Y, rows, cols, sel=sel, idx=idx, motions=motions, arrays=arrays):
-            return motion_angle_grads(Y, idx, motions, rows, sel[cols], arrays)
-
-        out.append(AngleBound("rom", n, ang2, ang2_grad, idx[sel], np.r_[hi, lo][keep], upper[keep],
-                              TOLERANCES["rom"], np.array(labels, object)[sel]))
-    return out

@@ -8,10 +8,11 @@ per joint, at every quadrature point:
     hyperextension   -theta <= limit (theta the flexion angle: negative bends backwards)   [deg]
     range of motion  lo <= x <= hi for each bounded motion (AAOS 1965)                      [deg]
 
-A limit is the anatomical one (a pure hinge, no hyperextension, the published range) widened to what the
-reference motion itself shows at its worst (the keyframes are met exactly, so the optimized path can
-never be held tighter than they are), plus the constraint's tolerance where the anatomical limit is 0:
-a hinge's swing angle is |swing|, not differentiable at 0, so its limit is at least the tolerance.
+A limit is the anatomical one (a pure hinge, no hyperextension, the published range) widened so that the
+keyframes, which are met exactly, meet it (`anatomy_constraints`): a hinge's to the largest swing the
+keyframes or the capture they came from show, hyperextension and range of motion to what the reference
+motion itself shows at its worst; plus the constraint's tolerance where the anatomical limit is 0: a
+hinge's swing angle is |swing|, not differentiable at 0, so its limit is at least the tolerance.
 """
 from __future__ import annotations
 
@@ -21,8 +22,11 @@ import numpy as np
 
 from solver.constraints.base import Constraint
 from solver.path_state import PathState, add_at
+from solver.quaternion import swing_angle_grad, twist_angle_grad
+from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
+from solver.terms.bending import flexion_angles
 
-__all__ = ["AngleBound"]
+__all__ = ["AngleBound", "anatomy_constraints"]
 
 
 class AngleBound(Constraint):
@@ -60,3 +64,84 @@ class AngleBound(Constraint):
         rows, cols = self.rows[on], self._cols[on]
         d = self.grads(state.Y, rows, cols) * (g[on] * self.sign[cols])[:, None]
         add_at(state.gY, (rows[:, None], self.idx[cols]), d)
+
+
+def _known_largest(angles, idx: np.ndarray, plain, capture=None) -> np.ndarray:
+    """(j,) the largest angles(Y) (n, j) [rad] at the keyframes that fix column j's quaternion (idx (j, 4))
+    and, with a capture (times, qpos), at its frames; -inf where neither says anything."""
+    keyed = np.flatnonzero(plain.is_keyframe)
+    fixed = plain.fixed[keyed][:, idx].all(axis=2)  # (k, j)
+    out = np.where(fixed, angles(plain.values[keyed]), -np.inf).max(axis=0, initial=-np.inf)
+    if capture is not None:
+        out = np.maximum(out, angles(np.asarray(capture[1], float)).max(axis=0))
+    return out
+
+
+def anatomy_constraints(figure, layout, reference, plain, capture, tolerances: dict) -> list:
+    """The hinge, hyperextension and rom constraints of a figure's problem (module docstring).
+
+    Args:
+        figure: `solver.figure.Figure` (its flexion axes). layout: its StateLayout. reference:
+            `ReferenceMotion` (the quadrature points, its qpos). plain: FrameSet of the plain spline (its
+            keyframes). capture: (times (m,), qpos (m, nq)) the keyframes came from, or None. tolerances:
+            {"hinge", "hyperextension", "rom": [rad]}.
+    Returns:
+        a list of `AngleBound`s, none for a figure without flexion axes or a range-of-motion table.
+    """
+    n = len(reference.t)
+    Yr = reference.qpos
+    out = []
+    hinges = dict(figure.flexion_axes)
+    if hinges:
+        names = list(hinges)
+        idx = np.array([layout.joint(j).quat_index for j in names], int).reshape(-1, 4)
+        axes = np.array([hinges[j] for j in names], float).reshape(-1, 3)
+        axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+
+        def off(Y, idx=idx, axes=axes):
+            return off_hinge_angles(Y, idx, axes)
+
+        def off_grad(Y, rows, cols, idx=idx, axes=axes):
+            return swing_angle_grad(Y[rows[:, None], idx[cols]], axes[cols])
+
+        tol = tolerances["hinge"]
+        limits = np.maximum(_known_largest(off, idx, plain, capture), tol)
+        out.append(AngleBound("hinge", n, off, off_grad, idx, limits, np.ones(len(names), bool), tol, names))
+
+        def minus_flex(Y, idx=idx, axes=axes):
+            return -flexion_angles(Y, idx, axes)
+
+        def minus_flex_grad(Y, rows, cols, idx=idx, axes=axes):
+            q = Y[rows[:, None], idx[cols]]
+            sign = np.where(q[:, :1] < 0, -1.0, 1.0)
+            return -sign * twist_angle_grad(q * sign, axes[cols])
+
+        limits = np.maximum(minus_flex(Yr).max(axis=0), 0.0)
+        out.append(AngleBound("hyperextension", n, minus_flex, minus_flex_grad, idx, limits,
+                              np.ones(len(names), bool), tolerances["hyperextension"], names))
+    motions = range_of_motion(figure)
+    if motions:
+        idx = np.array([layout.joint(m.joint).quat_index for m in motions], int).reshape(-1, 4)
+        arrays = motion_axes(motions)
+
+        def ang(Y, idx=idx, motions=motions, arrays=arrays):
+            return motion_angles(Y, idx, motions, arrays)
+
+        x = ang(Yr)
+        hi = np.maximum([m.hi for m in motions], x.max(axis=0))
+        lo = np.minimum([m.lo for m in motions], x.min(axis=0))
+        both = np.concatenate([np.arange(len(motions))] * 2)
+        upper = np.r_[np.ones(len(motions), bool), np.zeros(len(motions), bool)]
+        keep = np.isfinite(np.r_[hi, lo])
+        sel = both[keep]
+        labels = [f"{m.joint} {m.motion}" for m in motions]
+
+        def ang2(Y, sel=sel, ang=ang):
+            return ang(Y)[:, sel]
+
+        def ang2_grad(Y, rows, cols, sel=sel, idx=idx, motions=motions, arrays=arrays):
+            return motion_angle_grads(Y, idx, motions, rows, sel[cols], arrays)
+
+        out.append(AngleBound("rom", n, ang2, ang2_grad, idx[sel], np.r_[hi, lo][keep], upper[keep],
+                              tolerances["rom"], np.array(labels, object)[sel]))
+    return out
