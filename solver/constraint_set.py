@@ -47,8 +47,9 @@ there; the problem is made well posed instead of excused:
   still to the contact's end and flung it off at twice the capture's speed. The distance d itself is no bound on
   the measure, which is below it at speeds under b: a standing clip's keys, a capture's marker noise
   apart, summed 1.8-2.9 mm of "forced" slide, and a solve used it as a slow drift.
-* The anatomical limits are widened (docs/anatomy.md): off the hinge to what the keyframes force or the
-  capture does (not the plain spline's overshoot between keys); the others to the reference's own worst.
+* The anatomical limits are widened (docs/anatomy.md): off the hinge to a known path through the keyframes
+  (the capture, not the plain spline's overshoot between keys, else the plain spline); the others to the
+  reference's own worst.
 * No jolts is a bound only with a capture (keyframes made from motion capture): then A is the larger of
   the capture's filtered peak and the plain spline's. The plain spline's peak alone is no bound: sparse
   keyframes give a spline smoother than any motion that meets its contacts (run-and-step without its

@@ -9,10 +9,11 @@ per joint, at every quadrature point:
     range of motion  lo <= x <= hi for each bounded motion (AAOS 1965)                      [deg]
 
 A limit is the anatomical one (a pure hinge, no hyperextension, the published range) widened so that the
-keyframes, which are met exactly, meet it (`anatomy_constraints`): a hinge's to the largest swing the
-keyframes or the capture they came from show, hyperextension and range of motion to what the reference
-motion itself shows at its worst; plus the constraint's tolerance where the anatomical limit is 0: a
-hinge's swing angle is |swing|, not differentiable at 0, so its limit is at least the tolerance.
+keyframes, which are met exactly, meet it (`anatomy_constraints`): a hinge's to the largest swing of a
+known path through them (the capture they came from, else the plain spline), hyperextension and range
+of motion to what the reference motion itself shows at its worst; plus the constraint's tolerance where
+the anatomical limit is 0: a hinge's swing angle is |swing|, not differentiable at 0, so its limit is
+at least the tolerance.
 """
 from __future__ import annotations
 
@@ -66,15 +67,16 @@ class AngleBound(Constraint):
         add_at(state.gY, (rows[:, None], self.idx[cols]), d)
 
 
-def _known_largest(angles, idx: np.ndarray, plain, capture=None) -> np.ndarray:
-    """(j,) the largest angles(Y) (n, j) [rad] at the keyframes that fix column j's quaternion (idx (j, 4))
-    and, with a capture (times, qpos), at its frames; -inf where neither says anything."""
+def _witness_largest(angles, idx: np.ndarray, reference, plain, capture=None) -> np.ndarray:
+    """(j,) the largest angles(Y) (n, j) [rad] of a known path through the keyframes: with a capture (times,
+    qpos), the capture's at its frames and the keyframes' where they fix column j's quaternion (idx (j, 4));
+    else the reference motion's own (the plain spline: no other path through them is known)."""
+    if capture is None:
+        return angles(reference.qpos).max(axis=0)
     keyed = np.flatnonzero(plain.is_keyframe)
     fixed = plain.fixed[keyed][:, idx].all(axis=2)  # (k, j)
     out = np.where(fixed, angles(plain.values[keyed]), -np.inf).max(axis=0, initial=-np.inf)
-    if capture is not None:
-        out = np.maximum(out, angles(np.asarray(capture[1], float)).max(axis=0))
-    return out
+    return np.maximum(out, angles(np.asarray(capture[1], float)).max(axis=0))
 
 
 def anatomy_constraints(figure, layout, reference, plain, capture, tolerances: dict) -> list:
@@ -105,7 +107,7 @@ def anatomy_constraints(figure, layout, reference, plain, capture, tolerances: d
             return swing_angle_grad(Y[rows[:, None], idx[cols]], axes[cols])
 
         tol = tolerances["hinge"]
-        limits = np.maximum(_known_largest(off, idx, plain, capture), tol)
+        limits = np.maximum(_witness_largest(off, idx, reference, plain, capture), tol)
         out.append(AngleBound("hinge", n, off, off_grad, idx, limits, np.ones(len(names), bool), tol, names))
 
         def minus_flex(Y, idx=idx, axes=axes):

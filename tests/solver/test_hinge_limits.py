@@ -1,8 +1,8 @@
-"""The hinge constraint's limits (solver.constraint_set): each knee's and elbow's rotation off its hinge is held
-to what the keyframes force (their own largest swing) and, with a capture, to what the capture does, not to
-what the plain spline does between the keyframes. Checked on keyframes whose right elbow swings a known
-angle off its hinge (built from an axis and an angle with scipy's rotations), where the plain spline
-overshoots that angle between them."""
+"""The hinge constraint's limits (solver.constraints.anatomy): each knee's and elbow's rotation off its hinge is
+held to the largest swing of a known path through the keyframes: the capture they came from (with the
+keyframes' own swing), else the plain spline. Checked on keyframes whose right elbow swings a known angle
+off its hinge (built from an axis and an angle with scipy's rotations), where the plain spline overshoots
+that angle between them; the swings are measured by scipy's rotations (the twist about the axis taken out)."""
 from dataclasses import replace
 
 import numpy as np
@@ -59,20 +59,27 @@ def _limit(hinge, joint):
     return float(hinge.limit[list(hinge.labels).index(joint)])
 
 
-def test_the_hinge_is_held_to_the_keyframes_swing_not_the_plain_splines(swung):
+def test_a_capture_holds_the_hinge_to_its_swing_not_the_plain_splines_overshoot(swung):
+    """A capture through the keyframes that swings the right elbow SWING all along: the limit is SWING,
+    where the plain spline through the keyframes overshoots it; the left elbow's is its largest swing at
+    the keyframes that fix it or in the capture."""
     model, keyframes, qi, axis = swung
-    lc = build_least_change(model, keyframes)
-    t = np.linspace(lc.plain.times[0], lc.plain.times[-1], 2001)
-    plain = off_hinge_angles(interpolate(lc.plain.times, lc.plain.values, t), qi[None], axis[None])
-    assert np.degrees(plain.max()) > SWING + 1.0  # the plain spline overshoots the keyed swing
+    plain = build_least_change(model, keyframes).plain
+    t = np.linspace(plain.times[0], plain.times[-1], 2001)
+    over = off_hinge_angles(interpolate(plain.times, plain.values, t), qi[None], axis[None])
+    assert np.degrees(over.max()) > SWING + 1.0  # the plain spline overshoots the keyed swing
+    times = np.linspace(plain.times[0], plain.times[-1], 241)
+    qpos = interpolate(plain.times, plain.values, times)
+    qpos[:, qi] = _swing(axis, SWING)
+    lc = build_least_change(model, keyframes, capture=(times, qpos))
     assert np.degrees(_limit(_hinge(lc), "r_elbow")) == pytest.approx(SWING, abs=1e-9)
-    # the left elbow as keyed: its largest swing over the keyframes, by scipy's swing-twist split
     layout = solver.StateLayout.from_model(model)
     left = np.array(solver.Figure.from_model(model).flexion_axes["l_elbow"], float)
+    left = left / np.linalg.norm(left)
     li = layout.joint("l_elbow").quat_index
     fixed = keyframes.mask[:, li].all(axis=1)  # a partial keyframe that leaves the joint free forces nothing
-    keyed = max(_swing_angle(q, left / np.linalg.norm(left)) for q in keyframes.values[fixed][:, li])
-    assert _limit(_hinge(lc), "l_elbow") == pytest.approx(max(keyed, TOLERANCES["hinge"]), abs=1e-9)
+    known = [_swing_angle(q, left) for q in np.r_[keyframes.values[fixed][:, li], qpos[:, li]]]
+    assert _limit(_hinge(lc), "l_elbow") == pytest.approx(max(max(known), TOLERANCES["hinge"]), abs=1e-9)
 
 
 def test_a_capture_through_the_keyframes_widens_the_hinge_to_its_own_swing(swung):
@@ -86,3 +93,14 @@ def test_a_capture_through_the_keyframes_widens_the_hinge_to_its_own_swing(swung
     qpos[120, qi] = _swing(axis, WIDER)
     lc = build_least_change(model, keyframes, capture=(times, qpos))
     assert np.degrees(_limit(_hinge(lc), "r_elbow")) == pytest.approx(WIDER, abs=1e-9)
+
+
+def test_without_a_capture_the_plain_spline_is_the_known_path(swung):
+    """Keyframes alone (an animator's): the plain spline is the only path known to pass through them, so the
+    limit is its own largest swing at the quadrature points."""
+    model, keyframes, qi, axis = swung
+    lc = build_least_change(model, keyframes)
+    Y = interpolate(lc.plain.times, lc.plain.values, lc.al.t)
+    expected = max(_swing_angle(q, axis) for q in Y[:, qi])
+    assert np.degrees(expected) > SWING + 1.0
+    assert _limit(_hinge(lc), "r_elbow") == pytest.approx(expected, abs=1e-9)
