@@ -221,10 +221,11 @@ def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list,
     cut V: module docstring); returns ({constraint: largest amount [SI]}, the priority raised). The loop
     passes the priority it raised at the last stall as `above` when V has not fallen since: raising it
     again would not end the conflict (83_02 at its contacts raised its acceleration bounds at 14 stalls
-    in a row while its slide stayed 3.9 tolerances over). So the bounds set by the reference motion (no
-    jolts, effort) give first, the contact schedule's wishes (planted, slide, clearance) next, and the limits of the body, the
-    scene and physics (a foot in the floor, a knee bent backwards) only if the solve stalls with nothing
-    else broken: a lexicographic order of the constraints, as in prioritized inverse kinematics (Kanoun,
+    in a row while its slide stayed 3.9 tolerances over). So the unit-norm bound of the spline's
+    representation gives first, then the bounds set by the reference motion (no jolts, effort), the
+    contact schedule's wishes (planted, slide, clearance) next, and the limits of the body, the scene and
+    physics (a foot in the floor, a knee bent backwards) only if the solve stalls with nothing else
+    broken: a lexicographic order of the constraints, as in prioritized inverse kinematics (Kanoun,
     Lamiraux & Wieber, "Kinematic control of redundant manipulators: generalizing the task-priority
     framework to inequality tasks", IEEE T-RO 27, 2011)."""
     state = al.state(basis, frames.values)

@@ -41,11 +41,12 @@ class Constraint:
     rows: np.ndarray = np.zeros(0, int)
     labels: np.ndarray = np.zeros(0, object)
     #: the order in which limits give where the constraints cannot all be met (`solver.least_change`): a
-    #: broken pair of the lowest priority broken is raised first. REPRESENTATION (0): a bound of the spline's
-    #: own representation, not of the motion (unit quaternions between the frames); RELATIVE (1): a bound set by the reference
-    #: motion (what the capture or the plain spline does); SCHEDULE (2): a wish of the contact schedule (a
-    #: foot planted, a site clear), an estimate from the capture or the animator; LIMIT (3): a limit of
-    #: the body, the scene or physics (a foot in the floor, a knee bent backwards, a wrench in flight)
+    #: broken pair of the lowest priority broken is raised first. REPRESENTATION (0): a bound of the
+    #: spline's own representation, not of the motion (unit quaternions between the frames); RELATIVE (1):
+    #: a bound set by the reference motion (what the capture or the plain spline does); SCHEDULE (2): a wish
+    #: of the contact schedule (a foot planted, a site clear), an estimate from the capture or the animator;
+    #: LIMIT (3): a limit of the body, the scene or physics (a foot in the floor, a knee bent backwards, a
+    #: wrench in flight)
     priority: int = LIMIT
 
     @property
