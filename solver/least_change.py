@@ -13,8 +13,10 @@ residual of the augmented integrand predicts the largest decrease (`solver.least
 sec. 4.2 and fig. 5), never closer than `min_gap` to another frame.
 
 A pair the method cannot meet on any frame set (it stalls before and after refining) is reported, with
-where and by how much, and its limit is raised to what the path reaches, so the rest of the problem is
-solved as posed (`Solution.unmet`, in the constraint's SI unit). The multipliers and the penalty go back
+where and by how much, and the lowest priority in the conflict gives (`_relax_unmet`): its broken pairs'
+limits are raised to what the path reaches, and its met pairs that hold a broken pair of a higher
+priority back give what that pair needs (`_bind_freed`), so the rest of the problem is solved as posed
+(`Solution.unmet`, in the constraint's SI unit). The multipliers and the penalty go back
 to their values before the stall: on an infeasible problem the first-order estimates of every
 constraint in the conflict grow without bound, and carried past the relaxation they would push the path
 away from the point the raised limits were read at (safeguarded multipliers, Birgin & Martinez 2014,
@@ -24,7 +26,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -214,35 +216,103 @@ def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) ->
 
 
 def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list, before: tuple,
-                 above: int | None = None) -> tuple[dict, int]:
-    """Raise the limit of every pair still broken of the lowest `Constraint.priority` broken above `above`
-    (of the lowest broken if none is) to what the path reaches and set its multiplier to 0, the other
-    multipliers and the penalty back to `before` ((multipliers, rho) after the last subproblem that still
-    cut V: module docstring); returns ({constraint: largest amount [SI]}, the priority raised). The loop
-    passes the priority it raised at the last stall as `above` when V has not fallen since: raising it
-    again would not end the conflict (83_02 at its contacts raised its acceleration bounds at 14 stalls
-    in a row while its slide stayed 3.9 tolerances over). So the unit-norm bound of the spline's
-    representation gives first, then the bounds set by the reference motion (no jolts, effort), the
-    contact schedule's wishes (planted, slide, clearance) next, and the limits of the body, the scene and
-    physics (a foot in the floor, a knee bent backwards) only if the solve stalls with nothing else
-    broken: a lexicographic order of the constraints, as in prioritized inverse kinematics (Kanoun,
-    Lamiraux & Wieber, "Kinematic control of redundant manipulators: generalizing the task-priority
-    framework to inequality tasks", IEEE T-RO 27, 2011)."""
+                 above: int | None = None) -> tuple[dict, int | None, list]:
+    """Let the lowest `Constraint.priority` in the conflict give (module docstring): its broken pairs are
+    raised to what the path reaches, and its pairs that hold a broken pair of a higher priority back (met,
+    but beyond their limit with their multipliers grown since `before`) are freed for one subproblem
+    (their limit +inf, `_bind_freed` then raises it by what the higher ones need).
+
+    The conflict's levels are those broken and, below the highest broken, those holding; `level` is the
+    lowest above `above` (the loop passes the priority it let give at the last stall when V has not
+    fallen since: letting it give again would not end the conflict; 83_02 at its contacts raised its
+    acceleration bounds at 14 stalls in a row while its slide stayed 3.9 tolerances over), else the
+    lowest. So the unit-norm bound of the spline's representation gives first, then the bounds set by the
+    reference motion (no jolts, effort), the contact schedule's wishes (planted, slide, clearance) next,
+    and the limits of the body, the scene and physics (a foot in the floor, a knee bent backwards) last: a
+    lexicographic order, as in prioritized inverse kinematics (Kanoun, Lamiraux & Wieber, "Kinematic
+    control of redundant manipulators: generalizing the task-priority framework to inequality tasks",
+    IEEE T-RO 27, 2011). A met pair counts as well as a broken one: 74_05 keyed every 0.33 s held its
+    slide (met) by turning a knee 3.8 degrees off its hinge (broken), and raising the hinge, the broken
+    one, put the body's limit below the schedule's wish.
+
+    Args: al: its multipliers after the stall. scaled: (p,) c/tol per constraint on `frames`. before:
+        (multipliers, rho) after the last subproblem that still cut V; they go back to these, a raised
+        or freed pair's multiplier to 0.
+    Returns: ({constraint: largest amount raised [SI]}, the priority let give (None: nothing broken),
+        the freed pairs [(constraint index, (p,) mask, limit before, [(index, (p,) mask) of the broken
+        pairs above]), ...] for `_bind_freed`).
+    """
     state = al.state(basis, frames.values)
-    al.lam, al.rho = [lam.copy() for lam in before[0]], before[1]
-    unmet = {}
-    broken = [c.priority for c, ch in zip(al.constraints, scaled) if (ch > 1.0).any()]
-    level = min((p for p in broken if above is None or p > above), default=min(broken, default=None))
-    for j, (c, ch) in enumerate(zip(al.constraints, scaled)):
-        bad = ch > 1.0
-        if bad.any() and c.priority == level:
+    bad = [ch > 1.0 for ch in scaled]
+    hold = [(ch > 0.0) & (ch <= 1.0) & (lam > lam0) for ch, lam, lam0 in zip(scaled, al.lam, before[0])]
+    al.lam, al.rho, al.V = [lam.copy() for lam in before[0]], before[1], np.inf
+    top = max((c.priority for c, b in zip(al.constraints, bad) if b.any()), default=None)
+    levels = [c.priority for c, b, h in zip(al.constraints, bad, hold) if b.any() or (h.any() and top is not None and c.priority < top)]
+    level = min((p for p in levels if above is None or p > above), default=min(levels, default=None))
+    above_it = [(j, b) for j, (c, b) in enumerate(zip(al.constraints, bad)) if b.any() and c.priority > level]
+    unmet, freed = {}, []
+    for j, c in enumerate(al.constraints):
+        b, h = bad[j], hold[j] if above_it else np.zeros_like(bad[j])
+        if c.priority != level or not (b.any() or h.any()):
+            continue
+        c.limit = c.limit.copy()
+        if b.any():
             v = c.values(state)
-            unmet[c.name] = max(unmet.get(c.name, 0.0), float(v[bad].max()))
-            c.limit = c.limit.copy()
-            c.limit[bad] += v[bad]
-            al.lam[j] = np.where(bad, 0.0, al.lam[j])
-    al.V = np.inf
-    return unmet, level
+            unmet[c.name] = max(unmet.get(c.name, 0.0), float(v[b].max()))
+            c.limit[b] += v[b]
+        if h.any():
+            freed.append((j, h, c.limit.copy(), above_it))
+            c.limit[h] = np.inf
+        al.lam[j] = np.where(b | h, 0.0, al.lam[j])
+    return unmet, level, freed
+
+
+def _bind_freed(al: AugmentedLagrangian, basis, stalled: FrameSet, solved: FrameSet, freed: list,
+                quat_slots) -> tuple[FrameSet, dict, int]:
+    """Give the freed pairs (`_relax_unmet`) what the broken pairs above them need, no more: along the
+    segment from the stalled path to the one solved without them (frame values blended, free quaternions
+    made unit), the first path on which those pairs are met (bisection, until the freed pairs' values
+    at its ends differ by under their tolerance) becomes the path, and each freed limit the larger of
+    its own and what that path reaches. If the solved path does not meet them either, the freed limits go
+    back and the solved path stays: the conflict was elsewhere. Returns (frames, {constraint: largest
+    amount raised [SI]}, the paths evaluated)."""
+    if not freed:
+        return solved, {}, 0
+    targets, limits, evaluated = freed[0][3], [(al.constraints[j], h, old) for j, h, old, _ in freed], []
+    for c, _, old in limits:
+        c.limit = old
+
+    def at(alpha: float) -> tuple[FrameSet, float, np.ndarray]:
+        """The blended path, the worst broken pair's c/tol on it, the freed pairs' c/tol on it."""
+        evaluated.append(alpha)
+        frames = _with_frames(replace(stalled, values=(1.0 - alpha) * stalled.values + alpha * solved.values),
+                              np.zeros(0), quat_slots)
+        state = al.state(basis, frames.values)
+        worst = max(float((al.constraints[j].values(state) / al.constraints[j].tolerance)[b].max()) for j, b in targets)
+        return frames, worst, np.concatenate([(c.values(state) / c.tolerance)[h] for c, h, _ in limits])
+
+    (a, lo), (b, hi) = (0.0, at(0.0)), (1.0, at(1.0))
+    if hi[1] > 1.0:
+        return solved, {}, len(evaluated)
+    for _ in range(np.finfo(float).nmant):  # until the freed values are read to within their tolerance
+        if np.abs(hi[2] - lo[2]).max() <= 1.0:
+            break
+        mid = 0.5 * (a + b)
+        point = at(mid)
+        (a, lo), (b, hi) = ((a, lo), (mid, point)) if point[1] <= 1.0 else ((mid, point), (b, hi))
+    frames, state, unmet = hi[0], al.state(basis, hi[0].values), {}
+    for c, h, old in limits:
+        rise = np.where(h, np.maximum(c.values(state), 0.0), 0.0)
+        c.limit = old + rise
+        if rise.max() > 0.0:
+            unmet[c.name] = max(unmet.get(c.name, 0.0), float(rise.max()))
+    return frames, unmet, len(evaluated)
+
+
+def _merge(unmet: dict, raised: dict) -> None:
+    """Add `raised` ({constraint: amount [SI]}) to `unmet`, keeping each constraint's largest amount."""
+    for name, amount in raised.items():
+        unmet[name] = max(unmet.get(name, 0.0), amount)
 
 
 def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = None, *,
@@ -266,7 +336,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     frames, basis = _start(lc, o.min_gap)
     rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
     evals, level_its, stall, stalled_before, kind, last = 0, 0, 0, False, "start", None
-    before = al.estimates()  # the multipliers and penalty before a stall
+    before, freed, stalled = al.estimates(), [], None  # the multipliers and penalty before a stall
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
         left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
@@ -280,7 +350,9 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         r = solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=basis,
                              max_evals=o.max_evals - evals if o.max_evals else 0,
                              max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb)
-        frames, evals = r.frames, evals + r.result.n_evals
+        frames, bound, n = _bind_freed(al, basis, stalled, r.frames, freed, quat)
+        evals, freed = evals + r.result.n_evals + n, []
+        _merge(unmet, bound)
         rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
         trace.append(np.asarray(r.result.trace))
         if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
@@ -298,9 +370,9 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         level_its, kind, scores = level_its + 1, "boost", None
         if stall >= 2 and stalled_before:  # out of reach: raise one priority's limits (_relax_unmet)
             above = last[0] if last and STALL_RATIO * last[1] < V else None
-            raised, level = _relax_unmet(al, basis, frames, scaled, before, above)
-            unmet.update({name: max(unmet.get(name, 0.0), amount) for name, amount in raised.items()})
-            stall, stalled_before, last = 0, False, (level, V)
+            raised, level, freed = _relax_unmet(al, basis, frames, scaled, before, above)
+            stalled, stall, stalled_before, last = frames, 0, False, (level, V)
+            _merge(unmet, raised)
             continue
         if not (met or stall >= 2 or level_its >= o.per_level):
             continue

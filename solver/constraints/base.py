@@ -40,8 +40,8 @@ class Constraint:
     tolerance: float = 1.0
     rows: np.ndarray = np.zeros(0, int)
     labels: np.ndarray = np.zeros(0, object)
-    #: the order in which limits give where the constraints cannot all be met (`solver.least_change`): a
-    #: broken pair of the lowest priority broken is raised first. REPRESENTATION (0): a bound of the
+    #: the order in which limits give where the constraints cannot all be met (`solver.least_change`): the
+    #: lowest priority in the conflict (broken, or met and holding a broken one back) gives first. REPRESENTATION (0): a bound of the
     #: spline's own representation, not of the motion (unit quaternions between the frames); RELATIVE (1):
     #: a bound set by the reference motion (what the capture or the plain spline does); SCHEDULE (2): a wish
     #: of the contact schedule (a foot planted, a site clear), an estimate from the capture or the animator;

@@ -124,10 +124,10 @@ def test_bounds_relative_to_the_reference_give_before_the_scenes(captured):
     scaled = [np.zeros(c.size) for c in lc.al.constraints]
     scaled[acc][0] = scaled[pen][0] = 2.0  # both broken at twice their tolerance
     stored = lc.al.estimates()
-    unmet, _ = _relax_unmet(lc.al, basis, frames, scaled, stored)
+    unmet, _, _ = _relax_unmet(lc.al, basis, frames, scaled, stored)
     assert list(unmet) == ["acceleration"]
     assert np.array_equal(lc.al.constraints[pen].limit, before[pen])
     assert lc.al.constraints[acc].limit[0] != before[acc][0]
     scaled[acc][0] = 0.0  # only the scene's limit is still broken: now it gives
-    unmet, _ = _relax_unmet(lc.al, basis, frames, scaled, stored)
+    unmet, _, _ = _relax_unmet(lc.al, basis, frames, scaled, stored)
     assert list(unmet) == ["penetration"]

@@ -342,9 +342,12 @@ def test_out_of_reach_limits_give_one_priority_at_a_time(shipped):
     assert {SCHEDULE, LIMIT} <= broken
     for level in (SCHEDULE, LIMIT):
         before = [(c.limit.copy(), sc > 1.0) for c, sc in zip(al.constraints, al.scaled_values(basis, frames.values))]
-        al.lam, al.rho = [np.full(c.size, 1e6) for c in al.constraints], 1e9  # what a stall inflates
         stored = ([np.arange(c.size, dtype=float) + 1.0 for c in al.constraints], 3.0)
-        raised, raised_level = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored)
+        scaled = al.scaled_values(basis, frames.values)
+        al.rho = 1e9  # what a stall inflates: the broken pairs' multipliers (no met pair holds one back)
+        al.lam = [np.where(sc > 1.0, 1e6, lam0) for sc, lam0 in zip(scaled, stored[0])]
+        raised, raised_level, freed = _relax_unmet(al, basis, frames, scaled, stored)
+        assert not freed
         assert raised and {c.priority for c in al.constraints if c.name in raised} == {level} == {raised_level}
         assert al.rho == 3.0
         for c, sc, (old, bad), lam, lam0 in zip(al.constraints, al.scaled_values(basis, frames.values), before,
@@ -376,11 +379,11 @@ def test_the_unit_bound_gives_before_the_motion_and_the_scene(shipped):
     broken = {c.name for c, s in zip(al.constraints, scaled) if (s > 1).any()}
     assert "unit" in broken and len(broken) > 1
     stored = ([np.zeros(c.size) for c in al.constraints], 1.0)
-    raised, level = _relax_unmet(al, basis, frames, scaled, stored)
+    raised, level, _ = _relax_unmet(al, basis, frames, scaled, stored)
     assert level == REPRESENTATION and set(raised) == {"unit"}
     unit = next(c for c in al.constraints if c.name == "unit")
     after_first = unit.limit.copy()
-    raised, level = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored)
+    raised, level, _ = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored)
     assert level == SCHEDULE and "unit" not in raised
     assert np.array_equal(unit.limit, after_first)
 
@@ -396,6 +399,72 @@ def test_a_priority_raised_without_progress_passes_the_stall_on(shipped, above, 
     levels = {"schedule": SCHEDULE, "limit": LIMIT, None: None}
     al, basis, frames = _stalled(shipped)
     stored = ([np.zeros(c.size) for c in al.constraints], 1.0)
-    raised, level = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored, levels[above])
+    raised, level, _ = _relax_unmet(al, basis, frames, al.scaled_values(basis, frames.values), stored, levels[above])
     assert level == levels[expected]
     assert raised and {c.priority for c in al.constraints if c.name in raised} == {levels[expected]}
+
+
+class _Linear:
+    """A constraint measure = a x + b on the free value x of a three-frame path (frame 1, column 0)."""
+
+    def __init__(self, name, priority, a, b):
+        from solver.constraints.base import Constraint
+
+        self.c = type("Linear", (Constraint,), {"measure": lambda c, P: a * P[1, 0] + b})()
+        self.c.name, self.c.priority, self.c.tolerance = name, priority, 1.0
+        self.c.limit, self.c.rows, self.c.labels = np.zeros(1), np.zeros(1, int), np.array([name], object)
+
+
+class _Toy:
+    """The parts of an AugmentedLagrangian `_relax_unmet` and `_bind_freed` use; the state is the values."""
+
+    def __init__(self, constraints):
+        self.constraints, self.rho, self.V = constraints, 1e6, 1.0
+        self.lam = [np.zeros(1) for _ in constraints]
+
+    def state(self, basis, P):
+        return P
+
+
+def _toy_frames(x):
+    from solver.frames import FrameSet
+
+    fixed = np.array([[True], [False], [True]])
+    return FrameSet(np.array([0.0, 1.0, 2.0]), np.array([[0.0], [x], [0.0]]), fixed, fixed[:, 0].copy())
+
+
+def test_a_met_pair_that_holds_a_higher_one_back_gives_what_it_needs():
+    """A hand-built conflict: the schedule's x <= 0 (tolerance 1, met at 0.5 but beyond its limit, its
+    multiplier grown) holds the body's 3 - x <= 0 (broken, 2.5 tolerances over) back. The schedule gives,
+    not the body: its pair is freed for a subproblem, and bound again at what the body needs, x = 2 (the
+    body met within its tolerance), read to within the schedule's tolerance, not where the solve without
+    it went (x = 4); the path is moved there and the body's limit is untouched. If the path solved
+    without it does not meet the body either, the freed limit goes back."""
+    from solver.constraints.base import LIMIT, RELATIVE, SCHEDULE
+    from solver.least_change import _bind_freed, _relax_unmet
+
+    for solved_x, bound in ((4.0, True), (1.5, False)):
+        low, high, other = (_Linear("slide", SCHEDULE, 1.0, 0.0).c, _Linear("hinge", LIMIT, -1.0, 3.0).c,
+                            _Linear("acceleration", RELATIVE, 0.0, -10.0).c)
+        al = _Toy([low, high, other])
+        stalled = _toy_frames(0.5)
+        scaled = [c.values(stalled.values) / c.tolerance for c in al.constraints]
+        before = ([np.zeros(1) for _ in al.constraints], 1e3)
+        al.lam = [np.array([1e3]), np.array([5e6]), np.zeros(1)]  # grown by the stall
+        raised, level, freed = _relax_unmet(al, None, stalled, scaled, before)
+        assert level == SCHEDULE and raised == {} and al.rho == 1e3 and al.lam[0][0] == 0.0
+        assert np.isinf(low.limit[0]) and high.limit[0] == 0.0 and other.limit[0] == 0.0
+        frames, amounts, _ = _bind_freed(al, None, stalled, _toy_frames(solved_x), freed, np.zeros((0, 4), int))
+        assert high.limit[0] == 0.0 and other.limit[0] == 0.0
+        if bound:
+            x = frames.values[1, 0]
+            assert 2.0 <= x < 3.0 and low.limit[0] == pytest.approx(x, abs=1e-12) and amounts == {"slide": x}
+            assert high.values(frames.values)[0] <= high.tolerance
+            np.testing.assert_array_equal(frames.values[[0, 2]], stalled.values[[0, 2]])  # keyframes kept
+        else:
+            assert low.limit[0] == 0.0 and amounts == {} and frames.values[1, 0] == solved_x
+    high.limit[0] = 10.0  # nothing broken: a met pair holds nothing back, and nothing gives
+    scaled = [c.values(stalled.values) / c.tolerance for c in al.constraints]
+    al.lam = [np.array([1e3]), np.zeros(1), np.zeros(1)]
+    assert _relax_unmet(al, None, stalled, scaled, before) == ({}, None, [])
+    assert low.limit[0] == 0.0
