@@ -342,6 +342,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
         spent = Status.MAX_TIME if o.max_time_s and left <= 0 else Status.MAX_EVALS if o.max_evals and evals >= o.max_evals else None
         if spent:
+            for j, _, old, _ in freed:  # the solve ends before a freed pair is bound: its limit goes back
+                al.constraints[j].limit = old
             status, message = spent, _stop_message(spent, "", o)
             break
         if progress:
