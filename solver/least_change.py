@@ -12,7 +12,8 @@ done (the constraints met, or no longer improving), variable frames are added wh
 residual of the augmented integrand predicts the largest decrease (`solver.least_change_refine`, paper
 sec. 4.2 and fig. 5), never closer than `min_gap` to another frame.
 
-A pair the method cannot meet on any frame set (it stalls before and after refining) is reported, with
+A pair the method cannot meet on any frame set (it stalls, and refining the frames no longer cuts the
+infeasibility by 10 %) is reported, with
 where and by how much, and the lowest priority in the conflict gives (`_relax_unmet`): its broken pairs'
 limits are raised to what the path reaches, and its met pairs that hold a broken pair of a higher
 priority back give what that pair needs (`_bind_freed`), so the rest of the problem is solved as posed
@@ -57,8 +58,9 @@ __all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "solve_lea
 #: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
 STANDARD_GRAVITY = 9.80665
 #: a subproblem whose penalty grew stalls when it cut the infeasibility V by under 10 %; two in a row
-#: on one frame set send it to refinement, two more after refining report the pairs as unmet (and a
-#: relaxation after which V did not fall by 10 % by the next passes the next to a higher priority)
+#: on one frame set send it to refinement, and two more report the pairs as unmet once a refinement no
+#: longer cut V by 10 % (and a relaxation after which V did not fall by 10 % by the next passes the next
+#: to a higher priority)
 STALL_RATIO = 0.9
 
 
@@ -335,7 +337,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
     frames, basis = _start(lc, o.min_gap)
     rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
-    evals, level_its, stall, stalled_before, kind, last = 0, 0, 0, False, "start", None
+    evals, level_its, stall, refined_at, kind, last = 0, 0, 0, None, "start", None
     before, freed, stalled = al.estimates(), [], None  # the multipliers and penalty before a stall
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
@@ -370,15 +372,15 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
         before = al.estimates() if STALL_RATIO * V_prev >= V else before
         level_its, kind, scores = level_its + 1, "boost", None
-        if stall >= 2 and stalled_before:  # out of reach: raise one priority's limits (_relax_unmet)
+        if _out_of_reach(stall, refined_at, V):  # raise one priority's limits (_relax_unmet)
             above = last[0] if last and STALL_RATIO * last[1] < V else None
             raised, level, freed = _relax_unmet(al, basis, frames, scaled, before, above)
-            stalled, stall, stalled_before, last = frames, 0, False, (level, V)
+            stalled, stall, refined_at, last = frames, 0, None, (level, V)
             _merge(unmet, raised)
             continue
         if not (met or stall >= 2 or level_its >= o.per_level):
             continue
-        stalled_before = stalled_before or stall >= 2
+        refined_at = V if stall >= 2 else refined_at  # a stall refines while refining still cuts V
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
         decreases.append((frames.times.copy(), dec))
         evals += 3
@@ -399,6 +401,14 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
     return _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, time.perf_counter() - start,
                      estimate, o.tol, tuple(decreases))
+
+
+def _out_of_reach(stall: int, refined_at: float | None, V: float) -> bool:
+    """Whether the broken pairs are out of reach: the solve stalled twice in a row (`stall`) on frames
+    refined at a stall since the last relaxation, and that refinement did not cut the infeasibility V by
+    10 % (`refined_at`: V at the stall that sent it to refinement, None if none did; STALL_RATIO). While
+    refining still helps, frames where the pairs are broken may be all the path lacks (docs/solvers.md)."""
+    return stall >= 2 and refined_at is not None and STALL_RATIO * refined_at < V
 
 
 def _worst(al: AugmentedLagrangian, scaled: list) -> dict:

@@ -468,3 +468,16 @@ def test_a_met_pair_that_holds_a_higher_one_back_gives_what_it_needs():
     al.lam = [np.array([1e3]), np.zeros(1), np.zeros(1)]
     assert _relax_unmet(al, None, stalled, scaled, before) == ({}, None, [])
     assert low.limit[0] == 0.0
+
+
+@pytest.mark.parametrize("stall, refined_at, V, out", [
+    (2, None, 5.0, False),  # stalled, but never refined since the last relaxation: refine first
+    (2, 10.0, 8.0, False),  # the refinement cut V by 20 %: refine again
+    (2, 10.0, 9.5, True),   # it cut V by 5 %: out of reach
+    (1, 10.0, 9.5, False),  # one stall is no stall yet
+])
+def test_a_stall_refines_while_refining_cuts_the_infeasibility(stall, refined_at, V, out):
+    """Pairs are out of reach only when a refinement no longer cut V by 10 % (1 - STALL_RATIO)."""
+    from solver.least_change import _out_of_reach
+
+    assert _out_of_reach(stall, refined_at, V) is out
