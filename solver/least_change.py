@@ -293,15 +293,15 @@ def _bind_freed(al: AugmentedLagrangian, basis, stalled: FrameSet, solved: Frame
         worst = max(float((al.constraints[j].values(state) / al.constraints[j].tolerance)[b].max()) for j, b in targets)
         return frames, worst, np.concatenate([(c.values(state) / c.tolerance)[h] for c, h, _ in limits])
 
-    (a, lo), (b, hi) = (0.0, at(0.0)), (1.0, at(1.0))
+    (u0, lo), (u1, hi) = (0.0, at(0.0)), (1.0, at(1.0))  # the blend's ends: stalled, solved
     if hi[1] > 1.0:
         return solved, {}, len(evaluated)
     for _ in range(np.finfo(float).nmant):  # until the freed values are read to within their tolerance
         if np.abs(hi[2] - lo[2]).max() <= 1.0:
             break
-        mid = 0.5 * (a + b)
+        mid = 0.5 * (u0 + u1)
         point = at(mid)
-        (a, lo), (b, hi) = ((a, lo), (mid, point)) if point[1] <= 1.0 else ((mid, point), (b, hi))
+        (u0, lo), (u1, hi) = ((u0, lo), (mid, point)) if point[1] <= 1.0 else ((mid, point), (u1, hi))
     frames, state, unmet = hi[0], al.state(basis, hi[0].values), {}
     for c, h, old in limits:
         rise = np.where(h, np.maximum(c.values(state), 0.0), 0.0)
