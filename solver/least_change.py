@@ -28,6 +28,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -208,7 +209,11 @@ def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) ->
     """`frames.with_variable_frames(times)` with every free quaternion made unit: a frame inserted on the
     path takes its chord's shorter quaternion (norm cos(theta/2) between two frames theta apart), and the
     variables move a quaternion on its own sphere (`solver.manifold`), so it would keep that norm."""
-    frames = frames.with_variable_frames(times)
+    return _unit_quaternions(frames.with_variable_frames(times), quat_slots)
+
+
+def _unit_quaternions(frames: FrameSet, quat_slots: np.ndarray) -> FrameSet:
+    """`frames` with every free quaternion (quat_slots (s, 4)) divided by its norm."""
     values = frames.values.copy()
     for slot in quat_slots:
         free = ~frames.fixed[:, slot].any(axis=1)
@@ -217,8 +222,23 @@ def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) ->
     return FrameSet(frames.times, values, frames.fixed, frames.is_keyframe)
 
 
+class Freed(NamedTuple):
+    """Pairs `_relax_unmet` freed for one subproblem (`_bind_freed`): pairs ((constraint index, (p,) mask,
+    limit before), ...), targets ((constraint index, (p,) mask), ...) the broken pairs of higher priority
+    they held back. Empty: nothing freed."""
+
+    pairs: tuple = ()
+    targets: tuple = ()
+
+
+def _unfree(al: AugmentedLagrangian, freed: Freed) -> None:
+    """Put the freed pairs' limits back."""
+    for j, _, old in freed.pairs:
+        al.constraints[j].limit = old
+
+
 def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list, before: tuple,
-                 above: int | None = None) -> tuple[dict, int | None, list]:
+                 above: int | None = None) -> tuple[dict, int | None, Freed]:
     """Let the lowest `Constraint.priority` in the conflict give (module docstring): its broken pairs are
     raised to what the path reaches, and its pairs that hold a broken pair of a higher priority back (met,
     but beyond their limit with their multipliers grown since `before`) are freed for one subproblem
@@ -241,8 +261,7 @@ def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list,
         (multipliers, rho) after the last subproblem that still cut V; they go back to these, a raised
         or freed pair's multiplier to 0.
     Returns: ({constraint: largest amount raised [SI]}, the priority let give (None: nothing broken),
-        the freed pairs [(constraint index, (p,) mask, limit before, [(index, (p,) mask) of the broken
-        pairs above]), ...] for `_bind_freed`).
+        the `Freed` pairs for `_bind_freed`).
     """
     state = al.state(basis, frames.values)
     bad = [ch > 1.0 for ch in scaled]
@@ -263,13 +282,13 @@ def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list,
             unmet[c.name] = max(unmet.get(c.name, 0.0), float(v[b].max()))
             c.limit[b] += v[b]
         if h.any():
-            freed.append((j, h, c.limit.copy(), above_it))
+            freed.append((j, h, c.limit.copy()))
             c.limit[h] = np.inf
         al.lam[j] = np.where(b | h, 0.0, al.lam[j])
-    return unmet, level, freed
+    return unmet, level, Freed(tuple(freed), tuple(above_it)) if freed else Freed()
 
 
-def _bind_freed(al: AugmentedLagrangian, basis, stalled: FrameSet, solved: FrameSet, freed: list,
+def _bind_freed(al: AugmentedLagrangian, basis, stalled: FrameSet, solved: FrameSet, freed: Freed,
                 quat_slots) -> tuple[FrameSet, dict, int]:
     """Give the freed pairs (`_relax_unmet`) what the broken pairs above them need, no more: along the
     segment from the stalled path to the one solved without them (frame values blended, free quaternions
@@ -278,17 +297,16 @@ def _bind_freed(al: AugmentedLagrangian, basis, stalled: FrameSet, solved: Frame
     its own and what that path reaches. If the solved path does not meet them either, the freed limits go
     back and the solved path stays: the conflict was elsewhere. Returns (frames, {constraint: largest
     amount raised [SI]}, the paths evaluated)."""
-    if not freed:
+    if not freed.pairs:
         return solved, {}, 0
-    targets, limits, evaluated = freed[0][3], [(al.constraints[j], h, old) for j, h, old, _ in freed], []
-    for c, _, old in limits:
-        c.limit = old
+    _unfree(al, freed)
+    targets, limits, evaluated = freed.targets, [(al.constraints[j], h, old) for j, h, old in freed.pairs], []
 
     def at(alpha: float) -> tuple[FrameSet, float, np.ndarray]:
         """The blended path, the worst broken pair's c/tol on it, the freed pairs' c/tol on it."""
         evaluated.append(alpha)
-        frames = _with_frames(replace(stalled, values=(1.0 - alpha) * stalled.values + alpha * solved.values),
-                              np.zeros(0), quat_slots)
+        frames = _unit_quaternions(replace(stalled, values=(1.0 - alpha) * stalled.values + alpha * solved.values),
+                                   quat_slots)
         state = al.state(basis, frames.values)
         worst = max(float((al.constraints[j].values(state) / al.constraints[j].tolerance)[b].max()) for j, b in targets)
         return frames, worst, np.concatenate([(c.values(state) / c.tolerance)[h] for c, h, _ in limits])
@@ -329,23 +347,20 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             (evals, E = Phi), "constraints" (it ended: round, worst, value as `_worst`, rho: the next
             penalty), "estimate" (round, estimate: the predicted decrease over Phi, tol).
     Returns:
-        Solution: frames, initial (the plain spline's), one Round per subproblem, status, E = D/D0
-        before (0) and after, `integrals_*` the largest constraint value over its tolerance per
-        constraint, `stalled` {constraint: amount [SI]} of the pairs it could not meet.
+        Solution: frames, initial (the plain spline's), one Round per subproblem, status, E = D/D0 before
+        (0) and after, `integrals_*` each constraint's largest c/tol, `unmet` {constraint: amount [SI]}.
     """
     o = options or LeastChangeOptions()
     al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
     frames, basis = _start(lc, o.min_gap)
     rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
     evals, level_its, stall, refined_at, kind, last = 0, 0, 0, None, "start", None
-    before, freed, stalled = al.estimates(), [], None  # the multipliers and penalty before a stall
+    before, freed, stalled = al.estimates(), Freed(), None  # the multipliers and penalty before a stall
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
-        left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
-        spent = Status.MAX_TIME if o.max_time_s and left <= 0 else Status.MAX_EVALS if o.max_evals and evals >= o.max_evals else None
+        left, spent = _budget(o, start, evals)
         if spent:
-            for j, _, old, _ in freed:  # the solve ends before a freed pair is bound: its limit goes back
-                al.constraints[j].limit = old
+            _unfree(al, freed)  # the solve ends before a freed pair is bound: its limit goes back
             status, message = spent, _stop_message(spent, "", o)
             break
         if progress:
@@ -355,15 +370,14 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
                              max_evals=o.max_evals - evals if o.max_evals else 0,
                              max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb)
         frames, bound, n = _bind_freed(al, basis, stalled, r.frames, freed, quat)
-        evals, freed = evals + r.result.n_evals + n, []
+        evals, freed = evals + r.result.n_evals + n, Freed()
         _merge(unmet, bound)
         rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
         trace.append(np.asarray(r.result.trace))
         if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
             status, message = r.result.status, _stop_message(r.result.status, r.result.message, o)
             break
-        scaled = al.scaled_values(basis, frames.values)
-        V_prev, rho_prev = al.V, al.rho
+        scaled, V_prev, rho_prev = al.scaled_values(basis, frames.values), al.V, al.rho
         V = al.update(scaled)
         worst = _worst(al, scaled)
         if progress:
@@ -401,6 +415,15 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
     return _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, time.perf_counter() - start,
                      estimate, o.tol, tuple(decreases))
+
+
+def _budget(o: LeastChangeOptions, start: float, evals: int) -> tuple[float, Status | None]:
+    """([s] the time left of `o.max_time_s` (0: no limit), the status that ends the solve before its next
+    subproblem: MAX_TIME or MAX_EVALS when that budget is spent, else None)."""
+    left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
+    if o.max_time_s and left <= 0:
+        return left, Status.MAX_TIME
+    return left, Status.MAX_EVALS if o.max_evals and evals >= o.max_evals else None
 
 
 def _out_of_reach(stall: int, refined_at: float | None, V: float) -> bool:

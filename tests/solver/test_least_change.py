@@ -347,7 +347,7 @@ def test_out_of_reach_limits_give_one_priority_at_a_time(shipped):
         al.rho = 1e9  # what a stall inflates: the broken pairs' multipliers (no met pair holds one back)
         al.lam = [np.where(sc > 1.0, 1e6, lam0) for sc, lam0 in zip(scaled, stored[0])]
         raised, raised_level, freed = _relax_unmet(al, basis, frames, scaled, stored)
-        assert not freed
+        assert not freed.pairs
         assert raised and {c.priority for c in al.constraints if c.name in raised} == {level} == {raised_level}
         assert al.rho == 3.0
         for c, sc, (old, bad), lam, lam0 in zip(al.constraints, al.scaled_values(basis, frames.values), before,
@@ -466,7 +466,8 @@ def test_a_met_pair_that_holds_a_higher_one_back_gives_what_it_needs():
     high.limit[0] = 10.0  # nothing broken: a met pair holds nothing back, and nothing gives
     scaled = [c.values(stalled.values) / c.tolerance for c in al.constraints]
     al.lam = [np.array([1e3]), np.zeros(1), np.zeros(1)]
-    assert _relax_unmet(al, None, stalled, scaled, before) == ({}, None, [])
+    raised, level, freed = _relax_unmet(al, None, stalled, scaled, before)
+    assert (raised, level, freed.pairs) == ({}, None, ())
     assert low.limit[0] == 0.0
 
 
