@@ -52,14 +52,20 @@ class AugmentedLagrangian:
         change: `solver.change.MeasureOfChange`. constraints: the `Constraint`s. tmap: TangentMap.
         engine: the site engine (None without site constraints). gravity_scale: D0 [kg m^2/s^3].
         rho: the starting penalty parameter (dimensionless).
+        elastic: None (the objective is D/D0), or `Constraint`s whose violation is the objective in place
+            of D/D0: F = (1/2) sum_j sum_p (w_p/T) max(0, c_p/tol_j)^2, the elastic problem of
+            `solver.feasibility` (its least value over the paths is how far those constraints cannot be
+            met while `constraints` hold). `change` still gives the preconditioner.
     """
 
-    def __init__(self, change, constraints, tmap, engine, d0: float, rho: float = 1.0):
+    def __init__(self, change, constraints, tmap, engine, d0: float, rho: float = 1.0, elastic=None):
         self.change, self.constraints, self.tmap, self.engine = change, list(constraints), tmap, engine
+        self.elastic = None if elastic is None else list(elastic)
         ref = change.ref
         self.t, self.T = ref.t, ref.duration
         self.d0 = float(d0)
         self.w = [c.pair_weights(ref.weights) / self.T for c in self.constraints]
+        self.w_elastic = [c.pair_weights(ref.weights) / self.T for c in self.elastic or ()]
         self.lam = [np.zeros(c.size) for c in self.constraints]
         self.rho = float(rho)
         self.V = np.inf
@@ -70,17 +76,22 @@ class AugmentedLagrangian:
         return PathState(self.t, Y, Y1, Y2, self.tmap, self.engine)
 
     def evaluate(self, basis, P: np.ndarray, grad: bool = True):
-        """(Phi, dPhi/dP (m, nq) or None, D [kg m^2/s^3])."""
+        """(Phi, dPhi/dP (m, nq) or None, D [kg m^2/s^3]; with `elastic`, D is 0 and Phi's first part F)."""
         st = self.state(basis, P)
-        D = self.change.evaluate(st, grad)
-        if grad:
-            for a in ("gY", "gY1", "gY2"):
-                setattr(st, a, getattr(st, a) / self.d0)
-            st.g_acc = None if st.g_acc is None else st.g_acc / self.d0
-        phi = D / self.d0
+        if self.elastic is None:
+            D = self.change.evaluate(st, grad)
+            if grad:
+                for a in ("gY", "gY1", "gY2"):
+                    setattr(st, a, getattr(st, a) / self.d0)
+                st.g_acc = None if st.g_acc is None else st.g_acc / self.d0
+            phi = D / self.d0
+        else:
+            D, phi = 0.0, self._elastic(st, grad)
         rho = self.rho
         for c, w, lam in zip(self.constraints, self.w, self.lam):
             ch = c.values(st) / c.tolerance
+            if self.elastic is not None and ch.size:
+                self.worst = max(self.worst, float(ch.max()))
             s = np.maximum(0.0, lam + rho * ch)
             phi += float(w @ (s * s - lam * lam)) / (2.0 * rho)
             if grad and s.any():
@@ -89,6 +100,19 @@ class AugmentedLagrangian:
             return phi, None, D
         dY, dY1, dY2 = st.pullback()
         return phi, basis.pullback(dY, dY1, dY2), D
+
+    def _elastic(self, st, grad: bool) -> float:
+        """F = (1/2) sum (w_p/T) max(0, c_p/tol)^2 over the elastic constraints; with `grad` its gradient is
+        added to the state's adjoints. Sets `worst`, the largest c/tol of the evaluation (elastic and held
+        constraints; <= 1: every pair met within its tolerance)."""
+        F, self.worst = 0.0, 0.0
+        for c, w in zip(self.elastic, self.w_elastic):
+            v = np.maximum(0.0, c.values(st) / c.tolerance)
+            self.worst = max(self.worst, float(v.max(initial=0.0)))
+            F += 0.5 * float(w @ (v * v))
+            if grad and v.any():
+                c.pull(st, w * v / c.tolerance)
+        return F
 
     def shift(self) -> float:
         """sum_j sum_p (w_p/T) lam_p^2 / (2 rho): the part of Phi no path changes, with the sign that makes

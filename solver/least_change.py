@@ -12,23 +12,21 @@ done (the constraints met, or no longer improving), variable frames are added wh
 residual of the augmented integrand predicts the largest decrease (`solver.least_change_refine`, paper
 sec. 4.2 and fig. 5), never closer than `min_gap` to another frame.
 
-A pair the method cannot meet on any frame set (it stalls, and refining the frames no longer cuts the
-infeasibility by 10 %) is reported, with
-where and by how much, and the lowest priority in the conflict gives (`_relax_unmet`): its broken pairs'
-limits are raised to what the path reaches, and its met pairs that hold a broken pair of a higher
-priority back give what that pair needs (`_bind_freed`), so the rest of the problem is solved as posed
-(`Solution.unmet`, in the constraint's SI unit). The multipliers and the penalty go back
-to their values before the stall: on an infeasible problem the first-order estimates of every
-constraint in the conflict grow without bound, and carried past the relaxation they would push the path
-away from the point the raised limits were read at (safeguarded multipliers, Birgin & Martinez 2014,
-sec. 4.1 and ch. 5: bounded estimates keep the method convergent to a least-infeasible point).
+Where a frame set's subproblems are spent (`per_level`) with a constraint still broken, the method of
+multipliers alone cannot tell a problem it has not yet solved from one no path can solve, so the
+least violation is sought (`solver.feasibility`): the constraints' violation is minimized over the
+same paths, every constraint at once and, where that leaves a pair broken, level by level in the order
+in which limits give (`Constraint.priority`), with frames added where pairs stay broken. A limit rises
+only by what that solve shows no path through the keyframes beats (`Solution.certificate`, in the
+constraint's SI unit); the multipliers start again from 0 on the path it found, which meets every
+certified limit. A path the solve ends on beyond a limit (a budget spent) gives way to the best one
+that met them all.
 """
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
-from typing import NamedTuple
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,12 +35,13 @@ from solver.constraint_set import figure_constraints
 from solver.constraints.forces import figure_forces
 from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
+from solver.feasibility import Certificate, beyond, least_violation, with_frames
 from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.inverse_dynamics import InverseDynamics
 from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
-from solver.lagrangian import GAMMA, AugmentedLagrangian, Preconditioner, initial_penalty, solve_subproblem
+from solver.lagrangian import AugmentedLagrangian, Preconditioner, initial_penalty, solve_subproblem
 from solver.layout import StateLayout
 from solver.least_change_refine import doerfler_times, predicted_decreases
 from solver.manifold import FrameVariables
@@ -58,11 +57,6 @@ __all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "solve_lea
 
 #: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
 STANDARD_GRAVITY = 9.80665
-#: a subproblem whose penalty grew stalls when it cut the infeasibility V by under 10 %; two in a row
-#: on one frame set send it to refinement, and two more report the pairs as unmet once a refinement no
-#: longer cut V by 10 % (and a relaxation after which V did not fall by 10 % by the next passes the next
-#: to a higher priority)
-STALL_RATIO = 0.9
 
 
 @dataclass(frozen=True)
@@ -191,7 +185,7 @@ def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
     """The plain spline's frames with variable frames at the contacts' ends and in every segment."""
     frames = lc.plain.with_variable_frames(knot_hint_times(lc.plain, lc.knots, min_gap))
     mids = 0.5 * (frames.times[:-1] + frames.times[1:])
-    return _with_frames(frames, mids[np.diff(frames.times) >= 2 * min_gap], lc.layout.quat_slots)
+    return with_frames(frames, mids[np.diff(frames.times) >= 2 * min_gap], lc.layout.quat_slots)
 
 
 def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, SplineBasis]:
@@ -205,216 +199,113 @@ def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, SplineBasis]:
     return frames, basis
 
 
-def _with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) -> FrameSet:
-    """`frames.with_variable_frames(times)` with every free quaternion made unit: a frame inserted on the
-    path takes its chord's shorter quaternion (norm cos(theta/2) between two frames theta apart), and the
-    variables move a quaternion on its own sphere (`solver.manifold`), so it would keep that norm."""
-    return _unit_quaternions(frames.with_variable_frames(times), quat_slots)
-
-
-def _unit_quaternions(frames: FrameSet, quat_slots: np.ndarray) -> FrameSet:
-    """`frames` with every free quaternion (quat_slots (s, 4)) divided by its norm."""
-    values = frames.values.copy()
-    for slot in quat_slots:
-        free = ~frames.fixed[:, slot].any(axis=1)
-        q = values[np.ix_(free, slot)]
-        values[np.ix_(free, slot)] = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return FrameSet(frames.times, values, frames.fixed, frames.is_keyframe)
-
-
-class Freed(NamedTuple):
-    """Pairs `_relax_unmet` freed for one subproblem (`_bind_freed`): pairs ((constraint index, (p,) mask,
-    limit before), ...), targets ((constraint index, (p,) mask), ...) the broken pairs of higher priority
-    they held back. Empty: nothing freed."""
-
-    pairs: tuple = ()
-    targets: tuple = ()
-
-
-def _unfree(al: AugmentedLagrangian, freed: Freed) -> None:
-    """Put the freed pairs' limits back."""
-    for j, _, old in freed.pairs:
-        al.constraints[j].limit = old
-
-
-def _relax_unmet(al: AugmentedLagrangian, basis, frames: FrameSet, scaled: list, before: tuple,
-                 above: int | None = None) -> tuple[dict, int | None, Freed]:
-    """Let the lowest `Constraint.priority` in the conflict give (module docstring): its broken pairs are
-    raised to what the path reaches, and its pairs that hold a broken pair of a higher priority back (met,
-    but beyond their limit with their multipliers grown since `before`) are freed for one subproblem
-    (their limit +inf, `_bind_freed` then raises it by what the higher ones need).
-
-    The conflict's levels are those broken and, below the highest broken, those holding; `level` is the
-    lowest above `above` (the loop passes the priority it let give at the last stall when V has not
-    fallen since: letting it give again would not end the conflict; 83_02 at its contacts raised its
-    acceleration bounds at 14 stalls in a row while its slide stayed 3.9 tolerances over), else the
-    lowest. So the unit-norm bound of the spline's representation gives first, then the bounds set by the
-    reference motion (no jolts, effort), the contact schedule's wishes (planted, slide, clearance) next,
-    and the limits of the body, the scene and physics (a foot in the floor, a knee bent backwards) last: a
-    lexicographic order, as in prioritized inverse kinematics (Kanoun, Lamiraux & Wieber, "Kinematic
-    control of redundant manipulators: generalizing the task-priority framework to inequality tasks",
-    IEEE T-RO 27, 2011). A met pair counts as well as a broken one: 74_05 keyed every 0.33 s held its
-    slide (met) by turning a knee 3.8 degrees off its hinge (broken), and raising the hinge, the broken
-    one, put the body's limit below the schedule's wish.
-
-    Args: al: its multipliers after the stall. scaled: (p,) c/tol per constraint on `frames`. before:
-        (multipliers, rho) after the last subproblem that still cut V; they go back to these, a raised
-        or freed pair's multiplier to 0.
-    Returns: ({constraint: largest amount raised [SI]}, the priority let give (None: nothing broken),
-        the `Freed` pairs for `_bind_freed`).
-    """
-    state = al.state(basis, frames.values)
-    bad = [ch > 1.0 for ch in scaled]
-    hold = [(ch > 0.0) & (ch <= 1.0) & (lam > lam0) for ch, lam, lam0 in zip(scaled, al.lam, before[0])]
-    al.lam, al.rho, al.V = [lam.copy() for lam in before[0]], before[1], np.inf
-    top = max((c.priority for c, b in zip(al.constraints, bad) if b.any()), default=None)
-    levels = [c.priority for c, b, h in zip(al.constraints, bad, hold) if b.any() or (h.any() and top is not None and c.priority < top)]
-    level = min((p for p in levels if above is None or p > above), default=min(levels, default=None))
-    above_it = [(j, b) for j, (c, b) in enumerate(zip(al.constraints, bad)) if b.any() and c.priority > level]
-    unmet, freed = {}, []
-    for j, c in enumerate(al.constraints):
-        b, h = bad[j], hold[j] if above_it else np.zeros_like(bad[j])
-        if c.priority != level or not (b.any() or h.any()):
-            continue
-        c.limit = c.limit.copy()
-        if b.any():
-            v = c.values(state)
-            unmet[c.name] = max(unmet.get(c.name, 0.0), float(v[b].max()))
-            c.limit[b] += v[b]
-        if h.any():
-            freed.append((j, h, c.limit.copy()))
-            c.limit[h] = np.inf
-        al.lam[j] = np.where(b | h, 0.0, al.lam[j])
-    return unmet, level, Freed(tuple(freed), tuple(above_it)) if freed else Freed()
-
-
-def _bind_freed(al: AugmentedLagrangian, basis, stalled: FrameSet, solved: FrameSet, freed: Freed,
-                quat_slots) -> tuple[FrameSet, dict, int]:
-    """Give the freed pairs (`_relax_unmet`) what the broken pairs above them need, no more: along the
-    segment from the stalled path to the one solved without them (frame values blended, free quaternions
-    made unit), the first path on which those pairs are met (bisection, until the freed pairs' values
-    at its ends differ by under their tolerance) becomes the path, and each freed limit the larger of
-    its own and what that path reaches. If the solved path does not meet them either, the freed limits go
-    back and the solved path stays: the conflict was elsewhere. Returns (frames, {constraint: largest
-    amount raised [SI]}, the paths evaluated)."""
-    if not freed.pairs:
-        return solved, {}, 0
-    _unfree(al, freed)
-    targets, limits, evaluated = freed.targets, [(al.constraints[j], h, old) for j, h, old in freed.pairs], []
-
-    def at(alpha: float) -> tuple[FrameSet, float, np.ndarray]:
-        """The blended path, the worst broken pair's c/tol on it, the freed pairs' c/tol on it."""
-        evaluated.append(alpha)
-        frames = _unit_quaternions(replace(stalled, values=(1.0 - alpha) * stalled.values + alpha * solved.values),
-                                   quat_slots)
-        state = al.state(basis, frames.values)
-        worst = max(float((al.constraints[j].values(state) / al.constraints[j].tolerance)[b].max()) for j, b in targets)
-        return frames, worst, np.concatenate([(c.values(state) / c.tolerance)[h] for c, h, _ in limits])
-
-    (u0, lo), (u1, hi) = (0.0, at(0.0)), (1.0, at(1.0))  # the blend's ends: stalled, solved
-    if hi[1] > 1.0:
-        return solved, {}, len(evaluated)
-    for _ in range(np.finfo(float).nmant):  # until the freed values are read to within their tolerance
-        if np.abs(hi[2] - lo[2]).max() <= 1.0:
-            break
-        mid = 0.5 * (u0 + u1)
-        point = at(mid)
-        (u0, lo), (u1, hi) = ((u0, lo), (mid, point)) if point[1] <= 1.0 else ((mid, point), (u1, hi))
-    frames, state, unmet = hi[0], al.state(basis, hi[0].values), {}
-    for c, h, old in limits:
-        rise = np.where(h, np.maximum(c.values(state), 0.0), 0.0)
-        c.limit = old + rise
-        if rise.max() > 0.0:
-            unmet[c.name] = max(unmet.get(c.name, 0.0), float(rise.max()))
-    return frames, unmet, len(evaluated)
-
-
-def _merge(unmet: dict, raised: dict) -> None:
-    """Add `raised` ({constraint: amount [SI]}) to `unmet`, keeping each constraint's largest amount."""
-    for name, amount in raised.items():
-        unmet[name] = max(unmet.get(name, 0.0), amount)
-
-
 def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = None, *,
                        should_stop: Callable[[], bool] | None = None,
                        progress: Callable[[str, dict], None] | None = None) -> Solution:
-    """Solve a built problem by the method of multipliers with adaptive variable frames (module docstring).
+    """Solve a built problem by the method of multipliers with adaptive variable frames, and the least
+    violation where a frame set's subproblems end with a constraint broken (module docstring).
 
     Args:
-        lc: from `build_least_change` (its multipliers change). options: LeastChangeOptions.
+        lc: from `build_least_change` (its multipliers change, and the limits the keyframes leave out of
+            reach are raised, `solver.feasibility`). options: LeastChangeOptions.
         should_stop: polled during each subproblem; True ends the solve with the path so far.
         progress: progress(event, info): "round" (a subproblem starts: round, frames, variable), "eval"
-            (evals, E = Phi), "constraints" (it ended: round, worst, value as `_worst`, rho: the next
-            penalty), "estimate" (round, estimate: the predicted decrease over Phi, tol).
+            (evals, E: the best Phi so far), "constraints" (it ended: round, worst, value as `_worst`, rho:
+            the next penalty), "certify" (the least violation was sought: round, frames, raised {constraint:
+            amount [SI]}), "estimate" (round, estimate: the predicted decrease over Phi, tol).
     Returns:
-        Solution: frames, initial (the plain spline's), one Round per subproblem, status, E = D/D0 before
-        (0) and after, `integrals_*` each constraint's largest c/tol, `unmet` {constraint: amount [SI]}.
+        Solution: frames, initial (the plain spline's), one Round per subproblem, status (CONVERGED only
+        when no limit was raised; INFEASIBLE when the certificate raised one and the rest converged), E =
+        D/D0 before (0) and after, `integrals_*` each constraint's largest c/tol, `unmet` {constraint:
+        amount [SI]} and `certificate` (`solver.feasibility.Raise`s).
     """
     o = options or LeastChangeOptions()
     al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
     frames, basis = _start(lc, o.min_gap)
-    rounds, trace, unmet, estimate, decreases, scores = [], [], {}, float("nan"), [], None
-    evals, level_its, stall, refined_at, kind, last = 0, 0, 0, None, "start", None
-    before, freed, stalled = al.estimates(), Freed(), None  # the multipliers and penalty before a stall
+    raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
+    rounds, trace, estimate, decreases, scores = [], [], float("nan"), [], None
+    evals, level_its, kind, certified = 0, 0, "start", False
+    best = (np.inf, frames)  # (D, frames) of the best path that meets every (certified) limit
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
         left, spent = _budget(o, start, evals)
         if spent:
-            _unfree(al, freed)  # the solve ends before a freed pair is bound: its limit goes back
             status, message = spent, _stop_message(spent, "", o)
             break
         if progress:
             progress("round", {"round": k, "frames": frames.count, "variable": frames.n_variable})
-        cb = None if progress is None else (lambda n, best, e0=evals: progress("eval", {"evals": e0 + n, "E": best}))
+        cb = None if progress is None else (lambda n, phi, e0=evals: progress("eval", {"evals": e0 + n, "E": phi}))
         r = solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=basis,
                              max_evals=o.max_evals - evals if o.max_evals else 0,
                              max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb)
-        frames, bound, n = _bind_freed(al, basis, stalled, r.frames, freed, quat)
-        evals, freed = evals + r.result.n_evals + n, Freed()
-        _merge(unmet, bound)
+        frames, evals = r.frames, evals + r.result.n_evals
         rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
         trace.append(np.asarray(r.result.trace))
         if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
             status, message = r.result.status, _stop_message(r.result.status, r.result.message, o)
             break
-        scaled, V_prev, rho_prev = al.scaled_values(basis, frames.values), al.V, al.rho
+        scaled = al.scaled_values(basis, frames.values)
         V = al.update(scaled)
         worst = _worst(al, scaled)
         if progress:
             progress("constraints", {"round": k, **worst, "rho": al.rho})
         met = worst["value"] <= 1.0 and V <= 1.0
-        stall = stall + 1 if (STALL_RATIO * V_prev < V and al.rho > rho_prev) else 0
-        before = al.estimates() if STALL_RATIO * V_prev >= V else before
+        if worst["value"] <= 1.0:
+            D = al.evaluate(basis, frames.values, grad=False)[2]
+            best = (D, frames) if best[0] > D else best
         level_its, kind, scores = level_its + 1, "boost", None
-        if _out_of_reach(stall, refined_at, V):  # raise one priority's limits (_relax_unmet)
-            above = last[0] if last and STALL_RATIO * last[1] < V else None
-            raised, level, freed = _relax_unmet(al, basis, frames, scaled, before, above)
-            stalled, stall, refined_at, last = frames, 0, None, (level, V)
-            _merge(unmet, raised)
+        if not (met or level_its >= o.per_level):
             continue
-        if not (met or stall >= 2 or level_its >= o.per_level):
-            continue
-        refined_at = V if stall >= 2 else refined_at  # a stall refines while refining still cuts V
+        if not met and not certified:  # a frame set's subproblems are spent with a pair broken (once: after it,
+            # the path it found meets every limit, on these frames and on every refinement of them)
+            cert = _certify(lc, frames, o, start, evals, should_stop)
+            evals, raises, certified = evals + cert.n_evals, raises + list(cert.raises), True
+            if progress:
+                progress("certify", {"round": k, "frames": cert.frames.count, "raised": cert.unmet})
+            if cert.status is not Status.CONVERGED:
+                status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
+                break
+            cbasis = SplineBasis(cert.frames.times, al.t)
+            D = al.evaluate(cbasis, cert.frames.values, grad=False)[2]
+            best = (D, cert.frames) if best[0] > D or cert.raises else best
+            if cert.raises:  # go on from the path that meets the certified limits
+                raised = {r.constraint for r in cert.raises}
+                al.lam = [np.zeros(c.size) if c.name in raised else lam for c, lam in zip(al.constraints, al.lam)]
+                frames, basis, al.V, level_its, kind = cert.frames, cbasis, np.inf, 0, "certify"
+                continue
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
         decreases.append((frames.times.copy(), dec))
         evals += 3
         if met and estimate <= o.tol:
-            message = (f"refinement estimate {estimate:.3g} <= tol {o.tol:g}, every constraint met"
-                       + (" within reach" if unmet else ""))
+            message = f"every constraint met; refinement estimate {estimate:.3g} <= tol {o.tol:g}"
             break
-        if new.size == 0:
-            if met or stall >= 2:
-                message = "no segment predicts a decrease" if met else "constraints left unmet"
-                break
-            continue
-        frames, scores = _with_frames(frames, new, quat), dec
-        basis = SplineBasis(frames.times, al.t)
-        al.rho /= GAMMA if stall >= 2 else 1.0  # a stalled penalty starts the finer frames one step softer
-        stall, level_its, kind = 0, 0, "refine"
+        if new.size == 0 and met:
+            message = "every constraint met; no segment predicts a decrease"
+            break
+        if new.size:
+            frames, scores = with_frames(frames, new, quat), dec
+            basis = SplineBasis(frames.times, al.t)
+            level_its, kind = 0, "refine"
     else:
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
-    return _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, time.perf_counter() - start,
-                     estimate, o.tol, tuple(decreases))
+    if _worst(al, al.scaled_values(basis, frames.values))["value"] > 1.0 and np.isfinite(best[0]):
+        frames = best[1]  # the path ended beyond a limit: the best path that meets them all
+        basis = SplineBasis(frames.times, al.t)
+        message += "; the last path broke a limit: the best that met them all kept"
+    if raises:  # what stays raised: the pairs the path returned is beyond their limits as posed (no more
+        raises = beyond(al, al.constraints, frames, limits)  # than the certificate: it meets the raised ones)
+    if status is Status.CONVERGED and raises:
+        status = Status.INFEASIBLE
+    return _solution(lc, frames, basis, rounds, trace, status, message, evals, tuple(raises),
+                     time.perf_counter() - start, estimate, o.tol, tuple(decreases))
+
+
+def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop):
+    """`solver.feasibility.least_violation` from `frames` within what is left of the solve's budget."""
+    left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
+    return least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=o.min_gap, ftol_rel=o.ftol_rel,
+                           per_level=o.per_level, max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
+                           max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop)
 
 
 def _budget(o: LeastChangeOptions, start: float, evals: int) -> tuple[float, Status | None]:
@@ -424,14 +315,6 @@ def _budget(o: LeastChangeOptions, start: float, evals: int) -> tuple[float, Sta
     if o.max_time_s and left <= 0:
         return left, Status.MAX_TIME
     return left, Status.MAX_EVALS if o.max_evals and evals >= o.max_evals else None
-
-
-def _out_of_reach(stall: int, refined_at: float | None, V: float) -> bool:
-    """Whether the broken pairs are out of reach: the solve stalled twice in a row (`stall`) on frames
-    refined at a stall since the last relaxation, and that refinement did not cut the infeasibility V by
-    10 % (`refined_at`: V at the stall that sent it to refinement, None if none did; STALL_RATIO). While
-    refining still helps, frames where the pairs are broken may be all the path lacks (docs/solvers.md)."""
-    return stall >= 2 and refined_at is not None and STALL_RATIO * refined_at < V
 
 
 def _worst(al: AugmentedLagrangian, scaled: list) -> dict:
@@ -461,7 +344,7 @@ def _refinement(al, frames, quat, o: LeastChangeOptions, k: int, progress) -> tu
     return doerfler_times(dec, frames), estimate, dec
 
 
-def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, seconds, estimate, tol,
+def _solution(lc, frames, basis, rounds, trace, status, message, evals, raises, seconds, estimate, tol,
               decreases=()) -> Solution:
     """The Solution of a solve (`solve_least_change`'s Returns)."""
     al = lc.al
@@ -471,11 +354,13 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, unmet, s
     def worst(b, P):
         return {c.name: float(s.max()) if s.size else 0.0 for c, s in zip(al.constraints, al.scaled_values(b, P))}
 
-    if unmet:  # the limits were raised to what the path reaches
+    unmet = Certificate(raises).unmet
+    if unmet:  # the limits were raised to the least violation
         message += "; out of reach (limit raised by [SI]): " + ", ".join(f"{k} {v:.3g}" for k, v in unmet.items())
     return Solution(frames, lc.plain, tuple(rounds), status, message, 0.0, D / al.d0,
                     worst(plain_basis, lc.plain.values), worst(basis, frames.values), {},
                     np.concatenate(trace) if trace else np.zeros(0), seconds, evals, unmet=dict(unmet),
                     converged_to_tol=bool(status is Status.CONVERGED and np.isfinite(estimate) and estimate <= tol
                                           and not unmet),
-                    final_estimate=estimate, relaxations=tuple(lc.relaxations), segment_decreases=decreases)
+                    final_estimate=estimate, relaxations=tuple(lc.relaxations), segment_decreases=decreases,
+                    certificate=raises)

@@ -67,6 +67,7 @@ class Status(enum.Enum):
     NONFINITE = "nonfinite"  # the objective or its gradient was NaN/inf; best finite iterate kept
     FAILED = "failed"  # nlopt reported a failure
     NOTHING_TO_DO = "nothing_to_do"  # no free variables
+    INFEASIBLE = "infeasible"  # the least change converged with limits the keyframes leave out of reach raised
 
 
 _NLOPT_STATUS = {

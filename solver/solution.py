@@ -12,7 +12,7 @@ from solver.optimize import OptimizeResult, Status
 from solver.refinement import refinement_estimate
 
 #: `Round.kind` values: why a round ran.
-ROUND_KINDS = ("start", "refine", "boost", "polish")
+ROUND_KINDS = ("start", "refine", "boost", "polish", "certify")
 
 
 @dataclass(frozen=True)
@@ -28,7 +28,8 @@ class Round:
         times: (n_frames,) the frame times this round optimized [s].
         kind: why the round ran (`ROUND_KINDS`): "start" (the first), "refine" (frames were added),
             "boost" (the same frames under a weight the strategy raised: the orientation's unit term,
-            `solver.orient_refine.GapToOptimum`) or "polish" (the same frames at a stricter stopping test).
+            `solver.orient_refine.GapToOptimum`) "polish" (the same frames at a stricter stopping test) or "certify" (the least
+            change's first subproblem on the path of the least violation, `solver.feasibility`).
     """
 
     n_frames: int
@@ -68,8 +69,10 @@ class Solution:
         converged_to_tol: with a tolerance, whether the solve ended because the estimate reached it (the
             least change: with every constraint met; not after a budget or a stop request); None without one.
         final_estimate: the last estimate of a strategy with a tolerance, NaN otherwise.
-        unmet: {constraint: amount [SI]} of the constraints the least change could not meet
-            (`solver.least_change`); {} for `solve`.
+        unmet: {constraint: amount [SI]} of the constraints the least change could not meet: the largest
+            raise of each (`solver.feasibility`); {} for `solve`.
+        certificate: the least change's `solver.feasibility.Raise`s: per constraint and column, the least
+            violation no path through the keyframes beats [SI], where and over which span; () for `solve`.
         relaxations: the least change's `solver.constraint_set.Relaxation`s: where the keyframes decide a
             constraint (which, site or joint, keyframe, span [s], amount [SI]); () for `solve`.
         segment_decreases: the least change's refinement checks, in order: ((frame times (m,) [s],
@@ -98,6 +101,7 @@ class Solution:
     unmet: dict = field(default_factory=dict)
     relaxations: tuple = ()
     segment_decreases: tuple = ()
+    certificate: tuple = ()
 
     @cached_property
     def refinement_estimate(self) -> float:

@@ -23,7 +23,7 @@ __all__ = ["LIMIT", "RELATIVE", "RELATIVE_TOLERANCE", "REPRESENTATION", "SCHEDUL
 RELATIVE_TOLERANCE = 0.05
 
 #: `Constraint.priority` values, lowest first to give
-REPRESENTATION, RELATIVE, SCHEDULE, LIMIT = range(4)
+REPRESENTATION, SCHEDULE, RELATIVE, LIMIT = range(4)
 
 
 class Constraint:
@@ -40,13 +40,14 @@ class Constraint:
     tolerance: float = 1.0
     rows: np.ndarray = np.zeros(0, int)
     labels: np.ndarray = np.zeros(0, object)
-    #: the order in which limits give where the constraints cannot all be met (`solver.least_change`): the
-    #: lowest priority in the conflict (broken, or met and holding a broken one back) gives first. REPRESENTATION (0): a bound of the
-    #: spline's own representation, not of the motion (unit quaternions between the frames); RELATIVE (1):
-    #: a bound set by the reference motion (what the capture or the plain spline does); SCHEDULE (2): a wish
-    #: of the contact schedule (a foot planted, a site clear), an estimate from the capture or the animator;
-    #: LIMIT (3): a limit of the body, the scene or physics (a foot in the floor, a knee bent backwards, a
-    #: wrench in flight)
+    #: the order in which limits give where the constraints cannot all be met (`solver.feasibility`: the
+    #: least violation is found level by level from the highest). REPRESENTATION (0): a bound of the
+    #: spline's own representation, not of the motion (unit quaternions between the frames); SCHEDULE (1):
+    #: a wish of the contact schedule (a foot planted, a site clear), an estimate from the capture or the
+    #: animator; RELATIVE (2): a bound set by what the reference motion's body does (no jolts beyond the
+    #: capture's or the plain spline's peaks, their effort), which the feet's estimated schedule does not
+    #: override (a jolt is seen at once, a foot sliding a millimetre is not); LIMIT (3): a limit of the body,
+    #: the scene or physics (a foot in the floor, a knee bent backwards, a wrench in flight)
     priority: int = LIMIT
 
     @property

@@ -14,9 +14,8 @@ from solver.constraints.effort import TorqueRMS
 from solver.inverse_dynamics import InverseDynamics, constraint_free_copy
 from solver.kinematics import TangentMap
 from solver.layout import StateLayout
-from solver.least_change import LeastChangeOptions, _relax_unmet, _start_frames, build_least_change
+from solver.least_change import build_least_change
 from solver.path_state import PathState
-from solver.spline_basis import SplineBasis
 
 
 @pytest.fixture(scope="module")
@@ -112,22 +111,3 @@ def test_the_bound_is_the_larger_of_the_plain_splines_and_the_captures(figure, c
     np.testing.assert_allclose(effort.tolerance, 0.05 * max(plain, still), rtol=1e-12)  # the no-jolt bounds' 5 %
     built = build_least_change(model, figure[5], contacts=figure[6].contacts, flights=figure[6].flights, rate=200.0)
     assert "effort" not in [c.name for c in built.al.constraints]  # without a capture: no bound
-
-
-def test_bounds_relative_to_the_reference_give_before_the_scenes(captured):
-    lc = captured
-    frames = _start_frames(lc, LeastChangeOptions().min_gap)
-    basis = SplineBasis(frames.times, lc.al.t)
-    names = [c.name for c in lc.al.constraints]
-    acc, pen = names.index("acceleration"), names.index("penetration")
-    before = [c.limit.copy() for c in lc.al.constraints]
-    scaled = [np.zeros(c.size) for c in lc.al.constraints]
-    scaled[acc][0] = scaled[pen][0] = 2.0  # both broken at twice their tolerance
-    stored = lc.al.estimates()
-    unmet, _, _ = _relax_unmet(lc.al, basis, frames, scaled, stored)
-    assert list(unmet) == ["acceleration"]
-    assert np.array_equal(lc.al.constraints[pen].limit, before[pen])
-    assert lc.al.constraints[acc].limit[0] != before[acc][0]
-    scaled[acc][0] = 0.0  # only the scene's limit is still broken: now it gives
-    unmet, _, _ = _relax_unmet(lc.al, basis, frames, scaled, stored)
-    assert list(unmet) == ["penetration"]

@@ -1,0 +1,257 @@
+"""The least violation: how far no path through the keyframes can meet each constraint, shown by a solve.
+
+Before the least change is solved (`solver.least_change`), the constraints' violation itself is
+minimized over the same paths (the frames' free values, the keyframes fixed), the elastic problem of
+SQP methods (Gill, Murray & Saunders, "SNOPT: an SQP algorithm for large-scale constrained
+optimization", SIAM Review 47, 2005, sec. 1.3: when no feasible point is found, the sum of the
+violations is minimized instead):
+
+    F_S(P) = (1/2) sum_{j in S} sum_p (w_p/T) max(0, c_p/tol_j)^2
+
+1. **Every constraint at once** (S = all): one L-BFGS solve from the given path, stopped as soon as
+   every pair is within its tolerance, with a variable frame added to every segment that holds a broken
+   pair while the segment can take one (`min_gap`), and solved again. Where this meets every pair the
+   problem is feasible: nothing is raised.
+2. **Else level by level** (`Constraint.priority`: the limits of the body and the scene first, then the
+   bounds on what the reference motion's body does, the contact schedule's wishes, and the unit-norm
+   bound of the spline's representation last): the level's violation F_S is minimized while every pair of
+   the levels above holds the limit certified for it (a quadratic penalty raised until they do,
+   `_elastic_solve`), with the same refinement. What is left is the least violation: each pair still
+   beyond its tolerance has its limit raised by its value there, and the next level holds it. This is the
+   lexicographic order of prioritized inverse kinematics (Kanoun, Lamiraux & Wieber, "Kinematic control
+   of redundant manipulators: generalizing the task-priority framework to inequality tasks", IEEE T-RO 27,
+   2011): a lower level never costs a higher one anything.
+
+The path reached meets every certified limit, so the least change that follows is feasible and starts
+on a feasible path. The certificate (`Certificate.raises`) says per constraint and column (a site, a
+joint) by how much [SI], where and over which span the limit was raised.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solver.frames import FrameSet
+from solver.lagrangian import GAMMA, AugmentedLagrangian, solve_subproblem
+from solver.optimize import Status
+from solver.spline_basis import SplineBasis
+
+__all__ = ["Certificate", "Raise", "beyond", "least_violation", "with_frames"]
+
+
+@dataclass(frozen=True)
+class Raise:
+    """The pairs of one constraint at one column whose limit the least violation raised (read-only).
+
+    Attributes:
+        constraint: the constraint's name. label: its column (a contact site, a joint, "" for one column).
+        amount: [SI] the largest raise, the least violation reached at `time` [s].
+        start, end: [s] the first and last quadrature point raised. pairs: how many pairs were raised.
+        unit, scale: the unit shown to users and SI per shown unit (1e-3 for mm).
+    """
+
+    constraint: str
+    label: str
+    amount: float
+    time: float
+    start: float
+    end: float
+    pairs: int
+    unit: str = ""
+    scale: float = 1.0
+
+    def describe(self) -> str:
+        """e.g. "penetration at rtoe 4.2 mm at 1.350 s (1.32-1.38 s)"."""
+        where = f" at {self.label}" if self.label else ""
+        return (f"{self.constraint}{where} {self.amount / self.scale:.3g} {self.unit} at {self.time:.3f} s"
+                f" ({self.start:.3g}-{self.end:.3g} s)").replace("  ", " ")
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """The outcome of `least_violation` (read-only).
+
+    Attributes:
+        raises: (Raise, ...) per constraint and column raised; () when the problem is feasible.
+        frames: the path that reaches the least violation (it meets every certified limit).
+        n_evals: evaluations spent. status: CONVERGED, or the budget or stop request that ended it early.
+    """
+
+    raises: tuple = ()
+    frames: FrameSet | None = field(default=None, repr=False)
+    n_evals: int = 0
+    status: Status = Status.CONVERGED
+
+    @property
+    def unmet(self) -> dict:
+        """{constraint: the largest raise [SI]} ({} when nothing was raised)."""
+        out: dict = {}
+        for r in self.raises:
+            out[r.constraint] = max(out.get(r.constraint, 0.0), r.amount)
+        return out
+
+
+def with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) -> FrameSet:
+    """`frames.with_variable_frames(times)` with every free quaternion made unit: a frame inserted on the
+    path takes its chord's shorter quaternion (norm cos(theta/2) between two frames theta apart), and the
+    variables move a quaternion on its own sphere (`solver.manifold`), so it would keep that norm."""
+    frames = frames.with_variable_frames(times)
+    values = frames.values.copy()
+    for slot in quat_slots:
+        free = ~frames.fixed[:, slot].any(axis=1)
+        q = values[np.ix_(free, slot)]
+        values[np.ix_(free, slot)] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return FrameSet(frames.times, values, frames.fixed, frames.is_keyframe)
+
+
+class _Budget:
+    """The evaluations and time left of a solve, and its stop request."""
+
+    def __init__(self, max_evals: int, max_time_s: float, should_stop):
+        self.max_evals, self.max_time_s, self.should_stop = max_evals, max_time_s, should_stop
+        self.start, self.evals, self.status = time.perf_counter(), 0, Status.CONVERGED
+
+    def spent(self) -> bool:
+        if self.max_time_s and time.perf_counter() - self.start >= self.max_time_s:
+            self.status = Status.MAX_TIME
+        elif self.max_evals and self.evals >= self.max_evals:
+            self.status = Status.MAX_EVALS
+        return self.status is not Status.CONVERGED
+
+    def kwargs(self, done) -> dict:
+        """`solve_subproblem`'s budget arguments; `done()` True (every pair met) also ends it."""
+        left = self.max_time_s - (time.perf_counter() - self.start) if self.max_time_s else 0.0
+        user = self.should_stop or (lambda: False)
+        return {"max_evals": self.max_evals - self.evals if self.max_evals else 0, "max_time_s": max(left, 0.0),
+                "should_stop": lambda: done() or user()}
+
+
+def _scaled(constraints, state) -> list[np.ndarray]:
+    return [c.values(state) / c.tolerance for c in constraints]
+
+
+def _broken_times(al: AugmentedLagrangian, constraints, state) -> np.ndarray:
+    """(r,) [s] the quadrature times of the pairs of `constraints` beyond their tolerance."""
+    rows = [c.rows[c.values(state) / c.tolerance > 1.0] for c in constraints]
+    rows = np.concatenate(rows) if rows else np.zeros(0, int)
+    return al.t[np.unique(rows)]
+
+
+def _split_times(frames: FrameSet, at: np.ndarray, min_gap: float) -> np.ndarray:
+    """The midpoints of the segments of `frames` that hold a time of `at` and are at least 2 min_gap long."""
+    if at.size == 0:
+        return np.zeros(0)
+    seg = np.unique(np.clip(np.searchsorted(frames.times, at, side="right") - 1, 0, frames.count - 2))
+    seg = seg[np.diff(frames.times)[seg] >= 2.0 * min_gap]
+    return 0.5 * (frames.times[seg] + frames.times[seg + 1])
+
+
+def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames: FrameSet, quat_slots,
+                   budget: _Budget, min_gap: float, ftol_rel: float, per_level: int) -> FrameSet:
+    """Minimize F over `objective` while `held` meet their limits (module docstring), adding a variable
+    frame to every segment holding a broken pair of `objective` while one fits; returns the path with the
+    least F among those on which `held` are met (the start is one).
+
+    The held pairs are priced by the quadratic penalty (rho/2) sum (w_p/T) max(0, c_p/tol)^2, F's own form,
+    starting at rho = 1 (a held pair's violation costs what an objective pair's does) and raised by GAMMA
+    until a solve from the start (which meets them) ends with them met: the penalty method's continuation
+    (Nocedal & Wright, sec. 17.1), each solve from the feasible start so that none wanders into a basin
+    where the held pairs cannot be met again."""
+    eal = AugmentedLagrangian(al.change, held, al.tmap, al.engine, al.d0, elastic=objective)
+    eal.worst = np.inf
+    basis = SplineBasis(frames.times, al.t)
+    best, best_F = frames, eal.evaluate(basis, frames.values, grad=False)[0]
+    while True:
+        eal.rho, eal.lam = 1.0, [np.zeros(c.size) for c in held]
+        for _ in range(per_level if held else 1):
+            if best_F == 0.0 or budget.spent():
+                return best
+            r = solve_subproblem(eal, best, quat_slots, ftol_rel=ftol_rel, basis=basis,
+                                 **budget.kwargs(lambda: eal.worst <= 1.0))
+            budget.evals += r.result.n_evals
+            if r.result.status is Status.INTERRUPTED and budget.should_stop is not None and budget.should_stop():
+                budget.status = Status.INTERRUPTED
+            F = eal.evaluate(basis, r.frames.values, grad=False)[0]
+            held_met = all(float(s.max(initial=0.0)) <= 1.0 for s in eal.scaled_values(basis, r.frames.values))
+            if held_met and best_F > F:
+                best, best_F = r.frames, F
+            if held_met or budget.status is not Status.CONVERGED:
+                break
+            eal.rho *= GAMMA
+        if budget.status is not Status.CONVERGED:
+            return best
+        new = _split_times(best, _broken_times(al, objective, eal.state(basis, best.values)), min_gap)
+        if new.size == 0:
+            return best
+        best = with_frames(best, new, quat_slots)
+        basis = SplineBasis(best.times, al.t)
+        best_F = eal.evaluate(basis, best.values, grad=False)[0]
+
+
+def beyond(al: AugmentedLagrangian, constraints, frames: FrameSet, limits=None) -> list[Raise]:
+    """The pairs of `constraints` beyond their tolerance on the path of `frames`, per constraint and column.
+
+    Args:
+        al: the AugmentedLagrangian (its quadrature points and engine). constraints: the `Constraint`s.
+        frames: FrameSet (m, nq). limits: per constraint (p,) [SI] limits to measure against (None: their
+            own `limit`).
+    Returns:
+        [Raise, ...]: the largest amount c = measure - limit [SI] of each column beyond its tolerance, where.
+    """
+    state = al.state(SplineBasis(frames.times, al.t), frames.values)
+    out = []
+    for j, c in enumerate(constraints):
+        v = c.measure(state) - (c.limit if limits is None else limits[j])
+        bad = v / c.tolerance > 1.0
+        labels = np.asarray(c.labels, object) if len(c.labels) == c.size else np.full(c.size, "", object)
+        for label in dict.fromkeys(labels[bad]):
+            at = bad & (labels == label)
+            i = np.flatnonzero(at)[np.argmax(v[at])]
+            t = al.t[c.rows[at]]
+            out.append(Raise(c.name, str(label), float(v[i]), float(al.t[c.rows[i]]), float(t.min()), float(t.max()),
+                             int(at.sum()), c.unit, c.scale))
+    return out
+
+
+def _raise(al: AugmentedLagrangian, constraints, frames: FrameSet) -> list[Raise]:
+    """Raise the limit of every pair of `constraints` beyond its tolerance on `frames` by its value there
+    (the least violation reached), and describe what was raised (`beyond`)."""
+    out = beyond(al, constraints, frames)
+    state = al.state(SplineBasis(frames.times, al.t), frames.values)
+    for c in constraints:
+        v = c.values(state)
+        c.limit = c.limit + np.where(v / c.tolerance > 1.0, v, 0.0)
+    return out
+
+
+def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, min_gap: float, ftol_rel: float,
+                    per_level: int, max_evals: int = 0, max_time_s: float = 0.0, should_stop=None) -> Certificate:
+    """The least violation of the constraints over the paths through the keyframes (module docstring).
+
+    Args:
+        al: the least change's AugmentedLagrangian (its constraints; the limits of those that cannot be
+            met are raised in place, `Constraint.limit`). frames: the start FrameSet (m, nq).
+        quat_slots: (s, 4) the layout's quaternion slots. min_gap: [s] no two frames closer.
+        ftol_rel: each L-BFGS solve's relative tolerance. per_level: the most subproblems of the method of
+            multipliers per level and frame set. max_evals, max_time_s, should_stop: the budget (0: none).
+    Returns:
+        Certificate: what was raised, the path that reaches it, the evaluations spent.
+    """
+    budget = _Budget(max_evals, max_time_s, should_stop)
+    cons = list(al.constraints)
+    kw = dict(budget=budget, min_gap=min_gap, ftol_rel=ftol_rel, per_level=per_level)
+    frames = _elastic_solve(al, cons, [], frames, quat_slots, **kw)
+    state = al.state(SplineBasis(frames.times, al.t), frames.values)
+    if budget.status is not Status.CONVERGED or all(float(s.max(initial=0.0)) <= 1.0 for s in _scaled(cons, state)):
+        return Certificate((), frames, budget.evals, budget.status)
+    raises: list[Raise] = []
+    for level in sorted({c.priority for c in cons}, reverse=True):
+        objective = [c for c in cons if c.priority == level]
+        held = [c for c in cons if c.priority > level]
+        frames = _elastic_solve(al, objective, held, frames, quat_slots, **kw)
+        if budget.status is not Status.CONVERGED:
+            break
+        raises += _raise(al, objective, frames)
+    return Certificate(tuple(raises), frames, budget.evals, budget.status)

@@ -1,0 +1,168 @@
+"""The least violation and its certificate (solver.feasibility, solver.least_change): the contract, on
+problems whose answers are known by hand.
+
+The figure stands still on the floor through its keyframes (the plain spline: no change), and the only
+constraints are bounds on the pelvis height z at one instant t* (`PelvisHeight`, a user-defined
+`Constraint`): z(t*) <= top (the contact schedule's priority) and z(t*) >= bottom (a limit of the body's
+priority). Each is met or not by a known amount:
+
+* bottom <= top, both off the still path: feasible; nothing is raised, the status is CONVERGED, and the
+  least change ends on the bound it had to move to (an active bound holds with equality within its
+  tolerance, and the other is not touched);
+* bottom > top: no path meets both; the lower priority gives by exactly bottom - top, the body's limit
+  holds, the status is INFEASIBLE;
+* t* a keyframe that holds z above top: the certificate is the keyed excess, nothing more, and no finer
+  frames beat it.
+"""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import solver
+from solver.constraints.base import LIMIT, SCHEDULE, Constraint
+from solver.feasibility import least_violation, with_frames
+from solver.lagrangian import AugmentedLagrangian
+from solver.layout import StateLayout
+from solver.least_change import LeastChangeOptions, _start_frames, build_least_change, solve_least_change
+from solver.optimize import Status
+from solver.spline_basis import SplineBasis
+
+#: [m] the bounds' tolerance: 1 mm, the penetration constraint's
+TOL = 1e-3
+#: [s] the instant the bounds hold at, between the keyframes at 0 and 0.8 s, on the middle one: a
+#: quadrature point (200 per second, midpoints of 5 ms intervals from 0)
+T_STAR = 0.4025
+
+
+class PelvisHeight(Constraint):
+    """A user-defined bound: the pelvis height z (qpos[2]) at the quadrature point nearest `t` (and every
+    point within `half` [s] of it), sign +1: z <= limit, sign -1: z >= -limit (measure -z <= limit). Unit m,
+    tolerance `TOL`."""
+
+    unit, scale, tolerance = "m", 1.0, TOL
+
+    def __init__(self, name, t_points, t, sign, limit, priority, half=0.0):
+        self.name, self.sign, self.priority = name, float(sign), priority
+        near = np.abs(t_points - t)
+        self.rows = np.flatnonzero(near <= max(half, near.min()))
+        self.labels = np.full(len(self.rows), "pelvis", object)
+        self.limit = np.full(len(self.rows), float(limit))
+
+    def measure(self, state):
+        return self.sign * state.Y[self.rows, 2]
+
+    def pull(self, state, g):
+        np.add.at(state.gY[:, 2], self.rows, self.sign * g)
+
+
+@pytest.fixture(scope="module")
+def standing():
+    """(model, still keyframes at 0, T_STAR, 0.8 s, the standing pelvis height [m])."""
+    model = solver.load_model(solver.shipped("run_and_step.xml"))
+    keyframes, _ = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
+    q = keyframes.values[0].copy()
+    for slot in StateLayout.from_model(model).quat_slots:
+        q[slot] /= np.linalg.norm(q[slot])
+    still = replace(keyframes, times=np.array([0.0, T_STAR, 0.8]), values=np.tile(q, (3, 1)),
+                    mask=np.ones((3, model.nq), bool))
+    return model, still, float(q[2])
+
+
+def _problem(standing, top, bottom, keyed=True, half=0.0):
+    """The least change of the still figure under z(t*) <= top (SCHEDULE) and z(t*) >= bottom (LIMIT),
+    each over the points within `half` [s] of t*; without `keyed` the middle keyframe leaves the pelvis
+    height free (a partial keyframe)."""
+    model, still, _ = standing
+    if not keyed:
+        mask = still.mask.copy()
+        mask[1, 2] = False
+        still = replace(still, mask=mask)
+    lc = build_least_change(model, still, rate=200.0)
+    old = lc.al
+    t = old.t
+    cons = [PelvisHeight("top", t, T_STAR, +1, top, SCHEDULE, half),
+            PelvisHeight("bottom", t, T_STAR, -1, -bottom, LIMIT, half)]
+    lc.al = AugmentedLagrangian(old.change, cons, old.tmap, old.engine, old.d0)
+    return lc
+
+
+def top_limit(lc):
+    """(p,) [m] the limits of the bound z <= top after the solve (raised where certified)."""
+    return lc.al.constraints[0].limit
+
+
+def _z(sol):
+    return float(sol.frames.path(np.array([T_STAR]))[0, 2])
+
+
+def test_a_feasible_problem_raises_nothing_and_ends_on_its_active_bound(standing):
+    z0 = standing[2]
+    lc = _problem(standing, top=z0 - 0.05, bottom=z0 - 0.20, keyed=False)
+    sol = solve_least_change(lc, LeastChangeOptions())
+    assert sol.status is Status.CONVERGED and sol.certificate == () and sol.unmet == {}
+    assert z0 - 0.05 - TOL <= _z(sol) <= z0 - 0.05 + TOL  # active: on the bound, within its tolerance
+    assert _z(sol) >= z0 - 0.20  # the other untouched
+
+
+def test_conflicting_bounds_give_the_lower_priority_exactly_what_the_higher_needs(standing):
+    z0 = standing[2]
+    top, bottom = z0 - 0.10, z0 - 0.04  # no z is both <= top and >= bottom: the schedule's wish gives 6 cm
+    lc = _problem(standing, top=top, bottom=bottom, keyed=False)
+    sol = solve_least_change(lc, LeastChangeOptions())
+    assert sol.status is Status.INFEASIBLE
+    assert [r.constraint for r in sol.certificate] == ["top"]
+    (raised,) = sol.certificate
+    assert raised.amount == pytest.approx(bottom - top, abs=TOL)  # the least violation, no more
+    assert raised.time == pytest.approx(T_STAR, abs=0.005) and raised.label == "pelvis"
+    assert _z(sol) >= bottom - TOL  # the body's limit holds
+    assert sol.unmet == {"top": raised.amount}
+
+
+def test_a_keyed_pose_beyond_a_bound_is_certified_by_its_own_excess(standing):
+    z0 = standing[2]
+    # the key at t* holds z 5 mm above top, which holds over the 20 ms either side of it too
+    lc = _problem(standing, top=z0 - 0.005, bottom=z0 - 0.5, half=0.02)
+    sol = solve_least_change(lc, LeastChangeOptions())
+    (raised,) = sol.certificate
+    assert raised.constraint == "top" and 0.005 - TOL <= raised.amount <= 0.005 + 1e-9  # the keyed 5 mm, no more
+    assert raised.time == pytest.approx(T_STAR, abs=1e-9)  # at the key
+    assert sol.status is Status.INFEASIBLE and _z(sol) == pytest.approx(z0, abs=1e-12)
+    z = sol.frames.path(lc.al.t[lc.al.constraints[0].rows])[:, 2]
+    assert np.all(z - top_limit(lc) <= TOL + 1e-9)  # every pair meets its certified limit
+
+
+def test_finer_frames_do_not_beat_the_certificate(standing):
+    """The least violation on the start frames with a frame every min_gap around t* is no smaller."""
+    z0 = standing[2]
+    top, bottom = z0 - 0.10, z0 - 0.04
+    amounts = []
+    for fine in (False, True):
+        lc = _problem(standing, top=top, bottom=bottom, keyed=False)
+        o = LeastChangeOptions()
+        frames = _start_frames(lc, o.min_gap)
+        if fine:
+            extra = np.arange(0.2, 0.6, o.min_gap / 2)
+            frames = with_frames(frames, extra[np.min(np.abs(extra[:, None] - frames.times[None]), axis=1) >= o.min_gap],
+                                 lc.layout.quat_slots)
+        cert = least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=o.min_gap, ftol_rel=o.ftol_rel,
+                               per_level=o.per_level)
+        amounts.append(cert.unmet["top"])
+        state = lc.al.state(SplineBasis(cert.frames.times, lc.al.t), cert.frames.values)
+        assert all(float((c.values(state) / c.tolerance).max()) <= 1.0 for c in lc.al.constraints)
+    assert amounts[1] >= amounts[0] - TOL
+
+
+def test_multipliers_are_nonnegative_and_complementary_at_the_solution(standing):
+    """KKT at the least change's end: every multiplier >= 0 and zero on a pair well inside its bound."""
+    z0 = standing[2]
+    lc = _problem(standing, top=z0 - 0.05, bottom=z0 - 0.20, keyed=False)
+    sol = solve_least_change(lc, LeastChangeOptions())
+    state = lc.al.state(SplineBasis(sol.frames.times, lc.al.t), sol.frames.values)
+    for c, lam in zip(lc.al.constraints, lc.al.lam):
+        ch = c.values(state) / c.tolerance
+        assert np.all(lam >= 0.0)
+        assert np.all(lam[ch < -1.0] == 0.0), c.name  # inactive beyond a tolerance: no multiplier
+    top = next(c for c, lam in zip(lc.al.constraints, lc.al.lam) if c.name == "top")
+    assert lc.al.lam[lc.al.constraints.index(top)][0] > 0.0  # the active bound bears the pull of D
+
