@@ -299,11 +299,34 @@ def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bound
                           f"{r.amount * 1e3:.1f} mm)" for r in relaxed[:RELAXATIONS_SHOWN])
         more = f" and {len(relaxed) - RELAXATIONS_SHOWN} more" if len(relaxed) > RELAXATIONS_SHOWN else ""
         lines.append(f"where the keyframes decide (limit set to what they force): {shown}{more}")
-    unmet = getattr(solution, "unmet", None) or {}
-    if unmet:
-        lines.append("constraints the keyframes leave out of reach (limit raised to what the path reaches), by [SI]: "
-                     + ", ".join(f"{k} {v:.3g}" for k, v in unmet.items()))
+    lines += certificate_lines(solution)
     return "\n".join(lines)
+
+
+#: raised limits shown one per line under the table (the rest counted): the summary stays short
+CERTIFIED_SHOWN = 6
+
+
+def certificate_lines(solution) -> list[str]:
+    """The summary's lines on the limits the least violation raised (`Solution.certificate`): per
+    constraint and column, the amount no path through the keyframes beats, where, and the keyframes
+    around it; [] when nothing was raised."""
+    raises = sorted(getattr(solution, "certificate", ()) or (), key=lambda r: -r.amount / max(r.scale, 1e-300))
+    if not raises:
+        return []
+    keys = np.asarray(solution.initial.times)
+    out = ["out of reach (certified: the least violation no path through the keyframes beats; the limit raised by it):"]
+    for r in raises[:CERTIFIED_SHOWN]:
+        i = int(np.clip(np.searchsorted(keys, r.time, side="right") - 1, 0, len(keys) - 1))
+        near = int(np.argmin(np.abs(keys - r.time)))
+        if abs(keys[near] - r.time) <= 1e-3:
+            where = f"at keyframe {near}"
+        else:
+            where = f"between keyframes {i} and {min(i + 1, len(keys) - 1)}"
+        out.append(f"  {r.describe()}, {where}")
+    if len(raises) > CERTIFIED_SHOWN:
+        out.append(f"  and {len(raises) - CERTIFIED_SHOWN} more (the saved path's certificate_json)")
+    return out
 
 
 #: rows of `motion_metrics_table`: (label, key in a `plausibility` block, sub-key or None, format)

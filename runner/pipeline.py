@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from runner.mocap.contact_detection import reference_contacts
@@ -314,7 +314,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         subject's figure), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
         where the keyframes decide a constraint, `Solution.relaxations`), "relaxed" ({constraint: count} of
         those relaxations), "stalled" ({constraint: amount [SI]}
-        the keyframes leave out of reach, `Solution.unmet`), "unmet_at_end" ({constraint: worst value over
+        the keyframes leave out of reach, `Solution.unmet`), "certificate" (a dict per limit raised:
+        `solver.feasibility.Raise`'s fields), "unmet_at_end" ({constraint: worst value over
         its tolerance} of those still beyond it when the solve ended, `Solution.integrals_final`),
         "plain_constraints" ({constraint: worst value over its tolerance} on the plain spline,
         `Solution.integrals_initial`), "metrics"
@@ -455,6 +456,7 @@ def _solve_fields(solution) -> dict:
     return {"variable_frames": solution.frames.n_variable, "solve_time_s": solution.wall_time_s,
             "keyframe_conflicts": len(solution.relaxations), "relaxed": _relaxed(solution),
             "stalled": dict(solution.unmet or {}),
+            "certificate": [asdict(r) for r in getattr(solution, "certificate", ()) or ()],
             "unmet_at_end": {k: v for k, v in solution.integrals_final.items() if v > 1.0},
             "plain_constraints": dict(solution.integrals_initial)}
 

@@ -4,7 +4,8 @@ Fields (docs/saved-path.md): frame_times (m,) [s], frames (m, nq), frame_is_keyf
 keyframe_times (k,), keyframes (k, nq), keyframe_mask (k, nq), plain_frame_times, plain_frames,
 reference_times, reference_qpos (motion capture, may be empty), scene (relative to the .npz's folder),
 wall_time_s, objective_trace, status, unmet_json ({constraint or term: amount}: what the solve reports out of
-reach, `Solution.unmet`), metrics_json, options_json, versions_json, and contacts (a structured
+reach, `Solution.unmet`), certificate_json (a list of {constraint, label, amount [SI], time, start, end [s],
+pairs, unit, scale}: each limit the least violation raised, `Solution.certificate`), metrics_json, options_json, versions_json, and contacts (a structured
 array: site, start, end, surface; the reference's or the keyframe file's contacts, may be empty; files
 written before it have none). A path made from a BVH clip also has clip (the clip's path, relative to the
 .npz's folder like the scene) and clip_text (the clip's whole text, so that `dynsplines export` writes onto
@@ -142,6 +143,8 @@ def save_path_npz(run, path, command: dict | None = None) -> None:
         objective_trace=solution.trace,
         status=np.array(solution.status.value),
         unmet_json=np.array(json.dumps(dict(solution.unmet or {}), default=float)),
+        certificate_json=np.array(json.dumps([asdict(r) for r in getattr(solution, "certificate", ()) or ()],
+                                             default=float)),
         metrics_json=np.array(json.dumps(run.metrics, default=float)),
         options_json=np.array(json.dumps(opts, default=str)),
         versions_json=np.array(json.dumps(versions())),
