@@ -52,7 +52,7 @@ from runner.mocap.figure_record import clip_skeleton, figure_skeleton_digest, sk
 from runner.mocap.kinematics import rotate
 from runner.mocap.retarget import check_figure
 from runner.mocap.skeleton import RecognisedSkeleton
-from runner.mocap.source_check import keys_on_source
+from runner.mocap.source_check import ON_FRAME, keys_on_source
 from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure
@@ -62,9 +62,6 @@ __all__ = ["source_clip", "root_correction", "source_motion", "source_bvh_text",
            "export_on_source"]
 
 _DECIMALS = 6
-#: [frames] a time this near a captured frame's is that frame's: saved times are rounded to a microsecond
-#: (1.2e-4 of a 120 fps frame); a thousandth of a frame is 8 us at 120 fps
-ON_FRAME = 1e-3
 
 
 def source_clip(saved) -> BvhClip | None:
