@@ -275,10 +275,11 @@ def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np
     return "\n".join(out) + "\n"
 
 
-def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.ndarray,
-                     fps: float) -> tuple[BvhClip, int]:
+def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.ndarray, fps: float,
+                     clip: BvhClip | None = None) -> tuple[BvhClip, int]:
     """Write a motion of saved path `saved` onto its source skeleton (`source_bvh_text`), atomically; the
-    root is moved as the path's root is from its reference's (`source_motion`).
+    root is moved as the path's root is from its reference's (`source_motion`). `clip`: the path's source
+    clip if already read (`source_clip`), else it is read.
 
     Returns:
         (the source clip (its joints are the file's), the frames written: the motion's and the source's
@@ -288,7 +289,7 @@ def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.
     """
     from runner.files import atomic_output
 
-    clip = source_clip(saved)
+    clip = clip or source_clip(saved)
     if clip is None:
         raise InputError(f"{saved.source}: the path was not made from a BVH clip, so it has no source skeleton; "
                          "give --skeleton figure")
@@ -335,7 +336,7 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
                              "skeleton; give --skeleton figure, or redo the clip with --figure subject")
         return None
     try:
-        clip, frames = write_source_bvh(out, saved, model, motion.qpos, motion.times, motion.fps)
+        clip, frames = write_source_bvh(out, saved, model, motion.qpos, motion.times, motion.fps, clip)
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
                          "space or choose another --to") from None
