@@ -5,7 +5,7 @@ The file has the source's HIERARCHY verbatim (joint names, OFFSETs, channel orde
 rate, and starts, like the source, with the source's leading rest frames (the synthetic T-pose of CMU's
 cgspeed conversion; none in most files); frame k + rest is the path at t = k / fps. The skeleton is
 read as the import read it (the roles, unit, axes and body frames the subject's figure records,
-runner/mocap/figure_record.py). Per joint:
+runner/mocap/figure_record.py).
 
 The motion is the source plus the path's change (motion displacement mapping, Bruderlin & Williams
 1995; Witkin & Popovic 1995): the path's change relative to the capture as the figure has it is put onto
@@ -37,7 +37,8 @@ the source's own pose, so that where the path is the capture the file is the sou
   and the inner joints above), and position channels but the root's: the source's, resampled as above.
 
 Local rotations become each joint's Euler channels in its own order (R = R1 R2 R3 for channels listed
-1 2 3, intrinsic: the BVH convention), unwrapped over time.
+1 2 3, intrinsic: the BVH convention), unwrapped over time. `export_on_source` reads the file it wrote
+back and measures it at the path's keyframes (runner/mocap/source_check.py).
 """
 from __future__ import annotations
 
@@ -309,7 +310,8 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
         required: `--skeleton source` was given: a path without a clip is an error (else None is returned,
             and the caller writes the figure's skeleton).
     Returns:
-        `runner.export.ExportResult`, or None (no clip, not required).
+        `runner.export.ExportResult` (its frames the file's, rest frames included; its `check` the file read
+        back at the path's keyframes, `runner.mocap.source_check.KeysOnSource`), or None (no clip, not required).
     Raises:
         InputError: as `runner.export.prepare_export`; a missing clip; a failed write.
     """
