@@ -340,12 +340,12 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = clip_paths(clip, out_dir, o)
     problem, source, cs = clip_problem(clip, out_dir, o, paths, say)
-    on_source = keyframes_on_source_report(clip, cs, problem.keyframes.times, say)
     options_ = o.solve or LeastChangeOptions()
     video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, panels=o.panels, camera=o.camera, quiet=o.quiet)
     outputs = Outputs(save_path=paths["save_path"], exports=tuple(o.exports), plot_dir=o.plot, video=paths.get("video"),
                       video_options=video, summary=o.summary, quiet=o.quiet, command={"command": o.command})
     run = execute(problem, options_, source, outputs, say)
+    on_source = keyframes_on_source_report(paths["save_path"], cs, problem.keyframes, say)
     ref = source.reference
     status = "interrupted" if run.interrupted else run.solution.status.value
     result = {
@@ -387,56 +387,56 @@ def _mm(metres: float | None) -> float | None:
     return None if metres is None else 1000.0 * metres
 
 
-#: [m] a source joint this near the clip's own place at a keyframe counts as the clip's (optical
-#: capture's marker jitter is 1-5 mm)
-ON_SOURCE = 0.005
-
-
-def keyframes_on_source_report(clip: Path, cs, times, say=print) -> dict | None:
-    """How far the keyframes, written back onto the source skeleton (`dynsplines export --to FILE.bvh`),
-    are from the clip's own pose (`runner.mocap.source_export.keyframes_on_source`), said in one line
-    that names the corrections responsible beyond `ON_SOURCE` (the knee and elbow hyperextension clamp, the
-    footplant, the repair of tracking glitches: the root-height correction and the levelling are taken off
-    by the export). Only on the subject's own
-    figure (another figure's bones are not the source's).
+def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | None:
+    """The saved path written onto the source skeleton (as `dynsplines export --to FILE.bvh` writes it, into a
+    temporary file) and read back: how far its joints are from the clip's own at the keyframes
+    (`runner.mocap.source_check.keys_on_source`), said in one line that names, at the key moved most,
+    the corrections responsible (the knee and elbow hyperextension clamp, the footplant, the repair of
+    tracking glitches, a partial key; the root-height correction and the levelling are taken off by the
+    export). Only on the subject's own figure (another figure's bones are not the source's), with a
+    saved path.
 
     Returns:
-        {"max_mm", "joint", "time_s", "keys_moved" (keys with a joint beyond ON_SOURCE), "clamped_deg"
-        ({knee or elbow: [deg] hyperextension removed at that key}), "planted_mm" ({foot: [mm] the footplant
-        lowered it at that key})}, or None (another figure).
+        {"max_mm", "joint", "time_s", "keys_moved" (keys with a joint beyond `ON_SOURCE`), "keys",
+        "clamped_deg" ({knee or elbow: [deg] hyperextension removed at that key}), "planted_mm" ({foot:
+        [mm] the footplant lowered it at that key})}, all read from the written file; or None.
     """
+    import tempfile
+
     import numpy as np
 
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.source_export import keyframes_on_source
+    from runner.mocap.source_check import ON_SOURCE
+    from runner.mocap.source_export import export_on_source
 
     ref = cs.reference
-    if not ref.captured_root or ref.skeleton is None:
+    if not ref.captured_root or ref.skeleton is None or not Path(npz).is_file():
         return None
-    src = read_bvh(clip)
-    times = np.asarray(times, float)
-    d = keyframes_on_source(src, cs.model, ref, times)
-    k, j = np.unravel_index(int(np.argmax(d)), d.shape)
-    frame = int(np.clip(np.rint(times[k] / ref.frame_time), 0, ref.count - 1))
+    with tempfile.TemporaryDirectory(prefix="dynsplines-way-back-") as tmp:
+        res = export_on_source(npz, Path(tmp) / "way_back.bvh")
+    check = None if res is None else res.check
+    if check is None or not len(check.times):
+        return None
+    k, j = check.worst()
+    t = float(check.times[k])
+    frame = int(np.clip(np.rint(t / ref.frame_time), 0, ref.count - 1))
     clamped = {name: round(float(a[frame]), 2) for name, a in (ref.clamped or {}).items() if a[frame] > 0}
     planted = {} if ref.plant is None else {
         foot: round(-1000.0 * float(ref.plant.foot_dz[frame, i]), 1) for i, foot in enumerate(ref.plant.feet)
         if ref.plant.foot_dz[frame, i] < 0}
-    out = {"max_mm": round(1000.0 * float(d.max()), 2), "joint": src.names[j], "time_s": round(float(times[k]), 4),
-           "keys_moved": int((d.max(axis=1) > ON_SOURCE).sum()), "clamped_deg": clamped, "planted_mm": planted}
-    line = "  keyframes on the source skeleton (export --to FILE.bvh): every joint within "
-    if d.max() <= ON_SOURCE:
-        line += f"{out['max_mm']:.1f} mm of the clip's"
-    else:
-        glitched = [g.joint for g in ref.glitches if g.start - 1e-9 <= times[k] <= g.end + 1e-9]
+    out = {"max_mm": round(check.max_mm(), 3), "joint": check.joints[j], "time_s": round(t, 4),
+           "keys_moved": int(check.moved.sum()), "keys": len(check.times), "clamped_deg": clamped,
+           "planted_mm": planted}
+    line = f"  keyframes on the source skeleton (export --to FILE.bvh, read back): {check.summary()}"
+    if check.moved.any():
+        key = int(np.argmin(np.abs(keyframes.times - t)))
+        glitched = [g.joint for g in ref.glitches if g.start - 1e-9 <= t <= g.end + 1e-9]
         why = ", ".join([f"{n} {a:.1f} deg" for n, a in clamped.items()] +
                         [f"{foot} foot lowered {mm:.1f} mm" for foot, mm in planted.items()] +
-                        [f"{j} glitch repaired" for j in glitched]) or "none at that key"
-        line += (f"{1000 * ON_SOURCE:.0f} mm of the clip's at {len(times) - out['keys_moved']} of {len(times)} keys; at "
-                 f"{out['keys_moved']} the import's clean-up (the knee and elbow hyperextension clamp, the footplant, "
-                 "the repair of tracking glitches) moved "
-                 f"joints, most {src.names[j]} by {out['max_mm']:.0f} mm at {times[k]:.2f} s ({why}; docs/mocap.md "
-                 "\"Back onto the source skeleton\")")
+                        [f"{g} glitch repaired" for g in glitched] +
+                        (["a partial key"] if keyframes.is_partial[key] else [])) or "none at that key"
+        line += (f" ({why}; beyond {1000 * ON_SOURCE:g} mm the import's clean-up - the knee and elbow hyperextension "
+                 "clamp, the footplant, the repair of tracking glitches - moved the capture: docs/mocap.md \"Back onto "
+                 "the source skeleton\")")
     say(line)
     return out
 

@@ -42,4 +42,6 @@ def run(args) -> int:
         res = export_saved_path(args.path, args.to, args.which, args.fps)
     if not getattr(args, "quiet", False):
         print(f"dynsplines: wrote {res.describe()}")
+        if res.check is not None:
+            print(f"  keyframes read back from {res.path.name}: {res.check.summary()}")
     return 0

@@ -21,8 +21,10 @@ FORMATS = {".bvh": "BVH", ".glb": "glTF binary"}
 
 @dataclass(frozen=True)
 class ExportResult:
-    """What `export_saved_path` wrote: path, format, which motion, fps [Hz], frames, joints (bodies),
-    size [bytes], wall_time_s [s] (sampling and writing)."""
+    """What `export_saved_path` wrote: path, format, which motion, fps [Hz], frames (the file's, rest frames
+    included), joints (bodies), size [bytes], wall_time_s [s] (sampling and writing), and `check`: for a BVH
+    on a clip's own skeleton, the file read back at the keyframes (`runner.mocap.source_check.KeysOnSource`),
+    else None."""
 
     path: Path
     format: str
@@ -32,7 +34,7 @@ class ExportResult:
     joints: int
     size: int
     wall_time_s: float
-
+    check: object = None
 
     def describe(self) -> str:
         """One line: what was written, e.g. for `wrote ...`."""

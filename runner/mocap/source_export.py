@@ -5,30 +5,40 @@ The file has the source's HIERARCHY verbatim (joint names, OFFSETs, channel orde
 rate, and starts, like the source, with the source's leading rest frames (the synthetic T-pose of CMU's
 cgspeed conversion; none in most files); frame k + rest is the path at t = k / fps. The skeleton is
 read as the import read it (the roles, unit, axes and body frames the subject's figure records,
-runner/mocap/figure_record.py). Per joint:
+runner/mocap/figure_record.py).
 
-* **driving a figure body** (`runner.mocap.body_frames.DRIVERS`: the hips, upper and lower legs, feet,
-  chest, upper arms and forearms): its world orientation is the figure body's times the inverse body
-  offset (figure world = source world x R_off, so source world = figure world x R_off^-1). A merged
-  chain is split back by keeping the source's inner joints and solving the last one: with the spine
-  joints below the chest resampled from the source, the chest's local rotation is the one whose
-  composition with them gives the torso's world orientation; likewise a hip offset joint before the
-  thigh, a clavicle before the arm. At a keyframe, where the path is the reference and the reference
-  the retargeted source, this gives every source joint back. The hips' world position is the path's root
-  position minus the reference's height correction c(t) (`root_correction`: the import stands the
-  captured feet on the fitted surfaces by moving the root at most 3 cm up or down per frame,
-  `runner.mocap.contacts.correct_root_height`; the export takes that off again), written into the
-  position channels of the hips (or of the nearest joint above them that has some) given the source's
-  joints above. Both are taken back from the scene's levelled frame into the capture's coordinates first
-  (the inverse of the rigid transform the scene records, `solver.capture_frame`; docs/mocap.md), so
-  the file lies where the source does.
-* **not modelled** (neck and head, toes, hands, fingers, and the inner joints above; any position
-  channels but those above): the source's local rotations and translations, resampled to the export
-  times (spherical linear interpolation between the neighbouring captured frames,
-  `scipy.spatial.transform.Slerp`; at the captured times, the source's own).
+The motion is the source plus the path's change (motion displacement mapping, Bruderlin & Williams
+1995; Witkin & Popovic 1995): the path's change relative to the capture as the figure has it is put onto
+the source's own pose, so that where the path is the capture the file is the source. Per frame:
+
+* **the capture as the figure has it** (the base): the source's pose at the export time (its local
+  rotations and translations, the captured frame's own at a captured frame's time, else spherical
+  linear interpolation between the neighbouring frames, `scipy.spatial.transform.Slerp`) retargeted onto
+  the figure (`runner.mocap.retarget.retarget`, with the body frames the subject's figure records), and
+  the root where the path's reference has it (the saved path's `reference_qpos`: the captured hips
+  moved by the import's root-height correction, `runner.mocap.contacts.correct_root_height`, that
+  stands the feet on the fitted surfaces; without a reference, the captured hips). The import's
+  corrections of the capture (the knee and elbow hyperextension clamp, the repair of tracking glitches,
+  the footplant of the keys) are not in the base, so they are part of the path's change and reach the
+  file, where `mocap` names them.
+* **a joint driving a figure body** (`runner.mocap.body_frames.DRIVERS`: the hips, upper and lower legs,
+  feet, chest, upper arms and forearms): with the figure joint into that body turned by q_path on the
+  path and by q_base on the base, its change is D = q_base^-1 q_path, in the body's frame; in the
+  driving joint's frame that is E = R_off D R_off^-1 (figure world = source world x R_off), and the
+  joint's local rotation becomes L E (file axes: E' = A^T E A, A = skel.axes). The source joints
+  between two driving joints (CMU's LowerBack and Spine below the chest, a hip offset joint such as
+  LHipJoint, a clavicle) keep their local rotations, so the chain's composition changes by E exactly as
+  the figure joint does, and where D is the identity every joint is the source's.
+* **the root**: the path's root minus the base's, taken back from the scene's levelled frame into the
+  capture's coordinates (the inverse of the rigid transform the scene records, `solver.capture_frame`),
+  axes and unit, is added to the translation of the hips (or of the nearest joint above them that has
+  position channels) in its parent's frame.
+* **joints the figure does not have** (neck and head, toes, hands, fingers, end joints, static roots,
+  and the inner joints above), and position channels but the root's: the source's, resampled as above.
 
 Local rotations become each joint's Euler channels in its own order (R = R1 R2 R3 for channels listed
-1 2 3, intrinsic: the BVH convention), unwrapped over time.
+1 2 3, intrinsic: the BVH convention), unwrapped over time. `export_on_source` reads the file it wrote
+back and measures it at the path's keyframes (runner/mocap/source_check.py).
 """
 from __future__ import annotations
 
@@ -40,16 +50,17 @@ import numpy as np
 from runner.mocap.body_frames import DRIVERS
 from runner.mocap.bvh import POSITION_CHANNELS, BvhClip, read_bvh
 from runner.mocap.figure_record import clip_skeleton, figure_skeleton_digest, skeleton_digest
-from runner.mocap.kinematics import file_world, forward, rotate
+from runner.mocap.kinematics import rotate
 from runner.mocap.retarget import check_figure
 from runner.mocap.skeleton import RecognisedSkeleton
+from runner.mocap.source_check import ON_FRAME, keys_on_source
 from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.quaternion import conj, mul, normalize
 
-__all__ = ["source_clip", "root_correction", "source_motion", "keyframes_on_source", "source_bvh_text",
-           "write_source_bvh", "export_on_source"]
+__all__ = ["source_clip", "root_correction", "source_motion", "source_bvh_text", "write_source_bvh",
+           "export_on_source"]
 
 _DECIMALS = 6
 
@@ -87,35 +98,23 @@ def _renamed(clip: BvhClip, source: str) -> BvhClip:
 
 def _slerp_source(clip: BvhClip, first: int, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The source's local rotations (n, J, 4) (w x y z, file axes) and translations (n, J, 3) [units] at
-    `times` [s] (t = 0 at frame `first`, the first after the rest frames), slerp and linear between
-    captured frames."""
+    `times` [s] (t = 0 at frame `first`, the first after the rest frames): at a captured frame's time
+    (within `ON_FRAME` of a frame) that frame's own values, copied; between frames slerp and linear."""
     from scipy.spatial.transform import Rotation, Slerp
 
     quat, pos = clip.local_quat[first:], clip.local_pos[first:]
     t_src = np.arange(len(quat)) * clip.frame_time
     t = np.clip(times, 0.0, t_src[-1])
-    out_q = np.empty((len(t), quat.shape[1], 4))
-    for j in range(quat.shape[1]):
-        rot = Rotation.from_quat(quat[:, j][:, [1, 2, 3, 0]])
-        out_q[:, j] = Slerp(t_src, rot)(t).as_quat()[:, [3, 0, 1, 2]]
-    out_p = np.stack([np.stack([np.interp(t, t_src, pos[:, j, k]) for k in range(3)], -1)
-                      for j in range(pos.shape[1])], 1)
+    k = np.rint(t / clip.frame_time).astype(int)
+    on = np.abs(t / clip.frame_time - k) < ON_FRAME
+    out_q, out_p = quat[np.minimum(k, len(quat) - 1)].copy(), pos[np.minimum(k, len(pos) - 1)].copy()
+    if not on.all():
+        between = t[~on]
+        for j in range(quat.shape[1]):
+            rot = Rotation.from_quat(quat[:, j][:, [1, 2, 3, 0]])
+            out_q[~on, j] = Slerp(t_src, rot)(between).as_quat()[:, [3, 0, 1, 2]]
+            out_p[~on, j] = np.stack([np.interp(between, t_src, pos[:, j, c]) for c in range(3)], -1)
     return out_q, out_p
-
-
-def _figure_world(model, figure: Figure, qpos: np.ndarray) -> dict[str, np.ndarray]:
-    """{body: (n, 4)} world orientation of every figure body (MuJoCo axes) for (n, nq) qpos."""
-    world = {}
-    for b, body in enumerate(figure.bodies):
-        bid = int(figure.body_ids[b])
-        joint = next(j for j in figure.joints if figure.joint_bodies[j.name][1] == body)
-        q = normalize(qpos[:, joint.qpos_slice][:, -4:])  # a free joint's quaternion follows its position
-        if figure.parents[b] < 0:
-            world[body] = q
-        else:
-            frame = np.broadcast_to(model.body_quat[bid], q.shape)
-            world[body] = normalize(mul(mul(world[figure.bodies[figure.parents[b]]], frame), q))
-    return world
 
 
 def _world(clip: BvhClip, local: np.ndarray, trans: np.ndarray, upto: int) -> tuple[np.ndarray, np.ndarray]:
@@ -166,76 +165,70 @@ def root_correction(clip: BvhClip, skel: RecognisedSkeleton, model, reference, t
 
 
 def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray, reference=None) -> tuple[np.ndarray, ...]:
-    """The source skeleton's local rotations and translations for a figure motion (module docstring).
+    """The source skeleton's local rotations and translations for a figure motion: the source plus the
+    motion's change relative to the capture as the figure has it (module docstring).
 
     Args:
         clip: the source clip. model: the scene (its figure, made for the clip's skeleton, and the
             transform from the capture's coordinates to the scene's that it records). qpos: (n, nq)
             the motion, in the scene. times: (n,) [s] its sample times, 0 at the clip's first frame
             after its rest frames.
-        reference: (times (r,) [s], qpos (r, nq)) the reference the path was made against, whose root
-            correction is taken off the root (`root_correction`); None: none (the root as the path has it).
+        reference: (times (r,) [s], qpos (r, nq)) the reference the path was made against (the saved
+            path's `reference_times`, `reference_qpos`), whose root is the base's; None: the captured hips.
     Returns:
         local: (n, J, 4) unit local rotations (w x y z) in file axes; trans: (n, J, 3) local
-        translations [file units]: the source's, resampled, but where the hips' position is solved.
+        translations [file units]. Where `qpos` is the base, the source's own values.
     Raises:
         InputError: the skeleton cannot be recognised, the figure is not the one the retargeting drives,
             or the scene's capture frame is malformed.
     """
+    from dataclasses import replace
+
+    from runner.mocap.retarget import retarget
+    from solver.layout import StateLayout
+
     skel, frames, _ = clip_skeleton(clip, model)
     figure = check_figure(Figure.from_model(model))
-    qpos = CaptureFrame.from_model(model).inverse().root(qpos, figure.joints[0].qpos_slice.start)
-    local, trans = _slerp_source(clip, skel.rest_frames, np.asarray(times, float))
-    fig_world = _figure_world(model, figure, qpos)
-    target = {}  # the source world orientation each driving joint must have, in file axes (R = A^T R' A)
-    for body, role in DRIVERS.items():
-        q = np.array(mul(fig_world[body], np.broadcast_to(conj(frames.offsets[body]), fig_world[body].shape)))
-        q[:, 1:] = q[:, 1:] @ skel.axes
-        target[skel.index(clip, role)] = normalize(q)
-    world = np.empty_like(local)
-    for j, par in enumerate(clip.parents):
-        if j in target:
-            local[:, j] = target[j] if par < 0 else normalize(mul(conj(world[:, par]), target[j]))
-        world[:, j] = local[:, j] if par < 0 else normalize(mul(world[:, par], local[:, j]))
-    hips = skel.index(clip, "hips")
-    root = qpos[:, figure.joints[0].qpos_slice][:, :3] @ skel.axes / skel.unit
-    _place_hips(clip, skel, local, trans, root - root_correction(clip, skel, model, reference, times), hips)
+    adr = figure.joints[0].qpos_slice.start
+    back = CaptureFrame.from_model(model).inverse()
+    times = np.asarray(times, float)
+    path = back.root(np.asarray(qpos, float), adr)  # the motion in the capture's coordinates
+    local, trans = _slerp_source(clip, skel.rest_frames, times)
+    sampled = replace(clip, local_quat=local, local_pos=trans, raw=None)
+    base = retarget(sampled, skel, frames, figure, StateLayout.from_model(model))  # capture's coordinates
+    local = local.copy()
+    for joint in figure.joints:
+        body = figure.joint_bodies[joint.name][1]
+        j = skel.index(clip, DRIVERS[body])
+        q = slice(joint.qpos_slice.stop - 4, joint.qpos_slice.stop)  # a free joint's quaternion follows its position
+        change = mul(conj(normalize(base[:, q])), normalize(path[:, q]))  # D, in the body's frame
+        off = np.broadcast_to(frames.offsets[body], change.shape)
+        e = mul(mul(off, change), conj(off))  # E = R_off D R_off^-1, in the driving joint's frame
+        e[:, 1:] = e[:, 1:] @ skel.axes  # into the file's axes: E' = A^T E A
+        local[:, j] = normalize(mul(local[:, j], e))
+    root = base[:, adr:adr + 3]
+    if reference is not None and len(reference[0]) >= 2:
+        ref_t = np.asarray(reference[0], float)
+        ref_root = back.points(np.asarray(reference[1], float)[:, adr:adr + 3])
+        root = np.stack([np.interp(times, ref_t, ref_root[:, k]) for k in range(3)], axis=-1)
+    move = (path[:, adr:adr + 3] - root) @ skel.axes / skel.unit  # [file units], file axes
+    _move_hips(clip, skel, local, trans, move, skel.index(clip, "hips"))
     return local, trans
 
 
-def keyframes_on_source(clip: BvhClip, model, reference, times: np.ndarray) -> np.ndarray:
-    """(K, J) [m] how far each source joint is, at the keyframe times, from the clip's own: the keyframes'
-    values at those times (`Reference.keyed`, which a path meets exactly there) written onto the source
-    skeleton (`source_motion`, the import's root-height correction and levelling taken off) against the
-    clip's forward kinematics.
-    What is left is what the import's other clean-up changed: the knee and elbow hyperextension clamp and
-    the footplant (docs/mocap.md, "Back onto the source skeleton").
-
-    Args:
-        clip: the source clip. model: the scene (the subject's own figure). reference: the clip's
-            `runner.mocap.retarget.Reference`. times: (K,) [s] keyframe times, on the reference's frames.
-    """
-    skel, _, _ = clip_skeleton(clip, model)
-    times = np.asarray(times, float)
-    frames = np.clip(np.rint(times / reference.frame_time).astype(int), 0, reference.count - 1)
-    keyed = reference.keyed().qpos[frames]  # the keyframes' values: the capture with its resting feet planted
-    local, trans = source_motion(clip, model, keyed, times, (reference.times, reference.qpos))
-    _, out = forward(clip.parents, local, trans)
-    _, src = file_world(clip)
-    return np.linalg.norm(out - src[skel.rest_frames + frames], axis=-1) * skel.unit
-
-
-def _place_hips(clip: BvhClip, skel: RecognisedSkeleton, local, trans, hips_world: np.ndarray, hips: int) -> None:
-    """Set, in `trans`, the translation of the hips, or of the nearest joint above them with position
-    channels, so that the hips are at `hips_world` (n, 3) [file units] given the joints above."""
+def _move_hips(clip: BvhClip, skel: RecognisedSkeleton, local, trans, move: np.ndarray, hips: int) -> None:
+    """Move the hips by `move` (n, 3) [file units, file axes] in place: add it, in the parent's frame, to
+    the translation in `trans` of the hips or of the nearest joint above them with position channels
+    (the joints between them and the hips are not turned by the path: none drives a figure body)."""
     k = hips
     while clip.names[k] not in skel.position_joints:
         k = int(clip.parents[k])
-    q, p = _world(clip, local, trans, hips)
-    below = p[:, hips] - p[:, k]  # from joint k to the hips (zero if k is the hips)
-    at_k = hips_world - below
     par = int(clip.parents[k])
-    trans[:, k] = at_k if par < 0 else rotate(conj(q[:, par]), at_k - p[:, par])
+    if par < 0:
+        trans[:, k] = trans[:, k] + move
+    else:
+        q, _ = _world(clip, local, trans, par)
+        trans[:, k] = trans[:, k] + rotate(conj(q[:, par]), move)
 
 
 def _euler(q: np.ndarray, order: str) -> np.ndarray:
@@ -283,18 +276,21 @@ def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np
     return "\n".join(out) + "\n"
 
 
-def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.ndarray, fps: float) -> BvhClip:
+def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.ndarray, fps: float,
+                     clip: BvhClip | None = None) -> tuple[BvhClip, int]:
     """Write a motion of saved path `saved` onto its source skeleton (`source_bvh_text`), atomically; the
-    root correction of the path's reference (`root_correction`) is taken off the root.
+    root is moved as the path's root is from its reference's (`source_motion`). `clip`: the path's source
+    clip if already read (`source_clip`), else it is read.
 
     Returns:
-        the source clip (its joints are the file's).
+        (the source clip (its joints are the file's), the frames written: the motion's and the source's
+        leading rest frames).
     Raises:
         InputError: the path was not made from a BVH clip, or its clip is missing (`source_clip`).
     """
     from runner.files import atomic_output
 
-    clip = source_clip(saved)
+    clip = clip or source_clip(saved)
     if clip is None:
         raise InputError(f"{saved.source}: the path was not made from a BVH clip, so it has no source skeleton; "
                          "give --skeleton figure")
@@ -303,7 +299,7 @@ def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.
     body = source_bvh_text(clip, text, model, qpos, times, fps, reference)
     with atomic_output(out) as tmp:
         Path(tmp).write_text(body, encoding="utf-8")
-    return clip
+    return clip, len(qpos) + clip_skeleton(clip, model)[0].rest_frames
 
 
 def export_on_source(npz, out, which: str = "optimized", fps: float | None = None, required: bool = False):
@@ -314,7 +310,8 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
         required: `--skeleton source` was given: a path without a clip is an error (else None is returned,
             and the caller writes the figure's skeleton).
     Returns:
-        `runner.export.ExportResult`, or None (no clip, not required).
+        `runner.export.ExportResult` (its frames the file's, rest frames included; its `check` the file read
+        back at the path's keyframes, `runner.mocap.source_check.KeysOnSource`), or None (no clip, not required).
     Raises:
         InputError: as `runner.export.prepare_export`; a missing clip; a failed write.
     """
@@ -341,9 +338,14 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
                              "skeleton; give --skeleton figure, or redo the clip with --figure subject")
         return None
     try:
-        clip = write_source_bvh(out, saved, model, motion.qpos, motion.times, motion.fps)
+        clip, frames = write_source_bvh(out, saved, model, motion.qpos, motion.times, motion.fps, clip)
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
                          "space or choose another --to") from None
-    return ExportResult(Path(out), "BVH on the source skeleton", which, motion.fps, len(motion.times) + 1,
-                        len(clip.names), Path(out).stat().st_size, time.perf_counter() - t0)
+    check = None
+    if saved.keyframe_times is not None and len(saved.keyframe_times):
+        skel = clip_skeleton(clip, model)[0]
+        check = keys_on_source(clip, out, skel.rest_frames, skel.unit, saved.keyframe_times, float(motion.times[0]),
+                               motion.fps)
+    return ExportResult(Path(out), "BVH on the source skeleton", which, motion.fps, frames, len(clip.names),
+                        Path(out).stat().st_size, time.perf_counter() - t0, check)

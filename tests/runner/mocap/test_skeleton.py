@@ -131,10 +131,11 @@ def test_the_way_back_names_the_hyperextension_clamp(tmp_path):
     """A knee bent 20 degrees backwards at a keyframe: the import clamps it (the figure's knees do not bend
     backwards), so on the source skeleton the left ankle is, at that keyframe, the chord of 20 degrees
     about the knee away from the clip's (2 sin 10 deg x the 7.5-unit shin) and the toe further; every
-    other joint and keyframe is the clip's."""
+    other joint and keyframe is the clip's: the keyframes written onto the source skeleton and read back."""
     from runner.mocap.reference import load_bvh_reference
     from runner.mocap.scene_fit import FittedScene, scene_mjcf
-    from runner.mocap.source_export import keyframes_on_source
+    from runner.mocap.source_check import keys_on_source
+    from runner.mocap.source_export import source_bvh_text
     from runner.mocap.subject_figure import write_subject_figure
     from solver.model import load_model
 
@@ -151,7 +152,10 @@ def test_the_way_back_names_the_hyperextension_clamp(tmp_path):
     knee = ref.clamped["l_knee"]
     k = int(np.argmax(knee))
     assert knee[k] == pytest.approx(20.0, abs=1e-4) and np.delete(knee, k).max() == 0
-    d = keyframes_on_source(clip, model, ref, ref.times)  # every frame a keyframe
+    keyed, back = ref.keyed().qpos, tmp_path / "back.bvh"  # every frame a keyframe
+    back.write_text(source_bvh_text(clip, path.read_text(), model, keyed, ref.times, 1 / ref.frame_time,
+                                    (ref.times, ref.qpos)))
+    d = keys_on_source(clip, back, ref.skeleton.rest_frames, ref.skeleton.unit, ref.times).distance
     chord = 2 * np.sin(np.radians(10.0)) * 7.5 * 0.0254 / 0.45
     assert d[k, clip.index("LeftFoot")] == pytest.approx(chord, abs=1e-4)
     assert d[k, clip.index("LeftToeBase")] > chord
