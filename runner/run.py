@@ -251,12 +251,13 @@ def _replace(run: Run, **changes) -> Run:
 
 
 def report(run: Run) -> str:
-    """The summary tables of a run: what the optimization bought (plain spline vs optimized), the motion
-    metrics against the capture, and how close the capture's own feet are to the scene."""
+    """The summary of a run: the verdict and what the optimization bought (plain spline vs optimized,
+    `summary_table`), the motion metrics against the capture, and how close the capture's own feet are to
+    the scene."""
     motion = run.metrics.get("motion")
     rows = contact_summary_rows(motion)
     lines = [summary_table(run.metrics["plain"], run.metrics["optimized"], run.solution, contact_rows=rows,
-                           force_bounds=run.problem.force_bounds)]
+                           force_bounds=run.problem.force_bounds, motion=motion, tol=run.options.tol)]
     ref = run.source.reference
     if ref is not None:
         from runner.mocap.contacts import feet_line
@@ -377,9 +378,10 @@ def anatomy_summary_rows(motion) -> list:
     motion, plain spline and optimized at the capture's frames, the capture's own in the label.
 
     Returns:
-        [(label, plain value, optimized value, format, worse), ...] (`runner.console.motion_worse`).
+        [(label, plain value, optimized value, format, mark), ...] (`runner.verdict.motion_mark`, against
+        the capture's figure too).
     """
-    from runner.console import motion_worse
+    from runner.verdict import motion_mark
 
     capture = motion["plain"]["reference"]
     rows = []
@@ -387,7 +389,7 @@ def anatomy_summary_rows(motion) -> list:
         if key not in capture:  # metrics written without the anatomy figures
             continue
         a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
-        rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt, motion_worse(key, a, b)))
+        rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt, motion_mark(key, a, b, 0.0, capture[key])))
     return rows
 
 
@@ -395,13 +397,13 @@ def contact_summary_rows(motion) -> list:
     """Summary rows for the feet: float, skate, skating ratio, flight time and flight-phase error
     (`runner.motion_metrics.flight_mismatch`, extra + missed) of both paths against the motion-capture
     reference (`motion`: metrics["motion"], the `motion_metrics` of both paths at the clip's rate; the
-    capture's own figure in the label), then the anatomy rows (`anatomy_summary_rows`); each marked where the optimized path is worse than
-    the plain spline (`runner.console.motion_worse`).
+    capture's own figure in the label), then the anatomy rows (`anatomy_summary_rows`); each marked where
+    the optimized path is worse than the plain spline or moved toward the capture (`runner.verdict.motion_mark`).
 
     Returns:
-        [(label, plain value, optimized value, format, worse), ...].
+        [(label, plain value, optimized value, format, mark), ...].
     """
-    from runner.console import motion_worse
+    from runner.verdict import motion_mark
 
     rows = []
     if motion is not None:
@@ -419,9 +421,9 @@ def contact_summary_rows(motion) -> list:
             if key in capture:
                 a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
                 rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt,
-                             motion_worse(key, a, b, frame_s, capture[key])))
+                             motion_mark(key, a, b, frame_s, capture[key])))
         # flight-phase error: frames in flight in one and not the other (flight times can cancel)
         a, b = (motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"] for p in ("plain", "optimized"))
-        rows.append(("flight phase error vs capture [s]", a, b, "{:.3f}", motion_worse("flight_phase_error_s", a, b, frame_s)))
+        rows.append(("flight phase error vs capture [s]", a, b, "{:.3f}", motion_mark("flight_phase_error_s", a, b, frame_s)))
         rows += anatomy_summary_rows(motion)
     return rows
