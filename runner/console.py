@@ -12,7 +12,9 @@ from runner.verdict import (
     is_worse_mark,
     motion_mark,
     motion_worse,
+    motion_worse_text,
     row_mark,
+    row_name,
     verdict_lines,
 )
 
@@ -48,6 +50,15 @@ OVER = "over bound"
 BOUNDED_ROWS = {"peak_pelvis_acceleration_ms2": "pelvis_acceleration_ms2", "peak_root_force_ground_bw": "ground_force_bw"}
 BOUND_LEGEND = (f"<= B: the force bounds' limit on the row (the larger of the plain spline's and the capture's "
                 f"filtered peak); {OVER}: the optimized path is above it by > 1% and the row's last printed digit")
+#: the feet rows of the summary (`runner.run.contact_summary_rows`): (label, motion-metrics key, format); the
+#: motion-metrics table under the summary leaves these keys out (`motion_metrics_table`)
+FEET_ROWS = (("float in contact [mm]", "float_contact_mm", "{:.2f}"),
+             ("float in capture stance [mm]", "float_stance_mm", "{:.2f}"),
+             ("flight in capture stance [s]", "flight_in_stance_s", "{:.3f}"),
+             ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
+             ("skate, PhysDiff [mm/frame]", "skate_mm", "{:.2f}"),
+             ("skating ratio (contacts)", "skating_ratio_contacts", "{:.3f}"),
+             ("flight time [s]", "flight_time_s", "{:.3f}"))
 #: the summary rows that have a figure of the capture itself (`capture_figures`): {`path_metrics` key:
 #: the key of the capture's figure in a motion-metrics "reference" block (`runner.motion_metrics`: its
 #: jolts are of the capture filtered at 6 Hz, its flight is every site 3 cm clear at the capture's frames)}
@@ -234,7 +245,8 @@ def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bound
             penetration (`runner.run.contact_summary_rows`, marked by `motion_mark`).
         force_bounds: the problem's `solver.peak_bounds.PeakBounds` (with the force bounds), or None:
             printed with the two rows it bounds (`comparison_rows`) and described under the table.
-        motion: the run's metrics["motion"] (with a capture), or None: the capture's own figures.
+        motion: the run's metrics["motion"] (with a capture), or None: the capture's own figures, and the
+            motion-metrics rows marked worse, which the verdict counts too.
         tol: the refinement's tolerance (`LeastChangeOptions.tol`), or None: the verdict then gives the
             refinement estimate without judging it.
     """
@@ -253,7 +265,7 @@ def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bound
     rows += getattr(solution, "extra_rows", None) or []
     targets = row_targets([r[0] for r in rows], constraints, plain["penetration_mm_by_site"])
     feet, jolts = verdict_figures(plain, opt, motion)
-    lines = verdict_lines(feet, jolts, rows, targets, solution, refinement_text(solution, tol))
+    lines = verdict_lines(feet, jolts, rows, targets, solution, refinement_text(solution, tol), _motion_text(motion))
     lines += format_rows(rows, targets)
     marks = [r[4] for r in rows if len(r) > 4 and r[4]]
     if any(is_worse_mark(m) or m == TOWARD for m in marks):
@@ -270,6 +282,15 @@ def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bound
                  f"{len(solution.rounds)} rounds, {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
     lines += _keyframe_lines(solution)
     return "\n".join(lines)
+
+
+def _motion_text(motion: dict | None) -> str:
+    """The verdict's words on the motion-metrics rows marked worse (`motion_rows`, less the feet rows)."""
+    if motion is None:
+        return ""
+    top, accuracy = motion_rows(motion["plain"], motion["optimized"], [k for _, k, _ in FEET_ROWS])
+    return motion_worse_text(*([row_name(label) for label, _, mark in block if is_worse_mark(mark)]
+                               for block in (top, accuracy)))
 
 
 def _keyframe_lines(solution) -> list[str]:
@@ -391,7 +412,30 @@ def _accuracy_rows(error: dict) -> list[tuple[str, str, float, float]]:
     ]
 
 
-def motion_metrics_table(plain: dict, optimized: dict) -> str:
+def motion_rows(plain: dict, optimized: dict, shown=()) -> tuple[list, list]:
+    """The rows of `motion_metrics_table`: (the plausibility and no-jolt rows, the accuracy rows), each a list
+    of (label, cells: [reference, plain, optimized] texts, mark: False, True (worse), `TOWARD` or `OVER`)."""
+    ref = plain["reference"]
+    frame_s = 1.0 / float(plain["fps"])
+    cols = (ref, plain["path"], optimized["path"])
+    rows = []
+    for label, key, sub, fmt in (row for row in _PLAUSIBILITY_ROWS if row[1] not in shown):
+        vals = [c[key][sub] if sub else c[key] for c in cols]
+        rows.append((label, [cell(fmt, v) for v in vals], motion_mark(key, vals[1], vals[2], frame_s, vals[0])))
+    for label, key, fmt, bound in (row for row in _JOLT_ROWS if any(row[1] in c for c in cols)):
+        rows.append((label, [cell(fmt, c.get(key)) for c in cols], OVER if _over_jolt_bound(bound, key, cols) else False))
+    accuracy = []
+    pairs = zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"]), strict=True)
+    for (label, key, pm, px), (_, _, om, ox) in pairs:
+        cells = [MISSING] + [cell("{:.2f}", m) + (f" / {cell('{:.1f}', x)}" if np.isfinite(x) else "")
+                             for m, x in ((pm, px), (om, ox))]
+        bad = motion_worse(key, pm, om) or motion_worse(key, px, ox) or (key == "joint_orientation_deg"
+                                                                            and ox > LOST_TURN_DEG)
+        accuracy.append((label + (" mean / max" if np.isfinite(px) else " mean"), cells, bool(bad)))
+    return rows, accuracy
+
+
+def motion_metrics_table(plain: dict, optimized: dict, shown=()) -> str:
     """The motion metrics against the reference (`runner.motion_metrics`), reference | plain | optimized,
     a row marked "worse" where the optimized path is worse than the plain spline, or "toward capture"
     (`runner.verdict.motion_mark`).
@@ -399,39 +443,26 @@ def motion_metrics_table(plain: dict, optimized: dict) -> str:
     Args:
         plain, optimized: `motion_metrics(...)` of the plain spline and of the optimized path, both
             sampled at the reference's frames; the "reference" column is their (equal) "reference" block.
+        shown: the keys of plausibility rows the summary table already prints (`FEET_ROWS`): left out, and
+            the title says so.
     Returns:
         the table as text: plausibility rows for all three, the no-jolt rows (`_JOLT_ROWS`, when the blocks
         have them; marked `OVER` beyond the corpus's bound), then the accuracy rows (mean, max over
         frames; the joint angle is the mean over joints of each joint's mean, and the largest max; worse
         when the mean or the max is), then the legends of the marks printed.
     """
-    ref = plain["reference"]
-    frame_s = 1.0 / float(plain["fps"])
-    cols = (ref, plain["path"], optimized["path"])
-    rows = []
-    for label, key, sub, fmt in _PLAUSIBILITY_ROWS:
-        vals = [c[key][sub] if sub else c[key] for c in cols]
-        rows.append((label, [cell(fmt, v) for v in vals], motion_mark(key, vals[1], vals[2], frame_s, vals[0])))
-    jolts = [row for row in _JOLT_ROWS if any(row[1] in c for c in cols)]
-    for label, key, fmt, bound in jolts:
-        rows.append((label, [cell(fmt, c.get(key)) for c in cols], OVER if _over_jolt_bound(bound, key, cols) else ""))
-    w = max(max(len(r[0]) for r in rows), 38) + 2
+    top, accuracy = motion_rows(plain, optimized, shown)
+    w = max(max(len(r[0]) for r in top), 38) + 2
     head = f"{'':{w}}{'reference':>14}{'plain':>14}{'optimized':>14}"
-    marked = [bad for *_, bad in rows if bad]
-    lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz; "
-             "docs/contacts.md \"Motion metrics\")", head, "-" * (len(head) + len(WORSE) + 2)]
-    lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in vals) + (f"  {bad if isinstance(bad, str) else WORSE}"
-                                                                     if bad else "") for label, vals, bad in rows]
-    lines.append("-" * (len(head) + len(WORSE) + 2))
-    pairs = zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"]), strict=True)
-    for (label, key, pm, px), (_, _, om, ox) in pairs:
-        cells = [MISSING] + [cell("{:.2f}", m) + (f" / {cell('{:.1f}', x)}" if np.isfinite(x) else "")
-                             for m, x in ((pm, px), (om, ox))]
-        bad = motion_worse(key, pm, om) or motion_worse(key, px, ox) or (key == "joint_orientation_deg"
-                                                                            and ox > LOST_TURN_DEG)
-        marked += [True] if bad else []
-        lines.append(f"{label + (' mean / max' if np.isfinite(px) else ' mean'):{w}}"
-                     + "".join(f"{c:>14}" for c in cells) + (f"  {WORSE}" if bad else ""))
+    rule = "-" * (len(head) + len(WORSE) + 2)
+    left_out = "; the feet rows of the summary left out" if any(r[1] in shown for r in _PLAUSIBILITY_ROWS) else ""
+    lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz{left_out}; "
+             "docs/contacts.md \"Motion metrics\")", head, rule]
+    for block in (top, accuracy):
+        lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in cells)
+                  + (f"  {mark if isinstance(mark, str) else WORSE}" if mark else "") for label, cells, mark in block]
+        lines += [rule] if block is top else []
+    marked = [mark for *_, mark in top + accuracy if mark]
     if OVER in marked:
         lines.append(JOLT_LEGEND)
     if any(m != OVER for m in marked):

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.console import motion_metrics_table, summary_table
+from runner.console import FEET_ROWS, motion_metrics_table, summary_table
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.files import atomic_output
 from runner.paths import display_path
@@ -263,7 +263,7 @@ def report(run: Run) -> str:
         from runner.mocap.contacts import feet_line
         from runner.mocap.glitches import glitches_line
 
-        lines.append(motion_metrics_table(motion["plain"], motion["optimized"]))
+        lines.append(motion_metrics_table(motion["plain"], motion["optimized"], shown=[k for _, k, _ in FEET_ROWS]))
         forced = motion.get("keyframes", {}).get("forced_skate_contact_mm")
         if forced is not None:
             lines.append(f"skate, ref. contacts, that the keyframes force on any path through them: {forced:.2f} mm "
@@ -409,15 +409,7 @@ def contact_summary_rows(motion) -> list:
     if motion is not None:
         capture = motion["plain"]["reference"]
         frame_s = 1.0 / float(motion["plain"]["fps"])
-        for label, key, fmt in (
-            ("float in contact [mm]", "float_contact_mm", "{:.2f}"),
-            ("float in capture stance [mm]", "float_stance_mm", "{:.2f}"),
-            ("flight in capture stance [s]", "flight_in_stance_s", "{:.3f}"),
-            ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
-            ("skate, PhysDiff [mm/frame]", "skate_mm", "{:.2f}"),
-            ("skating ratio (contacts)", "skating_ratio_contacts", "{:.3f}"),
-            ("flight time [s]", "flight_time_s", "{:.3f}"),
-        ):
+        for label, key, fmt in FEET_ROWS:
             if key in capture:
                 a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
                 rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt,

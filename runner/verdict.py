@@ -141,9 +141,9 @@ def is_worse_mark(mark) -> bool:
 
 
 def row_name(label: str) -> str:
-    """A row's label without its unit, capture figure, sampling or bound ("peak pelvis acceleration [m/s^2]
-    (capture 16.5) <= 30.0" -> "peak pelvis acceleration")."""
-    name = re.sub(r" <= .*$", "", label.strip())
+    """A row's label without its unit, capture figure, sampling, bound or statistics ("peak pelvis
+    acceleration [m/s^2] (capture 16.5) <= 30.0" -> "peak pelvis acceleration")."""
+    name = re.sub(r" <= .*$| mean( / max)?$", "", label.strip())
     return re.sub(r" \[[^]]*\]| \(capture [^)]*\)| \(1000 Hz\)", "", name).strip()
 
 
@@ -254,7 +254,16 @@ def worse_line(rows, targets: dict, integrals_initial: dict, integrals_final: di
     return text
 
 
-def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estimate_text: str = "") -> list[str]:
+def motion_worse_text(plausibility: list[str], errors: list[str]) -> str:
+    """"; motion metrics worse: ..." for the motion-metrics rows marked worse (their names): plausibility
+    rows, and errors against the capture, which no constraint tracks; "" when none is."""
+    parts = ([", ".join(plausibility)] if plausibility else []) + (
+        [f"{', '.join(errors)} (no constraint tracks the capture's path)"] if errors else [])
+    return f"; motion metrics worse: {'; '.join(parts)}" if parts else ""
+
+
+def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estimate_text: str = "",
+                  motion_text: str = "") -> list[str]:
     """The verdict: three or four lines that go above the summary table.
 
     Args:
@@ -263,6 +272,7 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
         rows: the table's rows (label, plain, optimized, format[, mark]). targets: {label: constraints}
             (`runner.console.row_targets`). solution: its `integrals_initial`, `integrals_final` and
             `unmet`. estimate_text: the refinement's verdict ("refinement converged ..."), or "".
+            motion_text: `motion_worse_text` of the motion-metrics table, added to the worse line.
     Returns:
         ["verdict: ...", "  feet: ...", "  jolts: ...", "  worse: ..."], the feet and jolts lines only when
         they have a figure, each wrapped at WIDTH.
@@ -276,6 +286,7 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
             captures = [c for _, c in shown]
             against = f" (capture {', '.join(captures)})" if any(c != "-" for c in captures) else ""
             lines.append(f"  {name}: " + ", ".join(t for t, _ in shown) + against)
-    lines.append("  " + worse_line(rows, targets, solution.integrals_initial, solution.integrals_final, unmet))
+    lines.append("  " + worse_line(rows, targets, solution.integrals_initial, solution.integrals_final, unmet)
+                 + motion_text)
     return [part for line in lines for part in textwrap.wrap(line, WIDTH, subsequent_indent="    ",
                                                              break_on_hyphens=False)]

@@ -429,6 +429,7 @@ def test_the_verdict_comes_first_with_the_feet_the_jolts_and_the_worse_rows():
                                   {"float_contact_mm": 2.5, "skate_contact_mm": 1.8, "peak_pelvis_acceleration_m_s2": 16.0,
                                    "rms_joint_torque_Nm": 120.0, "peak_angular_acceleration_max_rad_s2": 250.0,
                                    "penetration_mm": {"mean": 0.0, "max": 0.0}})
+    motion["optimized"]["error"]["root_position_cm"] = {"mean": 3.0, "max": 9.0}  # against the capture's 1.0 / 1.0
     sol = solution()
     sol.integrals_initial = {**dict.fromkeys(CONSTRAINTS, 0.5), "penetration": 12.0, "slide": 4.0}
     text = summary_table(plain, opt, sol, motion=motion, tol=0.01)
@@ -444,6 +445,8 @@ def test_the_verdict_comes_first_with_the_feet_the_jolts_and_the_worse_rows():
     # the capture are not worse
     assert "peak joint torque, peak root torque in flight (bounded by no constraint: traded for penetration, slide," in worse
     assert "2 moved toward the capture: peak pelvis acceleration, RMS joint torque" in worse
+    # the motion metrics under the summary: the root strayed from the capture's
+    assert worse.endswith("; motion metrics worse: root position error (no constraint tracks the capture's path)")
     assert len(verdict) == 4
 
 
