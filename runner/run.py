@@ -265,8 +265,8 @@ def report(run: Run) -> str:
 
         lines.append(motion_metrics_table(motion["plain"], motion["optimized"], shown=[k for _, k, _ in FEET_ROWS]))
         forced = motion.get("keyframes", {}).get("forced_skate_contact_mm")
-        if forced is not None:
-            lines.append(f"skate, ref. contacts, that the keyframes force on any path through them: {forced:.2f} mm "
+        if forced is not None and f"{forced:.2f}" != "0.00":  # keys that hold the feet still force no skate
+            lines.append(f"skate in contact that the keyframes force on any path through them: {forced:.2f} mm/frame "
                          "(a lower bound: the distance between a site's keyed positions inside each contact)")
         worst = [motion["plain"]["path"], motion["optimized"]["path"], motion["plain"]["reference"]]
         lines.append("beyond range of motion (AAOS 1965, docs/anatomy.md), worst: " + "; ".join(
