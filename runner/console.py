@@ -260,7 +260,7 @@ def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bound
     shown = [name for name in constraints if name in unmet or max(solution.integrals_initial.get(name, 0.0),
                                                                     solution.integrals_final[name]) > 1.0]
     for name in shown:  # a constraint's worst value over its tolerance, where either path breaks it
-        rows.append((f"  {name}: worst / tolerance", solution.integrals_initial[name], solution.integrals_final[name],
+        rows.append((f"  {name}: worst / tolerance", solution.integrals_initial.get(name), solution.integrals_final[name],
                      "{:.4g}"))
     rows += getattr(solution, "extra_rows", None) or []
     targets = row_targets([r[0] for r in rows], constraints, plain["penetration_mm_by_site"])
