@@ -4,6 +4,20 @@ from __future__ import annotations
 
 import numpy as np
 
+from runner.verdict import (
+    FLIGHT_CHANGE,
+    TOWARD,
+    WORSE,
+    figure,
+    is_worse_mark,
+    motion_mark,
+    motion_worse,
+    motion_worse_text,
+    row_mark,
+    row_name,
+    verdict_lines,
+)
+
 #: the figures where lower is better: (label, metrics key, format, absolute tolerance below which a rise is
 #: round-off); the optimized path is marked worse when it is higher by more than 1% and the tolerance
 _GEOMETRY = [
@@ -28,108 +42,58 @@ _DYNAMICS_TERMS_ROWS = [
     ("RMS root force on ground [body wt]", "rms_root_force_ground_bw", "{:.2f}", 0.01),
     ("peak root force on ground [body wt]", "peak_root_force_ground_bw", "{:.2f}", 0.01),
 ]
-#: flight is the keyframes' gait: the optimized path is marked when its flight differs from the plain
-#: spline's by more than this fraction (and 0.01 s), longer or shorter
-FLIGHT_CHANGE = 0.2
-WORSE = "worse"
-LEGEND = (f"{WORSE}: the optimized path is worse than the plain spline there (higher by > 1% and the row's "
-          f"last printed digit; flight: changed by > {FLIGHT_CHANGE:.0%})")
+LEGEND = (f"{WORSE}: higher than the plain spline's (and the capture's, in the label) by > 1% and the row's floor; "
+          f"flight: further from the capture's (without one: changed by > {FLIGHT_CHANGE:.0%}); {TOWARD}: past the "
+          "plain spline's margin, no further from the capture's (README \"Reading the summary\")")
 OVER = "over bound"
 #: the rows the force bounds limit: {metrics key: `solver.peak_bounds.PeakBounds` field}
 BOUNDED_ROWS = {"peak_pelvis_acceleration_ms2": "pelvis_acceleration_ms2", "peak_root_force_ground_bw": "ground_force_bw"}
 BOUND_LEGEND = (f"<= B: the force bounds' limit on the row (the larger of the plain spline's and the capture's "
                 f"filtered peak); {OVER}: the optimized path is above it by > 1% and the row's last printed digit")
+#: the feet rows of the summary (`runner.run.contact_summary_rows`): (label, motion-metrics key, format); the
+#: motion-metrics table under the summary leaves these keys out (`motion_metrics_table`)
+FEET_ROWS = (("float in contact [mm]", "float_contact_mm", "{:.2f}"),
+             ("float in capture stance [mm]", "float_stance_mm", "{:.2f}"),
+             ("flight in capture stance [s]", "flight_in_stance_s", "{:.3f}"),
+             ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
+             ("skate, PhysDiff [mm/frame]", "skate_mm", "{:.2f}"),
+             ("skating ratio (contacts)", "skating_ratio_contacts", "{:.3f}"),
+             ("flight time [s]", "flight_time_s", "{:.3f}"))
+#: the summary rows that have a figure of the capture itself (`capture_figures`): {`path_metrics` key:
+#: the key of the capture's figure in a motion-metrics "reference" block (`runner.motion_metrics`: its
+#: jolts are of the capture filtered at 6 Hz, its flight is every site 3 cm clear at the capture's frames)}
+CAPTURE_FIGURES = {"peak_pelvis_acceleration_ms2": "peak_pelvis_acceleration_m_s2",
+                   "rms_joint_torque_Nm": "rms_joint_torque_Nm", "flight_s": "flight_time_s"}
 
 #: relaxations listed under the summary table (the rest counted)
 RELAXATIONS_SHOWN = 6
 
 
-#: the motion rows (the summary's feet rows and the motion-metrics table against the capture): the
-#: optimized figure is marked worse when it exceeds the plain spline's by more than 1 % (figures move by
-#: less between machines) and the row's absolute floor, here with its reason: {metrics key: (floor, reason)}
-MOTION_MARGINS = {
-    "penetration_mm": (0.1, "mm; a tenth of the 1 mm penetration bound"),
-    "float_contact_mm": (0.1, "mm; a fiftieth of the 5 mm float bound"),
-    "float_stance_mm": (0.1, "mm; as float in contact"),
-    "float_physdiff_mm": (0.1, "mm; as float in contact"),
-    "skate_mm": (0.05, "mm/frame; a tenth of the 0.5 mm/frame skate margin"),
-    "skate_contact_mm": (0.05, "mm/frame; as skate"),
-    "phys_err_mm": (0.2, "mm; the sum of a penetration, a float and a skate floor"),
-    "skating_ratio": (0.01, "one step in a hundred"),
-    "skating_ratio_contacts": (0.01, "one step in a hundred"),
-    "flight_in_stance_s": (None, "s; one frame of the capture: flight is counted in whole frames"),
-    "flight_phase_error_s": (None, "s; one frame of the capture: flight is counted in whole frames"),
-    "root_position_cm": (0.05, "cm; half a printed digit of the mean"),
-    "joint_orientation_deg": (0.05, "deg; half a printed digit of the mean"),
-    "site_position_cm": (0.05, "cm; half a printed digit of the mean"),
-    "accel_error_root_m_s2": (0.05, "m/s^2; half a printed digit"),
-    "accel_error_sites_m_s2": (0.05, "m/s^2; half a printed digit"),
-    "cone_rms": (0.1, "N; the printed digit"),
-    "cone_peak": (0.1, "N; the printed digit"),
-    "off_hinge_knee_deg": (3.0, "deg; the corpus bound: off the hinge by at most 3 deg more than the capture"),
-    "off_hinge_elbow_deg": (3.0, "deg; as the knees"),
-    "rom_excess_deg": (0.5, "deg; the hyperextension bound's half degree"),
-}
-#: rows whose figure the capture itself shows at a higher level (the spline is smoother than any real
-#: motion): worse only above both the plain spline's and the capture's, by 1 %
-CAPTURE_LEVEL_ROWS = ("jerk_root_m_s3", "jerk_sites_m_s3")
 #: [deg] a joint (the root's orientation included) further than this from the capture at some frame has
 #: lost the capture's motion: keys no more than a quarter turn apart (`runner.mocap.keyframe_selection.turn_keys`)
 #: leave no in-between that far from it unless the path goes round the other way (a full turn joined the
 #: short way is 174 deg off); the joint-angle row is then marked even if the plain spline is as far off
 LOST_TURN_DEG = 90.0
-MOTION_LEGEND = (f"{WORSE}: higher than the plain spline's by > 1% and a floor per row (float, penetration 0.1 mm; "
-                 "skate 0.05 mm/frame; skating ratio 0.01; errors half a printed digit); flight time: further from "
-                 "the capture's by more than one frame; jerk: above the plain spline's and the capture's; joint "
-                 f"angle: also a max over {LOST_TURN_DEG:g} deg (the path went round the other way)")
+MOTION_LEGEND = (f"{WORSE}: higher than the plain spline's and the reference's by > 1% and a floor per row (README "
+                 "\"Reading the summary\"); flight time: further from the reference's by more than one frame; joint "
+                 f"angle: also a max over {LOST_TURN_DEG:g} deg (the path went round the other way); {TOWARD}: past the "
+                 "plain spline's, but no further from the reference's")
 
 
-def motion_worse(key: str, plain: float, opt: float, frame_s: float = 0.0, capture: float | None = None) -> bool:
-    """Whether the optimized path's motion figure `opt` (metrics key `key`) is worse than the plain
-    spline's `plain` beyond the row's margin (`MOTION_MARGINS`, `CAPTURE_LEVEL_ROWS`); flight time
-    ("flight_time_s") is worse when further from the capture's `capture` by more than one frame
-    (`frame_s` [s]); a key without a margin is never marked.
-
-    Args:
-        key: the motion-metrics key. plain, opt: the two paths' figures (units of the key).
-        frame_s: [s] the capture's frame time. capture: the capture's own figure (flight, jerk).
-    """
-    a, b = float(plain), float(opt)
-    if not (np.isfinite(a) and np.isfinite(b)):
-        return False
-    if key == "flight_time_s":
-        return capture is not None and abs(b - capture) > abs(a - capture) * 1.01 + frame_s
-    if key in CAPTURE_LEVEL_ROWS:
-        return b > max(a, capture if capture is not None else a) * 1.01
-    if key not in MOTION_MARGINS:
-        return False
-    floor = MOTION_MARGINS[key][0]
-    return b > a * 1.01 + (frame_s if floor is None else floor)
-
-
-def is_worse(plain: float, opt: float, atol: float | None, fmt: str) -> bool:
-    """Whether the optimized figure `opt` is worse than the plain spline's `plain` (see `comparison_rows`)."""
-    a, b = float(plain), float(opt)
-    if not (np.isfinite(a) and np.isfinite(b)) or fmt.format(a) == fmt.format(b):
-        return False
-    if atol is None:  # flight
-        return abs(b - a) > FLIGHT_CHANGE * abs(a) + 0.01
-    return b > a * 1.01 + atol
-
-
-def _bound_mark(worse: bool, value: float, bound: float | None, atol: float, fmt: str) -> bool | str:
+def _bound_mark(mark: bool | str, value: float, bound: float | None, atol: float, fmt: str) -> bool | str:
     """The last column of a bounded row: `OVER` (with `WORSE` if also worse) when `value` is above
-    `bound` by more than 1 % and `atol` (and prints differently), else `worse` as it is."""
+    `bound` by more than 1 % and `atol` (and prints differently), else `mark` as it is."""
     if bound is None or not np.isfinite(float(value)) or fmt.format(value) == fmt.format(bound):
-        return worse
+        return mark
     if float(value) > float(bound) * 1.01 + atol:
-        return f"{WORSE}, {OVER}" if worse else OVER
-    return worse
+        return f"{WORSE}, {OVER}" if mark is True else OVER
+    return mark
 
 
-def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False, bounds=None) -> list[tuple]:
+def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False, bounds=None,
+                    capture: dict | None = None) -> list[tuple]:
     """The acceptance figures of two `path_metrics`, plain spline and optimized, each marked when the
-    optimized path is worse.
+    optimized path is worse (`row_mark`).
 
     Args:
         plain, opt: `solver.metrics.path_metrics` of the two paths.
@@ -137,19 +101,20 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False, bounds
             force on the ground in body weights).
         bounds: the forces term's `solver.peak_bounds.PeakBounds`, or None: its two rows (`BOUNDED_ROWS`)
             then print the bound in the label ("<= B") and are marked `OVER` above it.
+        capture: {`path_metrics` key: the capture's own figure} (`capture_figures`), or None: those rows
+            print it in the label ("(capture X)") and are judged against it as well.
     Returns:
         list of (label, plain value, optimized value, format, mark), rows whose key is missing from
-        either dict left out; mark: worse (bool), or a text (`OVER`, "worse, over bound"). Worse: for
-        every figure but flight, higher by more than 1% (and a per-row round-off tolerance); for
-        flight, changed by more than FLIGHT_CHANGE (the gait).
+        either dict left out, and the contact sites that no path puts in a surface (0.00 mm in both);
+        mark: True (worse), False, or a text (`TOWARD`, `OVER`, "worse, over bound").
     """
-    specs = [("max penetration [mm] (1000 Hz)", "max_penetration_mm", "{:.2f}", 0.01)]
-    rows = []
-    for label, key, fmt, atol in specs:
-        rows.append((label, plain[key], opt[key], fmt, is_worse(plain[key], opt[key], atol, fmt)))
+    capture = capture or {}
+    rows = [("max penetration [mm] (1000 Hz)", plain["max_penetration_mm"], opt["max_penetration_mm"], "{:.2f}",
+             row_mark(plain["max_penetration_mm"], opt["max_penetration_mm"], 0.01, "{:.2f}"))]
     for site in plain["penetration_mm_by_site"]:
         a, b = plain["penetration_mm_by_site"][site], opt["penetration_mm_by_site"][site]
-        rows.append((f"  {site} [mm]", a, b, "{:.2f}", is_worse(a, b, 0.01, "{:.2f}")))
+        if cell("{:.2f}", a) != "0.00" or cell("{:.2f}", b) != "0.00":
+            rows.append((f"  {site} [mm]", a, b, "{:.2f}", row_mark(a, b, 0.01, "{:.2f}")))
     more = _GEOMETRY + _DYNAMICS + (_DYNAMICS_TERMS_ROWS if dynamics_terms else [])
     for label, key, fmt, atol in more:
         if key == "keyframe_error":
@@ -158,12 +123,25 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False, bounds
             a, b = plain[key], opt[key]
         else:
             continue
-        mark = is_worse(a, b, atol, fmt)
+        c = capture.get(key)
+        mark = row_mark(a, b, atol, fmt, c)
+        if c is not None:
+            label = f"{label} (capture {cell(fmt, c)})"
         if bounds is not None and key in BOUNDED_ROWS:
             bound = float(getattr(bounds, BOUNDED_ROWS[key]))
             label, mark = f"{label} <= {cell(fmt, bound)}", _bound_mark(mark, b, bound, atol, fmt)
         rows.append((label, a, b, fmt, mark))
     return rows
+
+
+def capture_figures(motion: dict | None) -> dict:
+    """{`path_metrics` key: the capture's own figure} for the summary rows that have one (`CAPTURE_FIGURES`)
+    from a run's metrics["motion"] (None without a capture: {})."""
+    if motion is None:
+        return {}
+    ref = motion["plain"]["reference"]
+    return {key: float(ref[k]) for key, k in CAPTURE_FIGURES.items()
+            if ref.get(k) is not None and np.isfinite(float(ref[k]))}
 
 
 #: the summary rows each objective term penalizes (what the optimizer is asked to lower), by the row
@@ -252,47 +230,73 @@ def format_rows(rows, targets: dict | None = None) -> list[str]:
     return lines
 
 
-def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bounds=None) -> str:
-    """Plain spline vs optimized, the acceptance figures, as a text table; a "target" column names the
-    constraints that bound each row's figure (`row_targets`), and a figure on which the optimized path is
-    worse is marked "worse" in a last column (`comparison_rows`), with legend lines. A figure that is
-    not defined (the in-flight rows of a path without flight) is printed "-", never "nan".
+def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bounds=None, motion=None,
+                  tol: float | None = None) -> str:
+    """The verdict (`runner.verdict.verdict_lines`), then plain spline vs optimized, the acceptance figures,
+    as a text table; a "target" column names the constraints that bound each row's figure (`row_targets`),
+    and a last column marks a figure on which the optimized path is worse ("worse", `comparison_rows`) or
+    moved toward the capture's ("toward capture"), with legend lines for the marks printed. A figure that
+    is not defined (the in-flight rows of a path without flight) is printed "-", never "nan".
 
     Args:
         plain, opt: `path_metrics` of the two paths. solution: the least change's Solution (its
-            `integrals_*`: each constraint's worst value over its tolerance).
-        contact_rows: (label, plain, optimized, format[, worse]) rows about the feet, printed after
-            penetration (`runner.run.contact_summary_rows`, marked by `motion_worse`).
+            `integrals_*`: each constraint's worst value over its tolerance; `unmet`, `final_estimate`).
+        contact_rows: (label, plain, optimized, format[, mark]) rows about the feet, printed after
+            penetration (`runner.run.contact_summary_rows`, marked by `motion_mark`).
         force_bounds: the problem's `solver.peak_bounds.PeakBounds` (with the force bounds), or None:
             printed with the two rows it bounds (`comparison_rows`) and described under the table.
+        motion: the run's metrics["motion"] (with a capture), or None: the capture's own figures, and the
+            motion-metrics rows marked worse, which the verdict counts too.
+        tol: the refinement's tolerance (`LeastChangeOptions.tol`), or None: the verdict then gives the
+            refinement estimate without judging it.
     """
-    rows = comparison_rows(plain, opt, dynamics_terms=force_bounds is not None, bounds=force_bounds)
-    n_pen = 1 + len(plain["penetration_mm_by_site"])  # the feet rows go after the penetration rows
+    rows = comparison_rows(plain, opt, dynamics_terms=force_bounds is not None, bounds=force_bounds,
+                           capture=capture_figures(motion))
+    n_pen = 1 + sum(r[0].startswith("  ") for r in rows)  # the feet rows go after the penetration rows
     rows[n_pen:n_pen] = list(contact_rows)
     rows.append(("change E = D / (m g^2 T)", solution.E_initial, solution.E_final, "{:.5g}"))
     constraints = list(solution.integrals_final)
-    for name in constraints:  # a constraint's worst value over its tolerance
-        rows.append((f"  {name}: worst / tolerance", solution.integrals_initial[name], solution.integrals_final[name],
+    unmet = getattr(solution, "unmet", None) or {}
+    shown = [name for name in constraints if name in unmet or max(solution.integrals_initial.get(name, 0.0),
+                                                                    solution.integrals_final[name]) > 1.0]
+    for name in shown:  # a constraint's worst value over its tolerance, where either path breaks it
+        rows.append((f"  {name}: worst / tolerance", solution.integrals_initial.get(name), solution.integrals_final[name],
                      "{:.4g}"))
     rows += getattr(solution, "extra_rows", None) or []
-    lines = format_rows(rows, row_targets([r[0] for r in rows], constraints, plain["penetration_mm_by_site"]))
-    lines.append(LEGEND)
+    targets = row_targets([r[0] for r in rows], constraints, plain["penetration_mm_by_site"])
+    feet, jolts = verdict_figures(plain, opt, motion)
+    lines = verdict_lines(feet, jolts, rows, targets, solution, refinement_text(solution, tol), _motion_text(motion))
+    lines += format_rows(rows, targets)
+    marks = [r[4] for r in rows if len(r) > 4 and r[4]]
+    if any(is_worse_mark(m) or m == TOWARD for m in marks):
+        lines.append(LEGEND)
     if force_bounds is not None:
         lines += [BOUND_LEGEND, force_bounds.describe()]
-    if contact_rows:
-        lines.append("feet rows: " + MOTION_LEGEND)
     lines.append(TARGET_LEGEND)
     if any(cell("{}", v) == MISSING for r in rows for v in r[1:3]):
         lines.append(MISSING_LEGEND)
+    met = [name for name in constraints if name not in shown]
+    lines.append("NAME: worst / tolerance: a constraint's worst value over its tolerance (met at <= 1)"
+                 + (f"; met by both paths, not shown: {', '.join(met)}" if met else ""))
     lines.append(f"frames: {solution.initial.count} keyframes + {solution.frames.n_variable} variable; "
                  f"{len(solution.rounds)} rounds, {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
-    estimate = getattr(solution, "final_estimate", None)
-    if estimate is not None and np.isfinite(estimate):
-        ok = getattr(solution, "converged_to_tol", None)
-        how = f"tolerance met ({solution.message})" if ok else f"tolerance NOT met: {solution.message}"
-        lines.append(f"refinement estimate (decrease of E still predicted, relative to E): {estimate:.3g}; {how}")
-    lines.append("least change (docs/design.md): E = D / (m g^2 T), the mass-weighted change of the accelerations; "
-                 "a constraint row is its worst value over its tolerance (met at <= 1)")
+    lines += _keyframe_lines(solution)
+    return "\n".join(lines)
+
+
+def _motion_text(motion: dict | None) -> str:
+    """The verdict's words on the motion-metrics rows marked worse (`motion_rows`, less the feet rows)."""
+    if motion is None:
+        return ""
+    top, accuracy = motion_rows(motion["plain"], motion["optimized"], [k for _, k, _ in FEET_ROWS])
+    return motion_worse_text(*([row_name(label) for label, _, mark in block if is_worse_mark(mark)]
+                               for block in (top, accuracy)))
+
+
+def _keyframe_lines(solution) -> list[str]:
+    """Where the keyframes decide a limit (`Solution.relaxations`) and the limits the least violation raised
+    (`certificate_lines`; the verdict names them too)."""
+    lines = []
     relaxed = getattr(solution, "relaxations", ()) or ()
     if relaxed:
         shown = ", ".join(f"{r.constraint} {r.label} at keyframe {r.keyframe} ({r.start:.2f}-{r.end:.2f} s, "
@@ -300,7 +304,49 @@ def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bound
         more = f" and {len(relaxed) - RELAXATIONS_SHOWN} more" if len(relaxed) > RELAXATIONS_SHOWN else ""
         lines.append(f"where the keyframes decide (limit set to what they force): {shown}{more}")
     lines += certificate_lines(solution)
-    return "\n".join(lines)
+    return lines
+
+
+def refinement_text(solution, tol: float | None) -> str:
+    """The refinement's verdict: the decrease of Phi that more frames still predict, relative
+    (`Solution.final_estimate`), against `tol`; when the solve refined after its last estimate, that the
+    final frames have none; without an estimate, that the solve stopped first ("" without `tol` either)."""
+    estimate = getattr(solution, "final_estimate", None)
+    if estimate is None or not np.isfinite(estimate):
+        return "" if tol is None else "no refinement estimate (the solve stopped before one)"
+    checks = getattr(solution, "segment_decreases", ()) or ()
+    if checks and len(checks[-1][0]) != solution.frames.count:
+        return (f"no refinement estimate on the final frames (the last: {estimate:.3g} on {len(checks[-1][0])} "
+                "frames, before more were added)")
+    if tol is None:
+        return f"refinement estimate {estimate:.3g}"
+    if estimate <= tol:
+        return f"refinement converged (estimate {estimate:.3g} <= tol {tol:g})"
+    return f"refinement not converged (estimate {estimate:.3g} > tol {tol:g})"
+
+
+def verdict_figures(plain: dict, opt: dict, motion: dict | None) -> tuple[list, list]:
+    """The verdict's figures (`runner.verdict.figure` texts, None where missing): the feet (penetration at
+    1000 Hz; with a capture float and skate in contact) and the jolts (peak pelvis acceleration at 1000 Hz;
+    with a capture the peak joint angular acceleration at its frames; RMS joint torque), each with the
+    capture's own figure where there is one."""
+    ref, p, o = ({}, {}, {}) if motion is None else (motion["plain"]["reference"], motion["plain"]["path"],
+                                                     motion["optimized"]["path"])
+    cap = capture_figures(motion)
+    pen = ref.get("penetration_mm", {}).get("max")
+    feet = [figure("penetration", plain["max_penetration_mm"], opt["max_penetration_mm"], "{:.2f}", "mm", pen),
+            figure("float", p.get("float_contact_mm"), o.get("float_contact_mm"), "{:.2f}", "mm",
+                   ref.get("float_contact_mm")),
+            figure("skate", p.get("skate_contact_mm"), o.get("skate_contact_mm"), "{:.2f}", "mm/frame",
+                   ref.get("skate_contact_mm"))]
+    key = "peak_pelvis_acceleration_ms2"
+    jolts = [figure("peak pelvis", plain.get(key), opt.get(key), "{:.1f}", "m/s^2", cap.get(key)),
+             figure("peak joint", p.get("peak_angular_acceleration_max_rad_s2"),
+                    o.get("peak_angular_acceleration_max_rad_s2"), "{:.0f}", "rad/s^2",
+                    ref.get("peak_angular_acceleration_max_rad_s2")),
+             figure("RMS torque", plain.get("rms_joint_torque_Nm"), opt.get("rms_joint_torque_Nm"), "{:.1f}",
+                    "N m", cap.get("rms_joint_torque_Nm"))]
+    return feet, jolts
 
 
 #: raised limits shown one per line under the table (the rest counted): the summary stays short
@@ -393,45 +439,59 @@ def _accuracy_rows(error: dict) -> list[tuple[str, str, float, float]]:
     ]
 
 
-def motion_metrics_table(plain: dict, optimized: dict) -> str:
-    """The motion metrics against the reference (`runner.motion_metrics`), reference | plain | optimized,
-    a row marked "worse" where the optimized path is worse than the plain spline (`motion_worse`).
-
-    Args:
-        plain, optimized: `motion_metrics(...)` of the plain spline and of the optimized path, both
-            sampled at the reference's frames; the "reference" column is their (equal) "reference" block.
-    Returns:
-        the table as text: plausibility rows for all three, the no-jolt rows (`_JOLT_ROWS`, when the blocks
-        have them; marked `OVER` beyond the corpus's bound), then the accuracy rows (mean, max over
-        frames; the joint angle is the mean over joints of each joint's mean, and the largest max; worse
-        when the mean or the max is), then the legend of the mark.
-    """
+def motion_rows(plain: dict, optimized: dict, shown=()) -> tuple[list, list]:
+    """The rows of `motion_metrics_table`: (the plausibility and no-jolt rows, the accuracy rows), each a list
+    of (label, cells: [reference, plain, optimized] texts, mark: False, True (worse), `TOWARD` or `OVER`)."""
     ref = plain["reference"]
     frame_s = 1.0 / float(plain["fps"])
     cols = (ref, plain["path"], optimized["path"])
     rows = []
-    for label, key, sub, fmt in _PLAUSIBILITY_ROWS:
+    for label, key, sub, fmt in (row for row in _PLAUSIBILITY_ROWS if row[1] not in shown):
         vals = [c[key][sub] if sub else c[key] for c in cols]
-        rows.append((label, [cell(fmt, v) for v in vals], motion_worse(key, vals[1], vals[2], frame_s, vals[0])))
-    jolts = [row for row in _JOLT_ROWS if any(row[1] in c for c in cols)]
-    for label, key, fmt, bound in jolts:
-        rows.append((label, [cell(fmt, c.get(key)) for c in cols], OVER if _over_jolt_bound(bound, key, cols) else ""))
-    w = max(max(len(r[0]) for r in rows), 38) + 2
-    head = f"{'':{w}}{'reference':>14}{'plain':>14}{'optimized':>14}"
-    lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz; "
-             "docs/contacts.md \"Motion metrics\")", head, "-" * (len(head) + len(WORSE) + 2)]
-    lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in vals) + (f"  {bad if isinstance(bad, str) else WORSE}"
-                                                                     if bad else "") for label, vals, bad in rows]
-    lines.append("-" * (len(head) + len(WORSE) + 2))
+        rows.append((label, [cell(fmt, v) for v in vals], motion_mark(key, vals[1], vals[2], frame_s, vals[0])))
+    for label, key, fmt, bound in (row for row in _JOLT_ROWS if any(row[1] in c for c in cols)):
+        rows.append((label, [cell(fmt, c.get(key)) for c in cols], OVER if _over_jolt_bound(bound, key, cols) else False))
+    accuracy = []
     pairs = zip(_accuracy_rows(plain["error"]), _accuracy_rows(optimized["error"]), strict=True)
     for (label, key, pm, px), (_, _, om, ox) in pairs:
         cells = [MISSING] + [cell("{:.2f}", m) + (f" / {cell('{:.1f}', x)}" if np.isfinite(x) else "")
                              for m, x in ((pm, px), (om, ox))]
         bad = motion_worse(key, pm, om) or motion_worse(key, px, ox) or (key == "joint_orientation_deg"
                                                                             and ox > LOST_TURN_DEG)
-        lines.append(f"{label + (' mean / max' if np.isfinite(px) else ' mean'):{w}}"
-                     + "".join(f"{c:>14}" for c in cells) + (f"  {WORSE}" if bad else ""))
-    if jolts:
+        accuracy.append((label + (" mean / max" if np.isfinite(px) else " mean"), cells, bool(bad)))
+    return rows, accuracy
+
+
+def motion_metrics_table(plain: dict, optimized: dict, shown=()) -> str:
+    """The motion metrics against the reference (`runner.motion_metrics`), reference | plain | optimized,
+    a row marked "worse" where the optimized path is worse than the plain spline, or "toward capture"
+    (`runner.verdict.motion_mark`).
+
+    Args:
+        plain, optimized: `motion_metrics(...)` of the plain spline and of the optimized path, both
+            sampled at the reference's frames; the "reference" column is their (equal) "reference" block.
+        shown: the keys of plausibility rows the summary table already prints (`FEET_ROWS`): left out, and
+            the title says so.
+    Returns:
+        the table as text: plausibility rows for all three, the no-jolt rows (`_JOLT_ROWS`, when the blocks
+        have them; marked `OVER` beyond the corpus's bound), then the accuracy rows (mean, max over
+        frames; the joint angle is the mean over joints of each joint's mean, and the largest max; worse
+        when the mean or the max is), then the legends of the marks printed.
+    """
+    top, accuracy = motion_rows(plain, optimized, shown)
+    w = max(max(len(r[0]) for r in top), 38) + 2
+    head = f"{'':{w}}{'reference':>14}{'plain':>14}{'optimized':>14}"
+    rule = "-" * (len(head) + len(WORSE) + 2)
+    left_out = "; the feet rows of the summary left out" if any(r[1] in shown for r in _PLAUSIBILITY_ROWS) else ""
+    lines = [f"motion metrics against the reference ({plain['frames']} frames at {plain['fps']:g} Hz{left_out}; "
+             "docs/contacts.md \"Motion metrics\")", head, rule]
+    for block in (top, accuracy):
+        lines += [f"{label:{w}}" + "".join(f"{v:>14}" for v in cells)
+                  + (f"  {mark if isinstance(mark, str) else WORSE}" if mark else "") for label, cells, mark in block]
+        lines += [rule] if block is top else []
+    marked = [mark for *_, mark in top + accuracy if mark]
+    if OVER in marked:
         lines.append(JOLT_LEGEND)
-    lines.append(MOTION_LEGEND)
+    if any(m != OVER for m in marked):
+        lines.append(MOTION_LEGEND)
     return "\n".join(lines)

@@ -46,11 +46,15 @@ def _bar(stream, **kw):
 class Progress:
     """Progress of an optimization (`solver.solve`'s progress callback).
 
-    On a terminal: a tqdm bar per round (evaluations, the current objective E, elapsed time). Off a terminal
-    (a log, a pipe): plain lines, one when a round starts, one when it ends, and in between at most one every
-    `QUIET_INTERVAL` seconds, worded "(still optimizing)" so it does not read as a new round. A round of the
-    least change ends with its worst constraint ("worst flight wrench 10.9 x tol": the constraint the solve
-    is fighting, met at <= 1). `quiet`: nothing.
+    On a terminal: a tqdm bar per round (evaluations, the current value of Phi, elapsed time). Off a terminal
+    (a log, a pipe): one line when a round ends; a round still running after `QUIET_INTERVAL` seconds first
+    prints that it started, then at most one line every `QUIET_INTERVAL` seconds, worded "(still optimizing)"
+    so it does not read as a new round. A round of the least change ends with its worst constraint ("worst
+    flight wrench 10.9 x tol": the constraint the solve is fighting, met at <= 1). `quiet`: nothing.
+
+    Phi is the value the least change's subproblems minimize, the augmented Lagrangian (`solver.lagrangian`):
+    the change E = D / (m g^2 T) plus the multipliers' and the penalty's terms, which can make it negative;
+    the summary's E is the change alone.
     """
 
     def __init__(self, quiet=False, stream=None, interval=QUIET_INTERVAL):
@@ -67,20 +71,21 @@ class Progress:
         self.stream.flush()
 
     def _E(self):
-        return "E -" if self.E is None else f"E {self.E:.6g}"
+        return "Phi -" if self.E is None else f"Phi {self.E:.6g}"
+
+    def _head(self):
+        r = self.round
+        return f"round {r.get('round', 0) + 1}: {r.get('frames', 0)} frames ({r.get('variable', 0)} variable)"
 
     def __call__(self, event, info):
         if self.quiet:
             return
         if event == "round":
             self._end_round()
-            self.round = {**info, "evals0": self.evals, "t0": time.perf_counter()}
-            head = (f"round {info.get('round', 0) + 1}: {info.get('frames', 0)} frames "
-                    f"({info.get('variable', 0)} variable)")
+            self.round = {**info, "evals0": self.evals, "t0": time.perf_counter(), "said": False}
             if self.tty:
-                self.bar = _bar(self.stream, desc="  " + head, unit=" evals")
+                self.bar = _bar(self.stream, desc="  " + self._head(), unit=" evals")
             else:
-                self._line(f"  {head}: started, {time.perf_counter() - self.t0:.1f} s")
                 self.last = time.perf_counter()
         elif event == "eval":
             self.evals = info.get("evals", self.evals)
@@ -90,6 +95,9 @@ class Progress:
                 self.bar.set_postfix_str(self._E(), refresh=False)
             elif self.round is not None and time.perf_counter() - self.last >= self.interval:
                 self.last = time.perf_counter()
+                if not self.round["said"]:  # a long round: say when it started
+                    self.round["said"] = True
+                    self._line(f"  {self._head()}: started, {self.round['t0'] - self.t0:.1f} s")
                 self._line(f"  round {self.round.get('round', 0) + 1} (still optimizing): "
                            f"{self.evals - self.round['evals0']} evaluations, {self._E()}, "
                            f"{self.last - self.t0:.1f} s")
@@ -98,8 +106,7 @@ class Progress:
         elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
             self._end_round()
             tol = f" (tol {info['tol']:g})" if info.get("tol") else ""
-            self._line(f"  round {info['round'] + 1}: refinement estimate {info['estimate']:.3g} of E still "
-                       f"available{tol}")
+            self._line(f"  round {info['round'] + 1}: refinement estimate {info['estimate']:.3g} of Phi{tol}")
 
     def _end_round(self):
         if self.round is None:
@@ -111,7 +118,8 @@ class Progress:
             self.bar = None
         else:
             r = self.round
-            self._line(f"  round {r.get('round', 0) + 1}: done, {self.evals - r['evals0']} evaluations, {self._E()}"
+            head = f"round {r.get('round', 0) + 1}" if r["said"] else self._head()
+            self._line(f"  {head}: done, {self.evals - r['evals0']} evaluations, {self._E()}"
                        f"{worst}, {time.perf_counter() - r['t0']:.1f} s")
         self.round = None
 

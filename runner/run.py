@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.console import motion_metrics_table, summary_table
+from runner.console import FEET_ROWS, motion_metrics_table, summary_table
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.files import atomic_output
 from runner.paths import display_path
@@ -251,21 +251,22 @@ def _replace(run: Run, **changes) -> Run:
 
 
 def report(run: Run) -> str:
-    """The summary tables of a run: what the optimization bought (plain spline vs optimized), the motion
-    metrics against the capture, and how close the capture's own feet are to the scene."""
+    """The summary of a run: the verdict and what the optimization bought (plain spline vs optimized,
+    `summary_table`), the motion metrics against the capture, and how close the capture's own feet are to
+    the scene."""
     motion = run.metrics.get("motion")
     rows = contact_summary_rows(motion)
     lines = [summary_table(run.metrics["plain"], run.metrics["optimized"], run.solution, contact_rows=rows,
-                           force_bounds=run.problem.force_bounds)]
+                           force_bounds=run.problem.force_bounds, motion=motion, tol=run.options.tol)]
     ref = run.source.reference
     if ref is not None:
         from runner.mocap.contacts import feet_line
         from runner.mocap.glitches import glitches_line
 
-        lines.append(motion_metrics_table(motion["plain"], motion["optimized"]))
+        lines.append(motion_metrics_table(motion["plain"], motion["optimized"], shown=[k for _, k, _ in FEET_ROWS]))
         forced = motion.get("keyframes", {}).get("forced_skate_contact_mm")
-        if forced is not None:
-            lines.append(f"skate, ref. contacts, that the keyframes force on any path through them: {forced:.2f} mm "
+        if forced is not None and f"{forced:.2f}" != "0.00":  # keys that hold the feet still force no skate
+            lines.append(f"skate in contact that the keyframes force on any path through them: {forced:.2f} mm/frame "
                          "(a lower bound: the distance between a site's keyed positions inside each contact)")
         worst = [motion["plain"]["path"], motion["optimized"]["path"], motion["plain"]["reference"]]
         lines.append("beyond range of motion (AAOS 1965, docs/anatomy.md), worst: " + "; ".join(
@@ -377,9 +378,10 @@ def anatomy_summary_rows(motion) -> list:
     motion, plain spline and optimized at the capture's frames, the capture's own in the label.
 
     Returns:
-        [(label, plain value, optimized value, format, worse), ...] (`runner.console.motion_worse`).
+        [(label, plain value, optimized value, format, mark), ...] (`runner.verdict.motion_mark`, against
+        the capture's figure too).
     """
-    from runner.console import motion_worse
+    from runner.verdict import motion_mark
 
     capture = motion["plain"]["reference"]
     rows = []
@@ -387,7 +389,7 @@ def anatomy_summary_rows(motion) -> list:
         if key not in capture:  # metrics written without the anatomy figures
             continue
         a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
-        rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt, motion_worse(key, a, b)))
+        rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt, motion_mark(key, a, b, 0.0, capture[key])))
     return rows
 
 
@@ -395,33 +397,25 @@ def contact_summary_rows(motion) -> list:
     """Summary rows for the feet: float, skate, skating ratio, flight time and flight-phase error
     (`runner.motion_metrics.flight_mismatch`, extra + missed) of both paths against the motion-capture
     reference (`motion`: metrics["motion"], the `motion_metrics` of both paths at the clip's rate; the
-    capture's own figure in the label), then the anatomy rows (`anatomy_summary_rows`); each marked where the optimized path is worse than
-    the plain spline (`runner.console.motion_worse`).
+    capture's own figure in the label), then the anatomy rows (`anatomy_summary_rows`); each marked where
+    the optimized path is worse than the plain spline or moved toward the capture (`runner.verdict.motion_mark`).
 
     Returns:
-        [(label, plain value, optimized value, format, worse), ...].
+        [(label, plain value, optimized value, format, mark), ...].
     """
-    from runner.console import motion_worse
+    from runner.verdict import motion_mark
 
     rows = []
     if motion is not None:
         capture = motion["plain"]["reference"]
         frame_s = 1.0 / float(motion["plain"]["fps"])
-        for label, key, fmt in (
-            ("float in contact [mm]", "float_contact_mm", "{:.2f}"),
-            ("float in capture stance [mm]", "float_stance_mm", "{:.2f}"),
-            ("flight in capture stance [s]", "flight_in_stance_s", "{:.3f}"),
-            ("skate in contact [mm/frame]", "skate_contact_mm", "{:.2f}"),
-            ("skate, PhysDiff [mm/frame]", "skate_mm", "{:.2f}"),
-            ("skating ratio (contacts)", "skating_ratio_contacts", "{:.3f}"),
-            ("flight time [s]", "flight_time_s", "{:.3f}"),
-        ):
+        for label, key, fmt in FEET_ROWS:
             if key in capture:
                 a, b = motion["plain"]["path"][key], motion["optimized"]["path"][key]
                 rows.append((f"{label} (capture {fmt.format(capture[key])})", a, b, fmt,
-                             motion_worse(key, a, b, frame_s, capture[key])))
+                             motion_mark(key, a, b, frame_s, capture[key])))
         # flight-phase error: frames in flight in one and not the other (flight times can cancel)
         a, b = (motion[p]["error"]["flight_extra_s"] + motion[p]["error"]["flight_missed_s"] for p in ("plain", "optimized"))
-        rows.append(("flight phase error vs capture [s]", a, b, "{:.3f}", motion_worse("flight_phase_error_s", a, b, frame_s)))
+        rows.append(("flight phase error vs capture [s]", a, b, "{:.3f}", motion_mark("flight_phase_error_s", a, b, frame_s)))
         rows += anatomy_summary_rows(motion)
     return rows

@@ -43,7 +43,7 @@ def test_quiet_silences_progress_but_not_results(tmp_path, capsys):
     assert "wrote" in out and "p.npz" in out and "stopped:" in out
     assert "round 1" not in out and "importing" not in out  # progress
     code, out, _ = animate(capsys, "--no-render", "--no-summary")
-    assert "change E" not in out and re.search(r"round 1: \d+ frames \(\d+ variable\): started", out)
+    assert "change E" not in out and re.search(r"round 1: \d+ frames \(\d+ variable\): done, \d+ evaluations, Phi", out)
 
 
 def test_animate_without_out_renders_to_the_default_path(tmp_path, capsys, monkeypatch):
@@ -101,10 +101,11 @@ def test_progress_off_a_terminal_prints_rounds_once_and_a_still_line_every_5_s(m
     p.done()
     lines = stream.getvalue().splitlines()
     assert [line.split(":")[0].strip() for line in lines] == [
-        "round 1", "round 1 (still optimizing)", "round 1 (still optimizing)", "round 1", "round 2", "round 2"]
-    assert "started" in lines[0] and "done, 120 evaluations" in lines[3] and "started" in lines[4]
-    assert "worst flight wrench 10.9 x tol" in lines[3]
-    assert "done, 0 evaluations" in lines[5] and "worst" not in lines[5]
+        "round 1", "round 1 (still optimizing)", "round 1 (still optimizing)", "round 1", "round 2"]
+    # the long round says when it started, before its first "still" line; the short one prints one line
+    assert "15 frames (7 variable): started, 0.0 s" in lines[0] and "done, 120 evaluations" in lines[3]
+    assert "worst flight wrench 10.9 x tol" in lines[3] and ", Phi " in lines[3] and ", E " not in lines[3]
+    assert "20 frames (12 variable): done, 0 evaluations" in lines[4] and "worst" not in lines[4]
     assert progress.Progress(quiet=True, stream=stream) is not None
 
 

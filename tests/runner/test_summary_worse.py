@@ -9,19 +9,16 @@ import numpy as np
 import pytest
 
 from runner.console import (
-    FLIGHT_CHANGE,
     LEGEND,
     MISSING_LEGEND,
     MOTION_LEGEND,
-    MOTION_MARGINS,
     TARGET_LEGEND,
-    WORSE,
     cell,
     comparison_rows,
     motion_metrics_table,
-    motion_worse,
     summary_table,
 )
+from runner.verdict import FLIGHT_CHANGE, MOTION_MARGINS, TOWARD, WORSE, motion_mark, motion_worse
 from solver.layout import StateLayout
 from solver.metrics import dynamics_metrics, dynamics_series
 
@@ -253,7 +250,7 @@ def test_the_feet_rows_of_the_summary_are_marked_with_their_legend():
                      "beyond range of motion [deg]": False}
     text = summary_table(metrics(), metrics(), solution(), contact_rows=rows)
     assert {"flight time [s] (capture 0.450)", "flight phase error vs capture [s]"} <= marked(text)
-    assert "feet rows: " + MOTION_LEGEND in text.splitlines()
+    assert LEGEND in text.splitlines()
     assert _target(text, "flight time [s] (capture 0.450)") == "flight,ground"
     assert _target(text, "skate in contact [mm/frame] (capture 1.81)") == "slide"
     assert _target(text, "float in contact [mm] (capture 2.40)") == "planted"
@@ -271,8 +268,13 @@ def test_the_anatomy_rows_are_marked_beyond_their_bounds():
     # 0.4 deg further beyond the range of motion: inside the half degree
     assert worse == {"knee rotation off the hinge [deg]": True, "elbow rotation off the hinge [deg]": False,
                      "beyond range of motion [deg]": False}
-    m["optimized"]["path"]["rom_excess_deg"] = 2.0 * 1.01 + 0.51
-    assert {r[0].split(" (capture")[0]: r[4] for r in anatomy_summary_rows(m)}["beyond range of motion [deg]"]
+    def rom_mark():
+        return {r[0].split(" (capture")[0]: r[4] for r in anatomy_summary_rows(m)}["beyond range of motion [deg]"]
+
+    m["optimized"]["path"]["rom_excess_deg"] = 2.0 * 1.01 + 0.51  # past the half degree, short of the capture's 3.0
+    assert rom_mark() == TOWARD
+    m["optimized"]["path"]["rom_excess_deg"] = 3.0 * 1.01 + 0.51  # past the capture's too
+    assert rom_mark() is True
 
 
 def test_the_motion_metrics_table_has_a_worse_column():
@@ -348,11 +350,169 @@ def test_the_no_jolt_rows_are_marked_over_the_corpus_bound():
 
     # at 1.5x the plain spline's pelvis peak, each joint at 1.5x its larger reference, torque at 1.25x: held
     assert marks() == dict.fromkeys(marks(), False)
-    text = motion_metrics_table(plain, opt)
-    assert text.splitlines()[-2:] == [JOLT_LEGEND, MOTION_LEGEND]
+    assert JOLT_LEGEND not in motion_metrics_table(plain, opt).splitlines()  # a legend only for a mark printed
     # the hip 91 rad/s^2 against its larger reference, the capture's 60: over 1.5x, though the largest peak
     # (the knee's 150) is not
     opt["path"].update(jolts(15.1, 150.0, 91.0, 112.6))
     assert marks() == dict.fromkeys(marks(), True)
+    assert JOLT_LEGEND in motion_metrics_table(plain, opt).splitlines()
     # blocks without jolt figures (an older report): no rows, no legend
     assert "peak pelvis acceleration [m/s^2]" not in motion_metrics_table(_motion(), _motion())
+
+
+# --- toward the capture, and the verdict above the table (hand-built figures with known answers) ---
+
+def test_a_row_that_moves_toward_the_capture_is_not_worse():
+    # run-and-step's pelvis: plain 5.9, capture 16.5: up to the capture's level (and its 1 %) is toward it
+    assert motion_mark("skate_contact_mm", 1.0, 1.8, capture=2.0) == TOWARD
+    assert motion_mark("skate_contact_mm", 1.0, 2.0 * 1.01 + 0.05 + 1e-3, capture=2.0) is True  # past the capture
+    assert motion_mark("skate_contact_mm", 3.0, 2.5, capture=2.0) is False  # lower is never worse
+    assert motion_mark("skate_contact_mm", 1.0, 1.04, capture=2.0) is False  # inside the floor: unmarked
+    pelvis = "peak pelvis acceleration [m/s^2]"
+    for opt, mark in [(11.8, TOWARD), (16.5 * 1.01 + 0.1 - 1e-3, TOWARD), (16.5 * 1.01 + 0.1 + 0.05, True),
+                      (5.9, False), (3.0, False)]:
+        rows = {r[0].split(" (capture")[0]: r[4] for r in comparison_rows(
+            metrics(peak_pelvis_acceleration_ms2=5.9), metrics(peak_pelvis_acceleration_ms2=opt),
+            capture={"peak_pelvis_acceleration_ms2": 16.5})}
+        assert rows[pelvis] == mark, opt
+    # the feet rows' flight time: run-and-step's 0.233 -> 0.142 s against the capture's 0.133 at 120 Hz
+    assert motion_mark("flight_time_s", 0.233, 0.142, 1 / 120, capture=0.133) == TOWARD
+    assert motion_mark("flight_time_s", 0.142, 0.233, 1 / 120, capture=0.133) is True
+    # without a capture the same rise is worse
+    assert {r[0]: r[4] for r in comparison_rows(metrics(peak_pelvis_acceleration_ms2=5.9),
+                                                metrics(peak_pelvis_acceleration_ms2=11.8))}[pelvis] is True
+
+
+def test_flight_rows_compare_with_the_captures_flight():
+    flight = "flight (all feet clear) [s]"
+
+    def mark(plain, opt, capture):
+        rows = comparison_rows(metrics(flight_s=plain), metrics(flight_s=opt), capture={"flight_s": capture})
+        return {r[0].split(" (capture")[0]: r[4] for r in rows}[flight]
+
+    # run-and-step: plain 0.252, optimized 0.169, capture 0.133: a change of a third, toward the capture
+    assert mark(0.252, 0.169, 0.133) == TOWARD
+    assert mark(0.252, 0.100, 0.133) == TOWARD  # past it: 0.033 s off the capture against the plain spline's 0.119
+    assert mark(0.140, 0.300, 0.133) is True  # longer, further off
+    assert mark(0.140, 0.125, 0.133) is False  # 8 ms off against 7 ms: inside 1 % and 0.01 s
+    assert mark(0.252, 0.140, 0.133) == TOWARD
+    assert "flight (all feet clear) [s] (capture 0.133)" in [r[0] for r in comparison_rows(
+        metrics(), metrics(), capture={"flight_s": 0.133})]
+
+
+def _motion_with_capture(plain_over, opt_over, capture_over):
+    m = {"plain": _motion(plain_over), "optimized": _motion(opt_over)}
+    for p in m.values():
+        p["reference"].update(capture_over)
+    return m
+
+
+def _verdict(text):
+    """The lines above the table's header, continuation lines joined to theirs."""
+    lines = text.splitlines()
+    head = next(i for i, line in enumerate(lines) if line.rstrip().endswith("target"))
+    out = []
+    for line in lines[:head]:
+        if line.startswith("    ") and out:
+            out[-1] += " " + line.strip()
+        else:
+            out.append(line)
+    return out
+
+
+def test_the_verdict_comes_first_with_the_feet_the_jolts_and_the_worse_rows():
+    plain = metrics(max_penetration_mm=12.0, peak_pelvis_acceleration_ms2=6.0, rms_joint_torque_Nm=100.0)
+    opt = metrics(max_penetration_mm=0.5, peak_pelvis_acceleration_ms2=12.0, rms_joint_torque_Nm=104.0,
+                  penetration_mm_by_site={"l_toe": 0.5, "r_toe": 0.0},
+                  peak_joint_torque_Nm=250.0, peak_root_torque_flight_Nm=140.0)  # two rows no constraint bounds
+    jolt = {"peak_angular_acceleration_max_rad_s2": 100.0}
+    motion = _motion_with_capture({"float_contact_mm": 7.0, "skate_contact_mm": 9.0, **jolt},
+                                  {"float_contact_mm": 2.0, "skate_contact_mm": 1.0,
+                                   "peak_angular_acceleration_max_rad_s2": 240.0},
+                                  {"float_contact_mm": 2.5, "skate_contact_mm": 1.8, "peak_pelvis_acceleration_m_s2": 16.0,
+                                   "rms_joint_torque_Nm": 120.0, "peak_angular_acceleration_max_rad_s2": 250.0,
+                                   "penetration_mm": {"mean": 0.0, "max": 0.0}})
+    motion["optimized"]["error"]["root_position_cm"] = {"mean": 3.0, "max": 9.0}  # against the capture's 1.0 / 1.0
+    sol = solution()
+    sol.integrals_initial = {**dict.fromkeys(CONSTRAINTS, 0.5), "penetration": 12.0, "slide": 4.0}
+    text = summary_table(plain, opt, sol, motion=motion, tol=0.01)
+    verdict = _verdict(text)
+    assert verdict[0].startswith("verdict: every constraint met")
+    assert verdict[1] == ("  feet: penetration 12.00 -> 0.50 mm, float 7.00 -> 2.00 mm, skate 9.00 -> 1.00 mm/frame "
+                          "(capture 0.00, 2.50, 1.80)")
+    assert verdict[2] == ("  jolts: peak pelvis 6.0 -> 12.0 m/s^2, peak joint 100 -> 240 rad/s^2, RMS torque 100.0 -> "
+                          "104.0 N m (capture 16.0, 250, 120.0)")
+    worse = verdict[3]
+    assert worse.startswith("  worse: 2 of ")
+    # the two rows no constraint bounds, traded for what the plain spline breaks; the two that rose toward
+    # the capture are not worse
+    assert "peak joint torque, peak root torque in flight (bounded by no constraint: traded for penetration, slide," in worse
+    assert "2 moved toward the capture: peak pelvis acceleration, RMS joint torque" in worse
+    # the motion metrics under the summary: the root strayed from the capture's
+    assert worse.endswith("; motion metrics worse: root position error (no constraint tracks the capture's path)")
+    assert len(verdict) == 4
+
+
+def test_the_verdict_without_a_capture_and_with_limits_raised():
+    sol = solution()
+    sol.unmet = {"penetration": 0.0416, "hinge": np.radians(2.0), "acceleration": 1050.0}
+    sol.integrals_final = {**sol.integrals_final, "flight": 3.0}
+    # bounded by the hyperextension constraint, inside its limit; by the penetration constraint, whose limit rose
+    # and by the flight constraint, still over its tolerance
+    opt = metrics(max_hyperextension_deg=0.5, max_penetration_mm=120.0, flight_s=0.425)
+    verdict = _verdict(summary_table(metrics(), opt, sol))
+    assert verdict[0] == ("verdict: limits raised (the solve found no path that meets them): penetration by 41.6 mm, "
+                          "hinge by 2 deg, acceleration by 1.05e+03 m/s^2 | rad/s^2; over tolerance: flight 3 x tol; "
+                          "every other constraint met")
+    assert verdict[1] == "  feet: penetration 101.43 -> 120.00 mm"  # no capture: no float, no skate
+    assert "capture" not in verdict[2] and "peak joint" not in verdict[2]
+    # 14 rows judged: penetration and its two sites in a surface, 3 of geometry, 8 of dynamics
+    assert verdict[3] == ("  worse: 3 of 14 rows: max penetration (limit of penetration raised); max hyperextension "
+                          "(inside the limit of hyperextension); flight (all feet clear) (flight over tolerance)")
+
+
+def test_the_refinement_says_one_thing():
+    from runner.console import refinement_text
+
+    sol = solution()
+    for estimate, tol, words in [(0.0029, 0.01, "refinement converged (estimate 0.0029 <= tol 0.01)"),
+                                 (0.03, 0.01, "refinement not converged (estimate 0.03 > tol 0.01)"),
+                                 (0.0029, None, "refinement estimate 0.0029")]:
+        sol.final_estimate = estimate
+        assert refinement_text(sol, tol) == words
+    sol.final_estimate = float("nan")
+    assert refinement_text(sol, 0.01) == "no refinement estimate (the solve stopped before one)"
+    assert refinement_text(sol, None) == ""
+    # an estimate on coarser frames than the path's says so
+    sol.final_estimate, sol.segment_decreases = 0.03, ((np.zeros(20), np.zeros(19)),)
+    sol.frames = SimpleNamespace(n_variable=22, count=30)
+    assert refinement_text(sol, 0.01) == ("no refinement estimate on the final frames (the last: 0.03 on 20 frames, "
+                                          "before more were added)")
+
+
+def test_only_the_constraints_a_path_breaks_get_a_row():
+    sol = solution()
+    sol.integrals_initial = {**dict.fromkeys(CONSTRAINTS, 0.5), "penetration": 3.0}
+    sol.integrals_final = {**dict.fromkeys(CONSTRAINTS, 0.5), "rom": 1.5}
+    sol.unmet = {"hinge": 0.01}
+    text = summary_table(metrics(), metrics(), sol)
+    shown = {line.split(":")[0].strip() for line in text.splitlines() if "worst / tolerance" in line
+             and line.startswith("  ")}
+    assert shown == {"penetration", "rom", "hinge"}
+    note = next(line for line in text.splitlines() if line.startswith("NAME: worst / tolerance"))
+    assert note.endswith("met by both paths, not shown: planted, slide, flight, ground, hyperextension, unit, "
+                         "acceleration")
+
+
+def test_the_constraint_units_are_the_constraints_own():
+    """`CONSTRAINT_UNITS` (how a raised limit prints) agrees with the unit and scale of every constraint the
+    least change builds on run-and-step with the force bounds."""
+    import solver
+    from runner.verdict import CONSTRAINT_UNITS
+    from solver.least_change import build_least_change
+
+    model = solver.load_model(solver.shipped("run_and_step.xml"))
+    kf, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
+    lc = build_least_change(model, kf, contacts=tuple(info.contacts), forces=True)
+    for c in lc.al.constraints:
+        assert CONSTRAINT_UNITS[c.name] == (c.unit, pytest.approx(c.scale)), c.name
