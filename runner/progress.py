@@ -103,6 +103,14 @@ class Progress:
                            f"{self.last - self.t0:.1f} s")
         elif event == "constraints" and self.round is not None:  # after a subproblem: the worst constraint
             self.round["worst"] = f"worst {info['worst']} {info['value']:.3g} x tol" if info.get("worst") else ""
+        elif event == "certify":  # a frame set ended with a constraint broken: the least violation was sought
+            self._end_round()
+            self.evals = info.get("evals", self.evals)
+            raised = info.get("raised") or {}
+            what = ("every constraint can be met, nothing raised" if not raised else
+                    "out of reach, limits raised by [SI]: " + ", ".join(f"{k} {v:.3g}" for k, v in raised.items()))
+            self._line(f"  round {info['round'] + 1}: least violation sought ({info.get('spent', 0)} evaluations, "
+                       f"{info.get('frames', 0)} frames): {what}")
         elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
             self._end_round()
             tol = f" (tol {info['tol']:g})" if info.get("tol") else ""

@@ -40,6 +40,11 @@ from solver.spline_basis import SplineBasis
 
 __all__ = ["Certificate", "Raise", "beyond", "least_violation", "with_frames"]
 
+#: [1] the elastic solves' relative tolerance on F (nlopt's ftol_rel): their minimum is a certificate, so
+#: they are solved far tighter than the least change's inexact subproblems (1e-3); where every pair is met
+#: they stop at once (`_Budget.kwargs`)
+ELASTIC_FTOL_REL = 1e-6
+
 
 @dataclass(frozen=True)
 class Raise:
@@ -168,7 +173,7 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
         for _ in range(per_level if held else 1):
             if best_F == 0.0 or budget.spent():
                 return best
-            r = solve_subproblem(eal, best, quat_slots, ftol_rel=ftol_rel, basis=basis,
+            r = solve_subproblem(eal, best, quat_slots, ftol_rel=min(ftol_rel, ELASTIC_FTOL_REL), basis=basis,
                                  **budget.kwargs(lambda: eal.worst <= 1.0))
             budget.evals += r.result.n_evals
             if r.result.status is Status.INTERRUPTED and budget.should_stop is not None and budget.should_stop():

@@ -309,7 +309,7 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
         return out
 
     # the scale's probe counts against the budget; with two evaluations or fewer left it would spend it
-    c = first_step_scale(preconditioned, pre, var.size) if max_evals == 0 or max_evals > 2 else 1.0
+    c = first_step_scale(preconditioned, pre, var.size, up=al.elastic is not None) if max_evals == 0 or max_evals > 2 else 1.0
     probe = evals[0] - bool(start)  # evaluations beyond the one at z = 0 that L-BFGS reuses
 
     def fun(z, need_grad):
@@ -323,12 +323,13 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
     return SubproblemResult(out, res, time.perf_counter() - t0)
 
 
-def first_step_scale(fun, pre: Preconditioner, n: int) -> float:
+def first_step_scale(fun, pre: Preconditioner, n: int, up: bool = False) -> float:
     """The scale c <= 1 of the subproblem's variables z = c z' that makes L-BFGS's first step the right
     length: gamma = s^T y / y^T y, the inverse curvature along the steepest-descent direction from one
     gradient difference (y) over a short step (s), the scaling of the initial inverse Hessian H0 = gamma I
     (Nocedal & Wright, Numerical Optimization, 2nd ed., eq. 7.20) taken before the first step rather than
-    after it; c = sqrt(gamma) where gamma < 1, else 1.
+    after it; c = sqrt(gamma) where gamma < 1, else 1 (with `up`, sqrt(gamma) either way: the elastic
+    problem's curvature is its constraints' alone, which D's preconditioner does not make about 1).
 
     The preconditioner makes D/D0's Hessian about the identity, so without a broken constraint gamma is
     about 1 and nothing changes. A large penalty adds curvature rho |grad c|^2 along the directions that
@@ -340,7 +341,7 @@ def first_step_scale(fun, pre: Preconditioner, n: int) -> float:
         fun: fun(z, need_grad) -> (Phi, dPhi/dz) in the preconditioned variables. pre: the Preconditioner
             (the step's length in x). n: the number of variables.
     Returns:
-        c in (0, 1] (1 when the gradient vanishes or the curvature is not positive).
+        c in (0, 1], or > 0 with `up` (1 when the gradient vanishes or the curvature is not positive).
     """
     if n == 0:
         return 1.0
@@ -354,7 +355,7 @@ def first_step_scale(fun, pre: Preconditioner, n: int) -> float:
     y = g1 - g0
     yy, sy = float(y @ y), float(h * (d @ y))
     gamma = sy / yy if yy > 0 and sy > 0 else 1.0
-    return float(np.sqrt(gamma)) if gamma < 1.0 else 1.0
+    return float(np.sqrt(gamma)) if gamma < 1.0 or up else 1.0
 
 
 __all__ += ["SubproblemResult", "solve_subproblem", "Status"]

@@ -212,7 +212,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         progress: progress(event, info): "round" (a subproblem starts: round, frames, variable), "eval"
             (evals, E: the best Phi so far), "constraints" (it ended: round, worst, value as `_worst`, rho:
             the next penalty), "certify" (the least violation was sought: round, frames, raised {constraint:
-            amount [SI]}), "estimate" (round, estimate: the predicted decrease over Phi, tol).
+            amount [SI]}, evals: the solve's so far, spent: the search's), "estimate" (round, estimate: the predicted decrease over Phi, tol).
     Returns:
         Solution: frames, initial (the plain spline's), one Round per subproblem, status (CONVERGED only
         when no limit was raised; INFEASIBLE when the certificate raised one and the rest converged), E =
@@ -261,7 +261,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             cert = _certify(lc, frames, o, start, evals, should_stop)
             evals, raises, certified = evals + cert.n_evals, raises + list(cert.raises), True
             if progress:
-                progress("certify", {"round": k, "frames": cert.frames.count, "raised": cert.unmet})
+                progress("certify", {"round": k, "frames": cert.frames.count, "raised": cert.unmet, "evals": evals,
+                                     "spent": cert.n_evals})
             if cert.status is not Status.CONVERGED:
                 status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
                 break
@@ -292,12 +293,21 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         frames = best[1]  # the path ended beyond a limit: the best path that meets them all
         basis = SplineBasis(frames.times, al.t)
         message += "; the last path broke a limit: the best that met them all kept"
-    if raises:  # what stays raised: the pairs the path returned is beyond their limits as posed (no more
-        raises = beyond(al, al.constraints, frames, limits)  # than the certificate: it meets the raised ones)
+    if raises:  # what stays raised: the certified columns the path returned is beyond their limits as posed
+        raises = _still_raised(raises, beyond(al, al.constraints, frames, limits))
     if status is Status.CONVERGED and raises:
         status = Status.INFEASIBLE
     return _solution(lc, frames, basis, rounds, trace, status, message, evals, tuple(raises),
                      time.perf_counter() - start, estimate, o.tol, tuple(decreases))
+
+
+def _still_raised(certified: list, final: list) -> list:
+    """The certified `Raise`s whose column (constraint, label) the final path is beyond as posed (`final`,
+    `solver.feasibility.beyond`), each at the smaller of the two amounts: the certificate's least
+    violation, or less where the path needs less; a column the path meets as posed is not raised."""
+    out = {(r.constraint, r.label): r for r in final}
+    return [r if r.amount <= out[(r.constraint, r.label)].amount else out[(r.constraint, r.label)]
+            for r in certified if (r.constraint, r.label) in out]
 
 
 def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop):
