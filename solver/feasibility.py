@@ -43,7 +43,7 @@ __all__ = ["Certificate", "Raise", "beyond", "least_violation", "with_frames"]
 #: [1] the elastic solves' relative tolerance on F (nlopt's ftol_rel): their minimum is a certificate, so
 #: they are solved far tighter than the least change's inexact subproblems (1e-3); where every pair is met
 #: they stop at once (`_Budget.kwargs`)
-ELASTIC_FTOL_REL = 1e-6
+ELASTIC_FTOL_REL = 1e-3
 
 
 @dataclass(frozen=True)
