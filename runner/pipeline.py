@@ -70,6 +70,8 @@ class ClipOptions:
             the keyframe file's "source".
         skeleton_map: a skeleton map file naming the joints of roles the recogniser cannot find
             (`--skeleton-map`; runner/mocap/skeleton_map.py), or None.
+        key_frames: the clip's frames an animator keyed (`--key-frames`; 0 = the first after its rest
+            frames): the keyframes, instead of `keys` and `every` (`pick_keyframes`); None: picked.
     """
 
     keys: str = "every"
@@ -96,6 +98,7 @@ class ClipOptions:
     command: str = ""
     root_scale: float | str = ROOT_SCALE_LEGS
     skeleton_map: str | os.PathLike | None = None
+    key_frames: tuple[int, ...] | None = None
 
 
 def default_out_dir(clip) -> Path:
@@ -119,6 +122,7 @@ class ClipKeys:
         command: the command line recorded in the file's "source".
         skeleton_map: a skeleton map file (`--skeleton-map`), or None; the skeleton as read is recorded
             in the file's "source" "skeleton" (so `animate` reads the clip again with it).
+        key_frames: the frames an animator keyed (`pick_keyframes` `frames`), or None: picked.
     """
 
     scene: str | os.PathLike = AUTO
@@ -131,6 +135,7 @@ class ClipKeys:
     extremes: bool = True
     command: str = ""
     skeleton_map: str | os.PathLike | None = None
+    key_frames: tuple[int, ...] | None = None
 
 
 #: the stages of `write_clip_keyframes`, for a progress bar
@@ -187,14 +192,15 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
 
     figure, scene = clip_figure_scene(clip, k, scene_out)
     smap = _skeleton_map(k)
-    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, smap)
+    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, smap, root_height=k.key_frames is None)
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
     done(0)
     contacts = name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time))
     done(1)
     every = k.every if (k.every is not None or k.keys == "contacts") else 0.25
-    keyframes = pick_keyframes(ref, model, contacts, keys=k.keys, every=every, partial=k.partial, extremes=k.extremes)
+    keyframes = pick_keyframes(ref, model, contacts, keys=k.keys, every=every, partial=k.partial, extremes=k.extremes,
+                               frames=k.key_frames)
     done(2)
     source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
               "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
@@ -218,7 +224,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
         InputError: as `process_clip`.
     """
     k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, keys=o.keys, every=o.every,
-                 partial=o.partial, command=o.command, skeleton_map=o.skeleton_map)
+                 partial=o.partial, command=o.command, skeleton_map=o.skeleton_map, key_frames=o.key_frames)
     from runner.progress import Steps
 
     with Steps(f"keyframes from {clip.name}", len(CLIP_STAGES), o.quiet, unit=" stages") as bar:

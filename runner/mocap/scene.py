@@ -51,7 +51,7 @@ class ClipScene:
 
 
 def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_out: str | Path,
-               root_scale: float | str = ROOT_SCALE_LEGS, skeleton_map=None) -> ClipScene:
+               root_scale: float | str = ROOT_SCALE_LEGS, skeleton_map=None, root_height: bool = True) -> ClipScene:
     """Retarget `clip` onto `scene`, or with scene == "auto" onto a scene fitted to it.
 
     Fitting (docs/contacts.md "Fitted scenes"): retarget onto the figure alone (no surfaces, so no
@@ -71,13 +71,15 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
             (models/humanoid39.xml). fitted_out: where the fitted scene is written (only for "auto").
         root_scale: the root path's scale (`load_bvh_reference`: "legs" or a number).
         skeleton_map: a `runner.mocap.skeleton_map.SkeletonMap` or None (`load_bvh_reference`).
+        root_height: correct the root height onto the surfaces (`load_bvh_reference`); False for an
+            animator's keys (`--key-frames`), which are where they are.
     Raises:
         InputError: the clip or a scene cannot be read, or the clip's skeleton lacks a joint.
     """
     if str(scene) != AUTO:
         model = load_model(scene)
         frame = CaptureFrame.from_model(model, str(scene))  # a malformed record named with its file
-        ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map)
+        ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, root_height=root_height)
         return ClipScene(ref, model, Path(scene), frame=frame)
     bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
     first = load_bvh_reference(clip, bare, root_scale=root_scale, skeleton_map=skeleton_map)
@@ -88,29 +90,32 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     if not out.parent.is_dir():
         raise InputError(f"{out}: the folder {out.parent} does not exist; create it first")
     try:
-        return _onto_fitted(clip, capture, figure, out, root_scale, skeleton_map)
+        return _onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, root_height=root_height)
     except RootCorrectionRefused as refused:
         notes = []
         if capture.boxes:  # boxes no foot rests on (a foot held still in the air, fitted as a prop): the floor alone
             notes.append(f"{len(capture.boxes)} fitted box(es) dropped, the scene is the floor alone: with them, {refused}")
             capture = FittedScene(capture.floor_z, (), capture.floor_slope)
             try:
-                return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map), notes=tuple(notes))
+                return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, root_height=root_height), notes=tuple(notes))
             except RootCorrectionRefused as again:
                 refused = again
         notes.append(f"{refused}; the root is corrected by that much all the same, and the result is only as good as the "
                      "fitted floor under those feet")
-        return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, check=False), notes=tuple(notes))
+        return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, check=False,
+                                         root_height=root_height), notes=tuple(notes))
 
 
-def _onto_fitted(clip, capture: FittedScene, figure, out: Path, root_scale, skeleton_map, check: bool = True) -> ClipScene:
+def _onto_fitted(clip, capture: FittedScene, figure, out: Path, root_scale, skeleton_map, check: bool = True,
+                 root_height: bool = True) -> ClipScene:
     """The clip retargeted onto the scene `capture` (in the capture's coordinates), levelled and written to
     `out` (`clip_scene`); with `check`, a root correction beyond its bound raises RootCorrectionRefused."""
     frame, fitted = capture.levelling(), capture.levelled()
     with atomic_output(out, suffix=".xml") as tmp_path:
         Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem, capture=frame))
     model = load_model(out)
-    ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, fitted=check)
+    ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, fitted=check,
+                             root_height=root_height)
     return ClipScene(ref, model, out, fitted, capture, frame)
 
 

@@ -1,0 +1,286 @@
+"""dynsplines for Blender: solve the active armature's action with the installed `dynsplines` command.
+
+Two operators, in the 3D viewport's sidebar (tab "dynsplines") on the active armature:
+
+* `dynsplines.inbetween`: the frames keyed in the armature's action are the keyframes (poses as keyed,
+  feet not planted), the in-betweens solved as `dynsplines animate` does;
+* `dynsplines.clean`: the action as a capture, keyed as `dynsplines mocap` keys a clip (every 0.25 s).
+
+Either way the result is a new action `<action>.dynsplines`, baked at every scene frame between the first
+and the last key and assigned to the armature; the original action is kept (a fake user). Re-running
+replaces the result. How: the action goes out as BVH with Blender's own exporter (the armature's bones,
+rest pose and frame rate), `dynsplines mocap` recognises the skeleton (CMU, Mixamo, Rigify, LAFAN1, ...),
+solves, and `dynsplines export` writes the result back onto that skeleton; Blender's importer reads it
+and the motion is carried onto the armature's bones (actions.py).
+
+The command runs in a subprocess (job.py), not in Blender's Python: its path is in the add-on's
+preferences (found on PATH when empty). Interactively a modal operator polls it on a timer (progress in
+the status bar, Esc cancels and keeps the best path so far); in background mode (`blender -b`, scripts,
+tests) the operators run to completion. A failed command is an error report with its one line.
+
+This package imports only Blender's modules and the standard library (it runs in Blender's Python).
+"""
+import os
+import tempfile
+
+import bpy
+
+from . import actions
+from .job import Job, JobError, find_cli
+
+#: the skeleton map given with the exported BVH: it starts at the first key, no rest pose before the motion
+_MAP = '{"rest_frames": 0}'
+#: [s] the timer's period while a solve runs (Blender redraws the status bar at this rate)
+_TICK = 0.2
+
+
+class DynsplinesPreferences(bpy.types.AddonPreferences):
+    bl_idname = __package__
+
+    cli: bpy.props.StringProperty(
+        name="dynsplines command", subtype="FILE_PATH", default="",
+        description="Path of the installed `dynsplines` executable; empty: found on PATH")
+
+    def draw(self, context):
+        self.layout.prop(self, "cli")
+
+
+class DynsplinesSettings(bpy.types.PropertyGroup):
+    terms: bpy.props.EnumProperty(
+        name="Terms", default="default",
+        items=[("default", "Default", "The constraints (contacts, joints, no jolts)"),
+               ("all", "All", "Also the force bounds (--terms all)")])
+    tol: bpy.props.FloatProperty(name="Tolerance", default=0.01, min=1e-4, max=1.0,
+                                 description="Refinement tolerance: the decrease of E still predicted, over E (--tol)")
+    scene: bpy.props.EnumProperty(
+        name="Scene", default="floor",
+        items=[("floor", "Floor", "Blender's ground plane: a floor at z = 0 of the armature (--scene floor)"),
+               ("auto", "Fitted", "A floor and boxes fitted to where the feet rest (--scene auto)")])
+    figure: bpy.props.EnumProperty(
+        name="Figure", default="subject",
+        items=[("subject", "Subject", "The figure made from the armature's own bones"),
+               ("default", "Default", "The shipped 1.75 m figure")])
+    max_evals: bpy.props.IntProperty(name="Max evaluations", default=0, min=0,
+                                     description="Cap on the solve's evaluations, 0: none (--max-evals)")
+
+
+def _cli_path(context):
+    addon = context.preferences.addons.get(__package__)
+    return addon.preferences.cli if addon is not None else ""
+
+
+def _commands(context, bvh, frames, clean, out):
+    """[(label, argv)] of one solve: mocap (keys, solve, saved path) then export (onto the skeleton)."""
+    s = context.scene.dynsplines
+    cli = find_cli(_cli_path(context))
+    skel = os.path.join(out, "skeleton.json")
+    with open(skel, "w", encoding="utf-8") as f:
+        f.write(_MAP)
+    npz = os.path.join(out, "path.npz")
+    mocap = [cli, "mocap", bvh, "--skeleton-map", skel, "--out-dir", out, "--save-path", npz, "--no-render",
+             "--no-summary", "--terms", s.terms, "--tol", f"{s.tol:g}", "--figure", s.figure, "--scene", s.scene]
+    if clean:
+        mocap += ["--every", "0.25"]
+    else:
+        mocap += ["--key-frames", ",".join(str(f - frames[0]) for f in frames)]
+    if s.max_evals > 0:
+        mocap += ["--max-evals", str(s.max_evals)]
+    export = [cli, "export", npz, "--to", os.path.join(out, "result.bvh"), "--skeleton", "source"]
+    return [("solving", mocap), ("exporting", export)]
+
+
+def _armature(context):
+    """The active armature with an action, or a one-line reason why not."""
+    obj = context.active_object
+    if obj is None or obj.type != "ARMATURE":
+        return None, "dynsplines: select an armature (the active object is not one)"
+    action, _ = actions.assigned_action(obj)
+    if action is None:
+        return None, f"dynsplines: the armature {obj.name} has no action; key its bones first"
+    return obj, None
+
+
+def _export_bvh(context, obj, frames, path):
+    """The armature's motion over the keyed range as BVH (Blender's exporter: armature space, scene rate)."""
+    with context.temp_override(active_object=obj, object=obj, selected_objects=[obj]):
+        bpy.ops.export_anim.bvh(filepath=path, frame_start=frames[0], frame_end=frames[-1], rotate_mode="NATIVE",
+                                root_transform_only=False, global_scale=1.0)
+
+
+def _import_result(context, obj, path, first):
+    """Read the result BVH (Blender's importer, file axes as written: armature space) and carry its motion
+    onto `obj` as the new action; the temporary armature is removed. Returns the new action."""
+    before = set(bpy.data.objects)
+    actions_before = set(bpy.data.actions)
+    bpy.ops.import_anim.bvh(filepath=path, axis_forward="Y", axis_up="Z", global_scale=1.0, frame_start=first,
+                            use_fps_scale=False, update_scene_fps=False, update_scene_duration=False,
+                            rotate_mode="NATIVE")  # makes the new armature the active object
+    [tmp] = [o for o in bpy.data.objects if o not in before]
+    try:
+        action, _ = actions.assigned_action(tmp)
+        start, end = (int(round(v)) for v in action.frame_range)
+        original, _ = actions.assigned_action(obj)
+        keys = actions.sample_motion(tmp, obj, range(start, end + 1))
+        original.use_fake_user = True  # kept when the result takes its place
+        return actions.write_action(obj, original.name + actions.RESULT_SUFFIX, keys)
+    finally:
+        data = tmp.data
+        bpy.data.objects.remove(tmp)
+        bpy.data.armatures.remove(data)
+        for a in set(bpy.data.actions) - actions_before:
+            if not a.name.endswith(actions.RESULT_SUFFIX):
+                bpy.data.actions.remove(a)
+        context.view_layer.objects.active = obj
+        obj.select_set(True)
+
+
+class _Solve:
+    """The shared body of the two operators: prepare (export, job), finish (import, report)."""
+
+    bl_options = {"REGISTER", "UNDO"}
+    clean = False
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and obj.type == "ARMATURE"
+
+    def _prepare(self, context):
+        obj, why = _armature(context)
+        if obj is None:
+            raise JobError(why)
+        frames = actions.keyed_frames(obj)
+        if len(frames) < 2:
+            raise JobError(f"dynsplines: the action of {obj.name} has keys at {len(frames)} frame(s); key at "
+                           "least two frames")
+        self._obj, self._frames = obj.name, frames
+        self._dir = tempfile.mkdtemp(prefix="dynsplines-")
+        bvh = os.path.join(self._dir, f"{bpy.path.clean_name(obj.name)}.bvh")
+        frame = context.scene.frame_current
+        _export_bvh(context, obj, frames, bvh)
+        context.scene.frame_set(frame)
+        self._job = Job(_commands(context, bvh, frames, self.clean, self._dir), self._dir)
+
+    def _finish(self, context):
+        obj = bpy.data.objects[self._obj]
+        frame = context.scene.frame_current
+        action = _import_result(context, obj, os.path.join(self._dir, "result.bvh"), self._frames[0])
+        context.scene.frame_set(frame)
+        how = "cancelled: the best path so far" if self._job.cancelled else "solved"
+        self.report({"INFO"}, f"dynsplines: {how}; wrote the action {action.name} on {obj.name} "
+                              f"({len(self._frames)} keyed frames, {self._frames[0]}..{self._frames[-1]})")
+
+    def _cleanup(self):
+        import shutil
+
+        if getattr(self, "_dir", None):
+            shutil.rmtree(self._dir, ignore_errors=True)
+
+    def execute(self, context):
+        """Run to completion (background mode, scripts, F3 without a window)."""
+        try:
+            self._prepare(context)
+            self._job.run()
+            self._finish(context)
+        except JobError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        finally:
+            self._cleanup()
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window_manager is None or context.window is None:
+            return self.execute(context)
+        try:
+            self._prepare(context)
+        except JobError as e:
+            self._cleanup()
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(_TICK, window=context.window)
+        wm.progress_begin(0, 100)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        wm = context.window_manager
+        if event.type == "ESC" and event.value == "PRESS":
+            self._job.cancel()
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        done = self._job.poll()
+        share = 90 - 80 / (1 + self._job.rounds / 4) if self._job.index == 0 else 95
+        wm.progress_update(int(share))
+        context.workspace.status_text_set(f"dynsplines {self._job.label} (Esc cancels): {self._job.status}")
+        if not done:
+            return {"RUNNING_MODAL"}
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+        try:
+            if self._job.error is not None:
+                self.report({"ERROR"}, self._job.error)
+                return {"CANCELLED"}
+            self._finish(context)
+            return {"FINISHED"}
+        finally:
+            self._cleanup()
+
+
+class DYNSPLINES_OT_inbetween(_Solve, bpy.types.Operator):
+    """Solve the in-betweens of the keyed frames (they are the keyframes) into a new action"""
+
+    bl_idname = "dynsplines.inbetween"
+    bl_label = "In-between keys"
+
+
+class DYNSPLINES_OT_clean(_Solve, bpy.types.Operator):
+    """Clean the action as a capture (keyed every 0.25 s, as dynsplines mocap does) into a new action"""
+
+    bl_idname = "dynsplines.clean"
+    bl_label = "Clean capture"
+    clean = True
+
+
+class DYNSPLINES_PT_panel(bpy.types.Panel):
+    bl_label = "dynsplines"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "dynsplines"
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and obj.type == "ARMATURE"
+
+    def draw(self, context):
+        layout, s = self.layout, context.scene.dynsplines
+        obj = context.active_object
+        action, _ = actions.assigned_action(obj)
+        layout.label(text=f"Action: {action.name if action else 'none'}", icon="ACTION")
+        if action is not None:
+            frames = actions.keyed_frames(obj)
+            layout.label(text=f"{len(frames)} keyed frames")
+        for name in ("terms", "tol", "scene", "figure", "max_evals"):
+            layout.prop(s, name)
+        col = layout.column(align=True)
+        col.operator(DYNSPLINES_OT_inbetween.bl_idname, icon="IPO_BEZIER")
+        col.operator(DYNSPLINES_OT_clean.bl_idname, icon="MOD_SMOOTH")
+
+
+_CLASSES = (DynsplinesPreferences, DynsplinesSettings, DYNSPLINES_OT_inbetween, DYNSPLINES_OT_clean,
+            DYNSPLINES_PT_panel)
+
+
+def register():
+    for cls in _CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.dynsplines = bpy.props.PointerProperty(type=DynsplinesSettings)
+
+
+def unregister():
+    del bpy.types.Scene.dynsplines
+    for cls in reversed(_CLASSES):
+        bpy.utils.unregister_class(cls)
