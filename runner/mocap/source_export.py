@@ -283,9 +283,11 @@ def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np
     return "\n".join(out) + "\n"
 
 
-def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.ndarray, fps: float) -> BvhClip:
+def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.ndarray, fps: float,
+                     as_solved: bool = False) -> BvhClip:
     """Write a motion of saved path `saved` onto its source skeleton (`source_bvh_text`), atomically; the
-    root correction of the path's reference (`root_correction`) is taken off the root.
+    root correction of the path's reference (`root_correction`) is taken off the root, unless `as_solved`
+    (the root as the path has it: the feet where the solve put them on the scene's surfaces).
 
     Returns:
         the source clip (its joints are the file's).
@@ -299,20 +301,22 @@ def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.
         raise InputError(f"{saved.source}: the path was not made from a BVH clip, so it has no source skeleton; "
                          "give --skeleton figure")
     text = str(saved.arrays["clip_text"]) if str(saved.arrays.get("clip_text", "")) else Path(clip.source).read_text()
-    reference = (saved.reference_times, saved.reference_qpos) if saved.has_reference else None
+    reference = (saved.reference_times, saved.reference_qpos) if saved.has_reference and not as_solved else None
     body = source_bvh_text(clip, text, model, qpos, times, fps, reference)
     with atomic_output(out) as tmp:
         Path(tmp).write_text(body, encoding="utf-8")
     return clip
 
 
-def export_on_source(npz, out, which: str = "optimized", fps: float | None = None, required: bool = False):
+def export_on_source(npz, out, which: str = "optimized", fps: float | None = None, required: bool = False,
+                     as_solved: bool = False):
     """`dynsplines export PATH.npz --to FILE.bvh` onto the source skeleton (module docstring).
 
     Args:
         npz: the saved path. out: the .bvh file. which: the motion. fps: [Hz] (None: the clip's rate).
         required: `--skeleton source` was given: a path without a clip is an error (else None is returned,
             and the caller writes the figure's skeleton).
+        as_solved: keep the reference's root-height correction (`write_source_bvh`; `--root-height solved`).
     Returns:
         `runner.export.ExportResult`, or None (no clip, not required).
     Raises:
@@ -341,7 +345,7 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
                              "skeleton; give --skeleton figure, or redo the clip with --figure subject")
         return None
     try:
-        clip = write_source_bvh(out, saved, model, motion.qpos, motion.times, motion.fps)
+        clip = write_source_bvh(out, saved, model, motion.qpos, motion.times, motion.fps, as_solved)
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
                          "space or choose another --to") from None

@@ -56,10 +56,10 @@ class DynsplinesSettings(bpy.types.PropertyGroup):
         name="Scene", default="floor",
         items=[("floor", "Floor", "Blender's ground plane: a floor at z = 0 of the armature (--scene floor)"),
                ("auto", "Fitted", "A floor and boxes fitted to where the feet rest (--scene auto)")])
-    figure: bpy.props.EnumProperty(
-        name="Figure", default="subject",
-        items=[("subject", "Subject", "The figure made from the armature's own bones"),
-               ("default", "Default", "The shipped 1.75 m figure")])
+    out_dir: bpy.props.StringProperty(
+        name="Keep files in", subtype="DIR_PATH", default="",
+        description="A folder for the command's files (the BVH, keyframe file, saved path .npz for `dynsplines "
+                    "view`, metrics); empty: a temporary folder, removed after the run")
     max_evals: bpy.props.IntProperty(name="Max evaluations", default=0, min=0,
                                      description="Cap on the solve's evaluations, 0: none (--max-evals)")
 
@@ -73,19 +73,21 @@ def _commands(context, bvh, frames, clean, out):
     """[(label, argv)] of one solve: mocap (keys, solve, saved path) then export (onto the skeleton)."""
     s = context.scene.dynsplines
     cli = find_cli(_cli_path(context))
-    skel = os.path.join(out, "skeleton.json")
-    with open(skel, "w", encoding="utf-8") as f:
-        f.write(_MAP)
     npz = os.path.join(out, "path.npz")
-    mocap = [cli, "mocap", bvh, "--skeleton-map", skel, "--out-dir", out, "--save-path", npz, "--no-render",
-             "--no-summary", "--terms", s.terms, "--tol", f"{s.tol:g}", "--figure", s.figure, "--scene", s.scene]
-    if clean:
+    mocap = [cli, "mocap", bvh, "--out-dir", out, "--save-path", npz, "--no-render", "--no-summary",
+             "--terms", s.terms, "--tol", f"{s.tol:g}", "--scene", s.scene]
+    if clean:  # a capture: its rest pose (a T-pose before the motion, as CMU's clips have) found as mocap finds it
         mocap += ["--every", "0.25"]
     else:
-        mocap += ["--key-frames", ",".join(str(f - frames[0]) for f in frames)]
+        skel = os.path.join(out, "skeleton.json")
+        with open(skel, "w", encoding="utf-8") as f:
+            f.write(_MAP)
+        mocap += ["--key-frames", ",".join(str(f - frames[0]) for f in frames), "--skeleton-map", skel]
     if s.max_evals > 0:
         mocap += ["--max-evals", str(s.max_evals)]
-    export = [cli, "export", npz, "--to", os.path.join(out, "result.bvh"), "--skeleton", "source"]
+    # the feet where the solve put them on the floor (clean: the capture stood on it; in-between: no change)
+    export = [cli, "export", npz, "--to", os.path.join(out, "result.bvh"), "--skeleton", "source",
+              "--root-height", "solved"]
     return [("solving", mocap), ("exporting", export)]
 
 
@@ -154,7 +156,10 @@ class _Solve:
             raise JobError(f"dynsplines: the action of {obj.name} has keys at {len(frames)} frame(s); key at "
                            "least two frames")
         self._obj, self._frames = obj.name, frames
-        self._dir = tempfile.mkdtemp(prefix="dynsplines-")
+        kept = bpy.path.abspath(context.scene.dynsplines.out_dir) if context.scene.dynsplines.out_dir else ""
+        if kept:
+            os.makedirs(kept, exist_ok=True)
+        self._dir, self._keep = kept or tempfile.mkdtemp(prefix="dynsplines-"), bool(kept)
         bvh = os.path.join(self._dir, f"{bpy.path.clean_name(obj.name)}.bvh")
         frame = context.scene.frame_current
         _export_bvh(context, obj, frames, bvh)
@@ -173,7 +178,7 @@ class _Solve:
     def _cleanup(self):
         import shutil
 
-        if getattr(self, "_dir", None):
+        if getattr(self, "_dir", None) and not self._keep:
             shutil.rmtree(self._dir, ignore_errors=True)
 
     def execute(self, context):
@@ -263,7 +268,7 @@ class DYNSPLINES_PT_panel(bpy.types.Panel):
         if action is not None:
             frames = actions.keyed_frames(obj)
             layout.label(text=f"{len(frames)} keyed frames")
-        for name in ("terms", "tol", "scene", "figure", "max_evals"):
+        for name in ("terms", "tol", "scene", "out_dir", "max_evals"):
             layout.prop(s, name)
         col = layout.column(align=True)
         col.operator(DYNSPLINES_OT_inbetween.bl_idname, icon="IPO_BEZIER")

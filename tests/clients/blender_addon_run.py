@@ -1,0 +1,112 @@
+"""Drive the dynsplines add-on in Blender as a user would, headless, and print what came of it as JSON on
+the last line of stdout.
+
+Run with Blender's Python module (`bpy`), not the project's interpreter:
+    BPY_PYTHON blender_addon_run.py ADDON.zip DYNSPLINES CLIP.bvh MODE [FRAMES]
+ADDON.zip is installed as an extension (`bpy.ops.extensions.package_install_files`, as Install from Disk
+does) and its preference set to DYNSPLINES, the command; CLIP.bvh is imported with Blender's BVH importer
+("Update Scene FPS", docs/export.md). MODE:
+* inbetween: the action's keys are kept at FRAMES only (comma-separated scene frames), then
+  `dynsplines.inbetween`;
+* clean: `dynsplines.clean` on the action as imported (a key at every frame);
+* unknown: the bones renamed b0, b1, ... (no convention's names), then
+  `dynsplines.inbetween` at FRAMES: the report is expected.
+The JSON: the actions, the armature's action after the run, the error report (or null), the first and
+last keyed frame of each action, and for the original and the result action at every scene frame of the
+result, the world positions [Blender units] of every bone's head and tail.
+"""
+import json
+import sys
+
+import bpy
+import numpy as np
+
+
+def _install(zip_path, cli):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
+    [name] = [a.module for a in bpy.context.preferences.addons if a.module.endswith("dynsplines")]
+    bpy.context.preferences.addons[name].preferences.cli = cli
+    return name
+
+
+def _fcurves(obj):
+    from bpy_extras import anim_utils
+
+    return anim_utils.animdata_get_channelbag_for_assigned_slot(obj.animation_data).fcurves
+
+
+def _keep_keys(obj, frames):
+    """Delete every key of the action but those at `frames` (an animator's sparse keys)."""
+    for fc in _fcurves(obj):
+        pts = fc.keyframe_points
+        for i in reversed(range(len(pts))):
+            if int(round(pts[i].co[0])) not in frames:
+                pts.remove(pts[i], fast=True)
+        fc.update()
+
+
+def _points(obj, action, frames):
+    """(n, 2 B, 3) world heads then tails of every bone at `frames`, playing `action`."""
+    ad = obj.animation_data
+    ad.action = action
+    if hasattr(ad, "action_slot") and len(action.slots):
+        ad.action_slot = action.slots[0]
+    M = np.array(obj.matrix_world)
+    out = []
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        local = [pb.head for pb in obj.pose.bones] + [pb.tail for pb in obj.pose.bones]
+        out.append(np.array(local) @ M[:3, :3].T + M[:3, 3])
+    return np.array(out)
+
+
+def _bone_matrices(obj, action, frames, names):
+    """(n, len(names), 4, 4) world matrices of the named pose bones at `frames`, playing `action`."""
+    ad = obj.animation_data
+    ad.action = action
+    if hasattr(ad, "action_slot") and len(action.slots):
+        ad.action_slot = action.slots[0]
+    M = np.array(obj.matrix_world)
+    out = []
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        out.append([M @ np.array(obj.pose.bones[n].matrix) for n in names])
+    return np.array(out)
+
+
+def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
+    _install(zip_path, cli)
+    bpy.ops.import_anim.bvh(filepath=clip, update_scene_fps=True)
+    obj = bpy.context.object
+    keys = sorted(int(f) for f in frames.split(",")) if frames else []
+    if mode in ("inbetween", "unknown"):
+        _keep_keys(obj, set(keys))
+    if mode == "unknown":
+        for i, bone in enumerate(obj.data.bones):
+            bone.name = f"b{i}"
+    bpy.context.scene.dynsplines.max_evals = 300  # a short solve: the test checks the keys and the floor
+    bpy.context.scene.dynsplines.out_dir = out_dir
+    original = obj.animation_data.action
+    error = None
+    try:
+        getattr(bpy.ops.dynsplines, "clean" if mode == "clean" else "inbetween")()
+    except RuntimeError as e:  # an operator's ERROR report, as bpy.ops raises it in background mode
+        error = str(e)
+    out = {"actions": sorted(a.name for a in bpy.data.actions), "assigned": obj.animation_data.action.name,
+           "original": original.name, "error": error, "bones": [pb.name for pb in obj.pose.bones],
+           "ranges": {a.name: list(a.frame_range) for a in bpy.data.actions}}
+    result = bpy.data.actions.get(original.name + ".dynsplines")
+    if result is not None:
+        f0, f1 = (int(round(v)) for v in result.frame_range)
+        out["frames"] = list(range(f0, f1 + 1))
+        out["result_points"] = _points(obj, result, out["frames"]).tolist()
+        out["original_points"] = _points(obj, original, out["frames"]).tolist()
+        names = feet.split(",") if feet else []
+        out["feet_result"] = _bone_matrices(obj, result, out["frames"], names).tolist()
+        out["feet_original"] = _bone_matrices(obj, original, out["frames"], names).tolist()
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
