@@ -39,11 +39,12 @@ def run(args) -> int:
     from runner.export import check_output_name, export_saved_path
 
     res = None
+    as_solved = getattr(args, "root_height", "source") == "solved"  # the figure's skeleton: always as solved
     if args.skeleton == "source" or (args.skeleton is None and check_output_name(args.to) == "BVH"):
         from runner.mocap.source_export import export_on_source
 
         res = export_on_source(args.path, args.to, args.which, args.fps, required=args.skeleton == "source",
-                               as_solved=getattr(args, "root_height", "source") == "solved")
+                               as_solved=as_solved)
     if res is None:
         res = export_saved_path(args.path, args.to, args.which, args.fps)
     if not getattr(args, "quiet", False):

@@ -10,7 +10,9 @@ does) and its preference set to DYNSPLINES, the command; CLIP.bvh is imported wi
   `dynsplines.inbetween`;
 * clean: `dynsplines.clean` on the action as imported (a key at every frame);
 * unknown: the bones renamed b0, b1, ... (no convention's names), then
-  `dynsplines.inbetween` at FRAMES: the report is expected.
+  `dynsplines.inbetween` at FRAMES: the report is expected;
+* cancel: the keys kept at FRAMES, then the add-on's `SolveRun` (what the modal operator runs) polled as
+  its timer does, and cancelled (as Esc does) once the solve has finished its first round.
 The JSON: the actions, the armature's action after the run, the error report (or null), the first and
 last keyed frame of each action, and for the original and the result action at every scene frame of the
 result, the world positions [Blender units] of every bone's head and tail.
@@ -75,24 +77,51 @@ def _bone_matrices(obj, action, frames, names):
     return np.array(out)
 
 
+def _cancel(name):
+    """Run the add-on's SolveRun as the modal operator does, cancelled after the first round; the error
+    line or None."""
+    import importlib
+    import time
+
+    addon = importlib.import_module(name)
+    run = addon.SolveRun(clean=False)
+    try:
+        run.prepare(bpy.context)
+        while not run.job.poll():
+            if run.job.rounds >= 1 and not run.job.cancelled:
+                run.job.cancel()
+            time.sleep(0.02)
+        if run.job.error is not None:
+            return run.job.error
+        message = run.finish(bpy.context)
+        if run.job.codes[0] != 130:  # the solve's own exit code when interrupted (README "Exit codes")
+            return f"not interrupted: the solve's exit code {run.job.codes[0]}; {message}"
+        return None
+    finally:
+        run.cleanup()
+
+
 def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
-    _install(zip_path, cli)
+    name = _install(zip_path, cli)
     bpy.ops.import_anim.bvh(filepath=clip, update_scene_fps=True)
     obj = bpy.context.object
     keys = sorted(int(f) for f in frames.split(",")) if frames else []
-    if mode in ("inbetween", "unknown"):
+    if mode in ("inbetween", "unknown", "cancel"):
         _keep_keys(obj, set(keys))
     if mode == "unknown":
         for i, bone in enumerate(obj.data.bones):
             bone.name = f"b{i}"
-    bpy.context.scene.dynsplines.max_evals = 300  # a short solve: the test checks the keys and the floor
     bpy.context.scene.dynsplines.out_dir = out_dir
     original = obj.animation_data.action
     error = None
-    try:
-        getattr(bpy.ops.dynsplines, "clean" if mode == "clean" else "inbetween")()
-    except RuntimeError as e:  # an operator's ERROR report, as bpy.ops raises it in background mode
-        error = str(e)
+    if mode == "cancel":
+        error = _cancel(name)
+    else:
+        bpy.context.scene.dynsplines.max_evals = 300  # a short solve: the test checks the keys and the floor
+        try:
+            getattr(bpy.ops.dynsplines, "clean" if mode == "clean" else "inbetween")()
+        except RuntimeError as e:  # an operator's ERROR report, as bpy.ops raises it in background mode
+            error = str(e)
     out = {"actions": sorted(a.name for a in bpy.data.actions), "assigned": obj.animation_data.action.name,
            "original": original.name, "error": error, "bones": [pb.name for pb in obj.pose.bones],
            "ranges": {a.name: list(a.frame_range) for a in bpy.data.actions}}

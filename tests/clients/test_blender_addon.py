@@ -14,6 +14,7 @@ What is checked, against references that do not come from the add-on or the solv
   puts those bodies for the keyframe poses (within 1 mm); the feet are never more than 1 mm below Blender's
   floor (z = 0), measured at the figure's contact spheres carried on Blender's foot bones (their offset
   from the bone taken from the retargeted capture, by MuJoCo, at one frame);
+* cancelled after the solve's first round (as Esc does): the new action is there and meets the keys;
 * a rig whose bones have no convention's names gives an error report with the command's one line
   (bpy.ops raises RuntimeError with the report), not a traceback, and no new action.
 """
@@ -159,3 +160,17 @@ def test_unknown_bones_give_the_report(addon, tmp_path):
     assert got["error"] is not None and "dynsplines: error:" in got["error"], got["error"]
     assert "Traceback" not in got["error"] and len(got["error"].strip().splitlines()) == 1, got["error"]
     assert got["actions"] == [got["original"]] and got["assigned"] == got["original"]  # nothing new
+
+
+def test_cancel_returns_a_valid_action(addon, tmp_path):
+    """Esc after the solve's first round (the add-on's SolveRun polled as its timer does): the best path so
+    far comes back as the new action, and it still meets the keys."""
+    got = run_blender(addon, "cancel", tmp_path, KEYS)
+    assert_result_action(got, KEYS[0], KEYS[-1])
+    frames = got["frames"]
+    result, original = np.array(got["result_points"]), np.array(got["original_points"])
+    at_keys = [frames.index(k) for k in KEYS]
+    err = np.linalg.norm(result[at_keys] - original[at_keys], axis=-1).max() * UNIT
+    print(f"cancelled: bones within {1000 * err:.4f} mm of the keys")
+    assert err < 1e-3, err  # [m]
+    assert np.isfinite(result).all()

@@ -136,8 +136,59 @@ def _import_result(context, obj, path, first):
         obj.select_set(True)
 
 
+def _bug(e):
+    """The report of an unexpected failure of the add-on itself."""
+    return (f"dynsplines: the add-on failed: {type(e).__name__}: {e} (please report it, with the Blender "
+            "version and the rig)")
+
+
+class SolveRun:
+    """One solve of an armature's action, outside any operator (the operators drive it; scripts may too):
+    `prepare` exports the action and makes the job, `job.poll()` / `job.run()` runs the command,
+    `finish` reads the result back as the new action and returns the message, `cleanup` removes the
+    temporary folder. Raises JobError with the one line to report."""
+
+    def __init__(self, clean=False):
+        self.clean, self.job, self.folder, self.keep = clean, None, None, False
+
+    def prepare(self, context):
+        obj, why = _armature(context)
+        if obj is None:
+            raise JobError(why)
+        frames = actions.keyed_frames(obj)
+        if len(frames) < 2:
+            raise JobError(f"dynsplines: the action of {obj.name} has keys at {len(frames)} frame(s); key at "
+                           "least two frames")
+        self.obj, self.frames = obj.name, frames
+        kept = bpy.path.abspath(context.scene.dynsplines.out_dir) if context.scene.dynsplines.out_dir else ""
+        if kept:
+            os.makedirs(kept, exist_ok=True)
+        self.folder, self.keep = kept or tempfile.mkdtemp(prefix="dynsplines-"), bool(kept)
+        bvh = os.path.join(self.folder, f"{bpy.path.clean_name(obj.name)}.bvh")
+        frame = context.scene.frame_current
+        _export_bvh(context, obj, frames, bvh)
+        context.scene.frame_set(frame)
+        self.job = Job(_commands(context, bvh, frames, self.clean, self.folder), self.folder)
+
+    def finish(self, context):
+        """The result as the armature's new action; returns the message to report."""
+        obj = bpy.data.objects[self.obj]
+        frame = context.scene.frame_current
+        action = _import_result(context, obj, os.path.join(self.folder, "result.bvh"), self.frames[0])
+        context.scene.frame_set(frame)
+        how = "cancelled: the best path so far" if self.job.cancelled else "solved"
+        return (f"dynsplines: {how}; wrote the action {action.name} on {obj.name} ({len(self.frames)} keyed "
+                f"frames, {self.frames[0]}..{self.frames[-1]})")
+
+    def cleanup(self):
+        import shutil
+
+        if self.folder and not self.keep:
+            shutil.rmtree(self.folder, ignore_errors=True)
+
+
 class _Solve:
-    """The shared body of the two operators: prepare (export, job), finish (import, report)."""
+    """The shared body of the two operators (a `SolveRun`, to completion or modal)."""
 
     bl_options = {"REGISTER", "UNDO"}
     clean = False
@@ -147,60 +198,31 @@ class _Solve:
         obj = context.active_object
         return obj is not None and obj.type == "ARMATURE"
 
-    def _prepare(self, context):
-        obj, why = _armature(context)
-        if obj is None:
-            raise JobError(why)
-        frames = actions.keyed_frames(obj)
-        if len(frames) < 2:
-            raise JobError(f"dynsplines: the action of {obj.name} has keys at {len(frames)} frame(s); key at "
-                           "least two frames")
-        self._obj, self._frames = obj.name, frames
-        kept = bpy.path.abspath(context.scene.dynsplines.out_dir) if context.scene.dynsplines.out_dir else ""
-        if kept:
-            os.makedirs(kept, exist_ok=True)
-        self._dir, self._keep = kept or tempfile.mkdtemp(prefix="dynsplines-"), bool(kept)
-        bvh = os.path.join(self._dir, f"{bpy.path.clean_name(obj.name)}.bvh")
-        frame = context.scene.frame_current
-        _export_bvh(context, obj, frames, bvh)
-        context.scene.frame_set(frame)
-        self._job = Job(_commands(context, bvh, frames, self.clean, self._dir), self._dir)
-
-    def _finish(self, context):
-        obj = bpy.data.objects[self._obj]
-        frame = context.scene.frame_current
-        action = _import_result(context, obj, os.path.join(self._dir, "result.bvh"), self._frames[0])
-        context.scene.frame_set(frame)
-        how = "cancelled: the best path so far" if self._job.cancelled else "solved"
-        self.report({"INFO"}, f"dynsplines: {how}; wrote the action {action.name} on {obj.name} "
-                              f"({len(self._frames)} keyed frames, {self._frames[0]}..{self._frames[-1]})")
-
-    def _cleanup(self):
-        import shutil
-
-        if getattr(self, "_dir", None) and not self._keep:
-            shutil.rmtree(self._dir, ignore_errors=True)
-
     def execute(self, context):
         """Run to completion (background mode, scripts, F3 without a window)."""
+        run = SolveRun(self.clean)
         try:
-            self._prepare(context)
-            self._job.run()
-            self._finish(context)
+            run.prepare(context)
+            run.job.run()
+            self.report({"INFO"}, run.finish(context))
         except JobError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
+        except Exception as e:  # noqa: BLE001 - a bug of the add-on: one line, not a traceback
+            self.report({"ERROR"}, _bug(e))
+            return {"CANCELLED"}
         finally:
-            self._cleanup()
+            run.cleanup()
         return {"FINISHED"}
 
     def invoke(self, context, event):
         if bpy.app.background or context.window_manager is None or context.window is None:
             return self.execute(context)
+        self._run = SolveRun(self.clean)
         try:
-            self._prepare(context)
+            self._run.prepare(context)
         except JobError as e:
-            self._cleanup()
+            self._run.cleanup()
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
         wm = context.window_manager
@@ -210,28 +232,30 @@ class _Solve:
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
-        wm = context.window_manager
+        wm, job = context.window_manager, self._run.job
         if event.type == "ESC" and event.value == "PRESS":
-            self._job.cancel()
+            job.cancel()
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        done = self._job.poll()
-        share = 90 - 80 / (1 + self._job.rounds / 4) if self._job.index == 0 else 95
-        wm.progress_update(int(share))
-        context.workspace.status_text_set(f"dynsplines {self._job.label} (Esc cancels): {self._job.status}")
+        done = job.poll()
+        wm.progress_update(int(90 - 80 / (1 + job.rounds / 4) if job.index == 0 else 95))
+        context.workspace.status_text_set(f"dynsplines {job.label} (Esc cancels): {job.status}")
         if not done:
             return {"RUNNING_MODAL"}
         wm.event_timer_remove(self._timer)
         wm.progress_end()
         context.workspace.status_text_set(None)
         try:
-            if self._job.error is not None:
-                self.report({"ERROR"}, self._job.error)
+            if job.error is not None:
+                self.report({"ERROR"}, job.error)
                 return {"CANCELLED"}
-            self._finish(context)
+            self.report({"INFO"}, self._run.finish(context))
             return {"FINISHED"}
+        except Exception as e:  # noqa: BLE001 - a bug of the add-on: one line, not a traceback
+            self.report({"ERROR"}, _bug(e))
+            return {"CANCELLED"}
         finally:
-            self._cleanup()
+            self._run.cleanup()
 
 
 class DYNSPLINES_OT_inbetween(_Solve, bpy.types.Operator):

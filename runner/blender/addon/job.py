@@ -64,6 +64,7 @@ class Job:
         self.commands, self.cwd = list(commands), cwd
         self.index, self.proc, self.status, self.rounds = -1, None, "starting", 0
         self.cancelled, self.error, self._out, self._threads = False, None, [], []
+        self.codes = []  # the exit code of each command that finished
 
     @property
     def label(self):
@@ -103,6 +104,7 @@ class Job:
             return False
         for t in self._threads:
             t.join()
+        self.codes.append(code)
         if code not in (WROTE_PATH if self.index == 0 else (0,)):
             self.error = last_error("".join(self._out), code)
             return True
