@@ -7,7 +7,7 @@ ADDON.zip is installed as an extension (`bpy.ops.extensions.package_install_file
 does) and its preference set to DYNSPLINES, the command; CLIP.bvh is imported with Blender's BVH importer
 ("Update Scene FPS", docs/export.md). MODE:
 * inbetween: the action's keys are kept at FRAMES only (comma-separated scene frames), then
-  `dynsplines.inbetween`;
+  `dynsplines.inbetween`; rerun: the same, twice (the second replaces the first's result);
 * clean: `dynsplines.clean` on the action as imported (a key at every frame);
 * unknown: the bones renamed b0, b1, ... (no convention's names), then
   `dynsplines.inbetween` at FRAMES: the report is expected;
@@ -106,7 +106,7 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
     bpy.ops.import_anim.bvh(filepath=clip, update_scene_fps=True)
     obj = bpy.context.object
     keys = sorted(int(f) for f in frames.split(",")) if frames else []
-    if mode in ("inbetween", "unknown", "cancel"):
+    if mode in ("inbetween", "rerun", "unknown", "cancel"):
         _keep_keys(obj, set(keys))
     if mode == "unknown":
         for i, bone in enumerate(obj.data.bones):
@@ -119,7 +119,8 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
     else:
         bpy.context.scene.dynsplines.max_evals = 300  # a short solve: the test checks the keys and the floor
         try:
-            getattr(bpy.ops.dynsplines, "clean" if mode == "clean" else "inbetween")()
+            for _ in range(2 if mode == "rerun" else 1):
+                getattr(bpy.ops.dynsplines, "clean" if mode == "clean" else "inbetween")()
         except RuntimeError as e:  # an operator's ERROR report, as bpy.ops raises it in background mode
             error = str(e)
     out = {"actions": sorted(a.name for a in bpy.data.actions), "assigned": obj.animation_data.action.name,

@@ -3,8 +3,9 @@ as an extension, imports a shipped CMU clip with its own BVH importer and runs t
 (`blender_addon_run.py` in Blender's Python; `bpy` as CI installs it, see test_blender.py).
 
 What is checked, against references that do not come from the add-on or the solve:
-* in-between: the clip's action thinned to six keys (an animator's keyed frames); the new action
-  `<action>.dynsplines` exists, is assigned, the original is kept, and it is baked at every frame from
+* in-between: the clip's action thinned to six keys (an animator's keyed frames), run twice; the new
+  action `<action>.dynsplines` exists once (the second run replaced the first's, solving the keys
+  again, not the bake), is assigned, the original is kept, and it is baked at every frame from
   the first key to the last; at the keyed frames every bone's head and tail is where the original action
   puts it (within 1 mm, world positions in Blender); between the keys it is not Blender's own
   interpolation (the solve moved it); no foot is more than 1 mm below Blender's floor (z = 0) where the
@@ -113,8 +114,9 @@ def lowest_contact_mm(got, files):
 
 
 def test_inbetween_keeps_the_keys(addon, tmp_path):
-    got = run_blender(addon, "inbetween", tmp_path, KEYS)
+    got = run_blender(addon, "rerun", tmp_path, KEYS)  # run twice: the second solves the keys again
     assert_result_action(got, KEYS[0], KEYS[-1])
+    assert got["actions"] == [got["original"], got["original"] + ".dynsplines"]  # the result replaced
     frames = got["frames"]
     result, original = np.array(got["result_points"]), np.array(got["original_points"])  # (n, 2 B, 3)
     at_keys = [frames.index(k) for k in KEYS]

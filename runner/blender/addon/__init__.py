@@ -96,8 +96,7 @@ def _armature(context):
     obj = context.active_object
     if obj is None or obj.type != "ARMATURE":
         return None, "dynsplines: select an armature (the active object is not one)"
-    action, _ = actions.assigned_action(obj)
-    if action is None:
+    if actions.source_action(obj) is None:
         return None, f"dynsplines: the armature {obj.name} has no action; key its bones first"
     return obj, None
 

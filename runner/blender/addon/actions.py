@@ -28,6 +28,22 @@ def assigned_action(obj):
     return ad.action, getattr(ad, "action_slot", None)
 
 
+def source_action(obj):
+    """The action to solve: the assigned one, or, when that is an earlier result (`<action>.dynsplines`)
+    whose action is still there, that action, assigned again (a re-run solves the keys, not the bake)."""
+    action, _ = assigned_action(obj)
+    if action is None or not action.name.endswith(RESULT_SUFFIX):
+        return action
+    original = bpy.data.actions.get(action.name[: -len(RESULT_SUFFIX)])
+    if original is None:
+        return action
+    ad = obj.animation_data
+    ad.action = original
+    if hasattr(ad, "action_slot") and ad.action_slot is None and len(original.slots):
+        ad.action_slot = original.slots[0]
+    return original
+
+
 def fcurves_of(action, slot):
     """The F-curves of `slot` in `action` (layered actions), or the action's own (Blender 4.2, 4.3)."""
     if hasattr(action, "layers"):  # Blender 4.4+
