@@ -11,6 +11,8 @@ does) and its preference set to DYNSPLINES, the command; CLIP.bvh is imported wi
 * clean: `dynsplines.clean` on the action as imported (a key at every frame);
 * unknown: the bones renamed b0, b1, ... (no convention's names), then
   `dynsplines.inbetween` at FRAMES: the report is expected;
+* fbx: the imported clip through Blender's FBX exporter and importer first (a rig with FBX's bone
+  orientations, object transform and leaf bones), then as inbetween;
 * cancel: the keys kept at FRAMES, then the add-on's `SolveRun` (what the modal operator runs) polled as
   its timer does, and cancelled (as Esc does) once the solve has finished its first round.
 The JSON: the actions, the armature's action after the run, the error report (or null), the first and
@@ -77,6 +79,24 @@ def _bone_matrices(obj, action, frames, names):
     return np.array(out)
 
 
+def _through_fbx(obj, folder):
+    """The armature written as FBX (Blender's exporter, its defaults: the animation baked at every frame)
+    and read back (its importer's defaults) in place of it; returns the imported armature."""
+    import os
+
+    os.makedirs(folder, exist_ok=True)
+    path = os.path.join(folder, "clip.fbx")
+    bpy.ops.export_scene.fbx(filepath=path, use_selection=True, object_types={"ARMATURE"})
+    for o in list(bpy.data.objects):
+        bpy.data.objects.remove(o)
+    for a in list(bpy.data.actions):
+        bpy.data.actions.remove(a)
+    bpy.ops.import_scene.fbx(filepath=path)
+    [arm] = [o for o in bpy.data.objects if o.type == "ARMATURE"]
+    bpy.context.view_layer.objects.active = arm
+    return arm
+
+
 def _cancel(name):
     """Run the add-on's SolveRun as the modal operator does, cancelled after the first round; the error
     line or None."""
@@ -105,8 +125,10 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
     name = _install(zip_path, cli)
     bpy.ops.import_anim.bvh(filepath=clip, update_scene_fps=True)
     obj = bpy.context.object
+    if mode == "fbx":
+        obj = _through_fbx(obj, out_dir)
     keys = sorted(int(f) for f in frames.split(",")) if frames else []
-    if mode in ("inbetween", "rerun", "unknown", "cancel"):
+    if mode in ("inbetween", "rerun", "unknown", "cancel", "fbx"):
         _keep_keys(obj, set(keys))
     if mode == "unknown":
         for i, bone in enumerate(obj.data.bones):

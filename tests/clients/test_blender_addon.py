@@ -11,6 +11,8 @@ What is checked, against references that do not come from the add-on or the solv
   interpolation (the solve moved it); no foot is more than 1 mm below Blender's floor (z = 0) where the
   keys do not put it lower (a key with a foot in the floor: its limit there is the key's own,
   docs/design.md), measured as below;
+* the same after the clip went through Blender's FBX exporter and importer (another rig: FBX's bone
+  orientations, leaf bones);
 * clean: at the keyframes `mocap` picked, the bones that drive the figure's leg bodies are where MuJoCo
   puts those bodies for the keyframe poses (within 1 mm); the feet are never more than 1 mm below Blender's
   floor (z = 0), measured at the figure's contact spheres carried on Blender's foot bones (their offset
@@ -115,19 +117,31 @@ def lowest_contact_mm(got, files):
 
 def test_inbetween_keeps_the_keys(addon, tmp_path):
     got = run_blender(addon, "rerun", tmp_path, KEYS)  # run twice: the second solves the keys again
-    assert_result_action(got, KEYS[0], KEYS[-1])
     assert got["actions"] == [got["original"], got["original"] + ".dynsplines"]  # the result replaced
+    assert_inbetween(got, tmp_path, "in-between")
+
+
+def test_inbetween_after_an_fbx_round_trip(addon, tmp_path):
+    """The clip through Blender's FBX exporter and importer (FBX's bone orientations and leaf bones)."""
+    got = run_blender(addon, "fbx", tmp_path, KEYS)
+    assert any(b.endswith("_end") for b in got["bones"])  # the FBX importer's leaf bones: another rig
+    assert_inbetween(got, tmp_path, "FBX in-between")
+
+
+def assert_inbetween(got, tmp_path, label):
+    """The in-between's result: the action, the keys (1 mm), the solve's own motion, the floor."""
+    assert_result_action(got, KEYS[0], KEYS[-1])
     frames = got["frames"]
     result, original = np.array(got["result_points"]), np.array(got["original_points"])  # (n, 2 B, 3)
     at_keys = [frames.index(k) for k in KEYS]
     err = np.linalg.norm(result[at_keys] - original[at_keys], axis=-1).max() * UNIT
-    print(f"in-between: {len(KEYS)} keys, bones within {1000 * err:.4f} mm of the keys")
+    print(f"{label}: {len(KEYS)} keys, bones within {1000 * err:.4f} mm of the keys")
     assert err < 1e-3, err  # [m]
     moved = np.linalg.norm(result - original, axis=-1).max() * UNIT
     assert moved > 0.01, moved  # [m] between the keys the solve, not Blender's Bezier curves
     low = lowest_contact_mm(got, tmp_path / "files")
     keyed = min(low[k] for k in KEYS)  # a key may put a foot in the floor (its limit is then the key's own)
-    print(f"in-between: lowest contact sphere {min(low.values()):.2f} mm above z = 0 (the keys' {keyed:.2f} mm)")
+    print(f"{label}: lowest contact sphere {min(low.values()):.2f} mm above z = 0 (the keys' {keyed:.2f} mm)")
     assert min(low.values()) > min(0.0, keyed) - 1.0, (min(low.values()), keyed)
 
 
