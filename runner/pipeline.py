@@ -72,6 +72,7 @@ class ClipOptions:
             (`--skeleton-map`; runner/mocap/skeleton_map.py), or None.
         key_frames: the clip's frames an animator keyed (`--key-frames`; 0 = the first after its rest
             frames): the keyframes, instead of `keys` and `every` (`pick_keyframes`); None: picked.
+        key_joints: a file naming the clip's joints keyed at the partial key frames (`--key-joints`), or None.
     """
 
     keys: str = "every"
@@ -99,6 +100,7 @@ class ClipOptions:
     root_scale: float | str = ROOT_SCALE_LEGS
     skeleton_map: str | os.PathLike | None = None
     key_frames: tuple[int, ...] | None = None
+    key_joints: str | os.PathLike | None = None
 
 
 def default_out_dir(clip) -> Path:
@@ -123,6 +125,7 @@ class ClipKeys:
         skeleton_map: a skeleton map file (`--skeleton-map`), or None; the skeleton as read is recorded
             in the file's "source" "skeleton" (so `animate` reads the clip again with it).
         key_frames: the frames an animator keyed (`pick_keyframes` `frames`), or None: picked.
+        key_joints: a file naming the joints keyed at the partial ones (runner/mocap/key_joints.py), or None.
     """
 
     scene: str | os.PathLike = AUTO
@@ -136,6 +139,7 @@ class ClipKeys:
     command: str = ""
     skeleton_map: str | os.PathLike | None = None
     key_frames: tuple[int, ...] | None = None
+    key_joints: str | os.PathLike | None = None
 
 
 #: the stages of `write_clip_keyframes`, for a progress bar
@@ -173,6 +177,22 @@ def _skeleton_map(k: ClipKeys):
     return read_skeleton_map(k.skeleton_map)
 
 
+def _frame_joints(clip: Path, ref, model, k: ClipKeys) -> dict | None:
+    """{key frame: figure joints} of the partial keys `k.key_joints` names (None: none). Raises InputError
+    for a file without --key-frames, a frame that is not a key frame, or a joint the clip lacks."""
+    if k.key_joints is None:
+        return None
+    from runner.mocap.bvh import read_bvh
+    from runner.mocap.key_joints import figure_joints, read_key_joints
+
+    named = read_key_joints(k.key_joints)
+    if k.key_frames is None or not set(named) <= set(k.key_frames):
+        raise InputError(f"--key-joints {k.key_joints}: frames {sorted(set(named) - set(k.key_frames or ()))} are "
+                         "not among --key-frames; a partial key is one of the key frames")
+    parsed = read_bvh(clip)
+    return {f: figure_joints(parsed, ref.skeleton, model, names) for f, names in named.items()}
+
+
 def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, progress=None):
     """A clip's figure and scene (given or fitted), its retargeted reference, its contacts and keyframes
     picked from it (`pick_keyframes`), written as the keyframe file `out` (with the contacts and the
@@ -200,7 +220,7 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
     done(1)
     every = k.every if (k.every is not None or k.keys == "contacts") else 0.25
     keyframes = pick_keyframes(ref, model, contacts, keys=k.keys, every=every, partial=k.partial, extremes=k.extremes,
-                               frames=k.key_frames)
+                               frames=k.key_frames, frame_joints=_frame_joints(clip, ref, model, k))
     done(2)
     source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
               "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
@@ -224,7 +244,8 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
         InputError: as `process_clip`.
     """
     k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, keys=o.keys, every=o.every,
-                 partial=o.partial, command=o.command, skeleton_map=o.skeleton_map, key_frames=o.key_frames)
+                 partial=o.partial, command=o.command, skeleton_map=o.skeleton_map, key_frames=o.key_frames,
+                 key_joints=o.key_joints)
     from runner.progress import Steps
 
     with Steps(f"keyframes from {clip.name}", len(CLIP_STAGES), o.quiet, unit=" stages") as bar:

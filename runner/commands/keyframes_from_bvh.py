@@ -89,6 +89,8 @@ def command_line(args) -> str:
         words += ["--root-scale", f"{args.root_scale:g}"]
     if args.key_frames is not None:
         words += ["--key-frames", ",".join(str(f) for f in args.key_frames)]
+    if args.key_joints is not None:
+        words += ["--key-joints", args.key_joints]
     return f"{PROG} {shlex.join(str(w) for w in words)}"
 
 
@@ -105,7 +107,7 @@ def run(args, command: str | None = None) -> int:
     k = ClipKeys(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale,
                  skeleton_map=args.skeleton_map,
                  keys=args.keys, every=args.every, partial=args.partial, extremes=not args.no_root_extremes,
-                 key_frames=args.key_frames, command=command or command_line(args))
+                 key_frames=args.key_frames, key_joints=args.key_joints, command=command or command_line(args))
     with Steps(f"keyframes from {Path(args.clip).name}", len(CLIP_STAGES), args.quiet, unit=" stages") as bar:
         cs, contacts, keyframes = write_clip_keyframes(Path(args.clip), out, k, fitted_scene_path(out),
                                                        progress=lambda i, stage: bar.update(i, note=stage))

@@ -85,6 +85,10 @@ def add_key_frames_argument(p) -> None:
                    help="the clip's frames an animator keyed (0 = its first frame after a rest frame; at least two, "
                         "increasing): they are the keyframes, with the clip's own values (feet not planted), instead "
                         "of --keys and --every; the Blender add-on's in-between [picked by --keys]")
+    p.add_argument("--key-joints", type=Path, default=None, metavar="FILE.json",
+                   help="with --key-frames: the joints keyed at the partial ones, e.g. {\"30\": [\"LeftUpLeg\", "
+                        "\"LeftLeg\"]}: they fix the figure joints those joints drive, the rest is free "
+                        "(docs/mocap.md) [every key full]")
 
 
 def add_skeleton_map_argument(p) -> None:
@@ -125,6 +129,7 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
     return ClipOptions(
         keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.figure,
         mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map, key_frames=args.key_frames,
+        key_joints=args.key_joints,
         **clip_terms(args),
         command=f"{prog} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == [name] else prog, **fields,
     )

@@ -140,7 +140,7 @@ def given_indices(reference: Reference, frames) -> np.ndarray:
 
 
 def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", every: float | None = 0.25,
-                   partial: bool = False, extremes: bool = True, frames=None) -> Keyframes:
+                   partial: bool = False, extremes: bool = True, frames=None, frame_joints=None) -> Keyframes:
     """The keyframes of `dynsplines mocap` and `keyframes-from-bvh`.
 
     Args:
@@ -157,6 +157,8 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
         frames: the frames an animator keyed (`given_indices`), or None: then `keys` and `every` are not
             used, and the keys take the clip's own values (an animator's pose is the keyframe, its feet
             are not planted: docs/mocap.md "The keyframes' feet"), plus the turn keys.
+        frame_joints: with `frames`, {frame: figure joints} of the partial ones (`--key-joints`,
+            runner/mocap/key_joints.py); a frame that fixes no figure joint is no key.
     """
     from runner.mocap.keyframe_selection import CaptureError, contact_keyframes, turn_keys
     from solver.figure import model_feet
@@ -164,8 +166,12 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
     if frames is not None:
         reference = replace(reference, plant=None)
         idx = given_indices(reference, frames)
+        joints = dict(frame_joints or {})
+        idx = np.array([f for f in idx if joints.get(int(f), True)], int)  # a key of unmodelled joints only: none
         idx = np.asarray(turn_keys(idx, reference.qpos[:, StateLayout.from_model(model).quat_slots]), int)
-        return keyframes_from_reference(reference, model, indices=idx, partial=MIDDLE_LOWER_BODY if partial else None)
+        part = {int(np.flatnonzero(idx == f)[0]): names for f, names in joints.items() if names and f in idx}
+        return keyframes_from_reference(reference, model, indices=idx,
+                                        partial=part or (MIDDLE_LOWER_BODY if partial else None))
     reference = reference.keyed()  # keys are chosen on the motion they take their values from
     if keys == "contacts":
         if every is not None and not (isinstance(every, (int, float)) and math.isfinite(every) and every > 0):

@@ -3,6 +3,7 @@ the last line of stdout.
 
 Run with Blender's Python module (`bpy`), not the project's interpreter:
     BPY_PYTHON blender_addon_run.py ADDON.zip DYNSPLINES CLIP.bvh MODE [FRAMES]
+FRAMES: scene frames, comma-separated; "82:Hips+LeftUpLeg" keys only those bones at frame 82 (a partial key).
 ADDON.zip is installed as an extension (`bpy.ops.extensions.package_install_files`, as Install from Disk
 does) and its preference set to DYNSPLINES, the command; CLIP.bvh is imported with Blender's BVH importer
 ("Update Scene FPS", docs/export.md). MODE:
@@ -41,11 +42,14 @@ def _fcurves(obj):
 
 
 def _keep_keys(obj, frames):
-    """Delete every key of the action but those at `frames` (an animator's sparse keys)."""
+    """Delete every key of the action but those at `frames` (an animator's sparse keys); frames: {frame:
+    None (every bone keyed) or the bones keyed there (a partial key)}."""
     for fc in _fcurves(obj):
+        bone = fc.data_path.split('"')[1]
         pts = fc.keyframe_points
         for i in reversed(range(len(pts))):
-            if int(round(pts[i].co[0])) not in frames:
+            f = int(round(pts[i].co[0]))
+            if f not in frames or (frames[f] is not None and bone not in frames[f]):
                 pts.remove(pts[i], fast=True)
         fc.update()
 
@@ -127,9 +131,12 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
     obj = bpy.context.object
     if mode == "fbx":
         obj = _through_fbx(obj, out_dir)
-    keys = sorted(int(f) for f in frames.split(",")) if frames else []
+    keys = {}  # "42" a full key, "82:Hips+LeftUpLeg" a partial key of those bones
+    for word in frames.split(",") if frames else []:
+        f, _, bones = word.partition(":")
+        keys[int(f)] = set(bones.split("+")) if bones else None
     if mode in ("inbetween", "rerun", "unknown", "cancel", "fbx"):
-        _keep_keys(obj, set(keys))
+        _keep_keys(obj, keys)
     if mode == "unknown":
         for i, bone in enumerate(obj.data.bones):
             bone.name = f"b{i}"

@@ -11,6 +11,8 @@ What is checked, against references that do not come from the add-on or the solv
   interpolation (the solve moved it); no foot is more than 1 mm below Blender's floor (z = 0) where the
   keys do not put it lower (a key with a foot in the floor: its limit there is the key's own,
   docs/design.md), measured as below;
+* a partial key (only the hips and the left leg keyed at one frame): those bones are met there (1 mm),
+  the right leg is free;
 * the same after the clip went through Blender's FBX exporter and importer (another rig: FBX's bone
   orientations, leaf bones);
 * clean: at the keyframes `mocap` picked, the bones that drive the figure's leg bodies are where MuJoCo
@@ -126,6 +128,26 @@ def test_inbetween_after_an_fbx_round_trip(addon, tmp_path):
     got = run_blender(addon, "fbx", tmp_path, KEYS)
     assert any(b.endswith("_end") for b in got["bones"])  # the FBX importer's leaf bones: another rig
     assert_inbetween(got, tmp_path, "FBX in-between")
+
+
+def test_a_partial_key_fixes_its_bones(addon, tmp_path):
+    """At frame 82 only the hips and the left leg keyed (a partial key): those bones are where the key puts
+    them, the right leg is the solve's; the full keys are met as before."""
+    left = ("Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase")
+    keys = [f"{f}:{'+'.join(left)}" if f == 82 else str(f) for f in KEYS]
+    got = run_blender(addon, "inbetween", tmp_path, keys)
+    assert_result_action(got, KEYS[0], KEYS[-1])
+    frames, bones, n = got["frames"], got["bones"], len(got["bones"])
+    result, original = np.array(got["result_points"]), np.array(got["original_points"])
+    err = np.linalg.norm(result - original, axis=-1) * UNIT  # (frames, 2 B) [m]
+    full = [frames.index(k) for k in KEYS if k != 82]
+    keyed = [i for b in left for i in (bones.index(b), n + bones.index(b))]  # heads and tails
+    right = [i for b in ("RightLeg", "RightFoot") for i in (bones.index(b), n + bones.index(b))]
+    print(f"partial key: keyed bones within {1000 * err[frames.index(82), keyed].max():.4f} mm, the right leg "
+          f"{1000 * err[frames.index(82), right].max():.1f} mm from Blender's interpolation; full keys within "
+          f"{1000 * err[full].max():.4f} mm")
+    assert err[full].max() < 1e-3 and err[frames.index(82), keyed].max() < 1e-3
+    assert err[frames.index(82), right].max() > 1e-3  # free at the partial key: not Blender's curves
 
 
 def assert_inbetween(got, tmp_path, label):

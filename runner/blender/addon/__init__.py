@@ -20,6 +20,7 @@ tests) the operators run to completion. A failed command is an error report with
 
 This package imports only Blender's modules and the standard library (it runs in Blender's Python).
 """
+import json
 import os
 import tempfile
 
@@ -83,6 +84,12 @@ def _commands(context, bvh, frames, clean, out):
         with open(skel, "w", encoding="utf-8") as f:
             f.write(_MAP)
         mocap += ["--key-frames", ",".join(str(f - frames[0]) for f in frames), "--skeleton-map", skel]
+        partial = actions.partial_keys(context.active_object)
+        if partial:  # a bone keyed on some channels keys the bone; a frame keying some bones is partial
+            path = os.path.join(out, "key_joints.json")
+            with open(path, "w", encoding="utf-8") as f:
+                json.dump({str(k - frames[0]): v for k, v in partial.items()}, f)
+            mocap += ["--key-joints", path]
     if s.max_evals > 0:
         mocap += ["--max-evals", str(s.max_evals)]
     # the feet where the solve put them on the floor (clean: the capture stood on it; in-between: no change)

@@ -54,17 +54,32 @@ def fcurves_of(action, slot):
     return list(action.fcurves)
 
 
-def keyed_frames(obj):
-    """The frames (sorted ints) where any bone channel of the object's action has a key; subframe keys
-    round to the nearest frame (the solve works on whole scene frames)."""
+def keyed_bones(obj):
+    """{frame: set of bone names keyed there} of the object's action: any channel of a bone keyed at a
+    frame keys the bone (subframe keys round to the nearest frame: the solve works on whole frames)."""
     action, slot = assigned_action(obj)
+    out = {}
     if action is None:
-        return []
-    frames = set()
+        return out
     for fc in fcurves_of(action, slot):
-        if fc.data_path.startswith("pose.bones["):
-            frames.update(int(round(k.co[0])) for k in fc.keyframe_points)
-    return sorted(frames)
+        if fc.data_path.startswith('pose.bones["'):
+            bone = bpy.utils.unescape_identifier(fc.data_path[len('pose.bones["'):].split('"]', 1)[0])
+            for k in fc.keyframe_points:
+                out.setdefault(int(round(k.co[0])), set()).add(bone)
+    return out
+
+
+def keyed_frames(obj):
+    """The frames (sorted ints) where any bone channel of the object's action has a key."""
+    return sorted(keyed_bones(obj))
+
+
+def partial_keys(obj):
+    """{frame: sorted bone names} of the frames where only some of the animated bones are keyed (a
+    partial keyframe); the other keyed frames key every animated bone."""
+    keys = keyed_bones(obj)
+    animated = set().union(*keys.values()) if keys else set()
+    return {f: sorted(bones) for f, bones in keys.items() if bones != animated}
 
 
 def _pose_matrices(src, dst, names):

@@ -59,3 +59,35 @@ def test_bad_key_frames_are_one_line(short_clip, tmp_path, capsys, frames, match
                "--quiet"])
     err = capsys.readouterr().err
     assert rc == EXIT_INPUT and err.count("\n") == 1 and match in err, err
+
+
+def test_a_partial_key_fixes_the_figure_joints_its_joints_drive(short_clip, tmp_path):
+    """--key-joints: keyed CMU joints -> the figure joints they drive (docs/mocap.md "What the figure keeps"):
+    Hips the root, LHipJoint (merged, composed into the thigh) the left hip, LowerBack (merged into the
+    torso) the torso, LeftForeArm the left elbow; the toes, the head and a hand fix nothing, so a key of
+    those alone is no key."""
+    spec = tmp_path / "joints.json"
+    spec.write_text(json.dumps({"30": ["Hips", "LHipJoint", "LowerBack", "LeftForeArm", "LeftToeBase", "Head"],
+                                "50": ["LeftHand", "RightToeBase"]}))
+    out = tmp_path / "k.keyframes.json"
+    assert main(["keyframes-from-bvh", str(short_clip), "--out", str(out), "--key-frames", "0,30,50,77",
+                 "--key-joints", str(spec), "--scene", "floor", "--quiet"]) == 0
+    doc = json.loads(out.read_text())
+    model = mujoco.MjModel.from_xml_path(str(out.parent / doc["scene"]))
+    keys, _ = read_keyframes(out, model)
+    frame_time = float(Path(short_clip).read_text().split("Frame Time:")[1].split()[0])
+    assert not any(abs(t - 50 * frame_time) < 1e-6 for t in keys.times), keys.times  # fixes nothing: no key
+    k = int(np.argmin(np.abs(keys.times - 30 * frame_time)))
+    fixed = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(model.njnt)
+             if keys.mask[k, model.jnt_qposadr[j]]}
+    assert fixed == {"root", "l_hip", "torso", "l_elbow"}, fixed
+    assert keys.mask[[i for i in range(len(keys.times)) if i != k]].all()  # the other keys are full
+
+
+def test_key_joints_need_key_frames(short_clip, tmp_path, capsys):
+    spec = tmp_path / "joints.json"
+    spec.write_text('{"31": ["Hips"]}')
+    rc = main(["keyframes-from-bvh", str(short_clip), "--out", str(tmp_path / "k.json"), "--key-frames", "0,30",
+               "--key-joints", str(spec), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == EXIT_INPUT and "frames [31] are not among --key-frames" in err and err.count("\n") == 1, err
