@@ -30,9 +30,10 @@ from pathlib import Path
 
 from runner.mocap.contact_detection import reference_contacts
 from runner.mocap.figure_choice import SUBJECT, choose_figure, is_default, scene_with_figure
+from runner.mocap.key_joints import frame_joints
 from runner.mocap.keyframes import pick_keyframes
 from runner.mocap.reference import ROOT_SCALE_LEGS
-from runner.mocap.scene import AUTO, clip_scene, name_surfaces
+from runner.mocap.scene import AUTO, FLOOR, clip_scene, name_surfaces, read_boxes
 from runner.paths import display_path
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE
@@ -73,6 +74,7 @@ class ClipOptions:
         key_frames: the clip's frames an animator keyed (`--key-frames`; 0 = the first after its rest
             frames): the keyframes, instead of `keys` and `every` (`pick_keyframes`); None: picked.
         key_joints: a file naming the clip's joints keyed at the partial key frames (`--key-joints`), or None.
+        boxes: with scene "floor", boxes in the clip's coordinates (`--boxes FILE.json`), or None.
     """
 
     keys: str = "every"
@@ -101,6 +103,7 @@ class ClipOptions:
     skeleton_map: str | os.PathLike | None = None
     key_frames: tuple[int, ...] | None = None
     key_joints: str | os.PathLike | None = None
+    boxes: str | os.PathLike | None = None
 
 
 def default_out_dir(clip) -> Path:
@@ -126,6 +129,7 @@ class ClipKeys:
             in the file's "source" "skeleton" (so `animate` reads the clip again with it).
         key_frames: the frames an animator keyed (`pick_keyframes` `frames`), or None: picked.
         key_joints: a file naming the joints keyed at the partial ones (runner/mocap/key_joints.py), or None.
+        boxes: with scene "floor", a file of boxes in the clip's coordinates (`read_boxes`), or None.
     """
 
     scene: str | os.PathLike = AUTO
@@ -140,6 +144,7 @@ class ClipKeys:
     skeleton_map: str | os.PathLike | None = None
     key_frames: tuple[int, ...] | None = None
     key_joints: str | os.PathLike | None = None
+    boxes: str | os.PathLike | None = None
 
 
 #: the stages of `write_clip_keyframes`, for a progress bar
@@ -158,12 +163,12 @@ def clip_figure_scene(clip: Path, k: ClipKeys, scene_out: Path):
     `scene_out` when the figure differs from the scene's own; with the default figure, the given scene
     as it is)."""
     scene = k.scene
-    if str(scene) != AUTO and not is_default(k.figure):
+    if str(scene) not in (AUTO, FLOOR) and not is_default(k.figure):
         from solver.model import load_model
 
         check_scene(load_model(scene), scene)  # the user's scene first: a floor, the figure (file and fix named)
     figure = choose_figure(k.figure, clip, figure_path_for(scene_out), k.mass, _skeleton_map(k))
-    if str(scene) != AUTO and not is_default(k.figure):
+    if str(scene) not in (AUTO, FLOOR) and not is_default(k.figure):
         scene = scene_with_figure(scene, figure, scene_out)
     return figure, scene
 
@@ -175,22 +180,6 @@ def _skeleton_map(k: ClipKeys):
     from runner.mocap.skeleton_map import read_skeleton_map
 
     return read_skeleton_map(k.skeleton_map)
-
-
-def _frame_joints(clip: Path, ref, model, k: ClipKeys) -> dict | None:
-    """{key frame: figure joints} of the partial keys `k.key_joints` names (None: none). Raises InputError
-    for a file without --key-frames, a frame that is not a key frame, or a joint the clip lacks."""
-    if k.key_joints is None:
-        return None
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.key_joints import figure_joints, read_key_joints
-
-    named = read_key_joints(k.key_joints)
-    if k.key_frames is None or not set(named) <= set(k.key_frames):
-        raise InputError(f"--key-joints {k.key_joints}: frames {sorted(set(named) - set(k.key_frames or ()))} are "
-                         "not among --key-frames; a partial key is one of the key frames")
-    parsed = read_bvh(clip)
-    return {f: figure_joints(parsed, ref.skeleton, model, names) for f, names in named.items()}
 
 
 def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, progress=None):
@@ -212,7 +201,8 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
 
     figure, scene = clip_figure_scene(clip, k, scene_out)
     smap = _skeleton_map(k)
-    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, smap, root_height=k.key_frames is None)
+    boxes = read_boxes(k.boxes) if k.boxes is not None else ()
+    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, smap, root_height=k.key_frames is None, boxes=boxes)
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
     done(0)
@@ -220,7 +210,7 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
     done(1)
     every = k.every if (k.every is not None or k.keys == "contacts") else 0.25
     keyframes = pick_keyframes(ref, model, contacts, keys=k.keys, every=every, partial=k.partial, extremes=k.extremes,
-                               frames=k.key_frames, frame_joints=_frame_joints(clip, ref, model, k))
+                               frames=k.key_frames, frame_joints=frame_joints(clip, ref, model, k.key_frames, k.key_joints))
     done(2)
     source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
               "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
@@ -245,7 +235,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
     """
     k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, keys=o.keys, every=o.every,
                  partial=o.partial, command=o.command, skeleton_map=o.skeleton_map, key_frames=o.key_frames,
-                 key_joints=o.key_joints)
+                 key_joints=o.key_joints, boxes=o.boxes)
     from runner.progress import Steps
 
     with Steps(f"keyframes from {clip.name}", len(CLIP_STAGES), o.quiet, unit=" stages") as bar:
@@ -314,7 +304,7 @@ def clip_paths(clip: Path, out_dir: Path, o: ClipOptions) -> dict:
         from runner.run import check_exports
 
         check_exports(o.exports)
-    if str(o.scene) == AUTO or not is_default(o.figure):
+    if str(o.scene) in (AUTO, FLOOR) or not is_default(o.figure):
         paths["scene"] = out_dir / f"{stem}.scene.xml"
     if str(o.figure) == SUBJECT:
         paths["figure"] = out_dir / f"{stem}.figure.xml"

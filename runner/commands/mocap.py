@@ -48,25 +48,20 @@ def add_clip_arguments(p) -> None:
     keys.add_argument("--partial", action="store_true",
                       help="the middle keyframe fixes only the root and the legs (torso and arms free)")
     add_key_frames_argument(keys)
-    p.add_argument("--scene", default=AUTO, type=scene_argument,
-                   help="scene MJCF, 'floor' (the shipped flat floor at the clip's own height 0, as a DCC's ground "
-                        "plane) or 'auto' (default): a floor and boxes fitted to where the clip's feet rest, "
-                        "written next to the outputs as <stem>.scene.xml")
+    add_scene_arguments(p)
     add_figure_arguments(p)
     add_root_scale_argument(p)
 
 
-#: `--scene floor`: the shipped scene with a floor at z = 0 and nothing else (models/floor.xml)
-FLOOR = "floor"
-
-
-def scene_argument(text: str) -> str:
-    """`--scene`: 'auto', a file, or 'floor' (the shipped models/floor.xml, as its path)."""
-    if text == FLOOR:
-        from solver.shipped import shipped
-
-        return str(shipped("floor.xml"))
-    return text
+def add_scene_arguments(p, written: str = "next to the outputs as <stem>.scene.xml") -> None:
+    """`--scene auto|floor|FILE` and `--boxes FILE` (`mocap`, `batch`, `keyframes-from-bvh`)."""
+    p.add_argument("--scene", default=AUTO,
+                   help="scene MJCF; 'auto' (default): a floor and boxes fitted to where the clip's feet rest; or "
+                        "'floor': a level floor at the clip's own height 0 (a DCC's ground plane) and the --boxes; "
+                        f"auto and floor are written {written}")
+    p.add_argument("--boxes", type=Path, default=None, metavar="FILE.json",
+                   help="with --scene floor: boxes in the clip's coordinates (its axes and unit), "
+                        "[{\"min\": [x, y, z], \"max\": [x, y, z]}, ...] [none]")
 
 
 def key_frames(text: str) -> tuple[int, ...]:
@@ -129,7 +124,7 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
     return ClipOptions(
         keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.figure,
         mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map, key_frames=args.key_frames,
-        key_joints=args.key_joints,
+        key_joints=args.key_joints, boxes=args.boxes,
         **clip_terms(args),
         command=f"{prog} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == [name] else prog, **fields,
     )

@@ -45,7 +45,7 @@ def _keep_keys(obj, frames):
     """Delete every key of the action but those at `frames` (an animator's sparse keys); frames: {frame:
     None (every bone keyed) or the bones keyed there (a partial key)}."""
     for fc in _fcurves(obj):
-        bone = fc.data_path.split('"')[1]
+        bone = fc.data_path.split('"')[1] if fc.data_path.startswith("pose.bones") else None  # else the object's
         pts = fc.keyframe_points
         for i in reversed(range(len(pts))):
             f = int(round(pts[i].co[0]))
@@ -137,6 +137,11 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
         keys[int(f)] = set(bones.split("+")) if bones else None
     if mode in ("inbetween", "rerun", "unknown", "cancel", "fbx"):
         _keep_keys(obj, keys)
+    if mode == "rerun":  # a box off the path, selected with the armature: the scene's box (x 49..51, y -2..2, z 0..2)
+        bpy.ops.mesh.primitive_cube_add(location=(50.0, 0.0, 1.0), scale=(1.0, 2.0, 1.0))
+        bpy.context.object.select_set(True)
+        obj.select_set(True)
+        bpy.context.view_layer.objects.active = obj
     if mode == "unknown":
         for i, bone in enumerate(obj.data.bones):
             bone.name = f"b{i}"

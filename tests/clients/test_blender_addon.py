@@ -10,7 +10,7 @@ What is checked, against references that do not come from the add-on or the solv
   puts it (within 1 mm, world positions in Blender); between the keys it is not Blender's own
   interpolation (the solve moved it); no foot is more than 1 mm below Blender's floor (z = 0) where the
   keys do not put it lower (a key with a foot in the floor: its limit there is the key's own,
-  docs/design.md), measured as below;
+  docs/design.md), measured as below; a selected cube is the scene's box, in metres;
 * a partial key (only the hips and the left leg keyed at one frame): those bones are met there (1 mm),
   the right leg is free;
 * the same after the clip went through Blender's FBX exporter and importer (another rig: FBX's bone
@@ -121,6 +121,11 @@ def test_inbetween_keeps_the_keys(addon, tmp_path):
     got = run_blender(addon, "rerun", tmp_path, KEYS)  # run twice: the second solves the keys again
     assert got["actions"] == [got["original"], got["original"] + ".dynsplines"]  # the result replaced
     assert_inbetween(got, tmp_path, "in-between")
+    # the selected cube (x 49..51, y -2..2, z 0..2 Blender units, off the path) is the scene's box [m]
+    model = mujoco.MjModel.from_xml_path(str(next((tmp_path / "files").glob("*.scene.xml"))))
+    [box] = [g for g in range(model.ngeom) if model.geom_bodyid[g] == 0 and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX]
+    assert np.allclose(model.geom_pos[box], np.array([50.0, 0.0, 1.0]) * UNIT, atol=1e-5), model.geom_pos[box]
+    assert np.allclose(model.geom_size[box], np.array([1.0, 2.0, 1.0]) * UNIT, atol=1e-5), model.geom_size[box]
 
 
 def test_inbetween_after_an_fbx_round_trip(addon, tmp_path):

@@ -55,7 +55,8 @@ class DynsplinesSettings(bpy.types.PropertyGroup):
                                  description="Refinement tolerance: the decrease of E still predicted, over E (--tol)")
     scene: bpy.props.EnumProperty(
         name="Scene", default="floor",
-        items=[("floor", "Floor", "Blender's ground plane: a floor at z = 0 of the armature (--scene floor)"),
+        items=[("floor", "Floor", "Blender's ground plane (z = 0 of the armature) and the selected meshes as boxes "
+                                  "(--scene floor --boxes)"),
                ("auto", "Fitted", "A floor and boxes fitted to where the feet rest (--scene auto)")])
     out_dir: bpy.props.StringProperty(
         name="Keep files in", subtype="DIR_PATH", default="",
@@ -90,12 +91,35 @@ def _commands(context, bvh, frames, clean, out):
             with open(path, "w", encoding="utf-8") as f:
                 json.dump({str(k - frames[0]): v for k, v in partial.items()}, f)
             mocap += ["--key-joints", path]
+    boxes = _boxes(context) if s.scene == "floor" else []
+    if boxes:
+        path = os.path.join(out, "boxes.json")
+        with open(path, "w", encoding="utf-8") as f:
+            json.dump(boxes, f)
+        mocap += ["--boxes", path]
     if s.max_evals > 0:
         mocap += ["--max-evals", str(s.max_evals)]
     # the feet where the solve put them on the floor (clean: the capture stood on it; in-between: no change)
     export = [cli, "export", npz, "--to", os.path.join(out, "result.bvh"), "--skeleton", "source",
               "--root-height", "solved"]
     return [("solving", mocap), ("exporting", export)]
+
+
+def _boxes(context):
+    """[{"min", "max"}] the selected mesh objects as boxes (`--boxes`): the bounds of their world-space
+    bounding boxes, taken into the active armature's space (the space its BVH is written in), axis-aligned."""
+    from mathutils import Vector
+
+    arm = context.active_object
+    to_arm = arm.matrix_world.inverted()
+    out = []
+    for obj in context.selected_objects:
+        if obj.type != "MESH" or obj is arm:
+            continue
+        corners = [to_arm @ (obj.matrix_world @ Vector(c)) for c in obj.bound_box]
+        out.append({"min": [min(c[i] for c in corners) for i in range(3)],
+                    "max": [max(c[i] for c in corners) for i in range(3)]})
+    return out
 
 
 def _armature(context):
@@ -120,6 +144,7 @@ def _import_result(context, obj, path, first):
     onto `obj` as the new action; the temporary armature is removed. Returns the new action."""
     before = set(bpy.data.objects)
     actions_before = set(bpy.data.actions)
+    selected = [o.name for o in context.selected_objects]  # the importer selects its armature alone
     bpy.ops.import_anim.bvh(filepath=path, axis_forward="Y", axis_up="Z", global_scale=1.0, frame_start=first,
                             use_fps_scale=False, update_scene_fps=False, update_scene_duration=False,
                             rotate_mode="NATIVE")  # makes the new armature the active object
@@ -138,8 +163,10 @@ def _import_result(context, obj, path, first):
         for a in set(bpy.data.actions) - actions_before:
             if not a.name.endswith(actions.RESULT_SUFFIX):
                 bpy.data.actions.remove(a)
+        for name in selected:
+            if name in bpy.data.objects:
+                bpy.data.objects[name].select_set(True)
         context.view_layer.objects.active = obj
-        obj.select_set(True)
 
 
 def _bug(e):
