@@ -267,7 +267,8 @@ class _Solve:
     def modal(self, context, event):
         wm, job = context.window_manager, self._run.job
         if event.type == "ESC" and event.value == "PRESS":
-            job.cancel()
+            job.cancel()  # the solve ends with its best path so far, which still comes back
+            return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         done = job.poll()
@@ -322,9 +323,9 @@ class DYNSPLINES_PT_panel(bpy.types.Panel):
         obj = context.active_object
         action, _ = actions.assigned_action(obj)
         layout.label(text=f"Action: {action.name if action else 'none'}", icon="ACTION")
-        if action is not None:
-            frames = actions.keyed_frames(obj)
-            layout.label(text=f"{len(frames)} keyed frames")
+        if action is not None:  # its frame range (counting its keys at every redraw would slow the UI)
+            start, end = action.frame_range
+            layout.label(text=f"Frames {start:g}..{end:g}")
         for name in ("terms", "tol", "scene", "out_dir", "max_evals"):
             layout.prop(s, name)
         col = layout.column(align=True)

@@ -64,8 +64,10 @@ def keyed_bones(obj):
     for fc in fcurves_of(action, slot):
         if fc.data_path.startswith('pose.bones["'):
             bone = bpy.utils.unescape_identifier(fc.data_path[len('pose.bones["'):].split('"]', 1)[0])
-            for k in fc.keyframe_points:
-                out.setdefault(int(round(k.co[0])), set()).add(bone)
+            co = [0.0] * (2 * len(fc.keyframe_points))
+            fc.keyframe_points.foreach_get("co", co)  # (frame, value) pairs, read at once
+            for f in co[::2]:
+                out.setdefault(int(round(f)), set()).add(bone)
     return out
 
 
