@@ -72,7 +72,8 @@ def run_blender(addon, mode, tmp_path, keys=()):
     zip_path, cli = addon
     argv = [str(BPY_PYTHON), str(SCRIPT), str(zip_path), str(cli), str(CLIP), mode, ",".join(map(str, keys)),
             str(tmp_path / "files"), ",".join(FEET.values())]
-    res = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender-user"))  # the extension installs here
+    res = subprocess.run(argv, capture_output=True, text=True, timeout=300, env=env)
     assert res.returncode == 0, f"Blender failed:\n{res.stdout[-3000:]}\n{res.stderr[-3000:]}"
     return json.loads(res.stdout.strip().splitlines()[-1])
 
