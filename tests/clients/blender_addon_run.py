@@ -11,7 +11,8 @@ does) and its preference set to DYNSPLINES, the command; CLIP.bvh is imported wi
   `dynsplines.inbetween`; rerun: the same, twice (the second replaces the first's result);
 * clean: `dynsplines.clean` on the action as imported (a key at every frame);
 * unknown: the bones renamed b0, b1, ... (no convention's names), then
-  `dynsplines.inbetween` at FRAMES: the report is expected;
+  `dynsplines.inbetween` at FRAMES: the report is expected; mapped: the same rig with a skeleton map
+  (the panel's file) giving the unit the names no longer say: solved;
 * fbx: the imported clip through Blender's FBX exporter and importer first (a rig with FBX's bone
   orientations, object transform and leaf bones), then as inbetween;
 * cancel: the keys kept at FRAMES, then the add-on's `SolveRun` (what the modal operator runs) polled as
@@ -135,16 +136,24 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
     for word in frames.split(",") if frames else []:
         f, _, bones = word.partition(":")
         keys[int(f)] = set(bones.split("+")) if bones else None
-    if mode in ("inbetween", "rerun", "unknown", "cancel", "fbx"):
+    if mode in ("inbetween", "rerun", "unknown", "mapped", "cancel", "fbx"):
         _keep_keys(obj, keys)
     if mode == "rerun":  # a box off the path, selected with the armature: the scene's box (x 49..51, y -2..2, z 0..2)
         bpy.ops.mesh.primitive_cube_add(location=(50.0, 0.0, 1.0), scale=(1.0, 2.0, 1.0))
         bpy.context.object.select_set(True)
         obj.select_set(True)
         bpy.context.view_layer.objects.active = obj
-    if mode == "unknown":
+    if mode in ("unknown", "mapped"):
         for i, bone in enumerate(obj.data.bones):
             bone.name = f"b{i}"
+    if mode == "mapped":
+        import os
+
+        os.makedirs(out_dir, exist_ok=True)
+        path = os.path.join(out_dir, "..", "map.json")
+        with open(path, "w") as f:
+            f.write('{"unit": "cmu"}')  # CMU's unit, which only CMU's joint names allow by themselves
+        bpy.context.scene.dynsplines.skeleton_map = path
     bpy.context.scene.dynsplines.out_dir = out_dir
     original = obj.animation_data.action
     error = None
@@ -166,7 +175,7 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
         out["frames"] = list(range(f0, f1 + 1))
         out["result_points"] = _points(obj, result, out["frames"]).tolist()
         out["original_points"] = _points(obj, original, out["frames"]).tolist()
-        names = feet.split(",") if feet else []
+        names = [n for n in feet.split(",") if n in obj.pose.bones] if feet else []  # renamed rigs: none
         out["feet_result"] = _bone_matrices(obj, result, out["frames"], names).tolist()
         out["feet_original"] = _bone_matrices(obj, original, out["frames"], names).tolist()
     print(json.dumps(out))

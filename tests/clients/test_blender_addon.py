@@ -21,7 +21,8 @@ What is checked, against references that do not come from the add-on or the solv
   from the bone taken from the retargeted capture, by MuJoCo, at one frame);
 * cancelled after the solve's first round (as Esc does): the new action is there and meets the keys;
 * a rig whose bones have no convention's names gives an error report with the command's one line
-  (bpy.ops raises RuntimeError with the report), not a traceback, and no new action.
+  (bpy.ops raises RuntimeError with the report), not a traceback, and no new action; with a skeleton
+  map file in the panel giving what the names no longer say (the unit) it is solved and meets the keys.
 """
 import json
 import os
@@ -204,6 +205,19 @@ def test_unknown_bones_give_the_report(addon, tmp_path):
     assert got["error"] is not None and "dynsplines: error:" in got["error"], got["error"]
     assert "Traceback" not in got["error"] and len(got["error"].strip().splitlines()) == 1, got["error"]
     assert got["actions"] == [got["original"]] and got["assigned"] == got["original"]  # nothing new
+
+
+def test_a_skeleton_map_makes_it_known(addon, tmp_path):
+    """The renamed rig with a skeleton map file in the panel giving the unit: the roles come from the
+    hierarchy, and the in-between meets the keys."""
+    got = run_blender(addon, "mapped", tmp_path, KEYS)
+    assert_result_action(got, KEYS[0], KEYS[-1])
+    frames = got["frames"]
+    result, original = np.array(got["result_points"]), np.array(got["original_points"])
+    at_keys = [frames.index(k) for k in KEYS]
+    err = np.linalg.norm(result[at_keys] - original[at_keys], axis=-1).max() * UNIT
+    print(f"mapped rig: bones within {1000 * err:.4f} mm of the keys")
+    assert err < 1e-3, err  # [m]
 
 
 def test_cancel_returns_a_valid_action(addon, tmp_path):

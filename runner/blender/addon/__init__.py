@@ -30,7 +30,7 @@ from . import actions
 from .job import Job, JobError, find_cli
 
 #: the skeleton map given with the exported BVH: it starts at the first key, no rest pose before the motion
-_MAP = '{"rest_frames": 0}'
+_MAP = {"rest_frames": 0}
 #: [s] the timer's period while a solve runs (Blender redraws the status bar at this rate)
 _TICK = 0.2
 
@@ -58,6 +58,11 @@ class DynsplinesSettings(bpy.types.PropertyGroup):
         items=[("floor", "Floor", "Blender's ground plane (z = 0 of the armature) and the selected meshes as boxes "
                                   "(--scene floor --boxes)"),
                ("auto", "Fitted", "A floor and boxes fitted to where the feet rest (--scene auto)")])
+    skeleton_map: bpy.props.StringProperty(
+        name="Skeleton map", subtype="FILE_PATH", default="",
+        description="A JSON file naming the bone of each role the recogniser cannot find, and the unit and up "
+                    "axis, e.g. {\"hips\": \"pelvis\", \"unit\": \"cm\"} (--skeleton-map, docs/mocap.md); empty: "
+                    "every role recognised")
     out_dir: bpy.props.StringProperty(
         name="Keep files in", subtype="DIR_PATH", default="",
         description="A folder for the command's files (the BVH, keyframe file, saved path .npz for `dynsplines "
@@ -78,12 +83,15 @@ def _commands(context, bvh, frames, clean, out):
     npz = os.path.join(out, "path.npz")
     mocap = [cli, "mocap", bvh, "--out-dir", out, "--save-path", npz, "--no-render", "--no-summary",
              "--terms", s.terms, "--tol", f"{s.tol:g}", "--scene", s.scene]
+    user_map = _user_map(s)
     if clean:  # a capture: its rest pose (a T-pose before the motion, as CMU's clips have) found as mocap finds it
         mocap += ["--every", "0.25"]
+        if user_map:
+            mocap += ["--skeleton-map", bpy.path.abspath(s.skeleton_map)]
     else:
         skel = os.path.join(out, "skeleton.json")
         with open(skel, "w", encoding="utf-8") as f:
-            f.write(_MAP)
+            json.dump({**user_map, **_MAP}, f)
         mocap += ["--key-frames", ",".join(str(f - frames[0]) for f in frames), "--skeleton-map", skel]
         partial = actions.partial_keys(context.active_object)
         if partial:  # a bone keyed on some channels keys the bone; a frame keying some bones is partial
@@ -103,6 +111,27 @@ def _commands(context, bvh, frames, clean, out):
     export = [cli, "export", npz, "--to", os.path.join(out, "result.bvh"), "--skeleton", "source",
               "--root-height", "solved"]
     return [("solving", mocap), ("exporting", export)]
+
+
+def _user_map(settings):
+    """The user's skeleton map (the panel's file) as a dict, {} without one.
+
+    Raises:
+        JobError: the file is missing or not a JSON object (its own keys are checked by the command).
+    """
+    if not settings.skeleton_map:
+        return {}
+    path = bpy.path.abspath(settings.skeleton_map)
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except (OSError, ValueError) as e:
+        raise JobError(f"dynsplines: error: skeleton map {path}: cannot read it as JSON ({e}); give a JSON file "
+                       "such as {\"hips\": \"pelvis\", \"unit\": \"cm\"}") from None
+    if not isinstance(doc, dict):
+        raise JobError(f"dynsplines: error: skeleton map {path}: a JSON object is expected, e.g. "
+                       "{\"hips\": \"pelvis\", \"unit\": \"cm\"}")
+    return doc
 
 
 def _boxes(context):
@@ -326,7 +355,7 @@ class DYNSPLINES_PT_panel(bpy.types.Panel):
         if action is not None:  # its frame range (counting its keys at every redraw would slow the UI)
             start, end = action.frame_range
             layout.label(text=f"Frames {start:g}..{end:g}")
-        for name in ("terms", "tol", "scene", "out_dir", "max_evals"):
+        for name in ("terms", "tol", "scene", "skeleton_map", "out_dir", "max_evals"):
             layout.prop(s, name)
         col = layout.column(align=True)
         col.operator(DYNSPLINES_OT_inbetween.bl_idname, icon="IPO_BEZIER")
