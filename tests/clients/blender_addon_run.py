@@ -13,8 +13,8 @@ does) and its preference set to DYNSPLINES, the command; CLIP.bvh is imported wi
 * unknown: the bones renamed b0, b1, ... (no convention's names), then
   `dynsplines.inbetween` at FRAMES: the report is expected; mapped: the same rig with a skeleton map
   (the panel's file) giving the unit the names no longer say: solved;
-* fbx: the imported clip through Blender's FBX exporter and importer first (a rig with FBX's bone
-  orientations, object transform and leaf bones), then as inbetween;
+* fbx, fbx-clean: the imported clip through Blender's FBX exporter and importer first (a rig with FBX's
+  bone orientations, object transform and leaf bones), then as inbetween, clean;
 * cancel: the keys kept at FRAMES, then the add-on's `SolveRun` (what the modal operator runs) polled as
   its timer does, and cancelled (as Esc does) once the solve has finished its first round.
 The JSON: the actions, the armature's action after the run, the error report (or null), the first and
@@ -130,7 +130,7 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
     name = _install(zip_path, cli)
     bpy.ops.import_anim.bvh(filepath=clip, update_scene_fps=True)
     obj = bpy.context.object
-    if mode == "fbx":
+    if mode in ("fbx", "fbx-clean"):
         obj = _through_fbx(obj, out_dir)
     keys = {}  # "42" a full key, "82:Hips+LeftUpLeg" a partial key of those bones
     for word in frames.split(",") if frames else []:
@@ -163,7 +163,7 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
         bpy.context.scene.dynsplines.max_evals = 300  # a short solve: the test checks the keys and the floor
         try:
             for _ in range(2 if mode == "rerun" else 1):
-                getattr(bpy.ops.dynsplines, "clean" if mode == "clean" else "inbetween")()
+                getattr(bpy.ops.dynsplines, "clean" if mode.endswith("clean") else "inbetween")()
         except RuntimeError as e:  # an operator's ERROR report, as bpy.ops raises it in background mode
             error = str(e)
     out = {"actions": sorted(a.name for a in bpy.data.actions), "assigned": obj.animation_data.action.name,

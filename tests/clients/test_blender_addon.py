@@ -13,8 +13,8 @@ What is checked, against references that do not come from the add-on or the solv
   docs/design.md), measured as below; a selected cube is the scene's box, in metres;
 * a partial key (only the hips and the left leg keyed at one frame): those bones are met there (1 mm),
   the right leg is free;
-* the same after the clip went through Blender's FBX exporter and importer (another rig: FBX's bone
-  orientations, leaf bones);
+* the in-between and the clean after the clip went through Blender's FBX exporter and importer (another
+  rig: FBX's bone orientations, leaf bones);
 * clean: at the keyframes `mocap` picked, the bones that drive the figure's leg bodies are where MuJoCo
   puts those bodies for the keyframe poses (within 1 mm); the feet are never more than 1 mm below Blender's
   floor (z = 0), measured at the figure's contact spheres carried on Blender's foot bones (their offset
@@ -174,8 +174,9 @@ def assert_inbetween(got, tmp_path, label):
     assert min(low.values()) > min(0.0, keyed) - 1.0, (min(low.values()), keyed)
 
 
-def test_clean_stands_on_the_floor(addon, tmp_path):
-    got = run_blender(addon, "clean", tmp_path)
+@pytest.mark.parametrize("mode", ["clean", "fbx-clean"])
+def test_clean_stands_on_the_floor(addon, tmp_path, mode):
+    got = run_blender(addon, mode, tmp_path)
     files = tmp_path / "files"
     with np.load(files / "path.npz") as z:
         key_t, key_q, ref_t = z["keyframe_times"], z["keyframes"], z["reference_times"]
@@ -193,10 +194,10 @@ def test_clean_stands_on_the_floor(addon, tmp_path):
         row = got["frames"].index(last - len(ref_t) + 1 + int(round(t * fps)))
         for body, joint in DRIVEN.items():
             worst = max(worst, float(np.linalg.norm(result[row, bones.index(joint)] * UNIT - data.xpos[model.body(body).id])))
-    print(f"clean: {len(key_t)} keyframes, driving bones within {1000 * worst:.4f} mm of MuJoCo's bodies")
+    print(f"{mode}: {len(key_t)} keyframes, driving bones within {1000 * worst:.4f} mm of MuJoCo's bodies")
     assert worst < 1e-3, worst  # [m]
     low = min(lowest_contact_mm(got, files).values())
-    print(f"clean: lowest contact sphere {low:.2f} mm above z = 0")
+    print(f"{mode}: lowest contact sphere {low:.2f} mm above z = 0")
     assert low > -1.0, low
 
 
