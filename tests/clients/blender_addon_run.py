@@ -12,7 +12,7 @@ does) and its preference set to DYNSPLINES, the command; CLIP.bvh is imported wi
 * clean: `dynsplines.clean` on the action as imported (a key at every frame);
 * unknown: the bones renamed b0, b1, ... (no convention's names), then
   `dynsplines.inbetween` at FRAMES: the report is expected; mapped: the same rig with a skeleton map
-  (the panel's file) giving the unit the names no longer say: solved;
+  (the panel's file) giving the unit the names no longer say: solved ("bones" are the names as imported);
 * fbx, fbx-clean: the imported clip through Blender's FBX exporter and importer first (a rig with FBX's
   bone orientations, object transform and leaf bones), then as inbetween, clean;
 * cancel: the keys kept at FRAMES, then the add-on's `SolveRun` (what the modal operator runs) polled as
@@ -143,6 +143,7 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
         bpy.context.object.select_set(True)
         obj.select_set(True)
         bpy.context.view_layer.objects.active = obj
+    names = [pb.name for pb in obj.pose.bones]  # as imported (a renamed rig's bones in the same order)
     if mode in ("unknown", "mapped"):
         for i, bone in enumerate(obj.data.bones):
             bone.name = f"b{i}"
@@ -167,7 +168,7 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
         except RuntimeError as e:  # an operator's ERROR report, as bpy.ops raises it in background mode
             error = str(e)
     out = {"actions": sorted(a.name for a in bpy.data.actions), "assigned": obj.animation_data.action.name,
-           "original": original.name, "error": error, "bones": [pb.name for pb in obj.pose.bones],
+           "original": original.name, "error": error, "bones": names,
            "ranges": {a.name: list(a.frame_range) for a in bpy.data.actions}}
     result = bpy.data.actions.get(original.name + ".dynsplines")
     if result is not None:

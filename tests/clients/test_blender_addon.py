@@ -11,8 +11,6 @@ What is checked, against references that do not come from the add-on or the solv
   interpolation (the solve moved it); no foot is more than 1 mm below Blender's floor (z = 0) where the
   keys do not put it lower (a key with a foot in the floor: its limit there is the key's own,
   docs/design.md), measured as below; a selected cube is the scene's box, in metres;
-* a partial key (only the hips and the left leg keyed at one frame): those bones are met there (1 mm),
-  the right leg is free;
 * the in-between and the clean after the clip went through Blender's FBX exporter and importer (another
   rig: FBX's bone orientations, leaf bones);
 * clean: at the keyframes `mocap` picked, the bones that drive the figure's leg bodies are where MuJoCo
@@ -22,7 +20,9 @@ What is checked, against references that do not come from the add-on or the solv
 * cancelled after the solve's first round (as Esc does): the new action is there and meets the keys;
 * a rig whose bones have no convention's names gives an error report with the command's one line
   (bpy.ops raises RuntimeError with the report), not a traceback, and no new action; with a skeleton
-  map file in the panel giving what the names no longer say (the unit) it is solved and meets the keys.
+  map file in the panel giving what the names no longer say (the unit) it is solved and meets the keys,
+  and a partial key there (only the hips and the left leg keyed at one frame) meets those bones (1 mm)
+  and leaves the right leg free.
 """
 import json
 import os
@@ -137,26 +137,6 @@ def test_inbetween_after_an_fbx_round_trip(addon, tmp_path):
     assert_inbetween(got, tmp_path, "FBX in-between")
 
 
-def test_a_partial_key_fixes_its_bones(addon, tmp_path):
-    """At frame 82 only the hips and the left leg keyed (a partial key): those bones are where the key puts
-    them, the right leg is the solve's; the full keys are met as before."""
-    left = ("Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase")
-    keys = [f"{f}:{'+'.join(left)}" if f == 82 else str(f) for f in KEYS]
-    got = run_blender(addon, "inbetween", tmp_path, keys)
-    assert_result_action(got, KEYS[0], KEYS[-1])
-    frames, bones, n = got["frames"], got["bones"], len(got["bones"])
-    result, original = np.array(got["result_points"]), np.array(got["original_points"])
-    err = np.linalg.norm(result - original, axis=-1) * UNIT  # (frames, 2 B) [m]
-    full = [frames.index(k) for k in KEYS if k != 82]
-    keyed = [i for b in left for i in (bones.index(b), n + bones.index(b))]  # heads and tails
-    right = [i for b in ("RightLeg", "RightFoot") for i in (bones.index(b), n + bones.index(b))]
-    print(f"partial key: keyed bones within {1000 * err[frames.index(82), keyed].max():.4f} mm, the right leg "
-          f"{1000 * err[frames.index(82), right].max():.1f} mm from Blender's interpolation; full keys within "
-          f"{1000 * err[full].max():.4f} mm")
-    assert err[full].max() < 1e-3 and err[frames.index(82), keyed].max() < 1e-3
-    assert err[frames.index(82), right].max() > 1e-3  # free at the partial key: not Blender's curves
-
-
 def assert_inbetween(got, tmp_path, label):
     """The in-between's result: the action, the keys (1 mm), the solve's own motion, the floor."""
     assert_result_action(got, KEYS[0], KEYS[-1])
@@ -208,17 +188,25 @@ def test_unknown_bones_give_the_report(addon, tmp_path):
     assert got["actions"] == [got["original"]] and got["assigned"] == got["original"]  # nothing new
 
 
-def test_a_skeleton_map_makes_it_known(addon, tmp_path):
-    """The renamed rig with a skeleton map file in the panel giving the unit: the roles come from the
-    hierarchy, and the in-between meets the keys."""
-    got = run_blender(addon, "mapped", tmp_path, KEYS)
+def test_a_mapped_rig_with_a_partial_key(addon, tmp_path):
+    """The renamed rig with a skeleton map file in the panel giving the unit (the roles come from the
+    hierarchy), and at frame 82 only the hips and the left leg keyed (a partial key): the full keys are
+    met, at the partial key those bones are where it puts them and the right leg is the solve's."""
+    left = ("Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase")
+    keys = [f"{f}:{'+'.join(left)}" if f == 82 else str(f) for f in KEYS]
+    got = run_blender(addon, "mapped", tmp_path, keys)
     assert_result_action(got, KEYS[0], KEYS[-1])
-    frames = got["frames"]
+    frames, bones, n = got["frames"], got["bones"], len(got["bones"])  # bones: the names as imported
     result, original = np.array(got["result_points"]), np.array(got["original_points"])
-    at_keys = [frames.index(k) for k in KEYS]
-    err = np.linalg.norm(result[at_keys] - original[at_keys], axis=-1).max() * UNIT
-    print(f"mapped rig: bones within {1000 * err:.4f} mm of the keys")
-    assert err < 1e-3, err  # [m]
+    err = np.linalg.norm(result - original, axis=-1) * UNIT  # (frames, 2 B) [m]
+    full = [frames.index(k) for k in KEYS if k != 82]
+    keyed = [i for b in left for i in (bones.index(b), n + bones.index(b))]  # heads and tails
+    right = [i for b in ("RightLeg", "RightFoot") for i in (bones.index(b), n + bones.index(b))]
+    print(f"mapped rig, partial key: full keys within {1000 * err[full].max():.4f} mm; at the partial key the "
+          f"keyed bones within {1000 * err[frames.index(82), keyed].max():.4f} mm, the right leg "
+          f"{1000 * err[frames.index(82), right].max():.1f} mm from Blender's interpolation")
+    assert err[full].max() < 1e-3 and err[frames.index(82), keyed].max() < 1e-3
+    assert err[frames.index(82), right].max() > 1e-3  # free at the partial key: not Blender's curves
 
 
 def test_cancel_returns_a_valid_action(addon, tmp_path):

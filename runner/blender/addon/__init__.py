@@ -283,9 +283,9 @@ class _Solve:
         self._run = SolveRun(self.clean)
         try:
             self._run.prepare(context)
-        except JobError as e:
+        except Exception as e:  # noqa: BLE001 - the command's line, or a bug of the add-on: one line
             self._run.cleanup()
-            self.report({"ERROR"}, str(e))
+            self.report({"ERROR"}, str(e) if isinstance(e, JobError) else _bug(e))
             return {"CANCELLED"}
         wm = context.window_manager
         self._timer = wm.event_timer_add(_TICK, window=context.window)
@@ -300,7 +300,10 @@ class _Solve:
             return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        done = job.poll()
+        try:
+            done = job.poll()
+        except OSError as e:  # the command could not be started
+            job.error, done = f"dynsplines: the command {job.commands[0][1][0]} could not be run: {e}", True
         wm.progress_update(int(90 - 80 / (1 + job.rounds / 4) if job.index == 0 else 95))
         context.workspace.status_text_set(f"dynsplines {job.label} (Esc cancels): {job.status}")
         if not done:
