@@ -30,9 +30,10 @@ from pathlib import Path
 
 from runner.mocap.contact_detection import reference_contacts
 from runner.mocap.figure_choice import SUBJECT, choose_figure, is_default, scene_with_figure
+from runner.mocap.key_joints import frame_joints
 from runner.mocap.keyframes import pick_keyframes
 from runner.mocap.reference import ROOT_SCALE_LEGS
-from runner.mocap.scene import AUTO, clip_scene, name_surfaces
+from runner.mocap.scene import AUTO, FLOOR, clip_scene, name_surfaces, read_boxes
 from runner.paths import display_path
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE
@@ -70,6 +71,10 @@ class ClipOptions:
             the keyframe file's "source".
         skeleton_map: a skeleton map file naming the joints of roles the recogniser cannot find
             (`--skeleton-map`; runner/mocap/skeleton_map.py), or None.
+        key_frames: the clip's frames an animator keyed (`--key-frames`; 0 = the first after its rest
+            frames): the keyframes, instead of `keys` and `every` (`pick_keyframes`); None: picked.
+        key_joints: a file naming the clip's joints keyed at the partial key frames (`--key-joints`), or None.
+        boxes: with scene "floor", boxes in the clip's coordinates (`--boxes FILE.json`), or None.
     """
 
     keys: str = "every"
@@ -96,6 +101,9 @@ class ClipOptions:
     command: str = ""
     root_scale: float | str = ROOT_SCALE_LEGS
     skeleton_map: str | os.PathLike | None = None
+    key_frames: tuple[int, ...] | None = None
+    key_joints: str | os.PathLike | None = None
+    boxes: str | os.PathLike | None = None
 
 
 def default_out_dir(clip) -> Path:
@@ -119,6 +127,9 @@ class ClipKeys:
         command: the command line recorded in the file's "source".
         skeleton_map: a skeleton map file (`--skeleton-map`), or None; the skeleton as read is recorded
             in the file's "source" "skeleton" (so `animate` reads the clip again with it).
+        key_frames: the frames an animator keyed (`pick_keyframes` `frames`), or None: picked.
+        key_joints: a file naming the joints keyed at the partial ones (runner/mocap/key_joints.py), or None.
+        boxes: with scene "floor", a file of boxes in the clip's coordinates (`read_boxes`), or None.
     """
 
     scene: str | os.PathLike = AUTO
@@ -131,6 +142,9 @@ class ClipKeys:
     extremes: bool = True
     command: str = ""
     skeleton_map: str | os.PathLike | None = None
+    key_frames: tuple[int, ...] | None = None
+    key_joints: str | os.PathLike | None = None
+    boxes: str | os.PathLike | None = None
 
 
 #: the stages of `write_clip_keyframes`, for a progress bar
@@ -149,12 +163,12 @@ def clip_figure_scene(clip: Path, k: ClipKeys, scene_out: Path):
     `scene_out` when the figure differs from the scene's own; with the default figure, the given scene
     as it is)."""
     scene = k.scene
-    if str(scene) != AUTO and not is_default(k.figure):
+    if str(scene) not in (AUTO, FLOOR) and not is_default(k.figure):
         from solver.model import load_model
 
         check_scene(load_model(scene), scene)  # the user's scene first: a floor, the figure (file and fix named)
     figure = choose_figure(k.figure, clip, figure_path_for(scene_out), k.mass, _skeleton_map(k))
-    if str(scene) != AUTO and not is_default(k.figure):
+    if str(scene) not in (AUTO, FLOOR) and not is_default(k.figure):
         scene = scene_with_figure(scene, figure, scene_out)
     return figure, scene
 
@@ -187,14 +201,16 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
 
     figure, scene = clip_figure_scene(clip, k, scene_out)
     smap = _skeleton_map(k)
-    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, smap)
+    boxes = read_boxes(k.boxes) if k.boxes is not None else ()
+    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, smap, root_height=k.key_frames is None, boxes=boxes)
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
     done(0)
     contacts = name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time))
     done(1)
     every = k.every if (k.every is not None or k.keys == "contacts") else 0.25
-    keyframes = pick_keyframes(ref, model, contacts, keys=k.keys, every=every, partial=k.partial, extremes=k.extremes)
+    keyframes = pick_keyframes(ref, model, contacts, keys=k.keys, every=every, partial=k.partial, extremes=k.extremes,
+                               frames=k.key_frames, frame_joints=frame_joints(clip, ref, model, k.key_frames, k.key_joints))
     done(2)
     source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
               "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
@@ -218,7 +234,8 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
         InputError: as `process_clip`.
     """
     k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, keys=o.keys, every=o.every,
-                 partial=o.partial, command=o.command, skeleton_map=o.skeleton_map)
+                 partial=o.partial, command=o.command, skeleton_map=o.skeleton_map, key_frames=o.key_frames,
+                 key_joints=o.key_joints, boxes=o.boxes)
     from runner.progress import Steps
 
     with Steps(f"keyframes from {clip.name}", len(CLIP_STAGES), o.quiet, unit=" stages") as bar:
@@ -287,7 +304,7 @@ def clip_paths(clip: Path, out_dir: Path, o: ClipOptions) -> dict:
         from runner.run import check_exports
 
         check_exports(o.exports)
-    if str(o.scene) == AUTO or not is_default(o.figure):
+    if str(o.scene) in (AUTO, FLOOR) or not is_default(o.figure):
         paths["scene"] = out_dir / f"{stem}.scene.xml"
     if str(o.figure) == SUBJECT:
         paths["figure"] = out_dir / f"{stem}.figure.xml"

@@ -3,6 +3,7 @@ was made from (the reference shown in the summary and the saved path). `file_pro
 `dynsplines animate`, `run-and-step` and the benchmarks of a keyframe file solve."""
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from runner.mocap.reference import IMPORT_STAGES, load_bvh_reference
@@ -29,6 +30,11 @@ def load_problem(keyframes_path: Path, scene: Path | None):
     scene_path = Path(scene) if scene is not None else head
     if scene_path is None:
         raise InputError(f"{keyframes_path}: no 'scene' in the file; give one with --scene SCENE.xml")
+    if scene is None and not scene_path.exists():  # a file copied without its scene
+        raw = read_document(keyframes_path)["scene"]
+        raise InputError(f"{keyframes_path}: field 'scene' {raw!r} is read relative to the keyframe file's folder "
+                         f"({keyframes_path.resolve().parent}), where there is no {raw}; copy the scene (and the "
+                         "figure it includes) there, correct the path in the file, or give --scene SCENE.xml")
     model = load_model(scene_path)
     check_scene(model, scene_path)
     layout = StateLayout.from_model(model)
@@ -57,7 +63,11 @@ def find_reference(info, model, quiet=False):
     if not clip:
         return None
     path = Path(info.path).parent / clip if hasattr(info, "path") else MODELS / clip
-    if not path.is_file():
+    if not path.is_file():  # a file copied without its clip: said, since the capture's bounds go with it
+        where = f"{info.path}: " if hasattr(info, "path") else ""
+        print(f"dynsplines: warning: {where}source.clip {clip!r} is read relative to the keyframe file, and {path.resolve()} "
+              "is not there: solved without the capture (no comparison with it, no no-jolt or effort bounds from "
+              "it); copy the clip there or correct source.clip", file=sys.stderr)
         return None
     import json
 

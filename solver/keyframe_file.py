@@ -19,7 +19,9 @@ Format (docs/keyframe-format.md has a full example)::
       ]
     }
 
-Times in seconds, positions in metres, quaternions w x y z. In a keyframe, an omitted joint is entirely
+Times in seconds, positions in metres, quaternions w x y z, or a joint's rotation in degrees as an object
+({"euler": [...], "order": "xyz"} or {"axis": [...], "angle": a}; the root adds "pos": solver/joint_angles.py).
+In a keyframe, an omitted joint is entirely
 free and a `null` component is free (a partial keyframe, paper sec. 2). A keyframe may carry a
 "comment" string. Checks of times (increasing, not negative), of the keyframe count (>= 2), of
 keyframes that fix nothing and of zero quaternions are `solver.Keyframes`'s; this module checks the
@@ -238,11 +240,16 @@ def _joint_values(layout, where: str, name: str, comps, values: np.ndarray, mask
     except InputError as e:
         raise InputError(f"{where}, joints: {e}") from None
     what = "x y z qw qx qy qz" if jt.kind == "free" else ("qw qx qy qz" if jt.kind == "ball" else "value")
+    if isinstance(comps, dict):  # degrees: Euler angles or an axis and an angle (solver/joint_angles.py)
+        from solver.joint_angles import joint_components
+
+        comps = joint_components(jt.kind, comps, f"{where}, joint {name!r}")
     if not isinstance(comps, list) or len(comps) != jt.nq:
         got = f"has {len(comps)} components" if isinstance(comps, list) else "is not a list"
         raise InputError(
             f"{where}, joint {name!r}: {comps!r} {got}; a {jt.kind} joint "
             f"takes a list of {jt.nq} ({what}), null for a free component"
+            + ("; or, in degrees, an object such as {\"axis\": [0, 1, 0], \"angle\": 25}" if jt.kind == "ball" else "")
         )
     for c, v in enumerate(comps):
         if v is None:

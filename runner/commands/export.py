@@ -25,6 +25,11 @@ def register(sub) -> None:
     p.add_argument("--skeleton", choices=("source", "figure"), default=None,
                    help="BVH skeleton: 'source' the clip's own (hierarchy, names, offsets, channels, frame rate; the "
                         "default for a path made from a BVH clip), 'figure' the figure's 12 bodies plus neck and head")
+    p.add_argument("--root-height", choices=("source", "solved"), default="source",
+                   help="on the source skeleton: 'source' the root height in the clip's own coordinates (the "
+                        "import's correction that stood the feet on the scene taken off: the file replaces the "
+                        "source); 'solved' as the solve left it, the feet on the scene's surfaces (the Blender "
+                        "add-on's clean) [%(default)s]")
     p.add_argument("--quiet", action="store_true", help="no summary line")
     p.set_defaults(func=run)
 
@@ -34,10 +39,12 @@ def run(args) -> int:
     from runner.export import check_output_name, export_saved_path
 
     res = None
+    as_solved = getattr(args, "root_height", "source") == "solved"  # the figure's skeleton: always as solved
     if args.skeleton == "source" or (args.skeleton is None and check_output_name(args.to) == "BVH"):
         from runner.mocap.source_export import export_on_source
 
-        res = export_on_source(args.path, args.to, args.which, args.fps, required=args.skeleton == "source")
+        res = export_on_source(args.path, args.to, args.which, args.fps, required=args.skeleton == "source",
+                               as_solved=as_solved)
     if res is None:
         res = export_saved_path(args.path, args.to, args.which, args.fps)
     if not getattr(args, "quiet", False):

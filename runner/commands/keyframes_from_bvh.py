@@ -15,13 +15,17 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from runner.commands.mocap import add_figure_arguments, add_root_scale_argument
+from runner.commands.mocap import (
+    add_figure_arguments,
+    add_key_frames_argument,
+    add_root_scale_argument,
+    add_scene_arguments,
+)
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
 from runner.mocap.figure_choice import SUBJECT
 from runner.mocap.glitches import glitches_line
 from runner.mocap.keyframes import KEY_CHOICES
 from runner.mocap.reference import ROOT_SCALE_LEGS
-from runner.mocap.scene import AUTO
 from runner.parser import OneLineParser
 from runner.pipeline import CLIP_STAGES, ClipKeys, write_clip_keyframes
 from runner.progress import Steps
@@ -49,13 +53,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keys", choices=KEY_CHOICES, default="every",
                    help="every: evenly spaced keys plus the root's highest and lowest frames; contacts: keys at "
                         "touch-downs and lift-offs, the ends and the root's extremes [%(default)s]")
-    p.add_argument("--scene", default=AUTO,
-                   help="scene MJCF (figure + surfaces), or 'auto' (default): a floor and boxes fitted to where "
-                        "the clip's feet rest, written next to --out as NAME.scene.xml")
+    add_scene_arguments(p, written="next to --out as NAME.scene.xml")
     add_figure_arguments(p)
     p.add_argument("--partial", action="store_true",
                    help="make the middle keyframe partial: it fixes only the root and the legs (torso and arms "
                         "free for the optimizer); default: full keyframes")
+    add_key_frames_argument(p)
     p.add_argument("--no-root-extremes", action="store_true",
                    help="with --keys every: do not add keys at the root's highest and lowest frames")
     p.add_argument("--quiet", action="store_true", help="no progress bar; the 'wrote ...' line is still printed")
@@ -77,6 +80,8 @@ def command_line(args) -> str:
     if args.every is not None:
         words += ["--every", f"{args.every:g}"]
     words += ["--keys", args.keys, "--scene", args.scene]
+    if args.boxes is not None:
+        words += ["--boxes", args.boxes]
     if str(args.figure) != SUBJECT:
         words += ["--figure", args.figure]
     if args.mass is not None:
@@ -86,6 +91,10 @@ def command_line(args) -> str:
     words += ["--partial"] * bool(args.partial) + ["--no-root-extremes"] * bool(args.no_root_extremes)
     if args.root_scale != ROOT_SCALE_LEGS:
         words += ["--root-scale", f"{args.root_scale:g}"]
+    if args.key_frames is not None:
+        words += ["--key-frames", ",".join(str(f) for f in args.key_frames)]
+    if args.key_joints is not None:
+        words += ["--key-joints", args.key_joints]
     return f"{PROG} {shlex.join(str(w) for w in words)}"
 
 
@@ -102,6 +111,7 @@ def run(args, command: str | None = None) -> int:
     k = ClipKeys(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale,
                  skeleton_map=args.skeleton_map,
                  keys=args.keys, every=args.every, partial=args.partial, extremes=not args.no_root_extremes,
+                 key_frames=args.key_frames, key_joints=args.key_joints, boxes=args.boxes,
                  command=command or command_line(args))
     with Steps(f"keyframes from {Path(args.clip).name}", len(CLIP_STAGES), args.quiet, unit=" stages") as bar:
         cs, contacts, keyframes = write_clip_keyframes(Path(args.clip), out, k, fitted_scene_path(out),

@@ -47,11 +47,43 @@ def add_clip_arguments(p) -> None:
                       help="key spacing [s] (0.25); with --keys contacts: at most S s between keys [no limit]")
     keys.add_argument("--partial", action="store_true",
                       help="the middle keyframe fixes only the root and the legs (torso and arms free)")
-    p.add_argument("--scene", default=AUTO,
-                   help="scene MJCF, or 'auto' (default): a floor and boxes fitted to where the clip's feet rest, "
-                        "written next to the outputs as <stem>.scene.xml")
+    add_key_frames_argument(keys)
+    add_scene_arguments(p)
     add_figure_arguments(p)
     add_root_scale_argument(p)
+
+
+def add_scene_arguments(p, written: str = "next to the outputs as <stem>.scene.xml") -> None:
+    """`--scene auto|floor|FILE` and `--boxes FILE` (`mocap`, `batch`, `keyframes-from-bvh`)."""
+    p.add_argument("--scene", default=AUTO,
+                   help="scene MJCF; 'auto' (default): a floor and boxes fitted to where the clip's feet rest; or "
+                        "'floor': a level floor at the clip's own height 0 (a DCC's ground plane) and the --boxes; "
+                        f"auto and floor are written {written}")
+    p.add_argument("--boxes", type=Path, default=None, metavar="FILE.json",
+                   help="with --scene floor: boxes in the clip's coordinates (its axes and unit), "
+                        "[{\"min\": [x, y, z], \"max\": [x, y, z]}, ...] [none]")
+
+
+def key_frames(text: str) -> tuple[int, ...]:
+    """`--key-frames` "0,30,61": the frame numbers (checked against the clip by `given_indices`)."""
+    import argparse
+
+    try:
+        return tuple(int(w) for w in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of frame numbers, e.g. 0,30,61") from None
+
+
+def add_key_frames_argument(p) -> None:
+    """`--key-frames F,F,...` (`mocap`, `batch`, `keyframes-from-bvh`)."""
+    p.add_argument("--key-frames", type=key_frames, default=None, metavar="F,F,...",
+                   help="the clip's frames an animator keyed (0 = its first frame after a rest frame; at least two, "
+                        "increasing): they are the keyframes, with the clip's own values (feet not planted), instead "
+                        "of --keys and --every; the Blender add-on's in-between [picked by --keys]")
+    p.add_argument("--key-joints", type=Path, default=None, metavar="FILE.json",
+                   help="with --key-frames: the joints keyed at the partial ones, e.g. {\"30\": [\"LeftUpLeg\", "
+                        "\"LeftLeg\"]}: they fix the figure joints those joints drive, the rest is free "
+                        "(docs/mocap.md) [every key full]")
 
 
 def add_skeleton_map_argument(p) -> None:
@@ -91,7 +123,8 @@ def clip_options(args, prog: str, **fields) -> ClipOptions:
     name = prog.split()[-1]
     return ClipOptions(
         keys=args.keys, every=args.every, partial=args.partial, scene=args.scene, figure=args.figure,
-        mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map,
+        mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map, key_frames=args.key_frames,
+        key_joints=args.key_joints, boxes=args.boxes,
         **clip_terms(args),
         command=f"{prog} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == [name] else prog, **fields,
     )

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
+from dataclasses import replace
 
 import numpy as np
 
@@ -121,8 +122,25 @@ def keyframes_from_reference(
 KEY_CHOICES = ("every", "contacts")
 
 
+def given_indices(reference: Reference, frames) -> np.ndarray:
+    """The frames an animator keyed (`--key-frames`), checked: (k,) strictly increasing indices into the
+    reference (0 = the clip's first frame after its rest frames), k >= 2.
+
+    Raises:
+        InputError: fewer than two frames, a frame out of the clip, or frames not increasing.
+    """
+    idx = np.asarray(list(frames), dtype=float)
+    n = reference.count
+    if idx.ndim != 1 or len(idx) < 2 or not np.all(np.isfinite(idx)) or np.any(idx != np.rint(idx)):
+        raise InputError(f"--key-frames {list(frames)!r}: give at least two whole frame numbers, e.g. 0,30,60")
+    if idx[0] < 0 or idx[-1] > n - 1 or np.any(np.diff(idx) <= 0):
+        raise InputError(f"--key-frames {','.join(f'{f:g}' for f in idx)}: the frames must increase and lie in the "
+                         f"clip, 0..{n - 1} ({reference.source}: {n} frames after its rest frames)")
+    return idx.astype(int)
+
+
 def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", every: float | None = 0.25,
-                   partial: bool = False, extremes: bool = True) -> Keyframes:
+                   partial: bool = False, extremes: bool = True, frames=None, frame_joints=None) -> Keyframes:
     """The keyframes of `dynsplines mocap` and `keyframes-from-bvh`.
 
     Args:
@@ -136,10 +154,24 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
             round, and a full turn keyed every 0.25 s is lost).
         partial: the middle keyframe fixes only the root and the legs (`Figure.leg_joints`).
         extremes: with keys="every", also key the root's highest and lowest frames.
+        frames: the frames an animator keyed (`given_indices`), or None: then `keys` and `every` are not
+            used, and the keys take the clip's own values (an animator's pose is the keyframe, its feet
+            are not planted: docs/mocap.md "The keyframes' feet"), plus the turn keys.
+        frame_joints: with `frames`, {frame: figure joints} of the partial ones (`--key-joints`,
+            runner/mocap/key_joints.py); a frame that fixes no figure joint is no key.
     """
     from runner.mocap.keyframe_selection import CaptureError, contact_keyframes, turn_keys
     from solver.figure import model_feet
 
+    if frames is not None:
+        reference = replace(reference, plant=None)
+        idx = given_indices(reference, frames)
+        joints = dict(frame_joints or {})
+        idx = np.array([f for f in idx if joints.get(int(f), True)], int)  # a key of unmodelled joints only: none
+        idx = np.asarray(turn_keys(idx, reference.qpos[:, StateLayout.from_model(model).quat_slots]), int)
+        part = {int(np.flatnonzero(idx == f)[0]): names for f, names in joints.items() if names and f in idx}
+        return keyframes_from_reference(reference, model, indices=idx,
+                                        partial=part or (MIDDLE_LOWER_BODY if partial else None))
     reference = reference.keyed()  # keys are chosen on the motion they take their values from
     if keys == "contacts":
         if every is not None and not (isinstance(every, (int, float)) and math.isfinite(every) and every > 0):

@@ -44,7 +44,7 @@ ROOT_SCALE_LEGS = "legs"
 
 def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS,
                        skeleton_map: SkeletonMap | None = None, rest_pose: bool = False,
-                       fitted: bool = False) -> Reference:
+                       fitted: bool = False, root_height: bool = True) -> Reference:
     """Read a BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
     figure's own skeleton (written by `dynsplines export --to FILE.bvh` or `--export FILE.bvh`: a joint
     named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
@@ -80,6 +80,8 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
         fitted: the scene was fitted to this clip (`runner.mocap.scene.clip_scene`): on the subject's own
             figure, a root correction beyond its bound is refused (`check_root_correction`: the fit
             missed where the feet rest). In a scene of your own the correction is what the scene needs.
+        root_height: correct the root height (`correct_root_height`); False: the root as retargeted, for
+            an animator's keys (`--key-frames`: the poses are the keyframes, in the animator's scene).
     On the subject's own figure (the model's figure records this clip's skeleton) "legs" is 1: see the
     module docstring for why the root height is still corrected and how the export takes it off.
 
@@ -115,26 +117,26 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     clamped = hyperextension(qpos, figure)
     qpos, _ = clamp_hyperextension(qpos, figure)
     step(4, "clamped")
-    qpos, plant = _on_the_surfaces(qpos, model, layout, clip.frame_time, str(path), own and fitted, step)
+    qpos, plant = _on_the_surfaces(qpos, model, layout, clip.frame_time, str(path), own and fitted, step, root_height)
     step(7, "done")
     times = np.arange(len(qpos)) * clip.frame_time
     return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own, skeleton=skel,
                      clamped=clamped, plant=plant, glitches=glitches)
 
 
-def _on_the_surfaces(qpos, model, layout, frame_time: float, source: str, bounded: bool, step):
+def _on_the_surfaces(qpos, model, layout, frame_time: float, source: str, bounded: bool, step, root_height=True):
     """The import's last clean-up (`load_bvh_reference` steps 5-6): the root height corrected so that feet
     in contact stand on the surfaces and nothing is below one (a no-op without surfaces; on the subject's
     own figure it only takes up the captured feet's deviation, at most 3 cm, from the fitted scene, and
     with `bounded` a larger or sudden correction is refused), then the keyframes' footplant.
 
     Returns:
-        (qpos (n, nq) tidied, `FootPlant` with its qpos tidied).
+        (qpos (n, nq) tidied, `FootPlant` with its qpos tidied); root_height False: no correction.
     Raises:
         RootCorrectionRefused: `bounded` and the correction beyond its bound (`check_root_correction`).
     """
-    corrected = correct_root_height(qpos, model, frame_time)
-    if bounded:
+    corrected = correct_root_height(qpos, model, frame_time) if root_height else qpos
+    if bounded and root_height:
         check_root_correction(corrected[:, 2] - qpos[:, 2], frame_time, source)
     step(5, "root height")
     plant = plant_feet(corrected, model, frame_time)  # the keyframes' feet on their surfaces, by the legs

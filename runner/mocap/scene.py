@@ -1,6 +1,8 @@
-"""The scene a clip is retargeted onto: a given MJCF file, or one fitted to where the clip's feet rest
+"""The scene a clip is retargeted onto: a given MJCF file, one fitted to where the clip's feet rest
 (`--scene auto`: a floor plane, tilted if the capture's is, and boxes; runner/mocap/scene_fit.py), written
-next to the outputs in the levelled capture frame (the fitted floor at z = 0, solver/capture_frame.py)."""
+next to the outputs in the levelled capture frame (the fitted floor at z = 0, solver/capture_frame.py), or
+(`--scene floor`) the clip's own ground plane, a level floor at its height 0, with boxes given in its
+coordinates (`--boxes FILE.json`: a DCC's scene, the Blender add-on's)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -22,6 +24,8 @@ from solver.surfaces import StaticSurfaces
 
 #: `--scene auto`: fit the scene to the clip
 AUTO = "auto"
+#: `--scene floor`: a level floor at the clip's own height 0 (along its up axis), and the `--boxes`
+FLOOR = "floor"
 
 
 @dataclass(frozen=True)
@@ -51,7 +55,8 @@ class ClipScene:
 
 
 def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_out: str | Path,
-               root_scale: float | str = ROOT_SCALE_LEGS, skeleton_map=None) -> ClipScene:
+               root_scale: float | str = ROOT_SCALE_LEGS, skeleton_map=None, root_height: bool = True,
+               boxes=()) -> ClipScene:
     """Retarget `clip` onto `scene`, or with scene == "auto" onto a scene fitted to it.
 
     Fitting (docs/contacts.md "Fitted scenes"): retarget onto the figure alone (no surfaces, so no
@@ -71,46 +76,107 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
             (models/humanoid39.xml). fitted_out: where the fitted scene is written (only for "auto").
         root_scale: the root path's scale (`load_bvh_reference`: "legs" or a number).
         skeleton_map: a `runner.mocap.skeleton_map.SkeletonMap` or None (`load_bvh_reference`).
+        root_height: correct the root height onto the surfaces (`load_bvh_reference`); False for an
+            animator's keys (`--key-frames`), which are where they are.
+        boxes: with scene == "floor", ((min (3,), max (3,)), ...) boxes in the clip's coordinates (file
+            axes and units, `read_boxes`), written to `fitted_out` with the floor.
     Raises:
         InputError: the clip or a scene cannot be read, or the clip's skeleton lacks a joint.
     """
+    if str(scene) == FLOOR:
+        out = _writable(fitted_out)
+        capture = _floor_scene(clip, figure, boxes, skeleton_map)
+        return _onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, check=False, root_height=root_height)
     if str(scene) != AUTO:
         model = load_model(scene)
         frame = CaptureFrame.from_model(model, str(scene))  # a malformed record named with its file
-        ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map)
+        ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, root_height=root_height)
         return ClipScene(ref, model, Path(scene), frame=frame)
     bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
     first = load_bvh_reference(clip, bare, root_scale=root_scale, skeleton_map=skeleton_map)
     feet = model_feet(bare)
     pos = contact_points(bare, first.qpos)  # the figure's sites, foot by foot; rounded: their spheres' lowest points
     capture = fit_scene(first.times, pos, fit_contacts(first.times, pos, feet), feet)
-    out = Path(fitted_out)
-    if not out.parent.is_dir():
-        raise InputError(f"{out}: the folder {out.parent} does not exist; create it first")
+    out = _writable(fitted_out)
     try:
-        return _onto_fitted(clip, capture, figure, out, root_scale, skeleton_map)
+        return _onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, root_height=root_height)
     except RootCorrectionRefused as refused:
         notes = []
         if capture.boxes:  # boxes no foot rests on (a foot held still in the air, fitted as a prop): the floor alone
             notes.append(f"{len(capture.boxes)} fitted box(es) dropped, the scene is the floor alone: with them, {refused}")
             capture = FittedScene(capture.floor_z, (), capture.floor_slope)
             try:
-                return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map), notes=tuple(notes))
+                return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, root_height=root_height), notes=tuple(notes))
             except RootCorrectionRefused as again:
                 refused = again
         notes.append(f"{refused}; the root is corrected by that much all the same, and the result is only as good as the "
                      "fitted floor under those feet")
-        return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, check=False), notes=tuple(notes))
+        return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, check=False,
+                                         root_height=root_height), notes=tuple(notes))
 
 
-def _onto_fitted(clip, capture: FittedScene, figure, out: Path, root_scale, skeleton_map, check: bool = True) -> ClipScene:
+def _writable(path) -> Path:
+    """`path` as a Path; InputError when its folder does not exist."""
+    out = Path(path)
+    if not out.parent.is_dir():
+        raise InputError(f"{out}: the folder {out.parent} does not exist; create it first")
+    return out
+
+
+def read_boxes(path) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """The boxes of a `--boxes FILE.json`: [{"min": [x, y, z], "max": [x, y, z]}, ...], axis-aligned, in the
+    clip's coordinates (its axes and length unit, as its HIERARCHY and motion are written).
+
+    Raises:
+        InputError: the file is missing, not JSON, or a box is not two finite corners with min < max.
+    """
+    import json
+
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"--boxes {path}: no such file; give a JSON list such as "
+                         "[{\"min\": [0, 1, 0], \"max\": [1, 2, 0.3]}]") from None
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise InputError(f"--boxes {path}: cannot read it as JSON ({e})") from None
+    out = []
+    for i, box in enumerate(doc if isinstance(doc, list) else [None]):
+        try:
+            lo, hi = (np.asarray(box[k], float) for k in ("min", "max"))
+        except (TypeError, KeyError, ValueError):
+            lo = hi = np.zeros(0)
+        if lo.shape != (3,) or hi.shape != (3,) or not np.all(np.isfinite([lo, hi])) or np.any(hi <= lo):
+            raise InputError(f"--boxes {path}: box {i} is {box!r}; give {{\"min\": [x, y, z], \"max\": [x, y, z]}} "
+                             "with min < max, in the clip's coordinates")
+        out.append((lo, hi))
+    return tuple(out)
+
+
+def _floor_scene(clip, figure, boxes, skeleton_map) -> FittedScene:
+    """`--scene floor`: a level floor at the clip's height 0 and the boxes, in MuJoCo axes and metres (the
+    clip's recognised axes and unit: p = unit A p_file; A a signed permutation, so a box stays a box)."""
+    from runner.mocap.bvh import read_bvh
+    from runner.mocap.figure_record import clip_skeleton
+
+    skel = clip_skeleton(read_bvh(clip), load_model(figure), skeleton_map)[0]
+    out = []
+    for lo, hi in boxes:
+        a, b = (skel.unit * (skel.axes @ np.asarray(v, float)) for v in (lo, hi))
+        lo_m, hi_m = np.minimum(a, b), np.maximum(a, b)
+        out.append(((lo_m + hi_m) / 2, (hi_m - lo_m) / 2))
+    return FittedScene(0.0, tuple(out))
+
+
+def _onto_fitted(clip, capture: FittedScene, figure, out: Path, root_scale, skeleton_map, check: bool = True,
+                 root_height: bool = True) -> ClipScene:
     """The clip retargeted onto the scene `capture` (in the capture's coordinates), levelled and written to
     `out` (`clip_scene`); with `check`, a root correction beyond its bound raises RootCorrectionRefused."""
     frame, fitted = capture.levelling(), capture.levelled()
     with atomic_output(out, suffix=".xml") as tmp_path:
         Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem, capture=frame))
     model = load_model(out)
-    ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, fitted=check)
+    ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, fitted=check,
+                             root_height=root_height)
     return ClipScene(ref, model, out, fitted, capture, frame)
 
 

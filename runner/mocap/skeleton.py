@@ -25,8 +25,8 @@ with every channel zero):
   before the motion, as CMU's cgspeed conversion does: always, for a clip with its names) is not part
   of the motion (`REST_JUMP`).
 
-A skeleton map file (`--skeleton-map FILE`) names the joint of any role, the unit or the up axis, and
-wins over what is found. What cannot be found is one line naming the roles and the fix.
+A skeleton map file (`--skeleton-map FILE`) names the joint of any role, the unit, the up axis or the
+leading rest frames, and wins over what is found. What cannot be found is one line naming the roles and the fix.
 """
 from __future__ import annotations
 
@@ -79,6 +79,7 @@ class RecognisedSkeleton:
         position_joints: the joints with position channels (their translation is the channels').
         above_hips: the joints above the hips (a static extra root), root first.
         rest_frames: leading frames that are not motion (0, or 1 for a T-pose put before it).
+        rest_given: rest_frames came from a skeleton map (recorded in `skeleton_map`), not found.
         how: how the roles were found ("the hierarchy and names", or with the map file named).
         source: the clip file.
     """
@@ -93,6 +94,7 @@ class RecognisedSkeleton:
     rest_frames: int
     how: str
     source: str
+    rest_given: bool = False
 
     def joint(self, role: str) -> str:
         """The joint of `role`; an absent spine is the chest, an absent neck the head."""
@@ -104,7 +106,8 @@ class RecognisedSkeleton:
 
     def skeleton_map(self) -> SkeletonMap:
         """The complete map (every role found, unit, up): recognising with it gives this skeleton again."""
-        return SkeletonMap(dict(self.roles), self.unit, self.unit_name, self.up, self.source)
+        return SkeletonMap(dict(self.roles), self.unit, self.unit_name, self.up, self.source,
+                           self.rest_frames if self.rest_given else None)
 
 
 def skeleton_world(clip: BvhClip, skel: RecognisedSkeleton) -> tuple[np.ndarray, np.ndarray]:
@@ -371,9 +374,10 @@ def recognise(clip: BvhClip, skeleton_map: SkeletonMap | None = None) -> Recogni
         j = int(clip.parents[j])
     how = "the hierarchy and names" + (f", and the skeleton map {smap.source}" if smap.roles or smap.unit or smap.up
                                        else "")
+    given = smap.rest_frames is not None
+    rest = smap.rest_frames if given else _rest_frames(clip, p * unit[0], hips, sorted(set(idx.values())))
     return RecognisedSkeleton(MappingProxyType(roles), float(unit[0]), str(unit[1]), axes, up, positions,
-                              tuple(above), _rest_frames(clip, p * unit[0], hips, sorted(set(idx.values()))), how,
-                              clip.source)
+                              tuple(above), rest, how, clip.source, given)
 
 
 def _check_root_path(clip: BvhClip, hips: int, positions: tuple[str, ...]) -> None:

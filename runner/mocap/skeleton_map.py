@@ -5,9 +5,9 @@ the first joint of the spine above them (the torso's pivot), the chest (where th
 neck and the head, and on each side (``l_`` left, ``r_`` right) the upper leg, lower leg, foot, toe,
 upper arm, forearm and hand. The recogniser (runner/mocap/skeleton.py) finds them from the hierarchy and
 the names; a map file names the joint of any role it could not find (or overrides it), and may give the
-length unit and the up axis:
+length unit, the up axis and the leading rest frames:
 
-    {"hips": "pelvis", "chest": "spine_03", "l_upper_leg": "thigh_l", "unit": "cm", "up": "z"}
+    {"hips": "pelvis", "chest": "spine_03", "l_upper_leg": "thigh_l", "unit": "cm", "up": "z", "rest_frames": 0}
 
 This module holds the role names and reads, checks and writes that file (a JSON object).
 """
@@ -45,6 +45,8 @@ class SkeletonMap:
         roles: {role: joint name} (any subset of `ROLES`).
         unit: [m] per file unit, or None (found from the bone lengths). unit_name: as written ("cm", "0.01").
         up: the file axis pointing up ("y", "-z", ...), or None (found from the motion).
+        rest_frames: leading frames that are not motion (0 or 1), or None (found from the names and the
+            motion: a file written by a program that knows it has none, e.g. the Blender add-on, says 0).
         source: the file (for messages).
     """
 
@@ -53,6 +55,7 @@ class SkeletonMap:
     unit_name: str | None = None
     up: str | None = None
     source: str = ""
+    rest_frames: int | None = None
 
     def text(self) -> str:
         """The map as the JSON text of a map file (one line)."""
@@ -61,6 +64,8 @@ class SkeletonMap:
             doc["unit"] = self.unit_name if self.unit_name in UNITS else self.unit
         if self.up is not None:
             doc["up"] = self.up
+        if self.rest_frames is not None:
+            doc["rest_frames"] = self.rest_frames
         return json.dumps(doc, separators=(",", ":"))
 
 
@@ -92,7 +97,7 @@ def parse_skeleton_map(text: str, source: str) -> SkeletonMap:
     if not isinstance(doc, dict):
         raise InputError(f"{source}: a skeleton map is a JSON object {{\"role\": \"joint\", ...}}, not "
                          f"{type(doc).__name__}")
-    roles, unit, unit_name, up = {}, None, None, None
+    roles, unit, unit_name, up, rest = {}, None, None, None, None
     for key, value in doc.items():
         if key == "unit":
             unit, unit_name = _unit(value, source)
@@ -101,6 +106,11 @@ def parse_skeleton_map(text: str, source: str) -> SkeletonMap:
                 raise InputError(f"{source}: \"up\": {value!r} is not an axis; give one of {', '.join(AXES)} "
                                  "(the file axis that points up)")
             up = value.lower()
+        elif key == "rest_frames":
+            if value not in (0, 1) or isinstance(value, bool):
+                raise InputError(f"{source}: \"rest_frames\": {value!r} is not 0 or 1; give 1 when the file's first "
+                                 "frame is a rest pose put before the motion (a T-pose), else 0")
+            rest = int(value)
         elif key in ROLES:
             if not isinstance(value, str) or not value.strip():
                 raise InputError(f"{source}: \"{key}\": {value!r} is not a joint name; give the name of the "
@@ -108,8 +118,8 @@ def parse_skeleton_map(text: str, source: str) -> SkeletonMap:
             roles[key] = value.strip()
         else:
             raise InputError(f"{source}: unknown key \"{key}\"; the keys are the roles {', '.join(ROLES)}, and "
-                             "\"unit\" and \"up\"")
-    return SkeletonMap(roles, unit, unit_name, up, source)
+                             "\"unit\", \"up\" and \"rest_frames\"")
+    return SkeletonMap(roles, unit, unit_name, up, source, rest)
 
 
 def _unit(value, source: str) -> tuple[float, str]:

@@ -277,10 +277,11 @@ def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np
 
 
 def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.ndarray, fps: float,
-                     clip: BvhClip | None = None) -> tuple[BvhClip, int]:
+                     clip: BvhClip | None = None, as_solved: bool = False) -> tuple[BvhClip, int]:
     """Write a motion of saved path `saved` onto its source skeleton (`source_bvh_text`), atomically; the
-    root is moved as the path's root is from its reference's (`source_motion`). `clip`: the path's source
-    clip if already read (`source_clip`), else it is read.
+    root is moved as the path's root is from its reference's (`source_motion`: the reference's root-height
+    correction taken off), unless `as_solved` (from the captured hips: the feet where the solve put them on
+    the scene's surfaces). `clip`: the path's source clip if already read (`source_clip`), else it is read.
 
     Returns:
         (the source clip (its joints are the file's), the frames written: the motion's and the source's
@@ -295,20 +296,22 @@ def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.
         raise InputError(f"{saved.source}: the path was not made from a BVH clip, so it has no source skeleton; "
                          "give --skeleton figure")
     text = str(saved.arrays["clip_text"]) if str(saved.arrays.get("clip_text", "")) else Path(clip.source).read_text()
-    reference = (saved.reference_times, saved.reference_qpos) if saved.has_reference else None
+    reference = (saved.reference_times, saved.reference_qpos) if saved.has_reference and not as_solved else None
     body = source_bvh_text(clip, text, model, qpos, times, fps, reference)
     with atomic_output(out) as tmp:
         Path(tmp).write_text(body, encoding="utf-8")
     return clip, len(qpos) + clip_skeleton(clip, model)[0].rest_frames
 
 
-def export_on_source(npz, out, which: str = "optimized", fps: float | None = None, required: bool = False):
+def export_on_source(npz, out, which: str = "optimized", fps: float | None = None, required: bool = False,
+                     as_solved: bool = False):
     """`dynsplines export PATH.npz --to FILE.bvh` onto the source skeleton (module docstring).
 
     Args:
         npz: the saved path. out: the .bvh file. which: the motion. fps: [Hz] (None: the clip's rate).
         required: `--skeleton source` was given: a path without a clip is an error (else None is returned,
             and the caller writes the figure's skeleton).
+        as_solved: keep the reference's root-height correction (`write_source_bvh`; `--root-height solved`).
     Returns:
         `runner.export.ExportResult` (its frames the file's, rest frames included; its `check` the file read
         back at the path's keyframes, `runner.mocap.source_check.KeysOnSource`), or None (no clip, not required).
@@ -338,7 +341,7 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
                              "skeleton; give --skeleton figure, or redo the clip with --figure subject")
         return None
     try:
-        clip, frames = write_source_bvh(out, saved, model, motion.qpos, motion.times, motion.fps, clip)
+        clip, frames = write_source_bvh(out, saved, model, motion.qpos, motion.times, motion.fps, clip, as_solved)
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
                          "space or choose another --to") from None

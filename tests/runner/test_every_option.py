@@ -234,6 +234,7 @@ def test_the_other_commands_read_every_option(tmp_path, reads, monkeypatch, save
                    ["orient", MODELS / "orient_example.json", "--out", tmp_path / "o2.npz", "--rounds", "1",
                     "--form", "paper", "--rate", "200", "--quiet"]],
         "fig10": [["fig10", "--out", tmp_path / "f.png"]],
+        "blender-addon": [["blender-addon", "--out", tmp_path / "addon.zip"]],
         "view": [["view", saved_npz, "--port", "0"]],
     }
     for command, variants in runs.items():
@@ -265,5 +266,5 @@ def test_every_subcommand_is_walked():
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     covered = {"animate", "run-and-step", "mocap", "batch", "keyframes-from-bvh", "export", "view", "bench", "orient",
-               "fig10"}
+               "fig10", "blender-addon"}
     assert set(sub.choices) == covered, Path(__file__).name

@@ -56,11 +56,23 @@ def test_the_map_wins(short):
     ('{"unit": "feet"}', r"m\.json: \"unit\": 'feet' is neither one of m, cm, mm, inch, cmu nor a number"),
     ('{"unit": -1}', r"\"unit\": -1 is neither"),
     ('{"up": "w"}', r"m\.json: \"up\": 'w' is not an axis; give one of x, y, z, -x, -y, -z"),
+    ('{"rest_frames": 2}', r"m\.json: \"rest_frames\": 2 is not 0 or 1; give 1 when the file's first frame is a rest"),
+    ('{"rest_frames": true}', r"\"rest_frames\": True is not 0 or 1"),
 ])
 def test_a_bad_map_is_one_line(text, match):
     with pytest.raises(InputError, match=match) as e:
         parse_skeleton_map(text, "m.json")
     assert "\n" not in str(e.value)
+
+
+def test_the_map_gives_the_rest_frames(short, tmp_path):
+    """A CMU clip's first frame is its T-pose (1 rest frame, from its names); a map's "rest_frames": 0 says the
+    file has none (the Blender add-on's export), and the recognised skeleton's map records it again."""
+    clip = read_bvh(short)
+    assert recognise(clip).rest_frames == 1
+    skel = recognise(clip, parse_skeleton_map('{"rest_frames": 0}', "m.json"))
+    assert skel.rest_frames == 0 and json.loads(skel.skeleton_map().text())["rest_frames"] == 0
+    assert "rest_frames" not in json.loads(recognise(clip).skeleton_map().text())  # found, not given: not recorded
 
 
 def test_a_missing_map_file(tmp_path):
