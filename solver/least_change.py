@@ -262,7 +262,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             evals, raises, certified = evals + cert.n_evals, raises + list(cert.raises), True
             if progress:
                 progress("certify", {"round": k, "frames": cert.frames.count, "raised": cert.unmet, "evals": evals,
-                                     "spent": cert.n_evals})
+                                     "spent": cert.n_evals, "capped": cert.capped})
             if cert.status is not Status.CONVERGED:
                 status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
                 break
