@@ -59,9 +59,9 @@ CAUSES = {
                                  "passes through its keyed positions, so it slides at least the distance between "
                                  "consecutive ones (`runner.motion_metrics.forced_skate_mm`); no path through the "
                                  "keyframes holds the bound",
-    "bound out of reach": "the least change could not meet the constraint that bounds the figure (its limit "
-                          "raised to what the path reaches, `Solution.unmet`), or the capture itself misses "
-                          "the bound",
+    "bound out of reach": "the constraint that bounds the figure is out of reach of every path the solve of "
+                          "the violation itself found (its limit raised by the least violation, "
+                          "`Solution.certificate`), or the capture itself misses the bound",
     "the solve stopped short": "the solve ended (its subproblems, evaluations or time spent) with the bound's "
                                "constraint still beyond its tolerance (`Solution.integrals_final` above 1)",
     "the optimizer moved the root": "a joint-angle or contact-site error missed while the root's position error "

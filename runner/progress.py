@@ -109,8 +109,7 @@ class Progress:
             raised = info.get("raised") or {}
             what = ("every constraint can be met, nothing raised" if not raised else
                     "out of reach, limits raised by [SI]: " + ", ".join(f"{k} {v:.3g}" for k, v in raised.items()))
-            cap = ", its cap" if info.get("capped") else ""
-            self._line(f"  round {info['round'] + 1}: least violation sought ({info.get('spent', 0)} evaluations{cap}, "
+            self._line(f"  round {info['round'] + 1}: least violation sought ({info.get('spent', 0)} evaluations, "
                        f"{info.get('frames', 0)} frames): {what}")
         elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
             self._end_round()

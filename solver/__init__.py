@@ -14,6 +14,7 @@ One call for a figure in a scene, one for a single orientation::
     result = solver.orient(times, quats)                   # paper sec. 3
 """
 from solver.animate import animate, solve_problem
+from solver.constraints.base import Constraint
 from solver.contact_schedule import ContactSchedule
 from solver.contacts import Contact
 from solver.errors import DynsplinesError, InputError
@@ -68,6 +69,8 @@ __all__ = [
     # a figure problem built once from its spec (`build_problem`) and solved (`solve_problem`): the least
     # change to the plain spline that meets the constraints, as the command line does
     "Problem", "ProblemSpec", "build_problem", "solve_problem", "LeastChangeOptions",
+    # a constraint: the figure's own, or one of yours (`ProblemSpec.bounds`, docs/design.md)
+    "Constraint",
     # one-call APIs
     "animate", "orient", "OrientResult",
     # acceptance figures

@@ -92,5 +92,5 @@ def solve_problem(problem: Problem, options: LeastChangeOptions | None = None, *
         raise InputError(f"options must be a solver.LeastChangeOptions, got {type(options).__name__}")
     lc = build_least_change(problem.model, problem.keyframes, contacts=tuple(problem.contacts),
                             flights=problem.airborne, capture=problem.capture, rate=options.rate,
-                            forces=problem.forces, peaks=problem.force_bounds)
+                            forces=problem.forces, peaks=problem.force_bounds, bounds=problem.bounds)
     return solve_least_change(lc, options, should_stop=should_stop, progress=progress)

@@ -79,15 +79,12 @@ class Certificate:
         raises: (Raise, ...) per constraint and column raised; () when the problem is feasible.
         frames: the path that reaches the least violation (it meets every certified limit).
         n_evals: evaluations spent. status: CONVERGED, or the budget or stop request that ended it early.
-        capped: the search reached its cap of evaluations before its last solve ended: what it raised is the
-            least violation found, not every solve run to its tolerance.
     """
 
     raises: tuple = ()
     frames: FrameSet | None = field(default=None, repr=False)
     n_evals: int = 0
     status: Status = Status.CONVERGED
-    capped: bool = False
 
     @property
     def unmet(self) -> dict:
@@ -112,29 +109,26 @@ def with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) -> 
 
 
 class _Budget:
-    """The evaluations and time left of a solve and its stop request (which end the solve), and the
-    evaluations the search may spend (`cap`, 0: no cap; which end the search alone)."""
+    """The evaluations and time left of a solve, and its stop request."""
 
-    def __init__(self, max_evals: int, max_time_s: float, should_stop, cap: int = 0):
-        self.max_evals, self.max_time_s, self.should_stop, self.cap = max_evals, max_time_s, should_stop, cap
-        self.start, self.evals, self.status, self.capped = time.perf_counter(), 0, Status.CONVERGED, False
+    def __init__(self, max_evals: int, max_time_s: float, should_stop):
+        self.max_evals, self.max_time_s, self.should_stop = max_evals, max_time_s, should_stop
+        self.start, self.evals, self.status = time.perf_counter(), 0, Status.CONVERGED
 
     def spent(self) -> bool:
-        """Whether the search must end: the solve's budget spent (`status` says which) or the cap reached."""
+        """Whether the solve's budget is spent (`status` says which)."""
         if self.max_time_s and time.perf_counter() - self.start >= self.max_time_s:
             self.status = Status.MAX_TIME
         elif self.max_evals and self.evals >= self.max_evals:
             self.status = Status.MAX_EVALS
-        self.capped = self.capped or bool(self.cap and self.evals >= self.cap)
-        return self.status is not Status.CONVERGED or self.capped
+        return self.status is not Status.CONVERGED
 
     def kwargs(self, done) -> dict:
         """`solve_subproblem`'s budget arguments; `done()` True (every pair met) also ends it."""
         left = self.max_time_s - (time.perf_counter() - self.start) if self.max_time_s else 0.0
         user = self.should_stop or (lambda: False)
-        evals = [n - self.evals for n in (self.max_evals, self.cap) if n]
-        return {"max_evals": max(min(evals), 1) if evals else 0, "max_time_s": max(left, 0.0),
-                "should_stop": lambda: done() or user()}
+        return {"max_evals": max(self.max_evals - self.evals, 1) if self.max_evals else 0,
+                "max_time_s": max(left, 0.0), "should_stop": lambda: done() or user()}
 
 
 def _scaled(constraints, state) -> list[np.ndarray]:
@@ -236,8 +230,7 @@ def _raise(al: AugmentedLagrangian, constraints, frames: FrameSet) -> list[Raise
 
 
 def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, min_gap: float, ftol_rel: float,
-                    per_level: int, max_evals: int = 0, max_time_s: float = 0.0, should_stop=None,
-                    cap: int = 0) -> Certificate:
+                    per_level: int, max_evals: int = 0, max_time_s: float = 0.0, should_stop=None) -> Certificate:
     """The least violation of the constraints over the paths through the keyframes (module docstring).
 
     Args:
@@ -246,18 +239,17 @@ def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, mi
         quat_slots: (s, 4) the layout's quaternion slots. min_gap: [s] no two frames closer.
         ftol_rel: each L-BFGS solve's relative tolerance. per_level: the most
             penalty raises per level and frame set. max_evals, max_time_s, should_stop: the solve's budget
-            (0: none; spent, the Certificate's status says so). cap: the evaluations the search may spend
-            (0: no cap); reached, each level is certified on the path found so far (`Certificate.capped`).
+            (0: none; spent, the Certificate's status says so).
     Returns:
         Certificate: what was raised, the path that reaches it, the evaluations spent.
     """
-    budget = _Budget(max_evals, max_time_s, should_stop, cap)
+    budget = _Budget(max_evals, max_time_s, should_stop)
     cons = list(al.constraints)
     kw = dict(budget=budget, min_gap=min_gap, ftol_rel=ftol_rel, per_level=per_level)
     frames = _elastic_solve(al, cons, [], frames, quat_slots, **kw)
     state = al.state(SplineBasis(frames.times, al.t), frames.values)
     if budget.status is not Status.CONVERGED or all(float(s.max(initial=0.0)) <= 1.0 for s in _scaled(cons, state)):
-        return Certificate((), frames, budget.evals, budget.status, budget.capped)
+        return Certificate((), frames, budget.evals, budget.status)
     raises: list[Raise] = []
     for level in sorted({c.priority for c in cons}, reverse=True):
         objective = [c for c in cons if c.priority == level]
@@ -266,4 +258,4 @@ def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, mi
         if budget.status is not Status.CONVERGED:
             break
         raises += _raise(al, objective, frames)
-    return Certificate(tuple(raises), frames, budget.evals, budget.status, budget.capped)
+    return Certificate(tuple(raises), frames, budget.evals, budget.status)

@@ -130,7 +130,7 @@ class LeastChange:
 
 
 def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = LeastChangeOptions.rate,
-                       forces: bool = False, peaks=None) -> LeastChange:
+                       forces: bool = False, peaks=None, bounds=()) -> LeastChange:
     """Build the problem: the plain spline as the reference motion, D, the figure's constraints.
 
     Args:
@@ -142,10 +142,13 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
             (`solver.constraints.forces`: ballistic flights, the friction cone, with a capture the peak
             ground force), computed by the inverse dynamics. peaks: with `forces`, the problem's
             `solver.peak_bounds.PeakBounds` when already made (`Problem.force_bounds`); None: made here.
+        bounds: constraints of the caller's own (`ProblemSpec.bounds`): callables make(t) -> Constraint,
+            t (n,) the quadrature times [s].
     Returns:
         LeastChange.
     Raises:
-        InputError: fewer than two keyframes.
+        InputError: fewer than two keyframes; a bound that is not a Constraint or whose rows or limit do
+            not fit the quadrature points.
     """
     if keyframes.count < 2:
         raise InputError(f"{keyframes.source}: a path needs at least two keyframes, got {keyframes.count}")
@@ -171,6 +174,7 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
         else:
             peak = (peaks if peaks is not None else peak_bounds(model, plain, capture)).ground_force_bw
         constraints += figure_forces(model, t, flights, peak)
+    constraints += [_own_bound(make, t) for make in bounds]
     # the pose part's frequency: the keyframes' own Nyquist frequency (a change slower than the keyframe
     # spacing is priced by its pose, a faster one by its acceleration)
     omega = np.pi / float(np.mean(np.diff(keyframes.times)))
@@ -179,6 +183,21 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     al = AugmentedLagrangian(change, constraints, tmap, engine, d0)
     knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
     return LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots)
+
+
+def _own_bound(make, t: np.ndarray):
+    """A caller's constraint, `make(t)`, checked: a `Constraint` whose pairs are quadrature points of t."""
+    from solver.constraints.base import Constraint
+
+    c = make(t)
+    if not isinstance(c, Constraint):
+        raise InputError(f"a bound of ProblemSpec.bounds made {type(c).__name__}, not a solver.Constraint; "
+                         "make(t) must return a Constraint (docs/design.md 'A constraint of your own')")
+    rows = np.asarray(c.rows)
+    if rows.size and (rows.min() < 0 or rows.max() >= len(t) or np.shape(c.limit) != rows.shape):
+        raise InputError(f"bound {c.name!r}: rows must index the {len(t)} quadrature points and limit have one "
+                         f"value per row, got rows {rows.min()}..{rows.max()} and limit of shape {np.shape(c.limit)}")
+    return c
 
 
 def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
@@ -250,29 +269,20 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         if progress:
             progress("constraints", {"round": k, **worst, "rho": al.rho})
         met = worst["value"] <= 1.0 and V <= 1.0
-        if worst["value"] <= 1.0:
-            D = al.evaluate(basis, frames.values, grad=False)[2]
-            best = (D, frames) if best[0] > D else best
+        best = _better(al, best, frames, basis) if worst["value"] <= 1.0 else best
         level_its, kind, scores = level_its + 1, "boost", None
         if not (met or level_its >= o.per_level):
             continue
         if not met and not certified:  # a frame set's subproblems are spent with a pair broken (once: after it,
             # the path it found meets every limit, on these frames and on every refinement of them)
-            cert = _certify(lc, frames, o, start, evals, should_stop)
+            cert = _certify(lc, frames, o, start, evals, should_stop, progress, k)
             evals, raises, certified = evals + cert.n_evals, raises + list(cert.raises), True
-            if progress:
-                progress("certify", {"round": k, "frames": cert.frames.count, "raised": cert.unmet, "evals": evals,
-                                     "spent": cert.n_evals, "capped": cert.capped})
             if cert.status is not Status.CONVERGED:
                 status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
                 break
-            cbasis = SplineBasis(cert.frames.times, al.t)
-            D = al.evaluate(cbasis, cert.frames.values, grad=False)[2]
-            best = (D, cert.frames) if best[0] > D or cert.raises else best
+            best = _better(al, best, cert.frames)
             if cert.raises:  # go on from the path that meets the certified limits
-                raised = {r.constraint for r in cert.raises}
-                al.lam = [np.zeros(c.size) if c.name in raised else lam for c, lam in zip(al.constraints, al.lam)]
-                frames, basis, al.V, level_its, kind = cert.frames, cbasis, np.inf, 0, "certify"
+                frames, basis, level_its, kind = cert.frames, SplineBasis(cert.frames.times, al.t), 0, "certify"
                 continue
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
         decreases.append((frames.times.copy(), dec))
@@ -289,16 +299,32 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             level_its, kind = 0, "refine"
     else:
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
+    frames, basis, message, raises = _kept(al, frames, basis, best, message, raises, limits)
+    if status is Status.CONVERGED and raises:
+        status = Status.INFEASIBLE
+    return _solution(lc, frames, basis, rounds, trace, status, message, evals, tuple(raises),
+                     time.perf_counter() - start, estimate, o.tol, tuple(decreases))
+
+
+def _better(al: AugmentedLagrangian, best: tuple, frames: FrameSet, basis=None) -> tuple:
+    """(D, frames) of the better of `best` and `frames` (a path that meets every limit) by D."""
+    basis = basis if basis is not None else SplineBasis(frames.times, al.t)
+    D = al.evaluate(basis, frames.values, grad=False)[2]
+    return (D, frames) if best[0] > D else best
+
+
+def _kept(al: AugmentedLagrangian, frames: FrameSet, basis, best: tuple, message: str, raises: list,
+          limits: list) -> tuple:
+    """The path a solve returns: its last, or the best that met every limit where the last broke one; and
+    what stays raised on it (`_still_raised` against the limits as posed). Returns (frames, basis,
+    message, raises)."""
     if _worst(al, al.scaled_values(basis, frames.values))["value"] > 1.0 and np.isfinite(best[0]):
         frames = best[1]  # the path ended beyond a limit: the best path that meets them all
         basis = SplineBasis(frames.times, al.t)
         message += "; the last path broke a limit: the best that met them all kept"
     if raises:  # what stays raised: the certified columns the path returned is beyond their limits as posed
         raises = _still_raised(raises, beyond(al, al.constraints, frames, limits))
-    if status is Status.CONVERGED and raises:
-        status = Status.INFEASIBLE
-    return _solution(lc, frames, basis, rounds, trace, status, message, evals, tuple(raises),
-                     time.perf_counter() - start, estimate, o.tol, tuple(decreases))
+    return frames, basis, message, raises
 
 
 def _still_raised(certified: list, final: list) -> list:
@@ -310,12 +336,22 @@ def _still_raised(certified: list, final: list) -> list:
             for r in certified if (r.constraint, r.label) in out]
 
 
-def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop):
-    """`solver.feasibility.least_violation` from `frames` within what is left of the solve's budget."""
+def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop,
+             progress, k: int):
+    """`solver.feasibility.least_violation` from `frames` within what is left of the solve's budget; reports
+    it ("certify") and sets the multipliers of the constraints it raised to 0. Returns the Certificate."""
     left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
-    return least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=o.min_gap, ftol_rel=o.ftol_rel,
+    cert = least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=o.min_gap, ftol_rel=o.ftol_rel,
                            per_level=o.per_level, max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
                            max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop)
+    if progress:
+        progress("certify", {"round": k, "frames": cert.frames.count, "raised": cert.unmet,
+                             "evals": evals + cert.n_evals, "spent": cert.n_evals})
+    raised = {r.constraint for r in cert.raises}
+    al = lc.al
+    al.lam = [np.zeros(c.size) if c.name in raised else lam for c, lam in zip(al.constraints, al.lam)]
+    al.V = np.inf if raised else al.V
+    return cert
 
 
 def _budget(o: LeastChangeOptions, start: float, evals: int) -> tuple[float, Status | None]:

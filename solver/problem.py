@@ -56,6 +56,8 @@ class ProblemSpec:
             (`solver.peak_bounds`) and its flights are the problem's (`capture_airborne`).
         airborne: ((start, end), ...) [s] where the motion flies (a keyframe file's "flights"), used
             instead of the capture's; None: the capture's, else the schedule's gaps.
+        bounds: constraints of your own, each a callable make(t) -> `solver.Constraint` given the quadrature
+            times t (n,) [s] (docs/design.md "A constraint of your own"); () none.
     """
 
     keyframes: object
@@ -63,6 +65,7 @@ class ProblemSpec:
     forces: bool = False
     capture: tuple | None = field(default=None, repr=False)
     airborne: tuple | None = None
+    bounds: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -81,6 +84,7 @@ class Problem:
             larger of the plain spline's and the filtered capture's), or None without the force bounds.
         capture: None or (times (n,) [s], qpos (n, nq)): the motion capture the keyframes came from.
         airborne: None or ((start, end), ...) [s]: the flights given or found on the capture.
+        bounds: the constraints of the caller's own (`ProblemSpec.bounds`).
     """
 
     model: object = field(repr=False)
@@ -92,6 +96,7 @@ class Problem:
     force_bounds: object = None
     capture: tuple | None = field(default=None, repr=False)
     airborne: tuple | None = None
+    bounds: tuple = ()
 
     @property
     def terms(self) -> str:
@@ -161,4 +166,4 @@ def build_problem(model, spec: ProblemSpec) -> Problem:
         airborne = capture_airborne(model, *spec.capture)
     airborne = None if airborne is None else tuple((float(a), float(b)) for a, b in airborne)
     return Problem(model, keyframes, contacts, bool(spec.forces), initial, figure, peaks,
-                   spec.capture, airborne)
+                   spec.capture, airborne, tuple(spec.bounds))

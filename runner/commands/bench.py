@@ -269,7 +269,7 @@ def _run_and_step_block(runs: _Runs) -> Block:
     for name, terms in (("the constraints (default)", "default"), ("and the force bounds (`--terms all`)", "all")):
         f = runs.solved(terms)["figures"]
         # where the solve stops, so its change E, follows the CPU's round-off: with the force bounds a limit
-        # is out of reach (raised to what the path reaches, `Solution.unmet`); without them two kernels
+        # is out of reach (raised by the least violation, `Solution.certificate`); without them two kernels
         # stop after different refinement rounds (docs/solvers.md "Known limitation"): 0.65 here, 0.70
         # under OpenBLAS's Sandybridge kernels
         E = f"{f['E_final']:.3g}"

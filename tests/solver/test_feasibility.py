@@ -166,3 +166,20 @@ def test_multipliers_are_nonnegative_and_complementary_at_the_solution(standing)
     top = next(c for c, lam in zip(lc.al.constraints, lc.al.lam) if c.name == "top")
     assert lc.al.lam[lc.al.constraints.index(top)][0] > 0.0  # the active bound bears the pull of D
 
+
+
+def test_a_bound_of_your_own_through_the_public_api(standing):
+    """`ProblemSpec.bounds` (docs/design.md "A constraint of your own"): the pelvis held 5 mm under its keyed
+    height at the key is certified at those 5 mm by `solver.solve_problem`, beside the figure's own
+    constraints, which the still figure meets; a make(t) that returns no Constraint is one clear error."""
+    model, still, z0 = standing
+
+    def under(t):
+        return PelvisHeight("pelvis ceiling", t, T_STAR, +1, z0 - 0.005, LIMIT, half=0.02)
+
+    problem = solver.build_problem(model, solver.ProblemSpec(still, bounds=(under,)))
+    sol = solver.solve_problem(problem, LeastChangeOptions())
+    assert [r.constraint for r in sol.certificate] == ["pelvis ceiling"]
+    assert sol.certificate[0].amount == pytest.approx(0.005, abs=1e-9) and sol.status is Status.INFEASIBLE
+    with pytest.raises(solver.InputError, match="not a solver.Constraint"):
+        solver.solve_problem(solver.build_problem(model, solver.ProblemSpec(still, bounds=(lambda t: 3.0,))))
