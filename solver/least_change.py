@@ -281,8 +281,10 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
                 status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
                 break
             best = _better(al, best, cert.frames)
-            if cert.raises:  # go on from the path that meets the certified limits
-                frames, basis, level_its, kind = cert.frames, SplineBasis(cert.frames.times, al.t), 0, "certify"
+            if cert.raises:  # go on from its own path, with the frames the search added (it does not move
+                # the path there); the search's path, which meets every certified limit, is the fallback
+                frames = with_frames(frames, np.setdiff1d(cert.frames.times, frames.times), quat)
+                basis, level_its, kind = SplineBasis(frames.times, al.t), 0, "certify"
                 continue
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
         decreases.append((frames.times.copy(), dec))
@@ -339,18 +341,18 @@ def _still_raised(certified: list, final: list) -> list:
 def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop,
              progress, k: int):
     """`solver.feasibility.least_violation` from `frames` within what is left of the solve's budget; reports
-    it ("certify") and sets the multipliers of the constraints it raised to 0. Returns the Certificate."""
+    it ("certify") and sets the multipliers of the pairs it raised to 0. Returns the Certificate."""
     left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
+    before = [c.limit.copy() for c in lc.al.constraints]
     cert = least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=o.min_gap, ftol_rel=o.ftol_rel,
                            per_level=o.per_level, max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
                            max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop)
     if progress:
         progress("certify", {"round": k, "frames": cert.frames.count, "raised": cert.unmet,
                              "evals": evals + cert.n_evals, "spent": cert.n_evals})
-    raised = {r.constraint for r in cert.raises}
-    al = lc.al
-    al.lam = [np.zeros(c.size) if c.name in raised else lam for c, lam in zip(al.constraints, al.lam)]
-    al.V = np.inf if raised else al.V
+    al = lc.al  # a raised pair's multiplier estimated its old limit's pull: it starts again from 0
+    al.lam = [np.where(c.limit != old, 0.0, lam) for c, lam, old in zip(al.constraints, al.lam, before)]
+    al.V = np.inf if cert.raises else al.V
     return cert
 
 
