@@ -15,6 +15,7 @@ import sys
 from runner.commands.animate import register as register_animate
 from runner.commands.batch import register as register_batch
 from runner.commands.bench import register as register_bench
+from runner.commands.clean import register as register_clean
 from runner.commands.export import register as register_export
 from runner.commands.fig10 import register as register_fig10
 from runner.commands.keyframes_from_bvh import register as register_keyframes_from_bvh
@@ -27,7 +28,7 @@ from solver.errors import DynsplinesError, InputError
 from solver.objective import NonFiniteError
 
 #: every subcommand's `register`, in the order of `dynsplines --help`
-SUBCOMMANDS = (register_animate, register_mocap, register_batch, register_keyframes_from_bvh, register_export, register_view, register_bench,
+SUBCOMMANDS = (register_animate, register_mocap, register_clean, register_batch, register_keyframes_from_bvh, register_export, register_view, register_bench,
                register_orient, register_fig10)
 
 
