@@ -3,7 +3,7 @@
 The clip is the motion to keep: it is read and retargeted as `mocap` reads it (the figure, the scene
 fitted to where its feet rest, the contacts and flights found on it: `runner.pipeline`), and the path is
 the capture plus the least displacement that meets the constraints (`solver.displacement`), pinned to
-the capture at the clip's first and last frame and at the `--pin` times. No keyframes are picked and
+the capture at the `--pin` times (and with `--pin-ends` at the clip's first and last frame). No keyframes are picked and
 no in-betweens replace the performance: where nothing must change, the capture comes back exactly.
 
 Outputs, in renders/<clip stem>/ (`--out-dir`), beside `mocap`'s: `<stem>.clean.npz` (the saved path: the
@@ -36,14 +36,16 @@ class CleanOptions:
     """What `process_clean` does with a clip (the options of `dynsplines clean`).
 
     Attributes:
-        pins: [s] times where the cleaned clip is the capture, besides its first and last frame (each on the
-            nearest capture frame). scene, figure, mass, root_scale, skeleton_map: as `runner.pipeline.ClipKeys`.
+        pins: [s] times where the cleaned clip is the capture (each on the nearest capture frame). pin_ends:
+            the first and last frame too (else they move with the clean: a contact that runs into them
+            can be fixed there). scene, figure, mass, root_scale, skeleton_map: as `runner.pipeline.ClipKeys`.
         solve: LeastChangeOptions (None: the defaults). render: write the video (capture | cleaned);
             fps, size, speed, camera: its settings (`runner.render.side_by_side.VideoOptions`).
         quiet: no progress bars. summary: print the summary. command: the command line, recorded.
     """
 
     pins: tuple = ()
+    pin_ends: bool = False
     scene: str | os.PathLike = AUTO
     figure: str | os.PathLike = SUBJECT
     mass: float | None = None
@@ -139,16 +141,18 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
 
     ref, model = cs.reference, cs.model
     options = o.solve or LeastChangeOptions()
-    disp = build_displacement(model, ref.times, ref.qpos, pins=o.pins, contacts=contacts, flights=flights,
+    disp = build_displacement(model, ref.times, ref.qpos, pins=o.pins, pin_ends=o.pin_ends, contacts=contacts, flights=flights,
                               rate=options.rate)
-    pins = Keyframes(ref.times[disp.pins], ref.qpos[disp.pins], np.ones((len(disp.pins), model.nq), bool), str(clip))
-    problem = build_problem(model, ProblemSpec(pins, contacts, False, (ref.times, ref.qpos), flights))
-    source = Source(Path(cs.scene_path), ref, contacts, label=str(clip))
     with StopRequest(o.quiet) as stop:
         progress = Progress(o.quiet)
         sol = solve_displacement(disp, options, should_stop=stop, progress=progress)
         progress.done()
     out = clean_solution(disp, sol)
+    # the problem's keyframes: the pins and the clip's ends (the cleaned clip's values: the capture's at a pin)
+    at = out.frames.is_keyframe
+    keys = Keyframes(out.frames.times[at], out.frames.values[at], np.ones((int(at.sum()), model.nq), bool), str(clip))
+    problem = build_problem(model, ProblemSpec(keys, contacts, False, (ref.times, ref.qpos), flights))
+    source = Source(Path(cs.scene_path), ref, contacts, label=str(clip))
     interrupted = sol.status is Status.INTERRUPTED or stop.requested
     why = "interrupted (Ctrl-C), best path so far kept" if stop.requested else sol.message
     say(f"  stopped: {why}; {sol.n_evals} evaluations, {sol.frames.count} displacement frames, {sol.wall_time_s:.2f} s")

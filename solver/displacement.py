@@ -256,13 +256,15 @@ def cleaned_qpos(disp: Displacement, frames: FrameSet, times: np.ndarray | None 
 
 def clean_solution(disp: Displacement, solution: Solution) -> Solution:
     """The Solution of the cleaned clip: `frames` through every capture frame with the cleaned values
-    (c + d there; the pins its keyframes), `initial` the capture's own frames; the rest (rounds, status,
-    certificate, relaxations) the displacement's solve's.
+    (c + d there), `initial` the capture's own frames, both with the pins and the clip's ends as their
+    keyframes; the rest (rounds, status, certificate, relaxations) the displacement's solve's.
 
     The cleaned path between the capture's frames is the natural spline through those samples: it equals
     c + d where d's frames lie on capture frames (both are then cubic splines with knots at the frames)
     and differs by d's interpolation error between them otherwise.
     """
     cap = disp.capture_frames
-    frames = FrameSet(cap.times, cleaned_qpos(disp, solution.frames), cap.fixed, cap.is_keyframe)
-    return replace(solution, frames=frames, initial=cap)
+    keys = cap.is_keyframe.copy()
+    keys[[0, -1]] = True
+    frames = FrameSet(cap.times, cleaned_qpos(disp, solution.frames), cap.fixed, keys)
+    return replace(solution, frames=frames, initial=FrameSet(cap.times, cap.values, cap.fixed, keys))
