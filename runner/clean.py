@@ -159,11 +159,27 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
     return Run(problem, options, out, source, run_metrics(problem, out, source), interrupted), disp, sol
 
 
+def _on_source(paths: dict, say) -> dict | None:
+    """Write the cleaned clip onto the source skeleton (`runner.mocap.source_export.export_on_source`) and
+    say how far the file, read back, is from the source at the pins and the clip's ends (at a pin: the
+    source's own pose within `runner.mocap.source_check.ON_SOURCE`; at a free end: the clean's change)."""
+    from runner.mocap.source_export import export_on_source
+
+    res = export_on_source(paths["save_path"], paths["bvh"], required=True)
+    say(f"  wrote {res.describe()}")
+    check = res.check
+    if check is None or not len(check.times):
+        return None
+    say(f"  the pins and the clip's ends on {display_path(paths['bvh'])}, read back: {check.summary()}")
+    k, j = check.worst()
+    return {"max_mm": round(check.max_mm(), 3), "joint": check.joints[j], "time_s": round(float(check.times[k]), 4),
+            "keys_moved": int(check.moved.sum()), "keys": len(check.times)}
+
+
 def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu0: float, say) -> dict:
     """The summary, the saved path, the BVH on the source skeleton (checked at the pins), the metrics, the
     video; the result dict of `process_clean`."""
     from runner.clean_metrics import clean_figures
-    from runner.pipeline import keyframes_on_source_report
     from runner.render.side_by_side import VideoOptions
     from runner.run import Outputs, _filtered_capture, render_with_progress, report, write_metrics_json, write_results
     from solver.layout import StateLayout
@@ -178,10 +194,10 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu0:
         f"{fig['capture_pelvis_m_s2']:.2f}), joints {fig['change_joint_rad_s2']:.1f} rad/s^2 at {fig['change_joint']} "
         f"(capture at 6 Hz {fig['capture_joint_rad_s2']:.1f})")
     video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, camera=o.camera, quiet=o.quiet)
-    outputs = Outputs(save_path=paths["save_path"], exports=(paths["bvh"],), video=None, video_options=video,
-                      summary=False, quiet=o.quiet, command={"command": o.command, "mode": "clean"})
+    outputs = Outputs(save_path=paths["save_path"], video=None, video_options=video, summary=False, quiet=o.quiet,
+                      command={"command": o.command, "mode": "clean"})
     write_results(run, outputs, say)
-    on_source = keyframes_on_source_report(paths["save_path"], cs, run.problem.keyframes, say)
+    on_source = _on_source(paths, say)
     cpu = time.process_time() - cpu0
     result = {"clip": str(clip), "status": "interrupted" if run.interrupted else run.solution.status.value,
               "exit": "interrupted" if run.interrupted else "failed" if run.failed else "ok",
