@@ -193,7 +193,8 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu0:
         f"peak acceleration of the change: pelvis {fig['change_pelvis_m_s2']:.2f} m/s^2 (capture at 6 Hz "
         f"{fig['capture_pelvis_m_s2']:.2f}), joints {fig['change_joint_rad_s2']:.1f} rad/s^2 at {fig['change_joint']} "
         f"(capture at 6 Hz {fig['capture_joint_rad_s2']:.1f})")
-    video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, camera=o.camera, quiet=o.quiet)
+    video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, camera=o.camera, quiet=o.quiet,
+                         panels=("reference", "optimized"))  # capture | cleaned
     outputs = Outputs(save_path=paths["save_path"], video=None, video_options=video, summary=False, quiet=o.quiet,
                       command={"command": o.command, "mode": "clean"})
     write_results(run, outputs, say)
