@@ -8,7 +8,7 @@ no in-betweens replace the performance: where nothing must change, the capture c
 
 Outputs, in renders/<clip stem>/ (`--out-dir`), beside `mocap`'s: `<stem>.clean.npz` (the saved path: the
 cleaned clip at the capture's frames, `path_times`/`path_qpos`, beside the capture, `reference_qpos`),
-`<stem>.clean.bvh` (on the source skeleton: `runner.mocap.source_export`), `<stem>.clean.metrics.json`
+`<stem>.clean.bvh` (on the source skeleton: `runner.mocap.source_export`), `<stem>.clean.glb`, `<stem>.clean.metrics.json`
 and, unless `--no-render`, `<stem>.clean.mp4` (capture | cleaned).
 """
 from __future__ import annotations
@@ -68,6 +68,7 @@ def clean_paths(clip: Path, out_dir: Path, o: CleanOptions) -> dict:
 
     stem = clip.stem
     paths = {"save_path": out_dir / f"{stem}.clean.npz", "bvh": out_dir / f"{stem}.clean.bvh",
+             "glb": out_dir / f"{stem}.clean.glb",
              "metrics": out_dir / f"{stem}.clean.metrics.json", "scene": out_dir / f"{stem}.scene.xml"}
     if o.render:
         from runner.render.side_by_side import check_video_out
@@ -199,6 +200,9 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu0:
                       command={"command": o.command, "mode": "clean"})
     write_results(run, outputs, say)
     on_source = _on_source(paths, say)
+    from runner.export import export_saved_path
+
+    say(f"  wrote {export_saved_path(paths['save_path'], paths['glb'], option='--out-dir').describe()}")
     cpu = time.process_time() - cpu0
     result = {"clip": str(clip), "status": "interrupted" if run.interrupted else run.solution.status.value,
               "exit": "interrupted" if run.interrupted else "failed" if run.failed else "ok",

@@ -33,7 +33,7 @@ def register(sub) -> None:
                     "planted in contact and clear in flight, knees and elbows on their hinges, no new jolts "
                     "(motion displacement mapping; docs/mocap.md \"Cleaning a clip\"). Where nothing must change the "
                     "capture comes back exactly. Outputs go to renders/<clip stem>/ unless given: <stem>.clean.npz, "
-                    "<stem>.clean.bvh (on the source skeleton), <stem>.clean.metrics.json, <stem>.clean.mp4.")
+                    "<stem>.clean.bvh (on the source skeleton), <stem>.clean.glb, <stem>.clean.metrics.json, <stem>.clean.mp4.")
     p.add_argument("clip", type=Path, help="BVH clip, e.g. models/cmu/16_23.bvh")
     p.add_argument("--pin", type=_times, action="append", default=[], metavar="T1,T2",
                    help="times [s] where the clip is kept exactly as captured (each on the nearest frame); may be "

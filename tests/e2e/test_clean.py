@@ -22,7 +22,7 @@ def cleaned(tmp_path_factory):
 def test_clean_writes_its_outputs_and_meets_the_feet_limits(cleaned):
     out, result = cleaned
     assert result["exit"] == "ok"
-    for name in ("save_path", "bvh", "metrics", "scene"):
+    for name in ("save_path", "bvh", "glb", "metrics", "scene"):
         assert (out / result["outputs"][name].split("/")[-1]).is_file(), name
     report = json.loads((out / "16_23.clean.metrics.json").read_text())
     feet = report["metrics"]["motion"]["optimized"]["path"]
