@@ -226,10 +226,11 @@ def _change_bound(bound: AccelerationBound, reference: ReferenceMotion, times, q
 
 def _slide_as_captured(al: AugmentedLagrangian, plain: FrameSet) -> None:
     """Raise each slide limit to the capture's own slide over that contact: a clean slides no more than the
-    capture, and is not asked to slide less. The slide measure integrates the site's speed, and on a
-    capture at 120 Hz that is mostly marker noise (frame-to-frame speeds of 0.1-0.5 m/s of a resting heel,
-    16_23): halving it, as a keyed path must halve the capture's, asks a displacement no faster than the
-    capture's 6 Hz motion to cancel the noise, which it can only approach by changing the whole gait."""
+    capture, and is not asked to slide less. A contact found on a capture starts and ends with the site
+    still moving (entry below 0.5 m/s and 3 cm, exit above 1 m/s or 5 cm: `solver.contacts`), and marker
+    noise adds to its speed (16_23's resting heel: 0.1-0.5 m/s frame to frame; skate in contact 1.50
+    mm/frame, 0.92 after the 6 Hz filter): asked to halve that slide, as a keyed path is, the displacement
+    changed the whole gait (the bodies 5.6 cm from the capture on average, the torso up to 30 cm)."""
     from solver.spline_basis import SplineBasis
 
     state = al.state(SplineBasis(plain.times, al.t), plain.values)
