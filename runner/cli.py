@@ -16,6 +16,7 @@ from runner.commands.animate import register as register_animate
 from runner.commands.batch import register as register_batch
 from runner.commands.bench import register as register_bench
 from runner.commands.blender_addon import register as register_blender_addon
+from runner.commands.clean import register as register_clean
 from runner.commands.export import register as register_export
 from runner.commands.fig10 import register as register_fig10
 from runner.commands.keyframes_from_bvh import register as register_keyframes_from_bvh
@@ -28,8 +29,8 @@ from solver.errors import DynsplinesError, InputError
 from solver.objective import NonFiniteError
 
 #: every subcommand's `register`, in the order of `dynsplines --help`
-SUBCOMMANDS = (register_animate, register_mocap, register_batch, register_keyframes_from_bvh, register_export, register_view, register_bench,
-               register_orient, register_blender_addon, register_fig10)
+SUBCOMMANDS = (register_animate, register_mocap, register_clean, register_batch, register_keyframes_from_bvh, register_export,
+               register_view, register_bench, register_orient, register_blender_addon, register_fig10)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -9,7 +9,8 @@ pairs, unit, scale}: each limit the least violation raised, `Solution.certificat
 array: site, start, end, surface; the reference's or the keyframe file's contacts, may be empty; files
 written before it have none). A path made from a BVH clip also has clip (the clip's path, relative to the
 .npz's folder like the scene) and clip_text (the clip's whole text, so that `dynsplines export` writes onto
-the source skeleton even when the clip has moved); every path has figure (the figure MJCF the scene
+the source skeleton even when the clip has moved), path_times (r',) [s] and path_qpos (r', nq): the optimized
+path at the capture's frames within the path's span (`dynsplines clean`: the cleaned clip); every path has figure (the figure MJCF the scene
 includes, relative likewise; "" when the scene holds it inline).
 """
 from __future__ import annotations
@@ -110,6 +111,22 @@ def resolve_scene(name: str, npz_path) -> Path:
     return beside if beside.is_file() or not (REPO / scene).is_file() else REPO / scene
 
 
+def _path_at_capture(frames, reference) -> dict:
+    """{"path_times", "path_qpos"}: the optimized path at the capture's frames within its span (the frames'
+    own values where a frame lies on a capture frame, within 1e-9 s: a cleaned clip's, `dynsplines clean`,
+    exactly); {} without a capture."""
+    if reference is None or not len(reference.times):
+        return {}
+    t = np.asarray(reference.times, float)
+    t = t[(t >= frames.times[0] - 1e-9) & (t <= frames.times[-1] + 1e-9)]
+    q = frames.path(np.clip(t, frames.times[0], frames.times[-1]))
+    k = np.clip(np.searchsorted(frames.times, t), 0, frames.count - 1)
+    near = np.where(np.abs(frames.times[k - 1] - t) < np.abs(frames.times[k] - t), k - 1, k)
+    on = np.abs(frames.times[near] - t) <= 1e-9
+    q[on] = frames.values[near[on]]
+    return {"path_times": t, "path_qpos": q}
+
+
 def save_path_npz(run, path, command: dict | None = None) -> None:
     """Write a run's optimized path (.npz) atomically (fields: the module docstring).
 
@@ -151,6 +168,7 @@ def save_path_npz(run, path, command: dict | None = None) -> None:
         contacts=contacts_array(run.source.metric_contacts),
         figure=np.array(scene_reference(fig, path) if (fig := scene_figure(run.source.scene_path)) else ""),
         **_clip_fields(reference, path),
+        **_path_at_capture(solution.frames, reference),
     )
     try:
         with atomic_output(path) as tmp, open(tmp, "wb") as fh:

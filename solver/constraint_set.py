@@ -286,7 +286,7 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites, state
     whichever is less; and the relaxations worth reporting (the keyframes force more than the tolerance)."""
     t, w = reference.t, reference.weights
     index, times, values = _full_keyframes(plain)
-    keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else None
+    keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else np.zeros((0, len(sites), 2))
     cols_, pts, surf, pair, ww, span, rows, labels, keyed, reports = [], [], [], [], [], [], [], [], [], []
     for c in contacts:
         on = _pairs_in(t, c.start, c.end)

@@ -56,10 +56,15 @@ class AugmentedLagrangian:
             of D/D0: F = (1/2) sum_j sum_p (w_p/T) max(0, c_p/tol_j)^2, the elastic problem of
             `solver.feasibility` (its least value over the paths is how far those constraints cannot be
             met while `constraints` hold). `change` still gives the preconditioner.
+        base: None (the path is the spline through the frames), or (Y0, Y1_0, Y2_0), each (n, nq) at the
+            quadrature points: a fixed motion the spline is added to (the path is base + spline, its
+            derivatives the base's plus the spline's), the captured clip of a motion displacement
+            (`solver.displacement`). dPath/dP is the spline's either way.
     """
 
-    def __init__(self, change, constraints, tmap, engine, d0: float, rho: float = 1.0, elastic=None):
+    def __init__(self, change, constraints, tmap, engine, d0: float, rho: float = 1.0, elastic=None, base=None):
         self.change, self.constraints, self.tmap, self.engine = change, list(constraints), tmap, engine
+        self.base = None if base is None else tuple(np.asarray(b, float) for b in base)
         self.elastic = None if elastic is None else list(elastic)
         ref = change.ref
         self.t, self.T = ref.t, ref.duration
@@ -71,8 +76,11 @@ class AugmentedLagrangian:
         self.V = np.inf
 
     def state(self, basis, P: np.ndarray) -> PathState:
-        """The PathState of frame values P (m, nq) through `basis` (a `SplineBasis` at the points)."""
+        """The PathState of frame values P (m, nq) through `basis` (a `SplineBasis` at the points), plus
+        the base motion where there is one."""
         Y, Y1, Y2 = basis.evaluate(P, (0, 1, 2))
+        if self.base is not None:
+            Y, Y1, Y2 = Y + self.base[0], Y1 + self.base[1], Y2 + self.base[2]
         return PathState(self.t, Y, Y1, Y2, self.tmap, self.engine)
 
     def evaluate(self, basis, P: np.ndarray, grad: bool = True):

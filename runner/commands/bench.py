@@ -30,7 +30,7 @@ import argparse
 from runner.animate_options import default_args, solve_options
 from runner.bench import orient as orient_workload
 from runner.bench.figure import path_figures, time_solves
-from runner.commands import bench_contacts, bench_corpus, bench_speed
+from runner.commands import bench_clean, bench_contacts, bench_corpus, bench_speed
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
@@ -44,7 +44,7 @@ from solver.metrics import path_metrics
 
 def register(sub) -> None:
     """Add `bench` (run-and-step, docs, orient, scaling, contacts, corpus, speed) to the `dynsplines` parser."""
-    p = sub.add_parser("bench", help="benchmarks: run-and-step, docs, orient, scaling, contacts, corpus, speed")
+    p = sub.add_parser("bench", help="benchmarks: run-and-step, docs, orient, scaling, contacts, corpus, speed, clean")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
     r = bsub.add_parser("run-and-step", help="optimization time of the showcase clip, default and --terms all")
@@ -80,6 +80,7 @@ def register(sub) -> None:
     bench_contacts.register(bsub)
     bench_corpus.register(bsub)
     bench_speed.register(bsub)
+    bench_clean.register(bsub)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -1,0 +1,224 @@
+"""From a motion-capture clip to the same clip cleaned: `process_clean`, the work of `dynsplines clean`.
+
+The clip is the motion to keep: it is read and retargeted as `mocap` reads it (the figure, the scene
+fitted to where its feet rest, the contacts and flights found on it: `runner.pipeline`), and the path is
+the capture plus the least displacement that meets the constraints (`solver.displacement`), pinned to
+the capture at the `--pin` times (and with `--pin-ends` at the clip's first and last frame). No keyframes are picked and
+no in-betweens replace the performance: where nothing must change, the capture comes back exactly.
+
+Outputs, in renders/<clip stem>/ (`--out-dir`), beside `mocap`'s: `<stem>.clean.npz` (the saved path: the
+cleaned clip at the capture's frames, `path_times`/`path_qpos`, beside the capture, `reference_qpos`),
+`<stem>.clean.bvh` (on the source skeleton: `runner.mocap.source_export`), `<stem>.clean.glb`, `<stem>.clean.metrics.json`
+and, unless `--no-render`, `<stem>.clean.mp4` (capture | cleaned).
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from runner.mocap.figure_choice import SUBJECT
+from runner.mocap.reference import ROOT_SCALE_LEGS
+from runner.mocap.scene import AUTO
+from runner.paths import display_path
+from solver.errors import InputError
+from solver.least_change import LeastChangeOptions
+
+__all__ = ["CleanOptions", "process_clean"]
+
+
+@dataclass(frozen=True)
+class CleanOptions:
+    """What `process_clean` does with a clip (the options of `dynsplines clean`).
+
+    Attributes:
+        pins: [s] times where the cleaned clip is the capture (each on the nearest capture frame). pin_ends:
+            the first and last frame too (else they move with the clean: a contact that runs into them
+            can be fixed there). scene, figure, mass, root_scale, skeleton_map: as `runner.pipeline.ClipKeys`.
+        solve: LeastChangeOptions (None: the defaults). render: write the video (capture | cleaned);
+            fps, size, speed, camera: its settings (`runner.render.side_by_side.VideoOptions`).
+        quiet: no progress bars. summary: print the summary. command: the command line, recorded.
+    """
+
+    pins: tuple = ()
+    pin_ends: bool = False
+    scene: str | os.PathLike = AUTO
+    figure: str | os.PathLike = SUBJECT
+    mass: float | None = None
+    root_scale: float | str = ROOT_SCALE_LEGS
+    skeleton_map: str | os.PathLike | None = None
+    solve: LeastChangeOptions | None = None
+    render: bool = True
+    fps: float = 30.0
+    size: tuple[int, int] = (960, 540)
+    speed: float = 0.5
+    camera: float = 90.0
+    quiet: bool = False
+    summary: bool = True
+    command: str = ""
+
+
+def clean_paths(clip: Path, out_dir: Path, o: CleanOptions) -> dict:
+    """The output files of a clean ({name: path}), each folder checked for writing before any work."""
+    from runner.files import check_writable_dir
+
+    stem = clip.stem
+    paths = {"save_path": out_dir / f"{stem}.clean.npz", "bvh": out_dir / f"{stem}.clean.bvh",
+             "glb": out_dir / f"{stem}.clean.glb",
+             "metrics": out_dir / f"{stem}.clean.metrics.json", "scene": out_dir / f"{stem}.scene.xml"}
+    if o.render:
+        from runner.render.side_by_side import check_video_out
+
+        paths["video"] = out_dir / f"{stem}.clean.mp4"
+        check_video_out(paths["video"], o.size)
+    check_writable_dir(paths["save_path"], "--out-dir")
+    return paths
+
+
+def _capture(clip: Path, o: CleanOptions, scene_out: Path, say):
+    """The clip retargeted (figure, fitted scene) with its contacts and flights, as `mocap` reads it."""
+    from runner.mocap.contact_detection import reference_contacts
+    from runner.mocap.scene import clip_scene, name_surfaces
+    from runner.pipeline import ClipKeys, _skeleton_map, clip_figure_scene
+    from solver.model import check_scene
+    from solver.problem import capture_airborne
+
+    k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, skeleton_map=o.skeleton_map)
+    figure, scene = clip_figure_scene(clip, k, scene_out)
+    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, _skeleton_map(k))
+    ref, model = cs.reference, cs.model
+    check_scene(model, cs.scene_path)
+    contacts = tuple(name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time)))
+    flights = capture_airborne(model, ref.times, ref.qpos)
+    say(f"dynsplines clean: {clip} -> {ref.count} frames at {1 / ref.frame_time:.4g} Hz ({ref.duration:.2f} s), "
+        f"{len(contacts)} contacts, {len(flights)} flights; scene {'fitted: ' if cs.fitted is not None else ''}"
+        f"{display_path(cs.scene_path)}")
+    for note in cs.notes:
+        say(f"  warning: {note}")
+    return cs, contacts, flights
+
+
+def process_clean(clip, out_dir=None, options: CleanOptions | None = None, say=print) -> dict:
+    """Clean a BVH clip (module docstring).
+
+    Args:
+        clip: the .bvh file. out_dir: the output folder [renders/<clip stem>/], created if missing.
+        options: CleanOptions [defaults]. say: where result lines go.
+    Returns:
+        {"clip", "status", "exit" ("ok" | "failed" | "interrupted"), "frames", "fps", "pins" ([s]),
+        "displacement_frames", "solve_time_s", "cpu_time_s" (the whole command's process time), "clean"
+        (`runner.clean_metrics.clean_figures`), "certificate", "keyframes_on_source" (the pins on the
+        written BVH, read back), "outputs"}.
+    Raises:
+        InputError: a missing or malformed clip, another skeleton, an unwritable output, a pin outside the clip.
+    """
+    from runner.pipeline import default_out_dir
+
+    cpu0 = time.process_time()
+    o = options or CleanOptions()
+    clip = Path(clip)
+    if not clip.is_file():
+        raise InputError(f"{clip}: no such BVH clip (current folder: {Path.cwd()}); give the path of a .bvh file")
+    out_dir = Path(out_dir) if out_dir is not None else default_out_dir(clip)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = clean_paths(clip, out_dir, o)
+    cs, contacts, flights = _capture(clip, o, paths["scene"], say)
+    run, disp, sol = _solve(cs, contacts, flights, o, clip, say)
+    return _outputs(run, disp, sol, cs, o, paths, clip, cpu0, say)
+
+
+def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
+    """Build and solve the displacement; the Run of the cleaned clip (plain: the capture), with its metrics."""
+    from runner.progress import Progress, StopRequest
+    from runner.run import Run, Source, run_metrics
+    from solver.displacement import build_displacement, clean_solution, solve_displacement
+    from solver.keyframes import Keyframes
+    from solver.optimize import Status
+    from solver.problem import ProblemSpec, build_problem
+
+    ref, model = cs.reference, cs.model
+    options = o.solve or LeastChangeOptions()
+    disp = build_displacement(model, ref.times, ref.qpos, pins=o.pins, pin_ends=o.pin_ends, contacts=contacts, flights=flights,
+                              rate=options.rate)
+    with StopRequest(o.quiet) as stop:
+        progress = Progress(o.quiet)
+        sol = solve_displacement(disp, options, should_stop=stop, progress=progress)
+        progress.done()
+    out = clean_solution(disp, sol)
+    # the problem's keyframes: the pins and the clip's ends (the cleaned clip's values: the capture's at a pin)
+    at = out.frames.is_keyframe
+    keys = Keyframes(out.frames.times[at], out.frames.values[at], np.ones((int(at.sum()), model.nq), bool), str(clip))
+    problem = build_problem(model, ProblemSpec(keys, contacts, False, (ref.times, ref.qpos), flights))
+    source = Source(Path(cs.scene_path), ref, contacts, label=str(clip))
+    interrupted = sol.status is Status.INTERRUPTED or stop.requested
+    why = "interrupted (Ctrl-C), best path so far kept" if stop.requested else sol.message
+    say(f"  stopped: {why}; {sol.n_evals} evaluations, {sol.frames.count} displacement frames, {sol.wall_time_s:.2f} s")
+    return Run(problem, options, out, source, run_metrics(problem, out, source), interrupted), disp, sol
+
+
+def _on_source(paths: dict, say) -> dict | None:
+    """Write the cleaned clip onto the source skeleton (`runner.mocap.source_export.export_on_source`) and
+    say how far the file, read back, is from the source at the pins and the clip's ends (at a pin: the
+    source's own pose within `runner.mocap.source_check.ON_SOURCE`; at a free end: the clean's change)."""
+    from runner.mocap.source_export import export_on_source
+
+    res = export_on_source(paths["save_path"], paths["bvh"], required=True)
+    say(f"  wrote {res.describe()}")
+    check = res.check
+    if check is None or not len(check.times):
+        return None
+    say(f"  the pins and the clip's ends on {display_path(paths['bvh'])}, read back: {check.summary()}")
+    k, j = check.worst()
+    return {"max_mm": round(check.max_mm(), 3), "joint": check.joints[j], "time_s": round(float(check.times[k]), 4),
+            "keys_moved": int(check.moved.sum()), "keys": len(check.times)}
+
+
+def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu0: float, say) -> dict:
+    """The summary, the saved path, the BVH on the source skeleton (checked at the pins), the metrics, the
+    video; the result dict of `process_clean`."""
+    from runner.clean_metrics import clean_figures
+    from runner.render.side_by_side import VideoOptions
+    from runner.run import Outputs, _filtered_capture, render_with_progress, report, write_metrics_json, write_results
+    from solver.layout import StateLayout
+
+    ref, model = cs.reference, cs.model
+    fig = clean_figures(model, run.solution.frames.values, ref.qpos, 1.0 / ref.frame_time,
+                        _filtered_capture(ref, StateLayout.from_model(model)))
+    if o.summary:
+        say(report(run).replace("plain spline", "capture"))
+    say(f"  change from the capture: deviation mean {fig['deviation_mean_cm']:.2f} cm, max {fig['deviation_max_cm']:.2f} cm; "
+        f"peak acceleration of the change: pelvis {fig['change_pelvis_m_s2']:.2f} m/s^2 (capture at 6 Hz "
+        f"{fig['capture_pelvis_m_s2']:.2f}), joints {fig['change_joint_rad_s2']:.1f} rad/s^2 at {fig['change_joint']} "
+        f"(capture at 6 Hz {fig['capture_joint_rad_s2']:.1f})")
+    video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, camera=o.camera, quiet=o.quiet,
+                         panels=("reference", "optimized"))  # capture | cleaned
+    outputs = Outputs(save_path=paths["save_path"], video=None, video_options=video, summary=False, quiet=o.quiet,
+                      command={"command": o.command, "mode": "clean"})
+    write_results(run, outputs, say)
+    on_source = _on_source(paths, say)
+    from runner.export import export_saved_path
+
+    say(f"  wrote {export_saved_path(paths['save_path'], paths['glb'], option='--out-dir').describe()}")
+    cpu = time.process_time() - cpu0
+    result = {"clip": str(clip), "status": "interrupted" if run.interrupted else run.solution.status.value,
+              "exit": "interrupted" if run.interrupted else "failed" if run.failed else "ok",
+              "frames": ref.count, "fps": 1.0 / ref.frame_time, "pins": [float(t) for t in disp.times[disp.pins]],
+              "displacement_frames": sol.frames.count, "solve_time_s": sol.wall_time_s, "cpu_time_s": cpu,
+              "clean": fig, "certificate": [r.__dict__ for r in sol.certificate],
+              "keyframes_on_source": on_source, "outputs": {k: str(v) for k, v in paths.items()}}
+    write_metrics_json(run, paths["metrics"], extra={k: v for k, v in result.items() if k not in ("status", "exit")})
+    say(f"  wrote {display_path(paths['metrics'])}")
+    if "video" in paths and not run.interrupted:
+        try:
+            info = render_with_progress(paths["video"], run, video, quiet=o.quiet)
+            say(f"  wrote {display_path(paths['video'])} ({info.summary()})")
+        except KeyboardInterrupt:
+            print(f"\ndynsplines: interrupted while rendering: {display_path(paths['video'])} not written",
+                  file=sys.stderr)
+            result["exit"] = "interrupted"
+    say(f"  cpu time {cpu:.1f} s (before the video)")
+    return result

@@ -1,0 +1,57 @@
+"""How far a cleaned clip is from its capture, and whether the change adds a jolt (`dynsplines clean`).
+
+* **Deviation**: the distance between each body's origin on the cleaned clip and on the capture (MuJoCo's
+  forward kinematics, `xpos`), over every frame and body: mean and max [cm] (the field's mean per-joint
+  position error, MPJPE, measured against the capture instead of a ground truth).
+* **The change's jolts**: the peak acceleration of the change, a_clean - a_capture (finite differences of
+  both at the frame rate, `runner.jolts.differentiate`): the pelvis's [m/s^2] and the largest ball joint's
+  [rad/s^2], beside the capture's own peaks after the 6 Hz low-pass filter (`runner.jolts.jolt_figures`):
+  a change no harder than those adds no jolt the captured motion does not already have.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["clean_figures"]
+
+
+def _body_positions(model, qpos: np.ndarray) -> np.ndarray:
+    """(n, nbody - 1, 3) [m] every body's origin but the world's (MuJoCo `mj_kinematics`)."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    out = np.empty((len(qpos), model.nbody - 1, 3))
+    for i, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        out[i] = data.xpos[1:]
+    return out
+
+
+def clean_figures(model, clean: np.ndarray, capture: np.ndarray, fps: float, capture_filtered: np.ndarray) -> dict:
+    """The deviation of a cleaned clip from its capture and the change's peak accelerations (module docstring).
+
+    Args:
+        model: the scene's MjModel (a figure with a free root and ball joints). clean, capture: (n, nq)
+            frames at i / fps, n >= 3. fps: [Hz] > 0. capture_filtered: (n, nq) the capture low-pass
+            filtered at 6 Hz (`runner.jolts.filter_capture`).
+    Returns:
+        {"deviation_mean_cm", "deviation_max_cm", "change_pelvis_m_s2", "change_joint_rad_s2",
+        "change_joint", "capture_pelvis_m_s2", "capture_joint_rad_s2"} (JSON-serializable floats and a name).
+    Raises:
+        InputError: shapes that do not fit the model or fewer than 3 frames (`runner.jolts.differentiate`).
+    """
+    from runner.jolts import _joints, differentiate, jolt_figures
+
+    clean, capture = np.asarray(clean, float), np.asarray(capture, float)
+    dev = np.linalg.norm(_body_positions(model, clean) - _body_positions(model, capture), axis=-1)
+    da = differentiate(model, clean, fps)[1] - differentiate(model, capture, fps)[1]
+    free, balls, _ = _joints(model)
+    pelvis = float(np.linalg.norm(da[:, free:free + 3], axis=1).max()) if free is not None else float("nan")
+    peaks = {name: float(np.linalg.norm(da[:, adr:adr + 3], axis=1).max()) for name, adr in balls.items()}
+    worst = max(peaks, key=peaks.get, default="")
+    own = jolt_figures(model, capture_filtered, fps)
+    return {"deviation_mean_cm": 100.0 * float(dev.mean()), "deviation_max_cm": 100.0 * float(dev.max()),
+            "change_pelvis_m_s2": pelvis, "change_joint_rad_s2": peaks.get(worst, float("nan")), "change_joint": worst,
+            "capture_pelvis_m_s2": own["peak_pelvis_acceleration_m_s2"],
+            "capture_joint_rad_s2": own["peak_angular_acceleration_max_rad_s2"]}

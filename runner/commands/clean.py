@@ -1,0 +1,67 @@
+"""`dynsplines clean CLIP.bvh`: the clip cleaned, its performance kept (the work is
+`runner.clean.process_clean`; this module is argument glue)."""
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+
+from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from runner.parser import positive
+
+PROG = "dynsplines clean"
+
+
+def _times(text: str) -> tuple:
+    """--pin T1,T2,... [s]."""
+    import argparse
+
+    try:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of times in seconds, e.g. 0.5,1.25") from None
+
+
+def register(sub) -> None:
+    """Add `clean` to the `dynsplines` parser."""
+    from runner.commands.mocap import add_figure_arguments, add_root_scale_argument
+    from runner.mocap.scene import AUTO
+
+    p = sub.add_parser(
+        "clean", help="a motion-capture clip in, the same clip with its feet fixed out (the performance kept)",
+        description="Clean a BVH clip: the capture plus the least displacement that keeps the feet out of the floor, "
+                    "planted in contact and clear in flight, knees and elbows on their hinges, no new jolts "
+                    "(motion displacement mapping; docs/mocap.md \"Cleaning a clip\"). Where nothing must change the "
+                    "capture comes back exactly. Outputs go to renders/<clip stem>/ unless given: <stem>.clean.npz, "
+                    "<stem>.clean.bvh (on the source skeleton), <stem>.clean.glb, <stem>.clean.metrics.json, <stem>.clean.mp4.")
+    p.add_argument("clip", type=Path, help="BVH clip, e.g. models/cmu/16_23.bvh")
+    p.add_argument("--pin", type=_times, action="append", default=[], metavar="T1,T2",
+                   help="times [s] where the clip is kept exactly as captured (each on the nearest frame); may be "
+                        "repeated [none]")
+    p.add_argument("--pin-ends", action="store_true",
+                   help="keep the clip's first and last frame exactly as captured too (to join it to other clips); "
+                        "a contact that runs into them is then fixed only where it can be")
+    p.add_argument("--out-dir", type=Path, default=None, help="output folder [renders/<clip stem>/ in the current folder]")
+    p.add_argument("--scene", default=AUTO,
+                   help="scene MJCF, or 'auto' (default): a floor and boxes fitted to where the clip's feet rest")
+    add_figure_arguments(p)
+    add_root_scale_argument(p)
+    p.add_argument("--no-render", action="store_true", help="skip the video")
+    p.add_argument("--fps", type=positive(float), default=30.0, help="video frames per second [%(default)s]")
+    p.add_argument("--max-time", type=positive(float), default=None, metavar="S", help="stop the solve after S seconds")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--no-summary", action="store_true", help="do not print the summary")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from runner.clean import CleanOptions, process_clean
+    from solver.least_change import LeastChangeOptions
+
+    solve = LeastChangeOptions(max_time_s=args.max_time) if args.max_time else None
+    o = CleanOptions(pins=tuple(t for group in args.pin for t in group), pin_ends=args.pin_ends, scene=args.scene, figure=args.figure,
+                     mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map, solve=solve,
+                     render=not args.no_render, fps=args.fps, quiet=args.quiet, summary=not args.no_summary,
+                     command=shlex.join(["dynsplines", "clean", *sys.argv[2:]]))
+    result = process_clean(args.clip, args.out_dir, o)
+    return {"ok": EXIT_OK, "interrupted": EXIT_INTERRUPTED}.get(result["exit"], EXIT_FAILED)

@@ -1,0 +1,271 @@
+"""Clean a captured clip: the least change to the capture itself, as a motion displacement.
+
+    q(t) = c(t) + d(t)
+
+c is the retargeted capture, the natural cubic spline through every one of its frames (C2, so its
+accelerations are defined everywhere: `solver.reference.ReferenceMotion.from_samples`), and d is the
+displacement, a natural cubic spline through its own frames that the least change optimizes
+(`solver.least_change`): motion displacement mapping (Bruderlin & Williams, "Motion signal processing",
+SIGGRAPH 1995; Witkin & Popovic, "Motion warping", SIGGRAPH 1995; Lee & Shin, "A hierarchical approach
+to interactive motion editing for human-like figures", SIGGRAPH 1999), with the edit posed as the least
+change that meets the constraints (Gleicher, "Motion editing with spacetime constraints", I3D 1997).
+
+* **The reference motion is the capture** (D measures the change of the capture's own accelerations and
+  pose), and the constraints are the figure's (`solver.constraint_set`) with the capture's contacts and
+  flights; the capture is their witness (the no-jolt and effort bounds against the 6 Hz capture).
+* **The pins** are the displacement's keyframes, d = 0 exactly: the clip's first and last frame and any
+  the user names (each on the capture frame nearest it). Its variable frames start at the contacts'
+  touch-downs and lift-offs and one per segment, and go where the Euler-Lagrange residual says, as for
+  keyframes. Where no constraint asks for a change D's minimum is d = 0: the capture comes back exactly.
+* **Quaternions are displaced additively in R^4.** A displacement frame's quaternion slot holds a unit
+  quaternion p moved on its sphere (`solver.manifold`, three rotation variables, as a frame of a keyed
+  path) around a fixed anchor e, the clip's mean orientation of that joint, and the displacement is
+  p - e. So d = 0 where p = e, the variables are rotation vectors the preconditioner prices by the
+  joint's inertia, and the sum c + d is a quaternion MuJoCo normalizes (the unit-norm bound keeps it
+  near unit, as between the frames of a keyed path). Limit: a joint whose captured orientation turns
+  through 180 degrees from its mean (a root turning round) cannot be displaced about one axis there.
+* The solver sees the displacement's frames; the capture enters as a fixed base motion at the
+  quadrature points (`AugmentedLagrangian.base`: the path is c + d with its first and second
+  derivatives), so every constraint and gradient is the keyed path's, with the same dPath/dP.
+
+`clean_solution` turns the solved displacement into the cleaned clip at the capture's frames (a
+FrameSet through every frame: c + d sampled there) beside the capture itself.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from solver.change import MeasureOfChange
+from solver.constraint_set import figure_constraints
+from solver.constraints.acceleration import AccelerationBound
+from solver.constraints.base import RELATIVE_TOLERANCE
+from solver.contact_schedule import ContactSchedule
+from solver.errors import InputError
+from solver.figure import Figure
+from solver.frames import FrameSet
+from solver.inverse_dynamics import InverseDynamics
+from solver.kinematics import TangentMap
+from solver.lagrangian import AugmentedLagrangian
+from solver.layout import StateLayout
+from solver.least_change import STANDARD_GRAVITY, LeastChange, LeastChangeOptions, solve_least_change
+from solver.peak_bounds import filter_capture
+from solver.quadrature import check_points, quadrature_times
+from solver.reference import ReferenceMotion
+from solver.solution import Solution
+from solver.spline import interpolate
+
+__all__ = ["CORRECTION_TIME", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
+           "solve_displacement"]
+
+#: [s] the duration that divides a correction priced by its pose from one priced by its acceleration
+#: (the measure of change's omega = pi / CORRECTION_TIME): a quarter second, `mocap`'s default key spacing
+#: and about half a walking step's stance, so a foot's correction is spread over its contact, not over the clip
+CORRECTION_TIME = 0.25
+
+
+@dataclass
+class Displacement:
+    """A built clean: the least-change problem of the displacement and the capture it displaces.
+
+    Attributes:
+        lc: the `LeastChange` (its `plain` the pins: d = 0; `al.base` the capture at the quadrature points).
+        times: (n,) [s] the capture's frame times. qpos: (n, nq) the retargeted capture.
+        anchor: (nq,) the displacement's zero as frames hold it (0, and each quaternion slot's anchor e).
+        pins: (k,) indices of the capture frames pinned (d = 0 there).
+        capture_frames: FrameSet through every capture frame (the pins its keyframes): the capture as a path.
+    """
+
+    lc: LeastChange = field(repr=False)
+    times: np.ndarray
+    qpos: np.ndarray = field(repr=False)
+    anchor: np.ndarray
+    pins: np.ndarray
+    capture_frames: FrameSet = field(repr=False)
+
+
+def anchors(qpos: np.ndarray, quat_slots: np.ndarray) -> np.ndarray:
+    """The displacement's zero as its frames hold it: 0, and in each quaternion slot e, the normalized mean
+    of the slot's quaternions over the clip (each sign-aligned with the first; the middle frame's where
+    they cancel).
+
+    Args:
+        qpos: (n, nq) the capture. quat_slots: (s, 4) qpos indices of the quaternions.
+    Returns:
+        (nq,) the anchor.
+    """
+    qpos = np.asarray(qpos, float)
+    out = np.zeros(qpos.shape[1])
+    for slot in np.asarray(quat_slots, int).reshape(-1, 4):
+        q = qpos[:, slot] / np.linalg.norm(qpos[:, slot], axis=1, keepdims=True)
+        q = q * np.where(q @ q[0] < 0, -1.0, 1.0)[:, None]
+        m = q.mean(axis=0)
+        n = float(np.linalg.norm(m))
+        out[slot] = m / n if n > 1e-3 else q[len(q) // 2]
+    return out
+
+
+def pin_frames(times: np.ndarray, pins=(), ends: bool = False) -> np.ndarray:
+    """The capture frames pinned: the one nearest each time of `pins` and, with `ends`, the first and last.
+
+    Args:
+        times: (n,) [s] the capture's frame times. pins: times [s] inside the clip. ends: pin the first and
+            last frame too.
+    Returns:
+        (k,) sorted distinct frame indices.
+    Raises:
+        InputError: a pin outside the clip.
+    """
+    times = np.asarray(times, float)
+    idx = {0, len(times) - 1} if ends else set()
+    half = 0.5 * float(np.min(np.diff(times)))
+    for p in pins:
+        if not (times[0] - half <= float(p) <= times[-1] + half):
+            raise InputError(f"--pin {float(p):g}: outside the clip's {times[0]:g}..{times[-1]:g} s; give a time in it")
+        idx.add(int(np.argmin(np.abs(times - float(p)))))
+    return np.array(sorted(idx), int)
+
+
+def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, contacts=(), flights=None,
+                       rate: float = LeastChangeOptions.rate, correction_time: float = CORRECTION_TIME) -> Displacement:
+    """Build the clean of a retargeted capture (module docstring).
+
+    Args:
+        model: mujoco.MjModel of the scene with the figure. times: (n,) [s] increasing frame times, n >= 4.
+        qpos: (n, nq) the retargeted capture. pins: times [s] where d = 0 (`pin_frames`). pin_ends: the
+            first and last frame too (else they are the displacement's variable frames).
+        contacts: the capture's contact schedule (`Contact`s). flights: ((start, end), ...) [s] where every
+            site is clear (None: the schedule's gaps). rate: quadrature points per second [1/s].
+        correction_time: [s] the measure of change's pose part prices changes slower than this
+            (omega = pi / correction_time, `solver.change`).
+    Returns:
+        Displacement.
+    Raises:
+        InputError: shapes that do not fit the model, fewer than 4 frames, a pin outside the clip.
+    """
+    times, qpos = np.asarray(times, float), np.asarray(qpos, float)
+    if qpos.ndim != 2 or qpos.shape[1] != model.nq or len(times) != len(qpos):
+        raise InputError(f"capture qpos {qpos.shape} and times ({len(times)},) do not fit the model (nq = {model.nq})")
+    if len(times) < 4 or np.any(np.diff(times) <= 0):
+        raise InputError(f"a clean needs at least 4 capture frames at increasing times, got {len(times)}")
+    layout = StateLayout.from_model(model)
+    figure, tmap = Figure.from_model(model), TangentMap.from_layout(layout)
+    pinned = pin_frames(times, pins, pin_ends)
+    is_pin = np.zeros(len(times), bool)
+    is_pin[pinned] = True
+    capture_frames = FrameSet(times, qpos, np.ones(qpos.shape, bool), is_pin)
+    anchor = anchors(qpos, layout.quat_slots)
+    at = np.union1d(pinned, [0, len(times) - 1])  # the spline's ends are frames, pinned or variable
+    zero = np.tile(anchor, (len(at), 1))
+    fixed = np.repeat(is_pin[at][:, None], qpos.shape[1], axis=1)
+    plain = FrameSet(times[at], zero, fixed, is_pin[at])
+    t0, t1 = float(times[0]), float(times[-1])
+    check_points(t0, t1, rate)
+    t, h = quadrature_times(t0, t1, rate)
+    reference = ReferenceMotion.from_samples(model, times, qpos, t, np.full(len(t), h))
+    engine = InverseDynamics(model, figure.contact_sites)  # the effort bound of a capture needs the torques
+    schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
+    flights = tuple(schedule.flights()) if flights is None else tuple(flights)
+    constraints, relaxations = figure_constraints(model, figure, reference, capture_frames, tuple(schedule), flights,
+                                                  engine, capture=(times, qpos))
+    constraints = [_change_bound(c, reference, times, qpos, layout, tmap) if c.name == "acceleration" else c
+                   for c in constraints]
+    change = MeasureOfChange(reference, tmap, omega=np.pi / correction_time, joints=layout.articulated_dofs)
+    d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)
+    Y1, Y2 = interpolate(times, qpos, t, (1, 2))
+    al = AugmentedLagrangian(change, constraints, tmap, engine, d0, base=(reference.qpos - anchor, Y1, Y2))
+    _slide_as_captured(al, plain)
+    knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
+    lc = LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots)
+    return Displacement(lc, times, qpos, anchor, pinned, capture_frames)
+
+
+class ChangeAcceleration(AccelerationBound):
+    """No new jolt in a clean: the change's acceleration, not the path's, is bounded,
+
+        |a_j(t) - a_c,j(t)| <= A_j   at every point,
+
+    a_c the capture's own acceleration (the reference's `qacc`, noise and all: a clean keeps it) and A_j the
+    peak of the capture low-pass filtered at 6 Hz (`solver.peak_bounds.filter_capture`, Winter 2009): a
+    correction accelerates no joint harder than the captured motion itself does (`AccelerationBound`'s
+    smooth form and columns).
+
+    Args:
+        bound: the figure's `AccelerationBound` (its columns and labels). qacc: (n, nv) the capture's
+            acceleration at the points. peaks: (j,) A_j > 0 [m/s^2 or rad/s^2].
+    """
+
+    def __init__(self, bound: AccelerationBound, qacc: np.ndarray, peaks: np.ndarray):
+        n = int(bound.rows.max()) + 1 if len(bound.rows) else 0
+        super().__init__(n, bound.dofs, peaks, RELATIVE_TOLERANCE * np.asarray(peaks, float),
+                         bound.labels[: len(bound.dofs)])
+        self._ref = np.asarray(qacc, float)[:, self.dofs]  # (n, j, 3)
+
+    def measure(self, state):
+        a = state.motion.qacc[:, self.dofs] - self._ref
+        return (((a * a).sum(-1) - self.limits ** 2) / (2.0 * self.limits)).ravel()
+
+    def pull(self, state, g):
+        n = state.motion.qacc.shape[0]
+        G = g.reshape(n, -1) / self.limits
+        if not G.any():
+            return
+        ga = np.zeros(state.motion.qacc.shape)
+        ga[:, self.dofs] = G[..., None] * (state.motion.qacc[:, self.dofs] - self._ref)
+        state.add_acceleration(ga)
+
+
+def _change_bound(bound: AccelerationBound, reference: ReferenceMotion, times, qpos, layout, tmap) -> ChangeAcceleration:
+    """The clean's no-jolt bound (`ChangeAcceleration`) in place of the figure's: the capture's 6 Hz peaks."""
+    smooth = filter_capture(times, qpos, layout)
+    qacc = tmap.motion(*interpolate(times, smooth, reference.t, (0, 1, 2))).qacc
+    peaks = np.maximum(np.linalg.norm(qacc[:, bound.dofs], axis=-1).max(axis=0), 1e-6)
+    return ChangeAcceleration(bound, reference.qacc, peaks)
+
+
+def _slide_as_captured(al: AugmentedLagrangian, plain: FrameSet) -> None:
+    """Raise each slide limit to the capture's own slide over that contact: a clean slides no more than the
+    capture, and is not asked to slide less. A contact found on a capture starts and ends with the site
+    still moving (entry below 0.5 m/s and 3 cm, exit above 1 m/s or 5 cm: `solver.contacts`), and marker
+    noise adds to its speed (16_23's resting heel: 0.1-0.5 m/s frame to frame; skate in contact 1.50
+    mm/frame, 0.92 after the 6 Hz filter): asked to halve that slide, as a keyed path is, the displacement
+    changed the whole gait (the bodies 5.6 cm from the capture on average, the torso up to 30 cm)."""
+    from solver.spline_basis import SplineBasis
+
+    state = al.state(SplineBasis(plain.times, al.t), plain.values)
+    for c in al.constraints:
+        if c.name == "slide":
+            c.limit = np.maximum(c.limit, c.measure(state))
+
+
+def solve_displacement(disp: Displacement, options: LeastChangeOptions | None = None, *, should_stop=None,
+                       progress=None) -> Solution:
+    """Solve the displacement (`solve_least_change` on `disp.lc`; its arguments and Solution, whose frames
+    are the displacement's: `clean_solution` makes the cleaned clip of it)."""
+    return solve_least_change(disp.lc, options, should_stop=should_stop, progress=progress)
+
+
+def cleaned_qpos(disp: Displacement, frames: FrameSet, times: np.ndarray | None = None) -> np.ndarray:
+    """(n, nq) the cleaned clip c + d at `times` [s] (None: the capture's frames, where c is the capture's
+    own frames exactly), d from the displacement's `frames`; quaternions as the sum has them."""
+    if times is None:
+        return disp.qpos + (frames.path(disp.times) - disp.anchor)
+    t = np.asarray(times, float)
+    return interpolate(disp.times, disp.qpos, t, 0) + frames.path(t) - disp.anchor
+
+
+def clean_solution(disp: Displacement, solution: Solution) -> Solution:
+    """The Solution of the cleaned clip: `frames` through every capture frame with the cleaned values
+    (c + d there), `initial` the capture's own frames, both with the pins and the clip's ends as their
+    keyframes; the rest (rounds, status, certificate, relaxations) the displacement's solve's.
+
+    The cleaned path between the capture's frames is the natural spline through those samples: it equals
+    c + d where d's frames lie on capture frames (both are then cubic splines with knots at the frames)
+    and differs by d's interpolation error between them otherwise.
+    """
+    cap = disp.capture_frames
+    keys = cap.is_keyframe.copy()
+    keys[[0, -1]] = True
+    frames = FrameSet(cap.times, cleaned_qpos(disp, solution.frames), cap.fixed, keys)
+    return replace(solution, frames=frames, initial=FrameSet(cap.times, cap.values, cap.fixed, keys))

@@ -1,0 +1,52 @@
+"""`dynsplines clean` end to end on a shipped walk (16_23, 299 frames at 120 Hz): the outputs, the feet, the
+pins on the written BVH read back, and the saved path's cleaned clip at the capture's frames."""
+import json
+
+import numpy as np
+import pytest
+
+from runner.clean import CleanOptions, process_clean
+from runner.mocap.bvh import read_bvh
+from runner.paths import MODELS
+
+CLIP = MODELS / "cmu" / "16_23.bvh"
+
+
+@pytest.fixture(scope="module")
+def cleaned(tmp_path_factory):
+    out = tmp_path_factory.mktemp("clean")
+    o = CleanOptions(pins=(1.0,), pin_ends=True, render=False, quiet=True, summary=False)
+    return out, process_clean(CLIP, out, o, say=lambda *_: None)
+
+
+def test_clean_writes_its_outputs_and_meets_the_feet_limits(cleaned):
+    out, result = cleaned
+    assert result["exit"] == "ok"
+    for name in ("save_path", "bvh", "glb", "metrics", "scene"):
+        assert (out / result["outputs"][name].split("/")[-1]).is_file(), name
+    report = json.loads((out / "16_23.clean.metrics.json").read_text())
+    feet = report["metrics"]["motion"]["optimized"]["path"]
+    assert report["metrics"]["optimized"]["max_penetration_mm"] <= 1.0 + 0.1  # the 1 mm tolerance
+    assert feet["float_contact_mm"] <= report["metrics"]["motion"]["plain"]["path"]["float_contact_mm"]
+    # no new jolt: the change's peaks within the 6 Hz capture's (and its 5 % tolerance)
+    c = result["clean"]
+    assert c["change_pelvis_m_s2"] <= 1.05 * c["capture_pelvis_m_s2"]
+    assert c["change_joint_rad_s2"] <= 1.05 * c["capture_joint_rad_s2"]
+
+
+def test_pins_are_the_source_on_the_written_bvh(cleaned):
+    out, result = cleaned
+    on = result["keyframes_on_source"]
+    assert on["keys"] == 3 and on["max_mm"] <= 0.1  # the ends and the pin at 1 s, read back by bvhio
+    src, written = read_bvh(CLIP), read_bvh(out / "16_23.clean.bvh")
+    assert len(written.local_quat) == len(src.local_quat)  # every frame, at the capture's rate
+    assert abs(written.frame_time - src.frame_time) < 1e-9
+
+
+def test_saved_path_holds_the_cleaned_clip_at_the_capture_frames(cleaned):
+    out, result = cleaned
+    z = np.load(out / "16_23.clean.npz")
+    np.testing.assert_array_equal(z["path_times"], z["reference_times"])
+    assert z["path_qpos"].shape == z["reference_qpos"].shape
+    pins = [int(np.argmin(np.abs(z["reference_times"] - t))) for t in result["pins"]]
+    np.testing.assert_allclose(z["path_qpos"][pins], z["reference_qpos"][pins], rtol=0, atol=1e-12)

@@ -1,0 +1,150 @@
+"""The clean of a capture (solver.displacement): the capture plus the least displacement that meets the
+constraints, on hand-made captures of the toy figure whose answers are known.
+
+* A capture that meets every constraint (the figure swaying and swinging its legs above the floor) comes
+  back exactly: the
+  measure of change and every constraint are at their minimum on d = 0.
+* The same capture with the pelvis dipped 2 cm (its feet 2 cm into the floor) over 0.3 s comes back with
+  its feet out of the floor (penetration within the 1 mm tolerance, measured by MuJoCo's own kinematics),
+  and unchanged (within 1 mm) far from the dip; pinned frames are the capture's exactly.
+* Phi's gradient with the capture as the base motion agrees with central finite differences.
+"""
+import mujoco
+import numpy as np
+import pytest
+
+from solver.displacement import CORRECTION_TIME, anchors, build_displacement, clean_solution, pin_frames, solve_displacement
+from solver.errors import InputError
+from solver.layout import StateLayout
+from solver.least_change import LeastChangeOptions
+from solver.spline_basis import SplineBasis
+
+#: [Hz] the hand-made capture's frame rate
+FPS = 60.0
+#: [s] its length
+DURATION = 2.0
+#: [m] the pelvis height to start from (the toy's sites are 0.95 m below it with straight legs)
+STAND = 0.96
+#: [s] the dip's centre and width, [m] its depth below the floor's contact height (sites 1 cm up: 3 cm
+#: down puts them 2 cm in)
+DIP_T, DIP_W, DIP = 1.0, 0.3, 0.03
+
+
+def _capture(model, dip: float = 0.0):
+    """(times, qpos): the toy figure swaying 3 cm forward and back at 1 Hz (peak pelvis acceleration
+    1.2 m/s^2) and swinging its legs (hips +-6 deg, knees bent 9 +- 3 deg, about their flexion axis), its
+    pelvis at the height that holds its lowest site 1 cm above the floor, then lowered by a raised-cosine
+    dip of `dip` [m]."""
+    layout = StateLayout.from_model(model)
+    t = np.arange(int(round(DURATION * FPS)) + 1) / FPS
+    q = np.zeros((len(t), model.nq))
+    q[:, 0] = 0.03 * np.sin(2 * np.pi * t)
+    for slot in layout.quat_slots:
+        q[:, slot[0]] = 1.0
+    phase = 2 * np.pi * t
+    for name, angle in (("l_hip", 0.1 * np.sin(phase)), ("r_hip", -0.1 * np.sin(phase)),
+                        ("l_knee", 0.15 + 0.05 * np.sin(phase + 0.5)), ("r_knee", 0.15 - 0.05 * np.sin(phase + 0.5))):
+        a = toy_joint_slot(model, name)
+        q[:, a], q[:, a + 2] = np.cos(angle / 2), np.sin(angle / 2)  # about y, the flexion axis
+    q[:, 2] = STAND
+    q[:, 2] += 0.01 - _lowest_site(model, q)
+    near = np.abs(t - DIP_T) < DIP_W / 2
+    q[near, 2] -= dip * 0.5 * (1 + np.cos(2 * np.pi * (t[near] - DIP_T) / DIP_W))
+    return t, q
+
+
+def toy_joint_slot(model, name: str) -> int:
+    """The qpos address of a ball joint's quaternion."""
+    return int(model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)])
+
+
+def _lowest_site(model, qpos) -> np.ndarray:
+    """(n,) [m] the lowest contact site's height at each pose (MuJoCo's forward kinematics)."""
+    data = mujoco.MjData(model)
+    out = np.empty(len(qpos))
+    for i, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        out[i] = data.site_xpos[:, 2].min()
+    return out
+
+
+def test_a_capture_that_meets_every_constraint_comes_back_exactly(toy_model):
+    t, q = _capture(toy_model)
+    disp = build_displacement(toy_model, t, q)
+    sol = solve_displacement(disp, LeastChangeOptions())
+    clean = clean_solution(disp, sol)
+    assert not sol.unmet
+    np.testing.assert_allclose(clean.frames.values, q, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(clean.initial.values, q)
+
+
+@pytest.fixture(scope="module")
+def dipped(toy_model):
+    t, q = _capture(toy_model, DIP)
+    disp = build_displacement(toy_model, t, q, pins=(0.25, 1.75))
+    sol = solve_displacement(disp, LeastChangeOptions())
+    return t, q, disp, sol, clean_solution(disp, sol)
+
+
+def test_feet_pushed_into_the_floor_come_out_and_the_rest_stays(toy_model, dipped):
+    t, q, disp, sol, clean = dipped
+    assert _lowest_site(toy_model, q).min() < -0.019  # the capture: 2 cm in
+    fine = np.linspace(t[0], t[-1], 1001)  # between the frames too
+    low = _lowest_site(toy_model, clean.frames.path(fine))
+    assert low.min() >= -1e-3 - 1e-4, low.min()  # penetration within its 1 mm tolerance
+    far = np.abs(t - DIP_T) > DIP_W / 2 + 2 * CORRECTION_TIME  # two correction times beyond the dip's edges
+    moved = np.linalg.norm(_bodies(toy_model, clean.frames.values[far]) - _bodies(toy_model, q[far]), axis=-1)
+    assert moved.max() <= 0.1 * (DIP - 0.01), moved.max()  # a tenth of the 2 cm correction, at most
+
+
+def _bodies(model, qpos) -> np.ndarray:
+    """(n, nbody, 3) [m] every body's origin at each pose."""
+    data = mujoco.MjData(model)
+    out = np.empty((len(qpos), model.nbody, 3))
+    for i, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        out[i] = data.xpos
+    return out
+
+
+def test_pins_hold_the_capture_exactly(dipped):
+    t, q, disp, sol, clean = dipped
+    pinned = pin_frames(t, (0.25, 1.75))
+    np.testing.assert_array_equal(t[pinned], [0.25, 1.75])
+    np.testing.assert_allclose(clean.frames.values[pinned], q[pinned], rtol=0, atol=1e-15)
+
+
+def test_a_pin_outside_the_clip_is_named():
+    with pytest.raises(InputError, match="--pin 3: outside the clip's 0..2 s"):
+        pin_frames(np.linspace(0.0, 2.0, 5), (3.0,))
+
+
+def test_anchors_are_unit_and_zero_off_the_quaternions(toy_model):
+    t, q = _capture(toy_model)
+    layout = StateLayout.from_model(toy_model)
+    e = anchors(q, layout.quat_slots)
+    np.testing.assert_allclose(np.linalg.norm(e[layout.quat_slots], axis=1), 1.0, atol=1e-12)
+    lin = np.setdiff1d(np.arange(toy_model.nq), layout.quat_slots.ravel())
+    np.testing.assert_array_equal(e[lin], 0.0)
+
+
+def test_gradient_with_the_capture_as_base_matches_finite_differences(toy_model):
+    t, q = _capture(toy_model, DIP)
+    disp = build_displacement(toy_model, t, q, rate=100.0)
+    al, layout = disp.lc.al, disp.lc.layout
+    frames = disp.lc.plain.with_variable_frames(np.array([0.6, 0.95, 1.1, 1.4]))
+    rng = np.random.default_rng(3)
+    P = frames.values.copy()
+    free = ~frames.fixed
+    P[free] += rng.normal(scale=2e-3, size=int(free.sum()))  # off d = 0: every constraint and D nonzero
+    al.rho, al.lam = 10.0, [np.abs(rng.normal(size=c.size)) for c in al.constraints]
+    basis = SplineBasis(frames.times, al.t)
+    _, G, _ = al.evaluate(basis, P)
+    for _ in range(6):
+        V = np.where(free, rng.normal(size=P.shape), 0.0)
+        h = 1e-6
+        fd = (al.evaluate(basis, P + h * V, grad=False)[0] - al.evaluate(basis, P - h * V, grad=False)[0]) / (2 * h)
+        assert abs(float((G * V).sum()) - fd) <= 1e-5 * max(1.0, abs(fd)), (float((G * V).sum()), fd)
+    assert layout.quat_slots.size  # the toy has quaternions: their components are among the directions
