@@ -216,7 +216,8 @@ def saved_npz(tmp_path_factory):
 
 
 def test_the_other_commands_read_every_option(tmp_path, reads, monkeypatch, saved_npz):
-    """keyframes-from-bvh, export, orient, fig10 and view, run for real (view's server replaced)."""
+    """keyframes-from-bvh, export, orient, fig10, blender-addon, clean and view, run for real (view's server
+    replaced)."""
     import runner.viewer.server as server
 
     monkeypatch.setattr(server, "serve", lambda assets, port, ready=None: None)
@@ -235,6 +236,9 @@ def test_the_other_commands_read_every_option(tmp_path, reads, monkeypatch, save
                     "--form", "paper", "--rate", "200", "--quiet"]],
         "fig10": [["fig10", "--out", tmp_path / "f.png"]],
         "blender-addon": [["blender-addon", "--out", tmp_path / "addon.zip"]],
+        "clean": [["clean", clip, "--pin", "0.3", "--pin-ends", "--out-dir", tmp_path / "clean", "--scene", "auto",
+                   "--figure", "subject", "--mass", "65", "--root-scale", "1", "--no-render", "--fps", "24",
+                   "--max-time", "30", "--quiet", "--no-summary"]],
         "view": [["view", saved_npz, "--port", "0"]],
     }
     for command, variants in runs.items():
@@ -266,5 +270,5 @@ def test_every_subcommand_is_walked():
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     covered = {"animate", "run-and-step", "mocap", "batch", "keyframes-from-bvh", "export", "view", "bench", "orient",
-               "fig10", "blender-addon"}
+               "fig10", "blender-addon", "clean"}
     assert set(sub.choices) == covered, Path(__file__).name
