@@ -284,8 +284,10 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             if cert.raises:  # go on from its own path, with the frames the search added (it does not move
                 # the path there); the search's path, which meets every certified limit, is the fallback
                 frames = with_frames(frames, np.setdiff1d(cert.frames.times, frames.times), quat)
-                basis, level_its, kind = SplineBasis(frames.times, al.t), 0, "certify"
-                continue
+            else:  # feasible: go on from the path that meets every limit, the multipliers as they are
+                frames = cert.frames
+            basis, level_its, kind = SplineBasis(frames.times, al.t), 0, "certify"
+            continue
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
         decreases.append((frames.times.copy(), dec))
         evals += 3
