@@ -273,8 +273,11 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         level_its, kind, scores = level_its + 1, "boost", None
         if not (met or level_its >= o.per_level):
             continue
-        if not met and not certified:  # a frame set's subproblems are spent with a pair broken (once: after it,
-            # the path it found meets every limit, on these frames and on every refinement of them)
+        if not met and certified:  # spent again after the search: its path, or a better one, is the answer
+            message = "subproblems spent with a pair broken after the least violation was found"
+            break
+        if not met:  # a frame set's subproblems are spent with a pair broken (once: after it, the path it
+            # found meets every limit, on these frames and on every refinement of them)
             cert = _certify(lc, frames, o, start, evals, should_stop, progress, k)
             evals, raises, certified = evals + cert.n_evals, raises + list(cert.raises), True
             if cert.status is not Status.CONVERGED:
