@@ -247,16 +247,10 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     best = (np.inf, frames)  # (D, frames) of the best path that meets every (certified) limit
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
-        left, spent = _budget(o, start, evals)
+        r, spent = _subproblem(al, frames, basis, quat, o, start, evals, should_stop, progress, k)
         if spent:
             status, message = spent, _stop_message(spent, "", o)
             break
-        if progress:
-            progress("round", {"round": k, "frames": frames.count, "variable": frames.n_variable})
-        cb = None if progress is None else (lambda n, phi, e0=evals: progress("eval", {"evals": e0 + n, "E": phi}))
-        r = solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=basis,
-                             max_evals=o.max_evals - evals if o.max_evals else 0,
-                             max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb)
         frames, evals = r.frames, evals + r.result.n_evals
         rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
         trace.append(np.asarray(r.result.trace))
@@ -276,19 +270,13 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         if not met and certified:  # spent again after the search: its path, or a better one, is the answer
             message = "subproblems spent with a pair broken after the least violation was found"
             break
-        if not met:  # a frame set's subproblems are spent with a pair broken (once: after it, the path it
-            # found meets every limit, on these frames and on every refinement of them)
+        if not met:  # spent with a pair broken: the search, once (its path meets every limit on any refinement)
             cert = _certify(lc, frames, o, start, evals, should_stop, progress, k)
             evals, raises, certified = evals + cert.n_evals, raises + list(cert.raises), True
             if cert.status is not Status.CONVERGED:
                 status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
                 break
-            best = _better(al, best, cert.frames)
-            if cert.raises:  # go on from its own path, with the frames the search added (it does not move
-                # the path there); the search's path, which meets every certified limit, is the fallback
-                frames = with_frames(frames, np.setdiff1d(cert.frames.times, frames.times), quat)
-            else:  # feasible: go on from the path that meets every limit, the multipliers as they are
-                frames = cert.frames
+            best, frames = _better(al, best, cert.frames), _after_search(frames, cert, quat)
             basis, level_its, kind = SplineBasis(frames.times, al.t), 0, "certify"
             continue
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
@@ -307,10 +295,33 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     else:
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
     frames, basis, message, raises = _kept(al, frames, basis, best, message, raises, limits)
-    if status is Status.CONVERGED and raises:
-        status = Status.INFEASIBLE
+    status = Status.INFEASIBLE if status is Status.CONVERGED and raises else status
     return _solution(lc, frames, basis, rounds, trace, status, message, evals, tuple(raises),
                      time.perf_counter() - start, estimate, o.tol, tuple(decreases))
+
+
+def _subproblem(al, frames: FrameSet, basis, quat, o: LeastChangeOptions, start: float, evals: int, should_stop,
+                progress, k: int):
+    """Subproblem k on `frames` within what is left of the solve's budget: (its SubproblemResult, None), or
+    (None, the status MAX_TIME or MAX_EVALS) when the budget is spent before it."""
+    left, spent = _budget(o, start, evals)
+    if spent:
+        return None, spent
+    if progress:
+        progress("round", {"round": k, "frames": frames.count, "variable": frames.n_variable})
+    cb = None if progress is None else (lambda n, phi: progress("eval", {"evals": evals + n, "E": phi}))
+    return solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=basis,
+                            max_evals=o.max_evals - evals if o.max_evals else 0,
+                            max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb), None
+
+
+def _after_search(frames: FrameSet, cert, quat) -> FrameSet:
+    """Where the least change goes on after the search: where it raised a limit, from its own path with the
+    frames the search added (which do not move the path; the search's path, meeting every certified limit,
+    is the fallback); where everything can be met, from the search's path, which meets it all."""
+    if cert.raises:
+        return with_frames(frames, np.setdiff1d(cert.frames.times, frames.times), quat)
+    return cert.frames
 
 
 def _better(al: AugmentedLagrangian, best: tuple, frames: FrameSet, basis=None) -> tuple:
