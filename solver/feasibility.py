@@ -163,7 +163,6 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
     (Nocedal & Wright, sec. 17.1), each solve from the feasible start so that none wanders into a basin
     where the held pairs cannot be met again."""
     eal = AugmentedLagrangian(al.change, held, al.tmap, al.engine, al.d0, elastic=objective, base=al.base)
-    eal.worst = np.inf
     basis = SplineBasis(frames.times, al.t)
     best, best_F = frames, eal.evaluate(basis, frames.values, grad=False)[0]
     while True:

@@ -74,6 +74,8 @@ class AugmentedLagrangian:
         self.lam = [np.zeros(c.size) for c in self.constraints]
         self.rho = float(rho)
         self.V = np.inf
+        #: with `elastic`: the largest c/tol of the last evaluation, held and elastic pairs (<= 1: all met)
+        self.worst = np.inf
 
     def state(self, basis, P: np.ndarray) -> PathState:
         """The PathState of frame values P (m, nq) through `basis` (a `SplineBasis` at the points), plus
