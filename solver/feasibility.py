@@ -10,7 +10,8 @@ violations is minimized instead):
 
 1. **Every constraint at once** (S = all): one L-BFGS solve from the given path, stopped as soon as
    every pair is within its tolerance, with a variable frame added to every segment that holds a broken
-   pair while the segment can take one (`min_gap`), and solved again. Where this meets every pair the
+   pair while the segment can take one (`min_gap`: the least change passes the quadrature's spacing, the
+   finest the integrals tell apart, so no finer spacing of frames beats the certificate), and solved again. Where this meets every pair the
    problem is feasible: nothing is raised.
 2. **Else level by level** (`Constraint.priority`: the limits of the body and the scene first, then the
    bounds on what the reference motion's body does, the contact schedule's wishes, and the unit-norm

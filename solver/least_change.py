@@ -67,8 +67,10 @@ class LeastChangeOptions:
         tol: refinement stops when the decrease of Phi it still predicts is at most tol times Phi's
             nonnegative part (`AugmentedLagrangian.shift`) and every constraint is met (dimensionless;
             1 %: the paper's fig. 5 "good enough" test as a fraction).
-        min_gap: [s] no two frames closer: 1/48 s, half a frame of 24 fps film; a cubic spline through
-            frames closer than that kinks between them (its second derivative grows like 1/h^2).
+        min_gap: [s] no two frames the refinement adds closer: 1/48 s, half a frame of 24 fps film; a cubic
+            spline through frames closer than that kinks between them (its second derivative grows like
+            1/h^2). The least violation (`solver.feasibility`) splits a segment holding a broken pair down to
+            the quadrature's spacing (1 / rate) instead: a limit is raised only where no finer spacing helps.
         max_subproblems: subproblems in all (each an L-BFGS run), a guard against a method that cycles:
             100, above the most a converging solve was measured to need (24 on the corpus: 83_02 keyed at
             its contacts; 81: a Bandai-Namco walk backwards keyed every 0.2 s, its acceleration limits raised
@@ -360,7 +362,9 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     it ("certify") and sets the multipliers of the pairs it raised to 0. Returns the Certificate."""
     left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
     before = [c.limit.copy() for c in lc.al.constraints]
-    cert = least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=o.min_gap, ftol_rel=o.ftol_rel,
+    # the search splits segments down to the quadrature's spacing, the finest the integrals tell apart, so
+    # that no finer spacing of frames beats what it certifies (min_gap is the least change's, not a limit)
+    cert = least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=1.0 / o.rate, ftol_rel=o.ftol_rel,
                            per_level=o.per_level, max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
                            max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop)
     if progress:
