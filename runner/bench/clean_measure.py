@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["clean_figures_of", "saved_capture"]
+__all__ = ["clean_figures_of", "clean_result_figures", "saved_capture"]
 
 
 def saved_capture(saved_npz: Path):
@@ -49,3 +49,15 @@ def clean_figures_of(saved_npz: Path, qpos: np.ndarray) -> dict:
     pen = path_metrics(model, times, qpos, None, dynamics=False)["max_penetration_mm"]
     return {"penetration_mm": pen, "float_mm": feet["float_contact_mm"], "skate_mm": feet["skate_contact_mm"],
             **clean_figures(model, qpos, ref, fps, smooth)}
+
+
+def clean_result_figures(result: dict) -> dict:
+    """The figures of a clean from `runner.clean.process_clean`'s result: `clean_figures_of` its saved path's
+    cleaned clip, "displacement_frames" and "cpu_s" (the clean's CPU time [s], `cpu_time_s`).
+
+    Raises:
+        OSError, KeyError: the saved path it names is missing or not a clean's.
+    """
+    npz = Path(result["outputs"]["save_path"])
+    f = clean_figures_of(npz, np.load(npz)["path_qpos"])
+    return f | {"displacement_frames": int(result["displacement_frames"]), "cpu_s": float(result["cpu_time_s"])}
