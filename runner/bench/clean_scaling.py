@@ -132,7 +132,7 @@ def print_rows(rows: list[dict]) -> None:
               f"{r['skate_mm']:>6.2f} {r['deviation_mean_cm']:>6.2f}  {r['status']}")
     top = factors[-1]
     if top != base:
-        print(f"CPU {top}x / {base}x: {cpu[top] / cpu[base]:.2f} (issue 61's acceptance: at most {1.125 * top / base:g} "
+        print(f"CPU {top}x / {base}x: {cpu[top] / cpu[base]:.2f} (acceptance: at most {1.125 * top / base:g} "
               f"for {top / base:g}x the length)")
 
 
