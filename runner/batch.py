@@ -1,12 +1,16 @@
-"""A batch of motion-capture clips: `process_clip` on each, in worker processes, resumable, with a summary.
+"""A batch of motion-capture clips: `process_clip` (mocap) or `process_clean` (clean) on each, in worker
+processes, resumable, with a summary.
 
 Layout under the output folder DIR:
 
-    DIR/<clip stem>/      process_clip's outputs (keyframes, scene, .npz, metrics JSON, video if asked)
+    DIR/<clip stem>/      process_clip's outputs (keyframes, scene, .npz, metrics JSON, video if asked), or
+                          process_clean's (<stem>.clean.npz, .bvh, .glb, .metrics.json, the scene)
     DIR/<clip stem>/done.json   written last, when the clip finished ok: the SHA-256 of the clip's bytes,
                           the options and the clip's summary row; a rerun with the same clip bytes and
                           options skips the clip (if its outputs are still there)
-    DIR/summary.csv, DIR/summary.json   one row per clip and a totals row (written atomically)
+    DIR/summary.csv, DIR/summary.json   one row per clip and a totals row (written atomically); the
+                          columns are the mode's: COLUMNS (mocap) or CLEAN_COLUMNS (clean: the cleaned
+                          clip's figures, `runner.bench.clean_measure`)
 
 A bad clip (unreadable, another skeleton, a failed optimization) is a row with its one-line error; the
 batch goes on. Ctrl-C: no new clips are started, the running ones stop with their best path (their
@@ -24,6 +28,8 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from runner.bench.clean_measure import clean_result_figures
+from runner.clean import CleanOptions, process_clean
 from runner.files import atomic_output, check_writable_dir
 from runner.pipeline import ClipOptions, process_clip
 from runner.progress import Steps
@@ -35,6 +41,14 @@ DONE = "done.json"
 COLUMNS = ("clip", "folder", "status", "error", "wall_time_s", "keyframes", "variable_frames", "solver_status",
            "max_penetration_mm", "plain_float_contact_mm", "optimized_float_contact_mm", "plain_skate_mm",
            "optimized_skate_mm")
+#: the summary's columns with `CleanOptions` (`batch --mode clean`): the cleaned clip's penetration [mm], float
+#: and skate in contact [mm, mm/frame], deviation from the capture [cm], the change's peak accelerations beside
+#: the capture's at 6 Hz [m/s^2, rad/s^2] (`runner.bench.clean_measure`), the clean's CPU time [s]
+CLEAN_COLUMNS = ("clip", "folder", "status", "error", "wall_time_s", "displacement_frames", "solver_status",
+                 "penetration_mm", "float_mm", "skate_mm", "deviation_mean_cm", "deviation_max_cm",
+                 "change_pelvis_m_s2", "capture_pelvis_m_s2", "change_joint_rad_s2", "capture_joint_rad_s2", "cpu_s")
+#: the figures of CLEAN_COLUMNS that the totals row gives as the mean over the clips (the others: the worst)
+CLEAN_MEANS = ("deviation_mean_cm",)
 #: row statuses: ok (done now), skipped (done before, same clip and options), failed, interrupted (stopped
 #: by Ctrl-C, outputs of the best path so far), not run (Ctrl-C came first)
 STATUSES = ("ok", "skipped", "failed", "interrupted", "not run")
@@ -100,11 +114,19 @@ def longest_first(todo: list, durations: Sequence[float]) -> list:
     return [todo[j] for j in order]
 
 
-def options_fingerprint(options: ClipOptions) -> dict:
-    """The options that decide a clip's outputs, as JSON values (not `quiet` or `command`)."""
+def columns_of(options: ClipOptions | CleanOptions) -> tuple[str, ...]:
+    """The summary's columns for a clip run with `options`: COLUMNS (mocap) or CLEAN_COLUMNS (clean)."""
+    return CLEAN_COLUMNS if isinstance(options, CleanOptions) else COLUMNS
+
+
+def options_fingerprint(options: ClipOptions | CleanOptions) -> dict:
+    """The options that decide a clip's outputs, as JSON values (not `quiet` or `command`); a clean's has
+    "mode": "clean"."""
     d = dataclasses.asdict(options)
     for k in ("quiet", "command"):
         d.pop(k, None)
+    if isinstance(options, CleanOptions):
+        d["mode"] = "clean"
     return json.loads(json.dumps(d, sort_keys=True, default=str))
 
 
@@ -137,44 +159,57 @@ def _motion(result: dict, which: str, key: str):
     return None if v is None else float(v)
 
 
-def run_clip(clip: Path, folder: Path, options: ClipOptions, fingerprint: dict, sha: str) -> dict:
-    """Process one clip quietly (a worker's job): its summary row; never raises for a bad clip. On success
-    `done.json` is written last (atomically)."""
+def _mocap_figures(result: dict) -> dict:
+    """A mocap row's figures from `process_clip`'s result."""
+    opt = result["metrics"]["optimized"]
+    return dict(
+        wall_time_s=float(result["wall_time_s"]), keyframes=int(result["keyframes"]),
+        variable_frames=int(result["variable_frames"]), max_penetration_mm=float(opt["max_penetration_mm"]),
+        plain_float_contact_mm=_motion(result, "plain", "float_contact_mm"),
+        optimized_float_contact_mm=_motion(result, "optimized", "float_contact_mm"),
+        plain_skate_mm=_motion(result, "plain", "skate_mm"), optimized_skate_mm=_motion(result, "optimized", "skate_mm"))
+
+
+def run_clip(clip: Path, folder: Path, options: ClipOptions | CleanOptions, fingerprint: dict, sha: str) -> dict:
+    """Process one clip quietly (a worker's job): `process_clean` with `CleanOptions`, else `process_clip`;
+    its summary row; never raises for a bad clip. On success `done.json` is written last (atomically)."""
     t0 = time.perf_counter()
-    row = dict.fromkeys(COLUMNS)
+    clean = isinstance(options, CleanOptions)
+    row = dict.fromkeys(columns_of(options))
     row.update(clip=str(clip), folder=folder.name)
     try:
-        result = process_clip(clip, folder, dataclasses.replace(options, quiet=True), say=lambda *a: None)
+        if clean:
+            o = dataclasses.replace(options, quiet=True, summary=False)
+            result = process_clean(clip, folder, o, say=lambda *a: None)
+        else:
+            result = process_clip(clip, folder, dataclasses.replace(options, quiet=True), say=lambda *a: None)
+        row.update(status=result["exit"], solver_status=result["status"], wall_time_s=time.perf_counter() - t0)
+        row.update(clean_result_figures(result) if clean else _mocap_figures(result))
     except KeyboardInterrupt:
         row.update(status="interrupted", error="interrupted (Ctrl-C)", wall_time_s=time.perf_counter() - t0)
         return row
     except Exception as e:  # noqa: BLE001 - any failure of one clip is its row; the batch goes on
         row.update(status="failed", error=_one_line(e), wall_time_s=time.perf_counter() - t0)
         return row
-    opt = result["metrics"]["optimized"]
-    row.update(
-        status=result["exit"], wall_time_s=float(result["wall_time_s"]), keyframes=int(result["keyframes"]),
-        variable_frames=int(result["variable_frames"]), solver_status=result["status"],
-        max_penetration_mm=float(opt["max_penetration_mm"]),
-        plain_float_contact_mm=_motion(result, "plain", "float_contact_mm"),
-        optimized_float_contact_mm=_motion(result, "optimized", "float_contact_mm"),
-        plain_skate_mm=_motion(result, "plain", "skate_mm"),
-        optimized_skate_mm=_motion(result, "optimized", "skate_mm"))
     if result["exit"] == "failed":
         row["error"] = f"the optimization failed ({result['status']}); the best path before it was written"
     elif result["exit"] == "interrupted":
         row["error"] = "interrupted (Ctrl-C); the best path so far was written"
     else:
-        done = {"clip": str(clip), "clip_sha256": sha, "options": fingerprint, "outputs": result["outputs"],
-                "row": row}
+        outputs = result["outputs"]
+        if clean:  # a clean lists the fitted scene's path, not written with a given --scene
+            outputs = {k: v for k, v in outputs.items() if Path(v).is_file()}
+        done = {"clip": str(clip), "clip_sha256": sha, "options": fingerprint, "outputs": outputs, "row": row}
         with atomic_output(folder / DONE) as tmp:
             tmp.write_text(json.dumps(done, indent=1) + "\n")
     return row
 
 
-def totals(rows: list[dict], wall_time_s: float) -> dict:
-    """The totals row: counts per status, the batch's wall time, summed keyframes and variable frames, the
-    worst penetration and the mean float/skate over the clips that have them."""
+def totals(rows: list[dict], wall_time_s: float, columns: Sequence[str] = COLUMNS) -> dict:
+    """The totals row: counts per status, the batch's wall time, and for mocap (COLUMNS) summed keyframes
+    and variable frames, the worst penetration and the mean float/skate over the clips that have them; for
+    clean (CLEAN_COLUMNS) the summed displacement frames and CPU time, the mean of CLEAN_MEANS and the
+    worst (largest) of every other figure."""
     def values(k):
         return [r[k] for r in rows if r.get(k) is not None]
 
@@ -183,11 +218,16 @@ def totals(rows: list[dict], wall_time_s: float) -> dict:
         return sum(v) / len(v) if v else None
 
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
-    t = dict.fromkeys(COLUMNS)
+    t = dict.fromkeys(columns)
     t.update(clip="TOTAL", folder=f"{len(rows)} clips",
              status=", ".join(f"{n} {s}" for s, n in counts.items() if n),
-             error=f"{counts['failed']} failed" if counts["failed"] else "", wall_time_s=wall_time_s,
-             keyframes=sum(values("keyframes")), variable_frames=sum(values("variable_frames")),
+             error=f"{counts['failed']} failed" if counts["failed"] else "", wall_time_s=wall_time_s)
+    if columns == CLEAN_COLUMNS:
+        for k in CLEAN_COLUMNS[CLEAN_COLUMNS.index("penetration_mm"):]:
+            t[k] = mean(k) if k in CLEAN_MEANS else max(values(k), default=None)
+        t.update(displacement_frames=sum(values("displacement_frames")), cpu_s=sum(values("cpu_s")), counts=counts)
+        return t
+    t.update(keyframes=sum(values("keyframes")), variable_frames=sum(values("variable_frames")),
              max_penetration_mm=max(values("max_penetration_mm"), default=None))
     for k in ("plain_float_contact_mm", "optimized_float_contact_mm", "plain_skate_mm", "optimized_skate_mm"):
         t[k] = mean(k)
@@ -195,14 +235,15 @@ def totals(rows: list[dict], wall_time_s: float) -> dict:
     return t
 
 
-def write_summary(out: Path, rows: list[dict], total: dict, meta: dict) -> tuple[Path, Path]:
-    """DIR/summary.csv (COLUMNS, a row per clip, then the totals row) and DIR/summary.json, atomically."""
+def write_summary(out: Path, rows: list[dict], total: dict, meta: dict,
+                  columns: Sequence[str] = COLUMNS) -> tuple[Path, Path]:
+    """DIR/summary.csv (`columns`, a row per clip, then the totals row) and DIR/summary.json, atomically."""
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
+    w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
     for r in [*rows, total]:
         w.writerow({k: ("" if r.get(k) is None else f"{r[k]:.6g}" if isinstance(r[k], float) else r[k])
-                    for k in COLUMNS})
+                    for k in columns})
     paths = (out / "summary.csv", out / "summary.json")
     with atomic_output(paths[0]) as tmp:
         tmp.write_text(buf.getvalue())
@@ -280,7 +321,7 @@ class _Plan:
     are done before anything runs: skipped or unreadable), and the clips to run, longest first."""
 
     clips: list[Path]
-    per_clip: list[ClipOptions]
+    per_clip: list[ClipOptions | CleanOptions]
     prints: list[dict]
     folders: list[Path]
     rows: list[dict | None]
@@ -290,15 +331,20 @@ class _Plan:
     def skipped(self) -> int:
         return sum(r is not None and r["status"] == "skipped" for r in self.rows)
 
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The summary's columns: the first clip's mode's (`columns_of`)."""
+        return columns_of(self.per_clip[0]) if self.per_clip else COLUMNS
+
     def failed_row(self, i: int, error: str, status: str = "failed") -> dict:
-        row = dict.fromkeys(COLUMNS) | dict(clip=str(self.clips[i]), folder=self.folders[i].name,
+        row = dict.fromkeys(columns_of(self.per_clip[i])) | dict(clip=str(self.clips[i]), folder=self.folders[i].name,
                                             status=status, error=error)
         return row | {"wall_time_s": 0.0} if status == "failed" else row
 
 
 def _plan(clips: Sequence[Path], out: Path, options, folders: Sequence[str] | None) -> _Plan:
     """The clips' options, folders and done rows (`read_done`); raises ValueError on mismatched lengths."""
-    per_clip = [options] * len(clips) if isinstance(options, ClipOptions) else list(options)
+    per_clip = [options] * len(clips) if isinstance(options, ClipOptions | CleanOptions) else list(options)
     if len(per_clip) != len(clips) or (folders is not None and len(folders) != len(clips)):
         raise ValueError(f"{len(clips)} clips, {len(per_clip)} options, {len(folders or clips)} folders")
     paths = clip_folders(clips, out) if folders is None else [out / f for f in folders]
@@ -405,19 +451,20 @@ def _run_pool(plan: _Plan, track: _Tracker, workers: int, pool: tuple, say: Call
         close(True)
 
 
-def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions | Sequence[ClipOptions], *, workers: int = 1,
+def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions | CleanOptions | Sequence, *, workers: int = 1,
               engine: str = "local", ray_address: str | None = None, say: Callable = print, quiet: bool = False,
               folders: Sequence[str] | None = None, name: str = "dynsplines batch") -> dict:
     """Run `run_clip` on every clip not already done (see the module docstring).
 
     Args:
         clips: the .bvh files; one may come several times with different options (`bench corpus`).
-        out: the output folder. options: one ClipOptions for all, or one per clip.
+        out: the output folder. options: one ClipOptions (mocap) or CleanOptions (clean) for all, or one per
+            clip (the summary's columns are the first clip's mode's: `columns_of`).
         workers, engine, ray_address: where the clips run (`dynsplines batch --help`).
         folders: each clip's folder name under `out` [`clip_folders`: the stems, made unique].
         name: what the first line calls the run.
     Returns:
-        {"rows" (COLUMNS per clip, in the clips' order), "totals", "interrupted", "summary" (the two paths),
+        {"rows" (`columns_of` per clip, in the clips' order), "totals", "interrupted", "summary" (the two paths),
         "wall_time_s"}.
     Raises:
         InputError: `out` is not writable; --engine ray without Ray installed.
@@ -441,9 +488,10 @@ def run_batch(clips: Sequence[Path], out: Path, options: ClipOptions | Sequence[
     rows = [r if r is not None else plan.failed_row(i, "not started: the batch was interrupted", "not run")
             for i, r in enumerate(plan.rows)]
     wall = time.perf_counter() - t0
-    total = totals(rows, wall)
+    total = totals(rows, wall, plan.columns)
+    one = isinstance(options, ClipOptions | CleanOptions)
     meta = {"out": str(out), "engine": engine, "workers": workers, "interrupted": track.interrupted,
-            "wall_time_s": wall, "options": plan.prints[0] if isinstance(options, ClipOptions) else plan.prints}
-    summary = write_summary(out, rows, total, meta)
+            "wall_time_s": wall, "options": plan.prints[0] if one else plan.prints}
+    summary = write_summary(out, rows, total, meta, plan.columns)
     return {"rows": rows, "totals": total, "interrupted": track.interrupted, "summary": summary,
             "wall_time_s": wall}

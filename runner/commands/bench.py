@@ -26,6 +26,7 @@ The workloads are in runner/bench/; here: parse, load the showcase clip, call, f
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from runner.animate_options import default_args, solve_options
 from runner.bench import orient as orient_workload
@@ -66,16 +67,21 @@ def register(sub) -> None:
     o = bsub.add_parser("orient", help="single-body orientation vs earlier methods")
     add_arguments(o)
     o.set_defaults(func=bench_orient)
-    c = bsub.add_parser("scaling", help="cost against clip length: run-and-step's gait tiled 1x..8x",
+    c = bsub.add_parser("scaling", help="cost against clip length: run-and-step's gait tiled 1x..8x (or a clean's)",
                         description="The shipped clip's keyframes tiled end to end (root carried forward) on a "
                         "floor-only scene: optimization time, evaluations, time per evaluation and peak memory "
-                        "of each length, one subprocess per length (runner.bench.scaling, docs/scaling.md).")
+                        "of each length, one subprocess per length (runner.bench.scaling, docs/scaling.md). With "
+                        "--mode clean: `dynsplines clean` of a shipped clip looped forward and backward 1x..8x, "
+                        "its CPU time per length (runner.bench.clean_scaling).")
+    c.add_argument("--mode", choices=("animate", "clean"), default="animate",
+                   help="animate: the keyframes' solve; clean: a capture cleaned [%(default)s]")
+    c.add_argument("--clip", type=Path, default=None, help="with --mode clean: the BVH clip to loop [models/cmu/16_23.bvh]")
     c.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the clip [1,2,4,8]")
     c.add_argument("--rate", type=float, default=None, help="quadrature points per second [the command's]")
     c.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every length")
     c.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table, dense vs banded")
-    c.add_argument("--repeat", type=int, default=3,
-                   help="solves per length, the lengths alternating; the table gives medians [3]")
+    c.add_argument("--repeat", type=int, default=None,
+                   help="solves per length, the lengths alternating; the table gives medians [3; --mode clean 1]")
     c.set_defaults(func=bench_scaling)
     bench_contacts.register(bsub)
     bench_corpus.register(bsub)
@@ -323,9 +329,26 @@ def bench_scaling(args) -> int:
     """`dynsplines bench scaling`: runner.bench.scaling's table for the given lengths."""
     from runner.bench import scaling
 
-    if args.repeat < 1:
-        raise InputError(f"--repeat must be at least 1, got {args.repeat}")
-    argv = ["--factors", args.factors, "--repeat", str(args.repeat)]
+    repeat = args.repeat if args.repeat is not None else 1 if args.mode == "clean" else 3
+    if repeat < 1:
+        raise InputError(f"--repeat must be at least 1, got {repeat}")
+    if args.mode == "clean":
+        return _clean_scaling(args, repeat)
+    if args.clip is not None:
+        raise InputError(f"--clip {args.clip} goes with --mode clean (--mode animate tiles run_and_step's keyframes)")
+    argv = ["--factors", args.factors, "--repeat", str(repeat)]
     argv += [] if args.rate is None else ["--rate", str(args.rate)]
     argv += ["--dense"] * args.dense + ["--per-eval"] * args.per_eval
     return scaling.main(argv)
+
+
+def _clean_scaling(args, repeat: int) -> int:
+    """`bench scaling --mode clean`: runner.bench.clean_scaling's table."""
+    from runner.bench import clean_scaling
+
+    if args.rate is not None or args.dense or args.per_eval:
+        raise InputError("--rate, --dense and --per-eval go with --mode animate (the keyframes' solve)")
+    clip = args.clip or clean_scaling.CLIP
+    if not Path(clip).is_file():
+        raise InputError(f"--clip {clip}: no such BVH clip (current folder: {Path.cwd()})")
+    return clean_scaling.main(["--clip", str(clip), "--factors", args.factors, "--repeat", str(repeat)])

@@ -1,7 +1,8 @@
 """`dynsplines bench clean [CLIP.bvh ...]`: `dynsplines clean` and its peer, per-frame IK footskate cleanup
 (`runner.bench.clean_peer`, mink), on the same clips, retargeted captures, contacts and scenes, measured by the
 same code: penetration (1000 Hz), float and skate in contact (`runner.motion_metrics`), deviation from the
-capture and the change's peak accelerations against the 6 Hz capture's (`runner.clean_metrics`), CPU."""
+capture and the change's peak accelerations against the 6 Hz capture's (`runner.clean_metrics`), CPU
+(`runner.bench.clean_measure`)."""
 from __future__ import annotations
 
 import tempfile
@@ -22,34 +23,11 @@ def register(bsub) -> None:
     p.set_defaults(func=bench_clean)
 
 
-def _figures(saved_npz: Path, qpos: np.ndarray) -> dict:
-    """The figures of one cleaned clip `qpos` (r, nq) at the capture frames of the saved path `saved_npz`."""
-    from runner.clean_metrics import clean_figures
-    from runner.jolts import filter_capture
-    from runner.motion_metrics import motion_metrics
-    from runner.saved_path import contacts_from_array, resolve_scene
-    from solver.layout import StateLayout
-    from solver.metrics import path_metrics
-    from solver.model import load_model
-
-    z = np.load(saved_npz)
-    model = load_model(resolve_scene(str(z["scene"]), saved_npz))
-    times, ref = z["reference_times"], z["reference_qpos"]
-    fps = 1.0 / float(np.mean(np.diff(times)))
-    contacts = contacts_from_array(z["contacts"])
-    smooth = filter_capture(times, ref, StateLayout.from_model(model))
-    feet = motion_metrics(model, qpos, fps, ref, contacts)["path"]
-    pen = path_metrics(model, times, qpos, None, dynamics=False)["max_penetration_mm"]
-    return {"penetration_mm": pen, "float_mm": feet["float_contact_mm"], "skate_mm": feet["skate_contact_mm"],
-            **clean_figures(model, qpos, ref, fps, smooth)}
-
-
 def bench_clean(args) -> int:
     """Run both cleanups on each clip and print one row per clip and method. Returns 0."""
+    from runner.bench.clean_measure import clean_figures_of, saved_capture
     from runner.bench.clean_peer import ik_clean
     from runner.clean import CleanOptions, process_clean
-    from runner.saved_path import contacts_from_array
-    from solver.model import load_model
 
     clips = args.clips or [MODELS / "cmu" / f"{c}.bvh" for c in DEFAULT_CLIPS]
     head = (f"{'clip':10s} {'method':11s} {'pen mm':>7s} {'float mm':>8s} {'skate mm/fr':>11s} {'dev mean cm':>11s} "
@@ -61,13 +39,10 @@ def bench_clean(args) -> int:
             res = process_clean(clip, out, CleanOptions(render=False, quiet=True, summary=False), say=lambda *_: None)
             npz = Path(res["outputs"]["save_path"])
             z = np.load(npz)
-            from runner.saved_path import resolve_scene
-
-            model = load_model(resolve_scene(str(z["scene"]), npz))
-            peer, peer_cpu = ik_clean(model, z["reference_times"], z["reference_qpos"], contacts_from_array(z["contacts"]))
+            peer, peer_cpu = ik_clean(*saved_capture(npz))
             for name, qpos, cpu in (("capture", z["reference_qpos"], 0.0), ("dynsplines", z["path_qpos"], res["cpu_time_s"]),
                                     ("IK (mink)", peer, peer_cpu)):
-                f = _figures(npz, qpos)
+                f = clean_figures_of(npz, qpos)
                 print(f"{Path(clip).stem:10s} {name:11s} {f['penetration_mm']:7.2f} {f['float_mm']:8.2f} {f['skate_mm']:11.2f} "
                       f"{f['deviation_mean_cm']:11.2f} {f['deviation_max_cm']:10.2f} {f['change_pelvis_m_s2']:10.2f} "
                       f"{f['change_joint_rad_s2']:9.1f} {f['capture_pelvis_m_s2']:6.1f}/{f['capture_joint_rad_s2']:<7.0f} {cpu:6.2f}")

@@ -1,0 +1,154 @@
+"""Cost of `dynsplines clean` against clip length (docs/scaling.md "Cleaning a longer clip"): a shipped clip
+looped 1x, 2x, 4x, 8x.
+
+    python -m runner.bench.clean_scaling [--clip models/cmu/16_23.bvh] [--factors 1,2,4,8] [--repeat 1]
+
+The loop (`loop_bvh`) plays the clip forward, then backward, then forward again, ...: every copy after the
+first starts on the frame the one before it ended on (which it drops), so the looped clip is continuous in
+every joint and in the root with no transform to choose for any skeleton or axes, exactly `copies` times
+as long (frames after the rest frames: `copies` (n - 1) + 1), and each copy holds the same contacts, floats
+and skates (played backward, a slide is the same distance). What a loop adds is a turn at each seam: the
+velocities change sign there, over one frame, in the capture itself; its 6 Hz filtered copy, the no-jolt
+constraint's reference, sees the turn too. The clip's leading rest frames (`REST_FRAMES`: the synthetic
+T-pose a CMU conversion starts with) are kept once, in front.
+
+Each length is cleaned by `dynsplines clean --no-render` in its own subprocess (one BLAS thread); the CPU
+time compared is the clean's own as its metrics report gives it (`cpu_time_s`: reading, retargeting,
+contacts, the solve, the outputs), beside the whole process's (imports included). The cleaned clip is
+measured afterwards by `runner.bench.clean_measure`, outside those times.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from runner.bench.scaling import SINGLE_THREAD
+from runner.paths import MODELS
+
+CLIP = MODELS / "cmu" / "16_23.bvh"
+#: leading frames of a shipped (CMU, cgspeed) clip that are its synthetic T-pose rest frame, kept once
+REST_FRAMES = 1
+
+
+def loop_bvh(src: Path, dst: Path, copies: int, rest: int = REST_FRAMES) -> int:
+    """Write `src` looped forward and backward `copies` times to `dst` (module docstring).
+
+    Args:
+        src: a BVH clip with at least rest + 2 frames. dst: the looped clip. copies: >= 1. rest: leading
+            frames kept once, in front.
+    Returns:
+        the frames written.
+    Raises:
+        ValueError: copies < 1, or the clip has no MOTION section or too few frames.
+    """
+    if copies < 1:
+        raise ValueError(f"copies must be at least 1, got {copies}")
+    lines = Path(src).read_text().splitlines()
+    m = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
+    if m is None:
+        raise ValueError(f"{src}: no MOTION section")
+    frames = [ln for ln in lines[m + 3:] if ln.strip()]
+    head, motion = frames[:rest], frames[rest:]
+    if len(motion) < 2:
+        raise ValueError(f"{src}: {len(motion)} frames after {rest} rest frames; a loop needs at least 2")
+    out = list(motion)
+    for r in range(1, copies):
+        out += (motion[::-1] if r % 2 else motion)[1:]
+    body = head + out
+    Path(dst).write_text("\n".join([*lines[:m + 1], f"Frames: {len(body)}", lines[m + 2], *body]) + "\n")
+    return len(body)
+
+
+def clean_one(clip: Path, out: Path) -> dict:
+    """`dynsplines clean CLIP --no-render` in a subprocess with one BLAS thread, outputs in `out`: {"frames",
+    "displacement_frames", "evals", "status", "cpu_s" (the clean's own CPU time [s], `cpu_time_s` of its
+    metrics report), "process_cpu_s" (the whole subprocess's, imports included), and the cleaned clip's
+    figures (`runner.bench.clean_measure.clean_figures_of`)}.
+
+    Raises:
+        RuntimeError: the command failed (its stderr in the message).
+    """
+    import resource
+
+    from runner.bench.clean_measure import clean_figures_of
+
+    cmd = [sys.executable, "-m", "runner", "clean", str(clip), "--out-dir", str(out), "--no-render", "--quiet",
+           "--no-summary"]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    res = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, **SINGLE_THREAD}, check=False)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if res.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr}")
+    report = json.loads((out / f"{clip.stem}.clean.metrics.json").read_text())
+    npz = out / f"{clip.stem}.clean.npz"
+    f = clean_figures_of(npz, np.load(npz)["path_qpos"])
+    return {"frames": report["frames"], "displacement_frames": report["displacement_frames"],
+            "evals": report.get("n_evals"), "status": report["status"], "cpu_s": report["cpu_time_s"],
+            "process_cpu_s": (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime),
+            **{k: v for k, v in f.items() if k != "change_joint"}}
+
+
+def clean_scaling(clip: Path, factors=(1, 2, 4, 8), repeat: int = 1, rest: int = REST_FRAMES) -> list[dict]:
+    """Per length factor and repeat (the lengths alternating), `clean_one` of the looped clip: its dict with
+    "factor" and "repeat".
+
+    Raises:
+        RuntimeError: a clean failed.
+    """
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="dynsplines-clean-scaling-") as tmp:
+        paths = {}
+        for f in factors:
+            paths[f] = Path(tmp) / f"{clip.stem}_x{f}.bvh"
+            loop_bvh(clip, paths[f], f, rest)
+        for rep in range(max(1, repeat)):
+            for f in factors:
+                rows.append(clean_one(paths[f], Path(tmp) / f"x{f}.{rep}") | {"factor": f, "repeat": rep})
+    return rows
+
+
+def print_rows(rows: list[dict]) -> None:
+    """A row per length (median CPU over its repeats): frames, displacement frames, CPU, CPU per frame, the
+    ratios to the first length, and the cleaned clip's penetration, skate and mean deviation."""
+    factors = list(dict.fromkeys(r["factor"] for r in rows))
+    cpu = {f: float(np.median([r["cpu_s"] for r in rows if r["factor"] == f])) for f in factors}
+    first = {f: next(r for r in rows if r["factor"] == f) for f in factors}
+    base = factors[0]
+    proc = {f: float(np.median([r["process_cpu_s"] for r in rows if r["factor"] == f])) for f in factors}
+    print(f"{'length':>6} {'frames':>6} {'disp fr':>7} {'evals':>5} {'cpu s':>7} {'proc s':>7} {'ms/frame':>8} "
+          f"{'cpu/1x':>6} {'len/1x':>6} | {'pen mm':>6} {'skate':>6} {'dev cm':>6}  status")
+    for f in factors:
+        r = first[f]
+        print(f"{f:>5}x {r['frames']:>6} {r['displacement_frames']:>7} {r['evals'] or 0:>5} {cpu[f]:>7.2f} {proc[f]:>7.2f} "
+              f"{1e3 * cpu[f] / r['frames']:>8.2f} "
+              f"{cpu[f] / cpu[base]:>6.2f} {r['frames'] / first[base]['frames']:>6.2f} | {r['penetration_mm']:>6.2f} "
+              f"{r['skate_mm']:>6.2f} {r['deviation_mean_cm']:>6.2f}  {r['status']}")
+    top = factors[-1]
+    if top != base:
+        print(f"CPU {top}x / {base}x: {cpu[top] / cpu[base]:.2f} (acceptance: at most {1.125 * top / base:g} "
+              f"for {top / base:g}x the length)")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m runner.bench.clean_scaling", description=__doc__.splitlines()[0])
+    p.add_argument("--clip", type=Path, default=CLIP, help="the BVH clip to loop [models/cmu/16_23.bvh]")
+    p.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the clip [1,2,4,8]")
+    p.add_argument("--repeat", type=int, default=1, help="cleans per length, alternating; median CPU [1]")
+    p.add_argument("--rest-frames", type=int, default=REST_FRAMES, help=f"leading rest frames kept once [{REST_FRAMES}]")
+    args = p.parse_args(argv)
+    factors = [int(f) for f in args.factors.split(",")]
+    print(f"clean scaling: {args.clip.name} looped {args.factors}x (forward, backward, ...), `dynsplines clean "
+          "--no-render` in one subprocess per length, one BLAS thread; cpu s: the clean's own, proc s: the process's")
+    print_rows(clean_scaling(args.clip, factors, args.repeat, args.rest_frames))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
