@@ -77,6 +77,20 @@ class AugmentedLagrangian:
         #: with `elastic`: the largest c/tol of the last evaluation, held and elastic pairs (<= 1: all met)
         self.worst = np.inf
 
+
+    def posed(self) -> AugmentedLagrangian:
+        """A copy for one solve, as the problem was posed: the same D, engine, base and elastic objective;
+        each constraint a shallow copy holding its own `limit` (a solve raises limits on its copy,
+        `solver.feasibility`), the multipliers 0 and rho 1. Returns AugmentedLagrangian."""
+        import copy
+
+        def own(c):
+            c = copy.copy(c)
+            c.limit = np.array(c.limit, float)
+            return c
+
+        return AugmentedLagrangian(self.change, [own(c) for c in self.constraints], self.tmap, self.engine, self.d0,
+                                   elastic=self.elastic, base=self.base)
     def state(self, basis, P: np.ndarray) -> PathState:
         """The PathState of frame values P (m, nq) through `basis` (a `SplineBasis` at the points), plus
         the base motion where there is one."""

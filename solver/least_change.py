@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -111,9 +111,10 @@ class LeastChangeOptions:
                 raise InputError(f"LeastChangeOptions.{name} must be an integer >= 0, got {v!r}")
 
 
-@dataclass
+@dataclass(frozen=True)
 class LeastChange:
-    """One built least-change problem (`build_least_change`).
+    """One built least-change problem (`build_least_change`), read-only: a solve works on its own copy of
+    `al` (`AugmentedLagrangian.posed`), so the same problem solved twice gives the same Solution.
 
     Attributes:
         model: mujoco.MjModel. layout: its StateLayout. figure: its Figure. plain: FrameSet of the plain
@@ -227,8 +228,9 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     violation where a frame set's subproblems end with a constraint broken (module docstring).
 
     Args:
-        lc: from `build_least_change` (its multipliers change, and the limits the keyframes leave out of
-            reach are raised, `solver.feasibility`). options: LeastChangeOptions.
+        lc: from `build_least_change` (not modified: the solve's multipliers and the limits it raises where
+            the keyframes leave them out of reach, `solver.feasibility`, are on its own copy). options:
+            LeastChangeOptions.
         should_stop: polled during each subproblem; True ends the solve with the path so far.
         progress: progress(event, info): "round" (a subproblem starts: round, frames, variable), "eval"
             (evals, E: the best Phi so far), "constraints" (it ended: round, worst, value as `_worst`, rho:
@@ -241,6 +243,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         amount [SI]} and `certificate` (`solver.feasibility.Raise`s).
     """
     o = options or LeastChangeOptions()
+    lc = replace(lc, al=lc.al.posed())  # the solve's own multipliers and limits
     al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
     frames, basis = _start(lc, o.min_gap)
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
@@ -431,4 +434,4 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, raises, 
                     converged_to_tol=bool(status is Status.CONVERGED and np.isfinite(estimate) and estimate <= tol
                                           and not unmet),
                     final_estimate=estimate, relaxations=tuple(lc.relaxations), segment_decreases=decreases,
-                    certificate=raises)
+                    certificate=raises, multipliers=tuple((c.name, lam.copy()) for c, lam in zip(al.constraints, al.lam)))

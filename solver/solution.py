@@ -78,6 +78,9 @@ class Solution:
         segment_decreases: the least change's refinement checks, in order: ((frame times (m,) [s],
             (m - 1,) the decrease of Phi a midpoint frame predicts in each segment: the Euler-Lagrange
             residual of the augmented integrand, `solver.least_change_refine`), ...); () for `solve`.
+        multipliers: the least change's multiplier estimates at its end, ((constraint name, (p,) lambda >= 0
+            per pair, per unit of c/tol), ...) in the problem's order (Nocedal & Wright, sec. 17.3); () for
+            `solve`.
     """
 
     frames: FrameSet
@@ -102,6 +105,7 @@ class Solution:
     relaxations: tuple = ()
     segment_decreases: tuple = ()
     certificate: tuple = ()
+    multipliers: tuple = ()
 
     @cached_property
     def refinement_estimate(self) -> float:

@@ -83,12 +83,11 @@ def _problem(standing, top, bottom, keyed=True, half=0.0):
     t = old.t
     cons = [PelvisHeight("top", t, T_STAR, +1, top, SCHEDULE, half),
             PelvisHeight("bottom", t, T_STAR, -1, -bottom, LIMIT, half)]
-    lc.al = AugmentedLagrangian(old.change, cons, old.tmap, old.engine, old.d0)
-    return lc
+    return replace(lc, al=AugmentedLagrangian(old.change, cons, old.tmap, old.engine, old.d0))
 
 
 def top_limit(lc):
-    """(p,) [m] the limits of the bound z <= top after the solve (raised where certified)."""
+    """(p,) [m] the limits of the bound z <= top as posed (a solve raises them on its own copy)."""
     return lc.al.constraints[0].limit
 
 
@@ -129,7 +128,22 @@ def test_a_keyed_pose_beyond_a_bound_is_certified_by_its_own_excess(standing):
     assert raised.time == pytest.approx(T_STAR, abs=1e-9)  # at the key
     assert sol.status is Status.INFEASIBLE and _z(sol) == pytest.approx(z0, abs=1e-12)
     z = sol.frames.path(lc.al.t[lc.al.constraints[0].rows])[:, 2]
-    assert np.all(z - top_limit(lc) <= TOL + 1e-9)  # every pair meets its certified limit
+    assert np.all(z - (top_limit(lc) + raised.amount) <= TOL + 1e-9)  # every pair within the certified raise
+
+
+def test_a_solve_leaves_its_problem_as_posed(standing):
+    """The solve raises limits and updates multipliers on its own copy: the problem's limits are unchanged
+    after it, and the same problem solved again gives the same path."""
+    z0 = standing[2]
+    lc = _problem(standing, top=z0 - 0.005, bottom=z0 - 0.5, half=0.02)  # a keyed excess: a limit is raised
+    posed = [c.limit.copy() for c in lc.al.constraints]
+    first = solve_least_change(lc, LeastChangeOptions())
+    assert first.certificate  # something was raised
+    for c, limit in zip(lc.al.constraints, posed):
+        np.testing.assert_array_equal(c.limit, limit)
+    assert all(not np.any(lam) for lam in lc.al.lam)
+    again = solve_least_change(lc, LeastChangeOptions())
+    np.testing.assert_allclose(again.frames.path(lc.al.t), first.frames.path(lc.al.t), rtol=0, atol=1e-12)
 
 
 def test_finer_frames_do_not_beat_the_certificate(standing):
@@ -158,13 +172,14 @@ def test_multipliers_are_nonnegative_and_complementary_at_the_solution(standing)
     z0 = standing[2]
     lc = _problem(standing, top=z0 - 0.05, bottom=z0 - 0.20, keyed=False)
     sol = solve_least_change(lc, LeastChangeOptions())
+    assert sol.certificate == ()  # feasible: the limits as posed are the solve's
     state = lc.al.state(SplineBasis(sol.frames.times, lc.al.t), sol.frames.values)
-    for c, lam in zip(lc.al.constraints, lc.al.lam):
+    assert [name for name, _ in sol.multipliers] == [c.name for c in lc.al.constraints]
+    for c, (_, lam) in zip(lc.al.constraints, sol.multipliers):
         ch = c.values(state) / c.tolerance
         assert np.all(lam >= 0.0)
         assert np.all(lam[ch < -1.0] == 0.0), c.name  # inactive beyond a tolerance: no multiplier
-    top = next(c for c, lam in zip(lc.al.constraints, lc.al.lam) if c.name == "top")
-    assert lc.al.lam[lc.al.constraints.index(top)][0] > 0.0  # the active bound bears the pull of D
+    assert dict(sol.multipliers)["top"][0] > 0.0  # the active bound bears the pull of D
 
 
 
