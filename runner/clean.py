@@ -38,7 +38,9 @@ class CleanOptions:
     Attributes:
         pins: [s] times where the cleaned clip is the capture (each on the nearest capture frame). pin_ends:
             the first and last frame too (else they move with the clean: a contact that runs into them
-            can be fixed there). scene, figure, mass, root_scale, skeleton_map: as `runner.pipeline.ClipKeys`.
+            can be fixed there). feet: "planted" (a foot in contact slides no more than the pins force) or
+            "captured" (no more than the capture: only penetration, float and flight cleaned;
+            `solver.displacement.FEET`). scene, figure, mass, root_scale, skeleton_map: as `runner.pipeline.ClipKeys`.
         solve: LeastChangeOptions (None: the defaults). render: write the video (capture | cleaned);
             fps, size, speed, camera: its settings (`runner.render.side_by_side.VideoOptions`).
         quiet: no progress bars. summary: print the summary. command: the command line, recorded.
@@ -46,6 +48,7 @@ class CleanOptions:
 
     pins: tuple = ()
     pin_ends: bool = False
+    feet: str = "planted"
     scene: str | os.PathLike = AUTO
     figure: str | os.PathLike = SUBJECT
     mass: float | None = None
@@ -143,7 +146,7 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
     ref, model = cs.reference, cs.model
     options = o.solve or LeastChangeOptions()
     disp = build_displacement(model, ref.times, ref.qpos, pins=o.pins, pin_ends=o.pin_ends, contacts=contacts, flights=flights,
-                              rate=options.rate)
+                              rate=options.rate, feet=o.feet)
     with StopRequest(o.quiet) as stop:
         progress = Progress(o.quiet)
         sol = solve_displacement(disp, options, should_stop=stop, progress=progress)

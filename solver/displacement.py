@@ -56,13 +56,18 @@ from solver.reference import ReferenceMotion
 from solver.solution import Solution
 from solver.spline import interpolate
 
-__all__ = ["CORRECTION_TIME", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
+__all__ = ["CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
            "solve_displacement"]
 
 #: [s] the duration that divides a correction priced by its pose from one priced by its acceleration
 #: (the measure of change's omega = pi / CORRECTION_TIME): a quarter second, `mocap`'s default key spacing
 #: and about half a walking step's stance, so a foot's correction is spread over its contact, not over the clip
 CORRECTION_TIME = 0.25
+
+#: what a clean asks of a foot in contact: "planted", it slides no more than the pins force (Kovar, Schreiner
+#: & Gleicher, "Footskate cleanup for motion capture editing", SCA 2002: a planted foot stays put), or
+#: "captured", no more than the capture slides there (only penetration, float and flight are cleaned)
+FEET = ("planted", "captured")
 
 
 @dataclass
@@ -128,7 +133,8 @@ def pin_frames(times: np.ndarray, pins=(), ends: bool = False) -> np.ndarray:
 
 
 def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, contacts=(), flights=None,
-                       rate: float = LeastChangeOptions.rate, correction_time: float = CORRECTION_TIME) -> Displacement:
+                       rate: float = LeastChangeOptions.rate, correction_time: float = CORRECTION_TIME,
+                       feet: str = "planted") -> Displacement:
     """Build the clean of a retargeted capture (module docstring).
 
     Args:
@@ -138,12 +144,16 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
         contacts: the capture's contact schedule (`Contact`s). flights: ((start, end), ...) [s] where every
             site is clear (None: the schedule's gaps). rate: quadrature points per second [1/s].
         correction_time: [s] the measure of change's pose part prices changes slower than this
-            (omega = pi / correction_time, `solver.change`).
+            (omega = pi / correction_time, `solver.change`). feet: one of FEET: each slide limit is what
+            the pins force ("planted") or the capture's own slide over that contact ("captured").
     Returns:
         Displacement.
     Raises:
-        InputError: shapes that do not fit the model, fewer than 4 frames, a pin outside the clip.
+        InputError: shapes that do not fit the model, fewer than 4 frames, a pin outside the clip, an
+            unknown `feet`.
     """
+    if feet not in FEET:
+        raise InputError(f"feet {feet!r}: not one of {', '.join(FEET)}; give one of them")
     times, qpos = np.asarray(times, float), np.asarray(qpos, float)
     if qpos.ndim != 2 or qpos.shape[1] != model.nq or len(times) != len(qpos):
         raise InputError(f"capture qpos {qpos.shape} and times ({len(times)},) do not fit the model (nq = {model.nq})")
@@ -175,7 +185,7 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)
     Y1, Y2 = interpolate(times, qpos, t, (1, 2))
     al = AugmentedLagrangian(change, constraints, tmap, engine, d0, base=(reference.qpos - anchor, Y1, Y2))
-    _slide_as_captured(al, plain)
+    _slide_limits(al, plain, feet)
     knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
     lc = LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots)
     return Displacement(lc, times, qpos, anchor, pinned, capture_frames)
@@ -224,19 +234,19 @@ def _change_bound(bound: AccelerationBound, reference: ReferenceMotion, times, q
     return ChangeAcceleration(bound, reference.qacc, peaks)
 
 
-def _slide_as_captured(al: AugmentedLagrangian, plain: FrameSet) -> None:
-    """Raise each slide limit to the capture's own slide over that contact: a clean slides no more than the
-    capture, and is not asked to slide less. A contact found on a capture starts and ends with the site
-    still moving (entry below 0.5 m/s and 3 cm, exit above 1 m/s or 5 cm: `solver.contacts`), and marker
-    noise adds to its speed (16_23's resting heel: 0.1-0.5 m/s frame to frame; skate in contact 1.50
-    mm/frame, 0.92 after the 6 Hz filter): asked to halve that slide, as a keyed path is, the displacement
-    changed the whole gait (the bodies 5.6 cm from the capture on average, the torso up to 30 cm)."""
+def _slide_limits(al: AugmentedLagrangian, plain: FrameSet, feet: str) -> None:
+    """Set each slide limit (`solver.constraint_set` made it for a keyed path: what the keyframes force plus
+    half of what a known path slides beyond that). "planted": what the pins force, no allowance: a foot in
+    contact stays where it is put (the capture's contacts start and end with the site still moving and its
+    marker noise adds speed, 16_23's resting heel 0.1-0.5 m/s frame to frame: planting them moves more of
+    the body than a halved slide would). "captured": the capture's own slide over that contact, neither
+    more nor less."""
     from solver.spline_basis import SplineBasis
 
-    state = al.state(SplineBasis(plain.times, al.t), plain.values)
+    state = al.state(SplineBasis(plain.times, al.t), plain.values) if feet == "captured" else None
     for c in al.constraints:
         if c.name == "slide":
-            c.limit = np.maximum(c.limit, c.measure(state))
+            c.limit = c.measure(state) if feet == "captured" else np.array(c.forced, float)
 
 
 def solve_displacement(disp: Displacement, options: LeastChangeOptions | None = None, *, should_stop=None,

@@ -41,6 +41,9 @@ def register(sub) -> None:
     p.add_argument("--pin-ends", action="store_true",
                    help="keep the clip's first and last frame exactly as captured too (to join it to other clips); "
                         "a contact that runs into them is then fixed only where it can be")
+    p.add_argument("--feet", choices=("planted", "captured"), default="planted",  # solver.displacement.FEET
+                   help="a foot in contact: planted (slides no more than the pins force) or as captured "
+                        "(only penetration, float and flight cleaned) [%(default)s]")
     p.add_argument("--out-dir", type=Path, default=None, help="output folder [renders/<clip stem>/ in the current folder]")
     p.add_argument("--scene", default=AUTO,
                    help="scene MJCF, or 'auto' (default): a floor and boxes fitted to where the clip's feet rest")
@@ -59,7 +62,7 @@ def run(args) -> int:
     from solver.least_change import LeastChangeOptions
 
     solve = LeastChangeOptions(max_time_s=args.max_time) if args.max_time else None
-    o = CleanOptions(pins=tuple(t for group in args.pin for t in group), pin_ends=args.pin_ends, scene=args.scene, figure=args.figure,
+    o = CleanOptions(pins=tuple(t for group in args.pin for t in group), pin_ends=args.pin_ends, feet=args.feet, scene=args.scene, figure=args.figure,
                      mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map, solve=solve,
                      render=not args.no_render, fps=args.fps, quiet=args.quiet, summary=not args.no_summary,
                      command=shlex.join(["dynsplines", "clean", *sys.argv[2:]]))

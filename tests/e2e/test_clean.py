@@ -28,6 +28,8 @@ def test_clean_writes_its_outputs_and_meets_the_feet_limits(cleaned):
     feet = report["metrics"]["motion"]["optimized"]["path"]
     assert report["metrics"]["optimized"]["max_penetration_mm"] <= 1.0 + 0.1  # the 1 mm tolerance
     assert feet["float_contact_mm"] <= report["metrics"]["motion"]["plain"]["path"]["float_contact_mm"]
+    # --feet planted (the default): the capture's 1.50 mm/frame of skate in contact at least halved
+    assert feet["skate_contact_mm"] <= 0.5 * report["metrics"]["motion"]["plain"]["path"]["skate_contact_mm"]
     # no new jolt: the change's peaks within the 6 Hz capture's (and its 5 % tolerance)
     c = result["clean"]
     assert c["change_pelvis_m_s2"] <= 1.05 * c["capture_pelvis_m_s2"]

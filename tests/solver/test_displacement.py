@@ -121,6 +121,12 @@ def test_a_pin_outside_the_clip_is_named():
         pin_frames(np.linspace(0.0, 2.0, 5), (3.0,))
 
 
+def test_an_unknown_feet_mode_is_named(toy_model):
+    t, q = _capture(toy_model)
+    with pytest.raises(InputError, match="feet 'glued': not one of planted, captured"):
+        build_displacement(toy_model, t, q, feet="glued")
+
+
 def test_anchors_are_unit_and_zero_off_the_quaternions(toy_model):
     t, q = _capture(toy_model)
     layout = StateLayout.from_model(toy_model)
