@@ -28,6 +28,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from runner.mocap.capture import Capture, as_capture
 from runner.mocap.contact_detection import reference_contacts
 from runner.mocap.figure_choice import SUBJECT, choose_figure, is_default, scene_with_figure
 from runner.mocap.key_joints import frame_joints
@@ -157,8 +158,9 @@ def figure_path_for(scene_out: Path) -> Path:
     return scene_out.with_name(f"{name[:-len('.scene.xml')] if name.endswith('.scene.xml') else scene_out.stem}.figure.xml")
 
 
-def clip_figure_scene(clip: Path, k: ClipKeys, scene_out: Path):
-    """The figure file (`choose_figure`, a subject figure written beside `scene_out`), and the scene
+def clip_figure_scene(clip: Path | Capture, k: ClipKeys, scene_out: Path):
+    """The figure file of the clip (the run's `Capture`, or its file; `choose_figure`, a subject figure
+    written beside `scene_out`), and the scene
     to retarget onto: "auto", or the given scene with that figure (`scene_with_figure`, written to
     `scene_out` when the figure differs from the scene's own; with the default figure, the given scene
     as it is)."""
@@ -182,8 +184,9 @@ def _skeleton_map(k: ClipKeys):
     return read_skeleton_map(k.skeleton_map)
 
 
-def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, progress=None):
-    """A clip's figure and scene (given or fitted), its retargeted reference, its contacts and keyframes
+def write_clip_keyframes(clip: Path | Capture, out: Path, k: ClipKeys, scene_out: Path, progress=None):
+    """A clip's (read once here, `read_capture`, unless given as the run's `Capture`: every step takes that
+    value, and the reference carries it) figure and scene (given or fitted), its retargeted reference, its contacts and keyframes
     picked from it (`pick_keyframes`), written as the keyframe file `out` (with the contacts and the
     capture's flights, `solver.problem.capture_airborne`, the figure
     as "model" and a "source" naming the clip relative to the file, the command and the root scale).
@@ -199,10 +202,11 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
         if progress is not None:
             progress(i + 1, CLIP_STAGES[i])
 
-    figure, scene = clip_figure_scene(clip, k, scene_out)
+    capture = as_capture(clip)
+    figure, scene = clip_figure_scene(capture, k, scene_out)
     smap = _skeleton_map(k)
     boxes = read_boxes(k.boxes) if k.boxes is not None else ()
-    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, smap, root_height=k.key_frames is None, boxes=boxes)
+    cs = clip_scene(capture, scene, figure, scene_out, k.root_scale, smap, root_height=k.key_frames is None, boxes=boxes)
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
     done(0)
@@ -210,9 +214,9 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
     done(1)
     every = k.every if (k.every is not None or k.keys == "contacts") else 0.25
     keyframes = pick_keyframes(ref, model, contacts, keys=k.keys, every=every, partial=k.partial, extremes=k.extremes,
-                               frames=k.key_frames, frame_joints=frame_joints(clip, ref, model, k.key_frames, k.key_joints))
+                               frames=k.key_frames, frame_joints=frame_joints(capture, ref, model, k.key_frames, k.key_joints))
     done(2)
-    source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
+    source = {"clip": Path(os.path.relpath(Path(capture.source).resolve(), Path(out).parent.resolve())).as_posix(),
               "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
     if ref.skeleton is not None:  # read again by `animate` as read here
         source["skeleton"] = json.loads(ref.skeleton.skeleton_map().text())
@@ -429,7 +433,8 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
     if not ref.captured_root or ref.skeleton is None or not Path(npz).is_file():
         return None
     with tempfile.TemporaryDirectory(prefix="dynsplines-way-back-") as tmp:
-        res = export_on_source(npz, Path(tmp) / "way_back.bvh")
+        res = export_on_source(npz, Path(tmp) / "way_back.bvh",
+                               clip=ref.capture.clip if ref.capture is not None else None)  # the run's parse
     check = None if res is None else res.check
     if check is None or not len(check.times):
         return None

@@ -171,12 +171,13 @@ def feet_disagreement(reference: Reference, model) -> float | None:
     doing.
 
     Args:
-        reference: the retargeted clip (its `source` is read again). model: the scene's MjModel.
+        reference: the retargeted clip (its `capture`: the clip as read; without one its `source` is read
+            again). model: the scene's MjModel.
     Raises:
         InputError: the clip cannot be read or its skeleton recognised, or the model lacks the figure's feet.
     """
     from runner.mocap.body_frames import DRIVERS
-    from runner.mocap.bvh import read_bvh
+    from runner.mocap.capture import as_capture
     from runner.mocap.figure_record import clip_skeleton
     from runner.mocap.skeleton import skeleton_world
     from runner.mocap.stance import capture_rest
@@ -190,7 +191,7 @@ def feet_disagreement(reference: Reference, model) -> float | None:
     rows = rest.any(axis=1)
     if not rows.any():
         return None
-    clip = read_bvh(reference.source)
+    clip = as_capture(reference.capture or reference.source).clip
     figure = Figure.from_model(model)
     smap = reference.skeleton.skeleton_map() if reference.skeleton is not None else None
     skel, frames, _ = clip_skeleton(clip, model, smap)  # as the import read it

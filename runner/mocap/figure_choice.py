@@ -40,7 +40,8 @@ def choose_figure(figure, clip, out: Path, mass: float | None = None, skeleton_m
     """The figure MJCF file for `--figure` value `figure` (module docstring).
 
     Args:
-        figure: "subject", "default" or a path. clip: the BVH file. out: where a subject figure is written.
+        figure: "subject", "default" or a path. clip: the run's `runner.mocap.capture.Capture`, or the BVH
+            file (read here for "subject"). out: where a subject figure is written.
         mass: [kg] the subject's body mass (None: from the stature; only for "subject").
         skeleton_map: a `runner.mocap.skeleton_map.SkeletonMap` naming roles the recogniser cannot find
             (None: none; only for "subject").
@@ -51,10 +52,10 @@ def choose_figure(figure, clip, out: Path, mass: float | None = None, skeleton_m
             skeleton cannot be recognised or has a degenerate OFFSET (file and joint named).
     """
     if str(figure) == SUBJECT:
-        from runner.mocap.bvh import read_bvh
+        from runner.mocap.capture import as_capture
         from runner.mocap.subject_figure import write_subject_figure
 
-        return write_subject_figure(read_bvh(clip), out, mass, skeleton_map)
+        return write_subject_figure(as_capture(clip).clip, out, mass, skeleton_map)
     if mass is not None:
         raise InputError(f"--mass {mass:g}: only the subject's figure (--figure subject) takes a body mass; "
                          f"the figure {figure} has its own masses")

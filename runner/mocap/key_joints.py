@@ -97,22 +97,23 @@ def figure_joints(clip, skel, model, names) -> tuple[str, ...]:
     return tuple(jt.name for jt in Figure.from_model(model).joints if jt.name in fixed)
 
 
-def frame_joints(clip: Path, reference, model, key_frames, key_joints) -> dict | None:
+def frame_joints(clip, reference, model, key_frames, key_joints) -> dict | None:
     """{key frame: figure joints} of the partial keys the file `key_joints` names (None: no file).
 
     Args:
-        clip: the BVH file. reference: its retargeted reference (its recognised skeleton). model: the scene.
+        clip: the run's `runner.mocap.capture.Capture`, or the BVH file (then read here). reference: its
+            retargeted reference (its recognised skeleton). model: the scene.
         key_frames: the key frames (`--key-frames`). key_joints: the file (`--key-joints`) or None.
     Raises:
         InputError: a file without --key-frames, a frame that is not a key frame, or a joint the clip lacks.
     """
     if key_joints is None:
         return None
-    from runner.mocap.bvh import read_bvh
+    from runner.mocap.capture import as_capture
 
     named = read_key_joints(key_joints)
     if key_frames is None or not set(named) <= set(key_frames):
         raise InputError(f"--key-joints {key_joints}: frames {sorted(set(named) - set(key_frames or ()))} are "
                          "not among --key-frames; a partial key is one of the key frames")
-    parsed = read_bvh(clip)
+    parsed = as_capture(clip).clip
     return {f: figure_joints(parsed, reference.skeleton, model, names) for f, names in named.items()}

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.mocap.bvh import read_bvh
+from runner.mocap.capture import Capture, as_capture
 from runner.mocap.contacts import check_root_correction, correct_root_height
 from runner.mocap.figure_record import clip_skeleton
 from runner.mocap.foot_plant import plant_feet
@@ -42,7 +42,7 @@ IMPORT_STAGES = ("parse", "retarget", "glitches", "clamp", "root height", "footp
 ROOT_SCALE_LEGS = "legs"
 
 
-def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS,
+def load_bvh_reference(path: str | Path | Capture, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS,
                        skeleton_map: SkeletonMap | None = None, rest_pose: bool = False,
                        fitted: bool = False, root_height: bool = True) -> Reference:
     """Read a BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
@@ -64,7 +64,8 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     (`runner.mocap.foot_plant.plant_feet`, `Reference.plant`, `Reference.keyed`).
 
     Args:
-        path: a BVH file of a human skeleton of any convention (runner/mocap/skeleton.py).
+        path: the run's `Capture` (runner/mocap/capture.py), or a BVH file of a human skeleton of any
+            convention (runner/mocap/skeleton.py), then read here.
         model: the scene's MjModel (figure + floor + step box), e.g. models/run_and_step.xml; its
             figure must be models/humanoid39.xml (joint and site names). With a model that has no
             static surfaces (the figure alone) the root height is left as retargeted.
@@ -88,7 +89,7 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     Returns:
         Reference with times (n,) [s] from 0, qpos (n, nq), source = str(path), frame_time [s],
         root_scale, captured_root (the subject's own figure: root unscaled, only its height corrected),
-        skeleton (the recognised skeleton);
+        skeleton (the recognised skeleton), capture (the clip as read);
         n = frames in the file minus its rest frames.
     Raises:
         InputError: missing/unreadable file, malformed BVH (line named), wrong channel count, a
@@ -99,12 +100,13 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     from runner.export.bvh import figure_qpos_from_bvh, is_figure_clip
 
     step = progress or (lambda i, stage: None)
-    clip = read_bvh(path)
+    capture = as_capture(path)
+    clip, path = capture.clip, capture.source
     step(1, "parsed")
     if is_figure_clip(clip, model):  # our own export: the figure's qpos, read back without loss
         qpos = figure_qpos_from_bvh(clip, model)
         step(len(IMPORT_STAGES), "figure skeleton, read exactly")
-        return Reference(np.arange(len(qpos)) * clip.frame_time, qpos, str(path), clip.frame_time)
+        return Reference(np.arange(len(qpos)) * clip.frame_time, qpos, str(path), clip.frame_time, capture=capture)
     layout = StateLayout.from_model(model)
     figure = check_figure(Figure.from_model(model))
     skel, frames, own = clip_skeleton(clip, model, skeleton_map, rest_pose)  # own: the subject's own figure
@@ -121,7 +123,7 @@ def load_bvh_reference(path: str | Path, model, progress=None, root_scale: float
     step(7, "done")
     times = np.arange(len(qpos)) * clip.frame_time
     return Reference(times, qpos, str(path), clip.frame_time, scale, captured_root=own, skeleton=skel,
-                     clamped=clamped, plant=plant, glitches=glitches)
+                     clamped=clamped, plant=plant, glitches=glitches, capture=capture)
 
 
 def _on_the_surfaces(qpos, model, layout, frame_time: float, source: str, bounded: bool, step, root_height=True):

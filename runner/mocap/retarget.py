@@ -54,6 +54,7 @@ from solver.layout import StateLayout
 from solver.quaternion import align_hemispheres, conj, mul, normalize, swing_twist, twist_angle
 
 if TYPE_CHECKING:
+    from runner.mocap.capture import Capture
     from runner.mocap.foot_plant import FootPlant
     from runner.mocap.glitches import Glitch
 
@@ -85,6 +86,8 @@ class Reference:
             figure's own skeleton). `qpos` stays the capture: the motion metrics judge against it.
         glitches: the capture's tracking glitches repaired in `qpos` (`runner.mocap.glitches.Glitch`: a joint
             turning faster than any human joint between two frames).
+        capture: the clip as read (`runner.mocap.capture.Capture`), which the steps after the import take
+            instead of reading `source` again; None for a motion not read from a clip.
     """
 
     times: np.ndarray
@@ -97,6 +100,7 @@ class Reference:
     clamped: dict | None = None
     plant: FootPlant | None = None
     glitches: tuple[Glitch, ...] = ()
+    capture: Capture | None = None
 
     @property
     def count(self) -> int:

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.files import atomic_output
+from runner.mocap.capture import Capture, as_capture
 from runner.mocap.contacts import RootCorrectionRefused
 from runner.mocap.reference import ROOT_SCALE_LEGS, load_bvh_reference
 from runner.mocap.retarget import Reference
@@ -54,7 +55,7 @@ class ClipScene:
     notes: tuple[str, ...] = ()
 
 
-def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_out: str | Path,
+def clip_scene(clip: str | Path | Capture, scene: str | Path, figure: str | Path, fitted_out: str | Path,
                root_scale: float | str = ROOT_SCALE_LEGS, skeleton_map=None, root_height: bool = True,
                boxes=()) -> ClipScene:
     """Retarget `clip` onto `scene`, or with scene == "auto" onto a scene fitted to it.
@@ -72,7 +73,8 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     refused: `runner.mocap.contacts.check_root_correction`).
 
     Args:
-        clip: the BVH file. scene: an MJCF file or "auto". figure: the figure's MJCF
+        clip: the run's `Capture` (runner/mocap/capture.py), or a BVH file, then read here once. scene: an
+            MJCF file or "auto". figure: the figure's MJCF
             (models/humanoid39.xml). fitted_out: where the fitted scene is written (only for "auto").
         root_scale: the root path's scale (`load_bvh_reference`: "legs" or a number).
         skeleton_map: a `runner.mocap.skeleton_map.SkeletonMap` or None (`load_bvh_reference`).
@@ -83,6 +85,7 @@ def clip_scene(clip: str | Path, scene: str | Path, figure: str | Path, fitted_o
     Raises:
         InputError: the clip or a scene cannot be read, or the clip's skeleton lacks a joint.
     """
+    clip = as_capture(clip)  # read once: the fit and the retargeting onto the fitted scene take the same value
     if str(scene) == FLOOR:
         out = _writable(fitted_out)
         capture = _floor_scene(clip, figure, boxes, skeleton_map)
@@ -152,13 +155,12 @@ def read_boxes(path) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
     return tuple(out)
 
 
-def _floor_scene(clip, figure, boxes, skeleton_map) -> FittedScene:
+def _floor_scene(clip: Capture, figure, boxes, skeleton_map) -> FittedScene:
     """`--scene floor`: a level floor at the clip's height 0 and the boxes, in MuJoCo axes and metres (the
     clip's recognised axes and unit: p = unit A p_file; A a signed permutation, so a box stays a box)."""
-    from runner.mocap.bvh import read_bvh
     from runner.mocap.figure_record import clip_skeleton
 
-    skel = clip_skeleton(read_bvh(clip), load_model(figure), skeleton_map)[0]
+    skel = clip_skeleton(clip.clip, load_model(figure), skeleton_map)[0]
     out = []
     for lo, hi in boxes:
         a, b = (skel.unit * (skel.axes @ np.asarray(v, float)) for v in (lo, hi))
@@ -167,7 +169,7 @@ def _floor_scene(clip, figure, boxes, skeleton_map) -> FittedScene:
     return FittedScene(0.0, tuple(out))
 
 
-def _onto_fitted(clip, capture: FittedScene, figure, out: Path, root_scale, skeleton_map, check: bool = True,
+def _onto_fitted(clip: Capture, capture: FittedScene, figure, out: Path, root_scale, skeleton_map, check: bool = True,
                  root_height: bool = True) -> ClipScene:
     """The clip retargeted onto the scene `capture` (in the capture's coordinates), levelled and written to
     `out` (`clip_scene`); with `check`, a root correction beyond its bound raises RootCorrectionRefused."""

@@ -304,7 +304,7 @@ def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.
 
 
 def export_on_source(npz, out, which: str = "optimized", fps: float | None = None, required: bool = False,
-                     as_solved: bool = False):
+                     as_solved: bool = False, clip: BvhClip | None = None):
     """`dynsplines export PATH.npz --to FILE.bvh` onto the source skeleton (module docstring).
 
     Args:
@@ -312,6 +312,9 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
         required: `--skeleton source` was given: a path without a clip is an error (else None is returned,
             and the caller writes the figure's skeleton).
         as_solved: keep the reference's root-height correction (`write_source_bvh`; `--root-height solved`).
+        clip: the path's source clip as the run that made it parsed it (`runner.mocap.capture.Capture.clip`),
+            or None: parsed from the path's embedded text or its file (`source_clip`). The file written is
+            read back all the same.
     Returns:
         `runner.export.ExportResult` (its frames the file's, rest frames included; its `check` the file read
         back at the path's keyframes, `runner.mocap.source_check.KeysOnSource`), or None (no clip, not required).
@@ -326,7 +329,7 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
     fmt, saved, model, motion = prepare_export(npz, out, which, fps)
     if fmt != "BVH":
         raise InputError(f"--to {out}: --skeleton source writes BVH only; give a .bvh file or --skeleton figure")
-    clip = source_clip(saved)
+    clip = clip if clip is not None else source_clip(saved)
     if clip is None:
         if required:
             raise InputError(f"{npz}: the path was not made from a BVH clip, so it has no source skeleton; "

@@ -78,6 +78,19 @@ def test_reference_shape_and_time(reference, scene):
     assert reference.source == str(CLIP)
 
 
+def test_a_capture_read_once_is_its_file(reference, scene):
+    """The run's Capture (read once) holds the file's own text and gives the reference its file gives; the
+    reference carries it, so later steps read nothing again."""
+    from runner.mocap.capture import as_capture, read_capture
+
+    capture = read_capture(CLIP)
+    assert capture.text == CLIP.read_text(encoding="utf-8") and capture.source == str(CLIP)
+    assert as_capture(capture) is capture
+    again = load_bvh_reference(capture, scene, root_scale=1.0, rest_pose=True)
+    assert again.capture is capture and again.source == reference.source
+    assert np.array_equal(again.qpos, reference.qpos) and np.array_equal(again.times, reference.times)
+
+
 def test_quaternions_unit_and_hemisphere_consistent(reference, layout):
     for slot in layout.quat_slots:
         q = reference.qpos[:, slot]

@@ -194,6 +194,21 @@ def test_a_levelled_scene_and_another_rate(tmp_path):
     assert res.frames == len(b_out.values) and np.abs(res.check.distance - d).max() < 1e-6
 
 
+def test_the_runs_parse_writes_the_file_the_saved_text_does(tmp_path):
+    """`mocap` hands the way back the clip it parsed: the file written is byte for byte the one written from
+    the path's embedded text (`source_clip`), and the check reads that file back."""
+    from runner.mocap.capture import read_capture
+    from runner.mocap.source_export import export_on_source
+
+    clip = cmu_clip(tmp_path, "16_23", 0.3)
+    npz, _, _ = path_through_keys(tmp_path, clip)
+    a, b = tmp_path / "a.bvh", tmp_path / "b.bvh"
+    res_a = export_on_source(npz, a)
+    res_b = export_on_source(npz, b, clip=read_capture(clip).clip)
+    assert a.read_bytes() == b.read_bytes() and res_a.frames == res_b.frames
+    assert np.array_equal(res_a.check.distance, res_b.check.distance)
+
+
 @pytest.mark.slow
 def test_mocap_reports_the_file_it_would_write(tmp_path):
     """`mocap` then `export`: the keyframe figures in the metrics report are the exported file's, read back
