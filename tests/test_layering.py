@@ -1,7 +1,7 @@
 """The layering and lint contracts of docs/architecture.md, run as tests: import-linter (contracts in
 pyproject.toml [tool.importlinter]) and ruff (rules in [tool.ruff]).
 
-The contracts name the layout (runner/commands/, runner/mocap/, runner/render/, runner/console.py, ...,
+The contracts name the layout (runner/commands/, runner/capture/, runner/render/, runner/console.py, ...,
 runner/bench/sphere_reference/) and `ruff check` must report nothing. Each test
 skips, with the reason, when its tool is not installed (`pip install -e ".[test]"` installs both).
 """

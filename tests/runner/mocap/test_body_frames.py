@@ -1,10 +1,10 @@
-"""The frames in which a foot is taken to be flat (runner/mocap/body_frames.py, the foot's up axis), on
+"""The frames in which a foot is taken to be flat (runner/capture/body_frames.py, the foot's up axis), on
 hand-built ankle and ball-of-the-foot paths whose flat frames are known: a stair climber whose only
 frames on the floor are a push-off, a dancer who holds a kicked foot still in the air, and a runner whose
 first stance is on the forefoot."""
 import numpy as np
 
-from runner.mocap.body_frames import FLAT_FRACTION, _flat
+from runner.capture.body_frames import FLAT_FRACTION, _flat
 
 
 def _still(n, at):

@@ -1,4 +1,4 @@
-"""BVH import and retargeting (runner/mocap/), checked against physical expectations and
+"""BVH import and retargeting (runner/capture/), checked against physical expectations and
 hand-computed rotations, plus every malformed-input error."""
 import dataclasses
 import json
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy.interpolate import make_interp_spline
 
+from runner.capture.capture_keys import keyframe_indices, keyframes_from_reference
+from runner.capture.reference_motion import load_bvh_reference
+from runner.capture.root_height import worst_contact_distance
 from runner.commands.keyframes_from_bvh import keyframes_from_bvh_main
-from runner.mocap.contacts import worst_contact_distance
-from runner.mocap.keyframes import keyframe_indices, keyframes_from_reference
-from runner.mocap.reference import load_bvh_reference
 from solver.errors import InputError
 from solver.keyframe_file import read_keyframes
 from solver.layout import StateLayout
@@ -81,7 +81,7 @@ def test_reference_shape_and_time(reference, scene):
 def test_a_capture_read_once_is_its_file(reference, scene):
     """The run's Capture (read once) holds the file's own text and gives the reference its file gives; the
     reference carries it, so later steps read nothing again."""
-    from runner.mocap.capture import as_capture, read_capture
+    from runner.capture.clip import as_capture, read_capture
 
     capture = read_capture(CLIP)
     assert capture.text == CLIP.read_text(encoding="utf-8") and capture.source == str(CLIP)
@@ -642,7 +642,7 @@ def test_a_small_hop_keeps_its_height(tmp_path, scene):
     clip depend on where its feet are still and low, which the hop changes."""
     from bvh_edit import edit_bvh
 
-    from runner.mocap.stance import capture_rest
+    from runner.capture.stance import capture_rest
 
     start, duration, height = 0.25, 0.35, 0.15
     base = load_bvh_reference(CLIP, scene, root_scale=1.0, rest_pose=True)

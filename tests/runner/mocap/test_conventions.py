@@ -17,9 +17,9 @@ from bvh_conventions import CONVENTIONS, convention, read, resample, scale, writ
 from bvh_edit import edit_bvh
 from bvh_fk import AXES, parse, world
 
+from runner.capture.bvh import read_bvh
+from runner.capture.skeleton import recognise
 from runner.cli import main
-from runner.mocap.bvh import read_bvh
-from runner.mocap.skeleton import recognise
 from runner.saved_path import load_saved_path
 
 REPO = Path(__file__).resolve().parents[3]
@@ -100,9 +100,9 @@ def contacts_and_legs(clip, folder):
     end, surface), the leg joints' quaternions, the root height, the figure's leg and arm segments."""
     import mujoco
 
-    from runner.mocap.contact_detection import reference_contacts
-    from runner.mocap.scene import clip_scene, name_surfaces
-    from runner.mocap.subject_figure import write_subject_figure
+    from runner.capture.contact_detection import reference_contacts
+    from runner.capture.scene import clip_scene, name_surfaces
+    from runner.capture.subject_figure import write_subject_figure
     from solver.figure import Figure
     from solver.layout import StateLayout
 

@@ -1,4 +1,4 @@
-"""The footplant clean-up (runner.mocap.foot_plant) and the leg inverse kinematics under it (runner.mocap.leg_ik),
+"""The footplant clean-up (runner.capture.foot_plant) and the leg inverse kinematics under it (runner.capture.leg_ik),
 on the shipped figure on its floor scene, checked with MuJoCo's own forward kinematics:
 
 * `knee_angle` solves its distance equation (against rotating the shin by the returned angle) and picks the
@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 import solver
-from runner.mocap.clearance import CONTACT_CLEARANCE, ContactClearance
-from runner.mocap.foot_plant import plant_feet
-from runner.mocap.leg_ik import knee_angle, leg_chain, move_foot
+from runner.capture.clearance import CONTACT_CLEARANCE, ContactClearance
+from runner.capture.foot_plant import plant_feet
+from runner.capture.leg_ik import knee_angle, leg_chain, move_foot
 from solver.figure import FIGURE_FILE
 from solver.quaternion import mul, swing_angle, twist_angle
 

@@ -1,10 +1,10 @@
-"""runner.mocap.glitches: tracking glitches (a joint turning faster than OMEGA_MAX between frames) replaced by
+"""runner.capture.glitches: tracking glitches (a joint turning faster than OMEGA_MAX between frames) replaced by
 the slerp between the kept frames, on hand-built rotations about one axis whose angles are known exactly."""
 import numpy as np
 import pytest
 
 import solver
-from runner.mocap.glitches import OMEGA_MAX, glitches_line, repair_glitches
+from runner.capture.glitches import OMEGA_MAX, glitches_line, repair_glitches
 from solver.layout import StateLayout
 
 DT = 1.0 / 120.0

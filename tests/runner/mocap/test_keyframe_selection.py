@@ -1,4 +1,4 @@
-"""runner.mocap.keyframe_selection: keys at contact events, ends and the root's extremes."""
+"""runner.capture.keyframe_selection: keys at contact events, ends and the root's extremes."""
 from pathlib import Path
 
 import mujoco
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from shipped_sites import FEET
 
-from runner.mocap.contact_detection import reference_contacts
-from runner.mocap.keyframe_selection import KEY_MIN_GAP, CaptureError, add_keys_to_tolerance, contact_keyframes
+from runner.capture.contact_detection import reference_contacts
+from runner.capture.keyframe_selection import KEY_MIN_GAP, CaptureError, add_keys_to_tolerance, contact_keyframes
 from solver.contacts import Contact, touchdowns_liftoffs
 from solver.errors import InputError
 
@@ -53,7 +53,7 @@ def test_every_fills_long_gaps_only():
 
 
 def test_127_33_keys_at_the_landings():
-    from runner.mocap.reference import load_bvh_reference
+    from runner.capture.reference_motion import load_bvh_reference
     model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))
     ref = load_bvh_reference(ROOT / "models" / "cmu" / "127_33.bvh", model)
     cs = reference_contacts(model, ref.qpos, ref.frame_time)
@@ -210,7 +210,7 @@ def _wrapped(a):
 
 
 def test_a_full_turn_keyed_every_quarter_second_is_kept():
-    from runner.mocap.keyframe_selection import KEY_TURN_DEG, turn_keys
+    from runner.capture.keyframe_selection import KEY_TURN_DEG, turn_keys
 
     t, yaw, q = _full_turn()
     every = [0, 30, 60, 90, 120]                      # 0.25 s apart: 0, 78, 323, 360, 360 deg
@@ -227,7 +227,7 @@ def test_a_full_turn_keyed_every_quarter_second_is_kept():
 
 
 def test_turn_keys_leave_slow_turns_alone_and_reject_bad_input():
-    from runner.mocap.keyframe_selection import turn_keys
+    from runner.capture.keyframe_selection import turn_keys
 
     t = np.arange(481) / 120.0                        # 4 s: one turn at 90 deg/s, 45 deg between keys 0.5 s apart
     q = np.zeros((len(t), 1, 4))

@@ -9,24 +9,24 @@
 * 83_65: a jump with a full turn, keyed every 0.25 s: the plain spline keeps the capture's heading
   within 30 deg at every frame.
 
-The independent references are the clip's own forward kinematics (`runner.mocap.skeleton.skeleton_world`,
-`runner.mocap.source_export.root_correction`) and MuJoCo's kinematics of the reference.
+The independent references are the clip's own forward kinematics (`runner.capture.skeleton.skeleton_world`,
+`runner.capture.source_export.root_correction`) and MuJoCo's kinematics of the reference.
 """
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from runner.mocap.bvh import read_bvh
-from runner.mocap.contacts import (
+from runner.capture.bvh import read_bvh
+from runner.capture.root_height import (
     CONTACT_CLEARANCE,
     ROOT_CORRECTION_MAX,
     check_root_correction,
     feet_disagreement,
     worst_contact_distance,
 )
-from runner.mocap.source_export import root_correction
-from runner.mocap.stance import capture_rest
+from runner.capture.source_export import root_correction
+from runner.capture.stance import capture_rest
 from runner.pipeline import ClipKeys, write_clip_keyframes
 from solver.contacts import contact_points
 from solver.errors import InputError
@@ -106,7 +106,7 @@ def test_feet_disagreement_from_the_source_is_the_references_own(platform):
 
 
 def test_a_full_turn_keyed_every_quarter_second_keeps_the_heading(tmp_path):
-    from runner.mocap.keyframe_selection import CaptureError
+    from runner.capture.keyframe_selection import CaptureError
 
     cs, _, keyframes = _keyed("83_65", tmp_path)
     ref = cs.reference

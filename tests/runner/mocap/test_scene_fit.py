@@ -1,4 +1,4 @@
-"""runner.mocap.scene_fit: floor and boxes from where the feet rest; the MJCF loads from where it is saved.
+"""runner.capture.scene_fit: floor and boxes from where the feet rest; the MJCF loads from where it is saved.
 
 The independent check: 127_33 retargeted onto a FLOOR-ONLY scene (so the hand-made box cannot leak
 into the reference through the root-height correction) must give back the step of
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from shipped_sites import FEET, SITES
 
-from runner.mocap.scene_fit import LEVEL_TOL, MARGIN, MAX_SLOPE, FittedScene, fit_contacts, fit_scene, scene_mjcf
+from runner.capture.scene_fit import LEVEL_TOL, MARGIN, MAX_SLOPE, FittedScene, fit_contacts, fit_scene, scene_mjcf
 from solver.contacts import Contact, site_positions
 from solver.errors import InputError
 from solver.surfaces import StaticSurfaces
@@ -126,7 +126,7 @@ def test_scene_mjcf_loads_from_where_it_is_saved(tmp_path, monkeypatch):
 
 
 def load_clip(name, model):
-    from runner.mocap.reference import load_bvh_reference
+    from runner.capture.reference_motion import load_bvh_reference
     return load_bvh_reference(ROOT / "models" / "cmu" / f"{name}.bvh", model)
 
 
@@ -343,10 +343,10 @@ def test_a_scene_whose_boxes_need_too_much_root_correction_falls_back_to_the_flo
     """`clip_scene` "auto": when the fitted boxes need a root correction beyond its bound, they are dropped
     and the clip is retargeted onto the fitted floor alone, with a note that says so; when even the floor
     needs more, the correction is made all the same, with a note (the clip is not refused)."""
-    import runner.mocap.scene as scene
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.contacts import RootCorrectionRefused
-    from runner.mocap.subject_figure import write_subject_figure
+    import runner.capture.scene as scene
+    from runner.capture.bvh import read_bvh
+    from runner.capture.root_height import RootCorrectionRefused
+    from runner.capture.subject_figure import write_subject_figure
 
     clip = ROOT / "models" / "cmu" / "127_33.bvh"  # a run over a step: the fit has one box
     figure = write_subject_figure(read_bvh(clip), tmp_path / "c.figure.xml")

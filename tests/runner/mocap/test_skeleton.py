@@ -1,4 +1,4 @@
-"""Skeleton recognition (runner/mocap/skeleton.py) and the skeleton map (runner/mocap/skeleton_map.py):
+"""Skeleton recognition (runner/capture/skeleton.py) and the skeleton map (runner/capture/skeleton_map.py):
 roles found without names, units and up axes of any file, rest frames at any frame rate, the map winning,
 every bad map or skeleton one line naming the file, the key and the fix; and the correction the way back
 reports (the hyperextension clamp, against hand-computed geometry)."""
@@ -10,9 +10,9 @@ import pytest
 from bvh_conventions import read, reframe, rename, scale, write
 from bvh_edit import edit_bvh
 
-from runner.mocap.bvh import read_bvh
-from runner.mocap.skeleton import recognise
-from runner.mocap.skeleton_map import ROLES, SkeletonMap, parse_skeleton_map, read_skeleton_map
+from runner.capture.bvh import read_bvh
+from runner.capture.skeleton import recognise
+from runner.capture.skeleton_map import ROLES, SkeletonMap, parse_skeleton_map, read_skeleton_map
 from solver.errors import InputError
 
 REPO = Path(__file__).resolve().parents[3]
@@ -111,7 +111,7 @@ def test_any_up_axis_gives_the_same_joint_rotations(short, tmp_path, up, axes):
     as on the original (the root's heading may differ)."""
     import mujoco
 
-    from runner.mocap.reference import load_bvh_reference
+    from runner.capture.reference_motion import load_bvh_reference
 
     c = read(short)
     g = np.array(axes, float)
@@ -144,11 +144,11 @@ def test_the_way_back_names_the_hyperextension_clamp(tmp_path):
     backwards), so on the source skeleton the left ankle is, at that keyframe, the chord of 20 degrees
     about the knee away from the clip's (2 sin 10 deg x the 7.5-unit shin) and the toe further; every
     other joint and keyframe is the clip's: the keyframes written onto the source skeleton and read back."""
-    from runner.mocap.reference import load_bvh_reference
-    from runner.mocap.scene_fit import FittedScene, scene_mjcf
-    from runner.mocap.source_check import keys_on_source
-    from runner.mocap.source_export import source_bvh_text
-    from runner.mocap.subject_figure import write_subject_figure
+    from runner.capture.reference_motion import load_bvh_reference
+    from runner.capture.scene_fit import FittedScene, scene_mjcf
+    from runner.capture.source_check import keys_on_source
+    from runner.capture.source_export import source_bvh_text
+    from runner.capture.subject_figure import write_subject_figure
     from solver.model import load_model
 
     from .test_bvh_import import tiny_bvh, tiny_frame

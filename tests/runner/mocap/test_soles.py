@@ -1,11 +1,11 @@
-"""runner.mocap.soles: the heel and toe sites fitted to a hand-built motion whose true sole points are
+"""runner.capture.soles: the heel and toe sites fitted to a hand-built motion whose true sole points are
 known - the shipped figure rocking on a level floor about a heel point, standing flat, then rocking about
 a toe point, both points placed off the figure's published sites by known amounts."""
 import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from runner.mocap.soles import REACH, fit_soles
+from runner.capture.soles import REACH, fit_soles
 from solver.figure import FIGURE_FILE, Figure
 
 FPS = 120.0

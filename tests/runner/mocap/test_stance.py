@@ -1,11 +1,11 @@
-"""runner.mocap.stance: the capture's own stance on hand-built foot paths (exact masks from the definition),
+"""runner.capture.stance: the capture's own stance on hand-built foot paths (exact masks from the definition),
 on the toy figure through MuJoCo (heights known in closed form), and the agreement scores."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from runner.mocap.stance import (
+from runner.capture.stance import (
     StanceAgreement,
     capture_stance,
     lowest_sites,
@@ -140,8 +140,8 @@ def test_127_33_schedule_matches_the_capture_stance():
     frame by frame (recall and precision at least 0.97; measured 1.00 / 1.00 on this clip)."""
     import mujoco
 
-    from runner.mocap.contact_detection import reference_contacts
-    from runner.mocap.reference import load_bvh_reference
+    from runner.capture.contact_detection import reference_contacts
+    from runner.capture.reference_motion import load_bvh_reference
 
     model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))
     ref = load_bvh_reference(ROOT / "models" / "cmu" / "127_33.bvh", model)
@@ -182,7 +182,7 @@ def test_rolling_off_the_toes_is_stance_but_not_rest():
 def test_a_foot_resting_on_a_tilted_floor_rests():
     """A foot standing still at four places on a floor tilted 1 degree (heights from the fitted scene's
     surfaces, not from z): every frame rests, and its lowest site is on the floor."""
-    from runner.mocap.scene_fit import FittedScene
+    from runner.capture.scene_fit import FittedScene
 
     slope = np.tan(np.radians(1.0))
     floor = FittedScene(0.01, (), (slope, 0.0)).surfaces()
@@ -210,7 +210,7 @@ def test_a_site_enters_contact_with_its_foots_lowest_site():
     """Detection judged against the stance: a toe held still 26 mm up while the heel under it still
     sweeps in at 1 m/s does not enter contact until the heel (the foot's lowest site) is slow; the heel
     sweeping alone never enters. With feet=None the toe enters alone (the old per-site rule)."""
-    from runner.mocap.contact_detection import detect_contacts
+    from runner.capture.contact_detection import detect_contacts
 
     n = 40
     heel_x = np.r_[1.0 * np.arange(20) / FPS, np.full(n - 20, 0.19)]  # 1 m/s until frame 19, then still

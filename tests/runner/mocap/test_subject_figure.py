@@ -1,5 +1,5 @@
 """The subject's figure (made from a clip's HIERARCHY) and the lossless retargeting onto it, against the
-clip's own forward kinematics (tests/runner/mocap/bvh_fk.py: the text parsed here, scipy rotations)."""
+clip's own forward kinematics (tests/runner/capture/bvh_fk.py: the text parsed here, scipy rotations)."""
 from pathlib import Path
 
 import mujoco
@@ -8,11 +8,11 @@ import pytest
 from bvh_edit import edit_bvh
 from bvh_fk import parse, world
 
+from runner.capture.bvh import read_bvh
+from runner.capture.reference_motion import load_bvh_reference
+from runner.capture.subject_figure import ANKLE_HEIGHT, subject_figure_xml, subject_measures
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT
-from runner.mocap.bvh import read_bvh
-from runner.mocap.reference import load_bvh_reference
-from runner.mocap.subject_figure import ANKLE_HEIGHT, subject_figure_xml, subject_measures
 from solver.errors import InputError
 from solver.figure import Figure, shipped_figure
 
@@ -40,7 +40,7 @@ def point(model, data, name):
 def test_legs_relative_to_the_hips_are_the_captures(clip):
     """Hip, knee, ankle and toe joints relative to the hips within 5 mm of the clip's own forward
     kinematics at every frame but those of a repaired tracking glitch (74_05's right ankle, 16_23's right
-    shoulder: runner.mocap.glitches); on the figure alone (no surfaces to stand on) the root is the
+    shoulder: runner.capture.glitches); on the figure alone (no surfaces to stand on) the root is the
     captured Hips path (no scale, no height change)."""
     model = figure_model(clip)
     ref = load_bvh_reference(clip, model)
@@ -71,8 +71,8 @@ def test_on_a_fitted_scene_the_feet_stand_on_it(tmp_path, clip):
     path in the scene's levelled frame plus a vertical correction c(t) of at most 25 mm (the capture's
     floor is not flat to the mm: 14-23 mm on the six shared clips), and no contact site of any frame is
     below the fitted floor or box (MuJoCo's site positions against the scene's geoms)."""
-    from runner.mocap.scene import clip_scene
-    from runner.mocap.subject_figure import write_subject_figure
+    from runner.capture.scene import clip_scene
+    from runner.capture.subject_figure import write_subject_figure
     from solver.capture_frame import CaptureFrame
     from solver.surfaces import StaticSurfaces
 
@@ -89,7 +89,7 @@ def test_on_a_fitted_scene_the_feet_stand_on_it(tmp_path, clip):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
         lowest = min(lowest, StaticSurfaces.from_model(model, data).height_above(data.site_xpos[sites]).min())
-    assert lowest > 0.0015  # 2 mm clearance (runner.mocap.contacts.CONTACT_CLEARANCE), within 0.5 mm
+    assert lowest > 0.0015  # 2 mm clearance (runner.capture.root_height.CONTACT_CLEARANCE), within 0.5 mm
 
 
 def test_figure_proportions_masses_and_soles():

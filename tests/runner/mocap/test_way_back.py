@@ -56,10 +56,10 @@ def path_through_keys(tmp_path, clip, capture=None):
     which is the reference changed (`changed`); halfway between keys the reference changed. Keys avoid
     the frames whose reference the import corrected (a glitch repaired, a knee or elbow clamped).
     Returns (npz, key frame indices after the rest frames, the index of the changed key)."""
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.reference import load_bvh_reference
-    from runner.mocap.scene_fit import FittedScene, scene_mjcf
-    from runner.mocap.subject_figure import write_subject_figure
+    from runner.capture.bvh import read_bvh
+    from runner.capture.reference_motion import load_bvh_reference
+    from runner.capture.scene_fit import FittedScene, scene_mjcf
+    from runner.capture.subject_figure import write_subject_figure
     from solver.layout import StateLayout
     from solver.model import load_model
 
@@ -97,9 +97,9 @@ def assert_change_written(npz, clip, out, frame):
     from bvh_fk import local_rotations
     from scipy.spatial.transform import Rotation
 
-    from runner.mocap.body_frames import DRIVERS
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.figure_record import clip_skeleton
+    from runner.capture.body_frames import DRIVERS
+    from runner.capture.bvh import read_bvh
+    from runner.capture.figure_record import clip_skeleton
     from solver.model import load_model
 
     saved = np.load(npz)
@@ -145,9 +145,9 @@ def test_a_path_through_the_capture_exports_to_the_source_at_its_keys(tmp_path, 
     tests/bvh_fk.py; the changed key and the frames between keys are not the source (the change is
     written); the frames `export` reports are the file's, and its keyframe figures are the file's (as
     both readers measure them)."""
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.skeleton import recognise
-    from runner.mocap.source_export import export_on_source
+    from runner.capture.bvh import read_bvh
+    from runner.capture.skeleton import recognise
+    from runner.capture.source_export import export_on_source
 
     clip = CLIPS[name](tmp_path)
     npz, keys, moved = path_through_keys(tmp_path, clip)
@@ -177,9 +177,9 @@ def test_a_path_through_the_capture_exports_to_the_source_at_its_keys(tmp_path, 
 def test_a_levelled_scene_and_another_rate(tmp_path):
     """The scene's levelling transform is taken off the root, and at 60 fps the file's keys (every other
     one of a 120 fps clip's keys every 6 frames lands on its frames: all of them) are the source's too."""
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.skeleton import recognise
-    from runner.mocap.source_export import export_on_source
+    from runner.capture.bvh import read_bvh
+    from runner.capture.skeleton import recognise
+    from runner.capture.source_export import export_on_source
     from solver.capture_frame import CaptureFrame
 
     clip = cmu_clip(tmp_path, "127_33", 0.4)
@@ -197,8 +197,8 @@ def test_a_levelled_scene_and_another_rate(tmp_path):
 def test_the_runs_parse_writes_the_file_the_saved_text_does(tmp_path):
     """`mocap` hands the way back the clip it parsed: the file written is byte for byte the one written from
     the path's embedded text (`source_clip`), and the check reads that file back."""
-    from runner.mocap.capture import read_capture
-    from runner.mocap.source_export import export_on_source
+    from runner.capture.clip import read_capture
+    from runner.capture.source_export import export_on_source
 
     clip = cmu_clip(tmp_path, "16_23", 0.3)
     npz, _, _ = path_through_keys(tmp_path, clip)

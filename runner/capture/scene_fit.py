@@ -52,7 +52,7 @@ Method:
    capture floor is tilted by the calibration, the props on it too).
 
 5. Levelling (`FittedScene.levelling`, `FittedScene.levelled`; solver/capture_frame.py): a tilted
-   capture floor is a calibration error of the capture volume, so `runner.mocap.scene.clip_scene`
+   capture floor is a calibration error of the capture volume, so `runner.capture.scene.clip_scene`
    writes the scene in the frame where the fitted floor is z = 0 (the shortest rotation taking its
    normal to +z, then a vertical shift), the boxes square to the world axes, and records that rigid
    transform in the scene for the clip's import (and its inverse for the export onto the source).
@@ -73,7 +73,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.mocap.contact_detection import detect_contacts
+from runner.capture.contact_detection import detect_contacts
 from solver.capture_frame import CaptureFrame
 from solver.contacts import Contact, contact_mask, foot_contacts
 from solver.errors import InputError

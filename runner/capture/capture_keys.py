@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from runner.mocap.retarget import Reference
+from runner.capture.retarget import Reference
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.keyframes import Keyframes
@@ -147,10 +147,10 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
         reference: the retargeted clip. model: the scene's MjModel. contacts: the clip's contacts.
         keys: "every": `keyframe_indices(reference, every, extremes)`; "contacts": touch-downs,
             lift-offs, the ends and the root's extremes, then keys where the plain spline through
-            them strays from the capture (`runner.mocap.keyframe_selection.contact_keyframes` with a
+            them strays from the capture (`runner.capture.keyframe_selection.contact_keyframes` with a
             `CaptureError`), with `every` (or None) the largest gap [s]. Either way, then keys
             where the root or a joint turns more than 90 deg between two keys in the capture
-            (`runner.mocap.keyframe_selection.turn_keys`: else the plain spline joins them the short way
+            (`runner.capture.keyframe_selection.turn_keys`: else the plain spline joins them the short way
             round, and a full turn keyed every 0.25 s is lost).
         partial: the middle keyframe fixes only the root and the legs (`Figure.leg_joints`).
         extremes: with keys="every", also key the root's highest and lowest frames.
@@ -158,9 +158,9 @@ def pick_keyframes(reference: Reference, model, contacts, keys: str = "every", e
             used, and the keys take the clip's own values (an animator's pose is the keyframe, its feet
             are not planted: docs/mocap.md "The keyframes' feet"), plus the turn keys.
         frame_joints: with `frames`, {frame: figure joints} of the partial ones (`--key-joints`,
-            runner/mocap/key_joints.py); a frame that fixes no figure joint is no key.
+            runner/capture/key_joints.py); a frame that fixes no figure joint is no key.
     """
-    from runner.mocap.keyframe_selection import CaptureError, contact_keyframes, turn_keys
+    from runner.capture.keyframe_selection import CaptureError, contact_keyframes, turn_keys
     from solver.figure import model_feet
 
     if frames is not None:

@@ -4,7 +4,7 @@ The text check (`_check_bvh_text`: the HIERARCHY grammar, the MOTION header, eve
 line-numbered errors for user mistakes and protects against two `bvhio` 1.5.4 defects: its line reader
 loops forever at end of file (a truncated file would hang it), and the line numbers in its SyntaxErrors
 are wrong inside nested joints. Then `bvhio` parses the hierarchy, channels and Euler angles into local
-quaternions (the pipeline: runner/mocap/retarget.py).
+quaternions (the pipeline: runner/capture/retarget.py).
 """
 from __future__ import annotations
 

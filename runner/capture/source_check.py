@@ -1,12 +1,12 @@
-"""The way back checked on the file: a BVH written onto a clip's own skeleton (runner/mocap/source_export.py)
+"""The way back checked on the file: a BVH written onto a clip's own skeleton (runner/capture/source_export.py)
 read back and compared with the clip at the path's keyframes.
 
 At a keyframe the path is the capture as the figure has it, so there the written file is the source's own
 pose (docs/mocap.md, "Back onto the source skeleton") but where the import corrected the capture (the knee
 and elbow hyperextension clamp, the footplant, the repair of tracking glitches) or a partial key leaves
 joints to the path. The figures `export` prints and `mocap` prints and records are read from the written
-file: parsed by bvhio (`runner.mocap.bvh.read_bvh`), every joint's world position by the BVH forward
-kinematics (`runner.mocap.kinematics.file_world`), against the clip's, frame for frame.
+file: parsed by bvhio (`runner.capture.bvh.read_bvh`), every joint's world position by the BVH forward
+kinematics (`runner.capture.bvh_kinematics.file_world`), against the clip's, frame for frame.
 """
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.mocap.bvh import BvhClip, read_bvh
-from runner.mocap.kinematics import file_world
+from runner.capture.bvh import BvhClip, read_bvh
+from runner.capture.bvh_kinematics import file_world
 from solver.errors import InputError
 
 __all__ = ["ON_SOURCE", "ON_FRAME", "KeysOnSource", "keys_on_source"]

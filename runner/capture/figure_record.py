@@ -1,18 +1,18 @@
 """What a subject's figure records about the skeleton it was made for, and the skeleton a clip is read with.
 
-The subject's figure (runner/mocap/subject_figure.py) is made for one skeleton and measured on one clip.
+The subject's figure (runner/capture/subject_figure.py) is made for one skeleton and measured on one clip.
 It records in its `<custom>` section
 
 * ``subject:skeleton``: a digest of the skeleton's joint names, parents and OFFSETs (`skeleton_digest`);
 * ``subject:map``: the recognised skeleton as a complete skeleton map (roles, unit, up axis;
-  runner/mocap/skeleton_map.py), so that the same roles are read again whatever map was given;
-* ``subject:frame:<body>``: each body's offset R_off from its driving joint (runner/mocap/body_frames.py).
+  runner/capture/skeleton_map.py), so that the same roles are read again whatever map was given;
+* ``subject:frame:<body>``: each body's offset R_off from its driving joint (runner/capture/body_frames.py).
 
 `clip_skeleton` gives the skeleton and body frames a clip is retargeted with: on a figure made for the
 clip's skeleton the recorded ones (so that a clip of that skeleton is retargeted onto it without loss,
 and the export onto the source skeleton undoes exactly what the import did), else the clip's own
 (recognised, and the figure's bodies measured on it). A figure or keyframe file made before frames were
-recorded gets the rest-pose frames it was made with (`runner.mocap.body_frames.rest_pose_frames`).
+recorded gets the rest-pose frames it was made with (`runner.capture.body_frames.rest_pose_frames`).
 """
 from __future__ import annotations
 
@@ -22,10 +22,10 @@ from types import MappingProxyType
 
 import numpy as np
 
-from runner.mocap.body_frames import DRIVERS, BodyFrames, body_frames, rest_pose_frames
-from runner.mocap.bvh import BvhClip
-from runner.mocap.skeleton import RecognisedSkeleton, recognise
-from runner.mocap.skeleton_map import SkeletonMap, parse_skeleton_map
+from runner.capture.body_frames import DRIVERS, BodyFrames, body_frames, rest_pose_frames
+from runner.capture.bvh import BvhClip
+from runner.capture.skeleton import RecognisedSkeleton, recognise
+from runner.capture.skeleton_map import SkeletonMap, parse_skeleton_map
 from solver.errors import InputError
 from solver.figure import Figure
 

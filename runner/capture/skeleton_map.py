@@ -3,7 +3,7 @@
 A role is a place on the body the figure needs (docs/mocap.md, "Skeletons of any convention"): the hips,
 the first joint of the spine above them (the torso's pivot), the chest (where the arms branch off), the
 neck and the head, and on each side (``l_`` left, ``r_`` right) the upper leg, lower leg, foot, toe,
-upper arm, forearm and hand. The recogniser (runner/mocap/skeleton.py) finds them from the hierarchy and
+upper arm, forearm and hand. The recogniser (runner/capture/skeleton.py) finds them from the hierarchy and
 the names; a map file names the joint of any role it could not find (or overrides it), and may give the
 length unit, the up axis and the leading rest frames:
 

@@ -22,7 +22,7 @@ under each site):
   GMD skating speed) means a site enters contact not skating by their measure; leaving at 1 m/s
   keeps a rolling toe planted through push-off.
 - No minimum duration for a reference's schedule (`reference_contacts`: SCHEDULE_MIN_DURATION = 0):
-  judged against the capture's own stance (`runner.mocap.stance`, per foot, no minimum duration),
+  judged against the capture's own stance (`runner.capture.stance`, per foot, no minimum duration),
   the 0.05 s minimum dropped real touch-downs (75_03: the right toe's 4-frame touch at take-off, so
   the schedule's flight began early) and kept nothing the stance rejects on the tuning clips; the
   hysteresis alone keeps a swinging foot from flickering (below). `detect_contacts` still takes a
@@ -49,7 +49,7 @@ __all__ = ["DETECT_HEIGHT_OFF", "DETECT_HEIGHT_ON", "DETECT_MIN_DURATION", "DETE
 
 # -- detecting contact from a motion, with hysteresis: a reference's contact schedule
 #    (`detect_contacts`, values measured in its docstring) and the capture's own stance
-#    per foot (`runner.mocap.stance.capture_stance`, on the foot's lowest site). Speeds after the
+#    per foot (`runner.capture.stance.capture_stance`, on the foot's lowest site). Speeds after the
 #    kinematic gait-event rules validated against pressure insoles (Ghoussayni et al. 2004, Gait & Posture
 #    20:266, 0.5 m/s; Bonci et al. 2022, Front. Bioeng. Biotechnol. 10:868928: 3-D heel or forefoot speed
 #    under 0.5 m/s at initial contact, forefoot speed over 1.0 m/s at final contact).
@@ -161,7 +161,7 @@ def detect_contacts(
 
 def _foot_entry(enter: np.ndarray, heights: np.ndarray, sites: Sequence[str], feet) -> np.ndarray:
     """(n, s) `enter` where a site may also enter only while its foot's lowest site may: a foot touches
-    down with its lowest site (the capture's stance, `runner.mocap.stance`); a toe held still 2-3 cm
+    down with its lowest site (the capture's stance, `runner.capture.stance`); a toe held still 2-3 cm
     up while the heel under it still sweeps in at 0.5-1.2 m/s is not yet on the floor."""
     out = enter.copy()
     rows = np.arange(len(enter))

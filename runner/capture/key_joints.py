@@ -3,7 +3,7 @@ the figure joints they fix.
 
 A DCC keys bones, not the figure's joints: at a frame where only some bones carry keys (the left leg
 posed, the rest left to the interpolation), the keyframe is partial (paper sec. 2) and fixes the figure
-joints those bones drive (runner/mocap/body_frames.py `DRIVERS`: a body takes the world orientation of
+joints those bones drive (runner/capture/body_frames.py `DRIVERS`: a body takes the world orientation of
 the joint of its role). A keyed joint the figure merges into a body (CMU's `LHipJoint`, `LowerBack`,
 `Spine`, `LeftShoulder`: composed into the body below them) fixes the body of the first driving joint
 down its chain; a joint the figure does not model (toes, hands, fingers, neck and head, joints above
@@ -55,7 +55,7 @@ def read_key_joints(path: str | Path) -> dict[int, tuple[str, ...]]:
 
 def _driving(clip, skel, model) -> dict[int, str]:
     """{clip joint index: figure joint} of the joints that drive a figure body."""
-    from runner.mocap.body_frames import DRIVERS
+    from runner.capture.body_frames import DRIVERS
     from solver.figure import Figure
 
     figure = Figure.from_model(model)
@@ -67,7 +67,7 @@ def figure_joints(clip, skel, model, names) -> tuple[str, ...]:
     """The figure joints that the clip's keyed joints `names` fix (module docstring), in figure order.
 
     Args:
-        clip: the parsed clip (`runner.mocap.bvh.BvhClip`). skel: its recognised skeleton. model: the scene
+        clip: the parsed clip (`runner.capture.bvh.BvhClip`). skel: its recognised skeleton. model: the scene
             with the figure made for it. names: keyed joint names of the clip.
     Raises:
         InputError: a name is not a joint of the clip.
@@ -101,7 +101,7 @@ def frame_joints(clip, reference, model, key_frames, key_joints) -> dict | None:
     """{key frame: figure joints} of the partial keys the file `key_joints` names (None: no file).
 
     Args:
-        clip: the run's `runner.mocap.capture.Capture`, or the BVH file (then read here). reference: its
+        clip: the run's `runner.capture.clip.Capture`, or the BVH file (then read here). reference: its
             retargeted reference (its recognised skeleton). model: the scene.
         key_frames: the key frames (`--key-frames`). key_joints: the file (`--key-joints`) or None.
     Raises:
@@ -109,7 +109,7 @@ def frame_joints(clip, reference, model, key_frames, key_joints) -> dict | None:
     """
     if key_joints is None:
         return None
-    from runner.mocap.capture import as_capture
+    from runner.capture.clip import as_capture
 
     named = read_key_joints(key_joints)
     if key_frames is None or not set(named) <= set(key_frames):

@@ -1,12 +1,12 @@
 """A motion-capture clip read once per run: the `Capture` value every step of `mocap` takes.
 
-`read_capture` checks and parses the BVH file (`runner.mocap.bvh.read_bvh`: the HIERARCHY, channels,
+`read_capture` checks and parses the BVH file (`runner.capture.bvh.read_bvh`: the HIERARCHY, channels,
 offsets and every frame's local rotations and translations) and keeps the file's text (the export onto the
 source skeleton copies its HIERARCHY and rest frames). The figure, the scene fit, the retargeting, the
-contacts and stance, the keys and the way back (runner/mocap/source_export.py) all take this value, so a
-run parses its clip once; the way back still reads the file it *writes* (runner/mocap/source_check.py).
-The roles, unit, up axis and rest frames are recognised from it (`runner.mocap.figure_record.clip_skeleton`),
-the repairs are the `Reference`'s (runner/mocap/reference.py).
+contacts and stance, the keys and the way back (runner/capture/source_export.py) all take this value, so a
+run parses its clip once; the way back still reads the file it *writes* (runner/capture/source_check.py).
+The roles, unit, up axis and rest frames are recognised from it (`runner.capture.figure_record.clip_skeleton`),
+the repairs are the `Reference`'s (runner/capture/reference_motion.py).
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from runner.mocap.bvh import BvhClip, read_bvh
+from runner.capture.bvh import BvhClip, read_bvh
 from solver.errors import InputError
 
 __all__ = ["Capture", "read_capture", "as_capture"]
@@ -25,7 +25,7 @@ class Capture:
     """A BVH clip as read from its file (`read_capture`).
 
     Attributes:
-        clip: the parse (`runner.mocap.bvh.BvhClip`: J joints, n frames with the file's rest frames, file
+        clip: the parse (`runner.capture.bvh.BvhClip`: J joints, n frames with the file's rest frames, file
             units and axes).
         text: the file's whole text (as read; the export onto the source skeleton copies its HIERARCHY).
     """

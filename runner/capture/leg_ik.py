@@ -1,6 +1,6 @@
 """Moving a foot straight up or down with its own leg: analytic two-bone inverse kinematics on the figure.
 
-The footplant clean-up of an imported capture (`runner.mocap.foot_plant.plant_feet`) puts a resting foot
+The footplant clean-up of an imported capture (`runner.capture.foot_plant.plant_feet`) puts a resting foot
 the capture holds above its surface onto it, and lifts a foot back out of a surface, without moving the
 foot along the surface or turning it: the foot moves rigidly by dz along the vertical, in every frame
 where dz is not 0 (Kovar, Schreiner & Gleicher, "Footskate cleanup for motion capture editing", SCA 2002,
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from runner.mocap.kinematics import rotate
+from runner.capture.bvh_kinematics import rotate
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.quaternion import conj, mul, normalize, twist_angle

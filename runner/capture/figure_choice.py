@@ -1,10 +1,10 @@
 """`--figure subject|default|FILE.xml`: which figure a clip is retargeted onto, and a given scene with it.
 
 * ``subject`` (the default of `mocap`, `batch` and `keyframes-from-bvh`): the subject's own figure,
-  made from the clip's HIERARCHY (runner/mocap/subject_figure.py) and written next to the outputs as
+  made from the clip's HIERARCHY (runner/capture/subject_figure.py) and written next to the outputs as
   ``<stem>.figure.xml``;
 * ``default``: the shipped figure (models/humanoid39.xml), whose proportions are fixed (the root path is
-  then scaled by `--root-scale`, runner/mocap/reference.py);
+  then scaled by `--root-scale`, runner/capture/reference_motion.py);
 * a file: any figure MJCF with the shipped figure's bodies, joints, sites and annotations.
 
 A fitted scene (`--scene auto`) includes the chosen figure. A given scene includes its own figure; with
@@ -40,10 +40,10 @@ def choose_figure(figure, clip, out: Path, mass: float | None = None, skeleton_m
     """The figure MJCF file for `--figure` value `figure` (module docstring).
 
     Args:
-        figure: "subject", "default" or a path. clip: the run's `runner.mocap.capture.Capture`, or the BVH
+        figure: "subject", "default" or a path. clip: the run's `runner.capture.clip.Capture`, or the BVH
             file (read here for "subject"). out: where a subject figure is written.
         mass: [kg] the subject's body mass (None: from the stature; only for "subject").
-        skeleton_map: a `runner.mocap.skeleton_map.SkeletonMap` naming roles the recogniser cannot find
+        skeleton_map: a `runner.capture.skeleton_map.SkeletonMap` naming roles the recogniser cannot find
             (None: none; only for "subject").
     Returns:
         the figure file.
@@ -52,8 +52,8 @@ def choose_figure(figure, clip, out: Path, mass: float | None = None, skeleton_m
             skeleton cannot be recognised or has a degenerate OFFSET (file and joint named).
     """
     if str(figure) == SUBJECT:
-        from runner.mocap.capture import as_capture
-        from runner.mocap.subject_figure import write_subject_figure
+        from runner.capture.clip import as_capture
+        from runner.capture.subject_figure import write_subject_figure
 
         return write_subject_figure(as_capture(clip).clip, out, mass, skeleton_map)
     if mass is not None:

@@ -1,6 +1,6 @@
 """The capture's own stance: when each foot of a motion rests on a surface, judged on the motion itself.
 
-A contact schedule (`runner.mocap.contact_detection.reference_contacts`, or the contacts of a keyframe file) is a
+A contact schedule (`runner.capture.contact_detection.reference_contacts`, or the contacts of a keyframe file) is a
 labelling with its own purposes (per site, for the planted and clearance terms). The stance here is
 what it is judged against (docs/contacts.md "Contact schedules"):
 
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from runner.mocap.contact_detection import DETECT_HEIGHT_OFF, DETECT_HEIGHT_ON, DETECT_SPEED_OFF, DETECT_SPEED_ON, site_speeds
+from runner.capture.contact_detection import DETECT_HEIGHT_OFF, DETECT_HEIGHT_ON, DETECT_SPEED_OFF, DETECT_SPEED_ON, site_speeds
 from solver.contacts import contact_mask, contact_points, site_heights
 from solver.errors import InputError
 from solver.figure import foot_sites

@@ -5,7 +5,7 @@ The file has the source's HIERARCHY verbatim (joint names, OFFSETs, channel orde
 rate, and starts, like the source, with the source's leading rest frames (the synthetic T-pose of CMU's
 cgspeed conversion; none in most files); frame k + rest is the path at t = k / fps. The skeleton is
 read as the import read it (the roles, unit, axes and body frames the subject's figure records,
-runner/mocap/figure_record.py).
+runner/capture/figure_record.py).
 
 The motion is the source plus the path's change (motion displacement mapping, Bruderlin & Williams
 1995; Witkin & Popovic 1995): the path's change relative to the capture as the figure has it is put onto
@@ -14,14 +14,14 @@ the source's own pose, so that where the path is the capture the file is the sou
 * **the capture as the figure has it** (the base): the source's pose at the export time (its local
   rotations and translations, the captured frame's own at a captured frame's time, else spherical
   linear interpolation between the neighbouring frames, `scipy.spatial.transform.Slerp`) retargeted onto
-  the figure (`runner.mocap.retarget.retarget`, with the body frames the subject's figure records), and
+  the figure (`runner.capture.retarget.retarget`, with the body frames the subject's figure records), and
   the root where the path's reference has it (the saved path's `reference_qpos`: the captured hips
-  moved by the import's root-height correction, `runner.mocap.contacts.correct_root_height`, that
+  moved by the import's root-height correction, `runner.capture.root_height.correct_root_height`, that
   stands the feet on the fitted surfaces; without a reference, the captured hips). The import's
   corrections of the capture (the knee and elbow hyperextension clamp, the repair of tracking glitches,
   the footplant of the keys) are not in the base, so they are part of the path's change and reach the
   file, where `mocap` names them.
-* **a joint driving a figure body** (`runner.mocap.body_frames.DRIVERS`: the hips, upper and lower legs,
+* **a joint driving a figure body** (`runner.capture.body_frames.DRIVERS`: the hips, upper and lower legs,
   feet, chest, upper arms and forearms): with the figure joint into that body turned by q_path on the
   path and by q_base on the base, its change is D = q_base^-1 q_path, in the body's frame; in the
   driving joint's frame that is E = R_off D R_off^-1 (figure world = source world x R_off), and the
@@ -38,7 +38,7 @@ the source's own pose, so that where the path is the capture the file is the sou
 
 Local rotations become each joint's Euler channels in its own order (R = R1 R2 R3 for channels listed
 1 2 3, intrinsic: the BVH convention), unwrapped over time. `export_on_source` reads the file it wrote
-back and measures it at the path's keyframes (runner/mocap/source_check.py).
+back and measures it at the path's keyframes (runner/capture/source_check.py).
 """
 from __future__ import annotations
 
@@ -47,13 +47,13 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.mocap.body_frames import DRIVERS
-from runner.mocap.bvh import POSITION_CHANNELS, BvhClip, read_bvh
-from runner.mocap.figure_record import clip_skeleton, figure_skeleton_digest, skeleton_digest
-from runner.mocap.kinematics import rotate
-from runner.mocap.retarget import check_figure
-from runner.mocap.skeleton import RecognisedSkeleton
-from runner.mocap.source_check import ON_FRAME, keys_on_source
+from runner.capture.body_frames import DRIVERS
+from runner.capture.bvh import POSITION_CHANNELS, BvhClip, read_bvh
+from runner.capture.bvh_kinematics import rotate
+from runner.capture.figure_record import clip_skeleton, figure_skeleton_digest, skeleton_digest
+from runner.capture.retarget import check_figure
+from runner.capture.skeleton import RecognisedSkeleton
+from runner.capture.source_check import ON_FRAME, keys_on_source
 from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure
@@ -138,7 +138,7 @@ def root_correction(clip: BvhClip, skel: RecognisedSkeleton, model, reference, t
     taken back by the inverse of the scene's capture frame (x' = R x + shift, `solver.capture_frame`)
     and into the file's axes (A = skel.axes) and units, minus the source's own hips (forward kinematics
     of the clip). On the subject's own figure that is the per-frame height correction of the import
-    (`runner.mocap.contacts.correct_root_height`, a few mm, vertical in the levelled frame). Linear
+    (`runner.capture.root_height.correct_root_height`, a few mm, vertical in the levelled frame). Linear
     between the reference's frames, held before the first and after the last.
 
     Args:
@@ -184,7 +184,7 @@ def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray, ref
     """
     from dataclasses import replace
 
-    from runner.mocap.retarget import retarget
+    from runner.capture.retarget import retarget
     from solver.layout import StateLayout
 
     skel, frames, _ = clip_skeleton(clip, model)
@@ -312,12 +312,12 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
         required: `--skeleton source` was given: a path without a clip is an error (else None is returned,
             and the caller writes the figure's skeleton).
         as_solved: keep the reference's root-height correction (`write_source_bvh`; `--root-height solved`).
-        clip: the path's source clip as the run that made it parsed it (`runner.mocap.capture.Capture.clip`),
+        clip: the path's source clip as the run that made it parsed it (`runner.capture.clip.Capture.clip`),
             or None: parsed from the path's embedded text or its file (`source_clip`). The file written is
             read back all the same.
     Returns:
         `runner.export.ExportResult` (its frames the file's, rest frames included; its `check` the file read
-        back at the path's keyframes, `runner.mocap.source_check.KeysOnSource`), or None (no clip, not required).
+        back at the path's keyframes, `runner.capture.source_check.KeysOnSource`), or None (no clip, not required).
     Raises:
         InputError: as `runner.export.prepare_export`; a missing clip; a failed write.
     """

@@ -1,10 +1,10 @@
-"""Forward kinematics of a parsed BVH clip (runner/mocap/bvh.py): world orientations and positions of its
-joints, where a chain ends, and the lengths the skeleton recognition (runner/mocap/skeleton.py) reads."""
+"""Forward kinematics of a parsed BVH clip (runner/capture/bvh.py): world orientations and positions of its
+joints, where a chain ends, and the lengths the skeleton recognition (runner/capture/skeleton.py) reads."""
 from __future__ import annotations
 
 import numpy as np
 
-from runner.mocap.bvh import BvhClip
+from runner.capture.bvh import BvhClip
 from solver.quaternion import conj, mul
 
 __all__ = ["rotate", "forward", "file_world", "to_mujoco", "tip_positions", "bone_length", "reach"]

@@ -1,13 +1,13 @@
 """Feet and surfaces: the root height correction that puts a resting foot on the surface under it (and no
-contact site below a surface), and how far resting feet are from their surfaces (`runner.mocap.stance`
+contact site below a surface), and how far resting feet are from their surfaces (`runner.capture.stance`
 says when a foot rests)."""
 from __future__ import annotations
 
 import numpy as np
 
-from runner.mocap.clearance import CONTACT_CLEARANCE, ContactClearance, moving_average, smoothing_width
-from runner.mocap.contact_detection import DETECT_SPEED_ON
-from runner.mocap.retarget import Reference
+from runner.capture.clearance import CONTACT_CLEARANCE, ContactClearance, moving_average, smoothing_width
+from runner.capture.contact_detection import DETECT_SPEED_ON
+from runner.capture.retarget import Reference
 from solver.contacts import contact_radii, lowest_points
 from solver.errors import InputError
 from solver.figure import Figure
@@ -20,14 +20,14 @@ FIT_HEIGHT = 0.15
 #: (DETECT_HEIGHT_ON), so the scene is not where the capture's feet rest and the clip is refused
 ROOT_CORRECTION_MAX = 0.03
 #: [m] the most that correction may change between two frames 1/120 s apart: the 30 mm of the bound above,
-#: which the smoothing (`runner.mocap.clearance.SMOOTH_S`) keeps to a fifth of that; a jump is a surface that appears under a foot
+#: which the smoothing (`runner.capture.clearance.SMOOTH_S`) keeps to a fifth of that; a jump is a surface that appears under a foot
 ROOT_STEP_MAX = 0.03
 
 
 def worst_contact_distance(reference: Reference, model) -> float:
     """Acceptance figure: the worst |clearance| of a foot's lowest contact site while the foot rests.
 
-    Over the frames in which a foot rests on a surface (`runner.mocap.stance.capture_rest`: in the
+    Over the frames in which a foot rests on a surface (`runner.capture.stance.capture_rest`: in the
     capture's stance, its lowest site below the flight height and still), the largest distance between
     that site (heel or toe) and the surface under it, above or below (docs/contacts.md, "Feet on their
     surfaces").
@@ -39,7 +39,7 @@ def worst_contact_distance(reference: Reference, model) -> float:
     Raises:
         InputError: the model lacks the contact sites or the feet.
     """
-    from runner.mocap.stance import capture_rest
+    from runner.capture.stance import capture_rest
 
     rest, lowest = capture_rest(model, reference.qpos, reference.frame_time)
     if not rest.any():
@@ -101,7 +101,7 @@ def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarra
        lowest site within the wide window `FIT_HEIGHT` of the surface and slower than DETECT_SPEED_ON),
        of CONTACT_CLEARANCE - the lowest clearance of those feet.
     2. Contact frames: the frames in which a foot rests once that offset is applied, by the one
-       definition the detection is judged against and the acceptance figure uses (`runner.mocap.
+       definition the detection is judged against and the acceptance figure uses (`runner.capture.
        stance`: the capture's stance, and in it the lowest site below the flight height and still,
        `resting`). Only these are put on their surfaces: a foot near the top of a small hop is slow
        (its vertical speed passes through 0) and within the wide window, and putting it on the floor
@@ -122,7 +122,7 @@ def correct_root_height(qpos: np.ndarray, model, frame_time: float) -> np.ndarra
     Returns:
         (n, nq) qpos with the root z changed.
     """
-    from runner.mocap.stance import lowest_sites, resting, stance_mask
+    from runner.capture.stance import lowest_sites, resting, stance_mask
 
     kin = ContactClearance(model)
     pos = kin.positions(qpos)
@@ -156,11 +156,11 @@ def feet_disagreement(reference: Reference, model) -> float | None:
     source file's forward kinematics, or None when the figure is not the subject's own (its feet are not
     the source's) or no foot ever rests.
 
-    In each frame where a foot rests on a surface (`runner.mocap.stance.capture_rest` of the reference),
+    In each frame where a foot rests on a surface (`runner.capture.stance.capture_rest` of the reference),
     both feet's lowest contact points are found from the clip itself: the joint of each foot's role in the
     recognised skeleton (its world position and orientation by the BVH's forward kinematics in metres
-    and MuJoCo axes, `runner.mocap.skeleton.skeleton_world`, taken into the scene's levelled frame), turned
-    by the foot body's offset from it (`runner.mocap.figure_record.clip_skeleton`: the frames the figure
+    and MuJoCo axes, `runner.capture.skeleton.skeleton_world`, taken into the scene's levelled frame), turned
+    by the foot body's offset from it (`runner.capture.figure_record.clip_skeleton`: the frames the figure
     records), carries the figure's heel and toe sites as they sit in the foot (`model.site_pos`, the
     spheres' lowest points), and their heights above the surfaces under them are
     measured. A vertical move of the whole figure (the reference's root correction) changes every height
@@ -176,11 +176,11 @@ def feet_disagreement(reference: Reference, model) -> float | None:
     Raises:
         InputError: the clip cannot be read or its skeleton recognised, or the model lacks the figure's feet.
     """
-    from runner.mocap.body_frames import DRIVERS
-    from runner.mocap.capture import as_capture
-    from runner.mocap.figure_record import clip_skeleton
-    from runner.mocap.skeleton import skeleton_world
-    from runner.mocap.stance import capture_rest
+    from runner.capture.body_frames import DRIVERS
+    from runner.capture.clip import as_capture
+    from runner.capture.figure_record import clip_skeleton
+    from runner.capture.skeleton import skeleton_world
+    from runner.capture.stance import capture_rest
     from solver.capture_frame import CaptureFrame
     from solver.quaternion import mul
     from solver.surfaces import StaticSurfaces

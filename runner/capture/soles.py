@@ -2,7 +2,7 @@
 
 The skeleton's OFFSETs give the ankle and the ball of the foot (the toe joint), not the sole: how far
 below the ankle the heel rests, and where the forefoot touches the floor once the heel is up, are not in
-the HIERARCHY. The published ratios (`runner.mocap.subject_figure`: the sole 0.039 x stature below the
+the HIERARCHY. The published ratios (`runner.capture.subject_figure`: the sole 0.039 x stature below the
 ankle, the heel 0.24 x foot length behind it, the toe site under the ball) place them for an average
 foot in the skeleton's rest pose, which is not the foot's pose when it stands flat: on the shared clips
 the heel site of a flat, still foot rests 3 to 30 mm above or below its toe site, and the two feet
@@ -56,7 +56,7 @@ import numpy as np
 from solver.contacts import contact_mask, lowest_points
 from solver.figure import Figure
 
-#: the soft-L1 scale of the fit [m]: residuals beyond it count linearly (as the floor fit's, runner/mocap/scene_fit.py)
+#: the soft-L1 scale of the fit [m]: residuals beyond it count linearly (as the floor fit's, runner/capture/scene_fit.py)
 SCALE = 0.005
 #: a site moves at most this far from its published place in height, and the heel forward or back [m]
 REACH = 0.03
@@ -180,7 +180,7 @@ def fit_soles(model, qpos: np.ndarray, frame_time: float, tips: dict, rounded: b
     Raises:
         InputError: the figure lacks a contact site, or the feet never rest (nothing to fit a scene to).
     """
-    from runner.mocap.scene_fit import fit_contacts, fit_scene
+    from runner.capture.scene_fit import fit_contacts, fit_scene
 
     figure = Figure.from_model(model)
     names = list(figure.contact_sites)

@@ -5,8 +5,8 @@ same bodies, joints, sites, materials and `<custom>` annotations (models/README.
 annotations"), with
 
 * **joint centres and segment lengths from the skeleton** (docs/mocap.md, "The subject's figure"): the
-  recognised skeleton (runner/mocap/skeleton.py) and the figure's bodies measured on it
-  (runner/mocap/body_frames.py: each body's frame on its driving joint and the mean places, in that
+  recognised skeleton (runner/capture/skeleton.py) and the figure's bodies measured on it
+  (runner/capture/body_frames.py: each body's frame on its driving joint and the mean places, in that
   frame, of the joints it carries, in metres and MuJoCo axes). A body keeps the shipped figure's frame
   convention (parallel to the world at the identity pose: upright, legs straight down, arms hanging,
   feet flat), so a limb segment points along the shipped figure's segment with the length of the
@@ -19,7 +19,7 @@ annotations"), with
   the ankle, the toe site on the sole under the ball of the foot (where the foot pivots at push-off:
   the figure's foot is rigid and the subject's toes are not), the ball site at the toe joint; then
   both moved to the soles measured on the clip, and the heel rounded to a sphere of the radius measured
-  there (`runner.mocap.soles`; written as ``<numeric name="figure:radius:l_heel">``);
+  there (`runner.capture.soles`; written as ``<numeric name="figure:radius:l_heel">``);
 * **stature** H from the leg: the hip joint is `HIP_HEIGHT` x H above the sole (Winter 2009, fig. 4.1,
   after Drillis & Contini 1966), so H = (thigh + shin) / (HIP_HEIGHT - ANKLE_HEIGHT);
 * **masses** from the shipped figure's segment fractions (de Leva 1996, J. Biomech. 29(9):1223-1230,
@@ -28,9 +28,9 @@ annotations"), with
   shipped figure;
 * **geoms** scaled to the segments (lengths) and to H / 1.75 m (radii).
 
-The figure records the skeleton it was made for (runner/mocap/figure_record.py: a digest of the joint
+The figure records the skeleton it was made for (runner/capture/figure_record.py: a digest of the joint
 names and OFFSETs, the recognised roles, unit and up axis, and each body's frame on its joint): the
-retargeting of a clip of that skeleton onto it loses nothing (runner/mocap/retarget.py) and keeps the
+retargeting of a clip of that skeleton onto it loses nothing (runner/capture/retarget.py) and keeps the
 captured root path, and the export onto the source skeleton undoes it.
 """
 from __future__ import annotations
@@ -40,11 +40,11 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.mocap.body_frames import BodyFrames, body_frames
-from runner.mocap.bvh import BvhClip
-from runner.mocap.figure_record import write_record
-from runner.mocap.skeleton import RecognisedSkeleton, recognise
-from runner.mocap.skeleton_map import SkeletonMap
+from runner.capture.body_frames import BodyFrames, body_frames
+from runner.capture.bvh import BvhClip
+from runner.capture.figure_record import write_record
+from runner.capture.skeleton import RecognisedSkeleton, recognise
+from runner.capture.skeleton_map import SkeletonMap
 from solver.contacts import RADIUS_PREFIX
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE, Figure, shipped_figure
@@ -198,9 +198,9 @@ def _sole(spec, side: str, heel: np.ndarray, toe: np.ndarray, r: float, heel_rad
 
 def _fit_soles(spec, clip: BvhClip, m: SubjectMeasures) -> None:
     """Move the heel and toe sites (and the foot capsules) to the subject's soles measured on the clip
-    (`runner.mocap.soles.fit_soles`); the published places stay if the feet never rest long enough."""
-    from runner.mocap.retarget import clamp_hyperextension, retarget
-    from runner.mocap.soles import fit_soles
+    (`runner.capture.soles.fit_soles`); the published places stay if the feet never rest long enough."""
+    from runner.capture.retarget import clamp_hyperextension, retarget
+    from runner.capture.soles import fit_soles
     from solver.layout import StateLayout
 
     model = spec.compile()

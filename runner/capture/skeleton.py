@@ -5,7 +5,7 @@ convention"). `recognise` finds, from the hierarchy and the motion (never from a
 many conventions is not a standing pose: LAFAN1's and Bandai Namco's bones all lie along local +X
 with every channel zero):
 
-* **the roles** (runner/mocap/skeleton_map.py `ROLES`) from the tree: the hips are the first joint from
+* **the roles** (runner/capture/skeleton_map.py `ROLES`) from the tree: the hips are the first joint from
   the root whose branches are an upper body (the branch with the most end points) and two legs (two
   consecutive bones of comparable length; a static extra root above them, or IK targets hung from the
   root, are passed through); the chest
@@ -37,9 +37,9 @@ from types import MappingProxyType
 
 import numpy as np
 
-from runner.mocap.bvh import POSITION_CHANNELS, BvhClip
-from runner.mocap.kinematics import bone_length, file_world, reach, tip_positions, to_mujoco
-from runner.mocap.skeleton_map import OPTIONAL, ROLES, UNITS, SkeletonMap
+from runner.capture.bvh import POSITION_CHANNELS, BvhClip
+from runner.capture.bvh_kinematics import bone_length, file_world, reach, tip_positions, to_mujoco
+from runner.capture.skeleton_map import OPTIONAL, ROLES, UNITS, SkeletonMap
 from solver.errors import InputError
 
 __all__ = ["RecognisedSkeleton", "recognise", "skeleton_world", "name_side"]
@@ -201,7 +201,7 @@ def _hips(clip: BvhClip, children) -> tuple[int, int, list[int]] | None:
     with two limb-like branches besides the one with the most end points (the upper body); a joint whose
     other branches are not limbs (IK targets, props hung from a root) is passed down into that branch.
     Without any, the first joint with two branches besides the upper body's (a degenerate leg is then
-    named by the bone checks of runner/mocap/body_frames.py)."""
+    named by the bone checks of runner/capture/body_frames.py)."""
     score = lambda c: (_leaves(children, c), bool(_UPPER.search(clip.names[c])), reach(clip, children, c))  # noqa: E731
 
     def split(node):

@@ -1,8 +1,8 @@
 """The footplant clean-up of an imported capture: every resting foot on the surface under it.
 
-`runner.mocap.contacts.correct_root_height` moves the whole figure up or down, so it puts only the lower
+`runner.capture.root_height.correct_root_height` moves the whole figure up or down, so it puts only the lower
 of two resting feet on its surface. Where the capture holds the other resting foot higher (its feet
-disagree, `runner.mocap.contacts.feet_disagreement`: marker offsets, a foot held up while the other
+disagree, `runner.capture.root_height.feet_disagreement`: marker offsets, a foot held up while the other
 carries the weight), that foot stays above its surface by the difference: on 83_02 the right foot rests
 flat 23 mm above the floor for 0.5 s while the left stands on it. Keyframes taken from such a capture hold
 the foot up inside its own stance, and then no path through them both meets the keyframes and rests the
@@ -13,14 +13,14 @@ inverse kinematics (Kovar, Schreiner & Gleicher, "Footskate cleanup for motion c
 2002), vertically only (the horizontal slide is the slide constraint's, judged against the capture's
 own skate):
 
-1. each foot, in every frame in which it rests (`runner.mocap.stance.resting`: in the capture's
+1. each foot, in every frame in which it rests (`runner.capture.stance.resting`: in the capture's
    stance, its lowest contact point below the flight height and still, the definition the root
    correction and the float bound use), is moved down by the least height above `CONTACT_CLEARANCE`
    its lowest point has in that rest from its start to the frame, and from the frame to its end
    (`_settled`): a foot the capture holds up for the whole rest goes down by that height, while one
    coming down onto the surface lands when the capture's lands and one lifting off lifts when it lifts
    (slow, under 3 cm, both count as resting by the definition's thresholds). It moves by its own leg
-   (`runner.mocap.leg_ik.move_foot`: the knee flexes about its hinge, the foot keeps its orientation and
+   (`runner.capture.leg_ik.move_foot`: the knee flexes about its hinge, the foot keeps its orientation and
    its place along the surface);
 2. what a straight knee leaves out of reach, the root is lowered by (the most over the resting feet),
    and a foot that this puts below `CONTACT_CLEARANCE` (the other foot) is lifted back by its leg;
@@ -38,9 +38,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from runner.mocap.clearance import CONTACT_CLEARANCE, ContactClearance, moving_average, smoothing_width
-from runner.mocap.leg_ik import MOVE_TOL, leg_chain, move_foot
-from runner.mocap.stance import capture_rest
+from runner.capture.clearance import CONTACT_CLEARANCE, ContactClearance, moving_average, smoothing_width
+from runner.capture.leg_ik import MOVE_TOL, leg_chain, move_foot
+from runner.capture.stance import capture_rest
 
 __all__ = ["FootPlant", "plant_feet"]
 
@@ -101,7 +101,7 @@ def plant_feet(qpos: np.ndarray, model, frame_time: float) -> FootPlant:
     Returns:
         FootPlant; the motion unchanged when the scene has no surface or no foot rests.
     Raises:
-        InputError: the figure lacks a leg joint or a knee's flexion axis (`runner.mocap.leg_ik.leg_chain`).
+        InputError: the figure lacks a leg joint or a knee's flexion axis (`runner.capture.leg_ik.leg_chain`).
     """
     kin = ContactClearance(model)
     n = len(qpos)

@@ -3,8 +3,8 @@ its clean-up.
 
 The pipeline (one concept: from a BVH file to a reference motion and keyframes on *our* figure):
 
-1. Parse the BVH file with `bvhio` (runner/mocap/bvh.py, after a check of its text that gives
-   line-numbered errors) and recognise its skeleton (runner/mocap/skeleton.py): which joint plays which
+1. Parse the BVH file with `bvhio` (runner/capture/bvh.py, after a check of its text that gives
+   line-numbered errors) and recognise its skeleton (runner/capture/skeleton.py): which joint plays which
    role (hips, spine, chest, neck, head, and per side upper leg, lower leg, foot, toe, upper arm,
    forearm, hand), the length unit, the up axis, and a leading rest frame (CMU's cgspeed conversion
    starts with a synthetic T-pose), or take them from a skeleton map file.
@@ -13,14 +13,14 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    channels), in metres and in MuJoCo axes (z up; the file's up axis to z by a cyclic permutation of
    the axes: for Y-up files (x, y, z) = (Z, X, Y), as for CMU's clips).
 3. Retargeting: each figure body's world orientation is its driving joint's world orientation times a
-   constant offset R_off (runner/mocap/body_frames.py: the body's anatomical frame in the joint's frame,
+   constant offset R_off (runner/capture/body_frames.py: the body's anatomical frame in the joint's frame,
    measured on the clip, or recorded in the subject's figure). Local joint quaternions follow as
    q_joint = conj(q_parent_world) q_child_world, unit, w x y z, hemisphere-consistent over time.
    Joints the figure merges are composed, not dropped: a body's world orientation includes every
    rotation above its driving joint (the torso's is every spine joint's; the thigh's includes a hip
    offset joint such as CMU's LHipJoint), so the joint quaternion between two bodies is the chain's
    composition (docs/mocap.md, "What the figure keeps"). On the subject's own figure
-   (runner/mocap/subject_figure.py: the figure's segments are the subject's bones, its ball site the toe
+   (runner/capture/subject_figure.py: the figure's segments are the subject's bones, its ball site the toe
    joint) the hip, knee, ankle and toe-joint positions relative to the hips are the capture's, and the
    root path is the captured one. On another figure, which keeps its own bone lengths, the root
    position is the hips' position scaled by the ratio of the figure's leg length to the subject's
@@ -45,18 +45,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from runner.mocap.body_frames import DRIVERS, BodyFrames
-from runner.mocap.bvh import BvhClip
-from runner.mocap.skeleton import RecognisedSkeleton, skeleton_world
+from runner.capture.body_frames import DRIVERS, BodyFrames
+from runner.capture.bvh import BvhClip
+from runner.capture.skeleton import RecognisedSkeleton, skeleton_world
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.layout import StateLayout
 from solver.quaternion import align_hemispheres, conj, mul, normalize, swing_twist, twist_angle
 
 if TYPE_CHECKING:
-    from runner.mocap.capture import Capture
-    from runner.mocap.foot_plant import FootPlant
-    from runner.mocap.glitches import Glitch
+    from runner.capture.clip import Capture
+    from runner.capture.foot_plant import FootPlant
+    from runner.capture.glitches import Glitch
 
 # --------------------------------------------------------------------------------------------------
 # data
@@ -77,16 +77,16 @@ class Reference:
         root_scale: the scale applied to the captured root path (`retarget`; 1: as captured).
         captured_root: the root path is the captured one, unscaled, up to the per-frame height
             correction that stands the feet on the scene's surfaces (the subject's own figure,
-            `runner.mocap.reference.load_bvh_reference`; the source-skeleton export takes it off).
+            `runner.capture.reference_motion.load_bvh_reference`; the source-skeleton export takes it off).
         skeleton: the clip's recognised skeleton (None: a clip on the figure's own skeleton, read exactly).
         clamped: {knee or elbow joint: (n,) [deg]} the hyperextension the clean-up removed per frame
             (`hyperextension`), or None.
         plant: the capture with its resting feet planted on their surfaces, which the keyframes are taken
-            from (`runner.mocap.foot_plant.FootPlant`: its qpos, and what it moved), or None (a clip on the
+            from (`runner.capture.foot_plant.FootPlant`: its qpos, and what it moved), or None (a clip on the
             figure's own skeleton). `qpos` stays the capture: the motion metrics judge against it.
-        glitches: the capture's tracking glitches repaired in `qpos` (`runner.mocap.glitches.Glitch`: a joint
+        glitches: the capture's tracking glitches repaired in `qpos` (`runner.capture.glitches.Glitch`: a joint
             turning faster than any human joint between two frames).
-        capture: the clip as read (`runner.mocap.capture.Capture`), which the steps after the import take
+        capture: the clip as read (`runner.capture.clip.Capture`), which the steps after the import take
             instead of reading `source` again; None for a motion not read from a clip.
     """
 
@@ -180,7 +180,7 @@ def retarget(clip: BvhClip, skel: RecognisedSkeleton, frames: BodyFrames, figure
 
     Args:
         clip: a parsed clip (all frames, the rest frames included). skel: its recognised skeleton.
-        frames: the figure's bodies on it (`runner.mocap.body_frames.body_frames`, or a subject figure's
+        frames: the figure's bodies on it (`runner.capture.body_frames.body_frames`, or a subject figure's
             record). figure: the figure. layout: the scene's qpos layout.
         root_scale: scale of the root path, > 0 (`leg_length_ratio` for the figure's legs; 1: as captured).
     Returns:

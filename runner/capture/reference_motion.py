@@ -1,11 +1,11 @@
-"""A BVH clip as a reference motion of the figure: parsed, retargeted, cleaned up (runner/mocap/retarget.py).
+"""A BVH clip as a reference motion of the figure: parsed, retargeted, cleaned up (runner/capture/retarget.py).
 
-On the subject's own figure (runner/mocap/subject_figure.py: made from this clip's skeleton) the
+On the subject's own figure (runner/capture/subject_figure.py: made from this clip's skeleton) the
 retargeting is lossless: the root path is the captured one (no scale), and the modelled joints' positions
 relative to the root are the capture's (docs/mocap.md, "What the figure keeps"). In a scene with surfaces
 the root height is still corrected per frame by at most 3 cm (`correct_root_height`), so that the feet in
 contact stand on the fitted surfaces instead of sinking into them; the export onto the source skeleton
-takes that correction off again (runner/mocap/source_export.py).
+takes that correction off again (runner/capture/source_export.py).
 """
 from __future__ import annotations
 
@@ -14,12 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.mocap.capture import Capture, as_capture
-from runner.mocap.contacts import check_root_correction, correct_root_height
-from runner.mocap.figure_record import clip_skeleton
-from runner.mocap.foot_plant import plant_feet
-from runner.mocap.glitches import repair_glitches
-from runner.mocap.retarget import (
+from runner.capture.clip import Capture, as_capture
+from runner.capture.figure_record import clip_skeleton
+from runner.capture.foot_plant import plant_feet
+from runner.capture.glitches import repair_glitches
+from runner.capture.retarget import (
     Reference,
     check_figure,
     clamp_hyperextension,
@@ -28,7 +27,8 @@ from runner.mocap.retarget import (
     retarget,
     tidy_quaternions,
 )
-from runner.mocap.skeleton_map import SkeletonMap
+from runner.capture.root_height import check_root_correction, correct_root_height
+from runner.capture.skeleton_map import SkeletonMap
 from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
 from solver.figure import Figure
@@ -50,22 +50,22 @@ def load_bvh_reference(path: str | Path | Capture, model, progress=None, root_sc
     named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
     every frame, no retargeting, no clamping, no root-height correction.
 
-    Steps (runner/mocap/retarget.py docstring): parse (bvhio), recognise the skeleton (roles, unit, up axis;
-    `runner.mocap.figure_record.clip_skeleton`), drop a leading rest frame (the synthetic T-pose of CMU's
+    Steps (runner/capture/retarget.py docstring): parse (bvhio), recognise the skeleton (roles, unit, up axis;
+    `runner.capture.figure_record.clip_skeleton`), drop a leading rest frame (the synthetic T-pose of CMU's
     cgspeed conversion), forward kinematics in metres and MuJoCo axes, body-offset retargeting of body
     orientations, local joint quaternions
     (unit, w x y z, hemisphere-consistent), the root's position and orientation moved into the scene's
     levelled capture frame (the rigid transform its MJCF records, `solver.capture_frame.CaptureFrame.
     from_model`: a fitted scene's floor is z = 0 there; the identity for a scene that records none), tracking
-    glitches repaired (`runner.mocap.glitches.repair_glitches`: a joint turning faster than any human joint
+    glitches repaired (`runner.capture.glitches.repair_glitches`: a joint turning faster than any human joint
     between two frames), knee/elbow hyperextension clamped to 0 flexion (`clamp_hyperextension`), root
     height corrected so feet in contact stand on the floor or the box and no contact site is ever below a
     surface (`correct_root_height`); and, for the keyframes, the resting feet planted on their surfaces
-    (`runner.mocap.foot_plant.plant_feet`, `Reference.plant`, `Reference.keyed`).
+    (`runner.capture.foot_plant.plant_feet`, `Reference.plant`, `Reference.keyed`).
 
     Args:
-        path: the run's `Capture` (runner/mocap/capture.py), or a BVH file of a human skeleton of any
-            convention (runner/mocap/skeleton.py), then read here.
+        path: the run's `Capture` (runner/capture/clip.py), or a BVH file of a human skeleton of any
+            convention (runner/capture/skeleton.py), then read here.
         model: the scene's MjModel (figure + floor + step box), e.g. models/run_and_step.xml; its
             figure must be models/humanoid39.xml (joint and site names). With a model that has no
             static surfaces (the figure alone) the root height is left as retargeted.
@@ -77,8 +77,8 @@ def load_bvh_reference(path: str | Path | Capture, model, progress=None, root_sc
         skeleton_map: roles, unit or up axis that win over the recognised ones (`--skeleton-map`; on the
             figure made for this skeleton its recorded ones are used).
         rest_pose: the figure's bodies on the skeleton's rest pose, as keyframe files made before the
-            bodies were measured on the clip (`runner.mocap.body_frames.rest_pose_frames`).
-        fitted: the scene was fitted to this clip (`runner.mocap.scene.clip_scene`): on the subject's own
+            bodies were measured on the clip (`runner.capture.body_frames.rest_pose_frames`).
+        fitted: the scene was fitted to this clip (`runner.capture.scene.clip_scene`): on the subject's own
             figure, a root correction beyond its bound is refused (`check_root_correction`: the fit
             missed where the feet rest). In a scene of your own the correction is what the scene needs.
         root_height: correct the root height (`correct_root_height`); False: the root as retargeted, for

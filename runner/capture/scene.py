@@ -1,5 +1,5 @@
 """The scene a clip is retargeted onto: a given MJCF file, one fitted to where the clip's feet rest
-(`--scene auto`: a floor plane, tilted if the capture's is, and boxes; runner/mocap/scene_fit.py), written
+(`--scene auto`: a floor plane, tilted if the capture's is, and boxes; runner/capture/scene_fit.py), written
 next to the outputs in the levelled capture frame (the fitted floor at z = 0, solver/capture_frame.py), or
 (`--scene floor`) the clip's own ground plane, a level floor at its height 0, with boxes given in its
 coordinates (`--boxes FILE.json`: a DCC's scene, the Blender add-on's)."""
@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
+from runner.capture.clip import Capture, as_capture
+from runner.capture.reference_motion import ROOT_SCALE_LEGS, load_bvh_reference
+from runner.capture.retarget import Reference
+from runner.capture.root_height import RootCorrectionRefused
+from runner.capture.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
 from runner.files import atomic_output
-from runner.mocap.capture import Capture, as_capture
-from runner.mocap.contacts import RootCorrectionRefused
-from runner.mocap.reference import ROOT_SCALE_LEGS, load_bvh_reference
-from runner.mocap.retarget import Reference
-from runner.mocap.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
 from solver.capture_frame import CaptureFrame
 from solver.contacts import Contact, contact_points
 from solver.errors import InputError
@@ -70,14 +70,14 @@ def clip_scene(clip: str | Path | Capture, scene: str | Path, figure: str | Path
     of the figure relative to that folder, so it loads from where it is saved), and retarget again onto
     it: `load_bvh_reference` moves the root into the levelled frame, and the height correction then
     stands the feet on the fitted floor and boxes (at most 3 cm on the subject's own figure, or the clip is
-    refused: `runner.mocap.contacts.check_root_correction`).
+    refused: `runner.capture.root_height.check_root_correction`).
 
     Args:
-        clip: the run's `Capture` (runner/mocap/capture.py), or a BVH file, then read here once. scene: an
+        clip: the run's `Capture` (runner/capture/clip.py), or a BVH file, then read here once. scene: an
             MJCF file or "auto". figure: the figure's MJCF
             (models/humanoid39.xml). fitted_out: where the fitted scene is written (only for "auto").
         root_scale: the root path's scale (`load_bvh_reference`: "legs" or a number).
-        skeleton_map: a `runner.mocap.skeleton_map.SkeletonMap` or None (`load_bvh_reference`).
+        skeleton_map: a `runner.capture.skeleton_map.SkeletonMap` or None (`load_bvh_reference`).
         root_height: correct the root height onto the surfaces (`load_bvh_reference`); False for an
             animator's keys (`--key-frames`), which are where they are.
         boxes: with scene == "floor", ((min (3,), max (3,)), ...) boxes in the clip's coordinates (file
@@ -158,7 +158,7 @@ def read_boxes(path) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
 def _floor_scene(clip: Capture, figure, boxes, skeleton_map) -> FittedScene:
     """`--scene floor`: a level floor at the clip's height 0 and the boxes, in MuJoCo axes and metres (the
     clip's recognised axes and unit: p = unit A p_file; A a signed permutation, so a box stays a box)."""
-    from runner.mocap.figure_record import clip_skeleton
+    from runner.capture.figure_record import clip_skeleton
 
     skel = clip_skeleton(clip.clip, load_model(figure), skeleton_map)[0]
     out = []

@@ -50,9 +50,9 @@ from types import MappingProxyType
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from runner.mocap.bvh import BvhClip
-from runner.mocap.kinematics import rotate, tip_positions
-from runner.mocap.skeleton import RecognisedSkeleton, skeleton_world
+from runner.capture.bvh import BvhClip
+from runner.capture.bvh_kinematics import rotate, tip_positions
+from runner.capture.skeleton import RecognisedSkeleton, skeleton_world
 from solver.errors import InputError
 from solver.quaternion import conj, mul, normalize
 

@@ -1,6 +1,6 @@
 """The figure's contact points over a motion and their clearance above the scene's surfaces, and the
-smoothing of the corrections that stand feet on them (`runner.mocap.contacts.correct_root_height`,
-`runner.mocap.foot_plant.plant_feet`)."""
+smoothing of the corrections that stand feet on them (`runner.capture.root_height.correct_root_height`,
+`runner.capture.foot_plant.plant_feet`)."""
 from __future__ import annotations
 
 import numpy as np
