@@ -9,7 +9,7 @@ takes that correction off again (runner/capture/source_export.py).
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +28,7 @@ from runner.capture.retarget import (
     tidy_quaternions,
 )
 from runner.capture.root_height import check_root_correction, correct_root_height
+from runner.capture.skeleton import RecognisedSkeleton
 from runner.capture.skeleton_map import SkeletonMap
 from solver.capture_frame import CaptureFrame
 from solver.errors import InputError
@@ -42,9 +43,45 @@ IMPORT_STAGES = ("parse", "retarget", "glitches", "clamp", "root height", "footp
 ROOT_SCALE_LEGS = "legs"
 
 
+@dataclass(frozen=True)
+class Retargeted:
+    """A clip retargeted onto a figure (`retarget_capture`), in the capture's own coordinates, before the
+    scene's levelling and the clean-up: what the readings of one clip onto one figure share (a fitted scene
+    reads the clip onto the figure alone to find where the feet rest, then onto the scene fitted there).
+
+    Attributes:
+        qpos: (n, nq) the retargeted frames, the rest frames dropped (read-only).
+        skeleton: the recognised skeleton (roles, unit, axes, rest frames). scale: the root path's scale
+            applied (`load_bvh_reference` root_scale). own: the figure is the subject's own.
+    """
+
+    qpos: np.ndarray
+    skeleton: RecognisedSkeleton
+    scale: float
+    own: bool
+
+
+def retarget_capture(capture: Capture, model, root_scale: float | str = ROOT_SCALE_LEGS,
+                     skeleton_map: SkeletonMap | None = None, rest_pose: bool = False) -> Retargeted | None:
+    """`load_bvh_reference`'s retargeting step alone: the clip onto the figure of `model` (its skeleton
+    recognised, the body frames the figure records or measured, the root scale), or None for a clip on the
+    figure's own skeleton (read exactly, nothing to retarget). Arguments and errors as `load_bvh_reference`."""
+    from runner.export.bvh import is_figure_clip
+
+    clip = capture.clip
+    if is_figure_clip(clip, model):
+        return None
+    figure = check_figure(Figure.from_model(model))
+    skel, frames, own = clip_skeleton(clip, model, skeleton_map, rest_pose)  # own: the subject's own figure
+    scale = 1.0 if own and root_scale == ROOT_SCALE_LEGS else _root_scale(root_scale, clip, skel, model, capture.source)
+    qpos = retarget(clip, skel, frames, figure, StateLayout.from_model(model), scale)[skel.rest_frames:]
+    qpos.flags.writeable = False
+    return Retargeted(qpos, skel, scale, own)
+
+
 def load_bvh_reference(path: str | Path | Capture, model, progress=None, root_scale: float | str = ROOT_SCALE_LEGS,
                        skeleton_map: SkeletonMap | None = None, rest_pose: bool = False,
-                       fitted: bool = False, root_height: bool = True) -> Reference:
+                       fitted: bool = False, root_height: bool = True, retargeted: Retargeted | None = None) -> Reference:
     """Read a BVH clip and retarget it onto the figure: the dense reference motion. A clip on the
     figure's own skeleton (written by `dynsplines export --to FILE.bvh` or `--export FILE.bvh`: a joint
     named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
@@ -83,6 +120,8 @@ def load_bvh_reference(path: str | Path | Capture, model, progress=None, root_sc
             missed where the feet rest). In a scene of your own the correction is what the scene needs.
         root_height: correct the root height (`correct_root_height`); False: the root as retargeted, for
             an animator's keys (`--key-frames`: the poses are the keyframes, in the animator's scene).
+        retargeted: `retarget_capture` of this clip onto this model's figure, made before (onto the figure
+            alone, say), so the clip is retargeted once; None: retargeted here.
     On the subject's own figure (the model's figure records this clip's skeleton) "legs" is 1: see the
     module docstring for why the root height is still corrected and how the export takes it off.
 
@@ -107,12 +146,11 @@ def load_bvh_reference(path: str | Path | Capture, model, progress=None, root_sc
         qpos = figure_qpos_from_bvh(clip, model)
         step(len(IMPORT_STAGES), "figure skeleton, read exactly")
         return Reference(np.arange(len(qpos)) * clip.frame_time, qpos, str(path), clip.frame_time, capture=capture)
+    onto = retargeted or retarget_capture(capture, model, root_scale, skeleton_map, rest_pose)
+    skel, scale, own = onto.skeleton, onto.scale, onto.own
     layout = StateLayout.from_model(model)
     figure = check_figure(Figure.from_model(model))
-    skel, frames, own = clip_skeleton(clip, model, skeleton_map, rest_pose)  # own: the subject's own figure
-    scale = 1.0 if own and root_scale == ROOT_SCALE_LEGS else _root_scale(root_scale, clip, skel, model, path)
-    qpos = retarget(clip, skel, frames, figure, layout, scale)[skel.rest_frames:]
-    qpos = CaptureFrame.from_model(model).root(qpos, figure.joints[0].qpos_slice.start)  # the levelled frame
+    qpos = CaptureFrame.from_model(model).root(onto.qpos, figure.joints[0].qpos_slice.start)  # the levelled frame
     step(2, "retargeted")
     qpos, glitches = repair_glitches(qpos, layout, clip.frame_time)  # a joint turning faster than any human's
     step(3, "glitches")

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.capture.clip import Capture, as_capture
-from runner.capture.reference_motion import ROOT_SCALE_LEGS, load_bvh_reference
+from runner.capture.reference_motion import ROOT_SCALE_LEGS, Retargeted, load_bvh_reference, retarget_capture
 from runner.capture.retarget import Reference
 from runner.capture.root_height import RootCorrectionRefused
 from runner.capture.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
@@ -96,26 +96,28 @@ def clip_scene(clip: str | Path | Capture, scene: str | Path, figure: str | Path
         ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, root_height=root_height)
         return ClipScene(ref, model, Path(scene), frame=frame)
     bare = load_model(figure)  # no surfaces: the root height as captured (no correction to fit against)
-    first = load_bvh_reference(clip, bare, root_scale=root_scale, skeleton_map=skeleton_map)
+    onto = retarget_capture(clip, bare, root_scale, skeleton_map)  # once: the fitted scene holds the same figure
+    first = load_bvh_reference(clip, bare, root_scale=root_scale, skeleton_map=skeleton_map, retargeted=onto)
     feet = model_feet(bare)
     pos = contact_points(bare, first.qpos)  # the figure's sites, foot by foot; rounded: their spheres' lowest points
     capture = fit_scene(first.times, pos, fit_contacts(first.times, pos, feet), feet)
     out = _writable(fitted_out)
     try:
-        return _onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, root_height=root_height)
+        return _onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, root_height=root_height, onto=onto)
     except RootCorrectionRefused as refused:
         notes = []
         if capture.boxes:  # boxes no foot rests on (a foot held still in the air, fitted as a prop): the floor alone
             notes.append(f"{len(capture.boxes)} fitted box(es) dropped, the scene is the floor alone: with them, {refused}")
             capture = FittedScene(capture.floor_z, (), capture.floor_slope)
             try:
-                return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, root_height=root_height), notes=tuple(notes))
+                return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, root_height=root_height,
+                                                 onto=onto), notes=tuple(notes))
             except RootCorrectionRefused as again:
                 refused = again
         notes.append(f"{refused}; the root is corrected by that much all the same, and the result is only as good as the "
                      "fitted floor under those feet")
         return replace(_onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, check=False,
-                                         root_height=root_height), notes=tuple(notes))
+                                         root_height=root_height, onto=onto), notes=tuple(notes))
 
 
 def _writable(path) -> Path:
@@ -170,15 +172,16 @@ def _floor_scene(clip: Capture, figure, boxes, skeleton_map) -> FittedScene:
 
 
 def _onto_fitted(clip: Capture, capture: FittedScene, figure, out: Path, root_scale, skeleton_map, check: bool = True,
-                 root_height: bool = True) -> ClipScene:
+                 root_height: bool = True, onto: Retargeted | None = None) -> ClipScene:
     """The clip retargeted onto the scene `capture` (in the capture's coordinates), levelled and written to
-    `out` (`clip_scene`); with `check`, a root correction beyond its bound raises RootCorrectionRefused."""
+    `out` (`clip_scene`); with `check`, a root correction beyond its bound raises RootCorrectionRefused.
+    `onto`: the clip already retargeted onto the figure alone (`retarget_capture`), or None."""
     frame, fitted = capture.levelling(), capture.levelled()
     with atomic_output(out, suffix=".xml") as tmp_path:
         Path(tmp_path).write_text(scene_mjcf(fitted, figure, relative_to=out.parent, model=out.stem, capture=frame))
     model = load_model(out)
     ref = load_bvh_reference(clip, model, root_scale=root_scale, skeleton_map=skeleton_map, fitted=check,
-                             root_height=root_height)
+                             root_height=root_height, retargeted=onto)
     return ClipScene(ref, model, out, fitted, capture, frame)
 
 

@@ -91,6 +91,21 @@ def test_a_capture_read_once_is_its_file(reference, scene):
     assert np.array_equal(again.qpos, reference.qpos) and np.array_equal(again.times, reference.times)
 
 
+def test_one_retarget_serves_every_scene_of_the_figure(reference, scene):
+    """The clip retargeted once onto the figure alone (as a fitted scene first reads it) gives, in a scene
+    holding that figure, exactly the reference retargeted anew there; the retarget is read-only."""
+    from runner.capture.clip import read_capture
+    from runner.capture.reference_motion import retarget_capture
+    from solver.figure import FIGURE_FILE
+
+    capture = read_capture(CLIP)
+    onto = retarget_capture(capture, mujoco.MjModel.from_xml_path(str(FIGURE_FILE)), root_scale=1.0, rest_pose=True)
+    assert onto.qpos.shape == reference.qpos.shape and not onto.qpos.flags.writeable
+    again = load_bvh_reference(capture, scene, root_scale=1.0, rest_pose=True, retargeted=onto)
+    assert np.array_equal(again.qpos, reference.qpos)
+    assert again.skeleton.skeleton_map().text() == reference.skeleton.skeleton_map().text()
+
+
 def test_quaternions_unit_and_hemisphere_consistent(reference, layout):
     for slot in layout.quat_slots:
         q = reference.qpos[:, slot]
