@@ -3,6 +3,8 @@
 
 Steps (docs/architecture.md; the contact steps: docs/contacts.md):
 
+0. The clip read once (`runner.capture.clip.read_capture`): every step below takes that `Capture`, and the
+   reference carries it to the summary and the way back (which reads back only the file it writes).
 1. Figure and scene: the figure (`--figure`: by default the subject's own, made from the clip's
    HIERARCHY and written next to the outputs as `<stem>.figure.xml`, runner/capture/figure_choice.py);
    the given scene MJCF (with the chosen figure included), or (`"auto"`) a floor and boxes fitted to
