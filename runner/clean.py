@@ -81,6 +81,7 @@ def clean_paths(clip: Path, out_dir: Path, o: CleanOptions) -> dict:
 
 def _capture(clip: Path, o: CleanOptions, scene_out: Path, say):
     """The clip retargeted (figure, fitted scene) with its contacts and flights, as `mocap` reads it."""
+    from runner.capture.clip import read_capture
     from runner.capture.contact_detection import reference_contacts
     from runner.capture.scene import clip_scene, name_surfaces
     from runner.pipeline import ClipKeys, _skeleton_map, clip_figure_scene
@@ -88,8 +89,9 @@ def _capture(clip: Path, o: CleanOptions, scene_out: Path, say):
     from solver.problem import capture_airborne
 
     k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, skeleton_map=o.skeleton_map)
-    figure, scene = clip_figure_scene(clip, k, scene_out)
-    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, _skeleton_map(k))
+    capture = read_capture(clip)  # once: the figure and the scene take it, the reference carries it
+    figure, scene = clip_figure_scene(capture, k, scene_out)
+    cs = clip_scene(capture, scene, figure, scene_out, k.root_scale, _skeleton_map(k))
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)
     contacts = tuple(name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time)))
