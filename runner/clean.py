@@ -8,7 +8,7 @@ no in-betweens replace the performance: where nothing must change, the capture c
 
 Outputs, in renders/<clip stem>/ (`--out-dir`), beside `mocap`'s: `<stem>.clean.npz` (the saved path: the
 cleaned clip at the capture's frames, `path_times`/`path_qpos`, beside the capture, `reference_qpos`),
-`<stem>.clean.bvh` (on the source skeleton: `runner.mocap.source_export`), `<stem>.clean.glb`, `<stem>.clean.metrics.json`
+`<stem>.clean.bvh` (on the source skeleton: `runner.capture.source_export`), `<stem>.clean.glb`, `<stem>.clean.metrics.json`
 and, unless `--no-render`, `<stem>.clean.mp4` (capture | cleaned).
 """
 from __future__ import annotations
@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.mocap.figure_choice import SUBJECT
-from runner.mocap.reference import ROOT_SCALE_LEGS
-from runner.mocap.scene import AUTO
+from runner.capture.figure_choice import SUBJECT
+from runner.capture.reference_motion import ROOT_SCALE_LEGS
+from runner.capture.scene import AUTO
 from runner.paths import display_path
 from solver.errors import InputError
 from solver.least_change import LeastChangeOptions
@@ -84,15 +84,17 @@ def clean_paths(clip: Path, out_dir: Path, o: CleanOptions) -> dict:
 
 def _capture(clip: Path, o: CleanOptions, scene_out: Path, say):
     """The clip retargeted (figure, fitted scene) with its contacts and flights, as `mocap` reads it."""
-    from runner.mocap.contact_detection import reference_contacts
-    from runner.mocap.scene import clip_scene, name_surfaces
+    from runner.capture.clip import read_capture
+    from runner.capture.contact_detection import reference_contacts
+    from runner.capture.scene import clip_scene, name_surfaces
     from runner.pipeline import ClipKeys, _skeleton_map, clip_figure_scene
     from solver.model import check_scene
     from solver.problem import capture_airborne
 
     k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, skeleton_map=o.skeleton_map)
-    figure, scene = clip_figure_scene(clip, k, scene_out)
-    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, _skeleton_map(k))
+    capture = read_capture(clip)  # once: the figure and the scene take it, the reference carries it
+    figure, scene = clip_figure_scene(capture, k, scene_out)
+    cs = clip_scene(capture, scene, figure, scene_out, k.root_scale, _skeleton_map(k))
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)
     contacts = tuple(name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time)))
@@ -164,10 +166,10 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
 
 
 def _on_source(paths: dict, say) -> dict | None:
-    """Write the cleaned clip onto the source skeleton (`runner.mocap.source_export.export_on_source`) and
+    """Write the cleaned clip onto the source skeleton (`runner.capture.source_export.export_on_source`) and
     say how far the file, read back, is from the source at the pins and the clip's ends (at a pin: the
-    source's own pose within `runner.mocap.source_check.ON_SOURCE`; at a free end: the clean's change)."""
-    from runner.mocap.source_export import export_on_source
+    source's own pose within `runner.capture.source_check.ON_SOURCE`; at a free end: the clean's change)."""
+    from runner.capture.source_export import export_on_source
 
     res = export_on_source(paths["save_path"], paths["bvh"], required=True)
     say(f"  wrote {res.describe()}")

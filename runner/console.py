@@ -70,7 +70,7 @@ RELAXATIONS_SHOWN = 6
 
 
 #: [deg] a joint (the root's orientation included) further than this from the capture at some frame has
-#: lost the capture's motion: keys no more than a quarter turn apart (`runner.mocap.keyframe_selection.turn_keys`)
+#: lost the capture's motion: keys no more than a quarter turn apart (`runner.capture.keyframe_selection.turn_keys`)
 #: leave no in-between that far from it unless the path goes round the other way (a full turn joined the
 #: short way is 174 deg off); the joint-angle row is then marked even if the plain spline is as far off
 LOST_TURN_DEG = 90.0

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 #: the schedule agrees with the capture's stance when the recall and the precision of its stance frames are
-#: both at least this (`runner.mocap.stance.stance_agreement`); below it a flight missed the way the schedule's
+#: both at least this (`runner.capture.stance.stance_agreement`); below it a flight missed the way the schedule's
 #: gaps err is put down to the detection
 STANCE_AGREES = 0.95
 #: [cm] the root's position error must grow by more than this for "the optimizer moved the root": the
@@ -283,7 +283,7 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     "stance_precision": _at("stance_agreement", "precision"),
     "capture_penetration_mm": _at(*_M, "plain", "reference", "penetration_mm", "max"),
     "keyframe_error": _at("metrics", "optimized", "keyframe_error"),
-    # float on the capture's own stance frames (`runner.mocap.stance.capture_stance`): a foot the schedule
+    # float on the capture's own stance frames (`runner.capture.stance.capture_stance`): a foot the schedule
     # leaves out of contact is still judged where the capture stood on it; beside it the schedule's
     "float_mm": _at(*_M, "optimized", "path", "float_stance_mm"),
     "plain_float_mm": _at(*_M, "plain", "path", "float_stance_mm"),

@@ -138,7 +138,7 @@ def _cause(name: str, conflicts: int) -> str:
 
 def stance_lines(results: Sequence[dict]) -> list[str]:
     """Per clip, the contact schedule's recall and precision of the capture's stance frames
-    (`runner.mocap.stance.schedule_agreement`; the schedule is the clip's, whatever the keying)."""
+    (`runner.capture.stance.schedule_agreement`; the schedule is the clip's, whatever the keying)."""
     seen = {}
     for r in results:
         f = r["figures"]

@@ -20,9 +20,9 @@ TUNING = {
     "fe35fa5767a02eada3374567f4adf6e0acb509ef14118793641409c19c070a8f": "127_33",
     "f41afeed5253a494d6cc04be59c06239cbae82621af6526052c5bb8650edca5a": "16_23",
     "432052e9114663ca770a368f8984d1075c9106b6ecc9753f7a9e496b7ae42362": "35_17",
-    # the keyframes' footplant (runner/mocap/foot_plant.py) was designed on 83_02's float misses
+    # the keyframes' footplant (runner/capture/foot_plant.py) was designed on 83_02's float misses
     "19906172ff7b447bda304ef7f86450a206ccde5dd10ec10773401860cca32e80": "83_02",
-    # the repair of tracking glitches (runner/mocap/glitches.py) was added for 74_05's flipping ankle
+    # the repair of tracking glitches (runner/capture/glitches.py) was added for 74_05's flipping ankle
     "f46d31f114070b74a08c39f8e464057bfa48675b05107fbc2c333cda13124532": "74_05",
 }
 

@@ -36,7 +36,7 @@ than mesh vertices)
   (foot, frame) pairs. float_physdiff_mm: PhysDiff's all-frame variant, per frame the lowest site's
   h counted when above 5 mm (else 0), mean over all frames.
 - float_stance_mm / float_stance_max_mm (with a `stance` mask): the same as float_contact_mm over
-  the (foot, frame) pairs of the CAPTURE's own stance (`runner.mocap.stance.capture_stance`: the
+  the (foot, frame) pairs of the CAPTURE's own stance (`runner.capture.stance.capture_stance`: the
   foot's lowest site near its surface and nearly still, no minimum duration), mean and max: a
   foot the schedule leaves out of contact (a gap it counts as a flight) is still judged where the
   capture stood on it. flight_in_stance_s: frames in which the path is in flight (every site above
@@ -310,7 +310,7 @@ def motion_metrics(model, qpos: np.ndarray, fps: float, reference_qpos: np.ndarr
         fps: [Hz] frame rate, > 0. reference_qpos: (n, nq) the reference motion.
         reference_contacts: the reference's contacts (times in [s] from frame 0).
         stance: (n, 2) bool, the reference's own stance per foot (left, right; e.g.
-            `runner.mocap.stance.capture_stance`); None: no stance figures.
+            `runner.capture.stance.capture_stance`); None: no stance figures.
         capture_filtered: (n, nq) the reference low-pass filtered (`runner.jolts.filter_capture`, over the
             whole clip and cut to these frames), the motion of the reference's jolt figures; None: the
             reference as given.

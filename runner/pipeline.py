@@ -3,16 +3,18 @@
 
 Steps (docs/architecture.md; the contact steps: docs/contacts.md):
 
+0. The clip read once (`runner.capture.clip.read_capture`): every step below takes that `Capture`, and the
+   reference carries it to the summary and the way back (which reads back only the file it writes).
 1. Figure and scene: the figure (`--figure`: by default the subject's own, made from the clip's
-   HIERARCHY and written next to the outputs as `<stem>.figure.xml`, runner/mocap/figure_choice.py);
+   HIERARCHY and written next to the outputs as `<stem>.figure.xml`, runner/capture/figure_choice.py);
    the given scene MJCF (with the chosen figure included), or (`"auto"`) a floor and boxes fitted to
    where the clip's feet rest, written next to the outputs as `<stem>.scene.xml`
-   (`runner.mocap.scene.clip_scene`); the clip's skeleton recognised (runner/mocap/skeleton.py, or named
+   (`runner.capture.scene.clip_scene`); the clip's skeleton recognised (runner/capture/skeleton.py, or named
    by `--skeleton-map FILE`) and the clip retargeted onto the figure (`load_bvh_reference`: a leading rest
    frame dropped, channel orders and frame time read from the file; on the subject's figure without
    loss, docs/mocap.md).
-2. Contacts of the reference (`runner.mocap.contact_detection.reference_contacts`, surfaces named).
-3. Keyframes (`runner.mocap.keyframes.pick_keyframes`): evenly spaced plus the root's extremes, or at
+2. Contacts of the reference (`runner.capture.contact_detection.reference_contacts`, surfaces named).
+3. Keyframes (`runner.capture.capture_keys.pick_keyframes`): evenly spaced plus the root's extremes, or at
    the contact events; written as `<stem>.keyframes.json` with the contacts (a user can edit it and
    rerun `dynsplines animate` on it), and read back, so the solve is the one `animate` would do.
 4. Solve (solver.solve), acceptance figures of the plain spline and the optimized path
@@ -28,12 +30,13 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from runner.mocap.contact_detection import reference_contacts
-from runner.mocap.figure_choice import SUBJECT, choose_figure, is_default, scene_with_figure
-from runner.mocap.key_joints import frame_joints
-from runner.mocap.keyframes import pick_keyframes
-from runner.mocap.reference import ROOT_SCALE_LEGS
-from runner.mocap.scene import AUTO, FLOOR, clip_scene, name_surfaces, read_boxes
+from runner.capture.capture_keys import pick_keyframes
+from runner.capture.clip import Capture, as_capture
+from runner.capture.contact_detection import reference_contacts
+from runner.capture.figure_choice import SUBJECT, choose_figure, is_default, scene_with_figure
+from runner.capture.key_joints import frame_joints
+from runner.capture.reference_motion import ROOT_SCALE_LEGS
+from runner.capture.scene import AUTO, FLOOR, clip_scene, name_surfaces, read_boxes
 from runner.paths import display_path
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE
@@ -70,7 +73,7 @@ class ClipOptions:
             leg length over the subject's) or a number (1: as captured); the value used is recorded in
             the keyframe file's "source".
         skeleton_map: a skeleton map file naming the joints of roles the recogniser cannot find
-            (`--skeleton-map`; runner/mocap/skeleton_map.py), or None.
+            (`--skeleton-map`; runner/capture/skeleton_map.py), or None.
         key_frames: the clip's frames an animator keyed (`--key-frames`; 0 = the first after its rest
             frames): the keyframes, instead of `keys` and `every` (`pick_keyframes`); None: picked.
         key_joints: a file naming the clip's joints keyed at the partial key frames (`--key-joints`), or None.
@@ -128,7 +131,7 @@ class ClipKeys:
         skeleton_map: a skeleton map file (`--skeleton-map`), or None; the skeleton as read is recorded
             in the file's "source" "skeleton" (so `animate` reads the clip again with it).
         key_frames: the frames an animator keyed (`pick_keyframes` `frames`), or None: picked.
-        key_joints: a file naming the joints keyed at the partial ones (runner/mocap/key_joints.py), or None.
+        key_joints: a file naming the joints keyed at the partial ones (runner/capture/key_joints.py), or None.
         boxes: with scene "floor", a file of boxes in the clip's coordinates (`read_boxes`), or None.
     """
 
@@ -157,8 +160,9 @@ def figure_path_for(scene_out: Path) -> Path:
     return scene_out.with_name(f"{name[:-len('.scene.xml')] if name.endswith('.scene.xml') else scene_out.stem}.figure.xml")
 
 
-def clip_figure_scene(clip: Path, k: ClipKeys, scene_out: Path):
-    """The figure file (`choose_figure`, a subject figure written beside `scene_out`), and the scene
+def clip_figure_scene(clip: Path | Capture, k: ClipKeys, scene_out: Path):
+    """The figure file of the clip (the run's `Capture`, or its file; `choose_figure`, a subject figure
+    written beside `scene_out`), and the scene
     to retarget onto: "auto", or the given scene with that figure (`scene_with_figure`, written to
     `scene_out` when the figure differs from the scene's own; with the default figure, the given scene
     as it is)."""
@@ -177,13 +181,14 @@ def _skeleton_map(k: ClipKeys):
     """The `SkeletonMap` of `k.skeleton_map` (read and checked), or None."""
     if k.skeleton_map is None:
         return None
-    from runner.mocap.skeleton_map import read_skeleton_map
+    from runner.capture.skeleton_map import read_skeleton_map
 
     return read_skeleton_map(k.skeleton_map)
 
 
-def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, progress=None):
-    """A clip's figure and scene (given or fitted), its retargeted reference, its contacts and keyframes
+def write_clip_keyframes(clip: Path | Capture, out: Path, k: ClipKeys, scene_out: Path, progress=None):
+    """A clip's (read once here, `read_capture`, unless given as the run's `Capture`: every step takes that
+    value, and the reference carries it) figure and scene (given or fitted), its retargeted reference, its contacts and keyframes
     picked from it (`pick_keyframes`), written as the keyframe file `out` (with the contacts and the
     capture's flights, `solver.problem.capture_airborne`, the figure
     as "model" and a "source" naming the clip relative to the file, the command and the root scale).
@@ -199,10 +204,11 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
         if progress is not None:
             progress(i + 1, CLIP_STAGES[i])
 
-    figure, scene = clip_figure_scene(clip, k, scene_out)
+    capture = as_capture(clip)
+    figure, scene = clip_figure_scene(capture, k, scene_out)
     smap = _skeleton_map(k)
     boxes = read_boxes(k.boxes) if k.boxes is not None else ()
-    cs = clip_scene(clip, scene, figure, scene_out, k.root_scale, smap, root_height=k.key_frames is None, boxes=boxes)
+    cs = clip_scene(capture, scene, figure, scene_out, k.root_scale, smap, root_height=k.key_frames is None, boxes=boxes)
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)  # a floor, the free root, the contact sites (names the file and the fix)
     done(0)
@@ -210,9 +216,9 @@ def write_clip_keyframes(clip: Path, out: Path, k: ClipKeys, scene_out: Path, pr
     done(1)
     every = k.every if (k.every is not None or k.keys == "contacts") else 0.25
     keyframes = pick_keyframes(ref, model, contacts, keys=k.keys, every=every, partial=k.partial, extremes=k.extremes,
-                               frames=k.key_frames, frame_joints=frame_joints(clip, ref, model, k.key_frames, k.key_joints))
+                               frames=k.key_frames, frame_joints=frame_joints(capture, ref, model, k.key_frames, k.key_joints))
     done(2)
-    source = {"clip": Path(os.path.relpath(Path(clip).resolve(), Path(out).parent.resolve())).as_posix(),
+    source = {"clip": Path(os.path.relpath(Path(capture.source).resolve(), Path(out).parent.resolve())).as_posix(),
               "command": k.command, "hand_edits": "none", "root_scale": round(ref.root_scale, 6)}
     if ref.skeleton is not None:  # read again by `animate` as read here
         source["skeleton"] = json.loads(ref.skeleton.skeleton_map().text())
@@ -324,10 +330,10 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         {"clip", "status" (solver Status value, or "interrupted"), "exit" ("ok" | "failed" |
         "interrupted"), "frames" (reference frames), "fps", "keyframes" (count), "partial", "contacts"
         (count), "reference_contact_distance_mm" and "reference_feet_disagreement_mm" (the retargeted clip's
-        resting feet from the surfaces and the capture's own disagreement, `runner.mocap.contacts.feet_line`;
+        resting feet from the surfaces and the capture's own disagreement, `runner.capture.root_height.feet_line`;
         None off the subject's figure), "reference_footplant_mm" (`FootPlant.largest_mm`: the most each foot
         and the root were lowered to put resting feet on their surfaces), "reference_glitches" (the tracking glitches
-        repaired, `runner.mocap.glitches.Glitch`), "keyframes_on_source" (`keyframes_on_source_report`; None off the
+        repaired, `runner.capture.glitches.Glitch`), "keyframes_on_source" (`keyframes_on_source_report`; None off the
         subject's figure), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
         where the keyframes decide a constraint, `Solution.relaxations`), "relaxed" ({constraint: count} of
         those relaxations), "stalled" ({constraint: amount [SI]}
@@ -344,7 +350,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         InputError: a missing or malformed clip, another skeleton (the missing joints named), an
             unwritable output, a bad option.
     """
-    from runner.mocap.contacts import feet_disagreement, worst_contact_distance
+    from runner.capture.root_height import feet_disagreement, worst_contact_distance
     from runner.render.side_by_side import VideoOptions
     from runner.run import Outputs, execute, write_metrics_json
 
@@ -407,7 +413,7 @@ def _mm(metres: float | None) -> float | None:
 def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | None:
     """The saved path written onto the source skeleton (as `dynsplines export --to FILE.bvh` writes it, into a
     temporary file) and read back: how far its joints are from the clip's own at the keyframes
-    (`runner.mocap.source_check.keys_on_source`), said in one line that names, at the key moved most,
+    (`runner.capture.source_check.keys_on_source`), said in one line that names, at the key moved most,
     the corrections responsible (the knee and elbow hyperextension clamp, the footplant, the repair of
     tracking glitches, a partial key; the root-height correction and the levelling are taken off by the
     export). Only on the subject's own figure (another figure's bones are not the source's), with a
@@ -422,14 +428,15 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
 
     import numpy as np
 
-    from runner.mocap.source_check import ON_SOURCE
-    from runner.mocap.source_export import export_on_source
+    from runner.capture.source_check import ON_SOURCE
+    from runner.capture.source_export import export_on_source
 
     ref = cs.reference
     if not ref.captured_root or ref.skeleton is None or not Path(npz).is_file():
         return None
     with tempfile.TemporaryDirectory(prefix="dynsplines-way-back-") as tmp:
-        res = export_on_source(npz, Path(tmp) / "way_back.bvh")
+        res = export_on_source(npz, Path(tmp) / "way_back.bvh",
+                               clip=ref.capture.clip if ref.capture is not None else None)  # the run's parse
     check = None if res is None else res.check
     if check is None or not len(check.times):
         return None
@@ -459,8 +466,8 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
 
 
 def _agreement(problem, ref) -> dict:
-    """The contact schedule's recall and precision of the capture's stance frames (runner/mocap/stance.py)."""
-    from runner.mocap.stance import schedule_agreement
+    """The contact schedule's recall and precision of the capture's stance frames (runner/capture/stance.py)."""
+    from runner.capture.stance import schedule_agreement
 
     a = schedule_agreement(problem.model, ref.qpos, ref.frame_time, problem.contacts)
     return {"recall": a.recall, "precision": a.precision, "stance_frames": a.stance_frames,

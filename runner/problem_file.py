@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from runner.mocap.reference import IMPORT_STAGES, load_bvh_reference
+from runner.capture.reference_motion import IMPORT_STAGES, load_bvh_reference
 from runner.paths import MODELS
 from solver.errors import InputError
 from solver.keyframe_file import read_document, read_keyframes
@@ -56,7 +56,7 @@ def find_reference(info, model, quiet=False):
     path is scaled as the file's keyframes were made: its "source" "root_scale", or 1 (as captured) for a
     file that records none (made before the scaling, like the shipped run_and_step.keyframes.json), and
     the clip's skeleton read as the file records it ("skeleton": roles, unit, up axis); a file that records
-    none was made with the CMU skeleton's rest pose as the figure's (`runner.mocap.body_frames.
+    none was made with the CMU skeleton's rest pose as the figure's (`runner.capture.body_frames.
     rest_pose_frames`) and is read so."""
     source = getattr(info, "source", None) or {}
     clip = source.get("clip")
@@ -71,7 +71,7 @@ def find_reference(info, model, quiet=False):
         return None
     import json
 
-    from runner.mocap.skeleton_map import parse_skeleton_map
+    from runner.capture.skeleton_map import parse_skeleton_map
     from runner.progress import Steps
 
     recorded = source.get("skeleton")
@@ -118,7 +118,7 @@ def file_problem(keyframes_path, scene=None, terms: str | None = None, quiet: bo
     problem = build_problem(model, ProblemSpec(keyframes, contacts, forces, capture, getattr(info, "flights", None)))
     metric_contacts = contacts
     if reference is not None and not contacts:
-        from runner.mocap.contact_detection import reference_contacts
+        from runner.capture.contact_detection import reference_contacts
 
         metric_contacts = tuple(reference_contacts(model, reference.qpos, reference.frame_time))
     return problem, Source(Path(scene_path), reference, metric_contacts, label=str(keyframes_path))

@@ -43,7 +43,7 @@ class Source:
 
     Attributes:
         scene_path: the scene MJCF the model was loaded from.
-        reference: the motion-capture reference (`runner.mocap.reference.Reference`: times (r,) [s],
+        reference: the motion-capture reference (`runner.capture.reference_motion.Reference`: times (r,) [s],
             qpos (r, nq)) the keyframes were made from, or None.
         metric_contacts: the contacts the motion metrics judge feet by: the problem's schedule, or,
             for a keyframe file without one, the contacts detected on the reference.
@@ -150,7 +150,7 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     Raises:
         InputError: fewer than 4 reference frames in the keyframes' span.
     """
-    from runner.mocap.stance import capture_stance
+    from runner.capture.stance import capture_stance
     from runner.motion_metrics import forced_skate_mm, motion_metrics
     from solver.contacts import Contact
 
@@ -166,7 +166,7 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
     shifted = [Contact(c.site, c.start - shift, c.end - shift, c.surface) for c in contacts
                if c.end >= shift and c.start <= times[-1]]
     fps = 1.0 / reference.frame_time
-    # the capture's own stance (runner/mocap/stance.py), over the whole clip so its hysteresis starts there
+    # the capture's own stance (runner/capture/stance.py), over the whole clip so its hysteresis starts there
     stance = capture_stance(model, reference.qpos, reference.frame_time)[keep]
     smooth = _filtered_capture(reference, layout)[keep]  # the capture's jolt figures (runner.jolts)
     out = {label: motion_metrics(model, _sample(fs, times, layout), fps, qpos, shifted, stance=stance,
@@ -260,8 +260,8 @@ def report(run: Run) -> str:
                            force_bounds=run.problem.force_bounds, motion=motion, tol=run.options.tol)]
     ref = run.source.reference
     if ref is not None:
-        from runner.mocap.contacts import feet_line
-        from runner.mocap.glitches import glitches_line
+        from runner.capture.glitches import glitches_line
+        from runner.capture.root_height import feet_line
 
         lines.append(motion_metrics_table(motion["plain"], motion["optimized"], shown=[k for _, k, _ in FEET_ROWS]))
         forced = motion.get("keyframes", {}).get("forced_skate_contact_mm")

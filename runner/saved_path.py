@@ -98,7 +98,9 @@ def _clip_fields(reference, npz_path) -> dict:
     src = Path(reference.source) if reference is not None and reference.source else None
     if src is None or src.suffix.lower() != ".bvh" or not src.is_file():
         return {"clip": np.array(""), "clip_text": np.array("")}
-    return {"clip": np.array(scene_reference(src, npz_path)), "clip_text": np.array(src.read_text(encoding="utf-8"))}
+    capture = getattr(reference, "capture", None)  # the clip as the run read it (runner.capture.clip.Capture)
+    text = capture.text if capture is not None else src.read_text(encoding="utf-8")
+    return {"clip": np.array(scene_reference(src, npz_path)), "clip_text": np.array(text)}
 
 
 def resolve_scene(name: str, npz_path) -> Path:

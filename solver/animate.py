@@ -50,7 +50,7 @@ def animate(
         progress: progress(event, info) for "round", "eval" and "estimate".
         tol: `LeastChangeOptions.tol` (replacing the options').
         contacts: the contact schedule (`solver.contacts.Contact`s: site, start, end [s], surface), e.g.
-            `KeyframeFileInfo.contacts` or `runner.mocap.contact_detection.reference_contacts`.
+            `KeyframeFileInfo.contacts` or `runner.capture.contact_detection.reference_contacts`.
         capture: None, or (times (n,) [s] on the keyframes' clock, qpos (n, nq)): the motion capture the
             keyframes were made from (`ProblemSpec.capture`).
         airborne: None, or ((start, end), ...) [s] where the motion flies (`ProblemSpec.airborne`).

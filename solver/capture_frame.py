@@ -1,6 +1,6 @@
 """The levelled capture frame: the rigid transform that makes a fitted capture floor the plane z = 0.
 
-A capture floor that is not level (`runner.mocap.scene_fit`: a plane z = a + b x + c y) is a calibration
+A capture floor that is not level (`runner.capture.scene_fit`: a plane z = a + b x + c y) is a calibration
 error of the capture volume: the real floor was level and gravity normal to it. `CaptureFrame.levelling`
 is the rigid transform T: x' = R x + shift with R the shortest rotation taking the floor's upward
 normal n to +z (Rodrigues' formula; the inverse of `FittedScene.rotation`) and shift = (0, 0, -a n_z),

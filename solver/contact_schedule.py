@@ -7,7 +7,7 @@ touch-downs and lift-offs, and which site is in contact at given times. It is ch
 made; every later user trusts it. The empty schedule is a valid value (a motion with no known
 contacts: the contact terms cannot be chosen).
 
-Keyframe files (`solver.keyframe_file`) and contact detection (`runner.mocap.contact_detection.reference_contacts`)
+Keyframe files (`solver.keyframe_file`) and contact detection (`runner.capture.contact_detection.reference_contacts`)
 make one; `solver.problem.build_problem` checks it against its scene's surfaces (`for_scene`).
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Foot contacts: which contact site rests on a surface, and when.
 
 A contact is (site, surface, [start, end]) (docs/contacts.md "Contact schedules"): given by hand in a
-keyframe file, or detected from a motion capture (`runner.mocap.contact_detection`). This module holds
+keyframe file, or detected from a motion capture (`runner.capture.contact_detection`). This module holds
 what the method reads of them: the intervals, masks and whole-foot merges, and the contact sites' positions,
 radii and heights above the scene's surfaces.
 """

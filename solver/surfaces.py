@@ -2,7 +2,7 @@
 
 Used by the ground-penetration term (paper eq. 12, generalized from the plane y = 0 to every static
 plane and box of the scene) and by contact indicators. Planes and boxes may have any orientation
-(a fitted scene's floor and boxes are tilted with the capture's floor, `runner.mocap.scene_fit`); heights
+(a fitted scene's floor and boxes are tilted with the capture's floor, `runner.capture.scene_fit`); heights
 "above the surface" are vertical distances (for a floor tilted by 1 degree they differ from distances
 along its normal by 0.015 %).
 """
@@ -163,7 +163,7 @@ class StaticSurfaces:
         A plane counts everywhere (its height at the point's x, y; a vertical plane, a wall, has none).
         A box counts where the vertical line through the point crosses its top face (the face whose
         outward normal points most upward), with that face's height there: exact for a box rotated
-        about z only (a level top) and for one tilted with a tilted floor (`runner.mocap.scene_fit`). Beside
+        about z only (a level top) and for one tilted with a tilted floor (`runner.capture.scene_fit`). Beside
         a tilted box's edge its side wall leans out by up to its height times the tilt; a point over
         that band is over the floor here (a wall is no surface to stand on).
 

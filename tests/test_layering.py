@@ -1,7 +1,7 @@
 """The layering and lint contracts of docs/architecture.md, run as tests: import-linter (contracts in
 pyproject.toml [tool.importlinter]) and ruff (rules in [tool.ruff]).
 
-The contracts name the layout (runner/commands/, runner/mocap/, runner/render/, runner/console.py, ...,
+The contracts name the layout (runner/commands/, runner/capture/, runner/render/, runner/console.py, ...,
 runner/bench/sphere_reference/) and `ruff check` must report nothing. Each test
 skips, with the reason, when its tool is not installed (`pip install -e ".[test]"` installs both).
 """
@@ -59,3 +59,15 @@ def test_orchestration_functions_fit_on_a_screen():
                     if n > MAX_FUNCTION_LINES:
                         long.append(f"{path.relative_to(REPO)}:{node.lineno} {node.name} ({n} lines)")
     assert not long, "functions over 80 lines: " + ", ".join(long)
+
+
+def test_the_command_line_imports_no_video_or_bench_code():
+    """The `dynsplines` parser (every command's options) loads none of the video writer (OpenGL drawing,
+    Pillow, imageio), the plots (matplotlib), the glTF writer, nor the benchmarks' BVP reference
+    (scipy.integrate): a command pays for them only when it uses them (`mocap --no-render` never)."""
+    code = ("import sys, runner.cli; runner.cli.build_parser(); "
+            "print(' '.join(m for m in ('runner.render.gl', 'runner.render.video', 'PIL', 'imageio', 'matplotlib', "
+            "'pygltflib', 'scipy.integrate') if m in sys.modules))")
+    r = _run(sys.executable, "-c", code)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == [], r.stdout

@@ -35,8 +35,8 @@ def _type(parse):
 
 def register(bsub) -> None:
     """Add `bench corpus` to the `dynsplines bench` subparsers."""
+    from runner.capture.scene import AUTO
     from runner.corpus import DEFAULT_EVERY, parse_every, parse_keys
-    from runner.mocap.scene import AUTO
 
     c = bsub.add_parser(
         "corpus", help="every (clip, keying) pair held to the acceptance bounds, tuning and validation apart",

@@ -24,8 +24,8 @@ def _times(text: str) -> tuple:
 
 def register(sub) -> None:
     """Add `clean` to the `dynsplines` parser."""
+    from runner.capture.scene import AUTO
     from runner.commands.mocap import add_figure_arguments, add_root_scale_argument
-    from runner.mocap.scene import AUTO
 
     p = sub.add_parser(
         "clean", help="a motion-capture clip in, the same clip with its feet fixed out (the performance kept)",

@@ -41,7 +41,7 @@ def run(args) -> int:
     res = None
     as_solved = getattr(args, "root_height", "source") == "solved"  # the figure's skeleton: always as solved
     if args.skeleton == "source" or (args.skeleton is None and check_output_name(args.to) == "BVH"):
-        from runner.mocap.source_export import export_on_source
+        from runner.capture.source_export import export_on_source
 
         res = export_on_source(args.path, args.to, args.which, args.fps, required=args.skeleton == "source",
                                as_solved=as_solved)

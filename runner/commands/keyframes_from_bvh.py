@@ -15,6 +15,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from runner.capture.capture_keys import KEY_CHOICES
+from runner.capture.figure_choice import SUBJECT
+from runner.capture.glitches import glitches_line
+from runner.capture.reference_motion import ROOT_SCALE_LEGS
 from runner.commands.mocap import (
     add_figure_arguments,
     add_key_frames_argument,
@@ -22,10 +26,6 @@ from runner.commands.mocap import (
     add_scene_arguments,
 )
 from runner.exit_codes import EXIT_INPUT, EXIT_OK
-from runner.mocap.figure_choice import SUBJECT
-from runner.mocap.glitches import glitches_line
-from runner.mocap.keyframes import KEY_CHOICES
-from runner.mocap.reference import ROOT_SCALE_LEGS
 from runner.parser import OneLineParser
 from runner.pipeline import CLIP_STAGES, ClipKeys, write_clip_keyframes
 from runner.progress import Steps
@@ -124,7 +124,7 @@ def run(args, command: str | None = None) -> int:
         f"of {args.clip}; {scene_note}"
     )
     if cs.fitted is not None or reference.captured_root:
-        from runner.mocap.contacts import feet_line
+        from runner.capture.root_height import feet_line
 
         print(f"  retargeted clip: {feet_line(reference, cs.model)}")
     if (glitch := glitches_line(reference.glitches)) is not None:

@@ -7,10 +7,10 @@ import sys
 from pathlib import Path
 
 from runner.animate_options import add_options, clip_terms
+from runner.capture.capture_keys import KEY_CHOICES
+from runner.capture.reference_motion import ROOT_SCALE_LEGS
+from runner.capture.scene import AUTO
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from runner.mocap.keyframes import KEY_CHOICES
-from runner.mocap.reference import ROOT_SCALE_LEGS
-from runner.mocap.scene import AUTO
 from runner.parser import positive, positive_or
 from runner.pipeline import ClipOptions, default_out_dir, process_clip
 
@@ -97,7 +97,7 @@ def add_skeleton_map_argument(p) -> None:
 def add_figure_arguments(p) -> None:
     """`--figure subject|default|FILE.xml` (with its older name `--model FILE.xml`), `--mass KG` and
     `--skeleton-map FILE` (`mocap`, `batch`, `keyframes-from-bvh`)."""
-    from runner.mocap.figure_choice import SUBJECT
+    from runner.capture.figure_choice import SUBJECT
 
     p.add_argument("--figure", "--model", dest="figure", default=SUBJECT, metavar="subject|default|FILE.xml",
                    help="the figure the clip is retargeted onto: 'subject' (default) the subject's own, made from "

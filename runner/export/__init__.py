@@ -23,7 +23,7 @@ FORMATS = {".bvh": "BVH", ".glb": "glTF binary"}
 class ExportResult:
     """What `export_saved_path` wrote: path, format, which motion, fps [Hz], frames (the file's, rest frames
     included), joints (bodies), size [bytes], wall_time_s [s] (sampling and writing), and `check`: for a BVH
-    on a clip's own skeleton, the file read back at the keyframes (`runner.mocap.source_check.KeysOnSource`),
+    on a clip's own skeleton, the file read back at the keyframes (`runner.capture.source_check.KeysOnSource`),
     else None."""
 
     path: Path
@@ -86,7 +86,7 @@ def export_saved_path(npz: str | Path, out: str | Path, which: str = "optimized"
     """Sample motion `which` of saved path `npz` at `fps` [Hz] (default: the reference clip's rate, else
     30) and write it to `out` (.bvh on the figure's own skeleton, or .glb, chosen by the extension),
     atomically. `option` is the command-line option that named `out` (for messages). The source
-    skeleton of a path made from a clip: `runner.mocap.source_export`.
+    skeleton of a path made from a clip: `runner.capture.source_export`.
 
     Raises:
         InputError: unknown extension, unwritable folder, unreadable path or scene, unknown or absent

@@ -14,7 +14,7 @@ Their rotation channels are always 0. So the rest armature spans the figure's st
 the soles to the top of the head (1.75 m for models/humanoid39.xml).
 
 Units and axes: metres and degrees. BVH axes are Y up, the figure facing +Z, its left at +X:
-(X, Y, Z)_bvh = (y, z, x)_mujoco, the axes of the CMU clips (runner/mocap/skeleton.py, inverted).
+(X, Y, Z)_bvh = (y, z, x)_mujoco, the axes of the CMU clips (runner/capture/skeleton.py, inverted).
 Blender's BVH importer with its defaults (Forward -Z, Up Y, scale 1) turns BVH Y into Blender Z, so the
 figure opens upright, 1.75 m tall, standing on Blender's ground plane at the identity pose' root height.
 

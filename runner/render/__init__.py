@@ -35,18 +35,28 @@ drew rows of black specks ("shadow acne") on it in every frame. Rendering
 needs an OpenGL backend; without a display that is EGL (Mesa's llvmpipe), which `runner.environment`
 selects through MUJOCO_GL before mujoco is first imported (and `_headless_fallback` if mujoco came first).
 """
-from runner.render.gl import QUALITIES, Quality
-from runner.render.tracks import (
-    IMAGE_SUFFIXES,
-    VIDEO_SUFFIXES,
-    Camera,
-    RenderInfo,
-    Track,
-    frame_times,
-    parse_size,
-    sample_track,
-)
-from runner.render.video import render_still, render_tracks
+import importlib
+
+#: where each public name lives: imported on first use (PEP 562), so that a command that writes no video
+#: (`mocap --no-render`, `export`) does not pay for OpenGL, Pillow and imageio
+_HOME = {"QUALITIES": "gl", "Quality": "gl", "IMAGE_SUFFIXES": "tracks", "VIDEO_SUFFIXES": "tracks", "Camera": "tracks",
+         "RenderInfo": "tracks", "Track": "tracks", "frame_times": "tracks", "parse_size": "tracks",
+         "sample_track": "tracks", "render_still": "video", "render_tracks": "video"}
+
+
+def __getattr__(name: str):
+    """A public name (`_HOME`) or a submodule (`runner.render.gl`, ...), imported on first use."""
+    if name in _HOME:
+        value = getattr(importlib.import_module(f"{__name__}.{_HOME[name]}"), name)
+        globals()[name] = value
+        return value
+    try:
+        return importlib.import_module(f"{__name__}.{name}")
+    except ModuleNotFoundError as e:
+        if e.name != f"{__name__}.{name}":
+            raise
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+
 
 __all__ = [
     "IMAGE_SUFFIXES",

@@ -13,7 +13,7 @@ whole body; Featherstone 2008, sec. 9.4 on floating bases). With W = m g the bod
 
 Each norm is smoothed as sqrt(|v|^2 + delta^2) - delta with delta the constraint's own tolerance, so
 the smoothing moves a bound by less than the tolerance and the constraint is differentiable at v = 0.
-The cone is about the vertical: the supports are floors, steps and platforms (`runner.mocap.scene_fit`).
+The cone is about the vertical: the supports are floors, steps and platforms (`runner.capture.scene_fit`).
 B is the larger of the plain spline's and the filtered capture's peak ground force
 (`solver.peak_bounds`); as with the no-jolt bounds, the plain spline's peak alone is no bound.
 """

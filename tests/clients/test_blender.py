@@ -95,11 +95,11 @@ def capture_frame(npz):
 
 def root_correction_m(npz, t):
     """(n, 3) [m] MuJoCo axes: the reference's root height correction at times t that the export onto the
-    source skeleton takes off the root (`runner.mocap.source_export.root_correction`)."""
+    source skeleton takes off the root (`runner.capture.source_export.root_correction`)."""
     from bvh_fk import AXES, UNIT
 
-    from runner.mocap.figure_record import clip_skeleton
-    from runner.mocap.source_export import root_correction, source_clip
+    from runner.capture.figure_record import clip_skeleton
+    from runner.capture.source_export import root_correction, source_clip
     from runner.saved_path import load_saved_path
 
     saved = load_saved_path(npz)

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
+from runner.capture.bvh import read_bvh
 from runner.clean import CleanOptions, process_clean
-from runner.mocap.bvh import read_bvh
 from runner.paths import MODELS
 
 CLIP = MODELS / "cmu" / "16_23.bvh"

@@ -3,8 +3,8 @@ optimized path's planted feet float and skate less than the same solve without i
 import numpy as np
 import pytest
 
-from runner.mocap.contact_detection import reference_contacts
-from runner.mocap.reference import load_bvh_reference
+from runner.capture.contact_detection import reference_contacts
+from runner.capture.reference_motion import load_bvh_reference
 from runner.motion_metrics import motion_metrics
 from runner.paths import MODELS
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
@@ -35,7 +35,7 @@ def test_sparse_keys_float_under_5_mm(tmp_path):
     """127_33 keyed every 0.33 s (a keying the defaults were not chosen on) as `dynsplines mocap CLIP
     --every 0.33 --scene auto --figure default` makes it: mean float in the capture's contacts at most
     5.5 mm (on the shipped figure, whose reference stands on the fitted scene frame by frame; the fitted
-    floor is tilted by 1 degree, as the source's own feet show, runner/mocap/scene_fit.py).
+    floor is tilted by 1 degree, as the source's own feet show, runner/capture/scene_fit.py).
     """
     import json
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import solver
-from runner.mocap.contact_detection import reference_contacts
+from runner.capture.contact_detection import reference_contacts
 from runner.motion_metrics import motion_metrics
 from runner.paths import MODELS
 from solver.contacts import Contact

@@ -5,9 +5,9 @@ import re
 
 import pytest
 
+from runner.capture.bvh import read_bvh
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT
-from runner.mocap.bvh import read_bvh
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES
 
 FAST = ["--max-evals", "3"]

@@ -319,8 +319,8 @@ def test_the_float_bound_reads_the_capture_stance_where_the_schedule_has_a_gap()
     the bound missed; on the schedule's contacts 0 mm, held."""
     import mujoco
 
-    from runner.mocap.scene_fit import FittedScene, scene_mjcf
-    from runner.mocap.stance import capture_stance
+    from runner.capture.scene_fit import FittedScene, scene_mjcf
+    from runner.capture.stance import capture_stance
     from runner.motion_metrics import motion_metrics
 
     model = mujoco.MjModel.from_xml_string(scene_mjcf(FittedScene(0.0), REPO / "models" / "humanoid39.xml"))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from shipped_sites import SITES
 
+from runner.capture.scene_fit import FittedScene, scene_mjcf
 from runner.jolts import filter_capture, jolt_figures, worst_joint_ratio
-from runner.mocap.scene_fit import FittedScene, scene_mjcf
 from runner.motion_metrics import motion_metrics
 from solver.contacts import Contact
 from solver.errors import InputError

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from shipped_sites import SITES
 
-from runner.mocap.contact_detection import reference_contacts
-from runner.mocap.scene_fit import FittedScene, scene_mjcf
+from runner.capture.contact_detection import reference_contacts
+from runner.capture.scene_fit import FittedScene, scene_mjcf
 from runner.motion_metrics import FLIGHT_HEIGHT, flight_mismatch, motion_metrics
 from solver.contact_schedule import ContactSchedule
 from solver.contacts import Contact
@@ -149,7 +149,7 @@ def test_validation(floor_model):
 
 
 def test_127_33_reference_own_metrics():
-    from runner.mocap.reference import load_bvh_reference
+    from runner.capture.reference_motion import load_bvh_reference
     model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "run_and_step.xml"))
     ref = load_bvh_reference(ROOT / "models" / "cmu" / "127_33.bvh", model)
     cs = reference_contacts(model, ref.qpos, ref.frame_time)

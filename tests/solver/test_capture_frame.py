@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from shipped_sites import FEET, SITES
 
-from runner.mocap.scene_fit import FittedScene, fit_scene, scene_mjcf
+from runner.capture.scene_fit import FittedScene, fit_scene, scene_mjcf
 from solver.capture_frame import CAPTURE_FRAME, CaptureFrame
 from solver.contacts import Contact
 from solver.errors import InputError

@@ -1,4 +1,4 @@
-"""solver.contacts and the capture's contact detection (runner.mocap.contact_detection): hysteresis,
+"""solver.contacts and the capture's contact detection (runner.capture.contact_detection): hysteresis,
 minimum duration, masks and events on hand-built site paths, and the
 shipped clip 127_33 (touch-downs where the foot-height trace lands)."""
 from pathlib import Path
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from shipped_sites import FEET, SITES
 
-from runner.mocap.contact_detection import detect_contacts, reference_contacts
+from runner.capture.contact_detection import detect_contacts, reference_contacts
 from solver.contacts import (
     Contact,
     contact_mask,
@@ -105,7 +105,7 @@ def test_mask_events_and_feet():
 
 
 def load_clip(name, model):
-    from runner.mocap.reference import load_bvh_reference
+    from runner.capture.reference_motion import load_bvh_reference
     return load_bvh_reference(ROOT / "models" / "cmu" / f"{name}.bvh", model)
 
 

@@ -129,7 +129,7 @@ def test_bad_annotations_name_the_element_and_the_fix(old, new, message):
 
 def test_a_leaf_without_an_end_has_no_segment():
     """Without its ``figure:end`` site the foot has no segment; the retargeting, which needs it, says so."""
-    from runner.mocap.retarget import check_figure
+    from runner.capture.retarget import check_figure
 
     fig = Figure.from_model(_edit('<text name="figure:end:l_foot" data="l_ball"/>', ""))
     assert "l_foot" not in fig.segments and "r_foot" in fig.segments

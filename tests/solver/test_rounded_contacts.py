@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from shipped_sites import SITES as CONTACT_SITES
 
-from runner.mocap.contacts import worst_contact_distance
+from runner.capture.root_height import worst_contact_distance
 from solver.contacts import RADIUS_PREFIX, contact_points, contact_radii, lowest_points, site_heights, site_positions
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE, Figure

@@ -5,7 +5,6 @@ import functools
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.integrate import solve_bvp
 from scipy.interpolate import CubicSpline
 from threadpoolctl import threadpool_limits
 
@@ -140,6 +139,8 @@ def _initial_guess(times: np.ndarray, q: np.ndarray, nodes: np.ndarray) -> np.nd
 
 
 def _solve_bvp(times, q, guess_nodes, guess_y, tol, max_nodes):
+    from scipy.integrate import solve_bvp  # on first use: the commands that never bench do not import scipy.integrate
+
     K = len(times)
     h = np.diff(times)
     m = K - 1

@@ -8,10 +8,10 @@ import pytest
 from bvh_edit import edit_bvh
 from bvh_fk import UNIT, local_rotations, parse
 
+from runner.capture.bvh import read_bvh
 from runner.cli import main
 from runner.export.bvh import EULER_ORDER, figure_qpos_from_bvh, figure_skeleton, write_bvh
 from runner.export.sampling import WHICH, default_fps, sample_motion
-from runner.mocap.bvh import read_bvh
 from runner.paths import MODELS
 from runner.saved_path import load_saved_path
 from solver.errors import InputError
@@ -86,8 +86,8 @@ def test_clip_without_figure_joints_is_refused(scene_model):
 def test_our_bvh_of_the_127_33_reference_reads_back_as_the_reference(tmp_path, scene_model):
     """The reference motion (CMU 127_33 retargeted) exported as BVH is a clip on the figure's own skeleton:
     the importer recognizes it and reads it without retargeting (every frame, same qpos)."""
+    from runner.capture.reference_motion import load_bvh_reference
     from runner.export.bvh import is_figure_clip
-    from runner.mocap.reference import load_bvh_reference
     from runner.paths import MODELS
 
     ref = load_bvh_reference(MODELS / "cmu" / "127_33.bvh", scene_model)
@@ -177,10 +177,10 @@ def reference_path(tmp_path, src, seconds=0.5, capture=None):
     """A saved path whose frames are the reference on the subject's figure at every captured frame of the
     first `seconds` of `src` (its clip embedded), and the clip. `capture`: the scene's transform from the
     capture's coordinates (`solver.capture_frame.CaptureFrame`; None: none recorded, the identity)."""
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.reference import load_bvh_reference
-    from runner.mocap.scene_fit import FittedScene, scene_mjcf
-    from runner.mocap.subject_figure import write_subject_figure
+    from runner.capture.bvh import read_bvh
+    from runner.capture.reference_motion import load_bvh_reference
+    from runner.capture.scene_fit import FittedScene, scene_mjcf
+    from runner.capture.subject_figure import write_subject_figure
     from solver.model import load_model
 
     clip = edit_bvh(src, tmp_path / "c.bvh", seconds=seconds)
@@ -199,11 +199,11 @@ def reference_path(tmp_path, src, seconds=0.5, capture=None):
 
 def glitch_frames(clip):
     """File frame indices (the rest frame first) that the import's glitch repair replaced
-    (`runner.mocap.glitches`), from the clip read on a floor-only scene of its own figure."""
-    from runner.mocap.bvh import read_bvh
-    from runner.mocap.reference import load_bvh_reference
-    from runner.mocap.scene_fit import FittedScene, scene_mjcf
-    from runner.mocap.subject_figure import write_subject_figure
+    (`runner.capture.glitches`), from the clip read on a floor-only scene of its own figure."""
+    from runner.capture.bvh import read_bvh
+    from runner.capture.reference_motion import load_bvh_reference
+    from runner.capture.scene_fit import FittedScene, scene_mjcf
+    from runner.capture.subject_figure import write_subject_figure
     from solver.model import load_model
 
     folder = clip.parent / "glitches"
@@ -266,7 +266,7 @@ def test_a_levelled_reference_exports_back_into_the_sources_coordinates(tmp_path
     import mujoco
     from bvh_fk import AXES, UNIT
 
-    from runner.mocap.bvh import read_bvh
+    from runner.capture.bvh import read_bvh
     from runner.saved_path import load_saved_path
     from solver.capture_frame import CaptureFrame
 

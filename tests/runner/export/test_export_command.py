@@ -3,9 +3,9 @@ import argparse
 
 import pytest
 
+from runner.capture.bvh import read_bvh
 from runner.commands import export
 from runner.export import export_saved_path
-from runner.mocap.bvh import read_bvh
 from solver.errors import InputError
 
 

@@ -1,0 +1,197 @@
+"""The footplant clean-up (runner.capture.foot_plant) and the leg inverse kinematics under it (runner.capture.leg_ik),
+on the shipped figure on its floor scene, checked with MuJoCo's own forward kinematics:
+
+* `knee_angle` solves its distance equation (against rotating the shin by the returned angle) and picks the
+  root nearest 0 (against a fine scan of the angle);
+* `move_foot` moves a foot exactly by dz along the vertical, keeps its orientation, its place along the floor,
+  the pelvis, and the knee's rotation off its hinge; a straight knee cannot extend: the foot stays and the
+  returned dz says 0;
+* `plant_feet` on a standing figure whose right foot the capture holds up: with a bent right knee the leg
+  puts it down alone; with both knees straight (the pelvis tilted) the root goes down and the left knee
+  bends to keep the left foot on the floor. Every resting foot ends `CONTACT_CLEARANCE` above the floor,
+  nothing below it, the feet where they were along the floor. A foot coming down or lifting off slowly
+  (resting by the thresholds) is left as captured.
+"""
+import mujoco
+import numpy as np
+import pytest
+
+import solver
+from runner.capture.clearance import CONTACT_CLEARANCE, ContactClearance
+from runner.capture.foot_plant import plant_feet
+from runner.capture.leg_ik import knee_angle, leg_chain, move_foot
+from solver.figure import FIGURE_FILE
+from solver.quaternion import mul, swing_angle, twist_angle
+
+FPS = 120.0
+
+
+@pytest.fixture(scope="module")
+def scene():
+    model = solver.load_model(solver.shipped("floor.xml"))
+    return model, solver.Figure.from_model(model)
+
+
+def _about(axis, deg):
+    h = np.radians(deg) / 2
+    return np.r_[np.cos(h), np.sin(h) * np.asarray(axis, float)]
+
+
+def _bodies(model, qpos, names):
+    """World positions (n, b, 3) and orientations (n, b, 4) of the named bodies, by mj_kinematics."""
+    data = mujoco.MjData(model)
+    ids = [model.body(n).id for n in names]
+    pos, quat = np.empty((len(qpos), len(ids), 3)), np.empty((len(qpos), len(ids), 4))
+    for i, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        pos[i], quat[i] = data.xpos[ids], data.xquat[ids]
+    return pos, quat
+
+
+def _standing(model, figure, right_knee_deg=0.0, roll_deg=0.0):
+    """A still pose: upright (qpos0), the right knee flexed, the pelvis rolled about the forward axis, and the
+    root height that puts the lowest contact point CONTACT_CLEARANCE above the floor."""
+    q = model.qpos0.copy()
+    knee = figure.joint("r_knee").qpos_slice
+    q[knee] = _about(figure.flexion_axes["r_knee"], right_knee_deg)
+    q[3:7] = _about([1.0, 0.0, 0.0], roll_deg)
+    kin = ContactClearance(model)
+    q[2] += CONTACT_CLEARANCE - kin.clearance(kin.positions(q[None]))[0].min()
+    return q
+
+
+def test_knee_angle_solves_its_equation_and_takes_the_root_nearest_zero():
+    rng = np.random.default_rng(3)
+    n = 40
+    hip = rng.normal(size=(n, 3))
+    knee = hip + rng.normal(size=(n, 3)) * 0.4
+    ankle = knee + rng.normal(size=(n, 3)) * 0.4
+    axis = rng.normal(size=(n, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    grid = np.linspace(-np.pi, np.pi, 20001)
+
+    def dist(i, th):
+        v, a = ankle[i] - knee[i], axis[i]
+        rv = v * np.cos(th)[:, None] + np.cross(a, v) * np.sin(th)[:, None] + np.outer(1 - np.cos(th), a) * (a @ v)
+        return np.linalg.norm(knee[i] + rv - hip[i], axis=1)
+
+    lo = np.array([dist(i, grid).min() for i in range(n)])
+    hi = np.array([dist(i, grid).max() for i in range(n)])
+    target = lo + rng.uniform(0.05, 0.95, n) * (hi - lo)  # reachable distances
+    theta = knee_angle(hip, knee, ankle, axis, target)
+    for i in range(n):
+        assert dist(i, np.array([theta[i]]))[0] == pytest.approx(target[i], abs=1e-9)
+        roots = grid[np.flatnonzero(np.diff(np.sign(dist(i, grid) - target[i])))]
+        assert abs(theta[i]) <= np.abs(roots).min() + 1e-3  # the nearest root to 0 (grid step 3e-4 rad)
+
+
+@pytest.mark.parametrize("dz", [-0.012, 0.02])
+def test_move_foot_moves_it_exactly_vertically_and_keeps_the_knee_on_its_hinge(scene, dz):
+    model, figure = scene
+    q = _standing(model, figure, right_knee_deg=35.0)[None]
+    leg = leg_chain(model, figure, "right")
+    moved, reached = move_foot(model, leg, q, np.array([dz]))
+    assert reached[0] == pytest.approx(dz, abs=1e-12)
+    names = ["pelvis", "r_foot", "l_foot"]
+    (p0, q0), (p1, q1) = _bodies(model, q, names), _bodies(model, moved, names)
+    assert p1[0, 1] - p0[0, 1] == pytest.approx([0.0, 0.0, dz], abs=1e-9)  # the foot: straight down or up
+    assert abs(abs(q1[0, 1] @ q0[0, 1]) - 1.0) < 1e-12  # ... not turned
+    assert np.allclose(p1[0, [0, 2]], p0[0, [0, 2]], atol=1e-12) and np.allclose(q1[0, [0, 2]], q0[0, [0, 2]], atol=1e-12)
+    knee, axis = figure.joint("r_knee").qpos_slice, figure.flexion_axes["r_knee"]
+    assert swing_angle(moved[:, knee], axis)[0] == pytest.approx(swing_angle(q[:, knee], axis)[0], abs=1e-9)
+    bent = np.degrees(twist_angle(moved[:, knee], axis)[0])
+    assert (bent < 35.0) == (dz < 0)  # down: the knee extends; up: it flexes
+
+
+def test_a_straight_knee_cannot_lower_its_foot(scene):
+    model, figure = scene
+    q = _standing(model, figure)[None]
+    leg = leg_chain(model, figure, "right")
+    moved, reached = move_foot(model, leg, q, np.array([-0.01]))
+    assert reached[0] == pytest.approx(0.0, abs=1e-6)
+    assert np.allclose(_bodies(model, moved, ["r_foot"])[0], _bodies(model, q, ["r_foot"])[0], atol=1e-6)
+    assert twist_angle(moved[:, figure.joint("r_knee").qpos_slice], figure.flexion_axes["r_knee"])[0] >= -1e-9
+
+
+def _raised_right_foot(model, figure, pose, lift):
+    """A still motion of 40 frames: `pose` with the right foot lifted by `lift` [m] by its leg."""
+    leg = leg_chain(model, figure, "right")
+    q, reached = move_foot(model, leg, pose[None], np.array([lift]))
+    assert reached[0] == pytest.approx(lift, abs=1e-9)
+    return np.repeat(q, 40, axis=0)
+
+
+def _feet_lowest(model, qpos):
+    kin = ContactClearance(model)
+    clear = kin.clearance(kin.positions(qpos))
+    return clear[:, :2].min(axis=1), clear[:, 2:].min(axis=1), kin.positions(qpos)
+
+
+@pytest.mark.parametrize("case", ["bent knee", "straight knees"])
+def test_plant_feet_puts_a_raised_resting_foot_on_the_floor(scene, case):
+    model, figure = scene
+    if case == "bent knee":  # the right foot lifted flat 15 mm by bending its knee: its leg can reach down
+        qpos = _raised_right_foot(model, figure, _standing(model, figure), 0.015)
+    else:  # both knees straight, the pelvis rolled: the right foot 15-20 mm up, its leg cannot reach
+        qpos = np.repeat(_standing(model, figure, roll_deg=-5.0)[None], 40, axis=0)
+    left0, right0, pos0 = _feet_lowest(model, qpos)
+    assert right0.min() > CONTACT_CLEARANCE + 0.01 and left0.max() == pytest.approx(CONTACT_CLEARANCE, abs=1e-9)
+    plant = plant_feet(qpos, model, 1.0 / FPS)
+    left, right, pos = _feet_lowest(model, plant.qpos)
+    assert np.allclose(left, CONTACT_CLEARANCE, atol=1e-6) and np.allclose(right, CONTACT_CLEARANCE, atol=1e-6)
+    assert np.allclose(pos[..., :2], pos0[..., :2], atol=1e-9)  # the feet where they were along the floor
+    assert plant.foot_dz[:, 1] == pytest.approx(CONTACT_CLEARANCE - right0, abs=1e-6)
+    if case == "bent knee":
+        assert np.all(plant.root_dz == 0.0) and np.all(plant.foot_dz[:, 0] == 0.0)
+    else:  # the root went down by what the straight right leg could not reach; the left knee bent for it
+        assert plant.root_dz == pytest.approx(CONTACT_CLEARANCE - right0, abs=1e-6)
+        knee = figure.joint("l_knee").qpos_slice
+        assert np.all(twist_angle(plant.qpos[:, knee], figure.flexion_axes["l_knee"]) > np.radians(1.0))
+    assert plant.largest_mm()["right"] == pytest.approx(1000 * (right0.max() - CONTACT_CLEARANCE), abs=0.1)
+
+
+def test_a_foot_lifting_off_slowly_is_not_pulled_back_down(scene):
+    """The right foot rests on the floor, then rises 20 mm at 0.1 m/s (still 'resting' by the stance's 3 cm
+    and 0.5 m/s): the footplant leaves it where the capture has it."""
+    model, figure = scene
+    qpos = np.repeat(_standing(model, figure)[None], 60, axis=0)
+    leg = leg_chain(model, figure, "right")
+    rise = np.clip((np.arange(60) - 30) / FPS * 0.1, 0.0, None)
+    qpos, _ = move_foot(model, leg, qpos, rise)
+    plant = plant_feet(qpos, model, 1.0 / FPS)
+    assert np.allclose(plant.qpos, qpos, atol=1e-12)
+    assert not plant.foot_dz.any() and not plant.root_dz.any()
+
+
+def test_a_foot_coming_down_slowly_lands_when_the_capture_lands(scene):
+    """The right foot comes down 20 mm at 0.1 m/s onto the floor (under 3 cm and 0.5 m/s: 'resting' all the
+    way down) and stays: the footplant does not bring the landing forward."""
+    model, figure = scene
+    qpos = np.repeat(_standing(model, figure)[None], 60, axis=0)
+    leg = leg_chain(model, figure, "right")
+    up = np.clip((30 - np.arange(60)) / FPS * 0.1, 0.0, None)
+    qpos, _ = move_foot(model, leg, qpos, up)
+    plant = plant_feet(qpos, model, 1.0 / FPS)
+    assert np.allclose(plant.qpos, qpos, atol=1e-12)
+
+
+def test_plant_feet_without_a_surface_changes_nothing():
+    model = solver.load_model(FIGURE_FILE)  # the figure alone: no floor
+    qpos = np.repeat(model.qpos0[None], 5, axis=0)
+    plant = plant_feet(qpos, model, 1.0 / FPS)
+    assert plant.qpos is qpos and not plant.root_dz.any()
+
+
+def test_the_footplant_keeps_the_figure_pose_between_two_quaternion_conventions(scene):
+    """The hip, knee and ankle quaternions it writes give back the world orientations it solved for: the
+    thigh, shin and foot composed through their parents (body_quat included) by MuJoCo."""
+    model, figure = scene
+    q = _standing(model, figure, right_knee_deg=40.0)
+    q[figure.joint("r_hip").qpos_slice] = mul(_about([0, 1, 0], -20.0), _about([1, 0, 0], 5.0))
+    leg = leg_chain(model, figure, "right")
+    moved, reached = move_foot(model, leg, q[None], np.array([-0.02]))
+    (p0, q0), (p1, q1) = _bodies(model, q[None], ["r_foot"]), _bodies(model, moved, ["r_foot"])
+    assert reached[0] == pytest.approx(-0.02, abs=1e-12)
+    assert p1[0, 0] - p0[0, 0] == pytest.approx([0.0, 0.0, -0.02], abs=1e-9)
+    assert abs(abs(q1[0, 0] @ q0[0, 0]) - 1.0) < 1e-12
