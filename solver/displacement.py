@@ -199,7 +199,8 @@ class ChangeAcceleration(AccelerationBound):
     a_c the capture's own acceleration (the reference's `qacc`, noise and all: a clean keeps it) and A_j the
     peak of the capture low-pass filtered at 6 Hz (`solver.peak_bounds.filter_capture`, Winter 2009): a
     correction accelerates no joint harder than the captured motion itself does (`AccelerationBound`'s
-    smooth form and columns).
+    smooth form and columns). The limit is (1 - RELATIVE_TOLERANCE) A_j with tolerance RELATIVE_TOLERANCE A_j,
+    so a change that meets it within its tolerance stays within A_j itself.
 
     Args:
         bound: the figure's `AccelerationBound` (its columns and labels). qacc: (n, nv) the capture's
@@ -208,7 +209,8 @@ class ChangeAcceleration(AccelerationBound):
 
     def __init__(self, bound: AccelerationBound, qacc: np.ndarray, peaks: np.ndarray):
         n = int(bound.rows.max()) + 1 if len(bound.rows) else 0
-        super().__init__(n, bound.dofs, peaks, RELATIVE_TOLERANCE * np.asarray(peaks, float),
+        peaks = np.asarray(peaks, float)  # the limit and its tolerance inside A_j: met within tolerance, <= A_j
+        super().__init__(n, bound.dofs, (1.0 - RELATIVE_TOLERANCE) * peaks, RELATIVE_TOLERANCE * peaks,
                          bound.labels[: len(bound.dofs)])
         self._ref = np.asarray(qacc, float)[:, self.dofs]  # (n, j, 3)
 

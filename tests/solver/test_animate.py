@@ -92,11 +92,15 @@ def test_animate_hands_the_capture_to_the_problem(toy, monkeypatch):
     seen = {}
     real = animate_module.build_problem
 
+    class Built(Exception):
+        """The problem was built: the test needs no solve of it."""
+
     def spy(model_, spec):
-        seen["spec"] = spec
-        return real(model_, spec)
+        seen["spec"], seen["problem"] = spec, real(model_, spec)
+        raise Built
 
     monkeypatch.setattr(animate_module, "build_problem", spy)
     capture = (np.linspace(0.0, 1.0, 21), np.tile(model.qpos0, (21, 1)))
-    solver.animate(model, kf, capture=capture, tol=0.5)
-    assert seen["spec"].capture is capture
+    with pytest.raises(Built):
+        solver.animate(model, kf, capture=capture, tol=0.5)
+    assert seen["spec"].capture is capture and seen["problem"].capture is capture
