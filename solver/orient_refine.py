@@ -4,19 +4,18 @@
 and the measures of an orientation path it uses (covariant energy by Gauss quadrature, max |1 - |q||)."""
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
-from solver.error_estimate import GAP_FACTOR, estimate_gap, optimization_gap
+from solver.constraints.unit import UNIT_LIMIT
+from solver.error_estimate import estimate_gap, optimization_gap
 from solver.frames import FrameSet
+from solver.lagrangian import GAMMA
 from solver.layout import StateLayout
 from solver.objective import Objective
-from solver.optimize import OptimizeResult, Status
+from solver.optimize import OptimizeResult
 from solver.quadrature import gauss_nodes, gauss_times
-from solver.refinement import TOL_FRAMES_PER_INTERVAL, Refinement, Step
+from solver.refinement import Step, ToTolerance
 from solver.spline import interpolate_segments
-from solver.subdivide import predicted_times
 from solver.terms import NormalizedCovariantAcceleration
 
 _SINGLE = StateLayout.single_quaternion()  # one orientation: qpos = q (4,)
@@ -26,144 +25,66 @@ _SINGLE = StateLayout.single_quaternion()  # one orientation: qpos = q (4,)
 #: at most tol on all tuning sets (docs/orient.md, "Accuracy on request").
 TOL_SAFETY = 2.0
 
-#: With a tolerance, where to put frames (`solver.subdivide.predicted_times`): every segment c is cut so
-#: that its share GAP_FACTOR D_c / E of the estimate, assumed to fall as the segment length to the power
-#: PREDICT_RATE, brings the estimate to tol / TOL_SAFETY / PREDICT_MARGIN with the fewest frames. The
-#: first placement is made before any optimization, from the estimate on the starting path (one frame
-#: per keyframe interval, on the unit sphere): its shares put the frames where the optimized path will
-#: need them, so one optimization round usually meets the tolerance (rather than several rounds of
-#: midpoint frames, each re-optimized and re-estimated). Chosen on tuning seeds 0-49 (docs/orient.md, "Accuracy on
-#: request"): rate 4 and margin 2 met tol = 1e-4 in one round on 39 of 50 sets (rate 5: fewer frames but
-#: a second round on half the sets; margins 1.5-3 took the same time), the estimate accepted in the first
-#: round within 0.59-1.53x of the true gap.
-PREDICT_RATE = 4.0
-PREDICT_MARGIN = 2.0
-#: ... at most this many pieces per segment in one round.
-PREDICT_MAX_SPLIT = 8
 
-#: The share of tol the optimizer's own error may take: each round's optimizer stops at ftol_rel =
-#: max(the options' ftol_rel, OPTIMIZER_SHARE * tol) (on the tuning seeds 0-49: evaluations to the
-#: default tolerance 32 -> 12 in median, to 1e-4 26 -> 19), and a round that would be accepted is
-#: checked against the same share: a relative-decrease test can stop L-BFGS on a stall far from the
-#: optimum (seen once at 3e-5: true gap 1.6e-3 at an estimate of 1.1e-4), so where `optimization_gap`
-#: (the relative decrease a Newton step would still make) is above OPTIMIZER_SHARE * tol the frames are
-#: optimized again at the options' own ftol_rel (at most POLISHES times for the same frames and
-#: weights), and the check is added to the estimate. On the tuning seeds the check was at most 0.013 x
-#: tol on converged rounds (default tolerance); on the stalled round, 0.1 x tol. (The count was once for
-#: the whole loop: on acceptance seed 1028 the unit weight, boosted 1000x, left stalls the spent count
-#: could not polish.)
-OPTIMIZER_SHARE = 0.03
-POLISHES = 2
-
-#: With a tolerance: when a round reaches it but the path has max |1 - |q|| above DRIFT_LIMIT, the unit
-#: term's weight is multiplied by DRIFT_BOOST and the same frames are optimized again, and refined on if
-#: the estimate asks for it (at most DRIFT_BOOSTS times). The normalized form's f2 does not see |q|, so the weight does not move its exact-unit optimum;
-#: the light default weight lets |q| drift up to 36% on random sets with few frames.
-DRIFT_LIMIT = 0.08
-DRIFT_BOOST = 10.0
-DRIFT_BOOSTS = 3
+#: The unit term f1 = (1 - q.q)^2 is a quadratic penalty on |q| = 1. When a round meets the tolerance
+#: with max |1 - |q|| above the figure's own limit on it (`solver.constraints.unit.UNIT_LIMIT`, 3 %: a
+#: 3 % change of speed within a segment once normalized), the penalty's weight grows by the method of
+#: multipliers' factor (`solver.lagrangian.GAMMA`, 10; the penalty method of Nocedal & Wright,
+#: Numerical Optimization, 2006, Framework 17.1) and the same frames are optimized again, for as long as
+#: that lowers the drift. The normalized form's f2 does not see |q|, so this does not move its
+#: exact-unit optimum.
+DRIFT_LIMIT, DRIFT_BOOST = UNIT_LIMIT, GAMMA
 
 
+class GapToOptimum(ToTolerance):
+    """`solve`'s refinement strategy for `orient`'s tol: the figure-independent `ToTolerance` loop
+    (optimize -> estimate -> add a frame at the midpoint of every segment whose predicted decrease is
+    within a factor of four of the largest, `adaptive_times`) with the estimated gap to the exact
+    optimum as its estimate: `estimate_gap` plus the optimizer's stationarity gap (`_stationarity`) and
+    the quadrature discrepancy (`quadrature_discrepancy`), accepted at tol / TOL_SAFETY.
 
-class GapToOptimum(Refinement):
-    """`solve`'s refinement strategy for `orient`'s tol: rounds of optimize -> estimate -> refine until the
-    estimated gap is at most tol / TOL_SAFETY.
-
-    Each round stops the optimizer at ftol_rel OPTIMIZER_SHARE * tol (or the options' if larger). Frames
-    are added by `predicted_times` on the predicted decreases the estimate computed: once before the
-    first round (`first_frames`, from the estimate on the starting path), then after every round whose
-    estimate is above tol / TOL_SAFETY. Where a round would be accepted, the estimate adds the
-    quadrature discrepancy and the optimizer's stationarity gap; a stationarity gap above OPTIMIZER_SHARE *
-    tol has the same frames optimized again at the options' own ftol_rel ("polish", at most POLISHES
-    times per frames and weights), and a path with max |1 - |q|| above DRIFT_LIMIT has the unit term's
-    weight (the objective's first) multiplied by DRIFT_BOOST and the same frames optimized again
-    ("boost", at most DRIFT_BOOSTS times).
+    A round whose optimizer stopped short (a stall on its relative-decrease test) is not accepted: its
+    stationarity gap counts in the estimate, and the next round optimizes every frame again. A round
+    that is accepted with max |1 - |q|| above DRIFT_LIMIT has the unit weight (the objective's first)
+    multiplied by DRIFT_BOOST and the same frames optimized again ("boost"), while that lowers the drift.
 
     Args:
-        tol: the requested estimated gap (> 0). options: the SolveOptions of the solve (ftol_rel,
-            per_round, max_frames: default TOL_FRAMES_PER_INTERVAL per keyframe interval,
-            precondition, radial_weight, quat_slots).
+        tol: the requested estimated gap (> 0). options: the SolveOptions of the solve (per_round,
+            max_frames: default TOL_FRAMES_PER_INTERVAL per keyframe interval, precondition,
+            radial_weight, quat_slots).
     Attributes:
         estimates, converged, final_estimate: `Refinement`'s. boosts: unit-weight boosts made.
-        measures: {"frames", "energy", "drift"} of the last round that computed them
-            (`covariant_energy`, `max_norm_deviation`), else {}.
+        measures: {"frames", "energy", "drift"} of the last round (`covariant_energy`,
+            `max_norm_deviation`), else {}.
     """
 
-    converged = False
+    what = "estimated gap"
 
     def __init__(self, tol: float, options):
-        super().__init__()
-        self.tol, self.options = tol, options
-        self.boosts, self.measures = 0, {}
-        self._polishes, self._strict = 0, False
-        self._target = tol / TOL_SAFETY / PREDICT_MARGIN
-        self._budget = options.max_frames
-        self._per_round = options.per_round
-
-    def first_frames(self, objective, frames):
-        """Add frames where the estimate on the starting path asks for them (the optimized path will
-        need them there)."""
-        if not self._budget:
-            self._budget = TOL_FRAMES_PER_INTERVAL * (int(frames.is_keyframe.sum()) - 1)
-        E = objective.evaluate(frames.times, frames.values, grad=False).E
-        _, D = estimate_gap(objective, frames, E)
-        room = min(self._budget - frames.n_variable, self._per_round or self._budget)
-        return frames.with_variable_frames(_place(D, E, frames, self._target, room))
-
-    def round_options(self, options):
-        ftol = options.ftol_rel if self._strict else max(options.ftol_rel, OPTIMIZER_SHARE * self.tol)
-        self._strict = False
-        return replace(options, ftol_rel=ftol)
+        super().__init__(tol, options.per_round, options.max_frames, "decrease")
+        self.options, self.measures = options, {}
+        self.accept_at, self.bound = tol / TOL_SAFETY, f"tol {tol:g} / {TOL_SAFETY:g}"
+        self.boosts, self._drift_before = 0, float("inf")
 
     def after_round(self, objective, frames, result, index, progress):
-        ev = objective.evaluate(frames.times, frames.values, grad=False)
-        est, D = estimate_gap(objective, frames, ev.E)
-        if est <= self.tol / TOL_SAFETY:  # only where it may stop: ~1e-6 usually, and it costs an evaluation
-            E8 = covariant_energy(frames.times, frames.values)
-            opt = _stationarity(result, ev.E, objective, frames, self.options)
-            est += _discrepancy(ev.integrals, E8) + opt
-            self.measures = {"frames": frames, "energy": E8, "drift": max_norm_deviation(frames.times, frames.values)}
-            if opt > OPTIMIZER_SHARE * self.tol and self._polishes < POLISHES:
-                # the optimizer stopped short (a stall on its relative-decrease test): same frames again,
-                # at the options' own ftol_rel
-                self._record(est)
-                self._polishes += 1
-                self._strict = True
-                return Step("polish")
-        self._record(est)
-        if est <= self.tol / TOL_SAFETY:
-            return self._accept(objective, est)
-        room = self._budget - frames.n_variable
-        if room <= 0:
-            return Step("stop", message=f"frame budget of {self._budget} variable frames reached at estimated gap "
-                                        f"{est:.2g} (tol {self.tol:g})")
-        new = _place(D, ev.E, frames, self._target, min(room, self._per_round or self._budget))
-        if new.size == 0:
-            return Step("stop", message=f"no segment to refine at estimated gap {est:.2g} (tol {self.tol:g})")
-        self._polishes = 0
-        return Step("refine", new)
-
-    def _record(self, est: float) -> None:
-        self.estimates.append(est)
-        self.final_estimate = est
-
-    def _accept(self, objective, est: float) -> Step:
-        """The estimate is within tol: stop, unless |q| drifts (then stiffen the unit term and optimize the
-        same frames again; early rounds are not checked: there the drift is mostly the spline's dip
-        between frames far apart, ~theta^2/8, which only more frames remove)."""
-        if self.boosts < DRIFT_BOOSTS and self.measures["drift"] > DRIFT_LIMIT:
+        step = super().after_round(objective, frames, result, index, progress)
+        drift = self.measures["drift"]
+        if self.converged and drift > DRIFT_LIMIT and drift < self._drift_before:
+            # |q| leaves its limit: raise the unit term's penalty and optimize the same frames again, for
+            # as long as that lowers the drift
+            self.converged, self._drift_before = False, drift
             self.boosts += 1
             objective.weights[0] *= DRIFT_BOOST
-            self._polishes = 0  # a new objective: its optimizations may stall afresh
             return Step("boost")
-        self.converged = True
-        return Step("stop", message=f"estimated gap {est:.2g} <= tol {self.tol:g} / {TOL_SAFETY:g}")
+        return step
 
-    def final_message(self, status, message):
-        if status is Status.MAX_TIME and self.options.max_time_s:
-            return f"time limit of {self.options.max_time_s:g} s reached" + (
-                f" at estimated gap {self.estimates[-1]:.2g} (tol {self.tol:g})" if self.estimates else "")
-        return message
+    def estimate(self, objective, frames, result):
+        ev = objective.evaluate(frames.times, frames.values, grad=False)
+        est, D = estimate_gap(objective, frames, ev.E)
+        E8 = covariant_energy(frames.times, frames.values)
+        est += _discrepancy(ev.integrals, E8) + _stationarity(result, ev.E, objective, frames, self.options)
+        self.measures = {"frames": frames, "energy": E8, "drift": max_norm_deviation(frames.times, frames.values)}
+        return est, D
 
 
 def _stationarity(result: OptimizeResult, E: float, obj: Objective, frames: FrameSet, opts) -> float:
@@ -172,18 +93,11 @@ def _stationarity(result: OptimizeResult, E: float, obj: Objective, frames: Fram
     preconditioner, or the plain-variable retry of `solver.backend.nlopt_backend`), by
     `optimization_gap`. The optimizer's z stretches the radial directions of the frames at the round's
     *start* (`radial_weight`), where `optimization_gap` takes them at its end; the frames turn little in
-    a round, and this saves an evaluation with a gradient and a preconditioner (~5% of a tol=1e-4 call)."""
+    a round, and this saves an evaluation with a gradient and a preconditioner."""
     g = result.grad
     if opts.precondition and g is not None and g.size == frames.n_free:
         return float(0.5 * (g @ g) / E) if E > 0 else 0.0
     return optimization_gap(obj, frames, opts.radial_weight, opts.quat_slots)
-
-
-def _place(D: np.ndarray, E: float, frames: FrameSet, target: float, budget: int) -> np.ndarray:
-    """New frame times for the estimate's shares GAP_FACTOR D / E to reach `target` (`predicted_times`)."""
-    if not E > 0:
-        return np.zeros(0)
-    return predicted_times(GAP_FACTOR * D / E, frames, target, budget, PREDICT_RATE, PREDICT_MAX_SPLIT)
 
 
 def quadrature_discrepancy(sol, E8: float) -> float:
@@ -230,7 +144,7 @@ def covariant_energy(frame_times: np.ndarray, frames: np.ndarray, points: int = 
 def max_norm_deviation(frame_times: np.ndarray, frames: np.ndarray, per_segment: int = 64) -> float:
     """max |1 - |q(t)|| over the spline through frames (`per_segment` samples per segment, ends included:
     64, a sample every 1.6 % of a segment, where |q(t)| of a cubic varies smoothly; it is compared with
-    DRIFT_LIMIT, 8 %, so locating its peak to a fraction of a percent is enough)."""
+    DRIFT_LIMIT, 3 %, so locating its peak to a small fraction of a percent is enough)."""
     q = interpolate_segments(frame_times, frames, np.arange(per_segment) / per_segment)
     r2 = np.einsum("ni,ni->n", q, q)  # |q|^2; the last frame is the path's end
     last = np.asarray(frames, float)[-1]

@@ -154,36 +154,44 @@ class ToTolerance(Refinement):
     as `FixedRounds` places them."""
 
     converged = False
+    #: what the estimate is, in the solve's messages
+    what = "refinement estimate"
 
     def __init__(self, tol: float, per_round: int = 0, max_frames: int = 0, score: str = "decrease"):
         super().__init__()
         self.tol, self.per_round, self.max_frames, self.score = tol, per_round, max_frames, score
+        self.accept_at, self.bound = tol, f"tol {tol:g}"  # where a round is accepted, and how the message says it
 
     def first_frames(self, objective, frames):
         if not self.max_frames:
             self.max_frames = TOL_FRAMES_PER_INTERVAL * (int(frames.is_keyframe.sum()) - 1)
         return frames
 
+    def estimate(self, objective, frames: FrameSet, result: OptimizeResult) -> tuple[float, np.ndarray]:
+        """(estimate, (m-1,) per-segment decreases that rank the segments) of the round's path:
+        `refinement_estimate`. A subclass may estimate another error the same way."""
+        return refinement_estimate(objective, frames, result.fun)
+
     def after_round(self, objective, frames, result, index, progress):
-        est, D = refinement_estimate(objective, frames, result.fun)
+        est, D = self.estimate(objective, frames, result)
         self.estimates.append(est)
         self.final_estimate = est
         if progress:
             progress("estimate", {"round": index, "estimate": est, "tol": self.tol})
-        if est <= self.tol:
+        if est <= self.accept_at:
             self.converged = True
-            return Step("stop", message=f"refinement estimate {est:.2g} <= tol {self.tol:g}")
+            return Step("stop", message=f"{self.what} {est:.2g} <= {self.bound}")
         budget = _budget(frames, self.per_round, self.max_frames)
         if budget <= 0:
             return Step("stop", message=f"frame budget of {self.max_frames} variable frames reached at "
-                                        f"refinement estimate {est:.2g} (tol {self.tol:g})")
+                                        f"{self.what} {est:.2g} (tol {self.tol:g})")
         scores = D if self.score == "decrease" else weak_form_scores(objective, frames)
         new = adaptive_times(scores, frames, budget)
         if new.size == 0:
-            return Step("stop", message=f"no segment to refine at refinement estimate {est:.2g} (tol {self.tol:g})")
+            return Step("stop", message=f"no segment to refine at {self.what} {est:.2g} (tol {self.tol:g})")
         return Step("refine", new, scores)
 
     def final_message(self, status, message):
         if status is Status.MAX_TIME and self.estimates:
-            return f"{message} at refinement estimate {self.estimates[-1]:.2g} (tol {self.tol:g})"
+            return f"{message} at {self.what} {self.estimates[-1]:.2g} (tol {self.tol:g})"
         return message

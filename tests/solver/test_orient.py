@@ -113,7 +113,9 @@ def test_paper_form_on_moderate_rotations(E_star):
     plain = orient(s.times, s.quats, form="paper", renormalize="keyframes")
     assert plain.solution.scales["unit"] > 30 * paper.solution.scales["unit"]
     assert plain.max_norm_deviation > 2 * paper.max_norm_deviation
-    normalized = orient(s.times, s.quats)
+    # with the paper form's three adaptive rounds, the normalized form is nearer the exact optimum (its
+    # optimum is E*; the paper form's trades smoothness for |q|): measured 2.3e-6 against 6.3e-5
+    normalized = orient(s.times, s.quats, options=default_options(rounds=3))
     assert gap(normalized, E_star[s.name]) < gap(paper, E_star[s.name])
 
 
