@@ -96,7 +96,7 @@ class OptimizeResult:
         grad: (n,) gradient of the minimized function at x, in the optimizer's variables (those of
             `fun`: for `solve`'s preconditioned rounds the z of `AccelerationPreconditioner`), or None
             (x never evaluated with a gradient). Kept so that a caller can check stationarity without
-            another evaluation (`solver.orient_refine`).
+            another evaluation (`solver.paper.orient_refine`).
         fun_time_s: [s] wall time spent in `fun` (value and gradient, in the optimizer's variables).
             wall_time_s - fun_time_s is the optimizer's own work and this wrapper's: for nlopt's L-BFGS
             O(n k) per iteration with k <= `lbfgs_storage(n)` stored pairs (measured: ~5 ms an iteration

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Default Gauss quadrature (`Objective.points`, `solver.orient`): Gauss-Legendre with GAUSS_POINTS nodes
+#: Default Gauss quadrature (`Objective.points`, `solver.paper.orient`): Gauss-Legendre with GAUSS_POINTS nodes
 #: on every spline segment. The integrand is smooth inside a segment (the spline is one cubic there), so 4 nodes per segment integrate it to ~1e-6
 #: relative on the default frames of the test sets (1e-9 with 5 frames per keyframe interval), where the
 #: paper's uniform rule needed 80-120 points per second for a gap of 1e-4; 3 nodes change the default

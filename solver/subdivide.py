@@ -145,3 +145,23 @@ def adaptive_times(scores: np.ndarray, frames: FrameSet, budget: int, ratio: flo
     keep = [i for i in order if scores[i] >= ratio * scores[order[0]]][:budget]
     mids = 0.5 * (frames.times[:-1] + frames.times[1:])
     return np.sort(mids[keep])
+
+
+def refinement_estimate(objective, frames: FrameSet, E: float | None = None) -> tuple[float, np.ndarray]:
+    """The decrease of E still available from refinement, relative to E: sum_c D_c / E, with D_c the
+    predicted decrease from a frame inserted at the midpoint of segment c and moved to its best place
+    (`predicted_decreases`, what adaptive subdivision ranks segments by). A first-order prediction of
+    what halving every segment would buy (each frame moved alone, the others held); 0 where the path
+    is optimal for its frames and no frame could lower E.
+
+    Args:
+        objective: Objective. frames: FrameSet (m frames). E: the objective on frames, if known.
+    Returns:
+        (estimate, D): D (m-1,) the predicted decreases [units of E].
+    Raises:
+        NonFiniteError: a term is NaN or infinite on the path or a trial path.
+    """
+    D = predicted_decreases(objective, frames)
+    if E is None:
+        E = objective.evaluate(frames.times, frames.values, grad=False).E
+    return (float(D.sum() / E) if E > 0 else 0.0), D

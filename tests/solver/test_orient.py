@@ -23,7 +23,7 @@ from runner.bench.sphere_reference import (
 )
 from runner.euler_lagrange import deviation_by_region, el_lhs, residual, spline_residual
 from solver.errors import InputError
-from solver.orient import check_keyframes, default_options, orient
+from solver.paper.orient import check_keyframes, default_options, orient
 from solver.terms import NormalizedCovariantAcceleration
 
 from conftest import fd_gradient

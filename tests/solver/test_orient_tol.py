@@ -10,7 +10,7 @@ import pytest
 
 from runner.bench.random_sets import random_set, true_energy
 from solver.errors import InputError
-from solver.orient import DEFAULT_TOL, OrientOptions, default_options, orient
+from solver.paper.orient import DEFAULT_TOL, OrientOptions, default_options, orient
 
 #: acceptance seeds used here (a subset of random_sets.ACCEPTANCE_SEEDS: never used for tuning)
 TEST_SEEDS = range(1000, 1010)
@@ -76,7 +76,7 @@ def test_drift_stiffens_the_unit_term():
 def test_optimization_gap_against_the_decrease_left():
     """0.5 |g_z|^2 / E (`optimization_gap`) is ~0 on a converged path and, on paths stopped after a few
     evaluations, within 0.5-10x of the decrease the optimizer still finds (E_stopped - E_converged) / E."""
-    from solver.error_estimate import optimization_gap
+    from solver.paper.error_estimate import optimization_gap
 
     s = random_set(3)
     slots = ((0, 1, 2, 3),)
@@ -95,7 +95,7 @@ def test_a_stalled_round_is_not_accepted(monkeypatch):
     stalls far from its optimum: the optimizer's gap counts in the estimate, so the loop does not stop
     on a round that merely looks refined enough, and the result still meets the tolerance once a round
     at the options' ftol_rel is reached."""
-    from solver.orient_refine import TOL_SAFETY, GapToOptimum
+    from solver.paper.orient_refine import TOL_SAFETY, GapToOptimum
 
     stalls = {"n": 0}
     real = GapToOptimum.round_options
@@ -142,7 +142,7 @@ def orientation_problem(seed=3):
     """`orient`'s objective, starting frames and options for a generated set (normalized form)."""
 
     from solver.frames import FrameSet
-    from solver.orient import LAYOUT, RADIAL_WEIGHTS, build_objective, check_keyframes
+    from solver.paper.orient import LAYOUT, RADIAL_WEIGHTS, build_objective, check_keyframes
 
     s = random_set(seed)
     kf = check_keyframes(s.times, s.quats)
@@ -157,8 +157,8 @@ def test_gap_strategy_is_a_strategy_of_solves_loop():
     second loop)."""
     from dataclasses import replace
 
-    from solver.orient_refine import GapToOptimum, unit_rows
-    from solver.solve import solve
+    from solver.paper.orient_refine import GapToOptimum, unit_rows
+    from solver.paper.solve import solve
 
     s, obj, initial, opts = orientation_problem()
     tol = 1e-4
@@ -177,7 +177,7 @@ def test_gap_strategy_counts_a_stall_and_boosts_a_drifting_unit_term():
     than DRIFT_LIMIT has the unit weight multiplied by DRIFT_BOOST and the same frames optimized again,
     while the boosts lower the drift."""
     from solver.optimize import OptimizeResult, Status
-    from solver.orient_refine import DRIFT_BOOST, DRIFT_LIMIT, GapToOptimum, max_norm_deviation
+    from solver.paper.orient_refine import DRIFT_BOOST, DRIFT_LIMIT, GapToOptimum, max_norm_deviation
 
     _, obj, initial, opts = orientation_problem()
     frames = initial.with_variable_frames(np.array([0.5 * (initial.times[0] + initial.times[1])]))

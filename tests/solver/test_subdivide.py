@@ -7,7 +7,7 @@ from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.optimize import Status
-from solver.solve import SolveOptions, solve
+from solver.paper.solve import SolveOptions, solve
 from solver.subdivide import global_times, weak_form_scores
 from solver.terms import CovariantAcceleration, UnitQuaternion
 
@@ -100,7 +100,7 @@ def test_partial_keyframe_components_are_free_and_others_fixed():
 def test_grouped_preconditioner_equals_dense_cholesky_factor():
     """R^-1 applied per component group equals the dense inverse Cholesky factor of the free-component
     Hessian of integral |Y''|^2 (built here directly), and apply_transpose is its transpose."""
-    from solver.precondition import AccelerationPreconditioner
+    from solver.paper.precondition import AccelerationPreconditioner
 
     times = np.array([0.0, 0.5, 1.2, 1.6])
     vals = np.array([quat([1, 0, 0], a) for a in (0, 40, 80, 120)])
@@ -157,9 +157,9 @@ def test_gauss_quadrature_objective_gradient_and_integral():
 
 
 def test_preconditioner_folded_into_the_spline_matrices_gives_the_same_optimization():
-    """Whole free frames (one preconditioner group): `solver.round.optimize_round` folds R^-1 into the spline matrices;
+    """Whole free frames (one preconditioner group): `solver.paper.round.optimize_round` folds R^-1 into the spline matrices;
     the objective it minimizes is the same function of z as the scatter/gather path."""
-    from solver.precondition import AccelerationPreconditioner
+    from solver.paper.precondition import AccelerationPreconditioner
 
     kf, obj = orient_problem()
     fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots).with_variable_frames([0.25, 0.8, 1.4, 2.0])
@@ -201,7 +201,7 @@ def test_radial_stretch_of_the_preconditioner():
     c = 1/sqrt(w) - 1, so the assumed Hessian S (H x I) S has curvature w H along each frame's radial
     direction u. apply_transpose is the transpose of apply; the whole-frames path of `optimize_round`
     (R^-1, then the stretch, folded next to the spline matrices) minimizes the same function."""
-    from solver.precondition import AccelerationPreconditioner
+    from solver.paper.precondition import AccelerationPreconditioner
 
     kf, obj = orient_problem()
     fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots).with_variable_frames([0.25, 0.8, 1.4, 2.0])
@@ -242,7 +242,7 @@ def test_failed_preconditioned_round_is_retried_without_preconditioning(monkeypa
     """A round whose preconditioned optimization fails is re-run on the plain variables."""
     import importlib
 
-    round_mod = importlib.import_module("solver.round")  # where a round calls nlopt
+    round_mod = importlib.import_module("solver.paper.round")  # where a round calls nlopt
     from solver.optimize import minimize as real_minimize
 
     calls = []

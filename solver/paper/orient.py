@@ -24,20 +24,20 @@ from functools import cached_property
 
 import numpy as np
 
-from solver.error_estimate import estimate_gap
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
-from solver.orient_refine import (  # noqa: F401  (measures re-exported: orient.covariant_energy, ...)
+from solver.paper.error_estimate import estimate_gap
+from solver.paper.orient_refine import (  # noqa: F401  (measures re-exported: orient.covariant_energy, ...)
     GapToOptimum,
     covariant_energy,
     max_norm_deviation,
     unit_rows,
 )
+from solver.paper.solve import Solution, SolveOptions, solve
 from solver.quadrature import GAUSS_POINTS
-from solver.solve import Solution, SolveOptions, solve
 from solver.subdivide import global_times
 from solver.terms import CovariantAcceleration, NormalizedCovariantAcceleration, UnitQuaternion
 
@@ -85,14 +85,14 @@ DEFAULT_ROUNDS = {"normalized": 2, "paper": 3}
 
 #: Default accuracy of the normalized form (docs/orient.md "Accuracy on request: tol and the gap
 #: estimate"): adaptive rounds until the estimated relative gap
-#: (E - E*)/E* (`solver.error_estimate.estimate_gap`) is at most DEFAULT_TOL / TOL_SAFETY. It replaces a
+#: (E - E*)/E* (`solver.paper.error_estimate.estimate_gap`) is at most DEFAULT_TOL / TOL_SAFETY. It replaces a
 #: fixed number of rounds (DEFAULT_ROUNDS, still the paper form's default: its optimum is not E*).
 DEFAULT_TOL = 1e-3
 
 @dataclass(frozen=True)
 class OrientOptions(SolveOptions):
     """SolveOptions as `orient` reads them: with refine "tol", `tol` is the estimated relative gap
-    (E - E*)/E* to reach (`estimate_gap`, `solver.orient_refine.GapToOptimum`): refine and re-optimize
+    (E - E*)/E* to reach (`estimate_gap`, `solver.paper.orient_refine.GapToOptimum`): refine and re-optimize
     until it is at most tol, or the frame budget (`max_frames`, default TOL_FRAMES_PER_INTERVAL per
     keyframe interval) or the time budget (`max_time_s`) runs out. refine "rounds": a fixed number of
     adaptive `rounds` instead.
@@ -160,7 +160,7 @@ class OrientResult:
             their error estimates).
         tol: the requested estimated gap (0: fixed rounds).
         estimated_gap: a-posteriori estimate of the relative gap (E - E*)/E* of the result
-            (`solver.error_estimate.estimate_gap`; normalized form only, NaN for the paper form, and
+            (`solver.paper.error_estimate.estimate_gap`; normalized form only, NaN for the paper form, and
             for a tolerance run stopped before its first estimate). Without a tolerance it is
             computed when first read.
         converged_to_tol: with a tolerance, whether the estimate reached it (False: the frame or time
@@ -352,7 +352,7 @@ def orient(
             (their rounds, else DEFAULT_ROUNDS[form]). Default: the options' mode (refine "tol" with
             DEFAULT_TOL in the default options of the normalized form; "rounds" in a plain SolveOptions
             or options that give `rounds`). Normalized form only: the strategy is
-            `solver.orient_refine.GapToOptimum`, run by `solve`'s loop. The frames start as `options`
+            `solver.paper.orient_refine.GapToOptimum`, run by `solve`'s loop. The frames start as `options`
             says (`per_segment` per interval, on the unit sphere; none with subdivision "none"); the
             estimate on that starting path places the first optimized frames, and every round whose
             estimate is above tol adds more, each segment cut into as many equal pieces as the
@@ -360,7 +360,7 @@ def orient(
             estimate reaches tol or `max_frames` (default TOL_FRAMES_PER_INTERVAL per keyframe interval)
             or `max_time_s` runs out (`converged_to_tol` False, `solution.message` says which). After a
             round with max |1 - |q|| above DRIFT_LIMIT the unit weight is stiffened (DRIFT_BOOST). The
-            estimate used is `estimate_gap`, plus the quadrature discrepancy (`solver.orient_refine.quadrature_discrepancy`)
+            estimate used is `estimate_gap`, plus the quadrature discrepancy (`solver.paper.orient_refine.quadrature_discrepancy`)
             in the rounds where it would otherwise stop.
     Returns:
         OrientResult.

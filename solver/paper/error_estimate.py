@@ -31,10 +31,10 @@ optimum in the exact-unit limit is E*; with the paper form the optimum of the ob
 the estimate does not apply).
 
 The quadrature is assumed exact: D_c and E use the objective's own rule (Gauss, 4 points per segment),
-which the optimizer may exploit. `solver.orient`'s tolerance loop therefore adds the discrepancy
+which the optimizer may exploit. `solver.paper.orient`'s tolerance loop therefore adds the discrepancy
 |E_8 - E_4| / E_8 between 8 and 4 points per segment (~1e-6 usually, 1.6e-3 on one generated set).
 
-The optimizer's own gap is assumed small; `optimization_gap` checks it (`solver.orient_refine` adds it
+The optimizer's own gap is assumed small; `optimization_gap` checks it (`solver.paper.orient_refine` adds it
 to the estimate of a round it would accept, and optimizes again when it is not small; there it is read
 off the gradient the optimizer last evaluated, `OptimizeResult.grad`, and this function is the fallback).
 
@@ -47,7 +47,7 @@ import numpy as np
 
 from solver.frames import FrameSet
 from solver.objective import Objective
-from solver.precondition import AccelerationPreconditioner
+from solver.paper.precondition import AccelerationPreconditioner
 from solver.subdivide import predicted_decreases
 
 #: true gap / (sum of predicted decreases / E), calibrated on the tuning sets (median of the ratio)

@@ -8,7 +8,7 @@ stopping test, or a "boost" after the strategy changed the objective's weights).
 - `FixedRounds`: `rounds` rounds of adaptive subdivision (`SolveOptions.refine = "rounds"`).
 - `ToTolerance`: adaptive subdivision until the decrease of E refinement still predicts, relative to
   E (`refinement_estimate`), is at most tol (`SolveOptions.refine = "tol"`).
-- `solver.orient_refine.GapToOptimum`: the orientation's estimated gap to the exact optimum.
+- `solver.paper.orient_refine.GapToOptimum`: the orientation's estimated gap to the exact optimum.
 
 A strategy is made fresh for each solve and keeps its own state (`estimates`, `converged`).
 """
@@ -21,7 +21,7 @@ import numpy as np
 
 from solver.frames import FrameSet
 from solver.optimize import OptimizeResult, Status
-from solver.subdivide import adaptive_times, predicted_decreases, weak_form_scores
+from solver.subdivide import adaptive_times, refinement_estimate, weak_form_scores
 
 #: With a tolerance (`ToTolerance`, the orientation's `GapToOptimum`) and no `max_frames`: the frame budget,
 #: per keyframe interval, a guard against a tolerance the frames cannot reach. 40 frames cut an interval into
@@ -29,26 +29,6 @@ from solver.subdivide import adaptive_times, predicted_decreases, weak_form_scor
 TOL_FRAMES_PER_INTERVAL = 40
 #: `Step.action` values: what the loop does after a round.
 ACTIONS = ("stop", "refine", "polish", "boost")
-
-
-def refinement_estimate(objective, frames: FrameSet, E: float | None = None) -> tuple[float, np.ndarray]:
-    """The decrease of E still available from refinement, relative to E: sum_c D_c / E, with D_c the
-    predicted decrease from a frame inserted at the midpoint of segment c and moved to its best place
-    (`predicted_decreases`, what adaptive subdivision ranks segments by). A first-order prediction of
-    what halving every segment would buy (each frame moved alone, the others held); 0 where the path
-    is optimal for its frames and no frame could lower E.
-
-    Args:
-        objective: Objective. frames: FrameSet (m frames). E: the objective on frames, if known.
-    Returns:
-        (estimate, D): D (m-1,) the predicted decreases [units of E].
-    Raises:
-        NonFiniteError: a term is NaN or infinite on the path or a trial path.
-    """
-    D = predicted_decreases(objective, frames)
-    if E is None:
-        E = objective.evaluate(frames.times, frames.values, grad=False).E
-    return (float(D.sum() / E) if E > 0 else 0.0), D
 
 
 @dataclass(frozen=True)

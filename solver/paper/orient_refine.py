@@ -1,20 +1,20 @@
 """`orient(tol=...)`: the orientation's refinement strategy for `solve`'s loop (`GapToOptimum`): optimize
 -> estimate the gap -> refine until the estimated relative gap (E - E*)/E*
-(`solver.error_estimate.estimate_gap`) is at most the tolerance (docs/orient.md "Accuracy on request: tol and the gap estimate"),
+(`solver.paper.error_estimate.estimate_gap`) is at most the tolerance (docs/orient.md "Accuracy on request: tol and the gap estimate"),
 and the measures of an orientation path it uses (covariant energy by Gauss quadrature, max |1 - |q||)."""
 from __future__ import annotations
 
 import numpy as np
 
 from solver.constraints.unit import UNIT_LIMIT
-from solver.error_estimate import estimate_gap, optimization_gap
 from solver.frames import FrameSet
 from solver.lagrangian import GAMMA
 from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.optimize import OptimizeResult
+from solver.paper.error_estimate import estimate_gap, optimization_gap
+from solver.paper.refinement import Step, ToTolerance
 from solver.quadrature import gauss_nodes, gauss_times
-from solver.refinement import Step, ToTolerance
 from solver.spline import interpolate_segments
 from solver.terms import NormalizedCovariantAcceleration
 
@@ -90,7 +90,7 @@ class GapToOptimum(ToTolerance):
 def _stationarity(result: OptimizeResult, E: float, obj: Objective, frames: FrameSet, opts) -> float:
     """`optimization_gap` of the round's result, 0.5 |g_z|^2 / E: from the gradient in z the optimizer
     evaluated at its best iterate (`OptimizeResult.grad`), or, where there is none in z (no
-    preconditioner, or the plain-variable retry of `solver.backend.nlopt_backend`), by
+    preconditioner, or the plain-variable retry of `solver.paper.backend.nlopt_backend`), by
     `optimization_gap`. The optimizer's z stretches the radial directions of the frames at the round's
     *start* (`radial_weight`), where `optimization_gap` takes them at its end; the frames turn little in
     a round, and this saves an evaluation with a gradient and a preconditioner."""
