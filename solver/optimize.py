@@ -29,7 +29,7 @@ ALGORITHMS = {
 }
 
 
-#: The relative-decrease stopping test of a plain `minimize` (and of `solve`'s rounds unless the options
+#: [1] The relative-decrease stopping test of a plain `minimize` (and of `solve`'s rounds unless the options
 #: say otherwise): 1e-7, of the order of the square root of double precision's 2.2e-16, the usual floor of
 #: a relative-decrease test (Gill, Murray & Wright, Practical Optimization, 1981, ch. 8, termination criteria).
 FTOL_REL = 1e-7

@@ -50,7 +50,7 @@ from solver.objective import Objective
 from solver.paper.precondition import AccelerationPreconditioner
 from solver.subdivide import predicted_decreases
 
-#: true gap / (sum of predicted decreases / E), calibrated on the tuning sets (median of the ratio)
+#: [1] true gap / (sum of predicted decreases / E), calibrated on the tuning sets (median of the ratio)
 GAP_FACTOR = 1.4
 
 

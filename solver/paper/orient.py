@@ -36,6 +36,7 @@ from solver.paper.orient_refine import (  # noqa: F401  (measures re-exported: o
     max_norm_deviation,
     unit_rows,
 )
+from solver.paper.solve import DEFAULT_ROUNDS as SOLVE_ROUNDS
 from solver.paper.solve import Solution, SolveOptions, solve
 from solver.quadrature import GAUSS_POINTS
 from solver.subdivide import global_times
@@ -43,26 +44,27 @@ from solver.terms import CovariantAcceleration, NormalizedCovariantAcceleration,
 
 FORMS = ("normalized", "paper")
 
-#: f1 weight of the normalized form, in units of the mean keyframe interval: lambda_1 = UNIT_WEIGHT /
+#: [1] f1 weight of the normalized form, in units of the mean keyframe interval: lambda_1 = UNIT_WEIGHT /
 #: mean(dt)^4 [1/s^4], so that re-timing the keyframes (all times times c) gives the same path re-timed.
 #: f2 does not depend on |q| in this form, so f1 only picks the scale of the variable frames; small
 #: enough not to pull the orientation (docs/orient.md, trade-off table), large enough to hold |q| near 1.
 UNIT_WEIGHT = 0.1
 
-#: The paper's weights (sec. 3, figure 9): lambda_1 : lambda_2 = 2 : 5 on renormalized terms (eq. 7).
+#: [1] The paper's weights (sec. 3, figure 9): lambda_1 : lambda_2 = 2 : 5 on renormalized terms (eq. 7).
 PAPER_WEIGHTS = (2.0, 5.0)
 
 #: Uniform quadrature (`rate=` given, or `default_rate`): at least MIN_RATE points per second [Hz], and at
-#: least MIN_POINTS_PER_KEY_INTERVAL points in the shortest keyframe interval (so a frame inserted there
-#: is determined by the integral).
+#: least MIN_POINTS_PER_KEY_INTERVAL points [1] in the shortest keyframe interval (so a frame inserted
+#: there is determined by the integral).
 MIN_RATE = 40.0
 MIN_POINTS_PER_KEY_INTERVAL = 32
 
-#: Curvature the preconditioner assumes along each variable frame's radial direction, relative to the
+#: [1] Curvature the preconditioner assumes along each variable frame's radial direction, relative to the
 #: tangential ones (`SolveOptions.radial_weight`), per form: the normalized form's f2 does not see the
 #: scale of q, only the light f1 does (0.03-0.1 need 25-40% fewer evaluations than 1 for the same result,
-#: 0.01 is worse again; docs/orient.md); the paper form's f2 falls as q shrinks (1: fewer evaluations).
-RADIAL_WEIGHTS = {"normalized": 0.1, "paper": 1.0}
+#: 0.01 is worse again; docs/orient.md); the paper form's f2 falls as q shrinks, so it assumes nothing
+#: (`SolveOptions`' default, 1: every direction alike).
+RADIAL_WEIGHTS = {"normalized": 0.1, "paper": SolveOptions.radial_weight}
 
 #: The path eq. 7 renormalizes on ("the initial state before any optimization has taken place"), unless
 #: `orient(renormalize=...)` says otherwise: "start", the paper's starting path (sec. 3: "Initially, we
@@ -77,13 +79,14 @@ RADIAL_WEIGHTS = {"normalized": 0.1, "paper": 1.0}
 #: reports |q| within 0.2% with 2:5 (figure 9); docs/orient.md has both, measured.
 RENORMALIZE_ON = "start"
 
-#: Adaptive rounds by default, per form. The paper form's unit term, renormalized on the paper's start
-#: path, is stiff (|q| within 0.02-0.7% on the test sets), and a stiff unit term needs more frames for
-#: the same gap: after two rounds the moderate set's gap is 8.3e-3, after three 6.3e-5 (the large sets:
-#: 1.1-3.0e-4; docs/orient.md).
-DEFAULT_ROUNDS = {"normalized": 2, "paper": 3}
+#: [rounds] Adaptive rounds by default, per form (fixed rounds: the paper form, or the normalized form
+#: with tol=0). The paper form's unit term, renormalized on the paper's start path, is stiff (|q| within
+#: 0.02-0.7% on the test sets), and a stiff unit term needs more frames for the same gap: after two
+#: rounds the moderate set's gap is 8.3e-3, after three 6.3e-5 (the large sets: 1.1-3.0e-4;
+#: docs/orient.md); the normalized form takes `solve`'s default.
+DEFAULT_ROUNDS = {"normalized": SOLVE_ROUNDS, "paper": 3}
 
-#: Default accuracy of the normalized form (docs/orient.md "Accuracy on request: tol and the gap
+#: [1] Default accuracy of the normalized form, a relative gap (docs/orient.md "Accuracy on request: tol and the gap
 #: estimate"): adaptive rounds until the estimated relative gap
 #: (E - E*)/E* (`solver.paper.error_estimate.estimate_gap`) is at most DEFAULT_TOL / TOL_SAFETY. It replaces a
 #: fixed number of rounds (DEFAULT_ROUNDS, still the paper form's default: its optimum is not E*).

@@ -20,7 +20,7 @@ from solver.terms import NormalizedCovariantAcceleration
 
 _SINGLE = StateLayout.single_quaternion()  # one orientation: qpos = q (4,)
 
-#: The estimate is a median-calibrated guess (true/estimated 0.4-3.6 on the tuning sets, 90% within
+#: [1] The estimate is a median-calibrated guess (true/estimated 0.4-3.6 on the tuning sets, 90% within
 #: 0.7-1.6); a round is accepted when the estimate is at most tol / TOL_SAFETY, so that the true gap is
 #: at most tol on all tuning sets (docs/orient.md, "Accuracy on request").
 TOL_SAFETY = 2.0
@@ -79,12 +79,20 @@ class GapToOptimum(ToTolerance):
         return step
 
     def estimate(self, objective, frames, result):
+        """The estimated gap and each segment's share of it (what ranks the segments to refine): the
+        segment's GAP_FACTOR D_c / E (`estimate_gap`) plus its share of the quadrature discrepancy,
+        |E_8,c - E_q,c| / E_8 (`segment_energies` by 8 points and by the objective's Gauss points), so
+        that a segment whose integral the optimizer's rule gets wrong is refined too."""
         ev = objective.evaluate(frames.times, frames.values, grad=False)
         est, D = estimate_gap(objective, frames, ev.E)
-        E8 = covariant_energy(frames.times, frames.values)
+        E8c = segment_energies(frames.times, frames.values)
+        E8 = float(E8c.sum())
+        shares = est * D / D.sum() if D.sum() > 0 else np.zeros_like(D)
+        if objective.quadrature == "gauss" and E8 > 0:
+            shares = shares + np.abs(E8c - segment_energies(frames.times, frames.values, objective.points)) / E8
         est += _discrepancy(ev.integrals, E8) + _stationarity(result, ev.E, objective, frames, self.options)
         self.measures = {"frames": frames, "energy": E8, "drift": max_norm_deviation(frames.times, frames.values)}
-        return est, D
+        return est, shares
 
 
 def _stationarity(result: OptimizeResult, E: float, obj: Objective, frames: FrameSet, opts) -> float:
@@ -134,11 +142,16 @@ def covariant_energy(frame_times: np.ndarray, frames: np.ndarray, points: int = 
     Args:
         frame_times: (m,) [s]. frames: (m, 4) quaternions.
     """
+    return float(segment_energies(frame_times, frames, points).sum())
+
+
+def segment_energies(frame_times: np.ndarray, frames: np.ndarray, points: int = 8) -> np.ndarray:
+    """`covariant_energy` segment by segment: (m-1,) [1/s^3], Gauss-Legendre with `points` nodes each."""
     ft = np.asarray(frame_times, float)
     t, wt = gauss_times(ft, points)
     Y, Y1, Y2 = interpolate_segments(ft, frames, gauss_nodes(points)[0], (0, 1, 2))
     f = NormalizedCovariantAcceleration(_SINGLE.quat_slots).evaluate(t, Y, Y1, Y2, grad=False).f
-    return float(wt @ f)
+    return (wt * f).reshape(len(ft) - 1, points).sum(axis=1)
 
 
 def max_norm_deviation(frame_times: np.ndarray, frames: np.ndarray, per_segment: int = 64) -> float:

@@ -23,7 +23,7 @@ from solver.frames import FrameSet
 from solver.optimize import OptimizeResult, Status
 from solver.subdivide import adaptive_times, refinement_estimate, weak_form_scores
 
-#: With a tolerance (`ToTolerance`, the orientation's `GapToOptimum`) and no `max_frames`: the frame budget,
+#: [frames] With a tolerance (`ToTolerance`, the orientation's `GapToOptimum`) and no `max_frames`: the frame budget,
 #: per keyframe interval, a guard against a tolerance the frames cannot reach. 40 frames cut an interval into
 #: pieces 1/41 as long (docs/orient.md, "The loop").
 TOL_FRAMES_PER_INTERVAL = 40

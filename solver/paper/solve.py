@@ -40,7 +40,8 @@ SUBDIVISIONS = ("none", "global", "adaptive")
 SCORES = ("gradient", "decrease")
 #: `SolveOptions.refine`: how adaptive subdivision decides when to stop.
 REFINES = ("rounds", "tol")
-#: `SolveOptions.rounds` when not given (refine "rounds").
+#: [rounds] `SolveOptions.rounds` when not given (refine "rounds"): two adaptive rounds after the first
+#: optimization; for an accuracy, refine "tol" stops on an estimate instead of a count.
 DEFAULT_ROUNDS = 2
 _ENDS = (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED)  # statuses that end a solve
 
