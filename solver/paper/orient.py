@@ -108,8 +108,8 @@ LAYOUT = StateLayout.single_quaternion()
 def default_options(form: str = "normalized", **changes) -> OrientOptions:
     """The solve options `orient` uses unless given others: one variable frame per keyframe interval, then
     rounds of adaptive subdivision ranked by predicted decrease (`predicted_decreases`), preconditioned
-    L-BFGS, ftol_rel 1e-6. Normalized form: refine "tol", rounds until the estimated gap is at most
-    DEFAULT_TOL (`OrientOptions.tol`), unless `rounds` is given (then refine "rounds": that many rounds)
+    L-BFGS, ftol_rel `solver.optimize.FTOL_REL` (`SolveOptions`' default). Normalized form: refine
+    "tol", rounds until the estimated gap is at most DEFAULT_TOL (`OrientOptions.tol`), unless `rounds` is given (then refine "rounds": that many rounds)
     or the subdivision is not adaptive; paper form: refine "rounds", DEFAULT_ROUNDS rounds. A `tol` > 0
     selects refine "tol". Keyword arguments override fields (`OrientOptions`; `rounds=None` is taken
     as not given). `orient` sets `renormalize` and `radial_weight` from its own arguments (they
@@ -125,7 +125,7 @@ def default_options(form: str = "normalized", **changes) -> OrientOptions:
                          "the estimated gap is at most tol), not both")
     base = dict(
         subdivision="adaptive", per_segment=1, per_round=0, max_frames=0,
-        score="decrease", precondition=True, ftol_rel=1e-6, renormalize=False,
+        score="decrease", precondition=True, renormalize=False,
     )
     refine = changes.get("refine") or ("tol" if changes.get("tol") or (
         "tol" not in changes and form == "normalized" and changes.get("rounds") is None
@@ -356,15 +356,15 @@ def orient(
             DEFAULT_TOL in the default options of the normalized form; "rounds" in a plain SolveOptions
             or options that give `rounds`). Normalized form only: the strategy is
             `solver.paper.orient_refine.GapToOptimum`, run by `solve`'s loop. The frames start as `options`
-            says (`per_segment` per interval, on the unit sphere; none with subdivision "none"); the
-            estimate on that starting path places the first optimized frames, and every round whose
-            estimate is above tol adds more, each segment cut into as many equal pieces as the
-            estimate's share there asks for (`solver.subdivide.predicted_times`), until the
-            estimate reaches tol or `max_frames` (default TOL_FRAMES_PER_INTERVAL per keyframe interval)
-            or `max_time_s` runs out (`converged_to_tol` False, `solution.message` says which). After a
-            round with max |1 - |q|| above DRIFT_LIMIT the unit weight is stiffened (DRIFT_BOOST). The
-            estimate used is `estimate_gap`, plus the quadrature discrepancy (`solver.paper.orient_refine.quadrature_discrepancy`)
-            in the rounds where it would otherwise stop.
+            says (`per_segment` per interval, on the unit sphere; none with subdivision "none"); every round
+            whose estimate is above tol / TOL_SAFETY adds a frame at the midpoint of the segments
+            with the largest shares of it (`solver.subdivide.adaptive_times`), until the estimate
+            reaches it or `max_frames` (default TOL_FRAMES_PER_INTERVAL per keyframe interval) or
+            `max_time_s` runs out (`converged_to_tol` False, `solution.message` says which). A round
+            that meets it with max |1 - |q|| above DRIFT_LIMIT has the unit weight stiffened
+            (DRIFT_BOOST) while that lowers the drift. The estimate is `estimate_gap` plus the
+            quadrature discrepancy (`solver.paper.orient_refine.quadrature_discrepancy`) and the
+            optimizer's own gap (`solver.paper.error_estimate.optimization_gap`).
     Returns:
         OrientResult.
     Raises:
