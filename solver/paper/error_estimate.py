@@ -33,8 +33,9 @@ which the optimizer may exploit. `solver.paper.orient`'s tolerance loop therefor
 |E_8 - E_4| / E_8 between 8 and 4 points per segment (~1e-6 usually, 1.6e-3 on one generated set), and
 ranks segments by their share of it too.
 
-The optimizer's own gap is assumed small; `optimization_gap` checks it (`solver.paper.orient_refine` adds it
-to the estimate of every round, so a stalled round is not accepted; there it is read off the gradient the optimizer last evaluated, `OptimizeResult.grad`, and this function is the fallback).
+The optimizer's own gap is assumed small; `optimization_gap` checks it (`solver.paper.orient_refine`
+adds it to the estimate of every round, so a stalled round is not accepted; there it is read off the
+gradient the optimizer last evaluated, `OptimizeResult.grad`, and this function is the fallback).
 
 Cost: three gradient evaluations with a frame inserted in every segment (the predicted decreases are
 also what adaptive subdivision ranks segments by, so the estimate is free when another round follows).
