@@ -37,11 +37,12 @@ DRIFT_LIMIT, DRIFT_BOOST = UNIT_LIMIT, GAMMA
 
 
 class GapToOptimum(ToTolerance):
-    """`solve`'s refinement strategy for `orient`'s tol: the figure-independent `ToTolerance` loop
-    (optimize -> estimate -> add a frame at the midpoint of every segment whose predicted decrease is
-    within a factor of four of the largest, `adaptive_times`) with the estimated gap to the exact
-    optimum as its estimate: `estimate_gap` plus the optimizer's stationarity gap (`_stationarity`) and
-    the quadrature discrepancy (`quadrature_discrepancy`), accepted at tol / TOL_SAFETY.
+    """`solve`'s refinement strategy for `orient`'s tol: the loop of `solve`'s refine "tol"
+    (`ToTolerance`: optimize -> estimate -> add a frame at the midpoint of every segment whose share of
+    the estimate is within a factor of four of the largest, `adaptive_times`) with the estimated gap to
+    the exact optimum as its estimate: `estimate_gap` plus the optimizer's stationarity gap
+    (`_stationarity`) and the quadrature discrepancy (`quadrature_discrepancy`), accepted at
+    tol / TOL_SAFETY.
 
     A round whose optimizer stopped short (a stall on its relative-decrease test) is not accepted: its
     stationarity gap counts in the estimate, and the next round optimizes every frame again. A round
