@@ -15,7 +15,7 @@ see (the weak form of `solver.subdivide` does).
 With ``normalized=True`` the residual is evaluated on the orientation shown, u = q/|q| (unit, so b = 1
 and Z = 0), and only its tangential part is returned: the radial part of eq. 10 on a unit path is the
 Lagrange multiplier of |u| = 1, and the tangential part vanishes exactly on the natural Riemannian cubic
-spline, the optimum of the normalized objective (`solver.orient`).
+spline, the optimum of the normalized objective (`solver.paper.orient`).
 
 Units: [1/s^4].
 """

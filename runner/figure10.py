@@ -17,7 +17,7 @@ import numpy as np
 
 from runner.euler_lagrange import deviation_by_region
 from runner.files import atomic_output
-from solver.orient import check_keyframes, default_options, orient
+from solver.paper.orient import check_keyframes, default_options, orient
 
 #: variable frames of the adaptive curve (the paper's used 2)
 ADAPTIVE_FRAMES = 2

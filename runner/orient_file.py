@@ -26,7 +26,7 @@ def read_keyframes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     Args:
         path: JSON file {"times": [k numbers], "quaternions": [k lists of 4 numbers (w x y z)]}.
     Returns:
-        times (k,) [s], quaternions (k, 4) as given (validated by `solver.orient.check_keyframes`).
+        times (k,) [s], quaternions (k, 4) as given (validated by `solver.paper.orient.check_keyframes`).
     Raises:
         InputError: missing or unreadable file, invalid JSON, missing or malformed field; the message
             names the file, the field and the value.

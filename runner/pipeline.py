@@ -17,7 +17,7 @@ Steps (docs/architecture.md; the contact steps: docs/contacts.md):
 3. Keyframes (`runner.capture.capture_keys.pick_keyframes`): evenly spaced plus the root's extremes, or at
    the contact events; written as `<stem>.keyframes.json` with the contacts (a user can edit it and
    rerun `dynsplines animate` on it), and read back, so the solve is the one `animate` would do.
-4. Solve (solver.solve), acceptance figures of the plain spline and the optimized path
+4. Solve (solver.paper.solve), acceptance figures of the plain spline and the optimized path
    (`solver.metrics.path_metrics`), and the motion metrics of both and of the reference, at the
    reference's frames (`runner.motion_metrics`).
 5. Outputs: the saved path (.npz, with `metrics_json` and `contacts`), the metrics (.json), plots, video.

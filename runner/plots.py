@@ -196,7 +196,7 @@ def plot_objective(path, solution) -> Path:
     run of the method of multipliers; between them the multipliers, the penalty or the frames change).
 
     Args:
-        path: output PNG. solution: `solver.solve.Solution`.
+        path: output PNG. solution: `solver.paper.solve.Solution`.
     """
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(10, 4.8))
@@ -278,7 +278,7 @@ def plot_solution(directory, model, solution, keyframes, reference=None, objecti
     """Write the figures of a solved run into `directory` (created if missing).
 
     Args:
-        directory: output folder. model: the scene's MjModel. solution: `solver.solve.Solution`.
+        directory: output folder. model: the scene's MjModel. solution: `solver.paper.solve.Solution`.
         keyframes: the keyframes. reference: motion capture (`.times`, `.qpos`) or None.
         objective: the solved Objective, for the Euler-Lagrange scores after refinement; without it
             the least change's own (`Solution.segment_decreases`: the first check against the last on

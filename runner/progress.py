@@ -44,7 +44,7 @@ def _bar(stream, **kw):
 
 
 class Progress:
-    """Progress of an optimization (`solver.solve`'s progress callback).
+    """Progress of an optimization (`solver.paper.solve`'s progress callback).
 
     On a terminal: a tqdm bar per round (evaluations, the current value of Phi, elapsed time). Off a terminal
     (a log, a pipe): one line when a round ends; a round still running after `QUIET_INTERVAL` seconds first

@@ -28,11 +28,11 @@ from solver.metrics import path_metrics
 from solver.model import load_model
 from solver.objective import Evaluation, NonFiniteError, Objective
 from solver.optimize import OptimizeResult, Status
-from solver.orient import OrientResult, orient
+from solver.paper.orient import OrientResult, orient
+from solver.paper.solve import Round, Solution, SolveOptions, solve
 from solver.path_context import PathContext
 from solver.problem import Problem, ProblemSpec, build_problem
 from solver.shipped import shipped
-from solver.solve import Round, Solution, SolveOptions, solve
 from solver.spline_basis import SplineBasis
 from solver.terms import (
     CovariantAcceleration,

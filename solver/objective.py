@@ -132,7 +132,7 @@ class Objective:
     def fused_orientation(self) -> bool:
         """True for the orientation objective (unit + normalized covariant acceleration of one
         quaternion filling the state, Gauss quadrature), which `unit_and_normalized` evaluates in one
-        pass (`evaluate_path`, and `solver.round`'s component-major fast path)."""
+        pass (`evaluate_path`, and `solver.paper.round`'s component-major fast path)."""
         return self._fused
 
     @property

@@ -29,7 +29,7 @@ ALGORITHMS = {
 }
 
 
-#: The relative-decrease stopping test of a plain `minimize` (and of `solve`'s rounds unless the options
+#: [1] The relative-decrease stopping test of a plain `minimize` (and of `solve`'s rounds unless the options
 #: say otherwise): 1e-7, of the order of the square root of double precision's 2.2e-16, the usual floor of
 #: a relative-decrease test (Gill, Murray & Wright, Practical Optimization, 1981, ch. 8, termination criteria).
 FTOL_REL = 1e-7
@@ -96,7 +96,7 @@ class OptimizeResult:
         grad: (n,) gradient of the minimized function at x, in the optimizer's variables (those of
             `fun`: for `solve`'s preconditioned rounds the z of `AccelerationPreconditioner`), or None
             (x never evaluated with a gradient). Kept so that a caller can check stationarity without
-            another evaluation (`solver.orient_refine`).
+            another evaluation (`solver.paper.orient_refine`).
         fun_time_s: [s] wall time spent in `fun` (value and gradient, in the optimizer's variables).
             wall_time_s - fun_time_s is the optimizer's own work and this wrapper's: for nlopt's L-BFGS
             O(n k) per iteration with k <= `lbfgs_storage(n)` stored pairs (measured: ~5 ms an iteration

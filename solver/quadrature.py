@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Default Gauss quadrature (`Objective.points`, `solver.orient`): Gauss-Legendre with GAUSS_POINTS nodes
-#: on every spline segment. The integrand is smooth inside a segment (the spline is one cubic there), so 4 nodes per segment integrate it to ~1e-6
-#: relative on the default frames of the test sets (1e-9 with 5 frames per keyframe interval), where the
-#: paper's uniform rule needed 80-120 points per second for a gap of 1e-4; 3 nodes change the default
-#: result (docs/orient.md). Every segment, however short, has its own nodes.
+#: [nodes per segment] Default Gauss quadrature (`Objective.points`, `solver.paper.orient`): Gauss-Legendre
+#: with GAUSS_POINTS nodes on every spline segment. The integrand is smooth inside a segment (the spline is
+#: one cubic there), so 4 nodes per segment integrate it to ~1e-6 relative on the default frames of the
+#: test sets (1e-9 with 5 frames per keyframe interval), where the paper's uniform rule needed 80-120
+#: points per second for a gap of 1e-4; 3 nodes change the default result (docs/orient.md). Every
+#: segment, however short, has its own nodes.
 GAUSS_POINTS = 4
 
-#: Largest quadrature (points on the keyframe interval) a problem accepts: the spline matrices are
+#: [points] Largest quadrature (points on the keyframe interval) a problem accepts: the spline matrices are
 #: points x frames, so a clip minutes long at the default rate, or keyframe times in frames instead of
 #: seconds, would exhaust memory instead of failing clearly.
 MAX_QUADRATURE_POINTS = 100_000

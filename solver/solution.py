@@ -9,7 +9,7 @@ import numpy as np
 from solver.frames import FrameSet
 from solver.objective import Objective
 from solver.optimize import OptimizeResult, Status
-from solver.refinement import refinement_estimate
+from solver.subdivide import refinement_estimate
 
 #: `Round.kind` values: why a round ran.
 ROUND_KINDS = ("start", "refine", "boost", "polish", "certify")
@@ -28,7 +28,7 @@ class Round:
         times: (n_frames,) the frame times this round optimized [s].
         kind: why the round ran (`ROUND_KINDS`): "start" (the first), "refine" (frames were added),
             "boost" (the same frames under a weight the strategy raised: the orientation's unit term,
-            `solver.orient_refine.GapToOptimum`) "polish" (the same frames at a stricter stopping test) or "certify" (the least
+            `solver.paper.orient_refine.GapToOptimum`) "polish" (the same frames at a stricter stopping test) or "certify" (the least
             change's first subproblem on the path of the least violation, `solver.feasibility`).
     """
 
@@ -64,7 +64,7 @@ class Solution:
             objective that produced it. `solve` never changes the caller's Objective.
         refinement_estimates: the refinement strategy's estimate after each round that computed one:
             with adaptive subdivision `refinement_estimate` (refine "rounds" with score "decrease":
-            every round but the last; refine "tol": every round); `solver.orient_refine.GapToOptimum`:
+            every round but the last; refine "tol": every round); `solver.paper.orient_refine.GapToOptimum`:
             the estimated gap.
         converged_to_tol: with a tolerance, whether the solve ended because the estimate reached it (the
             least change: with every constraint met; not after a budget or a stop request); None without one.

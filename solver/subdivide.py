@@ -147,41 +147,21 @@ def adaptive_times(scores: np.ndarray, frames: FrameSet, budget: int, ratio: flo
     return np.sort(mids[keep])
 
 
-def predicted_times(shares: np.ndarray, frames: FrameSet, target: float, budget: int, rate: float,
-                    max_split: int) -> np.ndarray:
-    """Times of the new frames that should bring an estimated error to `target` in one round: segment c,
-    whose share of the estimate is e_c, is cut into k_c equal pieces (k_c - 1 new frames).
-
-    Model: a segment's share falls as its length to the power `rate` (e_c k_c^-rate after cutting it
-    into k_c pieces: the asymptotic rate of the refinement). The fewest frames with sum_c e_c k_c^-rate =
-    target are k_c = e_c^(1/(rate+1)) (S / target)^(1/rate), S = sum_c e_c^(1/(rate+1)) (a Lagrange
-    multiplier: every cut buys the same decrease per frame, the classical equidistribution of
-    mesh-adaptive methods), rounded up, at least 1 (no frame) and at most `max_split`.
+def refinement_estimate(objective, frames: FrameSet, E: float | None = None) -> tuple[float, np.ndarray]:
+    """The decrease of E still available from refinement, relative to E: sum_c D_c / E, with D_c the
+    predicted decrease from a frame inserted at the midpoint of segment c and moved to its best place
+    (`predicted_decreases`, what adaptive subdivision ranks segments by). A first-order prediction of
+    what halving every segment would buy (each frame moved alone, the others held); 0 where the path
+    is optimal for its frames and no frame could lower E.
 
     Args:
-        shares: (m-1,) each segment's share of the estimate (>= 0; e.g. GAP_FACTOR D_c / E from
-            `predicted_decreases`). frames: the frame set they were computed on (m frames).
-        target: the estimate wanted after the round (same units as shares). budget: at most this many
-            new frames (the k_c - 1 are scaled down to fit). rate: the assumed rate (> 0). max_split:
-            most pieces per segment in one round (a guard against an estimate far outside its regime).
+        objective: Objective. frames: FrameSet (m frames). E: the objective on frames, if known.
     Returns:
-        (r,) new frame times [s], sorted; empty if nothing to add.
+        (estimate, D): D (m-1,) the predicted decreases [units of E].
+    Raises:
+        NonFiniteError: a term is NaN or infinite on the path or a trial path.
     """
-    e = np.maximum(np.asarray(shares, float), 0.0)
-    if budget <= 0 or not target > 0 or not np.any(e > 0):
-        return np.zeros(0)
-    w = e ** (1.0 / (rate + 1.0))
-    k = np.ceil(w * (w.sum() / target) ** (1.0 / rate) - 1e-9)
-    extra = np.clip(k, 1, max_split).astype(int) - 1
-    if extra.sum() > budget:
-        wanted = extra > 0
-        extra = np.floor(extra * (budget / extra.sum())).astype(int)
-        if extra.sum() == 0:  # fewer frames allowed than segments wanting one: the largest shares first
-            order = [c for c in np.argsort(-e, kind="stable") if wanted[c]]
-            extra[order[:budget]] = 1
-    a, b = frames.times[:-1], frames.times[1:]
-    new = []
-    for c in np.flatnonzero(extra):
-        n = extra[c]
-        new.append(a[c] + (b[c] - a[c]) * np.arange(1, n + 1) / (n + 1))
-    return np.sort(np.concatenate(new)) if new else np.zeros(0)
+    D = predicted_decreases(objective, frames)
+    if E is None:
+        E = objective.evaluate(frames.times, frames.values, grad=False).E
+    return (float(D.sum() / E) if E > 0 else 0.0), D

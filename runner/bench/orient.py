@@ -26,7 +26,7 @@ import numpy as np
 from runner.bench import random_sets, sphere_reference
 from runner.bench.baselines import baseline_time_to_gap
 from solver.errors import InputError
-from solver.orient import default_options, orient
+from solver.paper.orient import default_options, orient
 
 GAPS = (1e-2, 1e-3, 1e-4)
 DEFAULT_SETS = "large_uniform,large_nonuniform,large_nonuniform_b"

@@ -163,7 +163,7 @@ def evaluate(seeds=ACCEPTANCE_SEEDS, reference=None, runs=RUNS, method: str = "d
     Returns:
         {label: Distribution}.
     """
-    from solver.orient import orient
+    from solver.paper.orient import orient
 
     if reference is None:
         from runner.bench import sphere_reference as reference

@@ -1,6 +1,6 @@
 """`dynsplines orient KEYFRAMES.json --out PATH.npz`: covariant interpolation of one orientation (sec. 3).
 
-Reads keyframe quaternions, optimizes the path (solver.orient), writes it (.npz) and prints a summary;
+Reads keyframe quaternions, optimizes the path (solver.paper.orient), writes it (.npz) and prints a summary;
 `--plot` adds the figure-10 comparison of Euler-Lagrange deviations for these keyframes (runner.figure10).
 
 The keyframe file and the output: runner/orient_file.py.
@@ -16,8 +16,8 @@ from runner.files import check_writable_dir
 from runner.orient_file import read_keyframes, write_result
 from runner.parser import nonnegative, positive
 from solver.errors import InputError
-from solver.orient import FORMS, default_options, orient
-from solver.solve import SUBDIVISIONS
+from solver.paper.orient import FORMS, default_options, orient
+from solver.paper.solve import SUBDIVISIONS
 
 
 def register(sub) -> None:

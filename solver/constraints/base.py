@@ -17,7 +17,7 @@ from solver.path_state import PathState
 
 __all__ = ["LIMIT", "RELATIVE", "RELATIVE_TOLERANCE", "REPRESENTATION", "SCHEDULE", "Constraint"]
 
-#: the tolerance of a bound set by a reference motion's own figure (the no-jolt peaks, the effort, the peak
+#: [1] the tolerance of a bound set by a reference motion's own figure (the no-jolt peaks, the effort, the peak
 #: ground force), relative to that bound: 5 %, one value for every such bound (a figure read off a
 #: low-pass-filtered capture is not known more precisely than that)
 RELATIVE_TOLERANCE = 0.05

@@ -28,7 +28,7 @@ __all__ = ["FORCE_TOLERANCE", "FRICTION", "FlightWrench", "GroundForce", "figure
 #: [body weights] each force bound's tolerance: 1 %, 7 N for 70 kg, about the air drag on a body
 #: running at 5 m/s (1/2 rho C_d A v^2 = 0.5 * 1.2 * 1.0 * 0.5 m^2 * 25 = 7.5 N)
 FORCE_TOLERANCE = 0.01
-#: static friction coefficient of a shoe on a floor: 0.8, inside the 0.5-1.0 measured for footwear on
+#: [1] static friction coefficient of a shoe on a floor: 0.8, inside the 0.5-1.0 measured for footwear on
 #: dry floors (Chang et al. 2001, "The role of friction in the measurement of slipperiness", Ergonomics 44)
 FRICTION = 0.8
 

@@ -35,7 +35,7 @@ __all__ = ["GOLDEN_STEPS", "PENETRATION_RATE", "Penetration"]
 #: [1/s] the samples a box's pairs are searched at before the golden-section search: 1600 a second, eight
 #: per interval at 200 Hz, so the nearest face changes at most once between two samples of a foot
 PENETRATION_RATE = 1600.0
-#: golden-section steps within the best sample's two spacings: each keeps 0.618 of the bracket, so 8
+#: [steps] golden-section steps within the best sample's two spacings: each keeps 0.618 of the bracket, so 8
 #: leave 2 % of it, enough to hold one kink, which the tangent lines then place exactly
 GOLDEN_STEPS = 8
 

@@ -56,7 +56,7 @@ class Term:
     name: str = "term"
     units: str = ""
     needs: tuple[int, ...] = (0,)  # which of Y (0), Y' (1), Y'' (2) the term reads
-    #: The Gauss-Newton curvature the preconditioner may assume (`solver.precondition`, radial weight
+    #: The Gauss-Newton curvature the preconditioner may assume (`solver.paper.precondition`, radial weight
     #: "auto"); 0 where the term says nothing. acceleration_curvature: d^2 f / d(y'')^2 of each component
     #: whose acceleration the term penalizes (|y''|^2: 2) [units of f s^4].
     acceleration_curvature: float = 0.0

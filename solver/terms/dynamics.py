@@ -211,7 +211,7 @@ class RootResidual(Term):
     """
 
     FLIGHT_MODES = ("lagged", "path")
-    LAG_SMOOTHING = 0.05  # e of the smooth max in the lagged indicator
+    LAG_SMOOTHING = 0.05  # [1] e of the smooth max in the lagged indicator phi (in [0, 1]): 5 % of its range
 
     name = "root"
     units = "N^2"

@@ -20,8 +20,8 @@ from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
+from solver.paper.solve import SolveOptions, solve
 from solver.quadrature import MAX_QUADRATURE_POINTS
-from solver.solve import SolveOptions, solve
 from solver.terms import UnitQuaternion
 
 REPO = Path(__file__).resolve().parents[2]

@@ -33,7 +33,7 @@ from solver.layout import StateLayout
 from solver.least_change import LeastChangeOptions
 from solver.objective import Objective
 from solver.optimize import Status
-from solver.solve import SolveOptions, solve
+from solver.paper.solve import SolveOptions, solve
 from solver.spline import interpolate
 from solver.terms import CovariantAcceleration, UnitQuaternion
 from solver.terms.base import Term, TermEval

@@ -5,12 +5,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import solver.backend as backend_mod
-from solver.backend import nlopt_backend
+import solver.paper.backend as backend_mod
 from solver.frames import FrameSet
 from solver.objective import Objective
 from solver.optimize import OptimizeResult, Status
-from solver.solve import SolveOptions
+from solver.paper.backend import nlopt_backend
+from solver.paper.solve import SolveOptions
 from solver.terms.base import Term, TermEval
 
 

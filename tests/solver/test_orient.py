@@ -23,7 +23,7 @@ from runner.bench.sphere_reference import (
 )
 from runner.euler_lagrange import deviation_by_region, el_lhs, residual, spline_residual
 from solver.errors import InputError
-from solver.orient import check_keyframes, default_options, orient
+from solver.paper.orient import check_keyframes, default_options, orient
 from solver.terms import NormalizedCovariantAcceleration
 
 from conftest import fd_gradient
@@ -113,7 +113,9 @@ def test_paper_form_on_moderate_rotations(E_star):
     plain = orient(s.times, s.quats, form="paper", renormalize="keyframes")
     assert plain.solution.scales["unit"] > 30 * paper.solution.scales["unit"]
     assert plain.max_norm_deviation > 2 * paper.max_norm_deviation
-    normalized = orient(s.times, s.quats)
+    # with the paper form's three adaptive rounds, the normalized form is nearer the exact optimum (its
+    # optimum is E*; the paper form's trades smoothness for |q|): measured 2.3e-6 against 6.3e-5
+    normalized = orient(s.times, s.quats, options=default_options(rounds=3))
     assert gap(normalized, E_star[s.name]) < gap(paper, E_star[s.name])
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from runner.bench.random_sets import random_set, true_energy
 from solver.errors import InputError
-from solver.orient import DEFAULT_TOL, OrientOptions, default_options, orient
+from solver.paper.orient import DEFAULT_TOL, OrientOptions, default_options, orient
 
 #: acceptance seeds used here (a subset of random_sets.ACCEPTANCE_SEEDS: never used for tuning)
 TEST_SEEDS = range(1000, 1010)
@@ -76,7 +76,7 @@ def test_drift_stiffens_the_unit_term():
 def test_optimization_gap_against_the_decrease_left():
     """0.5 |g_z|^2 / E (`optimization_gap`) is ~0 on a converged path and, on paths stopped after a few
     evaluations, within 0.5-10x of the decrease the optimizer still finds (E_stopped - E_converged) / E."""
-    from solver.error_estimate import optimization_gap
+    from solver.paper.error_estimate import optimization_gap
 
     s = random_set(3)
     slots = ((0, 1, 2, 3),)
@@ -90,19 +90,25 @@ def test_optimization_gap_against_the_decrease_left():
         assert 0.5 <= left / gap <= 10, (evals, left, gap)
 
 
-def test_a_stalled_round_is_optimized_again(monkeypatch):
-    """With a relative-decrease test so loose that L-BFGS stops early, the tolerance loop sees the
-    optimizer's gap and optimizes the same frames again at the options' ftol_rel."""
-    from solver.orient_refine import GapToOptimum
+def test_a_stalled_round_is_not_accepted(monkeypatch):
+    """With a relative-decrease test so loose that L-BFGS stops after a few evaluations, every round
+    stalls far from its optimum: the optimizer's gap counts in the estimate, so the loop does not stop
+    on a round that merely looks refined enough, and the result still meets the tolerance once a round
+    at the options' ftol_rel is reached."""
+    from solver.paper.orient_refine import TOL_SAFETY, GapToOptimum
 
-    loose = GapToOptimum.round_options  # ftol_rel 0.1 on the first round: L-BFGS stops after 2 evaluations
-    monkeypatch.setattr(GapToOptimum, "round_options",
-                        lambda self, o: replace(loose(self, o), ftol_rel=0.1) if not self.estimates else loose(self, o))
+    stalls = {"n": 0}
+    real = GapToOptimum.round_options
+
+    def loose(self, o):  # the first two rounds stop at ftol_rel 0.1
+        stalls["n"] += 1
+        return replace(real(self, o), ftol_rel=0.1) if stalls["n"] <= 2 else real(self, o)
+
+    monkeypatch.setattr(GapToOptimum, "round_options", loose)
     s = random_set(3)
     r = orient(s.times, s.quats, tol=1e-3)
-    counts = [rd.n_variable for rd in r.solution.rounds]
-    assert len(counts) >= 2 and counts[0] == counts[1]  # the same frames, optimized again
-    assert r.converged_to_tol and r.estimated_gap <= 5e-4
+    assert len(r.solution.rounds) >= 3 and all(e > 1e-3 / TOL_SAFETY for e in r.gap_estimates[:2])
+    assert r.converged_to_tol and r.estimated_gap <= 1e-3 / TOL_SAFETY
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +142,7 @@ def orientation_problem(seed=3):
     """`orient`'s objective, starting frames and options for a generated set (normalized form)."""
 
     from solver.frames import FrameSet
-    from solver.orient import LAYOUT, RADIAL_WEIGHTS, build_objective, check_keyframes
+    from solver.paper.orient import LAYOUT, RADIAL_WEIGHTS, build_objective, check_keyframes
 
     s = random_set(seed)
     kf = check_keyframes(s.times, s.quats)
@@ -147,35 +153,31 @@ def orientation_problem(seed=3):
 
 
 def test_gap_strategy_is_a_strategy_of_solves_loop():
-    """`orient(tol=)` is `solve` with `GapToOptimum`: the same result, round kinds start/refine (no
-    second loop), and each round's optimizer stopped at max(ftol_rel, OPTIMIZER_SHARE tol)."""
+    """`orient(tol=)` is `solve` with `GapToOptimum`: the same result, round kinds start/refine/boost (no
+    second loop)."""
     from dataclasses import replace
 
-    from solver.orient_refine import OPTIMIZER_SHARE, GapToOptimum, unit_rows
-    from solver.solve import solve
+    from solver.paper.orient_refine import GapToOptimum, unit_rows
+    from solver.paper.solve import solve
 
     s, obj, initial, opts = orientation_problem()
     tol = 1e-4
     opts = replace(opts, tol=tol)
-    gap = GapToOptimum(tol, opts)
-    assert gap.round_options(opts).ftol_rel == max(opts.ftol_rel, OPTIMIZER_SHARE * tol)
     sol = solve(obj, initial, opts, refinement=GapToOptimum(tol, opts), project=unit_rows)
     r = orient(s.times, s.quats, tol=tol)
     assert sol.n_evals == r.solution.n_evals and sol.E_final == pytest.approx(r.solution.E_final, rel=1e-12)
     assert sol.converged_to_tol is True and sol.refinement_estimates == r.gap_estimates
-    assert {rd.kind for rd in sol.rounds} <= {"start", "refine", "polish", "boost"}
+    assert {rd.kind for rd in sol.rounds} <= {"start", "refine", "boost"}
     assert sol.rounds[0].kind == "start"
 
 
-def test_gap_strategy_polishes_a_stalled_round_and_boosts_a_drifting_unit_term():
-    """A round whose optimizer stopped far from stationarity (a large gradient in z) is optimized again
-    at the options' own ftol_rel, at most POLISHES times for the same frames; an accepted round whose
-    |q| drifts by more than DRIFT_LIMIT has the unit weight multiplied by DRIFT_BOOST (at most
-    DRIFT_BOOSTS times)."""
-    from dataclasses import replace
-
+def test_gap_strategy_counts_a_stall_and_boosts_a_drifting_unit_term():
+    """A round whose optimizer stopped far from stationarity (a large gradient in z) is not accepted (its
+    optimization gap 0.5 |g_z|^2 / E is part of the estimate); an accepted round whose |q| drifts by more
+    than DRIFT_LIMIT has the unit weight multiplied by DRIFT_BOOST and the same frames optimized again,
+    while the boosts lower the drift."""
     from solver.optimize import OptimizeResult, Status
-    from solver.orient_refine import DRIFT_BOOST, DRIFT_BOOSTS, DRIFT_LIMIT, POLISHES, GapToOptimum, max_norm_deviation
+    from solver.paper.orient_refine import DRIFT_BOOST, DRIFT_LIMIT, GapToOptimum, max_norm_deviation
 
     _, obj, initial, opts = orientation_problem()
     frames = initial.with_variable_frames(np.array([0.5 * (initial.times[0] + initial.times[1])]))
@@ -185,19 +187,18 @@ def test_gap_strategy_polishes_a_stalled_round_and_boosts_a_drifting_unit_term()
         return OptimizeResult(frames.x(), E, Status.CONVERGED, "ftol", 1, 1, np.array([E]), 0.0, "fake",
                               grad=np.full(frames.n_free, g))
 
-    gap = GapToOptimum(1.0, replace(opts, tol=1.0, max_frames=20))
-    steps, ftols = [], [gap.round_options(opts).ftol_rel]
-    for i in range(POLISHES + 1):  # as solve's loop calls them: after_round, then the next round's options
-        steps.append(gap.after_round(obj, frames, result(1e3), i, None).action)
-        ftols.append(gap.round_options(opts).ftol_rel)
-    assert steps[:POLISHES] == ["polish"] * POLISHES
-    assert ftols == [0.03] + [opts.ftol_rel] * POLISHES + [0.03]  # polishes at the options' own ftol_rel
-    # then the stall counts against the estimate: not accepted
-    assert steps[-1] != "polish" and gap.converged is False and gap.estimates[-1] > 0.5
+    g = 1e3
+    stalled = 0.5 * frames.n_free * g * g / E
+    gap = GapToOptimum(0.5 * stalled, replace(opts, tol=0.5 * stalled, max_frames=20))
+    step = gap.after_round(obj, frames, result(g), 0, None)
+    assert step.action == "refine" and gap.converged is False and gap.estimates[-1] >= stalled
     # the plain spline through frames far apart dips well inside the sphere
-    assert max_norm_deviation(frames.times, frames.values) > DRIFT_LIMIT
+    drift = max_norm_deviation(frames.times, frames.values)
+    assert drift > DRIFT_LIMIT
     w0 = obj.weights[0]
     gap = GapToOptimum(1e9, replace(opts, tol=1e9))  # any estimate is accepted
-    steps = [gap.after_round(obj, frames, result(0.0), i, None).action for i in range(DRIFT_BOOSTS + 1)]
-    assert steps == ["boost"] * DRIFT_BOOSTS + ["stop"] and gap.converged is True
-    assert obj.weights[0] == pytest.approx(w0 * DRIFT_BOOST**DRIFT_BOOSTS) and gap.boosts == DRIFT_BOOSTS
+    assert gap.after_round(obj, frames, result(0.0), 0, None).action == "boost" and gap.converged is False
+    assert obj.weights[0] == pytest.approx(w0 * DRIFT_BOOST) and gap.boosts == 1
+    # the same frames again: the boost did not lower the drift, so the round is accepted as it is
+    assert gap.after_round(obj, frames, result(0.0), 1, None).action == "stop" and gap.converged is True
+    assert gap.boosts == 1

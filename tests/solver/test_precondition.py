@@ -8,8 +8,8 @@ from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
-from solver.precondition import AccelerationPreconditioner, auto_radial_weight
-from solver.solve import SolveOptions, solve
+from solver.paper.precondition import AccelerationPreconditioner, auto_radial_weight
+from solver.paper.solve import SolveOptions, solve
 from solver.spline import spline_matrices
 from solver.terms import CovariantAcceleration, UnitQuaternion
 

@@ -7,7 +7,7 @@ from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.objective import Objective
 from solver.optimize import OptimizeResult, Status
-from solver.refinement import (
+from solver.paper.refinement import (
     STOP,
     TOL_FRAMES_PER_INTERVAL,
     FixedRounds,
@@ -17,7 +17,7 @@ from solver.refinement import (
     ToTolerance,
     refinement_estimate,
 )
-from solver.solve import DEFAULT_ROUNDS, SolveOptions, solve
+from solver.paper.solve import DEFAULT_ROUNDS, SolveOptions, solve
 from solver.terms.base import Term, TermEval
 
 

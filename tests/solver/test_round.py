@@ -1,4 +1,4 @@
-"""`solver.round`: the functions of z that nlopt minimizes in one round, against the generic path.
+"""`solver.paper.round`: the functions of z that nlopt minimizes in one round, against the generic path.
 
 The fast paths for whole free frames fold R^-1 (and the radial stretch) next to the spline matrices;
 they must be the same function of z as x = x0 + `AccelerationPreconditioner.apply`(z) through
@@ -9,9 +9,9 @@ import pytest
 
 from solver.frames import FrameSet
 from solver.optimize import Status, Stop
-from solver.orient import LAYOUT, build_objective, check_keyframes
-from solver.precondition import AccelerationPreconditioner
-from solver.round import _orientation_fun, _whole_frames_fun
+from solver.paper.orient import LAYOUT, build_objective, check_keyframes
+from solver.paper.precondition import AccelerationPreconditioner
+from solver.paper.round import _orientation_fun, _whole_frames_fun
 
 
 def quat(axis, deg):

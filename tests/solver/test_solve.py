@@ -8,7 +8,7 @@ import pytest
 from solver.frames import FrameSet
 from solver.objective import Objective
 from solver.optimize import Status
-from solver.solve import SolveOptions, solve
+from solver.paper.solve import SolveOptions, solve
 from solver.terms.base import Term, TermEval
 
 A, B = np.array([0.5, -1.0]), np.array([2.0, 0.25])  # the target line a + b t

@@ -12,7 +12,7 @@ from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
-from solver.solve import SolveOptions, refinement_estimate, solve
+from solver.paper.solve import SolveOptions, refinement_estimate, solve
 from solver.terms import CovariantAcceleration, UnitQuaternion
 
 from conftest import TOY_SCENE

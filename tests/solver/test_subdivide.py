@@ -7,8 +7,8 @@ from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
 from solver.optimize import Status
-from solver.solve import SolveOptions, solve
-from solver.subdivide import global_times, predicted_times, weak_form_scores
+from solver.paper.solve import SolveOptions, solve
+from solver.subdivide import global_times, weak_form_scores
 from solver.terms import CovariantAcceleration, UnitQuaternion
 
 from conftest import fd_gradient
@@ -100,7 +100,7 @@ def test_partial_keyframe_components_are_free_and_others_fixed():
 def test_grouped_preconditioner_equals_dense_cholesky_factor():
     """R^-1 applied per component group equals the dense inverse Cholesky factor of the free-component
     Hessian of integral |Y''|^2 (built here directly), and apply_transpose is its transpose."""
-    from solver.precondition import AccelerationPreconditioner
+    from solver.paper.precondition import AccelerationPreconditioner
 
     times = np.array([0.0, 0.5, 1.2, 1.6])
     vals = np.array([quat([1, 0, 0], a) for a in (0, 40, 80, 120)])
@@ -157,9 +157,9 @@ def test_gauss_quadrature_objective_gradient_and_integral():
 
 
 def test_preconditioner_folded_into_the_spline_matrices_gives_the_same_optimization():
-    """Whole free frames (one preconditioner group): `solver.round.optimize_round` folds R^-1 into the spline matrices;
+    """Whole free frames (one preconditioner group): `solver.paper.round.optimize_round` folds R^-1 into the spline matrices;
     the objective it minimizes is the same function of z as the scatter/gather path."""
-    from solver.precondition import AccelerationPreconditioner
+    from solver.paper.precondition import AccelerationPreconditioner
 
     kf, obj = orient_problem()
     fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots).with_variable_frames([0.25, 0.8, 1.4, 2.0])
@@ -201,7 +201,7 @@ def test_radial_stretch_of_the_preconditioner():
     c = 1/sqrt(w) - 1, so the assumed Hessian S (H x I) S has curvature w H along each frame's radial
     direction u. apply_transpose is the transpose of apply; the whole-frames path of `optimize_round`
     (R^-1, then the stretch, folded next to the spline matrices) minimizes the same function."""
-    from solver.precondition import AccelerationPreconditioner
+    from solver.paper.precondition import AccelerationPreconditioner
 
     kf, obj = orient_problem()
     fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots).with_variable_frames([0.25, 0.8, 1.4, 2.0])
@@ -242,7 +242,7 @@ def test_failed_preconditioned_round_is_retried_without_preconditioning(monkeypa
     """A round whose preconditioned optimization fails is re-run on the plain variables."""
     import importlib
 
-    round_mod = importlib.import_module("solver.round")  # where a round calls nlopt
+    round_mod = importlib.import_module("solver.paper.round")  # where a round calls nlopt
     from solver.optimize import minimize as real_minimize
 
     calls = []
@@ -262,37 +262,3 @@ def test_failed_preconditioned_round_is_retried_without_preconditioning(monkeypa
     sol = solve(obj, fs, SolveOptions(subdivision="global", per_segment=1, precondition=True, ftol_rel=1e-10))
     assert len(calls) == 2 and sol.status is Status.CONVERGED
     assert sol.E_final < sol.E_initial and sol.n_evals == len(sol.trace)
-
-
-def test_predicted_times_equidistribute_the_shares():
-    """k_c = e_c^(1/(p+1)) (S / target)^(1/p), rounded up: under the model e_c k_c^-p the shares after the
-    cut sum to at most the target, each cut is k_c equal pieces, and a segment with no share gets none.
-    The unrounded k_c meet the target exactly (the Lagrange condition's solution)."""
-    kf, _ = orient_problem()
-    fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)  # 4 segments
-    shares, target, p = np.array([1e-1, 1e-4, 0.0, 1e-3]), 1e-4, 4.0
-    new = predicted_times(shares, fs, target, budget=100, rate=p, max_split=50)
-    a, b = fs.times[:-1], fs.times[1:]
-    k = np.array([1 + np.sum((new > lo) & (new < hi)) for lo, hi in zip(a, b)])
-    assert k[2] == 1 and k[0] > k[3] > 1
-    assert np.sum(shares * k ** -p) <= target * (1 + 1e-12)
-    w = shares ** (1 / (p + 1))
-    exact = w * (w.sum() / target) ** (1 / p)
-    np.testing.assert_array_equal(k[shares > 0], np.ceil(exact[shares > 0]))
-    on = shares > 0
-    np.testing.assert_allclose(np.sum(shares[on] * exact[on] ** -p), target)
-    for c in np.flatnonzero(k > 1):  # equal pieces
-        inside = np.concatenate([[a[c]], new[(new > a[c]) & (new < b[c])], [b[c]]])
-        np.testing.assert_allclose(np.diff(inside), (b[c] - a[c]) / k[c])
-
-
-def test_predicted_times_respect_budget_and_cap():
-    kf, _ = orient_problem()
-    fs = FrameSet.from_keyframes(kf, LAYOUT.quat_slots)
-    shares = np.array([1e-2, 1e-4, 0.0, 3e-3])
-    assert predicted_times(shares, fs, 1e-4, budget=5, rate=4.0, max_split=8).size <= 5
-    assert predicted_times(shares, fs, 1e-4, budget=1, rate=4.0, max_split=8).size == 1  # the largest share gets it
-    assert fs.times[0] < predicted_times(shares, fs, 1e-4, budget=1, rate=4.0, max_split=8)[0] < fs.times[1]
-    assert predicted_times(shares, fs, 1e-12, budget=1000, rate=4.0, max_split=3).size <= 3 * 2
-    assert predicted_times(np.zeros(4), fs, 1e-4, budget=10, rate=4.0, max_split=8).size == 0
-    assert predicted_times(shares, fs, 1e-4, budget=0, rate=4.0, max_split=8).size == 0

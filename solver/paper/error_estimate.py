@@ -17,26 +17,25 @@ whose gap is 2^-p of this one (p = 5-6 measured: docs/orient.md "Two objective f
 decrease of moving its frame alone, the others held (a Newton step on the diagonal block of the
 quadratic model). It misses (i) the coupling between new frames and the re-optimization of the old
 ones, which the joint optimum exploits (the sum underestimates: true/sum 0.57-5.0, median 1.34, 90%
-within 0.97-2.3, over rounds 1-6 of adaptive refinement on 18 tuning sets), and (ii) the part of the gap the optimizer's tolerance leaves (ftol_rel 1e-6: a
-few 1e-6 relative, negligible above a 1e-5 target). GAP_FACTOR calibrates (i) on the tuning sets
+within 0.97-2.3, over rounds 1-6 of adaptive refinement on 18 tuning sets), and (ii) the part of the gap the optimizer's tolerance leaves (checked
+separately: `optimization_gap`). GAP_FACTOR calibrates (i) on the tuning sets
 (runner/bench/random_sets.py seeds 0-49).
 
 Assumptions: the path is optimized for its frames (the estimate is of the discretization gap: it is
-computed after every round's optimization; ftol_rel 1e-6 leaves below 1e-5 of E), the path is in the
-asymptotic regime where one midpoint per segment captures most of what refinement buys (less so on the
-starting frames, one per keyframe interval: 2.2x below the truth on the moderate test set; `orient`
-uses it there only to place frames, `solver.subdivide.predicted_times`, and accepts it only after an
-optimization of frames so placed), and the objective is the normalized form with a light unit term (its
+computed after every round's optimization), the path is in the asymptotic regime where one midpoint
+per segment captures most of what refinement buys (less so on the starting frames, one per keyframe
+interval: 2.2x below the truth on the moderate test set), and the objective is the normalized form with a light unit term (its
 optimum in the exact-unit limit is E*; with the paper form the optimum of the objective is not E* and
 the estimate does not apply).
 
 The quadrature is assumed exact: D_c and E use the objective's own rule (Gauss, 4 points per segment),
-which the optimizer may exploit. `solver.orient`'s tolerance loop therefore adds the discrepancy
-|E_8 - E_4| / E_8 between 8 and 4 points per segment (~1e-6 usually, 1.6e-3 on one generated set).
+which the optimizer may exploit. `solver.paper.orient`'s tolerance loop therefore adds the discrepancy
+|E_8 - E_4| / E_8 between 8 and 4 points per segment (~1e-6 usually, 1.6e-3 on one generated set), and
+ranks segments by their share of it too.
 
-The optimizer's own gap is assumed small; `optimization_gap` checks it (`solver.orient_refine` adds it
-to the estimate of a round it would accept, and optimizes again when it is not small; there it is read
-off the gradient the optimizer last evaluated, `OptimizeResult.grad`, and this function is the fallback).
+The optimizer's own gap is assumed small; `optimization_gap` checks it (`solver.paper.orient_refine`
+adds it to the estimate of every round, so a stalled round is not accepted; there it is read off the
+gradient the optimizer last evaluated, `OptimizeResult.grad`, and this function is the fallback).
 
 Cost: three gradient evaluations with a frame inserted in every segment (the predicted decreases are
 also what adaptive subdivision ranks segments by, so the estimate is free when another round follows).
@@ -47,10 +46,10 @@ import numpy as np
 
 from solver.frames import FrameSet
 from solver.objective import Objective
-from solver.precondition import AccelerationPreconditioner
+from solver.paper.precondition import AccelerationPreconditioner
 from solver.subdivide import predicted_decreases
 
-#: true gap / (sum of predicted decreases / E), calibrated on the tuning sets (median of the ratio)
+#: [1] true gap / (sum of predicted decreases / E), calibrated on the tuning sets (median of the ratio)
 GAP_FACTOR = 1.4
 
 

@@ -8,7 +8,7 @@ stopping test, or a "boost" after the strategy changed the objective's weights).
 - `FixedRounds`: `rounds` rounds of adaptive subdivision (`SolveOptions.refine = "rounds"`).
 - `ToTolerance`: adaptive subdivision until the decrease of E refinement still predicts, relative to
   E (`refinement_estimate`), is at most tol (`SolveOptions.refine = "tol"`).
-- `solver.orient_refine.GapToOptimum`: the orientation's estimated gap to the exact optimum.
+- `solver.paper.orient_refine.GapToOptimum`: the orientation's estimated gap to the exact optimum.
 
 A strategy is made fresh for each solve and keeps its own state (`estimates`, `converged`).
 """
@@ -21,34 +21,14 @@ import numpy as np
 
 from solver.frames import FrameSet
 from solver.optimize import OptimizeResult, Status
-from solver.subdivide import adaptive_times, predicted_decreases, weak_form_scores
+from solver.subdivide import adaptive_times, refinement_estimate, weak_form_scores
 
-#: With a tolerance (`ToTolerance`, the orientation's `GapToOptimum`) and no `max_frames`: the frame budget,
+#: [frames] With a tolerance (`ToTolerance`, the orientation's `GapToOptimum`) and no `max_frames`: the frame budget,
 #: per keyframe interval, a guard against a tolerance the frames cannot reach. 40 frames cut an interval into
 #: pieces 1/41 as long (docs/orient.md, "The loop").
 TOL_FRAMES_PER_INTERVAL = 40
 #: `Step.action` values: what the loop does after a round.
 ACTIONS = ("stop", "refine", "polish", "boost")
-
-
-def refinement_estimate(objective, frames: FrameSet, E: float | None = None) -> tuple[float, np.ndarray]:
-    """The decrease of E still available from refinement, relative to E: sum_c D_c / E, with D_c the
-    predicted decrease from a frame inserted at the midpoint of segment c and moved to its best place
-    (`predicted_decreases`, what adaptive subdivision ranks segments by). A first-order prediction of
-    what halving every segment would buy (each frame moved alone, the others held); 0 where the path
-    is optimal for its frames and no frame could lower E.
-
-    Args:
-        objective: Objective. frames: FrameSet (m frames). E: the objective on frames, if known.
-    Returns:
-        (estimate, D): D (m-1,) the predicted decreases [units of E].
-    Raises:
-        NonFiniteError: a term is NaN or infinite on the path or a trial path.
-    """
-    D = predicted_decreases(objective, frames)
-    if E is None:
-        E = objective.evaluate(frames.times, frames.values, grad=False).E
-    return (float(D.sum() / E) if E > 0 else 0.0), D
 
 
 @dataclass(frozen=True)
@@ -154,36 +134,44 @@ class ToTolerance(Refinement):
     as `FixedRounds` places them."""
 
     converged = False
+    #: what the estimate is, in the solve's messages
+    what = "refinement estimate"
 
     def __init__(self, tol: float, per_round: int = 0, max_frames: int = 0, score: str = "decrease"):
         super().__init__()
         self.tol, self.per_round, self.max_frames, self.score = tol, per_round, max_frames, score
+        self.accept_at, self.bound = tol, f"tol {tol:g}"  # where a round is accepted, and how the message says it
 
     def first_frames(self, objective, frames):
         if not self.max_frames:
             self.max_frames = TOL_FRAMES_PER_INTERVAL * (int(frames.is_keyframe.sum()) - 1)
         return frames
 
+    def estimate(self, objective, frames: FrameSet, result: OptimizeResult) -> tuple[float, np.ndarray]:
+        """(estimate, (m-1,) per-segment decreases that rank the segments) of the round's path:
+        `refinement_estimate`. A subclass may estimate another error the same way."""
+        return refinement_estimate(objective, frames, result.fun)
+
     def after_round(self, objective, frames, result, index, progress):
-        est, D = refinement_estimate(objective, frames, result.fun)
+        est, D = self.estimate(objective, frames, result)
         self.estimates.append(est)
         self.final_estimate = est
         if progress:
             progress("estimate", {"round": index, "estimate": est, "tol": self.tol})
-        if est <= self.tol:
+        if est <= self.accept_at:
             self.converged = True
-            return Step("stop", message=f"refinement estimate {est:.2g} <= tol {self.tol:g}")
+            return Step("stop", message=f"{self.what} {est:.2g} <= {self.bound}")
         budget = _budget(frames, self.per_round, self.max_frames)
         if budget <= 0:
             return Step("stop", message=f"frame budget of {self.max_frames} variable frames reached at "
-                                        f"refinement estimate {est:.2g} (tol {self.tol:g})")
+                                        f"{self.what} {est:.2g} (tol {self.tol:g})")
         scores = D if self.score == "decrease" else weak_form_scores(objective, frames)
         new = adaptive_times(scores, frames, budget)
         if new.size == 0:
-            return Step("stop", message=f"no segment to refine at refinement estimate {est:.2g} (tol {self.tol:g})")
+            return Step("stop", message=f"no segment to refine at {self.what} {est:.2g} (tol {self.tol:g})")
         return Step("refine", new, scores)
 
     def final_message(self, status, message):
         if status is Status.MAX_TIME and self.estimates:
-            return f"{message} at refinement estimate {self.estimates[-1]:.2g} (tol {self.tol:g})"
+            return f"{message} at {self.what} {self.estimates[-1]:.2g} (tol {self.tol:g})"
         return message

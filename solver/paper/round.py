@@ -1,4 +1,4 @@
-"""Optimization of one round in the preconditioned variables (`optimize_round`, used by `solver.backend.nlopt_backend`)."""
+"""Optimization of one round in the preconditioned variables (`optimize_round`, used by `solver.paper.backend.nlopt_backend`)."""
 from __future__ import annotations
 
 import math
@@ -8,7 +8,7 @@ import numpy as np
 
 from solver.objective import NonFiniteError
 from solver.optimize import OptimizeResult, Status, Stop, minimize
-from solver.precondition import AccelerationPreconditioner
+from solver.paper.precondition import AccelerationPreconditioner
 from solver.terms.covariant import unit_and_normalized
 
 

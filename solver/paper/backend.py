@@ -4,7 +4,7 @@
 frames whose free components are the variables, the options, the time left, the stop poll, the
 progress callback and the evaluations of earlier rounds. The default, `nlopt_backend`, is nlopt's
 L-BFGS (or another of `solver.optimize.ALGORITHMS`) in the preconditioned variables
-(`solver.round.optimize_round`), with one retry in the plain variables after nlopt's generic failure.
+(`solver.paper.round.optimize_round`), with one retry in the plain variables after nlopt's generic failure.
 Another method (e.g. Gauss-Newton on residuals) implements the same call and returns an
 `OptimizeResult` whose `x` is in the frame variables (`FrameSet.values_from_x`).
 """
@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from solver.optimize import OptimizeResult, Status
-from solver.round import optimize_round
+from solver.paper.round import optimize_round
 
 
 class Backend(Protocol):

@@ -24,45 +24,47 @@ from functools import cached_property
 
 import numpy as np
 
-from solver.error_estimate import estimate_gap
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.keyframes import Keyframes
 from solver.layout import StateLayout
 from solver.objective import Objective
-from solver.orient_refine import (  # noqa: F401  (measures re-exported: orient.covariant_energy, ...)
+from solver.paper.error_estimate import estimate_gap
+from solver.paper.orient_refine import (  # noqa: F401  (measures re-exported: orient.covariant_energy, ...)
     GapToOptimum,
     covariant_energy,
     max_norm_deviation,
     unit_rows,
 )
+from solver.paper.solve import DEFAULT_ROUNDS as SOLVE_ROUNDS
+from solver.paper.solve import Solution, SolveOptions, solve
 from solver.quadrature import GAUSS_POINTS
-from solver.solve import Solution, SolveOptions, solve
 from solver.subdivide import global_times
 from solver.terms import CovariantAcceleration, NormalizedCovariantAcceleration, UnitQuaternion
 
 FORMS = ("normalized", "paper")
 
-#: f1 weight of the normalized form, in units of the mean keyframe interval: lambda_1 = UNIT_WEIGHT /
+#: [1] f1 weight of the normalized form, in units of the mean keyframe interval: lambda_1 = UNIT_WEIGHT /
 #: mean(dt)^4 [1/s^4], so that re-timing the keyframes (all times times c) gives the same path re-timed.
 #: f2 does not depend on |q| in this form, so f1 only picks the scale of the variable frames; small
 #: enough not to pull the orientation (docs/orient.md, trade-off table), large enough to hold |q| near 1.
 UNIT_WEIGHT = 0.1
 
-#: The paper's weights (sec. 3, figure 9): lambda_1 : lambda_2 = 2 : 5 on renormalized terms (eq. 7).
+#: [1] The paper's weights (sec. 3, figure 9): lambda_1 : lambda_2 = 2 : 5 on renormalized terms (eq. 7).
 PAPER_WEIGHTS = (2.0, 5.0)
 
 #: Uniform quadrature (`rate=` given, or `default_rate`): at least MIN_RATE points per second [Hz], and at
-#: least MIN_POINTS_PER_KEY_INTERVAL points in the shortest keyframe interval (so a frame inserted there
-#: is determined by the integral).
+#: least MIN_POINTS_PER_KEY_INTERVAL points [1] in the shortest keyframe interval (so a frame inserted
+#: there is determined by the integral).
 MIN_RATE = 40.0
 MIN_POINTS_PER_KEY_INTERVAL = 32
 
-#: Curvature the preconditioner assumes along each variable frame's radial direction, relative to the
+#: [1] Curvature the preconditioner assumes along each variable frame's radial direction, relative to the
 #: tangential ones (`SolveOptions.radial_weight`), per form: the normalized form's f2 does not see the
 #: scale of q, only the light f1 does (0.03-0.1 need 25-40% fewer evaluations than 1 for the same result,
-#: 0.01 is worse again; docs/orient.md); the paper form's f2 falls as q shrinks (1: fewer evaluations).
-RADIAL_WEIGHTS = {"normalized": 0.1, "paper": 1.0}
+#: 0.01 is worse again; docs/orient.md); the paper form's f2 falls as q shrinks, so it assumes nothing
+#: (`SolveOptions`' default, 1: every direction alike).
+RADIAL_WEIGHTS = {"normalized": 0.1, "paper": SolveOptions.radial_weight}
 
 #: The path eq. 7 renormalizes on ("the initial state before any optimization has taken place"), unless
 #: `orient(renormalize=...)` says otherwise: "start", the paper's starting path (sec. 3: "Initially, we
@@ -77,22 +79,23 @@ RADIAL_WEIGHTS = {"normalized": 0.1, "paper": 1.0}
 #: reports |q| within 0.2% with 2:5 (figure 9); docs/orient.md has both, measured.
 RENORMALIZE_ON = "start"
 
-#: Adaptive rounds by default, per form. The paper form's unit term, renormalized on the paper's start
-#: path, is stiff (|q| within 0.02-0.7% on the test sets), and a stiff unit term needs more frames for
-#: the same gap: after two rounds the moderate set's gap is 8.3e-3, after three 6.3e-5 (the large sets:
-#: 1.1-3.0e-4; docs/orient.md).
-DEFAULT_ROUNDS = {"normalized": 2, "paper": 3}
+#: [rounds] Adaptive rounds by default, per form (fixed rounds: the paper form, or the normalized form
+#: with tol=0). The paper form's unit term, renormalized on the paper's start path, is stiff (|q| within
+#: 0.02-0.7% on the test sets), and a stiff unit term needs more frames for the same gap: after two
+#: rounds the moderate set's gap is 8.3e-3, after three 6.3e-5 (the large sets: 1.1-3.0e-4;
+#: docs/orient.md); the normalized form takes `solve`'s default.
+DEFAULT_ROUNDS = {"normalized": SOLVE_ROUNDS, "paper": 3}
 
-#: Default accuracy of the normalized form (docs/orient.md "Accuracy on request: tol and the gap
+#: [1] Default accuracy of the normalized form, a relative gap (docs/orient.md "Accuracy on request: tol and the gap
 #: estimate"): adaptive rounds until the estimated relative gap
-#: (E - E*)/E* (`solver.error_estimate.estimate_gap`) is at most DEFAULT_TOL / TOL_SAFETY. It replaces a
+#: (E - E*)/E* (`solver.paper.error_estimate.estimate_gap`) is at most DEFAULT_TOL / TOL_SAFETY. It replaces a
 #: fixed number of rounds (DEFAULT_ROUNDS, still the paper form's default: its optimum is not E*).
 DEFAULT_TOL = 1e-3
 
 @dataclass(frozen=True)
 class OrientOptions(SolveOptions):
     """SolveOptions as `orient` reads them: with refine "tol", `tol` is the estimated relative gap
-    (E - E*)/E* to reach (`estimate_gap`, `solver.orient_refine.GapToOptimum`): refine and re-optimize
+    (E - E*)/E* to reach (`estimate_gap`, `solver.paper.orient_refine.GapToOptimum`): refine and re-optimize
     until it is at most tol, or the frame budget (`max_frames`, default TOL_FRAMES_PER_INTERVAL per
     keyframe interval) or the time budget (`max_time_s`) runs out. refine "rounds": a fixed number of
     adaptive `rounds` instead.
@@ -105,8 +108,8 @@ LAYOUT = StateLayout.single_quaternion()
 def default_options(form: str = "normalized", **changes) -> OrientOptions:
     """The solve options `orient` uses unless given others: one variable frame per keyframe interval, then
     rounds of adaptive subdivision ranked by predicted decrease (`predicted_decreases`), preconditioned
-    L-BFGS, ftol_rel 1e-6. Normalized form: refine "tol", rounds until the estimated gap is at most
-    DEFAULT_TOL (`OrientOptions.tol`), unless `rounds` is given (then refine "rounds": that many rounds)
+    L-BFGS, ftol_rel `solver.optimize.FTOL_REL` (`SolveOptions`' default). Normalized form: refine
+    "tol", rounds until the estimated gap is at most DEFAULT_TOL (`OrientOptions.tol`), unless `rounds` is given (then refine "rounds": that many rounds)
     or the subdivision is not adaptive; paper form: refine "rounds", DEFAULT_ROUNDS rounds. A `tol` > 0
     selects refine "tol". Keyword arguments override fields (`OrientOptions`; `rounds=None` is taken
     as not given). `orient` sets `renormalize` and `radial_weight` from its own arguments (they
@@ -122,7 +125,7 @@ def default_options(form: str = "normalized", **changes) -> OrientOptions:
                          "the estimated gap is at most tol), not both")
     base = dict(
         subdivision="adaptive", per_segment=1, per_round=0, max_frames=0,
-        score="decrease", precondition=True, ftol_rel=1e-6, renormalize=False,
+        score="decrease", precondition=True, renormalize=False,
     )
     refine = changes.get("refine") or ("tol" if changes.get("tol") or (
         "tol" not in changes and form == "normalized" and changes.get("rounds") is None
@@ -160,7 +163,7 @@ class OrientResult:
             their error estimates).
         tol: the requested estimated gap (0: fixed rounds).
         estimated_gap: a-posteriori estimate of the relative gap (E - E*)/E* of the result
-            (`solver.error_estimate.estimate_gap`; normalized form only, NaN for the paper form, and
+            (`solver.paper.error_estimate.estimate_gap`; normalized form only, NaN for the paper form, and
             for a tolerance run stopped before its first estimate). Without a tolerance it is
             computed when first read.
         converged_to_tol: with a tolerance, whether the estimate reached it (False: the frame or time
@@ -352,16 +355,16 @@ def orient(
             (their rounds, else DEFAULT_ROUNDS[form]). Default: the options' mode (refine "tol" with
             DEFAULT_TOL in the default options of the normalized form; "rounds" in a plain SolveOptions
             or options that give `rounds`). Normalized form only: the strategy is
-            `solver.orient_refine.GapToOptimum`, run by `solve`'s loop. The frames start as `options`
-            says (`per_segment` per interval, on the unit sphere; none with subdivision "none"); the
-            estimate on that starting path places the first optimized frames, and every round whose
-            estimate is above tol adds more, each segment cut into as many equal pieces as the
-            estimate's share there asks for (`solver.subdivide.predicted_times`), until the
-            estimate reaches tol or `max_frames` (default TOL_FRAMES_PER_INTERVAL per keyframe interval)
-            or `max_time_s` runs out (`converged_to_tol` False, `solution.message` says which). After a
-            round with max |1 - |q|| above DRIFT_LIMIT the unit weight is stiffened (DRIFT_BOOST). The
-            estimate used is `estimate_gap`, plus the quadrature discrepancy (`solver.orient_refine.quadrature_discrepancy`)
-            in the rounds where it would otherwise stop.
+            `solver.paper.orient_refine.GapToOptimum`, run by `solve`'s loop. The frames start as `options`
+            says (`per_segment` per interval, on the unit sphere; none with subdivision "none"); every round
+            whose estimate is above tol / TOL_SAFETY adds a frame at the midpoint of the segments
+            with the largest shares of it (`solver.subdivide.adaptive_times`), until the estimate
+            reaches it or `max_frames` (default TOL_FRAMES_PER_INTERVAL per keyframe interval) or
+            `max_time_s` runs out (`converged_to_tol` False, `solution.message` says which). A round
+            that meets it with max |1 - |q|| above DRIFT_LIMIT has the unit weight stiffened
+            (DRIFT_BOOST) while that lowers the drift. The estimate is `estimate_gap` plus the
+            quadrature discrepancy (`solver.paper.orient_refine.quadrature_discrepancy`) and the
+            optimizer's own gap (`solver.paper.error_estimate.optimization_gap`).
     Returns:
         OrientResult.
     Raises:

@@ -5,11 +5,11 @@
 1. the starting frames: the plain spline through the keyframes (partial keyframes' free components
    filled), optionally renormalized on (eq. 7), plus `per_segment` frames per segment for "global" and
    "adaptive" subdivision, valued on the current path;
-2. the optimizer back end (`solver.backend`): one round moves the free components, keyframes hold
+2. the optimizer back end (`solver.paper.backend`): one round moves the free components, keyframes hold
    exactly at every iterate;
-3. the refinement strategy (`solver.refinement`): after each accepted round, stop or add frames where
+3. the refinement strategy (`solver.paper.refinement`): after each accepted round, stop or add frames where
    the weak-form Euler-Lagrange score is largest (fixed rounds, or until a tolerance on the decrease
-   refinement still predicts; `solver.orient_refine.GapToOptimum` for the orientation's gap).
+   refinement still predicts; `solver.paper.orient_refine.GapToOptimum` for the orientation's gap).
 """
 from __future__ import annotations
 
@@ -20,12 +20,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from solver.backend import Backend, nlopt_backend
 from solver.errors import InputError
 from solver.frames import FrameSet
 from solver.objective import NonFiniteError, Objective
 from solver.optimize import ALGORITHMS, FTOL_REL, OptimizeResult, Status
-from solver.refinement import (  # noqa: F401 (TOL_FRAMES_PER_INTERVAL, refinement_estimate re-exported)
+from solver.paper.backend import Backend, nlopt_backend
+from solver.paper.refinement import (  # noqa: F401 (TOL_FRAMES_PER_INTERVAL, refinement_estimate re-exported)
     TOL_FRAMES_PER_INTERVAL,
     FixedRounds,
     NoRefinement,
@@ -40,7 +40,8 @@ SUBDIVISIONS = ("none", "global", "adaptive")
 SCORES = ("gradient", "decrease")
 #: `SolveOptions.refine`: how adaptive subdivision decides when to stop.
 REFINES = ("rounds", "tol")
-#: `SolveOptions.rounds` when not given (refine "rounds").
+#: [rounds] `SolveOptions.rounds` when not given (refine "rounds"): two adaptive rounds after the first
+#: optimization; for an accuracy, refine "tol" stops on an estimate instead of a count.
 DEFAULT_ROUNDS = 2
 _ENDS = (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.FAILED)  # statuses that end a solve
 
@@ -66,7 +67,7 @@ class SolveOptions:
         max_frames: cap on variable frames in total (0 = none).
         renormalize: divide each term by its value on the plain spline (eq. 7).
         algorithm, ftol_rel, max_evals (per round), max_time_s (whole solve): the nlopt optimizer's
-            settings (each round in the preconditioned variables, `solver.backend.nlopt_backend`).
+            settings (each round in the preconditioned variables, `solver.paper.backend.nlopt_backend`).
         score: what ranks segments for adaptive subdivision: "gradient" (|dE/dP| of a midpoint frame,
             `weak_form_scores`) or "decrease" (the decrease of E that frame predicts,
             `predicted_decreases`; does not favour short segments).
@@ -79,9 +80,9 @@ class SolveOptions:
             the radial direction of each quaternion (qpos indices `quat_slots`, (s, 4)) of a free frame,
             relative to the other directions (1: all alike). An objective that depends on q/|q| (the
             normalized covariant acceleration) has little radial curvature (its unit term's): there
-            0.1 saves 25-40% of the evaluations on the orientation test sets (`solver.orient`,
+            0.1 saves 25-40% of the evaluations on the orientation test sets (`solver.paper.orient`,
             docs/orient.md "Defaults, and what they deliver"). "auto": from the curvatures the objective's terms declare, on the slots
-            the unit term acts on (`solver.precondition.auto_radial_weight`; `quat_slots` unused):
+            the unit term acts on (`solver.paper.precondition.auto_radial_weight`; `quat_slots` unused):
             the default for an objective whose unit term makes the radial directions stiff (about
             20x the acceleration metric), where a weight of 1 leaves L-BFGS with a
             condition number of ~1e4 and an evaluation count that grows with the clip's length.
@@ -185,13 +186,13 @@ def solve(
             "kind"}, `Round.kind`), "eval" (each evaluation) and "estimate" (after a round: the refinement
             estimate).
         project: maps the values (r, nq) of the variable frames placed on the plain spline before the
-            first round (`per_segment`) to the values to start from (e.g. `solver.orient` puts the
+            first round (`per_segment`) to the values to start from (e.g. `solver.paper.orient` puts the
             quaternions back on the unit sphere); frames inserted by adaptive rounds keep the path's
             values (the path is then unchanged by the insertion).
-        refinement: the refinement strategy (a fresh `solver.refinement.Refinement`, e.g.
-            `solver.orient_refine.GapToOptimum`); default from `options` (`default_refinement`).
-        backend: the optimizer of one round (`solver.backend.Backend`); default nlopt
-            (`solver.backend.nlopt_backend`).
+        refinement: the refinement strategy (a fresh `solver.paper.refinement.Refinement`, e.g.
+            `solver.paper.orient_refine.GapToOptimum`); default from `options` (`default_refinement`).
+        backend: the optimizer of one round (`solver.paper.backend.Backend`); default nlopt
+            (`solver.paper.backend.nlopt_backend`).
     Returns:
         Solution.
     Raises:
@@ -377,7 +378,7 @@ def _check_inputs(objective, initial, options):
     if not isinstance(options, SolveOptions):
         raise InputError(f"options must be a SolveOptions, got {type(options).__name__}")
     if not isinstance(objective, Objective):
-        raise InputError(f"objective must be an Objective (e.g. `solver.orient`'s), got {type(objective).__name__}")
+        raise InputError(f"objective must be an Objective (e.g. `solver.paper.orient`'s), got {type(objective).__name__}")
     t0, t1 = float(initial.times[0]), float(initial.times[-1])
     if abs(objective.t0 - t0) > 1e-9 * max(1.0, abs(t0)) or abs(objective.t1 - t1) > 1e-9 * max(1.0, abs(t1)):
         raise InputError(
