@@ -10,8 +10,9 @@ violations is minimized instead):
 
 1. **Every constraint at once** (S = all): one L-BFGS solve from the given path, stopped as soon as
    every pair is within its tolerance, with a variable frame added to every segment that holds a broken
-   pair while the segment can take one (`min_gap`: the least change passes the quadrature's spacing, the
-   finest the integrals tell apart, so no finer spacing of frames beats the certificate), and solved again. Where this meets every pair the
+   pair while the segment can take one (`min_gap`: the least change passes two quadrature intervals, the
+   shortest segment whose acceleration, linear in time, two of its points fix, so no finer spacing the
+   quadrature resolves beats the certificate), and solved again. Where this meets every pair the
    problem is feasible: nothing is raised.
 2. **Else level by level** (`Constraint.priority`: the limits of the body and the scene first, then the
    bounds on what the reference motion's body does, the contact schedule's wishes, and the unit-norm
@@ -39,7 +40,7 @@ from solver.lagrangian import GAMMA, AugmentedLagrangian, solve_subproblem
 from solver.optimize import Status
 from solver.spline_basis import SplineBasis
 
-__all__ = ["Certificate", "Raise", "beyond", "least_violation", "with_frames"]
+__all__ = ["Certificate", "Raise", "beyond", "least_violation", "on_points", "with_frames"]
 
 
 
@@ -94,6 +95,27 @@ class Certificate:
         for r in self.raises:
             out[r.constraint] = max(out.get(r.constraint, 0.0), r.amount)
         return out
+
+
+def on_points(times: np.ndarray, points: np.ndarray, frames: FrameSet) -> np.ndarray:
+    """New variable-frame times moved each to the nearest quadrature point, those falling on a frame dropped.
+
+    The acceleration of a cubic spline is linear in time on each segment, so its extremes are at the
+    frames: a frame on a quadrature point is where the bounds on acceleration (no jolts) see the path's
+    hardest acceleration, not a point up to half an interval from it.
+
+    Args:
+        times: (r,) [s] times for new frames. points: (n,) [s] the quadrature points, increasing.
+        frames: FrameSet (m, nq) the frames so far.
+    Returns:
+        (r',) [s] sorted distinct quadrature points, none a frame's time.
+    """
+    times = np.asarray(times, float)
+    if times.size == 0:
+        return times
+    i = np.clip(np.searchsorted(points, times), 1, len(points) - 1)
+    snapped = np.unique(np.where(times - points[i - 1] <= points[i] - times, points[i - 1], points[i]))
+    return snapped[np.min(np.abs(snapped[:, None] - frames.times[None]), axis=1) > 1e-12]
 
 
 def with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) -> FrameSet:
@@ -185,7 +207,8 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
             eal.rho *= GAMMA
         if budget.spent():
             return best
-        new = _split_times(best, _broken_times(al, objective, eal.state(basis, best.values)), min_gap)
+        new = on_points(_split_times(best, _broken_times(al, objective, eal.state(basis, best.values)), min_gap),
+                        al.t, best)
         if new.size == 0:
             return best
         best = with_frames(best, new, quat_slots)

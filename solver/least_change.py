@@ -35,7 +35,7 @@ from solver.constraint_set import figure_constraints
 from solver.constraints.forces import figure_forces
 from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
-from solver.feasibility import Certificate, beyond, least_violation, with_frames
+from solver.feasibility import Certificate, beyond, least_violation, on_points, with_frames
 from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.inverse_dynamics import InverseDynamics
@@ -70,7 +70,8 @@ class LeastChangeOptions:
         min_gap: [s] no two frames the refinement adds closer: 1/48 s, half a frame of 24 fps film; a cubic
             spline through frames closer than that kinks between them (its second derivative grows like
             1/h^2). The least violation (`solver.feasibility`) splits a segment holding a broken pair down to
-            the quadrature's spacing (1 / rate) instead: a limit is raised only where no finer spacing helps.
+            two quadrature intervals (2 / rate) instead: a limit is raised only where no finer spacing the
+            quadrature resolves helps.
         max_subproblems: subproblems in all (each an L-BFGS run), a guard against a method that cycles:
             100, above the most a converging solve was measured to need (24 on the corpus: 83_02 keyed at
             its contacts; 81: a Bandai-Namco walk backwards keyed every 0.2 s, its acceleration limits raised
@@ -205,9 +206,9 @@ def _own_bound(make, t: np.ndarray):
 
 def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
     """The plain spline's frames with variable frames at the contacts' ends and in every segment."""
-    frames = lc.plain.with_variable_frames(knot_hint_times(lc.plain, lc.knots, min_gap))
+    frames = lc.plain.with_variable_frames(on_points(knot_hint_times(lc.plain, lc.knots, min_gap), lc.al.t, lc.plain))
     mids = 0.5 * (frames.times[:-1] + frames.times[1:])
-    return with_frames(frames, mids[np.diff(frames.times) >= 2 * min_gap], lc.layout.quat_slots)
+    return with_frames(frames, on_points(mids[np.diff(frames.times) >= 2 * min_gap], lc.al.t, frames), lc.layout.quat_slots)
 
 
 def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, SplineBasis]:
@@ -294,7 +295,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             message = "every constraint met; no segment predicts a decrease"
             break
         if new.size:
-            frames, scores = with_frames(frames, new, quat), dec
+            frames, scores = with_frames(frames, on_points(new, al.t, frames), quat), dec
             basis = SplineBasis(frames.times, al.t)
             level_its, kind = 0, "refine"
     else:
@@ -365,9 +366,10 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     it ("certify") and sets the multipliers of the pairs it raised to 0. Returns the Certificate."""
     left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
     before = [c.limit.copy() for c in lc.al.constraints]
-    # the search splits segments down to the quadrature's spacing, the finest the integrals tell apart, so
-    # that no finer spacing of frames beats what it certifies (min_gap is the least change's, not a limit)
-    cert = least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=1.0 / o.rate, ftol_rel=o.ftol_rel,
+    # the search splits segments down to two quadrature intervals, the shortest whose acceleration (linear in
+    # time on a cubic segment) two of its points still fix, so that the bounds hold between the points too;
+    # min_gap is the least change's refinement's, not a limit of the paths the search may try
+    cert = least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=2.0 / o.rate, ftol_rel=o.ftol_rel,
                            per_level=o.per_level, max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
                            max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop)
     if progress:

@@ -293,6 +293,26 @@ def test_shipped_clip_meets_keyframes_and_constraints(shipped, solved):
     assert m["max_penetration_mm"] <= 1.0  # the penetration constraint's tolerance, at 1000 Hz
 
 
+@pytest.mark.slow
+def test_variable_frames_sit_on_quadrature_points(solved):
+    """Every variable frame is on a quadrature point (`solver.feasibility.on_points`), where the acceleration
+    bounds see the spline's hardest acceleration (linear in time on a segment, extreme at its frames)."""
+    lc, sol, _ = solved
+    free = sol.frames.times[~sol.frames.is_keyframe]
+    assert free.size
+    assert np.abs(free[:, None] - lc.al.t[None]).min(axis=1).max() <= 1e-12
+
+
+def test_new_frame_times_go_to_the_nearest_quadrature_point_off_the_frames():
+    from solver.feasibility import on_points
+    from solver.frames import FrameSet
+
+    points = 0.005 * (np.arange(200) + 0.5)  # the midpoint rule at 200 Hz on [0, 1] s
+    frames = FrameSet(np.array([0.0, 0.5125, 1.0]), np.zeros((3, 1)), np.ones((3, 1), bool), np.ones(3, bool))
+    got = on_points(np.array([0.0126, 0.0124, 0.5124, 0.999]), points, frames)
+    np.testing.assert_allclose(got, [0.0125, 0.9975], rtol=0, atol=1e-15)  # 0.5125 is a frame already
+
+
 #: [1] the no-jolt acceptance bound over the constraint's limit (docs/corpus.md: peaks 1.5x the larger of
 #: the plain spline's and the filtered capture's)
 JOLT_FACTOR = 1.5
