@@ -115,6 +115,7 @@ def on_points(times: np.ndarray, points: np.ndarray, frames: FrameSet) -> np.nda
         return times
     i = np.clip(np.searchsorted(points, times), 1, len(points) - 1)
     snapped = np.unique(np.where(times - points[i - 1] <= points[i] - times, points[i - 1], points[i]))
+    # [s] a point within round-off of a frame is that frame (times are sums of the same float steps)
     return snapped[np.min(np.abs(snapped[:, None] - frames.times[None]), axis=1) > 1e-12]
 
 

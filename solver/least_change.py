@@ -263,12 +263,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
             status, message = r.result.status, _stop_message(r.result.status, r.result.message, o)
             break
-        scaled = al.scaled_values(basis, frames.values)
-        V = al.update(scaled)
-        worst = _worst(al, scaled)
-        if progress:
-            progress("constraints", {"round": k, **worst, "rho": al.rho})
-        met = worst["value"] <= 1.0 and V <= 1.0
+        worst, met = _multipliers(al, frames, basis, progress, k)
         best = _better(al, best, frames, basis) if worst["value"] <= 1.0 else best
         level_its, kind, scores = level_its + 1, "boost", None
         if not (met or level_its >= o.per_level):
@@ -295,7 +290,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             message = "every constraint met; no segment predicts a decrease"
             break
         if new.size:
-            frames, scores = with_frames(frames, on_points(new, al.t, frames), quat), dec
+            frames, scores = with_frames(frames, new, quat), dec
             basis = SplineBasis(frames.times, al.t)
             level_its, kind = 0, "refine"
     else:
@@ -304,6 +299,17 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     status = Status.INFEASIBLE if status is Status.CONVERGED and raises else status
     return _solution(lc, frames, basis, rounds, trace, status, message, evals, tuple(raises),
                      time.perf_counter() - start, estimate, o.tol, tuple(decreases))
+
+
+def _multipliers(al: AugmentedLagrangian, frames: FrameSet, basis, progress, k: int) -> tuple[dict, bool]:
+    """The multiplier update at the end of subproblem k (`AugmentedLagrangian.update`), reported ("constraints");
+    returns (the worst pair as `_worst`, met: every pair within its tolerance and the infeasibility V <= 1)."""
+    scaled = al.scaled_values(basis, frames.values)
+    V = al.update(scaled)
+    worst = _worst(al, scaled)
+    if progress:
+        progress("constraints", {"round": k, **worst, "rho": al.rho})
+    return worst, worst["value"] <= 1.0 and V <= 1.0
 
 
 def _subproblem(al, frames: FrameSet, basis, quat, o: LeastChangeOptions, start: float, evals: int, should_stop,
@@ -408,13 +414,13 @@ def _stop_message(status: Status, message: str, o: LeastChangeOptions) -> str:
 
 
 def _refinement(al, frames, quat, o: LeastChangeOptions, k: int, progress) -> tuple[np.ndarray, float, np.ndarray]:
-    """(times of new variable frames, the predicted decrease of Phi over Phi + shift, (m - 1,) each segment's
-    predicted decrease) on `frames`."""
+    """(times of new variable frames, each on a quadrature point (`on_points`), the predicted decrease of Phi
+    over Phi + shift, (m - 1,) each segment's predicted decrease) on `frames`."""
     dec, phi = predicted_decreases(al, frames, quat, o.min_gap)
     estimate = float(dec.sum() / max(phi + al.shift(), 1e-300))  # Phi itself can be <= 0 (PHR)
     if progress:
         progress("estimate", {"round": k, "estimate": estimate, "tol": o.tol})
-    return doerfler_times(dec, frames), estimate, dec
+    return on_points(doerfler_times(dec, frames), al.t, frames), estimate, dec
 
 
 def _solution(lc, frames, basis, rounds, trace, status, message, evals, raises, seconds, estimate, tol,

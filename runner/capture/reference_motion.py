@@ -87,18 +87,14 @@ def load_bvh_reference(path: str | Path | Capture, model, progress=None, root_sc
     named after every figure body) is read exactly instead (`runner.export.bvh.figure_qpos_from_bvh`):
     every frame, no retargeting, no clamping, no root-height correction.
 
-    Steps (runner/capture/retarget.py docstring): parse (bvhio), recognise the skeleton (roles, unit, up axis;
-    `runner.capture.figure_record.clip_skeleton`), drop a leading rest frame (the synthetic T-pose of CMU's
-    cgspeed conversion), forward kinematics in metres and MuJoCo axes, body-offset retargeting of body
-    orientations, local joint quaternions
-    (unit, w x y z, hemisphere-consistent), the root's position and orientation moved into the scene's
-    levelled capture frame (the rigid transform its MJCF records, `solver.capture_frame.CaptureFrame.
-    from_model`: a fitted scene's floor is z = 0 there; the identity for a scene that records none), tracking
-    glitches repaired (`runner.capture.glitches.repair_glitches`: a joint turning faster than any human joint
-    between two frames), knee/elbow hyperextension clamped to 0 flexion (`clamp_hyperextension`), root
-    height corrected so feet in contact stand on the floor or the box and no contact site is ever below a
-    surface (`correct_root_height`); and, for the keyframes, the resting feet planted on their surfaces
-    (`runner.capture.foot_plant.plant_feet`, `Reference.plant`, `Reference.keyed`).
+    Steps (runner/capture/retarget.py docstring): parse (bvhio), recognise the skeleton
+    (`runner.capture.figure_record.clip_skeleton`), drop a leading rest frame (CMU's cgspeed T-pose), forward
+    kinematics in metres and MuJoCo axes, body-offset retargeting, local joint quaternions (unit, w x y z,
+    hemisphere-consistent), the root moved into the scene's levelled capture frame
+    (`solver.capture_frame.CaptureFrame.from_model`), tracking glitches repaired (`repair_glitches`),
+    knee/elbow hyperextension clamped (`clamp_hyperextension`), the root height corrected so feet in contact
+    stand on their surfaces and no site is below one (`correct_root_height`); for the keyframes, the resting
+    feet planted (`runner.capture.foot_plant.plant_feet`, `Reference.plant`, `Reference.keyed`).
 
     Args:
         path: the run's `Capture` (runner/capture/clip.py), or a BVH file of a human skeleton of any
