@@ -210,7 +210,7 @@ def _relax_heights(constraints, state, plain, model, sites, support, radii, flig
     keyed = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
     keyed[..., 2] -= radii  # the contact points, as `Penetration` samples them
     t = state.t
-    half = 0.5 * (t[1] - t[0]) + 1e-9
+    half = 0.5 * float(np.max(np.diff(t))) + 1e-9  # [s] half the quadrature spacing (+ round-off)
     out = []
     for c in constraints:
         if c.name not in ("penetration", "flight", "ground"):

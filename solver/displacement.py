@@ -51,7 +51,7 @@ from solver.lagrangian import AugmentedLagrangian
 from solver.layout import StateLayout
 from solver.least_change import STANDARD_GRAVITY, LeastChange, LeastChangeOptions, solve_least_change
 from solver.peak_bounds import filter_capture
-from solver.quadrature import check_points, quadrature_times
+from solver.quadrature import check_points, quadrature_points
 from solver.reference import ReferenceMotion
 from solver.solution import Solution
 from solver.spline import interpolate
@@ -172,8 +172,8 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     plain = FrameSet(times[at], zero, fixed, is_pin[at])
     t0, t1 = float(times[0]), float(times[-1])
     check_points(t0, t1, rate)
-    t, h = quadrature_times(t0, t1, rate)
-    reference = ReferenceMotion.from_samples(model, times, qpos, t, np.full(len(t), h))
+    t, w = quadrature_points(t0, t1, rate, plain.times)  # the pins and ends are points too
+    reference = ReferenceMotion.from_samples(model, times, qpos, t, w)
     engine = InverseDynamics(model, figure.contact_sites)  # the effort bound of a capture needs the torques
     schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)

@@ -47,7 +47,7 @@ from solver.least_change_refine import doerfler_times, predicted_decreases
 from solver.manifold import FrameVariables
 from solver.optimize import Status
 from solver.peak_bounds import peak_bounds
-from solver.quadrature import check_points, quadrature_times
+from solver.quadrature import check_points, quadrature_points
 from solver.reference import ReferenceMotion
 from solver.solution import Round, Solution
 from solver.spline_basis import SplineBasis
@@ -162,8 +162,8 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     plain = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     t0, t1 = float(plain.times[0]), float(plain.times[-1])
     check_points(t0, t1, rate)
-    t, h = quadrature_times(t0, t1, rate)
-    reference = ReferenceMotion.from_frames(model, plain, t, np.full(len(t), h))
+    t, w = quadrature_points(t0, t1, rate, plain.times)  # the keyframes are points too (no jolt unseen)
+    reference = ReferenceMotion.from_frames(model, plain, t, w)
     if forces or capture is not None:  # the force bounds, or the effort bound of a capture's keyframes
         engine = InverseDynamics(model, figure.contact_sites)
     else:

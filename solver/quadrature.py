@@ -50,6 +50,36 @@ def quadrature_times(t0: float, t1: float, rate: float) -> tuple[np.ndarray, flo
     return t0 + h * (np.arange(n) + 0.5), h
 
 
+def quadrature_points(t0: float, t1: float, rate: float, knots=()) -> tuple[np.ndarray, np.ndarray]:
+    """The uniform midpoint rule (`quadrature_times`, weight h each) with the spline's fixed knots added as
+    points of weight 0: every integral is the midpoint rule's, and every pointwise bound is also checked
+    at the knots.
+
+    A cubic spline's acceleration is linear in time on each segment, so its extremes are at the knots,
+    which the midpoint rule never samples (they sit half an interval off its points): a bound on
+    acceleration (no jolts) holds between the points of a segment only if it holds at the segment's ends.
+    The knots known when a problem is built (keyframes, pins, the span's ends) are points here; variable
+    frames added later are put on points (`solver.feasibility.on_points`).
+
+    Args:
+        t0, t1: interval [s]. rate: points per second [1/s]. knots: (k,) [s] times in [t0, t1].
+    Returns:
+        t: (n + k',) points [s], increasing; w: same shape, weights [s] (h, or 0 at a knot). A knot within
+        round-off (1e-9 s) of a midpoint is that point.
+    """
+    t, h = quadrature_times(t0, t1, rate)
+    k = np.asarray(knots, float).ravel()
+    k = k[(k >= t0) & (k <= t1)]
+    # [s] a knot within round-off of a midpoint (times are sums of float steps) is that midpoint
+    if k.size and t.size:
+        i = np.clip(np.searchsorted(t, k), 1, len(t) - 1)
+        k = k[np.minimum(np.abs(t[i - 1] - k), np.abs(t[i] - k)) > 1e-9]
+    k = np.unique(k)
+    allt = np.concatenate([t, k])
+    order = np.argsort(allt, kind="stable")
+    return allt[order], np.concatenate([np.full(len(t), h), np.zeros(len(k))])[order]
+
+
 def gauss_times(knots: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray]:
     """Gauss-Legendre quadrature with `points` nodes on every spline segment.
 

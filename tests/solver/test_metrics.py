@@ -211,20 +211,17 @@ def test_run_and_step_all_terms_is_more_physical_and_keeps_the_bounds(all_terms)
     bounds = metrics["force_bounds"]
     assert bounds["capture_ground_force_bw"] is not None  # the keyframe file names its clip
     assert opt["peak_root_force_ground_bw"] <= 1.05 * bounds["ground_force_bw"]
-    # the pelvis: within its bound and 5 % tolerance where the bound is posed, the quadrature points (the
-    # root's x'' of the saved frames' natural cubic spline, computed here), and at 1000 Hz within the
-    # acceptance's 1.5x (docs/corpus.md): a keyframe sits half an interval off the points, and there a
-    # spline's acceleration kinks unseen (OpenBLAS's Sandybridge kernel: 17.8 m/s^2 at the key at 0.725 s)
+    # the pelvis: within its bound and 5 % tolerance at every frame of the saved spline (the root's x'' of
+    # its natural cubic spline, computed here) and at 1000 Hz (the metrics): a cubic's acceleration is
+    # linear between frames, so its peak is at a frame, and every frame is a point where the bound is posed
+    # (the keyframes by `solver.quadrature.quadrature_points`, the variable frames by `on_points`)
     from scipy.interpolate import CubicSpline
-
-    from solver.quadrature import quadrature_times
 
     opts = json.loads(str(z["options_json"]))
     ft = z["frame_times"]
-    points, _ = quadrature_times(float(ft[0]), float(ft[-1]), opts["solve"]["rate"])
-    root = CubicSpline(ft, z["frames"][:, :3], bc_type="natural")(points, 2)
+    root = CubicSpline(ft, z["frames"][:, :3], bc_type="natural")(ft, 2)
     assert np.linalg.norm(root, axis=1).max() <= 1.05 * bounds["pelvis_acceleration_ms2"]
-    assert opt["peak_pelvis_acceleration_ms2"] <= 1.5 * bounds["pelvis_acceleration_ms2"]
+    assert opt["peak_pelvis_acceleration_ms2"] <= 1.05 * bounds["pelvis_acceleration_ms2"]
     assert opts["terms"] == "all" and "min_gap" in opts["solve"]  # --terms all, solved by the least change
 
 

@@ -1,0 +1,33 @@
+"""The quadrature points: the midpoint rule's integrals, with the spline's knots as points of weight 0."""
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from solver.quadrature import quadrature_points, quadrature_times
+
+
+def test_knots_are_points_of_weight_zero_and_integrals_are_the_midpoint_rules():
+    knots = np.array([0.0, 0.25, 0.5 + 0.005, 0.9, 1.3])  # 0.505 is a midpoint of the 100/s rule
+    t, w = quadrature_points(0.0, 1.3, 100, knots)
+    tm, h = quadrature_times(0.0, 1.3, 100)
+    assert np.all(np.diff(t) > 0)
+    assert np.all(np.isin(knots, t))
+    assert len(t) == len(tm) + 4  # 0.505 is already a point: not twice
+    np.testing.assert_allclose(w[w > 0], h, rtol=1e-15)
+    assert np.count_nonzero(w == 0) == 4
+    np.testing.assert_allclose(t[w > 0], tm, rtol=0, atol=1e-15)
+    # the midpoint rule integrates a linear function exactly: int_0^1.3 (2 + 3 s) ds
+    assert abs(w @ (2 + 3 * t) - (2 * 1.3 + 1.5 * 1.3 ** 2)) < 1e-12
+
+
+def test_a_cubic_splines_peak_acceleration_is_seen_at_the_points():
+    """A cubic's acceleration is linear between knots, so the points (knots included) see its peak over
+    a 10 kHz grid; the midpoint rule's points alone miss it by up to half an interval's change."""
+    rng = np.random.default_rng(5)
+    knots = np.sort(np.concatenate([[0.0, 2.0], rng.uniform(0.05, 1.95, 8)]))
+    s = CubicSpline(knots, rng.normal(size=(10, 3)), bc_type="natural")
+    dense = np.linspace(0.0, 2.0, 20001)
+    peak = np.linalg.norm(s(dense, 2), axis=1).max()
+    t, _ = quadrature_points(0.0, 2.0, 100, knots)
+    assert np.linalg.norm(s(t, 2), axis=1).max() >= peak * (1 - 1e-12)
+    tm, _ = quadrature_times(0.0, 2.0, 100)
+    assert np.linalg.norm(s(tm, 2), axis=1).max() < peak  # without the knots: the peak is missed
