@@ -25,6 +25,7 @@ from runner.capture.figure_choice import SUBJECT
 from runner.capture.reference_motion import ROOT_SCALE_LEGS
 from runner.capture.scene import AUTO
 from runner.paths import display_path
+from runner.show_options import ShowOptions
 from solver.errors import InputError
 from solver.least_change import LeastChangeOptions
 
@@ -32,8 +33,10 @@ __all__ = ["CleanOptions", "process_clean"]
 
 
 @dataclass(frozen=True)
-class CleanOptions:
-    """What `process_clean` does with a clip (the options of `dynsplines clean`).
+class CleanOptions(ShowOptions):
+    """What `process_clean` does with a clip (the options of `dynsplines clean`): the video and console
+    options of `ShowOptions` (render: the video capture | cleaned; fps, size, speed, camera, quiet, summary,
+    command: recorded in the saved path) and these.
 
     Attributes:
         pins: [s] times where the cleaned clip is the capture (each on the nearest capture frame). pin_ends:
@@ -41,9 +44,7 @@ class CleanOptions:
             can be fixed there). feet: "planted" (a foot in contact slides no more than the pins force) or
             "captured" (no more than the capture: only penetration, float and flight cleaned;
             `solver.displacement.FEET`). scene, figure, mass, root_scale, skeleton_map: as `runner.pipeline.ClipKeys`.
-        solve: LeastChangeOptions (None: the defaults). render: write the video (capture | cleaned);
-            fps, size, speed, camera: its settings (`runner.render.side_by_side.VideoOptions`).
-        quiet: no progress bars. summary: print the summary. command: the command line, recorded.
+        solve: LeastChangeOptions (None: the defaults).
     """
 
     pins: tuple = ()
@@ -55,14 +56,6 @@ class CleanOptions:
     root_scale: float | str = ROOT_SCALE_LEGS
     skeleton_map: str | os.PathLike | None = None
     solve: LeastChangeOptions | None = None
-    render: bool = True
-    fps: float = 30.0
-    size: tuple[int, int] = (960, 540)
-    speed: float = 0.5
-    camera: float = 90.0
-    quiet: bool = False
-    summary: bool = True
-    command: str = ""
 
 
 def clean_paths(clip: Path, out_dir: Path, o: CleanOptions) -> dict:

@@ -38,6 +38,7 @@ from runner.capture.key_joints import frame_joints
 from runner.capture.reference_motion import ROOT_SCALE_LEGS
 from runner.capture.scene import AUTO, FLOOR, clip_scene, name_surfaces, read_boxes
 from runner.paths import display_path
+from runner.show_options import ShowOptions
 from solver.errors import InputError
 from solver.figure import FIGURE_FILE
 from solver.keyframe_file import read_keyframes, write_keyframes
@@ -50,8 +51,10 @@ FIGURE = FIGURE_FILE  # the shipped figure (solver.figure)
 
 
 @dataclass(frozen=True)
-class ClipOptions:
-    """What `process_clip` does with a clip (the options of `dynsplines mocap`).
+class ClipOptions(ShowOptions):
+    """What `process_clip` does with a clip (the options of `dynsplines mocap`): the video and console
+    options of `ShowOptions` (render, fps, size, speed, camera, quiet, summary; command: recorded in the
+    keyframe file's "source") and these.
 
     Attributes:
         keys: "every" (evenly spaced plus the root's extremes) or "contacts" (contact events).
@@ -63,12 +66,9 @@ class ClipOptions:
         forces: also the force bounds (`--terms all`, `solver.ProblemSpec.forces`).
         solve: LeastChangeOptions (None: the defaults).
         out, save_path, metrics, plot: output paths (None: the defaults under the output folder:
-            <stem>.mp4, <stem>.npz, <stem>.metrics.json; no plots). render: write the video.
-        fps, size, speed, panels, camera: video settings (`runner.render.side_by_side.VideoOptions`; camera:
-            degrees around the figure from straight ahead).
+            <stem>.mp4, <stem>.npz, <stem>.metrics.json; no plots).
+        panels: the video's panels, left to right (`runner.render.side_by_side.VideoOptions`).
         exports: the optimized path also written as these .bvh / .glb files.
-        quiet: no progress bars (results are still printed). summary: print the summary tables.
-        command: the command line, recorded in the keyframe file's "source".
         root_scale: the scale of the captured root path (`load_bvh_reference`): "legs" (the figure's
             leg length over the subject's) or a number (1: as captured); the value used is recorded in
             the keyframe file's "source".
@@ -92,16 +92,8 @@ class ClipOptions:
     save_path: Path | None = None
     metrics: Path | None = None
     plot: Path | None = None
-    render: bool = True
-    fps: float = 30.0
-    size: tuple[int, int] = (960, 540)
-    speed: float = 0.5
-    camera: float = 90.0
-    quiet: bool = False
-    summary: bool = True
     exports: tuple = ()
     panels: tuple = ("plain", "optimized")
-    command: str = ""
     root_scale: float | str = ROOT_SCALE_LEGS
     skeleton_map: str | os.PathLike | None = None
     key_frames: tuple[int, ...] | None = None

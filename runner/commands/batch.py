@@ -6,6 +6,7 @@ from pathlib import Path
 
 from runner.animate_options import add_solve_arguments
 from runner.batch import ENGINES, find_clips, run_batch
+from runner.commands.clean import add_pin_arguments, pins_of
 from runner.commands.mocap import add_clip_arguments, clip_options
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.parser import positive
@@ -46,6 +47,8 @@ def register(sub) -> None:
     p.add_argument("--ray-address", default=None, metavar="ADDR",
                    help="Ray cluster address for --engine ray [a local Ray, or RAY_ADDRESS]")
     add_clip_arguments(p)
+    pins = p.add_argument_group("pins (--mode clean)")
+    add_pin_arguments(pins, each="; the same for every clip, and a pin outside a clip is that clip's error")
     p.add_argument("--render", action="store_true",
                    help="also render each clip's video (off by default in a batch: rendering is slow)")
     add_solve_arguments(p)
@@ -56,9 +59,10 @@ def register(sub) -> None:
 def run(args) -> int:
     """Run `batch`. Returns the exit code; raises InputError on bad input."""
     if args.ray_address is not None and args.engine != "ray":
-        from solver.errors import InputError
-
         raise InputError(f"--ray-address {args.ray_address} goes with --engine ray")
+    if args.mode != "clean" and (args.pin or args.pin_ends):
+        names = ", ".join(n for n, given in (("--pin", args.pin), ("--pin-ends", args.pin_ends)) if given)
+        raise InputError(f"{names}: clean's pins; --mode mocap keys the clip instead (add --mode clean, or drop them)")
     clips = find_clips(args.clips)
     options = clean_options(args) if args.mode == "clean" else clip_options(args, PROG, render=args.render)
     say = (lambda *a: None) if args.quiet else print
@@ -72,8 +76,8 @@ def run(args) -> int:
 
 
 def clean_options(args):
-    """`CleanOptions` of the parsed arguments (`--mode clean`): scene, figure, root scale, skeleton map, the
-    solve options, --render.
+    """`CleanOptions` of the parsed arguments (`--mode clean`): the pins, scene, figure, root scale, skeleton map,
+    the solve options, --render.
 
     Raises:
         InputError: a keying option (`KEYING`) given with --mode clean.
@@ -89,6 +93,7 @@ def clean_options(args):
         names = ", ".join("--" + k.replace("_", "-") for k in given)
         raise InputError(f"{names}: mocap's keying options; --mode clean keeps every frame of the capture (drop them, "
                          "or use --mode mocap)")
-    return CleanOptions(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale,
-                        skeleton_map=args.skeleton_map, solve=solve_options(args), render=args.render, quiet=True,
+    return CleanOptions(pins=pins_of(args), pin_ends=args.pin_ends, scene=args.scene, figure=args.figure,
+                        mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map,
+                        solve=solve_options(args), render=args.render, quiet=True,
                         summary=False, command=f"{PROG} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == ["batch"] else PROG)

@@ -22,6 +22,22 @@ def _times(text: str) -> tuple:
         raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of times in seconds, e.g. 0.5,1.25") from None
 
 
+def add_pin_arguments(p, each: str = "") -> None:
+    """`--pin T1,T2` (repeatable) and `--pin-ends` (`clean`; `batch --mode clean`, with `each` saying that
+    every clip takes the same pins)."""
+    p.add_argument("--pin", type=_times, action="append", default=[], metavar="T1,T2",
+                   help="times [s] where the clip is kept exactly as captured (each on the nearest frame); may be "
+                        f"repeated{each} [none]")
+    p.add_argument("--pin-ends", action="store_true",
+                   help="keep the clip's first and last frame exactly as captured too (to join it to other clips); "
+                        "a contact that runs into them is then fixed only where it can be")
+
+
+def pins_of(args) -> tuple:
+    """The times [s] of every --pin given, in order."""
+    return tuple(t for group in args.pin for t in group)
+
+
 def register(sub) -> None:
     """Add `clean` to the `dynsplines` parser."""
     from runner.capture.scene import AUTO
@@ -35,12 +51,7 @@ def register(sub) -> None:
                     "capture comes back exactly. Outputs go to renders/<clip stem>/ unless given: <stem>.clean.npz, "
                     "<stem>.clean.bvh (on the source skeleton), <stem>.clean.glb, <stem>.clean.metrics.json, <stem>.clean.mp4.")
     p.add_argument("clip", type=Path, help="BVH clip, e.g. models/cmu/16_23.bvh")
-    p.add_argument("--pin", type=_times, action="append", default=[], metavar="T1,T2",
-                   help="times [s] where the clip is kept exactly as captured (each on the nearest frame); may be "
-                        "repeated [none]")
-    p.add_argument("--pin-ends", action="store_true",
-                   help="keep the clip's first and last frame exactly as captured too (to join it to other clips); "
-                        "a contact that runs into them is then fixed only where it can be")
+    add_pin_arguments(p)
     p.add_argument("--feet", choices=("planted", "captured"), default="planted",  # solver.displacement.FEET
                    help="a foot in contact: planted (slides no more than the pins force) or as captured "
                         "(only penetration, float and flight cleaned) [%(default)s]")
@@ -62,7 +73,7 @@ def run(args) -> int:
     from solver.least_change import LeastChangeOptions
 
     solve = LeastChangeOptions(max_time_s=args.max_time) if args.max_time else None
-    o = CleanOptions(pins=tuple(t for group in args.pin for t in group), pin_ends=args.pin_ends, feet=args.feet, scene=args.scene, figure=args.figure,
+    o = CleanOptions(pins=pins_of(args), pin_ends=args.pin_ends, feet=args.feet, scene=args.scene, figure=args.figure,
                      mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map, solve=solve,
                      render=not args.no_render, fps=args.fps, quiet=args.quiet, summary=not args.no_summary,
                      command=shlex.join(["dynsplines", "clean", *sys.argv[2:]]))

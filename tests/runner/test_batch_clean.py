@@ -1,6 +1,7 @@
 """`dynsplines batch --mode clean`: each clip cleaned into its folder with the clean's figures in the summary
 (the deviation checked against MuJoCo's forward kinematics of the saved path), a bad clip a failed row, a rerun
-skips what is done; mocap's keying options are refused in one line; the totals of hand-made rows."""
+skips what is done; --pin holds every clip at the capture there, a pin outside a clip is that clip's row; mocap's
+keying options are refused in one line, and the pins with --mode mocap; the totals of hand-made rows."""
 import csv
 import json
 from pathlib import Path
@@ -68,6 +69,33 @@ def test_a_clean_per_clip_and_a_bad_clip_failed(tmp_path):
     by = {Path(r["clip"]).name: r for r in read_csv(out / "summary.csv")[:-1]}
     assert (by["a.bvh"]["status"], by["corrupt.bvh"]["status"]) == ("skipped", "failed")
     assert float(by["a.bvh"]["deviation_mean_cm"]) == pytest.approx(mean, rel=1e-4, abs=1e-6)
+
+
+def test_a_pin_holds_the_capture_and_a_pin_outside_a_clip_is_its_error(tmp_path):
+    """The same --pin for every clip: on the 0.25 s clip the cleaned path is the capture at the pinned frame
+    (where the clean without pins moves it by ~0.26 in qpos), on the 0.1 s clip the pin is outside, its row."""
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    short_clip(clips / "a.bvh")
+    edit_bvh(CLIP, clips / "b.bvh", seconds=0.1)
+    out = tmp_path / "out"
+    assert main(["batch", str(clips), "--out", str(out), "--mode", "clean", "--pin", "0.2", "--quiet"]) == EXIT_FAILED
+    by = {Path(r["clip"]).name: r for r in read_csv(out / "summary.csv")[:-1]}
+    assert by["a.bvh"]["status"] == "ok" and by["b.bvh"]["status"] == "failed"
+    assert "--pin 0.2: outside the clip's" in by["b.bvh"]["error"] and not (out / "b" / "done.json").exists()
+    z = np.load(out / "a" / "a.clean.npz")
+    k = int(np.argmin(np.abs(z["path_times"] - 0.2)))
+    assert abs(z["path_times"][k] - 0.2) <= 0.5 / 120  # the nearest of the 120 Hz capture's frames
+    np.testing.assert_allclose(z["path_qpos"][k], z["reference_qpos"][k], rtol=0, atol=1e-9)
+    assert np.abs(z["path_qpos"] - z["reference_qpos"]).max() > 1e-3  # the clean moved the clip elsewhere
+
+
+def test_pins_with_mode_mocap_are_refused_in_one_line(tmp_path, capsys):
+    short_clip(tmp_path / "a.bvh")
+    assert main(["batch", str(tmp_path / "a.bvh"), "--out", str(tmp_path / "o"), "--pin", "0.1", "--pin-ends"]) == EXIT_INPUT
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--pin, --pin-ends" in err and "--mode clean" in err
+    assert not (tmp_path / "o" / "summary.csv").exists()
 
 
 def test_keying_options_are_refused_in_one_line(tmp_path, capsys):
