@@ -218,7 +218,7 @@ def _relax_heights(constraints, state, plain, model, sites, support, radii, flig
         v = c.values(state)
         ptimes = c.pair_times(t) if hasattr(c, "pair_times") else t[c.rows]
         groups = getattr(c, "group", c.series)
-        # penetration at the keyframes themselves (the first quadrature point is half a spacing after one)
+        # penetration at the keyframes themselves (a `Penetration` pair stands for an interval, not a point)
         depth = -c.surfaces.signed_distances(keyed)[0] if c.name == "penetration" else None  # (k, K, S)
         for g in np.unique(groups):
             in_g = np.flatnonzero(groups == g)
