@@ -58,8 +58,11 @@ class Constraint:
     def pair_weights(self, weights: np.ndarray) -> np.ndarray:
         """(p,) the time each pair stands for [s], from the quadrature weights (n,) [s]: a pointwise
         constraint's pair stands for its point's weight (the default); an integral constraint's pair for
-        its interval's length."""
-        return weights[self.rows]
+        its interval's length. A knot's point (weight 0: it only adds a point where a pointwise bound is
+        checked, `solver.quadrature.quadrature_points`) stands for one spacing of the rule, as its
+        neighbours do, so its pairs are priced like theirs."""
+        w = weights[self.rows]
+        return np.where(w > 0, w, float(np.max(weights, initial=0.0)))
 
     def measure(self, state: PathState) -> np.ndarray:
         """(p,) the constrained quantity at the pairs [SI], signed so that the bound is measure <= limit."""

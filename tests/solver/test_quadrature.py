@@ -31,3 +31,15 @@ def test_a_cubic_splines_peak_acceleration_is_seen_at_the_points():
     assert np.linalg.norm(s(t, 2), axis=1).max() >= peak * (1 - 1e-12)
     tm, _ = quadrature_times(0.0, 2.0, 100)
     assert np.linalg.norm(s(tm, 2), axis=1).max() < peak  # without the knots: the peak is missed
+
+
+def test_a_pointwise_bound_prices_a_knots_pair_like_its_neighbours():
+    """A knot's point adds nothing to an integral (weight 0) but a pointwise bound there is priced by one
+    spacing, as at every other point: the method of multipliers must feel a jolt at a keyframe."""
+    from solver.constraints.base import Constraint
+
+    t, w = quadrature_points(0.0, 1.0, 100, [0.0, 0.333, 1.0])
+    c = Constraint()
+    c.rows = np.arange(len(t))
+    np.testing.assert_allclose(c.pair_weights(w), 0.01, rtol=1e-12)
+    assert abs(w.sum() - 1.0) < 1e-12
