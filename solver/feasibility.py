@@ -230,14 +230,16 @@ def beyond(al: AugmentedLagrangian, constraints, frames: FrameSet, limits=None) 
     state = al.state(SplineBasis(frames.times, al.t), frames.values)
     out = []
     for j, c in enumerate(constraints):
-        v = c.measure(state) - (c.limit if limits is None else limits[j])
+        m, lim = c.measure(state), np.broadcast_to(c.limit if limits is None else limits[j], (c.size,))
+        v = m - lim
         bad = v / c.tolerance > 1.0
         labels = np.asarray(c.labels, object) if len(c.labels) == c.size else np.full(c.size, "", object)
         for label in dict.fromkeys(labels[bad]):
             at = bad & (labels == label)
             i = np.flatnonzero(at)[np.argmax(v[at])]
             t = al.t[c.rows[at]]
-            out.append(Raise(c.name, str(label), float(v[i]), float(al.t[c.rows[i]]), float(t.min()), float(t.max()),
+            amount = float(c.excess(m, lim, np.array([i]))[0])  # [SI] the quantity's own excess
+            out.append(Raise(c.name, str(label), amount, float(al.t[c.rows[i]]), float(t.min()), float(t.max()),
                              int(at.sum()), c.unit, c.scale))
     return out
 

@@ -45,6 +45,14 @@ class AccelerationBound(Constraint):
         a = state.motion.qacc[:, self.dofs]  # (n, j, 3)
         return (((a * a).sum(-1) - self.limits ** 2) / (2.0 * self.limits)).ravel()
 
+    def excess(self, measure, limit, pairs):
+        """|a| - |a|_limit [m/s^2 or rad/s^2] at `pairs`: the smooth form c = (|a|^2 - A^2) / (2 A) inverted,
+        |a| = sqrt(A^2 + 2 A c) (module docstring)."""
+        A = self.limits[self._cols[pairs]]
+        def magnitude(m):
+            return np.sqrt(np.maximum(A * A + 2.0 * A * m[pairs], 0.0))
+        return magnitude(measure) - magnitude(limit)
+
     def pull(self, state, g):
         n = state.motion.qacc.shape[0]
         G = g.reshape(n, -1) / self.limits  # (n, j)

@@ -72,6 +72,12 @@ class Constraint:
         """(p,) c = measure - limit [SI] at the pairs (<= 0: met)."""
         return self.measure(state) - self.limit
 
+    def excess(self, measure: np.ndarray, limit: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+        """(q,) how far the constrained quantity is beyond its limit at `pairs` (q,) [SI], from the measure
+        and limit (p,): measure - limit, unless the measure is a smooth form of the quantity (then the
+        subclass converts, e.g. `solver.constraints.acceleration`)."""
+        return measure[pairs] - limit[pairs]
+
     def pull(self, state: PathState, g: np.ndarray) -> None:
         """Add sum_p g_p dc_p/d(path) to the state's adjoints. g: (p,)."""
         raise NotImplementedError
