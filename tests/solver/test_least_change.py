@@ -313,16 +313,13 @@ def test_new_frame_times_go_to_the_nearest_quadrature_point_off_the_frames():
     np.testing.assert_allclose(got, [0.0125, 0.9975], rtol=0, atol=1e-15)  # 0.5125 is a frame already
 
 
-#: [1] the no-jolt acceptance bound over the constraint's limit (docs/corpus.md: peaks 1.5x the larger of
-#: the plain spline's and the filtered capture's)
-JOLT_FACTOR = 1.5
-
-
 @pytest.mark.slow
 def test_no_jolt_bounds_hold_at_1000_hz_between_the_quadrature_points(shipped, solved):
-    """The acceleration constraint holds at its 200 Hz quadrature points; between them the path's pelvis
-    and ball-joint accelerations, by MuJoCo's differences of the path sampled every 1 ms (independent of
-    the solver's derivatives), stay within the acceptance bound of the same columns."""
+    """The acceleration constraint holds at its 200 Hz quadrature points and at every frame (the keyframes
+    and the variable frames are points: `solver.quadrature.quadrature_points`, `on_points`); between them
+    the path's pelvis and ball-joint accelerations, by MuJoCo's differences of the path sampled every 1 ms
+    (independent of the solver's derivatives), stay within the bound as posed (its limit and 5 %
+    tolerance): a cubic's acceleration is linear between frames."""
     model = shipped[0]
     lc, sol, _ = solved
     (acc,) = [c for c in lc.al.constraints if c.name == "acceleration"]
@@ -335,7 +332,8 @@ def test_no_jolt_bounds_hold_at_1000_hz_between_the_quadrature_points(shipped, s
     a = np.diff(v, axis=0) / dt  # (n - 2, nv) at the samples 1..n-2
     a[:, 0:3] = (q[2:, 0:3] - 2 * q[1:-1, 0:3] + q[:-2, 0:3]) / dt ** 2  # the pelvis: x'' in the world frame
     peaks = np.linalg.norm(a[:, acc.dofs], axis=2).max(axis=0)  # (j,)
-    assert np.all(peaks <= JOLT_FACTOR * acc.limits), dict(zip(acc.labels[: len(acc.dofs)], peaks / acc.limits))
+    ratios = dict(zip(acc.labels[: len(acc.dofs)], peaks / acc.limits))
+    assert np.all(peaks <= acc.limits + acc.tolerance[: len(acc.dofs)]), ratios  # the bound as posed, 5 %
 
 
 def test_refinement_checks_are_recorded_where_they_chose_frames(shipped):
