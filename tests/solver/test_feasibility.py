@@ -198,3 +198,20 @@ def test_a_bound_of_your_own_through_the_public_api(standing):
     assert sol.certificate[0].amount == pytest.approx(0.005, abs=1e-9) and sol.status is Status.INFEASIBLE
     with pytest.raises(solver.InputError, match="not a solver.Constraint"):
         solver.solve_problem(solver.build_problem(model, solver.ProblemSpec(still, bounds=(lambda t: 3.0,))))
+
+
+def test_a_bound_at_a_keyframe_is_sought_there(standing):
+    """A key at 0.4 s, between the midpoints (a quadrature point of weight 0, `quadrature_points`), leaves the
+    pelvis height free, and a bound holds it 5 cm under the still height there: a path meets it, so the
+    solve meets it and raises nothing (a pair of weight 0 would be checked but never priced, and raised)."""
+    model, still, z0 = standing
+    mask = still.mask.copy()
+    mask[1, 2] = False
+    lc = build_least_change(model, replace(still, times=np.array([0.0, 0.4, 0.8]), mask=mask), rate=200.0)
+    old = lc.al
+    assert np.min(np.abs(old.t - 0.4)) == 0.0  # the key is a point
+    bound = PelvisHeight("top", old.t, 0.4, +1, z0 - 0.05, SCHEDULE)
+    lc = replace(lc, al=AugmentedLagrangian(old.change, [bound], old.tmap, old.engine, old.d0))
+    sol = solve_least_change(lc, LeastChangeOptions())
+    assert sol.status is Status.CONVERGED and sol.certificate == ()
+    assert float(sol.frames.path(np.array([0.4]))[0, 2]) <= z0 - 0.05 + TOL
