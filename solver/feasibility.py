@@ -24,6 +24,11 @@ violations is minimized instead):
    of redundant manipulators: generalizing the task-priority framework to inequality tasks", IEEE T-RO 27,
    2011): a lower level never costs a higher one anything.
 
+F is not convex in the frames, so a search reaches a least violation of its start's basin. When the
+keyframes came from a capture, the capture is a second start (`capture_start`: a path through the
+keyframes at the search's finest spacing): both are searched, every constraint at once and level by
+level (each level from the paths that meet the limits certified above it), and the lower F is certified.
+
 The path reached meets every certified limit, so the least change that follows is feasible and starts
 on a feasible path. The certificate (`Certificate.raises`) says per constraint and column (a site, a
 joint) by how much [SI], where and over which span the limit was raised.
@@ -40,7 +45,7 @@ from solver.lagrangian import GAMMA, AugmentedLagrangian, solve_subproblem
 from solver.optimize import Status
 from solver.spline_basis import SplineBasis
 
-__all__ = ["Certificate", "Raise", "beyond", "least_violation", "on_points", "with_frames"]
+__all__ = ["Certificate", "Raise", "beyond", "capture_start", "least_violation", "on_points", "with_frames"]
 
 
 
@@ -81,12 +86,14 @@ class Certificate:
         raises: (Raise, ...) per constraint and column raised; () when the problem is feasible.
         frames: the path that reaches the least violation (it meets every certified limit).
         n_evals: evaluations spent. status: CONVERGED, or the budget or stop request that ended it early.
+        start: which start `frames` descends from (0: the given frames, 1: the second, `least_violation`).
     """
 
     raises: tuple = ()
     frames: FrameSet | None = field(default=None, repr=False)
     n_evals: int = 0
     status: Status = Status.CONVERGED
+    start: int = 0
 
     @property
     def unmet(self) -> dict:
@@ -255,8 +262,57 @@ def _raise(al: AugmentedLagrangian, constraints, frames: FrameSet) -> list[Raise
     return out
 
 
+def capture_start(plain: FrameSet, capture, points: np.ndarray, gap: float, quat_slots) -> FrameSet:
+    """The capture the keyframes came from as a path through them: a second start for `least_violation`.
+
+    The keyframes were taken from the capture, so it passes through (or within its own sampling of) every
+    one: with variable frames on the quadrature points, `gap` apart as the search's finest spacing, valued
+    on the capture (linear between its samples, each quaternion made unit and put on the plain spline's
+    hemisphere), the keyframes fixed as they are, it is a path of the search's space whose violation is
+    about the capture's own, reached by no descent from the least change's path.
+
+    Args:
+        plain: FrameSet (k, nq) of the keyframes. capture: (times (n,) [s], qpos (n, nq)), increasing times.
+        points: (p,) [s] the quadrature points, increasing. gap: [s] the least spacing of two frames.
+        quat_slots: (s, 4) the layout's quaternion slots.
+    Returns:
+        FrameSet (k + r, nq): the keyframes and r variable frames.
+    """
+    keys, new = plain.times, []
+    last = keys[0]
+    for t in points:
+        i = int(np.searchsorted(keys, t, side="right"))
+        last = max(last, keys[i - 1])
+        # [s] round-off: the points are sums of the same float step, so a spacing of exactly gap may read 1 ulp under
+        if i < len(keys) and t - last >= gap - 1e-12 and keys[i] - t >= gap - 1e-12:
+            new.append(t)
+            last = t
+    frames = plain.with_variable_frames(np.array(new))
+    times, qpos = (np.asarray(a, float) for a in capture)
+    sampled = np.stack([np.interp(frames.times, times, q) for q in qpos.T], axis=1)
+    for slot in quat_slots:  # unit, on the side of the plain spline's quaternion at the same time
+        q = sampled[:, slot] / np.linalg.norm(sampled[:, slot], axis=1, keepdims=True)
+        sampled[:, slot] = q * np.where(np.sum(q * frames.values[:, slot], axis=1) < 0, -1.0, 1.0)[:, None]
+    values = frames.values.copy()
+    values[frames.free] = sampled[frames.free]
+    return FrameSet(frames.times, values, frames.fixed, frames.is_keyframe)
+
+
+def _meets(al: AugmentedLagrangian, constraints, frames: FrameSet) -> bool:
+    """Whether every pair of `constraints` is within its tolerance on the path of `frames`."""
+    state = al.state(SplineBasis(frames.times, al.t), frames.values)
+    return all(float(s.max(initial=0.0)) <= 1.0 for s in _scaled(constraints, state))
+
+
+def _violation(al: AugmentedLagrangian, constraints, frames: FrameSet) -> float:
+    """F over `constraints` (module docstring) on the path of `frames`."""
+    eal = AugmentedLagrangian(al.change, [], al.tmap, al.engine, al.d0, elastic=constraints, base=al.base)
+    return eal.evaluate(SplineBasis(frames.times, al.t), frames.values, grad=False)[0]
+
+
 def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, min_gap: float, ftol_rel: float,
-                    per_level: int, max_evals: int = 0, max_time_s: float = 0.0, should_stop=None) -> Certificate:
+                    per_level: int, second: FrameSet | None = None, max_evals: int = 0, max_time_s: float = 0.0,
+                    should_stop=None) -> Certificate:
     """The least violation of the constraints over the paths through the keyframes (module docstring).
 
     Args:
@@ -264,24 +320,32 @@ def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, mi
             met are raised in place, `Constraint.limit`). frames: the start FrameSet (m, nq).
         quat_slots: (s, 4) the layout's quaternion slots. min_gap: [s] no two frames closer.
         ftol_rel: each L-BFGS solve's relative tolerance. per_level: the most
-            penalty raises per level and frame set. max_evals, max_time_s, should_stop: the solve's budget
-            (0: none; spent, the Certificate's status says so).
+            penalty raises per level and frame set. second: None, or a second start FrameSet (m', nq)
+            through the same keyframes (`capture_start`): each level is searched from both paths that meet
+            the limits certified so far, and the lower F is certified. max_evals, max_time_s, should_stop:
+            the solve's budget (0: none; spent, the Certificate's status says so).
     Returns:
         Certificate: what was raised, the path that reaches it, the evaluations spent.
     """
     budget = _Budget(max_evals, max_time_s, should_stop)
     cons = list(al.constraints)
     kw = dict(budget=budget, min_gap=min_gap, ftol_rel=ftol_rel, per_level=per_level)
-    frames = _elastic_solve(al, cons, [], frames, quat_slots, **kw)
-    state = al.state(SplineBasis(frames.times, al.t), frames.values)
-    if budget.status is not Status.CONVERGED or all(float(s.max(initial=0.0)) <= 1.0 for s in _scaled(cons, state)):
-        return Certificate((), frames, budget.evals, budget.status)
+    paths = [(0, _elastic_solve(al, cons, [], frames, quat_slots, **kw))]
+    if second is not None and not _meets(al, cons, paths[0][1]):  # the second start only where the first falls short
+        paths.append((1, _elastic_solve(al, cons, [], second, quat_slots, **kw)))
+    met = [(i, p) for i, p in paths if _meets(al, cons, p)]
+    if budget.status is not Status.CONVERGED or met:
+        i, p = (met or paths)[0]
+        return Certificate((), p, budget.evals, budget.status, i)
     raises: list[Raise] = []
     for level in sorted({c.priority for c in cons}, reverse=True):
         objective = [c for c in cons if c.priority == level]
         held = [c for c in cons if c.priority > level]
-        frames = _elastic_solve(al, objective, held, frames, quat_slots, **kw)
+        paths = [(i, _elastic_solve(al, objective, held, p, quat_slots, **kw)) for i, p in paths
+                 if _meets(al, held, p)]
         if budget.status is not Status.CONVERGED:
             break
-        raises += _raise(al, objective, frames)
-    return Certificate(tuple(raises), frames, budget.evals, budget.status)
+        # the lower F is certified; the other path goes on while it meets what that certifies
+        paths.sort(key=lambda ip: _violation(al, objective, ip[1]))
+        raises += _raise(al, objective, paths[0][1])
+    return Certificate(tuple(raises), paths[0][1], budget.evals, budget.status, paths[0][0])

@@ -35,7 +35,7 @@ from solver.constraint_set import figure_constraints
 from solver.constraints.forces import figure_forces
 from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
-from solver.feasibility import Certificate, beyond, least_violation, on_points, with_frames
+from solver.feasibility import Certificate, beyond, capture_start, least_violation, on_points, with_frames
 from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.inverse_dynamics import InverseDynamics
@@ -122,6 +122,8 @@ class LeastChange:
         spline through the keyframes (the reference motion). al: the AugmentedLagrangian (D, the
         constraints, multipliers, penalty). relaxations: the `solver.constraint_set.Relaxation`s the
         keyframes force. knots: (r,) [s] times where a contact starts or ends (frames go there first).
+        capture: None, or (times (n,) [s], qpos (n, nq)) the capture the keyframes came from (the least
+        violation's second start, `solver.feasibility.capture_start`).
     """
 
     model: object = field(repr=False)
@@ -131,6 +133,7 @@ class LeastChange:
     al: AugmentedLagrangian = field(repr=False)
     relaxations: tuple = ()
     knots: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    capture: tuple | None = field(default=None, repr=False)
 
 
 def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = LeastChangeOptions.rate,
@@ -186,7 +189,7 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)
     al = AugmentedLagrangian(change, constraints, tmap, engine, d0)
     knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
-    return LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots)
+    return LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots, capture)
 
 
 def _own_bound(make, t: np.ndarray):
@@ -328,10 +331,12 @@ def _subproblem(al, frames: FrameSet, basis, quat, o: LeastChangeOptions, start:
 
 
 def _after_search(frames: FrameSet, cert, quat) -> FrameSet:
-    """Where the least change goes on after the search: where it raised a limit, from its own path with the
-    frames the search added (which do not move the path; the search's path, meeting every certified limit,
-    is the fallback); where everything can be met, from the search's path, which meets it all."""
-    if cert.raises:
+    """Where the least change goes on after the search: where it raised a limit from the least change's own
+    path, from that path with the frames the search added (which do not move the path; the search's path,
+    meeting every certified limit, is the fallback); where everything can be met, or the search's path
+    descends from the capture (`solver.feasibility.capture_start`, a basin the own path is not in), from the
+    search's path, which meets every certified limit."""
+    if cert.raises and cert.start == 0:
         return with_frames(frames, np.setdiff1d(cert.frames.times, frames.times), quat)
     return cert.frames
 
@@ -375,8 +380,10 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     # the search splits segments down to two quadrature intervals, the shortest whose acceleration (linear in
     # time on a cubic segment) two of its points still fix, so that the bounds hold between the points too;
     # min_gap is the least change's refinement's, not a limit of the paths the search may try
-    cert = least_violation(lc.al, frames, lc.layout.quat_slots, min_gap=2.0 / o.rate, ftol_rel=o.ftol_rel,
-                           per_level=o.per_level, max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
+    gap, quat = 2.0 / o.rate, lc.layout.quat_slots
+    second = None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat)
+    cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
+                           max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
                            max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop)
     if progress:
         progress("certify", {"round": k, "frames": cert.frames.count, "raised": cert.unmet,

@@ -200,6 +200,57 @@ def test_a_bound_of_your_own_through_the_public_api(standing):
         solver.solve_problem(solver.build_problem(model, solver.ProblemSpec(still, bounds=(lambda t: 3.0,))))
 
 
+class TwoWells(Constraint):
+    """A bound no path meets, with two local least violations: c(z) = min((z - za)^2 / S + ea, (z - zb)^2 / S
+    + eb) <= 0 at t* (z the pelvis height [m], S = 1 cm): its violation is least, ea, at z = za and, less,
+    eb at z = zb, with a ridge of 6 cm between (half the 10 cm between the wells, squared over S)."""
+
+    unit, scale, tolerance, name, priority, S = "m", 1.0, TOL, "wells", LIMIT, 0.01
+
+    def __init__(self, t_points, za, ea, zb, eb):
+        self.rows = np.array([int(np.argmin(np.abs(t_points - T_STAR)))])
+        self.labels, self.limit = np.array(["pelvis"], object), np.zeros(1)
+        self.wells = ((za, ea), (zb, eb))
+
+    def _each(self, state):
+        z = state.Y[self.rows, 2]
+        return np.stack([(z - w) ** 2 / self.S + e for w, e in self.wells])
+
+    def measure(self, state):
+        return self._each(state).min(axis=0)
+
+    def pull(self, state, g):
+        z, each = state.Y[self.rows, 2], self._each(state)
+        w = np.array([w for w, _ in self.wells])[np.argmin(each, axis=0)]
+        np.add.at(state.gY[:, 2], self.rows, g * 2.0 * (z - w) / self.S)
+
+
+def test_the_capture_start_certifies_the_lower_of_two_local_least_violations(standing):
+    """The least change's path stands in the well of 5 mm (z0), the capture the keys came from dips the
+    pelvis into the well of 2 mm 10 cm lower at t*: the certificate is the capture's 2 mm, and the path
+    returned reaches it; without the capture the search from the least change's path alone stays at 5 mm."""
+    model, still, z0 = standing
+    mask = still.mask.copy()
+    mask[1, 2] = False  # the middle key leaves the pelvis height free
+    lc = build_least_change(model, replace(still, mask=mask), rate=200.0)
+    old = lc.al
+    lc = replace(lc, al=AugmentedLagrangian(old.change, [TwoWells(old.t, z0, 0.005, z0 - 0.1, 0.002)], old.tmap,
+                                           old.engine, old.d0))
+    times = np.linspace(0.0, 0.8, 97)  # a 120 Hz capture through the keys: the pelvis 10 cm lower at t*
+    qpos = np.tile(still.values[0], (len(times), 1))
+    qpos[:, 2] -= 0.1 * np.sin(np.pi * times / 0.8) ** 2 / np.sin(np.pi * T_STAR / 0.8) ** 2
+    amounts = {}
+    for capture in (None, (times, qpos)):
+        sol = solve_least_change(replace(lc, capture=capture), LeastChangeOptions())
+        (raised,) = sol.certificate
+        amounts[capture is None] = raised.amount
+        assert sol.status is Status.INFEASIBLE and raised.constraint == "wells"
+        state = lc.al.state(SplineBasis(sol.frames.times, lc.al.t), sol.frames.values)
+        assert lc.al.constraints[0].values(state)[0] <= raised.amount + TOL  # the path reaches the certificate
+    assert amounts[False] == pytest.approx(0.002, abs=TOL)  # the capture's well
+    assert amounts[True] == pytest.approx(0.005, abs=TOL)  # the premise: one start alone stays in its well
+
+
 def test_a_bound_at_a_keyframe_is_sought_there(standing):
     """A key at 0.4 s, between the midpoints (a quadrature point of weight 0, `quadrature_points`), leaves the
     pelvis height free, and a bound holds it 5 cm under the still height there: a path meets it, so the
