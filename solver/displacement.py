@@ -14,9 +14,8 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
   pose), and the constraints are the figure's (`solver.constraint_set`) with the capture's contacts and
   flights; the capture is their witness (the no-jolt and effort bounds against the 6 Hz capture).
 * **The pins** are the displacement's keyframes, d = 0 exactly: the clip's first and last frame and any
-  the user names (each on the capture frame nearest it). Its variable frames start at the contacts'
-  touch-downs and lift-offs and one per segment, and go where the Euler-Lagrange residual says, as for
-  keyframes. Where no constraint asks for a change D's minimum is d = 0: the capture comes back exactly.
+  the user names (each on the capture frame nearest it); every other capture frame is a variable frame
+  (below). Where no constraint asks for a change D's minimum is d = 0: the capture comes back exactly.
 * **Quaternions are displaced additively in R^4.** A displacement frame's quaternion slot holds a unit
   quaternion p moved on its sphere (`solver.manifold`, three rotation variables, as a frame of a keyed
   path) around a fixed anchor e, the clip's mean orientation of that joint, and the displacement is
@@ -24,6 +23,13 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
   joint's inertia, and the sum c + d is a quaternion MuJoCo normalizes (the unit-norm bound keeps it
   near unit, as between the frames of a keyed path). Limit: a joint whose captured orientation turns
   through 180 degrees from its mean (a root turning round) cannot be displaced about one axis there.
+* **The displacement has a frame at every capture frame** (`LeastChange.grid`), each a quadrature
+  point: d lives in the capture's own spline space (c + d is the natural spline through its samples,
+  `clean_solution`), its acceleration, as c's, linear between frames, so a bound met at the frames
+  holds between them; and d can undo the capture's frame-to-frame slide as a per-frame clean does. On
+  frames the refinement placed (at least two points apart, off the capture's frames) the least
+  violation certified a walk's (16_23) slide 24.5 mm out of reach; on the capture's frames every
+  constraint is met, and the solve is faster.
 * The solver sees the displacement's frames; the capture enters as a fixed base motion at the
   quadrature points (`AugmentedLagrangian.base`: the path is c + d with its first and second
   derivatives), so every constraint and gradient is the keyed path's, with the same dPath/dP.
@@ -172,7 +178,7 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     plain = FrameSet(times[at], zero, fixed, is_pin[at])
     t0, t1 = float(times[0]), float(times[-1])
     check_points(t0, t1, rate)
-    t, w = quadrature_points(t0, t1, rate, plain.times)  # the pins and ends are points too
+    t, w = quadrature_points(t0, t1, rate, times)  # every capture frame a point (weight 0), the pins among them
     reference = ReferenceMotion.from_samples(model, times, qpos, t, w)
     engine = InverseDynamics(model, figure.contact_sites)  # the effort bound of a capture needs the torques
     schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
@@ -187,7 +193,7 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     al = AugmentedLagrangian(change, constraints, tmap, engine, d0, base=(reference.qpos - anchor, Y1, Y2))
     _slide_limits(al, plain, feet)
     knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
-    lc = LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots)
+    lc = LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots, grid=times)
     return Displacement(lc, times, qpos, anchor, pinned, capture_frames)
 
 

@@ -124,6 +124,9 @@ class LeastChange:
         keyframes force. knots: (r,) [s] times where a contact starts or ends (frames go there first).
         capture: None, or (times (n,) [s], qpos (n, nq)) the capture the keyframes came from (the least
         violation's second start, `solver.feasibility.capture_start`).
+        grid: (g,) [s] quadrature points that are every one a variable frame from the start, the finest
+        path of a fixed spacing (None: frames start at the contacts' ends and in every segment and are
+        added where the refinement says). A clean's is the capture's frames (`solver.displacement`).
     """
 
     model: object = field(repr=False)
@@ -134,6 +137,7 @@ class LeastChange:
     relaxations: tuple = ()
     knots: np.ndarray = field(default_factory=lambda: np.zeros(0))
     capture: tuple | None = field(default=None, repr=False)
+    grid: np.ndarray | None = None
 
 
 def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=None, rate: float = LeastChangeOptions.rate,
@@ -208,7 +212,10 @@ def _own_bound(make, t: np.ndarray):
 
 
 def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
-    """The plain spline's frames with variable frames at the contacts' ends and in every segment."""
+    """The plain spline's frames with variable frames at the contacts' ends and in every segment; on a
+    `grid`, at every time of it (the finest path it allows: a clean's displacement at every capture frame)."""
+    if lc.grid is not None:
+        return with_frames(lc.plain, on_points(lc.grid, lc.grid, lc.plain), lc.layout.quat_slots)
     frames = lc.plain.with_variable_frames(on_points(knot_hint_times(lc.plain, lc.knots, min_gap), lc.al.t, lc.plain))
     mids = 0.5 * (frames.times[:-1] + frames.times[1:])
     return with_frames(frames, on_points(mids[np.diff(frames.times) >= 2 * min_gap], lc.al.t, frames), lc.layout.quat_slots)

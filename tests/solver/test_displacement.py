@@ -7,6 +7,8 @@ constraints, on hand-made captures of the toy figure whose answers are known.
 * The same capture with the pelvis dipped 2 cm (its feet 2 cm into the floor) over 0.3 s comes back with
   its feet out of the floor (penetration within the 1 mm tolerance, measured by MuJoCo's own kinematics),
   and unchanged (within 1 mm) far from the dip; pinned frames are the capture's exactly.
+* The displacement has a frame at every capture frame, each a quadrature point: the cleaned clip between
+  frames is c + d exactly.
 * Phi's gradient with the capture as the base motion agrees with central finite differences.
 """
 import mujoco
@@ -17,6 +19,7 @@ from solver.displacement import CORRECTION_TIME, anchors, build_displacement, cl
 from solver.errors import InputError
 from solver.layout import StateLayout
 from solver.least_change import LeastChangeOptions
+from solver.spline import interpolate
 from solver.spline_basis import SplineBasis
 
 #: [Hz] the hand-made capture's frame rate
@@ -107,6 +110,19 @@ def _bodies(model, qpos) -> np.ndarray:
         mujoco.mj_kinematics(model, data)
         out[i] = data.xpos
     return out
+
+
+def test_the_displacement_lives_on_the_capture_frames(dipped):
+    """Every capture frame is a frame of d and a quadrature point, so c + d is a cubic spline on the
+    capture's knots: the cleaned clip's natural spline through its frames is c + d between them too (the
+    two computed independently: c and d each interpolated on its own frames), and a bound on acceleration
+    (linear between knots) met at the points holds between them."""
+    t, q, disp, sol, clean = dipped
+    np.testing.assert_array_equal(np.intersect1d(sol.frames.times, t), t)
+    assert np.min(np.abs(disp.lc.al.t[None, :] - t[:, None]), axis=1).max() <= 1e-9
+    fine = np.linspace(t[0], t[-1], 1001)
+    direct = interpolate(t, q, fine, 0) + sol.frames.path(fine) - disp.anchor
+    np.testing.assert_allclose(clean.frames.path(fine), direct, rtol=0, atol=1e-9)
 
 
 def test_pins_hold_the_capture_exactly(dipped):
