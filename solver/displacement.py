@@ -26,10 +26,8 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
 * **The displacement has a frame at every capture frame** (`LeastChange.grid`), each a quadrature
   point: d lives in the capture's own spline space (c + d is the natural spline through its samples,
   `clean_solution`), its acceleration, as c's, linear between frames, so a bound met at the frames
-  holds between them; and d can undo the capture's frame-to-frame slide as a per-frame clean does. On
-  frames the refinement placed (at least two points apart, off the capture's frames) the least
-  violation certified a walk's (16_23) slide 24.5 mm out of reach; on the capture's frames every
-  constraint is met, and the solve is faster.
+  holds between them; and d can undo the capture's frame-to-frame slide as a per-frame clean does,
+  which frames two or more points apart, off the capture's frames, cannot.
 * The solver sees the displacement's frames; the capture enters as a fixed base motion at the
   quadrature points (`AugmentedLagrangian.base`: the path is c + d with its first and second
   derivatives), so every constraint and gradient is the keyed path's, with the same dPath/dP.
