@@ -30,8 +30,9 @@ there; the problem is made well posed instead of excused:
 * Where a full keyframe breaks a height bound (a keyed toe below the floor, a keyed heel 2 cm up on
   its support), the plain spline through the keyframes breaks it on an interval around the keyframe
   (its excursion: the quadrature points of that site around the keyframe where it breaks it). There the
-  limit becomes the plain spline's own value: the path may do better, never worse, and the plain spline
-  meets those limits. Where a keyframe holds a foot up inside a contact, the planted limit (a mean over
+  limit becomes the plain spline's own value, but no more than the keyframe's own (a path through the
+  keyframe can leave it at the keyed value; the plain spline often dips deeper beside it): the path may
+  do better, never worse than the keyframe forces. Where a keyframe holds a foot up inside a contact, the planted limit (a mean over
   the contact) becomes the mean height of a known path through the keyframes over the contact: the
   capture they came from, else the plain spline (its witness: a path that meets it).
 * Two full keyframes dt apart in one foot contact that hold its support site a distance d apart along
@@ -202,7 +203,8 @@ def _run(values: np.ndarray, j: int) -> slice:
 
 def _relax_heights(constraints, state, plain, model, sites, support, radii, flights) -> list[Relaxation]:
     """Raise the pointwise limits (penetration, flight, ground) a full keyframe breaks by more than the
-    tolerance to the plain spline's own values on its excursion (module docstring); the reports. The
+    tolerance to the plain spline's own values on its excursion, at most the keyframe's own (module
+    docstring); the reports. The
     keyframe's value is the plain spline's at the pair nearest it (`Penetration`'s pairs stand for the
     intervals between quadrature points, at their midpoints); every time series of the
     same site (and surface) is relaxed on its own run of broken pairs around the keyframe."""
@@ -228,16 +230,19 @@ def _relax_heights(constraints, state, plain, model, sites, support, radii, flig
                 if abs(ptimes[near] - tk) > half or at_key <= c.tolerance:
                     continue  # no pair at the keyframe, or the keyframe meets the bound
                 amount = float(at_key)
-                spans = [_relax_run(c, v, ptimes, in_g[c.series[in_g] == key], tk) for key in np.unique(c.series[in_g])]
+                spans = [_relax_run(c, v, ptimes, in_g[c.series[in_g] == key], tk, amount)
+                         for key in np.unique(c.series[in_g])]
                 spans = [sp for sp in spans if sp is not None]
                 out.append(Relaxation(c.name, str(c.labels[near]), int(k), min(a for a, _ in spans),
                                       max(b for _, b in spans), amount))
     return out
 
 
-def _relax_run(c, v: np.ndarray, ptimes: np.ndarray, pairs: np.ndarray, tk: float):
-    """Raise the limit of one time series' run of broken pairs around time tk to the values there (v set
-    to 0 on it); returns the run's (start, end) [s], or None when the pair nearest tk is not broken."""
+def _relax_run(c, v: np.ndarray, ptimes: np.ndarray, pairs: np.ndarray, tk: float, forced: float):
+    """Raise the limit of one time series' run of broken pairs around time tk by the values there, at most
+    `forced` [SI] (what the keyframe itself breaks the bound by: a path through it need break it by no more
+    around it, leaving it at the keyed value; v set to 0 on the run); returns the run's (start, end) [s],
+    or None when the pair nearest tk is not broken."""
     pairs = pairs[np.argsort(c.rows[pairs], kind="stable")]
     rows, tp = c.rows[pairs], ptimes[pairs]
     i = int(np.argmin(np.abs(tp - tk)))
@@ -249,7 +254,7 @@ def _relax_run(c, v: np.ndarray, ptimes: np.ndarray, pairs: np.ndarray, tk: floa
     while hi < len(rows) - 1 and rows[hi + 1] == rows[hi] + 1 and v[pairs[hi + 1]] > 0:
         hi += 1
     at = pairs[lo:hi + 1]
-    c.limit[at] = c.limit[at] + v[at]
+    c.limit[at] = c.limit[at] + np.minimum(v[at], forced)
     v[at] = 0.0
     return float(tp[lo]), float(tp[hi])
 
