@@ -26,6 +26,10 @@ prices the slowest change a path pinned at both ends can make (a half sine over 
 displacement as by its acceleration, and every faster change less, so it does not compete with the
 acceleration part anywhere else.
 
+A clean of a capture (`solver.displacement`) gives its own pose metric instead of the diagonal P: the
+mass matrix of the figure with its mass spread equally over its bodies (`pose`), which measures how far
+the body's parts move, as a clean is judged.
+
 Quadrature: the reference's points and weights (uniform, paper after eq. 7).
 """
 from __future__ import annotations
@@ -48,27 +52,33 @@ class MeasureOfChange:
         omega: [rad/s] the pose part's frequency; default pi / T.
         joints: (k,) qvel indices of the articulated joints' rotations (ball and hinge joints), priced
             alike by the pose part; default none (every degree of freedom by its own inertia).
+        pose: None (the diagonal P above), or (n, nv, nv) the pose part's metric at the points, e.g. the
+            bodies' displacement (`solver.reference.body_position_gram`) [kg, kg m, kg m^2 by block].
     """
 
     units = "kg m^2/s^3"
 
     def __init__(self, reference: ReferenceMotion, tmap: TangentMap, omega: float | None = None,
-                 joints: np.ndarray | None = None):
+                 joints: np.ndarray | None = None, pose: np.ndarray | None = None):
         self.ref = reference
         self.tmap = tmap
         self.omega = float(np.pi / reference.duration if omega is None else omega)
         self._qref = reference.qpos[:, tmap.quat_q].transpose(2, 1, 0)  # (4, s, n)
         self._uref = self._qref / np.linalg.norm(self._qref, axis=0)
         self._M = reference.chol @ reference.chol.transpose(0, 2, 1)  # (n, nv, nv) M(q_ref)
-        self._P = np.einsum("nii->ni", self._M).copy()  # (n, nv) the pose part's diagonal P
-        if joints is not None and len(joints):
-            self._P[:, joints] = self._P[:, joints].mean(axis=1, keepdims=True)
+        if pose is None:
+            self._P = np.einsum("nii->ni", self._M).copy()  # (n, nv) the pose part's diagonal P
+            if joints is not None and len(joints):
+                self._P[:, joints] = self._P[:, joints].mean(axis=1, keepdims=True)
+        else:
+            self._P = np.asarray(pose, float)  # (n, nv, nv) the pose part's metric P
         w = reference.weights
         #: (nv, nv) the time-averaged mass matrix sum_i w_i M(q_ref,i) / sum_i w_i [kg m^2]: the
         #: preconditioner's and the refinement's curvature (`solver.lagrangian.Preconditioner`), made once
         self.mbar = np.tensordot(w, self._M, axes=1) / w.sum()
-        #: (nv,) the pose part's diagonal P averaged the same way [kg m^2]
-        self.pbar = w @ self._P / w.sum()
+        #: (nv, nv) the pose part's P averaged the same way [kg m^2]
+        P = self._P if self._P.ndim == 3 else np.einsum("ni,ij->nij", self._P, np.eye(tmap.nv))
+        self.pbar = np.tensordot(w, P, axes=1) / w.sum()
 
     def _pose_difference(self, Y: np.ndarray):
         """(dq (n, nv), q (4, s, n), |q| (s, n)): the tangent-space pose difference from the reference."""
@@ -92,7 +102,7 @@ class MeasureOfChange:
         dq, q, r = self._pose_difference(state.Y)
         X = np.stack([state.motion.qacc - self.ref.qacc, dq], axis=2)  # (n, nv, 2)
         MX = self._M @ X
-        MX[:, :, 1] = self._P * dq
+        MX[:, :, 1] = self._P * dq if self._P.ndim == 2 else np.einsum("nij,nj->ni", self._P, dq)
         w4 = self.omega ** 4
         e = (X * MX).sum(1)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T P dq
         D = float(w @ e[:, 0] + w4 * (w @ e[:, 1]))

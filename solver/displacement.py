@@ -13,6 +13,13 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
 * **The reference motion is the capture** (D measures the change of the capture's own accelerations and
   pose), and the constraints are the figure's (`solver.constraint_set`) with the capture's contacts and
   flights; the capture is their witness (the no-jolt and effort bounds against the 6 Hz capture).
+* **The pose part measures how far the body's parts move** (`solver.reference.equal_mass_matrices`: the
+  mass matrix of the figure with its mass spread equally over its bodies, so every body counts alike, as
+  the field's mean per-joint position error does), and it prices every change slower than the captured
+  movement's own band (`CORRECTION_TIME`). A clean is judged by how far it departs from the capture, and
+  a planted foot's slide can be undone anywhere over its contact: priced by the joint angles alike (the
+  keyed path's pose part), or with a quarter second's correction time, the least change moved a planted
+  foot 12-14 cm sideways on a clip whose capture slides it 4 cm (83_02).
 * **The pins** are the displacement's keyframes, d = 0 exactly: the clip's first and last frame and any
   the user names (each on the capture frame nearest it); every other capture frame is a variable frame
   (below). Where no constraint asks for a change D's minimum is d = 0: the capture comes back exactly.
@@ -54,19 +61,20 @@ from solver.kinematics import TangentMap
 from solver.lagrangian import AugmentedLagrangian
 from solver.layout import StateLayout
 from solver.least_change import STANDARD_GRAVITY, LeastChange, LeastChangeOptions, solve_least_change
-from solver.peak_bounds import filter_capture
+from solver.peak_bounds import CUTOFF_HZ, filter_capture
 from solver.quadrature import check_points, quadrature_points
-from solver.reference import ReferenceMotion
+from solver.reference import ReferenceMotion, equal_mass_matrices
 from solver.solution import Solution
 from solver.spline import interpolate
 
 __all__ = ["CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
            "solve_displacement"]
 
-#: [s] the duration that divides a correction priced by its pose from one priced by its acceleration
-#: (the measure of change's omega = pi / CORRECTION_TIME): a quarter second, `mocap`'s default key spacing
-#: and about half a walking step's stance, so a foot's correction is spread over its contact, not over the clip
-CORRECTION_TIME = 0.25
+#: [s] the duration that divides a correction priced by its pose from one priced by its acceleration (the
+#: measure of change's omega = pi / CORRECTION_TIME = 2 pi CUTOFF_HZ): the band of the captured movement
+#: itself, below the 6 Hz cutoff that the no-jolt bound filters the capture at (Winter 2009). A change
+#: within that band is priced by how far it moves the body's parts, a faster one by its acceleration
+CORRECTION_TIME = 1.0 / (2.0 * CUTOFF_HZ)
 
 #: what a clean asks of a foot in contact: "planted", it slides no more than the pins force (Kovar, Schreiner
 #: & Gleicher, "Footskate cleanup for motion capture editing", SCA 2002: a planted foot stays put), or
@@ -185,7 +193,8 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
                                                   engine, capture=(times, qpos))
     constraints = [_change_bound(c, reference, times, qpos, layout, tmap) if c.name == "acceleration" else c
                    for c in constraints]
-    change = MeasureOfChange(reference, tmap, omega=np.pi / correction_time, joints=layout.articulated_dofs)
+    change = MeasureOfChange(reference, tmap, omega=np.pi / correction_time,
+                             pose=equal_mass_matrices(model, reference.qpos))
     d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)
     Y1, Y2 = interpolate(times, qpos, t, (1, 2))
     al = AugmentedLagrangian(change, constraints, tmap, engine, d0, base=(reference.qpos - anchor, Y1, Y2))

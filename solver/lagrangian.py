@@ -200,7 +200,7 @@ class Preconditioner:
             D = np.array([d for d, _ in members])
             index = np.stack([at for _, at in members], axis=1)  # (f, k)
             lam, V = _pair_basis(K2[np.ix_(F, F)], K0[np.ix_(F, F)])
-            sig, U = _pair_basis(change.mbar[np.ix_(D, D)], np.diag(change.pbar[D]))
+            sig, U = _pair_basis(change.mbar[np.ix_(D, D)], change.pbar[np.ix_(D, D)])
             self.groups.append((index, V, U, 1.0 / np.sqrt(np.outer(lam, sig) + 1.0)))
 
     def apply(self, z: np.ndarray) -> np.ndarray:

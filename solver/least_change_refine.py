@@ -53,7 +53,7 @@ def predicted_decreases(al: AugmentedLagrangian, frames: FrameSet, quat_slots: n
     for c, idx in zip(mids, at):
         if idx.size:
             D = dof[idx]
-            H = K2[c, c] * ch.mbar[np.ix_(D, D)] + np.diag(K0[c, c] * ch.pbar[D])  # D/D0's, as the preconditioner's
+            H = K2[c, c] * ch.mbar[np.ix_(D, D)] + K0[c, c] * ch.pbar[np.ix_(D, D)]  # D/D0's, as the preconditioner's
             d[idx] = -np.linalg.solve(H, g[idx])
     gd = np.array([g[idx] @ d[idx] for idx in at])
     curv = np.zeros(len(mids))

@@ -22,26 +22,20 @@ from solver.kinematics import TangentMap
 from solver.layout import StateLayout
 from solver.spline import interpolate
 
-__all__ = ["ReferenceMotion", "mass_matrix_factors"]
+__all__ = ["ReferenceMotion", "equal_mass_matrices", "mass_matrices", "mass_matrix_factors"]
 
 
-def mass_matrix_factors(model, qpos: np.ndarray) -> np.ndarray:
-    """The lower Cholesky factors of the joint-space mass matrix at each pose (MuJoCo's `mj_crb`).
+def mass_matrices(model, qpos: np.ndarray) -> np.ndarray:
+    """The joint-space mass matrix at each pose (MuJoCo's composite rigid body algorithm, `mj_crb`).
 
     Args:
         model: mujoco.MjModel (not modified). qpos: (n, nq) poses (quaternions normalized here).
     Returns:
-        (n, nv, nv) L with L L^T = M(qpos) [kg, kg m, kg m^2 by block].
+        (n, nv, nv) M(qpos) [kg, kg m, kg m^2 by block].
     Raises:
         InputError: qpos does not fit the model.
     """
-    qpos = np.atleast_2d(np.asarray(qpos, float))
-    if qpos.shape[1] != model.nq:
-        raise InputError(f"qpos has {qpos.shape[1]} components but the model has nq = {model.nq}")
-    layout = StateLayout.from_model(model)
-    q = qpos.copy()
-    for slot in layout.quat_slots:
-        q[:, slot] /= np.linalg.norm(q[:, slot], axis=1, keepdims=True)
+    q = _normalized(model, qpos)
     data = mujoco.MjData(model)
     M = np.zeros((len(q), model.nv, model.nv))
     for i, y in enumerate(q):
@@ -50,7 +44,62 @@ def mass_matrix_factors(model, qpos: np.ndarray) -> np.ndarray:
         mujoco.mj_comPos(model, data)
         mujoco.mj_crb(model, data)
         _full_m(model, data, M[i])
-    return np.linalg.cholesky(M)
+    return M
+
+
+def mass_matrix_factors(model, qpos: np.ndarray) -> np.ndarray:
+    """The lower Cholesky factors of the joint-space mass matrix at each pose (`mass_matrices`).
+
+    Args:
+        model: mujoco.MjModel (not modified). qpos: (n, nq) poses (quaternions normalized here).
+    Returns:
+        (n, nv, nv) L with L L^T = M(qpos) [kg, kg m, kg m^2 by block].
+    Raises:
+        InputError: qpos does not fit the model.
+    """
+    return np.linalg.cholesky(mass_matrices(model, qpos))
+
+
+def equal_mass_matrices(model, qpos: np.ndarray) -> np.ndarray:
+    """The joint-space mass matrix of the figure with its mass spread equally over its bodies, at each pose.
+
+    Every body of mass m_k > 0 is given the figure's mean body mass m / b (b bodies with mass) and its
+    rotational inertia scaled by the same factor (m / b) / m_k, so its radius of gyration is kept:
+    dq^T G dq is then (m / b) times the sum over the bodies of |dx_k|^2 + |dR_k|^2_k, the squared
+    displacement of each body's centre of mass and its rotation weighted by its own radius of gyration.
+    Every body counts alike, as the field's mean per-joint position error (MPJPE: Ionescu et al.,
+    "Human3.6M", TPAMI 36(7), 2014) counts every joint; moving the whole figure costs its mass, as in M.
+    Positive definite wherever M is: every degree of freedom moves some body.
+
+    Args:
+        model: mujoco.MjModel (not modified: a copy is changed). qpos: (n, nq) poses.
+    Returns:
+        (n, nv, nv) G [kg, kg m, kg m^2 by block].
+    Raises:
+        InputError: qpos does not fit the model.
+    """
+    import copy
+
+    equal = copy.deepcopy(model)
+    m = np.asarray(equal.body_mass, float)
+    has = m > 0
+    mean = float(m[has].sum()) / max(int(has.sum()), 1)
+    scale = np.where(has, mean / np.where(has, m, 1.0), 0.0)
+    equal.body_mass[:] = m * scale
+    equal.body_inertia[:] = np.asarray(equal.body_inertia) * scale[:, None]
+    equal.dof_armature[:] = 0.0  # a motor's rotor inertia moves no body
+    return mass_matrices(equal, qpos)
+
+
+def _normalized(model, qpos: np.ndarray) -> np.ndarray:
+    """(n, nq) qpos with its quaternions normalized; InputError where it does not fit the model."""
+    qpos = np.atleast_2d(np.asarray(qpos, float))
+    if qpos.shape[1] != model.nq:
+        raise InputError(f"qpos has {qpos.shape[1]} components but the model has nq = {model.nq}")
+    q = qpos.copy()
+    for slot in StateLayout.from_model(model).quat_slots:
+        q[:, slot] /= np.linalg.norm(q[:, slot], axis=1, keepdims=True)
+    return q
 
 
 def _full_m(model, data, out: np.ndarray) -> None:
