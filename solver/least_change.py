@@ -126,7 +126,8 @@ class LeastChange:
         violation's second start, `solver.feasibility.capture_start`).
         grid: (g,) [s] quadrature points that are every one a variable frame from the start, the finest
         path of a fixed spacing (None: frames start at the contacts' ends and in every segment and are
-        added where the refinement says). A clean's is the capture's frames (`solver.displacement`).
+        added where the refinement says). A clean's is the capture's frames (`solver.displacement`): neither the
+        refinement nor the least violation adds a frame off it (the cleaned clip is written at those frames).
     """
 
     model: object = field(repr=False)
@@ -293,6 +294,9 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
         decreases.append((frames.times.copy(), dec))
         evals += 3
+        if lc.grid is not None:  # a frame at every time of the grid already: the finest path it allows
+            message = f"every constraint met on the grid's {frames.count} frames (refinement estimate {estimate:.3g})"
+            break
         if met and estimate <= o.tol:
             message = f"every constraint met; refinement estimate {estimate:.3g} <= tol {o.tol:g}"
             break
@@ -388,6 +392,7 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     # time on a cubic segment) two of its points still fix, so that the bounds hold between the points too;
     # min_gap is the least change's refinement's, not a limit of the paths the search may try
     gap, quat = 2.0 / o.rate, lc.layout.quat_slots
+    gap = np.inf if lc.grid is not None else gap  # on a grid the paths are the grid's: no segment is split
     second = None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat)
     cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
                            max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
