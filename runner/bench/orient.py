@@ -29,7 +29,6 @@ from solver.errors import InputError
 from solver.paper.orient import default_options, orient
 
 GAPS = (1e-2, 1e-3, 1e-4)
-DEFAULT_SETS = "large_uniform,large_nonuniform,large_nonuniform_b"
 #: our settings, from fast and coarse to slow and accurate: (label, orient keyword arguments). Gauss
 #: quadrature (orient's default) unless a rate is given; one rung keeps the paper's uniform rule to show
 #: what it costs. The optimizer tolerance is part of a setting (in its label), as the resolution is for

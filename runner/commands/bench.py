@@ -29,7 +29,6 @@ import argparse
 from pathlib import Path
 
 from runner.animate_options import default_args, solve_options
-from runner.bench import orient as orient_workload
 from runner.bench.figure import path_figures, time_solves
 from runner.commands import bench_clean, bench_contacts, bench_corpus, bench_speed
 from runner.console import LEGEND, comparison_rows, format_rows
@@ -41,6 +40,9 @@ from solver.constraints.forces import FORCE_TOLERANCE
 from solver.constraints.unit import UNIT_LIMIT
 from solver.errors import InputError
 from solver.metrics import path_metrics
+
+#: the keyframe sets of `bench orient` (runner/bench/sphere_reference/keyframe_sets.py)
+DEFAULT_SETS = "large_uniform,large_nonuniform,large_nonuniform_b"
 
 
 def register(sub) -> None:
@@ -91,7 +93,7 @@ def register(sub) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the options of `dynsplines bench orient` to a parser."""
-    p.add_argument("--sets", default=orient_workload.DEFAULT_SETS,
+    p.add_argument("--sets", default=DEFAULT_SETS,
                    help="comma-separated keyframe sets (runner/bench/sphere_reference/) [the three large sets]")
     p.add_argument("--methods", default="dynsplines,barr92,bspline", help="comma-separated methods")
     p.add_argument("--budget", type=float, default=60.0, help="seconds per baseline and set [60]")
@@ -117,8 +119,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def bench_orient(args) -> int:
     """`dynsplines bench orient` for parsed arguments (see `add_arguments`). Returns 0."""
+    from runner.bench import orient as orient_workload  # scipy.interpolate and .optimize: only for this bench
+
     sets = args.sets
-    if args.tradeoff and sets == orient_workload.DEFAULT_SETS:
+    if args.tradeoff and sets == DEFAULT_SETS:
         sets = "large_nonuniform,moderate"
     chosen = orient_workload.keyframe_sets([s.strip() for s in sets.split(",") if s.strip()])
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
