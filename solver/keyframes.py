@@ -110,8 +110,6 @@ class Keyframes:
         Raises:
             InputError: a fixed quaternion is zero or near zero (|q| < 1e-6); a slot outside 0..nq-1.
         """
-        from scipy.interpolate import make_interp_spline
-
         vals = self.values.copy()
         slots = np.asarray(quat_slots, dtype=int).reshape(-1, 4)
         if slots.size and (slots.min() < 0 or slots.max() >= self.nq):
@@ -139,6 +137,8 @@ class Keyframes:
             elif len(t) == 1:
                 fill = np.full(self.count, y[0])
             else:
+                from scipy.interpolate import make_interp_spline  # partial keyframes only: most runs never pay it
+
                 k = 3 if len(t) >= 4 else 1
                 bc = "natural" if k == 3 else None
                 fill = make_interp_spline(t, y, k=k, bc_type=bc)(self.times)
