@@ -157,6 +157,14 @@ class StaticSurfaces:
         """
         return _box_distance(np.asarray(points, float), self.box_center[b], self.box_rot[b], self.box_half[b])
 
+    def box_depth(self, points: np.ndarray, b: int) -> np.ndarray:
+        """(...,) [m] `box_distance` without its gradient (for searches that compare distances only).
+
+        Args:
+            points: (..., 3) world positions [m]. b: the box's index among the boxes.
+        """
+        return _box_depth(np.asarray(points, float), self.box_center[b], self.box_rot[b], self.box_half[b])
+
     def surface_below(self, points: np.ndarray) -> np.ndarray:
         """Height of the highest static surface under each point (floor planes, tops of boxes).
 
@@ -224,14 +232,25 @@ def _plane_height(pts: np.ndarray, p0: np.ndarray, nrm: np.ndarray) -> np.ndarra
     return p0[2] - (nrm[0] * (pts[..., 0] - p0[0]) + nrm[1] * (pts[..., 1] - p0[1])) / nrm[2]
 
 
-def _box_distance(pts: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The exact signed distance (...,) of (..., 3) points to one box (centre (3,), axes the columns of rot
-    (3, 3), half sizes (3,)) and its gradient (..., 3) (`StaticSurfaces.signed_distances`)."""
+def _box_parts(pts: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(local, q, q+, |q+|, d) of (..., 3) points against one box (`_box_distance`): box coordinates, the
+    excess over the half sizes, its positive part and that part's length, and the signed distance d."""
     local = (pts - center) @ rot
-    sign = np.where(local < 0, -1.0, 1.0)
     q = np.abs(local) - half
     qo = np.maximum(q, 0.0)
     outside = np.sqrt((qo * qo).sum(-1))
-    d = outside + np.minimum(q.max(-1), 0.0)
+    return local, q, qo, outside, outside + np.minimum(q.max(-1), 0.0)
+
+
+def _box_depth(pts: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """The signed distance (...,) alone of `_box_distance`, the same numbers without the gradient."""
+    return _box_parts(pts, center, rot, half)[-1]
+
+
+def _box_distance(pts: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The exact signed distance (...,) of (..., 3) points to one box (centre (3,), axes the columns of rot
+    (3, 3), half sizes (3,)) and its gradient (..., 3) (`StaticSurfaces.signed_distances`)."""
+    local, q, qo, outside, d = _box_parts(pts, center, rot, half)
+    sign = np.where(local < 0, -1.0, 1.0)
     g_local = np.where((outside > 0)[..., None], qo / np.maximum(outside, 1e-300)[..., None], np.eye(3)[np.argmax(q, axis=-1)])
     return d, (g_local * sign) @ rot.T

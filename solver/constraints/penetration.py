@@ -94,30 +94,30 @@ def plane_minimum(C: np.ndarray, point: np.ndarray, normal: np.ndarray) -> tuple
     return np.take_along_axis(cand, best[None], 0)[0], np.take_along_axis(values, best[None], 0)[0]
 
 
-def _golden(C: np.ndarray, a: np.ndarray, b: np.ndarray, distance) -> tuple[np.ndarray, ...]:
+def _golden(C: np.ndarray, a: np.ndarray, b: np.ndarray, depth) -> tuple[np.ndarray, ...]:
     """(u, d, a, b) the lowest point of each curve (power coefficients C (4, q, 3), `_power`) on [a, b] (q,),
     the distance unimodal there, and the final bracket: golden-section search (Kiefer, "Sequential minimax search for a maximum", Proc. AMS 4, 1953), then the
     vertex of the parabola through the best point and its neighbours, which places a smooth minimum to
     third order in the bracket (so that it moves continuously with the curve)."""
     r = 0.5 * (np.sqrt(5.0) - 1.0)
     c1, c2 = b - r * (b - a), a + r * (b - a)
-    f1, f2 = distance(_curve(C, c1))[0], distance(_curve(C, c2))[0]
+    f1, f2 = depth(_curve(C, c1)), depth(_curve(C, c2))
     for _ in range(GOLDEN_STEPS):
         left = f1 <= f2  # the minimum is in [a, c2]: c2 is the new right end, c1 the new inner right point
         a, b = np.where(left, a, c1), np.where(left, c2, b)
         keep, f_keep = np.where(left, c1, c2), np.where(left, f1, f2)
         new = np.where(left, b - r * (b - a), a + r * (b - a))
-        f_new = distance(_curve(C, new))[0]
+        f_new = depth(_curve(C, new))
         c1, c2 = np.where(left, new, keep), np.where(left, keep, new)
         f1, f2 = np.where(left, f_new, f_keep), np.where(left, f_keep, f_new)
-    fa, fb = distance(_curve(C, a))[0], distance(_curve(C, b))[0]
+    fa, fb = depth(_curve(C, a)), depth(_curve(C, b))
     left = f1 <= f2
     x0, x1, x2 = np.where(left, a, c1), np.where(left, c1, c2), np.where(left, c2, b)
     y0, y1, y2 = np.where(left, fa, f1), np.where(left, f1, f2), np.where(left, f2, fb)
     num = (x1 - x0) ** 2 * (y1 - y2) - (x1 - x2) ** 2 * (y1 - y0)
     den = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0)
     vertex = np.where(den != 0, np.clip(x1 - 0.5 * num / np.where(den != 0, den, 1.0), a, b), x1)
-    fv = distance(_curve(C, vertex))[0]
+    fv = depth(_curve(C, vertex))
     return np.where(fv <= y1, vertex, x1), np.minimum(fv, y1), a, b
 
 
@@ -154,7 +154,7 @@ def _kinks(C: np.ndarray, u: np.ndarray, a: np.ndarray, b: np.ndarray, distance)
     return u, d, g
 
 
-def box_minimum(C: np.ndarray, grid: np.ndarray, distance) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def box_minimum(C: np.ndarray, grid: np.ndarray, distance, depth=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(u*, d, grad d) the deepest point of each curve in a box (module docstring): every local minimum
     of the samples is searched within a spacing on each side (`_golden`), the deepest kept and, at a kink
     between two faces, placed exactly (`_kinks`).
@@ -162,11 +162,13 @@ def box_minimum(C: np.ndarray, grid: np.ndarray, distance) -> tuple[np.ndarray, 
     Args:
         C: (4, q, 3) Hermite coefficients [m]. grid: (j,) the sample fractions, 0 and 1 included.
         distance: f(points (q, 3)) -> (d (q,), grad (q, 3)), each curve's point against its own box.
+        depth: f(points (..., 3)) -> d (...,), `distance`'s d alone (the same numbers, cheaper); None: from `distance`.
     Returns:
         u*: (q,). d: (q,) [m]. grad: (q, 3), the combination at a kink (module docstring).
     """
+    depth = depth or (lambda points: distance(points)[0])
     W = _power(C)
-    samples = distance(_curve(W[:, None], np.broadcast_to(grid[:, None], (len(grid), C.shape[1]))))[0]  # (j, q)
+    samples = depth(_curve(W[:, None], np.broadcast_to(grid[:, None], (len(grid), C.shape[1]))))  # (j, q)
     padded = np.pad(samples, ((1, 1), (0, 0)), constant_values=np.inf)
     step = 1.0 / (len(grid) - 1)
     # |d'| <= |q'| <= 3 times the longest leg of the Bezier polygon: a sample's basin reaches at most that
@@ -174,7 +176,7 @@ def box_minimum(C: np.ndarray, grid: np.ndarray, distance) -> tuple[np.ndarray, 
     slope = 3 * np.linalg.norm(np.diff(_bezier(C), axis=0), axis=-1).max(axis=0)
     local = (samples <= padded[:-2]) & (samples <= padded[2:]) & (samples <= samples.min(axis=0) + slope * step)
     j, q = np.nonzero(local)
-    us, ds, a, b = _golden(W[:, q], np.maximum(grid[j] - step, 0.0), np.minimum(grid[j] + step, 1.0), distance)
+    us, ds, a, b = _golden(W[:, q], np.maximum(grid[j] - step, 0.0), np.minimum(grid[j] + step, 1.0), depth)
     us, ds = np.where(samples[j, q] < ds, grid[j], us), np.minimum(samples[j, q], ds)  # a sample deeper: an end
     order = np.lexsort((ds, q))
     first = order[np.r_[True, q[order][1:] != q[order][:-1]]]  # the deepest search of each curve
@@ -249,13 +251,13 @@ class Penetration(Constraint):
         middle = _curve(_power(flat), half)
         for b in range(len(s.box_center)):
             j = len(s.plane_point) + b
-            distance = partial(s.box_distance, b=b)
+            distance, depth = partial(s.box_distance, b=b), partial(s.box_depth, b=b)
             # a curve farther than the tolerance from the box is met with a margin and cannot be active:
             # its midpoint's distance stands for it; the rest are searched
             ub, (db, gb) = half.copy(), distance(middle)
-            near = np.flatnonzero(distance(mean)[0] - reach <= self.tolerance)
+            near = np.flatnonzero(depth(mean) - reach <= self.tolerance)
             if near.size:
-                ub[near], db[near], gb[near] = box_minimum(flat[:, near], self.grid, distance)
+                ub[near], db[near], gb[near] = box_minimum(flat[:, near], self.grid, distance, depth)
             u[..., j], d[..., j], g[..., j, :] = ub.reshape(self.shape[:2]), db.reshape(self.shape[:2]), gb.reshape(self.shape[:2] + (3,))
 
     def measure(self, state):
