@@ -77,8 +77,10 @@ class MeasureOfChange:
         #: preconditioner's and the refinement's curvature (`solver.lagrangian.Preconditioner`), made once
         self.mbar = np.tensordot(w, self._M, axes=1) / w.sum()
         #: (nv, nv) the pose part's P averaged the same way [kg m^2]
-        P = self._P if self._P.ndim == 3 else np.einsum("ni,ij->nij", self._P, np.eye(tmap.nv))
-        self.pbar = np.tensordot(w, P, axes=1) / w.sum()
+        if self._P.ndim == 3:
+            self.pbar = np.tensordot(w, self._P, axes=1) / w.sum()
+        else:
+            self.pbar = np.diag(w @ self._P / w.sum())
 
     def _pose_difference(self, Y: np.ndarray):
         """(dq (n, nv), q (4, s, n), |q| (s, n)): the tangent-space pose difference from the reference."""
