@@ -5,21 +5,16 @@ dq^T G dq must equal sum_k (m / b) |dc_k|^2 + dtheta_k^T (s_k I_k) dtheta_k over
 displacement of body k's centre of mass and dtheta_k its rotation for a step dq, I_k its inertia in the
 world frame and s_k = (m / b) / m_k: computed here from MuJoCo's forward kinematics alone (central
 differences of `xipos` and `ximat` along dq, `mj_integratePos`), not from the composite rigid body
-algorithm the code uses. A translation of the free root moves every body alike: it costs the figure's
-mass, as in the mass matrix; the measure of change with this metric prices a known change of the root by
-that mass.
+algorithm the code uses (the measure of change with this metric on a known change of the root:
+`tests/solver/test_least_change.py`).
 """
 import mujoco
 import numpy as np
 import pytest
 
 import solver
-from solver.change import MeasureOfChange
-from solver.kinematics import TangentMap
 from solver.layout import StateLayout
-from solver.path_state import PathState
-from solver.reference import ReferenceMotion, equal_mass_matrices
-from solver.spline import interpolate
+from solver.reference import equal_mass_matrices
 
 
 @pytest.fixture(scope="module")
@@ -71,29 +66,3 @@ def test_the_metric_is_the_bodies_displacement_with_equal_masses(shipped):
         dq = rng.normal(size=model.nv)
         assert dq @ G @ dq == pytest.approx(_bodies_moved(model, q, dq, 1e-6), rel=1e-6)
     assert np.all(np.linalg.eigvalsh(G) > 0)  # every degree of freedom moves some body
-
-
-def test_moving_the_root_costs_the_figures_mass(shipped):
-    """D of x(t) = A sin(pi (t - t0) / T) added to the root's x with this pose metric: the root's acceleration
-    changes by -A (pi/T)^2 sin(...) and every body moves by x(t), so D = sum_i w_i (a_i^2 + omega^4 x_i^2) m,
-    m the figure's mass, in both parts."""
-    model, keyframes = shipped
-    layout = StateLayout.from_model(model)
-    tmap = TangentMap.from_layout(layout)
-    plain = solver.FrameSet.from_keyframes(keyframes, layout.quat_slots)
-    t0, t1, n = plain.times[0], plain.times[-1], 200
-    h = (t1 - t0) / n
-    t = t0 + h * (np.arange(n) + 0.5)
-    ref = ReferenceMotion.from_frames(model, plain, t, np.full(n, h))
-    omega = 3.0
-    change = MeasureOfChange(ref, tmap, omega=omega, pose=equal_mass_matrices(model, ref.qpos))
-    Y, Y1, Y2 = interpolate(plain.times, plain.values, t, (0, 1, 2))
-    A, k = 0.01, np.pi / (t1 - t0)
-    s = np.sin(k * (t - t0))
-    Y, Y1, Y2 = Y.copy(), Y1.copy(), Y2.copy()
-    Y[:, 0] += A * s
-    Y1[:, 0] += A * k * np.cos(k * (t - t0))
-    Y2[:, 0] += -A * k * k * s
-    mass = float(np.sum(model.body_mass))
-    expected = float(np.sum(h * ((A * k * k * s) ** 2 + omega ** 4 * (A * s) ** 2) * mass))
-    assert change.evaluate(PathState(t, Y, Y1, Y2, tmap), grad=False) == pytest.approx(expected, rel=1e-9)

@@ -16,7 +16,7 @@ from solver.lagrangian import Preconditioner, _variable_dofs
 from solver.layout import StateLayout
 from solver.least_change import LeastChangeOptions, _start_frames, build_least_change, solve_least_change
 from solver.manifold import FrameVariables
-from solver.reference import ReferenceMotion
+from solver.reference import ReferenceMotion, equal_mass_matrices
 from solver.spline_basis import SplineBasis
 
 
@@ -126,10 +126,13 @@ def test_reference_mass_matrix_is_mujocos(shipped):
         np.testing.assert_allclose(ref.chol[i] @ ref.chol[i].T, M, rtol=1e-10, atol=1e-12)
 
 
-def test_measure_of_change_of_a_known_change(shipped):
+@pytest.mark.parametrize("pose", ["diagonal", "equal masses"])
+def test_measure_of_change_of_a_known_change(shipped, pose):
     """D of the reference is 0; moving the root by x(t) = A sin(pi (t - t0) / T) along x changes the
     root's acceleration by a(t) = -A (pi/T)^2 sin(...) and its position by x(t): D = sum_i w_i (a_i^2 +
-    omega^4 x_i^2) M_xx(t_i), M_xx the whole body's mass (a translation of the free root moves every body)."""
+    omega^4 x_i^2) M_xx(t_i), M_xx the whole body's mass (a translation of the free root moves every body),
+    with the pose part diagonal (a keyed path's) or a clean's (`equal_mass_matrices`: every body moved by x,
+    the figure's mass again)."""
     model, keyframes, _ = shipped
     layout = StateLayout.from_model(model)
     tmap = TangentMap.from_layout(layout)
@@ -140,7 +143,8 @@ def test_measure_of_change_of_a_known_change(shipped):
     t = t0 + h * (np.arange(n) + 0.5)
     ref = ReferenceMotion.from_frames(model, plain, t, np.full(n, h))
     omega = 3.0
-    change = MeasureOfChange(ref, tmap, omega=omega)
+    metric = None if pose == "diagonal" else equal_mass_matrices(model, ref.qpos)
+    change = MeasureOfChange(ref, tmap, omega=omega, pose=metric)
     from solver.path_state import PathState
     from solver.spline import interpolate
 
