@@ -304,19 +304,21 @@ class SubproblemResult:
 
 def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, ftol_rel: float,
                      max_evals: int = 0, max_time_s: float = 0.0, should_stop=None, callback=None,
-                     basis=None) -> SubproblemResult:
+                     basis=None, pre: Preconditioner | None = None) -> SubproblemResult:
     """Minimize Phi over the free values of `frames` (L-BFGS in the preconditioned variables).
 
     Args:
         al: AugmentedLagrangian (multipliers and rho as they are). frames: FrameSet to start from.
         quat_slots: (s, 4) the layout's quaternion slots. ftol_rel, max_evals, max_time_s,
             should_stop, callback: as `solver.optimize.minimize`. basis: the frames' SplineBasis.
+        pre: the frames' Preconditioner, or None (built here). It depends on which values of the frames
+            are free and on `al.change`, not on the values: one serves every subproblem on a frame set.
     Returns:
         SubproblemResult (frames at the best iterate).
     """
     t0 = time.perf_counter()
     var = FrameVariables(frames, quat_slots)
-    pre = Preconditioner(var, basis, al.change, al.tmap, al.d0)
+    pre = pre if pre is not None else Preconditioner(var, basis, al.change, al.tmap, al.d0)
 
     start = {}  # Phi and its gradient at z = 0, where first_step_scale and L-BFGS both begin
     evals = [0]

@@ -222,15 +222,22 @@ def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
     return with_frames(frames, on_points(mids[np.diff(frames.times) >= 2 * min_gap], lc.al.t, frames), lc.layout.quat_slots)
 
 
-def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, SplineBasis]:
-    """The starting frames (`_start_frames`) and their SplineBasis; sets the starting penalty rho_0 on
+def _maps(lc: LeastChange, frames: FrameSet) -> tuple[SplineBasis, Preconditioner]:
+    """The SplineBasis and the Preconditioner of a frame set: what every subproblem on it shares (the
+    preconditioner's generalized eigenvectors are O(m^3) in the m frames: a clean's m is every capture frame)."""
+    al = lc.al
+    basis = SplineBasis(frames.times, al.t)
+    return basis, Preconditioner(FrameVariables(frames, lc.layout.quat_slots), basis, al.change, al.tmap, al.d0)
+
+
+def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, tuple[SplineBasis, Preconditioner]]:
+    """The starting frames (`_start_frames`) and their maps (`_maps`); sets the starting penalty rho_0 on
     `lc.al` (`solver.lagrangian.initial_penalty`)."""
     al = lc.al
     frames = _start_frames(lc, min_gap)
-    basis = SplineBasis(frames.times, al.t)
-    var = FrameVariables(frames, lc.layout.quat_slots)
-    al.rho = initial_penalty(al, basis, var, Preconditioner(var, basis, al.change, al.tmap, al.d0))
-    return frames, basis
+    basis, pre = _maps(lc, frames)
+    al.rho = initial_penalty(al, basis, FrameVariables(frames, lc.layout.quat_slots), pre)
+    return frames, (basis, pre)
 
 
 def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = None, *,
@@ -257,14 +264,14 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     o = options or LeastChangeOptions()
     lc = replace(lc, al=lc.al.posed())  # the solve's own multipliers and limits
     al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
-    frames, basis = _start(lc, o.min_gap)
+    frames, (basis, pre) = _start(lc, o.min_gap)
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
     rounds, trace, estimate, decreases, scores = [], [], float("nan"), [], None
     evals, level_its, kind, certified = 0, 0, "start", False
     best = (np.inf, frames)  # (D, frames) of the best path that meets every (certified) limit
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
-        r, spent = _subproblem(al, frames, basis, quat, o, start, evals, should_stop, progress, k)
+        r, spent = _subproblem(al, frames, (basis, pre), quat, o, start, evals, should_stop, progress, k)
         if spent:
             status, message = spent, _stop_message(spent, "", o)
             break
@@ -289,7 +296,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
                 status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
                 break
             best, frames = _better(al, best, cert.frames), _after_search(frames, cert, quat)
-            basis, level_its, kind = SplineBasis(frames.times, al.t), 0, "certify"
+            (basis, pre), level_its, kind = _maps(lc, frames), 0, "certify"
             continue
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
         decreases.append((frames.times.copy(), dec))
@@ -305,7 +312,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             break
         if new.size:
             frames, scores = with_frames(frames, new, quat), dec
-            basis = SplineBasis(frames.times, al.t)
+            basis, pre = _maps(lc, frames)
             level_its, kind = 0, "refine"
     else:
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
@@ -326,17 +333,18 @@ def _multipliers(al: AugmentedLagrangian, frames: FrameSet, basis, progress, k: 
     return worst, worst["value"] <= 1.0 and V <= 1.0
 
 
-def _subproblem(al, frames: FrameSet, basis, quat, o: LeastChangeOptions, start: float, evals: int, should_stop,
+def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, start: float, evals: int, should_stop,
                 progress, k: int):
-    """Subproblem k on `frames` within what is left of the solve's budget: (its SubproblemResult, None), or
-    (None, the status MAX_TIME or MAX_EVALS) when the budget is spent before it."""
+    """Subproblem k on `frames` with their (SplineBasis, Preconditioner) `maps` within what is left of the
+    solve's budget: (its SubproblemResult, None), or (None, the status MAX_TIME or MAX_EVALS) when the
+    budget is spent before it."""
     left, spent = _budget(o, start, evals)
     if spent:
         return None, spent
     if progress:
         progress("round", {"round": k, "frames": frames.count, "variable": frames.n_variable})
     cb = None if progress is None else (lambda n, phi: progress("eval", {"evals": evals + n, "E": phi}))
-    return solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=basis,
+    return solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=maps[0], pre=maps[1],
                             max_evals=o.max_evals - evals if o.max_evals else 0,
                             max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb), None
 
