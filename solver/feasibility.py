@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solver.frames import FrameSet
-from solver.lagrangian import GAMMA, AugmentedLagrangian, solve_subproblem
+from solver.lagrangian import GAMMA, AugmentedLagrangian, frame_maps, solve_subproblem
 from solver.optimize import Status
 from solver.spline_basis import SplineBasis
 
@@ -194,14 +194,14 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
     (Nocedal & Wright, sec. 17.1), each solve from the feasible start so that none wanders into a basin
     where the held pairs cannot be met again."""
     eal = AugmentedLagrangian(al.change, held, al.tmap, al.engine, al.d0, elastic=objective, base=al.base)
-    basis = SplineBasis(frames.times, al.t)
+    basis, pre = frame_maps(al, frames, quat_slots)
     best, best_F = frames, eal.evaluate(basis, frames.values, grad=False)[0]
     while True:
         eal.rho, eal.lam = 1.0, [np.zeros(c.size) for c in held]
         for _ in range(per_level if held else 1):
             if best_F == 0.0 or budget.spent():
                 return best
-            r = solve_subproblem(eal, best, quat_slots, ftol_rel=ftol_rel, basis=basis,
+            r = solve_subproblem(eal, best, quat_slots, ftol_rel=ftol_rel, basis=basis, pre=pre,
                                  **budget.kwargs(lambda: eal.worst <= 1.0))
             budget.evals += r.result.n_evals
             if r.result.status is Status.INTERRUPTED and budget.should_stop is not None and budget.should_stop():
@@ -220,7 +220,7 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
         if new.size == 0:
             return best
         best = with_frames(best, new, quat_slots)
-        basis = SplineBasis(best.times, al.t)
+        basis, pre = frame_maps(al, best, quat_slots)
         best_F = eal.evaluate(basis, best.values, grad=False)[0]
 
 

@@ -36,8 +36,9 @@ from solver.frames import FrameSet
 from solver.manifold import FrameVariables
 from solver.optimize import OptimizeResult, Status, minimize
 from solver.path_state import PathState
+from solver.spline_basis import SplineBasis
 
-__all__ = ["AugmentedLagrangian", "Preconditioner"]
+__all__ = ["AugmentedLagrangian", "Preconditioner", "frame_maps"]
 
 #: [1] Birgin & Martinez (2014), Algorithm 4.1, their values: rho grows by GAMMA when the infeasibility V did
 #: not fall below TAU of its last value
@@ -216,6 +217,19 @@ class Preconditioner:
         for index, V, U, S in self.groups:
             out[index] = (V.T @ g[index] @ U) * S
         return out
+
+
+def frame_maps(al: AugmentedLagrangian, frames: FrameSet, quat_slots) -> tuple:
+    """(SplineBasis, Preconditioner) of a frame set at `al`'s points: what every subproblem on it shares. The
+    preconditioner depends on which values of the frames are free and on the measure of change, not on the
+    values, and building it is O(m^3) in the m frames (a clean's m is every capture frame).
+
+    Args:
+        al: AugmentedLagrangian (its points, measure of change, D0). frames: FrameSet (m, nq).
+        quat_slots: (s, 4) the layout's quaternion slots.
+    """
+    basis = SplineBasis(frames.times, al.t)
+    return basis, Preconditioner(FrameVariables(frames, quat_slots), basis, al.change, al.tmap, al.d0)
 
 
 def _frame_grams(basis, change, d0: float) -> tuple[np.ndarray, np.ndarray]:

@@ -41,7 +41,7 @@ from solver.frames import FrameSet
 from solver.inverse_dynamics import InverseDynamics
 from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
-from solver.lagrangian import AugmentedLagrangian, Preconditioner, initial_penalty, solve_subproblem
+from solver.lagrangian import AugmentedLagrangian, frame_maps, initial_penalty, solve_subproblem
 from solver.layout import StateLayout
 from solver.least_change_refine import doerfler_times, predicted_decreases
 from solver.manifold import FrameVariables
@@ -222,20 +222,12 @@ def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
     return with_frames(frames, on_points(mids[np.diff(frames.times) >= 2 * min_gap], lc.al.t, frames), lc.layout.quat_slots)
 
 
-def _maps(lc: LeastChange, frames: FrameSet) -> tuple[SplineBasis, Preconditioner]:
-    """The SplineBasis and the Preconditioner of a frame set: what every subproblem on it shares (the
-    preconditioner's generalized eigenvectors are O(m^3) in the m frames: a clean's m is every capture frame)."""
-    al = lc.al
-    basis = SplineBasis(frames.times, al.t)
-    return basis, Preconditioner(FrameVariables(frames, lc.layout.quat_slots), basis, al.change, al.tmap, al.d0)
-
-
-def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, tuple[SplineBasis, Preconditioner]]:
-    """The starting frames (`_start_frames`) and their maps (`_maps`); sets the starting penalty rho_0 on
-    `lc.al` (`solver.lagrangian.initial_penalty`)."""
+def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, tuple]:
+    """The starting frames (`_start_frames`) and their maps (`solver.lagrangian.frame_maps`); sets the
+    starting penalty rho_0 on `lc.al` (`solver.lagrangian.initial_penalty`)."""
     al = lc.al
     frames = _start_frames(lc, min_gap)
-    basis, pre = _maps(lc, frames)
+    basis, pre = frame_maps(al, frames, lc.layout.quat_slots)
     al.rho = initial_penalty(al, basis, FrameVariables(frames, lc.layout.quat_slots), pre)
     return frames, (basis, pre)
 
@@ -296,7 +288,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
                 status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
                 break
             best, frames = _better(al, best, cert.frames), _after_search(frames, cert, quat)
-            (basis, pre), level_its, kind = _maps(lc, frames), 0, "certify"
+            (basis, pre), level_its, kind = frame_maps(al, frames, quat), 0, "certify"
             continue
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
         decreases.append((frames.times.copy(), dec))
@@ -312,7 +304,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             break
         if new.size:
             frames, scores = with_frames(frames, new, quat), dec
-            basis, pre = _maps(lc, frames)
+            basis, pre = frame_maps(al, frames, lc.layout.quat_slots)
             level_its, kind = 0, "refine"
     else:
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
