@@ -53,7 +53,7 @@ class MeasureOfChange:
         joints: (k,) qvel indices of the articulated joints' rotations (ball and hinge joints), priced
             alike by the pose part; default none (every degree of freedom by its own inertia).
         pose: None (the diagonal P above), or (n, nv, nv) the pose part's metric at the points, e.g. the
-            bodies' displacement (`solver.reference.body_position_gram`) [kg, kg m, kg m^2 by block].
+            bodies' displacement (`solver.reference.equal_mass_matrices`) [kg, kg m, kg m^2 by block].
     """
 
     units = "kg m^2/s^3"
