@@ -65,13 +65,16 @@ class MeasureOfChange:
         self.omega = float(np.pi / reference.duration if omega is None else omega)
         self._qref = reference.qpos[:, tmap.quat_q].transpose(2, 1, 0)  # (4, s, n)
         self._uref = self._qref / np.linalg.norm(self._qref, axis=0)
-        self._M = reference.chol @ reference.chol.transpose(0, 2, 1)  # (n, nv, nv) M(q_ref)
+        M = reference.chol @ reference.chol.transpose(0, 2, 1)  # (n, nv, nv) M(q_ref)
+        self._MP = None  # with a full pose metric: (n, 2, nv, nv) M and P side by side, one batched product
         if pose is None:
-            self._P = np.einsum("nii->ni", self._M).copy()  # (n, nv) the pose part's diagonal P
+            self._M = M
+            self._P = np.einsum("nii->ni", M).copy()  # (n, nv) the pose part's diagonal P
             if joints is not None and len(joints):
                 self._P[:, joints] = self._P[:, joints].mean(axis=1, keepdims=True)
         else:
-            self._P = np.asarray(pose, float)  # (n, nv, nv) the pose part's metric P
+            self._MP = np.stack([M, np.asarray(pose, float)], axis=1)
+            self._M, self._P = self._MP[:, 0], self._MP[:, 1]  # views: (n, nv, nv) M and the pose metric P
         w = reference.weights
         #: (nv, nv) the time-averaged mass matrix sum_i w_i M(q_ref,i) / sum_i w_i [kg m^2]: the
         #: preconditioner's and the refinement's curvature (`solver.lagrangian.Preconditioner`), made once
@@ -103,8 +106,11 @@ class MeasureOfChange:
         w = self.ref.weights
         dq, q, r = self._pose_difference(state.Y)
         X = np.stack([state.motion.qacc - self.ref.qacc, dq], axis=2)  # (n, nv, 2)
-        MX = self._M @ X
-        MX[:, :, 1] = self._P * dq if self._P.ndim == 2 else np.einsum("nij,nj->ni", self._P, dq)
+        if self._MP is None:
+            MX = self._M @ X
+            MX[:, :, 1] = self._P * dq
+        else:  # (n, 2, nv, nv) @ (n, 2, nv, 1): M (a - a_ref) and P dq in one batched product
+            MX = np.matmul(self._MP, X.transpose(0, 2, 1)[..., None])[..., 0].transpose(0, 2, 1)
         w4 = self.omega ** 4
         e = (X * MX).sum(1)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T P dq
         D = float(w @ e[:, 0] + w4 * (w @ e[:, 1]))

@@ -318,7 +318,7 @@ class SubproblemResult:
 
 def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, ftol_rel: float,
                      max_evals: int = 0, max_time_s: float = 0.0, should_stop=None, callback=None,
-                     basis=None, pre: Preconditioner | None = None) -> SubproblemResult:
+                     basis=None, pre: Preconditioner | None = None, pairs: int | None = None) -> SubproblemResult:
     """Minimize Phi over the free values of `frames` (L-BFGS in the preconditioned variables).
 
     Args:
@@ -327,6 +327,7 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
             should_stop, callback: as `solver.optimize.minimize`. basis: the frames' SplineBasis.
         pre: the frames' Preconditioner, or None (built here). It depends on which values of the frames
             are free and on `al.change`, not on the values: one serves every subproblem on a frame set.
+        pairs: L-BFGS correction pairs (`solver.optimize.minimize`; None: nlopt's default by size).
     Returns:
         SubproblemResult (frames at the best iterate).
     """
@@ -357,7 +358,7 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
         return phi, (None if g is None else c * g)
 
     res = minimize(fun, np.zeros(var.size), algorithm="lbfgs", ftol_rel=ftol_rel, max_evals=max_evals and max_evals - probe,
-                   max_time_s=max_time_s, should_stop=should_stop, callback=callback)
+                   max_time_s=max_time_s, should_stop=should_stop, callback=callback, pairs=pairs)
     res = replace(res, n_evals=evals[0])  # its own and first_step_scale's, the one at z = 0 made once
     out = var.frame_set(pre.apply(c * res.x))
     return SubproblemResult(out, res, time.perf_counter() - t0)

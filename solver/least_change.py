@@ -57,6 +57,11 @@ __all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "solve_lea
 
 #: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
 STANDARD_GRAVITY = 9.80665
+#: L-BFGS correction pairs on a `LeastChange.grid` (every capture frame a variable frame, n ~ 1e4-1e5
+#: variables): the standard limited memory (Nocedal & Wright, Numerical Optimization, 2nd ed., sec. 7.2: "3 to
+#: 20"; L-BFGS-B's default). nlopt's default sizes it by a fixed memory, which its L-BFGS shifts at every
+#: iteration: ~10 ms an iteration at 17,000 variables, as much as an evaluation of a clean's Phi
+GRID_PAIRS = 10
 
 
 @dataclass(frozen=True)
@@ -66,7 +71,9 @@ class LeastChangeOptions:
     Attributes:
         tol: refinement stops when the decrease of Phi it still predicts is at most tol times Phi's
             nonnegative part (`AugmentedLagrangian.shift`) and every constraint is met (dimensionless;
-            1 %: the paper's fig. 5 "good enough" test as a fraction).
+            1 %: the paper's fig. 5 "good enough" test as a fraction). On a `LeastChange.grid`, where no
+            frame can be added, the solve ends when every constraint is met and a subproblem lowered Phi by
+            at most tol of that part (`_progress`).
         min_gap: [s] no two frames the refinement adds closer: 1/48 s, half a frame of 24 fps film; a cubic
             spline through frames closer than that kinks between them (its second derivative grows like
             1/h^2). The least violation (`solver.feasibility`) splits a segment holding a broken pair down to
@@ -239,9 +246,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     violation where a frame set's subproblems end with a constraint broken (module docstring).
 
     Args:
-        lc: from `build_least_change` (not modified: the solve's multipliers and the limits it raises where
-            the keyframes leave them out of reach, `solver.feasibility`, are on its own copy). options:
-            LeastChangeOptions.
+        lc: from `build_least_change`, not modified (the solve raises limits and moves multipliers on its own
+            copy). options: LeastChangeOptions (on a `LeastChange.grid`, `tol` bounds the last subproblem's progress).
         should_stop: polled during each subproblem; True ends the solve with the path so far.
         progress: progress(event, info): "round" (a subproblem starts: round, frames, variable), "eval"
             (evals, E: the best Phi so far), "constraints" (it ended: round, worst, value as `_worst`, rho:
@@ -258,22 +264,22 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
     frames, (basis, pre) = _start(lc, o.min_gap)
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
-    rounds, trace, estimate, decreases, scores = [], [], float("nan"), [], None
-    evals, level_its, kind, certified = 0, 0, "start", False
-    best = (np.inf, frames)  # (D, frames) of the best path that meets every (certified) limit
+    rounds, estimate, decreases, scores = [], float("nan"), [], None
+    # best: (D, frames) of the best path that meets every (certified) limit
+    evals, level_its, kind, certified, best = 0, 0, "start", False, (np.inf, frames)
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
-        r, spent = _subproblem(al, frames, (basis, pre), quat, o, start, evals, should_stop, progress, k)
+        r, spent = _subproblem(al, frames, (basis, pre), quat, o, (start, evals), should_stop, progress, k,
+                               GRID_PAIRS if lc.grid is not None else None)
         if spent:
             status, message = spent, _stop_message(spent, "", o)
             break
         frames, evals = r.frames, evals + r.result.n_evals
         rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
-        trace.append(np.asarray(r.result.trace))
         if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
             status, message = r.result.status, _stop_message(r.result.status, r.result.message, o)
             break
-        worst, met = _multipliers(al, frames, basis, progress, k)
+        shift, (worst, met) = al.shift(), _multipliers(al, frames, basis, progress, k)  # shift: under the old multipliers
         best = _better(al, best, frames, basis) if worst["value"] <= 1.0 else best
         level_its, kind, scores = level_its + 1, "boost", None
         if not (met or level_its >= o.per_level):
@@ -290,17 +296,17 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             best, frames = _better(al, best, cert.frames), _after_search(frames, cert, quat)
             (basis, pre), level_its, kind = frame_maps(al, frames, quat), 0, "certify"
             continue
+        if lc.grid is not None:  # a frame at every time of the grid already: done when a subproblem no longer moves
+            estimate, message = _grid_done(r.result, shift, frames.count, o, level_its, message)
+            if estimate <= o.tol or level_its >= o.per_level:
+                break
+            continue
         new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
         decreases.append((frames.times.copy(), dec))
         evals += 3
-        if lc.grid is not None:  # a frame at every time of the grid already: the finest path it allows
-            message = f"every constraint met on the grid's {frames.count} frames (refinement estimate {estimate:.3g})"
-            break
-        if met and estimate <= o.tol:
-            message = f"every constraint met; refinement estimate {estimate:.3g} <= tol {o.tol:g}"
-            break
-        if new.size == 0 and met:
-            message = "every constraint met; no segment predicts a decrease"
+        if met and (estimate <= o.tol or new.size == 0):
+            message = (f"every constraint met; refinement estimate {estimate:.3g} <= tol {o.tol:g}" if estimate <= o.tol
+                       else "every constraint met; no segment predicts a decrease")
             break
         if new.size:
             frames, scores = with_frames(frames, new, quat), dec
@@ -310,6 +316,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
     frames, basis, message, raises = _kept(al, frames, basis, best, message, raises, limits)
     status = Status.INFEASIBLE if status is Status.CONVERGED and raises else status
+    trace = [np.asarray(r.result.trace) for r in rounds]
     return _solution(lc, frames, basis, rounds, trace, status, message, evals, tuple(raises),
                      time.perf_counter() - start, estimate, o.tol, tuple(decreases))
 
@@ -325,11 +332,13 @@ def _multipliers(al: AugmentedLagrangian, frames: FrameSet, basis, progress, k: 
     return worst, worst["value"] <= 1.0 and V <= 1.0
 
 
-def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, start: float, evals: int, should_stop,
-                progress, k: int):
+def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, spent_so_far: tuple, should_stop,
+                progress, k: int, pairs: int | None = None):
     """Subproblem k on `frames` with their (SplineBasis, Preconditioner) `maps` within what is left of the
-    solve's budget: (its SubproblemResult, None), or (None, the status MAX_TIME or MAX_EVALS) when the
+    solve's budget (`spent_so_far`: its start [s, perf_counter] and evaluations), L-BFGS keeping `pairs`
+    (None: by size): (its SubproblemResult, None), or (None, the status MAX_TIME or MAX_EVALS) when the
     budget is spent before it."""
+    start, evals = spent_so_far
     left, spent = _budget(o, start, evals)
     if spent:
         return None, spent
@@ -338,7 +347,7 @@ def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, 
     cb = None if progress is None else (lambda n, phi: progress("eval", {"evals": evals + n, "E": phi}))
     return solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=maps[0], pre=maps[1],
                             max_evals=o.max_evals - evals if o.max_evals else 0,
-                            max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb), None
+                            max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb, pairs=pairs), None
 
 
 def _after_search(frames: FrameSet, cert, quat) -> FrameSet:
@@ -395,6 +404,7 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     gap = np.inf if lc.grid is not None else gap  # on a grid the paths are the grid's: no segment is split
     second = None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat)
     cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
+                           pairs=None if lc.grid is None else GRID_PAIRS,
                            max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
                            max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop)
     if progress:
@@ -404,6 +414,25 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     al.lam = [np.where(c.limit != old, 0.0, lam) for c, lam, old in zip(al.constraints, al.lam, before)]
     al.V = np.inf if cert.raises else al.V
     return cert
+
+
+def _grid_done(result, shift: float, count: int, o: LeastChangeOptions, level_its: int, message: str) -> tuple:
+    """On a grid with every constraint met: (the last subproblem's progress (`_progress`), the solve's message
+    if it ends here (the progress within tol, or the frame set's subproblems spent), else `message`)."""
+    estimate = _progress(result, shift)
+    if estimate <= o.tol or level_its >= o.per_level:
+        message = f"every constraint met on the grid's {count} frames; the last subproblem's decrease {estimate:.3g}"
+    return estimate, message
+
+
+def _progress(result, shift: float) -> float:
+    """The decrease of Phi over a subproblem over Phi + shift at its start (dimensionless, >= 0): the method of
+    multipliers is done when a subproblem started from the last one's path under the updated multipliers
+    moves Phi by no more than the tolerance (Birgin & Martinez 2014, sec. 4.1: the subproblems' progress)."""
+    trace = np.asarray(result.trace, float)
+    if trace.size == 0 or not np.isfinite(trace[0]):
+        return float("inf")
+    return float(max(trace[0] - result.fun, 0.0) / max(trace[0] + shift, 1e-300))
 
 
 def _budget(o: LeastChangeOptions, start: float, evals: int) -> tuple[float, Status | None]:

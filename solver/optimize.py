@@ -215,6 +215,7 @@ def minimize(
     max_time_s: float = 0.0,
     should_stop: Callable[[], bool] | None = None,
     callback: Callable[[int, float], None] | None = None,
+    pairs: int | None = None,
 ) -> OptimizeResult:
     """Minimize fun from x0 with an nlopt gradient-based algorithm.
 
@@ -226,6 +227,7 @@ def minimize(
         max_evals: evaluation limit (0 = none). max_time_s: wall-time limit [s] (0 = none).
         should_stop: polled at each evaluation; True stops with Status.INTERRUPTED.
         callback: called as callback(n_evals, best_value) after each evaluation (progress display).
+        pairs: L-BFGS correction pairs to keep (None: `lbfgs_storage(n)`).
     Returns:
         OptimizeResult with the best iterate.
     Raises:
@@ -246,7 +248,7 @@ def minimize(
 
     opt = nlopt.opt(ALGORITHMS[algorithm], x0.size)
     if algorithm == "lbfgs":
-        opt.set_vector_storage(lbfgs_storage(x0.size))
+        opt.set_vector_storage(int(pairs) if pairs else lbfgs_storage(x0.size))
     guard = _Guarded(fun, opt, t_start, max_evals, max_time_s, should_stop, callback)
     opt.set_min_objective(guard)
     for setter, value in ((opt.set_ftol_rel, ftol_rel), (opt.set_xtol_rel, xtol_rel),
