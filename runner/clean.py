@@ -108,7 +108,9 @@ def process_clean(clip, out_dir=None, options: CleanOptions | None = None, say=p
         options: CleanOptions [defaults]. say: where result lines go.
     Returns:
         {"clip", "status", "exit" ("ok" | "failed" | "interrupted"), "frames", "fps", "pins" ([s]),
-        "displacement_frames", "solve_time_s", "cpu_time_s" (the whole command's process time), "clean"
+        "displacement_frames", "solve_time_s", "cpu_time_s" (the whole command's process time), "solve_cpu_s"
+        (the clean's own process time: building and solving the displacement from the retargeted capture and
+        its contacts, what the IK peer's CPU time is compared with), "clean"
         (`runner.clean_metrics.clean_figures`), "certificate", "keyframes_on_source" (the pins on the
         written BVH, read back), "outputs"}.
     Raises:
@@ -125,12 +127,13 @@ def process_clean(clip, out_dir=None, options: CleanOptions | None = None, say=p
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = clean_paths(clip, out_dir, o)
     cs, contacts, flights = _capture(clip, o, paths["scene"], say)
-    run, disp, sol = _solve(cs, contacts, flights, o, clip, say)
-    return _outputs(run, disp, sol, cs, o, paths, clip, cpu0, say)
+    run, disp, sol, solve_cpu = _solve(cs, contacts, flights, o, clip, say)
+    return _outputs(run, disp, sol, cs, o, paths, clip, (cpu0, solve_cpu), say)
 
 
 def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
-    """Build and solve the displacement; the Run of the cleaned clip (plain: the capture), with its metrics."""
+    """Build and solve the displacement: (the Run of the cleaned clip (plain: the capture) with its metrics, the
+    Displacement, its Solution, [s] the process time of building and solving it)."""
     from runner.progress import Progress, StopRequest
     from runner.run import Run, Source, run_metrics
     from solver.displacement import build_displacement, clean_solution, solve_displacement
@@ -140,6 +143,7 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
 
     ref, model = cs.reference, cs.model
     options = o.solve or LeastChangeOptions()
+    cpu0 = time.process_time()
     disp = build_displacement(model, ref.times, ref.qpos, pins=o.pins, pin_ends=o.pin_ends, contacts=contacts, flights=flights,
                               rate=options.rate, feet=o.feet)
     with StopRequest(o.quiet) as stop:
@@ -147,6 +151,7 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
         sol = solve_displacement(disp, options, should_stop=stop, progress=progress)
         progress.done()
     out = clean_solution(disp, sol)
+    solve_cpu = time.process_time() - cpu0  # the clean itself: from the retargeted capture and its contacts
     # the problem's keyframes: the pins and the clip's ends (the cleaned clip's values: the capture's at a pin)
     at = out.frames.is_keyframe
     keys = Keyframes(out.frames.times[at], out.frames.values[at], np.ones((int(at.sum()), model.nq), bool), str(clip))
@@ -155,7 +160,7 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
     interrupted = sol.status is Status.INTERRUPTED or stop.requested
     why = "interrupted (Ctrl-C), best path so far kept" if stop.requested else sol.message
     say(f"  stopped: {why}; {sol.n_evals} evaluations, {sol.frames.count} displacement frames, {sol.wall_time_s:.2f} s")
-    return Run(problem, options, out, source, run_metrics(problem, out, source), interrupted), disp, sol
+    return Run(problem, options, out, source, run_metrics(problem, out, source), interrupted), disp, sol, solve_cpu
 
 
 def _on_source(paths: dict, say) -> dict | None:
@@ -175,9 +180,10 @@ def _on_source(paths: dict, say) -> dict | None:
             "keys_moved": int(check.moved.sum()), "keys": len(check.times)}
 
 
-def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu0: float, say) -> dict:
+def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: tuple, say) -> dict:
     """The summary, the saved path, the BVH on the source skeleton (checked at the pins), the metrics, the
-    video; the result dict of `process_clean`."""
+    video; the result dict of `process_clean`. cpu: ([s] the command's process time at its start, [s] the
+    clean's own, `_solve`)."""
     from runner.clean_metrics import clean_figures
     from runner.render.side_by_side import VideoOptions
     from runner.run import Outputs, _filtered_capture, render_with_progress, report, write_metrics_json, write_results
@@ -201,11 +207,12 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu0:
     from runner.export import export_saved_path
 
     say(f"  wrote {export_saved_path(paths['save_path'], paths['glb'], option='--out-dir').describe()}")
-    cpu = time.process_time() - cpu0
+    solve_cpu, cpu = cpu[1], time.process_time() - cpu[0]
     result = {"clip": str(clip), "status": "interrupted" if run.interrupted else run.solution.status.value,
               "exit": "interrupted" if run.interrupted else "failed" if run.failed else "ok",
               "frames": ref.count, "fps": 1.0 / ref.frame_time, "pins": [float(t) for t in disp.times[disp.pins]],
               "displacement_frames": sol.frames.count, "solve_time_s": sol.wall_time_s, "cpu_time_s": cpu,
+              "solve_cpu_s": solve_cpu,
               "clean": fig, "certificate": [r.__dict__ for r in sol.certificate],
               "keyframes_on_source": on_source, "outputs": {k: str(v) for k, v in paths.items()}}
     write_metrics_json(run, paths["metrics"], extra={k: v for k, v in result.items() if k not in ("status", "exit")})

@@ -40,7 +40,7 @@ def bench_clean(args) -> int:
             npz = Path(res["outputs"]["save_path"])
             z = np.load(npz)
             peer, peer_cpu = ik_clean(*saved_capture(npz))
-            for name, qpos, cpu in (("capture", z["reference_qpos"], 0.0), ("dynsplines", z["path_qpos"], res["cpu_time_s"]),
+            for name, qpos, cpu in (("capture", z["reference_qpos"], 0.0), ("dynsplines", z["path_qpos"], res["solve_cpu_s"]),
                                     ("IK (mink)", peer, peer_cpu)):
                 f = clean_figures_of(npz, qpos)
                 print(f"{Path(clip).stem:10s} {name:11s} {f['penetration_mm']:7.2f} {f['float_mm']:8.2f} {f['skate_mm']:11.2f} "
