@@ -308,7 +308,8 @@ def _keyframe_lines(solution) -> list[str]:
 
 
 def refinement_text(solution, tol: float | None) -> str:
-    """The refinement's verdict: the decrease of Phi that more frames still predict, relative
+    """The refinement's verdict: the decrease of Phi that more frames still predict, relative (a clean's: the last
+    subproblem's decrease, `Solution.estimate_kind` "progress")
     (`Solution.final_estimate`), against `tol`; when the solve refined after its last estimate, that the
     final frames have none; without an estimate, that the solve stopped first ("" without `tol` either)."""
     estimate = getattr(solution, "final_estimate", None)
@@ -318,6 +319,9 @@ def refinement_text(solution, tol: float | None) -> str:
     if checks and len(checks[-1][0]) != solution.frames.count:
         return (f"no refinement estimate on the final frames (the last: {estimate:.3g} on {len(checks[-1][0])} "
                 "frames, before more were added)")
+    if getattr(solution, "estimate_kind", "refinement") == "progress":  # a clean: no frame to add
+        what = f"the last subproblem lowered Phi by {estimate:.3g} of it"
+        return what if tol is None else f"{'converged' if estimate <= tol else 'not converged'} ({what}, tol {tol:g})"
     if tol is None:
         return f"refinement estimate {estimate:.3g}"
     if estimate <= tol:

@@ -489,5 +489,6 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, raises, 
                     np.concatenate(trace) if trace else np.zeros(0), seconds, evals, unmet=dict(unmet),
                     converged_to_tol=bool(status is Status.CONVERGED and np.isfinite(estimate) and estimate <= tol
                                           and not unmet),
-                    final_estimate=estimate, relaxations=tuple(lc.relaxations), segment_decreases=decreases,
+                    final_estimate=estimate, estimate_kind="refinement" if lc.grid is None else "progress",
+                    relaxations=tuple(lc.relaxations), segment_decreases=decreases,
                     certificate=raises, multipliers=tuple((c.name, lam.copy()) for c, lam in zip(al.constraints, al.lam)))

@@ -69,6 +69,9 @@ class Solution:
         converged_to_tol: with a tolerance, whether the solve ended because the estimate reached it (the
             least change: with every constraint met; not after a budget or a stop request); None without one.
         final_estimate: the last estimate of a strategy with a tolerance, NaN otherwise.
+        estimate_kind: what `final_estimate` is: "refinement" (the decrease of Phi more frames predict over
+            Phi) or "progress" (on a `LeastChange.grid`, where no frame can be added: the decrease of Phi over
+            the last subproblem, over Phi).
         unmet: {constraint: amount [SI]} of the constraints the least change could not meet: the largest
             raise of each (`solver.feasibility`); {} for `solve`.
         certificate: the least change's `solver.feasibility.Raise`s: per constraint and column, the least
@@ -101,6 +104,7 @@ class Solution:
     refinement_estimates: tuple = ()
     converged_to_tol: bool | None = None
     final_estimate: float = float("nan")
+    estimate_kind: str = "refinement"
     unmet: dict = field(default_factory=dict)
     relaxations: tuple = ()
     segment_decreases: tuple = ()

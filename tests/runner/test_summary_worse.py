@@ -488,6 +488,11 @@ def test_the_refinement_says_one_thing():
     sol.frames = SimpleNamespace(n_variable=22, count=30)
     assert refinement_text(sol, 0.01) == ("no refinement estimate on the final frames (the last: 0.03 on 20 frames, "
                                           "before more were added)")
+    # a clean's (a frame at every capture frame): the last subproblem's progress, not a refinement
+    sol.estimate_kind, sol.segment_decreases, sol.final_estimate = "progress", (), 0.002
+    assert refinement_text(sol, 0.01) == "converged (the last subproblem lowered Phi by 0.002 of it, tol 0.01)"
+    sol.final_estimate = 0.05
+    assert refinement_text(sol, 0.01) == "not converged (the last subproblem lowered Phi by 0.05 of it, tol 0.01)"
 
 
 def test_only_the_constraints_a_path_breaks_get_a_row():
