@@ -1,16 +1,27 @@
-"""Cost of `dynsplines clean` against clip length (docs/scaling.md "Cleaning a longer clip"): a shipped clip
-looped 1x, 2x, 4x, 8x.
+"""Cost of `dynsplines clean` against clip length (docs/scaling.md "Cleaning a longer clip"): the first L,
+2L, 4L, 8L seconds of one real continuous capture (by default), or a shipped clip looped 1x, 2x, 4x, 8x.
 
-    python -m runner.bench.clean_scaling [--clip models/cmu/16_23.bvh] [--factors 1,2,4,8] [--repeat 1]
+    python -m runner.bench.clean_scaling [--clip CLIP.bvh] [--factors 1,2,4,8] [--repeat 1] [--loop]
 
-The loop (`loop_bvh`) plays the clip forward, then backward, then forward again, ...: every copy after the
-first starts on the frame the one before it ended on (which it drops), so the looped clip is continuous in
-every joint and in the root with no transform to choose for any skeleton or axes, exactly `copies` times
-as long (frames after the rest frames: `copies` (n - 1) + 1), and each copy holds the same contacts, floats
-and skates (played backward, a slide is the same distance). What a loop adds is a turn at each seam: the
-velocities change sign there, over one frame, in the capture itself; its 6 Hz filtered copy, the no-jolt
-constraint's reference, sees the turn too. The clip's leading rest frames (`REST_FRAMES`: the synthetic
-T-pose a CMU conversion starts with) are kept once, in front.
+Prefixes (`prefix_bvh`, the default): with n captured frames after the rest frames and k the largest
+factor, L = floor(n / k) frames, and the clip of factor f is the capture's first f L frames, cut from the
+file as written (its header, `Frames:` set to the rows kept, the rows unchanged). Every length is the same
+take, so it holds what a longer capture holds: more steps, turns, contacts and floats, each where the
+subject made it, and no seam the capture did not have. The default clip is `PREFIX_CLIP`, the longest
+continuous capture shipped (models/cmu/07_04, a slow walk of 449 frames: L = 56 frames, 0.47 s, at k = 8).
+
+The loop (`loop_bvh`, `--loop`) plays the clip forward, then backward, then forward again, ...: every copy
+after the first starts on the frame the one before it ended on (which it drops), so the looped clip is
+continuous in every joint and in the root with no transform to choose for any skeleton or axes, exactly
+`copies` times as long (frames after the rest frames: `copies` (n - 1) + 1), and each copy holds the same
+contacts, floats and skates (played backward, a slide is the same distance). What a loop adds is a turn at
+each seam: the velocities change sign there, over one frame, in the capture itself; its 6 Hz filtered
+copy, the no-jolt constraint's reference, sees the turn too. On 16_23 (`LOOP_CLIP`, the loop's default,
+2.5 s) the clean certifies every looped length infeasible at the seams and returns the least violation, so
+the loop times that search more than a clean of a longer take.
+
+Both keep the clip's leading rest frames (`REST_FRAMES`: the synthetic T-pose a CMU conversion starts
+with) once, in front.
 
 Each length is cleaned by `dynsplines clean --no-render` in its own subprocess (one BLAS thread); the CPU
 time compared is the clean's own as its metrics report gives it (`cpu_time_s`: reading, retargeting,
@@ -32,9 +43,70 @@ import numpy as np
 from runner.bench.scaling import SINGLE_THREAD
 from runner.paths import MODELS
 
-CLIP = MODELS / "cmu" / "16_23.bvh"
+#: the prefixes' default clip: the longest continuous capture shipped (module docstring)
+PREFIX_CLIP = MODELS / "cmu" / "07_04.bvh"
+#: the loop's default clip
+LOOP_CLIP = MODELS / "cmu" / "16_23.bvh"
 #: leading frames of a shipped (CMU, cgspeed) clip that are its synthetic T-pose rest frame, kept once
 REST_FRAMES = 1
+
+
+def _split(src: Path, rest: int) -> tuple[list[str], list[str], list[str]]:
+    """(the lines up to and including "MOTION", the "Frame Time:" line, the frame rows) of the BVH file `src`.
+
+    Raises:
+        ValueError: the file has no MOTION section, or fewer than `rest` frame rows.
+    """
+    lines = Path(src).read_text().splitlines()
+    m = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
+    if m is None or len(lines) < m + 3:
+        raise ValueError(f"{src}: no MOTION section with Frames: and Frame Time: lines")
+    frames = [ln for ln in lines[m + 3:] if ln.strip()]
+    if len(frames) < rest:
+        raise ValueError(f"{src}: {len(frames)} frames, fewer than its {rest} rest frames")
+    return lines[:m + 1], [lines[m + 2]], frames
+
+
+def _write(dst: Path, head: list[str], frame_time: list[str], rows: list[str]) -> int:
+    """Write a BVH file: `head` (up to "MOTION"), `Frames: len(rows)`, the frame time line, the rows. Returns
+    the frames written."""
+    Path(dst).write_text("\n".join([*head, f"Frames: {len(rows)}", *frame_time, *rows]) + "\n")
+    return len(rows)
+
+
+def prefix_bvh(src: Path, dst: Path, frames: int, rest: int = REST_FRAMES) -> int:
+    """Write the first `frames` captured frames of `src` to `dst`, after its `rest` leading rest frames
+    (module docstring): the header as written, `Frames:` the rows kept, the rows unchanged.
+
+    Args:
+        src: a BVH clip. dst: the prefix. frames: >= 2 captured frames, at most the clip's. rest: leading
+            rest frames kept in front.
+    Returns:
+        the frames written (rest + frames).
+    Raises:
+        ValueError: the clip has no MOTION section, or `frames` is below 2 or beyond the clip's.
+    """
+    head, frame_time, rows = _split(src, rest)
+    n = len(rows) - rest
+    if not 2 <= frames <= n:
+        raise ValueError(f"{src}: a prefix of {frames} frames; the clip has {n} after its {rest} rest frames "
+                         "(give 2 to that many)")
+    return _write(dst, head, frame_time, rows[:rest + frames])
+
+
+def prefix_frames(src: Path, factors, rest: int = REST_FRAMES) -> dict[int, int]:
+    """{factor: captured frames of its prefix}: factor f gets f L frames, L = floor(n / max(factors)) with n
+    the clip's captured frames after its rest frames, so the lengths are in the factors' exact ratios.
+
+    Raises:
+        ValueError: the clip has no MOTION section, or L would be below 2 frames.
+    """
+    _, _, rows = _split(src, rest)
+    n, top = len(rows) - rest, max(factors)
+    unit = n // top
+    if unit < 2:
+        raise ValueError(f"{src}: {n} frames after {rest} rest frames; {top}x needs at least {2 * top}")
+    return {f: f * unit for f in factors}
 
 
 def loop_bvh(src: Path, dst: Path, copies: int, rest: int = REST_FRAMES) -> int:
@@ -50,20 +122,14 @@ def loop_bvh(src: Path, dst: Path, copies: int, rest: int = REST_FRAMES) -> int:
     """
     if copies < 1:
         raise ValueError(f"copies must be at least 1, got {copies}")
-    lines = Path(src).read_text().splitlines()
-    m = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
-    if m is None:
-        raise ValueError(f"{src}: no MOTION section")
-    frames = [ln for ln in lines[m + 3:] if ln.strip()]
+    head_lines, frame_time, frames = _split(src, rest)
     head, motion = frames[:rest], frames[rest:]
     if len(motion) < 2:
         raise ValueError(f"{src}: {len(motion)} frames after {rest} rest frames; a loop needs at least 2")
     out = list(motion)
     for r in range(1, copies):
         out += (motion[::-1] if r % 2 else motion)[1:]
-    body = head + out
-    Path(dst).write_text("\n".join([*lines[:m + 1], f"Frames: {len(body)}", lines[m + 2], *body]) + "\n")
-    return len(body)
+    return _write(dst, head_lines, frame_time, head + out)
 
 
 def clean_one(clip: Path, out: Path) -> dict:
@@ -95,19 +161,25 @@ def clean_one(clip: Path, out: Path) -> dict:
             **{k: v for k, v in f.items() if k != "change_joint"}}
 
 
-def clean_scaling(clip: Path, factors=(1, 2, 4, 8), repeat: int = 1, rest: int = REST_FRAMES) -> list[dict]:
-    """Per length factor and repeat (the lengths alternating), `clean_one` of the looped clip: its dict with
-    "factor" and "repeat".
+def clean_scaling(clip: Path, factors=(1, 2, 4, 8), repeat: int = 1, rest: int = REST_FRAMES,
+                  loop: bool = False) -> list[dict]:
+    """Per length factor and repeat (the lengths alternating), `clean_one` of the clip's prefix
+    (`prefix_frames`, `prefix_bvh`) or, with `loop`, of the clip looped (`loop_bvh`): its dict with "factor"
+    and "repeat".
 
     Raises:
+        ValueError: the clip is too short for the factors (prefixes) or has no MOTION section.
         RuntimeError: a clean failed.
     """
     rows = []
     with tempfile.TemporaryDirectory(prefix="dynsplines-clean-scaling-") as tmp:
-        paths = {}
-        for f in factors:
-            paths[f] = Path(tmp) / f"{clip.stem}_x{f}.bvh"
-            loop_bvh(clip, paths[f], f, rest)
+        paths = {f: Path(tmp) / f"{clip.stem}_x{f}.bvh" for f in factors}
+        if loop:
+            for f in factors:
+                loop_bvh(clip, paths[f], f, rest)
+        else:
+            for f, frames in prefix_frames(clip, factors, rest).items():
+                prefix_bvh(clip, paths[f], frames, rest)
         for rep in range(max(1, repeat)):
             for f in factors:
                 rows.append(clean_one(paths[f], Path(tmp) / f"x{f}.{rep}") | {"factor": f, "repeat": rep})
@@ -138,15 +210,21 @@ def print_rows(rows: list[dict]) -> None:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m runner.bench.clean_scaling", description=__doc__.splitlines()[0])
-    p.add_argument("--clip", type=Path, default=CLIP, help="the BVH clip to loop [models/cmu/16_23.bvh]")
-    p.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the clip [1,2,4,8]")
+    p.add_argument("--clip", type=Path, default=None,
+                   help="the BVH clip [prefixes: models/cmu/07_04.bvh; --loop: models/cmu/16_23.bvh]")
+    p.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the shortest [1,2,4,8]")
     p.add_argument("--repeat", type=int, default=1, help="cleans per length, alternating; median CPU [1]")
     p.add_argument("--rest-frames", type=int, default=REST_FRAMES, help=f"leading rest frames kept once [{REST_FRAMES}]")
+    p.add_argument("--loop", action="store_true",
+                   help="the clip looped forward and backward 1x..8x instead of the prefixes of one capture")
     args = p.parse_args(argv)
     factors = [int(f) for f in args.factors.split(",")]
-    print(f"clean scaling: {args.clip.name} looped {args.factors}x (forward, backward, ...), `dynsplines clean "
-          "--no-render` in one subprocess per length, one BLAS thread; cpu s: the clean's own, proc s: the process's")
-    print_rows(clean_scaling(args.clip, factors, args.repeat, args.rest_frames))
+    clip = args.clip or (LOOP_CLIP if args.loop else PREFIX_CLIP)
+    how = (f"looped {args.factors}x (forward, backward, ...)" if args.loop
+           else f"its first {args.factors} x L frames (L = its frames / {max(factors)})")
+    print(f"clean scaling: {clip.name} {how}, `dynsplines clean --no-render` in one subprocess per length, "
+          "one BLAS thread; cpu s: the clean's own, proc s: the process's")
+    print_rows(clean_scaling(clip, factors, args.repeat, args.rest_frames, loop=args.loop))
     return 0
 
 

@@ -73,11 +73,15 @@ def register(sub) -> None:
                         description="The shipped clip's keyframes tiled end to end (root carried forward) on a "
                         "floor-only scene: optimization time, evaluations, time per evaluation and peak memory "
                         "of each length, one subprocess per length (runner.bench.scaling, docs/scaling.md). With "
-                        "--mode clean: `dynsplines clean` of a shipped clip looped forward and backward 1x..8x, "
-                        "its CPU time per length (runner.bench.clean_scaling).")
+                        "--mode clean: `dynsplines clean` of the first 1/8, 2/8, 4/8 and all of one real "
+                        "capture (or, with --loop, a shipped clip looped forward and backward 1x..8x), its CPU "
+                        "time per length (runner.bench.clean_scaling).")
     c.add_argument("--mode", choices=("animate", "clean"), default="animate",
                    help="animate: the keyframes' solve; clean: a capture cleaned [%(default)s]")
-    c.add_argument("--clip", type=Path, default=None, help="with --mode clean: the BVH clip to loop [models/cmu/16_23.bvh]")
+    c.add_argument("--clip", type=Path, default=None,
+                   help="with --mode clean: the BVH clip [models/cmu/07_04.bvh; with --loop models/cmu/16_23.bvh]")
+    c.add_argument("--loop", action="store_true",
+                   help="with --mode clean: the clip looped forward and backward instead of its prefixes")
     c.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the clip [1,2,4,8]")
     c.add_argument("--rate", type=float, default=None, help="quadrature points per second [the command's]")
     c.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every length")
@@ -338,8 +342,9 @@ def bench_scaling(args) -> int:
         raise InputError(f"--repeat must be at least 1, got {repeat}")
     if args.mode == "clean":
         return _clean_scaling(args, repeat)
-    if args.clip is not None:
-        raise InputError(f"--clip {args.clip} goes with --mode clean (--mode animate tiles run_and_step's keyframes)")
+    if args.clip is not None or args.loop:
+        what = f"--clip {args.clip}" if args.clip is not None else "--loop"
+        raise InputError(f"{what} goes with --mode clean (--mode animate tiles run_and_step's keyframes)")
     argv = ["--factors", args.factors, "--repeat", str(repeat)]
     argv += [] if args.rate is None else ["--rate", str(args.rate)]
     argv += ["--dense"] * args.dense + ["--per-eval"] * args.per_eval
@@ -352,7 +357,19 @@ def _clean_scaling(args, repeat: int) -> int:
 
     if args.rate is not None or args.dense or args.per_eval:
         raise InputError("--rate, --dense and --per-eval go with --mode animate (the keyframes' solve)")
-    clip = args.clip or clean_scaling.CLIP
+    clip = args.clip or (clean_scaling.LOOP_CLIP if args.loop else clean_scaling.PREFIX_CLIP)
     if not Path(clip).is_file():
         raise InputError(f"--clip {clip}: no such BVH clip (current folder: {Path.cwd()})")
-    return clean_scaling.main(["--clip", str(clip), "--factors", args.factors, "--repeat", str(repeat)])
+    try:
+        factors = [int(f) for f in args.factors.split(",")]
+    except ValueError:
+        raise InputError(f"--factors {args.factors}: give whole numbers separated by commas, e.g. 1,2,4,8") from None
+    if min(factors) < 1:
+        raise InputError(f"--factors {args.factors}: every factor must be at least 1")
+    if not args.loop:
+        try:
+            clean_scaling.prefix_frames(Path(clip), factors)
+        except ValueError as e:
+            raise InputError(f"--clip {e}; give a longer clip or smaller --factors") from None
+    argv = ["--clip", str(clip), "--factors", args.factors, "--repeat", str(repeat)]
+    return clean_scaling.main(argv + ["--loop"] * args.loop)

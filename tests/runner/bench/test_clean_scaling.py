@@ -1,12 +1,15 @@
-"""`bench scaling --mode clean`'s loop: a clip played forward and backward k times is k times as long after its
-rest frame, continuous at every seam (no step larger than the clip's own), the rest frame kept once; bad
-options are one line."""
+"""`bench scaling --mode clean`'s lengths. A prefix is the capture's first frames as written: its header, the
+rest frame and the first rows read back by the BVH reader exactly as the whole file's, `Frames:` right, and the
+lengths in the factors' exact ratios. The loop: a clip played forward and backward k times is k times as long
+after its rest frame, continuous at every seam (no step larger than the clip's own), the rest frame kept once.
+Bad options are one line."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from runner.bench.clean_scaling import loop_bvh
+from runner.bench.clean_scaling import loop_bvh, prefix_bvh, prefix_frames
+from runner.capture.bvh import read_bvh
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT
 
@@ -19,6 +22,31 @@ def motion(path: Path) -> tuple[int, np.ndarray]:
     m = lines.index("MOTION")
     rows = np.array([[float(v) for v in ln.split()] for ln in lines[m + 3:] if ln.strip()])
     return int(lines[m + 1].split()[1]), rows
+
+
+@pytest.mark.parametrize("frames", [2, 37, 299])
+def test_a_prefix_is_the_first_frames_of_the_capture_as_written(tmp_path, frames):
+    whole = read_bvh(CLIP)
+    written = prefix_bvh(CLIP, tmp_path / "p.bvh", frames)
+    count, rows = motion(tmp_path / "p.bvh")
+    assert written == count == len(rows) == 1 + frames
+    head = CLIP.read_text().split("MOTION")[0]
+    assert (tmp_path / "p.bvh").read_text().split("MOTION")[0] == head
+    part = read_bvh(tmp_path / "p.bvh")
+    assert part.names == whole.names and part.frame_time == whole.frame_time
+    np.testing.assert_array_equal(part.raw, whole.raw[:1 + frames])  # the rest frame, then the first frames
+    np.testing.assert_array_equal(part.offsets, whole.offsets)
+
+
+def test_prefix_lengths_are_in_the_factors_ratios_and_fit_the_clip(tmp_path):
+    _, src = motion(CLIP)
+    n = len(src) - 1  # 299 after the rest frame
+    assert prefix_frames(CLIP, (1, 2, 4, 8)) == {1: 37, 2: 74, 4: 148, 8: 296}  # 37 = floor(299 / 8)
+    assert prefix_frames(CLIP, (1, 3)) == {1: n // 3, 3: 3 * (n // 3)}
+    with pytest.raises(ValueError, match="150x needs at least 300"):
+        prefix_frames(CLIP, (1, 150))
+    with pytest.raises(ValueError, match="a prefix of 300 frames; the clip has 299"):
+        prefix_bvh(CLIP, tmp_path / "p.bvh", 300)
 
 
 @pytest.mark.parametrize("copies", [1, 2, 3])
@@ -49,5 +77,9 @@ def test_bad_options_are_one_line(tmp_path, capsys):
     assert main(["bench", "scaling", "--mode", "clean", "--dense"]) == EXIT_INPUT
     assert main(["bench", "scaling", "--clip", str(CLIP)]) == EXIT_INPUT
     assert main(["bench", "scaling", "--mode", "clean", "--clip", str(tmp_path / "none.bvh")]) == EXIT_INPUT
+    assert main(["bench", "scaling", "--loop"]) == EXIT_INPUT
+    assert main(["bench", "scaling", "--mode", "clean", "--factors", "1,300"]) == EXIT_INPUT
+    assert main(["bench", "scaling", "--mode", "clean", "--factors", "1,x"]) == EXIT_INPUT
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 3 and "--mode animate" in err[0] and "--mode clean" in err[1] and "none.bvh" in err[2]
+    assert len(err) == 6 and "--mode animate" in err[0] and "--mode clean" in err[1] and "none.bvh" in err[2]
+    assert "--loop goes with --mode clean" in err[3] and "300x needs" in err[4] and "whole numbers" in err[5]
