@@ -1,5 +1,5 @@
 """Cost of `dynsplines clean` against clip length (docs/scaling.md "Cleaning a longer clip"): the first L,
-2L, 4L, 8L seconds of one real continuous capture (by default), or a shipped clip looped 1x, 2x, 4x, 8x.
+2L, 4L, 8L frames of one real continuous capture (by default), or a shipped clip looped 1x, 2x, 4x, 8x.
 
     python -m runner.bench.clean_scaling [--clip CLIP.bvh] [--factors 1,2,4,8] [--repeat 1] [--loop]
 
