@@ -7,8 +7,8 @@ Prefixes (`prefix_bvh`, the default): with n captured frames after the rest fram
 factor, L = floor(n / k) frames, and the clip of factor f is the capture's first f L frames, cut from the
 file as written (its header, `Frames:` set to the rows kept, the rows unchanged). Every length is the same
 take, so it holds what a longer capture holds: more steps, turns, contacts and floats, each where the
-subject made it, and no seam the capture did not have. The default clip is `PREFIX_CLIP`, the longest
-continuous capture shipped (models/cmu/07_04, a slow walk of 449 frames: L = 56 frames, 0.47 s, at k = 8).
+subject made it, and no seam the capture did not have. The default clip is `PREFIX_CLIP`, a 26 s walk at
+30 fps (models/long/zombie.bvh, Animated Drawings: 778 frames after its first, L = 97 frames, 3.2 s, at k = 8).
 
 The loop (`loop_bvh`, `--loop`) plays the clip forward, then backward, then forward again, ...: every copy
 after the first starts on the frame the one before it ended on (which it drops), so the looped clip is
@@ -43,8 +43,8 @@ import numpy as np
 from runner.bench.scaling import SINGLE_THREAD
 from runner.paths import MODELS
 
-#: the prefixes' default clip: the longest continuous capture shipped (module docstring)
-PREFIX_CLIP = MODELS / "cmu" / "07_04.bvh"
+#: the prefixes' default clip: a 26 s walk (models/long/README.md: source, licence), L = 97 frames (3.2 s) at 8x
+PREFIX_CLIP = MODELS / "long" / "zombie.bvh"
 #: the loop's default clip
 LOOP_CLIP = MODELS / "cmu" / "16_23.bvh"
 #: leading frames of a shipped (CMU, cgspeed) clip that are its synthetic T-pose rest frame, kept once
@@ -211,7 +211,7 @@ def print_rows(rows: list[dict]) -> None:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m runner.bench.clean_scaling", description=__doc__.splitlines()[0])
     p.add_argument("--clip", type=Path, default=None,
-                   help="the BVH clip [prefixes: models/cmu/07_04.bvh; --loop: models/cmu/16_23.bvh]")
+                   help="the BVH clip [prefixes: models/long/zombie.bvh; --loop: models/cmu/16_23.bvh]")
     p.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the shortest [1,2,4,8]")
     p.add_argument("--repeat", type=int, default=1, help="cleans per length, alternating; median CPU [1]")
     p.add_argument("--rest-frames", type=int, default=REST_FRAMES, help=f"leading rest frames kept once [{REST_FRAMES}]")

@@ -79,7 +79,7 @@ def register(sub) -> None:
     c.add_argument("--mode", choices=("animate", "clean"), default="animate",
                    help="animate: the keyframes' solve; clean: a capture cleaned [%(default)s]")
     c.add_argument("--clip", type=Path, default=None,
-                   help="with --mode clean: the BVH clip [models/cmu/07_04.bvh; with --loop models/cmu/16_23.bvh]")
+                   help="with --mode clean: the BVH clip [models/long/zombie.bvh; with --loop models/cmu/16_23.bvh]")
     c.add_argument("--loop", action="store_true",
                    help="with --mode clean: the clip looped forward and backward instead of its prefixes")
     c.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the clip [1,2,4,8]")

@@ -78,8 +78,8 @@ def test_bad_options_are_one_line(tmp_path, capsys):
     assert main(["bench", "scaling", "--clip", str(CLIP)]) == EXIT_INPUT
     assert main(["bench", "scaling", "--mode", "clean", "--clip", str(tmp_path / "none.bvh")]) == EXIT_INPUT
     assert main(["bench", "scaling", "--loop"]) == EXIT_INPUT
-    assert main(["bench", "scaling", "--mode", "clean", "--factors", "1,300"]) == EXIT_INPUT
+    assert main(["bench", "scaling", "--mode", "clean", "--factors", "1,1000"]) == EXIT_INPUT
     assert main(["bench", "scaling", "--mode", "clean", "--factors", "1,x"]) == EXIT_INPUT
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 6 and "--mode animate" in err[0] and "--mode clean" in err[1] and "none.bvh" in err[2]
-    assert "--loop goes with --mode clean" in err[3] and "300x needs" in err[4] and "whole numbers" in err[5]
+    assert "--loop goes with --mode clean" in err[3] and "1000x needs" in err[4] and "whole numbers" in err[5]
