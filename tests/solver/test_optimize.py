@@ -113,6 +113,16 @@ def test_lbfgs_storage_keeps_nlopts_iterates():
     assert lbfgs_storage(1) == 200 and lbfgs_storage(500) == 500
 
 
+def test_pairs_set_the_lbfgs_memory():
+    """`pairs` is the correction pairs nlopt keeps: our wrapper with 10 pairs ends on the bits of nlopt called
+    directly with 10 (the 30-variable Rosenbrock above takes more evaluations with 10 than with 200)."""
+    x0 = np.random.default_rng(3).uniform(-1.5, 1.5, 30)
+    ref, ref_evals = _raw_nlopt_lbfgs(rosenbrock, x0, 10, 1e-12)
+    res = minimize(rosenbrock, x0, ftol_rel=1e-12, pairs=10)
+    assert res.n_evals == ref_evals and np.array_equal(res.x, ref)
+    assert not np.array_equal(minimize(rosenbrock, x0, ftol_rel=1e-12).x, ref)  # the default's 200 pairs differ
+
+
 def test_time_inside_the_objective_is_counted_apart_from_the_optimizers():
     """`fun_time_s` is the wall time spent in fun: at least what fun sleeps on each call, never more
     than the whole run; the rest is the optimizer's own work (bookkeeping, not a speed claim)."""
