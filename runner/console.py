@@ -13,6 +13,7 @@ from runner.verdict import (
     motion_mark,
     motion_worse,
     motion_worse_text,
+    refinement_text,
     row_mark,
     row_name,
     verdict_lines,
@@ -305,28 +306,6 @@ def _keyframe_lines(solution) -> list[str]:
         lines.append(f"where the keyframes decide (limit set to what they force): {shown}{more}")
     lines += certificate_lines(solution)
     return lines
-
-
-def refinement_text(solution, tol: float | None) -> str:
-    """The refinement's verdict: the decrease of Phi that more frames still predict, relative (a clean's: the last
-    subproblem's decrease, `Solution.estimate_kind` "progress")
-    (`Solution.final_estimate`), against `tol`; when the solve refined after its last estimate, that the
-    final frames have none; without an estimate, that the solve stopped first ("" without `tol` either)."""
-    estimate = getattr(solution, "final_estimate", None)
-    if estimate is None or not np.isfinite(estimate):
-        return "" if tol is None else "no refinement estimate (the solve stopped before one)"
-    checks = getattr(solution, "segment_decreases", ()) or ()
-    if checks and len(checks[-1][0]) != solution.frames.count:
-        return (f"no refinement estimate on the final frames (the last: {estimate:.3g} on {len(checks[-1][0])} "
-                "frames, before more were added)")
-    if getattr(solution, "estimate_kind", "refinement") == "progress":  # a clean: no frame to add
-        what = f"the last subproblem lowered Phi by {estimate:.3g} of it"
-        return what if tol is None else f"{'converged' if estimate <= tol else 'not converged'} ({what}, tol {tol:g})"
-    if tol is None:
-        return f"refinement estimate {estimate:.3g}"
-    if estimate <= tol:
-        return f"refinement converged (estimate {estimate:.3g} <= tol {tol:g})"
-    return f"refinement not converged (estimate {estimate:.3g} > tol {tol:g})"
 
 
 def verdict_figures(plain: dict, opt: dict, motion: dict | None) -> tuple[list, list]:

@@ -290,3 +290,25 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
                  + motion_text)
     return [part for line in lines for part in textwrap.wrap(line, WIDTH, subsequent_indent="    ",
                                                              break_on_hyphens=False)]
+
+
+def refinement_text(solution, tol: float | None) -> str:
+    """The convergence verdict against `tol`: the decrease of Phi, relative, that more frames still predict
+    (`Solution.final_estimate`), or on a clean's grid what its last subproblem lowered Phi by (`estimate_kind`
+    "progress"); when the solve refined after its last estimate, that the final frames have none; without
+    an estimate, that the solve stopped first ("" without `tol` either)."""
+    estimate = getattr(solution, "final_estimate", None)
+    if estimate is None or not np.isfinite(estimate):
+        return "" if tol is None else "no refinement estimate (the solve stopped before one)"
+    checks = getattr(solution, "segment_decreases", ()) or ()
+    if checks and len(checks[-1][0]) != solution.frames.count:
+        return (f"no refinement estimate on the final frames (the last: {estimate:.3g} on {len(checks[-1][0])} "
+                "frames, before more were added)")
+    if getattr(solution, "estimate_kind", "refinement") == "progress":  # a clean: no frame to add
+        what = f"the last subproblem lowered Phi by {estimate:.3g} of it"
+        return what if tol is None else f"{'converged' if estimate <= tol else 'not converged'} ({what}, tol {tol:g})"
+    if tol is None:
+        return f"refinement estimate {estimate:.3g}"
+    if estimate <= tol:
+        return f"refinement converged (estimate {estimate:.3g} <= tol {tol:g})"
+    return f"refinement not converged (estimate {estimate:.3g} > tol {tol:g})"

@@ -472,7 +472,7 @@ def test_the_verdict_without_a_capture_and_with_limits_raised():
 
 
 def test_the_refinement_says_one_thing():
-    from runner.console import refinement_text
+    from runner.verdict import refinement_text
 
     sol = solution()
     for estimate, tol, words in [(0.0029, 0.01, "refinement converged (estimate 0.0029 <= tol 0.01)"),
