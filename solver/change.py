@@ -66,24 +66,20 @@ class MeasureOfChange:
         self._qref = reference.qpos[:, tmap.quat_q].transpose(2, 1, 0)  # (4, s, n)
         self._uref = self._qref / np.linalg.norm(self._qref, axis=0)
         M = reference.chol @ reference.chol.transpose(0, 2, 1)  # (n, nv, nv) M(q_ref)
-        self._MP = None  # with a full pose metric: (n, 2, nv, nv) M and P side by side, one batched product
-        if pose is None:
-            self._M = M
-            self._P = np.einsum("nii->ni", M).copy()  # (n, nv) the pose part's diagonal P
-            if joints is not None and len(joints):
-                self._P[:, joints] = self._P[:, joints].mean(axis=1, keepdims=True)
-        else:
-            self._MP = np.stack([M, np.asarray(pose, float)], axis=1)
-            self._M, self._P = self._MP[:, 0], self._MP[:, 1]  # views: (n, nv, nv) M and the pose metric P
         w = reference.weights
         #: (nv, nv) the time-averaged mass matrix sum_i w_i M(q_ref,i) / sum_i w_i [kg m^2]: the
         #: preconditioner's and the refinement's curvature (`solver.lagrangian.Preconditioner`), made once
-        self.mbar = np.tensordot(w, self._M, axes=1) / w.sum()
-        #: (nv, nv) the pose part's P averaged the same way [kg m^2]
-        if self._P.ndim == 3:
+        self.mbar = np.tensordot(w, M, axes=1) / w.sum()
+        if pose is None:
+            self._M, self._MP = M, None
+            self._P = np.einsum("nii->ni", M).copy()  # (n, nv) the pose part's diagonal P
+            if joints is not None and len(joints):
+                self._P[:, joints] = self._P[:, joints].mean(axis=1, keepdims=True)
+            self.pbar = np.diag(w @ self._P / w.sum())  #: (nv, nv) the pose part's P averaged the same way [kg m^2]
+        else:  # (n, 2, nv, nv): M and the pose metric P side by side, for one batched product in `evaluate`
+            self._MP = np.stack([M, np.asarray(pose, float)], axis=1)
+            self._M, self._P = self._MP[:, 0], self._MP[:, 1]  # views
             self.pbar = np.tensordot(w, self._P, axes=1) / w.sum()
-        else:
-            self.pbar = np.diag(w @ self._P / w.sum())
 
     def _pose_difference(self, Y: np.ndarray):
         """(dq (n, nv), q (4, s, n), |q| (s, n)): the tangent-space pose difference from the reference."""

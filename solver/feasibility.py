@@ -142,9 +142,8 @@ def with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) -> 
 class _Budget:
     """The evaluations and time left of a solve, and its stop request."""
 
-    def __init__(self, max_evals: int, max_time_s: float, should_stop, pairs: int | None = None):
+    def __init__(self, max_evals: int, max_time_s: float, should_stop):
         self.max_evals, self.max_time_s, self.should_stop = max_evals, max_time_s, should_stop
-        self.pairs = pairs  # L-BFGS correction pairs of every solve (None: by size)
         self.start, self.evals, self.status = time.perf_counter(), 0, Status.CONVERGED
 
     def spent(self) -> bool:
@@ -156,11 +155,11 @@ class _Budget:
         return self.status is not Status.CONVERGED
 
     def kwargs(self, done) -> dict:
-        """`solve_subproblem`'s budget arguments (and L-BFGS's pairs); `done()` True (every pair met) also ends it."""
+        """`solve_subproblem`'s budget arguments; `done()` True (every pair met) also ends it."""
         left = self.max_time_s - (time.perf_counter() - self.start) if self.max_time_s else 0.0
         user = self.should_stop or (lambda: False)
         return {"max_evals": max(self.max_evals - self.evals, 1) if self.max_evals else 0,
-                "max_time_s": max(left, 0.0), "should_stop": lambda: done() or user(), "pairs": self.pairs}
+                "max_time_s": max(left, 0.0), "should_stop": lambda: done() or user()}
 
 
 def _scaled(constraints, state) -> list[np.ndarray]:
@@ -184,7 +183,7 @@ def _split_times(frames: FrameSet, at: np.ndarray, min_gap: float) -> np.ndarray
 
 
 def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames: FrameSet, quat_slots,
-                   budget: _Budget, min_gap: float, ftol_rel: float, per_level: int) -> FrameSet:
+                   budget: _Budget, min_gap: float, ftol_rel: float, per_level: int, pairs: int | None) -> FrameSet:
     """Minimize F over `objective` while `held` meet their limits (module docstring), adding a variable
     frame to every segment holding a broken pair of `objective` while one fits; returns the path with the
     least F among those on which `held` are met (the start is one).
@@ -202,7 +201,7 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
         for _ in range(per_level if held else 1):
             if best_F == 0.0 or budget.spent():
                 return best
-            r = solve_subproblem(eal, best, quat_slots, ftol_rel=ftol_rel, basis=basis, pre=pre,
+            r = solve_subproblem(eal, best, quat_slots, ftol_rel=ftol_rel, basis=basis, pre=pre, pairs=pairs,
                                  **budget.kwargs(lambda: eal.worst <= 1.0))
             budget.evals += r.result.n_evals
             if r.result.status is Status.INTERRUPTED and budget.should_stop is not None and budget.should_stop():
@@ -329,9 +328,9 @@ def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, mi
     Returns:
         Certificate: what was raised, the path that reaches it, the evaluations spent.
     """
-    budget = _Budget(max_evals, max_time_s, should_stop, pairs)
+    budget = _Budget(max_evals, max_time_s, should_stop)
     cons = list(al.constraints)
-    kw = dict(budget=budget, min_gap=min_gap, ftol_rel=ftol_rel, per_level=per_level)
+    kw = dict(budget=budget, min_gap=min_gap, ftol_rel=ftol_rel, per_level=per_level, pairs=pairs)
     paths = [(0, _elastic_solve(al, cons, [], frames, quat_slots, **kw))]
     if second is not None and not _meets(al, cons, paths[0][1]):  # the second start only where the first falls short
         paths.append((1, _elastic_solve(al, cons, [], second, quat_slots, **kw)))

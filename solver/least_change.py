@@ -269,8 +269,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     evals, level_its, kind, certified, best = 0, 0, "start", False, (np.inf, frames)
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
-        r, spent = _subproblem(al, frames, (basis, pre), quat, o, (start, evals), should_stop, progress, k,
-                               GRID_PAIRS if lc.grid is not None else None)
+        r, spent = _subproblem(al, frames, (basis, pre), quat, o, (start, evals), should_stop, progress, k, _pairs(lc))
         if spent:
             status, message = spent, _stop_message(spent, "", o)
             break
@@ -404,7 +403,7 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     gap = np.inf if lc.grid is not None else gap  # on a grid the paths are the grid's: no segment is split
     second = None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat)
     cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
-                           pairs=None if lc.grid is None else GRID_PAIRS,
+                           pairs=_pairs(lc),
                            max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
                            max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop)
     if progress:
@@ -414,6 +413,11 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     al.lam = [np.where(c.limit != old, 0.0, lam) for c, lam, old in zip(al.constraints, al.lam, before)]
     al.V = np.inf if cert.raises else al.V
     return cert
+
+
+def _pairs(lc: LeastChange) -> int | None:
+    """L-BFGS correction pairs of `lc`'s subproblems: GRID_PAIRS on a grid, else None (nlopt's default by size)."""
+    return None if lc.grid is None else GRID_PAIRS
 
 
 def _grid_done(result, shift: float, count: int, o: LeastChangeOptions, level_its: int, message: str) -> tuple:
