@@ -227,18 +227,8 @@ class ChangeAcceleration(AccelerationBound):
                          bound.labels[: len(bound.dofs)])
         self._ref = np.asarray(qacc, float)[:, self.dofs]  # (n, j, 3)
 
-    def measure(self, state):
-        a = state.motion.qacc[:, self.dofs] - self._ref
-        return (((a * a).sum(-1) - self.limits ** 2) / (2.0 * self.limits)).ravel()
-
-    def pull(self, state, g):
-        n = state.motion.qacc.shape[0]
-        G = g.reshape(n, -1) / self.limits
-        if not G.any():
-            return
-        ga = np.zeros(state.motion.qacc.shape)
-        ga[:, self.dofs] = G[..., None] * (state.motion.qacc[:, self.dofs] - self._ref)
-        state.add_acceleration(ga)
+    def _accelerations(self, state):
+        return state.motion.qacc[:, self.dofs] - self._ref
 
 
 def _change_bound(bound: AccelerationBound, reference: ReferenceMotion, times, qpos, layout, tmap) -> ChangeAcceleration:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.constraints.base import RELATIVE, Constraint
+from solver.curvature import Curvature
 
 __all__ = ["AccelerationBound"]
 
@@ -41,8 +42,12 @@ class AccelerationBound(Constraint):
         self.labels = np.asarray(labels, object)[self._cols]
         self.limit = np.zeros(len(self.rows))  # the smooth form's own bound is 0 (module docstring)
 
+    def _accelerations(self, state):
+        """(n, j, 3) the bounded accelerations at the points."""
+        return state.motion.qacc[:, self.dofs]
+
     def measure(self, state):
-        a = state.motion.qacc[:, self.dofs]  # (n, j, 3)
+        a = self._accelerations(state)
         return (((a * a).sum(-1) - self.limits ** 2) / (2.0 * self.limits)).ravel()
 
     def excess(self, measure, limit, pairs):
@@ -58,7 +63,18 @@ class AccelerationBound(Constraint):
         G = g.reshape(n, -1) / self.limits  # (n, j)
         if not G.any():
             return
-        a = state.motion.qacc[:, self.dofs]
         ga = np.zeros(state.motion.qacc.shape)
-        ga[:, self.dofs] = G[..., None] * a
+        ga[:, self.dofs] = G[..., None] * self._accelerations(state)
         state.add_acceleration(ga)
+
+    def curvature(self, state, d1, d2):
+        """c = (|a|^2 - A^2) / (2 A) in the column's qacc: grad c = a / A, c's Hessian I / A (exact), so
+        K = d2 (a / A)(a / A)^T + (d1 / A) I on its three components, at the pairs where d1 or d2 > 0."""
+        live = np.flatnonzero((d1 > 0) | (d2 > 0))
+        if not live.size:
+            return []
+        pts, col = self.rows[live], self._cols[live]
+        A = self.limits[col]
+        u = self._accelerations(state)[pts, col] / A[:, None]
+        K = d2[live, None, None] * u[:, :, None] * u[:, None, :] + (d1[live] / A)[:, None, None] * np.eye(3)
+        return [Curvature(pts, self.dofs[col], {2: np.broadcast_to(np.eye(3), (len(live), 3, 3))}, K)]

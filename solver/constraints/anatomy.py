@@ -22,6 +22,7 @@ from collections.abc import Callable
 import numpy as np
 
 from solver.constraints.base import Constraint
+from solver.curvature import Curvature
 from solver.path_state import PathState, add_at
 from solver.quaternion import swing_angle_grad, twist_angle_grad
 from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
@@ -65,6 +66,19 @@ class AngleBound(Constraint):
         rows, cols = self.rows[on], self._cols[on]
         d = self.grads(state.Y, rows, cols) * (g[on] * self.sign[cols])[:, None]
         add_at(state.gY, (rows[:, None], self.idx[cols]), d)
+
+    def curvature(self, state: PathState, d1, d2):
+        """d2 grad c grad c^T, grad c = sign d angle / d q in the joint quaternion's components; the angle's
+        own curvature is left out."""
+        on = np.flatnonzero(d2 > 0)
+        if not on.size:
+            return []
+        rows, cols = self.rows[on], self._cols[on]
+        g = self.grads(state.Y, rows, cols) * self.sign[cols, None]
+        tm = state.motion.tmap
+        v_of = {tuple(int(x) for x in qq): vv for qq, vv in zip(tm.quat_q, tm.quat_v)}
+        support = np.array([v_of[tuple(int(x) for x in self.idx[c])] for c in cols])
+        return [Curvature(rows, support, {"qpos": g[:, None, :]}, d2[on, None, None], self.idx[cols])]
 
 
 def _witness_largest(angles, idx: np.ndarray, reference, plain, capture=None) -> np.ndarray:

@@ -81,3 +81,11 @@ class Constraint:
     def pull(self, state: PathState, g: np.ndarray) -> None:
         """Add sum_p g_p dc_p/d(path) to the state's adjoints. g: (p,)."""
         raise NotImplementedError
+
+    def curvature(self, state: PathState, d1: np.ndarray, d2: np.ndarray) -> list:
+        """The Gauss-Newton curvature of sum_p psi_p(c_p) at the state, psi_p'(c_p) = d1_p >= 0 and
+        psi_p''(c_p) = d2_p >= 0 (p,): sum_p d2_p grad c_p grad c_p^T + d1_p (the Gauss-Newton part of c_p's own
+        curvature), as `solver.curvature.Curvature` and `Outer` terms for the preconditioner
+        (`solver.gauss_newton`). The default, []: a constraint the preconditioner leaves out; the stiff
+        ones, the no-jolt bound and the slide, give theirs."""
+        return []

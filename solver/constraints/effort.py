@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.constraints.base import RELATIVE, Constraint
+from solver.curvature import Outer
 
 __all__ = ["TorqueRMS", "rms_torque"]
 
@@ -68,3 +69,8 @@ class TorqueRMS(Constraint):
         gt = np.zeros(state.tau.shape)
         gt[:, self.dofs] = (float(g[0]) * self.w / (self.T * r))[:, None] * state.tau[:, self.dofs]
         state.add_tau(gt)
+
+    def curvature(self, state, d1, d2):
+        """d2 grad c grad c^T (an `Outer`: the one pair spans every point); the RMS's own curvature is left out."""
+        n = len(self.w)
+        return [Outer(self, np.arange(n), np.zeros(n, int), d2)] if d2[0] > 0 else []

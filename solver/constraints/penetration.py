@@ -279,3 +279,25 @@ class Penetration(Constraint):
         add_at(gp, (i + 1, k), H[2][:, None] * gq)
         add_at(gv, (i + 1, k), H[3][:, None] * h * gq)
         state.add_sites(gp, gv)
+
+    def curvature(self, state, d1, d2):
+        """d2 grad c grad c^T with grad c = -grad d^T (H00 dp_i + H10 h dv_i + H01 dp_i+1 + H11 h dv_i+1) (`pull`),
+        each pair kept at its two points apart (the product's blocks across them are left out); d's own
+        curvature (zero on a plane's face) is left out."""
+        from solver.constraints.sites import site_terms, site_velocity_jacobians
+
+        on = np.flatnonzero(d2 > 0)
+        if not on.size:
+            return []
+        u, _, grad = self._minimum(state)
+        i, k, s = np.unravel_index(on, self.shape)
+        H = _hermite(u[i, k, s])
+        h = self.dt[i, None]
+        out = []
+        for pts, wp, wv in ((i, H[0], H[1]), (i + 1, H[2], H[3])):
+            J = site_velocity_jacobians(state, pts, k)  # (2, q, 3, nv): d v / d pose, d v / d qvel (= d p / d pose)
+            dp, dv0 = np.einsum("qa,qan->qn", grad[i, k, s], J[1]), np.einsum("qa,qan->qn", grad[i, k, s], J[0])
+            f0 = -(wp[:, None] * dp + (wv[:, None] * h) * dv0)
+            f1 = -(wv[:, None] * h) * dp
+            out += site_terms(pts, k, {0: f0[:, None, :], 1: f1[:, None, :]}, d2[on, None, None])
+        return out

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.constraints.base import SCHEDULE, Constraint
+from solver.curvature import Curvature, Outer
 from solver.path_state import PathState, add_at
 
 __all__ = ["HeightBound", "SupportHeight", "SupportSlide", "site_heights"]
@@ -96,6 +97,17 @@ class HeightBound(_SitePairs):
         add_at(gp, (self.rows, self.cols), (self.sign * g)[:, None] * n)
         state.add_sites(gp)
 
+    def curvature(self, state, d1, d2):
+        """d2 grad c grad c^T, grad c = sign n^T J in the pose (J the site's Jacobian): h is linear in the
+        site's position on a face (its own curvature, at a box's rounded edge, is left out)."""
+        live = np.flatnonzero(d2 > 0)
+        if not live.size:
+            return []
+        _, n = self.heights(state)
+        J = site_velocity_jacobians(state, self.rows[live], self.cols[live])[1]  # d position / d pose
+        g = self.sign * np.einsum("qa,qan->qn", n[live], J)
+        return site_terms(self.rows[live], self.cols[live], {0: g[:, None, :]}, d2[live, None, None])
+
 
 class _FootSupport(Constraint):
     """Pairs = a foot's contacts (its sites' contacts merged); at each quadrature point of one, the support
@@ -150,6 +162,10 @@ class SupportHeight(_FootSupport):
         add_at(gp, (self.points, self.cols), (g[self.pair] * self.w / self.span[self.pair])[:, None] * n)
         state.add_sites(gp)
 
+    def curvature(self, state, d1, d2):
+        """d2 grad c grad c^T (an `Outer`: each pair couples its contact's points); c is linear in the heights."""
+        return [Outer(self, self.points, self.pair, d2)] if (d2 > 0).any() else []
+
 
 def huber(s: np.ndarray, b: float) -> np.ndarray:
     """The Huber function of a speed s >= 0 [m/s] with width b [m/s]: s^2 / (2 b) below b, s - b/2 above
@@ -192,3 +208,54 @@ class SupportSlide(_FootSupport):
         gv = np.zeros(state.sites.shape)
         add_at(gv, (self.points, self.cols), (g[self.pair] * self.w * dc)[:, None] * vt)
         state.add_sites(None, gv)
+
+    def curvature(self, state, d1, d2):
+        """Per term (point, site): d1 w huber_b''(v_t) in the site's velocity v = J(q) qvel through its
+        Jacobians in the pose and in qvel (J_r (3, nv), r = 0, 1: `site_velocity_jacobians`), P K P with
+        P = I - n n^T and K = I / b below the Huber width, (I - u u^T) / s above it (u = v_t / s): the
+        Gauss-Newton part of c's curvature. The pairs' d2 grad c grad c^T couples every point of a contact:
+        an `Outer`."""
+        live = d1[self.pair] > 0
+        if not (live.any() or (d2 > 0).any()):
+            return []
+        vt = self._tangential(state)
+        _, n = self.heights(state)
+        s = np.sqrt((vt * vt).sum(1))
+        u = vt / np.maximum(s, 1e-300)[:, None]
+        P = np.eye(3) - n[:, :, None] * n[:, None, :]
+        below = s <= self.b
+        K = np.where(below[:, None, None], P / self.b,
+                     (P - u[:, :, None] * u[:, None, :]) / np.maximum(s, 1e-300)[:, None, None])
+        K = (d1[self.pair] * self.w)[:, None, None] * K
+        J = site_velocity_jacobians(state, self.points[live], self.cols[live])  # (2, q, 3, nv)
+        out = site_terms(self.points[live], self.cols[live], {0: J[0], 1: J[1]}, K[live])
+        return out + [Outer(self, self.points, self.pair, d2)]
+
+
+def site_terms(points: np.ndarray, cols: np.ndarray, factors: dict, K: np.ndarray) -> list:
+    """`Curvature` terms of (point, engine site) pairs, one per site on the degrees of freedom that move it (its
+    chain and the root: a third of the figure's), from factors {order: (q, k, nv)} and K (q, k, k)."""
+    out = []
+    for k in np.unique(cols):
+        at = np.flatnonzero(cols == k)
+        support = np.flatnonzero(np.abs(np.stack([f[at] for f in factors.values()])).max(axis=(0, 1, 2)) > 0)
+        if support.size:
+            out.append(Curvature(points[at], support, {r: f[at][..., support] for r, f in factors.items()}, K[at]))
+    return out
+
+
+def site_velocity_jacobians(state: PathState, points: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """(2, q, 3, nv) d(site velocity)/d(pose) [m/s per rad or m] and d(site velocity)/d(qvel) [m] of engine
+    site cols[i] at quadrature point points[i], by the engine's own reverse pass (`SiteKinematics.vjp`,
+    the pose in MuJoCo's tangent convention), one per site and axis."""
+    res = state._pass()
+    z = np.zeros(res.sites.shape)
+    J = np.empty((2, len(points), 3, state.motion.qvel.shape[1]))
+    for k in np.unique(cols):
+        at = np.flatnonzero(cols == k)
+        for ax in range(3):
+            g = np.zeros(res.sites.shape)
+            g[:, k, ax] = 1.0
+            gq, gv, _ = state.engine.vjp(res, None, z, g)
+            J[0, at, ax], J[1, at, ax] = gq[points[at]], gv[points[at]]
+    return J

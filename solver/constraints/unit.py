@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.constraints.base import REPRESENTATION, Constraint
+from solver.curvature import Curvature
 
 __all__ = ["UNIT_LIMIT", "UnitNorm"]
 
@@ -50,3 +51,19 @@ class UnitNorm(Constraint):
         r = np.linalg.norm(q, axis=-1, keepdims=True)
         G = g.reshape(q.shape[:2])[..., None] * ((r - 1.0) / UNIT_LIMIT) * q / r
         state.gY[:, self.quat_q] += G  # each quaternion component once: no repeats
+
+    def curvature(self, state, d1, d2):
+        """d2 grad c grad c^T with grad c = ((|q| - 1) / UNIT_LIMIT) q / |q| in the quaternion's components (the
+        norm's own curvature is left out)."""
+        live = np.flatnonzero(d2 > 0)
+        if not live.size:
+            return []
+        s = len(self.quat_q)
+        rows, slot = live // s, live % s
+        q = state.Y[rows[:, None], self.quat_q[slot]]  # (p, 4)
+        r = np.linalg.norm(q, axis=1, keepdims=True)
+        g = ((r - 1.0) / UNIT_LIMIT) * q / r
+        tm = state.motion.tmap
+        v_of = {tuple(int(x) for x in qq): vv for qq, vv in zip(tm.quat_q, tm.quat_v)}
+        support = np.array([v_of[tuple(int(x) for x in self.quat_q[k])] for k in slot])
+        return [Curvature(rows, support, {"qpos": g[:, None, :]}, d2[live, None, None], self.quat_q[slot])]
