@@ -189,6 +189,7 @@ class Preconditioner:
 
     def __init__(self, variables: FrameVariables, basis, change, tmap, d0: float):
         K2, K0 = _frame_grams(basis, change, d0)
+        self.size = variables.size  # z has as many components as x
         frames, dofs = _variable_dofs(variables, tmap)
         by_dof = {}
         for d in np.unique(dofs):
@@ -318,7 +319,7 @@ class SubproblemResult:
 
 def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, ftol_rel: float,
                      max_evals: int = 0, max_time_s: float = 0.0, should_stop=None, callback=None,
-                     basis=None, pre: Preconditioner | None = None, pairs: int | None = None) -> SubproblemResult:
+                     basis=None, pre=None, pairs: int | None = None) -> SubproblemResult:
     """Minimize Phi over the free values of `frames` (L-BFGS in the preconditioned variables).
 
     Args:
@@ -326,7 +327,8 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
         quat_slots: (s, 4) the layout's quaternion slots. ftol_rel, max_evals, max_time_s,
             should_stop, callback: as `solver.optimize.minimize`. basis: the frames' SplineBasis.
         pre: the frames' Preconditioner, or None (built here). It depends on which values of the frames
-            are free and on `al.change`, not on the values: one serves every subproblem on a frame set.
+            are free and on `al.change`, not on the values: one serves every subproblem on a frame set. Or
+            any object with its `size`, `apply` and `apply_transpose` (`solver.gauss_newton`).
         pairs: L-BFGS correction pairs (`solver.optimize.minimize`; None: nlopt's default by size).
     Returns:
         SubproblemResult (frames at the best iterate).
@@ -350,14 +352,14 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
         return out
 
     # the scale's probe counts against the budget; with two evaluations or fewer left it would spend it
-    c = first_step_scale(preconditioned, pre, var.size, up=al.elastic is not None) if max_evals == 0 or max_evals > 2 else 1.0
+    c = first_step_scale(preconditioned, pre, pre.size, up=al.elastic is not None) if max_evals == 0 or max_evals > 2 else 1.0
     probe = evals[0] - bool(start)  # evaluations beyond the one at z = 0 that L-BFGS reuses
 
     def fun(z, need_grad):
         phi, g = preconditioned(c * z, need_grad)
         return phi, (None if g is None else c * g)
 
-    res = minimize(fun, np.zeros(var.size), algorithm="lbfgs", ftol_rel=ftol_rel, max_evals=max_evals and max_evals - probe,
+    res = minimize(fun, np.zeros(pre.size), algorithm="lbfgs", ftol_rel=ftol_rel, max_evals=max_evals and max_evals - probe,
                    max_time_s=max_time_s, should_stop=should_stop, callback=callback, pairs=pairs)
     res = replace(res, n_evals=evals[0])  # its own and first_step_scale's, the one at z = 0 made once
     out = var.frame_set(pre.apply(c * res.x))
