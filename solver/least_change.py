@@ -38,6 +38,7 @@ from solver.errors import InputError
 from solver.feasibility import Certificate, beyond, capture_start, least_violation, on_points, with_frames
 from solver.figure import Figure
 from solver.frames import FrameSet
+from solver.gauss_newton import GridModel
 from solver.inverse_dynamics import InverseDynamics
 from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
@@ -57,10 +58,8 @@ __all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "solve_lea
 
 #: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
 STANDARD_GRAVITY = 9.80665
-#: L-BFGS correction pairs on a `LeastChange.grid` (every capture frame a variable frame, n ~ 1e4-1e5
-#: variables): the standard limited memory (Nocedal & Wright, Numerical Optimization, 2nd ed., sec. 7.2: "3 to
-#: 20"; L-BFGS-B's default). nlopt's default sizes it by a fixed memory, which its L-BFGS shifts at every
-#: iteration: ~10 ms an iteration at 17,000 variables, as much as an evaluation of a clean's Phi
+#: L-BFGS correction pairs on a `LeastChange.grid` (n ~ 1e4-1e5 variables): the standard limited memory (Nocedal
+#: & Wright, sec. 7.2: "3 to 20"; L-BFGS-B's default); nlopt's, sized by n, costs an evaluation an iteration
 GRID_PAIRS = 10
 
 
@@ -76,13 +75,10 @@ class LeastChangeOptions:
             at most tol of that part (`_progress`).
         min_gap: [s] no two frames the refinement adds closer: 1/48 s, half a frame of 24 fps film; a cubic
             spline through frames closer than that kinks between them (its second derivative grows like
-            1/h^2). The least violation (`solver.feasibility`) splits a segment holding a broken pair down to
-            two quadrature intervals (2 / rate) instead: a limit is raised only where no finer spacing the
-            quadrature resolves helps.
+            1/h^2). The least violation (`solver.feasibility`) splits a segment holding a broken pair down to two
+            quadrature intervals (2 / rate): a limit is raised only where no finer spacing it resolves helps.
         max_subproblems: subproblems in all (each an L-BFGS run), a guard against a method that cycles:
-            100, above the most a converging solve was measured to need (24 on the corpus: 83_02 keyed at
-            its contacts; 81: a Bandai-Namco walk backwards keyed every 0.2 s, its acceleration limits raised
-            one stall at a time, each relaxation and refinement level costing a few).
+            100, above the most a converging solve was measured to need (24 on the corpus, 83_02 at contacts).
         per_level: subproblems on one frame set before refining it anyway (the multipliers converge
             linearly; refining is cheaper than more updates on too few frames).
         ftol_rel: each subproblem's relative tolerance on Phi (nlopt's ftol_rel): 1e-3, a subproblem
@@ -95,6 +91,8 @@ class LeastChangeOptions:
         rate: [1/s] quadrature points per second: 200, at least four points in the shortest segment
             (min_gap) for the integrals; penetration holds between them too (its deepest point over each
             interval, `solver.constraints.penetration`).
+        newton: on a `LeastChange.grid` (a clean), precondition by the Gauss-Newton Hessian of all of Phi until
+            the least violation is sought (`solver.gauss_newton`; False: D's alone; docs/solvers.md).
     """
 
     tol: float = 1e-2
@@ -105,6 +103,7 @@ class LeastChangeOptions:
     max_evals: int = 0
     max_time_s: float = 0.0
     rate: float = 200.0
+    newton: bool = False
 
     def __post_init__(self):
         if not (isinstance(self.rate, (int, float)) and np.isfinite(self.rate) and self.rate > 0):
@@ -266,10 +265,13 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
     rounds, estimate, decreases, scores = [], float("nan"), [], None
     # best: (D, frames) of the best path that meets every (certified) limit
-    evals, level_its, kind, certified, best = 0, 0, "start", False, (np.inf, frames)
+    evals, level_its, kind, certified, best, model = 0, 0, "start", False, (np.inf, frames), None  # model: `newton`'s
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
-        r, spent = _subproblem(al, frames, (basis, pre), quat, o, (start, evals), should_stop, progress, k, _pairs(lc))
+        if o.newton and lc.grid is not None and getattr(model, "basis", None) is not basis:
+            model = GridModel(basis, al, quat)
+        maps = (basis, (model and not certified and model.preconditioner(al, frames)) or pre)  # D's after a search
+        r, spent = _subproblem(al, frames, maps, quat, o, (start, evals), should_stop, progress, k, _pairs(lc))
         if spent:
             status, message = spent, _stop_message(spent, "", o)
             break

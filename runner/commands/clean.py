@@ -63,6 +63,8 @@ def register(sub) -> None:
     p.add_argument("--no-render", action="store_true", help="skip the video")
     p.add_argument("--fps", type=positive(float), default=30.0, help="video frames per second [%(default)s]")
     p.add_argument("--max-time", type=positive(float), default=None, metavar="S", help="stop the solve after S seconds")
+    p.add_argument("--gauss-newton", action="store_true",
+                   help="precondition by the constraints' curvature too (fewer evaluations, a closer least change; docs/solvers.md)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--no-summary", action="store_true", help="do not print the summary")
     p.set_defaults(func=run)
@@ -72,7 +74,8 @@ def run(args) -> int:
     from runner.clean import CleanOptions, process_clean
     from solver.least_change import LeastChangeOptions
 
-    solve = LeastChangeOptions(max_time_s=args.max_time) if args.max_time else None
+    solve = LeastChangeOptions(max_time_s=args.max_time or 0.0, newton=args.gauss_newton) \
+        if args.max_time or args.gauss_newton else None
     o = CleanOptions(pins=pins_of(args), pin_ends=args.pin_ends, feet=args.feet, scene=args.scene, figure=args.figure,
                      mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map, solve=solve,
                      render=not args.no_render, fps=args.fps, quiet=args.quiet, summary=not args.no_summary,
