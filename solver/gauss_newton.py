@@ -193,7 +193,7 @@ def _low_rank(pre, al, basis, variables, P: np.ndarray, outer: list):
     V = Q R and R R^T = W diag(lambda) W^T (U = Q W, f = (1 + lambda)^(-1/2) - 1; Golub & Van Loan, Matrix
     Computations, 4th ed., sec. 2.1.4 and 8.1). grad_x c_p is the constraint's own reverse pass, one for the
     pairs that share no point, each pair's part of the path's adjoint then pulled back apart."""
-    cols = []
+    cols, weights = [], []
     x0 = np.zeros(variables.size)
     for o in outer:
         for color in _colors(o):
@@ -206,10 +206,11 @@ def _low_rank(pre, al, basis, variables, P: np.ndarray, outer: list):
                 rows = np.zeros(len(dY[0]), bool)
                 rows[o.points[o.pair == p]] = True
                 G = basis.pullback(*(np.where(rows[:, None], d, 0.0) for d in dY))
-                cols.append(pre.solve_lower(pre.scatter(variables.pullback(x0, G))) * np.sqrt(o.d2[p]))
+                cols.append(pre.scatter(variables.pullback(x0, G)))
+                weights.append(np.sqrt(o.d2[p]))
     if not cols:
         return None, None
-    Q, R = np.linalg.qr(np.stack(cols, axis=1))
+    Q, R = np.linalg.qr(pre.solve_lower(np.stack(cols, axis=1)) * np.array(weights))  # one solve, every pair
     lam, W = np.linalg.eigh(R @ R.T)
     return Q @ W, 1.0 / np.sqrt(1.0 + np.maximum(lam, 0.0)) - 1.0
 
