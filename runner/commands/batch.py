@@ -6,7 +6,7 @@ from pathlib import Path
 
 from runner.animate_options import add_solve_arguments
 from runner.batch import ENGINES, find_clips, run_batch
-from runner.commands.clean import add_pin_arguments, pins_of
+from runner.commands.clean import add_newton_argument, add_pin_arguments, pins_of
 from runner.commands.mocap import add_clip_arguments, clip_options
 from runner.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from runner.parser import positive
@@ -49,6 +49,7 @@ def register(sub) -> None:
     add_clip_arguments(p)
     pins = p.add_argument_group("pins (--mode clean)")
     add_pin_arguments(pins, each="; the same for every clip, and a pin outside a clip is that clip's error")
+    add_newton_argument(pins)
     p.add_argument("--render", action="store_true",
                    help="also render each clip's video (off by default in a batch: rendering is slow)")
     add_solve_arguments(p)
@@ -60,9 +61,10 @@ def run(args) -> int:
     """Run `batch`. Returns the exit code; raises InputError on bad input."""
     if args.ray_address is not None and args.engine != "ray":
         raise InputError(f"--ray-address {args.ray_address} goes with --engine ray")
-    if args.mode != "clean" and (args.pin or args.pin_ends):
-        names = ", ".join(n for n, given in (("--pin", args.pin), ("--pin-ends", args.pin_ends)) if given)
-        raise InputError(f"{names}: clean's pins; --mode mocap keys the clip instead (add --mode clean, or drop them)")
+    if args.mode != "clean" and (args.pin or args.pin_ends or args.gauss_newton):
+        names = ", ".join(n for n, given in (("--pin", args.pin), ("--pin-ends", args.pin_ends),
+                                             ("--gauss-newton", args.gauss_newton)) if given)
+        raise InputError(f"{names}: clean's options; --mode mocap keys the clip instead (add --mode clean, or drop them)")
     clips = find_clips(args.clips)
     options = clean_options(args) if args.mode == "clean" else clip_options(args, PROG, render=args.render)
     say = (lambda *a: None) if args.quiet else print
@@ -84,6 +86,7 @@ def clean_options(args):
     """
     import shlex
     import sys
+    from dataclasses import replace
 
     from runner.animate_options import solve_options
     from runner.clean import CleanOptions
@@ -95,5 +98,5 @@ def clean_options(args):
                          "or use --mode mocap)")
     return CleanOptions(pins=pins_of(args), pin_ends=args.pin_ends, scene=args.scene, figure=args.figure,
                         mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map,
-                        solve=solve_options(args), render=args.render, quiet=True,
+                        solve=replace(solve_options(args), newton=args.gauss_newton), render=args.render, quiet=True,
                         summary=False, command=f"{PROG} {shlex.join(sys.argv[2:])}" if sys.argv[1:2] == ["batch"] else PROG)

@@ -68,6 +68,9 @@ def register(bsub) -> None:
     add_figure_arguments(c)
     add_root_scale_argument(c)
     add_solve_arguments(c, terms_help="default")
+    from runner.commands.clean import add_newton_argument
+
+    add_newton_argument(c.add_argument_group("--mode clean"))
     c.add_argument("--quiet", action="store_true", help="no progress bar or per-pair lines")
     c.set_defaults(func=run)
 
@@ -85,6 +88,8 @@ def run(args) -> int:
     say = (lambda *a: None) if args.quiet else print
     if args.mode == "clean":
         return _run_clean(args, clips, out, say)
+    if args.gauss_newton:
+        raise InputError("--gauss-newton: clean's option; --mode mocap keys the clips instead (add --mode clean, or drop it)")
     base = ClipOptions(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale,
                        skeleton_map=args.skeleton_map, command=PROG,
                        **clip_terms(args))
@@ -99,6 +104,8 @@ def run(args) -> int:
 
 def _run_clean(args, clips, out, say) -> int:
     """`bench corpus --mode clean`: `run_clean_corpus` with the clean's options; mocap's keying options refused."""
+    from dataclasses import replace
+
     from runner.animate_options import solve_options
     from runner.clean import CleanOptions
     from runner.corpus import DEFAULT_EVERY
@@ -111,7 +118,8 @@ def _run_clean(args, clips, out, say) -> int:
         raise InputError(f"{', '.join(given)}: mocap's keying options; --mode clean keeps every frame of the capture "
                          "(drop them, or use --mode mocap)")
     base = CleanOptions(scene=args.scene, figure=args.figure, mass=args.mass, root_scale=args.root_scale,
-                        skeleton_map=args.skeleton_map, solve=solve_options(args), command=f"{PROG} --mode clean")
+                        skeleton_map=args.skeleton_map, solve=replace(solve_options(args), newton=args.gauss_newton),
+                        command=f"{PROG} --mode clean")
     r = run_clean_corpus(clips, out, base, workers=args.workers, engine=args.engine, ray_address=args.ray_address,
                          say=say, quiet=args.quiet)
     print(r["markdown"])

@@ -38,6 +38,13 @@ def pins_of(args) -> tuple:
     return tuple(t for group in args.pin for t in group)
 
 
+def add_newton_argument(p) -> None:
+    """--gauss-newton (`LeastChangeOptions.newton`), for `clean` and the clean mode of `batch` and `bench corpus`."""
+    p.add_argument("--gauss-newton", action="store_true",
+                   help="precondition the clean by the constraints' curvature too: fewer evaluations and a closer "
+                        "least change; CPU time falls on some clips, rises on others (docs/solvers.md)")
+
+
 def register(sub) -> None:
     """Add `clean` to the `dynsplines` parser."""
     from runner.capture.scene import AUTO
@@ -63,8 +70,7 @@ def register(sub) -> None:
     p.add_argument("--no-render", action="store_true", help="skip the video")
     p.add_argument("--fps", type=positive(float), default=30.0, help="video frames per second [%(default)s]")
     p.add_argument("--max-time", type=positive(float), default=None, metavar="S", help="stop the solve after S seconds")
-    p.add_argument("--gauss-newton", action="store_true",
-                   help="precondition by the constraints' curvature too (fewer evaluations, a closer least change; docs/solvers.md)")
+    add_newton_argument(p)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--no-summary", action="store_true", help="do not print the summary")
     p.set_defaults(func=run)

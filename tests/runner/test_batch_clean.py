@@ -98,6 +98,28 @@ def test_pins_with_mode_mocap_are_refused_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "o" / "summary.csv").exists()
 
 
+def test_gauss_newton_reaches_each_clip_and_is_clean_only(tmp_path, capsys):
+    """--gauss-newton sets the clean's LeastChangeOptions.newton for every clip of a batch, and batch and bench
+    corpus refuse it in one line with --mode mocap, where no clean runs."""
+    import argparse
+
+    from runner.commands import batch
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    batch.register(sub)
+    args = sub.choices["batch"].parse_args([str(tmp_path), "--out", str(tmp_path / "o"), "--mode", "clean", "--gauss-newton"])
+    assert batch.clean_options(args).solve.newton
+    args = sub.choices["batch"].parse_args([str(tmp_path), "--out", str(tmp_path / "o"), "--mode", "clean"])
+    assert not batch.clean_options(args).solve.newton
+    short_clip(tmp_path / "a.bvh")
+    for argv in (["batch", str(tmp_path / "a.bvh"), "--out", str(tmp_path / "o"), "--gauss-newton"],
+                 ["bench", "corpus", str(tmp_path / "a.bvh"), "--out", str(tmp_path / "o"), "--gauss-newton"]):
+        assert main(argv) == EXIT_INPUT
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--gauss-newton" in err and "--mode clean" in err
+    assert not (tmp_path / "o" / "summary.csv").exists()
+
+
 def test_keying_options_are_refused_in_one_line(tmp_path, capsys):
     short_clip(tmp_path / "a.bvh")
     assert main(["batch", str(tmp_path / "a.bvh"), "--out", str(tmp_path / "o"), "--mode", "clean",
