@@ -105,7 +105,8 @@ class GridModel:
     def preconditioner(self, al, frames) -> GaussNewtonPreconditioner | None:
         """The `GaussNewtonPreconditioner` of al's Phi at `frames` (on this frame set) under its multipliers and
         rho; None where no pair acts or is within a tolerance of acting (Phi is then D/D0 there, whose
-        curvature D's own preconditioner, `solver.lagrangian.Preconditioner`, already carries)."""
+        curvature D's own preconditioner, `solver.lagrangian.Preconditioner`, already carries) or where the
+        factorization fails (then D's preconditioner serves the subproblem)."""
         from solver.lagrangian import _variable_dofs
         from solver.manifold import FrameVariables
 
@@ -120,7 +121,10 @@ class GridModel:
             terms += c.curvature(st, w * s / c.tolerance, w * al.rho / np.asarray(c.tolerance, float) ** 2 * near)
         if not terms:
             return None
-        return GaussNewtonPreconditioner(var, self, al, st, terms, _variable_dofs(var, al.tmap))
+        try:
+            return GaussNewtonPreconditioner(var, self, al, st, terms, _variable_dofs(var, al.tmap))
+        except np.linalg.LinAlgError:  # not positive definite beyond the ridge's reach (round-off): D's serves
+            return None
 
 
 class GaussNewtonPreconditioner:

@@ -208,3 +208,31 @@ def test_a_clean_preconditioned_by_gauss_newton_meets_the_dip_contract(toy_model
     assert moved.max() <= 0.1 * (DIP - 0.01), moved.max()
     np.testing.assert_allclose(clean.frames.values[disp.pins], q[disp.pins], rtol=0, atol=1e-15)  # c + 0, rounded
 
+
+def test_an_indefinite_band_is_refused_and_the_subproblem_falls_back(dipped_problem, monkeypatch):
+    """`_factor` raises on a band that is not positive semidefinite (a negative pivot no ridge below 1 lifts);
+    where a factorization fails, the grid model gives no preconditioner, so the subproblem keeps D's."""
+    import solver.gauss_newton as gn
+
+    ab = np.zeros((2, 3))
+    ab[0] = [1.0, -1.0, 1.0]
+    with pytest.raises(np.linalg.LinAlgError):
+        gn._factor(ab)
+    disp, al0 = dipped_problem
+    quat = disp.lc.layout.quat_slots
+    frames = _start_frames(disp.lc, 0.0)
+    al = al0.posed()
+    al.rho = 1.0
+    basis = SplineBasis(frames.times, al.t)
+    var = FrameVariables(frames, quat)
+    fr, dof = _variable_dofs(var, al.tmap)
+    moved = var.frame_set(np.sin(2 * np.pi * frames.times)[fr] * 0.02)  # the feet slide: slide pairs act
+    model = GridModel(basis, al, quat)
+    assert model.preconditioner(al, moved) is not None
+
+    def fail(ab):
+        raise np.linalg.LinAlgError("not positive definite")
+
+    monkeypatch.setattr(gn, "_factor", fail)
+    assert model.preconditioner(al, moved) is None
+
