@@ -42,7 +42,7 @@ from scipy.sparse import csr_matrix
 
 from solver.curvature import Curvature, Outer
 
-__all__ = ["GaussNewtonPreconditioner", "GridModel", "SplineCoefficients"]
+__all__ = ["GaussNewtonPreconditioner", "GridModel", "SplineCoefficients", "cached_preconditioner"]
 
 #: [1] the end conditions' and pins' weight relative to the largest diagonal entry of H_C among the coefficients
 #: each ties: 1e6 leaves them met to 1e-6 of the curvature's scale there while LAPACK's Cholesky stays
@@ -125,6 +125,14 @@ class GridModel:
             return GaussNewtonPreconditioner(var, self, al, st, terms, _variable_dofs(var, al.tmap))
         except np.linalg.LinAlgError:  # not positive definite beyond the ridge's reach (round-off): D's serves
             return None
+
+
+def cached_preconditioner(cache: dict, basis, al, frames, quat_slots) -> GaussNewtonPreconditioner | None:
+    """`GridModel.preconditioner` at `frames`, the frame set's GridModel kept in `cache` while its `basis` is
+    the same object (a solve's subproblems on one frame set share it)."""
+    if cache.get("basis") is not basis:
+        cache.update(basis=basis, model=GridModel(basis, al, quat_slots))
+    return cache["model"].preconditioner(al, frames)
 
 
 class GaussNewtonPreconditioner:

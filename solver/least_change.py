@@ -38,7 +38,7 @@ from solver.errors import InputError
 from solver.feasibility import Certificate, beyond, capture_start, least_violation, on_points, with_frames
 from solver.figure import Figure
 from solver.frames import FrameSet
-from solver.gauss_newton import GridModel
+from solver.gauss_newton import cached_preconditioner
 from solver.inverse_dynamics import InverseDynamics
 from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
@@ -264,13 +264,11 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     frames, (basis, pre) = _start(lc, o.min_gap)
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
     rounds, estimate, decreases, scores = [], float("nan"), [], None
-    # best: (D, frames) of the best path that meets every (certified) limit
-    evals, level_its, kind, certified, best, model = 0, 0, "start", False, (np.inf, frames), None  # model: `newton`'s
+    evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
-        if o.newton and lc.grid is not None and getattr(model, "basis", None) is not basis:
-            model = GridModel(basis, al, quat)
-        maps = (basis, (model and not certified and model.preconditioner(al, frames)) or pre)  # D's after a search
+        newton = o.newton and lc.grid is not None and not certified  # D's preconditioner after a search
+        maps = (basis, (newton and cached_preconditioner(grid, basis, al, frames, quat)) or pre)
         r, spent = _subproblem(al, frames, maps, quat, o, (start, evals), should_stop, progress, k, _pairs(lc))
         if spent:
             status, message = spent, _stop_message(spent, "", o)
@@ -317,9 +315,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
     frames, basis, message, raises = _kept(al, frames, basis, best, message, raises, limits)
     status = Status.INFEASIBLE if status is Status.CONVERGED and raises else status
-    trace = [np.asarray(r.result.trace) for r in rounds]
-    return _solution(lc, frames, basis, rounds, trace, status, message, evals, tuple(raises),
-                     time.perf_counter() - start, estimate, o.tol, tuple(decreases))
+    return _solution(lc, frames, basis, rounds, [np.asarray(r.result.trace) for r in rounds], status, message, evals,
+                     tuple(raises), time.perf_counter() - start, estimate, o.tol, tuple(decreases))
 
 
 def _multipliers(al: AugmentedLagrangian, frames: FrameSet, basis, progress, k: int) -> tuple[dict, bool]:
