@@ -48,8 +48,6 @@ __all__ = ["GaussNewtonPreconditioner", "GridModel", "SplineCoefficients", "cach
 #: each ties: 1e6 leaves them met to 1e-6 of the curvature's scale there while LAPACK's Cholesky stays
 #: accurate (the condition number it adds is 1e6, against double precision's 1e16)
 STIFF = 1e6
-#: points evaluated at once when building the basis (memory: CHUNK x (m + 2) doubles per derivative)
-CHUNK = 1024
 
 
 class SplineCoefficients:
@@ -65,26 +63,36 @@ class SplineCoefficients:
 
     def __init__(self, knots: np.ndarray, t: np.ndarray):
         x = np.asarray(knots, float)
-        t = np.asarray(t, float)
+        t = np.clip(np.asarray(t, float), x[0], x[-1])
         m = len(x)
         self.size = m + 2
         full = np.r_[[x[0]] * 3, x, [x[-1]] * 3]
-        spl = BSpline(full, np.eye(self.size), 3, extrapolate=True)
-        d1, d2 = spl.derivative(1), spl.derivative(2)
         self.span = np.clip(np.searchsorted(x, t, side="right") - 1, 0, max(m - 2, 0))
-        idx = self.span[:, None] + np.arange(4)
-        self.b = np.empty((3, len(t), 4))
-        for lo in range(0, len(t), CHUNK):
-            sl = slice(lo, lo + CHUNK)
-            rows = np.arange(len(t[sl]))[:, None]
-            for r, f in enumerate((spl, d1, d2)):
-                self.b[r, sl] = f(t[sl])[rows, idx[sl]]
-        A = np.zeros((m, self.size))
-        for lo in range(0, m, CHUNK):
-            A[lo:lo + CHUNK] = spl(x[lo:lo + CHUNK])
-        A[np.abs(A) < 1e-14] = 0.0
-        self.at_frames = csr_matrix(A)
-        self.ends = d2(x[[0, -1]])
+        self.b = np.zeros((3, len(t), 4))
+        for r in range(3):
+            M = _derivative_design(full, t, r).tocoo()  # (n, m + 2), four entries a row at most
+            self.b[r, M.row, M.col - self.span[M.row]] = M.data
+        self.at_frames = _derivative_design(full, x, 0).tocsr()
+        self.at_frames.eliminate_zeros()
+        self.ends = _derivative_design(full, x[[0, -1]], 2).toarray()
+
+
+def _derivative_design(full: np.ndarray, x: np.ndarray, r: int):
+    """(len(x), n) sparse: the r-th derivative of each of the n cubic B-splines on the knots `full` at x, as
+    the degree 3 - r design matrix (scipy's `BSpline.design_matrix`) times the difference map of the
+    coefficients, d_i = k (c_i+1 - c_i) / (t_i+k+1 - t_i+1) per derivative (de Boor, ch. X)."""
+    from scipy.sparse import diags
+
+    k, T = 3, full
+    D = None
+    for _ in range(r):
+        n = len(T) - k - 1
+        h = k / (T[k + 1: n + k] - T[1:n])
+        step = diags([-h, h], [0, 1], shape=(n - 1, n), format="csr")
+        D = step if D is None else step @ D
+        T, k = T[1:-1], k - 1
+    X = BSpline.design_matrix(x, T, k)
+    return X if D is None else X @ D
 
 
 class GridModel:
@@ -307,8 +315,8 @@ def _assemble(coefs: SplineCoefficients, terms: list, M: dict, nv: int) -> np.nd
     return Hb
 
 
-#: [1] the relative step of the motion maps' central differences (`_motion_maps`): their truncation error is
-#: ~1e-14 relative, round-off ~1e-16 / 1e-7 = 1e-9 relative
+#: [rad] the rotation step of the motion maps' central differences (`_motion_maps`), on unit quaternions: their
+#: truncation error is ~1e-14 relative (step squared), round-off ~1e-16 / 1e-7 = 1e-9 relative
 MOTION_STEP = 1e-7
 
 
