@@ -41,6 +41,7 @@ from scipy.linalg.lapack import dtbtrs
 from scipy.sparse import csr_matrix
 
 from solver.curvature import Curvature, Outer
+from solver.quaternion import conj, left_matrix, mul
 
 __all__ = ["GaussNewtonPreconditioner", "GridModel", "SplineCoefficients", "cached_preconditioner"]
 
@@ -343,16 +344,12 @@ def _motion_maps(tm, st, Yd) -> dict:
     Ys = [st.Y, st.Y1, st.Y2]
     binom = ((1,), (1, 1), (1, 2, 1))
     for axis in range(3):
-        d = np.zeros(3)
-        d[axis] = 0.5
         for s in range(3):  # d^(s) = e_axis, the other derivatives 0: the path's r-th derivative moves by
             moved = []      # binomial(r, s) p^(r-s) [0, e/2] for r >= s
             for sign in (1.0, -1.0):
                 Y = [y.copy() for y in Ys]
-                for r in range(s, 3):
-                    q = p[r - s]
-                    dq = np.concatenate([-(q[..., 1:] @ d)[..., None], q[..., :1] * d + np.cross(q[..., 1:], d)], axis=2)
-                    Y[r][:, tm.quat_q] += sign * MOTION_STEP * binom[r][s] * dq
+                for r in range(s, 3):  # p^(r-s) [0, e_axis / 2]
+                    Y[r][:, tm.quat_q] += sign * MOTION_STEP * binom[r][s] * 0.5 * left_matrix(p[r - s])[..., 1 + axis]
                 mo = tm.motion(*Y)
                 moved.append((mo.qvel, mo.qacc))
             for r in (1, 2):
@@ -365,43 +362,25 @@ def _motion_maps(tm, st, Yd) -> dict:
 
 
 def _qpos_map(tm, Yd: np.ndarray) -> np.ndarray:
-    """(n, nq, nv) dY/dd at each point: 1 for a linear component, p [0, d/2] = (1/2) [-v^T; w I + [v]x] d for a
-    quaternion slot whose frames' spline is p = (w, v) there."""
-    n = len(Yd)
-    out = np.zeros((n, tm.nq, tm.nv))
+    """(n, nq, nv) dY/dd at each point: 1 for a linear component, p [0, d/2] = (1/2) L(p)[:, 1:] d for a
+    quaternion slot whose frames' spline is p there."""
+    out = np.zeros((len(Yd), tm.nq, tm.nv))
     out[:, tm.lin_q, tm.lin_v] = 1.0
     for qq, vv in zip(tm.quat_q, tm.quat_v):
-        w, v = Yd[:, qq[0]], Yd[:, qq[1:]]
-        E = np.zeros((n, 4, 3))
-        E[:, 0] = -v
-        E[:, 1:] = w[:, None, None] * np.eye(3)
-        E[:, 1, 1] -= v[:, 2]
-        E[:, 1, 2] += v[:, 1]
-        E[:, 2, 0] += v[:, 2]
-        E[:, 2, 2] -= v[:, 0]
-        E[:, 3, 0] -= v[:, 1]
-        E[:, 3, 1] += v[:, 0]
-        out[:, qq[:, None], vv[None, :]] = 0.5 * E
+        out[:, qq[:, None], vv[None, :]] = 0.5 * left_matrix(Yd[:, qq])[:, :, 1:]
     return out
 
 
 def _tangent_maps(tm, Y: np.ndarray, Yd: np.ndarray) -> np.ndarray:
-    """(n, nv, nv) T_i (module docstring): d(path tangent)/d(frame variable) per point; Y the path's qpos
-    and Yd the frames' spline's at the points."""
-    n = len(Y)
-    T = np.zeros((n, tm.nv, tm.nv))
+    """(n, nv, nv) d(path tangent)/d(frame variable) per point, Y the path's qpos and Yd the frames' spline's
+    at the points: the vector part of conj(Q) p [0, d], L(r)[1:, 1:] d with r = conj(Q) p, Q and p the unit
+    quaternions there (the identity on linear components)."""
+    T = np.zeros((len(Y), tm.nv, tm.nv))
     T[:, tm.lin_v, tm.lin_v] = 1.0
     for qq, vv in zip(tm.quat_q, tm.quat_v):
         Q = Y[:, qq] / np.linalg.norm(Y[:, qq], axis=1, keepdims=True)
         p = Yd[:, qq] / np.maximum(np.linalg.norm(Yd[:, qq], axis=1, keepdims=True), 1e-300)
-        w0, v0 = Q[:, 0], -Q[:, 1:]  # conj(Q)
-        w1, v1 = p[:, 0], p[:, 1:]
-        rw = w0 * w1 - (v0 * v1).sum(1)
-        rv = w0[:, None] * v1 + w1[:, None] * v0 + np.cross(v0, v1)
-        B = rw[:, None, None] * np.eye(3)
-        B[:, 0, 1], B[:, 0, 2], B[:, 1, 2] = -rv[:, 2], rv[:, 1], -rv[:, 0]
-        B[:, 1, 0], B[:, 2, 0], B[:, 2, 1] = rv[:, 2], -rv[:, 1], rv[:, 0]
-        T[:, vv[:, None], vv[None, :]] = B
+        T[:, vv[:, None], vv[None, :]] = left_matrix(mul(conj(Q), p))[:, 1:, 1:]
     return T
 
 

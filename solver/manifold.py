@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.frames import FrameSet
-from solver.quaternion import mul
+from solver.quaternion import left_matrix, mul
 
 __all__ = ["FrameVariables", "exp_rotation", "exp_rotation_jacobian"]
 
@@ -64,13 +64,6 @@ def exp_rotation_jacobian(delta: np.ndarray) -> np.ndarray:
     return J
 
 
-def _left(q: np.ndarray) -> np.ndarray:
-    """(..., 4, 4) L(q) with q (x) p = L(q) p (Hamilton product, w first)."""
-    w, x, y, z = np.moveaxis(np.asarray(q, float), -1, 0)
-    return np.stack([np.stack([w, -x, -y, -z], -1), np.stack([x, w, -z, y], -1),
-                     np.stack([y, z, w, -x], -1), np.stack([z, -y, x, w], -1)], -2)
-
-
 class FrameVariables:
     """x (n,) <-> the frame values of a frame set (module docstring), around the set's current values: a
     linear variable is the change of its component, a rotation variable the rotation vector delta.
@@ -95,7 +88,7 @@ class FrameVariables:
         lin[self._rows[:, None], self._idx] = False
         self._lin = lin
         self._q0 = self.base[self._rows[:, None], self._idx]  # (r, 4)
-        self._L0 = _left(self._q0)  # (r, 4, 4)
+        self._L0 = left_matrix(self._q0)  # (r, 4, 4)
         self.n_linear = int(lin.sum())
         self.size = self.n_linear + 3 * len(self._rows)
 

@@ -30,6 +30,13 @@ def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
+def left_matrix(q: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) L(q) with q (x) p = L(q) p (Hamilton product, w first)."""
+    w, x, y, z = np.moveaxis(np.asarray(q, float), -1, 0)
+    return np.stack([np.stack([w, -x, -y, -z], -1), np.stack([x, w, -z, y], -1),
+                     np.stack([y, z, w, -x], -1), np.stack([z, -y, x, w], -1)], -2)
+
+
 def conj(q: np.ndarray) -> np.ndarray:
     """Conjugate (w, -x, -y, -z) of (..., 4) quaternions."""
     return q * np.array([1.0, -1.0, -1.0, -1.0])
