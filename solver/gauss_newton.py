@@ -154,7 +154,8 @@ class GaussNewtonPreconditioner:
             terms: the constraints' `Constraint.curvature` there under the penalty's weights.
             var_dofs: (frame (k,), dof (k,)) of each variable (`solver.lagrangian._variable_dofs`).
     Raises:
-        numpy.linalg.LinAlgError: H_C not positive definite (cannot happen: D's part is).
+        numpy.linalg.LinAlgError: the band not positive definite beyond `RIDGE`'s reach (round-off;
+            `GridModel.preconditioner` then leaves the subproblem with D's preconditioner).
     """
 
     def __init__(self, variables, model: GridModel, al, st, terms: list, var_dofs):
