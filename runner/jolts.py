@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.errors import InputError
-from solver.peak_bounds import CUTOFF_HZ, filter_capture
+from solver.peak_bounds import CUTOFF_HZ, filter_capture, frame_derivatives
 
 __all__ = ["CUTOFF_HZ", "differentiate", "filter_capture", "inverse_torques", "jolt_figures", "worst_joint_ratio"]
 
@@ -40,7 +40,8 @@ STILL_RAD_S2 = 1e-3
 
 
 def differentiate(model, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Velocities and accelerations of sampled frames by finite differences (module docstring).
+    """Velocities and accelerations of frames sampled at a fixed rate by central differences (module
+    docstring; `solver.peak_bounds.frame_derivatives` at the times i / fps).
 
     Args:
         model: an MjModel. qpos: (n, nq) frames at times i / fps (quaternions of any norm: MuJoCo
@@ -50,17 +51,12 @@ def differentiate(model, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, np.n
     Raises:
         InputError: fewer than 3 frames, qpos not (n, nq), or fps not > 0.
     """
-    import mujoco
-
     qpos = np.atleast_2d(np.asarray(qpos, float))
     if qpos.ndim != 2 or qpos.shape[1] != model.nq or len(qpos) < 3:
         raise InputError(f"the motion is {qpos.shape}; its jolt figures need (n >= 3, nq = {model.nq}) frames")
     if not (np.isfinite(fps) and fps > 0):
         raise InputError(f"the frame rate is {fps!r}; it must be a positive number of frames per second")
-    half = np.empty((len(qpos) - 1, model.nv))
-    for i in range(len(qpos) - 1):
-        mujoco.mj_differentiatePos(model, half[i], 1.0 / fps, qpos[i], qpos[i + 1])
-    return 0.5 * (half[1:] + half[:-1]), (half[1:] - half[:-1]) * fps
+    return frame_derivatives(model, np.arange(len(qpos)) / fps, qpos)
 
 
 def inverse_torques(model, qpos: np.ndarray, qvel: np.ndarray, qacc: np.ndarray) -> np.ndarray:

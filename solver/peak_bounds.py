@@ -27,7 +27,7 @@ import numpy as np
 from solver.errors import InputError
 from solver.layout import StateLayout
 
-__all__ = ["CUTOFF_HZ", "PeakBounds", "capture_peaks", "filter_capture", "peak_bounds"]
+__all__ = ["CUTOFF_HZ", "PeakBounds", "capture_peaks", "filter_capture", "frame_derivatives", "peak_bounds"]
 
 #: [Hz] the kinematics cutoff of the capture's low-pass filter (Winter 2009, ch. 2: 6 Hz for gait)
 CUTOFF_HZ = 6.0
@@ -114,6 +114,40 @@ def filter_capture(times: np.ndarray, qpos: np.ndarray, layout: StateLayout,
     for slot in layout.quat_slots:
         out[:, slot] /= np.linalg.norm(out[:, slot], axis=1, keepdims=True)
     return out
+
+
+def frame_derivatives(model, times: np.ndarray, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Velocities and accelerations of sampled frames by central differences, as biomechanics differentiates
+    filtered kinematics (Winter 2009, ch. 2, sec. 2.2.5: finite differences of the filtered data).
+
+    Velocities at the half steps by MuJoCo's `mj_differentiatePos` (a position: (q[i+1] - q[i]) / h_i; a ball
+    joint: the rotation vector of q[i]^-1 q[i+1] over h_i, in the child's frame), and at the frames i = 1..n-2
+    qvel_i = (v[i-1/2] + v[i+1/2]) / 2 and qacc_i = (v[i+1/2] - v[i-1/2]) / ((h_{i-1} + h_i) / 2). For a
+    position this is a weighted mean of the second derivative at frames i-1, i, i+1 of any cubic spline
+    through the frames (weights h_{i-1} / (3 (h_{i-1} + h_i)), 2/3, h_i / (3 (h_{i-1} + h_i)): the spline's
+    moment equations, de Boor, A Practical Guide to Splines, ch. IV), so a spline whose acceleration is
+    bounded at its frames has central differences within the same bound.
+
+    Args:
+        model: an MjModel. times: (n,) [s] increasing. qpos: (n, nq) (quaternions of any norm: MuJoCo
+            normalizes them).
+    Returns:
+        (qvel, qacc), each (n - 2, nv) [m/s, rad/s; m/s^2, rad/s^2].
+    Raises:
+        InputError: fewer than 3 frames, qpos not (n, nq) or times not (n,) increasing.
+    """
+    import mujoco
+
+    times, qpos = np.asarray(times, float), np.atleast_2d(np.asarray(qpos, float))
+    if qpos.ndim != 2 or qpos.shape[1] != model.nq or len(qpos) < 3:
+        raise InputError(f"the motion is {qpos.shape}; its derivatives need (n >= 3, nq = {model.nq}) frames")
+    h = np.diff(times)
+    if times.shape != (len(qpos),) or not np.all(h > 0):
+        raise InputError(f"the frame times ({times.shape}) must be increasing, one per frame of the {len(qpos)}")
+    half = np.empty((len(qpos) - 1, model.nv))
+    for i in range(len(qpos) - 1):
+        mujoco.mj_differentiatePos(model, half[i], h[i], qpos[i], qpos[i + 1])
+    return 0.5 * (half[1:] + half[:-1]), (half[1:] - half[:-1]) / (0.5 * (h[1:] + h[:-1]))[:, None]
 
 
 def _series(model, frame_times, frames, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

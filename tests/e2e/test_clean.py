@@ -31,10 +31,10 @@ def test_clean_writes_its_outputs_and_meets_the_feet_limits(cleaned):
     # --feet planted (the default): the capture's 1.50 mm/frame of skate in contact at least halved
     assert feet["skate_contact_mm"] <= 0.5 * report["metrics"]["motion"]["plain"]["path"]["skate_contact_mm"]
     c = result["clean"]
-    # no new jolt: the change's peaks within the 6 Hz capture's (the bound holds them there at its 200 Hz points;
-    # 5 % for the difference from these finite differences at the 120 Hz frames)
-    assert c["change_pelvis_m_s2"] <= 1.05 * c["capture_pelvis_m_s2"]
-    assert c["change_joint_rad_s2"] <= 1.05 * c["capture_joint_rad_s2"]
+    # no new jolt: the change's peaks within the 6 Hz capture's, both by central differences at the frames, the
+    # bound's own measure (exact for the pelvis's position; 1 % for a ball joint's rotation, which is not linear)
+    assert c["change_pelvis_m_s2"] <= (1 + 1e-9) * c["capture_pelvis_m_s2"]
+    assert c["change_joint_rad_s2"] <= 1.01 * c["capture_joint_rad_s2"]
 
 
 def test_pins_are_the_source_on_the_written_bvh(cleaned):
