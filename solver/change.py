@@ -81,6 +81,17 @@ class MeasureOfChange:
             self._M, self._P = self._MP[:, 0], self._MP[:, 1]  # views
             self.pbar = np.tensordot(w, self._P, axes=1) / w.sum()
 
+    @property
+    def mass(self) -> np.ndarray:
+        """(n, nv, nv) M(q_ref) at the points [kg, kg m, kg m^2 by block]: the acceleration part's metric."""
+        return self._M
+
+    @property
+    def pose_metric(self) -> np.ndarray:
+        """(n, nv) the pose part's diagonal P, or (n, nv, nv) the metric given as `pose`: the pose part's
+        metric at the points (times omega^4 in D)."""
+        return self._P
+
     def _pose_difference(self, Y: np.ndarray):
         """(dq (n, nv), q (4, s, n), |q| (s, n)): the tangent-space pose difference from the reference."""
         tm = self.tmap

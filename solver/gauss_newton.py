@@ -259,11 +259,12 @@ def _change_terms(al) -> list:
     ch, nv = al.change, al.tmap.nv
     n = len(ch.ref.weights)
     w = ch.ref.weights * (2.0 / al.d0)
-    pose = ch._P if ch._P.ndim == 3 else np.einsum("ni,ij->nij", ch._P, np.eye(nv))
+    P = ch.pose_metric
+    pose = P if P.ndim == 3 else np.einsum("ni,ij->nij", P, np.eye(nv))
     eye = np.broadcast_to(np.eye(nv), (n, nv, nv))
     allp, alld = np.arange(n), np.arange(nv)
     return [Curvature(allp, alld, {0: eye}, (w * ch.omega ** 4)[:, None, None] * pose),
-            Curvature(allp, alld, {2: eye}, w[:, None, None] * ch._M)]
+            Curvature(allp, alld, {2: eye}, w[:, None, None] * ch.mass)]
 
 
 def _bmm(A: np.ndarray, B: np.ndarray) -> np.ndarray:

@@ -67,7 +67,10 @@ class PathState:
         #: what a function computes for its value and reuses for its gradient (keyed by the function)
         self.cache: dict = {}
 
-    def _pass(self):
+    def forward_pass(self):
+        """The engine's forward pass at the points (`InverseDynamics.forward`: site positions, torques when
+        the engine computes forces), made once per state and shared by every constraint that reads it and
+        by the reverse pass (`pullback`)."""
         if self._res is None:
             qvel = np.ascontiguousarray(self.motion.qvel)
             if self.engine.forces:
@@ -80,17 +83,17 @@ class PathState:
     def tau(self) -> np.ndarray:
         """(n, nv) generalized forces [N, N m] that make the motion (contact-free `mj_inverse`); needs an
         inverse-dynamics engine."""
-        return self._pass().tau
+        return self.forward_pass().tau
 
     @property
     def sites(self) -> np.ndarray:
         """(n, k, 3) world positions [m] of the engine's sites."""
-        return self._pass().sites
+        return self.forward_pass().sites
 
     @property
     def site_velocities(self) -> np.ndarray:
         """(n, k, 3) world velocities [m/s] of the engine's sites."""
-        return self.engine.site_velocities(self._pass())
+        return self.engine.site_velocities(self.forward_pass())
 
     def add_acceleration(self, g: np.ndarray) -> None:
         """Add g (n, nv) = d f / d qacc."""
@@ -113,7 +116,7 @@ class PathState:
         g_pose = g_vel = None
         g_acc = self.g_acc
         if self.g_sites is not None or self.g_site_vel is not None or self.g_tau is not None:
-            res = self._pass()
+            res = self.forward_pass()
             z = np.zeros(res.sites.shape)
             g_pose, g_vel, g_qacc = self.engine.vjp(res, self.g_tau, z if self.g_sites is None else self.g_sites,
                                                     z if self.g_site_vel is None else self.g_site_vel)

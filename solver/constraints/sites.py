@@ -248,7 +248,7 @@ def site_velocity_jacobians(state: PathState, points: np.ndarray, cols: np.ndarr
     """(2, q, 3, nv) d(site velocity)/d(pose) [m/s per rad or m] and d(site velocity)/d(qvel) [m] of engine
     site cols[i] at quadrature point points[i], by the engine's own reverse pass (`SiteKinematics.vjp`,
     the pose in MuJoCo's tangent convention), one per site and axis."""
-    res = state._pass()
+    res = state.forward_pass()
     z = np.zeros(res.sites.shape)
     J = np.empty((2, len(points), 3, state.motion.qvel.shape[1]))
     for k in np.unique(cols):
