@@ -6,7 +6,15 @@ SQP methods (Gill, Murray & Saunders, "SNOPT: an SQP algorithm for large-scale c
 optimization", SIAM Review 47, 2005, sec. 1.3: when no feasible point is found, the sum of the
 violations is minimized instead):
 
-    F_S(P) = (1/2) sum_{j in S} sum_p (w_p/T) max(0, c_p/tol_j)^2
+    F_S(P) = (1/2) sum_{j in S} sum_p (w_p/T) max(0, c_p/tol_j - aim)^2,   aim = 1 - ftol_rel
+
+A pair is met at c_p/tol_j <= 1, so F counts the violation of the tolerances themselves: a pair the least
+change met counts for nothing, and a solve's relative progress, on which L-BFGS stops (`ftol_rel`), is the
+broken pairs' alone. The aim sits ftol_rel of a tolerance inside the edge so that a descent that
+approaches the edge from outside and stops once an iteration gains less than ftol_rel stops inside it.
+(Counted from c_p = 0, where the least change aims, the met pairs made most of F: on 83_02's clean the
+first solve stopped after 4 evaluations, F down 0.15 %, and the search certified 3.4 mm of slide; counted
+from the edge, the same solve meets every pair in 563.)
 
 1. **Every constraint at once** (S = all): one L-BFGS solve from the given path, stopped as soon as
    every pair is within its tolerance, with a variable frame added to every segment that holds a broken
@@ -188,12 +196,13 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
     frame to every segment holding a broken pair of `objective` while one fits; returns the path with the
     least F among those on which `held` are met (the start is one).
 
-    The held pairs are priced by the quadratic penalty (rho/2) sum (w_p/T) max(0, c_p/tol)^2, F's own form,
+    The held pairs are priced by the quadratic penalty (rho/2) sum (w_p/T) max(0, c_p/tol)^2,
     starting at rho = 1 (a held pair's violation costs what an objective pair's does) and raised by GAMMA
     until a solve from the start (which meets them) ends with them met: the penalty method's continuation
     (Nocedal & Wright, sec. 17.1), each solve from the feasible start so that none wanders into a basin
     where the held pairs cannot be met again."""
-    eal = AugmentedLagrangian(al.change, held, al.tmap, al.engine, al.d0, elastic=objective, base=al.base)
+    eal = AugmentedLagrangian(al.change, held, al.tmap, al.engine, al.d0, elastic=objective, base=al.base,
+                              aim=1.0 - ftol_rel)
     basis, pre = frame_maps(al, frames, quat_slots)
     best, best_F = frames, eal.evaluate(basis, frames.values, grad=False)[0]
     while True:
@@ -304,9 +313,9 @@ def _meets(al: AugmentedLagrangian, constraints, frames: FrameSet) -> bool:
     return all(float(s.max(initial=0.0)) <= 1.0 for s in _scaled(constraints, state))
 
 
-def _violation(al: AugmentedLagrangian, constraints, frames: FrameSet) -> float:
-    """F over `constraints` (module docstring) on the path of `frames`."""
-    eal = AugmentedLagrangian(al.change, [], al.tmap, al.engine, al.d0, elastic=constraints, base=al.base)
+def _violation(al: AugmentedLagrangian, constraints, frames: FrameSet, aim: float) -> float:
+    """F over `constraints` (module docstring) on the path of `frames`, pairs counted from c/tol = aim."""
+    eal = AugmentedLagrangian(al.change, [], al.tmap, al.engine, al.d0, elastic=constraints, base=al.base, aim=aim)
     return eal.evaluate(SplineBasis(frames.times, al.t), frames.values, grad=False)[0]
 
 
@@ -347,6 +356,6 @@ def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, mi
         if budget.status is not Status.CONVERGED:
             break
         # the lower F is certified; the other path goes on while it meets what that certifies
-        paths.sort(key=lambda ip: _violation(al, objective, ip[1]))
+        paths.sort(key=lambda ip: _violation(al, objective, ip[1], 1.0 - ftol_rel))
         raises += _raise(al, objective, paths[0][1])
     return Certificate(tuple(raises), paths[0][1], budget.evals, budget.status, paths[0][0])

@@ -266,3 +266,32 @@ def test_a_bound_at_a_keyframe_is_sought_there(standing):
     sol = solve_least_change(lc, LeastChangeOptions())
     assert sol.status is Status.CONVERGED and sol.certificate == ()
     assert float(sol.frames.path(np.array([0.4]))[0, 2]) <= z0 - 0.05 + TOL
+
+
+def test_the_elastic_measure_counts_a_pair_only_beyond_its_aim(standing):
+    """F = (1/2) sum (w_p/T) max(0, c_p/tol - aim)^2 (solver.feasibility): nothing for a pair within the aim,
+    the squared excess beyond it otherwise (against numpy on the pelvis's own height), and its gradient
+    agrees with central differences."""
+    model, still, z0 = standing
+    lc = build_least_change(model, still, rate=200.0)
+    old, aim = lc.al, 1.0 - 1e-3
+    frames = with_frames(_start_frames(lc, 1 / 48), np.array([0.2, 0.6]), StateLayout.from_model(model).quat_slots)
+    basis = SplineBasis(frames.times, old.t)
+    for top, beyond in ((z0 + 0.5 * TOL, False), (z0 - 3 * TOL, True)):  # met within its tolerance; 3 tol over
+        bound = PelvisHeight("top", old.t, T_STAR, +1, top, SCHEDULE, half=0.05)
+        eal = AugmentedLagrangian(old.change, [], old.tmap, old.engine, old.d0, elastic=[bound], aim=aim)
+        F, G, _ = eal.evaluate(basis, frames.values)
+        z = frames.path(old.t[bound.rows])[:, 2]
+        w = eal.w_elastic[0]
+        expected = 0.5 * float(w @ np.maximum(0.0, (z - top) / TOL - aim) ** 2)
+        assert (expected > 0) == beyond
+        np.testing.assert_allclose(F, expected, rtol=1e-12, atol=1e-18)
+        if beyond:
+            free = np.flatnonzero(~frames.fixed[:, 2])
+            h = 1e-6
+            for i in free[:2]:
+                v = [frames.values.copy() for _ in range(2)]
+                v[0][i, 2] += h
+                v[1][i, 2] -= h
+                fd = (eal.evaluate(basis, v[0], grad=False)[0] - eal.evaluate(basis, v[1], grad=False)[0]) / (2 * h)
+                np.testing.assert_allclose(G[i, 2], fd, rtol=1e-5, atol=1e-9)
