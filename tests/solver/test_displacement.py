@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from solver.constraints.base import RELATIVE_TOLERANCE
+from solver.contacts import Contact
 from solver.displacement import CORRECTION_TIME, anchors, build_displacement, clean_solution, pin_frames, solve_displacement
 from solver.errors import InputError
 from solver.layout import StateLayout
@@ -159,6 +160,18 @@ def test_the_no_jolt_bound_is_the_filtered_capture_s_peak_by_central_differences
     peak = np.linalg.norm(x[2:] - 2 * x[1:-1] + x[:-2], axis=1).max() * fps ** 2
     np.testing.assert_allclose(A, peak, rtol=1e-9)
     assert np.abs(interpolate(t, x, t, 2)).max() > 1.05 * peak  # the spline's peak, which the bound is not
+
+
+def test_a_planted_foot_met_within_its_tolerance_is_within_the_clean_s_float_bound(toy_model):
+    """A clean's float bound is 3 mm (docs/corpus.md "Cleaning the corpus"): every planted pair's limit plus its
+    tolerance stays within it, so a path that meets the pair within tolerance meets the bound (a keyed path's
+    2 mm tolerance would accept 4 mm)."""
+    t, q = _capture(toy_model)
+    disp = build_displacement(toy_model, t, q, contacts=[Contact("l_toe", 0.2, 0.8), Contact("r_heel", 1.1, 1.6)])
+    planted = [c for c in disp.lc.al.constraints if c.name == "planted"]
+    assert planted and all(c.size for c in planted)
+    for c in planted:
+        assert np.all(np.asarray(c.limit) + c.tolerance <= 3e-3 + 1e-12), (c.limit, c.tolerance)
 
 
 def test_pins_hold_the_capture_exactly(dipped):
