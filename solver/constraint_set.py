@@ -126,14 +126,17 @@ def _pairs_in(t: np.ndarray, a: float, b: float) -> np.ndarray:
     return np.flatnonzero((t >= a) & (t <= b))
 
 
-def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None):
+def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None,
+                       planted_tolerance: float = TOLERANCES["planted"]):
     """The constraints of a figure's problem (module docstring).
 
     Args:
         model: MjModel of the scene. figure: its `solver.figure.Figure`. reference: `ReferenceMotion` (the
             quadrature points). plain: the plain spline's FrameSet (keyframes: the full ones pin sites).
         contacts: `solver.contacts.Contact`s. flights: ((start, end), ...) [s]. engine: the contact
-            sites' `SiteKinematics` (figure.contact_sites, in that order).
+            sites' `SiteKinematics` (figure.contact_sites, in that order). planted_tolerance: [m] the planted
+            limits' tolerance, also where a keyframe that holds a foot up relaxes them (a clean's is 1 mm:
+            `solver.displacement`).
     Returns:
         (constraints, relaxations): a list of `Constraint`s and a list of `Relaxation`s.
     """
@@ -147,10 +150,11 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     if engine is not None and surfaces.count:
         out.append(Penetration(surfaces, radii, t, sites, TOLERANCES["penetration"]))
         witness = None if capture is None else _capture_state(model, reference, capture, engine)
-        feet = _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness)
+        feet = _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness,
+                             planted_tolerance)
         if feet is not None:
             args, limit_h, reports = feet
-            height = SupportHeight(*args, limit=limit_h, tolerance=TOLERANCES["planted"])
+            height = SupportHeight(*args, limit=limit_h, tolerance=planted_tolerance)
             slide, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness)
             height.reports = reports + slide_reports
             out += [height, slide]
@@ -327,11 +331,13 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites, state
     return slide, reports
 
 
-def _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness=None):
+def _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness=None,
+                  tolerance: float = TOLERANCES["planted"]):
     """The foot contacts' support points (`solver.constraints.sites._FootSupport`) and their limits
     relaxed where the keyframes force (module docstring), or None without contacts. Where a keyframe holds
     a foot up, the limit is what a known path through the keyframes does over the contact: `witness` (the
     capture they came from, a PathState at the quadrature points), else the plain spline (`state`).
+    `tolerance` [m]: the planted limits'.
 
     Returns:
         (args of `_FootSupport`, planted limits (p,) [m], relaxation reports).
@@ -377,7 +383,7 @@ def _foot_support(model, figure, reference, plain, contacts, state, support, rad
                 continue
             i = int(np.argmin(np.abs(t[on] - tk)))
             keyed, _ = support.height(keyed_low[j, cols[i]][None], None if surfaces[i] < 0 else int(surfaces[i]))
-            if keyed[0] - FLOAT_LIMIT <= TOLERANCES["planted"]:
+            if keyed[0] - FLOAT_LIMIT <= tolerance:
                 continue  # the keyframe meets the bound
             run = _run(href - FLOAT_LIMIT, i)
             run = run if run.stop > run.start else slice(i, i + 1)
@@ -385,7 +391,7 @@ def _foot_support(model, figure, reference, plain, contacts, state, support, rad
                                       float(keyed[0])))
         limit_h = FLOAT_LIMIT
         if len(reports) > held_up:  # a keyframe holds the foot up: met where it floats no more than the witness
-            limit_h = max(FLOAT_LIMIT, float(w[on] @ href) / span - TOLERANCES["planted"])
+            limit_h = max(FLOAT_LIMIT, float(w[on] @ href) / span - tolerance)
         for lst, val in zip(args, (on, cols, surfaces, np.full(len(on), p), w[on], [span], [int(on[len(on) // 2])], [F.site])):
             lst.append(np.asarray(val))
         limits_h.append(limit_h)

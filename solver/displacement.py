@@ -189,11 +189,15 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     engine = InverseDynamics(model, figure.contact_sites)  # the effort bound of a capture needs the torques
     schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)
+    # the planted limits' tolerance is penetration's 1 mm, not the keyed path's 2 mm: a foot met within it floats
+    # at most FLOAT_LIMIT + 1 mm = 3 mm over its contact, a clean's float bound (docs/corpus.md "Cleaning the
+    # corpus"), as a keyed path's 4 mm is under its 5 mm (83_02's clean, on a path that met every pair within its
+    # tolerance and no further, floated 3.31 mm with 2 mm)
     constraints, relaxations = figure_constraints(model, figure, reference, capture_frames, tuple(schedule), flights,
-                                                  engine, capture=(times, qpos))
+                                                  engine, capture=(times, qpos),
+                                                  planted_tolerance=TOLERANCES["penetration"])
     constraints = [_change_bound(c, reference, model, times, qpos) if c.name == "acceleration" else c
                    for c in constraints]
-    _float_band(constraints)
     change = MeasureOfChange(reference, tmap, omega=np.pi / correction_time,
                              pose=equal_mass_matrices(model, reference.qpos))
     d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)
@@ -243,17 +247,6 @@ def _change_bound(bound: AccelerationBound, reference: ReferenceMotion, model, t
     qacc = frame_derivatives(model, times, smooth)[1]
     peaks = np.maximum(np.linalg.norm(qacc[:, bound.dofs], axis=-1).max(axis=0), 1e-6)
     return ChangeAcceleration(bound, reference.qacc, peaks)
-
-
-def _float_band(constraints) -> None:
-    """A clean's planted band inside its float bound: each planted limit's tolerance is penetration's 1 mm, not
-    the keyed path's 2 mm, so a foot met within its tolerance floats at most FLOAT_LIMIT + 1 mm = 3 mm over its
-    contact, a clean's float bound (docs/corpus.md "Cleaning the corpus"), as a keyed path's 4 mm is under its
-    5 mm (83_02's clean, returned on a path that met every pair within its tolerance and no further, floated
-    3.31 mm with 2 mm)."""
-    for c in constraints:
-        if c.name == "planted":
-            c.tolerance = TOLERANCES["penetration"]
 
 
 def _slide_limits(al: AugmentedLagrangian, plain: FrameSet, feet: str) -> None:
