@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Curvature", "Outer"]
+__all__ = ["Curvature", "Outer", "quaternion_dofs"]
 
 
 @dataclass(frozen=True)
@@ -54,3 +54,10 @@ class Outer:
     points: np.ndarray
     pair: np.ndarray
     d2: np.ndarray
+
+
+def quaternion_dofs(tmap, quats: np.ndarray) -> np.ndarray:
+    """(q, 3) the qvel indices of each quaternion given by its qpos indices `quats` (q, 4) (a `TangentMap`'s
+    `quat_q` and `quat_v`): the support of a `Curvature` whose "qpos" factor is on those components."""
+    v_of = {tuple(int(x) for x in qq): vv for qq, vv in zip(tmap.quat_q, tmap.quat_v)}
+    return np.array([v_of[tuple(int(x) for x in q)] for q in np.asarray(quats)])

@@ -22,7 +22,7 @@ from collections.abc import Callable
 import numpy as np
 
 from solver.constraints.base import Constraint
-from solver.curvature import Curvature
+from solver.curvature import Curvature, quaternion_dofs
 from solver.path_state import PathState, add_at
 from solver.quaternion import swing_angle_grad, twist_angle_grad
 from solver.terms.anatomy_table import motion_angle_grads, motion_angles, motion_axes, off_hinge_angles, range_of_motion
@@ -75,9 +75,7 @@ class AngleBound(Constraint):
             return []
         rows, cols = self.rows[on], self._cols[on]
         g = self.grads(state.Y, rows, cols) * self.sign[cols, None]
-        tm = state.motion.tmap
-        v_of = {tuple(int(x) for x in qq): vv for qq, vv in zip(tm.quat_q, tm.quat_v)}
-        support = np.array([v_of[tuple(int(x) for x in self.idx[c])] for c in cols])
+        support = quaternion_dofs(state.motion.tmap, self.idx[cols])
         return [Curvature(rows, support, {"qpos": g[:, None, :]}, d2[on, None, None], self.idx[cols])]
 
 

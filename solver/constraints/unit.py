@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.constraints.base import REPRESENTATION, Constraint
-from solver.curvature import Curvature
+from solver.curvature import Curvature, quaternion_dofs
 
 __all__ = ["UNIT_LIMIT", "UnitNorm"]
 
@@ -63,7 +63,5 @@ class UnitNorm(Constraint):
         q = state.Y[rows[:, None], self.quat_q[slot]]  # (p, 4)
         r = np.linalg.norm(q, axis=1, keepdims=True)
         g = ((r - 1.0) / UNIT_LIMIT) * q / r
-        tm = state.motion.tmap
-        v_of = {tuple(int(x) for x in qq): vv for qq, vv in zip(tm.quat_q, tm.quat_v)}
-        support = np.array([v_of[tuple(int(x) for x in self.quat_q[k])] for k in slot])
+        support = quaternion_dofs(state.motion.tmap, self.quat_q[slot])
         return [Curvature(rows, support, {"qpos": g[:, None, :]}, d2[live, None, None], self.quat_q[slot])]
