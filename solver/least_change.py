@@ -21,6 +21,11 @@ only by what that solve shows no path through the keyframes beats (`Solution.cer
 constraint's SI unit); the multipliers start again from 0 on the path it found, which meets every
 certified limit. A path the solve ends on beyond a limit (a budget spent) gives way to the best one
 that met them all.
+
+Where the reference motion itself (the plain spline; a clean's capture) meets every constraint within its
+tolerance it is the answer, unchanged: D >= 0 is 0 there, so no path that meets them changes less (the
+method of multipliers aims each pair at its limit, not at its tolerance's edge, and would move such a path
+for pairs already met).
 """
 from __future__ import annotations
 
@@ -262,6 +267,9 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     lc = replace(lc, al=lc.al.posed())  # the solve's own multipliers and limits
     al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
     frames, (basis, pre) = _start(lc, o.min_gap)
+    if _worst(al, al.scaled_values(basis, frames.values))["value"] <= 1.0:  # met at D = 0, D's least value
+        return _solution(lc, frames, basis, [], [], Status.CONVERGED, "the reference motion meets every constraint "
+                         "within its tolerance: it is the least change (D = 0)", 0, (), time.perf_counter() - start, 0.0, o.tol)
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
     rounds, estimate, decreases, scores = [], float("nan"), [], None
     evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met

@@ -104,6 +104,19 @@ def test_a_feasible_problem_raises_nothing_and_ends_on_its_active_bound(standing
     assert _z(sol) >= z0 - 0.20  # the other untouched
 
 
+def test_a_reference_within_every_tolerance_is_the_least_change_unchanged(standing):
+    """The still figure's pelvis is 0.6 mm above `top`, within its 1 mm tolerance: the plain spline meets every
+    constraint, D >= 0 is 0 on it, so it is the least change; the solve returns it as it is (the method of
+    multipliers alone aims at the limit itself and moved the pelvis down to it)."""
+    z0 = standing[2]
+    lc = _problem(standing, top=z0 - 0.0006, bottom=z0 - 0.20, keyed=False)
+    sol = solve_least_change(lc, LeastChangeOptions())
+    assert sol.status is Status.CONVERGED and sol.certificate == () and sol.unmet == {}
+    t = lc.al.t
+    assert np.max(np.abs(sol.frames.path(t) - lc.plain.path(t))) <= 1e-12  # [m, 1] the plain spline, to round-off
+    assert sol.E_final == pytest.approx(0.0, abs=1e-15)
+
+
 def test_conflicting_bounds_give_the_lower_priority_exactly_what_the_higher_needs(standing):
     z0 = standing[2]
     top, bottom = z0 - 0.10, z0 - 0.04  # no z is both <= top and >= bottom: the schedule's wish gives 6 cm
