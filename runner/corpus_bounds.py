@@ -79,10 +79,11 @@ NOT_TOLD = "not told by the data"
 #: the bounds made from the plain spline's own figure that no constraint bounds at that scale (the cause
 #: "the plain spline met the constraints")
 PLAIN_RELATIVE = ("joint_error", "site_error", "skate_excess")
-#: the least limit of a `PLAIN_RELATIVE` bound where the plain spline already meets every constraint within its
-#: tolerance ("plain_worst_constraint" <= 1), in the bound's units: a figure of a capture's resolution (issue
-#: 60's examples: 0.1 mm, 0.01 cm; a BVH's 0.1 degree), below which a limit made from the plain spline's own
-#: figure asks for what no capture resolves
+#: where the plain spline already meets every constraint within its tolerance ("plain_worst_constraint" <= 1), a
+#: `PLAIN_RELATIVE` bound allows at least this much above the plain spline's own figure, in the bound's units: a
+#: figure of a capture's resolution (issue 60's examples: 0.1 mm, 0.01 cm; a BVH's 0.1 degree). The least change
+#: of such a pair is the plain spline itself (D = 0, `solver.least_change`), so "below the plain spline's" or
+#: "half of it" asks the solve for what its problem does not: no path is told to beat the plain spline there
 PLAIN_FLOORS = {"joint_error": 0.1, "site_error": 0.01, "skate_excess": 0.1}
 #: the cause of a skate bound below what the keyframes force (`forced_out_of_reach`)
 FORCED = "keyframes force the skate"
@@ -122,8 +123,8 @@ class Bound:
 
     def limit(self, figures: dict) -> float | None:
         """The limit for the pair's `figures` [the value's units; for "within": on |value - reference|],
-        at least `PLAIN_FLOORS` where the plain spline met every constraint; None when a figure it needs is
-        missing."""
+        at least the plain spline's own figure plus `PLAIN_FLOORS` where the plain spline met every constraint;
+        None when a figure it needs is missing."""
         ref = 0.0 if self.reference is None else figures.get(self.reference)
         if ref is None or not math.isfinite(ref):
             return None
@@ -131,7 +132,7 @@ class Bound:
             return max(self.margin, self.factor * abs(ref))
         lim = self.factor * ref + self.margin
         if self.name in PLAIN_FLOORS and figures.get("plain_worst_constraint", math.inf) <= 1.0:
-            lim = max(lim, PLAIN_FLOORS[self.name])  # the plain spline met every constraint: its resolution
+            lim = max(lim, ref + PLAIN_FLOORS[self.name])  # the plain spline met every constraint: its own + resolution
         return lim
 
     def measured(self, figures: dict, value_key: str | None = None) -> float | None:
