@@ -27,7 +27,12 @@ from the edge, the same solve meets every pair in 563.)
    bound of the spline's representation last): the level's violation F_S is minimized while every pair of
    the levels above holds the limit certified for it (a quadratic penalty raised until they do,
    `_elastic_solve`), with the same refinement. What is left is the least violation: each pair still
-   beyond its tolerance has its limit raised by its value there, and the next level holds it. This is the
+   beyond its tolerance has its limit raised by its value there less half its tolerance, and the next level
+   holds it: the path that reaches the least violation then holds the pair in the middle of its tolerance.
+   The least change aims every pair at its limit and accepts it within its tolerance; a pair at its least
+   violation cannot reach the limit, so it needs slack inside the tolerance (raised to just below the edge,
+   the least change stalled there) and no more than half of one outside it (raised by the whole value, it
+   could end a whole tolerance beyond the least violation). This is the
    lexicographic order of prioritized inverse kinematics (Kanoun, Lamiraux & Wieber, "Kinematic control
    of redundant manipulators: generalizing the task-priority framework to inequality tasks", IEEE T-RO 27,
    2011): a lower level never costs a higher one anything.
@@ -52,6 +57,10 @@ from solver.frames import FrameSet
 from solver.lagrangian import GAMMA, AugmentedLagrangian, frame_maps, solve_subproblem
 from solver.optimize import Status
 from solver.spline_basis import SplineBasis
+
+#: [1] where the search's path holds a raised pair, in tolerances beyond its new limit: the middle of its tolerance,
+#: room either way for the least change that follows (it aims at the limit and accepts within the tolerance)
+RAISED_AT = 0.5
 
 __all__ = ["Certificate", "Raise", "beyond", "capture_start", "least_violation", "on_points", "with_frames"]
 
@@ -261,13 +270,16 @@ def beyond(al: AugmentedLagrangian, constraints, frames: FrameSet, limits=None) 
 
 
 def _raise(al: AugmentedLagrangian, constraints, frames: FrameSet) -> list[Raise]:
-    """Raise the limit of every pair of `constraints` beyond its tolerance on `frames` by its value there
-    (the least violation reached), and describe what was raised (`beyond`)."""
+    """Raise the limit of every pair of `constraints` beyond its tolerance on `frames` by its value there (the
+    least violation reached) less `RAISED_AT` of its tolerance, so that the path reaching the least violation holds the
+    pair in the middle of its raised tolerance (module docstring), and describe what was raised (`beyond`:
+    each amount the least violation from the limit as posed)."""
     out = beyond(al, constraints, frames)
     state = al.state(SplineBasis(frames.times, al.t), frames.values)
     for c in constraints:
         v = c.values(state)
-        c.limit = c.limit + np.where(v / c.tolerance > 1.0, v, 0.0)
+        tol = np.broadcast_to(c.tolerance, v.shape)
+        c.limit = c.limit + np.where(v / tol > 1.0, v - RAISED_AT * tol, 0.0)
     return out
 
 

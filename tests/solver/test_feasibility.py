@@ -144,6 +144,26 @@ def test_a_keyed_pose_beyond_a_bound_is_certified_by_its_own_excess(standing):
     assert np.all(z - (top_limit(lc) + raised.amount) <= TOL + 1e-9)  # every pair within the certified raise
 
 
+def test_a_raised_limit_puts_the_least_violation_in_the_middle_of_its_tolerance(standing):
+    """No z meets both bounds: the search raises `top` so that the path reaching the least violation holds it at
+    half its tolerance (c/tol = 1/2 on the raised limit), leaving the least change that follows half a tolerance
+    either way; that change ends within half a tolerance of the least violation, not a whole one beyond it."""
+    z0 = standing[2]
+    top, bottom = z0 - 0.10, z0 - 0.04
+    lc = _problem(standing, top=top, bottom=bottom, keyed=False)
+    al = lc.al.posed()
+    frames = _start_frames(replace(lc, al=al), LeastChangeOptions().min_gap)
+    cert = least_violation(al, frames, lc.layout.quat_slots, min_gap=0.01, ftol_rel=1e-3, per_level=8)
+    (raised,) = cert.raises
+    state = al.state(SplineBasis(cert.frames.times, al.t), cert.frames.values)
+    assert al.constraints[0].values(state).max() / TOL == pytest.approx(0.5, abs=1e-9)
+    z = float(cert.frames.path(np.array([T_STAR]))[0, 2])
+    assert raised.amount == pytest.approx(z - top, abs=1e-12)  # the least violation, from the limit as posed
+    sol = solve_least_change(lc, LeastChangeOptions())
+    assert sol.status is Status.INFEASIBLE
+    assert _z(sol) - top <= sol.unmet["top"] + TOL / 2 + 1e-9
+
+
 def test_a_solve_leaves_its_problem_as_posed(standing):
     """The solve raises limits and updates multipliers on its own copy: the problem's limits are unchanged
     after it, and the same problem solved again gives the same path."""
