@@ -304,6 +304,8 @@ def refinement_text(solution, tol: float | None) -> str:
     if checks and len(checks[-1][0]) != solution.frames.count:
         return (f"no refinement estimate on the final frames (the last: {estimate:.3g} on {len(checks[-1][0])} "
                 "frames, before more were added)")
+    if getattr(solution, "estimate_kind", "refinement") == "reference":
+        return "nothing to change: the reference motion already meets every constraint within its tolerance"
     if getattr(solution, "estimate_kind", "refinement") == "progress":  # a clean: no frame to add
         what = f"the last subproblem lowered Phi by {estimate:.3g} of it"
         return what if tol is None else f"{'converged' if estimate <= tol else 'not converged'} ({what}, tol {tol:g})"

@@ -268,8 +268,9 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
     frames, (basis, pre) = _start(lc, o.min_gap)
     if _worst(al, al.scaled_values(basis, frames.values))["value"] <= 1.0:  # met at D = 0, D's least value
-        return _solution(lc, frames, basis, [], [], Status.CONVERGED, "the reference motion meets every constraint "
-                         "within its tolerance: it is the least change (D = 0)", 0, (), time.perf_counter() - start, 0.0, o.tol)
+        return replace(_solution(lc, frames, basis, [], [], Status.CONVERGED, "the reference motion meets every constraint "
+                                 "within its tolerance: it is the least change (D = 0)", 0, (), time.perf_counter() - start,
+                                 0.0, o.tol), estimate_kind="reference")
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
     rounds, estimate, decreases, scores = [], float("nan"), [], None
     evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met

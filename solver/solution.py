@@ -70,8 +70,9 @@ class Solution:
             least change: with every constraint met; not after a budget or a stop request); None without one.
         final_estimate: the last estimate of a strategy with a tolerance, NaN otherwise.
         estimate_kind: what `final_estimate` is: "refinement" (the decrease of Phi more frames predict over
-            Phi) or "progress" (on a `LeastChange.grid`, where no frame can be added: the decrease of Phi over
-            the last subproblem, over Phi).
+            Phi), "progress" (on a `LeastChange.grid`, where no frame can be added: the decrease of Phi over
+            the last subproblem, over Phi) or "reference" (0: the reference motion met every constraint and is
+            returned unchanged, `solver.least_change`).
         unmet: {constraint: amount [SI]} of the constraints the least change could not meet: the largest
             raise of each (`solver.feasibility`); {} for `solve`.
         certificate: the least change's `solver.feasibility.Raise`s: per constraint and column, the least

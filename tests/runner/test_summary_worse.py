@@ -493,6 +493,10 @@ def test_the_refinement_says_one_thing():
     assert refinement_text(sol, 0.01) == "converged (the last subproblem lowered Phi by 0.002 of it, tol 0.01)"
     sol.final_estimate = 0.05
     assert refinement_text(sol, 0.01) == "not converged (the last subproblem lowered Phi by 0.05 of it, tol 0.01)"
+    # the reference motion returned as it is (it met every constraint): nothing was refined
+    sol.estimate_kind, sol.final_estimate = "reference", 0.0
+    assert refinement_text(sol, 0.01) == ("nothing to change: the reference motion already meets every constraint "
+                                          "within its tolerance")
 
 
 def test_only_the_constraints_a_path_breaks_get_a_row():

@@ -114,7 +114,7 @@ def test_a_reference_within_every_tolerance_is_the_least_change_unchanged(standi
     assert sol.status is Status.CONVERGED and sol.certificate == () and sol.unmet == {}
     t = lc.al.t
     assert np.max(np.abs(sol.frames.path(t) - lc.plain.path(t))) <= 1e-12  # [m, 1] the plain spline, to round-off
-    assert sol.E_final == pytest.approx(0.0, abs=1e-15)
+    assert sol.E_final == pytest.approx(0.0, abs=1e-15) and sol.estimate_kind == "reference"
 
 
 def test_conflicting_bounds_give_the_lower_priority_exactly_what_the_higher_needs(standing):
