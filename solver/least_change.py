@@ -20,12 +20,8 @@ in which limits give (`Constraint.priority`), with frames added where pairs stay
 only by what that solve shows no path through the keyframes beats (`Solution.certificate`, in the
 constraint's SI unit); the multipliers start again from 0 on the path it found, which meets every
 certified limit. A path the solve ends on beyond a limit (a budget spent) gives way to the best one
-that met them all.
-
-Where the reference motion itself (the plain spline; a clean's capture) meets every constraint within its
-tolerance it is the answer, unchanged: D >= 0 is 0 there, so no path that meets them changes less (the
-method of multipliers aims each pair at its limit, not at its tolerance's edge, and would move such a path
-for pairs already met).
+that met them all. A reference motion (the plain spline; a clean's capture) that meets every constraint
+within its tolerance is the answer as it is: D >= 0 is 0 there (the multipliers would move it to the limits).
 """
 from __future__ import annotations
 
@@ -59,6 +55,7 @@ from solver.solution import Round, Solution
 from solver.spline_basis import SplineBasis
 from solver.subdivide import knot_hint_times
 
+_MET_AS_IS = "the reference motion meets every constraint within its tolerance: it is the least change (D = 0)"
 __all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "solve_least_change"]
 
 #: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
@@ -268,9 +265,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
     frames, (basis, pre) = _start(lc, o.min_gap)
     if _worst(al, al.scaled_values(basis, frames.values))["value"] <= 1.0:  # met at D = 0, D's least value
-        return replace(_solution(lc, frames, basis, [], [], Status.CONVERGED, "the reference motion meets every constraint "
-                                 "within its tolerance: it is the least change (D = 0)", 0, (), time.perf_counter() - start,
-                                 0.0, o.tol), estimate_kind="reference")
+        return replace(_solution(lc, frames, basis, [], [], Status.CONVERGED, _MET_AS_IS, 0, (),
+                                 time.perf_counter() - start, 0.0, o.tol), estimate_kind="reference")
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
     rounds, estimate, decreases, scores = [], float("nan"), [], None
     evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met
@@ -466,11 +462,8 @@ def _worst(al: AugmentedLagrangian, scaled: list) -> dict:
 def _stop_message(status: Status, message: str, o: LeastChangeOptions) -> str:
     """Why a solve ended on `status`: the whole solve's budget for MAX_TIME and MAX_EVALS (a subproblem
     reports only its own share), else the subproblem's `message`."""
-    if status is Status.MAX_TIME:
-        return f"time limit of {o.max_time_s:g} s reached"
-    if status is Status.MAX_EVALS:
-        return f"evaluation budget of {o.max_evals} spent"
-    return message
+    return {Status.MAX_TIME: f"time limit of {o.max_time_s:g} s reached",
+            Status.MAX_EVALS: f"evaluation budget of {o.max_evals} spent"}.get(status, message)
 
 
 def _refinement(al, frames, quat, o: LeastChangeOptions, k: int, progress) -> tuple[np.ndarray, float, np.ndarray]:
