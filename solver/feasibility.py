@@ -62,7 +62,7 @@ from solver.spline_basis import SplineBasis
 #: room either way for the least change that follows (it aims at the limit and accepts within the tolerance)
 RAISED_AT = 0.5
 
-__all__ = ["Certificate", "Raise", "beyond", "capture_start", "least_violation", "on_points", "with_frames"]
+__all__ = ["Certificate", "Raise", "beyond", "capture_start", "least_violation", "on_points", "still_raised", "with_frames"]
 
 
 
@@ -267,6 +267,15 @@ def beyond(al: AugmentedLagrangian, constraints, frames: FrameSet, limits=None) 
             out.append(Raise(c.name, str(label), amount, float(al.t[c.rows[i]]), float(t.min()), float(t.max()),
                              int(at.sum()), c.unit, c.scale))
     return out
+
+
+def still_raised(certified: list, final: list) -> list:
+    """The certified `Raise`s whose column (constraint, label) the final path is beyond as posed (`final`,
+    `beyond`), each at the smaller of the two amounts: the certificate's least
+    violation, or less where the path needs less; a column the path meets as posed is not raised."""
+    out = {(r.constraint, r.label): r for r in final}
+    return [r if r.amount <= out[(r.constraint, r.label)].amount else out[(r.constraint, r.label)]
+            for r in certified if (r.constraint, r.label) in out]
 
 
 def _raise(al: AugmentedLagrangian, constraints, frames: FrameSet) -> list[Raise]:

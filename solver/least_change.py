@@ -36,7 +36,7 @@ from solver.constraint_set import figure_constraints
 from solver.constraints.forces import figure_forces
 from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
-from solver.feasibility import Certificate, beyond, capture_start, least_violation, on_points, with_frames
+from solver.feasibility import Certificate, beyond, capture_start, least_violation, on_points, still_raised, with_frames
 from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.gauss_newton import cached_preconditioner
@@ -262,11 +262,19 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     """
     o = options or LeastChangeOptions()
     lc = replace(lc, al=lc.al.posed())  # the solve's own multipliers and limits
-    al, quat, start = lc.al, lc.layout.quat_slots, time.perf_counter()
+    al, start = lc.al, time.perf_counter()
     frames, (basis, pre) = _start(lc, o.min_gap)
     if _worst(al, al.scaled_values(basis, frames.values))["value"] <= 1.0:  # met at D = 0, D's least value
         return replace(_solution(lc, frames, basis, [], [], Status.CONVERGED, _MET_AS_IS, 0, (),
                                  time.perf_counter() - start, 0.0, o.tol), estimate_kind="reference")
+    return _iterate(lc, o, frames, (basis, pre), start, should_stop, progress)
+
+
+def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tuple, start: float, should_stop,
+             progress) -> Solution:
+    """The subproblems, the search and the refinement of `solve_least_change` from its starting `frames` and
+    their (SplineBasis, Preconditioner) `maps`, `start` [s, perf_counter] the solve's."""
+    al, quat, (basis, pre) = lc.al, lc.layout.quat_slots, maps
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
     rounds, estimate, decreases, scores = [], float("nan"), [], None
     evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met
@@ -374,24 +382,15 @@ def _better(al: AugmentedLagrangian, best: tuple, frames: FrameSet, basis=None) 
 def _kept(al: AugmentedLagrangian, frames: FrameSet, basis, best: tuple, message: str, raises: list,
           limits: list) -> tuple:
     """The path a solve returns: its last, or the best that met every limit where the last broke one; and
-    what stays raised on it (`_still_raised` against the limits as posed). Returns (frames, basis,
+    what stays raised on it (`solver.feasibility.still_raised` against the limits as posed). Returns (frames, basis,
     message, raises)."""
     if _worst(al, al.scaled_values(basis, frames.values))["value"] > 1.0 and np.isfinite(best[0]):
         frames = best[1]  # the path ended beyond a limit: the best path that meets them all
         basis = SplineBasis(frames.times, al.t)
         message += "; the last path broke a limit: the best that met them all kept"
     if raises:  # what stays raised: the certified columns the path returned is beyond their limits as posed
-        raises = _still_raised(raises, beyond(al, al.constraints, frames, limits))
+        raises = still_raised(raises, beyond(al, al.constraints, frames, limits))
     return frames, basis, message, raises
-
-
-def _still_raised(certified: list, final: list) -> list:
-    """The certified `Raise`s whose column (constraint, label) the final path is beyond as posed (`final`,
-    `solver.feasibility.beyond`), each at the smaller of the two amounts: the certificate's least
-    violation, or less where the path needs less; a column the path meets as posed is not raised."""
-    out = {(r.constraint, r.label): r for r in final}
-    return [r if r.amount <= out[(r.constraint, r.label)].amount else out[(r.constraint, r.label)]
-            for r in certified if (r.constraint, r.label) in out]
 
 
 def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop,
