@@ -16,8 +16,9 @@ approaches the edge from outside and stops once an iteration gains less than fto
 first solve stopped after 4 evaluations, F down 0.15 %, and the search certified 3.4 mm of slide; counted
 from the edge, the same solve meets every pair in 563.)
 
-1. **Every constraint at once** (S = all): one L-BFGS solve from the given path, stopped as soon as
-   every pair is within its tolerance, with a variable frame added to every segment that holds a broken
+1. **Every constraint at once** (S = all): an L-BFGS solve from the given path, stopped as soon as
+   every pair is within its tolerance and started again from its end while a run gains more than
+   ftol_rel of F (`_elastic_solve`), with a variable frame added to every segment that holds a broken
    pair while the segment can take one (`min_gap`: the least change passes two quadrature intervals, the
    shortest segment whose acceleration, linear in time, two of its points fix, so no finer spacing the
    quadrature resolves beats the certificate), and solved again. Where this meets every pair the
@@ -209,14 +210,18 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
     starting at rho = 1 (a held pair's violation costs what an objective pair's does) and raised by GAMMA
     until a solve from the start (which meets them) ends with them met: the penalty method's continuation
     (Nocedal & Wright, sec. 17.1), each solve from the feasible start so that none wanders into a basin
-    where the held pairs cannot be met again."""
+    where the held pairs cannot be met again. A solve that meets the held pairs and lowers F by more than
+    ftol_rel is started again from where it ended, with a fresh L-BFGS memory (a restart: Nocedal & Wright,
+    sec. 7.2), until one gains no more than that or `per_level` solves are spent: an L-BFGS run stops when
+    one of its iterations gains less than ftol_rel, which a badly scaled stretch of the descent does long
+    before F is stationary, and a limit is raised only where a fresh descent no longer helps."""
     eal = AugmentedLagrangian(al.change, held, al.tmap, al.engine, al.d0, elastic=objective, base=al.base,
                               aim=1.0 - ftol_rel)
     basis, pre = frame_maps(al, frames, quat_slots)
     best, best_F = frames, eal.evaluate(basis, frames.values, grad=False)[0]
     while True:
         eal.rho, eal.lam = 1.0, [np.zeros(c.size) for c in held]
-        for _ in range(per_level if held else 1):
+        for _ in range(per_level):
             if best_F == 0.0 or budget.spent():
                 return best
             r = solve_subproblem(eal, best, quat_slots, ftol_rel=ftol_rel, basis=basis, pre=pre, pairs=pairs,
@@ -225,12 +230,14 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
             if r.result.status is Status.INTERRUPTED and budget.should_stop is not None and budget.should_stop():
                 budget.status = Status.INTERRUPTED
             F = eal.evaluate(basis, r.frames.values, grad=False)[0]
+            every_met = eal.worst <= 1.0  # set by the evaluation: the objective's pairs and the held ones
             held_met = all(float(s.max(initial=0.0)) <= 1.0 for s in eal.scaled_values(basis, r.frames.values))
+            gained = held_met and (1.0 - ftol_rel) * best_F > F
             if held_met and best_F > F:
                 best, best_F = r.frames, F
-            if held_met or budget.spent():
+            if budget.spent() or every_met or (held_met and not gained):
                 break
-            eal.rho *= GAMMA
+            eal.rho *= 1.0 if held_met else GAMMA
         if budget.spent():
             return best
         new = on_points(_split_times(best, _broken_times(al, objective, eal.state(basis, best.values)), min_gap),
