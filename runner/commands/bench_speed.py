@@ -5,7 +5,9 @@ temporary worktree of the baseline revision and in this checkout, alternately (b
 baseline, ...: load drift on a shared machine hits both), `--repeat` times each. Per run: the solve's
 time as the run records it (`solve_time_s` of `--metrics`, or of the saved path), and the whole
 process's CPU time and peak memory (`resource.getrusage` of the child). The table gives medians, the
-ratio current / baseline of each, and the bound the issue set for it.
+ratio current / baseline of each, and the bound the issue set for it; where the runs record their
+evaluations (`mocap`'s metrics), their medians and the ratio of the solve time per evaluation, which
+separates what an evaluation costs from how many of them round-off sends a solve through.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -80,18 +83,41 @@ def time_run(root: Path, workload: Workload, out: Path) -> dict:
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if r.returncode != 0:
         raise RuntimeError(f"{workload.name} in {root} failed: {r.stderr.strip()[-400:]}")
+    evals = None
     if args[0] == "mocap":
-        solve = json.loads((out / "m.json").read_text())["solve_time_s"]
+        doc = json.loads((out / "m.json").read_text())
+        solve, evals = doc["solve_time_s"], doc.get("n_evals")
     else:
         with np.load(out / "p.npz") as z:
             solve = float(z["wall_time_s"])
     return {"solve_s": float(solve), "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
-            "wall_s": wall, "peak_mb": after.ru_maxrss / 1024.0}
+            "wall_s": wall, "peak_mb": after.ru_maxrss / 1024.0, "evals": evals}
 
 
-def ratio_rows(runs: dict) -> list:
-    """Rows (workload, baseline median, current median, ratio, per-run ratios, bound) of the solve time,
-    from runs {(workload name, "baseline" | "current"): [run dicts]} and the workloads' bounds."""
+class SpeedRow(NamedTuple):
+    """One workload's line of the table: solve times [s] (medians), their ratio current / baseline and the
+    ratio run by run, the bound, CPU times [s] (medians), peak memory [MB] (largest), and the evaluations
+    (medians; None where the run records none) with the ratio of the solve time per evaluation: the solve's
+    cost apart from how many evaluations round-off sends it through (docs/benchmarks.md)."""
+
+    name: str
+    base_s: float
+    current_s: float
+    ratio: float
+    per_run: list
+    bound: float
+    base_cpu_s: float
+    current_cpu_s: float
+    base_mb: float
+    current_mb: float
+    base_evals: float | None = None
+    current_evals: float | None = None
+    per_eval_ratio: float | None = None
+
+
+def ratio_rows(runs: dict) -> list[SpeedRow]:
+    """The table's `SpeedRow`s from runs {(workload name, "baseline" | "current"): [run dicts]} (`time_run`)
+    and the workloads' bounds; a workload without runs of both has none."""
     rows = []
     for w in WORKLOADS:
         base, cur = runs.get((w.name, "baseline")), runs.get((w.name, "current"))
@@ -100,9 +126,15 @@ def ratio_rows(runs: dict) -> list:
         b = np.array([x["solve_s"] for x in base])
         c = np.array([x["solve_s"] for x in cur])
         per_run = (c[: len(b)] / b[: len(c)]).tolist()
-        rows.append((w.name, float(np.median(b)), float(np.median(c)), float(np.median(c) / np.median(b)), per_run,
-                     w.bound, float(np.median([x["cpu_s"] for x in base])), float(np.median([x["cpu_s"] for x in cur])),
-                     max(x["peak_mb"] for x in base), max(x["peak_mb"] for x in cur)))
+        evals = [None if any(x.get("evals") is None for x in r) else [float(x["evals"]) for x in r] for r in (base, cur)]
+        counted = {}
+        if evals[0] and evals[1] and min(evals[0] + evals[1]) > 0:
+            counted = {"base_evals": float(np.median(evals[0])), "current_evals": float(np.median(evals[1])),
+                       "per_eval_ratio": float(np.median(c / evals[1]) / np.median(b / evals[0]))}
+        rows.append(SpeedRow(w.name, float(np.median(b)), float(np.median(c)), float(np.median(c) / np.median(b)),
+                             per_run, w.bound, float(np.median([x["cpu_s"] for x in base])),
+                             float(np.median([x["cpu_s"] for x in cur])), max(x["peak_mb"] for x in base),
+                             max(x["peak_mb"] for x in cur), **counted))
     return rows
 
 
@@ -126,9 +158,12 @@ def bench_speed(args) -> int:
             subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(base)], capture_output=True)
     print(f"bench speed: {args.baseline} (baseline) against this checkout, {args.repeat} alternating runs each")
     print(f"  {'workload':<18} {'solve base':>10} {'current':>8} {'ratio':>6} {'bound':>6}  per run        "
-          f"{'CPU base':>8} {'current':>8} {'peak MB':>15}")
-    for name, b, c, ratio, per_run, bound, cb, cc, mb, mc in ratio_rows(runs):
-        held = "held" if ratio <= bound else "NOT held"
-        print(f"  {name:<18} {b:>9.2f}s {c:>7.2f}s {ratio:>6.3f} {bound:>6.2f}  "
-              f"{', '.join(f'{x:.3f}' for x in per_run):<14} {cb:>7.2f}s {cc:>7.2f}s {mb:>6.0f} / {mc:<6.0f} {held}")
+          f"{'CPU base':>8} {'current':>8} {'peak MB':>15} {'evals':>13} {'per eval':>8}")
+    for r in ratio_rows(runs):
+        held = "held" if r.ratio <= r.bound else "NOT held"
+        evals = "-" if r.per_eval_ratio is None else f"{r.base_evals:.0f} / {r.current_evals:.0f}"
+        per_eval = "-" if r.per_eval_ratio is None else f"{r.per_eval_ratio:.3f}"
+        print(f"  {r.name:<18} {r.base_s:>9.2f}s {r.current_s:>7.2f}s {r.ratio:>6.3f} {r.bound:>6.2f}  "
+              f"{', '.join(f'{x:.3f}' for x in r.per_run):<14} {r.base_cpu_s:>7.2f}s {r.current_cpu_s:>7.2f}s "
+              f"{r.base_mb:>6.0f} / {r.current_mb:<6.0f} {evals:>13} {per_eval:>8} {held}")
     return 0

@@ -6,8 +6,9 @@ from runner.commands.bench_speed import WORKLOADS, baseline_worktree, ratio_rows
 from solver.errors import InputError
 
 
-def _run(solve, cpu=None, mb=100.0):
-    return {"solve_s": solve, "cpu_s": solve + 1.0 if cpu is None else cpu, "wall_s": solve + 2.0, "peak_mb": mb}
+def _run(solve, cpu=None, mb=100.0, evals=None):
+    return {"solve_s": solve, "cpu_s": solve + 1.0 if cpu is None else cpu, "wall_s": solve + 2.0, "peak_mb": mb,
+            "evals": evals}
 
 
 def test_ratio_rows_are_medians_and_per_run_ratios():
@@ -19,6 +20,20 @@ def test_ratio_rows_are_medians_and_per_run_ratios():
     assert row[3] == pytest.approx(0.2) and row[4] == pytest.approx([0.2, 3.0 / 18.0, 5.5 / 22.0])
     assert row[5] == WORKLOADS[0].bound and row[9] == 250.0  # the larger peak of the current runs
     assert ratio_rows({(name, "baseline"): [_run(1.0)]}) == []  # no current runs: no row
+    assert row.per_eval_ratio is None and row.base_evals is None  # runs that record no evaluations
+
+
+def test_the_time_per_evaluation_separates_cost_from_the_count():
+    """Twice the evaluations in twice the time: the solve is 2x, each evaluation costs the same (1.0)."""
+    name = WORKLOADS[0].name
+    runs = {(name, "baseline"): [_run(1.0, evals=100), _run(1.2, evals=100), _run(0.9, evals=100)],
+            (name, "current"): [_run(2.0, evals=200), _run(2.4, evals=200), _run(1.8, evals=200)]}
+    (row,) = ratio_rows(runs)
+    assert row.ratio == pytest.approx(2.0)
+    assert (row.base_evals, row.current_evals) == (100.0, 200.0)
+    assert row.per_eval_ratio == pytest.approx(1.0)
+    runs[(name, "current")][1]["evals"] = None  # one run without a count: no per-evaluation figure
+    assert ratio_rows(runs)[0].per_eval_ratio is None
 
 
 def test_an_unknown_revision_is_one_clear_error(tmp_path):
