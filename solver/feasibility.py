@@ -356,8 +356,8 @@ def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, mi
         al: the least change's AugmentedLagrangian (its constraints; the limits of those that cannot be
             met are raised in place, `Constraint.limit`). frames: the start FrameSet (m, nq).
         quat_slots: (s, 4) the layout's quaternion slots. min_gap: [s] no two frames closer.
-        ftol_rel: each L-BFGS solve's relative tolerance. per_level: the most
-            penalty raises per level and frame set. second: None, or a second start FrameSet (m', nq)
+        ftol_rel: each L-BFGS solve's relative tolerance. per_level: the most L-BFGS solves (restarts and
+            penalty raises, `_elastic_solve`) per level and frame set. second: None, or a second start FrameSet (m', nq)
             through the same keyframes (`capture_start`): each level is searched from both paths that meet
             the limits certified so far, and the lower F is certified. max_evals, max_time_s, should_stop:
             the solve's budget (0: none; spent, the Certificate's status says so). pairs: L-BFGS correction
