@@ -50,7 +50,9 @@ class Progress:
     (a log, a pipe): one line when a round ends; a round still running after `QUIET_INTERVAL` seconds first
     prints that it started, then at most one line every `QUIET_INTERVAL` seconds, worded "(still optimizing)"
     so it does not read as a new round. A round of the least change ends with its worst constraint ("worst
-    flight wrench 10.9 x tol": the constraint the solve is fighting, met at <= 1). `quiet`: nothing.
+    flight wrench 10.9 x tol": the constraint the solve is fighting, met at <= 1). The least violation a
+    round's end may seek (`solver.feasibility`) shows the same way, with F, the violation it minimizes, in
+    place of Phi, and the line of what it raised after it. `quiet`: nothing.
 
     Phi is the value the least change's subproblems minimize, the augmented Lagrangian (`solver.lagrangian`):
     the change E = D / (m g^2 T) plus the multipliers' and the penalty's terms, which can make it negative;
@@ -71,18 +73,23 @@ class Progress:
         self.stream.flush()
 
     def _E(self):
+        if self.round is not None and self.round.get("search"):  # the least violation's F, not Phi
+            return "F -" if self.round.get("F") is None else f"F {self.round['F']:.6g}"
         return "Phi -" if self.E is None else f"Phi {self.E:.6g}"
 
     def _head(self):
         r = self.round
+        if r.get("search"):
+            return f"least violation after round {r.get('round', 0) + 1}: from {r.get('frames', 0)} frames"
         return f"round {r.get('round', 0) + 1}: {r.get('frames', 0)} frames ({r.get('variable', 0)} variable)"
 
     def __call__(self, event, info):
         if self.quiet:
             return
-        if event == "round":
+        if event in ("round", "search"):  # a subproblem round, or the least violation sought after one
             self._end_round()
-            self.round = {**info, "evals0": self.evals, "t0": time.perf_counter(), "said": False}
+            self.round = {**info, "evals0": self.evals, "t0": time.perf_counter(), "said": False,
+                          "search": event == "search"}
             if self.tty:
                 self.bar = _bar(self.stream, desc="  " + self._head(), unit=" evals")
             else:
@@ -90,6 +97,8 @@ class Progress:
         elif event == "eval":
             self.evals = info.get("evals", self.evals)
             self.E = info.get("E", self.E)
+            if self.round is not None and "F" in info:
+                self.round["F"] = info["F"]
             if self.bar is not None:
                 self.bar.update(self.evals - self.round["evals0"] - self.bar.n)
                 self.bar.set_postfix_str(self._E(), refresh=False)
@@ -98,7 +107,8 @@ class Progress:
                 if not self.round["said"]:  # a long round: say when it started
                     self.round["said"] = True
                     self._line(f"  {self._head()}: started, {self.round['t0'] - self.t0:.1f} s")
-                self._line(f"  round {self.round.get('round', 0) + 1} (still optimizing): "
+                what = "least violation" if self.round["search"] else f"round {self.round.get('round', 0) + 1}"
+                self._line(f"  {what} (still optimizing): "
                            f"{self.evals - self.round['evals0']} evaluations, {self._E()}, "
                            f"{self.last - self.t0:.1f} s")
         elif event == "constraints" and self.round is not None:  # after a subproblem: the worst constraint
@@ -126,7 +136,7 @@ class Progress:
             self.bar = None
         else:
             r = self.round
-            head = f"round {r.get('round', 0) + 1}" if r["said"] else self._head()
+            head = self._head() if not r["said"] else "least violation" if r["search"] else f"round {r.get('round', 0) + 1}"
             self._line(f"  {head}: done, {self.evals - r['evals0']} evaluations, {self._E()}"
                        f"{worst}, {time.perf_counter() - r['t0']:.1f} s")
         self.round = None

@@ -160,8 +160,8 @@ def with_frames(frames: FrameSet, times: np.ndarray, quat_slots: np.ndarray) -> 
 class _Budget:
     """The evaluations and time left of a solve, and its stop request."""
 
-    def __init__(self, max_evals: int, max_time_s: float, should_stop):
-        self.max_evals, self.max_time_s, self.should_stop = max_evals, max_time_s, should_stop
+    def __init__(self, max_evals: int, max_time_s: float, should_stop, callback=None):
+        self.max_evals, self.max_time_s, self.should_stop, self.callback = max_evals, max_time_s, should_stop, callback
         self.start, self.evals, self.status = time.perf_counter(), 0, Status.CONVERGED
 
     def spent(self) -> bool:
@@ -173,11 +173,14 @@ class _Budget:
         return self.status is not Status.CONVERGED
 
     def kwargs(self, done) -> dict:
-        """`solve_subproblem`'s budget arguments; `done()` True (every pair met) also ends it."""
+        """`solve_subproblem`'s budget arguments; `done()` True (every pair met) also ends it. The solve's
+        `callback(n, F)` gets the search's evaluations so far (n) and each evaluation's F."""
         left = self.max_time_s - (time.perf_counter() - self.start) if self.max_time_s else 0.0
         user = self.should_stop or (lambda: False)
+        spent, report = self.evals, self.callback
         return {"max_evals": max(self.max_evals - self.evals, 1) if self.max_evals else 0,
-                "max_time_s": max(left, 0.0), "should_stop": lambda: done() or user()}
+                "max_time_s": max(left, 0.0), "should_stop": lambda: done() or user(),
+                "callback": report and (lambda n, F: report(spent + n, F))}
 
 
 def _scaled(constraints, state) -> list[np.ndarray]:
@@ -349,7 +352,7 @@ def _violation(al: AugmentedLagrangian, constraints, frames: FrameSet, aim: floa
 
 def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, min_gap: float, ftol_rel: float,
                     per_level: int, second: FrameSet | None = None, max_evals: int = 0, max_time_s: float = 0.0,
-                    should_stop=None, pairs: int | None = None) -> Certificate:
+                    should_stop=None, pairs: int | None = None, callback=None) -> Certificate:
     """The least violation of the constraints over the paths through the keyframes (module docstring).
 
     Args:
@@ -361,11 +364,12 @@ def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, mi
             through the same keyframes (`capture_start`): each level is searched from both paths that meet
             the limits certified so far, and the lower F is certified. max_evals, max_time_s, should_stop:
             the solve's budget (0: none; spent, the Certificate's status says so). pairs: L-BFGS correction
-            pairs of each solve (None: by size, `solver.optimize.lbfgs_storage`).
+            pairs of each solve (None: by size, `solver.optimize.lbfgs_storage`). callback: None, or
+            f(n, F) after each evaluation: the search's evaluations so far and that evaluation's F (progress).
     Returns:
         Certificate: what was raised, the path that reaches it, the evaluations spent.
     """
-    budget = _Budget(max_evals, max_time_s, should_stop)
+    budget = _Budget(max_evals, max_time_s, should_stop, callback)
     cons = list(al.constraints)
     kw = dict(budget=budget, min_gap=min_gap, ftol_rel=ftol_rel, per_level=per_level, pairs=pairs)
     paths = [(0, _elastic_solve(al, cons, [], frames, quat_slots, **kw))]

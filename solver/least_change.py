@@ -396,19 +396,21 @@ def _kept(al: AugmentedLagrangian, frames: FrameSet, basis, best: tuple, message
 def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop,
              progress, k: int):
     """`solver.feasibility.least_violation` from `frames` within what is left of the solve's budget; reports
-    it ("certify") and sets the multipliers of the pairs it raised to 0. Returns the Certificate."""
+    it ("search", its "eval"s, "certify") and sets the multipliers of the pairs it raised to 0. Returns the
+    Certificate."""
     left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
     before = [c.limit.copy() for c in lc.al.constraints]
-    # the search splits segments down to two quadrature intervals, the shortest whose acceleration (linear in
-    # time on a cubic segment) two of its points still fix, so that the bounds hold between the points too;
-    # min_gap is the least change's refinement's, not a limit of the paths the search may try
+    # the search splits segments down to two quadrature intervals, the shortest whose (linear) acceleration two
+    # points fix, so the bounds hold between them; min_gap is the refinement's, not a limit of the search's paths
     gap, quat = 2.0 / o.rate, lc.layout.quat_slots
     gap = np.inf if lc.grid is not None else gap  # on a grid the paths are the grid's: no segment is split
     second = None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat)
+    if progress:  # the search's evaluations as they happen ("search", then "eval" with F), its outcome after
+        progress("search", {"round": k, "frames": frames.count})
     cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
-                           pairs=_pairs(lc),
-                           max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
-                           max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop)
+                           pairs=_pairs(lc), max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
+                           max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop,
+                           callback=progress and (lambda n, F: progress("eval", {"evals": evals + n, "F": F})))
     if progress:
         progress("certify", {"round": k, "frames": cert.frames.count, "raised": cert.unmet,
                              "evals": evals + cert.n_evals, "spent": cert.n_evals})

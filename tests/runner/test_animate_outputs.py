@@ -109,6 +109,33 @@ def test_progress_off_a_terminal_prints_rounds_once_and_a_still_line_every_5_s(m
     assert progress.Progress(quiet=True, stream=stream) is not None
 
 
+def test_the_least_violation_shows_its_progress_off_a_terminal(monkeypatch):
+    """The search after a round (the "search" event, its "eval"s with F, then "certify") prints lines of its
+    own while it runs, with F, not a round that seems to stand still."""
+    import io
+
+    import runner.progress as progress
+
+    clock = Clock()
+    monkeypatch.setattr(progress.time, "perf_counter", clock)
+    stream = io.StringIO()
+    p = progress.Progress(stream=stream)
+    p("round", {"round": 7, "frames": 130, "variable": 120})
+    p("eval", {"evals": 100, "E": 0.5})
+    p("search", {"round": 7, "frames": 130})
+    for i in range(1, 81):  # 8 s of the search, 10 evaluations a second
+        clock.t = i / 10
+        p("eval", {"evals": 100 + i, "F": 10.0 / i})
+    p("certify", {"round": 7, "frames": 961, "raised": {"planted": 0.0127}, "evals": 180, "spent": 80})
+    lines = stream.getvalue().splitlines()
+    assert lines[0].startswith("  round 8: 130 frames (120 variable): done, 100 evaluations, Phi 0.5")
+    assert "least violation after round 8: from 130 frames: started" in lines[1]
+    assert "least violation (still optimizing): 50 evaluations, F 0.2" in lines[2]
+    assert "least violation: done, 80 evaluations, F 0.125, 8.0 s" in lines[-2]
+    assert lines[-1] == ("  round 8: least violation sought (80 evaluations, 961 frames): out of reach, limits "
+                         "raised by [SI]: planted 0.0127")
+
+
 def test_steps_off_a_terminal_start_still_and_end_lines(monkeypatch):
     import io
 

@@ -131,6 +131,24 @@ def test_conflicting_bounds_give_the_lower_priority_exactly_what_the_higher_need
     assert sol.unmet == {"top": raised.amount}
 
 
+def test_the_search_reports_its_evaluations_as_it_goes(standing):
+    """A solve that seeks the least violation says so ("search"), reports the search's evaluations with its F
+    while it runs ("eval"), then what it raised ("certify"), with the evaluations counted on from the
+    subproblems' and the search's own total at the end."""
+    z0 = standing[2]
+    lc = _problem(standing, top=z0 - 0.10, bottom=z0 - 0.04, keyed=False)
+    events = []
+    solve_least_change(lc, LeastChangeOptions(), progress=lambda e, info: events.append((e, dict(info))))
+    names = [e for e, _ in events]
+    s, c = names.index("search"), names.index("certify")
+    during = [info for e, info in events[s + 1:c] if e == "eval"]
+    assert during and all("F" in info and info["F"] >= 0 for info in during)
+    counts = [info["evals"] for info in during]
+    base = events[c][1]["evals"] - events[c][1]["spent"]  # the subproblems' evaluations before the search
+    assert max(info["evals"] for e, info in events[:s] if e == "eval") <= base
+    assert counts == sorted(counts) and base < counts[0] and counts[-1] <= events[c][1]["evals"]
+
+
 def test_a_keyed_pose_beyond_a_bound_is_certified_by_its_own_excess(standing):
     z0 = standing[2]
     # the key at t* holds z 5 mm above top, which holds over the 20 ms either side of it too
