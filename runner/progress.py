@@ -77,6 +77,10 @@ class Progress:
             return "F -" if self.round.get("F") is None else f"F {self.round['F']:.6g}"
         return "Phi -" if self.E is None else f"Phi {self.E:.6g}"
 
+    def _short(self):
+        """The running round's name in its later lines: "round N", or "least violation"."""
+        return "least violation" if self.round["search"] else f"round {self.round.get('round', 0) + 1}"
+
     def _head(self):
         r = self.round
         if r.get("search"):
@@ -107,8 +111,7 @@ class Progress:
                 if not self.round["said"]:  # a long round: say when it started
                     self.round["said"] = True
                     self._line(f"  {self._head()}: started, {self.round['t0'] - self.t0:.1f} s")
-                what = "least violation" if self.round["search"] else f"round {self.round.get('round', 0) + 1}"
-                self._line(f"  {what} (still optimizing): "
+                self._line(f"  {self._short()} (still optimizing): "
                            f"{self.evals - self.round['evals0']} evaluations, {self._E()}, "
                            f"{self.last - self.t0:.1f} s")
         elif event == "constraints" and self.round is not None:  # after a subproblem: the worst constraint
@@ -136,7 +139,7 @@ class Progress:
             self.bar = None
         else:
             r = self.round
-            head = self._head() if not r["said"] else "least violation" if r["search"] else f"round {r.get('round', 0) + 1}"
+            head = self._short() if r["said"] else self._head()
             self._line(f"  {head}: done, {self.evals - r['evals0']} evaluations, {self._E()}"
                        f"{worst}, {time.perf_counter() - r['t0']:.1f} s")
         self.round = None

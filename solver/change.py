@@ -113,7 +113,7 @@ class MeasureOfChange:
         w = self.ref.weights
         dq, q, r = self._pose_difference(state.Y)
         X = np.stack([state.motion.qacc - self.ref.qacc, dq], axis=2)  # (n, nv, 2)
-        if self._MP is None:  # M (a - a_ref) alone by M (one column: the diagonal P's is P dq)
+        if self._MP is None:  # M times the acceleration column only: the pose column's product is P dq
             MX = np.stack([(self._M @ X[:, :, :1])[:, :, 0], self._P * dq], axis=2)
         else:  # (n, 2, nv, nv) @ (n, 2, nv, 1): M (a - a_ref) and P dq in one batched product
             MX = np.matmul(self._MP, X.transpose(0, 2, 1)[..., None])[..., 0].transpose(0, 2, 1)

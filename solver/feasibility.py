@@ -240,7 +240,8 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
                 best, best_F = r.frames, F
             if budget.spent() or every_met or (held_met and not gained):
                 break
-            eal.rho *= 1.0 if held_met else GAMMA
+            if not held_met:  # else a restart at the same penalty
+                eal.rho *= GAMMA
         if budget.spent():
             return best
         new = on_points(_split_times(best, _broken_times(al, objective, eal.state(basis, best.values)), min_gap),
