@@ -7,7 +7,10 @@ time as the run records it (`solve_time_s` of `--metrics`, or of the saved path)
 process's CPU time and peak memory (`resource.getrusage` of the child). The table gives medians, the
 ratio current / baseline of each, and the bound the issue set for it; where the runs record their
 evaluations (`mocap`'s metrics), their medians and the ratio of the solve time per evaluation, which
-separates what an evaluation costs from how many of them round-off sends a solve through.
+separates what an evaluation costs from how many of them round-off sends a solve through. The
+`mocap-corpus` workload solves the 60 (clip, keying) pairs of the shipped corpus in one `bench corpus`
+process and sums their solve times and evaluations: one solve's count moves by about 20 % with round-off
+(docs/benchmarks.md), a sum over many pairs far less.
 """
 from __future__ import annotations
 
@@ -33,16 +36,20 @@ BASELINE = "7624574"
 
 @dataclass(frozen=True)
 class Workload:
-    """One command line to time: its arguments after `python -m runner`, and the bound on its ratio."""
+    """One command line to time: its arguments after `python -m runner`, and the bound on its ratio (against
+    `BASELINE`; the corpus's 1.0 is issue 60's, no slower than its baseline b590890)."""
 
     name: str
     args: tuple
     bound: float
+    #: run without --only (the corpus, minutes a run, only when named)
+    default: bool = True
 
 
 WORKLOADS = (
     Workload("mocap-default", ("mocap", "models/cmu/127_33.bvh", "--every", "0.25"), 0.25),
     Workload("run-and-step-all", ("run-and-step", "--terms", "all"), 0.5),
+    Workload("mocap-corpus", ("bench", "corpus", "--workers", "1"), 1.0, default=False),
 )
 
 
@@ -52,7 +59,8 @@ def register(bsub) -> None:
                         description=__doc__.split("\n\n")[1].replace("\n", " "))
     c.add_argument("--baseline", default=BASELINE, help=f"the revision to compare with [{BASELINE}]")
     c.add_argument("--repeat", type=int, default=3, help="runs of each workload in each checkout [3]")
-    c.add_argument("--only", default=None, help=f"comma-separated workloads of {','.join(w.name for w in WORKLOADS)}")
+    c.add_argument("--only", default=None, help=f"comma-separated workloads of {','.join(w.name for w in WORKLOADS)} "
+                   f"[{','.join(w.name for w in WORKLOADS if w.default)}]")
     c.set_defaults(func=bench_speed)
 
 
@@ -72,9 +80,10 @@ def time_run(root: Path, workload: Workload, out: Path) -> dict:
     """Run the workload with `root`'s packages (PYTHONPATH) in a fresh process; its solve time [s], the
     process's CPU time [s] and peak memory [MB]."""
     out.mkdir(parents=True, exist_ok=True)
-    args = [*workload.args, "--no-render", "--quiet"]
-    args += ["--out-dir", str(out), "--metrics", str(out / "m.json")] if args[0] == "mocap" else \
-        ["--save-path", str(out / "p.npz")]
+    corpus = workload.args[:2] == ("bench", "corpus")
+    args = [*workload.args, "--quiet"] + ([] if corpus else ["--no-render"])
+    args += ["--out", str(out / "corpus")] if corpus else ["--out-dir", str(out), "--metrics", str(out / "m.json")] \
+        if args[0] == "mocap" else ["--save-path", str(out / "p.npz")]
     env = {**os.environ, "PYTHONPATH": str(root)}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -84,7 +93,9 @@ def time_run(root: Path, workload: Workload, out: Path) -> dict:
     if r.returncode != 0:
         raise RuntimeError(f"{workload.name} in {root} failed: {r.stderr.strip()[-400:]}")
     evals = None
-    if args[0] == "mocap":
+    if corpus:
+        solve, evals = corpus_sums(out / "corpus")
+    elif args[0] == "mocap":
         doc = json.loads((out / "m.json").read_text())
         solve, evals = doc["solve_time_s"], doc.get("n_evals")
     else:
@@ -92,6 +103,15 @@ def time_run(root: Path, workload: Workload, out: Path) -> dict:
             solve = float(z["wall_time_s"])
     return {"solve_s": float(solve), "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
             "wall_s": wall, "peak_mb": after.ru_maxrss / 1024.0, "evals": evals}
+
+
+def corpus_sums(out: Path) -> tuple[float, int]:
+    """(solve time [s], evaluations) summed over the pairs of a `bench corpus` run written to `out` (each pair's
+    `<pair>/<clip>.metrics.json`); raises RuntimeError when it holds no pair's metrics."""
+    docs = [json.loads(f.read_text()) for f in sorted(out.glob("*/*.metrics.json"))]
+    if not docs:
+        raise RuntimeError(f"the corpus run in {out} wrote no pair's metrics")
+    return float(sum(d["solve_time_s"] for d in docs)), int(sum(d.get("n_evals") or 0 for d in docs))
 
 
 class SpeedRow(NamedTuple):
@@ -140,7 +160,7 @@ def ratio_rows(runs: dict) -> list[SpeedRow]:
 
 def bench_speed(args) -> int:
     """`dynsplines bench speed`: print the table (module docstring). Returns 0."""
-    chosen = [w for w in WORKLOADS if args.only is None or w.name in args.only.split(",")]
+    chosen = [w for w in WORKLOADS if (w.default if args.only is None else w.name in args.only.split(","))]
     if not chosen:
         raise InputError(f"--only {args.only}: no such workload; choose from {', '.join(w.name for w in WORKLOADS)}")
     runs: dict = {}

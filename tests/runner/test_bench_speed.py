@@ -39,3 +39,17 @@ def test_the_time_per_evaluation_separates_cost_from_the_count():
 def test_an_unknown_revision_is_one_clear_error(tmp_path):
     with pytest.raises(InputError, match="--baseline no-such-rev"):
         baseline_worktree("no-such-rev", tmp_path / "b")
+
+
+def test_the_tuning_corpus_sums_its_pairs(tmp_path):
+    """The corpus workload's figures are the sums over the pairs' metrics files; a run without one is an error."""
+    import json
+
+    from runner.commands.bench_speed import corpus_sums
+
+    for pair, t, n in (("a.every0.2", 1.5, 100), ("a.contacts", 2.25, 300), ("b.every0.2", 0.25, 7)):
+        (tmp_path / pair).mkdir()
+        (tmp_path / pair / f"{pair.split('.')[0]}.metrics.json").write_text(json.dumps({"solve_time_s": t, "n_evals": n}))
+    assert corpus_sums(tmp_path) == (pytest.approx(4.0), 407)
+    with pytest.raises(RuntimeError, match="no pair"):
+        corpus_sums(tmp_path / "a.every0.2" / "nothing")
