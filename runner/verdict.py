@@ -180,28 +180,36 @@ def _num(fmt: str, v: float) -> str:
     return text[1:] if text.startswith("-") and float(text) == 0.0 else text  # no negative zero
 
 
-def raised_limits(unmet: dict) -> str:
-    """{constraint: amount [SI]} as "penetration by 41.6 mm, acceleration by 1.05e+03 m/s^2 | rad/s^2"."""
+def raised_limits(unmet: dict, certificate=()) -> str:
+    """{constraint: amount [SI]} as "penetration by 41.6 mm, acceleration by 1.05e+03 m/s^2 | rad/s^2"; where the
+    `certificate` (`solver.feasibility.Raise`s) holds the constraint, its largest raise in its column's own unit
+    and where: "acceleration by 3.08e+03 rad/s^2 at r_elbow"."""
     parts = []
     for name, amount in unmet.items():
         unit, scale = CONSTRAINT_UNITS.get(name, ("[SI]", 1.0))
-        parts.append(f"{name} by {float(amount) / scale:.3g} {unit}")
+        where = ""
+        raises = [r for r in certificate if r.constraint == name]
+        if raises:
+            top = max(raises, key=lambda r: r.amount)
+            amount, unit, scale, where = top.amount, top.unit, top.scale, f" at {top.label}" if top.label else ""
+        parts.append(f"{name} by {float(amount) / scale:.3g} {unit}{where}")
     return ", ".join(parts)
 
 
-def constraint_verdict(integrals_final: dict, unmet: dict) -> str:
+def constraint_verdict(integrals_final: dict, unmet: dict, certificate=()) -> str:
     """The first words of the verdict: "every constraint met", or the limits raised and the constraints
     still over their tolerance at the end (worst value / tolerance > 1; the "stopped:" line above the
     summary says why the solve ended).
 
     Args:
         integrals_final: {constraint: worst value over its tolerance on the optimized path} (met at <= 1).
-        unmet: {constraint: by how much its limit was raised [SI]} (`Solution.unmet`).
+        unmet: {constraint: by how much its limit was raised [SI]} (`Solution.unmet`). certificate: the
+            `Raise`s behind it (`Solution.certificate`), for each raise's column and unit.
     """
     over = {k: v for k, v in integrals_final.items() if v > 1.0 and k not in unmet}
     parts = []
     if unmet:
-        parts.append(f"limits raised (the solve found no path that meets them): {raised_limits(unmet)}")
+        parts.append(f"limits raised (the solve found no path that meets them): {raised_limits(unmet, certificate)}")
     if over:
         parts.append("over tolerance: " + ", ".join(f"{k} {v:.3g} x tol" for k, v in over.items()))
     if not parts:
@@ -278,7 +286,7 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
         they have a figure, each wrapped at WIDTH.
     """
     unmet = getattr(solution, "unmet", None) or {}
-    head = constraint_verdict(solution.integrals_final, unmet)
+    head = constraint_verdict(solution.integrals_final, unmet, getattr(solution, "certificate", None) or ())
     lines = [f"verdict: {head}" + (f"; {estimate_text}" if estimate_text else "")]
     for name, parts in (("feet", feet), ("jolts", jolts)):
         shown = [p for p in parts if p]

@@ -423,7 +423,8 @@ def _accelerations(model, reference, capture) -> AccelerationBound:
         qacc = TangentMap.from_layout(layout).motion(*_filtered_capture(model, reference, capture)).qacc
         peaks = np.maximum(peaks, np.linalg.norm(qacc[:, dofs], axis=-1).max(axis=0))
     peaks = np.maximum(peaks, 1e-6)
-    return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels)
+    return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels,
+                             linear=np.arange(len(labels)) < len(free))
 
 
 def _effort(model, reference, plain, capture, engine) -> list:

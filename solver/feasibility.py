@@ -276,7 +276,7 @@ def beyond(al: AugmentedLagrangian, constraints, frames: FrameSet, limits=None) 
             t = al.t[c.rows[at]]
             amount = float(c.excess(m, lim, np.array([i]))[0])  # [SI] the quantity's own excess
             out.append(Raise(c.name, str(label), amount, float(al.t[c.rows[i]]), float(t.min()), float(t.max()),
-                             int(at.sum()), c.unit, c.scale))
+                             int(at.sum()), c.column_unit(str(label)), c.scale))
     return out
 
 

@@ -26,21 +26,29 @@ class AccelerationBound(Constraint):
 
     Args:
         n_points: quadrature points. dofs: (j, 3) qvel indices of each column. limits: (j,) A_j > 0 [m/s^2 or
-            rad/s^2]. tolerance: (j,) [same units]. labels: (j,) column names.
+            rad/s^2]. tolerance: (j,) [same units]. labels: (j,) column names. linear: (j,) bool, the columns
+            of a linear acceleration [m/s^2] (the others angular [rad/s^2]); None: none.
     """
 
     name, unit, scale = "acceleration", "m/s^2 | rad/s^2", 1.0
     priority = RELATIVE
 
-    def __init__(self, n_points: int, dofs: np.ndarray, limits: np.ndarray, tolerance: np.ndarray, labels):
+    def __init__(self, n_points: int, dofs: np.ndarray, limits: np.ndarray, tolerance: np.ndarray, labels,
+                 linear=None):
         self.dofs = np.asarray(dofs, int).reshape(-1, 3)
         j = len(self.dofs)
+        named = np.asarray(labels, object).reshape(j)
+        self._linear = set(named[np.zeros(j, bool) if linear is None else np.asarray(linear, bool)].tolist())
         self.limits = np.asarray(limits, float).reshape(j)
         self.rows = np.repeat(np.arange(n_points), j)
         self._cols = np.tile(np.arange(j), n_points)
         self.tolerance = np.asarray(tolerance, float).reshape(j)[self._cols]
         self.labels = np.asarray(labels, object)[self._cols]
         self.limit = np.zeros(len(self.rows))  # the smooth form's own bound is 0 (module docstring)
+
+    def column_unit(self, label: str) -> str:
+        """m/s^2 for a linear column (the pelvis), rad/s^2 for a joint's."""
+        return "m/s^2" if label in self._linear else "rad/s^2"
 
     def _accelerations(self, state):
         """(n, j, 3) the bounded accelerations at the points."""

@@ -55,6 +55,11 @@ class Constraint:
         """p, the number of pairs."""
         return len(self.rows)
 
+    def column_unit(self, label: str) -> str:
+        """The unit shown for the column `label` (a site, a joint): the constraint's `unit`, unless its columns
+        measure different quantities."""
+        return self.unit
+
     def pair_weights(self, weights: np.ndarray) -> np.ndarray:
         """(p,) the time each pair stands for [s], from the quadrature weights (n,) [s]: a pointwise
         constraint's pair stands for its point's weight (the default); an integral constraint's pair for

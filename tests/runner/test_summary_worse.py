@@ -471,6 +471,22 @@ def test_the_verdict_without_a_capture_and_with_limits_raised():
                           "(inside the limit of hyperextension); flight (all feet clear) (flight over tolerance)")
 
 
+def test_a_certified_raise_prints_in_its_columns_unit():
+    """The no-jolt bound bounds the pelvis [m/s^2] and the joints [rad/s^2]: the verdict prints the largest
+    certified raise of a constraint with its column's unit and name, not the constraint's two units."""
+    from runner.verdict import constraint_verdict
+    from solver.feasibility import Raise
+
+    unmet = {"acceleration": 3083.0, "penetration": 0.0049}
+    certificate = (Raise("acceleration", "root (linear)", 12.5, 1.2, 1.1, 1.3, 2, "m/s^2", 1.0),
+                   Raise("acceleration", "r_elbow", 3083.0, 1.9, 1.89, 1.94, 12, "rad/s^2", 1.0),
+                   Raise("penetration", "r_toe", 0.0049, 0.7, 0.7, 0.75, 3, "mm", 1e-3))
+    head = constraint_verdict({"acceleration": 1.0, "penetration": 1.0, "slide": 0.5}, unmet, certificate)
+    assert head == ("limits raised (the solve found no path that meets them): acceleration by 3.08e+03 rad/s^2 at "
+                    "r_elbow, penetration by 4.9 mm at r_toe; every other constraint met")
+    assert "m/s^2 | rad/s^2" in constraint_verdict({"acceleration": 1.0}, {"acceleration": 3083.0})  # no certificate
+
+
 def test_the_refinement_says_one_thing():
     from runner.verdict import refinement_text
 

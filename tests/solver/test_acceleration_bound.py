@@ -22,3 +22,11 @@ def test_met_exactly_at_the_limit_and_the_excess_is_the_magnitudes():
     # against a raised limit (the smooth form's 2.2 at the hip: |a| 12 allowed): nothing beyond it
     raised = bound.limit + np.array([0.0, 0.0, 0.0, 2.2])
     assert abs(bound.excess(bound.measure(state), raised, np.array([3]))[0]) < 1e-12
+
+
+def test_each_column_shows_its_own_unit():
+    """A certificate names a joint's raise in rad/s^2 and the pelvis's in m/s^2 (`Raise.unit`), not both at once."""
+    bound = AccelerationBound(2, [[0, 1, 2], [3, 4, 5]], [4.0, 10.0], [0.2, 0.5], ["pelvis", "hip"], linear=[True, False])
+    assert (bound.column_unit("pelvis"), bound.column_unit("hip")) == ("m/s^2", "rad/s^2")
+    angular = AccelerationBound(2, [[0, 1, 2], [3, 4, 5]], [4.0, 10.0], [0.2, 0.5], ["a", "b"])
+    assert {angular.column_unit(x) for x in ("a", "b")} == {"rad/s^2"}
