@@ -54,19 +54,27 @@ class AugmentedLagrangian:
         engine: the site engine (None without site constraints). gravity_scale: D0 [kg m^2/s^3].
         rho: the starting penalty parameter (dimensionless).
         elastic: None (the objective is D/D0), or `Constraint`s whose violation is the objective in place
-            of D/D0: F = (1/2) sum_j sum_p (w_p/T) max(0, c_p/tol_j - aim)^2, the elastic problem of
-            `solver.feasibility` (its least value over the paths is how far those constraints cannot be
-            met while `constraints` hold). `change` still gives the preconditioner.
+            of D/D0, the elastic problem of `solver.feasibility` (its least value over the paths is how far
+            those constraints cannot be met while `constraints` hold): F = (1/2) sum_j sum_p (w_p/T)
+            max(0, c_p/tol_j - aim)^2, or with `elastic_sum` F = sum_j sum_p (w_p/T) huber(max(0, c_p/tol_j -
+            aim)), huber quadratic up to the tolerance's edge (c/tol = 1) and linear beyond. `change` still
+            gives the preconditioner.
         base: None (the path is the spline through the frames), or (Y0, Y1_0, Y2_0), each (n, nq) at the
             quadrature points: a fixed motion the spline is added to (the path is base + spline, its
             derivatives the base's plus the spline's), the captured clip of a motion displacement
             (`solver.displacement`). dPath/dP is the spline's either way.
         aim: with `elastic`, the value of c/tol from which a pair counts in F (dimensionless, <= 1: a pair
-            is met at c/tol <= 1, so F is the violation of the tolerances less 1 - aim).
+            is met at c/tol <= 1; < 1 with `elastic_sum`). elastic_sum: F the sum of the violations, not of
+            their squares.
+    Raises:
+        ValueError: elastic_sum with aim >= 1 (the sum's quadratic part spans aim..1).
     """
 
     def __init__(self, change, constraints, tmap, engine, d0: float, rho: float = 1.0, elastic=None, base=None,
-                 aim: float = 1.0):
+                 aim: float = 1.0, elastic_sum: bool = False):
+        if elastic_sum and not aim < 1.0:
+            raise ValueError(f"aim={aim!r}: the sum of the violations counts a pair from c/tol = aim < 1")
+        self.elastic_sum = bool(elastic_sum)
         self.change, self.constraints, self.tmap, self.engine = change, list(constraints), tmap, engine
         self.base = None if base is None else tuple(np.asarray(b, float) for b in base)
         self.elastic = None if elastic is None else list(elastic)
@@ -95,7 +103,7 @@ class AugmentedLagrangian:
             return c
 
         return AugmentedLagrangian(self.change, [own(c) for c in self.constraints], self.tmap, self.engine, self.d0,
-                                   elastic=self.elastic, base=self.base, aim=self.aim)
+                                   elastic=self.elastic, base=self.base, aim=self.aim, elastic_sum=self.elastic_sum)
 
     def state(self, basis, P: np.ndarray) -> PathState:
         """The PathState of frame values P (m, nq) through `basis` (a `SplineBasis` at the points), plus
@@ -132,17 +140,24 @@ class AugmentedLagrangian:
         return phi, basis.pullback(dY, dY1, dY2), D
 
     def _elastic(self, st, grad: bool) -> float:
-        """F = (1/2) sum (w_p/T) max(0, c_p/tol - aim)^2 over the elastic constraints; with `grad` its gradient
-        is added to the state's adjoints. Sets `worst`, the largest c/tol of the evaluation (elastic and held
-        constraints; <= 1: every pair met within its tolerance)."""
-        F, self.worst = 0.0, 0.0
+        """F over the elastic constraints, v_p = max(0, c_p/tol - aim): (1/2) sum (w_p/T) v_p^2, or with
+        `elastic_sum` sum (w_p/T) huber_d(v_p), d = 1 - aim (`solver.feasibility`: huber_d(v) = v^2 / (2 d) up
+        to the tolerance's edge, v - d/2 beyond); with `grad` its gradient is added to the state's adjoints.
+        Sets `worst`, the largest c/tol of the evaluation (elastic and held constraints; <= 1: every pair met
+        within its tolerance)."""
+        F, self.worst, d = 0.0, 0.0, 1.0 - self.aim
         for c, w in zip(self.elastic, self.w_elastic):
             ch = c.values(st) / c.tolerance
             self.worst = max(self.worst, float(ch.max(initial=0.0)))
             v = np.maximum(0.0, ch - self.aim)
-            F += 0.5 * float(w @ (v * v))
+            if self.elastic_sum:
+                F += float(w @ np.where(v <= d, 0.5 * v * v / d, v - 0.5 * d))
+                slope = np.minimum(v / d, 1.0)
+            else:
+                F += 0.5 * float(w @ (v * v))
+                slope = v
             if grad and v.any():
-                c.pull(st, w * v / c.tolerance)
+                c.pull(st, w * slope / c.tolerance)
         return F
 
     def shift(self) -> float:

@@ -21,7 +21,7 @@ import pytest
 
 import solver
 from solver.constraints.base import LIMIT, SCHEDULE, Constraint
-from solver.feasibility import least_violation, with_frames
+from solver.feasibility import RAISED_AT, least_violation, with_frames
 from solver.lagrangian import AugmentedLagrangian
 from solver.layout import StateLayout
 from solver.least_change import LeastChangeOptions, _start_frames, build_least_change, solve_least_change
@@ -129,6 +129,26 @@ def test_conflicting_bounds_give_the_lower_priority_exactly_what_the_higher_need
     assert raised.time == pytest.approx(T_STAR, abs=0.005) and raised.label == "pelvis"
     assert _z(sol) >= bottom - TOL  # the body's limit holds
     assert sol.unmet == {"top": raised.amount}
+
+
+def test_of_two_bounds_of_one_level_only_the_cheaper_gives(standing):
+    """z <= top and z >= bottom, 6 cm apart, both wishes of the schedule (one level), bottom's tolerance 4x
+    top's: a millimetre of bottom's violation costs a quarter of top's in tolerances, so the least violation,
+    a sum of the violations (SNOPT's elastic objective), puts all 6 cm on bottom and leaves top within its
+    tolerance. A sum of squares would raise both (top by 6 cm / 17 = 3.5 mm: (x/tol)^2 + (y/4tol)^2 is least
+    at y = 16x)."""
+    z0 = standing[2]
+    top, bottom = z0 - 0.10, z0 - 0.04
+    lc = _problem(standing, top=top, bottom=bottom, keyed=False)
+    lo = PelvisHeight("bottom", lc.al.t, T_STAR, -1, -bottom, SCHEDULE)
+    lo.tolerance = 4 * TOL
+    old = lc.al
+    lc = replace(lc, al=AugmentedLagrangian(old.change, [old.constraints[0], lo], old.tmap, old.engine, old.d0))
+    sol = solve_least_change(lc, LeastChangeOptions())
+    assert [r.constraint for r in sol.certificate] == ["bottom"]
+    (raised,) = sol.certificate
+    assert raised.amount == pytest.approx(bottom - top, abs=4 * TOL)  # the whole gap, within bottom's tolerance
+    assert _z(sol) <= top + TOL  # top met as posed
 
 
 def test_the_search_reports_its_evaluations_as_it_goes(standing):
@@ -319,30 +339,35 @@ def test_a_bound_at_a_keyframe_is_sought_there(standing):
     assert float(sol.frames.path(np.array([0.4]))[0, 2]) <= z0 - 0.05 + TOL
 
 
-def test_the_elastic_measure_counts_a_pair_only_beyond_its_aim(standing):
-    """F = (1/2) sum (w_p/T) max(0, c_p/tol - aim)^2 (solver.feasibility): nothing for a pair within the aim,
-    the squared excess beyond it otherwise (against numpy on the pelvis's own height), and its gradient
-    agrees with central differences."""
+def test_the_elastic_measures_count_a_pair_only_beyond_their_aims(standing):
+    """solver.feasibility's two measures, v = max(0, c/tol - aim): the squares (1/2) sum (w_p/T) v^2 from
+    aim = 1 - ftol_rel, and the sum sum (w_p/T) huber_d(v) from aim = 1/2, d = 1 - aim: v^2 / (2 d) up to the
+    tolerance's edge, v - d/2 beyond. Nothing for a pair below the aim (against numpy on the pelvis's own
+    height), and the gradient agrees with central differences in every part."""
     model, still, z0 = standing
     lc = build_least_change(model, still, rate=200.0)
-    old, aim = lc.al, 1.0 - 1e-3
+    old = lc.al
     frames = with_frames(_start_frames(lc, 1 / 48), np.array([0.2, 0.6]), StateLayout.from_model(model).quat_slots)
     basis = SplineBasis(frames.times, old.t)
-    for top, beyond in ((z0 + 0.5 * TOL, False), (z0 - 3 * TOL, True)):  # met within its tolerance; 3 tol over
+    # c/tol -0.5 (below both aims), 0.8 (met; beyond the sum's aim: its squared part), 3 (broken: the sum's linear part)
+    for top, count in ((z0 + 0.5 * TOL, (False, False)), (z0 - 0.8 * TOL, (False, True)), (z0 - 3 * TOL, (True, True))):
         bound = PelvisHeight("top", old.t, T_STAR, +1, top, SCHEDULE, half=0.05)
-        eal = AugmentedLagrangian(old.change, [], old.tmap, old.engine, old.d0, elastic=[bound], aim=aim)
-        F, G, _ = eal.evaluate(basis, frames.values)
-        z = frames.path(old.t[bound.rows])[:, 2]
-        w = eal.w_elastic[0]
-        expected = 0.5 * float(w @ np.maximum(0.0, (z - top) / TOL - aim) ** 2)
-        assert (expected > 0) == beyond
-        np.testing.assert_allclose(F, expected, rtol=1e-12, atol=1e-18)
-        if beyond:
-            free = np.flatnonzero(~frames.fixed[:, 2])
-            h = 1e-6
-            for i in free[:2]:
-                v = [frames.values.copy() for _ in range(2)]
-                v[0][i, 2] += h
-                v[1][i, 2] -= h
-                fd = (eal.evaluate(basis, v[0], grad=False)[0] - eal.evaluate(basis, v[1], grad=False)[0]) / (2 * h)
-                np.testing.assert_allclose(G[i, 2], fd, rtol=1e-5, atol=1e-9)
+        for elastic_sum, aim, beyond in ((False, 1.0 - 1e-3, count[0]), (True, RAISED_AT, count[1])):
+            eal = AugmentedLagrangian(old.change, [], old.tmap, old.engine, old.d0, elastic=[bound], aim=aim,
+                                      elastic_sum=elastic_sum)
+            F, G, _ = eal.evaluate(basis, frames.values)
+            z = frames.path(old.t[bound.rows])[:, 2]
+            w = eal.w_elastic[0]
+            v, d = np.maximum(0.0, (z - top) / TOL - aim), 1.0 - aim
+            expected = float(w @ (np.where(v <= d, 0.5 * v * v / d, v - 0.5 * d) if elastic_sum else 0.5 * v * v))
+            assert (expected > 0) == beyond
+            np.testing.assert_allclose(F, expected, rtol=1e-10, atol=1e-18)  # two computations of the heights
+            if beyond:
+                free = np.flatnonzero(~frames.fixed[:, 2])
+                h = 1e-6
+                for i in free[:2]:
+                    v = [frames.values.copy() for _ in range(2)]
+                    v[0][i, 2] += h
+                    v[1][i, 2] -= h
+                    fd = (eal.evaluate(basis, v[0], grad=False)[0] - eal.evaluate(basis, v[1], grad=False)[0]) / (2 * h)
+                    np.testing.assert_allclose(G[i, 2], fd, rtol=1e-5, atol=1e-9)
