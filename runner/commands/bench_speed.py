@@ -81,9 +81,12 @@ def time_run(root: Path, workload: Workload, out: Path) -> dict:
     process's CPU time [s] and peak memory [MB]."""
     out.mkdir(parents=True, exist_ok=True)
     corpus = workload.args[:2] == ("bench", "corpus")
-    args = [*workload.args, "--quiet"] + ([] if corpus else ["--no-render"])
-    args += ["--out", str(out / "corpus")] if corpus else ["--out-dir", str(out), "--metrics", str(out / "m.json")] \
-        if args[0] == "mocap" else ["--save-path", str(out / "p.npz")]
+    if corpus:  # a corpus run renders nothing and writes a folder of pairs
+        args = [*workload.args, "--quiet", "--out", str(out / "corpus")]
+    elif workload.args[0] == "mocap":
+        args = [*workload.args, "--no-render", "--quiet", "--out-dir", str(out), "--metrics", str(out / "m.json")]
+    else:
+        args = [*workload.args, "--no-render", "--quiet", "--save-path", str(out / "p.npz")]
     env = {**os.environ, "PYTHONPATH": str(root)}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
