@@ -182,7 +182,7 @@ BOUNDS: tuple[Bound, ...] = (
     Bound("joint_error", "joint-angle error [deg]", "joint_error_deg", "plain_joint_error_deg", "le", 1.10, 0.0, None,
           (), "motion", "joint-angle error <= the plain spline's + 10 %;"),
     Bound("site_error", "contact-site error [cm]", "site_error_cm", "plain_site_error_cm", "lt", 1.0, 0.0, None,
-          ("planted", "slide"), "motion", "contact-site error below the plain spline's;"),
+          ("planted", "slide", "tracking"), "motion", "contact-site error below the plain spline's;"),
     Bound("off_hinge", "knee/elbow off the hinge, beyond the capture's [deg]", "off_hinge_deg", "capture_off_hinge_deg", "le", 1.0, 3.0,
           None, ("hinge",), "motion", "knee and elbow rotation off the hinge <= the capture's + 3 degrees;"),
     Bound("hyperextension", "hyperextension [deg]", "hyperextension_deg", "plain_hyperextension_deg", "le", 1.0, 0.5,

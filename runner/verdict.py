@@ -61,7 +61,7 @@ CONSTRAINT_UNITS = {
     "penetration": ("mm", 1e-3), "planted": ("mm", 1e-3), "slide": ("mm", 1e-3), "flight": ("mm", 1e-3),
     "ground": ("mm", 1e-3), "hinge": ("deg", math.pi / 180.0), "hyperextension": ("deg", math.pi / 180.0),
     "rom": ("deg", math.pi / 180.0), "acceleration": ("m/s^2 | rad/s^2", 1.0), "effort": ("N m", 1.0),
-    "unit": ("1", 1.0), "flight wrench": ("N | N m", 1.0), "ground force": ("N", 1.0),
+    "tracking": ("mm", 1e-3), "unit": ("1", 1.0), "flight wrench": ("N | N m", 1.0), "ground force": ("N", 1.0),
 }
 
 

@@ -10,6 +10,7 @@
     rom          every joint motion inside its published range (AAOS 1965)              lo <= x <= hi    1 deg
     acceleration no jolts: pelvis and ball joints no harder than the capture's (6 Hz) or the plain spline's peak  5 %
     effort       with a capture: RMS joint torque no more than the capture's (6 Hz) or the plain spline's     5 %
+    tracking     with a capture: the contact sites' mean distance from the capture's, the plain spline's at most  5 %
     unit         quaternions near unit norm between the frames                          ||q| - 1| <= 0.03  0.01
 
 With `--terms all` the force bounds join them (`solver.constraints.forces`, added by
@@ -59,6 +60,10 @@ there; the problem is made well posed instead of excused:
 * The effort bound (`solver.constraints.effort`) is, for the same reason, a bound only with a capture: the
   larger of the capture's filtered RMS joint torque and the plain spline's. It needs the inverse
   dynamics (`solver.inverse_dynamics.InverseDynamics`), which a capture's problem then uses as its engine.
+* The tracking bound (`solver.constraints.tracking`) is a bound only with a capture, and only on a keyed
+  path: the contact sites no further from the capture's on average than the plain spline's. The contact
+  constraints move the feet, and the measure of change prices a change against the plain spline, not
+  against where the capture stood.
 
 Each relaxation is reported (`Relaxation`: which constraint, site or joint, keyframe, where, how much),
 so a user sees where the keyframes, not the optimizer, decide.
@@ -75,6 +80,7 @@ from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.constraints.effort import TorqueRMS, rms_torque
 from solver.constraints.penetration import Penetration
 from solver.constraints.sites import HeightBound, SupportHeight, SupportSlide, huber, site_heights
+from solver.constraints.tracking import SiteTracking, mean_site_distance
 from solver.constraints.unit import UnitNorm
 from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.contacts import contact_radii, foot_contacts, site_positions
@@ -127,7 +133,7 @@ def _pairs_in(t: np.ndarray, a: float, b: float) -> np.ndarray:
 
 
 def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None,
-                       planted_tolerance: float = TOLERANCES["planted"]):
+                       planted_tolerance: float = TOLERANCES["planted"], track: bool = False):
     """The constraints of a figure's problem (module docstring).
 
     Args:
@@ -136,7 +142,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         contacts: `solver.contacts.Contact`s. flights: ((start, end), ...) [s]. engine: the contact
             sites' `SiteKinematics` (figure.contact_sites, in that order). planted_tolerance: [m] the planted
             limits' tolerance, also where a keyframe that holds a foot up relaxes them (a clean's is 1 mm:
-            `solver.displacement`).
+            `solver.displacement`). track: with a capture, hold the contact sites as near it as the plain
+            spline keeps them (`solver.constraints.tracking`; a keyed path: a clean's plain spline is the capture).
     Returns:
         (constraints, relaxations): a list of `Constraint`s and a list of `Relaxation`s.
     """
@@ -158,6 +165,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             slide, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness)
             height.reports = reports + slide_reports
             out += [height, slide]
+        if track and witness is not None:
+            out += _tracking(reference, state, witness)
         if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
             out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     layout = StateLayout.from_model(model)
@@ -173,6 +182,14 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         relaxations = _relax_heights(out, state, plain, model, sites, support, radii, flights)
         relaxations += [r for c in out if isinstance(c, SupportHeight) for r in c.reports]
     return out, relaxations
+
+
+def _tracking(reference, plain: PathState, capture: PathState) -> list:
+    """[the tracking bound] (`solver.constraints.tracking`): the contact sites of the capture (`capture`, the
+    witness) as the target and the plain spline's (`plain`) mean distance from them as the bound; [] where the
+    plain spline is on the capture at every point (nothing to keep it nearer)."""
+    bound = mean_site_distance(plain.sites, capture.sites, reference.weights)
+    return [SiteTracking(reference.weights, capture.sites, bound)] if bound > 0 else []
 
 
 def _reference_state(model, reference, plain, engine) -> PathState:

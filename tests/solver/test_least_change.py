@@ -340,6 +340,35 @@ def test_no_jolt_bounds_hold_at_1000_hz_between_the_quadrature_points(shipped, s
     assert np.all(peaks <= acc.limits + acc.tolerance[: len(acc.dofs)]), ratios  # the bound as posed, 5 %
 
 
+@pytest.mark.slow
+def test_the_contact_sites_stay_as_near_the_capture_as_the_plain_spline(shipped, solved):
+    """The tracking bound as posed (`solver.constraints.tracking`: at most the plain spline's mean distance, met
+    within its tolerance, half of it above), measured between the quadrature points: the solved path, the plain
+    spline and the capture sampled every 1 ms by scipy's natural cubic spline and placed by MuJoCo's kinematics."""
+    from scipy.interpolate import CubicSpline
+
+    from solver.constraints.base import RELATIVE_TOLERANCE
+
+    model = shipped[0]
+    lc, sol, _ = solved
+    times, qpos = lc.capture
+    t = np.arange(sol.frames.times[0], sol.frames.times[-1], 1e-3)
+    data = mujoco.MjData(model)
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) for s in lc.figure.contact_sites]
+
+    def sites(frames_t, frames_q):
+        out = []
+        for q in CubicSpline(frames_t, frames_q, bc_type="natural")(t):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(model, data)
+            out.append(data.site_xpos[ids].copy())
+        return np.array(out)
+
+    target = sites(times, qpos)
+    mean = [float(np.linalg.norm(sites(f.times, f.values) - target, axis=2).mean()) for f in (lc.plain, sol.frames)]
+    assert mean[1] <= (1.0 + RELATIVE_TOLERANCE / 2) * mean[0], mean
+
+
 def test_refinement_checks_are_recorded_where_they_chose_frames(shipped):
     """`Solution.segment_decreases`: each check's predicted decreases, one per segment of the frames it was
     made on; a refine round's scores are the check that chose its frames, on the frames before it; the

@@ -1,0 +1,73 @@
+"""The contact sites no further from the capture than the plain spline keeps them (keyframes from a capture).
+
+    (1/T) integral (1/k) sum_s |x_s(t) - x*_s(t)| dt  <=  B - tol/2,   tol = RELATIVE_TOLERANCE B      [m]
+
+x_s the path's contact site s (a heel, a toe), x*_s the capture's (the motion the keyframes came from, the
+natural spline through its frames), k the contact sites, T the path's length, and B the plain spline's own
+figure: the field's mean per-site position error against the reference (`runner.motion_metrics`
+site_position_cm, METRICS.md's MPJPE on the sites), held as a limit. The contact constraints move the feet,
+and nothing else in the least change knows where the capture put them: a foot planted or kept from sliding
+could settle further from the capture's stance than the plain spline's in-betweens stray (on 83_02 and
+05_09 keyed every 0.2-0.33 s, 2-23 % further). The tolerance is the relative one of every bound read off a
+reference's own figure (`RELATIVE_TOLERANCE`); the limit lies half of it below B, so the plain spline sits
+in the middle of the tolerance (met, as it should be: the least change of a plain spline that meets every
+constraint is itself), and a path this constraint holds ends at the limit, below B.
+
+One integral constraint: one pair standing for the path's whole length. |d| has a kink at d = 0, where a
+full keyframe puts the path on the capture; a keyframe's values are fixed, so no variable moves a site there
+and the gradient is taken as 0.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solver.constraints.base import RELATIVE, RELATIVE_TOLERANCE, Constraint
+
+__all__ = ["SiteTracking", "mean_site_distance"]
+
+
+def mean_site_distance(sites: np.ndarray, target: np.ndarray, weights: np.ndarray) -> float:
+    """The mean distance of the sites from the target's, (1/T) sum_i w_i (1/k) sum_s |sites[i, s] - target[i, s]|
+    [m], of (n, k, 3) positions [m] at quadrature weights (n,) [s], T = sum w."""
+    d = np.linalg.norm(sites - target, axis=2)
+    return float(weights @ d.mean(axis=1) / weights.sum())
+
+
+class SiteTracking(Constraint):
+    """The contact sites' mean distance from the capture's <= the plain spline's [m] (module docstring).
+
+    Args:
+        weights: (n,) quadrature weights [s]. target: (n, k, 3) the capture's contact sites at the points [m],
+            in the order of the engine's sites. bound: B [m] > 0, the plain spline's figure.
+    Raises:
+        ValueError: bound is not a positive number.
+    """
+
+    name, unit, scale = "tracking", "mm", 1e-3
+    priority = RELATIVE
+
+    def __init__(self, weights: np.ndarray, target: np.ndarray, bound: float):
+        if not (np.isfinite(bound) and bound > 0):
+            raise ValueError(f"the tracking bound must be a positive distance [m], got {bound!r}")
+        self.w = np.asarray(weights, float)
+        self.T = float(self.w.sum())
+        self.target = np.asarray(target, float)
+        self.rows = np.array([len(self.w) // 2])
+        self.labels = np.array(["contact sites"], object)
+        self.tolerance = RELATIVE_TOLERANCE * float(bound)
+        self.limit = np.array([float(bound) - 0.5 * self.tolerance])
+
+    def pair_weights(self, weights):
+        """The one pair stands for the whole path [s]."""
+        return np.array([float(np.sum(weights))])
+
+    def measure(self, state):
+        return np.array([mean_site_distance(state.sites, self.target, self.w)])
+
+    def pull(self, state, g):
+        if not g.any():
+            return
+        d = state.sites - self.target
+        r = np.linalg.norm(d, axis=2, keepdims=True)
+        unit = np.divide(d, r, out=np.zeros_like(d), where=r > 0.0)  # 0 on the capture (a keyframe: fixed)
+        state.add_sites(float(g[0]) * (self.w / (self.T * d.shape[1]))[:, None, None] * unit)
