@@ -365,6 +365,27 @@ def test_a_skate_limit_below_what_the_keyframes_force_is_out_of_reach():
     assert "| every bound held that the keyframes leave in reach" in markdown_report([forced], pass_rates([forced]), {})
 
 
+def test_a_bound_whose_constraint_the_solve_certified_counts_apart():
+    """A pair missing the no-jolt bound whose acceleration limit the least violation raised (the report's
+    "stalled") holds every bound but those out of reach; one whose certificate raised another constraint, or
+    that misses a bound no certificate explains as well, does not."""
+    from runner.corpus import held_but_certified
+
+    jolt = {"joint_acc_ratio": 2.1}
+    certified = _result("j.bvh", "validation", **jolt, stalled=["acceleration"])
+    other = _result("k.bvh", "validation", **jolt, stalled=["planted"])
+    both = _result("l.bvh", "validation", **jolt, stalled=["acceleration"], penetration_mm=3.0)
+    assert not held_all(certified) and held_but_certified(certified)
+    assert not held_but_certified(other) and not held_but_certified(both)
+    assert held_but_certified(_result("g.bvh", "validation"))
+    slide = {"skate_mm": 1.2, "plain_skate_mm": 1.6, "capture_skate_mm": 0.2, "forced_skate_mm": 0.9,
+             "skate_excess_mm": 0.3, "plain_skate_excess_mm": 0.7}
+    assert held_but_certified(_result("e.bvh", "validation", **slide))  # forced by the keyframes
+    rates = pass_rates([certified, other, both])
+    assert rates["validation"]["held_all"] == 0 and rates["validation"]["held_but_certified"] == 1
+    assert "| every bound held but those out of reach" in markdown_report([certified], pass_rates([certified]), {})
+
+
 def test_a_failing_jolt_bound_is_listed_with_its_figures():
     worst = ["l_knee", 2.0, 300.0, 150.0, 120.0, 1.25]
     results = [_result("h.bvh", "tuning", joint_acc_ratio=2.0, joint_acc_worst=worst),
