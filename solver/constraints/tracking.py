@@ -4,14 +4,14 @@
 
 x_s the path's contact site s (a heel, a toe), x*_s the capture's (the motion the keyframes came from, the
 natural spline through its frames), k the contact sites, T the path's length, and B the plain spline's own
-figure: the field's mean per-site position error against the reference (`runner.motion_metrics`
-site_position_cm, METRICS.md's MPJPE on the sites), held as a limit. The contact constraints move the feet,
+figure: the mean per-site position error against the reference (`runner.motion_metrics` site_position_cm: mean
+per-joint position error, taken on the contact sites), held as a limit. The contact constraints move the feet,
 and nothing else in the least change knows where the capture put them: a foot planted or kept from sliding
-could settle further from the capture's stance than the plain spline's in-betweens stray (on 83_02 and
-05_09 keyed every 0.2-0.33 s, 2-23 % further). The tolerance is the relative one of every bound read off a
-reference's own figure (`RELATIVE_TOLERANCE`); the limit lies half of it below B, so the plain spline sits
-in the middle of the tolerance (met, as it should be: the least change of a plain spline that meets every
-constraint is itself), and a path this constraint holds ends at the limit, below B.
+could settle further from the capture's stance than the plain spline's in-betweens stray (on four pairs of
+83_02 and 05_09, keyed every 0.2-0.33 s and at contacts, 2-23 % further). The tolerance is the relative one of
+every bound read off a reference's own figure (`RELATIVE_TOLERANCE`); the limit lies half of it below B, so
+the plain spline sits in the middle of the tolerance (met, as it should be: the least change of a plain spline
+that meets every constraint is itself), and a path this constraint holds ends at the limit, below B.
 
 One integral constraint: one pair standing for the path's whole length. |d| has a kink at d = 0, where a
 full keyframe puts the path on the capture; a keyframe's values are fixed, so no variable moves a site there
