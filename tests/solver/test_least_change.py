@@ -342,12 +342,11 @@ def test_no_jolt_bounds_hold_at_1000_hz_between_the_quadrature_points(shipped, s
 
 @pytest.mark.slow
 def test_the_contact_sites_stay_as_near_the_capture_as_the_plain_spline(shipped, solved):
-    """The tracking bound as posed (`solver.constraints.tracking`: at most the plain spline's mean distance, met
-    within its tolerance, half of it above), measured between the quadrature points: the solved path, the plain
-    spline and the capture sampled every 1 ms by scipy's natural cubic spline and placed by MuJoCo's kinematics."""
+    """The tracking bound as posed (`solver.constraints.tracking`: met within its tolerance, at most the plain
+    spline's mean distance), measured between the quadrature points: the solved path, the plain spline and the
+    capture sampled every 1 ms by scipy's natural cubic spline and placed by MuJoCo's kinematics (within 1 %:
+    1 ms against the 200 Hz points)."""
     from scipy.interpolate import CubicSpline
-
-    from solver.constraints.base import RELATIVE_TOLERANCE
 
     model = shipped[0]
     lc, sol, _ = solved
@@ -366,7 +365,7 @@ def test_the_contact_sites_stay_as_near_the_capture_as_the_plain_spline(shipped,
 
     target = sites(times, qpos)
     mean = [float(np.linalg.norm(sites(f.times, f.values) - target, axis=2).mean()) for f in (lc.plain, sol.frames)]
-    assert mean[1] <= (1.0 + RELATIVE_TOLERANCE / 2) * mean[0], mean
+    assert mean[1] <= 1.01 * mean[0], mean
 
 
 def test_refinement_checks_are_recorded_where_they_chose_frames(shipped):
