@@ -71,13 +71,23 @@ class SiteTracking(Constraint):
         """The one pair stands for the whole path [s]."""
         return np.array([float(np.sum(weights))])
 
+    def _offsets(self, state):
+        """(d (n, k, 3) [m], |d| (n, k, 1) [m]): the sites less the capture's, once per state (`measure` and
+        `pull` of one evaluation share them)."""
+        key = ("tracking", id(self))
+        hit = state.cache.get(key)
+        if hit is None:
+            d = state.sites - self.target
+            state.cache[key] = hit = (d, np.linalg.norm(d, axis=2, keepdims=True))
+        return hit
+
     def measure(self, state):
-        return np.array([mean_site_distance(state.sites, self.target, self.w)])
+        r = self._offsets(state)[1][..., 0]
+        return np.array([float(self.w @ r.mean(axis=1) / self.T)])
 
     def pull(self, state, g):
         if not g.any():
             return
-        d = state.sites - self.target
-        r = np.linalg.norm(d, axis=2, keepdims=True)
+        d, r = self._offsets(state)
         unit = np.divide(d, r, out=np.zeros_like(d), where=r > 0.0)  # 0 on the capture (a keyframe: fixed)
         state.add_sites(float(g[0]) * (self.w / (self.T * d.shape[1]))[:, None, None] * unit)

@@ -352,16 +352,13 @@ def test_the_contact_sites_stay_as_near_the_capture_as_the_plain_spline(shipped,
     lc, sol, _ = solved
     times, qpos = lc.capture
     t = np.arange(sol.frames.times[0], sol.frames.times[-1], 1e-3)
+    from solver.kinematics import mujoco_site_positions
+
     data = mujoco.MjData(model)
     ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) for s in lc.figure.contact_sites]
 
     def sites(frames_t, frames_q):
-        out = []
-        for q in CubicSpline(frames_t, frames_q, bc_type="natural")(t):
-            data.qpos[:] = q
-            mujoco.mj_kinematics(model, data)
-            out.append(data.site_xpos[ids].copy())
-        return np.array(out)
+        return mujoco_site_positions(model, data, ids, CubicSpline(frames_t, frames_q, bc_type="natural")(t))
 
     target = sites(times, qpos)
     mean = [float(np.linalg.norm(sites(f.times, f.values) - target, axis=2).mean()) for f in (lc.plain, sol.frames)]

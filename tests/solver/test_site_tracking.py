@@ -14,7 +14,7 @@ import solver
 from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.constraints.tracking import SiteTracking
 from solver.inverse_dynamics import InverseDynamics
-from solver.kinematics import TangentMap
+from solver.kinematics import TangentMap, mujoco_site_positions
 from solver.layout import StateLayout
 from solver.least_change import build_least_change
 from solver.path_state import PathState
@@ -40,15 +40,10 @@ def _state(figure, t, Y, Y1=None, Y2=None):
 
 
 def _mujoco_sites(model, sites, qpos: np.ndarray) -> np.ndarray:
-    """(n, k, 3) the sites' world positions [m] by `mj_kinematics` (independent of the solver's kinematics)."""
-    data = mujoco.MjData(model)
+    """(n, k, 3) the sites' world positions [m] by `mj_kinematics` (`solver.kinematics.mujoco_site_positions`,
+    independent of the solver's vectorized kinematics)."""
     ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) for s in sites]
-    out = np.empty((len(qpos), len(ids), 3))
-    for i, q in enumerate(qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        out[i] = data.site_xpos[ids]
-    return out
+    return mujoco_site_positions(model, mujoco.MjData(model), ids, qpos)
 
 
 def test_a_figure_moved_rigidly_is_as_far_as_the_move(figure):
