@@ -371,3 +371,73 @@ def test_the_elastic_measures_count_a_pair_only_beyond_their_aims(standing):
                     v[1][i, 2] -= h
                     fd = (eal.evaluate(basis, v[0], grad=False)[0] - eal.evaluate(basis, v[1], grad=False)[0]) / (2 * h)
                     np.testing.assert_allclose(G[i, 2], fd, rtol=1e-5, atol=1e-9)
+
+
+class WindowMean(Constraint):
+    """An integral bound: the pelvis height's mean over the quadrature points within `half` [s] of t*, by their
+    weights, <= limit [m] (one pair, the contact schedule's priority, like a planted foot's mean height)."""
+
+    name, unit, scale, tolerance, priority = "window mean", "m", 1.0, TOL, SCHEDULE
+
+    def __init__(self, t_points, weights, half, limit):
+        self.points = np.flatnonzero(np.abs(t_points - T_STAR) <= half)
+        self.w = weights[self.points] / weights[self.points].sum()
+        self.rows, self.labels = np.array([self.points[len(self.points) // 2]]), np.array(["pelvis"], object)
+        self.limit = np.array([float(limit)])
+
+    def pair_weights(self, weights):
+        return np.array([float(weights[self.points].sum())])
+
+    def measure(self, state):
+        return np.array([self.w @ state.Y[self.points, 2]])
+
+    def pull(self, state, g):
+        np.add.at(state.gY[:, 2], self.points, g[0] * self.w)
+
+
+class VerticalAcceleration(Constraint):
+    """|z''| <= A at every quadrature point [m/s^2] (the body's limit: the highest priority), tolerance 1 % of A."""
+
+    name, unit, scale, priority = "vertical acceleration", "m/s^2", 1.0, LIMIT
+
+    def __init__(self, n, A):
+        self.rows, self.sign = np.r_[np.arange(n), np.arange(n)], np.r_[np.ones(n), -np.ones(n)]
+        self.labels, self.limit, self.tolerance = np.full(2 * n, "pelvis", object), np.full(2 * n, float(A)), 0.01 * A
+
+    def measure(self, state):
+        return self.sign * state.Y2[self.rows, 2]
+
+    def pull(self, state, g):
+        np.add.at(state.gY2[:, 2], self.rows, self.sign * g)
+
+
+def test_an_integral_bound_under_a_limit_is_certified_at_its_closed_form(standing):
+    """The pelvis keyed at its standing height z0 at t*, its mean over t* +- w wished 5 cm lower (SCHEDULE) while
+    |z''| <= A (LIMIT). Any path through the key has z(t) = z0 + z'(t*)(t - t*) + int_t*^t (t - s) z''(s) ds, whose
+    mean over the window is least with z'' = -A throughout: z0 - A w^2 / 6. So the least violation is
+    0.05 - A w^2 / 6 (4.33 cm at A = 4 m/s^2, w = 0.1 s), within what the limit's 1 % tolerance and the
+    bound's own allow; the path returned reaches it and holds the limit; a start with a frame every two
+    quadrature intervals does not beat it."""
+    model, still, z0 = standing
+    A, w = 4.0, 0.1
+    lc = build_least_change(model, still, rate=200.0)
+    old = lc.al
+    cons = [WindowMean(old.t, old.change.ref.weights, w, z0 - 0.05), VerticalAcceleration(len(old.t), A)]
+    lc = replace(lc, al=AugmentedLagrangian(old.change, cons, old.tmap, old.engine, old.d0))
+    least = 0.05 - A * w * w / 6.0
+    slack = 0.01 * A * w * w / 6.0 + TOL  # [m] the limit met within its tolerance, the bound within its own
+    sol = solve_least_change(lc, LeastChangeOptions())
+    (raised,) = sol.certificate
+    assert raised.constraint == "window mean" and sol.status is Status.INFEASIBLE
+    assert raised.amount == pytest.approx(least, abs=slack)
+    state = lc.al.state(SplineBasis(sol.frames.times, lc.al.t), sol.frames.values)
+    assert cons[0].values(state)[0] <= raised.amount + TOL
+    assert np.abs(state.Y2[:, 2]).max() <= 1.01 * A
+    o = LeastChangeOptions()
+    frames = _start_frames(lc, o.min_gap)
+    fine = np.arange(0.01, 0.8, 0.01)
+    frames = with_frames(frames, fine[np.min(np.abs(fine[:, None] - frames.times[None]), axis=1) > 0.005],
+                         lc.layout.quat_slots)
+    cert = least_violation(lc.al.posed(), frames, lc.layout.quat_slots, min_gap=2.0 / 200.0, ftol_rel=o.ftol_rel,
+                           per_level=o.per_level)
+    assert cert.unmet["window mean"] >= least - slack
