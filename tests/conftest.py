@@ -61,6 +61,21 @@ def toy_model():
     return mujoco.MjModel.from_xml_string(TOY_SCENE)
 
 
+def shipped_standing():
+    """The shipped run_and_step figure standing in its first keyframe's pose: (model, keyframes, keyframe-file
+    info, StateLayout, q (nq,)) with every quaternion of q made unit (the file's 6 digits leave norms 1e-6 off)."""
+    import solver
+    from solver.layout import StateLayout
+
+    model = solver.load_model(solver.shipped("run_and_step.xml"))
+    keyframes, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
+    layout = StateLayout.from_model(model)
+    q = keyframes.values[0].copy()
+    for slot in layout.quat_slots:
+        q[slot] /= np.linalg.norm(q[slot])
+    return model, keyframes, info, layout, q
+
+
 def random_qpos(rng, layout, n, spread=0.6, scale=(0.8, 1.3)):
     """(n, nq) random qpos with non-unit quaternions of moderate rotation, root near (0, 0, 1)."""
     Y = np.zeros((n, layout.nq))

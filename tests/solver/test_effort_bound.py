@@ -13,19 +13,15 @@ import solver
 from solver.constraints.effort import TorqueRMS
 from solver.inverse_dynamics import InverseDynamics, constraint_free_copy
 from solver.kinematics import TangentMap
-from solver.layout import StateLayout
 from solver.least_change import build_least_change
 from solver.path_state import PathState
+
+from conftest import shipped_standing
 
 
 @pytest.fixture(scope="module")
 def figure():
-    model = solver.load_model(solver.shipped("run_and_step.xml"))
-    keyframes, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
-    layout = StateLayout.from_model(model)
-    q = keyframes.values[0].copy()
-    for slot in layout.quat_slots:
-        q[slot] /= np.linalg.norm(q[slot])
+    model, keyframes, info, layout, q = shipped_standing()
     engine = InverseDynamics(model, solver.Figure.from_model(model).contact_sites)
     dofs = np.array([j.dofadr + i for j in layout.joints if j.kind != "free" for i in range(j.nv)], int)
     return model, layout, q, engine, dofs, keyframes, info

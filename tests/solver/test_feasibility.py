@@ -28,6 +28,8 @@ from solver.least_change import LeastChangeOptions, _start_frames, build_least_c
 from solver.optimize import Status
 from solver.spline_basis import SplineBasis
 
+from conftest import shipped_standing
+
 #: [m] the bounds' tolerance: 1 mm, the penetration constraint's
 TOL = 1e-3
 #: [s] the instant the bounds hold at, between the keyframes at 0 and 0.8 s, on the middle one: a
@@ -59,11 +61,7 @@ class PelvisHeight(Constraint):
 @pytest.fixture(scope="module")
 def standing():
     """(model, still keyframes at 0, T_STAR, 0.8 s, the standing pelvis height [m])."""
-    model = solver.load_model(solver.shipped("run_and_step.xml"))
-    keyframes, _ = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
-    q = keyframes.values[0].copy()
-    for slot in StateLayout.from_model(model).quat_slots:
-        q[slot] /= np.linalg.norm(q[slot])
+    model, keyframes, _, _, q = shipped_standing()
     still = replace(keyframes, times=np.array([0.0, T_STAR, 0.8]), values=np.tile(q, (3, 1)),
                     mask=np.ones((3, model.nq), bool))
     return model, still, float(q[2])

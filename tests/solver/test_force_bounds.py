@@ -12,18 +12,14 @@ import solver
 from solver.constraints.forces import FORCE_TOLERANCE, FlightWrench, GroundForce, figure_forces
 from solver.inverse_dynamics import InverseDynamics
 from solver.kinematics import TangentMap
-from solver.layout import StateLayout
 from solver.path_state import PathState
+
+from conftest import shipped_standing
 
 
 @pytest.fixture(scope="module")
 def figure():
-    model = solver.load_model(solver.shipped("run_and_step.xml"))
-    keyframes, _ = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
-    layout = StateLayout.from_model(model)
-    q = keyframes.values[0].copy()
-    for slot in layout.quat_slots:
-        q[slot] /= np.linalg.norm(q[slot])
+    model, _, _, layout, q = shipped_standing()
     engine = InverseDynamics(model, solver.Figure.from_model(model).contact_sites)
     return model, layout, q, engine
 

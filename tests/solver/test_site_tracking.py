@@ -15,19 +15,15 @@ from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.constraints.tracking import SiteTracking
 from solver.inverse_dynamics import InverseDynamics
 from solver.kinematics import TangentMap, mujoco_site_positions
-from solver.layout import StateLayout
 from solver.least_change import build_least_change
 from solver.path_state import PathState
+
+from conftest import shipped_standing
 
 
 @pytest.fixture(scope="module")
 def figure():
-    model = solver.load_model(solver.shipped("run_and_step.xml"))
-    keyframes, info = solver.read_keyframes(solver.shipped("run_and_step.keyframes.json"), model)
-    layout = StateLayout.from_model(model)
-    q = keyframes.values[0].copy()
-    for slot in layout.quat_slots:
-        q[slot] /= np.linalg.norm(q[slot])
+    model, keyframes, info, layout, q = shipped_standing()
     sites = solver.Figure.from_model(model).contact_sites
     return model, layout, q, InverseDynamics(model, sites), sites, keyframes, info
 
