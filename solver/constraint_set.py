@@ -142,8 +142,9 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         contacts: `solver.contacts.Contact`s. flights: ((start, end), ...) [s]. engine: the contact
             sites' `SiteKinematics` (figure.contact_sites, in that order). planted_tolerance: [m] the planted
             limits' tolerance, also where a keyframe that holds a foot up relaxes them (a clean's is 1 mm:
-            `solver.displacement`). track: with a capture, hold the contact sites as near it as the plain
-            spline keeps them (`solver.constraints.tracking`; a keyed path: a clean's plain spline is the capture).
+            `solver.displacement`). track: a keyed path: with a capture, hold the contact sites as near it
+            as the plain spline keeps them (`solver.constraints.tracking`; not a clean, whose plain spline is
+            the capture).
     Returns:
         (constraints, relaxations): a list of `Constraint`s and a list of `Relaxation`s.
     """

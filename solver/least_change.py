@@ -187,7 +187,7 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)
     constraints, relaxations = figure_constraints(model, figure, reference, plain, tuple(schedule), flights,
-                                                  engine, capture=capture, track=capture is not None)
+                                                  engine, capture=capture, track=True)
     if forces:
         if capture is None:
             peak = None
