@@ -5,6 +5,7 @@
     slide        over each site contact, the slide beyond what the keyframes force    <= allowance (below)  2 mm
     flight       in a flight, every site clear (the field's flight height)             h >= 3.1 cm      1 mm
     ground       outside flights, the site the reference holds lowest is down          h <= 2.9 cm      1 mm
+                 (with a capture, neither between the two frames about a flight's end: below)
     hinge        knees and elbows turn about their flexion axis                         phi <= limit     1 deg
     hyperextension  knees and elbows do not bend backwards                               -theta <= limit  0.5 deg
     rom          every joint motion inside its published range (AAOS 1965)              lo <= x <= hi    1 deg
@@ -16,6 +17,13 @@
 With `--terms all` the force bounds join them (`solver.constraints.forces`, added by
 `solver.least_change.build_least_change`): no external wrench in flight, the friction cone and the peak
 ground force on the ground.
+
+A capture's flights are found on its frames (`solver.contacts.airborne_intervals`): a flight starts midway
+between the last frame with a site down and the first with every site up (and ends likewise). Between those
+two frames the capture does not say when the foot crossed the flight height, so neither flight nor ground
+is posed between them: a bound there asks for a crossing time no data gave, and beside a keyframe only the
+velocity at the key could meet it. The two frames themselves are quadrature points (`flight_edge_frames`),
+where ground and flight hold as the capture observed them.
 
 A foot contact is a foot's sites' contacts merged; at each point of one the support site is the foot's
 site that the schedule has in contact there and the reference motion holds lowest: a walking foot
@@ -92,7 +100,7 @@ from solver.spline import interpolate
 from solver.support import SupportSurfaces
 from solver.surfaces import StaticSurfaces
 
-__all__ = ["TOLERANCES", "Relaxation", "figure_constraints"]
+__all__ = ["TOLERANCES", "Relaxation", "figure_constraints", "flight_edge_frames"]
 
 #: [1] the share of a known path's slide beyond what the keyframes force (the plain spline's, the capture's)
 #: that the path may keep: half, the product's skate requirement (docs/corpus.md, `skate_excess`)
@@ -281,13 +289,44 @@ def _relax_run(c, v: np.ndarray, ptimes: np.ndarray, pairs: np.ndarray, tk: floa
     return float(tp[lo]), float(tp[hi])
 
 
+def _half_frame(frame_times) -> float:
+    """[s] half the median interval of a capture's frames: how far from a flight's end (midway between two
+    frames, `solver.contacts.airborne_intervals`) the capture leaves the crossing of the flight height unknown."""
+    return 0.5 * float(np.median(np.diff(np.asarray(frame_times, float))))
+
+
+def flight_edge_frames(flights, frame_times, keytimes=()) -> np.ndarray:
+    """The capture's frames either side of each flight's start and end, where the ground and the flight
+    bounds resume (module docstring): a -+ h and b -+ h for each flight (a, b), h half the median frame
+    interval (`solver.contacts.airborne_intervals` puts a flight's ends midway between frames), less those
+    within a microsecond of a `keytimes` entry. A problem makes them quadrature points, so the bounds hold at
+    the frames the capture observed.
+
+    Args:
+        flights: ((start, end), ...) [s]. frame_times: (n,) the capture's increasing frame times [s], n >= 2.
+        keytimes: (k,) [s] times that are points already (the keyframes).
+    Returns:
+        (m,) times [s], m <= 4 len(flights).
+    """
+    h = _half_frame(frame_times)
+    edges = np.array([x for a, b in flights for x in (a - h, a + h, b - h, b + h)], float)
+    keys = np.asarray(keytimes, float).ravel()
+    if keys.size and edges.size:  # [s] a microsecond: far below any frame interval, far above round-off
+        edges = edges[np.abs(edges[:, None] - keys[None, :]).min(axis=1) >= 1e-6]
+    return edges
+
+
 def _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture=None) -> list:
     """flight: every site at least FLIGHT_HEIGHT + tol up in the flights; ground: elsewhere, the site the
-    reference holds lowest at most FLIGHT_HEIGHT - tol up (module docstring)."""
+    reference holds lowest at most FLIGHT_HEIGHT - tol up; with a `capture` (times, qpos), neither at points
+    within half its median frame interval of a flight's start or end (module docstring)."""
     n, K = len(t), len(sites)
-    flying = np.zeros(n, bool)
+    flying, edge = np.zeros(n, bool), np.zeros(n, bool)
+    half = 0.0 if capture is None else _half_frame(capture[0]) - 1e-9  # [s] (less round-off: the frames are points)
     for a, b in flights:
         flying |= (t > a) & (t < b)
+        edge |= (np.abs(t - a) < half) | (np.abs(t - b) < half)
+    flying &= ~edge
     out = []
     tol = TOLERANCES["flight"]
     if flying.any():
@@ -295,7 +334,7 @@ def _flight_and_ground(model, reference, plain, engine, support, radii, flights,
         rows, cols = np.repeat(on, K), np.tile(np.arange(K), len(on))
         out.append(HeightBound("flight", support, radii, rows, cols, -np.ones(len(rows), int),
                                np.full(len(rows), FLIGHT_HEIGHT + tol), False, tol, np.array(sites, object)[cols]))
-    on = np.flatnonzero(~flying)
+    on = np.flatnonzero(~flying & ~edge)
     if on.size:
         state = _reference_state(model, reference, plain, engine) if capture is None else _capture_state(model, reference, capture, engine)
         h, _ = site_heights(state, support, radii, np.repeat(on, K), np.tile(np.arange(K), len(on)),

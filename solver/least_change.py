@@ -32,7 +32,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from solver.change import MeasureOfChange
-from solver.constraint_set import figure_constraints
+from solver.constraint_set import figure_constraints, flight_edge_frames
 from solver.constraints.forces import figure_forces
 from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
@@ -178,14 +178,15 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     plain = FrameSet.from_keyframes(keyframes, layout.quat_slots)
     t0, t1 = float(plain.times[0]), float(plain.times[-1])
     check_points(t0, t1, rate)
-    t, w = quadrature_points(t0, t1, rate, plain.times)  # the keyframes are points too (no jolt unseen)
+    schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
+    flights = tuple(schedule.flights()) if flights is None else tuple(flights)
+    edges = () if capture is None else flight_edge_frames(flights, capture[0], plain.times)
+    t, w = quadrature_points(t0, t1, rate, np.concatenate([plain.times, edges]))  # keyframes: no jolt unseen
     reference = ReferenceMotion.from_frames(model, plain, t, w)
     if forces or capture is not None:  # the force bounds, or the effort bound of a capture's keyframes
         engine = InverseDynamics(model, figure.contact_sites)
     else:
         engine = SiteKinematics(model, figure.contact_sites) if figure.contact_sites else None
-    schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
-    flights = tuple(schedule.flights()) if flights is None else tuple(flights)
     constraints, relaxations = figure_constraints(model, figure, reference, plain, tuple(schedule), flights,
                                                   engine, capture=capture, track=True)
     if forces:
