@@ -2,7 +2,7 @@
 git does not know (timing itself is measured by the command, never asserted)."""
 import pytest
 
-from runner.commands.bench_speed import WORKLOADS, baseline_worktree, ratio_rows
+from runner.commands.bench_speed import WORKLOADS, baseline_worktree, ratio_rows, same_commit
 from solver.errors import InputError
 
 
@@ -20,6 +20,7 @@ def test_ratio_rows_are_medians_and_per_run_ratios():
     assert row[3] == pytest.approx(0.2) and row[4] == pytest.approx([0.2, 3.0 / 18.0, 5.5 / 22.0])
     assert row[5] == WORKLOADS[0].bound and row[9] == 250.0  # the larger peak of the current runs
     assert ratio_rows({(name, "baseline"): [_run(1.0)]}) == []  # no current runs: no row
+    assert ratio_rows(runs, bounded=set())[0].bound is None  # runs against another revision: no bound
     assert row.per_eval_ratio is None and row.base_evals is None  # runs that record no evaluations
 
 
@@ -34,6 +35,22 @@ def test_the_time_per_evaluation_separates_cost_from_the_count():
     assert row.per_eval_ratio == pytest.approx(1.0)
     runs[(name, "current")][1]["evals"] = None  # one run without a count: no per-evaluation figure
     assert ratio_rows(runs)[0].per_eval_ratio is None
+
+
+def test_each_bound_has_its_own_baseline_and_revisions_compare_as_commits():
+    """mocap-corpus's bound is issue 60's, against b590890; the others are issue 40's, against 7624574. A
+    revision compares as the commit it names (a full hash and its abbreviation agree; an unknown one names none)."""
+    import subprocess
+
+    from runner.paths import REPO
+
+    against = {w.name: w.against for w in WORKLOADS}
+    assert against["mocap-corpus"] == "b590890" and against["mocap-default"] == "7624574"
+    head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
+    if not head:
+        pytest.skip("not a git checkout")
+    assert same_commit(head, head[:12]) and same_commit("HEAD", head)
+    assert not same_commit("no-such-rev", "no-such-rev")
 
 
 def test_an_unknown_revision_is_one_clear_error(tmp_path):
