@@ -295,20 +295,27 @@ def _half_frame(frame_times) -> float:
     return 0.5 * float(np.median(np.diff(np.asarray(frame_times, float))))
 
 
-def flight_edge_frames(flights, frame_times) -> np.ndarray:
+def flight_edge_frames(flights, frame_times, keytimes=()) -> np.ndarray:
     """The capture's frames either side of each flight's start and end, where the ground and the flight
     bounds resume (module docstring): a -+ h and b -+ h for each flight (a, b), h half the median frame
-    interval (`solver.contacts.airborne_intervals` puts a flight's ends midway between frames). A problem
-    makes them quadrature points (`solver.quadrature.quadrature_points`, which merges a knot within round-off
-    of another: a one-frame flight's a + h and b - h), so the bounds hold at the frames the capture observed.
+    interval (`solver.contacts.airborne_intervals` puts a flight's ends midway between frames), each once
+    (a one-frame flight's a + h and b - h are one frame) and none within a microsecond of a `keytimes` entry.
+    A problem makes them quadrature points, so the bounds hold at the frames the capture observed.
 
     Args:
         flights: ((start, end), ...) [s]. frame_times: (n,) the capture's increasing frame times [s], n >= 2.
+        keytimes: (k,) [s] times that are points already (the keyframes).
     Returns:
-        (4 len(flights),) times [s].
+        (m,) increasing times [s], m <= 4 len(flights).
     """
+    near = 1e-6  # [s] a microsecond: far below any frame interval, far above the round-off of a -+ h
     h = _half_frame(frame_times)
-    return np.array([x for a, b in flights for x in (a - h, a + h, b - h, b + h)], float)
+    edges = np.sort([x for a, b in flights for x in (a - h, a + h, b - h, b + h)])
+    edges = edges[np.r_[True, np.diff(edges) >= near]] if edges.size else edges
+    keys = np.asarray(keytimes, float).ravel()
+    if keys.size and edges.size:
+        edges = edges[np.abs(edges[:, None] - keys[None, :]).min(axis=1) >= near]
+    return edges
 
 
 def _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture=None) -> list:

@@ -180,8 +180,8 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     check_points(t0, t1, rate)
     schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)
-    knots = plain.times if capture is None else np.r_[plain.times, flight_edge_frames(flights, capture[0])]
-    t, w = quadrature_points(t0, t1, rate, knots)  # the keyframes: no jolt unseen
+    edges = () if capture is None else flight_edge_frames(flights, capture[0], plain.times)
+    t, w = quadrature_points(t0, t1, rate, np.concatenate([plain.times, edges]))  # keyframes: no jolt unseen
     reference = ReferenceMotion.from_frames(model, plain, t, w)
     if forces or capture is not None:  # the force bounds, or the effort bound of a capture's keyframes
         engine = InverseDynamics(model, figure.contact_sites)
@@ -189,8 +189,11 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
         engine = SiteKinematics(model, figure.contact_sites) if figure.contact_sites else None
     constraints, relaxations = figure_constraints(model, figure, reference, plain, tuple(schedule), flights,
                                                   engine, capture=capture, track=True)
-    if forces:  # with a capture, its peak ground force bounds the path's
-        peak = None if capture is None else (peaks or peak_bounds(model, plain, capture)).ground_force_bw
+    if forces:
+        if capture is None:
+            peak = None
+        else:
+            peak = (peaks if peaks is not None else peak_bounds(model, plain, capture)).ground_force_bw
         constraints += figure_forces(model, t, flights, peak)
     constraints += [_own_bound(make, t) for make in bounds]
     # the pose part's frequency: the keyframes' own Nyquist frequency (a change slower than the keyframe

@@ -65,7 +65,7 @@ def quadrature_points(t0: float, t1: float, rate: float, knots=()) -> tuple[np.n
         t0, t1: interval [s]. rate: points per second [1/s]. knots: (k,) [s] times in [t0, t1].
     Returns:
         t: (n + k',) points [s], increasing; w: same shape, weights [s] (h, or 0 at a knot). A knot within
-        round-off (1e-9 s) of a midpoint is that point, and knots within it of each other are one.
+        round-off (1e-9 s) of a midpoint is that point.
     """
     t, h = quadrature_times(t0, t1, rate)
     k = np.asarray(knots, float).ravel()
@@ -75,7 +75,6 @@ def quadrature_points(t0: float, t1: float, rate: float, knots=()) -> tuple[np.n
         i = np.clip(np.searchsorted(t, k), 1, len(t) - 1)
         k = k[np.minimum(np.abs(t[i - 1] - k), np.abs(t[i] - k)) > 1e-9]
     k = np.unique(k)
-    k = k[np.r_[True, np.diff(k) > 1e-9]] if k.size else k  # one point for knots within round-off of each other
     allt = np.concatenate([t, k])
     order = np.argsort(allt, kind="stable")
     return allt[order], np.concatenate([np.full(len(t), h), np.zeros(len(k))])[order]

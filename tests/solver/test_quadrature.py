@@ -43,11 +43,3 @@ def test_a_pointwise_bound_prices_a_knots_pair_like_its_neighbours():
     c.rows = np.arange(len(t))
     np.testing.assert_allclose(c.pair_weights(w), 0.01, rtol=1e-12)
     assert abs(w.sum() - 1.0) < 1e-12
-
-
-def test_knots_within_round_off_of_each_other_are_one_point():
-    """Two knots 1e-16 s apart (a sum of float steps read two ways) are one point of weight 0; 1 ms apart, two."""
-    a = 0.3
-    t, w = quadrature_points(0.0, 1.0, 100.0, [a, np.nextafter(a, 1.0), 0.5, 0.501])
-    assert np.sum(np.abs(t - a) < 1e-9) == 1
-    assert np.sum(np.abs(t - 0.5) < 2e-3) == 2 and w[np.argmin(np.abs(t - a))] == 0.0
