@@ -189,11 +189,8 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
         engine = SiteKinematics(model, figure.contact_sites) if figure.contact_sites else None
     constraints, relaxations = figure_constraints(model, figure, reference, plain, tuple(schedule), flights,
                                                   engine, capture=capture, track=True)
-    if forces:
-        if capture is None:
-            peak = None
-        else:
-            peak = (peaks if peaks is not None else peak_bounds(model, plain, capture)).ground_force_bw
+    if forces:  # with a capture, its peak ground force bounds the path's
+        peak = None if capture is None else (peaks if peaks is not None else peak_bounds(model, plain, capture)).ground_force_bw
         constraints += figure_forces(model, t, flights, peak)
     constraints += [_own_bound(make, t) for make in bounds]
     # the pose part's frequency: the keyframes' own Nyquist frequency (a change slower than the keyframe
