@@ -308,7 +308,7 @@ def flight_edge_frames(flights, frame_times, keytimes=()) -> np.ndarray:
     Returns:
         (m,) increasing times [s], m <= 4 len(flights).
     """
-    near = 1e-6  # [s] a microsecond: far below any frame interval, far above the round-off of a -+ h
+    near = 1e-6  # [s] a microsecond: a key time's resolution (the keyframe file's 6 digits), far below any frame interval
     h = _half_frame(frame_times)
     edges = np.sort([x for a, b in flights for x in (a - h, a + h, b - h, b + h)])
     edges = edges[np.r_[True, np.diff(edges) >= near]] if edges.size else edges
