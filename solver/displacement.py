@@ -23,13 +23,17 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
 * **The pins** are the displacement's keyframes, d = 0 exactly: the clip's first and last frame and any
   the user names (each on the capture frame nearest it); every other capture frame is a variable frame
   (below). Where no constraint asks for a change D's minimum is d = 0: the capture comes back exactly.
-* **Quaternions are displaced additively in R^4.** A displacement frame's quaternion slot holds a unit
-  quaternion p moved on its sphere (`solver.manifold`, three rotation variables, as a frame of a keyed
-  path) around a fixed anchor e, the clip's mean orientation of that joint, and the displacement is
-  p - e. So d = 0 where p = e, the variables are rotation vectors the preconditioner prices by the
-  joint's inertia, and the sum c + d is a quaternion MuJoCo normalizes (the unit-norm bound keeps it
-  near unit, as between the frames of a keyed path). Limit: a joint whose captured orientation turns
-  through 180 degrees from its mean (a root turning round) cannot be displaced about one axis there.
+* **Quaternions are displaced additively in R^4, each about its own frame.** A displacement frame's
+  quaternion slot holds a unit quaternion p moved on its sphere (`solver.manifold`, three rotation
+  variables, as a frame of a keyed path) around that capture frame's own orientation e_i, and the
+  displacement there is p - e_i (d's anchors, `anchors`: the spline through them is the capture's own in
+  that slot). So d = 0 where p = e_i, c + d = p at every capture frame (a unit quaternion: the cleaned
+  clip's frames are the frames' values), the variables are rotation vectors the preconditioner prices by
+  the joint's inertia, and between frames c + d is the frames' spline, which MuJoCo normalizes (the
+  unit-norm bound keeps it near unit, as between the frames of a keyed path). Anchored at one orientation
+  for the whole clip (its mean), a joint turning far from it could not be displaced about every axis (at
+  180 degrees not at all) and the sum left the unit sphere: on 05_09 the unit-norm limit was raised by
+  0.12 at the right ankle, over 66 points.
 * **The displacement has a frame at every capture frame** (`LeastChange.grid`), each a quadrature
   point: d lives in the capture's own spline space (c + d is the natural spline through its samples,
   `clean_solution`), its acceleration, as c's, linear between frames, so a bound met at the frames
@@ -89,7 +93,7 @@ class Displacement:
     Attributes:
         lc: the `LeastChange` (its `plain` the pins: d = 0; `al.base` the capture at the quadrature points).
         times: (n,) [s] the capture's frame times. qpos: (n, nq) the retargeted capture.
-        anchor: (nq,) the displacement's zero as frames hold it (0, and each quaternion slot's anchor e).
+        anchor: (n, nq) the displacement's zero as its frames hold it at each capture frame (`anchors`).
         pins: (k,) indices of the capture frames pinned (d = 0 there).
         capture_frames: FrameSet through every capture frame (the pins its keyframes): the capture as a path.
     """
@@ -103,23 +107,18 @@ class Displacement:
 
 
 def anchors(qpos: np.ndarray, quat_slots: np.ndarray) -> np.ndarray:
-    """The displacement's zero as its frames hold it: 0, and in each quaternion slot e, the normalized mean
-    of the slot's quaternions over the clip (each sign-aligned with the first; the middle frame's where
-    they cancel).
+    """The displacement's zero as its frames hold it, at each capture frame: 0 on the linear components, and
+    in each quaternion slot the capture's own orientation there, normalized (module docstring).
 
     Args:
         qpos: (n, nq) the capture. quat_slots: (s, 4) qpos indices of the quaternions.
     Returns:
-        (nq,) the anchor.
+        (n, nq) the anchors.
     """
     qpos = np.asarray(qpos, float)
-    out = np.zeros(qpos.shape[1])
+    out = np.zeros_like(qpos)
     for slot in np.asarray(quat_slots, int).reshape(-1, 4):
-        q = qpos[:, slot] / np.linalg.norm(qpos[:, slot], axis=1, keepdims=True)
-        q = q * np.where(q @ q[0] < 0, -1.0, 1.0)[:, None]
-        m = q.mean(axis=0)
-        n = float(np.linalg.norm(m))
-        out[slot] = m / n if n > 1e-3 else q[len(q) // 2]
+        out[:, slot] = qpos[:, slot] / np.linalg.norm(qpos[:, slot], axis=1, keepdims=True)
     return out
 
 
@@ -177,11 +176,8 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     is_pin = np.zeros(len(times), bool)
     is_pin[pinned] = True
     capture_frames = FrameSet(times, qpos, np.ones(qpos.shape, bool), is_pin)
-    anchor = anchors(qpos, layout.quat_slots)
-    at = np.union1d(pinned, [0, len(times) - 1])  # the spline's ends are frames, pinned or variable
-    zero = np.tile(anchor, (len(at), 1))
-    fixed = np.repeat(is_pin[at][:, None], qpos.shape[1], axis=1)
-    plain = FrameSet(times[at], zero, fixed, is_pin[at])
+    anchor = anchors(qpos, layout.quat_slots)  # d = 0: every capture frame a frame of d, the pins fixed
+    plain = FrameSet(times, anchor, np.repeat(is_pin[:, None], qpos.shape[1], axis=1), is_pin)
     t0, t1 = float(times[0]), float(times[-1])
     check_points(t0, t1, rate)
     t, w = quadrature_points(t0, t1, rate, times)  # every capture frame a point (weight 0), the pins among them
@@ -202,7 +198,8 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
                              pose=equal_mass_matrices(model, reference.qpos))
     d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)
     Y1, Y2 = interpolate(times, qpos, t, (1, 2))
-    al = AugmentedLagrangian(change, constraints, tmap, engine, d0, base=(reference.qpos - anchor, Y1, Y2))
+    A0, A1, A2 = interpolate(times, anchor, t, (0, 1, 2))  # c - A: 0 in the quaternion slots, c elsewhere
+    al = AugmentedLagrangian(change, constraints, tmap, engine, d0, base=(reference.qpos - A0, Y1 - A1, Y2 - A2))
     _slide_limits(al, plain, feet)
     knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
     lc = LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots, grid=times)
@@ -277,7 +274,7 @@ def cleaned_qpos(disp: Displacement, frames: FrameSet, times: np.ndarray | None 
     if times is None:
         return disp.qpos + (frames.path(disp.times) - disp.anchor)
     t = np.asarray(times, float)
-    return interpolate(disp.times, disp.qpos, t, 0) + frames.path(t) - disp.anchor
+    return interpolate(disp.times, disp.qpos - disp.anchor, t, 0) + frames.path(t)
 
 
 def clean_solution(disp: Displacement, solution: Solution) -> Solution:

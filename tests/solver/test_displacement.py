@@ -129,7 +129,7 @@ def test_the_displacement_lives_on_the_capture_frames(dipped):
     np.testing.assert_array_equal(sol.frames.times, t)  # every capture frame, and no frame between them
     assert np.min(np.abs(disp.lc.al.t[None, :] - t[:, None]), axis=1).max() <= 1e-9
     fine = np.linspace(t[0], t[-1], 1001)
-    direct = interpolate(t, q, fine, 0) + sol.frames.path(fine) - disp.anchor
+    direct = interpolate(t, q, fine, 0) + interpolate(t, sol.frames.values - disp.anchor, fine, 0)
     np.testing.assert_allclose(clean.frames.path(fine), direct, rtol=0, atol=1e-9)
 
 
@@ -197,20 +197,49 @@ def test_an_unknown_feet_mode_is_named(toy_model):
         build_displacement(toy_model, t, q, feet="glued")
 
 
-def test_anchors_are_unit_and_zero_off_the_quaternions(toy_model):
+def test_anchors_are_the_captured_orientations_and_zero_off_the_quaternions(toy_model):
     t, q = _capture(toy_model)
     layout = StateLayout.from_model(toy_model)
-    e = anchors(q, layout.quat_slots)
-    np.testing.assert_allclose(np.linalg.norm(e[layout.quat_slots], axis=1), 1.0, atol=1e-12)
+    e = anchors(2.0 * q, layout.quat_slots)  # a quaternion of any length: its orientation
+    for slot in layout.quat_slots:
+        np.testing.assert_allclose(e[:, slot], q[:, slot], rtol=0, atol=1e-12)
     lin = np.setdiff1d(np.arange(toy_model.nq), layout.quat_slots.ravel())
-    np.testing.assert_array_equal(e[lin], 0.0)
+    np.testing.assert_array_equal(e[:, lin], 0.0)
+
+
+def test_a_joint_turning_round_is_displaced_by_any_rotation_on_the_unit_sphere(toy_model):
+    """The root turns through a full circle about the vertical over the clip (180 degrees from any one
+    orientation somewhere). Each frame of d moves its quaternion on its sphere about that frame's captured
+    orientation, so whatever rotation vectors d the variables hold, c + d at every capture frame is
+    c (x) exp(d), a unit quaternion (Hamilton's product computed here, apart from the solver's manifold).
+    Anchored at the clip's mean orientation, c + d left the unit sphere (norms 0.1 off on 05_09)."""
+    from solver.manifold import FrameVariables
+
+    t, q = _capture(toy_model)
+    yaw = 2 * np.pi * t / t[-1]
+    q[:, 3], q[:, 6] = np.cos(yaw / 2), np.sin(yaw / 2)  # the root's quaternion (w, x, y, z) about z
+    disp = build_displacement(toy_model, t, q, rate=100.0)
+    var = FrameVariables(disp.lc.plain, StateLayout.from_model(toy_model).quat_slots)
+    rng = np.random.default_rng(7)
+    x = np.zeros(var.size)
+    x[var.n_linear:] = rng.normal(scale=0.3, size=var.size - var.n_linear)  # rotation vectors [rad]
+    cleaned = disp.qpos + var.values(x) - disp.anchor
+    rows, slots = var.quaternion_frames()
+    d = x[var.n_linear:].reshape(-1, 3)[slots == 0]  # the root's rotation vector at each of its frames
+    angle = np.linalg.norm(d, axis=1)
+    e = np.c_[np.cos(angle / 2), np.sin(angle / 2)[:, None] * d / angle[:, None]]  # exp(d), (w, x, y, z)
+    c = q[rows[slots == 0], 3:7]
+    want = np.c_[c[:, 0] * e[:, 0] - (c[:, 1:] * e[:, 1:]).sum(1),  # c (x) exp(d), Hamilton's product
+                 c[:, :1] * e[:, 1:] + e[:, :1] * c[:, 1:] + np.cross(c[:, 1:], e[:, 1:])]
+    np.testing.assert_allclose(cleaned[rows[slots == 0], 3:7], want, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(cleaned[:, 3:7], axis=1), 1.0, rtol=0, atol=1e-12)
 
 
 def test_gradient_with_the_capture_as_base_matches_finite_differences(toy_model):
     t, q = _capture(toy_model, DIP)
     disp = build_displacement(toy_model, t, q, rate=100.0)
     al, layout = disp.lc.al, disp.lc.layout
-    frames = disp.lc.plain.with_variable_frames(np.array([0.6, 0.95, 1.1, 1.4]))
+    frames = disp.lc.plain  # a frame of d at every capture frame, as the clean solves it
     rng = np.random.default_rng(3)
     P = frames.values.copy()
     free = ~frames.fixed
