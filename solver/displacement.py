@@ -20,9 +20,9 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
   a planted foot's slide can be undone anywhere over its contact: priced by the joint angles alike (the
   keyed path's pose part), or with a quarter second's correction time, the least change moved a planted
   foot 12-14 cm sideways on a clip whose capture slides it 4 cm (83_02).
-* **The pins** are the displacement's keyframes, d = 0 exactly: the clip's first and last frame and any
-  the user names (each on the capture frame nearest it); every other capture frame is a variable frame
-  (below). Where no constraint asks for a change D's minimum is d = 0: the capture comes back exactly.
+* **The pins** are the displacement's keyframes, d = 0 exactly: any frames the user names (each on the
+  capture frame nearest it) and, with `pin_ends`, the clip's first and last; every other capture frame is
+  a variable frame (below). Where no constraint asks for a change D's minimum is d = 0: the capture comes back exactly.
 * **Quaternions are displaced additively in R^4, each about its own frame.** A displacement frame's
   quaternion slot holds a unit quaternion p moved on its sphere (`solver.manifold`, three rotation
   variables, as a frame of a keyed path) around that capture frame's own orientation e_i, and the
