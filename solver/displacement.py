@@ -12,7 +12,8 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
 
 * **The reference motion is the capture** (D measures the change of the capture's own accelerations and
   pose), and the constraints are the figure's (`solver.constraint_set`) with the capture's contacts and
-  flights; the capture is their witness (the no-jolt and effort bounds against the 6 Hz capture).
+  flights; the capture is their witness (the no-jolt and effort bounds against the 6 Hz capture, the
+  unit-norm bound between frames at least the capture's own: `_capture_limits`).
 * **The pose part measures how far the body's parts move** (`solver.reference.equal_mass_matrices`: the
   mass matrix of the figure with its mass spread equally over its bodies, so every body counts alike, as
   the field's mean per-joint position error does), and it prices every change slower than the captured
@@ -200,7 +201,7 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     Y1, Y2 = interpolate(times, qpos, t, (1, 2))
     A0, A1, A2 = interpolate(times, anchor, t, (0, 1, 2))  # c - A: 0 in the quaternion slots, c elsewhere
     al = AugmentedLagrangian(change, constraints, tmap, engine, d0, base=(reference.qpos - A0, Y1 - A1, Y2 - A2))
-    _slide_limits(al, plain, feet)
+    _capture_limits(al, plain, feet)
     knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
     lc = LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots, grid=times)
     return Displacement(lc, times, qpos, anchor, pinned, capture_frames)
@@ -246,19 +247,30 @@ def _change_bound(bound: AccelerationBound, reference: ReferenceMotion, model, t
     return ChangeAcceleration(bound, reference.qacc, peaks)
 
 
-def _slide_limits(al: AugmentedLagrangian, plain: FrameSet, feet: str) -> None:
-    """Set each slide limit (`solver.constraint_set` made it for a keyed path: what the keyframes force plus
-    half of what a known path slides beyond that). "planted": what the pins force, no allowance: a foot in
-    contact stays where it is put (the capture's contacts start and end with the site still moving and its
-    marker noise adds speed, 16_23's resting heel 0.1-0.5 m/s frame to frame: planting them moves more of
-    the body than a halved slide would). "captured": the capture's own slide over that contact, neither
-    more nor less."""
+def _capture_limits(al: AugmentedLagrangian, plain: FrameSet, feet: str) -> None:
+    """Set the limits the capture witnesses, on `plain` (d = 0: the capture's own path).
+
+    * Each slide limit (`solver.constraint_set` made it for a keyed path: what the keyframes force plus half
+      of what a known path slides beyond that). "planted": what the pins force, no allowance: a foot in
+      contact stays where it is put (the capture's contacts start and end with the site still moving and its
+      marker noise adds speed, 16_23's resting heel 0.1-0.5 m/s frame to frame: planting them moves more of
+      the body than a halved slide would). "captured": the capture's own slide over that contact, neither
+      more nor less.
+    * The unit-norm limit at each point: at least the capture's own (`solver.constraints.unit`). Between
+      two capture frames c + d is the spline through the displacement's frames, whose quaternions are the
+      cleaned frames' own: a joint that turns far from one frame to the next shortens the chord, and only a
+      change of the pose at those frames could lengthen it. The clip is written at its frames, where every
+      quaternion is unit; a capture at 30 fps whose elbow turns 50 degrees between two frames dips to 0.9
+      there (bvh_test1), which the least change would otherwise spend a search on and report out of reach.
+    """
     from solver.spline_basis import SplineBasis
 
-    state = al.state(SplineBasis(plain.times, al.t), plain.values) if feet == "captured" else None
+    state = al.state(SplineBasis(plain.times, al.t), plain.values)
     for c in al.constraints:
         if c.name == "slide":
             c.limit = c.measure(state) if feet == "captured" else np.array(c.forced, float)
+        elif c.name == "unit":
+            c.limit = np.maximum(c.limit, c.measure(state))
 
 
 def solve_displacement(disp: Displacement, options: LeastChangeOptions | None = None, *, should_stop=None,
