@@ -59,17 +59,23 @@ class KeysOnSource:
         """[mm] the largest distance (0 without keys)."""
         return 1000.0 * float(self.distance.max(initial=0.0))
 
-    def summary(self) -> str:
-        """e.g. "every joint within 0.1 mm of the clip's at 6 of 12 keys; most RightLeg, 14.9 mm at 2.48 s"."""
+    def summary(self, noun: str = "keys") -> str:
+        """e.g. "every joint within 0.1 mm of the clip's at 6 of 12 keys; most RightLeg, 14.9 mm at 2.48 s"
+        (`noun`: what the times are, "keys" or "pins")."""
         n = len(self.times)
-        missed = f" ({self.missed} keys between the file's frames not checked)" if self.missed else ""
+        missed = f" ({self.missed} {noun} between the file's frames not checked)" if self.missed else ""
         if not n:
-            return f"no keyframe at a frame of the file{missed}"
+            return f"no {noun[:-1]} at a frame of the file{missed}"
         if not self.moved.any():
-            return f"every joint within {self.max_mm():.3f} mm of the clip's at all {n} keys{missed}"
+            every = f"all {n} {noun}" if n > 1 else f"the {noun[:-1]}"
+            return f"every joint within {self.max_mm():.3f} mm of the clip's at {every}{missed}"
         k, j = self.worst()
         return (f"every joint within {1000 * ON_SOURCE:g} mm of the clip's at {n - int(self.moved.sum())} of {n} "
-                f"keys; most {self.joints[j]}, {self.max_mm():.1f} mm at {self.times[k]:.2f} s{missed}")
+                f"{noun}; most {self.joints[j]}, {self.max_mm():.1f} mm at {self.times[k]:.2f} s{missed}")
+
+    def at(self, rows: np.ndarray) -> KeysOnSource:
+        """The check at the keyframes `rows` ((K,) bool) alone (those between the file's frames counted with them)."""
+        return KeysOnSource(self.times[rows], self.distance[rows], self.joints, self.missed if rows.any() else 0)
 
 
 def keys_on_source(source: BvhClip, written: str | Path, rest: int, unit: float, key_times, start: float = 0.0,

@@ -53,3 +53,13 @@ def test_saved_path_holds_the_cleaned_clip_at_the_capture_frames(cleaned):
     assert z["path_qpos"].shape == z["reference_qpos"].shape
     pins = [int(np.argmin(np.abs(z["reference_times"] - t))) for t in result["pins"]]
     np.testing.assert_allclose(z["path_qpos"][pins], z["reference_qpos"][pins], rtol=0, atol=1e-12)
+
+
+def test_free_ends_are_reported_apart_from_the_pins(tmp_path):
+    """Without --pin-ends the clip's ends are the clean's to move: the check read back from the written BVH
+    holds the pin alone to the source (0.1 mm) and gives the ends' change apart, as the clean's figure."""
+    o = CleanOptions(pins=(0.3,), render=False, quiet=True, summary=False)
+    result = process_clean(MODELS / "cmu" / "143_31.bvh", tmp_path, o, say=lambda *_: None)
+    on = result["keyframes_on_source"]
+    assert on["keys"] == 1 and on["max_mm"] <= 0.1 and abs(on["time_s"] - 0.3) < 1e-3
+    assert on["ends_max_mm"] >= 0.0  # the two ends, measured on the file and reported apart
