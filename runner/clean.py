@@ -164,12 +164,12 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
     return Run(problem, options, out, source, run_metrics(problem, out, source), interrupted), disp, sol, solve_cpu
 
 
-def _on_source(paths: dict, say, pins: np.ndarray) -> dict | None:
+def _on_source(paths: dict, say) -> dict | None:
     """Write the cleaned clip onto the source skeleton (`runner.capture.source_export.export_on_source`) and
-    say how far the file, read back, is from the source at the pins (`pins`: their times [s]; there the
-    source's own pose within `runner.capture.source_check.ON_SOURCE`) and, apart, at the clip's free ends
-    (the clean's change there). Returns the pins' figures ("max_mm", "joint", "time_s", "keys_moved",
-    "keys") and "ends_max_mm" at the free ends, or None without a checked frame."""
+    say how far the file, read back, is from the source at the pins (there the source's own pose within
+    `runner.capture.source_check.ON_SOURCE`) and, apart, at the clip's free ends (the clean's change there).
+    Returns the pins' figures ("max_mm", "joint", "time_s", "keys_moved", "keys") and "ends_max_mm" at the
+    free ends, or None without a checked frame."""
     from runner.capture.source_export import export_on_source
 
     res = export_on_source(paths["save_path"], paths["bvh"], required=True)
@@ -177,22 +177,15 @@ def _on_source(paths: dict, say, pins: np.ndarray) -> dict | None:
     check = res.check
     if check is None or not len(check.times):
         return None
-    pinned = np.isclose(check.times[:, None], np.asarray(pins, float)[None, :], rtol=0, atol=1e-6).any(axis=1)
-    out, file = {}, display_path(paths["bvh"])
-    if pinned.any():
-        at = check.at(pinned)
-        say(f"  the pins on {file}, read back: {at.summary('pins')}")
-        k, j = at.worst()
-        out |= {"max_mm": round(at.max_mm(), 3), "joint": at.joints[j], "time_s": round(float(at.times[k]), 4),
-                "keys_moved": int(at.moved.sum()), "keys": len(at.times)}
-    if (~pinned).any():
-        ends = check.at(~pinned)
-        k, j = ends.worst()
-        moved = (f"moved by the clean, up to {ends.max_mm():.1f} mm ({ends.joints[j]} at {ends.times[k]:.2f} s); "
-                 "--pin-ends keeps them as captured") if ends.moved.any() else \
-            f"within {ends.max_mm():.3f} mm of the clip's"
-        say(f"  the clip's free ends on {file}, read back: {moved}")
-        out["ends_max_mm"] = round(ends.max_mm(), 3)
+    for what, figures in check.lines():
+        say(f"  {what} read back from {display_path(paths['bvh'])}: {figures}")
+    out, pins = {}, check.held()
+    if len(pins.times):
+        k, j = pins.worst()
+        out |= {"max_mm": round(pins.max_mm(), 3), "joint": pins.joints[j], "time_s": round(float(pins.times[k]), 4),
+                "keys_moved": int(pins.moved.sum()), "keys": len(pins.times)}
+    if check.free is not None and check.free.any():
+        out["ends_max_mm"] = round(check.at(check.free).max_mm(), 3)
     return out
 
 
@@ -217,9 +210,9 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: 
     video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, camera=o.camera, quiet=o.quiet,
                          panels=("reference", "optimized"))  # capture | cleaned
     outputs = Outputs(save_path=paths["save_path"], video=None, video_options=video, summary=False, quiet=o.quiet,
-                      command={"command": o.command, "mode": "clean"})
+                      command={"command": o.command, "mode": "clean", "pins": [float(t) for t in disp.times[disp.pins]]})
     write_results(run, outputs, say)
-    on_source = _on_source(paths, say, disp.times[disp.pins])
+    on_source = _on_source(paths, say)
     from runner.export import export_saved_path
 
     say(f"  wrote {export_saved_path(paths['save_path'], paths['glb'], option='--out-dir').describe()}")

@@ -38,12 +38,15 @@ class KeysOnSource:
         times: (K,) [s] the keyframe times the file has a frame at (0 at the clip's first frame after its
             rest frames). distance: (K, J) [m] each joint's distance from its place in the clip.
         joints: the J joint names. missed: keyframes the file has no frame at (written at another rate).
+        free: (K,) bool, a clean's keyframes that are the clip's free ends (the clean's to move, not held to
+            the source: `lines`), or None (a keyed path: every keyframe held).
     """
 
     times: np.ndarray
     distance: np.ndarray
     joints: tuple[str, ...]
     missed: int = 0
+    free: np.ndarray | None = None
 
     @property
     def moved(self) -> np.ndarray:
@@ -73,13 +76,33 @@ class KeysOnSource:
         return (f"every joint within {1000 * ON_SOURCE:g} mm of the clip's at {n - int(self.moved.sum())} of {n} "
                 f"{noun}; most {self.joints[j]}, {self.max_mm():.1f} mm at {self.times[k]:.2f} s{missed}")
 
+    def lines(self) -> list[tuple[str, str]]:
+        """The check as (what, figures) lines to print: a keyed path's keyframes (`summary`); a clean's pins,
+        held to the source, and apart from them the clip's free ends, which the clean moves unless
+        --pin-ends."""
+        if self.free is None:
+            return [("keyframes", self.summary())]
+        out = [("pins", self.held().summary("pins"))] if (~self.free).any() else []
+        if self.free.any():
+            ends = self.at(self.free)
+            k, j = ends.worst()
+            out.append(("the clip's free ends", (
+                f"moved by the clean, up to {ends.max_mm():.1f} mm ({ends.joints[j]} at {ends.times[k]:.2f} s); "
+                "--pin-ends keeps them as captured") if ends.moved.any() else
+                f"within {ends.max_mm():.3f} mm of the clip's"))
+        return out
+
+    def held(self) -> KeysOnSource:
+        """The check at the keyframes held to the source alone (a clean's pins; every key of a keyed path)."""
+        return self if self.free is None else self.at(~self.free)
+
     def at(self, rows: np.ndarray) -> KeysOnSource:
         """The check at the keyframes `rows` ((K,) bool) alone (those between the file's frames counted with them)."""
         return KeysOnSource(self.times[rows], self.distance[rows], self.joints, self.missed if rows.any() else 0)
 
 
 def keys_on_source(source: BvhClip, written: str | Path, rest: int, unit: float, key_times, start: float = 0.0,
-                   fps: float | None = None) -> KeysOnSource:
+                   fps: float | None = None, held=None) -> KeysOnSource:
     """Read a file written onto `source`'s skeleton back and measure it at the keyframes (module docstring).
 
     Args:
@@ -87,7 +110,8 @@ def keys_on_source(source: BvhClip, written: str | Path, rest: int, unit: float,
             then frame rest + k at t = start + k / fps). unit: [m per file unit] (the recognised skeleton's).
         key_times: (K,) [s] keyframe times, 0 at the source's frame `rest`.
         start: [s] the time of the file's first frame after its rest frames. fps: [Hz] the file's rate
-            (None: 1 / its frame time).
+            (None: 1 / its frame time). held: a clean's pins [s], the keyframes held to the source (its other
+            keyframes are the clip's free ends: `KeysOnSource.free`); None for a keyed path (every key held).
     Returns:
         KeysOnSource over the keys that fall on a frame of both files.
     Raises:
@@ -107,4 +131,6 @@ def keys_on_source(source: BvhClip, written: str | Path, rest: int, unit: float,
     _, p_src = file_world(source)
     _, p_out = file_world(out)
     d = np.linalg.norm(p_out[rest + k_out[ok]] - p_src[rest + k_src[ok]], axis=-1) * unit
-    return KeysOnSource(t[ok], d, tuple(source.names), int((~ok).sum()))
+    free = None if held is None else \
+        ~np.isclose(t[ok][:, None], np.asarray(held, float).reshape(1, -1), rtol=0, atol=1e-6).any(axis=1)
+    return KeysOnSource(t[ok], d, tuple(source.names), int((~ok).sum()), free)

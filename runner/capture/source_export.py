@@ -351,7 +351,10 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
     check = None
     if saved.keyframe_times is not None and len(saved.keyframe_times):
         skel = clip_skeleton(clip, model)[0]
+        command = saved.options.get("command") or {}
+        held = command.get("pins") if command.get("mode") == "clean" else None  # a clean's ends are free (a
+        # saved path from before the pins were recorded: every keyframe held, as it was checked then)
         check = keys_on_source(clip, out, skel.rest_frames, skel.unit, saved.keyframe_times, float(motion.times[0]),
-                               motion.fps)
+                               motion.fps, held)
     return ExportResult(Path(out), "BVH on the source skeleton", which, motion.fps, frames, len(clip.names),
                         Path(out).stat().st_size, time.perf_counter() - t0, check)

@@ -50,5 +50,6 @@ def run(args) -> int:
     if not getattr(args, "quiet", False):
         print(f"dynsplines: wrote {res.describe()}")
         if res.check is not None:
-            print(f"  keyframes read back from {res.path.name}: {res.check.summary()}")
+            for what, figures in res.check.lines():
+                print(f"  {what} read back from {res.path.name}: {figures}")
     return 0

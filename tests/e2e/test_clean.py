@@ -63,3 +63,7 @@ def test_free_ends_are_reported_apart_from_the_pins(tmp_path):
     on = result["keyframes_on_source"]
     assert on["keys"] == 1 and on["max_mm"] <= 0.1 and abs(on["time_s"] - 0.3) < 1e-3
     assert on["ends_max_mm"] >= 0.0  # the two ends, measured on the file and reported apart
+    from runner.capture.source_export import export_on_source  # `dynsplines export` of the saved path: the same
+
+    check = export_on_source(tmp_path / "143_31.clean.npz", tmp_path / "again.bvh", required=True).check
+    assert check.free.tolist() == [abs(t - 0.3) >= 1e-3 for t in check.times] and len(check.times) == 3
