@@ -92,7 +92,8 @@ class Displacement:
     """A built clean: the least-change problem of the displacement and the capture it displaces.
 
     Attributes:
-        lc: the `LeastChange` (its `plain` the pins: d = 0; `al.base` the capture at the quadrature points).
+        lc: the `LeastChange` (its `plain` d = 0 at every capture frame, the pins fixed; `al.base` the capture
+            less the anchors' spline at the quadrature points).
         times: (n,) [s] the capture's frame times. qpos: (n, nq) the retargeted capture.
         anchor: (n, nq) the displacement's zero as its frames hold it at each capture frame (`anchors`).
         pins: (k,) indices of the capture frames pinned (d = 0 there).
