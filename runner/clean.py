@@ -184,8 +184,9 @@ def _on_source(paths: dict, say) -> dict | None:
         k, j = pins.worst()
         out |= {"max_mm": round(pins.max_mm(), 3), "joint": pins.joints[j], "time_s": round(float(pins.times[k]), 4),
                 "keys_moved": int(pins.moved.sum()), "keys": len(pins.times)}
-    if check.free is not None and check.free.any():
-        out["ends_max_mm"] = round(check.at(check.free).max_mm(), 3)
+    ends = check.ends()
+    if ends is not None and len(ends.times):
+        out["ends_max_mm"] = round(ends.max_mm(), 3)
     return out
 
 
@@ -209,8 +210,9 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: 
         f"(capture at 6 Hz {fig['capture_joint_rad_s2']:.1f})")
     video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, camera=o.camera, quiet=o.quiet,
                          panels=("reference", "optimized"))  # capture | cleaned
+    pins = [float(t) for t in disp.times[disp.pins]]
     outputs = Outputs(save_path=paths["save_path"], video=None, video_options=video, summary=False, quiet=o.quiet,
-                      command={"command": o.command, "mode": "clean", "pins": [float(t) for t in disp.times[disp.pins]]})
+                      command={"command": o.command, "mode": "clean", "pins": pins})
     write_results(run, outputs, say)
     on_source = _on_source(paths, say)
     from runner.export import export_saved_path
@@ -219,7 +221,7 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: 
     solve_cpu, cpu = cpu[1], time.process_time() - cpu[0]
     result = {"clip": str(clip), "status": "interrupted" if run.interrupted else run.solution.status.value,
               "exit": "interrupted" if run.interrupted else "failed" if run.failed else "ok",
-              "frames": ref.count, "fps": 1.0 / ref.frame_time, "pins": [float(t) for t in disp.times[disp.pins]],
+              "frames": ref.count, "fps": 1.0 / ref.frame_time, "pins": pins,
               "displacement_frames": sol.frames.count, "solve_time_s": sol.wall_time_s, "cpu_time_s": cpu,
               "solve_cpu_s": solve_cpu,
               "clean": fig, "certificate": [r.__dict__ for r in sol.certificate],

@@ -83,8 +83,8 @@ class KeysOnSource:
         if self.free is None:
             return [("keyframes", self.summary())]
         out = [("pins", self.held().summary("pins"))] if (~self.free).any() else []
-        if self.free.any():
-            ends = self.at(self.free)
+        ends = self.ends()
+        if ends is not None and len(ends.times):
             k, j = ends.worst()
             out.append(("the clip's free ends", (
                 f"moved by the clean, up to {ends.max_mm():.1f} mm ({ends.joints[j]} at {ends.times[k]:.2f} s); "
@@ -95,6 +95,10 @@ class KeysOnSource:
     def held(self) -> KeysOnSource:
         """The check at the keyframes held to the source alone (a clean's pins; every key of a keyed path)."""
         return self if self.free is None else self.at(~self.free)
+
+    def ends(self) -> KeysOnSource | None:
+        """The check at a clean's free ends alone (None for a keyed path)."""
+        return None if self.free is None else self.at(self.free)
 
     def at(self, rows: np.ndarray) -> KeysOnSource:
         """The check at the keyframes `rows` ((K,) bool) alone (those between the file's frames counted with them)."""
@@ -131,6 +135,6 @@ def keys_on_source(source: BvhClip, written: str | Path, rest: int, unit: float,
     _, p_src = file_world(source)
     _, p_out = file_world(out)
     d = np.linalg.norm(p_out[rest + k_out[ok]] - p_src[rest + k_src[ok]], axis=-1) * unit
-    free = None if held is None else \
-        ~np.isclose(t[ok][:, None], np.asarray(held, float).reshape(1, -1), rtol=0, atol=1e-6).any(axis=1)
+    free = None if held is None else ~np.isclose(  # [s] within a microsecond: saved times' rounding (`ON_FRAME`)
+        t[ok][:, None], np.asarray(held, float).reshape(1, -1), rtol=0, atol=1e-6).any(axis=1)
     return KeysOnSource(t[ok], d, tuple(source.names), int((~ok).sum()), free)
