@@ -111,6 +111,17 @@ FLOAT_LIMIT = 2e-3
 #: [m/s] the width of the Huber function that smooths a sliding speed at 0 (`SupportSlide`): 1 cm/s,
 #: where a site's slide is within the capture's marker noise (about 1 mm per frame at 120 fps)
 SLIDE_SMOOTHING = 1e-2
+#: [m/frame] a clean's skate in contact, mean over its contacts' frames (docs/corpus.md "Cleaning the corpus"), what
+#: its slides are measured to (`figure_constraints`' `frames`): the Huber width at most this a frame (the keyed
+#: 1 cm/s where narrower, at 50 fps and above) and each contact's tolerance half of it a frame step (the keyed
+#: 2 mm where less). By Jensen's inequality a slide met within that tolerance moves on average at most
+#: huber_b^-1(tol / T) a frame, tol / T + b / 2 = this with both at their largest: within the bound at any
+#: frame rate, as the planted limit and its tolerance are within the float bound (the keyed 2 mm over a
+#: 3-frame contact at 30 fps is 0.55 mm a frame)
+CLEAN_SKATE = 2e-4
+#: [m] a capture file's position resolution (0.01 cm): the width that smooths a clean's planted heights'
+#: positive part (`SupportHeight`'s `above`: within half of it of max(0, h))
+CAPTURE_RESOLUTION = 1e-4
 #: each constraint's tolerance [SI]: a pair is met when c <= tolerance (the acceptance bounds' units:
 #: penetration 1 mm; float 2 mm, under the 5 mm of PhysDiff's float; slide 2 mm; flight 1 mm above the
 #: field's 3 cm flight height; angles 1 deg, hyperextension 0.5 deg as the acceptance list; unit norm 0.01,
@@ -135,13 +146,33 @@ class Relaxation:
     amount: float
 
 
+def frame_weights(t: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """(q,) [s] quadrature weights at the points `t` (q,) that sum over the capture `frames` (n,) [s], n >= 2:
+    the frame step at the point of each frame, 0 elsewhere (a mean over a contact is then its frames' own
+    mean, as the float figure takes it: ../shared/METRICS.md).
+
+    Raises:
+        ValueError: a frame more than a microsecond from every point (a clean's frames are its points:
+            `solver.quadrature.quadrature_points` with the frames as knots).
+    """
+    t, frames = np.asarray(t, float), np.asarray(frames, float)
+    i = np.clip(np.searchsorted(t, frames), 1, len(t) - 1)
+    i = np.where(np.abs(t[i - 1] - frames) < np.abs(t[i] - frames), i - 1, i)
+    if np.any(np.abs(t[i] - frames) > 1e-6):  # [s] a microsecond: the points are sums of float steps
+        raise ValueError("a capture frame is not a quadrature point")
+    w = np.zeros(len(t))
+    w[i] = float(np.median(np.diff(frames)))
+    return w
+
+
 def _pairs_in(t: np.ndarray, a: float, b: float) -> np.ndarray:
     """Indices of quadrature points in the closed interval [a, b]."""
     return np.flatnonzero((t >= a) & (t <= b))
 
 
 def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None,
-                       planted_tolerance: float = TOLERANCES["planted"], track: bool = False):
+                       planted_tolerance: float = TOLERANCES["planted"], track: bool = False,
+                       frames: np.ndarray | None = None):
     """The constraints of a figure's problem (module docstring).
 
     Args:
@@ -152,7 +183,10 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             limits' tolerance, also where a keyframe that holds a foot up relaxes them (a clean's is 1 mm:
             `solver.displacement`). track: a keyed path: with a capture, hold the contact sites as near it
             as the plain spline keeps them (`solver.constraints.tracking`; not a clean, whose plain spline is
-            the capture).
+            the capture). frames: (n,) [s] a clean's capture frame times, each a quadrature point: a clean is
+            written and judged at its frames, so its planted means are of the heights' positive part over a
+            contact's frames (`frame_weights`, to `CAPTURE_RESOLUTION`), its slides per frame (`CLEAN_SKATE`);
+            None: a keyed path's (signed heights by the midpoint rule; `SLIDE_SMOOTHING`, 2 mm a contact).
     Returns:
         (constraints, relaxations): a list of `Constraint`s and a list of `Relaxation`s.
     """
@@ -167,11 +201,14 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         out.append(Penetration(surfaces, radii, t, sites, TOLERANCES["penetration"]))
         witness = None if capture is None else _capture_state(model, reference, capture, engine)
         feet = _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness,
-                             planted_tolerance)
+                             planted_tolerance, frames)
         if feet is not None:
             args, limit_h, reports = feet
-            height = SupportHeight(*args, limit=limit_h, tolerance=planted_tolerance)
-            slide, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness)
+            height = SupportHeight(*args, limit=limit_h, tolerance=planted_tolerance,
+                                   above=0.0 if frames is None else CAPTURE_RESOLUTION)
+            rate = None if frames is None else 1.0 / float(np.median(np.diff(frames)))
+            slide, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness,
+                                                rate)
             height.reports = reports + slide_reports
             out += [height, slide]
         if track and witness is not None:
@@ -347,11 +384,13 @@ def _flight_and_ground(model, reference, plain, engine, support, radii, flights,
     return out
 
 
-def _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness=None):
+def _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness=None, frame_rate=None):
     """The slide constraint (`SupportSlide`), a pair per site contact (the site's own contact), its limit the
     slide the keyframes force in its own measure (Jensen's inequality: module docstring) plus an allowance:
     SLIDE_SHARE of what the plain spline (`state`, the reference) or the `witness` slides beyond that,
-    whichever is less; and the relaxations worth reporting (the keyframes force more than the tolerance)."""
+    whichever is less; and the relaxations worth reporting (the keyframes force more than the tolerance).
+    With a `frame_rate` [Hz] (a clean) the Huber width and each pair's tolerance are per frame (`CLEAN_SKATE`)."""
+    b = SLIDE_SMOOTHING if frame_rate is None else min(SLIDE_SMOOTHING, CLEAN_SKATE * float(frame_rate))
     t, w = reference.t, reference.weights
     index, times, values = _full_keyframes(plain)
     keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else np.zeros((0, len(sites), 2))
@@ -373,15 +412,17 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites, state
         inside = np.flatnonzero((times >= c.start - 1e-6) & (times <= c.end + 1e-6))
         d = np.linalg.norm(np.diff(keyed_xy[inside, col], axis=0), axis=-1)  # [m] between consecutive keys
         dt = np.diff(times[inside])
-        forced = float(dt @ huber(d / dt, SLIDE_SMOOTHING)) if len(d) else 0.0  # Jensen: the slide's own measure
+        forced = float(dt @ huber(d / dt, b)) if len(d) else 0.0  # Jensen: the slide's own measure
         keyed.append(forced)
         if forced > TOLERANCES["slide"]:  # worth saying: the keyframes force more than the tolerance
             reports.append(Relaxation("slide", c.site, int(index[inside[-1]]), float(times[inside[0]]),
                                       float(times[inside[-1]]), forced))
     args = (support, radii, np.concatenate(pts), np.concatenate(cols_), np.concatenate(surf), np.concatenate(pair),
             np.concatenate(ww), np.array(span), np.array(rows), np.array(labels, object))
-    forced = np.array(keyed)
-    slide = SupportSlide(*args, limit=forced, tolerance=TOLERANCES["slide"], width=SLIDE_SMOOTHING, forced=forced)
+    forced, span = np.array(keyed), np.array(span)
+    tol = (TOLERANCES["slide"] if frame_rate is None  # a clean: half CLEAN_SKATE a frame step
+           else np.minimum(TOLERANCES["slide"], 0.5 * CLEAN_SKATE * float(frame_rate) * span))
+    slide = SupportSlide(*args, limit=forced, tolerance=tol, width=b, forced=forced)
     allowance = np.full(len(forced), np.inf)
     for path in (state, witness):  # a known path through the keyframes: the path halves its excess
         if path is not None:
@@ -391,18 +432,20 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites, state
 
 
 def _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness=None,
-                  tolerance: float = TOLERANCES["planted"]):
+                  tolerance: float = TOLERANCES["planted"], frames=None):
     """The foot contacts' support points (`solver.constraints.sites._FootSupport`) and their limits
     relaxed where the keyframes force (module docstring), or None without contacts. Where a keyframe holds
     a foot up, the limit is what a known path through the keyframes does over the contact: `witness` (the
     capture they came from, a PathState at the quadrature points), else the plain spline (`state`).
-    `tolerance` [m]: the planted limits'.
+    `tolerance` [m]: the planted limits'. `frames` (n,) [s]: the means are over these frames (`frame_weights`);
+    None: the midpoint rule's.
 
     Returns:
         (args of `_FootSupport`, planted limits (p,) [m], relaxation reports).
     """
     sites = tuple(figure.contact_sites)
-    t, w = reference.t, reference.weights
+    t = reference.t
+    w = reference.weights if frames is None else frame_weights(t, frames)
     index, times, values = _full_keyframes(plain)
     keyed_pts = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
     keyed_low = keyed_pts.copy()
@@ -413,6 +456,7 @@ def _foot_support(model, figure, reference, plain, contacts, state, support, rad
     for F in foot_contacts(list(contacts), dict(figure.feet)):
         mine = [c for c in contacts if feet.get(c.site) == F.site and c.end >= F.start and c.start <= F.end]
         on = _pairs_in(t, F.start, F.end)
+        on = on[w[on] > 0]  # the points of the mean (with `frames`, the contact's frames)
         if not on.size:
             continue
         cand = np.full((len(on), len(sites)), np.inf)  # reference height of each site in contact there

@@ -40,6 +40,12 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
   `clean_solution`), its acceleration, as c's, linear between frames, so a bound met at the frames
   holds between them; and d can undo the capture's frame-to-frame slide as a per-frame clean does,
   which frames two or more points apart, off the capture's frames, cannot.
+* **The feet are measured at the capture's frames**, where the clip is written and judged
+  (`solver.constraint_set.figure_constraints`' `frames`): a planted mean over a contact's frames, of the
+  heights' positive part, and the slide per frame, within the clean's skate bound
+  (`solver.constraint_set.CLEAN_SKATE`). At 30 fps the midpoint rule gave a running contact's last
+  frame, the foot 2-4 cm up, half its weight in the float figure, and 2 mm of slide over a 3-frame contact
+  was 0.55 mm a frame.
 * The solver sees the displacement's frames; the capture enters as a fixed base motion at the
   quadrature points (`AugmentedLagrangian.base`: the path is c + d with its first and second
   derivatives), so every constraint and gradient is the keyed path's, with the same dPath/dP.
@@ -190,10 +196,11 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     # the planted limits' tolerance is penetration's 1 mm, not the keyed path's 2 mm: a foot met within it floats
     # at most FLOAT_LIMIT + 1 mm = 3 mm over its contact, a clean's float bound (docs/corpus.md "Cleaning the
     # corpus"), as a keyed path's 4 mm is under its 5 mm (83_02's clean, on a path that met every pair within its
-    # tolerance and no further, floated 3.31 mm with 2 mm)
+    # tolerance and no further, floated 3.31 mm with 2 mm); the feet measured at the capture's frames, as the
+    # bounds measure them (`figure_constraints`' frames)
     constraints, relaxations = figure_constraints(model, figure, reference, capture_frames, tuple(schedule), flights,
                                                   engine, capture=(times, qpos),
-                                                  planted_tolerance=TOLERANCES["penetration"])
+                                                  planted_tolerance=TOLERANCES["penetration"], frames=times)
     constraints = [_change_bound(c, reference, model, times, qpos) if c.name == "acceleration" else c
                    for c in constraints]
     change = MeasureOfChange(reference, tmap, omega=np.pi / correction_time,

@@ -143,28 +143,42 @@ class _FootSupport(Constraint):
 
 
 class SupportHeight(_FootSupport):
-    """Mean height of the support site over each foot contact <= limit [m] (`_FootSupport`)."""
+    """Mean height of the support site over each foot contact <= limit [m] (`_FootSupport`). With `above`
+    > 0 [m] the mean is of the height's positive part, smoothed over that width (`ramp`): a foot sunk into
+    the floor then does not offset one that floats, as the float figure counts them (a clean's)."""
 
     name, unit, scale = "planted", "mm", 1e-3
 
-    def __init__(self, *args, limit, tolerance: float):
+    def __init__(self, *args, limit, tolerance: float, above: float = 0.0):
         super().__init__(*args)
         self.limit = np.asarray(limit, float)
-        self.tolerance = float(tolerance)
+        self.tolerance, self.above = float(tolerance), float(above)
 
     def measure(self, state):
         h, _ = self.heights(state)
-        return self._sum(h) / self.span
+        return self._sum(ramp(h, self.above)[0] if self.above > 0 else h) / self.span
 
     def pull(self, state, g):
-        _, n = self.heights(state)
+        h, n = self.heights(state)
+        slope = ramp(h, self.above)[1] if self.above > 0 else 1.0
         gp = np.zeros(state.sites.shape)
-        add_at(gp, (self.points, self.cols), (g[self.pair] * self.w / self.span[self.pair])[:, None] * n)
+        add_at(gp, (self.points, self.cols), (g[self.pair] * self.w * slope / self.span[self.pair])[:, None] * n)
         state.add_sites(gp)
 
     def curvature(self, state, d1, d2):
-        """d2 grad c grad c^T (an `Outer`: each pair couples its contact's points); c is linear in the heights."""
+        """d2 grad c grad c^T (an `Outer`: each pair couples its contact's points); c is linear in the heights
+        (with `above`, the ramp's own curvature, 1/above within its width, is left out: Gauss-Newton)."""
         return [Outer(self, self.points, self.pair, d2)] if (d2 > 0).any() else []
+
+
+def ramp(h: np.ndarray, e: float) -> tuple[np.ndarray, np.ndarray]:
+    """The positive part of h [m], smoothed over a width e > 0 [m], and its slope: 0 below 0, h^2 / (2 e) up
+    to e, h - e / 2 above (the Huber function of max(0, h)): convex, nondecreasing, once differentiable,
+    within e / 2 of max(0, h)."""
+    h = np.asarray(h, float)
+    inside = (h > 0) & (h < e)
+    value = np.where(h <= 0, 0.0, np.where(inside, 0.5 * h * h / e, h - 0.5 * e))
+    return value, np.where(h <= 0, 0.0, np.where(inside, h / e, 1.0))
 
 
 def huber(s: np.ndarray, b: float) -> np.ndarray:
@@ -177,7 +191,8 @@ def huber(s: np.ndarray, b: float) -> np.ndarray:
 class SupportSlide(_FootSupport):
     """Distance the support site slides along its surface over each foot contact, integral of
     huber_b(|v_t|) dt, <= limit [m] (`_FootSupport`; b the Huber width [m/s]). `forced` (p,) [m]: the
-    part of the limit the keyframes force (`solver.constraint_set`; 0 when not given)."""
+    part of the limit the keyframes force (`solver.constraint_set`; 0 when not given). tolerance: [m], one
+    for every pair or (p,) each its own."""
 
     name, unit, scale = "slide", "mm", 1e-3
 
@@ -185,7 +200,8 @@ class SupportSlide(_FootSupport):
         super().__init__(*args)
         self.limit = np.asarray(limit, float)
         self.forced = np.zeros(len(self.span)) if forced is None else np.asarray(forced, float)
-        self.tolerance, self.b = float(tolerance), float(width)
+        self.tolerance = float(tolerance) if np.ndim(tolerance) == 0 else np.asarray(tolerance, float)
+        self.b = float(width)
 
     def _tangential(self, state):
         key = ("support vt", id(self))

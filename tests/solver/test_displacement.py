@@ -256,9 +256,13 @@ def test_a_joint_turning_round_is_displaced_by_any_rotation_on_the_unit_sphere(t
     np.testing.assert_allclose(np.linalg.norm(cleaned[:, 3:7], axis=1), 1.0, rtol=0, atol=1e-12)
 
 
-def test_gradient_with_the_capture_as_base_matches_finite_differences(toy_model):
+@pytest.mark.parametrize("contacts", [(), (Contact("l_toe", 0.4, 0.9), Contact("r_heel", 1.1, 1.6))])
+def test_gradient_with_the_capture_as_base_matches_finite_differences(toy_model, contacts):
+    """With contacts, the planted means over the contact's frames (the ramp of the heights) and the slides
+    measured per frame are among the terms."""
     t, q = _capture(toy_model, DIP)
-    disp = build_displacement(toy_model, t, q, rate=100.0)
+    disp = build_displacement(toy_model, t, q, rate=100.0, contacts=contacts, flights=())
+    assert {"planted", "slide"} <= {c.name for c in disp.lc.al.constraints} or not contacts
     al, layout = disp.lc.al, disp.lc.layout
     frames = disp.lc.plain  # a frame of d at every capture frame, as the clean solves it
     rng = np.random.default_rng(3)
@@ -274,3 +278,96 @@ def test_gradient_with_the_capture_as_base_matches_finite_differences(toy_model)
         fd = (al.evaluate(basis, P + h * V, grad=False)[0] - al.evaluate(basis, P - h * V, grad=False)[0]) / (2 * h)
         assert abs(float((G * V).sum()) - fd) <= 1e-5 * max(1.0, abs(fd)), (float((G * V).sum()), fd)
     assert layout.quat_slots.size  # the toy has quaternions: their components are among the directions
+
+
+@pytest.mark.parametrize("fps", [24.0, 30.0, 120.0])
+def test_a_slide_met_within_its_tolerance_is_within_the_clean_s_skate_bound(toy_model, fps):
+    """Every slide pair of a clean, met within its tolerance, lets its site slide at most 0.2 mm a frame on
+    average (the clean's skate bound) at the clip's frame rate, on a contact of three frame steps and a long
+    one: the fastest uniform slide its limit plus tolerance accepts (uniform: the Huber measure is convex,
+    so for a given measure it covers the most distance, Jensen), inverted here from the Huber function's
+    closed form, is within the bound."""
+    t, q = _capture(toy_model, fps=fps)
+    short = (3.0 / fps, 6.0 / fps)
+    disp = build_displacement(toy_model, t, q, contacts=[Contact("l_toe", *short), Contact("r_heel", 0.5, 1.5)],
+                              flights=())
+    slide = next(c for c in disp.lc.al.constraints if c.name == "slide")
+    b = slide.b
+    m = (np.asarray(slide.limit) + slide.tolerance) / slide.span  # [m/s] the mean Huber measure accepted
+    v = np.where(m <= b / 2, np.sqrt(2 * b * m), m + b / 2)  # huber_b(v) = m solved for v
+    assert np.all(v / fps <= 2e-4 + 1e-12), v / fps
+
+
+@pytest.mark.slow
+def test_a_short_contact_at_30_fps_is_held_within_the_clean_s_skate_bound(toy_model):
+    """A clean's skate bound is 0.2 mm a frame in contact (docs/corpus.md "Cleaning the corpus"), at the
+    clip's own frame rate: its slide pairs are measured per frame (`solver.constraint_set.CLEAN_SKATE`).
+    At 30 fps a contact of four frames, where the swaying capture slides the toe 1-6 mm a frame: the cleaned
+    toe, by MuJoCo's kinematics at the capture's frames, slides at most 0.2 mm a frame on average over it (a
+    keyed path's tolerance, 2 mm over the contact, left 0.38 mm a frame). The capture is lowered to hold its
+    lowest site 0.5 mm above the floor, the contact's site the lowest there."""
+    t, q = _capture(toy_model, fps=30.0)
+    q[:, 2] -= 0.0095
+    on = (t >= 0.2 - 1e-9) & (t <= 0.3 + 1e-9)
+    assert on.sum() == 4
+    heights = {name: _site(toy_model, q[on], name)[:, 2] for name in ("l_heel", "l_toe", "r_heel", "r_toe")}
+    site = min(heights, key=lambda name: heights[name].max())
+    disp = build_displacement(toy_model, t, q, contacts=[Contact(site, 0.2, 0.3)], flights=())
+    sol = solve_displacement(disp, LeastChangeOptions())
+    assert not sol.certificate
+
+    def skate(qpos):  # [m/frame] the site's mean horizontal step between the contact's frames
+        xy = _site(toy_model, qpos[on], site)[:, :2]
+        return float(np.linalg.norm(np.diff(xy, axis=0), axis=1).mean())
+
+    assert skate(q) > 2e-3  # the premise: the capture slides
+    assert skate(clean_solution(disp, sol).frames.values) <= 2e-4
+
+
+def _site(model, qpos, name: str) -> np.ndarray:
+    """(n, 3) [m] a site's position at each pose (MuJoCo's forward kinematics)."""
+    data = mujoco.MjData(model)
+    k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+    out = np.empty((len(qpos), 3))
+    for i, x in enumerate(qpos):
+        data.qpos[:] = x
+        mujoco.mj_kinematics(model, data)
+        out[i] = data.site_xpos[k]
+    return out
+
+
+def test_a_clean_s_planted_mean_is_over_its_contact_s_frames_of_the_positive_height(toy_model):
+    """A clean's planted pair is the mean over the contact's capture frames (the float figure's frames, not
+    the midpoint rule's) of the support site's height's positive part: on the capture, whose sites are 1 cm
+    up, it is that mean less half the ramp's width, the heights by MuJoCo's kinematics (the toy's sites
+    have no radius, its floor is z = 0); with the capture dipped 3 cm, the frames whose site is in the
+    floor count as 0."""
+    from solver.constraint_set import CAPTURE_RESOLUTION
+
+    for dip in (0.0, DIP):
+        t, q = _capture(toy_model, dip)
+        contact = Contact("l_toe", 0.9, 1.2)
+        disp = build_displacement(toy_model, t, q, contacts=[contact], flights=())
+        al = disp.lc.al
+        planted = next(c for c in al.constraints if c.name == "planted")
+        value = planted.measure(al.state(SplineBasis(t, al.t), disp.lc.plain.values))
+        on = (t >= contact.start - 1e-9) & (t <= contact.end + 1e-9)
+        h = _site(toy_model, q[on], "l_toe")[:, 2]
+        e = CAPTURE_RESOLUTION
+        want = np.where(h <= 0, 0.0, np.where(h < e, h * h / (2 * e), h - e / 2)).mean()
+        np.testing.assert_allclose(value, [want], rtol=0, atol=1e-9)
+    assert h.min() < 0  # the dipped capture: some frames in the floor, counted as 0
+
+
+def test_ramp_is_the_smoothed_positive_part_and_its_slope():
+    """`ramp`: 0 below 0, within e/2 of max(0, h), its slope the derivative (central differences)."""
+    from solver.constraints.sites import ramp
+
+    e = 1e-4
+    h = np.linspace(-3e-4, 3e-4, 601)
+    value, slope = ramp(h, e)
+    assert np.all(value[h <= 0] == 0.0)
+    assert np.all(np.abs(value - np.maximum(0.0, h)) <= e / 2 + 1e-18)
+    step = 1e-9
+    fd = (ramp(h + step, e)[0] - ramp(h - step, e)[0]) / (2 * step)
+    np.testing.assert_allclose(slope, fd, rtol=0, atol=1e-4)

@@ -186,9 +186,13 @@ def test_the_preconditioned_hessian_is_about_the_identity(dipped_problem):
         gn = GridModel(basis, al, quat).preconditioner(al, frames)
         curv = _curvatures(al, frames, basis, gn, quat)
         if names is None:  # every constraint: pairs within a tolerance of their bound are priced before they act,
-            assert 0.5 < curv[0] < 2.0 and np.all((curv > 0) & (curv < 2.0)), curv  # so no more than about 1
-        else:
-            assert np.all((curv > 0.5) & (curv < 2.0)), (names, curv)
+            # so no more than about 1; Phi is not convex there (the flight pairs' heights alone give -3.4 to 0.7
+            # along these directions), so a direction's sign follows the constraints' mix, not the model
+            assert 0.5 < curv[0] < 2.0 and np.all(curv < 2.0), curv
+        else:  # the band leaves out the site velocity's second derivative in the pose (Gauss-Newton), weighted
+            # by psi' = s / tol: with a clean's slide tolerance of a tenth of a millimetre a frame step (0.6 mm
+            # over these 0.1 s contacts) it prices one direction at twice its curvature (0.92 with 2 mm)
+            assert np.all((curv > 0.4) & (curv < 2.0)), (names, curv)
         if names is not None:
             old = Preconditioner(FrameVariables(frames, quat), basis, al.change, al.tmap, al.d0)
             assert _curvatures(al, frames, basis, old, quat)[0] > 100.0  # D's curvature alone: far from it
