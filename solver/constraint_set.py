@@ -456,7 +456,8 @@ def _foot_support(model, figure, reference, plain, contacts, state, support, rad
     for F in foot_contacts(list(contacts), dict(figure.feet)):
         mine = [c for c in contacts if feet.get(c.site) == F.site and c.end >= F.start and c.start <= F.end]
         on = _pairs_in(t, F.start, F.end)
-        on = on[w[on] > 0]  # the points of the mean (with `frames`, the contact's frames)
+        if frames is not None:
+            on = on[w[on] > 0]  # the contact's frames: the points of the mean
         if not on.size:
             continue
         cand = np.full((len(on), len(sites)), np.inf)  # reference height of each site in contact there
