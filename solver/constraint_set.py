@@ -61,10 +61,10 @@ there; the problem is made well posed instead of excused:
   (the capture, not the plain spline's overshoot between keys, else the plain spline); the others to the
   reference's own worst.
 * No jolts is a bound only with a capture (keyframes made from motion capture): then A is the larger of
-  the capture's filtered peak and the plain spline's. The plain spline's peak alone is no bound: sparse
-  keyframes give a spline smoother than any motion that meets its contacts (run-and-step without its
-  capture cannot land on the step within it), and the measure of change already prices every change of
-  acceleration.
+  the capture's filtered peak and the plain spline's (`solver.capture_bounds`). The plain spline's peak
+  alone is no bound: sparse keyframes give a spline smoother than any motion that meets its contacts
+  (run-and-step without its capture cannot land on the step within it), and the measure of change
+  already prices every change of acceleration.
 * The effort bound (`solver.constraints.effort`) is, for the same reason, a bound only with a capture: the
   larger of the capture's filtered RMS joint torque and the plain spline's. It needs the inverse
   dynamics (`solver.inverse_dynamics.InverseDynamics`), which a capture's problem then uses as its engine.
@@ -82,21 +82,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.constraints.acceleration import AccelerationBound
+from solver.capture_bounds import capture_accelerations, capture_effort, capture_state, reference_state
 from solver.constraints.anatomy import anatomy_constraints
-from solver.constraints.base import RELATIVE_TOLERANCE
-from solver.constraints.effort import TorqueRMS, rms_torque
 from solver.constraints.penetration import Penetration
 from solver.constraints.sites import HeightBound, SupportHeight, SupportSlide, huber, site_heights
 from solver.constraints.tracking import SiteTracking, mean_site_distance
 from solver.constraints.unit import UnitNorm
 from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.contacts import contact_radii, foot_contacts, site_positions
-from solver.kinematics import TangentMap
 from solver.layout import StateLayout
 from solver.path_state import PathState
-from solver.peak_bounds import filter_capture
-from solver.spline import interpolate
 from solver.support import SupportSurfaces
 from solver.surfaces import StaticSurfaces
 
@@ -196,10 +191,10 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     support = SupportSurfaces(surfaces, rounded_edges=True)
     radii = contact_radii(model, sites)
     out = []
-    state = None if engine is None else _reference_state(model, reference, plain, engine)  # the plain spline's
+    state = None if engine is None else reference_state(model, reference, plain, engine)  # the plain spline's
     if engine is not None and surfaces.count:
         out.append(Penetration(surfaces, radii, t, sites, TOLERANCES["penetration"]))
-        witness = None if capture is None else _capture_state(model, reference, capture, engine)
+        witness = None if capture is None else capture_state(model, reference, capture, engine)
         feet = _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness,
                              planted_tolerance, frames)
         if feet is not None:
@@ -220,9 +215,9 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     quats = [j for j in layout.joints if j.quat_index is not None]
     out.append(UnitNorm(len(t), np.array([j.quat_index for j in quats]), [j.name for j in quats], TOLERANCES["unit"]))
     if capture is not None:  # no jolts: bounded by what the captured motion does (module docstring)
-        out.append(_accelerations(model, reference, capture))
+        out.append(capture_accelerations(model, reference, capture))
         if engine is not None and getattr(engine, "forces", False):
-            out += _effort(model, reference, plain, capture, engine)
+            out += capture_effort(model, reference, plain, capture, engine)
     relaxations = []
     if engine is not None:
         relaxations = _relax_heights(out, state, plain, model, sites, support, radii, flights)
@@ -236,18 +231,6 @@ def _tracking(reference, plain: PathState, capture: PathState) -> list:
     plain spline is on the capture at every point (nothing to keep it nearer)."""
     bound = mean_site_distance(plain.sites, capture.sites, reference.weights)
     return [SiteTracking(reference.weights, capture.sites, bound)] if bound > 0 else []
-
-
-def _reference_state(model, reference, plain, engine) -> PathState:
-    """The plain spline (the reference) at the quadrature points, as an evaluation sees a path."""
-    Y1, Y2 = interpolate(plain.times, plain.values, reference.t, (1, 2))
-    return PathState(reference.t, reference.qpos, Y1, Y2, TangentMap.from_layout(StateLayout.from_model(model)), engine)
-
-
-def _capture_state(model, reference, capture, engine) -> PathState:
-    """The capture (times, qpos) as a path at the quadrature points (the natural spline through its frames)."""
-    Y, Y1, Y2 = interpolate(np.asarray(capture[0], float), np.asarray(capture[1], float), reference.t, (0, 1, 2))
-    return PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(StateLayout.from_model(model)), engine)
 
 
 def _full_keyframes(plain):
@@ -375,7 +358,7 @@ def _flight_and_ground(model, reference, plain, engine, support, radii, flights,
                                np.full(len(rows), FLIGHT_HEIGHT + tol), False, tol, np.array(sites, object)[cols]))
     on = np.flatnonzero(~flying & ~edge)
     if on.size:
-        state = _reference_state(model, reference, plain, engine) if capture is None else _capture_state(model, reference, capture, engine)
+        state = reference_state(model, reference, plain, engine) if capture is None else capture_state(model, reference, capture, engine)
         h, _ = site_heights(state, support, radii, np.repeat(on, K), np.tile(np.arange(K), len(on)),
                             -np.ones(len(on) * K, int))
         cols = np.argmin(h.reshape(len(on), K), axis=1)
@@ -503,43 +486,3 @@ def _foot_support(model, figure, reference, plain, contacts, state, support, rad
         return None
     support_args = (support, radii, *(np.concatenate(a) for a in args))
     return support_args, np.array(limits_h), reports
-
-
-def _filtered_capture(model, reference, capture):
-    """The capture ((times, qpos)) low-pass filtered (`solver.peak_bounds.filter_capture`, 6 Hz) as a path at
-    the quadrature points: the natural spline through all its frames, (Y, Y1, Y2)."""
-    times, qpos = np.asarray(capture[0], float), np.asarray(capture[1], float)
-    smooth = filter_capture(times, qpos, StateLayout.from_model(model))
-    return interpolate(times, smooth, reference.t, (0, 1, 2))
-
-
-def _accelerations(model, reference, capture) -> AccelerationBound:
-    """The no-jolt bounds (`solver.constraints.acceleration`): the reference's peaks and, with a capture
-    ((times, qpos)), the filtered capture's over the same span, joint by joint."""
-    layout = StateLayout.from_model(model)
-    free = [j for j in layout.joints if j.kind == "free"]
-    balls = [j for j in layout.joints if j.kind == "ball"]
-    dofs = [[f.dofadr, f.dofadr + 1, f.dofadr + 2] for f in free] + [[b.dofadr + i for i in range(3)] for b in balls]
-    labels = [f"{f.name} (linear)" for f in free] + [b.name for b in balls]
-    dofs = np.array(dofs, int).reshape(-1, 3)
-    peaks = np.linalg.norm(reference.qacc[:, dofs], axis=-1).max(axis=0)
-    if capture is not None:
-        qacc = TangentMap.from_layout(layout).motion(*_filtered_capture(model, reference, capture)).qacc
-        peaks = np.maximum(peaks, np.linalg.norm(qacc[:, dofs], axis=-1).max(axis=0))
-    peaks = np.maximum(peaks, 1e-6)
-    return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels,
-                             linear=np.arange(len(labels)) < len(free))
-
-
-def _effort(model, reference, plain, capture, engine) -> list:
-    """[the effort bound] (`solver.constraints.effort`): the larger of the plain spline's RMS joint torque and
-    the filtered capture's over the same span, with the no-jolt bounds' relative tolerance; [] for a figure
-    whose joints carry no torque in either (no joints besides the root: nothing to bound)."""
-    layout = StateLayout.from_model(model)
-    dofs = np.array([j.dofadr + i for j in layout.joints if j.kind != "free" for i in range(j.nv)], int)
-    w = reference.weights
-    Y, Y1, Y2 = _filtered_capture(model, reference, capture)
-    captured = PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(layout), engine)
-    bound = max(rms_torque(_reference_state(model, reference, plain, engine).tau, w, dofs),
-                rms_torque(captured.tau, w, dofs))
-    return [TorqueRMS(w, dofs, bound, RELATIVE_TOLERANCE * bound)] if bound > 0 else []

@@ -172,13 +172,10 @@ class SupportHeight(_FootSupport):
 
 
 def ramp(h: np.ndarray, e: float) -> tuple[np.ndarray, np.ndarray]:
-    """The positive part of h [m], smoothed over a width e > 0 [m], and its slope: 0 below 0, h^2 / (2 e) up
-    to e, h - e / 2 above (the Huber function of max(0, h)): convex, nondecreasing, once differentiable,
-    within e / 2 of max(0, h)."""
+    """The positive part of h [m], smoothed over a width e > 0 [m], and its slope: the Huber function of
+    max(0, h) (`huber`): convex, nondecreasing, once differentiable, within e / 2 of max(0, h)."""
     h = np.asarray(h, float)
-    inside = (h > 0) & (h < e)
-    value = np.where(h <= 0, 0.0, np.where(inside, 0.5 * h * h / e, h - 0.5 * e))
-    return value, np.where(h <= 0, 0.0, np.where(inside, h / e, 1.0))
+    return huber(np.maximum(h, 0.0), e), np.clip(h / e, 0.0, 1.0)
 
 
 def huber(s: np.ndarray, b: float) -> np.ndarray:
