@@ -146,7 +146,7 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
     import scipy.signal  # noqa: F401 - the capture's 6 Hz filter's module, loaded before the clock: the CPU measured is
     cpu0 = time.process_time()  # the method's, as the IK peer's clock starts after `import mink` (0.3 s of loading)
     disp = build_displacement(model, ref.times, ref.qpos, pins=o.pins, pin_ends=o.pin_ends, contacts=contacts, flights=flights,
-                              rate=options.rate, feet=o.feet)
+                              feet=o.feet)
     with StopRequest(o.quiet) as stop:
         progress = Progress(o.quiet)
         sol = solve_displacement(disp, options, should_stop=stop, progress=progress)

@@ -148,7 +148,7 @@ def frame_weights(t: np.ndarray, frames: np.ndarray) -> np.ndarray:
 
     Raises:
         ValueError: a frame more than a microsecond from every point (a clean's frames are its points:
-            `solver.quadrature.quadrature_points` with the frames as knots).
+            `solver.quadrature.simpson_points`).
     """
     t, frames = np.asarray(t, float), np.asarray(frames, float)
     i = np.clip(np.searchsorted(t, frames), 1, len(t) - 1)

@@ -239,7 +239,7 @@ def test_a_joint_turning_round_is_displaced_by_any_rotation_on_the_unit_sphere(t
     t, q = _capture(toy_model)
     yaw = 2 * np.pi * t / t[-1]
     q[:, 3], q[:, 6] = np.cos(yaw / 2), np.sin(yaw / 2)  # the root's quaternion (w, x, y, z) about z
-    disp = build_displacement(toy_model, t, q, rate=100.0)
+    disp = build_displacement(toy_model, t, q)
     var = FrameVariables(disp.lc.plain, StateLayout.from_model(toy_model).quat_slots)
     rng = np.random.default_rng(7)
     x = np.zeros(var.size)
@@ -261,7 +261,7 @@ def test_gradient_with_the_capture_as_base_matches_finite_differences(toy_model,
     """With contacts, the planted means over the contact's frames (the ramp of the heights) and the slides
     measured per frame are among the terms."""
     t, q = _capture(toy_model, DIP)
-    disp = build_displacement(toy_model, t, q, rate=100.0, contacts=contacts, flights=())
+    disp = build_displacement(toy_model, t, q, contacts=contacts, flights=())
     assert {"planted", "slide"} <= {c.name for c in disp.lc.al.constraints} or not contacts
     al, layout = disp.lc.al, disp.lc.layout
     frames = disp.lc.plain  # a frame of d at every capture frame, as the clean solves it

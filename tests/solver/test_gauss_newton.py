@@ -132,7 +132,7 @@ def dipped_problem(toy_model):
     t, q = _capture(toy_model, DIP)
     # planted around the legs' turning points (the hips swing at 1 Hz): each foot slides a few millimetres
     feet = (Contact("l_heel", 0.2, 0.3), Contact("r_toe", 0.7, 0.8), Contact("l_toe", 1.2, 1.3))
-    disp = build_displacement(toy_model, t, q, contacts=feet, rate=100.0)
+    disp = build_displacement(toy_model, t, q, contacts=feet)
     al = disp.lc.al.posed()
     return disp, al
 
@@ -186,9 +186,11 @@ def test_the_preconditioned_hessian_is_about_the_identity(dipped_problem):
         gn = GridModel(basis, al, quat).preconditioner(al, frames)
         curv = _curvatures(al, frames, basis, gn, quat)
         if names is None:  # every constraint: pairs within a tolerance of their bound are priced before they act,
-            # so no more than about 1; Phi is not convex there (the flight pairs' heights alone give -3.4 to 0.7
-            # along these directions), so a direction's sign follows the constraints' mix, not the model
-            assert 0.5 < curv[0] < 2.0 and np.all(curv < 2.0), curv
+            # so no more than about 1 along the gradient; Phi is not convex there (the flight pairs' heights alone
+            # give -3.4 to 0.7 along these directions), so a direction's sign follows the constraints' mix, not the
+            # model; along the random directions the hinge pairs alone curve 2.0-2.8 times as much as the band
+            # prices them (its Gauss-Newton part leaves out the hinge angle's own second derivative)
+            assert 0.5 < curv[0] < 2.0 and np.all(curv < 3.0), curv
         else:  # the band leaves out the site velocity's second derivative in the pose (Gauss-Newton), weighted
             # by psi' = s / tol: with a clean's slide tolerance of a tenth of a millimetre a frame step (0.6 mm
             # over these 0.1 s contacts) it prices one direction at twice its curvature (0.92 with 2 mm)

@@ -1,8 +1,9 @@
-"""The quadrature points: the midpoint rule's integrals, with the spline's knots as points of weight 0."""
+"""The quadrature points: the midpoint rule's integrals, with the spline's knots as points of weight 0, and
+Simpson's rule on a clean's frames."""
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from solver.quadrature import quadrature_points, quadrature_times
+from solver.quadrature import quadrature_points, quadrature_times, simpson_points
 
 
 def test_knots_are_points_of_weight_zero_and_integrals_are_the_midpoint_rules():
@@ -43,3 +44,37 @@ def test_a_pointwise_bound_prices_a_knots_pair_like_its_neighbours():
     c.rows = np.arange(len(t))
     np.testing.assert_allclose(c.pair_weights(w), 0.01, rtol=1e-12)
     assert abs(w.sum() - 1.0) < 1e-12
+
+
+def test_simpson_points_integrate_a_piecewise_cubic_exactly_on_uneven_frames():
+    """Simpson's rule is exact for a cubic on each interval: a continuous piecewise cubic with a knot at every
+    one of uneven frames (scipy's not-a-knot spline through random values) integrates to its antiderivative's
+    difference; its square, a sextic, does not (the check can fail)."""
+    rng = np.random.default_rng(11)
+    frames = np.cumsum(np.r_[0.0, rng.uniform(0.01, 0.05, 12)])
+    p = CubicSpline(frames, rng.normal(size=13))
+    t, w = simpson_points(frames)
+    assert np.all(np.diff(t) > 0) and np.all(np.isin(frames, t))
+    assert abs(w.sum() - (frames[-1] - frames[0])) < 1e-15
+    exact = float(p.integrate(frames[0], frames[-1]))
+    assert abs(w @ p(t) - exact) <= 1e-12 * max(1.0, abs(exact))
+    xg, wg = np.polynomial.legendre.leggauss(4)  # Gauss-Legendre, 4 nodes an interval: exact to degree 7
+    h = np.diff(frames)
+    tg = (frames[:-1, None] + 0.5 * h[:, None] * (xg + 1)).ravel()
+    sextic = float(((0.5 * h[:, None] * wg).ravel()) @ p(tg) ** 2)
+    assert abs(w @ p(t) ** 2 - sextic) > 1e-6 * abs(sextic)
+
+
+def test_simpson_points_integrate_a_natural_splines_squared_acceleration_exactly():
+    """A natural cubic spline's acceleration is linear between its knots, so |q''|^2 is quadratic there and
+    the rule at the knots and midpoints gives the integral Gauss-Legendre with 2 nodes an interval (exact to
+    degree 3, other points) gives."""
+    rng = np.random.default_rng(2)
+    frames = np.sort(np.r_[0.0, 1.0, rng.uniform(0.05, 0.95, 20)])
+    s = CubicSpline(frames, rng.normal(size=(22, 3)), bc_type="natural")
+    t, w = simpson_points(frames)
+    xg, wg = np.polynomial.legendre.leggauss(2)
+    h = np.diff(frames)
+    tg = (frames[:-1, None] + 0.5 * h[:, None] * (xg + 1)).ravel()
+    exact = float((0.5 * h[:, None] * wg).ravel() @ (s(tg, 2) ** 2).sum(axis=1))
+    assert abs(w @ (s(t, 2) ** 2).sum(axis=1) - exact) <= 1e-12 * exact
