@@ -19,9 +19,14 @@ same paths, every constraint at once and, where that leaves a pair broken, level
 in which limits give (`Constraint.priority`), with frames added where pairs stay broken. A limit rises
 only by what that solve shows no path through the keyframes beats (`Solution.certificate`, in the
 constraint's SI unit); the multipliers start again from 0 on the path it found, which meets every
-certified limit. A path the solve ends on beyond a limit (a budget spent) gives way to the best one
-that met them all. A reference motion (the plain spline; a clean's capture) that meets every constraint
-within its tolerance is the answer as it is: D >= 0 is 0 there (the multipliers would move it to the limits).
+certified limit. The search also starts from the reference motion where it is a capture: a keyed path's
+(`solver.feasibility.capture_start`) and a clean's, d = 0 itself, which meets every bound the capture
+witnesses. The path where the subproblems stall can be anywhere: on a 3 s clean (the first 97 frames of
+AnimatedDrawings' zombie) they stalled with the feet 118 tolerances off and the change's acceleration 35,
+the search from there certified 238 mm of slide out of reach, and from d = 0 it met every constraint. A
+path the solve ends on beyond a limit (a budget spent) gives way to the best one that met them all. A
+reference motion (the plain spline; a clean's capture) that meets every constraint within its tolerance is
+the answer as it is: D >= 0 is 0 there (the multipliers would move it to the limits).
 """
 from __future__ import annotations
 
@@ -402,7 +407,10 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     # points fix, so the bounds hold between them; min_gap is the refinement's, not a limit of the search's paths
     gap, quat = 2.0 / o.rate, lc.layout.quat_slots
     gap = np.inf if lc.grid is not None else gap  # on a grid the paths are the grid's: no segment is split
-    second = None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat)
+    if lc.grid is not None:  # a clean: the capture itself, d = 0 (module docstring)
+        second = lc.plain
+    else:  # a keyed path: the capture its keyframes came from, or none
+        second = None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat)
     if progress:  # the search's evaluations as they happen ("search", then "eval" with F), its outcome after
         progress("search", {"round": k, "frames": frames.count})
     cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
