@@ -19,12 +19,9 @@ same paths, every constraint at once and, where that leaves a pair broken, level
 in which limits give (`Constraint.priority`), with frames added where pairs stay broken. A limit rises
 only by what that solve shows no path through the keyframes beats (`Solution.certificate`, in the
 constraint's SI unit); the multipliers start again from 0 on the path it found, which meets every
-certified limit. The search also starts from the reference motion where it is a capture: a keyed path's
-(`solver.feasibility.capture_start`) and a clean's, d = 0 itself, which meets every bound the capture
-witnesses. The path where the subproblems stall can be anywhere: on a 3 s clean (the first 97 frames of
-AnimatedDrawings' zombie) they stalled with the feet 118 tolerances off and the change's acceleration 35,
-the search from there certified 238 mm of slide out of reach, and from d = 0 it met every constraint. A
-path the solve ends on beyond a limit (a budget spent) gives way to the best one that met them all. A
+certified limit. The search also starts from the capture where there is one (the path where the subproblems
+stall can be anywhere; docs/design.md): a keyed path's (`solver.feasibility.capture_start`), a clean's d = 0.
+A path the solve ends on beyond a limit (a budget spent) gives way to the best one that met them all. A
 reference motion (the plain spline; a clean's capture) that meets every constraint within its tolerance is
 the answer as it is: D >= 0 is 0 there (the multipliers would move it to the limits).
 """
