@@ -31,7 +31,6 @@ def capture_state(model, reference, capture, engine) -> PathState:
     return PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(StateLayout.from_model(model)), engine)
 
 
-
 def _filtered_capture(model, reference, capture):
     """The capture ((times, qpos)) low-pass filtered (`solver.peak_bounds.filter_capture`, 6 Hz) as a path at
     the quadrature points: the natural spline through all its frames, (Y, Y1, Y2)."""
@@ -53,7 +52,7 @@ def capture_accelerations(model, reference, capture) -> AccelerationBound:
     if capture is not None:
         qacc = TangentMap.from_layout(layout).motion(*_filtered_capture(model, reference, capture)).qacc
         peaks = np.maximum(peaks, np.linalg.norm(qacc[:, dofs], axis=-1).max(axis=0))
-    peaks = np.maximum(peaks, 1e-6)
+    peaks = np.maximum(peaks, 1e-6)  # [m/s^2 or rad/s^2] a joint neither path accelerates: a limit > 0, far below any motion
     return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels,
                              linear=np.arange(len(labels)) < len(free))
 

@@ -400,9 +400,9 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites, state
         if forced > TOLERANCES["slide"]:  # worth saying: the keyframes force more than the tolerance
             reports.append(Relaxation("slide", c.site, int(index[inside[-1]]), float(times[inside[0]]),
                                       float(times[inside[-1]]), forced))
-    args = (support, radii, np.concatenate(pts), np.concatenate(cols_), np.concatenate(surf), np.concatenate(pair),
-            np.concatenate(ww), np.array(span), np.array(rows), np.array(labels, object))
     forced, span = np.array(keyed), np.array(span)
+    args = (support, radii, np.concatenate(pts), np.concatenate(cols_), np.concatenate(surf), np.concatenate(pair),
+            np.concatenate(ww), span, np.array(rows), np.array(labels, object))
     tol = (TOLERANCES["slide"] if frame_rate is None  # a clean: half CLEAN_SKATE a frame step
            else np.minimum(TOLERANCES["slide"], 0.5 * CLEAN_SKATE * float(frame_rate) * span))
     slide = SupportSlide(*args, limit=forced, tolerance=tol, width=b, forced=forced)

@@ -19,11 +19,10 @@ same paths, every constraint at once and, where that leaves a pair broken, level
 in which limits give (`Constraint.priority`), with frames added where pairs stay broken. A limit rises
 only by what that solve shows no path through the keyframes beats (`Solution.certificate`, in the
 constraint's SI unit); the multipliers start again from 0 on the path it found, which meets every
-certified limit. The search also starts from the capture where there is one (the path where the subproblems
-stall can be anywhere; docs/design.md): a keyed path's (`solver.feasibility.capture_start`), a clean's d = 0.
-A path the solve ends on beyond a limit (a budget spent) gives way to the best one that met them all. A
-reference motion (the plain spline; a clean's capture) that meets every constraint within its tolerance is
-the answer as it is: D >= 0 is 0 there (the multipliers would move it to the limits).
+certified limit. It also starts from the capture, a keyed path's (`solver.feasibility.capture_start`) and a clean's
+d = 0, as a stalled path can be anywhere (docs/design.md). A path the solve ends on beyond a limit (a budget spent)
+gives way to the best one that met them all. A reference motion (the plain spline; a clean's capture) that meets every
+constraint within its tolerance is the answer as it is: D >= 0 is 0 there (the multipliers would move it to the limits).
 """
 from __future__ import annotations
 
@@ -133,7 +132,7 @@ class LeastChange:
         constraints, multipliers, penalty). relaxations: the `solver.constraint_set.Relaxation`s the
         keyframes force. knots: (r,) [s] times where a contact starts or ends (frames go there first).
         capture: None, or (times (n,) [s], qpos (n, nq)) the capture the keyframes came from (the least
-        violation's second start, `solver.feasibility.capture_start`).
+        violation's second start, `solver.feasibility.capture_start`; a clean's is `plain` itself, d = 0).
         grid: (g,) [s] quadrature points that are every one a variable frame from the start, the finest
         path of a fixed spacing (None: frames start at the contacts' ends and in every segment and are
         added where the refinement says). A clean's is the capture's frames (`solver.displacement`): neither the
@@ -402,12 +401,10 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     before = [c.limit.copy() for c in lc.al.constraints]
     # the search splits segments down to two quadrature intervals, the shortest whose (linear) acceleration two
     # points fix, so the bounds hold between them; min_gap is the refinement's, not a limit of the search's paths
-    gap, quat = 2.0 / o.rate, lc.layout.quat_slots
-    gap = np.inf if lc.grid is not None else gap  # on a grid the paths are the grid's: no segment is split
-    if lc.grid is not None:  # a clean: the capture itself, d = 0 (module docstring)
-        second = lc.plain
-    else:  # a keyed path: the capture its keyframes came from, or none
-        second = None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat)
+    gap, quat = (np.inf if lc.grid is not None else 2.0 / o.rate), lc.layout.quat_slots  # a grid's paths: no split
+    # the second start (module docstring): a clean's capture itself, d = 0; a keyed path's capture, or none
+    second = lc.plain if lc.grid is not None else (
+        None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat))
     if progress:  # the search's evaluations as they happen ("search", then "eval" with F), its outcome after
         progress("search", {"round": k, "frames": frames.count})
     cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
