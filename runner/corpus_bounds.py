@@ -87,6 +87,8 @@ PLAIN_RELATIVE = ("joint_error", "site_error", "skate_excess")
 PLAIN_FLOORS = {"joint_error": 0.1, "site_error": 0.01, "skate_excess": 0.1}
 #: the cause of a skate bound below what the keyframes force (`forced_out_of_reach`)
 FORCED = "keyframes force the skate"
+#: the cause of a bound whose constraint the solve certified out of reach (its limit raised, `Solution.certificate`)
+OUT_OF_REACH = "bound out of reach"
 
 
 @dataclass(frozen=True)
@@ -447,7 +449,7 @@ def causes(bound: Bound, figures: dict) -> list[str]:
     if forced_out_of_reach(bound, figures):
         out.append(FORCED)
     if set(bound.terms) & set(figures.get("stalled", ())) or (capture_misses and bound.kind != "surface"):
-        out.append("bound out of reach")
+        out.append(OUT_OF_REACH)
     if set(bound.terms) & set(figures.get("unmet_at_end", ())):
         out.append("the solve stopped short")
     if bound.name in ("joint_error", "site_error") and _root_moved(figures):
