@@ -341,12 +341,15 @@ def export_results(run: Run, outputs: Outputs) -> list:
 
 
 def write_metrics_json(run: Run, path: Path, extra: dict | None = None) -> None:
-    """The metrics report (.json, atomically): the run's metrics, its status and `extra` fields."""
+    """The metrics report (.json, atomically): the run's metrics, its status, its solve's time, evaluations and
+    longest round ("longest_round_s" [s], one subproblem or round of `Solution.rounds`; the least violation's search
+    is not a round) and `extra` fields."""
     report_ = {"status": "interrupted" if run.interrupted else run.solution.status.value,
                "exit": "interrupted" if run.interrupted else "failed" if run.failed else "ok",
                "keyframes": run.keyframes.count, "partial": int(run.keyframes.is_partial.sum()),
                "contacts": len(run.problem.contacts), "variable_frames": run.solution.frames.n_variable,
                "solve_time_s": run.solution.wall_time_s, "n_evals": run.solution.n_evals,
+               "longest_round_s": max((r.result.wall_time_s for r in run.solution.rounds), default=0.0),
                "terms": run.problem.terms, **(extra or {}), "metrics": run.metrics}
     with atomic_output(path, suffix=".json") as tmp:
         Path(tmp).write_text(json.dumps(report_, indent=1, default=float) + "\n")

@@ -39,6 +39,8 @@ def test_a_corpus_of_two_clips_reports_tuning_and_validation_apart(tmp_path, cap
         folder = out / p["folder"]
         report = json.loads((folder / f"{Path(p['clip']).stem}.metrics.json").read_text())
         assert p["figures"]["penetration_mm"] == report["metrics"]["optimized"]["max_penetration_mm"]
+        # the longest round: one of the solve's rounds, so within its whole time and more than none of it
+        assert 0.0 < report["longest_round_s"] <= report["solve_time_s"]
         # the schedule's flight counted by hand from the keyframe file: frames with no site in contact
         kf = json.loads((folder / f"{Path(p['clip']).stem}.keyframes.json").read_text())
         motion = report["metrics"]["motion"]["plain"]
