@@ -15,9 +15,9 @@ kinematics (the joints renamed, the lengths scaled by the unit). `CONVENTIONS` b
 * ``vicon``: a Vicon-style export - Z up, inches, a child performer (every length 0.7 of the subject's),
   mixed rotation orders, CMU's ASF names (lfemur, ltibia, lhumerus, lradius, ...), every End Site
   turned into an extra end joint (<name>_end), the synthetic T-pose first frame kept.
-* ``rokoko``: a Rokoko export with Mixamo names (mixamorig:LeftUpLeg, ...) - 60 joints (fingers of
-  three joints added to each hand, end joints HeadTop_End, LeftToe_End), Y X Z, resampled to 100 frames
-  per second, centimetres, the T-pose first frame kept.
+* ``rokoko``: a Rokoko export with Mixamo names (mixamorig:LeftUpLeg, ...) - 62 joints (fingers of
+  three joints added to each hand, end joints HeadTop_End, LeftToe_End, eyes LeftEye and RightEye under
+  the head), Y X Z, resampled to 100 frames per second, centimetres, the T-pose first frame kept.
 * ``max3ds``: a 3ds Max-style skeleton - Hips -> Spine -> Head (CMU's three spine and two neck joints
   merged: the kept joints' world rotations are the clip's, but where the merged joints bent, the
   positions above them are not), L_Thigh, L_Calf, L_Clavicle, L_UpperArm ..., inches, Z X Y.
@@ -358,6 +358,10 @@ def rokoko(c: Clip) -> tuple[Clip, dict]:
     c = rename(c, {"LowerBack": "Spine", "Spine": "Spine1", "Spine1": "Spine2"})
     c = end_joints(c, "_End", only=("Head", "LeftToeBase", "RightToeBase"))
     c = rename(c, {"Head_End": "HeadTop_End", "LeftToeBase_End": "LeftToe_End", "RightToeBase_End": "RightToe_End"})
+    top = c.offsets[c.index("HeadTop_End")]  # eyes under the head, static leaves, as Mixamo's characters have them
+    for name, side in (("LeftEye", 1.0), ("RightEye", -1.0)):
+        offset = 0.5 * top + np.linalg.norm(top) * np.array([0.15 * side, 0.0, 0.4])
+        c = _add(c, c.index("Head"), name, offset, np.eye(3), 0.1 * np.linalg.norm(top) * np.array([0.0, 0.0, 1.0]))
     for side in ("Left", "Right"):  # a hand 0.45 of the forearm long, along it (CMU's rest frames are the world's)
         c = fingers(c, f"{side}Hand", f"{side}Hand", 0.45 * c.offsets[c.index(f"{side}Hand")])
     c = rename(c, {n: f"mixamorig:{n}" for n in c.names})

@@ -10,7 +10,8 @@ with every channel zero):
   consecutive bones of comparable length; a static extra root above them, or IK targets hung from the
   root, are passed through); the chest
   is the upper body's first branching joint, its two farthest-reaching branches are the arms and the
-  remaining one (or the one named neck or head) the neck and head. Along a limb the knee or elbow is
+  remaining one (or the one named neck or head) the neck and head, its chain up to the last joint named
+  neck, head or skull where one is (Mixamo's eyes under the head are the head's). Along a limb the knee or elbow is
   the first joint whose name says so (LeftLeg, LowerLeg_L, Calf, Knee; ForeArm, LowerArm_L, Elbow);
   without such a name the hand is where the fingers branch off, or else the upper and lower bone are
   the two consecutive bones of the largest summed length (thigh + shin, upper arm + forearm), so that a
@@ -243,6 +244,9 @@ def _structure(clip: BvhClip) -> tuple[dict[str, int], list[dict[str, int]], lis
         head = named[0] if len(named) == 1 else by_reach[2]
         arms = [_limb(clip, children, _chain(clip, children, c), leg=False) for c in by_reach if c != head][:2]
         head_chain = _chain(clip, children, head)
+        named = [k for k, j in enumerate(head_chain) if _HEADLIKE.search(clip.names[j])]
+        if named:  # the head is the last joint named so: past it are the head's own parts (Mixamo's eyes, a jaw)
+            head_chain = head_chain[: named[-1] + 1]
         trunk["chest"] = chest
         trunk["head"] = head_chain[-1]
         if len(head_chain) > 1:
