@@ -55,6 +55,7 @@ CLEAN_BOUNDS: tuple[Bound, ...] = (
           f"{_SOURCE}: CPU at most 3x the IK peer's"),
 )
 NOT_MEASURED = "not measured"
+#: the clean's bounds by name (a check's "bound")
 BOUND_BY_NAME = {b.name: b for b in CLEAN_BOUNDS}
 #: why the peer's bounds are not measured without mink
 NO_PEER = 'the IK peer needs mink: pip install -e ".[peer]"'
@@ -179,7 +180,8 @@ def markdown_clean(results: Sequence[dict], meta: dict) -> str:
 
 
 def _missed(result: dict) -> str:
-    """"- clip: skate 0.43 > 0.2 (bound out of reach): slide 408 at r_toe, ..." for a clip's certified misses."""
+    """"- clip: skate 0.432 > 0.2 (bound out of reach: slide 59.6 mm at r_heel, 408 mm at r_toe)": a clip's misses
+    put down to its certificate, each with the raises of its constraints."""
     raises = {}
     for r in result.get("certificate", ()):
         raises.setdefault(r["constraint"], []).append(f"{number(r['amount'] / r['scale'])} {r['unit']} at {r['label']}")
