@@ -279,7 +279,8 @@ def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bound
     met = [name for name in constraints if name not in shown]
     lines.append("NAME: worst / tolerance: a constraint's worst value over its tolerance (met at <= 1)"
                  + (f"; met by both paths, not shown: {', '.join(met)}" if met else ""))
-    lines.append(f"frames: {solution.initial.count} keyframes + {solution.frames.n_variable} variable; "
+    keys = solution.frames.count - solution.frames.n_variable  # a clean's: its pins and the clip's ends
+    lines.append(f"frames: {keys} keyframes + {solution.frames.n_variable} variable; "
                  f"{len(solution.rounds)} rounds, {solution.n_evals} evaluations, {solution.wall_time_s:.2f} s")
     lines += _keyframe_lines(solution)
     return "\n".join(lines)
@@ -343,16 +344,16 @@ def certificate_lines(solution) -> list[str]:
     raises = sorted(getattr(solution, "certificate", ()) or (), key=lambda r: -r.amount / max(r.scale, 1e-300))
     if not raises:
         return []
-    keys = np.asarray(solution.initial.times)
+    keys = np.asarray(solution.frames.times)[np.asarray(solution.frames.is_keyframe, bool)]
     out = ["out of reach (certified: the least violation no path through the keyframes beats; the limit raised by it):"]
     for r in raises[:CERTIFIED_SHOWN]:
         i = int(np.clip(np.searchsorted(keys, r.time, side="right") - 1, 0, len(keys) - 1))
         near = int(np.argmin(np.abs(keys - r.time)))
-        if abs(keys[near] - r.time) <= 1e-3:
-            where = f"at keyframe {near}"
-        else:
-            where = f"between keyframes {i} and {min(i + 1, len(keys) - 1)}"
-        out.append(f"  {r.describe()}, {where}")
+        if abs(keys[near] - r.time) <= 1e-3:  # [s] within a millisecond of a keyframe: at it (points are 5 ms apart)
+            where = f", at keyframe {near}"
+        else:  # a clean's keyframes are its pins and the clip's ends: between the ends says nothing
+            where = f", between keyframes {i} and {min(i + 1, len(keys) - 1)}" if len(keys) > 2 else ""
+        out.append(f"  {r.describe()}{where}")
     if len(raises) > CERTIFIED_SHOWN:
         out.append(f"  and {len(raises) - CERTIFIED_SHOWN} more (the saved path's certificate_json)")
     return out

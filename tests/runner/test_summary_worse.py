@@ -47,7 +47,7 @@ def solution(names=CONSTRAINTS):
     return SimpleNamespace(E_initial=0.0, E_final=0.4,
                            integrals_initial=dict.fromkeys(names, 3.0), integrals_final=dict.fromkeys(names, 0.5),
                            initial=SimpleNamespace(count=8),
-                           frames=SimpleNamespace(n_variable=22), rounds=[1, 2], n_evals=450, wall_time_s=8.9)
+                           frames=SimpleNamespace(count=30, n_variable=22), rounds=[1, 2], n_evals=450, wall_time_s=8.9)
 
 
 def marked(text):
@@ -541,3 +541,22 @@ def test_the_constraint_units_are_the_constraints_own():
     lc = build_least_change(model, kf, contacts=tuple(info.contacts), forces=True)
     for c in lc.al.constraints:
         assert CONSTRAINT_UNITS[c.name] == (c.unit, pytest.approx(c.scale)), c.name
+
+
+def test_a_raised_limit_is_placed_among_the_keyframes_and_a_clean_s_frames_are_counted_as_they_are():
+    from runner.console import certificate_lines
+    from solver.feasibility import Raise
+
+    raises = (Raise("slide", "r_toe", 0.408, 0.7, 0.6, 0.8, 3, "mm", 1e-3), Raise("planted", "right", 0.002, 0.5004, 0.5, 0.5, 1, "mm", 1e-3))
+    keyed = SimpleNamespace(certificate=raises, frames=SimpleNamespace(
+        times=np.array([0.0, 0.25, 0.5, 0.75, 1.0]), is_keyframe=np.array([True, False, True, False, True])))
+    lines = certificate_lines(keyed)
+    assert lines[1] == "  slide at r_toe 408 mm at 0.700 s (0.6-0.8 s), between keyframes 1 and 2"
+    assert lines[2] == "  planted at right 2 mm at 0.500 s (0.5-0.5 s), at keyframe 1"
+    # a clean: a frame at every capture frame, the clip's ends its only keyframes; the time alone places a raise
+    frames = np.linspace(0.0, 1.0, 11)
+    clean = SimpleNamespace(certificate=raises[:1], frames=SimpleNamespace(times=frames, is_keyframe=np.isin(frames, [0.0, 1.0])))
+    assert certificate_lines(clean)[1] == "  slide at r_toe 408 mm at 0.700 s (0.6-0.8 s)"
+    sol = solution()
+    sol.frames = SimpleNamespace(count=11, n_variable=9, times=frames, is_keyframe=clean.frames.is_keyframe)
+    assert "frames: 2 keyframes + 9 variable; " in summary_table(metrics(), metrics(), sol)
