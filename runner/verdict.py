@@ -292,7 +292,8 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
         shown = [p for p in parts if p]
         if shown:
             captures = [c for _, c in shown]
-            against = f" (capture {', '.join(captures)})" if any(c != "-" for c in captures) else ""
+            firsts = [t.split(" -> ")[0].rsplit(" ", 1)[-1] for t, _ in shown]  # a clean's first column is the capture
+            against = f" (capture {', '.join(captures)})" if any(c != "-" for c in captures) and captures != firsts else ""
             lines.append(f"  {name}: " + ", ".join(t for t, _ in shown) + against)
     lines.append("  " + worse_line(rows, targets, solution.integrals_initial, solution.integrals_final, unmet)
                  + motion_text)

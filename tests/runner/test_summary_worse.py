@@ -442,6 +442,11 @@ def test_the_verdict_comes_first_with_the_feet_the_jolts_and_the_worse_rows():
                           "(capture 0.00, 2.50, 1.80)")
     assert verdict[2] == ("  jolts: peak pelvis 6.0 -> 12.0 m/s^2, peak joint 100 -> 240 rad/s^2, RMS torque 100.0 -> "
                           "104.0 N m (capture 16.0, 250, 120.0)")
+    # a clean's: the first column is the capture, whose figures are not repeated after it
+    captured = {"float_contact_mm": 2.5, "skate_contact_mm": 1.8, "penetration_mm": {"mean": 0.0, "max": 0.0}}
+    clean = _motion_with_capture(captured, {"float_contact_mm": 2.0, "skate_contact_mm": 1.0}, captured)
+    feet = _verdict(summary_table(metrics(max_penetration_mm=0.0), opt, sol, motion=clean, tol=0.01))[1]
+    assert feet == "  feet: penetration 0.00 -> 0.50 mm, float 2.50 -> 2.00 mm, skate 1.80 -> 1.00 mm/frame"
     worse = verdict[3]
     assert worse.startswith("  worse: 2 of ")
     # the two rows no constraint bounds, traded for what the plain spline breaks; the two that rose toward
