@@ -283,7 +283,8 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
             motion_text: `motion_worse_text` of the motion-metrics table, added to the worse line.
     Returns:
         ["verdict: ...", "  feet: ...", "  jolts: ...", "  worse: ..."], the feet and jolts lines only when
-        they have a figure, each wrapped at WIDTH.
+        they have a figure, with the capture's figures after them unless those are the first column's (a clean's),
+        each wrapped at WIDTH.
     """
     unmet = getattr(solution, "unmet", None) or {}
     head = constraint_verdict(solution.integrals_final, unmet, getattr(solution, "certificate", None) or ())
