@@ -79,7 +79,7 @@ from solver.lagrangian import AugmentedLagrangian
 from solver.layout import StateLayout
 from solver.least_change import STANDARD_GRAVITY, LeastChange, LeastChangeOptions, solve_least_change
 from solver.peak_bounds import CUTOFF_HZ, filter_capture, frame_derivatives
-from solver.quadrature import MAX_QUADRATURE_POINTS, simpson_points
+from solver.quadrature import simpson_points
 from solver.reference import ReferenceMotion, equal_mass_matrices
 from solver.solution import Solution
 from solver.spline import interpolate
@@ -192,9 +192,6 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     anchor = anchors(qpos, layout.quat_slots)  # d = 0: every capture frame a frame of d, the pins fixed
     plain = FrameSet(times, anchor, np.repeat(is_pin[:, None], qpos.shape[1], axis=1), is_pin)
     t0, t1 = float(times[0]), float(times[-1])
-    if 2 * len(times) - 1 > MAX_QUADRATURE_POINTS:
-        raise InputError(f"a clean of {len(times)} capture frames needs {2 * len(times) - 1} quadrature points (at most "
-                         f"{MAX_QUADRATURE_POINTS}); clean the clip in parts")
     t, w = simpson_points(times)  # every capture frame a point, the pins among them, and the midpoints between
     reference = ReferenceMotion.from_samples(model, times, qpos, t, w)
     engine = InverseDynamics(model, figure.contact_sites)  # the effort bound of a capture needs the torques

@@ -94,8 +94,15 @@ def simpson_points(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         frames: (m,) strictly increasing frame times [s], m >= 2.
     Returns:
         t: (2m - 1,) points [s] (frames at the even indices); w: same shape, weights [s] summing to the span.
+    Raises:
+        InputError: more than MAX_QUADRATURE_POINTS points (names the frames and the fix).
     """
+    from solver.errors import InputError
+
     x = np.asarray(frames, float)
+    if 2 * len(x) - 1 > MAX_QUADRATURE_POINTS:
+        raise InputError(f"{len(x)} frames need {2 * len(x) - 1} quadrature points by Simpson's rule (at most "
+                         f"{MAX_QUADRATURE_POINTS}); split the clip and clean it in parts")
     h = np.diff(x)
     t = np.empty(2 * len(x) - 1)
     t[0::2], t[1::2] = x, x[:-1] + 0.5 * h

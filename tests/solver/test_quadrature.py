@@ -1,9 +1,11 @@
 """The quadrature points: the midpoint rule's integrals, with the spline's knots as points of weight 0, and
 Simpson's rule on a clean's frames."""
 import numpy as np
+import pytest
 from scipy.interpolate import CubicSpline
 
-from solver.quadrature import quadrature_points, quadrature_times, simpson_points
+from solver.errors import InputError
+from solver.quadrature import MAX_QUADRATURE_POINTS, quadrature_points, quadrature_times, simpson_points
 
 
 def test_knots_are_points_of_weight_zero_and_integrals_are_the_midpoint_rules():
@@ -78,3 +80,12 @@ def test_simpson_points_integrate_a_natural_splines_squared_acceleration_exactly
     tg = (frames[:-1, None] + 0.5 * h[:, None] * (xg + 1)).ravel()
     exact = float((0.5 * h[:, None] * wg).ravel() @ (s(tg, 2) ** 2).sum(axis=1))
     assert abs(w @ (s(t, 2) ** 2).sum(axis=1) - exact) <= 1e-12 * exact
+
+
+def test_simpson_points_refuse_more_frames_than_the_points_allow():
+    """2m - 1 points for m frames: one frame more than the limit allows is named with the fix, in one line."""
+    m = (MAX_QUADRATURE_POINTS + 1) // 2
+    assert len(simpson_points(np.arange(m) / 120.0)[0]) == 2 * m - 1 <= MAX_QUADRATURE_POINTS
+    with pytest.raises(InputError, match=f"{m + 1} frames need {2 * m + 1} quadrature points") as e:
+        simpson_points(np.arange(m + 1) / 120.0)
+    assert "in parts" in str(e.value) and "\n" not in str(e.value)
