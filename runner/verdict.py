@@ -162,9 +162,9 @@ def _join_names(names: list[str]) -> str:
     return ", ".join(out)
 
 
-def figure(name: str, plain, opt, fmt: str, unit: str, capture=None) -> tuple[str, str] | None:
-    """("NAME PLAIN -> OPT UNIT", the capture's figure or "-"), or None when a path's figure is missing or
-    not finite."""
+def figure(name: str, plain, opt, fmt: str, unit: str, capture=None) -> tuple[str, str, str] | None:
+    """("NAME PLAIN -> OPT UNIT", the capture's figure or "-", PLAIN as shown), or None when a path's figure is
+    missing or not finite."""
     try:
         a, b = float(plain), float(opt)
     except (TypeError, ValueError):
@@ -172,7 +172,7 @@ def figure(name: str, plain, opt, fmt: str, unit: str, capture=None) -> tuple[st
     if not (math.isfinite(a) and math.isfinite(b)):
         return None
     c = "-" if capture is None or not math.isfinite(float(capture)) else _num(fmt, float(capture))
-    return f"{name} {_num(fmt, a)} -> {_num(fmt, b)} {unit}", c
+    return f"{name} {_num(fmt, a)} -> {_num(fmt, b)} {unit}", c, _num(fmt, a)
 
 
 def _num(fmt: str, v: float) -> str:
@@ -292,10 +292,9 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
     for name, parts in (("feet", feet), ("jolts", jolts)):
         shown = [p for p in parts if p]
         if shown:
-            captures = [c for _, c in shown]
-            firsts = [t.split(" -> ")[0].rsplit(" ", 1)[-1] for t, _ in shown]  # a clean's first column is the capture
+            captures, firsts = [c for _, c, _ in shown], [f for _, _, f in shown]  # a clean's first column: the capture
             against = f" (capture {', '.join(captures)})" if any(c != "-" for c in captures) and captures != firsts else ""
-            lines.append(f"  {name}: " + ", ".join(t for t, _ in shown) + against)
+            lines.append(f"  {name}: " + ", ".join(t for t, _, _ in shown) + against)
     lines.append("  " + worse_line(rows, targets, solution.integrals_initial, solution.integrals_final, unmet)
                  + motion_text)
     return [part for line in lines for part in textwrap.wrap(line, WIDTH, subsequent_indent="    ",
