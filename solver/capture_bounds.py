@@ -16,7 +16,7 @@ from solver.path_state import PathState
 from solver.peak_bounds import filter_capture
 from solver.spline import interpolate
 
-__all__ = ["capture_accelerations", "capture_effort", "capture_state", "reference_state"]
+__all__ = ["capture_accelerations", "capture_effort", "capture_state", "filtered_capture", "reference_state"]
 
 
 def reference_state(model, reference, plain, engine) -> PathState:
@@ -31,17 +31,18 @@ def capture_state(model, reference, capture, engine) -> PathState:
     return PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(StateLayout.from_model(model)), engine)
 
 
-def _filtered_capture(model, reference, capture):
+def filtered_capture(model, reference, capture) -> tuple:
     """The capture ((times, qpos)) low-pass filtered (`solver.peak_bounds.filter_capture`, 6 Hz) as a path at
-    the quadrature points: the natural spline through all its frames, (Y, Y1, Y2)."""
+    the quadrature points: the natural spline through all its frames, (Y, Y1, Y2), each (n, nq) [qpos units and
+    their rates]; what both bounds below are measured on, made once per problem."""
     times, qpos = np.asarray(capture[0], float), np.asarray(capture[1], float)
     smooth = filter_capture(times, qpos, StateLayout.from_model(model))
     return interpolate(times, smooth, reference.t, (0, 1, 2))
 
 
-def capture_accelerations(model, reference, capture) -> AccelerationBound:
-    """The no-jolt bounds (`solver.constraints.acceleration`): the reference's peaks and, with a capture
-    ((times, qpos)), the filtered capture's over the same span, joint by joint."""
+def capture_accelerations(model, reference, filtered) -> AccelerationBound:
+    """The no-jolt bounds (`solver.constraints.acceleration`): the reference's peaks and, with the filtered
+    capture (`filtered_capture`; None: none), its peaks over the same span, joint by joint."""
     layout = StateLayout.from_model(model)
     free = [j for j in layout.joints if j.kind == "free"]
     balls = [j for j in layout.joints if j.kind == "ball"]
@@ -49,23 +50,22 @@ def capture_accelerations(model, reference, capture) -> AccelerationBound:
     labels = [f"{f.name} (linear)" for f in free] + [b.name for b in balls]
     dofs = np.array(dofs, int).reshape(-1, 3)
     peaks = np.linalg.norm(reference.qacc[:, dofs], axis=-1).max(axis=0)
-    if capture is not None:
-        qacc = TangentMap.from_layout(layout).motion(*_filtered_capture(model, reference, capture)).qacc
+    if filtered is not None:
+        qacc = TangentMap.from_layout(layout).motion(*filtered).qacc
         peaks = np.maximum(peaks, np.linalg.norm(qacc[:, dofs], axis=-1).max(axis=0))
     peaks = np.maximum(peaks, 1e-6)  # [m/s^2 or rad/s^2] a joint neither path accelerates: a limit > 0, far below any motion
     return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels,
                              linear=np.arange(len(labels)) < len(free))
 
 
-def capture_effort(model, reference, plain, capture, engine) -> list:
+def capture_effort(model, reference, plain, filtered, engine) -> list:
     """[the effort bound] (`solver.constraints.effort`): the larger of the plain spline's RMS joint torque and
-    the filtered capture's over the same span, with the no-jolt bounds' relative tolerance; [] for a figure
-    whose joints carry no torque in either (no joints besides the root: nothing to bound)."""
+    the filtered capture's (`filtered_capture`) over the same span, with the no-jolt bounds' relative tolerance;
+    [] for a figure whose joints carry no torque in either (no joints besides the root: nothing to bound)."""
     layout = StateLayout.from_model(model)
     dofs = np.array([j.dofadr + i for j in layout.joints if j.kind != "free" for i in range(j.nv)], int)
     w = reference.weights
-    Y, Y1, Y2 = _filtered_capture(model, reference, capture)
-    captured = PathState(reference.t, Y, Y1, Y2, TangentMap.from_layout(layout), engine)
+    captured = PathState(reference.t, *filtered, TangentMap.from_layout(layout), engine)
     bound = max(rms_torque(reference_state(model, reference, plain, engine).tau, w, dofs),
                 rms_torque(captured.tau, w, dofs))
     return [TorqueRMS(w, dofs, bound, RELATIVE_TOLERANCE * bound)] if bound > 0 else []

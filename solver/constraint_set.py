@@ -82,7 +82,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.capture_bounds import capture_accelerations, capture_effort, capture_state, reference_state
+from solver.capture_bounds import capture_accelerations, capture_effort, capture_state, filtered_capture, reference_state
 from solver.constraints.anatomy import anatomy_constraints
 from solver.constraints.penetration import Penetration
 from solver.constraints.sites import HeightBound, SupportHeight, SupportSlide, huber, site_heights
@@ -215,9 +215,10 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     quats = [j for j in layout.joints if j.quat_index is not None]
     out.append(UnitNorm(len(t), np.array([j.quat_index for j in quats]), [j.name for j in quats], TOLERANCES["unit"]))
     if capture is not None:  # no jolts: bounded by what the captured motion does (module docstring)
-        out.append(capture_accelerations(model, reference, capture))
+        filtered = filtered_capture(model, reference, capture)
+        out.append(capture_accelerations(model, reference, filtered))
         if engine is not None and getattr(engine, "forces", False):
-            out += capture_effort(model, reference, plain, capture, engine)
+            out += capture_effort(model, reference, plain, filtered, engine)
     relaxations = []
     if engine is not None:
         relaxations = _relax_heights(out, state, plain, model, sites, support, radii, flights)
