@@ -376,13 +376,16 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
     c = first_step_scale(preconditioned, pre, pre.size, up=al.elastic is not None) if max_evals == 0 or max_evals > 2 else 1.0
     probe = evals[0] - bool(start)  # evaluations beyond the one at z = 0 that L-BFGS reuses
 
+    shift = al.shift() if al.elastic is None else 0.0  # ftol_rel is relative to Phi + shift >= 0, not to PHR's Phi
+
     def fun(z, need_grad):
         phi, g = preconditioned(c * z, need_grad)
-        return phi, (None if g is None else c * g)
+        return phi + shift, (None if g is None else c * g)
 
     res = minimize(fun, np.zeros(pre.size), algorithm="lbfgs", ftol_rel=ftol_rel, max_evals=max_evals and max_evals - probe,
-                   max_time_s=max_time_s, should_stop=should_stop, callback=callback, pairs=pairs)
-    res = replace(res, n_evals=evals[0])  # its own and first_step_scale's, the one at z = 0 made once
+                   max_time_s=max_time_s, should_stop=should_stop, callback=callback and (lambda n, f: callback(n, f - shift)),
+                   pairs=pairs)
+    res = replace(res, n_evals=evals[0], fun=res.fun - shift, trace=np.asarray(res.trace) - shift)  # evals: with first_step_scale's
     out = var.frame_set(pre.apply(c * res.x))
     return SubproblemResult(out, res, time.perf_counter() - t0)
 
