@@ -345,8 +345,9 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
 
     Args:
         al: AugmentedLagrangian (multipliers and rho as they are). frames: FrameSet to start from.
-        quat_slots: (s, 4) the layout's quaternion slots. ftol_rel, max_evals, max_time_s,
-            should_stop, callback: as `solver.optimize.minimize`. basis: the frames' SplineBasis.
+        quat_slots: (s, 4) the layout's quaternion slots. ftol_rel: the relative decrease that ends the run,
+            of Phi + `AugmentedLagrangian.shift` (>= 0; PHR's Phi itself can be 0 or negative). max_evals,
+            max_time_s, should_stop, callback: as `solver.optimize.minimize` (the callback is given Phi). basis: the frames' SplineBasis.
         pre: the frames' Preconditioner, or None (built here). It depends on which values of the frames
             are free and on `al.change`, not on the values: one serves every subproblem on a frame set. Or
             any object with its `size`, `apply` and `apply_transpose` (`solver.gauss_newton`).
