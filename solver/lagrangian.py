@@ -347,7 +347,8 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
         al: AugmentedLagrangian (multipliers and rho as they are). frames: FrameSet to start from.
         quat_slots: (s, 4) the layout's quaternion slots. ftol_rel: the relative decrease that ends the run,
             of Phi + `AugmentedLagrangian.shift` (>= 0; PHR's Phi itself can be 0 or negative). max_evals,
-            max_time_s, should_stop, callback: as `solver.optimize.minimize` (the callback is given Phi). basis: the frames' SplineBasis.
+            max_time_s, should_stop, callback: as `solver.optimize.minimize` (the callback is given Phi).
+            basis: the frames' SplineBasis.
         pre: the frames' Preconditioner, or None (built here). It depends on which values of the frames
             are free and on `al.change`, not on the values: one serves every subproblem on a frame set. Or
             any object with its `size`, `apply` and `apply_transpose` (`solver.gauss_newton`).
@@ -377,7 +378,7 @@ def solve_subproblem(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, f
     c = first_step_scale(preconditioned, pre, pre.size, up=al.elastic is not None) if max_evals == 0 or max_evals > 2 else 1.0
     probe = evals[0] - bool(start)  # evaluations beyond the one at z = 0 that L-BFGS reuses
 
-    shift = al.shift() if al.elastic is None else 0.0  # ftol_rel is relative to Phi + shift >= 0, not to PHR's Phi
+    shift = al.shift()  # ftol_rel is relative to Phi + shift >= 0, not to PHR's Phi (0 in the elastic problem: lam = 0)
 
     def fun(z, need_grad):
         phi, g = preconditioned(c * z, need_grad)
