@@ -110,9 +110,10 @@ def test_phi_without_its_constant_part_is_never_negative(problem):
 def test_a_subproblem_does_not_depend_on_phis_constant_part(problem):
     """PHR's Phi is its nonnegative part minus shift() = sum (w/T) lam^2 / (2 rho), a constant of the
     subproblem (`test_phi_without_its_constant_part_is_never_negative`): the constant moves neither the
-    minimizer nor the gradient, so a subproblem must end where it would without it, whatever it is. Here Phi is lowered by a constant K (and shift() raised by it) directly. L-BFGS's relative
-    stopping test is on Phi + shift >= 0: on Phi itself, made large and negative by K, it would end the run
-    after a few steps. The result reports Phi itself (its value at the returned path)."""
+    minimizer nor the gradient, so a subproblem must end where it would without it, whatever it is. Here
+    Phi is lowered by a constant K (and shift() raised by it) directly. L-BFGS's relative stopping test is
+    on Phi + shift >= 0: on Phi itself, made large and negative by K, it would end the run after a few
+    steps. The result reports Phi itself (its value at the returned path)."""
     import copy
 
     from solver.lagrangian import solve_subproblem
