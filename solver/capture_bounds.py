@@ -16,7 +16,7 @@ from solver.path_state import PathState
 from solver.peak_bounds import filter_capture
 from solver.spline import interpolate
 
-__all__ = ["capture_accelerations", "capture_effort", "capture_state", "filtered_capture", "reference_state"]
+__all__ = ["capture_accelerations", "capture_effort", "capture_state", "filtered_capture", "jolt_columns", "reference_state"]
 
 
 def reference_state(model, reference, plain, engine) -> PathState:
@@ -40,22 +40,27 @@ def filtered_capture(model, reference, capture) -> tuple:
     return interpolate(times, smooth, reference.t, (0, 1, 2))
 
 
-def capture_accelerations(model, reference, filtered) -> AccelerationBound:
-    """The no-jolt bounds (`solver.constraints.acceleration`): the reference's peaks and, with the filtered
-    capture (`filtered_capture`; None: none), its peaks over the same span, joint by joint."""
-    layout = StateLayout.from_model(model)
+def jolt_columns(layout: StateLayout) -> tuple[np.ndarray, list, np.ndarray]:
+    """The columns the no-jolt bounds hold: each free joint's linear acceleration [m/s^2] and each ball joint's
+    angular acceleration [rad/s^2]. Returns (dofs (j, 3) their `qvel` indices, labels (j,), linear (j,) bool)."""
     free = [j for j in layout.joints if j.kind == "free"]
     balls = [j for j in layout.joints if j.kind == "ball"]
     dofs = [[f.dofadr, f.dofadr + 1, f.dofadr + 2] for f in free] + [[b.dofadr + i for i in range(3)] for b in balls]
     labels = [f"{f.name} (linear)" for f in free] + [b.name for b in balls]
-    dofs = np.array(dofs, int).reshape(-1, 3)
+    return np.array(dofs, int).reshape(-1, 3), labels, np.arange(len(labels)) < len(free)
+
+
+def capture_accelerations(model, reference, filtered) -> AccelerationBound:
+    """The no-jolt bounds (`solver.constraints.acceleration`) on `jolt_columns`: the reference's peaks and, with
+    the filtered capture (`filtered_capture`; None: none), its peaks over the same span, joint by joint."""
+    layout = StateLayout.from_model(model)
+    dofs, labels, linear = jolt_columns(layout)
     peaks = np.linalg.norm(reference.qacc[:, dofs], axis=-1).max(axis=0)
     if filtered is not None:
         qacc = TangentMap.from_layout(layout).motion(*filtered).qacc
         peaks = np.maximum(peaks, np.linalg.norm(qacc[:, dofs], axis=-1).max(axis=0))
     peaks = np.maximum(peaks, 1e-6)  # [m/s^2 or rad/s^2] a joint neither path accelerates: a limit > 0, far below any motion
-    return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels,
-                             linear=np.arange(len(labels)) < len(free))
+    return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels, linear=linear)
 
 
 def capture_effort(model, reference, plain, filtered, engine) -> list:

@@ -167,7 +167,7 @@ def _pairs_in(t: np.ndarray, a: float, b: float) -> np.ndarray:
 
 def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None,
                        planted_tolerance: float = TOLERANCES["planted"], track: bool = False,
-                       frames: np.ndarray | None = None):
+                       frames: np.ndarray | None = None, no_jolt=None):
     """The constraints of a figure's problem (module docstring).
 
     Args:
@@ -182,6 +182,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             written and judged at its frames, so its planted means are of the heights' positive part over a
             contact's frames (`frame_weights`, to `CAPTURE_RESOLUTION`), its slides per frame (`CLEAN_SKATE`);
             None: a keyed path's (signed heights by the midpoint rule; `SLIDE_SMOOTHING`, 2 mm a contact).
+            no_jolt: with a capture, the no-jolt bound (a `Constraint`) in place of `capture_accelerations`'s
+            (a clean's bounds the change's accelerations, `solver.displacement.ChangeAcceleration`).
     Returns:
         (constraints, relaxations): a list of `Constraint`s and a list of `Relaxation`s.
     """
@@ -216,7 +218,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     out.append(UnitNorm(len(t), np.array([j.quat_index for j in quats]), [j.name for j in quats], TOLERANCES["unit"]))
     if capture is not None:  # no jolts: bounded by what the captured motion does (module docstring)
         filtered = filtered_capture(model, reference, capture)
-        out.append(capture_accelerations(model, reference, filtered))
+        out.append(capture_accelerations(model, reference, filtered) if no_jolt is None else no_jolt)
         if engine is not None and getattr(engine, "forces", False):
             out += capture_effort(model, reference, plain, filtered, engine)
     relaxations = []

@@ -65,6 +65,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from solver.capture_bounds import jolt_columns
 from solver.change import MeasureOfChange
 from solver.constraint_set import TOLERANCES, figure_constraints
 from solver.constraints.acceleration import AccelerationBound
@@ -204,9 +205,8 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     # bounds measure them (`figure_constraints`' frames)
     constraints, relaxations = figure_constraints(model, figure, reference, capture_frames, tuple(schedule), flights,
                                                   engine, capture=(times, qpos),
-                                                  planted_tolerance=TOLERANCES["penetration"], frames=times)
-    constraints = [_change_bound(c, reference, model, times, qpos) if c.name == "acceleration" else c
-                   for c in constraints]
+                                                  planted_tolerance=TOLERANCES["penetration"], frames=times,
+                                                  no_jolt=_change_bound(reference, model, times, qpos))
     change = MeasureOfChange(reference, tmap, omega=np.pi / correction_time,
                              pose=equal_mass_matrices(model, reference.qpos))
     d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)
@@ -227,36 +227,38 @@ class ChangeAcceleration(AccelerationBound):
     a_c the capture's own acceleration (the reference's `qacc`, noise and all: a clean keeps it) and A_j the
     peak of the capture low-pass filtered at 6 Hz (`solver.peak_bounds.filter_capture`, Winter 2009) by
     central differences at its frames (`_change_bound`): a correction accelerates no joint harder than the
-    captured motion itself does (`AccelerationBound`'s smooth form and columns). The limit is
-    (1 - RELATIVE_TOLERANCE) A_j with tolerance RELATIVE_TOLERANCE A_j, so a change that meets it within its
+    captured motion itself does (`AccelerationBound`'s smooth form, on the figure's `jolt_columns`). The limit
+    is (1 - RELATIVE_TOLERANCE) A_j with tolerance RELATIVE_TOLERANCE A_j, so a change that meets it within its
     tolerance stays within A_j itself.
 
     Args:
-        bound: the figure's `AccelerationBound` (its columns and labels). qacc: (n, nv) the capture's
-            acceleration at the points. peaks: (j,) A_j > 0 [m/s^2 or rad/s^2].
+        qacc: (n, nv) the capture's acceleration at the n points. columns: `jolt_columns` of the figure's
+            layout, (dofs (j, 3), labels (j,), linear (j,)). peaks: (j,) A_j > 0 [m/s^2 or rad/s^2].
     """
 
-    def __init__(self, bound: AccelerationBound, qacc: np.ndarray, peaks: np.ndarray):
-        n = int(bound.rows.max()) + 1 if len(bound.rows) else 0
+    def __init__(self, qacc: np.ndarray, columns: tuple, peaks: np.ndarray):
+        dofs, labels, linear = columns
         peaks = np.asarray(peaks, float)  # the limit and its tolerance inside A_j: met within tolerance, <= A_j
-        super().__init__(n, bound.dofs, (1.0 - RELATIVE_TOLERANCE) * peaks, RELATIVE_TOLERANCE * peaks,
-                         bound.labels[: len(bound.dofs)])
+        super().__init__(len(qacc), dofs, (1.0 - RELATIVE_TOLERANCE) * peaks, RELATIVE_TOLERANCE * peaks, labels,
+                         linear=linear)
         self._ref = np.asarray(qacc, float)[:, self.dofs]  # (n, j, 3)
 
     def _accelerations(self, state):
         return state.motion.qacc[:, self.dofs] - self._ref
 
 
-def _change_bound(bound: AccelerationBound, reference: ReferenceMotion, model, times, qpos) -> ChangeAcceleration:
-    """The clean's no-jolt bound (`ChangeAcceleration`) in place of the figure's: the 6 Hz capture's peaks by
+def _change_bound(reference: ReferenceMotion, model, times, qpos) -> ChangeAcceleration:
+    """The clean's no-jolt bound (`ChangeAcceleration`), the figure's in its place: the 6 Hz capture's peaks by
     central differences at its frames (`solver.peak_bounds.frame_derivatives`), the measure of the acceptance
     figures: the change's own central differences are weighted means of its spline's accelerations at the
     frames, so a change within the bound there shows at most these peaks by that measure (at 30 fps the
     spline's peaks of the filtered capture run 12-21 % above them)."""
-    smooth = filter_capture(times, qpos, StateLayout.from_model(model))
+    layout = StateLayout.from_model(model)
+    columns = jolt_columns(layout)
+    smooth = filter_capture(times, qpos, layout)
     qacc = frame_derivatives(model, times, smooth)[1]
-    peaks = np.maximum(np.linalg.norm(qacc[:, bound.dofs], axis=-1).max(axis=0), 1e-6)
-    return ChangeAcceleration(bound, reference.qacc, peaks)
+    peaks = np.maximum(np.linalg.norm(qacc[:, columns[0]], axis=-1).max(axis=0), 1e-6)
+    return ChangeAcceleration(reference.qacc, columns, peaks)
 
 
 def _capture_limits(al: AugmentedLagrangian, plain: FrameSet, feet: str) -> None:

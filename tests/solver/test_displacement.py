@@ -186,6 +186,10 @@ def test_the_no_jolt_bound_is_the_filtered_capture_s_peak_by_central_differences
     peak = np.linalg.norm(x[2:] - 2 * x[1:-1] + x[:-2], axis=1).max() * fps ** 2
     np.testing.assert_allclose(A, peak, rtol=1e-9)
     assert np.abs(interpolate(t, x, t, 2)).max() > 1.05 * peak  # the spline's peak, which the bound is not
+    # its unit, as a certificate that raises it states it: the pelvis's linear acceleration, a ball joint's angular
+    label = bound.labels[root]
+    assert label.endswith("(linear)") and bound.column_unit(label) == "m/s^2"
+    assert {bound.column_unit(x) for x in bound.labels if not x.endswith("(linear)")} == {"rad/s^2"}
 
 
 def test_a_planted_foot_met_within_its_tolerance_is_within_the_clean_s_float_bound(toy_model):
