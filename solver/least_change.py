@@ -18,8 +18,8 @@ least violation is sought (`solver.feasibility`): the constraints' violation is 
 same paths, every constraint at once and, where that leaves a pair broken, level by level in the order
 in which limits give (`Constraint.priority`), with frames added where pairs stay broken. A limit rises
 only by what that solve shows no path through the keyframes beats (`Solution.certificate`, in the
-constraint's SI unit); the multipliers start again from 0 on the path it found, which meets every
-certified limit. It also starts from the capture, a keyed path's (`solver.feasibility.capture_start`) and a clean's
+constraint's SI unit); the solve goes on from the path it found, which meets every certified limit (a raised pair's
+multiplier from 0, the rest as it was). It also starts from the capture, a keyed path's (`solver.feasibility.capture_start`) and a clean's
 d = 0, as a stalled path can be anywhere (docs/design.md). A path the solve ends on beyond a limit (a budget spent)
 gives way to the best one that met them all. A reference motion (the plain spline; a clean's capture) that meets every
 constraint within its tolerance is the answer as it is: D >= 0 is 0 there (the multipliers would move it to the limits).
