@@ -281,6 +281,9 @@ def _worst_joint(doc: dict) -> list | None:
 #: reference's frames (`runner.run.reference_motion_metrics`); float over the capture's stance (and the
 #: schedule's contacts beside it), skate over the schedule's contacts.
 FIGURES: dict[str, Callable[[dict], float | None]] = {
+    # the solve's longest round (one subproblem, wall time on the machine that ran it) and the clip's length
+    "longest_round_s": _at("longest_round_s"),
+    "clip_s": lambda doc: doc["frames"] / doc["fps"] if doc.get("frames") and doc.get("fps") else None,
     "penetration_mm": _at("metrics", "optimized", "max_penetration_mm"),
     "stance_recall": _at("stance_agreement", "recall"),
     "stance_precision": _at("stance_agreement", "precision"),

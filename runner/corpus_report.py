@@ -153,6 +153,26 @@ def stance_lines(results: Sequence[dict]) -> list[str]:
             + ", ".join(f"{c} {rc:.3f} / {pr:.3f}" for c, (rc, pr) in sorted(seen.items())) + "."]
 
 
+#: [s] a solve round's wall time per 10 s of clip the report counts pairs beyond: the bound on the rounds
+#: (docs/corpus.md "Speed"); a round's cost grows with the clip's quadrature points, so it is per clip length
+ROUND_PER_10_S = 5.0
+
+
+def round_lines(results: Sequence[dict]) -> list[str]:
+    """The solve rounds' line: the longest round per 10 s of clip [s] (wall time on this machine), its pair,
+    and how many pairs have a round over `ROUND_PER_10_S`; [] when no pair recorded its rounds."""
+    rows = [(10.0 * f["longest_round_s"] / f["clip_s"], r) for r in results
+            for f in [r.get("figures", {})] if f.get("longest_round_s") is not None and f.get("clip_s")]
+    if not rows:
+        return []
+    per10, worst = max(rows, key=lambda x: x[0])
+    f = worst["figures"]
+    over = sum(p > ROUND_PER_10_S for p, _ in rows)
+    return [f"Solve rounds (wall time on this machine): the longest is {per10:.3g} s per 10 s of clip "
+            f"({_pair_name(worst)}: {number(f['longest_round_s'])} s on a {number(f['clip_s'])} s clip); "
+            f"{over}/{len(rows)} pairs have a round over {ROUND_PER_10_S:g} s per 10 s of clip."]
+
+
 def markdown_report(results: Sequence[dict], rates: dict, meta: dict) -> str:
     """The whole report: a line on the run, the pass rates of both sets, then per set the pair table and
     the failing pairs, then the bounds' limits and the cause categories."""
@@ -164,6 +184,9 @@ def markdown_report(results: Sequence[dict], rates: dict, meta: dict) -> str:
              *rate_table(rates)]
     if n_na:
         lines += ["", f"n/a: not measured by this build ({', '.join(n_na)})."]
+    rounds = round_lines(results)
+    if rounds:
+        lines += ["", *rounds]
     for s in SETS:
         rs = [r for r in results if r["set"] == s]
         if not rs:

@@ -9,7 +9,7 @@ import pytest
 
 from runner.corpus import Keying, corpus_pairs, held_all, keyings, parse_every, parse_keys, pass_rates
 from runner.corpus_bounds import BOUNDS, FIGURES, causes, check_pair, pair_figures, schedule_flight_s
-from runner.corpus_report import check_cell, failing_lines, markdown_report, number, pair_table
+from runner.corpus_report import check_cell, failing_lines, markdown_report, number, pair_table, round_lines
 from runner.corpus_sets import TUNING, clip_set
 from solver.contacts import Contact
 from solver.errors import InputError
@@ -113,6 +113,7 @@ def test_figures_are_read_from_the_metrics_report():
                 "peak_angular_acceleration_t_s": {"l_knee": 1.25, "r_hip": 0.75}, "rms_joint_torque_Nm": torque}
 
     report = {"keyframe_conflicts": 3, "stalled": {"planted": 2e-6}, "unmet_at_end": {"penetration": 4.8},
+              "longest_round_s": 3.0, "frames": 300, "fps": 30.0,
               "metrics": {"plain": {"max_penetration_mm": 40.0, "keyframe_error": 0.0, "max_hyperextension_deg": 0.2},
                           "optimized": {"max_penetration_mm": 0.5, "keyframe_error": 1e-16,
                                         "max_hyperextension_deg": 0.6},
@@ -120,6 +121,7 @@ def test_figures_are_read_from_the_metrics_report():
                                      "optimized": motion(4.0, [1.0, 2.0, 6.0], [1.0, 2.0], 0.35, 2.5),
                                      "keyframes": {"forced_skate_contact_mm": 0.7}}}}
     f = pair_figures(report, schedule_flight=0.42)
+    assert f["longest_round_s"] == 3.0 and f["clip_s"] == pytest.approx(10.0)
     assert f["penetration_mm"] == 0.5 and f["plain_hyperextension_deg"] == 0.2 and f["hyperextension_deg"] == 0.6
     assert f["float_mm"] == 5.0 and f["capture_float_mm"] == 2.7 and f["capture_penetration_mm"] == 0.3
     assert f["float_schedule_mm"] == 4.0 and f["capture_float_schedule_mm"] == 2.5 and f["plain_float_mm"] == 7.0
@@ -310,6 +312,19 @@ def test_pass_rates_and_the_report_list_failing_pairs_with_their_causes():
     assert "**1/2 (50%)**, required 95%" in text and "**2 > 1**" in text
     assert number(1.1e-16) == "1.1e-16" and number(0.0) == "0" and number(None) == "n/a"
     assert np.isfinite(float(number(0.0337)))
+
+
+def test_the_report_gives_the_longest_solve_round_per_10_s_of_clip():
+    """A round's cost grows with the clip's length, so the rounds are compared per 10 s of clip: 3 s on a 12 s
+    clip is 2.5 s, 8 s on 10 s is 8 s, 6 s on 20 s is 3 s; one of the three is over ROUND_PER_10_S (5 s)."""
+    results = [_result("a.bvh", "validation", longest_round_s=3.0, clip_s=12.0),
+               _result("b.bvh", "validation", longest_round_s=8.0, clip_s=10.0),
+               _result("c.bvh", "tuning", longest_round_s=6.0, clip_s=20.0)]
+    assert round_lines(results) == ["Solve rounds (wall time on this machine): the longest is 8 s per 10 s of clip "
+                                    "(b every 0.25: 8 s on a 10 s clip); 1/3 pairs have a round over 5 s per 10 s "
+                                    "of clip."]
+    assert round_lines(results)[0] in markdown_report(results, pass_rates(results), {})
+    assert round_lines([_result("a.bvh", "tuning")]) == []  # reports written before the rounds were recorded
 
 
 def test_the_float_bound_reads_the_capture_stance_where_the_schedule_has_a_gap():
