@@ -14,7 +14,8 @@ frames where each subproblem stopped), and an optimized figure that sits inside 
 the check skips them. Every other figure is compared within a tolerance, because the same code gives
 slightly different figures on another CPU (BLAS kernels, library versions change the round-off, and an
 optimizer's path follows it): integers within `COUNT_RTOL`, other numbers within `VALUE_RTOL` or one unit in their last printed
-digit, whichever is larger, both relative to the file's figure; the words around them must match exactly. `exact=True` compares every
+digit, whichever is larger, both relative to the file's figure; the words around them must match exactly, but for a figure's
+`WORSE` mark where the figures differ (`lines_agree`). `exact=True` compares every
 figure as printed (a manual check on the machine that wrote the tables). `dynsplines bench docs
 [--check] [--exact]` (runner/commands/bench.py) runs the workloads and uses these; the tables live in
 docs/benchmarks.md.
@@ -38,6 +39,8 @@ which another CPU's BLAS kernels change through rounding: the peak root force in
 moves 13 % between OpenBLAS's SkylakeX and Sandybridge kernels while the evaluation count moves 3 %.
 What the check guards against is a changed result (a flight 43 % longer), not the last digits."""
 _BLOCK = re.compile(r"(<!-- bench:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /bench:(?P=name) -->)", re.S)
+WORSE = " (worse)"
+"""The mark of a figure worse than the plain spline's (`runner.console.comparison_rows`)."""
 _NUMBER = re.compile(r"(?<![\w.])-?\d+(?:\.\d+)?(?:e[-+]?\d+)?(?![\w.])")
 
 
@@ -135,10 +138,15 @@ def _close(found: str, expected: str) -> bool:
 
 def lines_agree(found: str, expected: str) -> bool:
     """Whether a line of the file (`found`) and a generated line (`expected`, wall times masked in
-    both) say the same: the same words, every number within the tolerances (module docstring)."""
+    both) say the same: the same words, every number within the tolerances (module docstring). A
+    `WORSE` mark follows its figure past a threshold (`runner.verdict`), so figures that differ within the
+    tolerance may fall either side of it (a flight time of 0.185 s marked, 0.193 s not, under two BLAS
+    kernels); figures printed alike must be marked alike."""
     if found == expected:
         return True
     f_nums, e_nums = _NUMBER.findall(found), _NUMBER.findall(expected)
+    if f_nums != e_nums:
+        found, expected = found.replace(WORSE, ""), expected.replace(WORSE, "")
     if len(f_nums) != len(e_nums) or _NUMBER.split(found) != _NUMBER.split(expected):
         return False
     return all(_close(f, e) for f, e in zip(f_nums, e_nums, strict=True))

@@ -34,7 +34,7 @@ from runner.commands import bench_clean, bench_contacts, bench_corpus, bench_spe
 from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
-from runner.readme_tables import Block, compare_blocks, replace_blocks, table, timing
+from runner.readme_tables import WORSE, Block, compare_blocks, replace_blocks, table, timing
 from solver.constraint_set import TOLERANCES
 from solver.constraints.forces import FORCE_TOLERANCE
 from solver.constraints.unit import UNIT_LIMIT
@@ -235,7 +235,7 @@ def _terms_all_block(runs: _Runs) -> Block:
     worse = {label: flag for label, _, _, _, flag in comparison_rows(p, o, dynamics_terms=True)}
 
     def mark(*labels):
-        return " (worse)" if any(worse.get(label) for label in labels) else ""
+        return WORSE if any(worse.get(label) for label in labels) else ""
 
     def pair(key_rms, key_peak, fmt, d):
         return f"{fmt.format(d[key_rms])} / {fmt.format(d[key_peak])}"

@@ -72,7 +72,9 @@ def test_exact_check_compares_every_figure_as_printed(tmp_path):
     ("| 0.01 / < 1e-12 |", "| 0.00 / < 1e-12 |", True),  # one unit in the last printed digit
     ("| 0.03 |", "| 0.00 |", False),
     ("| 2e-16 |", "| 1e-16 |", True),  # one unit of the printed mantissa
-    ("| 0.161 (worse) |", "| 0.161 |", False),  # words must match
+    ("| 0.161 (worse) |", "| 0.161 |", False),  # words must match: a figure printed alike is marked alike
+    ("| 0.252 | 0.185 (worse) |", "| 0.252 | 0.193 |", True),  # 4 %, either side of the mark's threshold
+    ("| 0.252 | 0.140 (worse) |", "| 0.252 | 0.193 |", False),  # 38 %
     ("| 31 variable frames |", "| 33 variable frames |", True),  # a count: within 10 % (or 1)
     ("| 0.060437 |", "| 0.07130 |", True),  # 18 %
     ("| 0.060437 |", "| 0.07300 |", False),  # 20.8 %
