@@ -304,7 +304,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
             if cert.status is not Status.CONVERGED:
                 status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
                 break
-            best, frames = _better(al, best, cert.frames), _after_search(frames, cert, quat)
+            best, frames = _better(al, best, cert.frames), cert.frames  # a path that meets every certified limit
             (basis, pre), level_its, kind = frame_maps(al, frames, quat), 0, "certify"
             continue
         if lc.grid is not None:  # a frame at every time of the grid already: done when a subproblem no longer moves
@@ -358,17 +358,6 @@ def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, 
     return solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=maps[0], pre=maps[1],
                             max_evals=o.max_evals - evals if o.max_evals else 0,
                             max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb, pairs=pairs), None
-
-
-def _after_search(frames: FrameSet, cert, quat) -> FrameSet:
-    """Where the least change goes on after the search: where it raised a limit from the least change's own
-    path, from that path with the frames the search added (which do not move the path; the search's path,
-    meeting every certified limit, is the fallback); where everything can be met, or the search's path
-    descends from the capture (`solver.feasibility.capture_start`, a basin the own path is not in), from the
-    search's path, which meets every certified limit."""
-    if cert.raises and cert.start == 0:
-        return with_frames(frames, np.setdiff1d(cert.frames.times, frames.times), quat)
-    return cert.frames
 
 
 def _better(al: AugmentedLagrangian, best: tuple, frames: FrameSet, basis=None) -> tuple:
