@@ -16,7 +16,12 @@ from solver.path_state import PathState
 from solver.peak_bounds import filter_capture
 from solver.spline import interpolate
 
-__all__ = ["capture_accelerations", "capture_effort", "capture_state", "filtered_capture", "jolt_columns", "reference_state"]
+__all__ = ["MIN_PEAK", "capture_accelerations", "capture_effort", "capture_state", "filtered_capture", "jolt_columns",
+           "reference_state"]
+
+#: [m/s^2 or rad/s^2] the no-jolt limit of a column no reference path accelerates: a limit > 0 (the bound's
+#: smooth form divides by it), far below any motion
+MIN_PEAK = 1e-6
 
 
 def reference_state(model, reference, plain, engine) -> PathState:
@@ -59,7 +64,7 @@ def capture_accelerations(model, reference, filtered) -> AccelerationBound:
     if filtered is not None:
         qacc = TangentMap.from_layout(layout).motion(*filtered).qacc
         peaks = np.maximum(peaks, np.linalg.norm(qacc[:, dofs], axis=-1).max(axis=0))
-    peaks = np.maximum(peaks, 1e-6)  # [m/s^2 or rad/s^2] a joint neither path accelerates: a limit > 0, far below any motion
+    peaks = np.maximum(peaks, MIN_PEAK)
     return AccelerationBound(len(reference.t), dofs, peaks, RELATIVE_TOLERANCE * peaks, labels, linear=linear)
 
 

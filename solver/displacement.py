@@ -65,7 +65,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from solver.capture_bounds import jolt_columns
+from solver.capture_bounds import MIN_PEAK, jolt_columns
 from solver.change import MeasureOfChange
 from solver.constraint_set import TOLERANCES, figure_constraints
 from solver.constraints.acceleration import AccelerationBound
@@ -257,8 +257,7 @@ def _change_bound(reference: ReferenceMotion, model, times, qpos) -> ChangeAccel
     columns = jolt_columns(layout)
     smooth = filter_capture(times, qpos, layout)
     qacc = frame_derivatives(model, times, smooth)[1]
-    # [m/s^2 or rad/s^2] a joint the capture does not accelerate: a limit > 0, far below any motion
-    peaks = np.maximum(np.linalg.norm(qacc[:, columns[0]], axis=-1).max(axis=0), 1e-6)
+    peaks = np.maximum(np.linalg.norm(qacc[:, columns[0]], axis=-1).max(axis=0), MIN_PEAK)
     return ChangeAcceleration(reference.qacc, columns, peaks)
 
 

@@ -61,7 +61,7 @@ __all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "solve_lea
 
 #: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
 STANDARD_GRAVITY = 9.80665
-#: L-BFGS correction pairs on a `LeastChange.grid` (n ~ 1e4-1e5 variables): the standard limited memory (Nocedal
+#: [pairs] L-BFGS correction pairs on a `LeastChange.grid` (n ~ 1e4-1e5 variables): the standard limited memory (Nocedal
 #: & Wright, sec. 7.2: "3 to 20"; L-BFGS-B's default); nlopt's, sized by n, costs an evaluation an iteration
 GRID_PAIRS = 10
 

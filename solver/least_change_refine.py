@@ -23,7 +23,7 @@ from solver.spline_basis import SplineBasis
 
 __all__ = ["THETA", "doerfler_times", "predicted_decreases"]
 
-#: Doerfler's bulk parameter (dimensionless): mark the segments carrying half the predicted decrease,
+#: [1] Doerfler's bulk parameter: mark the segments carrying half the predicted decrease,
 #: the value of Doerfler (1996) and of most adaptive finite-element codes since
 THETA = 0.5
 

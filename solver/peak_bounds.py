@@ -31,7 +31,7 @@ __all__ = ["CUTOFF_HZ", "PeakBounds", "capture_peaks", "filter_capture", "frame_
 
 #: [Hz] the kinematics cutoff of the capture's low-pass filter (Winter 2009, ch. 2: 6 Hz for gait)
 CUTOFF_HZ = 6.0
-#: Winter's correction of a two-pass (zero-lag) 2nd-order Butterworth: design at cutoff / 0.802 so that
+#: [1] Winter's correction of a two-pass (zero-lag) 2nd-order Butterworth: design at cutoff / 0.802 so that
 #: the -3 dB frequency of the two passes is the cutoff ((2^(1/2) - 1)^(1/4) = 0.802)
 TWO_PASS_CORRECTION = 0.802
 

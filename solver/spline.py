@@ -175,7 +175,7 @@ def interpolate(frame_times: np.ndarray, frames: np.ndarray, t: np.ndarray, nu: 
     return tuple(out) if isinstance(nu, tuple) else out[0]
 
 
-#: Doubles (points x components) per block of points on long paths, here and in the pointwise terms
+#: [doubles] Doubles (points x components) per block of points on long paths, here and in the pointwise terms
 #: (`Term.pointwise`, more than 4 blocks' worth; shorter paths are evaluated whole): a block's arrays
 #: (128 KB each; 321 points of the figure's 51 components) and a term's temporaries stay in a core's L2
 #: cache, a long clip's do not. Run-and-step's gait tiled 8x (5440 points): 60-65 -> 54-60 ms per

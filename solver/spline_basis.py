@@ -26,7 +26,7 @@ def _csr_accumulate(A, X: np.ndarray, out: np.ndarray) -> None:
     _csr_matvecs(A.shape[0], A.shape[1], X.shape[1], A.indptr, A.indices, A.data, X.ravel(), out.ravel())
 
 
-#: At or below this many entries per matrix (quadrature points x frames) `SplineBasis` stores W, W1, W2
+#: [entries] At or below this many entries per matrix (quadrature points x frames) `SplineBasis` stores W, W1, W2
 #: densely and evaluates with whole-matrix products; above it, it evaluates through the tridiagonal
 #: moment system (O(points + frames) work and memory per evaluation). Measured (value + pullback, one
 #: thread, `python -m runner.bench.scaling --per-eval`): the two cost the same near 21000 entries for the
