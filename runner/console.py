@@ -18,6 +18,7 @@ from runner.verdict import (
     row_name,
     verdict_lines,
 )
+from solver.animate import FINER
 
 #: the figures where lower is better: (label, metrics key, format, absolute tolerance below which a rise is
 #: round-off); the optimized path is marked worse when it is higher by more than 1% and the tolerance
@@ -342,8 +343,8 @@ def certificate_lines(solution) -> list[str]:
     constraint and column, the amount no path through the keyframes beats, where, and the keyframes
     around it; [] when nothing was raised."""
     raises = sorted(getattr(solution, "certificate", ()) or (), key=lambda r: -r.amount / max(r.scale, 1e-300))
-    if not raises:
-        return []
+    if not raises:  # nothing raised, or a finer spacing met what the solve's own had raised
+        return _finer_lines(getattr(solution, "finer", ()) or ())
     keys = np.asarray(solution.frames.times)[np.asarray(solution.frames.is_keyframe, bool)]
     out = ["out of reach (certified: the least violation no path through the keyframes beats; the limit raised by it):"]
     for r in raises[:CERTIFIED_SHOWN]:
@@ -356,7 +357,19 @@ def certificate_lines(solution) -> list[str]:
         out.append(f"  {r.describe()}{where}")
     if len(raises) > CERTIFIED_SHOWN:
         out.append(f"  and {len(raises) - CERTIFIED_SHOWN} more (the saved path's certificate_json)")
-    return out
+    return out + _finer_lines(getattr(solution, "finer", ()) or ())
+
+
+def _finer_lines(finer: tuple) -> list[str]:
+    """The line on the certificate's check at a finer spacing (`Solution.finer`); [] when it did not run."""
+    if not finer:
+        return []
+    rate, kept, other = finer
+    said = "; ".join(r.describe() for r in other[:CERTIFIED_SHOWN]) or "nothing"
+    if kept:  # the finer solve's path is the one returned
+        return [f"checked at a finer spacing: the path is the solve's at {rate:g} points/s, which raised less than "
+                f"the solve at {rate / FINER:g} ({said})"]
+    return [f"checked at a finer spacing: at {rate:g} points/s the search raised no less ({said}); the certificate stands"]
 
 
 #: rows of `motion_metrics_table`: (label, key in a `plausibility` block, sub-key or None, format)

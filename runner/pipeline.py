@@ -330,7 +330,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         where the keyframes decide a constraint, `Solution.relaxations`), "relaxed" ({constraint: count} of
         those relaxations), "stalled" ({constraint: amount [SI]}
         the keyframes leave out of reach, `Solution.unmet`), "certificate" (a dict per limit raised:
-        `solver.feasibility.Raise`'s fields), "unmet_at_end" ({constraint: worst value over
+        `solver.feasibility.Raise`'s fields), "certificate_finer" (`_finer`: the certificate checked at a finer
+        spacing, or None), "unmet_at_end" ({constraint: worst value over
         its tolerance} of those still beyond it when the solve ended, `Solution.integrals_final`),
         "plain_constraints" ({constraint: worst value over its tolerance} on the plain spline,
         `Solution.integrals_initial`), "metrics"
@@ -473,8 +474,19 @@ def _solve_fields(solution) -> dict:
             "keyframe_conflicts": len(solution.relaxations), "relaxed": _relaxed(solution),
             "stalled": dict(solution.unmet or {}),
             "certificate": [asdict(r) for r in getattr(solution, "certificate", ()) or ()],
+            "certificate_finer": _finer(solution),
             "unmet_at_end": {k: v for k, v in solution.integrals_final.items() if v > 1.0},
             "plain_constraints": dict(solution.integrals_initial)}
+
+
+def _finer(solution) -> dict | None:
+    """`Solution.finer` as JSON: {"rate" [1/s], "kept" (the finer solve's path returned), "other" (the other
+    solve's raises, `solver.feasibility.Raise`'s fields)}, or None when the certificate was not checked."""
+    finer = getattr(solution, "finer", ()) or ()
+    if not finer:
+        return None
+    rate, kept, other = finer
+    return {"rate": float(rate), "kept": bool(kept), "other": [asdict(r) for r in other]}
 
 
 def _relaxed(solution) -> dict:

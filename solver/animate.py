@@ -8,15 +8,23 @@ the command's path bit for bit (with the same BLAS thread count: the command use
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import replace
 
+import numpy as np
+
 from solver.errors import InputError
 from solver.least_change import LeastChangeOptions
+from solver.optimize import Status
 from solver.problem import Problem, ProblemSpec, build_problem
 from solver.solution import Solution
 
 __all__ = ["animate", "solve_problem"]
+
+#: [1] a certificate is checked at FINER times the solve's quadrature rate: one bisection of the quadrature
+#: interval, so the least violation's finest segment (two intervals, `solver.feasibility`) halves
+FINER = 2.0
 
 
 def animate(
@@ -73,24 +81,80 @@ def solve_problem(problem: Problem, options: LeastChangeOptions | None = None, *
                   should_stop: Callable[[], bool] | None = None,
                   progress: Callable[[str, dict], None] | None = None) -> Solution:
     """Solve a `Problem`: the least change to the plain spline that meets the figure's constraints
-    (`solver.least_change`, docs/design.md).
+    (`solver.least_change`, docs/design.md). Where the least violation raised a limit, it is checked at a
+    finer spacing (`_checked_finer`: the solve again at twice the rate, from its path).
 
     Args:
         problem: from `build_problem`. options: LeastChangeOptions (default: the command line's).
-        should_stop, progress: as for `animate`.
+        should_stop, progress: as for `animate`; progress also gets "finer" (rate [1/s], segment [s]: the
+            finer solve's rate and its search's finest segment) before the finer solve's own events.
     Returns:
-        Solution.
+        Solution (`Solution.finer`: what the check found).
     Raises:
         InputError: `problem` is not a Problem, `options` is not LeastChangeOptions.
     """
-    from solver.least_change import build_least_change, solve_least_change
+    from solver.least_change import solve_least_change
 
     if not isinstance(problem, Problem):
         raise InputError(f"problem must be a solver.Problem (from build_problem), got {type(problem).__name__}")
     options = LeastChangeOptions() if options is None else options
     if not isinstance(options, LeastChangeOptions):
         raise InputError(f"options must be a solver.LeastChangeOptions, got {type(options).__name__}")
-    lc = build_least_change(problem.model, problem.keyframes, contacts=tuple(problem.contacts),
-                            flights=problem.airborne, capture=problem.capture, rate=options.rate,
-                            forces=problem.forces, peaks=problem.force_bounds, bounds=problem.bounds)
-    return solve_least_change(lc, options, should_stop=should_stop, progress=progress)
+    solution = solve_least_change(_built(problem, options.rate), options, should_stop=should_stop, progress=progress)
+    if solution.certificate and solution.status is Status.INFEASIBLE:
+        return _checked_finer(problem, options, solution, should_stop, progress)
+    return solution
+
+
+def _built(problem: Problem, rate: float):
+    """The problem's `solver.least_change.LeastChange` with quadrature points at `rate` [1/s]."""
+    from solver.least_change import build_least_change
+
+    return build_least_change(problem.model, problem.keyframes, contacts=tuple(problem.contacts),
+                              flights=problem.airborne, capture=problem.capture, rate=rate,
+                              forces=problem.forces, peaks=problem.force_bounds, bounds=problem.bounds)
+
+
+def _checked_finer(problem: Problem, options: LeastChangeOptions, coarse: Solution, should_stop, progress) -> Solution:
+    """A certificate checked at a finer spacing: the least violation sought again at FINER times the rate, from
+    the returned path, so that the search (`solver.feasibility`) splits segments down to half the length. Where
+    it beats the certificate (`_beats`: it raises no column the certificate does not, none by more, and is not
+    the same), the least change is solved at that rate from the returned path and its answer returned; else
+    the coarse answer stands, checked. The least violation of a nonconvex problem is a search's, so the finer
+    search can also land higher. `Solution.finer` says what the other found; evaluations, time and rounds are
+    all of them. Within the options' budget; a check stopped early (time, evaluations, a stop request) leaves
+    the coarse answer.
+    """
+    from solver.least_change import least_violation_of, solve_least_change
+
+    spent = {"max_time_s": coarse.wall_time_s, "max_evals": coarse.n_evals}
+    left = {k: getattr(options, k) - v for k, v in spent.items() if getattr(options, k)}
+    if any(v <= 0 for v in left.values()):
+        return coarse
+    finer = replace(options, rate=FINER * options.rate, **{k: type(getattr(options, k))(v) for k, v in left.items()})
+    if progress:
+        progress("finer", {"rate": finer.rate, "segment": 2.0 / finer.rate})
+    t0 = time.perf_counter()
+    lc = _built(problem, finer.rate)
+    cert = least_violation_of(lc, coarse.frames, finer, should_stop=should_stop, progress=progress)
+    checked = {"n_evals": coarse.n_evals + cert.n_evals, "wall_time_s": coarse.wall_time_s + time.perf_counter() - t0}
+    if cert.status is not Status.CONVERGED:
+        return replace(coarse, **checked)
+    if not _beats(cert.raises, coarse.certificate):
+        return replace(coarse, finer=(finer.rate, False, tuple(cert.raises)), **checked)
+    fine = solve_least_change(lc, finer, should_stop=should_stop, progress=progress, from_frames=coarse.frames)
+    if fine.status not in (Status.CONVERGED, Status.INFEASIBLE) or not _beats(fine.certificate, coarse.certificate):
+        return replace(coarse, finer=(finer.rate, False, tuple(fine.certificate)), **checked)
+    return replace(fine, rounds=coarse.rounds + fine.rounds, trace=np.concatenate([coarse.trace, fine.trace]),
+                   n_evals=checked["n_evals"] + fine.n_evals, wall_time_s=checked["wall_time_s"] + fine.wall_time_s,
+                   finer=(finer.rate, True, tuple(coarse.certificate)))
+
+
+def _beats(fine, coarse) -> bool:
+    """Whether the Raises `fine` beat `coarse`: every (constraint, column) raised in `fine` is raised in `coarse`,
+    by at least as much [SI], and `fine` is not the same (fewer raised, or one by less)."""
+    was = {(r.constraint, r.label): r.amount for r in coarse}
+    now = {(r.constraint, r.label): r.amount for r in fine}
+    if any(k not in was or a > was[k] for k, a in now.items()):
+        return False
+    return len(now) < len(was) or any(a < was[k] for k, a in now.items())

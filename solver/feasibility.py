@@ -34,8 +34,8 @@ and the search certified 3.4 mm of slide; counted from the edge, the same solve 
    every pair is within its tolerance and started again from its end while a run gains more than
    ftol_rel of F (`_elastic_solve`), with a variable frame added to every segment that holds a broken
    pair while the segment can take one (`min_gap`: the least change passes two quadrature intervals, the
-   shortest segment whose acceleration, linear in time, two of its points fix, so no finer spacing the
-   quadrature resolves beats the certificate), and solved again. Where this meets every pair the
+   shortest segment whose acceleration, linear in time, two of its points fix; a finer spacing needs a finer
+   quadrature: `solver.animate.solve_problem` checks a certificate at twice the rate), and solved again. Where this meets every pair the
    problem is feasible: nothing is raised.
 2. **Else level by level** (`Constraint.priority`: the limits of the body and the scene first, then the
    bounds on what the reference motion's body does, the contact schedule's wishes, and the unit-norm

@@ -57,7 +57,7 @@ from solver.spline_basis import SplineBasis
 from solver.subdivide import knot_hint_times
 
 _MET_AS_IS = "the reference motion meets every constraint within its tolerance: it is the least change (D = 0)"
-__all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "solve_least_change"]
+__all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "least_violation_of", "solve_least_change"]
 
 #: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
 STANDARD_GRAVITY = 9.80665
@@ -79,7 +79,7 @@ class LeastChangeOptions:
         min_gap: [s] no two frames the refinement adds closer: 1/48 s, half a frame of 24 fps film; a cubic
             spline through frames closer than that kinks between them (its second derivative grows like
             1/h^2). The least violation (`solver.feasibility`) splits a segment holding a broken pair down to two
-            quadrature intervals (2 / rate): a limit is raised only where no finer spacing it resolves helps.
+            quadrature intervals (2 / rate); `solver.animate.solve_problem` checks a raised limit at twice the rate.
         max_subproblems: subproblems in all (each an L-BFGS run), a guard against a method that cycles:
             100, above the most a converging solve was measured to need (24 on the corpus, 83_02 at contacts).
         per_level: subproblems on one frame set before refining it anyway (the multipliers converge
@@ -229,11 +229,11 @@ def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
     return with_frames(frames, on_points(mids[np.diff(frames.times) >= 2 * min_gap], lc.al.t, frames), lc.layout.quat_slots)
 
 
-def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, tuple]:
-    """The starting frames (`_start_frames`) and their maps (`solver.lagrangian.frame_maps`); sets the
+def _start(lc: LeastChange, min_gap: float, frames: FrameSet | None = None) -> tuple[FrameSet, tuple]:
+    """The starting frames (`frames`, or `_start_frames`) and their maps (`solver.lagrangian.frame_maps`); sets the
     starting penalty rho_0 on `lc.al` (`solver.lagrangian.initial_penalty`)."""
     al = lc.al
-    frames = _start_frames(lc, min_gap)
+    frames = _start_frames(lc, min_gap) if frames is None else frames
     basis, pre = frame_maps(al, frames, lc.layout.quat_slots)
     al.rho = initial_penalty(al, basis, FrameVariables(frames, lc.layout.quat_slots), pre)
     return frames, (basis, pre)
@@ -241,7 +241,7 @@ def _start(lc: LeastChange, min_gap: float) -> tuple[FrameSet, tuple]:
 
 def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = None, *,
                        should_stop: Callable[[], bool] | None = None,
-                       progress: Callable[[str, dict], None] | None = None) -> Solution:
+                       progress: Callable[[str, dict], None] | None = None, from_frames: FrameSet | None = None) -> Solution:
     """Solve a built problem by the method of multipliers with adaptive variable frames, and the least
     violation where a frame set's subproblems end with a constraint broken (module docstring).
 
@@ -253,6 +253,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             (evals, E: the best Phi so far), "constraints" (it ended: round, worst, value as `_worst`, rho:
             the next penalty), "certify" (the least violation was sought: round, frames, raised {constraint:
             amount [SI]}, evals: the solve's so far, spent: the search's), "estimate" (round, estimate: the predicted decrease over Phi, tol).
+        from_frames: the frames to start from (a path through `lc`'s keyframes, e.g. another rate's solution); None:
+            the plain spline's with variable frames at the contacts' ends and in every segment.
     Returns:
         Solution: frames, initial (the plain spline's), one Round per subproblem, status (CONVERGED only
         when no limit was raised; INFEASIBLE when the certificate raised one and the rest converged), E =
@@ -262,8 +264,8 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     o = options or LeastChangeOptions()
     lc = replace(lc, al=lc.al.posed())  # the solve's own multipliers and limits
     al, start = lc.al, time.perf_counter()
-    frames, (basis, pre) = _start(lc, o.min_gap)
-    if _worst(al, al.scaled_values(basis, frames.values))["value"] <= 1.0:  # met at D = 0, D's least value
+    frames, (basis, pre) = _start(lc, o.min_gap, from_frames)
+    if from_frames is None and _worst(al, al.scaled_values(basis, frames.values))["value"] <= 1.0:  # met at D = 0, D's least
         return replace(_solution(lc, frames, basis, [], [], Status.CONVERGED, _MET_AS_IS, 0, (),
                                  time.perf_counter() - start, 0.0, o.tol), estimate_kind="reference")
     return _iterate(lc, o, frames, (basis, pre), start, should_stop, progress)
@@ -407,6 +409,13 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     al.lam = [np.where(c.limit != old, 0.0, lam) for c, lam, old in zip(al.constraints, al.lam, before)]
     al.V = np.inf if cert.raises else al.V
     return cert
+
+
+def least_violation_of(lc: LeastChange, frames: FrameSet, options: LeastChangeOptions, *, should_stop=None, progress=None):
+    """The least violation of `lc` as posed, searched from `frames` as a solve searches it after a stall (`_certify`:
+    both starts, segments down to two quadrature intervals), on its own copy: `solver.animate`'s check of a certificate
+    at a finer spacing. Returns the `solver.feasibility.Certificate`."""
+    return _certify(replace(lc, al=lc.al.posed()), frames, options, time.perf_counter(), 0, should_stop, progress, 0)
 
 
 def _pairs(lc: LeastChange) -> int | None:

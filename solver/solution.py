@@ -82,6 +82,10 @@ class Solution:
         segment_decreases: the least change's refinement checks, in order: ((frame times (m,) [s],
             (m - 1,) the decrease of Phi a midpoint frame predicts in each segment: the Euler-Lagrange
             residual of the augmented integrand, `solver.least_change_refine`), ...); () for `solve`.
+        finer: the certificate checked at a finer spacing (`solver.animate.solve_problem`): (rate [1/s] of the
+            finer solve, kept: True when its path is the one returned (it raised no limit more and one less
+            or by less), the other solve's Raises: the coarser's when kept, else the finer's); () when nothing was
+            raised or the check did not run.
         multipliers: the least change's multiplier estimates at its end, ((constraint name, (p,) lambda >= 0
             per pair, per unit of c/tol), ...) in the problem's order (Nocedal & Wright, sec. 17.3); () for
             `solve`.
@@ -110,6 +114,7 @@ class Solution:
     relaxations: tuple = ()
     segment_decreases: tuple = ()
     certificate: tuple = ()
+    finer: tuple = ()
     multipliers: tuple = ()
 
     @cached_property

@@ -562,6 +562,15 @@ def test_a_raised_limit_is_placed_among_the_keyframes_and_a_clean_s_frames_are_c
     frames = np.linspace(0.0, 1.0, 11)
     clean = SimpleNamespace(certificate=raises[:1], frames=SimpleNamespace(times=frames, is_keyframe=np.isin(frames, [0.0, 1.0])))
     assert certificate_lines(clean)[1] == "  slide at r_toe 408 mm at 0.700 s (0.6-0.8 s)"
+    # checked at a finer spacing: the coarse answer stands (the finer search raised more), or the finer path
+    # is kept and met everything (then the line is the only one, and names what the coarse solve raised)
+    stands = SimpleNamespace(certificate=raises[:1], frames=keyed.frames, finer=(400.0, False, raises))
+    assert certificate_lines(stands)[-1].startswith("checked at a finer spacing: at 400 points/s the search raised no "
+                                                    "less (slide at r_toe 408 mm")
+    kept = SimpleNamespace(certificate=(), frames=keyed.frames, finer=(400.0, True, raises[:1]))
+    assert certificate_lines(kept) == ["checked at a finer spacing: the path is the solve's at 400 points/s, which raised "
+                                       "less than the solve at 200 (slide at r_toe 408 mm at 0.700 s (0.6-0.8 s))"]
+    assert certificate_lines(SimpleNamespace(certificate=(), frames=keyed.frames)) == []  # nothing raised, no check
     sol = solution()
     sol.frames = SimpleNamespace(count=11, n_variable=9, times=frames, is_keyframe=clean.frames.is_keyframe)
     assert "frames: 2 keyframes + 9 variable; " in summary_table(metrics(), metrics(), sol)

@@ -265,6 +265,10 @@ def test_a_bound_of_your_own_through_the_public_api(standing):
     sol = solver.solve_problem(problem, LeastChangeOptions())
     assert [r.constraint for r in sol.certificate] == ["pelvis ceiling"]
     assert sol.certificate[0].amount == pytest.approx(0.005, abs=1e-9) and sol.status is Status.INFEASIBLE
+    # checked at twice the rate (the search's segments halved): the keyed 5 mm there too, whichever is kept
+    rate, _, other = sol.finer
+    assert rate == 2 * LeastChangeOptions().rate
+    assert [r.constraint for r in other] == ["pelvis ceiling"] and other[0].amount == pytest.approx(0.005, abs=1e-9)
     with pytest.raises(solver.InputError, match="not a solver.Constraint"):
         solver.solve_problem(solver.build_problem(model, solver.ProblemSpec(still, bounds=(lambda t: 3.0,))))
 
@@ -439,3 +443,22 @@ def test_an_integral_bound_under_a_limit_is_certified_at_its_closed_form(standin
     cert = least_violation(lc.al.posed(), frames, lc.layout.quat_slots, min_gap=2.0 / 200.0, ftol_rel=o.ftol_rel,
                            per_level=o.per_level)
     assert cert.unmet["window mean"] >= least - slack
+
+
+def test_a_finer_certificate_beats_only_one_it_raises_no_more_than_anywhere():
+    """`solver.animate._beats`, on Raises built by hand: the finer spacing's certificate is kept where it raises
+    nothing the coarse one does not, nothing by more, and is not the same."""
+    from solver.animate import _beats
+    from solver.feasibility import Raise
+
+    def raised(name, label, amount):
+        return Raise(name, label, amount, 1.0, 1.0, 1.0, 1)
+
+    coarse = (raised("acceleration", "r_elbow", 1108.0), raised("flight", "r_toe", 0.0099))
+    assert _beats((), coarse)  # nothing raised at the finer spacing
+    assert _beats((raised("acceleration", "r_elbow", 584.0), coarse[1]), coarse)  # one raised by less
+    assert _beats((coarse[1],), coarse)  # one fewer
+    assert not _beats(coarse, coarse)  # the same: the coarse answer stands
+    assert not _beats((raised("acceleration", "r_elbow", 3191.0),), coarse)  # more at one column
+    assert not _beats((raised("acceleration", "l_elbow", 1.0),), coarse)  # a column the coarse did not raise
+    assert not _beats((), ())
