@@ -82,12 +82,12 @@ def solve_problem(problem: Problem, options: LeastChangeOptions | None = None, *
                   progress: Callable[[str, dict], None] | None = None) -> Solution:
     """Solve a `Problem`: the least change to the plain spline that meets the figure's constraints
     (`solver.least_change`, docs/design.md). Where the least violation raised a limit, it is checked at a
-    finer spacing (`_checked_finer`: the solve again at twice the rate, from its path).
+    finer spacing (`_checked_finer`: the search again at twice the rate, from the returned path).
 
     Args:
         problem: from `build_problem`. options: LeastChangeOptions (default: the command line's).
         should_stop, progress: as for `animate`; progress also gets "finer" (rate [1/s], segment [s]: the
-            finer solve's rate and its search's finest segment) before the finer solve's own events.
+            check's rate and its search's finest segment) before the check's own events.
     Returns:
         Solution (`Solution.finer`: what the check found).
     Raises:
@@ -143,11 +143,11 @@ def _checked_finer(problem: Problem, options: LeastChangeOptions, coarse: Soluti
     if not _beats(cert.raises, coarse.certificate):
         return replace(coarse, finer=(finer.rate, False, tuple(cert.raises)), **checked)
     fine = solve_least_change(lc, finer, should_stop=should_stop, progress=progress, from_frames=coarse.frames)
+    checked = {"n_evals": checked["n_evals"] + fine.n_evals, "wall_time_s": checked["wall_time_s"] + fine.wall_time_s}
     if fine.status not in (Status.CONVERGED, Status.INFEASIBLE) or not _beats(fine.certificate, coarse.certificate):
         return replace(coarse, finer=(finer.rate, False, tuple(fine.certificate)), **checked)
     return replace(fine, rounds=coarse.rounds + fine.rounds, trace=np.concatenate([coarse.trace, fine.trace]),
-                   n_evals=checked["n_evals"] + fine.n_evals, wall_time_s=checked["wall_time_s"] + fine.wall_time_s,
-                   finer=(finer.rate, True, tuple(coarse.certificate)))
+                   finer=(finer.rate, True, tuple(coarse.certificate)), **checked)
 
 
 def _beats(fine, coarse) -> bool:
