@@ -124,10 +124,10 @@ class Progress:
                     "out of reach, limits raised by [SI]: " + ", ".join(f"{k} {v:.3g}" for k, v in raised.items()))
             self._line(f"  round {info['round'] + 1}: least violation sought ({info.get('spent', 0)} evaluations, "
                        f"{info.get('frames', 0)} frames): {what}")
-        elif event == "finer":  # limits were raised: the solve again at a finer spacing checks them
+        elif event == "finer":  # limits were raised: the least violation sought at a finer spacing checks them
             self._end_round()
-            self._line(f"  limits raised: checked by the solve again at {info['rate']:g} points/s (the least violation's "
-                       f"segments down to {1e3 * info['segment']:.3g} ms), from its path")
+            self._line(f"  limits raised: the least violation sought again at {info['rate']:g} points/s (segments down "
+                       f"to {1e3 * info['segment']:.3g} ms), from the path found")
         elif event == "estimate":  # after a round: what refinement still predicts (SolveOptions.tol)
             self._end_round()
             tol = f" (tol {info['tol']:g})" if info.get("tol") else ""

@@ -134,6 +134,9 @@ def test_the_least_violation_shows_its_progress_off_a_terminal(monkeypatch):
     assert "least violation: done, 80 evaluations, F 0.125, 8.0 s" in lines[-2]
     assert lines[-1] == ("  round 8: least violation sought (80 evaluations, 961 frames): out of reach, limits "
                          "raised by [SI]: planted 0.0127")
+    p("finer", {"rate": 400.0, "segment": 0.005})  # then the check at a finer spacing says what it does
+    assert stream.getvalue().splitlines()[-1] == ("  limits raised: the least violation sought again at 400 points/s "
+                                                  "(segments down to 5 ms), from the path found")
 
 
 def test_steps_off_a_terminal_start_still_and_end_lines(monkeypatch):
