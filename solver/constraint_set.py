@@ -2,6 +2,7 @@
 
     penetration  every contact site's lowest point outside every plane and box, at every instant  d >= 0     1 mm
     planted      over each foot contact, the support site's mean height                 mean h <= FLOAT_LIMIT 2 mm
+                 in a clean, over each site contact, that site's (solver.foot_bounds)   <= the capture's own
     slide        over each site contact, the slide beyond what the keyframes force    <= allowance (below)  2 mm
     flight       in a flight, every site clear (the field's flight height)             h >= 3.1 cm      1 mm
     ground       outside flights, the site the reference holds lowest is down          h <= 2.9 cm      1 mm
@@ -25,13 +26,7 @@ is posed between them: a bound there asks for a crossing time no data gave, and 
 velocity at the key could meet it. The two frames themselves are quadrature points (`flight_edge_frames`),
 where ground and flight hold as the capture observed them.
 
-A foot contact is a foot's sites' contacts merged; at each point of one the support site is the foot's
-site that the schedule has in contact there and the reference motion holds lowest: a walking foot
-rolls from its heel onto its toe, and the toe carries it while the heel rises (the float metric of the
-field is the foot's lowest point, ../shared/METRICS.md). Planted and slide are integrals over the foot
-contact (its mean height, the distance it slides): a contact detected on a capture begins and ends
-with the site still moving (entry below 0.5 m/s and 3 cm, exit above 1 m/s or 5 cm: solver.contacts),
-so a bound at every point would have the site held still to the contact's end and then thrown off it.
+The feet's bounds in contact, planted and slide, are `solver.foot_bounds`'s.
 
 What the keyframes force. Keyframes are met exactly, so a constraint a keyframe breaks cannot be met
 there; the problem is made well posed instead of excused:
@@ -78,91 +73,30 @@ so a user sees where the keyframes, not the optimizer, decide.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from solver.capture_bounds import capture_accelerations, capture_effort, capture_state, filtered_capture, reference_state
 from solver.constraints.anatomy import anatomy_constraints
 from solver.constraints.penetration import Penetration
-from solver.constraints.sites import HeightBound, SupportHeight, SupportSlide, huber, site_heights
+from solver.constraints.sites import HeightBound, SupportHeight, site_heights
 from solver.constraints.tracking import SiteTracking, mean_site_distance
 from solver.constraints.unit import UnitNorm
 from solver.contact_thresholds import FLIGHT_HEIGHT
-from solver.contacts import contact_radii, foot_contacts, site_positions
+from solver.contacts import contact_radii, site_positions
+from solver.foot_bounds import Relaxation, foot_bounds, full_keyframes
 from solver.layout import StateLayout
 from solver.path_state import PathState
 from solver.support import SupportSurfaces
 from solver.surfaces import StaticSurfaces
 
-__all__ = ["TOLERANCES", "Relaxation", "figure_constraints", "flight_edge_frames"]
+__all__ = ["TOLERANCES", "figure_constraints", "flight_edge_frames"]
 
-#: [1] the share of a known path's slide beyond what the keyframes force (the plain spline's, the capture's)
-#: that the path may keep: half, the product's skate requirement (docs/corpus.md, `skate_excess`)
-SLIDE_SHARE = 0.5
-#: [m] a planted foot's mean height over its contact: 2 mm (with the 2 mm tolerance, under the 5 mm float
-#: of PhysDiff's metric, ../shared/METRICS.md; a sole resting on a floor sits about that high in a capture)
-FLOAT_LIMIT = 2e-3
-#: [m/s] the width of the Huber function that smooths a sliding speed at 0 (`SupportSlide`): 1 cm/s,
-#: where a site's slide is within the capture's marker noise (about 1 mm per frame at 120 fps)
-SLIDE_SMOOTHING = 1e-2
-#: [m/frame] a clean's skate in contact, mean over its contacts' frames (docs/corpus.md "Cleaning the corpus"), what
-#: its slides are measured to (`figure_constraints`' `frames`): the Huber width at most this a frame (the keyed
-#: 1 cm/s where narrower, at 50 fps and above) and each contact's tolerance half of it a frame step (the keyed
-#: 2 mm where less). By Jensen's inequality a slide met within that tolerance moves on average at most
-#: huber_b^-1(tol / T) a frame, tol / T + b / 2 = this with both at their largest: within the bound at any
-#: frame rate, as the planted limit and its tolerance are within the float bound (the keyed 2 mm over a
-#: 3-frame contact at 30 fps is 0.55 mm a frame)
-CLEAN_SKATE = 2e-4
-#: [m] a capture file's position resolution (0.01 cm): the width that smooths a clean's planted heights'
-#: positive part (`SupportHeight`'s `above`: within half of it of max(0, h))
-CAPTURE_RESOLUTION = 1e-4
 #: each constraint's tolerance [SI]: a pair is met when c <= tolerance (the acceptance bounds' units:
 #: penetration 1 mm; float 2 mm, under the 5 mm of PhysDiff's float; slide 2 mm; flight 1 mm above the
 #: field's 3 cm flight height; angles 1 deg, hyperextension 0.5 deg as the acceptance list; unit norm 0.01,
 #: a third of its limit)
 TOLERANCES = {"penetration": 1e-3, "planted": 2e-3, "slide": 2e-3, "flight": 1e-3,
               "hinge": float(np.radians(1.0)), "hyperextension": float(np.radians(0.5)), "rom": float(np.radians(1.0)), "unit": 0.01}
-
-
-@dataclass(frozen=True)
-class Relaxation:
-    """Where the keyframes decide a constraint (module docstring).
-
-    Attributes:
-        constraint: its name. label: the site or joint. keyframe: index of the keyframe (-1: several).
-        start, end: [s] the span relaxed. amount: [SI] the largest amount the limit was raised by.
-    """
-    constraint: str
-    label: str
-    keyframe: int
-    start: float
-    end: float
-    amount: float
-
-
-def frame_weights(t: np.ndarray, frames: np.ndarray) -> np.ndarray:
-    """(q,) [s] quadrature weights at the points `t` (q,) that sum over the capture `frames` (n,) [s], n >= 2:
-    the frame step at the point of each frame, 0 elsewhere (a mean over a contact is then its frames' own
-    mean, as the float figure takes it: ../shared/METRICS.md).
-
-    Raises:
-        ValueError: a frame more than a microsecond from every point (a clean's frames are its points:
-            `solver.quadrature.simpson_points`).
-    """
-    t, frames = np.asarray(t, float), np.asarray(frames, float)
-    i = np.clip(np.searchsorted(t, frames), 1, len(t) - 1)
-    i = np.where(np.abs(t[i - 1] - frames) < np.abs(t[i] - frames), i - 1, i)
-    if np.any(np.abs(t[i] - frames) > 1e-6):  # [s] a microsecond: the points are sums of float steps
-        raise ValueError("a capture frame is not a quadrature point")
-    w = np.zeros(len(t))
-    w[i] = float(np.median(np.diff(frames)))
-    return w
-
-
-def _pairs_in(t: np.ndarray, a: float, b: float) -> np.ndarray:
-    """Indices of quadrature points in the closed interval [a, b]."""
-    return np.flatnonzero((t >= a) & (t <= b))
 
 
 def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None,
@@ -180,7 +114,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             as the plain spline keeps them (`solver.constraints.tracking`; not a clean, whose plain spline is
             the capture). frames: (n,) [s] a clean's capture frame times, each a quadrature point: a clean is
             written and judged at its frames, so its planted means are of the heights' positive part over a
-            contact's frames (`frame_weights`, to `CAPTURE_RESOLUTION`), its slides per frame (`CLEAN_SKATE`);
+            contact's frames (`solver.foot_bounds.frame_weights`, to `CAPTURE_RESOLUTION`), its slides per frame (`CLEAN_SKATE`);
             None: a keyed path's (signed heights by the midpoint rule; `SLIDE_SMOOTHING`, 2 mm a contact).
             no_jolt: with a capture, the no-jolt bound (a `Constraint`) in place of `capture_accelerations`'s
             (a clean's bounds the change's accelerations, `solver.displacement.ChangeAcceleration`).
@@ -197,17 +131,9 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     if engine is not None and surfaces.count:
         out.append(Penetration(surfaces, radii, t, sites, TOLERANCES["penetration"]))
         witness = None if capture is None else capture_state(model, reference, capture, engine)
-        feet = _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness,
-                             planted_tolerance, frames)
-        if feet is not None:
-            args, limit_h, reports = feet
-            height = SupportHeight(*args, limit=limit_h, tolerance=planted_tolerance,
-                                   above=0.0 if frames is None else CAPTURE_RESOLUTION)
-            rate = None if frames is None else 1.0 / float(np.median(np.diff(frames)))
-            slide, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness,
-                                                rate)
-            height.reports = reports + slide_reports
-            out += [height, slide]
+        feet = foot_bounds(model, figure, reference, plain, contacts, state, support, radii, witness, TOLERANCES,
+                           planted_tolerance, frames)
+        out += list(feet or ())
         if track and witness is not None:
             out += _tracking(reference, state, witness)
         if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
@@ -236,24 +162,6 @@ def _tracking(reference, plain: PathState, capture: PathState) -> list:
     return [SiteTracking(reference.weights, capture.sites, bound)] if bound > 0 else []
 
 
-def _full_keyframes(plain):
-    """(indices, times, values) of the keyframes that fix every component (they pin every site)."""
-    full = np.flatnonzero(plain.is_keyframe & plain.fixed.all(axis=1))
-    return full, plain.times[full], plain.values[full]
-
-
-def _run(values: np.ndarray, j: int) -> slice:
-    """The run of consecutive positive entries of `values` around index j (empty if values[j] <= 0)."""
-    if values[j] <= 0:
-        return slice(j, j)
-    lo, hi = j, j
-    while lo > 0 and values[lo - 1] > 0:
-        lo -= 1
-    while hi < len(values) - 1 and values[hi + 1] > 0:
-        hi += 1
-    return slice(lo, hi + 1)
-
-
 def _relax_heights(constraints, state, plain, model, sites, support, radii, flights) -> list[Relaxation]:
     """Raise the pointwise limits (penetration, flight, ground) a full keyframe breaks by more than the
     tolerance to the plain spline's own values on its excursion, at most the keyframe's own (module
@@ -261,7 +169,7 @@ def _relax_heights(constraints, state, plain, model, sites, support, radii, flig
     keyframe's value is the plain spline's at the pair nearest it (`Penetration`'s pairs stand for the
     intervals between quadrature points, at their midpoints); every time series of the
     same site (and surface) is relaxed on its own run of broken pairs around the keyframe."""
-    index, times, values = _full_keyframes(plain)
+    index, times, values = full_keyframes(plain)
     keyed = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
     keyed[..., 2] -= radii  # the contact points, as `Penetration` samples them
     t = state.t
@@ -368,124 +276,3 @@ def _flight_and_ground(model, reference, plain, engine, support, radii, flights,
         out.append(HeightBound("ground", support, radii, on, cols, -np.ones(len(on), int),
                                np.full(len(on), FLIGHT_HEIGHT - tol), True, tol, np.array(sites, object)[cols]))
     return out
-
-
-def _site_slides(model, reference, plain, contacts, support, radii, sites, state, witness=None, frame_rate=None):
-    """The slide constraint (`SupportSlide`), a pair per site contact (the site's own contact), its limit the
-    slide the keyframes force in its own measure (Jensen's inequality: module docstring) plus an allowance:
-    SLIDE_SHARE of what the plain spline (`state`, the reference) or the `witness` slides beyond that,
-    whichever is less; and the relaxations worth reporting (the keyframes force more than the tolerance).
-    With a `frame_rate` [Hz] (a clean) the Huber width and each pair's tolerance are per frame (`CLEAN_SKATE`)."""
-    b = SLIDE_SMOOTHING if frame_rate is None else min(SLIDE_SMOOTHING, CLEAN_SKATE * float(frame_rate))
-    t, w = reference.t, reference.weights
-    index, times, values = _full_keyframes(plain)
-    keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else np.zeros((0, len(sites), 2))
-    cols_, pts, surf, pair, ww, span, rows, labels, keyed, reports = [], [], [], [], [], [], [], [], [], []
-    for c in contacts:
-        on = _pairs_in(t, c.start, c.end)
-        if not on.size:
-            continue
-        col = sites.index(c.site)
-        k = len(keyed)
-        pts.append(on)
-        cols_.append(np.full(len(on), col))
-        surf.append(np.full(len(on), -1 if not c.surface else support.index(c.surface)))
-        pair.append(np.full(len(on), k))
-        ww.append(w[on])
-        span.append(float(w[on].sum()))
-        rows.append(int(on[len(on) // 2]))
-        labels.append(c.site)
-        inside = np.flatnonzero((times >= c.start - 1e-6) & (times <= c.end + 1e-6))
-        d = np.linalg.norm(np.diff(keyed_xy[inside, col], axis=0), axis=-1)  # [m] between consecutive keys
-        dt = np.diff(times[inside])
-        forced = float(dt @ huber(d / dt, b)) if len(d) else 0.0  # Jensen: the slide's own measure
-        keyed.append(forced)
-        if forced > TOLERANCES["slide"]:  # worth saying: the keyframes force more than the tolerance
-            reports.append(Relaxation("slide", c.site, int(index[inside[-1]]), float(times[inside[0]]),
-                                      float(times[inside[-1]]), forced))
-    forced, span = np.array(keyed), np.array(span)
-    args = (support, radii, np.concatenate(pts), np.concatenate(cols_), np.concatenate(surf), np.concatenate(pair),
-            np.concatenate(ww), span, np.array(rows), np.array(labels, object))
-    tol = (TOLERANCES["slide"] if frame_rate is None  # a clean: half CLEAN_SKATE a frame step
-           else np.minimum(TOLERANCES["slide"], 0.5 * CLEAN_SKATE * float(frame_rate) * span))
-    slide = SupportSlide(*args, limit=forced, tolerance=tol, width=b, forced=forced)
-    allowance = np.full(len(forced), np.inf)
-    for path in (state, witness):  # a known path through the keyframes: the path halves its excess
-        if path is not None:
-            allowance = np.minimum(allowance, SLIDE_SHARE * np.maximum(0.0, slide.measure(path) - forced))
-    slide.limit = forced + allowance
-    return slide, reports
-
-
-def _foot_support(model, figure, reference, plain, contacts, state, support, radii, witness=None,
-                  tolerance: float = TOLERANCES["planted"], frames=None):
-    """The foot contacts' support points (`solver.constraints.sites._FootSupport`) and their limits
-    relaxed where the keyframes force (module docstring), or None without contacts. Where a keyframe holds
-    a foot up, the limit is what a known path through the keyframes does over the contact: `witness` (the
-    capture they came from, a PathState at the quadrature points), else the plain spline (`state`).
-    `tolerance` [m]: the planted limits'. `frames` (n,) [s]: the means are over these frames (`frame_weights`);
-    None: the midpoint rule's.
-
-    Returns:
-        (args of `_FootSupport`, planted limits (p,) [m], relaxation reports).
-    """
-    sites = tuple(figure.contact_sites)
-    t = reference.t
-    w = reference.weights if frames is None else frame_weights(t, frames)
-    index, times, values = _full_keyframes(plain)
-    keyed_pts = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
-    keyed_low = keyed_pts.copy()
-    keyed_low[..., 2] -= radii  # the contact points (lowest points of the sites' spheres)
-    args = tuple([] for _ in range(8))
-    limits_h, reports = [], []
-    feet = {s: name for name, pair in figure.feet.items() for s in pair}
-    for F in foot_contacts(list(contacts), dict(figure.feet)):
-        mine = [c for c in contacts if feet.get(c.site) == F.site and c.end >= F.start and c.start <= F.end]
-        on = _pairs_in(t, F.start, F.end)
-        if frames is not None:
-            on = on[w[on] > 0]  # the contact's frames: the points of the mean
-        if not on.size:
-            continue
-        cand = np.full((len(on), len(sites)), np.inf)  # reference height of each site in contact there
-        surf = np.full((len(on), len(sites)), -1, int)
-        for c in mine:
-            col = sites.index(c.site)
-            inside = (t[on] >= c.start) & (t[on] <= c.end)
-            si = -1 if not c.surface else support.index(c.surface)
-            h, _ = site_heights(state, support, radii, on[inside], np.full(inside.sum(), col),
-                                np.full(inside.sum(), si), None)
-            better = h < cand[inside, col]
-            cand[np.flatnonzero(inside)[better], col] = h[better]
-            surf[np.flatnonzero(inside)[better], col] = si
-        cols = np.argmin(cand, axis=1)
-        ok = np.isfinite(cand[np.arange(len(on)), cols])
-        on, cols = on[ok], cols[ok]
-        if not on.size:
-            continue
-        surfaces = surf[np.flatnonzero(ok), cols]
-        href = cand[np.flatnonzero(ok), cols]
-        if witness is not None:
-            href = site_heights(witness, support, radii, on, cols, surfaces, None)[0]
-        p, held_up = len(limits_h), len(reports)
-        span = float(w[on].sum())
-        for j, (k, tk) in enumerate(zip(index, times)):  # keyframes inside the foot contact
-            if not (F.start - 1e-6 <= tk <= F.end + 1e-6):
-                continue
-            i = int(np.argmin(np.abs(t[on] - tk)))
-            keyed, _ = support.height(keyed_low[j, cols[i]][None], None if surfaces[i] < 0 else int(surfaces[i]))
-            if keyed[0] - FLOAT_LIMIT <= tolerance:
-                continue  # the keyframe meets the bound
-            run = _run(href - FLOAT_LIMIT, i)
-            run = run if run.stop > run.start else slice(i, i + 1)
-            reports.append(Relaxation("planted", F.site, int(k), float(t[on[run.start]]), float(t[on[run.stop - 1]]),
-                                      float(keyed[0])))
-        limit_h = FLOAT_LIMIT
-        if len(reports) > held_up:  # a keyframe holds the foot up: met where it floats no more than the witness
-            limit_h = max(FLOAT_LIMIT, float(w[on] @ href) / span - tolerance)
-        for lst, val in zip(args, (on, cols, surfaces, np.full(len(on), p), w[on], [span], [int(on[len(on) // 2])], [F.site])):
-            lst.append(np.asarray(val))
-        limits_h.append(limit_h)
-    if not limits_h:
-        return None
-    support_args = (support, radii, *(np.concatenate(a) for a in args))
-    return support_args, np.array(limits_h), reports

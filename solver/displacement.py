@@ -43,7 +43,7 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
 * **The feet are measured at the capture's frames**, where the clip is written and judged
   (`solver.constraint_set.figure_constraints`' `frames`): a planted mean over a contact's frames, of the
   heights' positive part, and the slide per frame, within the clean's skate bound
-  (`solver.constraint_set.CLEAN_SKATE`). At 30 fps the midpoint rule gave a running contact's last
+  (`solver.foot_bounds.CLEAN_SKATE`). At 30 fps the midpoint rule gave a running contact's last
   frame, the foot 2-4 cm up, half its weight in the float figure, and 2 mm of slide over a 3-frame contact
   was 0.55 mm a frame.
 * **The quadrature is Simpson's rule on the capture's frame intervals** (`solver.quadrature.simpson_points`: the

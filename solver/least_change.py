@@ -129,7 +129,7 @@ class LeastChange:
     Attributes:
         model: mujoco.MjModel. layout: its StateLayout. figure: its Figure. plain: FrameSet of the plain
         spline through the keyframes (the reference motion). al: the AugmentedLagrangian (D, the
-        constraints, multipliers, penalty). relaxations: the `solver.constraint_set.Relaxation`s the
+        constraints, multipliers, penalty). relaxations: the `solver.foot_bounds.Relaxation`s the
         keyframes force. knots: (r,) [s] times where a contact starts or ends (frames go there first).
         capture: None, or (times (n,) [s], qpos (n, nq)) the capture the keyframes came from (the least
         violation's second start, `solver.feasibility.capture_start`; a clean's is `plain` itself, d = 0).

@@ -77,7 +77,7 @@ class Solution:
             raise of each (`solver.feasibility`); {} for `solve`.
         certificate: the least change's `solver.feasibility.Raise`s: per constraint and column, the least
             violation no path through the keyframes beats [SI], where and over which span; () for `solve`.
-        relaxations: the least change's `solver.constraint_set.Relaxation`s: where the keyframes decide a
+        relaxations: the least change's `solver.foot_bounds.Relaxation`s: where the keyframes decide a
             constraint (which, site or joint, keyframe, span [s], amount [SI]); () for `solve`.
         segment_decreases: the least change's refinement checks, in order: ((frame times (m,) [s],
             (m - 1,) the decrease of Phi a midpoint frame predicts in each segment: the Euler-Lagrange

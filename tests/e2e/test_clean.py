@@ -86,3 +86,50 @@ def test_a_clean_that_can_meet_every_constraint_raises_nothing(tmp_path):
     assert report["status"] == "converged" and not report["certificate"], (report["status"], report["certificate"])
     assert report["metrics"]["motion"]["optimized"]["path"]["skate_contact_mm"] <= 0.2
     assert result["exit"] == "ok"
+
+
+@pytest.mark.slow
+def test_every_site_in_contact_stays_as_near_its_surface_as_captured(tmp_path):
+    """A shipped dance (05_09, 150 frames at 60 Hz) standing on the floor and a box, heels and toes in contact the
+    whole clip: its heels must come down to the planted limit, and a foot pitched about the ankle would lower a
+    heel by lifting its toe several times as far (before each site had a pair of its own, the clean lifted both
+    toes 2.4-4.6 cm). Each site's mean height over its contact at the capture's frames, on the written path by
+    MuJoCo's kinematics above the plane or box top the schedule names, is no more than the capture's, FLOAT_LIMIT
+    where lower, plus the 1 mm tolerance and what the certificate raised at that site."""
+    import mujoco
+
+    from solver.foot_bounds import FLOAT_LIMIT
+
+    process_clean(MODELS / "cmu" / "05_09.bvh", tmp_path, CleanOptions(render=False, quiet=True, summary=False),
+                  say=lambda *_: None)
+    saved = np.load(tmp_path / "05_09.clean.npz", allow_pickle=True)
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "05_09.scene.xml"))
+    raised = {r["label"]: r["amount"] for r in json.loads(str(saved["certificate_json"])) if r["constraint"] == "planted"}
+    t = saved["path_times"]
+    heights = [_heights(model, saved[k], saved["contacts"]) for k in ("reference_qpos", "path_qpos")]
+    for k, (site, start, end, _) in enumerate(saved["contacts"]):
+        on = (t >= start - 1e-9) & (t <= end + 1e-9)
+        captured, cleaned = heights[0][on, k].mean(), heights[1][on, k].mean()
+        # [m] the tolerance and the 0.1 mm by which the pair's smoothed positive part may fall under a mean height
+        assert cleaned <= max(FLOAT_LIMIT, captured) + 1e-3 + raised.get(str(site), 0.0) + 1e-4, (site, captured, cleaned)
+
+
+def _heights(model, qpos, contacts) -> np.ndarray:
+    """(n, c) [m] each contact's site height above its surface, the floor z = 0 or a box's top face, at each pose
+    (MuJoCo's kinematics: the site's centre less its radius)."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    names = {model.numeric(i).name for i in range(model.nnumeric)}
+    out = np.empty((len(qpos), len(contacts)))
+    for i, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        for k, (site, _, _, surface) in enumerate(contacts):
+            radius = model.numeric(f"figure:radius:{site}").data[0] if f"figure:radius:{site}" in names else 0.0
+            z = data.site_xpos[model.site(str(site)).id, 2] - radius
+            g = model.geom(str(surface))
+            assert abs(data.geom_xmat[g.id, 8] - 1.0) < 1e-9  # level: the floor, or a box turned about z only
+            top = 0.0 if g.type[0] == mujoco.mjtGeom.mjGEOM_PLANE else float(data.geom_xpos[g.id, 2] + g.size[2])
+            out[i, k] = z - top
+    return out

@@ -20,6 +20,7 @@ from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.contacts import Contact
 from solver.displacement import CORRECTION_TIME, anchors, build_displacement, clean_solution, pin_frames, solve_displacement
 from solver.errors import InputError
+from solver.foot_bounds import CAPTURE_RESOLUTION, FLOAT_LIMIT
 from solver.layout import StateLayout
 from solver.least_change import LeastChangeOptions
 from solver.peak_bounds import filter_capture
@@ -201,7 +202,40 @@ def test_a_planted_foot_met_within_its_tolerance_is_within_the_clean_s_float_bou
     planted = [c for c in disp.lc.al.constraints if c.name == "planted"]
     assert planted and all(c.size for c in planted)
     for c in planted:
-        assert np.all(np.asarray(c.limit) + c.tolerance <= 3e-3 + 1e-12), (c.limit, c.tolerance)
+        foot = np.isin(c.labels, ["left", "right"])  # a foot's pairs; the rest are each site's own (next test)
+        assert foot.any() and np.all(np.asarray(c.limit)[foot] + c.tolerance <= 3e-3 + 1e-12), (c.limit, c.tolerance)
+
+
+def test_each_site_in_contact_is_held_no_higher_than_captured(toy_model):
+    """Each site the schedule has in contact has a planted pair of its own over its own contact
+    (solver.foot_bounds): its mean height no more than the capture's there, FLOAT_LIMIT where the capture holds
+    it lower. The limits against the capture's mean height over each contact's frames by MuJoCo's kinematics
+    (the sites' radius is 0 and the floor z = 0: a site's height is its z)."""
+    t, q = _capture(toy_model)
+    contacts = [Contact("l_toe", 0.2, 0.8), Contact("l_heel", 0.5, 1.0), Contact("r_heel", 1.1, 1.6)]
+    disp = build_displacement(toy_model, t, q, contacts=contacts)
+    planted = next(c for c in disp.lc.al.constraints if c.name == "planted")
+    own = ~np.isin(planted.labels, ["left", "right"])
+    assert list(planted.labels[own]) == [c.site for c in contacts]
+    h = _site_heights(toy_model, q, [c.site for c in contacts])
+    expected = [h[(t >= c.start - 1e-9) & (t <= c.end + 1e-9), k].mean() for k, c in enumerate(contacts)]
+    # the clean's mean is of the heights' positive part smoothed over CAPTURE_RESOLUTION e (Huber's: h - e/2 for
+    # h > e, as every height here): the capture meets the limit exactly in the constraint's own measure
+    np.testing.assert_allclose(planted.limit[own], np.maximum(FLOAT_LIMIT, np.array(expected) - CAPTURE_RESOLUTION / 2),
+                               atol=1e-9)
+    assert np.all(planted.limit[own] > FLOAT_LIMIT)  # the capture holds its sites 1 cm up and more
+
+
+def _site_heights(model, qpos, sites) -> np.ndarray:
+    """(n, k) [m] the named sites' heights above the floor (z = 0) at each pose (MuJoCo's forward kinematics)."""
+    data = mujoco.MjData(model)
+    ids = [model.site(s).id for s in sites]
+    out = np.empty((len(qpos), len(ids)))
+    for i, x in enumerate(qpos):
+        data.qpos[:] = x
+        mujoco.mj_kinematics(model, data)
+        out[i] = data.site_xpos[ids, 2]
+    return out
 
 
 def test_pins_hold_the_capture_exactly(dipped):
@@ -305,7 +339,7 @@ def test_a_slide_met_within_its_tolerance_is_within_the_clean_s_skate_bound(toy_
 @pytest.mark.slow
 def test_a_short_contact_at_30_fps_is_held_within_the_clean_s_skate_bound(toy_model):
     """A clean's skate bound is 0.2 mm a frame in contact (docs/corpus.md "Cleaning the corpus"), at the
-    clip's own frame rate: its slide pairs are measured per frame (`solver.constraint_set.CLEAN_SKATE`).
+    clip's own frame rate: its slide pairs are measured per frame (`solver.foot_bounds.CLEAN_SKATE`).
     At 30 fps a contact of four frames, where the swaying capture slides the toe 1-6 mm a frame: the cleaned
     toe, by MuJoCo's kinematics at the capture's frames, slides at most 0.2 mm a frame on average over it (a
     keyed path's tolerance, 2 mm over the contact, left 0.38 mm a frame). The capture is lowered to hold its
@@ -346,7 +380,6 @@ def test_a_clean_s_planted_mean_is_over_its_contact_s_frames_of_the_positive_hei
     up, it is that mean less half the ramp's width, the heights by MuJoCo's kinematics (the toy's sites
     have no radius, its floor is z = 0); with the capture dipped 3 cm, the frames whose site is in the
     floor count as 0."""
-    from solver.constraint_set import CAPTURE_RESOLUTION
 
     for dip in (0.0, DIP):
         t, q = _capture(toy_model, dip)
@@ -359,7 +392,7 @@ def test_a_clean_s_planted_mean_is_over_its_contact_s_frames_of_the_positive_hei
         h = _site(toy_model, q[on], "l_toe")[:, 2]
         e = CAPTURE_RESOLUTION
         want = np.where(h <= 0, 0.0, np.where(h < e, h * h / (2 * e), h - e / 2)).mean()
-        np.testing.assert_allclose(value, [want], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(value, [want, want], rtol=0, atol=1e-9)  # the foot's pair and the site's own
     assert h.min() < 0  # the dipped capture: some frames in the floor, counted as 0
 
 

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 import solver
-from solver.constraint_set import FLOAT_LIMIT, TOLERANCES
+from solver.constraint_set import TOLERANCES
 from solver.contacts import contact_radii
+from solver.foot_bounds import FLOAT_LIMIT
 from solver.least_change import build_least_change
 from solver.spline import interpolate
 from solver.spline_basis import SplineBasis
@@ -92,7 +93,7 @@ def test_the_capture_floats_less_than_the_plain_spline_so_its_limit_is_tighter(l
 def test_a_capture_that_slides_less_than_a_centimetre_tightens_the_slide_limit(lifted):
     # a capture of the figure in one pose gliding at 5 mm/s along x: every site slides at v = 5 mm/s,
     # under the Huber width b (1 cm/s), so its slide over a contact of length T is T v^2 / (2 b)
-    from solver.constraint_set import SLIDE_SHARE, SLIDE_SMOOTHING
+    from solver.foot_bounds import SLIDE_SHARE, SLIDE_SMOOTHING
 
     model, keyframes, info, _, _ = lifted
     plain = build_least_change(model, keyframes).plain
@@ -123,7 +124,7 @@ def test_the_slide_keyframes_force_is_in_the_slides_own_measure(lifted, v):
     key interval (Jensen), which the plain spline, linear in time here, meets with equality over the keyed
     span: huber_b(v) = v^2 / (2 b) under b, v - b/2 over it. Summed distances (v dt each) would overstate
     it 2b/v = 4 times at 5 mm/s."""
-    from solver.constraint_set import SLIDE_SHARE, SLIDE_SMOOTHING
+    from solver.foot_bounds import SLIDE_SHARE, SLIDE_SMOOTHING
 
     model, keyframes, info, _, _ = lifted
     pose = build_least_change(model, keyframes).plain.values[0]
