@@ -66,6 +66,9 @@ FEET_ROWS = (("float in contact [mm]", "float_contact_mm", "{:.2f}"),
 #: jolts are of the capture filtered at 6 Hz, its flight is every site 3 cm clear at the capture's frames)}
 CAPTURE_FIGURES = {"peak_pelvis_acceleration_ms2": "peak_pelvis_acceleration_m_s2",
                    "rms_joint_torque_Nm": "rms_joint_torque_Nm", "flight_s": "flight_time_s"}
+#: the rows of `CAPTURE_FIGURES` whose capture figure is of the capture filtered at 6 Hz: their label says so
+#: ("(capture at 6 Hz X)"), as a clean's first column is the capture itself, unfiltered
+FILTERED_FIGURES = ("peak_pelvis_acceleration_ms2", "rms_joint_torque_Nm")
 
 #: relaxations listed under the summary table (the rest counted)
 RELAXATIONS_SHOWN = 6
@@ -128,7 +131,7 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False, bounds
         c = capture.get(key)
         mark = row_mark(a, b, atol, fmt, c)
         if c is not None:
-            label = f"{label} (capture {cell(fmt, c)})"
+            label = f"{label} (capture{' at 6 Hz' if key in FILTERED_FIGURES else ''} {cell(fmt, c)})"
         if bounds is not None and key in BOUNDED_ROWS:
             bound = float(getattr(bounds, BOUNDED_ROWS[key]))
             label, mark = f"{label} <= {cell(fmt, bound)}", _bound_mark(mark, b, bound, atol, fmt)

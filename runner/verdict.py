@@ -283,8 +283,8 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
             motion_text: `motion_worse_text` of the motion-metrics table, added to the worse line.
     Returns:
         ["verdict: ...", "  feet: ...", "  jolts: ...", "  worse: ..."], the feet and jolts lines only when
-        they have a figure, with the capture's figures after them unless those are the first column's (a clean's),
-        each wrapped at WIDTH.
+        they have a figure, with the capture's figures after them unless those are the first column's (a clean's;
+        the jolts' are of the capture filtered at 6 Hz, and say so), each wrapped at WIDTH.
     """
     unmet = getattr(solution, "unmet", None) or {}
     head = constraint_verdict(solution.integrals_final, unmet, getattr(solution, "certificate", None) or ())
@@ -293,7 +293,8 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
         shown = [p for p in parts if p]
         if shown:
             captures, firsts = [c for _, c, _ in shown], [f for _, _, f in shown]  # a clean's first column: the capture
-            against = f" (capture {', '.join(captures)})" if any(c != "-" for c in captures) and captures != firsts else ""
+            who = "capture at 6 Hz" if name == "jolts" else "capture"  # the jolts' figures: the capture filtered at 6 Hz
+            against = f" ({who} {', '.join(captures)})" if any(c != "-" for c in captures) and captures != firsts else ""
             lines.append(f"  {name}: " + ", ".join(t for t, _, _ in shown) + against)
     lines.append("  " + worse_line(rows, targets, solution.integrals_initial, solution.integrals_final, unmet)
                  + motion_text)

@@ -400,6 +400,15 @@ def test_flight_rows_compare_with_the_captures_flight():
         metrics(), metrics(), capture={"flight_s": 0.133})]
 
 
+def test_a_jolt_row_says_its_capture_figure_is_filtered():
+    """The capture's jolts are of the capture filtered at 6 Hz (`runner.motion_metrics`); a clean's first column is
+    the capture itself, so the label says which."""
+    labels = [r[0] for r in comparison_rows(metrics(), metrics(), capture={"peak_pelvis_acceleration_ms2": 16.5,
+                                                                           "rms_joint_torque_Nm": 120.0})]
+    assert "peak pelvis acceleration [m/s^2] (capture at 6 Hz 16.5)" in labels
+    assert "RMS joint torque [N m] (capture at 6 Hz 120.0)" in labels
+
+
 def _motion_with_capture(plain_over, opt_over, capture_over):
     m = {"plain": _motion(plain_over), "optimized": _motion(opt_over)}
     for p in m.values():
@@ -441,7 +450,7 @@ def test_the_verdict_comes_first_with_the_feet_the_jolts_and_the_worse_rows():
     assert verdict[1] == ("  feet: penetration 12.00 -> 0.50 mm, float 7.00 -> 2.00 mm, skate 9.00 -> 1.00 mm/frame "
                           "(capture 0.00, 2.50, 1.80)")
     assert verdict[2] == ("  jolts: peak pelvis 6.0 -> 12.0 m/s^2, peak joint 100 -> 240 rad/s^2, RMS torque 100.0 -> "
-                          "104.0 N m (capture 16.0, 250, 120.0)")
+                          "104.0 N m (capture at 6 Hz 16.0, 250, 120.0)")
     # a clean's: the first column is the capture, whose figures are not repeated after it
     captured = {"float_contact_mm": 2.5, "skate_contact_mm": 1.8, "penetration_mm": {"mean": 0.0, "max": 0.0}}
     clean = _motion_with_capture(captured, {"float_contact_mm": 2.0, "skate_contact_mm": 1.0}, captured)
