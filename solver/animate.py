@@ -136,18 +136,28 @@ def _checked_finer(problem: Problem, options: LeastChangeOptions, coarse: Soluti
         progress("finer", {"rate": finer.rate, "segment": 2.0 / finer.rate})
     t0 = time.perf_counter()
     lc = _built(problem, finer.rate)
-    cert = least_violation_of(lc, coarse.frames, finer, should_stop=should_stop, progress=progress)
+    cert = least_violation_of(lc, coarse.frames, finer, should_stop=should_stop,
+                              progress=_counted_on(progress, coarse.n_evals))
     checked = {"n_evals": coarse.n_evals + cert.n_evals, "wall_time_s": coarse.wall_time_s + time.perf_counter() - t0}
     if cert.status is not Status.CONVERGED:
         return replace(coarse, **checked)
     if not _beats(cert.raises, coarse.certificate):
         return replace(coarse, finer=(finer.rate, False, tuple(cert.raises)), **checked)
-    fine = solve_least_change(lc, finer, should_stop=should_stop, progress=progress, from_frames=coarse.frames)
+    fine = solve_least_change(lc, finer, should_stop=should_stop, progress=_counted_on(progress, checked["n_evals"]),
+                              from_frames=coarse.frames)
     checked = {"n_evals": checked["n_evals"] + fine.n_evals, "wall_time_s": checked["wall_time_s"] + fine.wall_time_s}
     if fine.status not in (Status.CONVERGED, Status.INFEASIBLE) or not _beats(fine.certificate, coarse.certificate):
         return replace(coarse, finer=(finer.rate, False, tuple(fine.certificate)), **checked)
     return replace(fine, rounds=coarse.rounds + fine.rounds, trace=np.concatenate([coarse.trace, fine.trace]),
                    finer=(finer.rate, True, tuple(coarse.certificate)), **checked)
+
+
+def _counted_on(progress, before: int):
+    """`progress` with the evaluations its events report ("evals") counted on from `before` (a solve's so far): the
+    check's search and least change each count from 0. None stays None."""
+    if progress is None:
+        return None
+    return lambda event, info: progress(event, {**info, "evals": info["evals"] + before} if "evals" in info else info)
 
 
 def _beats(fine, coarse) -> bool:

@@ -137,6 +137,15 @@ def test_the_least_violation_shows_its_progress_off_a_terminal(monkeypatch):
     p("finer", {"rate": 400.0, "segment": 0.005})  # then the check at a finer spacing says what it does
     assert stream.getvalue().splitlines()[-1] == ("  limits raised: the least violation sought again at 400 points/s "
                                                   "(segments down to 5 ms), from the path found")
+    from solver.animate import _counted_on
+
+    check = _counted_on(p, 180)  # the check's search counts its evaluations from 0: they count on from the solve's
+    check("search", {"round": 0, "frames": 961})
+    for i in range(1, 13):
+        check("eval", {"evals": i, "F": 1.0 / i})
+    check("certify", {"round": 0, "frames": 961, "raised": {}, "evals": 12, "spent": 12})
+    assert stream.getvalue().splitlines()[-2].startswith("  least violation after round 1: from 961 frames: done, "
+                                                         "12 evaluations")
 
 
 def test_steps_off_a_terminal_start_still_and_end_lines(monkeypatch):
