@@ -68,7 +68,7 @@ there; the problem is made well posed instead of excused:
   constraints move the feet, and the measure of change prices a change against the plain spline, not
   against where the capture stood.
 
-Each relaxation is reported (`Relaxation`: which constraint, site or joint, keyframe, where, how much),
+Each relaxation is reported (`solver.foot_bounds.Relaxation`: which constraint, site or joint, keyframe, where, how much),
 so a user sees where the keyframes, not the optimizer, decide.
 """
 from __future__ import annotations
