@@ -2,7 +2,7 @@
 
     penetration  every contact site's lowest point outside every plane and box, at every instant  d >= 0     1 mm
     planted      over each foot contact, the support site's mean height                 mean h <= FLOAT_LIMIT 2 mm
-                 over each site contact, that site's (solver.foot_bounds)               <= the known paths' own
+                 with a capture, over each site contact, that site's (solver.foot_bounds) <= the known paths'
     slide        over each site contact, the slide beyond what the keyframes force    <= allowance (below)  2 mm
     flight       in a flight, every site clear (the field's flight height)             h >= 3.1 cm      1 mm
     ground       outside flights, the site the reference holds lowest is down          h <= 2.9 cm      1 mm

@@ -1,7 +1,7 @@
 """The bounds on the feet in contact: planted and slide (`solver.constraint_set` poses them with the rest).
 
     planted   over each foot contact, its support site's mean height              mean h <= FLOAT_LIMIT   2 mm
-              over each site contact, the site's mean height                      mean h <= the known paths' own
+              with a capture, over each site contact, the site's mean height       mean h <= the known paths' own
     slide     over each site contact, the slide beyond what the keyframes force    <= allowance            2 mm
 
 A foot contact is a foot's sites' contacts merged; at each point of one the support site is the foot's
@@ -9,16 +9,19 @@ site that the schedule has in contact there and the reference motion holds lowes
 rolls from its heel onto its toe, and the toe carries it while the heel rises (the float metric of the
 field is the foot's lowest point, ../shared/METRICS.md). Its planted pair holds that site down.
 
-Each site the schedule has in contact also has a planted pair of its own over its own contact: no higher
-above its surface on average than a known path through the keyframes holds it, the higher of the two where
-there are two: the reference motion (the plain spline, or a clean's capture) and the capture the keyframes
-came from (FLOAT_LIMIT where they hold it lower). Both meet the pair, so the keyframes never force it.
-Without it the cheapest way down for a support site that rests too high is to pitch the foot about the
-ankle: a light joint, little change, and the foot's other site, in contact by the schedule, rises several
-times as far. The clean of 05_09 lowered its heels 3-4 mm by lifting both toes 2.4-4.6 cm off the floor
-and a box for the whole clip; keyed every 0.25 s, 127_33 lifted a heel 5 cm above the plain spline's over
-a 0.1 s contact. Against the plain spline alone, a keyed path whose capture holds a site higher between
-the keys would be held nearer the floor than the motion it came from, a change no constraint asks for.
+Where the keyframes came from a capture (and in a clean), each site the schedule has in contact also has a
+planted pair of its own over its own contact: no higher above its surface on average than the known paths
+through the keyframes hold it, the higher of the two: the reference motion (the plain spline, or a clean's
+capture itself) and the capture (FLOAT_LIMIT where both hold it lower). Both meet the pair, so the keyframes
+never force it. Without it the cheapest way down for a support site that rests too high is to pitch the foot
+about the ankle: a light joint, little change, and the foot's other site, in contact by the schedule, rises
+several times as far. The clean of 05_09 lowered its heels 3-4 mm by lifting both toes 2.4-4.6 cm off the
+floor and a box for the whole clip; keyed every 0.25 s, 127_33 lifted a heel 5 cm above both paths over a
+0.1 s contact. Against the plain spline alone, a keyed path whose capture holds a site higher between the
+keys would be held nearer the floor than the motion it came from. Without a capture nothing witnesses where
+a site other than the support rests (the plain spline only interpolates the keys), and the plain spline's
+own heights as the limit doubled the solve of the shipped standing jump without converging it: a
+keyframe-only problem keeps the foot's pair alone.
 
 Planted and slide are integrals over a contact (its mean height, the distance it slides): a contact
 detected on a capture begins and ends with the site still moving (entry below 0.5 m/s and 3 cm, exit above
@@ -137,12 +140,13 @@ def foot_bounds(model, figure, reference, plain, contacts, state, support, radii
     if feet is None:
         return None
     args, limit_h, reports = feet
-    args, own = _with_site_pairs(args, reference, contacts, figure.contact_sites, support, frames)
+    own = 0
+    if witness is not None:  # a capture witnesses where each site rests in contact (module docstring)
+        args, own = _with_site_pairs(args, reference, contacts, figure.contact_sites, support, frames)
     height = SupportHeight(*args, limit=np.r_[limit_h, np.zeros(own)], tolerance=planted_tolerance,
                            above=0.0 if frames is None else CAPTURE_RESOLUTION)
-    if own:  # each site in contact no higher than the known paths hold it, the higher of them (module docstring)
-        known = [height.measure(path)[-own:] for path in (state, witness) if path is not None]
-        height.limit[-own:] = np.maximum(FLOAT_LIMIT, np.max(known, axis=0))
+    if own:  # each site in contact no higher than the known paths hold it, the higher of the two
+        height.limit[-own:] = np.maximum(FLOAT_LIMIT, np.maximum(height.measure(state), height.measure(witness))[-own:])
     rate = None if frames is None else 1.0 / float(np.median(np.diff(frames)))
     slide, slide_reports = _site_slides(model, reference, plain, contacts, support, radii, tuple(figure.contact_sites),
                                         state, tolerances["slide"], witness, rate)
