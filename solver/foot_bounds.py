@@ -155,24 +155,32 @@ def foot_bounds(model, figure, reference, plain, contacts, state, support, radii
 
 
 def _with_site_pairs(args, reference, contacts, sites, support, frames):
-    """The foot support's args (`_FootSupport`) with a pair per site contact appended (the site's own contact
-    and surface, its points as the foot pairs': the capture's frames in a clean): (args, how many appended)."""
-    t = reference.t
-    w = reference.weights if frames is None else frame_weights(t, frames)
+    """The foot support's args (`_FootSupport`) with a pair per site contact appended (`_site_contact_pairs`, its
+    points as the foot pairs': the capture's frames in a clean): (args, how many appended)."""
+    w = reference.weights if frames is None else frame_weights(reference.t, frames)
     sup, radii, *cols = args
-    extra = [[] for _ in cols]
+    kept, own = _site_contact_pairs(contacts, sites, support, reference.t, w, frames is not None, first=len(cols[5]))
+    if not kept:
+        return args, 0
+    return (sup, radii, *(np.concatenate([a, b]) for a, b in zip(cols, own))), len(kept)
+
+
+def _site_contact_pairs(contacts, sites, support, t: np.ndarray, w: np.ndarray, frames_only: bool, first: int = 0):
+    """A pair per site contact over its quadrature points (with `frames_only`, those of weight w > 0: the capture's
+    frames), at its own site and surface, numbered from `first`: (the contacts that have points, the
+    `_FootSupport` arrays points, cols, surfaces, pair, w, span, rows, labels, or None without a pair)."""
+    kept, parts = [], [[] for _ in range(8)]
     for c in contacts:
         on = _pairs_in(t, c.start, c.end)
-        on = on if frames is None else on[w[on] > 0]
-        if c.site not in sites or not on.size:
+        on = on[w[on] > 0] if frames_only else on
+        if not on.size:
             continue
-        k, si = len(cols[5]) + len(extra[5]), -1 if not c.surface else support.index(c.surface)
-        for lst, val in zip(extra, (on, np.full(len(on), sites.index(c.site)), np.full(len(on), si), np.full(len(on), k),
-                                    w[on], [float(w[on].sum())], [int(on[len(on) // 2])], [c.site])):
+        k, si = first + len(kept), -1 if not c.surface else support.index(c.surface)
+        kept.append(c)
+        for lst, val in zip(parts, (on, np.full(len(on), sites.index(c.site)), np.full(len(on), si), np.full(len(on), k),
+                                    w[on], [float(w[on].sum())], [int(on[len(on) // 2])], np.array([c.site], object))):
             lst.append(np.asarray(val))
-    if not extra[5]:
-        return args, 0
-    return (sup, radii, *(np.concatenate([a, *e]) for a, e in zip(cols, extra))), len(extra[5])
+    return kept, (tuple(np.concatenate(p) for p in parts) if kept else None)
 
 
 def _site_slides(model, reference, plain, contacts, support, radii, sites, state, tolerance: float, witness=None,
@@ -183,24 +191,12 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites, state
     whichever is less; and the relaxations worth reporting (the keyframes force more than the `tolerance` [m]).
     With a `frame_rate` [Hz] (a clean) the Huber width and each pair's tolerance are per frame (`CLEAN_SKATE`)."""
     b = SLIDE_SMOOTHING if frame_rate is None else min(SLIDE_SMOOTHING, CLEAN_SKATE * float(frame_rate))
-    t, w = reference.t, reference.weights
     index, times, values = full_keyframes(plain)
     keyed_xy = site_positions(model, values, sites)[..., :2] if len(times) else np.zeros((0, len(sites), 2))
-    cols_, pts, surf, pair, ww, span, rows, labels, keyed, reports = [], [], [], [], [], [], [], [], [], []
-    for c in contacts:
-        on = _pairs_in(t, c.start, c.end)
-        if not on.size:
-            continue
+    kept, arrays = _site_contact_pairs(contacts, sites, support, reference.t, reference.weights, False)
+    keyed, reports = [], []
+    for c in kept:
         col = sites.index(c.site)
-        k = len(keyed)
-        pts.append(on)
-        cols_.append(np.full(len(on), col))
-        surf.append(np.full(len(on), -1 if not c.surface else support.index(c.surface)))
-        pair.append(np.full(len(on), k))
-        ww.append(w[on])
-        span.append(float(w[on].sum()))
-        rows.append(int(on[len(on) // 2]))
-        labels.append(c.site)
         inside = np.flatnonzero((times >= c.start - 1e-6) & (times <= c.end + 1e-6))
         d = np.linalg.norm(np.diff(keyed_xy[inside, col], axis=0), axis=-1)  # [m] between consecutive keys
         dt = np.diff(times[inside])
@@ -209,12 +205,10 @@ def _site_slides(model, reference, plain, contacts, support, radii, sites, state
         if forced > tolerance:  # worth saying: the keyframes force more than the tolerance
             reports.append(Relaxation("slide", c.site, int(index[inside[-1]]), float(times[inside[0]]),
                                       float(times[inside[-1]]), forced))
-    forced, span = np.array(keyed), np.array(span)
-    args = (support, radii, np.concatenate(pts), np.concatenate(cols_), np.concatenate(surf), np.concatenate(pair),
-            np.concatenate(ww), span, np.array(rows), np.array(labels, object))
+    forced, span = np.array(keyed), arrays[5]
     tol = (tolerance if frame_rate is None  # a clean: half CLEAN_SKATE a frame step
            else np.minimum(tolerance, 0.5 * CLEAN_SKATE * float(frame_rate) * span))
-    slide = SupportSlide(*args, limit=forced, tolerance=tol, width=b, forced=forced)
+    slide = SupportSlide(support, radii, *arrays, limit=forced, tolerance=tol, width=b, forced=forced)
     allowance = np.full(len(forced), np.inf)
     for path in (state, witness):  # a known path through the keyframes: the path halves its excess
         if path is not None:
