@@ -12,9 +12,9 @@ and orientations over the clip - and never from the rest pose (in many conventio
 * **thigh and shin, upper arm and forearm**: the figure's segment direction along the bone; the figure's
   flexion axis (knee, elbow) along the joint's functional hinge axis, the flexion-weighted mean of
   bone x next bone over the clip (a mean helical axis, Ehrig et al. 2007, J. Biomech. 40:2150-2157),
-  its sign from anatomy (flexing, the shin swings backward and the forearm forward of the pelvis's and
-  the torso's forward direction), so that a clip that mostly hyperextends a joint does not turn it
-  round; a joint that bends less than `MIN_FLEXION` on average gives no axis, and the parent body's
+  its sign from anatomy (a knee's axis points to the pelvis's left, in any posture; flexing, the forearm
+  swings forward of the torso: `_hinge_flipped`), so that a clip that mostly hyperextends a joint does not
+  turn it round; a joint that bends less than `MIN_FLEXION` on average gives no axis, and the parent body's
   frame, turned by the mean relative rotation and swung onto the bone, is taken instead;
 * **foot**: z along the world's up while the foot is flat, x towards the ball of the foot. The foot is
   taken to be flat in the slower half of its frames (the faster of the ankle and the ball of the foot:
@@ -215,13 +215,7 @@ def _limb_offset(body: str, figure, P: dict, Q: dict, off: dict) -> np.ndarray:
     seg = figure.segments[body].direction
     if np.linalg.norm(cross, axis=-1).mean() >= MIN_FLEXION:
         hinge = _mean_in(Q[start], cross)
-        # the sign from anatomy, not from which way the clip bends most: flexing, the shin swings back
-        # and the forearm forward (relative to the pelvis's and the torso's forward direction)
-        trunk = "pelvis" if "leg" in hinge_joint or "knee" in hinge_joint else "torso"
-        forward = rotate(mul(Q[DRIVERS[trunk]], np.broadcast_to(off[trunk], Q[start].shape)),
-                         np.broadcast_to([1.0, 0.0, 0.0], u.shape))
-        swings = np.sum(np.cross(rotate(Q[start], np.broadcast_to(hinge, u.shape)), u) * forward)
-        if (swings > 0) == (trunk == "pelvis"):
+        if _hinge_flipped(hinge_joint, rotate(Q[start], np.broadcast_to(hinge, u.shape)), u, Q, off):
             hinge = -hinge
         return triad(seg, figure.flexion_axes[hinge_joint], bone, hinge)
     parent = _PARENT[body]
@@ -230,6 +224,22 @@ def _limb_offset(body: str, figure, P: dict, Q: dict, off: dict) -> np.ndarray:
     mean = np.r_[mean[3], mean[:3]]
     turned = rotate(mean, np.asarray(seg, float))
     return mul(_swing(turned, bone), mean)
+
+
+def _hinge_flipped(hinge_joint: str, hinge: np.ndarray, u: np.ndarray, Q: dict, off: dict) -> bool:
+    """Whether the measured hinge axis (n, 3) [world, per frame] points against flexion, by anatomy, not by which
+    way the clip bends most (module docstring). A knee's flexion axis is the femur's medio-lateral axis (Grood &
+    Suntay, J. Biomech. Eng. 105:136-144, 1983), which the hip's rotation (at most 45 degrees either way, AAOS
+    1965) keeps near the pelvis's: it points to the pelvis's left, in any posture. An elbow's follows the upper
+    arm, which the shoulder turns anywhere: flexing swings the forearm forward of the torso, a test summed over
+    the frames, each counting by how far its upper arm (`u` (n, 3), the upper bone) lies across the torso's
+    forward direction. The knee's swing test fails where the thighs never hang: a seated subject's are level
+    and the forward swing is zero in every frame."""
+    if "knee" in hinge_joint or "leg" in hinge_joint:
+        frame = mul(Q[DRIVERS["pelvis"]], np.broadcast_to(off["pelvis"], Q[DRIVERS["pelvis"]].shape))
+        return float(np.sum(hinge * rotate(frame, np.broadcast_to([0.0, 1.0, 0.0], u.shape)))) < 0.0
+    frame = mul(Q[DRIVERS["torso"]], np.broadcast_to(off["torso"], Q[DRIVERS["torso"]].shape))
+    return float(np.sum(np.cross(hinge, u) * rotate(frame, np.broadcast_to([1.0, 0.0, 0.0], u.shape)))) <= 0.0
 
 
 def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ import pytest
 from bvh_conventions import convention
 from bvh_edit import edit_bvh
 from bvh_fk import parse, world
+from seated_clip import seated_clip
 
 from runner.paths import MODELS
 from solver.quaternion import mul, normalize
@@ -136,7 +137,8 @@ def other_skeleton(tmp_path, name):
 CLIPS = {"16_23": lambda p: cmu_clip(p, "16_23"), "35_17": lambda p: cmu_clip(p, "35_17"),
          "83_02": lambda p: cmu_clip(p, "83_02", 0.35), "ue5": lambda p: other_skeleton(p, "ue5"),
          "rokoko": lambda p: other_skeleton(p, "rokoko"), "lafan1": lambda p: other_skeleton(p, "lafan1"),
-         "bandai": lambda p: other_skeleton(p, "bandai"), "max3ds": lambda p: other_skeleton(p, "max3ds")}
+         "bandai": lambda p: other_skeleton(p, "bandai"), "max3ds": lambda p: other_skeleton(p, "max3ds"),
+         "seated": lambda p: seated_clip(p / "seated.bvh")}
 
 
 @pytest.mark.parametrize("name", sorted(CLIPS))

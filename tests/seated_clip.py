@@ -1,0 +1,85 @@
+"""A seated subject's clip, built by hand (tests/runner/capture/test_seated_hinges.py, test_way_back.py): thighs
+level the whole clip, so a knee's flexion cannot be told from the shin's swing against the body's forward
+direction."""
+from pathlib import Path
+
+import numpy as np
+
+#: [deg] the clip's knee flexion is KNEE +- SWING, its hips flexed 90 +- SWING / 2, its elbows ELBOW +- SWING
+KNEE, ELBOW, SWING = 90.0, 45.0, 10.0
+
+_LEG = """  JOINT {s}UpLeg
+  {{
+    OFFSET {x} -5 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT {s}Leg
+    {{
+      OFFSET 0 -42 2
+      CHANNELS 3 Zrotation Xrotation Yrotation
+      JOINT {s}Foot
+      {{
+        OFFSET 0 -42 -2
+        CHANNELS 3 Zrotation Xrotation Yrotation
+        JOINT {s}ToeBase
+        {{
+          OFFSET 0 -6 12
+          CHANNELS 3 Zrotation Xrotation Yrotation
+          End Site
+          {{
+            OFFSET 0 0 5
+          }}
+        }}
+      }}
+    }}
+  }}
+"""
+_ARM = """      JOINT {s}Shoulder
+      {{
+        OFFSET {x1} 12 0
+        CHANNELS 3 Zrotation Xrotation Yrotation
+        JOINT {s}Arm
+        {{
+          OFFSET {x2} 0 0
+          CHANNELS 3 Zrotation Xrotation Yrotation
+          JOINT {s}ForeArm
+          {{
+            OFFSET 0 -28 0
+            CHANNELS 3 Zrotation Xrotation Yrotation
+            JOINT {s}Hand
+            {{
+              OFFSET 0 -25 0
+              CHANNELS 3 Zrotation Xrotation Yrotation
+              End Site
+              {{
+                OFFSET 0 -10 0
+              }}
+            }}
+          }}
+        }}
+      }}
+"""
+
+
+def seated_clip(path: Path, frames: int = 72, fps: float = 24.0) -> Path:
+    """Write a seated subject's clip (Y up, Z forward, cm; rest pose standing, arms down): every frame the
+    hips at 48 cm, each thigh turned -90 deg about X (level, forward), each knee +KNEE about X (the shin
+    down again: flexion), the ankles keeping the feet flat, each elbow -ELBOW about X (the forearm forward:
+    flexion), all swinging by SWING over the clip so the hinges can be measured."""
+    spine = ("  JOINT Spine\n  {\n    OFFSET 0 10 0\n    CHANNELS 3 Zrotation Xrotation Yrotation\n"
+             "    JOINT Spine1\n    {\n      OFFSET 0 18 0\n      CHANNELS 3 Zrotation Xrotation Yrotation\n"
+             "      JOINT Neck\n      {\n        OFFSET 0 22 0\n        CHANNELS 3 Zrotation Xrotation Yrotation\n"
+             "        JOINT Head\n        {\n          OFFSET 0 10 0\n          CHANNELS 3 Zrotation Xrotation Yrotation\n"
+             "          End Site\n          {\n            OFFSET 0 16 0\n          }\n        }\n      }\n"
+             + _ARM.format(s="Left", x1=4, x2=14) + _ARM.format(s="Right", x1=-4, x2=-14) + "    }\n  }\n")
+    text = ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation "
+            "Yrotation\n" + _LEG.format(s="Left", x=9) + _LEG.format(s="Right", x=-9) + spine + "}\n")
+    rows = []
+    for f in range(frames):
+        s = np.sin(2.0 * np.pi * f / frames)
+        hip, knee, elbow = -90.0 + 0.5 * SWING * s, KNEE + SWING * s, -ELBOW + SWING * s
+        leg = [0, hip, 0, 0, knee, 0, 0, -(hip + knee), 0, 0, 0, 0]
+        arm = [0, 0, 0, 0, -20.0, 0, 0, elbow, 0, 0, 0, 0]
+        rows.append([0.5 * s, 48.0, 0.0, 0, 0, 0] + leg + leg + [0] * 12 + arm + arm)
+    body = "\n".join(" ".join(f"{v:.6f}" for v in r) for r in rows)
+    path.write_text(text + f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / fps:.10f}\n{body}\n")
+    return path
