@@ -60,11 +60,13 @@ _ARM = """      JOINT {s}Shoulder
 """
 
 
-def seated_clip(path: Path, frames: int = 72, fps: float = 24.0) -> Path:
+def seated_clip(path: Path, frames: int = 72, fps: float = 24.0, arms_up: bool = False) -> Path:
     """Write a seated subject's clip (Y up, Z forward, cm; rest pose standing, arms down): every frame the
     hips at 48 cm, each thigh turned -90 deg about X (level, forward), each knee +KNEE about X (the shin
-    down again: flexion), the ankles keeping the feet flat, each elbow -ELBOW about X (the forearm forward:
-    flexion), all swinging by SWING over the clip so the hinges can be measured."""
+    down again: flexion), the ankles keeping the feet flat, each elbow -ELBOW about X (flexion: the forearm
+    forward of a hanging arm, behind the head of a raised one), all swinging by SWING over the clip so the
+    hinges can be measured; the upper arms 20 deg forward of hanging, or with `arms_up` raised overhead (160
+    deg forward) the whole clip."""
     spine = ("  JOINT Spine\n  {\n    OFFSET 0 10 0\n    CHANNELS 3 Zrotation Xrotation Yrotation\n"
              "    JOINT Spine1\n    {\n      OFFSET 0 18 0\n      CHANNELS 3 Zrotation Xrotation Yrotation\n"
              "      JOINT Neck\n      {\n        OFFSET 0 22 0\n        CHANNELS 3 Zrotation Xrotation Yrotation\n"
@@ -78,7 +80,7 @@ def seated_clip(path: Path, frames: int = 72, fps: float = 24.0) -> Path:
         s = np.sin(2.0 * np.pi * f / frames)
         hip, knee, elbow = -90.0 + 0.5 * SWING * s, KNEE + SWING * s, -ELBOW + SWING * s
         leg = [0, hip, 0, 0, knee, 0, 0, -(hip + knee), 0, 0, 0, 0]
-        arm = [0, 0, 0, 0, -20.0, 0, 0, elbow, 0, 0, 0, 0]
+        arm = [0, 0, 0, 0, -160.0 if arms_up else -20.0, 0, 0, elbow, 0, 0, 0, 0]
         rows.append([0.5 * s, 48.0, 0.0, 0, 0, 0] + leg + leg + [0] * 12 + arm + arm)
     body = "\n".join(" ".join(f"{v:.6f}" for v in r) for r in rows)
     path.write_text(text + f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / fps:.10f}\n{body}\n")

@@ -12,8 +12,8 @@ and orientations over the clip - and never from the rest pose (in many conventio
 * **thigh and shin, upper arm and forearm**: the figure's segment direction along the bone; the figure's
   flexion axis (knee, elbow) along the joint's functional hinge axis, the flexion-weighted mean of
   bone x next bone over the clip (a mean helical axis, Ehrig et al. 2007, J. Biomech. 40:2150-2157),
-  its sign from anatomy (a knee's axis points to the pelvis's left, in any posture; flexing, the forearm
-  swings forward of the torso: `_hinge_flipped`), so that a clip that mostly hyperextends a joint does not
+  its sign from anatomy (a knee's axis points to the pelvis's left, in any posture; flexing, a hanging
+  forearm swings forward of the torso: `_hinge_flipped`), so that a clip that mostly hyperextends a joint does not
   turn it round; a joint that bends less than `MIN_FLEXION` on average gives no axis, and the parent body's
   frame, turned by the mean relative rotation and swung onto the bone, is taken instead;
 * **foot**: z along the world's up while the foot is flat, x towards the ball of the foot. The foot is
@@ -56,7 +56,7 @@ from runner.capture.skeleton import RecognisedSkeleton, skeleton_world
 from solver.errors import InputError
 from solver.quaternion import conj, mul, normalize
 
-__all__ = ["DRIVERS", "BODY_JOINT", "MIN_FLEXION", "FLAT_FRACTION", "BodyFrames", "body_frames", "rest_pose_frames",
+__all__ = ["DRIVERS", "BODY_JOINT", "MIN_FLEXION", "RAISED_ARM", "FLAT_FRACTION", "BodyFrames", "body_frames", "rest_pose_frames",
            "triad"]
 
 #: figure body -> the role whose joint drives its orientation
@@ -74,6 +74,9 @@ LIMBS = MappingProxyType({
 #: a hinge must bend on average more than this for its axis to be measured (sin 10 deg; below it the
 #: capture's marker noise of a few degrees is a large part of bone x next bone)
 MIN_FLEXION = np.sin(np.radians(10.0))
+#: [1] the upper arm's rise (its direction's component along the torso's up) above which a flexing elbow no
+#: longer swings the forearm forward but towards the head: sin 30 deg, the arm 30 deg above level
+RAISED_ARM = 0.5
 #: the fraction of frames, those of the slower half with the ankle lowest, in which a foot is taken to be flat
 FLAT_FRACTION = 0.1
 _PARENT = {"l_thigh": "pelvis", "l_shin": "l_thigh", "r_thigh": "pelvis", "r_shin": "r_thigh",
@@ -231,15 +234,19 @@ def _hinge_flipped(hinge_joint: str, hinge: np.ndarray, u: np.ndarray, Q: dict, 
     way the clip bends most (module docstring). A knee's flexion axis is the femur's medio-lateral axis (Grood &
     Suntay, J. Biomech. Eng. 105:136-144, 1983), which the hip's rotation (at most 45 degrees either way, AAOS
     1965) keeps near the pelvis's: it points to the pelvis's left, in any posture. An elbow's follows the upper
-    arm, which the shoulder turns anywhere: flexing swings the forearm forward of the torso, a test summed over
-    the frames, each counting by how far its upper arm (`u` (n, 3), the upper bone) lies across the torso's
-    forward direction. The knee's swing test fails where the thighs never hang: a seated subject's are level
-    and the forward swing is zero in every frame."""
+    arm, which the shoulder turns anywhere: flexing an arm that hangs or is held out to the side swings the
+    forearm forward of the torso (a raised arm's towards or behind the head), a test summed over the frames
+    whose upper arm (`u` (n, 3), the upper bone) is no higher than RAISED_ARM; a clip whose arms are always
+    higher keeps the measured bend (the mean of bone x next bone points to flexion wherever the joint bends more
+    than it hyperextends). A swing test fails where the limb never hangs: a seated subject's thighs are level,
+    and the shin's forward swing is zero in every frame."""
     if "knee" in hinge_joint or "leg" in hinge_joint:
         frame = mul(Q[DRIVERS["pelvis"]], np.broadcast_to(off["pelvis"], Q[DRIVERS["pelvis"]].shape))
         return float(np.sum(hinge * rotate(frame, np.broadcast_to([0.0, 1.0, 0.0], u.shape)))) < 0.0
     frame = mul(Q[DRIVERS["torso"]], np.broadcast_to(off["torso"], Q[DRIVERS["torso"]].shape))
-    return float(np.sum(np.cross(hinge, u) * rotate(frame, np.broadcast_to([1.0, 0.0, 0.0], u.shape)))) <= 0.0
+    low = np.sum(u * rotate(frame, np.broadcast_to([0.0, 0.0, 1.0], u.shape)), axis=-1) <= RAISED_ARM
+    forward = rotate(frame, np.broadcast_to([1.0, 0.0, 0.0], u.shape))
+    return float(np.sum(np.sum(np.cross(hinge[low], u[low]) * forward[low], axis=-1))) < 0.0
 
 
 def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -8,8 +8,9 @@ import pytest
 from seated_clip import ELBOW, KNEE, SWING, seated_clip
 
 
+@pytest.mark.parametrize("arms_up", [False, True], ids=["arms down", "arms overhead"])
 @pytest.mark.parametrize("joint, bent", [("l_knee", KNEE), ("r_knee", KNEE), ("l_elbow", ELBOW), ("r_elbow", ELBOW)])
-def test_a_seated_subjects_knees_and_elbows_read_as_flexed(tmp_path, joint, bent):
+def test_a_seated_subjects_knees_and_elbows_read_as_flexed(tmp_path, joint, bent, arms_up):
     from runner.capture.reference_motion import load_bvh_reference
     from runner.paths import MODELS
     from solver.figure import Figure
@@ -18,7 +19,7 @@ def test_a_seated_subjects_knees_and_elbows_read_as_flexed(tmp_path, joint, bent
     from solver.quaternion import twist_angle
 
     model = load_model(MODELS / "run_and_step.xml")
-    ref = load_bvh_reference(seated_clip(tmp_path / "seated.bvh"), model)
+    ref = load_bvh_reference(seated_clip(tmp_path / "seated.bvh", arms_up=arms_up), model)
     figure = Figure.from_model(model)
     axis = np.asarray(figure.flexion_axes[joint], float)
     flexion = np.degrees(twist_angle(ref.qpos[:, StateLayout.from_model(model).joint(joint).quat_index], axis / np.linalg.norm(axis)))
