@@ -27,10 +27,12 @@ import numpy as np
 from solver.errors import InputError
 from solver.layout import StateLayout
 
-__all__ = ["CUTOFF_HZ", "PeakBounds", "capture_peaks", "filter_capture", "frame_derivatives", "peak_bounds"]
+__all__ = ["CUTOFF_HZ", "MIN_FRAMES", "PeakBounds", "capture_peaks", "filter_capture", "frame_derivatives", "peak_bounds"]
 
 #: [Hz] the kinematics cutoff of the capture's low-pass filter (Winter 2009, ch. 2: 6 Hz for gait)
 CUTOFF_HZ = 6.0
+#: [frames] the fewest the filter takes: scipy's `filtfilt` pads 3 x the filter's order (2) on each side, 12, and one more
+MIN_FRAMES = 13
 #: [1] Winter's correction of a two-pass (zero-lag) 2nd-order Butterworth: design at cutoff / 0.802 so that
 #: the -3 dB frequency of the two passes is the cutoff ((2^(1/2) - 1)^(1/4) = 0.802)
 TWO_PASS_CORRECTION = 0.802
@@ -88,7 +90,7 @@ def filter_capture(times: np.ndarray, qpos: np.ndarray, layout: StateLayout,
         (n, nq) filtered qpos (the input unchanged where the frame rate is too low for the cutoff, i.e.
         the design frequency is at or above Nyquist: the capture holds nothing above it to remove).
     Raises:
-        InputError: fewer than 13 frames (scipy's `filtfilt` pads 3 x the filter's order on each side),
+        InputError: fewer than MIN_FRAMES frames,
             uneven frame times, or a cutoff that is not > 0.
     """
     from scipy.signal import butter, filtfilt
@@ -96,8 +98,9 @@ def filter_capture(times: np.ndarray, qpos: np.ndarray, layout: StateLayout,
     times, qpos = np.asarray(times, float), np.array(qpos, float)
     if not (np.isfinite(cutoff_hz) and cutoff_hz > 0):
         raise InputError(f"the capture filter's cutoff is {cutoff_hz} Hz; it must be > 0")
-    if len(times) < 13:
-        raise InputError(f"the capture has {len(times)} frames; its filtered peaks need at least 13")
+    if len(times) < MIN_FRAMES:
+        raise InputError(f"the capture has {len(times)} frames; its filtered peaks need at least {MIN_FRAMES}: give a "
+                         "longer clip")
     dt = np.diff(times)
     if not np.allclose(dt, dt[0], rtol=1e-6, atol=1e-9) or dt[0] <= 0:
         raise InputError("the capture's frame times are not evenly spaced; the low-pass filter needs a fixed rate")

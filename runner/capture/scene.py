@@ -21,6 +21,7 @@ from solver.contacts import Contact, contact_points
 from solver.errors import InputError
 from solver.figure import model_feet
 from solver.model import load_model
+from solver.peak_bounds import MIN_FRAMES
 from solver.surfaces import StaticSurfaces
 
 #: `--scene auto`: fit the scene to the clip
@@ -83,9 +84,13 @@ def clip_scene(clip: str | Path | Capture, scene: str | Path, figure: str | Path
         boxes: with scene == "floor", ((min (3,), max (3,)), ...) boxes in the clip's coordinates (file
             axes and units, `read_boxes`), written to `fitted_out` with the floor.
     Raises:
-        InputError: the clip or a scene cannot be read, or the clip's skeleton lacks a joint.
+        InputError: the clip or a scene cannot be read, the clip has fewer than MIN_FRAMES frames, or its skeleton lacks
+            a joint; with scene "auto", no foot rests in the clip.
     """
     clip = as_capture(clip)  # read once: the fit and the retargeting onto the fitted scene take the same value
+    if len(clip.clip.local_quat) < MIN_FRAMES:
+        raise InputError(f"{clip.source}: {len(clip.clip.local_quat)} frames; a capture needs at least {MIN_FRAMES}, the "
+                         "6 Hz filter of its no-jolt bounds (solver.peak_bounds); give a longer clip")
     if str(scene) == FLOOR:
         out = _writable(fitted_out)
         capture = _floor_scene(clip, figure, boxes, skeleton_map)
@@ -100,7 +105,12 @@ def clip_scene(clip: str | Path | Capture, scene: str | Path, figure: str | Path
     first = load_bvh_reference(clip, bare, root_scale=root_scale, skeleton_map=skeleton_map, retargeted=onto)
     feet = model_feet(bare)
     pos = contact_points(bare, first.qpos)  # the figure's sites, foot by foot; rounded: their spheres' lowest points
-    capture = fit_scene(first.times, pos, fit_contacts(first.times, pos, feet), feet)
+    contacts = fit_contacts(first.times, pos, feet)
+    if not contacts:
+        raise InputError(f"{clip.source}: no foot rests in the clip ({len(first.times)} frames), so no scene can be fitted "
+                         "to where the feet rest (--scene auto); give the scene: --scene floor for a level floor at the "
+                         "clip's height 0, or --scene FILE.xml")
+    capture = fit_scene(first.times, pos, contacts, feet)
     out = _writable(fitted_out)
     try:
         return _onto_fitted(clip, capture, figure, out, root_scale, skeleton_map, root_height=root_height, onto=onto)

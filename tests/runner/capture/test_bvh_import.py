@@ -490,6 +490,24 @@ def test_missing_file(tmp_path, scene):
         load_bvh_reference(tmp_path, scene)
 
 
+def test_a_clip_too_short_or_never_resting_is_named_with_the_fix(tmp_path):
+    """A capture of fewer frames than its 6 Hz filter takes, or whose feet never rest (nothing to fit a scene to),
+    is refused with the file, what is missing and the fix, before any retargeting or solve."""
+    from runner.capture.scene import clip_scene
+    from solver.figure import FIGURE_FILE
+    from solver.peak_bounds import MIN_FRAMES
+
+    short = write(tmp_path, tiny_bvh([tiny_frame()] * (MIN_FRAMES - 1)), "short.bvh")
+    for scene in ("auto", "floor"):
+        with pytest.raises(InputError, match=rf"short\.bvh: {MIN_FRAMES - 1} frames; a capture needs at least {MIN_FRAMES}.*give a longer clip"):
+            clip_scene(short, scene, FIGURE_FILE, tmp_path / "s.scene.xml")
+    # every frame 1 m further along: no foot is ever still, so none rests
+    flying = [tiny_frame(hips_pos=(100.0 * i, 17.0, 10.0)) for i in range(2 * MIN_FRAMES)]
+    moving = write(tmp_path, tiny_bvh(flying), "moving.bvh")
+    with pytest.raises(InputError, match=r"moving\.bvh: no foot rests in the clip.*--scene floor"):
+        clip_scene(moving, "auto", FIGURE_FILE, tmp_path / "m.scene.xml")
+
+
 def test_not_a_bvh(tmp_path, scene):
     p = write(tmp_path, "hello world\n")
     with pytest.raises(InputError, match=r"bad\.bvh: line 1: expected 'HIERARCHY', found 'hello world'"):
