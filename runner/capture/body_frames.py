@@ -23,7 +23,9 @@ and orientations over the clip - and never from the rest pose (in many conventio
   of all frames with the ankle lowest (heel strike and push-off raise it; a foot held still in the air
   is high). The lowest ankle alone took a stair climber's push-off from the floor, the only frames that
   foot had there, for flat (143_17's left foot, 42 degrees toes-down against 10 on the right), and the
-  stillest frames alone a runner's first forefoot stance.
+  stillest frames alone a runner's first forefoot stance. Only frames whose shin stands within 60 degrees
+  of vertical count (where the clip has any): a kneeling subject's feet lie on their tops, lower than they
+  stand, and taken for flat they turned the figure's feet over.
 
 Each vector is the mean over the clip's frames in the joint's frame, and each frame is made with the
 TRIAD method (the first vector exact, the second fixing the rotation about it; Shuster & Oh 1981, J.
@@ -56,7 +58,7 @@ from runner.capture.skeleton import RecognisedSkeleton, skeleton_world
 from solver.errors import InputError
 from solver.quaternion import conj, mul, normalize
 
-__all__ = ["DRIVERS", "BODY_JOINT", "MIN_FLEXION", "RAISED_ARM", "FLAT_FRACTION", "BodyFrames", "body_frames", "rest_pose_frames",
+__all__ = ["DRIVERS", "BODY_JOINT", "MIN_FLEXION", "RAISED_ARM", "SHIN_TILT", "FLAT_FRACTION", "BodyFrames", "body_frames", "rest_pose_frames",
            "triad"]
 
 #: figure body -> the role whose joint drives its orientation
@@ -77,6 +79,9 @@ MIN_FLEXION = np.sin(np.radians(10.0))
 #: [1] the upper arm's rise (its direction's component along the torso's up) above which a flexing elbow no
 #: longer swings the forearm forward but towards the head: sin 30 deg, the arm 30 deg above level
 RAISED_ARM = 0.5
+#: [rad] a flat foot's shin is at most this far from vertical: 60 deg, past a deep squat's forward lean of the
+#: shin (about 45 deg), short of a kneel's shin along the floor (90)
+SHIN_TILT = float(np.radians(60.0))
 #: the fraction of frames, those of the slower half with the ankle lowest, in which a foot is taken to be flat
 FLAT_FRACTION = 0.1
 _PARENT = {"l_thigh": "pelvis", "l_shin": "l_thigh", "r_thigh": "pelvis", "r_shin": "r_thigh",
@@ -163,7 +168,7 @@ def body_frames(clip: BvhClip, skel: RecognisedSkeleton, figure) -> BodyFrames:
     for side in "lr":
         ankle = P[f"{side}_foot"]
         ball = _ball(clip, skel, (q, p), side, at)
-        flat = _flat(ankle, ball)
+        flat = _flat(ankle, ball, P[f"{side}_lower_leg"])
         off[f"{side}_foot"] = triad([0, 0, 1], [1, 0, 0], _mean_in(Q[f"{side}_foot"][flat], up[flat]),
                                     _mean_in(Q[f"{side}_foot"], ball - ankle))
     offsets = MappingProxyType({b: normalize(np.asarray(v, float)) for b, v in off.items()})
@@ -192,11 +197,19 @@ def rest_pose_frames(clip: BvhClip, skel: RecognisedSkeleton, figure) -> BodyFra
     return BodyFrames(MappingProxyType(off), MappingProxyType({}))
 
 
-def _flat(ankle: np.ndarray, ball: np.ndarray) -> np.ndarray:
+def _flat(ankle: np.ndarray, ball: np.ndarray, knee: np.ndarray | None = None) -> np.ndarray:
     """(m,) the frames in which a foot is taken to be flat (module docstring), from the (n, 3) [m] places
-    of its ankle and ball: of the slower half, the `FLAT_FRACTION` of all frames with the ankle lowest."""
+    of its ankle, ball and knee: of the slower half, the `FLAT_FRACTION` of all frames with the ankle lowest,
+    among those whose shin stands within SHIN_TILT of vertical where the clip has any (a foot flat on the
+    floor carries its shin above it; a kneeling foot lies on its top, lower than it stands, with the shin
+    along the floor). knee None: every frame."""
     speed = np.maximum(*(np.linalg.norm(np.gradient(x, axis=0), axis=-1) for x in (ankle, ball)))
-    slow = np.flatnonzero(speed <= np.median(speed))
+    slow = speed <= np.median(speed)
+    if knee is not None:
+        shin = knee - ankle
+        upright = shin[:, 2] >= np.cos(SHIN_TILT) * np.linalg.norm(shin, axis=-1)
+        slow &= upright if (slow & upright).any() else True
+    slow = np.flatnonzero(slow)
     return slow[np.argsort(ankle[slow, 2], kind="stable")[:max(1, round(FLAT_FRACTION * len(ankle)))]]
 
 

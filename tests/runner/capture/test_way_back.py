@@ -11,7 +11,7 @@ import pytest
 from bvh_conventions import convention
 from bvh_edit import edit_bvh
 from bvh_fk import parse, world
-from seated_clip import seated_clip
+from posture_clips import seated_clip
 
 from runner.paths import MODELS
 from solver.quaternion import mul, normalize

@@ -1,11 +1,14 @@
-"""A seated subject's clip, built by hand (tests/runner/capture/test_seated_hinges.py, test_way_back.py): thighs
-level the whole clip, so a knee's flexion cannot be told from the shin's swing against the body's forward
-direction."""
+"""Clips of postures built by hand (tests/runner/capture/test_postures.py, test_way_back.py): a seated subject,
+whose level thighs give a knee's flexion no forward swing of the shin to be told by, and a kneeling one, whose
+feet lie on their tops lower than they stand flat. One skeleton: Y up, Z forward, cm, rest pose standing with
+the arms down."""
 from pathlib import Path
 
 import numpy as np
 
-#: [deg] the clip's knee flexion is KNEE +- SWING, its hips flexed 90 +- SWING / 2, its elbows ELBOW +- SWING
+#: [1] the share of the kneeling clip's frames standing before it kneels down
+STAND = 0.4
+#: [deg] the seated clip's knee flexion is KNEE +- SWING, its hips flexed 90 +- SWING / 2, its elbows ELBOW +- SWING
 KNEE, ELBOW, SWING = 90.0, 45.0, 10.0
 
 _LEG = """  JOINT {s}UpLeg
@@ -67,6 +70,34 @@ def seated_clip(path: Path, frames: int = 72, fps: float = 24.0, arms_up: bool =
     forward of a hanging arm, behind the head of a raised one), all swinging by SWING over the clip so the
     hinges can be measured; the upper arms 20 deg forward of hanging, or with `arms_up` raised overhead (160
     deg forward) the whole clip."""
+    rows = []
+    for f in range(frames):
+        s = np.sin(2.0 * np.pi * f / frames)
+        hip, knee, elbow = -90.0 + 0.5 * SWING * s, KNEE + SWING * s, -ELBOW + SWING * s
+        leg = [0, hip, 0, 0, knee, 0, 0, -(hip + knee), 0, 0, 0, 0]
+        arm = [0, 0, 0, 0, -160.0 if arms_up else -20.0, 0, 0, elbow, 0, 0, 0, 0]
+        rows.append([0.5 * s, 48.0, 0.0, 0, 0, 0] + leg + leg + [0] * 12 + arm + arm)
+    return _write(path, rows, fps)
+
+
+def kneeling_clip(path: Path, frames: int = 96, fps: float = 24.0) -> Path:
+    """Write a subject who stands (the first STAND of the frames: legs straight, hips at 95 cm, the toes' base on
+    the floor), kneels down (a tenth) and kneels (the rest: thighs upright, each knee +90 deg about X so the shin
+    lies back along the floor, each ankle +90 so the foot lies on its top behind it, the ankle 5 cm up, lower than
+    a standing foot's 6), the elbows swinging from ELBOW - SWING to ELBOW + SWING throughout."""
+    rows = []
+    down = int(STAND * frames)
+    for f in range(frames):
+        k = min(max((f - down) / (0.1 * frames), 0.0), 1.0)  # 0 standing .. 1 kneeling
+        leg = [0, 0, 0, 0, 90.0 * k, 0, 0, 90.0 * k, 0, 0, 0, 0]
+        elbow = -ELBOW + SWING * np.sin(2.0 * np.pi * f / frames)
+        arm = [0, 0, 0, 0, -20.0, 0, 0, elbow, 0, 0, 0, 0]
+        rows.append([0.0, 95.0 - 45.0 * k, 0.0, 0, 0, 0] + leg + leg + [0] * 12 + arm + arm)
+    return _write(path, rows, fps)
+
+
+def _write(path: Path, rows: list, fps: float) -> Path:
+    """The clip of `rows` (each frame's channel values in HIERARCHY order) at `fps` written to `path`."""
     spine = ("  JOINT Spine\n  {\n    OFFSET 0 10 0\n    CHANNELS 3 Zrotation Xrotation Yrotation\n"
              "    JOINT Spine1\n    {\n      OFFSET 0 18 0\n      CHANNELS 3 Zrotation Xrotation Yrotation\n"
              "      JOINT Neck\n      {\n        OFFSET 0 22 0\n        CHANNELS 3 Zrotation Xrotation Yrotation\n"
@@ -75,13 +106,6 @@ def seated_clip(path: Path, frames: int = 72, fps: float = 24.0, arms_up: bool =
              + _ARM.format(s="Left", x1=4, x2=14) + _ARM.format(s="Right", x1=-4, x2=-14) + "    }\n  }\n")
     text = ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation "
             "Yrotation\n" + _LEG.format(s="Left", x=9) + _LEG.format(s="Right", x=-9) + spine + "}\n")
-    rows = []
-    for f in range(frames):
-        s = np.sin(2.0 * np.pi * f / frames)
-        hip, knee, elbow = -90.0 + 0.5 * SWING * s, KNEE + SWING * s, -ELBOW + SWING * s
-        leg = [0, hip, 0, 0, knee, 0, 0, -(hip + knee), 0, 0, 0, 0]
-        arm = [0, 0, 0, 0, -160.0 if arms_up else -20.0, 0, 0, elbow, 0, 0, 0, 0]
-        rows.append([0.5 * s, 48.0, 0.0, 0, 0, 0] + leg + leg + [0] * 12 + arm + arm)
     body = "\n".join(" ".join(f"{v:.6f}" for v in r) for r in rows)
-    path.write_text(text + f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / fps:.10f}\n{body}\n")
+    path.write_text(text + f"MOTION\nFrames: {len(rows)}\nFrame Time: {1.0 / fps:.10f}\n{body}\n")
     return path

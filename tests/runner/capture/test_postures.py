@@ -1,0 +1,61 @@
+"""Postures the import reads right (runner/capture/body_frames.py), on hand-built clips (tests/posture_clips.py).
+
+* A knee's flexion axis has the right sign in any posture (`_hinge_flipped`): a seated subject - thighs level
+  the whole clip, knees bent 80-100 degrees, elbows 35-55, the arms down or overhead - reads as the flexion it
+  is, not as hyperextension that the import's clean-up would clamp. The sign was once taken from the shin's
+  swing against the pelvis's forward direction, which is zero when the thighs are level, and a seated
+  capture's right knee came out bent backwards by 113 degrees, its foot 70 cm off on the way back.
+* A foot's up axis is measured where it stands flat (`_flat`), not where a kneeling subject's foot lies on
+  its top."""
+import numpy as np
+import pytest
+from posture_clips import ELBOW, KNEE, STAND, SWING, kneeling_clip, seated_clip
+
+#: [rad] a standing foot's up axis is this near the world's: the clip's feet stand flat, and the figure's foot
+#: frame is a mean over the clip's (30 deg: far inside the 180 deg of a foot turned over)
+UPRIGHT = float(np.radians(30.0))
+
+
+@pytest.mark.parametrize("arms_up", [False, True], ids=["arms down", "arms overhead"])
+@pytest.mark.parametrize("joint, bent", [("l_knee", KNEE), ("r_knee", KNEE), ("l_elbow", ELBOW), ("r_elbow", ELBOW)])
+def test_a_seated_subjects_knees_and_elbows_read_as_flexed(tmp_path, joint, bent, arms_up):
+    from runner.capture.reference_motion import load_bvh_reference
+    from runner.paths import MODELS
+    from solver.figure import Figure
+    from solver.layout import StateLayout
+    from solver.model import load_model
+    from solver.quaternion import twist_angle
+
+    model = load_model(MODELS / "run_and_step.xml")
+    ref = load_bvh_reference(seated_clip(tmp_path / "seated.bvh", arms_up=arms_up), model)
+    figure = Figure.from_model(model)
+    axis = np.asarray(figure.flexion_axes[joint], float)
+    flexion = np.degrees(twist_angle(ref.qpos[:, StateLayout.from_model(model).joint(joint).quat_index], axis / np.linalg.norm(axis)))
+    clamped = (ref.clamped or {}).get(joint, np.zeros(1))
+    assert np.max(clamped) == 0.0, f"{joint}: the import clamped {np.max(clamped):.1f} deg of hyperextension"
+    # [deg] the figure's flexion is the clip's within 15 deg: the figure's bones are not the clip's, and its
+    # flexion axis is the measured hinge's, so the angle differs by the bones' and axes' misfit
+    assert np.all(np.abs(flexion - flexion.mean()) <= SWING + 15.0) and abs(flexion.mean() - bent) <= 15.0, \
+        f"{joint}: flexion {flexion.min():.1f}..{flexion.max():.1f} deg, the clip bends it {bent} +- {SWING}"
+
+
+def test_a_kneeling_subjects_feet_stand_upright_where_the_clip_stands(tmp_path):
+    """A foot's up axis is measured where it stands flat (runner/capture/body_frames.py, `_flat`): kneeling
+    with the feet on their tops puts the ankles lower than standing does, but those feet lie upside down, and
+    taken for flat they turned the figure's feet over where the clip stands. There each figure foot's up axis is
+    within UPRIGHT of the world's."""
+    import mujoco
+
+    from runner.capture.reference_motion import load_bvh_reference
+    from runner.paths import MODELS
+    from solver.model import load_model
+
+    model = load_model(MODELS / "run_and_step.xml")
+    ref = load_bvh_reference(kneeling_clip(tmp_path / "kneel.bvh"), model)
+    data = mujoco.MjData(model)
+    for i in range(int(0.9 * STAND * ref.count)):  # standing, before it kneels down
+        data.qpos[:] = ref.qpos[i]
+        mujoco.mj_kinematics(model, data)
+        for foot in ("l_foot", "r_foot"):
+            up = data.xmat[model.body(foot).id].reshape(3, 3)[:, 2]  # the body's z axis, in the world
+            assert up[2] >= np.cos(UPRIGHT), f"frame {i}: {foot} {np.degrees(np.arccos(np.clip(up[2], -1, 1))):.0f} deg off upright"
