@@ -23,7 +23,7 @@ and orientations over the clip - and never from the rest pose (in many conventio
   of all frames with the ankle lowest (heel strike and push-off raise it; a foot held still in the air
   is high). The lowest ankle alone took a stair climber's push-off from the floor, the only frames that
   foot had there, for flat (143_17's left foot, 42 degrees toes-down against 10 on the right), and the
-  stillest frames alone a runner's first forefoot stance. Only frames whose shin stands within 60 degrees
+  stillest frames alone a runner's first forefoot stance. Only frames whose shin stands within 75 degrees
   of vertical count (where the clip has any): a kneeling subject's feet lie on their tops, lower than they
   stand, and taken for flat they turned the figure's feet over.
 
@@ -79,9 +79,9 @@ MIN_FLEXION = np.sin(np.radians(10.0))
 #: [1] the upper arm's rise (its direction's component along the torso's up) above which a flexing elbow no
 #: longer swings the forearm forward but towards the head: sin 30 deg, the arm 30 deg above level
 RAISED_ARM = 0.5
-#: [rad] a flat foot's shin is at most this far from vertical: 60 deg, past a deep squat's forward lean of the
-#: shin (about 45 deg), short of a kneel's shin along the floor (90)
-SHIN_TILT = float(np.radians(60.0))
+#: [rad] a flat foot's shin is at most this far from vertical: 75 deg, past the deepest crouch with the heels down
+#: in the clips here (63 deg, a dancer's), short of a kneel's shin along the floor (90)
+SHIN_TILT = float(np.radians(75.0))
 #: the fraction of frames, those of the slower half with the ankle lowest, in which a foot is taken to be flat
 FLAT_FRACTION = 0.1
 _PARENT = {"l_thigh": "pelvis", "l_shin": "l_thigh", "r_thigh": "pelvis", "r_shin": "r_thigh",
