@@ -65,7 +65,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from solver.capture_bounds import MIN_PEAK, jolt_columns
+from solver.capture_bounds import jolt_columns
 from solver.change import MeasureOfChange
 from solver.constraint_set import TOLERANCES, figure_constraints
 from solver.constraints.acceleration import AccelerationBound
@@ -73,6 +73,7 @@ from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
 from solver.figure import Figure
+from solver.foot_bounds import CAPTURE_RESOLUTION
 from solver.frames import FrameSet
 from solver.inverse_dynamics import InverseDynamics
 from solver.kinematics import TangentMap
@@ -85,14 +86,18 @@ from solver.reference import ReferenceMotion, equal_mass_matrices
 from solver.solution import Solution
 from solver.spline import interpolate
 
-__all__ = ["CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
-           "solve_displacement"]
+__all__ = ["ANGLE_RESOLUTION", "CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
+           "solve_displacement", "still_peaks"]
 
 #: [s] the duration that divides a correction priced by its pose from one priced by its acceleration (the
 #: measure of change's omega = pi / CORRECTION_TIME = 2 pi CUTOFF_HZ): the band of the captured movement
 #: itself, below the 6 Hz cutoff that the no-jolt bound filters the capture at (Winter 2009). A change
 #: within that band is priced by how far it moves the body's parts, a faster one by its acceleration
 CORRECTION_TIME = 1.0 / (2.0 * CUTOFF_HZ)
+
+#: [rad] a capture's rotation resolution, as the corpus bounds take a BVH's (runner.corpus_bounds.PLAIN_FLOORS,
+#: 0.1 deg); with `solver.foot_bounds.CAPTURE_RESOLUTION` for positions, the floor of a still joint's no-jolt limit
+ANGLE_RESOLUTION = float(np.radians(0.1))
 
 #: what a clean asks of a foot in contact: "planted", it slides no more than the pins force (Kovar, Schreiner
 #: & Gleicher, "Footskate cleanup for motion capture editing", SCA 2002: a planted foot stays put), or
@@ -252,13 +257,25 @@ def _change_bound(reference: ReferenceMotion, model, times, qpos) -> ChangeAccel
     central differences at its frames (`solver.peak_bounds.frame_derivatives`), the measure of the acceptance
     figures: the change's own central differences are weighted means of its spline's accelerations at the
     frames, so a change within the bound there shows at most these peaks by that measure (at 30 fps the
-    spline's peaks of the filtered capture run 12-21 % above them)."""
+    spline's peaks of the filtered capture run 12-21 % above them).
+
+    A joint's peak is at least what the filtered capture can resolve, `still_peaks`: a joint the capture holds
+    still (a seated subject's ankles, 0.36 rad/s^2) had a limit the clean could not move it by, and a heel's
+    3.17 mm slide was certified out of reach where 2.3 rad/s^2 at the ankle meets it."""
     layout = StateLayout.from_model(model)
     columns = jolt_columns(layout)
     smooth = filter_capture(times, qpos, layout)
     qacc = frame_derivatives(model, times, smooth)[1]
-    peaks = np.maximum(np.linalg.norm(qacc[:, columns[0]], axis=-1).max(axis=0), MIN_PEAK)
+    peaks = np.maximum(np.linalg.norm(qacc[:, columns[0]], axis=-1).max(axis=0), still_peaks(columns[2]))
     return ChangeAcceleration(reference.qacc, columns, peaks)
+
+
+def still_peaks(linear: np.ndarray) -> np.ndarray:
+    """(j,) [m/s^2 or rad/s^2] the least peak the capture filtered at CUTOFF_HZ resolves for each jolt column
+    (`linear` (j,) bool: a position's, else a rotation's): the peak acceleration of a CUTOFF_HZ sinusoid of the
+    capture's resolution, resolution x (2 pi CUTOFF_HZ)^2 (0.14 m/s^2 for 0.1 mm, 2.5 rad/s^2 for 0.1 deg). A
+    peak below it is below the capture's resolution, not a movement the capture shows."""
+    return np.where(np.asarray(linear, bool), CAPTURE_RESOLUTION, ANGLE_RESOLUTION) * (2.0 * np.pi * CUTOFF_HZ) ** 2
 
 
 def _capture_limits(al: AugmentedLagrangian, plain: FrameSet, feet: str) -> None:

@@ -1,6 +1,7 @@
-"""Clips of postures built by hand (tests/runner/capture/test_postures.py, test_way_back.py): a seated subject,
-whose level thighs give a knee's flexion no forward swing of the shin to be told by, and a kneeling one, whose
-feet lie on their tops lower than they stand flat. One skeleton: Y up, Z forward, cm, rest pose standing with
+"""Clips of postures built by hand (tests/runner/capture/test_postures.py, test_way_back.py, tests/e2e/test_clean.py):
+a seated subject, whose level thighs give a knee's flexion no forward swing of the shin to be told by; a
+kneeling one, whose feet lie on their tops lower than they stand flat; one who stands up from a chair with
+the ankles still. One skeleton: Y up, Z forward, cm, rest pose standing with
 the arms down."""
 from pathlib import Path
 
@@ -93,6 +94,23 @@ def kneeling_clip(path: Path, frames: int = 96, fps: float = 24.0) -> Path:
         elbow = -ELBOW + SWING * np.sin(2.0 * np.pi * f / frames)
         arm = [0, 0, 0, 0, -20.0, 0, 0, elbow, 0, 0, 0, 0]
         rows.append([0.0, 95.0 - 45.0 * k, 0.0, 0, 0, 0] + leg + leg + [0] * 12 + arm + arm)
+    return _write(path, rows, fps)
+
+
+def sit_to_stand_clip(path: Path, fps: float = 30.0, seconds: float = 3.0) -> Path:
+    """Write a subject who sits (the first third: hips at 53 cm, thighs level, shins upright, the feet flat on
+    the floor), stands up (the second third, the thigh's angle from vertical easing from 90 deg to 0) and stands
+    (the last): the feet stay where they are, the hips rise over them and move 42 cm forward, and the ankles
+    never turn (the shins stay upright), the elbows swinging from ELBOW - SWING to ELBOW + SWING."""
+    rows = []
+    n = int(round(seconds * fps))
+    for f in range(n):
+        k = min(max((f / fps - seconds / 3) / (seconds / 3), 0.0), 1.0)
+        th = np.radians(90.0 * (0.5 + 0.5 * np.cos(np.pi * k)))  # the thigh's angle from vertical
+        leg = [0, -np.degrees(th), 0, 0, np.degrees(th), 0, 0, 0, 0, 0, 0, 0]
+        elbow = -ELBOW + SWING * np.sin(2.0 * np.pi * f / n)
+        arm = [0, 0, 0, 0, -20.0, 0, 0, elbow, 0, 0, 0, 0]
+        rows.append([0.0, 53.0 + 42.0 * np.cos(th), 30.0 - 42.0 * np.sin(th), 0, 0, 0] + leg + leg + [0] * 12 + arm + arm)
     return _write(path, rows, fps)
 
 

@@ -133,3 +133,23 @@ def _heights(model, qpos, contacts) -> np.ndarray:
             top = 0.0 if g.type[0] == mujoco.mjtGeom.mjGEOM_PLANE else float(data.geom_xpos[g.id, 2] + g.size[2])
             out[i, k] = z - top
     return out
+
+
+@pytest.mark.slow
+def test_a_joint_the_capture_holds_still_may_move_within_what_the_capture_resolves(tmp_path):
+    """A hand-built sit-to-stand whose ankles never turn (tests/posture_clips.py): the import scales the root's
+    path by the legs' ratio while the hips move 42 cm over the planted feet, so the feet slide about 2 cm, which
+    only turning the ankles undoes. With the ankles' own peak (0) as their no-jolt limit the clean certified the
+    slide out of reach (16 mm at every site); their limit is what the filtered capture resolves
+    (`solver.displacement.still_peaks`), the clean meets every constraint, and no joint's change is harder than
+    the larger of its capture peak and that floor."""
+    from posture_clips import sit_to_stand_clip
+
+    from solver.displacement import still_peaks
+
+    clip = sit_to_stand_clip(tmp_path / "sit_to_stand.bvh")
+    result = process_clean(clip, tmp_path, CleanOptions(render=False, quiet=True, summary=False), say=lambda *_: None)
+    report = json.loads((tmp_path / "sit_to_stand.clean.metrics.json").read_text())
+    assert report["status"] == "converged" and not report["certificate"], (report["status"], report["certificate"])
+    assert result["clean"]["change_joint_rad_s2"] <= max(result["clean"]["capture_joint_rad_s2"], still_peaks([False])[0])
+    assert report["metrics"]["motion"]["optimized"]["path"]["skate_contact_mm"] <= 0.2
