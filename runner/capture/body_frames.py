@@ -200,15 +200,16 @@ def rest_pose_frames(clip: BvhClip, skel: RecognisedSkeleton, figure) -> BodyFra
 def _flat(ankle: np.ndarray, ball: np.ndarray, knee: np.ndarray | None = None) -> np.ndarray:
     """(m,) the frames in which a foot is taken to be flat (module docstring), from the (n, 3) [m] places
     of its ankle, ball and knee: of the slower half, the `FLAT_FRACTION` of all frames with the ankle lowest,
-    among those whose shin stands within SHIN_TILT of vertical where the clip has any (a foot flat on the
-    floor carries its shin above it; a kneeling foot lies on its top, lower than it stands, with the shin
-    along the floor). knee None: every frame."""
+    among those whose shin stands within SHIN_TILT of vertical (a foot flat on the floor carries its shin above
+    it; a kneeling foot lies on its top, lower than it stands, with the shin along the floor); where no slow
+    frame's shin stands, of the frames whose shin does; where none does, of the slower half. knee None: every
+    frame."""
     speed = np.maximum(*(np.linalg.norm(np.gradient(x, axis=0), axis=-1) for x in (ankle, ball)))
     slow = speed <= np.median(speed)
     if knee is not None:
         shin = knee - ankle
         upright = shin[:, 2] >= np.cos(SHIN_TILT) * np.linalg.norm(shin, axis=-1)
-        slow &= upright if (slow & upright).any() else True
+        slow = next((m for m in (slow & upright, upright) if m.any()), slow)  # else no frame is upright
     slow = np.flatnonzero(slow)
     return slow[np.argsort(ankle[slow, 2], kind="stable")[:max(1, round(FLAT_FRACTION * len(ankle)))]]
 

@@ -1,7 +1,7 @@
 """The frames in which a foot is taken to be flat (runner/capture/body_frames.py, the foot's up axis), on
 hand-built ankle and ball-of-the-foot paths whose flat frames are known: a stair climber whose only
-frames on the floor are a push-off, a dancer who holds a kicked foot still in the air, and a runner whose
-first stance is on the forefoot."""
+frames on the floor are a push-off, a dancer who holds a kicked foot still in the air, a runner whose
+first stance is on the forefoot, and a kneel that is the clip's only stillness."""
 import numpy as np
 
 from runner.capture.body_frames import FLAT_FRACTION, _flat
@@ -45,3 +45,15 @@ def test_a_forefoot_stance_is_not_flat_the_heel_down_stance_is():
     ball = np.r_[_still(20, [0.11, 0, 0.06]), _move(40, [0.15, 0, 0.1], [1.1, 0, 0.08]), _still(20, [1.21, 0, 0.046])]
     flat = _flat(ankle, ball)
     assert len(flat) == _count(80) and flat.min() >= 60
+
+
+def test_a_kneel_is_not_flat_even_where_only_the_kneel_is_still():
+    # standing flat while stepping about (the ankle 6 cm up, the knee 45 cm above it), then kneeling still (the
+    # foot on its top, the ankle 5 cm up, the shin along the floor): the still frames are all kneeling ones, and
+    # the flat frames are taken where the shin stands
+    ankle = np.r_[_move(30, [0, 0, 0.06], [0.6, 0, 0.06]), _still(70, [0.6, 0, 0.05])]
+    ball = np.r_[_move(30, [0.12, 0, 0.0], [0.72, 0, 0.0]), _still(70, [0.48, 0, 0.02])]
+    knee = np.r_[ankle[:30] + [0, 0, 0.45], _still(70, [1.05, 0, 0.05])]
+    flat = _flat(ankle, ball, knee)
+    assert len(flat) == _count(100) and flat.max() < 30
+    assert _flat(ankle, ball).min() >= 30  # without the shin, the kneel is taken for flat
