@@ -182,7 +182,7 @@ def reference_motion_metrics(model, solution, reference, contacts) -> dict:
 def _filtered_capture(reference, layout: StateLayout) -> np.ndarray:
     """The reference's qpos low-pass filtered over the whole clip (`runner.jolts.filter_capture`, 6 Hz, Winter),
     so the filter's ends lie outside the keyframes' span where the clip extends beyond it; a clip too short
-    to filter (under 13 frames) is returned as it is."""
+    to filter (under `solver.peak_bounds.MIN_FRAMES`) is returned as it is."""
     from runner.jolts import filter_capture
 
     try:

@@ -31,8 +31,9 @@ __all__ = ["CUTOFF_HZ", "MIN_FRAMES", "PeakBounds", "capture_peaks", "filter_cap
 
 #: [Hz] the kinematics cutoff of the capture's low-pass filter (Winter 2009, ch. 2: 6 Hz for gait)
 CUTOFF_HZ = 6.0
-#: [frames] the fewest the filter takes: scipy's `filtfilt` pads 3 x the filter's order (2) on each side, 12, and one more
-MIN_FRAMES = 13
+#: [frames] the fewest the filter takes: scipy's `filtfilt` extends the signal by padlen = 3 max(len(a), len(b)) = 9
+#: samples (the 2nd-order Butterworth's 3 coefficients) and needs more frames than that
+MIN_FRAMES = 10
 #: [1] Winter's correction of a two-pass (zero-lag) 2nd-order Butterworth: design at cutoff / 0.802 so that
 #: the -3 dB frequency of the two passes is the cutoff ((2^(1/2) - 1)^(1/4) = 0.802)
 TWO_PASS_CORRECTION = 0.802

@@ -15,6 +15,7 @@ from runner.capture.reference_motion import ROOT_SCALE_LEGS, Retargeted, load_bv
 from runner.capture.retarget import Reference
 from runner.capture.root_height import RootCorrectionRefused
 from runner.capture.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
+from runner.capture.skeleton import recognise
 from runner.files import atomic_output
 from solver.capture_frame import CaptureFrame
 from solver.contacts import Contact, contact_points
@@ -88,9 +89,10 @@ def clip_scene(clip: str | Path | Capture, scene: str | Path, figure: str | Path
             a joint; with scene "auto", no foot rests in the clip.
     """
     clip = as_capture(clip)  # read once: the fit and the retargeting onto the fitted scene take the same value
-    if len(clip.clip.local_quat) < MIN_FRAMES:
-        raise InputError(f"{clip.source}: {len(clip.clip.local_quat)} frames; a capture needs at least {MIN_FRAMES}, the "
-                         "6 Hz filter of its no-jolt bounds (solver.peak_bounds); give a longer clip")
+    frames = len(clip.clip.local_quat) - recognise(clip.clip, skeleton_map).rest_frames  # the capture's, rest frames off
+    if frames < MIN_FRAMES:
+        raise InputError(f"{clip.source}: {frames} frames of capture; it needs at least {MIN_FRAMES}, the 6 Hz filter of its "
+                         "no-jolt bounds (solver.peak_bounds); give a longer clip")
     if str(scene) == FLOOR:
         out = _writable(fitted_out)
         capture = _floor_scene(clip, figure, boxes, skeleton_map)

@@ -497,9 +497,10 @@ def test_a_clip_too_short_or_never_resting_is_named_with_the_fix(tmp_path):
     from solver.figure import FIGURE_FILE
     from solver.peak_bounds import MIN_FRAMES
 
-    short = write(tmp_path, tiny_bvh([tiny_frame()] * (MIN_FRAMES - 1)), "short.bvh")
+    # MIN_FRAMES frames in the file, the first CMU's rest frame (the tiny clip has CMU's names): one short
+    short = write(tmp_path, tiny_bvh([tiny_frame()] * MIN_FRAMES), "short.bvh")
     for scene in ("auto", "floor"):
-        with pytest.raises(InputError, match=rf"short\.bvh: {MIN_FRAMES - 1} frames; a capture needs at least {MIN_FRAMES}.*give a longer clip"):
+        with pytest.raises(InputError, match=rf"short\.bvh: {MIN_FRAMES - 1} frames of capture; it needs at least {MIN_FRAMES}.*give a longer clip"):
             clip_scene(short, scene, FIGURE_FILE, tmp_path / "s.scene.xml")
     # every frame 1 m further along: no foot is ever still, so none rests
     flying = [tiny_frame(hips_pos=(100.0 * i, 17.0, 10.0)) for i in range(2 * MIN_FRAMES)]
