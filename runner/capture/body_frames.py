@@ -254,7 +254,7 @@ def _hinge_flipped(hinge_joint: str, hinge: np.ndarray, u: np.ndarray, Q: dict, 
     higher keeps the measured bend (the mean of bone x next bone points to flexion wherever the joint bends more
     than it hyperextends). A swing test fails where the limb never hangs: a seated subject's thighs are level,
     and the shin's forward swing is zero in every frame."""
-    if "knee" in hinge_joint or "leg" in hinge_joint:
+    if "knee" in hinge_joint:
         frame = mul(Q[DRIVERS["pelvis"]], np.broadcast_to(off["pelvis"], Q[DRIVERS["pelvis"]].shape))
         return float(np.sum(hinge * rotate(frame, np.broadcast_to([0.0, 1.0, 0.0], u.shape)))) < 0.0
     frame = mul(Q[DRIVERS["torso"]], np.broadcast_to(off["torso"], Q[DRIVERS["torso"]].shape))
