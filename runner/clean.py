@@ -161,7 +161,19 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
     interrupted = sol.status is Status.INTERRUPTED or stop.requested
     why = "interrupted (Ctrl-C), best path so far kept" if stop.requested else sol.message
     say(f"  stopped: {why}; {sol.n_evals} evaluations, {sol.frames.count} displacement frames, {sol.wall_time_s:.2f} s")
-    return Run(problem, options, out, source, run_metrics(problem, out, source), interrupted), disp, sol, solve_cpu
+    metrics = run_metrics(problem, out, source)
+    for name, fs in (("plain", out.initial), ("optimized", out.frames)):  # a clean's keyframes are its pins alone
+        metrics[name]["keyframe_error"] = _pin_error(fs, disp)
+    return Run(problem, options, out, source, metrics, interrupted), disp, sol, solve_cpu
+
+
+def _pin_error(frames, disp) -> float:
+    """The keyframe error of `frames` at the pins, where the cleaned clip is the capture (`solver.metrics.pose_error`);
+    0 without a pin (the clip's ends are keyframes of the problem, but unpinned they fix nothing)."""
+    from solver.metrics import pose_error
+
+    pins = disp.pins
+    return pose_error(frames, disp.times[pins], disp.qpos[pins], np.ones(disp.qpos[pins].shape, bool), disp.lc.layout.quat_slots)
 
 
 def _on_source(paths: dict, say) -> dict | None:

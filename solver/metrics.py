@@ -45,19 +45,28 @@ def sample_times(t0: float, t1: float, rate: float) -> np.ndarray:
 
 
 def keyframe_error(frames: FrameSet | tuple, keyframes: Keyframes, quat_slots) -> float:
-    """Largest |Y(t_k) - keyframe value| over components the keyframes fix.
+    """Largest |Y(t_k) - keyframe value| over components the keyframes fix (`pose_error` at the keyframes)."""
+    return pose_error(frames, keyframes.times, keyframes.values, keyframes.mask, quat_slots)
+
+
+def pose_error(frames: FrameSet | tuple, times: np.ndarray, values: np.ndarray, mask: np.ndarray, quat_slots) -> float:
+    """Largest |Y(t_k) - values[k]| over the components `mask` selects; 0 where it selects none.
 
     The path is evaluated by re-interpolating the frames (not read from the frame array), so this
     checks the spline too. Quaternions compare up to the sign of the whole quaternion (q and -q are
     one rotation; keyframes are hemisphere-aligned before interpolation).
+
+    Args:
+        frames: FrameSet or (frame times (m,) [s], values (m, nq)). times: (k,) [s]. values: (k, nq) the poses
+            there. mask: (k, nq) bool. quat_slots: the quaternions' qpos indices ((s, 4) or flat).
     """
-    times, values = (frames.times, frames.values) if isinstance(frames, FrameSet) else frames
-    Y = interpolate(times, values, keyframes.times)
-    target = keyframes.values.copy()
+    ft, fv = (frames.times, frames.values) if isinstance(frames, FrameSet) else frames
+    Y = interpolate(ft, fv, np.asarray(times, float))
+    target = np.array(values, float)
     for slot in np.asarray(quat_slots).reshape(-1, 4):
         flip = np.nansum(Y[:, slot] * target[:, slot], axis=1) < 0
         target[np.ix_(flip, slot)] *= -1
-    err = np.abs(Y - target)[keyframes.mask]
+    err = np.abs(Y - target)[np.asarray(mask, bool)]
     return float(err.max()) if err.size else 0.0
 
 
