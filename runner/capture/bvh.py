@@ -65,7 +65,7 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
 
     Checks: HIERARCHY first, ROOT next, the joint grammar (`_check_hierarchy`: braces, OFFSET, CHANNELS
     with matching count and known names, End Site), MOTION, "Frames: N" (N >= 2), "Frame Time: T"
-    (T > 0), exactly N data lines each with one finite number per declared channel. After this,
+    (T > 0), at least N data lines, the first N (those read) each with one finite number per declared channel. After this,
     bvhio's reader cannot run past the end of the file.
 
     Args:
@@ -117,6 +117,8 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
             "e.g. 'Frame Time: .0083333' for 120 frames per second"
         )
     data = rest[2:]
+    if len(data) > frames:  # lines past the count: read as bvhio reads them, the first `frames` (an exporter's
+        data = data[:frames]  # count one short, Assimp's Boxing_Toes.bvh: 3070 lines, "Frames: 3069")
     if len(data) != frames:
         where = f"line {data[-1][0]}" if data else f"line {ln_t}"
         raise InputError(
@@ -333,5 +335,5 @@ def _motion_numbers(text: str) -> np.ndarray:
     """(n, C) the numbers of the MOTION section's frame lines (already checked by `_check_bvh_text`)."""
     lines = text.splitlines()
     m = next(i for i, ln in enumerate(lines) if ln.split()[:1] == ["MOTION"])
-    rows = [ln.split() for ln in lines[m + 1:] if ln.strip()][2:]  # after "Frames:" and "Frame Time:"
-    return np.array(rows, float)
+    rows = [ln.split() for ln in lines[m + 1:] if ln.strip()]
+    return np.array(rows[2:2 + int(rows[0][1])], float)  # after "Frames: N" and "Frame Time:", the N frames read

@@ -301,15 +301,30 @@ def _axes_of(up: str) -> np.ndarray:
     return _up_axis(v)[1]
 
 
+def _leg(p: np.ndarray, legs: list[dict[str, int]]) -> float:
+    """[file units] the mean length of the legs (hip to knee to ankle) over the frames and sides."""
+    return float(np.mean([np.linalg.norm(p[:, lg["lower_leg"]] - p[:, lg["upper_leg"]], axis=-1).mean()
+                          + np.linalg.norm(p[:, lg["foot"]] - p[:, lg["lower_leg"]], axis=-1).mean() for lg in legs]))
+
+
 def _unit(clip: BvhClip, p: np.ndarray, legs: list[dict[str, int]]) -> tuple[float, str] | None:
     """(metres per unit, name) whose stature is a person's (module docstring); None if none is."""
-    leg = np.mean([np.linalg.norm(p[:, lg["lower_leg"]] - p[:, lg["upper_leg"]], axis=-1).mean()
-                   + np.linalg.norm(p[:, lg["foot"]] - p[:, lg["lower_leg"]], axis=-1).mean() for lg in legs])
+    leg = _leg(p, legs)
     cmu = bool(CMU_NAMES & set(clip.names))
     lo, hi, typical = STATURES
     fits = [(abs(np.log(leg * u / LEG_OF_STATURE / typical)), u, name) for name, u in UNITS.items()
             if (name != "cmu" or cmu) and lo <= leg * u / LEG_OF_STATURE <= hi]
     return min(fits)[1:] if fits else None
+
+
+def _unit_error(clip: BvhClip, leg: float) -> InputError:
+    """No unit makes the subject a person: the statures each would give and the metres per unit of a typical one."""
+    tall = ", ".join(f"{leg * u / LEG_OF_STATURE:.3g} m in {name}" for name, u in UNITS.items() if name != "cmu")
+    lo, hi, typical = STATURES
+    return InputError(f"{clip.source}: cannot tell the length unit: the legs are {leg:.4g} units long, a subject {tall}, none "
+                      f"{lo:g}-{hi:g} m tall; give \"unit\" in a skeleton map, a name or metres per unit (e.g. {{\"unit\": "
+                      f"{typical * LEG_OF_STATURE / leg:.3g}}} for a {typical:g} m subject; --skeleton-map FILE, docs/mocap.md "
+                      "\"Skeleton map\")")
 
 
 def _rest_frames(clip: BvhClip, p: np.ndarray, hips: int, joints: list[int]) -> int:
@@ -365,9 +380,7 @@ def recognise(clip: BvhClip, skeleton_map: SkeletonMap | None = None) -> Recogni
         up, axes = _up_axis((p[:, idx["chest"]] - feet).mean(axis=0))
     unit = (smap.unit, smap.unit_name) if smap.unit is not None else _unit(clip, p, sided)
     if unit is None:
-        raise InputError(f"{clip.source}: cannot tell the length unit: no unit (m, cm, mm, inch) makes the legs "
-                         "those of a person 0.8-2.4 m tall; give \"unit\" in a skeleton map (--skeleton-map FILE, "
-                         "docs/mocap.md \"Skeleton map\")")
+        raise _unit_error(clip, _leg(p, sided))
     hips = idx["hips"]
     positions = tuple(n for n, ch in zip(clip.names, clip.channels, strict=True) if set(ch) & set(POSITION_CHANNELS))
     _check_root_path(clip, hips, positions)

@@ -530,6 +530,17 @@ def test_wrong_value_count(tmp_path, scene):
         load_bvh_reference(p, scene)
 
 
+def test_frame_lines_past_the_count_are_not_read(tmp_path):
+    """An exporter's count one short (Assimp's Boxing_Toes.bvh: 3070 frame lines, "Frames: 3069") is read as bvhio
+    reads it: the declared frames, the numbers of the lines past them left out of the clip as of its raw numbers."""
+    from runner.capture.bvh import read_bvh
+
+    frames = [tiny_frame(hips_pos=(1.0, 17.0, 10.0 + i)) for i in range(4)]
+    clip = read_bvh(write(tmp_path, tiny_bvh(frames).replace("Frames: 4", "Frames: 3")))
+    assert clip.local_quat.shape[0] == 3 and clip.raw.shape[0] == 3
+    np.testing.assert_allclose(clip.raw[:, 2], [10.0, 11.0, 12.0], rtol=0, atol=1e-12)
+
+
 def test_truncated_file_does_not_hang(tmp_path, scene):
     """bvhio 1.5.4 loops forever at end of file; the importer must catch a short MOTION section first."""
     text = tiny_bvh([tiny_frame(), tiny_frame(), tiny_frame()]).replace("Frames: 3", "Frames: 5")

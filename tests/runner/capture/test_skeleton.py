@@ -3,6 +3,7 @@ roles found without names, units and up axes of any file, rest frames at any fra
 every bad map or skeleton one line naming the file, the key and the fix; and the correction the way back
 reports (the hyperextension clamp, against hand-computed geometry)."""
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -99,8 +100,12 @@ def test_the_unit_from_the_legs(short, tmp_path, unit, name):
 
 def test_a_skeleton_of_no_persons_size_asks_for_the_unit(short, tmp_path):
     path = write(scale(read(short), 1e-4), tmp_path / "tiny.bvh")  # legs of 1.5 mm in metres, or 3.8 cm in inches
-    with pytest.raises(InputError, match=r"tiny\.bvh: cannot tell the length unit.*give \"unit\" in a skeleton map"):
+    with pytest.raises(InputError, match=r"tiny\.bvh: cannot tell the length unit.*give \"unit\" in a skeleton map") as e:
         recognise(read_bvh(path))
+    # the fix it proposes, metres per unit for a 1.75 m subject, undoes the 1e-4 to within the CMU subject's own
+    # stature (an adult's, 1.5-2.0 m): the clip's true unit is CMU's, 0.0254 / 0.45 m
+    suggested = float(re.search(r'\{"unit": ([0-9.e+-]+)\}', str(e.value)).group(1))
+    assert 1.75 / 2.0 <= suggested * 1e-4 / (0.0254 / 0.45) <= 1.75 / 1.5
 
 
 @pytest.mark.parametrize("up, axes", [("z", [[1, 0, 0], [0, 0, -1], [0, 1, 0]]), ("-y", [[1, 0, 0], [0, -1, 0],
