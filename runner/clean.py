@@ -44,7 +44,8 @@ class CleanOptions(ShowOptions):
             can be fixed there). feet: "planted" (a foot in contact slides no more than the pins force) or
             "captured" (no more than the capture: only penetration, float and flight cleaned;
             `solver.displacement.FEET`). scene, figure, mass, root_scale, skeleton_map: as `runner.pipeline.ClipKeys`.
-        solve: LeastChangeOptions (None: the defaults).
+        solve: LeastChangeOptions (None: the defaults). contacts: a contacts file (or a keyframe file with
+            contacts) whose schedule replaces contact detection (`runner.capture.contacts_file`); None: detect.
     """
 
     pins: tuple = ()
@@ -56,6 +57,7 @@ class CleanOptions(ShowOptions):
     root_scale: float | str = ROOT_SCALE_LEGS
     skeleton_map: str | os.PathLike | None = None
     solve: LeastChangeOptions | None = None
+    contacts: str | os.PathLike | None = None
 
 
 def clean_paths(clip: Path, out_dir: Path, o: CleanOptions) -> dict:
@@ -65,7 +67,8 @@ def clean_paths(clip: Path, out_dir: Path, o: CleanOptions) -> dict:
     stem = clip.stem
     paths = {"save_path": out_dir / f"{stem}.clean.npz", "bvh": out_dir / f"{stem}.clean.bvh",
              "glb": out_dir / f"{stem}.clean.glb",
-             "metrics": out_dir / f"{stem}.clean.metrics.json", "scene": out_dir / f"{stem}.scene.xml"}
+             "metrics": out_dir / f"{stem}.clean.metrics.json", "scene": out_dir / f"{stem}.scene.xml",
+             "contacts": out_dir / f"{stem}.contacts.json"}
     if o.render:
         from runner.render.side_by_side import check_video_out
 
@@ -78,11 +81,9 @@ def clean_paths(clip: Path, out_dir: Path, o: CleanOptions) -> dict:
 def _capture(clip: Path, o: CleanOptions, scene_out: Path, say):
     """The clip retargeted (figure, fitted scene) with its contacts and flights, as `mocap` reads it."""
     from runner.capture.clip import read_capture
-    from runner.capture.contact_detection import reference_contacts
-    from runner.capture.scene import clip_scene, name_surfaces
+    from runner.capture.scene import clip_scene
     from runner.pipeline import ClipKeys, _skeleton_map, clip_figure_scene
     from solver.model import check_scene
-    from solver.problem import capture_airborne
 
     k = ClipKeys(scene=o.scene, figure=o.figure, mass=o.mass, root_scale=o.root_scale, skeleton_map=o.skeleton_map)
     capture = read_capture(clip)  # once: the figure and the scene take it, the reference carries it
@@ -90,14 +91,28 @@ def _capture(clip: Path, o: CleanOptions, scene_out: Path, say):
     cs = clip_scene(capture, scene, figure, scene_out, k.root_scale, _skeleton_map(k))
     ref, model = cs.reference, cs.model
     check_scene(model, cs.scene_path)
-    contacts = tuple(name_surfaces(model, ref, reference_contacts(model, ref.qpos, ref.frame_time)))
-    flights = capture_airborne(model, ref.times, ref.qpos)
+    contacts, flights = _contacts(o, model, ref)
     say(f"dynsplines clean: {clip} -> {ref.count} frames at {1 / ref.frame_time:.4g} Hz ({ref.duration:.2f} s), "
-        f"{len(contacts)} contacts, {len(flights)} flights; scene {'fitted: ' if cs.fitted is not None else ''}"
-        f"{display_path(cs.scene_path)}")
+        f"{len(contacts)} contacts{f' from {display_path(o.contacts)}' if o.contacts else ''}, {len(flights)} flights; "
+        f"scene {'fitted: ' if cs.fitted is not None else ''}{display_path(cs.scene_path)}")
     for note in cs.notes:
         say(f"  warning: {note}")
     return cs, contacts, flights
+
+
+def _contacts(o: CleanOptions, model, ref) -> tuple[tuple, tuple]:
+    """The clip's contacts (each on the surface under it, unless the file names one) and flights: detected
+    (`reference_contacts`, the capture's own flights), or read from `o.contacts` (its flights, else the capture's)."""
+    from runner.capture.contact_detection import reference_contacts
+    from runner.capture.contacts_file import read_contacts_file
+    from runner.capture.scene import name_surfaces
+    from solver.problem import capture_airborne
+
+    given, flights = read_contacts_file(o.contacts, model, ref.duration) if o.contacts else (None, None)
+    found = reference_contacts(model, ref.qpos, ref.frame_time) if given is None else given
+    named = name_surfaces(model, ref, found)
+    contacts = tuple(c if c.surface else n for c, n in zip(found, named, strict=True))
+    return contacts, tuple(capture_airborne(model, ref.times, ref.qpos) if flights is None else flights)
 
 
 def process_clean(clip, out_dir=None, options: CleanOptions | None = None, say=print) -> dict:
@@ -114,8 +129,10 @@ def process_clean(clip, out_dir=None, options: CleanOptions | None = None, say=p
         (`runner.clean_metrics.clean_figures`), "certificate", "keyframes_on_source" (the pins on the
         written BVH, read back, and the free ends' change apart: `_on_source`), "outputs"}.
     Raises:
-        InputError: a missing or malformed clip, another skeleton, an unwritable output, a pin outside the clip.
+        InputError: a missing or malformed clip, another skeleton, an unwritable output, a pin outside the clip,
+            a contacts file (`CleanOptions.contacts`) that is missing, malformed or not of this clip's figure and scene.
     """
+    from runner.capture.contacts_file import write_contacts_file
     from runner.pipeline import default_out_dir
 
     cpu0 = time.process_time()
@@ -127,6 +144,8 @@ def process_clean(clip, out_dir=None, options: CleanOptions | None = None, say=p
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = clean_paths(clip, out_dir, o)
     cs, contacts, flights = _capture(clip, o, paths["scene"], say)
+    write_contacts_file(paths["contacts"], contacts, flights, clip)  # the schedule to edit and give back (--contacts)
+    say(f"  wrote {display_path(paths['contacts'])} (the contacts: edit them and clean again with --contacts)")
     run, disp, sol, solve_cpu = _solve(cs, contacts, flights, o, clip, say)
     return _outputs(run, disp, sol, cs, o, paths, clip, (cpu0, solve_cpu), say)
 

@@ -56,12 +56,17 @@ def register(sub) -> None:
                     "planted in contact and clear in flight, knees and elbows on their hinges, no new jolts "
                     "(motion displacement mapping; docs/mocap.md \"Cleaning a clip\"). Where nothing must change the "
                     "capture comes back exactly. Outputs go to renders/<clip stem>/ unless given: <stem>.clean.npz, "
-                    "<stem>.clean.bvh (on the source skeleton), <stem>.clean.glb, <stem>.clean.metrics.json, <stem>.clean.mp4.")
+                    "<stem>.clean.bvh (on the source skeleton), <stem>.clean.glb, <stem>.clean.metrics.json, <stem>.clean.mp4, "
+                    "<stem>.contacts.json (the contacts cleaned with: edit them and give them back with --contacts).")
     p.add_argument("clip", type=Path, help="BVH clip, e.g. models/cmu/16_23.bvh")
     add_pin_arguments(p)
     p.add_argument("--feet", choices=("planted", "captured"), default="planted",  # solver.displacement.FEET
                    help="a foot in contact: planted (slides no more than the pins force) or as captured "
                         "(only penetration, float and flight cleaned) [%(default)s]")
+    p.add_argument("--contacts", type=Path, default=None, metavar="FILE.json",
+                   help="the contacts to clean with instead of those detected: the <stem>.contacts.json a clean wrote, "
+                        "edited (a slow step detected as a planted foot: split or delete its contact), or a keyframe "
+                        "file of the clip with contacts [detected]")
     p.add_argument("--out-dir", type=Path, default=None, help="output folder [renders/<clip stem>/ in the current folder]")
     p.add_argument("--scene", default=AUTO,
                    help="scene MJCF, or 'auto' (default): a floor and boxes fitted to where the clip's feet rest")
@@ -83,7 +88,7 @@ def run(args) -> int:
     solve = LeastChangeOptions(max_time_s=args.max_time or 0.0, newton=args.gauss_newton) \
         if args.max_time or args.gauss_newton else None
     o = CleanOptions(pins=pins_of(args), pin_ends=args.pin_ends, feet=args.feet, scene=args.scene, figure=args.figure,
-                     mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map, solve=solve,
+                     mass=args.mass, root_scale=args.root_scale, skeleton_map=args.skeleton_map, solve=solve, contacts=args.contacts,
                      render=not args.no_render, fps=args.fps, quiet=args.quiet, summary=not args.no_summary,
                      command=shlex.join(["dynsplines", "clean", *sys.argv[2:]]))
     result = process_clean(args.clip, args.out_dir, o)

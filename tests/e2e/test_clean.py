@@ -1,6 +1,7 @@
 """`dynsplines clean` end to end on a shipped walk (16_23, 299 frames at 120 Hz): the outputs, the feet, the
 pins on the written BVH read back, and the saved path's cleaned clip at the capture's frames."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -158,3 +159,25 @@ def test_a_joint_the_capture_holds_still_may_move_within_what_the_capture_resolv
     assert report["status"] == "converged" and not report["certificate"], (report["status"], report["certificate"])
     assert result["clean"]["change_joint_rad_s2"] <= max(result["clean"]["capture_joint_rad_s2"], still_peaks([False])[0])
     assert report["metrics"]["motion"]["optimized"]["path"]["skate_contact_mm"] <= 0.2
+
+
+def test_the_contacts_written_are_the_ones_cleaned_with_and_an_edited_file_replaces_them(tmp_path):
+    """The clean writes its contact schedule beside its outputs; given back edited (`--contacts`: here the left
+    foot's contacts deleted, a step detection missed), that schedule, not the detected one, is what the clean
+    holds the feet to and saves with the path."""
+    from runner.saved_path import contacts_from_array
+
+    clip = MODELS / "cmu" / "143_31.bvh"
+    first = process_clean(clip, tmp_path / "a", CleanOptions(render=False, quiet=True, summary=False), say=lambda *_: None)
+    written = json.loads(Path(first["outputs"]["contacts"]).read_text())
+    saved = contacts_from_array(np.load(first["outputs"]["save_path"])["contacts"])
+    assert {(c.site, c.surface) for c in saved} == {(e["site"], e["surface"]) for e in written["contacts"]}
+    assert any(e["site"].startswith("l_") for e in written["contacts"])
+    written["contacts"] = [e for e in written["contacts"] if not e["site"].startswith("l_")]
+    edited = tmp_path / "edited.json"
+    edited.write_text(json.dumps(written))
+    o = CleanOptions(render=False, quiet=True, summary=False, contacts=edited)
+    again = process_clean(clip, tmp_path / "b", o, say=lambda *_: None)
+    saved = contacts_from_array(np.load(again["outputs"]["save_path"])["contacts"])
+    assert saved and not any(c.site.startswith("l_") for c in saved)
+    assert json.loads(Path(again["outputs"]["contacts"]).read_text())["contacts"] == written["contacts"]

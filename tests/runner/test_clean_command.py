@@ -14,3 +14,8 @@ def test_a_bad_pin_is_named(capsys):
     with pytest.raises(SystemExit):
         build_parser().parse_args(["clean", "x.bvh", "--pin", "0.5,soon"])
     assert "'0.5,soon' is not a comma-separated list of times in seconds" in capsys.readouterr().err
+
+
+def test_contacts_name_a_file_the_clean_takes():
+    args = build_parser().parse_args(["clean", "x.bvh", "--contacts", "x.contacts.json"])
+    assert str(args.contacts) == "x.contacts.json"

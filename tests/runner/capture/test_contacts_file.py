@@ -1,0 +1,54 @@
+"""The contacts file a clean writes and `--contacts` reads back: the schedule round-trips, a foot becomes its
+sites, a surface may be left to the scene, and a bad file is one line naming it and the entry."""
+import json
+
+import pytest
+
+import solver
+from runner.capture.contacts_file import FORMAT, read_contacts_file, write_contacts_file
+from solver.contacts import Contact
+from solver.errors import InputError
+
+
+@pytest.fixture(scope="module")
+def model():
+    return solver.load_model(solver.shipped("floor.xml"))
+
+
+def test_a_written_schedule_reads_back(model, tmp_path):
+    contacts = [Contact("l_heel", 0.0, 0.5, "floor"), Contact("l_toe", 0.1, 0.6, "floor"), Contact("r_toe", 0.7, 1.25, "floor")]
+    path = tmp_path / "c.contacts.json"
+    write_contacts_file(path, contacts, [(0.6, 0.7)], "clip.bvh")
+    doc = json.loads(path.read_text())
+    assert doc["format"] == FORMAT and doc["source"] == {"clip": "clip.bvh"}
+    back, flights = read_contacts_file(path, model, duration=2.0)
+    assert set(back) == set(contacts) and flights == ((0.6, 0.7),)
+
+
+def test_an_edited_file_may_name_a_foot_and_leave_out_the_surface_and_flights(model, tmp_path):
+    path = tmp_path / "edited.json"
+    path.write_text(json.dumps({"contacts": [{"foot": "left", "start": 0.0, "end": 0.4},
+                                             {"site": "r_toe", "start": 0.2, "end": 0.9, "surface": "floor"}]}))
+    back, flights = read_contacts_file(path, model, duration=1.0)
+    assert set(back) == {Contact("l_heel", 0.0, 0.4, ""), Contact("l_toe", 0.0, 0.4, ""),
+                         Contact("r_toe", 0.2, 0.9, "floor")}
+    assert flights is None  # the caller takes the capture's own
+
+
+@pytest.mark.parametrize("doc, message", [
+    ({"keyframes": []}, r"no \"contacts\" list; give the <stem>\.contacts\.json a clean wrote"),
+    ({"contacts": [{"site": "l_knee", "start": 0.0, "end": 0.4}]}, r"contacts\[0\]: 'site' is 'l_knee'"),
+    ({"contacts": [{"site": "l_toe", "start": 0.0, "end": 0.4, "surface": "step"}]}, r"step"),
+    ({"contacts": [{"site": "l_toe", "start": 3.0, "end": 3.4}]}, r"contacts\[0\] starts at 3 s, after the clip's last frame"),
+])
+def test_a_bad_file_is_named_with_its_entry(model, tmp_path, doc, message):
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=message) as e:
+        read_contacts_file(path, model, duration=1.0)
+    assert str(path) in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_missing_file_is_named(model, tmp_path):
+    with pytest.raises(InputError, match=r"nothere\.json: no such contacts file"):
+        read_contacts_file(tmp_path / "nothere.json", model, duration=1.0)
