@@ -46,7 +46,10 @@ Method:
    padded likewise, its side facing that footprint is pulled back to halfway between the two
    footprints (on the axis along which they lie furthest apart; two boxes stop at the same line), and
    likewise where a contact site of any frame passed more than RAISED below its top beside the rests (a
-   swinging foot under the padding). So
+   swinging foot under the padding). A cluster whose own footprint overlaps a floor stance's footprint or
+   another cluster's gets no box: no prop stood where a foot rested at another height (a dancer's foot
+   held still 10 cm up over a spot it also stood on; a box cut back to halfway into its own footprint was
+   written with a negative size and the scene did not load). So
    the boxes of a stair are side by side, none inside another, each under the rests it was fitted to,
    and a contact is on the surface under its site. A box on a tilted floor is tilted with it (a
    capture floor is tilted by the calibration, the props on it too).
@@ -291,6 +294,11 @@ def _cut(lo: np.ndarray, hi: np.ndarray, own: tuple, other: tuple, reach: float)
         lo[k - 2] = max(lo[k - 2], (flo[k - 2] + ohi[k - 2]) / 2)
 
 
+def _overlap(a: tuple, b: tuple) -> bool:
+    """Whether the footprints a = (lo, hi) and b (x, y rectangles [m]) share a point (edges included)."""
+    return bool(np.all(a[0] <= b[1]) and np.all(b[0] <= a[1]))
+
+
 def _within(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(p,) bool: the points' x, y inside the rectangle [lo, hi]."""
     return ((points[:, :2] >= lo) & (points[:, :2] <= hi)).all(axis=1)
@@ -318,6 +326,8 @@ def _fit_boxes(stances, raised, height_tol, link, margin, passing):
     prints = [(np.min([m.lo for m in c], axis=0), np.max([m.hi for m in c], axis=0)) for c in clusters]
     boxes = []
     for i, members in enumerate(clusters):
+        if any(_overlap(prints[i], f) for f in [(s.lo, s.hi) for s in low] + prints[:i] + prints[i + 1:]):
+            continue  # a foot rested lower, or on another prop, within the footprint: feet held still in the air, no box
         top = float(np.mean([m.rest for m in members]))
         lo, hi = prints[i][0] - margin, prints[i][1] + margin
         # no surface covers where a foot rested at another height or on another prop: each side facing

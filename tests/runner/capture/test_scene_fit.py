@@ -64,6 +64,21 @@ def test_padding_stops_halfway_to_a_floor_contact():
     assert c[0] + h[0] == pytest.approx(1.5 + MARGIN)
 
 
+def test_a_rest_held_over_a_spot_a_foot_stood_on_is_no_box():
+    """A foot held still 10 cm up within a footprint the other foot stood on at floor height: no prop stood
+    there, so no box (a box cut back to halfway into its own footprint had a negative size: the scene did not
+    load); a raised rest apart from every floor footprint still gets its box."""
+    times, pos, cs = stances([
+        ("l_toe", 0.0, 0.2, 0.0, 0.0, 0.0),
+        ("r_toe", 0.3, 0.5, 0.0, 0.0, 0.10),  # over the floor toe's spot
+        ("l_toe", 0.6, 0.8, 1.0, 0.0, 0.0),
+        ("r_toe", 0.9, 1.1, 3.0, 0.0, 0.30),  # a step far from both
+    ])
+    f = fit_scene(times, pos, cs, FEET)
+    assert len(f.boxes) == 1 and f.box_tops()[0] == pytest.approx(0.30)
+    assert all((h > 0).all() for _, h in f.boxes)
+
+
 def test_two_heights_and_far_apart_make_separate_boxes():
     times, pos, cs = stances([
         ("l_toe", 0.0, 0.2, 0.0, 0.0, 0.0),
@@ -197,8 +212,9 @@ def test_fit_contacts_drops_the_top_of_a_hop():
     cs = fit_contacts(times, pos, FEET)
     assert cs and all(c.end <= 0.5 + 1e-9 or c.start >= 0.5 + up - 1e-9 for c in cs), cs
     assert fit_scene(times, pos, cs, FEET).boxes == ()
-    held = pos.copy()  # the same, but the feet stop at the top and stay there (standing on a box)
+    held = pos.copy()  # the same, but the feet hop 0.6 m forward, stop at the top and stay there (on a box)
     top = s >= up / 2
+    held[:, :, 0] += 0.6 * np.clip(s / (up / 2), 0.0, 1.0)[:, None]
     held[top, :, 2] = 0.12
     boxes = fit_scene(times, held, fit_contacts(times, held, FEET), FEET).boxes
     assert len(boxes) == 1 and boxes[0][0][2] + boxes[0][1][2] == pytest.approx(0.12, abs=1e-3)
