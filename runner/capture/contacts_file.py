@@ -61,7 +61,7 @@ def read_contacts_file(path: str | os.PathLike, model, duration: float) -> tuple
     Raises:
         InputError: naming the file, the entry and the fix: missing or malformed, no "contacts" list, an entry
             `solver.keyframe_file.read_contacts` refuses (unknown site, foot or surface, bad times), a contact
-            that starts after the clip ends.
+            that starts after the clip ends or inside one of the file's flights.
     """
     from solver.figure import model_feet
     from solver.keyframe_file import read_contacts, read_document, read_flights
@@ -81,4 +81,11 @@ def read_contacts_file(path: str | os.PathLike, model, duration: float) -> tuple
             raise InputError(f"{src}: {label} starts at {c.start:g} s, after the clip's last frame at {duration:g} s; "
                              "is the file of this clip? (times count from its first frame of motion)")
     flights = read_flights(doc["flights"], src) if "flights" in doc else None
+    for c, label in zip(schedule.contacts, schedule.labels, strict=True):
+        for i, (a, b) in enumerate(flights or ()):
+            # a detected contact starts below the flight height, so never inside a flight (it may run into one,
+            # a site staying within 5 cm while all are 3 cm up): one that does was written into the air
+            if a + 1e-6 < c.start < b - 1e-6:  # [s] a file's times are rounded to 1e-6
+                raise InputError(f"{src}: {label} ({c.site}, {c.start:g}-{c.end:g} s) starts in flights[{i}] ({a:g}-{b:g} s), "
+                                 "where every contact site is in the air; delete or shorten the one or the other")
     return list(schedule.contacts), flights

@@ -16,7 +16,8 @@ def model():
 
 
 def test_a_written_schedule_reads_back(model, tmp_path):
-    contacts = [Contact("l_heel", 0.0, 0.5, "floor"), Contact("l_toe", 0.1, 0.6, "floor"), Contact("r_toe", 0.7, 1.25, "floor")]
+    # the toe's contact runs into the flight, as a site staying within 5 cm while all are 3 cm up does
+    contacts = [Contact("l_heel", 0.0, 0.5, "floor"), Contact("l_toe", 0.1, 0.65, "floor"), Contact("r_toe", 0.7, 1.25, "floor")]
     path = tmp_path / "c.contacts.json"
     write_contacts_file(path, contacts, [(0.6, 0.7)], "clip.bvh")
     doc = json.loads(path.read_text())
@@ -40,6 +41,8 @@ def test_an_edited_file_may_name_a_foot_and_leave_out_the_surface_and_flights(mo
     ({"contacts": [{"site": "l_knee", "start": 0.0, "end": 0.4}]}, r"contacts\[0\]: 'site' is 'l_knee'"),
     ({"contacts": [{"site": "l_toe", "start": 0.0, "end": 0.4, "surface": "step"}]}, r"step"),
     ({"contacts": [{"site": "l_toe", "start": 3.0, "end": 3.4}]}, r"contacts\[0\] starts at 3 s, after the clip's last frame"),
+    ({"contacts": [{"site": "l_toe", "start": 0.0, "end": 0.4}, {"site": "r_toe", "start": 0.5, "end": 0.7}],
+      "flights": [[0.4, 0.6]]}, r"contacts\[1\] \(r_toe, 0\.5-0\.7 s\) starts in flights\[0\] \(0\.4-0\.6 s\)"),
 ])
 def test_a_bad_file_is_named_with_its_entry(model, tmp_path, doc, message):
     path = tmp_path / "bad.json"
