@@ -108,11 +108,13 @@ def _contacts(o: CleanOptions, model, ref) -> tuple[tuple, tuple]:
     from runner.capture.scene import name_surfaces
     from solver.problem import capture_airborne
 
-    given, flights = read_contacts_file(o.contacts, model, ref.duration) if o.contacts else (None, None)
-    found = reference_contacts(model, ref.qpos, ref.frame_time) if given is None else given
+    flights = tuple(capture_airborne(model, ref.times, ref.qpos))
+    if o.contacts:
+        found, flights = read_contacts_file(o.contacts, model, ref.duration, flights)
+    else:
+        found = reference_contacts(model, ref.qpos, ref.frame_time)
     named = name_surfaces(model, ref, found)
-    contacts = tuple(c if c.surface else n for c, n in zip(found, named, strict=True))
-    return contacts, tuple(capture_airborne(model, ref.times, ref.qpos) if flights is None else flights)
+    return tuple(c if c.surface else n for c, n in zip(found, named, strict=True)), tuple(flights)
 
 
 def process_clean(clip, out_dir=None, options: CleanOptions | None = None, say=print) -> dict:

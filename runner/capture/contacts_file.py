@@ -49,15 +49,16 @@ def write_contacts_file(path: str | os.PathLike, contacts, flights, clip: str | 
         tmp.write_text(text, encoding="utf-8")
 
 
-def read_contacts_file(path: str | os.PathLike, model, duration: float) -> tuple[list, tuple | None]:
-    """The contacts (and flights, where the file gives them) of a contacts file or a keyframe file.
+def read_contacts_file(path: str | os.PathLike, model, duration: float, flights: tuple) -> tuple[list, tuple]:
+    """The contacts and flights of a contacts file or a keyframe file.
 
     Args:
         path: the .json file. model: the scene's MjModel (its figure's feet and sites, its surfaces).
-        duration: [s] the clip's length: a contact must start within it.
+        duration: [s] the clip's length: a contact must start within it. flights: ((start, end), ...) [s] the
+            capture's own, taken where the file has no "flights".
     Returns:
         (contacts: `solver.contacts.Contact`s, a surface left out "" (the caller names the one under the site);
-        flights: ((start, end), ...) [s], or None where the file has no "flights").
+        flights: the file's, else `flights`).
     Raises:
         InputError: naming the file, the entry and the fix: missing or malformed, no "contacts" list, an entry
             `solver.keyframe_file.read_contacts` refuses (unknown site, foot or surface, bad times), a contact
@@ -80,12 +81,12 @@ def read_contacts_file(path: str | os.PathLike, model, duration: float) -> tuple
         if c.start > duration + 1e-6:
             raise InputError(f"{src}: {label} starts at {c.start:g} s, after the clip's last frame at {duration:g} s; "
                              "is the file of this clip? (times count from its first frame of motion)")
-    flights = read_flights(doc["flights"], src) if "flights" in doc else None
+    flights, whose = (read_flights(doc["flights"], src), "flights") if "flights" in doc else (tuple(flights), "the capture's flight")
     for c, label in zip(schedule.contacts, schedule.labels, strict=True):
-        for i, (a, b) in enumerate(flights or ()):
+        for i, (a, b) in enumerate(flights):
             # a detected contact starts below the flight height, so never inside a flight (it may run into one,
             # a site staying within 5 cm while all are 3 cm up): one that does was written into the air
             if a + 1e-6 < c.start < b - 1e-6:  # [s] a file's times are rounded to 1e-6
-                raise InputError(f"{src}: {label} ({c.site}, {c.start:g}-{c.end:g} s) starts in flights[{i}] ({a:g}-{b:g} s), "
+                raise InputError(f"{src}: {label} ({c.site}, {c.start:g}-{c.end:g} s) starts in {whose}[{i}] ({a:g}-{b:g} s), "
                                  "where every contact site is in the air; delete or shorten the one or the other")
     return list(schedule.contacts), flights

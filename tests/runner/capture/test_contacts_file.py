@@ -22,7 +22,7 @@ def test_a_written_schedule_reads_back(model, tmp_path):
     write_contacts_file(path, contacts, [(0.6, 0.7)], "clip.bvh")
     doc = json.loads(path.read_text())
     assert doc["format"] == FORMAT and doc["source"] == {"clip": "clip.bvh"}
-    back, flights = read_contacts_file(path, model, duration=2.0)
+    back, flights = read_contacts_file(path, model, 2.0, ())
     assert set(back) == set(contacts) and flights == ((0.6, 0.7),)
 
 
@@ -30,10 +30,13 @@ def test_an_edited_file_may_name_a_foot_and_leave_out_the_surface_and_flights(mo
     path = tmp_path / "edited.json"
     path.write_text(json.dumps({"contacts": [{"foot": "left", "start": 0.0, "end": 0.4},
                                              {"site": "r_toe", "start": 0.2, "end": 0.9, "surface": "floor"}]}))
-    back, flights = read_contacts_file(path, model, duration=1.0)
+    back, flights = read_contacts_file(path, model, 1.0, ((0.95, 1.0),))
     assert set(back) == {Contact("l_heel", 0.0, 0.4, ""), Contact("l_toe", 0.0, 0.4, ""),
                          Contact("r_toe", 0.2, 0.9, "floor")}
-    assert flights is None  # the caller takes the capture's own
+    assert flights == ((0.95, 1.0),)  # the capture's own
+    path.write_text(json.dumps({"contacts": [{"site": "r_toe", "start": 0.5, "end": 0.9}]}))
+    with pytest.raises(InputError, match=r"contacts\[0\] \(r_toe, 0\.5-0\.9 s\) starts in the capture's flight\[0\]"):
+        read_contacts_file(path, model, 1.0, ((0.4, 0.6),))
 
 
 @pytest.mark.parametrize("doc, message", [
@@ -48,10 +51,10 @@ def test_a_bad_file_is_named_with_its_entry(model, tmp_path, doc, message):
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(doc))
     with pytest.raises(InputError, match=message) as e:
-        read_contacts_file(path, model, duration=1.0)
+        read_contacts_file(path, model, 1.0, ())
     assert str(path) in str(e.value) and "\n" not in str(e.value)
 
 
 def test_a_missing_file_is_named(model, tmp_path):
     with pytest.raises(InputError, match=r"nothere\.json: no such contacts file"):
-        read_contacts_file(tmp_path / "nothere.json", model, duration=1.0)
+        read_contacts_file(tmp_path / "nothere.json", model, 1.0, ())
