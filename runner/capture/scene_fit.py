@@ -46,13 +46,10 @@ Method:
    padded likewise, its side facing that footprint is pulled back to halfway between the two
    footprints (on the axis along which they lie furthest apart; two boxes stop at the same line), and
    likewise where a contact site of any frame passed more than RAISED below its top beside the rests (a
-   swinging foot under the padding). A cluster whose own footprint overlaps a floor stance's footprint or
-   another cluster's gets no box: no prop stood where a foot rested at another height (a dancer's foot
-   held still 10 cm up over a spot it also stood on; a box cut back to halfway into its own footprint was
-   written with a negative size and the scene did not load). So
-   the boxes of a stair are side by side, none inside another, each under the rests it was fitted to,
-   and a contact is on the surface under its site. A box on a tilted floor is tilted with it (a
-   capture floor is tilted by the calibration, the props on it too).
+   swinging foot under the padding). A cluster whose footprint overlaps a floor stance's or another
+   cluster's gets no box: no prop stood where a foot rested at another height (docs/contacts.md). So the
+   boxes of a stair are side by side, none inside another, each under the rests it was fitted to, and a
+   contact is on the surface under its site. A box on a tilted floor is tilted with it.
 
 5. Levelling (`FittedScene.levelling`, `FittedScene.levelled`; solver/capture_frame.py): a tilted
    capture floor is a calibration error of the capture volume, so `runner.capture.scene.clip_scene`
@@ -60,12 +57,9 @@ Method:
    normal to +z, then a vertical shift), the boxes square to the world axes, and records that rigid
    transform in the scene for the clip's import (and its inverse for the export onto the source).
 
-Limits: one floor plane (a floor that bends or steps is fitted by the best plane, its stances
-scattering about it); no drift in time; boxes are square to the floor (no rotation about its normal)
-and stand on it; one box per cluster (an L-shaped platform becomes one bounding box); an edge no foot
-came near is set by the margin, not by data (only the contacts bound it: an edge lies between the last
-contact on the box and the first on the floor or the next step); rises of 5 cm or less are not told
-apart (a ramp becomes one box at its mean height). A surface nobody stood on is not found.
+Limits (docs/contacts.md "Fitted scenes"): one floor plane, no drift in time, boxes square to the floor
+and standing on it, one box per cluster, an edge no foot came near set by the margin, rises of 5 cm or
+less not told apart; a surface nobody stood on is not found.
 """
 from __future__ import annotations
 
@@ -327,7 +321,7 @@ def _fit_boxes(stances, raised, height_tol, link, margin, passing):
     boxes = []
     for i, members in enumerate(clusters):
         if any(_overlap(prints[i], f) for f in [(s.lo, s.hi) for s in low] + prints[:i] + prints[i + 1:]):
-            continue  # a foot rested lower, or on another prop, within the footprint: feet held still in the air, no box
+            continue  # a foot rested at another height within the footprint: feet held still in the air (module doc, 4)
         top = float(np.mean([m.rest for m in members]))
         lo, hi = prints[i][0] - margin, prints[i][1] + margin
         # no surface covers where a foot rested at another height or on another prop: each side facing
@@ -445,10 +439,8 @@ _SCENE = """<mujoco model="{model}">
   </visual>
 
   <asset>
-    <texture name="sky" type="skybox" builtin="gradient" rgb1="0.55 0.70 0.90" rgb2="0.10 0.15 0.25"
-             width="512" height="512"/>
-    <texture name="grid" type="2d" builtin="checker" rgb1="0.30 0.33 0.36" rgb2="0.22 0.25 0.28"
-             mark="edge" markrgb="0.5 0.5 0.5" width="512" height="512"/>
+    <texture name="sky" type="skybox" builtin="gradient" rgb1="0.55 0.70 0.90" rgb2="0.10 0.15 0.25" width="512" height="512"/>
+    <texture name="grid" type="2d" builtin="checker" rgb1="0.30 0.33 0.36" rgb2="0.22 0.25 0.28" mark="edge" markrgb="0.5 0.5 0.5" width="512" height="512"/>
     <material name="floor" texture="grid" texrepeat="1 1" texuniform="true" reflectance="0.1"/>
     <texture name="wood" type="cube" builtin="flat" rgb1="0.62 0.48 0.32" rgb2="0.55 0.40 0.25"
              mark="random" random="0.05" markrgb="0.45 0.33 0.20" width="256" height="256"/>
@@ -458,8 +450,7 @@ _SCENE = """<mujoco model="{model}">
   <worldbody>
     <light name="sun" mode="trackcom" pos="0 -2 6" dir="0.1 0.25 -1" directional="true" castshadow="true"
            diffuse="0.7 0.7 0.7" specular="0.2 0.2 0.2"/>
-    <light name="fill" pos="4 4 4" dir="-1 -1 -1" directional="true" castshadow="false"
-           diffuse="0.25 0.25 0.25"/>
+    <light name="fill" pos="4 4 4" dir="-1 -1 -1" directional="true" castshadow="false" diffuse="0.25 0.25 0.25"/>
     <geom name="floor" type="plane" pos="0 0 {floor_z:.6f}"{quat} size="0 0 0.05" material="floor"
           contype="1" conaffinity="1"/>
 {boxes}    <camera name="side" mode="trackcom" pos="0 -5 1.2" xyaxes="1 0 0 0 0.25 1"/>
