@@ -62,7 +62,7 @@ def read_contacts_file(path: str | os.PathLike, model, duration: float, flights:
     Raises:
         InputError: naming the file, the entry and the fix: missing or malformed, no "contacts" list, an entry
             `solver.keyframe_file.read_contacts` refuses (unknown site, foot or surface, bad times), a contact
-            that starts after the clip ends or inside one of the file's flights.
+            that starts after the clip ends or inside a flight (the file's, else the capture's).
     """
     from solver.figure import model_feet
     from solver.keyframe_file import read_contacts, read_document, read_flights
@@ -77,16 +77,16 @@ def read_contacts_file(path: str | os.PathLike, model, duration: float, flights:
         raise InputError(f"{src}: no \"contacts\" list; give the <stem>.contacts.json a clean wrote, or a keyframe file "
                          "with contacts (docs/keyframe-format.md)")
     schedule = read_contacts(doc["contacts"], src, tuple(StaticSurfaces.from_model(model).names), model_feet(model))
-    for c, label in zip(schedule.contacts, schedule.labels, strict=True):
-        if c.start > duration + 1e-6:
-            raise InputError(f"{src}: {label} starts at {c.start:g} s, after the clip's last frame at {duration:g} s; "
-                             "is the file of this clip? (times count from its first frame of motion)")
     flights, whose = (read_flights(doc["flights"], src), "flights") if "flights" in doc else (tuple(flights), "the capture's flight")
     for c, label in zip(schedule.contacts, schedule.labels, strict=True):
-        for i, (a, b) in enumerate(flights):
-            # a detected contact starts below the flight height, so never inside a flight (it may run into one,
-            # a site staying within 5 cm while all are 3 cm up): one that does was written into the air
-            if a + 1e-6 < c.start < b - 1e-6:  # [s] a file's times are rounded to 1e-6
-                raise InputError(f"{src}: {label} ({c.site}, {c.start:g}-{c.end:g} s) starts in {whose}[{i}] ({a:g}-{b:g} s), "
-                                 "where every contact site is in the air; delete or shorten the one or the other")
+        if c.start > duration + 1e-6:  # [s] a file's times are rounded to 1e-6
+            raise InputError(f"{src}: {label} starts at {c.start:g} s, after the clip's last frame at {duration:g} s; "
+                             "is the file of this clip? (times count from its first frame of motion)")
+        # a detected contact starts below the flight height, so never inside a flight (it may run into one, a site
+        # staying within 5 cm while all are 3 cm up): one that does was written into the air
+        i = next((i for i, (a, b) in enumerate(flights) if a + 1e-6 < c.start < b - 1e-6), None)
+        if i is not None:
+            a, b = flights[i]
+            raise InputError(f"{src}: {label} ({c.site}, {c.start:g}-{c.end:g} s) starts in {whose}[{i}] ({a:g}-{b:g} s), "
+                             "where every contact site is in the air; delete or shorten the one or the other")
     return list(schedule.contacts), flights
