@@ -60,7 +60,7 @@ class BvhClip:
 # --------------------------------------------------------------------------------------------------
 
 
-def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
+def _check_bvh_text(text: str, src: str) -> tuple[int, int, list[str]]:
     """Check the structure of a BVH text enough to give line-numbered errors and to make bvhio safe.
 
     Checks: HIERARCHY first, ROOT next, the joint grammar (`_check_hierarchy`: braces, OFFSET, CHANNELS
@@ -71,7 +71,8 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
     Args:
         text: the file's text. src: the file name for messages.
     Returns:
-        (frames, channels): the declared frame count and the total channel count.
+        (frames, channels, names): the declared frame count, the total channel count and the joints' names
+        in the file's order, each the whole rest of its ROOT or JOINT line (3ds Max Biped's "Bip01 L Thigh").
     Raises:
         InputError: naming the line, the value and the fix.
     """
@@ -85,10 +86,10 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
             f"{src}: line {lineno}: expected 'HIERARCHY', found {' '.join(tok)[:60]!r}; "
             "is this a BVH file? A BVH file starts with HIERARCHY, then ROOT <name>"
         )
-    if len(rows) < 2 or rows[1][1][:1] != ["ROOT"] or len(rows[1][1]) != 2:
+    if len(rows) < 2 or rows[1][1][:1] != ["ROOT"] or len(rows[1][1]) < 2:
         ln, t = rows[1] if len(rows) > 1 else (lineno, [])
         raise InputError(f"{src}: line {ln}: expected 'ROOT <name>' after HIERARCHY, found {' '.join(t)!r}")
-    channels, motion_at = _check_hierarchy(rows, src)
+    channels, motion_at, names = _check_hierarchy(rows, src)
     rest = rows[motion_at + 1 :]
     if len(rest) < 2:
         raise InputError(
@@ -139,14 +140,14 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int]:
         if not all(math.isfinite(v) for v in vals):
             bad = next(v for v in t if not math.isfinite(float(v)))
             raise InputError(f"{src}: line {ln}: frame {i + 1} has the value {bad!r}; values must be finite")
-    return frames, channels
+    return frames, channels, names
 
 
 class _Grammar:
     """Recursive descent over the HIERARCHY's rows (see `_check_hierarchy`); counts the channels."""
 
     def __init__(self, rows: list[tuple[int, list[str]]], src: str):
-        self.rows, self.src, self.total = rows, src, 0
+        self.rows, self.src, self.total, self.names = rows, src, 0, [" ".join(rows[1][1][1:])]
 
     def row(self, i: int) -> tuple[int, list[str]]:
         if i >= len(self.rows):
@@ -211,9 +212,10 @@ class _Grammar:
         i += 3
         while True:
             _, t = self.row(i)
-            if t[0] == "JOINT" and len(t) == 2:
+            if t[0] == "JOINT" and len(t) >= 2:  # the name is the rest of the line (Biped's "Bip01 L Thigh")
+                self.names.append(" ".join(t[1:]))
                 i = self.joint(i + 1)
-            elif t == ["End", "Site"]:
+            elif t[:2] == ["End", "Site"]:  # a name after it (MotionBuilder's "End Site Head_end") names nothing
                 i = self.end_site(i)
             elif t == ["}"]:
                 return i + 1
@@ -221,17 +223,17 @@ class _Grammar:
                 self.fail(i, "'JOINT <name>', 'End Site' or '}'")
 
 
-def _check_hierarchy(rows: list[tuple[int, list[str]]], src: str) -> tuple[int, int]:
+def _check_hierarchy(rows: list[tuple[int, list[str]]], src: str) -> tuple[int, int, list[str]]:
     """Check the HIERARCHY grammar (recursive descent over the non-empty lines' tokens).
 
-    joint := ('ROOT' | 'JOINT') name '{' 'OFFSET' x y z 'CHANNELS' n names... (joint | end)* '}'
-    end   := 'End' 'Site' '{' 'OFFSET' x y z '}'
+    joint := ('ROOT' | 'JOINT') name... '{' 'OFFSET' x y z 'CHANNELS' n names... (joint | end)* '}'
+    end   := 'End' 'Site' [name] '{' 'OFFSET' x y z '}'
 
     Args:
         rows: (line number, tokens) of the non-empty lines; rows[0] is HIERARCHY.
         src: the file name for messages.
     Returns:
-        (total channel count, index in rows of the MOTION line).
+        (total channel count, index in rows of the MOTION line, the joints' names in the file's order).
     Raises:
         InputError: naming the line, what was found and what was expected.
     """
@@ -246,7 +248,7 @@ def _check_hierarchy(rows: list[tuple[int, list[str]]], src: str) -> tuple[int, 
         grammar.fail(k, "'MOTION' after the ROOT joint's closing '}'")
     if rows[k][1] != ["MOTION"]:
         grammar.fail(k, "'MOTION' alone on its line")
-    return grammar.total, k
+    return grammar.total, k, grammar.names
 
 
 def _is_float(s: str) -> bool:
@@ -284,7 +286,7 @@ def read_bvh(path: str | Path) -> BvhClip:
         raise InputError(f"{src}: not a text file (byte {e.start} is not UTF-8); give a .bvh motion file") from None
     except OSError as e:
         raise InputError(f"{src}: cannot read the BVH clip: {e.strerror}; check the file's permissions") from None
-    _check_bvh_text(text, src)
+    full_names = _check_bvh_text(text, src)[2]
     try:
         container = bvhio.readAsBvh(str(p))
     except SyntaxError as e:  # not expected after _check_bvh_text; bvhio's own message, no line number
@@ -307,6 +309,8 @@ def read_bvh(path: str | Path) -> BvhClip:
             walk(child, me)
 
     walk(container.Root, -1)
+    if len(full_names) == len(names):  # bvhio keeps a name's first word ("Bip01" of "Bip01 L Thigh"); same order
+        names = list(full_names)
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise InputError(f"{src}: joint name(s) {', '.join(dup)} appear more than once; joint names must be unique")
