@@ -1,7 +1,7 @@
 """Clips of postures built by hand (tests/runner/capture/test_postures.py, test_way_back.py, tests/e2e/test_clean.py):
 a seated subject, whose level thighs give a knee's flexion no forward swing of the shin to be told by; a
 kneeling one, whose feet lie on their tops lower than they stand flat; one who stands up from a chair with
-the ankles still. One skeleton: Y up, Z forward, cm, rest pose standing with
+the ankles still; one whose arms are held rounded in front of the body. One skeleton: Y up, Z forward, cm, rest pose standing with
 the arms down."""
 from pathlib import Path
 
@@ -111,6 +111,19 @@ def sit_to_stand_clip(path: Path, fps: float = 30.0, seconds: float = 3.0) -> Pa
         elbow = -ELBOW + SWING * np.sin(2.0 * np.pi * f / n)
         arm = [0, 0, 0, 0, -20.0, 0, 0, elbow, 0, 0, 0, 0]
         rows.append([0.0, 53.0 + 42.0 * np.cos(th), 30.0 - 42.0 * np.sin(th), 0, 0, 0] + leg + leg + [0] * 12 + arm + arm)
+    return _write(path, rows, fps)
+
+
+def rounded_arms_clip(path: Path, frames: int = 72, fps: float = 24.0) -> Path:
+    """Write a standing subject whose arms are held rounded in front of the body, as a dancer's first position:
+    each upper arm raised 70 deg forward of hanging and turned 110 deg inwards about its own length, so that the
+    elbows, bent ELBOW +- SWING (flexion), carry the forearms across the chest and a little back towards it,
+    not forward."""
+    rows = []
+    for f in range(frames):
+        elbow = -ELBOW + SWING * np.sin(2.0 * np.pi * f / frames)
+        arms = [[0, 0, 0, 0, -70.0, turn, 0, elbow, 0, 0, 0, 0] for turn in (-110.0, 110.0)]
+        rows.append([0.0, 95.0, 0.0, 0, 0, 0] + [0] * 24 + [0] * 12 + arms[0] + arms[1])
     return _write(path, rows, fps)
 
 

@@ -58,7 +58,8 @@ from runner.capture.skeleton import RecognisedSkeleton, skeleton_world
 from solver.errors import InputError
 from solver.quaternion import conj, mul, normalize
 
-__all__ = ["DRIVERS", "BODY_JOINT", "MIN_FLEXION", "RAISED_ARM", "SHIN_TILT", "FLAT_FRACTION", "BodyFrames", "body_frames", "rest_pose_frames",
+__all__ = ["DRIVERS", "BODY_JOINT", "ELBOW_HYPEREXTENSION",
+           "MIN_FLEXION", "RAISED_ARM", "SHIN_TILT", "FLAT_FRACTION", "BodyFrames", "body_frames", "rest_pose_frames",
            "triad"]
 
 #: figure body -> the role whose joint drives its orientation
@@ -79,6 +80,9 @@ MIN_FLEXION = np.sin(np.radians(10.0))
 #: [1] the upper arm's rise (its direction's component along the torso's up) above which a flexing elbow no
 #: longer swings the forearm forward but towards the head: sin 30 deg, the arm 30 deg above level
 RAISED_ARM = 0.5
+#: [rad] the most an elbow hyperextends: 15 deg (AAOS 1965 gives extension 0; Kapandji, The Physiology of the
+#: Joints, vol. 1, 6th ed., 2007: 5-15 deg in lax joints), so an elbow bent further in most frames is flexed
+ELBOW_HYPEREXTENSION = float(np.radians(15.0))
 #: [rad] a flat foot's shin is at most this far from vertical: 75 deg, past the deepest crouch with the heels down
 #: in the clips here (63 deg, a dancer's), short of a kneel's shin along the floor (90)
 SHIN_TILT = float(np.radians(75.0))
@@ -232,7 +236,7 @@ def _limb_offset(body: str, figure, P: dict, Q: dict, off: dict) -> np.ndarray:
     seg = figure.segments[body].direction
     if np.linalg.norm(cross, axis=-1).mean() >= MIN_FLEXION:
         hinge = _mean_in(Q[start], cross)
-        if _hinge_flipped(hinge_joint, rotate(Q[start], np.broadcast_to(hinge, u.shape)), u, Q, off):
+        if _hinge_flipped(hinge_joint, rotate(Q[start], np.broadcast_to(hinge, u.shape)), u, v, Q, off):
             hinge = -hinge
         return triad(seg, figure.flexion_axes[hinge_joint], bone, hinge)
     parent = _PARENT[body]
@@ -243,7 +247,7 @@ def _limb_offset(body: str, figure, P: dict, Q: dict, off: dict) -> np.ndarray:
     return mul(_swing(turned, bone), mean)
 
 
-def _hinge_flipped(hinge_joint: str, hinge: np.ndarray, u: np.ndarray, Q: dict, off: dict) -> bool:
+def _hinge_flipped(hinge_joint: str, hinge: np.ndarray, u: np.ndarray, v: np.ndarray, Q: dict, off: dict) -> bool:
     """Whether the measured hinge axis (n, 3) [world, per frame] points against flexion, by anatomy, not by which
     way the clip bends most (module docstring). A knee's flexion axis is the femur's medio-lateral axis (Grood &
     Suntay, J. Biomech. Eng. 105:136-144, 1983), which the hip's rotation (at most 45 degrees either way, AAOS
@@ -252,11 +256,17 @@ def _hinge_flipped(hinge_joint: str, hinge: np.ndarray, u: np.ndarray, Q: dict, 
     forearm forward of the torso (a raised arm's towards or behind the head), a test summed over the frames
     whose upper arm (`u` (n, 3), the upper bone) is no higher than RAISED_ARM; a clip whose arms are always
     higher keeps the measured bend (the mean of bone x next bone points to flexion wherever the joint bends more
-    than it hyperextends). A swing test fails where the limb never hangs: a seated subject's thighs are level,
-    and the shin's forward swing is zero in every frame."""
+    than it hyperextends), and so does an elbow bent further than any elbow hyperextends (`ELBOW_HYPEREXTENSION`)
+    in most frames (the median of the angle between `u` and the next bone `v` (n, 3)): its bend is flexion, and
+    the swing test, which arms rounded in front of the body misread (a dancer's first position: the forearm
+    swings across the torso, not forward; a pirouette's right elbow, bent 24-88 degrees, was read as bent
+    backwards and straightened), is not asked. A swing test fails where the limb never hangs: a seated
+    subject's thighs are level, and the shin's forward swing is zero in every frame."""
     if "knee" in hinge_joint:
         frame = mul(Q[DRIVERS["pelvis"]], np.broadcast_to(off["pelvis"], Q[DRIVERS["pelvis"]].shape))
         return float(np.sum(hinge * rotate(frame, np.broadcast_to([0.0, 1.0, 0.0], u.shape)))) < 0.0
+    if np.median(np.sum(u * v, axis=-1)) < np.cos(ELBOW_HYPEREXTENSION):
+        return False
     frame = mul(Q[DRIVERS["torso"]], np.broadcast_to(off["torso"], Q[DRIVERS["torso"]].shape))
     low = np.sum(u * rotate(frame, np.broadcast_to([0.0, 0.0, 1.0], u.shape)), axis=-1) <= RAISED_ARM
     forward = rotate(frame, np.broadcast_to([1.0, 0.0, 0.0], u.shape))

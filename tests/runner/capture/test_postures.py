@@ -9,7 +9,7 @@
   its top."""
 import numpy as np
 import pytest
-from posture_clips import ELBOW, KNEE, STAND, SWING, kneeling_clip, seated_clip
+from posture_clips import ELBOW, KNEE, STAND, SWING, kneeling_clip, rounded_arms_clip, seated_clip
 
 #: [rad] a standing foot's up axis is this near the world's: the clip's feet stand flat, and the figure's foot
 #: frame is a mean over the clip's (30 deg: far inside the 180 deg of a foot turned over)
@@ -59,3 +59,26 @@ def test_a_kneeling_subjects_feet_stand_upright_where_the_clip_stands(tmp_path):
         for foot in ("l_foot", "r_foot"):
             up = data.xmat[model.body(foot).id].reshape(3, 3)[:, 2]  # the body's z axis, in the world
             assert up[2] >= np.cos(UPRIGHT), f"frame {i}: {foot} {np.degrees(np.arccos(np.clip(up[2], -1, 1))):.0f} deg off upright"
+
+
+@pytest.mark.parametrize("joint", ["l_elbow", "r_elbow"])
+def test_arms_rounded_in_front_read_as_flexed(tmp_path, joint):
+    """An elbow's sign (`_hinge_flipped`): arms held rounded in front of the body (a dancer's first position)
+    swing their forearms across the chest and a little back as the elbows flex, which the forearm's forward
+    swing read as hyperextension, and the import straightened a pirouette's right elbow bent 24-88 degrees. An
+    elbow bent further than elbows hyperextend (`ELBOW_HYPEREXTENSION`) in most frames is flexed: no clamp, and
+    the figure's flexion is the clip's within 15 degrees (as the seated subject's)."""
+    from runner.capture.reference_motion import load_bvh_reference
+    from runner.paths import MODELS
+    from solver.figure import Figure
+    from solver.layout import StateLayout
+    from solver.model import load_model
+    from solver.quaternion import twist_angle
+
+    model = load_model(MODELS / "run_and_step.xml")
+    ref = load_bvh_reference(rounded_arms_clip(tmp_path / "rounded.bvh"), model)
+    axis = np.asarray(Figure.from_model(model).flexion_axes[joint], float)
+    flexion = np.degrees(twist_angle(ref.qpos[:, StateLayout.from_model(model).joint(joint).quat_index], axis / np.linalg.norm(axis)))
+    clamped = (ref.clamped or {}).get(joint, np.zeros(1))
+    assert np.max(clamped) == 0.0, f"{joint}: the import clamped {np.max(clamped):.1f} deg of hyperextension"
+    assert abs(flexion.mean() - ELBOW) <= 15.0, f"{joint}: flexion {flexion.min():.1f}..{flexion.max():.1f} deg, the clip bends it {ELBOW}"
