@@ -64,21 +64,31 @@ _ARM = """      JOINT {s}Shoulder
 """
 
 
-def seated_clip(path: Path, frames: int = 72, fps: float = 24.0, arms_up: bool = False) -> Path:
+def seated_clip(path: Path, frames: int = 72, fps: float = 24.0, arms_up: bool = False, displaced: float = 0.0) -> Path:
     """Write a seated subject's clip (Y up, Z forward, cm; rest pose standing, arms down): every frame the
     hips at 48 cm, each thigh turned -90 deg about X (level, forward), each knee +KNEE about X (the shin
     down again: flexion), the ankles keeping the feet flat, each elbow -ELBOW about X (flexion: the forearm
     forward of a hanging arm, behind the head of a raised one), all swinging by SWING over the clip so the
     hinges can be measured; the upper arms 20 deg forward of hanging, or with `arms_up` raised overhead (160
-    deg forward) the whole clip."""
+    deg forward) the whole clip. With `displaced` [deg] the feet have position channels, as a Perception Neuron
+    export "with displacement": each knee's rotation is off by d = displaced x sin(3 x 2 pi f / frames) about X,
+    the foot's translation turned back by -d and its rotation by -d, so every joint's world position and
+    rotation below the knee is the clip's without them (its known answer), and only the knee's rotation
+    no longer points the shin."""
     rows = []
     for f in range(frames):
         s = np.sin(2.0 * np.pi * f / frames)
         hip, knee, elbow = -90.0 + 0.5 * SWING * s, KNEE + SWING * s, -ELBOW + SWING * s
-        leg = [0, hip, 0, 0, knee, 0, 0, -(hip + knee), 0, 0, 0, 0]
+        d = displaced * np.sin(6.0 * np.pi * f / frames)
+        if displaced:
+            c, n = np.cos(np.radians(-d)), np.sin(np.radians(-d))
+            foot = [0.0, -42.0 * c + 2.0 * n, -42.0 * n - 2.0 * c]  # Rx(-d) (0, -42, -2): the foot's OFFSET turned back
+            leg = [0, hip, 0, 0, knee + d, 0] + foot + [0, -(hip + knee) - d, 0, 0, 0, 0]
+        else:
+            leg = [0, hip, 0, 0, knee, 0, 0, -(hip + knee), 0, 0, 0, 0]
         arm = [0, 0, 0, 0, -160.0 if arms_up else -20.0, 0, 0, elbow, 0, 0, 0, 0]
         rows.append([0.5 * s, 48.0, 0.0, 0, 0, 0] + leg + leg + [0] * 12 + arm + arm)
-    return _write(path, rows, fps)
+    return _write(path, rows, fps, foot_positions=bool(displaced))
 
 
 def kneeling_clip(path: Path, frames: int = 96, fps: float = 24.0) -> Path:
@@ -127,16 +137,20 @@ def rounded_arms_clip(path: Path, frames: int = 72, fps: float = 24.0) -> Path:
     return _write(path, rows, fps)
 
 
-def _write(path: Path, rows: list, fps: float) -> Path:
-    """The clip of `rows` (each frame's channel values in HIERARCHY order) at `fps` written to `path`."""
+def _write(path: Path, rows: list, fps: float, foot_positions: bool = False) -> Path:
+    """The clip of `rows` (each frame's channel values in HIERARCHY order) at `fps` written to `path`; with
+    `foot_positions` the feet's CHANNELS are 6, their position first."""
     spine = ("  JOINT Spine\n  {\n    OFFSET 0 10 0\n    CHANNELS 3 Zrotation Xrotation Yrotation\n"
              "    JOINT Spine1\n    {\n      OFFSET 0 18 0\n      CHANNELS 3 Zrotation Xrotation Yrotation\n"
              "      JOINT Neck\n      {\n        OFFSET 0 22 0\n        CHANNELS 3 Zrotation Xrotation Yrotation\n"
              "        JOINT Head\n        {\n          OFFSET 0 10 0\n          CHANNELS 3 Zrotation Xrotation Yrotation\n"
              "          End Site\n          {\n            OFFSET 0 16 0\n          }\n        }\n      }\n"
              + _ARM.format(s="Left", x1=4, x2=14) + _ARM.format(s="Right", x1=-4, x2=-14) + "    }\n  }\n")
+    legs = _LEG.format(s="Left", x=9) + _LEG.format(s="Right", x=-9)
+    if foot_positions:
+        legs = legs.replace("OFFSET 0 -42 -2\n        CHANNELS 3", "OFFSET 0 -42 -2\n        CHANNELS 6 Xposition Yposition Zposition")
     text = ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation "
-            "Yrotation\n" + _LEG.format(s="Left", x=9) + _LEG.format(s="Right", x=-9) + spine + "}\n")
+            "Yrotation\n" + legs + spine + "}\n")
     body = "\n".join(" ".join(f"{v:.6f}" for v in r) for r in rows)
     path.write_text(text + f"MOTION\nFrames: {len(rows)}\nFrame Time: {1.0 / fps:.10f}\n{body}\n")
     return path

@@ -257,7 +257,7 @@ def _hinge_flipped(hinge_joint: str, hinge: np.ndarray, u: np.ndarray, v: np.nda
     whose upper arm (`u` (n, 3), the upper bone) is no higher than RAISED_ARM; a clip whose arms are always
     higher keeps the measured bend (the mean of bone x next bone points to flexion wherever the joint bends more
     than it hyperextends), and so does an elbow bent further than any elbow hyperextends (`ELBOW_HYPEREXTENSION`)
-    in most frames (the median of the angle between `u` and the next bone `v` (n, 3)): its bend is flexion, and
+    in most frames (more than half, the angle between `u` and the next bone `v` (n, 3)): its bend is flexion, and
     the swing test, which arms rounded in front of the body misread (a dancer's first position: the forearm
     swings across the torso, not forward; a pirouette's right elbow, bent 24-88 degrees, was read as bent
     backwards and straightened), is not asked. A swing test fails where the limb never hangs: a seated
@@ -265,7 +265,7 @@ def _hinge_flipped(hinge_joint: str, hinge: np.ndarray, u: np.ndarray, v: np.nda
     if "knee" in hinge_joint:
         frame = mul(Q[DRIVERS["pelvis"]], np.broadcast_to(off["pelvis"], Q[DRIVERS["pelvis"]].shape))
         return float(np.sum(hinge * rotate(frame, np.broadcast_to([0.0, 1.0, 0.0], u.shape)))) < 0.0
-    if np.median(np.sum(u * v, axis=-1)) < np.cos(ELBOW_HYPEREXTENSION):
+    if np.mean(np.sum(u * v, axis=-1) < np.cos(ELBOW_HYPEREXTENSION)) > 0.5:  # bent beyond it in most frames
         return False
     frame = mul(Q[DRIVERS["torso"]], np.broadcast_to(off["torso"], Q[DRIVERS["torso"]].shape))
     low = np.sum(u * rotate(frame, np.broadcast_to([0.0, 0.0, 1.0], u.shape)), axis=-1) <= RAISED_ARM

@@ -5,15 +5,23 @@ from __future__ import annotations
 import numpy as np
 
 from runner.capture.bvh import BvhClip
-from solver.quaternion import conj, mul
+from solver.quaternion import conj, mul, normalize
 
-__all__ = ["rotate", "forward", "file_world", "to_mujoco", "tip_positions", "bone_length", "reach"]
+__all__ = ["between", "rotate", "forward", "file_world", "to_mujoco", "tip_positions", "bone_length", "reach"]
 
 
 def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate (..., 3) vectors by (..., 4) unit quaternions (w x y z)."""
     qv = np.concatenate([np.zeros(v.shape[:-1] + (1,)), v], axis=-1)
     return mul(mul(q, qv), conj(q))[..., 1:]
+
+
+def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n, 4) the shortest rotations taking the directions a (n, 3) to b (n, 3) (not opposite): w = 1 + a.b,
+    v = a x b for unit a, b, normalized (the half-way quaternion)."""
+    a = a / np.linalg.norm(a, axis=1, keepdims=True)
+    b = b / np.linalg.norm(b, axis=1, keepdims=True)
+    return normalize(np.concatenate([1.0 + np.sum(a * b, axis=1, keepdims=True), np.cross(a, b)], axis=1))
 
 
 def forward(parents, local_quat: np.ndarray, local_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

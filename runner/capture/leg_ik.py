@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from runner.capture.bvh_kinematics import rotate
+from runner.capture.bvh_kinematics import between, rotate
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.quaternion import conj, mul, normalize, twist_angle
@@ -95,13 +95,6 @@ def _axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.concatenate([np.cos(half), np.sin(half) * axis], axis=1)
 
 
-def _between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(n, 4) the shortest rotations taking the directions a (n, 3) to b (n, 3) (not opposite)."""
-    a = a / np.linalg.norm(a, axis=1, keepdims=True)
-    b = b / np.linalg.norm(b, axis=1, keepdims=True)
-    return normalize(np.concatenate([1.0 + np.sum(a * b, axis=1, keepdims=True), np.cross(a, b)], axis=1))
-
-
 def knee_angle(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, axis: np.ndarray,
                distance: np.ndarray) -> np.ndarray:
     """(n,) [rad] the rotation theta of the shin about the knee axis that puts the ankle `distance` from the hip.
@@ -162,7 +155,7 @@ def move_foot(model, leg: LegChain, qpos: np.ndarray, dz: np.ndarray) -> tuple[n
     disc = np.sqrt(np.maximum(0.0, w[:, 2] ** 2 - np.sum(w * w, axis=1) + np.sum((ankle - H) ** 2, axis=1)))
     roots = np.stack([-w[:, 2] + disc, -w[:, 2] - disc])
     z = roots[np.argmin(np.abs(roots - dz[rows]), axis=0), np.arange(len(rows))]
-    swing = _between(ankle - H, A + z[:, None] * up - H)
+    swing = between(ankle - H, A + z[:, None] * up - H)
     thigh, shin = mul(swing, rot[:, 1]), mul(swing, mul(bend, rot[:, 2]))
     out = qpos.copy()
     frame = [np.broadcast_to(model.body_quat[b], (len(rows), 4)) for b in (leg.thigh, leg.shin, leg.foot)]

@@ -14,7 +14,8 @@ The pipeline (one concept: from a BVH file to a reference motion and keyframes o
    the axes: for Y-up files (x, y, z) = (Z, X, Y), as for CMU's clips).
 3. Retargeting: each figure body's world orientation is its driving joint's world orientation times a
    constant offset R_off (runner/capture/body_frames.py: the body's anatomical frame in the joint's frame,
-   measured on the clip, or recorded in the subject's figure). Local joint quaternions follow as
+   measured on the clip, or recorded in the subject's figure); a limb whose bone a file bends by position
+   channels of its own turns along the bone (`_along_bones`). Local joint quaternions follow as
    q_joint = conj(q_parent_world) q_child_world, unit, w x y z, hemisphere-consistent over time.
    Joints the figure merges are composed, not dropped: a body's world orientation includes every
    rotation above its driving joint (the torso's is every spine joint's; the thigh's includes a hip
@@ -192,6 +193,7 @@ def retarget(clip: BvhClip, skel: RecognisedSkeleton, frames: BodyFrames, figure
     qw, pw = skeleton_world(clip, skel)
     body_q = {b: mul(qw[:, skel.index(clip, role)], np.broadcast_to(frames.offsets[b], qw[:, 0].shape))
               for b, role in DRIVERS.items()}
+    body_q = _along_bones(body_q, clip, skel, pw)
     qpos = np.zeros((len(qw), layout.nq))
     root = figure.joints[0]  # the free joint: the root body's
     qpos[:, root.qposadr : root.qposadr + 3] = root_scale * pw[:, skel.index(clip, "hips")]
@@ -200,6 +202,30 @@ def retarget(clip: BvhClip, skel: RecognisedSkeleton, frames: BodyFrames, figure
         parent, child = figure.joint_bodies[joint.name]
         qpos[:, joint.qpos_slice] = mul(conj(body_q[parent]), body_q[child])
     return tidy_quaternions(qpos, layout)
+
+
+def _along_bones(body_q: dict, clip: BvhClip, skel: RecognisedSkeleton, pw: np.ndarray) -> dict:
+    """The limbs' world orientations (`body_q`, {body: (n, 4)}) turned along their bones where the file moves
+    joints by position channels of their own (a Perception Neuron export "with displacement": a foot 2.8-12.7
+    cm off its OFFSET from the knee). The driving joint's rotation then no longer points the bone: each limb
+    (`body_frames.LIMBS`: thigh, shin, upper arm, forearm) turns by the shortest rotation from its bone
+    at the clip's mean translations to its bone in the frame, the capture's joint positions `pw` (n, J, 3)
+    [m], so the figure's knee, ankle, elbow and wrist lie along the capture's bones. A file whose joints
+    other than the root keep their OFFSETs (or constant translations) is left exactly as it is."""
+    from runner.capture.body_frames import LIMBS
+    from runner.capture.bvh_kinematics import between, forward
+
+    pos = clip.local_pos[:, 1:]
+    if not np.any(pos != pos[:1]):
+        return body_q
+    mean = clip.local_pos.copy()
+    mean[:, 1:] = pos.mean(axis=0)
+    pm = (forward(clip.parents, clip.local_quat, mean)[1] @ skel.axes.T) * skel.unit
+    out = dict(body_q)
+    for body, (end, _) in LIMBS.items():
+        s, e = skel.index(clip, DRIVERS[body]), skel.index(clip, end)
+        out[body] = normalize(mul(between(pm[:, e] - pm[:, s], pw[:, e] - pw[:, s]), body_q[body]))
+    return out
 
 
 def tidy_quaternions(qpos: np.ndarray, layout: StateLayout) -> np.ndarray:

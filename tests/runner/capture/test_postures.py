@@ -82,3 +82,30 @@ def test_arms_rounded_in_front_read_as_flexed(tmp_path, joint):
     clamped = (ref.clamped or {}).get(joint, np.zeros(1))
     assert np.max(clamped) == 0.0, f"{joint}: the import clamped {np.max(clamped):.1f} deg of hyperextension"
     assert abs(flexion.mean() - ELBOW) <= 15.0, f"{joint}: flexion {flexion.min():.1f}..{flexion.max():.1f} deg, the clip bends it {ELBOW}"
+
+
+def test_a_knee_displaced_by_position_channels_still_points_the_shin(tmp_path):
+    """A file that moves joints by position channels of their own (Perception Neuron "with displacement") no
+    longer has the knee's rotation point the shin: here it is off by up to 15 deg, the foot's translation and
+    rotation turned back so that the ankle and foot are where the clip without them has them (the known
+    answer). The retarget turns each limb along its bone (`retarget._along_bones`): the knees' and ankles'
+    flexion is the plain clip's within 0.5 deg (the body frames are measured on each file apart)."""
+    from runner.capture.reference_motion import load_bvh_reference
+    from runner.paths import MODELS
+    from solver.figure import Figure
+    from solver.layout import StateLayout
+    from solver.model import load_model
+    from solver.quaternion import twist_angle
+
+    model = load_model(MODELS / "run_and_step.xml")
+    figure, layout = Figure.from_model(model), StateLayout.from_model(model)
+    plain = load_bvh_reference(seated_clip(tmp_path / "plain.bvh"), model)
+    shifted = load_bvh_reference(seated_clip(tmp_path / "displaced.bvh", displaced=15.0), model)
+    for joint in ("l_knee", "r_knee"):
+        axis = np.asarray(figure.flexion_axes[joint], float)
+        a, b = (np.degrees(twist_angle(r.qpos[:, layout.joint(joint).quat_index], axis / np.linalg.norm(axis))) for r in (plain, shifted))
+        assert np.max(np.abs(a - b)) <= 0.5, f"{joint}: flexion {np.max(np.abs(a - b)):.2f} deg off the plain clip's"
+    for side in "lr":  # the ankle's whole rotation (not a hinge): its angle from the plain clip's
+        q = layout.joint(f"{side}_ankle").quat_index
+        dot = np.abs(np.sum(plain.qpos[:, q] * shifted.qpos[:, q], axis=1))
+        assert np.degrees(2 * np.arccos(np.clip(dot, 0, 1))).max() <= 0.5, f"{side}_ankle"
