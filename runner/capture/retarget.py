@@ -204,6 +204,10 @@ def retarget(clip: BvhClip, skel: RecognisedSkeleton, frames: BodyFrames, figure
     return tidy_quaternions(qpos, layout)
 
 
+#: [m] a limb's bone shorter than this (1 mm: below any capture's resolution) has no direction to turn the limb along
+BONE_MIN = 1e-3
+
+
 def _along_bones(body_q: dict, clip: BvhClip, skel: RecognisedSkeleton, pw: np.ndarray) -> dict:
     """The limbs' world orientations (`body_q`, {body: (n, 4)}) turned along their bones where the file moves
     joints by position channels of their own (a Perception Neuron export "with displacement": a foot 2.8-12.7
@@ -224,7 +228,11 @@ def _along_bones(body_q: dict, clip: BvhClip, skel: RecognisedSkeleton, pw: np.n
     out = dict(body_q)
     for body, (end, _) in LIMBS.items():
         s, e = skel.index(clip, DRIVERS[body]), skel.index(clip, end)
-        out[body] = normalize(mul(between(pm[:, e] - pm[:, s], pw[:, e] - pw[:, s]), body_q[body]))
+        a, b = pm[:, e] - pm[:, s], pw[:, e] - pw[:, s]
+        ok = np.minimum(np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)) > BONE_MIN  # a bone to point
+        if ok.any():
+            out[body] = body_q[body].copy()
+            out[body][ok] = normalize(mul(between(a[ok], b[ok]), body_q[body][ok]))
     return out
 
 
