@@ -77,7 +77,8 @@ class RecognisedSkeleton:
         unit: [m] per file unit. unit_name: "cm", "inch", ... or the number a map gave.
         axes: (3, 3) rotation from the file's axes to MuJoCo's (z up): v_mujoco = axes @ v_file.
         up: the file axis that points up ("y", "-z", ...).
-        position_joints: the joints with position channels (their translation is the channels').
+        position_joints: the joints with position channels (their translation is the channels'); none at or
+            above the hips: the root stands at its OFFSET (three.js's pirouette.bvh).
         above_hips: the joints above the hips (a static extra root), root first.
         rest_frames: leading frames that are not motion (0, or 1 for a T-pose put before it).
         rest_given: rest_frames came from a skeleton map (recorded in `skeleton_map`), not found.
@@ -383,7 +384,6 @@ def recognise(clip: BvhClip, skeleton_map: SkeletonMap | None = None) -> Recogni
         raise _unit_error(clip, _leg(p, sided))
     hips = idx["hips"]
     positions = tuple(n for n, ch in zip(clip.names, clip.channels, strict=True) if set(ch) & set(POSITION_CHANNELS))
-    _check_root_path(clip, hips, positions)
     above = []
     j = int(clip.parents[hips])
     while j >= 0:
@@ -395,17 +395,6 @@ def recognise(clip: BvhClip, skeleton_map: SkeletonMap | None = None) -> Recogni
     rest = smap.rest_frames if given else _rest_frames(clip, p * unit[0], hips, sorted(set(idx.values())))
     return RecognisedSkeleton(MappingProxyType(roles), float(unit[0]), str(unit[1]), axes, up, positions,
                               tuple(above), rest, how, clip.source, given)
-
-
-def _check_root_path(clip: BvhClip, hips: int, positions: tuple[str, ...]) -> None:
-    """InputError unless the hips or a joint above them has position channels (the clip's root path)."""
-    j = hips
-    while j >= 0 and clip.names[j] not in positions:
-        j = int(clip.parents[j])
-    if j < 0:
-        raise InputError(f"{clip.source}: neither the hips ({clip.names[hips]}) nor a joint above them has position "
-                         f"channels, so the clip has no root path; the hips need 'CHANNELS 6 Xposition Yposition "
-                         "Zposition' and their rotations")
 
 
 def _geometric_sides(clip, world, pair, legs, trunk) -> list[str | None]:

@@ -1,9 +1,10 @@
 """A saved path written back onto the skeleton of the BVH clip it came from (`dynsplines export --to
 FILE.bvh`, docs/export.md "Onto the source skeleton").
 
-The file has the source's HIERARCHY verbatim (joint names, OFFSETs, channel order, units) and its frame
-rate, and starts, like the source, with the source's leading rest frames (the synthetic T-pose of CMU's
-cgspeed conversion; none in most files); frame k + rest is the path at t = k / fps. The skeleton is
+The file has the source's HIERARCHY verbatim (joint names, OFFSETs, channel order, units; a root with
+rotation channels only gets position channels, which carry the path's root) and its frame rate, and
+starts, like the source, with the source's leading rest frames (the synthetic T-pose of CMU's cgspeed
+conversion; none in most files); frame k + rest is the path at t = k / fps. The skeleton is
 read as the import read it (the roles, unit, axes and body frames the subject's figure records,
 runner/capture/figure_record.py).
 
@@ -216,13 +217,22 @@ def source_motion(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray, ref
     return local, trans
 
 
+def _root_carrier(clip: BvhClip, skel: RecognisedSkeleton) -> int | None:
+    """The hips or the nearest joint above them with position channels, whose channels carry the root's path;
+    None where none has them (the file's root stands at its OFFSET: the export gives it position channels)."""
+    k = skel.index(clip, "hips")
+    while k >= 0 and clip.names[k] not in skel.position_joints:
+        k = int(clip.parents[k])
+    return k if k >= 0 else None
+
+
 def _move_hips(clip: BvhClip, skel: RecognisedSkeleton, local, trans, move: np.ndarray, hips: int) -> None:
     """Move the hips by `move` (n, 3) [file units, file axes] in place: add it, in the parent's frame, to
     the translation in `trans` of the hips or of the nearest joint above them with position channels
-    (the joints between them and the hips are not turned by the path: none drives a figure body)."""
-    k = hips
-    while clip.names[k] not in skel.position_joints:
-        k = int(clip.parents[k])
+    (the joints between them and the hips are not turned by the path: none drives a figure body), or, where
+    none has them, of the file's root (`source_bvh_text` then writes its position channels)."""
+    k = _root_carrier(clip, skel)
+    k = int(np.flatnonzero(np.asarray(clip.parents) < 0)[0]) if k is None else k
     par = int(clip.parents[k])
     if par < 0:
         trans[:, k] = trans[:, k] + move
@@ -253,8 +263,9 @@ def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np
         reference: (times, qpos) of the reference the path was made against, or None (`source_motion`).
     """
     local, trans = source_motion(clip, model, qpos, times, reference)
-    first = clip_skeleton(clip, model)[0].rest_frames
-    cols = []
+    skel = clip_skeleton(clip, model)[0]
+    first, added = skel.rest_frames, _root_carrier(clip, skel) is None
+    cols = [trans[:, 0, k] for k in range(3)] if added else []  # a root without position channels gets them
     for j, chans in enumerate(clip.channels):
         rot = [c[0] for c in chans if c.endswith("rotation")]
         angles = dict(zip(rot, _euler(local[:, j], "".join(rot)).T, strict=True)) if rot else {}
@@ -268,10 +279,16 @@ def source_bvh_text(clip: BvhClip, text: str, model, qpos: np.ndarray, times: np
     m = next(i for i, ln in enumerate(lines) if ln.split()[:1] == ["MOTION"])
     data = [ln for ln in lines[m + 1:] if ln.strip()]
     same_rate = abs(fps * clip.frame_time - 1.0) < 1e-6
-    frame_time = data[1].split(":", 1)[1].strip() if same_rate else f"{1.0 / fps:.9f}"
-    out = lines[:m] + ["MOTION", f"Frames: {len(rows) + first}", f"Frame Time: {frame_time}"]
-    out += [ln.strip() for ln in data[2:2 + first]]
     fmt = f"{{:.{_DECIMALS}f}}"
+    frame_time = data[1].split(":", 1)[1].strip() if same_rate else f"{1.0 / fps:.9f}"
+    head, rest = lines[:m], [ln.strip() for ln in data[2:2 + first]]
+    if added:  # the root's CHANNELS line and rest frames with its position (its OFFSET) first
+        c = next(i for i, ln in enumerate(head) if ln.split()[:1] == ["CHANNELS"])
+        tok, indent = head[c].split(), head[c][:len(head[c]) - len(head[c].lstrip())]
+        line = " ".join(["CHANNELS", str(int(tok[1]) + 3), *POSITION_CHANNELS, *tok[2:]])
+        head = head[:c] + [indent + line] + head[c + 1:]
+        rest = [" ".join([fmt.format(v) for v in clip.offsets[0]] + [ln]) for ln in rest]
+    out = head + ["MOTION", f"Frames: {len(rows) + first}", f"Frame Time: {frame_time}"] + rest
     out += [" ".join(fmt.format(v) for v in row) for row in rows]
     return "\n".join(out) + "\n"
 

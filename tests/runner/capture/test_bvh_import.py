@@ -606,14 +606,14 @@ def test_a_skeleton_without_a_head_names_the_roles(tmp_path, scene):
 
 
 def test_root_without_position_channels(tmp_path, scene):
-    frame = tiny_frame()
-    text = tiny_bvh([frame, frame]).replace(
-        "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation", "CHANNELS 3 Zrotation Yrotation Xrotation"
-    ).replace(frame, " ".join(frame.split()[3:]))
-    p = write(tmp_path, text)
-    with pytest.raises(InputError, match=r"bad\.bvh: neither the hips \(Hips\) nor a joint above them has position "
-                                         r"channels"):
-        load_bvh_reference(p, scene)
+    """A root with rotation channels only stands at its OFFSET, as BVH (bvhio, Blender) reads it (three.js's
+    pirouette.bvh): the same reference as the file whose root's position channels hold that OFFSET."""
+    frames = [tiny_frame(LeftUpLeg=(0, 0, 5.0 * i), RightLeg=(0, 0, -8.0 * i)) for i in range(6)]
+    text = tiny_bvh([" ".join(f.split()[3:]) for f in frames]).replace(
+        "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation", "CHANNELS 3 Zrotation Yrotation Xrotation")
+    rooted = load_bvh_reference(write(tmp_path, text.replace("  OFFSET 0 0 0", "  OFFSET 1 17 10", 1)), scene)
+    positioned = load_bvh_reference(write(tmp_path, tiny_bvh(frames), "positioned.bvh"), scene)
+    np.testing.assert_allclose(rooted.qpos, positioned.qpos, rtol=0, atol=1e-9)
 
 
 # ---- clips of other captures: other Euler orders, frame rates, bone lengths; another skeleton ----------

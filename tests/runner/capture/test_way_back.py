@@ -134,11 +134,24 @@ def other_skeleton(tmp_path, name):
     return convention(cmu_clip(tmp_path, "35_17"), name, tmp_path / f"{name}.bvh")[0]
 
 
+def root_at_offset(tmp_path):
+    """The seated clip with a root of rotation channels only, standing at its OFFSET (48 cm up), as three.js's
+    pirouette.bvh has it: the export gives the root position channels to carry the path's root."""
+    head, motion = seated_clip(tmp_path / "seated.bvh").read_text().split("MOTION\n")
+    root = "  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+    assert root in head
+    head = head.replace(root, "  OFFSET 0 48 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n", 1)
+    lines = motion.splitlines()
+    out = tmp_path / "rooted.bvh"
+    out.write_text(head + "MOTION\n" + "\n".join(lines[:2] + [" ".join(ln.split()[3:]) for ln in lines[2:]]) + "\n")
+    return out
+
+
 CLIPS = {"16_23": lambda p: cmu_clip(p, "16_23"), "35_17": lambda p: cmu_clip(p, "35_17"),
          "83_02": lambda p: cmu_clip(p, "83_02", 0.35), "ue5": lambda p: other_skeleton(p, "ue5"),
          "rokoko": lambda p: other_skeleton(p, "rokoko"), "lafan1": lambda p: other_skeleton(p, "lafan1"),
          "bandai": lambda p: other_skeleton(p, "bandai"), "max3ds": lambda p: other_skeleton(p, "max3ds"),
-         "seated": lambda p: seated_clip(p / "seated.bvh")}
+         "seated": lambda p: seated_clip(p / "seated.bvh"), "root at its offset": root_at_offset}
 
 
 @pytest.mark.parametrize("name", sorted(CLIPS))
