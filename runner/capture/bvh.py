@@ -126,6 +126,12 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int, list[str]]:
             f"{src}: {where}: the file has {len(data)} frame lines but line {ln_f} says Frames: {frames}; "
             "fix the count or restore the missing lines (file truncated?)"
         )
+    _check_frame_lines(data, channels, src)
+    return frames, channels, names
+
+
+def _check_frame_lines(data: list[tuple[int, list[str]]], channels: int, src: str) -> None:
+    """InputError unless every frame line of `data` ((line number, tokens) each) has `channels` finite numbers."""
     for i, (ln, t) in enumerate(data):
         if len(t) != channels:
             raise InputError(
@@ -140,7 +146,6 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int, list[str]]:
         if not all(math.isfinite(v) for v in vals):
             bad = next(v for v in t if not math.isfinite(float(v)))
             raise InputError(f"{src}: line {ln}: frame {i + 1} has the value {bad!r}; values must be finite")
-    return frames, channels, names
 
 
 class _Grammar:
