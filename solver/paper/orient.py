@@ -153,7 +153,7 @@ class OrientResult:
             8 points per spline segment), the quantity the exact optimum minimizes.
         energy_initial: the same for the plain spline through the keyframes [1/s^3] (a report on the
             input, not part of the result).
-        max_norm_deviation: max over the path of |1 - |q(t)|| (64 samples per segment).
+        max_norm_deviation: max over the path of |1 - |q(t)|| (exact: `orient_refine.max_norm_deviation`).
         keyframe_error: max |q(t_i) - keyframe_i| (the hard constraints; ~1e-16).
             These four are reports on the path, not needed to produce it: computed when first read
             (with a tolerance, `energy` and `max_norm_deviation` come from the last round's measures),

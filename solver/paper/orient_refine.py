@@ -156,11 +156,24 @@ def segment_energies(frame_times: np.ndarray, frames: np.ndarray, points: int = 
     return (wt * f).reshape(len(ft) - 1, points).sum(axis=1)
 
 
-def max_norm_deviation(frame_times: np.ndarray, frames: np.ndarray, per_segment: int = 64) -> float:
-    """max |1 - |q(t)|| over the spline through frames (`per_segment` samples per segment, ends included:
-    64, a sample every 1.6 % of a segment, where |q(t)| of a cubic varies smoothly; it is compared with
-    DRIFT_LIMIT, 3 %, so locating its peak to a small fraction of a percent is enough)."""
-    q = interpolate_segments(frame_times, frames, np.arange(per_segment) / per_segment)
-    r2 = np.einsum("ni,ni->n", q, q)  # |q|^2; the last frame is the path's end
-    last = np.asarray(frames, float)[-1]
-    return float(max(np.abs(1.0 - np.sqrt(r2)).max(), abs(1.0 - np.sqrt(last @ last))))
+def max_norm_deviation(frame_times: np.ndarray, frames: np.ndarray) -> float:
+    """max |1 - |q(t)|| over the natural cubic spline through frames (m, 4), exactly.
+
+    On a segment q is a cubic in tau in [0, 1], so |q|^2 is a degree-6 polynomial; |1 - |q|| is monotone in
+    |q|^2 on either side of 1, so its maximum is at an end or at a real root in [0, 1] of d|q|^2/dtau
+    (degree 5, `numpy.roots`; a complex root's real part in [0, 1] is a point of the segment too, so taking every
+    root's keeps the true extremes and adds only points on the path). The cubics come from the spline's values
+    at four nodes (exact for a cubic).
+
+    Returns:
+        the largest deviation [1] (0 for a path of unit quaternions)."""
+    nodes = np.linspace(0.0, 1.0, 4)
+    q = interpolate_segments(frame_times, frames, nodes).reshape(-1, 4, 4)      # (segment, node, component)
+    coefs = np.einsum("ij,sjc->sci", np.linalg.inv(np.vander(nodes, 4)), q)     # (segment, component, 4), highest first
+    worst = 0.0
+    for seg in coefs:
+        r2 = sum(np.polymul(c, c) for c in seg)                                    # |q|^2, degree 6
+        roots = np.roots(np.polyder(r2)) if np.any(r2[:-1]) else np.empty(0)
+        tau = np.r_[0.0, 1.0, np.clip(roots.real, 0.0, 1.0)]
+        worst = max(worst, float(np.abs(1.0 - np.sqrt(np.maximum(np.polyval(r2, tau), 0.0))).max()))
+    return worst

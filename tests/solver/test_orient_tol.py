@@ -202,3 +202,23 @@ def test_gap_strategy_counts_a_stall_and_boosts_a_drifting_unit_term():
     # the same frames again: the boost did not lower the drift, so the round is accepted as it is
     assert gap.after_round(obj, frames, result(0.0), 1, None).action == "stop" and gap.converged is True
     assert gap.boosts == 1
+
+
+def test_norm_deviation_is_the_splines_exact_maximum():
+    """max |1 - |q(t)|| of the spline through non-unit frames, against scipy's natural cubic spline sampled
+    every 1e-5 of a segment (an independent evaluation): never below the samples' max, and above it by no
+    more than the curve can rise between samples (1e-6 here, a bound on |d|q|/dtau| h^2 for these frames)."""
+    from scipy.interpolate import CubicSpline
+
+    from solver.paper.orient_refine import max_norm_deviation
+
+    rng = np.random.default_rng(3)
+    times = np.cumsum(rng.uniform(0.2, 0.6, 7))
+    frames = rng.normal(size=(7, 4))
+    frames /= np.linalg.norm(frames, axis=1, keepdims=True)
+    frames *= rng.uniform(0.9, 1.1, (7, 1))                       # |q| off 1 by up to 10 %: the drift
+    t = np.linspace(times[0], times[-1], 600_001)
+    dense = float(np.abs(1.0 - np.linalg.norm(CubicSpline(times, frames, bc_type="natural")(t), axis=1)).max())
+    exact = max_norm_deviation(times, frames)
+    assert dense - 1e-12 <= exact <= dense + 1e-6
+    assert max_norm_deviation(times, np.tile([1.0, 0.0, 0.0, 0.0], (7, 1))) < 1e-12  # constant unit q: 0
