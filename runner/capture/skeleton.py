@@ -10,7 +10,8 @@ with every channel zero):
   consecutive bones of comparable length; a static extra root above them, or IK targets hung from the
   root, are passed through); the chest
   is the upper body's first branching joint, its two farthest-reaching branches are the arms and the
-  remaining one (or the one named neck or head) the neck and head, its chain up to the last joint named
+  remaining one (or the one named neck or head) the neck and head (where it has two branches, the head's and
+  a chain to the joint the arms hang from, Biovision-style, those arms), its chain up to the last joint named
   neck, head or skull where one is (Mixamo's eyes under the head are the head's). Along a limb the knee or elbow is
   the first joint whose name says so (LeftLeg, LowerLeg_L, Calf, Knee; ForeArm, LowerArm_L, Elbow);
   without such a name the hand is where the fingers branch off, or else the upper and lower bone are
@@ -226,6 +227,20 @@ def _hips(clip: BvhClip, children) -> tuple[int, int, list[int]] | None:
     return (first, upper, legs) if len(legs) == 2 else None
 
 
+def _upper_branches(children, chest: int) -> list[int]:
+    """The branches of the arms and the head at the chest: its children, or where it has two, one the head's
+    (fewer ends) and one a chain to a joint with the two arms (a Biovision-style Chest -> Chest2 -> collars
+    beside Chest -> Neck -> Head), the two arms' and the head's: the chest is then where the head and the arms
+    part, below the joint the arms hang from."""
+    kids = list(children[chest])
+    if len(kids) == 2:
+        for arms, head in (kids, kids[::-1]):
+            below = _descend(children, arms)
+            if len(children[below]) == 2 and _leaves(children, head) < _leaves(children, arms):
+                return list(children[below]) + [head]
+    return kids
+
+
 def _structure(clip: BvhClip) -> tuple[dict[str, int], list[dict[str, int]], list[dict[str, int]]]:
     """The trunk roles {role: joint} and the two legs' and two arms' roles, unsided (module docstring);
     what is not found is left out."""
@@ -238,10 +253,11 @@ def _structure(clip: BvhClip) -> tuple[dict[str, int], list[dict[str, int]], lis
     trunk["hips"] = hips
     legs = [_limb(clip, children, _chain(clip, children, c), leg=True) for c in legs]
     chest = _descend(children, upper)
+    branches = _upper_branches(children, chest)
     arms: list[dict[str, int]] = []
-    if len(children[chest]) >= 3:
-        named = [c for c in children[chest] if _HEADLIKE.search(clip.names[c])]
-        by_reach = sorted(children[chest], key=lambda c: reach(clip, children, c), reverse=True)
+    if len(branches) >= 3:
+        named = [c for c in branches if _HEADLIKE.search(clip.names[c])]
+        by_reach = sorted(branches, key=lambda c: reach(clip, children, c), reverse=True)
         head = named[0] if len(named) == 1 else by_reach[2]
         arms = [_limb(clip, children, _chain(clip, children, c), leg=False) for c in by_reach if c != head][:2]
         head_chain = _chain(clip, children, head)

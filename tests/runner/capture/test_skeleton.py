@@ -4,6 +4,7 @@ every bad map or skeleton one line naming the file, the key and the fix; and the
 reports (the hyperextension clamp, against hand-computed geometry)."""
 import json
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -178,3 +179,23 @@ def test_the_way_back_names_the_hyperextension_clamp(tmp_path):
     assert d[k, clip.index("LeftToeBase")] > chord
     moved = {clip.names[j] for j in np.flatnonzero(d[k] > 1e-6)}
     assert moved == {"LeftFoot", "LeftToeBase"} and np.delete(d, k, axis=0).max() < 1e-6
+
+
+def test_arms_that_hang_from_a_joint_above_the_neck(short, tmp_path):
+    """A Biovision-style upper body, Chest -> Chest2 -> the collars beside Chest -> Neck -> Head: CMU's Neck hung
+    from Spine instead of Spine1 (its world rotations kept), so Spine is where the head and the arms part.
+    The old recognition found neither arms nor head there (no joint with three branches) and asked for a map."""
+    c = read(short)
+    spine, upper, neck = c.index("Spine"), c.index("Spine1"), c.index("Neck")
+    local, offsets = c.local.copy(), c.offsets.copy()
+    local[:, neck] = c.local[:, upper] @ c.local[:, neck]
+    offsets[neck] = c.offsets[upper] + c.offsets[neck]
+    parents = list(c.parents)
+    parents[neck] = spine
+    trans = c.trans.copy()
+    trans[:, neck] = offsets[neck]
+    path = write(replace(c, local=local, offsets=offsets, parents=parents, trans=trans), tmp_path / "biovision.bvh")
+    cmu, other = recognise(read_bvh(short)), recognise(read_bvh(path))
+    assert other.roles["chest"] == "Spine" and other.roles["neck"] == "Neck" and other.roles["head"] == cmu.roles["head"]
+    for role in ("l_upper_arm", "l_forearm", "l_hand", "r_upper_arm", "r_forearm", "r_hand", "l_foot", "r_foot"):
+        assert other.roles[role] == cmu.roles[role], role
