@@ -100,6 +100,19 @@ def twist_angle(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     return 2.0 * np.arctan2(np.sum(q[..., 1:] * axis, axis=-1), q[..., 0])
 
 
+def hinge_angle(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The twist angle about `axis` of the rotation q stands for, in (-pi, pi] [rad]: `twist_angle` of q taken
+    with w >= 0 (q and -q are one rotation; a hemisphere-continuous series of quaternions can reach w < 0, where
+    `twist_angle` gives an angle beyond pi: a knee flexed 28 degrees read as -332).
+
+    Args:
+        q: (..., 4) quaternions. axis: (3,) unit axis (or (..., 3)).
+    Returns:
+        (...,) angles [rad]."""
+    q = np.asarray(q, float)
+    return twist_angle(q * np.where(q[..., :1] < 0, -1.0, 1.0), axis)
+
+
 def twist_angle_grad(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """Gradient of `twist_angle(q, axis)` with respect to the 4 components of q.
 

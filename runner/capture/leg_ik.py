@@ -26,7 +26,7 @@ import numpy as np
 from runner.capture.bvh_kinematics import between, rotate
 from solver.errors import InputError
 from solver.figure import Figure
-from solver.quaternion import conj, mul, normalize, twist_angle
+from solver.quaternion import conj, hinge_angle, mul, normalize
 
 __all__ = ["LegChain", "leg_chain", "move_foot"]
 
@@ -147,7 +147,7 @@ def move_foot(model, leg: LegChain, qpos: np.ndarray, dz: np.ndarray) -> tuple[n
     up = np.array([0.0, 0.0, 1.0])
     axis = rotate(rot[:, 2], np.broadcast_to(leg.knee_axis, (len(rows), 3)))
     theta = knee_angle(H, K, A, axis, np.linalg.norm(A + dz[rows, None] * up - H, axis=1))
-    theta = np.maximum(theta, -twist_angle(qpos[rows, leg.knee], leg.knee_axis))  # never past a straight knee
+    theta = np.maximum(theta, -hinge_angle(qpos[rows, leg.knee], leg.knee_axis))  # never past a straight knee
     bend = _axis_angle(axis, theta)
     ankle = K + rotate(bend, A - K)
     # the height the bent leg reaches exactly: |A + z up - H| = |ankle - H|, the root nearest the wish

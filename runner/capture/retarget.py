@@ -52,7 +52,7 @@ from runner.capture.skeleton import RecognisedSkeleton, skeleton_world
 from solver.errors import InputError
 from solver.figure import Figure
 from solver.layout import StateLayout
-from solver.quaternion import align_hemispheres, conj, mul, normalize, swing_twist, twist_angle
+from solver.quaternion import align_hemispheres, conj, hinge_angle, mul, normalize, swing_twist
 
 if TYPE_CHECKING:
     from runner.capture.clip import Capture
@@ -249,15 +249,15 @@ def tidy_quaternions(qpos: np.ndarray, layout: StateLayout) -> np.ndarray:
 
 def hyperextension(qpos: np.ndarray, figure: Figure) -> dict[str, np.ndarray]:
     """{knee or elbow joint: (n,) [deg]} how far each frame bends the joint backwards: minus its flexion
-    (`twist_angle` about the figure's flexion axis) where that is negative, else 0."""
-    return {name: np.degrees(np.maximum(-twist_angle(qpos[:, figure.joint(name).qpos_slice], np.array(axis)), 0.0))
+    (`hinge_angle` about the figure's flexion axis, in (-180, 180]) where that is negative, else 0."""
+    return {name: np.degrees(np.maximum(-hinge_angle(qpos[:, figure.joint(name).qpos_slice], np.array(axis)), 0.0))
             for name, axis in figure.flexion_axes.items()}
 
 
 def clamp_hyperextension(qpos: np.ndarray, figure: Figure) -> tuple[np.ndarray, int]:
     """Clamp knee and elbow hyperextension to zero flexion.
 
-    Flexion is `twist_angle(q, axis)` with the figure's flexion axes (`Figure.flexion_axes`). Where it
+    Flexion is `hinge_angle(q, axis)` (in (-pi, pi]) with the figure's flexion axes (`Figure.flexion_axes`). Where it
     is negative, the twist about the hinge axis is removed: q = s t (swing-twist decomposition,
     `solver.quaternion.swing_twist`), q <- s = q conj(t), which has twist angle exactly 0 and the same swing.
     Other joints are unchanged.
@@ -273,7 +273,7 @@ def clamp_hyperextension(qpos: np.ndarray, figure: Figure) -> tuple[np.ndarray, 
         a = np.array(axis)
         sl = figure.joint(name).qpos_slice
         q = out[:, sl]
-        bad = twist_angle(q, a) < 0
+        bad = hinge_angle(q, a) < 0
         if not bad.any():
             continue
         swing, _ = swing_twist(q[bad], a)

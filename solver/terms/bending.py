@@ -5,7 +5,7 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.figure import shipped_figure
-from solver.quaternion import twist_angle, twist_angle_grad
+from solver.quaternion import hinge_angle, twist_angle_grad
 from solver.terms.base import Term, TermEval
 
 
@@ -20,8 +20,7 @@ def flexion_angles(Y: np.ndarray, quat_index: np.ndarray, axes: np.ndarray) -> n
         (n, j) angles [rad]; negative = hyperextension.
     """
     q = Y[:, quat_index]
-    q = q * np.where(q[..., :1] < 0, -1.0, 1.0)
-    return np.stack([twist_angle(q[:, k], axes[k]) for k in range(len(axes))], axis=1)
+    return np.stack([hinge_angle(q[:, k], axes[k]) for k in range(len(axes))], axis=1)
 
 
 class Hyperextension(Term):
