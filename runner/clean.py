@@ -207,6 +207,8 @@ def _on_source(paths: dict, say) -> dict | None:
 
     res = export_on_source(paths["save_path"], paths["bvh"], required=True)
     say(f"  wrote {res.describe()}")
+    for note in res.notes:
+        say(f"  {note}")
     check = res.check
     if check is None or not len(check.times):
         return None

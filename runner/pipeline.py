@@ -455,6 +455,8 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
                  "clamp, the footplant, the repair of tracking glitches - moved the capture: docs/mocap.md \"Back onto "
                  "the source skeleton\")")
     say(line)
+    for note in res.notes:
+        say(f"  {note}")
     return out
 
 

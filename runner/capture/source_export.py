@@ -365,6 +365,7 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
                          "space or choose another --to") from None
+    notes = () if as_solved else tuple(filter(None, [root_taken_off(clip, model, saved, motion.times)]))
     check = None
     if saved.keyframe_times is not None and len(saved.keyframe_times):
         skel = clip_skeleton(clip, model)[0]
@@ -374,4 +375,29 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
         check = keys_on_source(clip, out, skel.rest_frames, skel.unit, saved.keyframe_times, float(motion.times[0]),
                                motion.fps, held)
     return ExportResult(Path(out), "BVH on the source skeleton", which, motion.fps, frames, len(clip.names),
-                        Path(out).stat().st_size, time.perf_counter() - t0, check)
+                        Path(out).stat().st_size, time.perf_counter() - t0, check, notes)
+
+
+def root_taken_off(clip: BvhClip, model, saved, times: np.ndarray) -> str | None:
+    """The line to print where the root-height correction the export takes off (`root_correction`) is beyond
+    what a scene fitted to the capture's feet needs (`runner.capture.root_height.ROOT_CORRECTION_MAX`, 3 cm):
+    the import made it all the same (its warning: a site far inside a surface, or a scene that does not fit),
+    so there the file's feet are the capture's, not the solved path's the summary measured. None otherwise.
+
+    Args:
+        clip: the source clip. model: the scene. saved: the saved path (its reference). times: (n,) [s] the export
+            times."""
+    from runner.capture.root_height import ROOT_CORRECTION_MAX
+
+    if not saved.has_reference:
+        return None
+    skel = clip_skeleton(clip, model)[0]
+    size = np.linalg.norm(root_correction(clip, skel, model, (saved.reference_times, saved.reference_qpos), times),
+                          axis=1) * skel.unit
+    i = int(np.argmax(size)) if len(size) else 0
+    if not len(size) or size[i] <= ROOT_CORRECTION_MAX:
+        return None
+    return (f"the root-height correction taken off (--root-height source) is up to {1000 * size[i]:.0f} mm "
+            f"({times[i]:.2f} s), beyond the {1000 * ROOT_CORRECTION_MAX:.0f} mm of a scene that fits the capture's feet: "
+            "there the file's feet are as far in or above the surfaces as the capture's, not where the summary "
+            "measured the path; --root-height solved writes the motion as solved")

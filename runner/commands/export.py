@@ -52,4 +52,6 @@ def run(args) -> int:
         if res.check is not None:
             for what, figures in res.check.lines():
                 print(f"  {what} read back from {res.path.name}: {figures}")
+        for note in res.notes:
+            print(f"  {note}")
     return 0

@@ -24,7 +24,7 @@ class ExportResult:
     """What `export_saved_path` wrote: path, format, which motion, fps [Hz], frames (the file's, rest frames
     included), joints (bodies), size [bytes], wall_time_s [s] (sampling and writing), and `check`: for a BVH
     on a clip's own skeleton, the file read back at the keyframes (`runner.capture.source_check.KeysOnSource`),
-    else None."""
+    else None; `notes`: lines to print after it (`runner.capture.source_export.root_taken_off`)."""
 
     path: Path
     format: str
@@ -35,6 +35,7 @@ class ExportResult:
     size: int
     wall_time_s: float
     check: object = None
+    notes: tuple = ()
 
     def describe(self) -> str:
         """One line: what was written, e.g. for `wrote ...`."""

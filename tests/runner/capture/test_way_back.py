@@ -6,6 +6,8 @@ key - CMU's merged chains (LowerBack and Spine below the chest, LHipJoint, the c
 figure does not have (fingers, neck, head, toes, end joints, a static root, IK and twist joints) included -
 and the figures `export` reports are those of the file it wrote.
 """
+import re
+
 import numpy as np
 import pytest
 from bvh_conventions import convention
@@ -251,3 +253,25 @@ def test_mocap_reports_the_file_it_would_write(tmp_path):
     # the keys as captured: the keyframe file's values (6 decimals) are the reference's, where the footplant did not move them
     as_captured = np.abs(saved.keyframes - saved.reference_qpos[k]).max(axis=1) < 1e-5
     assert as_captured.sum() >= 2 and d[as_captured].max() < AT_KEY
+
+
+def test_a_root_correction_beyond_a_fitting_scenes_is_said(tmp_path):
+    """The export takes the import's root-height correction off (--root-height source); where that was more
+    than the 3 cm a scene fitted to the capture's feet needs (the import's 'all the same' warning), the file's
+    feet are the capture's, not the solved path's, and export says so in a line naming the size and time."""
+    from runner.capture.source_export import export_on_source
+
+    clip = cmu_clip(tmp_path, "35_17")
+    npz, _, _ = path_through_keys(tmp_path, clip)
+    assert export_on_source(npz, tmp_path / "a.bvh").notes == ()  # the capture's own root: nothing to say
+    saved = dict(np.load(npz))
+    ref_t, ref_q = saved["reference_times"], saved["reference_qpos"].copy()
+    lifted = (ref_t > 0.2) & (ref_t < 0.3)
+    ref_q[lifted, 2] += 0.08  # the import lifted the root 8 cm over these frames
+    saved["reference_qpos"] = ref_q
+    np.savez(npz, **saved)
+    notes = export_on_source(npz, tmp_path / "b.bvh").notes
+    found = re.search(r"up to (\d+) mm \((\d\.\d\d) s\), beyond the 30 mm", notes[0]) if len(notes) == 1 else None
+    assert found, notes  # 80 mm on top of the import's own correction, which is at most 30 mm (no note above)
+    assert 50 <= int(found.group(1)) <= 110 and 0.2 <= float(found.group(2)) <= 0.3
+    assert export_on_source(npz, tmp_path / "c.bvh", as_solved=True).notes == ()
