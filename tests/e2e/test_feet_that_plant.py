@@ -1,4 +1,4 @@
-"""Issue 11 end to end: on run-and-step, the contact schedule of the clip (reference_contacts) makes the
+"""End to end: on run-and-step, the contact schedule of the clip (reference_contacts) makes the
 optimized path's planted feet float and skate less than the same solve without it."""
 import numpy as np
 import pytest
@@ -9,6 +9,11 @@ from runner.motion_metrics import motion_metrics
 from runner.paths import MODELS
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
 from solver.animate import animate
+
+#: [mm] how deep a point between two of the solve's can be beyond the depth its penetration bound measured: the
+#: golden-section search leaves 2 % of a 5 ms quadrature interval (`solver.constraints.penetration.GOLDEN_STEPS`),
+#: 0.1 ms, and near its deepest point a site's depth departs quadratically, 0.5 x 100 m/s^2 x (0.1 ms)^2 = 0.5 um
+SEARCH_RESOLUTION_MM = 1e-3
 
 
 @pytest.mark.slow
@@ -25,8 +30,9 @@ def test_run_and_step_with_contacts_floats_and_skates_less():
         unmet[label] = sol.unmet
     assert got["with"]["float_contact_mm"] < got["without"]["float_contact_mm"]
     assert got["with"]["skate_contact_mm"] < got["without"]["skate_contact_mm"]
-    # penetration within its 1 mm tolerance, up to what the solve reports out of reach [m] (`Solution.unmet`)
-    assert got["with"]["penetration_mm"]["max"] <= 1.0 + 1e3 * unmet["with"].get("penetration", 0.0)
+    # penetration within its 1 mm tolerance, up to what the solve reports out of reach [m] (`Solution.unmet`), at
+    # the capture's frames, which the solve's points and search resolve to SEARCH_RESOLUTION_MM
+    assert got["with"]["penetration_mm"]["max"] <= 1.0 + SEARCH_RESOLUTION_MM + 1e3 * unmet["with"].get("penetration", 0.0)
     assert np.isfinite(got["with"]["flight_time_s"])
 
 
