@@ -108,6 +108,8 @@ class Bound:
         counted: False for a figure shown beside the bounds but not one of the acceptance list's (the
             schedule's own float, the flight while the capture stands): reported held / missed, left out of
             "every bound held" and of the failing pairs.
+        resolution: a figure the limit is at least (the resolution the value is measured at: a flight time
+            counted in frames resolves one frame, "frame_s"), or None.
     """
 
     name: str
@@ -122,6 +124,7 @@ class Bound:
     kind: str
     source: str
     counted: bool = True
+    resolution: str | None = None
 
     def limit(self, figures: dict) -> float | None:
         """The limit for the pair's `figures` [the value's units; for "within": on |value - reference|],
@@ -131,7 +134,7 @@ class Bound:
         if ref is None or not math.isfinite(ref):
             return None
         if self.rule == "within":
-            return max(self.margin, self.factor * abs(ref))
+            return max(self.margin, self.factor * abs(ref), figures.get(self.resolution, 0.0) if self.resolution else 0.0)
         lim = self.factor * ref + self.margin
         if self.name in PLAIN_FLOORS and figures.get("plain_worst_constraint", math.inf) <= 1.0:
             lim = max(lim, ref + PLAIN_FLOORS[self.name])  # the plain spline met every constraint: its own + resolution
@@ -180,7 +183,12 @@ BOUNDS: tuple[Bound, ...] = (
           "plain_skate_excess_mm", "le", 0.5, 0.0, "capture_skate_excess_mm", ("slide",), "contact",
           "and the skate above what the keyframes force <= half the plain spline's above it;"),
     Bound("flight", "flight time vs capture [s]", "flight_s", "capture_flight_s", "within", 0.10, 0.030, None,
-          ("flight", "ground"), "contact", "flight time within 30 ms or 10 % of the capture's, whichever is larger;"),
+          ("flight", "ground"), "contact", "flight time within 30 ms or 10 % of the capture's, whichever is larger "
+          "(and one frame: both are counted in frames, so under 33 fps 30 ms asked for the same count);",
+          resolution="frame_s"),
+    Bound("flight_30ms", "flight time vs capture, without the frame [s]", "flight_s", "capture_flight_s", "within",
+          0.10, 0.030, None, ("flight", "ground"), "contact",
+          "the flight bound as the list words it, without its one-frame floor (shown, not counted).", counted=False),
     Bound("joint_error", "joint-angle error [deg]", "joint_error_deg", "plain_joint_error_deg", "le", 1.10, 0.0, None,
           (), "motion", "joint-angle error <= the plain spline's + 10 %;"),
     Bound("site_error", "contact-site error [cm]", "site_error_cm", "plain_site_error_cm", "lt", 1.0, 0.0, None,
@@ -284,6 +292,7 @@ FIGURES: dict[str, Callable[[dict], float | None]] = {
     # the solve's longest round (one subproblem, wall time on the machine that ran it) and the clip's length
     "longest_round_s": _at("longest_round_s"),
     "clip_s": lambda doc: doc["frames"] / doc["fps"] if doc.get("frames") and doc.get("fps") else None,
+    "frame_s": lambda doc: 1.0 / doc["fps"] if doc.get("fps") else None,  # the motion metrics' frame [s]
     "penetration_mm": _at("metrics", "optimized", "max_penetration_mm"),
     "stance_recall": _at("stance_agreement", "recall"),
     "stance_precision": _at("stance_agreement", "precision"),

@@ -63,6 +63,12 @@ def test_a_pair_within_every_bound_holds_them_all_and_the_unmeasured_one_is_na()
     ("flight", {"flight_s": 0.451, "capture_flight_s": 0.5}, {"flight_s": 0.449, "capture_flight_s": 0.5}),
     # 10 % of 0.2 s = 20 ms: the 30 ms floor rules
     ("flight", {"flight_s": 0.229, "capture_flight_s": 0.2}, {"flight_s": 0.231, "capture_flight_s": 0.2}),
+    # at 30 fps flight is counted in frames of 33.3 ms: one frame off holds, two do not; the bound as the list
+    # words it (30 ms, shown beside) misses one frame already, a path within 15 ms of the capture's flight
+    ("flight", {"flight_s": 7 / 30, "capture_flight_s": 6 / 30, "frame_s": 1 / 30},
+     {"flight_s": 8 / 30, "capture_flight_s": 6 / 30, "frame_s": 1 / 30}),
+    ("flight_30ms", {"flight_s": 6 / 30, "capture_flight_s": 6 / 30, "frame_s": 1 / 30},
+     {"flight_s": 7 / 30, "capture_flight_s": 6 / 30, "frame_s": 1 / 30}),
     ("joint_error", {"joint_error_deg": 5.5}, {"joint_error_deg": 5.51}),  # plain 5.0 + 10 %
     ("site_error", {"site_error_cm": 4.99}, {"site_error_cm": 5.0}),  # strictly below the plain 5.0
     ("hyperextension", {"hyperextension_deg": 0.5}, {"hyperextension_deg": 0.51}),  # plain 0 + 0.5 deg
@@ -82,7 +88,7 @@ def test_each_bound_holds_at_its_limit_and_misses_beyond_it(name, ok, bad):
 
 def test_skate_excess_replaces_skate_plain_and_every_bound_counts():
     assert "skate_plain" not in BOUND and BOUND["skate_excess"].counted
-    assert {b.name for b in BOUNDS if not b.counted} == {"float_schedule", "flight_in_stance"}
+    assert {b.name for b in BOUNDS if not b.counted} == {"float_schedule", "flight_in_stance", "flight_30ms"}
     # the plain spline's skate halved, but not the part above what the keyframes force: missed
     f = figures(skate_mm=2.0, plain_skate_mm=4.0, forced_skate_mm=1.0, skate_excess_mm=1.0, plain_skate_excess_mm=3.0)
     assert BOUND["skate_excess"].held(f) is True
