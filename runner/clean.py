@@ -225,6 +225,18 @@ def _on_source(paths: dict, say) -> dict | None:
     return out
 
 
+def _import_clamp(ref) -> str:
+    """The change line's clause for the capture's knees or elbows the import straightened before the clean (its
+    "capture" is the retargeted clip, `Reference.clamped`), "" where it straightened none: that correction is
+    not in the deviation, but the file on the source skeleton carries it."""
+    worst = max(((float(a.max()), j) for j, a in (ref.clamped or {}).items() if len(a) and a.max() > 0), default=None)
+    if worst is None:
+        return ""
+    return (f"; before it, the import straightened knees or elbows the capture bends backwards, {worst[1]} by up to "
+            f"{worst[0]:.1f} deg, which the file on the source skeleton carries too (docs/mocap.md \"Back onto the "
+            "source skeleton\")")
+
+
 def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: tuple, say) -> dict:
     """The summary, the saved path, the BVH on the source skeleton (checked at the pins), the metrics, the
     video; the result dict of `process_clean`. cpu: ([s] the command's process time at its start, [s] the
@@ -242,7 +254,7 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: 
     say(f"  change from the capture: deviation mean {fig['deviation_mean_cm']:.2f} cm, max {fig['deviation_max_cm']:.2f} cm; "
         f"peak acceleration of the change: pelvis {fig['change_pelvis_m_s2']:.2f} m/s^2 (capture at 6 Hz "
         f"{fig['capture_pelvis_m_s2']:.2f}), joints {fig['change_joint_rad_s2']:.1f} rad/s^2 at {fig['change_joint']} "
-        f"(capture at 6 Hz {fig['capture_joint_rad_s2']:.1f})")
+        f"(capture at 6 Hz {fig['capture_joint_rad_s2']:.1f}){_import_clamp(ref)}")
     video = VideoOptions(fps=o.fps, size=o.size, speed=o.speed, camera=o.camera, quiet=o.quiet,
                          panels=("reference", "optimized"))  # capture | cleaned
     pins = [float(t) for t in disp.times[disp.pins]]

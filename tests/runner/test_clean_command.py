@@ -1,4 +1,5 @@
 """`dynsplines clean`'s arguments: --pin takes comma-separated times, repeated; a bad one is one line."""
+import numpy as np
 import pytest
 
 from runner.cli import build_parser
@@ -19,3 +20,16 @@ def test_a_bad_pin_is_named(capsys):
 def test_contacts_name_a_file_the_clean_takes():
     args = build_parser().parse_args(["clean", "x.bvh", "--contacts", "x.contacts.json"])
     assert str(args.contacts) == "x.contacts.json"
+
+
+def test_the_change_line_names_the_imports_straightened_knee():
+    """The clean's change is from the capture as retargeted: where the import straightened a knee or elbow the
+    capture bends backwards, the change line says which and by how much (the file carries it too)."""
+    from types import SimpleNamespace
+
+    from runner.clean import _import_clamp
+
+    said = _import_clamp(SimpleNamespace(clamped={"l_knee": np.zeros(4), "r_knee": np.array([0.0, 55.25, 3.0, 0.0])}))
+    assert "r_knee by up to 55.2 deg" in said or "r_knee by up to 55.3 deg" in said
+    assert _import_clamp(SimpleNamespace(clamped={"l_knee": np.zeros(4)})) == ""
+    assert _import_clamp(SimpleNamespace(clamped=None)) == ""
