@@ -61,11 +61,9 @@ __all__ = ["LeastChange", "LeastChangeOptions", "build_least_change", "least_vio
 
 #: [m/s^2] gravity's acceleration (standard gravity, CGPM 1901): D0 = m g^2 T makes D dimensionless
 STANDARD_GRAVITY = 9.80665
-#: [pairs] L-BFGS correction pairs of every subproblem and least-violation solve: the standard limited memory
-#: (Nocedal & Wright, sec. 7.2: "3 to 20"; L-BFGS-B's default). nlopt's default, sized by n (~180 pairs for a keyed
-#: path's ~7000 variables), costs more than an evaluation per iteration and older pairs carry curvature of
-#: penalties since raised: on the unseen corpus 18 % less time, the longest solves halved, the same bounds
-LBFGS_PAIRS = 10
+#: [pairs] L-BFGS correction pairs on a `LeastChange.grid` (n ~ 1e4-1e5 variables): the standard limited memory (Nocedal
+#: & Wright, sec. 7.2: "3 to 20"; L-BFGS-B's default); nlopt's, sized by n, costs an evaluation an iteration
+GRID_PAIRS = 10
 
 
 @dataclass(frozen=True)
@@ -285,7 +283,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
     for k in range(o.max_subproblems):
         newton = o.newton and lc.grid is not None and not certified  # D's preconditioner after a search
         maps = (basis, (newton and cached_preconditioner(grid, basis, al, frames, quat)) or pre)
-        r, spent = _subproblem(al, frames, maps, quat, o, (start, evals), should_stop, progress, k)
+        r, spent = _subproblem(al, frames, maps, quat, o, (start, evals), should_stop, progress, k, _pairs(lc))
         if spent:
             status, message = spent, _stop_message(spent, "", o)
             break
@@ -347,10 +345,11 @@ def _multipliers(al: AugmentedLagrangian, frames: FrameSet, basis, progress, k: 
 
 
 def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, spent_so_far: tuple, should_stop,
-                progress, k: int):
+                progress, k: int, pairs: int | None = None):
     """Subproblem k on `frames` with their (SplineBasis, Preconditioner) `maps` within what is left of the
-    solve's budget (`spent_so_far`: its start [s, perf_counter] and evaluations), L-BFGS keeping LBFGS_PAIRS:
-    (its SubproblemResult, None), or (None, the status MAX_TIME or MAX_EVALS) when the budget is spent before it."""
+    solve's budget (`spent_so_far`: its start [s, perf_counter] and evaluations), L-BFGS keeping `pairs`
+    (None: by size): (its SubproblemResult, None), or (None, the status MAX_TIME or MAX_EVALS) when the
+    budget is spent before it."""
     start, evals = spent_so_far
     left, spent = _budget(o, start, evals)
     if spent:
@@ -360,7 +359,7 @@ def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, 
     cb = None if progress is None else (lambda n, phi: progress("eval", {"evals": evals + n, "E": phi}))
     return solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=maps[0], pre=maps[1],
                             max_evals=o.max_evals - evals if o.max_evals else 0,
-                            max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb, pairs=LBFGS_PAIRS), None
+                            max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb, pairs=pairs), None
 
 
 def _better(al: AugmentedLagrangian, best: tuple, frames: FrameSet, basis=None) -> tuple:
@@ -400,7 +399,7 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     if progress:  # the search's evaluations as they happen ("search", then "eval" with F), its outcome after
         progress("search", {"round": k, "frames": frames.count})
     cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
-                           pairs=LBFGS_PAIRS, max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
+                           pairs=_pairs(lc), max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
                            max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop,
                            callback=progress and (lambda n, F: progress("eval", {"evals": evals + n, "F": F})))
     if progress:
@@ -417,6 +416,11 @@ def least_violation_of(lc: LeastChange, frames: FrameSet, options: LeastChangeOp
     both starts, segments down to two quadrature intervals), on its own copy: `solver.animate`'s check of a certificate
     at a finer spacing. Returns the `solver.feasibility.Certificate`."""
     return _certify(replace(lc, al=lc.al.posed()), frames, options, time.perf_counter(), 0, should_stop, progress, 0)
+
+
+def _pairs(lc: LeastChange) -> int | None:
+    """L-BFGS correction pairs of `lc`'s subproblems: GRID_PAIRS on a grid, else None (nlopt's default by size)."""
+    return None if lc.grid is None else GRID_PAIRS
 
 
 def _grid_done(result, shift: float, count: int, o: LeastChangeOptions, level_its: int, message: str) -> tuple:

@@ -47,8 +47,7 @@ def lbfgs_storage(n: int) -> int:
     uses min(iterations, pairs) pairs, so a run of at most `lbfgs_storage(n)` iterations has the same
     iterates as with the default. Here: at most 1000 pairs, and at most max(n, 200): n pairs (2n
     rank-one terms) can already span the whole n x n inverse-Hessian update, so more only repeat older
-    curvature. Problems with n >= ~1300 variables keep nlopt's own default (the least change passes its own,
-    `solver.least_change.LBFGS_PAIRS`).
+    curvature. Problems with n >= ~1300 variables (the figure's) keep nlopt's own default.
 
     Args:
         n: number of variables, >= 1.
