@@ -109,3 +109,29 @@ def test_a_knee_displaced_by_position_channels_still_points_the_shin(tmp_path):
         q = layout.joint(f"{side}_ankle").quat_index
         dot = np.abs(np.sum(plain.qpos[:, q] * shifted.qpos[:, q], axis=1))
         assert np.degrees(2 * np.arccos(np.clip(dot, 0, 1))).max() <= 0.5, f"{side}_ankle"
+
+
+@pytest.mark.parametrize("flexion_deg", [28.0, -28.0])
+def test_the_clamp_reads_a_knee_by_its_rotation_not_its_quaternions_sign(flexion_deg):
+    """A knee flexed (or bent backwards) 28 degrees held as -q (w < 0, as a hemisphere-continuous series can
+    reach): the hyperextension and its clamp are those of q. Read as 2 atan2(v.axis, w) the flexion was -332
+    (or +332) degrees: a flexed knee reported hyperextended by 332 degrees and straightened."""
+    import math
+
+    import mujoco
+
+    from runner.capture.retarget import clamp_hyperextension, hyperextension
+    from solver.figure import FIGURE_FILE, Figure
+
+    model = mujoco.MjModel.from_xml_path(str(FIGURE_FILE))
+    figure = Figure.from_model(model)
+    axis = np.asarray(figure.flexion_axes["l_knee"], float)
+    half = math.radians(flexion_deg) / 2.0
+    qpos = np.tile(model.qpos0, (2, 1))
+    qpos[:, figure.joint("l_knee").qpos_slice] = [np.r_[math.cos(half), math.sin(half) * axis],
+                                                   -np.r_[math.cos(half), math.sin(half) * axis]]
+    backwards = max(0.0, -flexion_deg)
+    np.testing.assert_allclose(hyperextension(qpos, figure)["l_knee"], [backwards, backwards], atol=1e-9)
+    clamped, changed = clamp_hyperextension(qpos, figure)
+    assert changed == (2 if backwards else 0)
+    np.testing.assert_allclose(hyperextension(clamped, figure)["l_knee"], 0.0, atol=1e-9)
