@@ -120,10 +120,12 @@ def _checked_finer(problem: Problem, options: LeastChangeOptions, coarse: Soluti
     the returned path, so that the search (`solver.feasibility`) splits segments down to half the length. Where
     it beats the certificate (`_beats`: it raises no column the certificate does not, none by more, and is not
     the same), the least change is solved at that rate from the returned path and its answer returned; else
-    the coarse answer stands, checked. The least violation of a nonconvex problem is a search's, so the finer
-    search can also land higher. `Solution.finer` says what the other found; evaluations, time and rounds are
-    all of them. Within the options' budget; a check stopped early (time, evaluations, a stop request) leaves
-    the coarse answer.
+    the coarse answer stands, checked. Where the budget ends before the least change at that rate does, the
+    coarse path is returned with the status that says so (not INFEASIBLE: its certificate is beaten, no proof).
+    The least violation of a nonconvex problem is a search's, so the finer search can also land higher.
+    `Solution.finer` says what the other found; evaluations, time and rounds are all of them. Within the
+    options' budget; a check whose search stopped early (time, evaluations, a stop request) leaves the coarse
+    answer.
     """
     from solver.least_change import least_violation_of, solve_least_change
 
@@ -146,7 +148,12 @@ def _checked_finer(problem: Problem, options: LeastChangeOptions, coarse: Soluti
     fine = solve_least_change(lc, finer, should_stop=should_stop, progress=_counted_on(progress, checked["n_evals"]),
                               from_frames=coarse.frames)
     checked = {"n_evals": checked["n_evals"] + fine.n_evals, "wall_time_s": checked["wall_time_s"] + fine.wall_time_s}
-    if fine.status not in (Status.CONVERGED, Status.INFEASIBLE) or not _beats(fine.certificate, coarse.certificate):
+    if fine.status not in (Status.CONVERGED, Status.INFEASIBLE):  # the budget ended at the finer rate: its search
+        # beat the certificate, which is then no proof; the coarse path, with the status that says why it stopped
+        return replace(coarse, status=fine.status, finer=(finer.rate, False, tuple(cert.raises)), **checked,
+                       message=f"{fine.message}; the least violation at {finer.rate:g} points/s raised less than at "
+                               f"{options.rate:g}, so the limits raised are not proved out of reach")
+    if not _beats(fine.certificate, coarse.certificate):
         return replace(coarse, finer=(finer.rate, False, tuple(fine.certificate)), **checked)
     return replace(fine, rounds=coarse.rounds + fine.rounds, trace=np.concatenate([coarse.trace, fine.trace]),
                    finer=(finer.rate, True, tuple(coarse.certificate)), **checked)

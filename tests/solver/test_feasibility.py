@@ -273,6 +273,36 @@ def test_a_bound_of_your_own_through_the_public_api(standing):
         solver.solve_problem(solver.build_problem(model, solver.ProblemSpec(still, bounds=(lambda t: 3.0,))))
 
 
+def test_a_certificate_a_finer_search_beats_is_not_proved_when_the_budget_ends(standing, monkeypatch):
+    """Where the check at a finer spacing finds the limits can be met but its least change is cut by the budget,
+    the coarse path comes back with the budget's status, not INFEASIBLE, and the summary does not call its
+    raised limits certified (an unseen MediaPipe clip under --max-time printed 'out of reach' beside a finer
+    search that raised nothing). The finer search and solve are stood in for: their answers are the case."""
+    from types import SimpleNamespace
+
+    import solver.least_change as least_change
+    from runner.console import certificate_lines
+    from solver.animate import _built, _checked_finer
+
+    model, still, z0 = standing
+    problem = solver.build_problem(model, solver.ProblemSpec(still, bounds=(
+        lambda t: PelvisHeight("pelvis ceiling", t, T_STAR, +1, z0 - 0.005, LIMIT, half=0.02),)))
+    options = LeastChangeOptions()
+    coarse = least_change.solve_least_change(_built(problem, options.rate), options)
+    assert coarse.status is Status.INFEASIBLE and coarse.certificate
+    monkeypatch.setattr(least_change, "least_violation_of",
+                        lambda *a, **k: SimpleNamespace(status=Status.CONVERGED, raises=(), n_evals=3))
+    monkeypatch.setattr(least_change, "solve_least_change", lambda *a, **k: replace(
+        coarse, status=Status.MAX_TIME, message="time limit of 1 s reached", certificate=(), n_evals=5))
+    out = _checked_finer(problem, options, coarse, None, None)
+    assert out.status is Status.MAX_TIME and "not proved out of reach" in out.message
+    assert out.certificate == coarse.certificate and out.finer == (2 * options.rate, False, ())
+    np.testing.assert_array_equal(out.frames.values, coarse.frames.values)
+    said = " ".join(certificate_lines(out))
+    assert "certified" not in said and "not proved out of reach" in said
+    assert "certified" in " ".join(certificate_lines(coarse))
+
+
 class TwoWells(Constraint):
     """A bound no path meets, with two local least violations: c(z) = min((z - za)^2 / S + ea, (z - zb)^2 / S
     + eb) <= 0 at t* (z the pelvis height [m], S = 1 cm): its violation is least, ea, at z = za and, less,
