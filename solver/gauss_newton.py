@@ -280,7 +280,7 @@ def _bmm(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return (A[..., :, :, None] * B[..., None, :, :]).sum(-2)
 
 
-_PAIRS = [(ca, cb) for ca in range(4) for cb in range(ca + 1)]  # a knot interval's coefficient pairs, row >= column
+_PAIRS = [(ca, cb) for ca in range(4) for cb in range(ca + 1)]  # [indices] a knot interval's coefficient pairs, row >= column
 
 
 def _assemble(coefs: SplineCoefficients, terms: list, M: dict, nv: int) -> np.ndarray:

@@ -52,7 +52,7 @@ _TOP_KEYS = {"format", "model", "scene", "source", "terms", "contacts", "flights
 _CONTACT_KEYS = {"site", "foot", "start", "end", "surface", "comment"}
 _KEYFRAME_KEYS = {"time", "joints", "comment"}
 _JSON_CONSTANTS = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
-_DIGITS = 6  # decimals written: 1 micrometre, 1e-6 of a unit quaternion
+_DIGITS = 6  # [decimals] written: 1 micrometre, 1e-6 of a unit quaternion
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,7 @@ class Joint:
         return None
 
 
+#: MuJoCo's joint types (mjtJoint codes): (name, qpos size, qvel size) [coordinates]
 _KINDS = {0: ("free", 7, 6), 1: ("ball", 4, 3), 2: ("slide", 1, 1), 3: ("hinge", 1, 1)}
 
 

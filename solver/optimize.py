@@ -34,7 +34,7 @@ ALGORITHMS = {
 #: a relative-decrease test (Gill, Murray & Wright, Practical Optimization, 1981, ch. 8, termination criteria).
 FTOL_REL = 1e-7
 
-#: nlopt's luksan/luksan.h MEMAVAIL: doubles of scratch memory its L-BFGS sizes its default storage by.
+#: [doubles] nlopt's luksan/luksan.h MEMAVAIL: the scratch memory its L-BFGS sizes its default storage by.
 _LUKSAN_MEMAVAIL = 1310720
 
 

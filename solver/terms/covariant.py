@@ -22,7 +22,7 @@ class CovariantAcceleration(Term):
     name = "covariant"
     units = "1/s^4"
     needs = (0, 2)
-    #: |y''|^2 per linear component, and per tangential quaternion direction
+    #: [1] d^2/d(y'')^2 of |y''|^2 per linear component, and per tangential quaternion direction
     acceleration_curvature = 2.0
     pointwise = True
 
@@ -81,7 +81,7 @@ class NormalizedCovariantAcceleration(Term):
     name = "covariant_normalized"
     units = "1/s^4"
     needs = (0, 1, 2)
-    acceleration_curvature = 2.0  # |A|^2 on a unit quaternion's tangent directions
+    acceleration_curvature = 2.0  # [1] of |A|^2 on a unit quaternion's tangent directions
     pointwise = True
 
     def __init__(self, quat_slots: np.ndarray):

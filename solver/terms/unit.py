@@ -16,7 +16,7 @@ class UnitQuaternion(Term):
     name = "unit"
     units = "1"
     needs = (0,)
-    #: d^2/dr^2 (1 - r^2)^2 = 12 r^2 - 4 = 8 at r = |q| = 1 (also its Gauss-Newton value 2 (2r)^2)
+    #: [1] d^2/dr^2 (1 - r^2)^2 = 12 r^2 - 4 = 8 at r = |q| = 1 (also its Gauss-Newton value 2 (2r)^2)
     radial_curvature = 8.0
     pointwise = True
 
