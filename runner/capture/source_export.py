@@ -365,7 +365,7 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}; an earlier file there is unchanged; free some "
                          "space or choose another --to") from None
-    notes = () if as_solved else tuple(filter(None, [root_taken_off(clip, model, saved, motion.times)]))
+    notes = tuple(filter(None, [root_taken_off(clip, model, motion.qpos, motion.times, out)]))
     check = None
     if saved.keyframe_times is not None and len(saved.keyframe_times):
         skel = clip_skeleton(clip, model)[0]
@@ -378,26 +378,31 @@ def export_on_source(npz, out, which: str = "optimized", fps: float | None = Non
                         Path(out).stat().st_size, time.perf_counter() - t0, check, notes)
 
 
-def root_taken_off(clip: BvhClip, model, saved, times: np.ndarray) -> str | None:
-    """The line to print where the root-height correction the export takes off (`root_correction`) is beyond
-    what a scene fitted to the capture's feet needs (`runner.capture.root_height.ROOT_CORRECTION_MAX`, 3 cm):
-    the import made it all the same (its warning: a site far inside a surface, or a scene that does not fit),
-    so there the file's feet are the capture's, not the solved path's the summary measured. None otherwise.
+def root_taken_off(clip: BvhClip, model, qpos: np.ndarray, times: np.ndarray, written: str | Path) -> str | None:
+    """The line to print where the written file's hips are further from the path's root than a scene fitted to
+    the capture's feet moves them (`runner.capture.root_height.ROOT_CORRECTION_MAX`, 3 cm): the export took off
+    a larger root-height correction, which the import made all the same (its warning: a site far inside a
+    surface, or a scene that does not fit), so there the file's feet are the capture's, not where the summary
+    measured the path. Measured on the file read back (`read_bvh`, bvhio): its hips' world positions against
+    the path's root taken back into the capture's coordinates. None otherwise.
 
     Args:
-        clip: the source clip. model: the scene. saved: the saved path (its reference). times: (n,) [s] the export
-            times."""
+        clip: the source clip. model: the scene. qpos: (n, nq) the motion written, at `times` (n,) [s] (0 at the
+            clip's first frame after its rest frames). written: the BVH file written."""
     from runner.capture.root_height import ROOT_CORRECTION_MAX
 
-    if not saved.has_reference:
-        return None
     skel = clip_skeleton(clip, model)[0]
-    size = np.linalg.norm(root_correction(clip, skel, model, (saved.reference_times, saved.reference_qpos), times),
+    adr = check_figure(Figure.from_model(model)).joints[0].qpos_slice.start
+    solved = CaptureFrame.from_model(model).inverse().points(np.asarray(qpos)[:, adr:adr + 3]) @ skel.axes / skel.unit
+    back = read_bvh(written)
+    hips = skel.index(back, "hips")
+    rest = skel.rest_frames
+    size = np.linalg.norm(_world(back, back.local_quat[rest:], back.local_pos[rest:], hips)[1][:, hips] - solved,
                           axis=1) * skel.unit
     i = int(np.argmax(size)) if len(size) else 0
     if not len(size) or size[i] <= ROOT_CORRECTION_MAX:
         return None
-    return (f"the root-height correction taken off (--root-height source) is up to {1000 * size[i]:.0f} mm "
-            f"({times[i]:.2f} s), beyond the {1000 * ROOT_CORRECTION_MAX:.0f} mm of a scene that fits the capture's feet: "
-            "there the file's feet are as far in or above the surfaces as the capture's, not where the summary "
-            "measured the path; --root-height solved writes the motion as solved")
+    return (f"the file's hips are up to {1000 * size[i]:.0f} mm ({times[i]:.2f} s) from the path's root, read back: "
+            f"the root-height correction taken off (--root-height source) is beyond the {1000 * ROOT_CORRECTION_MAX:.0f} "
+            "mm of a scene that fits the capture's feet, so there the file's feet are as far in or above the surfaces as "
+            "the capture's, not where the summary measured the path; --root-height solved writes the motion as solved")

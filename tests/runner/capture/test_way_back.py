@@ -258,7 +258,8 @@ def test_mocap_reports_the_file_it_would_write(tmp_path):
 def test_a_root_correction_beyond_a_fitting_scenes_is_said(tmp_path):
     """The export takes the import's root-height correction off (--root-height source); where that was more
     than the 3 cm a scene fitted to the capture's feet needs (the import's 'all the same' warning), the file's
-    feet are the capture's, not the solved path's, and export says so in a line naming the size and time."""
+    feet are the capture's, not the solved path's, and export says so in a line naming the size and time, as
+    measured on the file read back (its hips against the path's root)."""
     from runner.capture.source_export import export_on_source
 
     clip = cmu_clip(tmp_path, "35_17")
@@ -271,7 +272,7 @@ def test_a_root_correction_beyond_a_fitting_scenes_is_said(tmp_path):
     saved["reference_qpos"] = ref_q
     np.savez(npz, **saved)
     notes = export_on_source(npz, tmp_path / "b.bvh").notes
-    found = re.search(r"up to (\d+) mm \((\d\.\d\d) s\), beyond the 30 mm", notes[0]) if len(notes) == 1 else None
+    found = re.search(r"up to (\d+) mm \((\d\.\d\d) s\) from the path's root, read back", notes[0]) if len(notes) == 1 else None
     assert found, notes  # 80 mm on top of the import's own correction, which is at most 30 mm (no note above)
     assert 50 <= int(found.group(1)) <= 110 and 0.2 <= float(found.group(2)) <= 0.3
     assert export_on_source(npz, tmp_path / "c.bvh", as_solved=True).notes == ()
