@@ -16,10 +16,15 @@ own skate):
 1. each foot, in every frame in which it rests (`runner.capture.stance.resting`: in the capture's
    stance, its lowest contact point below the flight height and still, the definition the root
    correction and the float bound use), is moved down by the least height above `CONTACT_CLEARANCE`
-   its lowest point has in that rest from its start to the frame, and from the frame to its end
-   (`_settled`): a foot the capture holds up for the whole rest goes down by that height, while one
-   coming down onto the surface lands when the capture's lands and one lifting off lifts when it lifts
-   (slow, under 3 cm, both count as resting by the definition's thresholds). It moves by its own leg
+   its lowest point has in that rest within `LANDING_S` of the frame (`_settled`, a running minimum): a
+   foot the capture holds up, or lets drift up and down while it rests as inertial captures do (a
+   Perception Neuron foot sinking 12 mm over 1.3 s, an Xsens foot hovering 24 mm for 2 s after it
+   landed), goes down onto the surface, while a landing or a lift-off inside the rest keeps its shape
+   within `LANDING_S` of its touchdown. The rest's thresholds (under 3 cm, slower than 0.5 m/s) let a
+   foot pass through them in no less than that; one slower than any step is held v LANDING_S over the
+   surface (6 mm at 0.1 m/s) until it leaves the rest, where the smoothing below takes it up to the
+   capture's height. A foot that would go down by no more than the capture's resolution (0.1 mm,
+   `solver.foot_bounds.CAPTURE_RESOLUTION`) stays as captured. It moves by its own leg
    (`runner.capture.leg_ik.move_foot`: the knee flexes about its hinge, the foot keeps its orientation and
    its place along the surface);
 2. what a straight knee leaves out of reach, the root is lowered by (the most over the resting feet),
@@ -39,10 +44,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from runner.capture.clearance import CONTACT_CLEARANCE, ContactClearance, moving_average, smoothing_width
+from runner.capture.contact_detection import DETECT_HEIGHT_ON, DETECT_SPEED_ON
 from runner.capture.leg_ik import MOVE_TOL, leg_chain, move_foot
 from runner.capture.stance import capture_rest
+from solver.foot_bounds import CAPTURE_RESOLUTION
 
 __all__ = ["FootPlant", "plant_feet"]
+
+#: [s] the shortest a foot can take through a rest's height, DETECT_HEIGHT_ON (3 cm) at DETECT_SPEED_ON
+#: (0.5 m/s): a landing or a lift-off inside a rest is kept within this of its touchdown
+LANDING_S = DETECT_HEIGHT_ON / DETECT_SPEED_ON
 
 
 @dataclass(frozen=True)
@@ -79,15 +90,16 @@ def _spread(values: np.ndarray, on: np.ndarray) -> np.ndarray:
     return np.interp(np.arange(len(values)), idx, values[idx])
 
 
-def _settled(above: np.ndarray, rest: np.ndarray) -> np.ndarray:
+def _settled(above: np.ndarray, rest: np.ndarray, frame_time: float) -> np.ndarray:
     """(n,) how far the footplant lowers a foot (module docstring, 1): in each run of frames where it rests,
-    the least of its heights over the clearance from the run's start to the frame and from the frame to
-    the run's end (0 outside the rests): the height it keeps throughout, not the approach of a landing or
-    the start of a lift-off. above: (n,) [m] its lowest point's height over the clearance; rest: (n,) bool."""
+    the least of its heights over the clearance within `LANDING_S` of the frame, inside the run (0 outside
+    the rests). above: (n,) [m] its lowest point's height over the clearance; rest: (n,) bool; frame_time [s]."""
     out = np.zeros(len(above))
+    half = int(round(LANDING_S / frame_time))
     edges = np.flatnonzero(np.diff(np.concatenate([[0], rest.astype(int), [0]])))
     for a, b in zip(edges[::2], edges[1::2]):
-        out[a:b] = np.minimum(np.minimum.accumulate(above[a:b]), np.minimum.accumulate(above[a:b][::-1])[::-1])
+        run = np.pad(above[a:b], half, mode="edge")
+        out[a:b] = np.lib.stride_tricks.sliding_window_view(run, 2 * half + 1).min(axis=1)
     return out
 
 
@@ -115,7 +127,8 @@ def plant_feet(qpos: np.ndarray, model, frame_time: float) -> FootPlant:
         return unchanged
     legs = [leg_chain(model, kin.figure, side) for side in feet]
     above = np.maximum(0.0, lowest - CONTACT_CLEARANCE)  # (n, f): each foot's height over the clearance
-    settled = np.stack([_settled(above[:, f], rest[:, f]) for f in range(len(feet))], axis=1)
+    settled = np.stack([_settled(above[:, f], rest[:, f], frame_time) for f in range(len(feet))], axis=1)
+    settled[settled <= CAPTURE_RESOLUTION] = 0.0  # a foot the capture cannot tell from resting on it stays
     # 1. the root's share: what a resting foot's leg cannot reach (its knee straight), the most over the feet
     short = np.zeros(n)
     for f, leg in enumerate(legs):

@@ -9,8 +9,8 @@ pelvis fixed, the hip joint stays where it is, and (`move_foot`):
 
 1. the knee flexes about its own flexion axis (the figure's annotation, `Figure.flexion_axes`) by the
    angle that puts the ankle at the target's distance from the hip (the root of
-   |K - H + R(theta) (A - K)| = |A' - H| nearest theta = 0, in closed form), never past a straight knee
-   (flexion >= 0): the knee's rotation off its hinge is unchanged;
+   |K - H + R(theta) (A - K)| = |A' - H| nearest theta = 0 that leaves the knee flexed, in closed form),
+   never past a straight knee (flexion >= 0): the knee's rotation off its hinge is unchanged;
 2. the thigh swings about the hip by the shortest rotation that takes the ankle onto the target;
 3. the ankle turns so that the foot keeps its world orientation.
 
@@ -96,14 +96,17 @@ def _axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 
 def knee_angle(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, axis: np.ndarray,
-               distance: np.ndarray) -> np.ndarray:
+               distance: np.ndarray, flexion: np.ndarray | None = None) -> np.ndarray:
     """(n,) [rad] the rotation theta of the shin about the knee axis that puts the ankle `distance` from the hip.
 
     With v = A - K split along the unit axis a (world, (n, 3)) into v_par + v_perp,
     |K - H + R(theta) v|^2 = |K - H|^2 + |v|^2 + 2 (c0 + c1 cos(theta) + c2 sin(theta)), c0 = (K - H).v_par,
     c1 = (K - H).v_perp, c2 = (K - H).(a x v_perp): theta = phi +- acos(rhs / r), r = hypot(c1, c2),
     phi = atan2(c2, c1); the root nearest 0, and where no theta reaches the distance the one that comes
-    nearest (acos clipped). Points hip, knee, ankle: (n, 3) [m]; distance: (n,) [m].
+    nearest (acos clipped). Points hip, knee, ankle: (n, 3) [m]; distance: (n,) [m]. flexion: (n,) [rad] the
+    knee's flexion now (None: any root): the root nearest 0 among those that leave it flexed, flexion +
+    theta >= 0, where one does. A straight knee shortens its leg by the same |theta| either way, and which
+    of the two roots is nearer 0 is then round-off: the one that hyperextends would be stopped at straight.
     """
     kh, v = knee - hip, ankle - knee
     v_par = np.sum(v * axis, axis=1, keepdims=True) * axis
@@ -116,7 +119,11 @@ def knee_angle(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, axis: np.nd
     phi = np.arctan2(c2, c1)
     delta = np.arccos(np.clip(rhs / np.maximum(r, np.finfo(float).tiny), -1.0, 1.0))
     roots = (np.stack([phi + delta, phi - delta]) + np.pi) % (2 * np.pi) - np.pi
-    return roots[np.argmin(np.abs(roots), axis=0), np.arange(len(r))]
+    cost = np.abs(roots)
+    if flexion is not None:
+        bent = roots + np.asarray(flexion, float) >= 0.0
+        cost = np.where(bent | ~bent.any(axis=0), cost, np.inf)
+    return roots[np.argmin(cost, axis=0), np.arange(len(r))]
 
 
 def move_foot(model, leg: LegChain, qpos: np.ndarray, dz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -146,8 +153,9 @@ def move_foot(model, leg: LegChain, qpos: np.ndarray, dz: np.ndarray) -> tuple[n
     H, K, A = pts[:, 0], pts[:, 1], pts[:, 2]
     up = np.array([0.0, 0.0, 1.0])
     axis = rotate(rot[:, 2], np.broadcast_to(leg.knee_axis, (len(rows), 3)))
-    theta = knee_angle(H, K, A, axis, np.linalg.norm(A + dz[rows, None] * up - H, axis=1))
-    theta = np.maximum(theta, -hinge_angle(qpos[rows, leg.knee], leg.knee_axis))  # never past a straight knee
+    flexion = hinge_angle(qpos[rows, leg.knee], leg.knee_axis)
+    theta = knee_angle(H, K, A, axis, np.linalg.norm(A + dz[rows, None] * up - H, axis=1), flexion)
+    theta = np.maximum(theta, -flexion)  # never past a straight knee
     bend = _axis_angle(axis, theta)
     ankle = K + rotate(bend, A - K)
     # the height the bent leg reaches exactly: |A + z up - H| = |ankle - H|, the root nearest the wish
