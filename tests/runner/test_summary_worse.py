@@ -558,7 +558,7 @@ def test_the_constraint_units_are_the_constraints_own():
 
 
 def test_a_raised_limit_is_placed_among_the_keyframes_and_a_clean_s_frames_are_counted_as_they_are():
-    from runner.console import certificate_lines
+    from runner.certificate_text import certificate_lines
     from solver.feasibility import Raise
 
     raises = (Raise("slide", "r_toe", 0.408, 0.7, 0.6, 0.8, 3, "mm", 1e-3), Raise("planted", "right", 0.002, 0.5004, 0.5, 0.5, 1, "mm", 1e-3))

@@ -281,7 +281,7 @@ def test_a_certificate_a_finer_search_beats_is_not_proved_when_the_budget_ends(s
     from types import SimpleNamespace
 
     import solver.least_change as least_change
-    from runner.console import certificate_lines
+    from runner.certificate_text import certificate_lines
     from solver.animate import _built, _checked_finer
 
     model, still, z0 = standing
