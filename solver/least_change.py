@@ -12,17 +12,17 @@ done (the constraints met, or no longer improving), variable frames are added wh
 residual of the augmented integrand predicts the largest decrease (`solver.least_change_refine`, paper
 sec. 4.2 and fig. 5), never closer than `min_gap` to another frame.
 
-Where a frame set's subproblems are spent (`per_level`) with a constraint still broken, the method of
-multipliers alone cannot tell a problem it has not yet solved from one no path can solve, so the
-least violation is sought (`solver.feasibility`): the constraints' violation is minimized over the
-same paths, every constraint at once and, where that leaves a pair broken, level by level in the order
-in which limits give (`Constraint.priority`), with frames added where pairs stay broken. A limit rises
-only by what that solve shows no path through the keyframes beats (`Solution.certificate`, in the
-constraint's SI unit); the solve goes on from the path it found, which meets every certified limit (a raised pair's
-multiplier from 0, the rest as it was). It also starts from the capture, a keyed path's (`solver.feasibility.capture_start`) and a clean's
-d = 0, as a stalled path can be anywhere (docs/design.md). A path the solve ends on beyond a limit (a budget spent)
-gives way to the best one that met them all. A reference motion (the plain spline; a clean's capture) that meets every
-constraint within its tolerance is the answer as it is: D >= 0 is 0 there (the multipliers would move it to the limits).
+Where a frame set's subproblems are spent (`per_level`) with a constraint still broken, the method of multipliers alone
+cannot tell a problem it has not yet solved from one no path can solve, so the least violation is sought
+(`solver.feasibility`): the constraints' violation is minimized over the same paths, every constraint at once and, where
+that leaves a pair broken, level by level in the order in which limits give (`Constraint.priority`), with frames added
+where pairs stay broken. A limit rises only by what that solve shows no path through the keyframes beats
+(`Solution.certificate`, in the constraint's SI unit); the solve goes on from the path it found, which meets every
+certified limit (a raised pair's multiplier from 0, the rest as it was). It also starts from the capture, a keyed
+path's (`solver.feasibility.capture_start`) and a clean's d = 0, as a stalled path can be anywhere (docs/design.md). A
+path the solve ends on beyond a limit (a budget spent) gives way to the best one that met them all. A reference motion
+(the plain spline; a clean's capture) that meets every constraint within its tolerance is the answer as it is: D >= 0 is
+0 there (the multipliers would move it to the limits).
 """
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
 from solver.lagrangian import AugmentedLagrangian, frame_maps, initial_penalty, solve_subproblem
 from solver.layout import StateLayout
-from solver.least_change_refine import doerfler_times, predicted_decreases
+from solver.least_change_refine import refinement
 from solver.manifold import FrameVariables
 from solver.optimize import Status
 from solver.peak_bounds import peak_bounds
@@ -88,6 +88,10 @@ class LeastChangeOptions:
             need not be solved tightly while its multipliers are still estimates (inexact subproblems,
             Birgin & Martinez 2014, sec. 4.1); a tighter 1e-6 with a cap of 200 evaluations was slower
             and met fewer bounds on the corpus.
+        round_evals: [evaluations] the most a subproblem spends before the multipliers are updated (0: no limit): 100 at
+            200 points/s, what fits a round in 5 s per 10 s of clip (30-50 ms an evaluation per 10 s of clip), fewer
+            at denser points; inexact subproblems (Birgin & Martinez 2014, sec. 4.1; docs/solvers.md). Not on a
+            `LeastChange.grid`, whose solve ends on a whole subproblem's progress (`_grid_done`).
         max_evals: evaluations of the whole solve, subproblems and refinement estimates (0: no limit): when
             they are spent the solve ends with the path so far (status MAX_EVALS), as with `max_time_s`.
         max_time_s: [s] stop after this much time in all, keeping the path so far (0: no limit).
@@ -103,6 +107,7 @@ class LeastChangeOptions:
     max_subproblems: int = 100
     per_level: int = 8
     ftol_rel: float = 1e-3
+    round_evals: int = 100
     max_evals: int = 0
     max_time_s: float = 0.0
     rate: float = 200.0
@@ -115,7 +120,7 @@ class LeastChangeOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
                 raise InputError(f"LeastChangeOptions.{name} must be a number >= 0, got {v!r}")
-        for name in ("max_subproblems", "per_level", "max_evals"):
+        for name in ("max_subproblems", "per_level", "round_evals", "max_evals"):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)) or v < 0:
                 raise InputError(f"LeastChangeOptions.{name} must be an integer >= 0, got {v!r}")
@@ -276,6 +281,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
     """The subproblems, the search and the refinement of `solve_least_change` from its starting `frames` and
     their (SplineBasis, Preconditioner) `maps`, `start` [s, perf_counter] the solve's."""
     al, quat, (basis, pre) = lc.al, lc.layout.quat_slots, maps
+    o = o if lc.grid is None else replace(o, round_evals=0)  # a grid's solve ends on a whole subproblem's progress
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
     rounds, estimate, decreases, scores = [], float("nan"), [], None
     evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met
@@ -314,7 +320,9 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
             if estimate <= o.tol or level_its >= o.per_level:
                 break
             continue
-        new, estimate, dec = _refinement(al, frames, quat, o, k, progress)
+        new, estimate, dec = refinement(al, frames, quat, o.min_gap)
+        if progress:
+            progress("estimate", {"round": k, "estimate": estimate, "tol": o.tol})
         decreases.append((frames.times.copy(), dec))
         evals += 3
         if met and (estimate <= o.tol or new.size == 0):
@@ -346,10 +354,9 @@ def _multipliers(al: AugmentedLagrangian, frames: FrameSet, basis, progress, k: 
 
 def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, spent_so_far: tuple, should_stop,
                 progress, k: int, pairs: int | None = None):
-    """Subproblem k on `frames` with their (SplineBasis, Preconditioner) `maps` within what is left of the
-    solve's budget (`spent_so_far`: its start [s, perf_counter] and evaluations), L-BFGS keeping `pairs`
-    (None: by size): (its SubproblemResult, None), or (None, the status MAX_TIME or MAX_EVALS) when the
-    budget is spent before it."""
+    """Subproblem k on `frames` with their (SplineBasis, Preconditioner) `maps`, at most `round_evals` evaluations within the
+    solve's budget (`spent_so_far`: its start [s, perf_counter] and evaluations), L-BFGS keeping `pairs` (None: by size):
+    (its SubproblemResult, CONVERGED where its own cap ended it, None), or (None, MAX_TIME or MAX_EVALS: the budget spent)."""
     start, evals = spent_so_far
     left, spent = _budget(o, start, evals)
     if spent:
@@ -357,9 +364,15 @@ def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, 
     if progress:
         progress("round", {"round": k, "frames": frames.count, "variable": frames.n_variable})
     cb = None if progress is None else (lambda n, phi: progress("eval", {"evals": evals + n, "E": phi}))
-    return solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=maps[0], pre=maps[1],
-                            max_evals=o.max_evals - evals if o.max_evals else 0,
-                            max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb, pairs=pairs), None
+    solve_left = o.max_evals - evals if o.max_evals else 0
+    # round_evals at the default rate's points per second: denser points (the finer check's 400) cost more an evaluation
+    cap = max(1, int(o.round_evals * min(1.0, LeastChangeOptions.rate * al.T / len(al.t)))) if o.round_evals else 0
+    own = bool(cap) and not 0 < solve_left <= cap  # the round's own cap, not the solve's budget
+    r = solve_subproblem(al, frames, quat, ftol_rel=o.ftol_rel, basis=maps[0], pre=maps[1], max_evals=cap if own else solve_left,
+                         max_time_s=max(left, 0.0), should_stop=should_stop, callback=cb, pairs=pairs)
+    if own and r.result.status is Status.MAX_EVALS:  # an inexact subproblem: the multipliers are updated next
+        r = replace(r, result=replace(r.result, status=Status.CONVERGED, message=f"the round's {cap} evaluations spent (round_evals)"))
+    return r, None
 
 
 def _better(al: AugmentedLagrangian, best: tuple, frames: FrameSet, basis=None) -> tuple:
@@ -369,8 +382,7 @@ def _better(al: AugmentedLagrangian, best: tuple, frames: FrameSet, basis=None) 
     return (D, frames) if best[0] > D else best
 
 
-def _kept(al: AugmentedLagrangian, frames: FrameSet, basis, best: tuple, message: str, raises: list,
-          limits: list) -> tuple:
+def _kept(al: AugmentedLagrangian, frames: FrameSet, basis, best: tuple, message: str, raises: list, limits: list) -> tuple:
     """The path a solve returns: its last, or the best that met every limit where the last broke one; and
     what stays raised on it (`solver.feasibility.still_raised` against the limits as posed). Returns (frames, basis,
     message, raises)."""
@@ -452,27 +464,16 @@ def _budget(o: LeastChangeOptions, start: float, evals: int) -> tuple[float, Sta
 
 
 def _worst(al: AugmentedLagrangian, scaled: list) -> dict:
-    """{"worst": the name of the constraint furthest over its tolerance ("" without one), "value": its
-    largest c/tol (met at <= 1)}."""
+    """{"worst": the name of the constraint furthest over its tolerance ("" without one), "value": its largest c/tol (met at <= 1)}."""
     value, name = max(((float(s.max()), c.name) for c, s in zip(al.constraints, scaled) if s.size), default=(0.0, ""))
     return {"worst": name, "value": value}
 
 
 def _stop_message(status: Status, message: str, o: LeastChangeOptions) -> str:
-    """Why a solve ended on `status`: the whole solve's budget for MAX_TIME and MAX_EVALS (a subproblem
-    reports only its own share), else the subproblem's `message`."""
+    """Why a solve ended on `status`: the whole solve's budget for MAX_TIME and MAX_EVALS (a subproblem reports only its own
+    share), else the subproblem's `message`."""
     return {Status.MAX_TIME: f"time limit of {o.max_time_s:g} s reached",
             Status.MAX_EVALS: f"evaluation budget of {o.max_evals} spent"}.get(status, message)
-
-
-def _refinement(al, frames, quat, o: LeastChangeOptions, k: int, progress) -> tuple[np.ndarray, float, np.ndarray]:
-    """(times of new variable frames, each on a quadrature point (`on_points`), the predicted decrease of Phi
-    over Phi + shift, (m - 1,) each segment's predicted decrease) on `frames`."""
-    dec, phi = predicted_decreases(al, frames, quat, o.min_gap)
-    estimate = float(dec.sum() / max(phi + al.shift(), 1e-300))  # Phi itself can be <= 0 (PHR)
-    if progress:
-        progress("estimate", {"round": k, "estimate": estimate, "tol": o.tol})
-    return on_points(doerfler_times(dec, frames), al.t, frames), estimate, dec
 
 
 def _solution(lc, frames, basis, rounds, trace, status, message, evals, raises, seconds, estimate, tol,

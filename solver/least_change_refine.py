@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.feasibility import on_points
 from solver.frames import FrameSet
 from solver.lagrangian import AugmentedLagrangian, _frame_grams, _variable_dofs
 from solver.manifold import FrameVariables
 from solver.spline_basis import SplineBasis
 
-__all__ = ["THETA", "doerfler_times", "predicted_decreases"]
+__all__ = ["THETA", "doerfler_times", "predicted_decreases", "refinement"]
 
 #: [1] Doerfler's bulk parameter: mark the segments carrying half the predicted decrease,
 #: the value of Doerfler (1996) and of most adaptive finite-element codes since
@@ -91,3 +92,12 @@ def doerfler_times(decreases: np.ndarray, frames: FrameSet, theta: float = THETA
     k = int(np.searchsorted(np.cumsum(decreases[order]), theta * decreases.sum())) + 1
     mids = 0.5 * (frames.times[:-1] + frames.times[1:])
     return np.sort(mids[order[:k]])
+
+
+def refinement(al: AugmentedLagrangian, frames: FrameSet, quat_slots: np.ndarray, min_gap: float) -> tuple:
+    """One refinement step on `frames`: (times (r,) [s] of new variable frames, Doerfler's (`doerfler_times`) each moved to
+    a quadrature point (`solver.feasibility.on_points`), the predicted decrease of Phi over Phi + shift (dimensionless,
+    Phi itself can be <= 0), (m - 1,) each segment's predicted decrease (`predicted_decreases`))."""
+    dec, phi = predicted_decreases(al, frames, quat_slots, min_gap)
+    estimate = float(dec.sum() / max(phi + al.shift(), 1e-300))
+    return on_points(doerfler_times(dec, frames), al.t, frames), estimate, dec

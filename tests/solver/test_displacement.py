@@ -116,6 +116,15 @@ def dipped(toy_model):
     return t, q, disp, sol, clean_solution(disp, sol)
 
 
+def test_a_clean_s_rounds_run_to_their_own_end(dipped):
+    """`LeastChangeOptions.round_evals` caps the rounds of a solve whose frames are refined, not a clean's: its solve ends
+    on a whole subproblem's progress, so the same clean under any cap is the same path."""
+    t, q, disp, sol, clean = dipped
+    capped = solve_displacement(disp, LeastChangeOptions(round_evals=3))
+    assert max(r.result.n_evals for r in sol.rounds) > 3  # the cap would have bitten
+    np.testing.assert_array_equal(capped.frames.values, sol.frames.values)
+
+
 def test_feet_pushed_into_the_floor_come_out_and_the_rest_stays(toy_model, dipped):
     t, q, disp, sol, clean = dipped
     assert _lowest_site(toy_model, q).min() < -0.019  # the capture: 2 cm in

@@ -434,3 +434,20 @@ def test_the_evaluation_budget_is_for_the_whole_solve(shipped):
     assert sol.n_evals <= budget + 3
     at = np.flatnonzero(sol.frames.is_keyframe)
     assert np.abs(sol.frames.values[at][keyframes.mask] - keyframes.values[keyframes.mask]).max() <= 1e-12
+
+
+def test_a_round_ends_at_its_own_evaluations_and_the_solve_goes_on(shipped):
+    """`round_evals` caps each subproblem, not the solve: a round that spends it ends as an inexact subproblem
+    (CONVERGED, its message naming the cap) and the solve goes on with the next round; the solve's own budget is
+    not spent by it (no MAX_EVALS "evaluation budget"), and the keyframes stay met."""
+    from solver.optimize import Status
+
+    model, keyframes, info = shipped
+    lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights)
+    sol = solve_least_change(lc, LeastChangeOptions(round_evals=10, max_subproblems=4))
+    capped = [r for r in sol.rounds if "round_evals" in r.result.message]
+    assert capped and all(r.result.status is Status.CONVERGED for r in capped)
+    assert all(r.result.n_evals <= 10 for r in sol.rounds)
+    assert len(sol.rounds) == 4 and "evaluation budget" not in sol.message
+    at = np.flatnonzero(sol.frames.is_keyframe)
+    assert np.abs(sol.frames.values[at][keyframes.mask] - keyframes.values[keyframes.mask]).max() <= 1e-12
