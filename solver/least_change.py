@@ -71,9 +71,9 @@ class LeastChangeOptions:
     """How the least-change problem is solved (read-only).
 
     Attributes:
-        tol: refinement stops when the decrease of Phi it still predicts is at most tol times Phi's
-            nonnegative part (`AugmentedLagrangian.shift`) and every constraint is met (dimensionless;
-            1 %: the paper's fig. 5 "good enough" test as a fraction). On a `LeastChange.grid`, where no
+        tol: refinement stops when the decrease of Phi it still predicts is at most tol times Phi's nonnegative part
+            (`AugmentedLagrangian.shift`) and every constraint is met (dimensionless; 1 %: the paper's fig. 5 "good
+            enough" test as a fraction); until then a frame goes to each segment over its share by length. On a `LeastChange.grid`, where no
             frame can be added, the solve ends when every constraint is met and a subproblem lowered Phi by
             at most tol of that part (`_progress`).
         min_gap: [s] no two frames the refinement adds closer: 1/48 s, half a frame of 24 fps film; a cubic
@@ -320,14 +320,14 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
             if estimate <= o.tol or level_its >= o.per_level:
                 break
             continue
-        new, estimate, dec = refinement(al, frames, quat, o.min_gap)
+        new, estimate, dec = refinement(al, frames, quat, o.min_gap, o.tol)
         if progress:
             progress("estimate", {"round": k, "estimate": estimate, "tol": o.tol})
         decreases.append((frames.times.copy(), dec))
         evals += 3
         if met and (estimate <= o.tol or new.size == 0):
             message = (f"every constraint met; refinement estimate {estimate:.3g} <= tol {o.tol:g}" if estimate <= o.tol
-                       else "every constraint met; no segment predicts a decrease")
+                       else "every constraint met; no segment over its share can take another frame")
             break
         if new.size:
             frames, scores = with_frames(frames, new, quat), dec

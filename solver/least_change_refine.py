@@ -1,5 +1,5 @@
 """Where the least-change path needs variable frames: the Euler-Lagrange residual of the augmented
-integrand, as the decrease of Phi a midpoint frame predicts (paper sec. 4.2), marked by Doerfler's rule.
+integrand, as the decrease of Phi a midpoint frame predicts (paper sec. 4.2), marked by equidistribution.
 
 A candidate frame at the midpoint of each segment, where the spline through the current frames already
 passes (so adding it leaves the path unchanged), has gradient g_c = dPhi/dx_c: the weak-form
@@ -8,9 +8,17 @@ Euler-Lagrange residual of Phi's integrand tested with that frame's basis functi
 -H_c^-1 g_c with H_c the measure of change's own curvature there (the preconditioner's block of frame c,
 `solver.lagrangian.Preconditioner`), predicts the decrease (g_c . d_c)^2 / (2 d_c^T H_true d_c), the
 true curvature along d_c measured by one gradient difference (all even and all odd midpoints at once:
-their basis functions barely overlap). Segments are marked by Doerfler's bulk criterion (Doerfler,
-"A convergent adaptive algorithm for Poisson's equation", SIAM J. Numer. Anal. 33, 1996): the fewest
-segments whose predicted decreases sum to THETA of the total.
+their basis functions barely overlap).
+
+The solve stops when the predicted decreases sum to at most tol of Phi + shift. A segment is marked when
+its own predicted decrease exceeds its share of that allowance, tol (Phi + shift) h / T for a segment h
+long on a path T long: the equidistribution strategy (Babuska & Rheinboldt, "Error estimates for adaptive
+finite element computations", SIAM J. Numer. Anal. 15, 1978; Verfuerth, "A Review of A Posteriori Error
+Estimation and Adaptive Mesh-Refinement Techniques", 1996, sec. 4.1). Where no segment exceeds its share
+the sum is within the allowance, so the test that ends the solve and the marking agree; and each segment is
+judged by its own share, not by its rank among all of them, so a clip twice as long, made of the same
+motion, is refined in the same steps (Doerfler's bulk rule, which marks the fewest segments that carry half
+the total, marked one local peak of the residual a step and took more steps on longer clips).
 """
 from __future__ import annotations
 
@@ -22,11 +30,7 @@ from solver.lagrangian import AugmentedLagrangian, _frame_grams, _variable_dofs
 from solver.manifold import FrameVariables
 from solver.spline_basis import SplineBasis
 
-__all__ = ["THETA", "doerfler_times", "predicted_decreases", "refinement"]
-
-#: [1] Doerfler's bulk parameter: mark the segments carrying half the predicted decrease,
-#: the value of Doerfler (1996) and of most adaptive finite-element codes since
-THETA = 0.5
+__all__ = ["equidistributed_times", "predicted_decreases", "refinement"]
 
 
 def predicted_decreases(al: AugmentedLagrangian, frames: FrameSet, quat_slots: np.ndarray,
@@ -77,27 +81,26 @@ def predicted_decreases(al: AugmentedLagrangian, frames: FrameSet, quat_slots: n
     return dec, float(phi)
 
 
-def doerfler_times(decreases: np.ndarray, frames: FrameSet, theta: float = THETA) -> np.ndarray:
-    """The midpoints of the fewest segments whose predicted decreases sum to `theta` of the total.
+def equidistributed_times(decreases: np.ndarray, frames: FrameSet, allowed: float) -> np.ndarray:
+    """The midpoints of the segments whose predicted decrease exceeds their share of `allowed` by length.
 
     Args:
-        decreases: (m - 1,) from `predicted_decreases`. frames: the FrameSet they were computed on.
-        theta: the bulk parameter in (0, 1].
+        decreases: (m - 1,) from `predicted_decreases`. frames: the FrameSet they were computed on (m frames).
+        allowed: the decrease of Phi the whole path may still predict (dimensionless, tol (Phi + shift)).
     Returns:
-        (r,) sorted times [s] for new variable frames; empty when nothing predicts a decrease.
+        (r,) sorted times [s] for new variable frames; empty when every segment is within its share, and then
+        the decreases sum to at most `allowed`.
     """
-    if not np.any(decreases > 0):
-        return np.zeros(0)
-    order = np.argsort(-decreases)
-    k = int(np.searchsorted(np.cumsum(decreases[order]), theta * decreases.sum())) + 1
-    mids = 0.5 * (frames.times[:-1] + frames.times[1:])
-    return np.sort(mids[order[:k]])
+    h = np.diff(frames.times)
+    share = allowed * h / (frames.times[-1] - frames.times[0])
+    return 0.5 * (frames.times[:-1] + frames.times[1:])[decreases > share]
 
 
-def refinement(al: AugmentedLagrangian, frames: FrameSet, quat_slots: np.ndarray, min_gap: float) -> tuple:
-    """One refinement step on `frames`: (times (r,) [s] of new variable frames, Doerfler's (`doerfler_times`) each moved to
-    a quadrature point (`solver.feasibility.on_points`), the predicted decrease of Phi over Phi + shift (dimensionless,
-    Phi itself can be <= 0), (m - 1,) each segment's predicted decrease (`predicted_decreases`))."""
+def refinement(al: AugmentedLagrangian, frames: FrameSet, quat_slots: np.ndarray, min_gap: float, tol: float) -> tuple:
+    """One refinement step on `frames`: (times (r,) [s] of new variable frames, the segments over their share of tol
+    (`equidistributed_times`) each moved to a quadrature point (`solver.feasibility.on_points`), the predicted
+    decrease of Phi over Phi + shift (dimensionless, Phi itself can be <= 0), (m - 1,) each segment's predicted
+    decrease (`predicted_decreases`))."""
     dec, phi = predicted_decreases(al, frames, quat_slots, min_gap)
-    estimate = float(dec.sum() / max(phi + al.shift(), 1e-300))
-    return on_points(doerfler_times(dec, frames), al.t, frames), estimate, dec
+    scale = max(phi + al.shift(), 1e-300)
+    return on_points(equidistributed_times(dec, frames, tol * scale), al.t, frames), float(dec.sum() / scale), dec

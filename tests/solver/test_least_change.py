@@ -419,6 +419,44 @@ def test_refinement_checks_are_recorded_where_they_chose_frames(shipped):
     assert sol.final_estimate <= o.tol
 
 
+def _frames_at(times):
+    from solver.frames import FrameSet
+
+    times = np.asarray(times, float)
+    return FrameSet(times, np.zeros((len(times), 1)), np.zeros((len(times), 1), bool), np.zeros(len(times), bool))
+
+
+def test_a_segment_is_refined_when_it_predicts_more_than_its_share_by_length():
+    """`equidistributed_times`: the midpoints of exactly the segments whose decrease exceeds allowed h / T (hand-built);
+    where none is marked the decreases sum to at most `allowed` (the solve's stop test), on random decreases."""
+    from solver.least_change_refine import equidistributed_times
+
+    frames = _frames_at([0.0, 0.1, 0.4, 0.5, 1.0])  # segments 0.1, 0.3, 0.1, 0.5 s long on a 1 s path: shares 0.1, 0.3, ...
+    marked = equidistributed_times(np.array([0.11, 0.29, 0.2, 0.5]), frames, allowed=1.0)
+    np.testing.assert_allclose(marked, [0.05, 0.45])  # 0.11 > 0.1 and 0.2 > 0.1; 0.29 < 0.3, 0.5 = its share
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        times = np.cumsum(np.r_[0.0, rng.uniform(0.02, 0.3, 12)])
+        dec = rng.exponential(0.01, 12)
+        if equidistributed_times(dec, _frames_at(times), allowed=0.1).size == 0:
+            assert dec.sum() <= 0.1 * (1 + 1e-12)
+
+
+def test_a_clip_twice_as_long_is_refined_in_the_same_segments():
+    """Two copies of one path's segments end to end, the second's residual peaks of other heights (as where tiles
+    join), with twice the allowance (Phi doubles with the path): the same segments of each copy are marked, each
+    over its share. Ranked among all (Doerfler's bulk rule, half the total: 0.6 and 0.4), one peak of each copy
+    would be."""
+    from solver.least_change_refine import equidistributed_times
+
+    times = np.array([0.0, 0.2, 0.3, 0.7, 1.0])  # shares of 0.5 on 1 s: 0.1, 0.05, 0.2, 0.15
+    first, second = np.array([0.05, 0.3, 0.02, 0.4]), np.array([0.05, 0.6, 0.02, 0.16])
+    one = equidistributed_times(first, _frames_at(times), allowed=0.5)
+    np.testing.assert_allclose(one, [0.25, 0.85])
+    two = equidistributed_times(np.r_[first, second], _frames_at(np.r_[times, 1.0 + times[1:]]), allowed=1.0)
+    np.testing.assert_allclose(two, np.r_[one, 1.0 + one])
+
+
 def test_the_evaluation_budget_is_for_the_whole_solve(shipped):
     """`max_evals` caps the solve's evaluations in all, not each subproblem's: a budget smaller than one
     subproblem's first run ends the solve with status MAX_EVALS, within the budget (plus the 3 of a
