@@ -99,7 +99,7 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float | None = 
             (None: `LeastChangeOptions`' default).
     Returns:
         dict: keyframes, frames, points (quadrature), wall_s, cpu_s (user + system of the solve),
-        evals, ms_per_eval (wall / evals), rss_before_mb, maxrss_mb (peak resident size of the
+        evals, checks (refinement checks: `Solution.segment_decreases`), ms_per_eval (wall / evals), rss_before_mb, maxrss_mb (peak resident size of the
         process after the solve), peak_mb (the difference), E_initial, E_final, status,
         max_penetration_mm, keyframe_error (path_metrics at 1000 Hz), banded (the spline bases of the
         final frames are evaluated through the tridiagonal system), obj_cpu_s and obj_calls (CPU time
@@ -128,7 +128,7 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float | None = 
     return {
         "keyframes": keyframes.count, "frames": sol.frames.count, "points": len(t),
         "wall_s": wall, "cpu_s": (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime),
-        "solve_wall_s": sol.wall_time_s, "evals": sol.n_evals, "ms_per_eval": 1e3 * wall / max(1, sol.n_evals),
+        "solve_wall_s": sol.wall_time_s, "evals": sol.n_evals, "checks": len(sol.segment_decreases), "ms_per_eval": 1e3 * wall / max(1, sol.n_evals),
         "rss_before_mb": rss_before, "maxrss_mb": maxrss, "peak_mb": maxrss - rss_before,
         "E_initial": sol.E_initial, "E_final": sol.E_final, "status": sol.status.name,
         "max_penetration_mm": metrics["max_penetration_mm"], "keyframe_error": metrics["keyframe_error"],
@@ -295,7 +295,7 @@ def print_table(rows: list[dict], title: str) -> None:
     b_cpu_eval = base["cpu_s"] / max(1, base["evals"])
     b_obj = base["obj_cpu_s"] / max(1, base["obj_calls"])
     print(title)
-    print(f"{'length':>6} {'keyfr':>5} {'frames':>6} {'points':>6} {'wall s':>7} {'cpu s':>6} {'evals':>5} "
+    print(f"{'length':>6} {'keyfr':>5} {'frames':>6} {'points':>6} {'wall s':>7} {'cpu s':>6} {'evals':>5} {'checks':>6} "
           f"{'cpu ms/ev':>9} {'obj ms':>6} {'rest s':>6} {'peak MB':>7} | {'wall/1x':>7} {'cpu/1x':>6} {'ev/1x':>5} "
           f"{'ms/ev/1x':>8} {'obj/1x':>6} {'rest/1x':>7} {'mem/1x':>6} | {'pen mm':>6} {'kf err':>7} {'E_final':>7}  status")
     for r in rows:
@@ -303,7 +303,7 @@ def print_table(rows: list[dict], title: str) -> None:
         obj = r["obj_cpu_s"] / max(1, r["obj_calls"])
         rest = r["cpu_s"] - r["obj_cpu_s"]
         print(f"{r['factor']:>5}x {r['keyframes']:>5} {r['frames']:>6} {r['points']:>6} {r['wall_s']:>7.2f} "
-              f"{r['cpu_s']:>6.2f} {r['evals']:>5} {1e3 * cpu_eval:>9.2f} {1e3 * obj:>6.2f} {rest:>6.2f} "
+              f"{r['cpu_s']:>6.2f} {r['evals']:>5} {r.get('checks', 0):>6} {1e3 * cpu_eval:>9.2f} {1e3 * obj:>6.2f} {rest:>6.2f} "
               f"{r['peak_mb']:>7.1f} | {r['wall_s'] / base['wall_s']:>7.2f} {r['cpu_s'] / base['cpu_s']:>6.2f} "
               f"{r['evals'] / max(1, base['evals']):>5.2f} {cpu_eval / b_cpu_eval:>8.2f} {obj / b_obj:>6.2f} "
               f"{rest / max(base['cpu_s'] - base['obj_cpu_s'], 1e-9):>7.2f} "

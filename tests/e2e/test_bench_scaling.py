@@ -11,10 +11,11 @@ from runner.cli import main
 def test_bench_scaling_repeats(capsys):
     assert main(["bench", "scaling", "--factors", "1,2", "--repeat", "2"]) == 0
     printed = capsys.readouterr().out
-    rows = re.findall(r"^\s+([12])x\s+(\d+)\s+(\d+)\s+(\d+)\s+[\d.]+\s+([\d.]+)\s+(\d+)", printed, re.M)
+    rows = re.findall(r"^\s+([12])x\s+(\d+)\s+(\d+)\s+(\d+)\s+[\d.]+\s+([\d.]+)\s+(\d+)\s+(\d+)", printed, re.M)
     assert [r[0] for r in rows] == ["1", "2"]
     points = [int(r[3]) for r in rows]
     assert points[1] == 2 * points[0]  # the tiled clip: exactly twice the quadrature points
+    assert all(int(r[6]) >= 1 for r in rows)  # a converged solve ends on a refinement check: each length made one
     assert "median of 2 runs per length, the lengths alternating" in printed
     ratios = re.search(r"CPU time 2x / 1x, run by run: ([\d.]+), ([\d.]+) \(median", printed)
     assert ratios and all(0.5 < float(r) < 20 for r in ratios.groups())
