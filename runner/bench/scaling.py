@@ -17,8 +17,8 @@ The problem is built and solved as `dynsplines animate` builds and solves it (`s
 `solver.solve_problem`: the least change to the plain spline that meets the constraints, with the
 command's `LeastChangeOptions`). The keyframes have no contact schedule here (the shipped schedule
 names the step box), so the constraints are penetration, the anatomical limits, the unit norm and the
-no-jolt bounds; refinement is the command's (frames where the predicted decrease is largest, until it
-is below the tolerance), so the frame count at 8x need not be 8 times the count at 1x.
+no-jolt bounds; refinement is the command's (a frame in each segment over its share of the tolerance, until
+the total is below it), so the frame count at 8x need not be 8 times the count at 1x.
 """
 from __future__ import annotations
 
