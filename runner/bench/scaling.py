@@ -99,9 +99,9 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float | None = 
             (None: `LeastChangeOptions`' default).
     Returns:
         dict: keyframes, frames, points (quadrature), wall_s, cpu_s (user + system of the solve),
-        evals, checks (refinement checks: `Solution.segment_decreases`), ms_per_eval (wall / evals), rss_before_mb, maxrss_mb (peak resident size of the
-        process after the solve), peak_mb (the difference), E_initial, E_final, status,
-        max_penetration_mm, keyframe_error (path_metrics at 1000 Hz), banded (the spline bases of the
+        evals, checks (refinement checks: `Solution.segment_decreases`), ms_per_eval (wall / evals),
+        rss_before_mb, maxrss_mb (peak resident size of the process after the solve), peak_mb (the
+        difference), E_initial, E_final, status, max_penetration_mm, keyframe_error (path_metrics at 1000 Hz), banded (the spline bases of the
         final frames are evaluated through the tridiagonal system), obj_cpu_s and obj_calls (CPU time
         in, and calls of, `AugmentedLagrangian.evaluate` during the solve: `_objective_cpu`).
     """
@@ -128,7 +128,8 @@ def solve_one(keyframes: Keyframes, figure: Path = FIGURE, rate: float | None = 
     return {
         "keyframes": keyframes.count, "frames": sol.frames.count, "points": len(t),
         "wall_s": wall, "cpu_s": (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime),
-        "solve_wall_s": sol.wall_time_s, "evals": sol.n_evals, "checks": len(sol.segment_decreases), "ms_per_eval": 1e3 * wall / max(1, sol.n_evals),
+        "solve_wall_s": sol.wall_time_s, "evals": sol.n_evals, "checks": len(sol.segment_decreases),
+        "ms_per_eval": 1e3 * wall / max(1, sol.n_evals),
         "rss_before_mb": rss_before, "maxrss_mb": maxrss, "peak_mb": maxrss - rss_before,
         "E_initial": sol.E_initial, "E_final": sol.E_final, "status": sol.status.name,
         "max_penetration_mm": metrics["max_penetration_mm"], "keyframe_error": metrics["keyframe_error"],
@@ -303,7 +304,7 @@ def print_table(rows: list[dict], title: str) -> None:
         obj = r["obj_cpu_s"] / max(1, r["obj_calls"])
         rest = r["cpu_s"] - r["obj_cpu_s"]
         print(f"{r['factor']:>5}x {r['keyframes']:>5} {r['frames']:>6} {r['points']:>6} {r['wall_s']:>7.2f} "
-              f"{r['cpu_s']:>6.2f} {r['evals']:>5} {r.get('checks', 0):>6} {1e3 * cpu_eval:>9.2f} {1e3 * obj:>6.2f} {rest:>6.2f} "
+              f"{r['cpu_s']:>6.2f} {r['evals']:>5} {r['checks']:>6} {1e3 * cpu_eval:>9.2f} {1e3 * obj:>6.2f} {rest:>6.2f} "
               f"{r['peak_mb']:>7.1f} | {r['wall_s'] / base['wall_s']:>7.2f} {r['cpu_s'] / base['cpu_s']:>6.2f} "
               f"{r['evals'] / max(1, base['evals']):>5.2f} {cpu_eval / b_cpu_eval:>8.2f} {obj / b_obj:>6.2f} "
               f"{rest / max(base['cpu_s'] - base['obj_cpu_s'], 1e-9):>7.2f} "

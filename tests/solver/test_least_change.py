@@ -427,19 +427,24 @@ def _frames_at(times):
 
 
 def test_a_segment_is_refined_when_it_predicts_more_than_its_share_by_length():
-    """`equidistributed_times`: the midpoints of exactly the segments whose decrease exceeds allowed h / T (hand-built);
-    where none is marked the decreases sum to at most `allowed` (the solve's stop test), on random decreases."""
+    """`equidistributed_times`: the midpoints of exactly the segments whose decrease exceeds allowed h / T (hand-built,
+    and on random segments: within every share nothing is marked and the sum is within `allowed`, the solve's stop
+    test; one segment over its share is marked alone)."""
     from solver.least_change_refine import equidistributed_times
 
     frames = _frames_at([0.0, 0.1, 0.4, 0.5, 1.0])  # segments 0.1, 0.3, 0.1, 0.5 s long on a 1 s path: shares 0.1, 0.3, ...
     marked = equidistributed_times(np.array([0.11, 0.29, 0.2, 0.5]), frames, allowed=1.0)
     np.testing.assert_allclose(marked, [0.05, 0.45])  # 0.11 > 0.1 and 0.2 > 0.1; 0.29 < 0.3, 0.5 = its share
     rng = np.random.default_rng(7)
-    for _ in range(200):
+    for _ in range(200):  # random segments, each decrease within its share: nothing marked, the sum within `allowed`
         times = np.cumsum(np.r_[0.0, rng.uniform(0.02, 0.3, 12)])
-        dec = rng.exponential(0.01, 12)
-        if equidistributed_times(dec, _frames_at(times), allowed=0.1).size == 0:
-            assert dec.sum() <= 0.1 * (1 + 1e-12)
+        share = 0.1 * np.diff(times) / times[-1]
+        dec = share * rng.uniform(0.0, 1.0, 12)
+        assert equidistributed_times(dec, _frames_at(times), allowed=0.1).size == 0
+        assert dec.sum() <= 0.1 * (1 + 1e-12)
+        j = int(rng.integers(12))  # one segment 1 % over its share: it alone is marked, at its midpoint
+        dec[j] = 1.01 * share[j]
+        np.testing.assert_allclose(equidistributed_times(dec, _frames_at(times), allowed=0.1), [0.5 * (times[j] + times[j + 1])])
 
 
 def test_a_clip_twice_as_long_is_refined_in_the_same_segments():
