@@ -219,7 +219,7 @@ def _split_times(frames: FrameSet, at: np.ndarray, min_gap: float) -> np.ndarray
 
 def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames: FrameSet, quat_slots,
                    budget: _Budget, min_gap: float, ftol_rel: float, per_level: int, pairs: int | None,
-                   level: bool = True) -> FrameSet:
+                   level: bool = True, maps=frame_maps) -> FrameSet:
     """Minimize F over `objective` while `held` meet their limits (module docstring; `level`: F the sum of
     the violations, else the squares of step 1), adding a variable frame to every segment holding a broken
     pair of `objective` while one fits; returns the path with the least F among those on which `held` are
@@ -236,7 +236,7 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
     before F is stationary, and a limit is raised only where a fresh descent no longer helps."""
     eal = AugmentedLagrangian(al.change, held, al.tmap, al.engine, al.d0, elastic=objective, base=al.base,
                               **_measure(level, ftol_rel))
-    basis, pre = frame_maps(al, frames, quat_slots)
+    basis, pre = maps(al, frames, quat_slots)
     best, best_F = frames, eal.evaluate(basis, frames.values, grad=False)[0]
     while True:
         eal.rho, eal.lam = 1.0, [np.zeros(c.size) for c in held]
@@ -265,7 +265,7 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
         if new.size == 0:
             return best
         best = with_frames(best, new, quat_slots)
-        basis, pre = frame_maps(al, best, quat_slots)
+        basis, pre = maps(al, best, quat_slots)
         best_F = eal.evaluate(basis, best.values, grad=False)[0]
 
 
@@ -376,7 +376,7 @@ def _violation(al: AugmentedLagrangian, constraints, frames: FrameSet) -> float:
 
 def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, min_gap: float, ftol_rel: float,
                     per_level: int, second: FrameSet | None = None, max_evals: int = 0, max_time_s: float = 0.0,
-                    should_stop=None, pairs: int | None = None, callback=None) -> Certificate:
+                    should_stop=None, pairs: int | None = None, callback=None, maps=frame_maps) -> Certificate:
     """The least violation of the constraints over the paths through the keyframes (module docstring).
 
     Args:
@@ -390,12 +390,14 @@ def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, mi
             the solve's budget (0: none; spent, the Certificate's status says so). pairs: L-BFGS correction
             pairs of each solve (None: by size, `solver.optimize.lbfgs_storage`). callback: None, or
             f(n, F) after each evaluation: the search's evaluations so far and that evaluation's F (progress).
+        maps: maps(al, frames, quat_slots) -> (SplineBasis, preconditioner) of each frame set searched
+            (`solver.lagrangian.frame_maps`; a grid's: `solver.grid_preconditioner.grid_maps`).
     Returns:
         Certificate: what was raised, the path that reaches it, the evaluations spent.
     """
     budget = _Budget(max_evals, max_time_s, should_stop, callback)
     cons = list(al.constraints)
-    kw = dict(budget=budget, min_gap=min_gap, ftol_rel=ftol_rel, per_level=per_level, pairs=pairs)
+    kw = dict(budget=budget, min_gap=min_gap, ftol_rel=ftol_rel, per_level=per_level, pairs=pairs, maps=maps)
     paths = [(0, _elastic_solve(al, cons, [], frames, quat_slots, level=False, **kw))]
     if second is not None and not _meets(al, cons, paths[0][1]):  # the second start only where the first falls short
         paths.append((1, _elastic_solve(al, cons, [], second, quat_slots, level=False, **kw)))

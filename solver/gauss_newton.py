@@ -36,64 +36,19 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg
-from scipy.interpolate import BSpline
 from scipy.linalg.lapack import dtbtrs
 from scipy.sparse import csr_matrix
 
 from solver.curvature import Curvature, Outer
 from solver.quaternion import conj, left_matrix, mul
+from solver.spline_coefficients import SplineCoefficients
 
-__all__ = ["GaussNewtonPreconditioner", "GridModel", "SplineCoefficients", "cached_preconditioner"]
+__all__ = ["GaussNewtonPreconditioner", "GridModel", "cached_preconditioner"]
 
 #: [1] the end conditions' and pins' weight relative to the largest diagonal entry of H_C among the coefficients
 #: each ties: 1e6 leaves them met to 1e-6 of the curvature's scale there while LAPACK's Cholesky stays
 #: accurate (the condition number it adds is 1e6, against double precision's 1e16)
 STIFF = 1e6
-
-
-class SplineCoefficients:
-    """The natural cubic spline through frames at `knots` as a clamped cubic B-spline (module docstring).
-
-    Args:
-        knots: (m,) increasing frame times [s], m >= 2. t: (n,) quadrature times [s] within them.
-    Attributes:
-        span: (n,) the first of each point's four coefficients. b: (3, n, 4) the basis functions' value,
-        first and second derivative [1, 1/s, 1/s^2] at the points. at_frames: (m, m + 2) CSR, the basis at
-        the frames (the frame values are at_frames @ C). ends: (2, m + 2) the second derivative at the ends.
-    """
-
-    def __init__(self, knots: np.ndarray, t: np.ndarray):
-        x = np.asarray(knots, float)
-        t = np.clip(np.asarray(t, float), x[0], x[-1])
-        m = len(x)
-        self.size = m + 2
-        full = np.r_[[x[0]] * 3, x, [x[-1]] * 3]
-        self.span = np.clip(np.searchsorted(x, t, side="right") - 1, 0, max(m - 2, 0))
-        self.b = np.zeros((3, len(t), 4))
-        for r in range(3):
-            M = _derivative_design(full, t, r).tocoo()  # (n, m + 2), four entries a row at most
-            self.b[r, M.row, M.col - self.span[M.row]] = M.data
-        self.at_frames = _derivative_design(full, x, 0).tocsr()
-        self.at_frames.eliminate_zeros()
-        self.ends = _derivative_design(full, x[[0, -1]], 2).toarray()
-
-
-def _derivative_design(full: np.ndarray, x: np.ndarray, r: int):
-    """(len(x), n) sparse: the r-th derivative of each of the n cubic B-splines on the knots `full` at x, as
-    the degree 3 - r design matrix (scipy's `BSpline.design_matrix`) times the difference map of the
-    coefficients, d_i = k (c_i+1 - c_i) / (t_i+k+1 - t_i+1) per derivative (de Boor, ch. X)."""
-    from scipy.sparse import diags
-
-    k, T = 3, full
-    D = None
-    for _ in range(r):
-        n = len(T) - k - 1
-        h = k / (T[k + 1: n + k] - T[1:n])
-        step = diags([-h, h], [0, 1], shape=(n - 1, n), format="csr")
-        D = step if D is None else step @ D
-        T, k = T[1:-1], k - 1
-    X = BSpline.design_matrix(x, T, k)
-    return X if D is None else X @ D
 
 
 class GridModel:

@@ -41,6 +41,7 @@ from solver.feasibility import Certificate, beyond, capture_start, least_violati
 from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.gauss_newton import cached_preconditioner
+from solver.grid_preconditioner import grid_maps
 from solver.inverse_dynamics import InverseDynamics
 from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
@@ -235,11 +236,11 @@ def _start_frames(lc: LeastChange, min_gap: float) -> FrameSet:
 
 
 def _start(lc: LeastChange, min_gap: float, frames: FrameSet | None = None) -> tuple[FrameSet, tuple]:
-    """The starting frames (`frames`, or `_start_frames`) and their maps (`solver.lagrangian.frame_maps`); sets the
+    """The starting frames (`frames`, or `_start_frames`) and their maps (`_grid`); sets the
     starting penalty rho_0 on `lc.al` (`solver.lagrangian.initial_penalty`)."""
     al = lc.al
     frames = _start_frames(lc, min_gap) if frames is None else frames
-    basis, pre = frame_maps(al, frames, lc.layout.quat_slots)
+    basis, pre = _grid(lc)[0](al, frames, lc.layout.quat_slots)
     al.rho = initial_penalty(al, basis, FrameVariables(frames, lc.layout.quat_slots), pre)
     return frames, (basis, pre)
 
@@ -289,7 +290,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
     for k in range(o.max_subproblems):
         newton = o.newton and lc.grid is not None and not certified  # D's preconditioner after a search
         maps = (basis, (newton and cached_preconditioner(grid, basis, al, frames, quat)) or pre)
-        r, spent = _subproblem(al, frames, maps, quat, o, (start, evals), should_stop, progress, k, _pairs(lc))
+        r, spent = _subproblem(al, frames, maps, quat, o, (start, evals), should_stop, progress, k, _grid(lc)[1])
         if spent:
             status, message = spent, _stop_message(spent, "", o)
             break
@@ -313,7 +314,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
                 status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
                 break
             best, frames = _better(al, best, cert.frames), cert.frames  # a path that meets every certified limit
-            (basis, pre), level_its, kind = frame_maps(al, frames, quat), 0, "certify"
+            (basis, pre), level_its, kind = _grid(lc)[0](al, frames, quat), 0, "certify"
             continue
         if lc.grid is not None:  # a frame at every time of the grid already: done when a subproblem no longer moves
             estimate, message = _grid_done(r.result, shift, frames.count, o, level_its, message)
@@ -411,7 +412,7 @@ def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: fl
     if progress:  # the search's evaluations as they happen ("search", then "eval" with F), its outcome after
         progress("search", {"round": k, "frames": frames.count})
     cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
-                           pairs=_pairs(lc), max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
+                           maps=_grid(lc)[0], pairs=_grid(lc)[1], max_evals=max(o.max_evals - evals, 1) if o.max_evals else 0,
                            max_time_s=max(left, 1e-9) if o.max_time_s else 0.0, should_stop=should_stop,
                            callback=progress and (lambda n, F: progress("eval", {"evals": evals + n, "F": F})))
     if progress:
@@ -430,9 +431,10 @@ def least_violation_of(lc: LeastChange, frames: FrameSet, options: LeastChangeOp
     return _certify(replace(lc, al=lc.al.posed()), frames, options, time.perf_counter(), 0, should_stop, progress, 0)
 
 
-def _pairs(lc: LeastChange) -> int | None:
-    """L-BFGS correction pairs of `lc`'s subproblems: GRID_PAIRS on a grid, else None (nlopt's default by size)."""
-    return None if lc.grid is None else GRID_PAIRS
+def _grid(lc: LeastChange) -> tuple:
+    """(the maps of `lc`'s frame sets, its subproblems' L-BFGS correction pairs): on a grid `grid_maps` (linear in its
+    frames) and GRID_PAIRS, else `solver.lagrangian.frame_maps` and None (nlopt's default by size)."""
+    return (frame_maps, None) if lc.grid is None else (grid_maps, GRID_PAIRS)
 
 
 def _grid_done(result, shift: float, count: int, o: LeastChangeOptions, level_its: int, message: str) -> tuple:

@@ -22,7 +22,7 @@ from solver.constraints.acceleration import AccelerationBound
 from solver.constraints.sites import site_velocity_jacobians
 from solver.contacts import Contact
 from solver.displacement import build_displacement, clean_solution, solve_displacement
-from solver.gauss_newton import GridModel, SplineCoefficients
+from solver.gauss_newton import GridModel
 from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
 from solver.lagrangian import Preconditioner, _variable_dofs
@@ -31,6 +31,7 @@ from solver.least_change import LeastChangeOptions, _start_frames
 from solver.manifold import FrameVariables
 from solver.path_state import PathState
 from solver.spline_basis import SplineBasis
+from solver.spline_coefficients import SplineCoefficients
 from tests.solver.test_displacement import DIP, _capture, _lowest_site
 
 
