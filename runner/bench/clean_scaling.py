@@ -208,6 +208,80 @@ def print_rows(rows: list[dict]) -> None:
               f"for {top / base:g}x the length)")
 
 
+def preconditioner_rows(model, times, qpos, contacts, factors=(1, 2, 4, 8), repeat: int = 10) -> list[dict]:
+    """Per length factor f: D's preconditioner on the grid of a clean of the capture's first f/max(factors) of its
+    frames (`solver.displacement.build_displacement`, the contacts that end within them), the dense Kronecker one
+    (`solver.lagrangian.frame_maps`) and the banded one (`solver.grid_preconditioner.grid_maps`) side by side in this
+    process: {"factor", "frames", "build_ms" and "apply_ms" (each (dense, banded): the build's CPU time [ms] and an
+    application's, `apply` and `apply_transpose`, the median of `repeat`), "eval_ms" (an evaluation of Phi and its
+    gradient at the capture, for scale), "difference" (the largest relative difference of the two S S^T g over
+    three random g: the same matrix, to round-off)}.
+
+    Args:
+        model: the scene's MjModel. times: (n,) [s]. qpos: (n, nq) the retargeted capture. contacts: its contacts.
+    Raises:
+        ValueError: the capture is too short for the factors (fewer than 4 frames at the shortest).
+    """
+    top, rows = max(factors), []
+    for f in factors:
+        n = len(times) * f // top
+        if n < 4:
+            raise ValueError(f"{len(times)} frames: {f}/{top} of them is {n}, fewer than the 4 a clean needs")
+        rows.append({"factor": f, "frames": n} | _preconditioner_row(model, times[:n], qpos[:n],
+                                                                     [c for c in contacts if c.end <= times[n - 1]], repeat))
+    return rows
+
+
+def _preconditioner_row(model, times, qpos, contacts, repeat: int) -> dict:
+    """`preconditioner_rows`' figures of one clean's grid ("build_ms", "apply_ms", "eval_ms", "difference")."""
+    from solver.displacement import build_displacement
+    from solver.grid_preconditioner import grid_maps
+    from solver.lagrangian import frame_maps
+    from solver.manifold import FrameVariables
+
+    lc = build_displacement(model, times, qpos, contacts=contacts).lc
+    quat, frames = lc.layout.quat_slots, lc.plain  # the grid: a frame at every capture frame, free but at the pins
+    built = [_timed(lambda maps=maps: maps(lc.al, frames, quat), 1) for maps in (frame_maps, grid_maps)]
+    (basis, dense), (_, banded) = (maps for maps, _ in built)
+    rng = np.random.default_rng(0)
+    gs = [rng.standard_normal(dense.size) for _ in range(3)]
+    applied = [_timed(lambda pre=pre: pre.apply(pre.apply_transpose(gs[0])), repeat) for pre in (dense, banded)]
+    diff = max(float(np.linalg.norm(dense.apply(dense.apply_transpose(g)) - banded.apply(banded.apply_transpose(g)))
+                     / np.linalg.norm(dense.apply(dense.apply_transpose(g)))) for g in gs)
+    var = FrameVariables(frames, quat)
+    _, ev = _timed(lambda: lc.al.evaluate(basis, var.values(np.zeros(var.size))), 3)
+    return {"build_ms": tuple(1e3 * t for _, t in built), "apply_ms": tuple(1e3 * t for _, t in applied),
+            "eval_ms": 1e3 * ev, "difference": diff}
+
+
+def _timed(fn, repeat: int) -> tuple:
+    """(fn()'s last result, the median CPU time [s] of `repeat` calls)."""
+    import time
+
+    times, out = [], None
+    for _ in range(repeat):
+        t = time.process_time()
+        out = fn()
+        times.append(time.process_time() - t)
+    return out, float(np.median(times))
+
+
+def print_preconditioner_rows(rows: list[dict]) -> None:
+    """A row per length: frames, the two preconditioners' build and application [ms], an evaluation's, the
+    difference; and the growth of each from the shortest length to the longest against the length's."""
+    print(f"{'length':>6} {'frames':>6} | {'build ms':>17} | {'apply ms':>15} | {'eval ms':>7} | {'S S^T g':>8}")
+    print(f"{'':>6} {'':>6} | {'dense':>8} {'banded':>8} | {'dense':>7} {'banded':>7} | {'':>7} | {'rel diff':>8}")
+    for r in rows:
+        print(f"{r['factor']:>5}x {r['frames']:>6} | {r['build_ms'][0]:>8.1f} {r['build_ms'][1]:>8.1f} | "
+              f"{r['apply_ms'][0]:>7.2f} {r['apply_ms'][1]:>7.2f} | {r['eval_ms']:>7.1f} | {r['difference']:>8.1e}")
+    a, b = rows[0], rows[-1]
+    if b["frames"] > a["frames"]:
+        grow = [f"{what} {kind} x{b[key][i] / max(a[key][i], 1e-9):.1f}" for what, key in (("build", "build_ms"),
+                ("apply", "apply_ms")) for i, kind in enumerate(("dense", "banded"))]
+        print(f"{b['frames'] / a['frames']:.0f}x the frames: " + ", ".join(grow) +
+              f"; an evaluation x{b['eval_ms'] / a['eval_ms']:.1f}")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m runner.bench.clean_scaling", description=__doc__.splitlines()[0])
     p.add_argument("--clip", type=Path, default=None,

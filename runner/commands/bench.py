@@ -85,7 +85,8 @@ def register(sub) -> None:
     c.add_argument("--factors", default="1,2,4,8", help="lengths, as multiples of the clip [1,2,4,8]")
     c.add_argument("--rate", type=float, default=None, help="quadrature points per second [the command's]")
     c.add_argument("--dense", action="store_true", help="also run with dense spline matrices at every length")
-    c.add_argument("--per-eval", action="store_true", help="only the spline's per-evaluation table, dense vs banded")
+    c.add_argument("--per-eval", action="store_true", help="only the per-evaluation table, dense vs banded: the spline's "
+                   "(--mode animate) or D's preconditioner on a clean's grid (--mode clean)")
     c.add_argument("--repeat", type=int, default=None,
                    help="solves per length, the lengths alternating; the table gives medians [3; --mode clean 1]")
     c.set_defaults(func=bench_scaling)
@@ -351,12 +352,32 @@ def bench_scaling(args) -> int:
     return scaling.main(argv)
 
 
+def _clean_per_eval(clip: Path, factors: list[int]) -> int:
+    """`bench scaling --mode clean --per-eval`: D's preconditioner on a clean's grid, dense against banded, on the
+    first f/max(factors) of the clip's retargeted capture (`runner.bench.clean_scaling.preconditioner_rows`)."""
+    import tempfile
+
+    from runner.bench import clean_scaling
+    from runner.clean import CleanOptions, _capture
+
+    with tempfile.TemporaryDirectory(prefix="dynsplines-per-eval-") as tmp:
+        cs, contacts, _ = _capture(clip, CleanOptions(render=False, quiet=True), Path(tmp) / "scene.xml", lambda *_: None)
+    ref = cs.reference
+    print(f"clean per evaluation: {clip.name}, its first {','.join(map(str, factors))} / {max(factors)} of "
+          f"{ref.count} frames; D's preconditioner on the clean's grid, built and applied in this process (CPU)")
+    try:
+        clean_scaling.print_preconditioner_rows(clean_scaling.preconditioner_rows(cs.model, ref.times, ref.qpos, contacts, factors))
+    except ValueError as e:
+        raise InputError(f"--clip {clip}: {e}; give a longer clip or smaller --factors") from None
+    return 0
+
+
 def _clean_scaling(args, repeat: int) -> int:
     """`bench scaling --mode clean`: runner.bench.clean_scaling's table."""
     from runner.bench import clean_scaling
 
-    if args.rate is not None or args.dense or args.per_eval:
-        raise InputError("--rate, --dense and --per-eval go with --mode animate (the keyframes' solve)")
+    if args.rate is not None or args.dense:
+        raise InputError("--rate and --dense go with --mode animate (the keyframes' solve)")
     clip = args.clip or (clean_scaling.LOOP_CLIP if args.loop else clean_scaling.PREFIX_CLIP)
     if not Path(clip).is_file():
         raise InputError(f"--clip {clip}: no such BVH clip (current folder: {Path.cwd()})")
@@ -366,6 +387,8 @@ def _clean_scaling(args, repeat: int) -> int:
         raise InputError(f"--factors {args.factors}: give whole numbers separated by commas, e.g. 1,2,4,8") from None
     if min(factors) < 1:
         raise InputError(f"--factors {args.factors}: every factor must be at least 1")
+    if args.per_eval:
+        return _clean_per_eval(Path(clip), factors)
     if not args.loop:
         try:
             clean_scaling.prefix_frames(Path(clip), factors)

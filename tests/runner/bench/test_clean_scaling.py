@@ -83,3 +83,14 @@ def test_bad_options_are_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 6 and "--mode animate" in err[0] and "--mode clean" in err[1] and "none.bvh" in err[2]
     assert "--loop goes with --mode clean" in err[3] and "1000x needs" in err[4] and "whole numbers" in err[5]
+
+
+def test_the_per_evaluation_table_builds_one_preconditioner_two_ways(capsys):
+    """`--per-eval`: D's preconditioner on the clean's grid of the capture's first half and of all of it, dense and
+    banded; the two S S^T g agree to round-off (the same matrix), and the lengths are in the factors' ratio."""
+    assert main(["bench", "scaling", "--mode", "clean", "--per-eval", "--clip", str(CLIP), "--factors", "1,2"]) == 0
+    rows = [ln.split() for ln in capsys.readouterr().out.splitlines() if "|" in ln and ln.split()[0] in ("1x", "2x")]
+    assert [r[0] for r in rows] == ["1x", "2x"] and abs(int(rows[1][1]) - 2 * int(rows[0][1])) <= 1
+    assert all(float(r[-1]) < 1e-8 for r in rows)  # the relative difference of S S^T g, dense against banded
+    assert main(["bench", "scaling", "--mode", "clean", "--per-eval", "--clip", str(CLIP), "--factors", "1,200"]) == EXIT_INPUT
+    assert "fewer than the 4 a clean needs" in capsys.readouterr().err
