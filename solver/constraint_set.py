@@ -101,7 +101,8 @@ TOLERANCES = {"penetration": 1e-3, "planted": 2e-3, "slide": 2e-3, "flight": 1e-
 
 def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None,
                        planted_tolerance: float = TOLERANCES["planted"], track: bool = False,
-                       frames: np.ndarray | None = None, no_jolt=None):
+                       frames: np.ndarray | None = None, no_jolt=None,
+                       penetration_tolerance: float = TOLERANCES["penetration"]):
     """The constraints of a figure's problem (module docstring).
 
     Args:
@@ -118,6 +119,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             None: a keyed path's (signed heights by the midpoint rule; `SLIDE_SMOOTHING`, 2 mm a contact).
             no_jolt: with a capture, the no-jolt bound (a `Constraint`) in place of `capture_accelerations`'s
             (a clean's bounds the change's accelerations, `solver.displacement.ChangeAcceleration`).
+        penetration_tolerance: [m] the penetration's tolerance (a clean's inside its bound:
+            `solver.displacement.PENETRATION_TOLERANCE`).
     Returns:
         (constraints, relaxations): a list of `Constraint`s and a list of `Relaxation`s.
     """
@@ -129,7 +132,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     out = []
     state = None if engine is None else reference_state(model, reference, plain, engine)  # the plain spline's
     if engine is not None and surfaces.count:
-        out.append(Penetration(surfaces, radii, t, sites, TOLERANCES["penetration"]))
+        out.append(Penetration(surfaces, radii, t, sites, penetration_tolerance))
         witness = None if capture is None else capture_state(model, reference, capture, engine)
         feet = foot_bounds(model, figure, reference, plain, contacts, state, support, radii, witness, TOLERANCES,
                            planted_tolerance, frames)

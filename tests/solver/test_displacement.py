@@ -18,7 +18,7 @@ import pytest
 
 from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.contacts import Contact
-from solver.displacement import CORRECTION_TIME, anchors, build_displacement, clean_solution, pin_frames, solve_displacement
+from solver.displacement import CORRECTION_TIME, PENETRATION_TOLERANCE, anchors, build_displacement, clean_solution, pin_frames, solve_displacement
 from solver.errors import InputError
 from solver.foot_bounds import CAPTURE_RESOLUTION, FLOAT_LIMIT
 from solver.layout import StateLayout
@@ -130,7 +130,9 @@ def test_feet_pushed_into_the_floor_come_out_and_the_rest_stays(toy_model, dippe
     assert _lowest_site(toy_model, q).min() < -0.019  # the capture: 2 cm in
     fine = np.linspace(t[0], t[-1], 1001)  # between the frames too
     low = _lowest_site(toy_model, clean.frames.path(fine))
-    assert low.min() >= -1e-3 - 1e-4, low.min()  # penetration within its 1 mm tolerance
+    # penetration within its 0.9 mm tolerance as MuJoCo measures it at 1001 times: the constraint's cubic between two
+    # points is micrometres from the path (10 um allowed), inside the clean's 1 mm bound by the capture's resolution
+    assert low.min() >= -PENETRATION_TOLERANCE - 1e-5, low.min()
     far = np.abs(t - DIP_T) > DIP_W / 2 + 2 * CORRECTION_TIME  # two correction times beyond the dip's edges
     moved = np.linalg.norm(_bodies(toy_model, clean.frames.values) - _bodies(toy_model, q), axis=-1).max(axis=1)
     inside = far & (t > t[0] + CORRECTION_TIME) & (t < t[-1] - CORRECTION_TIME)
