@@ -368,28 +368,30 @@ def _stiffen(Hb: np.ndarray, coefs: SplineCoefficients, free: np.ndarray) -> Non
 def _factor(ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(d (N,), L) with d_i^-1 d_j^-1 H_ij = (L L^T)_ij: LAPACK's banded Cholesky of H (lower band storage ab) scaled
     to a unit diagonal first (Jacobi equilibration: the penalty's curvature and D's differ by orders of magnitude
-    between the degrees of freedom; Higham, Accuracy and Stability of Numerical Algorithms, 2nd ed., sec. 10.1)
-    plus RIDGE of that diagonal, raised tenfold until the factorization succeeds (H is positive semidefinite:
-    a failure is round-off)."""
+    between the degrees of freedom; Higham, Accuracy and Stability of Numerical Algorithms, 2nd ed., sec. 10.1);
+    where that fails (H is positive semidefinite: a failure is round-off), with RIDGE of that diagonal added, raised
+    tenfold until it succeeds. Not a ridge from the start: equilibrated, the band's least curvature is far below
+    RIDGE where STIFF's rows set the scale (a 40-frame clean at 120 fps: with it, S S^T fell short of the Hessian's
+    inverse 1000-fold along the slowest displacements; without, the two agreed within 0.1 %)."""
     d = 1.0 / np.sqrt(np.maximum(ab[0], 1e-300))
     u = ab.shape[0]
     scaled = ab.copy()
     for k in range(u):
         scaled[k, : ab.shape[1] - k] *= d[k:] * d[: ab.shape[1] - k]
-    ridge = RIDGE
+    ridge = 0.0
     while True:
         trial = scaled.copy()
         trial[0] += ridge
         try:
             return d, scipy.linalg.cholesky_banded(trial, lower=True)
         except np.linalg.LinAlgError:
-            ridge *= 10.0
+            ridge = RIDGE if ridge == 0.0 else 10.0 * ridge
             if ridge > 1.0:
                 raise
 
 
-#: [1] the ridge added to the equilibrated H_C's unit diagonal: 1e-10, above the round-off of a positive
-#: semidefinite matrix's Cholesky (~n eps = 1e-12 for n ~ 1e4) and below any curvature the preconditioner models
+#: [1] the ridge added to the equilibrated H_C's unit diagonal where its Cholesky fails: 1e-10, above the round-off of a
+#: positive semidefinite matrix's Cholesky (~n eps = 1e-12 for n ~ 1e4)
 RIDGE = 1e-10
 
 
