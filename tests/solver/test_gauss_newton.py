@@ -296,4 +296,4 @@ def test_s_s_transpose_is_the_inverse_of_the_modelled_hessian(dipped_problem, mo
     H = (np.kron(T, np.eye(nv)).T @ HC @ np.kron(T, np.eye(nv)))[np.ix_(free, free)]
     SS = np.stack([pre.apply(pre.apply_transpose(e)) for e in np.eye(var.size)], axis=1)
     eig = np.linalg.eigvals(SS @ H).real
-    assert 0.99 < eig.min() and eig.max() < 1.01, (eig.min(), eig.max())
+    assert eig.min() > 0.99 and eig.max() < 1.01, (eig.min(), eig.max())
