@@ -13,25 +13,30 @@ values at the points (`SplineCoefficients.gram_band`), banded with three off-dia
 ubiquitous Kronecker product", J. Comput. Appl. Math. 123, 2000). The natural end conditions and the fixed
 frames (a clean's pins) are constraints on a few neighbouring coefficients each; solved for one coefficient
 each (`null_space`: C = N c), they leave c, one coefficient for each free frame, and the band N^T G N
-(`_reduced_band`). With each mode's band factored as L_k L_k^T (LAPACK's banded Cholesky, all modes in one
-band), x = S z with S = Sel A N (L^-T (x) U^T) (A the basis at the frames, Sel the free frames) is square and
-S S^T = H^-1 exactly: x = Sel A N c is one-to-one (a natural spline is fixed by its values at the frames). So
-S S^T is `Preconditioner`'s R^-1 R^-T, and L-BFGS, invariant under an orthogonal change of its variables,
-takes the same steps with either, to round-off.
+(`_reduced_band`). With each mode's band factored as L_k L_k^T (`solver.gauss_newton._factor`: LAPACK's banded
+Cholesky of the equilibrated band; all modes in one band), x = S z with S = Sel A N (L^-T (x) U^T) (A the basis
+at the frames, Sel the free frames) is square and S S^T = H^-1 exactly: x = Sel A N c is one-to-one (a natural
+spline is fixed by its values at the frames). So S S^T is `Preconditioner`'s R^-1 R^-T, and L-BFGS, invariant
+under an orthogonal change of its variables, takes the same steps with either, to round-off.
 """
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 from scipy.linalg.lapack import dtbtrs
 from scipy.sparse import csr_matrix, diags, tril
 
+from solver.gauss_newton import _factor
 from solver.lagrangian import _pair_basis, _variable_dofs
 from solver.manifold import FrameVariables
 from solver.spline_basis import SplineBasis
 from solver.spline_coefficients import SplineCoefficients
 
 __all__ = ["BandedPreconditioner", "grid_maps", "null_space"]
+
+#: [1] entries of N below this fraction of its largest (at least its identity's 1) are the solve's round-off (about 50
+#: machine epsilons) where the exact N has zeros: dropped, so that N^T G N keeps the band its constraints' few
+#: neighbours give it
+ROUND_OFF = 1e-14
 
 
 class BandedPreconditioner:
@@ -56,29 +61,30 @@ class BandedPreconditioner:
                                                   and np.array_equal(dofs[order], np.tile(D, F.size))):
             raise ValueError("the degrees of freedom are not all free at the same frames; use Preconditioner")
         self.index, self.free = order.reshape(F.size, D.size), F  # index[f, j]: x's entry of frame F[f], dof D[j]
-        co = self.coefs = SplineCoefficients(basis.knots, change.ref.t)
+        co = SplineCoefficients(basis.knots, change.ref.t)
         fixed = np.setdiff1d(np.arange(len(basis.knots)), F)
-        self.N = null_space(np.vstack([co.ends, co.at_frames[fixed].toarray()]))  # C = N c: natural ends, fixed frames 0
+        N = null_space(np.vstack([co.ends, co.at_frames[fixed].toarray()]))  # C = N c: natural ends, fixed frames 0
+        self.AN = (co.at_frames @ N).tocsr()  # (m, f): the frame values of c
         w = change.ref.weights * (2.0 / d0)
         sigma, self.U = _pair_basis(change.mbar[np.ix_(D, D)], change.pbar[np.ix_(D, D)])
-        G2, G0 = (_reduced_band(co.gram_band(r, w), self.N) for r in (2, 0))
+        G2, G0 = (_reduced_band(co.gram_band(r, w), N) for r in (2, 0))
         band = sigma[:, None, None] * G2 + change.omega ** 4 * G0  # (k, b + 1, f): each mode's band
-        self._scale, self.L = _cholesky(band.transpose(1, 0, 2).reshape(len(G2), -1))  # the modes one after another
+        self._scale, self.L = _factor(band.transpose(1, 0, 2).reshape(len(G2), -1))  # the modes one after another
         self.size = band.shape[0] * band.shape[2]
 
     def apply(self, z: np.ndarray) -> np.ndarray:
         """x = S z: (n,) from (n,)."""
         c, _ = dtbtrs(self.L, z, uplo="L", trans="T")
-        Y = self.coefs.at_frames @ (self.N @ (c * self._scale).reshape(len(self.U), -1).T)  # (m, k): each mode at the frames
+        Y = self.AN @ (c * self._scale).reshape(len(self.U), -1).T  # (m, k): each mode at the frames
         out = np.empty(self.index.size)
         out[self.index] = (Y @ self.U.T)[self.free]
         return out
 
     def apply_transpose(self, g: np.ndarray) -> np.ndarray:
         """S^T g: (n,) from a gradient (n,) in x."""
-        G = np.zeros((self.coefs.at_frames.shape[0], len(self.U)))
+        G = np.zeros((self.AN.shape[0], len(self.U)))
         G[self.free] = g[self.index]
-        y = (self.N.T @ (self.coefs.at_frames.T @ (G @ self.U))).T.ravel()
+        y = (self.AN.T @ (G @ self.U)).T.ravel()
         out, _ = dtbtrs(self.L, y * self._scale, uplo="L", trans="N")
         return out
 
@@ -102,11 +108,11 @@ def null_space(B: np.ndarray):
     P = B[:, piv]
     if np.linalg.matrix_rank(P) < r:
         raise ValueError("the spline's constraints are not independent")
-    N = np.zeros((c, c - r))
-    N[rest, np.arange(c - r)] = 1.0
-    N[piv] = -np.linalg.solve(P, B[:, rest])
-    N[np.abs(N) < 1e-14 * np.abs(N).max()] = 0.0
-    return csr_matrix(N)
+    M = -np.linalg.solve(P, B[:, rest])  # (r, c - r): the pivots in terms of the rest
+    pr, pc = np.nonzero(np.abs(M) >= ROUND_OFF * max(1.0, np.abs(M).max()))
+    rows = np.r_[rest, np.asarray(piv)[pr]]
+    cols = np.r_[np.arange(c - r), pc]
+    return csr_matrix((np.r_[np.ones(c - r), M[pr, pc]], (rows, cols)), shape=(c, c - r))
 
 
 def _reduced_band(band: np.ndarray, N) -> np.ndarray:
@@ -121,17 +127,6 @@ def _reduced_band(band: np.ndarray, N) -> np.ndarray:
     out = np.zeros((b + 1, R.shape[0]))
     out[(R.row - R.col)[low], R.col[low]] = R.data[low]
     return out
-
-
-def _cholesky(ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(d (n,), L) with d_i^-1 d_j^-1 H_ij = (L L^T)_ij: LAPACK's banded Cholesky of the positive definite H (lower
-    band storage ab) scaled to a unit diagonal first (Jacobi equilibration: the modes' curvatures differ by orders
-    of magnitude; Higham, Accuracy and Stability of Numerical Algorithms, 2nd ed., sec. 10.1)."""
-    d = 1.0 / np.sqrt(ab[0])
-    scaled = ab.copy()
-    for k in range(len(ab)):
-        scaled[k, : ab.shape[1] - k] *= d[k:] * d[: ab.shape[1] - k]
-    return d, scipy.linalg.cholesky_banded(scaled, lower=True)
 
 
 def grid_maps(al, frames, quat_slots) -> tuple:

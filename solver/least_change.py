@@ -432,8 +432,7 @@ def least_violation_of(lc: LeastChange, frames: FrameSet, options: LeastChangeOp
 
 
 def _grid(lc: LeastChange) -> tuple:
-    """(the maps of `lc`'s frame sets, its subproblems' L-BFGS correction pairs): on a grid `grid_maps` (linear in its
-    frames) and GRID_PAIRS, else `solver.lagrangian.frame_maps` and None (nlopt's default by size)."""
+    """(`lc`'s frame sets' maps, its subproblems' L-BFGS pairs): `grid_maps` and GRID_PAIRS on a grid, else `frame_maps` and None."""
     return (frame_maps, None) if lc.grid is None else (grid_maps, GRID_PAIRS)
 
 

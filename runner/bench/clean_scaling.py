@@ -234,6 +234,9 @@ def preconditioner_rows(model, times, qpos, contacts, factors=(1, 2, 4, 8), repe
 
 def _preconditioner_row(model, times, qpos, contacts, repeat: int) -> dict:
     """`preconditioner_rows`' figures of one clean's grid ("build_ms", "apply_ms", "eval_ms", "difference")."""
+    import time
+
+    from runner.bench.common import median_time
     from solver.displacement import build_displacement
     from solver.grid_preconditioner import grid_maps
     from solver.lagrangian import frame_maps
@@ -241,29 +244,18 @@ def _preconditioner_row(model, times, qpos, contacts, repeat: int) -> dict:
 
     lc = build_displacement(model, times, qpos, contacts=contacts).lc
     quat, frames = lc.layout.quat_slots, lc.plain  # the grid: a frame at every capture frame, free but at the pins
-    built = [_timed(lambda maps=maps: maps(lc.al, frames, quat), 1) for maps in (frame_maps, grid_maps)]
+    cpu = time.process_time  # this process's CPU time
+    built = [median_time(lambda maps=maps: maps(lc.al, frames, quat), 1, cpu) for maps in (frame_maps, grid_maps)]
     (basis, dense), (_, banded) = (maps for maps, _ in built)
     rng = np.random.default_rng(0)
     gs = [rng.standard_normal(dense.size) for _ in range(3)]
-    applied = [_timed(lambda pre=pre: pre.apply(pre.apply_transpose(gs[0])), repeat) for pre in (dense, banded)]
+    applied = [median_time(lambda pre=pre: pre.apply(pre.apply_transpose(gs[0])), repeat, cpu) for pre in (dense, banded)]
     diff = max(float(np.linalg.norm(dense.apply(dense.apply_transpose(g)) - banded.apply(banded.apply_transpose(g)))
                      / np.linalg.norm(dense.apply(dense.apply_transpose(g)))) for g in gs)
     var = FrameVariables(frames, quat)
-    _, ev = _timed(lambda: lc.al.evaluate(basis, var.values(np.zeros(var.size))), 3)
+    _, ev = median_time(lambda: lc.al.evaluate(basis, var.values(np.zeros(var.size))), 3, cpu)
     return {"build_ms": tuple(1e3 * t for _, t in built), "apply_ms": tuple(1e3 * t for _, t in applied),
             "eval_ms": 1e3 * ev, "difference": diff}
-
-
-def _timed(fn, repeat: int) -> tuple:
-    """(fn()'s last result, the median CPU time [s] of `repeat` calls)."""
-    import time
-
-    times, out = [], None
-    for _ in range(repeat):
-        t = time.process_time()
-        out = fn()
-        times.append(time.process_time() - t)
-    return out, float(np.median(times))
 
 
 def print_preconditioner_rows(rows: list[dict]) -> None:

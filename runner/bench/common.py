@@ -1,5 +1,5 @@
-"""Shared pieces of the baselines (runner/bench/barr92.py, runner/bench/bspline.py): the result, the input
-check, the normalized path energy and the time-limited SLSQP driver."""
+"""Shared pieces of the benchmarks: of the baselines (runner/bench/barr92.py, runner/bench/bspline.py) the result,
+the input check, the normalized path energy and the time-limited SLSQP driver; and a call's median time."""
 from __future__ import annotations
 
 import math
@@ -56,6 +56,17 @@ class BaselineResult:
 
 # ----------------------------------------------------------------------------------------------------
 # helpers
+
+
+def median_time(fn: Callable, repeat: int, clock: Callable[[], float] = time.perf_counter) -> tuple:
+    """(the last result of fn(), the median [s] of `repeat` calls' times by `clock`: wall by default,
+    `time.process_time` for this process's CPU)."""
+    times, out = [], None
+    for _ in range(max(1, repeat)):
+        t0 = clock()
+        out = fn()
+        times.append(clock() - t0)
+    return out, float(np.median(times))
 
 
 def check_inputs(times, quats):

@@ -25,6 +25,7 @@ import numpy as np
 
 from runner.bench import random_sets, sphere_reference
 from runner.bench.baselines import baseline_time_to_gap
+from runner.bench.common import median_time
 from solver.errors import InputError
 from solver.paper.orient import default_options, orient
 
@@ -168,13 +169,9 @@ SPEED_GAP = 1e-4
 
 
 def _timed(fn, repeat: int):
+    """(fn()'s result, its median wall time [s] over `repeat` calls) after an untimed warm-up call."""
     fn()  # warm-up, untimed
-    walls = []
-    for _ in range(max(1, repeat)):
-        t0 = time.perf_counter()
-        r = fn()
-        walls.append(time.perf_counter() - t0)
-    return r, statistics.median(walls)
+    return median_time(fn, repeat)
 
 
 def _gap(ref, fr, E_star: float) -> float:
