@@ -1,6 +1,6 @@
 """The figure's constraints for one problem, each a function with its unit and tolerance (docs/design.md).
 
-    penetration  every contact site's lowest point outside every plane and box, at every instant  d >= 0     1 mm
+    penetration  every contact site's lowest point outside every plane and box, at every instant  d >= 0     0.9 mm (below)
     planted      over each foot contact, the support site's mean height                 mean h <= FLOAT_LIMIT 2 mm
                  with a capture, over each site contact, that site's (solver.foot_bounds) <= the known paths'
     slide        over each site contact, the slide beyond what the keyframes force    <= allowance (below)  2 mm
@@ -68,6 +68,11 @@ there; the problem is made well posed instead of excused:
   constraints move the feet, and the measure of change prices a change against the plain spline, not
   against where the capture stood.
 
+Penetration's tolerance is its 1 mm bound less a capture's 0.1 mm position resolution
+(`PENETRATION_TOLERANCE`), so that a path met within it is inside the bound as measured at 1000 Hz: the
+constraint takes each site's height between two quadrature points as a cubic, whose deepest point differs from
+the path's by micrometres, and paths the solve left at the edge of a 1 mm tolerance measured 0.989-1.0008 mm.
+
 Each relaxation is reported (`solver.foot_bounds.Relaxation`: which constraint, site or joint, keyframe, where, how much),
 so a user sees where the keyframes, not the optimizer, decide.
 """
@@ -83,13 +88,13 @@ from solver.constraints.tracking import SiteTracking, mean_site_distance
 from solver.constraints.unit import UnitNorm
 from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.contacts import contact_radii, site_positions
-from solver.foot_bounds import Relaxation, foot_bounds, full_keyframes
+from solver.foot_bounds import CAPTURE_RESOLUTION, Relaxation, foot_bounds, full_keyframes
 from solver.layout import StateLayout
 from solver.path_state import PathState
 from solver.support import SupportSurfaces
 from solver.surfaces import StaticSurfaces
 
-__all__ = ["TOLERANCES", "figure_constraints", "flight_edge_frames"]
+__all__ = ["PENETRATION_TOLERANCE", "TOLERANCES", "figure_constraints", "flight_edge_frames"]
 
 #: each constraint's tolerance [SI]: a pair is met when c <= tolerance (the acceptance bounds' units:
 #: penetration 1 mm; float 2 mm, under the 5 mm of PhysDiff's float; slide 2 mm; flight 1 mm above the
@@ -98,11 +103,14 @@ __all__ = ["TOLERANCES", "figure_constraints", "flight_edge_frames"]
 TOLERANCES = {"penetration": 1e-3, "planted": 2e-3, "slide": 2e-3, "flight": 1e-3,
               "hinge": float(np.radians(1.0)), "hyperextension": float(np.radians(0.5)), "rom": float(np.radians(1.0)), "unit": 0.01}
 
+#: [m] the penetration constraint's tolerance: its 1 mm bound (TOLERANCES) less a capture's position resolution
+#: (`solver.foot_bounds.CAPTURE_RESOLUTION`, 0.1 mm), the margin for the cubic between quadrature points (module docstring)
+PENETRATION_TOLERANCE = TOLERANCES["penetration"] - CAPTURE_RESOLUTION
+
 
 def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None,
                        planted_tolerance: float = TOLERANCES["planted"], track: bool = False,
-                       frames: np.ndarray | None = None, no_jolt=None,
-                       penetration_tolerance: float = TOLERANCES["penetration"]):
+                       frames: np.ndarray | None = None, no_jolt=None):
     """The constraints of a figure's problem (module docstring).
 
     Args:
@@ -119,8 +127,6 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             None: a keyed path's (signed heights by the midpoint rule; `SLIDE_SMOOTHING`, 2 mm a contact).
             no_jolt: with a capture, the no-jolt bound (a `Constraint`) in place of `capture_accelerations`'s
             (a clean's bounds the change's accelerations, `solver.displacement.ChangeAcceleration`).
-        penetration_tolerance: [m] the penetration's tolerance (a clean's inside its bound:
-            `solver.displacement.PENETRATION_TOLERANCE`).
     Returns:
         (constraints, relaxations): a list of `Constraint`s and a list of `Relaxation`s.
     """
@@ -132,7 +138,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     out = []
     state = None if engine is None else reference_state(model, reference, plain, engine)  # the plain spline's
     if engine is not None and surfaces.count:
-        out.append(Penetration(surfaces, radii, t, sites, penetration_tolerance))
+        out.append(Penetration(surfaces, radii, t, sites, PENETRATION_TOLERANCE))
         witness = None if capture is None else capture_state(model, reference, capture, engine)
         feet = foot_bounds(model, figure, reference, plain, contacts, state, support, radii, witness, TOLERANCES,
                            planted_tolerance, frames)

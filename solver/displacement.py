@@ -86,7 +86,7 @@ from solver.reference import ReferenceMotion, equal_mass_matrices
 from solver.solution import Solution
 from solver.spline import interpolate
 
-__all__ = ["ANGLE_RESOLUTION", "CORRECTION_TIME", "FEET", "PENETRATION_TOLERANCE", "Displacement", "anchors", "build_displacement",
+__all__ = ["ANGLE_RESOLUTION", "CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement",
            "clean_solution", "pin_frames",
            "solve_displacement", "still_peaks"]
 
@@ -100,12 +100,6 @@ CORRECTION_TIME = 1.0 / (2.0 * CUTOFF_HZ)
 #: 0.1 deg); with `solver.foot_bounds.CAPTURE_RESOLUTION` for positions, the floor of a still joint's no-jolt limit
 ANGLE_RESOLUTION = float(np.radians(0.1))
 
-#: [m] a clean's penetration tolerance: penetration's 1 mm (`solver.constraint_set.TOLERANCES`, the clean's bound,
-#: docs/corpus.md "Cleaning the corpus") less a capture's position resolution (`CAPTURE_RESOLUTION`, 0.1 mm), so that a
-#: path met within it is inside the bound as measured at 1000 Hz: the constraint takes each site's height between two
-#: points as a cubic, whose deepest point differs from the path's by micrometres, and a clean the solve left at the
-#: edge of a 1 mm tolerance measured 1.0008 mm
-PENETRATION_TOLERANCE = TOLERANCES["penetration"] - CAPTURE_RESOLUTION
 
 #: what a clean asks of a foot in contact: "planted", it slides no more than the pins force (Kovar, Schreiner
 #: & Gleicher, "Footskate cleanup for motion capture editing", SCA 2002: a planted foot stays put), or
@@ -219,8 +213,7 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     constraints, relaxations = figure_constraints(model, figure, reference, capture_frames, tuple(schedule), flights,
                                                   engine, capture=(times, qpos),
                                                   planted_tolerance=TOLERANCES["penetration"], frames=times,
-                                                  no_jolt=_change_bound(reference, model, times, qpos),
-                                                  penetration_tolerance=PENETRATION_TOLERANCE)
+                                                  no_jolt=_change_bound(reference, model, times, qpos))
     change = MeasureOfChange(reference, tmap, omega=np.pi / correction_time,
                              pose=equal_mass_matrices(model, reference.qpos))
     d0 = float(np.sum(model.body_mass)) * STANDARD_GRAVITY ** 2 * (t1 - t0)

@@ -35,7 +35,7 @@ from runner.console import LEGEND, comparison_rows, format_rows
 from runner.paths import REPO
 from runner.problem_file import RUN_AND_STEP_KEYFRAMES, file_problem, load_problem
 from runner.readme_tables import WORSE, Block, compare_blocks, replace_blocks, table, timing
-from solver.constraint_set import TOLERANCES
+from solver.constraint_set import PENETRATION_TOLERANCE
 from solver.constraints.forces import FORCE_TOLERANCE
 from solver.constraints.unit import UNIT_LIMIT
 from solver.errors import InputError
@@ -248,7 +248,7 @@ def _terms_all_block(runs: _Runs) -> Block:
         # the optimized penetration and |q| sit inside their constraints' bounds, and where in them the solve
         # stops follows the machine's round-off (penetration 0.73 and 1.26 mm on two machines, max |1 - |q||
         # 0.0075 and 0.0101 under two BLAS kernels): machine-dependent, as a wall time
-        [f"max penetration [mm] (the constraint's tolerance: {TOLERANCES['penetration'] * 1e3:g} mm)", f"{p['max_penetration_mm']:.2f}",
+        [f"max penetration [mm] (the constraint's tolerance: {PENETRATION_TOLERANCE * 1e3:g} mm)", f"{p['max_penetration_mm']:.2f}",
          timing(f"{o['max_penetration_mm']:.2f}" + mark("max penetration [mm] (1000 Hz)"))],
         [f"max \\|1-\\|q\\|\\| (the constraint's limit: {UNIT_LIMIT:g})", f"{p['max_norm_deviation']:.4f}",
          timing(f"{o['max_norm_deviation']:.4f}" + mark("max |1 - |q||"))],

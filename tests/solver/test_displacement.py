@@ -16,9 +16,10 @@ import mujoco
 import numpy as np
 import pytest
 
+from solver.constraint_set import PENETRATION_TOLERANCE
 from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.contacts import Contact
-from solver.displacement import CORRECTION_TIME, PENETRATION_TOLERANCE, anchors, build_displacement, clean_solution, pin_frames, solve_displacement
+from solver.displacement import CORRECTION_TIME, anchors, build_displacement, clean_solution, pin_frames, solve_displacement
 from solver.errors import InputError
 from solver.foot_bounds import CAPTURE_RESOLUTION, FLOAT_LIMIT
 from solver.layout import StateLayout
