@@ -414,8 +414,8 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
 
     Returns:
         {"max_mm", "joint", "time_s", "keys_moved" (keys with a joint beyond `ON_SOURCE`), "keys",
-        "clamped_deg" ({knee or elbow: [deg] hyperextension removed at that key}), "planted_mm" ({foot:
-        [mm] the footplant lowered it at that key})}, all read from the written file; or None.
+        "clamped_deg" ({knee or elbow: [deg] hyperextension removed at that key}), "planted_mm" ({foot or
+        "root": [mm] the footplant lowered it at that key, `FootPlant.moved_at`})}, all read from the written file; or None.
     """
     import tempfile
 
@@ -437,9 +437,7 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
     t = float(check.times[k])
     frame = int(np.clip(np.rint(t / ref.frame_time), 0, ref.count - 1))
     clamped = {name: round(float(a[frame]), 2) for name, a in (ref.clamped or {}).items() if a[frame] > 0}
-    planted = {} if ref.plant is None else {
-        foot: round(-1000.0 * float(ref.plant.foot_dz[frame, i]), 1) for i, foot in enumerate(ref.plant.feet)
-        if ref.plant.foot_dz[frame, i] < 0}
+    planted = {} if ref.plant is None else ref.plant.moved_at(frame)
     out = {"max_mm": round(check.max_mm(), 3), "joint": check.joints[j], "time_s": round(t, 4),
            "keys_moved": int(check.moved.sum()), "keys": len(check.times), "clamped_deg": clamped,
            "planted_mm": planted}
@@ -447,10 +445,7 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
     if check.moved.any():
         key = int(np.argmin(np.abs(keyframes.times - t)))
         glitched = [g.joint for g in ref.glitches if g.start - 1e-9 <= t <= g.end + 1e-9]
-        why = ", ".join([f"{n} {a:.1f} deg" for n, a in clamped.items()] +
-                        [f"{foot} foot lowered {mm:.1f} mm" for foot, mm in planted.items()] +
-                        [f"{g} glitch repaired" for g in glitched] +
-                        (["a partial key"] if keyframes.is_partial[key] else [])) or "none at that key"
+        why = corrections_text(clamped, planted, glitched, bool(keyframes.is_partial[key]))
         line += (f" ({why}; beyond {1000 * ON_SOURCE:g} mm the import's clean-up - the knee and elbow hyperextension "
                  "clamp, the footplant, the repair of tracking glitches - moved the capture: docs/mocap.md \"Back onto "
                  "the source skeleton\")")
@@ -458,6 +453,16 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
     for note in res.notes:
         say(f"  {note}")
     return out
+
+
+def corrections_text(clamped: dict, planted: dict, glitched: list, partial: bool) -> str:
+    """The import's corrections at a key, in words: `clamped` {joint: [deg]}, `planted` {foot or "root": [mm]
+    lowered} (`runner.capture.foot_plant.FootPlant.moved_at`), the joints whose glitch was repaired there and
+    whether the key is partial; "none at that key" without any."""
+    feet = [f"{foot} foot lowered {mm:.1f} mm" for foot, mm in planted.items() if foot != "root"]
+    root = [f"root lowered {planted['root']:.2f} mm by the footplant"] if "root" in planted else []
+    return ", ".join([f"{n} {a:.1f} deg" for n, a in clamped.items()] + feet + root + [f"{g} glitch repaired" for g in glitched]
+                     + (["a partial key"] if partial else [])) or "none at that key"
 
 
 def _agreement(problem, ref) -> dict:

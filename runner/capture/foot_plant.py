@@ -74,6 +74,20 @@ class FootPlant:
     root_dz: np.ndarray
     feet: tuple[str, ...]
 
+    def moved_at(self, frame: int) -> dict[str, float]:
+        """{foot: [mm] how far the footplant lowered it, "root": [mm] how far it lowered the root} at one frame,
+        each only where it lowered it by more than the leg IK's `MOVE_TOL` (a micrometre). A root lowered moves every joint, and a leg that lifts its foot
+        back up (step 2 of the module docstring) bends a near-straight knee far more than the height: a root
+        lowered 0.33 mm moved a knee 11 mm (CMU 12_01's walk), so the root is named however little it went down.
+
+        Raises:
+            IndexError: a frame outside the motion.
+        """
+        out = {f: round(-1000.0 * float(dz), 1) for f, dz in zip(self.feet, self.foot_dz[frame]) if dz < -MOVE_TOL}
+        if self.root_dz[frame] < -MOVE_TOL:
+            out["root"] = round(-1000.0 * float(self.root_dz[frame]), 2)
+        return out
+
     def largest_mm(self) -> dict[str, float]:
         """{foot: the most it was lowered [mm], "root": the most the root was lowered [mm]}."""
         out = {f: round(1000.0 * float(max(0.0, -self.foot_dz[:, i].min())), 1) for i, f in enumerate(self.feet)}

@@ -9,7 +9,8 @@ on the shipped figure on its floor scene, checked with MuJoCo's own forward kine
 * `plant_feet` on a standing figure whose right foot the capture holds up: with a bent right knee the leg
   puts it down alone; with both knees straight (the pelvis tilted) the root goes down and the left knee
   bends to keep the left foot on the floor. Every resting foot ends `CONTACT_CLEARANCE` above the floor,
-  nothing below it, the feet where they were along the floor. A foot coming down or lifting off slowly
+  nothing below it, the feet where they were along the floor; a frame's report names the foot and the root
+  lowered there. A foot coming down or lifting off slowly
   (resting by the thresholds) keeps its shape near its touchdown and still lands or lifts; one that drifts
   while it rests (an inertial capture's) goes down onto the floor.
 """
@@ -166,6 +167,10 @@ def test_plant_feet_puts_a_raised_resting_foot_on_the_floor(scene, case):
         knee = figure.joint("l_knee").qpos_slice
         assert np.all(twist_angle(plant.qpos[:, knee], figure.flexion_axes["l_knee"]) > np.radians(1.0))
     assert plant.largest_mm()["right"] == pytest.approx(1000 * (right0.max() - CONTACT_CLEARANCE), abs=0.1)
+    # what a key's report names there: the right foot lowered and, with straight knees, the root (the left
+    # foot, lowered by the root and lifted back by its leg, did not move)
+    drop = 1000 * (right0[0] - CONTACT_CLEARANCE)
+    assert plant.moved_at(0) == pytest.approx({"right": drop} | ({"root": drop} if case == "straight knees" else {}), abs=0.06)
 
 
 def _right_lowest(model, qpos):

@@ -276,3 +276,14 @@ def test_a_root_correction_beyond_a_fitting_scenes_is_said(tmp_path):
     assert found, notes  # 80 mm on top of the import's own correction, which is at most 30 mm (no note above)
     assert 50 <= int(found.group(1)) <= 110 and 0.2 <= float(found.group(2)) <= 0.3
     assert export_on_source(npz, tmp_path / "c.bvh", as_solved=True).notes == ()
+
+
+def test_the_corrections_at_a_key_are_named_the_root_the_footplant_lowered_too():
+    """A key the footplant moved only by lowering the root (a near-straight leg then bends to hold its foot:
+    a knee 11 mm off for a 0.33 mm drop) names the root, not "none"."""
+    from runner.pipeline import corrections_text
+
+    assert corrections_text({}, {"root": 0.33}, [], False) == "root lowered 0.33 mm by the footplant"
+    assert corrections_text({"l_elbow": 13.2}, {"right": 10.4, "root": 6.0}, ["r_ankle"], True) == (
+        "l_elbow 13.2 deg, right foot lowered 10.4 mm, root lowered 6.00 mm by the footplant, r_ankle glitch repaired, a partial key")
+    assert corrections_text({}, {}, [], False) == "none at that key"
