@@ -415,11 +415,11 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
     Returns:
         {"max_mm", "joint", "time_s", "keys_moved" (keys with a joint beyond `ON_SOURCE`), "keys",
         "clamped_deg" ({knee or elbow: [deg] hyperextension removed at that key}), "planted_mm" ({foot or
-        "root": [mm] the footplant lowered it at that key, `FootPlant.moved_at`})}, all read from the written file; or None.
+        "root": [mm] the footplant lowered it at that key, `FootPlant.moved_at`}), "unexplained_s" (the times [s] of
+        keys moved where the import changed nothing: the way back off there, [] when it is exact)}, all read
+        from the written file; or None.
     """
     import tempfile
-
-    import numpy as np
 
     from runner.capture.source_check import ON_SOURCE
     from runner.capture.source_export import export_on_source
@@ -435,24 +435,39 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
         return None
     k, j = check.worst()
     t = float(check.times[k])
-    frame = int(np.clip(np.rint(t / ref.frame_time), 0, ref.count - 1))
-    clamped = {name: round(float(a[frame]), 2) for name, a in (ref.clamped or {}).items() if a[frame] > 0}
-    planted = {} if ref.plant is None else ref.plant.moved_at(frame)
+    clamped, planted, glitched, partial = _corrections_at(ref, keyframes, t)
+    unexplained = [round(float(s), 4) for s, moved in zip(check.times, check.moved)
+                   if moved and not any(_corrections_at(ref, keyframes, float(s)))]
     out = {"max_mm": round(check.max_mm(), 3), "joint": check.joints[j], "time_s": round(t, 4),
            "keys_moved": int(check.moved.sum()), "keys": len(check.times), "clamped_deg": clamped,
-           "planted_mm": planted}
+           "planted_mm": planted, "unexplained_s": unexplained}
     line = f"  keyframes on the source skeleton (export --to FILE.bvh, read back): {check.summary()}"
     if check.moved.any():
-        key = int(np.argmin(np.abs(keyframes.times - t)))
-        glitched = [g.joint for g in ref.glitches if g.start - 1e-9 <= t <= g.end + 1e-9]
-        why = corrections_text(clamped, planted, glitched, bool(keyframes.is_partial[key]))
+        why = corrections_text(clamped, planted, glitched, partial)
         line += (f" ({why}; beyond {1000 * ON_SOURCE:g} mm the import's clean-up - the knee and elbow hyperextension "
                  "clamp, the footplant, the repair of tracking glitches - moved the capture: docs/mocap.md \"Back onto "
                  "the source skeleton\")")
+    if unexplained:
+        line += (f"; {len(unexplained)} key(s) moved where the import changed nothing, at "
+                 f"{', '.join(f'{s:.2f}' for s in unexplained)} s: the way back is off there")
     say(line)
     for note in res.notes:
         say(f"  {note}")
     return out
+
+
+def _corrections_at(ref, keyframes, t: float) -> tuple[dict, dict, list, bool]:
+    """What the import changed at the key at `t` [s]: (clamped {knee or elbow: [deg] hyperextension removed},
+    planted {foot or "root": [mm] lowered, `FootPlant.moved_at`}, the joints whose tracking glitch was repaired
+    there, whether the key is partial); all empty and False where the key is the capture."""
+    import numpy as np
+
+    frame = int(np.clip(np.rint(t / ref.frame_time), 0, ref.count - 1))
+    clamped = {name: round(float(a[frame]), 2) for name, a in (ref.clamped or {}).items() if a[frame] > 0}
+    planted = {} if ref.plant is None else ref.plant.moved_at(frame)
+    glitched = [g.joint for g in ref.glitches if g.start - 1e-9 <= t <= g.end + 1e-9]
+    key = int(np.argmin(np.abs(keyframes.times - t)))
+    return clamped, planted, glitched, bool(keyframes.is_partial[key])
 
 
 def corrections_text(clamped: dict, planted: dict, glitched: list, partial: bool) -> str:

@@ -230,7 +230,7 @@ def test_the_runs_parse_writes_the_file_the_saved_text_does(tmp_path):
 def test_mocap_reports_the_file_it_would_write(tmp_path):
     """`mocap` then `export`: the keyframe figures in the metrics report are the exported file's, read back
     independently; every key the import did not correct (its keyframe is the reference there) is within
-    0.1 mm of the source."""
+    0.1 mm of the source, and the report finds a correction at every key moved."""
     import json
 
     from runner.cli import main
@@ -253,6 +253,7 @@ def test_mocap_reports_the_file_it_would_write(tmp_path):
     # the keys as captured: the keyframe file's values (6 decimals) are the reference's, where the footplant did not move them
     as_captured = np.abs(saved.keyframes - saved.reference_qpos[k]).max(axis=1) < 1e-5
     assert as_captured.sum() >= 2 and d[as_captured].max() < AT_KEY
+    assert report["unexplained_s"] == []  # every key moved is one the import changed
 
 
 def test_a_root_correction_beyond_a_fitting_scenes_is_said(tmp_path):
