@@ -465,7 +465,8 @@ def _corrections_at(ref, keyframes, t: float) -> tuple[dict, dict, list, bool]:
     frame = int(np.clip(np.rint(t / ref.frame_time), 0, ref.count - 1))
     clamped = {name: round(float(a[frame]), 2) for name, a in (ref.clamped or {}).items() if a[frame] > 0}
     planted = {} if ref.plant is None else ref.plant.moved_at(frame)
-    glitched = [g.joint for g in ref.glitches if g.start - 1e-9 <= t <= g.end + 1e-9]
+    half = 0.5 * ref.frame_time  # a key's time is its frame's to the keyframe file's decimals (1.35 s for 1.3499946)
+    glitched = [g.joint for g in ref.glitches if g.start - half <= t <= g.end + half]
     key = int(np.argmin(np.abs(keyframes.times - t)))
     return clamped, planted, glitched, bool(keyframes.is_partial[key])
 
