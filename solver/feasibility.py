@@ -223,7 +223,8 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
     """Minimize F over `objective` while `held` meet their limits (module docstring; `level`: F the sum of
     the violations, else the squares of step 1), adding a variable frame to every segment holding a broken
     pair of `objective` while one fits; returns the path with the least F among those on which `held` are
-    met (the start is one).
+    met (the start is one; a path refined after it, which moves between its old frames, only where it still
+    meets them).
 
     The held pairs are priced by the quadratic penalty (rho/2) sum (w_p/T) max(0, c_p/tol)^2,
     starting at rho = 1 (a held pair's violation costs what an objective pair's does) and raised by GAMMA
@@ -238,11 +239,19 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
                               **_measure(level, ftol_rel))
     basis, pre = maps(al, frames, quat_slots)
     best, best_F = frames, eal.evaluate(basis, frames.values, grad=False)[0]
+    witness = frames  # the last path found on which `held` are met: the start, then each better one
+
+    def held_met_on(fr, b) -> bool:
+        return all(float(s.max(initial=0.0)) <= 1.0 for s in eal.scaled_values(b, fr.values))
+
+    def answer() -> FrameSet:  # a refined path moves between its old frames: it may break a held pair
+        return best if best is witness or held_met_on(best, basis) else witness
+
     while True:
         eal.rho, eal.lam = 1.0, [np.zeros(c.size) for c in held]
         for _ in range(per_level):
             if best_F == 0.0 or budget.spent():
-                return best
+                return answer()
             r = solve_subproblem(eal, best, quat_slots, ftol_rel=ftol_rel, basis=basis, pre=pre, pairs=pairs,
                                  **budget.kwargs(lambda: eal.worst <= 1.0))
             budget.evals += r.result.n_evals
@@ -250,20 +259,20 @@ def _elastic_solve(al: AugmentedLagrangian, objective: list, held: list, frames:
                 budget.status = Status.INTERRUPTED
             F = eal.evaluate(basis, r.frames.values, grad=False)[0]
             every_met = eal.worst <= 1.0  # set by the evaluation: the objective's pairs and the held ones
-            held_met = all(float(s.max(initial=0.0)) <= 1.0 for s in eal.scaled_values(basis, r.frames.values))
+            held_met = held_met_on(r.frames, basis)
             gained = held_met and (1.0 - ftol_rel) * best_F > F
             if held_met and best_F > F:
-                best, best_F = r.frames, F
+                best, best_F, witness = r.frames, F, r.frames
             if budget.spent() or every_met or (held_met and not gained):
                 break
             if not held_met:  # else a restart at the same penalty
                 eal.rho *= GAMMA
         if budget.spent():
-            return best
+            return answer()
         new = on_points(_split_times(best, _broken_times(al, objective, eal.state(basis, best.values)), min_gap),
                         al.t, best)
         if new.size == 0:
-            return best
+            return answer()
         best = with_frames(best, new, quat_slots)
         basis, pre = maps(al, best, quat_slots)
         best_F = eal.evaluate(basis, best.values, grad=False)[0]
@@ -409,8 +418,10 @@ def least_violation(al: AugmentedLagrangian, frames: FrameSet, quat_slots, *, mi
     for level in sorted({c.priority for c in cons}, reverse=True):
         objective = [c for c in cons if c.priority == level]
         held = [c for c in cons if c.priority > level]
-        paths = [(i, _elastic_solve(al, objective, held, p, quat_slots, **kw)) for i, p in paths
-                 if _meets(al, held, p)]
+        kept = [(i, p) for i, p in paths if _meets(al, held, p)]
+        if not kept:  # none meets what is certified (round-off at a held pair's edge): the last certified path stands
+            break
+        paths = [(i, _elastic_solve(al, objective, held, p, quat_slots, **kw)) for i, p in kept]
         if budget.status is not Status.CONVERGED:
             break
         # the lower F is certified; the other path goes on while it meets what that certifies
