@@ -492,3 +492,32 @@ def test_a_finer_certificate_beats_only_one_it_raises_no_more_than_anywhere():
     assert not _beats((raised("acceleration", "r_elbow", 3191.0),), coarse)  # more at one column
     assert not _beats((raised("acceleration", "l_elbow", 1.0),), coarse)  # a column the coarse did not raise
     assert not _beats((), ())
+
+
+def test_the_elastic_solve_returns_a_path_that_meets_what_it_held(standing, monkeypatch):
+    """A path refined after the last solve that met the held pairs moves between its old frames, and can break
+    one; the elastic solve then returns the last path that met them (an unseen MediaPipe dance crashed when
+    neither start met them at the next level). The refinement is stood in for: every new frame drops the pelvis
+    5 cm, below `bottom` (held over 0.1 s about t*), and one solve per frame set (its penalty at rho = 1) does
+    not bring it back before the next refinement."""
+    import solver.feasibility as feasibility
+
+    z0 = standing[2]
+    top, bottom = z0 - 0.10, z0 - 0.04
+    lc = _problem(standing, top=top, bottom=bottom, keyed=False, half=0.05)
+    real = feasibility.with_frames
+
+    def dropped(frames, times, quat_slots):
+        out = real(frames, times, quat_slots)
+        new = np.isin(out.times, times)
+        values = out.values.copy()
+        values[new, 2] -= 0.05
+        return replace(out, values=values)
+
+    monkeypatch.setattr(feasibility, "with_frames", dropped)
+    al = lc.al
+    start = _start_frames(lc, 0.01)
+    held, objective = [al.constraints[1]], [al.constraints[0]]
+    got = feasibility._elastic_solve(al, objective, held, start, lc.layout.quat_slots, feasibility._Budget(0, 0.0, None),
+                                     min_gap=0.01, ftol_rel=1e-6, per_level=1, pairs=None)
+    assert feasibility._meets(al, held, got)  # the held bound within its tolerance at every point it holds at
