@@ -421,7 +421,7 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
     """
     import tempfile
 
-    from runner.capture.source_check import ON_SOURCE
+    from runner.capture.source_check import ON_SOURCE, corrections_at, corrections_text
     from runner.capture.source_export import export_on_source
 
     ref = cs.reference
@@ -435,9 +435,9 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
         return None
     k, j = check.worst()
     t = float(check.times[k])
-    clamped, planted, glitched, partial = _corrections_at(ref, keyframes, t)
+    clamped, planted, glitched, partial = corrections_at(ref, keyframes, t)
     unexplained = [round(float(s), 4) for s, moved in zip(check.times, check.moved)
-                   if moved and not any(_corrections_at(ref, keyframes, float(s)))]
+                   if moved and not any(corrections_at(ref, keyframes, float(s)))]
     out = {"max_mm": round(check.max_mm(), 3), "joint": check.joints[j], "time_s": round(t, 4),
            "keys_moved": int(check.moved.sum()), "keys": len(check.times), "clamped_deg": clamped,
            "planted_mm": planted, "unexplained_s": unexplained}
@@ -454,31 +454,6 @@ def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | No
     for note in res.notes:
         say(f"  {note}")
     return out
-
-
-def _corrections_at(ref, keyframes, t: float) -> tuple[dict, dict, list, bool]:
-    """What the import changed at the key at `t` [s]: (clamped {knee or elbow: [deg] hyperextension removed},
-    planted {foot or "root": [mm] lowered, `FootPlant.moved_at`}, the joints whose tracking glitch was repaired
-    there, whether the key is partial); all empty and False where the key is the capture."""
-    import numpy as np
-
-    frame = int(np.clip(np.rint(t / ref.frame_time), 0, ref.count - 1))
-    clamped = {name: round(float(a[frame]), 2) for name, a in (ref.clamped or {}).items() if a[frame] > 0}
-    planted = {} if ref.plant is None else ref.plant.moved_at(frame)
-    half = 0.5 * ref.frame_time  # a key's time is its frame's to the keyframe file's decimals (1.35 s for 1.3499946)
-    glitched = [g.joint for g in ref.glitches if g.start - half <= t <= g.end + half]
-    key = int(np.argmin(np.abs(keyframes.times - t)))
-    return clamped, planted, glitched, bool(keyframes.is_partial[key])
-
-
-def corrections_text(clamped: dict, planted: dict, glitched: list, partial: bool) -> str:
-    """The import's corrections at a key, in words: `clamped` {joint: [deg]}, `planted` {foot or "root": [mm]
-    lowered} (`runner.capture.foot_plant.FootPlant.moved_at`), the joints whose glitch was repaired there and
-    whether the key is partial; "none at that key" without any."""
-    feet = [f"{foot} foot lowered {mm:.1f} mm" for foot, mm in planted.items() if foot != "root"]
-    root = [f"root lowered {planted['root']:.2f} mm by the footplant"] if "root" in planted else []
-    return ", ".join([f"{n} {a:.1f} deg" for n, a in clamped.items()] + feet + root + [f"{g} glitch repaired" for g in glitched]
-                     + (["a partial key"] if partial else [])) or "none at that key"
 
 
 def _agreement(problem, ref) -> dict:

@@ -6,7 +6,9 @@ pose (docs/mocap.md, "Back onto the source skeleton") but where the import corre
 and elbow hyperextension clamp, the footplant, the repair of tracking glitches) or a partial key leaves
 joints to the path. The figures `export` prints and `mocap` prints and records are read from the written
 file: parsed by bvhio (`runner.capture.bvh.read_bvh`), every joint's world position by the BVH forward
-kinematics (`runner.capture.bvh_kinematics.file_world`), against the clip's, frame for frame.
+kinematics (`runner.capture.bvh_kinematics.file_world`), against the clip's, frame for frame. What the import
+changed at each key (`corrections_at`) is what may move it; a key moved where it changed nothing is the way
+back off there.
 """
 from __future__ import annotations
 
@@ -19,7 +21,7 @@ from runner.capture.bvh import BvhClip, read_bvh
 from runner.capture.bvh_kinematics import file_world
 from solver.errors import InputError
 
-__all__ = ["ON_SOURCE", "ON_FRAME", "KeysOnSource", "keys_on_source"]
+__all__ = ["ON_SOURCE", "ON_FRAME", "KeysOnSource", "corrections_at", "corrections_text", "keys_on_source"]
 
 #: [m] a written joint this near the clip's own place at a keyframe is the clip's: far above what the file's
 #: rounding moves a joint (6 decimals of a degree, 1.7e-8 rad: 3.5e-5 mm at 2 m from the root) and far
@@ -138,3 +140,27 @@ def keys_on_source(source: BvhClip, written: str | Path, rest: int, unit: float,
     free = None if held is None else ~np.isclose(  # [s] within a microsecond: saved times' rounding (`ON_FRAME`)
         t[ok][:, None], np.asarray(held, float).reshape(1, -1), rtol=0, atol=1e-6).any(axis=1)
     return KeysOnSource(t[ok], d, tuple(source.names), int((~ok).sum()), free)
+
+
+def corrections_at(ref, keyframes, t: float) -> tuple[dict, dict, list, bool]:
+    """What the import changed at the key at `t` [s] of a run's `Reference` (runner.capture.retarget) and its
+    `Keyframes`: (clamped {knee or elbow: [deg] hyperextension removed},
+    planted {foot or "root": [mm] lowered, `FootPlant.moved_at`}, the joints whose tracking glitch was repaired
+    there, whether the key is partial); all empty and False where the key is the capture."""
+    frame = int(np.clip(np.rint(t / ref.frame_time), 0, ref.count - 1))
+    clamped = {name: round(float(a[frame]), 2) for name, a in (ref.clamped or {}).items() if a[frame] > 0}
+    planted = {} if ref.plant is None else ref.plant.moved_at(frame)
+    half = 0.5 * ref.frame_time  # a key's time is its frame's to the keyframe file's decimals (1.35 s for 1.3499946)
+    glitched = [g.joint for g in ref.glitches if g.start - half <= t <= g.end + half]
+    key = int(np.argmin(np.abs(keyframes.times - t)))
+    return clamped, planted, glitched, bool(keyframes.is_partial[key])
+
+
+def corrections_text(clamped: dict, planted: dict, glitched: list, partial: bool) -> str:
+    """The import's corrections at a key, in words: `clamped` {joint: [deg]}, `planted` {foot or "root": [mm]
+    lowered} (`runner.capture.foot_plant.FootPlant.moved_at`), the joints whose glitch was repaired there and
+    whether the key is partial; "none at that key" without any."""
+    feet = [f"{foot} foot lowered {mm:.1f} mm" for foot, mm in planted.items() if foot != "root"]
+    root = [f"root lowered {planted['root']:.2f} mm by the footplant"] if "root" in planted else []
+    return ", ".join([f"{n} {a:.1f} deg" for n, a in clamped.items()] + feet + root + [f"{g} glitch repaired" for g in glitched]
+                     + (["a partial key"] if partial else [])) or "none at that key"

@@ -282,7 +282,7 @@ def test_a_root_correction_beyond_a_fitting_scenes_is_said(tmp_path):
 def test_the_corrections_at_a_key_are_named_the_root_the_footplant_lowered_too():
     """A key the footplant moved only by lowering the root (a near-straight leg then bends to hold its foot:
     a knee 11 mm off for a 0.33 mm drop) names the root, not "none"."""
-    from runner.pipeline import corrections_text
+    from runner.capture.source_check import corrections_text
 
     assert corrections_text({}, {"root": 0.33}, [], False) == "root lowered 0.33 mm by the footplant"
     assert corrections_text({"l_elbow": 13.2}, {"right": 10.4, "root": 6.0}, ["r_ankle"], True) == (
