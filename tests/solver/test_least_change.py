@@ -134,7 +134,7 @@ def test_a_subproblem_does_not_depend_on_phis_constant_part(problem):
         runs.append((r, al.evaluate(basis, r.frames.values, grad=False)[0]))
     (a, phi_a), (b, phi_b) = runs
     # the same function, up to the round-off of Phi at 1e3 (~1e-13), which parts the two L-BFGS paths: run to 1e-5
-    # they end at about the same Phi + shift (0.01-0.1 % apart under four BLAS kernels; at 1e-3, where a run
+    # they end at about the same Phi + shift (0.01-0.1 % apart under three BLAS kernels; at 1e-3, where a run
     # stops follows the round-off, up to 8 %), while a stopping test on Phi itself (~ -1e3) ends 86 % higher
     assert b.result.fun + 1e3 == pytest.approx(a.result.fun, rel=0.05)
     assert a.result.fun == pytest.approx(phi_a, rel=1e-12) and b.result.fun == pytest.approx(phi_b, rel=1e-12)
