@@ -76,9 +76,10 @@ class FootPlant:
 
     def moved_at(self, frame: int) -> dict[str, float]:
         """{foot: [mm] how far the footplant lowered it, "root": [mm] how far it lowered the root} at one frame,
-        each only where it lowered it by more than the leg IK's `MOVE_TOL` (a micrometre). A root lowered moves every joint, and a leg that lifts its foot
-        back up (step 2 of the module docstring) bends a near-straight knee far more than the height: a root
-        lowered 0.33 mm moved a knee 11 mm (CMU 12_01's walk), so the root is named however little it went down.
+        each only where it lowered it by more than the leg IK's `MOVE_TOL` (a micrometre). A root lowered moves
+        every joint, and a leg that lifts its foot back up (step 2 of the module docstring) bends a near-straight
+        knee far more than the height: a root lowered 0.33 mm moved a knee 11 mm (CMU 12_01's walk), so the root
+        is named however little it went down.
 
         Raises:
             IndexError: a frame outside the motion.
