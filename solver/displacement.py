@@ -86,8 +86,7 @@ from solver.reference import ReferenceMotion, equal_mass_matrices
 from solver.solution import Solution
 from solver.spline import interpolate
 
-__all__ = ["ANGLE_RESOLUTION", "CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement",
-           "clean_solution", "pin_frames",
+__all__ = ["ANGLE_RESOLUTION", "CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
            "solve_displacement", "still_peaks"]
 
 #: [s] the duration that divides a correction priced by its pose from one priced by its acceleration (the
@@ -99,7 +98,6 @@ CORRECTION_TIME = 1.0 / (2.0 * CUTOFF_HZ)
 #: [rad] a capture's rotation resolution, as the corpus bounds take a BVH's (runner.corpus_bounds.PLAIN_FLOORS,
 #: 0.1 deg); with `solver.foot_bounds.CAPTURE_RESOLUTION` for positions, the floor of a still joint's no-jolt limit
 ANGLE_RESOLUTION = float(np.radians(0.1))
-
 
 #: what a clean asks of a foot in contact: "planted", it slides no more than the pins force (Kovar, Schreiner
 #: & Gleicher, "Footskate cleanup for motion capture editing", SCA 2002: a planted foot stays put), or
