@@ -8,7 +8,7 @@
     ground       outside flights, the site the reference holds lowest is down          h <= 2.9 cm      1 mm
                  (with a capture, neither between the two frames about a flight's end: below)
     hinge        knees and elbows turn about their flexion axis                         phi <= limit     1 deg
-    hyperextension  knees and elbows do not bend backwards                               -theta <= limit  0.5 deg
+    hyperextension  knees and elbows do not bend backwards                               -theta <= limit  0.4 deg (below)
     rom          every joint motion inside its published range (AAOS 1965)              lo <= x <= hi    1 deg
     acceleration no jolts: pelvis and ball joints no harder than the capture's (6 Hz) or the plain spline's peak  5 %
     effort       with a capture: RMS joint torque no more than the capture's (6 Hz) or the plain spline's     5 %
@@ -72,6 +72,9 @@ Penetration's tolerance is its 1 mm bound less a capture's 0.1 mm position resol
 (`PENETRATION_TOLERANCE`), so that a path met within it is inside the bound as measured at 1000 Hz: the
 constraint takes each site's height between two quadrature points as a cubic, whose deepest point differs from
 the path's by micrometres, and paths the solve left at the edge of a 1 mm tolerance measured 0.989-1.0008 mm.
+Hyperextension's is likewise its 0.5 degree bound less a capture's 0.1 degree rotation resolution
+(`HYPEREXTENSION_TOLERANCE`): the constraint holds at the quadrature points and the bound is measured at 1000 Hz,
+where a keyed walk the solve left at the edge of a 0.5 degree tolerance measured 0.0007 degree beyond it.
 
 Each relaxation is reported (`solver.foot_bounds.Relaxation`: which constraint, site or joint, keyframe, where, how much),
 so a user sees where the keyframes, not the optimizer, decide.
@@ -94,7 +97,7 @@ from solver.path_state import PathState
 from solver.support import SupportSurfaces
 from solver.surfaces import StaticSurfaces
 
-__all__ = ["PENETRATION_TOLERANCE", "TOLERANCES", "figure_constraints", "flight_edge_frames"]
+__all__ = ["ANGLE_RESOLUTION", "HYPEREXTENSION_TOLERANCE", "PENETRATION_TOLERANCE", "TOLERANCES", "figure_constraints", "flight_edge_frames"]
 
 #: each constraint's tolerance [SI]: a pair is met when c <= tolerance (the acceptance bounds' units:
 #: penetration 1 mm; float 2 mm, under the 5 mm of PhysDiff's float; slide 2 mm; flight 1 mm above the
@@ -106,6 +109,12 @@ TOLERANCES = {"penetration": 1e-3, "planted": 2e-3, "slide": 2e-3, "flight": 1e-
 #: [m] the penetration constraint's tolerance: its 1 mm bound (TOLERANCES) less a capture's position resolution
 #: (`solver.foot_bounds.CAPTURE_RESOLUTION`, 0.1 mm), the margin for the cubic between quadrature points (module docstring)
 PENETRATION_TOLERANCE = TOLERANCES["penetration"] - CAPTURE_RESOLUTION
+#: [rad] a capture's rotation resolution, as the corpus bounds take a BVH's (runner.corpus_bounds.PLAIN_FLOORS,
+#: 0.1 deg); with `solver.foot_bounds.CAPTURE_RESOLUTION` for positions, the floor of a still joint's no-jolt limit
+ANGLE_RESOLUTION = float(np.radians(0.1))
+#: [rad] the hyperextension constraint's tolerance: its 0.5 deg bound (TOLERANCES) less `ANGLE_RESOLUTION`, the
+#: margin for the path between quadrature points, where the bound is measured at 1000 Hz (module docstring)
+HYPEREXTENSION_TOLERANCE = TOLERANCES["hyperextension"] - ANGLE_RESOLUTION
 
 
 def figure_constraints(model, figure, reference, plain, contacts=(), flights=(), engine=None, capture=None,
@@ -148,7 +157,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
             out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     layout = StateLayout.from_model(model)
-    out += anatomy_constraints(figure, layout, reference, plain, capture, TOLERANCES)
+    out += anatomy_constraints(figure, layout, reference, plain, capture, TOLERANCES | {"hyperextension": HYPEREXTENSION_TOLERANCE})
     quats = [j for j in layout.joints if j.quat_index is not None]
     out.append(UnitNorm(len(t), np.array([j.quat_index for j in quats]), [j.name for j in quats], TOLERANCES["unit"]))
     if capture is not None:  # no jolts: bounded by what the captured motion does (module docstring)

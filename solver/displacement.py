@@ -67,7 +67,7 @@ import numpy as np
 
 from solver.capture_bounds import jolt_columns
 from solver.change import MeasureOfChange
-from solver.constraint_set import TOLERANCES, figure_constraints
+from solver.constraint_set import ANGLE_RESOLUTION, TOLERANCES, figure_constraints
 from solver.constraints.acceleration import AccelerationBound
 from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.contact_schedule import ContactSchedule
@@ -86,7 +86,7 @@ from solver.reference import ReferenceMotion, equal_mass_matrices
 from solver.solution import Solution
 from solver.spline import interpolate
 
-__all__ = ["ANGLE_RESOLUTION", "CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
+__all__ = ["CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
            "solve_displacement", "still_peaks"]
 
 #: [s] the duration that divides a correction priced by its pose from one priced by its acceleration (the
@@ -94,10 +94,6 @@ __all__ = ["ANGLE_RESOLUTION", "CORRECTION_TIME", "FEET", "Displacement", "ancho
 #: itself, below the 6 Hz cutoff that the no-jolt bound filters the capture at (Winter 2009). A change
 #: within that band is priced by how far it moves the body's parts, a faster one by its acceleration
 CORRECTION_TIME = 1.0 / (2.0 * CUTOFF_HZ)
-
-#: [rad] a capture's rotation resolution, as the corpus bounds take a BVH's (runner.corpus_bounds.PLAIN_FLOORS,
-#: 0.1 deg); with `solver.foot_bounds.CAPTURE_RESOLUTION` for positions, the floor of a still joint's no-jolt limit
-ANGLE_RESOLUTION = float(np.radians(0.1))
 
 #: what a clean asks of a foot in contact: "planted", it slides no more than the pins force (Kovar, Schreiner
 #: & Gleicher, "Footskate cleanup for motion capture editing", SCA 2002: a planted foot stays put), or

@@ -104,3 +104,13 @@ def test_without_a_capture_the_plain_spline_is_the_known_path(swung):
     expected = max(_swing_angle(q, axis) for q in Y[:, qi])
     assert np.degrees(expected) > SWING + 1.0
     assert _limit(_hinge(lc), "r_elbow") == pytest.approx(expected, abs=1e-9)
+
+
+def test_hyperextension_is_held_a_rotation_resolution_inside_its_bound(swung):
+    """The acceptance bound is hyperextension <= the plain spline's + 0.5 degree, measured at 1000 Hz; the constraint
+    holds at the quadrature points, so its tolerance is the bound's 0.5 degree less a capture's 0.1 degree rotation
+    resolution (a keyed walk left at the edge of 0.5 degree measured 0.0007 degree beyond it between the points)."""
+    model, keyframes, _, _ = swung
+    lc = build_least_change(model, keyframes)
+    bend = next(c for c in lc.al.constraints if c.name == "hyperextension")
+    assert np.degrees(bend.tolerance) == pytest.approx(0.5 - 0.1, abs=1e-12)
