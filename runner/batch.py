@@ -42,13 +42,13 @@ COLUMNS = ("clip", "folder", "status", "error", "wall_time_s", "keyframes", "var
            "max_penetration_mm", "plain_float_contact_mm", "optimized_float_contact_mm", "plain_skate_mm",
            "optimized_skate_mm")
 #: the summary's columns with `CleanOptions` (`batch --mode clean`): the cleaned clip's penetration [mm], float
-#: and skate in contact [mm, mm/frame], deviation from the capture [cm], the change's peak accelerations beside
+#: and skate in contact [mm, mm/frame], deviation from the capture [cm] and of its joint angles [deg], the change's peak accelerations beside
 #: the capture's at 6 Hz [m/s^2, rad/s^2] (`runner.bench.clean_measure`), the clean's CPU time [s]
 CLEAN_COLUMNS = ("clip", "folder", "status", "error", "wall_time_s", "displacement_frames", "solver_status",
-                 "penetration_mm", "float_mm", "skate_mm", "deviation_mean_cm", "deviation_max_cm",
-                 "change_pelvis_m_s2", "capture_pelvis_m_s2", "change_joint_rad_s2", "capture_joint_rad_s2", "cpu_s")
+                 "penetration_mm", "float_mm", "skate_mm", "deviation_mean_cm", "deviation_max_cm", "angle_mean_deg",
+                 "angle_max_deg", "change_pelvis_m_s2", "capture_pelvis_m_s2", "change_joint_rad_s2", "capture_joint_rad_s2", "cpu_s")
 #: the figures of CLEAN_COLUMNS that the totals row gives as the mean over the clips (the others: the worst)
-CLEAN_MEANS = ("deviation_mean_cm",)
+CLEAN_MEANS = ("deviation_mean_cm", "angle_mean_deg")
 #: row statuses: ok (done now), skipped (done before, same clip and options), failed, interrupted (stopped
 #: by Ctrl-C, outputs of the best path so far), not run (Ctrl-C came first)
 STATUSES = ("ok", "skipped", "failed", "interrupted", "not run")

@@ -252,6 +252,7 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: 
     if o.summary:
         say(report(run).replace("plain spline", "capture"))
     say(f"  change from the capture: deviation mean {fig['deviation_mean_cm']:.2f} cm, max {fig['deviation_max_cm']:.2f} cm; "
+        f"joint angles mean {fig['angle_mean_deg']:.2f} deg, max {fig['angle_max_deg']:.1f} deg; "
         f"peak acceleration of the change: pelvis {fig['change_pelvis_m_s2']:.2f} m/s^2 (capture at 6 Hz "
         f"{fig['capture_pelvis_m_s2']:.2f}), joints {fig['change_joint_rad_s2']:.1f} rad/s^2 at {fig['change_joint']} "
         f"(capture at 6 Hz {fig['capture_joint_rad_s2']:.1f}){_import_clamp(ref)}")

@@ -2,7 +2,10 @@
 
 * **Deviation**: the distance between each body's origin on the cleaned clip and on the capture (MuJoCo's
   forward kinematics, `xpos`), over every frame and body: mean and max [cm] (the field's mean per-joint
-  position error, MPJPE, measured against the capture instead of a ground truth).
+  position error, MPJPE, measured against the capture instead of a ground truth); and the angle between each
+  joint's rotation on the cleaned clip and on the capture (the geodesic angle 2 acos |<q, q_ref>| of the local
+  quaternions of every ball joint and of the free root, `runner.motion_metrics`' joint_orientation_deg), over every
+  frame and joint: mean and max [deg] (the field's mean per-joint angle error, MPJAE).
 * **The change's jolts**: the peak acceleration of the change, a_clean - a_capture (finite differences of
   both at the frame rate, `runner.jolts.differentiate`): the pelvis's [m/s^2] and the largest ball joint's
   [rad/s^2], beside the capture's own peaks after the 6 Hz low-pass filter (`runner.jolts.jolt_figures`):
@@ -11,6 +14,8 @@
 from __future__ import annotations
 
 import numpy as np
+
+from solver.quaternion import angle_between
 
 __all__ = ["clean_figures"]
 
@@ -28,6 +33,18 @@ def _body_positions(model, qpos: np.ndarray) -> np.ndarray:
     return out
 
 
+def _joint_angles(model, clean: np.ndarray, capture: np.ndarray) -> np.ndarray:
+    """(n, j) [deg] the angle between the cleaned clip's and the capture's rotation of each ball joint and of the
+    free root at every frame (module docstring)."""
+    import mujoco
+
+    kinds = (int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_FREE))
+    adr = [int(model.jnt_qposadr[j]) + (3 if int(model.jnt_type[j]) == kinds[1] else 0)
+           for j in range(model.njnt) if int(model.jnt_type[j]) in kinds]
+    q = np.asarray(adr, int)[:, None] + np.arange(4)  # (j, 4) each rotation's qpos components
+    return np.degrees(angle_between(clean[:, q], capture[:, q]))
+
+
 def clean_figures(model, clean: np.ndarray, capture: np.ndarray, fps: float, capture_filtered: np.ndarray) -> dict:
     """The deviation of a cleaned clip from its capture and the change's peak accelerations (module docstring).
 
@@ -36,7 +53,7 @@ def clean_figures(model, clean: np.ndarray, capture: np.ndarray, fps: float, cap
             frames at i / fps, n >= 3. fps: [Hz] > 0. capture_filtered: (n, nq) the capture low-pass
             filtered at 6 Hz (`runner.jolts.filter_capture`).
     Returns:
-        {"deviation_mean_cm", "deviation_max_cm", "change_pelvis_m_s2", "change_joint_rad_s2",
+        {"deviation_mean_cm", "deviation_max_cm", "angle_mean_deg", "angle_max_deg", "change_pelvis_m_s2", "change_joint_rad_s2",
         "change_joint", "capture_pelvis_m_s2", "capture_joint_rad_s2"} (JSON-serializable floats and a name).
     Raises:
         InputError: shapes that do not fit the model or fewer than 3 frames (`runner.jolts.differentiate`).
@@ -45,6 +62,7 @@ def clean_figures(model, clean: np.ndarray, capture: np.ndarray, fps: float, cap
 
     clean, capture = np.asarray(clean, float), np.asarray(capture, float)
     dev = np.linalg.norm(_body_positions(model, clean) - _body_positions(model, capture), axis=-1)
+    angle = _joint_angles(model, clean, capture)
     da = differentiate(model, clean, fps)[1] - differentiate(model, capture, fps)[1]
     free, balls, _ = _joints(model)
     pelvis = float(np.linalg.norm(da[:, free:free + 3], axis=1).max()) if free is not None else float("nan")
@@ -52,6 +70,7 @@ def clean_figures(model, clean: np.ndarray, capture: np.ndarray, fps: float, cap
     worst = max(peaks, key=peaks.get, default="")
     own = jolt_figures(model, capture_filtered, fps)
     return {"deviation_mean_cm": 100.0 * float(dev.mean()), "deviation_max_cm": 100.0 * float(dev.max()),
+            "angle_mean_deg": float(angle.mean()), "angle_max_deg": float(angle.max(initial=0.0)),
             "change_pelvis_m_s2": pelvis, "change_joint_rad_s2": peaks.get(worst, float("nan")), "change_joint": worst,
             "capture_pelvis_m_s2": own["peak_pelvis_acceleration_m_s2"],
             "capture_joint_rad_s2": own["peak_angular_acceleration_max_rad_s2"]}

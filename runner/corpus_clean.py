@@ -115,7 +115,8 @@ def measure_clip(npz: Path, peer: bool) -> dict:
         qpos, cpu = ik_clean(model, times, ref, contacts)
         f = clean_figures_of(npz, qpos)
         out |= {f"peer_{k}": f[k] for k in ("penetration_mm", "float_mm", "skate_mm", "deviation_mean_cm",
-                                            "deviation_max_cm", "change_pelvis_m_s2", "change_joint_rad_s2")}
+                                            "deviation_max_cm", "angle_mean_deg", "angle_max_deg", "change_pelvis_m_s2",
+                                            "change_joint_rad_s2")}
         out["peer_cpu_s"] = cpu
     return out
 

@@ -86,6 +86,7 @@ from solver.contact_thresholds import FLIGHT_HEIGHT
 from solver.contacts import Contact, contact_mask, contact_radii, figure_sites, lowest_points
 from solver.errors import InputError
 from solver.figure import foot_sites
+from solver.quaternion import angle_between
 
 # -- the published metrics' own thresholds, as they define them (../shared/METRICS.md)
 #: PhysDiff skate: a site is on the ground at most this high [m].
@@ -118,10 +119,7 @@ def _kinematics(model, qpos, sites):
 
 
 def _angle_deg(a, b):
-    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
-    b = b / np.linalg.norm(b, axis=-1, keepdims=True)
-    d = np.clip(np.abs(np.sum(a * b, axis=-1)), 0.0, 1.0)
-    return np.degrees(2.0 * np.arccos(d))
+    return np.degrees(angle_between(a, b))
 
 
 def _stats(x, scale=1.0):

@@ -30,6 +30,18 @@ def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
+def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The geodesic angle 2 acos |<a, b>| [rad] between the rotations of quaternions a and b.
+
+    Args:
+        a, b: (..., 4) quaternions (w, x, y, z), each normalized here (q and -q are one rotation).
+    Returns:
+        (...,) angles in [0, pi].
+    """
+    d = np.abs(np.sum(normalize(np.asarray(a, float)) * normalize(np.asarray(b, float)), axis=-1))
+    return 2.0 * np.arccos(np.clip(d, 0.0, 1.0))
+
+
 def left_matrix(q: np.ndarray) -> np.ndarray:
     """(..., 4, 4) L(q) with q (x) p = L(q) p (Hamilton product, w first)."""
     w, x, y, z = np.moveaxis(np.asarray(q, float), -1, 0)

@@ -1,0 +1,57 @@
+"""runner/clean_metrics.py: a cleaned clip's deviation from its capture on hand-built changes whose answers are
+known: joint angles turned by scipy's rotations, and the whole figure shifted."""
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import solver
+from runner.clean_metrics import clean_figures
+from solver.quaternion import mul
+
+FPS = 30.0  # [Hz]
+N = 20  # frames
+
+
+def _rotate(q: np.ndarray, deg: float, axis) -> np.ndarray:
+    """q (w, x, y, z) times a rotation of `deg` about `axis` (in q's own frame)."""
+    r = Rotation.from_rotvec(np.radians(deg) * np.asarray(axis, float) / np.linalg.norm(axis)).as_quat()
+    return mul(q, np.r_[r[3], r[:3]])
+
+
+def _figure():
+    return solver.load_model(solver.shipped("run_and_step.xml"))
+
+
+def test_the_joint_angles_are_the_rotations_made():
+    """The capture stands still; the clean turns the right knee 30 degrees at five frames and the root 10 degrees
+    at one, and negates the left hip's quaternion at every frame (the same rotation): the angle's max is 30
+    degrees, its mean (5 x 30 + 10) / (N x the rotations), a rotation being every quaternion of the state
+    (`StateLayout.quat_slots`: the free root's and each ball joint's)."""
+    model = _figure()
+    layout = solver.StateLayout.from_model(model)
+    capture = np.tile(model.qpos0, (N, 1))
+    clean = capture.copy()
+    knee = layout.joint("r_knee").quat_index
+    for i in range(5, 10):
+        clean[i, knee] = _rotate(capture[i, knee], 30.0, [0.2, 1.0, 0.1])
+    root = layout.quat_slots[0]
+    clean[12, root] = _rotate(capture[12, root], 10.0, [0.0, 0.0, 1.0])
+    hip = layout.joint("l_hip").quat_index
+    clean[:, hip] = -capture[:, hip]
+    f = clean_figures(model, clean, capture, FPS, capture)
+    rotations = len(layout.quat_slots)
+    assert f["angle_max_deg"] == pytest.approx(30.0, abs=1e-5)  # acos near 0 keeps about half the digits
+    assert f["angle_mean_deg"] == pytest.approx((5 * 30.0 + 10.0) / (N * rotations), abs=1e-6)
+
+
+def test_a_figure_shifted_whole_deviates_by_the_shift_and_turns_no_joint():
+    """The clean is the capture 2 cm higher at every frame: every body's origin is 2 cm from its place (mean and max),
+    and no joint turns."""
+    model = _figure()
+    capture = np.tile(model.qpos0, (N, 1))
+    clean = capture.copy()
+    clean[:, 2] += 0.02  # the free root's height [m]
+    f = clean_figures(model, clean, capture, FPS, capture)
+    assert f["deviation_mean_cm"] == pytest.approx(2.0, abs=1e-9)
+    assert f["deviation_max_cm"] == pytest.approx(2.0, abs=1e-9)
+    assert f["angle_max_deg"] == pytest.approx(0.0, abs=1e-6)
