@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.layout import StateLayout
 from solver.quaternion import angle_between
 
 __all__ = ["clean_figures"]
@@ -35,13 +36,8 @@ def _body_positions(model, qpos: np.ndarray) -> np.ndarray:
 
 def _joint_angles(model, clean: np.ndarray, capture: np.ndarray) -> np.ndarray:
     """(n, j) [deg] the angle between the cleaned clip's and the capture's rotation of each ball joint and of the
-    free root at every frame (module docstring)."""
-    import mujoco
-
-    kinds = (int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_FREE))
-    adr = [int(model.jnt_qposadr[j]) + (3 if int(model.jnt_type[j]) == kinds[1] else 0)
-           for j in range(model.njnt) if int(model.jnt_type[j]) in kinds]
-    q = np.asarray(adr, int)[:, None] + np.arange(4)  # (j, 4) each rotation's qpos components
+    free root (every quaternion of the state, `StateLayout.quat_slots`) at every frame (module docstring)."""
+    q = StateLayout.from_model(model).quat_slots  # (j, 4) each rotation's qpos components
     return np.degrees(angle_between(clean[:, q], capture[:, q]))
 
 
