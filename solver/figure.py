@@ -39,7 +39,7 @@ MODELS_DIR = Path(__file__).resolve().parent / "models"
 #: the shipped figure's MJCF file: the one place its path is written
 FIGURE_FILE = MODELS_DIR / "humanoid39.xml"
 
-_FOOT, _FLEXION, _END = "figure:foot:", "figure:flexion:", "figure:end:"
+_FOOT, _FLEXION, _END, _SOLE = "figure:foot:", "figure:flexion:", "figure:end:", "figure:sole:"
 _NECK_GEOM, _HEAD_SITE = "neck", "head"
 
 
@@ -110,6 +110,10 @@ class Figure:
         standing_height: [m] top of the highest geom minus the lowest contact site, at `qpos0`
             (standing upright: the identity pose).
         neck: the neck and head bones, or None if the model has no geom ``neck`` or site ``head``.
+        soles: {side: (inner edge site, outer edge site)} (``figure:sole:SIDE``; {} when not annotated): the
+            edges of a foot's sole across the ball of the foot, held out of every surface no deeper than the
+            capture holds them (the sole constraint), never in contact themselves (docs/contacts.md, "The soles'
+            edges").
     Equality is identity (the fields hold arrays); build one per model with `from_model`.
     """
 
@@ -128,6 +132,17 @@ class Figure:
     total_mass: float
     standing_height: float
     neck: NeckChain | None
+    soles: Mapping[str, tuple[str, ...]]
+
+    @property
+    def sole_sites(self) -> tuple[str, ...]:
+        """The soles' edge sites, side by side (`soles`)."""
+        return tuple(s for pair in self.soles.values() for s in pair)
+
+    @property
+    def surface_sites(self) -> tuple[str, ...]:
+        """The sites held out of every surface (penetration): the contact sites, then the soles' edges."""
+        return self.contact_sites + self.sole_sites
 
     @property
     def root(self) -> str:
@@ -180,7 +195,8 @@ class Figure:
         return cls(names, _frozen(ids, int), _frozen(parents, int), joints, MappingProxyType(joint_bodies),
                    MappingProxyType(axes), sites, _frozen(site_ids, int), MappingProxyType(feet), leg_joints,
                    MappingProxyType(segments), _frozen(masses, float), float(masses.sum()),
-                   _standing_height(model, ids, site_ids), _neck(model, ids, names))
+                   _standing_height(model, ids, site_ids), _neck(model, ids, names),
+                   MappingProxyType(_soles(model, texts, feet)))
 
 
 def foot_sites(feet: Mapping[str, Sequence[str]]) -> tuple[str, ...]:
@@ -301,6 +317,22 @@ def _feet(model, texts: dict[str, str]) -> dict[str, tuple[str, str]]:
         raise InputError('the figure has no feet: add <custom><text name="figure:foot:left" data="l_heel l_toe"/>'
                          "...</custom> to its MJCF (models/README.md, \"The figure's annotations\")")
     return feet
+
+
+def _soles(model, texts: dict[str, str], feet: Mapping[str, tuple[str, str]]) -> dict[str, tuple[str, str]]:
+    """{side: (inner, outer)} of every ``figure:sole:SIDE`` annotation (`Figure.soles`)."""
+    out = {}
+    for key, data in texts.items():
+        if not key.startswith(_SOLE):
+            continue
+        pair, side = tuple(data.split()), key[len(_SOLE):]
+        if len(pair) != 2 or side not in feet:
+            raise InputError(f'<text name="{key}" data="{data}">: give two site names, the sole\'s inner then outer edge, '
+                             f"of a foot the figure has ({', '.join(f'figure:sole:{f}' for f in feet)})")
+        for s in pair:
+            _site(model, s, f'<text name="{key}">')
+        out[side] = pair
+    return out
 
 
 def _flexion_axes(numerics: dict[str, np.ndarray], joints: dict[str, Joint]) -> dict[str, np.ndarray]:

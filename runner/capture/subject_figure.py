@@ -59,6 +59,9 @@ ANKLE_HEIGHT = 0.039
 HIP_HEIGHT = 0.530
 #: foot length as a fraction of stature (de Leva 1996, table 1: 258.1 mm of 1741 mm, male)
 FOOT_LENGTH = 258.1 / 1741.0
+#: foot breadth (across the ball of the foot) as a fraction of stature (Winter 2009, fig. 4.1: 0.055 H): the
+#: soles' edge sites lie half of it either side of the sole's line at the ball
+FOOT_BREADTH = 0.055
 #: the heel behind the ankle joint centre, as a fraction of the foot length (the shipped figure's 6 cm
 #: of its 25 cm foot)
 HEEL_BACK = 0.24
@@ -180,20 +183,27 @@ def _leg(spec, side: str, m: SubjectMeasures, s: float) -> None:
     heel = -HEEL_BACK * m.foot_length * forward + [0, 0, -h]
     toe = np.r_[ball[:2], -h]
     spec.site(f"{side}_ball").pos = ball
-    _sole(spec, side, heel, toe, h / 2)
+    _sole(spec, side, heel, toe, h / 2, FOOT_BREADTH * m.stature)
 
 
-def _sole(spec, side: str, heel: np.ndarray, toe: np.ndarray, r: float, heel_radius: float = 0.0,
+def _sole(spec, side: str, heel: np.ndarray, toe: np.ndarray, r: float, breadth: float, heel_radius: float = 0.0,
           toe_radius: float = 0.0) -> None:
     """The foot's heel and toe sites at `heel`, `toe` (foot frame [m]; the centres of their spheres of the
-    given radii [m]) and its capsule of radius r over the sole under them."""
+    given radii [m]), its capsule of radius r over the sole under them, and the sole's edge sites (inner
+    and outer: ``figure:sole:SIDE``) `breadth` [m] apart across the sole's line under the ball site."""
     spec.site(f"{side}_heel").pos = heel
     spec.site(f"{side}_toe").pos = toe
     heel = heel - [0, 0, heel_radius]  # the sole: the spheres' lowest points with the foot flat
     toe = toe - [0, 0, toe_radius]
     forward = np.r_[toe[:2] - heel[:2], 0.0]
-    forward /= np.linalg.norm(forward)
+    length = np.linalg.norm(forward)
+    forward /= length
     _capsule(spec, f"{side}_foot", heel + r * forward + [0, 0, r], toe - 0.5 * r * forward + [0, 0, r], r)
+    a = np.clip(float(np.asarray(spec.site(f"{side}_ball").pos)[:2] @ forward[:2] - heel[:2] @ forward[:2]) / length, 0.0, 1.0)
+    at = heel + a * (toe - heel)  # the sole's line under the ball
+    inward = np.cross([0.0, 0.0, 1.0], forward) * (-1.0 if side == "l" else 1.0)  # toward the body's midline
+    spec.site(f"{side}_sole_in").pos = at + 0.5 * breadth * inward
+    spec.site(f"{side}_sole_out").pos = at - 0.5 * breadth * inward
 
 
 def _fit_soles(spec, clip: BvhClip, m: SubjectMeasures) -> None:
@@ -213,7 +223,8 @@ def _fit_soles(spec, clip: BvhClip, m: SubjectMeasures) -> None:
     except InputError:  # the feet never rest: nothing to measure
         return
     for heel, toe in figure.feet.values():
-        _sole(spec, heel[0], fit.sites[heel], fit.sites[toe], m.ankle_height / 2, fit.radii[heel], fit.radii[toe])
+        _sole(spec, heel[0], fit.sites[heel], fit.sites[toe], m.ankle_height / 2, FOOT_BREADTH * m.stature,
+              fit.radii[heel], fit.radii[toe])
         for site in (heel, toe):
             if fit.radii[site] > 0:
                 spec.add_numeric(name=RADIUS_PREFIX + site, data=[float(fit.radii[site])])

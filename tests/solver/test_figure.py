@@ -46,6 +46,19 @@ def test_contact_sites_and_feet(model):
                                              for s in fig.contact_sites]
 
 
+def test_sole_edges_are_held_with_the_contact_sites(model, rest):
+    """The soles' edges (figure:sole:SIDE): inner and outer across the sole under the ball, on the sole's plane
+    at the rest pose (the heel's height), the inner one toward the body's midline, 0.055 x 1.75 m apart."""
+    fig = Figure.from_model(model)
+    assert fig.sole_sites == ("l_sole_in", "l_sole_out", "r_sole_in", "r_sole_out")
+    assert fig.surface_sites == fig.contact_sites + fig.sole_sites
+    for side in "lr":
+        inner, outer, heel = (rest.site(f"{side}_{s}").xpos for s in ("sole_in", "sole_out", "heel"))
+        assert inner[2] == pytest.approx(heel[2], abs=1e-9) and outer[2] == pytest.approx(heel[2], abs=1e-9)
+        assert abs(inner[1]) < abs(outer[1])
+        assert np.linalg.norm(inner - outer) == pytest.approx(0.055 * 1.75, abs=5e-4)  # the MJCF's mm
+
+
 def test_segments_from_kinematics_at_rest(model, rest):
     """Segment ends against world positions from mj_kinematics (every body frame is parallel to the
     world frame at the identity pose), and the documented joint heights (hip 0.91, knee 0.49, ankle
@@ -121,6 +134,7 @@ def _edit(old, new):
      "give an axis"),
     ('<text name="figure:end:l_foot" data="l_ball"/>', '<text name="figure:end:l_foot" data="r_ball"/>',
      "not on the body 'l_foot'"),
+    ('data="l_sole_in l_sole_out"', 'data="l_sole_in l_edge"', r"figure:sole:left.*site 'l_edge'"),
 ])
 def test_bad_annotations_name_the_element_and_the_fix(old, new, message):
     with pytest.raises(InputError, match=message):

@@ -10,7 +10,7 @@ from bvh_fk import parse, world
 
 from runner.capture.bvh import read_bvh
 from runner.capture.reference_motion import load_bvh_reference
-from runner.capture.subject_figure import ANKLE_HEIGHT, subject_figure_xml, subject_measures
+from runner.capture.subject_figure import ANKLE_HEIGHT, FOOT_BREADTH, subject_figure_xml, subject_measures
 from runner.cli import main
 from runner.exit_codes import EXIT_INPUT
 from solver.errors import InputError
@@ -118,6 +118,11 @@ def test_figure_proportions_masses_and_soles():
         heel, toe = data.site(f"{side}_heel").xpos, data.site(f"{side}_toe").xpos
         assert foot[2] - heel[2] == pytest.approx(ANKLE_HEIGHT * m.stature, abs=2e-5)
         assert heel[2] == pytest.approx(toe[2], abs=2e-5)
+        inner, outer = data.site(f"{side}_sole_in").xpos, data.site(f"{side}_sole_out").xpos  # across the sole
+        assert inner[2] == pytest.approx(toe[2], abs=2e-5) and outer[2] == pytest.approx(toe[2], abs=2e-5)
+        assert np.linalg.norm(inner - outer) == pytest.approx(FOOT_BREADTH * m.stature, abs=2e-5)
+        assert (inner - outer) @ (toe - heel) == pytest.approx(0.0, abs=1e-9) and abs(inner[1]) < abs(outer[1])
+    assert fig.sole_sites == shipped.sole_sites
     assert fig.standing_height == pytest.approx(m.stature, rel=0.01)
     assert 1.5 < m.stature < 1.95  # an adult
 
