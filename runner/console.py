@@ -116,10 +116,11 @@ def comparison_rows(plain: dict, opt: dict, dynamics_terms: bool = False, bounds
     capture = capture or {}
     rows = [("max penetration [mm] (1000 Hz)", plain["max_penetration_mm"], opt["max_penetration_mm"], "{:.2f}",
              row_mark(plain["max_penetration_mm"], opt["max_penetration_mm"], 0.01, "{:.2f}"))]
-    for site in plain["penetration_mm_by_site"]:
-        a, b = plain["penetration_mm_by_site"][site], opt["penetration_mm_by_site"][site]
-        if cell("{:.2f}", a) != "0.00" or cell("{:.2f}", b) != "0.00":
-            rows.append((f"  {site} [mm]", a, b, "{:.2f}", row_mark(a, b, 0.01, "{:.2f}")))
+    for key in ("penetration_mm_by_site", "sole_mm_by_site"):  # the contact sites, then the soles' edges
+        for site in plain.get(key, {}):
+            a, b = plain[key][site], opt[key][site]
+            if cell("{:.2f}", a) != "0.00" or cell("{:.2f}", b) != "0.00":
+                rows.append((f"  {site} [mm]", a, b, "{:.2f}", row_mark(a, b, 0.01, "{:.2f}")))
     more = _GEOMETRY + _DYNAMICS + (_DYNAMICS_TERMS_ROWS if dynamics_terms else [])
     for label, key, fmt, atol in more:
         if key == "keyframe_error":
@@ -155,6 +156,7 @@ def capture_figures(motion: dict | None) -> dict:
 #: flight, which only the force bounds target (`--terms all`, README "Reading the summary").
 TERM_ROWS = {
     "penetration": ("max penetration",),  # and the per-site rows under it (`row_targets`)
+    "sole": (),  # the soles' edges' rows (`row_targets`)
     "unit": ("max |1 - |q||",),
     "hyperextension": ("max hyperextension",),
     "hinge": ("knee rotation off the hinge", "elbow rotation off the hinge"),
@@ -194,20 +196,21 @@ def cell(fmt: str, value) -> str:
     return text
 
 
-def row_targets(labels, constraints, sites=()) -> dict[str, str]:
+def row_targets(labels, constraints, sites=(), soles=()) -> dict[str, str]:
     """{row label: the constraints, comma-separated, that bound the row's figure} (`TERM_ROWS`).
 
     Args:
         labels: the summary's row labels. constraints: the constraint names of the solve.
         sites: the contact sites whose "  SITE [mm]" penetration rows belong to the penetration constraint.
+        soles: the soles' edge sites whose rows belong to the sole constraint.
     Returns:
         only the labels some constraint bounds; a "  NAME: worst / tolerance" row belongs to NAME.
     """
-    site_rows = {f"  {site} [mm]" for site in sites}
+    site_rows, sole_rows = {f"  {site} [mm]" for site in sites}, {f"  {site} [mm]" for site in soles}
     out = {}
     for label in labels:
         terms = [name for name in constraints if name in TERM_ROWS and (
-            label.strip().startswith(TERM_ROWS[name]) or (name == "penetration" and label in site_rows))]
+            label.strip().startswith(TERM_ROWS[name]) or (name == "penetration" and label in site_rows) or (name == "sole" and label in sole_rows))]
         own = label.strip().removesuffix(": worst / tolerance")
         if label.endswith(": worst / tolerance") and own in constraints:
             terms.append(own)
@@ -268,7 +271,7 @@ def summary_table(plain: dict, opt: dict, solution, contact_rows=(), force_bound
         rows.append((f"  {name}: worst / tolerance", solution.integrals_initial.get(name), solution.integrals_final[name],
                      "{:.4g}"))
     rows += getattr(solution, "extra_rows", None) or []
-    targets = row_targets([r[0] for r in rows], constraints, plain["penetration_mm_by_site"])
+    targets = row_targets([r[0] for r in rows], constraints, plain["penetration_mm_by_site"], plain.get("sole_mm_by_site", {}))
     feet, jolts = verdict_figures(plain, opt, motion)
     lines = verdict_lines(feet, jolts, rows, targets, solution, refinement_text(solution, tol), _motion_text(motion))
     lines += format_rows(rows, targets)

@@ -58,7 +58,7 @@ WIDTH = 128
 #: each constraint's unit as printed and its size in SI units (the `unit` and `scale` of the classes in
 #: `solver.constraints`; a test checks them): a limit raised by `amount` [SI] prints as amount / scale
 CONSTRAINT_UNITS = {
-    "penetration": ("mm", 1e-3), "planted": ("mm", 1e-3), "slide": ("mm", 1e-3), "flight": ("mm", 1e-3),
+    "penetration": ("mm", 1e-3), "sole": ("mm", 1e-3), "planted": ("mm", 1e-3), "slide": ("mm", 1e-3), "flight": ("mm", 1e-3),
     "ground": ("mm", 1e-3), "hinge": ("deg", math.pi / 180.0), "hyperextension": ("deg", math.pi / 180.0),
     "rom": ("deg", math.pi / 180.0), "acceleration": ("m/s^2 | rad/s^2", 1.0), "effort": ("N m", 1.0),
     "tracking": ("mm", 1e-3), "unit": ("1", 1.0), "flight wrench": ("N | N m", 1.0), "ground force": ("N", 1.0),

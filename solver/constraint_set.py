@@ -1,6 +1,7 @@
 """The figure's constraints for one problem, each a function with its unit and tolerance (docs/design.md).
 
     penetration  every contact site's lowest point outside every plane and box, at every instant  d >= 0     0.9 mm (below)
+    sole         the soles' edges likewise, no deeper than the capture holds them (else 0)  -d <= capture's  0.9 mm
     planted      over each foot contact, the support site's mean height                 mean h <= FLOAT_LIMIT 2 mm
                  with a capture, over each site contact, that site's (solver.foot_bounds) <= the known paths'
     slide        over each site contact, the slide beyond what the keyframes force    <= allowance (below)  2 mm
@@ -85,7 +86,7 @@ import numpy as np
 
 from solver.capture_bounds import capture_accelerations, capture_effort, capture_state, filtered_capture, reference_state
 from solver.constraints.anatomy import anatomy_constraints
-from solver.constraints.penetration import Penetration
+from solver.constraints.penetration import Penetration, SoleEdges
 from solver.constraints.sites import HeightBound, SupportHeight, site_heights
 from solver.constraints.tracking import SiteTracking, mean_site_distance
 from solver.constraints.unit import UnitNorm
@@ -149,11 +150,14 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     if engine is not None and surfaces.count:
         out.append(Penetration(surfaces, radii, t, sites, PENETRATION_TOLERANCE))
         witness = None if capture is None else capture_state(model, reference, capture, engine)
+        if figure.sole_sites:  # the engine's sites: the contact sites, then the soles' edges
+            out.append(SoleEdges(surfaces, t, figure.sole_sites, PENETRATION_TOLERANCE,
+                                 len(sites) + np.arange(len(figure.sole_sites)), witness))
         feet = foot_bounds(model, figure, reference, plain, contacts, state, support, radii, witness, TOLERANCES,
                            planted_tolerance, frames)
         out += list(feet or ())
         if track and witness is not None:
-            out += _tracking(reference, state, witness)
+            out += _tracking(reference, state, witness, len(sites))
         if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
             out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     layout = StateLayout.from_model(model)
@@ -167,40 +171,39 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
             out += capture_effort(model, reference, plain, filtered, engine)
     relaxations = []
     if engine is not None:
-        relaxations = _relax_heights(out, state, plain, model, sites, support, radii, flights)
+        relaxations = _relax_heights(out, state, plain, model)
         relaxations += [r for c in out if isinstance(c, SupportHeight) for r in c.reports]
     return out, relaxations
 
 
-def _tracking(reference, plain: PathState, capture: PathState) -> list:
-    """[the tracking bound] (`solver.constraints.tracking`): the contact sites of the capture (`capture`, the
-    witness) as the target and the plain spline's (`plain`) mean distance from them as the bound; [] where the
-    plain spline is on the capture at every point (nothing to keep it nearer)."""
-    bound = mean_site_distance(plain.sites, capture.sites, reference.weights)
-    return [SiteTracking(reference.weights, capture.sites, bound)] if bound > 0 else []
+def _tracking(reference, plain: PathState, capture: PathState, k: int) -> list:
+    """[the tracking bound] (`solver.constraints.tracking`): the k contact sites of the capture (`capture`, the
+    witness; the engine's first k sites) as the target and the plain spline's (`plain`) mean distance from them
+    as the bound; [] where the plain spline is on the capture at every point (nothing to keep it nearer)."""
+    target = capture.sites[:, :k]
+    bound = mean_site_distance(plain.sites[:, :k], target, reference.weights)
+    return [SiteTracking(reference.weights, target, bound)] if bound > 0 else []
 
 
-def _relax_heights(constraints, state, plain, model, sites, support, radii, flights) -> list[Relaxation]:
-    """Raise the pointwise limits (penetration, flight, ground) a full keyframe breaks by more than the
+def _relax_heights(constraints, state, plain, model) -> list[Relaxation]:
+    """Raise the pointwise limits (penetration, sole, flight, ground) a full keyframe breaks by more than the
     tolerance to the plain spline's own values on its excursion, at most the keyframe's own (module
     docstring); the reports. The
     keyframe's value is the plain spline's at the pair nearest it (`Penetration`'s pairs stand for the
     intervals between quadrature points, at their midpoints); every time series of the
     same site (and surface) is relaxed on its own run of broken pairs around the keyframe."""
     index, times, values = full_keyframes(plain)
-    keyed = site_positions(model, values, sites) if len(times) else np.zeros((0, len(sites), 3))
-    keyed[..., 2] -= radii  # the contact points, as `Penetration` samples them
     t = state.t
     half = 0.5 * float(np.max(np.diff(t))) + 1e-9  # [s] half the quadrature spacing (+ round-off)
     out = []
     for c in constraints:
-        if c.name not in ("penetration", "flight", "ground"):
+        if c.name not in ("penetration", "sole", "flight", "ground"):
             continue
         v = c.values(state)
         ptimes = c.pair_times(t) if hasattr(c, "pair_times") else t[c.rows]
         groups = getattr(c, "group", c.series)
         # penetration at the keyframes themselves (a `Penetration` pair stands for an interval, not a point)
-        depth = -c.surfaces.signed_distances(keyed)[0] if c.name == "penetration" else None  # (k, K, S)
+        depth = _keyed_depths(model, values, c) if isinstance(c, Penetration) else None  # (k, K, S)
         for g in np.unique(groups):
             in_g = np.flatnonzero(groups == g)
             for j, (k, tk) in enumerate(zip(index, times)):
@@ -215,6 +218,14 @@ def _relax_heights(constraints, state, plain, model, sites, support, radii, flig
                 out.append(Relaxation(c.name, str(c.labels[near]), int(k), min(a for a, _ in spans),
                                       max(b for _, b in spans), amount))
     return out
+
+
+def _keyed_depths(model, values: np.ndarray, c: Penetration) -> np.ndarray:
+    """(k, K, S) [m] the depth of each of a `Penetration`'s K sites' contact points (the sites less their radii, as it
+    samples them) in each of its S surfaces at the full keyframes' poses `values` (k, nq)."""
+    keyed = site_positions(model, values, c.sites) if len(values) else np.zeros((0, len(c.sites), 3))
+    keyed[..., 2] -= c.radii
+    return -c.surfaces.signed_distances(keyed)[0]
 
 
 def _relax_run(c, v: np.ndarray, ptimes: np.ndarray, pairs: np.ndarray, tk: float, forced: float):

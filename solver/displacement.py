@@ -196,7 +196,7 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     t0, t1 = float(times[0]), float(times[-1])
     t, w = simpson_points(times)  # every capture frame a point, the pins among them, and the midpoints between
     reference = ReferenceMotion.from_samples(model, times, qpos, t, w)
-    engine = InverseDynamics(model, figure.contact_sites)  # the effort bound of a capture needs the torques
+    engine = InverseDynamics(model, figure.surface_sites)  # the effort bound of a capture needs the torques
     schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)
     # the planted limits' tolerance is penetration's 1 mm, not the keyed path's 2 mm: a foot met within it floats

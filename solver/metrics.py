@@ -175,12 +175,14 @@ def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None,
         dynamics: also report the inverse-dynamics figures (`dynamics_metrics`; skipped, without an
             error, for a model the analytic engine does not support).
     Returns:
-        dict with max_penetration_mm, penetration_mm_by_site {site: mm}, max_norm_deviation (max over
+        dict with max_penetration_mm, penetration_mm_by_site {site: mm}, sole_mm_by_site {the figure's soles'
+            edge sites (`Figure.sole_sites`; {} without): mm in a surface}, max_norm_deviation (max over
         time and quaternions of |1 - |q||), max_hyperextension_deg {joint: deg} and overall,
         keyframe_error (if keyframes given), samples, and the `dynamics_metrics` keys.
     """
     layout = StateLayout.from_model(model)
-    sites = Figure.from_model(model).contact_sites if sites is None else tuple(sites)
+    figure = Figure.from_model(model)
+    sites = figure.contact_sites if sites is None else tuple(sites)
     t = sample_times(frame_times[0], frame_times[-1], rate)
     Y = interpolate(frame_times, frames, t)
     pen = Penetration(model, sites=sites, margin=0.0)
@@ -191,8 +193,12 @@ def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None,
         "rate_hz": rate,
         "max_penetration_mm": float(depth.max()),
         "penetration_mm_by_site": dict(zip(sites, depth.max(axis=0).round(3).tolist())),
+        "sole_mm_by_site": {},
         "max_norm_deviation": float(np.abs(1.0 - norms).max()),
     }
+    if figure.sole_sites:  # the soles' edges, points
+        edges = Penetration(model, sites=figure.sole_sites, margin=0.0).depths(Y, margin=0.0) * 1000.0
+        out["sole_mm_by_site"] = dict(zip(figure.sole_sites, edges.max(axis=0).round(3).tolist()))
     try:
         bend = Hyperextension(layout, Figure.from_model(model).flexion_axes)
         hyper = np.degrees(np.maximum(0.0, -bend.angles(Y))).max(axis=0)

@@ -30,7 +30,7 @@ import numpy as np
 from solver.constraints.base import Constraint
 from solver.path_state import add_at
 
-__all__ = ["GOLDEN_STEPS", "PENETRATION_RATE", "Penetration"]
+__all__ = ["GOLDEN_STEPS", "PENETRATION_RATE", "Penetration", "SoleEdges"]
 
 #: [1/s] the samples a box's pairs are searched at before the golden-section search: 1600 a second, eight
 #: per interval at 200 Hz, so the nearest face changes at most once between two samples of a foot
@@ -188,13 +188,15 @@ class Penetration(Constraint):
 
     Args:
         surfaces: StaticSurfaces. radii: (k,) [m]. t: (n,) quadrature points [s]. sites: (k,) names.
-        tolerance: [m].
+        tolerance: [m]. columns: (k,) each site's index among the engine's sites (None: the first k).
     """
 
     name, unit, scale = "penetration", "mm", 1e-3
 
-    def __init__(self, surfaces, radii, t: np.ndarray, sites, tolerance: float):
+    def __init__(self, surfaces, radii, t: np.ndarray, sites, tolerance: float, columns=None):
         self.surfaces, self.radii = surfaces, np.asarray(radii, float)
+        self.sites = tuple(sites)
+        self.columns = np.arange(len(sites)) if columns is None else np.asarray(columns, int)
         t = np.asarray(t, float)
         m, K, S = max(len(t) - 1, 0), len(sites), surfaces.count
         self.dt = np.diff(t)  # (m,) interval lengths [s]
@@ -223,7 +225,7 @@ class Penetration(Constraint):
         hit = state.cache.get(key)
         if hit is not None:
             return hit
-        p, v = state.sites, state.site_velocities
+        p, v = state.sites[:, self.columns], state.site_velocities[:, self.columns]
         low = p.copy()
         low[..., 2] -= self.radii
         h = self.dt[:, None, None]
@@ -271,9 +273,9 @@ class Penetration(Constraint):
         i, k, s = np.unravel_index(on, self.shape)
         H = _hermite(u[i, k, s])  # (4, q)
         gq = -g[on, None] * grad[i, k, s]  # (q, 3) d c / d contact point
-        n = len(self.dt) + 1
-        gp, gv = np.zeros((n, self.shape[1], 3)), np.zeros((n, self.shape[1], 3))
+        gp, gv = np.zeros(state.sites.shape), np.zeros(state.sites.shape)
         h = self.dt[i, None]
+        k = self.columns[k]
         add_at(gp, (i, k), H[0][:, None] * gq)
         add_at(gv, (i, k), H[1][:, None] * h * gq)
         add_at(gp, (i + 1, k), H[2][:, None] * gq)
@@ -293,11 +295,32 @@ class Penetration(Constraint):
         i, k, s = np.unravel_index(on, self.shape)
         H = _hermite(u[i, k, s])
         h = self.dt[i, None]
+        grad, col = grad[i, k, s], self.columns[k]
         out = []
         for pts, wp, wv in ((i, H[0], H[1]), (i + 1, H[2], H[3])):
-            J = site_velocity_jacobians(state, pts, k)  # (2, q, 3, nv): d v / d pose, d v / d qvel (= d p / d pose)
-            dp, dv0 = np.einsum("qa,qan->qn", grad[i, k, s], J[1]), np.einsum("qa,qan->qn", grad[i, k, s], J[0])
+            J = site_velocity_jacobians(state, pts, col)  # (2, q, 3, nv): d v / d pose, d v / d qvel (= d p / d pose)
+            dp, dv0 = np.einsum("qa,qan->qn", grad, J[1]), np.einsum("qa,qan->qn", grad, J[0])
             f0 = -(wp[:, None] * dp + (wv[:, None] * h) * dv0)
             f1 = -(wv[:, None] * h) * dp
-            out += site_terms(pts, k, {0: f0[:, None, :], 1: f1[:, None, :]}, d2[on, None, None])
+            out += site_terms(pts, col, {0: f0[:, None, :], 1: f1[:, None, :]}, d2[on, None, None])
         return out
+
+
+class SoleEdges(Penetration):
+    """The soles' edges (`solver.figure.Figure.soles`) out of every surface, as `Penetration` holds the contact
+    sites, but no deeper than a known path through the keyframes holds them: -min_u d(q(u)) <= limit [m], the
+    limit of each pair the capture's own depth there (0 where it is out; `witness`), else 0 relaxed around a
+    keyframe that breaks it (`solver.constraint_set`). A capture rests its feet rolled by a few degrees, an edge
+    a few millimetres into the floor, at keyframes a keyed path must meet; what the edges stop is a new roll onto
+    an edge (docs/contacts.md, "The soles' edges").
+
+    Args:
+        as `Penetration`; radii are 0 (the edges are points). witness: the capture's PathState at the points, or None.
+    """
+
+    name = "sole"
+
+    def __init__(self, surfaces, t: np.ndarray, sites, tolerance: float, columns, witness=None):
+        super().__init__(surfaces, np.zeros(len(sites)), t, sites, tolerance, columns)
+        if witness is not None:
+            self.limit = np.maximum(0.0, self.measure(witness))

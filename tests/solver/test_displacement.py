@@ -28,6 +28,8 @@ from solver.peak_bounds import filter_capture
 from solver.spline import interpolate
 from solver.spline_basis import SplineBasis
 
+from conftest import TOY_SCENE
+
 #: [Hz] the hand-made capture's frame rate
 FPS = 60.0
 #: [s] its length
@@ -420,3 +422,37 @@ def test_ramp_is_the_smoothed_positive_part_and_its_slope():
     step = 1e-9
     fd = (ramp(h + step, e)[0] - ramp(h - step, e)[0]) / (2 * step)
     np.testing.assert_allclose(slope, fd, rtol=0, atol=1e-4)
+
+
+def test_the_soles_edges_are_held_no_deeper_than_the_capture_holds_them():
+    """The soles' edge sites (``figure:sole:SIDE``, `Figure.soles`) of the toy figure, 1 cm below its heel and toe, in
+    the dipped capture: 2 cm into the floor in the dip, out elsewhere. The sole constraint's limit on each interval
+    between quadrature points is the capture's own deepest point there (brute force: MuJoCo's kinematics on the
+    capture's spline at 20 samples an interval), 0 where it is out; the clean, which lifts the heel and toe out
+    of the floor, leaves no edge deeper than the capture's (1001 times) within the penetration tolerance."""
+    from solver.constraints.penetration import SoleEdges
+    from solver.spline import interpolate as spline
+
+    scene = TOY_SCENE.replace("<custom>", '<custom><text name="figure:sole:left" data="l_sole_in l_sole_out"/>'
+                                          '<text name="figure:sole:right" data="r_sole_in r_sole_out"/>')
+    for s in "lr":  # the edges across the sole under the ball, 1 cm below the heel and toe
+        toe = f'<site name="{s}_toe" pos=".15 0 -.45"/>'
+        scene = scene.replace(toe, toe + f'<site name="{s}_sole_in" pos=".1 .05 -.46"/><site name="{s}_sole_out" pos=".1 -.05 -.46"/>')
+    model = mujoco.MjModel.from_xml_string(scene)
+    edges = [f"{s}_sole_{e}" for s in "lr" for e in ("in", "out")]
+    t, q = _capture(model, DIP)  # its lowest site, an edge, 1 cm up, then 2 cm down in the dip
+    disp = build_displacement(model, t, q)
+    (sole,) = [c for c in disp.lc.al.constraints if isinstance(c, SoleEdges)]
+    pts = disp.lc.al.t
+    u = np.linspace(0.0, 1.0, 21)
+    fine = (pts[:-1, None] + np.diff(pts)[:, None] * u).ravel()
+    depth = -_site_heights(model, spline(t, q, fine), edges).reshape(len(pts) - 1, len(u), len(edges)).min(axis=1)
+    expected = np.maximum(0.0, depth)[..., None]  # (interval, edge, surface): the floor's; the step is out of reach
+    expected = np.concatenate([expected, np.zeros_like(expected)], axis=-1).ravel()
+    assert expected.max() > 0.019  # the premise: 2 cm in the dip
+    np.testing.assert_allclose(sole.limit, expected, rtol=0, atol=2e-5)  # the cubic between points: microns
+    clean = clean_solution(disp, solve_displacement(disp, LeastChangeOptions()))
+    times = np.linspace(t[0], t[-1], 1001)
+    captured = np.maximum(0.0, -_site_heights(model, spline(t, q, times), edges))
+    cleaned = -_site_heights(model, clean.frames.path(times), edges)
+    assert (cleaned <= captured + PENETRATION_TOLERANCE + 1e-5).all(), (cleaned - captured).max()

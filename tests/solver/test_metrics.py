@@ -101,6 +101,28 @@ def test_standing_on_the_floor_is_not_flight(model, layout):
     assert dynamics_metrics(dynamics_series(model, times, frames, rate=200.0))["flight_s"] == pytest.approx(1.0, abs=0.01)
 
 
+def test_a_foot_rolled_about_its_long_axis_puts_its_sole_s_inner_edge_into_the_floor(model, layout):
+    """The figure standing with its soles on the floor, its left foot turned 20 degrees about its long axis (x)
+    at the ankle: the sole's inner edge site at (x, y, z) in the foot's frame goes to the ankle's height plus
+    y sin 20 + z cos 20 (a rotation by hand), into the floor; the soles' metric names it with that depth. The
+    outer edge rises out of the floor, and the heel and toe, on the axis, stay out of it."""
+    times, frames = still(model, layout, height=1.0)
+    frames[:, 2] -= lowest_site_height(model, frames[0])
+    d = mujoco.MjData(model)
+    d.qpos[:] = frames[0]
+    mujoco.mj_kinematics(model, d)
+    ankle = d.body("l_foot").xpos[2]
+    a = np.radians(20.0)
+    slot = model.joint("l_ankle").qposadr[0]
+    frames[:, slot:slot + 4] = [np.cos(a / 2), np.sin(a / 2), 0.0, 0.0]
+    _, y, z = model.site("l_sole_in").pos
+    assert y < 0  # the inner edge of the left foot: toward the body's midline
+    m = path_metrics(model, times, frames, dynamics=False)
+    depth = -1000 * (ankle + y * np.sin(a) + z * np.cos(a))  # [mm] 12.2
+    assert m["sole_mm_by_site"]["l_sole_in"] == pytest.approx(depth, abs=5e-4)  # rounded to the micrometre
+    assert m["sole_mm_by_site"]["l_sole_out"] == 0.0 and m["max_penetration_mm"] == 0.0
+
+
 def test_path_metrics_report_the_dynamics_figures_against_mujoco(model, layout, keyframes):
     """The plain spline of the shipped clip: torques of a few samples against mj_inverse, and the
     summary figures against their definitions."""
