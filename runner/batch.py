@@ -45,7 +45,7 @@ COLUMNS = ("clip", "folder", "status", "error", "wall_time_s", "keyframes", "var
 #: and skate in contact [mm, mm/frame], deviation from the capture [cm] and of its joint angles [deg], the change's peak accelerations beside
 #: the capture's at 6 Hz [m/s^2, rad/s^2] (`runner.bench.clean_measure`), the clean's CPU time [s]
 CLEAN_COLUMNS = ("clip", "folder", "status", "error", "wall_time_s", "displacement_frames", "solver_status",
-                 "penetration_mm", "float_mm", "skate_mm", "deviation_mean_cm", "deviation_max_cm", "angle_mean_deg",
+                 "penetration_mm", "sole_mm", "float_mm", "skate_mm", "deviation_mean_cm", "deviation_max_cm", "angle_mean_deg",
                  "angle_max_deg", "change_pelvis_m_s2", "capture_pelvis_m_s2", "change_joint_rad_s2", "capture_joint_rad_s2", "cpu_s")
 #: the figures of CLEAN_COLUMNS that the totals row gives as the mean over the clips (the others: the worst)
 CLEAN_MEANS = ("deviation_mean_cm", "angle_mean_deg")

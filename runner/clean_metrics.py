@@ -6,6 +6,9 @@
   joint's rotation on the cleaned clip and on the capture (the geodesic angle 2 acos |<q, q_ref>| of the local
   quaternions of every ball joint and of the free root, `runner.motion_metrics`' joint_orientation_deg), over every
   frame and joint: mean and max [deg] (the field's mean per-joint angle error, MPJAE).
+* **The soles' edges**: how much deeper than the capture a sole's edge goes into a surface at the same frame
+  (`solver.figure.Figure.soles`, the sole constraint's measure; 0 for a figure without them) [mm]: a foot
+  rolled onto its edge.
 * **The change's jolts**: the peak acceleration of the change, a_clean - a_capture (finite differences of
   both at the frame rate, `runner.jolts.differentiate`): the pelvis's [m/s^2] and the largest ball joint's
   [rad/s^2], beside the capture's own peaks after the 6 Hz low-pass filter (`runner.jolts.jolt_figures`):
@@ -41,6 +44,20 @@ def _joint_angles(model, clean: np.ndarray, capture: np.ndarray) -> np.ndarray:
     return np.degrees(angle_between(clean[:, q], capture[:, q]))
 
 
+def _sole_beyond_mm(model, clean: np.ndarray, capture: np.ndarray) -> float:
+    """[mm] the most any sole edge goes deeper into a surface than on the capture at the same frame (module
+    docstring); 0 without soles or surfaces."""
+    from solver.figure import Figure
+    from solver.surfaces import StaticSurfaces
+    from solver.terms.penetration import Penetration
+
+    soles = Figure.from_model(model).sole_sites
+    if not soles or not StaticSurfaces.from_model(model).count:
+        return 0.0
+    pen = Penetration(model, sites=soles)
+    return 1000.0 * float(np.maximum(0.0, pen.depths(clean) - pen.depths(capture)).max(initial=0.0))
+
+
 def clean_figures(model, clean: np.ndarray, capture: np.ndarray, fps: float, capture_filtered: np.ndarray) -> dict:
     """The deviation of a cleaned clip from its capture and the change's peak accelerations (module docstring).
 
@@ -49,8 +66,9 @@ def clean_figures(model, clean: np.ndarray, capture: np.ndarray, fps: float, cap
             frames at i / fps, n >= 3. fps: [Hz] > 0. capture_filtered: (n, nq) the capture low-pass
             filtered at 6 Hz (`runner.jolts.filter_capture`).
     Returns:
-        {"deviation_mean_cm", "deviation_max_cm", "angle_mean_deg", "angle_max_deg", "change_pelvis_m_s2", "change_joint_rad_s2",
-        "change_joint", "capture_pelvis_m_s2", "capture_joint_rad_s2"} (JSON-serializable floats and a name).
+        {"deviation_mean_cm", "deviation_max_cm", "angle_mean_deg", "angle_max_deg", "sole_mm", "change_pelvis_m_s2",
+        "change_joint_rad_s2", "change_joint", "capture_pelvis_m_s2", "capture_joint_rad_s2"} (JSON-serializable floats
+        and a name).
     Raises:
         InputError: shapes that do not fit the model or fewer than 3 frames (`runner.jolts.differentiate`).
     """
@@ -67,6 +85,7 @@ def clean_figures(model, clean: np.ndarray, capture: np.ndarray, fps: float, cap
     own = jolt_figures(model, capture_filtered, fps)
     return {"deviation_mean_cm": 100.0 * float(dev.mean()), "deviation_max_cm": 100.0 * float(dev.max()),
             "angle_mean_deg": float(angle.mean()), "angle_max_deg": float(angle.max(initial=0.0)),
+            "sole_mm": _sole_beyond_mm(model, clean, capture),
             "change_pelvis_m_s2": pelvis, "change_joint_rad_s2": peaks.get(worst, float("nan")), "change_joint": worst,
             "capture_pelvis_m_s2": own["peak_pelvis_acceleration_m_s2"],
             "capture_joint_rad_s2": own["peak_angular_acceleration_max_rad_s2"]}

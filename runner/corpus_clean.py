@@ -99,7 +99,7 @@ def holds_every_measured(result: dict) -> bool:
 def measure_clip(npz: Path, peer: bool) -> dict:
     """The capture's figures (`capture_penetration_mm`, `capture_float_mm`, `capture_skate_mm`) and, with
     `peer`, the IK peer's on the same clip (`peer_deviation_mean_cm`, `peer_cpu_s`, and its penetration,
-    float, skate and change's peaks as `peer_*`) from a clean's saved path `npz`.
+    float, skate, soles' edges and change's peaks as `peer_*`) from a clean's saved path `npz`.
 
     Raises:
         OSError, KeyError: `npz` is missing or not a clean's saved path.
@@ -115,7 +115,7 @@ def measure_clip(npz: Path, peer: bool) -> dict:
         qpos, cpu = ik_clean(model, times, ref, contacts)
         f = clean_figures_of(npz, qpos)
         out |= {f"peer_{k}": f[k] for k in ("penetration_mm", "float_mm", "skate_mm", "deviation_mean_cm",
-                                            "deviation_max_cm", "angle_mean_deg", "angle_max_deg", "change_pelvis_m_s2",
+                                            "deviation_max_cm", "angle_mean_deg", "angle_max_deg", "sole_mm", "change_pelvis_m_s2",
                                             "change_joint_rad_s2")}
         out["peer_cpu_s"] = cpu
     return out

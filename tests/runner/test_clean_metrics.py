@@ -56,3 +56,28 @@ def test_a_figure_shifted_whole_deviates_by_the_shift_and_turns_no_joint():
     assert f["deviation_mean_cm"] == pytest.approx(2.0, abs=1e-9)
     assert f["deviation_max_cm"] == pytest.approx(2.0, abs=1e-9)
     assert f["angle_max_deg"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_foot_rolled_onto_its_edge_is_the_depth_its_edge_goes_beyond_the_capture_s():
+    """The capture stands on the floor; the clean turns the left foot 20 degrees about its long axis (x) at the ankle
+    at one frame: its sole's inner edge at (x, y, z) in the foot's frame goes to the ankle's height plus
+    y sin 20 + z cos 20 (a rotation by hand), which the soles' figure reports. With the capture rolled alike,
+    nothing is beyond it."""
+    model = _figure()
+    capture = np.tile(model.qpos0, (N, 1))
+    data = mujoco.MjData(model)
+    data.qpos[:] = capture[0]
+    mujoco.mj_kinematics(model, data)
+    capture[:, 2] -= data.site_xpos[[model.site(s).id for s in ("l_heel", "l_toe", "r_heel", "r_toe")], 2].min()
+    capture[:, 0] = -3.0  # away from the step
+    data.qpos[:] = capture[0]
+    mujoco.mj_kinematics(model, data)
+    ankle = data.body("l_foot").xpos[2]
+    clean = capture.copy()
+    a = np.radians(20.0)
+    slot = model.joint("l_ankle").qposadr[0]
+    clean[7, slot:slot + 4] = [np.cos(a / 2), np.sin(a / 2), 0.0, 0.0]
+    _, y, z = model.site("l_sole_in").pos
+    f = clean_figures(model, clean, capture, FPS, capture)
+    assert f["sole_mm"] == pytest.approx(-1000.0 * (ankle + y * np.sin(a) + z * np.cos(a)), abs=1e-6)
+    assert clean_figures(model, clean, clean, FPS, clean)["sole_mm"] == 0.0
