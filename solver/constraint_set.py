@@ -1,7 +1,7 @@
 """The figure's constraints for one problem, each a function with its unit and tolerance (docs/design.md).
 
     penetration  every contact site's lowest point outside every plane and box, at every instant  d >= 0     0.9 mm (below)
-    sole         the soles' edges likewise, no deeper than the capture holds them (else 0)  -d <= capture's  0.9 mm
+    sole         in a clean, the soles' edges likewise, no deeper than the capture holds them  -d <= capture's  0.9 mm
     planted      over each foot contact, the support site's mean height                 mean h <= FLOAT_LIMIT 2 mm
                  with a capture, over each site contact, that site's (solver.foot_bounds) <= the known paths'
     slide        over each site contact, the slide beyond what the keyframes force    <= allowance (below)  2 mm
@@ -127,7 +127,8 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         model: MjModel of the scene. figure: its `solver.figure.Figure`. reference: `ReferenceMotion` (the
             quadrature points). plain: the plain spline's FrameSet (keyframes: the full ones pin sites).
         contacts: `solver.contacts.Contact`s. flights: ((start, end), ...) [s]. engine: the contact
-            sites' `SiteKinematics` (figure.contact_sites, in that order). planted_tolerance: [m] the planted
+            sites' `SiteKinematics` (figure.contact_sites, in that order; a clean's, `figure.surface_sites`: the
+            soles' edges follow them and are held by the sole constraint). planted_tolerance: [m] the planted
             limits' tolerance, also where a keyframe that holds a foot up relaxes them (a clean's is 1 mm:
             `solver.displacement`). track: a keyed path: with a capture, hold the contact sites as near it
             as the plain spline keeps them (`solver.constraints.tracking`; not a clean, whose plain spline is
@@ -150,7 +151,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     if engine is not None and surfaces.count:
         out.append(Penetration(surfaces, radii, t, sites, PENETRATION_TOLERANCE))
         witness = None if capture is None else capture_state(model, reference, capture, engine)
-        if figure.sole_sites:  # the engine's sites: the contact sites, then the soles' edges
+        if frames is not None and figure.sole_sites:  # a clean's engine: the contact sites, then the soles' edges
             out.append(SoleEdges(surfaces, t, figure.sole_sites, PENETRATION_TOLERANCE,
                                  len(sites) + np.arange(len(figure.sole_sites)), witness))
         feet = foot_bounds(model, figure, reference, plain, contacts, state, support, radii, witness, TOLERANCES,

@@ -111,7 +111,7 @@ class Figure:
             (standing upright: the identity pose).
         neck: the neck and head bones, or None if the model has no geom ``neck`` or site ``head``.
         soles: {side: (inner edge site, outer edge site)} (``figure:sole:SIDE``; {} when not annotated): the
-            edges of a foot's sole across the ball of the foot, held out of every surface no deeper than the
+            edges of a foot's sole across the ball of the foot, held in a clean no deeper in any surface than the
             capture holds them (the sole constraint), never in contact themselves (docs/contacts.md, "The soles'
             edges").
     Equality is identity (the fields hold arrays); build one per model with `from_model`.

@@ -191,9 +191,9 @@ def build_least_change(model, keyframes, *, contacts=(), flights=None, capture=N
     t, w = quadrature_points(t0, t1, rate, np.concatenate([plain.times, edges]))  # keyframes: no jolt unseen
     reference = ReferenceMotion.from_frames(model, plain, t, w)
     if forces or capture is not None:  # the force bounds, or the effort bound of a capture's keyframes
-        engine = InverseDynamics(model, figure.surface_sites)
+        engine = InverseDynamics(model, figure.contact_sites)
     else:
-        engine = SiteKinematics(model, figure.surface_sites) if figure.contact_sites else None
+        engine = SiteKinematics(model, figure.contact_sites) if figure.contact_sites else None
     constraints, relaxations = figure_constraints(model, figure, reference, plain, tuple(schedule), flights,
                                                   engine, capture=capture, track=True)
     if forces:  # with a capture, its peak ground force bounds the path's

@@ -307,12 +307,12 @@ class Penetration(Constraint):
 
 
 class SoleEdges(Penetration):
-    """The soles' edges (`solver.figure.Figure.soles`) out of every surface, as `Penetration` holds the contact
-    sites, but no deeper than a known path through the keyframes holds them: -min_u d(q(u)) <= limit [m], the
-    limit of each pair the capture's own depth there (0 where it is out; `witness`), else 0 relaxed around a
-    keyframe that breaks it (`solver.constraint_set`). A capture rests its feet rolled by a few degrees, an edge
-    a few millimetres into the floor, at keyframes a keyed path must meet; what the edges stop is a new roll onto
-    an edge (docs/contacts.md, "The soles' edges").
+    """The soles' edges (`solver.figure.Figure.soles`) of a clean out of every surface, as `Penetration` holds the
+    contact sites, but no deeper than the capture holds them: -min_u d(q(u)) <= limit [m], the limit of each pair
+    the capture's own depth there (0 where it is out; `witness`; without one 0, relaxed around a keyframe that
+    breaks it, `solver.constraint_set`). A capture rests its feet rolled by a few degrees, an edge a few
+    millimetres into the floor; what the constraint stops is a new roll onto an edge (docs/contacts.md, "The
+    soles' edges").
 
     Args:
         as `Penetration`; radii are 0 (the edges are points). witness: the capture's PathState at the points, or None.
