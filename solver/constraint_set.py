@@ -158,7 +158,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
                            planted_tolerance, frames)
         out += list(feet or ())
         if track and witness is not None:
-            out += _tracking(reference, state, witness, len(sites))
+            out += _tracking(reference, state, witness)
         if len(contacts) or len(flights):  # nothing known of the contacts: no ground or flight height to hold
             out += _flight_and_ground(model, reference, plain, engine, support, radii, flights, sites, t, capture)
     layout = StateLayout.from_model(model)
@@ -177,13 +177,12 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     return out, relaxations
 
 
-def _tracking(reference, plain: PathState, capture: PathState, k: int) -> list:
-    """[the tracking bound] (`solver.constraints.tracking`): the k contact sites of the capture (`capture`, the
-    witness; the engine's first k sites) as the target and the plain spline's (`plain`) mean distance from them
-    as the bound; [] where the plain spline is on the capture at every point (nothing to keep it nearer)."""
-    target = capture.sites[:, :k]
-    bound = mean_site_distance(plain.sites[:, :k], target, reference.weights)
-    return [SiteTracking(reference.weights, target, bound)] if bound > 0 else []
+def _tracking(reference, plain: PathState, capture: PathState) -> list:
+    """[the tracking bound] (`solver.constraints.tracking`): the contact sites of the capture (`capture`, the
+    witness) as the target and the plain spline's (`plain`) mean distance from them as the bound; [] where the
+    plain spline is on the capture at every point (nothing to keep it nearer)."""
+    bound = mean_site_distance(plain.sites, capture.sites, reference.weights)
+    return [SiteTracking(reference.weights, capture.sites, bound)] if bound > 0 else []
 
 
 def _relax_heights(constraints, state, plain, model) -> list[Relaxation]:

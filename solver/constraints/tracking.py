@@ -48,7 +48,7 @@ class SiteTracking(Constraint):
 
     Args:
         weights: (n,) quadrature weights [s]. target: (n, k, 3) the capture's contact sites at the points [m],
-            the engine's first k sites (the soles' edges follow them and are not tracked). bound: B [m] > 0, the plain spline's figure.
+            in the order of the engine's sites. bound: B [m] > 0, the plain spline's figure.
     Raises:
         ValueError: bound is not a positive number.
     """
@@ -77,7 +77,7 @@ class SiteTracking(Constraint):
         key = ("tracking", id(self))
         hit = state.cache.get(key)
         if hit is None:
-            d = state.sites[:, :self.target.shape[1]] - self.target
+            d = state.sites - self.target
             state.cache[key] = hit = (d, np.linalg.norm(d, axis=2, keepdims=True))
         return hit
 
@@ -90,6 +90,4 @@ class SiteTracking(Constraint):
             return
         d, r = self._offsets(state)
         unit = np.divide(d, r, out=np.zeros_like(d), where=r > 0.0)  # 0 on the capture (a keyframe: fixed)
-        full = np.zeros(state.sites.shape)
-        full[:, :d.shape[1]] = float(g[0]) * (self.w / (self.T * d.shape[1]))[:, None, None] * unit
-        state.add_sites(full)
+        state.add_sites(float(g[0]) * (self.w / (self.T * d.shape[1]))[:, None, None] * unit)
