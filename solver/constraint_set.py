@@ -151,7 +151,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
     if engine is not None and surfaces.count:
         out.append(Penetration(surfaces, radii, t, sites, PENETRATION_TOLERANCE))
         witness = None if capture is None else capture_state(model, reference, capture, engine)
-        if frames is not None and figure.sole_sites:  # a clean's engine: the contact sites, then the soles' edges
+        if frames is not None and figure.sole_sites and witness is not None:  # a clean's engine: contact sites, soles' edges
             out.append(SoleEdges(surfaces, t, figure.sole_sites, PENETRATION_TOLERANCE,
                                  len(sites) + np.arange(len(figure.sole_sites)), witness))
         feet = foot_bounds(model, figure, reference, plain, contacts, state, support, radii, witness, TOLERANCES,
@@ -186,7 +186,7 @@ def _tracking(reference, plain: PathState, capture: PathState) -> list:
 
 
 def _relax_heights(constraints, state, plain, model) -> list[Relaxation]:
-    """Raise the pointwise limits (penetration, sole, flight, ground) a full keyframe breaks by more than the
+    """Raise the pointwise limits (penetration, flight, ground) a full keyframe breaks by more than the
     tolerance to the plain spline's own values on its excursion, at most the keyframe's own (module
     docstring); the reports. The
     keyframe's value is the plain spline's at the pair nearest it (`Penetration`'s pairs stand for the
@@ -197,7 +197,7 @@ def _relax_heights(constraints, state, plain, model) -> list[Relaxation]:
     half = 0.5 * float(np.max(np.diff(t))) + 1e-9  # [s] half the quadrature spacing (+ round-off)
     out = []
     for c in constraints:
-        if c.name not in ("penetration", "sole", "flight", "ground"):
+        if c.name not in ("penetration", "flight", "ground"):
             continue
         v = c.values(state)
         ptimes = c.pair_times(t) if hasattr(c, "pair_times") else t[c.rows]

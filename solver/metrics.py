@@ -185,22 +185,20 @@ def path_metrics(model, frame_times, frames, keyframes: Keyframes | None = None,
     sites = figure.contact_sites if sites is None else tuple(sites)
     t = sample_times(frame_times[0], frame_times[-1], rate)
     Y = interpolate(frame_times, frames, t)
-    pen = Penetration(model, sites=sites, margin=0.0)
-    depth = pen.depths(Y, margin=0.0) * 1000.0  # (n, k) mm
+    soles = tuple(s for s in figure.sole_sites if s not in sites)  # the soles' edges, points
+    both = Penetration(model, sites=sites + soles, margin=0.0).depths(Y, margin=0.0) * 1000.0  # (n, k + e) mm
+    depth, edges = both[:, :len(sites)], both[:, len(sites):]
     norms = np.linalg.norm(Y[:, layout.quat_slots], axis=-1)
     out = {
         "samples": len(t),
         "rate_hz": rate,
         "max_penetration_mm": float(depth.max()),
         "penetration_mm_by_site": dict(zip(sites, depth.max(axis=0).round(3).tolist())),
-        "sole_mm_by_site": {},
+        "sole_mm_by_site": dict(zip(soles, edges.max(axis=0).round(3).tolist())),
         "max_norm_deviation": float(np.abs(1.0 - norms).max()),
     }
-    if figure.sole_sites:  # the soles' edges, points
-        edges = Penetration(model, sites=figure.sole_sites, margin=0.0).depths(Y, margin=0.0) * 1000.0
-        out["sole_mm_by_site"] = dict(zip(figure.sole_sites, edges.max(axis=0).round(3).tolist()))
     try:
-        bend = Hyperextension(layout, Figure.from_model(model).flexion_axes)
+        bend = Hyperextension(layout, figure.flexion_axes)
         hyper = np.degrees(np.maximum(0.0, -bend.angles(Y))).max(axis=0)
         out["max_hyperextension_deg_by_joint"] = dict(zip(bend.joint_names, hyper.round(3).tolist()))
         out["max_hyperextension_deg"] = float(hyper.max())

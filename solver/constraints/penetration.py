@@ -309,18 +309,16 @@ class Penetration(Constraint):
 class SoleEdges(Penetration):
     """The soles' edges (`solver.figure.Figure.soles`) of a clean out of every surface, as `Penetration` holds the
     contact sites, but no deeper than the capture holds them: -min_u d(q(u)) <= limit [m], the limit of each pair
-    the capture's own depth there (0 where it is out; `witness`; without one 0, relaxed around a keyframe that
-    breaks it, `solver.constraint_set`). A capture rests its feet rolled by a few degrees, an edge a few
+    the capture's own depth there (0 where it is out). A capture rests its feet rolled by a few degrees, an edge a few
     millimetres into the floor; what the constraint stops is a new roll onto an edge (docs/contacts.md, "The
     soles' edges").
 
     Args:
-        as `Penetration`; radii are 0 (the edges are points). witness: the capture's PathState at the points, or None.
+        as `Penetration`; radii are 0 (the edges are points). witness: the capture's PathState at the points.
     """
 
     name = "sole"
 
-    def __init__(self, surfaces, t: np.ndarray, sites, tolerance: float, columns, witness=None):
+    def __init__(self, surfaces, t: np.ndarray, sites, tolerance: float, columns, witness):
         super().__init__(surfaces, np.zeros(len(sites)), t, sites, tolerance, columns)
-        if witness is not None:
-            self.limit = np.maximum(0.0, self.measure(witness))
+        self.limit = np.maximum(0.0, self.measure(witness))
