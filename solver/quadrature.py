@@ -80,36 +80,46 @@ def quadrature_points(t0: float, t1: float, rate: float, knots=()) -> tuple[np.n
     return allt[order], np.concatenate([np.full(len(t), h), np.zeros(len(k))])[order]
 
 
-def simpson_points(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Simpson's rule on every interval between consecutive frames: the frames and the intervals' midpoints,
-    weights h/6 at each end (a frame between two intervals gathers both) and 4h/6 at the midpoint.
+def simpson_points(frames: np.ndarray, panels: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Simpson's rule on every interval between consecutive frames, composite over `panels` equal panels: each
+    panel's ends and midpoint, weights h/6 at each end (a point between two panels gathers both) and 4h/6 at the
+    midpoint, h the panel's length.
 
-    Exact for a cubic on each interval (Burden & Faires, Numerical Analysis, 9th ed., sec. 4.3); a natural
+    Exact for a cubic on each interval (Burden & Faires, Numerical Analysis, 9th ed., sec. 4.3-4.4); a natural
     cubic spline through the frames has its acceleration linear there, so the integral of a squared
     acceleration under a constant metric is exact, and the frames, where a spline's acceleration peaks,
     are points (a pointwise bound on acceleration checked there holds between them). The rule of a clean
-    (`solver.displacement`), whose path is such a spline with a knot at every capture frame.
+    (`solver.displacement`), whose path is such a spline with a knot at every capture frame; more panels where
+    the cubic between two points does not follow a contact site there (`solver.displacement.frame_panels`).
 
     Args:
-        frames: (m,) strictly increasing frame times [s], m >= 2.
+        frames: (m,) strictly increasing frame times [s], m >= 2. panels: (m - 1,) panels of each interval,
+            each >= 1 (None: one each).
     Returns:
-        t: (2m - 1,) points [s] (frames at the even indices); w: same shape, weights [s] summing to the span.
+        t: (2 sum(panels) + 1,) points [s], the frames among them (at 2 cumsum(panels) from 0); w: same shape,
+        weights [s] summing to the span.
     Raises:
         InputError: more than MAX_QUADRATURE_POINTS points (names the frames and the fix).
     """
     from solver.errors import InputError
 
     x = np.asarray(frames, float)
-    if 2 * len(x) - 1 > MAX_QUADRATURE_POINTS:
-        raise InputError(f"{len(x)} frames need {2 * len(x) - 1} quadrature points by Simpson's rule (at most "
+    k = np.ones(len(x) - 1, int) if panels is None else np.asarray(panels, int)
+    n = 2 * int(k.sum()) + 1
+    if n > MAX_QUADRATURE_POINTS:
+        raise InputError(f"{len(x)} frames need {n} quadrature points by Simpson's rule (at most "
                          f"{MAX_QUADRATURE_POINTS}); split the clip and clean it in parts")
-    h = np.diff(x)
-    t = np.empty(2 * len(x) - 1)
-    t[0::2], t[1::2] = x, x[:-1] + 0.5 * h
-    w = np.zeros_like(t)
-    w[1::2] = 4.0 * h / 6.0
-    w[0:-1:2] += h / 6.0
-    w[2::2] += h / 6.0
+    seg = np.repeat(np.arange(len(k)), 2 * k)  # the interval of each point but the last
+    step = np.arange(len(seg)) - np.repeat(2 * np.r_[0, np.cumsum(k)[:-1]], 2 * k)  # its half-panel within it
+    h = np.diff(x)[seg] / (2 * k[seg])  # [s] half a panel
+    t = np.r_[x[seg] + step * h, x[-1]]
+    t[np.r_[0, 2 * np.cumsum(k)]] = x  # the frames exactly, not sums of steps
+    w = np.zeros(n)
+    mid = step % 2 == 1
+    w[:-1][mid] = 4.0 * 2.0 * h[mid] / 6.0
+    ends = np.flatnonzero(~mid)  # a panel starts at each even half-step
+    w[ends] += 2.0 * h[ends] / 6.0
+    w[ends + 2] += 2.0 * h[ends] / 6.0
     return t, w
 
 

@@ -89,3 +89,26 @@ def test_simpson_points_refuse_more_frames_than_the_points_allow():
     with pytest.raises(InputError, match=f"{m + 1} frames need {2 * m + 1} quadrature points") as e:
         simpson_points(np.arange(m + 1) / 120.0)
     assert "in parts" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_simpson_points_in_panels_integrate_a_piecewise_cubic_exactly_and_keep_the_frames():
+    """Composite Simpson over several panels of an interval is exact for a cubic on each panel, so for a
+    piecewise cubic with a knot at every frame (scipy's spline, its antiderivative the reference); every frame
+    is a point at the index two panels count to, the points are the panels' ends and midpoints, equally spaced
+    within each interval; one panel each is the plain rule to the last bit."""
+    rng = np.random.default_rng(4)
+    frames = np.cumsum(np.r_[0.0, rng.uniform(0.01, 0.05, 9)])
+    panels = np.array([1, 2, 4, 1, 8, 2, 3, 1, 5])
+    p = CubicSpline(frames, rng.normal(size=10))
+    t, w = simpson_points(frames, panels)
+    assert len(t) == 2 * panels.sum() + 1 and np.all(np.diff(t) > 0)
+    np.testing.assert_array_equal(t[np.r_[0, 2 * np.cumsum(panels)]], frames)
+    for i, k in enumerate(panels):
+        inside = t[2 * panels[:i].sum(): 2 * panels[: i + 1].sum() + 1]
+        np.testing.assert_allclose(np.diff(inside), (frames[i + 1] - frames[i]) / (2 * k), rtol=1e-12)
+    exact = float(p.integrate(frames[0], frames[-1]))
+    assert abs(w @ p(t) - exact) <= 1e-12 * max(1.0, abs(exact))
+    one_t, one_w = simpson_points(frames, np.ones(len(panels), int))
+    plain_t, plain_w = simpson_points(frames)
+    np.testing.assert_array_equal(one_t, plain_t)
+    np.testing.assert_array_equal(one_w, plain_w)
