@@ -51,7 +51,10 @@ change that meets the constraints (Gleicher, "Motion editing with spacetime cons
   acceleration part exactly under a constant mass matrix, and the frames, where its acceleration peaks, are
   points. The keyed path's midpoint rule at `LeastChangeOptions.rate` (200 points a second) plus the frames
   spent 7 points on every interval of a 30 fps capture for nothing the bounds measure; the clean then cost
-  2.5 times as much on Bandai Namco's 30 fps clips, with the same bounds held.
+  2.5 times as much on Bandai Namco's 30 fps clips, with the same bounds held. Where a frame interval is
+  long for the motion, it is split into 2, 4 or 8 panels of the rule (`frame_panels`): the penetration
+  constraint holds the deepest point of a site's cubic between two points, and that cubic must follow the
+  site's path to within the margin its tolerance leaves under the 1 mm bound.
 * The solver sees the displacement's frames; the capture enters as a fixed base motion at the
   quadrature points (`AugmentedLagrangian.base`: the path is c + d with its first and second
   derivatives), so every constraint and gradient is the keyed path's, with the same dPath/dP.
@@ -67,7 +70,7 @@ import numpy as np
 
 from solver.capture_bounds import jolt_columns
 from solver.change import MeasureOfChange
-from solver.constraint_set import ANGLE_RESOLUTION, TOLERANCES, figure_constraints
+from solver.constraint_set import ANGLE_RESOLUTION, PENETRATION_TOLERANCE, TOLERANCES, figure_constraints
 from solver.constraints.acceleration import AccelerationBound
 from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.contact_schedule import ContactSchedule
@@ -80,14 +83,15 @@ from solver.kinematics import TangentMap
 from solver.lagrangian import AugmentedLagrangian
 from solver.layout import StateLayout
 from solver.least_change import STANDARD_GRAVITY, LeastChange, LeastChangeOptions, solve_least_change
+from solver.path_state import PathState
 from solver.peak_bounds import CUTOFF_HZ, filter_capture, frame_derivatives
 from solver.quadrature import simpson_points
 from solver.reference import ReferenceMotion, equal_mass_matrices
 from solver.solution import Solution
 from solver.spline import interpolate
 
-__all__ = ["CORRECTION_TIME", "FEET", "Displacement", "anchors", "build_displacement", "clean_solution", "pin_frames",
-           "solve_displacement", "still_peaks"]
+__all__ = ["CORRECTION_TIME", "CUBIC_ERROR", "FEET", "MAX_PANELS", "Displacement", "anchors", "build_displacement",
+           "clean_solution", "frame_panels", "pin_frames", "solve_displacement", "still_peaks"]
 
 #: [s] the duration that divides a correction priced by its pose from one priced by its acceleration (the
 #: measure of change's omega = pi / CORRECTION_TIME = 2 pi CUTOFF_HZ): the band of the captured movement
@@ -194,9 +198,10 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     anchor = anchors(qpos, layout.quat_slots)  # d = 0: every capture frame a frame of d, the pins fixed
     plain = FrameSet(times, anchor, np.repeat(is_pin[:, None], qpos.shape[1], axis=1), is_pin)
     t0, t1 = float(times[0]), float(times[-1])
-    t, w = simpson_points(times)  # every capture frame a point, the pins among them, and the midpoints between
-    reference = ReferenceMotion.from_samples(model, times, qpos, t, w)
     engine = InverseDynamics(model, figure.surface_sites)  # the effort bound of a capture needs the torques
+    # every capture frame a point, the pins among them, and each panel's midpoint; more panels where the sites need them
+    t, w = simpson_points(times, frame_panels(times, qpos, tmap, engine))
+    reference = ReferenceMotion.from_samples(model, times, qpos, t, w)
     schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)
     # the planted limits' tolerance is penetration's 1 mm, not the keyed path's 2 mm: a foot met within it floats
@@ -218,6 +223,55 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
     lc = LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots, grid=times)
     return Displacement(lc, times, qpos, anchor, pinned, capture_frames)
+
+
+#: [m] the most the cubic between two quadrature points may miss a site's path by: the margin the penetration
+#: constraint's tolerance leaves under its 1 mm bound for that cubic (`solver.constraint_set.PENETRATION_TOLERANCE`)
+CUBIC_ERROR = TOLERANCES["penetration"] - PENETRATION_TOLERANCE
+#: [panels] the most Simpson panels a frame interval is split into: points a sixteenth of a frame apart (2 ms at
+#: 30 fps), the cubic's miss there 16^-3 of one panel's (4 cm between two points comes within 0.01 mm)
+MAX_PANELS = 8
+
+
+def frame_panels(times: np.ndarray, qpos: np.ndarray, tmap: TangentMap, engine) -> np.ndarray:
+    """(m - 1,) Simpson panels of each capture frame interval (`simpson_points`): one, doubled while the cubic
+    Hermite curve between two consecutive points (each site's position and velocity there: the curve whose
+    deepest point the penetration constraint holds, `solver.constraints.penetration`) misses a site of
+    `engine` at their midpoint by more than CUBIC_ERROR on the capture's own path, up to MAX_PANELS.
+
+    The cubic's miss at the midpoint is h^4 |p''''| / 384 on a smooth path p over h (Burden & Faires, Numerical
+    Analysis, 9th ed., thm. 3.9), so each doubling divides it by 16. A capture's frame interval is short enough
+    on a clip of a body's motion (0.04 mm at 30 fps on a Bandai Namco walk) but not on one whose joints turn by
+    tens of degrees from one frame to the next (poses estimated from video: 4.3 mm at 25 fps, 42 mm at 30 fps),
+    where a heel's path between two points dipped 1 mm into the floor while the cubic held it out. A clean
+    moves the capture by centimetres, not its motion's shape, so the panels that serve the capture serve it.
+
+    Args:
+        times: (m,) [s] the capture's frame times, increasing. qpos: (m, nq) its frames. tmap: TangentMap.
+        engine: the sites' `InverseDynamics` (its `forward` and `site_velocities`).
+    """
+    panels = np.ones(len(times) - 1, int)
+    while True:
+        t, _ = simpson_points(times, panels)
+        mid = 0.5 * (t[:-1] + t[1:])
+        p, v = _sites(times, qpos, np.r_[t, mid], tmap, engine)
+        n, h = len(t), np.diff(t)[:, None, None]
+        cubic = 0.5 * (p[: n - 1] + p[1:n]) + h / 8.0 * (v[: n - 1] - v[1:n])  # the Hermite curve at the midpoint
+        miss = np.linalg.norm(cubic - p[n:], axis=-1).max(axis=1)  # (n - 1,) [m]
+        grow = np.zeros(len(panels), bool)
+        grow[np.searchsorted(times, mid[miss > CUBIC_ERROR]) - 1] = True
+        grow &= panels < MAX_PANELS
+        if not grow.any():
+            return panels
+        panels[grow] *= 2
+
+
+def _sites(times: np.ndarray, qpos: np.ndarray, t: np.ndarray, tmap: TangentMap, engine) -> tuple[np.ndarray, np.ndarray]:
+    """(positions, velocities), each (len(t), k, 3) [m, m/s], of the engine's sites on the natural spline through
+    the capture's frames at `t` [s]."""
+    Y, Y1 = interpolate(times, qpos, t, 0), interpolate(times, qpos, t, 1)
+    state = PathState(t, Y, Y1, np.zeros_like(Y), tmap, engine)
+    return state.sites, state.site_velocities
 
 
 class ChangeAcceleration(AccelerationBound):

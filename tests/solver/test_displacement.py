@@ -19,12 +19,23 @@ import pytest
 from solver.constraint_set import PENETRATION_TOLERANCE
 from solver.constraints.base import RELATIVE_TOLERANCE
 from solver.contacts import Contact
-from solver.displacement import CORRECTION_TIME, anchors, build_displacement, clean_solution, pin_frames, solve_displacement
+from solver.displacement import (
+    CORRECTION_TIME,
+    CUBIC_ERROR,
+    MAX_PANELS,
+    anchors,
+    build_displacement,
+    clean_solution,
+    frame_panels,
+    pin_frames,
+    solve_displacement,
+)
 from solver.errors import InputError
 from solver.foot_bounds import CAPTURE_RESOLUTION, FLOAT_LIMIT
 from solver.layout import StateLayout
 from solver.least_change import LeastChangeOptions
 from solver.peak_bounds import filter_capture
+from solver.quadrature import simpson_points
 from solver.spline import interpolate
 from solver.spline_basis import SplineBasis
 
@@ -99,16 +110,73 @@ def test_a_capture_turning_fast_between_its_frames_comes_back_exactly(toy_model)
     own: the capture meets every constraint and comes back exactly, nothing raised."""
     from solver.constraints.unit import UNIT_LIMIT
 
-    t, q = _capture(toy_model, fps=10.0)
+    t, q = _twisting(toy_model)
     a = toy_joint_slot(toy_model, "l_hip")
-    twist = np.radians(40.0) * np.cos(np.pi * 10.0 * t)  # +-40 deg, alternating frame to frame (5 Hz)
-    q[:, a:a + 4] = np.c_[np.cos(twist / 2), np.zeros((len(t), 2)), np.sin(twist / 2)]  # about z
     between = interpolate(t, q, 0.5 * (t[:-1] + t[1:]), 0)[:, a:a + 4]
     assert np.abs(np.linalg.norm(between, axis=1) - 1).max() > UNIT_LIMIT + 0.02  # the premise: the bare bound broken
     disp = build_displacement(toy_model, t, q)
     sol = solve_displacement(disp, LeastChangeOptions())
     assert not sol.unmet and not sol.certificate
     np.testing.assert_allclose(clean_solution(disp, sol).frames.values, q, rtol=0, atol=1e-12)
+
+
+def _twisting(model, fps: float = 10.0):
+    """The toy capture at `fps` with its left hip twisting +-40 degrees about the vertical at 5 Hz (80 degrees from
+    one frame to the next at 10 fps)."""
+    t, q = _capture(model, fps=fps)
+    a = toy_joint_slot(model, "l_hip")
+    twist = np.radians(40.0) * np.cos(np.pi * 10.0 * t)
+    q[:, a:a + 4] = np.c_[np.cos(twist / 2), np.zeros((len(t), 2)), np.sin(twist / 2)]  # about z
+    return t, q
+
+
+def _cubic_miss(model, t, q, points, per: int) -> np.ndarray:
+    """(len(points) - 1,) [m] the most the cubic Hermite curve between consecutive `points` (each contact site's
+    position and velocity there) misses the site's path at `per` times inside, by MuJoCo's kinematics on the
+    natural spline through the frames (t, q), its quaternions made unit; velocities by central differences."""
+    layout = StateLayout.from_model(model)
+
+    def sites(times):
+        Y = interpolate(t, q, times, 0)
+        for slot in layout.quat_slots:
+            Y[:, slot] /= np.linalg.norm(Y[:, slot], axis=1, keepdims=True)
+        data, out = mujoco.MjData(model), np.empty((len(times), model.nsite, 3))
+        for i, y in enumerate(Y):
+            data.qpos[:] = y
+            mujoco.mj_kinematics(model, data)
+            out[i] = data.site_xpos
+        return out
+
+    step = 1e-6  # [s] central differences: truncation ~1e-12 relative, round-off ~1e-10 m/s
+    p, v = sites(points), (sites(points + step) - sites(points - step)) / (2 * step)
+    h = np.diff(points)[:, None, None, None]
+    s = (np.arange(per) + 1.0) / (per + 1)  # inside each interval
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    cubic = (h00[:, None, None] * p[:-1, None] + h10[:, None, None] * h * v[:-1, None]
+             + h01[:, None, None] * p[1:, None] + h11[:, None, None] * h * v[1:, None])
+    inner = sites((points[:-1, None] + np.diff(points)[:, None] * s).ravel()).reshape(cubic.shape)
+    return np.linalg.norm(cubic - inner, axis=-1).max(axis=(1, 2))
+
+
+def test_the_quadrature_panels_bring_the_cubic_between_two_points_within_its_error(toy_model):
+    """Where a site turns fast between capture frames (the left hip twisting 80 degrees from one 10 fps frame to the
+    next), the cubic between two points of one Simpson panel misses the foot's path by centimetres; the panels
+    (`frame_panels`) split those intervals until the cubic between any two points, measured by MuJoCo at nine times
+    between them, is within CUBIC_ERROR of it (the Hermite error peaks at the midpoint where it checks, 5 % allowed
+    for its higher-order terms). On the slow capture at 60 fps one panel each already is."""
+    t, q = _twisting(toy_model)
+    disp = build_displacement(toy_model, t, q)
+    one, _ = simpson_points(t)
+    assert _cubic_miss(toy_model, t, q, one, 9).max() > 10 * CUBIC_ERROR  # the premise: one panel misses the foot
+    panels = frame_panels(t, q, disp.lc.al.tmap, disp.lc.al.engine)
+    assert panels.max() > 1 and panels.max() <= MAX_PANELS
+    points, _ = simpson_points(t, panels)
+    np.testing.assert_array_equal(disp.lc.al.t, points)  # the clean's own points
+    assert _cubic_miss(toy_model, t, q, points, 9).max() <= 1.05 * CUBIC_ERROR
+    slow_t, slow_q = _capture(toy_model)
+    slow = build_displacement(toy_model, slow_t, slow_q)
+    np.testing.assert_array_equal(frame_panels(slow_t, slow_q, slow.lc.al.tmap, slow.lc.al.engine), 1)
+    np.testing.assert_array_equal(slow.lc.al.t, simpson_points(slow_t)[0])
 
 
 @pytest.fixture(scope="module")
