@@ -14,11 +14,13 @@ from runner.corpus_clean import (
     CLEAN,
     NO_PEER,
     NOT_MEASURED,
+    PEER_FIXED_LESS,
     check_clean,
     holds_but_certified,
     holds_every_bound,
     holds_every_measured,
     markdown_clean,
+    peer_broke,
     run_clean_corpus,
 )
 from runner.exit_codes import EXIT_INPUT
@@ -116,3 +118,22 @@ def test_a_clip_missing_only_certified_bounds_holds_them_but_those():
     assert "**0/1 clips hold every bound**; 1/1 every bound but those" in markdown_clean([r], {"peer": True})
     uncertified = result(FIGURES | PEER)  # the same skate miss without a certificate: nothing to put it down to
     assert not holds_but_certified(uncertified) and "- walk:" not in markdown_clean([uncertified], {"peer": True})
+
+
+def test_a_deviation_over_a_peer_that_left_a_foot_bound_broken_is_named_with_the_peer_s_figures():
+    """The peer left the heel 28.3 mm in the floor where the clean lifted it to 13.6 mm (certified) or out: the peer's
+    smaller deviation is of a clip it changed less, and the miss says so; a peer that holds the foot bounds, or misses
+    one by no more than the clean, gives no such cause."""
+    peer = PEER | {"peer_deviation_mean_cm": 0.003, "peer_penetration_mm": 28.3, "peer_float_mm": 0.0, "peer_skate_mm": 0.0}
+    for own in (0.4, 13.6):
+        figures = FIGURES | peer | {"skate_mm": 0.1, "deviation_mean_cm": 0.03, "penetration_mm": own}
+        checks = {c["bound"]: c for c in check_clean(figures)}
+        assert checks["deviation"]["held"] is False and checks["deviation"]["causes"] == [PEER_FIXED_LESS]
+        assert peer_broke(figures) == ["penetration 28.3 > 1"]
+        r = result(figures) | {"checks": list(checks.values())}
+        line = next(ln for ln in markdown_clean([r], {"peer": True}).splitlines() if ln.startswith("- walk:"))
+        assert f"deviation 0.03 > 0.003 ({PEER_FIXED_LESS}: its penetration 28.3 > 1)" in line
+        assert not holds_but_certified(r)  # named, not excused
+    for other in ({"peer_penetration_mm": 0.5}, {"penetration_mm": 30.0}):  # the peer holds it; the clean is deeper
+        figures = FIGURES | peer | {"skate_mm": 0.1, "deviation_mean_cm": 0.03} | other
+        assert {c["bound"]: c for c in check_clean(figures)}["deviation"]["causes"] == [] and not peer_broke(figures)
