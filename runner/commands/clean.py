@@ -13,20 +13,49 @@ PROG = "dynsplines clean"
 
 
 def _times(text: str) -> tuple:
-    """--pin T1,T2,... [s]."""
+    """--pin T1,T2,... [s], or a keyframe file (.json) whose keyframes' times are the pins (`_keyframe_times`)."""
     import argparse
 
+    if text.lower().endswith(".json"):
+        return _keyframe_times(text)
     try:
         return tuple(float(x) for x in text.split(",") if x.strip())
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of times in seconds, e.g. 0.5,1.25") from None
 
 
+def _keyframe_times(path: str) -> tuple:
+    """The times [s] of a keyframe file's keyframes (its "keyframes", each with its "time", on the clip's own
+    timeline: the keys `mocap` chose for the clip, or an animator's): the frames a clean keeps as captured.
+
+    Raises:
+        argparse.ArgumentTypeError: the file cannot be read as JSON, or has no keyframe with a finite time (the
+            message names the file and the fix, one line).
+    """
+    import argparse
+    import math
+
+    from solver.errors import InputError
+    from solver.keyframe_file import read_document
+
+    try:
+        doc = read_document(path)
+    except InputError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    keys = doc.get("keyframes") if isinstance(doc, dict) else None
+    times = [k.get("time") for k in keys if isinstance(k, dict)] if isinstance(keys, list) else []
+    if not times or not all(isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t) for t in times):
+        raise argparse.ArgumentTypeError(f"{path}: no keyframe times to pin (its \"keyframes\", each with a finite "
+                                         "\"time\" [s]); give a keyframe file as mocap writes it, or times: --pin 0.5,1.25")
+    return tuple(float(t) for t in times)
+
+
 def add_pin_arguments(p, each: str = "") -> None:
     """`--pin T1,T2` (repeatable) and `--pin-ends` (`clean`; `batch --mode clean`, with `each` saying that
     every clip takes the same pins)."""
     p.add_argument("--pin", type=_times, action="append", default=[], metavar="T1,T2",
-                   help="times [s] where the clip is kept exactly as captured (each on the nearest frame); may be "
+                   help="times [s] where the clip is kept exactly as captured (each on the nearest frame), or a "
+                        "keyframe file (.json) whose keyframes' times are pinned, e.g. the keys mocap chose; may be "
                         f"repeated{each} [none]")
     p.add_argument("--pin-ends", action="store_true",
                    help="keep the clip's first and last frame exactly as captured too (to join it to other clips); "

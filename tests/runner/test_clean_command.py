@@ -33,3 +33,22 @@ def test_the_change_line_names_the_imports_straightened_knee():
     assert "r_knee by up to 55.2 deg" in said or "r_knee by up to 55.3 deg" in said
     assert _import_clamp(SimpleNamespace(clamped={"l_knee": np.zeros(4)})) == ""
     assert _import_clamp(SimpleNamespace(clamped=None)) == ""
+
+
+def test_a_keyframe_file_pins_its_keyframes_times(tmp_path, capsys):
+    """--pin KEYS.json: the times of a keyframe file's keyframes (read here with json, the reference) are the pins,
+    beside times given as numbers; a file without keyframe times, or none at all, is one line naming it."""
+    import json
+    from pathlib import Path
+
+    keys = Path(__file__).resolve().parents[2] / "models" / "run_and_step.keyframes.json"
+    args = build_parser().parse_args(["clean", "x.bvh", "--pin", str(keys), "--pin", "3"])
+    expected = [float(k["time"]) for k in json.loads(keys.read_text())["keyframes"]]
+    assert len(expected) > 2 and [t for group in args.pin for t in group] == expected + [3.0]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"keyframes": [{"joints": {}}]}))
+    for path, said in ((bad, "no keyframe times to pin"), (tmp_path / "none.json", "no such keyframe file")):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(["clean", "x.bvh", "--pin", str(path)])
+        err = capsys.readouterr().err
+        assert f"{path}: {said}" in err and len(err.strip().splitlines()) == 1
