@@ -125,7 +125,8 @@ def process_clean(clip, out_dir=None, options: CleanOptions | None = None, say=p
         options: CleanOptions [defaults]. say: where result lines go.
     Returns:
         {"clip", "status", "exit" ("ok" | "failed" | "interrupted"), "frames", "fps", "pins" ([s]),
-        "displacement_frames", "solve_time_s", "cpu_time_s" (the whole command's process time), "solve_cpu_s"
+        "displacement_frames", "split_intervals" (capture frame intervals in more than one quadrature panel,
+        `solver.displacement.frame_panels`), "solve_time_s", "cpu_time_s" (the whole command's process time), "solve_cpu_s"
         (the clean's own process time: building and solving the displacement from the retargeted capture and
         its contacts, what the IK peer's CPU time is compared with), "clean"
         (`runner.clean_metrics.clean_figures`), "certificate", "keyframes_on_source" (the pins on the
@@ -168,6 +169,11 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
     cpu0 = time.process_time()  # the method's, as the IK peer's clock starts after `import mink` (0.3 s of loading)
     disp = build_displacement(model, ref.times, ref.qpos, pins=o.pins, pin_ends=o.pin_ends, contacts=contacts, flights=flights,
                               feet=o.feet)
+    if disp.panels.max() > 1:
+        say(f"  {int((disp.panels > 1).sum())} of the capture's {len(disp.panels)} frame intervals split into up to "
+            f"{int(disp.panels.max())} quadrature panels: its feet move so far from one frame to the next (a low frame "
+            "rate, or poses estimated from video) that a cubic between two points misses them by more than 0.1 mm "
+            "(docs/mocap.md \"Cleaning a clip\")")
     with StopRequest(o.quiet) as stop:
         progress = Progress(o.quiet)
         sol = solve_displacement(disp, options, should_stop=stop, progress=progress)
@@ -270,7 +276,8 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: 
     result = {"clip": str(clip), "status": "interrupted" if run.interrupted else run.solution.status.value,
               "exit": "interrupted" if run.interrupted else "failed" if run.failed else "ok",
               "frames": ref.count, "fps": 1.0 / ref.frame_time, "pins": pins,
-              "displacement_frames": sol.frames.count, "solve_time_s": sol.wall_time_s, "cpu_time_s": cpu,
+              "displacement_frames": sol.frames.count, "split_intervals": int((disp.panels > 1).sum()),
+              "solve_time_s": sol.wall_time_s, "cpu_time_s": cpu,
               "solve_cpu_s": solve_cpu,
               "clean": fig, "certificate": [r.__dict__ for r in sol.certificate],
               "keyframes_on_source": on_source, "outputs": {k: str(v) for k, v in paths.items()}}

@@ -116,6 +116,7 @@ class Displacement:
         anchor: (n, nq) the displacement's zero as its frames hold it at each capture frame (`anchors`).
         pins: (k,) indices of the capture frames pinned (d = 0 there).
         capture_frames: FrameSet through every capture frame (the pins its keyframes): the capture as a path.
+        panels: (n - 1,) Simpson panels of each capture frame interval (`frame_panels`).
     """
 
     lc: LeastChange = field(repr=False)
@@ -124,6 +125,7 @@ class Displacement:
     anchor: np.ndarray
     pins: np.ndarray
     capture_frames: FrameSet = field(repr=False)
+    panels: np.ndarray = field(repr=False, default=None)
 
 
 def anchors(qpos: np.ndarray, quat_slots: np.ndarray) -> np.ndarray:
@@ -200,7 +202,8 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     t0, t1 = float(times[0]), float(times[-1])
     engine = InverseDynamics(model, figure.surface_sites)  # the effort bound of a capture needs the torques
     # every capture frame a point, the pins among them, and each panel's midpoint; more panels where the sites need them
-    t, w = simpson_points(times, frame_panels(times, qpos, tmap, engine))
+    panels = frame_panels(times, qpos, tmap, engine)
+    t, w = simpson_points(times, panels)
     reference = ReferenceMotion.from_samples(model, times, qpos, t, w)
     schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)
@@ -222,7 +225,7 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     _capture_limits(al, plain, feet)
     knots = np.array([x for c in schedule for x in (c.start, c.end)], float)
     lc = LeastChange(model, layout, figure, plain, al, tuple(relaxations), knots, grid=times)
-    return Displacement(lc, times, qpos, anchor, pinned, capture_frames)
+    return Displacement(lc, times, qpos, anchor, pinned, capture_frames, panels)
 
 
 #: [m] the most the cubic between two quadrature points may miss a site's path by: the margin the penetration

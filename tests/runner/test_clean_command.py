@@ -1,4 +1,5 @@
-"""`dynsplines clean`'s arguments: --pin takes comma-separated times, repeated; a bad one is one line."""
+"""`dynsplines clean`'s arguments: --pin takes comma-separated times or a keyframe file, repeated; a bad one is one line; a
+clean says where it splits its frame intervals."""
 import numpy as np
 import pytest
 
@@ -52,3 +53,26 @@ def test_a_keyframe_file_pins_its_keyframes_times(tmp_path, capsys):
             build_parser().parse_args(["clean", "x.bvh", "--pin", str(path)])
         err = capsys.readouterr().err
         assert f"{path}: {said}" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_clean_says_where_its_frame_intervals_are_split(tmp_path, capsys):
+    """127_33 at 15 fps (every 8th frame, 1 s): its feet move so far from one frame to the next that the clean splits
+    frame intervals into quadrature panels (`solver.displacement.frame_panels`), says how many, and records them; at
+    its own 120 fps (0.25 s) nothing is split and nothing is said."""
+    import json
+    from pathlib import Path
+
+    from bvh_edit import edit_bvh
+
+    from runner.cli import main
+
+    clip = Path(__file__).resolve().parents[2] / "models" / "cmu" / "127_33.bvh"
+    for name, kw in (("slow", {"seconds": 1.0, "stride": 8}), ("full", {"seconds": 0.25})):
+        src = edit_bvh(clip, tmp_path / f"{name}.bvh", **kw)
+        main(["clean", str(src), "--no-render", "--no-summary", "--out-dir", str(tmp_path / name)])
+        said = capsys.readouterr().out
+        split = json.loads((tmp_path / name / f"{name}.clean.metrics.json").read_text())["split_intervals"]
+        if name == "slow":
+            assert split > 0 and f"{split} of the capture's 15 frame intervals split into up to" in said
+        else:
+            assert split == 0 and "quadrature panels" not in said

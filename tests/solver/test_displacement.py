@@ -172,6 +172,7 @@ def test_the_quadrature_panels_bring_the_cubic_between_two_points_within_its_err
     assert panels.max() > 1 and panels.max() <= MAX_PANELS
     points, _ = simpson_points(t, panels)
     np.testing.assert_array_equal(disp.lc.al.t, points)  # the clean's own points
+    np.testing.assert_array_equal(disp.panels, panels)
     assert _cubic_miss(toy_model, t, q, points, 9).max() <= 1.05 * CUBIC_ERROR
     slow_t, slow_q = _capture(toy_model)
     slow = build_displacement(toy_model, slow_t, slow_q)
