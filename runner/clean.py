@@ -158,7 +158,7 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
     Displacement, its Solution, [s] the process time of building and solving it)."""
     from runner.progress import Progress, StopRequest
     from runner.run import Run, Source, run_metrics
-    from solver.displacement import build_displacement, clean_solution, solve_displacement
+    from solver.displacement import CUBIC_ERROR, build_displacement, clean_solution, solve_displacement
     from solver.keyframes import Keyframes
     from solver.optimize import Status
     from solver.problem import ProblemSpec, build_problem
@@ -172,8 +172,8 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
     if disp.panels.max() > 1:
         say(f"  {int((disp.panels > 1).sum())} of the capture's {len(disp.panels)} frame intervals split into up to "
             f"{int(disp.panels.max())} quadrature panels: its feet move so far from one frame to the next (a low frame "
-            "rate, or poses estimated from video) that a cubic between two points misses them by more than 0.1 mm "
-            "(docs/mocap.md \"Cleaning a clip\")")
+            f"rate, or poses estimated from video) that a cubic between two points misses them by more than "
+            f"{CUBIC_ERROR * 1e3:.2g} mm (docs/mocap.md \"Cleaning a clip\")")
     with StopRequest(o.quiet) as stop:
         progress = Progress(o.quiet)
         sol = solve_displacement(disp, options, should_stop=stop, progress=progress)

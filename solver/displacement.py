@@ -125,7 +125,7 @@ class Displacement:
     anchor: np.ndarray
     pins: np.ndarray
     capture_frames: FrameSet = field(repr=False)
-    panels: np.ndarray = field(repr=False, default=None)
+    panels: np.ndarray = field(repr=False)
 
 
 def anchors(qpos: np.ndarray, quat_slots: np.ndarray) -> np.ndarray:
