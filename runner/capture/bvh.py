@@ -220,7 +220,8 @@ class _Grammar:
             if t[0] == "JOINT" and len(t) >= 2:  # the name is the rest of the line (Biped's "Bip01 L Thigh")
                 self.names.append(" ".join(t[1:]))
                 i = self.joint(i + 1)
-            elif t[:2] == ["End", "Site"]:  # a name after it (MotionBuilder's "End Site Head_end") names nothing
+            elif t[0] == "End" and len(t) >= 2 and t[1].startswith("Site"):  # a name after it names nothing
+                # (MotionBuilder's "End Site Head_end"; "End Site5", numbered by an exporter of ASF/AMC names)
                 i = self.end_site(i)
             elif t == ["}"]:
                 return i + 1

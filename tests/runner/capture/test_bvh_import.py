@@ -706,8 +706,9 @@ def test_a_small_hop_keeps_its_height(tmp_path, scene):
 
 def test_names_with_spaces_and_named_end_sites(tmp_path, scene):
     """3ds Max Biped names hold spaces ("Bip01 L Thigh") and MotionBuilder names its End Sites ("End Site
-    LeftToe_end"): the name is the rest of the JOINT line (bvhio keeps its first word, which made two joints
-    "Bip01"), an End Site's name names nothing; the motion is the file's with the plain names."""
+    LeftToe_end"), an exporter of ASF/AMC names numbers them ("End Site5"): the name is the rest of the JOINT line
+    (bvhio keeps its first word, which made two joints "Bip01"), an End Site's name or number names nothing; the
+    motion is the file's with the plain names."""
     from runner.capture.bvh import read_bvh
 
     frames = [tiny_frame(hips_pos=(1.0, 17.0, 10.0 + i), LeftUpLeg=(5.0 * i, 10, 0), LeftLeg=(0, 0, -20.0 * i))
@@ -715,7 +716,11 @@ def test_names_with_spaces_and_named_end_sites(tmp_path, scene):
     plain = read_bvh(write(tmp_path, tiny_bvh(frames), "plain.bvh"))
     text = tiny_bvh(frames).replace("JOINT LeftUpLeg", "JOINT Bip01 L Thigh").replace("JOINT LeftLeg", "JOINT Bip01  L Calf")
     text = text.replace("End Site", "End Site LeftToe_end", 1)
+    assert text.count("End Site") >= 2
+    text = text[::-1].replace("End Site"[::-1], "End Site5"[::-1], 1)[::-1]  # the last End Site numbered
     clip = read_bvh(write(tmp_path, text, "biped.bvh"))
+    np.testing.assert_allclose(np.array(sorted(map(tuple, clip.end_sites.values()))),
+                               np.array(sorted(map(tuple, plain.end_sites.values()))), rtol=0, atol=1e-12)
     assert clip.names == tuple("Bip01 L Thigh" if n == "LeftUpLeg" else "Bip01 L Calf" if n == "LeftLeg" else n
                                for n in plain.names)
     np.testing.assert_allclose(clip.local_quat, plain.local_quat, rtol=0, atol=1e-12)
