@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 
 def edit_bvh(src, dst, *, seconds: float | None = None, stride: int = 1, order: str | None = None,
-             rename: dict | None = None, scale: float = 1.0, hop: tuple | None = None) -> Path:
+             rename: dict | None = None, scale: float = 1.0, hop: tuple | None = None, toeless: tuple = ()) -> Path:
     """Write an edited copy of the BVH clip `src` to `dst`.
 
     Args:
@@ -22,12 +22,16 @@ def edit_bvh(src, dst, *, seconds: float | None = None, stride: int = 1, order: 
         hop: (start [s], duration [s], height [m]): add 4 height s (1 - s), s = (t - start) / duration,
             to the root's height (BVH Y) for 0 < s < 1, t the time after the T-pose frame: the figure
             lifted off the ground, both feet with it (a synthetic hop).
+        toeless: joints (e.g. the toes) replaced, with everything below them, by an End Site at their parent's
+            joint (OFFSET 0 0 0), their channels dropped: a skeleton that gives the foot no length.
     """
     lines = Path(src).read_text().splitlines()
     m = next(i for i, ln in enumerate(lines) if ln.strip() == "MOTION")
     frame_time = float(lines[m + 2].split()[-1])
     head = lines[:m]
     data = np.array([[float(v) for v in ln.split()] for ln in lines[m + 3:] if ln.strip()])
+    if toeless:
+        head, data = _toeless(head, data, toeless)
     chans = []  # (joint, [channel names]) in file order
     joint = None
     out_head = []
@@ -76,3 +80,32 @@ def edit_bvh(src, dst, *, seconds: float | None = None, stride: int = 1, order: 
     text += [" ".join(f"{v:.6f}" for v in row) for row in frames]
     Path(dst).write_text("\n".join(text) + "\n")
     return Path(dst)
+
+
+def _toeless(head: list, data: np.ndarray, joints) -> tuple[list, np.ndarray]:
+    """The HIERARCHY lines with each of `joints` (and its subtree) an End Site at OFFSET 0 0 0, and the MOTION
+    columns without their channels."""
+    out, keep, col, i = [], [], 0, 0
+    while i < len(head):
+        tok = head[i].split()
+        if tok[:1] == ["JOINT"] and tok[1] in joints:
+            indent = head[i][: len(head[i]) - len(head[i].lstrip())]
+            depth, j = 0, i + 1
+            while True:  # to the closing brace of the joint's block, dropping the channels inside it
+                t = head[j].split()
+                depth += t == ["{"]
+                depth -= t == ["}"]
+                if t[:1] == ["CHANNELS"]:
+                    col += int(t[1])
+                j += 1
+                if depth == 0:
+                    break
+            out += [f"{indent}End Site", f"{indent}{{", f"{indent}\tOFFSET 0.00000 0.00000 0.00000", f"{indent}}}"]
+            i = j
+            continue
+        if tok[:1] == ["CHANNELS"]:
+            keep += range(col, col + int(tok[1]))
+            col += int(tok[1])
+        out.append(head[i])
+        i += 1
+    return out, data[:, keep]

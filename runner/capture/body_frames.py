@@ -25,7 +25,9 @@ and orientations over the clip - and never from the rest pose (in many conventio
   foot had there, for flat (143_17's left foot, 42 degrees toes-down against 10 on the right), and the
   stillest frames alone a runner's first forefoot stance. Only frames whose shin stands within 75 degrees
   of vertical count (where the clip has any): a kneeling subject's feet lie on their tops, lower than they
-  stand, and taken for flat they turned the figure's feet over.
+  stand, and taken for flat they turned the figure's feet over. A skeleton that gives the foot no length
+  (no toe joint, its End Site at the ankle: a toeless Perception Neuron export) shows no ball; there x is
+  forward as the skeleton stands in its rest pose (`rest_forward`), the one direction taken from it.
 
 Each vector is the mean over the clip's frames in the joint's frame, and each frame is made with the
 TRIAD method (the first vector exact, the second fixing the rotation about it; Shuster & Oh 1981, J.
@@ -88,6 +90,9 @@ ELBOW_HYPEREXTENSION = float(np.radians(15.0))
 SHIN_TILT = float(np.radians(75.0))
 #: the fraction of frames, those of the slower half with the ankle lowest, in which a foot is taken to be flat
 FLAT_FRACTION = 0.1
+#: [m] a foot whose ball of the foot is nearer its ankle than this has no length the skeleton gives (a toeless
+#: export with its End Site at the ankle): a centimetre, a tenth of the shortest adult foot's ankle-to-ball reach
+MIN_FOOT = 0.01
 _PARENT = {"l_thigh": "pelvis", "l_shin": "l_thigh", "r_thigh": "pelvis", "r_shin": "r_thigh",
            "l_upper_arm": "torso", "l_forearm": "l_upper_arm", "r_upper_arm": "torso", "r_forearm": "r_upper_arm"}
 
@@ -173,8 +178,10 @@ def body_frames(clip: BvhClip, skel: RecognisedSkeleton, figure) -> BodyFrames:
         ankle = P[f"{side}_foot"]
         ball = _ball(clip, skel, (q, p), side, at)
         flat = _flat(ankle, ball, P[f"{side}_lower_leg"])
-        off[f"{side}_foot"] = triad([0, 0, 1], [1, 0, 0], _mean_in(Q[f"{side}_foot"][flat], up[flat]),
-                                    _mean_in(Q[f"{side}_foot"], ball - ankle))
+        ahead = _mean_in(Q[f"{side}_foot"], ball - ankle)
+        if np.linalg.norm(ahead) < MIN_FOOT:  # the skeleton gives the foot no length: forward as it stands at rest
+            ahead = rest_forward(clip, skel, side)
+        off[f"{side}_foot"] = triad([0, 0, 1], [1, 0, 0], _mean_in(Q[f"{side}_foot"][flat], up[flat]), ahead)
     offsets = MappingProxyType({b: normalize(np.asarray(v, float)) for b, v in off.items()})
     return BodyFrames(offsets, MappingProxyType(_points(clip, skel, (q, p), at, offsets)))
 
@@ -199,6 +206,26 @@ def rest_pose_frames(clip: BvhClip, skel: RecognisedSkeleton, figure) -> BodyFra
                              "has no direction; fix the HIERARCHY")
         off[body] = _swing(np.asarray(figure.segments[body].direction, float), bone)
     return BodyFrames(MappingProxyType(off), MappingProxyType({}))
+
+
+def rest_forward(clip: BvhClip, skel: RecognisedSkeleton, side: str) -> np.ndarray:
+    """(3,) the direction a foot points in its joint's frame for a skeleton that gives the foot no length (no toe
+    joint, its End Site at the ankle): forward as the skeleton stands in its rest pose (every channel zero, where
+    every joint's frame is the world's), horizontal and square to the line from the right hip to the left.
+
+    Raises:
+        InputError: the rest pose's hips do not span a horizontal line (names the file and the fix).
+    """
+    rest = np.zeros((len(clip.names), 3))
+    for j, par in enumerate(clip.parents):
+        rest[j] = clip.offsets[j] + (rest[par] if par >= 0 else 0.0)
+    left = skel.axes @ (rest[skel.index(clip, "l_upper_leg")] - rest[skel.index(clip, "r_upper_leg")])
+    ahead = np.cross(left, [0.0, 0.0, 1.0])
+    if np.linalg.norm(ahead) < 1e-6 * max(np.linalg.norm(left), 1e-300):
+        raise InputError(f"{skel.source}: joint {skel.joint(f'{side}_foot')} has no toe and its End Site is at the joint, "
+                         "so the foot has no direction, and the rest pose does not show one; name a toe joint in a "
+                         "skeleton map (--skeleton-map FILE) or give the foot's End Site its length")
+    return ahead / np.linalg.norm(ahead)
 
 
 def _flat(ankle: np.ndarray, ball: np.ndarray, knee: np.ndarray | None = None) -> np.ndarray:

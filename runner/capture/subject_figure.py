@@ -14,7 +14,8 @@ annotations"), with
   forearm = elbow to wrist). The hips, the torso joint (at the spine joint above the hips) and the
   shoulders sit at their mean places on the pelvis and the torso (exact where the source's joints
   between them do not move); the foot is the subject's foot (ball of the foot = the toe joint, flat
-  sole);
+  sole; a foot the skeleton gives no length points forward as it stands at rest, `BALL_AHEAD` of the foot
+  length to its ball: `runner.capture.body_frames.rest_forward`);
 * **the sole** `ANKLE_HEIGHT` x stature below the ankle, the heel site `HEEL_BACK` x foot length behind
   the ankle, the toe site on the sole under the ball of the foot (where the foot pivots at push-off:
   the figure's foot is rigid and the subject's toes are not), the ball site at the toe joint; then
@@ -40,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.capture.body_frames import BodyFrames, body_frames
+from runner.capture.body_frames import MIN_FOOT, BodyFrames, body_frames
 from runner.capture.bvh import BvhClip
 from runner.capture.figure_record import write_record
 from runner.capture.skeleton import RecognisedSkeleton, recognise
@@ -65,6 +66,9 @@ FOOT_BREADTH = 0.055
 #: the heel behind the ankle joint centre, as a fraction of the foot length (the shipped figure's 6 cm
 #: of its 25 cm foot)
 HEEL_BACK = 0.24
+#: the ball of the foot ahead of the ankle joint centre, as a fraction of the foot length, for a skeleton that gives
+#: the foot no length (no toe joint, its End Site at the ankle): the shipped figure's 13 cm on its 26 cm foot
+BALL_AHEAD = 0.5
 #: [kg/m^2] default body mass over stature squared: the shipped figure's 70 kg at 1.75 m
 SHIPPED_MASS, SHIPPED_STATURE = 70.0, 1.75
 DEFAULT_BMI = SHIPPED_MASS / SHIPPED_STATURE**2
@@ -178,8 +182,10 @@ def _leg(spec, side: str, m: SubjectMeasures, s: float) -> None:
         lo, hi = (0.03, 0.39) if key == "thigh" else (0.02, 0.38)
         _capsule(spec, body, [0, 0, -lo * k], [0, 0, -hi * k], radius * s)
     ball = np.array(m.points[f"{side}_foot"]["ball"], float)
-    forward = np.r_[ball[:2], 0.0] / np.linalg.norm(ball[:2])
     h = m.ankle_height
+    if np.linalg.norm(ball[:2]) < MIN_FOOT:  # the skeleton gives the foot no length: the figure's ball on its frame's x
+        ball = np.array([BALL_AHEAD * m.foot_length, 0.0, -0.5 * h])
+    forward = np.r_[ball[:2], 0.0] / np.linalg.norm(ball[:2])
     heel = -HEEL_BACK * m.foot_length * forward + [0, 0, -h]
     toe = np.r_[ball[:2], -h]
     spec.site(f"{side}_ball").pos = ball

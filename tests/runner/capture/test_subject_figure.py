@@ -191,3 +191,34 @@ def test_a_scene_holding_its_figure_inline_cannot_take_the_subjects(tmp_path, ca
                "--quiet"])
     err = capsys.readouterr().err
     assert rc == EXIT_INPUT and err.count("\n") == 1 and "inline" in err and "--figure default" in err, err
+
+
+def test_a_foot_the_skeleton_gives_no_length_points_where_it_stands_at_rest(tmp_path):
+    """127_33 with its toes cut off, each foot's End Site at its ankle (a toeless export): the foot's direction is the
+    rest pose's forward, square to the hips and level, in place of the ball's. Its frame is the toed clip's turned about
+    the vertical by no more than CMU's toes turn out from straight ahead in the rest pose (their OFFSETs, by hand:
+    atan(0.207 / 2.203) = 5.4 degrees left, atan(0.267 / 2.208) = 6.9 right), 1 degree allowed for the flat frames'
+    scatter; the subject's figure has its toe site on the sole `BALL_AHEAD` of the foot length straight ahead, the heel
+    `HEEL_BACK` of it behind; the clean of the clip ends with its exit code 0."""
+    from runner.capture.body_frames import body_frames
+    from runner.capture.skeleton import recognise
+    from runner.capture.subject_figure import BALL_AHEAD, HEEL_BACK
+    from solver.quaternion import conj, mul
+
+    clip = SHIPPED_CLIP
+    toeless = read_bvh(edit_bvh(clip, tmp_path / "toeless.bvh", seconds=1.0, toeless=("LeftToeBase", "RightToeBase")))
+    toed = read_bvh(edit_bvh(clip, tmp_path / "toed.bvh", seconds=1.0))
+    a, b = (body_frames(c, recognise(c), shipped_figure()) for c in (toeless, toed))
+    for side, (out, ahead) in (("l", (0.20718, 2.20259)), ("r", (0.26704, 2.20815))):
+        r = mul(conj(a.offsets[f"{side}_foot"]), b.offsets[f"{side}_foot"])
+        assert np.linalg.norm(r[1:3]) < 1e-9  # about the vertical alone: the up direction is the flat frames' in both
+        angle = np.degrees(2 * np.arccos(min(1.0, abs(float(r[0])))))
+        assert angle <= np.degrees(np.arctan2(out, ahead)) + 1.0, (side, angle)
+    model = mujoco.MjModel.from_xml_string(subject_figure_xml(toeless, soles=False))
+    m = subject_measures(toeless)
+    for side in "lr":
+        heel, toe = model.site(f"{side}_heel").pos, model.site(f"{side}_toe").pos
+        assert toe[0] == pytest.approx(BALL_AHEAD * m.foot_length, abs=2e-5) and abs(toe[1]) < 1e-9
+        assert heel[0] == pytest.approx(-HEEL_BACK * m.foot_length, abs=2e-5) and heel[2] == pytest.approx(toe[2], abs=2e-5)
+    assert main(["clean", str(tmp_path / "toeless.bvh"), "--no-render", "--no-summary", "--quiet",
+                 "--out-dir", str(tmp_path / "out")]) == 0
