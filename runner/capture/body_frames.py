@@ -113,15 +113,16 @@ class BodyFrames:
     points: Mapping[str, Mapping[str, np.ndarray]]
 
 
-def triad(a_fig, b_fig, a_src, b_src) -> np.ndarray:
+def triad(a_fig, b_fig, a_src, b_src, what: str = "a body's frame") -> np.ndarray:
     """(4,) the rotation R taking a_fig to a_src exactly and b_fig as near b_src as that allows (TRIAD,
-    Shuster & Oh 1981). Raises InputError if a pair is parallel."""
+    Shuster & Oh 1981). Raises InputError if a pair is parallel (naming `what`: the file and the body)."""
     def frame(a, b):
         a = np.asarray(a, float) / np.linalg.norm(a)
         c = np.cross(a, b)
         if np.linalg.norm(c) < 1e-9:
-            raise InputError("two directions that fix a body's frame are parallel; the skeleton is degenerate "
-                             "there (give --figure default, or check the HIERARCHY)")
+            raise InputError(f"{what}: the two directions that fix it are parallel, so the skeleton is degenerate "
+                             "there; check the HIERARCHY, or name other joints for it in a skeleton map "
+                             "(--skeleton-map FILE, docs/mocap.md \"Skeleton map\")")
         c /= np.linalg.norm(c)
         return np.column_stack([a, c, np.cross(a, c)])
 
@@ -167,12 +168,15 @@ def body_frames(clip: BvhClip, skel: RecognisedSkeleton, figure) -> BodyFrames:
                              "HIERARCHY, or name other joints in a skeleton map (--skeleton-map FILE)")
     shoulders = 0.5 * (P["l_upper_arm"] + P["r_upper_arm"])
     hips = 0.5 * (P["l_upper_leg"] + P["r_upper_leg"])
+    def what(body):
+        return f"{skel.source}: the {body}'s frame"
+
     off = {"pelvis": triad([0, 1, 0], [0, 0, 1], _mean_in(Q["hips"], P["l_upper_leg"] - P["r_upper_leg"]),
-                           _mean_in(Q["hips"], shoulders - hips)),
+                           _mean_in(Q["hips"], shoulders - hips), what("pelvis")),
            "torso": triad([0, 1, 0], [0, 0, 1], _mean_in(Q["chest"], P["l_upper_arm"] - P["r_upper_arm"]),
-                          _mean_in(Q["chest"], shoulders - P["spine"]))}
+                          _mean_in(Q["chest"], shoulders - P["spine"]), what("torso"))}
     for body in ("l_thigh", "l_shin", "r_thigh", "r_shin", "l_upper_arm", "l_forearm", "r_upper_arm", "r_forearm"):
-        off[body] = _limb_offset(body, figure, P, Q, off)
+        off[body] = _limb_offset(body, figure, P, Q, off, what(body))
     up = np.broadcast_to([0.0, 0.0, 1.0], p[:, 0].shape)
     for side in "lr":
         ankle = P[f"{side}_foot"]
@@ -181,7 +185,8 @@ def body_frames(clip: BvhClip, skel: RecognisedSkeleton, figure) -> BodyFrames:
         ahead = _mean_in(Q[f"{side}_foot"], ball - ankle)
         if np.linalg.norm(ahead) < MIN_FOOT:  # the skeleton gives the foot no length: forward as it stands at rest
             ahead = rest_forward(clip, skel, side)
-        off[f"{side}_foot"] = triad([0, 0, 1], [1, 0, 0], _mean_in(Q[f"{side}_foot"][flat], up[flat]), ahead)
+        off[f"{side}_foot"] = triad([0, 0, 1], [1, 0, 0], _mean_in(Q[f"{side}_foot"][flat], up[flat]), ahead,
+                                    what(f"{side}_foot"))
     offsets = MappingProxyType({b: normalize(np.asarray(v, float)) for b, v in off.items()})
     return BodyFrames(offsets, MappingProxyType(_points(clip, skel, (q, p), at, offsets)))
 
@@ -250,8 +255,9 @@ def _mean_in(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return _in_frame(q, v).mean(axis=0)
 
 
-def _limb_offset(body: str, figure, P: dict, Q: dict, off: dict) -> np.ndarray:
-    """R_off of a limb body: segment along the bone, flexion axis along the measured hinge (module docstring)."""
+def _limb_offset(body: str, figure, P: dict, Q: dict, off: dict, what: str) -> np.ndarray:
+    """R_off of a limb body: segment along the bone, flexion axis along the measured hinge (module docstring);
+    `what` names it in an error (`triad`)."""
     end, hinge_joint = LIMBS[body]
     start = BODY_JOINT[body]
     bone = _mean_in(Q[start], P[end] - P[start])
@@ -265,7 +271,7 @@ def _limb_offset(body: str, figure, P: dict, Q: dict, off: dict) -> np.ndarray:
         hinge = _mean_in(Q[start], cross)
         if _hinge_flipped(hinge_joint, rotate(Q[start], np.broadcast_to(hinge, u.shape)), u, v, Q, off):
             hinge = -hinge
-        return triad(seg, figure.flexion_axes[hinge_joint], bone, hinge)
+        return triad(seg, figure.flexion_axes[hinge_joint], bone, hinge, what)
     parent = _PARENT[body]
     rel = mul(conj(Q[start]), mul(Q[DRIVERS[parent]], np.broadcast_to(off[parent], Q[start].shape)))
     mean = Rotation.from_quat(normalize(rel)[:, [1, 2, 3, 0]]).mean().as_quat()

@@ -57,3 +57,20 @@ def test_a_kneel_is_not_flat_even_where_only_the_kneel_is_still():
     flat = _flat(ankle, ball, knee)
     assert len(flat) == _count(100) and flat.max() < 30
     assert _flat(ankle, ball).min() >= 30  # without the shin, the kneel is taken for flat
+
+
+def test_a_frame_two_parallel_directions_cannot_fix_is_named():
+    """TRIAD needs two directions that are not parallel: where a skeleton gives two, the error names the file and the
+    body, and the fix, in one line; two that are not parallel give the rotation taking the first exactly."""
+    import pytest
+
+    from runner.capture.body_frames import triad
+    from runner.capture.bvh_kinematics import rotate
+    from solver.errors import InputError
+
+    with pytest.raises(InputError) as e:
+        triad([0, 1, 0], [0, 0, 1], [1.0, 0, 0], [2.0, 0, 0], "x.bvh: the pelvis's frame")
+    assert str(e.value).startswith("x.bvh: the pelvis's frame: the two directions") and "--skeleton-map" in str(e.value)
+    assert "\n" not in str(e.value)
+    q = triad([0, 1, 0], [0, 0, 1], [1.0, 0, 0], [0.0, 0.3, 1.0])
+    np.testing.assert_allclose(rotate(q, np.array([0.0, 1.0, 0.0])), [1.0, 0.0, 0.0], atol=1e-12)
