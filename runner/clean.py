@@ -247,6 +247,7 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: 
     """The summary, the saved path, the BVH on the source skeleton (checked at the pins), the metrics, the
     video; the result dict of `process_clean`. cpu: ([s] the command's process time at its start, [s] the
     clean's own, `_solve`)."""
+    from runner.capture.gaps import clip_gaps
     from runner.clean_metrics import clean_figures
     from runner.render.side_by_side import VideoOptions
     from runner.run import Outputs, _filtered_capture, render_with_progress, report, write_metrics_json, write_results
@@ -280,6 +281,7 @@ def _outputs(run, disp, sol, cs, o: CleanOptions, paths: dict, clip: Path, cpu: 
               "solve_time_s": sol.wall_time_s, "cpu_time_s": cpu,
               "solve_cpu_s": solve_cpu,
               "clean": fig, "certificate": [r.__dict__ for r in sol.certificate],
+              "reference_gaps": [str(g) for g in clip_gaps(ref)],
               "keyframes_on_source": on_source, "outputs": {k: str(v) for k, v in paths.items()}}
     write_metrics_json(run, paths["metrics"], extra={k: v for k, v in result.items() if k not in ("status", "exit")})
     say(f"  wrote {display_path(paths['metrics'])}")

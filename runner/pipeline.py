@@ -34,6 +34,7 @@ from runner.capture.capture_keys import pick_keyframes
 from runner.capture.clip import Capture, as_capture
 from runner.capture.contact_detection import reference_contacts
 from runner.capture.figure_choice import SUBJECT, choose_figure, is_default, scene_with_figure
+from runner.capture.gaps import clip_gaps
 from runner.capture.key_joints import frame_joints
 from runner.capture.reference_motion import ROOT_SCALE_LEGS
 from runner.capture.scene import AUTO, FLOOR, clip_scene, name_surfaces, read_boxes
@@ -325,7 +326,8 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         resting feet from the surfaces and the capture's own disagreement, `runner.capture.root_height.feet_line`;
         None off the subject's figure), "reference_footplant_mm" (`FootPlant.largest_mm`: the most each foot
         and the root were lowered to put resting feet on their surfaces), "reference_glitches" (the tracking glitches
-        repaired, `runner.capture.glitches.Glitch`), "keyframes_on_source" (`keyframes_on_source_report`; None off the
+        repaired, `runner.capture.glitches.Glitch`), "reference_gaps" (the frames filled where the file had no number,
+        `runner.capture.gaps.Gap`), "keyframes_on_source" (`keyframes_on_source_report`; None off the
         subject's figure), "variable_frames", "wall_time_s" (whole pipeline), "solve_time_s", "keyframe_conflicts" (keyframes
         where the keyframes decide a constraint, `Solution.relaxations`), "relaxed" ({constraint: count} of
         those relaxations), "stalled" ({constraint: amount [SI]}
@@ -376,6 +378,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         "reference_feet_disagreement_mm": _mm(feet_disagreement(ref, problem.model)),
         "reference_footplant_mm": ref.plant.largest_mm() if ref.plant is not None else None,
         "reference_glitches": [str(g) for g in ref.glitches],
+        "reference_gaps": [str(g) for g in clip_gaps(ref)],
         "stance_agreement": _agreement(problem, ref),
         "keyframes_on_source": on_source,
         "metrics": run.metrics, "scene_fitted": _scene_fitted(cs), "outputs": {k: str(v) for k, v in paths.items()},

@@ -260,6 +260,7 @@ def report(run: Run) -> str:
                            force_bounds=run.problem.force_bounds, motion=motion, tol=run.options.tol)]
     ref = run.source.reference
     if ref is not None:
+        from runner.capture.gaps import clip_gaps, gaps_line
         from runner.capture.glitches import glitches_line
         from runner.capture.root_height import feet_line
 
@@ -275,6 +276,8 @@ def report(run: Run) -> str:
                      + feet_line(ref, run.model))
         if (glitch := glitches_line(ref.glitches)) is not None:
             lines.append(glitch)
+        if (gap := gaps_line(clip_gaps(ref))) is not None:
+            lines.append(gap)
     return "\n".join(lines)
 
 

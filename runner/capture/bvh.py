@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from runner.capture.gaps import fill_gaps
 from solver.errors import InputError
 from solver.quaternion import normalize
 
@@ -38,6 +39,8 @@ class BvhClip:
         end_sites: {joint index: (3,) End Site OFFSET [BVH units]} for the leaf joints (those without
             child joints; the BVH grammar gives a leaf an End Site).
         raw: (n, C) the MOTION section's numbers as written, C = total channel count (file order).
+        gaps: the runs of frames where the file gives a joint no number ("nan"), filled in `local_quat` and
+            `local_pos` from the frames around them (`runner.capture.gaps`).
     """
 
     names: tuple[str, ...]
@@ -50,6 +53,7 @@ class BvhClip:
     source: str
     end_sites: dict = field(default_factory=dict)
     raw: np.ndarray | None = None
+    gaps: tuple = ()
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -65,8 +69,8 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int, list[str]]:
 
     Checks: HIERARCHY first, ROOT next, the joint grammar (`_check_hierarchy`: braces, OFFSET, CHANNELS
     with matching count and known names, End Site), MOTION, "Frames: N" (N >= 2), "Frame Time: T"
-    (T > 0), at least N data lines, the first N (those read) each with one finite number per declared channel. After this,
-    bvhio's reader cannot run past the end of the file.
+    (T > 0), at least N data lines, the first N (those read) each with one number per declared channel (finite,
+    or "nan": a gap). After this, bvhio's reader cannot run past the end of the file.
 
     Args:
         text: the file's text. src: the file name for messages.
@@ -131,7 +135,8 @@ def _check_bvh_text(text: str, src: str) -> tuple[int, int, list[str]]:
 
 
 def _check_frame_lines(data: list[tuple[int, list[str]]], channels: int, src: str) -> None:
-    """InputError unless every frame line of `data` ((line number, tokens) each) has `channels` finite numbers."""
+    """InputError unless every frame line of `data` ((line number, tokens) each) has `channels` numbers, each
+    finite or "nan" (a gap, `runner.capture.gaps`)."""
     for i, (ln, t) in enumerate(data):
         if len(t) != channels:
             raise InputError(
@@ -143,9 +148,10 @@ def _check_frame_lines(data: list[tuple[int, list[str]]], channels: int, src: st
         except ValueError:
             bad = next(v for v in t if not _is_float(v))
             raise InputError(f"{src}: line {ln}: frame {i + 1} has the non-number {bad!r}; use plain numbers") from None
-        if not all(math.isfinite(v) for v in vals):
-            bad = next(v for v in t if not math.isfinite(float(v)))
-            raise InputError(f"{src}: line {ln}: frame {i + 1} has the value {bad!r}; values must be finite")
+        if any(math.isinf(v) for v in vals):  # "nan" is a gap (`runner.capture.gaps`); an infinite angle is no value
+            bad = next(v for v in t if math.isinf(float(v)))
+            raise InputError(f"{src}: line {ln}: frame {i + 1} has the value {bad!r}; give a finite number, or nan "
+                             "where the capture has no value (a gap, filled from the frames around it)")
 
 
 class _Grammar:
@@ -327,6 +333,7 @@ def read_bvh(path: str | Path) -> BvhClip:
     for j, joint in enumerate(joints):
         quat[:, j] = [list(k.Rotation) for k in joint.Keyframes]  # glm.quat iterates w, x, y, z
         pos[:, j] = [list(k.Position) for k in joint.Keyframes]
+    quat, pos, gaps = fill_gaps(quat, pos, names, float(container.FrameTime), src)
     return BvhClip(
         tuple(names),
         tuple(channels),
@@ -338,6 +345,7 @@ def read_bvh(path: str | Path) -> BvhClip:
         src,
         end_sites,
         _motion_numbers(text),
+        gaps,
     )
 
 

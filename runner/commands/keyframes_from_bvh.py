@@ -17,6 +17,7 @@ from pathlib import Path
 
 from runner.capture.capture_keys import KEY_CHOICES
 from runner.capture.figure_choice import SUBJECT
+from runner.capture.gaps import clip_gaps, gaps_line
 from runner.capture.glitches import glitches_line
 from runner.capture.reference_motion import ROOT_SCALE_LEGS
 from runner.commands.mocap import (
@@ -129,6 +130,8 @@ def run(args, command: str | None = None) -> int:
         print(f"  retargeted clip: {feet_line(reference, cs.model)}")
     if (glitch := glitches_line(reference.glitches)) is not None:
         print(f"  {glitch}")
+    if (gap := gaps_line(clip_gaps(reference))) is not None:
+        print(f"  {gap}")
     return EXIT_OK
 
 
