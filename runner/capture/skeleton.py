@@ -409,6 +409,10 @@ def recognise(clip: BvhClip, skeleton_map: SkeletonMap | None = None) -> Recogni
                                        else "")
     given = smap.rest_frames is not None
     rest = smap.rest_frames if given else _rest_frames(clip, p * unit[0], hips, sorted(set(idx.values())))
+    if len(clip.local_quat) - rest < 2:  # a motion's velocities need two frames
+        raise InputError(f"{clip.source}: the clip has {len(clip.local_quat) - rest} frame of motion after its {rest} "
+                         "rest frame (a T-pose before the motion); a motion needs at least 2 frames: export more frames, "
+                         'or give {"rest_frames": 0} in a skeleton map (--skeleton-map FILE) if the first is motion')
     return RecognisedSkeleton(MappingProxyType(roles), float(unit[0]), str(unit[1]), axes, up, positions,
                               tuple(above), rest, how, clip.source, given)
 

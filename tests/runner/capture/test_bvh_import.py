@@ -568,6 +568,9 @@ def test_bad_numbers_and_headers(tmp_path, scene):
     p = write(tmp_path, tiny_bvh([tiny_frame()]))
     with pytest.raises(InputError, match=r"Frames: 1; need at least 2 frames"):
         load_bvh_reference(p, scene)
+    p = write(tmp_path, tiny_bvh([tiny_frame(), tiny_frame()]))  # the first is the T-pose: one frame of motion
+    with pytest.raises(InputError, match=r"has 1 frame of motion after its 1 rest frame .* a motion needs at least 2"):
+        load_bvh_reference(p, scene)
 
 
 def test_bad_channels(tmp_path, scene):
