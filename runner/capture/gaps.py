@@ -3,11 +3,11 @@
 A BVH exporter writes "nan" where it has no value: an optical system's joint whose markers were all lost
 for a few frames, or a converter whose Euler decomposition failed (mdm2bvh's SMPL output has "nan" in one
 spine joint's angles at 17 of its 120 frames). Such a frame is a gap in that joint's track, as in any
-capture's marker trajectories, and is filled the way capture software fills a short gap: from the joint's
-last frame before it and its first frame after it (Vicon Nexus's and Motive's gap filling interpolate a
-trajectory between the gap's ends). `fill_gaps` takes the rotation along the slerp between the two
+capture's marker trajectories, and is filled as capture software's linear gap fill fills a short one (Motive's
+"Linear" interpolation; Vicon Nexus's spline fill is its smooth variant): from the joint's last frame before
+the gap and its first frame after it. `fill_gaps` takes the rotation along the slerp between the two
 orientations (constant angular velocity between them, the shortest way round: Shoemake, "Animating rotation
-with quaternion curves", SIGGRAPH 1985) and a translation along the straight line; a gap at the clip's start
+with quaternion curves", SIGGRAPH 1985; scipy's `Slerp`, as the glitch repair) and a translation along the straight line; a gap at the clip's start
 or end holds the nearest frame with a number. `runner.capture.glitches` then judges the filled frames like
 any other. The summary names every gap filled (`gaps_line`) and the metrics report lists them
 (`reference_gaps`).
@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from runner.capture.glitches import slerp
 from solver.errors import InputError
-from solver.quaternion import normalize
 
 __all__ = ["Gap", "fill_gaps", "gaps_line", "clip_gaps"]
 
@@ -60,15 +60,6 @@ def _runs(bad: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1))
 
 
-def _slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """(k, 4) unit quaternions from a (u = 0) to b (u = 1) at (k,) u, the short way round (Shoemake 1985)."""
-    b = b if float(a @ b) >= 0.0 else -b
-    theta = float(np.arccos(np.clip(a @ b, -1.0, 1.0)))
-    if theta < 1e-9:
-        return normalize(np.outer(1.0 - u, a) + np.outer(u, b))
-    return (np.outer(np.sin((1.0 - u) * theta), a) + np.outer(np.sin(u * theta), b)) / np.sin(theta)
-
-
 def _fill_track(quat: np.ndarray, pos: np.ndarray, bad: np.ndarray) -> None:
     """Fill, in place, the frames `bad` (n,) of one joint's (n, 4) rotations and (n, 3) translations from the
     frames on either side (module docstring); at least one frame is not bad."""
@@ -80,7 +71,7 @@ def _fill_track(quat: np.ndarray, pos: np.ndarray, bad: np.ndarray) -> None:
             quat[a:b + 1], pos[a:b + 1] = quat[held], pos[held]
             continue
         u = (np.arange(a, b + 1) - before) / float(after - before)
-        quat[a:b + 1] = _slerp(quat[before], quat[after], u)
+        quat[a:b + 1] = slerp(quat[before], quat[after], u)
         pos[a:b + 1] = np.outer(1.0 - u, pos[before]) + np.outer(u, pos[after])
 
 

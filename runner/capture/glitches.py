@@ -25,7 +25,7 @@ import numpy as np
 from solver.layout import StateLayout
 from solver.quaternion import normalize
 
-__all__ = ["OMEGA_MAX", "Glitch", "repair_glitches", "glitches_line"]
+__all__ = ["OMEGA_MAX", "Glitch", "repair_glitches", "glitches_line", "slerp"]
 
 #: [rad/s] the fastest rotation of a human joint measured: baseball pitching's shoulder internal rotation,
 #: about 7,000 deg/s at its peak (Fleisig et al. 1995, module docstring)
@@ -56,7 +56,7 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
     return 2.0 * float(np.arccos(min(1.0, abs(float(a @ b)))))
 
 
-def _slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
+def slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
     """(k, 4) unit quaternions (w x y z) from a (u = 0) to b (u = 1) at (k,) u, the short way round
     (`scipy.spatial.transform.Slerp`), in a's hemisphere."""
     from scipy.spatial.transform import Rotation, Slerp
@@ -76,7 +76,7 @@ def _repair_one(q: np.ndarray, step: float) -> tuple[np.ndarray, list[tuple[int,
             worst = max(worst, turn)
             continue
         if i - g > 1:
-            q[g + 1:i] = _slerp(q[g], q[i], (np.arange(g + 1, i) - g) / (i - g))
+            q[g + 1:i] = slerp(q[g], q[i], (np.arange(g + 1, i) - g) / (i - g))
             runs.append((g + 1, i - 1, worst))
         g, worst = i, 0.0
     if g < len(q) - 1:  # the clip ends in a glitch: hold the last kept orientation
