@@ -99,7 +99,7 @@ def _clip_fields(reference, npz_path) -> dict:
     if src is None or src.suffix.lower() != ".bvh" or not src.is_file():
         return {"clip": np.array(""), "clip_text": np.array("")}
     capture = getattr(reference, "capture", None)  # the clip as the run read it (runner.capture.clip.Capture)
-    text = capture.text if capture is not None else src.read_text(encoding="utf-8")
+    text = capture.text if capture is not None else src.read_text(encoding="utf-8-sig")
     return {"clip": np.array(scene_reference(src, npz_path)), "clip_text": np.array(text)}
 
 

@@ -8,7 +8,9 @@ quaternions (the pipeline: runner/capture/retarget.py).
 """
 from __future__ import annotations
 
+import codecs
 import math
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -293,14 +295,15 @@ def read_bvh(path: str | Path) -> BvhClip:
         hint = "it is a folder" if p.is_dir() else f"no such file (current folder: {Path.cwd()})"
         raise InputError(f"{src}: cannot read the BVH clip: {hint}; give the path of a .bvh file")
     try:
-        text = p.read_text(encoding="utf-8")
+        raw = p.read_bytes()
+        text = raw.decode("utf-8-sig")  # a byte-order mark (.NET's UTF-8 writers put one first) is not text
     except UnicodeDecodeError as e:
         raise InputError(f"{src}: not a text file (byte {e.start} is not UTF-8); give a .bvh motion file") from None
     except OSError as e:
         raise InputError(f"{src}: cannot read the BVH clip: {e.strerror}; check the file's permissions") from None
     full_names = _check_bvh_text(text, src)[2]
     try:
-        container = bvhio.readAsBvh(str(p))
+        container = _parse(bvhio, p, text if raw.startswith(codecs.BOM_UTF8) else None)
     except SyntaxError as e:  # not expected after _check_bvh_text; bvhio's own message, no line number
         raise InputError(
             f"{src}: malformed BVH file: {e.args[0] if e.args else e}; check the HIERARCHY and MOTION sections"
@@ -347,6 +350,17 @@ def read_bvh(path: str | Path) -> BvhClip:
         _motion_numbers(text),
         gaps,
     )
+
+
+def _parse(bvhio, p: Path, text: str | None):
+    """bvhio's parse of the file `p`, or, given its `text`, of a copy of that text (bvhio reads a byte-order
+    mark as part of the first line, and refuses the file)."""
+    if text is None:
+        return bvhio.readAsBvh(str(p))
+    with tempfile.TemporaryDirectory() as folder:
+        copy = Path(folder) / p.name
+        copy.write_text(text, encoding="utf-8")
+        return bvhio.readAsBvh(str(copy))
 
 
 def _motion_numbers(text: str) -> np.ndarray:

@@ -47,7 +47,7 @@ def read_capture(path: str | os.PathLike) -> Capture:
     """
     clip = read_bvh(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8-sig")  # without a byte-order mark, as read_bvh
     except (OSError, UnicodeDecodeError) as e:  # read a moment ago by read_bvh: only a file changed meanwhile
         raise InputError(f"{path}: cannot read the BVH clip again ({e}); check the file") from None
     return Capture(clip, text)

@@ -312,7 +312,7 @@ def write_source_bvh(out: str | Path, saved, model, qpos: np.ndarray, times: np.
     if clip is None:
         raise InputError(f"{saved.source}: the path was not made from a BVH clip, so it has no source skeleton; "
                          "give --skeleton figure")
-    text = str(saved.arrays["clip_text"]) if str(saved.arrays.get("clip_text", "")) else Path(clip.source).read_text()
+    text = str(saved.arrays["clip_text"]) if str(saved.arrays.get("clip_text", "")) else Path(clip.source).read_text(encoding="utf-8-sig")
     reference = (saved.reference_times, saved.reference_qpos) if saved.has_reference and not as_solved else None
     body = source_bvh_text(clip, text, model, qpos, times, fps, reference)
     with atomic_output(out) as tmp:

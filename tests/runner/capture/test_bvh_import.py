@@ -573,6 +573,21 @@ def test_bad_numbers_and_headers(tmp_path, scene):
         load_bvh_reference(p, scene)
 
 
+def test_a_byte_order_mark_is_not_part_of_the_file(tmp_path):
+    """A file written with a UTF-8 byte-order mark first (.NET's UTF-8 writers do) reads as the same file without
+    it (bvhio alone refuses it: "First line must be only HIERARCHY"), and the text kept for the export has none."""
+    from runner.capture.bvh import read_bvh
+    from runner.capture.clip import read_capture
+
+    text = tiny_bvh([tiny_frame()] + [tiny_frame(LeftLeg=(0, 0, a)) for a in (0, 20, 40)])
+    plain, marked = tmp_path / "plain.bvh", tmp_path / "marked.bvh"
+    plain.write_text(text, encoding="utf-8")
+    marked.write_bytes(b"\xef\xbb\xbf" + text.encode("utf-8"))
+    a, b = read_bvh(plain), read_bvh(marked)
+    assert a.names == b.names and np.array_equal(a.local_quat, b.local_quat) and np.array_equal(a.local_pos, b.local_pos)
+    assert read_capture(marked).text == text
+
+
 def test_bad_channels(tmp_path, scene):
     text = tiny_bvh([tiny_frame(), tiny_frame()])
     p = write(tmp_path, text.replace("CHANNELS 3 Zrotation Yrotation Xrotation", "CHANNELS 3 Zrotation Yrotation", 1))
