@@ -97,7 +97,7 @@ def read_document(path: str | os.PathLike) -> Any:
     p = Path(path)
     src = str(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark (Notepad, .NET) is not JSON
     except FileNotFoundError:
         from solver.shipped import shipped_hint
 

@@ -32,7 +32,7 @@ def read_key_joints(path: str | Path) -> dict[int, tuple[str, ...]]:
     """
     p = Path(path)
     try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
+        doc = json.loads(p.read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise InputError(f"--key-joints {path}: no such file; give a JSON file such as "
                          "{\"30\": [\"LeftUpLeg\", \"LeftLeg\"]}") from None

@@ -150,7 +150,7 @@ def read_boxes(path) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
     import json
 
     try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        doc = json.loads(Path(path).read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise InputError(f"--boxes {path}: no such file; give a JSON list such as "
                          "[{\"min\": [0, 1, 0], \"max\": [1, 2, 0.3]}]") from None

@@ -81,7 +81,7 @@ def read_skeleton_map(path: str | Path) -> SkeletonMap:
         raise InputError(f"--skeleton-map {path}: no such file (current folder: {Path.cwd()}); give a JSON file "
                          "naming the joint of each role, e.g. {\"hips\": \"pelvis\", \"l_foot\": \"foot_l\"}")
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"--skeleton-map {path}: cannot read it ({e}); give a JSON text file") from None
     return parse_skeleton_map(text, str(path))

@@ -94,6 +94,15 @@ def test_reads_hand_written_file(tmp_path, layout):
     assert info.source == {} and info.terms is None
 
 
+def test_a_file_saved_with_a_byte_order_mark_reads_as_without(tmp_path, layout):
+    """Notepad and .NET's UTF-8 writers put a byte-order mark first; JSON has none, and json.loads refuses it."""
+    text = json.dumps(minimal(l_knee=[1, 0, 0, 0]))
+    plain, marked = write_json(tmp_path, text, "plain.json"), tmp_path / "marked.json"
+    marked.write_bytes(b"\xef\xbb\xbf" + text.encode("utf-8"))
+    (a, _), (b, _) = read_keyframes(plain, layout), read_keyframes(marked, layout)
+    assert np.array_equal(a.times, b.times) and np.array_equal(a.values, b.values, equal_nan=True) and np.array_equal(a.mask, b.mask)
+
+
 @pytest.mark.parametrize("umask", [0o022, 0o077])
 def test_written_file_has_the_permissions_of_a_new_file(tmp_path, layout, umask):
     """The atomic write goes through mkstemp (mode 0600); the result gets 0666 minus the umask, as a file
