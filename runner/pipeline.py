@@ -345,7 +345,6 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         InputError: a missing or malformed clip, another skeleton (the missing joints named), an
             unwritable output, a bad option.
     """
-    from runner.capture.root_height import feet_disagreement, worst_contact_distance
     from runner.render.side_by_side import VideoOptions
     from runner.run import Outputs, execute, write_metrics_json
 
@@ -374,11 +373,7 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
         **_solve_fields(run.solution),
         "max_penetration_mm": run.metrics["optimized"]["max_penetration_mm"],
         "keyframe_error": run.metrics["optimized"].get("keyframe_error"),
-        "reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, problem.model),
-        "reference_feet_disagreement_mm": _mm(feet_disagreement(ref, problem.model)),
-        "reference_footplant_mm": ref.plant.largest_mm() if ref.plant is not None else None,
-        "reference_glitches": [str(g) for g in ref.glitches],
-        "reference_gaps": [str(g) for g in clip_gaps(ref)],
+        **_reference_fields(ref, problem.model),
         "stance_agreement": _agreement(problem, ref),
         "keyframes_on_source": on_source,
         "metrics": run.metrics, "scene_fitted": _scene_fitted(cs), "outputs": {k: str(v) for k, v in paths.items()},
@@ -391,6 +386,17 @@ def process_clip(clip, out_dir=None, options: ClipOptions | None = None, say=pri
     result["wall_time_s"] = time.perf_counter() - t_start
     say(f"  wall time {result['wall_time_s']:.1f} s")
     return result
+
+
+def _reference_fields(ref, model) -> dict:
+    """The metrics report's figures of the retargeted capture `ref` itself (`process_clip`'s "reference_*")."""
+    from runner.capture.root_height import feet_disagreement, worst_contact_distance
+
+    return {"reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, model),
+            "reference_feet_disagreement_mm": _mm(feet_disagreement(ref, model)),
+            "reference_footplant_mm": ref.plant.largest_mm() if ref.plant is not None else None,
+            "reference_glitches": [str(g) for g in ref.glitches],
+            "reference_gaps": [str(g) for g in clip_gaps(ref)]}
 
 
 def _scene_fitted(cs) -> dict | None:
