@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.capture.gaps import fill_gaps
+from runner.capture.gaps import corrupt_frames, fill_gaps, rest_size
 from solver.errors import InputError
 from solver.quaternion import normalize
 
@@ -41,8 +41,9 @@ class BvhClip:
         end_sites: {joint index: (3,) End Site OFFSET [BVH units]} for the leaf joints (those without
             child joints; the BVH grammar gives a leaf an End Site).
         raw: (n, C) the MOTION section's numbers as written, C = total channel count (file order).
-        gaps: the runs of frames where the file gives a joint no number ("nan"), filled in `local_quat` and
-            `local_pos` from the frames around them (`runner.capture.gaps`).
+        gaps: the runs of frames where the file gives a joint no number ("nan"), or whose root is farther from
+            the frames around them than a body moves (every joint's), filled in `local_quat` and `local_pos` from the
+            frames around them (`runner.capture.gaps`).
     """
 
     names: tuple[str, ...]
@@ -336,7 +337,9 @@ def read_bvh(path: str | Path) -> BvhClip:
     for j, joint in enumerate(joints):
         quat[:, j] = [list(k.Rotation) for k in joint.Keyframes]  # glm.quat iterates w, x, y, z
         pos[:, j] = [list(k.Position) for k in joint.Keyframes]
-    quat, pos, gaps = fill_gaps(quat, pos, names, float(container.FrameTime), src)
+    dt = float(container.FrameTime)
+    corrupt = corrupt_frames(pos[:, 0], rest_size(np.array(offsets, float), np.array(parents), end_sites), dt)
+    quat, pos, gaps = fill_gaps(quat, pos, names, dt, src, corrupt)
     return BvhClip(
         tuple(names),
         tuple(channels),

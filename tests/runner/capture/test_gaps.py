@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
 from runner.capture.bvh import read_bvh
-from runner.capture.gaps import fill_gaps, gaps_line
+from runner.capture.gaps import EVERY_JOINT, ROOT_SPEED_MAX, corrupt_frames, fill_gaps, gaps_line, rest_size
 from solver.errors import InputError
 from tests.runner.capture.test_bvh_import import TINY_JOINTS, tiny_bvh, tiny_frame
 
@@ -69,6 +69,46 @@ def test_a_file_with_nan_reads_with_its_gap_filled(tmp_path):
     assert abs(abs(float(clip.local_quat[3, knee] @ expected)) - 1.0) < 1e-9
     assert [(g.joint, g.first, g.last) for g in clip.gaps] == [("LeftLeg", 4, 4)]
     assert np.isfinite(clip.local_quat).all() and np.isfinite(clip.local_pos).all()
+
+
+def test_the_rest_size_is_the_largest_extent_of_the_joints_and_end_sites():
+    """A chain 1 + 1 down with a foot 0.5 forward and an arm 0.3 to the side: 2.0 (the vertical extent)."""
+    offsets = np.array([[0, 0, 0], [0, -1, 0], [0, -1, 0], [0.3, 0, 0]], float)
+    assert rest_size(offsets, np.array([-1, 0, 1, 0]), {2: np.array([0, 0, 0.5]), 3: np.zeros(3)}) == pytest.approx(2.0)
+
+
+def test_a_root_far_from_its_neighbours_is_corrupt_and_a_sprint_is_not():
+    """A 1.75-unit body at 60 fps: a walk at 1.4 units/s with frames 0 and 50-52 put 1,460 units away (a decoder's
+    garbage, the first frame among them) is corrupt at exactly those; a sprint at the fastest human speed
+    (12.4 m/s for a 1.75 m body), reversing at once (the largest departure from a window's median), is not."""
+    dt, size, n = 1 / 60, 1.75, 120
+    t = np.arange(n) * dt
+    walk = np.stack([1.4 * t, np.full(n, 0.95), np.zeros(n)], axis=1)
+    walk[[0, 50, 51, 52]] = [1460.0, -1460.0, 1460.0]
+    assert np.flatnonzero(corrupt_frames(walk, size, dt)).tolist() == [0, 50, 51, 52]
+    v = 12.4 / 1.75 * size
+    assert v <= ROOT_SPEED_MAX * size
+    sprint = np.stack([v * np.minimum(t, 1.0) - v * np.maximum(t - 1.0, 0.0), np.full(n, 0.95), np.zeros(n)], axis=1)
+    assert not corrupt_frames(sprint, size, dt).any()
+
+
+def test_a_corrupt_frame_is_filled_for_every_joint_and_named_once(tmp_path):
+    """The tiny clip (root at 1, 17, 10; 10 fps) with file frames 8-9 of its 16 put 10,000 units away and their knee
+    angles garbage: read, those frames are their neighbours' root and the slerp of their knees, named once."""
+    frames = [tiny_frame()] + [tiny_frame(LeftLeg=(0, 0, 5 * i)) for i in range(15)]
+    for i in (7, 8):
+        frames[i] = tiny_frame(hips_pos=(1e4, -1e4, 1e4), LeftLeg=(170, -80, 33))
+    path = tmp_path / "corrupt.bvh"
+    path.write_text(tiny_bvh(frames))
+    clip = read_bvh(path)
+    assert [(g.joint, g.first, g.last) for g in clip.gaps] == [(EVERY_JOINT, 8, 9)]
+    assert clip.local_pos[7, 0] == pytest.approx([1.0, 17.0, 10.0]) and clip.local_pos[8, 0] == pytest.approx([1.0, 17.0, 10.0])
+    knee = clip.names.index("LeftLeg")
+    ends = Rotation.from_euler("ZYX", [[0, 0, 25], [0, 0, 40]], degrees=True)  # file frames 7 and 10
+    for frame, u in ((7, 1 / 3), (8, 2 / 3)):
+        xyzw = Slerp([0.0, 1.0], ends)([u]).as_quat()[0]
+        assert abs(abs(float(clip.local_quat[frame, knee] @ np.r_[xyzw[3], xyzw[:3]])) - 1.0) < 1e-9
+    assert "every joint frames 8-9 (0.200 s)" in gaps_line(clip.gaps)
 
 
 def test_an_infinite_value_is_one_line_naming_the_line(tmp_path):
