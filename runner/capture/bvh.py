@@ -339,6 +339,7 @@ def read_bvh(path: str | Path) -> BvhClip:
         pos[:, j] = [list(k.Position) for k in joint.Keyframes]
     dt = float(container.FrameTime)
     corrupt = corrupt_frames(pos[:, 0], rest_size(np.array(offsets, float), np.array(parents), end_sites), dt)
+    corrupt[0] = False  # a first frame elsewhere can be a rest pose put before the motion (skeleton.py's rest frames)
     quat, pos, gaps = fill_gaps(quat, pos, names, dt, src, corrupt)
     return BvhClip(
         tuple(names),

@@ -109,6 +109,11 @@ def test_a_corrupt_frame_is_filled_for_every_joint_and_named_once(tmp_path):
         xyzw = Slerp([0.0, 1.0], ends)([u]).as_quat()[0]
         assert abs(abs(float(clip.local_quat[frame, knee] @ np.r_[xyzw[3], xyzw[:3]])) - 1.0) < 1e-9
     assert "every joint frames 8-9 (0.200 s)" in gaps_line(clip.gaps)
+    frames[0] = tiny_frame(hips_pos=(1e4, -1e4, 1e4))  # a rest pose put before the motion, elsewhere: as written
+    path.write_text(tiny_bvh(frames))
+    clip = read_bvh(path)
+    assert [(g.joint, g.first, g.last) for g in clip.gaps] == [(EVERY_JOINT, 8, 9)]
+    assert clip.local_pos[0, 0] == pytest.approx([1e4, -1e4, 1e4])
 
 
 def test_an_infinite_value_is_one_line_naming_the_line(tmp_path):
