@@ -502,8 +502,8 @@ def test_a_clip_too_short_or_never_resting_is_named_with_the_fix(tmp_path):
     for scene in ("auto", "floor"):
         with pytest.raises(InputError, match=rf"short\.bvh: {MIN_FRAMES - 1} frames of capture; it needs at least {MIN_FRAMES}.*give a longer clip"):
             clip_scene(short, scene, FIGURE_FILE, tmp_path / "s.scene.xml")
-    # every frame 1 m further along: no foot is ever still, so none rests
-    flying = [tiny_frame(hips_pos=(100.0 * i, 17.0, 10.0)) for i in range(2 * MIN_FRAMES)]
+    # every frame 0.56 m further along (5.6 m/s, a run a body can make): no foot is ever still, so none rests
+    flying = [tiny_frame(hips_pos=(10.0 * i, 17.0, 10.0)) for i in range(2 * MIN_FRAMES)]
     moving = write(tmp_path, tiny_bvh(flying), "moving.bvh")
     with pytest.raises(InputError, match=r"moving\.bvh: no foot rests in the clip.*--scene floor"):
         clip_scene(moving, "auto", FIGURE_FILE, tmp_path / "m.scene.xml")
