@@ -392,8 +392,9 @@ def _reference_fields(ref, model) -> dict:
     """The metrics report's figures of the retargeted capture `ref` itself (`process_clip`'s "reference_*")."""
     from runner.capture.root_height import feet_disagreement, worst_contact_distance
 
+    apart = feet_disagreement(ref, model)  # [m], None off the subject's figure
     return {"reference_contact_distance_mm": 1000.0 * worst_contact_distance(ref, model),
-            "reference_feet_disagreement_mm": _mm(feet_disagreement(ref, model)),
+            "reference_feet_disagreement_mm": None if apart is None else 1000.0 * apart,
             "reference_footplant_mm": ref.plant.largest_mm() if ref.plant is not None else None,
             "reference_glitches": [str(g) for g in ref.glitches],
             "reference_gaps": [str(g) for g in clip_gaps(ref)]}
@@ -405,11 +406,6 @@ def _scene_fitted(cs) -> dict | None:
         "floor_z": cs.capture_floor.floor_z, "floor_slope": list(cs.capture_floor.floor_slope),
         "capture_frame": [*cs.frame.quat.tolist(), *cs.frame.shift.tolist()],
         "boxes": [{"center": c.tolist(), "half": h.tolist()} for c, h in cs.fitted.boxes], "notes": list(cs.notes)}
-
-
-def _mm(metres: float | None) -> float | None:
-    """[mm] of a length in metres, None kept."""
-    return None if metres is None else 1000.0 * metres
 
 
 def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | None:
