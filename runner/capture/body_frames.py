@@ -199,7 +199,7 @@ def rest_pose_frames(clip: BvhClip, skel: RecognisedSkeleton, figure) -> BodyFra
     Raises:
         InputError: a bone of zero length in the rest pose (joint named).
     """
-    rest = _rest_positions(clip)
+    rest = clip.rest_positions()
     off = {"pelvis": np.array([1.0, 0, 0, 0]), "torso": np.array([1.0, 0, 0, 0])}
     for body, (end, _) in {**LIMBS, "l_foot": ("l_toe", None), "r_foot": ("r_toe", None)}.items():
         start = BODY_JOINT[body]
@@ -219,7 +219,7 @@ def rest_forward(clip: BvhClip, skel: RecognisedSkeleton, side: str) -> np.ndarr
     Raises:
         InputError: the rest pose's hips do not span a horizontal line (names the file and the fix).
     """
-    rest = _rest_positions(clip)
+    rest = clip.rest_positions()
     left = skel.axes @ (rest[skel.index(clip, "l_upper_leg")] - rest[skel.index(clip, "r_upper_leg")])
     ahead = np.cross(left, [0.0, 0.0, 1.0])
     if np.linalg.norm(ahead) < 1e-6 * max(np.linalg.norm(left), 1e-300):
@@ -227,15 +227,6 @@ def rest_forward(clip: BvhClip, skel: RecognisedSkeleton, side: str) -> np.ndarr
                          "so the foot has no direction, and the rest pose does not show one; name a toe joint in a "
                          "skeleton map (--skeleton-map FILE) or give the foot's End Site its length")
     return ahead / np.linalg.norm(ahead)
-
-
-def _rest_positions(clip: BvhClip) -> np.ndarray:
-    """(J, 3) [file units, file axes] every joint's place in the rest pose (every channel zero): its OFFSETs summed
-    from the root."""
-    rest = np.zeros((len(clip.names), 3))
-    for j, par in enumerate(clip.parents):
-        rest[j] = clip.offsets[j] + (rest[par] if par >= 0 else 0.0)
-    return rest
 
 
 def _flat(ankle: np.ndarray, ball: np.ndarray, knee: np.ndarray | None = None) -> np.ndarray:

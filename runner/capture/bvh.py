@@ -61,6 +61,19 @@ class BvhClip:
     def index(self, name: str) -> int:
         return self.names.index(name)
 
+    def rest_positions(self) -> np.ndarray:
+        """(J, 3) [file units, file axes] every joint's place in the rest pose (`rest_places`)."""
+        return rest_places(self.offsets, self.parents)
+
+
+def rest_places(offsets: np.ndarray, parents) -> np.ndarray:
+    """(J, 3) [file units, file axes] every joint's place in the rest pose (every channel zero): its (J, 3) OFFSETs
+    summed from the root, `parents` (J,) before their children (-1 for the root)."""
+    rest = np.zeros((len(offsets), 3))
+    for j, par in enumerate(parents):
+        rest[j] = offsets[j] + (rest[par] if par >= 0 else 0.0)
+    return rest
+
 
 # --------------------------------------------------------------------------------------------------
 # parsing
@@ -338,7 +351,7 @@ def read_bvh(path: str | Path) -> BvhClip:
         quat[:, j] = [list(k.Rotation) for k in joint.Keyframes]  # glm.quat iterates w, x, y, z
         pos[:, j] = [list(k.Position) for k in joint.Keyframes]
     dt = float(container.FrameTime)
-    corrupt = corrupt_frames(pos[:, 0], rest_size(np.array(offsets, float), np.array(parents), end_sites), dt)
+    corrupt = corrupt_frames(pos[:, 0], rest_size(rest_places(np.array(offsets, float), parents), end_sites), dt)
     corrupt[0] = False  # a first frame elsewhere can be a rest pose put before the motion (skeleton.py's rest frames)
     quat, pos, gaps = fill_gaps(quat, pos, names, dt, src, corrupt)
     return BvhClip(

@@ -97,15 +97,12 @@ def _fill_track(quat: np.ndarray, pos: np.ndarray, bad: np.ndarray) -> None:
         pos[a:b + 1] = np.outer(1.0 - u, pos[before]) + np.outer(u, pos[after])
 
 
-def rest_size(offsets: np.ndarray, parents: np.ndarray, end_sites: dict) -> float:
-    """[file units] the skeleton's size: the largest extent, along the file's axes, of its joints and End Sites
-    placed by their OFFSETs (the rest pose: a standing body's height, a T-pose's arm span at most about as much).
+def rest_size(places: np.ndarray, end_sites: dict) -> float:
+    """[file units] the skeleton's size: the largest extent, along the file's axes, of its joints and End Sites in
+    the rest pose (a standing body's height, a T-pose's arm span at most about as much).
 
-    Args: offsets (J, 3), parents (J,) (-1 for the root, parents before children), end_sites {joint: (3,)}."""
-    at = np.zeros((len(offsets), 3))
-    for j, p in enumerate(parents):
-        at[j] = offsets[j] + (at[p] if p >= 0 else 0.0)
-    points = np.vstack([at] + [at[j] + np.asarray(e, float) for j, e in end_sites.items()])
+    Args: places (J, 3) the joints' rest places (`runner.capture.bvh.rest_places`), end_sites {joint: (3,) OFFSET}."""
+    points = np.vstack([places] + [places[j] + np.asarray(e, float) for j, e in end_sites.items()])
     return float((points.max(axis=0) - points.min(axis=0)).max())
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from runner.capture.bvh import read_bvh
+from runner.capture.bvh import read_bvh, rest_places
 from runner.capture.gaps import EVERY_JOINT, ROOT_SPEED_MAX, corrupt_frames, fill_gaps, gaps_line, rest_size
 from solver.errors import InputError
 from tests.runner.capture.test_bvh_import import TINY_JOINTS, tiny_bvh, tiny_frame
@@ -74,7 +74,9 @@ def test_a_file_with_nan_reads_with_its_gap_filled(tmp_path):
 def test_the_rest_size_is_the_largest_extent_of_the_joints_and_end_sites():
     """A chain 1 + 1 down with a foot 0.5 forward and an arm 0.3 to the side: 2.0 (the vertical extent)."""
     offsets = np.array([[0, 0, 0], [0, -1, 0], [0, -1, 0], [0.3, 0, 0]], float)
-    assert rest_size(offsets, np.array([-1, 0, 1, 0]), {2: np.array([0, 0, 0.5]), 3: np.zeros(3)}) == pytest.approx(2.0)
+    places = rest_places(offsets, [-1, 0, 1, 0])
+    assert places[2] == pytest.approx([0, -2, 0]) and places[3] == pytest.approx([0.3, 0, 0])
+    assert rest_size(places, {2: np.array([0, 0, 0.5]), 3: np.zeros(3)}) == pytest.approx(2.0)
 
 
 def test_a_root_far_from_its_neighbours_is_corrupt_and_a_sprint_is_not():
