@@ -165,7 +165,6 @@ def _solve(cs, contacts, flights, o: CleanOptions, clip: Path, say):
 
     ref, model = cs.reference, cs.model
     options = o.solve or LeastChangeOptions()
-    import scipy.signal  # noqa: F401 - the capture's 6 Hz filter's module, loaded before the clock: the CPU measured is
     cpu0 = time.process_time()  # the method's, as the IK peer's clock starts after `import mink` (0.3 s of loading)
     disp = build_displacement(model, ref.times, ref.qpos, pins=o.pins, pin_ends=o.pin_ends, contacts=contacts, flights=flights,
                               feet=o.feet)

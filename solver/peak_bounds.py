@@ -26,14 +26,15 @@ import numpy as np
 
 from solver.errors import InputError
 from solver.layout import StateLayout
+from solver.lowpass import PADLEN, butter2, filtfilt2
 
 __all__ = ["CUTOFF_HZ", "MIN_FRAMES", "PeakBounds", "capture_peaks", "filter_capture", "frame_derivatives", "peak_bounds"]
 
 #: [Hz] the kinematics cutoff of the capture's low-pass filter (Winter 2009, ch. 2: 6 Hz for gait)
 CUTOFF_HZ = 6.0
-#: [frames] the fewest the filter takes: scipy's `filtfilt` extends the signal by padlen = 3 max(len(a), len(b)) = 9
-#: samples (the 2nd-order Butterworth's 3 coefficients) and needs more frames than that
-MIN_FRAMES = 10
+#: [frames] the fewest the filter takes: it extends the signal by `solver.lowpass.PADLEN` = 9 samples (scipy's
+#: filtfilt default for the 2nd-order Butterworth's 3 coefficients) and needs more frames than that
+MIN_FRAMES = PADLEN + 1
 #: [1] Winter's correction of a two-pass (zero-lag) 2nd-order Butterworth: design at cutoff / 0.802 so that
 #: the -3 dB frequency of the two passes is the cutoff ((2^(1/2) - 1)^(1/4) = 0.802)
 TWO_PASS_CORRECTION = 0.802
@@ -94,8 +95,6 @@ def filter_capture(times: np.ndarray, qpos: np.ndarray, layout: StateLayout,
         InputError: fewer than MIN_FRAMES frames,
             uneven frame times, or a cutoff that is not > 0.
     """
-    from scipy.signal import butter, filtfilt
-
     times, qpos = np.asarray(times, float), np.array(qpos, float)
     if not (np.isfinite(cutoff_hz) and cutoff_hz > 0):
         raise InputError(f"the capture filter's cutoff is {cutoff_hz} Hz; it must be > 0")
@@ -113,8 +112,7 @@ def filter_capture(times: np.ndarray, qpos: np.ndarray, layout: StateLayout,
     wn = cutoff_hz / TWO_PASS_CORRECTION / (0.5 / dt[0])
     if wn >= 1.0:
         return qpos
-    b, a = butter(2, wn)
-    out = filtfilt(b, a, qpos, axis=0)
+    out = filtfilt2(*butter2(wn), qpos)
     for slot in layout.quat_slots:
         out[:, slot] /= np.linalg.norm(out[:, slot], axis=1, keepdims=True)
     return out
