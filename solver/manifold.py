@@ -21,7 +21,7 @@ import numpy as np
 from solver.frames import FrameSet
 from solver.quaternion import left_matrix, mul
 
-__all__ = ["FrameVariables", "exp_rotation", "exp_rotation_jacobian"]
+__all__ = ["FrameVariables", "exp_rotation", "exp_rotation_vjp"]
 
 #: [rad] below this |delta| the series of sin(x/2)/x is used (its relative error there is below 1e-17)
 _SMALL = 1e-4
@@ -43,25 +43,26 @@ def exp_rotation(delta: np.ndarray) -> np.ndarray:
     return np.concatenate([np.cos(0.5 * t)[..., None], s[..., None] * delta], axis=-1)
 
 
-def exp_rotation_jacobian(delta: np.ndarray) -> np.ndarray:
-    """d exp(delta) / d delta.
+def exp_rotation_vjp(delta: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """h^T d exp(delta) / d delta, the product with the (4, 3) Jacobian of `exp_rotation` without forming it: with
+    t = |delta|, s = sin(t/2)/t and ds = (cos(t/2) t/2 - sin(t/2)) / t^3 (= s'(t)/t), d cos(t/2) = -s delta / 2 and
+    d (s delta) = s I + ds delta delta^T, so the product is -h_w s delta / 2 + s h_xyz + ds (h_xyz . delta) delta
+    (series in t below `_SMALL`).
 
     Args:
-        delta: (..., 3) rotation vectors [rad].
+        delta: (r, 3) rotation vectors [rad]. h: (r, 4) the adjoint of exp(delta).
     Returns:
-        (..., 4, 3).
+        (r, 3).
     """
-    delta = np.asarray(delta, float)
     t = np.linalg.norm(delta, axis=-1)
     small = t < _SMALL
     ts = np.where(small, 1.0, t)
-    s = np.where(small, 0.5 - t * t / 48.0, np.sin(0.5 * ts) / ts)
-    # ds/dt / t, the coefficient of delta delta^T: (cos(t/2)/2 t - sin(t/2)) / t^3
-    ds = np.where(small, -1.0 / 24.0 + t * t / 960.0, (0.5 * np.cos(0.5 * ts) * ts - np.sin(0.5 * ts)) / ts ** 3)
-    J = np.zeros(delta.shape[:-1] + (4, 3))
-    J[..., 0, :] = -0.5 * s[..., None] * delta  # d cos(t/2) = -sin(t/2)/2 delta/t
-    J[..., 1:, :] = s[..., None, None] * np.eye(3) + ds[..., None, None] * delta[..., :, None] * delta[..., None, :]
-    return J
+    half = 0.5 * ts
+    s = np.where(small, 0.5 - t * t / 48.0, np.sin(half) / ts)
+    ds = np.where(small, -1.0 / 24.0 + t * t / 960.0, (np.cos(half) * half - np.sin(half)) / ts ** 3)
+    hv = h[:, 1:]
+    coef = ds * np.einsum("rk,rk->r", hv, delta) - 0.5 * s * h[:, 0]
+    return s[:, None] * hv + coef[:, None] * delta
 
 
 class FrameVariables:
@@ -112,9 +113,9 @@ class FrameVariables:
         out[: self.n_linear] = G[self._lin]
         if len(self._rows):
             d = x[self.n_linear:].reshape(-1, 3)
-            J = np.einsum("rij,rjk->rik", self._L0, exp_rotation_jacobian(d))  # (r, 4, 3)
             g = G[self._rows[:, None], self._idx]  # (r, 4)
-            out[self.n_linear:] = np.einsum("rik,ri->rk", J, g).ravel()
+            h = (g[:, None, :] @ self._L0)[:, 0, :]  # (r, 4): g^T L0, the adjoint of exp(d) (q = L0 exp(d))
+            out[self.n_linear:] = exp_rotation_vjp(d, h).ravel()
         return out
 
     def quaternion_frames(self) -> tuple[np.ndarray, np.ndarray]:
