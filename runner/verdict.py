@@ -305,9 +305,12 @@ def verdict_lines(feet: list, jolts: list, rows, targets: dict, solution, estima
 def refinement_text(solution, tol: float | None) -> str:
     """The convergence verdict against `tol`: the decrease of Phi, relative, that more frames still predict
     (`Solution.final_estimate`), or on a clean's grid what its last subproblem lowered Phi by (`estimate_kind`
-    "progress"); when the solve refined after its last estimate, that the final frames have none; without
-    an estimate, that the solve stopped first ("" without `tol` either)."""
+    "progress"), or that it ended on the least violation's path ("search"); when the solve refined after its last
+    estimate, that the final frames have none; without an estimate, that the solve stopped first ("" without `tol`
+    either)."""
     estimate = getattr(solution, "final_estimate", None)
+    if getattr(solution, "estimate_kind", "refinement") == "search":
+        return "converged (the least violation's path meets every constraint)"
     if estimate is None or not np.isfinite(estimate):
         return "" if tol is None else "no refinement estimate (the solve stopped before one)"
     checks = getattr(solution, "segment_decreases", ()) or ()

@@ -71,8 +71,9 @@ class Solution:
         final_estimate: the last estimate of a strategy with a tolerance, NaN otherwise.
         estimate_kind: what `final_estimate` is: "refinement" (the decrease of Phi more frames predict over
             Phi), "progress" (on a `LeastChange.grid`, where no frame can be added: the decrease of Phi over
-            the last subproblem, over Phi) or "reference" (0: the reference motion met every constraint and is
-            returned unchanged, `solver.least_change`).
+            the last subproblem, over Phi), "reference" (0: the reference motion met every constraint and is
+            returned unchanged, `solver.least_change`) or "search" (NaN: a grid's solve ended on the least
+            violation's path, which met every constraint as posed).
         unmet: {constraint: amount [SI]} of the constraints the least change could not meet: the largest
             raise of each (`solver.feasibility`); {} for `solve`.
         certificate: the least change's `solver.feasibility.Raise`s: per constraint and column, the least

@@ -32,6 +32,7 @@ from solver.displacement import (
 )
 from solver.errors import InputError
 from solver.foot_bounds import CAPTURE_RESOLUTION, FLOAT_LIMIT
+from solver.frames import FrameSet
 from solver.layout import StateLayout
 from solver.least_change import LeastChangeOptions
 from solver.peak_bounds import filter_capture
@@ -525,3 +526,38 @@ def test_the_soles_edges_are_held_no_deeper_than_the_capture_holds_them():
     captured = np.maximum(0.0, -_site_heights(model, spline(t, q, times), edges))
     cleaned = -_site_heights(model, clean.frames.path(times), edges)
     assert (cleaned <= captured + PENETRATION_TOLERANCE + 1e-5).all(), (cleaned - captured).max()
+
+
+def test_a_search_that_raises_nothing_ends_a_clean_on_a_path_that_meets_every_limit(toy_model, dipped):
+    """One round a frame set (per_level=1) leaves a pair broken, so the least violation is sought at once; it can
+    meet every limit of the dip (the default solve does), so it raises nothing and the clean ends on its path, which
+    MuJoCo finds out of the floor within the penetration tolerance at 1001 times (as the default solve's)."""
+    t, q, disp, *_ = dipped
+    sol = solve_displacement(disp, LeastChangeOptions(per_level=1))
+    assert sol.estimate_kind == "search" and sol.converged_to_tol and not sol.certificate
+    assert len(sol.rounds) == 1  # no round after the search
+    assert max(sol.integrals_final.values()) <= 1.0, sol.integrals_final  # every c/tol, met at <= 1
+    fine = np.linspace(t[0], t[-1], 1001)
+    low = _lowest_site(toy_model, clean_solution(disp, sol).frames.path(fine))
+    assert low.min() >= -PENETRATION_TOLERANCE - 1e-5, low.min()
+
+
+def test_a_clean_returns_the_least_change_among_the_paths_that_met_every_limit(dipped):
+    """`_kept` on a grid: of the last path and the best (least D) one that met every limit, the one of lower D;
+    off a grid the last, which met them. Both paths here are the dipped clean's (met), the best's D given
+    either side of the last's."""
+    from solver.least_change import _kept
+
+    _, _, disp, sol, _ = dipped
+    al = disp.lc.al
+    basis = SplineBasis(sol.frames.times, al.t)
+    D = al.evaluate(basis, sol.frames.values, grad=False)[2]
+    f = sol.frames
+    other = FrameSet(f.times, f.values.copy(), f.fixed, f.is_keyframe)
+    limits = [c.limit.copy() for c in al.constraints]
+    kept, _, message, _ = _kept(al, sol.frames, basis, (0.5 * D, other), "done", [], limits, grid=True)
+    assert kept is other and "least change" in message
+    kept, _, message, _ = _kept(al, sol.frames, basis, (2.0 * D, other), "done", [], limits, grid=True)
+    assert kept is sol.frames and message == "done"
+    kept, _, message, _ = _kept(al, sol.frames, basis, (0.5 * D, other), "done", [], limits, grid=False)
+    assert kept is sol.frames and message == "done"
