@@ -41,7 +41,7 @@ from solver.constraint_set import figure_constraints, flight_edge_frames
 from solver.constraints.forces import figure_forces
 from solver.contact_schedule import ContactSchedule
 from solver.errors import InputError
-from solver.feasibility import Certificate, beyond, capture_start, least_violation, on_points, still_raised, with_frames
+from solver.feasibility import Certificate, capture_start, least_violation, on_points, with_frames
 from solver.figure import Figure
 from solver.frames import FrameSet
 from solver.gauss_newton import cached_preconditioner
@@ -51,6 +51,7 @@ from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
 from solver.lagrangian import AugmentedLagrangian, frame_maps, initial_penalty, solve_subproblem
 from solver.layout import StateLayout
+from solver.least_change_end import better_path, budget_left, grid_done, kept_path, stop_message, worst_pair
 from solver.least_change_refine import refinement
 from solver.manifold import FrameVariables
 from solver.optimize import Status
@@ -80,7 +81,7 @@ class LeastChangeOptions:
             (`AugmentedLagrangian.shift`) and every constraint is met (dimensionless; 1 %: the paper's fig. 5 "good
             enough" test as a fraction); until then a frame goes to each segment over its share by length. On a `LeastChange.grid`, where no
             frame can be added, the solve ends when every constraint is met and a subproblem lowered Phi by
-            at most tol of that part (`_progress`).
+            at most tol of that part (`subproblem_progress`).
         min_gap: [s] no two frames the refinement adds closer: 1/48 s, half a frame of 24 fps film; a cubic
             spline through frames closer than that kinks between them (its second derivative grows like
             1/h^2). The least violation (`solver.feasibility`) splits a segment holding a broken pair down to two
@@ -96,7 +97,7 @@ class LeastChangeOptions:
         round_evals: [evaluations] the most a subproblem spends before the multipliers are updated (0: no limit): 100 at
             200 points/s, what fits a round in 5 s per 10 s of clip (30-50 ms an evaluation per 10 s of clip), fewer
             at denser points; inexact subproblems (Birgin & Martinez 2014, sec. 4.1; docs/solvers.md). Not on a
-            `LeastChange.grid`, whose solve ends on a whole subproblem's progress (`_grid_done`).
+            `LeastChange.grid`, whose solve ends on a whole subproblem's progress (`grid_done`).
         max_evals: evaluations of the whole solve, subproblems and refinement estimates (0: no limit): when
             they are spent the solve ends with the path so far (status MAX_EVALS), as with `max_time_s`.
         max_time_s: [s] stop after this much time in all, keeping the path so far (0: no limit).
@@ -260,7 +261,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
             copy). options: LeastChangeOptions (on a `LeastChange.grid`, `tol` bounds the last subproblem's progress).
         should_stop: polled during each subproblem; True ends the solve with the path so far.
         progress: progress(event, info): "round" (a subproblem starts: round, frames, variable), "eval"
-            (evals, E: the best Phi so far), "constraints" (it ended: round, worst, value as `_worst`, rho:
+            (evals, E: the best Phi so far), "constraints" (it ended: round, worst, value as `worst_pair`, rho:
             the next penalty), "certify" (the least violation was sought: round, frames, raised {constraint:
             amount [SI]}, evals: the solve's so far, spent: the search's), "estimate" (round, estimate: the predicted decrease over Phi, tol).
         from_frames: the frames to start from (a path through `lc`'s keyframes, e.g. another rate's solution); None:
@@ -275,7 +276,7 @@ def solve_least_change(lc: LeastChange, options: LeastChangeOptions | None = Non
     lc = replace(lc, al=lc.al.posed())  # the solve's own multipliers and limits
     al, start = lc.al, time.perf_counter()
     frames, (basis, pre) = _start(lc, o.min_gap, from_frames)
-    if from_frames is None and _worst(al, al.scaled_values(basis, frames.values))["value"] <= 1.0:  # met at D = 0, D's least
+    if from_frames is None and worst_pair(al, al.scaled_values(basis, frames.values))["value"] <= 1.0:  # met at D = 0, D's least
         return replace(_solution(lc, frames, basis, [], [], Status.CONVERGED, _MET_AS_IS, 0, (),
                                  time.perf_counter() - start, 0.0, o.tol), estimate_kind="reference")
     return _iterate(lc, o, frames, (basis, pre), start, should_stop, progress)
@@ -296,15 +297,15 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
         maps = (basis, (newton and cached_preconditioner(grid, basis, al, frames, quat)) or pre)
         r, spent = _subproblem(al, frames, maps, quat, o, (start, evals), should_stop, progress, k, _grid(lc)[1])
         if spent:
-            status, message = spent, _stop_message(spent, "", o)
+            status, message = spent, stop_message(spent, "", o)
             break
         frames, evals = r.frames, evals + r.result.n_evals
         rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
         if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
-            status, message = r.result.status, _stop_message(r.result.status, r.result.message, o)
+            status, message = r.result.status, stop_message(r.result.status, r.result.message, o)
             break
         shift, (worst, met) = al.shift(), _multipliers(al, frames, basis, progress, k)  # shift: under the old multipliers
-        best = _better(al, best, frames, basis) if worst["value"] <= 1.0 else best
+        best = better_path(al, best, frames, basis) if worst["value"] <= 1.0 else best
         level_its, kind, scores = level_its + 1, "boost", None
         if not (met or level_its >= o.per_level):
             continue
@@ -315,16 +316,16 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
             cert = _certify(lc, frames, o, start, evals, should_stop, progress, k)
             evals, raises, certified = evals + cert.n_evals, raises + list(cert.raises), True
             if cert.status is not Status.CONVERGED:
-                status, message = cert.status, _stop_message(cert.status, "while seeking the least violation", o)
+                status, message = cert.status, stop_message(cert.status, "while seeking the least violation", o)
                 break
-            best, frames = _better(al, best, cert.frames), cert.frames  # a path that meets every certified limit
+            best, frames = better_path(al, best, cert.frames), cert.frames  # a path that meets every certified limit
             (basis, pre), level_its, kind = _grid(lc)[0](al, frames, quat), 0, "certify"
             if lc.grid is not None and not cert.raises:  # met as posed: on a grid the continuation raised D (docstring)
                 message, search = f"every constraint met on the grid's {frames.count} frames by the least violation", "search"
                 break
             continue
         if lc.grid is not None:  # a frame at every time of the grid already: done when a subproblem no longer moves
-            estimate, message = _grid_done(r.result, shift, frames.count, o, level_its, message)
+            estimate, message = grid_done(r.result, shift, frames.count, o, level_its, message)
             if estimate <= o.tol or level_its >= o.per_level:
                 break
             continue
@@ -343,7 +344,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
             level_its, kind = 0, "refine"
     else:
         status, message = Status.MAX_EVALS, f"{o.max_subproblems} subproblems without converging"
-    frames, basis, message, raises = _kept(al, frames, basis, best, message, raises, limits, lc.grid is not None)
+    frames, basis, message, raises = kept_path(al, frames, basis, best, message, raises, limits, lc.grid is not None)
     status = Status.INFEASIBLE if status is Status.CONVERGED and raises else status
     return _solution(lc, frames, basis, rounds, [np.asarray(r.result.trace) for r in rounds], status, message, evals,
                      tuple(raises), time.perf_counter() - start, estimate, o.tol, tuple(decreases), search)
@@ -351,10 +352,10 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
 
 def _multipliers(al: AugmentedLagrangian, frames: FrameSet, basis, progress, k: int) -> tuple[dict, bool]:
     """The multiplier update at the end of subproblem k (`AugmentedLagrangian.update`), reported ("constraints");
-    returns (the worst pair as `_worst`, met: every pair within its tolerance and the infeasibility V <= 1)."""
+    returns (the worst pair as `worst_pair`, met: every pair within its tolerance and the infeasibility V <= 1)."""
     scaled = al.scaled_values(basis, frames.values)
     V = al.update(scaled)
-    worst = _worst(al, scaled)
+    worst = worst_pair(al, scaled)
     if progress:
         progress("constraints", {"round": k, **worst, "rho": al.rho})
     return worst, worst["value"] <= 1.0 and V <= 1.0
@@ -366,7 +367,7 @@ def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, 
     solve's budget (`spent_so_far`: its start [s, perf_counter] and evaluations), L-BFGS keeping `pairs` (None: by size):
     (its SubproblemResult, CONVERGED where its own cap ended it, None), or (None, MAX_TIME or MAX_EVALS: the budget spent)."""
     start, evals = spent_so_far
-    left, spent = _budget(o, start, evals)
+    left, spent = budget_left(o, start, evals)
     if spent:
         return None, spent
     if progress:
@@ -381,29 +382,6 @@ def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, 
     if own and r.result.status is Status.MAX_EVALS:  # an inexact subproblem: the multipliers are updated next
         r = replace(r, result=replace(r.result, status=Status.CONVERGED, message=f"the round's {cap} evaluations spent (round_evals)"))
     return r, None
-
-
-def _better(al: AugmentedLagrangian, best: tuple, frames: FrameSet, basis=None) -> tuple:
-    """(D, frames) of the better of `best` and `frames` (a path that meets every limit) by D."""
-    basis = basis if basis is not None else SplineBasis(frames.times, al.t)
-    D = al.evaluate(basis, frames.values, grad=False)[2]
-    return (D, frames) if best[0] > D else best
-
-
-def _kept(al: AugmentedLagrangian, frames: FrameSet, basis, best: tuple, message: str, raises: list, limits: list,
-          grid: bool = False) -> tuple:
-    """The path a solve returns: its last, or the best that met every limit where the last broke one or, on a `grid`
-    (one frame set: every path on the same frames), has the lower D; and what stays raised on it
-    (`solver.feasibility.still_raised` against the limits as posed). Returns (frames, basis, message, raises)."""
-    broke = _worst(al, al.scaled_values(basis, frames.values))["value"] > 1.0
-    if np.isfinite(best[0]) and (broke or (grid and best[0] < al.evaluate(basis, frames.values, grad=False)[2])):
-        frames = best[1]  # the path ended beyond a limit, or above the least D of those that met them: that one
-        basis = SplineBasis(frames.times, al.t)
-        message += ("; the last path broke a limit: the best that met them all kept" if broke else
-                    "; the path of least change among those that met every limit kept")
-    if raises:  # what stays raised: the certified columns the path returned is beyond their limits as posed
-        raises = still_raised(raises, beyond(al, al.constraints, frames, limits))
-    return frames, basis, message, raises
 
 
 def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop,
@@ -444,47 +422,6 @@ def least_violation_of(lc: LeastChange, frames: FrameSet, options: LeastChangeOp
 def _grid(lc: LeastChange) -> tuple:
     """(`lc`'s frame sets' maps, its subproblems' L-BFGS pairs): `grid_maps` and GRID_PAIRS on a grid, else `frame_maps` and None."""
     return (frame_maps, None) if lc.grid is None else (grid_maps, GRID_PAIRS)
-
-
-def _grid_done(result, shift: float, count: int, o: LeastChangeOptions, level_its: int, message: str) -> tuple:
-    """On a grid with every constraint met: (the last subproblem's progress (`_progress`), the solve's message
-    if it ends here (the progress within tol, or the frame set's subproblems spent), else `message`)."""
-    estimate = _progress(result, shift)
-    if estimate <= o.tol or level_its >= o.per_level:
-        message = f"every constraint met on the grid's {count} frames; the last subproblem's decrease {estimate:.3g}"
-    return estimate, message
-
-
-def _progress(result, shift: float) -> float:
-    """The decrease of Phi over a subproblem over Phi + shift at its start (dimensionless, >= 0): the method of
-    multipliers is done when a subproblem started from the last one's path under the updated multipliers
-    moves Phi by no more than the tolerance (Birgin & Martinez 2014, sec. 4.1: the subproblems' progress)."""
-    trace = np.asarray(result.trace, float)
-    if trace.size == 0 or not np.isfinite(trace[0]):
-        return float("inf")
-    return float(max(trace[0] - result.fun, 0.0) / max(trace[0] + shift, 1e-300))
-
-
-def _budget(o: LeastChangeOptions, start: float, evals: int) -> tuple[float, Status | None]:
-    """([s] the time left of `o.max_time_s` (0: no limit), the status that ends the solve before its next
-    subproblem: MAX_TIME or MAX_EVALS when that budget is spent, else None)."""
-    left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
-    if o.max_time_s and left <= 0:
-        return left, Status.MAX_TIME
-    return left, Status.MAX_EVALS if o.max_evals and evals >= o.max_evals else None
-
-
-def _worst(al: AugmentedLagrangian, scaled: list) -> dict:
-    """{"worst": the name of the constraint furthest over its tolerance ("" without one), "value": its largest c/tol (met at <= 1)}."""
-    value, name = max(((float(s.max()), c.name) for c, s in zip(al.constraints, scaled) if s.size), default=(0.0, ""))
-    return {"worst": name, "value": value}
-
-
-def _stop_message(status: Status, message: str, o: LeastChangeOptions) -> str:
-    """Why a solve ended on `status`: the whole solve's budget for MAX_TIME and MAX_EVALS (a subproblem reports only its own
-    share), else the subproblem's `message`."""
-    return {Status.MAX_TIME: f"time limit of {o.max_time_s:g} s reached",
-            Status.MAX_EVALS: f"evaluation budget of {o.max_evals} spent"}.get(status, message)
 
 
 def _solution(lc, frames, basis, rounds, trace, status, message, evals, raises, seconds, estimate, tol,

@@ -543,10 +543,10 @@ def test_a_search_that_raises_nothing_ends_a_clean_on_a_path_that_meets_every_li
 
 
 def test_a_clean_returns_the_least_change_among_the_paths_that_met_every_limit(dipped):
-    """`_kept` on a grid: of the last path and the best (least D) one that met every limit, the one of lower D;
+    """`kept_path` on a grid: of the last path and the best (least D) one that met every limit, the one of lower D;
     off a grid the last, which met them. Both paths here are the dipped clean's (met), the best's D given
     either side of the last's."""
-    from solver.least_change import _kept
+    from solver.least_change_end import kept_path
 
     _, _, disp, sol, _ = dipped
     al = disp.lc.al
@@ -555,9 +555,9 @@ def test_a_clean_returns_the_least_change_among_the_paths_that_met_every_limit(d
     f = sol.frames
     other = FrameSet(f.times, f.values.copy(), f.fixed, f.is_keyframe)
     limits = [c.limit.copy() for c in al.constraints]
-    kept, _, message, _ = _kept(al, sol.frames, basis, (0.5 * D, other), "done", [], limits, grid=True)
+    kept, _, message, _ = kept_path(al, sol.frames, basis, (0.5 * D, other), "done", [], limits, grid=True)
     assert kept is other and "least change" in message
-    kept, _, message, _ = _kept(al, sol.frames, basis, (2.0 * D, other), "done", [], limits, grid=True)
+    kept, _, message, _ = kept_path(al, sol.frames, basis, (2.0 * D, other), "done", [], limits, grid=True)
     assert kept is sol.frames and message == "done"
-    kept, _, message, _ = _kept(al, sol.frames, basis, (0.5 * D, other), "done", [], limits, grid=False)
+    kept, _, message, _ = kept_path(al, sol.frames, basis, (0.5 * D, other), "done", [], limits, grid=False)
     assert kept is sol.frames and message == "done"

@@ -1,0 +1,83 @@
+"""How a least-change solve ends (`solver.least_change`): its budget, the progress that ends a grid's, the path it keeps.
+
+A solve keeps the best path that met every limit as it goes (`better_path`, by D); the path it returns is its last, or
+that best where the last broke a limit or, on a grid (one frame set, so every path on the same frames), lies above
+the best's D (`kept_path`).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from solver.feasibility import beyond, still_raised
+from solver.frames import FrameSet
+from solver.optimize import Status
+from solver.spline_basis import SplineBasis
+
+__all__ = ["budget_left", "better_path", "grid_done", "kept_path", "stop_message", "subproblem_progress", "worst_pair"]
+
+
+def better_path(al, best: tuple, frames: FrameSet, basis=None) -> tuple:
+    """(D, frames) of the better of `best` and `frames` (a path that meets every limit) by D."""
+    basis = basis if basis is not None else SplineBasis(frames.times, al.t)
+    D = al.evaluate(basis, frames.values, grad=False)[2]
+    return (D, frames) if best[0] > D else best
+
+
+def kept_path(al, frames: FrameSet, basis, best: tuple, message: str, raises: list, limits: list,
+              grid: bool = False) -> tuple:
+    """The path a solve returns: its last, or the best that met every limit where the last broke one or, on a `grid`
+    (one frame set: every path on the same frames), has the lower D; and what stays raised on it
+    (`solver.feasibility.still_raised` against the limits as posed). Returns (frames, basis, message, raises)."""
+    broke = worst_pair(al, al.scaled_values(basis, frames.values))["value"] > 1.0
+    if np.isfinite(best[0]) and (broke or (grid and best[0] < al.evaluate(basis, frames.values, grad=False)[2])):
+        frames = best[1]  # the path ended beyond a limit, or above the least D of those that met them: that one
+        basis = SplineBasis(frames.times, al.t)
+        message += ("; the last path broke a limit: the best that met them all kept" if broke else
+                    "; the path of least change among those that met every limit kept")
+    if raises:  # what stays raised: the certified columns the path returned is beyond their limits as posed
+        raises = still_raised(raises, beyond(al, al.constraints, frames, limits))
+    return frames, basis, message, raises
+
+
+def grid_done(result, shift: float, count: int, o, level_its: int, message: str) -> tuple:
+    """On a grid with every constraint met: (the last subproblem's progress (`subproblem_progress`), the solve's message
+    if it ends here (the progress within tol, or the frame set's subproblems spent), else `message`)."""
+    estimate = subproblem_progress(result, shift)
+    if estimate <= o.tol or level_its >= o.per_level:
+        message = f"every constraint met on the grid's {count} frames; the last subproblem's decrease {estimate:.3g}"
+    return estimate, message
+
+
+def subproblem_progress(result, shift: float) -> float:
+    """The decrease of Phi over a subproblem over Phi + shift at its start (dimensionless, >= 0): the method of
+    multipliers is done when a subproblem started from the last one's path under the updated multipliers
+    moves Phi by no more than the tolerance (Birgin & Martinez 2014, sec. 4.1: the subproblems' progress)."""
+    trace = np.asarray(result.trace, float)
+    if trace.size == 0 or not np.isfinite(trace[0]):
+        return float("inf")
+    return float(max(trace[0] - result.fun, 0.0) / max(trace[0] + shift, 1e-300))
+
+
+def budget_left(o, start: float, evals: int) -> tuple[float, Status | None]:
+    """([s] the time left of `o.max_time_s` (0: no limit), the status that ends the solve before its next
+    subproblem: MAX_TIME or MAX_EVALS when that budget is spent, else None)."""
+    left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
+    if o.max_time_s and left <= 0:
+        return left, Status.MAX_TIME
+    return left, Status.MAX_EVALS if o.max_evals and evals >= o.max_evals else None
+
+
+def worst_pair(al, scaled: list) -> dict:
+    """{"worst": the name of the constraint furthest over its tolerance ("" without one), "value": its largest c/tol (met at <= 1)}."""
+    value, name = max(((float(s.max()), c.name) for c, s in zip(al.constraints, scaled) if s.size), default=(0.0, ""))
+    return {"worst": name, "value": value}
+
+
+def stop_message(status: Status, message: str, o) -> str:
+    """Why a solve ended on `status`: the whole solve's budget for MAX_TIME and MAX_EVALS (a subproblem reports only its own
+    share), else the subproblem's `message`."""
+    return {Status.MAX_TIME: f"time limit of {o.max_time_s:g} s reached",
+            Status.MAX_EVALS: f"evaluation budget of {o.max_evals} spent"}.get(status, message)
+
