@@ -498,3 +498,18 @@ def test_a_round_ends_at_its_own_evaluations_and_the_solve_goes_on(shipped):
     assert len(sol.rounds) == 4 and "evaluation budget" not in sol.message
     at = np.flatnonzero(sol.frames.is_keyframe)
     assert np.abs(sol.frames.values[at][keyframes.mask] - keyframes.values[keyframes.mask]).max() <= 1e-12
+
+
+@pytest.mark.slow
+def test_a_search_that_raises_nothing_is_judged_by_the_refinement_at_once(shipped):
+    """One round a frame set (per_level=1) leaves a pair broken, so the least violation is sought after round 0; the
+    run-and-step problem can be met, so it raises nothing, and the refinement judges the search's path next (its
+    estimate), as it judges a round's, before any other round; the path returned meets every constraint."""
+    model, keyframes, info = shipped
+    lc = build_least_change(model, keyframes, contacts=info.contacts, flights=info.flights)
+    events = []
+    sol = solve_least_change(lc, LeastChangeOptions(per_level=1), progress=lambda e, i: events.append((e, i)))
+    steps = [(e, i) for e, i in events if e in ("round", "certify", "estimate")]
+    at = next(k for k, (e, _) in enumerate(steps) if e == "certify")
+    assert steps[at][1]["raised"] == {} and steps[at + 1][0] == "estimate"
+    assert all(v <= 1.0 for v in sol.integrals_final.values()), sol.integrals_final
