@@ -21,7 +21,7 @@ where pairs stay broken. A limit rises only by what that solve shows no path thr
 certified limit (a raised pair's multiplier from 0, the rest as it was). It also starts from the capture, a keyed
 path's (`solver.feasibility.capture_start`) and a clean's d = 0, as a stalled path can be anywhere (docs/design.md). A
 path the solve ends on beyond a limit (a budget spent) gives way to the best one that met them all; on a grid (a clean's
-one frame set) so does one above their least D. There a search that raises nothing ends the solve: its path meets every
+one frame set) with nothing raised, so does one above their least D. There a search that raises nothing ends the solve: its path meets every
 limit as posed, and the multipliers' rounds after it, pushed by estimates from the broken rounds, ended above its D on
 6 of the 7 shipped clips whose search raised nothing (by 30-115 %) and on it on the 7th, for 95-220 evaluations more.
 Off a grid, the refinement judges such a search's path as it judges a round's (the solve ends there when it predicts

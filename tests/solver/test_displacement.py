@@ -31,6 +31,7 @@ from solver.displacement import (
     solve_displacement,
 )
 from solver.errors import InputError
+from solver.feasibility import Raise
 from solver.foot_bounds import CAPTURE_RESOLUTION, FLOAT_LIMIT
 from solver.frames import FrameSet
 from solver.layout import StateLayout
@@ -544,8 +545,8 @@ def test_a_search_that_raises_nothing_ends_a_clean_on_a_path_that_meets_every_li
 
 def test_a_clean_returns_the_least_change_among_the_paths_that_met_every_limit(dipped):
     """`kept_path` on a grid: of the last path and the best (least D) one that met every limit, the one of lower D;
-    off a grid the last, which met them. Both paths here are the dipped clean's (met), the best's D given
-    either side of the last's."""
+    off a grid, or with a limit raised, the last, which met them. Both paths here are the dipped clean's (met), the
+    best's D given either side of the last's."""
     from solver.least_change_end import kept_path
 
     _, _, disp, sol, _ = dipped
@@ -560,4 +561,8 @@ def test_a_clean_returns_the_least_change_among_the_paths_that_met_every_limit(d
     kept, _, message, _ = kept_path(al, sol.frames, basis, (2.0 * D, other), "done", [], limits, grid=True)
     assert kept is sol.frames and message == "done"
     kept, _, message, _ = kept_path(al, sol.frames, basis, (0.5 * D, other), "done", [], limits, grid=False)
+    assert kept is sol.frames and message == "done"
+    # with a limit raised, the rounds that brought its pairs toward their least violation are kept (their D aside)
+    raised = [Raise("penetration", "", 1e-3, 1.0, 1.0, 1.0, 1, "mm", 1e-3)]
+    kept, _, message, _ = kept_path(al, sol.frames, basis, (0.5 * D, other), "done", raised, limits, grid=True)
     assert kept is sol.frames and message == "done"
