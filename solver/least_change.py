@@ -22,8 +22,9 @@ certified limit (a raised pair's multiplier from 0, the rest as it was). It also
 path's (`solver.feasibility.capture_start`) and a clean's d = 0, as a stalled path can be anywhere (docs/design.md). A
 path the solve ends on beyond a limit (a budget spent) gives way to the best one that met them all; on a grid (a clean's
 one frame set) with nothing raised, so does one above their least D. There a search that raises nothing ends the
-solve: its path meets every limit as posed, and the multipliers' rounds after it, pushed by estimates from the broken rounds, ended above its D on
-6 of the 7 shipped clips whose search raised nothing (by 32-116 %) and on it on the 7th, for 95-220 evaluations more.
+solve: its path meets every limit as posed, and the multipliers' rounds after it, pushed by estimates from the broken
+rounds, ended above its D on 6 of the 7 shipped clips whose search raised nothing (by 32-116 %) and on it on the 7th,
+for 95-220 evaluations more.
 Off a grid, the refinement judges such a search's path as it judges a round's (the solve ends there when it predicts
 under tol), not another round first: those rounds ended above the search's D on 7 of the 9 shipped clips keyed every
 0.25 s whose search raised nothing (by 3-45 %; at it on one, 5 % below it with 9 more frames on one). A reference motion
