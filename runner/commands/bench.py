@@ -269,8 +269,10 @@ def _terms_all_block(runs: _Runs) -> Block:
          pair("rms_root_torque_flight_Nm", "peak_root_torque_flight_Nm", "{:.1f}", p),
          timing(pair("rms_root_torque_flight_Nm", "peak_root_torque_flight_Nm", "{:.1f}", o)
                 + mark("RMS root torque in flight [N m]", "peak root torque in flight [N m]"))],
+        # inside the no-jolt bound of the pelvis (16.6 m/s^2, the capture's 6 Hz peak), where the solve stops in it
+        # follows the round-off (12.4 and 16.5 m/s^2 under two BLAS kernels): machine-dependent
         ["peak pelvis acceleration [m/s^2]", f"{p['peak_pelvis_acceleration_ms2']:.1f}",
-         f"{o['peak_pelvis_acceleration_ms2']:.1f}" + mark("peak pelvis acceleration [m/s^2]")],
+         timing(f"{o['peak_pelvis_acceleration_ms2']:.1f}" + mark("peak pelvis acceleration [m/s^2]"))],
         ["RMS / peak root force on the ground [body weights]",
          pair("rms_root_force_ground_bw", "peak_root_force_ground_bw", "{:.2f}", p),
          pair("rms_root_force_ground_bw", "peak_root_force_ground_bw", "{:.2f}", o)
