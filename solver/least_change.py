@@ -292,7 +292,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
     al, quat, (basis, pre) = lc.al, lc.layout.quat_slots, maps
     o = o if lc.grid is None else replace(o, round_evals=0)  # a grid's solve ends on a whole subproblem's progress
     raises, limits = [], [c.limit.copy() for c in al.constraints]  # the limits as posed
-    rounds, estimate, decreases, scores, search = [], float("nan"), [], None, None
+    rounds, estimate, decreases, scores, on_search = [], float("nan"), [], None, False
     evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
     for k in range(o.max_subproblems):
@@ -326,7 +326,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
             if cert.raises:
                 continue
             if lc.grid is not None:  # met as posed: on a grid the continuation raised D (module docstring)
-                message, search = f"every constraint met on the grid's {frames.count} frames by the least violation", "search"
+                message, on_search = f"every constraint met on the grid's {frames.count} frames by the least violation", True
                 break
             met = True  # met as posed: the refinement judges the search's path as it judges a round's (module docstring)
         if lc.grid is not None:  # a frame at every time of the grid already: done when a subproblem no longer moves
@@ -352,7 +352,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
     frames, basis, message, raises = kept_path(al, frames, basis, best, message, raises, limits, lc.grid is not None)
     status = Status.INFEASIBLE if status is Status.CONVERGED and raises else status
     return _solution(lc, frames, basis, rounds, [np.asarray(r.result.trace) for r in rounds], status, message, evals,
-                     tuple(raises), time.perf_counter() - start, estimate, o.tol, tuple(decreases), search)
+                     tuple(raises), time.perf_counter() - start, estimate, o.tol, tuple(decreases), on_search)
 
 
 def _multipliers(al: AugmentedLagrangian, frames: FrameSet, basis, progress, k: int) -> tuple[dict, bool]:
@@ -430,9 +430,9 @@ def _grid(lc: LeastChange) -> tuple:
 
 
 def _solution(lc, frames, basis, rounds, trace, status, message, evals, raises, seconds, estimate, tol,
-              decreases=(), search=None) -> Solution:
-    """The Solution of a solve (`solve_least_change`'s Returns); `search`: "search" where a grid's solve ended on the
-    least violation's path (no estimate: met as posed, it is converged)."""
+              decreases=(), on_search: bool = False) -> Solution:
+    """The Solution of a solve (`solve_least_change`'s Returns); `on_search`: a grid's solve ended on the least
+    violation's path (estimate_kind "search", no estimate: met as posed, it is converged)."""
     al = lc.al
     plain_basis = SplineBasis(lc.plain.times, al.t)
     _, _, D = al.evaluate(basis, frames.values, grad=False)
@@ -446,8 +446,14 @@ def _solution(lc, frames, basis, rounds, trace, status, message, evals, raises, 
     return Solution(frames, lc.plain, tuple(rounds), status, message, 0.0, D / al.d0,
                     worst(plain_basis, lc.plain.values), worst(basis, frames.values), {},
                     np.concatenate(trace) if trace else np.zeros(0), seconds, evals, unmet=dict(unmet),
-                    converged_to_tol=bool(status is Status.CONVERGED and (search or np.isfinite(estimate) and estimate <= tol)
+                    converged_to_tol=bool(status is Status.CONVERGED and (on_search or np.isfinite(estimate) and estimate <= tol)
                                           and not unmet),
-                    final_estimate=estimate, estimate_kind=search or ("refinement" if lc.grid is None else "progress"),
+                    final_estimate=estimate, estimate_kind=_estimate_kind(lc, on_search),
                     relaxations=tuple(lc.relaxations), segment_decreases=decreases,
                     certificate=raises, multipliers=tuple((c.name, lam.copy()) for c, lam in zip(al.constraints, al.lam)))
+
+
+def _estimate_kind(lc: LeastChange, on_search: bool) -> str:
+    """What a solve's final estimate is (`Solution.estimate_kind`): "search" where a grid's solve ended on the least
+    violation's path, else "refinement" off a grid and "progress" on one."""
+    return "search" if on_search else ("refinement" if lc.grid is None else "progress")
