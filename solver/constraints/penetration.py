@@ -7,14 +7,17 @@ at the two,
     q(u) = H00(u) p_i + H10(u) h v_i + H01(u) p_i+1 + H11(u) h v_i+1,   u in [0, 1]
 
 (exact for a site moving on a cubic; its error is h^4/384 max |p''''|, microns at 200 Hz). The constraint
-is the deepest point of each interval, -min_u d(q(u)) <= 0, d the signed distance to the surface
-(`StaticSurfaces`): sampled instants miss a heel that clips a box's edge at 5 m/s for a millisecond, and
-a path that meets the bound at samples breaks it between them.
+is the deepest point of each interval, -min_u d(q(u)) <= 0, d the surface's distance (`StaticSurfaces`):
+sampled instants miss a heel that clips a box's edge at 5 m/s for a millisecond, and a path that meets the
+bound at samples breaks it between them. The deepest point is found exactly, as a cubic's:
 
-    plane   d(q(u)) is a cubic in u: its minimum over [0, 1] is at an end or where d' = 0 (closed form)
-    box     d is the largest of the faces' distances inside (a kink where the nearest face changes): the
-            best of PENETRATION_RATE samples, golden-section search around it, and at the final bracket
-            the point where its two sides' tangent lines meet (exact at a kink between two faces)
+    plane   d(q(u)) is a cubic in u: its minimum over [0, 1] is at an end or where d' = 0
+    box     d is the largest of the six faces' distances, each a cubic in u: the signed distance inside the
+            box and positive outside it (below the Euclidean distance near an edge or corner), so that
+            -min d <= tol (tol >= 0) holds on the same curves as with the Euclidean distance. The least of
+            the faces' upper envelope is at an end, where one face is stationary, or where two cross: those
+            candidates, roots of quadratics and cubics in closed form (`solver.polynomial_roots`), are
+            compared
 
 The value's gradient is grad d at the minimizer times the Hermite weights there: the minimizer's own
 motion does not change the minimum to first order (the envelope theorem); at a kink it is the
@@ -23,21 +26,13 @@ min-max: Bertsekas, Nonlinear Programming, 2nd ed., 1999, prop. B.25).
 """
 from __future__ import annotations
 
-from functools import partial
-
 import numpy as np
 
 from solver.constraints.base import Constraint
 from solver.path_state import add_at
+from solver.polynomial_roots import cubic_roots, quadratic_roots
 
-__all__ = ["GOLDEN_STEPS", "PENETRATION_RATE", "Penetration", "SoleEdges"]
-
-#: [1/s] the samples a box's pairs are searched at before the golden-section search: 1600 a second, eight
-#: per interval at 200 Hz, so the nearest face changes at most once between two samples of a foot
-PENETRATION_RATE = 1600.0
-#: [steps] golden-section steps within the best sample's two spacings: each keeps 0.618 of the bracket, so 8
-#: leave 2 % of it, enough to hold one kink, which the tangent lines then place exactly
-GOLDEN_STEPS = 8
+__all__ = ["Penetration", "SoleEdges"]
 
 
 def _hermite(u: np.ndarray) -> np.ndarray:
@@ -81,106 +76,78 @@ def plane_minimum(C: np.ndarray, point: np.ndarray, normal: np.ndarray) -> tuple
     """
     c3, c2, c1, c0 = np.einsum("j...c,c->j...", _power(C), normal)  # the distance's power coefficients
     c0 = c0 - normal @ point
-    # d'(u) = 3 c3 u^2 + 2 c2 u + c1: its roots in [0, 1] and the two ends are the candidates, the roots
-    # in the form that stays exact as c3 -> 0 (Press et al., Numerical Recipes, 3rd ed., sec. 5.6); a
-    # candidate that is no root (no real roots, a root outside [0, 1], clipped) is never lower than the minimum
-    q = -(c2 + np.where(c2 >= 0, 1.0, -1.0) * np.sqrt(np.maximum(c2 * c2 - 3 * c3 * c1, 0.0)))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r1, r2 = q / (3 * c3), c1 / q
-    cand = np.stack([np.zeros_like(c1), np.ones_like(c1), np.nan_to_num(r1), np.nan_to_num(r2)])
-    cand = np.clip(cand, 0.0, 1.0)
+    # d'(u) = 3 c3 u^2 + 2 c2 u + c1: its roots in [0, 1] and the two ends are the candidates; a candidate that
+    # is no root (no real roots, a root outside [0, 1], clipped) is never lower than the minimum
+    roots = np.moveaxis(quadratic_roots(3 * c3, 2 * c2, c1), -1, 0)
+    cand = np.clip(np.nan_to_num(np.concatenate([np.stack([np.zeros_like(c1), np.ones_like(c1)]), roots])), 0.0, 1.0)
     values = ((c3 * cand + c2) * cand + c1) * cand + c0
     best = np.argmin(values, axis=0)
     return np.take_along_axis(cand, best[None], 0)[0], np.take_along_axis(values, best[None], 0)[0]
 
 
-def _golden(C: np.ndarray, a: np.ndarray, b: np.ndarray, depth) -> tuple[np.ndarray, ...]:
-    """(u, d, a, b) the lowest point of each curve (power coefficients C (4, q, 3), `_power`) on [a, b] (q,),
-    the distance unimodal there, and the final bracket: golden-section search (Kiefer, "Sequential minimax search for a maximum", Proc. AMS 4, 1953), then the
-    vertex of the parabola through the best point and its neighbours, which places a smooth minimum to
-    third order in the bracket (so that it moves continuously with the curve)."""
-    r = 0.5 * (np.sqrt(5.0) - 1.0)
-    c1, c2 = b - r * (b - a), a + r * (b - a)
-    f1, f2 = depth(_curve(C, c1)), depth(_curve(C, c2))
-    for _ in range(GOLDEN_STEPS):
-        left = f1 <= f2  # the minimum is in [a, c2]: c2 is the new right end, c1 the new inner right point
-        a, b = np.where(left, a, c1), np.where(left, c2, b)
-        keep, f_keep = np.where(left, c1, c2), np.where(left, f1, f2)
-        new = np.where(left, b - r * (b - a), a + r * (b - a))
-        f_new = depth(_curve(C, new))
-        c1, c2 = np.where(left, new, keep), np.where(left, keep, new)
-        f1, f2 = np.where(left, f_new, f_keep), np.where(left, f_keep, f_new)
-    fa, fb = depth(_curve(C, a)), depth(_curve(C, b))
-    left = f1 <= f2
-    x0, x1, x2 = np.where(left, a, c1), np.where(left, c1, c2), np.where(left, c2, b)
-    y0, y1, y2 = np.where(left, fa, f1), np.where(left, f1, f2), np.where(left, f2, fb)
-    num = (x1 - x0) ** 2 * (y1 - y2) - (x1 - x2) ** 2 * (y1 - y0)
-    den = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0)
-    vertex = np.where(den != 0, np.clip(x1 - 0.5 * num / np.where(den != 0, den, 1.0), a, b), x1)
-    fv = depth(_curve(C, vertex))
-    return np.where(fv <= y1, vertex, x1), np.minimum(fv, y1), a, b
+def _box_faces(L: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """(4, ..., 6) the power coefficients of the six faces' distances along curves whose box coordinates have power
+    coefficients L (4, ..., 3): face f is axis f % 3 on the + side (f < 3) or the - side, s L_k - h_k."""
+    F = np.concatenate([L, -L], axis=-1)
+    F[3] -= np.concatenate([half, half])
+    return F
 
 
-def _kinks(C: np.ndarray, u: np.ndarray, a: np.ndarray, b: np.ndarray, distance) -> tuple[np.ndarray, ...]:
-    """(u, d, grad d) at each curve's (power coefficients C, `_power`) lowest point found at u (q,) in the
-    bracket [a, b]: where the distance falls into the bracket on one box face and rises out of it on
-    another (both planes there), the point where the two faces' distances are equal; elsewhere u."""
-    d, g = distance(_curve(C, u))
-    a, b = np.minimum(a, u), np.maximum(b, u)
-    fa, ga = distance(_curve(C, a))
-    fb, gb = distance(_curve(C, b))
-    sa = np.einsum("qc,qc->q", ga, _curve(C, a, 1))
-    sb = np.einsum("qc,qc->q", gb, _curve(C, b, 1))
-    kink = np.flatnonzero((sa < 0) & (sb > 0) & (fa < 0) & (fb < 0) & (ga != gb).any(axis=1))
-    if not kink.size:
-        return u, d, g
-    Ck, ga, gb, a, b = C[:, kink], ga[kink], gb[kink], a[kink], b[kink]
-    ka = np.einsum("qc,qc->q", ga, _curve(Ck, a)) - fa[kink]  # each face's distance: d = g . q - k
-    kb = np.einsum("qc,qc->q", gb, _curve(Ck, b)) - fb[kink]
-    # one Newton step from where the two faces' tangent lines at the bracket's ends meet: the faces'
-    # difference is a cubic in u, so the step's error is of the order of the bracket's width squared
-    sa_, sb_ = sa[kink], sb[kink]
-    uk = np.clip((fa[kink] - fb[kink] - sa_ * a + sb_ * b) / (sb_ - sa_), a, b)
-    gap = np.einsum("qc,qc->q", ga - gb, _curve(Ck, uk)) - (ka - kb)
-    slope = np.einsum("qc,qc->q", ga - gb, _curve(Ck, uk, 1))
-    uk = np.clip(uk - gap / np.where(slope != 0, slope, 1.0), a, b)
-    q1 = _curve(Ck, uk, 1)
-    s1, s2 = np.einsum("qc,qc->q", ga, q1), np.einsum("qc,qc->q", gb, q1)
-    mu = np.clip(s2 / np.where(s2 > s1, s2 - s1, 1.0), 0.0, 1.0)
-    u, d, g = u.copy(), d.copy(), g.copy()
-    u[kink] = uk
-    d[kink] = np.einsum("qc,qc->q", ga, _curve(Ck, uk)) - ka
-    g[kink] = mu[:, None] * ga + (1 - mu[:, None]) * gb
-    return u, d, g
+def _face_distance(points: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(d, grad) the largest face distance of points (q, 3) to a box (`box_minimum`), (q,) [m], and its face's outward
+    normal (q, 3)."""
+    local = (points - center) @ rot
+    faces = np.concatenate([local, -local], axis=-1) - np.concatenate([half, half])
+    top = np.argmax(faces, axis=-1)
+    return faces[np.arange(len(top)), top], np.concatenate([rot.T, -rot.T])[top]
 
 
-def box_minimum(C: np.ndarray, grid: np.ndarray, distance, depth=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(u*, d, grad d) the deepest point of each curve in a box (module docstring): every local minimum
-    of the samples is searched within a spacing on each side (`_golden`), the deepest kept and, at a kink
-    between two faces, placed exactly (`_kinks`).
+#: (15, 2) the pairs of faces (`_box_faces`) whose crossing can hold a curve's deepest point in a box
+_PAIRS = np.array([(f, g) for f in range(6) for g in range(f + 1, 6)])
+
+
+def box_minimum(C: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(u*, d, grad d) the deepest point of each curve in a box (module docstring), exactly.
+
+    d is the largest of the six faces' distances, each a cubic in u along a curve, and the least of such an upper
+    envelope over [0, 1] lies at an end, where one face's cubic is stationary, or where two faces cross: the two ends,
+    the 6 stationary points and the 45 crossings (`solver.polynomial_roots`) are evaluated and the deepest kept. At a
+    crossing the gradient is the combination of the two faces' normals whose slope along the curve is zero.
 
     Args:
-        C: (4, q, 3) Hermite coefficients [m]. grid: (j,) the sample fractions, 0 and 1 included.
-        distance: f(points (q, 3)) -> (d (q,), grad (q, 3)), each curve's point against its own box.
-        depth: f(points (..., 3)) -> d (...,), `distance`'s d alone (the same numbers, cheaper); None: from `distance`.
+        C: (4, q, 3) Hermite coefficients [m]. center: (3,) [m]. rot: (3, 3) the box's axes as columns. half: (3,) [m].
     Returns:
-        u*: (q,). d: (q,) [m]. grad: (q, 3), the combination at a kink (module docstring).
+        u*: (q,). d: (q,) [m] the largest face distance there. grad: (q, 3) its gradient in the curve's point.
     """
-    depth = depth or (lambda points: distance(points)[0])
-    W = _power(C)
-    samples = depth(_curve(W[:, None], np.broadcast_to(grid[:, None], (len(grid), C.shape[1]))))  # (j, q)
-    padded = np.pad(samples, ((1, 1), (0, 0)), constant_values=np.inf)
-    step = 1.0 / (len(grid) - 1)
-    # |d'| <= |q'| <= 3 times the longest leg of the Bezier polygon: a sample's basin reaches at most that
-    # times a spacing below it, so the local minima that cannot beat the best sample are not searched
-    slope = 3 * np.linalg.norm(np.diff(_bezier(C), axis=0), axis=-1).max(axis=0)
-    local = (samples <= padded[:-2]) & (samples <= padded[2:]) & (samples <= samples.min(axis=0) + slope * step)
-    j, q = np.nonzero(local)
-    us, ds, a, b = _golden(W[:, q], np.maximum(grid[j] - step, 0.0), np.minimum(grid[j] + step, 1.0), depth)
-    us, ds = np.where(samples[j, q] < ds, grid[j], us), np.minimum(samples[j, q], ds)  # a sample deeper: an end
-    order = np.lexsort((ds, q))
-    first = order[np.r_[True, q[order][1:] != q[order][:-1]]]  # the deepest search of each curve
-    return _kinks(W, us[first], a[first], b[first], distance)
+    L = _power(C) @ rot
+    L[3] -= center @ rot
+    F = _box_faces(L, half)  # (4, q, 6)
+    ends = np.broadcast_to(np.array([0.0, 1.0]), (C.shape[1], 2))
+    stationary = quadratic_roots(3 * L[0], 2 * L[1], L[2]).reshape(-1, 6)
+    # a face below the envelope's least bound all along the curve is never on it: its crossings are not sought (each
+    # face's cubic lies between its least and largest value at the Bezier points)
+    B = _bezier(C) @ rot - center @ rot
+    at = np.concatenate([B, -B], axis=-1) - np.concatenate([half, half])  # (4, q, 6)
+    on = at.max(axis=0) >= at.min(axis=0).max(axis=-1, keepdims=True)
+    i, k = np.nonzero(on[:, _PAIRS[:, 0]] & on[:, _PAIRS[:, 1]])
+    crossing = np.full((C.shape[1], len(_PAIRS), 3), np.nan)
+    crossing[i, k] = cubic_roots(*(F[:, i, _PAIRS[k, 0]] - F[:, i, _PAIRS[k, 1]]))
+    crossing = crossing.reshape(-1, 3 * len(_PAIRS))
+    cand = np.clip(np.nan_to_num(np.concatenate([ends, stationary, crossing], axis=1), nan=0.0), 0.0, 1.0)
+    depth = (abs(_curve(L[:, :, None], cand)) - half).max(axis=-1)  # (q, 53)
+    best = np.argmin(depth, axis=1)
+    rows = np.arange(len(best))
+    u, d = cand[rows, best], depth[rows, best]
+    Lu, slope = _curve(L, u), _curve(L, u, 1)
+    faces = np.concatenate([Lu, -Lu], axis=-1) - np.concatenate([half, half])
+    normals = np.concatenate([rot.T, -rot.T])  # (6, 3) each face's outward normal in world coordinates
+    top = np.argmax(faces, axis=1)
+    f, g = _PAIRS[np.clip(best - 8, 0, None) // 3].T  # the crossing's two faces (meaningful where best >= 8)
+    sf, sg = (np.take_along_axis(np.concatenate([slope, -slope], axis=-1), x[:, None], 1)[:, 0] for x in (f, g))
+    kink = (best >= 8) & (sf * sg < 0)  # falling into the crossing on one face and rising out of it on the other
+    mu = np.where(kink, sg / np.where(kink, sg - sf, 1.0), 1.0)[:, None]
+    grad = np.where(kink[:, None], mu * normals[f] + (1 - mu) * normals[g], normals[top])
+    return u, d, grad
 
 
 class Penetration(Constraint):
@@ -200,8 +167,6 @@ class Penetration(Constraint):
         t = np.asarray(t, float)
         m, K, S = max(len(t) - 1, 0), len(sites), surfaces.count
         self.dt = np.diff(t)  # (m,) interval lengths [s]
-        per = max(1, int(np.ceil(PENETRATION_RATE * float(self.dt.max(initial=0.0)) - 1e-9)))
-        self.grid = np.arange(per + 1) / per  # a box's samples over an interval, both ends included
         self.shape = (m, K, S)
         self.rows = np.repeat(np.arange(m), K * S)  # an interval's first quadrature point
         self.cols = np.tile(np.repeat(np.arange(K), S), m)
@@ -244,22 +209,18 @@ class Penetration(Constraint):
         """Fill the box pairs of u, d, g (`_minimum`) from the Hermite curves C (4, m, K, 3). In place."""
         s = self.surfaces
         flat = C.reshape(4, -1, 3)
-        # a curve lies within `reach` of the mean of its Bezier points, so (d being 1-Lipschitz) at least
-        # d(mean) - reach from a box
-        bez = _bezier(flat)
-        mean = bez.mean(axis=0)
-        reach = np.linalg.norm(bez - mean, axis=-1).max(axis=0)
-        half = np.full(len(mean), 0.5)
-        middle = _curve(_power(flat), half)
-        for b in range(len(s.box_center)):
+        bez, middle = _bezier(flat), _curve(_power(flat), np.full(flat.shape[1], 0.5))
+        for b, (center, rot, half) in enumerate(zip(s.box_center, s.box_rot, s.box_half)):
             j = len(s.plane_point) + b
-            distance, depth = partial(s.box_distance, b=b), partial(s.box_depth, b=b)
-            # a curve farther than the tolerance from the box is met with a margin and cannot be active:
-            # its midpoint's distance stands for it; the rest are searched
-            ub, (db, gb) = half.copy(), distance(middle)
-            near = np.flatnonzero(depth(mean) - reach <= self.tolerance)
+            # each face's distance is affine in the point, so along a curve at least its least at the Bezier points
+            # (a convex combination of them): a curve whose bound is over the tolerance is out of the box with a
+            # margin and cannot be active, and its midpoint's distance stands for it; the rest are solved
+            local = (bez - center) @ rot  # (4, q, 3)
+            low = (np.concatenate([local, -local], axis=-1).min(axis=0) - np.concatenate([half, half])).max(axis=-1)
+            ub, (db, gb) = np.full(len(middle), 0.5), _face_distance(middle, center, rot, half)
+            near = np.flatnonzero(low <= self.tolerance)
             if near.size:
-                ub[near], db[near], gb[near] = box_minimum(flat[:, near], self.grid, distance, depth)
+                ub[near], db[near], gb[near] = box_minimum(flat[:, near], center, rot, half)
             u[..., j], d[..., j], g[..., j, :] = ub.reshape(self.shape[:2]), db.reshape(self.shape[:2]), gb.reshape(self.shape[:2] + (3,))
 
     def measure(self, state):

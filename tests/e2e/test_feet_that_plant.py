@@ -11,8 +11,8 @@ from runner.problem_file import RUN_AND_STEP_KEYFRAMES, load_problem
 from solver.animate import animate
 
 #: [mm] how deep a point between two of the solve's can be beyond the depth its penetration bound measured: the
-#: golden-section search leaves 2 % of a 5 ms quadrature interval (`solver.constraints.penetration.GOLDEN_STEPS`),
-#: 0.1 ms, and near its deepest point a site's depth departs quadratically, 0.5 x 100 m/s^2 x (0.1 ms)^2 = 0.5 um
+#: bound holds the deepest point of each site's cubic Hermite curve between two quadrature points exactly, and the
+#: curve departs from the path by h^4/384 max |p''''|, under a micrometre at 200 Hz
 SEARCH_RESOLUTION_MM = 1e-3
 
 

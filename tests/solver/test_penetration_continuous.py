@@ -1,8 +1,7 @@
 """The penetration constraint holds on the continuous path (solver.constraints.penetration): its value is
 the deepest point of each Hermite curve between two quadrature points, checked against the curve sampled
-a hundred thousand times (an independent brute force), against hand-built curves whose deepest point is
-known in closed form (a parabola over a plane, a straight line through a box's edge), and its gradient
-against central differences."""
+a hundred thousand times (an independent brute force), and against hand-built curves whose deepest point is
+known in closed form (a parabola over a plane, a straight line through a box's edge)."""
 import numpy as np
 import pytest
 
@@ -62,10 +61,7 @@ def test_a_heel_clipping_a_step_edge_is_caught_between_samples():
     h = 0.005
     v = np.array([0.03, 0.0, -0.012]) / h
     C = _hermite_coefficients([0.98, 0, 0.2], v, [1.01, 0, 0.188], v, h)
-    grid = np.linspace(0.0, 1.0, 9)
-    sampled = min(STEP.box_distance(_curve(_power(C), np.full(1, x)), 0)[0][0] for x in grid)
-    u, d, g = box_minimum(C, grid, lambda x: STEP.box_distance(x, 0))
-    assert sampled == pytest.approx(-0.005, abs=1e-15)
+    u, d, g = box_minimum(C, *_box(STEP))
     assert u[0] == pytest.approx(0.02 / 0.042, abs=1e-12)
     assert d[0] == pytest.approx(-0.24 / 42, abs=1e-15)
     # the gradient at the kink combines the side's normal (x) and the top's (z) so that its slope along the
@@ -74,19 +70,70 @@ def test_a_heel_clipping_a_step_edge_is_caught_between_samples():
     np.testing.assert_allclose(g[0], [mu, 0.0, 1 - mu], atol=1e-12)
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_box_minimum_matches_a_brute_force_search(seed):
-    rng = np.random.default_rng(seed)
-    n = 200
+def _box(surfaces, b=0):
+    """(center, rot, half) of box b."""
+    return surfaces.box_center[b], surfaces.box_rot[b], surfaces.box_half[b]
+
+
+def _random_curves(rng, n=200):
+    """(4, n, 3) Hermite curves over 5 ms at up to ~10 m/s around the step."""
     p0 = rng.uniform([-0.1, -0.6, -0.05], [1.1, 0.6, 0.3], size=(n, 3))
     p1 = p0 + rng.normal(scale=0.02, size=(n, 3))
     v0, v1 = rng.normal(scale=3.0, size=(n, 3)), rng.normal(scale=3.0, size=(n, 3))
     h = 0.005
-    C = np.stack([p0, h * v0, p1, h * v1])
-    _, d, _ = box_minimum(C, np.linspace(0.0, 1.0, 9), lambda x: STEP.box_distance(x, 0))
+    return np.stack([p0, h * v0, p1, h * v1])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_box_minimum_matches_a_brute_force_search(seed):
+    # against the box's exact signed distance: equal inside the box, where the constraint can be active; outside
+    # (at an edge or corner) the faces' largest distance is below the Euclidean one but still positive, so that the
+    # constraint -min d <= tol holds on the same curves
+    rng = np.random.default_rng(seed)
+    C = _random_curves(rng)
+    _, d, _ = box_minimum(C, *_box(STEP))
     brute = _brute_minimum(C, lambda x: STEP.box_distance(x, 0), n=20_001)
     inside = brute < 0
     assert inside.sum() > 20
     # the deepest point inside, to the brute force's resolution (a 10 m/s site moves 2.5 um a sample)
     np.testing.assert_allclose(d[inside], brute[inside], atol=3e-6)
-    assert (d <= brute + 3e-6).all()  # never shallower than the curve's own samples
+    assert (d <= brute + 1e-12).all()  # never shallower than the curve's own samples
+    assert (d[brute > 3e-6] > 0).all()  # out of the box where the curve is
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_box_minimum_is_the_least_of_the_faces_largest_distance_on_a_turned_box(seed):
+    # a box turned 0.3 rad about z and tilted 0.1 rad about x: the value is the least over the curve of the largest
+    # face distance, to the brute force's resolution, and never above it
+    c, s, ct, st = np.cos(0.3), np.sin(0.3), np.cos(0.1), np.sin(0.1)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ np.array([[1.0, 0.0, 0.0], [0.0, ct, -st], [0.0, st, ct]])
+    center, half = np.array([0.5, 0.0, 0.1]), np.array([0.5, 0.5, 0.1])
+
+    def faces(x):
+        local = (x - center) @ rot
+        return (abs(local) - half).max(axis=-1), None
+
+    C = _random_curves(np.random.default_rng(100 + seed), 300)
+    u, d, _ = box_minimum(C, center, rot, half)
+    brute = _brute_minimum(C, faces, n=100_001)
+    np.testing.assert_allclose(d, brute, atol=6e-7)  # 1e-5 of u at up to 0.06 m per unit u
+    assert (d <= brute + 1e-12).all()
+    np.testing.assert_allclose(faces(_curve(_power(C), u))[0], d, atol=1e-15)  # the value is the curve's at u
+
+
+def test_box_gradient_matches_central_differences():
+    # d's gradient in the curve's coefficients: grad d at the deepest point times the Hermite weights there
+    # (envelope and Danskin theorems, module docstring), away from ties between candidates
+    C = _random_curves(np.random.default_rng(7), 60)
+    u, d, g = box_minimum(C, *_box(STEP))
+    H = np.stack([2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2])
+    eps, checked = 1e-7, 0
+    for j in np.flatnonzero(d < -1e-3):
+        for a, c in ((0, 2), (2, 0), (3, 1)):
+            Cp, Cm = C.copy(), C.copy()
+            Cp[a, j, c] += eps
+            Cm[a, j, c] -= eps
+            fd = (box_minimum(Cp[:, j:j + 1], *_box(STEP))[1] - box_minimum(Cm[:, j:j + 1], *_box(STEP))[1])[0] / (2 * eps)
+            assert fd == pytest.approx(H[a, j] * g[j, c], abs=1e-6)
+            checked += 1
+    assert checked >= 30
