@@ -95,7 +95,7 @@ def _capture(clip: Path, o: CleanOptions, scene_out: Path, say):
     say(f"dynsplines clean: {clip} -> {ref.count} frames at {1 / ref.frame_time:.4g} Hz ({ref.duration:.2f} s), "
         f"{len(contacts)} contacts{f' from {display_path(o.contacts)}' if o.contacts else ''}, {len(flights)} flights; "
         f"scene {'fitted: ' if cs.fitted is not None else ''}{display_path(cs.scene_path)}")
-    for note in cs.notes:
+    for note in cs.warnings:
         say(f"  warning: {note}")
     return cs, contacts, flights
 

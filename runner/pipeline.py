@@ -250,7 +250,7 @@ def clip_keyframes(clip: Path, out_dir: Path, o: ClipOptions, paths: dict, say=p
             say(f"  fitted box{i}: top {100 * (c[2] + h[2]):.1f} cm, x {100 * (c[0] - h[0]):.1f} .. "
                 f"{100 * (c[0] + h[0]):.1f} cm, y {100 * (c[1] - h[1]):.1f} .. {100 * (c[1] + h[1]):.1f} cm; "
                 f"floor {100 * cs.fitted.floor_z:.1f} cm")
-    for note in cs.notes:
+    for note in cs.warnings:
         say(f"  warning: {note}")
     keyframes, info = read_keyframes(paths["keyframes"], model)
     say(f"  wrote {display_path(paths['keyframes'])}: {keyframes.count} keyframes ({int(keyframes.is_partial.sum())} partial) "
@@ -405,7 +405,7 @@ def _scene_fitted(cs) -> dict | None:
     return None if cs.fitted is None else {
         "floor_z": cs.capture_floor.floor_z, "floor_slope": list(cs.capture_floor.floor_slope),
         "capture_frame": [*cs.frame.quat.tolist(), *cs.frame.shift.tolist()],
-        "boxes": [{"center": c.tolist(), "half": h.tolist()} for c, h in cs.fitted.boxes], "notes": list(cs.notes)}
+        "boxes": [{"center": c.tolist(), "half": h.tolist()} for c, h in cs.fitted.boxes], "notes": list(cs.warnings)}
 
 
 def keyframes_on_source_report(npz: Path, cs, keyframes, say=print) -> dict | None:

@@ -15,7 +15,7 @@ from runner.capture.reference_motion import ROOT_SCALE_LEGS, Retargeted, load_bv
 from runner.capture.retarget import Reference
 from runner.capture.root_height import RootCorrectionRefused
 from runner.capture.scene_fit import FittedScene, fit_contacts, fit_scene, scene_mjcf
-from runner.capture.skeleton import recognise
+from runner.capture.skeleton import recognise, unit_note
 from runner.files import atomic_output
 from solver.capture_frame import CaptureFrame
 from solver.contacts import Contact, contact_points
@@ -55,6 +55,13 @@ class ClipScene:
     capture_floor: FittedScene | None = None
     frame: CaptureFrame = field(default_factory=CaptureFrame.identity)
     notes: tuple[str, ...] = ()
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """The lines a user is warned with: an assumed length unit (`runner.capture.skeleton.unit_note`), then `notes`."""
+        skel = self.reference.skeleton
+        unit = None if skel is None else unit_note(skel)
+        return ((unit,) if unit else ()) + tuple(self.notes)
 
 
 def clip_scene(clip: str | Path | Capture, scene: str | Path, figure: str | Path, fitted_out: str | Path,

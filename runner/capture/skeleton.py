@@ -44,7 +44,7 @@ from runner.capture.bvh_kinematics import bone_length, file_world, reach, tip_po
 from runner.capture.skeleton_map import OPTIONAL, ROLES, UNITS, SkeletonMap
 from solver.errors import InputError
 
-__all__ = ["RecognisedSkeleton", "recognise", "skeleton_world", "name_side"]
+__all__ = ["RecognisedSkeleton", "recognise", "skeleton_world", "name_side", "unit_note"]
 
 #: [m] a person's leg, hip to ankle joint centre, is 0.491 of stature (Winter, "Biomechanics and Motor
 #: Control of Human Movement", 2009, fig. 4.1: hip 0.530 H, ankle 0.039 H above the sole)
@@ -85,6 +85,8 @@ class RecognisedSkeleton:
         rest_given: rest_frames came from a skeleton map (recorded in `skeleton_map`), not found.
         how: how the roles were found ("the hierarchy and names", or with the map file named).
         source: the clip file.
+        unit_assumed: None, or why the unit is a typical subject's: no unit makes the subject a person
+            (`unit_note`).
     """
 
     roles: Mapping[str, str]
@@ -98,6 +100,7 @@ class RecognisedSkeleton:
     how: str
     source: str
     rest_given: bool = False
+    unit_assumed: str | None = None
 
     def joint(self, role: str) -> str:
         """The joint of `role`; an absent spine is the chest, an absent neck the head."""
@@ -110,7 +113,7 @@ class RecognisedSkeleton:
     def skeleton_map(self) -> SkeletonMap:
         """The complete map (every role found, unit, up): recognising with it gives this skeleton again."""
         return SkeletonMap(dict(self.roles), self.unit, self.unit_name, self.up, self.source,
-                           self.rest_frames if self.rest_given else None)
+                           self.rest_frames if self.rest_given else None, self.unit_assumed)
 
 
 def skeleton_world(clip: BvhClip, skel: RecognisedSkeleton) -> tuple[np.ndarray, np.ndarray]:
@@ -334,14 +337,23 @@ def _unit(clip: BvhClip, p: np.ndarray, legs: list[dict[str, int]]) -> tuple[flo
     return min(fits)[1:] if fits else None
 
 
-def _unit_error(clip: BvhClip, leg: float) -> InputError:
-    """No unit makes the subject a person: the statures each would give and the metres per unit of a typical one."""
+def _assumed_unit(leg: float) -> tuple[float, str, str]:
+    """No named unit makes the subject a person (0.8-2.4 m tall): (metres per unit of a typical subject, its name, why),
+    as a skeleton map's {"unit": x} would give it. The statures the named units give are in the why."""
     tall = ", ".join(f"{leg * u / LEG_OF_STATURE:.3g} m in {name}" for name, u in UNITS.items() if name != "cmu")
     lo, hi, typical = STATURES
-    return InputError(f"{clip.source}: cannot tell the length unit: the legs are {leg:.4g} units long, a subject {tall}, none "
-                      f"{lo:g}-{hi:g} m tall; give \"unit\" in a skeleton map, a name or metres per unit (e.g. {{\"unit\": "
-                      f"{typical * LEG_OF_STATURE / leg:.3g}}} for a {typical:g} m subject; --skeleton-map FILE, docs/mocap.md "
-                      "\"Skeleton map\")")
+    u = typical * LEG_OF_STATURE / leg
+    return u, f"{u:.3g}", (f"the legs are {leg:.4g} units long, a subject {tall}, none {lo:g}-{hi:g} m tall: read as a "
+                           f"{typical:g} m subject, {u:.3g} m per unit")
+
+
+def unit_note(skel: RecognisedSkeleton) -> str | None:
+    """The warning line of an assumed length unit (`RecognisedSkeleton.unit_assumed`), None when it was found or given."""
+    if skel.unit_assumed is None:
+        return None
+    return (f"cannot tell the length unit of {skel.source}: {skel.unit_assumed} (gravity, the body's mass and the "
+            "contact heights at that size; the outputs in the file's own units); give \"unit\" in a skeleton map if "
+            "the subject is another size (--skeleton-map FILE, docs/mocap.md \"Skeleton map\")")
 
 
 def _rest_frames(clip: BvhClip, p: np.ndarray, hips: int, joints: list[int]) -> int:
@@ -396,8 +408,9 @@ def recognise(clip: BvhClip, skeleton_map: SkeletonMap | None = None) -> Recogni
         feet = np.mean([p[:, lg["foot"]] for lg in sided], axis=0)
         up, axes = _up_axis((p[:, idx["chest"]] - feet).mean(axis=0))
     unit = (smap.unit, smap.unit_name) if smap.unit is not None else _unit(clip, p, sided)
+    assumed = smap.unit_assumed if smap.unit is not None else None
     if unit is None:
-        raise _unit_error(clip, _leg(p, sided))
+        *unit, assumed = _assumed_unit(_leg(p, sided))
     hips = idx["hips"]
     positions = tuple(n for n, ch in zip(clip.names, clip.channels, strict=True) if set(ch) & set(POSITION_CHANNELS))
     above = []
@@ -414,7 +427,7 @@ def recognise(clip: BvhClip, skeleton_map: SkeletonMap | None = None) -> Recogni
                          "rest frame (a T-pose before the motion); a motion needs at least 2 frames: export more frames, "
                          'or give {"rest_frames": 0} in a skeleton map (--skeleton-map FILE) if the first is motion')
     return RecognisedSkeleton(MappingProxyType(roles), float(unit[0]), str(unit[1]), axes, up, positions,
-                              tuple(above), rest, how, clip.source, given)
+                              tuple(above), rest, how, clip.source, given, assumed)
 
 
 def _geometric_sides(clip, world, pair, legs, trunk) -> list[str | None]:

@@ -48,6 +48,8 @@ class SkeletonMap:
         rest_frames: leading frames that are not motion (0 or 1), or None (found from the names and the
             motion: a file written by a program that knows it has none, e.g. the Blender add-on, says 0).
         source: the file (for messages).
+        unit_assumed: why `unit` is a typical subject's (`runner.capture.skeleton.RecognisedSkeleton.unit_assumed`):
+            written by the tool into a subject figure's record, so that the figure keeps the warning.
     """
 
     roles: dict = field(default_factory=dict)
@@ -56,6 +58,7 @@ class SkeletonMap:
     up: str | None = None
     source: str = ""
     rest_frames: int | None = None
+    unit_assumed: str | None = None
 
     def text(self) -> str:
         """The map as the JSON text of a map file (one line)."""
@@ -66,6 +69,8 @@ class SkeletonMap:
             doc["up"] = self.up
         if self.rest_frames is not None:
             doc["rest_frames"] = self.rest_frames
+        if self.unit_assumed is not None:
+            doc["unit_assumed"] = self.unit_assumed
         return json.dumps(doc, separators=(",", ":"))
 
 
@@ -97,7 +102,7 @@ def parse_skeleton_map(text: str, source: str) -> SkeletonMap:
     if not isinstance(doc, dict):
         raise InputError(f"{source}: a skeleton map is a JSON object {{\"role\": \"joint\", ...}}, not "
                          f"{type(doc).__name__}")
-    roles, unit, unit_name, up, rest = {}, None, None, None, None
+    roles, unit, unit_name, up, rest, assumed = {}, None, None, None, None, None
     for key, value in doc.items():
         if key == "unit":
             unit, unit_name = _unit(value, source)
@@ -111,6 +116,8 @@ def parse_skeleton_map(text: str, source: str) -> SkeletonMap:
                 raise InputError(f"{source}: \"rest_frames\": {value!r} is not 0 or 1; give 1 when the file's first "
                                  "frame is a rest pose put before the motion (a T-pose), else 0")
             rest = int(value)
+        elif key == "unit_assumed" and isinstance(value, str):  # the tool's own note in a subject figure's record
+            assumed = value
         elif key in ROLES:
             if not isinstance(value, str) or not value.strip():
                 raise InputError(f"{source}: \"{key}\": {value!r} is not a joint name; give the name of the "
@@ -119,7 +126,7 @@ def parse_skeleton_map(text: str, source: str) -> SkeletonMap:
         else:
             raise InputError(f"{source}: unknown key \"{key}\"; the keys are the roles {', '.join(ROLES)}, and "
                              "\"unit\", \"up\" and \"rest_frames\"")
-    return SkeletonMap(roles, unit, unit_name, up, source, rest)
+    return SkeletonMap(roles, unit, unit_name, up, source, rest, assumed)
 
 
 def _unit(value, source: str) -> tuple[float, str]:

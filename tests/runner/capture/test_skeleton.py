@@ -13,7 +13,7 @@ from bvh_conventions import read, reframe, rename, scale, write
 from bvh_edit import edit_bvh
 
 from runner.capture.bvh import read_bvh
-from runner.capture.skeleton import recognise
+from runner.capture.skeleton import recognise, unit_note
 from runner.capture.skeleton_map import ROLES, SkeletonMap, parse_skeleton_map, read_skeleton_map
 from solver.errors import InputError
 
@@ -99,14 +99,21 @@ def test_the_unit_from_the_legs(short, tmp_path, unit, name):
     assert skel.unit == unit and skel.unit_name == name
 
 
-def test_a_skeleton_of_no_persons_size_asks_for_the_unit(short, tmp_path):
+def test_a_skeleton_of_no_persons_size_is_read_as_a_typical_subject_with_a_warning(short, tmp_path):
     path = write(scale(read(short), 1e-4), tmp_path / "tiny.bvh")  # legs of 1.5 mm in metres, or 3.8 cm in inches
-    with pytest.raises(InputError, match=r"tiny\.bvh: cannot tell the length unit.*give \"unit\" in a skeleton map") as e:
-        recognise(read_bvh(path))
-    # the fix it proposes, metres per unit for a 1.75 m subject, undoes the 1e-4 to within the CMU subject's own
-    # stature (an adult's, 1.5-2.0 m): the clip's true unit is CMU's, 0.0254 / 0.45 m
-    suggested = float(re.search(r'\{"unit": ([0-9.e+-]+)\}', str(e.value)).group(1))
-    assert 1.75 / 2.0 <= suggested * 1e-4 / (0.0254 / 0.45) <= 1.75 / 1.5
+    skel = recognise(read_bvh(path))
+    # no named unit makes a person of it: the unit makes a typical 1.75 m subject, which undoes the 1e-4 to within
+    # the CMU subject's own stature (an adult's, 1.5-2.0 m): the clip's true unit is CMU's, 0.0254 / 0.45 m
+    assert 1.75 / 2.0 <= skel.unit * 1e-4 / (0.0254 / 0.45) <= 1.75 / 1.5
+    assert skel.unit_assumed is not None
+    note = unit_note(skel)
+    assert re.search(r"tiny\.bvh: the legs are .* none 0\.8-2\.4 m tall: read as a 1\.75 m subject", note.replace(
+        "cannot tell the length unit of ", "")), note
+    assert 'give "unit" in a skeleton map' in note
+    # the complete map a subject figure records keeps the warning: recognising with it flags the unit again
+    again = recognise(read_bvh(path), parse_skeleton_map(skel.skeleton_map().text(), "record"))
+    assert again.unit == pytest.approx(skel.unit, rel=1e-12) and again.unit_assumed == skel.unit_assumed
+    assert unit_note(recognise(read_bvh(short))) is None  # a unit found: no warning
 
 
 @pytest.mark.parametrize("up, axes", [("z", [[1, 0, 0], [0, 0, -1], [0, 1, 0]]), ("-y", [[1, 0, 0], [0, -1, 0],
