@@ -118,7 +118,7 @@ class MeasureOfChange:
         else:  # (n, 2, nv, nv) @ (n, 2, nv, 1): M (a - a_ref) and P dq in one batched product
             MX = np.matmul(self._MP, X.transpose(0, 2, 1)[..., None])[..., 0].transpose(0, 2, 1)
         w4 = self.omega ** 4
-        e = (X * MX).sum(1)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T P dq
+        e = np.einsum("nvk,nvk->nk", X, MX)  # (n, 2): (a - a_ref)^T M (a - a_ref), dq^T P dq
         D = float(w @ e[:, 0] + w4 * (w @ e[:, 1]))
         if grad:
             state.add_acceleration(2.0 * w[:, None] * MX[:, :, 0])
