@@ -84,7 +84,8 @@ class Progress:
     def _head(self):
         r = self.round
         if r.get("search"):
-            return f"least violation after round {r.get('round', 0) + 1}: from {r.get('frames', 0)} frames"
+            after = "from the start" if r.get("round", 0) < 0 else f"after round {r.get('round', 0) + 1}"
+            return f"least violation {after}: from {r.get('frames', 0)} frames"
         return f"round {r.get('round', 0) + 1}: {r.get('frames', 0)} frames ({r.get('variable', 0)} variable)"
 
     def __call__(self, event, info):
@@ -122,7 +123,8 @@ class Progress:
             raised = info.get("raised") or {}
             what = ("every constraint can be met, nothing raised" if not raised else
                     "out of reach, limits raised by [SI]: " + ", ".join(f"{k} {v:.3g}" for k, v in raised.items()))
-            self._line(f"  round {info['round'] + 1}: least violation sought ({info.get('spent', 0)} evaluations, "
+            when = "start" if info["round"] < 0 else f"round {info['round'] + 1}"
+            self._line(f"  {when}: least violation sought ({info.get('spent', 0)} evaluations, "
                        f"{info.get('frames', 0)} frames): {what}")
         elif event == "finer":  # limits were raised: the least violation sought at a finer spacing checks them
             self._end_round()

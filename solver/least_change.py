@@ -21,10 +21,15 @@ where pairs stay broken. A limit rises only by what that solve shows no path thr
 certified limit (a raised pair's multiplier from 0, the rest as it was). It also starts from the capture, a keyed
 path's (`solver.feasibility.capture_start`) and a clean's d = 0, as a stalled path can be anywhere (docs/design.md). A
 path the solve ends on beyond a limit (a budget spent) gives way to the best one that met them all; on a grid (a clean's
-one frame set) with nothing raised, so does one above their least D. There a search that raises nothing ends the
-solve: its path meets every limit as posed, and the multipliers' rounds after it, pushed by estimates from the broken
-rounds, ended above its D on 6 of the 7 shipped clips whose search raised nothing (by 32-116 %) and on it on the 7th,
-for 95-220 evaluations more.
+one frame set) with nothing raised, so does one above their least D.
+A clean (a grid; not with `newton`) searches first, from d = 0, before any subproblem, and a search that raises nothing
+ends the solve. Its descent of the violation runs in D's preconditioned variables, where D is about |z|^2, from z = 0:
+L-BFGS's every step is a combination of the broken pairs' gradients there, so the path it stops on, the first that
+meets every pair, is of the form d = H^-1 A^T lam, the least-D path's form for linearized constraints (Landweber's
+iteration from 0 converges to the least-norm solution: Engl, Hanke & Neubauer, "Regularization of Inverse
+Problems", 1996, sec. 6.1). On the 13 shipped cleans whose search raises nothing it took
+half the evaluations of the multipliers' rounds then the search, its D lower on 8 and higher on 5 (by 11-28 %,
+docs/solvers.md).
 Off a grid, the refinement judges such a search's path as it judges a round's (the solve ends there when it predicts
 under tol), not another round first: those rounds ended above the search's D on 7 of the 9 shipped clips keyed every
 0.25 s whose search raised nothing (by 3-45 %; at it on one, 5 % below it with 9 more frames on one). A reference motion
@@ -107,8 +112,9 @@ class LeastChangeOptions:
         rate: [1/s] quadrature points per second: 200, at least four points in the shortest segment
             (min_gap) for the integrals; penetration holds between them too (its deepest point over each
             interval, `solver.constraints.penetration`).
-        newton: on a `LeastChange.grid` (a clean), precondition by the Gauss-Newton Hessian of all of Phi until
-            the least violation is sought (`solver.gauss_newton`; False: D's alone; docs/solvers.md).
+        newton: on a `LeastChange.grid` (a clean), the rounds before any search, preconditioned by the Gauss-Newton
+            Hessian of all of Phi until the least violation is sought (`solver.gauss_newton`; False: the search
+            first, D's preconditioner alone; docs/solvers.md).
     """
 
     tol: float = 1e-2
@@ -295,28 +301,30 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
     rounds, estimate, decreases, scores, on_search = [], float("nan"), [], None, False
     evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
+    first, met = lc.grid is not None and not o.newton, False  # a clean searches from the capture first (module docstring)
     for k in range(o.max_subproblems):
-        newton = o.newton and lc.grid is not None and not certified  # D's preconditioner after a search
-        maps = (basis, (newton and cached_preconditioner(grid, basis, al, frames, quat)) or pre)
-        r, spent = _subproblem(al, frames, maps, quat, o, (start, evals), should_stop, progress, k, _grid(lc)[1])
-        if spent:
-            status, message = spent, stop_message(spent, "", o)
-            break
-        frames, evals = r.frames, evals + r.result.n_evals
-        rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
-        if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
-            status, message = r.result.status, stop_message(r.result.status, r.result.message, o)
-            break
-        shift, (worst, met) = al.shift(), _multipliers(al, frames, basis, progress, k)  # shift: under the old multipliers
-        best = better_path(al, best, frames, basis) if worst["value"] <= 1.0 else best
-        level_its, kind, scores = level_its + 1, "boost", None
-        if not (met or level_its >= o.per_level):
-            continue
-        if not met and certified:  # spent again after the search: its path, or a better one, is the answer
-            message = "subproblems spent with a pair broken after the least violation was found"
-            break
-        if not met:  # spent with a pair broken: the search, once (its path meets every limit on any refinement)
-            cert = _certify(lc, frames, o, start, evals, should_stop, progress, k)
+        if k or not first:
+            newton = o.newton and lc.grid is not None and not certified  # D's preconditioner after a search
+            maps = (basis, (newton and cached_preconditioner(grid, basis, al, frames, quat)) or pre)
+            r, spent = _subproblem(al, frames, maps, quat, o, (start, evals), should_stop, progress, k, _grid(lc)[1])
+            if spent:
+                status, message = spent, stop_message(spent, "", o)
+                break
+            frames, evals = r.frames, evals + r.result.n_evals
+            rounds.append(Round(frames.count, frames.n_variable, r.result, scores, frames.times.copy(), kind))
+            if r.result.status in (Status.INTERRUPTED, Status.MAX_TIME, Status.NONFINITE, Status.MAX_EVALS):
+                status, message = r.result.status, stop_message(r.result.status, r.result.message, o)
+                break
+            shift, (worst, met) = al.shift(), _multipliers(al, frames, basis, progress, k)  # shift: under the old multipliers
+            best = better_path(al, best, frames, basis) if worst["value"] <= 1.0 else best
+            level_its, kind, scores = level_its + 1, "boost", None
+            if not (met or level_its >= o.per_level):
+                continue
+            if not met and certified:  # spent again after the search: its path, or a better one, is the answer
+                message = "subproblems spent with a pair broken after the least violation was found"
+                break
+        if not met:  # spent with a pair broken (or a clean's start): the search, once (its path meets every limit)
+            cert = _certify(lc, frames, o, start, evals, should_stop, progress, k - (not rounds), bool(rounds))
             evals, raises, certified = evals + cert.n_evals, raises + list(cert.raises), True
             if cert.status is not Status.CONVERGED:
                 status, message = cert.status, stop_message(cert.status, "while seeking the least violation", o)
@@ -390,17 +398,17 @@ def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, 
 
 
 def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop,
-             progress, k: int):
+             progress, k: int, second_start: bool = True):
     """`solver.feasibility.least_violation` from `frames` within what is left of the solve's budget; reports
-    it ("search", its "eval"s, "certify") and sets the multipliers of the pairs it raised to 0. Returns the
-    Certificate."""
+    it ("search" after round k, -1 before any, its "eval"s, "certify") and sets the multipliers of the pairs it
+    raised to 0. Returns the Certificate. second_start: search from the capture too (False: `frames` are it)."""
     left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
     before = [c.limit.copy() for c in lc.al.constraints]
     # the search splits segments down to two quadrature intervals, the shortest whose (linear) acceleration two
     # points fix, so the bounds hold between them; min_gap is the refinement's, not a limit of the search's paths
     gap, quat = (np.inf if lc.grid is not None else 2.0 / o.rate), lc.layout.quat_slots  # a grid's paths: no split
     # the second start (module docstring): a clean's capture itself, d = 0; a keyed path's capture, or none
-    second = lc.plain if lc.grid is not None else (
+    second = None if not second_start else lc.plain if lc.grid is not None else (
         None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat))
     if progress:  # the search's evaluations as they happen ("search", then "eval" with F), its outcome after
         progress("search", {"round": k, "frames": frames.count})

@@ -70,8 +70,8 @@ def pins_of(args) -> tuple:
 def add_newton_argument(p) -> None:
     """--gauss-newton (`LeastChangeOptions.newton`), for `clean` and the clean mode of `batch` and `bench corpus`."""
     p.add_argument("--gauss-newton", action="store_true",
-                   help="precondition the clean by the constraints' curvature too: fewer evaluations and a closer "
-                        "least change; CPU time falls on some clips, rises on others (docs/solvers.md)")
+                   help="the multipliers' rounds first, preconditioned by the constraints' curvature too, then the "
+                        "least violation where they stall (the default searches first, which is cheaper; docs/solvers.md)")
 
 
 def register(sub) -> None:

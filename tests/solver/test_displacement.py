@@ -192,11 +192,13 @@ def dipped(toy_model):
 
 def test_a_clean_s_rounds_run_to_their_own_end(dipped):
     """`LeastChangeOptions.round_evals` caps the rounds of a solve whose frames are refined, not a clean's: its solve ends
-    on a whole subproblem's progress, so the same clean under any cap is the same path."""
+    on a whole subproblem's progress, so the same clean under any cap is the same path (a clean's rounds: with
+    `newton`, which runs them before any search)."""
     t, q, disp, sol, clean = dipped
-    capped = solve_displacement(disp, LeastChangeOptions(round_evals=3))
-    assert max(r.result.n_evals for r in sol.rounds) > 3  # the cap would have bitten
-    np.testing.assert_array_equal(capped.frames.values, sol.frames.values)
+    rounds = solve_displacement(disp, LeastChangeOptions(newton=True))
+    capped = solve_displacement(disp, LeastChangeOptions(newton=True, round_evals=3))
+    assert max(r.result.n_evals for r in rounds.rounds) > 3  # the cap would have bitten
+    np.testing.assert_array_equal(capped.frames.values, rounds.frames.values)
 
 
 def test_feet_pushed_into_the_floor_come_out_and_the_rest_stays(toy_model, dipped):
@@ -529,18 +531,18 @@ def test_the_soles_edges_are_held_no_deeper_than_the_capture_holds_them():
     assert (cleaned <= captured + PENETRATION_TOLERANCE + 1e-5).all(), (cleaned - captured).max()
 
 
-def test_a_search_that_raises_nothing_ends_a_clean_on_a_path_that_meets_every_limit(toy_model, dipped):
-    """One round a frame set (per_level=1) leaves a pair broken, so the least violation is sought at once; it can
-    meet every limit of the dip (the default solve does), so it raises nothing and the clean ends on its path, which
-    MuJoCo finds out of the floor within the penetration tolerance at 1001 times (as the default solve's)."""
-    t, q, disp, *_ = dipped
-    sol = solve_displacement(disp, LeastChangeOptions(per_level=1))
-    assert sol.estimate_kind == "search" and sol.converged_to_tol and not sol.certificate
-    assert len(sol.rounds) == 1  # no round after the search
-    assert max(sol.integrals_final.values()) <= 1.0, sol.integrals_final  # every c/tol, met at <= 1
-    fine = np.linspace(t[0], t[-1], 1001)
-    low = _lowest_site(toy_model, clean_solution(disp, sol).frames.path(fine))
-    assert low.min() >= -PENETRATION_TOLERANCE - 1e-5, low.min()
+def test_a_clean_searches_first_and_a_search_that_raises_nothing_ends_it(toy_model, dipped):
+    """A clean seeks the least violation from the capture before any round; it can meet every limit of the dip, so it
+    raises nothing and the clean ends on its path, with no round at all, which MuJoCo finds out of the floor within the
+    penetration tolerance at 1001 times; with one round a frame set (per_level=1) the same."""
+    t, q, disp, sol, _ = dipped
+    for s in (sol, solve_displacement(disp, LeastChangeOptions(per_level=1))):
+        assert s.estimate_kind == "search" and s.converged_to_tol and not s.certificate
+        assert len(s.rounds) == 0 and s.n_evals > 0  # the search's evaluations, no round's
+        assert max(s.integrals_final.values()) <= 1.0, s.integrals_final  # every c/tol, met at <= 1
+        fine = np.linspace(t[0], t[-1], 1001)
+        low = _lowest_site(toy_model, clean_solution(disp, s).frames.path(fine))
+        assert low.min() >= -PENETRATION_TOLERANCE - 1e-5, low.min()
 
 
 def test_a_clean_returns_the_least_change_among_the_paths_that_met_every_limit(dipped):
