@@ -129,7 +129,7 @@ def figure_constraints(model, figure, reference, plain, contacts=(), flights=(),
         contacts: `solver.contacts.Contact`s. flights: ((start, end), ...) [s]. engine: the contact
             sites' `SiteKinematics` (figure.contact_sites, in that order; a clean's, `figure.surface_sites`: the
             soles' edges follow them and are held by the sole constraint). planted_tolerance: [m] the planted
-            limits' tolerance, also where a keyframe that holds a foot up relaxes them (a clean's is 1 mm:
+            limits' tolerance, also where a keyframe that holds a foot up relaxes them (a clean's is 0.9 mm:
             `solver.displacement`). track: a keyed path: with a capture, hold the contact sites as near it
             as the plain spline keeps them (`solver.constraints.tracking`; not a clean, whose plain spline is
             the capture). frames: (n,) [s] a clean's capture frame times, each a quadrature point: a clean is

@@ -207,14 +207,14 @@ def build_displacement(model, times, qpos, *, pins=(), pin_ends: bool = False, c
     reference = ReferenceMotion.from_samples(model, times, qpos, t, w)
     schedule = ContactSchedule.of(contacts or (), figure.contact_sites)
     flights = tuple(schedule.flights()) if flights is None else tuple(flights)
-    # the planted limits' tolerance is penetration's 1 mm, not the keyed path's 2 mm: a foot met within it floats
-    # at most FLOAT_LIMIT + 1 mm = 3 mm over its contact, a clean's float bound (docs/corpus.md "Cleaning the
-    # corpus"), as a keyed path's 4 mm is under its 5 mm (83_02's clean, on a path that met every pair within its
-    # tolerance and no further, floated 3.31 mm with 2 mm); the feet measured at the capture's frames, as the
-    # bounds measure them (`figure_constraints`' frames)
+    # the planted limits' tolerance is penetration's, 1 mm less a capture's 0.1 mm resolution, not the keyed path's
+    # 2 mm: a foot met within it floats at most FLOAT_LIMIT + 0.9 mm over its contact, inside a clean's 3 mm float bound
+    # (docs/corpus.md "Cleaning the corpus") by the margin the bound's own measure needs (searched first, three unseen
+    # cleans met every pair within a whole 1 mm and floated 3.00-3.01 mm; 83_02's, within 2 mm, 3.31 mm); the feet
+    # measured at the capture's frames, as the bounds measure them (`figure_constraints`' frames)
     constraints, relaxations = figure_constraints(model, figure, reference, capture_frames, tuple(schedule), flights,
                                                   engine, capture=(times, qpos),
-                                                  planted_tolerance=TOLERANCES["penetration"], frames=times,
+                                                  planted_tolerance=PENETRATION_TOLERANCE, frames=times,
                                                   no_jolt=_change_bound(reference, model, times, qpos))
     change = MeasureOfChange(reference, tmap, omega=np.pi / correction_time,
                              pose=equal_mass_matrices(model, reference.qpos))
