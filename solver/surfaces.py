@@ -157,14 +157,6 @@ class StaticSurfaces:
         """
         return _box_distance(np.asarray(points, float), self.box_center[b], self.box_rot[b], self.box_half[b])
 
-    def box_depth(self, points: np.ndarray, b: int) -> np.ndarray:
-        """(...,) [m] `box_distance` without its gradient (for searches that compare distances only).
-
-        Args:
-            points: (..., 3) world positions [m]. b: the box's index among the boxes.
-        """
-        return _box_depth(np.asarray(points, float), self.box_center[b], self.box_rot[b], self.box_half[b])
-
     def surface_below(self, points: np.ndarray) -> np.ndarray:
         """Height of the highest static surface under each point (floor planes, tops of boxes).
 
@@ -240,11 +232,6 @@ def _box_parts(pts: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.nd
     qo = np.maximum(q, 0.0)
     outside = np.sqrt((qo * qo).sum(-1))
     return local, q, qo, outside, outside + np.minimum(q.max(-1), 0.0)
-
-
-def _box_depth(pts: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """The signed distance (...,) alone of `_box_distance`, the same numbers without the gradient."""
-    return _box_parts(pts, center, rot, half)[-1]
 
 
 def _box_distance(pts: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
