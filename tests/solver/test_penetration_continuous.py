@@ -1,7 +1,8 @@
 """The penetration constraint holds on the continuous path (solver.constraints.penetration): its value is
 the deepest point of each Hermite curve between two quadrature points, checked against the curve sampled
-a hundred thousand times (an independent brute force), and against hand-built curves whose deepest point is
-known in closed form (a parabola over a plane, a straight line through a box's edge)."""
+a hundred thousand times (an independent brute force), against hand-built curves whose deepest point is
+known in closed form (a parabola over a plane, a straight line through a box's edge), and its gradient in a box
+against central differences."""
 import numpy as np
 import pytest
 
@@ -18,6 +19,20 @@ STEP = StaticSurfaces(np.zeros((0, 3)), np.zeros((0, 3)), np.array([[0.5, 0.0, 0
 def _hermite_coefficients(p0, v0, p1, v1, h):
     """(4, 1, 3) the coefficients p0, h v0, p1, h v1 of one curve."""
     return np.array([p0, h * np.asarray(v0), p1, h * np.asarray(v1)], float)[:, None, :]
+
+
+def _box(surfaces, b=0):
+    """(center, rot, half) of box b."""
+    return surfaces.box_center[b], surfaces.box_rot[b], surfaces.box_half[b]
+
+
+def _random_curves(rng, n=200):
+    """(4, n, 3) Hermite curves over 5 ms at up to ~10 m/s around the step."""
+    p0 = rng.uniform([-0.1, -0.6, -0.05], [1.1, 0.6, 0.3], size=(n, 3))
+    p1 = p0 + rng.normal(scale=0.02, size=(n, 3))
+    v0, v1 = rng.normal(scale=3.0, size=(n, 3)), rng.normal(scale=3.0, size=(n, 3))
+    h = 0.005
+    return np.stack([p0, h * v0, p1, h * v1])
 
 
 def _brute_minimum(C, distance, n=100_001):
@@ -68,20 +83,6 @@ def test_a_heel_clipping_a_step_edge_is_caught_between_samples():
     # curve is zero: mu x + (1 - mu) z with 0.03 mu - 0.012 (1 - mu) = 0
     mu = 0.012 / 0.042
     np.testing.assert_allclose(g[0], [mu, 0.0, 1 - mu], atol=1e-12)
-
-
-def _box(surfaces, b=0):
-    """(center, rot, half) of box b."""
-    return surfaces.box_center[b], surfaces.box_rot[b], surfaces.box_half[b]
-
-
-def _random_curves(rng, n=200):
-    """(4, n, 3) Hermite curves over 5 ms at up to ~10 m/s around the step."""
-    p0 = rng.uniform([-0.1, -0.6, -0.05], [1.1, 0.6, 0.3], size=(n, 3))
-    p1 = p0 + rng.normal(scale=0.02, size=(n, 3))
-    v0, v1 = rng.normal(scale=3.0, size=(n, 3)), rng.normal(scale=3.0, size=(n, 3))
-    h = 0.005
-    return np.stack([p0, h * v0, p1, h * v1])
 
 
 @pytest.mark.parametrize("seed", range(4))
