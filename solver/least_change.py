@@ -23,7 +23,8 @@ path's (`solver.feasibility.capture_start`) and a clean's d = 0, as a stalled pa
 path the solve ends on beyond a limit (a budget spent) gives way to the best one that met them all; on a grid (a clean's
 one frame set) with nothing raised, so does one above their least D.
 A clean (a grid; not with `newton`) searches first, from d = 0, before any subproblem, and a search that raises nothing
-ends the solve. Its descent of the violation runs in D's preconditioned variables, where D is about |z|^2, from z = 0:
+ends the solve; one that raises something is undone and its path kept as the second start of the search after the
+rounds (a least violation from one start is a local one). Its descent of the violation runs in D's preconditioned variables, where D is about |z|^2, from z = 0:
 L-BFGS's every step is a combination of the broken pairs' gradients there, so the path it stops on, the first that
 meets every pair, is of the form d = H^-1 A^T lam, the least-D path's form for linearized constraints (Landweber's
 iteration from 0 converges to the least-norm solution: Engl, Hanke & Neubauer, "Regularization of Inverse
@@ -301,7 +302,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
     rounds, estimate, decreases, scores, on_search = [], float("nan"), [], None, False
     evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
-    first, met = lc.grid is not None and not o.newton, False  # a clean searches from the capture first (module docstring)
+    first, met, other = lc.grid is not None and not o.newton, False, None  # a clean searches first (module docstring)
     for k in range(o.max_subproblems):
         if k or not first:
             newton = o.newton and lc.grid is not None and not certified  # D's preconditioner after a search
@@ -324,11 +325,17 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
                 message = "subproblems spent with a pair broken after the least violation was found"
                 break
         if not met:  # spent with a pair broken (or a clean's start): the search, once (its path meets every limit)
-            cert = _certify(lc, frames, o, start, evals, should_stop, progress, k - (not rounds), bool(rounds))
-            evals, raises, certified = evals + cert.n_evals, raises + list(cert.raises), True
+            cert = _certify(lc, frames, o, start, evals, should_stop, progress, k - (not rounds),
+                            other if rounds else None)
+            evals = evals + cert.n_evals
             if cert.status is not Status.CONVERGED:
                 status, message = cert.status, stop_message(cert.status, "while seeking the least violation", o)
                 break
+            if cert.raises and not rounds:  # one start's least violation is no proof: the rounds, then both starts
+                other = cert.frames
+                _as_posed(al, limits)
+                continue
+            raises, certified = raises + list(cert.raises), True
             best, frames = better_path(al, best, cert.frames), cert.frames  # a path that meets every certified limit
             (basis, pre), level_its, kind = _grid(lc)[0](al, frames, quat), 0, "certify"
             if cert.raises:
@@ -397,19 +404,29 @@ def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, 
     return r, None
 
 
+def _as_posed(al: AugmentedLagrangian, limits: list) -> None:
+    """Set `al`'s constraints' limits back to `limits` (as posed), its multipliers to 0 and V to inf: the raises of
+    a search whose path is kept only as a start for a later one are undone."""
+    for c, limit in zip(al.constraints, limits):
+        c.limit = limit.copy()
+    al.lam, al.V = [np.zeros(c.size) for c in al.constraints], np.inf
+
+
 def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop,
-             progress, k: int, second_start: bool = True):
+             progress, k: int, second: FrameSet | None = None):
     """`solver.feasibility.least_violation` from `frames` within what is left of the solve's budget; reports
     it ("search" after round k, -1 before any, its "eval"s, "certify") and sets the multipliers of the pairs it
-    raised to 0. Returns the Certificate. second_start: search from the capture too (False: `frames` are it)."""
+    raised to 0. Returns the Certificate. second: the second start (None: the capture's, `capture_start`, or
+    for a clean's first search, whose `frames` are the capture, none)."""
     left = o.max_time_s - (time.perf_counter() - start) if o.max_time_s else 0.0
     before = [c.limit.copy() for c in lc.al.constraints]
     # the search splits segments down to two quadrature intervals, the shortest whose (linear) acceleration two
     # points fix, so the bounds hold between them; min_gap is the refinement's, not a limit of the search's paths
     gap, quat = (np.inf if lc.grid is not None else 2.0 / o.rate), lc.layout.quat_slots  # a grid's paths: no split
     # the second start (module docstring): a clean's capture itself, d = 0; a keyed path's capture, or none
-    second = None if not second_start else lc.plain if lc.grid is not None else (
-        None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat))
+    if second is None and k >= 0:
+        second = lc.plain if lc.grid is not None else (
+            None if lc.capture is None else capture_start(lc.plain, lc.capture, lc.al.t, gap, quat))
     if progress:  # the search's evaluations as they happen ("search", then "eval" with F), its outcome after
         progress("search", {"round": k, "frames": frames.count})
     cert = least_violation(lc.al, frames, quat, min_gap=gap, ftol_rel=o.ftol_rel, per_level=o.per_level, second=second,
