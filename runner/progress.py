@@ -122,7 +122,8 @@ class Progress:
             self.evals = info.get("evals", self.evals)
             raised = info.get("raised") or {}
             what = ("every constraint can be met, nothing raised" if not raised else
-                    "out of reach, limits raised by [SI]: " + ", ".join(f"{k} {v:.3g}" for k, v in raised.items()))
+                    ("out of reach from this start (sought again after the rounds, from two starts)" if info["round"] < 0
+                     else "out of reach, limits raised") + " by [SI]: " + ", ".join(f"{k} {v:.3g}" for k, v in raised.items()))
             when = "start" if info["round"] < 0 else f"round {info['round'] + 1}"
             self._line(f"  {when}: least violation sought ({info.get('spent', 0)} evaluations, "
                        f"{info.get('frames', 0)} frames): {what}")
