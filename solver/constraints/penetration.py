@@ -142,9 +142,10 @@ def box_minimum(C: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.nda
     faces = np.concatenate([Lu, -Lu], axis=-1) - np.concatenate([half, half])
     normals = np.concatenate([rot.T, -rot.T])  # (6, 3) each face's outward normal in world coordinates
     top = np.argmax(faces, axis=1)
-    f, g = _PAIRS[np.clip(best - 8, 0, None) // 3].T  # the crossing's two faces (meaningful where best >= 8)
+    cross = best - ends.shape[1] - stationary.shape[1]  # the crossing candidate's index (>= 0 where it is one)
+    f, g = _PAIRS[np.clip(cross, 0, None) // 3].T  # its two faces
     sf, sg = (np.take_along_axis(np.concatenate([slope, -slope], axis=-1), x[:, None], 1)[:, 0] for x in (f, g))
-    kink = (best >= 8) & (sf * sg < 0)  # falling into the crossing on one face and rising out of it on the other
+    kink = (cross >= 0) & (sf * sg < 0)  # falling into the crossing on one face and rising out of it on the other
     mu = np.where(kink, sg / np.where(kink, sg - sf, 1.0), 1.0)[:, None]
     grad = np.where(kink[:, None], mu * normals[f] + (1 - mu) * normals[g], normals[top])
     return u, d, grad
