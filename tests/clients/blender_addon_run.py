@@ -10,9 +10,10 @@ does) and its preference set to DYNSPLINES, the command; CLIP.bvh is imported wi
 * inbetween: the action's keys are kept at FRAMES only (comma-separated scene frames), then
   `dynsplines.inbetween`; rerun: the same, twice (the second replaces the first's result);
 * clean: `dynsplines.clean` on the action as imported (a key at every frame);
-* unknown: the bones renamed b0, b1, ... (no convention's names), then
-  `dynsplines.inbetween` at FRAMES: the report is expected; mapped: the same rig with a skeleton map
-  (the panel's file) giving the unit the names no longer say: solved ("bones" are the names as imported);
+* unknown: the bones renamed b0, b1, ... (no convention's names, so no named length unit), then
+  `dynsplines.inbetween` at FRAMES: solved at an assumed size, with a warning report; mapped: the same rig
+  with a skeleton map (the panel's file) giving the unit the names no longer say: solved ("bones" are the
+  names as imported); badmap: the same rig with a skeleton map whose unit is no unit: the error report;
 * fbx, fbx-clean: the imported clip through Blender's FBX exporter and importer first (a rig with FBX's
   bone orientations, object transform and leaf bones), then as inbetween, clean;
 * cancel: the keys kept at FRAMES, then the add-on's `SolveRun` (what the modal operator runs) polled as
@@ -136,7 +137,7 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
     for word in frames.split(",") if frames else []:
         f, _, bones = word.partition(":")
         keys[int(f)] = set(bones.split("+")) if bones else None
-    if mode in ("inbetween", "rerun", "unknown", "mapped", "cancel", "fbx"):
+    if mode in ("inbetween", "rerun", "unknown", "mapped", "badmap", "cancel", "fbx"):
         _keep_keys(obj, keys)
     if mode == "rerun":  # a box off the path, selected with the armature: the scene's box (x 49..51, y -2..2, z 0..2)
         bpy.ops.mesh.primitive_cube_add(location=(50.0, 0.0, 1.0), scale=(1.0, 2.0, 1.0))
@@ -144,16 +145,16 @@ def main(zip_path, cli, clip, mode, frames="", out_dir="", feet=""):
         obj.select_set(True)
         bpy.context.view_layer.objects.active = obj
     names = [pb.name for pb in obj.pose.bones]  # as imported (a renamed rig's bones in the same order)
-    if mode in ("unknown", "mapped"):
+    if mode in ("unknown", "mapped", "badmap"):
         for i, bone in enumerate(obj.data.bones):
             bone.name = f"b{i}"
-    if mode == "mapped":
+    if mode in ("mapped", "badmap"):
         import os
 
         os.makedirs(out_dir, exist_ok=True)
         path = os.path.join(out_dir, "..", "map.json")
-        with open(path, "w") as f:
-            f.write('{"unit": "cmu"}')  # CMU's unit, which only CMU's joint names allow by themselves
+        with open(path, "w") as f:  # CMU's unit, which only CMU's joint names allow by themselves; or no unit
+            f.write('{"unit": "cmu"}' if mode == "mapped" else '{"unit": "furlong"}')
         bpy.context.scene.dynsplines.skeleton_map = path
     bpy.context.scene.dynsplines.out_dir = out_dir
     original = obj.animation_data.action

@@ -18,11 +18,12 @@ What is checked, against references that do not come from the add-on or the solv
   floor (z = 0), measured at the figure's contact spheres carried on Blender's foot bones (their offset
   from the bone taken from the retargeted capture, by MuJoCo, at one frame);
 * cancelled after the solve's first round (as Esc does): the new action is there and meets the keys;
-* a rig whose bones have no convention's names gives an error report with the command's one line
-  (bpy.ops raises RuntimeError with the report), not a traceback, and no new action; with a skeleton
-  map file in the panel giving what the names no longer say (the unit) it is solved and meets the keys,
-  and a partial key there (only the hips and the left leg keyed at one frame) meets those bones (1 mm)
-  and leaves the right leg free.
+* a rig whose bones have no convention's names (so no named length unit) is solved at an assumed size and
+  meets the keys (1 mm), with the command's warning of the assumed unit as a warning report; with a
+  skeleton map file in the panel giving what the names no longer say (the unit) it is solved and meets
+  the keys, and a partial key there (only the hips and the left leg keyed at one frame) meets those bones
+  (1 mm) and leaves the right leg free; a map whose unit is no unit gives an error report with the
+  command's one line (bpy.ops raises RuntimeError with the report), not a traceback, and no new action.
 """
 import json
 import os
@@ -76,7 +77,8 @@ def run_blender(addon, mode, tmp_path, keys=()):
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender-user"))  # the extension installs here
     res = subprocess.run(argv, capture_output=True, text=True, timeout=300, env=env)
     assert res.returncode == 0, f"Blender failed:\n{res.stdout[-3000:]}\n{res.stderr[-3000:]}"
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    *printed, last = res.stdout.strip().splitlines()
+    return dict(json.loads(last), printed=printed)  # printed: Blender's own lines, its reports among them
 
 
 def assert_result_action(got, first, last):
@@ -181,8 +183,23 @@ def test_clean_stands_on_the_floor(addon, tmp_path, mode):
     assert low > -1.0, low
 
 
-def test_unknown_bones_give_the_report(addon, tmp_path):
+def test_unknown_bones_are_solved_at_an_assumed_size_with_a_warning(addon, tmp_path):
     got = run_blender(addon, "unknown", tmp_path, KEYS)
+    assert_result_action(got, KEYS[0], KEYS[-1])
+    warned = [ln for ln in got["printed"] if ln.startswith("Warning: dynsplines: warning:")]  # Blender's report line
+    assert any("cannot tell the length unit" in ln for ln in warned), got["printed"][-20:]
+    assert all(len(ln) < 1000 and "Traceback" not in ln for ln in warned), warned
+    frames = got["frames"]
+    result, original = np.array(got["result_points"]), np.array(got["original_points"])
+    at_keys = [frames.index(k) for k in KEYS]
+    err = np.linalg.norm(result[at_keys] - original[at_keys], axis=-1).max() * UNIT
+    print(f"unknown bones: {warned[0]}; bones within {1000 * err:.4f} mm of the keys")
+    assert err < 1e-3, err  # [m]
+
+
+def test_a_bad_skeleton_map_gives_the_report(addon, tmp_path):
+    got = run_blender(addon, "badmap", tmp_path, KEYS)
+    assert "furlong" in (got["error"] or ""), got["error"]
     assert got["error"] is not None and "dynsplines: error:" in got["error"], got["error"]
     assert "Traceback" not in got["error"] and len(got["error"].strip().splitlines()) == 1, got["error"]
     assert got["actions"] == [got["original"]] and got["assigned"] == got["original"]  # nothing new

@@ -55,3 +55,22 @@ def test_a_bad_out_is_one_line(tmp_path, capsys):
     assert err.count("\n") == 1 and "the add-on is a .zip file" in err, err
     assert main(["blender-addon", "--out", str(tmp_path / "no" / "addon.zip")]) == EXIT_INPUT
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_the_job_keeps_what_the_commands_warn_of(addon_zip, tmp_path):
+    """The job (stdlib only, so it runs here) runs two real commands and keeps their warning lines, each once, in
+    the command's own form: what the operators report as warnings beside a result that still comes back."""
+    import importlib.util
+
+    with zipfile.ZipFile(addon_zip) as z:
+        (tmp_path / "job.py").write_bytes(z.read("job.py"))
+    spec = importlib.util.spec_from_file_location("addon_job", tmp_path / "job.py")
+    job = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(job)
+    say = "import sys; print('solving'); print('  warning: cannot tell the length unit'); sys.stdout.write({!r})"
+    run = job.Job([("one", [sys.executable, "-c", say.format("dynsplines: warning: the optimization failed\r\n")]),
+                   ("two", [sys.executable, "-c", say.format("a line that mentions no warning\n")])], tmp_path)
+    run.run()
+    assert run.codes == [0, 0] and run.error is None
+    assert run.warnings == ["dynsplines: warning: cannot tell the length unit",
+                            "dynsplines: warning: the optimization failed"], run.warnings

@@ -266,7 +266,7 @@ class _Solve:
         try:
             run.prepare(context)
             run.job.run()
-            self.report({"INFO"}, run.finish(context))
+            self._report_result(context, run)
         except JobError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
@@ -276,6 +276,12 @@ class _Solve:
         finally:
             run.cleanup()
         return {"FINISHED"}
+
+    def _report_result(self, context, run):
+        """The result read back (`SolveRun.finish`) and reported, with each warning of the job's commands."""
+        self.report({"INFO"}, run.finish(context))
+        for line in run.job.warnings:
+            self.report({"WARNING"}, line)
 
     def invoke(self, context, event):
         if bpy.app.background or context.window_manager is None or context.window is None:
@@ -315,7 +321,7 @@ class _Solve:
             if job.error is not None:
                 self.report({"ERROR"}, job.error)
                 return {"CANCELLED"}
-            self.report({"INFO"}, self._run.finish(context))
+            self._report_result(context, self._run)
             return {"FINISHED"}
         except Exception as e:  # noqa: BLE001 - a bug of the add-on: one line, not a traceback
             self.report({"ERROR"}, _bug(e))

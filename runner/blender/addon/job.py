@@ -18,6 +18,7 @@ import threading
 #: (the best path before it written), 130 interrupted (the best path so far written)
 WROTE_PATH = (0, 3, 130)
 _ROUND = re.compile(r"round (\d+)")
+_WARNING = re.compile(r"\s*(?:dynsplines: )?warning: (.+?)\s*$")
 
 
 class JobError(Exception):
@@ -52,12 +53,25 @@ def last_error(text, code):
     return lines[-1] if lines else f"dynsplines: the command stopped with exit code {code}"
 
 
+def warning_lines(text):
+    """[str] the warnings a command printed ("warning: ..." or "dynsplines: warning: ..."), each once, in order,
+    as "dynsplines: warning: ..." (an assumed length unit, a solve that failed partway: what the user must know
+    about a result that still comes back)."""
+    out = []
+    for ln in re.split(r"[\r\n]+", text):
+        m = _WARNING.match(ln)
+        if m and f"dynsplines: warning: {m.group(1)}" not in out:
+            out.append(f"dynsplines: warning: {m.group(1)}")
+    return out
+
+
 class Job:
     """Runs `commands` ([(label, argv)]) one after the other, each after the last one succeeded.
 
     Poll with `poll()` (non-blocking; returns True when every command finished) or run to the end with
     `run()` (blocking, background mode). `status` is the latest line of output, `rounds` the solve rounds
-    seen so far; `cancel()` interrupts the running command (SIGINT; Windows: terminate).
+    seen so far, `warnings` what the finished commands warned of; `cancel()` interrupts the running command
+    (SIGINT; Windows: terminate).
     """
 
     def __init__(self, commands, cwd):
@@ -65,6 +79,7 @@ class Job:
         self.index, self.proc, self.status, self.rounds = -1, None, "starting", 0
         self.cancelled, self.error, self._out, self._threads = False, None, [], []
         self.codes = []  # the exit code of each command that finished
+        self.warnings = []  # `warning_lines` of the commands that finished
 
     @property
     def label(self):
@@ -105,6 +120,7 @@ class Job:
         for t in self._threads:
             t.join()
         self.codes.append(code)
+        self.warnings += [w for w in warning_lines("".join(self._out)) if w not in self.warnings]
         if code not in (WROTE_PATH if self.index == 0 else (0,)):
             self.error = last_error("".join(self._out), code)
             return True
