@@ -66,6 +66,20 @@ def _curve(W: np.ndarray, u: np.ndarray, order: int = 0) -> np.ndarray:
     return 6 * A * u + 2 * B
 
 
+def _cubic_minimum(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(u*, value) the least of cubics with power coefficients c (4, ...) (c3 u^3 + c2 u^2 + c1 u + c0) over [0, 1]:
+    at an end or where the derivative 3 c3 u^2 + 2 c2 u + c1 vanishes. u*, value: (...,)."""
+    c3, c2, c1, c0 = (x[..., None] for x in c)
+    cand = np.empty(c1.shape[:-1] + (4,))
+    cand[..., 0], cand[..., 1] = 0.0, 1.0
+    # a candidate that is no root (NaN: no real roots; fmax makes it 0) or one outside [0, 1], clipped, is never
+    # lower than the minimum
+    cand[..., 2:] = np.minimum(np.fmax(quadratic_roots(3 * c3[..., 0], 2 * c2[..., 0], c1[..., 0]), 0.0), 1.0)
+    values = ((c3 * cand + c2) * cand + c1) * cand + c0
+    best = np.argmin(values, axis=-1)[..., None]
+    return np.take_along_axis(cand, best, -1)[..., 0], np.take_along_axis(values, best, -1)[..., 0]
+
+
 def plane_minimum(C: np.ndarray, point: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(u*, d) the lowest point of each curve over the plane through `point` with unit `normal`.
 
@@ -74,80 +88,94 @@ def plane_minimum(C: np.ndarray, point: np.ndarray, normal: np.ndarray) -> tuple
     Returns:
         u*: (...,) in [0, 1]. d: (...,) [m] the signed distance there.
     """
-    c3, c2, c1, c0 = np.einsum("j...c,c->j...", _power(C), normal)  # the distance's power coefficients
-    c0 = c0 - normal @ point
-    # d'(u) = 3 c3 u^2 + 2 c2 u + c1: its roots in [0, 1] and the two ends are the candidates; a candidate that
-    # is no root (no real roots, a root outside [0, 1], clipped) is never lower than the minimum
-    roots = np.moveaxis(quadratic_roots(3 * c3, 2 * c2, c1), -1, 0)
-    cand = np.clip(np.nan_to_num(np.concatenate([np.stack([np.zeros_like(c1), np.ones_like(c1)]), roots])), 0.0, 1.0)
-    values = ((c3 * cand + c2) * cand + c1) * cand + c0
-    best = np.argmin(values, axis=0)
-    return np.take_along_axis(cand, best[None], 0)[0], np.take_along_axis(values, best[None], 0)[0]
+    c = np.einsum("j...c,c->j...", _power(C), normal)  # the distance's power coefficients
+    c[3] -= normal @ point
+    return _cubic_minimum(c)
 
 
-def _box_faces(L: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """(4, ..., 6) the power coefficients of the six faces' distances along curves whose box coordinates have power
-    coefficients L (4, ..., 3): face f is axis f % 3 on the + side (f < 3) or the - side, s L_k - h_k."""
-    F = np.concatenate([L, -L], axis=-1)
-    F[3] -= np.concatenate([half, half])
-    return F
+def _box_frame(X: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray, power: bool = False) -> np.ndarray:
+    """(..., q, 6) the six faces' distances s x_k - h_k [m] of points X (..., q, 3) in per-curve boxes (center (q, 3),
+    rot (q, 3, 3), half (q, 3)): face f is box axis f % 3 on the + side (f < 3) or the - side. power: X (4, q, 3)
+    holds curves' power coefficients (`_power`), of which only the constant one is offset."""
+    local = np.einsum("...qc,qck->...qk", X, rot)
+    off = np.einsum("qc,qck->qk", center, rot)
+    if power:
+        local[3] -= off
+    else:
+        local = local - off
+    F = np.concatenate([local, -local], axis=-1)
+    h2 = np.concatenate([half, half], axis=-1)
+    if power:
+        F[3] -= h2
+        return F
+    return F - h2
 
 
-def _face_distance(points: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(d, grad) the largest face distance of points (q, 3) to a box (`box_minimum`), (q,) [m], and its face's outward
-    normal (q, 3)."""
-    local = (points - center) @ rot
-    faces = np.concatenate([local, -local], axis=-1) - np.concatenate([half, half])
-    top = np.argmax(faces, axis=-1)
-    return faces[np.arange(len(top)), top], np.concatenate([rot.T, -rot.T])[top]
+def _normals(rot: np.ndarray) -> np.ndarray:
+    """(q, 6, 3) the outward normals (world) of the faces (`_box_frame`) of boxes with axes rot (q, 3, 3) as columns."""
+    axes = np.swapaxes(rot, -1, -2)
+    return np.concatenate([axes, -axes], axis=-2)
 
 
-#: (15, 2) the pairs of faces (`_box_faces`) whose crossing can hold a curve's deepest point in a box
+#: (15, 2) the pairs of faces (`_box_frame`) whose crossing can hold a curve's deepest point in a box
 _PAIRS = np.array([(f, g) for f in range(6) for g in range(f + 1, 6)])
 
 
 def box_minimum(C: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, ...]:
     """(u*, d, grad d) the deepest point of each curve in a box (module docstring), exactly.
 
-    d is the largest of the six faces' distances, each a cubic in u along a curve, and the least of such an upper
-    envelope over [0, 1] lies at an end, where one face's cubic is stationary, or where two faces cross: the two ends,
-    the 6 stationary points and the 45 crossings (`solver.polynomial_roots`) are evaluated and the deepest kept. At a
-    crossing the gradient is the combination of the two faces' normals whose slope along the curve is zero.
+    d is the largest of the six faces' distances, each a cubic in u along a curve. Where one face alone can be on
+    that upper envelope (the others' largest value at the curve's Bezier points is under the envelope's least bound
+    there: a face's cubic lies between its least and largest Bezier value), d is that face's cubic, least at an end
+    or where it is stationary, and its gradient the face's normal. Elsewhere `_envelope_minimum` solves it.
 
     Args:
-        C: (4, q, 3) Hermite coefficients [m]. center: (3,) [m]. rot: (3, 3) the box's axes as columns. half: (3,) [m].
+        C: (4, q, 3) Hermite coefficients [m]. center: (3,) or (q, 3) [m]. rot: (3, 3) or (q, 3, 3) the box's axes
+            as columns. half: (3,) or (q, 3) [m]: one box, or each curve's own.
     Returns:
         u*: (q,). d: (q,) [m] the largest face distance there. grad: (q, 3) its gradient in the curve's point.
     """
-    L = _power(C) @ rot
-    L[3] -= center @ rot
-    F = _box_faces(L, half)  # (4, q, 6)
-    ends = np.broadcast_to(np.array([0.0, 1.0]), (C.shape[1], 2))
-    stationary = quadratic_roots(3 * L[0], 2 * L[1], L[2]).reshape(-1, 6)
-    # a face below the envelope's least bound all along the curve is never on it: its crossings are not sought (each
-    # face's cubic lies between its least and largest value at the Bezier points)
-    B = _bezier(C) @ rot - center @ rot
-    at = np.concatenate([B, -B], axis=-1) - np.concatenate([half, half])  # (4, q, 6)
-    on = at.max(axis=0) >= at.min(axis=0).max(axis=-1, keepdims=True)
+    q = C.shape[1]
+    center, rot, half = (np.broadcast_to(x, (q,) + np.shape(x)[-k:]) for x, k in ((center, 1), (rot, 2), (half, 1)))
+    F = _box_frame(_power(C), center, rot, half, power=True)  # (4, q, 6) the faces' power coefficients
+    at = _box_frame(_bezier(C), center, rot, half)  # (4, q, 6) the faces at the Bezier points
+    on = at.max(axis=0) >= at.min(axis=0).max(axis=-1, keepdims=True)  # (q, 6) faces that can be on the envelope
+    normals, rows = _normals(rot), np.arange(q)
+    face = np.argmax(on, axis=1)  # the face where it is alone
+    u, d = _cubic_minimum(F[:, rows, face])
+    grad = normals[rows, face]
+    many = np.flatnonzero(on.sum(axis=1) > 1)
+    if many.size:
+        u[many], d[many], grad[many] = _envelope_minimum(F[:, many], on[many], normals[many])
+    return u, d, grad
+
+
+def _envelope_minimum(F: np.ndarray, on: np.ndarray, normals: np.ndarray) -> tuple:
+    """(u*, d, grad d) of `box_minimum` for curves whose faces' distances have power coefficients F (4, q, 6), `on`
+    (q, 6) the faces that can be on the envelope, and the faces' `normals` (q, 6, 3): the least of the upper envelope
+    is at an end, where one face's cubic is stationary, or where two faces cross: the two ends, the 6 stationary
+    points and the crossings of the faces on it (`solver.polynomial_roots`) are evaluated and the deepest kept. At a
+    crossing the gradient is the combination of the two faces' normals whose slope along the curve is zero."""
+    q = F.shape[1]
+    ends = np.broadcast_to(np.array([0.0, 1.0]), (q, 2))
+    stationary = quadratic_roots(3 * F[0, :, :3], 2 * F[1, :, :3], F[2, :, :3]).reshape(-1, 6)  # -x: the same points
     i, k = np.nonzero(on[:, _PAIRS[:, 0]] & on[:, _PAIRS[:, 1]])
-    crossing = np.full((C.shape[1], len(_PAIRS), 3), np.nan)
+    crossing = np.full((q, len(_PAIRS), 3), np.nan)
     crossing[i, k] = cubic_roots(*(F[:, i, _PAIRS[k, 0]] - F[:, i, _PAIRS[k, 1]]))
     crossing = crossing.reshape(-1, 3 * len(_PAIRS))
     cand = np.clip(np.nan_to_num(np.concatenate([ends, stationary, crossing], axis=1), nan=0.0), 0.0, 1.0)
-    depth = (abs(_curve(L[:, :, None], cand)) - half).max(axis=-1)  # (q, 53)
+    depth = _curve(F[:, :, None], cand).max(axis=-1)  # (q, 53)
+    rows = np.arange(q)
     best = np.argmin(depth, axis=1)
-    rows = np.arange(len(best))
     u, d = cand[rows, best], depth[rows, best]
-    Lu, slope = _curve(L, u), _curve(L, u, 1)
-    faces = np.concatenate([Lu, -Lu], axis=-1) - np.concatenate([half, half])
-    normals = np.concatenate([rot.T, -rot.T])  # (6, 3) each face's outward normal in world coordinates
+    faces, slope = _curve(F, u), _curve(F, u, 1)
     top = np.argmax(faces, axis=1)
     cross = best - ends.shape[1] - stationary.shape[1]  # the crossing candidate's index (>= 0 where it is one)
     f, g = _PAIRS[np.clip(cross, 0, None) // 3].T  # its two faces
-    sf, sg = (np.take_along_axis(np.concatenate([slope, -slope], axis=-1), x[:, None], 1)[:, 0] for x in (f, g))
+    sf, sg = slope[rows, f], slope[rows, g]
     kink = (cross >= 0) & (sf * sg < 0)  # falling into the crossing on one face and rising out of it on the other
     mu = np.where(kink, sg / np.where(kink, sg - sf, 1.0), 1.0)[:, None]
-    grad = np.where(kink[:, None], mu * normals[f] + (1 - mu) * normals[g], normals[top])
+    grad = np.where(kink[:, None], mu * normals[rows, f] + (1 - mu) * normals[rows, g], normals[rows, top])
     return u, d, grad
 
 
@@ -207,22 +235,35 @@ class Penetration(Constraint):
         return hit
 
     def _boxes(self, C: np.ndarray, u: np.ndarray, d: np.ndarray, g: np.ndarray) -> None:
-        """Fill the box pairs of u, d, g (`_minimum`) from the Hermite curves C (4, m, K, 3). In place."""
-        s = self.surfaces
+        """Fill the box pairs of u, d, g (`_minimum`) from the Hermite curves C (4, m, K, 3). In place.
+
+        Each face's distance is affine in the point, so along a curve at least its least at the Bezier points (a
+        convex combination of them): a curve whose bound is over the tolerance is out of the box with a margin and
+        cannot be active, and its midpoint's distance stands for it; the rest, of every box, are solved at once
+        (`box_minimum`)."""
+        s, P = self.surfaces, len(self.surfaces.plane_point)
         flat = C.reshape(4, -1, 3)
         bez, middle = _bezier(flat), _curve(_power(flat), np.full(flat.shape[1], 0.5))
+        n, q = len(s.box_center), flat.shape[1]
+        ub, db, gb = np.full((n, q), 0.5), np.empty((n, q)), np.empty((n, q, 3))
+        near = []
         for b, (center, rot, half) in enumerate(zip(s.box_center, s.box_rot, s.box_half)):
-            j = len(s.plane_point) + b
-            # each face's distance is affine in the point, so along a curve at least its least at the Bezier points
-            # (a convex combination of them): a curve whose bound is over the tolerance is out of the box with a
-            # margin and cannot be active, and its midpoint's distance stands for it; the rest are solved
-            local = (bez - center) @ rot  # (4, q, 3)
-            low = (np.concatenate([local, -local], axis=-1).min(axis=0) - np.concatenate([half, half])).max(axis=-1)
-            ub, (db, gb) = np.full(len(middle), 0.5), _face_distance(middle, center, rot, half)
-            near = np.flatnonzero(low <= self.tolerance)
-            if near.size:
-                ub[near], db[near], gb[near] = box_minimum(flat[:, near], center, rot, half)
-            u[..., j], d[..., j], g[..., j, :] = ub.reshape(self.shape[:2]), db.reshape(self.shape[:2]), gb.reshape(self.shape[:2] + (3,))
+            h2, off = np.concatenate([half, half]), center @ rot
+            local = bez @ rot - off  # (4, q, 3)
+            low = (np.concatenate([local, -local], axis=-1).min(axis=0) - h2).max(axis=-1)
+            mid = middle @ rot - off
+            faces = np.concatenate([mid, -mid], axis=-1) - h2
+            top = np.argmax(faces, axis=-1)
+            db[b], gb[b] = np.take_along_axis(faces, top[:, None], 1)[:, 0], np.concatenate([rot.T, -rot.T])[top]
+            near.append(np.flatnonzero(low <= self.tolerance))
+        box = np.repeat(np.arange(n), [len(i) for i in near])
+        if box.size:
+            i = np.concatenate(near)
+            ub[box, i], db[box, i], gb[box, i] = box_minimum(flat[:, i], s.box_center[box], s.box_rot[box], s.box_half[box])
+        m, K = self.shape[:2]
+        u[..., P:] = ub.reshape(n, m, K).transpose(1, 2, 0)
+        d[..., P:] = db.reshape(n, m, K).transpose(1, 2, 0)
+        g[..., P:, :] = gb.reshape(n, m, K, 3).transpose(1, 2, 0, 3)
 
     def measure(self, state):
         return -self._minimum(state)[1].ravel()
