@@ -88,6 +88,15 @@ def assert_result_action(got, first, last):
     assert got["frames"] == list(range(first, last + 1))  # baked at every frame
 
 
+def key_error(got):
+    """[m] the largest distance of any bone's head or tail in the result action from the original's at the KEYS
+    (Blender's world positions, in CMU units times UNIT)."""
+    frames = got["frames"]
+    result, original = np.array(got["result_points"]), np.array(got["original_points"])
+    at_keys = [frames.index(k) for k in KEYS]
+    return float(np.linalg.norm(result[at_keys] - original[at_keys], axis=-1).max() * UNIT)
+
+
 def lowest_contact_mm(got, files):
     """({scene frame: [mm]} the height over Blender's z = 0 of the lowest point of the figure's contact
     spheres, carried on the result's foot bones (negative: below). Each site's place on its foot bone: the foot body's
@@ -189,10 +198,7 @@ def test_unknown_bones_are_solved_at_an_assumed_size_with_a_warning(addon, tmp_p
     warned = [ln for ln in got["printed"] if ln.startswith("Warning: dynsplines: warning:")]  # Blender's report line
     assert any("cannot tell the length unit" in ln for ln in warned), got["printed"][-20:]
     assert all(len(ln) < 1000 and "Traceback" not in ln for ln in warned), warned
-    frames = got["frames"]
-    result, original = np.array(got["result_points"]), np.array(got["original_points"])
-    at_keys = [frames.index(k) for k in KEYS]
-    err = np.linalg.norm(result[at_keys] - original[at_keys], axis=-1).max() * UNIT
+    err = key_error(got)
     print(f"unknown bones: {warned[0]}; bones within {1000 * err:.4f} mm of the keys")
     assert err < 1e-3, err  # [m]
 
@@ -231,10 +237,7 @@ def test_cancel_returns_a_valid_action(addon, tmp_path):
     far comes back as the new action, and it still meets the keys."""
     got = run_blender(addon, "cancel", tmp_path, KEYS)
     assert_result_action(got, KEYS[0], KEYS[-1])
-    frames = got["frames"]
-    result, original = np.array(got["result_points"]), np.array(got["original_points"])
-    at_keys = [frames.index(k) for k in KEYS]
-    err = np.linalg.norm(result[at_keys] - original[at_keys], axis=-1).max() * UNIT
+    err = key_error(got)
     print(f"cancelled: bones within {1000 * err:.4f} mm of the keys")
     assert err < 1e-3, err  # [m]
-    assert np.isfinite(result).all()
+    assert np.isfinite(np.array(got["result_points"])).all()
