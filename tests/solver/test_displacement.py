@@ -568,32 +568,3 @@ def test_a_clean_returns_the_least_change_among_the_paths_that_met_every_limit(d
     raised = [Raise("penetration", "", 1e-3, 1.0, 1.0, 1.0, 1, "mm", 1e-3)]
     kept, _, message, _ = kept_path(al, sol.frames, basis, (0.5 * D, other), "done", raised, limits, grid=True)
     assert kept is sol.frames and message == "done"
-
-
-@pytest.mark.slow
-def test_a_clean_whose_first_search_raises_seeks_again_after_the_rounds(toy_model):
-    """A contact whose two ends are pinned where the capture's toe is 13 cm apart: no path through the pins keeps the
-    toe's slide at what they force, so the clean's first search (from the capture) raises it. That raise is undone,
-    the rounds run, and the search after them (from the stalled path and the first search's) certifies the slide at
-    the toe alone: the answer meets every limit as certified, holds the pins exactly and, by MuJoCo's kinematics at
-    1001 times, keeps the feet out of the floor within the penetration tolerance."""
-    t, q = _capture(toy_model, fps=30.0)
-    q[:, 2] -= 0.0095  # the lowest site 0.5 mm above the floor
-    a, b = 0.2, 0.6
-    xy = _site(toy_model, q[pin_frames(t, (a, b))], "l_toe")[:, :2]
-    assert np.linalg.norm(xy[1] - xy[0]) > 0.1  # the premise: the pins are far apart along the floor
-    disp = build_displacement(toy_model, t, q, contacts=[Contact("l_toe", a, b)], flights=(), pins=(a, b))
-    events = []
-    sol = solve_displacement(disp, LeastChangeOptions(), progress=lambda kind, info: events.append((kind, info)))
-    searches = [info for kind, info in events if kind == "certify"]
-    first_round = next(i for i, (kind, _) in enumerate(events) if kind == "round")
-    assert searches[0]["round"] == -1 and "slide" in searches[0]["raised"]  # the first search, before any round
-    assert [kind for kind, _ in events[:first_round]].count("certify") == 1  # its raise undone: the rounds follow
-    assert len(searches) >= 2 and searches[1]["round"] >= 1  # sought again after the rounds
-    assert {(r.constraint, r.label) for r in sol.certificate} == {("slide", "l_toe")}, sol.certificate
-    assert max(sol.integrals_final.values()) <= 1.0, sol.integrals_final  # every c/tol within the certified limits
-    clean = clean_solution(disp, sol)
-    pinned = pin_frames(t, (a, b))
-    np.testing.assert_allclose(clean.frames.values[pinned], q[pinned], rtol=0, atol=1e-15)  # round-off of c + 0
-    low = _lowest_site(toy_model, clean.frames.path(np.linspace(t[0], t[-1], 1001)))
-    assert low.min() >= -PENETRATION_TOLERANCE - 1e-5, low.min()
