@@ -127,6 +127,9 @@ class Progress:
             when = "start" if info["round"] < 0 else f"round {info['round'] + 1}"
             self._line(f"  {when}: least violation sought ({info.get('spent', 0)} evaluations, "
                        f"{info.get('frames', 0)} frames): {what}")
+        elif event == "kept":  # a clean's later search certified some column beyond the first's: the first's kept
+            self._line("  the first search's certificate kept: the search after the rounds raised "
+                       + ", ".join(f"{k} by {v:.3g}" for k, v in info["worse"].items()) + " [SI] beyond it")
         elif event == "finer":  # limits were raised: the least violation sought at a finer spacing checks them
             self._end_round()
             self._line(f"  limits raised: the least violation sought again at {info['rate']:g} points/s (segments down "

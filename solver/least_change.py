@@ -24,7 +24,8 @@ path the solve ends on beyond a limit (a budget spent) gives way to the best one
 one frame set) with nothing raised, so does one above their least D.
 A clean (a grid; not with `newton`) searches first, from d = 0, before any subproblem, and a search that raises
 nothing ends the solve; one that raises something is undone and its path kept as the second start of the search after
-the rounds (a least violation from one start is a local one). The search's descent of the violation runs in D's
+the rounds (a least violation from one start is a local one), whose certificate replaces the first's only where no
+column of it is worse by more than a tolerance (`solver.least_change_end.kept_certificate`). The search's descent of the violation runs in D's
 preconditioned variables, where D is about |z|^2, from z = 0: L-BFGS's every step is a combination of the broken
 pairs' gradients there, so the path it stops on, the first that meets every pair, is of the form d = H^-1 A^T lam, the
 least-D path's form for linearized constraints (Landweber's iteration from 0 converges to the least-norm solution:
@@ -60,7 +61,16 @@ from solver.kinematic_tree import SiteKinematics
 from solver.kinematics import TangentMap
 from solver.lagrangian import AugmentedLagrangian, frame_maps, initial_penalty, solve_subproblem
 from solver.layout import StateLayout
-from solver.least_change_end import better_path, budget_left, grid_done, kept_path, stop_message, worst_pair
+from solver.least_change_end import (
+    as_posed,
+    better_path,
+    budget_left,
+    grid_done,
+    kept_certificate,
+    kept_path,
+    stop_message,
+    worst_pair,
+)
 from solver.least_change_refine import refinement
 from solver.manifold import FrameVariables
 from solver.optimize import Status
@@ -302,7 +312,7 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
     rounds, estimate, decreases, scores, on_search = [], float("nan"), [], None, False
     evals, level_its, kind, certified, best, grid = 0, 0, "start", False, (np.inf, frames), {}  # best: (D, frames) met
     status, message = Status.CONVERGED, "every constraint met and refinement predicts under tol"
-    first, met, other = lc.grid is not None and not o.newton, False, None  # a clean searches first (module docstring)
+    first, met, prior = lc.grid is not None and not o.newton, False, None  # a clean searches first (module docstring)
     for k in range(o.max_subproblems):
         if k or not first:
             newton = o.newton and lc.grid is not None and not certified  # D's preconditioner after a search
@@ -326,15 +336,16 @@ def _iterate(lc: LeastChange, o: LeastChangeOptions, frames: FrameSet, maps: tup
                 break
         if not met:  # spent with a pair broken (or a clean's start): the search, once (its path meets every limit)
             cert = _certify(lc, frames, o, start, evals, should_stop, progress, k - (not rounds),
-                            other if rounds else None)
+                            prior[0].frames if rounds and prior else None)
             evals = evals + cert.n_evals
             if cert.status is not Status.CONVERGED:
                 status, message = cert.status, stop_message(cert.status, "while seeking the least violation", o)
                 break
             if cert.raises and not rounds:  # one start's least violation is no proof: the rounds, then both starts
-                other = cert.frames
-                _as_posed(al, limits)
+                prior = (cert, [c.limit.copy() for c in al.constraints])
+                as_posed(al, limits)
                 continue
+            cert = kept_certificate(al, cert, prior, limits, progress)
             raises, certified = raises + list(cert.raises), True
             best, frames = better_path(al, best, cert.frames), cert.frames  # a path that meets every certified limit
             (basis, pre), level_its, kind = _grid(lc)[0](al, frames, quat), 0, "certify"
@@ -402,14 +413,6 @@ def _subproblem(al, frames: FrameSet, maps: tuple, quat, o: LeastChangeOptions, 
     if own and r.result.status is Status.MAX_EVALS:  # an inexact subproblem: the multipliers are updated next
         r = replace(r, result=replace(r.result, status=Status.CONVERGED, message=f"the round's {cap} evaluations spent (round_evals)"))
     return r, None
-
-
-def _as_posed(al: AugmentedLagrangian, limits: list) -> None:
-    """Set `al`'s constraints' limits back to `limits` (as posed), its multipliers to 0 and V to inf: the raises of
-    a search whose path is kept only as a start for a later one are undone."""
-    for c, limit in zip(al.constraints, limits):
-        c.limit = limit.copy()
-    al.lam, al.V = [np.zeros(c.size) for c in al.constraints], np.inf
 
 
 def _certify(lc: LeastChange, frames: FrameSet, o: LeastChangeOptions, start: float, evals: int, should_stop,

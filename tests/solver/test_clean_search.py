@@ -8,7 +8,9 @@ import pytest
 from solver.constraint_set import PENETRATION_TOLERANCE
 from solver.contacts import Contact
 from solver.displacement import build_displacement, clean_solution, pin_frames, solve_displacement
+from solver.feasibility import Certificate, Raise
 from solver.least_change import LeastChangeOptions
+from solver.least_change_end import kept_certificate
 from tests.solver.test_displacement import _capture, _lowest_site, _site
 
 
@@ -39,3 +41,53 @@ def test_a_clean_whose_first_search_raises_seeks_again_after_the_rounds(toy_mode
     np.testing.assert_allclose(clean.frames.values[pinned], q[pinned], rtol=0, atol=1e-15)  # round-off of c + 0
     low = _lowest_site(toy_model, clean.frames.path(np.linspace(t[0], t[-1], 1001)))
     assert low.min() >= -PENETRATION_TOLERANCE - 1e-5, low.min()
+
+
+class _Pairs:
+    """A constraint's bookkeeping alone (name, labels, tolerance, limit), as `kept_certificate` reads it."""
+
+    def __init__(self, name, labels, tolerance, limit):
+        self.name, self.labels, self.tolerance, self.limit = name, np.array(labels, object), tolerance, np.array(limit)
+        self.size = len(labels)
+
+
+class _AL:
+    def __init__(self, constraints):
+        self.constraints, self.lam, self.V = constraints, [np.ones(c.size) for c in constraints], 1.0
+
+
+def _raise(name, label, amount):
+    return Raise(name, label, amount, 1.0, 1.0, 1.0, 1, "", 1.0)
+
+
+def test_a_later_certificate_replaces_the_first_only_where_no_column_is_worse_beyond_its_tolerance():
+    """`kept_certificate` on hand-made certificates: a later one that raises a column more than its tolerance above
+    the first's (slide at l_toe 0.795 m against 0.022 m, tolerance 2 mm) gives way to the first, whose limits are
+    set again (the multipliers of the pairs they raise from 0, the others as they were) and reported; one within
+    every column's tolerance of it (or with nothing raised, or with no first) is kept, the limits as it left them."""
+    posed = [np.zeros(2), np.zeros(2)]
+    first_limits = [np.array([0.0, 0.135]), np.array([0.0, 0.022])]
+
+    def setup():
+        al = _AL([_Pairs("acceleration", ["r_hip", "r_shoulder"], np.array([1.0, 2.0]), [0.0057, 0.0]),
+                  _Pairs("slide", ["l_heel", "l_toe"], 2e-3, [0.0, 0.795])])
+        return al, Certificate((_raise("acceleration", "r_shoulder", 0.135), _raise("slide", "l_toe", 0.022)), "first")
+
+    al, first = setup()
+    later = Certificate((_raise("acceleration", "r_hip", 0.0057), _raise("slide", "l_toe", 0.795)), "later", 7)
+    said = []
+    kept = kept_certificate(al, later, (first, first_limits), posed, lambda kind, info: said.append((kind, info)))
+    assert kept.frames == "first" and kept.raises == first.raises and kept.n_evals == 7
+    for c, limit in zip(al.constraints, first_limits):
+        np.testing.assert_array_equal(c.limit, limit)
+    np.testing.assert_array_equal(al.lam[0], [1.0, 0.0])  # r_shoulder raised again: its multiplier from 0
+    np.testing.assert_array_equal(al.lam[1], [1.0, 0.0])
+    assert np.inf == al.V and said == [("kept", {"worse": {"slide at l_toe": 0.795}})]
+
+    al, first = setup()
+    within = Certificate((_raise("acceleration", "r_shoulder", 0.135 + 1.9), _raise("slide", "l_toe", 0.022 + 1.9e-3)),
+                         "within")
+    assert kept_certificate(al, within, (first, first_limits), posed, None) is within
+    np.testing.assert_array_equal(al.constraints[1].limit, [0.0, 0.795])  # as the later search left them
+    for cert, prior in ((Certificate((), "met"), (first, first_limits)), (later, None)):
+        assert kept_certificate(al, cert, prior, posed, None) is cert
