@@ -25,13 +25,13 @@ one frame set) with nothing raised, so does one above their least D.
 A clean (a grid; not with `newton`) searches first, from d = 0, before any subproblem, and a search that raises
 nothing ends the solve; one that raises something is undone and its path kept as the second start of the search after
 the rounds (a least violation from one start is a local one), whose certificate replaces the first's only where no
-column of it is worse by more than a tolerance (`solver.least_change_end.kept_certificate`). The search's descent of the violation runs in D's
-preconditioned variables, where D is about |z|^2, from z = 0: L-BFGS's every step is a combination of the broken
-pairs' gradients there, so the path it stops on, the first that meets every pair, is of the form d = H^-1 A^T lam, the
-least-D path's form for linearized constraints (Landweber's iteration from 0 converges to the least-norm solution:
-Engl, Hanke & Neubauer, "Regularization of Inverse Problems", 1996, sec. 6.1). On the 13 shipped cleans whose search
-raises nothing it took half the evaluations of the multipliers' rounds then the search, its D lower on 8 and higher on
-5 (by 11-28 %, docs/solvers.md).
+column of it is worse by more than a tolerance (`solver.least_change_end.kept_certificate`). The search's descent of
+the violation runs in D's preconditioned variables, where D is about |z|^2, from z = 0: L-BFGS's every step is a
+combination of the broken pairs' gradients there, so the path it stops on, the first that meets every pair, is of the
+form d = H^-1 A^T lam, the least-D path's form for linearized constraints (Landweber's iteration from 0 converges to the
+least-norm solution: Engl, Hanke & Neubauer, "Regularization of Inverse Problems", 1996, sec. 6.1). On the 13 shipped
+cleans whose search raises nothing it took half the evaluations of the multipliers' rounds then the search, its D lower
+on 8 and higher on 5 (by 11-28 %, docs/solvers.md).
 Off a grid, the refinement judges such a search's path as it judges a round's (the solve ends there when it predicts
 under tol), not another round first: those rounds ended above the search's D on 7 of the 9 shipped clips keyed every
 0.25 s whose search raised nothing (by 3-45 %; at it on one, 5 % below it with 9 more frames on one). A reference motion
